@@ -1,0 +1,424 @@
+"""Read and validate an accelnav model file (TOML).
+
+The model file is the single source of truth for a sensor, its sampling, the
+bias model of every axis, the noise figures, the declared ranges and the
+filter options. :func:`load_model` turns it into one immutable :class:`Model`;
+everything derived from it (Ts, phi, b, F, Q, H, code conversion) is computed
+in :mod:`codegen.design` and nowhere else.
+
+A bad file raises :class:`ModelError` whose message is one line naming the
+file, the key, what was wrong and what is accepted.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+G0 = 9.80665  # standard gravity, m/s^2
+
+DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "models" / "adxl250_default.toml"
+
+SENSOR_KINDS = ("analog", "duty_cycle")
+FILTER_FORMS = ("covariance", "gain_schedule")
+
+
+class ModelError(ValueError):
+    """A model file that cannot be used; ``str()`` is one line for the user."""
+
+    def __init__(self, source: str, key: str, problem: str):
+        self.source = source
+        self.key = key
+        self.problem = problem
+        super().__init__(f"{source}: {key}: {problem}")
+
+
+@dataclass(frozen=True)
+class AnalogInput:
+    """ADC read-out of an analog output: V = code * adc_ref_v / 2**adc_bits."""
+
+    supply_v: float
+    adc_bits: int
+    adc_ref_v: float
+    sensitivity_v_per_g: float
+    zero_g_v: float
+
+    @property
+    def ratiometric(self) -> bool:
+        return self.adc_ref_v == self.supply_v
+
+
+@dataclass(frozen=True)
+class DutyCycleInput:
+    """Timer capture of a duty-cycle output: A[g] = (T1/T2 - zero_g_duty) / duty_per_g."""
+
+    timer_clock_hz: float
+    t2_period_s: float
+    zero_g_duty: float
+    duty_per_g: float
+
+    @property
+    def t2_counts(self) -> int:
+        """Nominal T2 period in timer counts."""
+        return int(round(self.t2_period_s * self.timer_clock_hz))
+
+
+@dataclass(frozen=True)
+class Sensor:
+    kind: str
+    part: str
+    range_g: float
+    noise_density_g_rthz: float
+    bandwidth_hz: float
+    analog: AnalogInput | None
+    duty_cycle: DutyCycleInput | None
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One sensing axis: its calibration and its bias constants (SI units).
+
+    ``sensitivity`` and ``zero_g`` are in the sensor's native units: V/g and V
+    for an analog part, duty/g and duty for a duty-cycle part.
+    """
+
+    name: str
+    c1: float
+    c2: float
+    T: float
+    sensitivity: float
+    zero_g: float
+
+
+@dataclass(frozen=True)
+class Noise:
+    sigma_n: float
+    sigma_eps: float
+    R: float
+
+
+@dataclass(frozen=True)
+class Ranges:
+    max_velocity_m_s: float
+    max_position_m: float
+    max_run_s: float
+
+
+@dataclass(frozen=True)
+class FilterOptions:
+    form: str
+    initial_sigma: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class Model:
+    name: str
+    description: str
+    source: str
+    sha256: str
+    sensor: Sensor
+    rate_hz: float
+    axes: tuple[Axis, ...]
+    noise: Noise
+    ranges: Ranges
+    filter: FilterOptions
+
+    @property
+    def Ts(self) -> float:
+        """Sample period, s."""
+        return 1.0 / self.rate_hz
+
+    @property
+    def max_accel_m_s2(self) -> float:
+        """Sensor full scale, m/s^2."""
+        return self.sensor.range_g * G0
+
+    def axis(self, name_or_index: str | int) -> Axis:
+        if isinstance(name_or_index, int):
+            return self.axes[name_or_index]
+        for ax in self.axes:
+            if ax.name == name_or_index:
+                return ax
+        names = ", ".join(a.name for a in self.axes)
+        raise ModelError(self.source, "axes", f"no axis named {name_or_index!r}; the model has: {names}")
+
+
+# --------------------------------------------------------------------------
+# Validation helpers. Each takes the table, the dotted path of the table (for
+# messages) and the key; each refuses with one ModelError naming that key.
+
+
+class _Table:
+    """A TOML table being consumed; unknown keys are refused at the end."""
+
+    def __init__(self, source: str, path: str, data: object):
+        self.source = source
+        self.path = path
+        if not isinstance(data, dict):
+            raise ModelError(source, path or "(top level)", f"expected a table, got {_kind(data)}")
+        self.data = data
+        self.seen: set[str] = set()
+
+    def key(self, name: str) -> str:
+        return f"{self.path}.{name}" if self.path else name
+
+    def fail(self, name: str, problem: str) -> ModelError:
+        return ModelError(self.source, self.key(name), problem)
+
+    def raw(self, name: str, default: object = ...) -> object:
+        self.seen.add(name)
+        if name in self.data:
+            return self.data[name]
+        if default is ...:
+            raise self.fail(name, "missing; this key is required")
+        return default
+
+    def table(self, name: str, required: bool = True) -> _Table | None:
+        self.seen.add(name)
+        if name not in self.data:
+            if required:
+                raise self.fail(name, "missing table; this table is required")
+            return None
+        return _Table(self.source, self.key(name), self.data[name])
+
+    def number(
+        self,
+        name: str,
+        default: object = ...,
+        *,
+        lo: float | None = None,
+        hi: float | None = None,
+        lo_open: bool = False,
+    ) -> float:
+        value = self.raw(name, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(name, f"expected a number, got {_kind(value)}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise self.fail(name, f"expected a finite number, got {value}")
+        _check_range(self, name, value, lo, hi, lo_open)
+        return value
+
+    def integer(self, name: str, default: object = ..., *, lo: int, hi: int) -> int:
+        value = self.raw(name, default)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(name, f"expected an integer from {lo} to {hi}, got {_kind(value)}")
+        if not lo <= value <= hi:
+            raise self.fail(name, f"expected an integer from {lo} to {hi}, got {value}")
+        return value
+
+    def string(self, name: str, default: object = ..., *, choices: tuple[str, ...] | None = None) -> str:
+        value = self.raw(name, default)
+        if not isinstance(value, str):
+            raise self.fail(name, f"expected a string, got {_kind(value)}")
+        if choices is not None and value not in choices:
+            accepted = ", ".join(repr(c) for c in choices)
+            raise self.fail(name, f"got {value!r}; accepted: {accepted}")
+        return value
+
+    def done(self) -> None:
+        unknown = sorted(set(self.data) - self.seen)
+        if unknown:
+            accepted = ", ".join(sorted(self.seen))
+            raise self.fail(unknown[0], f"unknown key; accepted here: {accepted}")
+
+
+def _kind(value: object) -> str:
+    if isinstance(value, bool):
+        return f"a boolean ({str(value).lower()})"
+    if isinstance(value, str):
+        return f"a string ({value!r})"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, (int, float)):
+        return f"the number {value}"
+    return type(value).__name__
+
+
+def _check_range(t: _Table, name: str, value: float, lo, hi, lo_open: bool) -> None:
+    bad_lo = lo is not None and (value <= lo if lo_open else value < lo)
+    bad_hi = hi is not None and value > hi
+    if bad_lo or bad_hi:
+        left = "(" if lo_open else "["
+        lo_s = "-inf" if lo is None else f"{lo:g}"
+        hi_s = "inf" if hi is None else f"{hi:g}"
+        raise t.fail(name, f"got {value:g}; accepted: a number in {left}{lo_s}, {hi_s}]")
+
+
+# --------------------------------------------------------------------------
+
+
+def load_model(path: str | Path | None = None) -> Model:
+    """Read, validate and return the model at ``path`` (the embedded default if None)."""
+    path = Path(path) if path is not None else DEFAULT_MODEL
+    source = str(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise ModelError(source, "(file)", "no such file") from None
+    except OSError as exc:
+        raise ModelError(source, "(file)", f"cannot read: {exc.strerror}") from None
+    return loads_model(raw, source=source)
+
+
+def loads_model(text: str | bytes, source: str = "<model>") -> Model:
+    """Validate model text; ``source`` names it in error messages."""
+    raw = text.encode() if isinstance(text, str) else text
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ModelError(source, "(file)", f"not UTF-8 text (byte {exc.start})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelError(source, "(syntax)", f"not valid TOML: {exc}") from None
+    return _parse(data, source, hashlib.sha256(raw).hexdigest())
+
+
+def _parse(data: dict, source: str, sha: str) -> Model:
+    top = _Table(source, "", data)
+
+    meta = top.table("model")
+    name = meta.string("name")
+    description = meta.string("description", "")
+    meta.done()
+
+    sensor = _parse_sensor(top.table("sensor"))
+
+    sampling = top.table("sampling")
+    rate_hz = sampling.number("rate_hz", lo=1.0, hi=100_000.0)
+    sampling.done()
+    if sensor.duty_cycle is not None and sensor.duty_cycle.t2_period_s > 1.0 / rate_hz * 1.000001:
+        raise ModelError(
+            source,
+            "sensor.duty_cycle.t2_period_s",
+            f"the duty-cycle period {sensor.duty_cycle.t2_period_s:g} s is longer than the sample "
+            f"period {1.0 / rate_hz:g} s; accepted: at most 1/sampling.rate_hz",
+        )
+    axes = _parse_axes(top, sensor, source)
+
+    noise_t = top.table("noise")
+    noise = Noise(
+        sigma_n=noise_t.number("sigma_n", lo=0.0, lo_open=True),
+        sigma_eps=noise_t.number("sigma_eps", lo=0.0),
+        R=noise_t.number("R", lo=0.0, lo_open=True),
+    )
+    noise_t.done()
+
+    rng = top.table("ranges")
+    ranges = Ranges(
+        max_velocity_m_s=rng.number("max_velocity_m_s", lo=0.0, lo_open=True),
+        max_position_m=rng.number("max_position_m", lo=0.0, lo_open=True),
+        max_run_s=rng.number("max_run_s", lo=0.0, lo_open=True),
+    )
+    rng.done()
+
+    filt = top.table("filter")
+    form = filt.string("form", "covariance", choices=FILTER_FORMS)
+    sig = filt.raw("initial_sigma", [0.0, 0.0, 1.0, 0.1])
+    if (
+        not isinstance(sig, list)
+        or len(sig) != 4
+        or not all(isinstance(s, (int, float)) and not isinstance(s, bool) for s in sig)
+    ):
+        raise filt.fail("initial_sigma", f"expected an array of 4 numbers [r, u, a, eps], got {_kind(sig)}")
+    if not all(math.isfinite(s) and s >= 0 for s in sig):
+        raise filt.fail("initial_sigma", f"expected 4 finite numbers >= 0, got {sig}")
+    filt.done()
+
+    top.done()
+    return Model(
+        name=name,
+        description=description,
+        source=source,
+        sha256=sha,
+        sensor=sensor,
+        rate_hz=rate_hz,
+        axes=axes,
+        noise=noise,
+        ranges=ranges,
+        filter=FilterOptions(form=form, initial_sigma=tuple(float(s) for s in sig)),
+    )
+
+
+def _parse_sensor(t: _Table) -> Sensor:
+    kind = t.string("kind", choices=SENSOR_KINDS)
+    part = t.string("part", "")
+    range_g = t.number("range_g", lo=0.0, lo_open=True, hi=1000.0)
+    density = t.number("noise_density_g_rthz", lo=0.0)
+    bandwidth = t.number("bandwidth_hz", lo=0.0, lo_open=True)
+    analog = duty = None
+    if kind == "analog":
+        a = t.table("analog")
+        supply = a.number("supply_v", lo=0.0, lo_open=True, hi=50.0)
+        analog = AnalogInput(
+            supply_v=supply,
+            adc_bits=a.integer("adc_bits", lo=6, hi=24),
+            adc_ref_v=a.number("adc_ref_v", supply, lo=0.0, lo_open=True, hi=50.0),
+            sensitivity_v_per_g=a.number("sensitivity_v_per_g", lo=0.0, lo_open=True),
+            zero_g_v=a.number("zero_g_v", supply / 2, lo=0.0),
+        )
+        a.done()
+        if analog.zero_g_v >= analog.adc_ref_v:
+            raise a.fail("zero_g_v", f"got {analog.zero_g_v:g} V, at or above the ADC reference {analog.adc_ref_v:g} V")
+        if "duty_cycle" in t.data:
+            raise t.fail("duty_cycle", "given, but sensor.kind is 'analog'; remove it or set kind = 'duty_cycle'")
+    else:
+        d = t.table("duty_cycle")
+        duty = DutyCycleInput(
+            timer_clock_hz=d.number("timer_clock_hz", lo=1e3, hi=1e9),
+            t2_period_s=d.number("t2_period_s", lo=0.0, lo_open=True, hi=1.0),
+            zero_g_duty=d.number("zero_g_duty", 0.5, lo=0.0, lo_open=True, hi=1.0),
+            duty_per_g=d.number("duty_per_g", lo=0.0, lo_open=True, hi=1.0),
+        )
+        d.done()
+        if duty.t2_counts < 16:
+            raise d.fail(
+                "t2_period_s",
+                f"gives only {duty.t2_counts} timer counts per period at "
+                f"{duty.timer_clock_hz:g} Hz; accepted: at least 16 counts",
+            )
+        if "analog" in t.data:
+            raise t.fail("analog", "given, but sensor.kind is 'duty_cycle'; remove it or set kind = 'analog'")
+    t.done()
+    return Sensor(kind, part, range_g, density, bandwidth, analog, duty)
+
+
+def _parse_axes(top: _Table, sensor: Sensor, source: str) -> tuple[Axis, ...]:
+    raw = top.raw("axes")
+    if not isinstance(raw, list) or not raw:
+        raise ModelError(source, "axes", f"expected one or more [[axes]] tables, got {_kind(raw)}")
+    if len(raw) > 3:
+        raise ModelError(source, "axes", f"got {len(raw)} axes; accepted: 1 to 3")
+    if sensor.kind == "analog":
+        sens_key, zero_key = "sensitivity_v_per_g", "zero_g_v"
+        sens_default, zero_default = sensor.analog.sensitivity_v_per_g, sensor.analog.zero_g_v
+    else:
+        sens_key, zero_key = "duty_per_g", "zero_g_duty"
+        sens_default, zero_default = sensor.duty_cycle.duty_per_g, sensor.duty_cycle.zero_g_duty
+    axes = []
+    for i, item in enumerate(raw):
+        t = _Table(source, f"axes[{i}]", item)
+        name = t.string("name")
+        if not name.isidentifier():
+            raise t.fail("name", f"got {name!r}; accepted: a C identifier (letters, digits, _)")
+        axes.append(
+            Axis(
+                name=name,
+                c1=t.number("c1"),
+                c2=t.number("c2"),
+                T=t.number("T", lo=0.0, lo_open=True),
+                sensitivity=t.number(sens_key, sens_default, lo=0.0, lo_open=True),
+                zero_g=t.number(zero_key, zero_default, lo=0.0),
+            )
+        )
+        t.done()
+        if abs(axes[-1].c1) + abs(axes[-1].c2) > sensor.range_g * G0:
+            raise t.fail("c1", "|c1| + |c2| exceeds the sensor's full scale")
+    names = [a.name for a in axes]
+    if len(set(names)) != len(names):
+        raise ModelError(source, "axes", f"axis names must differ, got {names}")
+    return tuple(axes)
