@@ -12,10 +12,11 @@ file, the key, what was wrong and what is accepted.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 G0 = 9.80665  # standard gravity, m/s^2
@@ -125,6 +126,7 @@ class Model:
     noise: Noise
     ranges: Ranges
     filter: FilterOptions
+    text: str = field(default="", repr=False, compare=False)  # the file's text, for embedding in outputs
 
     @property
     def Ts(self) -> float:
@@ -275,7 +277,8 @@ def loads_model(text: str | bytes, source: str = "<model>") -> Model:
         raise ModelError(source, "(file)", f"not UTF-8 text (byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(source, "(syntax)", f"not valid TOML: {exc}") from None
-    return _parse(data, source, hashlib.sha256(raw).hexdigest())
+    model = _parse(data, source, hashlib.sha256(raw).hexdigest())
+    return dataclasses.replace(model, text=raw.decode("utf-8"))
 
 
 def _parse(data: dict, source: str, sha: str) -> Model:

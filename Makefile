@@ -1,0 +1,41 @@
+# accelnav: `make demo` runs the whole chain on the built-in default model,
+# `make test` runs the test suite. Each does the setup it needs.
+
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.accelnav-installed
+
+.PHONY: setup demo test lint format bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $@
+
+demo: setup
+	$(VENV)/bin/accelnav demo --out build/demo
+
+test: setup
+	$(PY) -m pytest -q
+
+lint: setup
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+	@files=$$(git ls-files '*.c' '*.h'); \
+	if [ -n "$$files" ]; then clang-format --dry-run -Werror $$files; fi
+
+format: setup
+	$(PY) -m ruff format .
+	$(PY) -m ruff check --fix .
+	@files=$$(git ls-files '*.c' '*.h'); \
+	if [ -n "$$files" ]; then clang-format -i $$files; fi
+
+bench: setup
+	@for f in bench/bench_*.py; do echo "== $$f"; $(PY) $$f || exit 1; done
+
+clean:
+	rm -rf build .pytest_cache

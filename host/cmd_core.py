@@ -1,0 +1,168 @@
+"""``accelnav sim``, ``filter``, ``smooth`` and ``demo``: the simulate -> filter -> smooth chain on run files."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from codegen.model import DEFAULT_MODEL, Model, load_model
+
+from .errors import UserError
+from .pipeline import filter_run, format_errors, position_errors, smooth_run
+from .runfile import STATE, export_csv, load_run, save_run
+
+
+def _model_arg(p: argparse.ArgumentParser, help_extra: str = "") -> None:
+    p.add_argument("--model", type=Path, default=None, help=f"model file (TOML){help_extra}")
+
+
+def _csv_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--csv", type=Path, default=None, metavar="CSV", help="also export the samples as CSV")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("sim", help="simulate a trajectory and the raw sensor output")
+    _model_arg(p, f"; default: the embedded {DEFAULT_MODEL.name}")
+    p.add_argument("--scenario", default="vehicle", help="trajectory (see --list-scenarios); default: vehicle")
+    p.add_argument("--duration", type=float, default=60.0, help="seconds; default: 60")
+    p.add_argument("--seed", type=int, default=1, help="random seed; default: 1")
+    p.add_argument("--list-scenarios", action="store_true", help="print the scenario names and exit")
+    p.add_argument("--out", type=Path, help="run file to write (.npz)")
+    _csv_arg(p)
+    p.set_defaults(func=cmd_sim)
+
+    p = sub.add_parser("filter", help="run the float64 reference filter over a run file")
+    p.add_argument("run", type=Path, help="run file (.npz) from accelnav sim")
+    _model_arg(p, "; default: the model embedded in the run file")
+    p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
+    _csv_arg(p)
+    p.set_defaults(func=cmd_filter)
+
+    p = sub.add_parser("smooth", help="filter (if not done) and RTS-smooth a run file")
+    p.add_argument("run", type=Path, help="run file (.npz) from accelnav sim or accelnav filter")
+    _model_arg(p, "; default: the model embedded in the run file")
+    p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
+    p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write a PNG plot into DIR")
+    _csv_arg(p)
+    p.set_defaults(func=cmd_smooth)
+
+    p = sub.add_parser("demo", help="simulate -> filter -> smooth on the default model; table and plot")
+    _model_arg(p, f"; default: the embedded {DEFAULT_MODEL.name}")
+    p.add_argument("--scenario", default="vehicle", help="trajectory; default: vehicle")
+    p.add_argument("--duration", type=float, default=60.0, help="seconds; default: 60")
+    p.add_argument("--seed", type=int, default=1, help="random seed; default: 1")
+    p.add_argument("--out", type=Path, default=Path("build/demo"), help="output folder; default: build/demo")
+    p.set_defaults(func=cmd_demo)
+
+
+def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[str, np.ndarray]:
+    from hil_sim.sensor import simulate
+    from hil_sim.trajectories import SCENARIOS
+
+    if scenario not in SCENARIOS:
+        raise UserError(f"--scenario: unknown scenario {scenario!r}; accepted: {', '.join(SCENARIOS)}")
+    try:
+        run = simulate(model, scenario, duration, seed)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    return run.to_arrays()
+
+
+def _load(args) -> tuple[dict[str, np.ndarray], Model]:
+    arrays, model = load_run(args.run)
+    if args.model is not None:
+        override = load_model(args.model)
+        if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:
+            raise UserError(
+                f"{args.model}: axes {[a.name for a in override.axes]} do not match the run's "
+                f"{[str(a) for a in arrays['axis_names']]}"
+            )
+        model = override
+    return arrays, model
+
+
+def _save(args, arrays, model) -> None:
+    save_run(args.out, arrays, model)
+    print(f"wrote {args.out}")
+    if args.csv is not None:
+        export_csv(args.csv, arrays)
+        print(f"wrote {args.csv}")
+
+
+def _summary(arrays: dict[str, np.ndarray]) -> str:
+    n = len(arrays["t"])
+    dur = arrays["t"][-1] - arrays["t"][0] if n > 1 else 0.0
+    lines = [f"{n} samples, {dur:.2f} s, axes {', '.join(str(a) for a in arrays['axis_names'])}"]
+    for j, name in enumerate(str(a) for a in arrays["axis_names"]):
+        parts = [f"axis {name}: {int(arrays['clipped'][:, j].sum())} clipped"]
+        for stage in ("filt", "smooth"):
+            if f"{stage}_x" in arrays:
+                k = -1 if stage == "filt" else 0
+                x = arrays[f"{stage}_x"][j, k]
+                sd = np.sqrt(np.diag(arrays[f"{stage}_P"][j, k]))
+                at = "end" if k == -1 else "start"
+                est = ", ".join(f"{s}={v:.4g}+-{e:.2g}" for s, v, e in zip(STATE, x, sd, strict=True))
+                parts.append(f"{'filter' if stage == 'filt' else 'smoother'} at {at}: {est}")
+        lines.append("; ".join(parts))
+    return "\n".join(lines)
+
+
+def cmd_sim(args) -> int:
+    if args.list_scenarios:
+        from hil_sim.trajectories import SCENARIOS
+
+        print("\n".join(SCENARIOS))
+        return 0
+    if args.out is None:
+        raise UserError("--out: a run file to write is required")
+    model = load_model(args.model)
+    arrays = _simulate(model, args.scenario, args.duration, args.seed)
+    print(_summary(arrays))
+    _save(args, arrays, model)
+    return 0
+
+
+def cmd_filter(args) -> int:
+    arrays, model = _load(args)
+    arrays = filter_run(arrays, model)
+    print(_summary(arrays))
+    rows = position_errors(arrays, model)
+    if rows:
+        print(format_errors(rows))
+    _save(args, arrays, model)
+    return 0
+
+
+def cmd_smooth(args) -> int:
+    arrays, model = _load(args)
+    arrays = smooth_run(arrays, model)
+    print(_summary(arrays))
+    rows = position_errors(arrays, model)
+    if rows:
+        print(format_errors(rows))
+    _save(args, arrays, model)
+    if args.plots is not None:
+        from .plots import plot_run
+
+        print(f"wrote {plot_run(arrays, model, args.plots / 'smooth.png')}")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from .plots import plot_run
+
+    model = load_model(args.model)
+    print(f"model {model.name} ({model.source}), scenario {args.scenario}, {args.duration:g} s, seed {args.seed}")
+    arrays = _simulate(model, args.scenario, args.duration, args.seed)
+    arrays = smooth_run(arrays, model)
+    out = Path(args.out)
+    save_run(out / "run.npz", arrays, model)
+    print()
+    print("position error against the simulated truth (double integration: calibrated output, no bias model)")
+    print(format_errors(position_errors(arrays, model)))
+    print()
+    print(f"wrote {out / 'run.npz'}")
+    print(f"wrote {plot_run(arrays, model, out / 'demo.png', f'accelnav demo: {model.name}, {args.scenario}')}")
+    return 0

@@ -1,0 +1,54 @@
+"""A small progress display for long work, written to stderr.
+
+It draws only when stderr is a terminal (or when forced), redraws at most
+ten times a second, and costs one comparison per call otherwise, so it can
+sit in a loop over chunks without slowing it down.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+
+class Progress:
+    """``with Progress("filter", total=n) as p: ... p.update(done)``"""
+
+    def __init__(self, label: str, total: int, *, stream=None, enabled: bool | None = None, unit: str = "samples"):
+        self.label = label
+        self.total = max(int(total), 1)
+        self.unit = unit
+        self.stream = stream if stream is not None else sys.stderr
+        if enabled is None:
+            enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.enabled = enabled
+        self._t0 = time.monotonic()
+        self._last = 0.0
+        self.done = 0
+
+    def update(self, done: int) -> None:
+        self.done = done
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if now - self._last < 0.1 and done < self.total:
+            return
+        self._last = now
+        frac = min(done / self.total, 1.0)
+        elapsed = now - self._t0
+        rate = done / elapsed if elapsed > 0 else 0.0
+        eta = (self.total - done) / rate if rate > 0 else 0.0
+        bar = "#" * int(frac * 24)
+        self.stream.write(
+            f"\r{self.label:>10} [{bar:<24}] {100 * frac:5.1f}%  {rate:,.0f} {self.unit}/s  eta {eta:4.0f} s "
+        )
+        self.stream.flush()
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.enabled:
+            self.update(self.total if exc[0] is None else self.done)
+            self.stream.write("\n")
+            self.stream.flush()

@@ -1,0 +1,110 @@
+"""The accelnav run file: one NPZ that each stage reads and extends.
+
+Format ``accelnav-run/1`` (numpy ``.npz``, no pickled objects):
+
+========================  =====================  ===============================================
+key                       shape, dtype           meaning
+========================  =====================  ===============================================
+``format``                (), str                ``"accelnav-run/1"``
+``model_toml``            (), str                the model file's text (the run is self-contained)
+``model_source``          (), str                where that text came from
+``t``                     (N,), float64          sample time, s
+``axis_names``            (n_axes,), str         axis names, in column order
+``accel``                 (N, n_axes), float64   measured acceleration, m/s^2 (the filter's z)
+``clipped``               (N, n_axes), bool      sample not used by the filter (rail, bad capture)
+``code``                  (N, n_axes), int32     raw ADC codes (analog parts)
+``t1``, ``t2``            (N, n_axes), int32     raw timer counts (duty-cycle parts)
+``r u a eps``             (N, n_axes), float64   simulated truth (``accelnav sim`` only)
+``scenario``, ``seed``    ()                     simulation settings (``accelnav sim`` only)
+``filt_x``                (n_axes, N, 4)         filter posterior x[k|k] = [r, u, a, eps]
+``filt_P``                (n_axes, N, 4, 4)      its covariance
+``filt_x_prior``          (n_axes, N, 4)         filter prior x[k|k-1]
+``filt_P_prior``          (n_axes, N, 4, 4)      its covariance
+``smooth_x``              (n_axes, N, 4)         RTS-smoothed x[k|N-1]
+``smooth_P``              (n_axes, N, 4, 4)      its covariance
+========================  =====================  ===============================================
+
+:func:`export_csv` writes the per-sample columns (not the covariances, only
+their standard deviations) as CSV for spreadsheets and other tools.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from codegen.model import Model, ModelError, loads_model
+
+from .errors import UserError
+
+FORMAT = "accelnav-run/1"
+STATE = ("r", "u", "a", "eps")
+
+
+def save_run(path: str | Path, arrays: dict[str, np.ndarray], model: Model) -> None:
+    """Write ``arrays`` and the model's text to ``path`` atomically (write, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = dict(arrays)
+    data["format"] = np.array(FORMAT)
+    data["model_toml"] = np.array(model.text)
+    data["model_source"] = np.array(str(model.source))
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **data)
+    os.replace(tmp, path)
+
+
+def load_run(path: str | Path) -> tuple[dict[str, np.ndarray], Model]:
+    """Read a run file; returns (arrays, model). Refuses anything else with one line."""
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"{path}: no such file")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise UserError(f"{path}: not an accelnav run file (NPZ): {exc}") from None
+    fmt = str(arrays.get("format", ""))
+    if fmt != FORMAT:
+        raise UserError(f"{path}: format is {fmt or 'missing'!r}; accepted: {FORMAT!r} (written by accelnav sim)")
+    for key in ("model_toml", "t", "axis_names", "accel", "clipped"):
+        if key not in arrays:
+            raise UserError(f"{path}: key {key!r} is missing; the file is damaged or not from accelnav")
+    try:
+        model = loads_model(str(arrays["model_toml"]), source=f"{path}:model_toml")
+    except ModelError as exc:
+        raise UserError(str(exc)) from None
+    n, n_axes = arrays["accel"].shape
+    if arrays["t"].shape != (n,) or arrays["clipped"].shape != (n, n_axes) or len(arrays["axis_names"]) != n_axes:
+        raise UserError(f"{path}: array shapes disagree (t, accel, clipped, axis_names); the file is damaged")
+    return arrays, model
+
+
+def export_csv(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
+    """Write one row per sample: time, then per axis the raw input, truth, filter and smoother columns."""
+    cols: list[tuple[str, np.ndarray]] = [("t_s", arrays["t"])]
+    for j, name in enumerate(str(a) for a in arrays["axis_names"]):
+        for raw in ("code", "t1", "t2"):
+            if raw in arrays:
+                cols.append((f"{name}_{raw}", arrays[raw][:, j]))
+        cols.append((f"{name}_accel", arrays["accel"][:, j]))
+        cols.append((f"{name}_clipped", arrays["clipped"][:, j].astype(int)))
+        for s in STATE:
+            if s in arrays:
+                cols.append((f"{name}_true_{s}", arrays[s][:, j]))
+        for stage in ("filt", "smooth"):
+            if f"{stage}_x" in arrays:
+                x = arrays[f"{stage}_x"][j]
+                sd = np.sqrt(np.einsum("kii->ki", arrays[f"{stage}_P"][j]))
+                for i, s in enumerate(STATE):
+                    cols.append((f"{name}_{stage}_{s}", x[:, i]))
+                    cols.append((f"{name}_{stage}_{s}_sd", sd[:, i]))
+    table = np.column_stack([c for _, c in cols])
+    buf = io.StringIO()
+    np.savetxt(buf, table, delimiter=",", header=",".join(n for n, _ in cols), comments="", fmt="%.10g")
+    Path(path).write_text(buf.getvalue())

@@ -1,0 +1,55 @@
+"""Shared fixtures and helpers for the accelnav test suite."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen.model import DEFAULT_MODEL, load_model, loads_model
+
+REPO = Path(__file__).resolve().parents[1]
+MODELS = REPO / "models"
+SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def default_model():
+    return load_model(DEFAULT_MODEL)
+
+
+@pytest.fixture(scope="session")
+def duty_model():
+    return load_model(MODELS / "adxl202_duty.toml")
+
+
+def model_text(path: Path = DEFAULT_MODEL) -> str:
+    return Path(path).read_text()
+
+
+def edited_model(replacements: list[tuple[str, str]], base: Path = DEFAULT_MODEL, source: str = "bad.toml"):
+    """The default model's text with each (old, new) replaced exactly once, loaded."""
+    text = model_text(base)
+    for old, new in replacements:
+        assert text.count(old) == 1, f"test setup: {old!r} must occur once in {base.name}"
+        text = text.replace(old, new)
+    return loads_model(text, source=source)
+
+
+def assert_rel_close(actual, ref, scale, rtol, what=""):
+    """|actual - ref| <= rtol * (|ref| + scale) elementwise, with a readable failure.
+
+    ``scale`` carries the quantity's own size where ref itself may pass through
+    zero (a state's standard deviation, a covariance's sqrt(P_ii P_jj)).
+    """
+    actual, ref, scale = np.asarray(actual), np.asarray(ref), np.asarray(scale)
+    err = np.abs(actual - ref)
+    bound = rtol * (np.abs(ref) + scale)
+    bad = err > bound
+    if bad.any():
+        idx = np.unravel_index(np.argmax(np.where(bad, err - bound, -np.inf)), err.shape)
+        raise AssertionError(
+            f"{what}: {int(bad.sum())} of {err.size} values off; worst at {idx}: "
+            f"actual {actual[idx]!r}, reference {ref[idx]!r}, bound {bound[idx]:.3g}"
+        )
