@@ -10,7 +10,7 @@ import numpy as np
 from codegen.model import DEFAULT_MODEL, Model, load_model
 
 from .errors import UserError
-from .pipeline import filter_run, format_errors, position_errors, smooth_run
+from .pipeline import combine_errors, filter_run, format_errors, position_errors, smooth_run
 from .runfile import STATE, export_csv, load_run, save_run
 
 
@@ -52,7 +52,8 @@ def register(sub) -> None:
     _model_arg(p, f"; default: the embedded {DEFAULT_MODEL.name}")
     p.add_argument("--scenario", default="vehicle", help="trajectory; default: vehicle")
     p.add_argument("--duration", type=float, default=60.0, help="seconds; default: 60")
-    p.add_argument("--seed", type=int, default=1, help="random seed; default: 1")
+    p.add_argument("--seed", type=int, default=1, help="first random seed; default: 1")
+    p.add_argument("--runs", type=int, default=10, help="seeded runs to average the errors over; default: 10")
     p.add_argument("--out", type=Path, default=Path("build/demo"), help="output folder; default: build/demo")
     p.set_defaults(func=cmd_demo)
 
@@ -152,17 +153,34 @@ def cmd_smooth(args) -> int:
 
 def cmd_demo(args) -> int:
     from .plots import plot_run
+    from .progress import Progress
 
+    if args.runs < 1:
+        raise UserError(f"--runs: got {args.runs}; accepted: 1 or more")
     model = load_model(args.model)
-    print(f"model {model.name} ({model.source}), scenario {args.scenario}, {args.duration:g} s, seed {args.seed}")
-    arrays = _simulate(model, args.scenario, args.duration, args.seed)
-    arrays = smooth_run(arrays, model)
+    print(
+        f"model {model.name} ({model.source}), scenario {args.scenario}, {args.duration:g} s, "
+        f"seeds {args.seed}..{args.seed + args.runs - 1}"
+    )
     out = Path(args.out)
-    save_run(out / "run.npz", arrays, model)
+    runs = []
+    with Progress("demo", args.runs, unit="runs") as bar:
+        for i in range(args.runs):
+            arrays = smooth_run(_simulate(model, args.scenario, args.duration, args.seed + i), model, progress=False)
+            if i == 0:
+                save_run(out / "run.npz", arrays, model)
+                first = arrays
+            runs.append(position_errors(arrays, model))
+            bar.update(i + 1)
     print()
-    print("position error against the simulated truth (double integration: calibrated output, no bias model)")
-    print(format_errors(position_errors(arrays, model)))
+    print(f"position error against the simulated truth, seed {args.seed}")
+    print("(double integration: the calibrated sensor output integrated twice, no bias model)")
+    print(format_errors(runs[0]))
+    if args.runs > 1:
+        print()
+        print(f"root mean square over {args.runs} seeded runs")
+        print(format_errors(combine_errors(runs)))
     print()
     print(f"wrote {out / 'run.npz'}")
-    print(f"wrote {plot_run(arrays, model, out / 'demo.png', f'accelnav demo: {model.name}, {args.scenario}')}")
+    print(f"wrote {plot_run(first, model, out / 'demo.png', f'accelnav demo: {model.name}, {args.scenario}')}")
     return 0

@@ -90,8 +90,22 @@ def position_errors(arrays: dict[str, np.ndarray], model: Model) -> list[Positio
             estimates["smoother"] = arrays["smooth_x"][j, :, 0]
         for method, r in estimates.items():
             e = r - truth
-            rows.append(PositionErrors(name, method, float(np.sqrt(np.mean(e**2))), float(e[-1]), float(np.max(np.abs(e)))))
+            rms = float(np.sqrt(np.mean(e**2)))
+            rows.append(PositionErrors(name, method, rms, float(e[-1]), float(np.max(np.abs(e)))))
     return rows
+
+
+def combine_errors(runs: list[list[PositionErrors]]) -> list[PositionErrors]:
+    """Root mean square of each figure over several runs (rows matched by axis and method)."""
+    out = []
+    for i, row in enumerate(runs[0]):
+        rows = [r[i] for r in runs]
+
+        def rms(field: str, rows=rows) -> float:
+            return float(np.sqrt(np.mean([getattr(r, field) ** 2 for r in rows])))
+
+        out.append(PositionErrors(row.axis, row.method, rms("rms"), rms("final"), rms("max_abs")))
+    return out
 
 
 def format_errors(rows: list[PositionErrors]) -> str:

@@ -20,8 +20,8 @@ def _pyplot():
     return plt
 
 
-def _band(ax, t, x, sd, color, label):
-    ax.plot(t, x, color=color, lw=1.2, label=label)
+def _band(ax, t, x, sd, color, label, ls="-"):
+    ax.plot(t, x, color=color, lw=1.2, ls=ls, label=label)
     ax.fill_between(t, x - sd, x + sd, color=color, alpha=0.18, lw=0)
 
 
@@ -41,11 +41,12 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
                 ax.plot(t, arrays[truth_keys[i]][:, j], color="black", lw=1.6, label="truth")
             if i < 2:
                 ax.plot(t, plain[j, :, i], color="tab:gray", lw=1.0, ls="--", label="double integration")
-            for stage, color, lab in (("filt", "tab:blue", "filter"), ("smooth", "tab:red", "smoother")):
+            # the smoother underneath, the filter dashed on top: they coincide where no future data helps
+            for stage, color, lab, ls in (("smooth", "tab:red", "smoother", "-"), ("filt", "tab:blue", "filter", "--")):
                 if f"{stage}_x" in arrays:
                     x = arrays[f"{stage}_x"][j, :, i]
                     sd = np.sqrt(arrays[f"{stage}_P"][j, :, i, i])
-                    _band(ax, t, x, sd, color, f"{lab} +-1 sigma")
+                    _band(ax, t, x, sd, color, f"{lab} +-1 sigma", ls)
             if i < 2 and "r" in arrays:
                 # keep the truth readable when dead reckoning runs away
                 span = np.ptp(arrays[truth_keys[i]][:, j])
