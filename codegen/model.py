@@ -19,6 +19,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 G0 = 9.80665  # standard gravity, m/s^2
 
 DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "models" / "adxl250_default.toml"
@@ -139,8 +141,11 @@ class Model:
         return self.sensor.range_g * G0
 
     def axis(self, name_or_index: str | int) -> Axis:
-        if isinstance(name_or_index, int):
-            return self.axes[name_or_index]
+        """The axis named ``name_or_index``, or at that index; ModelError if there is none."""
+        if isinstance(name_or_index, (int, np.integer)) and not isinstance(name_or_index, bool):
+            if 0 <= name_or_index < len(self.axes):
+                return self.axes[name_or_index]
+            raise ModelError(self.source, "axes", f"no axis {name_or_index}; the model has {len(self.axes)}")
         for ax in self.axes:
             if ax.name == name_or_index:
                 return ax
@@ -419,8 +424,20 @@ def _parse_axes(top: _Table, sensor: Sensor, source: str) -> tuple[Axis, ...]:
             )
         )
         t.done()
-        if abs(axes[-1].c1) + abs(axes[-1].c2) > sensor.range_g * G0:
+        ax = axes[-1]
+        if abs(ax.c1) + abs(ax.c2) > sensor.range_g * G0:
             raise t.fail("c1", "|c1| + |c2| exceeds the sensor's full scale")
+        # the sensor's full scale must fit the read-out's input span, or
+        # accelerations inside the declared range would be clipped unseen
+        lo, hi = ax.zero_g - sensor.range_g * ax.sensitivity, ax.zero_g + sensor.range_g * ax.sensitivity
+        span = (0.0, min(sensor.analog.supply_v, sensor.analog.adc_ref_v)) if sensor.analog else (0.0, 1.0)
+        if lo < span[0] or hi > span[1]:
+            unit = "V" if sensor.analog else "(duty)"
+            raise t.fail(
+                sens_key,
+                f"+-{sensor.range_g:g} g spans {lo:.4g}..{hi:.4g} {unit}, outside the read-out's "
+                f"{span[0]:g}..{span[1]:g}; accepted: zero_g +- range_g * sensitivity inside it",
+            )
     names = [a.name for a in axes]
     if len(set(names)) != len(names):
         raise ModelError(source, "axes", f"axis names must differ, got {names}")

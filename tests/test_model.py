@@ -108,6 +108,11 @@ BAD_FILES = {
         "kind is 'analog'",
     ),
     "bias beyond full scale": ([("c2 = 0.05", "c2 = 600.0")], "axes[0].c1", "full scale"),
+    "full scale beyond ADC": (
+        [("sensitivity_v_per_g = 0.038", "sensitivity_v_per_g = 0.06")],
+        "axes[0].sensitivity_v_per_g",
+        "outside the read-out's 0..5",
+    ),
     "max run": ([("max_run_s = 3600.0", "max_run_s = 0")], "ranges.max_run_s", "accepted"),
 }
 
@@ -133,6 +138,13 @@ def test_duty_model_refusals():
     # a PWM period longer than the sample period cannot give one capture per sample
     with pytest.raises(ModelError, match=r"sensor\.duty_cycle\.t2_period_s: .* longer than the sample period"):
         edited_model([("t2_period_s = 0.005", "t2_period_s = 0.05")], base=base)
+
+
+def test_axis_lookup(default_model):
+    assert default_model.axis(1).name == "y" and default_model.axis("x").name == "x"
+    for bad in (2, -1, "z"):
+        with pytest.raises(ModelError, match="axes: no axis"):
+            default_model.axis(bad)
 
 
 def test_not_utf8():

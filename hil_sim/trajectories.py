@@ -1,0 +1,256 @@
+"""Truth trajectories along one axis: position r, velocity u, acceleration a.
+
+Conventions
+-----------
+* SI units: t in s, r in m, u in m/s, a in m/s^2; all arrays float64.
+* ``t`` is the sample grid, uniform, starting at 0. The truth is a
+  continuous-time function evaluated at those instants, so r, u and a are
+  exactly consistent (u = dr/dt, a = du/dt) up to float64 rounding.
+* Every scenario starts at rest at the origin: r(0) = u(0) = 0, a(0) = 0,
+  which is the filter's prior (x0 = [0, 0, 0, c2], sigma_r = sigma_u = 0).
+* ``truth`` draws all its random numbers from the generator it is given, in
+  fixed-size chunks, so a shorter run is a prefix of a longer run with the
+  same generator state.
+
+Building block: the smooth step
+-------------------------------
+Every scenario except ``stationary`` and ``sinusoid`` is a chain of
+segments. In segment j, of duration d and starting at state (r0, u0, a0),
+the acceleration moves from a0 to a0 + A along half a raised cosine
+(A = 0 is a hold at a0). With s the time into the segment, x = s/d and
+sigma(x) = (1 - cos(pi x)) / 2:
+
+    a(s) = a0 + A sigma(x)
+    u(s) = u0 + a0 s + A (s/2 - d/(2 pi) sin(pi x))
+    r(s) = r0 + u0 s + a0 s^2/2 + A (s^2/4 - d^2/pi^2 sin^2(pi x / 2))
+
+These are exact integrals of one another; a is continuous with a continuous
+derivative (the jerk A pi/(2 d) sin(pi x) is zero at both ends), so the
+motion is smooth enough for any filter and numerical differentiation at a
+fine grid recovers it.
+
+A *move* is eight such segments, always in this order:
+
+    rest | up +A1 (e1) | hold (f1) | down -A1 (e1) | coast (c) | down -A2 (e2) | hold (f2) | up +A2 (e2)
+
+The two pulses have equal areas, A1 (e1 + f1) = A2 (e2 + f2), so the move
+ends at rest. The states within a move are accumulated from zero at its
+rest, never carried over from earlier moves, so every rest has u = a = 0
+exactly (not merely to rounding): rests are true rests. The direction (sign)
+of each move is chosen to head back towards the origin, which keeps |r|
+below the length of one move for any run length.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shock")
+
+_CHUNK = 64  # moves drawn per batch of random numbers (fixed: keeps runs prefix-consistent)
+
+# Shock impacts: peak, edge length and flat-top length.
+SHOCK_PEAK = 2.5  # times amax; the default ADXL250 rails are at 1.32 amax, an ADXL202's at 2 amax
+SHOCK_EDGE_S = 0.010
+SHOCK_TOP_S = 0.010  # at least one sample period, so that a sample lands on the flat top
+SHOCK_MAX_DV = 30.0  # m/s, cap on the velocity change of one impact (shortens the top if needed)
+STRESS_MAX_DV = 20.0  # m/s, velocity change of the largest stress pulse
+
+
+def truth(name: str, t: np.ndarray, rng: np.random.Generator, amax: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Truth (r [m], u [m/s], a [m/s^2]) of scenario ``name`` at the instants ``t`` [s].
+
+    ``amax`` is the sensor full scale in m/s^2 (``model.max_accel_m_s2``).
+    Scenarios (see :data:`SCENARIOS`):
+
+    * ``stationary``: r = u = a = 0.
+    * ``stop_and_go``: rests of 2-8 s alternating with moves: pulses of
+      1-3 m/s^2 (edges 0.2-0.8 s, flat top 0-1.5 s), a coast of 0-3 s, then
+      the mirror-image braking pulse. Rests have u == 0 and a == 0 exactly.
+    * ``sinusoid``: a = A sin(2 pi f t), A in 0.5-2 m/s^2 (at most amax/2),
+      f in 0.5-2 Hz; u = A/w (1 - cos wt), r = A/w t - A/w^2 sin wt with
+      w = 2 pi f, so r(0) = u(0) = 0. The velocity then has mean A/w > 0 and
+      r drifts at that speed (at most 0.64 m/s: 2.3 km in an hour).
+    * ``vehicle``: rest 5-20 s, accelerate at 1.5-3 m/s^2 to 5-30 m/s, cruise
+      10-60 s, brake at 1-3 m/s^2 to a stop, repeated (out and back).
+    * ``stress``: full-scale pulse pairs: peak amax (half the pulses) or
+      0.3-1 amax, edges 5-15 ms, flat tops giving a velocity swing of
+      5-20 m/s, rests of 0.05-0.3 s between pairs. |a| <= amax exactly.
+    * ``shock``: as ``stress``, but a quarter of the pulse pairs are impacts
+      of +-2.5 amax (10 ms edges, a flat top of max(10 ms, one sample
+      period), velocity swing at most 30 m/s), beyond the sensor's rails.
+    """
+    if name not in SCENARIOS:
+        accepted = ", ".join(repr(s) for s in SCENARIOS)
+        raise ValueError(f"name: unknown scenario {name!r}; accepted: {accepted}")
+    t = np.asarray(t, dtype=np.float64)
+    if t.ndim != 1:
+        raise ValueError(f"t: expected a 1-D array of sample times, got shape {t.shape}")
+    if not (np.isfinite(amax) and amax > 0):
+        raise ValueError(f"amax: expected a positive full scale in m/s^2, got {amax}")
+    if t.size == 0 or name == "stationary":
+        z = np.zeros_like(t)
+        return z, z.copy(), z.copy()
+    if name == "sinusoid":
+        return _sinusoid(t, rng, amax)
+    dt = float(t[1] - t[0]) if t.size > 1 else 0.0
+    draw = {
+        "stop_and_go": _draw_stop_and_go,
+        "vehicle": _draw_vehicle,
+        "stress": _draw_stress,
+        "shock": _draw_shock,
+    }[name]
+    moves = _draw_moves(lambda: draw(rng, amax, dt), float(t[-1]))
+    return _evaluate(moves, t)
+
+
+# --------------------------------------------------------------------------
+# Scenario parameters. Each draw function returns one chunk of _CHUNK moves
+# as a dict of (_CHUNK,) arrays: rest, A1, e1, f1, c, A2, e2, f2 (all >= 0;
+# A1, A2 are magnitudes) and pref (+-1, the direction used when r == 0).
+
+
+def _draw_stop_and_go(rng: np.random.Generator, amax: float, dt: float) -> dict[str, np.ndarray]:
+    n = _CHUNK
+    rest = rng.uniform(2.0, 8.0, n)
+    A = np.minimum(rng.uniform(1.0, 3.0, n), 0.5 * amax)
+    e = rng.uniform(0.2, 0.8, n)
+    f = rng.uniform(0.0, 1.5, n)
+    c = rng.uniform(0.0, 3.0, n)
+    pref = rng.choice([-1.0, 1.0], n)
+    return dict(rest=rest, A1=A, e1=e, f1=f, c=c, A2=A, e2=e, f2=f, pref=pref)
+
+
+def _pulse_for(dv: np.ndarray, A: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Edge and flat-top lengths of a pulse of peak A whose area is dv (shorter edges if dv/A < e)."""
+    e = np.minimum(e, dv / A)
+    return e, dv / A - e
+
+
+def _draw_vehicle(rng: np.random.Generator, amax: float, dt: float) -> dict[str, np.ndarray]:
+    n = _CHUNK
+    rest = rng.uniform(5.0, 20.0, n)
+    v = rng.uniform(5.0, 30.0, n)
+    A1 = np.minimum(rng.uniform(1.5, 3.0, n), 0.5 * amax)
+    e1, f1 = _pulse_for(v, A1, rng.uniform(0.5, 1.5, n))
+    c = rng.uniform(10.0, 60.0, n)
+    A2 = np.minimum(rng.uniform(1.0, 3.0, n), 0.5 * amax)
+    e2, f2 = _pulse_for(v, A2, rng.uniform(0.5, 1.5, n))
+    pref = rng.choice([-1.0, 1.0], n)
+    return dict(rest=rest, A1=A1, e1=e1, f1=f1, c=c, A2=A2, e2=e2, f2=f2, pref=pref)
+
+
+def _draw_stress(rng: np.random.Generator, amax: float, dt: float) -> dict[str, np.ndarray]:
+    n = _CHUNK
+    rest = rng.uniform(0.05, 0.3, n)
+    full = rng.random(n) < 0.5
+    P = np.where(full, amax, amax * rng.uniform(0.3, 1.0, n))
+    e, h = _pulse_for(rng.uniform(5.0, STRESS_MAX_DV, n), P, rng.uniform(0.005, 0.015, n))
+    c = rng.uniform(0.0, 0.05, n)
+    pref = rng.choice([-1.0, 1.0], n)
+    return dict(rest=rest, A1=P, e1=e, f1=h, c=c, A2=P, e2=e, f2=h, pref=pref)
+
+
+def _draw_shock(rng: np.random.Generator, amax: float, dt: float) -> dict[str, np.ndarray]:
+    base = _draw_stress(rng, amax, dt)
+    impact = rng.random(_CHUNK) < 0.25
+    P = SHOCK_PEAK * amax
+    e = min(SHOCK_EDGE_S, SHOCK_MAX_DV / P)
+    h = min(max(SHOCK_TOP_S, dt), SHOCK_MAX_DV / P - e)
+    for key, value in (("A1", P), ("A2", P), ("e1", e), ("e2", e), ("f1", h), ("f2", h), ("c", 0.0)):
+        base[key] = np.where(impact, value, base[key])
+    return base
+
+
+def _sinusoid(t: np.ndarray, rng: np.random.Generator, amax: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    A = min(rng.uniform(0.5, 2.0), 0.5 * amax)
+    w = 2.0 * np.pi * rng.uniform(0.5, 2.0)
+    wt = w * t
+    a = A * np.sin(wt)
+    u = A / w * (1.0 - np.cos(wt))
+    r = A / w * t - A / w**2 * np.sin(wt)
+    return r, u, a
+
+
+# --------------------------------------------------------------------------
+# Moves -> segments -> samples.
+
+_KEYS = ("rest", "A1", "e1", "f1", "c", "A2", "e2", "f2", "pref")
+
+
+def _draw_moves(draw_chunk: Callable[[], dict[str, np.ndarray]], t_end: float) -> dict[str, np.ndarray]:
+    """Draw chunks of moves until they cover [0, t_end]; concatenated parameters."""
+    chunks: list[dict[str, np.ndarray]] = []
+    covered = 0.0
+    while covered <= t_end + 1.0:  # a margin, so rounding in the segment start times cannot matter
+        chunk = draw_chunk()
+        covered += float(np.sum(_durations(chunk)))
+        chunks.append(chunk)
+    return {k: np.concatenate([c[k] for c in chunks]) for k in _KEYS}
+
+
+def _durations(m: dict[str, np.ndarray]) -> np.ndarray:
+    """(n_moves, 8) segment durations of the move template."""
+    return np.stack([m["rest"], m["e1"], m["f1"], m["e1"], m["c"], m["e2"], m["f2"], m["e2"]], axis=1)
+
+
+def _steps(m: dict[str, np.ndarray]) -> np.ndarray:
+    """(n_moves, 8) acceleration change across each segment, for a move in the + direction."""
+    z = np.zeros_like(m["A1"])
+    return np.stack([z, m["A1"], z, -m["A1"], z, -m["A2"], z, m["A2"]], axis=1)
+
+
+def _segment_states(d: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Start states (r0, u0, a0) of every segment of each move, relative to the move's start at rest.
+
+    Rows are moves, columns the 8 segments. Also returns each move's displacement.
+    Each row is accumulated on its own (exclusive cumulative sums along the row).
+    """
+
+    def exclusive_cumsum(x: np.ndarray) -> np.ndarray:
+        out = np.zeros_like(x)
+        np.cumsum(x[:, :-1], axis=1, out=out[:, 1:])
+        return out
+
+    a0 = exclusive_cumsum(A)
+    u0 = exclusive_cumsum(a0 * d + A * d / 2.0)
+    dr = u0 * d + a0 * d**2 / 2.0 + A * d**2 * (0.25 - 1.0 / np.pi**2)
+    r0 = exclusive_cumsum(dr)
+    return r0, u0, a0, r0[:, -1] + dr[:, -1]
+
+
+def _evaluate(m: dict[str, np.ndarray], t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    d = _durations(m)
+    A = _steps(m)
+    r0, u0, a0, disp = _segment_states(d, A)
+
+    # Direction of each move: back towards the origin (a recursion over moves, not samples).
+    sign = np.empty(len(disp))
+    r_start = np.empty(len(disp))
+    r = 0.0
+    for k, (dk, pk) in enumerate(zip(disp, m["pref"], strict=True)):
+        s = -1.0 if r > 0 else 1.0 if r < 0 else pk
+        sign[k] = s
+        r_start[k] = r
+        r += s * dk
+
+    A = A * sign[:, None]
+    a0 = a0 * sign[:, None]
+    u0 = u0 * sign[:, None]
+    r0 = r0 * sign[:, None] + r_start[:, None]
+    # The rest segment (column 0) of every move starts at u0 = a0 = 0 exactly, by construction: each row
+    # is accumulated on its own from zero, so no rounding from earlier moves can leak into a rest.
+
+    d, A, a0, u0, r0 = (x.ravel() for x in (d, A, a0, u0, r0))
+    start = np.concatenate(([0.0], np.cumsum(d)[:-1]))
+    j = np.searchsorted(start, t, side="right") - 1
+    s = t - start[j]
+    dj, Aj = d[j], A[j]
+    x = np.clip(np.divide(s, dj, out=np.zeros_like(s), where=dj > 0), 0.0, 1.0)
+    half = np.sin(0.5 * np.pi * x)
+    a = a0[j] + Aj * half**2  # (1 - cos(pi x)) / 2 = sin^2(pi x / 2)
+    u = u0[j] + a0[j] * s + Aj * (s / 2.0 - dj / (2.0 * np.pi) * np.sin(np.pi * x))
+    r = r0[j] + u0[j] * s + a0[j] * s**2 / 2.0 + Aj * (s**2 / 4.0 - (dj / np.pi) ** 2 * half**2)
+    return r, u, a
