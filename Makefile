@@ -8,6 +8,7 @@ STAMP  := $(VENV)/.accelnav-installed
 
 .PHONY: setup demo test lint format bench clean
 
+
 setup: $(STAMP)
 
 $(STAMP): pyproject.toml
@@ -34,8 +35,9 @@ format: setup
 	@files=$$(git ls-files '*.c' '*.h'); \
 	if [ -n "$$files" ]; then clang-format -i $$files; fi
 
+# every bench/bench_*.py; their markdown tables collected in build/bench/results.md
 bench: setup
-	@for f in bench/bench_*.py; do echo "== $$f"; $(PY) $$f || exit 1; done
+	$(PY) bench/run_all.py --out build/bench/results.md
 
 clean:
 	rm -rf build .pytest_cache

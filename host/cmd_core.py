@@ -12,6 +12,7 @@ from codegen.model import DEFAULT_MODEL, Model, load_model
 from .errors import UserError
 from .pipeline import combine_errors, filter_run, format_errors, position_errors, smooth_run
 from .runfile import STATE, export_csv, load_run, save_run
+from .zupt import ZuptParams
 
 
 def _model_arg(p: argparse.ArgumentParser, help_extra: str = "") -> None:
@@ -40,11 +41,66 @@ def register(sub) -> None:
     _csv_arg(p)
     p.set_defaults(func=cmd_filter)
 
-    p = sub.add_parser("smooth", help="filter (if not done) and RTS-smooth a run file")
-    p.add_argument("run", type=Path, help="run file (.npz) from accelnav sim or accelnav filter")
+    p = sub.add_parser(
+        "smooth",
+        help="filter and RTS-smooth a run file (compiled), optionally with position fixes and zero-velocity updates",
+        description="Float64 forward filter and RTS smoother per axis (host/fastsmooth.py), agreeing with the "
+        "reference of accelnav filter to 1e-9. Without --fixes and --zupt the plain path runs: gains computed "
+        "once per model and run length, then a few operations per sample. Zero-velocity detection: host/zupt.py.",
+    )
+    p.add_argument("run", type=Path, help="run file (.npz) from accelnav sim, filter or a recording")
     _model_arg(p, "; default: the model embedded in the run file")
     p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
-    p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write a PNG plot into DIR")
+    p.add_argument(
+        "--fixes",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="position fixes, CSV with columns time_s,position_m,sigma_m (and axis for runs with several axes)",
+    )
+    p.add_argument(
+        "--zupt",
+        default=None,
+        metavar="auto|FILE",
+        help="zero-velocity updates: 'auto' detects rests in the acceleration; FILE is a CSV of rest "
+        "intervals (start_s,end_s), applied without a gate",
+    )
+    z = ZuptParams()
+    p.add_argument(
+        "--zupt-window", type=float, default=z.window_s, metavar="S", help=f"detector window, s; default {z.window_s:g}"
+    )
+    p.add_argument(
+        "--zupt-var-k",
+        type=float,
+        default=z.var_k,
+        metavar="K",
+        help=f"quiet if window variance <= K*R; default {z.var_k:g}",
+    )
+    p.add_argument(
+        "--zupt-level",
+        type=float,
+        default=None,
+        metavar="A",
+        help="at rest if |window mean - bias| <= A m/s^2; default: from the model's bias uncertainty and R",
+    )
+    p.add_argument(
+        "--zupt-sigma", type=float, default=z.sigma, metavar="V", help=f"update std, m/s; default {z.sigma:g}"
+    )
+    p.add_argument(
+        "--zupt-every",
+        type=float,
+        default=z.every_s,
+        metavar="S",
+        help=f"one update per S s of rest; default {z.every_s:g}",
+    )
+    p.add_argument(
+        "--zupt-gate",
+        type=float,
+        default=z.gate,
+        metavar="G",
+        help=f"chi-square gate of each update, 0 = none; default {z.gate:g}",
+    )
+    p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     _csv_arg(p)
     p.set_defaults(func=cmd_smooth)
 
@@ -137,17 +193,50 @@ def cmd_filter(args) -> int:
 
 
 def cmd_smooth(args) -> int:
+    from . import zupt
+    from .fixes import read_fixes
+
     arrays, model = _load(args)
-    arrays = smooth_run(arrays, model)
+    names = [str(a) for a in arrays["axis_names"]]
+    fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
+    params = ZuptParams(
+        window_s=args.zupt_window,
+        var_k=args.zupt_var_k,
+        level=args.zupt_level,
+        sigma=args.zupt_sigma,
+        every_s=args.zupt_every,
+        gate=args.zupt_gate,
+    )
+    rest = None
+    if args.zupt == "auto":
+        try:
+            params = zupt.resolved(model, params)
+        except ValueError as exc:
+            raise UserError(f"--zupt-*: {exc}") from None
+        rest = zupt.rest_mask(arrays["accel"], arrays["clipped"], model, params)
+        print(
+            f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} R, "
+            f"|mean - bias| <= {params.level:.3g} m/s^2: {len(zupt.intervals(rest))} rests, "
+            f"{100 * rest.mean():.1f} % of the run"
+        )
+    elif args.zupt is not None:
+        rest = zupt.intervals_from_csv(args.zupt, arrays["t"])
+    arrays = smooth_run(arrays, model, fixes=fixes, rest=rest, zupt_params=params, zupt_gated=args.zupt == "auto")
+    if rest is not None:
+        print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
+    if fixes is not None:
+        print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
     print(_summary(arrays))
     rows = position_errors(arrays, model)
     if rows:
         print(format_errors(rows))
     _save(args, arrays, model)
     if args.plots is not None:
-        from .plots import plot_run
+        from .plots import plot_run, plot_smoothing
 
         print(f"wrote {plot_run(arrays, model, args.plots / 'smooth.png')}")
+        for path in plot_smoothing(arrays, model, args.plots):
+            print(f"wrote {path}")
     return 0
 
 

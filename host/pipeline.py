@@ -1,4 +1,8 @@
-"""Run the reference filter and smoother over every axis of a run (no I/O here)."""
+"""Run the filter and smoother over every axis of a run (no I/O here).
+
+filter_run uses the float64 reference (host.kf); smooth_run the compiled
+filter and smoother of host.fastsmooth, which agree with it to 1e-9.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +13,7 @@ import numpy as np
 from codegen.design import axis_design
 from codegen.model import Model
 
-from .kf import FilterResult, SmoothResult, double_integrate, rts_smooth, run_filter
+from .kf import double_integrate, run_filter
 
 
 def filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None) -> dict[str, np.ndarray]:
@@ -28,25 +32,60 @@ def filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | 
     return out
 
 
-def _filter_result(arrays: dict[str, np.ndarray], j: int) -> FilterResult:
+def smooth_run(
+    arrays: dict[str, np.ndarray],
+    model: Model,
+    *,
+    progress: bool | None = None,
+    fixes: list[list] | None = None,
+    rest: np.ndarray | None = None,
+    zupt_params=None,
+    zupt_gated: bool = True,
+) -> dict[str, np.ndarray]:
+    """Return ``arrays`` with the filter's and the RTS smoother's output (keys filt_*, smooth_*).
+
+    Compiled (host.fastsmooth): the plain path when there are no extras, else
+    the general path. ``fixes[j]`` are position-fix measurements of axis
+    column j (host.fixes.read_fixes); ``rest`` is an (N,) mask of samples at
+    rest (host.zupt.rest_mask, or intervals from a file) that become
+    zero-velocity updates, gated when ``zupt_gated``. The filter keys are
+    rewritten too, so that filter and smoother saw the same measurements.
+    Adds ``zupt`` (N, n_axes) bool, the samples whose zero-velocity update
+    was applied, and ``fixes`` (M, 4) [t, axis column, position, sigma].
+    ``progress`` is accepted for symmetry with filter_run (the C is quick).
+    """
+    from . import fastsmooth, zupt
+
+    params = zupt.ZuptParams() if zupt_params is None else zupt_params
     n = len(arrays["t"])
-    nan = np.full(n, np.nan)
-    return FilterResult(
-        arrays["filt_x_prior"][j], arrays["filt_P_prior"][j], arrays["filt_x"][j], arrays["filt_P"][j], nan, nan
-    )
-
-
-def smooth_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None) -> dict[str, np.ndarray]:
-    """Return ``arrays`` with the RTS smoother's output added (keys smooth_*); filters first if needed."""
-    if "filt_x_prior" not in arrays:
-        arrays = filter_run(arrays, model, progress=progress)
-    results: list[SmoothResult] = [
-        rts_smooth(axis_design(model, j), _filter_result(arrays, j), progress=progress)
-        for j in range(len(arrays["axis_names"]))
-    ]
+    n_axes = len(arrays["axis_names"])
+    zupt_ks = zupt.update_samples(rest, model, params) if rest is not None else np.zeros(0, dtype=np.int64)
+    zupt_extras, zupt_gates = zupt.measurements(zupt_ks, params)
+    if not zupt_gated:
+        zupt_gates = [0.0] * len(zupt_gates)
+    keys = {k: [] for k in ("filt_x", "filt_P", "filt_x_prior", "filt_P_prior", "smooth_x", "smooth_P")}
+    applied = np.zeros((n, n_axes), dtype=bool)
+    fix_rows = []
+    for j in range(n_axes):
+        d = axis_design(model, j)
+        fx = list(fixes[j]) if fixes is not None else []
+        extras = fx + zupt_extras
+        gates = [0.0] * len(fx) + list(zupt_gates)
+        res = fastsmooth.smooth(d, arrays["accel"][:, j], valid=~arrays["clipped"][:, j], extras=extras, gates=gates)
+        keys["filt_x"].append(res.x_post)
+        keys["filt_P"].append(fastsmooth.unpack(res.P_post))
+        keys["filt_x_prior"].append(res.x_prior)
+        keys["filt_P_prior"].append(fastsmooth.unpack(res.P_prior))
+        keys["smooth_x"].append(res.xs)
+        keys["smooth_P"].append(fastsmooth.unpack(res.Ps))
+        if len(zupt_ks):
+            applied[zupt_ks[res.applied[len(fx) :]], j] = True
+        fix_rows += [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for m in fx]
     out = dict(arrays)
-    out["smooth_x"] = np.stack([s.x for s in results])
-    out["smooth_P"] = np.stack([s.P for s in results])
+    for k, v in keys.items():
+        out[k] = np.stack(v)
+    out["zupt"] = applied
+    out["fixes"] = np.array(fix_rows, dtype=np.float64).reshape(-1, 4)
     return out
 
 

@@ -66,3 +66,126 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _axis_columns(plt, n_axes: int, title: str):
+    fig, axes = plt.subplots(1, n_axes, figsize=(6.5 * n_axes, 4.6), squeeze=False)
+    fig.suptitle(title)
+    return fig, axes[0]
+
+
+def _save(plt, fig, path: Path) -> Path:
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _marks(ax, arrays, j, t, y_of_k=None):
+    """Shade the samples whose zero-velocity update was applied; dots for position fixes."""
+    if "zupt" in arrays and arrays["zupt"][:, j].any():
+        from .zupt import intervals
+
+        # an update every few samples: join the runs with gaps up to a second
+        z = arrays["zupt"][:, j].astype(float)
+        w = max(1, int(round(1.0 / max(t[1] - t[0], 1e-9)))) if len(t) > 1 else 1
+        joined = np.convolve(z, np.ones(w), mode="same") > 0
+        for i, (a, b) in enumerate(intervals(joined)):
+            ax.axvspan(
+                t[a], t[b - 1], color="tab:green", alpha=0.08, lw=0, label="zero-velocity updates" if i == 0 else None
+            )
+    if "fixes" in arrays and len(arrays["fixes"]):
+        f = arrays["fixes"][arrays["fixes"][:, 1] == j]
+        if len(f):
+            ax.errorbar(
+                f[:, 0], f[:, 2], yerr=f[:, 3], fmt="o", color="tab:purple", ms=4, label="position fix +-1 sigma"
+            )
+
+
+def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Path) -> list[Path]:
+    """The paper's figures for a smoothed run, one PNG each, every axis side by side.
+
+    * fig10_bias.png: the bias estimate of the filter and of the smoother (+-1
+      sigma) beside the model's mean bias eps(t) (and the truth when simulated).
+    * fig11_position_filter.png: position from plain double integration and
+      from the filter (+-1 sigma), and the truth.
+    * fig12_position_smoother.png: position from the filter and the smoother
+      (+-1 sigma), and the truth; zero-velocity updates shaded, fixes as dots.
+    """
+    from codegen.design import axis_design
+
+    from .kf import bias_model
+
+    plt = _pyplot()
+    folder = Path(folder)
+    t = arrays["t"]
+    names = [str(a) for a in arrays["axis_names"]]
+    plain = dead_reckoning(arrays, model)
+    has_truth = "r" in arrays
+    paths = []
+
+    fig, axes = _axis_columns(plt, len(names), f"Bias estimate (cf. paper Fig. 10): {model.name}")
+    for j, ax in enumerate(axes):
+        d = axis_design(model, j)
+        if has_truth:
+            ax.plot(t, arrays["eps"][:, j], color="black", lw=1.4, label="truth")
+        ax.plot(t, bias_model(d, len(t)), color="tab:gray", ls=":", lw=1.2, label="model mean c1(1-exp(-t/T))+c2")
+        for stage, color, lab, ls in (("smooth", "tab:red", "smoother", "-"), ("filt", "tab:blue", "filter", "--")):
+            _band(
+                ax,
+                t,
+                arrays[f"{stage}_x"][j, :, 3],
+                np.sqrt(arrays[f"{stage}_P"][j, :, 3, 3]),
+                color,
+                f"{lab} +-1 sigma",
+                ls,
+            )
+        ax.set_title(f"axis {names[j]}")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("bias eps [m/s^2]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="best", fontsize=8)
+    paths.append(_save(plt, fig, folder / "fig10_bias.png"))
+
+    fig, axes = _axis_columns(plt, len(names), f"Position, filter (cf. paper Fig. 11): {model.name}")
+    for j, ax in enumerate(axes):
+        if has_truth:
+            ax.plot(t, arrays["r"][:, j], color="black", lw=1.4, label="truth")
+        ax.plot(t, plain[j, :, 0], color="tab:gray", ls="--", lw=1.0, label="double integration")
+        _band(ax, t, arrays["filt_x"][j, :, 0], np.sqrt(arrays["filt_P"][j, :, 0, 0]), "tab:blue", "filter +-1 sigma")
+        _marks(ax, arrays, j, t)
+        ax.set_title(f"axis {names[j]}")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("position r [m]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="best", fontsize=8)
+    paths.append(_save(plt, fig, folder / "fig11_position_filter.png"))
+
+    fig, axes = _axis_columns(plt, len(names), f"Position, smoother (cf. paper Fig. 12): {model.name}")
+    for j, ax in enumerate(axes):
+        ref = arrays["r"][:, j] if has_truth else arrays["smooth_x"][j, :, 0]
+        if has_truth:
+            ax.plot(t, ref, color="black", lw=1.4, label="truth")
+        _band(
+            ax,
+            t,
+            arrays["filt_x"][j, :, 0],
+            np.sqrt(arrays["filt_P"][j, :, 0, 0]),
+            "tab:blue",
+            "filter +-1 sigma",
+            "--",
+        )
+        _band(
+            ax, t, arrays["smooth_x"][j, :, 0], np.sqrt(arrays["smooth_P"][j, :, 0, 0]), "tab:red", "smoother +-1 sigma"
+        )
+        _marks(ax, arrays, j, t)
+        span = np.ptp(ref) if len(ref) else 1.0
+        ax.set_ylim(ref.min() - 0.5 * span - 1.0, ref.max() + 0.5 * span + 1.0)  # the filter may run far away
+        ax.set_title(f"axis {names[j]}")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("position r [m]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="best", fontsize=8)
+    paths.append(_save(plt, fig, folder / "fig12_position_smoother.png"))
+    return paths

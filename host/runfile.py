@@ -22,6 +22,8 @@ key                       shape, dtype           meaning
 ``filt_P_prior``          (n_axes, N, 4, 4)      its covariance
 ``smooth_x``              (n_axes, N, 4)         RTS-smoothed x[k|N-1]
 ``smooth_P``              (n_axes, N, 4, 4)      its covariance
+``zupt``                  (N, n_axes), bool      samples whose zero-velocity update was applied
+``fixes``                 (M, 4), float64        position fixes used: [t, axis column, r, sigma]
 ========================  =====================  ===============================================
 
 :func:`export_csv` writes the per-sample columns (not the covariances, only

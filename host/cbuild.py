@@ -1,0 +1,114 @@
+"""Compile hand-written C into a Python extension with cffi (API mode), once per source text.
+
+:func:`build_module` takes C sources, the declarations cffi should expose
+(``cdef``) and a module stem, and returns the imported module (``.ffi``,
+``.lib``). The module name carries a hash of everything that goes into the
+build (sources, headers, cdef, flags, Python and cffi versions), so an edit
+gives a new module and an unchanged source is compiled once per cache
+folder. The compile happens in a private temporary folder and the finished
+``.so`` is moved into place with an atomic rename, so two processes building
+the same module at once cannot see a half-written file.
+
+Cache folder: ``$ACCELNAV_BUILD_DIR`` if set, else ``build/cffi`` in the
+source checkout when it is writable, else ``~/.cache/accelnav/cffi``. It is
+never committed (``build/`` is git-ignored).
+
+This is deliberately generic (it knows nothing about filters) so that the
+hand-written kernels in host/csrc and the generated code of codegen can share
+one builder.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import sysconfig
+import tempfile
+from pathlib import Path
+
+STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2")
+
+_REPO = Path(__file__).resolve().parent.parent
+
+
+def cache_dir() -> Path:
+    """Where built modules live (see the module docstring)."""
+    env = os.environ.get("ACCELNAV_BUILD_DIR")
+    if env:
+        return Path(env)
+    local = _REPO / "build" / "cffi"
+    try:
+        local.mkdir(parents=True, exist_ok=True)
+        if os.access(local, os.W_OK):
+            return local
+    except OSError:
+        pass
+    return Path.home() / ".cache" / "accelnav" / "cffi"
+
+
+def build_module(
+    stem: str,
+    cdef: str,
+    sources: dict[str, str],
+    *,
+    main: str,
+    extra_compile_args: tuple[str, ...] = STRICT_FLAGS,
+    workdir: str | Path | None = None,
+):
+    """Build (or reuse) and import a cffi API-mode module.
+
+    ``sources`` maps file names to text (``.c`` and ``.h`` files, written side
+    by side); ``main`` is the ``.c`` file compiled into the module (its
+    header is included by the cffi wrapper as ``main`` with ``.h``).
+    ``cdef`` is the declaration block cffi exposes. Returns the module.
+    """
+    import cffi
+
+    key = "\0".join(
+        [cdef, main, *(f"{k}\0{v}" for k, v in sorted(sources.items())), *extra_compile_args]
+        + [sys.version, cffi.__version__, platform.machine()]
+    )
+    modname = f"_{stem}_{hashlib.sha256(key.encode()).hexdigest()[:16]}"
+    if modname in sys.modules:
+        return sys.modules[modname]
+    root = Path(workdir) if workdir is not None else cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
+    so = root / f"{modname}{suffix}"
+    if not so.exists():
+        tmp = Path(tempfile.mkdtemp(prefix=f"{modname}.", dir=root))
+        try:
+            for name, text in sources.items():
+                (tmp / name).write_text(text)
+            header = Path(main).with_suffix(".h").name
+            # Our C is compiled on its own with the strict flags; cffi's generated wrapper
+            # (which is not -pedantic clean) is then compiled with the defaults and linked to it.
+            obj = tmp / (Path(main).stem + ".o")
+            cc = os.environ.get("CC", "cc")
+            cmd = [cc, *extra_compile_args, "-fPIC", "-c", str(tmp / main), "-o", str(obj), f"-I{tmp}"]
+            done = subprocess.run(cmd, capture_output=True, text=True)
+            if done.returncode != 0:
+                raise RuntimeError(f"{' '.join(cmd)} failed:\n{done.stderr}")
+            ffi = cffi.FFI()
+            ffi.cdef(cdef)
+            ffi.set_source(
+                modname,
+                f'#include "{header}"' if header in sources else "",
+                include_dirs=[str(tmp)],
+                extra_objects=[str(obj)],
+                libraries=["m"],
+            )
+            built = Path(ffi.compile(tmpdir=str(tmp), verbose=False))
+            os.replace(built, so)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    spec = importlib.util.spec_from_file_location(modname, so)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    sys.modules[modname] = mod
+    return mod

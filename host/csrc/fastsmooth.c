@@ -1,0 +1,418 @@
+/*
+ * Float64 filter and RTS smoother of one accelnav axis: see fastsmooth.h for
+ * the conventions and host/fastsmooth.py for the derivation of the plain path.
+ *
+ * Every block carries the equation it computes, as in host/kf.py.
+ */
+#include "fastsmooth.h"
+
+#include <math.h>
+#include <stddef.h>
+
+/* Index of (i, j) in a packed symmetric 4x4 matrix. */
+static const int PK[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
+
+static void unpack(const double *p, double M[4][4])
+{
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            M[i][j] = p[PK[i][j]];
+}
+
+static void pack(double M[4][4], double *p)
+{
+    for (int i = 0; i < 4; i++)
+        for (int j = i; j < 4; j++)
+            p[PK[i][j]] = M[i][j];
+}
+
+static void transition(const acn_axis *m, double F[4][4])
+{
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            F[i][j] = (i == j) ? 1.0 : 0.0;
+    F[0][1] = m->f01;
+    F[0][2] = m->f02;
+    F[1][2] = m->f12;
+    F[3][3] = m->phi;
+}
+
+/* P = F P F' + Q, with F = [[1, f01, f02, 0], [0, 1, f12, 0], [0, 0, 1, 0], [0, 0, 0, phi]] */
+static void predict_cov(const acn_axis *m, double F[4][4], double P[4][4])
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
+    double G[4][4]; /* G = F P */
+    (void)F;
+    for (int j = 0; j < 4; j++) {
+        G[0][j] = P[0][j] + f01 * P[1][j] + f02 * P[2][j];
+        G[1][j] = P[1][j] + f12 * P[2][j];
+        G[2][j] = P[2][j];
+        G[3][j] = phi * P[3][j];
+    }
+    for (int i = 0; i < 4; i++) { /* P = G F' + Q, upper triangle then mirrored */
+        double g0 = G[i][0] + f01 * G[i][1] + f02 * G[i][2];
+        double g1 = G[i][1] + f12 * G[i][2];
+        double row[4] = {g0, g1, G[i][2], phi * G[i][3]};
+        for (int j = i; j < 4; j++)
+            P[i][j] = row[j] + m->q[PK[i][j]];
+    }
+    for (int i = 1; i < 4; i++)
+        for (int j = 0; j < i; j++)
+            P[i][j] = P[j][i];
+}
+
+/* x = F x + b */
+static void predict_mean(const acn_axis *m, double x[4])
+{
+    x[0] = x[0] + m->f01 * x[1] + m->f02 * x[2];
+    x[1] = x[1] + m->f12 * x[2];
+    x[3] = m->phi * x[3] + m->b_eps;
+}
+
+/*
+ * One scalar update z = h x + v, v ~ N(0, R), Joseph form. Writes K.
+ * Returns the innovation y; *S gets its variance.
+ */
+static double update(double x[4], double P[4][4], const double h[4], double z, double R, double *S,
+                     double K[4])
+{
+    double PHt[4], IKH_P[4][4], hIKH_P[4];
+    /* y = z - H x */
+    double y = z - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3]);
+    /* S = H P H' + R */
+    for (int i = 0; i < 4; i++)
+        PHt[i] = P[i][0] * h[0] + P[i][1] * h[1] + P[i][2] * h[2] + P[i][3] * h[3];
+    double s = h[0] * PHt[0] + h[1] * PHt[1] + h[2] * PHt[2] + h[3] * PHt[3] + R;
+    /* K = P H' / S;  x = x + K y */
+    for (int i = 0; i < 4; i++) {
+        K[i] = PHt[i] / s;
+        x[i] += K[i] * y;
+    }
+    /* P = (I - K H) P (I - K H)' + K R K'   (P H' = PHt, P symmetric) */
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            IKH_P[i][j] = P[i][j] - K[i] * PHt[j];
+    for (int i = 0; i < 4; i++)
+        hIKH_P[i] =
+            IKH_P[i][0] * h[0] + IKH_P[i][1] * h[1] + IKH_P[i][2] * h[2] + IKH_P[i][3] * h[3];
+    for (int i = 0; i < 4; i++)
+        for (int j = i; j < 4; j++) {
+            P[i][j] = IKH_P[i][j] - hIKH_P[i] * K[j] + R * K[i] * K[j];
+            P[j][i] = P[i][j];
+        }
+    *S = s;
+    return y;
+}
+
+static const double H_ACC[4] = {0.0, 0.0, 1.0, 1.0};
+
+/* ------------------------------------------------------------------------- */
+/* Plain path, data-independent part: gains, covariances, smoother gains.      */
+
+int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double *K, double *Cs,
+                  double *Pprior, double *Ppost, double *Psm)
+{
+    double F[4][4], P[4][4], x[4] = {0.0, 0.0, 0.0, 0.0}, S;
+    transition(m, F);
+    unpack(m->p0, P);
+
+    /* Forward: the 4-state covariance filter; K[k] = 0 where sample k is skipped. */
+    for (long k = 0; k < n; k++) {
+        double *Kk = K + 4 * k;
+        if (k > 0)
+            predict_cov(m, F, P);
+        pack(P, Pprior + 10 * k);
+        if (valid == NULL || valid[k]) {
+            update(x, P, H_ACC, 0.0, m->R, &S, Kk);
+        } else {
+            Kk[0] = Kk[1] = Kk[2] = Kk[3] = 0.0;
+        }
+        pack(P, Ppost + 10 * k);
+    }
+
+    /* Backward: the 2-state RTS smoother of s = (a, eps), Fs = diag(1, phi). */
+    const double phi = m->phi;
+    double *last = Psm + 10 * (n - 1);
+    for (int i = 0; i < 10; i++)
+        last[i] = Ppost[10 * (n - 1) + i];
+    Cs[4 * (n - 1) + 0] = Cs[4 * (n - 1) + 1] = Cs[4 * (n - 1) + 2] = Cs[4 * (n - 1) + 3] = 0.0;
+    for (long k = n - 2; k >= 0; k--) {
+        const double *pf = Ppost + 10 * k, *pp = Pprior + 10 * (k + 1), *s1 = Psm + 10 * (k + 1);
+        double *ps = Psm + 10 * k, *C = Cs + 4 * k;
+        double paa = pf[7], pae = pf[8], pee = pf[9];
+        double qaa = pp[7], qae = pp[8], qee = pp[9];
+        /* C = Pf Fs' inv(Pp), inv(Pp) = [qee, -qae; -qae, qaa] / det, det on the equilibrated Pp */
+        double sa = sqrt(qaa), se = sqrt(qee);
+        double rho = qae / (sa * se);
+        double det = (1.0 - rho * rho) * qaa * qee;
+        if (!(det > 0.0))
+            return -(int)(k + 1 > 1000000000L ? 1000000000L : k + 1);
+        double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee; /* Pf Fs' */
+        double c00 = (m00 * qee - m01 * qae) / det, c01 = (m01 * qaa - m00 * qae) / det;
+        double c10 = (m10 * qee - m11 * qae) / det, c11 = (m11 * qaa - m10 * qae) / det;
+        C[0] = c00, C[1] = c01, C[2] = c10, C[3] = c11;
+        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
+        double daa = s1[7] - qaa, dae = s1[8] - qae, dee = s1[9] - qee;
+        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
+        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
+        ps[7] = paa + t00 * c00 + t01 * c01;
+        ps[8] = pae + t00 * c10 + t01 * c11;
+        ps[9] = pee + t10 * c10 + t11 * c11;
+    }
+
+    /*
+     * Forward: the r, u rows of the smoothed covariance. With s~ the smoothing
+     * error of s, Cov(x~_k, s~_j) = beta_x' Cov(s~_k, s~_j) for every j >= k;
+     * moving to k+1 maps beta to Cs[k]' beta (Cov(s~_k, s~_j) = C_k Cov(s~_k+1, s~_j)).
+     *   u~' = p_u + gu a~' + e_u,   p_u = u~ + (f12 - gu) a~
+     *   r~' = p_r + gr a~' + e_r,   p_r = r~ + f01 u~ + (f02 - gr) a~
+     * e = (e_r, e_u) is the part of w_(r,u) independent of w_a, covariance Qe.
+     */
+    const double gr = m->gr, gu = m->gu, f01 = m->f01;
+    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
+    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
+    const double qe_uu = m->q[4] - gu * m->q[5];
+    double br0 = 0.0, br1 = 0.0, bu0 = 0.0, bu1 = 0.0;
+    {
+        double *ps = Psm + 0;
+        const double *pf = Ppost + 0;
+        if (n > 1) { /* r, u of sample 0 are independent of every measurement */
+            ps[0] = pf[0], ps[1] = pf[1], ps[4] = pf[4];
+            ps[2] = ps[3] = ps[5] = ps[6] = 0.0;
+        }
+    }
+    for (long k = 0; k + 1 < n; k++) {
+        const double *p = Psm + 10 * k, *C = Cs + 4 * k;
+        double *q = Psm + 10 * (k + 1);
+        double rr = p[0], ru = p[1], ra = p[2], uu = p[4], ua = p[5], aa = p[7];
+        /* Var and Cov of p_r, p_u (time-k quantities) */
+        double vpr =
+            rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
+        double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
+        double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
+        /* beta of p_r, p_u at k, then mapped to k+1: gamma = C' beta */
+        double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
+        double pu0 = bu0 + c2u, pu1 = bu1;
+        double gr0 = C[0] * pr0 + C[2] * pr1, gr1 = C[1] * pr0 + C[3] * pr1;
+        double gu0 = C[0] * pu0 + C[2] * pu1, gu1 = C[1] * pu0 + C[3] * pu1;
+        double aa1 = q[7], ae1 = q[8], ee1 = q[9];
+        double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1; /* Cov(p, a~') */
+        br0 = gr0 + gr, br1 = gr1;
+        bu0 = gu0 + gu, bu1 = gu1;
+        /* Var(r~'), Var(u~'), Cov(r~', u~') */
+        q[0] = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
+        q[4] = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
+        q[1] = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
+        /* Cov(r~', s~') = beta_r' Ps_s, Cov(u~', s~') = beta_u' Ps_s */
+        q[2] = br0 * aa1 + br1 * ae1, q[3] = br0 * ae1 + br1 * ee1;
+        q[5] = bu0 * aa1 + bu1 * ae1, q[6] = bu0 * ae1 + bu1 * ee1;
+    }
+    /* the smoother's last sample is the filter's, exactly (the reference's convention) */
+    for (int i = 0; i < 10; i++)
+        last[i] = Ppost[10 * (n - 1) + i];
+    return 0;
+}
+
+/* ------------------------------------------------------------------------- */
+/* Plain path, data pass: filter means with the precomputed gains, the (a, eps) */
+/* RTS means, then r, u of the smoother in closed form.                        */
+
+void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned char *valid,
+                    const double *K, const double *Cs, double *xf, double *xs)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    const double gr = m->gr, gu = m->gu;
+    double r = m->x0[0], u = m->x0[1], a = m->x0[2], e = m->x0[3];
+
+    /*
+     * x = F x + b, then y = z - (a + eps), x = x + K y. Written so that the
+     * loop-carried chain through (a, eps) is short: with ep = phi eps + b,
+     *   a'   = (1 - Ka) a - Ka ep + Ka z
+     *   eps' = -Ke a + (1 - Ke) ep + Ke z
+     * (the same numbers up to rounding).
+     */
+    for (long k = 0; k < n; k++) {
+        const double *Kk = K + 4 * k;
+        double ep = e;
+        if (k > 0) {
+            r = r + f01 * u + f02 * a;
+            u = u + f12 * a;
+            ep = phi * e + b;
+        }
+        if (valid == NULL || valid[k]) {
+            double y = z[k] - a - ep;
+            r += Kk[0] * y;
+            u += Kk[1] * y;
+            double ka = Kk[2], ke = Kk[3], zk = z[k];
+            double an = (a - ka * a) + ka * (zk - ep);
+            e = (ep - ke * ep) + ke * (zk - a);
+            a = an;
+        } else {
+            e = ep;
+        }
+        double *o = xf + 4 * k;
+        o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+    }
+
+    /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b),  s = (a, eps) */
+    double as = xf[4 * (n - 1) + 2], es = xf[4 * (n - 1) + 3];
+    xs[4 * (n - 1) + 2] = as, xs[4 * (n - 1) + 3] = es;
+    for (long k = n - 2; k >= 0; k--) {
+        const double *f = xf + 4 * k, *C = Cs + 4 * k;
+        /* = C s[k+1] + (s_post[k] - C (Fs s_post[k] + b)): the chain through s is one mul-add */
+        double fa = f[2], fe = phi * f[3] + b;
+        double ca = f[2] - (C[0] * fa + C[1] * fe), ce = f[3] - (C[2] * fa + C[3] * fe);
+        double an = C[0] * as + C[1] * es + ca;
+        es = C[2] * as + C[3] * es + ce;
+        as = an;
+        xs[4 * k + 2] = as, xs[4 * k + 3] = es;
+    }
+
+    /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise, from r[0], u[0] of the filter */
+    r = xf[0], u = xf[1];
+    xs[0] = r, xs[1] = u;
+    for (long k = 0; k + 1 < n; k++) {
+        double a0 = xs[4 * k + 2], a1 = xs[4 * k + 6];
+        double dw = a1 - a0;
+        r = r + (f01 * u + (f02 * a0 + gr * dw));
+        u = u + (f12 * a0 + gu * dw);
+        xs[4 * k + 4] = r, xs[4 * k + 5] = u;
+    }
+    xs[4 * (n - 1) + 0] = xf[4 * (n - 1) + 0]; /* the smoother's last sample is the filter's */
+    xs[4 * (n - 1) + 1] = xf[4 * (n - 1) + 1];
+}
+
+/* ------------------------------------------------------------------------- */
+/* General path: 4-state filter with extras, 4-state RTS smoother.            */
+
+/* Solve M Y = B for symmetric positive definite 4x4 M (Cholesky), B 4x4. */
+static int chol_solve4(double M[4][4], double B[4][4])
+{
+    double L[4][4] = {{0.0}};
+    for (int j = 0; j < 4; j++) {
+        double d = M[j][j];
+        for (int l = 0; l < j; l++)
+            d -= L[j][l] * L[j][l];
+        if (!(d > 0.0))
+            return -1;
+        L[j][j] = sqrt(d);
+        for (int i = j + 1; i < 4; i++) {
+            double s = M[i][j];
+            for (int l = 0; l < j; l++)
+                s -= L[i][l] * L[j][l];
+            L[i][j] = s / L[j][j];
+        }
+    }
+    for (int c = 0; c < 4; c++) {
+        for (int i = 0; i < 4; i++) { /* L y = b */
+            double s = B[i][c];
+            for (int l = 0; l < i; l++)
+                s -= L[i][l] * B[l][c];
+            B[i][c] = s / L[i][i];
+        }
+        for (int i = 3; i >= 0; i--) { /* L' x = y */
+            double s = B[i][c];
+            for (int l = i + 1; l < 4; l++)
+                s -= L[l][i] * B[l][c];
+            B[i][c] = s / L[i][i];
+        }
+    }
+    return 0;
+}
+
+int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
+                long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
+                const double *egate, unsigned char *applied, double *xprior, double *Pprior,
+                double *xpost, double *Ppost, double *xs, double *Psm)
+{
+    double F[4][4], P[4][4], x[4], K[4], S;
+    long ei = 0;
+    transition(m, F);
+    unpack(m->p0, P);
+    for (int i = 0; i < 4; i++)
+        x[i] = m->x0[i];
+
+    for (long k = 0; k < n; k++) {
+        if (k > 0) {
+            predict_mean(m, x);
+            predict_cov(m, F, P);
+        }
+        for (int i = 0; i < 4; i++)
+            xprior[4 * k + i] = x[i];
+        pack(P, Pprior + 10 * k);
+        if (valid == NULL || valid[k])
+            update(x, P, H_ACC, z[k], m->R, &S, K);
+        for (; ei < n_extra && ek[ei] == k; ei++) {
+            const double *h = eh + 4 * ei;
+            if (egate[ei] > 0.0) {
+                /* gated: apply only if y^2 / S <= gate (a chi-square test of the innovation) */
+                double y = ez[ei] - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3]);
+                double s = eR[ei];
+                for (int i = 0; i < 4; i++)
+                    for (int j = 0; j < 4; j++)
+                        s += h[i] * P[i][j] * h[j];
+                if (y * y > egate[ei] * s) {
+                    applied[ei] = 0;
+                    continue;
+                }
+            }
+            update(x, P, h, ez[ei], eR[ei], &S, K);
+            applied[ei] = 1;
+        }
+        for (int i = 0; i < 4; i++)
+            xpost[4 * k + i] = x[i];
+        pack(P, Ppost + 10 * k);
+    }
+
+    for (int i = 0; i < 4; i++)
+        xs[4 * (n - 1) + i] = xpost[4 * (n - 1) + i];
+    for (int i = 0; i < 10; i++)
+        Psm[10 * (n - 1) + i] = Ppost[10 * (n - 1) + i];
+    for (long k = n - 2; k >= 0; k--) {
+        double Pp[4][4], Pf[4][4], Ps1[4][4], B[4][4], C[4][4], sd[4], dx[4], T[4][4];
+        unpack(Pprior + 10 * (k + 1), Pp);
+        unpack(Ppost + 10 * k, Pf);
+        unpack(Psm + 10 * (k + 1), Ps1);
+        /* C = Pf F' inv(Pp)  <=>  C' = inv(Pp) F Pf, solved on the equilibrated Pp */
+        for (int i = 0; i < 4; i++)
+            sd[i] = Pp[i][i] > 0.0 ? sqrt(Pp[i][i]) : 1.0;
+        for (int i = 0; i < 4; i++)
+            for (int j = 0; j < 4; j++) {
+                double s = 0.0;
+                for (int l = i; l < 4; l++)
+                    s += F[i][l] * Pf[l][j];
+                B[i][j] = s / sd[i];
+            }
+        double Mq[4][4];
+        for (int i = 0; i < 4; i++)
+            for (int j = 0; j < 4; j++)
+                Mq[i][j] = Pp[i][j] / (sd[i] * sd[j]);
+        if (chol_solve4(Mq, B) != 0)
+            return -(int)(k + 1 > 1000000000L ? 1000000000L : k + 1);
+        for (int i = 0; i < 4; i++)
+            for (int j = 0; j < 4; j++)
+                C[j][i] = B[i][j] / sd[i];
+        /* xs = x_post + C (xs[k+1] - x_prior[k+1]) */
+        for (int i = 0; i < 4; i++)
+            dx[i] = xs[4 * (k + 1) + i] - xprior[4 * (k + 1) + i];
+        for (int i = 0; i < 4; i++)
+            xs[4 * k + i] = xpost[4 * k + i] + C[i][0] * dx[0] + C[i][1] * dx[1] + C[i][2] * dx[2] +
+                            C[i][3] * dx[3];
+        /* Ps = P_post + C (Ps[k+1] - P_prior[k+1]) C' */
+        for (int i = 0; i < 4; i++)
+            for (int j = 0; j < 4; j++) {
+                double s = 0.0;
+                for (int l = 0; l < 4; l++)
+                    s += C[i][l] * (Ps1[l][j] - Pp[l][j]);
+                T[i][j] = s;
+            }
+        for (int i = 0; i < 4; i++)
+            for (int j = i; j < 4; j++) {
+                double s = 0.0;
+                for (int l = 0; l < 4; l++)
+                    s += T[i][l] * C[j][l];
+                Psm[10 * k + PK[i][j]] = Pf[i][j] + s;
+            }
+    }
+    return 0;
+}

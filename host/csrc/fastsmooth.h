@@ -1,0 +1,50 @@
+/*
+ * Float64 Kalman filter and Rauch-Tung-Striebel smoother of one accelnav axis,
+ * state x = [r, u, a, eps] (position, velocity, acceleration, bias).
+ *
+ * Conventions are those of host/kf.py (the reference): F maps x[k] to x[k+1],
+ * x[k+1] = F x[k] + b + w, w ~ N(0, Q); the prior of sample 0 is (x0, P0); at
+ * sample k the filter predicts (k >= 1), applies z[k] = a + eps + v unless the
+ * sample is invalid, then the extra scalar measurements of sample k in order.
+ *
+ * Symmetric 4x4 matrices are stored packed, 10 doubles, upper triangle by rows:
+ *   rr ru ra re  uu ua ue  aa ae  ee
+ *
+ * Two paths:
+ *   plain:   no extra measurements. The covariances and gains do not depend on
+ *            the data (only on the model and the valid mask), so they are
+ *            computed once (acn_plain_cov) and reused by a cheap data pass
+ *            (acn_plain_data). See host/fastsmooth.py for the proof that the
+ *            reduced smoother is the 4-state RTS smoother.
+ *   general: any scalar extras (position fixes, zero-velocity updates), full
+ *            4-state filter and RTS smoother (acn_general).
+ */
+#ifndef ACCELNAV_FASTSMOOTH_H
+#define ACCELNAV_FASTSMOOTH_H
+
+#define ACN_FASTSMOOTH_API 1
+
+/* ACN-CDEF-BEGIN */
+typedef struct {
+    double f01, f02, f12; /* F[0][1] = Ts, F[0][2] = Ts^2/2, F[1][2] = Ts */
+    double phi, b_eps;    /* eps[k+1] = phi eps[k] + b_eps */
+    double q[10];         /* Q, packed */
+    double R;             /* variance of the acceleration measurement */
+    double x0[4];         /* prior mean of sample 0 */
+    double p0[10];        /* prior covariance of sample 0, packed */
+    double gr, gu;        /* Q_ra / Q_aa, Q_ua / Q_aa: E[w_r | w_a] = gr w_a */
+} acn_axis;
+
+int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double *K, double *Cs,
+                  double *Pprior, double *Ppost, double *Psm);
+
+void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned char *valid,
+                    const double *K, const double *Cs, double *xf, double *xs);
+
+int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
+                long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
+                const double *egate, unsigned char *applied, double *xprior, double *Pprior,
+                double *xpost, double *Ppost, double *xs, double *Psm);
+/* ACN-CDEF-END */
+
+#endif

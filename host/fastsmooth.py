@@ -1,0 +1,432 @@
+"""Compiled float64 filter + RTS smoother of one axis: a fast plain path and a general path.
+
+Both return the same :class:`AxisSmooth` and agree with the reference
+(:func:`host.kf.run_filter` then :func:`host.kf.rts_smooth`) to rounding;
+tests/test_fastsmooth.py asserts 1e-9 relative, sigma-scaled, for states and
+covariances. The C is host/csrc/fastsmooth.c, built on first use by
+:mod:`host.cbuild`.
+
+General path (:func:`smooth_general`)
+-------------------------------------
+The 4-state filter with the acceleration update of every valid sample and any
+extra scalar measurements (position fixes, zero-velocity updates), then the
+4-state RTS smoother, exactly the reference's algorithm (Joseph update, the
+smoother gain solved on the diagonally equilibrated prior, here by Cholesky).
+An extra may carry a *gate* g > 0: it is applied only if its innovation passes
+y^2 <= g S (used for automatic zero-velocity updates, see host/zupt.py);
+which ones were applied is returned so the reference can be rerun with them.
+
+Plain path (:func:`smooth_plain`): the structure of the model
+-------------------------------------------------------------
+With no extras, the measurement z = a + eps sees only s = (a, eps), and s is a
+Markov chain of its own (F's (a, eps) block is diag(1, phi), Q has no (a, eps)
+to (r, u) cross terms in the eps row). Hence:
+
+1. The covariances and gains depend on the model and the valid mask only,
+   never on z. They are computed once (:func:`plain_gains`) and cached in
+   memory, keyed on the design numbers, N and the mask (and optionally on disk).
+2. The smoothed (a, eps) of the 4-state RTS smoother are those of the 2-state
+   RTS smoother of s, because the marginal of s given all z is the 2-state
+   smoothing posterior (s is Markov and z depends on s alone).
+3. Smoothed r and u in closed form. Split the process noise of (r, u) as
+   w_r = gr w_a + e_r, w_u = gu w_a + e_u with gr = Q_ra/Q_aa, gu = Q_ua/Q_aa
+   (Ts^2/6 and Ts/2 here), so e = (e_r, e_u) is independent of w_a and of
+   everything else, with covariance Qe = Q_(ru)(ru) - Q_(ru)a Q_aa^-1 Q_a(ru).
+   Since w_a[k] = a[k+1] - a[k] exactly (F's a row is (0, 0, 1, 0)),
+
+       u[k+1] = u[k] + Ts a[k] + gu (a[k+1] - a[k]) + e_u[k]
+       r[k+1] = r[k] + Ts u[k] + Ts^2/2 a[k] + gr (a[k+1] - a[k]) + e_r[k].
+
+   Taking E[. | all z] (E[e | z] = 0) gives the smoothed r, u from the
+   smoothed a by this recursion without e, from E[r0, u0 | z] = (r0, u0) of the
+   prior (r0, u0 are independent of every z when P0 has no (r, u)-(a, eps)
+   cross terms, which the design guarantees). With Ts: the trapezoid rule for
+   u and Ts^2 (a[k]/3 + a[k+1]/6) for the a part of r.
+4. Smoothed covariances of r and u: the errors x~ = x - E[x | z] obey the same
+   recursion with e included. For j >= k the smoothed cross-covariance of s is
+   Cov(s~_k, s~_j) = C_k Cov(s~_k+1, s~_j) (C the 2-state smoother gain), so a
+   linear combination of s~_0..s~_k plus independent noise has
+   Cov(., s~_j) = beta' Cov(s~_k, s~_j) for every j >= k with a 2-vector beta
+   that moves to k+1 as beta -> C_k' beta. Carrying beta_r, beta_u forward
+   gives Cov(r~, s~) and Cov(u~, s~) at every k, and the recursion above
+   gives Var(r~), Var(u~), Cov(r~, u~) (acn_plain_cov in the C, commented term
+   by term). All exact: no truncation, no steady-state assumption.
+
+The data pass is then a few multiply-adds per sample: forward means with the
+cached gains, backward (a, eps) means, forward r, u. Predict-only samples
+(clipped, missing) keep the gains data-independent, so the valid mask is part
+of the plain path (and of the cache key).
+
+Conventions of the outputs: those of host/kf.py. The smoother's last sample
+is the filter's, exactly. Covariances are returned packed (10 numbers per
+sample, upper triangle by rows: rr ru ra re uu ua ue aa ae ee); use
+:func:`unpack` for (N, 4, 4).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import threading
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from codegen.design import AxisDesign
+
+from .cbuild import STRICT_FLAGS, build_module
+from .kf import Measurement
+
+CSRC = Path(__file__).resolve().parent / "csrc"
+PACKED = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))
+_ROWS = np.array([i for i, _ in PACKED])
+_COLS = np.array([j for _, j in PACKED])
+_DIAG = np.array([0, 4, 7, 9])
+
+_lib_lock = threading.Lock()
+_module = None
+
+
+def _lib():
+    """The compiled kernels (built on first use, then cached on disk and in the process)."""
+    global _module
+    with _lib_lock:
+        if _module is None:
+            header = (CSRC / "fastsmooth.h").read_text()
+            a = header.index("/* ACN-CDEF-BEGIN */")
+            b = header.index("/* ACN-CDEF-END */")
+            cdef = header[a:b].split("\n", 1)[1]
+            _module = build_module(
+                "acn_fastsmooth",
+                cdef,
+                {"fastsmooth.c": (CSRC / "fastsmooth.c").read_text(), "fastsmooth.h": header},
+                main="fastsmooth.c",
+                extra_compile_args=(*STRICT_FLAGS, "-O3"),
+            )
+        return _module
+
+
+# --------------------------------------------------------------------------
+
+
+def unpack(Pp: np.ndarray) -> np.ndarray:
+    """(..., 10) packed symmetric -> (..., 4, 4)."""
+    Pp = np.asarray(Pp)
+    out = np.empty((*Pp.shape[:-1], 4, 4))
+    out[..., _ROWS, _COLS] = Pp
+    out[..., _COLS, _ROWS] = Pp
+    return out
+
+
+def pack(P: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) -> (..., 10) packed upper triangle."""
+    return np.ascontiguousarray(np.asarray(P)[..., _ROWS, _COLS])
+
+
+def packed_sd(Pp: np.ndarray) -> np.ndarray:
+    """(..., 10) packed -> (..., 4) standard deviations of r, u, a, eps."""
+    return np.sqrt(np.asarray(Pp)[..., _DIAG])
+
+
+@dataclass(frozen=True)
+class AxisSmooth:
+    """Filter and smoother output of one axis (see the module docstring for conventions)."""
+
+    x_prior: np.ndarray  # (N, 4) x[k|k-1]
+    P_prior: np.ndarray  # (N, 10) packed
+    x_post: np.ndarray  # (N, 4) x[k|k]
+    P_post: np.ndarray  # (N, 10) packed
+    xs: np.ndarray  # (N, 4) x[k|N-1]
+    Ps: np.ndarray  # (N, 10) packed
+    applied: np.ndarray  # (n_extras,) bool, in the order the extras were given
+    path: str  # "plain" or "general"
+
+    def __len__(self) -> int:
+        return len(self.xs)
+
+
+def _axis_struct(ffi, d: AxisDesign):
+    F, Q, b = np.asarray(d.F), np.asarray(d.Q), np.asarray(d.b)
+    expect = np.eye(4)
+    expect[0, 1], expect[0, 2], expect[1, 2], expect[3, 3] = F[0, 1], F[0, 2], F[1, 2], F[3, 3]
+    if not np.array_equal(F, expect) or np.any(b[:3] != 0) or np.any(Q[3, :3] != 0):
+        raise ValueError("design: F, b or Q do not have the structure of codegen.design (see DESIGN.md)")
+    if not np.array_equal(np.asarray(d.H), [[0.0, 0.0, 1.0, 1.0]]):
+        raise ValueError("design: H must be [0, 0, 1, 1]")
+    if not Q[2, 2] > 0:
+        raise ValueError("design: Q_aa must be > 0 (sigma_n > 0)")
+    m = ffi.new("acn_axis *")
+    m.f01, m.f02, m.f12 = F[0, 1], F[0, 2], F[1, 2]
+    m.phi, m.b_eps = F[3, 3], b[3]
+    m.q = pack(Q).tolist()
+    m.R = float(d.R)
+    m.x0 = np.asarray(d.x0, dtype=np.float64).tolist()
+    m.p0 = pack(np.asarray(d.P0, dtype=np.float64)).tolist()
+    m.gr, m.gu = Q[0, 2] / Q[2, 2], Q[1, 2] / Q[2, 2]
+    return m
+
+
+def _design_key(d: AxisDesign) -> bytes:
+    parts = [np.asarray(v, dtype=np.float64).tobytes() for v in (d.Ts, d.F, d.b, d.Q, d.H, d.R, d.x0, d.P0)]
+    return b"".join(parts)
+
+
+def _valid(z: np.ndarray, valid) -> np.ndarray:
+    ok = np.isfinite(z)
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != z.shape:
+            raise ValueError(f"valid: shape {valid.shape}, expected {z.shape}")
+        ok &= valid
+    return ok
+
+
+def _ptr(ffi, arr: np.ndarray, ctype: str):
+    """A C pointer into ``arr`` (C-contiguous); the returned cdata keeps ``arr`` alive."""
+    assert arr.flags.c_contiguous
+    return ffi.from_buffer(ctype.replace(" *", "[]"), arr)
+
+
+# --------------------------------------------------------------------------
+# Plain path
+
+
+@dataclass(frozen=True)
+class PlainGains:
+    """The data-independent part of the plain path for one (design, N, mask)."""
+
+    key: str
+    K: np.ndarray  # (N, 4) filter gain [K_r, K_u, K_a, K_eps]; 0 on skipped samples
+    Cs: np.ndarray  # (N, 4) (a, eps) smoother gain C[k] = [[c00, c01], [c10, c11]]; last row 0
+    P_prior: np.ndarray  # (N, 10)
+    P_post: np.ndarray  # (N, 10)
+    Ps: np.ndarray  # (N, 10)
+    all_valid: bool
+
+
+_CACHE: OrderedDict[str, PlainGains] = OrderedDict()
+_CACHE_SIZE = 4
+_cache_lock = threading.Lock()
+
+
+def gain_cache_dir() -> Path | None:
+    """Optional disk cache for :func:`plain_gains`: ``$ACCELNAV_GAIN_CACHE`` (off when unset)."""
+    env = os.environ.get("ACCELNAV_GAIN_CACHE")
+    return Path(env) if env else None
+
+
+def plain_gains(d: AxisDesign, n: int, valid: np.ndarray | None = None, *, cache_dir: Path | None = None) -> PlainGains:
+    """Gains and covariances of the plain path for N = n samples (cached; see the module docstring).
+
+    ``valid`` is the mask of samples whose acceleration is used (None: all).
+    The key hashes every design number, n and the mask, so a model with the
+    same numbers (whatever its file) shares the entry and an x0/P0 override
+    does not. ``cache_dir`` (default :func:`gain_cache_dir`) also keeps them on disk.
+    """
+    n = int(n)
+    if n < 1:
+        raise ValueError("n: at least one sample is needed")
+    if valid is not None:
+        valid = np.ascontiguousarray(valid, dtype=bool)
+        if valid.shape != (n,):
+            raise ValueError(f"valid: shape {valid.shape}, expected ({n},)")
+        if valid.all():
+            valid = None
+    h = hashlib.sha256(_design_key(d))
+    h.update(n.to_bytes(8, "little"))
+    if valid is not None:
+        h.update(np.packbits(valid).tobytes())
+    key = h.hexdigest()[:24]
+    with _cache_lock:
+        if key in _CACHE:
+            _CACHE.move_to_end(key)
+            return _CACHE[key]
+    cache_dir = cache_dir if cache_dir is not None else gain_cache_dir()
+    g = _load_gains(cache_dir, key) if cache_dir is not None else None
+    if g is None:
+        g = _compute_gains(d, n, valid, key)
+        if cache_dir is not None:
+            _save_gains(cache_dir, g)
+    with _cache_lock:
+        _CACHE[key] = g
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return g
+
+
+def clear_gain_cache() -> None:
+    with _cache_lock:
+        _CACHE.clear()
+
+
+def _compute_gains(d: AxisDesign, n: int, valid: np.ndarray | None, key: str) -> PlainGains:
+    mod = _lib()
+    ffi, lib = mod.ffi, mod.lib
+    P0 = np.asarray(d.P0)
+    if np.any(P0[:2, 2:] != 0):
+        raise ValueError("design: the plain path needs P0 without (r, u)-(a, eps) cross terms; use smooth_general")
+    m = _axis_struct(ffi, d)
+    K = np.empty((n, 4))
+    Cs = np.empty((n, 4))
+    Pp, Pf, Ps = np.empty((n, 10)), np.empty((n, 10)), np.empty((n, 10))
+    vmask = ffi.NULL if valid is None else _ptr(ffi, valid.view(np.uint8), "unsigned char *")
+    rc = lib.acn_plain_cov(
+        m, n, vmask, *(_ptr(ffi, a, "double *") for a in (K, Cs, Pp, Pf, Ps))
+    )  # fmt: skip
+    if rc != 0:
+        raise ValueError(f"plain path: the (a, eps) prior covariance is singular at sample {-rc}")
+    for a in (K, Cs, Pp, Pf, Ps):
+        a.flags.writeable = False
+    return PlainGains(key, K, Cs, Pp, Pf, Ps, valid is None)
+
+
+def _load_gains(cache_dir: Path, key: str) -> PlainGains | None:
+    path = Path(cache_dir) / f"gains-{key}.npz"
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            arrays = [f[k] for k in ("K", "Cs", "P_prior", "P_post", "Ps")]
+            all_valid = bool(f["all_valid"])
+    except (OSError, KeyError, ValueError):
+        return None
+    for a in arrays:
+        a.flags.writeable = False
+    return PlainGains(key, *arrays, all_valid)
+
+
+def _save_gains(cache_dir: Path, g: PlainGains) -> None:
+    cache_dir = Path(cache_dir)
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    tmp = cache_dir / f"gains-{g.key}.{os.getpid()}.tmp.npz"
+    np.savez(tmp, K=g.K, Cs=g.Cs, P_prior=g.P_prior, P_post=g.P_post, Ps=g.Ps, all_valid=g.all_valid)
+    os.replace(tmp, cache_dir / f"gains-{g.key}.npz")
+
+
+def plain_data(d: AxisDesign, z: np.ndarray, valid: np.ndarray | None, g: PlainGains, *, out=None):
+    """The data pass alone: (x_post, xs), each (N, 4). ``out`` may pass two preallocated arrays.
+
+    ``valid`` must be the mask ``g`` was computed for (None when all valid);
+    this is what the benchmark times.
+    """
+    mod = _lib()
+    ffi, lib = mod.ffi, mod.lib
+    z = np.ascontiguousarray(z, dtype=np.float64)
+    n = len(z)
+    xf, xs = out if out is not None else (np.empty((n, 4)), np.empty((n, 4)))
+    vbytes = None if valid is None else np.ascontiguousarray(valid, dtype=bool).view(np.uint8)
+    vmask = ffi.NULL if vbytes is None else _ptr(ffi, vbytes, "unsigned char *")
+    lib.acn_plain_data(
+        _axis_struct(ffi, d),
+        n,
+        _ptr(ffi, z, "double *"),
+        vmask,
+        _ptr(ffi, g.K, "double *"),
+        _ptr(ffi, g.Cs, "double *"),
+        _ptr(ffi, xf, "double *"),
+        _ptr(ffi, xs, "double *"),
+    )
+    return xf, xs
+
+
+def _priors(d: AxisDesign, x_post: np.ndarray) -> np.ndarray:
+    x_prior = np.empty_like(x_post)
+    x_prior[0] = d.x0
+    x_prior[1:] = x_post[:-1] @ np.asarray(d.F).T + np.asarray(d.b)
+    return x_prior
+
+
+def smooth_plain(d: AxisDesign, z: np.ndarray, *, valid: np.ndarray | None = None) -> AxisSmooth:
+    """Filter and smoother without extra measurements (the fast path)."""
+    z = np.asarray(z, dtype=np.float64)
+    ok = _valid(z, valid)
+    mask = None if ok.all() else ok
+    g = plain_gains(d, len(z), mask)
+    zc = np.where(ok, z, 0.0)
+    xf, xs = plain_data(d, zc, mask, g)
+    return AxisSmooth(_priors(d, xf), g.P_prior, xf, g.P_post, xs, g.Ps, np.zeros(0, dtype=bool), "plain")
+
+
+# --------------------------------------------------------------------------
+# General path
+
+
+def smooth_general(
+    d: AxisDesign,
+    z: np.ndarray,
+    *,
+    valid: np.ndarray | None = None,
+    extras: Sequence[Measurement] = (),
+    gates: Sequence[float] | None = None,
+    out: AxisSmooth | None = None,
+) -> AxisSmooth:
+    """Filter and smoother with extra scalar measurements (see host.kf.position_fix, zero_velocity).
+
+    ``gates[i]`` > 0 makes extra i conditional (applied iff y^2 <= gates[i] S);
+    0 or None applies it unconditionally. ``applied`` in the result follows
+    the order of ``extras``. ``out``, a previous result of the same length,
+    is overwritten instead of allocating (a long-running caller avoids the
+    page faults of fresh 300 MB buffers at N = 1e6).
+    """
+    mod = _lib()
+    ffi, lib = mod.ffi, mod.lib
+    z = np.asarray(z, dtype=np.float64)
+    n = len(z)
+    if n < 1:
+        raise ValueError("z: at least one sample is needed")
+    ok = _valid(z, valid)
+    zc = np.ascontiguousarray(np.where(ok, z, 0.0))
+    ne = len(extras)
+    ek = np.array([m.k for m in extras], dtype=np.int64).reshape(ne)
+    if ne and (ek.min() < 0 or ek.max() >= n):
+        bad = int(ek[(ek < 0) | (ek >= n)][0])
+        raise ValueError(f"extra measurement at sample {bad} is outside 0..{n - 1}")
+    eR = np.array([m.R for m in extras], dtype=np.float64).reshape(ne)
+    if ne and not np.all(eR > 0):
+        raise ValueError(f"extra measurement at sample {int(ek[~(eR > 0)][0])} has variance <= 0")
+    order = np.argsort(ek, kind="stable")
+    eh = np.ascontiguousarray(np.array([m.h for m in extras], dtype=np.float64).reshape(ne, 4)[order])
+    ez = np.ascontiguousarray(np.array([m.z for m in extras], dtype=np.float64).reshape(ne)[order])
+    eg = np.zeros(ne) if gates is None else np.asarray(gates, dtype=np.float64).reshape(ne)
+    eg = np.ascontiguousarray(eg[order])
+    eks = np.ascontiguousarray(ek[order])
+    eR = np.ascontiguousarray(eR[order])
+    applied = np.zeros(max(ne, 1), dtype=np.uint8)
+    if out is not None and len(out) == n and out.path == "general":
+        xp, Pp, xf, Pf, xs, Ps = out.x_prior, out.P_prior, out.x_post, out.P_post, out.xs, out.Ps
+    else:
+        xp, xf, xs = np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4))
+        Pp, Pf, Ps = np.empty((n, 10)), np.empty((n, 10)), np.empty((n, 10))
+    keep = [eks, eh, ez, eR, eg]  # keep the buffers alive across the call
+    rc = lib.acn_general(
+        _axis_struct(ffi, d),
+        n,
+        _ptr(ffi, zc, "double *"),
+        _ptr(ffi, ok.view(np.uint8), "unsigned char *"),
+        ne,
+        ffi.from_buffer("long[]", eks) if ne else ffi.NULL,
+        *((_ptr(ffi, a, "double *") if ne else ffi.NULL) for a in keep[1:]),
+        _ptr(ffi, applied, "unsigned char *"),
+        *(_ptr(ffi, a, "double *") for a in (xp, Pp, xf, Pf, xs, Ps)),
+    )
+    if rc != 0:
+        raise ValueError(f"general path: the prior covariance is not positive definite at sample {-rc}")
+    done = np.zeros(ne, dtype=bool)
+    done[order] = applied[:ne].astype(bool)
+    return AxisSmooth(xp, Pp, xf, Pf, xs, Ps, done, "general")
+
+
+def smooth(
+    d: AxisDesign,
+    z: np.ndarray,
+    *,
+    valid: np.ndarray | None = None,
+    extras: Sequence[Measurement] = (),
+    gates: Sequence[float] | None = None,
+) -> AxisSmooth:
+    """The plain path when there are no extras (and P0 allows it), else the general path."""
+    P0 = np.asarray(d.P0)
+    if not extras and not np.any(P0[:2, 2:] != 0):
+        return smooth_plain(d, z, valid=valid)
+    return smooth_general(d, z, valid=valid, extras=extras, gates=gates)

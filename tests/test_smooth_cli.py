@@ -1,0 +1,99 @@
+"""accelnav smooth: fixes, automatic and file zero-velocity updates, plots, refusals of bad files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_rel_close
+
+from codegen.design import axis_design
+from host.cli import main
+from host.kf import rts_smooth, run_filter
+from host.runfile import load_run
+
+
+def _run(argv, capsys):
+    status = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return status, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    path = tmp_path_factory.mktemp("smooth") / "sim.npz"
+    assert main(["sim", "--scenario", "stop_and_go", "--duration", "40", "--seed", "9", "--out", str(path)]) == 0
+    return path
+
+
+def test_plain_smooth_matches_reference(sim, tmp_path, capsys):
+    status, out, _ = _run(["smooth", sim, "--out", tmp_path / "s.npz"], capsys)
+    assert status == 0
+    arrays, model = load_run(tmp_path / "s.npz")
+    for j in range(2):
+        d = axis_design(model, j)
+        f = run_filter(d, arrays["accel"][:, j], valid=~arrays["clipped"][:, j])
+        s = rts_smooth(d, f)
+        sd = np.sqrt(np.einsum("kii->ki", s.P))
+        assert_rel_close(arrays["smooth_x"][j], s.x, sd, 1e-9, "smooth_x")
+        assert_rel_close(arrays["smooth_P"][j], s.P, sd[:, :, None] * sd[:, None, :], 1e-9, "smooth_P")
+    assert not arrays["zupt"].any() and arrays["fixes"].shape == (0, 4)
+
+
+def test_fixes_and_auto_zupt_with_plots(sim, tmp_path, capsys):
+    arrays, _ = load_run(sim)
+    t, r = arrays["t"], arrays["r"]
+    rows = ["time_s,axis,position_m,sigma_m"]
+    for k in (1000, 2500, 3999):
+        rows += [f"{t[k] + 0.002:.4f},x,{r[k, 0]:.6f},0.05", f"{t[k]:.4f},y,{r[k, 1]:.6f},0.05"]
+    (tmp_path / "fixes.csv").write_text("\n".join(rows) + "\n")
+    argv = ["smooth", sim, "--fixes", tmp_path / "fixes.csv", "--zupt", "auto", "--out", tmp_path / "s.npz"]
+    status, out, _ = _run([*argv, "--plots", tmp_path / "plots"], capsys)
+    assert status == 0 and "zero-velocity detector" in out and "position fixes per axis: 3, 3" in out
+    out_arrays, _ = load_run(tmp_path / "s.npz")
+    assert out_arrays["zupt"].sum() > 100 and out_arrays["fixes"].shape == (6, 4)
+    # the fix at k pins the smoothed position there
+    for k in (1000, 2500):
+        assert abs(out_arrays["smooth_x"][0, k, 0] - r[k, 0]) < 0.1
+    for name in ("smooth.png", "fig10_bias.png", "fig11_position_filter.png", "fig12_position_smoother.png"):
+        assert (tmp_path / "plots" / name).stat().st_size > 10_000
+
+
+def test_zupt_from_file_is_applied_without_gate(sim, tmp_path, capsys):
+    (tmp_path / "rest.csv").write_text("start_s,end_s\n0,1.5\n10,10.2\n")
+    status, out, _ = _run(["smooth", sim, "--zupt", tmp_path / "rest.csv", "--out", tmp_path / "s.npz"], capsys)
+    assert status == 0
+    arrays, _ = load_run(tmp_path / "s.npz")
+    # 0..1.5 s -> samples 0..150, every 10th: 16; 10..10.2 s -> 1000..1020: 3
+    assert arrays["zupt"][:, 0].sum() == 19 and arrays["zupt"][:, 1].sum() == 19
+
+
+@pytest.mark.parametrize(
+    "text,words",
+    [
+        ("", "empty"),
+        ("time_s,position_m\n1,2\n", "missing column 'sigma_m'"),
+        ("time_s,axis,position_m,sigma_m,colour\n1,x,2,3,red\n", "unknown column 'colour'"),
+        ("time_s,axis,position_m,sigma_m\n", "no data rows"),
+        ("time_s,axis,position_m,sigma_m\n1,x,abc,0.1\n", "row 2: position_m is 'abc'"),
+        ("time_s,axis,position_m,sigma_m\n1,x,1,0\n", "row 2: sigma_m is 0"),
+        ("time_s,axis,position_m,sigma_m\n1,z,1,0.1\n", "row 2: axis 'z'"),
+        ("time_s,axis,position_m,sigma_m\n99,x,1,0.1\n", "row 2: time_s 99 is outside the run"),
+        ("time_s,axis,position_m,sigma_m\n1,x,1\n", "row 2: 3 fields"),
+        ("time_s,position_m,sigma_m\n1,1,0.1\n", "add an 'axis' column"),
+    ],
+)
+def test_bad_fixes_files_refused_with_one_line(sim, tmp_path, capsys, text, words):
+    (tmp_path / "f.csv").write_text(text)
+    status, _, err = _run(["smooth", sim, "--fixes", tmp_path / "f.csv", "--out", tmp_path / "s.npz"], capsys)
+    assert status == 2 and words in err and err.count("\n") == 1
+    assert not (tmp_path / "s.npz").exists()
+
+
+def test_bad_zupt_arguments_refused(sim, tmp_path, capsys):
+    status, _, err = _run(["smooth", sim, "--zupt", "auto", "--zupt-window", "0", "--out", tmp_path / "s.npz"], capsys)
+    assert status == 2 and "window" in err and err.count("\n") == 1
+    status, _, err = _run(["smooth", sim, "--zupt", tmp_path / "none.csv", "--out", tmp_path / "s.npz"], capsys)
+    assert status == 2 and "none.csv: no such file" in err
+    (tmp_path / "r.csv").write_text("start_s,end_s\n5,4\n")
+    status, _, err = _run(["smooth", sim, "--zupt", tmp_path / "r.csv", "--out", tmp_path / "s.npz"], capsys)
+    assert status == 2 and "end_s 4 is before start_s 5" in err
