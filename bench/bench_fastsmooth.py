@@ -22,6 +22,7 @@ import argparse
 import time
 
 import numpy as np
+from baselines import best_of, filterpy_smooth
 
 from codegen.design import axis_design
 from codegen.model import load_model
@@ -29,27 +30,6 @@ from hil_sim.sensor import simulate
 from host import fastsmooth as fs
 from host import zupt
 from host.kf import rts_smooth, run_filter
-
-
-def best_of(fn, repeat: int) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
-def filterpy(d, z):
-    from filterpy.kalman import KalmanFilter
-
-    mu = d.eps_mean  # FilterPy's smoother ignores b: run on eps - (c1 + c2), exactly equivalent
-    kf = KalmanFilter(dim_x=4, dim_z=1)
-    kf.x = (d.x0 - [0, 0, 0, mu]).reshape(4, 1)
-    kf.P, kf.F, kf.Q, kf.H, kf.R = np.array(d.P0), np.array(d.F), np.array(d.Q), np.array(d.H), np.array([[d.R]])
-    xs, Ps, _, _ = kf.batch_filter((z - mu).reshape(-1, 1), update_first=True)
-    x, _, _, _ = kf.rts_smoother(xs, Ps)
-    return x.reshape(-1, 4) + [0, 0, 0, mu]
 
 
 def rel_err(x, x_ref, P_ref) -> float:
@@ -111,7 +91,7 @@ def main() -> None:
     t_genc = best_of(lambda: fs.smooth_general(d, z, extras=extras, gates=gates), 2)
     row("general", f"{len(extras)} gated ZUPTs, fresh buffers", n, t_genc, f"{agree_general:.1e}")
 
-    t_fp = best_of(lambda: filterpy(d, z[:nb]), 1)
+    t_fp = best_of(lambda: filterpy_smooth(d, z[:nb]), 1)
     row("FilterPy", "batch_filter + rts_smoother", nb, t_fp, "")
     t_ref = best_of(lambda: rts_smooth(d, run_filter(d, z[:nb], progress=False), progress=False), 1)
     row("reference", "host/kf.py run_filter + rts_smooth", nb, t_ref, "0")

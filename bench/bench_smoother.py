@@ -12,6 +12,7 @@ import argparse
 import time
 
 import numpy as np
+from baselines import filterpy_smooth, pykalman_smooth
 
 from codegen.design import axis_design
 from codegen.model import load_model
@@ -22,34 +23,6 @@ from host.kf import rts_smooth, run_filter
 def ours(d, z):
     f = run_filter(d, z, progress=False)
     return rts_smooth(d, f, progress=False).x
-
-
-def filterpy(d, z):
-    from filterpy.kalman import KalmanFilter
-
-    mu = d.eps_mean  # FilterPy's smoother ignores b: run on eps - (c1 + c2)
-    kf = KalmanFilter(dim_x=4, dim_z=1)
-    kf.x = (d.x0 - [0, 0, 0, mu]).reshape(4, 1)
-    kf.P, kf.F, kf.Q, kf.H, kf.R = np.array(d.P0), np.array(d.F), np.array(d.Q), np.array(d.H), np.array([[d.R]])
-    xs, Ps, _, _ = kf.batch_filter((z - mu).reshape(-1, 1), update_first=True)
-    x, _, _, _ = kf.rts_smoother(xs, Ps)
-    return x.reshape(-1, 4) + [0, 0, 0, mu]
-
-
-def pykalman(d, z):
-    from pykalman import KalmanFilter
-
-    kf = KalmanFilter(
-        transition_matrices=np.array(d.F),
-        observation_matrices=np.array(d.H),
-        transition_covariance=np.array(d.Q),
-        observation_covariance=np.array([[d.R]]),
-        transition_offsets=np.array(d.b),
-        observation_offsets=np.zeros(1),
-        initial_state_mean=np.array(d.x0),
-        initial_state_covariance=np.array(d.P0),
-    )
-    return kf.smooth(z.reshape(-1, 1))[0]
 
 
 def timed(fn, d, z, repeat):
@@ -77,7 +50,7 @@ def main() -> None:
         t_ours, x_ours = timed(ours, d, z, args.repeat)
         sd = np.sqrt(np.einsum("kii->ki", rts_smooth(d, run_filter(d, z, progress=False), progress=False).P))
         print(f"| {n} | accelnav reference | {t_ours:.3f} | {n / t_ours:,.0f} | 1.00 | 0 |")
-        for name, fn in (("FilterPy", filterpy), ("pykalman", pykalman)):
+        for name, fn in (("FilterPy", filterpy_smooth), ("pykalman", pykalman_smooth)):
             t, x = timed(fn, d, z, args.repeat)
             diff = np.max(np.abs(x - x_ours) / np.where(sd > 0, sd, 1.0))
             print(f"| {n} | {name} | {t:.3f} | {n / t:,.0f} | {t / t_ours:.2f} | {diff:.1e} |")
