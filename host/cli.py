@@ -21,6 +21,8 @@ from .errors import UserError
 COMMAND_MODULES = (
     "host.cmd_core",  # sim, filter, smooth, demo
     "host.cmd_fit_bias",  # fit-bias
+    "host.cmd_codegen",  # codegen
+    "host.cmd_record",  # record, log info|export
 )
 
 

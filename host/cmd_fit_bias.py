@@ -1,0 +1,338 @@
+"""``accelnav fit-bias``: bias model, whiteness and noise figures from a stationary recording.
+
+For each axis: read and check the samples (:mod:`host.recording`), fit
+eps(t) = c1 (1 - exp(-t/T)) + c2 (:mod:`host.biasfit`), test the residuals
+for whiteness (:mod:`host.whiteness`), identify the noise from their Allan
+deviation (:mod:`host.noiseid`), print a report and optionally draw the
+figures (:mod:`host.biasfit_plots`). Then write a model file: the input
+model (``--model``; else the one embedded in the recording; else the embedded
+default) with the fitted axes merged in and the noise figures replaced:
+
+* each fitted axis gets c1, c2, T; when T is not identified the axis gets
+  c1 = 0, c2 = mean and keeps the base model's T (with c1 = 0 T only sets how
+  fast the filter's bias state reverts to c2), or the record length for a new axis;
+* R = max over the fitted axes of N^2 / Ts (Ts of the output model),
+  sigma_eps = max over the fitted axes of K (fitted or bound);
+* sigma_n is kept from the base model (a stationary recording cannot identify
+  it) unless ``--sigma-n paper`` asks for the paper's rule.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+from codegen.model import DEFAULT_MODEL, G0, Model, load_model, loads_model
+from codegen.modelfile import dump_model, revalidate, with_axis_bias, with_noise
+
+from .biasfit import BiasFit, FitError, fit_bias
+from .errors import UserError
+from .noiseid import NoiseId, identify_noise
+from .progress import Progress
+from .recording import MIN_DURATION_S, Recording, check_axis, read_recording
+from .whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "fit-bias",
+        help="identify the bias model and noise figures from a stationary recording",
+        description="Fit eps(t) = c1 (1 - exp(-t/T)) + c2 to a stationary recording, test the residuals for "
+        "whiteness, identify the noise from the Allan deviation, and write a model file.",
+    )
+    p.add_argument("recording", type=Path, help="CSV (plain or gzip) or NPZ (as written by accelnav sim)")
+    p.add_argument(
+        "--axis",
+        action="append",
+        metavar="NAME",
+        help="axis to fit: a column name or its short name (acc_x_g or x); repeat for several; default: all",
+    )
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        metavar="IN.toml",
+        help="model file to merge the results into; default: the model embedded in the recording, "
+        f"else the embedded {DEFAULT_MODEL.name}",
+    )
+    p.add_argument("--out", type=Path, required=True, metavar="OUT.toml", help="model file to write (TOML)")
+    p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write the figures (PNG) into DIR")
+    p.add_argument(
+        "--unit", default=None, help="unit of the acceleration columns: g, mg or m/s^2; default: from the name"
+    )
+    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="sample rate if there is no time column")
+    p.add_argument("--time-column", default=None, metavar="NAME", help="time column; default: t, t_s, time, ...")
+    p.add_argument(
+        "--min-duration",
+        type=float,
+        default=MIN_DURATION_S,
+        metavar="S",
+        help=f"refuse recordings shorter than this; default: {MIN_DURATION_S:g} s",
+    )
+    p.add_argument(
+        "--sigma-n",
+        choices=("keep", "paper"),
+        default="keep",
+        help="sigma_n: keep the base model's (default) or use the paper's derivative-variance rule",
+    )
+    p.add_argument("--lags", type=int, default=DEFAULT_LB_LAGS, help=f"Ljung-Box lags; default: {DEFAULT_LB_LAGS}")
+    p.set_defaults(func=cmd_fit_bias)
+
+
+@dataclass(frozen=True, eq=False)
+class AxisResult:
+    name: str
+    column: str
+    unit: str
+    fit: BiasFit
+    white: Whiteness
+    noise: NoiseId
+
+
+def analyse_axis(
+    rec: Recording, axis: str, *, min_duration_s: float, full_scale: float | None, lags: int
+) -> AxisResult:
+    """Check, fit, test and identify one axis of ``rec`` (with progress on stderr)."""
+    y = check_axis(rec, axis, min_duration_s=min_duration_s, full_scale=full_scale)
+    j = rec.column(axis)
+    name = rec.axis_names[j]
+    try:
+        with Progress(f"fit {name}", total=4, unit="stages") as p:
+            fit = fit_bias(rec.t, y, progress=p)
+    except FitError as exc:
+        raise UserError(f"{rec.source}: axis {name!r}: {exc}") from None
+    with Progress(f"white {name}", total=1, unit="tests") as p:
+        white = whiteness(fit.residuals, lb_lags=lags)
+        p.update(1)
+    with Progress(f"allan {name}", total=1, unit="taus") as p:
+        noise = identify_noise(fit.residuals, rec.rate_hz, progress=p)
+    return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise)
+
+
+def cmd_fit_bias(args: argparse.Namespace) -> int:
+    if args.lags < 1:
+        raise UserError(f"--lags: got {args.lags}; accepted: a positive number of lags")
+    rec = read_recording(
+        args.recording, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column
+    )
+    base, base_label, given = _base_model(args.model, rec)
+    full_scale = base.max_accel_m_s2 if given else None
+
+    print(
+        f"{rec.source}: {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s), "
+        f"axes {', '.join(rec.axis_names)}"
+    )
+    results = [
+        analyse_axis(rec, a, min_duration_s=args.min_duration, full_scale=full_scale, lags=args.lags)
+        for a in rec.axis_names
+    ]
+    for r in results:
+        print()
+        print("\n".join(axis_report(r)))
+
+    model = merge(base, rec, results, sigma_n=args.sigma_n, keep_rate=given)
+    header = provenance(rec, results, base_label)
+    text = dump_model(model, header=header)
+    loads_model(text, source=str(args.out))  # a result the loader refuses is not written
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
+    print()
+    print("\n".join(model_report(model, base, base_label, rec, results, args.sigma_n, args.out)))
+
+    if args.plots is not None:
+        from .biasfit_plots import plot_all
+
+        paths = []
+        with Progress("plots", total=len(results), unit="axes") as p:
+            for i, r in enumerate(results):
+                y = rec.axis(r.name)
+                paths += plot_all(rec.t, y, rec.rate_hz, r.fit, r.white, r.noise, args.plots, r.name)
+                p.update(i + 1)
+        print(f"figures: {', '.join(str(p) for p in paths)}")
+    return 0
+
+
+def _base_model(path: Path | None, rec: Recording) -> tuple[Model, str, bool]:
+    """(model, how to name it, whether it describes this sensor)."""
+    if path is not None:
+        return load_model(path), str(path), True
+    if rec.model_toml is not None:
+        return (
+            loads_model(rec.model_toml, source=f"{rec.source}:model_toml"),
+            f"the model embedded in {rec.source}",
+            True,
+        )
+    return load_model(DEFAULT_MODEL), f"the embedded default {DEFAULT_MODEL.name}", False
+
+
+def _sig(x: float, digits: int = 6) -> float:
+    return float(f"{x:.{digits}g}")
+
+
+def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: str, keep_rate: bool) -> Model:
+    """The base model with the fitted axes and noise figures merged in (see the module notes)."""
+    model = base
+    if not keep_rate:
+        model = dataclasses.replace(model, rate_hz=_sig(rec.rate_hz, 9))
+        stem = Path(rec.source).name.split(".")[0]
+        model = dataclasses.replace(
+            model,
+            name=f"{stem}_fit",
+            description=f"bias and noise fitted from {Path(rec.source).name} by accelnav fit-bias; "
+            f"sensor, ranges and filter from {base.name}",
+        )
+    names = [a.name for a in model.axes]
+    for r in results:
+        f = r.fit
+        if f.T_identified:
+            c1, c2, T = f.c1, f.c2, f.T
+        else:
+            T = model.axis(r.name).T if r.name in names else float(round(rec.duration))
+            c1, c2 = 0.0, f.c2
+        if not r.name.isidentifier():
+            raise UserError(f"axis name {r.name!r} cannot name a model axis (it must be a C identifier); use --axis")
+        model = with_axis_bias(model, r.name, _sig(c1), _sig(c2), _sig(T))
+    Ts = model.Ts
+    R = max(r.noise.R(Ts) for r in results)
+    sigma_eps = max(r.noise.sigma_eps for r in results)
+    values = {"R": _sig(R), "sigma_eps": _sig(sigma_eps)}
+    if sigma_n == "paper":
+        values["sigma_n"] = _sig(max(r.noise.sigma_n_paper for r in results))
+    model = with_noise(model, **values)
+    if len(model.axes) > 3:
+        raise UserError(
+            f"the model would have {len(model.axes)} axes ({', '.join(a.name for a in model.axes)}); "
+            "accepted: 1 to 3; choose axes with --axis"
+        )
+    return revalidate(model)
+
+
+# --------------------------------------------------------------------------
+# Report
+
+
+def _mg(x: float) -> str:
+    return f"{x / G0 * 1e3:.3g} mg"
+
+
+def _ci(ci: tuple[float, float], fmt: str = ".6g") -> str:
+    return f"[{ci[0]:{fmt}}, {ci[1]:{fmt}}]"
+
+
+def axis_report(r: AxisResult) -> list[str]:
+    f, w, nz = r.fit, r.white, r.noise
+    e = f.exp
+    out = [f"axis {r.name} (column {r.column}, in {r.unit}): {f.n} samples"]
+    out.append(f"  bias fit: {f.verdict}")
+    if f.T_identified:
+        out.append(f"    c1 = {f.c1:.6g} m/s^2  se {f.se[0]:.3g}  95 % {_ci(f.ci95[0])}  ({_mg(f.c1)})")
+        out.append(f"    c2 = {f.c2:.6g} m/s^2  se {f.se[1]:.3g}  95 % {_ci(f.ci95[1])}  ({_mg(f.c2)})")
+        out.append(f"    T  = {f.T:.6g} s  se {f.se[2]:.3g}  95 % profile {_ci(f.ci95[2], '.4g')}")
+    else:
+        out.append(f"    constant bias c2 = {f.c2:.6g} m/s^2  se {f.se[1]:.3g}  95 % {_ci(f.ci95[1])}  ({_mg(f.c2)})")
+        out.append(
+            f"    (rejected exponential: c1 = {e.c1:.4g} m/s^2, c2 = {e.c2:.6g} m/s^2, T = {e.T:.4g} s, "
+            f"T profile 95 % {_ci(e.ci95[2], '.4g')}{'' if all(e.T_ci_closed) else ' open'})"
+        )
+    out.append(
+        f"    residual rms {f.sigma:.4g} m/s^2 ({_mg(f.sigma)}); variance factors for residual correlation: "
+        f"short-range srf = {f.srf:.3g}, long-run vif = {f.vif:.3g} (both 1 for white residuals)"
+    )
+    out.append(f"  whiteness of the residuals ({w.n} samples):")
+    for t in w.tests:
+        out.append(f"    {t.line()}")
+    if not w.white:
+        out.append(
+            "    -> the residuals are not white: the intervals above allow only for short-range correlation "
+            f"and are too narrow; widened by the long-run variance (vif = {f.vif:.3g}) they are:"
+        )
+        lr = f.ci95_lr
+        if f.T_identified:
+            out.append(f"       c1 {_ci(lr[0])}, c2 {_ci(lr[1])} m/s^2, T {_ci(lr[2], '.4g')} s")
+        else:
+            out.append(f"       c2 {_ci(lr[1])} m/s^2")
+    k = nz.terms
+    c = nz.curve
+    out.append(f"  noise (overlapping Allan deviation of the residual, tau {c.tau[0]:.3g} .. {c.tau[-1]:.4g} s):")
+    out.append(
+        f"    white noise N = {k.N:.4g} m/s^2/sqrt(Hz) at tau = 1 s; one-sided density sqrt(2) N = "
+        f"{k.density_one_sided:.4g} m/s^2/sqrt(Hz) ({_mg(k.density_one_sided)}/sqrt(Hz))"
+    )
+    out.append(
+        f"    Allan minimum {k.adev_min:.4g} m/s^2 ({_mg(k.adev_min)}) at tau = {k.tau_min:.4g} s, "
+        f"95 % {_ci(k.adev_min_ci, '.3g')}; bias instability B = min/0.664 = {k.B:.4g} m/s^2 ({_mg(k.B)})"
+    )
+    if k.K_is_bound:
+        out.append(
+            f"    random walk: not seen at the longest tau; upper bound K <= {k.K_bound:.4g} m/s^2/sqrt(s) "
+            f"(fitted term {k.K_fit:.3g})"
+        )
+    else:
+        out.append(f"    random walk K = {k.K:.4g} m/s^2/sqrt(s) (bound {k.K_bound:.4g})")
+    out.append(
+        f"    fitted flicker B = {k.B_fit:.4g} m/s^2, drift D = {k.D:.4g} m/s^3 "
+        f"(N, B, K, D fitted over tau {k.fit_tau_range[0]:.3g} .. {k.fit_tau_range[1]:.4g} s)"
+    )
+    out.append(
+        f"    sample variance {nz.sample_var:.4g} (m/s^2)^2 (white-equivalent N^2/Ts = {nz.R():.4g}); "
+        f"paper's rule var(dy/dt) = {nz.deriv_var:.4g} (m/s^3)^2 -> sigma_n = sqrt(var * Ts) = {nz.sigma_n_paper:.4g}"
+    )
+    return out
+
+
+def model_report(
+    model: Model, base: Model, base_label: str, rec: Recording, results, sigma_n: str, out: Path
+) -> list[str]:
+    lines = [f"model written to {out} (merged into {base_label}):"]
+    for r in results:
+        ax = model.axis(r.name)
+        how = "fitted" if r.fit.T_identified else "constant bias; T kept, it has no effect on the mean with c1 = 0"
+        lines.append(f"  axis {ax.name}: c1 = {ax.c1:.6g}, c2 = {ax.c2:.6g} m/s^2, T = {ax.T:.6g} s ({how})")
+    names = ", ".join(r.name for r in results)
+    n = model.noise
+    lines.append(f"  R = {n.R:.6g} (m/s^2)^2 = max over {names} of N^2/Ts at Ts = {model.Ts:.6g} s")
+    bound = any(r.noise.terms.K_is_bound for r in results)
+    lines.append(
+        f"  sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) = max over {names} of K"
+        + (" (an upper bound where no random walk is seen)" if bound else "")
+    )
+    paper = max(r.noise.sigma_n_paper for r in results)
+    if sigma_n == "paper":
+        lines.append(f"  sigma_n = {n.sigma_n:.6g} from the paper's rule (the base model had {base.noise.sigma_n:.6g})")
+    else:
+        lines.append(
+            f"  sigma_n = {n.sigma_n:.6g} kept from the base model: it describes motion, which a stationary "
+            f"recording cannot identify (the paper's rule would give {paper:.4g}; --sigma-n paper)"
+        )
+    if abs(model.rate_hz / rec.rate_hz - 1) > 1e-6:
+        lines.append(
+            f"  note: the model runs at {model.rate_hz:g} Hz, the recording at {rec.rate_hz:.6g} Hz; "
+            "R is mapped to the model's rate"
+        )
+    return lines
+
+
+def provenance(rec: Recording, results, base_label: str) -> str:
+    lines = [
+        "accelnav model written by accelnav fit-bias",
+        f"recording: {Path(rec.source).name}, {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s)",
+        f"base: {base_label}",
+    ]
+    for r in results:
+        f, k = r.fit, r.noise.terms
+        if f.T_identified:
+            lines.append(
+                f"axis {r.name}: c1 = {f.c1:.4g} +- {f.se[0]:.2g}, c2 = {f.c2:.6g} +- {f.se[1]:.2g} m/s^2, "
+                f"T = {f.T:.4g} s (95 % {f.ci95[2][0]:.4g} .. {f.ci95[2][1]:.4g})"
+            )
+        else:
+            lines.append(f"axis {r.name}: T not identified, constant bias c2 = {f.c2:.6g} +- {f.se[1]:.2g} m/s^2")
+        verdicts = ", ".join(f"{t.name} {'white' if t.white else 'not white'}" for t in r.white.tests)
+        lines.append(f"  residuals: {verdicts}")
+        lines.append(
+            f"  Allan: N = {k.N:.4g} m/s^2/sqrt(Hz), minimum {k.adev_min:.3g} m/s^2 at {k.tau_min:.3g} s, "
+            f"K {'<=' if k.K_is_bound else '='} {k.K:.3g} m/s^2/sqrt(s)"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,424 @@
+"""Read a stationary recording (CSV, gzip CSV, NPZ) and refuse what the bias fit cannot use.
+
+Formats
+-------
+* **CSV** (plain or gzip, told apart by content, not by name): one header
+  row of column names, then numbers; ``#`` comment lines before the header
+  are skipped; comma, semicolon or tab separated. Acceleration columns are
+  the ones named with ``--axis`` (a column name, or its short axis name), by
+  default every column whose name starts with ``acc``. Their unit comes from
+  the name's suffix (``_g``, ``_mg``, ``_m_s2``, ``_mps2``, ``_ms2``) or
+  from ``unit``. Time comes from a column ``t``/``time`` (suffix ``_s``,
+  ``_ms`` or ``_us`` for its unit, seconds without one) or from ``rate_hz``.
+  The short axis name drops an ``acc_``/``accel_`` prefix and the unit
+  suffix: ``acc_x_g`` is axis ``x``.
+* **NPZ** as written by ``accelnav sim``: ``t`` (N,), ``axis_names``
+  (n_axes,), ``accel`` (N, n_axes) in m/s^2, optionally a 0-d
+  ``model_toml`` string and a ``clipped`` (N, n_axes) mask. ``accel`` may be
+  1-D for one axis; without ``t`` the rate comes from ``rate_hz`` or the
+  embedded model.
+
+Refusals (:class:`host.errors.UserError`, one line each, saying where):
+unreadable file, missing column, unknown unit, no time and no rate, time not
+finite or not increasing, a gap in time, a non-finite sample, too short a
+recording, a constant signal, a clipped signal (samples flagged in the file,
+at the model's full scale, or piled up on the extreme value as a rail does).
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import re
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from codegen.model import G0, ModelError, loads_model
+
+from .errors import UserError
+from .progress import Progress
+
+UNITS = {"g": G0, "mg": G0 * 1e-3, "m/s^2": 1.0}
+UNIT_ALIASES = {
+    "g": "g",
+    "mg": "mg",
+    "m/s^2": "m/s^2",
+    "m/s2": "m/s^2",
+    "mps2": "m/s^2",
+    "m_s2": "m/s^2",
+    "ms2": "m/s^2",
+}
+_UNIT_SUFFIX = re.compile(r"(?:_|\[|\()(g|mg|m_s2|mps2|ms2|m/s\^?2)[\])]?$", re.IGNORECASE)
+_TIME_NAME = re.compile(r"^(t|time|timestamp)(?:_(s|ms|us))?$", re.IGNORECASE)
+_TIME_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6}
+_ACC_PREFIX = re.compile(r"^(acceleration|accel|acc)_?", re.IGNORECASE)
+
+GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap
+MIN_DURATION_S = 60.0
+MIN_SAMPLES = 1000
+CHUNK_CHARS = 1 << 22  # CSV text parsed per piece (progress granularity)
+PILEUP_FRACTION = 0.005  # an extreme value holding this share of the samples, more than its neighbour: a rail
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """A stationary recording: time [s] and acceleration [m/s^2] of one or more axes."""
+
+    source: str
+    t: np.ndarray  # (N,)
+    accel: np.ndarray  # (N, n_axes)
+    axis_names: tuple[str, ...]
+    columns: tuple[str, ...]  # where each axis came from (column or key)
+    units: tuple[str, ...]  # the unit each axis was given in
+    rate_hz: float
+    model_toml: str | None = None
+    clipped: np.ndarray | None = None  # (N, n_axes) from the file, if it had one
+
+    @property
+    def n(self) -> int:
+        return len(self.t)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if self.n > 1 else 0.0
+
+    def column(self, axis: str) -> int:
+        for i, (name, col) in enumerate(zip(self.axis_names, self.columns, strict=True)):
+            if axis in (name, col):
+                return i
+        raise UserError(f"{self.source}: no axis {axis!r}; the recording has: {', '.join(self.axis_names)}")
+
+    def axis(self, axis: str) -> np.ndarray:
+        return self.accel[:, self.column(axis)]
+
+
+def parse_unit(unit: str) -> str:
+    key = unit.strip().lower()
+    if key not in UNIT_ALIASES:
+        raise UserError(f"unit {unit!r} is not known; accepted: g, mg, m/s^2")
+    return UNIT_ALIASES[key]
+
+
+def read_recording(
+    path: str | Path,
+    *,
+    axes: list[str] | None = None,
+    unit: str | None = None,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+) -> Recording:
+    """Read ``path`` (CSV, gzip CSV or NPZ); see the module notes. Checks the format, not the content."""
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"{path}: no such file")
+    try:
+        head = path.open("rb").read(4)
+    except OSError as exc:
+        raise UserError(f"{path}: cannot read: {exc.strerror}") from None
+    if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
+    if head.startswith(b"PK"):
+        return _read_npz(path, axes, unit, rate_hz)
+    return _read_csv(path, axes, unit, rate_hz, time_column, gz=head.startswith(b"\x1f\x8b"))
+
+
+# --------------------------------------------------------------------------
+
+
+def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
+    src = str(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            data = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise UserError(f"{src}: not a readable NPZ file: {exc}") from None
+    if "accel" not in data:
+        raise UserError(
+            f"{src}: no 'accel' array; keys: {', '.join(sorted(data)) or 'none'} (expected accelnav sim's layout)"
+        )
+    accel = np.asarray(data["accel"], dtype=np.float64)
+    if accel.ndim == 1:
+        accel = accel[:, None]
+    if accel.ndim != 2 or accel.shape[0] < 2:
+        raise UserError(f"{src}: 'accel' has shape {data['accel'].shape}; accepted: (N,) or (N, n_axes)")
+    n, k = accel.shape
+    if "axis_names" in data:
+        names = tuple(str(s) for s in np.asarray(data["axis_names"]).reshape(-1))
+        if len(names) != k:
+            raise UserError(f"{src}: {len(names)} axis_names for {k} accel columns")
+    else:
+        names = tuple(f"a{i}" for i in range(k))
+    model_toml = str(data["model_toml"][()]) if "model_toml" in data else None
+    clipped = None
+    if "clipped" in data:
+        clipped = np.asarray(data["clipped"], dtype=bool).reshape(n, -1)
+    if "t" in data:
+        t = np.asarray(data["t"], dtype=np.float64).reshape(-1)
+        if len(t) != n:
+            raise UserError(f"{src}: 't' has {len(t)} samples, 'accel' {n}")
+    else:
+        rate = rate_hz
+        if rate is None and "rate_hz" in data:
+            rate = float(data["rate_hz"])
+        if rate is None and model_toml is not None:
+            rate = _model(model_toml, src).rate_hz
+        if rate is None:
+            raise UserError(f"{src}: no 't' array and no sample rate; give --rate HZ")
+        t = np.arange(n) / rate
+    u = "m/s^2"
+    if unit is not None:
+        u = parse_unit(unit)
+    elif "unit" in data:
+        u = parse_unit(str(data["unit"][()]))
+    accel = accel * UNITS[u]
+    cols = names
+    if axes:
+        idx = [_pick(a, names, names, src) for a in axes]
+        accel = accel[:, idx]
+        names = tuple(names[i] for i in idx)
+        cols = names
+        clipped = None if clipped is None else clipped[:, idx]
+    return _finish(src, t, accel, names, cols, (u,) * len(names), rate_hz, model_toml, clipped)
+
+
+def _model(text: str, src: str):
+    try:
+        return loads_model(text, source=f"{src}:model_toml")
+    except ModelError as exc:
+        raise UserError(f"the embedded model is not valid: {exc}") from None
+
+
+def _pick(axis: str, names, cols, src: str) -> int:
+    for i, (nm, col) in enumerate(zip(names, cols, strict=True)):
+        if axis in (nm, col):
+            return i
+    raise UserError(f"{src}: no axis or column {axis!r}; available: {', '.join(cols)}")
+
+
+def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recording:
+    src = str(path)
+    try:
+        raw = gzip.open(path, "rb").read() if gz else path.read_bytes()
+        text = raw.decode("utf-8-sig")
+    except (OSError, EOFError) as exc:
+        raise UserError(f"{src}: cannot read as {'gzip ' if gz else ''}text: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise UserError(f"{src}: not UTF-8 text (byte {exc.start}); accepted: CSV, gzip CSV or NPZ") from None
+    lines = text[: 1 << 16].splitlines()  # enough for the header
+    skip = 0
+    while skip < len(lines) and (not lines[skip].strip() or lines[skip].lstrip().startswith("#")):
+        skip += 1
+    if skip >= len(lines):
+        raise UserError(f"{src}: no header row (the file is empty)")
+    header = lines[skip]
+    delim = max((",", ";", "\t"), key=header.count)
+    if header.count(delim) == 0:
+        delim = ","
+    cols = [c.strip().strip('"').strip() for c in header.split(delim)]
+    if any(_is_number(c) for c in cols):
+        raise UserError(f"{src}: line {skip + 1} should be a header of column names, got {header[:60]!r}")
+    if len(set(cols)) != len(cols):
+        raise UserError(f"{src}: duplicate column names in the header: {cols}")
+
+    # time column
+    tcol = None
+    if time_column is not None:
+        if time_column not in cols:
+            raise UserError(f"{src}: no time column {time_column!r}; columns: {', '.join(cols)}")
+        tcol = time_column
+    else:
+        for c in cols:
+            if _TIME_NAME.match(c):
+                tcol = c
+                break
+    if tcol is None and rate_hz is None:
+        raise UserError(f"{src}: no time column (t, t_s, time, ...) and no --rate; columns: {', '.join(cols)}")
+
+    # acceleration columns and their short names
+    short = {c: _short_name(c) for c in cols}
+    if axes:
+        chosen = []
+        for a in axes:
+            hits = [c for c in cols if a in (c, short[c])]
+            if not hits:
+                raise UserError(f"{src}: no column {a!r}; columns: {', '.join(cols)}")
+            chosen.append(hits[0])
+    else:
+        chosen = [c for c in cols if _ACC_PREFIX.match(c) and c != tcol]
+        if not chosen:
+            raise UserError(f"{src}: no acceleration column (acc...); name one with --axis; columns: {', '.join(cols)}")
+    units = []
+    for c in chosen:
+        if unit is not None:
+            units.append(parse_unit(unit))
+            continue
+        m = _UNIT_SUFFIX.search(c)
+        if not m:
+            raise UserError(
+                f"{src}: column {c!r} does not say its unit (suffix _g, _mg, _m_s2); give --unit g or m/s^2"
+            )
+        units.append(parse_unit(m.group(1)))
+    names = [short[c] for c in chosen]
+    if len(set(names)) != len(names):
+        names = list(chosen)
+
+    use = ([cols.index(tcol)] if tcol else []) + [cols.index(c) for c in chosen]
+    try:
+        table = _parse_rows(text, skip + 1, delim, use, src)
+    except ValueError:
+        _locate_bad_cell(text.splitlines(), skip, delim, cols, use, src)
+        raise  # _locate_bad_cell always raises; this keeps linters quiet
+    if table.shape[0] < 2:
+        raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
+    if tcol:
+        m = _TIME_NAME.match(tcol)
+        t = table[:, 0] * _TIME_SCALE[m.group(2).lower() if m and m.group(2) else None]
+        data = table[:, 1:]
+    else:
+        t = np.arange(table.shape[0]) / rate_hz
+        data = table
+    accel = data * np.array([UNITS[u] for u in units])
+    return _finish(src, t, accel, tuple(names), tuple(chosen), tuple(units), rate_hz if tcol else None, None, None)
+
+
+def _parse_rows(text: str, skiprows: int, delim: str, use: list[int], src: str) -> np.ndarray:
+    """The numbers of the data rows, parsed in pieces of about CHUNK_CHARS with a progress display."""
+    pos = 0
+    for _ in range(skiprows):
+        nl = text.find("\n", pos)
+        pos = len(text) if nl < 0 else nl + 1
+    pieces = []
+    with Progress("read", total=len(text) - pos, unit="chars") as p:
+        start = pos
+        while start < len(text):
+            end = text.find("\n", min(start + CHUNK_CHARS, len(text)))
+            end = len(text) if end < 0 else end + 1
+            chunk = np.loadtxt(
+                io.StringIO(text[start:end]), delimiter=delim, usecols=use, ndmin=2, dtype=np.float64, comments="#"
+            )
+            if chunk.size:
+                pieces.append(chunk.reshape(-1, len(use)))
+            start = end
+            p.update(start - pos)
+    return np.concatenate(pieces) if pieces else np.empty((0, len(use)))
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def _short_name(col: str) -> str:
+    name = _UNIT_SUFFIX.sub("", col)
+    name = _ACC_PREFIX.sub("", name) or name
+    return name.strip("_") or col
+
+
+def _locate_bad_cell(lines, skip, delim, cols, use, src) -> None:
+    for i in range(skip + 1, len(lines)):
+        line = lines[i]
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        cells = line.split(delim)
+        for j in use:
+            cell = cells[j].strip() if j < len(cells) else ""
+            if not _is_number(cell):
+                what = "is empty" if not cell else f"is not a number ({cell[:20]!r})"
+                raise UserError(f"{src}: line {i + 1}, column {cols[j]!r} {what}; a gap in the data is not accepted")
+    raise UserError(f"{src}: cannot parse the numbers (rows of unequal length?)")
+
+
+def _finish(src, t, accel, names, cols, units, rate_given, model_toml, clipped) -> Recording:
+    if not np.isfinite(t).all():
+        k = int(np.argmax(~np.isfinite(t)))
+        raise UserError(f"{src}: time is not a finite number at sample {k}")
+    dt = np.diff(t)
+    back = dt <= 0
+    if back.any():
+        k = int(np.argmax(back))
+        raise UserError(
+            f"{src}: time does not increase at sample {k + 1} (t = {t[k]:.6g} s, then {t[k + 1]:.6g} s); "
+            f"{int(back.sum())} such steps"
+        )
+    step = float(np.median(dt))
+    gaps = dt > GAP_FACTOR * step
+    if gaps.any():
+        k = int(np.argmax(gaps))
+        raise UserError(
+            f"{src}: gap in time of {dt[k]:.6g} s at t = {t[k]:.6g} s (after sample {k}; the usual step is "
+            f"{step:.6g} s); {int(gaps.sum())} gaps in all"
+        )
+    rate = (len(t) - 1) / float(t[-1] - t[0])  # the mean step: less rounding than the median
+    if rate_given is not None and abs(rate / rate_given - 1) > 0.01:
+        raise UserError(f"{src}: the time column says {rate:.6g} Hz but --rate says {rate_given:g} Hz")
+    return Recording(
+        source=src,
+        t=t,
+        accel=np.ascontiguousarray(accel),
+        axis_names=tuple(names),
+        columns=tuple(cols),
+        units=tuple(units),
+        rate_hz=rate,
+        model_toml=model_toml,
+        clipped=clipped,
+    )
+
+
+def check_axis(
+    rec: Recording,
+    axis: str,
+    *,
+    min_duration_s: float = MIN_DURATION_S,
+    min_samples: int = MIN_SAMPLES,
+    full_scale: float | None = None,
+) -> np.ndarray:
+    """The samples of ``axis`` if the bias fit can use them; otherwise a UserError saying what and where."""
+    j = rec.column(axis)
+    y = rec.accel[:, j]
+    where = f"{rec.source}: axis {rec.axis_names[j]!r}"
+    bad = ~np.isfinite(y)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise UserError(
+            f"{where}: {int(bad.sum())} samples are not numbers (NaN/inf), the first at sample {k} "
+            f"(t = {rec.t[k]:.6g} s); gaps in the data are not accepted"
+        )
+    if rec.duration < min_duration_s or rec.n < min_samples:
+        raise UserError(
+            f"{where}: too short: {rec.duration:.4g} s, {rec.n} samples; identifying the warm-up time constant T "
+            f"needs at least {min_duration_s:g} s and {min_samples} samples"
+        )
+    lo, hi = float(y.min()), float(y.max())
+    if lo == hi:
+        raise UserError(f"{where}: the signal is constant ({lo:.6g} m/s^2 in every sample); a sensor that is not alive")
+    if rec.clipped is not None and rec.clipped[:, j].any():
+        c = rec.clipped[:, j]
+        k = int(np.argmax(c))
+        raise UserError(
+            f"{where}: {int(c.sum())} samples are flagged clipped, the first at sample {k} (t = {rec.t[k]:.6g} s)"
+        )
+    if full_scale is not None:
+        at_rail = np.abs(y) >= full_scale * (1 - 1e-6)
+        if at_rail.any():
+            k = int(np.argmax(at_rail))
+            raise UserError(
+                f"{where}: {int(at_rail.sum())} samples at the sensor's full scale +-{full_scale:.6g} m/s^2, "
+                f"the first at sample {k} (t = {rec.t[k]:.6g} s): the signal is clipped"
+            )
+    values, counts = np.unique(y, return_counts=True)
+    if len(values) >= 3:
+        for end, inner, label in ((-1, -2, "maximum"), (0, 1, "minimum")):
+            if counts[end] >= PILEUP_FRACTION * len(y) and counts[end] > counts[inner]:
+                k = int(np.argmax(y == values[end]))
+                raise UserError(
+                    f"{where}: {counts[end]} samples ({100 * counts[end] / len(y):.2g} %) sit at the {label} "
+                    f"{values[end]:.6g} m/s^2, more than at the next value: the signal is clipped there "
+                    f"(first at sample {k}, t = {rec.t[k]:.6g} s)"
+                )
+    return y
