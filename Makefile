@@ -6,6 +6,10 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.accelnav-installed
 
+# numpy's BLAS threads on 4x4 and block products only fight each other on a
+# 2-core machine (measured: a fit took 8x the CPU); one thread is faster.
+export OPENBLAS_NUM_THREADS ?= 1
+
 .PHONY: setup demo test lint format bench clean
 
 
