@@ -1,0 +1,37 @@
+"""``accelnav codegen MODEL.toml --out DIR [--report]``: write the generated C and its manifest."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from codegen.emit_c import emit, write
+from codegen.model import load_model
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "codegen",
+        help="generate the per-axis filter in C (fixed point or float32) and its manifest",
+        description="Generate PREFIX.h, PREFIX.c and PREFIX.json for every axis of the model.",
+    )
+    p.add_argument("model", type=Path, help="model file (TOML)")
+    p.add_argument("--out", type=Path, required=True, help="output directory (created if missing)")
+    p.add_argument("--form", choices=("covariance", "gain_schedule"), help="override [filter] form of the model")
+    p.add_argument("--float32", action="store_true", help="emit the float32 variant instead of fixed point")
+    p.add_argument("--prefix", default="accelnav", help="file and symbol prefix (default: accelnav)")
+    p.add_argument("--report", action="store_true", help="print ranges, formats, error bounds, flash and RAM")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    model = load_model(args.model)
+    arith = "float32" if args.float32 else "fixed"
+    files = emit(model, form=args.form, arith=arith, prefix=args.prefix)
+    for path in write(files, args.out):
+        print(path)
+    if args.report:
+        from codegen.report import report
+
+        print(report(model, form=args.form, arith=arith, files=files, prefix=args.prefix))
+    return 0

@@ -1,0 +1,274 @@
+"""Generated C, through cffi, in lockstep with the float64 reference (host.kf).
+
+Every state at every step must lie within the generator's stated bound, and
+after the first second within 1e-3 of the reference's own standard deviation;
+the overflow counters stay zero. Both fixed-point forms, two sample rates, six
+simulated scenarios (including the +-50 g stress profile and rail-clipped
+shocks), both axes. Plus: byte-identical regeneration, the banner, strict
+compiles (host, sanitizers, Cortex-M0/M3) and the float32 variant.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from codegen.bounds import error_bound
+from codegen.design import axis_design
+from codegen.emit_c import _schedule_for, emit
+from codegen.gains import run_gains
+from codegen.harness import STRICT, AxisRunner, build
+from codegen.model import load_model, loads_model
+from codegen.ranges import plan_axis
+from host.kf import run_filter
+
+sensor = pytest.importorskip("hil_sim.sensor")
+
+SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shock")
+DURATION = {100.0: 30.0, 1000.0: 3.0}
+SIGMA_FRACTION = 1e-3
+
+
+def model_at(rate: float):
+    base = load_model()
+    if rate == base.rate_hz:
+        return base
+    text = open(base.source).read().replace("rate_hz = 100.0", f"rate_hz = {rate}")
+    return loads_model(text, source=f"adxl250_default@{rate:g}Hz")
+
+
+_BUILT: dict = {}
+_REF: dict = {}
+_PLAN: dict = {}
+
+
+@pytest.fixture(scope="session")
+def workdir(tmp_path_factory):
+    return tmp_path_factory.mktemp("codegen")
+
+
+def built(model, form, workdir):
+    key = (model.sha256, form)
+    if key not in _BUILT:
+        files = emit(model, form=form)
+        _BUILT[key] = (files, build(files, workdir))
+    return _BUILT[key]
+
+
+def plan(model, axis, form):
+    key = (model.sha256, axis, form)
+    if key not in _PLAN:
+        p = plan_axis(model, axis, form)
+        _PLAN[key] = (p, _schedule_for(p) if form == "gain_schedule" else None)
+    return _PLAN[key]
+
+
+def reference(model, scenario, axis):
+    key = (model.sha256, scenario, axis)
+    if key not in _REF:
+        run = sensor.simulate(model, scenario, DURATION[model.rate_hz], seed=11)
+        d = axis_design(model, axis)
+        valid = ~run.clipped[:, axis]
+        ref = run_filter(d, run.accel[:, axis], valid=valid)
+        sig = np.sqrt(np.einsum("kii->ki", ref.P_post))
+        _REF[key] = (run, d, valid, ref, sig)
+    return _REF[key]
+
+
+@pytest.mark.parametrize("rate", [100.0, 1000.0])
+@pytest.mark.parametrize("form", ["covariance", "gain_schedule"])
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_lockstep(rate, form, scenario, workdir):
+    model = model_at(rate)
+    files, mod = built(model, form, workdir)
+    for axis in range(len(model.axes)):
+        run, d, valid, ref, sig = reference(model, scenario, axis)
+        p, sched = plan(model, axis, form)
+        res = AxisRunner(mod, files["accelnav.json"], axis).run(code=run.code[:, axis])
+        assert res["overflow"] == 0
+        assert np.array_equal(res["valid"], valid), "the C and the reference disagree on which samples to skip"
+        x_ref = ref.x_post
+        if form == "gain_schedule" and not valid.all():
+            # a skip changes the Kalman gain but not the schedule: compare with the float64 twin of the schedule
+            K = np.asarray(p.gains.K)[: len(valid)]
+            x_ref = run_gains(d, run.accel[:, axis], valid, K)
+        err = np.abs(res["x"] - x_ref)
+        bound = error_bound(p, len(err), sched)
+        worst = np.unravel_index(np.argmax(err / bound), err.shape)
+        assert np.all(err <= bound), f"axis {axis}: state {worst[1]} at sample {worst[0]} beyond the stated bound"
+        k1 = int(model.rate_hz)
+        ratio = err[k1:] / sig[k1:]
+        worst = np.unravel_index(np.argmax(ratio), ratio.shape)
+        assert ratio.max() <= SIGMA_FRACTION, (
+            f"axis {axis}: state {worst[1]} at sample {worst[0] + k1}: {ratio.max():.3g} sigma"
+        )
+
+
+def test_duty_cycle_part(workdir):
+    """A duty-cycle model: T1/T2 conversion without a division, bad captures skipped."""
+    text = open(load_model().source).read()
+    text = text.replace('kind = "analog" ', 'kind = "duty_cycle"').replace("range_g = 50.0", "range_g = 4.0")
+    a = text.index("[sensor.analog]")
+    b = text.index("[sampling]")
+    text = (
+        text[:a]
+        + "[sensor.duty_cycle]\ntimer_clock_hz = 1.0e6\nt2_period_s = 0.005\nzero_g_duty = 0.5\nduty_per_g = 0.125\n\n"
+        + text[b:]
+    )
+    text = text.replace("zero_g_v = 2.501\n", "")
+    text = text.replace("max_run_s = 3600.0", "max_run_s = 600.0")
+    model = loads_model(text, source="duty.toml")
+    files, mod = built(model, "covariance", workdir)
+    run = sensor.simulate(model, "stop_and_go", 20.0, seed=3)
+    d = axis_design(model, 0)
+    valid = ~run.clipped[:, 0]
+    ref = run_filter(d, run.accel[:, 0], valid=valid)
+    sig = np.sqrt(np.einsum("kii->ki", ref.P_post))
+    res = AxisRunner(mod, files["accelnav.json"], 0).run(t1=run.t1[:, 0], t2=run.t2[:, 0])
+    assert res["overflow"] == 0
+    assert np.array_equal(res["valid"], valid)
+    err = np.abs(res["x"] - ref.x_post)
+    assert np.all(err <= error_bound(plan(model, 0, "covariance")[0], len(err), None))
+    assert (err[100:] / sig[100:]).max() <= SIGMA_FRACTION
+
+
+def test_skip_table(workdir):
+    """Edge inputs: the rails and the codes next to them; a skipped sample predicts only."""
+    model = load_model()
+    files, mod = built(model, "covariance", workdir)
+    lib, ffi = mod.lib, mod.ffi
+    z = ffi.new("int32_t *")
+    full = 2**model.sensor.analog.adc_bits - 1
+    for code, ok in ((0, False), (1, True), (full - 1, True), (full, False), (-5, False), (full + 10, False)):
+        assert lib.accelnav_x_convert(code, z) is ok, code
+    s = ffi.new("accelnav_x_t *")
+    lib.accelnav_x_init(s)
+    lib.accelnav_x_step(s, 2048)
+    before = (s.a, s.e, s.k)
+    assert lib.accelnav_x_step(s, 0) is False
+    assert s.a == before[0] and s.k == before[2] + 1  # predict only: a is a random walk, unchanged
+
+
+def test_regeneration_is_byte_identical_and_bannered():
+    model = load_model()
+    for form in ("covariance", "gain_schedule"):
+        a = emit(model, form=form)
+        b = emit(load_model(), form=form)
+        assert a == b
+        for name in ("accelnav.h", "accelnav.c"):
+            assert model.sha256 in a[name].splitlines()[2]
+            assert "accelnav codegen 0.1.0" in a[name].splitlines()[1]
+            assert "DO NOT EDIT" in a[name]
+    f32 = emit(model, arith="float32", prefix="accelnav_f32")
+    assert f32 == emit(model, arith="float32", prefix="accelnav_f32")
+
+
+def test_no_float_no_division_in_fixed_point():
+    import re
+
+    src = emit(load_model())["accelnav.c"]
+    body = re.sub(r"/\*.*?\*/", "", src[src.index("#endif") :], flags=re.S)
+    for bad in ("float", "double", " / ", "malloc", "#include <"):
+        assert bad not in body, bad
+
+
+def _driver(files, prefix, codes, axis_name="x"):
+    """A stand-alone C program that runs one axis over `codes` and prints the raw states."""
+    arr = ", ".join(str(int(c)) for c in codes)
+    T = f"{prefix}_{axis_name}"
+    return f"""#include <stdio.h>
+#include "{prefix}.h"
+static const int32_t codes[] = {{{arr}}};
+int main(void)
+{{
+    {T}_t s;
+    size_t k;
+    {T}_init(&s);
+    for (k = 0; k < sizeof codes / sizeof codes[0]; ++k) {{
+        {T}_step(&s, codes[k]);
+        printf("%lld %lld %ld %lld\\n", (long long)s.r, (long long)s.v, (long)s.a, (long long)s.e);
+    }}
+    printf("overflow %lu\\n", (unsigned long)s.overflow);
+    return 0;
+}}
+"""
+
+
+@pytest.mark.parametrize("form", ["covariance", "gain_schedule"])
+def test_sanitizers_bit_identical(form, workdir, tmp_path):
+    """-fsanitize=undefined,address build runs the stress and shock data clean, bit-identical to the cffi run."""
+    model = load_model()
+    files, mod = built(model, form, workdir)
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    for scenario in ("stress", "shock"):
+        run = sensor.simulate(model, scenario, 10.0, seed=5)
+        (tmp_path / "drv.c").write_text(_driver(files, "accelnav", run.code[:, 0]))
+        exe = tmp_path / "drv"
+        flags = [*STRICT, "-fsanitize=undefined,address", "-fno-sanitize-recover=all", "-g"]
+        subprocess.run(
+            ["gcc", *flags, str(tmp_path / "drv.c"), str(tmp_path / "accelnav.c"), "-o", str(exe)],
+            check=True,
+            capture_output=True,
+            text=True,
+        )
+        out = subprocess.run([str(exe)], check=True, capture_output=True, text=True)
+        assert out.stderr == ""
+        rows = out.stdout.splitlines()
+        assert rows[-1] == "overflow 0"
+        r = AxisRunner(mod, files["accelnav.json"], 0)
+        step = mod.lib.accelnav_x_step
+        for k, c in enumerate(run.code[:, 0]):
+            step(r.state, int(c))
+            s = r.state
+            assert rows[k] == f"{s.r} {s.v} {s.a} {s.e}", f"sample {k}"
+
+
+@pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None, reason="arm-none-eabi-gcc not installed")
+@pytest.mark.parametrize("cpu", ["cortex-m0", "cortex-m3"])
+def test_cross_compiles(cpu, tmp_path):
+    model = load_model()
+    for form, arith in (("covariance", "fixed"), ("gain_schedule", "fixed"), ("covariance", "float32")):
+        files = emit(model, form=form, arith=arith)
+        for name, text in files.items():
+            (tmp_path / name).write_text(text)
+        subprocess.run(
+            [
+                "arm-none-eabi-gcc",
+                f"-mcpu={cpu}",
+                "-mthumb",
+                "-ffreestanding",
+                *STRICT,
+                "-c",
+                str(tmp_path / "accelnav.c"),
+                "-o",
+                str(tmp_path / "accelnav.o"),
+            ],
+            check=True,
+        )
+
+
+def test_float32_variant(workdir):
+    """The float32 variant from the same generator tracks the reference to ~1e-3 sigma (float32 epsilon)."""
+    model = load_model()
+    files = emit(model, arith="float32", prefix="accelnav_f32")
+    mod = build(files, workdir, prefix="accelnav_f32")
+    run, d, valid, ref, sig = reference(model, "stress", 0)
+    res = AxisRunner(mod, files["accelnav_f32.json"], 0, prefix="accelnav_f32").run(code=run.code[:, 0])
+    assert np.array_equal(res["valid"], valid)
+    ratio = np.abs(res["x"] - ref.x_post)[100:] / sig[100:]
+    assert ratio.max() < 1e-2
+
+
+def test_cli_writes_files_and_report(tmp_path, capsys):
+    from host.cli import main
+
+    model = load_model()
+    assert main(["codegen", model.source, "--out", str(tmp_path), "--report"]) == 0
+    out = capsys.readouterr().out
+    assert {p.name for p in tmp_path.iterdir()} == {"accelnav.c", "accelnav.h", "accelnav.json"}
+    for needle in ("Q16.47", "predicted error bound", "RAM", "resolution"):
+        assert needle in out

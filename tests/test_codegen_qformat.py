@@ -1,0 +1,50 @@
+"""The one quantizer: round to nearest, then saturate; at +-max and +-0.5 LSB."""
+
+import numpy as np
+import pytest
+
+from codegen.qformat import QFormat, bits_for, const_format, dequantize, fit, quantize
+
+Q31 = QFormat(32, 31)
+Q12_19 = QFormat(32, 19)
+Q16_47 = QFormat(64, 47)
+
+
+@pytest.mark.parametrize(
+    "value, fmt, expected",
+    [
+        (0.0, Q31, 0),
+        (0.5 * 2**-31, Q31, 1),  # +0.5 LSB rounds up (ties toward +inf, as the C's rounding shift)
+        (-0.5 * 2**-31, Q31, 0),  # -0.5 LSB rounds toward +inf too
+        (0.49 * 2**-31, Q31, 0),
+        (-0.51 * 2**-31, Q31, -1),
+        (1.0, Q31, 2**31 - 1),  # +max saturates
+        (1.0 - 2**-31, Q31, 2**31 - 1),
+        (-1.0, Q31, -(2**31)),  # -max is exact
+        (-2.0, Q31, -(2**31)),
+        (1e300, Q16_47, 2**63 - 1),
+        (-1e300, Q16_47, -(2**63)),
+        (4095.999999, Q12_19, 2**31 - 1),
+        (-4096.0, Q12_19, -(2**31)),
+    ],
+)
+def test_quantize_edges(value, fmt, expected):
+    assert quantize(value, fmt) == expected
+    assert quantize(np.array([value]), fmt)[0] == expected  # the array path agrees
+
+
+def test_round_trip_within_half_lsb():
+    rng = np.random.default_rng(7)
+    x = rng.uniform(-4000, 4000, 10000)
+    q = quantize(x, Q12_19)
+    assert np.max(np.abs(dequantize(q, Q12_19) - x)) <= Q12_19.lsb / 2
+
+
+def test_formats():
+    assert bits_for(1.0) == 1 and bits_for(0.99) == 0 and bits_for(40000) == 16
+    assert fit(40000, 64).name == "Q16.47"
+    assert fit(0.004, 32).name == "Q-7.38"
+    f = const_format(4.8e-7)
+    assert 2**30 <= quantize(4.8e-7, f) < 2**31  # per-constant scaling uses the whole word
+    with pytest.raises(ValueError):
+        quantize(float("nan"), Q31)
