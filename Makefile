@@ -12,6 +12,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 
 .PHONY: setup demo test lint format bench clean
 
+include firmware/firmware.mk
 
 setup: $(STAMP)
 

@@ -1,0 +1,46 @@
+/* The board interface: what the application needs from a board, and what a
+ * board calls in the application.
+ *
+ * A board owns the main loop (board_run), its time base, the sample source
+ * (ADC + DMA, timer capture, or a stimulus stream standing in for them) and
+ * the UARTs. Telemetry goes out through board_uart_write(); received bytes and
+ * samples go in through app_rx() and app_sample(). */
+#ifndef ACN_BOARD_H
+#define ACN_BOARD_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "acnframe.h"
+
+/* Set up clocks, pins, UARTs and the sample source. */
+void board_init(void);
+
+/* One pass of the main loop: feed received bytes and ready samples to the
+ * application, move queued telemetry out. Returns false when the board has
+ * nothing more to do (host board at end of input); MCU boards never return false. */
+bool board_poll(void);
+
+/* Queue n telemetry bytes for the host link; all or nothing (false: no room, nothing queued). */
+bool board_uart_write(const uint8_t *p, size_t n);
+
+/* Milliseconds since board_init, wrapping. */
+uint32_t board_time_ms(void);
+
+/* ACNF_BOARD_* of this board. */
+uint8_t board_id(void);
+
+/* ---- implemented by the application (firmware/src/app.c) ---- */
+
+/* Channels of app_rx(): they carry the same frames; each has its own receiver. */
+enum { APP_CH_HOST = 0, APP_CH_STIM = 1, APP_NCH = 2 };
+
+void app_init(void);
+/* The raw input of one sample: ADC codes or T1/T2 counts, and per axis a
+ * no-capture flag (bit i: axis i saw no duty-cycle period: sensor unplugged). */
+void app_sample(const acnf_stimulus_t *in);
+/* Bytes received on a channel: commands, and stimulus frames (which call app_sample). */
+void app_rx(unsigned ch, const uint8_t *p, size_t n);
+
+#endif

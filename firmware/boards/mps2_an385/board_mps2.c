@@ -1,0 +1,118 @@
+/* accelnav board layer for QEMU's mps2-an385 (Cortex-M3, 25 MHz), beside the
+ * bare-metal runtime of this folder (startup.c, board.h, mps2_an385.ld).
+ *
+ * UART0 (CMSDK APB UART at 0x40004000, QEMU's first -serial): telemetry out,
+ * commands in. UART1 (0x40005000, the second -serial): the stimulus feed
+ * standing in for the ADC or the timer capture, which the emulator lacks: one
+ * stimulus frame (the same framing as everything else) is one sample, so the
+ * run is paced by the feed and reproducible. A stimulus byte is read only
+ * while the telemetry queue has room for three more frames: the emulated board
+ * never drops telemetry, it slows the feed down instead (commands likewise).
+ *
+ * Time base: SysTick free-running on the core clock (board_ticks of the
+ * runtime), folded into milliseconds on every pass of the loop. */
+#include "acn_board.h"
+#include "board.h"
+
+/* CMSDK APB UART registers (ARM DDI 0479, "APB UART") */
+typedef struct {
+    volatile uint32_t DATA; /* 0x00: rx/tx byte */
+    volatile uint32_t
+        STATE;              /* 0x04: bit0 TX full, bit1 RX full, bit2 TX overrun, bit3 RX overrun */
+    volatile uint32_t CTRL; /* 0x08: bit0 TX enable, bit1 RX enable, bits 2..5 interrupt enables */
+    volatile uint32_t INTSTAT; /* 0x0c: read status / write 1 to clear */
+    volatile uint32_t BAUDDIV; /* 0x10: >= 16 */
+} cmsdk_uart_t;
+
+#define UART0 ((cmsdk_uart_t *)0x40004000u)
+#define UART1 ((cmsdk_uart_t *)0x40005000u)
+#define UART_STATE_TXFULL 1u
+#define UART_STATE_RXFULL 2u
+#define UART_CTRL_TXEN 1u
+#define UART_CTRL_RXEN 2u
+/* 115200 baud; the emulator does not pace the bytes, a real MPS2 would */
+#define UART_BAUDDIV (BOARD_CPU_HZ / 115200u)
+
+#define TX_SIZE 2048u /* power of two */
+static uint8_t tx_ring[TX_SIZE];
+static uint32_t tx_head; /* next write */
+static uint32_t tx_tail; /* next send */
+
+static uint32_t time_ms;
+static uint32_t tick_last;
+static uint32_t tick_rem; /* ticks not yet folded into time_ms */
+
+static void uart_init(cmsdk_uart_t *u)
+{
+    u->CTRL = 0;
+    u->BAUDDIV = UART_BAUDDIV;
+    u->INTSTAT = 0xfu;
+    u->CTRL = UART_CTRL_TXEN | UART_CTRL_RXEN;
+}
+
+void board_init(void)
+{
+    uart_init(UART0);
+    uart_init(UART1);
+    tx_head = tx_tail = 0;
+    board_ticks_start();
+    tick_last = board_ticks();
+    time_ms = tick_rem = 0;
+}
+
+uint8_t board_id(void)
+{
+    return ACNF_BOARD_MPS2_AN385;
+}
+
+static uint32_t tx_free(void)
+{
+    return TX_SIZE - (tx_head - tx_tail);
+}
+
+bool board_uart_write(const uint8_t *p, size_t n)
+{
+    size_t i;
+    if (n > tx_free()) {
+        return false;
+    }
+    for (i = 0; i < n; ++i) {
+        tx_ring[tx_head++ & (TX_SIZE - 1u)] = p[i];
+    }
+    return true;
+}
+
+uint32_t board_time_ms(void)
+{
+    return time_ms;
+}
+
+static void time_update(void)
+{
+    uint32_t now = board_ticks();
+    tick_rem += (now - tick_last) & 0x00ffffffu; /* 24-bit counter */
+    tick_last = now;
+    time_ms += tick_rem / (BOARD_CPU_HZ / 1000u);
+    tick_rem %= BOARD_CPU_HZ / 1000u;
+}
+
+bool board_poll(void)
+{
+    uint8_t b;
+    time_update();
+    while (tx_tail != tx_head && !(UART0->STATE & UART_STATE_TXFULL)) {
+        UART0->DATA = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
+    }
+    if (tx_free() < 3u * ACNF_MAX_UP_WIRE) {
+        return true; /* let the queue drain before taking input that makes more */
+    }
+    if (UART0->STATE & UART_STATE_RXFULL) {
+        b = (uint8_t)UART0->DATA;
+        app_rx(APP_CH_HOST, &b, 1);
+    }
+    if (UART1->STATE & UART_STATE_RXFULL) {
+        b = (uint8_t)UART1->DATA;
+        app_rx(APP_CH_STIM, &b, 1);
+    }
+    return true;
+}

@@ -1,0 +1,95 @@
+# Firmware build, included by the top-level Makefile.
+#
+#   make firmware BOARD=host|mps2_an385|stm32f103 [MODEL=models/x.toml]
+#   make flash BOARD=stm32f103 [FLASH_TOOL=openocd|st-flash]
+#
+# The filter (accelnav.*) and the frame code (acnframe.*) of MODEL are
+# generated into build/firmware/gen/MODEL_NAME/ first; the board's image goes to
+# build/firmware/BOARD/ with a size report (size.txt).
+
+BOARD      ?= host
+MODEL      ?= models/adxl250_default.toml
+FW_GEN     := build/firmware/gen/$(basename $(notdir $(MODEL)))
+FW_OUT     := build/firmware/$(BOARD)
+FW_WARN    := -std=c99 -Wall -Wextra -Werror -pedantic
+FW_INC     := -Ifirmware/src -Ifirmware/boards -I$(FW_GEN)
+FW_COMMON  := $(wildcard firmware/src/*.c) $(FW_GEN)/accelnav.c $(FW_GEN)/acnframe.c
+FW_HEADERS := $(wildcard firmware/src/*.h firmware/boards/*.h firmware/boards/$(BOARD)/*.h)
+ARM_CC     ?= arm-none-eabi-gcc
+ARM_FLAGS  := -mcpu=cortex-m3 -mthumb -Os -ffunction-sections -fdata-sections -ffreestanding -g
+
+ifeq ($(BOARD),host)
+FW_CC      := $(CC)
+FW_CFLAGS  := $(FW_WARN) -O2 -g -Ifirmware/boards/host
+FW_SRCS    := firmware/boards/host/board_host.c
+FW_LDFLAGS :=
+FW_SIZE    := size
+else ifeq ($(BOARD),mps2_an385)
+FW_CC      := $(ARM_CC)
+FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -Ifirmware/boards/mps2_an385
+FW_SRCS    := firmware/boards/mps2_an385/board_mps2.c
+# the runtime's startup.c (not ours) casts function pointers to void * in its vector
+# table, which -pedantic refuses: it is built with the same flags minus -pedantic
+FW_LOOSE   := firmware/boards/mps2_an385/startup.c
+FW_LDFLAGS := -nostartfiles --specs=nano.specs -Tfirmware/boards/mps2_an385/mps2_an385.ld \
+              -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
+FW_SIZE    := arm-none-eabi-size
+else ifeq ($(BOARD),stm32f103)
+FW_CC      := $(ARM_CC)
+FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -Ifirmware/boards/stm32f103
+FW_SRCS    := firmware/boards/stm32f103/startup_stm32f103.c firmware/boards/stm32f103/board_stm32.c
+FW_LDFLAGS := -nostartfiles --specs=nano.specs -Tfirmware/boards/stm32f103/stm32f103c8.ld \
+              -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
+FW_SIZE    := arm-none-eabi-size
+else
+$(error BOARD=$(BOARD): accepted: host, mps2_an385, stm32f103)
+endif
+
+FW_ELF := $(FW_OUT)/accelnav_fw$(if $(filter host,$(BOARD)),,.elf)
+# which model the image in FW_OUT was built for: a different MODEL rebuilds it
+FW_STAMP := $(FW_OUT)/.model
+
+.PHONY: firmware firmware-gen flash FORCE
+FORCE:
+
+$(FW_STAMP): FORCE
+	@mkdir -p $(FW_OUT)
+	@echo '$(MODEL)' | cmp -s - $@ || echo '$(MODEL)' > $@
+
+firmware: $(FW_ELF)
+	@$(FW_SIZE) $(FW_ELF) | tee $(FW_OUT)/size.txt
+
+firmware-gen: $(FW_GEN)/acnframe.h
+
+$(FW_GEN)/acnframe.h $(FW_GEN)/acnframe.c $(FW_GEN)/accelnav.c: $(MODEL) $(wildcard codegen/*.py) | $(STAMP)
+	$(PY) -m codegen.frames --model $(MODEL) --out $(FW_GEN)
+	@touch $(FW_GEN)/acnframe.h
+
+FW_LOOSE_OBJ := $(patsubst %.c,$(FW_OUT)/%.o,$(notdir $(FW_LOOSE)))
+
+$(FW_OUT)/%.o: firmware/boards/$(BOARD)/%.c $(FW_HEADERS)
+	@mkdir -p $(FW_OUT)
+	$(FW_CC) $(filter-out -pedantic,$(FW_CFLAGS)) -c $< -o $@
+
+$(FW_ELF): $(FW_COMMON) $(FW_SRCS) $(FW_LOOSE_OBJ) $(FW_HEADERS) $(FW_GEN)/acnframe.h $(FW_STAMP)
+	@mkdir -p $(FW_OUT)
+	$(FW_CC) $(FW_CFLAGS) $(FW_INC) $(FW_COMMON) $(FW_SRCS) $(FW_LOOSE_OBJ) $(FW_LDFLAGS) -o $@
+ifeq ($(BOARD),stm32f103)
+	arm-none-eabi-objcopy -O binary $@ $(FW_OUT)/accelnav_fw.bin
+	arm-none-eabi-objcopy -O ihex $@ $(FW_OUT)/accelnav_fw.hex
+endif
+
+# Not run here (no board attached); with an ST-Link on SWD:
+#   openocd: make flash BOARD=stm32f103
+#   st-flash: make flash BOARD=stm32f103 FLASH_TOOL=st-flash
+FLASH_TOOL ?= openocd
+flash: firmware
+ifneq ($(BOARD),stm32f103)
+	$(error make flash: BOARD=stm32f103 only; mps2_an385 runs in qemu-system-arm (see firmware/README.md))
+endif
+ifeq ($(FLASH_TOOL),st-flash)
+	st-flash --reset write $(FW_OUT)/accelnav_fw.bin 0x08000000
+else
+	openocd -f interface/stlink.cfg -f target/stm32f1x.cfg \
+	    -c "program $(FW_ELF) verify reset exit"
+endif

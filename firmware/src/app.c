@@ -1,0 +1,197 @@
+#include "app.h"
+
+#include <string.h>
+
+app_state_t app;
+
+static void app_reset_filters(void)
+{
+    acn_filters_init(&app.filters);
+    app.index = 0;
+    app.decim_left = 0;
+    app.overflow_seen = 0;
+    app.reset_pending = true;
+}
+
+void app_init(void)
+{
+    unsigned ch;
+    memset(&app, 0, sizeof app);
+    for (ch = 0; ch < APP_NCH; ++ch) {
+        link_rx_init(&app.rx[ch]);
+    }
+    app.decimation = 1;
+    app.running = true; /* stream from power-on; the host may send stop */
+    app_reset_filters();
+}
+
+uint32_t app_overflow_total(void)
+{
+    uint32_t total = 0;
+    unsigned i;
+    for (i = 0; i < ACNF_NAXES; ++i) {
+        uint32_t o = acn_filter_overflow(&app.filters, i);
+        total = (o > UINT32_MAX - total) ? UINT32_MAX : total + o;
+    }
+    return total;
+}
+
+static void app_send_info(void)
+{
+    acnf_info_t info;
+    uint8_t payload[ACNF_INFO_SIZE];
+    uint32_t err = app.rx[APP_CH_HOST].errors + app.rx[APP_CH_STIM].errors;
+    info.protocol = ACNF_PROTOCOL_VERSION;
+    info.layout_hash = ACNF_LAYOUT_HASH;
+    info.runtime_api = ACN_RUNTIME_API;
+    info.board = board_id();
+    info.running = app.running ? 1u : 0u;
+    info.decimation = app.decimation;
+    info.rate_mhz = ACNF_RATE_MHZ;
+    info.index = app.index;
+    info.seq = app.seq;
+    info.uptime_ms = board_time_ms();
+    info.rx_errors = (uint16_t)err;
+    memcpy(info.model_sha256, acn_model_sha256, sizeof info.model_sha256);
+    (void)link_send(payload, acnf_pack_info(&info, payload));
+}
+
+static void app_ack(uint8_t command, uint8_t status, uint16_t arg)
+{
+    acnf_ack_t ack;
+    uint8_t payload[ACNF_ACK_SIZE];
+    ack.command = command;
+    ack.status = status;
+    ack.arg = arg;
+    ack.index = app.index;
+    (void)link_send(payload, acnf_pack_ack(&ack, payload));
+}
+
+static void app_command(const acnf_command_t *c)
+{
+    uint8_t status = ACNF_ACK_OK;
+    switch (c->type) {
+    case ACNF_CMD_START:
+        if (!app.running) { /* seq runs on: the host sees no gap across a stop */
+            app.running = true;
+            app.decim_left = 0;
+        }
+        break;
+    case ACNF_CMD_STOP:
+        app.running = false;
+        break;
+    case ACNF_CMD_RESET:
+        app_reset_filters();
+        break;
+    case ACNF_CMD_DECIMATE:
+        if (c->factor >= 1u && c->factor <= ACNF_MAX_DECIMATION) {
+            app.decimation = c->factor;
+            app.decim_left = 0;
+        } else {
+            status = ACNF_ACK_BAD_ARGUMENT;
+        }
+        break;
+    case ACNF_CMD_INFO:
+        app_send_info();
+        break;
+    case ACNF_CMD_ZUPT_BEGIN:
+        app.zupt = true;
+        break;
+    case ACNF_CMD_ZUPT_END:
+        app.zupt = false;
+        break;
+    default:
+        status = ACNF_ACK_BAD_ARGUMENT;
+        break;
+    }
+    app_ack(c->type, status, c->factor);
+}
+
+void app_sample(const acnf_stimulus_t *in)
+{
+    acnf_sample_t s;
+    unsigned i;
+    uint32_t overflow;
+    /* input stage and filters, every sample whether streamed or not */
+    for (i = 0; i < ACNF_NAXES; ++i) {
+        acnf_axis_t *ax = &s.axis[i];
+        memset(ax, 0, sizeof *ax);
+#if ACNF_INPUT_DUTY
+        ax->t1 = in->t1[i];
+        ax->t2 = in->t2[i];
+        if (in->flags & (1u << i)) { /* no capture: sensor unplugged; predict, flag, keep running */
+            acn_filter_skip(&app.filters, i);
+            ax->flags = ACNF_AXIS_TIMEOUT | ACNF_AXIS_SKIPPED;
+        } else if (!acn_filter_step(&app.filters, i, in)) {
+            ax->flags = ACNF_AXIS_SKIPPED;
+        }
+#else
+        ax->code = in->code[i];
+        if (!acn_filter_step(&app.filters, i, in)) { /* a rail: the generated rule */
+            ax->flags = ACNF_AXIS_SKIPPED | ACNF_AXIS_RAIL;
+        }
+#endif
+        if (ax->flags & ACNF_AXIS_SKIPPED) {
+            ++app.skipped;
+        }
+        acn_filter_read(&app.filters, i, ax);
+    }
+    s.index = app.index++;
+    if (!app.running) {
+        return;
+    }
+    if (app.decim_left > 0u) {
+        --app.decim_left;
+        return;
+    }
+    app.decim_left = (uint16_t)(app.decimation - 1u);
+    overflow = app_overflow_total();
+    s.seq = app.seq++;
+    s.flags = ACNF_FLAG_RUNNING;
+    if (app.zupt) {
+        s.flags |= ACNF_FLAG_ZUPT;
+    }
+    if (app.reset_pending) {
+        s.flags |= ACNF_FLAG_RESET;
+    }
+    if (overflow != app.overflow_seen) {
+        s.flags |= ACNF_FLAG_OVERFLOW;
+    }
+    s.tx_drop = app.tx_drop;
+    s.skipped = app.skipped;
+    s.overflow = overflow > 0xffffu ? 0xffffu : (uint16_t)overflow;
+    {
+        uint8_t payload[ACNF_SAMPLE_SIZE];
+        if (link_send(payload, acnf_pack_sample(&s, payload))) {
+            app.reset_pending = false;
+            app.overflow_seen = overflow;
+        } else {
+            ++app.tx_drop; /* its seq is spent: the host counts it lost, tx_drop says why */
+        }
+    }
+}
+
+void app_rx(unsigned ch, const uint8_t *p, size_t n)
+{
+    link_rx_t *rx;
+    size_t k;
+    if (ch >= APP_NCH) {
+        return;
+    }
+    rx = &app.rx[ch];
+    for (k = 0; k < n; ++k) {
+        size_t len = link_rx_byte(rx, p[k]);
+        acnf_command_t c;
+        acnf_stimulus_t t;
+        if (len == 0u) {
+            continue;
+        }
+        if (acnf_parse_stimulus(rx->buf, len, &t)) {
+            app_sample(&t);
+        } else if (acnf_parse_command(rx->buf, len, &c)) {
+            app_command(&c);
+        } else {
+            ++rx->errors;
+        }
+    }
+}

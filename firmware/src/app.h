@@ -1,0 +1,34 @@
+/* The application: input stage, filters, telemetry, commands. Board-independent.
+ * Its entry points (app_init, app_sample, app_rx) are declared in board.h;
+ * this header adds what tests and boards may inspect. */
+#ifndef ACN_APP_H
+#define ACN_APP_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "acn_board.h"
+#include "filter_adapter.h"
+#include "link.h"
+
+typedef struct {
+    acn_filters_t filters;
+    link_rx_t rx[APP_NCH];
+    uint32_t index;      /* samples since reset */
+    uint16_t seq;        /* sample frames attempted since start */
+    uint16_t decimation; /* 1..ACNF_MAX_DECIMATION */
+    uint16_t decim_left; /* samples until the next frame */
+    uint16_t tx_drop;
+    uint16_t skipped;
+    uint32_t overflow_seen; /* saturation total at the last frame */
+    bool running;
+    bool zupt;
+    bool reset_pending; /* flag the next frame */
+} app_state_t;
+
+extern app_state_t app;
+
+/* Total filter saturations of every axis (saturating at UINT32_MAX). */
+uint32_t app_overflow_total(void);
+
+#endif

@@ -1,0 +1,225 @@
+"""``accelnav record`` and ``accelnav log info|export``: record a telemetry link, inspect and export the log."""
+
+from __future__ import annotations
+
+import json
+import signal
+from pathlib import Path
+
+import numpy as np
+
+from .errors import UserError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("record", help="record a telemetry link (serial port, pty, socket://, loop://) to a log")
+    p.add_argument("port", metavar="PORT_OR_URL", help="/dev/ttyUSB0, /dev/pts/N, socket://HOST:PORT, ...")
+    p.add_argument("--out", type=Path, required=True, help="log file to create")
+    p.add_argument("--baud", type=int, default=921600, help="baud rate; default: 921600 (ignored by socket://)")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--manifest", type=Path, help="frame manifest (acnframe.json) the firmware was built with")
+    src.add_argument("--model", type=Path, help="model file; its manifest is generated (default: the embedded model)")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    p.add_argument("--frames", type=int, default=None, help="stop after this many sample frames")
+    p.add_argument("--decimate", type=int, default=None, metavar="N", help="ask the device for one frame in N")
+    p.add_argument("--no-commands", action="store_true", help="send nothing to the device (not even an info request)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing log")
+    p.add_argument("--status", action="store_true", help="show the status line even when stderr is not a terminal")
+    p.set_defaults(func=cmd_record)
+
+    p = sub.add_parser("log", help="inspect or export a recorded log")
+    lsub = p.add_subparsers(dest="log_command", metavar="ACTION")
+    q = lsub.add_parser("info", help="summary of a log: source, model, frames, losses, errors")
+    q.add_argument("log", type=Path)
+    q.add_argument("--json", action="store_true", help="print the summary as JSON")
+    q.set_defaults(func=cmd_log_info)
+    q = lsub.add_parser("export", help="export the sample frames as CSV or as an accelnav run file (NPZ)")
+    q.add_argument("log", type=Path)
+    q.add_argument("--out", type=Path, required=True, help="FILE.csv or FILE.npz")
+    q.set_defaults(func=cmd_log_export)
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
+
+
+def _manifest(args):
+    from codegen.model import load_model
+
+    from .telemetry import Manifest
+
+    if args.manifest is not None:
+        try:
+            man = Manifest.load(args.manifest)
+        except (OSError, ValueError, KeyError) as exc:
+            raise UserError(f"{args.manifest}: not a telemetry manifest: {exc}") from None
+        return man, ""
+    model = load_model(args.model)
+    return Manifest.for_model(model), model.text
+
+
+def cmd_record(args) -> int:
+    import serial
+
+    from .recorder import Recorder, Status
+
+    if args.out.exists() and not args.force:
+        raise UserError(f"--out: {args.out} exists; give --force to overwrite it")
+    if args.decimate is not None and not 1 <= args.decimate <= 1000:
+        raise UserError(f"--decimate: got {args.decimate}; accepted: 1 to 1000")
+    man, model_text = _manifest(args)
+    commands: tuple = ()
+    if not args.no_commands:
+        commands = (("info", {}),)
+        if args.decimate is not None:
+            commands = (("decimate", {"factor": args.decimate}), ("start", {}), ("info", {}))
+    try:
+        rec = Recorder(
+            args.port,
+            args.out,
+            man,
+            baud=args.baud,
+            model_text=model_text,
+            commands=commands,
+            overwrite=args.force,
+            status=Status(enabled=True if args.status else None),
+        )
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise UserError(f"{args.port}: cannot open: {exc}") from None
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: rec.stop())
+    try:
+        res = rec.run(duration=args.duration, max_frames=args.frames)
+    finally:
+        rec.close()
+    for w in res.warnings[:5]:
+        print(f"accelnav record: warning: {w}")
+    s = res.stats
+    print(
+        f"accelnav record: {args.out}: {s['frames'].get('sample', 0)} sample frames in {res.seconds:.1f} s, "
+        f"lost {s['lost']}, CRC errors {s['crc_errors']}, bad frames {s['bad_frames']} ({res.reason})"
+    )
+    return 1 if res.reason.startswith("link lost") else 0
+
+
+def _summary(path: Path) -> dict:
+    from .logfile import LogError
+    from .recorder import decode_log
+
+    try:
+        d = decode_log(path)
+    except LogError as exc:
+        raise UserError(str(exc)) from None
+    s = d.frames["sample"]
+    man = d.manifest
+    out = {
+        "log": str(path),
+        "source": d.meta.get("source"),
+        "started_utc": d.meta.get("started_utc"),
+        "model": man.data.get("model"),
+        "model_sha256": man.model_sha256,
+        "layout_hash": f"0x{man.layout_hash:08x}",
+        "axes": man.axes,
+        "input": man.input,
+        "rate_hz": man.rate_hz,
+        "chunks": d.chunks,
+        "damaged_bytes": d.damaged_bytes,
+        "torn_bytes": d.torn_bytes,
+        **d.stats,
+        "host_seconds": float((d.host_t_ns[-1] - d.host_t_ns[0]) / 1e9) if len(s) else 0.0,
+        "index_first": int(s["index"][0]) if len(s) else None,
+        "index_last": int(s["index"][-1]) if len(s) else None,
+        "tx_drop_last": int(s["tx_drop"][-1]) if len(s) else None,
+    }
+    if len(d.frames["info"]):
+        info = d.frames["info"][-1]
+        out["device_layout_ok"] = int(info["layout_hash"]) == man.layout_hash
+        out["device_decimation"] = int(info["decimation"])
+    return out
+
+
+def cmd_log_info(args) -> int:
+    summary = _summary(args.log)
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    for k, v in summary.items():
+        print(f"{k:>18}: {v}")
+    return 0
+
+
+def cmd_log_export(args) -> int:
+    from codegen.design import input_conversion
+    from codegen.model import ModelError, loads_model
+
+    from .logfile import LogError
+    from .recorder import decode_log
+    from .runfile import FORMAT
+    from .telemetry import sample_columns
+
+    suffix = args.out.suffix.lower()
+    if suffix not in (".csv", ".npz"):
+        raise UserError(f"--out: {args.out}: accepted: a .csv or .npz file name")
+    try:
+        d = decode_log(args.log)
+    except LogError as exc:
+        raise UserError(str(exc)) from None
+    cols = sample_columns(d.manifest, d.frames["sample"])
+    names = d.manifest.axes
+    raw = d.manifest.raw_fields()
+    skipped = (cols["axis_flags"] & (1 << d.manifest.axis_flags["skipped"])) != 0
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".csv":
+        header = ["t_s", "index", "seq", "flags", "host_time_s"]
+        table = [cols["t"], cols["index"], cols["seq"], cols["flags"], d.host_t_ns / 1e9]
+        for j, ax in enumerate(names):
+            for r in raw:
+                header.append(f"{ax}_{r}")
+                table.append(cols[r][:, j])
+            header.append(f"{ax}_flags")
+            table.append(cols["axis_flags"][:, j])
+            for s in ("r", "u", "a", "eps"):
+                header.append(f"{ax}_fw_{s}")
+                table.append(cols[s][:, j])
+        np.savetxt(args.out, np.column_stack(table), delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+        print(f"accelnav log export: {args.out}: {len(cols['t'])} rows")
+        return 0
+    # NPZ: an accelnav run file (host/runfile.py) plus the firmware's own states
+    text = d.meta.get("model_toml") or ""
+    if not text:
+        raise UserError(f"{args.log}: the log carries no model text (recorded with --manifest); export to .csv instead")
+    try:
+        model = loads_model(text, source=f"{args.log}:model_toml")
+    except ModelError as exc:
+        raise UserError(str(exc)) from None
+    accel = np.empty((len(cols["t"]), len(names)))
+    for j in range(len(names)):
+        conv = input_conversion(model, j)
+        accel[:, j] = (
+            conv.accel(cols["code"][:, j]) if "code" in cols else conv.accel(cols["t1"][:, j], cols["t2"][:, j])
+        )
+    arrays = {
+        "format": np.array(FORMAT),
+        "model_toml": np.array(text),
+        "model_source": np.array(f"{args.log}:model_toml"),
+        "t": cols["t"],
+        "axis_names": np.array(names),
+        "accel": accel,
+        "clipped": skipped,
+        **{r: cols[r].astype(np.int32) for r in raw},
+        "fw_x": np.stack(
+            [np.stack([cols[s][:, j] for s in ("r", "u", "a", "eps")], axis=1) for j in range(len(names))]
+        ),
+        "fw_index": cols["index"],
+        "fw_seq": cols["seq"],
+        "fw_flags": cols["flags"],
+        "fw_axis_flags": cols["axis_flags"],
+        "host_time_ns": d.host_t_ns,
+    }
+    tmp = args.out.with_name(args.out.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+    tmp.replace(args.out)
+    gaps = int(np.count_nonzero(np.diff(cols["index"]) != 1)) if len(cols["index"]) > 1 else 0
+    print(
+        f"accelnav log export: {args.out}: {len(cols['t'])} samples"
+        + (f" ({gaps} gaps in the sample index: decimation or lost frames; t is from the index)" if gaps else "")
+    )
+    return 0

@@ -1,0 +1,241 @@
+"""The log format and the recorder: loop://, a pty, kill -9 mid-stream, a pulled cable, log info/export."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import serial
+from firmware_sil import HostFirmware, build_firmware, generated, manifest
+
+from codegen.model import load_model
+from host.cli import main as cli_main
+from host.logfile import LogError, LogWriter, read_log
+from host.recorder import Recorder, Status, decode_log
+from host.runfile import load_run
+from host.telemetry import decode_all, encode_stimulus
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def man():
+    return manifest(None)
+
+
+@pytest.fixture(scope="module")
+def telemetry(man):
+    """2000 samples of the default model's firmware (host board, cffi): its telemetry bytes."""
+    fw = HostFirmware(build_firmware(None))
+    code = 2048 + np.random.default_rng(8).integers(-60, 60, (2000, 2))
+    fw.rx(encode_stimulus(man, code=code))
+    return fw.take()
+
+
+@pytest.fixture
+def manifest_file(tmp_path):
+    p = tmp_path / "acnframe.json"
+    p.write_text(generated(None)["acnframe.json"])
+    return p
+
+
+# --------------------------------------------------------------------------
+# log file
+
+
+def test_log_round_trip_and_chunking(tmp_path):
+    clock = iter(range(0, 10**12, 30_000_000))  # 30 ms per call
+    path = tmp_path / "a.acnlog"
+    pieces = [bytes([k % 251 + 1]) * (k + 1) for k in range(40)]
+    with LogWriter(path, {"x": 1}, clock=lambda: next(clock), fsync_s=None) as log:
+        for p in pieces:
+            log.append(p)
+    got = read_log(path)
+    assert got.meta["x"] == 1 and got.meta["format"] == "accelnav-log/1"
+    assert b"".join(got.data) == b"".join(pieces)
+    assert 8 <= len(got.data) <= 14  # one chunk per 0.1 s of 30 ms appends
+    assert got.torn_bytes == 0 and got.damaged_bytes == 0
+
+
+def test_log_survives_truncation_and_damage(tmp_path):
+    path = tmp_path / "b.acnlog"
+    t = iter(range(0, 10**12, 200_000_000))  # every append is its own chunk
+    with LogWriter(path, {}, clock=lambda: next(t), fsync_s=None) as log:
+        for k in range(20):
+            log.append(bytes([k + 1]) * 100)
+    whole = path.read_bytes()
+    head_len = len(whole) - 20 * (20 + 100)
+    for cut in range(head_len, len(whole), 7):  # torn anywhere: a prefix of the chunks, never an error
+        path.write_bytes(whole[:cut])
+        got = read_log(path)
+        assert len(got.data) == (cut - head_len) // 120
+        assert all(d == bytes([k + 1]) * 100 for k, d in enumerate(got.data))
+    damaged = bytearray(whole)
+    damaged[head_len + 5 * 120 + 50] ^= 0xFF  # inside chunk 5's bytes
+    path.write_bytes(bytes(damaged))
+    got = read_log(path)
+    assert len(got.data) == 19 and got.damaged_bytes == 120
+    path.write_bytes(b"not a log")
+    with pytest.raises(LogError, match="not an accelnav log"):
+        read_log(path)
+
+
+def test_log_refuses_to_overwrite(tmp_path):
+    path = tmp_path / "c.acnlog"
+    LogWriter(path, {}).close()
+    with pytest.raises(FileExistsError):
+        LogWriter(path, {})
+
+
+# --------------------------------------------------------------------------
+# recorder in-process over loop://
+
+
+def _loop_record(out, man, data: bytes, status: Status | None = None):
+    """Record ``data`` sent through pyserial's loop:// (its queue holds 4 KiB: a thread writes)."""
+    port = serial.serial_for_url("loop://", timeout=0.02)
+    writer = threading.Thread(target=port.write, args=(data,), daemon=True)
+    status = status or Status(enabled=False)
+    rec = Recorder(port, out, man, commands=(), model_text=load_model().text, status=status)
+    writer.start()
+    res = rec.run(max_frames=2000, duration=30)
+    rec.close()
+    writer.join(5)
+    return res
+
+
+def test_recorder_over_loop(tmp_path, man, telemetry):
+    junk = bytes(np.random.default_rng(1).integers(0, 256, 300, dtype=np.uint8))
+    out = tmp_path / "loop.acnlog"
+    cut = telemetry.index(b"\0", 50_000) + 1  # between two frames; the junk ends with a delimiter
+    shown = io.StringIO()
+    res = _loop_record(
+        out, man, junk + b"\0" + telemetry[:cut] + junk + b"\0" + telemetry[cut:], Status(shown, enabled=True)
+    )
+    last = shown.getvalue().rstrip("\n").split("\r")[-1]
+    assert re.search(r"frames/s +2000 frames +lost 0 +CRC errors 0 +bad \d+", last), last
+    assert res.reason == "frames"
+    assert res.stats["frames"]["sample"] == 2000
+    d = decode_log(out)
+    ref, _ = decode_all(man, telemetry)
+    np.testing.assert_array_equal(d.frames["sample"], ref["sample"])
+    assert d.stats["lost"] == 0 and d.stats["bad_frames"] >= 1  # the junk
+
+
+def test_log_info_and_export(tmp_path, man, telemetry, capsys):
+    out = tmp_path / "x.acnlog"
+    _loop_record(out, man, telemetry)
+    assert cli_main(["log", "info", str(out), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["frames"]["sample"] == 2000 and info["lost"] == 0 and info["axes"] == ["x", "y"]
+    assert cli_main(["log", "export", str(out), "--out", str(tmp_path / "x.csv")]) == 0
+    rows = np.loadtxt(tmp_path / "x.csv", delimiter=",", skiprows=1)
+    assert rows.shape[0] == 2000
+    assert cli_main(["log", "export", str(out), "--out", str(tmp_path / "x.npz")]) == 0
+    arrays, model = load_run(tmp_path / "x.npz")
+    assert arrays["fw_x"].shape == (2, 2000, 4) and model.name == "adxl250_default"
+    ref = decode_all(man, telemetry)[0]["sample"]
+    np.testing.assert_array_equal(arrays["code"][:, 0], ref["x.code"])
+    assert cli_main(["log", "info", str(tmp_path / "x.csv")]) == 2  # not a log: one line, status 2
+    assert "not an accelnav log" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------
+# recorder as a program on a pty: kill -9, pulled cable
+
+
+def _start_recorder(tmp_path, manifest_file, slave_name, out):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    cmd = [sys.executable, "-m", "host.cli", "record", slave_name, "--out", str(out)]
+    cmd += ["--manifest", str(manifest_file), "--no-commands"]
+    proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while not out.exists():  # the header is written once the port is open
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "the recorder did not start"
+        time.sleep(0.02)
+    return proc
+
+
+def _feeder(master_fd, frames: list[bytes], rate_hz: float, sent: list, stop: threading.Event):
+    """Write one frame every 1/rate_hz s; note (time, seq index) of each."""
+    t0 = time.monotonic()
+    for k, f in enumerate(frames):
+        if stop.is_set():
+            return
+        delay = t0 + k / rate_hz - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        try:
+            os.write(master_fd, f)
+        except OSError:
+            return
+        sent.append((time.monotonic(), k))
+
+
+def _frames(telemetry: bytes) -> list[bytes]:
+    return [p + b"\0" for p in telemetry.split(b"\0")[:-1]]
+
+
+def _pty():
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    return master, slave, os.ttyname(slave)
+
+
+def test_kill_9_mid_stream_loses_at_most_the_last_tenth_of_a_second(tmp_path, manifest_file, telemetry, man):
+    master, slave, name = _pty()
+    out = tmp_path / "kill.acnlog"
+    proc = _start_recorder(tmp_path, manifest_file, name, out)
+    frames = _frames(telemetry)
+    sent: list = []
+    stop = threading.Event()
+    feeder = threading.Thread(target=_feeder, args=(master, frames, 1000.0, sent, stop))
+    feeder.start()
+    time.sleep(1.2)
+    t_kill = time.monotonic()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    stop.set()
+    feeder.join()
+    os.close(master)
+    os.close(slave)
+    d = decode_log(out)  # readable after kill -9
+    s = d.frames["sample"]
+    before = [k for t, k in sent if t < t_kill]
+    assert len(before) > 500
+    assert d.stats["crc_errors"] == 0 and d.stats["lost"] == 0
+    np.testing.assert_array_equal(s["seq"], np.arange(len(s)))  # a clean prefix of what was sent
+    last_kept_t = next(t for t, k in sent if k == len(s) - 1)
+    lost_s = t_kill - last_kept_t
+    print(f"\nkill -9: {len(before)} frames sent before the kill, {len(s)} in the log, last {lost_s * 1e3:.0f} ms lost")
+    assert lost_s < 0.1 + 0.15  # flush interval + scheduling slack on a loaded CI machine
+
+
+def test_pulled_cable_closes_the_log_cleanly(tmp_path, manifest_file, telemetry):
+    master, slave, name = _pty()
+    out = tmp_path / "pulled.acnlog"
+    proc = _start_recorder(tmp_path, manifest_file, name, out)
+    os.close(slave)
+    frames = _frames(telemetry)[:300]
+    os.write(master, b"".join(frames))
+    time.sleep(0.5)
+    os.close(master)  # the cable is pulled
+    stdout, stderr = proc.communicate(timeout=30)
+    assert proc.returncode == 1, (stdout, stderr)
+    assert b"link lost" in stdout
+    d = decode_log(out)
+    assert len(d.frames["sample"]) == 300 and d.torn_bytes == 0
