@@ -29,6 +29,7 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2")
@@ -56,22 +57,30 @@ def build_module(
     cdef: str,
     sources: dict[str, str],
     *,
-    main: str,
-    extra_compile_args: tuple[str, ...] = STRICT_FLAGS,
+    main: str | Sequence[str],
+    preamble: str | None = None,
+    extra_compile_args: Sequence[str] = STRICT_FLAGS,
+    extra_link_args: Sequence[str] = (),
     workdir: str | Path | None = None,
 ):
     """Build (or reuse) and import a cffi API-mode module.
 
     ``sources`` maps file names to text (``.c`` and ``.h`` files, written side
-    by side); ``main`` is the ``.c`` file compiled into the module (its
-    header is included by the cffi wrapper as ``main`` with ``.h``).
+    by side); ``main`` is the ``.c`` file (or the list of them) compiled into
+    the module with ``extra_compile_args``. The cffi wrapper starts with
+    ``preamble`` (default: ``#include`` of the first main file's header).
+    ``extra_link_args`` go to the final link (e.g. a sanitizer's runtime).
     ``cdef`` is the declaration block cffi exposes. Returns the module.
     """
     import cffi
 
+    mains = [main] if isinstance(main, str) else list(main)
+    if preamble is None:
+        header = Path(mains[0]).with_suffix(".h").name
+        preamble = f'#include "{header}"' if header in sources else ""
     key = "\0".join(
-        [cdef, main, *(f"{k}\0{v}" for k, v in sorted(sources.items())), *extra_compile_args]
-        + [sys.version, cffi.__version__, platform.machine()]
+        [cdef, preamble, *mains, *(f"{k}\0{v}" for k, v in sorted(sources.items()))]
+        + [*extra_compile_args, "--link", *extra_link_args, sys.version, cffi.__version__, platform.machine()]
     )
     modname = f"_{stem}_{hashlib.sha256(key.encode()).hexdigest()[:16]}"
     if modname in sys.modules:
@@ -85,22 +94,25 @@ def build_module(
         try:
             for name, text in sources.items():
                 (tmp / name).write_text(text)
-            header = Path(main).with_suffix(".h").name
             # Our C is compiled on its own with the strict flags; cffi's generated wrapper
             # (which is not -pedantic clean) is then compiled with the defaults and linked to it.
-            obj = tmp / (Path(main).stem + ".o")
             cc = os.environ.get("CC", "cc")
-            cmd = [cc, *extra_compile_args, "-fPIC", "-c", str(tmp / main), "-o", str(obj), f"-I{tmp}"]
-            done = subprocess.run(cmd, capture_output=True, text=True)
-            if done.returncode != 0:
-                raise RuntimeError(f"{' '.join(cmd)} failed:\n{done.stderr}")
+            objs = []
+            for name in mains:
+                obj = tmp / (Path(name).stem + ".o")
+                cmd = [cc, *extra_compile_args, "-fPIC", "-c", str(tmp / name), "-o", str(obj), f"-I{tmp}"]
+                done = subprocess.run(cmd, capture_output=True, text=True)
+                if done.returncode != 0:
+                    raise RuntimeError(f"{' '.join(cmd)} failed:\n{done.stderr}")
+                objs.append(str(obj))
             ffi = cffi.FFI()
             ffi.cdef(cdef)
             ffi.set_source(
                 modname,
-                f'#include "{header}"' if header in sources else "",
+                preamble,
                 include_dirs=[str(tmp)],
-                extra_objects=[str(obj)],
+                extra_objects=objs,
+                extra_link_args=list(extra_link_args),
                 libraries=["m"],
             )
             built = Path(ffi.compile(tmpdir=str(tmp), verbose=False))

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import serial
-from firmware_sil import DUTY_MODEL
 
+from hil_sim.firmware import DUTY_MODEL
 from host.recorder import Recorder, Status, decode_log
 from host.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus
 

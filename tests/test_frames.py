@@ -15,10 +15,11 @@ import zlib
 
 import numpy as np
 import pytest
-from firmware_sil import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
 
 from codegen.frames import COMMANDS, MAX_ENCODED, layout
 from codegen.model import load_model
+from hil_sim.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
+from host.cbuild import cache_dir
 from host.telemetry import (
     Decoder,
     cobs_decode,
@@ -219,7 +220,7 @@ def _run_filter_directly(kind, raw):
     from codegen.harness import AxisRunner, build
 
     files = {k: v for k, v in generated(MODELS[kind]).items() if k.startswith("accelnav.")}
-    mod = build(files, build_firmware.__globals__["_cache_root"]() / "harness")
+    mod = build(files, cache_dir() / "harness")
     return [
         AxisRunner(mod, files["accelnav.json"], axis=j).run(**{k: v[:, j] for k, v in raw.items()}) for j in range(2)
     ]

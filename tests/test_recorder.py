@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import serial
-from firmware_sil import HostFirmware, build_firmware, generated, manifest
 
 from codegen.model import load_model
+from hil_sim.firmware import HostFirmware, build_firmware, generated, manifest
 from host.cli import main as cli_main
 from host.logfile import LogError, LogWriter, read_log
 from host.recorder import Recorder, Status, decode_log

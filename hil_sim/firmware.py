@@ -1,0 +1,164 @@
+"""The firmware, built the one way for each place it runs.
+
+* :func:`generated`: the generated filter (``accelnav.*``) and frame code
+  (``acnframe.*``) of a model, cached on disk by the model's text and the
+  generator's source.
+* :func:`build_firmware`: firmware/src, the host board and the generated C
+  compiled with the strict flags (optionally with AddressSanitizer and
+  UndefinedBehaviorSanitizer) into a cffi module: the firmware in-process
+  (SIL), driven through :class:`HostFirmware`.
+* :func:`make_firmware`: an image for a board through the Makefile (``make
+  firmware BOARD=...``), e.g. the mps2-an385 ELF that hil_sim.qemu runs (PIL).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+from functools import cache
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+FW = REPO / "firmware"
+STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g"]
+SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
+DUTY_MODEL = REPO / "models" / "adxl202_duty.toml"
+
+
+@cache
+def generated(model_path: str | None = None) -> dict[str, str]:
+    """accelnav.{h,c,json} and acnframe.{h,c,json} of a model (the embedded default if None)."""
+    from codegen.emit_c import emit
+    from codegen.frames import emit_frames
+    from codegen.model import load_model
+
+    model = load_model(model_path)
+    # the generator takes seconds: keep its output on disk, keyed by the model and the generator's source
+    key = hashlib.sha256(model.text.encode())
+    for p in sorted((REPO / "codegen").glob("*.py")):
+        key.update(p.read_bytes())
+    from host.cbuild import cache_dir
+
+    cache = cache_dir() / f"gen-{key.hexdigest()[:20]}.json"
+    if cache.exists():
+        return json.loads(cache.read_text())
+    files = emit(model)
+    files.update(emit_frames(model, json.loads(files["accelnav.json"])))
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    tmp = cache.with_suffix(f".{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(files))
+    os.replace(tmp, cache)
+    return files
+
+
+def manifest(model_path: str | None = None):
+    from host.telemetry import Manifest
+
+    return Manifest(json.loads(generated(model_path)["acnframe.json"]))
+
+
+def _cdef(files: dict[str, str]) -> str:
+    man = json.loads(files["acnframe.json"])
+    n = len(man["axes"])
+    duty = man["input"] == "duty_cycle"
+    raw = "uint32_t t1; uint32_t t2;" if duty else "uint16_t code;"
+    stim = f"uint32_t t1[{n}]; uint32_t t2[{n}];" if duty else f"uint16_t code[{n}];"
+    return f"""
+typedef struct {{ uint8_t flags; {raw} int64_t r; int64_t u; int32_t a; int64_t e; }} acnf_axis_t;
+typedef struct {{ uint16_t seq; uint32_t index; uint16_t flags; uint16_t tx_drop; uint16_t skipped;
+                 uint16_t overflow; acnf_axis_t axis[{n}]; }} acnf_sample_t;
+typedef struct {{ uint8_t type; uint16_t factor; }} acnf_command_t;
+typedef struct {{ uint8_t flags; {stim} }} acnf_stimulus_t;
+size_t acnf_pack_sample(const acnf_sample_t *s, uint8_t *p);
+bool acnf_parse_command(const uint8_t *p, size_t n, acnf_command_t *c);
+bool acnf_parse_stimulus(const uint8_t *p, size_t n, acnf_stimulus_t *t);
+size_t link_frame(const uint8_t *payload, size_t n, uint8_t *out);
+size_t cobs_encode(const uint8_t *in, size_t n, uint8_t *out);
+size_t cobs_decode(const uint8_t *in, size_t n, uint8_t *out);
+uint32_t crc32_update(uint32_t crc, const uint8_t *p, size_t n);
+void board_init(void);
+size_t board_host_take(uint8_t *out, size_t max);
+void board_host_set_tx_limit(size_t limit);
+void app_init(void);
+void app_sample(const acnf_stimulus_t *in);
+void app_rx(unsigned ch, const uint8_t *p, size_t n);
+"""
+
+
+def build_firmware(model_path: str | None = None, *, sanitize: bool = False, workdir: Path | None = None):
+    """The host-board firmware as a cffi module (``.ffi``, ``.lib``), built once per source text."""
+    from host.cbuild import build_module
+
+    files = generated(model_path)
+    sources = {p.name: p.read_text() for p in sorted((FW / "src").glob("*.[ch]"))}
+    sources.update({p.name: p.read_text() for p in sorted((FW / "boards" / "host").glob("*.[ch]"))})
+    sources["acn_board.h"] = (FW / "boards" / "acn_board.h").read_text()
+    sources.update({k: v for k, v in files.items() if not k.endswith(".json")})
+    sources.pop("main.c")
+    preamble = "".join(
+        f'#include "{h}"\n' for h in ("acnframe.h", "link.h", "cobs.h", "crc32.h", "acn_board.h", "board_host.h")
+    )
+    return build_module(
+        "acn_fw_asan" if sanitize else "acn_fw",
+        _cdef(files),
+        sources,
+        main=sorted(n for n in sources if n.endswith(".c")),
+        preamble=preamble,
+        extra_compile_args=STRICT + (SANITIZE if sanitize else []),
+        extra_link_args=SANITIZE if sanitize else [],
+        workdir=workdir,
+    )
+
+
+def make_firmware(board: str, model_path: str | Path | None = None) -> Path:
+    """Build ``board``'s image with ``make firmware`` and return its output folder (build/firmware/BOARD)."""
+    cmd = ["make", "--no-print-directory", "firmware", f"BOARD={board}"]
+    if model_path is not None:
+        cmd.append(f"MODEL={Path(model_path).resolve()}")
+    if board != "host" and shutil.which("arm-none-eabi-gcc") is None:
+        raise FirmwareError(
+            f"board {board}: arm-none-eabi-gcc not found (Debian: gcc-arm-none-eabi libnewlib-arm-none-eabi)"
+        )
+    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600)
+    if done.returncode != 0:
+        raise FirmwareError(f"{' '.join(cmd)} failed:\n{done.stdout[-2000:]}{done.stderr[-4000:]}")
+    return REPO / "build" / "firmware" / board
+
+
+class FirmwareError(RuntimeError):
+    """A firmware build that could not be done (missing toolchain, compile error)."""
+
+
+class HostFirmware:
+    """The firmware in-process: feed bytes, collect telemetry."""
+
+    def __init__(self, mod):
+        self.ffi, self.lib = mod.ffi, mod.lib
+        self.lib.board_init()
+        self.lib.board_host_set_tx_limit(1 << 16)
+        self.lib.app_init()
+        self._buf = self.ffi.new("uint8_t[]", 1 << 16)
+        self._out = bytearray()
+
+    def rx(self, data: bytes, ch: int = 0, step: int = 4096) -> None:
+        """Feed bytes in pieces of ``step``, moving the telemetry out between pieces (a fast link)."""
+        for a in range(0, len(data), step):
+            part = data[a : a + step]
+            self.lib.app_rx(ch, part, len(part))
+            self._drain()
+
+    def _drain(self) -> None:
+        while True:
+            n = self.lib.board_host_take(self._buf, len(self._buf))
+            if n == 0:
+                return
+            self._out += self.ffi.buffer(self._buf, n)[:]
+
+    def take(self) -> bytes:
+        """All telemetry since the last take()."""
+        self._drain()
+        out, self._out = bytes(self._out), bytearray()
+        return out
