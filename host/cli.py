@@ -23,6 +23,7 @@ COMMAND_MODULES = (
     "host.cmd_fit_bias",  # fit-bias
     "host.cmd_codegen",  # codegen
     "host.cmd_record",  # record, log info|export
+    "host.cmd_hil",  # hil
 )
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 import re
 import shutil
-import socket
 import subprocess
 import threading
 import time
@@ -19,9 +18,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import serial
 
 from hil_sim.firmware import DUTY_MODEL
+from hil_sim.firmware import make_firmware as build_image
+from hil_sim.qemu import Mps2Board, qemu_command
 from host.recorder import Recorder, Status, decode_log
 from host.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus
 
@@ -34,12 +34,7 @@ needs_qemu = pytest.mark.skipif(shutil.which("qemu-system-arm") is None, reason=
 
 
 def make_firmware(board: str, model: Path | None = None) -> Path:
-    cmd = ["make", "-s", "firmware", f"BOARD={board}"]
-    if model is not None:
-        cmd.append(f"MODEL={model.relative_to(REPO)}")
-    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, f"{' '.join(cmd)}:\n{done.stdout}\n{done.stderr}"
-    out = REPO / "build" / "firmware" / board
+    out = build_image(board, model)
     assert (out / "size.txt").is_file()
     return out
 
@@ -104,70 +99,28 @@ def test_firmware_c_is_clang_formatted():
 # QEMU
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def qemu_command(elf: Path, tel_port: int, stim_port: int) -> list[str]:
-    """The command line documented in firmware/README.md."""
-    return [
-        "qemu-system-arm",
-        "-M", "mps2-an385",
-        "-display", "none",
-        "-monitor", "none",
-        "-semihosting-config", "enable=on,target=native",
-        "-kernel", str(elf),
-        "-chardev", f"socket,id=tel,host=127.0.0.1,port={tel_port},server=on,wait=off",
-        "-chardev", f"socket,id=stim,host=127.0.0.1,port={stim_port},server=on,wait=off",
-        "-serial", "chardev:tel",
-        "-serial", "chardev:stim",
-    ]  # fmt: skip
-
-
-def _connect(url: str, deadline: float):
-    while True:
-        try:
-            return serial.serial_for_url(url, timeout=0.05)
-        except serial.SerialException:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.05)
-
-
 @needs_arm
 @needs_qemu
 def test_mps2_an385_in_qemu_matches_the_host_board(tmp_path):
     out = make_firmware("mps2_an385")
     host = make_firmware("host")
     man = Manifest.load(GEN / "adxl250_default" / "acnframe.json")
+    # the README documents the very command hil_sim.qemu runs (ports are examples there)
     readme = (REPO / "firmware" / "README.md").read_text()
-    assert re.search(
-        r"qemu-system-arm -M mps2-an385 .*-serial chardev:tel -serial chardev:stim", readme.replace("\\\n", " ")
-    )
+    documented = " ".join(qemu_command("build/firmware/mps2_an385/accelnav_fw.elf", uart_ports=(5760, 5761)))
+    assert documented in readme.replace("\\\n", " ")
     n = 3000
     code = 2048 + np.random.default_rng(4).integers(-80, 80, (n, 2))
     code[100, 1] = 0  # a rail
     stim = encode_stimulus(man, code=code)
-    tel_port, stim_port = _free_port(), _free_port()
-    q = subprocess.Popen(
-        qemu_command(out / "accelnav_fw.elf", tel_port, stim_port), stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
-    try:
-        deadline = time.monotonic() + 20
-        tel = _connect(f"socket://127.0.0.1:{tel_port}", deadline)
-        feed = _connect(f"socket://127.0.0.1:{stim_port}", deadline)
-        log = tmp_path / "qemu.acnlog"
+    log = tmp_path / "qemu.acnlog"
+    with Mps2Board(out / "accelnav_fw.elf") as board:
+        tel, feed = board.open(0), board.open(1)
         rec = Recorder(tel, log, man, commands=(("info", {}),), status=Status(enabled=False))
         writer = threading.Thread(target=lambda: (time.sleep(0.2), feed.write(stim)), daemon=True)
         writer.start()
         res = rec.run(max_frames=n, duration=120)
         rec.close()
-        feed.close()
-    finally:
-        q.kill()
-        q.communicate(timeout=10)
     assert res.reason == "frames", res
     assert res.info_ok is True
     d = decode_log(log)
@@ -186,12 +139,9 @@ def test_mps2_an385_in_qemu_matches_the_host_board(tmp_path):
 def test_mps2_commands_in_qemu():
     out = make_firmware("mps2_an385")
     man = Manifest.load(GEN / "adxl250_default" / "acnframe.json")
-    tel_port, stim_port = _free_port(), _free_port()
-    q = subprocess.Popen(qemu_command(out / "accelnav_fw.elf", tel_port, stim_port), stderr=subprocess.PIPE)
-    try:
+    with Mps2Board(out / "accelnav_fw.elf") as board:
         deadline = time.monotonic() + 20
-        tel = _connect(f"socket://127.0.0.1:{tel_port}", deadline)
-        feed = _connect(f"socket://127.0.0.1:{stim_port}", deadline)
+        tel, feed = board.open(0), board.open(1)
         tel.write(encode_command(man, "decimate", factor=10))
         time.sleep(0.2)
         feed.write(encode_stimulus(man, code=np.full((200, 2), 2048)))
@@ -201,11 +151,6 @@ def test_mps2_commands_in_qemu():
             b = d.feed(tel.read(4096))
             for k in got:
                 got[k] += len(b[k])
-        tel.close()
-        feed.close()
-    finally:
-        q.kill()
-        q.communicate(timeout=10)
     assert got == {"sample": 20, "ack": 1}
     assert d.stats.lost == 0
 

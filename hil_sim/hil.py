@@ -1,0 +1,173 @@
+"""Software- and processor-in-the-loop runs of the firmware on simulated sensor data.
+
+* SIL: the firmware's input stage, generated filter and frame packer (host
+  board), in-process through cffi (:mod:`hil_sim.firmware`), fed the
+  simulator's raw ADC codes or T1/T2 counts as stimulus frames.
+* PIL: the same sources built for the emulated Cortex-M3 (mps2-an385) and run
+  in qemu-system-arm (:mod:`hil_sim.qemu`); the stimulus goes into UART1, and
+  UART0 is recorded through the very same path as ``accelnav record``
+  (:class:`host.recorder.Recorder` over a pyserial ``socket://`` port, into
+  an append-only log that is then decoded).
+
+:func:`compare` puts the frames side by side: PIL against SIL bit for bit,
+frame by frame; both against the float64 reference (host.kf) on the same
+raw input, in units of the reference's own standard deviation; and truth
+against the firmware's filter, the reference filter and the smoother.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from codegen.design import axis_design
+from codegen.model import Model
+from host.kf import rts_smooth, run_filter
+from host.pipeline import smooth_run
+from host.telemetry import Manifest, decode_all, encode_stimulus, sample_columns
+from host.zupt import rest_mask
+
+from .firmware import HostFirmware, build_firmware, generated, make_firmware
+from .qemu import Mps2Board
+from .sensor import SimRun
+
+STATES = ("r", "u", "a", "eps")
+
+
+def manifest_for(model: Model) -> Manifest:
+    import json
+
+    return Manifest(json.loads(generated(model.source)["acnframe.json"]))
+
+
+def stimulus(man: Manifest, run: SimRun) -> bytes:
+    """The stimulus frames of a simulated run: one per sample, the raw input of every axis."""
+    if run.code is not None:
+        return encode_stimulus(man, code=run.code)
+    return encode_stimulus(man, t1=run.t1, t2=run.t2)
+
+
+def run_sil(model: Model, stim: bytes) -> bytes:
+    """Feed ``stim`` to the host-board firmware in-process; returns its telemetry bytes."""
+    fw = HostFirmware(build_firmware(model.source))
+    fw.rx(stim)
+    return fw.take()
+
+
+@dataclass(frozen=True)
+class PilResult:
+    log: Path
+    telemetry: bytes
+    seconds: float
+    stats: dict
+
+
+def run_pil(model: Model, stim: bytes, n_samples: int, log: Path, *, timeout_s: float = 600.0) -> PilResult:
+    """Run the firmware on the emulated Cortex-M3 with ``stim`` on UART1; UART0 recorded into ``log``."""
+    from host.logfile import read_log
+    from host.recorder import Recorder, Status
+
+    elf = make_firmware("mps2_an385", model.source) / "accelnav_fw.elf"
+    man = manifest_for(model)
+    with Mps2Board(elf) as board:
+        tel = board.open(0)
+        feed = board.open(1)
+        rec = Recorder(tel, log, man, model_text=model.text, commands=(), overwrite=True, status=Status(enabled=False))
+        # the board reads its feed only while it has room to send: writing it all at once is safe
+        writer = threading.Thread(target=feed.write, args=(stim,), daemon=True)
+        writer.start()
+        res = rec.run(max_frames=n_samples, duration=timeout_s)
+        rec.close()
+        writer.join(timeout=5)
+    if res.reason != "frames":
+        from .qemu import QemuError
+
+        raise QemuError(f"PIL run ended early ({res.reason}) after {res.stats.get('frames', {})} frames")
+    return PilResult(log, b"".join(read_log(log).data), res.seconds, res.stats)
+
+
+@dataclass
+class Comparison:
+    """What :func:`compare` found; ``rows`` feed the summary table."""
+
+    n: int
+    pil_equal_sil: bool | None  # None: no PIL run
+    first_difference: int | None
+    max_err_sigma: dict[str, float]  # firmware vs float64 reference, max |e|/sigma after the first second
+    position_rows: list[tuple[str, str, float, float]] = field(default_factory=list)  # axis, method, rms, final
+    fw: dict[str, np.ndarray] = field(default_factory=dict)
+    ref_x: np.ndarray | None = None  # (n_axes, N, 4)
+    ref_sd: np.ndarray | None = None
+    smooth_x: np.ndarray | None = None
+    zupt_x: np.ndarray | None = None
+
+
+def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> Comparison:
+    """SIL vs PIL bit for bit, firmware vs float64 reference, truth vs firmware/reference/smoother."""
+    man = manifest_for(model)
+    sil_frames, _ = decode_all(man, sil)
+    s = sil_frames["sample"]
+    equal = first = None
+    if pil is not None:
+        pil_frames, _ = decode_all(man, pil)
+        p = pil_frames["sample"]
+        same = min(len(p), len(s))
+        # frame by frame, every byte of the decoded record (structured rows viewed as raw bytes)
+        rows_p = p[:same].view(np.uint8).reshape(same, -1)
+        rows_s = s[:same].view(np.uint8).reshape(same, -1)
+        bad = np.flatnonzero((rows_p != rows_s).any(axis=1))
+        equal = bool(len(p) == len(s) and len(bad) == 0)
+        first = int(bad[0]) if len(bad) else (None if len(p) == len(s) else same)
+    cols = sample_columns(man, s)
+    n = len(s)
+    if n != len(run.t):
+        raise ValueError(f"the firmware sent {n} sample frames for {len(run.t)} samples; it must send one each")
+    n_axes = len(model.axes)
+    ref_x = np.empty((n_axes, n, 4))
+    ref_sd = np.empty((n_axes, n, 4))
+    smooth_x = np.empty((n_axes, n, 4))
+    errs = {k: 0.0 for k in STATES}
+    # the smoother with automatic zero-velocity updates, as `accelnav smooth --zupt auto` runs it
+    arrays = run.to_arrays()
+    rest = rest_mask(arrays["accel"], arrays["clipped"], model)
+    zupt_x = smooth_run(arrays, model, rest=rest)["smooth_x"]
+    rows = []
+    start = int(round(model.rate_hz))  # after the first second, as the codegen lockstep tests
+    for j in range(n_axes):
+        d = axis_design(model, j)
+        f = run_filter(d, run.accel[:, j], valid=~run.clipped[:, j], progress=False)
+        sm = rts_smooth(d, f, progress=False)
+        ref_x[j] = f.x_post
+        ref_sd[j] = np.sqrt(np.einsum("kii->ki", f.P_post))
+        smooth_x[j] = sm.x
+        for i, key in enumerate(STATES):
+            e = np.abs(cols[key][start:, j] - f.x_post[start:, i]) / ref_sd[j, start:, i]
+            errs[key] = max(errs[key], float(e.max()) if len(e) else 0.0)
+        truth = run.r[:, j]
+        estimates = (
+            ("firmware filter", cols["r"][:, j]),
+            ("float64 filter", f.x_post[:, 0]),
+            ("smoother", sm.x[:, 0]),
+            ("smoother + ZUPT", zupt_x[j, :, 0]),
+        )
+        for method, r in estimates:
+            e = r - truth
+            rows.append((run.axis_names[j], method, float(np.sqrt(np.mean(e**2))), float(e[-1])))
+    return Comparison(n, equal, first, errs, rows, cols, ref_x, ref_sd, smooth_x, zupt_x)
+
+
+def format_comparison(c: Comparison) -> str:
+    lines = []
+    if c.pil_equal_sil is not None:
+        verdict = "bit-identical" if c.pil_equal_sil else f"DIFFERENT from frame {c.first_difference}"
+        lines.append(f"PIL vs SIL: {c.n} sample frames, {verdict}")
+    errs = ", ".join(f"{k} {v:.2e}" for k, v in c.max_err_sigma.items())
+    lines.append(f"firmware vs float64 reference, max |error| / reference sigma after 1 s: {errs}")
+    lines.append("")
+    lines.append(f"{'axis':<6}{'estimate':<18}{'rms r error [m]':>17}{'final [m]':>12}")
+    for axis, method, rms, final in c.position_rows:
+        lines.append(f"{axis:<6}{method:<18}{rms:17.3f}{final:12.3f}")
+    return "\n".join(lines)

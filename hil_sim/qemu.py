@@ -1,0 +1,133 @@
+"""The one way accelnav runs code on the emulated Cortex-M3 (qemu-system-arm, mps2-an385).
+
+Two uses, one command line (:func:`qemu_command`):
+
+* :class:`Mps2Board`: the firmware as a board. UART0 (telemetry out,
+  commands in) and UART1 (the stimulus feed that stands in for the ADC or
+  timer capture) are TCP servers on loopback, opened from Python as pyserial
+  ``socket://`` URLs. A context manager: leaving it kills QEMU and waits for
+  it, so no process is left behind, whatever happens inside.
+* :func:`run_to_exit`: a bare-metal program that prints over semihosting and
+  exits through it (the instruction-count benchmark), with ``-icount
+  shift=0`` so one instruction is one tick of virtual time and the counts are
+  deterministic.
+
+A missing emulator or toolchain is a :class:`QemuError` with one line that
+says what to install.
+"""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+QEMU = "qemu-system-arm"
+MACHINE = "mps2-an385"  # Cortex-M3; UART0 at 0x40004000, UART1 at 0x40005000
+
+
+class QemuError(RuntimeError):
+    """The emulator could not be started or did not behave."""
+
+
+def require_qemu() -> str:
+    """Path of qemu-system-arm, or QemuError saying how to get it."""
+    path = shutil.which(QEMU)
+    if path is None:
+        raise QemuError(f"{QEMU} not found: install Debian's qemu-system-arm (PIL needs the emulator)")
+    return path
+
+
+def qemu_command(elf: str | Path, *, uart_ports: tuple[int, ...] = (), icount: bool = False) -> list[str]:
+    """The emulator's command line: ``elf`` on mps2-an385, UARTs as loopback TCP servers in port order."""
+    cmd = [QEMU, "-M", MACHINE, "-display", "none", "-monitor", "none"]
+    cmd += ["-semihosting-config", "enable=on,target=native", "-kernel", str(elf)]
+    if icount:
+        cmd += ["-icount", "shift=0"]  # one instruction per ns of virtual time: deterministic counts
+    if not uart_ports:
+        cmd += ["-serial", "none"]
+    for i, port in enumerate(uart_ports):
+        cmd += ["-chardev", f"socket,id=uart{i},host=127.0.0.1,port={port},server=on,wait=off"]
+        cmd += ["-serial", f"chardev:uart{i}"]
+    return cmd
+
+
+def free_port() -> int:
+    """A TCP port on loopback that nothing listens on right now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Mps2Board:
+    """``with Mps2Board(elf) as board: tel = board.open(0); feed = board.open(1)``.
+
+    ``open(i)`` returns a pyserial port on UART i (retrying until QEMU listens).
+    """
+
+    def __init__(self, elf: str | Path, *, uarts: int = 2, start_timeout: float = 20.0):
+        self.elf = Path(elf)
+        if not self.elf.is_file():
+            raise QemuError(f"{self.elf}: no firmware image (build it with 'make firmware BOARD=mps2_an385')")
+        require_qemu()
+        self.ports = tuple(free_port() for _ in range(uarts))
+        self.start_timeout = start_timeout
+        self.proc: subprocess.Popen | None = None
+        self._opened: list = []
+
+    def url(self, uart: int) -> str:
+        return f"socket://127.0.0.1:{self.ports[uart]}"
+
+    def __enter__(self) -> Mps2Board:
+        self.proc = subprocess.Popen(
+            qemu_command(self.elf, uart_ports=self.ports), stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        )
+        return self
+
+    def open(self, uart: int, timeout: float = 0.05):
+        import serial
+
+        deadline = time.monotonic() + self.start_timeout
+        while True:
+            if self.proc is not None and self.proc.poll() is not None:
+                err = self.proc.stderr.read().decode(errors="replace").strip() if self.proc.stderr else ""
+                raise QemuError(f"{QEMU} exited with status {self.proc.returncode}: {err[-500:]}")
+            try:
+                port = serial.serial_for_url(self.url(uart), timeout=timeout)
+                self._opened.append(port)
+                return port
+            except serial.SerialException:
+                if time.monotonic() > deadline:
+                    raise QemuError(f"{QEMU}: UART{uart} on {self.url(uart)} did not open in time") from None
+                time.sleep(0.05)
+
+    def close(self) -> None:
+        for port in self._opened:
+            try:
+                port.close()
+            except Exception:  # noqa: BLE001 - closing a dead socket must not hide the real error
+                pass
+        self._opened.clear()
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+        if self.proc is not None:
+            self.proc.communicate(timeout=10)
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def run_to_exit(elf: str | Path, *, icount: bool = True, timeout: float = 300.0) -> str:
+    """Run a semihosting program to its exit; returns what it printed. Non-zero exit is a QemuError."""
+    require_qemu()
+    try:
+        done = subprocess.run(
+            qemu_command(elf, icount=icount), capture_output=True, text=True, timeout=timeout, check=False
+        )
+    except subprocess.TimeoutExpired:
+        raise QemuError(f"{QEMU}: {elf} did not exit within {timeout:g} s") from None
+    if done.returncode != 0:
+        raise QemuError(f"{QEMU}: {elf} exited with status {done.returncode}: {done.stderr.strip()[-500:]}")
+    return done.stdout + done.stderr

@@ -1,0 +1,100 @@
+"""``accelnav hil``: the firmware on simulated data, in-process (SIL) or on the emulated Cortex-M3 (PIL)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from codegen.model import DEFAULT_MODEL, load_model
+
+from .errors import UserError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("hil", help="run the firmware on simulated sensor data: SIL (cffi) or PIL (QEMU)")
+    p.add_argument("--model", type=Path, default=None, help=f"model file; default: the embedded {DEFAULT_MODEL.name}")
+    p.add_argument("--scenario", default="stop_and_go", help="trajectory (accelnav sim --list-scenarios)")
+    p.add_argument("--duration", type=float, default=20.0, help="seconds; default: 20")
+    p.add_argument("--seed", type=int, default=1, help="random seed; default: 1")
+    p.add_argument(
+        "--target", choices=("sil", "pil"), default="sil", help="sil: in-process; pil: QEMU, compared with SIL"
+    )
+    p.add_argument("--out", type=Path, default=Path("build/hil"), help="folder for the PIL log; default build/hil")
+    p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write hil.png into DIR")
+    p.set_defaults(func=cmd_hil)
+
+
+def cmd_hil(args) -> int:
+    from hil_sim import hil
+    from hil_sim.firmware import FirmwareError
+    from hil_sim.qemu import QemuError
+    from hil_sim.sensor import simulate
+    from hil_sim.trajectories import SCENARIOS
+
+    from .progress import Progress
+
+    model = load_model(args.model)
+    if args.scenario not in SCENARIOS:
+        raise UserError(f"--scenario: unknown scenario {args.scenario!r}; accepted: {', '.join(SCENARIOS)}")
+    try:
+        run = simulate(model, args.scenario, args.duration, args.seed)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    n = len(run.t)
+    print(f"model {model.name}, {model.sensor.kind} input, scenario {args.scenario}, {n} samples, seed {args.seed}")
+    try:
+        man = hil.manifest_for(model)
+        stim = hil.stimulus(man, run)
+        sil = hil.run_sil(model, stim)
+        pil = None
+        if args.target == "pil":
+            log = args.out / f"pil_{model.name}_{args.scenario}.acnlog"
+            log.parent.mkdir(parents=True, exist_ok=True)
+            with Progress("pil", n, unit="samples", enabled=None) as bar:
+                res = hil.run_pil(model, stim, n, log)
+                bar.update(n)
+            pil = res.telemetry
+            print(f"PIL: {n} samples in {res.seconds:.1f} s ({n / res.seconds:,.0f} samples/s), log {log}")
+    except (QemuError, FirmwareError) as exc:
+        raise UserError(str(exc).splitlines()[0]) from None
+    c = hil.compare(model, run, sil, pil)
+    print(hil.format_comparison(c))
+    if args.plots is not None:
+        path = plot_hil(run, c, args.plots / "hil.png", f"accelnav hil ({args.target}): {model.name}, {args.scenario}")
+        print(f"wrote {path}")
+    return 0 if c.pil_equal_sil in (None, True) else 1
+
+
+def plot_hil(run, c, path: Path, title: str) -> Path:
+    from .plots import _pyplot
+
+    plt = _pyplot()
+    t = run.t
+    n_axes = len(run.axis_names)
+    fig, axes = plt.subplots(2, n_axes, figsize=(6.5 * n_axes, 7), sharex=True, squeeze=False)
+    for j, name in enumerate(run.axis_names):
+        ax = axes[0, j]
+        ax.plot(t, run.r[:, j], color="black", lw=1.6, label="truth")
+        ax.plot(t, c.fw["r"][:, j], color="tab:blue", lw=1.2, label="firmware filter")
+        ax.plot(t, c.smooth_x[j, :, 0], color="tab:red", lw=1.0, ls="--", label="smoother")
+        ax.plot(t, c.zupt_x[j, :, 0], color="tab:green", lw=1.2, label="smoother + ZUPT")
+        ax.set_ylabel("position r [m]")
+        ax.set_title(f"axis {name}")
+        ax.grid(True, alpha=0.3)
+        ax = axes[1, j]
+        for i, key in enumerate(("r", "u", "a", "eps")):
+            sd = c.ref_sd[j, :, i]
+            e = np.abs(c.fw[key][:, j] - c.ref_x[j, :, i]) / np.where(sd > 0, sd, np.inf)  # r, u known at k = 0
+            ax.semilogy(t, np.maximum(e, 1e-12), lw=0.8, label=key)
+        ax.set_ylabel("|firmware - float64| / sigma")
+        ax.set_xlabel("time [s]")
+        ax.grid(True, alpha=0.3, which="both")
+    axes[0, 0].legend(fontsize=8)
+    axes[1, 0].legend(fontsize=8, ncol=4)
+    fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
