@@ -19,11 +19,12 @@ from .errors import UserError
 
 # Modules that provide subcommands, in the order `accelnav --help` lists them.
 COMMAND_MODULES = (
-    "host.cmd_core",  # sim, filter, smooth, demo
+    "host.cmd_core",  # sim, filter, smooth
     "host.cmd_fit_bias",  # fit-bias
     "host.cmd_codegen",  # codegen
     "host.cmd_record",  # record, log info|export
     "host.cmd_hil",  # hil
+    "host.cmd_demo",  # demo
 )
 
 

@@ -1,4 +1,4 @@
-"""``accelnav sim``, ``filter``, ``smooth`` and ``demo``: the simulate -> filter -> smooth chain on run files."""
+"""``accelnav sim``, ``filter`` and ``smooth``: the simulate -> filter -> smooth chain on run files."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 from codegen.model import DEFAULT_MODEL, Model, load_model
 
 from .errors import UserError
-from .pipeline import combine_errors, filter_run, format_errors, position_errors, smooth_run
+from .pipeline import filter_run, format_errors, position_errors, smooth_run
 from .runfile import STATE, export_csv, load_run, save_run
 from .zupt import ZuptParams
 
@@ -103,15 +103,6 @@ def register(sub) -> None:
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     _csv_arg(p)
     p.set_defaults(func=cmd_smooth)
-
-    p = sub.add_parser("demo", help="simulate -> filter -> smooth on the default model; table and plot")
-    _model_arg(p, f"; default: the embedded {DEFAULT_MODEL.name}")
-    p.add_argument("--scenario", default="vehicle", help="trajectory; default: vehicle")
-    p.add_argument("--duration", type=float, default=60.0, help="seconds; default: 60")
-    p.add_argument("--seed", type=int, default=1, help="first random seed; default: 1")
-    p.add_argument("--runs", type=int, default=10, help="seeded runs to average the errors over; default: 10")
-    p.add_argument("--out", type=Path, default=Path("build/demo"), help="output folder; default: build/demo")
-    p.set_defaults(func=cmd_demo)
 
 
 def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[str, np.ndarray]:
@@ -237,39 +228,4 @@ def cmd_smooth(args) -> int:
         print(f"wrote {plot_run(arrays, model, args.plots / 'smooth.png')}")
         for path in plot_smoothing(arrays, model, args.plots):
             print(f"wrote {path}")
-    return 0
-
-
-def cmd_demo(args) -> int:
-    from .plots import plot_run
-    from .progress import Progress
-
-    if args.runs < 1:
-        raise UserError(f"--runs: got {args.runs}; accepted: 1 or more")
-    model = load_model(args.model)
-    print(
-        f"model {model.name} ({model.source}), scenario {args.scenario}, {args.duration:g} s, "
-        f"seeds {args.seed}..{args.seed + args.runs - 1}"
-    )
-    out = Path(args.out)
-    runs = []
-    with Progress("demo", args.runs, unit="runs") as bar:
-        for i in range(args.runs):
-            arrays = smooth_run(_simulate(model, args.scenario, args.duration, args.seed + i), model, progress=False)
-            if i == 0:
-                save_run(out / "run.npz", arrays, model)
-                first = arrays
-            runs.append(position_errors(arrays, model))
-            bar.update(i + 1)
-    print()
-    print(f"position error against the simulated truth, seed {args.seed}")
-    print("(double integration: the calibrated sensor output integrated twice, no bias model)")
-    print(format_errors(runs[0]))
-    if args.runs > 1:
-        print()
-        print(f"root mean square over {args.runs} seeded runs")
-        print(format_errors(combine_errors(runs)))
-    print()
-    print(f"wrote {out / 'run.npz'}")
-    print(f"wrote {plot_run(first, model, out / 'demo.png', f'accelnav demo: {model.name}, {args.scenario}')}")
     return 0

@@ -134,19 +134,6 @@ def position_errors(arrays: dict[str, np.ndarray], model: Model) -> list[Positio
     return rows
 
 
-def combine_errors(runs: list[list[PositionErrors]]) -> list[PositionErrors]:
-    """Root mean square of each figure over several runs (rows matched by axis and method)."""
-    out = []
-    for i, row in enumerate(runs[0]):
-        rows = [r[i] for r in runs]
-
-        def rms(field: str, rows=rows) -> float:
-            return float(np.sqrt(np.mean([getattr(r, field) ** 2 for r in rows])))
-
-        out.append(PositionErrors(row.axis, row.method, rms("rms"), rms("final"), rms("max_abs")))
-    return out
-
-
 def format_errors(rows: list[PositionErrors]) -> str:
     """A plain-text table of :func:`position_errors`."""
     lines = [f"{'axis':<6}{'method':<20}{'rms [m]':>12}{'final [m]':>12}{'max |e| [m]':>13}"]

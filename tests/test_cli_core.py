@@ -58,16 +58,6 @@ def test_smooth_runs_the_filter_when_needed_and_duty_model(tmp_path, capsys):
     assert "t1" in arrays and "filt_x" in arrays and "smooth_x" in arrays
 
 
-def test_demo_writes_table_and_plot(tmp_path, capsys):
-    status, out, _ = _run(["demo", "--duration", 10, "--runs", 2, "--out", tmp_path], capsys)
-    assert status == 0
-    for method in ("double integration", "filter", "smoother"):
-        assert method in out
-    assert "over 2 seeded runs" in out
-    assert (tmp_path / "demo.png").stat().st_size > 10_000
-    assert load_run(tmp_path / "run.npz")[0]["smooth_x"].shape[1] == 1000
-
-
 @pytest.mark.parametrize(
     "argv,words",
     [
@@ -78,7 +68,6 @@ def test_demo_writes_table_and_plot(tmp_path, capsys):
         (["filter", "{tmp}/missing.npz", "--out", "{tmp}/y.npz"], "missing.npz: no such file"),
         (["filter", "{tmp}/garbage.npz", "--out", "{tmp}/y.npz"], "not an accelnav run file"),
         (["smooth", "{tmp}/other.npz", "--out", "{tmp}/y.npz"], "format is 'missing'"),
-        (["demo", "--runs", "0", "--out", "{tmp}/d"], "--runs"),
     ],
 )
 def test_bad_input_is_one_line(tmp_path, capsys, argv, words):

@@ -1,0 +1,235 @@
+"""``accelnav demo``: the whole chain on the embedded default model, no hardware needed.
+
+1. A simulated stationary warm-up recording of the sensor (``accelnav sim``).
+2. The bias model and noise figures fitted from it (``accelnav fit-bias``).
+3. Fixed-point C generated from the fitted model (``accelnav codegen``).
+4. A motion scenario run through the firmware built from that C: in-process
+   (SIL), and on the emulated Cortex-M3 (PIL) when qemu-system-arm and
+   arm-none-eabi-gcc are there, checked bit for bit against SIL.
+5. The firmware's telemetry decoded, then filtered and smoothed on the host
+   with automatic zero-velocity updates (``accelnav smooth --zupt auto``).
+6. A short report (table of errors, figures) in the output folder.
+
+The simulator always uses the true sensor (the default model); everything
+downstream of the warm-up only knows what fit-bias identified.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from codegen.design import input_conversion
+from codegen.model import DEFAULT_MODEL, Model, load_model
+
+from .errors import UserError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("demo", help="the whole chain on the default model: warm-up, fit, codegen, SIL/PIL, smooth")
+    p.add_argument("--model", type=Path, default=None, help=f"the true sensor; default: {DEFAULT_MODEL.name}")
+    p.add_argument("--scenario", default="stop_and_go", help="motion scenario; default: stop_and_go")
+    p.add_argument("--duration", type=float, default=30.0, help="seconds of motion; default: 30")
+    p.add_argument("--warmup", type=float, default=1200.0, help="seconds of stationary warm-up; default: 1200")
+    p.add_argument("--seed", type=int, default=1, help="random seed; default: 1")
+    p.add_argument("--pil", choices=("auto", "on", "off"), default="auto", help="run PIL too; auto: if QEMU is there")
+    p.add_argument("--out", type=Path, default=Path("build/demo"), help="output folder; default: build/demo")
+    p.set_defaults(func=cmd_demo)
+
+
+class _Steps:
+    """Numbered step lines with their wall time."""
+
+    def __init__(self):
+        self.t0 = time.monotonic()
+        self.k = 0
+
+    @contextlib.contextmanager
+    def step(self, what: str):
+        self.k += 1
+        t = time.monotonic()
+        print(f"[{self.k}] {what} ...", flush=True)
+        yield
+        print(f"    done in {time.monotonic() - t:.1f} s", flush=True)
+
+
+def _quiet(argv: list[str], log: Path) -> None:
+    """Run an accelnav command with its report going to ``log``; its errors still raise."""
+    from .cli import main
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        status = main(argv)
+    log.write_text(buf.getvalue())
+    if status != 0:
+        raise UserError(f"accelnav {argv[0]} failed (status {status}); see {log}")
+
+
+def _pil_wanted(mode: str) -> tuple[bool, str]:
+    missing = [t for t in ("qemu-system-arm", "arm-none-eabi-gcc") if shutil.which(t) is None]
+    if mode == "off":
+        return False, "PIL off (--pil off)"
+    if missing:
+        if mode == "on":
+            raise UserError(f"--pil on: {', '.join(missing)} not found")
+        return False, f"PIL skipped: {', '.join(missing)} not found"
+    return True, ""
+
+
+def decoded_run(fitted: Model, run, telemetry: bytes) -> dict[str, np.ndarray]:
+    """Run-file arrays from the firmware's sample frames (raw input, skip flags) plus the simulated truth."""
+    from hil_sim.hil import manifest_for
+    from host.telemetry import decode_all, sample_columns
+
+    man = manifest_for(fitted)
+    frames, stats = decode_all(man, telemetry)
+    cols = sample_columns(man, frames["sample"])
+    if stats.lost or len(cols["t"]) != len(run.t):
+        raise UserError(f"telemetry: {len(cols['t'])} sample frames for {len(run.t)} samples, {stats.lost} lost")
+    raw = [cols[k] for k in man.raw_fields()]
+    skipped = (cols["axis_flags"] >> man.data["axis_flags"]["skipped"]) & 1
+    arrays = {
+        "t": cols["t"],
+        "axis_names": np.array(run.axis_names),
+        "accel": np.column_stack(
+            [input_conversion(fitted, j).accel(*(r[:, j] for r in raw)) for j in range(len(run.axis_names))]
+        ),
+        "clipped": skipped.astype(bool),
+        "fw_x": np.stack(
+            [np.column_stack([cols[k][:, j] for k in ("r", "u", "a", "eps")]) for j in range(raw[0].shape[1])]
+        ),
+    }
+    for k, r in zip(man.raw_fields(), raw, strict=True):
+        arrays[k] = r.astype(np.int32)
+    for key in ("r", "u", "a", "eps"):
+        arrays[key] = getattr(run, key)
+    return arrays
+
+
+def cmd_demo(args) -> int:
+    from hil_sim import hil
+    from hil_sim.sensor import simulate
+    from hil_sim.trajectories import SCENARIOS
+
+    from .pipeline import dead_reckoning, smooth_run
+    from .plots import plot_smoothing
+    from .runfile import save_run
+    from .zupt import rest_mask
+
+    true_model = load_model(args.model)
+    if args.scenario not in SCENARIOS:
+        raise UserError(f"--scenario: unknown scenario {args.scenario!r}; accepted: {', '.join(SCENARIOS)}")
+    limit = true_model.ranges.max_run_s
+    for name, value in (("--duration", args.duration), ("--warmup", args.warmup)):
+        if not 0 < value <= limit:
+            raise UserError(f"{name}: got {value:g} s; accepted: seconds in (0, {limit:g}] (model ranges.max_run_s)")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    steps = _Steps()
+    pil_on, pil_note = _pil_wanted(args.pil)
+    print(f"accelnav demo: true sensor {true_model.name}; everything after step 2 knows only the fitted model")
+
+    with steps.step(f"simulate a {args.warmup:g} s stationary warm-up recording"):
+        # a characterisation run: the sensor's mean warm-up, without a turn-on draw of the bias
+        # (that run-to-run spread is what the motion run below draws and the filter's prior covers)
+        warm = simulate(true_model, "stationary", args.warmup, args.seed, initial_random=False)
+        save_run(out / "warmup.npz", warm.to_arrays(), true_model)
+
+    with steps.step("fit the bias model and noise figures (accelnav fit-bias)"):
+        fitted_path = out / "fitted.toml"
+        _quiet(
+            ["fit-bias", str(out / "warmup.npz"), "--out", str(fitted_path), "--plots", str(out / "fit")],
+            out / "fit-bias.txt",
+        )
+        fitted = load_model(fitted_path)
+        for ax in fitted.axes:
+            tr = true_model.axis(ax.name)
+            print(
+                f"    axis {ax.name}: c1 {ax.c1:+.4f} (true {tr.c1:+.4f}), c2 {ax.c2:+.4f} (true {tr.c2:+.4f}) m/s^2, "
+                f"T {ax.T:.0f} s (true {tr.T:.0f})"
+            )
+        noise = fitted.noise
+        print(f"    R {noise.R:.4g} (m/s^2)^2, sigma_eps {noise.sigma_eps:.3g}; report {out / 'fit-bias.txt'}")
+
+    with steps.step("generate the fixed-point C (accelnav codegen --report)"):
+        _quiet(["codegen", str(fitted_path), "--out", str(out / "gen"), "--report"], out / "codegen-report.txt")
+        print(f"    {', '.join(sorted(p.name for p in (out / 'gen').iterdir()))}; report {out / 'codegen-report.txt'}")
+
+    with steps.step(f"run {args.duration:g} s of {args.scenario} through the firmware in-process (SIL)"):
+        run = simulate(true_model, args.scenario, args.duration, args.seed + 1)
+        man = hil.manifest_for(fitted)
+        stim = hil.stimulus(man, run)
+        sil = hil.run_sil(fitted, stim)
+        print(f"    {len(run.t)} samples in, {len(sil)} bytes of telemetry out")
+
+    pil = None
+    if pil_on:
+        with steps.step("run the same stimulus on the emulated Cortex-M3 (PIL, qemu mps2-an385)"):
+            res = hil.run_pil(fitted, stim, len(run.t), out / "pil.acnlog")
+            pil = res.telemetry
+            verdict = "bit-identical to SIL" if pil == sil else "DIFFERS from SIL"
+            print(f"    {len(run.t) / res.seconds:,.0f} samples/s; {verdict}")
+    else:
+        print(f"    ({pil_note})")
+
+    with steps.step("decode the telemetry, filter and smooth with automatic zero-velocity updates"):
+        arrays = decoded_run(fitted, run, pil if pil is not None else sil)
+        rest = rest_mask(arrays["accel"], arrays["clipped"], fitted)
+        arrays = smooth_run(arrays, fitted, rest=rest)
+        plain_only = smooth_run(decoded_run(fitted, run, sil), fitted)
+        save_run(out / "run.npz", arrays, fitted)
+        figures = plot_smoothing(arrays, fitted, out)
+
+    rows = _error_rows(arrays, plain_only, dead_reckoning(arrays, fitted), run)
+    table = _format(rows)
+    print()
+    print(f"position error against the truth, {args.duration:g} s of {args.scenario} (fitted model, seed {args.seed})")
+    print(table)
+    lines = [
+        "# accelnav demo",
+        "",
+        f"True sensor `{true_model.name}`; fitted model `{fitted_path.name}`; {args.scenario}, {args.duration:g} s.",
+        "",
+        table_md(rows),
+        "",
+        f"PIL: {'bit-identical to SIL' if pil is not None and pil == sil else pil_note or 'DIFFERS from SIL'}",
+        "",
+        *[f"![{p.stem}]({p.name})" for p in figures],
+    ]
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    print()
+    print(f"wrote {out / 'report.md'}, figures {', '.join(p.name for p in figures)}, fit figures in {out / 'fit'}")
+    print(f"total {time.monotonic() - steps.t0:.1f} s")
+    return 0 if pil is None or pil == sil else 1
+
+
+def _error_rows(arrays, plain_only, dr, run) -> list[tuple[str, str, float, float]]:
+    rows = []
+    for j, name in enumerate(run.axis_names):
+        truth = run.r[:, j]
+        for method, r in (
+            ("double integration", dr[j, :, 0]),
+            ("firmware filter", arrays["fw_x"][j, :, 0]),
+            ("smoother", plain_only["smooth_x"][j, :, 0]),
+            ("smoother + ZUPT", arrays["smooth_x"][j, :, 0]),
+        ):
+            e = r - truth
+            rows.append((name, method, float(np.sqrt(np.mean(e**2))), float(e[-1])))
+    return rows
+
+
+def _format(rows) -> str:
+    lines = [f"{'axis':<6}{'estimate':<20}{'rms [m]':>10}{'final [m]':>11}"]
+    lines += [f"{a:<6}{m:<20}{rms:10.3f}{fin:11.3f}" for a, m, rms, fin in rows]
+    return "\n".join(lines)
+
+
+def table_md(rows) -> str:
+    lines = ["| axis | estimate | rms position error [m] | final [m] |", "|---|---|---|---|"]
+    lines += [f"| {a} | {m} | {rms:.3f} | {fin:.3f} |" for a, m, rms, fin in rows]
+    return "\n".join(lines)
