@@ -1,19 +1,59 @@
 """Predicted error of the generated fixed-point C against the float64 reference.
 
-Every rounding of the C is an injection of at most half an LSB of its target
-format; gain errors inject |dK| |y| with |y| <= the bound of y. Injections
-reach a and eps through the closed (a, eps) loop, whose l1 gains are computed
-in :mod:`codegen.ranges` (an input-like error enters through K; a push into a;
-a push into eps, which the slow bias mode amplifies by ~T/Ts). u and r have
-no feedback: their bounds add up every step (linear in k for u, quadratic for
-r). The bound therefore holds sample by sample for any data within the
-declared ranges, and is pessimistic for ordinary data (|y| is typically 1e-4
-of its bound): the lockstep tests also check the much tighter 1e-3 sigma.
+Two bounds, both sample by sample:
 
-Gain errors: gain-schedule form, the exact compression error of the schedule
-(max over the run) plus the gain's rounding; covariance form, every carried
-c = P H' entry contracts by R/S per update, so its rounding error stays
-below CONTRACTION_LSB of its format; dK_i <= (dc_i + |K_i| dS) / R.
+* :func:`worst_case_bound`: holds for any data within the declared ranges (every innovation at its
+  range bound, every error pushed through the l1 gains of the closed (a, eps) loop). Rigorous and
+  very loose (the bias mode's l1 gain is ~T/Ts); kept for the report.
+* :func:`error_bound`: the useful one. It propagates the per-step rounding and gain errors through
+  the closed-loop error dynamics of the filter, sample by sample, with the innovation magnitudes
+  |y[k]| and the acceleration |a[k]| of a given run (the float64 reference's, for the lockstep
+  tests: rigorous for that data), or, without data, with |y[k]| <= 8 sqrt(S[k]) and |a| <= its range
+  bound (what a run that follows the model meets with overwhelming probability: P(|y| > 8 sigma) is
+  1e-15 per sample for a Gaussian innovation; a trajectory that breaks the model (steps in a) needs
+  the data form).
+
+Derivation. Let e = x_C - x_64 (C minus float64) after the update of sample k, in SI units. The C
+(see :func:`codegen.emit_c._core_fixed`) does per sample, with K_C = K + dK:
+
+    predict: eps' = eps - (1 - phi)_C (eps_hi - eps_bar_C) + floor       (d_dec: roundings below)
+    y_C     = z_C - a' - eps'_hi                                       (z_C = z + dz, eps'_hi: 1/2 LSB)
+    update:  a += K_a,C y_C (1/2 LSB);  eps += K_e,C y_C (floor, 1 LSB of eps)
+    r, v = Ts u: r += v + Ts^2/2 a + K_r,C y_C;  v += Ts^2 a + K_v,C y_C  (floors, 1 LSB each)
+
+Write s = a + eps (what z observes). Then with Kt = K_a + K_e, e_s^- = e_s - (1 - phi) e_eps + d_dec,
+e_eps^- = phi e_eps + d_dec and y_C - y = dz + d_y - e_s^-:
+
+    e_s+   = (1 - Kt) e_s^- + Kt (dz + d_y) + (dK_a + dK_e) y_C + d_a + d_e
+    e_eps+ = e_eps^- - K_e e_s^- + K_e (dz + d_y) + dK_e y_C + d_e
+    e_a+   = e_s+ - e_eps+
+    e_v+   = e_v + Ts^2 e_a + dT2 a + K_v (dz + d_y - e_s^-) + dK_v y_C + 1 LSB
+    e_r+   = e_r + e_v + Ts^2/2 e_a + dH2 a + K_r (dz + d_y - e_s^-) + dK_r y_C + 1 or 2 LSB
+
+Taking absolute values term by term gives a linear recursion for the bounds E (E_s, E_eps decay at
+the rates |1 - Kt| and ~ phi + |K_e|, so they stay bounded; E_v and E_r accumulate, as u and r have
+no feedback), with |y_C| <= |y| + E_s^- + dz + d_y and |a_C| <= |a| + E_a. Skipped samples drop the
+update terms. The gain errors dK: gain-schedule form, the exact |K_stored[k] - K[k]| of the
+schedule; covariance form, per sample (dc + |K[k]| dS) / R + |K[k]| 2^-23 + 1 LSB of K, where dc and
+dS, the errors of the carried c = P H' and of S, are taken as CONTRACTION_LSB of their formats (the
+update contracts c by R / S every sample, so their rounding errors do not accumulate; asserted from
+that argument and checked by the lockstep tests, not derived term by term).
+
+For a run in the tests, :func:`twin_bound` splits the error exactly: the float64 filter run with the
+C's quantized constants (:func:`quantized_twin`) carries the whole deterministic effect of the
+constants (signs and all); the recursion above, with the constants taken as exact, bounds what is
+left (the per-step roundings, and the covariance form's gain errors). What it catches (mutation
+check, 100 Hz vehicle run): the input offset one LSB too high, a product read one bit off, eps_bar
+off by 1 %. What it cannot catch: a rounding direction flipped (floor for round in a or in the high
+word of eps), the offset one LSB too low, a few LSB of the input scale, or a 1-LSB change of
+(1 - phi), eps_bar, Ts^2/2 or a gain slope: each adds at most one LSB a step, which a correct
+rounding may also do in the worst case, or (the slow constants) acts on a time scale of T, far
+beyond a 30 s test. A bit-exact
+Python twin of the integer C would catch those; the bound is the rigorous statement.
+
+What it assumes: the reference is the float64 filter with the same skips (for the schedule with
+skips, its float64 twin with the same gains); the float64 arithmetic itself is exact (its own
+error, ~1e-16 relative, is far below every term here).
 """
 
 from __future__ import annotations
@@ -23,51 +63,236 @@ import numpy as np
 from .ranges import AxisPlan
 
 CONTRACTION_LSB = 16.0
+Y_SIGMAS = 8.0
 
 
-def gain_errors(p: AxisPlan, schedule=None) -> np.ndarray:
-    """Bound of |K_C - K_float64| per gain [r, v, a, e] (C coordinates)."""
+def gain_errors(p: AxisPlan, schedule=None, K: np.ndarray | None = None) -> np.ndarray:
+    """Bound of |K_C - K_float64| per gain [r, v, a, e] (C coordinates): over the run, or per sample
+    (covariance form, given the float64 gains K (n, 4) of the run)."""
     lsbK = np.array([p.vars["K" + n].fmt.lsb for n in "rvae"])
     if p.form == "gain_schedule":
-        return np.asarray(schedule.error.max(0)) + lsbK
+        return np.asarray(schedule.error.max(0))
     R = p.design.R
-    kmax = np.array([p.vars["K" + n].bound for n in "rvae"])
+    kmax = np.array([p.vars["K" + n].bound for n in "rvae"]) if K is None else np.abs(K)
     dc = CONTRACTION_LSB * np.array([p.vars[n].fmt.lsb for n in ("cr", "cv", "ca", "ce")])
     dS = CONTRACTION_LSB * (p.vars["ca"].fmt.lsb + p.vars["ce"].fmt.lsb)
-    # reciprocal: relative 2^-28
-    return (dc + kmax * dS) / R + kmax * 2.0**-28 + lsbK
+    # reciprocal: relative 2^-28, and the shifts that align it drop up to 7 of its 30 bits
+    return (dc + kmax * dS) / R + kmax * 2.0**-22 + lsbK
 
 
-def error_bound(p: AxisPlan, n: int, schedule=None) -> np.ndarray:
-    """(n, 4) bound of |x_C - x_float64| at every sample k < n: [r m, u m/s, a m/s^2, eps m/s^2]."""
+def _const_err(p: AxisPlan, name: str) -> float:
+    val, fmt = p.consts[name]
+    return abs(val - round(val * 2**fmt.frac) / 2**fmt.frac)
+
+
+def error_bound(
+    p: AxisPlan,
+    n: int,
+    schedule=None,
+    *,
+    y_abs: np.ndarray | None = None,
+    a_abs: np.ndarray | None = None,
+    e_dev: float | None = None,
+    valid: np.ndarray | None = None,
+    exact: bool = False,
+    K: np.ndarray | None = None,
+) -> np.ndarray:
+    """(n, 4) bound of |x_C - x_float64| at every sample k < n: [r m, u m/s, a m/s^2, eps m/s^2].
+
+    y_abs, a_abs: |innovation| and |a| of the float64 run (data form); None: 8 sqrt(S) and the range
+    bound of a. e_dev: max |eps - eps_bar| (default: the prior's offset + 8 sigma of eps). valid:
+    which samples update (default all). exact: the constants count as exact
+    (the bound of the C against :func:`quantized_twin`). K: the gains of the run in C coordinates
+    (default: the Kalman gains without skips).
+    """
+    v, d = p.vars, p.design
+    Ts, phi = d.Ts, d.phi
+    omp = 1.0 - phi
+    lsb_y, lsb_e, lsb_r = v["y"].fmt.lsb, v["e"].fmt.lsb, v["r"].fmt.lsb
+    if K is None:
+        K = np.asarray(p.gains.K)[:n] * np.array([1.0, Ts, 1.0, 1.0])
+    dz_ = p.z_error
+    sched_err = None if schedule is None else np.asarray(schedule.error)[:n]
+    if exact:  # against the quantized twin: constants exact, the input's only error its final rounding
+        dz_ = v["z"].fmt.lsb / 2
+        if p.form == "gain_schedule":
+            sched_err = np.zeros((n, 4))
+    if p.form == "gain_schedule":
+        dK = sched_err if sched_err is not None else np.asarray(schedule.error)[:n]
+    else:
+        dK = gain_errors(p, K=K[:n])
+    if y_abs is None:
+        y_abs = Y_SIGMAS * np.sqrt(np.asarray(p.gains.S)[:n])
+    if a_abs is None:
+        a_abs = np.full(n, v["a"].bound)
+    if valid is None:
+        valid = np.ones(n, dtype=bool)
+    dz = dz_
+    d_y = lsb_y / 2  # eps'_hi rounded
+    d_a = lsb_y / 2  # a += K_a y rounded
+    d_e = lsb_e  # eps += K_e y floored
+    # decay: eps_hi (1/2 LSB of y) and eps_bar's rounding through (1 - phi), (1 - phi)'s own rounding
+    # on |eps - eps_bar| (eps within the range bound), the floor
+    e_bar_err = 0.0 if exact else _const_err(p, "EBAR")
+    d_omp = 0.0 if exact else _const_err(p, "OMP")
+    if e_dev is None:  # |eps - eps_bar|: the prior's offset and 8 sigma of the bias
+        e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(np.asarray(p.gains.sigma)[:n, 3].max())
+    d_dec = omp * (lsb_y / 2 + e_bar_err) + d_omp * (e_dev + lsb_y) + lsb_e
+    dH2, dT2 = (0.0, 0.0) if exact else (_const_err(p, "H2"), _const_err(p, "T2"))
+    # floors: r += (v >> .) + (p >> .) [+ (Ts^2/2 a >> .)]; v += (q >> .) [+ (Ts^2 a >> .)], none if exact
+    fy, fr, fv = v["y"].fmt.frac, v["r"].fmt.frac, v["v"].fmt.frac
+    n_r_floor = (fv > fr) + (v["Kr"].fmt.frac + fy > fr) + (p.consts["H2"][1] != v["Kr"].fmt)
+    n_v_floor = (v["Kv"].fmt.frac + fy > fv) + (p.consts["T2"][1] != v["Kv"].fmt)
+    lsb_v = v["v"].fmt.lsb
+    H2, T2 = Ts * Ts / 2, Ts * Ts
+    out = np.empty((n, 4))
+    Es, Ee = 0.0, lsb_e / 2  # x0: eps0 rounded, a0 = 0 exact
+    Ea, Ev, Er = Ee, 0.0, 0.0
+    a_prev = 0.0
+    Kl, dKl, yl, al, vl = K.tolist(), np.asarray(dK).tolist(), np.asarray(y_abs).tolist(), np.asarray(a_abs), valid
+    al = al.tolist()
+    vl = np.asarray(vl).tolist()
+    for k in range(n):
+        if k:
+            Esm = Es + omp * Ee + d_dec
+            Eem = phi * Ee + d_dec
+        else:
+            Esm, Eem = Es, Ee
+        # r and v: the previous posterior a (its error Ea), the constants' rounding on |a|
+        a_c = a_prev + Ea
+        Er = Er + Ev + H2 * Ea + dH2 * a_c + n_r_floor * lsb_r
+        Ev = Ev + T2 * Ea + dT2 * a_c + n_v_floor * lsb_v
+        if vl[k]:
+            kr, kv, ka, ke = Kl[k]
+            dkr, dkv, dka, dke = dKl[k]
+            inj = dz + d_y
+            yc = yl[k] + Esm + inj
+            Es = abs(1.0 - ka - ke) * Esm + abs(ka + ke) * inj + (dka + dke) * yc + d_a + d_e
+            Ee = Eem + abs(ke) * (Esm + inj) + dke * yc + d_e
+            Ev += abs(kv) * (Esm + inj) + dkv * yc
+            Er += abs(kr) * (Esm + inj) + dkr * yc
+        else:
+            Es, Ee = Esm, Eem
+        Ea = Es + Ee
+        a_prev = al[k]
+        out[k, 0] = Er
+        out[k, 1] = Ev / Ts
+        out[k, 2] = Ea
+        out[k, 3] = Ee
+    return out
+
+
+def worst_case_bound(p: AxisPlan, n: int, schedule=None) -> np.ndarray:
+    """(n, 4) bound for any data within the declared ranges (every |y| at its bound): l1 gains of the
+    closed (a, eps) loop carry the per-step injections to a and eps; u and r add theirs up."""
     v = p.vars
     l1 = p.l1
-    half = {k: x.fmt.lsb / 2 for k, x in v.items()}
     ymax = v["y"].bound
     dK = gain_errors(p, schedule)
     Kmax = np.abs(p.gains.K).max(0) * np.array([1.0, p.design.Ts, 1.0, 1.0])
-    c = p.consts
-    # input-like: conversion error and the rounding of y
-    d_in = p.z_error + half["y"]
-    # direct pushes into a (rounding of K_a y, gain error) and eps (roundings, phi and b constants, gain error)
-    d_a = half["a"] + dK[2] * ymax
-    omp_q = abs(c["OMP"][0] - round(c["OMP"][0] * 2 ** c["OMP"][1].frac) / 2 ** c["OMP"][1].frac)
-    # the decay (1 - phi) eps uses the high word of eps: truncation below 2^-(frac-32)
-    d_e = 3 * half["e"] + omp_q * v["e"].bound + c["OMP"][0] * 2.0 ** -(v["e"].fmt.frac - 32) + dK[3] * ymax
+    lsb_y, lsb_e, lsb_r = v["y"].fmt.lsb, v["e"].fmt.lsb, v["r"].fmt.lsb
+    omp = 1.0 - p.design.phi
+    d_in = p.z_error + lsb_y / 2
+    d_a = lsb_y / 2 + dK[2] * ymax
+    d_e = (
+        2 * lsb_e
+        + omp * (lsb_y / 2 + _const_err(p, "EBAR"))
+        + _const_err(p, "OMP") * (v["e"].bound + abs(p.consts["EBAR"][0]))
+        + dK[3] * ymax
+    )
     Ea = l1.z_a * d_in + l1.a_a * d_a + l1.e_a * d_e
     Ee = l1.z_e * d_in + l1.a_e * d_a + l1.e_e * d_e
     Ts = p.design.Ts
-    q = lambda nm: c[nm][1].lsb / 2  # noqa: E731
-    # v = Ts u per step: Ts^2 a (error of a, of the constant, rounding), K_v y (error of y, of K_v), clamps exact
-    dv = (Ts * Ts) * Ea + q("T2") * v["a"].bound + 2 * half["v"] + Kmax[1] * (Ea + Ee + d_in) + dK[1] * ymax
-    # r per step: the v error so far, Ts^2/2 a, K_r y
-    dr0 = (Ts * Ts / 2) * Ea + q("H2") * v["a"].bound + 3 * half["r"] + Kmax[0] * (Ea + Ee + d_in) + dK[0] * ymax
+    dv = Ts * Ts * Ea + _const_err(p, "T2") * v["a"].bound + 2 * lsb_r + Kmax[1] * (Ea + Ee + d_in) + dK[1] * ymax
+    dr0 = Ts * Ts / 2 * Ea + _const_err(p, "H2") * v["a"].bound + 2 * lsb_r + Kmax[0] * (Ea + Ee + d_in) + dK[0] * ymax
     k = np.arange(1, n + 1, dtype=np.float64)
-    Ev = k * dv
-    Er = k * dr0 + k * (k - 1) / 2 * dv
     out = np.empty((n, 4))
-    out[:, 0] = Er
-    out[:, 1] = Ev / Ts + half["u_out"]
+    out[:, 0] = k * dr0 + k * (k - 1) / 2 * dv
+    out[:, 1] = k * dv / Ts
     out[:, 2] = Ea
     out[:, 3] = Ee
     return out
+
+
+def reference_data(d, z: np.ndarray, x_post: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """|y[k]| and |a[k]| of a float64 run from its posteriors (prior k: F x_post[k-1] + b)."""
+    n = len(z)
+    prior = np.empty((n, 4))
+    prior[0] = d.x0
+    prior[1:] = x_post[:-1] @ np.asarray(d.F).T + np.asarray(d.b)
+    y = np.where(valid, np.abs(z - prior[:, 2] - prior[:, 3]), 0.0)
+    return y, np.abs(x_post[:, 2])
+
+
+def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: np.ndarray, schedule=None):
+    """The float64 filter with the C's constants: what the C computes, minus its per-step roundings.
+
+    Same recursion as :func:`codegen.emit_c._core_fixed` in float64 and C coordinates (v = Ts u):
+    1 - phi, eps_bar, Ts^2/2, Ts^2 and the input scale and offset as quantized; the gains as the C
+    has them (gain schedule: the schedule's; covariance: the float64 Kalman gains of this valid
+    pattern, the C's own gain errors stay in the bound). Returns (x (n, 4) in SI units, |y| (n,),
+    |a| (n,), the gains (n, 4)). ``code``: the raw analog codes (None: use z, the conversion error stays in the bound).
+    """
+    from .gains import riccati
+    from .qformat import dequantize, quantize
+
+    c, v, d = p.consts, p.vars, p.design
+    n = len(z)
+
+    def q(name):
+        val, fmt = c[name]
+        return dequantize(quantize(val, fmt), fmt)
+
+    if code is not None and p.conv_shift >= 0:
+        fz = v["z"].fmt.frac
+        zq = np.asarray(code, dtype=np.float64) * q("SCALE") + (q("OFFSET") - 2.0 ** -(fz + 1))
+    else:
+        zq = np.asarray(z, dtype=np.float64)
+    omp, ebar, h2, t2 = q("OMP"), q("EBAR"), q("H2"), q("T2")
+    if schedule is not None:
+        K = np.asarray(schedule.stored)[:n]
+    else:
+        K = np.asarray(riccati(d, n, valid).K) * np.array([1.0, d.Ts, 1.0, 1.0])
+    r = dequantize(quantize(d.x0[0], v["r"].fmt), v["r"].fmt)
+    vv = dequantize(quantize(d.Ts * d.x0[1], v["v"].fmt), v["v"].fmt)
+    a = dequantize(quantize(d.x0[2], v["a"].fmt), v["a"].fmt)
+    e = dequantize(quantize(d.x0[3], v["e"].fmt), v["e"].fmt)
+    out = np.empty((n, 4))
+    yabs = np.zeros(n)
+    Kl, zl, vl = K.tolist(), zq.tolist(), np.asarray(valid).tolist()
+    for k in range(n):
+        if k:
+            # eps = eps - (1 - phi)(eps - eps_bar)
+            e = e - omp * (e - ebar)
+        pp = h2 * a
+        qq = t2 * a
+        if vl[k]:
+            kr, kv, ka, ke = Kl[k]
+            # y = z - a - eps;  x = x + K y
+            y = zl[k] - a - e
+            yabs[k] = abs(y)
+            pp += kr * y
+            qq += kv * y
+            a = a + ka * y
+            e = e + ke * y
+        r = r + vv + pp
+        vv = vv + qq
+        out[k] = (r, vv / d.Ts, a, e)
+    return out, yabs, np.abs(out[:, 2]), K
+
+
+def d_eps_bar(p: AxisPlan) -> float:
+    return p.design.eps_mean
+
+
+def twin_bound(p: AxisPlan, code, z, valid, x_ref: np.ndarray, schedule=None):
+    """The stated bound of |x_C - x_float64| for one run, split into its exact deterministic part and
+    a rigorous bound on the rest: |x_twin - x_ref| (the effect of the quantized constants, computed
+    exactly, signs and all) + the per-step roundings (and, covariance form, gain errors) of the C
+    propagated through the closed loop (:func:`error_bound` with exact constants)."""
+    x_tw, y_abs, a_abs, K = quantized_twin(p, code, z, valid, schedule)
+    e_dev = float(np.abs(x_tw[:, 3] - d_eps_bar(p)).max())
+    b = error_bound(
+        p, len(z), schedule, y_abs=y_abs, a_abs=a_abs, e_dev=e_dev, valid=valid, exact=code is not None, K=K
+    )
+    return np.abs(x_tw - x_ref) + b, x_tw

@@ -6,6 +6,13 @@ filter of DESIGN.md for every axis of the model, in one of two forms
 float64 gains compressed into a piecewise-linear table) and one of two
 arithmetics (fixed point from :mod:`codegen.ranges`, or float32).
 
+Every step is straight-line 32x32 -> 64 arithmetic (SMULL/SMLAL on a
+Cortex-M3): the formats of :mod:`codegen.ranges` are chosen so that most
+products need no shift or a single one, clamps run once per step and only on
+r and u (the two states no analysis bounds), and the gain schedule keeps K_r,
+K_v, K_a in int32 and K_e in an int64 accumulator (its slope falls far below
+one LSB of K_e as it settles).
+
 The header carries the plain declarations between ``ACCELNAV-CDEF-BEGIN`` /
 ``ACCELNAV-CDEF-END`` so that the cffi harness builds from exactly them.
 """
@@ -13,17 +20,19 @@ The header carries the plain declarations between ``ACCELNAV-CDEF-BEGIN`` /
 from __future__ import annotations
 
 import json
+import math
+import re
 from pathlib import Path
 
 from .design import AnalogConversion
-from .gains import ACC_EXTRA, Schedule, schedule
+from .gains import Schedule, schedule
 from .model import Model
 from .qformat import quantize
 from .ranges import AxisPlan, plan_axis
 
 GENERATOR_VERSION = "0.1.0"
 RUNTIME_API = 1
-SCHEDULE_REL_TOL = 2e-5
+SCHEDULE_REL_TOL = (1e-4, 3e-4, 1e-4, 1e-4)  # K_r, K_v (no feedback), K_a, K_e
 
 
 def _banner(model: Model, what: str) -> str:
@@ -58,11 +67,32 @@ def _shift(expr: str, frm: int, to: int, comment: str = "") -> str:
     return f"(({expr}) * ((int64_t)1 << {-s})){c}"
 
 
+def _shf(expr: str, frm: int, to: int) -> str:
+    """expr (int64, frac bits frm) -> frac bits to, floor (an arithmetic right shift)."""
+    s = frm - to
+    if s >= 64:
+        return f"0 /* ({expr}) Q.{frm} -> Q.{to}: below one LSB, dropped */"
+    if s > 0:
+        return f"(({expr}) >> {s}) /* Q.{frm} -> Q.{to}, floor */"
+    if s == 0:
+        return f"({expr}) /* Q.{frm} -> Q.{to}, exact */"
+    return f"(({expr}) * ((int64_t)1 << {-s})) /* Q.{frm} -> Q.{to}, exact */"
+
+
+_PRODUCT = re.compile(r"\(int64_t\)([A-Za-z_][\w>.-]*) \* ([A-Za-z_][\w>.-]*)")
+
+
+def _smull(line: str) -> str:
+    """(int64_t)a * b of two int32 -> acn_mul(a, b)."""
+    return _PRODUCT.sub(r"acn_mul(\1, \2)", line)
+
+
 def _fixed_consts(p: AxisPlan, P: str) -> list[str]:
     out = []
     for name, (value, fmt) in sorted(p.consts.items()):
         q = quantize(value, fmt)
-        out.append(f"#define {P}_{name} {_c_int(q, fmt.word)} /* {value:.17g} {fmt} */")
+        lit = f"UINT32_C({q})" if fmt.word == 33 else _c_int(q, fmt.word)  # 33: an unsigned 32-bit mantissa
+        out.append(f"#define {P}_{name} {lit} /* {value:.17g} {'UQ0.' + str(fmt.frac) if fmt.word == 33 else fmt} */")
     return out
 
 
@@ -78,8 +108,10 @@ def _fields_fixed(p: AxisPlan) -> list[tuple[str, str, str]]:
         for nm in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"):
             f.append(("int32_t", nm, f"{v[nm].note.split(',')[0]} {v[nm].fmt}"))
     else:
-        for nm in ("r", "v", "a", "e"):
-            f.append(("int64_t", "acc_" + nm, f"K_{nm} accumulator Q.{v['K' + nm].fmt.frac + ACC_EXTRA}"))
+        for nm in ("r", "v", "a"):
+            f.append(("int32_t", "K" + nm, f"K_{nm} of the next sample {v['K' + nm].fmt}"))
+        f.append(("uint32_t", "Ke_lo", f"K_e accumulator, low word (Q.{v['Ke'].fmt.frac + 32} with Ke)"))
+        f.append(("int32_t", "Ke", f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"))
         f.append(("uint32_t", "seg", "schedule segment"))
         f.append(("uint32_t", "left", "samples left in the segment"))
     f.append(("uint32_t", "k", "samples since init"))
@@ -90,6 +122,20 @@ def _fields_fixed(p: AxisPlan) -> list[tuple[str, str, str]]:
 def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
     """(parameter list, argument list, body lines computing `valid` and `z`)."""
     fz = p.f("z")
+    if isinstance(p.conv, AnalogConversion) and p.conv_shift >= 0:
+        fs = p.consts["SCALE"][1].frac
+        body = [
+            f"    /* rails: codes 0 and {p.conv.full_code} are clipped */",
+            f"    if (code <= 0 || code >= {p.conv.full_code}) {{",
+            "        return false;",
+            "    }",
+            f"    /* z = code * scale + offset: (code << {p.conv_shift}) x SCALE (Q.{fs}, unsigned) is"
+            f" Q.{fs + p.conv_shift}, its high word Q.{fz} (floor;",
+            "     * OFFSET carries half an LSB, so the sum rounds) */",
+            f"    *z = (int32_t)(((uint64_t)((uint32_t)code << {p.conv_shift}) * {P}_SCALE) >> 32) + {P}_OFFSET;",
+            "    return true;",
+        ]
+        return "int32_t code", "code", body
     if isinstance(p.conv, AnalogConversion):
         cs = p.consts["SCALE"][1]
         body = [
@@ -123,60 +169,104 @@ def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
     return "int32_t t1, int32_t t2", "t1, t2", body
 
 
-def _predict_fixed(p: AxisPlan, P: str) -> list[str]:
-    fr, fv, fy, fe = p.f("r"), p.f("v"), p.f("y"), p.f("e")
+def _sh(expr: str, s: int, what: str) -> str:
+    """expr (int64) >> s, floor (arithmetic shift); s <= 0 multiplies. Comment: what it converts."""
+    if s > 0:
+        return f"(({expr}) >> {s}) /* {what}, floor */"
+    if s == 0:
+        return f"({expr}) /* {what}, exact */"
+    return f"(({expr}) * ((int64_t)1 << {-s})) /* {what}, exact */"
+
+
+def _hi_round(expr: str) -> str:
+    """The high word of an int64, rounded to nearest (ties up)."""
+    return f"(int32_t)(((uint64_t)({expr}) + UINT64_C(0x80000000)) >> 32)"
+
+
+GUARD_BITS = 16  # bits below the target's LSB at which a sum of products is formed, rounded once
+
+
+def _acc(ft: int, terms: list[tuple[str, str, int]]) -> str:
+    """Sum of int64 terms (sign, expr, frac bits) in Q.ft with one rounding: the terms already in
+    Q.ft add exactly; the finer ones are aligned (floor) to Q.(ft + g), g <= GUARD_BITS the most that
+    needs no left shift, summed, and rounded once to Q.ft."""
+    exact = [(sg, e) for sg, e, fr in terms if fr == ft]
+    fine = [(sg, e, fr) for sg, e, fr in terms if fr != ft]
+    if any(fr < ft for _, _, fr in fine):
+        raise ValueError("a term coarser than its target")
+    out = " ".join(f"{sg} {e}" for sg, e in exact).lstrip("+ ")
+    if fine:
+        g = min(GUARD_BITS, *(fr - ft for _, _, fr in fine))
+        parts = " ".join(f"{sg} " + (f"(({e}) >> {fr - ft - g})" if fr - ft > g else f"({e})") for sg, e, fr in fine)
+        out += f" + ACN_RSHR({parts.lstrip('+ ')}, {g}) /* in Q.{ft + g}, rounded once to Q.{ft} */"
+    return f"({out})"
+
+
+def _predict_cov(p: AxisPlan, P: str) -> list[str]:
+    fcr, fPr, fcv, fPv, fca, fPae, fce = (p.f(n) for n in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"))
     H2, T2, OMP = (p.consts[n][1].frac for n in ("H2", "T2", "OMP"))
-    rmax = quantize(p.vars["r"].bound, p.vars["r"].fmt)
-    vmax = quantize(p.vars["v"].bound, p.vars["v"].fmt)
-    L = [
-        "    /* x = F x + b:  r += Ts u + Ts^2/2 a,  u += Ts a,  eps = phi eps + b  (v = Ts u) */",
-        "    s->r = acn_clamp64(s->r",
-        f"                       + {_shift('s->v', fv, fr)}",
-        f"                       + {_shift(f'(int64_t){P}_H2 * s->a', H2 + fy, fr)},",
-        f"                       {_c_int(rmax, 64)}, &s->overflow);",
-        f"    s->v = acn_clamp64(s->v + {_shift(f'(int64_t){P}_T2 * s->a', T2 + fy, fv)},",
-        f"                       {_c_int(vmax, 64)}, &s->overflow);",
-        f"    /* eps - (1 - phi) eps, eps by its high word: Q.{fe - 32} x Q.{OMP} -> Q.{fe}, round */",
-        f"    s->e = s->e - {_shift(f'(int64_t){P}_OMP * (int32_t)(s->e >> 32)', OMP + fe - 32, fe)} + {P}_B;",
+    PO = p.consts["PHIOMP"][1].frac
+
+    def c(name):
+        return f"(int64_t){P}_{name}"
+
+    tr = _acc(
+        fPr, [("+", "(int64_t)s->Pre", fPr), ("+", "(int64_t)s->Pve", fPv), ("+", f"{c('H2')} * s->Pae", H2 + fPae)]
+    )
+    tv = _acc(fPv, [("+", "(int64_t)s->Pve", fPv), ("+", f"{c('T2')} * s->Pae", T2 + fPae)])
+    cr = _acc(
+        fcr,
+        [
+            ("+", "(int64_t)s->cr", fcr),
+            ("+", "(int64_t)s->cv", fcv),
+            ("+", f"{c('H2')} * s->ca", H2 + fca),
+            ("+", c("Qra"), fcr),
+            ("-", f"{c('OMP')} * tr", OMP + fPr),
+        ],
+    )
+    cv = _acc(
+        fcv,
+        [
+            ("+", "(int64_t)s->cv", fcv),
+            ("+", f"{c('T2')} * s->ca", T2 + fca),
+            ("+", c("Qva"), fcv),
+            ("-", f"{c('OMP')} * tv", OMP + fPv),
+        ],
+    )
+    pre = _acc(fPr, [("+", "(int64_t)tr", fPr), ("-", f"{c('OMP')} * tr", OMP + fPr)])
+    pve = _acc(fPv, [("+", "(int64_t)tv", fPv), ("-", f"{c('OMP')} * tv", OMP + fPv)])
+    ca = _acc(fca, [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fca), ("-", f"{c('OMP')} * s->Pae", OMP + fPae)])
+    ce = _acc(
+        fce,
+        [("+", f"{c('PHI2')} * s->ce", 31 + fce), ("+", f"{c('PHIOMP')} * s->Pae", PO + fPae), ("+", c("Qee"), fce)],
+    )
+    return [
+        "        /* P = F P F' + Q on the carried block (c = P H' carried directly in fine formats);",
+        "         * every right-hand side reads the old values; each sum is rounded once */",
+        "        int32_t tr, tv;",
+        "        /* tr = P_re + P_ve + Ts^2/2 P_ae; P_re' = phi tr */",
+        f"        tr = acn_sat32({tr}, &s->overflow);",
+        "        /* tv = P_ve + Ts^2 P_ae; P_ve' = phi tv */",
+        f"        tv = acn_sat32({tv}, &s->overflow);",
+        "        /* c_r' = c_r + c_v + Ts^2/2 c_a + Q_ra - (1 - phi) tr */",
+        f"        s->cr = acn_sat32({cr}, &s->overflow);",
+        "        /* c_v' = c_v + Ts^2 c_a + Ts Q_ua - (1 - phi) tv */",
+        f"        s->cv = acn_sat32({cv}, &s->overflow);",
+        f"        s->Pre = (int32_t){pre};",
+        f"        s->Pve = (int32_t){pve};",
+        "        /* c_a' = c_a + Q_aa - (1 - phi) P_ae */",
+        f"        s->ca = acn_sat32({ca}, &s->overflow);",
+        "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
+        f"        s->ce = acn_sat32({ce}, &s->overflow);",
+        "        /* P_ae' = phi P_ae */",
+        f"        s->Pae = (int32_t){_shift(f'(int64_t){P}_PHI * s->Pae', 31 + fPae, fPae)};",
     ]
-    if p.form == "covariance":
-        fcr, fPr, fcv, fPv, fca, fPae, fce = (p.f(n) for n in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"))
-        PO = p.consts["PHIOMP"][1].frac
-        L += [
-            "    /* P = F P F' + Q on the carried block (c = P H' carried directly in fine formats);",
-            "     * every right-hand side reads the old values */",
-            "    {",
-            "        int32_t tr, tv;",
-            "        /* tr = P_re + P_ve + Ts^2/2 P_ae; P_re' = phi tr */",
-            f"        tr = acn_sat32((int64_t)s->Pre + {_shift('(int64_t)s->Pve', fPv, fPr)}",
-            f"                       + {_shift(f'(int64_t){P}_H2 * s->Pae', H2 + fPae, fPr)}, &s->overflow);",
-            "        /* tv = P_ve + Ts^2 P_ae; P_ve' = phi tv */",
-            f"        tv = acn_sat32((int64_t)s->Pve + {_shift(f'(int64_t){P}_T2 * s->Pae', T2 + fPae, fPv)},"
-            " &s->overflow);",
-            "        /* c_r' = c_r + c_v + Ts^2/2 c_a + Q_ra - (1 - phi) tr */",
-            f"        s->cr = acn_sat32((int64_t)s->cr + {_shift('(int64_t)s->cv', fcv, fcr)}",
-            f"                          + {_shift(f'(int64_t){P}_H2 * s->ca', H2 + fca, fcr)} + {P}_Qra",
-            f"                          - {_shift(f'(int64_t){P}_OMP * tr', OMP + fPr, fcr)}, &s->overflow);",
-            "        /* c_v' = c_v + Ts^2 c_a + Ts Q_ua - (1 - phi) tv */",
-            f"        s->cv = acn_sat32((int64_t)s->cv + {_shift(f'(int64_t){P}_T2 * s->ca', T2 + fca, fcv)} + {P}_Qva",
-            f"                          - {_shift(f'(int64_t){P}_OMP * tv', OMP + fPv, fcv)}, &s->overflow);",
-            f"        s->Pre = (int32_t)(tr - {_shift(f'(int64_t){P}_OMP * tr', OMP + fPr, fPr)});",
-            f"        s->Pve = (int32_t)(tv - {_shift(f'(int64_t){P}_OMP * tv', OMP + fPv, fPv)});",
-            "        /* c_a' = c_a + Q_aa - (1 - phi) P_ae */",
-            f"        s->ca = acn_sat32((int64_t)s->ca + {P}_Qaa",
-            f"                          - {_shift(f'(int64_t){P}_OMP * s->Pae', OMP + fPae, fca)}, &s->overflow);",
-            "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
-            f"        s->ce = acn_sat32({_shift(f'(int64_t){P}_PHI2 * s->ce', 31 + fce, fce)}",
-            f"                          + {_shift(f'(int64_t){P}_PHIOMP * s->Pae', PO + fPae, fce)} + {P}_Qee,"
-            " &s->overflow);",
-            "        /* P_ae' = phi P_ae */",
-            f"        s->Pae = (int32_t){_shift(f'(int64_t){P}_PHI * s->Pae', 31 + fPae, fPae)};",
-            "    }",
-        ]
-    return L
 
 
 def _gains_cov(p: AxisPlan, P: str) -> list[str]:
+    """K = c / S from the carried block, then P = P - K c'. Every shift rounds; the posterior
+    entries are not saturated: the update only contracts the block (c_i -> c_i R / S, and the
+    cross terms stay within the diagonal terms, which only shrink)."""
     fca = p.f("ca")
     fK = {n: p.f("K" + n) for n in "rvae"}
     fc = {"r": p.f("cr"), "v": p.f("cv"), "a": fca, "e": p.f("ce")}
@@ -184,20 +274,23 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
     nmax = 32 - R_int.bit_length()  # clz of the smallest S
     L = [
         "    /* S = H P H' + R = c_a + c_e + R (>= R by construction) */",
-        f"    S = acn_sat32((int64_t)s->ca + {_shift('(int64_t)s->ce', fc['e'], fca)} + {P}_R, &s->overflow);",
+        f"    S = acn_sat32((int64_t)s->ca + {_shf('(int64_t)s->ce', fc['e'], fca)} + {P}_R, &s->overflow);",
         f"    if (S < {P}_R) {{",
         f"        S = {P}_R;",
         "    }",
-        f"    /* K = c / S: one reciprocal, 1/S = x 2^(n-62) with n = clz(S) in 1..{nmax} */",
+        f"    /* K = c / S: one reciprocal, 1/S = x 2^(n-62) with n = clz(S) in 1..{nmax}; x >> ({nmax} - n)",
+        f"     * puts it at 1/S = x 2^({nmax - 62}) for every S (dropping at most {nmax} of its 30 bits) */",
         "    x = acn_recip((uint32_t)S, &n);",
+        f"    x >>= {nmax} - n;",
+        "    xs = (int32_t)(x >> 1); /* below 2^31: each K is one signed 32x32 product */",
     ]
     for nm in "rvae":
-        sh = 62 - fca + fc[nm] - fK[nm]
-        if sh - nmax < 1 or sh - 1 > 62:
+        sh = 62 - fca + fc[nm] - fK[nm] - nmax - 1
+        if sh < 1 or sh > 62:
             raise ValueError(f"K_{nm} shift {sh} out of range")
         L.append(
-            f"    K{nm} = acn_sat32(ACN_RSHR((int64_t)s->c{nm} * x, {sh} - n), &s->overflow);"
-            f" /* Q.{fc[nm]} x Q(62-n-{fca}) -> {p.vars['K' + nm].fmt} */"
+            f"    K{nm} = acn_sat32(ACN_RSHR((int64_t)s->c{nm} * xs, {sh}), &s->overflow);"
+            f" /* Q.{fc[nm]} x Q.{61 - nmax - fca} -> {p.vars['K' + nm].fmt}, round */"
         )
     L.append("    /* P = P - K c'; for a carried c_i = P_ia + P_ie: c_i -= K_i (c_a + c_e) = K_i (S - R) */")
     L.append(f"    sr = S - {P}_R;")
@@ -210,39 +303,103 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         ("Pae", "Ka", "s->ce", fc["e"]),
     ):
         L.append(
-            f"    s->{dst} = acn_sat32((int64_t)s->{dst} - "
-            f"{_shift(f'(int64_t){ki} * {cj}', fK[ki[1]] + fcj, p.f(dst))}, &s->overflow);"
+            f"    s->{dst} = (int32_t)((int64_t)s->{dst} - "
+            f"{_shift(f'(int64_t){ki} * {cj}', fK[ki[1]] + fcj, p.f(dst))});"
         )
     L.append("    /* c_e = c_e - (K_a + K_e) c_e */")
     L.append(
-        f"    s->ce = acn_sat32((int64_t)s->ce - {_shift('(int64_t)Ka * s->ce', fK['a'] + fc['e'], fc['e'])}"
-        f" - {_shift('(int64_t)Ke * s->ce', fK['e'] + fc['e'], fc['e'])}, &s->overflow);"
+        f"    s->ce = (int32_t)((int64_t)s->ce - {_shift('(int64_t)Ka * s->ce', fK['a'] + fc['e'], fc['e'])}"
+        f" - {_shift('(int64_t)Ke * s->ce', fK['e'] + fc['e'], fc['e'])});"
     )
     return L
 
 
-def _update_fixed(p: AxisPlan, P: str) -> list[str]:
+def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
+    """Body of T_core: predict (k > 0) and update (valid) merged, every state read and written once.
+
+    Contract (formats from :mod:`codegen.ranges`): z, y, a in Q.fy (int32); eps int64 in Q.(fy+32)
+    (its high word is Q.fy); r and v = Ts u int64 in one format Q.fr; K_a, K_e int32 each with its own
+    scaling, K_r (K_v) in the format of Ts^2/2 (Ts^2). Products are 32x32 -> 64 (one SMULL or SMLAL);
+    every shift is a floor except the two that make y and a (round to nearest). r and v are clamped
+    once per step on their high words; nothing else can overflow over the declared ranges.
+    """
     fr, fv, fy, fe = p.f("r"), p.f("v"), p.f("y"), p.f("e")
     fK = {n: p.f("K" + n) for n in "rvae"}
-    rmax = quantize(p.vars["r"].bound, p.vars["r"].fmt)
-    vmax = quantize(p.vars["v"].bound, p.vars["v"].fmt)
+    fo = p.consts["OMP"][1].frac
+    sa = fK["a"]  # Q.(fKa + fy) -> Q.fy
+    eh = _hi_round("e")
+    ft = {"r": fr, "v": fv, "e": fe}
+    conv = {n: f"Q.{fK[n] + fy} -> Q.{ft[n]}" for n in "rve"}
+    # Ts^2/2 a and Ts^2 a: in the accumulator of K_r y (K_v y) when they share its format, else shifted apart
+    pre, post = {}, {}
+    for n, c in (("r", "H2"), ("v", "T2")):
+        fc = p.consts[c][1].frac
+        if fc == fK[n]:
+            pre[n], post[n] = f"(int64_t){P}_{c} * a /* Q.{fc + fy} */", ""
+        else:
+            pre[n] = "0"
+            post[n] = " + " + _sh(f"(int64_t){P}_{c} * a", fc + fy - ft[n], f"Q.{fc + fy} -> Q.{ft[n]}")
+    x0 = p.design.x0
     L = [
-        "    /* y = z - H x = z - a - eps */",
-        f"    y = (int32_t)((int64_t)z - s->a - {_shift('s->e', fe, fy)});",
+        "    int32_t y = 0, a = s->a;",
+        "    int64_t e = s->e, p, q, r, v;",
     ]
     if p.form == "covariance":
-        L += _gains_cov(p, P)
+        L += ["    int32_t Kr, Kv, Ka, Ke, K[4];"]
     else:
-        L += [f"    K{n} = (int32_t)(s->acc_{n} >> {ACC_EXTRA}); /* the gain of this sample */" for n in "rvae"]
+        L += ["    int32_t Kr, Kv, Ka, Ke;"]
     L += [
-        "    /* x = x + K y */",
-        f"    s->a = (int32_t)(s->a + {_shift('(int64_t)Ka * y', fK['a'] + fy, fy)});",
-        f"    s->e = s->e + {_shift('(int64_t)Ke * y', fK['e'] + fy, fe)};",
-        f"    s->v = acn_clamp64(s->v + {_shift('(int64_t)Kv * y', fK['v'] + fy, fv)}, {_c_int(vmax, 64)},"
-        " &s->overflow);",
-        f"    s->r = acn_clamp64(s->r + {_shift('(int64_t)Kr * y', fK['r'] + fy, fr)}, {_c_int(rmax, 64)},"
-        " &s->overflow);",
+        "    if (s->k > 0) {",
+        "        /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar), eps by its rounded high word */",
+        f"        e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
+        if fo != 32
+        else f"        e += (int64_t)-{P}_OMP * ({eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */",
     ]
+    if p.form == "covariance":
+        L += [f"        {T}_ppredict(s);"]
+    L += ["    }"]
+    if x0[0] != 0 or x0[1] != 0 or x0[2] != 0:
+        raise ValueError("the merged predict needs r, u, a of x0 at zero")
+    L += [
+        "    /* r += Ts u + Ts^2/2 a (+ K_r y),  u += Ts a (+ K_v y); a is the previous posterior, and at",
+        "     * k = 0 both increments are zero (x0 has r = u = a = 0), so no test of k is needed */",
+        f"    p = {pre['r']};",
+        f"    q = {pre['v']};",
+        "    if (valid) {",
+    ]
+    if p.form == "covariance":
+        L += [
+            "        /* K = P H' / S and P = P - K c' on the carried block */",
+            f"        {T}_pupdate(s, K);",
+            "        Kr = K[0];",
+            "        Kv = K[1];",
+            "        Ka = K[2];",
+            "        Ke = K[3];",
+        ]
+    else:
+        L += ["        Kr = s->Kr;", "        Kv = s->Kv;", "        Ka = s->Ka;", "        Ke = s->Ke;"]
+    L += [
+        "        /* y = z - H x = z - a - eps */",
+        f"        y = z - a - {eh};",
+        "        /* x = x + K y */",
+        "        p += (int64_t)Kr * y;",
+        "        q += (int64_t)Kv * y;",
+        f"        s->a = a + (int32_t)(((int64_t)Ka * y + ((int64_t)1 << {sa - 1})) >> {sa});"
+        f" /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
+        f"        e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
+    ]
+    L += [
+        "    }",
+        "    s->e = e;",
+        f"    r = s->r + {_sh('s->v', fv - fr, f'Q.{fv} -> Q.{fr}')}"
+        f" + {_sh('p', fK['r'] + fy - fr, conv['r'])}{post['r']};",
+        f"    v = s->v + {_sh('q', fK['v'] + fy - fv, conv['v'])}{post['v']};",
+        f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
+        f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
+    ]
+    if p.form == "gain_schedule":
+        L += [f"    {T}_gains(s);"]
+    L += ["    ++s->k;"]
     return L
 
 
@@ -251,6 +408,19 @@ HELPERS = r"""
  * right shift of a negative value is arithmetic on every compiler accelnav
  * supports (gcc, clang, arm-none-eabi-gcc); it is checked in the tests. */
 #define ACN_RSHR(x, s) (((x) + ((int64_t)1 << ((s) - 1))) >> (s))
+
+/* a b as int64: one SMULL. gcc for Cortex-M3 sometimes builds it from UMULL and two MLA (a 64x64
+ * product), so on Thumb-2 it is spelled out; the result is the same integer everywhere. */
+static inline int64_t acn_mul(int32_t a, int32_t b)
+{
+#if defined(__arm__) && defined(__thumb2__)
+    uint32_t lo, hi;
+    __asm__("smull %0, %1, %2, %3" : "=&r"(lo), "=&r"(hi) : "r"(a), "r"(b));
+    return (int64_t)(((uint64_t)hi << 32) | lo);
+#else
+    return (int64_t)a * b;
+#endif
+}
 
 /* Narrow an int64 to int32, saturating and counting. */
 static inline int32_t acn_sat32(int64_t x, uint32_t *overflow)
@@ -266,16 +436,13 @@ static inline int32_t acn_sat32(int64_t x, uint32_t *overflow)
     return (int32_t)x;
 }
 
-/* Clamp an int64 to +-lim, counting. */
-static inline int64_t acn_clamp64(int64_t x, int64_t lim, uint32_t *overflow)
+/* Clamp an int64 to +-hmax 2^32 when its high word leaves [-hmax, hmax], counting: one add and
+ * one compare on the high word in the common case. */
+static inline int64_t acn_limit(int64_t x, int32_t hmax, uint32_t *overflow)
 {
-    if (x > lim) {
+    if ((uint32_t)(x >> 32) + (uint32_t)hmax > 2u * (uint32_t)hmax) {
         ++*overflow;
-        return lim;
-    }
-    if (x < -lim) {
-        ++*overflow;
-        return -lim;
+        return x < 0 ? -(int64_t)hmax * ((int64_t)1 << 32) : (int64_t)hmax * ((int64_t)1 << 32);
     }
     return x;
 }
@@ -306,7 +473,7 @@ static inline uint32_t acn_recip(uint32_t d, int *n)
     x = UINT32_C(3031741621) - (uint32_t)(((uint64_t)UINT32_C(2021161080) * dn) >> 32); /* Q2.30 */
     for (i = 0; i < 3; ++i) {
         int32_t err = (int32_t)(UINT32_C(0x40000000) - (uint32_t)(((uint64_t)dn * x) >> 32)); /* 1 - D x */
-        x = (uint32_t)((int64_t)x + (((int64_t)x * err) >> 30));
+        x = (uint32_t)((int64_t)x + (acn_mul((int32_t)(x >> 1), err) >> 29));
     }
     return x;
 }
@@ -318,7 +485,7 @@ def _schedule_for(p: AxisPlan) -> Schedule:
 
     K = np.array(p.gains.K) * np.array([1.0, p.design.Ts, 1.0, 1.0])
     fm = tuple(p.vars["K" + n].fmt for n in "rvae")
-    return schedule(K, fm, SCHEDULE_REL_TOL)
+    return schedule(K, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
 
 
 def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[str], dict]:
@@ -358,18 +525,32 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     d = p.design
     src = [f"/* ---- axis {ax}: {p.form} form ---- */", ""] + _fixed_consts(p, P) + [""]
     sched = None
+    v = p.vars
+    for nm, key in (("RHI", "r"), ("VHI", "v")):
+        h = math.ceil(v[key].bound * 2.0 ** (v[key].fmt.frac - 32))
+        src.append(f"#define {P}_{nm} INT32_C({h}) /* clamp: |{key}| <= {h} 2^32 LSB ({v[key].bound:.6g} m) */")
+    src.append("")
     if p.form == "gain_schedule":
         sched = _schedule_for(p)
         src.append(f"#define {P}_NSEG {sched.n_segments}")
-        src.append("/* samples per segment; after the last one the gains are held */")
+        src.append("/* segment j: for len[j] samples every gain adds slope[j][i] after the sample;")
+        src.append(" * after the last segment the gains are held */")
         src.append(f"static const uint32_t {T}_seg_len[{P}_NSEG] = {{")
         for i in range(0, sched.n_segments, 8):
             src.append("    " + ", ".join(f"{L}u" for L in sched.lengths[i : i + 8]) + ",")
         src.append("};")
-        src.append(f"/* per-sample slope of the K_r, K_v, K_a, K_e accumulators (Q.frac+{ACC_EXTRA}) */")
-        src.append(f"static const int64_t {T}_seg_slope[{P}_NSEG][4] = {{")
+        src.append(
+            "/* per-sample slopes of K_r, K_v, K_a, K_e in LSB of their accumulators ("
+            + ", ".join(str(f) for f in sched.formats)
+            + ") */"
+        )
+        src.append(f"static const int32_t {T}_seg_slope[{P}_NSEG][3] = {{")
         for sl in sched.slopes:
-            src.append("    {" + ", ".join(_c_int(x, 64) for x in sl) + "},")
+            src.append("    {" + ", ".join(_c_int(x, 32) for x in sl[:3]) + "},")
+        src.append("};")
+        src.append(f"static const int64_t {T}_seg_slope_e[{P}_NSEG] = {{")
+        for i in range(0, sched.n_segments, 4):
+            src.append("    " + ", ".join(_c_int(sl[3], 64) for sl in sched.slopes[i : i + 4]) + ",")
         src.append("};")
         src.append("")
     # init
@@ -403,50 +584,59 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         for nm, val in vals.items():
             src.append(f"    s->{nm} = {_c_int(quantize(val, v[nm].fmt), 32)}; /* {val:.17g} */")
     else:
-        for i, nm in enumerate("rvae"):
-            src.append(f"    s->acc_{nm} = {_c_int(sched.start[i], 64)};")
+        for i, nm in enumerate("rva"):
+            src.append(f"    s->K{nm} = {_c_int(sched.start[i], 32)};")
+        ke0 = sched.start[3]
+        src.append(f"    s->Ke_lo = UINT32_C({ke0 & 0xFFFFFFFF});")
+        src.append(f"    s->Ke = {_c_int(ke0 >> 32, 32)};")
         src.append("    s->seg = 0;")
         src.append(f"    s->left = {sched.lengths[0] if sched.n_segments else 0}u;")
     src += ["    s->k = 0;", "    s->overflow = 0;", "}", ""]
     # convert
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
-    # predict (static) and schedule advance
-    src += [f"static inline void {T}_predict({T}_t *s)", "{"] + _predict_fixed(p, P) + ["}", ""]
     if p.form == "gain_schedule":
         src += [
-            f"static inline void {T}_advance({T}_t *s)",
+            "/* The gains of the next sample: one step along the schedule. */",
+            f"static inline void {T}_gains({T}_t *s)",
             "{",
-            f"    if (s->seg < {P}_NSEG) {{",
-            f"        const int64_t *d = {T}_seg_slope[s->seg];",
-            "        s->acc_r += d[0];",
-            "        s->acc_v += d[1];",
-            "        s->acc_a += d[2];",
-            "        s->acc_e += d[3];",
-            "        if (--s->left == 0) {",
-            "            ++s->seg;",
-            f"            s->left = s->seg < {P}_NSEG ? {T}_seg_len[s->seg] : 0u;",
+            "    if (s->left != 0u) {",
+            f"        const int32_t *d = {T}_seg_slope[s->seg];",
+            "        uint64_t ke = (((uint64_t)(uint32_t)s->Ke << 32) | s->Ke_lo)",
+            f"                      + (uint64_t){T}_seg_slope_e[s->seg]; /* K_e: 64-bit add, wraps like int64 */",
+            "        s->Kr += d[0];",
+            "        s->Kv += d[1];",
+            "        s->Ka += d[2];",
+            "        s->Ke_lo = (uint32_t)ke;",
+            "        s->Ke = (int32_t)(ke >> 32);",
+            f"        if (--s->left == 0u && ++s->seg < {P}_NSEG) {{",
+            f"            s->left = {T}_seg_len[s->seg];",
             "        }",
             "    }",
-            "    ++s->k;",
             "}",
             "",
         ]
-    else:
-        src += [f"static inline void {T}_advance({T}_t *s)", "{", "    ++s->k;", "}", ""]
-    # update (public: takes z already converted)
-    decl = ["    int32_t y, Kr, Kv, Ka, Ke;"]
     if p.form == "covariance":
-        decl += ["    int32_t S, sr;", "    uint32_t x;", "    int n;"]
+        # the covariance block in functions of their own: its registers do not crowd the states'
+        src += [f"static void {T}_ppredict({T}_t *s)", "{"]
+        src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(p, P)]
+        src += ["}", ""]
+        src += [
+            f"static void {T}_pupdate({T}_t *s, int32_t K[4])",
+            "{",
+            "    int32_t Kr, Kv, Ka, Ke, S, sr, xs;",
+            "    uint32_t x;",
+            "    int n;",
+        ]
+        src += [_smull(ln) for ln in _gains_cov(p, P)]
+        src += ["    K[0] = Kr;", "    K[1] = Kv;", "    K[2] = Ka;", "    K[3] = Ke;", "}", ""]
     src += [
         "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
         f" * with z [m/s^2] {v['z'].fmt}. Inlined into update, skip and step. */",
         f"static inline void {T}_core({T}_t *s, int32_t z, bool valid)",
         "{",
     ]
-    src += decl
-    src += ["    if (s->k > 0) {", f"        {T}_predict(s);", "    }", "    if (valid) {"]
-    src += ["    " + ln if ln else ln for ln in _update_fixed(p, P)]
-    src += ["    }", f"    {T}_advance(s);", "}", ""]
+    src += _core_fixed(p, P, T)
+    src += ["}", ""]
     src += [
         f"void {T}_update({T}_t *s, int32_t z)",
         "{",
@@ -502,8 +692,8 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         man["schedule"] = {
             "segments": sched.n_segments,
             "max_error": [float(e) for e in sched.error.max(0)],
-            "rel_tol": SCHEDULE_REL_TOL,
-            "flash_bytes": sched.n_segments * (4 + 32),
+            "rel_tol": list(SCHEDULE_REL_TOL),
+            "flash_bytes": sched.n_segments * (4 + 12 + 8),
         }
     return header, cdef, src, man
 

@@ -10,8 +10,8 @@ the prior P0 without a prediction; every later sample predicts, then updates.
 :func:`schedule` compresses K[k] for the gain-schedule form: piecewise
 linear in k, the knots shared by the four gains and chosen greedily so that
 every gain stays within its tolerance of the float64 value. On the MCU each
-gain is an int64 accumulator that adds its segment's slope every sample (no
-multiply, no interpolation), and the high word is the gain used. The
+gain is an int32 that adds its segment's int32 slope every sample (no
+multiply, no interpolation). The
 integers are simulated here exactly, so the compression error
 |K_stored[k] - K[k]| is known for every k, not estimated.
 """
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .design import AxisDesign
-from .qformat import QFormat, dequantize, quantize
+from .qformat import QFormat
 
 BLOCK_NAMES = ("ra", "ua", "aa", "re", "ue", "ae", "ee")
 
@@ -98,7 +98,135 @@ def _riccati_cached(key: tuple, n: int) -> GainRun:
     return _riccati(key, n, None)
 
 
+_RICCATI_C = r"""
+#include <math.h>
+#define AB(x) fabs(x)
+#define MX(m, x) do { double t_ = AB(x); if (t_ > (m)) (m) = t_; } while (0)
+void acn_riccati(long n, const double *par, const double *P0, const unsigned char *valid,
+                 const unsigned char *mark, double *K, double *sig, double *S_all,
+                 double *mprior, double *mpost, double *mc, double *ckpt)
+{
+    double Ts = par[0], phi = par[1], qaa = par[2], qua = par[3], qra = par[4], qee = par[5];
+    double quu = par[6], qru = par[7], qrr = par[8], R = par[9];
+    double h2 = Ts * Ts / 2.0, phi2 = phi * phi;
+    double prr = P0[0], pru = P0[1], puu = P0[5];
+    double pra = P0[2], pua = P0[6], paa = P0[10], pre = P0[3], pue = P0[7], pae = P0[11], pee = P0[15];
+    long k;
+    int i;
+    for (i = 0; i < 7; ++i) { mprior[i] = 0.0; mpost[i] = 0.0; }
+    for (i = 0; i < 4; ++i) { mc[i] = 0.0; }
+    for (k = 0; k < n; ++k) {
+        double cr, cu, ca, ce, S, kr, ku, ka, ke;
+        if (k) {
+            double nrr = prr + 2 * Ts * pru + Ts * Ts * puu + 2 * h2 * pra + 2 * Ts * h2 * pua + h2 * h2 * paa + qrr;
+            double nru = pru + Ts * puu + h2 * pua + Ts * (pra + Ts * pua + h2 * paa) + qru;
+            double nuu = puu + 2 * Ts * pua + Ts * Ts * paa + quu;
+            double nra = pra + Ts * pua + h2 * paa + qra;
+            double nre = phi * (pre + Ts * pue + h2 * pae);
+            double nua = pua + Ts * paa + qua;
+            double nue = phi * (pue + Ts * pae);
+            prr = nrr; pru = nru; puu = nuu; pra = nra; pre = nre; pua = nua; pue = nue;
+            paa = paa + qaa;
+            pae = phi * pae;
+            pee = phi2 * pee + qee;
+        }
+        MX(mprior[0], pra); MX(mprior[1], pua); MX(mprior[2], paa); MX(mprior[3], pre);
+        MX(mprior[4], pue); MX(mprior[5], pae); MX(mprior[6], pee);
+        if (mark[k]) {
+            double P[16] = {prr, pru, pra, pre, pru, puu, pua, pue, pra, pua, paa, pae, pre, pue, pae, pee};
+            for (i = 0; i < 16; ++i) { ckpt[i] = P[i]; }
+            ckpt += 16;
+        }
+        cr = pra + pre; cu = pua + pue; ca = paa + pae; ce = pae + pee;
+        MX(mc[0], cr); MX(mc[1], cu); MX(mc[2], ca); MX(mc[3], ce);
+        S = ca + ce + R;
+        if (valid == 0 || valid[k]) {
+            kr = cr / S; ku = cu / S; ka = ca / S; ke = ce / S;
+            prr -= kr * cr; pru -= kr * cu; puu -= ku * cu;
+            pra -= kr * ca; pua -= ku * ca; paa -= ka * ca;
+            pre -= kr * ce; pue -= ku * ce; pae -= ka * ce; pee -= ke * ce;
+        } else {
+            kr = ku = ka = ke = 0.0;
+        }
+        K[4 * k] = kr; K[4 * k + 1] = ku; K[4 * k + 2] = ka; K[4 * k + 3] = ke;
+        sig[4 * k] = sqrt(prr > 0.0 ? prr : 0.0); sig[4 * k + 1] = sqrt(puu > 0.0 ? puu : 0.0);
+        sig[4 * k + 2] = sqrt(paa > 0.0 ? paa : 0.0); sig[4 * k + 3] = sqrt(pee > 0.0 ? pee : 0.0);
+        S_all[k] = S;
+        MX(mpost[0], pra); MX(mpost[1], pua); MX(mpost[2], paa); MX(mpost[3], pre);
+        MX(mpost[4], pue); MX(mpost[5], pae); MX(mpost[6], pee);
+        MX(mc[0], pra + pre); MX(mc[1], pua + pue); MX(mc[2], paa + pae); MX(mc[3], pae + pee);
+    }
+}
+"""
+_CDEF = """void acn_riccati(long n, const double *par, const double *P0, const unsigned char *valid,
+    const unsigned char *mark, double *K, double *sig, double *S_all, double *mprior, double *mpost,
+    double *mc, double *ckpt);"""
+
+
+@functools.lru_cache(maxsize=1)
+def _riccati_lib():
+    """The C twin of :func:`_riccati_py` (same operations in the same order, IEEE double, no
+    contraction), built once per source by the project's one cffi builder; None without a C compiler."""
+    import os
+    import shutil
+
+    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    if cc is None or os.environ.get("ACCELNAV_PURE_PYTHON"):
+        return None
+    from host.cbuild import STRICT_FLAGS, build_module
+
+    try:
+        mod = build_module(
+            "acn_riccati",
+            _CDEF,
+            {"riccati.c": _RICCATI_C},
+            main="riccati.c",
+            preamble=_CDEF,
+            extra_compile_args=(*STRICT_FLAGS, "-ffp-contract=off", "-fno-fast-math"),
+        )
+    except (OSError, RuntimeError):
+        return None
+    return mod.ffi, mod.lib
+
+
 def _riccati(key: tuple, n: int, valid) -> GainRun:
+    lib = _riccati_lib()
+    if lib is None:
+        return _riccati_py(key, n, valid)
+    ffi, C = lib
+    Ts, phi, qaa, qua, qra, qee, quu, qru, qrr, R, P0 = key
+    par = np.array([Ts, phi, qaa, qua, qra, qee, quu, qru, qrr, R], dtype=np.float64)
+    P0 = np.ascontiguousarray(np.array(P0, dtype=np.float64).reshape(16))
+    mark = np.zeros(n, dtype=np.uint8)
+    marks = sorted(_marks(n) & set(range(n)))
+    mark[marks] = 1
+    K = np.empty((n, 4))
+    sigma = np.empty((n, 4))
+    S_all = np.empty(n)
+    mprior, mpost, mc = np.empty(7), np.empty(7), np.empty(4)
+    ck = np.empty((len(marks), 16))
+    v = None if valid is None else np.ascontiguousarray(valid, dtype=np.uint8)
+
+    def ptr(a, t="double *"):
+        return ffi.cast(t, a.ctypes.data)
+
+    C.acn_riccati(
+        n, ptr(par), ptr(P0), ffi.NULL if v is None else ptr(v, "unsigned char *"), ptr(mark, "unsigned char *"),
+        ptr(K), ptr(sigma), ptr(S_all), ptr(mprior), ptr(mpost), ptr(mc), ptr(ck),
+    )  # fmt: skip
+    checkpoints = tuple(
+        (k, tuple(tuple(float(x) for x in ck[i].reshape(4, 4)[r]) for r in range(4))) for i, k in enumerate(marks)
+    )
+    for a in (K, sigma, S_all):
+        a.flags.writeable = False
+    return GainRun(K, sigma, S_all, mprior, mpost, mc, checkpoints)
+
+
+def _marks(n: int) -> set:
+    return set(np.unique(np.geomspace(1, max(n - 1, 1), 40).astype(int)).tolist()) | {0}
+
+
+def _riccati_py(key: tuple, n: int, valid) -> GainRun:
     Ts, phi, qaa, qua, qra, qee, quu, qru, qrr, R, P0 = key
     h2 = Ts * Ts / 2.0
     phi2 = phi * phi
@@ -112,7 +240,7 @@ def _riccati(key: tuple, n: int, valid) -> GainRun:
     mpost = np.zeros(7)
     mc = np.zeros(4)
     chunk = 1 << 16
-    marks = set(np.unique(np.geomspace(1, max(n - 1, 1), 40).astype(int)).tolist()) | {0}
+    marks = _marks(n)
     checkpoints = []
     for k0 in range(0, n, chunk):
         k1 = min(n, k0 + chunk)
@@ -181,21 +309,22 @@ def _riccati(key: tuple, n: int, valid) -> GainRun:
 # Gain schedule
 
 
-ACC_EXTRA = 32  # accumulator fractional bits beyond the gain's own format
+EXTRA = (0, 0, 0, 32)  # accumulator bits below each gain's LSB: K_e settles to 2e-6 of its start
 
 
 @dataclass(frozen=True)
 class Schedule:
-    """Piecewise-linear gains: segment j spans lengths[j] samples from knot j.
+    """Piecewise-linear gains on shared knots: segment j spans lengths[j] samples.
 
-    Gain i is held as an int64 accumulator in Q(fmt[i].frac + ACC_EXTRA); it
-    starts at start[i], adds slope[j][i] after every sample of segment j, and
-    its high 32 bits (>> ACC_EXTRA) are the Q gain used. After the last
-    segment the gains are held constant.
+    Gain i is an accumulator of 32 + EXTRA[i] bits in Q(formats[i].frac + EXTRA[i]) whose high 32
+    bits are the gain (K_r, K_v, K_a: the int32 itself; K_e: the high word of an int64, whose slope
+    is far below one LSB of K_e once it settles). It starts at start[i] (the gain of sample 0) and
+    adds slope[j][i] after every sample of segment j; after the last segment the gains are held.
+    The integers are those of the C, simulated here exactly.
     """
 
     formats: tuple[QFormat, ...]  # per gain, int32
-    start: tuple[int, ...]  # accumulator values at sample 0
+    start: tuple[int, ...]  # accumulators at sample 0
     lengths: tuple[int, ...]
     slopes: tuple[tuple[int, ...], ...]
     stored: np.ndarray  # (N, 4) the gains the C uses, as real numbers
@@ -207,58 +336,75 @@ class Schedule:
         return len(self.lengths)
 
 
-def _chord_ok(K: np.ndarray, k0: int, k1: int, tol: np.ndarray) -> bool:
-    """Does the chord from K[k0] to K[k1] stay within tol of K on [k0, k1]?"""
-    t = np.linspace(0.0, 1.0, k1 - k0 + 1)[:, None]
-    chord = K[k0] + t * (K[k1] - K[k0])
-    err = np.abs(chord - K[k0 : k1 + 1])
-    return bool(np.all(err <= tol[k0 : k1 + 1]))
+def _segment(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, k0: int, L: int):
+    """Slopes (4,) of a segment of L samples from k0 starting at the accumulators A, or None if
+    some gain leaves its tolerance on samples k0 .. k0 + L (the endpoint starts the next segment)."""
+    sl = np.floor((Kq[k0 + L] - A) / L + 0.5).astype(np.int64)
+    t = np.arange(L + 1, dtype=np.int64)[:, None]
+    err = np.abs((A + sl * t).astype(np.float64) - Kq[k0 : k0 + L + 1])
+    if np.all(err <= tolq[k0 : k0 + L + 1]):
+        return sl
+    return None
 
 
-def schedule(K: np.ndarray, formats: tuple[QFormat, ...], rel_tol: float = 2e-5) -> Schedule:
-    """Compress K (N, 4) into a piecewise-linear schedule; tolerance rel_tol * |K[k]| + 1 LSB."""
+def schedule(K: np.ndarray, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0) -> Schedule:
+    """Compress K (N, 4) into a piecewise-linear integer schedule.
+
+    Tolerance per gain and sample: rel_tol |K[k]| + half an LSB of the accumulator's high word (the
+    floor of the high word adds up to one more LSB); for K_r and K_v, rel_tol ramps up from 1/20 over
+    the first ``ramp`` samples. Knots are chosen greedily: from each knot the segment grows by
+    doubling from the previous segment's length, then bisects; as the gains settle, the segments
+    lengthen geometrically.
+    """
     n = len(K)
-    lsb = np.array([f.lsb for f in formats])
-    tol = rel_tol * np.abs(K) + lsb
-    knots = [0]
-    k0 = 0
+    ex = np.array(EXTRA, dtype=np.int64)
+    unit = np.array([f.lsb for f in formats]) / 2.0**ex  # one accumulator LSB
+    Kq = K / unit
+    # the high word floors: an accumulator within rel_tol |K| of K leaves the gain within that + 1 LSB
+    rel = np.broadcast_to(np.asarray(rel_tol, dtype=np.float64), (4,))
+    if ramp:  # K_r, K_v feed r and u only, whose sigma grows with time: 20x tighter at the start
+        w = np.clip((np.arange(n) + 1.0) / ramp, 0.05, 1.0)[:, None]
+        rel = rel * np.where(np.arange(4) < 2, w, 1.0)
+    tolq = rel * np.abs(Kq) + np.where(ex > 0, 0.5 * 2.0**ex, 0.5)
+    A = np.floor(Kq[0] + 0.5).astype(np.int64)
+    start = tuple(int(x) for x in A)
+    lengths, slopes = [], []
+    acc = np.empty((n, 4), dtype=np.int64)
+    k0, last = 0, 1
     while k0 < n - 1:
-        # grow the segment geometrically, then bisect the last step
-        step = 1
-        good = k0 + 1
-        while good + step <= n - 1 and _chord_ok(K, k0, good + step, tol):
-            good += step
+        good, sl_good = 1, _segment(Kq, tolq, A, k0, 1)
+        step = max(1, last // 2)
+        while good + step <= n - 1 - k0:
+            sl = _segment(Kq, tolq, A, k0, good + step)
+            if sl is None:
+                break
+            good, sl_good = good + step, sl
             step *= 2
         while step > 1:
             step //= 2
-            if good + step <= n - 1 and _chord_ok(K, k0, good + step, tol):
-                good += step
-        knots.append(good)
-        k0 = good
-    # integers: accumulator Q(frac + ACC_EXTRA); slope rounded so the sum lands near the next knot
-    acc_fmts = [QFormat(64, f.frac + ACC_EXTRA) for f in formats]
-    start = tuple(quantize(K[0, i], acc_fmts[i]) for i in range(4))
-    lengths, slopes = [], []
-    acc = list(start)
-    stored = np.empty((n, 4))
-    pos = 0
-    for j in range(len(knots) - 1):
-        L = knots[j + 1] - knots[j]
-        target = [quantize(K[knots[j + 1], i], acc_fmts[i]) for i in range(4)]
-        sl = tuple(int(round((target[i] - acc[i]) / L)) for i in range(4))
-        for i in range(4):
-            seq = np.int64(acc[i]) + np.int64(sl[i]) * np.arange(L, dtype=np.int64)
-            stored[pos : pos + L, i] = np.ldexp((seq >> ACC_EXTRA).astype(np.float64), -formats[i].frac)
-            acc[i] = acc[i] + sl[i] * L
-        lengths.append(L)
-        slopes.append(sl)
-        pos += L
-    for i in range(4):  # held constant from the last knot on
-        stored[pos:, i] = dequantize(acc[i] >> ACC_EXTRA, formats[i])
+            if good + step <= n - 1 - k0:
+                sl = _segment(Kq, tolq, A, k0, good + step)
+                if sl is not None:
+                    good, sl_good = good + step, sl
+        if sl_good is None:  # one sample: the slope lands on the rounded next value
+            sl_good = np.floor(Kq[k0 + 1] + 0.5).astype(np.int64) - A
+        acc[k0 : k0 + good] = A + sl_good * np.arange(good, dtype=np.int64)[:, None]
+        A = A + sl_good * good
+        lengths.append(good)
+        slopes.append(tuple(int(x) for x in sl_good))
+        k0 += good
+        last = good
+    acc[k0:] = A
+    hi = acc >> ex  # the gains the C uses: the high words
+    for i, f in enumerate(formats):
+        if np.any(np.abs(hi[:, i]) > 2**31 - 1):
+            raise ValueError(f"gain {i} leaves its int32 format {f}")
+    for sl in slopes:
+        if any(abs(x) > 2**31 - 1 for x, e in zip(sl, EXTRA, strict=True) if e == 0):
+            raise ValueError("a slope leaves int32")
+    stored = hi.astype(np.float64) * np.array([f.lsb for f in formats])
     err = np.abs(stored - K)
-    return Schedule(
-        tuple(formats), start, tuple(lengths), tuple(slopes), stored, err, tuple(float(t) for t in tol.max(0))
-    )
+    return Schedule(tuple(formats), start, tuple(lengths), tuple(slopes), stored, err, tuple(np.max(tolq * unit, 0)))
 
 
 def run_gains(d: AxisDesign, z: np.ndarray, valid: np.ndarray, K: np.ndarray) -> np.ndarray:

@@ -11,18 +11,26 @@ ranges and the design numbers, and from that bound its word and binary point
   (a, eps) loop; computed exactly for the transient gains (the first
   N_TRANSIENT samples, all rows) and for the steady gains at several points
   of the declared run (the tail), then given 25 % margin.
-* y = z - a - eps: |z| + |a| + |eps|.
+* y = z - a - eps: |z| + |a| + |eps|. z, y and a share one int32 format.
+* eps: int64 in Q.(fy + 32), so its high word is in the format of y: the
+  innovation reads eps by one rounding of the high word, and K_e y (K_e in
+  Q.32 when it fits) and the decay (1 - phi)(eps_hi - eps_bar) (1 - phi in
+  Q.32 when that keeps 13 bits) each add into it with one SMLAL, no shift.
+  32 bits below y's LSB: the bias mode's l1 gain (~T/Ts) multiplies the
+  per-step rounding of eps, so eps needs far more resolution than a.
 * u and r: the declared max |u| and max |r| with a guard factor 2. The
   filter's u and r integrate without feedback, so no analysis bounds them;
-  they saturate and each saturation is counted.
+  they are clamped once per step (on their high words) and each clamp is
+  counted. r is int64 in a format holding 2 max|r| plus one step; v = Ts u
+  is int64 in the format of the products K_v y and Ts^2 a when that holds
+  2 Ts max|u| plus one step, so they accumulate into it without a shift.
+  K_r and K_v share their formats with Ts^2/2 and Ts^2 (when that leaves
+  Ts^2/2 at least 20 bits): r += v + (Ts^2/2 a + K_r y) needs one shift.
 * P block, c = P H', S, K: the float64 Riccati over the declared run
   (data-independent) with a factor 2; predict-only samples make P grow, so
   these saturate and count too (covariance form only).
 
-The error of each state against float64 is bounded the same way: every
-rounding is an injection of at most half an LSB; injections into a and eps
-are carried by the l1 norms of the closed loop, and u and r add up theirs
-(and those of a) without feedback.
+The error of each state against float64: :mod:`codegen.bounds`.
 """
 
 from __future__ import annotations
@@ -87,6 +95,9 @@ class AxisPlan:
     consts: dict[str, tuple[float, QFormat]] = field(default_factory=dict)
     z_error: float = 0.0
     gap: int = 0
+    step_max: float = 0.0
+    kv_room: float = 0.0
+    conv_shift: int = -1  # analog fast path: code << conv_shift (-1: the int64 path)
 
     def f(self, name: str) -> int:
         return self.vars[name].fmt.frac
@@ -127,6 +138,8 @@ def _l1_steady(A: np.ndarray, B: np.ndarray, horizon: int) -> np.ndarray:
     lam = lam.real
     V = V.real
     Vi = Vi.real
+    if np.all(lam > 0) and np.all(lam < 1) and lam[0] != lam[1]:
+        return _l1_two_geometric(lam, V, Vi, B, horizon)
     chunk = 1 << 18
     m0 = 0
     while m0 < horizon:
@@ -140,6 +153,29 @@ def _l1_steady(A: np.ndarray, B: np.ndarray, horizon: int) -> np.ndarray:
         m0 += chunk
         if np.max(np.abs(lam)) ** m0 < 1e-13:
             break
+    return out
+
+
+def _l1_two_geometric(lam, V, Vi, B, horizon: int) -> np.ndarray:
+    """sum_{m<horizon} |c0 lam0^m + c1 lam1^m| in closed form, for 0 < lam < 1: the sum changes sign
+    at most once (at (lam0/lam1)^m = -c1/c0), and on each side it is two geometric series."""
+
+    def geo(lm: float, a: int, b: int) -> float:  # sum_{m=a}^{b} lm^m
+        if b < a:
+            return 0.0
+        return lm**a * -math.expm1((b - a + 1) * math.log(lm)) / (1.0 - lm)
+
+    out = np.zeros((2, B.shape[1]))
+    for o in range(2):
+        for i in range(B.shape[1]):
+            c = V[o, :] * (Vi @ B[:, i])
+            cuts = [0, horizon]
+            if c[0] != 0 and c[1] != 0 and -c[1] / c[0] > 0:
+                ms = math.log(-c[1] / c[0]) / math.log(lam[0] / lam[1])
+                if 0 <= ms < horizon - 1:
+                    cuts = [0, int(math.floor(ms)) + 1, horizon]
+            for a, b in zip(cuts[:-1], cuts[1:], strict=False):
+                out[o, i] += abs(c[0] * geo(lam[0], a, b - 1) + c[1] * geo(lam[1], a, b - 1))
     return out
 
 
@@ -205,11 +241,28 @@ def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPla
     add("z", Var("z", "m/s^2", zb, fy, "input acceleration; shares the format of y"))
     add("y", Var("y", "m/s^2", y_b, fy, "innovation z - a - eps"))
     add("a", Var("a", "m/s^2", a_b, fy, f"l1 gain z->a {l1.z_a:.3g} x max|z|, shares the format of y"))
-    add("e", Var("e", "m/s^2", e_b, _require(model, "eps", "m/s^2", e_b, 64), f"l1 gain z->eps {l1.z_e:.3g}"))
+    # eps: 64 bits whose high word is in the format of y (the innovation reads it by one rounding of the
+    # high word, and K_e y adds into it without a shift); e_b <= y_b, so it fits
+    add(
+        "e", Var("e", "m/s^2", e_b, QFormat(64, fy.frac + 32), f"l1 gain z->eps {l1.z_e:.3g}; high word in Q.{fy.frac}")
+    )
+    # r and v = Ts u share one 64-bit format, so r += v is a plain add; they saturate (clamped once per
+    # step, on the high word, counted): nothing feeds them back, so no analysis bounds them
     vb = GUARD * Ts * model.ranges.max_velocity_m_s
-    add("v", Var("v", "m", vb, _require(model, "ranges.max_velocity_m_s", "m", vb, 64), "Ts*u, 2x max|u|", True))
     rb = GUARD * model.ranges.max_position_m
-    add("r", Var("r", "m", rb, _require(model, "ranges.max_position_m", "m", rb, 64), "2x max|r|", True))
+    _require(model, "ranges.max_velocity_m_s", "m", vb, 64)
+    _require(model, "ranges.max_position_m", "m", rb, 64)
+    kb = _gain_bounds(p) if form == "gain_schedule" else None
+    p.step_max = vb + Ts * Ts * a_b + (GUARD * 0.25 + 1) * y_b  # |K_r|, |K_v| < 0.25 (checked below)
+    fr = _require(model, "ranges.max_position_m", "m", rb + p.step_max, 64)
+    # v gets the format of the products K_v y and Ts^2 a, so they accumulate into it with no shift
+    # (one SMLAL each), when that format holds v and one step's increment
+    kv_b = 2 * GUARD * float(np.abs(g.K[:, 1]).max()) * Ts  # K_v (Ts u gain) bound, with room for skips
+    p.kv_room = kv_b
+    v_step = Ts * Ts * a_b + kv_b * y_b
+    fv = _require(model, "ranges.max_velocity_m_s", "m", vb + v_step, 64)
+    add("v", Var("v", "m", vb, fv, "Ts*u, 2x max|u|", True))
+    add("r", Var("r", "m", rb, fr, "2x max|r|", True))
     ub = GUARD * model.ranges.max_velocity_m_s
     add("u_out", Var("u_out", "m/s", ub, _require(model, "ranges.max_velocity_m_s", "m/s", ub, 64), "read-out of u"))
 
@@ -220,21 +273,29 @@ def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPla
         else:
             p.consts[name] = (value, const_format(value, word))
 
-    const("H2", Ts * Ts / 2.0)
-    const("T2", Ts * Ts)
-    const("OMP", 1.0 - d.phi)
+    # 1 - phi in Q.32 when that keeps 13 bits: eps -= (1 - phi)(eps_hi - eps_bar) is then one SMLAL
+    omp = 1.0 - d.phi
+    p.consts["OMP"] = (omp, QFormat(32, 32) if omp * 2**32 >= 2**13 else const_format(omp))
     const("RATE", 1.0 / Ts)
-    p.consts["B"] = (float(d.b[3]), p.vars["e"].fmt)
-    for nm in ("H2", "T2", "RATE"):
-        fr = p.consts[nm][1].frac
-        if fr + fy.frac - p.f("v") < -62 or fr < 0 and nm != "RATE":
-            raise RangeError(model.source, "sampling.rate_hz", f"{nm} = {p.consts[nm][0]:.6g} cannot be scaled")
-
+    # eps' = phi eps + b = eps - (1 - phi)(eps - eps_bar), eps_bar = b / (1 - phi) = c1 + c2
+    p.consts["EBAR"] = (float(d.b[3] / (1.0 - d.phi)), fy)
+    if p.consts["OMP"][1].frac - 32 < 0:
+        raise RangeError(model.source, f"axes.{d.axis.name}.T", f"1 - phi = {1 - d.phi:.6g} cannot be scaled")
     _plan_input(p)
     if form == "covariance":
         _plan_covariance(p)
     else:
-        _plan_gain_formats(p)
+        _plan_gain_formats(p, kb)
+    # Ts^2/2 shares the format of K_r, Ts^2 that of K_v: r += v + (Ts^2/2 a + K_r y) needs one shift
+    # (when that leaves Ts^2/2 fewer than 20 bits, it gets its own format and a second shift)
+    for nm, kn, val in (("H2", "Kr", Ts * Ts / 2.0), ("T2", "Kv", Ts * Ts)):
+        f = p.vars[kn].fmt
+        if val * 2**f.frac < 2**20:
+            f = const_format(val)
+        p.consts[nm] = (val, f)
+        for fm in (f, p.vars[kn].fmt):
+            if fm.frac + fy.frac - fr.frac < 1:
+                raise RangeError(model.source, "sampling.rate_hz", f"{nm} = {val:.6g} cannot be scaled")
     return p
 
 
@@ -242,6 +303,16 @@ def _plan_input(p: AxisPlan) -> None:
     conv = p.conv
     fz = p.f("z")
     if isinstance(conv, AnalogConversion):
+        # unsigned fast path: z = hi((code << c) x SCALE) + OFFSET, SCALE a 32-bit unsigned mantissa
+        fs = 31 - bits_for(conv.scale) + 1  # conv.scale 2^fs in [2^31, 2^32)
+        c = fz + 32 - fs
+        if c >= 0 and conv.full_code * 2**c < 2**32 and conv.full_code * conv.scale * 2**fz < 2**31:
+            p.consts["SCALE"] = (conv.scale, QFormat(33, fs))
+            # + half an LSB turns the floor of the high word into round to nearest
+            p.consts["OFFSET"] = (conv.offset + 2.0 ** -(fz + 1), QFormat(32, fz))
+            p.conv_shift = c
+            p.z_error = conv.full_code * 2.0 ** -(fs + 1) + 2.0**-fz
+            return
         cs = const_format(conv.scale)
         p.consts["SCALE"] = (conv.scale, cs)
         p.consts["OFFSET"] = (conv.offset, QFormat(64, cs.frac))
@@ -272,10 +343,25 @@ def _gain_bounds(p: AxisPlan) -> np.ndarray:
     return kmax
 
 
-def _plan_gain_formats(p: AxisPlan) -> None:
-    kb = _gain_bounds(p)
+def _gain_format(p: AxisPlan, nm: str, bound: float, note: str, saturates: bool) -> None:
+    """K_r and K_v share their format with Ts^2/2 and Ts^2 (the smaller of the two fits)."""
+    Ts = p.design.Ts
+    if nm in ("Kr", "Kv") and bound >= 0.25:
+        raise RangeError(p.model.source, "noise", f"{nm} up to {bound:.6g}: accepted below 0.25")
+    partner = {"Kr": Ts * Ts / 2.0, "Kv": Ts * Ts}.get(nm, 0.0)
+    fmt = const_format(max(bound, partner))
+    if nm == "Ke" and fmt.frac > 32:  # Q.32: K_e y lands in the format of eps (high word = y's)
+        fmt = QFormat(32, 32)
+    if nm == "Kv":  # the product K_v y in the format of v when it keeps 20 bits of Ts^2
+        f = p.vars["v"].fmt.frac - p.vars["y"].fmt.frac
+        if f <= fmt.frac and partner * 2**f >= 2**20 and bound <= p.kv_room:
+            fmt = QFormat(32, f)
+    p.vars[nm] = Var(nm, "1", bound, fmt, note, saturates)
+
+
+def _plan_gain_formats(p: AxisPlan, kb) -> None:
     for i, nm in enumerate(("Kr", "Kv", "Ka", "Ke")):
-        p.vars[nm] = Var(nm, "1", kb[i], const_format(kb[i]), "gain, per-constant scaling")
+        _gain_format(p, nm, kb[i], "gain, per-constant scaling", False)
 
 
 BLOCK = ("ra", "va", "aa", "re", "ve", "ae", "ee")
@@ -320,7 +406,7 @@ def _plan_covariance(p: AxisPlan) -> None:
     p.vars["S"] = Var("S", "(m/s^2)^2", GUARD * bounds["ca"], fmts["ca"], "H P H' + R, >= R", True)
     kb = np.maximum(np.abs(g.K).max(0), gg.K[0]) * np.array([1.0, Ts, 1.0, 1.0])
     for i, nm in enumerate(("Kr", "Kv", "Ka", "Ke")):
-        p.vars[nm] = Var(nm, "1", GUARD * kb[i], const_format(GUARD * kb[i]), "K = c / S, Riccati max x2", True)
+        _gain_format(p, nm, GUARD * kb[i], "K = c / S, Riccati max x2", True)
     d = p.design
     fa = fmts["ca"]
     p.consts["PHI"] = (d.phi, QFormat(32, 31))

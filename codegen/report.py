@@ -13,7 +13,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from .bounds import error_bound
+from .bounds import Y_SIGMAS, error_bound, worst_case_bound
 from .model import Model
 
 ARM_FLAGS = ["-mcpu=cortex-m3", "-mthumb", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
@@ -78,15 +78,26 @@ def report(model: Model, *, form: str | None, arith: str, files: dict[str, str],
         sched = _schedule_for(p) if form == "gain_schedule" else None
         if sched is not None:
             lines.append(
-                f"  gain schedule: {sched.n_segments} piecewise-linear segments ({sched.n_segments * 36} B), "
+                f"  gain schedule: {sched.n_segments} piecewise-linear segments ({sched.n_segments * 24} B), "
                 f"max |K - K64| = " + ", ".join(f"{e:.3g}" for e in sched.error.max(0)) + " [r, v=Ts u, a, eps]"
             )
         b = error_bound(p, p.n_run, sched)
+        w = worst_case_bound(p, p.n_run, sched)
+        sig = p.gains.sigma
         names = ("r [m]", "u [m/s]", "a [m/s^2]", "eps [m/s^2]")
         at1 = min(int(model.rate_hz), p.n_run - 1)
-        lines.append("  predicted error bound vs float64 (worst case over the declared ranges):")
+        lines.append(
+            f"  predicted error bound vs float64 (roundings and gain errors through the closed loop, |y| <= "
+            f"{Y_SIGMAS:g} sqrt(S), |a| <= its range; in units of the filter's own sigma in brackets):"
+        )
         for j, nm in enumerate(names):
-            lines.append(f"    {nm:<12} after 1 s {b[at1, j]:.3g}   after {model.ranges.max_run_s:g} s {b[-1, j]:.3g}")
+            lines.append(
+                f"    {nm:<12} after 1 s {b[at1, j]:.3g} [{b[at1, j] / sig[at1, j]:.2g}]   after "
+                f"{model.ranges.max_run_s:g} s {b[-1, j]:.3g} [{b[-1, j] / sig[-1, j]:.2g}]"
+            )
+        lines.append("  worst case over the declared ranges (every |y| at its bound; rigorous, loose):")
+        for j, nm in enumerate(names):
+            lines.append(f"    {nm:<12} after 1 s {w[at1, j]:.3g}   after {model.ranges.max_run_s:g} s {w[-1, j]:.3g}")
         lines.append(
             f"  l1 gains of the (a, eps) loop: z->a {p.l1.z_a:.3g}, z->eps {p.l1.z_e:.3g}, "
             f"eps-push->eps {p.l1.e_e:.3g}; skipped-sample gap covered: {p.gap} samples"

@@ -10,13 +10,14 @@ compiles (host, sanitizers, Cortex-M0/M3) and the float32 variant.
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 
 import numpy as np
 import pytest
 
-from codegen.bounds import error_bound
+from codegen.bounds import twin_bound
 from codegen.design import axis_design
 from codegen.emit_c import _schedule_for, emit
 from codegen.gains import run_gains
@@ -78,6 +79,16 @@ def reference(model, scenario, axis):
     return _REF[key]
 
 
+def _check_against_bound(p, sched, code, z, valid, x_ref, x_c, what):
+    """Every state within the stated bound at every step (codegen.bounds.twin_bound: the exact effect
+    of the quantized constants plus a rigorous bound on the roundings of this run)."""
+    bound, _ = twin_bound(p, code, z, valid, x_ref, sched)
+    ratio = np.abs(x_c - x_ref) / bound
+    worst = np.unravel_index(np.argmax(ratio), ratio.shape)
+    assert ratio.max() <= 1.0, f"{what}: state {worst[1]} at sample {worst[0]} at {ratio.max():.3g} of the stated bound"
+    return ratio
+
+
 @pytest.mark.parametrize("rate", [100.0, 1000.0])
 @pytest.mark.parametrize("form", ["covariance", "gain_schedule"])
 @pytest.mark.parametrize("scenario", SCENARIOS)
@@ -96,9 +107,7 @@ def test_lockstep(rate, form, scenario, workdir):
             K = np.asarray(p.gains.K)[: len(valid)]
             x_ref = run_gains(d, run.accel[:, axis], valid, K)
         err = np.abs(res["x"] - x_ref)
-        bound = error_bound(p, len(err), sched)
-        worst = np.unravel_index(np.argmax(err / bound), err.shape)
-        assert np.all(err <= bound), f"axis {axis}: state {worst[1]} at sample {worst[0]} beyond the stated bound"
+        _check_against_bound(p, sched, run.code[:, axis], run.accel[:, axis], valid, x_ref, res["x"], f"axis {axis}")
         k1 = int(model.rate_hz)
         ratio = err[k1:] / sig[k1:]
         worst = np.unravel_index(np.argmax(ratio), ratio.shape)
@@ -131,7 +140,9 @@ def test_duty_cycle_part(workdir):
     assert res["overflow"] == 0
     assert np.array_equal(res["valid"], valid)
     err = np.abs(res["x"] - ref.x_post)
-    assert np.all(err <= error_bound(plan(model, 0, "covariance")[0], len(err), None))
+    _check_against_bound(
+        plan(model, 0, "covariance")[0], None, None, run.accel[:, 0], valid, ref.x_post, res["x"], "duty"
+    )
     assert (err[100:] / sig[100:]).max() <= SIGMA_FRACTION
 
 
@@ -167,8 +178,6 @@ def test_regeneration_is_byte_identical_and_bannered():
 
 
 def test_no_float_no_division_in_fixed_point():
-    import re
-
     src = emit(load_model())["accelnav.c"]
     body = re.sub(r"/\*.*?\*/", "", src[src.index("#endif") :], flags=re.S)
     for bad in ("float", "double", " / ", "malloc", "#include <"):
@@ -272,3 +281,39 @@ def test_cli_writes_files_and_report(tmp_path, capsys):
     assert {p.name for p in tmp_path.iterdir()} == {"accelnav.c", "accelnav.h", "accelnav.json"}
     for needle in ("Q16.47", "predicted error bound", "RAM", "resolution"):
         assert needle in out
+
+
+MUTATIONS = {
+    # the input offset one LSB off: a bias of one LSB of z, twice what the conversion may round
+    "OFFSET +1 LSB": (r"(#define ACCELNAV_X_OFFSET INT32_C\()(-?\d+)", lambda m: f"{m.group(1)}{int(m.group(2)) + 1}"),
+    # K_a y shifted one bit too far (K_a read in the wrong format)
+    "Ka shift +1": (
+        r"(\(\(int64_t\)Ka \* y \+ \(\(int64_t\)1 << )(\d+)(\)\) >> )(\d+)",
+        lambda m: f"{m.group(1)}{int(m.group(2)) + 1}{m.group(3)}{int(m.group(4)) + 1}",
+    ),
+    # eps_bar off by 1 %: the bias's fixed point
+    "EBAR +1 %": (
+        r"(#define ACCELNAV_X_EBAR INT32_C\()(-?\d+)",
+        lambda m: f"{m.group(1)}{int(int(m.group(2)) * 1.01)}",
+    ),
+}
+
+
+@pytest.mark.parametrize("form", ["covariance", "gain_schedule"])
+@pytest.mark.parametrize("mutation", sorted(MUTATIONS))
+def test_mutations_break_the_lockstep(form, mutation, workdir):
+    """The stated bound is tight enough to catch a constant one LSB off where one LSB matters, or a
+    product read in the wrong format. (A wrong rounding direction, at most one LSB a step, stays
+    within it: see the note in codegen/bounds.py.)"""
+    model = load_model()
+    files = dict(built(model, form, workdir)[0])
+    pat, rep = MUTATIONS[mutation]
+    src, n = re.subn(pat, rep, files["accelnav.c"], count=1)
+    assert n == 1, mutation
+    files["accelnav.c"] = src
+    mod = build(files, workdir)
+    run, d, valid, ref, sig = reference(model, "vehicle", 0)
+    p, sched = plan(model, 0, form)
+    res = AxisRunner(mod, files["accelnav.json"], 0).run(code=run.code[:, 0])
+    with pytest.raises(AssertionError):
+        _check_against_bound(p, sched, run.code[:, 0], run.accel[:, 0], valid, ref.x_post, res["x"], mutation)

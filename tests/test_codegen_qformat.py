@@ -48,3 +48,20 @@ def test_formats():
     assert 2**30 <= quantize(4.8e-7, f) < 2**31  # per-constant scaling uses the whole word
     with pytest.raises(ValueError):
         quantize(float("nan"), Q31)
+
+
+def test_compiled_riccati_is_bit_identical_to_python(default_model):
+    """The gain recursion's C copy (used for speed) repeats the Python one operation for operation."""
+    import numpy as np
+
+    from codegen import gains
+    from codegen.design import axis_design
+
+    assert gains._riccati_lib() is not None, "a C compiler is on this machine: the compiled path must build"
+    key = gains._key(axis_design(default_model, 1))
+    valid = np.ones(4000, dtype=bool)
+    valid[1500:1530] = False
+    for v in (None, valid):
+        fast, slow = gains._riccati(key, 4000, v), gains._riccati_py(key, 4000, v)
+        for name in ("K", "sigma", "S"):
+            assert np.array_equal(getattr(fast, name), getattr(slow, name)), name
