@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 from codegen.emit_c import emit  # noqa: E402
 from codegen.model import load_model  # noqa: E402
 from codegen.report import struct_size  # noqa: E402
+from hil_sim.qemu import run_to_exit  # noqa: E402
 
 BOARD = ROOT / "firmware" / "boards" / "mps2_an385"
 CFLAGS = ["-mcpu=cortex-m3", "-mthumb", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
@@ -152,29 +153,8 @@ def main(argv=None) -> int:
         ],
         check=True,
     )
-    q = subprocess.run(
-        [
-            "qemu-system-arm",
-            "-M",
-            "mps2-an385",
-            "-nographic",
-            "-monitor",
-            "none",
-            "-serial",
-            "none",
-            "-icount",
-            "shift=0",
-            "-semihosting-config",
-            "enable=on,target=native",
-            "-kernel",
-            str(elf),
-        ],
-        check=True,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    text_out = q.stdout + q.stderr
+    # the one way accelnav runs code on the emulator (hil_sim.qemu), with -icount shift=0
+    text_out = run_to_exit(elf, icount=True, timeout=300)
     vals = dict(line.split() for line in text_out.splitlines() if len(line.split()) == 2)
     vals = {k: int(v) for k, v in vals.items()}
     ipt = 2_000_000 / vals["calib_2M"]
