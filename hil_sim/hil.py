@@ -97,12 +97,34 @@ class Comparison:
     pil_equal_sil: bool | None  # None: no PIL run
     first_difference: int | None
     max_err_sigma: dict[str, float]  # firmware vs float64 reference, max |e|/sigma after the first second
+    max_of_bound: float  # firmware vs float64, max |e| / the generator's stated bound (<= 1 required)
     position_rows: list[tuple[str, str, float, float]] = field(default_factory=list)  # axis, method, rms, final
     fw: dict[str, np.ndarray] = field(default_factory=dict)
     ref_x: np.ndarray | None = None  # (n_axes, N, 4)
     ref_sd: np.ndarray | None = None
     smooth_x: np.ndarray | None = None
     zupt_x: np.ndarray | None = None
+
+
+def stated_bound(model: Model, j: int, run: SimRun, x_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The generator's stated bound of |firmware - float64| for axis column j of this run, and the
+    float64 run it bounds the distance to (the Kalman filter; for a gain schedule with skipped
+    samples, the float64 filter with the schedule's gains, since a skip changes the Kalman gain but
+    not the schedule). See codegen.bounds.twin_bound."""
+    from codegen.bounds import twin_bound
+    from codegen.emit_c import _schedule_for
+    from codegen.gains import run_gains
+    from codegen.ranges import plan_axis
+
+    form = model.filter.form
+    p = plan_axis(model, j, form)
+    sched = _schedule_for(p) if form == "gain_schedule" else None
+    valid = ~run.clipped[:, j]
+    if sched is not None and not valid.all():
+        x_ref = run_gains(axis_design(model, j), run.accel[:, j], valid, np.asarray(p.gains.K)[: len(valid)])
+    code = run.code[:, j] if run.code is not None else None
+    bound, _ = twin_bound(p, code, run.accel[:, j], valid, x_ref, sched)
+    return bound, x_ref
 
 
 def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> Comparison:
@@ -130,6 +152,7 @@ def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> 
     ref_sd = np.empty((n_axes, n, 4))
     smooth_x = np.empty((n_axes, n, 4))
     errs = {k: 0.0 for k in STATES}
+    of_bound = 0.0  # largest |firmware - float64| / stated bound, any state, any sample
     # the smoother with automatic zero-velocity updates, as `accelnav smooth --zupt auto` runs it
     arrays = run.to_arrays()
     rest = rest_mask(arrays["accel"], arrays["clipped"], model)
@@ -143,9 +166,12 @@ def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> 
         ref_x[j] = f.x_post
         ref_sd[j] = np.sqrt(np.einsum("kii->ki", f.P_post))
         smooth_x[j] = sm.x
+        fw_x = np.column_stack([cols[key][:, j] for key in STATES])
         for i, key in enumerate(STATES):
-            e = np.abs(cols[key][start:, j] - f.x_post[start:, i]) / ref_sd[j, start:, i]
+            e = np.abs(fw_x[start:, i] - f.x_post[start:, i]) / ref_sd[j, start:, i]
             errs[key] = max(errs[key], float(e.max()) if len(e) else 0.0)
+        bound, x_b = stated_bound(model, j, run, f.x_post)
+        of_bound = max(of_bound, float((np.abs(fw_x - x_b) / bound).max()))
         truth = run.r[:, j]
         estimates = (
             ("firmware filter", cols["r"][:, j]),
@@ -156,7 +182,7 @@ def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> 
         for method, r in estimates:
             e = r - truth
             rows.append((run.axis_names[j], method, float(np.sqrt(np.mean(e**2))), float(e[-1])))
-    return Comparison(n, equal, first, errs, rows, cols, ref_x, ref_sd, smooth_x, zupt_x)
+    return Comparison(n, equal, first, errs, of_bound, rows, cols, ref_x, ref_sd, smooth_x, zupt_x)
 
 
 def format_comparison(c: Comparison) -> str:
@@ -166,6 +192,10 @@ def format_comparison(c: Comparison) -> str:
         lines.append(f"PIL vs SIL: {c.n} sample frames, {verdict}")
     errs = ", ".join(f"{k} {v:.2e}" for k, v in c.max_err_sigma.items())
     lines.append(f"firmware vs float64 reference, max |error| / reference sigma after 1 s: {errs}")
+    verdict = "within" if c.max_of_bound <= 1.0 else "OUTSIDE"
+    lines.append(
+        f"firmware vs float64 reference: {verdict} the generator's stated bound (at most {c.max_of_bound:.2f} of it)"
+    )
     lines.append("")
     lines.append(f"{'axis':<6}{'estimate':<18}{'rms r error [m]':>17}{'final [m]':>12}")
     for axis, method, rms, final in c.position_rows:

@@ -55,6 +55,7 @@ def test_pil_frames_equal_sil_bit_for_bit(tmp_path, model_file, scenario, second
         assert run.clipped.any()
     for key, err in c.max_err_sigma.items():
         assert err < SIGMA_FRACTION, f"{key}: firmware off the float64 reference by {err:.2e} sigma"
+    assert c.max_of_bound <= 1.0, f"firmware at {c.max_of_bound:.3g} of the generator's stated bound"
     assert pil.stats["lost"] == 0 and pil.stats["crc_errors"] == 0
 
 
@@ -64,7 +65,7 @@ def test_sil_agrees_with_reference_and_compare_catches_a_flipped_bit(default_mod
     sil = hil.run_sil(default_model, hil.stimulus(man, run))
     c = hil.compare(default_model, run, sil, sil)
     assert c.pil_equal_sil and c.first_difference is None
-    assert max(c.max_err_sigma.values()) < SIGMA_FRACTION
+    assert max(c.max_err_sigma.values()) < SIGMA_FRACTION and c.max_of_bound <= 1.0
     # one bit of one state in frame 500, re-framed with a valid CRC: must be seen
     from host.telemetry import decode_all, encode_frames
 
