@@ -25,10 +25,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests"))
 
-from firmware_sil import DUTY_MODEL, generated  # noqa: E402
-
+from hil_sim.firmware import DUTY_MODEL, generated  # noqa: E402
 from host.telemetry import Decoder, Manifest, decode_naive, encode_frames  # noqa: E402
 
 BAUDS = (115200, 230400, 460800, 921600)
