@@ -32,7 +32,7 @@ from .ranges import AxisPlan, plan_axis
 
 GENERATOR_VERSION = "0.1.0"
 RUNTIME_API = 1
-SCHEDULE_REL_TOL = (1e-4, 3e-4, 1e-4, 1e-4)  # K_r, K_v (no feedback), K_a, K_e
+SCHEDULE_REL_TOL = (1e-4, 3e-4, 2e-7, 1e-4)  # K_r, K_v (no feedback), K_a (held in a segment: tight), K_e
 
 
 def _banner(model: Model, what: str) -> str:
@@ -79,7 +79,7 @@ def _shf(expr: str, frm: int, to: int) -> str:
     return f"(({expr}) * ((int64_t)1 << {-s})) /* Q.{frm} -> Q.{to}, exact */"
 
 
-_PRODUCT = re.compile(r"\(int64_t\)([A-Za-z_][\w>.-]*) \* ([A-Za-z_][\w>.-]*)")
+_PRODUCT = re.compile(r"\(int64_t\)(-?[A-Za-z_][\w>.-]*) \* ([A-Za-z_][\w>.-]*)")
 
 
 def _smull(line: str) -> str:
@@ -96,7 +96,28 @@ def _fixed_consts(p: AxisPlan, P: str) -> list[str]:
     return out
 
 
-def _fields_fixed(p: AxisPlan) -> list[tuple[str, str, str]]:
+def _thumb_imm(x: int) -> bool:
+    """x is a Thumb-2 modified immediate of the shifted-byte kind (an 8-bit value shifted left)."""
+    if x == 0:
+        return True
+    while x % 2 == 0:
+        x //= 2
+    return x < 256
+
+
+def _clamp_word(bound: float, fmt, step: float) -> int:
+    """High-word clamp h >= bound (in 2^32 LSB of fmt) of acn_limit; rounded up to a value whose
+    double is a Thumb-2 immediate (one ADD and one CMP with immediates, no literal loads) when
+    h 2^32 plus one step still fits the int64 (the format was chosen to hold bound + step)."""
+    h = math.ceil(bound * 2.0 ** (fmt.frac - 32))
+    k = max(0, h.bit_length() - 8)
+    hi = -(-h >> k) << k  # h rounded up to 8 significant bits
+    if _thumb_imm(2 * hi) and 2 * hi < 2**32 and hi * 2.0**32 + step * 2.0**fmt.frac < 2.0**63 - 2.0**40:
+        return hi
+    return h
+
+
+def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
     v = p.vars
     f = [
         ("int64_t", "r", f"r [m] {v['r'].fmt}"),
@@ -112,8 +133,7 @@ def _fields_fixed(p: AxisPlan) -> list[tuple[str, str, str]]:
             f.append(("int32_t", "K" + nm, f"K_{nm} of the next sample {v['K' + nm].fmt}"))
         f.append(("uint32_t", "Ke_lo", f"K_e accumulator, low word (Q.{v['Ke'].fmt.frac + 32} with Ke)"))
         f.append(("int32_t", "Ke", f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"))
-        f.append(("uint32_t", "seg", "schedule segment"))
-        f.append(("uint32_t", "left", "samples left in the segment"))
+        f.append((f"const struct {T}_seg_s *", "seg", "the schedule's current row"))
     f.append(("uint32_t", "k", "samples since init"))
     f.append(("uint32_t", "overflow", "saturations so far"))
     return f
@@ -183,20 +203,23 @@ def _hi_round(expr: str) -> str:
     return f"(int32_t)(((uint64_t)({expr}) + UINT64_C(0x80000000)) >> 32)"
 
 
-GUARD_BITS = 16  # bits below the target's LSB at which a sum of products is formed, rounded once
+GUARD_BITS = 16  # bits below the target's LSB at which a sum of three or more terms is formed
+GUARD_BITS_2 = 32  # ... and a sum of one or two: at 32 the rounding is the high word, no shift
 
 
 def _acc(ft: int, terms: list[tuple[str, str, int]]) -> str:
     """Sum of int64 terms (sign, expr, frac bits) in Q.ft with one rounding: the terms already in
-    Q.ft add exactly; the finer ones are aligned (floor) to Q.(ft + g), g <= GUARD_BITS the most that
-    needs no left shift, summed, and rounded once to Q.ft."""
+    Q.ft add exactly; the finer ones are aligned (floor) to Q.(ft + g), g the most that needs no
+    left shift, at most GUARD_BITS_2 for one or two fine terms (each a product of two int32, neither
+    INT32_MIN, so |term| < 2^62 and two of them plus the rounding half stay below 2^63) and
+    GUARD_BITS for more, summed, and rounded once to Q.ft."""
     exact = [(sg, e) for sg, e, fr in terms if fr == ft]
     fine = [(sg, e, fr) for sg, e, fr in terms if fr != ft]
     if any(fr < ft for _, _, fr in fine):
         raise ValueError("a term coarser than its target")
     out = " ".join(f"{sg} {e}" for sg, e in exact).lstrip("+ ")
     if fine:
-        g = min(GUARD_BITS, *(fr - ft for _, _, fr in fine))
+        g = min(GUARD_BITS_2 if len(fine) <= 2 else GUARD_BITS, *(fr - ft for _, _, fr in fine))
         parts = " ".join(f"{sg} " + (f"(({e}) >> {fr - ft - g})" if fr - ft > g else f"({e})") for sg, e, fr in fine)
         out += f" + ACN_RSHR({parts.lstrip('+ ')}, {g}) /* in Q.{ft + g}, rounded once to Q.{ft} */"
     return f"({out})"
@@ -207,8 +230,9 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
     H2, T2, OMP = (p.consts[n][1].frac for n in ("H2", "T2", "OMP"))
     PO = p.consts["PHIOMP"][1].frac
 
-    def c(name):
-        return f"(int64_t){P}_{name}"
+    def c(name):  # "-NAME": the constant negated in the literal (no 64-bit negation of the product)
+        neg = name.startswith("-")
+        return f"(int64_t){'-' if neg else ''}{P}_{name.lstrip('-')}"
 
     tr = _acc(
         fPr, [("+", "(int64_t)s->Pre", fPr), ("+", "(int64_t)s->Pve", fPv), ("+", f"{c('H2')} * s->Pae", H2 + fPae)]
@@ -221,7 +245,7 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
             ("+", "(int64_t)s->cv", fcv),
             ("+", f"{c('H2')} * s->ca", H2 + fca),
             ("+", c("Qra"), fcr),
-            ("-", f"{c('OMP')} * tr", OMP + fPr),
+            ("+", f"{c('-OMP')} * tr", OMP + fPr),
         ],
     )
     cv = _acc(
@@ -230,12 +254,12 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
             ("+", "(int64_t)s->cv", fcv),
             ("+", f"{c('T2')} * s->ca", T2 + fca),
             ("+", c("Qva"), fcv),
-            ("-", f"{c('OMP')} * tv", OMP + fPv),
+            ("+", f"{c('-OMP')} * tv", OMP + fPv),
         ],
     )
-    pre = _acc(fPr, [("+", "(int64_t)tr", fPr), ("-", f"{c('OMP')} * tr", OMP + fPr)])
-    pve = _acc(fPv, [("+", "(int64_t)tv", fPv), ("-", f"{c('OMP')} * tv", OMP + fPv)])
-    ca = _acc(fca, [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fca), ("-", f"{c('OMP')} * s->Pae", OMP + fPae)])
+    pre = _acc(fPr, [("+", "(int64_t)tr", fPr), ("+", f"{c('-OMP')} * tr", OMP + fPr)])
+    pve = _acc(fPv, [("+", "(int64_t)tv", fPv), ("+", f"{c('-OMP')} * tv", OMP + fPv)])
+    ca = _acc(fca, [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fca), ("+", f"{c('-OMP')} * s->Pae", OMP + fPae)])
     ce = _acc(
         fce,
         [("+", f"{c('PHI2')} * s->ce", 31 + fce), ("+", f"{c('PHIOMP')} * s->Pae", PO + fPae), ("+", c("Qee"), fce)],
@@ -257,7 +281,9 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
         "        /* c_a' = c_a + Q_aa - (1 - phi) P_ae */",
         f"        s->ca = acn_sat32({ca}, &s->overflow);",
         "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
-        f"        s->ce = acn_sat32({ce}, &s->overflow);",
+        f"        s->ce = (int32_t){ce}; /* fits int32 for any c_e, P_ae: see codegen.ranges._predict_sat_free */"
+        if "ce" in p.sat_free
+        else f"        s->ce = acn_sat32({ce}, &s->overflow);",
         "        /* P_ae' = phi P_ae */",
         f"        s->Pae = (int32_t){_shift(f'(int64_t){P}_PHI * s->Pae', 31 + fPae, fPae)};",
     ]
@@ -382,8 +408,8 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
         "        /* y = z - H x = z - a - eps */",
         f"        y = z - a - {eh};",
         "        /* x = x + K y */",
-        "        p += (int64_t)Kr * y;",
-        "        q += (int64_t)Kv * y;",
+        "        p = acn_mac(p, Kr, y); /* p += K_r y */",
+        "        q = acn_mac(q, Kv, y); /* q += K_v y */",
         f"        s->a = a + (int32_t)(((int64_t)Ka * y + ((int64_t)1 << {sa - 1})) >> {sa});"
         f" /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
         f"        e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
@@ -398,12 +424,20 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
         f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
     ]
     if p.form == "gain_schedule":
-        L += [f"    {T}_gains(s);"]
-    L += ["    ++s->k;"]
+        L += ["    ++s->k;", f"    {T}_gains(s, s->k);"]
+    else:
+        L += ["    ++s->k;"]
     return L
 
 
 HELPERS = r"""
+/* The per-sample core is inlined into each entry point (it is small, and a call costs a register
+ * save and restore every sample). */
+#if defined(__GNUC__)
+#define ACN_INLINE static inline __attribute__((always_inline))
+#else
+#define ACN_INLINE static inline
+#endif
 /* Round-to-nearest right shift of an int64 by s >= 1 (ties toward +inf). The
  * right shift of a negative value is arithmetic on every compiler accelnav
  * supports (gcc, clang, arm-none-eabi-gcc); it is checked in the tests. */
@@ -422,18 +456,29 @@ static inline int64_t acn_mul(int32_t a, int32_t b)
 #endif
 }
 
-/* Narrow an int64 to int32, saturating and counting. */
+/* acc + a b as int64: one SMLAL (gcc for Cortex-M3 often forms the product with SMULL and adds it
+ * with ADDS/ADC); the same integer everywhere. */
+static inline int64_t acn_mac(int64_t acc, int32_t a, int32_t b)
+{
+#if defined(__arm__) && defined(__thumb2__)
+    uint32_t lo = (uint32_t)acc, hi = (uint32_t)((uint64_t)acc >> 32);
+    __asm__("smlal %0, %1, %2, %3" : "+r"(lo), "+r"(hi) : "r"(a), "r"(b));
+    return (int64_t)(((uint64_t)hi << 32) | lo);
+#else
+    return acc + (int64_t)a * b;
+#endif
+}
+
+/* Narrow an int64 to int32, saturating and counting. x fits int32 exactly when its high word is the
+ * sign extension of its low word: one compare on the common path. */
 static inline int32_t acn_sat32(int64_t x, uint32_t *overflow)
 {
-    if (x > INT32_MAX) {
+    int32_t lo = (int32_t)(uint32_t)x, hi = (int32_t)(x >> 32);
+    if (__builtin_expect(hi != (lo >> 31), 0)) {
         ++*overflow;
-        return INT32_MAX;
+        return hi < 0 ? INT32_MIN : INT32_MAX;
     }
-    if (x < INT32_MIN) {
-        ++*overflow;
-        return INT32_MIN;
-    }
-    return (int32_t)x;
+    return lo;
 }
 
 /* Clamp an int64 to +-hmax 2^32 when its high word leaves [-hmax, hmax], counting: one add and
@@ -464,17 +509,34 @@ static inline int64_t acn_mul64x32(int64_t x, int32_t c, int s)
 /* Reciprocal without a divide: for d > 0 returns x (Q2.30, 1 < x <= 2) and n = clz(d)
  * with 1/d = x 2^(n-62) to a relative 2^-28. Newton-Raphson, three steps from
  * the linear start 48/17 - 32/17 D, D = d 2^(n-32) in [0.5, 1). */
+static inline uint32_t acn_umulhi(uint32_t a, uint32_t b)
+{
+#if defined(__arm__) && defined(__thumb2__)
+    uint32_t lo, hi;
+    __asm__("umull %0, %1, %2, %3" : "=&r"(lo), "=&r"(hi) : "r"(a), "r"(b));
+    (void)lo;
+    return hi;
+#else
+    return (uint32_t)(((uint64_t)a * b) >> 32);
+#endif
+}
+
+/* One Newton-Raphson step x += x (1 - D x) of the reciprocal below. */
+#define ACN_NR(dn, x)                                                                        \
+    do {                                                                                     \
+        int32_t err_ = (int32_t)(UINT32_C(0x40000000) - acn_umulhi((dn), (x))); /* 1 - D x */ \
+        (x) = (uint32_t)((int64_t)(x) + (acn_mul((int32_t)((x) >> 1), err_) >> 29));         \
+    } while (0)
+
 static inline uint32_t acn_recip(uint32_t d, int *n)
 {
-    int i;
     uint32_t dn, x;
     *n = __builtin_clz(d);
     dn = d << *n;                                                        /* D, Q0.32 */
-    x = UINT32_C(3031741621) - (uint32_t)(((uint64_t)UINT32_C(2021161080) * dn) >> 32); /* Q2.30 */
-    for (i = 0; i < 3; ++i) {
-        int32_t err = (int32_t)(UINT32_C(0x40000000) - (uint32_t)(((uint64_t)dn * x) >> 32)); /* 1 - D x */
-        x = (uint32_t)((int64_t)x + (acn_mul((int32_t)(x >> 1), err) >> 29));
-    }
+    x = UINT32_C(3031741621) - acn_umulhi(UINT32_C(2021161080), dn); /* Q2.30 */
+    ACN_NR(dn, x); /* three steps, unrolled */
+    ACN_NR(dn, x);
+    ACN_NR(dn, x);
     return x;
 }
 """
@@ -493,8 +555,9 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     ax = p.design.axis.name
     P = f"{prefix.upper()}_{ax.upper()}"
     T = f"{prefix}_{ax}"
-    fields = _fields_fixed(p)
-    struct = ["typedef struct {"] + [f"    {t} {n}; /* {c} */" for t, n, c in fields] + [f"}} {T}_t;"]
+    fields = _fields_fixed(p, T)
+    struct = ["typedef struct {"] + [f"    {t}{'' if t.endswith('*') else ' '}{n}; /* {c} */" for t, n, c in fields]
+    struct += [f"}} {T}_t;"]
     out_struct = [
         "typedef struct {",
         f"    int64_t r; /* [m] {p.vars['r'].fmt} */",
@@ -526,31 +589,45 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     src = [f"/* ---- axis {ax}: {p.form} form ---- */", ""] + _fixed_consts(p, P) + [""]
     sched = None
     v = p.vars
-    for nm, key in (("RHI", "r"), ("VHI", "v")):
-        h = math.ceil(v[key].bound * 2.0 ** (v[key].fmt.frac - 32))
-        src.append(f"#define {P}_{nm} INT32_C({h}) /* clamp: |{key}| <= {h} 2^32 LSB ({v[key].bound:.6g} m) */")
+    for nm, key, step in (("RHI", "r", p.step_max), ("VHI", "v", p.v_step)):
+        h = _clamp_word(v[key].bound, v[key].fmt, step)
+        src.append(
+            f"#define {P}_{nm} INT32_C({h}) /* clamp: |{key}| <= {h} 2^32 LSB"
+            f" ({h * 2.0 ** (32 - v[key].fmt.frac):.6g} m >= {v[key].bound:.6g} m) */"
+        )
     src.append("")
     if p.form == "gain_schedule":
         sched = _schedule_for(p)
         src.append(f"#define {P}_NSEG {sched.n_segments}")
-        src.append("/* segment j: for len[j] samples every gain adds slope[j][i] after the sample;")
-        src.append(" * after the last segment the gains are held */")
-        src.append(f"static const uint32_t {T}_seg_len[{P}_NSEG] = {{")
-        for i in range(0, sched.n_segments, 8):
-            src.append("    " + ", ".join(f"{L}u" for L in sched.lengths[i : i + 8]) + ",")
+        src.append("/* segment j: K_a holds its ka; after every sample of it K_r, K_v and K_e add their slopes;")
+        src.append(" * it ends when end[j] samples are done. The last row (zero slopes, the last ka, end 0:")
+        src.append(" * never reached) holds the gains. */")
+        src.append(f"struct {T}_seg_s {{")
+        src.append("    int32_t dr, dv; /* per-sample slopes of K_r, K_v */")
+        src.append("    int32_t ka; /* K_a over the segment */")
+        src.append("    uint32_t de_lo; /* K_e's per-sample slope: int64, low word */")
+        src.append("    int32_t de_hi; /* ... and high word */")
+        src.append("    uint32_t end; /* samples done when the segment ends */")
         src.append("};")
+        src.append(f"typedef struct {T}_seg_s {T}_seg_t;")
         src.append(
-            "/* per-sample slopes of K_r, K_v, K_a, K_e in LSB of their accumulators ("
+            "/* K_r, K_v, K_a, K_e in LSB of ("
             + ", ".join(str(f) for f in sched.formats)
-            + ") */"
+            + f"; K_e's is Q.{sched.formats[3].frac + 32}) */"
         )
-        src.append(f"static const int32_t {T}_seg_slope[{P}_NSEG][3] = {{")
-        for sl in sched.slopes:
-            src.append("    {" + ", ".join(_c_int(x, 32) for x in sl[:3]) + "},")
-        src.append("};")
-        src.append(f"static const int64_t {T}_seg_slope_e[{P}_NSEG] = {{")
-        for i in range(0, sched.n_segments, 4):
-            src.append("    " + ", ".join(_c_int(sl[3], 64) for sl in sched.slopes[i : i + 4]) + ",")
+        src.append(f"static const {T}_seg_t {T}_seg[{P}_NSEG + 1] = {{")
+        end = 0
+        for L, sl in zip(sched.lengths, sched.slopes, strict=True):
+            end += L
+            e64 = sl[3] & 0xFFFFFFFFFFFFFFFF
+            src.append(
+                "    {"
+                + ", ".join(_c_int(x, 32) for x in sl[:3])
+                + f", UINT32_C({e64 & 0xFFFFFFFF}), {_c_int((e64 >> 32) - ((e64 >> 63) << 32), 32)}, {end}u}},"
+                + f" /* K_e slope {sl[3]} */"
+            )
+        last = sched.slopes[-1] if sched.n_segments else (0, 0, sched.start[2], 0)
+        src.append(f"    {{0, 0, {_c_int(last[2], 32)}, 0u, 0, 0u}},")
         src.append("};")
         src.append("")
     # init
@@ -589,28 +666,25 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         ke0 = sched.start[3]
         src.append(f"    s->Ke_lo = UINT32_C({ke0 & 0xFFFFFFFF});")
         src.append(f"    s->Ke = {_c_int(ke0 >> 32, 32)};")
-        src.append("    s->seg = 0;")
-        src.append(f"    s->left = {sched.lengths[0] if sched.n_segments else 0}u;")
+        src.append(f"    s->seg = &{T}_seg[0];")
     src += ["    s->k = 0;", "    s->overflow = 0;", "}", ""]
     # convert
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
     if p.form == "gain_schedule":
         src += [
-            "/* The gains of the next sample: one step along the schedule. */",
-            f"static inline void {T}_gains({T}_t *s)",
+            "/* The gains of the next sample: one step along the schedule; k = samples done. */",
+            f"ACN_INLINE void {T}_gains({T}_t *s, uint32_t k)",
             "{",
-            "    if (s->left != 0u) {",
-            f"        const int32_t *d = {T}_seg_slope[s->seg];",
-            "        uint64_t ke = (((uint64_t)(uint32_t)s->Ke << 32) | s->Ke_lo)",
-            f"                      + (uint64_t){T}_seg_slope_e[s->seg]; /* K_e: 64-bit add, wraps like int64 */",
-            "        s->Kr += d[0];",
-            "        s->Kv += d[1];",
-            "        s->Ka += d[2];",
-            "        s->Ke_lo = (uint32_t)ke;",
-            "        s->Ke = (int32_t)(ke >> 32);",
-            f"        if (--s->left == 0u && ++s->seg < {P}_NSEG) {{",
-            f"            s->left = {T}_seg_len[s->seg];",
-            "        }",
+            f"    const {T}_seg_t *d = s->seg;",
+            "    uint64_t ke = (((uint64_t)(uint32_t)s->Ke << 32) | s->Ke_lo)",
+            "                  + (((uint64_t)(uint32_t)d->de_hi << 32) | d->de_lo); /* 64-bit add, wraps like int64 */",
+            "    s->Kr += d->dr;",
+            "    s->Kv += d->dv;",
+            "    s->Ke_lo = (uint32_t)ke;",
+            "    s->Ke = (int32_t)(ke >> 32);",
+            f"    if (k == d->end && d != &{T}_seg[{P}_NSEG]) {{",
+            "        s->seg = ++d;",
+            "        s->Ka = d->ka;",
             "    }",
             "}",
             "",
@@ -632,7 +706,7 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     src += [
         "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
         f" * with z [m/s^2] {v['z'].fmt}. Inlined into update, skip and step. */",
-        f"static inline void {T}_core({T}_t *s, int32_t z, bool valid)",
+        f"ACN_INLINE void {T}_core({T}_t *s, int32_t z, bool valid)",
         "{",
     ]
     src += _core_fixed(p, P, T)
@@ -693,7 +767,7 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             "segments": sched.n_segments,
             "max_error": [float(e) for e in sched.error.max(0)],
             "rel_tol": list(SCHEDULE_REL_TOL),
-            "flash_bytes": sched.n_segments * (4 + 12 + 8),
+            "flash_bytes": (sched.n_segments + 1) * 24,
         }
     return header, cdef, src, man
 

@@ -310,16 +310,20 @@ def _riccati_py(key: tuple, n: int, valid) -> GainRun:
 
 
 EXTRA = (0, 0, 0, 32)  # accumulator bits below each gain's LSB: K_e settles to 2e-6 of its start
+HOLD = (False, False, True, False)  # gains held constant within a segment (K_a: set at its start)
 
 
 @dataclass(frozen=True)
 class Schedule:
     """Piecewise-linear gains on shared knots: segment j spans lengths[j] samples.
 
-    Gain i is an accumulator of 32 + EXTRA[i] bits in Q(formats[i].frac + EXTRA[i]) whose high 32
-    bits are the gain (K_r, K_v, K_a: the int32 itself; K_e: the high word of an int64, whose slope
-    is far below one LSB of K_e once it settles). It starts at start[i] (the gain of sample 0) and
-    adds slope[j][i] after every sample of segment j; after the last segment the gains are held.
+    A held gain (HOLD[i]: K_a, which settles early and then moves by a few parts in 1e6) is
+    constant within a segment: slopes[j][i] is then its value over segment j, set when the segment
+    starts, and start[i] is that of segment 0. Any other gain i is an accumulator of 32 + EXTRA[i]
+    bits in Q(formats[i].frac + EXTRA[i]) whose high 32 bits are the gain (K_r, K_v: the int32
+    itself; K_e: the high word of an int64, whose slope is far below one LSB of K_e once it
+    settles). It starts at start[i] (the gain of sample 0) and adds slope[j][i] after every sample
+    of segment j; after the last segment the gains are held.
     The integers are those of the C, simulated here exactly.
     """
 
@@ -336,15 +340,26 @@ class Schedule:
         return len(self.lengths)
 
 
-def _segment(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, k0: int, L: int):
-    """Slopes (4,) of a segment of L samples from k0 starting at the accumulators A, or None if
-    some gain leaves its tolerance on samples k0 .. k0 + L (the endpoint starts the next segment)."""
+def _segment(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, k0: int, L: int, hold: np.ndarray):
+    """Per-gain numbers (4,) of a segment of L samples from k0 starting at the accumulators A, or
+    None if some gain leaves its tolerance. A linear gain: its per-sample slope, checked on samples
+    k0 .. k0 + L (the endpoint starts the next segment from the accumulator); a held gain (hold[i]):
+    its constant value over the segment, checked on samples k0 .. k0 + L - 1 (the next segment sets
+    its own)."""
     sl = np.floor((Kq[k0 + L] - A) / L + 0.5).astype(np.int64)
     t = np.arange(L + 1, dtype=np.int64)[:, None]
     err = np.abs((A + sl * t).astype(np.float64) - Kq[k0 : k0 + L + 1])
-    if np.all(err <= tolq[k0 : k0 + L + 1]):
-        return sl
-    return None
+    ok = err <= tolq[k0 : k0 + L + 1]
+    if not np.all(ok[:, ~hold]):
+        return None
+    if np.any(hold):
+        lo = np.max(Kq[k0 : k0 + L, hold] - tolq[k0 : k0 + L, hold], axis=0)
+        hi = np.min(Kq[k0 : k0 + L, hold] + tolq[k0 : k0 + L, hold], axis=0)
+        v = np.ceil(lo)
+        if np.any(v > hi):
+            return None
+        sl[hold] = v.astype(np.int64)
+    return sl
 
 
 def schedule(K: np.ndarray, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0) -> Schedule:
@@ -366,16 +381,16 @@ def schedule(K: np.ndarray, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: in
         w = np.clip((np.arange(n) + 1.0) / ramp, 0.05, 1.0)[:, None]
         rel = rel * np.where(np.arange(4) < 2, w, 1.0)
     tolq = rel * np.abs(Kq) + np.where(ex > 0, 0.5 * 2.0**ex, 0.5)
+    hold = np.array(HOLD, dtype=bool)
     A = np.floor(Kq[0] + 0.5).astype(np.int64)
-    start = tuple(int(x) for x in A)
     lengths, slopes = [], []
     acc = np.empty((n, 4), dtype=np.int64)
     k0, last = 0, 1
     while k0 < n - 1:
-        good, sl_good = 1, _segment(Kq, tolq, A, k0, 1)
+        good, sl_good = 1, _segment(Kq, tolq, A, k0, 1, hold)
         step = max(1, last // 2)
         while good + step <= n - 1 - k0:
-            sl = _segment(Kq, tolq, A, k0, good + step)
+            sl = _segment(Kq, tolq, A, k0, good + step, hold)
             if sl is None:
                 break
             good, sl_good = good + step, sl
@@ -383,18 +398,21 @@ def schedule(K: np.ndarray, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: in
         while step > 1:
             step //= 2
             if good + step <= n - 1 - k0:
-                sl = _segment(Kq, tolq, A, k0, good + step)
+                sl = _segment(Kq, tolq, A, k0, good + step, hold)
                 if sl is not None:
                     good, sl_good = good + step, sl
         if sl_good is None:  # one sample: the slope lands on the rounded next value
             sl_good = np.floor(Kq[k0 + 1] + 0.5).astype(np.int64) - A
-        acc[k0 : k0 + good] = A + sl_good * np.arange(good, dtype=np.int64)[:, None]
-        A = A + sl_good * good
+            sl_good[hold] = np.floor(Kq[k0, hold] + 0.5).astype(np.int64)
+        lin = np.where(hold, 0, sl_good)
+        acc[k0 : k0 + good] = np.where(hold, sl_good, A + lin * np.arange(good, dtype=np.int64)[:, None])
+        A = np.where(hold, sl_good, A + lin * good)
         lengths.append(good)
         slopes.append(tuple(int(x) for x in sl_good))
         k0 += good
         last = good
     acc[k0:] = A
+    start = tuple(int(x) for x in acc[0])
     hi = acc >> ex  # the gains the C uses: the high words
     for i, f in enumerate(formats):
         if np.any(np.abs(hi[:, i]) > 2**31 - 1):

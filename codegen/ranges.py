@@ -97,6 +97,8 @@ class AxisPlan:
     gap: int = 0
     step_max: float = 0.0
     kv_room: float = 0.0
+    sat_free: frozenset = frozenset()  # predict sums that fit int32 for every int32 input (no clamp)
+    v_step: float = 0.0  # largest |v| increment of one step
     conv_shift: int = -1  # analog fast path: code << conv_shift (-1: the int64 path)
 
     def f(self, name: str) -> int:
@@ -260,6 +262,7 @@ def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPla
     kv_b = 2 * GUARD * float(np.abs(g.K[:, 1]).max()) * Ts  # K_v (Ts u gain) bound, with room for skips
     p.kv_room = kv_b
     v_step = Ts * Ts * a_b + kv_b * y_b
+    p.v_step = v_step
     fv = _require(model, "ranges.max_velocity_m_s", "m", vb + v_step, 64)
     add("v", Var("v", "m", vb, fv, "Ts*u, 2x max|u|", True))
     add("r", Var("r", "m", rb, fr, "2x max|r|", True))
@@ -346,8 +349,6 @@ def _gain_bounds(p: AxisPlan) -> np.ndarray:
 def _gain_format(p: AxisPlan, nm: str, bound: float, note: str, saturates: bool) -> None:
     """K_r and K_v share their format with Ts^2/2 and Ts^2 (the smaller of the two fits)."""
     Ts = p.design.Ts
-    if nm in ("Kr", "Kv") and bound >= 0.25:
-        raise RangeError(p.model.source, "noise", f"{nm} up to {bound:.6g}: accepted below 0.25")
     partner = {"Kr": Ts * Ts / 2.0, "Kv": Ts * Ts}.get(nm, 0.0)
     fmt = const_format(max(bound, partner))
     if nm == "Ke" and fmt.frac > 32:  # Q.32: K_e y lands in the format of eps (high word = y's)
@@ -421,6 +422,7 @@ def _plan_covariance(p: AxisPlan) -> None:
             "Qee": (d.Q[3, 3], fmts["ce"]),
         }
     )
+    p.sat_free = _predict_sat_free(p)
     R_int = round(d.R * 2**fa.frac)
     if R_int < 2**12:
         raise RangeError(
@@ -429,3 +431,35 @@ def _plan_covariance(p: AxisPlan) -> None:
             f"R = {d.R:.6g} is {R_int} LSB of the covariance format {fa}; needs at least 13 bits below the "
             f"largest covariance {bounds['ca']:.6g}",
         )
+
+
+def _predict_sat_free(p: AxisPlan) -> frozenset:
+    """The predict sums of the covariance block that fit int32 whatever int32 values the carried
+    entries hold, so they need no saturation: no assumption about the data, the skip pattern or the
+    history (the entries are bounded only by their words).
+
+    c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee, formed in the C as Qee + round((PHI2 c_e +
+    (PHIOMP P_ae >> s)) / 2^g) with g = 31 (PHI2 in Q.31) and the PHIOMP product aligned (floor) to
+    Q.(f_ce + 31). In LSB of c_e, for |c_e|, |P_ae| <= 2^31: |c_e'| <= PHI2_int + PHIOMP_int 2^31 /
+    2^(f_PO + f_Pae - f_ce) + 1 (the floor) + Qee_int + 1 (the rounding); phi^2 + phi (1 - phi) = phi
+    < 1 leaves (1 - phi) 2^31 LSB of room, which the model's Qee must not use up.
+
+    Every other sum adds to an entry that can sit anywhere in its word (c_a += Q_aa each skipped
+    sample; P_re, P_ve follow the unbounded P_ue through gaps of any length): those keep their clamps.
+    """
+    from .qformat import quantize
+
+    def qi(name):
+        val, fmt = p.consts[name]
+        return abs(quantize(val, fmt)), fmt.frac
+
+    fce, fPae = p.f("ce"), p.f("Pae")
+    phi2, f2 = qi("PHI2")
+    po, fpo = qi("PHIOMP")
+    qee, _ = qi("Qee")
+    free = set()
+    if f2 == 31 and fpo + fPae - fce >= 31:
+        worst = phi2 + po * 2.0**31 / 2.0 ** (fpo + fPae - fce) + 1 + qee + 1
+        if worst <= 2**31 - 1:
+            free.add("ce")
+    return frozenset(free)

@@ -35,12 +35,13 @@ def arm_size(files: dict[str, str], prefix: str) -> dict[str, int] | None:
 
 
 def struct_size(header: str, tname: str) -> int:
-    """Bytes of a generated struct (fields are int32/uint32/int64/float; 8-byte alignment of int64)."""
+    """Bytes of a generated struct on the 32-bit target (fields are int32/uint32/int64/float or a
+    pointer; 8-byte alignment of int64)."""
     m = re.search(r"typedef struct \{([^{}]*)\} " + re.escape(tname) + ";", header)
     size = 0
     align = 4
-    for ctype in re.findall(r"^\s*(\w+) \w+;", m.group(1), re.M):
-        w = 8 if ctype in ("int64_t", "uint64_t", "double") else 4
+    for ctype in re.findall(r"^\s*(?:const )?(?:struct )?(\w+ ?\*?) ?\w+;", m.group(1), re.M):
+        w = 8 if ctype.strip() in ("int64_t", "uint64_t", "double") else 4  # a pointer: 4 on the 32-bit targets
         align = max(align, w)
         size = (size + w - 1) // w * w + w
     return (size + align - 1) // align * align

@@ -317,3 +317,24 @@ def test_mutations_break_the_lockstep(form, mutation, workdir):
     res = AxisRunner(mod, files["accelnav.json"], 0).run(code=run.code[:, 0])
     with pytest.raises(AssertionError):
         _check_against_bound(p, sched, run.code[:, 0], run.accel[:, 0], valid, ref.x_post, res["x"], mutation)
+
+
+def test_unclamped_predict_sums_fit_any_state(workdir):
+    """The predict sums emitted without a clamp (codegen.ranges._predict_sat_free) stay in int32 for
+    the carried entries at the ends of their words: c_e' keeps the sign and size of phi c_e."""
+    model = load_model()
+    files, mod = built(model, "covariance", workdir)
+    p, _ = plan(model, 0, "covariance")
+    assert "ce" in p.sat_free
+    phi = p.design.phi
+    for x in (2**31 - 1, -(2**31)):
+        s = mod.ffi.new("accelnav_x_t *")
+        mod.lib.accelnav_x_init(s)
+        s.k = 1
+        s.ce = x
+        s.Pae = x
+        mod.lib.accelnav_x_skip(s)
+        # c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee, P_ae and c_e in one format here
+        want = phi * x + p.consts["Qee"][0] * 2.0 ** p.f("ce")
+        assert p.f("Pae") == p.f("ce")
+        assert abs(s.ce - want) <= 4, (x, s.ce, want)
