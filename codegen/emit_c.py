@@ -129,10 +129,12 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
         for nm in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"):
             f.append(("int32_t", nm, f"{v[nm].note.split(',')[0]} {v[nm].fmt}"))
     else:
-        for nm in ("r", "v", "a"):
+        # K_r, K_v and K_e's two words in adjacent pairs: one LDRD and one STRD each (ACN_LD2, ACN_ST2)
+        for nm in ("r", "v"):
             f.append(("int32_t", "K" + nm, f"K_{nm} of the next sample {v['K' + nm].fmt}"))
         f.append(("uint32_t", "Ke_lo", f"K_e accumulator, low word (Q.{v['Ke'].fmt.frac + 32} with Ke)"))
         f.append(("int32_t", "Ke", f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"))
+        f.append(("int32_t", "Ka", f"K_a of the next sample {v['Ka'].fmt}"))
         f.append((f"const struct {T}_seg_s *", "seg", "the schedule's current row"))
     f.append(("uint32_t", "k", "samples since init"))
     f.append(("uint32_t", "overflow", "saturations so far"))
@@ -373,9 +375,14 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
     if p.form == "covariance":
         L += ["    int32_t Kr, Kv, Ka, Ke, K[4];"]
     else:
-        L += ["    int32_t Kr, Kv, Ka, Ke;"]
+        L += [
+            "    int32_t Kr, Kv, Ka, Ke;",
+            "    uint32_t kr, kv, klo, khi; /* K_r, K_v and K_e's accumulator, each pair in one LDRD */",
+            f"    ACN_LD2(kr, kv, s, {T}_t, Kr, Kv);",
+            f"    ACN_LD2(klo, khi, s, {T}_t, Ke_lo, Ke);",
+        ]
     L += [
-        "    if (s->k > 0) {",
+        "    if (__builtin_expect(s->k > 0, 1)) {",
         "        /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar), eps by its rounded high word */",
         f"        e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
         if fo != 32
@@ -403,7 +410,8 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
             "        Ke = K[3];",
         ]
     else:
-        L += ["        Kr = s->Kr;", "        Kv = s->Kv;", "        Ka = s->Ka;", "        Ke = s->Ke;"]
+        L += ["        Kr = (int32_t)kr;", "        Kv = (int32_t)kv;", "        Ka = s->Ka;"]
+        L += ["        Ke = (int32_t)khi;"]
     L += [
         "        /* y = z - H x = z - a - eps */",
         f"        y = z - a - {eh};",
@@ -424,7 +432,7 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
         f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
     ]
     if p.form == "gain_schedule":
-        L += ["    ++s->k;", f"    {T}_gains(s, s->k);"]
+        L += ["    ++s->k;", f"    {T}_gains(s, s->k, kr, kv, klo, khi);"]
     else:
         L += ["    ++s->k;"]
     return L
@@ -438,6 +446,31 @@ HELPERS = r"""
 #else
 #define ACN_INLINE static inline
 #endif
+/* Two adjacent 32-bit fields f1, f2 of *base (f2 four bytes after f1, checked at compile time) in one
+ * LDRD (STRD): gcc for Cortex-M3 moves them one word at a time. Word by word, so the same values on
+ * any endianness; elsewhere (and with clang, whose operand modifiers are not checked here) plain member
+ * accesses. */
+#if defined(__arm__) && defined(__thumb2__) && !defined(__clang__)
+#define ACN_ADJ(T, f1, f2) ((void)sizeof(char[offsetof(T, f2) == offsetof(T, f1) + 4 ? 1 : -1]))
+#define ACN_LD2(a, b, base, T, f1, f2)                                                                   \
+    do {                                                                                                \
+        ACN_ADJ(T, f1, f2);                                                                             \
+        __asm__("ldrd %0, %1, [%2, #%c3]"                                                               \
+                : "=r"(a), "=r"(b)                                                                      \
+                : "r"(base), "i"(offsetof(T, f1)), "m"(*(const char(*)[8])(const void *)&(base)->f1));  \
+    } while (0)
+#define ACN_ST2(a, b, base, T, f1, f2)                                                                   \
+    do {                                                                                                \
+        ACN_ADJ(T, f1, f2);                                                                             \
+        __asm__("strd %1, %2, [%3, #%c4]"                                                               \
+                : "=m"(*(char(*)[8])(void *)&(base)->f1)                                                \
+                : "r"(a), "r"(b), "r"(base), "i"(offsetof(T, f1)));                                     \
+    } while (0)
+#else
+#define ACN_LD2(a, b, base, T, f1, f2) ((a) = (uint32_t)(base)->f1, (b) = (uint32_t)(base)->f2)
+#define ACN_ST2(a, b, base, T, f1, f2) ((base)->f1 = (a), (base)->f2 = (b))
+#endif
+
 /* Round-to-nearest right shift of an int64 by s >= 1 (ties toward +inf). The
  * right shift of a negative value is arithmetic on every compiler accelnav
  * supports (gcc, clang, arm-none-eabi-gcc); it is checked in the tests. */
@@ -604,9 +637,9 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         src.append(" * never reached) holds the gains. */")
         src.append(f"struct {T}_seg_s {{")
         src.append("    int32_t dr, dv; /* per-sample slopes of K_r, K_v */")
-        src.append("    int32_t ka; /* K_a over the segment */")
         src.append("    uint32_t de_lo; /* K_e's per-sample slope: int64, low word */")
         src.append("    int32_t de_hi; /* ... and high word */")
+        src.append("    int32_t ka; /* K_a over the segment */")
         src.append("    uint32_t end; /* samples done when the segment ends */")
         src.append("};")
         src.append(f"typedef struct {T}_seg_s {T}_seg_t;")
@@ -622,12 +655,13 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             e64 = sl[3] & 0xFFFFFFFFFFFFFFFF
             src.append(
                 "    {"
-                + ", ".join(_c_int(x, 32) for x in sl[:3])
-                + f", UINT32_C({e64 & 0xFFFFFFFF}), {_c_int((e64 >> 32) - ((e64 >> 63) << 32), 32)}, {end}u}},"
+                + ", ".join(_c_int(x, 32) for x in sl[:2])
+                + f", UINT32_C({e64 & 0xFFFFFFFF}), {_c_int((e64 >> 32) - ((e64 >> 63) << 32), 32)}"
+                + f", {_c_int(sl[2], 32)}, {end}u}},"
                 + f" /* K_e slope {sl[3]} */"
             )
         last = sched.slopes[-1] if sched.n_segments else (0, 0, sched.start[2], 0)
-        src.append(f"    {{0, 0, {_c_int(last[2], 32)}, 0u, 0, 0u}},")
+        src.append(f"    {{0, 0, 0u, 0, {_c_int(last[2], 32)}, 0u}},")
         src.append("};")
         src.append("")
     # init
@@ -672,16 +706,18 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
     if p.form == "gain_schedule":
         src += [
-            "/* The gains of the next sample: one step along the schedule; k = samples done. */",
-            f"ACN_INLINE void {T}_gains({T}_t *s, uint32_t k)",
+            "/* The gains of the next sample: one step along the schedule; k = samples done, kr, kv, klo, khi",
+            " * the current K_r, K_v and K_e's accumulator words (already loaded by the core). */",
+            f"ACN_INLINE void {T}_gains({T}_t *s, uint32_t k, uint32_t kr, uint32_t kv, uint32_t klo, uint32_t khi)",
             "{",
             f"    const {T}_seg_t *d = s->seg;",
-            "    uint64_t ke = (((uint64_t)(uint32_t)s->Ke << 32) | s->Ke_lo)",
-            "                  + (((uint64_t)(uint32_t)d->de_hi << 32) | d->de_lo); /* 64-bit add, wraps like int64 */",
-            "    s->Kr += d->dr;",
-            "    s->Kv += d->dv;",
-            "    s->Ke_lo = (uint32_t)ke;",
-            "    s->Ke = (int32_t)(ke >> 32);",
+            "    uint32_t dr, dv, dlo, dhi;",
+            "    uint64_t ke;",
+            f"    ACN_LD2(dr, dv, d, {T}_seg_t, dr, dv);",
+            f"    ACN_LD2(dlo, dhi, d, {T}_seg_t, de_lo, de_hi);",
+            "    ke = (((uint64_t)khi << 32) | klo) + (((uint64_t)dhi << 32) | dlo); /* wraps like int64 */",
+            f"    ACN_ST2(kr + dr, kv + dv, s, {T}_t, Kr, Kv); /* wraps like int32 (never does: a gain) */",
+            f"    ACN_ST2((uint32_t)ke, (uint32_t)(ke >> 32), s, {T}_t, Ke_lo, Ke);",
             f"    if (k == d->end && d != &{T}_seg[{P}_NSEG]) {{",
             "        s->seg = ++d;",
             "        s->Ka = d->ka;",
@@ -727,9 +763,12 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         f"bool {T}_step({T}_t *s, {params})",
         "{",
         "    int32_t z = 0;",
-        f"    bool valid = {T}_convert({args}, &z);",
-        f"    {T}_core(s, z, valid);",
-        "    return valid;",
+        f"    if (!{T}_convert({args}, &z)) {{",
+        f"        {T}_skip(s); /* rare: the core inlined once, for valid samples only */",
+        "        return false;",
+        "    }",
+        f"    {T}_core(s, z, true);",
+        "    return true;",
         "}",
         "",
         f"void {T}_read(const {T}_t *s, {T}_out_t *o)",
@@ -803,7 +842,7 @@ def emit(model: Model, *, form: str | None = None, arith: str = "fixed", prefix:
     )
     source = (
         _banner(model, f"{prefix}.c: fixed-point {form} filter. No floating point, no division, no heap.")
-        + f'#include "{prefix}.h"\n\n'
+        + f'#include "{prefix}.h"\n\n#include <stddef.h> /* offsetof */\n\n'
         + f"#if {prefix.upper()}_RUNTIME_API != {RUNTIME_API}\n#error Regenerate {prefix}.h: runtime API mismatch\n"
         + "#endif\n"
         + HELPERS
