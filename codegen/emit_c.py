@@ -823,48 +823,73 @@ def emit(model: Model, *, form: str | None = None, arith: str = "fixed", prefix:
 
         return emit_f32(model, form=form, prefix=prefix)
     ps = plans(model, form)
-    guard = prefix.upper() + "_H"
-    H, CD, S, MAN = [], [], [], []
+    H, S, MAN = [], [], []
     for p in ps:
-        h, cd, s, man = _axis_fixed(p, prefix)
+        h, _, s, man = _axis_fixed(p, prefix)
         H += h + [""]
-        CD += cd
         S += s
         MAN.append(man)
+    return package(
+        model,
+        prefix,
+        what_h=f"fixed-point {form} filter, one set per axis",
+        what_c=f"fixed-point {form} filter. No floating point, no division, no heap.",
+        declarations=H,
+        source_includes="#include <stddef.h> /* offsetof */\n\n",
+        source_prelude=HELPERS + "\n",
+        body=S,
+        manifest={"arith": "fixed", "form": form, "axes": MAN},
+    )
+
+
+def package(
+    model: Model,
+    prefix: str,
+    *,
+    what_h: str,
+    what_c: str,
+    declarations: list[str],
+    source_includes: str,
+    source_prelude: str,
+    body: list[str],
+    manifest: dict,
+) -> dict[str, str]:
+    """PREFIX.h, PREFIX.c and PREFIX.json around generated declarations and code, for every variant:
+    the banner, the include guard, the runtime-API lock and the cffi declaration markers, once."""
+    guard = prefix.upper() + "_H"
+    api = prefix.upper() + "_RUNTIME_API"
     header = (
-        _banner(model, f"{prefix}.h: fixed-point {form} filter, one set per axis")
+        _banner(model, f"{prefix}.h: {what_h}")
         + f"#ifndef {guard}\n#define {guard}\n\n#include <stdbool.h>\n#include <stdint.h>\n\n"
-        + f"#define {prefix.upper()}_RUNTIME_API {RUNTIME_API}\n"
+        + f"#define {api} {RUNTIME_API}\n"
         + f'#define {prefix.upper()}_MODEL_SHA256 "{model.sha256}"\n\n'
         + "/* ACCELNAV-CDEF-BEGIN */\n"
-        + "\n".join(H)
+        + "\n".join(declarations)
         + "/* ACCELNAV-CDEF-END */\n\n#endif\n"
     )
     source = (
-        _banner(model, f"{prefix}.c: fixed-point {form} filter. No floating point, no division, no heap.")
-        + f'#include "{prefix}.h"\n\n#include <stddef.h> /* offsetof */\n\n'
-        + f"#if {prefix.upper()}_RUNTIME_API != {RUNTIME_API}\n#error Regenerate {prefix}.h: runtime API mismatch\n"
+        _banner(model, f"{prefix}.c: {what_c}")
+        + f'#include "{prefix}.h"\n\n'
+        + source_includes
+        + f"#if {api} != {RUNTIME_API}\n#error Regenerate {prefix}.h: runtime API mismatch\n"
         + "#endif\n"
-        + HELPERS
-        + "\n"
-        + "\n".join(S)
+        + source_prelude
+        + "\n".join(body)
     )
-    manifest = {
+    meta = {
         "generator": "accelnav codegen",
         "version": GENERATOR_VERSION,
         "runtime_api": RUNTIME_API,
         "model": model.name,
         "model_sha256": model.sha256,
-        "arith": "fixed",
-        "form": form,
         "sample_rate_hz": model.rate_hz,
         "input": model.sensor.kind,
-        "axes": MAN,
+        **manifest,
     }
     return {
         f"{prefix}.h": header,
         f"{prefix}.c": source,
-        f"{prefix}.json": json.dumps(manifest, indent=2, sort_keys=True, default=float) + "\n",
+        f"{prefix}.json": json.dumps(meta, indent=2, sort_keys=True, default=float) + "\n",
     }
 
 

@@ -9,8 +9,6 @@ a wider word.
 
 from __future__ import annotations
 
-import json
-
 from .design import AnalogConversion, axis_design, input_conversion
 from .model import G0, Model
 
@@ -153,7 +151,7 @@ def _axis(model: Model, i: int, prefix: str) -> tuple[list[str], list[str], dict
 
 
 def emit_f32(model: Model, *, form: str, prefix: str) -> dict[str, str]:
-    from .emit_c import GENERATOR_VERSION, RUNTIME_API, _banner
+    from .emit_c import package
 
     H, S, MAN = [], [], []
     for i in range(len(model.axes)):
@@ -161,37 +159,14 @@ def emit_f32(model: Model, *, form: str, prefix: str) -> dict[str, str]:
         H += h + [""]
         S += s
         MAN.append(man)
-    guard = prefix.upper() + "_H"
-    header = (
-        _banner(model, f"{prefix}.h: float32 covariance filter, one set per axis")
-        + f"#ifndef {guard}\n#define {guard}\n\n#include <stdbool.h>\n#include <stdint.h>\n\n"
-        + f"#define {prefix.upper()}_RUNTIME_API {RUNTIME_API}\n"
-        + f'#define {prefix.upper()}_MODEL_SHA256 "{model.sha256}"\n\n'
-        + "/* ACCELNAV-CDEF-BEGIN */\n"
-        + "\n".join(H)
-        + "/* ACCELNAV-CDEF-END */\n\n#endif\n"
+    return package(
+        model,
+        prefix,
+        what_h="float32 covariance filter, one set per axis",
+        what_c=f"float32 covariance filter (requested form: {form}). No heap, no libc.",
+        declarations=H,
+        source_includes="",
+        source_prelude="\n",
+        body=S,
+        manifest={"arith": "float32", "form": "covariance", "axes": MAN},
     )
-    source = (
-        _banner(model, f"{prefix}.c: float32 covariance filter (requested form: {form}). No heap, no libc.")
-        + f'#include "{prefix}.h"\n\n'
-        + f"#if {prefix.upper()}_RUNTIME_API != {RUNTIME_API}\n#error Regenerate {prefix}.h: runtime API mismatch\n"
-        + "#endif\n\n"
-        + "\n".join(S)
-    )
-    manifest = {
-        "generator": "accelnav codegen",
-        "version": GENERATOR_VERSION,
-        "runtime_api": RUNTIME_API,
-        "model": model.name,
-        "model_sha256": model.sha256,
-        "arith": "float32",
-        "form": "covariance",
-        "sample_rate_hz": model.rate_hz,
-        "input": model.sensor.kind,
-        "axes": MAN,
-    }
-    return {
-        f"{prefix}.h": header,
-        f"{prefix}.c": source,
-        f"{prefix}.json": json.dumps(manifest, indent=2, sort_keys=True) + "\n",
-    }
