@@ -26,7 +26,7 @@ import numpy as np
 from codegen.design import axis_design
 from codegen.model import Model
 from host.kf import rts_smooth, run_filter
-from host.pipeline import smooth_run
+from host.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from host.telemetry import Manifest, decode_all, encode_stimulus, sample_columns
 from host.zupt import rest_mask
 
@@ -98,7 +98,7 @@ class Comparison:
     first_difference: int | None
     max_err_sigma: dict[str, float]  # firmware vs float64 reference, max |e|/sigma after the first second
     max_of_bound: float  # firmware vs float64, max |e| / the generator's stated bound (<= 1 required)
-    position_rows: list[tuple[str, str, float, float]] = field(default_factory=list)  # axis, method, rms, final
+    position_rows: list[PositionErrors] = field(default_factory=list)
     fw: dict[str, np.ndarray] = field(default_factory=dict)
     ref_x: np.ndarray | None = None  # (n_axes, N, 4)
     ref_sd: np.ndarray | None = None
@@ -157,7 +157,6 @@ def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> 
     arrays = run.to_arrays()
     rest = rest_mask(arrays["accel"], arrays["clipped"], model)
     zupt_x = smooth_run(arrays, model, rest=rest)["smooth_x"]
-    rows = []
     start = int(round(model.rate_hz))  # after the first second, as the codegen lockstep tests
     for j in range(n_axes):
         d = axis_design(model, j)
@@ -172,16 +171,16 @@ def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> 
             errs[key] = max(errs[key], float(e.max()) if len(e) else 0.0)
         bound, x_b = stated_bound(model, j, run, f.x_post)
         of_bound = max(of_bound, float((np.abs(fw_x - x_b) / bound).max()))
-        truth = run.r[:, j]
-        estimates = (
-            ("firmware filter", cols["r"][:, j]),
-            ("float64 filter", f.x_post[:, 0]),
-            ("smoother", sm.x[:, 0]),
-            ("smoother + ZUPT", zupt_x[j, :, 0]),
-        )
-        for method, r in estimates:
-            e = r - truth
-            rows.append((run.axis_names[j], method, float(np.sqrt(np.mean(e**2))), float(e[-1])))
+    rows = error_rows(
+        run.axis_names,
+        run.r,
+        {
+            "firmware filter": cols["r"].T,
+            "float64 filter": ref_x[:, :, 0],
+            "smoother": smooth_x[:, :, 0],
+            "smoother + ZUPT": zupt_x[:, :, 0],
+        },
+    )
     return Comparison(n, equal, first, errs, of_bound, rows, cols, ref_x, ref_sd, smooth_x, zupt_x)
 
 
@@ -197,7 +196,5 @@ def format_comparison(c: Comparison) -> str:
         f"firmware vs float64 reference: {verdict} the generator's stated bound (at most {c.max_of_bound:.2f} of it)"
     )
     lines.append("")
-    lines.append(f"{'axis':<6}{'estimate':<18}{'rms r error [m]':>17}{'final [m]':>12}")
-    for axis, method, rms, final in c.position_rows:
-        lines.append(f"{axis:<6}{method:<18}{rms:17.3f}{final:12.3f}")
+    lines.append(format_errors(c.position_rows))
     return "\n".join(lines)

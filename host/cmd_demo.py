@@ -116,7 +116,7 @@ def cmd_demo(args) -> int:
     from hil_sim.sensor import simulate
     from hil_sim.trajectories import SCENARIOS
 
-    from .pipeline import dead_reckoning, smooth_run
+    from .pipeline import dead_reckoning, error_rows, format_errors, smooth_run
     from .plots import plot_smoothing
     from .runfile import save_run
     from .zupt import rest_mask
@@ -185,8 +185,17 @@ def cmd_demo(args) -> int:
         save_run(out / "run.npz", arrays, fitted)
         figures = plot_smoothing(arrays, fitted, out)
 
-    rows = _error_rows(arrays, plain_only, dead_reckoning(arrays, fitted), run)
-    table = _format(rows)
+    rows = error_rows(
+        run.axis_names,
+        run.r,
+        {
+            "double integration": dead_reckoning(arrays, fitted)[:, :, 0],
+            "firmware filter": arrays["fw_x"][:, :, 0],
+            "smoother": plain_only["smooth_x"][:, :, 0],
+            "smoother + ZUPT": arrays["smooth_x"][:, :, 0],
+        },
+    )
+    table = format_errors(rows)
     print()
     print(f"position error against the truth, {args.duration:g} s of {args.scenario} (fitted model, seed {args.seed})")
     print(table)
@@ -208,28 +217,7 @@ def cmd_demo(args) -> int:
     return 0 if pil is None or pil == sil else 1
 
 
-def _error_rows(arrays, plain_only, dr, run) -> list[tuple[str, str, float, float]]:
-    rows = []
-    for j, name in enumerate(run.axis_names):
-        truth = run.r[:, j]
-        for method, r in (
-            ("double integration", dr[j, :, 0]),
-            ("firmware filter", arrays["fw_x"][j, :, 0]),
-            ("smoother", plain_only["smooth_x"][j, :, 0]),
-            ("smoother + ZUPT", arrays["smooth_x"][j, :, 0]),
-        ):
-            e = r - truth
-            rows.append((name, method, float(np.sqrt(np.mean(e**2))), float(e[-1])))
-    return rows
-
-
-def _format(rows) -> str:
-    lines = [f"{'axis':<6}{'estimate':<20}{'rms [m]':>10}{'final [m]':>11}"]
-    lines += [f"{a:<6}{m:<20}{rms:10.3f}{fin:11.3f}" for a, m, rms, fin in rows]
-    return "\n".join(lines)
-
-
 def table_md(rows) -> str:
-    lines = ["| axis | estimate | rms position error [m] | final [m] |", "|---|---|---|---|"]
-    lines += [f"| {a} | {m} | {rms:.3f} | {fin:.3f} |" for a, m, rms, fin in rows]
+    lines = ["| axis | estimate | rms position error [m] | final [m] | max abs [m] |", "|---|---|---|---|---|"]
+    lines += [f"| {r.axis} | {r.method} | {r.rms:.3f} | {r.final:.3f} | {r.max_abs:.3f} |" for r in rows]
     return "\n".join(lines)

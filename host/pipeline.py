@@ -114,24 +114,30 @@ def dead_reckoning(arrays: dict[str, np.ndarray], model: Model) -> np.ndarray:
     )
 
 
+def error_rows(axis_names, truth_r: np.ndarray, estimates: dict[str, np.ndarray]) -> list[PositionErrors]:
+    """Position errors of each named estimate against the truth, axis by axis.
+
+    ``truth_r`` is (N, n_axes); each estimate is (n_axes, N), in the order the table lists them.
+    """
+    rows = []
+    for j, name in enumerate(str(a) for a in axis_names):
+        for method, r in estimates.items():
+            e = r[j] - truth_r[:, j]
+            rms = float(np.sqrt(np.mean(e**2)))
+            rows.append(PositionErrors(name, method, rms, float(e[-1]), float(np.max(np.abs(e)))))
+    return rows
+
+
 def position_errors(arrays: dict[str, np.ndarray], model: Model) -> list[PositionErrors]:
     """Errors of plain double integration, the filter and the smoother, per axis (needs truth)."""
     if "r" not in arrays:
         return []
-    plain = dead_reckoning(arrays, model)
-    rows = []
-    for j, name in enumerate(str(a) for a in arrays["axis_names"]):
-        truth = arrays["r"][:, j]
-        estimates = {"double integration": plain[j, :, 0]}
-        if "filt_x" in arrays:
-            estimates["filter"] = arrays["filt_x"][j, :, 0]
-        if "smooth_x" in arrays:
-            estimates["smoother"] = arrays["smooth_x"][j, :, 0]
-        for method, r in estimates.items():
-            e = r - truth
-            rms = float(np.sqrt(np.mean(e**2)))
-            rows.append(PositionErrors(name, method, rms, float(e[-1]), float(np.max(np.abs(e)))))
-    return rows
+    estimates = {"double integration": dead_reckoning(arrays, model)[:, :, 0]}
+    if "filt_x" in arrays:
+        estimates["filter"] = arrays["filt_x"][:, :, 0]
+    if "smooth_x" in arrays:
+        estimates["smoother"] = arrays["smooth_x"][:, :, 0]
+    return error_rows(arrays["axis_names"], arrays["r"], estimates)
 
 
 def format_errors(rows: list[PositionErrors]) -> str:

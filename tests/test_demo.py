@@ -26,11 +26,11 @@ def test_demo_runs_the_whole_chain(tmp_path, capsys):
         assert (tmp_path / name).stat().st_size > 500, name
     assert any((tmp_path / "fit").glob("*_fit.png"))
     # the table: smoothing with zero-velocity updates must beat the firmware's filter at the end of the run
-    rows = {}
+    rows = {}  # (axis, estimate) -> |final error|; columns: axis, estimate, rms, final, max |e|
     for line in out.splitlines():
         parts = line.split()
-        if len(parts) >= 4 and parts[0] in ("x", "y"):
-            rows[(parts[0], " ".join(parts[1:-2]))] = abs(float(parts[-1]))
+        if len(parts) >= 5 and parts[0] in ("x", "y"):
+            rows[(parts[0], " ".join(parts[1:-3]))] = abs(float(parts[-2]))
     for axis in ("x", "y"):
         assert rows[(axis, "smoother + ZUPT")] < rows[(axis, "firmware filter")], rows
 

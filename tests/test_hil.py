@@ -81,7 +81,7 @@ def test_smoother_with_zupt_beats_filter_in_the_summary(default_model):
     run = simulate(default_model, "stop_and_go", 30.0, seed=4)
     man = hil.manifest_for(default_model)
     c = hil.compare(default_model, run, hil.run_sil(default_model, hil.stimulus(man, run)))
-    final = {(axis, method): abs(f) for axis, method, _, f in c.position_rows}
+    final = {(row.axis, row.method): abs(row.final) for row in c.position_rows}
     for axis in run.axis_names:
         assert final[(axis, "smoother + ZUPT")] < 0.1 * final[(axis, "firmware filter")]
 
