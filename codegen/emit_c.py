@@ -227,6 +227,28 @@ def _acc(ft: int, terms: list[tuple[str, str, int]]) -> str:
     return f"({out})"
 
 
+def _acc_sat(ft: int, terms: list[tuple[str, str, int]], mag) -> str:
+    """acn_sat32 of _acc(ft, terms) whose first term is an int32 already in Q.ft, spelled as one
+    saturating 32-bit add of that int32 and the rest: the same integer and the same overflow count
+    (a sum of two int32 leaves int32 exactly when the 32-bit add overflows, and then its sign is the
+    first operand's), provided the rest fits int32 for every int32 input. That is checked here from
+    mag(expr), a bound on |term| before its alignment shift; otherwise the 64-bit form is kept."""
+    sg0, e0, fr0 = terms[0]
+    m = re.fullmatch(r"\(int64_t\)((?:s->)?\w+)", e0)
+    rest = terms[1:]
+    if sg0 == "+" and fr0 == ft and m and rest:
+        exact = [mag(e) for sg, e, fr in rest if fr == ft]
+        fine = [(mag(e), fr) for sg, e, fr in rest if fr != ft]
+        bound = sum(exact)
+        if fine:
+            g = min(GUARD_BITS_2 if len(fine) <= 2 else GUARD_BITS, *(fr - ft for _, fr in fine))
+            tot = sum((mg >> (fr - ft - g)) + 1 for mg, fr in fine) + (1 << (g - 1))
+            bound += (tot >> g) + 1
+        if bound < 2**31 - 1:
+            return f"acn_add_sat32({m.group(1)}, (int32_t){_acc(ft, rest)}, &s->overflow)"
+    return f"acn_sat32({_acc(ft, terms)}, &s->overflow)"
+
+
 def _predict_cov(p: AxisPlan, P: str) -> list[str]:
     fcr, fPr, fcv, fPv, fca, fPae, fce = (p.f(n) for n in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"))
     H2, T2, OMP = (p.consts[n][1].frac for n in ("H2", "T2", "OMP"))
@@ -236,11 +258,23 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
         neg = name.startswith("-")
         return f"(int64_t){'-' if neg else ''}{P}_{name.lstrip('-')}"
 
-    tr = _acc(
+    def mag(expr: str) -> int:  # a bound on |expr| for any int32 operands
+        m = re.fullmatch(r"\(int64_t\)(-?)" + P + r"_(\w+)(?: \* (\w+|s->\w+))?", expr)
+        if m:
+            v, fmt = p.consts[m.group(2)]
+            return abs(quantize(v, fmt)) * (2**31 if m.group(3) else 1)
+        if re.fullmatch(r"\(int64_t\)(\w+|s->\w+)", expr):
+            return 2**31
+        raise ValueError(f"no bound for {expr}")
+
+    def sat(ft, terms):
+        return _acc_sat(ft, terms, mag)
+
+    tr = sat(
         fPr, [("+", "(int64_t)s->Pre", fPr), ("+", "(int64_t)s->Pve", fPv), ("+", f"{c('H2')} * s->Pae", H2 + fPae)]
     )
-    tv = _acc(fPv, [("+", "(int64_t)s->Pve", fPv), ("+", f"{c('T2')} * s->Pae", T2 + fPae)])
-    cr = _acc(
+    tv = sat(fPv, [("+", "(int64_t)s->Pve", fPv), ("+", f"{c('T2')} * s->Pae", T2 + fPae)])
+    cr = sat(
         fcr,
         [
             ("+", "(int64_t)s->cr", fcr),
@@ -250,7 +284,7 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
             ("+", f"{c('-OMP')} * tr", OMP + fPr),
         ],
     )
-    cv = _acc(
+    cv = sat(
         fcv,
         [
             ("+", "(int64_t)s->cv", fcv),
@@ -261,7 +295,7 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
     )
     pre = _acc(fPr, [("+", "(int64_t)tr", fPr), ("+", f"{c('-OMP')} * tr", OMP + fPr)])
     pve = _acc(fPv, [("+", "(int64_t)tv", fPv), ("+", f"{c('-OMP')} * tv", OMP + fPv)])
-    ca = _acc(fca, [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fca), ("+", f"{c('-OMP')} * s->Pae", OMP + fPae)])
+    ca = sat(fca, [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fca), ("+", f"{c('-OMP')} * s->Pae", OMP + fPae)])
     ce = _acc(
         fce,
         [("+", f"{c('PHI2')} * s->ce", 31 + fce), ("+", f"{c('PHIOMP')} * s->Pae", PO + fPae), ("+", c("Qee"), fce)],
@@ -271,17 +305,17 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
         "         * every right-hand side reads the old values; each sum is rounded once */",
         "        int32_t tr, tv;",
         "        /* tr = P_re + P_ve + Ts^2/2 P_ae; P_re' = phi tr */",
-        f"        tr = acn_sat32({tr}, &s->overflow);",
+        f"        tr = {tr};",
         "        /* tv = P_ve + Ts^2 P_ae; P_ve' = phi tv */",
-        f"        tv = acn_sat32({tv}, &s->overflow);",
+        f"        tv = {tv};",
         "        /* c_r' = c_r + c_v + Ts^2/2 c_a + Q_ra - (1 - phi) tr */",
-        f"        s->cr = acn_sat32({cr}, &s->overflow);",
+        f"        s->cr = {cr};",
         "        /* c_v' = c_v + Ts^2 c_a + Ts Q_ua - (1 - phi) tv */",
-        f"        s->cv = acn_sat32({cv}, &s->overflow);",
+        f"        s->cv = {cv};",
         f"        s->Pre = (int32_t){pre};",
         f"        s->Pve = (int32_t){pve};",
         "        /* c_a' = c_a + Q_aa - (1 - phi) P_ae */",
-        f"        s->ca = acn_sat32({ca}, &s->overflow);",
+        f"        s->ca = {ca};",
         "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
         f"        s->ce = (int32_t){ce}; /* fits int32 for any c_e, P_ae: see codegen.ranges._predict_sat_free */"
         if "ce" in p.sat_free
@@ -302,7 +336,10 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
     nmax = 32 - R_int.bit_length()  # clz of the smallest S
     L = [
         "    /* S = H P H' + R = c_a + c_e + R (>= R by construction) */",
-        f"    S = acn_sat32((int64_t)s->ca + {_shf('(int64_t)s->ce', fc['e'], fca)} + {P}_R, &s->overflow);",
+        # one saturating 32-bit add when c_e aligned plus R fits int32 for any c_e (see _acc_sat)
+        f"    S = acn_add_sat32(s->ca, (int32_t)({_shf('(int64_t)s->ce', fc['e'], fca)} + {P}_R), &s->overflow);"
+        if fc["e"] > fca and (2**31 >> (fc["e"] - fca)) + 1 + abs(R_int) < 2**31 - 1
+        else f"    S = acn_sat32((int64_t)s->ca + {_shf('(int64_t)s->ce', fc['e'], fca)} + {P}_R, &s->overflow);",
         f"    if (S < {P}_R) {{",
         f"        S = {P}_R;",
         "    }",
@@ -512,6 +549,23 @@ static inline int32_t acn_sat32(int64_t x, uint32_t *overflow)
         return hi < 0 ? INT32_MIN : INT32_MAX;
     }
     return lo;
+}
+
+/* a + b saturated to int32, counting: the same value and count as acn_sat32((int64_t)a + b) (the
+ * 32-bit add overflows exactly when the sum leaves int32, and then the sum has a's sign); one ADDS
+ * and one branch on the overflow flag in the common case. */
+static inline int32_t acn_add_sat32(int32_t a, int32_t b, uint32_t *overflow)
+{
+#if defined(__GNUC__)
+    int32_t r;
+    if (__builtin_expect(__builtin_add_overflow(a, b, &r), 0)) {
+        ++*overflow;
+        return a < 0 ? INT32_MIN : INT32_MAX;
+    }
+    return r;
+#else
+    return acn_sat32((int64_t)a + b, overflow);
+#endif
 }
 
 /* Clamp an int64 to +-hmax 2^32 when its high word leaves [-hmax, hmax], counting: one add and
