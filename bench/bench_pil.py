@@ -18,6 +18,7 @@ from baselines import best_of
 
 from codegen.model import load_model
 from hil_sim import hil
+from hil_sim.firmware import manifest
 from hil_sim.sensor import simulate
 from host.telemetry import decode_all
 
@@ -34,7 +35,7 @@ def main() -> None:
         model = load_model(REPO / "models" / f"{name}.toml")
         run = simulate(model, "vehicle", args.seconds, seed=3)
         n = len(run.t)
-        man = hil.manifest_for(model)
+        man = manifest(model.source)
         stim = hil.stimulus(man, run)
         hil.run_sil(model, stim)  # build once, outside the timing
         t_sil = best_of(lambda: decode_all(man, hil.run_sil(model, stim)), 3)  # noqa: B023

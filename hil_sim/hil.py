@@ -30,17 +30,11 @@ from host.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from host.telemetry import Manifest, decode_all, encode_stimulus, sample_columns
 from host.zupt import rest_mask
 
-from .firmware import HostFirmware, build_firmware, generated, make_firmware
+from .firmware import HostFirmware, build_firmware, make_firmware, manifest
 from .qemu import Mps2Board
 from .sensor import SimRun
 
 STATES = ("r", "u", "a", "eps")
-
-
-def manifest_for(model: Model) -> Manifest:
-    import json
-
-    return Manifest(json.loads(generated(model.source)["acnframe.json"]))
 
 
 def stimulus(man: Manifest, run: SimRun) -> bytes:
@@ -71,7 +65,7 @@ def run_pil(model: Model, stim: bytes, n_samples: int, log: Path, *, timeout_s: 
     from host.recorder import Recorder, Status
 
     elf = make_firmware("mps2_an385", model.source) / "accelnav_fw.elf"
-    man = manifest_for(model)
+    man = manifest(model.source)
     with Mps2Board(elf) as board:
         tel = board.open(0)
         feed = board.open(1)
@@ -129,7 +123,7 @@ def stated_bound(model: Model, j: int, run: SimRun, x_ref: np.ndarray) -> tuple[
 
 def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> Comparison:
     """SIL vs PIL bit for bit, firmware vs float64 reference, truth vs firmware/reference/smoother."""
-    man = manifest_for(model)
+    man = manifest(model.source)
     sil_frames, _ = decode_all(man, sil)
     s = sil_frames["sample"]
     equal = first = None

@@ -105,12 +105,18 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_smooth)
 
 
-def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[str, np.ndarray]:
-    from hil_sim.sensor import simulate
+def require_scenario(name: str) -> None:
+    """UserError for a --scenario the simulator does not have (shared by sim, hil and demo)."""
     from hil_sim.trajectories import SCENARIOS
 
-    if scenario not in SCENARIOS:
-        raise UserError(f"--scenario: unknown scenario {scenario!r}; accepted: {', '.join(SCENARIOS)}")
+    if name not in SCENARIOS:
+        raise UserError(f"--scenario: unknown scenario {name!r}; accepted: {', '.join(SCENARIOS)}")
+
+
+def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[str, np.ndarray]:
+    from hil_sim.sensor import simulate
+
+    require_scenario(scenario)
     try:
         run = simulate(model, scenario, duration, seed)
     except ValueError as exc:

@@ -83,10 +83,10 @@ def _pil_wanted(mode: str) -> tuple[bool, str]:
 
 def decoded_run(fitted: Model, run, telemetry: bytes) -> dict[str, np.ndarray]:
     """Run-file arrays from the firmware's sample frames (raw input, skip flags) plus the simulated truth."""
-    from hil_sim.hil import manifest_for
+    from hil_sim.firmware import manifest
     from host.telemetry import decode_all, sample_columns
 
-    man = manifest_for(fitted)
+    man = manifest(fitted.source)
     frames, stats = decode_all(man, telemetry)
     cols = sample_columns(man, frames["sample"])
     if stats.lost or len(cols["t"]) != len(run.t):
@@ -113,17 +113,17 @@ def decoded_run(fitted: Model, run, telemetry: bytes) -> dict[str, np.ndarray]:
 
 def cmd_demo(args) -> int:
     from hil_sim import hil
+    from hil_sim.firmware import manifest
     from hil_sim.sensor import simulate
-    from hil_sim.trajectories import SCENARIOS
 
+    from .cmd_core import require_scenario
     from .pipeline import dead_reckoning, error_rows, format_errors, smooth_run
     from .plots import plot_smoothing
     from .runfile import save_run
     from .zupt import rest_mask
 
     true_model = load_model(args.model)
-    if args.scenario not in SCENARIOS:
-        raise UserError(f"--scenario: unknown scenario {args.scenario!r}; accepted: {', '.join(SCENARIOS)}")
+    require_scenario(args.scenario)
     limit = true_model.ranges.max_run_s
     for name, value in (("--duration", args.duration), ("--warmup", args.warmup)):
         if not 0 < value <= limit:
@@ -162,7 +162,7 @@ def cmd_demo(args) -> int:
 
     with steps.step(f"run {args.duration:g} s of {args.scenario} through the firmware in-process (SIL)"):
         run = simulate(true_model, args.scenario, args.duration, args.seed + 1)
-        man = hil.manifest_for(fitted)
+        man = manifest(fitted.source)
         stim = hil.stimulus(man, run)
         sil = hil.run_sil(fitted, stim)
         print(f"    {len(run.t)} samples in, {len(sil)} bytes of telemetry out")

@@ -27,16 +27,15 @@ def register(sub) -> None:
 
 def cmd_hil(args) -> int:
     from hil_sim import hil
-    from hil_sim.firmware import FirmwareError
+    from hil_sim.firmware import FirmwareError, manifest
     from hil_sim.qemu import QemuError
     from hil_sim.sensor import simulate
-    from hil_sim.trajectories import SCENARIOS
 
+    from .cmd_core import require_scenario
     from .progress import Progress
 
     model = load_model(args.model)
-    if args.scenario not in SCENARIOS:
-        raise UserError(f"--scenario: unknown scenario {args.scenario!r}; accepted: {', '.join(SCENARIOS)}")
+    require_scenario(args.scenario)
     try:
         run = simulate(model, args.scenario, args.duration, args.seed)
     except ValueError as exc:
@@ -44,7 +43,7 @@ def cmd_hil(args) -> int:
     n = len(run.t)
     print(f"model {model.name}, {model.sensor.kind} input, scenario {args.scenario}, {n} samples, seed {args.seed}")
     try:
-        man = hil.manifest_for(model)
+        man = manifest(model.source)
         stim = hil.stimulus(man, run)
         sil = hil.run_sil(model, stim)
         pil = None

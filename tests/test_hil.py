@@ -16,6 +16,7 @@ from conftest import MODELS
 
 from codegen.model import load_model
 from hil_sim import hil, qemu
+from hil_sim.firmware import manifest
 from hil_sim.sensor import simulate
 from host.cli import main
 
@@ -44,7 +45,7 @@ def test_pil_frames_equal_sil_bit_for_bit(tmp_path, model_file, scenario, second
     _require_pil()
     model = load_model(MODELS / model_file)
     run = simulate(model, scenario, seconds, seed=9)
-    man = hil.manifest_for(model)
+    man = manifest(model.source)
     stim = hil.stimulus(man, run)
     sil = hil.run_sil(model, stim)
     pil = hil.run_pil(model, stim, len(run.t), tmp_path / "pil.acnlog")
@@ -61,7 +62,7 @@ def test_pil_frames_equal_sil_bit_for_bit(tmp_path, model_file, scenario, second
 
 def test_sil_agrees_with_reference_and_compare_catches_a_flipped_bit(default_model):
     run = simulate(default_model, "stop_and_go", 8.0, seed=2)
-    man = hil.manifest_for(default_model)
+    man = manifest(default_model.source)
     sil = hil.run_sil(default_model, hil.stimulus(man, run))
     c = hil.compare(default_model, run, sil, sil)
     assert c.pil_equal_sil and c.first_difference is None
@@ -79,7 +80,7 @@ def test_sil_agrees_with_reference_and_compare_catches_a_flipped_bit(default_mod
 
 def test_smoother_with_zupt_beats_filter_in_the_summary(default_model):
     run = simulate(default_model, "stop_and_go", 30.0, seed=4)
-    man = hil.manifest_for(default_model)
+    man = manifest(default_model.source)
     c = hil.compare(default_model, run, hil.run_sil(default_model, hil.stimulus(man, run)))
     final = {(row.axis, row.method): abs(row.final) for row in c.position_rows}
     for axis in run.axis_names:
