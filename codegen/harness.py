@@ -5,7 +5,7 @@ declarations cut from ``PREFIX.h`` (so the C and Python cannot drift) and
 returns the imported module (``.ffi``, ``.lib``). Modules are keyed by the
 hash of the generated text and cached in ``workdir``: the same model builds
 once. ``sanitize=True`` adds -fsanitize=undefined,address (the test process
-must then preload libasan; see tests/test_codegen_sanitize.py).
+must then preload libasan; tests/test_codegen.py builds its sanitized run as a program instead).
 
 :class:`AxisRunner` drives one axis sample by sample and returns the states
 as float64 arrays in SI units (r, u, a, eps), for the lockstep tests and for
@@ -14,58 +14,31 @@ hil_sim.
 
 from __future__ import annotations
 
-import hashlib
-import importlib.util
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from .emit_c import cdef_of
 
-CC = os.environ.get("CC", "gcc")
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
 SANITIZE = ["-fsanitize=undefined,address", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g"]
 
 
 def build(files: dict[str, str], workdir: str | Path, *, prefix: str = "accelnav", sanitize: bool = False):
-    import cffi
+    """Compile ``PREFIX.c`` with the strict flags and the declarations cut from ``PREFIX.h``, through the
+    project's one cffi builder (host.cbuild), cached in ``workdir`` by the hash of the generated text."""
+    from host.cbuild import build_module
 
-    workdir = Path(workdir).resolve()
-    digest = hashlib.sha256(
-        "\0".join(f"{k}\0{v}" for k, v in sorted(files.items())).encode() + bytes([sanitize])
-    ).hexdigest()[:16]
-    modname = f"_acn_{prefix}_{digest}"
-    d = workdir / modname
-    if modname in sys.modules:
-        return sys.modules[modname]
-    d.mkdir(parents=True, exist_ok=True)
-    for name, text in files.items():
-        (d / name).write_text(text)
-    so = next(d.glob(f"{modname}*.so"), None)
-    if so is None:
-        # the generated C is compiled on its own with the strict flags (the cffi wrapper is not -pedantic clean)
-        obj = d / f"{prefix}.o"
-        cmd = [CC, *STRICT, "-fPIC", *(SANITIZE if sanitize else []), "-c", str(d / f"{prefix}.c"), "-o", str(obj)]
-        subprocess.run(cmd, check=True, capture_output=True, text=True)
-        ffi = cffi.FFI()
-        ffi.cdef(cdef_of(files[f"{prefix}.h"]))
-        ffi.set_source(
-            modname,
-            f'#include "{prefix}.h"',
-            include_dirs=[str(d)],
-            extra_objects=[str(obj)],
-            extra_link_args=SANITIZE if sanitize else [],
-        )
-        so = Path(ffi.compile(tmpdir=str(d), verbose=False))
-    spec = importlib.util.spec_from_file_location(modname, so)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    sys.modules[modname] = mod
-    return mod
+    return build_module(
+        f"acn_{prefix}",
+        cdef_of(files[f"{prefix}.h"]),
+        {k: v for k, v in files.items() if not k.endswith(".json")},
+        main=f"{prefix}.c",
+        extra_compile_args=STRICT + (SANITIZE if sanitize else []),
+        extra_link_args=SANITIZE if sanitize else [],
+        workdir=Path(workdir).resolve(),
+    )
 
 
 class AxisRunner:
