@@ -24,9 +24,9 @@ import warnings
 import numpy as np
 from scipy.optimize import OptimizeWarning, curve_fit
 
-from host.biasfit import fit_bias
-from host.noiseid import identify_noise
-from host.whiteness import whiteness
+from accelnav.identify.biasfit import fit_bias
+from accelnav.identify.noiseid import identify_noise
+from accelnav.identify.whiteness import whiteness
 
 RATE = 100.0
 C1, C2, T_TRUE, SIGMA = 0.08, 0.05, 300.0, 0.126

@@ -22,15 +22,13 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from accelnav.codegen.emit_c import emit
+from accelnav.codegen.model import load_model
+from accelnav.codegen.report import struct_size
+from accelnav.codegen.resources import firmware_dir
+from accelnav.hil_sim.qemu import run_to_exit
 
-from codegen.emit_c import emit  # noqa: E402
-from codegen.model import load_model  # noqa: E402
-from codegen.report import struct_size  # noqa: E402
-from hil_sim.qemu import run_to_exit  # noqa: E402
-
-BOARD = ROOT / "firmware" / "boards" / "mps2_an385"
+BOARD = firmware_dir() / "boards" / "mps2_an385"
 CFLAGS = ["-mcpu=cortex-m3", "-mthumb", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
 VARIANTS = (("cov", "covariance", "fixed"), ("gs", "gain_schedule", "fixed"), ("f32", "covariance", "float32"))
 
@@ -113,7 +111,7 @@ def main(argv=None) -> int:
     model = load_model(args.model)
     if model.sensor.kind != "analog":
         raise SystemExit("bench: analog models only for now")
-    from hil_sim.sensor import simulate
+    from accelnav.hil_sim.sensor import simulate
 
     run = simulate(model, args.scenario, args.samples / model.rate_hz, seed=1)
     codes = run.code[: args.samples, 0]

@@ -2,7 +2,7 @@
 
 1. A one-hour, two-axis, 1 kHz stream of sample frames (3.6 million frames of the
    default model's layout, plausible contents, a few damaged frames) is decoded
-   by host.telemetry.Decoder (vectorised, fed in 1 MiB pieces as a log is read)
+   by accelnav.link.telemetry.Decoder (vectorised, fed in 1 MiB pieces as a log is read)
    and by decode_naive (a straightforward frame-by-frame Python decode: split,
    COBS loop, zlib.crc32, struct.unpack) in the same run. Both must agree; the
    figures are printed side by side, nothing is asserted about speed.
@@ -17,17 +17,12 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from hil_sim.firmware import DUTY_MODEL, generated  # noqa: E402
-from host.telemetry import Decoder, Manifest, decode_naive, encode_frames  # noqa: E402
+from accelnav.hil_sim.firmware import DUTY_MODEL, generated
+from accelnav.link.telemetry import Decoder, Manifest, decode_naive, encode_frames
 
 BAUDS = (115200, 230400, 460800, 921600)
 
@@ -97,7 +92,10 @@ def main(argv=None) -> int:
 
     print()
     print(f"{'decoder':<34}{'seconds':>9}{'frames/s':>14}{'MB/s':>9}{'x realtime':>12}")
-    for name, secs in (("vectorised (host.telemetry.Decoder)", t_vec), ("naive frame-by-frame (baseline)", t_naive)):
+    for name, secs in (
+        ("vectorised (link.telemetry.Decoder)", t_vec),
+        ("naive frame-by-frame (baseline)", t_naive),
+    ):
         print(f"{name:<34}{secs:9.2f}{got / secs:14,.0f}{len(data) / 1e6 / secs:9.1f}{n / args.rate / secs:12,.0f}")
     print(
         f"speed-up: {t_naive / t_vec:.1f}x; both: {got:,} frames accepted, {dec.stats.lost} lost, "

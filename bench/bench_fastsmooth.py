@@ -1,4 +1,4 @@
-"""Benchmark: the compiled filter + RTS smoother (host/fastsmooth.py) against FilterPy, same run.
+"""Benchmark: the compiled filter + RTS smoother (host/estimate/fastsmooth.py) against FilterPy, same run.
 
 One axis of the default model, one core. Rows:
 
@@ -8,7 +8,7 @@ One axis of the default model, one core. Rows:
 * general path: the full 4-state filter and smoother with measurements that
   vary in time; warm reuses its output buffers, cold allocates them (at
   N = 1e6 that is 336 MB, and first-touch page faults cost a good share).
-* FilterPy batch_filter + rts_smoother and the accelnav reference (host/kf.py)
+* FilterPy batch_filter + rts_smoother and the accelnav reference (host/estimate/kf.py)
   at a smaller N (they are 1000x slower), same data prefix.
 
 Agreement: max over samples and states of |ours - ref| / (|ref| + sigma)
@@ -24,12 +24,12 @@ import time
 import numpy as np
 from baselines import best_of, filterpy_smooth
 
-from codegen.design import axis_design
-from codegen.model import load_model
-from hil_sim.sensor import simulate
-from host import fastsmooth as fs
-from host import zupt
-from host.kf import rts_smooth, run_filter
+from accelnav.codegen.design import axis_design
+from accelnav.codegen.model import load_model
+from accelnav.estimate import fastsmooth as fs
+from accelnav.estimate import zupt
+from accelnav.estimate.kf import rts_smooth, run_filter
+from accelnav.hil_sim.sensor import simulate
 
 
 def rel_err(x, x_ref, P_ref) -> float:
@@ -94,7 +94,7 @@ def main() -> None:
     t_fp = best_of(lambda: filterpy_smooth(d, z[:nb]), 1)
     row("FilterPy", "batch_filter + rts_smoother", nb, t_fp, "")
     t_ref = best_of(lambda: rts_smooth(d, run_filter(d, z[:nb], progress=False), progress=False), 1)
-    row("reference", "host/kf.py run_filter + rts_smooth", nb, t_ref, "0")
+    row("reference", "host/estimate/kf.py run_filter + rts_smooth", nb, t_ref, "0")
 
     fp_rate = nb / t_fp
     print("| path | what | N | seconds | samples/s | x FilterPy | max err / (abs(ref) + sigma) |")

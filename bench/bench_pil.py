@@ -2,7 +2,7 @@
 
 One simulated run per model (analog ADC codes and duty-cycle counts): the
 stimulus goes into UART1 of qemu-system-arm (mps2-an385), UART0 is recorded
-through host.recorder into a log and decoded; the SIL run feeds the same
+through accelnav.link.recorder into a log and decoded; the SIL run feeds the same
 bytes to the host-board build through cffi. Both include framing and decode.
 Usage: python bench/bench_pil.py [--seconds 20]
 """
@@ -16,13 +16,12 @@ from pathlib import Path
 
 from baselines import best_of
 
-from codegen.model import load_model
-from hil_sim import hil
-from hil_sim.firmware import manifest
-from hil_sim.sensor import simulate
-from host.telemetry import decode_all
-
-REPO = Path(__file__).resolve().parents[1]
+from accelnav.codegen.model import load_model
+from accelnav.codegen.resources import models_dir
+from accelnav.hil_sim import hil
+from accelnav.hil_sim.firmware import manifest
+from accelnav.hil_sim.sensor import simulate
+from accelnav.link.telemetry import decode_all
 
 
 def main() -> None:
@@ -32,7 +31,7 @@ def main() -> None:
     print("| model | input | samples | SIL samples/s | PIL samples/s (QEMU, end to end) | SIL/PIL | frames equal |")
     print("|---|---|---|---|---|---|---|")
     for name in ("adxl250_default", "adxl202_duty"):
-        model = load_model(REPO / "models" / f"{name}.toml")
+        model = load_model(models_dir() / f"{name}.toml")
         run = simulate(model, "vehicle", args.seconds, seed=3)
         n = len(run.t)
         man = manifest(model.source)

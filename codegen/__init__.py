@@ -1,0 +1,1 @@
+"""Model file -> design numbers -> Q formats -> C text (pure functions), and the one cffi builder."""

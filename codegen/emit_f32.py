@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from .design import AnalogConversion, axis_design, input_conversion
 from .model import G0, Model
+from .package import package
 
 
 def _f(x: float) -> str:
@@ -151,8 +152,6 @@ def _axis(model: Model, i: int, prefix: str) -> tuple[list[str], list[str], dict
 
 
 def emit_f32(model: Model, *, form: str, prefix: str) -> dict[str, str]:
-    from .emit_c import package
-
     H, S, MAN = [], [], []
     for i in range(len(model.axes)):
         h, s, man = _axis(model, i, prefix)

@@ -4,7 +4,7 @@ The gain of the filter does not depend on the data, only on the design and
 on which samples are skipped. :func:`riccati` runs the Riccati recursion of
 DESIGN.md restricted to the seven entries of P the gain needs (P_ra, P_ua,
 P_aa, P_re, P_ue, P_ae, P_ee); P_rr, P_uu and P_ru are never read, so they
-are never computed. Same convention as host.kf.run_filter: sample 0 updates
+are never computed. Same convention as accelnav.estimate.kf.run_filter: sample 0 updates
 the prior P0 without a prediction; every later sample predicts, then updates.
 
 :func:`schedule` compresses K[k] for the gain-schedule form: piecewise
@@ -173,7 +173,7 @@ def _riccati_lib():
     cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
     if cc is None or os.environ.get("ACCELNAV_PURE_PYTHON"):
         return None
-    from host.cbuild import STRICT_FLAGS, build_module
+    from accelnav.codegen.cbuild import STRICT_FLAGS, build_module
 
     try:
         mod = build_module(
@@ -426,7 +426,7 @@ def schedule(K: np.ndarray, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: in
 
 
 def run_gains(d: AxisDesign, z: np.ndarray, valid: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Float64 twin of a filter with a given gain sequence K[k] (natural units), host.kf conventions.
+    """Float64 twin of a filter with a given gain sequence K[k] (natural units), accelnav.estimate.kf conventions.
 
     The reference for the gain-schedule form where samples are skipped: the
     Kalman filter's gain then depends on the skips, the schedule's does not.

@@ -27,8 +27,8 @@ SANITIZE = ["-fsanitize=undefined,address", "-fno-sanitize-recover=all", "-fno-o
 
 def build(files: dict[str, str], workdir: str | Path, *, prefix: str = "accelnav", sanitize: bool = False):
     """Compile ``PREFIX.c`` with the strict flags and the declarations cut from ``PREFIX.h``, through the
-    project's one cffi builder (host.cbuild), cached in ``workdir`` by the hash of the generated text."""
-    from host.cbuild import build_module
+    project's one cffi builder (accelnav.codegen.cbuild), cached in ``workdir`` by the hash of the generated text."""
+    from accelnav.codegen.cbuild import build_module
 
     return build_module(
         f"acn_{prefix}",

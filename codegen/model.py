@@ -21,9 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .resources import models_dir
+
 G0 = 9.80665  # standard gravity, m/s^2
 
-DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "models" / "adxl250_default.toml"
+# the embedded default, shipped as package data (accelnav.models)
+DEFAULT_MODEL = models_dir() / "adxl250_default.toml"
 
 SENSOR_KINDS = ("analog", "duty_cycle")
 FILTER_FORMS = ("covariance", "gain_schedule")

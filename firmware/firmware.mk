@@ -6,39 +6,45 @@
 # The filter (accelnav.*) and the frame code (acnframe.*) of MODEL are
 # generated into build/firmware/gen/MODEL_NAME/ first; the board's image goes to
 # build/firmware/BOARD/ with a size report (size.txt).
+#
+# The installed package runs this file on its own (accelnav.hil_sim.firmware):
+#   make -f FW_DIR/firmware.mk firmware BOARD=... FW_DIR=... FW_OUT=... FW_GEN=... FW_PREGEN=1
+# with the generated C already written to FW_GEN, so that nothing depends on
+# the source checkout's layout and every output lands in the folder it names.
 
 BOARD      ?= host
 MODEL      ?= models/adxl250_default.toml
-FW_GEN     := build/firmware/gen/$(basename $(notdir $(MODEL)))
-FW_OUT     := build/firmware/$(BOARD)
+FW_DIR     ?= firmware
+FW_GEN     ?= build/firmware/gen/$(basename $(notdir $(MODEL)))
+FW_OUT     ?= build/firmware/$(BOARD)
 FW_WARN    := -std=c99 -Wall -Wextra -Werror -pedantic
-FW_INC     := -Ifirmware/src -Ifirmware/boards -I$(FW_GEN)
-FW_COMMON  := $(wildcard firmware/src/*.c) $(FW_GEN)/accelnav.c $(FW_GEN)/acnframe.c
-FW_HEADERS := $(wildcard firmware/src/*.h firmware/boards/*.h firmware/boards/$(BOARD)/*.h)
+FW_INC     := -I$(FW_DIR)/src -I$(FW_DIR)/boards -I$(FW_GEN)
+FW_COMMON  := $(wildcard $(FW_DIR)/src/*.c) $(FW_GEN)/accelnav.c $(FW_GEN)/acnframe.c
+FW_HEADERS := $(wildcard $(FW_DIR)/src/*.h $(FW_DIR)/boards/*.h $(FW_DIR)/boards/$(BOARD)/*.h)
 ARM_CC     ?= arm-none-eabi-gcc
 ARM_FLAGS  := -mcpu=cortex-m3 -mthumb -Os -ffunction-sections -fdata-sections -ffreestanding -g
 
 ifeq ($(BOARD),host)
 FW_CC      := $(CC)
-FW_CFLAGS  := $(FW_WARN) -O2 -g -Ifirmware/boards/host
-FW_SRCS    := firmware/boards/host/board_host.c
+FW_CFLAGS  := $(FW_WARN) -O2 -g -I$(FW_DIR)/boards/host
+FW_SRCS    := $(FW_DIR)/boards/host/board_host.c
 FW_LDFLAGS :=
 FW_SIZE    := size
 else ifeq ($(BOARD),mps2_an385)
 FW_CC      := $(ARM_CC)
-FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -Ifirmware/boards/mps2_an385
-FW_SRCS    := firmware/boards/mps2_an385/board_mps2.c
+FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/mps2_an385
+FW_SRCS    := $(FW_DIR)/boards/mps2_an385/board_mps2.c
 # the runtime's startup.c (not ours) casts function pointers to void * in its vector
 # table, which -pedantic refuses: it is built with the same flags minus -pedantic
-FW_LOOSE   := firmware/boards/mps2_an385/startup.c
-FW_LDFLAGS := -nostartfiles --specs=nano.specs -Tfirmware/boards/mps2_an385/mps2_an385.ld \
+FW_LOOSE   := $(FW_DIR)/boards/mps2_an385/startup.c
+FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/mps2_an385/mps2_an385.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size
 else ifeq ($(BOARD),stm32f103)
 FW_CC      := $(ARM_CC)
-FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -Ifirmware/boards/stm32f103
-FW_SRCS    := firmware/boards/stm32f103/startup_stm32f103.c firmware/boards/stm32f103/board_stm32.c
-FW_LDFLAGS := -nostartfiles --specs=nano.specs -Tfirmware/boards/stm32f103/stm32f103c8.ld \
+FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/stm32f103
+FW_SRCS    := $(FW_DIR)/boards/stm32f103/startup_stm32f103.c $(FW_DIR)/boards/stm32f103/board_stm32.c
+FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/stm32f103/stm32f103c8.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size
 else
@@ -61,13 +67,16 @@ firmware: $(FW_ELF)
 
 firmware-gen: $(FW_GEN)/acnframe.h
 
+# FW_PREGEN: the caller wrote the generated C to FW_GEN itself (the installed package does)
+ifndef FW_PREGEN
 $(FW_GEN)/acnframe.h $(FW_GEN)/acnframe.c $(FW_GEN)/accelnav.c: $(MODEL) $(wildcard codegen/*.py) | $(STAMP)
-	$(PY) -m codegen.frames --model $(MODEL) --out $(FW_GEN)
+	$(PY) -m accelnav.codegen.frames --model $(MODEL) --out $(FW_GEN)
 	@touch $(FW_GEN)/acnframe.h
+endif
 
 FW_LOOSE_OBJ := $(patsubst %.c,$(FW_OUT)/%.o,$(notdir $(FW_LOOSE)))
 
-$(FW_OUT)/%.o: firmware/boards/$(BOARD)/%.c $(FW_HEADERS)
+$(FW_OUT)/%.o: $(FW_DIR)/boards/$(BOARD)/%.c $(FW_HEADERS)
 	@mkdir -p $(FW_OUT)
 	$(FW_CC) $(filter-out -pedantic,$(FW_CFLAGS)) -c $< -o $@
 

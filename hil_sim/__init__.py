@@ -1,0 +1,1 @@
+"""Sensor and trajectory simulator, SIL (cffi) and PIL (QEMU) runners."""

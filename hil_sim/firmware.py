@@ -7,8 +7,13 @@
   compiled with the strict flags (optionally with AddressSanitizer and
   UndefinedBehaviorSanitizer) into a cffi module: the firmware in-process
   (SIL), driven through :class:`HostFirmware`.
-* :func:`make_firmware`: an image for a board through the Makefile (``make
-  firmware BOARD=...``), e.g. the mps2-an385 ELF that hil_sim.qemu runs (PIL).
+* :func:`make_firmware`: an image for a board through the firmware's own
+  Makefile fragment (the one ``make firmware BOARD=...`` uses), e.g. the
+  mps2-an385 ELF that hil_sim.qemu runs (PIL).
+
+The firmware sources are package data (:func:`accelnav.codegen.resources.firmware_dir`);
+what is built goes to the cache (:func:`accelnav.codegen.resources.cache_root`)
+or a folder the caller names, never into the installed package.
 """
 
 from __future__ import annotations
@@ -21,26 +26,29 @@ import subprocess
 from functools import cache
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-FW = REPO / "firmware"
+from accelnav.codegen.resources import cache_root, firmware_dir, models_dir
+
+FW = firmware_dir()
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g"]
 SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
-DUTY_MODEL = REPO / "models" / "adxl202_duty.toml"
+DUTY_MODEL = models_dir() / "adxl202_duty.toml"
 
 
 @cache
 def generated(model_path: str | None = None) -> dict[str, str]:
     """accelnav.{h,c,json} and acnframe.{h,c,json} of a model (the embedded default if None)."""
-    from codegen.emit_c import emit
-    from codegen.frames import emit_frames
-    from codegen.model import load_model
+    from accelnav.codegen.emit_c import emit
+    from accelnav.codegen.frames import emit_frames
+    from accelnav.codegen.model import load_model
 
     model = load_model(model_path)
     # the generator takes seconds: keep its output on disk, keyed by the model and the generator's source
     key = hashlib.sha256(model.text.encode())
-    for p in sorted((REPO / "codegen").glob("*.py")):
+    import accelnav.codegen
+
+    for p in sorted(Path(accelnav.codegen.__file__).parent.glob("*.py")):
         key.update(p.read_bytes())
-    from host.cbuild import cache_dir
+    from accelnav.codegen.cbuild import cache_dir
 
     cache = cache_dir() / f"gen-{key.hexdigest()[:20]}.json"
     if cache.exists():
@@ -55,7 +63,7 @@ def generated(model_path: str | None = None) -> dict[str, str]:
 
 
 def manifest(model_path: str | None = None):
-    from host.telemetry import Manifest
+    from accelnav.link.telemetry import Manifest
 
     return Manifest(json.loads(generated(model_path)["acnframe.json"]))
 
@@ -90,7 +98,7 @@ void app_rx(unsigned ch, const uint8_t *p, size_t n);
 
 def build_firmware(model_path: str | None = None, *, sanitize: bool = False, workdir: Path | None = None):
     """The host-board firmware as a cffi module (``.ffi``, ``.lib``), built once per source text."""
-    from host.cbuild import build_module
+    from accelnav.codegen.cbuild import build_module
 
     files = generated(model_path)
     sources = {p.name: p.read_text() for p in sorted((FW / "src").glob("*.[ch]"))}
@@ -113,19 +121,47 @@ def build_firmware(model_path: str | None = None, *, sanitize: bool = False, wor
     )
 
 
-def make_firmware(board: str, model_path: str | Path | None = None) -> Path:
-    """Build ``board``'s image with ``make firmware`` and return its output folder (build/firmware/BOARD)."""
-    cmd = ["make", "--no-print-directory", "firmware", f"BOARD={board}"]
-    if model_path is not None:
-        cmd.append(f"MODEL={Path(model_path).resolve()}")
+def make_firmware(board: str, model_path: str | Path | None = None, out: Path | None = None) -> Path:
+    """Build ``board``'s image with the firmware's Makefile fragment and return its output folder.
+
+    The generated C of the model is written to ``OUT/gen`` first; ``out``
+    defaults to a folder in the cache named by the board and the model's
+    hash, so images of different models never overwrite each other.
+    """
+    from accelnav.codegen.model import load_model
+
+    model = load_model(model_path)
+    if out is None:
+        out = cache_root() / "firmware" / f"{board}-{model.sha256[:16]}"
+    out = Path(out).resolve()
     if board != "host" and shutil.which("arm-none-eabi-gcc") is None:
         raise FirmwareError(
             f"board {board}: arm-none-eabi-gcc not found (Debian: gcc-arm-none-eabi libnewlib-arm-none-eabi)"
         )
-    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600)
+    if shutil.which("make") is None:
+        raise FirmwareError(f"board {board}: make not found (Debian: make)")
+    gen = out / "gen"
+    gen.mkdir(parents=True, exist_ok=True)
+    for name, text in generated(model_path).items():
+        path = gen / name
+        if not path.exists() or path.read_text() != text:  # unchanged files keep their time: no rebuild
+            path.write_text(text)
+    cmd = [
+        "make",
+        "--no-print-directory",
+        "-f",
+        str(FW / "firmware.mk"),
+        "firmware",
+        f"BOARD={board}",
+        f"FW_DIR={FW}",
+        f"FW_GEN={gen}",
+        f"FW_OUT={out}",
+        "FW_PREGEN=1",
+    ]
+    done = subprocess.run(cmd, cwd=out, capture_output=True, text=True, timeout=600)
     if done.returncode != 0:
         raise FirmwareError(f"{' '.join(cmd)} failed:\n{done.stdout[-2000:]}{done.stderr[-4000:]}")
-    return REPO / "build" / "firmware" / board
+    return out
 
 
 class FirmwareError(RuntimeError):

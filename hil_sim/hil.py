@@ -6,11 +6,11 @@
 * PIL: the same sources built for the emulated Cortex-M3 (mps2-an385) and run
   in qemu-system-arm (:mod:`hil_sim.qemu`); the stimulus goes into UART1, and
   UART0 is recorded through the very same path as ``accelnav record``
-  (:class:`host.recorder.Recorder` over a pyserial ``socket://`` port, into
+  (:class:`accelnav.link.recorder.Recorder` over a pyserial ``socket://`` port, into
   an append-only log that is then decoded).
 
 :func:`compare` puts the frames side by side: PIL against SIL bit for bit,
-frame by frame; both against the float64 reference (host.kf) on the same
+frame by frame; both against the float64 reference (accelnav.estimate.kf) on the same
 raw input, in units of the reference's own standard deviation; and truth
 against the firmware's filter, the reference filter and the smoother.
 """
@@ -23,12 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.design import axis_design
-from codegen.model import Model
-from host.kf import rts_smooth, run_filter
-from host.pipeline import PositionErrors, error_rows, format_errors, smooth_run
-from host.telemetry import Manifest, decode_all, encode_stimulus, sample_columns
-from host.zupt import rest_mask
+from accelnav.codegen.design import axis_design
+from accelnav.codegen.model import Model
+from accelnav.estimate.kf import rts_smooth, run_filter
+from accelnav.estimate.pipeline import PositionErrors, error_rows, format_errors, smooth_run
+from accelnav.estimate.zupt import rest_mask
+from accelnav.link.telemetry import Manifest, decode_all, encode_stimulus, sample_columns
 
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
 from .qemu import Mps2Board
@@ -61,8 +61,8 @@ class PilResult:
 
 def run_pil(model: Model, stim: bytes, n_samples: int, log: Path, *, timeout_s: float = 600.0) -> PilResult:
     """Run the firmware on the emulated Cortex-M3 with ``stim`` on UART1; UART0 recorded into ``log``."""
-    from host.logfile import read_log
-    from host.recorder import Recorder, Status
+    from accelnav.link.logfile import read_log
+    from accelnav.link.recorder import Recorder, Status
 
     elf = make_firmware("mps2_an385", model.source) / "accelnav_fw.elf"
     man = manifest(model.source)
@@ -105,10 +105,10 @@ def stated_bound(model: Model, j: int, run: SimRun, x_ref: np.ndarray) -> tuple[
     float64 run it bounds the distance to (the Kalman filter; for a gain schedule with skipped
     samples, the float64 filter with the schedule's gains, since a skip changes the Kalman gain but
     not the schedule). See codegen.bounds.twin_bound."""
-    from codegen.bounds import twin_bound
-    from codegen.emit_c import _schedule_for
-    from codegen.gains import run_gains
-    from codegen.ranges import plan_axis
+    from accelnav.codegen.bounds import twin_bound
+    from accelnav.codegen.emit_c import _schedule_for
+    from accelnav.codegen.gains import run_gains
+    from accelnav.codegen.ranges import plan_axis
 
     form = model.filter.form
     p = plan_axis(model, j, form)

@@ -51,8 +51,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.signal import lfilter
 
-from codegen.design import input_conversion
-from codegen.model import G0, Model
+from accelnav.codegen.design import input_conversion
+from accelnav.codegen.model import G0, Model
 
 from .trajectories import SCENARIOS, truth
 

@@ -7,10 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen.model import DEFAULT_MODEL, load_model, loads_model
+from accelnav.codegen.model import DEFAULT_MODEL, load_model, loads_model
+from accelnav.codegen.resources import models_dir
 
-REPO = Path(__file__).resolve().parents[1]
-MODELS = REPO / "models"
+REPO = Path(__file__).resolve().parents[1]  # the checkout: for ../shared and for reading docs only
+MODELS = models_dir()
 SHARED_DATA = REPO.parent / "shared" / "data"
 
 

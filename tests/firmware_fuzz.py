@@ -10,13 +10,8 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-if str(REPO) not in sys.path:
-    sys.path.insert(0, str(REPO))
-
-from hil_sim.firmware import HostFirmware, build_firmware, manifest  # noqa: E402
+from accelnav.hil_sim.firmware import HostFirmware, build_firmware, manifest
 
 
 def fuzz(examples: int, random_inputs: int, seed: int = 5) -> dict:
@@ -25,7 +20,7 @@ def fuzz(examples: int, random_inputs: int, seed: int = 5) -> dict:
     from hypothesis import HealthCheck, given, settings
     from hypothesis import strategies as st
 
-    from host.telemetry import encode_command, encode_stimulus, frame
+    from accelnav.link.telemetry import encode_command, encode_stimulus, frame
 
     mod = build_firmware(sanitize=True)
     fw = HostFirmware(mod)

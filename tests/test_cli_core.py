@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from conftest import MODELS
 
-from host.cli import main
-from host.runfile import FORMAT, load_run
+from accelnav.cli import main
+from accelnav.data.runfile import FORMAT, load_run
 
 
 def _run(argv, capsys):

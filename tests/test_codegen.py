@@ -1,4 +1,4 @@
-"""Generated C, through cffi, in lockstep with the float64 reference (host.kf).
+"""Generated C, through cffi, in lockstep with the float64 reference (accelnav.estimate.kf).
 
 Every state at every step must lie within the generator's stated bound, and
 after the first second within 1e-3 of the reference's own standard deviation;
@@ -17,16 +17,16 @@ import subprocess
 import numpy as np
 import pytest
 
-from codegen.bounds import twin_bound
-from codegen.design import axis_design
-from codegen.emit_c import _schedule_for, emit
-from codegen.gains import run_gains
-from codegen.harness import STRICT, AxisRunner, build
-from codegen.model import load_model, loads_model
-from codegen.ranges import plan_axis
-from host.kf import run_filter
+from accelnav.codegen.bounds import twin_bound
+from accelnav.codegen.design import axis_design
+from accelnav.codegen.emit_c import _schedule_for, emit
+from accelnav.codegen.gains import run_gains
+from accelnav.codegen.harness import STRICT, AxisRunner, build
+from accelnav.codegen.model import load_model, loads_model
+from accelnav.codegen.ranges import plan_axis
+from accelnav.estimate.kf import run_filter
 
-sensor = pytest.importorskip("hil_sim.sensor")
+sensor = pytest.importorskip("accelnav.hil_sim.sensor")
 
 SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shock")
 DURATION = {100.0: 30.0, 1000.0: 3.0}
@@ -273,7 +273,7 @@ def test_float32_variant(workdir):
 
 
 def test_cli_writes_files_and_report(tmp_path, capsys):
-    from host.cli import main
+    from accelnav.cli import main
 
     model = load_model()
     assert main(["codegen", model.source, "--out", str(tmp_path), "--report"]) == 0

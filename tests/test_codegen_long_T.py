@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from test_codegen import SIGMA_FRACTION, _check_against_bound, built, plan
 
-from codegen.design import axis_design
-from codegen.gains import run_gains
-from codegen.harness import AxisRunner
-from codegen.model import load_model, loads_model
-from hil_sim import sensor
-from host.kf import run_filter
+from accelnav.codegen.design import axis_design
+from accelnav.codegen.gains import run_gains
+from accelnav.codegen.harness import AxisRunner
+from accelnav.codegen.model import load_model, loads_model
+from accelnav.estimate.kf import run_filter
+from accelnav.hil_sim import sensor
 
 
 @pytest.fixture(scope="module")

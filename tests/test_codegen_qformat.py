@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from codegen.qformat import QFormat, bits_for, const_format, dequantize, fit, quantize
+from accelnav.codegen.qformat import QFormat, bits_for, const_format, dequantize, fit, quantize
 
 Q31 = QFormat(32, 31)
 Q12_19 = QFormat(32, 19)
@@ -54,8 +54,8 @@ def test_compiled_riccati_is_bit_identical_to_python(default_model):
     """The gain recursion's C copy (used for speed) repeats the Python one operation for operation."""
     import numpy as np
 
-    from codegen import gains
-    from codegen.design import axis_design
+    from accelnav.codegen import gains
+    from accelnav.codegen.design import axis_design
 
     assert gains._riccati_lib() is not None, "a C compiler is on this machine: the compiled path must build"
     key = gains._key(axis_design(default_model, 1))

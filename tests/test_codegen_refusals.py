@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import pytest
 
-from codegen.emit_c import emit
-from codegen.model import ModelError, load_model, loads_model
+from accelnav.codegen.emit_c import emit
+from accelnav.codegen.model import ModelError, load_model, loads_model
 
 BASE = open(load_model().source).read()
 
@@ -85,7 +85,7 @@ MALFORMED = [
 
 @pytest.mark.parametrize("old, new, message", MALFORMED)
 def test_malformed_via_cli(old, new, message, tmp_path, capsys):
-    from host.cli import main
+    from accelnav.cli import main
 
     path = tmp_path / "bad.toml"
     path.write_text(variant((old, new)))

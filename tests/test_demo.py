@@ -6,8 +6,8 @@ import shutil
 
 import pytest
 
-from codegen.model import load_model
-from host.cli import main
+from accelnav.cli import main
+from accelnav.codegen.model import load_model
 
 
 def test_demo_runs_the_whole_chain(tmp_path, capsys):
@@ -36,7 +36,7 @@ def test_demo_runs_the_whole_chain(tmp_path, capsys):
 
 
 def test_demo_refuses_pil_on_without_emulator(tmp_path, capsys, monkeypatch):
-    import host.cmd_demo as demo
+    import accelnav.cli.demo as demo
 
     monkeypatch.setattr(demo.shutil, "which", lambda name: None)
     assert main(["demo", "--pil", "on", "--out", str(tmp_path)]) == 2

@@ -1,4 +1,4 @@
-"""The compiled filter + smoother (host.fastsmooth) against the float64 reference, every sample.
+"""The compiled filter + smoother (accelnav.estimate.fastsmooth) against the float64 reference, every sample.
 
 Agreement is asserted as in test_reference_oracles: |ours - ref| <= 1e-9 (|ref| + sigma)
 for states, 1e-9 (|P_ij| + sqrt(P_ii P_jj)) for covariances, for the filter's
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from conftest import assert_rel_close
 
-from codegen.design import axis_design
-from hil_sim.sensor import simulate
-from host import fastsmooth as fs
-from host.kf import position_fix, rts_smooth, run_filter, zero_velocity
+from accelnav.codegen.design import axis_design
+from accelnav.estimate import fastsmooth as fs
+from accelnav.estimate.kf import position_fix, rts_smooth, run_filter, zero_velocity
+from accelnav.hil_sim.sensor import simulate
 
 RTOL = 1e-9
 

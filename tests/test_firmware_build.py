@@ -19,14 +19,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil_sim.firmware import DUTY_MODEL
-from hil_sim.firmware import make_firmware as build_image
-from hil_sim.qemu import Mps2Board, qemu_command
-from host.recorder import Recorder, Status, decode_log
-from host.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus
+from accelnav.hil_sim.firmware import DUTY_MODEL
+from accelnav.hil_sim.firmware import make_firmware as build_image
+from accelnav.hil_sim.qemu import Mps2Board, qemu_command
+from accelnav.link.recorder import Recorder, Status, decode_log
+from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus
 
 REPO = Path(__file__).resolve().parents[1]
-GEN = REPO / "build" / "firmware" / "gen"
 STM32_FLASH, STM32_RAM = 64 * 1024, 20 * 1024
 
 needs_arm = pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None, reason="arm-none-eabi-gcc not installed")
@@ -46,7 +45,7 @@ def sizes(out: Path) -> dict[str, int]:
 
 def test_host_board_builds_and_runs_as_a_program():
     out = make_firmware("host")
-    man = Manifest.load(GEN / "adxl250_default" / "acnframe.json")
+    man = Manifest.load(out / "gen" / "acnframe.json")
     code = 2048 + np.random.default_rng(3).integers(-30, 30, (300, 2))
     stdin = encode_command(man, "info") + encode_stimulus(man, code=code)
     done = subprocess.run([out / "accelnav_fw"], input=stdin, capture_output=True, timeout=60)
@@ -104,7 +103,7 @@ def test_firmware_c_is_clang_formatted():
 def test_mps2_an385_in_qemu_matches_the_host_board(tmp_path):
     out = make_firmware("mps2_an385")
     host = make_firmware("host")
-    man = Manifest.load(GEN / "adxl250_default" / "acnframe.json")
+    man = Manifest.load(out / "gen" / "acnframe.json")
     # the README documents the very command hil_sim.qemu runs (ports are examples there)
     readme = (REPO / "firmware" / "README.md").read_text()
     documented = " ".join(qemu_command("build/firmware/mps2_an385/accelnav_fw.elf", uart_ports=(5760, 5761)))
@@ -138,7 +137,7 @@ def test_mps2_an385_in_qemu_matches_the_host_board(tmp_path):
 @needs_qemu
 def test_mps2_commands_in_qemu():
     out = make_firmware("mps2_an385")
-    man = Manifest.load(GEN / "adxl250_default" / "acnframe.json")
+    man = Manifest.load(out / "gen" / "acnframe.json")
     with Mps2Board(out / "accelnav_fw.elf") as board:
         deadline = time.monotonic() + 20
         tel, feed = board.open(0), board.open(1)

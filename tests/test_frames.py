@@ -16,11 +16,11 @@ import zlib
 import numpy as np
 import pytest
 
-from codegen.frames import COMMANDS, MAX_ENCODED, layout
-from codegen.model import load_model
-from hil_sim.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
-from host.cbuild import cache_dir
-from host.telemetry import (
+from accelnav.codegen.cbuild import cache_dir
+from accelnav.codegen.frames import COMMANDS, MAX_ENCODED, layout
+from accelnav.codegen.model import load_model
+from accelnav.hil_sim.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
+from accelnav.link.telemetry import (
     Decoder,
     cobs_decode,
     cobs_encode,
@@ -94,7 +94,7 @@ def test_layout_hash_follows_the_layout():
 
 
 def test_generated_frame_code_is_reproducible():
-    from codegen.frames import emit_frames
+    from accelnav.codegen.frames import emit_frames
 
     files = generated(None)
     again = emit_frames(load_model(), json.loads(files["accelnav.json"]))
@@ -217,7 +217,7 @@ def test_stream_split_anywhere_decodes_the_same(fw_mod, man):
 
 def _run_filter_directly(kind, raw):
     """The generated filter alone (codegen.harness), for comparison with what the firmware streams."""
-    from codegen.harness import AxisRunner, build
+    from accelnav.codegen.harness import AxisRunner, build
 
     files = {k: v for k, v in generated(MODELS[kind]).items() if k.startswith("accelnav.")}
     mod = build(files, cache_dir() / "harness")

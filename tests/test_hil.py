@@ -14,11 +14,11 @@ import subprocess
 import pytest
 from conftest import MODELS
 
-from codegen.model import load_model
-from hil_sim import hil, qemu
-from hil_sim.firmware import manifest
-from hil_sim.sensor import simulate
-from host.cli import main
+from accelnav.cli import main
+from accelnav.codegen.model import load_model
+from accelnav.hil_sim import hil, qemu
+from accelnav.hil_sim.firmware import manifest
+from accelnav.hil_sim.sensor import simulate
 
 SIGMA_FRACTION = 1e-3  # firmware vs float64 reference, in units of the reference's sigma, after 1 s
 
@@ -68,7 +68,7 @@ def test_sil_agrees_with_reference_and_compare_catches_a_flipped_bit(default_mod
     assert c.pil_equal_sil and c.first_difference is None
     assert max(c.max_err_sigma.values()) < SIGMA_FRACTION and c.max_of_bound <= 1.0
     # one bit of one state in frame 500, re-framed with a valid CRC: must be seen
-    from host.telemetry import decode_all, encode_frames
+    from accelnav.link.telemetry import decode_all, encode_frames
 
     frames, _ = decode_all(man, sil)
     samples = frames["sample"].copy()

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from codegen.model import G0
-from codegen.modelfile import revalidate
-from hil_sim.sensor import noise_sigma_rho, simulate
-from host.noiseid import allan_deviation, derivative_variance, identify_noise
+from accelnav.codegen.model import G0
+from accelnav.codegen.modelfile import revalidate
+from accelnav.hil_sim.sensor import noise_sigma_rho, simulate
+from accelnav.identify.noiseid import allan_deviation, derivative_variance, identify_noise
 
 
 def oadev_by_definition(y: np.ndarray, rate: float, m: int) -> float:

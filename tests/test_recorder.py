@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 import serial
 
-from codegen.model import load_model
-from hil_sim.firmware import HostFirmware, build_firmware, generated, manifest
-from host.cli import main as cli_main
-from host.logfile import LogError, LogWriter, read_log
-from host.recorder import Recorder, Status, decode_log
-from host.runfile import load_run
-from host.telemetry import decode_all, encode_stimulus
+from accelnav.cli import main as cli_main
+from accelnav.codegen.model import load_model
+from accelnav.data.runfile import load_run
+from accelnav.hil_sim.firmware import HostFirmware, build_firmware, generated, manifest
+from accelnav.link.logfile import LogError, LogWriter, read_log
+from accelnav.link.recorder import Recorder, Status, decode_log
+from accelnav.link.telemetry import decode_all, encode_stimulus
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -156,7 +156,7 @@ def test_log_info_and_export(tmp_path, man, telemetry, capsys):
 
 def _start_recorder(tmp_path, manifest_file, slave_name, out):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    cmd = [sys.executable, "-m", "host.cli", "record", slave_name, "--out", str(out)]
+    cmd = [sys.executable, "-m", "accelnav.cli", "record", slave_name, "--out", str(out)]
     cmd += ["--manifest", str(manifest_file), "--no-commands"]
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60

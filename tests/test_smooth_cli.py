@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from conftest import assert_rel_close
 
-from codegen.design import axis_design
-from host.cli import main
-from host.kf import rts_smooth, run_filter
-from host.runfile import load_run
+from accelnav.cli import main
+from accelnav.codegen.design import axis_design
+from accelnav.data.runfile import load_run
+from accelnav.estimate.kf import rts_smooth, run_filter
 
 
 def _run(argv, capsys):

@@ -1,6 +1,6 @@
 """Corruption and fuzz tests of the telemetry link.
 
-Decoder (host/telemetry.py), hypothesis-driven with a fixed derandomised
+Decoder (host/link/telemetry.py), hypothesis-driven with a fixed derandomised
 seed: streams of frames suffer bit flips, dropped and inserted bytes, garbage
 bursts (with and without zero bytes) and truncated frames. The oracle is
 independent of the decoder: a frame must be received if and only if its
@@ -30,8 +30,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hil_sim.firmware import manifest
-from host.telemetry import Decoder, decode_naive, encode_frames
+from accelnav.hil_sim.firmware import manifest
+from accelnav.link.telemetry import Decoder, decode_naive, encode_frames
 
 EXAMPLES = 440  # about 250 damage operations each: comfortably over the 1e5 the issue asks for
 BULK_OPS = (200, 300)  # numpy-driven damage per example, on top of hypothesis' own list
@@ -198,7 +198,7 @@ def test_command_parser_fuzz_under_sanitizers():
     env["LD_PRELOAD"] = libasan
     env["ASAN_OPTIONS"] = "detect_leaks=0:abort_on_error=1"
     env["UBSAN_OPTIONS"] = "halt_on_error=1:print_stacktrace=1"
-    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parent), str(Path(__file__).parents[1])])
+    env["PYTHONPATH"] = str(Path(__file__).parent)
     script = Path(__file__).with_name("firmware_fuzz.py")
     done = subprocess.run(
         [sys.executable, str(script), "3000", "60000"], capture_output=True, text=True, env=env, timeout=600

@@ -8,7 +8,14 @@ from scipy import stats
 from statsmodels.stats.diagnostic import acorr_ljungbox
 from statsmodels.tsa.stattools import acf as sm_acf
 
-from host.whiteness import acf, acf_band_test, cumulative_periodogram, cumulative_periodogram_test, ljung_box, whiteness
+from accelnav.identify.whiteness import (
+    acf,
+    acf_band_test,
+    cumulative_periodogram,
+    cumulative_periodogram_test,
+    ljung_box,
+    whiteness,
+)
 
 
 def ar1(n: int, phi: float, seed: int, mean: float = 0.0) -> np.ndarray:

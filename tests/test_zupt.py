@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from hil_sim.sensor import simulate
-from host import zupt
-from host.pipeline import smooth_run
+from accelnav.estimate import zupt
+from accelnav.estimate.pipeline import smooth_run
+from accelnav.hil_sim.sensor import simulate
 
 SEEDS = (101, 102, 103)
 

@@ -17,9 +17,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from scipy import signal
 
-from .biasfit import BiasFit
-from .noiseid import FLICKER_FACTOR, NoiseId
-from .whiteness import Whiteness
+from accelnav.identify.biasfit import BiasFit
+from accelnav.identify.noiseid import FLICKER_FACTOR, NoiseId
+from accelnav.identify.whiteness import Whiteness
 
 MAX_POINTS = 1000  # block means drawn for a long recording
 

@@ -6,9 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.model import DEFAULT_MODEL, load_model
-
-from .errors import UserError
+from accelnav.codegen.model import DEFAULT_MODEL, load_model
+from accelnav.errors import UserError
 
 
 def register(sub) -> None:
@@ -26,13 +25,12 @@ def register(sub) -> None:
 
 
 def cmd_hil(args) -> int:
-    from hil_sim import hil
-    from hil_sim.firmware import FirmwareError, manifest
-    from hil_sim.qemu import QemuError
-    from hil_sim.sensor import simulate
-
-    from .cmd_core import require_scenario
-    from .progress import Progress
+    from accelnav.cli.core import require_scenario
+    from accelnav.hil_sim import hil
+    from accelnav.hil_sim.firmware import FirmwareError, manifest
+    from accelnav.hil_sim.qemu import QemuError
+    from accelnav.hil_sim.sensor import simulate
+    from accelnav.progress import Progress
 
     model = load_model(args.model)
     require_scenario(args.scenario)
@@ -66,7 +64,7 @@ def cmd_hil(args) -> int:
 
 
 def plot_hil(run, c, path: Path, title: str) -> Path:
-    from .plots import _pyplot
+    from accelnav.plots.run import _pyplot
 
     plt = _pyplot()
     t = run.t

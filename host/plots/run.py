@@ -6,9 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.model import Model
-
-from .pipeline import dead_reckoning
+from accelnav.codegen.model import Model
+from accelnav.estimate.pipeline import dead_reckoning
 
 
 def _pyplot():
@@ -85,7 +84,7 @@ def _save(plt, fig, path: Path) -> Path:
 def _marks(ax, arrays, j, t, y_of_k=None):
     """Shade the samples whose zero-velocity update was applied; dots for position fixes."""
     if "zupt" in arrays and arrays["zupt"][:, j].any():
-        from .zupt import intervals
+        from accelnav.estimate.zupt import intervals
 
         # an update every few samples: join the runs with gaps up to a second
         z = arrays["zupt"][:, j].astype(float)
@@ -113,9 +112,8 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
     * fig12_position_smoother.png: position from the filter and the smoother
       (+-1 sigma), and the truth; zero-velocity updates shaded, fixes as dots.
     """
-    from codegen.design import axis_design
-
-    from .kf import bias_model
+    from accelnav.codegen.design import axis_design
+    from accelnav.estimate.kf import bias_model
 
     plt = _pyplot()
     folder = Path(folder)

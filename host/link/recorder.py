@@ -1,10 +1,10 @@
-"""Record a telemetry link to a log: pyserial in, :mod:`host.logfile` out, decoded live for the status line.
+"""Record a telemetry link to a log: pyserial in, :mod:`accelnav.link.logfile` out, decoded live for the status line.
 
 Every link goes through ``serial.serial_for_url``: a real port (``/dev/ttyUSB0``,
 ``COM3``), a pty (``/dev/pts/7``), a TCP socket such as QEMU's ``-serial``
 (``socket://localhost:5760``) or ``loop://`` for tests. The recorder writes
 the raw bytes to the log (nothing is lost to a decoding problem), decodes them
-as they come with :class:`host.telemetry.Decoder` for the status line (rate,
+as they come with :class:`accelnav.link.telemetry.Decoder` for the status line (rate,
 frames, lost frames, CRC errors), checks the info frame against its manifest,
 and stops on SIGINT/SIGTERM, after ``duration`` or ``max_frames``, or when the
 link goes away (the log is closed cleanly in every case).
@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 
 import serial
 
-from .logfile import LogWriter
-from .telemetry import Decoder, Manifest, encode_command
+from accelnav.link.logfile import LogWriter
+from accelnav.link.telemetry import Decoder, Manifest, encode_command
 
 DEFAULT_BAUD = 921600
 
@@ -178,7 +178,7 @@ def decode_log(path) -> DecodedLog:
     """Read a log and decode its bytes with the manifest stored in it."""
     import numpy as np
 
-    from .logfile import read_log
+    from accelnav.link.logfile import read_log
 
     contents = read_log(path)
     man = Manifest(contents.meta["manifest"])

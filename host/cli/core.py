@@ -7,12 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.model import DEFAULT_MODEL, Model, load_model
-
-from .errors import UserError
-from .pipeline import filter_run, format_errors, position_errors, smooth_run
-from .runfile import STATE, export_csv, load_run, save_run
-from .zupt import ZuptParams
+from accelnav.codegen.model import DEFAULT_MODEL, Model, load_model
+from accelnav.data.runfile import STATE, export_csv, load_run, save_run
+from accelnav.errors import UserError
+from accelnav.estimate.pipeline import filter_run, format_errors, position_errors, smooth_run
+from accelnav.estimate.zupt import ZuptParams
 
 
 def _model_arg(p: argparse.ArgumentParser, help_extra: str = "") -> None:
@@ -44,9 +43,10 @@ def register(sub) -> None:
     p = sub.add_parser(
         "smooth",
         help="filter and RTS-smooth a run file (compiled), optionally with position fixes and zero-velocity updates",
-        description="Float64 forward filter and RTS smoother per axis (host/fastsmooth.py), agreeing with the "
-        "reference of accelnav filter to 1e-9. Without --fixes and --zupt the plain path runs: gains computed "
-        "once per model and run length, then a few operations per sample. Zero-velocity detection: host/zupt.py.",
+        description="Float64 forward filter and RTS smoother per axis (accelnav.estimate.fastsmooth), agreeing "
+        "with the reference of accelnav filter to 1e-9. Without --fixes and --zupt the plain path runs: gains "
+        "computed once per model and run length, then a few operations per sample. Zero-velocity detection: "
+        "accelnav.estimate.zupt.",
     )
     p.add_argument("run", type=Path, help="run file (.npz) from accelnav sim, filter or a recording")
     _model_arg(p, "; default: the model embedded in the run file")
@@ -107,14 +107,14 @@ def register(sub) -> None:
 
 def require_scenario(name: str) -> None:
     """UserError for a --scenario the simulator does not have (shared by sim, hil and demo)."""
-    from hil_sim.trajectories import SCENARIOS
+    from accelnav.hil_sim.trajectories import SCENARIOS
 
     if name not in SCENARIOS:
         raise UserError(f"--scenario: unknown scenario {name!r}; accepted: {', '.join(SCENARIOS)}")
 
 
 def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[str, np.ndarray]:
-    from hil_sim.sensor import simulate
+    from accelnav.hil_sim.sensor import simulate
 
     require_scenario(scenario)
     try:
@@ -165,7 +165,7 @@ def _summary(arrays: dict[str, np.ndarray]) -> str:
 
 def cmd_sim(args) -> int:
     if args.list_scenarios:
-        from hil_sim.trajectories import SCENARIOS
+        from accelnav.hil_sim.trajectories import SCENARIOS
 
         print("\n".join(SCENARIOS))
         return 0
@@ -190,8 +190,8 @@ def cmd_filter(args) -> int:
 
 
 def cmd_smooth(args) -> int:
-    from . import zupt
-    from .fixes import read_fixes
+    from accelnav.estimate import zupt
+    from accelnav.estimate.fixes import read_fixes
 
     arrays, model = _load(args)
     names = [str(a) for a in arrays["axis_names"]]
@@ -229,7 +229,7 @@ def cmd_smooth(args) -> int:
         print(format_errors(rows))
     _save(args, arrays, model)
     if args.plots is not None:
-        from .plots import plot_run, plot_smoothing
+        from accelnav.plots.run import plot_run, plot_smoothing
 
         print(f"wrote {plot_run(arrays, model, args.plots / 'smooth.png')}")
         for path in plot_smoothing(arrays, model, args.plots):

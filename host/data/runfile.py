@@ -39,9 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.model import Model, ModelError, loads_model
-
-from .errors import UserError
+from accelnav.codegen.model import Model, ModelError, loads_model
+from accelnav.errors import UserError
 
 FORMAT = "accelnav-run/1"
 STATE = ("r", "u", "a", "eps")

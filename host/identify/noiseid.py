@@ -144,7 +144,7 @@ def allan_deviation(y, rate_hz: float, *, taus_per_decade: int = TAUS_PER_DECADE
     """Overlapping Allan deviation of samples ``y`` at ``rate_hz`` with 95 % intervals.
 
     Averaging factors m are log-spaced from 1 to a quarter of the record.
-    ``progress`` (a :class:`host.progress.Progress`, or None) has its ``total`` set to the number
+    ``progress`` (a :class:`accelnav.progress.Progress`, or None) has its ``total`` set to the number
     of taus and is advanced as they are computed.
     """
     y = np.asarray(y, dtype=np.float64)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from codegen.emit_c import emit, write
-from codegen.model import load_model
+from accelnav.codegen.emit_c import emit, write
+from accelnav.codegen.model import load_model
 
 
 def register(sub) -> None:
@@ -31,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     for path in write(files, args.out):
         print(path)
     if args.report:
-        from codegen.report import report
+        from accelnav.codegen.report import report
 
         print(report(model, form=args.form, arith=arith, files=files, prefix=args.prefix))
     return 0

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import UserError
+from accelnav.errors import UserError
 
 
 def register(sub) -> None:
@@ -41,9 +41,8 @@ def register(sub) -> None:
 
 
 def _manifest(args):
-    from codegen.model import load_model
-
-    from .telemetry import Manifest
+    from accelnav.codegen.model import load_model
+    from accelnav.link.telemetry import Manifest
 
     if args.manifest is not None:
         try:
@@ -58,7 +57,7 @@ def _manifest(args):
 def cmd_record(args) -> int:
     import serial
 
-    from .recorder import Recorder, Status
+    from accelnav.link.recorder import Recorder, Status
 
     if args.out.exists() and not args.force:
         raise UserError(f"--out: {args.out} exists; give --force to overwrite it")
@@ -100,8 +99,8 @@ def cmd_record(args) -> int:
 
 
 def _summary(path: Path) -> dict:
-    from .logfile import LogError
-    from .recorder import decode_log
+    from accelnav.link.logfile import LogError
+    from accelnav.link.recorder import decode_log
 
     try:
         d = decode_log(path)
@@ -146,13 +145,12 @@ def cmd_log_info(args) -> int:
 
 
 def cmd_log_export(args) -> int:
-    from codegen.design import input_conversion
-    from codegen.model import ModelError, loads_model
-
-    from .logfile import LogError
-    from .recorder import decode_log
-    from .runfile import FORMAT
-    from .telemetry import sample_columns
+    from accelnav.codegen.design import input_conversion
+    from accelnav.codegen.model import ModelError, loads_model
+    from accelnav.data.runfile import FORMAT
+    from accelnav.link.logfile import LogError
+    from accelnav.link.recorder import decode_log
+    from accelnav.link.telemetry import sample_columns
 
     suffix = args.out.suffix.lower()
     if suffix not in (".csv", ".npz"):
@@ -181,7 +179,7 @@ def cmd_log_export(args) -> int:
         np.savetxt(args.out, np.column_stack(table), delimiter=",", header=",".join(header), comments="", fmt="%.17g")
         print(f"accelnav log export: {args.out}: {len(cols['t'])} rows")
         return 0
-    # NPZ: an accelnav run file (host/runfile.py) plus the firmware's own states
+    # NPZ: an accelnav run file (host/data/runfile.py) plus the firmware's own states
     text = d.meta.get("model_toml") or ""
     if not text:
         raise UserError(f"{args.log}: the log carries no model text (recorded with --manifest); export to .csv instead")

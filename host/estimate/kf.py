@@ -25,9 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from codegen.design import AxisDesign
-
-from .progress import Progress
+from accelnav.codegen.design import AxisDesign
+from accelnav.progress import Progress
 
 
 @dataclass(frozen=True)

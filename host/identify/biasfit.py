@@ -371,7 +371,7 @@ def fit_bias(
     """Fit eps(t) = c1 (1 - exp(-(t - t[0])/T)) + c2 to the stationary samples ``y`` at times ``t``.
 
     ``T_min`` / ``T_max`` bound the search (default: 10 sample periods and 10
-    record durations). ``progress`` (a :class:`host.progress.Progress` over
+    record durations). ``progress`` (a :class:`accelnav.progress.Progress` over
     4 stages, or None) is advanced as the stages finish. Raises
     :class:`FitError` for data it cannot use (too few samples, non-finite
     values, time not increasing, a constant signal).

@@ -1,7 +1,7 @@
 """Run the filter and smoother over every axis of a run (no I/O here).
 
-filter_run uses the float64 reference (host.kf); smooth_run the compiled
-filter and smoother of host.fastsmooth, which agree with it to 1e-9.
+filter_run uses the float64 reference (accelnav.estimate.kf); smooth_run the compiled
+filter and smoother of accelnav.estimate.fastsmooth, which agree with it to 1e-9.
 """
 
 from __future__ import annotations
@@ -10,10 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from codegen.design import axis_design
-from codegen.model import Model
-
-from .kf import double_integrate, run_filter
+from accelnav.codegen.design import axis_design
+from accelnav.codegen.model import Model
+from accelnav.estimate.kf import double_integrate, run_filter
 
 
 def filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None) -> dict[str, np.ndarray]:
@@ -44,17 +43,17 @@ def smooth_run(
 ) -> dict[str, np.ndarray]:
     """Return ``arrays`` with the filter's and the RTS smoother's output (keys filt_*, smooth_*).
 
-    Compiled (host.fastsmooth): the plain path when there are no extras, else
+    Compiled (accelnav.estimate.fastsmooth): the plain path when there are no extras, else
     the general path. ``fixes[j]`` are position-fix measurements of axis
-    column j (host.fixes.read_fixes); ``rest`` is an (N,) mask of samples at
-    rest (host.zupt.rest_mask, or intervals from a file) that become
+    column j (accelnav.estimate.fixes.read_fixes); ``rest`` is an (N,) mask of samples at
+    rest (accelnav.estimate.zupt.rest_mask, or intervals from a file) that become
     zero-velocity updates, gated when ``zupt_gated``. The filter keys are
     rewritten too, so that filter and smoother saw the same measurements.
     Adds ``zupt`` (N, n_axes) bool, the samples whose zero-velocity update
     was applied, and ``fixes`` (M, 4) [t, axis column, position, sigma].
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
-    from . import fastsmooth, zupt
+    from accelnav.estimate import fastsmooth, zupt
 
     params = zupt.ZuptParams() if zupt_params is None else zupt_params
     n = len(arrays["t"])

@@ -1,10 +1,11 @@
 """Compiled float64 filter + RTS smoother of one axis: a fast plain path and a general path.
 
 Both return the same :class:`AxisSmooth` and agree with the reference
-(:func:`host.kf.run_filter` then :func:`host.kf.rts_smooth`) to rounding;
+(:func:`accelnav.estimate.kf.run_filter` then :func:`accelnav.estimate.kf.rts_smooth`) to rounding;
 tests/test_fastsmooth.py asserts 1e-9 relative, sigma-scaled, for states and
-covariances. The C is host/csrc/fastsmooth.c, built on first use by
-:mod:`host.cbuild`.
+covariances. The C is csrc/fastsmooth.c, compiled when the package is built
+(fastsmooth_build.py); a source checkout whose C was edited since builds it on
+first use with :mod:`accelnav.codegen.cbuild`.
 
 General path (:func:`smooth_general`)
 -------------------------------------
@@ -13,7 +14,7 @@ extra scalar measurements (position fixes, zero-velocity updates), then the
 4-state RTS smoother, exactly the reference's algorithm (Joseph update, the
 smoother gain solved on the diagonally equilibrated prior, here by Cholesky).
 An extra may carry a *gate* g > 0: it is applied only if its innovation passes
-y^2 <= g S (used for automatic zero-velocity updates, see host/zupt.py);
+y^2 <= g S (used for automatic zero-velocity updates, see host/estimate/zupt.py);
 which ones were applied is returned so the reference can be rerun with them.
 
 Plain path (:func:`smooth_plain`): the structure of the model
@@ -57,7 +58,7 @@ cached gains, backward (a, eps) means, forward r, u. Predict-only samples
 (clipped, missing) keep the gains data-independent, so the valid mask is part
 of the plain path (and of the cache key).
 
-Conventions of the outputs: those of host/kf.py. The smoother's last sample
+Conventions of the outputs: those of host/estimate/kf.py. The smoother's last sample
 is the filter's, exactly. Covariances are returned packed (10 numbers per
 sample, upper triangle by rows: rr ru ra re uu ua ue aa ae ee); use
 :func:`unpack` for (N, 4, 4).
@@ -75,12 +76,13 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.design import AxisDesign
+from accelnav.codegen.cbuild import STRICT_FLAGS, build_module
+from accelnav.codegen.design import AxisDesign
+from accelnav.codegen.resources import package_dir
+from accelnav.estimate.fastsmooth_build import kernel_cdef, source_hash
+from accelnav.estimate.kf import Measurement
 
-from .cbuild import STRICT_FLAGS, build_module
-from .kf import Measurement
-
-CSRC = Path(__file__).resolve().parent / "csrc"
+CSRC = package_dir("accelnav.estimate") / "csrc"  # package data
 PACKED = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))
 _ROWS = np.array([i for i, _ in PACKED])
 _COLS = np.array([j for _, j in PACKED])
@@ -90,18 +92,27 @@ _lib_lock = threading.Lock()
 _module = None
 
 
+def _prebuilt():
+    """The kernel compiled with the package (fastsmooth_build.py), if it was built from this very C."""
+    try:
+        from accelnav.estimate import _fastsmooth
+    except ImportError:
+        return None
+    built = _fastsmooth.ffi.string(_fastsmooth.lib.acn_fastsmooth_source()).decode()
+    return _fastsmooth if built == source_hash(CSRC) else None
+
+
 def _lib():
-    """The compiled kernels (built on first use, then cached on disk and in the process)."""
+    """The compiled kernels: the package's own build, else built on first use with the cffi builder."""
     global _module
     with _lib_lock:
         if _module is None:
+            _module = _prebuilt()
+        if _module is None:
             header = (CSRC / "fastsmooth.h").read_text()
-            a = header.index("/* ACN-CDEF-BEGIN */")
-            b = header.index("/* ACN-CDEF-END */")
-            cdef = header[a:b].split("\n", 1)[1]
             _module = build_module(
                 "acn_fastsmooth",
-                cdef,
+                kernel_cdef(header),
                 {"fastsmooth.c": (CSRC / "fastsmooth.c").read_text(), "fastsmooth.h": header},
                 main="fastsmooth.c",
                 extra_compile_args=(*STRICT_FLAGS, "-O3"),
@@ -361,7 +372,7 @@ def smooth_general(
     gates: Sequence[float] | None = None,
     out: AxisSmooth | None = None,
 ) -> AxisSmooth:
-    """Filter and smoother with extra scalar measurements (see host.kf.position_fix, zero_velocity).
+    """Filter and smoother with extra scalar measurements (see accelnav.estimate.kf.position_fix, zero_velocity).
 
     ``gates[i]`` > 0 makes extra i conditional (applied iff y^2 <= gates[i] S);
     0 or None applies it unconditionally. ``applied`` in the result follows

@@ -9,12 +9,12 @@ folder. The compile happens in a private temporary folder and the finished
 ``.so`` is moved into place with an atomic rename, so two processes building
 the same module at once cannot see a half-written file.
 
-Cache folder: ``$ACCELNAV_BUILD_DIR`` if set, else ``build/cffi`` in the
-source checkout when it is writable, else ``~/.cache/accelnav/cffi``. It is
-never committed (``build/`` is git-ignored).
+Cache folder: ``cffi/`` under :func:`accelnav.codegen.resources.cache_root`
+(``$ACCELNAV_CACHE_DIR``, else ``~/.cache/accelnav``): never inside the
+installed package or the source checkout.
 
 This is deliberately generic (it knows nothing about filters) so that the
-hand-written kernels in host/csrc and the generated code of codegen can share
+hand-written kernels in host/estimate/csrc and the generated code of codegen can share
 one builder.
 """
 
@@ -32,24 +32,14 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2")
+from .resources import cache_root
 
-_REPO = Path(__file__).resolve().parent.parent
+STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2")
 
 
 def cache_dir() -> Path:
     """Where built modules live (see the module docstring)."""
-    env = os.environ.get("ACCELNAV_BUILD_DIR")
-    if env:
-        return Path(env)
-    local = _REPO / "build" / "cffi"
-    try:
-        local.mkdir(parents=True, exist_ok=True)
-        if os.access(local, os.W_OK):
-            return local
-    except OSError:
-        pass
-    return Path.home() / ".cache" / "accelnav" / "cffi"
+    return cache_root() / "cffi"
 
 
 def build_module(

@@ -18,7 +18,7 @@ Formats
   1-D for one axis; without ``t`` the rate comes from ``rate_hz`` or the
   embedded model.
 
-Refusals (:class:`host.errors.UserError`, one line each, saying where):
+Refusals (:class:`accelnav.errors.UserError`, one line each, saying where):
 unreadable file, missing column, unknown unit, no time and no rate, time not
 finite or not increasing, a gap in time, a non-finite sample, too short a
 recording, a constant signal, a clipped signal (samples flagged in the file,
@@ -36,10 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.model import G0, ModelError, loads_model
-
-from .errors import UserError
-from .progress import Progress
+from accelnav.codegen.model import G0, ModelError, loads_model
+from accelnav.errors import UserError
+from accelnav.progress import Progress
 
 UNITS = {"g": G0, "mg": G0 * 1e-3, "m/s^2": 1.0}
 UNIT_ALIASES = {

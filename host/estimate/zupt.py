@@ -28,7 +28,7 @@ filter's velocity is far from zero with a small variance, and the update is
 refused; after a move that returns to rest it is accepted.
 
 Measurements: within each run of rest samples, one zero-velocity update
-(:func:`host.kf.zero_velocity`, u = 0 with standard deviation ``sigma``) every
+(:func:`accelnav.estimate.kf.zero_velocity`, u = 0 with standard deviation ``sigma``) every
 ``every_s`` seconds, from the run's first sample. Updating at every sample of
 a long rest would treat 100 readings of the same zero velocity per second as
 independent evidence and cost general-path time for nothing; one per 0.1 s
@@ -44,10 +44,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from codegen.design import axis_design
-from codegen.model import Model
-
-from .kf import Measurement, bias_model, zero_velocity
+from accelnav.codegen.design import axis_design
+from accelnav.codegen.model import Model
+from accelnav.estimate.kf import Measurement, bias_model, zero_velocity
 
 
 @dataclass(frozen=True)
@@ -136,20 +135,20 @@ def update_samples(mask: np.ndarray, model: Model, params: ZuptParams = ZuptPara
 
 
 def measurements(ks: np.ndarray, params: ZuptParams = ZuptParams()) -> tuple[list[Measurement], list[float]]:
-    """Zero-velocity updates at samples ``ks`` and their gates (for host.fastsmooth.smooth)."""
+    """Zero-velocity updates at samples ``ks`` and their gates (for accelnav.estimate.fastsmooth.smooth)."""
     extras = [zero_velocity(int(k), params.sigma) for k in ks]
     return extras, [params.gate] * len(extras)
 
 
 def intervals_from_csv(path, t: np.ndarray) -> np.ndarray:
     """A rest mask from a CSV of intervals (columns start_s, end_s; inclusive), on the sample times t."""
-    from .fixes import read_table
+    from accelnav.estimate.fixes import read_table
 
     rows = read_table(path, required=("start_s", "end_s"), optional=())
     mask = np.zeros(len(t), dtype=bool)
     for i, (a, b) in enumerate(zip(rows["start_s"], rows["end_s"], strict=True)):
         if not b >= a:
-            from .errors import UserError
+            from accelnav.errors import UserError
 
             raise UserError(f"{path}: row {i + 2}: end_s {b:g} is before start_s {a:g}")
         mask |= (t >= a) & (t <= b)

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import UserError
-from .kf import Measurement, position_fix
+from accelnav.errors import UserError
+from accelnav.estimate.kf import Measurement, position_fix
 
 
 def read_table(path, required: tuple[str, ...], optional: tuple[str, ...]) -> dict[str, list]:

@@ -78,8 +78,8 @@ class Manifest:
     @classmethod
     def for_model(cls, model, form: str | None = None) -> Manifest:
         """Generate the manifest of ``model`` (runs the filter generator: a few seconds)."""
-        from codegen.emit_c import emit
-        from codegen.frames import emit_frames
+        from accelnav.codegen.emit_c import emit
+        from accelnav.codegen.frames import emit_frames
 
         files = emit(model, form=form)
         frames = emit_frames(model, json.loads(files["accelnav.json"]))

@@ -24,10 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.design import input_conversion
-from codegen.model import DEFAULT_MODEL, Model, load_model
-
-from .errors import UserError
+from accelnav.codegen.design import input_conversion
+from accelnav.codegen.model import DEFAULT_MODEL, Model, load_model
+from accelnav.errors import UserError
 
 
 def register(sub) -> None:
@@ -60,7 +59,7 @@ class _Steps:
 
 def _quiet(argv: list[str], log: Path) -> None:
     """Run an accelnav command with its report going to ``log``; its errors still raise."""
-    from .cli import main
+    from accelnav.cli import main
 
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
@@ -83,8 +82,8 @@ def _pil_wanted(mode: str) -> tuple[bool, str]:
 
 def decoded_run(fitted: Model, run, telemetry: bytes) -> dict[str, np.ndarray]:
     """Run-file arrays from the firmware's sample frames (raw input, skip flags) plus the simulated truth."""
-    from hil_sim.firmware import manifest
-    from host.telemetry import decode_all, sample_columns
+    from accelnav.hil_sim.firmware import manifest
+    from accelnav.link.telemetry import decode_all, sample_columns
 
     man = manifest(fitted.source)
     frames, stats = decode_all(man, telemetry)
@@ -112,15 +111,15 @@ def decoded_run(fitted: Model, run, telemetry: bytes) -> dict[str, np.ndarray]:
 
 
 def cmd_demo(args) -> int:
-    from hil_sim import hil
-    from hil_sim.firmware import manifest
-    from hil_sim.sensor import simulate
-
-    from .cmd_core import require_scenario
-    from .pipeline import dead_reckoning, error_rows, format_errors, smooth_run
-    from .plots import plot_smoothing
-    from .runfile import save_run
-    from .zupt import rest_mask
+    from accelnav.cli.core import require_scenario
+    from accelnav.data.runfile import save_run
+    from accelnav.estimate.pipeline import dead_reckoning, error_rows, format_errors, smooth_run
+    from accelnav.estimate.zupt import rest_mask
+    from accelnav.hil_sim import hil
+    from accelnav.hil_sim.firmware import FirmwareError, manifest
+    from accelnav.hil_sim.qemu import QemuError
+    from accelnav.hil_sim.sensor import simulate
+    from accelnav.plots.run import plot_smoothing
 
     true_model = load_model(args.model)
     require_scenario(args.scenario)
@@ -170,7 +169,10 @@ def cmd_demo(args) -> int:
     pil = None
     if pil_on:
         with steps.step("run the same stimulus on the emulated Cortex-M3 (PIL, qemu mps2-an385)"):
-            res = hil.run_pil(fitted, stim, len(run.t), out / "pil.acnlog")
+            try:
+                res = hil.run_pil(fitted, stim, len(run.t), out / "pil.acnlog")
+            except (QemuError, FirmwareError) as exc:
+                raise UserError(f"PIL: {str(exc).splitlines()[0]}") from None
             pil = res.telemetry
             verdict = "bit-identical to SIL" if pil == sil else "DIFFERS from SIL"
             print(f"    {len(run.t) / res.seconds:,.0f} samples/s; {verdict}")

@@ -1,10 +1,10 @@
 """``accelnav fit-bias``: bias model, whiteness and noise figures from a stationary recording.
 
-For each axis: read and check the samples (:mod:`host.recording`), fit
-eps(t) = c1 (1 - exp(-t/T)) + c2 (:mod:`host.biasfit`), test the residuals
-for whiteness (:mod:`host.whiteness`), identify the noise from their Allan
-deviation (:mod:`host.noiseid`), print a report and optionally draw the
-figures (:mod:`host.biasfit_plots`). Then write a model file: the input
+For each axis: read and check the samples (:mod:`accelnav.data.recording`), fit
+eps(t) = c1 (1 - exp(-t/T)) + c2 (:mod:`accelnav.identify.biasfit`), test the residuals
+for whiteness (:mod:`accelnav.identify.whiteness`), identify the noise from their Allan
+deviation (:mod:`accelnav.identify.noiseid`), print a report and optionally draw the
+figures (:mod:`accelnav.plots.biasfit`). Then write a model file: the input
 model (``--model``; else the one embedded in the recording; else the embedded
 default) with the fitted axes merged in and the noise figures replaced:
 
@@ -24,15 +24,14 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from codegen.model import DEFAULT_MODEL, G0, Model, load_model, loads_model
-from codegen.modelfile import dump_model, revalidate, with_axis_bias, with_noise
-
-from .biasfit import BiasFit, FitError, fit_bias
-from .errors import UserError
-from .noiseid import NoiseId, identify_noise
-from .progress import Progress
-from .recording import MIN_DURATION_S, Recording, check_axis, read_recording
-from .whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
+from accelnav.codegen.model import DEFAULT_MODEL, G0, Model, load_model, loads_model
+from accelnav.codegen.modelfile import dump_model, revalidate, with_axis_bias, with_noise
+from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, read_recording
+from accelnav.errors import UserError
+from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
+from accelnav.identify.noiseid import NoiseId, identify_noise
+from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
+from accelnav.progress import Progress
 
 
 def register(sub) -> None:
@@ -142,7 +141,7 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
     print("\n".join(model_report(model, base, base_label, rec, results, args.sigma_n, args.out)))
 
     if args.plots is not None:
-        from .biasfit_plots import plot_all
+        from accelnav.plots.biasfit import plot_all
 
         paths = []
         with Progress("plots", total=len(results), unit="axes") as p:

@@ -3,7 +3,7 @@
 Each subcommand lives in its own module that exposes ``register(sub)``: it
 adds its parser to the argparse sub-parsers and sets ``func`` to a callable
 taking the parsed arguments and returning an exit status. Bad input raises
-:class:`host.errors.UserError` or :class:`codegen.model.ModelError`; main()
+:class:`accelnav.errors.UserError` or :class:`codegen.model.ModelError`; main()
 prints those as one line and exits 2.
 """
 
@@ -13,18 +13,17 @@ import argparse
 import importlib
 import sys
 
-from codegen.model import ModelError
-
-from .errors import UserError
+from accelnav.codegen.model import ModelError
+from accelnav.errors import UserError
 
 # Modules that provide subcommands, in the order `accelnav --help` lists them.
 COMMAND_MODULES = (
-    "host.cmd_core",  # sim, filter, smooth
-    "host.cmd_fit_bias",  # fit-bias
-    "host.cmd_codegen",  # codegen
-    "host.cmd_record",  # record, log info|export
-    "host.cmd_hil",  # hil
-    "host.cmd_demo",  # demo
+    "accelnav.cli.core",  # sim, filter, smooth
+    "accelnav.cli.fit_bias",  # fit-bias
+    "accelnav.cli.codegen",  # codegen
+    "accelnav.cli.record",  # record, log info|export
+    "accelnav.cli.hil",  # hil
+    "accelnav.cli.demo",  # demo
 )
 
 
@@ -59,6 +58,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("accelnav: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (accelnav ... | head): not an error of ours
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

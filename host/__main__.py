@@ -1,0 +1,7 @@
+"""``python -m accelnav``: the accelnav command."""
+
+import sys
+
+from accelnav.cli import main
+
+sys.exit(main())

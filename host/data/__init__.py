@@ -1,0 +1,1 @@
+"""Files a user brings or keeps: recordings in (recording) and accelnav run files (runfile)."""

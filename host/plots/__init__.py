@@ -1,0 +1,1 @@
+"""Figures a person looks at: a run and its smoothing (run), the bias fit (biasfit)."""

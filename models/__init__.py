@@ -1,0 +1,1 @@
+"""The model files shipped with accelnav (package data; see accelnav.codegen.resources)."""

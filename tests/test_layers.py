@@ -1,0 +1,167 @@
+"""The package's shape: one import name, layers that only import downward, no import circle.
+
+Read from the source with ast (every import statement, also those inside
+functions), so a lazy import cannot hide an upward arrow.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import accelnav
+
+ROOT = Path(accelnav.__file__).parent  # host/ in a checkout, accelnav/ in a wheel
+
+# rank of each part of the package: an import may only go to the same rank or a lower one
+LAYERS = {
+    "accelnav.cli": 3,
+    "accelnav.__main__": 3,
+    "accelnav.hil_sim": 2,
+    "accelnav.estimate": 1,
+    "accelnav.identify": 1,
+    "accelnav.link": 1,
+    "accelnav.data": 1,
+    "accelnav.plots": 1,
+    "accelnav.errors": 1,
+    "accelnav.progress": 1,
+    "accelnav.codegen": 0,
+}
+
+
+def _modules() -> dict[str, Path]:
+    """Every module of the installed package by dotted name (subpackages may live in other folders)."""
+    import accelnav.codegen
+    import accelnav.hil_sim
+
+    roots = {
+        "accelnav": ROOT,
+        "accelnav.codegen": Path(accelnav.codegen.__file__).parent,
+        "accelnav.hil_sim": Path(accelnav.hil_sim.__file__).parent,
+    }
+    out = {}
+    for prefix, root in roots.items():
+        for path in root.rglob("*.py"):
+            rel = path.relative_to(root).with_suffix("")
+            parts = [p for p in rel.parts if p != "__init__"]
+            name = ".".join([prefix, *parts])
+            if name.startswith("accelnav.codegen") and prefix == "accelnav" or "csrc" in parts:
+                continue
+            out.setdefault(name, path)
+    return out
+
+
+def _imports(name: str, path: Path) -> list[tuple[str, int, bool]]:
+    """(imported module, line, at module level) for each accelnav import in one file."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    pkg = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    top_level = {id(n) for n in tree.body}
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            targets = [mod] if node.module else [f"{mod}.{a.name}" for a in node.names]
+        else:
+            continue
+        for t in targets:
+            if t == "accelnav" or t.startswith("accelnav."):
+                found.append((t, node.lineno, id(node) in top_level))
+    return found
+
+
+def _rank(module: str) -> int | None:
+    for prefix, rank in sorted(LAYERS.items(), key=lambda kv: -len(kv[0])):
+        if module == prefix or module.startswith(prefix + "."):
+            return rank
+    return None
+
+
+MODULES = _modules()
+
+
+def test_every_module_has_a_layer():
+    loose = [m for m in MODULES if m != "accelnav" and _rank(m) is None]
+    assert not loose, f"modules outside every layer (add them to LAYERS): {loose}"
+
+
+def test_no_import_runs_upward():
+    bad = []
+    for name, path in MODULES.items():
+        mine = _rank(name)
+        for target, line, _ in _imports(name, path):
+            theirs = _rank(target)
+            if mine is not None and theirs is not None and theirs > mine:
+                bad.append(f"{path}:{line}: {name} (layer {mine}) imports {target} (layer {theirs})")
+    assert not bad, "\n".join(bad)
+
+
+def test_codegen_imports_only_codegen():
+    bad = [
+        f"{path}:{line}: {target}"
+        for name, path in MODULES.items()
+        if name.startswith("accelnav.codegen")
+        for target, line, _ in _imports(name, path)
+        if not target.startswith("accelnav.codegen")
+    ]
+    assert not bad, "\n".join(bad)
+
+
+def _resolve(target: str) -> str | None:
+    """The module an import names (``from pkg import mod`` names mod when mod is a module)."""
+    while target and target not in MODULES:
+        target = target.rpartition(".")[0]
+    return target or None
+
+
+@pytest.mark.parametrize("lazy", [False, True], ids=["module-level", "all imports"])
+def test_no_import_circle(lazy):
+    graph = {
+        name: {
+            r
+            for t, _, top in _imports(name, path)
+            if (top or lazy) and (r := _resolve(t)) and r != name and not name.startswith(r + ".")
+        }
+        for name, path in MODULES.items()
+    }
+    # a package's __init__ importing its own children is not a circle; drop those edges
+    seen, stack, cycle = set(), [], []
+
+    def visit(n):
+        if n in stack:
+            cycle.extend(stack[stack.index(n) :] + [n])
+            return True
+        if n in seen:
+            return False
+        seen.add(n)
+        stack.append(n)
+        for m in sorted(graph.get(n, ())):
+            if visit(m):
+                return True
+        stack.pop()
+        return False
+
+    for n in sorted(graph):
+        if visit(n):
+            break
+    assert not cycle, " -> ".join(cycle)
+
+
+def test_one_import_name(tmp_path):
+    """From an empty folder (so the checkout is not on sys.path), only ``accelnav`` imports."""
+    code = (
+        "import importlib.util, accelnav, accelnav.codegen, accelnav.hil_sim, accelnav.cli\n"
+        "print([n for n in ('host', 'codegen', 'hil_sim') if importlib.util.find_spec(n)])"
+    )
+    done = subprocess.run([sys.executable, "-I", "-c", code], cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"

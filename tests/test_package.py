@@ -1,0 +1,112 @@
+"""The wheel, as a user gets it: one top-level name, its data inside, every command from an empty folder.
+
+The wheel is built from this checkout and unpacked into a folder that alone
+is put on PYTHONPATH; the commands run from another, empty folder, with the
+cache in a third. That is what ``pip install`` of the wheel gives, minus the
+dependency resolution (CI also does the real install into a fresh venv and
+runs ``accelnav demo``, see .ci/run).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = (
+    "accelnav/models/adxl250_default.toml",
+    "accelnav/models/adxl202_duty.toml",
+    "accelnav/firmware/firmware.mk",
+    "accelnav/firmware/src/app.c",
+    "accelnav/firmware/boards/acn_board.h",
+    "accelnav/firmware/boards/host/board_host.c",
+    "accelnav/firmware/boards/mps2_an385/mps2_an385.ld",
+    "accelnav/firmware/boards/stm32f103/stm32f103c8.ld",
+    "accelnav/estimate/csrc/fastsmooth.c",
+    "accelnav/estimate/csrc/fastsmooth.h",
+)
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory):
+    if not (REPO / "pyproject.toml").is_file():
+        pytest.skip("not a source checkout: no wheel to build")
+    out = tmp_path_factory.mktemp("dist")
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(out), str(REPO)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    (whl,) = out.glob("accelnav-*.whl")
+    site = tmp_path_factory.mktemp("site")
+    with zipfile.ZipFile(whl) as z:
+        z.extractall(site)
+        names = z.namelist()
+    return whl, names, site
+
+
+def test_wheel_has_one_top_level_name_and_its_data(wheel):
+    _, names, _ = wheel
+    tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
+    assert tops == {"accelnav"}
+    missing = [d for d in DATA if d not in names]
+    assert not missing, missing
+    assert any(n.startswith("accelnav/estimate/_fastsmooth") and n.endswith(".so") for n in names), (
+        "the smoother kernel is not compiled into the wheel"
+    )
+
+
+def _run(site: Path, cwd: Path, cache: Path, *args: str, env_extra: dict | None = None, timeout: int = 300):
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "ACCELNAV_CACHE_DIR")}
+    env.update(PYTHONPATH=str(site), ACCELNAV_CACHE_DIR=str(cache), MPLBACKEND="Agg", **(env_extra or {}))
+    done = subprocess.run(
+        [sys.executable, "-m", "accelnav", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
+    )
+    assert done.returncode == 0, f"accelnav {' '.join(args)}:\n{done.stdout[-2000:]}\n{done.stderr[-3000:]}"
+    return done.stdout
+
+
+def _tree(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*") if "__pycache__" not in p.parts}
+
+
+def test_commands_work_from_an_empty_folder(wheel, tmp_path):
+    _, _, site = wheel
+    work, cache = tmp_path / "work", tmp_path / "cache"
+    work.mkdir()
+    before = _tree(site)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["PYTHONPATH"] = str(site)
+    where = subprocess.run(
+        [sys.executable, "-c", "import accelnav; print(accelnav.__file__)"],
+        cwd=work,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert Path(where.stdout.strip()).is_relative_to(site), where
+
+    _run(site, work, cache, "sim", "--scenario", "stop_and_go", "--duration", "20", "--out", "run.npz")
+    _run(site, work, cache, "filter", "run.npz", "--out", "filtered.npz")
+    # the smoother's kernel comes with the wheel: no C compiler is reached for (CC would fail)
+    out = _run(
+        site, work, cache, "smooth", "run.npz", "--zupt", "auto", "--out", "smoothed.npz", env_extra={"CC": "false"}
+    )
+    assert "smoother" in out.lower()
+    _run(site, work, cache, "sim", "--scenario", "stationary", "--duration", "300", "--seed", "4", "--out", "st.npz")
+    _run(site, work, cache, "fit-bias", "st.npz", "--out", "fitted.toml")
+    _run(site, work, cache, "codegen", "fitted.toml", "--out", "gen")
+    assert {"accelnav.c", "accelnav.h", "accelnav.json"} <= {p.name for p in (work / "gen").iterdir()}
+    out = _run(site, work, cache, "hil", "--target", "sil", "--scenario", "stop_and_go", "--duration", "10")
+    assert "firmware vs float64 reference" in out
+    for f in ("run.npz", "filtered.npz", "smoothed.npz", "fitted.toml"):
+        assert (work / f).is_file(), f
+    assert _tree(site) == before, "a run wrote into the installed package"
+    assert any(cache.rglob("*.so")), "SIL builds were expected in the cache folder"
