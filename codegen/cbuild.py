@@ -24,6 +24,7 @@ import hashlib
 import importlib.util
 import os
 import platform
+import shlex
 import shutil
 import subprocess
 import sys
@@ -35,6 +36,10 @@ from pathlib import Path
 from .resources import cache_root
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2")
+
+
+class BuildError(RuntimeError):
+    """A C build that could not be done: no compiler (one line naming the Debian package), or a compile error."""
 
 
 def cache_dir() -> Path:
@@ -87,13 +92,15 @@ def build_module(
             # Our C is compiled on its own with the strict flags; cffi's generated wrapper
             # (which is not -pedantic clean) is then compiled with the defaults and linked to it.
             cc = os.environ.get("CC", "cc")
+            if shutil.which(shlex.split(cc)[0] if cc.strip() else "cc") is None:
+                raise BuildError(f"C compiler {cc!r} not found: building {stem} needs one (Debian: gcc)")
             objs = []
             for name in mains:
                 obj = tmp / (Path(name).stem + ".o")
                 cmd = [cc, *extra_compile_args, "-fPIC", "-c", str(tmp / name), "-o", str(obj), f"-I{tmp}"]
                 done = subprocess.run(cmd, capture_output=True, text=True)
                 if done.returncode != 0:
-                    raise RuntimeError(f"{' '.join(cmd)} failed:\n{done.stderr}")
+                    raise BuildError(f"{' '.join(cmd)} failed:\n{done.stderr}")
                 objs.append(str(obj))
             ffi = cffi.FFI()
             ffi.cdef(cdef)

@@ -110,3 +110,21 @@ def test_commands_work_from_an_empty_folder(wheel, tmp_path):
         assert (work / f).is_file(), f
     assert _tree(site) == before, "a run wrote into the installed package"
     assert any(cache.rglob("*.so")), "SIL builds were expected in the cache folder"
+
+
+def test_a_run_time_build_without_a_compiler_is_refused_in_one_line(tmp_path):
+    """SIL compiles the user's generated C: with no compiler that is one line naming Debian's package."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env.update(CC=str(tmp_path / "no-such-cc"), ACCELNAV_CACHE_DIR=str(tmp_path / "cache"))
+    done = subprocess.run(
+        [sys.executable, "-m", "accelnav", "hil", "--target", "sil", "--duration", "2"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert "not found" in line and "Debian: gcc" in line

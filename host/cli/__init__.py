@@ -13,6 +13,7 @@ import argparse
 import importlib
 import sys
 
+from accelnav.codegen.cbuild import BuildError
 from accelnav.codegen.model import ModelError
 from accelnav.errors import UserError
 
@@ -53,6 +54,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except (UserError, ModelError) as exc:
+        print(f"accelnav: error: {exc}", file=sys.stderr)
+        return 2
+    except BuildError as exc:  # no C compiler for a run-time build (SIL), or the C did not compile
         print(f"accelnav: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
