@@ -177,9 +177,10 @@ def test_initial_random_changes_only_the_bias_start(default):
 def test_truth_is_consistent_r_u_a(default, scenario):
     """Central differences of r and u on a fine grid equal u and a within the bound of fd_tolerance.
 
-    2 kHz over 240 s; 20 kHz over 60 s for stress and shock, whose pulse edges are 5-15 ms.
+    2 kHz over 240 s; 20 kHz over 60 s for stress and shock, whose pulse edges are 5-15 ms, and for
+    walking, whose heel-strike and toe-off pulses last 20-40 ms.
     """
-    h, duration = (5e-5, 60.0) if scenario in ("stress", "shock") else (5e-4, 240.0)
+    h, duration = (5e-5, 60.0) if scenario in ("stress", "shock", "walking") else (5e-4, 240.0)
     t = np.arange(0.0, duration, h)
     r, u, a = truth(scenario, t, np.random.default_rng(11), default.max_accel_m_s2)
     assert r.dtype == u.dtype == a.dtype == np.float64 and r.shape == t.shape

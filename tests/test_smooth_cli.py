@@ -63,7 +63,12 @@ def test_zupt_from_file_is_applied_without_gate(sim, tmp_path, capsys):
     status, out, _ = _run(["smooth", sim, "--zupt", tmp_path / "rest.csv", "--out", tmp_path / "s.npz"], capsys)
     assert status == 0
     arrays, _ = load_run(tmp_path / "s.npz")
-    # 0..1.5 s -> samples 0..150, every 10th: 16; 10..10.2 s -> 1000..1020: 3
+    # 0..1.5 s -> samples 0..150: 151; 10..10.2 s -> 1000..1020: 21 (an update at every sample by default)
+    assert arrays["zupt"][:, 0].sum() == 172 and arrays["zupt"][:, 1].sum() == 172
+    status, out, _ = _run(["smooth", sim, "--zupt", tmp_path / "rest.csv", "--zupt-every", "0.1", "--out",
+                           tmp_path / "s.npz"], capsys)  # fmt: skip
+    arrays, _ = load_run(tmp_path / "s.npz")
+    # every 10th: 16 and 3
     assert arrays["zupt"][:, 0].sum() == 19 and arrays["zupt"][:, 1].sum() == 19
 
 

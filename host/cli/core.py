@@ -10,7 +10,14 @@ import numpy as np
 from accelnav.codegen.model import DEFAULT_MODEL, Model, load_model
 from accelnav.data.runfile import STATE, export_csv, load_run, save_run
 from accelnav.errors import UserError
-from accelnav.estimate.pipeline import filter_run, format_errors, position_errors, smooth_run
+from accelnav.estimate.pipeline import (
+    filter_run,
+    format_errors,
+    format_strides,
+    position_errors,
+    smooth_run,
+    stride_table,
+)
 from accelnav.estimate.zupt import ZuptParams
 
 
@@ -62,44 +69,42 @@ def register(sub) -> None:
         "--zupt",
         default=None,
         metavar="auto|FILE",
-        help="zero-velocity updates: 'auto' detects rests in the acceleration; FILE is a CSV of rest "
-        "intervals (start_s,end_s), applied without a gate",
+        help="zero-velocity updates: 'auto' detects rests in the acceleration (accelnav.estimate.zupt); FILE is a "
+        "CSV of rest intervals (start_s,end_s[,axis][,sigma]) or a per-sample 0/1 mask (NPZ key 'rest', or a CSV "
+        "column 'rest'), applied as given",
     )
     z = ZuptParams()
-    p.add_argument(
-        "--zupt-window", type=float, default=z.window_s, metavar="S", help=f"detector window, s; default {z.window_s:g}"
-    )
-    p.add_argument(
-        "--zupt-var-k",
-        type=float,
-        default=z.var_k,
-        metavar="K",
-        help=f"quiet if window variance <= K*R; default {z.var_k:g}",
-    )
-    p.add_argument(
-        "--zupt-level",
-        type=float,
-        default=None,
-        metavar="A",
-        help="at rest if |window mean - bias| <= A m/s^2; default: from the model's bias uncertainty and R",
-    )
-    p.add_argument(
-        "--zupt-sigma", type=float, default=z.sigma, metavar="V", help=f"update std, m/s; default {z.sigma:g}"
-    )
-    p.add_argument(
-        "--zupt-every",
-        type=float,
-        default=z.every_s,
-        metavar="S",
-        help=f"one update per S s of rest; default {z.every_s:g}",
-    )
-    p.add_argument(
-        "--zupt-gate",
-        type=float,
-        default=z.gate,
-        metavar="G",
-        help=f"chi-square gate of each update, 0 = none; default {z.gate:g}",
-    )
+    zupt_opts = [
+        ("--zupt-window", "window_s", "S", f"detector window, s; default {z.window_s:g}"),
+        (
+            "--zupt-var-k",
+            "var_k",
+            "K",
+            f"quiet if the window variance, averaged over axes, <= K*R; default {z.var_k:g}",
+        ),
+        (
+            "--zupt-level",
+            "level",
+            "A",
+            f"at rest if |window means - bias| <= A m/s^2; default: from the model, at least {z.level_min:g}",
+        ),
+        ("--zupt-sigma", "sigma", "V", f"update std, m/s; default {z.sigma:g}"),
+        ("--zupt-every", "every_s", "S", "one update per S s of rest; default 0: every sample"),
+        (
+            "--zupt-gate",
+            "gate",
+            "G",
+            f"per-rest chi-square bound on the velocity since the last rest, 0 = none; default {z.gate:g}",
+        ),
+        (
+            "--zupt-rel",
+            "rel",
+            "F",
+            f"per-rest: also accept when the speed fell to F of its peak since the last rest; default {z.rel:g}",
+        ),
+    ]
+    for flag, field, metavar, text in zupt_opts:
+        p.add_argument(flag, type=float, default=getattr(z, field), dest=f"zupt_{field}", metavar=metavar, help=text)
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     _csv_arg(p)
     p.set_defaults(func=cmd_smooth)
@@ -197,28 +202,36 @@ def cmd_smooth(args) -> int:
     names = [str(a) for a in arrays["axis_names"]]
     fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
     params = ZuptParams(
-        window_s=args.zupt_window,
+        window_s=args.zupt_window_s,
         var_k=args.zupt_var_k,
         level=args.zupt_level,
         sigma=args.zupt_sigma,
-        every_s=args.zupt_every,
+        every_s=args.zupt_every_s,
         gate=args.zupt_gate,
+        rel=args.zupt_rel,
     )
-    rest = None
-    if args.zupt == "auto":
+    rest = rest_sigma = None
+    if args.zupt is not None:
         try:
             params = zupt.resolved(model, params)
         except ValueError as exc:
             raise UserError(f"--zupt-*: {exc}") from None
-        rest = zupt.rest_mask(arrays["accel"], arrays["clipped"], model, params)
+    if args.zupt == "auto":
+        cand = zupt.candidates(arrays["accel"], arrays["clipped"], model, params)
+        decisions = zupt.gate_rests(arrays["accel"], arrays["clipped"], cand, model, params)
+        rest = np.zeros(len(cand), dtype=bool)
+        for d in decisions:
+            if d.accepted:
+                rest[d.start : d.stop] = True
+        kept = sum(d.accepted for d in decisions)
         print(
             f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} R, "
-            f"|mean - bias| <= {params.level:.3g} m/s^2: {len(zupt.intervals(rest))} rests, "
-            f"{100 * rest.mean():.1f} % of the run"
+            f"|mean - bias| <= {params.level:.3g} m/s^2: {len(decisions)} candidate rests, {kept} accepted by the "
+            f"per-rest gate, {100 * rest.mean():.1f} % of the run"
         )
     elif args.zupt is not None:
-        rest = zupt.intervals_from_csv(args.zupt, arrays["t"])
-    arrays = smooth_run(arrays, model, fixes=fixes, rest=rest, zupt_params=params, zupt_gated=args.zupt == "auto")
+        rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
+    arrays = smooth_run(arrays, model, fixes=fixes, rest=rest, zupt_params=params, rest_sigma=rest_sigma)
     if rest is not None:
         print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
     if fixes is not None:
@@ -227,6 +240,9 @@ def cmd_smooth(args) -> int:
     rows = position_errors(arrays, model)
     if rows:
         print(format_errors(rows))
+    strides = stride_table(arrays, model)
+    if strides:
+        print(format_strides(strides))
     _save(args, arrays, model)
     if args.plots is not None:
         from accelnav.plots.run import plot_run, plot_smoothing
