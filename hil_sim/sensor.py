@@ -130,7 +130,7 @@ class SimRun:
             d["stance"] = self.stance
         if self.code is not None:
             d["code"] = self.code
-        else:
+        elif self.t1 is not None:
             d["t1"] = self.t1
             d["t2"] = self.t2
         return {k: np.array(v) for k, v in d.items()}
@@ -142,8 +142,7 @@ class SimRun:
         Checks the keys, shapes, axis names and that ``accel`` and ``clipped``
         are what ``model`` converts the raw input to; raises ValueError otherwise.
         """
-        analog = model.sensor.kind == "analog"
-        raw_keys = ("code",) if analog else ("t1", "t2")
+        raw_keys = {"analog": ("code",), "duty_cycle": ("t1", "t2"), "calibrated": ()}[model.sensor.kind]
         need = ("t", "axis_names", "r", "u", "a", "eps", "clipped", "accel", "scenario", "seed", *raw_keys)
         missing = [k for k in need if k not in d]
         if missing:
@@ -165,7 +164,7 @@ class SimRun:
             arrays[key] = _readonly(arr.astype(dtype))
         for j, name in enumerate(names):
             conv = input_conversion(model, name)
-            raw = [arrays[k][:, j] for k in raw_keys]
+            raw = [arrays[k][:, j] for k in raw_keys] or [arrays["accel"][:, j] / conv.scale]
             if not np.allclose(conv.accel(*raw), arrays["accel"][:, j], rtol=1e-12, atol=1e-12):
                 raise ValueError(f"accel: axis {name!r} does not match its raw input under model {model.name!r}")
             if not np.array_equal(conv.clipped(*raw), arrays["clipped"][:, j]):
@@ -271,6 +270,7 @@ def simulate(
         return _readonly(np.stack(cols[key], axis=1).astype(dtype, copy=False))
 
     analog = model.sensor.kind == "analog"
+    duty = model.sensor.kind == "duty_cycle"
     return SimRun(
         model=model,
         scenario=scenario,
@@ -281,9 +281,9 @@ def simulate(
         u=stack("u", np.float64),
         a=stack("a", np.float64),
         eps=stack("eps", np.float64),
-        code=stack("raw0", np.int32) if analog else None,
-        t1=None if analog else stack("raw0", np.int32),
-        t2=None if analog else stack("raw1", np.int32),
+        code=stack("raw0", np.int32) if analog else None,  # calibrated: no raw input beside accel
+        t1=stack("raw0", np.int32) if duty else None,
+        t2=stack("raw1", np.int32) if duty else None,
         clipped=stack("clipped", bool),
         accel=stack("accel", np.float64),
         initial_random=initial_random,
@@ -358,8 +358,21 @@ def sensor_noise(model: Model, n: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def read_out(model: Model, axis: int | str, m: np.ndarray, rng_jitter: np.random.Generator) -> tuple[np.ndarray, ...]:
-    """Raw samples for the sensed acceleration m [m/s^2]: (code,) or (t1, t2), int32."""
+    """Raw samples for the sensed acceleration m [m/s^2]: (code,) or (t1, t2), int32; (value,) for calibrated.
+
+    A calibrated sensor gives m in its unit, rounded to its LSB when the model
+    declares one (int16 counts of a digital part) and saturated at its full scale.
+    """
     ax = model.axis(axis)
+    if model.sensor.kind == "calibrated":
+        c = model.sensor.calibrated
+        scale = G0 if c.unit == "g" else 1.0
+        full = model.max_accel_m_s2
+        v = np.clip(m, -full, full)
+        if c.lsb_per_g > 0:
+            lsb = G0 / c.lsb_per_g
+            v = np.clip(np.rint(v / lsb) * lsb, -full, full)
+        return (v / scale,)
     if model.sensor.kind == "analog":
         an = model.sensor.analog
         volts = np.clip(ax.zero_g + ax.sensitivity * m / G0, 0.0, an.supply_v)

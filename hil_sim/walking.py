@@ -23,7 +23,8 @@ Gait (one stride = one stance then one swing, SI units)
 
       a = P c (sin y - sin(2 y)/2),  c = 1/1.299 (so that max a = P),
 
-  tau 30-50 ms, |P| 8-16 g (capped at 0.9 of the sensor's full scale), + at
+  tau 30-50 ms, |P| 8-16 g (capped at 0.8 of the sensor's full scale, so that with the
+  swing's 2 g it stays inside), + at
   toe-off and - at heel strike. At 100 Hz a pulse spans three to five
   samples; shorter ones (20-40 ms) alias so badly that even the smoother
   given the true stances misses strides by 5-7 % (velocity integrated over
@@ -73,7 +74,7 @@ def _draw_strides(rng: np.random.Generator, amax: float) -> dict[str, np.ndarray
     turn_every = rng.integers(6, 13, n)
     turn = rng.uniform(np.pi / 3, 2 * np.pi / 3, n) * rng.choice([-1.0, 1.0], n)
     wiggle = rng.normal(0.0, np.radians(3.0), n)
-    peak = np.minimum(rng.uniform(8.0, 16.0, (n, 2)) * G0, 0.9 * amax)
+    peak = np.minimum(rng.uniform(8.0, 16.0, (n, 2)) * G0, 0.8 * amax)
     tau = rng.uniform(0.030, 0.050, (n, 2))
     return dict(
         cycle=cycle, frac=frac, length=length, turn_every=turn_every, turn=turn, wiggle=wiggle, peak=peak, tau=tau
