@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.model import DEFAULT_MODEL, Model, load_model
+from accelnav.codegen.model import DEFAULT_MODEL, Model, load_model, loads_model
 from accelnav.data.runfile import STATE, export_csv, load_run, save_run
 from accelnav.errors import UserError
 from accelnav.estimate.pipeline import (
@@ -25,6 +25,34 @@ def _model_arg(p: argparse.ArgumentParser, help_extra: str = "") -> None:
     p.add_argument("--model", type=Path, default=None, help=f"model file (TOML){help_extra}")
 
 
+INPUT_HELP = (
+    "the data: an accelnav run file (.npz), a recorder log (.acnlog), a CSV or gzip CSV with a time column "
+    "and one column per axis, or an NPZ with t and accel"
+)
+
+
+def _input_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--axis",
+        action="append",
+        metavar="NAME",
+        help="CSV/NPZ: a column to use as an axis, in the model's axis order; repeat for each axis",
+    )
+    p.add_argument("--time-column", default=None, metavar="NAME", help="CSV: the time column; default t, t_s, time")
+    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="CSV without a time column: sample rate")
+    p.add_argument(
+        "--unit",
+        default=None,
+        help="CSV: unit of the acceleration columns, g, mg or m/s^2; default: from the column names, else "
+        "the unit of a calibrated model",
+    )
+    p.add_argument(
+        "--allow-gaps",
+        action="store_true",
+        help="accept gaps in time: the missing samples are filled in and the filter only predicts across them",
+    )
+
+
 def _csv_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--csv", type=Path, default=None, metavar="CSV", help="also export the samples as CSV")
 
@@ -40,9 +68,10 @@ def register(sub) -> None:
     _csv_arg(p)
     p.set_defaults(func=cmd_sim)
 
-    p = sub.add_parser("filter", help="run the float64 reference filter over a run file")
-    p.add_argument("run", type=Path, help="run file (.npz) from accelnav sim")
-    _model_arg(p, "; default: the model embedded in the run file")
+    p = sub.add_parser("filter", help="run the float64 reference filter over a recording or run file")
+    p.add_argument("run", type=Path, help=INPUT_HELP)
+    _model_arg(p, "; default: the model embedded in the input, else the embedded default")
+    _input_args(p)
     p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
     _csv_arg(p)
     p.set_defaults(func=cmd_filter)
@@ -55,8 +84,9 @@ def register(sub) -> None:
         "computed once per model and run length, then a few operations per sample. Zero-velocity detection: "
         "accelnav.estimate.zupt.",
     )
-    p.add_argument("run", type=Path, help="run file (.npz) from accelnav sim, filter or a recording")
-    _model_arg(p, "; default: the model embedded in the run file")
+    p.add_argument("run", type=Path, help=INPUT_HELP)
+    _model_arg(p, "; default: the model embedded in the input, else the embedded default")
+    _input_args(p)
     p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
     p.add_argument(
         "--fixes",
@@ -130,15 +160,101 @@ def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[s
 
 
 def _load(args) -> tuple[dict[str, np.ndarray], Model]:
-    arrays, model = load_run(args.run)
-    if args.model is not None:
-        override = load_model(args.model)
+    """The input of filter and smooth, whatever its form, checked against the model (see INPUT_HELP)."""
+    from accelnav.data.recording import check_rate, on_grid, read_recording
+    from accelnav.link.logfile import MAGIC
+
+    path = args.run
+    if not path.is_file():
+        raise UserError(f"{path}: no such file")
+    with open(path, "rb") as fh:
+        head = fh.read(len(MAGIC))
+    override = load_model(args.model) if args.model is not None else None
+    if head == MAGIC:
+        from accelnav.cli.record import log_run_arrays
+
+        arrays, model = log_run_arrays(path)
+        return _with_model(path, arrays, model, override, args)
+    if (head.startswith(b"PK") or path.suffix.lower() == ".npz") and not _is_recording_npz(path):
+        arrays, model = load_run(path)
+        return _with_model(path, arrays, model, override, args)
+    # a recording: CSV, gzip CSV, or an NPZ of t and accel
+    model = override
+    unit = args.unit
+    if unit is None and model is not None and model.sensor.kind == "calibrated":
+        unit = model.sensor.calibrated.unit
+    rec = read_recording(
+        path, axes=args.axis, unit=unit, rate_hz=args.rate, time_column=args.time_column, allow_gaps=args.allow_gaps
+    )
+    if model is None:
+        model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
+    check_rate(rec, model.rate_hz, str(model.source))
+    names = [a.name for a in model.axes]
+    if len(rec.axis_names) != len(names):
+        raise UserError(
+            f"{path}: {len(rec.axis_names)} axes ({', '.join(rec.columns)}) for the model's {len(names)} "
+            f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
+        )
+    bad = ~np.isfinite(rec.accel)
+    if bad.any():
+        k = int(np.argmax(bad.any(axis=1)))
+        raise UserError(f"{path}: {rec.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
+    max_n = int(np.ceil(model.ranges.max_run_s * model.rate_hz))
+    t, accel, missing = on_grid(rec, model.rate_hz, max_n)
+    # at the sensor's declared full scale a sample is clipped (as a digital part saturates); missing ones too
+    with np.errstate(invalid="ignore"):
+        clipped = np.abs(accel) >= model.max_accel_m_s2 * (1 - 1e-9)
+    clipped |= missing[:, None]
+    if rec.clipped is not None and not missing.any():
+        clipped |= rec.clipped
+    if missing.any():
+        print(f"{path}: {int(missing.sum())} missing samples filled in (predict only)")
+    if len(rec.axis_names) and list(rec.axis_names) != names:
+        print(f"{path}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
+    arrays = {"t": t, "axis_names": np.array(names), "accel": accel, "clipped": clipped}
+    return arrays, model
+
+
+def _is_recording_npz(path: Path) -> bool:
+    """An NPZ of t and accel without the run file's format key (else it is read, and refused, as a run file)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (OSError, zipfile.BadZipFile):
+        return False
+    return "accel.npy" in names and "format.npy" not in names
+
+
+def _with_model(path, arrays, model: Model, override: Model | None, args) -> tuple[dict[str, np.ndarray], Model]:
+    from accelnav.data.recording import GAP_FACTOR
+
+    for flag in ("axis", "time_column", "rate", "unit"):
+        if getattr(args, flag) not in (None, []):
+            raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
+    if override is not None:
         if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:
             raise UserError(
                 f"{args.model}: axes {[a.name for a in override.axes]} do not match the run's "
                 f"{[str(a) for a in arrays['axis_names']]}"
             )
         model = override
+    t = arrays["t"]
+    if len(t) > 2:
+        dt = np.diff(t)
+        step = float(np.median(dt))
+        if abs(step * model.rate_hz - 1) > 0.01:
+            raise UserError(
+                f"{path}: the run is sampled at {1 / step:.6g} Hz but the model {model.source} has "
+                f"sampling.rate_hz = {model.rate_hz:g} Hz"
+            )
+        if np.any(dt > GAP_FACTOR * step):
+            k = int(np.argmax(dt > GAP_FACTOR * step))
+            raise UserError(
+                f"{path}: gap in time of {dt[k]:.6g} s after sample {k}; a run file is not filled in "
+                "(--allow-gaps is for CSV and NPZ recordings: export the samples with --csv)"
+            )
     return arrays, model
 
 
