@@ -152,6 +152,12 @@ def test_log_info_and_export(tmp_path, man, telemetry, capsys):
     a, _ = load_run(tmp_path / "from_log.npz")
     b, _ = load_run(tmp_path / "from_run.npz")
     np.testing.assert_array_equal(a["smooth_x"], b["smooth_x"])
+    # and fit-bias reads it too: the stimulus is uniform over +-60 codes, whose extreme codes hold more than
+    # the rail detector's 0.5 %, so the fit refuses it, but only after reading the axis from the log
+    capsys.readouterr()
+    status = cli_main(["fit-bias", str(out), "--min-duration", "10", "--out", str(tmp_path / "fit.toml")])
+    err = capsys.readouterr().err
+    assert status == 2 and "x.acnlog: axis 'x': " in err and "sit at the m" in err and err.count("\n") == 1
     assert cli_main(["log", "info", str(tmp_path / "x.csv")]) == 2  # not a log: one line, status 2
     assert "not an accelnav log" in capsys.readouterr().err
 

@@ -153,3 +153,10 @@ def test_fit_bias_refuses_a_ragged_row_too(tmp_path, capsys):
     (tmp_path / "r.csv").write_text("\n".join(lines) + "\n")
     status, _, err = _run(["fit-bias", tmp_path / "r.csv", "--out", tmp_path / "m.toml"], capsys)
     assert status == 2 and "line 4001: 3 fields; the header has 2" in err
+
+
+def test_jittery_timing_is_refused(tmp_path, capsys, walk):
+    # a clock that wanders by half a period, slowly (no step is a gap, the median rate is right)
+    t = walk.t + 0.5 * 0.005 * np.sin(2 * np.pi * np.arange(len(walk.t)) / 400)
+    err = _refusal(tmp_path, capsys, _csv_lines(t, walk.accel))
+    assert "timing jitters too much" in err

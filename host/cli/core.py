@@ -200,7 +200,7 @@ def _load(args) -> tuple[dict[str, np.ndarray], Model]:
         k = int(np.argmax(bad.any(axis=1)))
         raise UserError(f"{path}: {rec.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
     max_n = int(np.ceil(model.ranges.max_run_s * model.rate_hz))
-    t, accel, missing = on_grid(rec, model.rate_hz, max_n)
+    t, accel, missing = on_grid(rec, rec.rate_hz, max_n)  # its own clock: within 1 % of the model by now
     # at the sensor's declared full scale a sample is clipped (as a digital part saturates); missing ones too
     with np.errstate(invalid="ignore"):
         clipped = np.abs(accel) >= model.max_accel_m_s2 * (1 - 1e-9)

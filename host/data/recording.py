@@ -375,6 +375,23 @@ def _finish(src, t, accel, names, cols, units, model_toml, clipped) -> Recording
     )
 
 
+def from_arrays(source: str, arrays: dict[str, np.ndarray], axes: list[str] | None = None) -> Recording:
+    """A recording from run-file arrays (t, axis_names, accel in m/s^2, clipped, model_toml), time checked."""
+    names = tuple(str(a) for a in arrays["axis_names"])
+    idx = [_pick(a, names, names, source) for a in axes] if axes else list(range(len(names)))
+    rec = _finish(
+        source,
+        np.asarray(arrays["t"], dtype=np.float64),
+        np.asarray(arrays["accel"], dtype=np.float64)[:, idx],
+        tuple(names[i] for i in idx),
+        tuple(names[i] for i in idx),
+        ("m/s^2",) * len(idx),
+        str(arrays["model_toml"]) if "model_toml" in arrays else None,
+        np.asarray(arrays["clipped"], dtype=bool)[:, idx] if "clipped" in arrays else None,
+    )
+    return _check_time(replace(rec, time_unit="s"), None, False)
+
+
 def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> Recording:
     """Finite, increasing time without gaps (unless allowed); the rate from the mean step."""
     src, t = rec.source, rec.t
@@ -427,7 +444,8 @@ def check_rate(rec: Recording, model_rate_hz: float, model_source: str) -> None:
 def on_grid(rec: Recording, rate_hz: float, max_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, accel, missing): the samples placed on the uniform grid t0 + k / rate_hz, gaps filled with NaN.
 
-    Each sample must lie within a quarter period of its grid point; a filled
+    Each sample must lie within a quarter period of its grid point (the
+    recording's timing jitter, checked whether or not there are gaps); a filled
     run longer than ``max_samples`` samples in all is refused (memory bound).
     """
     Ts = 1.0 / rate_hz
@@ -436,8 +454,8 @@ def on_grid(rec: Recording, rate_hz: float, max_samples: int) -> tuple[np.ndarra
     if off.any():
         i = int(np.argmax(off))
         raise UserError(
-            f"{rec.source}: {rec.where(i)} (t = {rec.t[i]:.6g} s) is off the {rate_hz:g} Hz sample grid by more "
-            "than a quarter period; filling gaps needs regular sampling"
+            f"{rec.source}: {rec.where(i)} (t = {rec.t[i]:.6g} s) is off the {rate_hz:.6g} Hz sample grid by more "
+            "than a quarter period: the timing jitters too much for a fixed-rate filter"
         )
     if np.any(np.diff(k) < 1):
         i = int(np.argmax(np.diff(k) < 1)) + 1
