@@ -177,3 +177,21 @@ def test_a_drifted_swing_does_not_refuse_the_stance(default_model):
     stance = arrays["stance"]
     late = np.arange(len(stance)) > len(stance) // 2
     assert rest[stance & late].mean() > 0.8
+
+
+def test_a_knock_inside_each_rest_splits_none_and_costs_little(default_model):
+    """A one-sample 5 g spike in the middle of every rest: the rests stay whole and the position barely moves."""
+    arrays = simulate(default_model, "stop_and_go", 120.0, 101).to_arrays()
+    true_rest = np.all(arrays["u"] == 0, axis=1)
+    knocked = dict(arrays)
+    knocked["accel"] = np.array(arrays["accel"])
+    rests = zupt.intervals(true_rest)
+    for a, b in rests[1:-1]:
+        knocked["accel"][(a + b) // 2, 0] += 5 * 9.80665
+    clean_rest = zupt.rest_mask(arrays["accel"], arrays["clipped"], default_model)
+    rest = zupt.rest_mask(knocked["accel"], knocked["clipped"], default_model)
+    assert len(zupt.intervals(rest)) == len(zupt.intervals(clean_rest))
+    assert rest[true_rest].mean() > 0.95
+    clean = _rms(smooth_run(arrays, default_model, rest=clean_rest), arrays)
+    hit = _rms(smooth_run(knocked, default_model, rest=rest), arrays)
+    assert np.all(hit <= clean + 0.05), (hit, clean)

@@ -35,7 +35,11 @@ eps_j(k) = (c1 + c2) - c1 phi^k:
    start of a move;
 3. every sample of the window valid (not clipped, finite) on every axis.
 
-Samples whose window passes are rest candidates; each run of them is widened
+Samples whose window passes are rest candidates; runs of them less than
+``bridge_s`` (0.1 s, one window) apart are joined, so that a knock or a
+glitch inside a rest, which fails every window holding it, does not split
+the rest in two (whose second half the gate would then judge on a velocity
+integral that carries the knock); each run is widened
 by ``widen`` * (W // 2) samples on both sides (default half of the window's
 half-width: every sample of a passing window was quiet, but a vehicle's move
 starts so gently that the full width puts updates on its first few cm/s) and
@@ -48,7 +52,8 @@ Quiet and level cannot tell a rest from coasting at constant velocity. Each
 candidate rest is therefore tested once, on the velocity v_j that its start
 would have if the body had been at rest at the end of the previous accepted
 rest: v_j = Ts sum (z_j - b_j) over the samples in between, where b_j is the
-mean reading of axis j over that previous rest (the model's bias mean before
+mean reading of axis j over that previous rest, leaving out samples more
+than 5 sqrt(R_j) from the rest's median (a knock) (the model's bias mean before
 the first rest). Re-measuring the bias at every rest absorbs a slowly changing
 tilt leak, and nothing here depends on the Kalman filter's own velocity, so a
 filter that drifted during a swing never makes a rest be refused. The rest
@@ -56,7 +61,7 @@ is accepted when either
 
 * mean_j v_j^2 / s_j^2 <= ``gate`` (default 16), with
   s_j^2 = (sd(b_j) D)^2 + R_j Ts^2 m + sigma^2 over a span of m samples,
-  D = m Ts, sd(b_j) = sqrt(R_j / rest length) (the model's bias spread
+  D = m Ts, sd(b_j) = sqrt(R_j / samples kept) (the model's bias spread
   before the first rest), or
 * |v| <= ``rel`` |v|_max (default 0.5): the speed has come back to half of
   the largest speed reached since the previous rest. A coast, a cruise keep
@@ -94,6 +99,7 @@ class ZuptParams:
     level: float | None = None  # m/s^2, bound on |window means - bias means|; None: from the model
     level_min: float = 0.3  # m/s^2, the model-derived level is raised to at least this
     min_rest_s: float = 0.1  # s, shortest rest kept (after widening)
+    bridge_s: float = 0.1  # s, a break in a rest this short (a knock, a glitch) does not split it
     widen: float = 0.5  # runs of window centres are widened by widen * (W // 2) samples on both sides
     sigma: float = 0.02  # m/s, standard deviation of each zero-velocity update
     every_s: float = 0.0  # s, one update per every_s within a rest; 0: every sample
@@ -112,7 +118,7 @@ def resolved(model: Model, p: ZuptParams) -> ZuptParams:
         v = getattr(p, name)
         if not (math.isfinite(v) and v > 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number > 0")
-    for name in ("every_s", "min_rest_s", "level_min", "rel", "widen"):
+    for name in ("every_s", "min_rest_s", "level_min", "rel", "widen", "bridge_s"):
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
@@ -184,10 +190,18 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
         centre = (bad == 0) & (quiet / n_axes <= p.var_k) & (mean2 <= p.level**2)
     # widen each run of passing window centres to the windows' extent, drop the short ones
     h = int(round(p.widen * (w // 2)))
+    runs = [(max(0, a - h), min(n, b + h)) for a, b in intervals(centre)]
+    # bridge short breaks: one spike fails every window that holds it, W samples of centres
+    bridge = int(round(p.bridge_s * model.rate_hz))
+    merged: list[list[int]] = []
+    for a, b in runs:
+        if merged and a - merged[-1][1] <= bridge:
+            merged[-1][1] = b
+        else:
+            merged.append([a, b])
     rest = np.zeros(n, dtype=bool)
     shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
-    for a, b in intervals(centre):
-        a, b = max(0, a - h), min(n, b + h)
+    for a, b in merged:
         if b - a >= shortest:
             rest[a:b] = True
     return rest
@@ -233,10 +247,21 @@ def gate_rests(
         if accepted:
             use = ok[a:stop].all(axis=1)
             if use.any():
-                b = x[a:stop][use].mean(axis=0)
-                sd_b = np.sqrt(R / use.sum())
+                b, kept = _robust_mean(x[a:stop][use], R)
+                sd_b = np.sqrt(R / kept)
             since, u0 = stop, 0.0
     return out
+
+
+def _robust_mean(x: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per column, the mean of the samples within 5 sqrt(R) of the median (a knock left out), and their count.
+
+    Not the median itself: a coarse ADC (the default's step is 3.6 sqrt(R)) puts the median on a code.
+    """
+    med = np.median(x, axis=0)
+    near = np.abs(x - med) <= 5.0 * np.sqrt(R)
+    kept = np.maximum(near.sum(axis=0), 1)
+    return np.where(near, x, 0.0).sum(axis=0) / kept, kept
 
 
 def rest_mask(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams = ZuptParams()) -> np.ndarray:
