@@ -24,8 +24,11 @@ measured acceleration z_j of every axis j minus the model's bias mean
 eps_j(k) = (c1 + c2) - c1 phi^k:
 
 1. **quiet**: the mean over the axes of (window variance / R_j) is at most
-   ``var_k`` (default 3; at rest it is chi2(n (W - 1)) / (n (W - 1)), whose
-   0.1 % upper quantile is 2.3 for W = 11 and two axes);
+   ``var_k`` (default 10). At rest on pure sensor noise it is
+   chi2(n (W - 1)) / (n (W - 1)), whose 0.1 % upper quantile is 2.3 for
+   W = 11 and two axes, so 3 would do in the simulator (3 to 30 give the same
+   result on its walks and stop-and-go runs); 10 leaves room for what a real
+   stance or an idling engine adds to the noise;
 2. **level**: the length of the vector of window means is at most
    ``level``: the larger of three standard deviations of the bias about its
    model plus three of the window mean (as before), and ``level_min``
@@ -95,7 +98,7 @@ from accelnav.estimate.kf import Measurement, bias_model, zero_velocity
 @dataclass(frozen=True)
 class ZuptParams:
     window_s: float = 0.1  # s, centred window of the moving mean and variance
-    var_k: float = 3.0  # quiet if mean over axes of window variance / R <= var_k
+    var_k: float = 10.0  # quiet if mean over axes of window variance / R <= var_k
     level: float | None = None  # m/s^2, bound on |window means - bias means|; None: from the model
     level_min: float = 0.3  # m/s^2, the model-derived level is raised to at least this
     min_rest_s: float = 0.1  # s, shortest rest kept (after widening)
