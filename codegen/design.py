@@ -155,9 +155,32 @@ class DutyConversion:
         return (t2 <= 0) | off_period | (t1 <= 0) | (t1 >= t2)
 
 
-def input_conversion(model: Model, axis: str | int = 0) -> AnalogConversion | DutyConversion:
+@dataclass(frozen=True)
+class CalibratedConversion:
+    """a [m/s^2] = value * scale: the raw sample is already an acceleration in the model's unit.
+
+    A sample is clipped when it is not finite or at (or beyond) the declared
+    full scale, where a digital sensor saturates.
+    """
+
+    scale: float
+    full_scale: float  # m/s^2
+
+    def accel(self, value) -> np.ndarray:
+        return np.asarray(value, dtype=np.float64) * self.scale
+
+    def clipped(self, value) -> np.ndarray:
+        a = np.asarray(value, dtype=np.float64) * self.scale
+        with np.errstate(invalid="ignore"):
+            return ~np.isfinite(a) | (np.abs(a) >= self.full_scale * (1 - 1e-9))
+
+
+def input_conversion(model: Model, axis: str | int = 0) -> AnalogConversion | DutyConversion | CalibratedConversion:
     """How raw samples of ``axis`` become acceleration."""
     ax = model.axis(axis)
+    if model.sensor.kind == "calibrated":
+        return CalibratedConversion(scale=G0 if model.sensor.calibrated.unit == "g" else 1.0,
+                                    full_scale=model.max_accel_m_s2)  # fmt: skip
     if model.sensor.kind == "analog":
         an = model.sensor.analog
         volts_per_code = an.adc_ref_v / 2**an.adc_bits

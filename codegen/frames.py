@@ -227,6 +227,9 @@ class Layout:
 
 def layout(model: Model, filter_manifest: dict) -> Layout:
     """The frame layout of ``model`` with the state formats of its generated filter."""
+    from .ranges import refuse_calibrated
+
+    refuse_calibrated(model)
     names = tuple(a.name for a in model.axes)
     if [a["axis"] for a in filter_manifest["axes"]] != list(names):
         raise ValueError("the filter manifest's axes differ from the model's: regenerate the filter")

@@ -28,7 +28,8 @@ G0 = 9.80665  # standard gravity, m/s^2
 # the embedded default, shipped as package data (accelnav.models)
 DEFAULT_MODEL = models_dir() / "adxl250_default.toml"
 
-SENSOR_KINDS = ("analog", "duty_cycle")
+SENSOR_KINDS = ("analog", "duty_cycle", "calibrated")
+CALIBRATED_UNITS = ("g", "m/s^2")
 FILTER_FORMS = ("covariance", "gain_schedule")
 
 
@@ -73,6 +74,19 @@ class DutyCycleInput:
 
 
 @dataclass(frozen=True)
+class CalibratedInput:
+    """Samples that are already acceleration (an IMU's calibrated output, a log in g or m/s^2).
+
+    ``unit`` is the unit of the samples; ``lsb_per_g`` (0: not given) is the
+    resolution of a digital sensor's int16 counts, used by the simulator to
+    quantise. No read-out constants: the axes carry no sensitivity or zero level.
+    """
+
+    unit: str
+    lsb_per_g: float
+
+
+@dataclass(frozen=True)
 class Sensor:
     kind: str
     part: str
@@ -81,6 +95,7 @@ class Sensor:
     bandwidth_hz: float
     analog: AnalogInput | None
     duty_cycle: DutyCycleInput | None
+    calibrated: CalibratedInput | None = None
 
 
 @dataclass(frozen=True)
@@ -361,8 +376,18 @@ def _parse_sensor(t: _Table) -> Sensor:
     range_g = t.number("range_g", lo=0.0, lo_open=True, hi=1000.0)
     density = t.number("noise_density_g_rthz", lo=0.0)
     bandwidth = t.number("bandwidth_hz", lo=0.0, lo_open=True)
-    analog = duty = None
-    if kind == "analog":
+    analog = duty = calibrated = None
+    if kind == "calibrated":
+        c = t.table("calibrated")
+        calibrated = CalibratedInput(
+            unit=c.string("unit", choices=CALIBRATED_UNITS),
+            lsb_per_g=c.number("lsb_per_g", 0.0, lo=0.0),
+        )
+        c.done()
+        for other in ("analog", "duty_cycle"):
+            if other in t.data:
+                raise t.fail(other, f"given, but sensor.kind is 'calibrated'; remove it or set kind = {other!r}")
+    elif kind == "analog":
         a = t.table("analog")
         supply = a.number("supply_v", lo=0.0, lo_open=True, hi=50.0)
         analog = AnalogInput(
@@ -394,8 +419,10 @@ def _parse_sensor(t: _Table) -> Sensor:
             )
         if "analog" in t.data:
             raise t.fail("analog", "given, but sensor.kind is 'duty_cycle'; remove it or set kind = 'analog'")
+    if kind != "calibrated" and "calibrated" in t.data:
+        raise t.fail("calibrated", f"given, but sensor.kind is {kind!r}; remove it or set kind = 'calibrated'")
     t.done()
-    return Sensor(kind, part, range_g, density, bandwidth, analog, duty)
+    return Sensor(kind, part, range_g, density, bandwidth, analog, duty, calibrated)
 
 
 def _parse_axes(top: _Table, sensor: Sensor, source: str) -> tuple[Axis, ...]:
@@ -404,7 +431,10 @@ def _parse_axes(top: _Table, sensor: Sensor, source: str) -> tuple[Axis, ...]:
         raise ModelError(source, "axes", f"expected one or more [[axes]] tables, got {_kind(raw)}")
     if len(raw) > 3:
         raise ModelError(source, "axes", f"got {len(raw)} axes; accepted: 1 to 3")
-    if sensor.kind == "analog":
+    if sensor.kind == "calibrated":
+        sens_key = zero_key = None
+        sens_default, zero_default = 1.0, 0.0
+    elif sensor.kind == "analog":
         sens_key, zero_key = "sensitivity_v_per_g", "zero_g_v"
         sens_default, zero_default = sensor.analog.sensitivity_v_per_g, sensor.analog.zero_g_v
     else:
@@ -422,14 +452,16 @@ def _parse_axes(top: _Table, sensor: Sensor, source: str) -> tuple[Axis, ...]:
                 c1=t.number("c1"),
                 c2=t.number("c2"),
                 T=t.number("T", lo=0.0, lo_open=True),
-                sensitivity=t.number(sens_key, sens_default, lo=0.0, lo_open=True),
-                zero_g=t.number(zero_key, zero_default, lo=0.0),
+                sensitivity=t.number(sens_key, sens_default, lo=0.0, lo_open=True) if sens_key else sens_default,
+                zero_g=t.number(zero_key, zero_default, lo=0.0) if zero_key else zero_default,
             )
         )
         t.done()
         ax = axes[-1]
         if abs(ax.c1) + abs(ax.c2) > sensor.range_g * G0:
             raise t.fail("c1", "|c1| + |c2| exceeds the sensor's full scale")
+        if sensor.kind == "calibrated":
+            continue  # no read-out span to fit
         # the sensor's full scale must fit the read-out's input span, or
         # accelerations inside the declared range would be clipped unseen
         lo, hi = ax.zero_g - sensor.range_g * ax.sensitivity, ax.zero_g + sensor.range_g * ax.sensitivity

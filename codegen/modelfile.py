@@ -57,14 +57,21 @@ def dump_model(model: Model, header: str = "") -> str:
     out += ["", "[sensor]"]
     out += _lines(
         [
-            ("kind", _str(s.kind), "analog (ADC) or duty_cycle (timer capture)"),
+            ("kind", _str(s.kind), "analog (ADC), duty_cycle (timer capture) or calibrated"),
             ("part", _str(s.part), ""),
             ("range_g", _float(s.range_g), "full scale, +-g"),
             ("noise_density_g_rthz", _float(s.noise_density_g_rthz), "g/sqrt(Hz), one-sided"),
             ("bandwidth_hz", _float(s.bandwidth_hz), "output filter, Hz"),
         ]
     )
-    if s.kind == "analog":
+    if s.kind == "calibrated":
+        sens_key = zero_key = None
+        sens_default = zero_default = None
+        out += ["", "[sensor.calibrated]"]
+        out += _lines([("unit", _str(s.calibrated.unit), "unit of the samples: g or m/s^2")])
+        if s.calibrated.lsb_per_g > 0:
+            out += _lines([("lsb_per_g", _float(s.calibrated.lsb_per_g), "counts per g of the digital output")])
+    elif s.kind == "analog":
         a = s.analog
         sens_key, zero_key = "sensitivity_v_per_g", "zero_g_v"
         sens_default, zero_default = a.sensitivity_v_per_g, a.zero_g_v
@@ -101,9 +108,9 @@ def dump_model(model: Model, header: str = "") -> str:
             ("c2", _float(ax.c2), "m/s^2"),
             ("T", _float(ax.T), "s"),
         ]
-        if ax.sensitivity != sens_default:
+        if sens_key and ax.sensitivity != sens_default:
             pairs.append((sens_key, _float(ax.sensitivity), "this axis's calibration"))
-        if ax.zero_g != zero_default:
+        if zero_key and ax.zero_g != zero_default:
             pairs.append((zero_key, _float(ax.zero_g), "this axis's calibration"))
         out += _lines(pairs)
     n = model.noise
@@ -149,7 +156,9 @@ def with_axis_bias(model: Model, name: str, c1: float, c2: float, T: float) -> M
             axes[i] = dataclasses.replace(ax, c1=float(c1), c2=float(c2), T=float(T))
             return dataclasses.replace(model, axes=tuple(axes))
     s = model.sensor
-    if s.kind == "analog":
+    if s.kind == "calibrated":
+        sens, zero = 1.0, 0.0
+    elif s.kind == "analog":
         sens, zero = s.analog.sensitivity_v_per_g, s.analog.zero_g_v
     else:
         sens, zero = s.duty_cycle.duty_per_g, s.duty_cycle.zero_g_duty

@@ -55,6 +55,17 @@ class RangeError(ModelError):
     """A variable that no word of the generated C can hold."""
 
 
+def refuse_calibrated(model: Model) -> None:
+    """The fixed-point C starts from the MCU's raw input; a calibrated sensor has none to describe."""
+    if model.sensor.kind == "calibrated":
+        raise RangeError(
+            model.source,
+            "sensor.kind",
+            "'calibrated' data (already in g or m/s^2) are for the host tools; the generated C reads an ADC or a "
+            "timer capture: accepted for codegen, hil and firmware: 'analog' or 'duty_cycle'",
+        )
+
+
 @dataclass(frozen=True)
 class Var:
     name: str
@@ -223,6 +234,7 @@ def z_bound(conv) -> float:
 
 def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPlan:
     form = form or model.filter.form
+    refuse_calibrated(model)
     d = axis_design(model, axis)
     conv = input_conversion(model, axis)
     n_run = int(math.ceil(model.ranges.max_run_s * model.rate_hz))

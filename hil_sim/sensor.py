@@ -40,6 +40,11 @@ longer one, simulating a subset of the axes gives the same columns, and
 Motion of several axes: one trajectory is drawn and axis i of the model sees
 it scaled by AXIS_GAIN[i] = (1.0, -0.8, 0.6)[i], as a rigid body moving along
 a fixed direction would. Rests, and rest times, are thus common to all axes.
+The ``walking`` scenario is the exception: it is a horizontal walk
+(:mod:`accelnav.hil_sim.walking`), axes 0 and 1 see its two horizontal
+components plus the gravity leaking through its tilt error, a third axis sees
+no motion, and the run carries the true stance mask (``stance``) from which
+stride lengths are scored.
 """
 
 from __future__ import annotations
@@ -87,6 +92,7 @@ class SimRun:
     clipped: np.ndarray
     accel: np.ndarray
     initial_random: bool = field(default=True)
+    stance: np.ndarray | None = None  # (N,) bool, walking only: the foot is on the ground
 
     @property
     def n_axes(self) -> int:
@@ -120,9 +126,11 @@ class SimRun:
             "seed": np.array(self.seed, dtype=np.int64),
             "initial_random": np.array(self.initial_random, dtype=bool),
         }
+        if self.stance is not None:
+            d["stance"] = self.stance
         if self.code is not None:
             d["code"] = self.code
-        else:
+        elif self.t1 is not None:
             d["t1"] = self.t1
             d["t2"] = self.t2
         return {k: np.array(v) for k, v in d.items()}
@@ -134,8 +142,7 @@ class SimRun:
         Checks the keys, shapes, axis names and that ``accel`` and ``clipped``
         are what ``model`` converts the raw input to; raises ValueError otherwise.
         """
-        analog = model.sensor.kind == "analog"
-        raw_keys = ("code",) if analog else ("t1", "t2")
+        raw_keys = {"analog": ("code",), "duty_cycle": ("t1", "t2"), "calibrated": ()}[model.sensor.kind]
         need = ("t", "axis_names", "r", "u", "a", "eps", "clipped", "accel", "scenario", "seed", *raw_keys)
         missing = [k for k in need if k not in d]
         if missing:
@@ -157,7 +164,7 @@ class SimRun:
             arrays[key] = _readonly(arr.astype(dtype))
         for j, name in enumerate(names):
             conv = input_conversion(model, name)
-            raw = [arrays[k][:, j] for k in raw_keys]
+            raw = [arrays[k][:, j] for k in raw_keys] or [arrays["accel"][:, j] / conv.scale]
             if not np.allclose(conv.accel(*raw), arrays["accel"][:, j], rtol=1e-12, atol=1e-12):
                 raise ValueError(f"accel: axis {name!r} does not match its raw input under model {model.name!r}")
             if not np.array_equal(conv.clipped(*raw), arrays["clipped"][:, j]):
@@ -178,6 +185,7 @@ class SimRun:
             clipped=arrays["clipped"],
             accel=arrays["accel"],
             initial_random=bool(np.asarray(d.get("initial_random", True))[()]),
+            stance=_readonly(np.asarray(d["stance"], dtype=bool)) if "stance" in d else None,
         )
 
 
@@ -226,19 +234,31 @@ def simulate(
     n = max(1, math.ceil(float(duration_s) * model.rate_hz - 1e-9))
     t = np.arange(n, dtype=np.float64) / model.rate_hz
     motion_ss, *axis_ss = np.random.SeedSequence(int(seed)).spawn(1 + MAX_AXES)
-    r1, u1, a1 = truth(scenario, t, np.random.default_rng(motion_ss), model.max_accel_m_s2)
+    stance = None
+    if scenario == "walking":
+        from .walking import walk
+
+        w = walk(t, np.random.default_rng(motion_ss), model.max_accel_m_s2)
+        stance = w.stance
+    else:
+        r1, u1, a1 = truth(scenario, t, np.random.default_rng(motion_ss), model.max_accel_m_s2)
 
     cols: dict[str, list[np.ndarray]] = {k: [] for k in ("r", "u", "a", "eps", "raw0", "raw1", "clipped", "accel")}
     for i in indices:
-        gain = AXIS_GAIN[i]
         walk_ss, start_ss, noise_ss, jitter_ss = axis_ss[i].spawn(4)
         eps = bias(model, i, t, np.random.default_rng(walk_ss), np.random.default_rng(start_ss), initial_random)
         noise = sensor_noise(model, n, np.random.default_rng(noise_ss))
-        a = gain * a1
-        raw = read_out(model, i, a + eps + noise, np.random.default_rng(jitter_ss))
+        if stance is not None:  # walking: horizontal components, tilt leak; a third axis does not move
+            zero = np.zeros(n)
+            r_i, u_i, a_i, leak = (x[:, i] if i < 2 else zero for x in (w.r, w.u, w.a, w.leak))
+        else:
+            gain = AXIS_GAIN[i]
+            r_i, u_i, a_i, leak = gain * r1, gain * u1, gain * a1, 0.0
+        a = a_i
+        raw = read_out(model, i, a + eps + leak + noise, np.random.default_rng(jitter_ss))
         conv = input_conversion(model, i)
-        cols["r"].append(gain * r1)
-        cols["u"].append(gain * u1)
+        cols["r"].append(r_i)
+        cols["u"].append(u_i)
         cols["a"].append(a)
         cols["eps"].append(eps)
         for k, v in enumerate(raw):
@@ -250,6 +270,7 @@ def simulate(
         return _readonly(np.stack(cols[key], axis=1).astype(dtype, copy=False))
 
     analog = model.sensor.kind == "analog"
+    duty = model.sensor.kind == "duty_cycle"
     return SimRun(
         model=model,
         scenario=scenario,
@@ -260,12 +281,13 @@ def simulate(
         u=stack("u", np.float64),
         a=stack("a", np.float64),
         eps=stack("eps", np.float64),
-        code=stack("raw0", np.int32) if analog else None,
-        t1=None if analog else stack("raw0", np.int32),
-        t2=None if analog else stack("raw1", np.int32),
+        code=stack("raw0", np.int32) if analog else None,  # calibrated: no raw input beside accel
+        t1=stack("raw0", np.int32) if duty else None,
+        t2=stack("raw1", np.int32) if duty else None,
         clipped=stack("clipped", bool),
         accel=stack("accel", np.float64),
         initial_random=initial_random,
+        stance=None if stance is None else _readonly(np.array(stance)),
     )
 
 
@@ -336,8 +358,21 @@ def sensor_noise(model: Model, n: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def read_out(model: Model, axis: int | str, m: np.ndarray, rng_jitter: np.random.Generator) -> tuple[np.ndarray, ...]:
-    """Raw samples for the sensed acceleration m [m/s^2]: (code,) or (t1, t2), int32."""
+    """Raw samples for the sensed acceleration m [m/s^2]: (code,) or (t1, t2), int32; (value,) for calibrated.
+
+    A calibrated sensor gives m in its unit, rounded to its LSB when the model
+    declares one (int16 counts of a digital part) and saturated at its full scale.
+    """
     ax = model.axis(axis)
+    if model.sensor.kind == "calibrated":
+        c = model.sensor.calibrated
+        scale = G0 if c.unit == "g" else 1.0
+        full = model.max_accel_m_s2
+        v = np.clip(m, -full, full)
+        if c.lsb_per_g > 0:
+            lsb = G0 / c.lsb_per_g
+            v = np.clip(np.rint(v / lsb) * lsb, -full, full)
+        return (v / scale,)
     if model.sensor.kind == "analog":
         an = model.sensor.analog
         volts = np.clip(ax.zero_g + ax.sensitivity * m / G0, 0.0, an.supply_v)

@@ -47,7 +47,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shock")
+SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shock", "walking")
 
 _CHUNK = 64  # moves drawn per batch of random numbers (fixed: keeps runs prefix-consistent)
 
@@ -81,6 +81,9 @@ def truth(name: str, t: np.ndarray, rng: np.random.Generator, amax: float) -> tu
     * ``shock``: as ``stress``, but a quarter of the pulse pairs are impacts
       of +-2.5 amax (10 ms edges, a flat top of max(10 ms, one sample
       period), velocity swing at most 30 m/s), beyond the sensor's rails.
+    * ``walking``: a foot during a walk with turns (:mod:`accelnav.hil_sim.walking`);
+      this function returns its first horizontal axis, :func:`simulate
+      <accelnav.hil_sim.sensor.simulate>` uses both and the stance mask.
     """
     if name not in SCENARIOS:
         accepted = ", ".join(repr(s) for s in SCENARIOS)
@@ -95,6 +98,11 @@ def truth(name: str, t: np.ndarray, rng: np.random.Generator, amax: float) -> tu
         return z, z.copy(), z.copy()
     if name == "sinusoid":
         return _sinusoid(t, rng, amax)
+    if name == "walking":
+        from .walking import walk
+
+        w = walk(t, rng, amax)
+        return w.r[:, 0].copy(), w.u[:, 0].copy(), w.a[:, 0].copy()
     dt = float(t[1] - t[0]) if t.size > 1 else 0.0
     draw = {
         "stop_and_go": _draw_stop_and_go,

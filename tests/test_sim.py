@@ -177,9 +177,10 @@ def test_initial_random_changes_only_the_bias_start(default):
 def test_truth_is_consistent_r_u_a(default, scenario):
     """Central differences of r and u on a fine grid equal u and a within the bound of fd_tolerance.
 
-    2 kHz over 240 s; 20 kHz over 60 s for stress and shock, whose pulse edges are 5-15 ms.
+    2 kHz over 240 s; 20 kHz over 60 s for stress and shock, whose pulse edges are 5-15 ms, and for
+    walking, whose heel-strike and toe-off pulses last 20-40 ms.
     """
-    h, duration = (5e-5, 60.0) if scenario in ("stress", "shock") else (5e-4, 240.0)
+    h, duration = (5e-5, 60.0) if scenario in ("stress", "shock", "walking") else (5e-4, 240.0)
     t = np.arange(0.0, duration, h)
     r, u, a = truth(scenario, t, np.random.default_rng(11), default.max_accel_m_s2)
     assert r.dtype == u.dtype == a.dtype == np.float64 and r.shape == t.shape
@@ -451,3 +452,47 @@ def test_max_run_duration_is_accepted(default):
     run = simulate(default, "stationary", default.ranges.max_run_s, 0, axes=[0])
     assert len(run.t) == int(default.ranges.max_run_s * default.rate_hz)
     assert run.t[-1] < default.ranges.max_run_s
+
+
+# --------------------------------------------------------------------------
+# Walking (issue #11)
+
+
+def test_walking_strides_stances_and_shocks(default):
+    from accelnav.estimate.pipeline import stance_midpoints, stride_lengths
+    from accelnav.estimate.zupt import intervals
+
+    run = simulate(default, "walking", 120.0, 6)
+    st = run.stance
+    assert np.all(run.u[st] == 0.0) and np.all(run.a[st] == 0.0)
+    assert np.all(np.linalg.norm(run.u[~st], axis=1) > 0)
+    assert 0.30 <= st.mean() <= 0.40
+    runs = intervals(st)
+    durations = np.array([b - a for a, b in runs[:-1]]) * default.Ts
+    assert durations.min() >= 0.28 and durations.max() <= 0.45
+    starts = np.array([a for a, _ in runs]) * default.Ts
+    assert 0.9 <= np.median(np.diff(starts)) <= 1.15  # about 1 Hz cadence
+    lengths = stride_lengths(run.r, stance_midpoints(st))
+    assert lengths.min() >= 1.2 - 1e-9 and lengths.max() <= 1.5 + 1e-9
+    peak = np.abs(run.a).max() / 9.80665
+    assert 12.0 <= peak <= 17.0  # heel strike / toe-off pulses to about 16 g
+    # turns: the heading of the strides changes by more than 60 degrees over the run
+    mids = stance_midpoints(st)
+    d = np.diff(run.r[mids], axis=0)
+    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    assert np.ptp(heading) > np.radians(60)
+    # the tilt leak: at rest the sensor reads more than bias and noise explain
+    leak = run.accel[st] - run.eps[st]
+    assert np.abs(leak.mean(axis=0)).max() > 0.01
+
+
+def test_sim_cli_walking_and_smooth_prints_strides(tmp_path, capsys):
+    from accelnav.cli import main
+
+    path = tmp_path / "w.npz"
+    assert main(["sim", "--scenario", "walking", "--duration", "20", "--seed", "2", "--out", str(path)]) == 0
+    assert main(["smooth", str(path), "--zupt", "auto", "--out", str(tmp_path / "s.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "stride length" in out and "smoother" in out
+    row = [ln for ln in out.splitlines() if ln.startswith("smoother")][-1].split()
+    assert float(row[3]) < 5.0  # mean |error| in % of the stride

@@ -63,7 +63,12 @@ def test_zupt_from_file_is_applied_without_gate(sim, tmp_path, capsys):
     status, out, _ = _run(["smooth", sim, "--zupt", tmp_path / "rest.csv", "--out", tmp_path / "s.npz"], capsys)
     assert status == 0
     arrays, _ = load_run(tmp_path / "s.npz")
-    # 0..1.5 s -> samples 0..150, every 10th: 16; 10..10.2 s -> 1000..1020: 3
+    # 0..1.5 s -> samples 0..150: 151; 10..10.2 s -> 1000..1020: 21 (an update at every sample by default)
+    assert arrays["zupt"][:, 0].sum() == 172 and arrays["zupt"][:, 1].sum() == 172
+    status, out, _ = _run(["smooth", sim, "--zupt", tmp_path / "rest.csv", "--zupt-every", "0.1", "--out",
+                           tmp_path / "s.npz"], capsys)  # fmt: skip
+    arrays, _ = load_run(tmp_path / "s.npz")
+    # every 10th: 16 and 3
     assert arrays["zupt"][:, 0].sum() == 19 and arrays["zupt"][:, 1].sum() == 19
 
 
@@ -97,3 +102,49 @@ def test_bad_zupt_arguments_refused(sim, tmp_path, capsys):
     (tmp_path / "r.csv").write_text("start_s,end_s\n5,4\n")
     status, _, err = _run(["smooth", sim, "--zupt", tmp_path / "r.csv", "--out", tmp_path / "s.npz"], capsys)
     assert status == 2 and "end_s 4 is before start_s 5" in err
+
+
+def test_zupt_file_with_axis_and_sigma_columns(sim, tmp_path, capsys):
+    (tmp_path / "rest.csv").write_text("start_s,end_s,axis,sigma\n0,1.5,x,0.001\n10,10.2,y,0.5\n")
+    status, _, err = _run(["smooth", sim, "--zupt", tmp_path / "rest.csv", "--out", tmp_path / "s.npz"], capsys)
+    assert status == 0, err
+    arrays, _ = load_run(tmp_path / "s.npz")
+    assert arrays["zupt"][:, 0].sum() == 151 and arrays["zupt"][:, 1].sum() == 21
+    assert not arrays["zupt"][1000:1021, 0].any() and arrays["zupt"][1000:1021, 1].all()
+    # sigma is honoured: a tight update pins the velocity, a loose one hardly moves it
+    assert np.sqrt(arrays["smooth_P"][0, 100, 1, 1]) < 0.002
+    bad = tmp_path / "bad.csv"
+    bad.write_text("start_s,end_s,axis,sigma\n0,1,x,0\n")
+    status, _, err = _run(["smooth", sim, "--zupt", bad, "--out", tmp_path / "s.npz"], capsys)
+    assert status == 2 and "row 2: sigma is 0" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("form", ["npz", "csv", "csv_t"])
+def test_zupt_as_a_per_sample_mask(sim, tmp_path, capsys, form):
+    arrays, _ = load_run(sim)
+    n = len(arrays["t"])
+    mask = np.zeros(n, dtype=int)
+    mask[0:151] = 1
+    mask[1000:1021] = 1
+    if form == "npz":
+        path = tmp_path / "m.npz"
+        np.savez(path, rest=mask)
+    elif form == "csv":
+        path = tmp_path / "m.csv"
+        path.write_text("rest\n" + "\n".join(str(v) for v in mask) + "\n")
+    else:
+        path = tmp_path / "m.csv"
+        path.write_text("t_s,rest\n" + "\n".join(f"{t:.3f},{v}" for t, v in zip(arrays["t"], mask, strict=True)) + "\n")
+    status, _, err = _run(["smooth", sim, "--zupt", path, "--out", tmp_path / "s.npz"], capsys)
+    assert status == 0, err
+    out, _ = load_run(tmp_path / "s.npz")
+    assert np.array_equal(out["zupt"][:, 0], mask.astype(bool)) and np.array_equal(out["zupt"][:, 1], mask.astype(bool))
+
+
+def test_bad_masks_refused_in_one_line(sim, tmp_path, capsys):
+    (tmp_path / "short.csv").write_text("rest\n1\n0\n")
+    status, _, err = _run(["smooth", sim, "--zupt", tmp_path / "short.csv", "--out", tmp_path / "s.npz"], capsys)
+    assert status == 2 and "the rest mask has 2 samples; the run has 4000" in err and err.count("\n") == 1
+    np.savez(tmp_path / "two.npz", rest=np.full(4000, 2))
+    status, _, err = _run(["smooth", sim, "--zupt", tmp_path / "two.npz", "--out", tmp_path / "s.npz"], capsys)
+    assert status == 2 and "accepted: 0 or 1" in err and err.count("\n") == 1

@@ -7,15 +7,50 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.model import DEFAULT_MODEL, Model, load_model
+from accelnav.codegen.model import DEFAULT_MODEL, Model, load_model, loads_model
 from accelnav.data.runfile import STATE, export_csv, load_run, save_run
 from accelnav.errors import UserError
-from accelnav.estimate.pipeline import filter_run, format_errors, position_errors, smooth_run
+from accelnav.estimate.pipeline import (
+    filter_run,
+    format_errors,
+    format_strides,
+    position_errors,
+    smooth_run,
+    stride_table,
+)
 from accelnav.estimate.zupt import ZuptParams
 
 
 def _model_arg(p: argparse.ArgumentParser, help_extra: str = "") -> None:
     p.add_argument("--model", type=Path, default=None, help=f"model file (TOML){help_extra}")
+
+
+INPUT_HELP = (
+    "the data: an accelnav run file (.npz), a recorder log (.acnlog), a CSV or gzip CSV with a time column "
+    "and one column per axis, or an NPZ with t and accel"
+)
+
+
+def _input_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--axis",
+        action="append",
+        metavar="NAME",
+        help="CSV/NPZ: a column to use as an axis, in the model's axis order; repeat for each axis",
+    )
+    p.add_argument("--time-column", default=None, metavar="NAME", help="CSV: the time column; default t, t_s, time")
+    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="CSV without a time column: sample rate")
+    p.add_argument(
+        "--unit",
+        default=None,
+        help="CSV: unit of the acceleration columns, g, mg or m/s^2; default: from the column names, else "
+        "the unit of a calibrated model",
+    )
+    p.add_argument(
+        "--allow-gaps",
+        action="store_true",
+        help="accept gaps in time: the missing samples are filled in and the filter only predicts across them",
+    )
 
 
 def _csv_arg(p: argparse.ArgumentParser) -> None:
@@ -33,9 +68,10 @@ def register(sub) -> None:
     _csv_arg(p)
     p.set_defaults(func=cmd_sim)
 
-    p = sub.add_parser("filter", help="run the float64 reference filter over a run file")
-    p.add_argument("run", type=Path, help="run file (.npz) from accelnav sim")
-    _model_arg(p, "; default: the model embedded in the run file")
+    p = sub.add_parser("filter", help="run the float64 reference filter over a recording or run file")
+    p.add_argument("run", type=Path, help=INPUT_HELP)
+    _model_arg(p, "; default: the model embedded in the input, else the embedded default")
+    _input_args(p)
     p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
     _csv_arg(p)
     p.set_defaults(func=cmd_filter)
@@ -48,8 +84,9 @@ def register(sub) -> None:
         "computed once per model and run length, then a few operations per sample. Zero-velocity detection: "
         "accelnav.estimate.zupt.",
     )
-    p.add_argument("run", type=Path, help="run file (.npz) from accelnav sim, filter or a recording")
-    _model_arg(p, "; default: the model embedded in the run file")
+    p.add_argument("run", type=Path, help=INPUT_HELP)
+    _model_arg(p, "; default: the model embedded in the input, else the embedded default")
+    _input_args(p)
     p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
     p.add_argument(
         "--fixes",
@@ -62,44 +99,42 @@ def register(sub) -> None:
         "--zupt",
         default=None,
         metavar="auto|FILE",
-        help="zero-velocity updates: 'auto' detects rests in the acceleration; FILE is a CSV of rest "
-        "intervals (start_s,end_s), applied without a gate",
+        help="zero-velocity updates: 'auto' detects rests in the acceleration (accelnav.estimate.zupt); FILE is a "
+        "CSV of rest intervals (start_s,end_s[,axis][,sigma]) or a per-sample 0/1 mask (NPZ key 'rest', or a CSV "
+        "column 'rest'), applied as given",
     )
     z = ZuptParams()
-    p.add_argument(
-        "--zupt-window", type=float, default=z.window_s, metavar="S", help=f"detector window, s; default {z.window_s:g}"
-    )
-    p.add_argument(
-        "--zupt-var-k",
-        type=float,
-        default=z.var_k,
-        metavar="K",
-        help=f"quiet if window variance <= K*R; default {z.var_k:g}",
-    )
-    p.add_argument(
-        "--zupt-level",
-        type=float,
-        default=None,
-        metavar="A",
-        help="at rest if |window mean - bias| <= A m/s^2; default: from the model's bias uncertainty and R",
-    )
-    p.add_argument(
-        "--zupt-sigma", type=float, default=z.sigma, metavar="V", help=f"update std, m/s; default {z.sigma:g}"
-    )
-    p.add_argument(
-        "--zupt-every",
-        type=float,
-        default=z.every_s,
-        metavar="S",
-        help=f"one update per S s of rest; default {z.every_s:g}",
-    )
-    p.add_argument(
-        "--zupt-gate",
-        type=float,
-        default=z.gate,
-        metavar="G",
-        help=f"chi-square gate of each update, 0 = none; default {z.gate:g}",
-    )
+    zupt_opts = [
+        ("--zupt-window", "window_s", "S", f"detector window, s; default {z.window_s:g}"),
+        (
+            "--zupt-var-k",
+            "var_k",
+            "K",
+            f"quiet if the window variance, averaged over axes, <= K*R; default {z.var_k:g}",
+        ),
+        (
+            "--zupt-level",
+            "level",
+            "A",
+            f"at rest if |window means - bias| <= A m/s^2; default: from the model, at least {z.level_min:g}",
+        ),
+        ("--zupt-sigma", "sigma", "V", f"update std, m/s; default {z.sigma:g}"),
+        ("--zupt-every", "every_s", "S", "one update per S s of rest; default 0: every sample"),
+        (
+            "--zupt-gate",
+            "gate",
+            "G",
+            f"per-rest chi-square bound on the velocity since the last rest, 0 = none; default {z.gate:g}",
+        ),
+        (
+            "--zupt-rel",
+            "rel",
+            "F",
+            f"per-rest: also accept when the speed fell to F of its peak since the last rest; default {z.rel:g}",
+        ),
+    ]
+    for flag, field, metavar, text in zupt_opts:
+        p.add_argument(flag, type=float, default=getattr(z, field), dest=f"zupt_{field}", metavar=metavar, help=text)
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     _csv_arg(p)
     p.set_defaults(func=cmd_smooth)
@@ -125,15 +160,101 @@ def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[s
 
 
 def _load(args) -> tuple[dict[str, np.ndarray], Model]:
-    arrays, model = load_run(args.run)
-    if args.model is not None:
-        override = load_model(args.model)
+    """The input of filter and smooth, whatever its form, checked against the model (see INPUT_HELP)."""
+    from accelnav.data.recording import check_rate, on_grid, read_recording
+    from accelnav.link.logfile import MAGIC
+
+    path = args.run
+    if not path.is_file():
+        raise UserError(f"{path}: no such file")
+    with open(path, "rb") as fh:
+        head = fh.read(len(MAGIC))
+    override = load_model(args.model) if args.model is not None else None
+    if head == MAGIC:
+        from accelnav.cli.record import log_run_arrays
+
+        arrays, model = log_run_arrays(path)
+        return _with_model(path, arrays, model, override, args)
+    if (head.startswith(b"PK") or path.suffix.lower() == ".npz") and not _is_recording_npz(path):
+        arrays, model = load_run(path)
+        return _with_model(path, arrays, model, override, args)
+    # a recording: CSV, gzip CSV, or an NPZ of t and accel
+    model = override
+    unit = args.unit
+    if unit is None and model is not None and model.sensor.kind == "calibrated":
+        unit = model.sensor.calibrated.unit
+    rec = read_recording(
+        path, axes=args.axis, unit=unit, rate_hz=args.rate, time_column=args.time_column, allow_gaps=args.allow_gaps
+    )
+    if model is None:
+        model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
+    check_rate(rec, model.rate_hz, str(model.source))
+    names = [a.name for a in model.axes]
+    if len(rec.axis_names) != len(names):
+        raise UserError(
+            f"{path}: {len(rec.axis_names)} axes ({', '.join(rec.columns)}) for the model's {len(names)} "
+            f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
+        )
+    bad = ~np.isfinite(rec.accel)
+    if bad.any():
+        k = int(np.argmax(bad.any(axis=1)))
+        raise UserError(f"{path}: {rec.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
+    max_n = int(np.ceil(model.ranges.max_run_s * model.rate_hz))
+    t, accel, missing = on_grid(rec, rec.rate_hz, max_n)  # its own clock: within 1 % of the model by now
+    # at the sensor's declared full scale a sample is clipped (as a digital part saturates); missing ones too
+    with np.errstate(invalid="ignore"):
+        clipped = np.abs(accel) >= model.max_accel_m_s2 * (1 - 1e-9)
+    clipped |= missing[:, None]
+    if rec.clipped is not None and not missing.any():
+        clipped |= rec.clipped
+    if missing.any():
+        print(f"{path}: {int(missing.sum())} missing samples filled in (predict only)")
+    if len(rec.axis_names) and list(rec.axis_names) != names:
+        print(f"{path}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
+    arrays = {"t": t, "axis_names": np.array(names), "accel": accel, "clipped": clipped}
+    return arrays, model
+
+
+def _is_recording_npz(path: Path) -> bool:
+    """An NPZ of t and accel without the run file's format key (else it is read, and refused, as a run file)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (OSError, zipfile.BadZipFile):
+        return False
+    return "accel.npy" in names and "format.npy" not in names
+
+
+def _with_model(path, arrays, model: Model, override: Model | None, args) -> tuple[dict[str, np.ndarray], Model]:
+    from accelnav.data.recording import GAP_FACTOR
+
+    for flag in ("axis", "time_column", "rate", "unit"):
+        if getattr(args, flag) not in (None, []):
+            raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
+    if override is not None:
         if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:
             raise UserError(
                 f"{args.model}: axes {[a.name for a in override.axes]} do not match the run's "
                 f"{[str(a) for a in arrays['axis_names']]}"
             )
         model = override
+    t = arrays["t"]
+    if len(t) > 2:
+        dt = np.diff(t)
+        step = float(np.median(dt))
+        if abs(step * model.rate_hz - 1) > 0.01:
+            raise UserError(
+                f"{path}: the run is sampled at {1 / step:.6g} Hz but the model {model.source} has "
+                f"sampling.rate_hz = {model.rate_hz:g} Hz"
+            )
+        if np.any(dt > GAP_FACTOR * step):
+            k = int(np.argmax(dt > GAP_FACTOR * step))
+            raise UserError(
+                f"{path}: gap in time of {dt[k]:.6g} s after sample {k}; a run file is not filled in "
+                "(--allow-gaps is for CSV and NPZ recordings: export the samples with --csv)"
+            )
     return arrays, model
 
 
@@ -197,28 +318,36 @@ def cmd_smooth(args) -> int:
     names = [str(a) for a in arrays["axis_names"]]
     fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
     params = ZuptParams(
-        window_s=args.zupt_window,
+        window_s=args.zupt_window_s,
         var_k=args.zupt_var_k,
         level=args.zupt_level,
         sigma=args.zupt_sigma,
-        every_s=args.zupt_every,
+        every_s=args.zupt_every_s,
         gate=args.zupt_gate,
+        rel=args.zupt_rel,
     )
-    rest = None
-    if args.zupt == "auto":
+    rest = rest_sigma = None
+    if args.zupt is not None:
         try:
             params = zupt.resolved(model, params)
         except ValueError as exc:
             raise UserError(f"--zupt-*: {exc}") from None
-        rest = zupt.rest_mask(arrays["accel"], arrays["clipped"], model, params)
+    if args.zupt == "auto":
+        cand = zupt.candidates(arrays["accel"], arrays["clipped"], model, params)
+        decisions = zupt.gate_rests(arrays["accel"], arrays["clipped"], cand, model, params)
+        rest = np.zeros(len(cand), dtype=bool)
+        for d in decisions:
+            if d.accepted:
+                rest[d.start : d.stop] = True
+        kept = sum(d.accepted for d in decisions)
         print(
             f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} R, "
-            f"|mean - bias| <= {params.level:.3g} m/s^2: {len(zupt.intervals(rest))} rests, "
-            f"{100 * rest.mean():.1f} % of the run"
+            f"|mean - bias| <= {params.level:.3g} m/s^2: {len(decisions)} candidate rests, {kept} accepted by the "
+            f"per-rest gate, {100 * rest.mean():.1f} % of the run"
         )
     elif args.zupt is not None:
-        rest = zupt.intervals_from_csv(args.zupt, arrays["t"])
-    arrays = smooth_run(arrays, model, fixes=fixes, rest=rest, zupt_params=params, zupt_gated=args.zupt == "auto")
+        rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
+    arrays = smooth_run(arrays, model, fixes=fixes, rest=rest, zupt_params=params, rest_sigma=rest_sigma)
     if rest is not None:
         print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
     if fixes is not None:
@@ -227,6 +356,9 @@ def cmd_smooth(args) -> int:
     rows = position_errors(arrays, model)
     if rows:
         print(format_errors(rows))
+    strides = stride_table(arrays, model)
+    if strides:
+        print(format_strides(strides))
     _save(args, arrays, model)
     if args.plots is not None:
         from accelnav.plots.run import plot_run, plot_smoothing

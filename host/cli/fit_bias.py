@@ -41,7 +41,9 @@ def register(sub) -> None:
         description="Fit eps(t) = c1 (1 - exp(-t/T)) + c2 to a stationary recording, test the residuals for "
         "whiteness, identify the noise from the Allan deviation, and write a model file.",
     )
-    p.add_argument("recording", type=Path, help="CSV (plain or gzip) or NPZ (as written by accelnav sim)")
+    p.add_argument(
+        "recording", type=Path, help="CSV (plain or gzip), NPZ (as written by accelnav sim) or a recorder log (.acnlog)"
+    )
     p.add_argument(
         "--axis",
         action="append",
@@ -110,12 +112,32 @@ def analyse_axis(
     return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise)
 
 
+def _read(args: argparse.Namespace) -> Recording:
+    """The recording: a CSV, gzip CSV or NPZ through the checked reader, or a recorder log read directly."""
+    from accelnav.link.logfile import MAGIC
+
+    path = args.recording
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(len(MAGIC))
+    except OSError:
+        head = b""  # read_recording says what is wrong with the path
+    if head == MAGIC:
+        from accelnav.cli.record import log_run_arrays
+        from accelnav.data.recording import from_arrays
+
+        for flag in ("unit", "rate", "time_column"):
+            if getattr(args, flag) is not None:
+                raise UserError(f"--{flag.replace('_', '-')}: not for a recorder log, which says its own")
+        arrays, _ = log_run_arrays(path)
+        return from_arrays(str(path), arrays, args.axis)
+    return read_recording(path, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column)
+
+
 def cmd_fit_bias(args: argparse.Namespace) -> int:
     if args.lags < 1:
         raise UserError(f"--lags: got {args.lags}; accepted: a positive number of lags")
-    rec = read_recording(
-        args.recording, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column
-    )
+    rec = _read(args)
     base, base_label, given = _base_model(args.model, rec)
     full_scale = base.max_accel_m_s2 if given else None
 

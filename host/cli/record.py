@@ -145,9 +145,6 @@ def cmd_log_info(args) -> int:
 
 
 def cmd_log_export(args) -> int:
-    from accelnav.codegen.design import input_conversion
-    from accelnav.codegen.model import ModelError, loads_model
-    from accelnav.data.runfile import FORMAT
     from accelnav.link.logfile import LogError
     from accelnav.link.recorder import decode_log
     from accelnav.link.telemetry import sample_columns
@@ -162,7 +159,6 @@ def cmd_log_export(args) -> int:
     cols = sample_columns(d.manifest, d.frames["sample"])
     names = d.manifest.axes
     raw = d.manifest.raw_fields()
-    skipped = (cols["axis_flags"] & (1 << d.manifest.axis_flags["skipped"])) != 0
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".csv":
         header = ["t_s", "index", "seq", "flags", "host_time_s"]
@@ -180,11 +176,42 @@ def cmd_log_export(args) -> int:
         print(f"accelnav log export: {args.out}: {len(cols['t'])} rows")
         return 0
     # NPZ: an accelnav run file (host/data/runfile.py) plus the firmware's own states
+    arrays, _ = log_run_arrays(args.log, d)
+    tmp = args.out.with_name(args.out.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+    tmp.replace(args.out)
+    gaps = int(np.count_nonzero(np.diff(cols["index"]) != 1)) if len(cols["index"]) > 1 else 0
+    print(
+        f"accelnav log export: {args.out}: {len(cols['t'])} samples"
+        + (f" ({gaps} gaps in the sample index: decimation or lost frames; t is from the index)" if gaps else "")
+    )
+    return 0
+
+
+def log_run_arrays(log, d=None) -> tuple[dict[str, np.ndarray], object]:
+    """A recorder log as the arrays of an accelnav run file (and its model); what ``log export`` writes."""
+    from accelnav.codegen.design import input_conversion
+    from accelnav.codegen.model import ModelError, loads_model
+    from accelnav.data.runfile import FORMAT
+    from accelnav.link.logfile import LogError
+    from accelnav.link.recorder import decode_log
+    from accelnav.link.telemetry import sample_columns
+
+    if d is None:
+        try:
+            d = decode_log(log)
+        except LogError as exc:
+            raise UserError(str(exc)) from None
+    cols = sample_columns(d.manifest, d.frames["sample"])
+    names = d.manifest.axes
+    raw = d.manifest.raw_fields()
+    skipped = (cols["axis_flags"] & (1 << d.manifest.axis_flags["skipped"])) != 0
     text = d.meta.get("model_toml") or ""
     if not text:
-        raise UserError(f"{args.log}: the log carries no model text (recorded with --manifest); export to .csv instead")
+        raise UserError(f"{log}: the log carries no model text (recorded with --manifest); export to .csv instead")
     try:
-        model = loads_model(text, source=f"{args.log}:model_toml")
+        model = loads_model(text, source=f"{log}:model_toml")
     except ModelError as exc:
         raise UserError(str(exc)) from None
     accel = np.empty((len(cols["t"]), len(names)))
@@ -196,7 +223,7 @@ def cmd_log_export(args) -> int:
     arrays = {
         "format": np.array(FORMAT),
         "model_toml": np.array(text),
-        "model_source": np.array(f"{args.log}:model_toml"),
+        "model_source": np.array(f"{log}:model_toml"),
         "t": cols["t"],
         "axis_names": np.array(names),
         "accel": accel,
@@ -211,13 +238,4 @@ def cmd_log_export(args) -> int:
         "fw_axis_flags": cols["axis_flags"],
         "host_time_ns": d.host_t_ns,
     }
-    tmp = args.out.with_name(args.out.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
-    tmp.replace(args.out)
-    gaps = int(np.count_nonzero(np.diff(cols["index"]) != 1)) if len(cols["index"]) > 1 else 0
-    print(
-        f"accelnav log export: {args.out}: {len(cols['t'])} samples"
-        + (f" ({gaps} gaps in the sample index: decimation or lost frames; t is from the index)" if gaps else "")
-    )
-    return 0
+    return arrays, model

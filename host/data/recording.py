@@ -31,7 +31,7 @@ import gzip
 import io
 import re
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +75,12 @@ class Recording:
     rate_hz: float
     model_toml: str | None = None
     clipped: np.ndarray | None = None  # (N, n_axes) from the file, if it had one
+    lines: np.ndarray | None = None  # (N,) the file line of each sample (CSV only), for messages
+    time_unit: str | None = None  # the time column's unit as its name says ("s", "ms", "us"), None: unsaid
+
+    def where(self, k: int) -> str:
+        """Where sample k is in the file: its line (CSV) or its index."""
+        return f"sample {k} (line {int(self.lines[k])})" if self.lines is not None else f"sample {k}"
 
     @property
     def n(self) -> int:
@@ -108,8 +114,12 @@ def read_recording(
     unit: str | None = None,
     rate_hz: float | None = None,
     time_column: str | None = None,
+    allow_gaps: bool = False,
 ) -> Recording:
-    """Read ``path`` (CSV, gzip CSV or NPZ); see the module notes. Checks the format, not the content."""
+    """Read ``path`` (CSV, gzip CSV or NPZ); see the module notes. Checks the format, not the content.
+
+    ``allow_gaps`` lets gaps in time through (the caller fills them, see :func:`on_grid`).
+    """
     path = Path(path)
     if not path.is_file():
         raise UserError(f"{path}: no such file")
@@ -120,8 +130,10 @@ def read_recording(
     if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
         raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
     if head.startswith(b"PK"):
-        return _read_npz(path, axes, unit, rate_hz)
-    return _read_csv(path, axes, unit, rate_hz, time_column, gz=head.startswith(b"\x1f\x8b"))
+        rec = _read_npz(path, axes, unit, rate_hz)
+    else:
+        rec = _read_csv(path, axes, unit, rate_hz, time_column, gz=head.startswith(b"\x1f\x8b"))
+    return _check_time(rec, rate_hz, allow_gaps)
 
 
 # --------------------------------------------------------------------------
@@ -180,7 +192,7 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
         names = tuple(names[i] for i in idx)
         cols = names
         clipped = None if clipped is None else clipped[:, idx]
-    return _finish(src, t, accel, names, cols, (u,) * len(names), rate_hz, model_toml, clipped)
+    return _finish(src, t, accel, names, cols, (u,) * len(names), model_toml, clipped)
 
 
 def _model(text: str, src: str):
@@ -265,6 +277,17 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
         names = list(chosen)
 
     use = ([cols.index(tcol)] if tcol else []) + [cols.index(c) for c in chosen]
+    # every data row must have the header's number of fields: an extra or a missing cell is refused
+    # (loadtxt with usecols would drop an extra one silently); the line of each sample is kept for messages
+    all_lines = text.splitlines()
+    data_lines = []
+    for i in range(skip + 1, len(all_lines)):
+        line = all_lines[i]
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        if line.count(delim) != len(cols) - 1:
+            raise UserError(f"{src}: line {i + 1}: {line.count(delim) + 1} fields; the header has {len(cols)}")
+        data_lines.append(i + 1)
     try:
         table = _parse_rows(text, skip + 1, delim, use, src)
     except ValueError:
@@ -272,15 +295,20 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
         raise  # _locate_bad_cell always raises; this keeps linters quiet
     if table.shape[0] < 2:
         raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
+    time_unit = None
     if tcol:
         m = _TIME_NAME.match(tcol)
-        t = table[:, 0] * _TIME_SCALE[m.group(2).lower() if m and m.group(2) else None]
+        time_unit = m.group(2).lower() if m and m.group(2) else None
+        t = table[:, 0] * _TIME_SCALE[time_unit]
         data = table[:, 1:]
     else:
         t = np.arange(table.shape[0]) / rate_hz
         data = table
+        time_unit = "s"
     accel = data * np.array([UNITS[u] for u in units])
-    return _finish(src, t, accel, tuple(names), tuple(chosen), tuple(units), rate_hz if tcol else None, None, None)
+    rec = _finish(src, t, accel, tuple(names), tuple(chosen), tuple(units), None, None)
+    lines = np.asarray(data_lines, dtype=np.int64) if len(data_lines) == len(t) else None
+    return replace(rec, lines=lines, time_unit=time_unit)
 
 
 def _parse_rows(text: str, skiprows: int, delim: str, use: list[int], src: str) -> np.ndarray:
@@ -333,29 +361,7 @@ def _locate_bad_cell(lines, skip, delim, cols, use, src) -> None:
     raise UserError(f"{src}: cannot parse the numbers (rows of unequal length?)")
 
 
-def _finish(src, t, accel, names, cols, units, rate_given, model_toml, clipped) -> Recording:
-    if not np.isfinite(t).all():
-        k = int(np.argmax(~np.isfinite(t)))
-        raise UserError(f"{src}: time is not a finite number at sample {k}")
-    dt = np.diff(t)
-    back = dt <= 0
-    if back.any():
-        k = int(np.argmax(back))
-        raise UserError(
-            f"{src}: time does not increase at sample {k + 1} (t = {t[k]:.6g} s, then {t[k + 1]:.6g} s); "
-            f"{int(back.sum())} such steps"
-        )
-    step = float(np.median(dt))
-    gaps = dt > GAP_FACTOR * step
-    if gaps.any():
-        k = int(np.argmax(gaps))
-        raise UserError(
-            f"{src}: gap in time of {dt[k]:.6g} s at t = {t[k]:.6g} s (after sample {k}; the usual step is "
-            f"{step:.6g} s); {int(gaps.sum())} gaps in all"
-        )
-    rate = (len(t) - 1) / float(t[-1] - t[0])  # the mean step: less rounding than the median
-    if rate_given is not None and abs(rate / rate_given - 1) > 0.01:
-        raise UserError(f"{src}: the time column says {rate:.6g} Hz but --rate says {rate_given:g} Hz")
+def _finish(src, t, accel, names, cols, units, model_toml, clipped) -> Recording:
     return Recording(
         source=src,
         t=t,
@@ -363,10 +369,109 @@ def _finish(src, t, accel, names, cols, units, rate_given, model_toml, clipped) 
         axis_names=tuple(names),
         columns=tuple(cols),
         units=tuple(units),
-        rate_hz=rate,
+        rate_hz=float("nan"),
         model_toml=model_toml,
         clipped=clipped,
     )
+
+
+def from_arrays(source: str, arrays: dict[str, np.ndarray], axes: list[str] | None = None) -> Recording:
+    """A recording from run-file arrays (t, axis_names, accel in m/s^2, clipped, model_toml), time checked."""
+    names = tuple(str(a) for a in arrays["axis_names"])
+    idx = [_pick(a, names, names, source) for a in axes] if axes else list(range(len(names)))
+    rec = _finish(
+        source,
+        np.asarray(arrays["t"], dtype=np.float64),
+        np.asarray(arrays["accel"], dtype=np.float64)[:, idx],
+        tuple(names[i] for i in idx),
+        tuple(names[i] for i in idx),
+        ("m/s^2",) * len(idx),
+        str(arrays["model_toml"]) if "model_toml" in arrays else None,
+        np.asarray(arrays["clipped"], dtype=bool)[:, idx] if "clipped" in arrays else None,
+    )
+    return _check_time(replace(rec, time_unit="s"), None, False)
+
+
+def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> Recording:
+    """Finite, increasing time without gaps (unless allowed); the rate from the mean step."""
+    src, t = rec.source, rec.t
+    if not np.isfinite(t).all():
+        k = int(np.argmax(~np.isfinite(t)))
+        raise UserError(f"{src}: time is not a finite number at {rec.where(k)}")
+    dt = np.diff(t)
+    back = dt <= 0
+    if back.any():
+        k = int(np.argmax(back))
+        raise UserError(
+            f"{src}: time does not increase at {rec.where(k + 1)} (t = {t[k]:.6g} s, then {t[k + 1]:.6g} s); "
+            f"{int(back.sum())} such steps"
+        )
+    step = float(np.median(dt))
+    gaps = dt > GAP_FACTOR * step
+    if gaps.any() and not allow_gaps:
+        k = int(np.argmax(gaps))
+        raise UserError(
+            f"{src}: gap in time of {dt[k]:.6g} s at t = {t[k]:.6g} s (after {rec.where(k)}; the usual step is "
+            f"{step:.6g} s); {int(gaps.sum())} gaps in all"
+        )
+    if gaps.any():  # the rate from the usual step, the gaps left out
+        rate = 1.0 / float(np.mean(dt[~gaps]))
+    else:
+        rate = (len(t) - 1) / float(t[-1] - t[0])  # the mean step: less rounding than the median
+    if rate_given is not None and abs(rate / rate_given - 1) > 0.01:
+        raise UserError(f"{src}: the time column says {rate:.6g} Hz but --rate says {rate_given:g} Hz")
+    return replace(rec, rate_hz=rate)
+
+
+def check_rate(rec: Recording, model_rate_hz: float, model_source: str) -> None:
+    """Refuse a recording whose sample rate is not the model's, in one line (naming a millisecond clock)."""
+    dt = np.diff(rec.t)
+    step = float(np.median(dt))
+    rate = 1.0 / step
+    if abs(rate / model_rate_hz - 1) <= 0.01:
+        return
+    if rec.time_unit is None and abs(rate * 1000.0 / model_rate_hz - 1) <= 0.01:
+        raise UserError(
+            f"{rec.source}: the time column looks like milliseconds (median step {step:.6g}, the model's "
+            f"{model_rate_hz:g} Hz is a step of {1000.0 / model_rate_hz:.6g} ms); name it t_ms or give seconds"
+        )
+    raise UserError(
+        f"{rec.source}: the recording is sampled at {rate:.6g} Hz (median step {step:.6g} s) but the model "
+        f"{model_source} has sampling.rate_hz = {model_rate_hz:g} Hz; use a model made for {rate:.6g} Hz"
+    )
+
+
+def on_grid(rec: Recording, rate_hz: float, max_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, accel, missing): the samples placed on the uniform grid t0 + k / rate_hz, gaps filled with NaN.
+
+    Each sample must lie within a quarter period of its grid point (the
+    recording's timing jitter, checked whether or not there are gaps); a filled
+    run longer than ``max_samples`` samples in all is refused (memory bound).
+    """
+    Ts = 1.0 / rate_hz
+    k = np.rint((rec.t - rec.t[0]) / Ts).astype(np.int64)
+    off = np.abs(rec.t - rec.t[0] - k * Ts) > 0.25 * Ts
+    if off.any():
+        i = int(np.argmax(off))
+        raise UserError(
+            f"{rec.source}: {rec.where(i)} (t = {rec.t[i]:.6g} s) is off the {rate_hz:.6g} Hz sample grid by more "
+            "than a quarter period: the timing jitters too much for a fixed-rate filter"
+        )
+    if np.any(np.diff(k) < 1):
+        i = int(np.argmax(np.diff(k) < 1)) + 1
+        raise UserError(f"{rec.source}: {rec.where(i)} falls on the same sample period as the one before it")
+    n = int(k[-1]) + 1
+    if n > max_samples:
+        raise UserError(
+            f"{rec.source}: with its gaps filled the recording is {n} samples; the model's ranges.max_run_s "
+            f"allows {max_samples}"
+        )
+    t = rec.t[0] + np.arange(n) * Ts
+    accel = np.full((n, rec.accel.shape[1]), np.nan)
+    accel[k] = rec.accel
+    missing = np.ones(n, dtype=bool)
+    missing[k] = False
+    return t, accel, missing
 
 
 def check_axis(

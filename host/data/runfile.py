@@ -16,6 +16,7 @@ key                       shape, dtype           meaning
 ``t1``, ``t2``            (N, n_axes), int32     raw timer counts (duty-cycle parts)
 ``r u a eps``             (N, n_axes), float64   simulated truth (``accelnav sim`` only)
 ``scenario``, ``seed``    ()                     simulation settings (``accelnav sim`` only)
+``stance``                (N,), bool             the foot is on the ground (``walking`` scenario only)
 ``filt_x``                (n_axes, N, 4)         filter posterior x[k|k] = [r, u, a, eps]
 ``filt_P``                (n_axes, N, 4, 4)      its covariance
 ``filt_x_prior``          (n_axes, N, 4)         filter prior x[k|k-1]

@@ -12,7 +12,7 @@ import numpy as np
 
 from accelnav.codegen.design import axis_design
 from accelnav.codegen.model import Model
-from accelnav.estimate.kf import double_integrate, run_filter
+from accelnav.estimate.kf import double_integrate, run_filter, zero_velocity
 
 
 def filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None) -> dict[str, np.ndarray]:
@@ -39,7 +39,8 @@ def smooth_run(
     fixes: list[list] | None = None,
     rest: np.ndarray | None = None,
     zupt_params=None,
-    zupt_gated: bool = True,
+    zupt_gated: bool = False,
+    rest_sigma: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Return ``arrays`` with the filter's and the RTS smoother's output (keys filt_*, smooth_*).
 
@@ -47,7 +48,10 @@ def smooth_run(
     the general path. ``fixes[j]`` are position-fix measurements of axis
     column j (accelnav.estimate.fixes.read_fixes); ``rest`` is an (N,) mask of samples at
     rest (accelnav.estimate.zupt.rest_mask, or intervals from a file) that become
-    zero-velocity updates, gated when ``zupt_gated``. The filter keys are
+    zero-velocity updates, the same on every axis ((N,)) or per axis ((N, n_axes), from a
+    ZUPT file), with ``rest_sigma`` (N, n_axes) their standard deviations (NaN: the
+    params' sigma) (automatic rests are already gated per rest by rest_mask; ``zupt_gated`` adds the
+    kernel's per-update innovation gate, which the detector no longer uses). The filter keys are
     rewritten too, so that filter and smoother saw the same measurements.
     Adds ``zupt`` (N, n_axes) bool, the samples whose zero-velocity update
     was applied, and ``fixes`` (M, 4) [t, axis column, position, sigma].
@@ -58,16 +62,28 @@ def smooth_run(
     params = zupt.ZuptParams() if zupt_params is None else zupt_params
     n = len(arrays["t"])
     n_axes = len(arrays["axis_names"])
-    zupt_ks = zupt.update_samples(rest, model, params) if rest is not None else np.zeros(0, dtype=np.int64)
-    zupt_extras, zupt_gates = zupt.measurements(zupt_ks, params)
-    if not zupt_gated:
-        zupt_gates = [0.0] * len(zupt_gates)
+    rest2 = None
+    if rest is not None:
+        rest2 = np.asarray(rest, dtype=bool)
+        rest2 = np.broadcast_to(rest2[:, None] if rest2.ndim == 1 else rest2, (n, n_axes))
     keys = {k: [] for k in ("filt_x", "filt_P", "filt_x_prior", "filt_P_prior", "smooth_x", "smooth_P")}
     applied = np.zeros((n, n_axes), dtype=bool)
     fix_rows = []
     for j in range(n_axes):
         d = axis_design(model, j)
         fx = list(fixes[j]) if fixes is not None else []
+        zupt_ks = np.zeros(0, dtype=np.int64)
+        if rest2 is not None:
+            zupt_ks = zupt.update_samples(rest2[:, j], model, params)
+        zupt_extras, zupt_gates = zupt.measurements(zupt_ks, params)
+        if rest_sigma is not None and len(zupt_ks):
+            sd = np.asarray(rest_sigma)[zupt_ks, j]
+            zupt_extras = [
+                zero_velocity(int(k), float(s) if np.isfinite(s) else params.sigma)
+                for k, s in zip(zupt_ks, sd, strict=True)
+            ]
+        if not zupt_gated:
+            zupt_gates = [0.0] * len(zupt_gates)
         extras = fx + zupt_extras
         gates = [0.0] * len(fx) + list(zupt_gates)
         res = fastsmooth.smooth(d, arrays["accel"][:, j], valid=~arrays["clipped"][:, j], extras=extras, gates=gates)
@@ -145,3 +161,82 @@ def format_errors(rows: list[PositionErrors]) -> str:
     for row in rows:
         lines.append(f"{row.axis:<6}{row.method:<20}{row.rms:12.3f}{row.final:12.3f}{row.max_abs:13.3f}")
     return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class StrideErrors:
+    """Stride-length error of one estimate against the truth, over the strides of a walk."""
+
+    method: str
+    n_strides: int
+    mean_length: float  # m, true
+    mean_abs: float  # m
+    rms: float  # m
+    max_abs: float  # m
+
+    @property
+    def percent(self) -> float:
+        """Mean absolute error as a share of the mean true stride length, %."""
+        return 100.0 * self.mean_abs / self.mean_length
+
+
+def stance_midpoints(stance: np.ndarray) -> np.ndarray:
+    """Sample index at the middle of each stance (runs of True in ``stance``)."""
+    from accelnav.estimate.zupt import intervals
+
+    return np.array([(a + b - 1) // 2 for a, b in intervals(stance)], dtype=np.int64)
+
+
+def stride_lengths(r: np.ndarray, mids: np.ndarray) -> np.ndarray:
+    """Horizontal distance between consecutive stance midpoints; ``r`` is (N, n_axes)."""
+    p = np.asarray(r)[mids]
+    return np.linalg.norm(np.diff(p, axis=0), axis=1)
+
+
+def stride_errors(arrays: dict[str, np.ndarray], estimates: dict[str, np.ndarray]) -> list[StrideErrors]:
+    """Per-stride length error of each estimate ((n_axes, N) positions), from the true stance mask.
+
+    A stride runs from the middle of one stance to the middle of the next;
+    its length is the distance between the two foot positions, over all axes
+    of the run (the horizontal plane for the walking scenario).
+    """
+    if "stance" not in arrays or "r" not in arrays:
+        return []
+    mids = stance_midpoints(arrays["stance"])
+    if len(mids) < 2:
+        return []
+    true = stride_lengths(arrays["r"], mids)
+    rows = []
+    for method, r in estimates.items():
+        e = stride_lengths(np.asarray(r).T, mids) - true
+        rows.append(
+            StrideErrors(
+                method,
+                len(e),
+                float(true.mean()),
+                float(np.mean(np.abs(e))),
+                float(np.sqrt(np.mean(e**2))),
+                float(np.max(np.abs(e))),
+            )
+        )
+    return rows
+
+
+def format_strides(rows: list[StrideErrors]) -> str:
+    """A plain-text table of :func:`stride_errors`."""
+    lines = [f"{'stride length':<26}{'strides':>8}{'mean |e| [m]':>14}{'[%]':>7}{'rms [m]':>10}{'max [m]':>10}"]
+    for s in rows:
+        lines.append(f"{s.method:<26}{s.n_strides:>8}{s.mean_abs:14.3f}{s.percent:7.1f}{s.rms:10.3f}{s.max_abs:10.3f}")
+    return "\n".join(lines)
+
+
+def stride_table(arrays: dict[str, np.ndarray], model: Model) -> list[StrideErrors]:
+    """Stride errors of double integration, the filter and the smoother (needs truth with a stance mask)."""
+    if "stance" not in arrays or "r" not in arrays:
+        return []
+    estimates = {"double integration": dead_reckoning(arrays, model)[:, :, 0]}
+    if "filt_x" in arrays:
+        estimates["filter"] = arrays["filt_x"][:, :, 0]
+    if "smooth_x" in arrays:
+        estimates["smoother"] = arrays["smooth_x"][:, :, 0]
+    return stride_errors(arrays, estimates)

@@ -1,0 +1,157 @@
+"""A foot-mounted sensor during a walk: the ``walking`` scenario.
+
+The sensor sits on a foot; its two horizontal axes are taken as already
+rotated to a level frame with gravity removed (what a user gets from an IMU's
+attitude solution), so they measure the foot's horizontal acceleration plus
+whatever that rotation got wrong.
+
+Gait (one stride = one stance then one swing, SI units)
+-------------------------------------------------------
+* cycle time 0.95-1.10 s (about 1 Hz cadence); stance 30-40 % of the cycle
+  (0.29-0.44 s), swing the rest;
+* stride length L 1.2-1.5 m, the foot's displacement over one swing;
+* heading: a small random change at every stride (sigma 3 degrees), and every
+  6-12 strides a turn of 60-120 degrees either way spread over three strides;
+* swing profile along the heading, x = s/d in [0, 1] over a swing of length d:
+
+      a = 2 pi L'/d^2 sin(2 pi x),  u = L'/d (1 - cos(2 pi x)),  r = L' (x - sin(2 pi x)/(2 pi))
+
+  so velocity and acceleration are zero at both ends (the foot lands and
+  leaves at rest, peak speed 2 L'/d, about 4 m/s, peak acceleration about 2 g);
+* shocks: at toe-off (the first tau of the swing) and at heel strike (the
+  last tau) a pulse along the heading, with y = 2 pi s/tau,
+
+      a = P c (sin y - sin(2 y)/2),  c = 1/1.299 (so that max a = P),
+
+  tau 30-50 ms, |P| 8-16 g (capped at 0.8 of the sensor's full scale, so that with the
+  swing's 2 g it stays inside), + at
+  toe-off and - at heel strike. At 100 Hz a pulse spans three to five
+  samples; shorter ones (20-40 ms) alias so badly that even the smoother
+  given the true stances misses strides by 5-7 % (velocity integrated over
+  two or three samples of a 16 g pulse): a sample rate of 200 Hz or more
+  suits a foot. a and its derivative are zero at both ends
+  of a pulse, its area is zero (the velocity comes back to where it was) and
+  it moves the foot by P c tau^2 3/(8 pi); the main profile's
+  L' = L - (sum of the two pulse moves), so the stride is exactly L;
+* stance: r constant, u = a = 0 exactly.
+
+Tilt error: the level-frame rotation is off by a slowly varying tilt
+theta_j(t) = theta0_j + A_j sin(2 pi t/P_j + phi_j) per axis (theta0 up to
+0.5 degrees, A up to 0.5 degrees, P 20-60 s), which leaks g sin(theta_j) into
+the horizontal axis: a sensor error, not motion, returned as ``leak``.
+
+Random numbers: the tilt parameters first (a fixed count), then strides in
+chunks of a fixed size, so a shorter run is a prefix of a longer one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+G0 = 9.80665
+_CHUNK = 64  # strides drawn per batch of random numbers
+_C = 1.0 / (np.sin(2 * np.pi / 3) - 0.5 * np.sin(4 * np.pi / 3))  # pulse shape's peak normalisation
+
+
+@dataclass(frozen=True)
+class Walk:
+    """Truth of a walk on the sample instants t: (N, 2) horizontal r, u, a, leak; (N,) stance mask."""
+
+    r: np.ndarray
+    u: np.ndarray
+    a: np.ndarray
+    leak: np.ndarray  # m/s^2, gravity leaking through the tilt error (sensor error, not motion)
+    stance: np.ndarray  # bool, the foot is on the ground (u == a == 0 exactly)
+
+
+def _draw_strides(rng: np.random.Generator, amax: float) -> dict[str, np.ndarray]:
+    n = _CHUNK
+    cycle = rng.uniform(0.95, 1.10, n)
+    frac = rng.uniform(0.30, 0.40, n)
+    length = rng.uniform(1.2, 1.5, n)
+    turn_every = rng.integers(6, 13, n)
+    turn = rng.uniform(np.pi / 3, 2 * np.pi / 3, n) * rng.choice([-1.0, 1.0], n)
+    wiggle = rng.normal(0.0, np.radians(3.0), n)
+    peak = np.minimum(rng.uniform(8.0, 16.0, (n, 2)) * G0, 0.8 * amax)
+    tau = rng.uniform(0.030, 0.050, (n, 2))
+    return dict(
+        cycle=cycle, frac=frac, length=length, turn_every=turn_every, turn=turn, wiggle=wiggle, peak=peak, tau=tau
+    )
+
+
+def walk(t: np.ndarray, rng: np.random.Generator, amax: float) -> Walk:
+    """The walk at the instants ``t`` (s, from 0); ``amax`` is the sensor's full scale in m/s^2."""
+    t = np.asarray(t, dtype=np.float64)
+    n = len(t)
+    theta0 = np.radians(rng.uniform(-0.5, 0.5, 2))
+    amp = np.radians(rng.uniform(0.0, 0.5, 2))
+    period = rng.uniform(20.0, 60.0, 2)
+    phase = rng.uniform(0.0, 2 * np.pi, 2)
+    leak = G0 * np.sin(theta0 + amp * np.sin(2 * np.pi * t[:, None] / period + phase))
+
+    # strides until they cover the run
+    chunks = []
+    covered = 0.0
+    t_end = float(t[-1]) if n else 0.0
+    while covered <= t_end + 2.0:
+        c = _draw_strides(rng, amax)
+        covered += float(c["cycle"].sum())
+        chunks.append(c)
+    s = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]}
+    m = len(s["cycle"])
+
+    # heading: a wiggle per stride plus turns spread over three strides
+    dpsi = s["wiggle"].copy()
+    k = 0
+    while k < m:
+        k += int(s["turn_every"][k])
+        if k + 3 <= m:
+            dpsi[k : k + 3] += s["turn"][k] / 3.0
+        k += 3
+    psi = np.cumsum(dpsi)
+
+    stance_d = s["cycle"] * s["frac"]
+    swing_d = s["cycle"] - stance_d
+    start = np.concatenate(([0.0], np.cumsum(s["cycle"])[:-1]))  # stance start of stride i
+    swing0 = start + stance_d
+    pulse_dr = _C * s["peak"] * s["tau"] ** 2 * 3 / (8 * np.pi) * np.array([1.0, -1.0])  # toe-off +, heel strike -
+    main_len = s["length"] - pulse_dr.sum(axis=1)
+    direction = np.stack([np.cos(psi), np.sin(psi)], axis=1)
+    foot = np.concatenate((np.zeros((1, 2)), np.cumsum(s["length"][:, None] * direction, axis=0)))  # at stance i
+
+    i = np.clip(np.searchsorted(start, t, side="right") - 1, 0, m - 1)
+    q = t - swing0[i]  # time into the swing (< 0: stance)
+    in_swing = q >= 0.0
+    d = swing_d[i]
+    x = np.clip(q / d, 0.0, 1.0)
+    w = 2 * np.pi * x
+    L = main_len[i]
+    # along-track: the main profile ...
+    r1 = np.where(in_swing, L * (x - np.sin(w) / (2 * np.pi)), 0.0)
+    u1 = np.where(in_swing, L / d * (1 - np.cos(w)), 0.0)
+    a1 = np.where(in_swing, 2 * np.pi * L / d**2 * np.sin(w), 0.0)
+    # ... plus the toe-off pulse (first tau of the swing) and the heel-strike pulse (last tau)
+    for p, (sign, t0) in enumerate(((1.0, np.zeros_like(q)), (-1.0, d - s["tau"][i, 1]))):
+        P, tau = sign * s["peak"][i, p], s["tau"][i, p]
+        sp = np.clip(q - t0, 0.0, tau)
+        wp = 2 * np.pi * sp / tau
+        on = in_swing & (q >= t0) & (q < t0 + tau)
+        done = in_swing & (q >= t0 + tau)
+        y = sp / tau
+        a1 = a1 + np.where(on, _C * P * (np.sin(wp) - 0.5 * np.sin(2 * wp)), 0.0)
+        u_p = _C * P * tau * ((1 - np.cos(wp)) / (2 * np.pi) - (1 - np.cos(2 * wp)) / (8 * np.pi))
+        u1 = u1 + np.where(on, u_p, 0.0)
+        r_p = (
+            _C
+            * P
+            * tau**2
+            * ((y - np.sin(wp) / (2 * np.pi)) / (2 * np.pi) - (y - np.sin(2 * wp) / (4 * np.pi)) / (8 * np.pi))
+        )
+        r1 = r1 + np.where(on | done, r_p, 0.0)
+    dirs = direction[i]
+    r = foot[i] + r1[:, None] * dirs
+    u = u1[:, None] * dirs
+    a = a1[:, None] * dirs
+    return Walk(r=r, u=u, a=a, leak=leak, stance=~in_swing)
