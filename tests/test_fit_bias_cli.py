@@ -109,6 +109,8 @@ def test_csv_end_to_end(tmp_path, capsys):
     ay = m.axis("y")
     assert ay.c1 == 0.0 and ay.c2 == pytest.approx(np.mean(y) * G0, rel=1e-5)
     assert ay.T == load_model(DEFAULT_MODEL).axis("y").T  # not identified: the base model's T is kept
+    # white noise: the composite check finds the white R adequate over the band and keeps it
+    assert "the white-noise R represents this band" in text and "understates the noise" not in text
     # R = N^2 / Ts: for white noise the sample variance
     assert m.noise.R == pytest.approx((sigma * G0) ** 2, rel=0.1)
     assert m.noise.sigma_n == 1.0  # kept from the base model
@@ -117,7 +119,7 @@ def test_csv_end_to_end(tmp_path, capsys):
     # the written file carries the provenance as comments
     assert out.read_text().startswith("# accelnav model written by accelnav fit-bias\n")
     pngs = _files(plots)
-    assert [p.name for p in pngs] == sorted(f"{a}_{k}.png" for a in "xy" for k in ("fit", "spectrum", "allan", "acf"))
+    assert [p.name for p in pngs] == sorted(f"{a}_{k}.png" for a in "xy" for k in ("fit", "spectrum", "allan", "acf", "noise_model"))
     assert all(p.stat().st_size > 5000 for p in pngs)
 
 
@@ -330,9 +332,14 @@ def test_real_recording_every_axis(adis, tmp_path, capsys):
         assert r.fit.vif > 10
         if name == "z":
             assert r.fit.c2 == pytest.approx(-1.018 * G0, abs=0.01)  # gravity is part of the constant
+        # spectral lines (0.57, 1.7, 10 Hz) are not white, GM, flicker or random walk: the composite misses
+        # them, and says so rather than claiming a good fit
+        assert r.composite.fit_poor
     out = tmp_path / "adis.toml"
     assert main(["fit-bias", str(ADIS), "--out", str(out), "--axis", "z", "--plots", str(tmp_path)]) == 0
-    assert "axis z (column acc_z_g, in g)" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "axis z (column acc_z_g, in g)" in text
+    assert "WARNING: poor fit" in text and "fits this band poorly" in text
     data = tomllib.loads(out.read_text())
     assert [a["name"] for a in data["axes"]] == ["x", "y", "z"]
-    assert len(_files(tmp_path)) == 4
+    assert len(_files(tmp_path)) == 5
