@@ -119,7 +119,9 @@ def test_csv_end_to_end(tmp_path, capsys):
     # the written file carries the provenance as comments
     assert out.read_text().startswith("# accelnav model written by accelnav fit-bias\n")
     pngs = _files(plots)
-    assert [p.name for p in pngs] == sorted(f"{a}_{k}.png" for a in "xy" for k in ("fit", "spectrum", "allan", "acf", "noise_model"))
+    assert [p.name for p in pngs] == sorted(
+        f"{a}_{k}.png" for a in "xy" for k in ("fit", "spectrum", "allan", "acf", "noise_model")
+    )
     assert all(p.stat().st_size > 5000 for p in pngs)
 
 

@@ -282,7 +282,8 @@ def composite_table(r: AxisResult) -> list[str]:
         )
     rows.append(
         f"| fit quality | chi2/point {c.chi2 / c.n_points:.3g}, {100 * c.outside_share:.0f} % of {c.n_points} "
-        f"points outside 95 %, worst deviation {100 * c.max_rel_err:.0f} % | tau {c.tau_range[0]:.3g}..{c.tau_range[1]:.4g} s | |"
+        f"points outside 95 %, worst deviation {100 * c.max_rel_err:.0f} % "
+        f"| tau {c.tau_range[0]:.3g}..{c.tau_range[1]:.4g} s | |"
     )
     return rows
 
@@ -463,9 +464,7 @@ def provenance(rec: Recording, results, base_label: str) -> str:
         )
         if chk is not None:
             choice = (
-                f"R raised to the band's R {chk.R_band:.4g}"
-                if chk.R_chosen > chk.R_white
-                else "white-noise R kept"
+                f"R raised to the band's R {chk.R_band:.4g}" if chk.R_chosen > chk.R_white else "white-noise R kept"
             )
             lines.append(
                 f"  noise band {chk.band[0]:.3g} .. {chk.band[1]:.4g} s: the white-noise R {chk.R_white:.4g} "

@@ -16,22 +16,17 @@ and g(u) ~ 2/u for u >> 1, white noise of N^2 = 2 s^2 T). Low-pass filtered
 white noise is such a process: this is what a band-limited sensor output, or
 the "hump" of an Allan curve that rises before it falls, looks like.
 
-Fit (in the manner of GMWM: the model's Allan variance against the
-empirical one, not line slopes read by eye): for fixed correlation times the
-Allan variance is linear in the squared amplitudes, so those come from a
-non-negative least-squares fit of the relative misfit, each point weighted by
-sqrt(edf/2) (the relative standard deviation of an Allan variance estimate
-with edf degrees of freedom), reweighted twice with the model in the
-denominator. The correlation times are searched on a log grid inside the
-curve's tau range (a GM term with T outside [2 tau_first, tau_last/2] cannot
-be told from white noise or a random walk there) and refined by Nelder-Mead
-on log T. White noise and random walk are always in the model; flicker and drift
-(which compete with the random walk and slow GM terms) and 0, 1 or 2 GM
-terms are each kept only where seen: of all these candidates the one with
-the least chi^2 + ``BIC_PER_PARAM`` ln(n) x (number of parameters) wins (BIC; the points overlap, so the chi^2 is a quality figure, not an
-exact likelihood). Fit quality is stated as the weighted chi^2 per point and
-the share of points whose model value lies outside the empirical 95 %
-interval.
+Fit (in the manner of GMWM: the model's Allan variance against the empirical one, not line slopes read by
+eye): for fixed correlation times the Allan variance is linear in the squared amplitudes, so those come from a
+non-negative least-squares fit of the relative misfit, each point weighted by sqrt(edf/2) (the relative
+standard deviation of an Allan variance estimate with edf degrees of freedom), reweighted twice with the model
+in the denominator. The correlation times are searched on a log grid inside the curve's tau range (a GM term
+with T outside [2 tau_first, tau_last/2] cannot be told from white noise or a random walk there) and refined
+by Nelder-Mead on log T. White noise and random walk are always in the model; flicker and drift (which compete
+with the random walk and slow GM terms) and 0, 1 or 2 GM terms are each kept only where seen: of all these
+candidates the one with the least chi^2 + ``BIC_PER_PARAM`` ln(n) x (number of parameters) wins (BIC; the
+points overlap, so the chi^2 is a quality figure, not an exact likelihood). Fit quality is stated as the
+weighted chi^2 per point and the share of points whose model value lies outside the empirical 95 % interval.
 
 The check that matters for the filter
 -------------------------------------

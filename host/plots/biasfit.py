@@ -137,7 +137,9 @@ def plot_composite(noise: NoiseId, comp, check, path: Path, label: str) -> Path:
         ax.loglog(tau, np.sqrt(f), style, color="tab:gray", lw=1.5, label=f"filter's model, {what} = {R:.3g}")
         if check.R_chosen == check.R_white:
             break
-    ax.axvspan(*check.band, color="tab:olive", alpha=0.08, label=f"band checked {check.band[0]:.3g}..{check.band[1]:.3g} s")
+    ax.axvspan(
+        *check.band, color="tab:olive", alpha=0.08, label=f"band checked {check.band[0]:.3g}..{check.band[1]:.3g} s"
+    )
     lo = c.lo[np.isfinite(c.lo)].min() / 3
     hi = c.hi[np.isfinite(c.hi)].max() * 3
     ax.set_ylim(lo, hi)
