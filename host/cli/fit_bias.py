@@ -15,7 +15,8 @@ default) with the fitted axes merged in and the noise figures replaced:
   composite noise model (:mod:`accelnav.identify.noisecomp`) shows that this
   white-noise R understates the noise over the band that matters for the
   filter (``--noise-band``, default 0.1 .. 100 s) by more than 1.5x in
-  variance, or fits that band poorly: then R is the band's R (the smallest
+  variance (measured on the Allan curve itself where the composite fits the
+  band poorly): then R is the band's R (the smallest
   white R whose Allan curve, with the model's bias, covers the noise over the
   band), and the model's header comments say so with the numbers;
   sigma_eps = max over the fitted axes of K (fitted or bound);
@@ -298,7 +299,8 @@ def band_report(r: AxisResult) -> list[str]:
     if k.reference == "empirical":
         lines.append(
             f"    WARNING: the composite model fits this band poorly ({100 * k.band_outside_share:.0f} % of its points "
-            f"outside their 95 % interval); the band's R is read from the Allan curve itself: R = {k.R_band:.4g}"
+            f"outside their 95 % interval): the check above uses the Allan curve itself (points with >= 10 degrees of "
+            "freedom)"
         )
     if k.understated:
         lines.append(
@@ -307,6 +309,11 @@ def band_report(r: AxisResult) -> list[str]:
             f"error, driven by this band, would be underestimated. The band's R = {k.R_band:.4g} "
             f"(x{k.R_band / k.R_white:.3g}) covers it."
         )
+        if k.R_band > 1.2 * k.worst_ratio * k.R_white:
+            lines.append(
+                f"    (more than the worst ratio x{k.worst_ratio:.3g}: where the filter's bias walk sigma_eps carries "
+                "part of its curve, a white R must make up the rest alone)"
+            )
     else:
         lines.append(f"    the white-noise R represents this band (ratio at most x{WARN_RATIO:g})")
     return lines

@@ -277,7 +277,7 @@ class BandCheck:
 
     @property
     def R_chosen(self) -> float:
-        return self.R_band if self.understated or self.reference == "empirical" else self.R_white
+        return self.R_band if self.understated else self.R_white
 
 
 def check_band(
