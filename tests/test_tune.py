@@ -19,7 +19,7 @@ from accelnav.codegen.design import axis_design
 from accelnav.codegen.model import DEFAULT_MODEL, load_model
 from accelnav.codegen.modelfile import dump_model, revalidate, with_noise
 from accelnav.estimate.kf import position_fix
-from accelnav.estimate.tune import loglik, tune
+from accelnav.estimate.tune import all_figures, loglik, tune, with_figures
 
 TRUE = {"sigma_n": 1.0, "sigma_eps": 0.01, "R": 0.016}
 
@@ -74,11 +74,22 @@ def test_well_specified_model_is_not_made_worse():
         adopted += r.adopted
         # held-out data: the written figures explain new data at least about as well as the truth does
         z2, v2, e2 = process(truth, 4000, seed + 100)
-        chosen = with_noise(truth, **r.chosen)
+        chosen = with_figures(truth, r.chosen)
         assert loglik(chosen, z2, v2, e2) >= loglik(truth, z2, v2, e2) - 2.0
         if not r.adopted:
-            assert r.chosen == {f: getattr(truth.noise, f) for f in TRUE}
+            assert r.chosen == all_figures(truth)
     assert adopted <= 1  # a 5 % test: three well-specified runs adopt a change at most once
+
+
+def test_recovers_the_constant_bias_c2():
+    truth = with_figures(one_axis_model(**TRUE), {"c2.x": 0.3})
+    z, valid, extras = process(truth, 4000, 21)
+    start = with_figures(truth, {"c2.x": 0.0, "R": 0.03})
+    r = tune(start, z, valid, extras, figures=("R", "c2"))
+    assert r.adopted and r.figures == ("R", "c2.x")
+    lo, hi = r.ci95["c2.x"]
+    assert lo <= 0.3 <= hi and hi - lo < 0.2, (lo, hi)
+    assert r.identified("c2.x")
 
 
 def test_sigma_eps_without_aids_is_reported_not_identified():
@@ -103,6 +114,12 @@ def test_cli_on_a_simulated_stop_and_go(tmp_path, capsys):
     # the simulator's noise: 8.9 mg analog + the ADC's rounding; R is far below the bad start's 0.05
     assert 0.005 < m.noise.R < 0.025 and m.noise.sigma_n < 5.0
     assert out.read_text().startswith("# accelnav model written by accelnav tune\n")
+    # with sigma_n held at the bad 5, the likelihood drives R to its search bound: said, not called identified
+    assert (
+        main(["tune", str(run), "--model", str(start), "--zupt", "auto", "--figures", "R,c2", "--out", str(out)]) == 0
+    )
+    text = capsys.readouterr().out
+    assert "| R | 0.05 |" in text and "NO (at the search bound)" in text and "| c2.y |" in text
 
 
 def test_cli_refusals(tmp_path, capsys):

@@ -16,9 +16,9 @@ import numpy as np
 
 from accelnav.cli.core import _load
 from accelnav.codegen.model import loads_model
-from accelnav.codegen.modelfile import dump_model, revalidate, with_noise
+from accelnav.codegen.modelfile import dump_model
 from accelnav.errors import UserError
-from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, NOT_IDENTIFIED_SE, TuneResult, tune
+from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, tune, with_figures
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.progress import Progress
 
@@ -46,7 +46,8 @@ def register(sub) -> None:
     p.add_argument(
         "--figures",
         default=",".join(FIGURES),
-        help=f"comma-separated figures to tune, of {', '.join(FIGURES)}; default: all",
+        help=f"comma-separated figures to tune, of {', '.join(FIGURES)}, c2 (every axis's constant bias); "
+        f"default: {','.join(FIGURES)}",
     )
     p.add_argument(
         "--max-evaluations",
@@ -65,10 +66,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
     from accelnav.estimate.kf import zero_velocity
 
     figures = tuple(f.strip() for f in args.figures.split(",") if f.strip())
-    bad = [f for f in figures if f not in FIGURES] or ([] if figures else ["(none)"])
+    bad = [f for f in figures if f not in FIGURES + ("c2",)] or ([] if figures else ["(none)"])
     if bad:
         raise UserError(
-            f"--figures: {', '.join(bad)} unknown; accepted: a comma-separated subset of {', '.join(FIGURES)}"
+            f"--figures: {', '.join(bad)} unknown; accepted: a comma-separated subset of {', '.join(FIGURES)}, c2"
         )
     if args.max_evaluations < 10:
         raise UserError(f"--max-evaluations: got {args.max_evaluations}; accepted: 10 or more")
@@ -122,7 +123,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise UserError(f"{args.run}: {exc}") from None
     print("\n".join(report(result)))
-    out_model = revalidate(with_noise(model, **{f: float(f"{v:.6g}") for f, v in result.chosen.items()}))
+    out_model = with_figures(model, {f: float(f"{v:.6g}") for f, v in result.chosen.items()})
     text = dump_model(out_model, header=provenance(args, result))
     loads_model(text, source=str(args.out))
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -133,13 +134,20 @@ def cmd_tune(args: argparse.Namespace) -> int:
 
 def report(r: TuneResult) -> list[str]:
     lines = ["| figure | start | estimate | 95 % interval | identified |", "|---|---|---|---|---|"]
-    for f in FIGURES:
+    for f in r.start:
         if f in r.figures:
             lo, hi = r.ci95[f]
-            ident = "yes" if r.identified(f) else f"NO (se of ln > {NOT_IDENTIFIED_SE:g})"
+            ident = (
+                "yes"
+                if r.identified(f)
+                else "NO (at the search bound)"
+                if f in r.at_bound
+                else "NO (interval too wide)"
+            )
             lines.append(f"| {f} | {r.start[f]:.4g} | {r.estimate[f]:.4g} | [{lo:.4g}, {hi:.4g}] | {ident} |")
         else:
-            lines.append(f"| {f} | {r.start[f]:.4g} | (kept) | | |")
+            if not f.startswith("c2."):
+                lines.append(f"| {f} | {r.start[f]:.4g} | (kept) | | |")
     lines.append(
         f"ln L: start {r.ll_start:.6g}, estimate {r.ll_estimate:.6g}; improvement {r.ll_estimate - r.ll_start:.4g} "
         f"(likelihood ratio 2 dlnL = {r.lr:.4g}, p = {r.p_value:.3g} under the starting model, "

@@ -17,7 +17,9 @@ the bias from the motion: they are what identifies sigma_eps.
 
 Estimate
 --------
-theta = (ln sigma_n, ln sigma_eps, ln R), or a subset (the others kept), maximised by Nelder-Mead from the
+theta = (ln sigma_n, ln sigma_eps, ln R), or a subset (the others kept), optionally with each axis's
+constant bias c2 (searched in units of 0.01 m/s^2; it sets the filter's prior bias and the level the bias
+reverts to), maximised by Nelder-Mead from the
 starting model's values; 95 % intervals from the observed information (the central-difference Hessian of
 -ln L in theta): exp(theta +- 1.96 se), a factor, so the interval of a positive figure stays positive. A
 figure whose se(ln) exceeds ``NOT_IDENTIFIED_SE`` is reported as not identified by the data.
@@ -33,6 +35,7 @@ held fixed, so the likelihood is a smooth function of theta.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -94,12 +97,19 @@ def loglik(model: Model, accel: np.ndarray, valid: np.ndarray, extras: Sequence[
     return sum(_axis_loglik(model, j, accel[:, j], valid[:, j], extras[j]) for j in range(accel.shape[1]))
 
 
+C2_SCALE = 0.01  # m/s^2 per unit of the search variable for c2 (the noise figures are searched as logarithms)
+
+
+def _is_c2(name: str) -> bool:
+    return name.startswith("c2.")
+
+
 @dataclass(frozen=True)
 class TuneResult:
-    figures: tuple[str, ...]  # tuned
-    start: dict[str, float]
+    figures: tuple[str, ...]  # tuned: noise figures and "c2.<axis>"
+    start: dict[str, float]  # every figure, tuned or not
     estimate: dict[str, float]
-    se_ln: dict[str, float]  # standard error of ln(figure); nan if the information is not positive
+    se_ln: dict[str, float]  # noise figures: standard error of ln(figure); c2: standard error in m/s^2
     ci95: dict[str, tuple[float, float]]
     ll_start: float
     ll_estimate: float
@@ -108,9 +118,14 @@ class TuneResult:
     adopted: bool
     evaluations: int
     converged: bool
+    at_bound: tuple[str, ...] = ()  # figures whose estimate sits on the search bound
 
     def identified(self, name: str) -> bool:
+        if name in self.at_bound:
+            return False
         s = self.se_ln[name]
+        if _is_c2(name):
+            return math.isfinite(s) and s <= NOT_IDENTIFIED_SE * C2_SCALE * 10  # c2 known to 0.1 m/s^2 (10 mg)
         return math.isfinite(s) and s <= NOT_IDENTIFIED_SE
 
     @property
@@ -118,8 +133,23 @@ class TuneResult:
         return dict(self.estimate) if self.adopted else dict(self.start)
 
 
-def with_figures(model: Model, values: dict[str, float]) -> Model:
-    return revalidate(with_noise(model, **values))
+def all_figures(model: Model) -> dict[str, float]:
+    """Every figure tune can set, with the model's values: the noise figures and c2 of each axis."""
+    out = {f: float(getattr(model.noise, f)) for f in FIGURES}
+    out.update({f"c2.{a.name}": float(a.c2) for a in model.axes})
+    return out
+
+
+def with_figures(model: Model, values: dict[str, float], *, check: bool = True) -> Model:
+    """``model`` with the noise figures and c2.<axis> values in ``values`` replaced."""
+    noise = {k: v for k, v in values.items() if not _is_c2(k)}
+    c2 = {k[3:]: v for k, v in values.items() if _is_c2(k)}
+    m = with_noise(model, **noise)
+    if c2:
+        m = dataclasses.replace(
+            m, axes=tuple(dataclasses.replace(a, c2=float(c2[a.name])) if a.name in c2 else a for a in m.axes)
+        )
+    return revalidate(m) if check else m
 
 
 def tune(
@@ -132,35 +162,42 @@ def tune(
     progress=None,
     max_evaluations: int = MAX_EVALUATIONS,
 ) -> TuneResult:
-    """Maximum-likelihood sigma_n, sigma_eps, R (those in ``figures``) from ``accel`` (N, axes) and ``extras``."""
-    figures = tuple(figures)
+    """Maximum-likelihood figures (of sigma_n, sigma_eps, R, and "c2" for every axis's c2) from ``accel``."""
+    names = []
     for f in figures:
-        if f not in FIGURES:
-            raise ValueError(f"figure {f!r}; accepted: {', '.join(FIGURES)}")
-    start = {f: float(getattr(model.noise, f)) for f in FIGURES}
-    if start["sigma_eps"] <= 0 and "sigma_eps" in figures:
-        start["sigma_eps"] = 1e-6  # ln 0 is not a starting point
-    lo = np.array([math.log(LN_BOUNDS[f][0]) for f in figures])
-    hi = np.array([math.log(LN_BOUNDS[f][1]) for f in figures])
+        if f == "c2":
+            names += [f"c2.{a.name}" for a in model.axes]
+        elif f in FIGURES:
+            names.append(f)
+        else:
+            raise ValueError(f"figure {f!r}; accepted: {', '.join(FIGURES)}, c2")
+    figures = tuple(names)
+    start = all_figures(model)
+    first = dict(start)
+    if first["sigma_eps"] <= 0 and "sigma_eps" in figures:
+        first["sigma_eps"] = 1e-6  # ln 0 is not a starting point
+    span = model.max_accel_m_s2 / C2_SCALE
+    lo = np.array([-span if _is_c2(f) else math.log(LN_BOUNDS[f][0]) for f in figures])
+    hi = np.array([span if _is_c2(f) else math.log(LN_BOUNDS[f][1]) for f in figures])
     count = [0]
 
     def values(theta) -> dict[str, float]:
         th = np.clip(theta, lo, hi)
-        return {f: float(math.exp(t)) for f, t in zip(figures, th, strict=True)}
+        return {f: float(t * C2_SCALE if _is_c2(f) else math.exp(t)) for f, t in zip(figures, th, strict=True)}
 
     def nll(theta) -> float:
         count[0] += 1
         if progress is not None:
             progress.update(min(count[0], progress.total))
         try:
-            m = with_noise(model, **values(theta))
+            m = with_figures(model, values(theta), check=False)
             v = -loglik(m, accel, valid, extras)
         except ValueError:  # a covariance that is not positive definite at an extreme theta
             return 1e300
         # outside the bounds: the clipped value plus a penalty, so the search turns back
         return v + 1e3 * float(np.sum(np.maximum(lo - theta, 0) ** 2 + np.maximum(theta - hi, 0) ** 2))
 
-    theta0 = np.array([math.log(start[f]) for f in figures])
+    theta0 = np.array([first[f] / C2_SCALE if _is_c2(f) else math.log(first[f]) for f in figures])
     ll0 = -nll(theta0)
     res = optimize.minimize(
         nll,
@@ -202,17 +239,20 @@ def tune(
         se[f] = s
     est = dict(start)
     est.update(values(theta))
-    ci = {
-        f: (est[f] * math.exp(-min(1.96 * se[f], 700.0)), est[f] * math.exp(min(1.96 * se[f], 700.0)))
-        if math.isfinite(se[f])
-        else (float("nan"), float("nan"))
-        for f in figures
-    }
+    ci = {}
+    for f in figures:
+        if not math.isfinite(se[f]):
+            ci[f] = (float("nan"), float("nan"))
+        elif _is_c2(f):
+            se[f] *= C2_SCALE
+            ci[f] = (est[f] - 1.96 * se[f], est[f] + 1.96 * se[f])
+        else:
+            ci[f] = (est[f] * math.exp(-min(1.96 * se[f], 700.0)), est[f] * math.exp(min(1.96 * se[f], 700.0)))
     lr = max(0.0, 2.0 * (ll1 - ll0))
     p = float(stats.chi2.sf(lr, k))
     return TuneResult(
         figures=figures,
-        start={f: float(getattr(model.noise, f)) for f in FIGURES},
+        start=start,
         estimate=est,
         se_ln=se,
         ci95=ci,
@@ -223,4 +263,5 @@ def tune(
         adopted=p < 0.05,
         evaluations=count[0],
         converged=bool(res.success),
+        at_bound=tuple(f for f, t, a, b in zip(figures, theta, lo, hi, strict=True) if t <= a + 0.05 or t >= b - 0.05),
     )
