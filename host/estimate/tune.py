@@ -228,15 +228,18 @@ def tune(
                 H[i, j] = H[j, i] = (
                     nll(theta + ei + ej) - nll(theta + ei - ej) - nll(theta - ei + ej) + nll(theta - ei - ej)
                 ) / (4 * h**2)
+    # covariance on the well-determined directions; a figure that leans on a flat or curved-the-wrong-way
+    # direction of -ln L (eigenvalue <= 0) gets no interval
     try:
         w, V = np.linalg.eigh(H)
-        cov = (V / np.where(w > 0, w, np.nan)) @ V.T if np.all(w > 0) else None
     except np.linalg.LinAlgError:
-        cov = None
+        w, V = np.full(k, np.nan), np.eye(k)
+    good = np.isfinite(w) & (w > 0)
+    cov = (V[:, good] / w[good]) @ V[:, good].T
+    weak = np.sum(V[:, ~good] ** 2, axis=1) > 0.1
     se = {}
     for i, f in enumerate(figures):
-        s = math.sqrt(cov[i, i]) if cov is not None and cov[i, i] > 0 else float("nan")
-        se[f] = s
+        se[f] = math.sqrt(cov[i, i]) if cov[i, i] > 0 and not weak[i] else float("nan")
     est = dict(start)
     est.update(values(theta))
     ci = {}
