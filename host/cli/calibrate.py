@@ -34,7 +34,7 @@ from accelnav.errors import UserError
 from accelnav.identify.calibrate import Calibration, CalibrationError, detect_poses, fit_axes, native
 from accelnav.progress import Progress
 
-MAX_SAMPLES = 50_000_000
+MAX_SAMPLES = 10_000_000  # about 28 h at 100 Hz; the pose search holds a few copies of the samples
 
 
 def register(sub) -> None:

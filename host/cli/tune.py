@@ -22,7 +22,7 @@ from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, tune, w
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.progress import Progress
 
-MAX_SAMPLES = 2_000_000  # samples x axes: each likelihood evaluation runs the filter over all of them
+MAX_SAMPLES = 500_000  # samples x axes: every likelihood evaluation runs filter and smoother (~340 B per sample)
 
 
 def register(sub) -> None:

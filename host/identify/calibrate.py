@@ -56,6 +56,7 @@ MIN_POSE_S = 3.0
 STILL_K = 3.0
 ALIGN_TOL_G = 0.2
 MIN_POSES = 4
+MAX_POSES = 500  # the fit's covariance of the pose means is poses x poses
 DRIFT_MAX_G = 2e-3  # a pose whose halves differ by more than this and 6 standard errors is not still
 BLOCK_S = 0.5
 
@@ -220,6 +221,10 @@ def check_poses(poses: list[Pose], names: tuple[str, ...]) -> None:
                 f"pose {k + 1} at {p.t0:.1f}..{p.t1:.1f} s reads ({reading}) g: not within {ALIGN_TOL_G:g} g of an "
                 "aligned pose (one axis at +-1 g, the others at 0 g); calibrate needs aligned poses"
             )
+    if len(poses) > MAX_POSES:
+        raise CalibrationError(
+            f"found {len(poses)} still poses; accepted: at most {MAX_POSES} (cut the recording to the calibration)"
+        )
     if len(poses) < MIN_POSES:
         raise CalibrationError(
             f"found {len(poses)} still pose(s), need at least {MIN_POSES} (hold each pose still for "
