@@ -345,3 +345,27 @@ def test_real_recording_every_axis(adis, tmp_path, capsys):
     data = tomllib.loads(out.read_text())
     assert [a["name"] for a in data["axes"]] == ["x", "y", "z"]
     assert len(_files(tmp_path)) == 5
+
+
+def test_band_limited_recording_is_flagged_and_R_raised(tmp_path, capsys):
+    # the phone: 10 Hz, band-limited noise whose Allan curve rises to a hump near 3 s (white 8e-4
+    # m/s^2/sqrt(Hz) plus a Gauss-Markov part of sd 7e-3 m/s^2 and correlation time 1.5 s), 2 hours
+    from scipy import signal
+
+    fs, n = 10.0, 72_000
+    rng = np.random.default_rng(4)
+    phi = math.exp(-1 / (fs * 1.5))
+    gm = signal.lfilter([1.0], [1.0, -phi], rng.standard_normal(n) * 7e-3 * math.sqrt(1 - phi**2))
+    y = rng.standard_normal(n) * 8e-4 * math.sqrt(fs) + gm
+    t = np.arange(n) / fs
+    rec = write_csv(tmp_path / "phone.csv.gz", {"t_s": t, "acc_x_m_s2": y}, fmt="%.7g")
+    out = tmp_path / "phone.toml"
+    assert main(["fit-bias", str(rec), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "WARNING: the white-noise R understates the noise in this band" in text
+    m = load_model(out)
+    # the white-noise R is N^2/Ts at tau = 1 s; the band's R must reach the true low-frequency level
+    # (white + GM white-equivalent, 2 s^2 T, at tau >> T), which is what position error sees
+    true_band = (8e-4**2 + 2 * 7e-3**2 * 1.5) * fs
+    assert 0.7 * true_band < m.noise.R < 1.5 * true_band
+    assert "R raised to the band's R" in out.read_text()
