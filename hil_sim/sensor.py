@@ -37,6 +37,10 @@ jitter. So the same seed gives the same run, a shorter run is a prefix of a
 longer one, simulating a subset of the axes gives the same columns, and
 ``initial_random`` changes nothing but the bias start.
 
+The ``tumble`` scenario (the six-position calibration test) is the exception: each
+axis sees its own share of gravity as the part is turned through the poses of
+:func:`accelnav.hil_sim.trajectories.tumble_poses`, and r = u = 0.
+
 Motion of several axes: one trajectory is drawn and axis i of the model sees
 it scaled by AXIS_GAIN[i] = (1.0, -0.8, 0.6)[i], as a rigid body moving along
 a fixed direction would. Rests, and rest times, are thus common to all axes.
@@ -59,7 +63,7 @@ from scipy.signal import lfilter
 from accelnav.codegen.design import input_conversion
 from accelnav.codegen.model import G0, Model
 
-from .trajectories import SCENARIOS, truth
+from .trajectories import ALL_SCENARIOS, truth, tumble_specific_force
 
 AXIS_GAIN = (1.0, -0.8, 0.6)  # motion seen by model axis 0, 1, 2 (relative to the drawn trajectory)
 MAX_AXES = len(AXIS_GAIN)
@@ -213,8 +217,8 @@ def simulate(
     order). ``seed`` is a non-negative integer. See the module docstring for
     the sensor model and the random streams.
     """
-    if scenario not in SCENARIOS:
-        accepted = ", ".join(repr(s) for s in SCENARIOS)
+    if scenario not in ALL_SCENARIOS:
+        accepted = ", ".join(repr(s) for s in ALL_SCENARIOS)
         raise ValueError(f"scenario: unknown scenario {scenario!r}; accepted: {accepted}")
     max_run = model.ranges.max_run_s
     if (
@@ -234,12 +238,15 @@ def simulate(
     n = max(1, math.ceil(float(duration_s) * model.rate_hz - 1e-9))
     t = np.arange(n, dtype=np.float64) / model.rate_hz
     motion_ss, *axis_ss = np.random.SeedSequence(int(seed)).spawn(1 + MAX_AXES)
-    stance = None
+    stance = turned = None
     if scenario == "walking":
         from .walking import walk
 
         w = walk(t, np.random.default_rng(motion_ss), model.max_accel_m_s2)
         stance = w.stance
+    elif scenario == "tumble":
+        r1 = u1 = a1 = np.zeros_like(t)
+        turned = tumble_specific_force(t, len(model.axes), G0)
     else:
         r1, u1, a1 = truth(scenario, t, np.random.default_rng(motion_ss), model.max_accel_m_s2)
 
@@ -251,6 +258,8 @@ def simulate(
         if stance is not None:  # walking: horizontal components, tilt leak; a third axis does not move
             zero = np.zeros(n)
             r_i, u_i, a_i, leak = (x[:, i] if i < 2 else zero for x in (w.r, w.u, w.a, w.leak))
+        elif turned is not None:  # tumble: the specific force of each pose; no motion of the part's centre
+            r_i, u_i, a_i, leak = np.zeros(n), np.zeros(n), turned[:, i], 0.0
         else:
             gain = AXIS_GAIN[i]
             r_i, u_i, a_i, leak = gain * r1, gain * u1, gain * a1, 0.0

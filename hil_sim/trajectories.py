@@ -48,6 +48,12 @@ from collections.abc import Callable
 import numpy as np
 
 SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shock", "walking")
+# Scenarios whose truth differs per axis and is not a motion along one line (see tumble_specific_force)
+MULTI_AXIS_SCENARIOS = ("tumble",)
+ALL_SCENARIOS = SCENARIOS + MULTI_AXIS_SCENARIOS
+
+TUMBLE_HOLD_S = 8.0  # each pose is held this long ...
+TUMBLE_TURN_S = 3.0  # ... and the turn to the next one takes this long
 
 _CHUNK = 64  # moves drawn per batch of random numbers (fixed: keeps runs prefix-consistent)
 
@@ -262,3 +268,48 @@ def _evaluate(m: dict[str, np.ndarray], t: np.ndarray) -> tuple[np.ndarray, np.n
     u = u0[j] + a0[j] * s + Aj * (s / 2.0 - dj / (2.0 * np.pi) * np.sin(np.pi * x))
     r = r0[j] + u0[j] * s + a0[j] * s**2 / 2.0 + Aj * (s**2 / 4.0 - (dj / np.pi) ** 2 * half**2)
     return r, u, a
+
+
+# --------------------------------------------------------------------------
+# Tumble: the six-position calibration test
+
+
+def tumble_poses(n_axes: int) -> np.ndarray:
+    """Unit 'up' vectors (sensor frame, 3 components) of the tumble's poses for a part with ``n_axes`` axes.
+
+    Axis i reads +1 g when it points up. Three axes: +x, -x, +y, -y, +z, -z (the six-position test).
+    Two axes (x, y in the plane of the part): +x, -x, +y, -y, then flat face up and face down, where both
+    axes read 0 g. One axis: +x, -x, flat up, flat down.
+    """
+    if n_axes not in (1, 2, 3):
+        raise ValueError(f"n_axes: got {n_axes!r}; accepted: 1, 2 or 3")
+    eye = np.eye(3)
+    order = {1: [0, 2], 2: [0, 1, 2], 3: [0, 1, 2]}[n_axes]
+    return np.array([sign * eye[i] for i in order for sign in (1.0, -1.0)])
+
+
+def tumble_specific_force(t: np.ndarray, n_axes: int, g0: float) -> np.ndarray:
+    """Specific force [m/s^2] on each of ``n_axes`` axes while the part is turned through :func:`tumble_poses`.
+
+    Shape (len(t), n_axes). The part starts in the first pose, holds each pose ``TUMBLE_HOLD_S`` and turns to
+    the next in ``TUMBLE_TURN_S`` (a rotation), cycling through the poses for as long as ``t`` lasts. It turns
+    in place, so its position and velocity stay 0: unlike the other scenarios, a is gravity's projection, not
+    du/dt. A turn between opposite poses goes through a perpendicular pose; the up vector turns at the raised-
+    cosine rate, so the turn starts and ends smoothly. The poses are exact (a calibration cube on a level
+    table).
+    """
+    t = np.asarray(t, dtype=np.float64)
+    poses = tumble_poses(n_axes)
+    period = TUMBLE_HOLD_S + TUMBLE_TURN_S
+    k = np.floor(t / period).astype(np.int64)
+    s = t - k * period
+    cur = poses[k % len(poses)]
+    nxt = poses[(k + 1) % len(poses)]
+    x = np.clip((s - TUMBLE_HOLD_S) / TUMBLE_TURN_S, 0.0, 1.0)
+    w = ((1.0 - np.cos(np.pi * x)) / 2.0)[:, None]
+    # a rotation in the plane of the two poses (90 degrees), or through a perpendicular one (180 degrees)
+    opposite = np.sum(cur * nxt, axis=1, keepdims=True) < -0.5
+    other = np.where(opposite, np.roll(cur, 1, axis=1), nxt)
+    angle = np.where(opposite, np.pi, np.pi / 2) * w
+    up = np.cos(angle) * cur + np.sin(angle) * other
+    return g0 * up[:, :n_axes]

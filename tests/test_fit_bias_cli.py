@@ -109,6 +109,8 @@ def test_csv_end_to_end(tmp_path, capsys):
     ay = m.axis("y")
     assert ay.c1 == 0.0 and ay.c2 == pytest.approx(np.mean(y) * G0, rel=1e-5)
     assert ay.T == load_model(DEFAULT_MODEL).axis("y").T  # not identified: the base model's T is kept
+    # white noise: the composite check finds the white R adequate over the band and keeps it
+    assert "the white-noise R represents this band" in text and "understates the noise" not in text
     # R = N^2 / Ts: for white noise the sample variance
     assert m.noise.R == pytest.approx((sigma * G0) ** 2, rel=0.1)
     assert m.noise.sigma_n == 1.0  # kept from the base model
@@ -117,7 +119,9 @@ def test_csv_end_to_end(tmp_path, capsys):
     # the written file carries the provenance as comments
     assert out.read_text().startswith("# accelnav model written by accelnav fit-bias\n")
     pngs = _files(plots)
-    assert [p.name for p in pngs] == sorted(f"{a}_{k}.png" for a in "xy" for k in ("fit", "spectrum", "allan", "acf"))
+    assert [p.name for p in pngs] == sorted(
+        f"{a}_{k}.png" for a in "xy" for k in ("fit", "spectrum", "allan", "acf", "noise_model")
+    )
     assert all(p.stat().st_size > 5000 for p in pngs)
 
 
@@ -330,9 +334,38 @@ def test_real_recording_every_axis(adis, tmp_path, capsys):
         assert r.fit.vif > 10
         if name == "z":
             assert r.fit.c2 == pytest.approx(-1.018 * G0, abs=0.01)  # gravity is part of the constant
+        # spectral lines (0.57, 1.7, 10 Hz) are not white, GM, flicker or random walk: the composite misses
+        # them, and says so rather than claiming a good fit
+        assert r.composite.fit_poor
     out = tmp_path / "adis.toml"
     assert main(["fit-bias", str(ADIS), "--out", str(out), "--axis", "z", "--plots", str(tmp_path)]) == 0
-    assert "axis z (column acc_z_g, in g)" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "axis z (column acc_z_g, in g)" in text
+    assert "WARNING: poor fit" in text and "fits this band poorly" in text
     data = tomllib.loads(out.read_text())
     assert [a["name"] for a in data["axes"]] == ["x", "y", "z"]
-    assert len(_files(tmp_path)) == 4
+    assert len(_files(tmp_path)) == 5
+
+
+def test_band_limited_recording_is_flagged_and_R_raised(tmp_path, capsys):
+    # the phone: 10 Hz, band-limited noise whose Allan curve rises to a hump near 3 s (white 8e-4
+    # m/s^2/sqrt(Hz) plus a Gauss-Markov part of sd 7e-3 m/s^2 and correlation time 1.5 s), 2 hours
+    from scipy import signal
+
+    fs, n = 10.0, 72_000
+    rng = np.random.default_rng(4)
+    phi = math.exp(-1 / (fs * 1.5))
+    gm = signal.lfilter([1.0], [1.0, -phi], rng.standard_normal(n) * 7e-3 * math.sqrt(1 - phi**2))
+    y = rng.standard_normal(n) * 8e-4 * math.sqrt(fs) + gm
+    t = np.arange(n) / fs
+    rec = write_csv(tmp_path / "phone.csv.gz", {"t_s": t, "acc_x_m_s2": y}, fmt="%.7g")
+    out = tmp_path / "phone.toml"
+    assert main(["fit-bias", str(rec), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "WARNING: the white-noise R understates the noise in this band" in text
+    m = load_model(out)
+    # the white-noise R is N^2/Ts at tau = 1 s; the band's R must reach the true low-frequency level
+    # (white + GM white-equivalent, 2 s^2 T, at tau >> T), which is what position error sees
+    true_band = (8e-4**2 + 2 * 7e-3**2 * 1.5) * fs
+    assert 0.7 * true_band < m.noise.R < 1.5 * true_band
+    assert "R raised to the band's R" in out.read_text()

@@ -21,6 +21,8 @@ from accelnav.errors import UserError
 COMMAND_MODULES = (
     "accelnav.cli.core",  # sim, filter, smooth
     "accelnav.cli.fit_bias",  # fit-bias
+    "accelnav.cli.calibrate",  # calibrate
+    "accelnav.cli.tune",  # tune
     "accelnav.cli.codegen",  # codegen
     "accelnav.cli.record",  # record, log info|export
     "accelnav.cli.hil",  # hil

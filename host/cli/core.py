@@ -142,7 +142,7 @@ def register(sub) -> None:
 
 def require_scenario(name: str) -> None:
     """UserError for a --scenario the simulator does not have (shared by sim, hil and demo)."""
-    from accelnav.hil_sim.trajectories import SCENARIOS
+    from accelnav.hil_sim.trajectories import ALL_SCENARIOS as SCENARIOS
 
     if name not in SCENARIOS:
         raise UserError(f"--scenario: unknown scenario {name!r}; accepted: {', '.join(SCENARIOS)}")
@@ -286,7 +286,7 @@ def _summary(arrays: dict[str, np.ndarray]) -> str:
 
 def cmd_sim(args) -> int:
     if args.list_scenarios:
-        from accelnav.hil_sim.trajectories import SCENARIOS
+        from accelnav.hil_sim.trajectories import ALL_SCENARIOS as SCENARIOS
 
         print("\n".join(SCENARIOS))
         return 0

@@ -11,7 +11,14 @@ default) with the fitted axes merged in and the noise figures replaced:
 * each fitted axis gets c1, c2, T; when T is not identified the axis gets
   c1 = 0, c2 = mean and keeps the base model's T (with c1 = 0 T only sets how
   fast the filter's bias state reverts to c2), or the record length for a new axis;
-* R = max over the fitted axes of N^2 / Ts (Ts of the output model),
+* R = max over the fitted axes of N^2 / Ts (Ts of the output model), unless the
+  composite noise model (:mod:`accelnav.identify.noisecomp`) shows that this
+  white-noise R understates the noise over the band that matters for the
+  filter (``--noise-band``, default 0.1 .. 100 s) by more than 1.5x in
+  variance (measured on the Allan curve itself where the composite fits the
+  band poorly): then R is the band's R (the smallest
+  white R whose Allan curve, with the model's bias, covers the noise over the
+  band), and the model's header comments say so with the numbers;
   sigma_eps = max over the fitted axes of K (fitted or bound);
 * sigma_n is kept from the base model (a stationary recording cannot identify
   it) unless ``--sigma-n paper`` asks for the paper's rule.
@@ -29,6 +36,7 @@ from accelnav.codegen.modelfile import dump_model, revalidate, with_axis_bias, w
 from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, read_recording
 from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
+from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
 from accelnav.progress import Progress
@@ -78,6 +86,16 @@ def register(sub) -> None:
         default="keep",
         help="sigma_n: keep the base model's (default) or use the paper's derivative-variance rule",
     )
+    p.add_argument(
+        "--noise-band",
+        type=float,
+        nargs=2,
+        default=DEFAULT_BAND_S,
+        metavar=("LO", "HI"),
+        help="averaging times [s] over which the filter's noise model is checked against the composite "
+        f"noise model (the times between aids that drive position error); default: {DEFAULT_BAND_S[0]:g} "
+        f"{DEFAULT_BAND_S[1]:g}",
+    )
     p.add_argument("--lags", type=int, default=DEFAULT_LB_LAGS, help=f"Ljung-Box lags; default: {DEFAULT_LB_LAGS}")
     p.set_defaults(func=cmd_fit_bias)
 
@@ -90,6 +108,8 @@ class AxisResult:
     fit: BiasFit
     white: Whiteness
     noise: NoiseId
+    composite: Composite
+    check: BandCheck | None = None
 
 
 def analyse_axis(
@@ -109,7 +129,13 @@ def analyse_axis(
         p.update(1)
     with Progress(f"allan {name}", total=1, unit="taus") as p:
         noise = identify_noise(fit.residuals, rec.rate_hz, progress=p)
-    return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise)
+    with Progress(f"noise model {name}", total=1, unit="fits") as p:
+        try:
+            comp = fit_composite(noise.curve, 1.0 / rec.rate_hz)
+        except ValueError as exc:
+            raise UserError(f"{rec.source}: axis {name!r}: composite noise model: {exc}") from None
+        p.update(1)
+    return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise, comp)
 
 
 def _read(args: argparse.Namespace) -> Recording:
@@ -137,6 +163,9 @@ def _read(args: argparse.Namespace) -> Recording:
 def cmd_fit_bias(args: argparse.Namespace) -> int:
     if args.lags < 1:
         raise UserError(f"--lags: got {args.lags}; accepted: a positive number of lags")
+    lo, hi = args.noise_band
+    if not (0 < lo < hi):
+        raise UserError(f"--noise-band: got {lo:g} {hi:g}; accepted: two times in s, 0 < LO < HI")
     rec = _read(args)
     base, base_label, given = _base_model(args.model, rec)
     full_scale = base.max_accel_m_s2 if given else None
@@ -149,11 +178,12 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
         analyse_axis(rec, a, min_duration_s=args.min_duration, full_scale=full_scale, lags=args.lags)
         for a in rec.axis_names
     ]
+    model = merge(base, rec, results, sigma_n=args.sigma_n, keep_rate=given)
+    results, model = check_noise_band(model, rec, results, tuple(args.noise_band))
     for r in results:
         print()
         print("\n".join(axis_report(r)))
 
-    model = merge(base, rec, results, sigma_n=args.sigma_n, keep_rate=given)
     header = provenance(rec, results, base_label)
     text = dump_model(model, header=header)
     loads_model(text, source=str(args.out))  # a result the loader refuses is not written
@@ -169,7 +199,9 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
         with Progress("plots", total=len(results), unit="axes") as p:
             for i, r in enumerate(results):
                 y = rec.axis(r.name)
-                paths += plot_all(rec.t, y, rec.rate_hz, r.fit, r.white, r.noise, args.plots, r.name)
+                paths += plot_all(
+                    rec.t, y, rec.rate_hz, r.fit, r.white, r.noise, args.plots, r.name, (r.composite, r.check)
+                )
                 p.update(i + 1)
         print(f"figures: {', '.join(str(p) for p in paths)}")
     return 0
@@ -228,6 +260,85 @@ def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: st
             "accepted: 1 to 3; choose axes with --axis"
         )
     return revalidate(model)
+
+
+def check_noise_band(model: Model, rec: Recording, results: list[AxisResult], band: tuple[float, float]):
+    """Check each axis's composite noise against the merged model's noise over ``band``; raise R where needed."""
+    out = []
+    for r in results:
+        try:
+            chk = check_band(
+                r.noise.curve,
+                r.composite,
+                R=model.noise.R,
+                Ts_filter=model.Ts,
+                sigma_eps=model.noise.sigma_eps,
+                T_bias=model.axis(r.name).T,
+                band=band,
+            )
+        except ValueError as exc:
+            raise UserError(f"{rec.source}: axis {r.name!r}: --noise-band: {exc}") from None
+        out.append(dataclasses.replace(r, check=chk))
+    R = max(r.check.R_chosen for r in out)
+    if R > model.noise.R:
+        model = revalidate(with_noise(model, R=_sig(R)))
+    return out, model
+
+
+def composite_table(r: AxisResult) -> list[str]:
+    """The composite noise model of one axis as a markdown table (also printed by the report)."""
+    c, g0 = r.composite, G0 / 1e3
+    rows = [
+        "| term | value | unit | in mg units |",
+        "|---|---|---|---|",
+        f"| white N | {c.N:.4g} | m/s^2/sqrt(Hz) | {c.N / g0:.4g} mg/sqrt(Hz) |",
+        f"| random walk K | {c.K:.4g} | m/s^2/sqrt(s) | {c.K / g0:.4g} mg/sqrt(s) |",
+    ]
+    if c.B > 0:
+        rows.append(f"| bias instability B | {c.B:.4g} | m/s^2 | {c.B / g0:.4g} mg |")
+    if c.D > 0:
+        rows.append(f"| drift D | {c.D:.4g} | m/s^3 | {c.D / g0:.4g} mg/s |")
+    for i, g in enumerate(c.gm):
+        rows.append(
+            f"| Gauss-Markov {i + 1}: sigma, T | {g.sigma:.4g}, {g.T:.4g} | m/s^2, s | {g.sigma / g0:.4g} mg, "
+            f"white-equivalent {g.N_equiv / g0:.4g} mg/sqrt(Hz) |"
+        )
+    rows.append(
+        f"| fit quality | chi2/point {c.chi2 / c.n_points:.3g}, {100 * c.outside_share:.0f} % of {c.n_points} "
+        f"points outside 95 %, worst deviation {100 * c.max_rel_err:.0f} % "
+        f"| tau {c.tau_range[0]:.3g}..{c.tau_range[1]:.4g} s | |"
+    )
+    return rows
+
+
+def band_report(r: AxisResult) -> list[str]:
+    k = r.check
+    lines = [
+        f"    filter's noise model (R = {k.R_white:.4g}, sigma_eps = {k.sigma_eps:.3g}, T = {k.T_bias:.4g} s) against "
+        f"the {k.reference} Allan variance over the band {k.band[0]:.3g} .. {k.band[1]:.4g} s: worst ratio "
+        f"x{k.worst_ratio:.3g} in variance at tau = {k.worst_tau:.3g} s"
+    ]
+    if k.reference == "empirical":
+        lines.append(
+            f"    WARNING: the composite model fits this band poorly ({100 * k.band_outside_share:.0f} % of its points "
+            f"outside their 95 % interval): the check above uses the Allan curve itself (points with >= 10 degrees of "
+            "freedom)"
+        )
+    if k.understated:
+        lines.append(
+            f"    WARNING: the white-noise R understates the noise in this band by x{k.worst_ratio:.3g} in variance "
+            f"(threshold x{WARN_RATIO:g}): the noise is not white there (band-limited / Gauss-Markov), and position "
+            f"error, driven by this band, would be underestimated. The band's R = {k.R_band:.4g} "
+            f"(x{k.R_band / k.R_white:.3g}) covers it."
+        )
+        if k.R_band > 1.2 * k.worst_ratio * k.R_white:
+            lines.append(
+                f"    (more than the worst ratio x{k.worst_ratio:.3g}: where the filter's bias walk sigma_eps carries "
+                "part of its curve, a white R must make up the rest alone)"
+            )
+    else:
+        lines.append(f"    the white-noise R represents this band (ratio at most x{WARN_RATIO:g})")
+    return lines
 
 
 # --------------------------------------------------------------------------
@@ -300,6 +411,15 @@ def axis_report(r: AxisResult) -> list[str]:
         f"    sample variance {nz.sample_var:.4g} (m/s^2)^2 (white-equivalent N^2/Ts = {nz.R():.4g}); "
         f"paper's rule var(dy/dt) = {nz.deriv_var:.4g} (m/s^3)^2 -> sigma_n = sqrt(var * Ts) = {nz.sigma_n_paper:.4g}"
     )
+    out.append("  composite noise model (white + random walk + Gauss-Markov terms, flicker and drift where seen):")
+    out += [f"    {row}" for row in composite_table(r)]
+    if r.composite.fit_poor:
+        out.append(
+            f"    WARNING: poor fit: {100 * r.composite.outside_share:.0f} % of the points lie outside their 95 % "
+            "interval; the composite's terms are only indicative"
+        )
+    if r.check is not None:
+        out += band_report(r)
     return out
 
 
@@ -313,7 +433,16 @@ def model_report(
         lines.append(f"  axis {ax.name}: c1 = {ax.c1:.6g}, c2 = {ax.c2:.6g} m/s^2, T = {ax.T:.6g} s ({how})")
     names = ", ".join(r.name for r in results)
     n = model.noise
-    lines.append(f"  R = {n.R:.6g} (m/s^2)^2 = max over {names} of N^2/Ts at Ts = {model.Ts:.6g} s")
+    raised = [r for r in results if r.check is not None and r.check.R_chosen > r.check.R_white]
+    if raised:
+        lines.append(
+            f"  R = {n.R:.6g} (m/s^2)^2: the band's R, chosen because the white-noise R "
+            f"({raised[0].check.R_white:.4g}) misrepresents the noise over "
+            f"{raised[0].check.band[0]:.3g} .. {raised[0].check.band[1]:.4g} s on axis "
+            + ", ".join(f"{r.name} (x{r.check.worst_ratio:.3g})" for r in raised)
+        )
+    else:
+        lines.append(f"  R = {n.R:.6g} (m/s^2)^2 = max over {names} of N^2/Ts at Ts = {model.Ts:.6g} s")
     bound = any(r.noise.terms.K_is_bound for r in results)
     lines.append(
         f"  sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) = max over {names} of K"
@@ -356,4 +485,19 @@ def provenance(rec: Recording, results, base_label: str) -> str:
             f"  Allan: N = {k.N:.4g} m/s^2/sqrt(Hz), minimum {k.adev_min:.3g} m/s^2 at {k.tau_min:.3g} s, "
             f"K {'<=' if k.K_is_bound else '='} {k.K:.3g} m/s^2/sqrt(s)"
         )
+        c, chk = r.composite, r.check
+        gm = "; ".join(f"GM sigma {g.sigma:.3g} m/s^2, T {g.T:.3g} s" for g in c.gm) or "no GM term"
+        lines.append(
+            f"  composite: N = {c.N:.4g}, K = {c.K:.3g}, B = {c.B:.3g}, D = {c.D:.3g}; {gm}; "
+            f"{100 * c.outside_share:.0f} % of points outside 95 %"
+        )
+        if chk is not None:
+            choice = (
+                f"R raised to the band's R {chk.R_band:.4g}" if chk.R_chosen > chk.R_white else "white-noise R kept"
+            )
+            lines.append(
+                f"  noise band {chk.band[0]:.3g} .. {chk.band[1]:.4g} s: the white-noise R {chk.R_white:.4g} "
+                f"understates the {chk.reference} Allan variance by at most x{chk.worst_ratio:.3g} "
+                f"(at {chk.worst_tau:.3g} s; threshold x{WARN_RATIO:g}): {choice}"
+            )
     return "\n".join(lines)

@@ -12,7 +12,7 @@ import numpy as np
 
 from accelnav.codegen.design import axis_design
 from accelnav.codegen.model import Model
-from accelnav.estimate.kf import double_integrate, run_filter, zero_velocity
+from accelnav.estimate.kf import double_integrate, run_filter
 
 
 def filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None) -> dict[str, np.ndarray]:
@@ -72,18 +72,11 @@ def smooth_run(
     for j in range(n_axes):
         d = axis_design(model, j)
         fx = list(fixes[j]) if fixes is not None else []
-        zupt_ks = np.zeros(0, dtype=np.int64)
+        zupt_ks, zupt_extras = np.zeros(0, dtype=np.int64), []
         if rest2 is not None:
-            zupt_ks = zupt.update_samples(rest2[:, j], model, params)
-        zupt_extras, zupt_gates = zupt.measurements(zupt_ks, params)
-        if rest_sigma is not None and len(zupt_ks):
-            sd = np.asarray(rest_sigma)[zupt_ks, j]
-            zupt_extras = [
-                zero_velocity(int(k), float(s) if np.isfinite(s) else params.sigma)
-                for k, s in zip(zupt_ks, sd, strict=True)
-            ]
-        if not zupt_gated:
-            zupt_gates = [0.0] * len(zupt_gates)
+            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
+            zupt_ks, zupt_extras = zupt.axis_updates(rest2[:, j], sigma, model, params)
+        zupt_gates = [params.gate if zupt_gated else 0.0] * len(zupt_extras)
         extras = fx + zupt_extras
         gates = [0.0] * len(fx) + list(zupt_gates)
         res = fastsmooth.smooth(d, arrays["accel"][:, j], valid=~arrays["clipped"][:, j], extras=extras, gates=gates)

@@ -297,6 +297,21 @@ def measurements(ks: np.ndarray, params: ZuptParams = ZuptParams()) -> tuple[lis
     return extras, [params.gate] * len(extras)
 
 
+def axis_updates(
+    rest: np.ndarray, sigma: np.ndarray | None, model: Model, params: ZuptParams = ZuptParams()
+) -> tuple[np.ndarray, list[Measurement]]:
+    """The zero-velocity updates of one axis: the samples ``ks`` of its (N,) rest mask that get one
+    (:func:`update_samples`) and their measurements, with the per-sample ``sigma`` of a ZUPT file
+    where it gives one (NaN or None: ``params.sigma``)."""
+    ks = update_samples(rest, model, params)
+    if sigma is None:
+        return ks, [zero_velocity(int(k), params.sigma) for k in ks]
+    sd = np.asarray(sigma)[ks]
+    return ks, [
+        zero_velocity(int(k), float(s) if np.isfinite(s) else params.sigma) for k, s in zip(ks, sd, strict=True)
+    ]
+
+
 def intervals_from_csv(path, t: np.ndarray) -> np.ndarray:
     """A rest mask from a CSV of intervals (columns start_s, end_s; inclusive), on the sample times t."""
     mask, _ = read_zupt_file(path, t, ["_"])

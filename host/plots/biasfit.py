@@ -112,6 +112,49 @@ def plot_allan(noise: NoiseId, path: Path, label: str) -> Path:
     return _save(fig, path)
 
 
+def plot_composite(noise: NoiseId, comp, check, path: Path, label: str) -> Path:
+    """Allan deviation with the composite model, its parts, the filter's implied curve and the band checked."""
+    from accelnav.identify.noisecomp import filter_avar
+
+    c = noise.curve
+    fig = _figure(8.0, 5.4)
+    ax = fig.add_subplot()
+    ax.fill_between(c.tau, c.lo, c.hi, color="tab:blue", alpha=0.2, lw=0, label="95 % interval")
+    ax.loglog(c.tau, c.adev, "o", ms=3, color="tab:blue", label="overlapping Allan deviation")
+    tau = np.geomspace(c.tau[0], c.tau[-1], 300)
+    ax.loglog(tau, np.sqrt(comp.avar(tau)), "-", color="k", lw=1.8, label="composite model")
+    styles = {"white": "tab:green", "flicker": "tab:orange", "random walk": "tab:red", "drift": "tab:brown"}
+    for name, part in comp.avar(tau, parts=True).items():
+        if not np.any(part > 0):
+            continue
+        text = name
+        if name.startswith("GM"):
+            g = comp.gm[int(name[2:]) - 1]
+            text = f"{name}: sigma {g.sigma:.3g}, T {g.T:.3g} s"
+        ax.loglog(tau, np.sqrt(part), "--", lw=1, color=styles.get(name, "tab:purple"), label=text)
+    for R, style, what in ((check.R_white, ":", "white R"), (check.R_chosen, "-.", "written R")):
+        f = filter_avar(tau, R, check.Ts_filter, check.sigma_eps, check.T_bias)
+        ax.loglog(tau, np.sqrt(f), style, color="tab:gray", lw=1.5, label=f"filter's model, {what} = {R:.3g}")
+        if check.R_chosen == check.R_white:
+            break
+    ax.axvspan(
+        *check.band, color="tab:olive", alpha=0.08, label=f"band checked {check.band[0]:.3g}..{check.band[1]:.3g} s"
+    )
+    lo = c.lo[np.isfinite(c.lo)].min() / 3
+    hi = c.hi[np.isfinite(c.hi)].max() * 3
+    ax.set_ylim(lo, hi)
+    ax.set_xlabel("averaging time tau [s]")
+    ax.set_ylabel("Allan deviation [m/s^2]")
+    ax.set_title(
+        f"{label}: composite noise model; filter understates the band by x{check.worst_ratio:.3g} "
+        f"(variance, at {check.worst_tau:.3g} s)",
+        fontsize=9,
+    )
+    ax.legend(fontsize=7, loc="best")
+    ax.grid(alpha=0.3, which="both")
+    return _save(fig, path)
+
+
 def plot_whiteness(w: Whiteness, rate_hz: float, path: Path, label: str) -> Path:
     """Residual autocorrelation with the +-1.96/sqrt(N) band, and the cumulative periodogram."""
     fig = _figure(8.0, 7.0)
@@ -150,8 +193,10 @@ def plot_whiteness(w: Whiteness, rate_hz: float, path: Path, label: str) -> Path
     return _save(fig, path)
 
 
-def plot_all(t, y, rate_hz, fit: BiasFit, white: Whiteness, noise: NoiseId, folder: Path, label: str) -> list[Path]:
-    """Write the four PNGs of one axis into ``folder``; returns their paths."""
+def plot_all(
+    t, y, rate_hz, fit: BiasFit, white: Whiteness, noise: NoiseId, folder: Path, label: str, composite=None
+) -> list[Path]:
+    """Write the four PNGs of one axis (five with ``composite`` = (model, band check)) into ``folder``."""
     folder.mkdir(parents=True, exist_ok=True)
     stem = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in label)
     return [
@@ -159,4 +204,4 @@ def plot_all(t, y, rate_hz, fit: BiasFit, white: Whiteness, noise: NoiseId, fold
         plot_spectrum(y, rate_hz, noise, folder / f"{stem}_spectrum.png", label),
         plot_allan(noise, folder / f"{stem}_allan.png", label),
         plot_whiteness(white, rate_hz, folder / f"{stem}_acf.png", label),
-    ]
+    ] + ([plot_composite(noise, *composite, folder / f"{stem}_noise_model.png", label)] if composite else [])

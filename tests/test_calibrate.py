@@ -1,0 +1,216 @@
+"""accelnav calibrate: pose detection, recovery of simulated offsets and sensitivities, interval coverage, refusals."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from accelnav.cli import main
+from accelnav.cli.calibrate import steps_and_noise
+from accelnav.codegen.design import input_conversion
+from accelnav.codegen.model import DEFAULT_MODEL, G0, load_model
+from accelnav.codegen.modelfile import revalidate, with_axis_bias, with_noise
+from accelnav.hil_sim.sensor import simulate
+from accelnav.hil_sim.trajectories import TUMBLE_HOLD_S, TUMBLE_TURN_S, tumble_poses, tumble_specific_force
+from accelnav.identify.calibrate import CalibrationError, detect_poses, fit_axes, native
+
+POSE_S = TUMBLE_HOLD_S + TUMBLE_TURN_S
+
+
+def nominal(n_axes: int = 2):
+    """The default model with no warm-up and a small bias walk: the calibration's constant-offset assumption holds."""
+    m = load_model(DEFAULT_MODEL)
+    if n_axes == 3:
+        m = with_axis_bias(m, "z", 0.0, 0.0, 300.0)
+    m = dataclasses.replace(
+        with_noise(m, sigma_eps=1e-4), axes=tuple(dataclasses.replace(a, c1=0.0, c2=0.0) for a in m.axes)
+    )
+    return revalidate(m)
+
+
+def perturbed(nom, rng):
+    """A 'true' part: zero-g within +-5 mV (+-0.13 g) and sensitivity within +-3 % of the nominal."""
+    axes = tuple(
+        dataclasses.replace(
+            a, zero_g=a.zero_g + rng.uniform(-0.005, 0.005), sensitivity=a.sensitivity * (1 + rng.uniform(-0.03, 0.03))
+        )
+        for a in nom.axes
+    )
+    return revalidate(dataclasses.replace(nom, axes=axes))
+
+
+def tumble_recording(nom, true, seed: int, duration: float | None = None):
+    """Tumble on the true part, converted with the nominal calibration (what the user's recording holds)."""
+    n = len(nom.axes)
+    duration = duration or len(tumble_poses(n)) * POSE_S
+    run = simulate(true, "tumble", duration, seed, initial_random=False)
+    acc = np.column_stack([input_conversion(nom, i).accel(run.code[:, i]) for i in range(n)])
+    return run, acc
+
+
+def truth_offset_scale(nom, true, i):
+    a0, a1 = nom.axes[i], true.axes[i]
+    return (a1.zero_g - a0.zero_g) / a0.sensitivity * G0, a1.sensitivity / a0.sensitivity
+
+
+def calibrate_arrays(nom, acc):
+    steps, noise = steps_and_noise(nom)
+    poses = detect_poses(acc, nom.rate_hz, steps=steps, noise_sd=noise)
+    return fit_axes(poses, tuple(a.name for a in nom.axes))
+
+
+def test_tumble_scenario_holds_the_six_positions():
+    t = np.arange(0, 6 * POSE_S, 0.01)
+    f = tumble_specific_force(t, 3, G0)
+    assert np.allclose(np.linalg.norm(f, axis=1), G0)  # a rotation: gravity's length is kept
+    held = t % POSE_S < TUMBLE_HOLD_S
+    k = (t // POSE_S).astype(int)
+    assert np.allclose(f[held], G0 * tumble_poses(3)[k[held]])
+    f2 = tumble_specific_force(t, 2, G0)
+    assert f2.shape == (len(t), 2) and np.allclose(f2, f[:, :2])  # a 2-axis part: the in-plane components
+
+
+def test_detects_the_poses_of_a_two_axis_tumble():
+    nom = nominal()
+    run, acc = tumble_recording(nom, nom, 1)
+    cal = calibrate_arrays(nom, acc)
+    levels = [tuple(int(v) for v in p.level) for p in cal.poses]
+    assert levels == [(1, 0), (-1, 0), (0, 1), (0, -1), (0, 0), (0, 0)]
+    # every pose covers most of its hold and reaches at most 0.5 s into a turn (a turn about an in-plane axis
+    # starts as 1 - cos: the first 0.4 s change the reading by less than the noise)
+    for p in cal.poses:
+        assert p.t1 - p.t0 > 0.9 * (TUMBLE_HOLD_S - 1.0)
+        assert (p.t1 % POSE_S) <= TUMBLE_HOLD_S + 0.5
+    # what a 2-axis part cannot identify is said
+    assert all(any("out-of-plane" in m for m in a.not_identified) for a in cal.axes)
+
+
+def test_recovers_offsets_and_scales_with_coverage_over_seeds():
+    nom = nominal()
+    z = []
+    for seed in range(20):
+        true = perturbed(nom, np.random.default_rng(100 + seed))
+        _, acc = tumble_recording(nom, true, seed)
+        cal = calibrate_arrays(nom, acc)
+        for i, a in enumerate(cal.axes):
+            o, s = truth_offset_scale(nom, true, i)
+            lo, hi = a.ci95["offset"]
+            z.append(("offset", lo <= o <= hi, (a.offset - o) / a.se["offset"]))
+            lo, hi = a.ci95["scale"]
+            z.append(("scale", lo <= s <= hi, (a.scale - s) / a.se["scale"]))
+            # and the estimate itself is good: within 4 mg and 0.5 % (the perturbation is up to 130 mg and 3 %)
+            assert abs(a.offset - o) < 4e-3 * G0 and abs(a.scale - s) < 5e-3
+    covered = np.mean([c for _, c, _ in z])
+    # 80 nominal 95 % intervals: the binomial 99 % band is about [0.89, 1.0]
+    assert covered >= 0.87, covered
+    # and not covering by being far too wide: |z| of a standard normal has median 0.67
+    assert np.median(np.abs([v for *_, v in z])) > 0.35
+
+
+def test_three_axis_six_position_with_cross_terms():
+    nom = nominal(3)
+    true = perturbed(nom, np.random.default_rng(7))
+    _, acc = tumble_recording(nom, true, 7)
+    cal = calibrate_arrays(nom, acc)
+    assert len(cal.poses) == 6
+    for i, a in enumerate(cal.axes):
+        o, s = truth_offset_scale(nom, true, i)
+        assert abs(a.offset - o) < 4 * a.se["offset"] + 1e-9
+        assert abs(a.scale - s) < 4 * a.se["scale"]
+        # the simulated part has no cross-axis sensitivity: each cross term is ~0 within its interval
+        assert set(a.cross) == {n.name for n in nom.axes} - {a.name}
+        for k, v in a.cross.items():
+            assert abs(v) < 4 * a.se[k] + 1e-4
+        assert not a.not_identified
+
+
+def test_native_units_round_trip():
+    nom = nominal()
+    true = perturbed(nom, np.random.default_rng(3))
+    for i in range(2):
+        o, s = truth_offset_scale(nom, true, i)
+        z, sens = native(nom.axes[i], o, s)
+        assert z == pytest.approx(true.axes[i].zero_g, rel=1e-12) and sens == pytest.approx(true.axes[i].sensitivity)
+
+
+def test_cli_writes_the_calibration(tmp_path, capsys):
+    nom = nominal()
+    model_path = tmp_path / "nominal.toml"
+    from accelnav.codegen.modelfile import dump_model
+
+    model_path.write_text(dump_model(nom))
+    true = perturbed(nom, np.random.default_rng(11))
+    run, acc = tumble_recording(nom, true, 11)
+    csv = tmp_path / "tumble.csv"
+    np.savetxt(
+        csv, np.column_stack([run.t, acc / G0]), delimiter=",", header="t_s,acc_x_g,acc_y_g", comments="", fmt="%.8g"
+    )
+    out = tmp_path / "cal.toml"
+    assert main(["calibrate", str(csv), "--model", str(model_path), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "6 still poses" in text and "not identifiable" in text
+    m = load_model(out)
+    for i, a in enumerate(m.axes):
+        t = true.axes[i]
+        # 4.5 standard errors of the offset in volts (se ~ 1 mg = 0.04 mV) and of the sensitivity
+        assert a.zero_g == pytest.approx(t.zero_g, abs=3e-4)
+        assert a.sensitivity == pytest.approx(t.sensitivity, rel=5e-3)
+        assert a.c2 == -a.c1
+    assert out.read_text().startswith("# accelnav model written by accelnav calibrate\n")
+
+
+def _cli_error(args, capsys) -> str:
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err
+    return err
+
+
+def test_refusals(tmp_path, capsys):
+    nom = nominal()
+    model_path = tmp_path / "nominal.toml"
+    from accelnav.codegen.modelfile import dump_model
+
+    model_path.write_text(dump_model(nom))
+    run, acc = tumble_recording(nom, nom, 2)
+
+    def write(name, a, t=run.t):
+        p = tmp_path / name
+        np.savetxt(
+            p, np.column_stack([t, a / G0]), delimiter=",", header="t_s,acc_x_g,acc_y_g", comments="", fmt="%.8g"
+        )
+        return str(p)
+
+    base = ["--model", str(model_path), "--out", str(tmp_path / "o.toml")]
+    # too few poses: only the first three
+    n3 = int(3 * POSE_S * nom.rate_hz)
+    err = _cli_error(["calibrate", write("short.csv", acc[:n3], run.t[:n3]), *base], capsys)
+    assert "found 3 still pose(s), need at least 4" in err
+    # a pose that is not still: pose 2 creeps by 20 mg over its hold (slow enough to pass as still per window)
+    bad = acc.copy()
+    k0, k1 = int(POSE_S * nom.rate_hz), int((POSE_S + TUMBLE_HOLD_S) * nom.rate_hz)
+    bad[k0:k1, 1] += np.linspace(0, 0.02 * G0, k1 - k0)
+    err = _cli_error(["calibrate", write("creep.csv", bad), *base], capsys)
+    assert "is not still" in err and "mg between its halves" in err
+    # a tilted pose (30 degrees): not aligned
+    tilt = acc.copy()
+    tilt[k0:k1, 1] += 0.5 * G0
+    err = _cli_error(["calibrate", write("tilt.csv", tilt), *base], capsys)
+    assert "not within 0.2 g of an aligned pose" in err
+    # y never turned: every pose reads it at 0 g (x up, x down, flat, flat, ...)
+    flat_y = acc.copy()
+    flat_y[:, 1] = acc[:, 1] - G0 * np.round(acc[:, 1] / G0)
+    err = _cli_error(["calibrate", write("noy.csv", flat_y), *base], capsys)
+    assert "axis y: every pose reads it at +0 g" in err
+    # the model's axes must be in the recording
+    only_x = tmp_path / "x.csv"
+    np.savetxt(only_x, np.column_stack([run.t, acc[:, 0] / G0]), delimiter=",", header="t_s,acc_x_g", comments="")
+    err = _cli_error(["calibrate", str(only_x), *base], capsys)
+    assert "missing y" in err
+
+
+def test_calibration_error_is_a_value_error():
+    with pytest.raises(CalibrationError, match="too few"):
+        detect_poses(np.zeros((10, 2)), 100.0)
