@@ -3,11 +3,13 @@
 * SIL: the firmware's input stage, generated filter and frame packer (host
   board), in-process through cffi (:mod:`hil_sim.firmware`), fed the
   simulator's raw ADC codes or T1/T2 counts as stimulus frames.
-* PIL: the same sources built for the emulated Cortex-M3 (mps2-an385) and run
-  in qemu-system-arm (:mod:`hil_sim.qemu`); the stimulus goes into UART1, and
-  UART0 is recorded through the very same path as ``accelnav record``
-  (:class:`accelnav.link.recorder.Recorder` over a pyserial ``socket://`` port, into
-  an append-only log that is then decoded).
+* PIL: the same sources built for an emulated board and run in
+  qemu-system-arm (:mod:`hil_sim.qemu`): mps2-an385 (Cortex-M3), microbit
+  (Cortex-M0) or stm32vldiscovery (the STM32 port's code on an STM32F100); the
+  stimulus goes into the board's stimulus UART, and its telemetry UART is
+  recorded through the very same path as ``accelnav record``
+  (:class:`accelnav.link.recorder.Recorder` over a pyserial ``socket://``
+  port, into an append-only log that is then decoded).
 
 :func:`compare` puts the frames side by side: PIL against SIL bit for bit,
 frame by frame; both against the float64 reference (accelnav.estimate.kf) on the same
@@ -31,10 +33,11 @@ from accelnav.estimate.zupt import rest_mask
 from accelnav.link.telemetry import Manifest, decode_all, encode_stimulus, sample_columns
 
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
-from .qemu import Mps2Board
+from .qemu import MACHINES, QemuBoard, QemuError, machine_for
 from .sensor import SimRun
 
 STATES = ("r", "u", "a", "eps")
+PIL_BOARDS = tuple(MACHINES)  # the boards `accelnav hil --target pil --board` runs
 
 
 def stimulus(man: Manifest, run: SimRun) -> bytes:
@@ -59,16 +62,26 @@ class PilResult:
     stats: dict
 
 
-def run_pil(model: Model, stim: bytes, n_samples: int, log: Path, *, timeout_s: float = 600.0) -> PilResult:
-    """Run the firmware on the emulated Cortex-M3 with ``stim`` on UART1; UART0 recorded into ``log``."""
+def run_pil(
+    model: Model,
+    stim: bytes,
+    n_samples: int,
+    log: Path,
+    *,
+    board: str = "mps2_an385",
+    timeout_s: float = 600.0,
+) -> PilResult:
+    """Run the firmware on the emulated ``board`` with ``stim`` on its stimulus UART; its telemetry
+    UART recorded into ``log``."""
     from accelnav.link.logfile import read_log
     from accelnav.link.recorder import Recorder, Status
 
-    elf = make_firmware("mps2_an385", model.source) / "accelnav_fw.elf"
+    m = machine_for(board)
+    elf = make_firmware(board, model.source) / "accelnav_fw.elf"
     man = manifest(model.source)
-    with Mps2Board(elf) as board:
-        tel = board.open(0)
-        feed = board.open(1)
+    with QemuBoard(elf, board) as qb:
+        tel = qb.open(m.telemetry)
+        feed = qb.open(m.stimulus)  # the same port when one UART carries both
         rec = Recorder(tel, log, man, model_text=model.text, commands=(), overwrite=True, status=Status(enabled=False))
         # the board reads its feed only while it has room to send: writing it all at once is safe
         writer = threading.Thread(target=feed.write, args=(stim,), daemon=True)
@@ -77,9 +90,7 @@ def run_pil(model: Model, stim: bytes, n_samples: int, log: Path, *, timeout_s: 
         rec.close()
         writer.join(timeout=5)
     if res.reason != "frames":
-        from .qemu import QemuError
-
-        raise QemuError(f"PIL run ended early ({res.reason}) after {res.stats.get('frames', {})} frames")
+        raise QemuError(f"PIL run ({board}) ended early ({res.reason}) after {res.stats.get('frames', {})} frames")
     return PilResult(log, b"".join(read_log(log).data), res.seconds, res.stats)
 
 
