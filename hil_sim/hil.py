@@ -20,6 +20,7 @@ against the firmware's filter, the reference filter and the smoother.
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,7 +31,7 @@ from accelnav.codegen.model import Model
 from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.estimate.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from accelnav.estimate.zupt import rest_mask
-from accelnav.link.telemetry import Manifest, decode_all, encode_stimulus, sample_columns
+from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus, sample_columns
 
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
 from .qemu import MACHINES, QemuBoard, QemuError, machine_for
@@ -82,6 +83,7 @@ def run_pil(
     with QemuBoard(elf, board) as qb:
         tel = qb.open(m.telemetry)
         feed = qb.open(m.stimulus)  # the same port when one UART carries both
+        wait_ready(tel, man, board)
         rec = Recorder(tel, log, man, model_text=model.text, commands=(), overwrite=True, status=Status(enabled=False))
         # the board reads its feed only while it has room to send: writing it all at once is safe
         writer = threading.Thread(target=feed.write, args=(stim,), daemon=True)
@@ -92,6 +94,33 @@ def run_pil(
     if res.reason != "frames":
         raise QemuError(f"PIL run ({board}) ended early ({res.reason}) after {res.stats.get('frames', {})} frames")
     return PilResult(log, b"".join(read_log(log).data), res.seconds, res.stats)
+
+
+def wait_ready(tel, man: Manifest, board: str, timeout_s: float = 30.0) -> None:
+    """Return once the firmware answers ``info`` on ``tel``, with the answers all read.
+
+    Nothing may be fed before: QEMU's STM32 USART takes bytes from its socket
+    even while the USART is still disabled, and drops them (its nRF51 and CMSDK
+    UARTs wait), so a feed that starts before the firmware has set up its
+    USARTs loses the first stimulus frame. ``info`` is resent every 0.2 s (a
+    command that met a disabled USART is lost too) until an info frame comes
+    back; then, with nothing more sent, the acks and any late answers are read
+    until the line has been quiet for 0.3 s, so the recording starts on a
+    frame boundary."""
+    dec = Decoder(man)
+    deadline = time.monotonic() + timeout_s
+    infos = 0
+    while infos == 0:
+        if time.monotonic() > deadline:
+            raise QemuError(f"{board}: no answer to 'info' within {timeout_s:g} s")
+        tel.write(encode_command(man, "info"))
+        t_end = time.monotonic() + 0.2
+        while infos == 0 and time.monotonic() < t_end:
+            infos += len(dec.feed(tel.read(4096))["info"])
+    quiet_since = time.monotonic()
+    while time.monotonic() - quiet_since < 0.3:
+        if tel.read(4096):
+            quiet_since = time.monotonic()
 
 
 @dataclass

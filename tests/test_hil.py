@@ -83,7 +83,7 @@ def test_pil_frames_equal_sil_bit_for_bit(tmp_path, model_in_form, board, model_
     man = manifest(model.source)
     stim = hil.stimulus(man, run)
     sil = hil.run_sil(model, stim)
-    pil = hil.run_pil(model, stim, len(run.t), tmp_path / "pil.acnlog", board=board)
+    pil = hil.run_pil(model, stim, len(run.t), tmp_path / "pil.acnlog", board=board, timeout_s=120)
     c = hil.compare(model, run, sil, pil.telemetry)
     assert c.n == len(run.t)
     assert c.pil_equal_sil, f"{board}: PIL differs from SIL from frame {c.first_difference}"

@@ -308,7 +308,7 @@ bool board_uart_write(const uint8_t *p, size_t n)
         tx_ring[head++ & (TX_SIZE - 1u)] = p[i];
     }
     tx_head = head;
-#ifndef ACN_STM32_QEMU /* there the main loop empties the ring (tx_poll) */
+#ifndef ACN_STM32_QEMU /* there the main loop empties the ring (board_poll) */
     irq_disable();
     USART1->CR1 |= USART_CR1_TXEIE;
     irq_enable();
