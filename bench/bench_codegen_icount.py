@@ -1,15 +1,19 @@
-"""Instructions per axis-step of the generated filters on an emulated Cortex-M3, in one run.
+"""Instructions per axis-step of the generated filters on an emulated Cortex-M3 and Cortex-M0.
 
 Builds the fixed-point covariance form, the fixed-point gain-schedule form and
-the float32 variant (soft float) of one model from the same generator, links
-them with the mps2-an385 runtime (firmware/boards/mps2_an385) and runs them
-under `qemu-system-arm -M mps2-an385 -icount shift=0 -semihosting`. With
-icount every instruction is 1 ns of virtual time and SysTick ticks on the
-25 MHz core clock, so one tick is 40 instructions; each filter runs over
-N simulated samples (ADC codes, input conversion included) and the count is
-averaged per step. The loop and call overhead is measured with an empty
-function of the same signature and reported separately. Flash and RAM come
-from arm-none-eabi-size and the state struct.
+the float32 variant (soft float) of one model from the same generator, twice:
+for the Cortex-M3, linked with the mps2-an385 runtime (firmware/boards/mps2_an385)
+and run under `qemu-system-arm -M mps2-an385 -icount shift=0 -semihosting`, and
+for the Cortex-M0 (no 32x32->64 multiply: 64-bit products go through libgcc),
+linked with the microbit runtime (firmware/boards/microbit) and run under
+`-M microbit` the same way. With icount every instruction is 1 ns of virtual
+time and SysTick ticks on the core clock (25 MHz: 40 instructions per tick;
+16 MHz: 62.5); a loop of a known 2,000,000 instructions checks that ratio on
+each run. Each filter runs over N simulated samples (ADC codes, input
+conversion included) and the count is averaged per step. The loop and call
+overhead is measured with an empty function of the same signature and
+reported separately. Flash and RAM come from arm-none-eabi-size and the state
+struct.
 
     .venv/bin/python bench/bench_codegen_icount.py [MODEL.toml] [--samples N] [--scenario NAME]
 """
@@ -28,8 +32,12 @@ from accelnav.codegen.report import struct_size
 from accelnav.codegen.resources import firmware_dir
 from accelnav.hil_sim.qemu import run_to_exit
 
-BOARD = firmware_dir() / "boards" / "mps2_an385"
-CFLAGS = ["-mcpu=cortex-m3", "-mthumb", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
+CFLAGS = ["-mthumb", "-masm-syntax-unified", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
+# core -> (gcc -mcpu, runtime folder, linker script, qemu machine)
+CORES = {
+    "M3": ("cortex-m3", "mps2_an385", "mps2_an385.ld", "mps2-an385"),
+    "M0": ("cortex-m0", "microbit", "nrf51822.ld", "microbit"),
+}
 VARIANTS = (("cov", "covariance", "fixed"), ("gs", "gain_schedule", "fixed"), ("f32", "covariance", "float32"))
 
 MAIN = r"""
@@ -101,6 +109,37 @@ int main(void)
 """
 
 
+def run_core(core: str, model, codes, tmp: Path) -> tuple[dict, dict, float]:
+    """Build the three variants for ``core`` and run them; returns (tick counts, sizes, instructions per tick)."""
+    cpu, board_name, ld, machine = CORES[core]
+    board = firmware_dir() / "boards" / board_name
+    cflags = [f"-mcpu={cpu}", *CFLAGS]
+    ax = model.axes[0].name
+    tmp.mkdir(parents=True, exist_ok=True)
+    sizes = {}
+    for tag, form, arith in VARIANTS:
+        files = emit(model, form=form, arith=arith, prefix=f"accelnav_{tag}")
+        for name, text in files.items():
+            (tmp / name).write_text(text)
+        obj = tmp / f"accelnav_{tag}.o"
+        subprocess.run(["arm-none-eabi-gcc", *cflags, "-c", str(tmp / f"accelnav_{tag}.c"), "-o", str(obj)], check=True)
+        out = subprocess.run(["arm-none-eabi-size", str(obj)], check=True, capture_output=True, text=True).stdout
+        text, data, bss = (int(x) for x in out.splitlines()[1].split()[:3])
+        ram = struct_size(files[f"accelnav_{tag}.h"], f"accelnav_{tag}_{ax}_t")
+        sizes[tag] = (text, data, bss, ram)
+    main_c = MAIN.replace("CODES", ", ".join(str(int(c)) for c in codes)).replace("_AX_", f"_{ax}_")
+    (tmp / "main.c").write_text(main_c)
+    elf = tmp / "bench.elf"
+    srcs = [tmp / "main.c", board / "startup.c"] + [tmp / f"accelnav_{t}.c" for t, _, _ in VARIANTS]
+    link = ["arm-none-eabi-gcc", *cflags, "-nostdlib", "-I", str(board), "-I", str(tmp), "-T", str(board / ld)]
+    subprocess.run([*link, *map(str, srcs), "-lgcc", "-o", str(elf)], check=True)
+    # the one way accelnav runs code on the emulator (hil_sim.qemu), with -icount shift=0
+    text_out = run_to_exit(elf, icount=True, timeout=300, machine=machine)
+    vals = dict(line.split() for line in text_out.splitlines() if len(line.split()) == 2)
+    vals = {k: int(v) for k, v in vals.items()}
+    return vals, sizes, 2_000_000 / vals["calib_2M"]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("model", nargs="?", default=None)
@@ -115,75 +154,45 @@ def main(argv=None) -> int:
 
     run = simulate(model, args.scenario, args.samples / model.rate_hz, seed=1)
     codes = run.code[: args.samples, 0]
-    ax = model.axes[0].name
     tmp = args.keep or Path(tempfile.mkdtemp(prefix="acn_bench_"))
-    tmp.mkdir(parents=True, exist_ok=True)
-    sizes = {}
-    for tag, form, arith in VARIANTS:
-        files = emit(model, form=form, arith=arith, prefix=f"accelnav_{tag}")
-        for name, text in files.items():
-            (tmp / name).write_text(text)
-        obj = tmp / f"accelnav_{tag}.o"
-        subprocess.run(["arm-none-eabi-gcc", *CFLAGS, "-c", str(tmp / f"accelnav_{tag}.c"), "-o", str(obj)], check=True)
-        out = subprocess.run(["arm-none-eabi-size", str(obj)], check=True, capture_output=True, text=True).stdout
-        text, data, bss = (int(x) for x in out.splitlines()[1].split()[:3])
-        ram = struct_size(files[f"accelnav_{tag}.h"], f"accelnav_{tag}_{ax}_t")
-        sizes[tag] = (text, data, bss, ram)
-    main_c = MAIN.replace("CODES", ", ".join(str(int(c)) for c in codes)).replace("_AX_", f"_{ax}_")
-    (tmp / "main.c").write_text(main_c)
-    elf = tmp / "bench.elf"
-    srcs = [tmp / "main.c", BOARD / "startup.c"] + [tmp / f"accelnav_{t}.c" for t, _, _ in VARIANTS]
-    subprocess.run(
-        [
-            "arm-none-eabi-gcc",
-            *CFLAGS,
-            "-nostdlib",
-            "-I",
-            str(BOARD),
-            "-I",
-            str(tmp),
-            "-T",
-            str(BOARD / "mps2_an385.ld"),
-            *map(str, srcs),
-            "-lgcc",
-            "-o",
-            str(elf),
-        ],
-        check=True,
-    )
-    # the one way accelnav runs code on the emulator (hil_sim.qemu), with -icount shift=0
-    text_out = run_to_exit(elf, icount=True, timeout=300)
-    vals = dict(line.split() for line in text_out.splitlines() if len(line.split()) == 2)
-    vals = {k: int(v) for k, v in vals.items()}
-    ipt = 2_000_000 / vals["calib_2M"]
-    n = vals["n"]
-    empty = vals["empty"] * ipt / n
+    results = {core: run_core(core, model, codes, tmp / core) for core in CORES}
+    n = results["M3"][0]["n"]
     print(f"model {model.name} ({model.sha256[:12]}), {model.rate_hz:g} Hz, scenario {args.scenario}, {n} steps,")
-    print(f"Cortex-M3 (qemu mps2-an385, -icount shift=0), arm-none-eabi-gcc -O2; {ipt:.2f} instructions per tick")
-    print(f"loop + call overhead (empty step): {empty:.1f} instructions per step")
-    print(f"{'variant':<34} {'insn/step':>10} {'net':>8} {'flash B':>8} {'RAM B':>6}")
+    print("arm-none-eabi-gcc -O2, qemu-system-arm -icount shift=0: Cortex-M3 on mps2-an385, Cortex-M0 on microbit")
+    for core, (vals, _, ipt) in results.items():
+        empty = vals["empty"] * ipt / vals["n"]
+        print(f"{core}: {ipt:.2f} instructions per tick; loop + call overhead (empty step) {empty:.1f} per step")
     names = {
         "cov": "fixed point, covariance form",
         "gs": "fixed point, gain-schedule form",
         "f32": "float32 (soft float)",
     }
-    per = {}
+    print(
+        f"{'variant':<34} {'M3 insn':>8} {'net':>8} {'M0 insn':>8} {'net':>8} {'M0/M3':>6}"
+        f" {'flash M3':>8} {'flash M0':>8} {'RAM B':>6}"
+    )
+    per = {core: {} for core in CORES}
     for tag in ("cov", "gs", "f32"):
-        tot = vals[tag] * ipt / n
-        per[tag] = tot
-        text, data, bss, ram = sizes[tag]
-        flash = (text + data) // len(model.axes)
-        print(f"{names[tag]:<34} {tot:10.1f} {tot - empty:8.1f} {flash:8d} {ram:6d}")
-    print(f"flash is per axis (object size / {len(model.axes)} axes; libgcc soft-float routines not included)")
+        row = f"{names[tag]:<34}"
+        for core, (vals, _, ipt) in results.items():
+            tot = vals[tag] * ipt / vals["n"]
+            per[core][tag] = tot
+            row += f" {tot:8.1f} {tot - vals['empty'] * ipt / vals['n']:8.1f}"
+        row += f" {per['M0'][tag] / per['M3'][tag]:6.2f}"
+        for core in CORES:
+            text, data, _bss, ram = results[core][1][tag]
+            row += f" {(text + data) // len(model.axes):8d}"
+        print(row + f" {ram:6d}")
+    print(f"flash is per axis (object size / {len(model.axes)} axes; libgcc routines not included)")
+    m3 = per["M3"]
+    ratio = f"float32 / gain-schedule: {m3['f32'] / m3['gs']:.1f}x;  float32 / covariance: {m3['f32'] / m3['cov']:.1f}x"
+    print(f"M3: {ratio}")
     print(
-        f"float32 / gain-schedule: {per['f32'] / per['gs']:.1f}x;  float32 / covariance: {per['f32'] / per['cov']:.1f}x"
+        f"M3 targets: covariance <= 300 ({'met' if m3['cov'] <= 300 else 'NOT met'}), gain schedule <= 80 "
+        f"({'met' if m3['gs'] <= 80 else 'NOT met'}), float32 >= 12x gain schedule "
+        f"({'met' if m3['f32'] >= 12 * m3['gs'] else 'NOT met'})"
     )
-    print(
-        f"targets: covariance <= 300 ({'met' if per['cov'] <= 300 else 'NOT met'}), gain schedule <= 80 "
-        f"({'met' if per['gs'] <= 80 else 'NOT met'}), float32 >= 12x gain schedule "
-        f"({'met' if per['f32'] >= 12 * per['gs'] else 'NOT met'})"
-    )
-    print(f"overflow counters: {vals['overflow']}")
+    print("overflow counters: " + ", ".join(f"{core} {results[core][0]['overflow']}" for core in CORES))
     return 0
 
 

@@ -80,7 +80,7 @@ AXIS_FLAGS = {
     "timeout": 2,  # duty cycle: no capture within two periods (sensor unplugged)
 }
 ACK_STATUS = {"ok": 0, "bad_argument": 1}
-BOARDS = {"host": 1, "mps2_an385": 2, "stm32f103": 3}
+BOARDS = {"host": 1, "mps2_an385": 2, "stm32f103": 3, "microbit": 4, "stm32vldiscovery": 5}
 
 
 @dataclass(frozen=True)
@@ -244,6 +244,8 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
     b.add("tx_drop", "u16", "s->tx_drop", doc="frames the MCU could not queue (link too slow), mod 2^16")
     b.add("skipped", "u16", "s->skipped", doc="updates skipped (rail, bad capture, timeout), mod 2^16")
     b.add("overflow", "u16", "s->overflow", doc="filter saturations, all axes, saturating at 65535")
+    b.add("missed", "u16", "s->missed", doc="samples the board missed (main loop too slow), predicted over, mod 2^16")
+    b.add("rx_lost", "u16", "s->rx_lost", doc="bytes the board's receivers lost (overrun, full ring), mod 2^16")
     for i, ax in enumerate(names):
         a = f"s->axis[{i}]"
         b.add(f"{ax}.flags", "u8", f"{a}.flags", doc="AXIS_FLAGS bits")
@@ -415,6 +417,8 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         "    uint16_t tx_drop;",
         "    uint16_t skipped;",
         "    uint16_t overflow;",
+        "    uint16_t missed;",
+        "    uint16_t rx_lost;",
         "    acnf_axis_t axis[ACNF_NAXES];",
         "} acnf_sample_t;",
         "",

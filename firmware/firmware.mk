@@ -1,6 +1,6 @@
 # Firmware build, included by the top-level Makefile.
 #
-#   make firmware BOARD=host|mps2_an385|stm32f103 [MODEL=models/x.toml]
+#   make firmware BOARD=host|mps2_an385|microbit|stm32f103|stm32vldiscovery [MODEL=models/x.toml]
 #   make flash BOARD=stm32f103 [FLASH_TOOL=openocd|st-flash]
 #
 # The filter (accelnav.*) and the frame code (acnframe.*) of MODEL are
@@ -20,9 +20,12 @@ FW_OUT     ?= build/firmware/$(BOARD)
 FW_WARN    := -std=c99 -Wall -Wextra -Werror -pedantic
 FW_INC     := -I$(FW_DIR)/src -I$(FW_DIR)/boards -I$(FW_GEN)
 FW_COMMON  := $(wildcard $(FW_DIR)/src/*.c) $(FW_GEN)/accelnav.c $(FW_GEN)/acnframe.c
-FW_HEADERS := $(wildcard $(FW_DIR)/src/*.h $(FW_DIR)/boards/*.h $(FW_DIR)/boards/$(BOARD)/*.h)
+# the folder of the board's sources: stm32vldiscovery is the stm32f103 port built for QEMU's STM32F100
+FW_BOARD_DIR := $(FW_DIR)/boards/$(if $(filter stm32vldiscovery,$(BOARD)),stm32f103,$(BOARD))
+FW_HEADERS := $(wildcard $(FW_DIR)/src/*.h $(FW_DIR)/boards/*.h $(FW_BOARD_DIR)/*.h)
 ARM_CC     ?= arm-none-eabi-gcc
-ARM_FLAGS  := -mcpu=cortex-m3 -mthumb -Os -ffunction-sections -fdata-sections -ffreestanding -g
+ARM_CPU    := $(if $(filter microbit,$(BOARD)),-mcpu=cortex-m0,-mcpu=cortex-m3)
+ARM_FLAGS  := $(ARM_CPU) -mthumb -Os -ffunction-sections -fdata-sections -ffreestanding -g
 
 ifeq ($(BOARD),host)
 FW_CC      := $(CC)
@@ -40,15 +43,27 @@ FW_LOOSE   := $(FW_DIR)/boards/mps2_an385/startup.c
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/mps2_an385/mps2_an385.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size
-else ifeq ($(BOARD),stm32f103)
+else ifeq ($(BOARD),microbit)
+# QEMU's BBC micro:bit: nRF51822, Cortex-M0 (no 32x32->64 multiply: 64-bit products go through libgcc)
 FW_CC      := $(ARM_CC)
-FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/stm32f103
+FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -masm-syntax-unified -I$(FW_DIR)/boards/microbit
+FW_SRCS    := $(FW_DIR)/boards/microbit/board_microbit.c
+FW_LOOSE   := $(FW_DIR)/boards/microbit/startup.c
+FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/microbit/nrf51822.ld \
+              -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
+FW_SIZE    := arm-none-eabi-size
+else ifneq ($(filter stm32f103 stm32vldiscovery,$(BOARD)),)
+# stm32vldiscovery: the same sources and layout for QEMU's STM32F100 (see board_stm32.c, ACN_STM32_QEMU)
+FW_CC      := $(ARM_CC)
+FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/stm32f103 \
+              $(if $(filter stm32vldiscovery,$(BOARD)),-DACN_STM32_QEMU)
 FW_SRCS    := $(FW_DIR)/boards/stm32f103/startup_stm32f103.c $(FW_DIR)/boards/stm32f103/board_stm32.c
-FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/stm32f103/stm32f103c8.ld \
+FW_LD      := $(if $(filter stm32vldiscovery,$(BOARD)),stm32f100rb_qemu.ld,stm32f103c8.ld)
+FW_LDFLAGS := -nostartfiles --specs=nano.specs -L$(FW_DIR)/boards/stm32f103 -T$(FW_DIR)/boards/stm32f103/$(FW_LD) \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size
 else
-$(error BOARD=$(BOARD): accepted: host, mps2_an385, stm32f103)
+$(error BOARD=$(BOARD): accepted: host, mps2_an385, microbit, stm32f103, stm32vldiscovery)
 endif
 
 FW_ELF := $(FW_OUT)/accelnav_fw$(if $(filter host,$(BOARD)),,.elf)
@@ -76,14 +91,14 @@ endif
 
 FW_LOOSE_OBJ := $(patsubst %.c,$(FW_OUT)/%.o,$(notdir $(FW_LOOSE)))
 
-$(FW_OUT)/%.o: $(FW_DIR)/boards/$(BOARD)/%.c $(FW_HEADERS)
+$(FW_OUT)/%.o: $(FW_BOARD_DIR)/%.c $(FW_HEADERS)
 	@mkdir -p $(FW_OUT)
 	$(FW_CC) $(filter-out -pedantic,$(FW_CFLAGS)) -c $< -o $@
 
-$(FW_ELF): $(FW_COMMON) $(FW_SRCS) $(FW_LOOSE_OBJ) $(FW_HEADERS) $(FW_GEN)/acnframe.h $(FW_STAMP)
+$(FW_ELF): $(FW_COMMON) $(FW_SRCS) $(FW_LOOSE_OBJ) $(FW_HEADERS) $(wildcard $(FW_BOARD_DIR)/*.ld) $(FW_GEN)/acnframe.h $(FW_STAMP)
 	@mkdir -p $(FW_OUT)
 	$(FW_CC) $(FW_CFLAGS) $(FW_INC) $(FW_COMMON) $(FW_SRCS) $(FW_LOOSE_OBJ) $(FW_LDFLAGS) -o $@
-ifeq ($(BOARD),stm32f103)
+ifneq ($(filter stm32f103 stm32vldiscovery,$(BOARD)),)
 	arm-none-eabi-objcopy -O binary $@ $(FW_OUT)/accelnav_fw.bin
 	arm-none-eabi-objcopy -O ihex $@ $(FW_OUT)/accelnav_fw.hex
 endif

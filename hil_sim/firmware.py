@@ -77,7 +77,7 @@ def _cdef(files: dict[str, str]) -> str:
     return f"""
 typedef struct {{ uint8_t flags; {raw} int64_t r; int64_t u; int32_t a; int64_t e; }} acnf_axis_t;
 typedef struct {{ uint16_t seq; uint32_t index; uint16_t flags; uint16_t tx_drop; uint16_t skipped;
-                 uint16_t overflow; acnf_axis_t axis[{n}]; }} acnf_sample_t;
+                 uint16_t overflow; uint16_t missed; uint16_t rx_lost; acnf_axis_t axis[{n}]; }} acnf_sample_t;
 typedef struct {{ uint8_t type; uint16_t factor; }} acnf_command_t;
 typedef struct {{ uint8_t flags; {stim} }} acnf_stimulus_t;
 size_t acnf_pack_sample(const acnf_sample_t *s, uint8_t *p);
@@ -92,6 +92,7 @@ size_t board_host_take(uint8_t *out, size_t max);
 void board_host_set_tx_limit(size_t limit);
 void app_init(void);
 void app_sample(const acnf_stimulus_t *in);
+void app_missed(uint32_t n);
 void app_rx(unsigned ch, const uint8_t *p, size_t n);
 """
 

@@ -3,11 +3,13 @@
 * SIL: the firmware's input stage, generated filter and frame packer (host
   board), in-process through cffi (:mod:`hil_sim.firmware`), fed the
   simulator's raw ADC codes or T1/T2 counts as stimulus frames.
-* PIL: the same sources built for the emulated Cortex-M3 (mps2-an385) and run
-  in qemu-system-arm (:mod:`hil_sim.qemu`); the stimulus goes into UART1, and
-  UART0 is recorded through the very same path as ``accelnav record``
-  (:class:`accelnav.link.recorder.Recorder` over a pyserial ``socket://`` port, into
-  an append-only log that is then decoded).
+* PIL: the same sources built for an emulated board and run in
+  qemu-system-arm (:mod:`hil_sim.qemu`): mps2-an385 (Cortex-M3), microbit
+  (Cortex-M0) or stm32vldiscovery (the STM32 port's code on an STM32F100); the
+  stimulus goes into the board's stimulus UART, and its telemetry UART is
+  recorded through the very same path as ``accelnav record``
+  (:class:`accelnav.link.recorder.Recorder` over a pyserial ``socket://``
+  port, into an append-only log that is then decoded).
 
 :func:`compare` puts the frames side by side: PIL against SIL bit for bit,
 frame by frame; both against the float64 reference (accelnav.estimate.kf) on the same
@@ -18,6 +20,7 @@ against the firmware's filter, the reference filter and the smoother.
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,13 +31,14 @@ from accelnav.codegen.model import Model
 from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.estimate.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from accelnav.estimate.zupt import rest_mask
-from accelnav.link.telemetry import Manifest, decode_all, encode_stimulus, sample_columns
+from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus, sample_columns
 
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
-from .qemu import Mps2Board
+from .qemu import MACHINES, QemuBoard, QemuError, machine_for
 from .sensor import SimRun
 
 STATES = ("r", "u", "a", "eps")
+PIL_BOARDS = tuple(MACHINES)  # the boards `accelnav hil --target pil --board` runs
 
 
 def stimulus(man: Manifest, run: SimRun) -> bytes:
@@ -59,16 +63,27 @@ class PilResult:
     stats: dict
 
 
-def run_pil(model: Model, stim: bytes, n_samples: int, log: Path, *, timeout_s: float = 600.0) -> PilResult:
-    """Run the firmware on the emulated Cortex-M3 with ``stim`` on UART1; UART0 recorded into ``log``."""
+def run_pil(
+    model: Model,
+    stim: bytes,
+    n_samples: int,
+    log: Path,
+    *,
+    board: str = "mps2_an385",
+    timeout_s: float = 600.0,
+) -> PilResult:
+    """Run the firmware on the emulated ``board`` with ``stim`` on its stimulus UART; its telemetry
+    UART recorded into ``log``."""
     from accelnav.link.logfile import read_log
     from accelnav.link.recorder import Recorder, Status
 
-    elf = make_firmware("mps2_an385", model.source) / "accelnav_fw.elf"
+    m = machine_for(board)
+    elf = make_firmware(board, model.source) / "accelnav_fw.elf"
     man = manifest(model.source)
-    with Mps2Board(elf) as board:
-        tel = board.open(0)
-        feed = board.open(1)
+    with QemuBoard(elf, board) as qb:
+        tel = qb.open(m.telemetry)
+        feed = qb.open(m.stimulus)  # the same port when one UART carries both
+        wait_ready(tel, man, board)
         rec = Recorder(tel, log, man, model_text=model.text, commands=(), overwrite=True, status=Status(enabled=False))
         # the board reads its feed only while it has room to send: writing it all at once is safe
         writer = threading.Thread(target=feed.write, args=(stim,), daemon=True)
@@ -77,10 +92,35 @@ def run_pil(model: Model, stim: bytes, n_samples: int, log: Path, *, timeout_s: 
         rec.close()
         writer.join(timeout=5)
     if res.reason != "frames":
-        from .qemu import QemuError
-
-        raise QemuError(f"PIL run ended early ({res.reason}) after {res.stats.get('frames', {})} frames")
+        raise QemuError(f"PIL run ({board}) ended early ({res.reason}) after {res.stats.get('frames', {})} frames")
     return PilResult(log, b"".join(read_log(log).data), res.seconds, res.stats)
+
+
+def wait_ready(tel, man: Manifest, board: str, timeout_s: float = 30.0) -> None:
+    """Return once the firmware answers ``info`` on ``tel``, with the answers all read.
+
+    Nothing may be fed before: QEMU's STM32 USART takes bytes from its socket
+    even while the USART is still disabled, and drops them (its nRF51 and CMSDK
+    UARTs wait), so a feed that starts before the firmware has set up its
+    USARTs loses the first stimulus frame. ``info`` is resent every 0.2 s (a
+    command that met a disabled USART is lost too) until an info frame comes
+    back; then, with nothing more sent, the acks and any late answers are read
+    until the line has been quiet for 0.3 s, so the recording starts on a
+    frame boundary."""
+    dec = Decoder(man)
+    deadline = time.monotonic() + timeout_s
+    infos = 0
+    while infos == 0:
+        if time.monotonic() > deadline:
+            raise QemuError(f"{board}: no answer to 'info' within {timeout_s:g} s")
+        tel.write(encode_command(man, "info"))
+        t_end = time.monotonic() + 0.2
+        while infos == 0 and time.monotonic() < t_end:
+            infos += len(dec.feed(tel.read(4096))["info"])
+    quiet_since = time.monotonic()
+    while time.monotonic() - quiet_since < 0.3:
+        if tel.read(4096):
+            quiet_since = time.monotonic()
 
 
 @dataclass

@@ -1,12 +1,18 @@
-"""The one way accelnav runs code on the emulated Cortex-M3 (qemu-system-arm, mps2-an385).
+"""The one way accelnav runs code on an emulated Cortex-M (qemu-system-arm).
+
+The machines (:data:`MACHINES`), one per firmware board that runs in QEMU:
+``mps2_an385`` (Cortex-M3, CMSDK UARTs), ``microbit`` (nRF51822, Cortex-M0,
+one UART) and ``stm32vldiscovery`` (STM32F100, Cortex-M3: the stm32f103
+port's code, see firmware/boards/stm32f103/board_stm32.c).
 
 Two uses, one command line (:func:`qemu_command`):
 
-* :class:`Mps2Board`: the firmware as a board. UART0 (telemetry out,
-  commands in) and UART1 (the stimulus feed that stands in for the ADC or
-  timer capture) are TCP servers on loopback, opened from Python as pyserial
-  ``socket://`` URLs. A context manager: leaving it kills QEMU and waits for
-  it, so no process is left behind, whatever happens inside.
+* :class:`QemuBoard`: the firmware as a board. Its UARTs (telemetry out and
+  commands in; the stimulus feed that stands in for the ADC or timer capture,
+  on a second UART or, on the one-UART microbit, on the same one) are TCP
+  servers on loopback, opened from Python as pyserial ``socket://`` URLs. A
+  context manager: leaving it kills QEMU and waits for it, so no process is
+  left behind, whatever happens inside. :class:`Mps2Board` is the mps2-an385 one.
 * :func:`run_to_exit`: a bare-metal program that prints over semihosting and
   exits through it (the instruction-count benchmark), with ``-icount
   shift=0`` so one instruction is one tick of virtual time and the counts are
@@ -22,10 +28,41 @@ import shutil
 import socket
 import subprocess
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 QEMU = "qemu-system-arm"
 MACHINE = "mps2-an385"  # Cortex-M3; UART0 at 0x40004000, UART1 at 0x40005000
+
+
+@dataclass(frozen=True)
+class Machine:
+    """A QEMU machine that runs a firmware board: which -serial carries what."""
+
+    board: str  # the firmware's BOARD name
+    machine: str  # qemu-system-arm -M
+    core: str
+    uarts: int  # -serial devices, in the machine's order
+    telemetry: int  # telemetry out, commands in
+    stimulus: int  # the stimulus feed (may be the telemetry UART)
+
+
+MACHINES = {
+    m.board: m
+    for m in (
+        Machine("mps2_an385", "mps2-an385", "Cortex-M3", 2, 0, 1),  # CMSDK UART0 / UART1
+        Machine("microbit", "microbit", "Cortex-M0 (nRF51822)", 1, 0, 0),  # the nRF51's one UART
+        Machine("stm32vldiscovery", "stm32vldiscovery", "Cortex-M3 (STM32F100)", 2, 0, 1),  # USART1 / USART2
+    )
+}
+
+
+def machine_for(board: str) -> Machine:
+    """The QEMU machine of a firmware board, or QemuError naming the boards that run in QEMU."""
+    try:
+        return MACHINES[board]
+    except KeyError:
+        raise QemuError(f"board {board!r} does not run in QEMU; accepted: {', '.join(MACHINES)}") from None
 
 
 class QemuError(RuntimeError):
@@ -40,9 +77,11 @@ def require_qemu() -> str:
     return path
 
 
-def qemu_command(elf: str | Path, *, uart_ports: tuple[int, ...] = (), icount: bool = False) -> list[str]:
-    """The emulator's command line: ``elf`` on mps2-an385, UARTs as loopback TCP servers in port order."""
-    cmd = [QEMU, "-M", MACHINE, "-display", "none", "-monitor", "none"]
+def qemu_command(
+    elf: str | Path, *, uart_ports: tuple[int, ...] = (), icount: bool = False, machine: str = MACHINE
+) -> list[str]:
+    """The emulator's command line: ``elf`` on ``machine``, UARTs as loopback TCP servers in port order."""
+    cmd = [QEMU, "-M", machine, "-display", "none", "-monitor", "none"]
     cmd += ["-semihosting-config", "enable=on,target=native", "-kernel", str(elf)]
     if icount:
         cmd += ["-icount", "shift=0"]  # one instruction per ns of virtual time: deterministic counts
@@ -61,18 +100,20 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-class Mps2Board:
-    """``with Mps2Board(elf) as board: tel = board.open(0); feed = board.open(1)``.
+class QemuBoard:
+    """``with QemuBoard(elf, "microbit") as board: tel = board.open(board.machine.telemetry)``.
 
-    ``open(i)`` returns a pyserial port on UART i (retrying until QEMU listens).
+    ``open(i)`` returns a pyserial port on UART i (retrying until QEMU listens);
+    opening the same UART twice returns the same port.
     """
 
-    def __init__(self, elf: str | Path, *, uarts: int = 2, start_timeout: float = 20.0):
+    def __init__(self, elf: str | Path, board: str = "mps2_an385", *, start_timeout: float = 20.0):
+        self.machine = machine_for(board)
         self.elf = Path(elf)
         if not self.elf.is_file():
-            raise QemuError(f"{self.elf}: no firmware image (build it with 'make firmware BOARD=mps2_an385')")
+            raise QemuError(f"{self.elf}: no firmware image (build it with 'make firmware BOARD={board}')")
         require_qemu()
-        self.ports = tuple(free_port() for _ in range(uarts))
+        self.ports = tuple(free_port() for _ in range(self.machine.uarts))
         self.start_timeout = start_timeout
         self.proc: subprocess.Popen | None = None
         self._opened: list = []
@@ -80,15 +121,17 @@ class Mps2Board:
     def url(self, uart: int) -> str:
         return f"socket://127.0.0.1:{self.ports[uart]}"
 
-    def __enter__(self) -> Mps2Board:
-        self.proc = subprocess.Popen(
-            qemu_command(self.elf, uart_ports=self.ports), stdout=subprocess.PIPE, stderr=subprocess.PIPE
-        )
+    def __enter__(self) -> QemuBoard:
+        cmd = qemu_command(self.elf, uart_ports=self.ports, machine=self.machine.machine)
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         return self
 
     def open(self, uart: int, timeout: float = 0.05):
         import serial
 
+        for port in self._opened:
+            if port.port == self.url(uart):
+                return port
         deadline = time.monotonic() + self.start_timeout
         while True:
             if self.proc is not None and self.proc.poll() is not None:
@@ -119,12 +162,19 @@ class Mps2Board:
         self.close()
 
 
-def run_to_exit(elf: str | Path, *, icount: bool = True, timeout: float = 300.0) -> str:
+class Mps2Board(QemuBoard):
+    """``with Mps2Board(elf) as board: tel = board.open(0); feed = board.open(1)`` (mps2-an385)."""
+
+    def __init__(self, elf: str | Path, *, start_timeout: float = 20.0):
+        super().__init__(elf, "mps2_an385", start_timeout=start_timeout)
+
+
+def run_to_exit(elf: str | Path, *, icount: bool = True, timeout: float = 300.0, machine: str = MACHINE) -> str:
     """Run a semihosting program to its exit; returns what it printed. Non-zero exit is a QemuError."""
     require_qemu()
     try:
         done = subprocess.run(
-            qemu_command(elf, icount=icount), capture_output=True, text=True, timeout=timeout, check=False
+            qemu_command(elf, icount=icount, machine=machine), capture_output=True, text=True, timeout=timeout
         )
     except subprocess.TimeoutExpired:
         raise QemuError(f"{QEMU}: {elf} did not exit within {timeout:g} s") from None

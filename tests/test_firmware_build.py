@@ -1,6 +1,8 @@
-"""The firmware builds for all three boards with -Werror, the host board runs as a program, and the
+"""The firmware builds for every board with -Werror, the host board runs as a program, and the
 mps2_an385 image runs in qemu-system-arm: telemetry on UART0, stimulus on UART1, both over TCP
-(pyserial socket://), bit-identical to the host board. The C is clang-format clean.
+(pyserial socket://), bit-identical to the host board; the microbit (Cortex-M0) and
+stm32vldiscovery (the STM32 port on QEMU's STM32F100) images answer commands there too (their
+bit-for-bit runs are in test_hil.py). The C is clang-format clean.
 
 Boards needing arm-none-eabi-gcc or qemu-system-arm are skipped, with the reason, where those are
 missing; CI (.ci/run) installs them.
@@ -21,12 +23,14 @@ import pytest
 
 from accelnav.hil_sim.firmware import DUTY_MODEL
 from accelnav.hil_sim.firmware import make_firmware as build_image
-from accelnav.hil_sim.qemu import Mps2Board, qemu_command
+from accelnav.hil_sim.qemu import MACHINES, Mps2Board, QemuBoard, qemu_command
 from accelnav.link.recorder import Recorder, Status, decode_log
 from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus
 
 REPO = Path(__file__).resolve().parents[1]
 STM32_FLASH, STM32_RAM = 64 * 1024, 20 * 1024
+# flash, RAM of the emulated parts: nRF51822 (microbit), STM32F100RB (stm32vldiscovery)
+EMULATED_MEMORY = {"microbit": (256 * 1024, 16 * 1024), "stm32vldiscovery": (128 * 1024, 8 * 1024)}
 
 needs_arm = pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None, reason="arm-none-eabi-gcc not installed")
 needs_qemu = pytest.mark.skipif(shutil.which("qemu-system-arm") is None, reason="qemu-system-arm not installed")
@@ -74,6 +78,23 @@ def test_stm32f103_builds_and_fits(model):
 
 
 @needs_arm
+@pytest.mark.parametrize("board", sorted(EMULATED_MEMORY))
+@pytest.mark.parametrize("model", [None, DUTY_MODEL], ids=["adxl250", "adxl202"])
+def test_emulated_boards_build_and_fit(board, model):
+    out = make_firmware(board, model)
+    s = sizes(out)
+    flash, ram = EMULATED_MEMORY[board]
+    print(f"\n{board} ({'default' if model is None else model.stem}): {s}")
+    assert s["text"] + s["data"] <= flash
+    assert s["data"] + s["bss"] + 2048 <= ram  # the linker scripts keep 2 KiB for the stack
+    hdr = subprocess.run(["arm-none-eabi-readelf", "-h", "-A", out / "accelnav_fw.elf"], capture_output=True, text=True)
+    # the M0 image is ARMv6-M code (no 32x32->64 multiply); the STM32 one the F103's ARMv7-M
+    assert re.search(r"Tag_CPU_arch: v6S-M" if board == "microbit" else r"Tag_CPU_arch: v7", hdr.stdout), hdr.stdout
+    if board == "stm32vldiscovery":  # the STM32F103 layout: vector table at the start of flash
+        assert re.search(r"Entry point address:\s+0x80", hdr.stdout)
+
+
+@needs_arm
 def test_mps2_an385_builds():
     out = make_firmware("mps2_an385")
     print(f"\nmps2_an385: {sizes(out)}")
@@ -88,6 +109,7 @@ def test_firmware_c_is_clang_formatted():
         REPO / "firmware" / "boards" / "acn_board.h",
         *sorted((REPO / "firmware" / "boards" / "host").glob("*.[ch]")),
         REPO / "firmware" / "boards" / "mps2_an385" / "board_mps2.c",
+        *sorted((REPO / "firmware" / "boards" / "microbit").glob("*.[ch]")),
         *sorted((REPO / "firmware" / "boards" / "stm32f103").glob("*.[ch]")),
     ]
     done = subprocess.run(["clang-format", "--dry-run", "-Werror", *ours], capture_output=True, text=True)
@@ -135,27 +157,53 @@ def test_mps2_an385_in_qemu_matches_the_host_board(tmp_path):
 
 @needs_arm
 @needs_qemu
-def test_mps2_commands_in_qemu():
-    out = make_firmware("mps2_an385")
+@pytest.mark.parametrize("board_name", sorted(MACHINES))
+def test_commands_in_qemu(board_name):
+    out = make_firmware(board_name)
     man = Manifest.load(out / "gen" / "acnframe.json")
-    with Mps2Board(out / "accelnav_fw.elf") as board:
+    with QemuBoard(out / "accelnav_fw.elf", board_name) as board:
         deadline = time.monotonic() + 20
-        tel, feed = board.open(0), board.open(1)
-        tel.write(encode_command(man, "decimate", factor=10))
+        tel, feed = board.open(board.machine.telemetry), board.open(board.machine.stimulus)
+        tel.write(encode_command(man, "decimate", factor=10) + encode_command(man, "info"))
         time.sleep(0.2)
         feed.write(encode_stimulus(man, code=np.full((200, 2), 2048)))
         d = Decoder(man)
-        got = {"sample": 0, "ack": 0}
+        got = {"sample": 0, "ack": 0, "info": 0}
+        infos = []
         while got["sample"] < 20 and time.monotonic() < deadline + 20:
             b = d.feed(tel.read(4096))
+            infos += list(b["info"])
             for k in got:
                 got[k] += len(b[k])
-    assert got == {"sample": 20, "ack": 1}
+    assert got == {"sample": 20, "ack": 2, "info": 1}
     assert d.stats.lost == 0
+    assert infos[0]["board"] == man.data["boards"][board_name]  # the image says which board it is
 
 
 def test_readme_names_every_board():
     text = (REPO / "firmware" / "README.md").read_text()
-    for word in ("BOARD=host", "BOARD=mps2_an385", "BOARD=stm32f103", "make flash", "st-flash", "openocd"):
+    for word in (
+        "BOARD=host",
+        "BOARD=mps2_an385",
+        "BOARD=microbit",
+        "BOARD=stm32f103",
+        "BOARD=stm32vldiscovery",
+        "make flash",
+        "st-flash",
+        "openocd",
+    ):
         assert word in text
     assert os.path.isfile(REPO / "firmware" / "firmware.mk")
+    # the board table says, for every board, whether CI runs it or only builds it
+    for board in ("host", "mps2_an385", "microbit", "stm32f103", "stm32vldiscovery"):
+        row = next((line for line in text.splitlines() if line.startswith(f"| `{board}`")), None)
+        assert row is not None, f"no row for {board} in the README's board table"
+        assert ("run in CI" in row) != ("build only" in row), row
+
+
+def test_unknown_board_lists_the_accepted_ones():
+    done = subprocess.run(
+        ["make", "-f", REPO / "firmware" / "firmware.mk", "firmware", "BOARD=nrf52"], capture_output=True, text=True
+    )
+    assert done.returncode != 0
+    assert "accepted: host, mps2_an385, microbit, stm32f103, stm32vldiscovery" in done.stderr

@@ -164,7 +164,7 @@ def test_round_trip_sample_frames(fw_mod, man):
     stream = bytearray()
     raw = man.raw_fields()
     for k in range(n):
-        for top in ("seq", "index", "flags", "tx_drop", "skipped", "overflow"):
+        for top in ("seq", "index", "flags", "tx_drop", "skipped", "overflow", "missed", "rx_lost"):
             setattr(s, top, int(vals[top][k]))
         for j, ax in enumerate(man.axes):
             a = s.axis[j]
@@ -258,6 +258,43 @@ def test_streamed_states_are_the_generated_filters(kind, fw_mod, man):
     assert frames["sample"]["skipped"][-1] == 2
     assert frames["sample"]["flags"][0] & 4  # reset: the first frame after init
     assert not (frames["sample"]["flags"][1:] & 4).any()
+
+
+def test_missed_samples_are_predicted_over_and_counted(kind, fw_mod, man):
+    """A board that misses samples (its main loop too slow: the STM32 port's sample overrun) calls
+    app_missed: every axis filter predicts over each missed sample, exactly as over a refused input,
+    the sample index keeps time, and the `missed` counter says how many. Here the host board misses
+    samples 100, 101 and 200 of 300; the reference is the generated filter with those refused."""
+    fw = HostFirmware(fw_mod)
+    rng = np.random.default_rng(11)
+    n = 300
+    missed = [100, 101, 200]
+    if kind == "duty":
+        t2 = np.full((n, 2), man.data["t2_nominal"], dtype=np.int64)
+        raw = {"t1": t2 // 2 + rng.integers(-300, 300, (n, 2)), "t2": t2}
+        refused = {"t1": raw["t1"].copy(), "t2": t2}
+        refused["t1"][missed] = 0  # output stuck low: the generated filter predicts only
+    else:
+        raw = {"code": 2048 + rng.integers(-40, 40, (n, 2))}
+        refused = {"code": raw["code"].copy()}
+        refused["code"][missed] = 0  # a rail: the generated filter predicts only
+    stim = encode_stimulus(man, **raw)
+    per = len(stim) // n  # every stimulus frame has the same size on the wire
+    for a, b, gap in ((0, 100, 2), (102, 200, 1), (201, n, 0)):
+        fw.rx(stim[a * per : b * per])
+        fw.lib.app_missed(gap)
+    frames, stats = decode_all(man, fw.take())
+    s = frames["sample"]
+    kept = np.setdiff1d(np.arange(n), missed)
+    np.testing.assert_array_equal(s["index"], kept)  # no frame for a missed sample; the index keeps time
+    assert stats.lost == 0  # nothing was dropped on the link: seq has no gaps
+    np.testing.assert_array_equal(s["missed"], np.select([kept > 200, kept > 101], [3, 2], 0))
+    assert not s["skipped"].any() and not s["rx_lost"].any()
+    cols = sample_columns(man, s)
+    ref = _run_filter_directly(kind, refused)
+    for j in range(2):
+        for i, key in enumerate(("r", "u", "a", "eps")):
+            np.testing.assert_allclose(cols[key][:, j], ref[j]["x"][kept, i], rtol=1e-12, atol=1e-12, err_msg=key)
 
 
 def test_duty_cycle_timeout_is_flagged_and_the_filter_keeps_running():

@@ -31,6 +31,9 @@ uint32_t board_time_ms(void);
 /* ACNF_BOARD_* of this board. */
 uint8_t board_id(void);
 
+/* Bytes the board's receivers lost since board_init (hardware overrun, full ring), wrapping. */
+uint32_t board_rx_lost(void);
+
 /* ---- implemented by the application (firmware/src/app.c) ---- */
 
 /* Channels of app_rx(): they carry the same frames; each has its own receiver. */
@@ -40,6 +43,10 @@ void app_init(void);
 /* The raw input of one sample: ADC codes or T1/T2 counts, and per axis a
  * no-capture flag (bit i: axis i saw no duty-cycle period: sensor unplugged). */
 void app_sample(const acnf_stimulus_t *in);
+/* n sample periods passed whose input the board missed (its main loop was too slow to take them):
+ * every axis filter predicts over each (the filter's skip), the sample index advances, the sample
+ * frame's `missed` counter counts them; no frame is sent for them. */
+void app_missed(uint32_t n);
 /* Bytes received on a channel: commands, and stimulus frames (which call app_sample). */
 void app_rx(unsigned ch, const uint8_t *p, size_t n);
 

@@ -160,6 +160,8 @@ void app_sample(const acnf_stimulus_t *in)
     s.tx_drop = app.tx_drop;
     s.skipped = app.skipped;
     s.overflow = overflow > 0xffffu ? 0xffffu : (uint16_t)overflow;
+    s.missed = app.missed;
+    s.rx_lost = (uint16_t)board_rx_lost();
     {
         uint8_t payload[ACNF_SAMPLE_SIZE];
         if (link_send(payload, acnf_pack_sample(&s, payload))) {
@@ -168,6 +170,18 @@ void app_sample(const acnf_stimulus_t *in)
         } else {
             ++app.tx_drop; /* its seq is spent: the host counts it lost, tx_drop says why */
         }
+    }
+}
+
+void app_missed(uint32_t n)
+{
+    unsigned i;
+    for (; n > 0u; --n) {
+        for (i = 0; i < ACNF_NAXES; ++i) {
+            acn_filter_skip(&app.filters, i); /* predict only: x = F x + b, P = F P F' + Q */
+        }
+        ++app.index;
+        ++app.missed;
     }
 }
 

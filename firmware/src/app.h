@@ -20,6 +20,7 @@ typedef struct {
     uint16_t decim_left; /* samples until the next frame */
     uint16_t tx_drop;
     uint16_t skipped;
+    uint16_t missed;        /* samples missed by the board and predicted over */
     uint32_t overflow_seen; /* saturation total at the last frame */
     bool running;
     bool zupt;

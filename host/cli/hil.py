@@ -1,4 +1,4 @@
-"""``accelnav hil``: the firmware on simulated data, in-process (SIL) or on the emulated Cortex-M3 (PIL)."""
+"""``accelnav hil``: the firmware on simulated data, in-process (SIL) or on an emulated board (PIL)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import numpy as np
 
 from accelnav.codegen.model import DEFAULT_MODEL, load_model
 from accelnav.errors import UserError
+from accelnav.hil_sim.qemu import MACHINES
 
 
 def register(sub) -> None:
@@ -18,6 +19,13 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=1, help="random seed; default: 1")
     p.add_argument(
         "--target", choices=("sil", "pil"), default="sil", help="sil: in-process; pil: QEMU, compared with SIL"
+    )
+    p.add_argument(
+        "--board",
+        choices=tuple(MACHINES),
+        default=None,
+        help="emulated board for --target pil: mps2_an385 (Cortex-M3, default), microbit (Cortex-M0), "
+        "stm32vldiscovery (the STM32 port's code on an STM32F100)",
     )
     p.add_argument("--out", type=Path, default=Path("build/hil"), help="folder for the PIL log; default build/hil")
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write hil.png into DIR")
@@ -32,6 +40,9 @@ def cmd_hil(args) -> int:
     from accelnav.hil_sim.sensor import simulate
     from accelnav.progress import Progress
 
+    if args.board is not None and args.target != "pil":
+        raise UserError(f"--board {args.board}: a board is emulated only with --target pil")
+    board = args.board or "mps2_an385"
     model = load_model(args.model)
     require_scenario(args.scenario)
     try:
@@ -46,13 +57,13 @@ def cmd_hil(args) -> int:
         sil = hil.run_sil(model, stim)
         pil = None
         if args.target == "pil":
-            log = args.out / f"pil_{model.name}_{args.scenario}.acnlog"
+            log = args.out / f"pil_{board}_{model.name}_{args.scenario}.acnlog"
             log.parent.mkdir(parents=True, exist_ok=True)
             with Progress("pil", n, unit="samples", enabled=None) as bar:
-                res = hil.run_pil(model, stim, n, log)
+                res = hil.run_pil(model, stim, n, log, board=board)
                 bar.update(n)
             pil = res.telemetry
-            print(f"PIL: {n} samples in {res.seconds:.1f} s ({n / res.seconds:,.0f} samples/s), log {log}")
+            print(f"PIL ({board}): {n} samples in {res.seconds:.1f} s ({n / res.seconds:,.0f} samples/s), log {log}")
     except (QemuError, FirmwareError) as exc:
         raise UserError(str(exc).splitlines()[0]) from None
     c = hil.compare(model, run, sil, pil)

@@ -28,6 +28,7 @@ typedef struct {
 #define UART1 ((cmsdk_uart_t *)0x40005000u)
 #define UART_STATE_TXFULL 1u
 #define UART_STATE_RXFULL 2u
+#define UART_STATE_RXOVERRUN 8u /* write 1 to clear */
 #define UART_CTRL_TXEN 1u
 #define UART_CTRL_RXEN 2u
 /* 115200 baud; the emulator does not pace the bytes, a real MPS2 would */
@@ -37,6 +38,8 @@ typedef struct {
 static uint8_t tx_ring[TX_SIZE];
 static uint32_t tx_head; /* next write */
 static uint32_t tx_tail; /* next send */
+
+static uint32_t rx_lost; /* bytes the UARTs dropped (RX overrun) */
 
 static uint32_t time_ms;
 static uint32_t tick_last;
@@ -55,6 +58,7 @@ void board_init(void)
     uart_init(UART0);
     uart_init(UART1);
     tx_head = tx_tail = 0;
+    rx_lost = 0;
     board_ticks_start();
     tick_last = board_ticks();
     time_ms = tick_rem = 0;
@@ -63,6 +67,19 @@ void board_init(void)
 uint8_t board_id(void)
 {
     return ACNF_BOARD_MPS2_AN385;
+}
+
+uint32_t board_rx_lost(void)
+{
+    return rx_lost;
+}
+
+static void rx_overrun_check(cmsdk_uart_t *u)
+{
+    if (u->STATE & UART_STATE_RXOVERRUN) {
+        u->STATE = UART_STATE_RXOVERRUN;
+        ++rx_lost;
+    }
 }
 
 static uint32_t tx_free(void)
@@ -103,6 +120,8 @@ bool board_poll(void)
     while (tx_tail != tx_head && !(UART0->STATE & UART_STATE_TXFULL)) {
         UART0->DATA = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
     }
+    rx_overrun_check(UART0);
+    rx_overrun_check(UART1);
     if (tx_free() < 3u * ACNF_MAX_UP_WIRE) {
         return true; /* let the queue drain before taking input that makes more */
     }

@@ -8,11 +8,38 @@
  * resets the counter, CCR1 holds the period T2, CCR2 the high time T1; TIM3's update interrupt
  * takes the latest pair of each axis and flags an axis whose output has not toggled for two T2
  * periods (unplugged). Link: USART1 (PA9 TX, PA10 RX) at 921600 baud 8N1, interrupt-driven rings.
- * Time base: SysTick, 1 ms. */
+ * Time base: SysTick, 1 ms.
+ *
+ * Missed samples: a sample that arrives while the main loop has not taken the previous one is
+ * counted (sample_overrun); the loop predicts over it (app_missed: every axis filter's skip) right
+ * after the sample that was waiting, so the filter keeps time. Lost RX bytes (a hardware overrun
+ * or a full ring) are counted too; both counters are in every sample frame.
+ *
+ * Built with ACN_STM32_QEMU (make firmware BOARD=stm32vldiscovery), these sources run on QEMU's
+ * stm32vldiscovery machine (STM32F100RB, Cortex-M3, 24 MHz, 128 KiB flash, 8 KiB SRAM). QEMU
+ * models its USARTs, the NVIC and SysTick, and nothing else on the bus here: RCC, FLASH, GPIO,
+ * TIM2..4, ADC1 and DMA1 are unimplemented devices (writes ignored, reads 0). So that build differs
+ * in exactly these places: the clock setup writes its registers but does not wait for HSE and PLL
+ * ready flags that never rise; the core clock is the machine's fixed 24 MHz; the sample input is
+ * a stimulus feed on USART2 (PA2/PA3, QEMU's second -serial) instead of ADC + DMA or timer
+ * capture, polled by the main loop and taken only while the telemetry ring has room (the feed is
+ * paced, never dropped); and USART1's transmit ring is emptied by the main loop, not by the TXE
+ * interrupt, which QEMU 7.2's USART model never raises (it raises RXNE only), so the loop does not
+ * sleep (WFI) either. Startup, vector table, linker-script layout, USART1 receive interrupt and
+ * ring, SysTick and the rest of the main loop are the same code. */
 #include "acn_board.h"
 #include "stm32f103_regs.h"
 
+#ifdef ACN_STM32_QEMU
+#define SYSCLK_HZ 24000000u /* QEMU stm32vldiscovery: a fixed sysclk, no RCC model */
+/* RCC's ready flags read 0 in QEMU: write the clock setup, do not wait for it */
+#define WAIT_UNTIL(cond) ((void)0)
+#else
 #define SYSCLK_HZ 72000000u
+#define WAIT_UNTIL(cond)                                                                           \
+    do {                                                                                           \
+    } while (!(cond))
+#endif
 #define BAUD 921600u
 
 #if ACNF_PERIOD_US < 100u || ACNF_PERIOD_US > 65536u
@@ -35,6 +62,7 @@ static volatile uint32_t rx_lost; /* bytes lost to a full ring or a hardware ove
 static volatile uint32_t time_ms;
 static volatile bool sample_ready;
 static volatile uint32_t sample_overrun; /* samples the main loop was too slow to take */
+static uint32_t missed_seen;             /* sample_overrun already handed to app_missed */
 static acnf_stimulus_t sample;           /* written by the interrupt, read when sample_ready */
 
 static void gpio_mode(gpio_t *port, unsigned pin, uint32_t mode)
@@ -47,16 +75,13 @@ static void gpio_mode(gpio_t *port, unsigned pin, uint32_t mode)
 static void clock_init(void)
 {
     RCC->CR |= RCC_CR_HSEON;
-    while (!(RCC->CR & RCC_CR_HSERDY)) {
-    }
+    WAIT_UNTIL(RCC->CR & RCC_CR_HSERDY);
     FLASH->ACR = FLASH_ACR_PRFTBE | FLASH_ACR_LATENCY2; /* 2 wait states above 48 MHz */
     RCC->CFGR = RCC_CFGR_PLLSRC_HSE | RCC_CFGR_PLLMUL9 | RCC_CFGR_PPRE1_DIV2 | RCC_CFGR_ADCPRE_DIV6;
     RCC->CR |= RCC_CR_PLLON;
-    while (!(RCC->CR & RCC_CR_PLLRDY)) {
-    }
+    WAIT_UNTIL(RCC->CR & RCC_CR_PLLRDY);
     RCC->CFGR |= RCC_CFGR_SW_PLL;
-    while ((RCC->CFGR & RCC_CFGR_SWS_MASK) != RCC_CFGR_SWS_PLL) {
-    }
+    WAIT_UNTIL((RCC->CFGR & RCC_CFGR_SWS_MASK) == RCC_CFGR_SWS_PLL);
     RCC->AHBENR |= RCC_AHBENR_DMA1EN;
     RCC->APB2ENR |= RCC_APB2ENR_AFIOEN | RCC_APB2ENR_IOPAEN | RCC_APB2ENR_IOPBEN |
                     RCC_APB2ENR_ADC1EN | RCC_APB2ENR_USART1EN;
@@ -81,7 +106,26 @@ static void sample_clock_init(void)
     TIM3->SR = 0;
 }
 
-#if !ACNF_INPUT_DUTY
+#if defined(ACN_STM32_QEMU)
+static void input_init(void)
+{
+    RCC->APB1ENR |= RCC_APB1ENR_USART2EN;
+    gpio_mode(GPIOA, 2, GPIO_AF_PUSHPULL_50MHZ);              /* USART2 TX */
+    gpio_mode(GPIOA, 3, GPIO_INPUT_FLOATING);                 /* USART2 RX */
+    USART2->BRR = (SYSCLK_HZ / 2u + BAUD / 2u) / BAUD;        /* APB1 = SYSCLK / 2 */
+    USART2->CR1 = USART_CR1_UE | USART_CR1_TE | USART_CR1_RE; /* polled */
+}
+
+/* One stimulus byte, when there is one and the telemetry ring has room for what it may produce:
+ * QEMU's USART takes the next byte from its socket only after DR is read, so the feed waits. */
+static void stim_poll(void)
+{
+    if ((USART2->SR & USART_SR_RXNE) && TX_SIZE - (tx_head - tx_tail) >= 3u * ACNF_MAX_UP_WIRE) {
+        uint8_t b = (uint8_t)USART2->DR;
+        app_rx(APP_CH_STIM, &b, 1);
+    }
+}
+#elif !ACNF_INPUT_DUTY
 static volatile uint16_t adc_codes[ACNF_NAXES]; /* DMA target */
 
 static void input_init(void)
@@ -231,7 +275,16 @@ void board_init(void)
 
 uint8_t board_id(void)
 {
+#ifdef ACN_STM32_QEMU
+    return ACNF_BOARD_STM32VLDISCOVERY;
+#else
     return ACNF_BOARD_STM32F103;
+#endif
+}
+
+uint32_t board_rx_lost(void)
+{
+    return rx_lost;
 }
 
 uint32_t board_time_ms(void)
@@ -255,10 +308,22 @@ bool board_uart_write(const uint8_t *p, size_t n)
         tx_ring[head++ & (TX_SIZE - 1u)] = p[i];
     }
     tx_head = head;
+#ifndef ACN_STM32_QEMU /* there the main loop empties the ring (board_poll) */
     irq_disable();
     USART1->CR1 |= USART_CR1_TXEIE;
     irq_enable();
+#endif
     return true;
+}
+
+/* The next byte of the ring into DR, or the TXE interrupt off when the ring is empty. */
+static void tx_move(void)
+{
+    if (tx_tail != tx_head) {
+        USART1->DR = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
+    } else {
+        USART1->CR1 &= ~USART_CR1_TXEIE;
+    }
 }
 
 void usart1_handler(void)
@@ -276,11 +341,7 @@ void usart1_handler(void)
         }
     }
     if ((sr & USART_SR_TXE) && (USART1->CR1 & USART_CR1_TXEIE)) {
-        if (tx_tail != tx_head) {
-            USART1->DR = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
-        } else {
-            USART1->CR1 &= ~USART_CR1_TXEIE;
-        }
+        tx_move();
     }
 }
 
@@ -288,20 +349,32 @@ bool board_poll(void)
 {
     if (sample_ready) {
         acnf_stimulus_t in;
-        __asm__ volatile("" ::: "memory"); /* read the sample only after the flag */
+        uint32_t overrun;
+        irq_disable();
         in = sample;
+        overrun = sample_overrun; /* the samples that came while this one waited */
         sample_ready = false;
+        irq_enable();
         app_sample(&in);
+        app_missed(overrun - missed_seen); /* predict over them, in order, after it */
+        missed_seen = overrun;
     }
     while (rx_tail != rx_head) {
         uint8_t b = rx_ring[rx_tail & (RX_SIZE - 1u)];
         ++rx_tail;
         app_rx(APP_CH_HOST, &b, 1);
     }
+#ifdef ACN_STM32_QEMU
+    while (tx_tail != tx_head && (USART1->SR & USART_SR_TXE)) {
+        tx_move();
+    }
+    stim_poll();
+#else
     irq_disable();
     if (!sample_ready && rx_tail == rx_head) {
         __asm__ volatile("wfi"); /* an interrupt wakes it even with interrupts masked */
     }
     irq_enable();
+#endif
     return true;
 }

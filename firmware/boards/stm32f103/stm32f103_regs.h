@@ -1,5 +1,6 @@
 /* The few STM32F103 registers this firmware uses (RM0008 rev 21), written for
- * accelnav: RCC, FLASH, GPIO, TIM2..4, ADC1, DMA1, USART1, SysTick, NVIC.
+ * accelnav: RCC, FLASH, GPIO, TIM2..4, ADC1, DMA1, USART1 (and USART2, the
+ * emulator's stimulus feed), SysTick, NVIC.
  * Register blocks are structs laid out at their reference-manual offsets. */
 #ifndef STM32F103_REGS_H
 #define STM32F103_REGS_H
@@ -49,6 +50,7 @@ typedef struct {
 #define ADC1 ((adc_t *)0x40012400u)
 #define DMA1 ((dma_t *)0x40020000u)
 #define USART1 ((usart_t *)0x40013800u)
+#define USART2 ((usart_t *)0x40004400u)
 #define SYSTICK ((systick_t *)0xe000e010u)
 #define NVIC_ISER ((REG *)0xe000e100u) /* ISER[n]: bit k enables IRQ 32 n + k */
 
@@ -73,6 +75,7 @@ typedef struct {
 #define RCC_APB1ENR_TIM2EN (1u << 0)
 #define RCC_APB1ENR_TIM3EN (1u << 1)
 #define RCC_APB1ENR_TIM4EN (1u << 2)
+#define RCC_APB1ENR_USART2EN (1u << 17)
 #define FLASH_ACR_LATENCY2 (2u << 0)
 #define FLASH_ACR_PRFTBE (1u << 4)
 
