@@ -81,7 +81,9 @@ def test_update_samples_and_intervals(default_model):
     assert ks.tolist() == [*range(10, 35), 60]
 
 
-@pytest.mark.parametrize("field,value", [("window_s", 0.0), ("var_k", -1.0), ("sigma", math.nan), ("gate", -1.0)])
+@pytest.mark.parametrize(
+    "field,value", [("window_s", 0.0), ("var_k", -1.0), ("sigma", math.nan), ("gate", -1.0), ("tremor", -0.1)]
+)
 def test_bad_parameters_refused(default_model, field, value):
     from dataclasses import replace
 
