@@ -110,7 +110,13 @@ def register(sub) -> None:
             "--zupt-var-k",
             "var_k",
             "K",
-            f"quiet if the window variance, averaged over axes, <= K*R; default {z.var_k:g}",
+            f"quiet if the window variance over (R + tremor^2), averaged over axes, <= K; default {z.var_k:g}",
+        ),
+        (
+            "--zupt-tremor",
+            "tremor",
+            "A",
+            f"rms motion of a body at rest (a stance's sway, an idling engine), m/s^2; default {z.tremor:g}",
         ),
         (
             "--zupt-level",
@@ -320,6 +326,7 @@ def cmd_smooth(args) -> int:
     params = ZuptParams(
         window_s=args.zupt_window_s,
         var_k=args.zupt_var_k,
+        tremor=args.zupt_tremor,
         level=args.zupt_level,
         sigma=args.zupt_sigma,
         every_s=args.zupt_every_s,
@@ -341,7 +348,8 @@ def cmd_smooth(args) -> int:
                 rest[d.start : d.stop] = True
         kept = sum(d.accepted for d in decisions)
         print(
-            f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} R, "
+            f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} (R + "
+            f"{params.tremor:g}^2), "
             f"|mean - bias| <= {params.level:.3g} m/s^2: {len(decisions)} candidate rests, {kept} accepted by the "
             f"per-rest gate, {100 * rest.mean():.1f} % of the run"
         )
