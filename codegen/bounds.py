@@ -51,8 +51,10 @@ rounding may also do in the worst case, or (the slow constants) acts on a time s
 beyond a 30 s test. A bit-exact
 Python twin of the integer C would catch those; the bound is the rigorous statement.
 
-What it assumes: the reference is the float64 filter with the same skips (for the schedule with
-skips, its float64 twin with the same gains); the float64 arithmetic itself is exact (its own
+What it assumes: the reference is the float64 Kalman filter with the same skips, for both forms;
+the gain errors are the generator's stated ones (for the schedule, those of an uninterrupted run:
+with skips the schedule is not the Kalman gain, so such a run leaves the bound, as it should); the
+float64 arithmetic itself is exact (its own
 error, ~1e-16 relative, is far below every term here).
 """
 
@@ -115,8 +117,6 @@ def error_bound(
     sched_err = None if schedule is None else np.asarray(schedule.error)[:n]
     if exact:  # against the quantized twin: constants exact, the input's only error its final rounding
         dz_ = v["z"].fmt.lsb / 2
-        if p.form == "gain_schedule":
-            sched_err = np.zeros((n, 4))
     if p.form == "gain_schedule":
         dK = sched_err if sched_err is not None else np.asarray(schedule.error)[:n]
     else:
@@ -228,10 +228,14 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     """The float64 filter with the C's constants: what the C computes, minus its per-step roundings.
 
     Same recursion as :func:`codegen.emit_c._core_fixed` in float64 and C coordinates (v = Ts u):
-    1 - phi, eps_bar, Ts^2/2, Ts^2 and the input scale and offset as quantized; the gains as the C
-    has them (gain schedule: the schedule's; covariance: the float64 Kalman gains of this valid
-    pattern, the C's own gain errors stay in the bound). Returns (x (n, 4) in SI units, |y| (n,),
-    |a| (n,), the gains (n, 4)). ``code``: the raw analog codes (None: use z, the conversion error stays in the bound).
+    1 - phi, eps_bar, Ts^2/2, Ts^2 and the input scale and offset as quantized; the gains are the
+    float64 Kalman gains of this valid pattern for both forms: what the C's gains should be. Their
+    distance to the C's gains is not taken from the run: it is the generator's stated gain error
+    (gain schedule: the compression error of an uninterrupted run; covariance: its rounding bound),
+    which stays in :func:`error_bound`. So a C whose gains leave the Kalman gains by more than the
+    generator states (a time-indexed schedule after a skip) departs from the bound. Returns (x (n, 4)
+    in SI units, |y| (n,), |a| (n,), the gains (n, 4)). ``code``: the raw analog codes (None: use z,
+    the conversion error stays in the bound).
     """
     from .gains import riccati
     from .qformat import dequantize, quantize
@@ -249,10 +253,7 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     else:
         zq = np.asarray(z, dtype=np.float64)
     omp, ebar, h2, t2 = q("OMP"), q("EBAR"), q("H2"), q("T2")
-    if schedule is not None:
-        K = np.asarray(schedule.stored)[:n]
-    else:
-        K = np.asarray(riccati(d, n, valid).K) * np.array([1.0, d.Ts, 1.0, 1.0])
+    K = np.asarray(riccati(d, n, valid).K) * np.array([1.0, d.Ts, 1.0, 1.0])
     r = dequantize(quantize(d.x0[0], v["r"].fmt), v["r"].fmt)
     vv = dequantize(quantize(d.Ts * d.x0[1], v["v"].fmt), v["v"].fmt)
     a = dequantize(quantize(d.x0[2], v["a"].fmt), v["a"].fmt)
@@ -288,8 +289,10 @@ def d_eps_bar(p: AxisPlan) -> float:
 def twin_bound(p: AxisPlan, code, z, valid, x_ref: np.ndarray, schedule=None):
     """The stated bound of |x_C - x_float64| for one run, split into its exact deterministic part and
     a rigorous bound on the rest: |x_twin - x_ref| (the effect of the quantized constants, computed
-    exactly, signs and all) + the per-step roundings (and, covariance form, gain errors) of the C
-    propagated through the closed loop (:func:`error_bound` with exact constants)."""
+    exactly, signs and all, with the Kalman gains of the run's skip pattern) + the per-step roundings
+    and the generator's stated gain errors of the C propagated through the closed loop
+    (:func:`error_bound` with exact constants). ``x_ref``: the float64 Kalman filter on the same input
+    (accelnav.estimate.kf.run_filter with the same valid mask), never a filter with the C's gains."""
     x_tw, y_abs, a_abs, K = quantized_twin(p, code, z, valid, schedule)
     e_dev = float(np.abs(x_tw[:, 3] - d_eps_bar(p)).max())
     b = error_bound(

@@ -423,24 +423,3 @@ def schedule(K: np.ndarray, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: in
     stored = hi.astype(np.float64) * np.array([f.lsb for f in formats])
     err = np.abs(stored - K)
     return Schedule(tuple(formats), start, tuple(lengths), tuple(slopes), stored, err, tuple(np.max(tolq * unit, 0)))
-
-
-def run_gains(d: AxisDesign, z: np.ndarray, valid: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Float64 twin of a filter with a given gain sequence K[k] (natural units), accelnav.estimate.kf conventions.
-
-    The reference for the gain-schedule form where samples are skipped: the
-    Kalman filter's gain then depends on the skips, the schedule's does not.
-    Returns x_post (N, 4).
-    """
-    F, b = d.F, d.b
-    x = np.array(d.x0, dtype=np.float64)
-    out = np.empty((len(z), 4))
-    for k in range(len(z)):
-        if k:
-            # x = F x + b
-            x = F @ x + b
-        if valid[k]:
-            # x = x + K (z - H x)
-            x = x + K[k] * (z[k] - x[2] - x[3])
-        out[k] = x
-    return out

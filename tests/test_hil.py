@@ -119,3 +119,39 @@ def test_hil_cli_sil(tmp_path, capsys):
     assert (tmp_path / "hil.png").stat().st_size > 10_000
     status = main(["hil", "--scenario", "nowhere"])
     assert status == 2 and "unknown scenario" in capsys.readouterr().err
+
+
+def _schedule_model(tmp_path):
+    from accelnav.codegen.model import load_model as load
+
+    text = (MODELS / "adxl250_default.toml").read_text().replace('form = "covariance" ', 'form = "gain_schedule" ')
+    path = tmp_path / "gs.toml"
+    path.write_text(text)
+    model = load(path)
+    assert model.filter.form == "gain_schedule"
+    return model
+
+
+def test_stated_bound_is_against_the_kalman_filter_and_catches_a_blind_schedule(tmp_path, capsys):
+    """The time-indexed schedule ignores skipped samples. Forced past the generator's refusal onto a
+    shock run (rail-clipped samples), its departure from the float64 Kalman filter must exceed the
+    stated bound, which hil.compare uses; the refusal itself reaches `accelnav hil` as one line."""
+    import numpy as np
+
+    from accelnav.codegen.design import axis_design
+    from accelnav.codegen.emit_c import emit
+    from accelnav.codegen.harness import AxisRunner, build
+    from accelnav.estimate.kf import run_filter
+
+    model = _schedule_model(tmp_path)
+    run = simulate(model, "shock", 4.0, seed=9)
+    valid = ~run.clipped[:, 0]
+    assert not valid.all()
+    files = emit(model, assume_no_skips=True)
+    res = AxisRunner(build(files, tmp_path / "c"), files["accelnav.json"], 0).run(code=run.code[:, 0])
+    kf = run_filter(axis_design(model, 0), run.accel[:, 0], valid=valid, progress=False)
+    bound = hil.stated_bound(model, 0, run, kf.x_post)
+    assert (np.abs(res["x"] - kf.x_post) / bound).max() > 1.0
+    status = main(["hil", "--model", str(tmp_path / "gs.toml"), "--target", "sil", "--duration", "2"])
+    err = capsys.readouterr().err.strip()
+    assert status != 0 and len(err.splitlines()) == 1 and "'gain_schedule' refused" in err
