@@ -82,6 +82,16 @@ def gain_errors(p: AxisPlan, schedule=None, K: np.ndarray | None = None) -> np.n
     return (dc + kmax * dS) / R + kmax * 2.0**-22 + lsbK
 
 
+def gains_upto(p: AxisPlan, n: int):
+    """The plan's Riccati run with per-sample K, sigma, S for at least the first n samples (the plan
+    keeps the first gains.KEEP; a longer run of data gets its own, as long as that data)."""
+    from .gains import riccati
+
+    if n <= len(p.gains.K):
+        return p.gains
+    return riccati(p.design, n)
+
+
 def _const_err(p: AxisPlan, name: str) -> float:
     val, fmt = p.consts[name]
     return abs(val - round(val * 2**fmt.frac) / 2**fmt.frac)
@@ -111,8 +121,9 @@ def error_bound(
     Ts, phi = d.Ts, d.phi
     omp = 1.0 - phi
     lsb_y, lsb_e, lsb_r = v["y"].fmt.lsb, v["e"].fmt.lsb, v["r"].fmt.lsb
+    g = gains_upto(p, n) if K is None or y_abs is None or e_dev is None else None
     if K is None:
-        K = np.asarray(p.gains.K)[:n] * np.array([1.0, Ts, 1.0, 1.0])
+        K = np.asarray(g.K)[:n] * np.array([1.0, Ts, 1.0, 1.0])
     dz_ = p.z_error
     sched_err = None if schedule is None else np.asarray(schedule.error)[:n]
     if exact:  # against the quantized twin: constants exact, the input's only error its final rounding
@@ -122,7 +133,7 @@ def error_bound(
     else:
         dK = gain_errors(p, K=K[:n])
     if y_abs is None:
-        y_abs = Y_SIGMAS * np.sqrt(np.asarray(p.gains.S)[:n])
+        y_abs = Y_SIGMAS * np.sqrt(np.asarray(g.S)[:n])
     if a_abs is None:
         a_abs = np.full(n, v["a"].bound)
     if valid is None:
@@ -136,7 +147,7 @@ def error_bound(
     e_bar_err = 0.0 if exact else _const_err(p, "EBAR")
     d_omp = 0.0 if exact else _const_err(p, "OMP")
     if e_dev is None:  # |eps - eps_bar|: the prior's offset and 8 sigma of the bias
-        e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(np.asarray(p.gains.sigma)[:n, 3].max())
+        e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(np.asarray(g.sigma)[:n, 3].max())
     d_dec = omp * (lsb_y / 2 + e_bar_err) + d_omp * (e_dev + lsb_y) + lsb_e
     dH2, dT2 = (0.0, 0.0) if exact else (_const_err(p, "H2"), _const_err(p, "T2"))
     # floors: r += (v >> .) + (p >> .) [+ (Ts^2/2 a >> .)]; v += (q >> .) [+ (Ts^2 a >> .)], none if exact
@@ -182,14 +193,45 @@ def error_bound(
     return out
 
 
-def worst_case_bound(p: AxisPlan, n: int, schedule=None) -> np.ndarray:
+def error_bound_rows(p: AxisPlan, n: int, rows, schedule=None) -> np.ndarray:
+    """:func:`error_bound` without data (|y| <= 8 sqrt(S), |a| at its range bound, every sample valid)
+    at the sorted sample indices ``rows`` < n, (len(rows), 4). Covariance form: a C recursion fed by the
+    Riccati sample by sample, so its time is linear in n and its memory does not grow with n (the
+    report runs it over the declared run); otherwise, or without a C compiler, error_bound itself."""
+    from .gains import _key, bound_rows
+
+    rows = sorted(int(k) for k in rows)
+    if p.form == "covariance":
+        v, d = p.vars, p.design
+        lsb_y, lsb_e, lsb_r, lsb_v = v["y"].fmt.lsb, v["e"].fmt.lsb, v["r"].fmt.lsb, v["v"].fmt.lsb
+        omp = 1.0 - d.phi
+        # the same numbers error_bound derives (exact=False, no data); keep the two in step
+        e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(p.gains.sigma_max[3]) if n == p.n_run else None
+        if e_dev is not None:
+            d_dec = omp * (lsb_y / 2 + _const_err(p, "EBAR")) + _const_err(p, "OMP") * (e_dev + lsb_y) + lsb_e
+            fy, fr, fv = v["y"].fmt.frac, v["r"].fmt.frac, v["v"].fmt.frac
+            n_r_floor = (fv > fr) + (v["Kr"].fmt.frac + fy > fr) + (p.consts["H2"][1] != v["Kr"].fmt)
+            n_v_floor = (v["Kv"].fmt.frac + fy > fv) + (p.consts["T2"][1] != v["Kv"].fmt)
+            lsbK = [v["K" + c].fmt.lsb for c in "rvae"]
+            dc = [CONTRACTION_LSB * v[c].fmt.lsb for c in ("cr", "cv", "ca", "ce")]
+            dS = CONTRACTION_LSB * (v["ca"].fmt.lsb + v["ce"].fmt.lsb)
+            bp = [omp, d.Ts, p.z_error + lsb_y / 2, lsb_y / 2, lsb_e, d_dec, _const_err(p, "H2"), _const_err(p, "T2")]
+            bp += [n_r_floor * lsb_r, n_v_floor * lsb_v, v["a"].bound, Y_SIGMAS, dS, d.R, 2.0**-22, lsb_e / 2]
+            out = bound_rows(_key(d), n, np.array(bp + dc + lsbK), rows)
+            if out is not None:
+                return out
+    return error_bound(p, n, schedule)[rows]
+
+
+def worst_case_bound(p: AxisPlan, n: int, schedule=None, rows=None) -> np.ndarray:
     """(n, 4) bound for any data within the declared ranges (every |y| at its bound): l1 gains of the
-    closed (a, eps) loop carry the per-step injections to a and eps; u and r add theirs up."""
+    closed (a, eps) loop carry the per-step injections to a and eps; u and r add theirs up. ``rows``:
+    only at those sample indices (len(rows), 4)."""
     v = p.vars
     l1 = p.l1
     ymax = v["y"].bound
     dK = gain_errors(p, schedule)
-    Kmax = np.abs(p.gains.K).max(0) * np.array([1.0, p.design.Ts, 1.0, 1.0])
+    Kmax = p.gains.kmax * np.array([1.0, p.design.Ts, 1.0, 1.0])
     lsb_y, lsb_e, lsb_r = v["y"].fmt.lsb, v["e"].fmt.lsb, v["r"].fmt.lsb
     omp = 1.0 - p.design.phi
     d_in = p.z_error + lsb_y / 2
@@ -205,8 +247,8 @@ def worst_case_bound(p: AxisPlan, n: int, schedule=None) -> np.ndarray:
     Ts = p.design.Ts
     dv = Ts * Ts * Ea + _const_err(p, "T2") * v["a"].bound + 2 * lsb_r + Kmax[1] * (Ea + Ee + d_in) + dK[1] * ymax
     dr0 = Ts * Ts / 2 * Ea + _const_err(p, "H2") * v["a"].bound + 2 * lsb_r + Kmax[0] * (Ea + Ee + d_in) + dK[0] * ymax
-    k = np.arange(1, n + 1, dtype=np.float64)
-    out = np.empty((n, 4))
+    k = np.arange(1, n + 1, dtype=np.float64) if rows is None else np.asarray(rows, dtype=np.float64) + 1
+    out = np.empty((len(k), 4))
     out[:, 0] = k * dr0 + k * (k - 1) / 2 * dv
     out[:, 1] = k * dv / Ts
     out[:, 2] = Ea

@@ -621,7 +621,11 @@ static inline uint32_t acn_recip(uint32_t d, int *n)
 def _schedule_for(p: AxisPlan) -> Schedule:
     import numpy as np
 
-    K = np.array(p.gains.K) * np.array([1.0, p.design.Ts, 1.0, 1.0])
+    from .gains import riccati
+
+    # the whole run's gains, sample by sample: memory linear in the declared run (the covariance form
+    # never needs this; the gain-schedule form is refused for every input that can skip)
+    K = np.array(riccati(p.design, p.n_run).K) * np.array([1.0, p.design.Ts, 1.0, 1.0])
     fm = tuple(p.vars["K" + n].fmt for n in "rvae")
     return schedule(K, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
 
