@@ -108,11 +108,12 @@ def _clamp_word(bound: float, fmt, step: float) -> int:
 
 def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
     v = p.vars
+    # the three int64 first, then the int32: no padding word after a (the covariance state is 64 B, not 72)
     f = [
         ("int64_t", "r", f"r [m] {v['r'].fmt}"),
         ("int64_t", "v", f"Ts*u [m] {v['v'].fmt}"),
-        ("int32_t", "a", f"a [m/s^2] {v['a'].fmt}"),
         ("int64_t", "e", f"eps [m/s^2] {v['e'].fmt}"),
+        ("int32_t", "a", f"a [m/s^2] {v['a'].fmt}"),
     ]
     if p.form == "covariance":
         for nm in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"):
