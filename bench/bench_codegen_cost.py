@@ -48,6 +48,10 @@ except ValueError as exc:  # ModelError: a refusal
     out["refused"] = str(exc).split(": ", 1)[-1][:90]
 out["seconds"] = time.perf_counter() - t0
 out["rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+try:  # VmHWM: this process image's high-water mark (ru_maxrss carries a forked parent's over exec)
+    out["rss_mb"] = [int(ln.split()[1]) for ln in open("/proc/self/status") if ln.startswith("VmHWM:")][0] / 1024
+except (OSError, IndexError):
+    pass
 print(json.dumps(out))
 """
 

@@ -19,6 +19,15 @@ LIMIT_MB = 300.0
 
 _CHILD = r"""
 import json, resource, sys, tracemalloc
+def peak_rss():
+    # VmHWM: this process image's high-water mark (ru_maxrss would carry the forked parent's over exec)
+    try:
+        for line in open("/proc/self/status"):
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 from accelnav.codegen.model import loads_model
 from accelnav.codegen.emit_c import emit
 from accelnav.codegen.report import report
@@ -27,7 +36,7 @@ tracemalloc.start()
 files = emit(model)
 text = report(model, form=None, arith="fixed", files=files, prefix="accelnav")
 peak = tracemalloc.get_traced_memory()[1]
-rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+rss = peak_rss()
 print(json.dumps({"traced": peak, "rss": rss, "axes": text.count("\naxis "), "c": len(files["accelnav.c"])}))
 """
 
