@@ -51,8 +51,10 @@ rounding may also do in the worst case, or (the slow constants) acts on a time s
 beyond a 30 s test. A bit-exact
 Python twin of the integer C would catch those; the bound is the rigorous statement.
 
-What it assumes: the reference is the float64 filter with the same skips (for the schedule with
-skips, its float64 twin with the same gains); the float64 arithmetic itself is exact (its own
+What it assumes: the reference is the float64 Kalman filter with the same skips, for both forms;
+the gain errors are the generator's stated ones (for the schedule, those of an uninterrupted run:
+with skips the schedule is not the Kalman gain, so such a run leaves the bound, as it should); the
+float64 arithmetic itself is exact (its own
 error, ~1e-16 relative, is far below every term here).
 """
 
@@ -78,6 +80,16 @@ def gain_errors(p: AxisPlan, schedule=None, K: np.ndarray | None = None) -> np.n
     dS = CONTRACTION_LSB * (p.vars["ca"].fmt.lsb + p.vars["ce"].fmt.lsb)
     # reciprocal: relative 2^-28, and the shifts that align it drop up to 7 of its 30 bits
     return (dc + kmax * dS) / R + kmax * 2.0**-22 + lsbK
+
+
+def gains_upto(p: AxisPlan, n: int):
+    """The plan's Riccati run with per-sample K, sigma, S for at least the first n samples (the plan
+    keeps the first gains.KEEP; a longer run of data gets its own, as long as that data)."""
+    from .gains import riccati
+
+    if n <= len(p.gains.K):
+        return p.gains
+    return riccati(p.design, n)
 
 
 def _const_err(p: AxisPlan, name: str) -> float:
@@ -109,20 +121,19 @@ def error_bound(
     Ts, phi = d.Ts, d.phi
     omp = 1.0 - phi
     lsb_y, lsb_e, lsb_r = v["y"].fmt.lsb, v["e"].fmt.lsb, v["r"].fmt.lsb
+    g = gains_upto(p, n) if K is None or y_abs is None or e_dev is None else None
     if K is None:
-        K = np.asarray(p.gains.K)[:n] * np.array([1.0, Ts, 1.0, 1.0])
+        K = np.asarray(g.K)[:n] * np.array([1.0, Ts, 1.0, 1.0])
     dz_ = p.z_error
     sched_err = None if schedule is None else np.asarray(schedule.error)[:n]
     if exact:  # against the quantized twin: constants exact, the input's only error its final rounding
         dz_ = v["z"].fmt.lsb / 2
-        if p.form == "gain_schedule":
-            sched_err = np.zeros((n, 4))
     if p.form == "gain_schedule":
         dK = sched_err if sched_err is not None else np.asarray(schedule.error)[:n]
     else:
         dK = gain_errors(p, K=K[:n])
     if y_abs is None:
-        y_abs = Y_SIGMAS * np.sqrt(np.asarray(p.gains.S)[:n])
+        y_abs = Y_SIGMAS * np.sqrt(np.asarray(g.S)[:n])
     if a_abs is None:
         a_abs = np.full(n, v["a"].bound)
     if valid is None:
@@ -136,7 +147,7 @@ def error_bound(
     e_bar_err = 0.0 if exact else _const_err(p, "EBAR")
     d_omp = 0.0 if exact else _const_err(p, "OMP")
     if e_dev is None:  # |eps - eps_bar|: the prior's offset and 8 sigma of the bias
-        e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(np.asarray(p.gains.sigma)[:n, 3].max())
+        e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(np.asarray(g.sigma)[:n, 3].max())
     d_dec = omp * (lsb_y / 2 + e_bar_err) + d_omp * (e_dev + lsb_y) + lsb_e
     dH2, dT2 = (0.0, 0.0) if exact else (_const_err(p, "H2"), _const_err(p, "T2"))
     # floors: r += (v >> .) + (p >> .) [+ (Ts^2/2 a >> .)]; v += (q >> .) [+ (Ts^2 a >> .)], none if exact
@@ -182,14 +193,45 @@ def error_bound(
     return out
 
 
-def worst_case_bound(p: AxisPlan, n: int, schedule=None) -> np.ndarray:
+def error_bound_rows(p: AxisPlan, n: int, rows, schedule=None) -> np.ndarray:
+    """:func:`error_bound` without data (|y| <= 8 sqrt(S), |a| at its range bound, every sample valid)
+    at the sorted sample indices ``rows`` < n, (len(rows), 4). Covariance form: a C recursion fed by the
+    Riccati sample by sample, so its time is linear in n and its memory does not grow with n (the
+    report runs it over the declared run); otherwise, or without a C compiler, error_bound itself."""
+    from .gains import _key, bound_rows
+
+    rows = sorted(int(k) for k in rows)
+    if p.form == "covariance":
+        v, d = p.vars, p.design
+        lsb_y, lsb_e, lsb_r, lsb_v = v["y"].fmt.lsb, v["e"].fmt.lsb, v["r"].fmt.lsb, v["v"].fmt.lsb
+        omp = 1.0 - d.phi
+        # the same numbers error_bound derives (exact=False, no data); keep the two in step
+        e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(p.gains.sigma_max[3]) if n == p.n_run else None
+        if e_dev is not None:
+            d_dec = omp * (lsb_y / 2 + _const_err(p, "EBAR")) + _const_err(p, "OMP") * (e_dev + lsb_y) + lsb_e
+            fy, fr, fv = v["y"].fmt.frac, v["r"].fmt.frac, v["v"].fmt.frac
+            n_r_floor = (fv > fr) + (v["Kr"].fmt.frac + fy > fr) + (p.consts["H2"][1] != v["Kr"].fmt)
+            n_v_floor = (v["Kv"].fmt.frac + fy > fv) + (p.consts["T2"][1] != v["Kv"].fmt)
+            lsbK = [v["K" + c].fmt.lsb for c in "rvae"]
+            dc = [CONTRACTION_LSB * v[c].fmt.lsb for c in ("cr", "cv", "ca", "ce")]
+            dS = CONTRACTION_LSB * (v["ca"].fmt.lsb + v["ce"].fmt.lsb)
+            bp = [omp, d.Ts, p.z_error + lsb_y / 2, lsb_y / 2, lsb_e, d_dec, _const_err(p, "H2"), _const_err(p, "T2")]
+            bp += [n_r_floor * lsb_r, n_v_floor * lsb_v, v["a"].bound, Y_SIGMAS, dS, d.R, 2.0**-22, lsb_e / 2]
+            out = bound_rows(_key(d), n, np.array(bp + dc + lsbK), rows)
+            if out is not None:
+                return out
+    return error_bound(p, n, schedule)[rows]
+
+
+def worst_case_bound(p: AxisPlan, n: int, schedule=None, rows=None) -> np.ndarray:
     """(n, 4) bound for any data within the declared ranges (every |y| at its bound): l1 gains of the
-    closed (a, eps) loop carry the per-step injections to a and eps; u and r add theirs up."""
+    closed (a, eps) loop carry the per-step injections to a and eps; u and r add theirs up. ``rows``:
+    only at those sample indices (len(rows), 4)."""
     v = p.vars
     l1 = p.l1
     ymax = v["y"].bound
     dK = gain_errors(p, schedule)
-    Kmax = np.abs(p.gains.K).max(0) * np.array([1.0, p.design.Ts, 1.0, 1.0])
+    Kmax = p.gains.kmax * np.array([1.0, p.design.Ts, 1.0, 1.0])
     lsb_y, lsb_e, lsb_r = v["y"].fmt.lsb, v["e"].fmt.lsb, v["r"].fmt.lsb
     omp = 1.0 - p.design.phi
     d_in = p.z_error + lsb_y / 2
@@ -205,8 +247,8 @@ def worst_case_bound(p: AxisPlan, n: int, schedule=None) -> np.ndarray:
     Ts = p.design.Ts
     dv = Ts * Ts * Ea + _const_err(p, "T2") * v["a"].bound + 2 * lsb_r + Kmax[1] * (Ea + Ee + d_in) + dK[1] * ymax
     dr0 = Ts * Ts / 2 * Ea + _const_err(p, "H2") * v["a"].bound + 2 * lsb_r + Kmax[0] * (Ea + Ee + d_in) + dK[0] * ymax
-    k = np.arange(1, n + 1, dtype=np.float64)
-    out = np.empty((n, 4))
+    k = np.arange(1, n + 1, dtype=np.float64) if rows is None else np.asarray(rows, dtype=np.float64) + 1
+    out = np.empty((len(k), 4))
     out[:, 0] = k * dr0 + k * (k - 1) / 2 * dv
     out[:, 1] = k * dv / Ts
     out[:, 2] = Ea
@@ -228,10 +270,14 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     """The float64 filter with the C's constants: what the C computes, minus its per-step roundings.
 
     Same recursion as :func:`codegen.emit_c._core_fixed` in float64 and C coordinates (v = Ts u):
-    1 - phi, eps_bar, Ts^2/2, Ts^2 and the input scale and offset as quantized; the gains as the C
-    has them (gain schedule: the schedule's; covariance: the float64 Kalman gains of this valid
-    pattern, the C's own gain errors stay in the bound). Returns (x (n, 4) in SI units, |y| (n,),
-    |a| (n,), the gains (n, 4)). ``code``: the raw analog codes (None: use z, the conversion error stays in the bound).
+    1 - phi, eps_bar, Ts^2/2, Ts^2 and the input scale and offset as quantized; the gains are the
+    float64 Kalman gains of this valid pattern for both forms: what the C's gains should be. Their
+    distance to the C's gains is not taken from the run: it is the generator's stated gain error
+    (gain schedule: the compression error of an uninterrupted run; covariance: its rounding bound),
+    which stays in :func:`error_bound`. So a C whose gains leave the Kalman gains by more than the
+    generator states (a time-indexed schedule after a skip) departs from the bound. Returns (x (n, 4)
+    in SI units, |y| (n,), |a| (n,), the gains (n, 4)). ``code``: the raw analog codes (None: use z,
+    the conversion error stays in the bound).
     """
     from .gains import riccati
     from .qformat import dequantize, quantize
@@ -249,10 +295,7 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     else:
         zq = np.asarray(z, dtype=np.float64)
     omp, ebar, h2, t2 = q("OMP"), q("EBAR"), q("H2"), q("T2")
-    if schedule is not None:
-        K = np.asarray(schedule.stored)[:n]
-    else:
-        K = np.asarray(riccati(d, n, valid).K) * np.array([1.0, d.Ts, 1.0, 1.0])
+    K = np.asarray(riccati(d, n, valid).K) * np.array([1.0, d.Ts, 1.0, 1.0])
     r = dequantize(quantize(d.x0[0], v["r"].fmt), v["r"].fmt)
     vv = dequantize(quantize(d.Ts * d.x0[1], v["v"].fmt), v["v"].fmt)
     a = dequantize(quantize(d.x0[2], v["a"].fmt), v["a"].fmt)
@@ -288,8 +331,10 @@ def d_eps_bar(p: AxisPlan) -> float:
 def twin_bound(p: AxisPlan, code, z, valid, x_ref: np.ndarray, schedule=None):
     """The stated bound of |x_C - x_float64| for one run, split into its exact deterministic part and
     a rigorous bound on the rest: |x_twin - x_ref| (the effect of the quantized constants, computed
-    exactly, signs and all) + the per-step roundings (and, covariance form, gain errors) of the C
-    propagated through the closed loop (:func:`error_bound` with exact constants)."""
+    exactly, signs and all, with the Kalman gains of the run's skip pattern) + the per-step roundings
+    and the generator's stated gain errors of the C propagated through the closed loop
+    (:func:`error_bound` with exact constants). ``x_ref``: the float64 Kalman filter on the same input
+    (accelnav.estimate.kf.run_filter with the same valid mask), never a filter with the C's gains."""
     x_tw, y_abs, a_abs, K = quantized_twin(p, code, z, valid, schedule)
     e_dev = float(np.abs(x_tw[:, 3] - d_eps_bar(p)).max())
     b = error_bound(

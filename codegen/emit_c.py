@@ -108,11 +108,12 @@ def _clamp_word(bound: float, fmt, step: float) -> int:
 
 def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
     v = p.vars
+    # the three int64 first, then the int32: no padding word after a (the covariance state is 64 B, not 72)
     f = [
         ("int64_t", "r", f"r [m] {v['r'].fmt}"),
         ("int64_t", "v", f"Ts*u [m] {v['v'].fmt}"),
-        ("int32_t", "a", f"a [m/s^2] {v['a'].fmt}"),
         ("int64_t", "e", f"eps [m/s^2] {v['e'].fmt}"),
+        ("int32_t", "a", f"a [m/s^2] {v['a'].fmt}"),
     ]
     if p.form == "covariance":
         for nm in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"):
@@ -621,7 +622,11 @@ static inline uint32_t acn_recip(uint32_t d, int *n)
 def _schedule_for(p: AxisPlan) -> Schedule:
     import numpy as np
 
-    K = np.array(p.gains.K) * np.array([1.0, p.design.Ts, 1.0, 1.0])
+    from .gains import riccati
+
+    # the whole run's gains, sample by sample: memory linear in the declared run (the covariance form
+    # never needs this; the gain-schedule form is refused for every input that can skip)
+    K = np.array(riccati(p.design, p.n_run).K) * np.array([1.0, p.design.Ts, 1.0, 1.0])
     fm = tuple(p.vars["K" + n].fmt for n in "rvae")
     return schedule(K, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
 
@@ -858,9 +863,53 @@ def plans(model: Model, form: str | None = None) -> list[AxisPlan]:
     return [plan_axis(model, i, form) for i in range(len(model.axes))]
 
 
-def emit(model: Model, *, form: str | None = None, arith: str = "fixed", prefix: str = "accelnav") -> dict[str, str]:
-    """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json."""
+def refuse_schedule_with_skips(model: Model, form: str) -> None:
+    """The gain-schedule form is refused for every input that can skip samples, which is every input
+    the model format describes (analog: the ADC rails; duty cycle: a bad or missing capture).
+
+    Why: the schedule is indexed by time and assumes an uninterrupted run. After a skipped sample the
+    Kalman gain is not the schedule's (a gap of 38 samples at 100 Hz leaves K_a 79 % and K_v 25x off
+    for ~10 samples; the firmware then departed from the float64 filter by 33-75 sigma in a, issue
+    #12), and a schedule that follows skips needs the covariance block at the moment of the skip,
+    which only the covariance form carries. Measured: that block cannot be taken stale from a table
+    (P_re off by a segment leaves K_r 10 % off for good), so the honest choice is the covariance form.
+    """
+    if form != "gain_schedule":
+        return
+    from .model import ModelError
+    from .ranges import refuse_calibrated
+
+    refuse_calibrated(model)  # a sensor codegen does not take at all is refused as such first
+
+    if model.sensor.kind == "analog":
+        full = 2**model.sensor.analog.adc_bits
+        why = f"this analog input skips rail-clipped samples (ADC codes 0 and {full})"
+    else:
+        why = "this duty-cycle input skips bad captures (no period, a period off nominal, a stuck output)"
+    raise ModelError(
+        model.source,
+        "filter.form",
+        f"'gain_schedule' refused: {why}, and after a skip the Kalman gain is no longer the time-indexed "
+        "schedule's (K_a up to ~80 % off), so the C would depart from the float64 filter; accepted: 'covariance'",
+    )
+
+
+def emit(
+    model: Model,
+    *,
+    form: str | None = None,
+    arith: str = "fixed",
+    prefix: str = "accelnav",
+    assume_no_skips: bool = False,
+) -> dict[str, str]:
+    """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json.
+
+    The gain-schedule form is refused (:func:`refuse_schedule_with_skips`) unless the caller
+    guarantees ``assume_no_skips``: an input that never skips a sample (the tests and the bench use it
+    to check the form's arithmetic; the CLI and the firmware build never pass it)."""
     form = form or model.filter.form
+    if not assume_no_skips:
+        refuse_schedule_with_skips(model, form)
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)
     ps = plans(model, form)

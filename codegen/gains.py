@@ -30,11 +30,19 @@ from .qformat import QFormat
 BLOCK_NAMES = ("ra", "ua", "aa", "re", "ue", "ae", "ee")
 
 
+KEEP = 1 << 17  # leading samples whose K, sigma, S a plan keeps (lockstep runs); beyond: summaries only
+
+
 @dataclass(frozen=True)
 class GainRun:
-    """K[k] (N, 4) in natural units [r, u, a, eps]; sigma[k] (N, 4) the posterior standard
-    deviations; S[k] (N,) the innovation variance; max_prior/max_post (7,) the largest |P| of
-    each BLOCK_NAMES entry, max_c (4,) of |P H'|, S_min/S_max."""
+    """The Riccati recursion over n samples, summarised so that its memory does not grow with n.
+
+    K (m, 4) in natural units [r, u, a, eps], sigma (m, 4) the posterior standard deviations and
+    S (m,) the innovation variance of the first m = min(n, keep) samples; rows: the sample indices
+    (sorted) whose K, sigma and S are also kept in row_K, row_sigma, row_S (the first one, log-spaced
+    ones and the last, plus any asked for); kmax (4,) max |K|, sigma_max (4,), S_min, S_max over all
+    n samples; max_prior/max_post (7,) the largest |P| of each BLOCK_NAMES entry, max_c (4,) of |P H'|;
+    checkpoints ((k, prior P (4, 4)), ...) at log-spaced samples."""
 
     K: np.ndarray
     sigma: np.ndarray
@@ -42,7 +50,24 @@ class GainRun:
     max_prior: np.ndarray
     max_post: np.ndarray
     max_c: np.ndarray
-    checkpoints: tuple = ()  # ((k, prior P (4, 4)), ...) at log-spaced samples
+    checkpoints: tuple = ()
+    n: int = 0
+    rows: tuple = ()
+    row_K: np.ndarray | None = None
+    row_sigma: np.ndarray | None = None
+    row_S: np.ndarray | None = None
+    kmax: np.ndarray | None = None
+    sigma_max: np.ndarray | None = None
+    S_min: float = 0.0
+    S_max: float = 0.0
+
+    def at(self, k: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """(K, sigma, S) of sample k (negative: from the end), kept or a row."""
+        k = k + self.n if k < 0 else k
+        if k < len(self.K):
+            return self.K[k], self.sigma[k], float(self.S[k])
+        i = self.rows.index(k)  # ValueError: the sample was neither kept nor asked for
+        return self.row_K[i], self.row_sigma[i], float(self.row_S[i])
 
 
 def _key(d: AxisDesign) -> tuple:
@@ -73,94 +98,194 @@ def gap_maxima(d: AxisDesign, g: GainRun, gap: int, recover: int) -> GainRun:
     kmax = np.zeros(4)
     for _, P in g.checkpoints:
         key = _key(d)[:-1] + (tuple(float(x) for row in P for x in row),)
-        r = _riccati(key, gap + recover, valid)
+        r = _riccati(key, gap + recover, valid, gap + recover, ())
         mprior = np.maximum(mprior, r.max_prior)
         mpost = np.maximum(mpost, r.max_post)
         mc = np.maximum(mc, r.max_c)
-        S_max = max(S_max, float(r.S.max()))
-        kmax = np.maximum(kmax, np.abs(r.K).max(0))
-    return GainRun(kmax[None, :], np.zeros((1, 4)), np.array([S_max]), mprior, mpost, mc)
+        S_max = max(S_max, r.S_max)
+        kmax = np.maximum(kmax, r.kmax)
+    return GainRun(kmax[None, :], np.zeros((1, 4)), np.array([S_max]), mprior, mpost, mc, kmax=kmax, S_max=S_max)
 
 
-def riccati(d: AxisDesign, n: int, valid: np.ndarray | None = None) -> GainRun:
-    """The Riccati recursion over n samples (valid[k] False: predict only).
+def riccati(d: AxisDesign, n: int, valid: np.ndarray | None = None, *, keep: int | None = None, rows=()) -> GainRun:
+    """The Riccati recursion over n samples (valid[k] False: predict only), keeping the per-sample K,
+    sigma, S of the first ``keep`` samples (default: all n) and of the samples in ``rows``.
 
     Besides the seven block entries it carries P_rr, P_uu, P_ru in float64 to
     report the posterior standard deviation of r and u; they never feed the gain.
+    Memory is O(keep + len(rows)), whatever n.
     """
+    n = int(n)
+    keep = n if keep is None else min(int(keep), n)
+    rows = tuple(sorted({int(k) for k in rows if 0 <= int(k) < n}))
     if valid is None:
-        return _riccati_cached(_key(d), int(n))
-    return _riccati(_key(d), int(n), np.asarray(valid, dtype=bool))
+        return _riccati_cached(_key(d), n, keep, rows)
+    return _riccati(_key(d), n, np.asarray(valid, dtype=bool), keep, rows)
 
 
 @functools.lru_cache(maxsize=16)
-def _riccati_cached(key: tuple, n: int) -> GainRun:
-    return _riccati(key, n, None)
+def _riccati_cached(key: tuple, n: int, keep: int, rows: tuple) -> GainRun:
+    return _riccati(key, n, None, keep, rows)
 
 
 _RICCATI_C = r"""
 #include <math.h>
 #define AB(x) fabs(x)
 #define MX(m, x) do { double t_ = AB(x); if (t_ > (m)) (m) = t_; } while (0)
-void acn_riccati(long n, const double *par, const double *P0, const unsigned char *valid,
-                 const unsigned char *mark, double *K, double *sig, double *S_all,
-                 double *mprior, double *mpost, double *mc, double *ckpt)
+
+/* P = F P F' + Q on the entries carried (right-hand sides read the old values) */
+#define RIC_PREDICT                                                                                   \
+    do {                                                                                              \
+        double nrr = prr + 2 * Ts * pru + Ts * Ts * puu + 2 * h2 * pra + 2 * Ts * h2 * pua + h2 * h2 * paa + qrr; \
+        double nru = pru + Ts * puu + h2 * pua + Ts * (pra + Ts * pua + h2 * paa) + qru;              \
+        double nuu = puu + 2 * Ts * pua + Ts * Ts * paa + quu;                                        \
+        double nra = pra + Ts * pua + h2 * paa + qra;                                                 \
+        double nre = phi * (pre + Ts * pue + h2 * pae);                                               \
+        double nua = pua + Ts * paa + qua;                                                            \
+        double nue = phi * (pue + Ts * pae);                                                          \
+        prr = nrr; pru = nru; puu = nuu; pra = nra; pre = nre; pua = nua; pue = nue;                  \
+        paa = paa + qaa;                                                                              \
+        pae = phi * pae;                                                                              \
+        pee = phi2 * pee + qee;                                                                       \
+    } while (0)
+/* K = c / S, P = P - K c' */
+#define RIC_UPDATE                                                                                    \
+    do {                                                                                              \
+        kr = cr / S; ku = cu / S; ka = ca / S; ke = ce / S;                                           \
+        prr -= kr * cr; pru -= kr * cu; puu -= ku * cu;                                               \
+        pra -= kr * ca; pua -= ku * ca; paa -= ka * ca;                                               \
+        pre -= kr * ce; pue -= ku * ce; pae -= ka * ce; pee -= ke * ce;                               \
+    } while (0)
+#define RIC_STATE                                                                                     \
+    double Ts = par[0], phi = par[1], qaa = par[2], qua = par[3], qra = par[4], qee = par[5];         \
+    double quu = par[6], qru = par[7], qrr = par[8], R = par[9];                                      \
+    double h2 = Ts * Ts / 2.0, phi2 = phi * phi;                                                      \
+    double prr = P0[0], pru = P0[1], puu = P0[5];                                                     \
+    double pra = P0[2], pua = P0[6], paa = P0[10], pre = P0[3], pue = P0[7], pae = P0[11], pee = P0[15]
+/* rows: sorted sample indices (nrows of them) whose prior P (16), K, sig and S are stored; ext: kmax[4],
+ * sigma_max[4], S_min, S_max. K, sig, S_all: the first `keep` samples. */
+void acn_riccati(long n, const double *par, const double *P0, const unsigned char *valid, long keep,
+                 long nrows, const long *rows, double *K, double *sig, double *S_all,
+                 double *mprior, double *mpost, double *mc, double *rowP, double *rowK, double *rowsig,
+                 double *rowS, double *ext)
 {
-    double Ts = par[0], phi = par[1], qaa = par[2], qua = par[3], qra = par[4], qee = par[5];
-    double quu = par[6], qru = par[7], qrr = par[8], R = par[9];
-    double h2 = Ts * Ts / 2.0, phi2 = phi * phi;
-    double prr = P0[0], pru = P0[1], puu = P0[5];
-    double pra = P0[2], pua = P0[6], paa = P0[10], pre = P0[3], pue = P0[7], pae = P0[11], pee = P0[15];
-    long k;
+    RIC_STATE;
+    long k, ir = 0;
     int i;
+    double vmax[4] = {0.0, 0.0, 0.0, 0.0};
     for (i = 0; i < 7; ++i) { mprior[i] = 0.0; mpost[i] = 0.0; }
-    for (i = 0; i < 4; ++i) { mc[i] = 0.0; }
+    for (i = 0; i < 4; ++i) { mc[i] = 0.0; ext[i] = 0.0; ext[4 + i] = 0.0; }
+    ext[8] = HUGE_VAL;
+    ext[9] = 0.0;
     for (k = 0; k < n; ++k) {
-        double cr, cu, ca, ce, S, kr, ku, ka, ke;
+        double cr, cu, ca, ce, S, kr, ku, ka, ke, sg[4];
+        int row = ir < nrows && rows[ir] == k;
         if (k) {
-            double nrr = prr + 2 * Ts * pru + Ts * Ts * puu + 2 * h2 * pra + 2 * Ts * h2 * pua + h2 * h2 * paa + qrr;
-            double nru = pru + Ts * puu + h2 * pua + Ts * (pra + Ts * pua + h2 * paa) + qru;
-            double nuu = puu + 2 * Ts * pua + Ts * Ts * paa + quu;
-            double nra = pra + Ts * pua + h2 * paa + qra;
-            double nre = phi * (pre + Ts * pue + h2 * pae);
-            double nua = pua + Ts * paa + qua;
-            double nue = phi * (pue + Ts * pae);
-            prr = nrr; pru = nru; puu = nuu; pra = nra; pre = nre; pua = nua; pue = nue;
-            paa = paa + qaa;
-            pae = phi * pae;
-            pee = phi2 * pee + qee;
+            RIC_PREDICT;
         }
         MX(mprior[0], pra); MX(mprior[1], pua); MX(mprior[2], paa); MX(mprior[3], pre);
         MX(mprior[4], pue); MX(mprior[5], pae); MX(mprior[6], pee);
-        if (mark[k]) {
+        if (row) {
             double P[16] = {prr, pru, pra, pre, pru, puu, pua, pue, pra, pua, paa, pae, pre, pue, pae, pee};
-            for (i = 0; i < 16; ++i) { ckpt[i] = P[i]; }
-            ckpt += 16;
+            for (i = 0; i < 16; ++i) { rowP[16 * ir + i] = P[i]; }
         }
         cr = pra + pre; cu = pua + pue; ca = paa + pae; ce = pae + pee;
         MX(mc[0], cr); MX(mc[1], cu); MX(mc[2], ca); MX(mc[3], ce);
         S = ca + ce + R;
         if (valid == 0 || valid[k]) {
-            kr = cr / S; ku = cu / S; ka = ca / S; ke = ce / S;
-            prr -= kr * cr; pru -= kr * cu; puu -= ku * cu;
-            pra -= kr * ca; pua -= ku * ca; paa -= ka * ca;
-            pre -= kr * ce; pue -= ku * ce; pae -= ka * ce; pee -= ke * ce;
+            RIC_UPDATE;
         } else {
             kr = ku = ka = ke = 0.0;
         }
-        K[4 * k] = kr; K[4 * k + 1] = ku; K[4 * k + 2] = ka; K[4 * k + 3] = ke;
-        sig[4 * k] = sqrt(prr > 0.0 ? prr : 0.0); sig[4 * k + 1] = sqrt(puu > 0.0 ? puu : 0.0);
-        sig[4 * k + 2] = sqrt(paa > 0.0 ? paa : 0.0); sig[4 * k + 3] = sqrt(pee > 0.0 ? pee : 0.0);
-        S_all[k] = S;
+        /* sigma only where it is stored; its maximum from the variances (sqrt is monotonic) */
+        if (prr > vmax[0]) { vmax[0] = prr; }
+        if (puu > vmax[1]) { vmax[1] = puu; }
+        if (paa > vmax[2]) { vmax[2] = paa; }
+        if (pee > vmax[3]) { vmax[3] = pee; }
+        if (k < keep || row) {
+            sg[0] = sqrt(prr > 0.0 ? prr : 0.0); sg[1] = sqrt(puu > 0.0 ? puu : 0.0);
+            sg[2] = sqrt(paa > 0.0 ? paa : 0.0); sg[3] = sqrt(pee > 0.0 ? pee : 0.0);
+        }
+        MX(ext[0], kr); MX(ext[1], ku); MX(ext[2], ka); MX(ext[3], ke);
+        if (S < ext[8]) { ext[8] = S; }
+        if (S > ext[9]) { ext[9] = S; }
+        if (k < keep) {
+            K[4 * k] = kr; K[4 * k + 1] = ku; K[4 * k + 2] = ka; K[4 * k + 3] = ke;
+            for (i = 0; i < 4; ++i) { sig[4 * k + i] = sg[i]; }
+            S_all[k] = S;
+        }
+        if (row) {
+            rowK[4 * ir] = kr; rowK[4 * ir + 1] = ku; rowK[4 * ir + 2] = ka; rowK[4 * ir + 3] = ke;
+            for (i = 0; i < 4; ++i) { rowsig[4 * ir + i] = sg[i]; }
+            rowS[ir] = S;
+            ++ir;
+        }
         MX(mpost[0], pra); MX(mpost[1], pua); MX(mpost[2], paa); MX(mpost[3], pre);
         MX(mpost[4], pue); MX(mpost[5], pae); MX(mpost[6], pee);
         MX(mc[0], pra + pre); MX(mc[1], pua + pue); MX(mc[2], paa + pae); MX(mc[3], pae + pee);
     }
+    for (i = 0; i < 4; ++i) { ext[4 + i] = sqrt(vmax[i]); }
+}
+
+/* The data-free stated bound of codegen.bounds.error_bound (covariance form, every sample valid,
+ * |y| <= ysig sqrt(S), |a| <= a_abs), the same recursion in the same order, fed by the Riccati above
+ * sample by sample: its cost is constant per sample and nothing is stored but the asked-for rows.
+ * bp: omp, Ts, dz + d_y, d_a, d_e, d_dec, dH2, dT2, r floors, v floors, a_abs, ysig, dS, R, 2^-22,
+ * Ee0, dc[4], lsbK[4]. out: (nrows, 4) [r, u, a, eps]. */
+void acn_bound(long n, const double *par, const double *P0, const double *bp, long nrows, const long *rows,
+               double *out)
+{
+    RIC_STATE;
+    double omp = bp[0], inj = bp[2], d_a = bp[3], d_e = bp[4], d_dec = bp[5], dH2 = bp[6], dT2 = bp[7];
+    double rfl = bp[8], vfl = bp[9], a_abs = bp[10], ysig = bp[11], dS = bp[12], Rq = bp[13], k22 = bp[14];
+    const double *dc = bp + 16, *lsbK = bp + 20;
+    double H2 = Ts * Ts / 2, T2 = Ts * Ts;
+    double Es = 0.0, Ee = bp[15], Ea, Ev = 0.0, Er = 0.0, a_prev = 0.0, Esm, Eem;
+    long k, ir = 0;
+    Ea = Ee;
+    for (k = 0; k < n; ++k) {
+        double cr, cu, ca, ce, S, kr, ku, ka, ke, Kc[4], dK[4], yc, a_c;
+        int i;
+        if (k) {
+            RIC_PREDICT;
+        }
+        cr = pra + pre; cu = pua + pue; ca = paa + pae; ce = pae + pee;
+        S = ca + ce + R;
+        RIC_UPDATE;
+        Kc[0] = kr; Kc[1] = ku * Ts; Kc[2] = ka; Kc[3] = ke;
+        for (i = 0; i < 4; ++i) {
+            double ak = fabs(Kc[i]);
+            dK[i] = (dc[i] + ak * dS) / Rq + ak * k22 + lsbK[i];
+        }
+        if (k) {
+            Esm = Es + omp * Ee + d_dec;
+            Eem = phi * Ee + d_dec;
+        } else {
+            Esm = Es;
+            Eem = Ee;
+        }
+        a_c = a_prev + Ea;
+        Er = Er + Ev + H2 * Ea + dH2 * a_c + rfl;
+        Ev = Ev + T2 * Ea + dT2 * a_c + vfl;
+        yc = ysig * sqrt(S) + Esm + inj;
+        Es = fabs(1.0 - Kc[2] - Kc[3]) * Esm + fabs(Kc[2] + Kc[3]) * inj + (dK[2] + dK[3]) * yc + d_a + d_e;
+        Ee = Eem + fabs(Kc[3]) * (Esm + inj) + dK[3] * yc + d_e;
+        Ev += fabs(Kc[1]) * (Esm + inj) + dK[1] * yc;
+        Er += fabs(Kc[0]) * (Esm + inj) + dK[0] * yc;
+        Ea = Es + Ee;
+        a_prev = a_abs;
+        if (ir < nrows && rows[ir] == k) {
+            out[4 * ir] = Er; out[4 * ir + 1] = Ev / Ts; out[4 * ir + 2] = Ea; out[4 * ir + 3] = Ee;
+            ++ir;
+        }
+    }
 }
 """
-_CDEF = """void acn_riccati(long n, const double *par, const double *P0, const unsigned char *valid,
-    const unsigned char *mark, double *K, double *sig, double *S_all, double *mprior, double *mpost,
-    double *mc, double *ckpt);"""
+_CDEF = """void acn_riccati(long n, const double *par, const double *P0, const unsigned char *valid, long keep,
+    long nrows, const long *rows, double *K, double *sig, double *S_all, double *mprior, double *mpost,
+    double *mc, double *rowP, double *rowK, double *rowsig, double *rowS, double *ext);
+void acn_bound(long n, const double *par, const double *P0, const double *bp, long nrows, const long *rows,
+    double *out);"""
 
 
 @functools.lru_cache(maxsize=1)
@@ -189,59 +314,102 @@ def _riccati_lib():
     return mod.ffi, mod.lib
 
 
-def _riccati(key: tuple, n: int, valid) -> GainRun:
+def bound_rows(key: tuple, n: int, bp: np.ndarray, rows) -> np.ndarray | None:
+    """The C recursion of :func:`codegen.bounds.error_bound` (data-free, covariance form, all valid) at
+    the sorted ``rows``; None without a C compiler (the caller then runs the Python one)."""
     lib = _riccati_lib()
     if lib is None:
-        return _riccati_py(key, n, valid)
+        return None
     ffi, C = lib
     Ts, phi, qaa, qua, qra, qee, quu, qru, qrr, R, P0 = key
     par = np.array([Ts, phi, qaa, qua, qra, qee, quu, qru, qrr, R], dtype=np.float64)
     P0 = np.ascontiguousarray(np.array(P0, dtype=np.float64).reshape(16))
-    mark = np.zeros(n, dtype=np.uint8)
-    marks = sorted(_marks(n) & set(range(n)))
-    mark[marks] = 1
-    K = np.empty((n, 4))
-    sigma = np.empty((n, 4))
-    S_all = np.empty(n)
-    mprior, mpost, mc = np.empty(7), np.empty(7), np.empty(4)
-    ck = np.empty((len(marks), 16))
+    bp = np.ascontiguousarray(bp, dtype=np.float64)
+    ridx = np.ascontiguousarray(np.array(sorted(rows), dtype=np.int64))
+    out = np.empty((max(1, len(ridx)), 4))
+
+    def ptr(a, t="double *"):
+        return ffi.cast(t, a.ctypes.data)
+
+    C.acn_bound(n, ptr(par), ptr(P0), ptr(bp), len(ridx), ptr(ridx, "long *"), ptr(out))
+    return out[: len(ridx)]
+
+
+def _all_rows(n: int, rows: tuple) -> tuple[list[int], list[int]]:
+    """(sorted row indices: the asked-for ones, the checkpoints and the last sample; the checkpoints)."""
+    marks = sorted(k for k in _marks(n) if k < n)
+    return sorted(set(rows) | set(marks) | ({n - 1} if n else set())), marks
+
+
+def _finish(n, keep, K, sigma, S_all, mprior, mpost, mc, rr, rowP, rowK, rowsig, rowS, ext, marks) -> GainRun:
+    pos = {k: i for i, k in enumerate(rr)}
+    checkpoints = tuple(
+        (k, tuple(tuple(float(x) for x in rowP[pos[k]].reshape(4, 4)[r]) for r in range(4))) for k in marks
+    )
+    for a in (K, sigma, S_all, rowK, rowsig, rowS):
+        a.flags.writeable = False
+    return GainRun(
+        K, sigma, S_all, mprior, mpost, mc, checkpoints, n, tuple(rr), rowK, rowsig, rowS,
+        ext[:4].copy(), ext[4:8].copy(), float(ext[8]), float(ext[9]),
+    )  # fmt: skip
+
+
+def _riccati(key: tuple, n: int, valid, keep: int | None = None, rows: tuple = ()) -> GainRun:
+    keep = n if keep is None else keep
+    lib = _riccati_lib()
+    if lib is None:
+        return _riccati_py(key, n, valid, keep, rows)
+    ffi, C = lib
+    Ts, phi, qaa, qua, qra, qee, quu, qru, qrr, R, P0 = key
+    par = np.array([Ts, phi, qaa, qua, qra, qee, quu, qru, qrr, R], dtype=np.float64)
+    P0 = np.ascontiguousarray(np.array(P0, dtype=np.float64).reshape(16))
+    rr, marks = _all_rows(n, rows)
+    ridx = np.array(rr, dtype=np.int64) if rr else np.zeros(1, dtype=np.int64)
+    K = np.empty((keep, 4))
+    sigma = np.empty((keep, 4))
+    S_all = np.empty(keep)
+    mprior, mpost, mc, ext = np.empty(7), np.empty(7), np.empty(4), np.empty(10)
+    m = max(1, len(rr))
+    rowP, rowK, rowsig, rowS = np.empty((m, 16)), np.empty((m, 4)), np.empty((m, 4)), np.empty(m)
     v = None if valid is None else np.ascontiguousarray(valid, dtype=np.uint8)
 
     def ptr(a, t="double *"):
         return ffi.cast(t, a.ctypes.data)
 
     C.acn_riccati(
-        n, ptr(par), ptr(P0), ffi.NULL if v is None else ptr(v, "unsigned char *"), ptr(mark, "unsigned char *"),
-        ptr(K), ptr(sigma), ptr(S_all), ptr(mprior), ptr(mpost), ptr(mc), ptr(ck),
+        n, ptr(par), ptr(P0), ffi.NULL if v is None else ptr(v, "unsigned char *"), keep, len(rr),
+        ptr(ridx, "long *"), ptr(K), ptr(sigma), ptr(S_all), ptr(mprior), ptr(mpost), ptr(mc),
+        ptr(rowP), ptr(rowK), ptr(rowsig), ptr(rowS), ptr(ext),
     )  # fmt: skip
-    checkpoints = tuple(
-        (k, tuple(tuple(float(x) for x in ck[i].reshape(4, 4)[r]) for r in range(4))) for i, k in enumerate(marks)
+    n_r = len(rr)
+    return _finish(
+        n, keep, K, sigma, S_all, mprior, mpost, mc, rr, rowP[:n_r], rowK[:n_r], rowsig[:n_r], rowS[:n_r], ext, marks
     )
-    for a in (K, sigma, S_all):
-        a.flags.writeable = False
-    return GainRun(K, sigma, S_all, mprior, mpost, mc, checkpoints)
 
 
 def _marks(n: int) -> set:
     return set(np.unique(np.geomspace(1, max(n - 1, 1), 40).astype(int)).tolist()) | {0}
 
 
-def _riccati_py(key: tuple, n: int, valid) -> GainRun:
+def _riccati_py(key: tuple, n: int, valid, keep: int, rows: tuple) -> GainRun:
     Ts, phi, qaa, qua, qra, qee, quu, qru, qrr, R, P0 = key
     h2 = Ts * Ts / 2.0
     phi2 = phi * phi
     P0 = np.array(P0).reshape(4, 4)
     prr, pru, puu = P0[0, 0], P0[0, 1], P0[1, 1]
     pra, pua, paa, pre, pue, pae, pee = P0[0, 2], P0[1, 2], P0[2, 2], P0[0, 3], P0[1, 3], P0[2, 3], P0[3, 3]
-    K = np.empty((n, 4))
-    sigma = np.empty((n, 4))
-    S_all = np.empty(n)
+    K = np.empty((keep, 4))
+    sigma = np.empty((keep, 4))
+    S_all = np.empty(keep)
     mprior = np.zeros(7)
     mpost = np.zeros(7)
     mc = np.zeros(4)
+    ext = np.zeros(10)
+    ext[8] = np.inf
+    rr, marks = _all_rows(n, rows)
+    rset = set(rr)
+    rowP, rowK, rowsig, rowS = [], [], [], []
     chunk = 1 << 16
-    marks = _marks(n)
-    checkpoints = []
     for k0 in range(0, n, chunk):
         k1 = min(n, k0 + chunk)
         kf, sg, sf, pr, po = array("d"), array("d"), array("d"), array("d"), array("d")
@@ -261,10 +429,8 @@ def _riccati_py(key: tuple, n: int, valid) -> GainRun:
                 pae = phi * pae
                 pee = phi2 * pee + qee
             pr.extend((pra, pua, paa, pre, pue, pae, pee))
-            if k in marks:
-                checkpoints.append(
-                    (k, ((prr, pru, pra, pre), (pru, puu, pua, pue), (pra, pua, paa, pae), (pre, pue, pae, pee)))
-                )
+            if k in rset:
+                rowP.append((prr, pru, pra, pre, pru, puu, pua, pue, pra, pua, paa, pae, pre, pue, pae, pee))
             # c = P H',  S = H P H' + R,  K = c / S
             cr, cu, ca, ce = pra + pre, pua + pue, paa + pae, pae + pee
             S = ca + ce + R
@@ -282,15 +448,27 @@ def _riccati_py(key: tuple, n: int, valid) -> GainRun:
                 pae -= ka * ce
                 pee -= ke * ce
             else:
-                kr = ku = ka = ke = 0.0
+                kr, ku, ka, ke = 0.0, 0.0, 0.0, 0.0
             kf.extend((kr, ku, ka, ke))
             sg.extend((prr, puu, paa, pee))
             sf.append(S)
             po.extend((pra, pua, paa, pre, pue, pae, pee))
         m = k1 - k0
-        K[k0:k1] = np.frombuffer(kf).reshape(m, 4)
-        sigma[k0:k1] = np.sqrt(np.maximum(np.frombuffer(sg).reshape(m, 4), 0.0))
-        S_all[k0:k1] = np.frombuffer(sf)
+        kc = np.frombuffer(kf).reshape(m, 4)
+        sc = np.sqrt(np.maximum(np.frombuffer(sg).reshape(m, 4), 0.0))
+        Sc = np.frombuffer(sf)
+        if k0 < keep:
+            j = min(keep, k1) - k0
+            K[k0 : k0 + j], sigma[k0 : k0 + j], S_all[k0 : k0 + j] = kc[:j], sc[:j], Sc[:j]
+        for k in rr:
+            if k0 <= k < k1:
+                rowK.append(kc[k - k0])
+                rowsig.append(sc[k - k0])
+                rowS.append(Sc[k - k0])
+        ext[:4] = np.maximum(ext[:4], np.abs(kc).max(0))
+        ext[4:8] = np.maximum(ext[4:8], sc.max(0))
+        ext[8] = min(ext[8], Sc.min())
+        ext[9] = max(ext[9], Sc.max())
         prior = np.abs(np.frombuffer(pr).reshape(m, 7))
         mprior = np.maximum(mprior, prior.max(0))
         mpost = np.maximum(mpost, np.abs(np.frombuffer(po).reshape(m, 7)).max(0))
@@ -300,9 +478,12 @@ def _riccati_py(key: tuple, n: int, valid) -> GainRun:
                 [blk[:, 0] + blk[:, 3], blk[:, 1] + blk[:, 4], blk[:, 2] + blk[:, 5], blk[:, 5] + blk[:, 6]], 1
             )
             mc = np.maximum(mc, np.abs(c).max(0))
-    for a in (K, sigma, S_all):
-        a.flags.writeable = False
-    return GainRun(K, sigma, S_all, mprior, mpost, mc, tuple(checkpoints))
+    r4 = (lambda x: np.array(x, dtype=np.float64).reshape(-1, 4)) if rr else (lambda x: np.zeros((0, 4)))
+    rowP_a = np.array(rowP, dtype=np.float64).reshape(-1, 16)
+    return _finish(
+        n, keep, K, sigma, S_all, mprior, mpost, mc, rr, rowP_a, r4(rowK), r4(rowsig), np.array(rowS, dtype=np.float64),
+        ext, marks,
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------
@@ -423,24 +604,3 @@ def schedule(K: np.ndarray, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: in
     stored = hi.astype(np.float64) * np.array([f.lsb for f in formats])
     err = np.abs(stored - K)
     return Schedule(tuple(formats), start, tuple(lengths), tuple(slopes), stored, err, tuple(np.max(tolq * unit, 0)))
-
-
-def run_gains(d: AxisDesign, z: np.ndarray, valid: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Float64 twin of a filter with a given gain sequence K[k] (natural units), accelnav.estimate.kf conventions.
-
-    The reference for the gain-schedule form where samples are skipped: the
-    Kalman filter's gain then depends on the skips, the schedule's does not.
-    Returns x_post (N, 4).
-    """
-    F, b = d.F, d.b
-    x = np.array(d.x0, dtype=np.float64)
-    out = np.empty((len(z), 4))
-    for k in range(len(z)):
-        if k:
-            # x = F x + b
-            x = F @ x + b
-        if valid[k]:
-            # x = x + K (z - H x)
-            x = x + K[k] * (z[k] - x[2] - x[3])
-        out[k] = x
-    return out

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .design import AnalogConversion, AxisDesign, DutyConversion, axis_design, input_conversion
-from .gains import GainRun, gap_maxima, riccati
+from .gains import KEEP, GainRun, gap_maxima, riccati
 from .model import G0, Model, ModelError
 from .qformat import QFormat, bits_for, const_format, fit
 
@@ -192,10 +192,16 @@ def _l1_two_geometric(lam, V, Vi, B, horizon: int) -> np.ndarray:
     return out
 
 
+def l1_rows(n: int) -> list[int]:
+    """The samples whose steady gains l1_gains takes for the tail."""
+    nt = min(N_TRANSIENT, n)
+    return sorted({min(n - 1, x) for x in (nt, 10 * nt, n // 10, n // 3, n - 1)})
+
+
 def l1_gains(d: AxisDesign, g: GainRun) -> L1:
     phi = d.phi
-    n = len(g.K)
-    K2 = g.K[:, 2:4]
+    n = g.n
+    K2 = g.K[:, 2:4]  # the first N_TRANSIENT rows are always kept
     # transient: every output row k < N_TRANSIENT, exactly; Phi(k, j) for all j kept as a stack
     nt = min(N_TRANSIENT, n)
     best = np.zeros((2, 3))
@@ -212,9 +218,10 @@ def l1_gains(d: AxisDesign, g: GainRun) -> L1:
         best = np.maximum(best, rows)
     # tail: steady gains at several points; a tail row also carries what the transient left
     horizon = int(40.0 / max(1e-12, 1.0 - phi)) + 100_000
-    for k in sorted({min(n - 1, x) for x in (nt, 10 * nt, n // 10, n // 3, n - 1)}):
-        A = _closed(K2[k], phi)
-        B = np.column_stack([K2[k], [1.0, 0.0], [0.0, 1.0]])
+    for k in l1_rows(n):
+        K2k = g.at(k)[0][2:4]
+        A = _closed(K2k, phi)
+        B = np.column_stack([K2k, [1.0, 0.0], [0.0, 1.0]])
         best = np.maximum(best, _l1_steady(A, B, horizon) + rows)
     best *= MARGIN
     return L1(best[0, 0], best[1, 0], best[0, 1], best[1, 1], best[0, 2], best[1, 2])
@@ -232,15 +239,36 @@ def z_bound(conv) -> float:
     return max(abs(lo), abs(hi))
 
 
+# rate_hz x max_run_s per axis the generator accepts: its time is linear in it (~1.5 s for 3 axes at the
+# limit on the 2-core build machine, bench/bench_codegen_cost.py), its memory is not; and below the C's
+# 31-bit sample counter
+MAX_RUN_SAMPLES = 2**23
+assert MAX_RUN_SAMPLES < 2**31
+
+
+def run_samples(model: Model) -> int:
+    """Samples of the declared run, refused in one line when the generator would take too long: the
+    Riccati and the bound recursions cost a constant time per sample (memory does not grow with it)."""
+    n_run = int(math.ceil(model.ranges.max_run_s * model.rate_hz))
+    if n_run > MAX_RUN_SAMPLES:
+        lim = MAX_RUN_SAMPLES
+        raise RangeError(
+            model.source,
+            "sampling.rate_hz x ranges.max_run_s",
+            f"{model.rate_hz:g} Hz x {model.ranges.max_run_s:g} s = {n_run:.4g} samples per axis is too long a run "
+            f"to generate for; accepted: at most {lim} (2**23), e.g. {lim / 1e3 / 3600:.2f} h at 1 kHz, "
+            f"{lim / 1e4 / 60:.0f} min at 10 kHz, {lim / 1e5:.0f} s at 100 kHz",
+        )
+    return n_run
+
+
 def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPlan:
     form = form or model.filter.form
     refuse_calibrated(model)
     d = axis_design(model, axis)
     conv = input_conversion(model, axis)
-    n_run = int(math.ceil(model.ranges.max_run_s * model.rate_hz))
-    if n_run > 2**31 - 1:
-        raise RangeError(model.source, "ranges.max_run_s", f"{n_run} samples do not fit the 31-bit sample counter")
-    g = riccati(d, n_run)
+    n_run = run_samples(model)
+    g = riccati(d, n_run, keep=min(n_run, KEEP), rows=(*l1_rows(n_run), min(int(model.rate_hz), n_run - 1)))
     l1 = l1_gains(d, g)
     p = AxisPlan(model, d, conv, form, n_run, g, l1)
     Ts = d.Ts
@@ -271,7 +299,7 @@ def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPla
     fr = _require(model, "ranges.max_position_m", "m", rb + p.step_max, 64)
     # v gets the format of the products K_v y and Ts^2 a, so they accumulate into it with no shift
     # (one SMLAL each), when that format holds v and one step's increment
-    kv_b = 2 * GUARD * float(np.abs(g.K[:, 1]).max()) * Ts  # K_v (Ts u gain) bound, with room for skips
+    kv_b = 2 * GUARD * float(g.kmax[1]) * Ts  # K_v (Ts u gain) bound, with room for skips
     p.kv_room = kv_b
     v_step = Ts * Ts * a_b + kv_b * y_b
     p.v_step = v_step
@@ -354,8 +382,7 @@ def _plan_input(p: AxisPlan) -> None:
 
 def _gain_bounds(p: AxisPlan) -> np.ndarray:
     """|K| bounds in the C's coordinates [r, v = Ts u, a, eps]."""
-    kmax = np.abs(p.gains.K).max(axis=0) * np.array([1.0, p.design.Ts, 1.0, 1.0])
-    return kmax
+    return p.gains.kmax * np.array([1.0, p.design.Ts, 1.0, 1.0])
 
 
 def _gain_format(p: AxisPlan, nm: str, bound: float, note: str, saturates: bool) -> None:
@@ -399,7 +426,7 @@ def _plan_covariance(p: AxisPlan) -> None:
         "Pre": pm[3],
         "cv": Ts * mc[1],
         "Pve": Ts * pm[4],
-        "ca": max(mc[2], float(g.S.max()), float(gg.S.max())),
+        "ca": max(mc[2], g.S_max, gg.S_max),
         "Pae": pm[5],
         "ce": mc[3],
     }
@@ -417,7 +444,7 @@ def _plan_covariance(p: AxisPlan) -> None:
         fmts[nm] = _require(p.model, f"covariance {notes[nm]}", "(SI units squared)", GUARD * b, 32)
         p.vars[nm] = Var(nm, "cov", GUARD * b, fmts[nm], notes[nm] + ", Riccati max x2", True)
     p.vars["S"] = Var("S", "(m/s^2)^2", GUARD * bounds["ca"], fmts["ca"], "H P H' + R, >= R", True)
-    kb = np.maximum(np.abs(g.K).max(0), gg.K[0]) * np.array([1.0, Ts, 1.0, 1.0])
+    kb = np.maximum(g.kmax, gg.kmax) * np.array([1.0, Ts, 1.0, 1.0])
     for i, nm in enumerate(("Kr", "Kv", "Ka", "Ke")):
         _gain_format(p, nm, GUARD * kb[i], "K = c / S, Riccati max x2", True)
     d = p.design

@@ -62,6 +62,28 @@ def test_compiled_riccati_is_bit_identical_to_python(default_model):
     valid = np.ones(4000, dtype=bool)
     valid[1500:1530] = False
     for v in (None, valid):
-        fast, slow = gains._riccati(key, 4000, v), gains._riccati_py(key, 4000, v)
-        for name in ("K", "sigma", "S"):
-            assert np.array_equal(getattr(fast, name), getattr(slow, name)), name
+        for keep, rows in ((4000, ()), (1000, (1500, 2222, 3999))):  # streamed: a prefix and rows only
+            fast, slow = gains._riccati(key, 4000, v, keep, rows), gains._riccati_py(key, 4000, v, keep, rows)
+            for name in ("K", "sigma", "S", "row_K", "row_sigma", "row_S", "kmax", "sigma_max", "max_prior", "max_c"):
+                assert np.array_equal(getattr(fast, name), getattr(slow, name)), name
+            assert fast.rows == slow.rows and fast.checkpoints == slow.checkpoints
+            assert (fast.S_min, fast.S_max) == (slow.S_min, slow.S_max)
+            full = gains._riccati_py(key, 4000, v, 4000, ())
+            assert np.array_equal(fast.at(2222)[0], full.K[2222]) and np.array_equal(fast.at(-1)[1], full.sigma[-1])
+            assert np.array_equal(fast.kmax, np.abs(full.K).max(0))
+
+
+def test_streamed_bound_is_the_python_bound(default_model):
+    """The report's bound over the declared run comes from a C recursion fed by the Riccati sample by
+    sample (no per-sample arrays); it repeats codegen.bounds.error_bound operation for operation."""
+    import numpy as np
+
+    from accelnav.codegen.bounds import error_bound, error_bound_rows
+    from accelnav.codegen.model import loads_model
+    from accelnav.codegen.ranges import plan_axis
+
+    model = loads_model(default_model.text.replace("max_run_s = 3600.0", "max_run_s = 60.0"), source="60s")
+    p = plan_axis(model, 1, "covariance")
+    rows = [0, 1, 99, 100, 2500, p.n_run - 1]
+    want = error_bound(p, p.n_run)[rows]
+    assert np.array_equal(error_bound_rows(p, p.n_run, rows), want)

@@ -1,0 +1,138 @@
+"""Codegen time and peak memory against the declared run length, beside the previous generator.
+
+For each model (the default ADXL250 at 100 Hz for 1 h, at 1 kHz with three axes for 1 h, at 10 kHz for
+the longest run accepted, and at 100 kHz for 30 min, which the validator accepts), ``emit`` + the
+``--report`` text run in a child process, timed, with the child's peak RSS (getrusage). The same child
+runs the generator of BASE_COMMIT (extracted from git into a temporary package; the issue #12 "before")
+under an address-space cap, so a run that would take the machine's memory is reported as such.
+
+    .venv/bin/python bench/bench_codegen_cost.py [--base COMMIT] [--cap-mb MB]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tarfile
+import tempfile
+from io import BytesIO
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE_COMMIT = "3cab69e"  # main before issue #12
+
+CHILD = r"""
+import importlib, json, resource, sys, time
+cap = int(sys.argv[2])
+if cap:
+    resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+pkg = sys.argv[1]
+text = sys.stdin.read()
+out = {}
+t0 = time.perf_counter()
+try:
+    m = importlib.import_module(pkg + ".model")
+    e = importlib.import_module(pkg + ".emit_c")
+    r = importlib.import_module(pkg + ".report")
+    t0 = time.perf_counter()
+    model = m.loads_model(text, source="bench.toml")
+    files = e.emit(model)
+    r.report(model, form=None, arith="fixed", files=files, prefix="accelnav")
+    out["ok"] = True
+except MemoryError:
+    out["error"] = "MemoryError at the cap"
+except ValueError as exc:  # ModelError: a refusal
+    out["refused"] = str(exc).split(": ", 1)[-1][:90]
+out["seconds"] = time.perf_counter() - t0
+out["rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+try:  # VmHWM: this process image's high-water mark (ru_maxrss carries a forked parent's over exec)
+    out["rss_mb"] = [int(ln.split()[1]) for ln in open("/proc/self/status") if ln.startswith("VmHWM:")][0] / 1024
+except (OSError, IndexError):
+    pass
+print(json.dumps(out))
+"""
+
+Z_AXIS = '[[axes]]\nname = "z"\nc1 = 0.03\nc2 = -0.02\nT = 200.0\n\n[noise]'
+
+
+def model_text(rate: float, run_s: float, three_axes: bool = False) -> str:
+    text = (ROOT / "models" / "adxl250_default.toml").read_text()
+    text = text.replace("rate_hz = 100.0", f"rate_hz = {rate:.1f}").replace(
+        "max_run_s = 3600.0", f"max_run_s = {run_s!r}"
+    )
+    return text.replace("[noise]", Z_AXIS, 1) if three_axes else text
+
+
+def extract_base(commit: str, dest: Path) -> str:
+    """The codegen package of ``commit`` as the importable package ``acn_base_codegen`` under dest."""
+    tar = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "codegen"], check=True, capture_output=True)
+    with tarfile.open(fileobj=BytesIO(tar.stdout)) as tf:
+        tf.extractall(dest, filter="data")
+    (dest / "codegen").rename(dest / "acn_base_codegen")
+    return "acn_base_codegen"
+
+
+def run_child(pkg: str, text: str, cap_mb: int, path: Path | None, timeout: float = 300.0) -> dict:
+    env = dict(os.environ)
+    if path is not None:
+        env["PYTHONPATH"] = str(path) + os.pathsep + env.get("PYTHONPATH", "")
+    try:
+        out = subprocess.run(
+            [sys.executable, "-c", CHILD, pkg, str(cap_mb * 2**20)],
+            input=text,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            env=env,
+        )
+    except subprocess.TimeoutExpired:
+        return {"error": f"over {timeout:.0f} s"}
+    lines = out.stdout.strip().splitlines()
+    if not lines:
+        return {"error": f"exit {out.returncode}: {(out.stderr.strip().splitlines() or ['?'])[-1][:80]}"}
+    return json.loads(lines[-1])
+
+
+def fmt(r: dict) -> str:
+    if "error" in r:
+        return f"{r['error']} ({r.get('seconds', float('nan')):.1f} s, {r.get('rss_mb', float('nan')):.0f} MB)"
+    if "refused" in r:
+        return f"refused in {r['seconds']:.2f} s, {r['rss_mb']:.0f} MB"
+    return f"{r['seconds']:.2f} s, {r['rss_mb']:.0f} MB"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base", default=BASE_COMMIT, help="the previous generator's commit")
+    ap.add_argument("--cap-mb", type=int, default=1500, help="address-space cap of the previous generator's child")
+    args = ap.parse_args(argv)
+    from accelnav.codegen.ranges import MAX_RUN_SAMPLES
+
+    cases = [
+        ("100 Hz, 2 axes, 1 h", model_text(100.0, 3600.0)),
+        ("1 kHz, 3 axes, 1 h", model_text(1000.0, 3600.0, True)),
+        (
+            f"10 kHz, 2 axes, {MAX_RUN_SAMPLES / 1e4:.0f} s (longest accepted)",
+            model_text(10000.0, MAX_RUN_SAMPLES / 1e4),
+        ),
+        ("100 kHz, 2 axes, 1800 s", model_text(100000.0, 1800.0)),
+    ]
+    with tempfile.TemporaryDirectory(prefix="acn_base_") as tmp:
+        base_pkg = extract_base(args.base, Path(tmp))
+        print("codegen + --report (fixed point, the model's covariance form), child process; previous generator")
+        print(f"= {args.base} capped at {args.cap_mb} MB of address space; peak RSS of the child")
+        print()
+        print(f"| model | previous ({args.base}) | now | limit |")
+        print("|---|---|---|---|")
+        for name, text in cases:
+            now = run_child("accelnav.codegen", text, 0, None)
+            before = run_child(base_pkg, text, args.cap_mb, Path(tmp))
+            print(f"| {name} | {fmt(before)} | {fmt(now)} | <= 5 s, <= 300 MB |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
