@@ -45,8 +45,33 @@ BOARDS = tuple(qemu.MACHINES)
 FORMS = ("covariance", "gain_schedule")
 SCENARIOS = {  # model -> two short scenarios (seconds of samples)
     "adxl250_default.toml": (("shock", 2.0), ("stop_and_go", 3.0)),  # shock: rail-clipped samples
-    "adxl202_duty.toml": (("vehicle", 3.0), ("sinusoid", 2.0)),
+    "adxl202_duty.toml": (("vehicle", 3.0), ("sinusoid+bad_captures", 2.0)),  # bad captures: skipped samples
 }
+BAD_CAPTURES = (37, 38, 39, 120, 151)  # samples whose T2 capture is lost (T2 = 0), on every axis
+
+
+def _simulate(model, scenario: str, seconds: float, seed: int):
+    """A simulated run; ``NAME+bad_captures`` loses the duty-cycle captures of BAD_CAPTURES, as a timer
+    that missed an edge does: the firmware must skip (predict over) exactly those samples."""
+    name, _, extra = scenario.partition("+")
+    run = simulate(model, name, seconds, seed=seed)
+    if extra != "bad_captures":
+        return run
+    import dataclasses
+
+    import numpy as np
+
+    from accelnav.codegen.design import input_conversion
+
+    t2 = np.array(run.t2)
+    t2[list(BAD_CAPTURES), :] = 0
+    conv = [input_conversion(model, j) for j in range(len(model.axes))]
+    clipped = np.column_stack([c.clipped(run.t1[:, j], t2[:, j]) for j, c in enumerate(conv)])
+    accel = np.column_stack([c.accel(run.t1[:, j], t2[:, j]) for j, c in enumerate(conv)])
+    assert clipped[list(BAD_CAPTURES)].all()
+    return dataclasses.replace(run, t2=t2, clipped=clipped, accel=accel)
+
+
 PIL_CASES = [
     (board, model_file, form, scenario, seconds)
     for board in BOARDS
@@ -86,7 +111,7 @@ def test_pil_frames_equal_sil_bit_for_bit(
         monkeypatch.setattr(emit_c, "refuse_schedule_with_skips", lambda model, form: None)
     model = load_model(model_in_form(model_file, form))
     assert model.filter.form == form
-    run = simulate(model, scenario, seconds, seed=9)
+    run = _simulate(model, scenario, seconds, seed=9)
     man = manifest(model.source)
     stim = hil.stimulus(man, run)
     sil = hil.run_sil(model, stim)
@@ -94,9 +119,10 @@ def test_pil_frames_equal_sil_bit_for_bit(
     c = hil.compare(model, run, sil, pil.telemetry)
     assert c.n == len(run.t)
     assert c.pil_equal_sil, f"{board}: PIL differs from SIL from frame {c.first_difference}"
-    if scenario == "shock":
+    if scenario in ("shock", "sinusoid+bad_captures"):
         assert run.clipped.any()
-        assert (c.fw["axis_flags"] & 2).any()  # the rail flag reached the frames
+        flag = 2 if scenario == "shock" else 1  # the rail flag (analog), the skipped flag (a lost capture)
+        assert (c.fw["axis_flags"] & flag).any(), "the skip reached no frame"
     if form == "covariance" or not run.clipped.any():
         # the firmware's filter is the Kalman filter here
         for key, err in c.max_err_sigma.items():
