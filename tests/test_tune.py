@@ -103,6 +103,13 @@ def test_sigma_eps_without_aids_is_reported_not_identified():
     # a smaller motion walk with a larger bias walk fits as well: sigma_n's profile is open below
     assert r.ends["sigma_n"][0] == "open" and not r.identified("sigma_n")
     assert "open below" in r.why_not_identified("sigma_n")
+    # a smaller budget holds (but for the Hessian's and the last step's few), and an end it cannot reach is said
+    small = tune(with_noise(truth, sigma_n=2.0), z, valid, [[]], figures=("sigma_n", "sigma_eps"), max_evaluations=300)
+    assert small.evaluations <= 300 + 30
+    assert small.why_not_identified("sigma_n") in (
+        "profile not closed within the evaluation budget",
+        "profile open below within the search range",
+    )
     # with the bias walk held, sigma_n is identified and its interval holds the truth
     r = tune(with_noise(truth, sigma_n=2.0), z, valid, [[]], figures=("sigma_n", "R"))
     assert r.identified("sigma_n") and r.identified("R")

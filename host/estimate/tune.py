@@ -37,9 +37,9 @@ ran out before an end closed (said as such).
 c2 keeps the normal interval from the observed information (the innovations are linear in c2).
 
 Budget: ``max_evaluations`` likelihood evaluations in all; the search takes at most a third, the
-Hessian a few, the profiles the rest, weakest figure (largest se_ln) first, each end of each profile at most
-an equal share of what is left when it starts (so a profile that wanders to its search bound cannot starve
-the others).
+Hessian a few, the profiles the rest, best-determined figure (smallest se_ln) first, each end of each
+profile at most an equal share of what is left when it starts: the weakest figure, last, gets what the
+others did not need, and a profile that wanders to its search bound cannot starve the others.
 
 The result is adopted only if it is significantly better than the starting model: the likelihood-ratio
 statistic 2 (ln L(theta_hat) - ln L(theta_0)) must exceed the chi-square 95 % point with as many degrees of
@@ -291,8 +291,9 @@ def tune(
     ci = {}
     ends: dict[str, tuple[str, str]] = {}
     noise_figs = [f for f in figures if not _is_c2(f)]
-    # profiles, weakest figure first (an undefined se counts as the weakest)
-    noise_figs.sort(key=lambda f: -se[f] if math.isfinite(se[f]) else -math.inf)
+    # profiles, best-determined figure first (cheap: its ends are near), so that what they leave goes to the
+    # weakest (an undefined se counts as the weakest), whose profile may have to walk to a search bound
+    noise_figs.sort(key=lambda f: se[f] if math.isfinite(se[f]) else math.inf)
     total = max_evaluations + 20  # the Hessian may take the search's evaluations past its share
     for n_fig, f in enumerate(noise_figs):
         i = figures.index(f)
