@@ -35,6 +35,7 @@ def main() -> int:
     else:
         spec = importlib.util.spec_from_file_location("tune_other", args.module)
         mod = importlib.util.module_from_spec(spec)
+        sys.modules["tune_other"] = mod  # its dataclasses look their module up
         spec.loader.exec_module(mod)
         tune = mod.tune
     truth = one_axis_model(**TRUE)

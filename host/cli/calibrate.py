@@ -42,7 +42,8 @@ MAX_SAMPLES = 10_000_000  # about 28 h at 100 Hz; the pose search holds a few co
 def register(sub) -> None:
     p = sub.add_parser(
         "calibrate",
-        help="zero-g offset and sensitivity per axis from a recording of still poses (six-position test)",
+        help="zero-g offset and sensitivity per axis from a recording of still poses (six-position test, or any "
+        "orientations of a 3-axis part)",
         description="Find the still poses in a recording, fit each axis's zero-g offset, sensitivity and "
         "cross-axis terms with 95 %% intervals, and write them into a model file.",
     )
