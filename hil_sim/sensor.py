@@ -39,7 +39,11 @@ longer one, simulating a subset of the axes gives the same columns, and
 
 The ``tumble`` scenario (the six-position calibration test) is the exception: each
 axis sees its own share of gravity as the part is turned through the poses of
-:func:`accelnav.hil_sim.trajectories.tumble_poses`, and r = u = 0.
+:func:`accelnav.hil_sim.trajectories.tumble_poses`, and r = u = 0. ``tumble_any``
+does the same through random still orientations
+(:func:`accelnav.hil_sim.trajectories.tumble_any_poses`, drawn from the motion
+stream: one per ``TUMBLE_HOLD_S + TUMBLE_TURN_S``), for the gravity-magnitude
+calibration of a 3-axis part (a 2-axis part sees only their in-plane components).
 
 Motion of several axes: one trajectory is drawn and axis i of the model sees
 it scaled by AXIS_GAIN[i] = (1.0, -0.8, 0.6)[i], as a rigid body moving along
@@ -63,7 +67,7 @@ from scipy.signal import lfilter
 from accelnav.codegen.design import input_conversion
 from accelnav.codegen.model import G0, Model
 
-from .trajectories import ALL_SCENARIOS, truth, tumble_specific_force
+from .trajectories import ALL_SCENARIOS, TUMBLE_HOLD_S, TUMBLE_TURN_S, truth, tumble_any_poses, tumble_specific_force
 
 AXIS_GAIN = (1.0, -0.8, 0.6)  # motion seen by model axis 0, 1, 2 (relative to the drawn trajectory)
 MAX_AXES = len(AXIS_GAIN)
@@ -247,6 +251,11 @@ def simulate(
     elif scenario == "tumble":
         r1 = u1 = a1 = np.zeros_like(t)
         turned = tumble_specific_force(t, len(model.axes), G0)
+    elif scenario == "tumble_any":
+        r1 = u1 = a1 = np.zeros_like(t)
+        count = int(t[-1] // (TUMBLE_HOLD_S + TUMBLE_TURN_S)) + 2
+        poses = tumble_any_poses(np.random.default_rng(motion_ss), count)
+        turned = tumble_specific_force(t, len(model.axes), G0, poses)
     else:
         r1, u1, a1 = truth(scenario, t, np.random.default_rng(motion_ss), model.max_accel_m_s2)
 

@@ -49,11 +49,12 @@ import numpy as np
 
 SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shock", "walking")
 # Scenarios whose truth differs per axis and is not a motion along one line (see tumble_specific_force)
-MULTI_AXIS_SCENARIOS = ("tumble",)
+MULTI_AXIS_SCENARIOS = ("tumble", "tumble_any")
 ALL_SCENARIOS = SCENARIOS + MULTI_AXIS_SCENARIOS
 
 TUMBLE_HOLD_S = 8.0  # each pose is held this long ...
 TUMBLE_TURN_S = 3.0  # ... and the turn to the next one takes this long
+TUMBLE_ANY_MIN_TURN_DEG = 45.0  # tumble_any: consecutive random poses differ by at least this much
 
 _CHUNK = 64  # moves drawn per batch of random numbers (fixed: keeps runs prefix-consistent)
 
@@ -288,18 +289,37 @@ def tumble_poses(n_axes: int) -> np.ndarray:
     return np.array([sign * eye[i] for i in order for sign in (1.0, -1.0)])
 
 
-def tumble_specific_force(t: np.ndarray, n_axes: int, g0: float) -> np.ndarray:
-    """Specific force [m/s^2] on each of ``n_axes`` axes while the part is turned through :func:`tumble_poses`.
+def tumble_any_poses(rng: np.random.Generator, count: int) -> np.ndarray:
+    """``count`` random 'up' vectors (sensor frame, unit, 3 components): still poses in any orientation.
 
-    Shape (len(t), n_axes). The part starts in the first pose, holds each pose ``TUMBLE_HOLD_S`` and turns to
-    the next in ``TUMBLE_TURN_S`` (a rotation), cycling through the poses for as long as ``t`` lasts. It turns
-    in place, so its position and velocity stay 0: unlike the other scenarios, a is gravity's projection, not
-    du/dt. A turn between opposite poses goes through a perpendicular pose; the up vector turns at the raised-
-    cosine rate, so the turn starts and ends smoothly. The poses are exact (a calibration cube on a level
-    table).
+    Uniform on the sphere, drawn from ``rng`` in chunks of 64 (a shorter run's poses are a prefix of a longer
+    one's); a pose within ``TUMBLE_ANY_MIN_TURN_DEG`` of the one before is turned the other way up (negated),
+    so that every turn is large enough to be seen as a turn and consecutive poses are distinct.
+    """
+    chunks = -(-max(1, int(count)) // _CHUNK)
+    v = rng.standard_normal((chunks * _CHUNK, 3))[:count]
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    c = np.cos(np.radians(TUMBLE_ANY_MIN_TURN_DEG))
+    for k in range(1, len(v)):
+        if float(v[k] @ v[k - 1]) > c:
+            v[k] = -v[k]
+    return v
+
+
+def tumble_specific_force(t: np.ndarray, n_axes: int, g0: float, poses: np.ndarray | None = None) -> np.ndarray:
+    """Specific force [m/s^2] on each of ``n_axes`` axes while the part is turned through still poses.
+
+    ``poses`` (count, 3) are unit 'up' vectors; default :func:`tumble_poses` (the ``tumble`` scenario;
+    ``tumble_any`` passes :func:`tumble_any_poses`). Shape (len(t), n_axes). The part starts in the first
+    pose, holds each pose ``TUMBLE_HOLD_S`` and turns to the next in ``TUMBLE_TURN_S`` (a rotation in the
+    plane of the two up vectors, through their angle), cycling through the poses for as long as ``t`` lasts.
+    It turns in place, so its position and velocity stay 0: unlike the other scenarios, a is gravity's
+    projection, not du/dt. A turn between opposite poses goes through a perpendicular pose; the up vector
+    turns at the raised-cosine rate, so the turn starts and ends smoothly. The poses are exact (a calibration
+    cube on a level table, or a part held still in a known orientation for the truth).
     """
     t = np.asarray(t, dtype=np.float64)
-    poses = tumble_poses(n_axes)
+    poses = tumble_poses(n_axes) if poses is None else np.asarray(poses, dtype=np.float64)
     period = TUMBLE_HOLD_S + TUMBLE_TURN_S
     k = np.floor(t / period).astype(np.int64)
     s = t - k * period
@@ -307,9 +327,12 @@ def tumble_specific_force(t: np.ndarray, n_axes: int, g0: float) -> np.ndarray:
     nxt = poses[(k + 1) % len(poses)]
     x = np.clip((s - TUMBLE_HOLD_S) / TUMBLE_TURN_S, 0.0, 1.0)
     w = ((1.0 - np.cos(np.pi * x)) / 2.0)[:, None]
-    # a rotation in the plane of the two poses (90 degrees), or through a perpendicular one (180 degrees)
-    opposite = np.sum(cur * nxt, axis=1, keepdims=True) < -0.5
-    other = np.where(opposite, np.roll(cur, 1, axis=1), nxt)
-    angle = np.where(opposite, np.pi, np.pi / 2) * w
+    # a rotation in the plane of the two poses, or through a perpendicular one (180 degrees)
+    dot = np.clip(np.sum(cur * nxt, axis=1, keepdims=True), -1.0, 1.0)
+    opposite = dot < -1.0 + 1e-9
+    perp = nxt - dot * cur
+    norm = np.linalg.norm(perp, axis=1, keepdims=True)
+    other = np.where(opposite | (norm < 1e-12), np.roll(cur, 1, axis=1), perp / np.maximum(norm, 1e-300))
+    angle = np.where(opposite, np.pi, np.arccos(dot)) * w
     up = np.cos(angle) * cur + np.sin(angle) * other
     return g0 * up[:, :n_axes]

@@ -2,9 +2,11 @@
 
 The recording (CSV, NPZ or an accelnav run file, read by :mod:`accelnav.data.recording`) holds the part
 turned through several still poses: the six-position test (each axis up and down; with the 2-axis ADXL250,
-x up/down, y up/down and flat), or any set of at least four aligned poses. Its accelerations must be the
-ones the model's current calibration gives (``--model``; else the model embedded in the recording; else
-the embedded default): calibrate measures what that conversion gets wrong. The poses are found
+x up/down, y up/down and flat), or any set of at least four aligned poses, or, with a 3-axis part, any set
+of at least six still poses in arbitrary orientations (the gravity-magnitude fit; ten or more also give the
+angles between the axes). The method is chosen from the poses and named in the report. Its accelerations
+must be the ones the model's current calibration gives (``--model``; else the model embedded in the
+recording; else the embedded default): calibrate measures what that conversion gets wrong. The poses are found
 automatically (:func:`accelnav.identify.calibrate.detect_poses`), the per-axis offset, sensitivity and
 (where the poses allow) cross-axis terms are fitted with 95 % intervals, and the model is written with:
 
@@ -31,7 +33,7 @@ from accelnav.codegen.model import DEFAULT_MODEL, G0, Model, load_model, loads_m
 from accelnav.codegen.modelfile import dump_model, revalidate
 from accelnav.data.recording import read_recording
 from accelnav.errors import UserError
-from accelnav.identify.calibrate import Calibration, CalibrationError, detect_poses, fit_axes, native
+from accelnav.identify.calibrate import GRAVITY, Calibration, CalibrationError, calibrate, detect_poses, native
 from accelnav.progress import Progress
 
 MAX_SAMPLES = 10_000_000  # about 28 h at 100 Hz; the pose search holds a few copies of the samples
@@ -40,7 +42,8 @@ MAX_SAMPLES = 10_000_000  # about 28 h at 100 Hz; the pose search holds a few co
 def register(sub) -> None:
     p = sub.add_parser(
         "calibrate",
-        help="zero-g offset and sensitivity per axis from a recording of still poses (six-position test)",
+        help="zero-g offset and sensitivity per axis from a recording of still poses (six-position test, or any "
+        "orientations of a 3-axis part)",
         description="Find the still poses in a recording, fit each axis's zero-g offset, sensitivity and "
         "cross-axis terms with 95 %% intervals, and write them into a model file.",
     )
@@ -120,7 +123,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         with Progress("poses", total=2, unit="stages") as p:
             poses = detect_poses(acc, rec.rate_hz, steps=steps, noise_sd=noise, min_pose_s=args.min_pose)
             p.update(1)
-            cal = fit_axes(poses, names, cross=not args.no_cross)
+            cal = calibrate(poses, names, cross=not args.no_cross)
             p.update(2)
     except CalibrationError as exc:
         raise UserError(f"{rec.source}: {exc}") from None
@@ -165,7 +168,9 @@ def report(cal: Calibration, names: tuple[str, ...]) -> list[str]:
     for k, p in enumerate(cal.poses):
         lv = ", ".join(f"{n} {int(v):+d}" for n, v in zip(names, p.level, strict=True))
         rd = ", ".join(f"{m / G0:+.5f}" for m in p.mean)
-        out.append(f"  {k + 1}: {p.t0:7.1f} .. {p.t1:7.1f} s  levels ({lv}) g  reads ({rd}) g")
+        lv = "" if cal.method == GRAVITY else f"  levels ({lv}) g"
+        out.append(f"  {k + 1}: {p.t0:7.1f} .. {p.t1:7.1f} s{lv}  reads ({rd}) g")
+    out.append(f"method: {cal.method}")
     for a in cal.axes:
         out.append(f"axis {a.name}:")
         out.append(
@@ -184,6 +189,13 @@ def report(cal: Calibration, names: tuple[str, ...]) -> list[str]:
         out.append(
             f"  fit: {a.dof} degrees of freedom, chi2 {a.chi2:.3g}, "
             f"residual rms {a.residual_rms / G0 * 1e3:.3g} mg{scaled}"
+            + (" (of |gravity|, shared by the axes)" if cal.method == GRAVITY else "")
+        )
+    for pc in cal.pairs:
+        out.append(
+            f"axes {pc.name}: cosine of the angle between them {pc.value:+.5f} "
+            f"({math.degrees(math.asin(pc.value)):+.3f} deg from square)  se {pc.se:.3g}  95 % {_ci(pc.ci95)}  "
+            "(reported, not written)"
         )
     return out
 
@@ -193,6 +205,7 @@ def provenance(rec, cal: Calibration, label: str) -> str:
         "accelnav model written by accelnav calibrate",
         f"recording: {Path(rec.source).name}, {rec.n} samples at {rec.rate_hz:.6g} Hz, {len(cal.poses)} still poses",
         f"base: {label}",
+        f"method: {cal.method}",
     ]
     for a in cal.axes:
         cross = "; ".join(f"cross to {k} {v:+.4g} +- {a.se[k]:.2g} (not written)" for k, v in a.cross.items())
@@ -202,4 +215,6 @@ def provenance(rec, cal: Calibration, label: str) -> str:
         )
         for m in a.not_identified:
             lines.append(f"  not identifiable: {m}")
+    for pc in cal.pairs:
+        lines.append(f"axes {pc.name}: cos(angle) {pc.value:+.4g} +- {pc.se:.2g} (not written)")
     return "\n".join(lines)

@@ -56,7 +56,8 @@ def register(sub) -> None:
         type=int,
         default=MAX_EVALUATIONS,
         metavar="N",
-        help=f"likelihood evaluations at most; default {MAX_EVALUATIONS}",
+        help="likelihood evaluations at most: the search (a third) and the profile intervals together; "
+        f"default {MAX_EVALUATIONS}",
     )
     p.set_defaults(func=cmd_tune)
 
@@ -130,17 +131,12 @@ def cmd_tune(args: argparse.Namespace) -> int:
 
 def report(r: TuneResult) -> list[str]:
     lines = ["| figure | start | estimate | 95 % interval | identified |", "|---|---|---|---|---|"]
+    # noise figures: profile-likelihood intervals; c2: normal, from the observed information
     for f in r.start:
         if f in r.figures:
-            lo, hi = r.ci95[f]
-            ident = (
-                "yes"
-                if r.identified(f)
-                else "NO (at the search bound)"
-                if f in r.at_bound
-                else "NO (interval too wide)"
-            )
-            lines.append(f"| {f} | {r.start[f]:.4g} | {r.estimate[f]:.4g} | [{lo:.4g}, {hi:.4g}] | {ident} |")
+            why = r.why_not_identified(f)
+            ident = "yes" if not why else f"NO ({why})"
+            lines.append(f"| {f} | {r.start[f]:.4g} | {r.estimate[f]:.4g} | {_interval(r, f)} | {ident} |")
         else:
             if not f.startswith("c2."):
                 lines.append(f"| {f} | {r.start[f]:.4g} | (kept) | | |")
@@ -157,6 +153,15 @@ def report(r: TuneResult) -> list[str]:
     return lines
 
 
+def _interval(r: TuneResult, f: str) -> str:
+    """The 95 % interval; an open end of a profile interval is the search bound, marked as such."""
+    lo, hi = r.ci95[f]
+    ends = r.ends.get(f, ("closed", "closed"))
+    a = f"{lo:.4g}" + (" (search bound)" if ends[0] == "open" else "")
+    b = f"{hi:.4g}" + (" (search bound)" if ends[1] == "open" else "")
+    return f"[{a}, {b}]"
+
+
 def provenance(args, r: TuneResult) -> str:
     lines = [
         "accelnav model written by accelnav tune",
@@ -165,6 +170,6 @@ def provenance(args, r: TuneResult) -> str:
         + ("estimate adopted" if r.adopted else "starting figures kept"),
     ]
     for f in r.figures:
-        lo, hi = r.ci95[f]
-        lines.append(f"{f}: estimate {r.estimate[f]:.4g}, 95 % [{lo:.4g}, {hi:.4g}], start {r.start[f]:.4g}")
+        kind = "normal" if f.startswith("c2.") else "profile likelihood"
+        lines.append(f"{f}: estimate {r.estimate[f]:.4g}, 95 % ({kind}) {_interval(r, f)}, start {r.start[f]:.4g}")
     return "\n".join(lines)

@@ -19,10 +19,27 @@ Estimate
 --------
 theta = (ln sigma_n, ln sigma_eps, ln R), or a subset (the others kept), optionally with each axis's
 constant bias c2 (searched in units of 0.01 m/s^2; it sets the filter's prior bias and the level the bias
-reverts to), maximised by Nelder-Mead from the
-starting model's values; 95 % intervals from the observed information (the central-difference Hessian of
--ln L in theta): exp(theta +- 1.96 se), a factor, so the interval of a positive figure stays positive. A
-figure whose se(ln) exceeds ``NOT_IDENTIFIED_SE`` is reported as not identified by the data.
+reverts to), maximised by Nelder-Mead from the starting model's values.
+
+Intervals
+---------
+Noise figures: 95 % profile-likelihood intervals in ln(figure): the values of ln(figure) at which the
+profile -ln L (minimised over the other tuned figures) rises 1.92 (chi-square, 1 dof, 3.84 / 2) above its
+minimum. The bias walk is weakly observable, so -ln L is far from quadratic in ln sigma_eps and an interval
+from the curvature at the optimum (``se_ln``, kept for reference: the observed information, the
+central-difference Hessian of -ln L in theta) covers the truth too rarely. Each end is found by following
+the signed root r = sqrt(2 (profile - min)), nearly linear in ln(figure), from the Wald guess, with the
+other figures re-optimised at every step (Nelder-Mead, started from the Hessian's linear prediction or the
+previous step's optimum, whichever fits better). An end that is not reached inside the search range
+(``LN_BOUNDS``) is open: the figure is then reported as not identified by the data, as it is when its
+interval spans more than a factor e^(2 x 1.96 x ``NOT_IDENTIFIED_SE``) ~ 50, or when the evaluation budget
+ran out before an end closed (said as such).
+c2 keeps the normal interval from the observed information (the innovations are linear in c2).
+
+Budget: ``max_evaluations`` likelihood evaluations in all; the search takes at most a third, the
+Hessian a few, the profiles the rest, best-determined figure (smallest se_ln) first, each end of each
+profile at most an equal share of what is left when it starts: the weakest figure, last, gets what the
+others did not need, and a profile that wanders to its search bound cannot starve the others.
 
 The result is adopted only if it is significantly better than the starting model: the likelihood-ratio
 statistic 2 (ln L(theta_hat) - ln L(theta_0)) must exceed the chi-square 95 % point with as many degrees of
@@ -51,7 +68,9 @@ from accelnav.estimate.kf import Measurement
 
 FIGURES = ("sigma_n", "sigma_eps", "R")
 NOT_IDENTIFIED_SE = 1.0  # se of ln(figure): a 95 % interval wider than a factor e^(2 x 1.96) ~ 50
-MAX_EVALUATIONS = 400
+MAX_EVALUATIONS = 1500  # search (at most a third), Hessian and profile intervals together
+PROFILE_DROP = 0.5 * float(stats.chi2.ppf(0.95, 1))  # 1.92: the rise of -ln L at a 95 % profile interval end
+R95 = math.sqrt(2.0 * PROFILE_DROP)  # 1.96: the signed root at an end
 LN_BOUNDS = {"sigma_n": (1e-4, 1e3), "sigma_eps": (1e-9, 10.0), "R": (1e-10, 1e4)}
 
 
@@ -65,31 +84,41 @@ def _axis_loglik(model: Model, j: int, z: np.ndarray, valid: np.ndarray, extras:
     y = z - (xp[:, 2] + xp[:, 3])
     ok = valid & np.isfinite(z)
     ll = -0.5 * float(np.sum(np.log(2.0 * math.pi * S[ok]) + y[ok] ** 2 / S[ok]))
-    h_z = np.array([0.0, 0.0, 1.0, 1.0])
-    by_k: dict[int, list[Measurement]] = {}
-    for m in extras:
-        by_k.setdefault(m.k, []).append(m)
-    for k, ms in by_k.items():
-        x = xp[k].copy()
-        P = Pp[k].copy()
-        if ok[k]:
-            x, P = _update(x, P, h_z, z[k], d.R)
-        for m in ms:
-            h = np.asarray(m.h, dtype=np.float64)
-            Se = float(h @ P @ h) + m.R
-            ye = m.z - float(h @ x)
-            ll -= 0.5 * (math.log(2.0 * math.pi * Se) + ye * ye / Se)
-            x, P = _update(x, P, h, m.z, m.R)
+    if not extras:
+        return ll
+    # the extras' terms, replayed from the prior of their sample (acceleration update first, then the extras in
+    # order): every sample's replay is independent of the others', so all samples are replayed at once
+    ks = np.fromiter((m.k for m in extras), dtype=np.int64, count=len(extras))
+    order = np.argsort(ks, kind="stable")
+    ks = ks[order]
+    hs = np.array([extras[i].h for i in order], dtype=np.float64)
+    zs = np.fromiter((extras[i].z for i in order), dtype=np.float64, count=len(order))
+    rs = np.fromiter((extras[i].R for i in order), dtype=np.float64, count=len(order))
+    uk, first, group = np.unique(ks, return_index=True, return_inverse=True)
+    rank = np.arange(len(ks)) - first[group]
+    X = xp[uk].copy()
+    P = Pp[uk].copy()
+    zk = ok[uk]
+    h_z = np.broadcast_to(np.array([0.0, 0.0, 1.0, 1.0]), (int(zk.sum()), 4))
+    X[zk], P[zk], _ = _update_many(X[zk], P[zk], h_z, z[uk][zk], np.full(int(zk.sum()), d.R))
+    for r in range(int(rank.max()) + 1):
+        sel = rank == r
+        g = group[sel]
+        X[g], P[g], terms = _update_many(X[g], P[g], hs[sel], zs[sel], rs[sel])
+        ll -= 0.5 * float(np.sum(terms))
     return ll
 
 
-def _update(x, P, h, z, R):
-    Ph = P @ h
-    S = float(h @ Ph) + R
-    K = Ph / S
-    x = x + K * (z - float(h @ x))
-    P = P - np.outer(K, Ph)
-    return x, 0.5 * (P + P.T)
+def _update_many(X, P, H, z, R):
+    """Scalar updates of many (x, P) at once: (x, P, log(2 pi S) + y^2 / S) per row."""
+    Ph = np.einsum("nij,nj->ni", P, H)
+    S = np.einsum("ni,ni->n", H, Ph) + R
+    y = z - np.einsum("ni,ni->n", H, X)
+    K = Ph / S[:, None]
+    X = X + K * y[:, None]
+    P = P - K[:, :, None] * Ph[:, None, :]
+    P = 0.5 * (P + np.swapaxes(P, 1, 2))
+    return X, P, np.log(2.0 * math.pi * S) + y * y / S
 
 
 def loglik(model: Model, accel: np.ndarray, valid: np.ndarray, extras: Sequence[Sequence[Measurement]]) -> float:
@@ -119,14 +148,31 @@ class TuneResult:
     evaluations: int
     converged: bool
     at_bound: tuple[str, ...] = ()  # figures whose estimate sits on the search bound
+    # noise figures: how each end of the profile interval ended: "closed", "open" (the profile does not rise
+    # 1.92 inside the search range: that end is the search bound) or "budget" (evaluations ran out: nan)
+    ends: dict[str, tuple[str, str]] = dataclasses.field(default_factory=dict)
 
     def identified(self, name: str) -> bool:
+        return not self.why_not_identified(name)
+
+    def why_not_identified(self, name: str) -> str:
+        """'' when ``name`` is identified by the data; else the reason, in a few words."""
         if name in self.at_bound:
-            return False
+            return "at the search bound"
         s = self.se_ln[name]
         if _is_c2(name):
-            return math.isfinite(s) and s <= NOT_IDENTIFIED_SE * C2_SCALE * 10  # c2 known to 0.1 m/s^2 (10 mg)
-        return math.isfinite(s) and s <= NOT_IDENTIFIED_SE
+            ok = math.isfinite(s) and s <= NOT_IDENTIFIED_SE * C2_SCALE * 10  # c2 known to 0.1 m/s^2 (10 mg)
+            return "" if ok else "interval too wide"
+        ends = self.ends.get(name, ("closed", "closed"))
+        if "open" in ends:
+            side = " and ".join(w for w, e in zip(("below", "above"), ends, strict=True) if e == "open")
+            return f"profile open {side} within the search range"
+        if "budget" in ends:
+            return "profile not closed within the evaluation budget"
+        lo, hi = self.ci95[name]
+        if not (lo > 0 and hi / lo <= math.exp(2 * 1.96 * NOT_IDENTIFIED_SE)):
+            return "interval too wide"
+        return ""
 
     @property
     def chosen(self) -> dict[str, float]:
@@ -206,7 +252,7 @@ def tune(
         options={
             "xatol": 1e-3,
             "fatol": 1e-3,
-            "maxfev": max_evaluations,
+            "maxfev": max(10, max_evaluations // 3),
             "initial_simplex": np.vstack([theta0] + [theta0 + 0.5 * e for e in np.eye(len(figures))]),
         },
     )
@@ -229,7 +275,7 @@ def tune(
                     nll(theta + ei + ej) - nll(theta + ei - ej) - nll(theta - ei + ej) + nll(theta - ei - ej)
                 ) / (4 * h**2)
     # covariance on the well-determined directions; a figure that leans on a flat or curved-the-wrong-way
-    # direction of -ln L (eigenvalue <= 0) gets no interval
+    # direction of -ln L (eigenvalue <= 0) gets no Wald se
     try:
         w, V = np.linalg.eigh(H)
     except np.linalg.LinAlgError:
@@ -243,14 +289,32 @@ def tune(
     est = dict(start)
     est.update(values(theta))
     ci = {}
+    ends: dict[str, tuple[str, str]] = {}
+    noise_figs = [f for f in figures if not _is_c2(f)]
+    # profiles, best-determined figure first (cheap: its ends are near), so that what they leave goes to the
+    # weakest (an undefined se counts as the weakest), whose profile may have to walk to a search bound
+    noise_figs.sort(key=lambda f: se[f] if math.isfinite(se[f]) else math.inf)
+    total = max_evaluations + 20  # the Hessian may take the search's evaluations past its share
+    for n_fig, f in enumerate(noise_figs):
+        i = figures.index(f)
+        sides = []
+        for side, direction in enumerate((-1.0, 1.0)):
+            # a fair share of what is left, so that a figure whose profile wanders far cannot starve the others
+            left = (len(noise_figs) - n_fig) * 2 - side
+            limit = count[0] + max(0, total - count[0]) // left
+            bound = lo[i] if direction < 0 else hi[i]
+            psi, how = _profile_end(nll, theta, f0, i, direction, se[f], bound, lo, hi, H, count, limit)
+            sides.append((psi, how))
+        ends[f] = (sides[0][1], sides[1][1])
+        ci[f] = tuple(math.exp(psi) if how != "budget" else float("nan") for psi, how in sides)
     for f in figures:
+        if not _is_c2(f):
+            continue
         if not math.isfinite(se[f]):
             ci[f] = (float("nan"), float("nan"))
-        elif _is_c2(f):
+        else:
             se[f] *= C2_SCALE
             ci[f] = (est[f] - 1.96 * se[f], est[f] + 1.96 * se[f])
-        else:
-            ci[f] = (est[f] * math.exp(-min(1.96 * se[f], 700.0)), est[f] * math.exp(min(1.96 * se[f], 700.0)))
     lr = max(0.0, 2.0 * (ll1 - ll0))
     p = float(stats.chi2.sf(lr, k))
     return TuneResult(
@@ -267,4 +331,108 @@ def tune(
         evaluations=count[0],
         converged=bool(res.success),
         at_bound=tuple(f for f, t, a, b in zip(figures, theta, lo, hi, strict=True) if t <= a + 0.05 or t >= b - 0.05),
+        ends=ends,
     )
+
+
+def _profile_end(nll, theta, f0, i, direction, se, bound, lo, hi, H, count, limit) -> tuple[float, str]:
+    """ln(figure) where the profile of -ln L in theta[i] rises PROFILE_DROP above f0, going ``direction``.
+
+    Returns (value, "closed"), (bound, "open") when the profile stays below the drop up to the search bound,
+    or (nan, "budget") when ``count`` reaches ``limit`` first. The other coordinates are re-optimised at
+    every step (Nelder-Mead from the linear prediction of the Hessian ``H`` where it is positive definite,
+    else from the previous step's optimum).
+    """
+    k = len(theta)
+    others = [j for j in range(k) if j != i]
+    psi_hat = float(theta[i])
+    predict = None
+    if others:
+        Hoo = H[np.ix_(others, others)]
+        try:
+            np.linalg.cholesky(Hoo)
+            predict = -np.linalg.solve(Hoo, H[others, i])  # d theta_others / d psi
+        except np.linalg.LinAlgError:
+            predict = None
+    last = theta[others].copy() if others else None
+
+    def profile(psi: float) -> float:
+        nonlocal last
+        if not others:
+            return nll(np.array([psi])) if count[0] < limit else float("nan")
+
+        def inner(x):
+            full = np.array(theta, dtype=np.float64)
+            full[i] = psi
+            full[others] = x
+            return nll(full)
+
+        room = limit - count[0]
+        if room < 2 * len(others) + 4:
+            return float("nan")
+        # start from the Hessian's linear prediction or from the previous step's optimum, whichever fits better
+        start = np.clip(last, lo[others], hi[others])
+        if predict is not None:
+            guess = np.clip(theta[others] + predict * (psi - psi_hat), lo[others], hi[others])
+            if inner(guess) < inner(start):
+                start = guess
+        r = optimize.minimize(
+            inner,
+            start,
+            method="Nelder-Mead",
+            options={
+                "xatol": 2e-3,
+                "fatol": 2e-3,
+                "maxfev": min(room, 60 * len(others)),
+                "initial_simplex": np.vstack([start] + [start + 0.05 * e for e in np.eye(len(others))]),
+            },
+        )
+        last = r.x
+        return float(r.fun)
+
+    def root(psi: float) -> float:
+        v = profile(psi)
+        return math.sqrt(2.0 * max(v - f0, 0.0)) if math.isfinite(v) else float("nan")
+
+    step = 1.96 * se if math.isfinite(se) and se > 0 else 0.5
+    step = min(max(step, 0.02), 3.0)
+    below = (psi_hat, 0.0)  # (psi, r) with r < R95, nearest the end found so far
+    above = None  # (psi, r) with r > R95
+    psi = psi_hat + direction * step
+    for _ in range(16):
+        at_bound = (psi - bound) * direction >= 0
+        if at_bound:
+            psi = bound
+        r = root(psi)
+        if not math.isfinite(r):
+            return float("nan"), "budget"
+        if abs(r - R95) < 0.02:
+            return psi, "closed"
+        if r < R95:
+            if at_bound:
+                return bound, "open"
+            below = (psi, r)
+        else:
+            above = (psi, r)
+        if above is not None:
+            (p0, r0), (p1, r1) = below, above
+            if abs(p1 - p0) < 5e-3:
+                return p0 + (p1 - p0) * (R95 - r0) / (r1 - r0), "closed"
+            # the signed root is nearly linear in psi: interpolate, kept inside the bracket
+            x = (R95 - r0) / (r1 - r0)
+            psi = p0 + (p1 - p0) * min(max(x, 0.1), 0.9)
+        else:
+            (p0, r0) = below
+            slope = (r0 - 0.0) / (p0 - psi_hat) if p0 != psi_hat else 0.0
+            dist = abs(p0 - psi_hat)
+            if slope * direction > 0:
+                want = abs((R95 - r0) / slope)
+                dist_next = min(max(want * 1.05, 0.2 * dist), 3.0 * dist + 0.5)
+            else:
+                dist_next = 2.0 * dist + 0.5
+            psi = p0 + direction * dist_next
+    (p0, r0) = below
+    if above is not None:
+        (p1, r1) = above
+        return p0 + (p1 - p0) * (R95 - r0) / (r1 - r0), "closed"
+    return float("nan"), "budget"

@@ -11,7 +11,9 @@ sensitivity relative to the model's, c_ik the cross-axis sensitivity to axis k.
 Poses
 -----
 Found automatically: a sample is still when, on every axis, the standard deviation over a ``window_s`` window
-is at most ``STILL_K`` times that axis's typical (median) window deviation; runs of still samples lasting
+is at most ``STILL_K`` times that axis's typical (median) window deviation, and the means of the two
+adjacent windows around it differ by at most ``LEVEL_K`` standard errors (a slow turn through a small
+angle, as between two tilted poses, can stay below the spread test on every axis); runs of still samples lasting
 ``min_pose_s`` or longer (less half a window at each end) are poses. A pose's mean is its reading; its
 standard error comes from the spread of 0.5 s block means, taken from their successive differences (which
 allows for short-range correlation of the noise and is not inflated by a creep) plus an allowance for the
@@ -22,12 +24,37 @@ that amplitude at a random phase (variance b^2/2). A turn starts slowly (1 - cos
 trimmed to the samples whose 0.5 s mean stays within 4 standard errors of the pose's central level. A pose
 whose two halves differ by more than 2 mg and 6 standard errors is refused as not still.
 
-The poses must be aligned: every axis within ``ALIGN_TOL_G`` of +1, 0 or -1 g, at most one axis at +-1 g
-(the six-position test on a cube; with a 2-axis part, +-x, +-y and flat). Tilted poses are refused:
-with a 2-axis part gravity's third component, and so the tilt, is not observable.
+Method, chosen from the poses (:func:`calibrate`)
+------------------------------------------------
+*Known orientations*, when every pose is aligned: every axis within ``ALIGN_TOL_G`` of +1, 0 or -1 g, at
+most one axis at +-1 g (the six-position test on a cube; with a 2-axis part, +-x, +-y and flat). Gravity's
+projection on each axis is then known in every pose, and each axis is a linear fit (below).
 
-What is identifiable
---------------------
+*Gravity magnitude*, when some pose is tilted and the part has 3 axes: the orientations are unknown, but
+in every still pose the calibrated reading has the length of gravity (the classic ellipsoid fit):
+
+    | N^-1 diag(1/s) (m - o) | = G0
+
+with o the offsets, s the sensitivities (relative to the model's) and N's rows the unit sensing directions
+in a frame tied to the axes (x = (1, 0, 0), y = (p, sqrt(1 - p^2), 0), z = (q, r, sqrt(1 - q^2 - r^2))):
+a rotation of the whole part is not observable, so of the cross-axis terms only the three angles between
+the axes are (n_i . n_k, about c_ik + c_ki of the linear model), fitted when there are
+``MIN_POSES_ANGLES`` poses or more. Weighted nonlinear least squares (Levenberg-Marquardt) of |.| - G0,
+each pose weighted by the variance of its residual from its axes' noise and rounding allowance (the
+rounding errors are independent here: the poses' levels differ); the weights are re-evaluated at the
+estimate and the fit repeated. Intervals from the Jacobian (observed information), scaled by chi2/dof
+with Student's t as below. It needs ``MIN_POSES_ANY`` poses or more (6 unknowns, one equation per pose),
+and poses spread in direction: refused, saying which, when they all lie near one direction or one plane,
+when some axis is never read far from 0 g or its readings span too little, or when an axis's sensitivity
+comes out known to worse than ``SCALE_SE_MAX`` (offset ``OFFSET_SE_MAX_G``). It takes the local gravity
+as G0 (the standard value; local gravity differs by up to +-0.3 %, which would show in the sensitivities,
+as it does in the known-orientation method).
+
+With a 2-axis part tilted poses are refused: gravity's third component is not measured, so neither |g|
+nor a tilt gives the in-plane level of a tilted pose.
+
+What is identifiable (known orientations)
+-----------------------------------------
 Offset and sensitivity of axis i need i read at two different levels (+1 and -1 g, or +-1 and 0 g).
 A cross term c_ik needs axis k at +-1 g in poses where i is at 0 and enough poses left over (the
 design matrix of axis i keeps full column rank with at least one degree of freedom). With a 2-axis part
@@ -47,13 +74,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
 from accelnav.codegen.model import G0
 
 WINDOW_S = 0.5
 MIN_POSE_S = 3.0
 STILL_K = 3.0
+LEVEL_K = 6.0  # adjacent windows' means further apart than this many standard errors: the part is turning
 ALIGN_TOL_G = 0.2
 MIN_POSES = 4
 MAX_POSES = 500  # the fit's covariance of the pose means is poses x poses
@@ -96,10 +124,16 @@ class AxisCal:
     scaled: bool  # covariance scaled by chi2/dof
 
 
+ALIGNED = "known orientations (aligned poses: each axis at +1, 0 or -1 g)"
+GRAVITY = "gravity magnitude (poses in any orientation: |gravity| = 1 g in each)"
+
+
 @dataclass(frozen=True)
 class Calibration:
     poses: tuple[Pose, ...]
     axes: tuple[AxisCal, ...]
+    method: str = ALIGNED
+    pairs: tuple = ()  # gravity method with enough poses: PairCal per pair of axes
 
 
 def _moving_mean(x: np.ndarray, w: int) -> np.ndarray:
@@ -151,12 +185,18 @@ def detect_poses(
     sd = np.column_stack([_moving_std(accel[:, j], w) for j in range(m)])
     floor = np.array([max(1e-6 * G0, 0.5 * (steps[j] if steps is not None else 0.0)) for j in range(m)])
     thr = STILL_K * np.maximum(np.median(sd, axis=0), floor)
-    still = np.all(sd <= thr, axis=1)
+    mm = np.column_stack([_moving_mean(accel[:, j], w) for j in range(m)])
+    # a slow turn through a small angle can keep every axis's spread below thr: also not still where the
+    # means of the two adjacent windows differ by more than LEVEL_K standard errors of their difference
+    h = w // 2
+    step_tol = LEVEL_K * math.sqrt(2.0) * np.maximum(np.median(sd, axis=0), floor) / math.sqrt(w)
+    jump = np.zeros_like(mm)
+    jump[h : n - h] = np.abs(mm[2 * h :] - mm[: n - 2 * h])
+    still = np.all(sd <= thr, axis=1) & np.all(jump <= step_tol, axis=1)
     edges = np.flatnonzero(np.diff(np.concatenate(([0], still.astype(np.int8), [0]))))
     trim = w // 2
     poses = []
     block = max(1, int(round(BLOCK_S * rate_hz)))
-    mm = np.column_stack([_moving_mean(accel[:, j], w) for j in range(m)])
     tol = 4.0 * np.maximum(np.median(sd, axis=0), floor) / math.sqrt(w)
     for s0, s1 in zip(edges[::2], edges[1::2], strict=True):
         a0, a1 = s0 + trim, s1 - trim
@@ -310,3 +350,231 @@ def native(model_axis, offset: float, scale: float) -> tuple[float, float]:
     offset = (zero' - zero_g) / sensitivity * G0 and scale = sensitivity' / sensitivity.
     """
     return model_axis.zero_g + offset * model_axis.sensitivity / G0, model_axis.sensitivity * scale
+
+
+# --------------------------------------------------------------------------
+# Poses in any orientation (3 axes): the gravity-magnitude (ellipsoid) calibration
+
+MIN_POSES_ANY = 6  # offsets and sensitivities of 3 axes: 6 unknowns, one equation (|gravity| = 1 g) per pose
+MIN_POSES_ANGLES = 10  # and the 3 angles between the axes, with a spare pose
+PLANE_MIN = 0.02  # smallest eigenvalue of the poses' mean (up up^T): below (rms 8 deg out of a plane), near one plane
+AXIS_MAX_MIN = 0.5  # some pose must read each axis at least this far from 0 g (in g) ...
+AXIS_SPAN_MIN = 0.5  # ... and the readings of each axis must span at least this much (in g)
+SCALE_SE_MAX = 0.02  # a sensitivity known to worse than 2 %, or an offset to worse than 20 mg: refused
+OFFSET_SE_MAX_G = 0.02
+
+
+@dataclass(frozen=True)
+class PairCal:
+    """Angle between two sensing axes (gravity-magnitude method): n_i . n_k, the cosine of their angle."""
+
+    name: str  # "x-y"
+    value: float  # n_i . n_k (0 for orthogonal axes; about c_ik + c_ki of the known-orientation model)
+    se: float
+    ci95: tuple[float, float]
+
+
+def is_aligned(p: Pose) -> bool:
+    """Within ``ALIGN_TOL_G`` of an aligned pose: each axis at +-1 or 0 g, at most one at +-1 g."""
+    g = p.mean / G0
+    return not (np.any(np.abs(p.level) > 1) or np.any(np.abs(g - p.level) > ALIGN_TOL_G) or np.sum(np.abs(p.level)) > 1)
+
+
+def calibrate(poses: list[Pose], names: tuple[str, ...], *, cross: bool = True) -> Calibration:
+    """Choose the method from the poses: all aligned -> known orientations (:func:`fit_axes`); else, with 3
+    axes, the gravity magnitude (:func:`fit_gravity`); else refused (one line, says why and what to do)."""
+    if len(poses) > MAX_POSES:
+        raise CalibrationError(
+            f"found {len(poses)} still poses; accepted: at most {MAX_POSES} (cut the recording to the calibration)"
+        )
+    tilted = [k for k, p in enumerate(poses) if not is_aligned(p)]
+    if not tilted:
+        return fit_axes(poses, names, cross=cross)
+    if len(names) == 3:
+        return fit_gravity(poses, names, cross=cross)
+    k = tilted[0]
+    p = poses[k]
+    reading = ", ".join(f"{n} {v:+.3f}" for n, v in zip(names, p.mean / G0, strict=True))
+    raise CalibrationError(
+        f"pose {k + 1} at {p.t0:.1f}..{p.t1:.1f} s reads ({reading}) g: not within {ALIGN_TOL_G:g} g of an aligned "
+        f"pose, and a {len(names)}-axis part cannot use tilted poses (gravity's out-of-plane component is not "
+        "measured, so neither |g| nor the tilt gives the in-plane level); hold it aligned: "
+        + ("x up, x down, y up, y down and flat" if len(names) == 2 else "x up, x down and flat")
+        + f" (each axis within {ALIGN_TOL_G:g} g of +-1 or 0 g)"
+    )
+
+
+def _unpack(theta: np.ndarray, angles: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(offset [m/s^2], scale, N) from theta = (offset/G0 (3), scale (3)[, p, q, r]); rows of N are the unit
+    sensing directions: x = (1, 0, 0), y = (p, sqrt(1 - p^2), 0), z = (q, r, sqrt(1 - q^2 - r^2))."""
+    o = theta[:3] * G0
+    s = theta[3:6]
+    N = np.eye(3)
+    if angles:
+        p, q, r = theta[6:9]
+        N = np.array(
+            [
+                [1.0, 0.0, 0.0],
+                [p, math.sqrt(max(1 - p * p, 1e-12)), 0.0],
+                [q, r, math.sqrt(max(1 - q * q - r * r, 1e-12))],
+            ]
+        )
+    return o, s, N
+
+
+def _gravity_residuals(theta, M, angles):
+    """|gravity| - G0 per pose, gravity = N^-1 diag(1/s) (m - o), and d residual / d m (poses, 3)."""
+    o, s, N = _unpack(theta, angles)
+    A = np.linalg.inv(N) / s[None, :]  # N^-1 diag(1/s)
+    a = (M - o) @ A.T
+    norm = np.linalg.norm(a, axis=1)
+    return norm - G0, (a / norm[:, None]) @ A
+
+
+def _pair_values(theta: np.ndarray) -> np.ndarray:
+    p, q, r = theta[6:9]
+    return np.array([p, q, p * q + math.sqrt(max(1 - p * p, 1e-12)) * r])
+
+
+def _directions(poses: list[Pose]) -> np.ndarray:
+    U = np.array([p.mean for p in poses])
+    return U / np.linalg.norm(U, axis=1, keepdims=True)
+
+
+def check_spread(poses: list[Pose], names: tuple[str, ...]) -> None:
+    """Refuse, in one line, pose sets whose directions do not determine every offset and sensitivity."""
+    n = len(poses)
+    if n < MIN_POSES_ANY:
+        raise CalibrationError(
+            f"found {n} still pose(s), some tilted; in arbitrary orientations the gravity-magnitude calibration "
+            f"needs at least {MIN_POSES_ANY} (6 unknowns, offset and sensitivity of 3 axes, and one equation per "
+            f"pose: |gravity| = 1 g; {MIN_POSES_ANGLES} with the angles between the axes); add poses, or hold "
+            f"{MIN_POSES} or more aligned ones (the six-position test)"
+        )
+    U = _directions(poses)
+    w, V = np.linalg.eigh(U.T @ U / n)
+    if w[1] < PLANE_MIN:
+        d = V[:, 2] * np.sign(V[np.argmax(np.abs(V[:, 2])), 2])
+        spread = math.degrees(math.asin(min(1.0, math.sqrt(max(w[0] + w[1], 0.0)))))
+        raise CalibrationError(
+            f"all {n} poses lie within about {spread:.0f} deg of one direction (up = "
+            + ", ".join(f"{nm} {round(float(v), 2) + 0.0:+.2f}" for nm, v in zip(names, d, strict=True))
+            + " and its opposite): the offsets and sensitivities of the other axes are not identifiable; "
+            "turn the part so that each axis points up, down and sideways in some poses"
+        )
+    if w[0] < PLANE_MIN:
+        nrm = V[:, 0] * np.sign(V[np.argmax(np.abs(V[:, 0])), 0])
+        tilt = math.degrees(math.asin(min(1.0, math.sqrt(max(w[0], 0.0)))))
+        raise CalibrationError(
+            f"all {n} poses lie near one plane (rms {tilt:.0f} deg out of it; its normal: "
+            + ", ".join(f"{nm} {round(float(v), 2) + 0.0:+.2f}" for nm, v in zip(names, nrm, strict=True))
+            + "): the sensitivity along the normal is not identifiable; add poses with the normal pointing up "
+            "and down"
+        )
+    for j, name in enumerate(names):
+        lo, hi = float(U[:, j].min()), float(U[:, j].max())
+        if max(abs(lo), abs(hi)) < AXIS_MAX_MIN:
+            raise CalibrationError(
+                f"axis {name}: every pose reads it between {lo:+.2f} and {hi:+.2f} g (near the plane of the other "
+                f"axes): its offset and sensitivity are not identifiable; add poses with {name} near +1 and -1 g"
+            )
+        if hi - lo < AXIS_SPAN_MIN:
+            raise CalibrationError(
+                f"axis {name}: every pose reads it between {lo:+.2f} and {hi:+.2f} g (all poses near one "
+                f"direction of it): its offset and sensitivity cannot be told apart; add poses with {name} at "
+                "other levels (up, down, sideways)"
+            )
+
+
+def fit_gravity(poses: list[Pose], names: tuple[str, ...], *, cross: bool = True) -> Calibration:
+    """Offsets, sensitivities and (with ``cross`` and enough poses) the angles between the axes of a 3-axis
+    part from still poses in any orientation: |N^-1 diag(1/s) (m - o)| = G0 in every pose, by weighted
+    nonlinear least squares (see the module docstring)."""
+    if len(names) != 3:
+        raise CalibrationError(f"the gravity-magnitude calibration needs 3 axes; the model has {len(names)}")
+    n = len(poses)
+    angles = cross and n >= MIN_POSES_ANGLES
+    check_spread(poses, names)
+    M = np.array([p.mean for p in poses])
+    var = np.array([p.se**2 + p.quant**2 / 2.0 for p in poses])  # (poses, 3); independent between poses
+    theta = np.concatenate((np.zeros(3), np.ones(3), np.zeros(3 if angles else 0)))
+    sig = np.ones(n)
+    for _ in range(3):  # the weights depend (weakly) on theta: refit with them re-evaluated
+        _, D = _gravity_residuals(theta, M, angles)
+        sig = np.sqrt(np.sum(D**2 * var, axis=1))
+
+        def fun(th, sig=sig):
+            return _gravity_residuals(th, M, angles)[0] / sig
+
+        res = optimize.least_squares(fun, theta, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12)
+        theta = res.x
+    J = res.jac
+    r, _ = _gravity_residuals(theta, M, angles)
+    chi2 = float(np.sum((r / sig) ** 2))
+    k = len(theta)
+    dof = n - k
+    try:
+        cov = np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        cov = np.full((k, k), np.inf)
+    scaled = dof >= 3 and chi2 / dof > 1.0
+    qn = 1.959964
+    if scaled:
+        cov = cov * (chi2 / dof)
+        qn = float(stats.t.ppf(0.975, dof))
+    sd = np.sqrt(np.abs(np.diag(cov)))
+    for j, name in enumerate(names):
+        if not (sd[3 + j] <= SCALE_SE_MAX and sd[j] <= OFFSET_SE_MAX_G):
+            raise CalibrationError(
+                f"axis {name}: the {n} poses determine its sensitivity to {sd[3 + j] * 100:.2g} % and its offset to "
+                f"{sd[j] * 1e3:.3g} mg (se; accepted: {SCALE_SE_MAX * 100:g} % and {OFFSET_SE_MAX_G * 1e3:g} mg): "
+                f"the poses do not spread enough; add poses with {name} up, down and sideways"
+            )
+    o, s, _ = _unpack(theta, angles)
+    missing_all = []
+    if cross and not angles:
+        missing_all.append(
+            f"the angles between the axes (the gravity-magnitude fit needs {MIN_POSES_ANGLES} poses or more for "
+            f"them; found {n})"
+        )
+    axes = []
+    for j, name in enumerate(names):
+        miss = list(missing_all)
+        if cross:
+            miss.append(
+                f"cross-axis terms of {name} one by one (with unknown orientations only the angles between the axes "
+                "are known: see the axis pairs)"
+            )
+        se_o, se_s = float(sd[j] * G0), float(sd[3 + j])
+        axes.append(
+            AxisCal(
+                name=name,
+                offset=float(o[j]),
+                scale=float(s[j]),
+                cross={},
+                se={"offset": se_o, "scale": se_s},
+                ci95={
+                    "offset": (float(o[j]) - qn * se_o, float(o[j]) + qn * se_o),
+                    "scale": (float(s[j]) - qn * se_s, float(s[j]) + qn * se_s),
+                },
+                not_identified=tuple(miss),
+                chi2=chi2,
+                dof=dof,
+                residual_rms=float(np.sqrt(np.mean(r**2))),
+                scaled=scaled,
+            )
+        )
+    pairs = []
+    if angles:
+        vals = _pair_values(theta)
+        G = np.zeros((3, k))
+        h = 1e-7
+        for c in range(6, 9):
+            e = np.zeros(k)
+            e[c] = h
+            G[:, c] = (_pair_values(theta + e) - _pair_values(theta - e)) / (2 * h)
+        pcov = G @ cov @ G.T
+        for (a, b), v, var_p in zip(((0, 1), (0, 2), (1, 2)), vals, np.diag(pcov), strict=True):
+            se_p = math.sqrt(max(var_p, 0.0))
+            pairs.append(PairCal(f"{names[a]}-{names[b]}", float(v), se_p, (v - qn * se_p, v + qn * se_p)))
+    return Calibration(tuple(poses), tuple(axes), method=GRAVITY, pairs=tuple(pairs))
