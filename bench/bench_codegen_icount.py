@@ -136,8 +136,10 @@ def run_core(core: str, model, codes, tmp: Path) -> tuple[dict, dict, float]:
     main_c = MAIN.replace("CODES", ", ".join(str(int(c)) for c in codes)).replace("_AX_", f"_{ax}_")
     (tmp / "main.c").write_text(main_c)
     elf = tmp / "bench.elf"
-    srcs = [tmp / "main.c", board / "startup.c"] + [tmp / f"accelnav_{t}.c" for t, _, _ in VARIANTS]
-    link = ["arm-none-eabi-gcc", *cflags, "-nostdlib", "-I", str(board), "-I", str(tmp), "-T", str(board / ld)]
+    runtime = board.parent / "semihost_rt.c"  # the runtime the emulated boards share
+    srcs = [tmp / "main.c", board / "startup.c", runtime] + [tmp / f"accelnav_{t}.c" for t, _, _ in VARIANTS]
+    inc = ["-I", str(board), "-I", str(board.parent), "-I", str(tmp)]
+    link = ["arm-none-eabi-gcc", *cflags, "-nostdlib", *inc, "-T", str(board / ld)]
     subprocess.run([*link, *map(str, srcs), "-lgcc", "-o", str(elf)], check=True)
     # the one way accelnav runs code on the emulator (hil_sim.qemu), with -icount shift=0
     text_out = run_to_exit(elf, icount=True, timeout=300, machine=machine)

@@ -39,7 +39,7 @@ FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/mps2_an385
 FW_SRCS    := $(FW_DIR)/boards/mps2_an385/board_mps2.c
 # the runtime's startup.c (not ours) casts function pointers to void * in its vector
 # table, which -pedantic refuses: it is built with the same flags minus -pedantic
-FW_LOOSE   := $(FW_DIR)/boards/mps2_an385/startup.c
+FW_LOOSE   := $(FW_DIR)/boards/mps2_an385/startup.c $(FW_DIR)/boards/semihost_rt.c
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/mps2_an385/mps2_an385.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size
@@ -48,7 +48,7 @@ else ifeq ($(BOARD),microbit)
 FW_CC      := $(ARM_CC)
 FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -masm-syntax-unified -I$(FW_DIR)/boards/microbit
 FW_SRCS    := $(FW_DIR)/boards/microbit/board_microbit.c
-FW_LOOSE   := $(FW_DIR)/boards/microbit/startup.c
+FW_LOOSE   := $(FW_DIR)/boards/microbit/startup.c $(FW_DIR)/boards/semihost_rt.c
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/microbit/nrf51822.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size
@@ -93,7 +93,12 @@ FW_LOOSE_OBJ := $(patsubst %.c,$(FW_OUT)/%.o,$(notdir $(FW_LOOSE)))
 
 $(FW_OUT)/%.o: $(FW_BOARD_DIR)/%.c $(FW_HEADERS)
 	@mkdir -p $(FW_OUT)
-	$(FW_CC) $(filter-out -pedantic,$(FW_CFLAGS)) -c $< -o $@
+	$(FW_CC) $(filter-out -pedantic,$(FW_CFLAGS)) -I$(FW_DIR)/boards -c $< -o $@
+
+# the runtime the emulated boards share (semihost_rt.c): inline asm with register variables, as startup.c
+$(FW_OUT)/%.o: $(FW_DIR)/boards/%.c $(FW_HEADERS)
+	@mkdir -p $(FW_OUT)
+	$(FW_CC) $(filter-out -pedantic,$(FW_CFLAGS)) -I$(FW_DIR)/boards -c $< -o $@
 
 $(FW_ELF): $(FW_COMMON) $(FW_SRCS) $(FW_LOOSE_OBJ) $(FW_HEADERS) $(wildcard $(FW_BOARD_DIR)/*.ld) $(FW_GEN)/acnframe.h $(FW_STAMP)
 	@mkdir -p $(FW_OUT)

@@ -10,16 +10,9 @@
 
 #include <stdint.h>
 
+#include "semihost_rt.h" /* the shared runtime: console, exit, ticks, reset */
+
 #define BOARD_CPU_HZ 16000000u
 #define BOARD_INSNS_PER_TICK_X2 125u /* 2 x (1 ns per instruction / 62.5 ns per tick) */
-
-void board_puts(const char *s);          /* semihosting SYS_WRITE0 */
-void board_put_u32(uint32_t v);          /* decimal, via board_puts */
-void board_exit(int status);             /* semihosting SYS_EXIT; never returns */
-void board_ticks_start(void);            /* SysTick free-running on the core clock */
-uint32_t board_ticks(void);              /* a free-running 24-bit tick count */
-uint32_t board_ticks_since(uint32_t t0); /* ticks from t0 to now, modulo 2^24 */
-
-int main(void);
 
 #endif

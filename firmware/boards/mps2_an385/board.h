@@ -11,17 +11,11 @@
 
 #include <stdint.h>
 
+#include "semihost_rt.h" /* the shared runtime: console, exit, ticks, reset */
+
 #define BOARD_CPU_HZ 25000000u
 #define BOARD_INSNS_PER_TICK 40u /* 1 ns per instruction (icount shift 0) / 40 ns per tick */
 
-void board_puts(const char *s);          /* semihosting SYS_WRITE0 */
-void board_uart_puts(const char *s);     /* CMSDK UART0 at 0x40004000 */
-void board_put_u32(uint32_t v);          /* decimal, via board_puts */
-void board_exit(int status);             /* semihosting SYS_EXIT; never returns */
-void board_ticks_start(void);            /* SysTick free-running on the core clock */
-uint32_t board_ticks(void);              /* a free-running 24-bit tick count */
-uint32_t board_ticks_since(uint32_t t0); /* ticks from t0 to now, modulo 2^24 */
-
-int main(void);
+void board_uart_puts(const char *s); /* CMSDK UART0 at 0x40004000 */
 
 #endif
