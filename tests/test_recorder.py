@@ -123,7 +123,7 @@ def test_recorder_over_loop(tmp_path, man, telemetry):
         out, man, junk + b"\0" + telemetry[:cut] + junk + b"\0" + telemetry[cut:], Status(shown, enabled=True)
     )
     last = shown.getvalue().rstrip("\n").split("\r")[-1]
-    assert re.search(r"frames/s +2000 frames +lost 0 +CRC errors 0 +bad \d+", last), last
+    assert re.search(r"frames/s +2000 frames +lost 0 +dup 0 +CRC errors 0 +bad \d+", last), last
     assert res.reason == "frames"
     assert res.stats["frames"]["sample"] == 2000
     d = decode_log(out)
@@ -160,6 +160,30 @@ def test_log_info_and_export(tmp_path, man, telemetry, capsys):
     assert status == 2 and "x.acnlog: axis 'x': " in err and "sit at the m" in err and err.count("\n") == 1
     assert cli_main(["log", "info", str(tmp_path / "x.csv")]) == 2  # not a log: one line, status 2
     assert "not an accelnav log" in capsys.readouterr().err
+
+
+def test_log_info_and_export_show_lost_duplicate_and_damaged_frames(tmp_path, man, telemetry, capsys):
+    frames = _frames(telemetry)
+    damaged = bytearray(frames[1500])
+    damaged[10] ^= 0x40  # refused and counted as damaged
+    # frames 100..109 repeated, 1000..1003 lost, 1500 damaged (so lost too)
+    stream = frames[:110] + frames[100:1000] + frames[1004:1500] + [bytes(damaged)] + frames[1501:]
+    path = tmp_path / "faults.acnlog"
+    with LogWriter(path, {"manifest": man.data, "model_toml": load_model().text}, fsync_s=None) as log:
+        for k in range(0, len(stream), 64):
+            log.append(b"".join(stream[k : k + 64]))
+    assert cli_main(["log", "info", str(path), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert (info["lost"], info["duplicates"], info["damaged_frames"]) == (5, 10, 1)
+    assert info["frames"]["sample"] == 2000 - 5
+    assert cli_main(["log", "info", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert re.search(r"lost: 5\n +duplicates: 10\n", text), text
+    for suffix in ("csv", "npz"):
+        assert cli_main(["log", "export", str(path), "--out", str(tmp_path / f"f.{suffix}")]) == 0
+        assert "lost 5, duplicates 10, damaged 1 frames" in capsys.readouterr().out
+    rows = np.loadtxt(tmp_path / "f.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(rows[:, 1], np.r_[0:1000, 1004:1500, 1501:2000])  # each sample once
 
 
 # --------------------------------------------------------------------------

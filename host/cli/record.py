@@ -93,7 +93,8 @@ def cmd_record(args) -> int:
     s = res.stats
     print(
         f"accelnav record: {args.out}: {s['frames'].get('sample', 0)} sample frames in {res.seconds:.1f} s, "
-        f"lost {s['lost']}, CRC errors {s['crc_errors']}, bad frames {s['bad_frames']} ({res.reason})"
+        f"lost {s['lost']}, duplicates {s['duplicates']}, damaged {s['bad_frames']} "
+        f"(CRC errors {s['crc_errors']}) ({res.reason})"
     )
     return 1 if res.reason.startswith("link lost") else 0
 
@@ -122,6 +123,7 @@ def _summary(path: Path) -> dict:
         "damaged_bytes": d.damaged_bytes,
         "torn_bytes": d.torn_bytes,
         **d.stats,
+        "damaged_frames": d.stats["bad_frames"],
         "host_seconds": float((d.host_t_ns[-1] - d.host_t_ns[0]) / 1e9) if len(s) else 0.0,
         "index_first": int(s["index"][0]) if len(s) else None,
         "index_last": int(s["index"][-1]) if len(s) else None,
@@ -173,7 +175,7 @@ def cmd_log_export(args) -> int:
                 header.append(f"{ax}_fw_{s}")
                 table.append(cols[s][:, j])
         np.savetxt(args.out, np.column_stack(table), delimiter=",", header=",".join(header), comments="", fmt="%.17g")
-        print(f"accelnav log export: {args.out}: {len(cols['t'])} rows")
+        print(f"accelnav log export: {args.out}: {len(cols['t'])} rows; {_link_counts(d.stats)}")
         return 0
     # NPZ: an accelnav run file (host/data/runfile.py) plus the firmware's own states
     arrays, _ = log_run_arrays(args.log, d)
@@ -183,10 +185,14 @@ def cmd_log_export(args) -> int:
     tmp.replace(args.out)
     gaps = int(np.count_nonzero(np.diff(cols["index"]) != 1)) if len(cols["index"]) > 1 else 0
     print(
-        f"accelnav log export: {args.out}: {len(cols['t'])} samples"
+        f"accelnav log export: {args.out}: {len(cols['t'])} samples; {_link_counts(d.stats)}"
         + (f" ({gaps} gaps in the sample index: decimation or lost frames; t is from the index)" if gaps else "")
     )
     return 0
+
+
+def _link_counts(stats: dict) -> str:
+    return f"lost {stats['lost']}, duplicates {stats['duplicates']}, damaged {stats['bad_frames']} frames"
 
 
 def log_run_arrays(log, d=None) -> tuple[dict[str, np.ndarray], object]:

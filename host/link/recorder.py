@@ -51,7 +51,7 @@ class Status:
             self.rate = (n - n0) / (t - t0)
             self._prev = (t, n)
         return (
-            f"{t:7.1f} s  {self.rate:7.1f} frames/s  {n:9d} frames  lost {s.lost}  "
+            f"{t:7.1f} s  {self.rate:7.1f} frames/s  {n:9d} frames  lost {s.lost}  dup {s.duplicates}  "
             f"CRC errors {s.crc_errors}  bad {s.bad_frames}  {s.bytes / 1024:8.1f} KiB"
         )
 
