@@ -21,6 +21,13 @@ def register(sub) -> None:
     src.add_argument("--model", type=Path, help="model file; its manifest is generated (default: the embedded model)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--frames", type=int, default=None, help="stop after this many sample frames")
+    p.add_argument(
+        "--give-up-after",
+        type=float,
+        default=None,
+        metavar="S",
+        help="end the recording after S seconds without the link (default: keep retrying until Ctrl-C)",
+    )
     p.add_argument("--decimate", type=int, default=None, metavar="N", help="ask the device for one frame in N")
     p.add_argument("--no-commands", action="store_true", help="send nothing to the device (not even an info request)")
     p.add_argument("--force", action="store_true", help="overwrite an existing log")
@@ -61,6 +68,8 @@ def cmd_record(args) -> int:
 
     if args.out.exists() and not args.force:
         raise UserError(f"--out: {args.out} exists; give --force to overwrite it")
+    if args.give_up_after is not None and args.give_up_after < 0:
+        raise UserError(f"--give-up-after: got {args.give_up_after}; accepted: 0 or more seconds")
     if args.decimate is not None and not 1 <= args.decimate <= 1000:
         raise UserError(f"--decimate: got {args.decimate}; accepted: 1 to 1000")
     man, model_text = _manifest(args)
@@ -85,11 +94,15 @@ def cmd_record(args) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: rec.stop())
     try:
-        res = rec.run(duration=args.duration, max_frames=args.frames)
+        res = rec.run(duration=args.duration, max_frames=args.frames, give_up_after=args.give_up_after)
     finally:
         rec.close()
     for w in res.warnings[:5]:
         print(f"accelnav record: warning: {w}")
+    for g in res.gaps:
+        back = f"back at {g['back_s']:.1f} s" if "back_s" in g else "not back"
+        lost = f", {g['frames_lost']} frames lost" if "frames_lost" in g else ""
+        print(f"accelnav record: link lost at {g['lost_s']:.1f} s, {back} ({g['attempts']} attempts){lost}")
     s = res.stats
     print(
         f"accelnav record: {args.out}: {s['frames'].get('sample', 0)} sample frames in {res.seconds:.1f} s, "
