@@ -64,7 +64,7 @@ def test_a_long_gap_is_counted_exactly(man, gap, decimation):
 
 
 def test_seq_wraps_without_loss(man):
-    k = np.arange(200_000)
+    k = np.arange(140_000)  # two wraps of seq
     _check(man, b"".join(_frames(man, k, k + 5)), lost=0, duplicates=0, delivered_index=k + 5)
 
 

@@ -20,11 +20,13 @@ how many frames the sample index says were lost) before recording carries on.
 from __future__ import annotations
 
 import copy
+import select
 import sys
 import time
 from dataclasses import dataclass, field
 
 import serial
+from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
 from accelnav.link.logfile import LogWriter
 from accelnav.link.telemetry import Decoder, Manifest, encode_command
@@ -169,8 +171,7 @@ class Recorder:
                     pending = gaps[-1]
                     continue
                 try:
-                    n = self.ser.in_waiting
-                    data = self.ser.read(max(1, min(n, 1 << 16)))
+                    data = self._read()
                 except (serial.SerialException, OSError) as exc:
                     if not self.reopen or give_up_after == 0:
                         reason = f"link lost: {exc}"
@@ -201,6 +202,21 @@ class Recorder:
             self.status.note = ""
             self.status.update(time.monotonic() - t0, self.decoder, final=True)
         return Result(reason, time.monotonic() - t0, self.decoder.stats.as_dict(), self.info_ok, self.warnings, gaps)
+
+    def _read(self) -> bytes:
+        """What the link has (at most 64 KiB), waiting up to the port's timeout for the first byte."""
+        if isinstance(self.ser, SocketSerial):
+            # pyserial's socket in_waiting is 0 or 1 (readable or not): one byte per read made the recorder
+            # the bottleneck of PIL; take everything the socket holds, and see the peer's close as pyserial does
+            sock = self.ser._socket
+            if not select.select([sock], [], [], self.ser.timeout)[0]:
+                return b""
+            data = sock.recv(1 << 16)
+            if not data:
+                raise serial.SerialException("socket disconnected")
+            return data
+        n = self.ser.in_waiting
+        return self.ser.read(max(1, min(n, 1 << 16)))
 
     def _send_commands(self) -> None:
         for name, args in self.commands:
