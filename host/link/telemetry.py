@@ -283,14 +283,19 @@ class SampleOrder:
     counted in ``duplicates`` (never delivered twice), unless it is a firmware reset (the index restarts
     at 0, seq runs on): seq 1..32767 ahead, the index step not what the seq step back says (within 16
     frames, modulo 2^16), and either the reset flag or an index below what those seq steps take a fresh
-    start to; for 16384 frames after it a frame from before that reset is a repeat too. For a frame with
-    a later index the number of
-    frames sent since the last delivered one is ``a + 65536 k`` with ``a`` the seq step modulo 2^16
-    and ``k`` chosen so that it is nearest to the index step divided by the decimation (the index step
-    of the last one-frame step): gaps of any length are counted exactly as long as the decimation did
-    not change and the MCU missed fewer than 32768 frames' worth of samples inside the gap. After a
-    frame flagged as the first after a filter reset, or a ``stop`` acknowledged inside the gap (the
-    index runs on while stopped, seq does not), the seq step alone counts (k = 0).
+    start to; for 16384 frames after it a frame from before that reset is a repeat too.
+
+    For a frame with a later index the number of frames sent since the last delivered one is
+    ``a + 65536 k`` with ``a`` the seq step modulo 2^16 and ``k`` chosen so that it is nearest to the
+    index step divided by the decimation (the index step of the last one-frame step): gaps of any
+    length are counted exactly as long as the decimation did not change and the MCU missed fewer than
+    32768 frames' worth of samples inside the gap. After a frame flagged as the first after a filter
+    reset, or a ``stop`` acknowledged inside the gap (the index runs on while stopped, seq does not),
+    the seq step alone counts (k = 0); a stop of D frame periods whose ack was lost adds
+    65536 round(D / 65536) lost frames (none below 32768).
+
+    :meth:`step` is the rule frame by frame (:func:`decode_naive`); :meth:`run` applies it to a batch
+    with numpy between the irregular frames (index not later, reset flag, stop), which it steps.
     """
 
     def __init__(self, reset_mask: int = 1 << 2, stop_command: int = 0x11):
