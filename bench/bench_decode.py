@@ -50,6 +50,19 @@ def make_stream(man: Manifest, n: int, rng) -> bytes:
     return b"".join(out)
 
 
+def repeat_chunks(data: bytes, wire: int, rng, n: int) -> bytes:
+    """Repeat ``n`` runs of 1..50 frames right after themselves (a USB-serial adapter's buffer replayed)."""
+    n_frames = len(data) // wire
+    ends = np.sort(rng.integers(50, n_frames, n))
+    parts, at = [], 0
+    for e in ends.tolist():
+        k = int(rng.integers(1, 51))
+        parts += [data[at * wire : e * wire], data[(e - k) * wire : e * wire]]
+        at = e
+    parts.append(data[at * wire :])
+    return b"".join(parts)
+
+
 def damage(data: bytes, rng, n_hits: int) -> bytes:
     buf = bytearray(data)
     for pos in rng.integers(0, len(buf), n_hits):
@@ -62,17 +75,20 @@ def main(argv=None) -> int:
     ap.add_argument("--minutes", type=float, default=60.0)
     ap.add_argument("--rate", type=float, default=1000.0, help="sample rate of the stream, Hz")
     ap.add_argument("--piece", type=int, default=1 << 20, help="bytes per Decoder.feed()")
+    ap.add_argument("--repeats", type=int, default=100, help="runs of 1..50 frames repeated in the stream")
     args = ap.parse_args(argv)
 
     man = Manifest(json.loads(generated(None)["acnframe.json"]))
     n = int(args.minutes * 60 * args.rate)
     rng = np.random.default_rng(1)
     t = time.perf_counter()
-    data = damage(make_stream(man, n, rng), rng, 100)
+    wire = man.frames["sample"]["wire_size"]
+    data = damage(repeat_chunks(make_stream(man, n, rng), wire, rng, args.repeats), rng, 100)
     t_make = time.perf_counter() - t
     print(
         f"stream: {n:,} frames ({args.minutes:g} min at {args.rate:g} Hz, {len(man.axes)} axes), "
-        f"{len(data) / 1e6:.1f} MB, 100 damaged bytes; made in {t_make:.1f} s"
+        f"{len(data) / 1e6:.1f} MB, {args.repeats} repeated runs of frames, 100 damaged bytes; "
+        f"made in {t_make:.1f} s"
     )
 
     t = time.perf_counter()
@@ -85,9 +101,11 @@ def main(argv=None) -> int:
     got = int(sum(len(s) for s in seqs))
 
     t = time.perf_counter()
-    naive, naive_lost = decode_naive(man, data)
+    counts = {}
+    naive, naive_lost = decode_naive(man, data, counts)
     t_naive = time.perf_counter() - t
     assert got == len(naive["sample"]) and dec.stats.lost == naive_lost, "the two decoders disagree"
+    assert dec.stats.duplicates == counts["duplicates"], "the two decoders disagree on duplicates"
     assert np.array_equal(np.concatenate(seqs), np.array([r[1] for r in naive["sample"]], dtype=np.uint16))
 
     print()
@@ -99,7 +117,8 @@ def main(argv=None) -> int:
         print(f"{name:<34}{secs:9.2f}{got / secs:14,.0f}{len(data) / 1e6 / secs:9.1f}{n / args.rate / secs:12,.0f}")
     print(
         f"speed-up: {t_naive / t_vec:.1f}x; both: {got:,} frames accepted, {dec.stats.lost} lost, "
-        f"{dec.stats.crc_errors} CRC errors, {dec.stats.bad_frames} refused"
+        f"{dec.stats.duplicates} duplicates dropped, {dec.stats.crc_errors} CRC errors, "
+        f"{dec.stats.bad_frames} refused"
     )
 
     print("\nbytes per sample on the wire (COBS + CRC-32 + delimiter) and the decimation a link needs")

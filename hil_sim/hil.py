@@ -89,7 +89,7 @@ def run_pil(
         writer = threading.Thread(target=feed.write, args=(stim,), daemon=True)
         writer.start()
         res = rec.run(max_frames=n_samples, duration=timeout_s)
-        rec.close()
+        rec.log.close()  # the ports are the board's: it closes them
         writer.join(timeout=5)
     if res.reason != "frames":
         raise QemuError(f"PIL run ({board}) ended early ({res.reason}) after {res.stats.get('frames', {})} frames")

@@ -246,6 +246,9 @@ def test_hil_cli_pil_on_the_m0(tmp_path, capsys):
     out = capsys.readouterr().out
     assert status == 0, out
     assert "PIL (microbit): 200 samples" in out and "PIL vs SIL: 200 sample frames, bit-identical" in out
+    # the link budget: PIL's telemetry is SIL's, byte for byte (200 frames of the same wire size)
+    sil_bytes = int(re.search(r"SIL: 200 samples in, (\d+) bytes of telemetry out", out).group(1))
+    assert f"PIL (microbit): 200 samples in, {sil_bytes} bytes of telemetry out" in out
 
 
 def test_hil_cli_sil(tmp_path, capsys):
@@ -253,6 +256,9 @@ def test_hil_cli_sil(tmp_path, capsys):
     out = capsys.readouterr().out
     assert status == 0
     assert "firmware vs float64 reference" in out and "smoother + ZUPT" in out
+    man = manifest(None)
+    wire = man.frames["sample"]["wire_size"]
+    assert f"SIL: 600 samples in, {600 * wire} bytes of telemetry out ({wire:.1f} B per sample)" in out
     assert (tmp_path / "hil.png").stat().st_size > 10_000
     status = main(["hil", "--scenario", "nowhere"])
     assert status == 2 and "unknown scenario" in capsys.readouterr().err

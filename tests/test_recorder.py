@@ -7,6 +7,7 @@ import json
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -123,7 +124,7 @@ def test_recorder_over_loop(tmp_path, man, telemetry):
         out, man, junk + b"\0" + telemetry[:cut] + junk + b"\0" + telemetry[cut:], Status(shown, enabled=True)
     )
     last = shown.getvalue().rstrip("\n").split("\r")[-1]
-    assert re.search(r"frames/s +2000 frames +lost 0 +CRC errors 0 +bad \d+", last), last
+    assert re.search(r"frames/s +2000 frames +lost 0 +dup 0 +CRC errors 0 +bad \d+", last), last
     assert res.reason == "frames"
     assert res.stats["frames"]["sample"] == 2000
     d = decode_log(out)
@@ -162,14 +163,38 @@ def test_log_info_and_export(tmp_path, man, telemetry, capsys):
     assert "not an accelnav log" in capsys.readouterr().err
 
 
+def test_log_info_and_export_show_lost_duplicate_and_damaged_frames(tmp_path, man, telemetry, capsys):
+    frames = _frames(telemetry)
+    damaged = bytearray(frames[1500])
+    damaged[10] ^= 0x40  # refused and counted as damaged
+    # frames 100..109 repeated, 1000..1003 lost, 1500 damaged (so lost too)
+    stream = frames[:110] + frames[100:1000] + frames[1004:1500] + [bytes(damaged)] + frames[1501:]
+    path = tmp_path / "faults.acnlog"
+    with LogWriter(path, {"manifest": man.data, "model_toml": load_model().text}, fsync_s=None) as log:
+        for k in range(0, len(stream), 64):
+            log.append(b"".join(stream[k : k + 64]))
+    assert cli_main(["log", "info", str(path), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert (info["lost"], info["duplicates"], info["damaged_frames"]) == (5, 10, 1)
+    assert info["frames"]["sample"] == 2000 - 5
+    assert cli_main(["log", "info", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert re.search(r"lost: 5\n +duplicates: 10\n", text), text
+    for suffix in ("csv", "npz"):
+        assert cli_main(["log", "export", str(path), "--out", str(tmp_path / f"f.{suffix}")]) == 0
+        assert "lost 5, duplicates 10, damaged 1 frames" in capsys.readouterr().out
+    rows = np.loadtxt(tmp_path / "f.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(rows[:, 1], np.r_[0:1000, 1004:1500, 1501:2000])  # each sample once
+
+
 # --------------------------------------------------------------------------
 # recorder as a program on a pty: kill -9, pulled cable
 
 
-def _start_recorder(tmp_path, manifest_file, slave_name, out):
+def _start_recorder(tmp_path, manifest_file, slave_name, out, *extra):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     cmd = [sys.executable, "-m", "accelnav.cli", "record", slave_name, "--out", str(out)]
-    cmd += ["--manifest", str(manifest_file), "--no-commands"]
+    cmd += ["--manifest", str(manifest_file), "--no-commands", *extra]
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
     while not out.exists():  # the header is written once the port is open
@@ -237,10 +262,10 @@ def test_kill_9_mid_stream_loses_at_most_the_last_tenth_of_a_second(tmp_path, ma
     assert lost_s < 0.1 + 0.15  # flush interval + scheduling slack on a loaded CI machine
 
 
-def test_pulled_cable_closes_the_log_cleanly(tmp_path, manifest_file, telemetry):
+def test_pulled_cable_for_good_closes_the_log_cleanly(tmp_path, manifest_file, telemetry):
     master, slave, name = _pty()
     out = tmp_path / "pulled.acnlog"
-    proc = _start_recorder(tmp_path, manifest_file, name, out)
+    proc = _start_recorder(tmp_path, manifest_file, name, out, "--give-up-after", "1")
     os.close(slave)
     frames = _frames(telemetry)[:300]
     os.write(master, b"".join(frames))
@@ -249,5 +274,104 @@ def test_pulled_cable_closes_the_log_cleanly(tmp_path, manifest_file, telemetry)
     stdout, stderr = proc.communicate(timeout=30)
     assert proc.returncode == 1, (stdout, stderr)
     assert b"link lost" in stdout
+    d = decode_log(out)
+    assert len(d.frames["sample"]) == 300 and d.torn_bytes == 0
+
+
+# --------------------------------------------------------------------------
+# a link that goes away and comes back: a TCP server on 127.0.0.1 (pyserial's socket://)
+
+
+def _serve(srv: socket.socket, parts: list[bytes], down_s: float, log: list) -> None:
+    """Serve ``parts`` one connection each on ``srv``'s port, the port closed for ``down_s`` between them."""
+    port = srv.getsockname()[1]
+    for k, data in enumerate(parts):
+        if k:
+            time.sleep(down_s)  # nobody listens: the recorder's attempts are refused
+            srv = socket.socket()
+            srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            srv.bind(("127.0.0.1", port))
+            srv.listen(1)
+        srv.settimeout(20)
+        try:
+            conn, _ = srv.accept()
+        except OSError:
+            srv.close()
+            return
+        conn.settimeout(0.3)
+        try:  # the recorder's commands, or a pause: pyserial drops what arrives while it opens the socket
+            conn.recv(4096)
+        except OSError:
+            pass
+        conn.sendall(data)
+        try:  # read what the recorder sends (its commands) until it is quiet: closing on unread bytes resets
+            while conn.recv(4096):
+                pass
+        except OSError:
+            pass
+        conn.shutdown(socket.SHUT_RDWR)  # the cable is pulled
+        conn.close()
+        srv.close()
+        log.append(time.monotonic())
+
+
+def _server(parts, down_s):
+    srv = socket.socket()
+    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    log: list = []
+    th = threading.Thread(target=_serve, args=(srv, parts, down_s, log), daemon=True)
+    th.start()
+    return f"socket://127.0.0.1:{srv.getsockname()[1]}", th, log
+
+
+def test_recorder_reconnects_and_records_the_gap(tmp_path, man, telemetry):
+    frames = _frames(telemetry)
+    # the second connection starts with 50 frames the first one carried (an adapter's buffer replayed)
+    url, th, _ = _server([b"".join(frames[:500]), b"".join(frames[450:500] + frames[700:])], down_s=2.0)
+    shown = io.StringIO()
+    out = tmp_path / "reconnect.acnlog"
+    rec = Recorder(url, out, man, commands=(("info", {}),), status=Status(shown, enabled=False))
+    res = rec.run(max_frames=1800, duration=60)
+    rec.close()
+    th.join(30)
+    assert res.reason == "frames", (res.reason, shown.getvalue())
+    assert len(res.gaps) == 1, res.gaps
+    g = res.gaps[0]
+    assert (g["index_before"], g["index_after"], g["frames_lost"]) == (499, 700, 200)
+    assert g["attempts"] >= 2 and g["back_s"] - g["lost_s"] >= 0.5  # refused while the port was closed
+    text = shown.getvalue()
+    assert "link lost" in text and "retrying socket://127.0.0.1" in text and "link back after" in text
+    assert "sample index 499 -> 700, 200 frames lost" in text
+    d = decode_log(out)  # one log across the outage
+    np.testing.assert_array_equal(d.frames["sample"]["index"], np.r_[0:500, 700:2000])
+    assert (d.stats["lost"], d.stats["duplicates"], d.stats["crc_errors"]) == (200, 50, 0)
+    assert res.stats["lost"] == 200 and res.stats["duplicates"] == 50
+    print(f"\nreconnect: {g}")
+
+
+def test_status_line_says_the_link_is_being_retried(man):
+    st = Status(io.StringIO(), enabled=True)
+    st.note = "link lost 1.2 s ago: retrying socket://x (attempt 3 in 0.4 s)"
+    assert st.line(5.0, None).endswith("link lost 1.2 s ago: retrying socket://x (attempt 3 in 0.4 s)")
+
+
+def test_ctrl_c_while_the_link_is_away_closes_cleanly(tmp_path, manifest_file, telemetry):
+    frames = _frames(telemetry)
+    url, th, served = _server([b"".join(frames[:300])], down_s=0)
+    out = tmp_path / "ctrl_c.acnlog"
+    proc = _start_recorder(tmp_path, manifest_file, url, out)
+    deadline = time.monotonic() + 30
+    while not served:  # the first connection is over: the recorder is retrying
+        assert time.monotonic() < deadline and proc.poll() is None
+        time.sleep(0.05)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=30)
+    th.join(5)
+    assert proc.returncode == 0, (stdout, stderr)
+    assert b"(stopped)" in stdout and b"link lost at" in stdout and b"not back" in stdout
+    assert b"retrying socket://127.0.0.1" in stderr and b"Traceback" not in stderr
     d = decode_log(out)
     assert len(d.frames["sample"]) == 300 and d.torn_bytes == 0

@@ -49,6 +49,7 @@ def _pristine(man, n, rng):
     raw = rng.integers(0, 256, (n, man.dtypes["sample"].itemsize), dtype=np.uint8)
     recs = raw.view(man.dtypes["sample"]).ravel().copy()
     recs["seq"] = np.arange(n)
+    recs["index"] = np.arange(n)
     size = man.frames["sample"]["wire_size"]
     enc = np.frombuffer(encode_frames(man, "sample", recs), np.uint8).reshape(n, size)
     frames = [bytes(r) for r in enc]
@@ -176,7 +177,9 @@ def test_garbage_only_and_overlong_segments(man):
     d = Decoder(man)
     junk = rng.integers(1, 256, 100_000, dtype=np.uint8).tobytes()  # no delimiter at all
     assert not any(len(v) for v in d.feed(junk).frames.values())
-    good = encode_frames(man, "sample", np.zeros(3, man.dtypes["sample"]))
+    recs = np.zeros(3, man.dtypes["sample"])
+    recs["seq"] = recs["index"] = np.arange(3)  # three different frames (the same one thrice is two repeats)
+    good = encode_frames(man, "sample", recs)
     batch = d.feed(b"\0" + good)  # the over-long segment is refused at its delimiter, then all is well
     assert len(batch["sample"]) == 3
     assert d.stats.bad_frames == 1 and d.stats.crc_errors == 0

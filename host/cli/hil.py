@@ -55,6 +55,7 @@ def cmd_hil(args) -> int:
         man = manifest(model.source)
         stim = hil.stimulus(man, run)
         sil = hil.run_sil(model, stim)
+        print(f"SIL: {n} samples in, {len(sil)} bytes of telemetry out ({len(sil) / max(n, 1):.1f} B per sample)")
         pil = None
         if args.target == "pil":
             log = args.out / f"pil_{board}_{model.name}_{args.scenario}.acnlog"
@@ -64,6 +65,7 @@ def cmd_hil(args) -> int:
                 bar.update(n)
             pil = res.telemetry
             print(f"PIL ({board}): {n} samples in {res.seconds:.1f} s ({n / res.seconds:,.0f} samples/s), log {log}")
+            print(f"PIL ({board}): {n} samples in, {len(pil)} bytes of telemetry out")
     except (QemuError, FirmwareError) as exc:
         raise UserError(str(exc).splitlines()[0]) from None
     c = hil.compare(model, run, sil, pil)

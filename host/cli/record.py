@@ -21,6 +21,13 @@ def register(sub) -> None:
     src.add_argument("--model", type=Path, help="model file; its manifest is generated (default: the embedded model)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--frames", type=int, default=None, help="stop after this many sample frames")
+    p.add_argument(
+        "--give-up-after",
+        type=float,
+        default=None,
+        metavar="S",
+        help="end the recording after S seconds without the link (default: keep retrying until Ctrl-C)",
+    )
     p.add_argument("--decimate", type=int, default=None, metavar="N", help="ask the device for one frame in N")
     p.add_argument("--no-commands", action="store_true", help="send nothing to the device (not even an info request)")
     p.add_argument("--force", action="store_true", help="overwrite an existing log")
@@ -61,6 +68,8 @@ def cmd_record(args) -> int:
 
     if args.out.exists() and not args.force:
         raise UserError(f"--out: {args.out} exists; give --force to overwrite it")
+    if args.give_up_after is not None and args.give_up_after < 0:
+        raise UserError(f"--give-up-after: got {args.give_up_after}; accepted: 0 or more seconds")
     if args.decimate is not None and not 1 <= args.decimate <= 1000:
         raise UserError(f"--decimate: got {args.decimate}; accepted: 1 to 1000")
     man, model_text = _manifest(args)
@@ -85,15 +94,20 @@ def cmd_record(args) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: rec.stop())
     try:
-        res = rec.run(duration=args.duration, max_frames=args.frames)
+        res = rec.run(duration=args.duration, max_frames=args.frames, give_up_after=args.give_up_after)
     finally:
         rec.close()
     for w in res.warnings[:5]:
         print(f"accelnav record: warning: {w}")
+    for g in res.gaps:
+        back = f"back at {g['back_s']:.1f} s" if "back_s" in g else "not back"
+        lost = f", {g['frames_lost']} frames lost" if "frames_lost" in g else ""
+        print(f"accelnav record: link lost at {g['lost_s']:.1f} s, {back} ({g['attempts']} attempts){lost}")
     s = res.stats
     print(
         f"accelnav record: {args.out}: {s['frames'].get('sample', 0)} sample frames in {res.seconds:.1f} s, "
-        f"lost {s['lost']}, CRC errors {s['crc_errors']}, bad frames {s['bad_frames']} ({res.reason})"
+        f"lost {s['lost']}, duplicates {s['duplicates']}, damaged {s['bad_frames']} "
+        f"(CRC errors {s['crc_errors']}) ({res.reason})"
     )
     return 1 if res.reason.startswith("link lost") else 0
 
@@ -122,6 +136,7 @@ def _summary(path: Path) -> dict:
         "damaged_bytes": d.damaged_bytes,
         "torn_bytes": d.torn_bytes,
         **d.stats,
+        "damaged_frames": d.stats["bad_frames"],
         "host_seconds": float((d.host_t_ns[-1] - d.host_t_ns[0]) / 1e9) if len(s) else 0.0,
         "index_first": int(s["index"][0]) if len(s) else None,
         "index_last": int(s["index"][-1]) if len(s) else None,
@@ -173,7 +188,7 @@ def cmd_log_export(args) -> int:
                 header.append(f"{ax}_fw_{s}")
                 table.append(cols[s][:, j])
         np.savetxt(args.out, np.column_stack(table), delimiter=",", header=",".join(header), comments="", fmt="%.17g")
-        print(f"accelnav log export: {args.out}: {len(cols['t'])} rows")
+        print(f"accelnav log export: {args.out}: {len(cols['t'])} rows; {_link_counts(d.stats)}")
         return 0
     # NPZ: an accelnav run file (host/data/runfile.py) plus the firmware's own states
     arrays, _ = log_run_arrays(args.log, d)
@@ -183,10 +198,14 @@ def cmd_log_export(args) -> int:
     tmp.replace(args.out)
     gaps = int(np.count_nonzero(np.diff(cols["index"]) != 1)) if len(cols["index"]) > 1 else 0
     print(
-        f"accelnav log export: {args.out}: {len(cols['t'])} samples"
+        f"accelnav log export: {args.out}: {len(cols['t'])} samples; {_link_counts(d.stats)}"
         + (f" ({gaps} gaps in the sample index: decimation or lost frames; t is from the index)" if gaps else "")
     )
     return 0
+
+
+def _link_counts(stats: dict) -> str:
+    return f"lost {stats['lost']}, duplicates {stats['duplicates']}, damaged {stats['bad_frames']} frames"
 
 
 def log_run_arrays(log, d=None) -> tuple[dict[str, np.ndarray], object]:

@@ -6,17 +6,27 @@ Every link goes through ``serial.serial_for_url``: a real port (``/dev/ttyUSB0``
 the raw bytes to the log (nothing is lost to a decoding problem), decodes them
 as they come with :class:`accelnav.link.telemetry.Decoder` for the status line (rate,
 frames, lost frames, CRC errors), checks the info frame against its manifest,
-and stops on SIGINT/SIGTERM, after ``duration`` or ``max_frames``, or when the
-link goes away (the log is closed cleanly in every case).
+and stops on SIGINT/SIGTERM or after ``duration`` or ``max_frames`` (the log
+is closed cleanly in every case).
+
+A pulled cable (the port raises, a socket closes) does not end a recording
+opened from a URL: the log stays open, the port is reopened with backoff
+(0.1 s doubling to 2 s) while the status line says so, the commands are sent
+again on reconnection, and the gap is recorded (``Result.gaps``: how long, and
+how many frames the sample index says were lost) before recording carries on.
+``give_up_after`` (seconds without the link) ends it with ``link lost``.
 """
 
 from __future__ import annotations
 
+import copy
+import select
 import sys
 import time
 from dataclasses import dataclass, field
 
 import serial
+from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
 from accelnav.link.logfile import LogWriter
 from accelnav.link.telemetry import Decoder, Manifest, encode_command
@@ -31,6 +41,10 @@ class Result:
     stats: dict
     info_ok: bool | None  # None: no info frame seen
     warnings: list[str] = field(default_factory=list)
+    gaps: list[dict] = field(default_factory=list)  # per outage of the link: see Recorder.run
+
+
+BACKOFF_S = (0.1, 2.0)  # first retry delay, longest delay
 
 
 class Status:
@@ -42,8 +56,16 @@ class Status:
         self._last = 0.0
         self._prev = (0.0, 0)
         self.rate = 0.0
+        self.note = ""  # shown instead of the counters while set (link lost, retrying)
+
+    def event(self, t: float, text: str) -> None:
+        """A one-line event (link lost, link back), written even when the live line is off."""
+        self.stream.write(("\r" if self.enabled else "") + f"{t:7.1f} s  {text}\n")
+        self.stream.flush()
 
     def line(self, t: float, dec: Decoder) -> str:
+        if self.note:
+            return f"{t:7.1f} s  {self.note}"
         s = dec.stats
         n = s.frames.get("sample", 0)
         t0, n0 = self._prev
@@ -51,7 +73,7 @@ class Status:
             self.rate = (n - n0) / (t - t0)
             self._prev = (t, n)
         return (
-            f"{t:7.1f} s  {self.rate:7.1f} frames/s  {n:9d} frames  lost {s.lost}  "
+            f"{t:7.1f} s  {self.rate:7.1f} frames/s  {n:9d} frames  lost {s.lost}  dup {s.duplicates}  "
             f"CRC errors {s.crc_errors}  bad {s.bad_frames}  {s.bytes / 1024:8.1f} KiB"
         )
 
@@ -81,9 +103,11 @@ class Recorder:
         status: Status | None = None,
     ):
         self.man = manifest
+        self.baud = baud
+        self.reopen = isinstance(port, str)  # a URL can be opened again after the link is lost
         if isinstance(port, str):
             self.url = port
-            self.ser = serial.serial_for_url(port, baudrate=baud, timeout=0.02, do_not_open=False)
+            self.ser = self._open()
         else:
             self.url = getattr(port, "portstr", None) or getattr(port, "name", "?")
             self.ser = port
@@ -102,6 +126,9 @@ class Recorder:
         self.info_ok: bool | None = None
         self.warnings: list[str] = []
         self._stop = False
+
+    def _open(self):
+        return serial.serial_for_url(self.url, baudrate=self.baud, timeout=0.02, do_not_open=False)
 
     def stop(self) -> None:
         """Ask run() to finish (from a signal handler or another thread)."""
@@ -122,25 +149,46 @@ class Recorder:
                 )
             self.info_ok = ok if self.info_ok is None else (self.info_ok and ok)
 
-    def run(self, duration: float | None = None, max_frames: int | None = None) -> Result:
+    def run(
+        self, duration: float | None = None, max_frames: int | None = None, give_up_after: float | None = None
+    ) -> Result:
+        """Record until stopped, ``duration`` s, ``max_frames`` sample frames, or ``give_up_after`` s without
+        the link (``None``: retry until stopped). Each entry of ``Result.gaps``: ``lost_s`` and ``back_s``
+        (recording time the link went and came back), ``attempts``, ``index_before`` (last sample index before
+        it), and once a sample frame arrived after it ``index_after`` and ``frames_lost`` (counted exactly
+        from the sample index by the decoder)."""
         t0 = time.monotonic()
         reason = "stopped"
+        gaps: list[dict] = []
+        pending: dict | None = None  # the last gap, until a sample frame tells how long it was
         try:
-            for name, args in self.commands:
-                self.ser.write(encode_command(self.man, name, **args))
+            self._send_commands()
             while not self._stop:
+                if self.ser is None:
+                    reason = self._reconnect(t0, gaps[-1], duration, give_up_after)
+                    if reason:
+                        break
+                    pending = gaps[-1]
+                    continue
                 try:
-                    n = self.ser.in_waiting
-                    data = self.ser.read(max(1, min(n, 1 << 16)))
+                    data = self._read()
                 except (serial.SerialException, OSError) as exc:
-                    reason = f"link lost: {exc}"
-                    break
+                    if not self.reopen or give_up_after == 0:
+                        reason = f"link lost: {exc}"
+                        break
+                    gaps.append(self._lost(time.monotonic() - t0, exc))
+                    pending = None
+                    continue
                 now_ns = time.time_ns()
                 self.log.append(data, now_ns)
                 if data:
+                    before = copy.deepcopy(self.decoder.order) if pending is not None else None
                     batch = self.decoder.feed(data)
                     if len(batch["info"]):
                         self._check_info(batch["info"])
+                    if pending is not None and len(batch["sample"]):
+                        self._gap_measured(pending, before, batch["sample"][0], time.monotonic() - t0)
+                        pending = None
                 t = time.monotonic() - t0
                 self.status.update(t, self.decoder)
                 if duration is not None and t >= duration:
@@ -151,11 +199,98 @@ class Recorder:
                     break
         finally:
             self.log.close()
+            self.status.note = ""
             self.status.update(time.monotonic() - t0, self.decoder, final=True)
-        return Result(reason, time.monotonic() - t0, self.decoder.stats.as_dict(), self.info_ok, self.warnings)
+        return Result(reason, time.monotonic() - t0, self.decoder.stats.as_dict(), self.info_ok, self.warnings, gaps)
+
+    def _read(self) -> bytes:
+        """What the link has (at most 64 KiB), waiting up to the port's timeout for the first byte."""
+        if isinstance(self.ser, SocketSerial):
+            # pyserial's socket in_waiting is 0 or 1 (readable or not): one byte per read made the recorder
+            # the bottleneck of PIL; take everything the socket holds, and see the peer's close as pyserial does
+            sock = self.ser._socket
+            if not select.select([sock], [], [], self.ser.timeout)[0]:
+                return b""
+            data = sock.recv(1 << 16)
+            if not data:
+                raise serial.SerialException("socket disconnected")
+            return data
+        n = self.ser.in_waiting
+        return self.ser.read(max(1, min(n, 1 << 16)))
+
+    def _send_commands(self) -> None:
+        for name, args in self.commands:
+            self.ser.write(encode_command(self.man, name, **args))
+
+    def _lost(self, t: float, exc: Exception) -> dict:
+        """The link went away: close the port, keep the log, refuse the unfinished frame."""
+        try:
+            self.ser.close()
+        except (serial.SerialException, OSError):
+            pass
+        self.ser = None
+        self.log.flush()
+        self.decoder.finish()
+        gap = {"lost_s": round(t, 3), "error": str(exc), "index_before": self.decoder.order.last_index, "attempts": 0}
+        self.status.event(t, f"link lost ({exc}); the log stays open, retrying {self.url}")
+        return gap
+
+    def _reconnect(self, t0: float, gap: dict, duration: float | None, give_up_after: float | None) -> str:
+        """Reopen the port with backoff; '' once open, else why the recording ends."""
+        delay = BACKOFF_S[0]
+        while not self._stop:
+            t_retry = time.monotonic() + delay
+            while time.monotonic() < t_retry:  # wait in small steps: Ctrl-C, duration and the log's flush
+                t = time.monotonic() - t0
+                if self._stop:
+                    return "stopped"
+                if duration is not None and t >= duration:
+                    return "duration"
+                if give_up_after is not None and t - gap["lost_s"] >= give_up_after:
+                    return f"link lost: {gap['error']} (no link for {t - gap['lost_s']:.1f} s)"
+                self.log.poll()
+                self.status.note = (
+                    f"link lost {t - gap['lost_s']:.1f} s ago: retrying {self.url} "
+                    f"(attempt {gap['attempts'] + 1} in {max(0.0, t_retry - time.monotonic()):.1f} s)"
+                )
+                self.status.update(t, self.decoder)
+                time.sleep(min(0.05, max(0.0, t_retry - time.monotonic())))
+            gap["attempts"] += 1
+            try:
+                self.ser = self._open()
+                self._send_commands()
+            except (serial.SerialException, OSError, ValueError):
+                if self.ser is not None:
+                    try:
+                        self.ser.close()
+                    except (serial.SerialException, OSError):
+                        pass
+                self.ser = None
+                delay = min(2 * delay, BACKOFF_S[1])
+                continue
+            t = time.monotonic() - t0
+            gap["back_s"] = round(t, 3)
+            self.status.note = ""
+            self.status.event(t, f"link back after {t - gap['lost_s']:.1f} s ({gap['attempts']} attempts)")
+            return ""
+        return "stopped"
+
+    def _gap_measured(self, gap: dict, before, first, t: float) -> None:
+        """The first sample frame after a reconnection: the frames the gap cost, exactly (the decoder's rule)."""
+        lost0 = before.lost
+        before.step(int(first["seq"]), int(first["index"]), int(first["flags"]))
+        gap["index_after"] = int(first["index"])
+        gap["frames_lost"] = before.lost - lost0
+        self.status.event(
+            t,
+            f"gap recorded: sample index {gap['index_before']} -> {gap['index_after']}, "
+            f"{gap['frames_lost']} frames lost while the link was away",
+        )
 
     def close(self) -> None:
         self.log.close()
+        if self.ser is None:
+            return
         try:
             self.ser.close()
         except (serial.SerialException, OSError):

@@ -19,11 +19,11 @@ same bytes (``bytes.split``, a Python COBS loop, ``zlib.crc32``,
 ``struct.unpack_from``): the benchmark's baseline and a second oracle in the
 tests.
 
-Lost frames: sample frames carry a 16-bit sequence number that the MCU
-increments for every sample frame it means to send; the decoder counts the
-gaps (modulo 2^16) between consecutive accepted sample frames. Losses of
-65536 frames or more in one gap are undercounted by multiples of 65536; the
-sample ``index`` (32 bits) shows them.
+Lost and repeated frames: sample frames carry a 16-bit sequence number that
+the MCU increments for every sample frame it means to send and the 32-bit
+sample index; :class:`SampleOrder` drops a repeated or older frame (counted
+in ``duplicates``, never delivered twice) and counts the frames missing in a
+gap exactly, the index telling how many times seq wrapped.
 """
 
 from __future__ import annotations
@@ -269,13 +269,185 @@ def _cobs_decode_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # --------------------------------------------------------------------------
+# Sample frame accounting
+
+_WRAP = 1 << 16
+_HALF = 1 << 15
+
+
+class SampleOrder:
+    """Exact accounting of sample frames from their ``seq`` (u16, one per frame the MCU meant to send)
+    and ``index`` (u32, the sample index): which frames to deliver, how many were lost, how many repeated.
+
+    A frame whose index is not past the last delivered one is a repeat or an older frame: dropped and
+    counted in ``duplicates`` (never delivered twice), unless it is a firmware reset (the index restarts
+    at 0, seq runs on): seq 1..32767 ahead, the index step not what the seq step back says (within 16
+    frames, modulo 2^16), and either the reset flag or an index below what those seq steps take a fresh
+    start to; for 16384 frames after it a frame from before that reset is a repeat too.
+
+    For a frame with a later index the number of frames sent since the last delivered one is
+    ``a + 65536 k`` with ``a`` the seq step modulo 2^16 and ``k`` chosen so that it is nearest to the
+    index step divided by the decimation (the index step of the last one-frame step): gaps of any
+    length are counted exactly as long as the decimation did not change and the MCU missed fewer than
+    32768 frames' worth of samples inside the gap. After a frame flagged as the first after a filter
+    reset, or a ``stop`` acknowledged inside the gap (the index runs on while stopped, seq does not),
+    the seq step alone counts (k = 0); a stop of D frame periods whose ack was lost adds
+    65536 round(D / 65536) lost frames (none below 32768).
+
+    :meth:`step` is the rule frame by frame (:func:`decode_naive`); :meth:`run` applies it to a batch
+    with numpy between the irregular frames (index not later, reset flag, stop), which it steps.
+    """
+
+    def __init__(self, reset_mask: int = 1 << 2, stop_command: int = 0x11):
+        self.reset_mask = reset_mask
+        self.stop_command = stop_command
+        self.last_seq: int | None = None
+        self.last_index: int | None = None
+        self.decimation: int | None = None  # index step of the last one-frame step
+        self.stops: list[int] = []  # indices of acknowledged stops not yet passed
+        # after a reset: (seq of its first frame, seq, index and decimation of the last frame before it)
+        self.before_reset: tuple[int, int, int, int] | None = None
+        self._since_reset = 0
+        self.lost = 0
+        self.duplicates = 0
+
+    def ack(self, command: int, index: int) -> None:
+        """An ack frame, in stream order with the sample frames."""
+        if command == self.stop_command:
+            self.stops.append(index)
+
+    def _paused(self, index: int) -> bool:
+        last = self.last_index
+        paused = any(last < s <= index for s in self.stops)
+        self.stops = [s for s in self.stops if s > index]
+        return paused
+
+    def step(self, seq: int, index: int, flags: int) -> bool:
+        """One accepted sample frame, in stream order: True to deliver it."""
+        if self.last_seq is None:
+            self.last_seq, self.last_index = seq, index
+            return True
+        a = (seq - self.last_seq) % _WRAP
+        di = index - self.last_index
+        ahead = 1 <= a < _HALF
+        if di <= 0:
+            # a firmware reset (the index started again at 0) if seq is ahead and the index no further than
+            # those seq steps take it; otherwise a repeat of an earlier frame
+            d = self.decimation or 1
+            back = (-di / d - (_WRAP - a) + _HALF) % _WRAP - _HALF  # 0 for an older frame (modulo 2^16 frames)
+            older = abs(back) <= 16
+            if older or not (ahead and (flags & self.reset_mask or index < a * d)):
+                self.duplicates += 1
+                return False
+            n = a
+            self._reset(seq)
+        elif self.before_reset and self._before(seq, index):
+            self.duplicates += 1  # a repeat of a frame from before the last reset
+            return False
+        elif flags & self.reset_mask and ahead:
+            n = a
+            self._reset(seq)
+        elif self._paused(index):
+            n = a if a else _WRAP
+        else:
+            d = self.decimation
+            k = max(0, round((di / d - a) / _WRAP)) if d else 0
+            if a == 0:
+                k = max(k, 1)
+            n = a + _WRAP * k
+            if a == 1:
+                self.decimation = di
+        self.lost += n - 1
+        self.last_seq, self.last_index = seq, index
+        if self.before_reset:
+            self._since_reset += 1
+            if self._since_reset > 16384:
+                self.before_reset = None  # far enough into the new run: no repeats from before it any more
+        return True
+
+    def _reset(self, seq: int) -> None:
+        self.before_reset = (seq, self.last_seq, self.last_index, self.decimation or 1)
+        self._since_reset = 0
+        self.decimation, self.stops = None, []
+
+    def _before(self, seq: int, index: int) -> bool:
+        """Is (seq, index) a frame from before the last reset (seq and index steps back agree)?"""
+        _, ls, li, d = self.before_reset
+        back = (ls - seq) % _WRAP
+        return index <= li and back < _HALF and abs(((li - index) / d - back + _HALF) % _WRAP - _HALF) <= 16
+
+    def run(self, seq, index, flags, stops: list[tuple[int, int]] = ()) -> np.ndarray:
+        """:meth:`step` over arrays (stream order), vectorised between irregular frames: the keep mask.
+        ``stops``: (number of these sample frames before the ack in the stream, index) of stop acks."""
+        n = len(seq)
+        keep = np.ones(n, bool)
+        if n == 0:
+            for _, s in stops:
+                self.stops.append(s)
+            return keep
+        seq = seq.astype(np.int64)
+        index = index.astype(np.int64)
+        flags = flags.astype(np.int64)
+        regular = np.zeros(n, bool)  # later index than the previous frame, no reset flag, no stop between
+        regular[1:] = index[1:] > index[:-1]
+        regular &= (flags & self.reset_mask) == 0
+        prev = np.empty(n, np.int64)
+        prev[0] = -1
+        prev[1:] = index[:-1]
+        for p, s in [(0, s) for s in self.stops] + list(stops):
+            hit = (prev < s) & (s <= index)
+            hit[:p] = False
+            regular &= ~hit
+        pending = sorted(stops)
+        irregular = np.flatnonzero(~regular)
+        i = 0
+        while i < n:
+            while pending and pending[0][0] <= i:
+                self.stops.append(pending.pop(0)[1])
+            keep[i] = self.step(int(seq[i]), int(index[i]), int(flags[i]))
+            i += 1
+            if not keep[i - 1] or i == n or self.before_reset:
+                continue
+            nb = irregular[np.searchsorted(irregular, i)] if irregular.size and irregular[-1] >= i else n
+            if pending:
+                nb = min(nb, max(pending[0][0], i))
+            if nb > i:
+                self._regular(seq[i - 1 : nb], index[i - 1 : nb])
+                i = nb
+        for _, s in pending:
+            self.stops.append(s)
+        return keep
+
+    def _regular(self, s: np.ndarray, x: np.ndarray) -> None:
+        """Frames s[1:], x[1:] after the delivered s[0], x[0], every index later than the one before."""
+        a = np.diff(s) % _WRAP
+        di = np.diff(x)
+        one = a == 1
+        pos = np.where(one, np.arange(a.size), -1)
+        last_one = np.maximum.accumulate(pos)
+        prev_one = np.empty_like(last_one)
+        prev_one[0] = -1
+        prev_one[1:] = last_one[:-1]
+        d = np.where(prev_one >= 0, di[np.maximum(prev_one, 0)], self.decimation or 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = np.where(d > 0, np.rint((di / np.where(d > 0, d, 1) - a) / _WRAP), 0).astype(np.int64)
+        k = np.maximum(k, 0)
+        k = np.where(a == 0, np.maximum(k, 1), k)
+        self.lost += int((a + _WRAP * k - 1).sum())
+        if last_one[-1] >= 0:
+            self.decimation = int(di[last_one[-1]])
+        self.last_seq, self.last_index = int(s[-1]), int(x[-1])
+
+
+# --------------------------------------------------------------------------
 # Decoder
 
 
 @dataclass
 class Stats:
     frames: dict[str, int] = field(default_factory=dict)
-    lost: int = 0  # sample frames missing between accepted ones (seq gaps)
+    lost: int = 0  # sample frames missing between delivered ones
+    duplicates: int = 0  # sample frames dropped as repeated or older than the last delivered one
     bad_frames: int = 0  # delimited segments refused (length, COBS, type, CRC)
     crc_errors: int = 0  # of those: right length and COBS, wrong CRC
     garbage_bytes: int = 0  # bytes in refused segments
@@ -285,6 +457,7 @@ class Stats:
         return {
             "frames": dict(self.frames),
             "lost": self.lost,
+            "duplicates": self.duplicates,
             "bad_frames": self.bad_frames,
             "crc_errors": self.crc_errors,
             "garbage_bytes": self.garbage_bytes,
@@ -315,7 +488,7 @@ class Decoder:
         self.max_len = max(self.by_len)
         self._tail = b""
         self._overlong = False  # the tail exceeded every frame length: the segment is refused at its delimiter
-        self._last_seq: int | None = None
+        self.order = SampleOrder(1 << manifest.flags["reset"], manifest.frames["cmd_stop"]["type"])
         self.stats = Stats(frames={n: 0 for n in self.names})
 
     def feed(self, data: bytes) -> Batch:
@@ -365,11 +538,35 @@ class Decoder:
         self.stats.bad_frames += int(np.count_nonzero(refused))
         self.stats.garbage_bytes += int(lengths[refused].sum())
         out = dict(empty)
+        where = {}
         for n, o, r in zip(name_parts, order_parts, rec_parts, strict=True):
-            out[n] = r[np.argsort(o, kind="stable")] if o.size > 1 else r  # stream order
-            self.stats.frames[n] += len(r)
-        lost = self._count_lost(out.get("sample"))
+            k = np.argsort(o, kind="stable")
+            out[n], where[n] = r[k], o[k]  # stream order
+        lost = self._account(out, where)
+        for n in out:
+            self.stats.frames[n] += len(out[n])
         return Batch(out, lost)
+
+    def _account(self, out: dict, where: dict) -> int:
+        """Drop repeated sample frames and count the lost ones (:class:`SampleOrder`)."""
+        if "sample" not in out:
+            return 0
+        stops = []
+        acks = out.get("ack")
+        if acks is not None and len(acks):
+            is_stop = acks["command"] == self.order.stop_command
+            if is_stop.any():
+                before = np.searchsorted(where.get("sample", np.zeros(0, np.int64)), where["ack"][is_stop])
+                stops = list(zip(before.tolist(), acks["index"][is_stop].tolist(), strict=True))
+        smp = out["sample"]
+        lost0, dup0 = self.order.lost, self.order.duplicates
+        keep = self.order.run(smp["seq"], smp["index"], smp["flags"], stops)
+        if not keep.all():
+            out["sample"] = smp[keep]
+        lost = self.order.lost - lost0
+        self.stats.lost += lost
+        self.stats.duplicates += self.order.duplicates - dup0
+        return lost
 
     def _keep_tail(self, tail: bytes) -> None:
         if len(tail) > self.max_len:
@@ -377,18 +574,6 @@ class Decoder:
             tail = tail[-self.max_len :]
             self._overlong = True
         self._tail = tail
-
-    def _count_lost(self, samples: np.ndarray | None) -> int:
-        if samples is None or len(samples) == 0:
-            return 0
-        seq = samples["seq"].astype(np.int64)
-        gaps = (np.diff(seq) - 1) % 65536
-        lost = int(gaps.sum())
-        if self._last_seq is not None:
-            lost += (int(seq[0]) - self._last_seq - 1) % 65536
-        self._last_seq = int(seq[-1])
-        self.stats.lost += lost
-        return lost
 
     def finish(self) -> int:
         """End of stream: the bytes after the last delimiter are an unfinished frame; returns their count."""
@@ -407,8 +592,9 @@ def decode_all(man: Manifest, data: bytes) -> tuple[dict[str, np.ndarray], Stats
     return batch.frames, d.stats
 
 
-def decode_naive(man: Manifest, data: bytes) -> tuple[dict[str, list[tuple]], int]:
-    """Frame-by-frame reference decode: ({frame: [field tuples]}, lost). The benchmark's baseline."""
+def decode_naive(man: Manifest, data: bytes, counts: dict | None = None) -> tuple[dict[str, list[tuple]], int]:
+    """Frame-by-frame reference decode: ({frame: [field tuples]}, lost). The benchmark's baseline.
+    ``counts``, if given, receives ``lost`` and ``duplicates``."""
     fmts = {}
     for name in man.up():
         fr = man.frames[name]
@@ -422,7 +608,10 @@ def decode_naive(man: Manifest, data: bytes) -> tuple[dict[str, list[tuple]], in
             )
         fmts[fr["type"]] = (name, struct.Struct("<B" + "".join(parts)), fr["size"])
     out: dict[str, list[tuple]] = {n: [] for n in man.up()}
-    last, lost = None, 0
+    order = SampleOrder(1 << man.flags["reset"], man.frames["cmd_stop"]["type"])
+    names = {n: [f["name"] for f in man.frames[n]["fields"]] for n in ("sample", "ack")}
+    i_seq, i_index, i_flags = (1 + names["sample"].index(k) for k in ("seq", "index", "flags"))
+    i_cmd, i_aindex = (1 + names["ack"].index(k) for k in ("command", "index"))
     segments = data.split(b"\0")[:-1]  # the piece after the last delimiter is unfinished
     for seg in segments:
         if not seg:
@@ -437,13 +626,14 @@ def decode_naive(man: Manifest, data: bytes) -> tuple[dict[str, list[tuple]], in
         if kind is None or len(payload) != kind[2]:
             continue
         rec = kind[1].unpack_from(payload)
+        if kind[0] == "sample" and not order.step(rec[i_seq], rec[i_index], rec[i_flags]):
+            continue
+        if kind[0] == "ack":
+            order.ack(rec[i_cmd], rec[i_aindex])
         out[kind[0]].append(rec)
-        if kind[0] == "sample":
-            seq = rec[1]
-            if last is not None:
-                lost += (seq - last - 1) % 65536
-            last = seq
-    return out, lost
+    if counts is not None:
+        counts.update(lost=order.lost, duplicates=order.duplicates)
+    return out, order.lost
 
 
 # --------------------------------------------------------------------------
