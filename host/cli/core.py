@@ -168,20 +168,20 @@ def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[s
 def _load(args) -> tuple[dict[str, np.ndarray], Model]:
     """The input of filter and smooth, whatever its form, checked against the model (see INPUT_HELP)."""
     from accelnav.data.recording import check_rate, on_grid, read_recording
-    from accelnav.link.logfile import MAGIC
+    from accelnav.link.logfile import is_log
 
     path = args.run
     if not path.is_file():
         raise UserError(f"{path}: no such file")
-    with open(path, "rb") as fh:
-        head = fh.read(len(MAGIC))
     override = load_model(args.model) if args.model is not None else None
-    if head == MAGIC:
+    if is_log(path):
         from accelnav.cli.record import log_run_arrays
 
         arrays, model = log_run_arrays(path)
         return _with_model(path, arrays, model, override, args)
-    if (head.startswith(b"PK") or path.suffix.lower() == ".npz") and not _is_recording_npz(path):
+    with open(path, "rb") as fh:
+        zipped = fh.read(2) == b"PK"  # an NPZ, whatever its name
+    if (zipped or path.suffix.lower() == ".npz") and not _is_recording_npz(path):
         arrays, model = load_run(path)
         return _with_model(path, arrays, model, override, args)
     # a recording: CSV, gzip CSV, or an NPZ of t and accel

@@ -140,15 +140,10 @@ def analyse_axis(
 
 def _read(args: argparse.Namespace) -> Recording:
     """The recording: a CSV, gzip CSV or NPZ through the checked reader, or a recorder log read directly."""
-    from accelnav.link.logfile import MAGIC
+    from accelnav.link.logfile import is_log
 
     path = args.recording
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(len(MAGIC))
-    except OSError:
-        head = b""  # read_recording says what is wrong with the path
-    if head == MAGIC:
+    if is_log(path):  # else read_recording says what is wrong with the path, if anything
         from accelnav.cli.record import log_run_arrays
         from accelnav.data.recording import from_arrays
 

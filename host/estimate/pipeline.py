@@ -140,12 +140,17 @@ def position_errors(arrays: dict[str, np.ndarray], model: Model) -> list[Positio
     """Errors of plain double integration, the filter and the smoother, per axis (needs truth)."""
     if "r" not in arrays:
         return []
+    return error_rows(arrays["axis_names"], arrays["r"], _position_estimates(arrays, model))
+
+
+def _position_estimates(arrays: dict[str, np.ndarray], model: Model) -> dict[str, np.ndarray]:
+    """(N, n_axes) positions of double integration, and of the filter and smoother where the run has them."""
     estimates = {"double integration": dead_reckoning(arrays, model)[:, :, 0]}
     if "filt_x" in arrays:
         estimates["filter"] = arrays["filt_x"][:, :, 0]
     if "smooth_x" in arrays:
         estimates["smoother"] = arrays["smooth_x"][:, :, 0]
-    return error_rows(arrays["axis_names"], arrays["r"], estimates)
+    return estimates
 
 
 def format_errors(rows: list[PositionErrors]) -> str:
@@ -227,9 +232,4 @@ def stride_table(arrays: dict[str, np.ndarray], model: Model) -> list[StrideErro
     """Stride errors of double integration, the filter and the smoother (needs truth with a stance mask)."""
     if "stance" not in arrays or "r" not in arrays:
         return []
-    estimates = {"double integration": dead_reckoning(arrays, model)[:, :, 0]}
-    if "filt_x" in arrays:
-        estimates["filter"] = arrays["filt_x"][:, :, 0]
-    if "smooth_x" in arrays:
-        estimates["smoother"] = arrays["smooth_x"][:, :, 0]
-    return stride_errors(arrays, estimates)
+    return stride_errors(arrays, _position_estimates(arrays, model))

@@ -37,6 +37,15 @@ _CHUNK_HEAD = struct.Struct("<4sIQI")  # magic, len, t_ns, crc
 MAX_CHUNK = 1 << 24
 
 
+def is_log(path: str | Path) -> bool:
+    """Whether ``path`` is a recorder log (it starts with MAGIC); False for a file that cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
+
+
 class LogError(ValueError):
     """A file that is not an accelnav log; ``str()`` is one line."""
 
