@@ -36,7 +36,7 @@ FW_SIZE    := size
 else ifeq ($(BOARD),mps2_an385)
 FW_CC      := $(ARM_CC)
 FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/mps2_an385
-FW_SRCS    := $(FW_DIR)/boards/mps2_an385/board_mps2.c
+FW_SRCS    := $(FW_DIR)/boards/mps2_an385/board_mps2.c $(FW_DIR)/boards/emu_txq.c
 # the runtime's startup.c (not ours) casts function pointers to void * in its vector
 # table, which -pedantic refuses: it is built with the same flags minus -pedantic
 FW_LOOSE   := $(FW_DIR)/boards/mps2_an385/startup.c $(FW_DIR)/boards/semihost_rt.c
@@ -47,7 +47,7 @@ else ifeq ($(BOARD),microbit)
 # QEMU's BBC micro:bit: nRF51822, Cortex-M0 (no 32x32->64 multiply: 64-bit products go through libgcc)
 FW_CC      := $(ARM_CC)
 FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -masm-syntax-unified -I$(FW_DIR)/boards/microbit
-FW_SRCS    := $(FW_DIR)/boards/microbit/board_microbit.c
+FW_SRCS    := $(FW_DIR)/boards/microbit/board_microbit.c $(FW_DIR)/boards/emu_txq.c
 FW_LOOSE   := $(FW_DIR)/boards/microbit/startup.c $(FW_DIR)/boards/semihost_rt.c
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/microbit/nrf51822.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map

@@ -12,6 +12,7 @@
  * milliseconds on every pass of the loop. */
 #include "acn_board.h"
 #include "board.h"
+#include "emu_txq.h"
 
 /* nRF51 UART registers (nRF51 Series Reference Manual v3.0, chapter 29), offsets in words */
 #define UART0_BASE 0x40002000u
@@ -33,16 +34,8 @@
 #define PIN_TX 24u /* micro:bit edge connector USB bridge: P0.24 TX, P0.25 RX */
 #define PIN_RX 25u
 
-#define TX_SIZE 2048u /* power of two */
-static uint8_t tx_ring[TX_SIZE];
-static uint32_t tx_head; /* next write */
-static uint32_t tx_tail; /* next send */
 static bool tx_busy;     /* a byte is in TXD and TXDRDY has not come yet */
 static uint32_t rx_lost; /* bytes the UART dropped (overrun) */
-
-static uint32_t time_ms;
-static uint32_t tick_last;
-static uint32_t tick_rem; /* ticks not yet folded into time_ms */
 
 void board_init(void)
 {
@@ -55,12 +48,10 @@ void board_init(void)
     UART_TXDRDY = 0;
     UART_STARTTX = 1u;
     UART_STARTRX = 1u;
-    tx_head = tx_tail = 0;
     tx_busy = false;
     rx_lost = 0;
     board_ticks_start();
-    tick_last = board_ticks();
-    time_ms = tick_rem = 0;
+    emu_txq_init();
 }
 
 uint8_t board_id(void)
@@ -73,54 +64,23 @@ uint32_t board_rx_lost(void)
     return rx_lost;
 }
 
-static uint32_t tx_free(void)
-{
-    return TX_SIZE - (tx_head - tx_tail);
-}
-
-bool board_uart_write(const uint8_t *p, size_t n)
-{
-    size_t i;
-    if (n > tx_free()) {
-        return false;
-    }
-    for (i = 0; i < n; ++i) {
-        tx_ring[tx_head++ & (TX_SIZE - 1u)] = p[i];
-    }
-    return true;
-}
-
-uint32_t board_time_ms(void)
-{
-    return time_ms;
-}
-
-static void time_update(void)
-{
-    uint32_t now = board_ticks();
-    tick_rem += (now - tick_last) & 0x00ffffffu; /* 24-bit counter */
-    tick_last = now;
-    time_ms += tick_rem / (BOARD_CPU_HZ / 1000u);
-    tick_rem %= BOARD_CPU_HZ / 1000u;
-}
-
 bool board_poll(void)
 {
     uint8_t b;
-    time_update();
+    emu_clock_update();
     if (tx_busy && UART_TXDRDY) {
         tx_busy = false;
     }
-    if (!tx_busy && tx_tail != tx_head) {
+    if (!tx_busy && emu_txq_next(&b)) {
         UART_TXDRDY = 0;
-        UART_TXD = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
+        UART_TXD = b;
         tx_busy = true;
     }
     if (UART_ERRORSRC & UART_ERRORSRC_OVERRUN) {
         UART_ERRORSRC = UART_ERRORSRC_OVERRUN; /* write 1 to clear */
         ++rx_lost;
     }
-    if (tx_free() < 3u * ACNF_MAX_UP_WIRE) {
+    if (emu_txq_free() < 3u * ACNF_MAX_UP_WIRE) {
         return true; /* let the queue drain before taking input that makes more */
     }
     if (UART_RXDRDY) {

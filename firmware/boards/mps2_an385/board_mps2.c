@@ -13,6 +13,7 @@
  * runtime), folded into milliseconds on every pass of the loop. */
 #include "acn_board.h"
 #include "board.h"
+#include "emu_txq.h"
 
 /* CMSDK APB UART registers (ARM DDI 0479, "APB UART") */
 typedef struct {
@@ -34,16 +35,7 @@ typedef struct {
 /* 115200 baud; the emulator does not pace the bytes, a real MPS2 would */
 #define UART_BAUDDIV (BOARD_CPU_HZ / 115200u)
 
-#define TX_SIZE 2048u /* power of two */
-static uint8_t tx_ring[TX_SIZE];
-static uint32_t tx_head; /* next write */
-static uint32_t tx_tail; /* next send */
-
 static uint32_t rx_lost; /* bytes the UARTs dropped (RX overrun) */
-
-static uint32_t time_ms;
-static uint32_t tick_last;
-static uint32_t tick_rem; /* ticks not yet folded into time_ms */
 
 static void uart_init(cmsdk_uart_t *u)
 {
@@ -57,11 +49,9 @@ void board_init(void)
 {
     uart_init(UART0);
     uart_init(UART1);
-    tx_head = tx_tail = 0;
     rx_lost = 0;
     board_ticks_start();
-    tick_last = board_ticks();
-    time_ms = tick_rem = 0;
+    emu_txq_init();
 }
 
 uint8_t board_id(void)
@@ -82,47 +72,16 @@ static void rx_overrun_check(cmsdk_uart_t *u)
     }
 }
 
-static uint32_t tx_free(void)
-{
-    return TX_SIZE - (tx_head - tx_tail);
-}
-
-bool board_uart_write(const uint8_t *p, size_t n)
-{
-    size_t i;
-    if (n > tx_free()) {
-        return false;
-    }
-    for (i = 0; i < n; ++i) {
-        tx_ring[tx_head++ & (TX_SIZE - 1u)] = p[i];
-    }
-    return true;
-}
-
-uint32_t board_time_ms(void)
-{
-    return time_ms;
-}
-
-static void time_update(void)
-{
-    uint32_t now = board_ticks();
-    tick_rem += (now - tick_last) & 0x00ffffffu; /* 24-bit counter */
-    tick_last = now;
-    time_ms += tick_rem / (BOARD_CPU_HZ / 1000u);
-    tick_rem %= BOARD_CPU_HZ / 1000u;
-}
-
 bool board_poll(void)
 {
     uint8_t b;
-    time_update();
-    while (tx_tail != tx_head && !(UART0->STATE & UART_STATE_TXFULL)) {
-        UART0->DATA = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
+    emu_clock_update();
+    while (!(UART0->STATE & UART_STATE_TXFULL) && emu_txq_next(&b)) {
+        UART0->DATA = b;
     }
     rx_overrun_check(UART0);
     rx_overrun_check(UART1);
-    if (tx_free() < 3u * ACNF_MAX_UP_WIRE) {
+    if (emu_txq_free() < 3u * ACNF_MAX_UP_WIRE) {
         return true; /* let the queue drain before taking input that makes more */
     }
     if (UART0->STATE & UART_STATE_RXFULL) {
