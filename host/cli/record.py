@@ -107,7 +107,7 @@ def cmd_record(args) -> int:
     print(
         f"accelnav record: {args.out}: {s['frames'].get('sample', 0)} sample frames in {res.seconds:.1f} s, "
         f"lost {s['lost']}, duplicates {s['duplicates']}, damaged {s['bad_frames']} "
-        f"(CRC errors {s['crc_errors']}) ({res.reason})"
+        f"(CRC errors {s['crc_errors']}){_compact_counts(s)} ({res.reason})"
     )
     return 1 if res.reason.startswith("link lost") else 0
 
@@ -141,6 +141,7 @@ def _summary(path: Path) -> dict:
         "index_first": int(s["index"][0]) if len(s) else None,
         "index_last": int(s["index"][-1]) if len(s) else None,
         "tx_drop_last": int(s["tx_drop"][-1]) if len(s) else None,
+        "warnings": d.warnings,
     }
     if len(d.frames["info"]):
         info = d.frames["info"][-1]
@@ -171,6 +172,8 @@ def cmd_log_export(args) -> int:
         d = decode_log(args.log)
     except LogError as exc:
         raise UserError(str(exc)) from None
+    for w in d.warnings:
+        print(f"accelnav log export: warning: {w}")
     cols = sample_columns(d.manifest, d.frames["sample"])
     names = d.manifest.axes
     raw = d.manifest.raw_fields()
@@ -205,7 +208,22 @@ def cmd_log_export(args) -> int:
 
 
 def _link_counts(stats: dict) -> str:
-    return f"lost {stats['lost']}, duplicates {stats['duplicates']}, damaged {stats['bad_frames']} frames"
+    return (
+        f"lost {stats['lost']}, duplicates {stats['duplicates']}, damaged {stats['bad_frames']} frames"
+        + _compact_counts(stats)
+    )
+
+
+def _compact_counts(stats: dict) -> str:
+    """The compact mode's checks, when the stream had block frames."""
+    if not stats["frames"].get("block"):
+        return ""
+    text = f"; replay: {stats['checkpoints']} checkpoints matched, {stats['mismatches']} mismatches"
+    if stats["mismatches"]:
+        text += " (MISMATCH: the host's replay differs from the firmware's filter; rows flagged 'mismatch')"
+    if stats["unreplayed"]:
+        text += f", {stats['unreplayed']} samples unreplayed (no model text)"
+    return text
 
 
 def log_run_arrays(log, d=None) -> tuple[dict[str, np.ndarray], object]:

@@ -28,8 +28,9 @@ from dataclasses import dataclass, field
 import serial
 from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
+from accelnav.codegen.cbuild import BuildError
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import Decoder, Manifest, encode_command
+from accelnav.link.telemetry import Decoder, Manifest, encode_command, replay_for
 
 DEFAULT_BAUD = 921600
 
@@ -113,7 +114,8 @@ class Recorder:
             self.ser = port
             self.ser.timeout = 0.02
         self.commands = commands
-        self.decoder = Decoder(manifest)
+        self.warnings: list[str] = []
+        self.decoder = Decoder(manifest, replay=_replay(manifest, model_text, self.warnings))
         self.status = status or Status()
         meta = {
             "manifest": manifest.data,
@@ -124,7 +126,6 @@ class Recorder:
         }
         self.log = LogWriter(out, meta, flush_s=flush_s, overwrite=overwrite)
         self.info_ok: bool | None = None
-        self.warnings: list[str] = []
         self._stop = False
 
     def _open(self):
@@ -183,11 +184,13 @@ class Recorder:
                 self.log.append(data, now_ns)
                 if data:
                     before = copy.deepcopy(self.decoder.order) if pending is not None else None
+                    lost0 = self.decoder.stats.lost
                     batch = self.decoder.feed(data)
                     if len(batch["info"]):
                         self._check_info(batch["info"])
                     if pending is not None and len(batch["sample"]):
-                        self._gap_measured(pending, before, batch["sample"][0], time.monotonic() - t0)
+                        lost = self.decoder.stats.lost - lost0
+                        self._gap_measured(pending, before, batch["sample"][0], time.monotonic() - t0, lost)
                         pending = None
                 t = time.monotonic() - t0
                 self.status.update(t, self.decoder)
@@ -275,12 +278,19 @@ class Recorder:
             return ""
         return "stopped"
 
-    def _gap_measured(self, gap: dict, before, first, t: float) -> None:
-        """The first sample frame after a reconnection: the frames the gap cost, exactly (the decoder's rule)."""
-        lost0 = before.lost
-        before.step(int(first["seq"]), int(first["index"]), int(first["flags"]))
-        gap["index_after"] = int(first["index"])
-        gap["frames_lost"] = before.lost - lost0
+    def _gap_measured(self, gap: dict, before, first, t: float, batch_lost: int) -> None:
+        """The first sample row after a reconnection: the rows the gap cost, exactly (the decoder's rule).
+        A sample frame is stepped through the state mode's rule; a replayed row (compact mode) takes the
+        samples the decoder counted lost in the batch that brought it (the gap and the stretch to the first
+        checkpoint after it)."""
+        if int(first["flags"]) & (1 << self.man.flags.get("replayed", 99)):
+            gap["index_after"] = int(first["index"])
+            gap["frames_lost"] = batch_lost
+        else:
+            lost0 = before.lost
+            before.step(int(first["seq"]), int(first["index"]), int(first["flags"]))
+            gap["index_after"] = int(first["index"])
+            gap["frames_lost"] = before.lost - lost0
         self.status.event(
             t,
             f"gap recorded: sample index {gap['index_before']} -> {gap['index_after']}, "
@@ -297,6 +307,20 @@ class Recorder:
             pass
 
 
+def _replay(man: Manifest, model_text: str, warnings: list, source: str = "the recording"):
+    """The replay for the compact mode's frames, or None (with a warning when the frames need one)."""
+    if "block" not in man.frames:
+        return None
+    if not model_text:
+        warnings.append(f"{source}: no model text: the compact frames' samples cannot be replayed (unreplayed)")
+        return None
+    try:
+        return replay_for(man, model_text)
+    except (ValueError, BuildError) as exc:  # ReplayError, ModelError, no compiler: one line
+        warnings.append(f"{source}: {str(exc).splitlines()[0]}")
+        return None
+
+
 @dataclass
 class DecodedLog:
     manifest: Manifest
@@ -307,6 +331,7 @@ class DecodedLog:
     chunks: int
     damaged_bytes: int
     torn_bytes: int
+    warnings: list = field(default_factory=list)
 
 
 def decode_log(path) -> DecodedLog:
@@ -317,7 +342,8 @@ def decode_log(path) -> DecodedLog:
 
     contents = read_log(path)
     man = Manifest(contents.meta["manifest"])
-    dec = Decoder(man)
+    warnings: list[str] = []
+    dec = Decoder(man, replay=_replay(man, contents.meta.get("model_toml") or "", warnings, str(path)))
     parts: dict[str, list] = {n: [] for n in dec.names}
     times = []
     for t_ns, data in zip(contents.times, contents.data, strict=True):
@@ -326,6 +352,10 @@ def decode_log(path) -> DecodedLog:
             parts[n].append(batch[n])
         times.append(np.full(len(batch["sample"]), t_ns, np.int64))
     dec.finish()
+    rest = dec.release()  # rows after the last checkpoint: the recording ended before the next one
+    if len(rest):
+        parts["sample"].append(rest)
+        times.append(np.full(len(rest), contents.times[-1], np.int64))
     frames = {n: (np.concatenate(p) if p else np.zeros(0, man.dtypes[n])) for n, p in parts.items()}
     host_t = np.concatenate(times) if times else np.zeros(0, np.int64)
     return DecodedLog(
@@ -337,4 +367,5 @@ def decode_log(path) -> DecodedLog:
         len(contents.data),
         contents.damaged_bytes,
         contents.torn_bytes,
+        warnings,
     )

@@ -1,0 +1,347 @@
+"""Sample rows from the compact mode's block and checkpoint frames (see :mod:`accelnav.codegen.frames`).
+
+:class:`CompactStream` takes the block and checkpoint frames a decoder
+accepted, in stream order, batch after batch, and returns the sample rows
+they make (the dtype of the state mode's ``sample`` frame, so every consumer
+reads both modes alike) with the filter's states from the host's replay of
+the firmware's own C (:class:`accelnav.link.replay.Replay`).
+
+The rules, frame by frame (:meth:`CompactStream.order`; vectorised when a
+batch holds nothing but the next frames in order, which is the common case):
+
+* The stream is a run of samples with 32-bit indices. A block whose first
+  index is before the end of the run so far is a repeat or an older frame:
+  dropped and counted in ``duplicates`` (its samples), never delivered twice.
+  A block or checkpoint after the end of the run means frames were lost: the
+  samples in between are counted in ``lost``, gaps of any length, unless the
+  frame is flagged ``resume`` (the firmware paused: a stop, a mode change).
+* A checkpoint at the end of the run is held against the replay (bit for bit:
+  a mismatch is counted in ``mismatches`` and the rows since the stretch
+  began are flagged ``mismatch``) and the replay goes on from the
+  checkpoint's state; a sample whose step verdict (input taken or refused)
+  differs from the code the firmware sent counts as a mismatch too. After a gap the replay starts again at the next
+  checkpoint: the samples received in between have no state and are counted
+  in ``lost`` as well, so ``lost`` is exactly the samples of the run that
+  were not delivered.
+* A checkpoint flagged ``reset`` before the end of the run starts a new run
+  (a reset command, a reboot), unless it is byte for byte the checkpoint that
+  opened the current run and less than ``4 x checkpoint_samples`` samples
+  back (then it is a repeat). A repeated older checkpoint is ignored
+  (``checkpoint_repeats``).
+
+Without a replay (no model text: a log recorded with ``--manifest``), the
+ordering and the counts are the same but no row is delivered; the samples
+are counted in ``unreplayed``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class CompactStream:
+    def __init__(self, man, replay=None):
+        self.man = man
+        self.replay = replay
+        self.axes = list(man.axes)
+        self.B = int(man.data["block_samples"])
+        self.state_bytes = [int(n) for n in man.data["state_bytes"]]
+        self.window = 4 * int(man.data["checkpoint_samples"])
+        self.R = 1 << man.flags["resume"]
+        self.X = 1 << man.flags["reset"]
+        self.REPLAYED = 1 << man.flags["replayed"]
+        self.MISMATCH = 1 << man.flags["mismatch"]
+        self.raw = man.raw_fields()
+        self.sample_dtype = man.dtypes["sample"]
+        self.end: int | None = None  # the index after the run's last sample so far
+        self.carry: list[bytes | None] = [None] * len(self.axes)  # replay state at `end`, per axis
+        self.opener: list[tuple[int, bytes] | None] = [None] * len(self.axes)
+        self.last_ck: list[int | None] = [None] * len(self.axes)  # index of the axis' last checkpoint taken
+        # rows wait until the checkpoint closing their stretch came (so that a mismatch flags them all):
+        # samples are numbered g = 0, 1, ... as accepted; open_from[j]: g where axis j's open stretch began
+        self.g = 0
+        self.open_from = [0] * len(self.axes)
+        self.held = (np.zeros(0, self.sample_dtype), np.zeros(0, np.int64))  # rows, their g
+        self.lost = self.duplicates = self.mismatches = self.checkpoints = 0
+        self.checkpoint_repeats = self.unreplayed = 0
+
+    # ------------------------------------------------------------------
+    def order(self, kinds, ids, b_index, b_n, b_flags, c_index, c_flags, c_axis, c_state):
+        """The per-frame rule over frames in stream order (``kinds`` 0 block, 1 checkpoint; ``ids`` into the
+        block or checkpoint arrays): (accepted block ids, break positions, per axis [[position, ck id, verify,
+        sync]]): a checkpoint verifies the stretch ending at its position unless a break came first there, and
+        the replay starts from it unless a break follows it there (its state is then the one before a gap)."""
+        end = self.end
+        acc, breaks = [], []
+        events: list[list[list]] = [[] for _ in self.axes]
+        pos = 0
+        R, X = self.R, self.X
+
+        def brk(p):
+            breaks.append(p)
+            for ev in events:
+                for e in ev[::-1]:
+                    if e[0] != p:
+                        break
+                    e[3] = False
+
+        for kind, i in zip(kinds, ids, strict=True):
+            if kind == 0:
+                idx, n, fl = b_index[i], b_n[i], b_flags[i]
+                if end is None or (fl & X and idx < end and end - idx > self.window):
+                    brk(pos)  # the first frame seen, or a reset whose checkpoints were lost
+                elif idx < end:
+                    self.duplicates += n
+                    continue
+                elif idx > end:
+                    if not fl & R:
+                        self.lost += idx - end
+                    brk(pos)
+                acc.append(i)
+                pos += n
+                end = idx + n
+                continue
+            idx, fl, ax = c_index[i], c_flags[i], c_axis[i]
+            if end is not None and idx < end:
+                st = bytes(c_state[i])
+                op = self.opener[ax]
+                if fl & X and not (op is not None and op == (idx, st) and end - idx <= self.window):
+                    brk(pos)  # a new run: a reset or a reboot
+                    end = idx
+                    self.opener[ax] = (idx, st)
+                    self.last_ck[ax] = idx
+                    events[ax].append([pos, i, False, True])
+                else:
+                    self.checkpoint_repeats += 1
+                continue
+            if end is not None and idx == end and self.last_ck[ax] == idx and not fl & X:
+                self.checkpoint_repeats += 1  # the one just taken, again
+                continue
+            if end is None or idx > end:
+                if end is not None and not fl & R:
+                    self.lost += idx - end
+                brk(pos)
+                end = idx
+            if fl & (R | X):
+                self.opener[ax] = (idx, bytes(c_state[i]))
+            self.last_ck[ax] = idx
+            events[ax].append([pos, i, not (breaks and breaks[-1] == pos), True])
+        self.end = end
+        return acc, breaks, events
+
+    # ------------------------------------------------------------------
+    def feed(self, blocks: np.ndarray, bpos: np.ndarray, cks: np.ndarray, cpos: np.ndarray):
+        """Accepted block and checkpoint frames of one batch with their stream positions: (rows, row positions)."""
+        nb, nc = len(blocks), len(cks)
+        empty = np.zeros(0, self.sample_dtype), np.zeros(0, np.int64)
+        if nb + nc == 0:
+            return empty
+        b_index = blocks["index"].astype(np.int64)
+        b_n = blocks["n"].astype(np.int64)
+        b_flags = blocks["flags"].astype(np.int64)
+        c_index = cks["index"].astype(np.int64)
+        c_flags = cks["flags"].astype(np.int64)
+        c_axis = cks["axis"].astype(np.int64)
+        kinds = np.r_[np.zeros(nb, np.int8), np.ones(nc, np.int8)]
+        ids = np.r_[np.arange(nb), np.arange(nc)]
+        o = np.argsort(np.r_[bpos, cpos], kind="stable")
+        kinds, ids = kinds[o], ids[o]
+        # the common case: every frame the next one of the run, none flagged resume or reset
+        isb = kinds == 0
+        n_sel = np.zeros(len(kinds), np.int64)
+        n_sel[isb] = b_n[ids[isb]]
+        nbefore = np.cumsum(n_sel) - n_sel
+        if self.end is not None:
+            idx = np.empty(len(kinds), np.int64)
+            fl = np.empty(len(kinds), np.int64)
+            idx[isb], idx[~isb] = b_index[ids[isb]], c_index[ids[~isb]]
+            fl[isb], fl[~isb] = b_flags[ids[isb]], c_flags[ids[~isb]]
+            regular = bool(np.all(idx == self.end + nbefore) and not np.any(fl & (self.R | self.X)))
+            if regular and nc:  # and no checkpoint twice (the rule counts a repeat)
+                ax_o, idx_o = c_axis[ids[~isb]], c_index[ids[~isb]]
+                for j in range(len(self.axes)):
+                    seen = idx_o[ax_o == j]
+                    if len(seen) and (np.any(np.diff(seen) == 0) or seen[0] == self.last_ck[j]):
+                        regular = False
+        else:
+            regular = False
+        if regular:
+            acc = ids[kinds == 0]
+            breaks: list[int] = []
+            events = [[] for _ in self.axes]
+            ck_at = nbefore[kinds == 1]
+            ck_ids = ids[kinds == 1]
+            for p, i in zip(ck_at.tolist(), ck_ids.tolist(), strict=True):
+                events[int(c_axis[i])].append([p, i, True, True])
+                self.last_ck[int(c_axis[i])] = int(c_index[i])
+            self.end = self.end + int(b_n.sum())
+        else:
+            acc, breaks, events = self.order(
+                kinds.tolist(),
+                ids.tolist(),
+                b_index.tolist(),
+                b_n.tolist(),
+                b_flags.tolist(),
+                c_index.tolist(),
+                c_flags.tolist(),
+                c_axis.tolist(),
+                cks["state"],
+            )
+            acc = np.asarray(acc, np.int64)
+        return self._rows(blocks[acc], bpos[acc], breaks, events, cks)
+
+    # ------------------------------------------------------------------
+    def _rows(self, blk, bpos, breaks, events, cks):
+        B = self.B
+        n_ax = len(self.axes)
+        ns = blk["n"].astype(np.int64)
+        N = int(ns.sum())
+        slot = np.arange(B)
+        mask = slot[None, :] < ns[:, None]
+        index = (blk["index"].astype(np.int64)[:, None] + slot[None, :])[mask]
+        first = np.zeros_like(mask)
+        first[:, 0] = True
+        first = first[mask]
+        aflags = blk["aflags"][mask].astype(np.int64)
+        codes = [((aflags >> (2 * j)) & 3).astype(np.uint8) for j in range(n_ax)]
+        raw = {(j, k): blk[f"{ax}.{k}"][mask] for j, ax in enumerate(self.axes) for k in self.raw}
+        breakset = set(breaks)
+        valid = np.ones(N, bool)
+        mism = np.zeros(N, bool)
+        states = np.zeros((n_ax, N, 4), np.int64)
+        g0 = self.g
+        held_rows, held_g = self.held
+        held_mism = np.zeros(len(held_rows), bool)
+        for j in range(n_ax):
+            nbj = self.state_bytes[j]
+            ev_at: dict[int, list[int]] = {}  # checkpoints verifying the stretch that ends here
+            sync_at: dict[int, int] = {}  # the checkpoint the replay starts from here
+            for p, i, verify, sync in events[j]:
+                if verify:
+                    ev_at.setdefault(p, []).append(i)
+                if sync:
+                    sync_at[p] = i
+            points = sorted(breakset | set(ev_at) | set(sync_at) | {0, N})
+            init = self.carry[j] if 0 not in breakset else None
+            opened = self.open_from[j] if init is not None else g0  # g where the open stretch began
+            if N == 0:
+                points = [0]
+            checks = []  # (stretch number or -1 for the carried state, checkpoint id)
+            segs = []  # (start, end, init bytes, g where the stretch began)
+            if self.carry[j] is not None and 0 in ev_at:  # no break before them: they close the carried stretch
+                checks += [(-1, i) for i in ev_at[0]]
+            if 0 in sync_at:
+                init = bytes(cks["state"][sync_at[0], :nbj])
+                opened = g0
+            for a, b in zip(points[:-1], points[1:], strict=True):
+                segs.append((a, b, init, opened))
+                checks += [(len(segs) - 1, i) for i in ev_at.get(b, [])]
+                if b in breakset:
+                    init = None
+                if b in sync_at:
+                    init = bytes(cks["state"][sync_at[b], :nbj])
+                elif b not in breakset:
+                    init = "continue"  # only at b == N: the last stretch's final state
+                if init != "continue":
+                    opened = g0 + b
+            stale_from = self.open_from[j]
+            self.open_from[j] = opened
+            live = [k for k, s in enumerate(segs) if s[2] is not None and s[1] > s[0]]
+            for sg in segs:
+                if sg[2] is None and sg[1] > sg[0]:
+                    valid[sg[0] : sg[1]] = False
+            fin = {}
+            if self.replay is not None and live:
+                start = np.array([segs[k][0] for k in live], np.int64)
+                length = np.array([segs[k][1] - segs[k][0] for k in live], np.int64)
+                init_arr = np.frombuffer(b"".join(segs[k][2] for k in live), np.uint8).reshape(len(live), nbj)
+                in1 = raw[(j, self.raw[0])]
+                in2 = raw[(j, self.raw[1])] if len(self.raw) > 1 else None
+                x, f, nbad = self.replay.run(j, start, length, init_arr, codes[j], in1, in2)
+                states[j] = x
+                for m, k in enumerate(live):
+                    fin[k] = f[m].tobytes()
+                    if nbad[m]:
+                        self.mismatches += int(nbad[m])
+                        mism[segs[k][0] : segs[k][1]] = True
+                        held_mism |= held_g >= segs[k][3]
+            elif self.replay is None:
+                valid[:] = False
+            # empty stretches pass their start state through
+            for k, sg in enumerate(segs):
+                if k not in fin and sg[2] is not None and sg[1] == sg[0]:
+                    fin[k] = sg[2]
+            for k, i in checks:
+                got = self.carry[j] if k == -1 else fin.get(k)
+                if got is None:
+                    continue
+                if got == bytes(cks["state"][i, :nbj]):
+                    self.checkpoints += 1
+                else:
+                    self.mismatches += 1
+                    if k >= 0:
+                        mism[segs[k][0] : segs[k][1]] = True
+                        held_mism |= held_g >= segs[k][3]
+                    else:
+                        held_mism |= held_g >= stale_from
+            if N == 0 or not segs:
+                self.carry[j] = init if isinstance(init, bytes) else (self.carry[j] if init == "continue" else None)
+            elif init == "continue":
+                self.carry[j] = fin.get(len(segs) - 1)
+            else:
+                self.carry[j] = init
+        if self.replay is None:
+            self.unreplayed += N
+        else:
+            self.lost += int(np.count_nonzero(~valid))
+        self.g = g0 + N
+        rows, rpos = self._assemble(blk, bpos, ns, mask, index, first, codes, raw, states, valid, mism)
+        if held_mism.any():
+            held_rows["flags"] |= np.where(held_mism, self.MISMATCH, 0).astype(held_rows["flags"].dtype)
+        # deliver what no open stretch holds; the held rows came before this batch (position -1)
+        rows = np.concatenate([held_rows, rows])
+        rpos = np.r_[np.full(len(held_rows), -1, np.int64), rpos]
+        g = np.r_[held_g, g0 + np.flatnonzero(valid)]
+        done = g < min(self.open_from)
+        self.held = (rows[~done], g[~done])
+        return rows[done], rpos[done]
+
+    def release(self) -> np.ndarray:
+        """End of the stream: the rows after the last checkpoint (replayed, never verified)."""
+        rows = self.held[0]
+        self.held = (np.zeros(0, self.sample_dtype), np.zeros(0, np.int64))
+        self.open_from = [self.g] * len(self.axes)
+        return rows
+
+    def _assemble(self, blk, bpos, ns, mask, index, first, codes, raw, states, valid, mism):
+        man = self.man
+        n = int(np.count_nonzero(valid))
+        rows = np.zeros(n, self.sample_dtype)
+        rows["type"] = man.frames["sample"]["type"]
+        bi = np.repeat(np.arange(len(blk)), ns)[valid]
+        rows["index"] = index[valid]
+        rows["seq"] = index[valid] & 0xFFFF
+        fl = blk["flags"].astype(np.int64)[bi]
+        fl = np.where(first[valid], fl, fl & ~(self.R | self.X))
+        fl |= self.REPLAYED
+        fl |= np.where(mism[valid], self.MISMATCH, 0)
+        rows["flags"] = fl
+        for k in ("tx_drop", "skipped", "overflow", "missed", "rx_lost"):
+            rows[k] = blk[k][bi]
+        af = man.axis_flags
+        duty = man.input == "duty_cycle"
+        per_code = np.array(
+            [
+                0,
+                (1 << af["skipped"]) | (0 if duty else 1 << af["rail"]),
+                (1 << af["skipped"]) | (1 << af["timeout"]),
+                (1 << af["skipped"]) | (1 << af["missed"]),
+            ]
+        )
+        for j, ax in enumerate(self.axes):
+            rows[f"{ax}.flags"] = per_code[codes[j][valid]]
+            for k in self.raw:
+                rows[f"{ax}.{k}"] = raw[(j, k)][valid]
+            for c, s in enumerate(("r", "u", "a", "e")):
+                rows[f"{ax}.{s}"] = states[j, valid, c]
+        return rows, np.repeat(bpos, ns)[valid]
