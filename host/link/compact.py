@@ -196,22 +196,32 @@ class CompactStream:
         n_ax = len(self.axes)
         ns = blk["n"].astype(np.int64)
         N = int(ns.sum())
-        slot = np.arange(B)
-        mask = slot[None, :] < ns[:, None]
-        index = (blk["index"].astype(np.int64)[:, None] + slot[None, :])[mask]
-        first = np.zeros_like(mask)
-        first[:, 0] = True
-        first = first[mask]
-        aflags = blk["aflags"][mask].astype(np.int64)
+        if N == len(ns) * B:  # every block full: the slots in order without a gather
+
+            def take(a):
+                return a.reshape(N, *a.shape[2:])
+
+            first = np.zeros(N, bool)
+            first[::B] = True
+        else:
+            mask = np.arange(B)[None, :] < ns[:, None]
+
+            def take(a):
+                return a[mask]
+
+            first = np.zeros(N, bool)
+            first[np.cumsum(ns) - ns] = True
+        aflags = take(blk["aflags"])
         codes = [((aflags >> (2 * j)) & 3).astype(np.uint8) for j in range(n_ax)]
-        raw = {(j, k): blk[f"{ax}.{k}"][mask] for j, ax in enumerate(self.axes) for k in self.raw}
+        raw = {(j, k): take(blk[f"{ax}.{k}"]) for j, ax in enumerate(self.axes) for k in self.raw}
+        rows = np.empty(N, self.sample_dtype)
         breakset = set(breaks)
         valid = np.ones(N, bool)
         mism = np.zeros(N, bool)
-        states = np.zeros((n_ax, N, 4), np.int64)
         g0 = self.g
         held_rows, held_g = self.held
         held_mism = np.zeros(len(held_rows), bool)
+        ck_states = cks["state"]
         for j in range(n_ax):
             nbj = self.state_bytes[j]
             ev_at: dict[int, list[int]] = {}  # checkpoints verifying the stretch that ends here
@@ -222,89 +232,95 @@ class CompactStream:
                 if sync:
                     sync_at[p] = i
             points = sorted(breakset | set(ev_at) | set(sync_at) | {0, N})
-            init = self.carry[j] if 0 not in breakset else None
-            opened = self.open_from[j] if init is not None else g0  # g where the open stretch began
-            if N == 0:
-                points = [0]
+            CARRY, NONE = -2, -1  # a stretch starts from the carried state, a checkpoint (its id), or nothing
+            carry = self.carry[j]
+            src = CARRY if (carry is not None and 0 not in breakset) else NONE
+            opened = self.open_from[j] if src == CARRY else g0  # g where the open stretch began
             checks = []  # (stretch number or -1 for the carried state, checkpoint id)
-            segs = []  # (start, end, init bytes, g where the stretch began)
-            if self.carry[j] is not None and 0 in ev_at:  # no break before them: they close the carried stretch
+            segs = []  # (start, end, source, g where the stretch began)
+            if carry is not None and 0 in ev_at:  # no break before them: they close the carried stretch
                 checks += [(-1, i) for i in ev_at[0]]
             if 0 in sync_at:
-                init = bytes(cks["state"][sync_at[0], :nbj])
-                opened = g0
+                src, opened = sync_at[0], g0
             for a, b in zip(points[:-1], points[1:], strict=True):
-                segs.append((a, b, init, opened))
+                segs.append((a, b, src, opened))
                 checks += [(len(segs) - 1, i) for i in ev_at.get(b, [])]
-                if b in breakset:
-                    init = None
                 if b in sync_at:
-                    init = bytes(cks["state"][sync_at[b], :nbj])
-                elif b not in breakset:
-                    init = "continue"  # only at b == N: the last stretch's final state
-                if init != "continue":
-                    opened = g0 + b
+                    src, opened = sync_at[b], g0 + b
+                elif b in breakset:
+                    src, opened = NONE, g0 + b
+                else:
+                    src = "continue"  # only at b == N: the last stretch's final state is carried
             stale_from = self.open_from[j]
             self.open_from[j] = opened
-            live = [k for k, s in enumerate(segs) if s[2] is not None and s[1] > s[0]]
+            live = [k for k, sg in enumerate(segs) if sg[2] != NONE]
             for sg in segs:
-                if sg[2] is None and sg[1] > sg[0]:
+                if sg[2] == NONE:
                     valid[sg[0] : sg[1]] = False
-            fin = {}
+            fin = np.zeros((max(len(segs), 1), nbj), np.uint8)  # a row even without a stretch (N == 0)
+            has_fin = np.zeros(len(fin), bool)
             if self.replay is not None and live:
                 start = np.array([segs[k][0] for k in live], np.int64)
                 length = np.array([segs[k][1] - segs[k][0] for k in live], np.int64)
-                init_arr = np.frombuffer(b"".join(segs[k][2] for k in live), np.uint8).reshape(len(live), nbj)
+                srcs = np.array([segs[k][2] for k in live], np.int64)
+                init = np.empty((len(live), nbj), np.uint8)
+                from_ck = srcs >= 0
+                init[from_ck] = ck_states[srcs[from_ck], :nbj]
+                if not from_ck.all():
+                    init[~from_ck] = np.frombuffer(carry, np.uint8)
                 in1 = raw[(j, self.raw[0])]
                 in2 = raw[(j, self.raw[1])] if len(self.raw) > 1 else None
-                x, f, nbad = self.replay.run(j, start, length, init_arr, codes[j], in1, in2)
-                states[j] = x
-                for m, k in enumerate(live):
-                    fin[k] = f[m].tobytes()
-                    if nbad[m]:
-                        self.mismatches += int(nbad[m])
-                        mism[segs[k][0] : segs[k][1]] = True
-                        held_mism |= held_g >= segs[k][3]
+                f, nbad = self.replay.run(j, start, length, init, codes[j], in1, in2, rows)
+                fin[live] = f
+                has_fin[live] = True
+                for m in np.flatnonzero(nbad).tolist():
+                    k = live[m]
+                    self.mismatches += int(nbad[m])
+                    mism[segs[k][0] : segs[k][1]] = True
+                    held_mism |= held_g >= segs[k][3]
             elif self.replay is None:
                 valid[:] = False
-            # empty stretches pass their start state through
-            for k, sg in enumerate(segs):
-                if k not in fin and sg[2] is not None and sg[1] == sg[0]:
-                    fin[k] = sg[2]
-            for k, i in checks:
-                got = self.carry[j] if k == -1 else fin.get(k)
-                if got is None:
-                    continue
-                if got == bytes(cks["state"][i, :nbj]):
-                    self.checkpoints += 1
-                else:
+            if checks:
+                ks = np.array([k for k, _ in checks], np.int64)
+                ids = np.array([i for _, i in checks], np.int64)
+                ok = np.where(ks >= 0, has_fin[np.maximum(ks, 0)], True)
+                got = fin[np.maximum(ks, 0)]
+                if (ks < 0).any():
+                    got[ks < 0] = np.frombuffer(carry, np.uint8)
+                same = (got == ck_states[ids, :nbj]).all(axis=1)
+                self.checkpoints += int(np.count_nonzero(ok & same))
+                for k in ks[ok & ~same].tolist():
                     self.mismatches += 1
                     if k >= 0:
                         mism[segs[k][0] : segs[k][1]] = True
                         held_mism |= held_g >= segs[k][3]
                     else:
                         held_mism |= held_g >= stale_from
-            if N == 0 or not segs:
-                self.carry[j] = init if isinstance(init, bytes) else (self.carry[j] if init == "continue" else None)
-            elif init == "continue":
-                self.carry[j] = fin.get(len(segs) - 1)
+            if src == "continue":
+                self.carry[j] = fin[-1].tobytes() if segs and has_fin[-1] else None
+            elif src == CARRY:
+                pass  # no sample and no checkpoint in this batch: the carried state stays
             else:
-                self.carry[j] = init
+                self.carry[j] = None if src == NONE else ck_states[src, :nbj].tobytes()
         if self.replay is None:
             self.unreplayed += N
         else:
             self.lost += int(np.count_nonzero(~valid))
         self.g = g0 + N
-        rows, rpos = self._assemble(blk, bpos, ns, mask, index, first, codes, raw, states, valid, mism)
+        rpos = np.repeat(bpos, ns)
+        self._assemble(rows, blk, ns, first, codes, raw, mism)
+        if not valid.all():
+            rows, rpos = rows[valid], rpos[valid]
         if held_mism.any():
             held_rows["flags"] |= np.where(held_mism, self.MISMATCH, 0).astype(held_rows["flags"].dtype)
-        # deliver what no open stretch holds; the held rows came before this batch (position -1)
-        rows = np.concatenate([held_rows, rows])
-        rpos = np.r_[np.full(len(held_rows), -1, np.int64), rpos]
-        g = np.r_[held_g, g0 + np.flatnonzero(valid)]
-        done = g < min(self.open_from)
-        self.held = (rows[~done], g[~done])
-        return rows[done], rpos[done]
+        g = g0 + np.flatnonzero(valid) if not valid.all() else g0 + np.arange(N)
+        if len(held_rows):  # the held rows came before this batch (position -1)
+            rows = np.concatenate([held_rows, rows])
+            rpos = np.r_[np.full(len(held_rows), -1, np.int64), rpos]
+            g = np.r_[held_g, g]
+        cut = int(np.searchsorted(g, min(self.open_from)))  # g increases: deliver what no open stretch holds
+        self.held = (rows[cut:].copy(), g[cut:])
+        return rows[:cut], rpos[:cut]
 
     def release(self) -> np.ndarray:
         """End of the stream: the rows after the last checkpoint (replayed, never verified)."""
@@ -313,21 +329,22 @@ class CompactStream:
         self.open_from = [self.g] * len(self.axes)
         return rows
 
-    def _assemble(self, blk, bpos, ns, mask, index, first, codes, raw, states, valid, mism):
+    def _assemble(self, rows, blk, ns, first, codes, raw, mism) -> None:
+        """Every field of the rows but the states (the replay wrote those)."""
         man = self.man
-        n = int(np.count_nonzero(valid))
-        rows = np.zeros(n, self.sample_dtype)
+        N = len(rows)
         rows["type"] = man.frames["sample"]["type"]
-        bi = np.repeat(np.arange(len(blk)), ns)[valid]
-        rows["index"] = index[valid]
-        rows["seq"] = index[valid] & 0xFFFF
-        fl = blk["flags"].astype(np.int64)[bi]
-        fl = np.where(first[valid], fl, fl & ~(self.R | self.X))
-        fl |= self.REPLAYED
-        fl |= np.where(mism[valid], self.MISMATCH, 0)
+        index = np.repeat(blk["index"].astype(np.int64) - np.cumsum(ns) + ns, ns) + np.arange(N)
+        rows["index"] = index
+        rows["seq"] = index & 0xFFFF
+        bfl = blk["flags"].astype(np.uint16)
+        fl = np.repeat(bfl & np.uint16(~(self.R | self.X) & 0xFFFF), ns) | np.uint16(self.REPLAYED)
+        fl[first] |= bfl & np.uint16(self.R | self.X)
+        if mism.any():
+            fl |= np.where(mism, self.MISMATCH, 0).astype(np.uint16)
         rows["flags"] = fl
         for k in ("tx_drop", "skipped", "overflow", "missed", "rx_lost"):
-            rows[k] = blk[k][bi]
+            rows[k] = np.repeat(blk[k], ns)
         af = man.axis_flags
         duty = man.input == "duty_cycle"
         per_code = np.array(
@@ -336,12 +353,10 @@ class CompactStream:
                 (1 << af["skipped"]) | (0 if duty else 1 << af["rail"]),
                 (1 << af["skipped"]) | (1 << af["timeout"]),
                 (1 << af["skipped"]) | (1 << af["missed"]),
-            ]
+            ],
+            np.uint8,
         )
         for j, ax in enumerate(self.axes):
-            rows[f"{ax}.flags"] = per_code[codes[j][valid]]
+            rows[f"{ax}.flags"] = per_code[codes[j]]
             for k in self.raw:
-                rows[f"{ax}.{k}"] = raw[(j, k)][valid]
-            for c, s in enumerate(("r", "u", "a", "e")):
-                rows[f"{ax}.{s}"] = states[j, valid, c]
-        return rows, np.repeat(bpos, ns)[valid]
+                rows[f"{ax}.{k}"] = raw[(j, k)]

@@ -29,10 +29,12 @@ from accelnav.codegen.model import Model, loads_model
 _KERNEL = """
 /* Replay of axis {ax}: stretch j starts from the state bytes init[j], runs samples
  * start[j] .. start[j] + len[j] - 1 and leaves its final state's bytes in fin[j];
- * x4 gets r, u, a, e of every sample (accelnav_{ax}_read), nbad[j] the samples whose
- * step verdict (input taken or refused) differs from the code the firmware sent. */
+ * r, u, a, e of sample k (accelnav_{ax}_read) go to rows + k * stride + off[0..3]
+ * (little-endian, as the fields of the host's sample rows), nbad[j] counts the
+ * samples whose step verdict (input taken or refused) differs from the code sent. */
 void acnr_{ax}(int64_t nseg, const int64_t *start, const int64_t *len, const uint8_t *init, uint8_t *fin,
-               const uint8_t *code, const uint32_t *in1, const uint32_t *in2, int64_t *x4, int64_t *nbad)
+               const uint8_t *code, const uint32_t *in1, const uint32_t *in2, uint8_t *rows, int64_t stride,
+               const int64_t *off, int64_t *nbad)
 {{
     int64_t j, k;
     (void)in2;
@@ -49,10 +51,10 @@ void acnr_{ax}(int64_t nseg, const int64_t *start, const int64_t *len, const uin
                 accelnav_{ax}_skip(&s);
             }}
             accelnav_{ax}_read(&s, &o);
-            x4[4 * k] = o.r;
-            x4[4 * k + 1] = o.u;
-            x4[4 * k + 2] = o.a;
-            x4[4 * k + 3] = o.e;
+            memcpy(rows + k * stride + off[0], &o.r, sizeof o.r);
+            memcpy(rows + k * stride + off[1], &o.u, sizeof o.u);
+            memcpy(rows + k * stride + off[2], &o.a, sizeof o.a);
+            memcpy(rows + k * stride + off[3], &o.e, sizeof o.e);
         }}
         memcpy(fin + j * (int64_t)sizeof s, &s, sizeof s);
         nbad[j] = bad;
@@ -67,7 +69,8 @@ size_t acnr_{ax}_size(void)
 
 _DECL = (
     "void acnr_{ax}(int64_t nseg, const int64_t *start, const int64_t *len, const uint8_t *init, uint8_t *fin,"
-    " const uint8_t *code, const uint32_t *in1, const uint32_t *in2, int64_t *x4, int64_t *nbad);\n"
+    " const uint8_t *code, const uint32_t *in1, const uint32_t *in2, uint8_t *rows, int64_t stride,"
+    " const int64_t *off, int64_t *nbad);\n"
     "size_t acnr_{ax}_size(void);\n"
 )
 
@@ -140,12 +143,24 @@ class Replay:
             got = getattr(self.lib, f"acnr_{ax}_size")()
             if got != nb:
                 raise ReplayError(f"axis {ax}: the state struct is {got} bytes here, the manifest says {nb}")
+        dt = manifest.dtypes["sample"]
+        self.row_dtype = dt
+        self.offsets = []
+        for ax in self.axes:
+            off = []
+            for st, size in (("r", 8), ("u", 8), ("a", 4), ("e", 8)):  # accelnav_AXIS_out_t's members
+                f = dt.fields[f"{ax}.{st}"]
+                if f[0].itemsize != size or f[0].byteorder == ">":
+                    raise ReplayError(f"{ax}.{st}: the sample row's field is not the read struct's")
+                off.append(f[1])
+            self.offsets.append(np.array(off, np.int64))
 
-    def run(self, j: int, start, length, init: np.ndarray, code, in1, in2):
+    def run(self, j: int, start, length, init: np.ndarray, code, in1, in2, rows: np.ndarray):
         """Axis ``j`` over stretches (``start``, ``length``: int64 arrays) of the sample arrays ``code`` (uint8),
-        ``in1``/``in2`` (uint32); ``init``: (n_stretches, state_bytes) uint8. Returns (x (n, 4) int64 with
-        r, u, a, e in the read formats (rows outside every stretch are 0), final states like ``init``, and
-        per stretch the samples whose step verdict disagreed with the code)."""
+        ``in1``/``in2`` (uint32); ``init``: (n_stretches, state_bytes) uint8. Writes r, u, a, e of the
+        stretches' samples into ``rows`` (the manifest's sample dtype, one per sample; the others untouched);
+        returns (final states like ``init``, per stretch the samples whose step verdict disagreed with the
+        code)."""
         ax = self.axes[j]
         nb = self.state_bytes[j]
         start = np.ascontiguousarray(start, np.int64)
@@ -157,7 +172,8 @@ class Replay:
         n = len(code)
         if len(start) and int((start + length).max()) > n:
             raise ValueError("a stretch runs past the samples")
-        x = np.zeros((n, 4), np.int64)
+        if rows.dtype != self.row_dtype or len(rows) != n or not rows.flags.c_contiguous:
+            raise ValueError("rows: one contiguous sample row per sample")
         fin = np.empty_like(init)
         nbad = np.zeros(len(start), np.int64)
         ffi = self.ffi
@@ -174,7 +190,9 @@ class Replay:
             p(code, "uint8_t[]"),
             p(in1, "uint32_t[]"),
             p(in2, "uint32_t[]"),
-            p(x, "int64_t[]"),
+            ffi.from_buffer("uint8_t[]", rows.view(np.uint8).reshape(-1), require_writable=True),
+            rows.dtype.itemsize,
+            p(self.offsets[j], "int64_t[]"),
             p(nbad, "int64_t[]"),
         )
-        return x, fin, nbad
+        return fin, nbad

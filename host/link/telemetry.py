@@ -800,9 +800,12 @@ def _naive_rows(man: Manifest, frames: list, replay) -> tuple[list, dict]:
             base = base0 + j * len(raw) * B
             in1 = np.array([blk[base + k]], np.uint32)
             in2 = np.array([blk[base + B + k]], np.uint32) if len(raw) > 1 else None
-            xs, fin, nbad = replay.run(
-                j, np.zeros(1, np.int64), np.ones(1, np.int64), np.frombuffer(st, np.uint8), [code], in1, in2
+            one = np.zeros(1, man.dtypes["sample"])
+            fin, nbad = replay.run(
+                j, np.zeros(1, np.int64), np.ones(1, np.int64), np.frombuffer(st, np.uint8), [code], in1, in2, one
             )
+            ax = man.axes[j]
+            xs = [[int(one[f"{ax}.{c}"][0]) for c in "ruae"]]
             if nbad[0]:
                 cs.mismatches += int(nbad[0])
                 for q in [*since, p]:
