@@ -255,3 +255,31 @@ def test_a_block_lost_right_after_a_checkpoint(man, replay, telemetry):
     assert c["lost"] == C and c["mismatches"] == 0 and c["duplicates"] == 0
     assert c["checkpoints"] == 2 * (N // C + 1) - 2  # the one after the gap starts the replay again
     assert B <= C
+
+
+def test_recorder_reconnects_and_counts_the_gap_in_samples(tmp_path, man, telemetry):
+    """A pulled cable in the compact mode: the gap is counted from the sample index, the samples received
+    after it before the next checkpoint too, and the log decodes to the same rows."""
+    import io
+
+    from test_recorder import _server
+
+    from accelnav.link.recorder import Recorder, Status, decode_log
+
+    f = _frames(telemetry)
+    kinds = [_kind(man, x) for x in f]
+    blocks = [k for k, x in enumerate(kinds) if x == "block"]
+    a, b = blocks[12], blocks[20]  # blocks 12..19 never arrive; the second connection repeats 3 frames
+    url, th, _ = _server([b"".join(f[:a]), b"".join(f[a - 3 : a] + f[b:])], down_s=0.5)
+    rec = Recorder(url, tmp_path / "c.acnlog", man, model_text=load_model().text, status=Status(io.StringIO()))
+    C, B = man.data["checkpoint_samples"], man.data["block_samples"]
+    resync = C * (20 * B // C + 1)
+    res = rec.run(max_frames=12 * B + N - resync, duration=60)
+    rec.close()
+    th.join(30)
+    assert res.reason == "frames", res
+    g = res.gaps[0]
+    assert (g["index_before"], g["index_after"], g["frames_lost"]) == (12 * B - 1, resync, resync - 12 * B)
+    d = decode_log(tmp_path / "c.acnlog")
+    np.testing.assert_array_equal(d.frames["sample"]["index"], np.r_[0 : 12 * B, resync:N])
+    assert d.stats["lost"] == resync - 12 * B and d.stats["mismatches"] == 0

@@ -39,6 +39,16 @@ from __future__ import annotations
 import numpy as np
 
 
+def concat_records(parts: list, dtype) -> np.ndarray:
+    """np.concatenate of structured arrays of one dtype, as bytes (numpy copies records field by field:
+    several times slower)."""
+    n = dtype.itemsize
+    raw = [np.ascontiguousarray(p).view(np.uint8).reshape(-1, n) for p in parts if len(p)]
+    if not raw:
+        return np.zeros(0, dtype)
+    return np.concatenate(raw).view(dtype).ravel()
+
+
 class CompactStream:
     def __init__(self, man, replay=None):
         self.man = man
@@ -214,13 +224,16 @@ class CompactStream:
         aflags = take(blk["aflags"])
         codes = [((aflags >> (2 * j)) & 3).astype(np.uint8) for j in range(n_ax)]
         raw = {(j, k): take(blk[f"{ax}.{k}"]) for j, ax in enumerate(self.axes) for k in self.raw}
-        rows = np.empty(N, self.sample_dtype)
+        held_rows, held_g = self.held
+        h = len(held_rows)
+        whole = np.empty(h + N, self.sample_dtype)  # the held rows first: no copy of the batch's rows later
+        whole[:h] = held_rows
+        rows = whole[h:]
         breakset = set(breaks)
         valid = np.ones(N, bool)
         mism = np.zeros(N, bool)
         g0 = self.g
-        held_rows, held_g = self.held
-        held_mism = np.zeros(len(held_rows), bool)
+        held_mism = np.zeros(h, bool)
         ck_states = cks["state"]
         for j in range(n_ax):
             nbj = self.state_bytes[j]
@@ -307,20 +320,21 @@ class CompactStream:
         else:
             self.lost += int(np.count_nonzero(~valid))
         self.g = g0 + N
-        rpos = np.repeat(bpos, ns)
         self._assemble(rows, blk, ns, first, codes, raw, mism)
-        if not valid.all():
-            rows, rpos = rows[valid], rpos[valid]
         if held_mism.any():
-            held_rows["flags"] |= np.where(held_mism, self.MISMATCH, 0).astype(held_rows["flags"].dtype)
-        g = g0 + np.flatnonzero(valid) if not valid.all() else g0 + np.arange(N)
-        if len(held_rows):  # the held rows came before this batch (position -1)
-            rows = np.concatenate([held_rows, rows])
-            rpos = np.r_[np.full(len(held_rows), -1, np.int64), rpos]
-            g = np.r_[held_g, g]
+            whole["flags"][:h] |= np.where(held_mism, self.MISMATCH, 0).astype(whole["flags"].dtype)
+        # the held rows came before this batch (position -1)
+        rpos = np.r_[np.full(h, -1, np.int64), np.repeat(bpos, ns)]
+        g = np.r_[held_g, g0 + np.arange(N)]
+        if not valid.all():  # drop the runs of rows without a state: whole runs copied (a record gather is slow)
+            keep = np.r_[np.ones(h, bool), valid]
+            edges = np.flatnonzero(np.diff(np.r_[0, keep.view(np.int8), 0]))
+            runs = list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+            whole = concat_records([whole[a:b] for a, b in runs], whole.dtype)
+            rpos, g = rpos[keep], g[keep]
         cut = int(np.searchsorted(g, min(self.open_from)))  # g increases: deliver what no open stretch holds
-        self.held = (rows[cut:].copy(), g[cut:])
-        return rows[:cut], rpos[:cut]
+        self.held = (whole[cut:].copy(), g[cut:])
+        return whole[:cut], rpos[:cut]
 
     def release(self) -> np.ndarray:
         """End of the stream: the rows after the last checkpoint (replayed, never verified)."""
@@ -329,22 +343,49 @@ class CompactStream:
         self.open_from = [self.g] * len(self.axes)
         return rows
 
+    def _groups(self):
+        """The rows' fields other than the states, as runs of adjacent bytes: [(start, end, dense dtype)]."""
+        if getattr(self, "_group_cache", None) is None:
+            dt = self.sample_dtype
+            states = {f"{ax}.{s}" for ax in self.axes for s in "ruae"}
+            fields = sorted(((o, n, t) for n, (t, o, *_) in dt.fields.items()), key=lambda x: x[0])
+            groups, cur = [], []
+            for o, n, t in fields:
+                if n in states:
+                    if cur:
+                        groups.append(cur)
+                    cur = []
+                else:
+                    cur.append((o, n, t))
+            if cur:
+                groups.append(cur)
+            out = []
+            for grp in groups:
+                a = grp[0][0]
+                b = grp[-1][0] + grp[-1][2].itemsize
+                sub = np.dtype(
+                    {
+                        "names": [n for _, n, _ in grp],
+                        "formats": [t for _, _, t in grp],
+                        "offsets": [o - a for o, _, _ in grp],
+                        "itemsize": b - a,
+                    }
+                )
+                out.append((a, b, sub))
+            self._group_cache = out
+        return self._group_cache
+
     def _assemble(self, rows, blk, ns, first, codes, raw, mism) -> None:
-        """Every field of the rows but the states (the replay wrote those)."""
+        """Every field of the rows but the states (the replay wrote those): filled in dense arrays of the
+        adjacent fields, each copied into the rows in one pass (a pass per field is several times slower)."""
         man = self.man
         N = len(rows)
-        rows["type"] = man.frames["sample"]["type"]
         index = np.repeat(blk["index"].astype(np.int64) - np.cumsum(ns) + ns, ns) + np.arange(N)
-        rows["index"] = index
-        rows["seq"] = index & 0xFFFF
         bfl = blk["flags"].astype(np.uint16)
         fl = np.repeat(bfl & np.uint16(~(self.R | self.X) & 0xFFFF), ns) | np.uint16(self.REPLAYED)
         fl[first] |= bfl & np.uint16(self.R | self.X)
         if mism.any():
             fl |= np.where(mism, self.MISMATCH, 0).astype(np.uint16)
-        rows["flags"] = fl
-        for k in ("tx_drop", "skipped", "overflow", "missed", "rx_lost"):
-            rows[k] = np.repeat(blk[k], ns)
         af = man.axis_flags
         duty = man.input == "duty_cycle"
         per_code = np.array(
@@ -356,7 +397,16 @@ class CompactStream:
             ],
             np.uint8,
         )
+        cols = {"type": man.frames["sample"]["type"], "index": index, "seq": index & 0xFFFF, "flags": fl}
+        for k in ("tx_drop", "skipped", "overflow", "missed", "rx_lost"):
+            cols[k] = np.repeat(blk[k], ns)
         for j, ax in enumerate(self.axes):
-            rows[f"{ax}.flags"] = per_code[codes[j]]
+            cols[f"{ax}.flags"] = per_code[codes[j]]
             for k in self.raw:
-                rows[f"{ax}.{k}"] = raw[(j, k)]
+                cols[f"{ax}.{k}"] = raw[(j, k)]
+        u8 = rows.view(np.uint8).reshape(N, rows.dtype.itemsize)
+        for a, b, sub in self._groups():
+            dense = np.empty(N, sub)
+            for name in sub.names:
+                dense[name] = cols[name]
+            u8[:, a:b] = dense.view(np.uint8).reshape(N, b - a)

@@ -188,9 +188,12 @@ class Recorder:
                     batch = self.decoder.feed(data)
                     if len(batch["info"]):
                         self._check_info(batch["info"])
-                    if pending is not None and len(batch["sample"]):
+                    rows = batch["sample"]
+                    if pending is not None and self.decoder.compact is not None and pending["index_before"] is not None:
+                        rows = rows[rows["index"] > pending["index_before"]]  # not rows held from before the gap
+                    if pending is not None and len(rows):
                         lost = self.decoder.stats.lost - lost0
-                        self._gap_measured(pending, before, batch["sample"][0], time.monotonic() - t0, lost)
+                        self._gap_measured(pending, before, rows[0], time.monotonic() - t0, lost)
                         pending = None
                 t = time.monotonic() - t0
                 self.status.update(t, self.decoder)
@@ -234,7 +237,7 @@ class Recorder:
         self.ser = None
         self.log.flush()
         self.decoder.finish()
-        gap = {"lost_s": round(t, 3), "error": str(exc), "index_before": self.decoder.order.last_index, "attempts": 0}
+        gap = {"lost_s": round(t, 3), "error": str(exc), "index_before": self.decoder.last_index, "attempts": 0}
         self.status.event(t, f"link lost ({exc}); the log stays open, retrying {self.url}")
         return gap
 
@@ -338,6 +341,7 @@ def decode_log(path) -> DecodedLog:
     """Read a log and decode its bytes with the manifest stored in it."""
     import numpy as np
 
+    from accelnav.link.compact import concat_records
     from accelnav.link.logfile import read_log
 
     contents = read_log(path)
@@ -356,7 +360,7 @@ def decode_log(path) -> DecodedLog:
     if len(rest):
         parts["sample"].append(rest)
         times.append(np.full(len(rest), contents.times[-1], np.int64))
-    frames = {n: (np.concatenate(p) if p else np.zeros(0, man.dtypes[n])) for n, p in parts.items()}
+    frames = {n: concat_records(p, man.dtypes[n]) for n, p in parts.items()}
     host_t = np.concatenate(times) if times else np.zeros(0, np.int64)
     return DecodedLog(
         man,

@@ -630,6 +630,15 @@ class Decoder:
             self._overlong = True
         self._tail = tail
 
+    @property
+    def last_index(self) -> int | None:
+        """The index of the last sample received in order (a sample frame, or a block's last sample)."""
+        ends = [self.order.last_index]
+        if self.compact is not None and self.compact.end is not None:
+            ends.append(self.compact.end - 1)
+        ends = [e for e in ends if e is not None]
+        return max(ends) if ends else None
+
     def release(self) -> np.ndarray:
         """End of the stream: the compact mode's sample rows still waiting for the checkpoint that closes
         their stretch (replayed but never verified: the stream ended first); they count as delivered."""
