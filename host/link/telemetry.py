@@ -19,6 +19,12 @@ same bytes (``bytes.split``, a Python COBS loop, ``zlib.crc32``,
 ``struct.unpack_from``): the benchmark's baseline and a second oracle in the
 tests.
 
+Compact mode (block and checkpoint frames, see :mod:`accelnav.codegen.frames`): the
+decoder turns them into sample rows of the same dtype as the sample frame, their states
+from the replay of the firmware's own filter (:mod:`accelnav.link.replay`, given to
+:class:`Decoder`), every checkpoint held against the replay bit for bit, losses and
+repeats counted in samples from the 32-bit index (:mod:`accelnav.link.compact`).
+
 Lost and repeated frames: sample frames carry a 16-bit sequence number that
 the MCU increments for every sample frame it means to send and the 32-bit
 sample index; :class:`SampleOrder` drops a repeated or older frame (counted
