@@ -180,6 +180,11 @@ def test_log_info_and_export_show_a_mismatch(tmp_path, man, telemetry, capsys):
     assert cli_main(["log", "info", str(path2), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["unreplayed"] == N and info["frames"]["sample"] == 0 and info["warnings"]
+    model_file = tmp_path / "model.toml"  # the model given afterwards replays them
+    model_file.write_text(load_model().text)
+    assert cli_main(["log", "info", str(path2), "--json", "--model", str(model_file)]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["unreplayed"] == 0 and info["frames"]["sample"] == N and info["mismatches"] == 2
 
 
 def test_hil_reports_a_mismatch(man, telemetry):

@@ -337,8 +337,9 @@ class DecodedLog:
     warnings: list = field(default_factory=list)
 
 
-def decode_log(path) -> DecodedLog:
-    """Read a log and decode its bytes with the manifest stored in it."""
+def decode_log(path, model_text: str = "") -> DecodedLog:
+    """Read a log and decode its bytes with the manifest stored in it; the compact mode's samples are
+    replayed with the model text stored in it, else with ``model_text`` (a log recorded with --manifest)."""
     import numpy as np
 
     from accelnav.link.compact import concat_records
@@ -347,7 +348,8 @@ def decode_log(path) -> DecodedLog:
     contents = read_log(path)
     man = Manifest(contents.meta["manifest"])
     warnings: list[str] = []
-    dec = Decoder(man, replay=_replay(man, contents.meta.get("model_toml") or "", warnings, str(path)))
+    text = contents.meta.get("model_toml") or model_text
+    dec = Decoder(man, replay=_replay(man, text, warnings, str(path)))
     parts: dict[str, list] = {n: [] for n in dec.names}
     times = []
     for t_ns, data in zip(contents.times, contents.data, strict=True):
