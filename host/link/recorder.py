@@ -73,10 +73,13 @@ class Status:
         if t - t0 >= 1.0:
             self.rate = (n - n0) / (t - t0)
             self._prev = (t, n)
-        return (
+        line = (
             f"{t:7.1f} s  {self.rate:7.1f} frames/s  {n:9d} frames  lost {s.lost}  dup {s.duplicates}  "
             f"CRC errors {s.crc_errors}  bad {s.bad_frames}  {s.bytes / 1024:8.1f} KiB"
         )
+        if s.frames.get("block"):  # compact mode: the replay's checks
+            line += f"  checkpoints {s.checkpoints}" + (f"  MISMATCHES {s.mismatches}" if s.mismatches else "")
+        return line
 
     def update(self, t: float, dec: Decoder, final: bool = False) -> None:
         if not self.enabled:
