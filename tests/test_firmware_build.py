@@ -130,6 +130,8 @@ def test_mps2_an385_in_qemu_matches_the_host_board(tmp_path):
     readme = (REPO / "firmware" / "README.md").read_text()
     documented = " ".join(qemu_command("build/firmware/mps2_an385/accelnav_fw.elf", uart_ports=(5760, 5761)))
     assert documented in readme.replace("\\\n", " ")
+    fed = " ".join(qemu_command("/abs/path/accelnav_fw.elf", feed=("stim.bin", "tel.bin")))
+    assert fed in readme  # the file feed PIL runs (hil_sim.qemu.run_feed)
     n = 3000
     code = 2048 + np.random.default_rng(4).integers(-80, 80, (n, 2))
     code[100, 1] = 0  # a rail

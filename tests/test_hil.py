@@ -179,18 +179,62 @@ def test_qemu_is_never_left_behind(tmp_path, board_name):
     assert ps in ("", "Z"), f"qemu process {pid} still there: {ps!r}"
 
 
-def test_qemu_left_behind_by_no_pil_run(tmp_path):
-    """After a whole PIL run (and one that fails: too few frames for what it waits for), no qemu of ours runs."""
+@pytest.mark.parametrize("link", ["feed", "uart"])
+def test_qemu_left_behind_by_no_pil_run(tmp_path, link):
+    """After a whole PIL run (and one that fails: too few frames for what it waits for), no qemu of ours runs.
+    Over the UART too: the real link's path (stimulus UART in, the recorder on the telemetry UART), the
+    one PIL took before the file feed, still equals SIL."""
     _require_pil()
     model = load_model(MODELS / "adxl250_default.toml")
     man = manifest(model.source)
     run = simulate(model, "stationary", 0.5, seed=1)
     stim = hil.stimulus(man, run)
     before = _our_qemus()
-    hil.run_pil(model, stim, len(run.t), tmp_path / "ok.acnlog", board="microbit")
+    ok = hil.run_pil(model, stim, len(run.t), tmp_path / "ok.acnlog", board="microbit", link=link)
+    assert ok.telemetry == hil.run_sil(model, stim)
     with pytest.raises(qemu.QemuError, match="ended early"):
-        hil.run_pil(model, stim, len(run.t) + 5, tmp_path / "short.acnlog", board="microbit", timeout_s=2.0)
+        hil.run_pil(model, stim, len(run.t) + 5, tmp_path / "short.acnlog", board="microbit", timeout_s=2.0, link=link)
     assert _our_qemus() - before == set()
+
+
+@pytest.mark.parametrize("board_name", BOARDS)
+def test_file_feed_takes_commands_as_the_host_board_does(tmp_path, board_name):
+    """The feed's input is the host board's stdin: command frames in it act as in SIL (decimate 7: a
+    frame every 7th sample; stop, then start: no frames in between), byte for byte; the log holds it."""
+    _require_pil()
+    from accelnav.link.logfile import read_log
+    from accelnav.link.telemetry import encode_command
+
+    model = load_model(MODELS / "adxl250_default.toml")
+    man = manifest(model.source)
+    run = simulate(model, "shock", 1.0, seed=2)
+    n = len(run.t)
+    half = hil.stimulus(man, run)
+    stop, start = encode_command(man, "stop"), encode_command(man, "start")
+    stim = encode_command(man, "decimate", factor=7) + half + stop + half + start + half
+    sil = hil.run_sil(model, stim)
+    frames = decode_all(man, sil)[0]
+    expected = len(range(0, n, 7)) * 2
+    assert len(frames["sample"]) == expected and len(frames["ack"]) == 3
+    assert frames["sample"]["index"][expected // 2] == 2 * n  # the first sample after start
+    pil = hil.run_pil(model, stim, expected, tmp_path / "cmd.acnlog", board=board_name)
+    assert pil.telemetry == sil
+    assert b"".join(read_log(pil.log).data) == sil
+    assert pil.stats["lost"] == 0 and pil.stats["crc_errors"] == 0
+
+
+def test_file_feed_errors_are_one_line(tmp_path):
+    """A feed whose input file is missing ends the emulator with status 1 and a one-line reason; a feed
+    file name the semihosting command line cannot carry is refused before QEMU starts."""
+    _require_pil()
+    elf = hil.make_firmware("mps2_an385") / "accelnav_fw.elf"
+    cmd = qemu.qemu_command(elf.resolve(), machine="mps2-an385", feed=("missing.bin", "tel.bin"))
+    done = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1
+    assert "accelnav-feed: cannot open the stimulus or the telemetry file" in done.stdout + done.stderr
+    for bad in ("two words.bin", "a,b.bin", "sub/stim.bin", ""):
+        with pytest.raises(ValueError, match="plain file name"):
+            qemu.qemu_command(elf, feed=(bad, "tel.bin"))
 
 
 def _our_qemus() -> set[int]:
