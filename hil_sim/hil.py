@@ -92,15 +92,15 @@ def run_pil(
     m = machine_for(board)
     elf = make_firmware(board, model.source) / "accelnav_fw.elf"
     man = manifest(model.source)
-    t0 = time.monotonic()
-    tel = run_feed(elf, board, stim, timeout=timeout_s)
-    seconds = time.monotonic() - t0
     meta = {
         "manifest": man.data,
         "model_toml": model.text,
         "source": f"qemu {m.machine} (file feed over semihosting)",
         "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
+    t0 = time.monotonic()
+    tel = run_feed(elf, board, stim, timeout=timeout_s)
+    seconds = time.monotonic() - t0
     with LogWriter(log, meta, overwrite=True, fsync_s=None) as writer:
         step = writer.max_chunk
         for a in range(0, len(tel), step):
