@@ -3,7 +3,10 @@
 PIL runs on every board hil_sim.qemu knows: mps2-an385 (Cortex-M3), microbit
 (Cortex-M0) and stm32vldiscovery (the STM32 port's code on QEMU's STM32F100),
 for both shipped models, each built in both filter forms, on two short
-scenarios each (one with rail-clipped samples for the analog model).
+scenarios each (one with rail-clipped samples for the analog model), and a
+1 kHz model. PIL runs through the boards' file feed over semihosting (the
+path `accelnav hil --target pil` takes); test_qemu_left_behind_by_no_pil_run
+also runs it over the UARTs with the recorder (the real link's path).
 
 The PIL tests need qemu-system-arm and arm-none-eabi-gcc. Where they are
 missing the tests skip and say why; with ACCELNAV_REQUIRE_PIL=1 (set by
@@ -361,3 +364,26 @@ def test_sil_shock_against_the_float64_filter(tmp_path, rate):
     assert c.max_of_bound <= 1.0, f"firmware at {c.max_of_bound:.3g} of the generator's stated bound"
     for key, err in c.max_err_sigma.items():
         assert err < SIGMA_FRACTION, f"{key}: firmware off the float64 reference by {err:.2e} sigma"
+
+
+@pytest.mark.parametrize("board_name", BOARDS)
+def test_pil_at_1khz_equals_sil(tmp_path, board_name):
+    """A 1 kHz model (rail-clipped shock, 3 s: 3 000 samples) on every emulated board: the telemetry is
+    SIL's byte for byte, nothing lost or missed."""
+    _require_pil()
+    text = (MODELS / "adxl250_default.toml").read_text().replace("rate_hz = 100.0", "rate_hz = 1000.0")
+    path = tmp_path / "fast.toml"
+    path.write_text(text)
+    model = load_model(path)
+    assert model.rate_hz == 1000.0
+    run = simulate(model, "shock", 3.0, seed=9)
+    assert run.clipped.any()
+    man = manifest(model.source)
+    stim = hil.stimulus(man, run)
+    pil = hil.run_pil(model, stim, len(run.t), tmp_path / "pil.acnlog", board=board_name, timeout_s=120)
+    assert pil.telemetry == hil.run_sil(model, stim)
+    assert pil.stats["frames"]["sample"] == len(run.t) == 3000
+    assert pil.stats["lost"] == 0 and pil.stats["crc_errors"] == 0
+    fr = decode_all(man, pil.telemetry)[0]
+    assert not fr["sample"]["missed"].any() and not fr["sample"]["rx_lost"].any()
+    print(f"\n{board_name} at 1 kHz: {len(run.t)} samples, {len(run.t) / pil.seconds:.0f} samples/s")
