@@ -23,6 +23,7 @@ import pytest
 
 from accelnav.hil_sim.firmware import DUTY_MODEL
 from accelnav.hil_sim.firmware import make_firmware as build_image
+from accelnav.hil_sim.hil import wait_ready
 from accelnav.hil_sim.qemu import MACHINES, Mps2Board, QemuBoard, qemu_command
 from accelnav.link.recorder import Recorder, Status, decode_log
 from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus
@@ -164,8 +165,11 @@ def test_commands_in_qemu(board_name):
     out = make_firmware(board_name)
     man = Manifest.load(out / "gen" / "acnframe.json")
     with QemuBoard(out / "accelnav_fw.elf", board_name) as board:
-        deadline = time.monotonic() + 20
         tel, feed = board.open(board.machine.telemetry), board.open(board.machine.stimulus)
+        # QEMU's STM32 USART drops what comes before the firmware enables it: a command written right
+        # after connecting was lost when the emulator started late (seen on a loaded machine)
+        wait_ready(tel, man, board_name)
+        deadline = time.monotonic() + 20
         tel.write(encode_command(man, "decimate", factor=10) + encode_command(man, "info"))
         time.sleep(0.2)
         feed.write(encode_stimulus(man, code=np.full((200, 2), 2048)))
