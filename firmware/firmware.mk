@@ -36,7 +36,7 @@ FW_SIZE    := size
 else ifeq ($(BOARD),mps2_an385)
 FW_CC      := $(ARM_CC)
 FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/mps2_an385
-FW_SRCS    := $(FW_DIR)/boards/mps2_an385/board_mps2.c $(FW_DIR)/boards/emu_txq.c
+FW_SRCS    := $(FW_DIR)/boards/mps2_an385/board_mps2.c $(FW_DIR)/boards/emu_txq.c $(FW_DIR)/boards/emu_feed.c
 # the runtime's startup.c (not ours) casts function pointers to void * in its vector
 # table, which -pedantic refuses: it is built with the same flags minus -pedantic
 FW_LOOSE   := $(FW_DIR)/boards/mps2_an385/startup.c $(FW_DIR)/boards/semihost_rt.c
@@ -47,7 +47,7 @@ else ifeq ($(BOARD),microbit)
 # QEMU's BBC micro:bit: nRF51822, Cortex-M0 (no 32x32->64 multiply: 64-bit products go through libgcc)
 FW_CC      := $(ARM_CC)
 FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -masm-syntax-unified -I$(FW_DIR)/boards/microbit
-FW_SRCS    := $(FW_DIR)/boards/microbit/board_microbit.c $(FW_DIR)/boards/emu_txq.c
+FW_SRCS    := $(FW_DIR)/boards/microbit/board_microbit.c $(FW_DIR)/boards/emu_txq.c $(FW_DIR)/boards/emu_feed.c
 FW_LOOSE   := $(FW_DIR)/boards/microbit/startup.c $(FW_DIR)/boards/semihost_rt.c
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/microbit/nrf51822.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
@@ -57,7 +57,8 @@ else ifneq ($(filter stm32f103 stm32vldiscovery,$(BOARD)),)
 FW_CC      := $(ARM_CC)
 FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/stm32f103 \
               $(if $(filter stm32vldiscovery,$(BOARD)),-DACN_STM32_QEMU)
-FW_SRCS    := $(FW_DIR)/boards/stm32f103/startup_stm32f103.c $(FW_DIR)/boards/stm32f103/board_stm32.c
+FW_SRCS    := $(FW_DIR)/boards/stm32f103/startup_stm32f103.c $(FW_DIR)/boards/stm32f103/board_stm32.c \
+              $(if $(filter stm32vldiscovery,$(BOARD)),$(FW_DIR)/boards/emu_feed.c)
 FW_LD      := $(if $(filter stm32vldiscovery,$(BOARD)),stm32f100rb_qemu.ld,stm32f103c8.ld)
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -L$(FW_DIR)/boards/stm32f103 -T$(FW_DIR)/boards/stm32f103/$(FW_LD) \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map

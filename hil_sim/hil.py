@@ -5,11 +5,16 @@
   simulator's raw ADC codes or T1/T2 counts as stimulus frames.
 * PIL: the same sources built for an emulated board and run in
   qemu-system-arm (:mod:`hil_sim.qemu`): mps2-an385 (Cortex-M3), microbit
-  (Cortex-M0) or stm32vldiscovery (the STM32 port's code on an STM32F100); the
-  stimulus goes into the board's stimulus UART, and its telemetry UART is
-  recorded through the very same path as ``accelnav record``
-  (:class:`accelnav.link.recorder.Recorder` over a pyserial ``socket://``
-  port, into an append-only log that is then decoded).
+  (Cortex-M0) or stm32vldiscovery (the STM32 port's code on an STM32F100). By
+  default (``link="feed"``) the stimulus goes in and the telemetry comes out
+  through files over semihosting, a block per trap (:func:`hil_sim.qemu.run_feed`),
+  and the telemetry is written to the recorder's log format
+  (:class:`accelnav.link.logfile.LogWriter`) and read back from it. With
+  ``link="uart"`` the stimulus goes into the board's stimulus UART and its
+  telemetry UART is recorded through the very same path as ``accelnav
+  record`` (:class:`accelnav.link.recorder.Recorder` over a pyserial
+  ``socket://`` port): the real link, slower, kept for the benchmark and one
+  test.
 
 :func:`compare` puts the frames side by side: PIL against SIL bit for bit,
 frame by frame; both against the float64 reference (accelnav.estimate.kf) on the same
@@ -42,7 +47,7 @@ from accelnav.link.telemetry import (
 )
 
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
-from .qemu import MACHINES, QemuBoard, QemuError, machine_for
+from .qemu import MACHINES, QemuBoard, QemuError, machine_for, run_feed
 from .sensor import SimRun
 
 STATES = ("r", "u", "a", "eps")
@@ -82,9 +87,47 @@ def run_pil(
     *,
     board: str = "mps2_an385",
     timeout_s: float = 600.0,
+    link: str = "feed",
 ) -> PilResult:
-    """Run the firmware on the emulated ``board`` with ``stim`` on its stimulus UART; its telemetry
-    UART recorded into ``log``."""
+    """Run the firmware on the emulated ``board`` with ``stim`` as its input and its telemetry in ``log``.
+
+    ``link="feed"``: through files over semihosting (fast; the emulator exits at the end of
+    ``stim``); ``link="uart"``: ``stim`` on the stimulus UART, the telemetry UART recorded by the
+    recorder (the real link's path). Either way the run must yield ``n_samples`` sample frames."""
+    if link == "uart":
+        return _run_pil_uart(model, stim, n_samples, log, board=board, timeout_s=timeout_s)
+    if link != "feed":
+        raise ValueError(f"link {link!r}: accepted: feed, uart")
+    from accelnav.link.logfile import LogWriter, read_log
+
+    m = machine_for(board)
+    elf = make_firmware(board, model.source) / "accelnav_fw.elf"
+    man = manifest(model.source)
+    meta = {
+        "manifest": man.data,
+        "model_toml": model.text,
+        "source": f"qemu {m.machine} (file feed over semihosting)",
+        "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
+    t0 = time.monotonic()
+    tel = run_feed(elf, board, stim, timeout=timeout_s)
+    seconds = time.monotonic() - t0
+    with LogWriter(log, meta, overwrite=True, fsync_s=None) as writer:
+        step = writer.max_chunk
+        for a in range(0, len(tel), step):
+            writer.append(tel[a : a + step])
+            writer.flush()
+    dec = Decoder(man, replay=replay_for(man, model))  # the compact frames' rows need the replay
+    dec.feed(tel)
+    dec.release()
+    stats = dec.stats.as_dict()
+    if stats.get("frames", {}).get("sample", 0) < n_samples:
+        raise QemuError(f"PIL run ({board}) ended early (end of the stimulus) after {stats.get('frames', {})} frames")
+    return PilResult(log, b"".join(read_log(log).data), seconds, stats)
+
+
+def _run_pil_uart(model: Model, stim: bytes, n_samples: int, log: Path, *, board: str, timeout_s: float) -> PilResult:
+    """run_pil over the board's UARTs, recorded by the recorder."""
     from accelnav.link.logfile import read_log
     from accelnav.link.recorder import Recorder, Status
 

@@ -13,6 +13,12 @@ Two uses, one command line (:func:`qemu_command`):
   servers on loopback, opened from Python as pyserial ``socket://`` URLs. A
   context manager: leaving it kills QEMU and waits for it, so no process is
   left behind, whatever happens inside. :class:`Mps2Board` is the mps2-an385 one.
+* :func:`run_feed`: the firmware in feed mode, the way PIL runs it: the
+  stimulus read from a file and the telemetry written to one through ARM
+  semihosting, a block per trap, so the emulated core runs flat out instead
+  of waiting for QEMU to move one UART byte per poll of its socket
+  (firmware/boards/emu_feed.h). The same image runs on its UARTs when the
+  command line names no feed.
 * :func:`run_to_exit`: a bare-metal program that prints over semihosting and
   exits through it (the instruction-count benchmark), with ``-icount
   shift=0`` so one instruction is one tick of virtual time and the counts are
@@ -27,6 +33,7 @@ from __future__ import annotations
 import shutil
 import socket
 import subprocess
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -77,12 +84,29 @@ def require_qemu() -> str:
     return path
 
 
+FEED_MARKER = "accelnav-feed"  # the first word of the command line that puts a board in feed mode (emu_feed.h)
+
+
 def qemu_command(
-    elf: str | Path, *, uart_ports: tuple[int, ...] = (), icount: bool = False, machine: str = MACHINE
+    elf: str | Path,
+    *,
+    uart_ports: tuple[int, ...] = (),
+    icount: bool = False,
+    machine: str = MACHINE,
+    feed: tuple[str, str] | None = None,
 ) -> list[str]:
-    """The emulator's command line: ``elf`` on ``machine``, UARTs as loopback TCP servers in port order."""
+    """The emulator's command line: ``elf`` on ``machine``, UARTs as loopback TCP servers in port order.
+
+    ``feed``: the names of the stimulus and telemetry files, relative to the emulator's working folder,
+    for the board's file feed over semihosting (firmware/boards/emu_feed.h) instead of its UARTs."""
     cmd = [QEMU, "-M", machine, "-display", "none", "-monitor", "none"]
-    cmd += ["-semihosting-config", "enable=on,target=native", "-kernel", str(elf)]
+    semi = "enable=on,target=native"
+    if feed is not None:
+        for name in feed:
+            if not name or any(c in name for c in " ,/"):
+                raise ValueError(f"feed file name {name!r}: a plain file name (no spaces, commas or folders)")
+        semi += f",arg={FEED_MARKER},arg={feed[0]},arg={feed[1]}"
+    cmd += ["-semihosting-config", semi, "-kernel", str(elf)]
     if icount:
         cmd += ["-icount", "shift=0"]  # one instruction per ns of virtual time: deterministic counts
     if not uart_ports:
@@ -174,6 +198,35 @@ class Mps2Board(QemuBoard):
 
     def __init__(self, elf: str | Path, *, start_timeout: float = 20.0):
         super().__init__(elf, "mps2_an385", start_timeout=start_timeout)
+
+
+def run_feed(elf: str | Path, board: str, stimulus: bytes, *, timeout: float = 600.0) -> bytes:
+    """Run a firmware image on ``board``'s machine in feed mode and return its telemetry.
+
+    The stimulus goes in and the telemetry comes out through files over semihosting, a block per
+    trap (firmware/boards/emu_feed.h); the board exits at the end of the stimulus. Nothing is
+    paced by a UART or by the host: the emulated core runs flat out. The files live in a
+    temporary folder that is removed afterwards; the emulator is killed if it overruns ``timeout``."""
+    m = machine_for(board)
+    elf = Path(elf).resolve()
+    if not elf.is_file():
+        raise QemuError(f"{elf}: no firmware image (build it with 'make firmware BOARD={board}')")
+    require_qemu()
+    with tempfile.TemporaryDirectory(prefix="accelnav-feed-") as tmp:
+        folder = Path(tmp)
+        (folder / "stim.bin").write_bytes(stimulus)
+        cmd = qemu_command(elf, machine=m.machine, feed=("stim.bin", "tel.bin"))
+        try:
+            done = subprocess.run(cmd, cwd=folder, capture_output=True, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise QemuError(f"{QEMU} ({board}): the file feed did not finish within {timeout:g} s") from None
+        err = (done.stdout + done.stderr).decode(errors="replace").strip()
+        if done.returncode != 0:
+            raise QemuError(f"{QEMU} ({board}) exited with status {done.returncode}: {err[-500:]}")
+        out = folder / "tel.bin"
+        if not out.is_file():
+            raise QemuError(f"{QEMU} ({board}): the firmware wrote no telemetry file (an image without the file feed?)")
+        return out.read_bytes()
 
 
 def run_to_exit(elf: str | Path, *, icount: bool = True, timeout: float = 300.0, machine: str = MACHINE) -> str:

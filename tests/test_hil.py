@@ -3,7 +3,10 @@
 PIL runs on every board hil_sim.qemu knows: mps2-an385 (Cortex-M3), microbit
 (Cortex-M0) and stm32vldiscovery (the STM32 port's code on QEMU's STM32F100),
 for both shipped models, each built in both filter forms, on two short
-scenarios each (one with rail-clipped samples for the analog model).
+scenarios each (one with rail-clipped samples for the analog model), and a
+1 kHz model. PIL runs through the boards' file feed over semihosting (the
+path `accelnav hil --target pil` takes); test_qemu_left_behind_by_no_pil_run
+also runs it over the UARTs with the recorder (the real link's path).
 
 The PIL tests need qemu-system-arm and arm-none-eabi-gcc. Where they are
 missing the tests skip and say why; with ACCELNAV_REQUIRE_PIL=1 (set by
@@ -27,7 +30,7 @@ from accelnav.codegen.model import load_model
 from accelnav.hil_sim import hil, qemu
 from accelnav.hil_sim.firmware import manifest
 from accelnav.hil_sim.sensor import simulate
-from accelnav.link.telemetry import decode_all
+from accelnav.link.telemetry import decode_all, replay_for
 
 SIGMA_FRACTION = 1e-3  # firmware vs float64 reference, in units of the reference's sigma, after 1 s
 
@@ -133,7 +136,8 @@ def test_pil_frames_equal_sil_bit_for_bit(
         # Kalman filter must say so (this is why codegen refuses the form)
         assert c.max_of_bound > 1.0, "a blind gain schedule after clipped samples passed as within the bound"
     assert pil.stats["lost"] == 0 and pil.stats["crc_errors"] == 0
-    fr = decode_all(man, pil.telemetry)[0]
+    fr = decode_all(man, pil.telemetry, replay_for(man, model))[0]
+    assert len(fr["sample"]) == len(run.t)
     assert not fr["sample"]["missed"].any() and not fr["sample"]["rx_lost"].any()
     print(f"\n{board} {model.name} {form} {scenario}: {c.n} samples, {c.n / pil.seconds:.0f} samples/s")
 
@@ -187,18 +191,63 @@ def test_qemu_is_never_left_behind(tmp_path, board_name):
     assert ps in ("", "Z"), f"qemu process {pid} still there: {ps!r}"
 
 
-def test_qemu_left_behind_by_no_pil_run(tmp_path):
-    """After a whole PIL run (and one that fails: too few frames for what it waits for), no qemu of ours runs."""
+@pytest.mark.parametrize("link", ["feed", "uart"])
+def test_qemu_left_behind_by_no_pil_run(tmp_path, link):
+    """After a whole PIL run (and one that fails: too few frames for what it waits for), no qemu of ours runs.
+    Over the UART too: the real link's path (stimulus UART in, the recorder on the telemetry UART), the
+    one PIL took before the file feed, still equals SIL."""
     _require_pil()
     model = load_model(MODELS / "adxl250_default.toml")
     man = manifest(model.source)
     run = simulate(model, "stationary", 0.5, seed=1)
     stim = hil.stimulus(man, run)
     before = _our_qemus()
-    hil.run_pil(model, stim, len(run.t), tmp_path / "ok.acnlog", board="microbit")
+    ok = hil.run_pil(model, stim, len(run.t), tmp_path / "ok.acnlog", board="microbit", link=link)
+    assert ok.telemetry == hil.run_sil(model, stim)
     with pytest.raises(qemu.QemuError, match="ended early"):
-        hil.run_pil(model, stim, len(run.t) + 5, tmp_path / "short.acnlog", board="microbit", timeout_s=2.0)
+        hil.run_pil(model, stim, len(run.t) + 5, tmp_path / "short.acnlog", board="microbit", timeout_s=2.0, link=link)
     assert _our_qemus() - before == set()
+
+
+@pytest.mark.parametrize("board_name", BOARDS)
+def test_file_feed_takes_commands_as_the_host_board_does(tmp_path, board_name):
+    """The feed's input is the host board's stdin: command frames in it act as in SIL (decimate 7: a
+    frame every 7th sample; stop, then start: no frames in between), byte for byte; the log holds it."""
+    _require_pil()
+    from accelnav.link.logfile import read_log
+    from accelnav.link.telemetry import encode_command
+
+    model = load_model(MODELS / "adxl250_default.toml")
+    man = manifest(model.source)
+    run = simulate(model, "shock", 1.0, seed=2)
+    n = len(run.t)
+    half = hil.stimulus(man, run)
+    stop, start = encode_command(man, "stop"), encode_command(man, "start")
+    stim = encode_command(man, "decimate", factor=7) + half + stop + half + start + half
+    sil = hil.run_sil(model, stim)
+    frames = decode_all(man, sil)[0]
+    expected = len(range(0, n, 7)) * 2
+    # acks: decimate, then stop and start, and the flush that ends each third of the stimulus
+    assert len(frames["sample"]) == expected and len(frames["ack"]) == 6
+    assert frames["sample"]["index"][expected // 2] == 2 * n  # the first sample after start
+    pil = hil.run_pil(model, stim, expected, tmp_path / "cmd.acnlog", board=board_name)
+    assert pil.telemetry == sil
+    assert b"".join(read_log(pil.log).data) == sil
+    assert pil.stats["lost"] == 0 and pil.stats["crc_errors"] == 0
+
+
+def test_file_feed_errors_are_one_line(tmp_path):
+    """A feed whose input file is missing ends the emulator with status 1 and a one-line reason; a feed
+    file name the semihosting command line cannot carry is refused before QEMU starts."""
+    _require_pil()
+    elf = hil.make_firmware("mps2_an385") / "accelnav_fw.elf"
+    cmd = qemu.qemu_command(elf.resolve(), machine="mps2-an385", feed=("missing.bin", "tel.bin"))
+    done = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1
+    assert "accelnav-feed: cannot open the stimulus or the telemetry file" in done.stdout + done.stderr
+    for bad in ("two words.bin", "a,b.bin", "sub/stim.bin", ""):
+        with pytest.raises(ValueError, match="plain file name"):
+            qemu.qemu_command(elf, feed=(bad, "tel.bin"))
 
 
 def _our_qemus() -> set[int]:
@@ -330,3 +379,27 @@ def test_sil_shock_against_the_float64_filter(tmp_path, rate):
     assert c.max_of_bound <= 1.0, f"firmware at {c.max_of_bound:.3g} of the generator's stated bound"
     for key, err in c.max_err_sigma.items():
         assert err < SIGMA_FRACTION, f"{key}: firmware off the float64 reference by {err:.2e} sigma"
+
+
+@pytest.mark.parametrize("board_name", BOARDS)
+def test_pil_at_1khz_equals_sil(tmp_path, board_name):
+    """A 1 kHz model (rail-clipped shock, 3 s: 3 000 samples) on every emulated board: the telemetry is
+    SIL's byte for byte, nothing lost or missed."""
+    _require_pil()
+    text = (MODELS / "adxl250_default.toml").read_text().replace("rate_hz = 100.0", "rate_hz = 1000.0")
+    path = tmp_path / "fast.toml"
+    path.write_text(text)
+    model = load_model(path)
+    assert model.rate_hz == 1000.0
+    run = simulate(model, "shock", 3.0, seed=9)
+    assert run.clipped.any()
+    man = manifest(model.source)
+    stim = hil.stimulus(man, run)
+    pil = hil.run_pil(model, stim, len(run.t), tmp_path / "pil.acnlog", board=board_name, timeout_s=120)
+    assert pil.telemetry == hil.run_sil(model, stim)
+    assert pil.stats["frames"]["sample"] == len(run.t) == 3000
+    assert pil.stats["lost"] == 0 and pil.stats["crc_errors"] == 0
+    fr = decode_all(man, pil.telemetry, replay_for(man, model))[0]
+    assert len(fr["sample"]) == len(run.t)
+    assert not fr["sample"]["missed"].any() and not fr["sample"]["rx_lost"].any()
+    print(f"\n{board_name} at 1 kHz: {len(run.t)} samples, {len(run.t) / pil.seconds:.0f} samples/s")

@@ -1,6 +1,7 @@
 /* The telemetry queue and millisecond clock the emulated boards share (mps2_an385, microbit).
  * board_uart_write() and board_time_ms() of acn_board.h are implemented here; each board's
- * board_poll() feeds its own UART from emu_txq_next() and calls emu_clock_update(). */
+ * board_poll() feeds its own UART (or the file feed, emu_feed.h) from emu_txq_next() and calls
+ * emu_clock_update(). */
 #ifndef EMU_TXQ_H
 #define EMU_TXQ_H
 

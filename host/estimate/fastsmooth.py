@@ -363,12 +363,43 @@ def smooth_plain(d: AxisDesign, z: np.ndarray, *, valid: np.ndarray | None = Non
 # General path
 
 
+@dataclass(frozen=True)
+class Extras:
+    """Extra scalar measurements as arrays, stably sorted by sample: made once by :meth:`of` and passed
+    to :func:`smooth_general` many times (a likelihood search filters the same extras hundreds of times,
+    and turning the Measurement objects into arrays cost as much as the filter itself)."""
+
+    k: np.ndarray  # (n,) int64, ascending
+    h: np.ndarray  # (n, 4)
+    z: np.ndarray  # (n,)
+    R: np.ndarray  # (n,) > 0
+    order: np.ndarray  # position i of the sorted arrays holds the given measurement order[i]
+
+    @classmethod
+    def of(cls, extras: Sequence[Measurement] | Extras) -> Extras:
+        if isinstance(extras, Extras):
+            return extras
+        ne = len(extras)
+        ek = np.array([m.k for m in extras], dtype=np.int64).reshape(ne)
+        eR = np.array([m.R for m in extras], dtype=np.float64).reshape(ne)
+        if ne and not np.all(eR > 0):
+            raise ValueError(f"extra measurement at sample {int(ek[~(eR > 0)][0])} has variance <= 0")
+        order = np.argsort(ek, kind="stable")
+        eh = np.array([m.h for m in extras], dtype=np.float64).reshape(ne, 4)[order]
+        ez = np.array([m.z for m in extras], dtype=np.float64).reshape(ne)[order]
+        c = np.ascontiguousarray
+        return cls(c(ek[order]), c(eh), c(ez), c(eR[order]), order)
+
+    def __len__(self) -> int:
+        return len(self.k)
+
+
 def smooth_general(
     d: AxisDesign,
     z: np.ndarray,
     *,
     valid: np.ndarray | None = None,
-    extras: Sequence[Measurement] = (),
+    extras: Sequence[Measurement] | Extras = (),
     gates: Sequence[float] | None = None,
     out: AxisSmooth | None = None,
 ) -> AxisSmooth:
@@ -388,21 +419,15 @@ def smooth_general(
         raise ValueError("z: at least one sample is needed")
     ok = _valid(z, valid)
     zc = np.ascontiguousarray(np.where(ok, z, 0.0))
-    ne = len(extras)
-    ek = np.array([m.k for m in extras], dtype=np.int64).reshape(ne)
-    if ne and (ek.min() < 0 or ek.max() >= n):
-        bad = int(ek[(ek < 0) | (ek >= n)][0])
+    ex = Extras.of(extras)
+    ne = len(ex)
+    if ne and (ex.k[0] < 0 or ex.k[-1] >= n):
+        bad = int(ex.k[(ex.k < 0) | (ex.k >= n)][0])
         raise ValueError(f"extra measurement at sample {bad} is outside 0..{n - 1}")
-    eR = np.array([m.R for m in extras], dtype=np.float64).reshape(ne)
-    if ne and not np.all(eR > 0):
-        raise ValueError(f"extra measurement at sample {int(ek[~(eR > 0)][0])} has variance <= 0")
-    order = np.argsort(ek, kind="stable")
-    eh = np.ascontiguousarray(np.array([m.h for m in extras], dtype=np.float64).reshape(ne, 4)[order])
-    ez = np.ascontiguousarray(np.array([m.z for m in extras], dtype=np.float64).reshape(ne)[order])
+    order = ex.order
+    eks, eh, ez, eR = ex.k, ex.h, ex.z, ex.R
     eg = np.zeros(ne) if gates is None else np.asarray(gates, dtype=np.float64).reshape(ne)
     eg = np.ascontiguousarray(eg[order])
-    eks = np.ascontiguousarray(ek[order])
-    eR = np.ascontiguousarray(eR[order])
     applied = np.zeros(max(ne, 1), dtype=np.uint8)
     if out is not None and len(out) == n and out.path == "general":
         xp, Pp, xf, Pf, xs, Ps = out.x_prior, out.P_prior, out.x_post, out.P_post, out.xs, out.Ps

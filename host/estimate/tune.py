@@ -74,30 +74,29 @@ R95 = math.sqrt(2.0 * PROFILE_DROP)  # 1.96: the signed root at an end
 LN_BOUNDS = {"sigma_n": (1e-4, 1e3), "sigma_eps": (1e-9, 10.0), "R": (1e-10, 1e4)}
 
 
-def _axis_loglik(model: Model, j: int, z: np.ndarray, valid: np.ndarray, extras: Sequence[Measurement]) -> float:
+def _axis_loglik(
+    model: Model, j: int, z: np.ndarray, valid: np.ndarray, extras: Sequence[Measurement] | fastsmooth.Extras
+) -> float:
     d = axis_design(model, j)
+    ex = fastsmooth.Extras.of(extras)
     # the general path: the plain one caches gains per design, and every theta is a new design
-    res = fastsmooth.smooth_general(d, z, valid=valid, extras=list(extras))
+    res = fastsmooth.smooth_general(d, z, valid=valid, extras=ex)
     xp = res.x_prior
-    Pp = fastsmooth.unpack(res.P_prior)
-    S = Pp[:, 2, 2] + 2.0 * Pp[:, 2, 3] + Pp[:, 3, 3] + d.R
+    pk = fastsmooth.PACKED.index
+    Pa = res.P_prior  # packed: only the (a, eps) block enters S, only the extras' samples are unpacked
+    S = Pa[:, pk((2, 2))] + 2.0 * Pa[:, pk((2, 3))] + Pa[:, pk((3, 3))] + d.R
     y = z - (xp[:, 2] + xp[:, 3])
     ok = valid & np.isfinite(z)
     ll = -0.5 * float(np.sum(np.log(2.0 * math.pi * S[ok]) + y[ok] ** 2 / S[ok]))
-    if not extras:
+    if not len(ex):
         return ll
     # the extras' terms, replayed from the prior of their sample (acceleration update first, then the extras in
     # order): every sample's replay is independent of the others', so all samples are replayed at once
-    ks = np.fromiter((m.k for m in extras), dtype=np.int64, count=len(extras))
-    order = np.argsort(ks, kind="stable")
-    ks = ks[order]
-    hs = np.array([extras[i].h for i in order], dtype=np.float64)
-    zs = np.fromiter((extras[i].z for i in order), dtype=np.float64, count=len(order))
-    rs = np.fromiter((extras[i].R for i in order), dtype=np.float64, count=len(order))
+    ks, hs, zs, rs = ex.k, ex.h, ex.z, ex.R
     uk, first, group = np.unique(ks, return_index=True, return_inverse=True)
     rank = np.arange(len(ks)) - first[group]
     X = xp[uk].copy()
-    P = Pp[uk].copy()
+    P = fastsmooth.unpack(Pa[uk])
     zk = ok[uk]
     h_z = np.broadcast_to(np.array([0.0, 0.0, 1.0, 1.0]), (int(zk.sum()), 4))
     X[zk], P[zk], _ = _update_many(X[zk], P[zk], h_z, z[uk][zk], np.full(int(zk.sum()), d.R))
@@ -121,7 +120,12 @@ def _update_many(X, P, H, z, R):
     return X, P, np.log(2.0 * math.pi * S) + y * y / S
 
 
-def loglik(model: Model, accel: np.ndarray, valid: np.ndarray, extras: Sequence[Sequence[Measurement]]) -> float:
+def loglik(
+    model: Model,
+    accel: np.ndarray,
+    valid: np.ndarray,
+    extras: Sequence[Sequence[Measurement] | fastsmooth.Extras],
+) -> float:
     """ln L of the accelerations (N, axes) and each axis's extra measurements under ``model``."""
     return sum(_axis_loglik(model, j, accel[:, j], valid[:, j], extras[j]) for j in range(accel.shape[1]))
 
@@ -218,6 +222,7 @@ def tune(
         else:
             raise ValueError(f"figure {f!r}; accepted: {', '.join(FIGURES)}, c2")
     figures = tuple(names)
+    extras = [fastsmooth.Extras.of(e) for e in extras]  # once: the search filters them hundreds of times
     start = all_figures(model)
     first = dict(start)
     if first["sigma_eps"] <= 0 and "sigma_eps" in figures:

@@ -6,12 +6,15 @@
  * stimulus frame is one sample; the frame type tells them apart, as on the host board). The run is
  * paced by the feed and reproducible. A received byte is taken only while the telemetry queue has
  * room for three more frames: the board never drops telemetry, it slows the feed down (QEMU's UART
- * holds at most 6 bytes and stops reading its socket when they are not taken).
+ * holds at most 6 bytes and stops reading its socket when they are not taken). When QEMU's command
+ * line names a file feed (emu_feed.h: how PIL runs), input and telemetry go through files over
+ * semihosting instead, and the UART is left alone.
  *
  * Time base: SysTick free-running on the core clock (board_ticks of the runtime), folded into
  * milliseconds on every pass of the loop. */
 #include "acn_board.h"
 #include "board.h"
+#include "emu_feed.h"
 #include "emu_txq.h"
 
 /* nRF51 UART registers (nRF51 Series Reference Manual v3.0, chapter 29), offsets in words */
@@ -36,6 +39,7 @@
 
 static bool tx_busy;     /* a byte is in TXD and TXDRDY has not come yet */
 static uint32_t rx_lost; /* bytes the UART dropped (overrun) */
+static bool feed;        /* the file feed instead of the UART (emu_feed.h) */
 
 void board_init(void)
 {
@@ -52,6 +56,7 @@ void board_init(void)
     rx_lost = 0;
     board_ticks_start();
     emu_txq_init();
+    feed = emu_feed_start();
 }
 
 uint8_t board_id(void)
@@ -68,6 +73,10 @@ bool board_poll(void)
 {
     uint8_t b;
     emu_clock_update();
+    if (feed) {
+        emu_feed_poll();
+        return true;
+    }
     if (tx_busy && UART_TXDRDY) {
         tx_busy = false;
     }

@@ -7,12 +7,15 @@
  * stimulus frame (the same framing as everything else) is one sample, so the
  * run is paced by the feed and reproducible. A stimulus byte is read only
  * while the telemetry queue has room for three more frames: the emulated board
- * never drops telemetry, it slows the feed down instead (commands likewise).
+ * never drops telemetry, it slows the feed down instead (commands likewise). When QEMU's command
+ * line names a file feed (emu_feed.h: how PIL runs), input and telemetry go through files over
+ * semihosting instead, and the UARTs are left alone.
  *
  * Time base: SysTick free-running on the core clock (board_ticks of the
  * runtime), folded into milliseconds on every pass of the loop. */
 #include "acn_board.h"
 #include "board.h"
+#include "emu_feed.h"
 #include "emu_txq.h"
 
 /* CMSDK APB UART registers (ARM DDI 0479, "APB UART") */
@@ -36,6 +39,7 @@ typedef struct {
 #define UART_BAUDDIV (BOARD_CPU_HZ / 115200u)
 
 static uint32_t rx_lost; /* bytes the UARTs dropped (RX overrun) */
+static bool feed;        /* the file feed instead of the UARTs (emu_feed.h) */
 
 static void uart_init(cmsdk_uart_t *u)
 {
@@ -52,6 +56,7 @@ void board_init(void)
     rx_lost = 0;
     board_ticks_start();
     emu_txq_init();
+    feed = emu_feed_start();
 }
 
 uint8_t board_id(void)
@@ -76,6 +81,10 @@ bool board_poll(void)
 {
     uint8_t b;
     emu_clock_update();
+    if (feed) {
+        emu_feed_poll();
+        return true;
+    }
     while (!(UART0->STATE & UART_STATE_TXFULL) && emu_txq_next(&b)) {
         UART0->DATA = b;
     }

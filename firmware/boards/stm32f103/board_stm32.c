@@ -26,9 +26,14 @@
  * paced, never dropped); and USART1's transmit ring is emptied by the main loop, not by the TXE
  * interrupt, which QEMU 7.2's USART model never raises (it raises RXNE only), so the loop does not
  * sleep (WFI) either. Startup, vector table, linker-script layout, USART1 receive interrupt and
- * ring, SysTick and the rest of the main loop are the same code. */
+ * ring, SysTick and the rest of the main loop are the same code. When QEMU's command line names a
+ * file feed (emu_feed.h: how PIL runs), the QEMU build takes its input from that file and empties
+ * its transmit ring into the other one instead of USART2 and USART1. */
 #include "acn_board.h"
 #include "stm32f103_regs.h"
+#ifdef ACN_STM32_QEMU
+#include "emu_feed.h"
+#endif
 
 #ifdef ACN_STM32_QEMU
 #define SYSCLK_HZ 24000000u /* QEMU stm32vldiscovery: a fixed sysclk, no RCC model */
@@ -114,6 +119,23 @@ static void input_init(void)
     gpio_mode(GPIOA, 3, GPIO_INPUT_FLOATING);                 /* USART2 RX */
     USART2->BRR = (SYSCLK_HZ / 2u + BAUD / 2u) / BAUD;        /* APB1 = SYSCLK / 2 */
     USART2->CR1 = USART_CR1_UE | USART_CR1_TE | USART_CR1_RE; /* polled */
+}
+
+static bool feed; /* the file feed (emu_feed.h) instead of USART2 and USART1 */
+
+/* The transmit ring as the file feed sees it. */
+uint32_t emu_txq_free(void)
+{
+    return TX_SIZE - (tx_head - tx_tail);
+}
+
+bool emu_txq_next(uint8_t *b)
+{
+    if (tx_tail == tx_head) {
+        return false;
+    }
+    *b = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
+    return true;
 }
 
 /* One stimulus byte, when there is one and the telemetry ring has room for what it may produce:
@@ -271,6 +293,9 @@ void board_init(void)
     usart_init();
     sample_clock_init();
     input_init();
+#ifdef ACN_STM32_QEMU
+    feed = emu_feed_start();
+#endif
 }
 
 uint8_t board_id(void)
@@ -347,6 +372,12 @@ void usart1_handler(void)
 
 bool board_poll(void)
 {
+#ifdef ACN_STM32_QEMU
+    if (feed) {
+        emu_feed_poll();
+        return true;
+    }
+#endif
     if (sample_ready) {
         acnf_stimulus_t in;
         uint32_t overrun;
