@@ -132,14 +132,16 @@ def bench_compact(args) -> None:
         f"{len(data) / 1e6:.1f} MB ({len(clean) / n:.2f} B per sample), {args.repeats} repeated runs of frames, "
         f"100 damaged bytes; made by the firmware (SIL) in {t_make:.1f} s"
     )
-    t = time.perf_counter()
-    dec = Decoder(man, replay=replay)
-    idx = []
-    for a in range(0, len(data), args.piece):
-        idx.append(dec.feed(data[a : a + args.piece])["sample"]["index"])
-    idx.append(dec.release()["index"])
-    dec.finish()
-    t_vec = time.perf_counter() - t
+    t_vec = math.inf
+    for _ in range(args.best_of):  # the best of a few runs: the machine's load only ever adds
+        t = time.perf_counter()
+        dec = Decoder(man, replay=replay)
+        idx = []
+        for a in range(0, len(data), args.piece):
+            idx.append(dec.feed(data[a : a + args.piece])["sample"]["index"])
+        idx.append(dec.release()["index"])
+        dec.finish()
+        t_vec = min(t_vec, time.perf_counter() - t)
     got = int(sum(len(s) for s in idx))
     st = dec.stats
 
@@ -160,7 +162,7 @@ def bench_compact(args) -> None:
 
     print(f"\n{'decoder':<44}{'seconds':>9}{'samples':>12}{'samples/s':>14}{'x realtime':>12}")
     for name, secs, k in (
-        ("vectorised + replay (whole stream)", t_vec, got),
+        (f"vectorised + replay (whole, best of {args.best_of})", t_vec, got),
         (f"naive frame-by-frame ({args.naive_fraction:.0%} of it)", t_naive, n_naive),
     ):
         print(f"{name:<44}{secs:9.2f}{k:12,}{k / secs:14,.0f}{k / args.rate / secs:12,.0f}")
@@ -185,11 +187,20 @@ def main(argv=None) -> int:
     ap.add_argument("--piece", type=int, default=1 << 20, help="bytes per Decoder.feed()")
     ap.add_argument("--repeats", type=int, default=100, help="runs of 1..50 frames repeated in the stream")
     ap.add_argument("--naive-fraction", type=float, default=0.05, help="share of the compact stream decoded naively")
+    ap.add_argument("--best-of", type=int, default=3, help="runs of the vectorised compact decode (the best counts)")
+    ap.add_argument("--skip-state", action="store_true", help="leave out the state mode's (slow) part")
     args = ap.parse_args(argv)
 
     print("== compact mode (block frames of raw inputs, checkpoints, host replay) ==")
     bench_compact(args)
-    print("\n== state mode (one sample frame per sample, states included) ==")
+    if not args.skip_state:
+        print("\n== state mode (one sample frame per sample, states included) ==")
+        bench_state(args)
+    bytes_table()
+    return 0
+
+
+def bench_state(args) -> None:
 
     man = Manifest(json.loads(generated(None)["acnframe.json"]))
     n = int(args.minutes * 60 * args.rate)
@@ -234,6 +245,8 @@ def main(argv=None) -> int:
         f"{dec.stats.bad_frames} refused"
     )
 
+
+def bytes_table() -> None:
     print("\nbytes per sample on the wire (COBS + CRC-32 + delimiter; compact: checkpoints included, measured on")
     print("100 000 samples of the firmware's stream) and the samples per second (every axis) a link carries (8N1)")
     print(f"{'model':<20}{'mode':<9}{'B/sample':>9}" + "".join(f"{b:>12} Bd" for b in BAUDS))
@@ -250,7 +263,6 @@ def main(argv=None) -> int:
                 f"{'':<20}{'':<9}{'1 kHz:':>9}"
                 + "".join(f"{'whole' if x >= 1000 else 'decimate ' + str(math.ceil(1000 / x)):>15}" for x in sps)
             )
-    return 0
 
 
 if __name__ == "__main__":
