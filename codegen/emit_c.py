@@ -27,7 +27,7 @@ from .emit_f32 import emit_f32
 from .gains import Schedule, schedule
 from .model import Model
 from .package import cdef_of, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
-from .qformat import quantize
+from .qformat import acc_bound, guard_bits, quantize
 from .ranges import AxisPlan, plan_axis
 
 SCHEDULE_REL_TOL = (1e-4, 3e-4, 2e-7, 1e-4)  # K_r, K_v (no feedback), K_a (held in a segment: tight), K_e
@@ -195,25 +195,32 @@ def _hi_round(expr: str) -> str:
     return f"(int32_t)(((uint64_t)({expr}) + UINT64_C(0x80000000)) >> 32)"
 
 
-GUARD_BITS = 16  # bits below the target's LSB at which a sum of three or more terms is formed
-GUARD_BITS_2 = 32  # ... and a sum of one or two: at 32 the rounding is the high word, no shift
-
-
-def _acc(ft: int, terms: list[tuple[str, str, int]]) -> str:
+def _acc(ft: int, terms: list[tuple[str, str, int]], dither: str | None = None) -> str:
     """Sum of int64 terms (sign, expr, frac bits) in Q.ft with one rounding: the terms already in
-    Q.ft add exactly; the finer ones are aligned (floor) to Q.(ft + g), g the most that needs no
-    left shift, at most GUARD_BITS_2 for one or two fine terms (each a product of two int32, neither
-    INT32_MIN, so |term| < 2^62 and two of them plus the rounding half stay below 2^63) and
-    GUARD_BITS for more, summed, and rounded once to Q.ft."""
+    Q.ft add exactly; the finer ones are aligned (floor) to Q.(ft + g) (g: :func:`codegen.qformat.guard_bits`; each fine
+    term a product of two int32, neither INT32_MIN, or an int32 constant, so |term| < 2^62 and two
+    of them plus the rounding offset stay below 2^63), summed, and rounded once to Q.ft.
+
+    The rounding adds half an LSB (to nearest, ties up), or with ``dither`` (the C name of a uint32
+    that runs through its values evenly from sample to sample: the bit-reversed sample count) its top
+    g bits: still one floor of the sum plus an offset below one LSB, so the result is within one LSB
+    of the exact sum, but an increment that holds a steady fraction of an LSB for many samples is no
+    longer rounded the same way every time: over any 2^m consecutive samples the roundings add up to
+    at most about one LSB instead of up to 2^m / 2 (used on the entries whose own change per sample
+    is a small fraction of their LSB)."""
     exact = [(sg, e) for sg, e, fr in terms if fr == ft]
     fine = [(sg, e, fr) for sg, e, fr in terms if fr != ft]
     if any(fr < ft for _, _, fr in fine):
         raise ValueError("a term coarser than its target")
     out = " ".join(f"{sg} {e}" for sg, e in exact).lstrip("+ ")
     if fine:
-        g = min(GUARD_BITS_2 if len(fine) <= 2 else GUARD_BITS, *(fr - ft for _, _, fr in fine))
+        g = guard_bits([fr for _, _, fr in fine], ft)
         parts = " ".join(f"{sg} " + (f"(({e}) >> {fr - ft - g})" if fr - ft > g else f"({e})") for sg, e, fr in fine)
-        out += f" + ACN_RSHR({parts.lstrip('+ ')}, {g}) /* in Q.{ft + g}, rounded once to Q.{ft} */"
+        if dither is not None and g <= 32:
+            off = f"(int64_t)({dither} >> {32 - g})" if g < 32 else f"(int64_t){dither}"
+            out += f" + (({parts.lstrip('+ ')} + {off}) >> {g}) /* in Q.{ft + g}, dithered once to Q.{ft} */"
+        else:
+            out += f" + ACN_RSHR({parts.lstrip('+ ')}, {g}) /* in Q.{ft + g}, rounded once to Q.{ft} */"
     return f"({out})"
 
 
@@ -227,26 +234,74 @@ def _acc_sat(ft: int, terms: list[tuple[str, str, int]], mag) -> str:
     m = re.fullmatch(r"\(int64_t\)((?:s->)?\w+)", e0)
     rest = terms[1:]
     if sg0 == "+" and fr0 == ft and m and rest:
-        exact = [mag(e) for sg, e, fr in rest if fr == ft]
-        fine = [(mag(e), fr) for sg, e, fr in rest if fr != ft]
-        bound = sum(exact)
-        if fine:
-            g = min(GUARD_BITS_2 if len(fine) <= 2 else GUARD_BITS, *(fr - ft for _, fr in fine))
-            tot = sum((mg >> (fr - ft - g)) + 1 for mg, fr in fine) + (1 << (g - 1))
-            bound += (tot >> g) + 1
-        if bound < 2**31 - 1:
+        if acc_bound(ft, [(mag(e), fr) for sg, e, fr in rest]) < 2**31 - 1:
             return f"acn_add_sat32({m.group(1)}, (int32_t){_acc(ft, rest)}, &s->overflow)"
     return f"acn_sat32({_acc(ft, terms)}, &s->overflow)"
 
 
-def _predict_cov(p: AxisPlan, P: str) -> list[str]:
+def _predict_terms(p: AxisPlan, P: str) -> dict[str, tuple[int, list[tuple[str, str, int]]]]:
+    """The predict sums of the carried block: name -> (target frac bits, [(sign, expr, frac bits)]).
+
+    Every constant has its own scaling (Q_ra, Q_ua, Q_aa, Q_ee and 1 - phi are far below the LSB of
+    the entry they feed: in the entry's format Q_ra at 1 kHz was 6 LSB for 5.7, a 5 % error that
+    biased c_r and with it K_r), so each enters as a fine term, aligned with the products. The decay
+    by phi is written as x - (1 - phi) x, (1 - phi) in its own scaling, for the same reason."""
     fcr, fPr, fcv, fPv, fca, fPae, fce = (p.f(n) for n in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"))
-    H2, T2, OMP = (p.consts[n][1].frac for n in ("H2", "T2", "OMP"))
-    PO = p.consts["PHIOMP"][1].frac
+    fq = {n: p.consts[n][1].frac for n in ("H2", "T2", "OMPC", "PHIOMP", "Qra", "Qva", "Qaa", "Qee")}
+    H2, T2, OMP, PO = fq["H2"], fq["T2"], fq["OMPC"], fq["PHIOMP"]
 
     def c(name):  # "-NAME": the constant negated in the literal (no 64-bit negation of the product)
         neg = name.startswith("-")
         return f"(int64_t){'-' if neg else ''}{P}_{name.lstrip('-')}"
+
+    return {
+        "tr": (
+            fPr,
+            [("+", "(int64_t)s->Pre", fPr), ("+", "(int64_t)s->Pve", fPv), ("+", f"{c('H2')} * s->Pae", H2 + fPae)],
+        ),
+        "tv": (fPv, [("+", "(int64_t)s->Pve", fPv), ("+", f"{c('T2')} * s->Pae", T2 + fPae)]),
+        "cr": (
+            fcr,
+            [
+                ("+", "(int64_t)s->cr", fcr),
+                ("+", "(int64_t)s->cv", fcv),
+                ("+", f"{c('H2')} * s->ca", H2 + fca),
+                ("+", c("Qra"), fq["Qra"]),
+                ("+", f"{c('-OMPC')} * tr", OMP + fPr),
+            ],
+        ),
+        "cv": (
+            fcv,
+            [
+                ("+", "(int64_t)s->cv", fcv),
+                ("+", f"{c('T2')} * s->ca", T2 + fca),
+                ("+", c("Qva"), fq["Qva"]),
+                ("+", f"{c('-OMPC')} * tv", OMP + fPv),
+            ],
+        ),
+        "Pre": (fPr, [("+", "(int64_t)tr", fPr), ("+", f"{c('-OMPC')} * tr", OMP + fPr)]),
+        "Pve": (fPv, [("+", "(int64_t)tv", fPv), ("+", f"{c('-OMPC')} * tv", OMP + fPv)]),
+        "ca": (
+            fca,
+            [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fq["Qaa"]), ("+", f"{c('-OMPC')} * s->Pae", OMP + fPae)],
+        ),
+        "ce": (
+            fce,
+            [
+                ("+", f"{c('PHI2')} * s->ce", 31 + fce),
+                ("+", f"{c('PHIOMP')} * s->Pae", PO + fPae),
+                ("+", c("Qee"), fq["Qee"]),
+            ],
+        ),
+        "Pae": (fPae, [("+", "(int64_t)s->Pae", fPae), ("+", f"{c('-OMPC')} * s->Pae", OMP + fPae)]),
+    }
+
+
+DITHERED = ("Pre", "Pve", "Pae")  # entries whose change per sample is a small fraction of their LSB
+
+
+def _predict_cov(p: AxisPlan, P: str) -> list[str]:
+    t = _predict_terms(p, P)
 
     def mag(expr: str) -> int:  # a bound on |expr| for any int32 operands
         m = re.fullmatch(r"\(int64_t\)(-?)" + P + r"_(\w+)(?: \* (\w+|s->\w+))?", expr)
@@ -257,61 +312,37 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
             return 2**31
         raise ValueError(f"no bound for {expr}")
 
-    def sat(ft, terms):
-        return _acc_sat(ft, terms, mag)
+    def sat(name):
+        return _acc_sat(*t[name], mag)
 
-    tr = sat(
-        fPr, [("+", "(int64_t)s->Pre", fPr), ("+", "(int64_t)s->Pve", fPv), ("+", f"{c('H2')} * s->Pae", H2 + fPae)]
-    )
-    tv = sat(fPv, [("+", "(int64_t)s->Pve", fPv), ("+", f"{c('T2')} * s->Pae", T2 + fPae)])
-    cr = sat(
-        fcr,
-        [
-            ("+", "(int64_t)s->cr", fcr),
-            ("+", "(int64_t)s->cv", fcv),
-            ("+", f"{c('H2')} * s->ca", H2 + fca),
-            ("+", c("Qra"), fcr),
-            ("+", f"{c('-OMP')} * tr", OMP + fPr),
-        ],
-    )
-    cv = sat(
-        fcv,
-        [
-            ("+", "(int64_t)s->cv", fcv),
-            ("+", f"{c('T2')} * s->ca", T2 + fca),
-            ("+", c("Qva"), fcv),
-            ("+", f"{c('-OMP')} * tv", OMP + fPv),
-        ],
-    )
-    pre = _acc(fPr, [("+", "(int64_t)tr", fPr), ("+", f"{c('-OMP')} * tr", OMP + fPr)])
-    pve = _acc(fPv, [("+", "(int64_t)tv", fPv), ("+", f"{c('-OMP')} * tv", OMP + fPv)])
-    ca = sat(fca, [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fca), ("+", f"{c('-OMP')} * s->Pae", OMP + fPae)])
-    ce = _acc(
-        fce,
-        [("+", f"{c('PHI2')} * s->ce", 31 + fce), ("+", f"{c('PHIOMP')} * s->Pae", PO + fPae), ("+", c("Qee"), fce)],
-    )
+    # x - (1 - phi) x fits int32 for every int32 x: 0 < 1 - phi < 1, the product enters with the sign
+    # opposite to x, and neither its floor nor the rounding offset (below one LSB) can push past x
+    def decay(name):
+        return f"(int32_t){_acc(*t[name], dither='dz' if name in DITHERED else None)}"
+
     return [
         "        /* P = F P F' + Q on the carried block (c = P H' carried directly in fine formats);",
         "         * every right-hand side reads the old values; each sum is rounded once */",
         "        int32_t tr, tv;",
+        "        uint32_t dz = acn_rbit(s->k); /* rounding offsets: the sample count, bit-reversed */",
         "        /* tr = P_re + P_ve + Ts^2/2 P_ae; P_re' = phi tr */",
-        f"        tr = {tr};",
+        f"        tr = {sat('tr')};",
         "        /* tv = P_ve + Ts^2 P_ae; P_ve' = phi tv */",
-        f"        tv = {tv};",
+        f"        tv = {sat('tv')};",
         "        /* c_r' = c_r + c_v + Ts^2/2 c_a + Q_ra - (1 - phi) tr */",
-        f"        s->cr = {cr};",
+        f"        s->cr = {sat('cr')};",
         "        /* c_v' = c_v + Ts^2 c_a + Ts Q_ua - (1 - phi) tv */",
-        f"        s->cv = {cv};",
-        f"        s->Pre = (int32_t){pre};",
-        f"        s->Pve = (int32_t){pve};",
+        f"        s->cv = {sat('cv')};",
+        f"        s->Pre = {decay('Pre')};",
+        f"        s->Pve = {decay('Pve')};",
         "        /* c_a' = c_a + Q_aa - (1 - phi) P_ae */",
-        f"        s->ca = {ca};",
+        f"        s->ca = {sat('ca')};",
         "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
-        f"        s->ce = (int32_t){ce}; /* fits int32 for any c_e, P_ae: see codegen.ranges._predict_sat_free */"
+        f"        s->ce = (int32_t){_acc(*t['ce'])}; /* fits int32 for any c_e, P_ae: ranges._predict_sat_free */"
         if "ce" in p.sat_free
-        else f"        s->ce = acn_sat32({ce}, &s->overflow);",
-        "        /* P_ae' = phi P_ae */",
-        f"        s->Pae = (int32_t){_shift(f'(int64_t){P}_PHI * s->Pae', 31 + fPae, fPae)};",
+        else f"        s->ce = acn_sat32({_acc(*t['ce'])}, &s->overflow);",
+        "        /* P_ae' = phi P_ae = P_ae - (1 - phi) P_ae */",
+        f"        s->Pae = {decay('Pae')};",
     ]
 
 
@@ -526,6 +557,22 @@ static inline int64_t acn_mac(int64_t acc, int32_t a, int32_t b)
     return (int64_t)(((uint64_t)hi << 32) | lo);
 #else
     return acc + (int64_t)a * b;
+#endif
+}
+
+/* The bits of x in reverse order (one RBIT on Thumb-2): the bit-reversed sample count runs through
+ * the rounding offsets of the covariance predict evenly (see codegen.emit_c._acc). */
+static inline uint32_t acn_rbit(uint32_t x)
+{
+#if defined(__arm__) && defined(__thumb2__)
+    __asm__("rbit %0, %1" : "=r"(x) : "r"(x));
+    return x;
+#else
+    x = ((x >> 1) & UINT32_C(0x55555555)) | ((x & UINT32_C(0x55555555)) << 1);
+    x = ((x >> 2) & UINT32_C(0x33333333)) | ((x & UINT32_C(0x33333333)) << 2);
+    x = ((x >> 4) & UINT32_C(0x0F0F0F0F)) | ((x & UINT32_C(0x0F0F0F0F)) << 4);
+    x = ((x >> 8) & UINT32_C(0x00FF00FF)) | ((x & UINT32_C(0x00FF00FF)) << 8);
+    return (x >> 16) | (x << 16);
 #endif
 }
 
