@@ -346,57 +346,137 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
     ]
 
 
-def _gains_cov(p: AxisPlan, P: str) -> list[str]:
-    """K = c / S from the carried block, then P = P - K c'. Every shift rounds; the posterior
-    entries are not saturated: the update only contracts the block (c_i -> c_i R / S, and the
-    cross terms stay within the diagonal terms, which only shrink)."""
+def cov_fracs(p: AxisPlan) -> dict:
+    """Binary points of the covariance form's update: nmax, the clz of the smallest S (= R); x, the
+    format of xs = 1/S; and per state the product c_i w that it adds."""
     fca = p.f("ca")
-    fK = {n: p.f("K" + n) for n in "rvae"}
-    fc = {"r": p.f("cr"), "v": p.f("cv"), "a": fca, "e": p.f("ce")}
+    nmax = 32 - quantize(p.design.R, p.vars["S"].fmt).bit_length()
+    fw = p.f("w")
+    prod = {"r": p.f("cr") + fw, "v": p.f("cv") + fw, "a": fca + fw, "e": p.f("ce") + fw}
+    return {"nmax": nmax, "x": 61 - nmax - fca, "prod": prod}
+
+
+def _gains_cov(p: AxisPlan, P: str) -> list[str]:
+    """Body of T_pupdate, the measurement update of the carried block: S = c_a + c_e + R, one
+    reciprocal, then P = P - c c' / S, which for the carried c = P H' is c_i -> c_i (1 - kappa) with
+    kappa = (S - R) / S, and P_ie -= c_i K_e with K_e = c_e / S (all from the prior block). The gain
+    is never formed: the core adds c_i+ y / R (K = P- H' / S = P+ H' / R). The posterior entries are
+    not saturated: the update only contracts the block (c_i -> c_i R / S, and the cross terms stay
+    within the diagonal terms, which only shrink)."""
+    fca, fce, fKe = p.f("ca"), p.f("ce"), p.f("Ke")
+    cf = cov_fracs(p)
+    nmax, fx = cf["nmax"], cf["x"]
+    d = fce - fca
     R_int = quantize(p.design.R, p.vars["S"].fmt)
-    nmax = 32 - R_int.bit_length()  # clz of the smallest S
+    if d > 0:  # c_e in c_a's format, rounded (ties up) in 32 bits: floor((floor(c_e / 2^(d-1)) + 1) / 2)
+        ce_a = f"(((ce >> {d - 1}) + 1) >> 1) /* Q.{fce} -> Q.{fca}, round */"
+        fits = (2**31 >> d) + 1 + abs(R_int) < 2**31 - 1
+    else:
+        ce_a, fits = "", False
+    fy, fw, fr, fv, fe = p.f("y"), p.f("w"), p.f("r"), p.f("v"), p.f("e")
+    pr = cf["prod"]
+    sw = fy + fx - fw
+    for what, sh in (("kappa", fca + fx - 31), ("K_e", fce + fx - fKe), ("w", sw), ("a", pr["a"] - fy)):
+        if not 1 <= sh <= 62:
+            raise ValueError(f"{what} shift {sh} out of range")
     L = [
+        "    int32_t cr = s->cr, cv = s->cv, ca = s->ca, ce = s->ce, S, xs, w, kap, Ke;",
+        "    uint32_t x;",
+        "    int n;",
         "    /* S = H P H' + R = c_a + c_e + R (>= R by construction) */",
         # one saturating 32-bit add when c_e aligned plus R fits int32 for any c_e (see _acc_sat)
-        f"    S = acn_add_sat32(s->ca, (int32_t)({_shf('(int64_t)s->ce', fc['e'], fca)} + {P}_R), &s->overflow);"
-        if fc["e"] > fca and (2**31 >> (fc["e"] - fca)) + 1 + abs(R_int) < 2**31 - 1
-        else f"    S = acn_sat32((int64_t)s->ca + {_shf('(int64_t)s->ce', fc['e'], fca)} + {P}_R, &s->overflow);",
+        f"    S = acn_add_sat32(ca, {ce_a} + {P}_R, &s->overflow);"
+        if fits
+        else f"    S = acn_sat32((int64_t)ca + {_shift('(int64_t)ce', fce, fca)} + {P}_R, &s->overflow);",
         f"    if (S < {P}_R) {{",
         f"        S = {P}_R;",
         "    }",
-        f"    /* K = c / S: one reciprocal, 1/S = x 2^(n-62) with n = clz(S) in 1..{nmax}; x >> ({nmax} - n)",
-        f"     * puts it at 1/S = x 2^({nmax - 62}) for every S (dropping at most {nmax} of its 30 bits) */",
+        f"    /* 1/S: one reciprocal, 1/S = x 2^(n-62) with n = clz(S) in 1..{nmax}; x >> ({nmax} - n)",
+        f"     * puts it at 1/S = x 2^({nmax - 62}) for every S (dropping at most {nmax} of its 30 bits):",
+        f"     * xs = 1/S in Q.{fx} */",
         "    x = acn_recip((uint32_t)S, &n);",
         f"    x >>= {nmax} - n;",
-        "    xs = (int32_t)(x >> 1); /* below 2^31: each K is one signed 32x32 product */",
+        "    xs = (int32_t)(x >> 1); /* below 2^31: each product is one signed 32x32 multiply */",
+        "    /* w = y / S (|w| <= max|y| / R: fits, no saturation) */",
+        f"    w = (int32_t)ACN_RSHR(acn_mul(y, xs), {sw}); /* Q.{fy} x Q.{fx} -> {p.vars['w'].fmt}, round */",
+        "    /* x = x + K y = x + c w (K = c / S), c the prior block: r and v = Ts u take K_r y, K_v y here,",
+        "     * the rest of their step in the core */",
+        f"    s->r += {_sh('acn_mul(cr, w)', pr['r'] - fr, 'Q.{} -> Q.{}'.format(pr['r'], fr))};",
+        f"    s->v += {_sh('acn_mul(cv, w)', pr['v'] - fv, 'Q.{} -> Q.{}'.format(pr['v'], fv))};",
+        f"    s->a += (int32_t)ACN_RSHR(acn_mul(ca, w), {pr['a'] - fy}); /* Q.{pr['a']} -> Q.{fy}, round */",
+        f"    s->e = acn_mac(s->e, ce, w); /* Q.{fe}, exact */"
+        if pr["e"] == fe
+        else f"    s->e += {_sh('acn_mul(ce, w)', pr['e'] - fe, 'Q.{} -> Q.{}'.format(pr['e'], fe))};",
+        "    /* P = P - c c' / S: c_i -= c_i kappa with kappa = (S - R) / S in [0, 1), Q0.31;",
+        "     * P_ie -= c_i K_e with K_e = c_e / S */",
+        f"    kap = (int32_t)ACN_RSHR(acn_mul(S - {P}_R, xs), {fca + fx - 31}); /* Q.{fca + fx} -> Q0.31, round */",
+        f"    Ke = acn_sat32(ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}), &s->overflow);"
+        f" /* Q.{fce + fx} -> {p.vars['Ke'].fmt}, round */",
     ]
-    for nm in "rvae":
-        sh = 62 - fca + fc[nm] - fK[nm] - nmax - 1
-        if sh < 1 or sh > 62:
-            raise ValueError(f"K_{nm} shift {sh} out of range")
-        L.append(
-            f"    K{nm} = acn_sat32(ACN_RSHR((int64_t)s->c{nm} * xs, {sh}), &s->overflow);"
-            f" /* Q.{fc[nm]} x Q.{61 - nmax - fca} -> {p.vars['K' + nm].fmt}, round */"
-        )
-    L.append("    /* P = P - K c'; for a carried c_i = P_ia + P_ie: c_i -= K_i (c_a + c_e) = K_i (S - R) */")
-    L.append(f"    sr = S - {P}_R;")
-    for dst, ki, cj, fcj in (
-        ("cr", "Kr", "sr", fca),
-        ("Pre", "Kr", "s->ce", fc["e"]),
-        ("cv", "Kv", "sr", fca),
-        ("Pve", "Kv", "s->ce", fc["e"]),
-        ("ca", "Ka", "sr", fca),
-        ("Pae", "Ka", "s->ce", fc["e"]),
-    ):
-        L.append(
-            f"    s->{dst} = (int32_t)((int64_t)s->{dst} - "
-            f"{_shift(f'(int64_t){ki} * {cj}', fK[ki[1]] + fcj, p.f(dst))});"
-        )
-    L.append("    /* c_e = c_e - (K_a + K_e) c_e */")
-    L.append(
-        f"    s->ce = (int32_t)((int64_t)s->ce - {_shift('(int64_t)Ka * s->ce', fK['a'] + fc['e'], fc['e'])}"
-        f" - {_shift('(int64_t)Ke * s->ce', fK['e'] + fc['e'], fc['e'])});"
-    )
+    for dst, ci in (("Pre", "cr"), ("Pve", "cv"), ("Pae", "ca")):
+        dec = _shift(f"acn_mul({ci}, Ke)", p.f(ci) + fKe, p.f(dst))
+        L.append(f"    s->{dst} = (int32_t)((int64_t)s->{dst} - {dec});")
+    for ci in ("cr", "cv", "ca", "ce"):
+        L.append(f"    s->{ci} = (int32_t)((int64_t){ci} - {_shift(f'acn_mul({ci}, kap)', p.f(ci) + 31, p.f(ci))});")
+    return L
+
+
+def _cov_state_update(p: AxisPlan, P: str) -> list[str]:
+    """x = x + K y (covariance form) as c_i+ w, w = y / R, into the accumulators p (r), q (v = Ts u),
+    a and eps; the block is the posterior one."""
+    fy, fe, fw = p.f("y"), p.f("e"), p.f("w")
+    pr = cov_fracs(p)["prod"]
+    fri = p.consts["RINV"][1].frac
+    sw = fy + fri - fw
+    if not 1 <= sw <= 62:
+        raise ValueError(f"w shift {sw} out of range")
+    return [
+        "        /* y = z - H x = z - a - eps;  w = y / R (|w| <= max|y| / R: fits, no saturation) */",
+        f"        y = z - a - {_hi_round('e')};",
+        f"        w = (int32_t)ACN_RSHR(acn_mul(y, {P}_RINV), {sw}); /* Q.{fy + fri} -> {p.vars['w'].fmt}, round */",
+        "        /* x = x + K y = x + c+ w */",
+        "        p = acn_mac(p, s->cr, w); /* p += K_r y */",
+        "        q = acn_mac(q, s->cv, w); /* q += K_v y */",
+        f"        s->a = a + (int32_t)ACN_RSHR(acn_mul(s->ca, w), {pr['a'] - fy}); /* Q.{pr['a']} -> Q.{fy}, round */",
+        f"        e = acn_mac(e, s->ce, w); /* Q.{fe}, exact */"
+        if pr["e"] == fe
+        else f"        e += {_sh('acn_mul(s->ce, w)', pr['e'] - fe, 'Q.{} -> Q.{}'.format(pr['e'], fe))};",
+    ]
+
+
+def _core_cov(p: AxisPlan, P: str, T: str) -> list[str]:
+    """Body of T_core for the covariance form: as _core_fixed, with the update of _gains_cov inline
+    (the prior block is read once into registers; the predict of the block stays a function of its own)."""
+    fr, fv, fe, fy = p.f("r"), p.f("v"), p.f("e"), p.f("y")
+    fo = p.consts["OMP"][1].frac
+    eh = _hi_round("e")
+    if p.design.x0[0] != 0 or p.design.x0[1] != 0 or p.design.x0[2] != 0:
+        raise ValueError("the merged predict needs r, u, a of x0 at zero")
+    fH2, fT2 = p.consts["H2"][1].frac, p.consts["T2"][1].frac
+    L = [
+        "    int32_t a = s->a;",
+        "    int64_t e = s->e, v0 = s->v, r, v;",
+        "    if (__builtin_expect(s->k > 0, 1)) {",
+        "        /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar), eps by its rounded high word */",
+        f"        e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
+        if fo != 32
+        else f"        e += (int64_t)-{P}_OMP * ({eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */",
+        f"        {T}_ppredict(s);",
+        "    }",
+        "    s->e = e;",
+        "    if (valid) {",
+        "        /* y = z - H x = z - a - eps; K = P H' / S, x = x + K y and P = P - K H P */",
+        f"        {T}_pupdate(s, z - a - {_hi_round('e')});",
+        "    }",
+        "    /* r += Ts u + Ts^2/2 a,  u += Ts a (K_r y and K_v y are in already); u and a are the previous",
+        "     * posteriors, and at k = 0 both increments are zero (x0 has r = u = a = 0): no test of k */",
+        f"    r = s->r + {_sh('v0', fv - fr, f'Q.{fv} -> Q.{fr}')}"
+        f" + {_sh(f'(int64_t){P}_H2 * a', fH2 + fy - fr, f'Q.{fH2 + fy} -> Q.{fr}')};",
+        f"    v = s->v + {_sh(f'(int64_t){P}_T2 * a', fT2 + fy - fv, f'Q.{fT2 + fy} -> Q.{fv}')};",
+        f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
+        f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
+        "    ++s->k;",
+    ]
     return L
 
 
@@ -409,6 +489,8 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
     every shift is a floor except the two that make y and a (round to nearest). r and v are clamped
     once per step on their high words; nothing else can overflow over the declared ranges.
     """
+    if p.form == "covariance":
+        return _core_cov(p, P, T)
     fr, fv, fy, fe = p.f("r"), p.f("v"), p.f("y"), p.f("e")
     fK = {n: p.f("K" + n) for n in "rvae"}
     fo = p.consts["OMP"][1].frac
@@ -821,19 +903,11 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             "",
         ]
     if p.form == "covariance":
-        # the covariance block in functions of their own: its registers do not crowd the states'
+        # the predict of the covariance block in a function of its own: its registers do not crowd the states'
         src += [f"static void {T}_ppredict({T}_t *s)", "{"]
         src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(p, P)]
         src += ["}", ""]
-        src += [
-            f"static void {T}_pupdate({T}_t *s, int32_t K[4])",
-            "{",
-            "    int32_t Kr, Kv, Ka, Ke, S, sr, xs;",
-            "    uint32_t x;",
-            "    int n;",
-        ]
-        src += [_smull(ln) for ln in _gains_cov(p, P)]
-        src += ["    K[0] = Kr;", "    K[1] = Kv;", "    K[2] = Ka;", "    K[3] = Ke;", "}", ""]
+        src += [f"static void {T}_pupdate({T}_t *s, int32_t y)", "{"] + _gains_cov(p, P) + ["}", ""]
     src += [
         "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
         f" * with z [m/s^2] {v['z'].fmt}. Inlined into update, skip and step. */",
