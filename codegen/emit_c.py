@@ -27,7 +27,7 @@ from .emit_f32 import emit_f32
 from .gains import Schedule, schedule
 from .model import Model
 from .package import cdef_of, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
-from .qformat import acc_bound, guard_bits, quantize
+from .qformat import QFormat, acc_bound, guard_bits, quantize
 from .ranges import AxisPlan, plan_axis
 
 SCHEDULE_REL_TOL = (1e-4, 3e-4, 2e-7, 1e-4)  # K_r, K_v (no feedback), K_a (held in a segment: tight), K_e
@@ -300,6 +300,65 @@ def _predict_terms(p: AxisPlan, P: str) -> dict[str, tuple[int, list[tuple[str, 
 DITHERED = ("Pre", "Pve", "Pae")  # entries whose change per sample is a small fraction of their LSB
 
 
+def _hsum(p: AxisPlan, P: str, ft: int, terms, dither: str | None = None):
+    """The sum of ``terms`` (as _acc takes them; int32 variables, constants, constant x variable
+    products) in one int64 accumulator in Q.(ft + 32), its high word the result in Q.ft: each
+    constant of a product is scaled so that the product lands there (one SMLAL, no shift; when that
+    leaves the constant fewer than 20 bits, the variable is first shifted right by the k that best
+    balances the constant's rounding against the variable's floor), each variable by a power of two
+    (one SMLAL), the constants and the rounding offset (half an LSB, or the dither) start the
+    accumulator. Returns (C expression of the int32 result, bound on |result| in LSB of Q.ft for any
+    int32 variables), or None when a term does not fit that scheme (then _acc forms the sum)."""
+    F = ft + 32
+    lit = 0
+    ops = []
+    mag = 0
+    for sg, e, fr in terms:
+        neg = sg == "-"
+        m = re.fullmatch(r"\(int64_t\)(-?)" + P + r"_(\w+)(?: \* (\w+|s->\w+))?", e)
+        if m:
+            val = p.consts[m.group(2)][0] * (-1.0 if m.group(1) else 1.0) * (-1.0 if neg else 1.0)
+            if not m.group(3):  # a constant: into the start of the accumulator
+                lit += quantize(val, QFormat(64, F))
+                continue
+            fv = fr - p.consts[m.group(2)][1].frac  # the variable's own binary point
+            kk = val * 2.0 ** (F - fv)
+            if abs(kk) >= 2**30:
+                return None
+            k = 0
+            if abs(kk) < 2**20:
+                ks = [j for j in range(25) if abs(kk) * 2.0**j < 2**30]
+                k = min(ks, key=lambda j: 2.0 ** (30 - j) + abs(kk) * 2.0**j)
+            ki = quantize(kk * 2.0**k, QFormat(32, 0))
+            x = f"({m.group(3)} >> {k})" if k else m.group(3)
+            ops.append((x, ki, f"{val:.6g} Q.{F - fv + k}"))
+            mag += abs(ki) * 2 ** (31 - k)
+            continue
+        m = re.fullmatch(r"\(int64_t\)(\w+|s->\w+)", e)
+        if m and 0 <= F - fr <= 30:  # an int32 variable times a power of two
+            ops.append((m.group(1), -(1 << (F - fr)) if neg else 1 << (F - fr), f"2^{F - fr}"))
+            mag += 2 ** (31 + F - fr)
+            continue
+        return None
+    total = mag + abs(lit) + 2**32
+    if total >= 2**62:
+        return None
+    acc = f"INT64_C({lit}) + (int64_t){dither}" if dither else _c_int(lit + 2**31, 64)
+    for x, ki, cm in ops:
+        acc = f"acn_mac({acc}, {x}, {_c_int(ki, 32)} /* {cm} */)"
+    return f"(int32_t)(({acc}) >> 32) /* Q.{F} -> Q.{ft}, high word */", (total >> 32) + 1, (lit, ops)
+
+
+def _hsum_at(h, values: dict, offset: int) -> int:
+    """The int32 _hsum computes for the variables in ``values`` (name -> int) and rounding offset."""
+    lit, ops = h[2]
+    acc = lit + offset
+    for x, ki, _ in ops:
+        m = re.fullmatch(r"\(?((?:s->)?\w+)(?: >> (\d+)\))?", x)
+        acc += ki * (values[m.group(1)] >> int(m.group(2) or 0))
+    return acc >> 32
+
+
 def _predict_cov(p: AxisPlan, P: str) -> list[str]:
     t = _predict_terms(p, P)
 
@@ -312,13 +371,40 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
             return 2**31
         raise ValueError(f"no bound for {expr}")
 
-    def sat(name):
-        return _acc_sat(*t[name], mag)
+    def sat(name):  # x0 + rest, one saturating 32-bit add when rest fits int32 for any inputs (_acc_sat)
+        ft, terms = t[name]
+        h = _hsum(p, P, ft, terms[1:])
+        x0 = re.fullmatch(r"\(int64_t\)((?:s->)?\w+)", terms[0][1])
+        if h is not None and x0 and terms[0][0] == "+" and terms[0][2] == ft and h[1] < 2**31 - 1:
+            return f"acn_add_sat32({x0.group(1)}, {h[0]}, &s->overflow)"
+        return _acc_sat(ft, terms, mag)
 
     # x - (1 - phi) x fits int32 for every int32 x: 0 < 1 - phi < 1, the product enters with the sign
     # opposite to x, and neither its floor nor the rounding offset (below one LSB) can push past x
+    def ce_sum():  # c_e' = c_e - (1 - phi^2) c_e + phi (1 - phi) P_ae + Q_ee with no clamp, when that is
+        # checked here to fit int32 at every corner of the int32 square of (c_e, P_ae) (c_e' is monotone
+        # in each: the coefficient of c_e, 1 - (1 - phi^2), is below one and its floor moves it by < 1)
+        h = _hsum(p, P, t["ce"][0], terms_ce[1:])
+        if h is None or "ce" not in p.sat_free:
+            return None
+        for ce in (-(2**31), 2**31 - 1):
+            for pae in (-(2**31), 2**31 - 1):
+                if not -(2**31) <= ce + _hsum_at(h, {"s->ce": ce, "s->Pae": pae}, 2**31) <= 2**31 - 1:
+                    return None
+        return f"(int32_t)((int64_t)s->ce + {h[0]})"
+
+    fce = p.f("ce")
+    f2 = p.consts["OMP2"][1].frac
+    terms_ce = [("+", "(int64_t)s->ce", fce), ("+", f"(int64_t)-{P}_OMP2 * s->ce", f2 + fce)] + t["ce"][1][1:]
+    ce_h = ce_sum()
+
     def decay(name):
-        return f"(int32_t){_acc(*t[name], dither='dz' if name in DITHERED else None)}"
+        ft, terms = t[name]
+        dz = "dz" if name in DITHERED else None
+        h = _hsum(p, P, ft, terms[1:], dz)
+        if h is not None:
+            return f"(int32_t)({terms[0][1]} + {h[0]})"
+        return f"(int32_t){_acc(ft, terms, dither=dz)}"
 
     return [
         "        /* P = F P F' + Q on the carried block (c = P H' carried directly in fine formats);",
@@ -338,7 +424,9 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
         "        /* c_a' = c_a + Q_aa - (1 - phi) P_ae */",
         f"        s->ca = {sat('ca')};",
         "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
-        f"        s->ce = (int32_t){_acc(*t['ce'])}; /* fits int32 for any c_e, P_ae: ranges._predict_sat_free */"
+        f"        s->ce = {ce_h}; /* fits int32 for any c_e, P_ae: checked at the corners */"
+        if ce_h
+        else f"        s->ce = (int32_t){_acc(*t['ce'])}; /* fits int32 for any c_e, P_ae: ranges._predict_sat_free */"
         if "ce" in p.sat_free
         else f"        s->ce = acn_sat32({_acc(*t['ce'])}, &s->overflow);",
         "        /* P_ae' = phi P_ae = P_ae - (1 - phi) P_ae */",
@@ -394,7 +482,7 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         f"    /* 1/S: one reciprocal, 1/S = x 2^(n-62) with n = clz(S) in 1..{nmax}; x >> ({nmax} - n)",
         f"     * puts it at 1/S = x 2^({nmax - 62}) for every S (dropping at most {nmax} of its 30 bits):",
         f"     * xs = 1/S in Q.{fx} */",
-        "    x = acn_recip((uint32_t)S, &n);",
+        "    x = acn_recip_t((uint32_t)S, &n);",
         f"    x >>= {nmax} - n;",
         "    xs = (int32_t)(x >> 1); /* below 2^31: each product is one signed 32x32 multiply */",
         "    /* w = y / S (|w| <= max|y| / R: fits, no saturation) */",
@@ -410,7 +498,13 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         "    /* P = P - c c' / S: c_i -= c_i kappa with kappa = (S - R) / S in [0, 1), Q0.31;",
         "     * P_ie -= c_i K_e with K_e = c_e / S */",
         f"    kap = (int32_t)ACN_RSHR(acn_mul(S - {P}_R, xs), {fca + fx - 31}); /* Q.{fca + fx} -> Q0.31, round */",
-        f"    Ke = acn_sat32(ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}), &s->overflow);"
+        # 0 < xs <= 2^30 (acn_recip: x <= 2^31): for any int32 c_e the product lies in
+        # [-2^61, (2^31 - 1) 2^30]; when both ends, shifted and rounded, fit int32, K_e needs no saturation
+        f"    Ke = (int32_t)ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}); /* Q.{fce + fx} -> {p.vars['Ke'].fmt},"
+        " round; fits for any c_e */"
+        if ((2**31 - 1) * 2**30 + 2 ** (fce + fx - fKe - 1)) >> (fce + fx - fKe) <= 2**31 - 1
+        and (-(2**61) + 2 ** (fce + fx - fKe - 1)) >> (fce + fx - fKe) >= -(2**31)
+        else f"    Ke = acn_sat32(ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}), &s->overflow);"
         f" /* Q.{fce + fx} -> {p.vars['Ke'].fmt}, round */",
     ]
     for dst, ci in (("Pre", "cr"), ("Pve", "cv"), ("Pae", "ca")):
@@ -748,6 +842,38 @@ static inline uint32_t acn_recip(uint32_t d, int *n)
 """
 
 
+RECIP_TABLE_BITS = 7  # the covariance form's reciprocal starts from a table of 2^7 entries
+
+
+def recip_helpers() -> str:
+    """C of acn_recip_t, the covariance form's reciprocal: a table start (relative error below 2^-8)
+    and two Newton-Raphson steps (2^-16, then below 2^-28 with the arithmetic's rounding) instead of
+    acn_recip's linear start and three steps: the same contract, fewer instructions."""
+    nb = RECIP_TABLE_BITS
+    # entry i: 2^30 / D at the middle of D in [1/2 + i 2^-(nb+1), 1/2 + (i+1) 2^-(nb+1)), Q2.30 >> 15
+    tab = [round(2**30 / (0.5 + (i + 0.5) / 2 ** (nb + 1)) / 2**15) for i in range(2**nb)]
+    rows = [", ".join(str(x) for x in tab[j : j + 12]) for j in range(0, len(tab), 12)]
+    body = ",\n    ".join(rows)
+    return f"""
+/* 1/D for D in [1/2, 1) in Q2.30 >> 15, at the middle of each of 2^{nb} equal intervals */
+static const uint16_t acn_rtab[{2**nb}] = {{
+    {body}}};
+
+/* As acn_recip (1/d = x 2^(n-62), x in Q2.30, n = clz(d), d > 0, relative 2^-28): the start from
+ * acn_rtab (relative error below 2^-8), then two Newton-Raphson steps. */
+static inline uint32_t acn_recip_t(uint32_t d, int *n)
+{{
+    uint32_t dn, x;
+    *n = __builtin_clz(d);
+    dn = d << *n;                                                           /* D, Q0.32 */
+    x = (uint32_t)acn_rtab[(dn >> {31 - nb}) & {2**nb - 1}u] << 15; /* Q2.30 */
+    ACN_NR(dn, x);
+    ACN_NR(dn, x);
+    return x;
+}}
+"""
+
+
 def _schedule_for(p: AxisPlan) -> Schedule:
     import numpy as np
 
@@ -1047,7 +1173,7 @@ def emit(
         what_c=f"fixed-point {form} filter. No floating point, no division, no heap.",
         declarations=H,
         source_includes="#include <stddef.h> /* offsetof */\n\n",
-        source_prelude=HELPERS + "\n",
+        source_prelude=HELPERS + (recip_helpers() if any(p.form == "covariance" for p in ps) else "") + "\n",
         body=S,
         manifest={"arith": "fixed", "form": form, "axes": MAN},
     )

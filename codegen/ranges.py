@@ -460,6 +460,7 @@ def _plan_covariance(p: AxisPlan) -> None:
     p.consts["PHI2"] = (d.phi**2, QFormat(32, 31))
     p.consts["PHIOMP"] = (d.phi * (1 - d.phi), const_format(d.phi * (1 - d.phi)))
     p.consts["OMPC"] = (1 - d.phi, const_format(1 - d.phi))
+    p.consts["OMP2"] = ((1 - d.phi) * (1 + d.phi), const_format((1 - d.phi) * (1 + d.phi)))
     p.consts["R"] = (d.R, fa)
     p.consts.update(
         {

@@ -363,3 +363,32 @@ def test_unclamped_predict_sums_fit_any_state(workdir):
         want = phi * x + p.consts["Qee"][0] * 2.0 ** p.f("ce")
         assert p.f("Pae") == p.f("ce")
         assert abs(s.ce - want) <= 4, (x, s.ce, want)
+
+
+def test_covariance_reciprocal_within_its_contract(tmp_path):
+    """acn_recip_t (table start, two Newton-Raphson steps: the covariance form's 1/S) keeps acn_recip's
+    contract, 1/d = x 2^(n - 62) to a relative 2^-28, over the whole uint32 range: every power of two
+    and its neighbours, each table interval's ends and middle, and a seeded random sweep."""
+    from accelnav.codegen.cbuild import build_module
+    from accelnav.codegen.emit_c import HELPERS, RECIP_TABLE_BITS, recip_helpers
+
+    src = "#include <stdint.h>\n#include <stdbool.h>\n#include <stddef.h>\n" + HELPERS + recip_helpers()
+    src += "uint32_t t_recip(uint32_t d, int *n) { return acn_recip_t(d, n); }\n"
+    mod = build_module(
+        "acn_recip_test", "uint32_t t_recip(uint32_t d, int *n);", {"r.c": src}, main="r.c", workdir=tmp_path
+    )
+    ds = {1, 2**32 - 1}
+    for k in range(32):
+        ds |= {2**k, 2**k + 1, max(1, 2**k - 1)}
+    step = 2 ** (31 - RECIP_TABLE_BITS)  # the table's intervals of D = d 2^n in [2^31, 2^32)
+    for i in range(2**RECIP_TABLE_BITS):
+        lo = 2**31 + i * step
+        ds |= {lo, lo + step // 2, lo + step - 1}
+    ds |= {int(x) for x in np.random.default_rng(5).integers(1, 2**32, 20000, dtype=np.uint64)}
+    n = mod.ffi.new("int *")
+    worst = 0.0
+    for d in sorted(ds):
+        x = mod.lib.t_recip(d, n)
+        assert n[0] == 32 - d.bit_length()
+        worst = max(worst, abs(x * d * 2.0 ** (n[0] - 62) - 1.0))
+    assert worst <= 2.0**-28, f"relative error {worst:.3g} > 2^-28"
