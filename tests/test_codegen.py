@@ -392,3 +392,30 @@ def test_covariance_reciprocal_within_its_contract(tmp_path):
         assert n[0] == 32 - d.bit_length()
         worst = max(worst, abs(x * d * 2.0 ** (n[0] - 62) - 1.0))
     assert worst <= 2.0**-28, f"relative error {worst:.3g} > 2^-28"
+
+
+SHOCK_1KHZ_SIGMA = 3e-4  # reached 2.7e-4 (a, axis x); main's generator 9.2e-4: issue #12 asks < 2e-4
+
+
+@pytest.mark.parametrize("seed", [9, 11])
+def test_covariance_1khz_shock_margin(seed, workdir):
+    """The covariance form at 1 kHz on rail-clipped shock data against the float64 Kalman filter with
+    the same skips: every state of both axes within SHOCK_1KHZ_SIGMA of the filter's sigma after 1 s,
+    a 3.3x margin to the 1e-3 criterion (issue #12 asks 5x, < 2e-4: not reached; the carried c_a and
+    c_v would need about 4 more bits each, bench/bench_cov_margin.py)."""
+    model = model_at(1000.0)
+    files, mod = built(model, "covariance", workdir)
+    run = sensor.simulate(model, "shock", 3.0, seed=seed)
+    assert run.clipped.any()
+    k1 = int(model.rate_hz)
+    for axis in range(len(model.axes)):
+        valid = ~run.clipped[:, axis]
+        ref = run_filter(axis_design(model, axis), run.accel[:, axis], valid=valid)
+        sig = np.sqrt(np.einsum("kii->ki", ref.P_post))
+        res = AxisRunner(mod, files["accelnav.json"], axis).run(code=run.code[:, axis])
+        assert res["overflow"] == 0
+        ratio = (np.abs(res["x"] - ref.x_post) / sig)[k1:]
+        worst = np.unravel_index(np.argmax(ratio), ratio.shape)
+        assert ratio.max() < SHOCK_1KHZ_SIGMA, (
+            f"axis {axis}: state {worst[1]} at sample {worst[0] + k1}: {ratio.max():.3g} sigma"
+        )
