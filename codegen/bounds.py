@@ -40,7 +40,7 @@ update contracts c by R / S every sample, so their rounding errors do not accumu
 that argument and checked by the lockstep tests, not derived term by term). The covariance form
 never rounds a gain on its own: it adds c_i w with w = y / S rounded once (codegen.emit_c._gains_cov),
 which is K_i (y + S dw): the rounding dw of w enters like an error of the innovation, S |dw| <= S lsb_w / 2
-(per sample with the run's S; without data, S at its range bound).
+per sample (the worst-case bound takes S at its range bound).
 
 For a run in the tests, :func:`twin_bound` splits the error exactly: the float64 filter run with the
 C's quantized constants (:func:`quantized_twin`) carries the whole deterministic effect of the
@@ -141,7 +141,8 @@ def error_bound(
     which samples update (default all). exact: the constants count as exact
     (the bound of the C against :func:`quantized_twin`). K: the gains of the run in C coordinates
     (default: the Kalman gains without skips). S: the innovation variance of the run (covariance form:
-    the rounding of w = y / S enters as S lsb_w / 2; default: S at its range bound).
+    the rounding of w = y / S enters as S lsb_w / 2; default: the S of the Kalman run without skips,
+    or S at its range bound when K is given without it).
     """
     v, d = p.vars, p.design
     Ts, phi = d.Ts, d.phi
@@ -167,8 +168,8 @@ def error_bound(
     dz = dz_
     d_y = lsb_y / 2  # eps'_hi rounded
     d_w = np.full(n, w_injection(p))  # covariance form: the rounding of w = y / S, as an innovation error
-    if p.form == "covariance" and S is not None:
-        d_w = np.asarray(S, dtype=np.float64)[:n] * (v["w"].fmt.lsb / 2)
+    if p.form == "covariance" and (S is not None or g is not None):
+        d_w = np.asarray(S if S is not None else g.S, dtype=np.float64)[:n] * (v["w"].fmt.lsb / 2)
     d_a = lsb_y / 2  # a += K_a y rounded
     d_e = lsb_e  # eps += K_e y floored
     # decay: eps_hi (1/2 LSB of y) and eps_bar's rounding through (1 - phi), (1 - phi)'s own rounding
@@ -241,10 +242,10 @@ def error_bound_rows(p: AxisPlan, n: int, rows, schedule=None) -> np.ndarray:
             lsbK = [v["K" + c].fmt.lsb for c in "rvae"]
             dc = [CONTRACTION_LSB * v[c].fmt.lsb for c in ("cr", "cv", "ca", "ce")]
             dS = CONTRACTION_LSB * (v["ca"].fmt.lsb + v["ce"].fmt.lsb)
-            inj = p.z_error + lsb_y / 2 + w_injection(p)
+            inj = p.z_error + lsb_y / 2
             bp = [omp, d.Ts, inj, lsb_y / 2, lsb_e, d_dec, _const_err(p, "H2"), _const_err(p, "T2")]
             bp += [n_r_floor * lsb_r, n_v_floor * lsb_v, v["a"].bound, Y_SIGMAS, dS, d.R, 2.0**-22, lsb_e / 2]
-            out = bound_rows(_key(d), n, np.array(bp + dc + lsbK), rows)
+            out = bound_rows(_key(d), n, np.array(bp + dc + lsbK + [v["w"].fmt.lsb / 2]), rows)
             if out is not None:
                 return out
     return error_bound(p, n, schedule)[rows]

@@ -445,12 +445,13 @@ def cov_fracs(p: AxisPlan) -> dict:
 
 
 def _gains_cov(p: AxisPlan, P: str) -> list[str]:
-    """Body of T_pupdate, the measurement update of the carried block: S = c_a + c_e + R, one
-    reciprocal, then P = P - c c' / S, which for the carried c = P H' is c_i -> c_i (1 - kappa) with
-    kappa = (S - R) / S, and P_ie -= c_i K_e with K_e = c_e / S (all from the prior block). The gain
-    is never formed: the core adds c_i+ y / R (K = P- H' / S = P+ H' / R). The posterior entries are
-    not saturated: the update only contracts the block (c_i -> c_i R / S, and the cross terms stay
-    within the diagonal terms, which only shrink)."""
+    """Body of T_pupdate(s, y), the measurement update: S = c_a + c_e + R, one reciprocal, w = y / S;
+    every state adds c_i w = K_i y (r and v = Ts u their K y part only; the core adds the rest of
+    their step), so no gain is rounded on its own; then P = P - c c' / S, which for the carried
+    c = P H' is c_i -> c_i (1 - kappa) with kappa = (S - R) / S, and P_ie -= c_i K_e with K_e = c_e / S
+    (all from the prior block). The posterior entries are not saturated: the update only contracts
+    the block (c_i -> c_i R / S, and the cross terms stay within the diagonal terms, which only
+    shrink)."""
     fca, fce, fKe = p.f("ca"), p.f("ce"), p.f("Ke")
     cf = cov_fracs(p)
     nmax, fx = cf["nmax"], cf["x"]
@@ -513,29 +514,6 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
     for ci in ("cr", "cv", "ca", "ce"):
         L.append(f"    s->{ci} = (int32_t)((int64_t){ci} - {_shift(f'acn_mul({ci}, kap)', p.f(ci) + 31, p.f(ci))});")
     return L
-
-
-def _cov_state_update(p: AxisPlan, P: str) -> list[str]:
-    """x = x + K y (covariance form) as c_i+ w, w = y / R, into the accumulators p (r), q (v = Ts u),
-    a and eps; the block is the posterior one."""
-    fy, fe, fw = p.f("y"), p.f("e"), p.f("w")
-    pr = cov_fracs(p)["prod"]
-    fri = p.consts["RINV"][1].frac
-    sw = fy + fri - fw
-    if not 1 <= sw <= 62:
-        raise ValueError(f"w shift {sw} out of range")
-    return [
-        "        /* y = z - H x = z - a - eps;  w = y / R (|w| <= max|y| / R: fits, no saturation) */",
-        f"        y = z - a - {_hi_round('e')};",
-        f"        w = (int32_t)ACN_RSHR(acn_mul(y, {P}_RINV), {sw}); /* Q.{fy + fri} -> {p.vars['w'].fmt}, round */",
-        "        /* x = x + K y = x + c+ w */",
-        "        p = acn_mac(p, s->cr, w); /* p += K_r y */",
-        "        q = acn_mac(q, s->cv, w); /* q += K_v y */",
-        f"        s->a = a + (int32_t)ACN_RSHR(acn_mul(s->ca, w), {pr['a'] - fy}); /* Q.{pr['a']} -> Q.{fy}, round */",
-        f"        e = acn_mac(e, s->ce, w); /* Q.{fe}, exact */"
-        if pr["e"] == fe
-        else f"        e += {_sh('acn_mul(s->ce, w)', pr['e'] - fe, 'Q.{} -> Q.{}'.format(pr['e'], fe))};",
-    ]
 
 
 def _core_cov(p: AxisPlan, P: str, T: str) -> list[str]:

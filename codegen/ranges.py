@@ -447,13 +447,6 @@ def _plan_covariance(p: AxisPlan) -> None:
     kb = np.maximum(g.kmax, gg.kmax) * np.array([1.0, Ts, 1.0, 1.0])
     for i, nm in enumerate(("Kr", "Kv", "Ka", "Ke")):
         _gain_format(p, nm, GUARD * kb[i], "K = c / S, Riccati max x2", True)
-    # w = y / R: with the posterior c = P+ H', K = P- H' / S = P+ H' / R, so each state adds c_i w = K_i y
-    # with w the innovation times a constant: no gain is rounded on its own (only K_e is formed, for the
-    # update of P_re, P_ve, P_ae), and the state update does not wait for 1/S. y stays within its
-    # analysed bound, so |w| <= max|y| / R and w needs no saturation.
-    wb = p.vars["y"].bound / p.design.R
-    p.vars["w"] = Var("w", "s^2/m", wb, _require(p.model, "covariance w = y / R", "s^2/m", wb, 32), "y / R")
-    p.consts["RINV"] = (1.0 / p.design.R, const_format(1.0 / p.design.R))
     d = p.design
     fa = fmts["ca"]
     p.consts["PHI"] = (d.phi, QFormat(32, 31))
@@ -479,6 +472,18 @@ def _plan_covariance(p: AxisPlan) -> None:
             f"R = {d.R:.6g} is {R_int} LSB of the covariance format {fa}; needs at least 13 bits below the "
             f"largest covariance {bounds['ca']:.6g}",
         )
+    # w = y / S: the innovation divided once by S; each state then adds c_i w = K_i y, so no gain is
+    # rounded on its own (only K_e is formed, for the update of P_re, P_ve, P_ae). S >= R and y stays
+    # within its analysed bound, so |w| <= max|y| / R and w needs no saturation.
+    wb = p.vars["y"].bound / d.R
+    if bits_for(wb) > 30:
+        raise RangeError(
+            p.model.source,
+            "noise.R",
+            f"R = {d.R:.6g} is too small for the innovation range +-{p.vars['y'].bound:.6g} m/s^2: y / R needs "
+            f"{bits_for(wb) + 1} bits; accepted: R >= {p.vars['y'].bound / 2**30:.3g}",
+        )
+    p.vars["w"] = Var("w", "s^2/m", wb, fit(wb, 32), "y / S, at most max|y| / R")
 
 
 def _predict_sat_free(p: AxisPlan) -> frozenset:
