@@ -21,7 +21,10 @@ The gain-schedule form is refused for users (every input can skip samples, and t
 follow skips: codegen.emit_c.refuse_schedule_with_skips); it is built here with assume_no_skips on a
 scenario without clipping, to keep its figures comparable. Previous figures (issue #4's closing
 note, same bench, 100 Hz default model): covariance 333.0, gain schedule 89.6, float32 3007.1
-instructions per step; RAM 72 / 64 / 52 B per axis; flash 2260 / 9852 B per axis.
+instructions per step; RAM 72 / 64 / 52 B per axis; flash 2260 / 9852 B per axis. Issue #12 (main's
+generator in its own venv, same run): covariance 333.0 -> 296.0 at 100 Hz, 332.0 -> 295.0 at 1 kHz;
+RAM 64 B per axis both; flash 2250 -> 2084 B per axis at 100 Hz (the reciprocal's 256 B table
+included, shared by the axes).
 """
 
 from __future__ import annotations

@@ -231,20 +231,21 @@ void acn_riccati(long n, const double *par, const double *P0, const unsigned cha
  * |y| <= ysig sqrt(S), |a| <= a_abs), the same recursion in the same order, fed by the Riccati above
  * sample by sample: its cost is constant per sample and nothing is stored but the asked-for rows.
  * bp: omp, Ts, dz + d_y, d_a, d_e, d_dec, dH2, dT2, r floors, v floors, a_abs, ysig, dS, R, 2^-22,
- * Ee0, dc[4], lsbK[4]. out: (nrows, 4) [r, u, a, eps]. */
+ * Ee0, dc[4], lsbK[4], lsb_w / 2 (the rounding of w = y / S enters as S lsb_w / 2 of innovation error).
+ * out: (nrows, 4) [r, u, a, eps]. */
 void acn_bound(long n, const double *par, const double *P0, const double *bp, long nrows, const long *rows,
                double *out)
 {
     RIC_STATE;
     double omp = bp[0], inj = bp[2], d_a = bp[3], d_e = bp[4], d_dec = bp[5], dH2 = bp[6], dT2 = bp[7];
     double rfl = bp[8], vfl = bp[9], a_abs = bp[10], ysig = bp[11], dS = bp[12], Rq = bp[13], k22 = bp[14];
-    const double *dc = bp + 16, *lsbK = bp + 20;
+    const double *dc = bp + 16, *lsbK = bp + 20, lw = bp[24];
     double H2 = Ts * Ts / 2, T2 = Ts * Ts;
     double Es = 0.0, Ee = bp[15], Ea, Ev = 0.0, Er = 0.0, a_prev = 0.0, Esm, Eem;
     long k, ir = 0;
     Ea = Ee;
     for (k = 0; k < n; ++k) {
-        double cr, cu, ca, ce, S, kr, ku, ka, ke, Kc[4], dK[4], yc, a_c;
+        double cr, cu, ca, ce, S, kr, ku, ka, ke, Kc[4], dK[4], yc, a_c, injk;
         int i;
         if (k) {
             RIC_PREDICT;
@@ -267,11 +268,12 @@ void acn_bound(long n, const double *par, const double *P0, const double *bp, lo
         a_c = a_prev + Ea;
         Er = Er + Ev + H2 * Ea + dH2 * a_c + rfl;
         Ev = Ev + T2 * Ea + dT2 * a_c + vfl;
-        yc = ysig * sqrt(S) + Esm + inj;
-        Es = fabs(1.0 - Kc[2] - Kc[3]) * Esm + fabs(Kc[2] + Kc[3]) * inj + (dK[2] + dK[3]) * yc + d_a + d_e;
-        Ee = Eem + fabs(Kc[3]) * (Esm + inj) + dK[3] * yc + d_e;
-        Ev += fabs(Kc[1]) * (Esm + inj) + dK[1] * yc;
-        Er += fabs(Kc[0]) * (Esm + inj) + dK[0] * yc;
+        injk = inj + S * lw;
+        yc = ysig * sqrt(S) + Esm + injk;
+        Es = fabs(1.0 - Kc[2] - Kc[3]) * Esm + fabs(Kc[2] + Kc[3]) * injk + (dK[2] + dK[3]) * yc + d_a + d_e;
+        Ee = Eem + fabs(Kc[3]) * (Esm + injk) + dK[3] * yc + d_e;
+        Ev += fabs(Kc[1]) * (Esm + injk) + dK[1] * yc;
+        Er += fabs(Kc[0]) * (Esm + injk) + dK[0] * yc;
         Ea = Es + Ee;
         a_prev = a_abs;
         if (ir < nrows && rows[ir] == k) {

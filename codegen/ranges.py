@@ -452,13 +452,15 @@ def _plan_covariance(p: AxisPlan) -> None:
     p.consts["PHI"] = (d.phi, QFormat(32, 31))
     p.consts["PHI2"] = (d.phi**2, QFormat(32, 31))
     p.consts["PHIOMP"] = (d.phi * (1 - d.phi), const_format(d.phi * (1 - d.phi)))
+    p.consts["OMPC"] = (1 - d.phi, const_format(1 - d.phi))
+    p.consts["OMP2"] = ((1 - d.phi) * (1 + d.phi), const_format((1 - d.phi) * (1 + d.phi)))
     p.consts["R"] = (d.R, fa)
     p.consts.update(
         {
-            "Qra": (d.Q[0, 2], fmts["cr"]),
-            "Qva": (Ts * d.Q[1, 2], fmts["cv"]),
-            "Qaa": (d.Q[2, 2], fa),
-            "Qee": (d.Q[3, 3], fmts["ce"]),
+            "Qra": (d.Q[0, 2], const_format(d.Q[0, 2])),
+            "Qva": (Ts * d.Q[1, 2], const_format(Ts * d.Q[1, 2])),
+            "Qaa": (d.Q[2, 2], const_format(d.Q[2, 2])),
+            "Qee": (d.Q[3, 3], const_format(d.Q[3, 3])),
         }
     )
     p.sat_free = _predict_sat_free(p)
@@ -470,6 +472,18 @@ def _plan_covariance(p: AxisPlan) -> None:
             f"R = {d.R:.6g} is {R_int} LSB of the covariance format {fa}; needs at least 13 bits below the "
             f"largest covariance {bounds['ca']:.6g}",
         )
+    # w = y / S: the innovation divided once by S; each state then adds c_i w = K_i y, so no gain is
+    # rounded on its own (only K_e is formed, for the update of P_re, P_ve, P_ae). S >= R and y stays
+    # within its analysed bound, so |w| <= max|y| / R and w needs no saturation.
+    wb = p.vars["y"].bound / d.R
+    if bits_for(wb) > 30:
+        raise RangeError(
+            p.model.source,
+            "noise.R",
+            f"R = {d.R:.6g} is too small for the innovation range +-{p.vars['y'].bound:.6g} m/s^2: y / R needs "
+            f"{bits_for(wb) + 1} bits; accepted: R >= {p.vars['y'].bound / 2**30:.3g}",
+        )
+    p.vars["w"] = Var("w", "s^2/m", wb, fit(wb, 32), "y / S, at most max|y| / R")
 
 
 def _predict_sat_free(p: AxisPlan) -> frozenset:
@@ -477,16 +491,16 @@ def _predict_sat_free(p: AxisPlan) -> frozenset:
     entries hold, so they need no saturation: no assumption about the data, the skip pattern or the
     history (the entries are bounded only by their words).
 
-    c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee, formed in the C as Qee + round((PHI2 c_e +
-    (PHIOMP P_ae >> s)) / 2^g) with g = 31 (PHI2 in Q.31) and the PHIOMP product aligned (floor) to
-    Q.(f_ce + 31). In LSB of c_e, for |c_e|, |P_ae| <= 2^31: |c_e'| <= PHI2_int + PHIOMP_int 2^31 /
-    2^(f_PO + f_Pae - f_ce) + 1 (the floor) + Qee_int + 1 (the rounding); phi^2 + phi (1 - phi) = phi
-    < 1 leaves (1 - phi) 2^31 LSB of room, which the model's Qee must not use up.
+    c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee, formed in the C (codegen.emit_c._predict_terms) as
+    one rounding of the three terms, each aligned (floor) to a few guard bits below c_e's LSB. For
+    |c_e|, |P_ae| <= 2^31 it stays below (phi^2 + phi (1 - phi)) 2^31 = phi 2^31 plus Q_ee and a few
+    LSB of flooring and rounding (codegen.qformat.acc_bound adds them up exactly): phi < 1 leaves
+    (1 - phi) 2^31 LSB of room, which the model's Q_ee must not use up.
 
     Every other sum adds to an entry that can sit anywhere in its word (c_a += Q_aa each skipped
     sample; P_re, P_ve follow the unbounded P_ue through gaps of any length): those keep their clamps.
     """
-    from .qformat import quantize
+    from .qformat import acc_bound, quantize
 
     def qi(name):
         val, fmt = p.consts[name]
@@ -495,10 +509,9 @@ def _predict_sat_free(p: AxisPlan) -> frozenset:
     fce, fPae = p.f("ce"), p.f("Pae")
     phi2, f2 = qi("PHI2")
     po, fpo = qi("PHIOMP")
-    qee, _ = qi("Qee")
+    qee, fq = qi("Qee")
     free = set()
-    if f2 == 31 and fpo + fPae - fce >= 31:
-        worst = phi2 + po * 2.0**31 / 2.0 ** (fpo + fPae - fce) + 1 + qee + 1
-        if worst <= 2**31 - 1:
+    if min(f2, fpo + fPae - fce, fq - fce) > 0:  # all three finer than c_e, as emitted
+        if acc_bound(fce, [(phi2 * 2**31, f2 + fce), (po * 2**31, fpo + fPae), (qee, fq)]) <= 2**31 - 1:
             free.add("ce")
     return frozenset(free)

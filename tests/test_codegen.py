@@ -306,10 +306,15 @@ def test_cli_writes_files_and_report(tmp_path, capsys):
 MUTATIONS = {
     # the input offset one LSB off: a bias of one LSB of z, twice what the conversion may round
     "OFFSET +1 LSB": (r"(#define ACCELNAV_X_OFFSET INT32_C\()(-?\d+)", lambda m: f"{m.group(1)}{int(m.group(2)) + 1}"),
-    # K_a y shifted one bit too far (K_a read in the wrong format)
+    # K_a y shifted one bit too far (K_a read in the wrong format); the covariance form adds c_a w
     "Ka shift +1": (
-        r"(\(\(int64_t\)Ka \* y \+ \(\(int64_t\)1 << )(\d+)(\)\) >> )(\d+)",
-        lambda m: f"{m.group(1)}{int(m.group(2)) + 1}{m.group(3)}{int(m.group(4)) + 1}",
+        r"(\(\(int64_t\)Ka \* y \+ \(\(int64_t\)1 << )(\d+)(\)\) >> )(\d+)"
+        r"|(ACN_RSHR\(acn_mul\(ca, w\), )(\d+)",
+        lambda m: (
+            f"{m.group(1)}{int(m.group(2)) + 1}{m.group(3)}{int(m.group(4)) + 1}"
+            if m.group(1)
+            else f"{m.group(5)}{int(m.group(6)) + 1}"
+        ),
     ),
     # eps_bar off by 1 %: the bias's fixed point
     "EBAR +1 %": (
@@ -358,3 +363,59 @@ def test_unclamped_predict_sums_fit_any_state(workdir):
         want = phi * x + p.consts["Qee"][0] * 2.0 ** p.f("ce")
         assert p.f("Pae") == p.f("ce")
         assert abs(s.ce - want) <= 4, (x, s.ce, want)
+
+
+def test_covariance_reciprocal_within_its_contract(tmp_path):
+    """acn_recip_t (table start, two Newton-Raphson steps: the covariance form's 1/S) keeps acn_recip's
+    contract, 1/d = x 2^(n - 62) to a relative 2^-28, over the whole uint32 range: every power of two
+    and its neighbours, each table interval's ends and middle, and a seeded random sweep."""
+    from accelnav.codegen.cbuild import build_module
+    from accelnav.codegen.emit_c import HELPERS, RECIP_TABLE_BITS, recip_helpers
+
+    src = "#include <stdint.h>\n#include <stdbool.h>\n#include <stddef.h>\n" + HELPERS + recip_helpers()
+    src += "uint32_t t_recip(uint32_t d, int *n) { return acn_recip_t(d, n); }\n"
+    mod = build_module(
+        "acn_recip_test", "uint32_t t_recip(uint32_t d, int *n);", {"r.c": src}, main="r.c", workdir=tmp_path
+    )
+    ds = {1, 2**32 - 1}
+    for k in range(32):
+        ds |= {2**k, 2**k + 1, max(1, 2**k - 1)}
+    step = 2 ** (31 - RECIP_TABLE_BITS)  # the table's intervals of D = d 2^n in [2^31, 2^32)
+    for i in range(2**RECIP_TABLE_BITS):
+        lo = 2**31 + i * step
+        ds |= {lo, lo + step // 2, lo + step - 1}
+    ds |= {int(x) for x in np.random.default_rng(5).integers(1, 2**32, 20000, dtype=np.uint64)}
+    n = mod.ffi.new("int *")
+    worst = 0.0
+    for d in sorted(ds):
+        x = mod.lib.t_recip(d, n)
+        assert n[0] == 32 - d.bit_length()
+        worst = max(worst, abs(x * d * 2.0 ** (n[0] - 62) - 1.0))
+    assert worst <= 2.0**-28, f"relative error {worst:.3g} > 2^-28"
+
+
+SHOCK_1KHZ_SIGMA = 3e-4  # reached 2.7e-4 (a, axis x); main's generator 9.2e-4: issue #12 asks < 2e-4
+
+
+@pytest.mark.parametrize("seed", [9, 11])
+def test_covariance_1khz_shock_margin(seed, workdir):
+    """The covariance form at 1 kHz on rail-clipped shock data against the float64 Kalman filter with
+    the same skips: every state of both axes within SHOCK_1KHZ_SIGMA of the filter's sigma after 1 s,
+    a 3.3x margin to the 1e-3 criterion (issue #12 asks 5x, < 2e-4: not reached; the carried c_a and
+    c_v would need about 4 more bits each, bench/bench_cov_margin.py)."""
+    model = model_at(1000.0)
+    files, mod = built(model, "covariance", workdir)
+    run = sensor.simulate(model, "shock", 3.0, seed=seed)
+    assert run.clipped.any()
+    k1 = int(model.rate_hz)
+    for axis in range(len(model.axes)):
+        valid = ~run.clipped[:, axis]
+        ref = run_filter(axis_design(model, axis), run.accel[:, axis], valid=valid)
+        sig = np.sqrt(np.einsum("kii->ki", ref.P_post))
+        res = AxisRunner(mod, files["accelnav.json"], axis).run(code=run.code[:, axis])
+        assert res["overflow"] == 0
+        ratio = np.abs(res["x"] - ref.x_post)[k1:] / sig[k1:]
+        worst = np.unravel_index(np.argmax(ratio), ratio.shape)
+        assert ratio.max() < SHOCK_1KHZ_SIGMA, (
+            f"axis {axis}: state {worst[1]} at sample {worst[0] + k1}: {ratio.max():.3g} sigma"
+        )
