@@ -52,9 +52,9 @@ beyond a 30 s test. A bit-exact
 Python twin of the integer C would catch those; the bound is the rigorous statement.
 
 What it assumes: the reference is the float64 Kalman filter with the same skips, for both forms;
-the gain errors are the generator's stated ones (for the schedule, those of an uninterrupted run:
-with skips the schedule is not the Kalman gain, so such a run leaves the bound, as it should); the
-float64 arithmetic itself is exact (its own
+the gain errors are the generator's stated ones (for the schedule, those of an uninterrupted run;
+given a run, :func:`twin_bound` takes the gain-schedule C's gains exactly, skips and the deviation it
+carries after them included: :func:`schedule_gain_errors`); the float64 arithmetic itself is exact (its own
 error, ~1e-16 relative, is far below every term here).
 """
 
@@ -73,7 +73,7 @@ def gain_errors(p: AxisPlan, schedule=None, K: np.ndarray | None = None) -> np.n
     (covariance form, given the float64 gains K (n, 4) of the run)."""
     lsbK = np.array([p.vars["K" + n].fmt.lsb for n in "rvae"])
     if p.form == "gain_schedule":
-        return np.asarray(schedule.error.max(0))
+        return np.asarray(schedule.max_error)
     R = p.design.R
     kmax = np.array([p.vars["K" + n].bound for n in "rvae"]) if K is None else np.abs(K)
     dc = CONTRACTION_LSB * np.array([p.vars[n].fmt.lsb for n in ("cr", "cv", "ca", "ce")])
@@ -108,6 +108,7 @@ def error_bound(
     valid: np.ndarray | None = None,
     exact: bool = False,
     K: np.ndarray | None = None,
+    dK: np.ndarray | None = None,
 ) -> np.ndarray:
     """(n, 4) bound of |x_C - x_float64| at every sample k < n: [r m, u m/s, a m/s^2, eps m/s^2].
 
@@ -115,7 +116,8 @@ def error_bound(
     bound of a. e_dev: max |eps - eps_bar| (default: the prior's offset + 8 sigma of eps). valid:
     which samples update (default all). exact: the constants count as exact
     (the bound of the C against :func:`quantized_twin`). K: the gains of the run in C coordinates
-    (default: the Kalman gains without skips).
+    (default: the Kalman gains without skips). dK: |K_C - K| per sample (n, 4) when known exactly
+    (gain schedule after skips: :func:`schedule_gain_errors`); default: the generator's stated errors.
     """
     v, d = p.vars, p.design
     Ts, phi = d.Ts, d.phi
@@ -125,11 +127,13 @@ def error_bound(
     if K is None:
         K = np.asarray(g.K)[:n] * np.array([1.0, Ts, 1.0, 1.0])
     dz_ = p.z_error
-    sched_err = None if schedule is None else np.asarray(schedule.error)[:n]
+    sched_err = None if schedule is None else schedule.errors(n)
     if exact:  # against the quantized twin: constants exact, the input's only error its final rounding
         dz_ = v["z"].fmt.lsb / 2
-    if p.form == "gain_schedule":
-        dK = sched_err if sched_err is not None else np.asarray(schedule.error)[:n]
+    if dK is not None:
+        dK = np.asarray(dK)[:n]
+    elif p.form == "gain_schedule":
+        dK = sched_err
     else:
         dK = gain_errors(p, K=K[:n])
     if y_abs is None:
@@ -275,7 +279,7 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     distance to the C's gains is not taken from the run: it is the generator's stated gain error
     (gain schedule: the compression error of an uninterrupted run; covariance: its rounding bound),
     which stays in :func:`error_bound`. So a C whose gains leave the Kalman gains by more than the
-    generator states (a time-indexed schedule after a skip) departs from the bound. Returns (x (n, 4)
+    generator states (e.g. a time-indexed schedule that ignored a skip) departs from the bound. Returns (x (n, 4)
     in SI units, |y| (n,), |a| (n,), the gains (n, 4)). ``code``: the raw analog codes (None: use z,
     the conversion error stays in the bound).
     """
@@ -324,6 +328,18 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     return out, yabs, np.abs(out[:, 2]), K
 
 
+def schedule_gain_errors(p: AxisPlan, schedule, valid: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Gain-schedule form: |K_C[k] - K[k]| (n, 4) exactly, K the float64 Kalman gains of this skip pattern
+    (C coordinates): K_C is the schedule's integers, and after a skip the C's own deviation recursion
+    (codegen.follow, its integer twin bit for bit, with the C's decisions of when to return)."""
+    from .follow import followed_gains, thresholds
+
+    n = len(valid)
+    Kc, _ = followed_gains(p, schedule.gains_int(n), valid, thresholds(p, schedule))
+    lsb = np.array([p.vars["K" + c].fmt.lsb for c in "rvae"])
+    return np.abs(Kc * lsb - np.asarray(K)[:n])
+
+
 def d_eps_bar(p: AxisPlan) -> float:
     return p.design.eps_mean
 
@@ -337,7 +353,8 @@ def twin_bound(p: AxisPlan, code, z, valid, x_ref: np.ndarray, schedule=None):
     (accelnav.estimate.kf.run_filter with the same valid mask), never a filter with the C's gains."""
     x_tw, y_abs, a_abs, K = quantized_twin(p, code, z, valid, schedule)
     e_dev = float(np.abs(x_tw[:, 3] - d_eps_bar(p)).max())
+    dK = schedule_gain_errors(p, schedule, valid, K) if p.form == "gain_schedule" else None
     b = error_bound(
-        p, len(z), schedule, y_abs=y_abs, a_abs=a_abs, e_dev=e_dev, valid=valid, exact=code is not None, K=K
+        p, len(z), schedule, y_abs=y_abs, a_abs=a_abs, e_dev=e_dev, valid=valid, exact=code is not None, K=K, dK=dK
     )
     return np.abs(x_tw - x_ref) + b, x_tw

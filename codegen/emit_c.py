@@ -24,7 +24,7 @@ import re
 
 from .design import AnalogConversion
 from .emit_f32 import emit_f32
-from .gains import Schedule, schedule
+from .gains import Schedule
 from .model import Model
 from .package import cdef_of, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
 from .qformat import quantize
@@ -126,9 +126,18 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
         f.append(("int32_t", "Ke", f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"))
         f.append(("int32_t", "Ka", f"K_a of the next sample {v['Ka'].fmt}"))
         f.append((f"const struct {T}_seg_s *", "seg", "the schedule's current row"))
+        f += _fields_follow(p)
     f.append(("uint32_t", "k", "samples since init"))
     f.append(("uint32_t", "overflow", "saturations so far"))
     return f
+
+
+def _fields_follow(p: AxisPlan) -> list[tuple[str, str, str]]:
+    """Gain schedule: the deviation from the schedule's covariance block after a skip (codegen.follow)."""
+    from .follow import DEV
+
+    f = [("int32_t", nm, f"{p.vars[nm].note} {p.vars[nm].fmt}") for nm in DEV]
+    return f + [("uint32_t", "dev", "1: following a skip (the deviation above is carried), 0: on the schedule")]
 
 
 def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
@@ -439,6 +448,21 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
     else:
         L += ["        Kr = (int32_t)kr;", "        Kv = (int32_t)kv;", "        Ka = s->Ka;"]
         L += ["        Ke = (int32_t)khi;"]
+        L += [
+            "        if (__builtin_expect(s->dev != 0u, 0)) {",
+            "            /* after a skip: the schedule's gains plus the carried deviation (codegen.follow) */",
+            "            int32_t K[4];",
+            "            K[0] = Kr;",
+            "            K[1] = Kv;",
+            "            K[2] = Ka;",
+            "            K[3] = Ke;",
+            f"            {T}_follow(s, true, K);",
+            "            Kr = K[0];",
+            "            Kv = K[1];",
+            "            Ka = K[2];",
+            "            Ke = K[3];",
+            "        }",
+        ]
     L += [
         "        /* y = z - H x = z - a - eps */",
         f"        y = z - a - {eh};",
@@ -449,6 +473,17 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
         f" /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
         f"        e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
     ]
+    if p.form == "gain_schedule":
+        L += [
+            "    } else {",
+            "        /* skipped: the gains of the next samples leave the schedule (codegen.follow) */",
+            "        int32_t K[4];",
+            "        K[0] = (int32_t)kr;",
+            "        K[1] = (int32_t)kv;",
+            "        K[2] = s->Ka;",
+            "        K[3] = (int32_t)khi;",
+            f"        {T}_follow(s, false, K);",
+        ]
     L += [
         "    }",
         "    s->e = e;",
@@ -620,15 +655,12 @@ static inline uint32_t acn_recip(uint32_t d, int *n)
 
 
 def _schedule_for(p: AxisPlan) -> Schedule:
-    import numpy as np
+    """The plan's gain schedule over its declared run, computed window by window (memory does not grow
+    with the run)."""
+    from .gains import schedule_of
 
-    from .gains import riccati
-
-    # the whole run's gains, sample by sample: memory linear in the declared run (the covariance form
-    # never needs this; the gain-schedule form is refused for every input that can skip)
-    K = np.array(riccati(p.design, p.n_run).K) * np.array([1.0, p.design.Ts, 1.0, 1.0])
     fm = tuple(p.vars["K" + n].fmt for n in "rvae")
-    return schedule(K, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
+    return schedule_of(p.design, p.n_run, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
 
 
 def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[str], dict]:
@@ -749,6 +781,8 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         src.append(f"    s->Ke_lo = UINT32_C({ke0 & 0xFFFFFFFF});")
         src.append(f"    s->Ke = {_c_int(ke0 >> 32, 32)};")
         src.append(f"    s->seg = &{T}_seg[0];")
+        src.append("    s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;")
+        src.append("    s->dev = 0u;")
     src += ["    s->k = 0;", "    s->overflow = 0;", "}", ""]
     # convert
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
@@ -773,6 +807,9 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             "}",
             "",
         ]
+        from .follow import emit_follow, thresholds
+
+        src += emit_follow(p, P, T, thresholds(p, sched))
     if p.form == "covariance":
         # the covariance block in functions of their own: its registers do not crowd the states'
         src += [f"static void {T}_ppredict({T}_t *s)", "{"]
@@ -852,7 +889,7 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     if sched is not None:
         man["schedule"] = {
             "segments": sched.n_segments,
-            "max_error": [float(e) for e in sched.error.max(0)],
+            "max_error": [float(e) for e in sched.max_error],
             "rel_tol": list(SCHEDULE_REL_TOL),
             "flash_bytes": (sched.n_segments + 1) * 24,
         }
@@ -864,34 +901,15 @@ def plans(model: Model, form: str | None = None) -> list[AxisPlan]:
 
 
 def refuse_schedule_with_skips(model: Model, form: str) -> None:
-    """The gain-schedule form is refused for every input that can skip samples, which is every input
-    the model format describes (analog: the ADC rails; duty cycle: a bad or missing capture).
-
-    Why: the schedule is indexed by time and assumes an uninterrupted run. After a skipped sample the
-    Kalman gain is not the schedule's (a gap of 38 samples at 100 Hz leaves K_a 79 % and K_v 25x off
-    for ~10 samples; the firmware then departed from the float64 filter by 33-75 sigma in a, issue
-    #12), and a schedule that follows skips needs the covariance block at the moment of the skip,
-    which only the covariance form carries. Measured: that block cannot be taken stale from a table
-    (P_re off by a segment leaves K_r 10 % off for good), so the honest choice is the covariance form.
-    """
+    """Kept for callers: the gain-schedule form now follows skipped samples (codegen.follow: after a
+    skip the C carries the deviation of the covariance block from the schedule's until its gains are
+    back on the schedule), so no input that codegen takes is refused for skipping. What it still refuses,
+    as every form does: a sensor codegen does not take at all (calibrated data)."""
     if form != "gain_schedule":
         return
-    from .model import ModelError
     from .ranges import refuse_calibrated
 
-    refuse_calibrated(model)  # a sensor codegen does not take at all is refused as such first
-
-    if model.sensor.kind == "analog":
-        full = 2**model.sensor.analog.adc_bits
-        why = f"this analog input skips rail-clipped samples (ADC codes 0 and {full})"
-    else:
-        why = "this duty-cycle input skips bad captures (no period, a period off nominal, a stuck output)"
-    raise ModelError(
-        model.source,
-        "filter.form",
-        f"'gain_schedule' refused: {why}, and after a skip the Kalman gain is no longer the time-indexed "
-        "schedule's (K_a up to ~80 % off), so the C would depart from the float64 filter; accepted: 'covariance'",
-    )
+    refuse_calibrated(model)
 
 
 def emit(
@@ -904,12 +922,10 @@ def emit(
 ) -> dict[str, str]:
     """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json.
 
-    The gain-schedule form is refused (:func:`refuse_schedule_with_skips`) unless the caller
-    guarantees ``assume_no_skips``: an input that never skips a sample (the tests and the bench use it
-    to check the form's arithmetic; the CLI and the firmware build never pass it)."""
+    ``assume_no_skips`` is accepted for older callers and changes nothing: both forms follow skipped
+    samples."""
     form = form or model.filter.form
-    if not assume_no_skips:
-        refuse_schedule_with_skips(model, form)
+    refuse_schedule_with_skips(model, form)
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)
     ps = plans(model, form)
