@@ -378,7 +378,7 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
     return L
 
 
-def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
+def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     """Body of T_core: predict (k > 0) and update (valid) merged, every state read and written once.
 
     Contract (formats from :mod:`codegen.ranges`): z, y, a in Q.fy (int32); eps int64 in Q.(fy+32)
@@ -448,21 +448,22 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
     else:
         L += ["        Kr = (int32_t)kr;", "        Kv = (int32_t)kv;", "        Ka = s->Ka;"]
         L += ["        Ke = (int32_t)khi;"]
-        L += [
-            "        if (__builtin_expect(s->dev != 0u, 0)) {",
-            "            /* after a skip: the schedule's gains plus the carried deviation (codegen.follow) */",
-            "            int32_t K[4];",
-            "            K[0] = Kr;",
-            "            K[1] = Kv;",
-            "            K[2] = Ka;",
-            "            K[3] = Ke;",
-            f"            {T}_follow(s, true, K);",
-            "            Kr = K[0];",
-            "            Kv = K[1];",
-            "            Ka = K[2];",
-            "            Ke = K[3];",
-            "        }",
-        ]
+        if follow:
+            L += [
+                "        if (s->dev) {",
+                "            /* after a skip: the schedule's gains plus the carried deviation (codegen.follow) */",
+                "            int32_t K[4];",
+                "            K[0] = Kr;",
+                "            K[1] = Kv;",
+                "            K[2] = Ka;",
+                "            K[3] = Ke;",
+                f"            {T}_follow(s, true, K);",
+                "            Kr = K[0];",
+                "            Kv = K[1];",
+                "            Ka = K[2];",
+                "            Ke = K[3];",
+                "        }",
+            ]
     L += [
         "        /* y = z - H x = z - a - eps */",
         f"        y = z - a - {eh};",
@@ -473,7 +474,7 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
         f" /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
         f"        e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
     ]
-    if p.form == "gain_schedule":
+    if follow:
         L += [
             "    } else {",
             "        /* skipped: the gains of the next samples leave the schedule (codegen.follow) */",
@@ -832,22 +833,64 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     ]
     src += _core_fixed(p, P, T)
     src += ["}", ""]
+    gs = p.form == "gain_schedule"
+    if gs:  # after a skip: the same sample with the schedule's gains corrected (rare, out of line)
+        src += [
+            "/* One sample while following a skip (codegen.follow): the core with the deviation carried. */",
+            f"static __attribute__((noinline)) void {T}_core_dev({T}_t *s, int32_t z, bool valid)",
+            "{",
+        ]
+        src += _core_fixed(p, P, T, follow=True)
+        src += ["}", ""]
+    dispatch = (
+        [
+            "    if (__builtin_expect(s->dev != 0u, 0)) { /* following a skip */",
+            f"        {T}_core_dev(s, z, true);",
+            "    } else {",
+            f"        {T}_core(s, z, true);",
+            "    }",
+        ]
+        if gs
+        else [f"    {T}_core(s, z, true);"]
+    )
+    src += [f"void {T}_update({T}_t *s, int32_t z)", "{"] + dispatch + ["}", ""]
     src += [
-        f"void {T}_update({T}_t *s, int32_t z)",
-        "{",
-        f"    {T}_core(s, z, true);",
-        "}",
-        "",
         "/* A sample that must be skipped (rail-clipped, missing capture): predict only. */",
         f"void {T}_skip({T}_t *s)",
         "{",
-        f"    {T}_core(s, 0, false);",
+        f"    {T}_core_dev(s, 0, false);" if gs else f"    {T}_core(s, 0, false);",
         "}",
         "",
+    ]
+    if gs:
+        src += [
+            "/* T_step while following a skip: out of line, so that nothing of it",
+            " * reaches the registers of the common path. */",
+            f"static __attribute__((noinline)) bool {T}_step_dev({T}_t *s, {params})",
+            "{",
+            "    int32_t z = 0;",
+            f"    if (!{T}_convert({args}, &z)) {{",
+            f"        {T}_core_dev(s, 0, false);",
+            "        return false;",
+            "    }",
+            f"    {T}_core_dev(s, z, true);",
+            "    return true;",
+            "}",
+            "",
+        ]
+    src += [
         "/* Convert the raw input and run one step; returns false when the sample was skipped. */",
         f"bool {T}_step({T}_t *s, {params})",
         "{",
         "    int32_t z = 0;",
+    ]
+    if gs:
+        src += [
+            "    if (__builtin_expect(s->dev != 0u, 0)) { /* following a skip */",
+            f"        return {T}_step_dev(s, {args});",
+            "    }",
+        ]
+    src += [
         f"    if (!{T}_convert({args}, &z)) {{",
         f"        {T}_skip(s); /* rare: the core inlined once, for valid samples only */",
         "        return false;",
@@ -856,6 +899,8 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         "    return true;",
         "}",
         "",
+    ]
+    src += [
         f"void {T}_read(const {T}_t *s, {T}_out_t *o)",
         "{",
         "    o->r = s->r;",

@@ -5,8 +5,9 @@ rail, bad capture) the Kalman gain is no longer that (a gap of 38 samples at 100
 and K_v 25x off for about 10 samples), so the gain-schedule C follows the skip: from the first
 skipped sample it carries the deviation D = P - P_u of the seven-entry block of P (codegen.gains,
 carried as in the covariance form: c = P H' per state and P_re, P_ve, P_ae; v = Ts u) from the
-block P_u of the uninterrupted run, and uses K = K_u + dK. Once dK is back within the schedule's
-own stated accuracy, it drops D and returns to the schedule.
+block P_u of the uninterrupted run, and uses K = K_u + dK (clamped to the gain's format after a long
+gap). Once dK is back within the schedule's own stated accuracy, it drops D and returns to the
+schedule.
 
 Why a deviation and not the block itself: the block at the moment of the skip is not available
 (P_re grows to ~34 while c_r stays ~1e-3: taken from a table even one segment stale, it leaves
@@ -153,6 +154,16 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         f"#define {P}_THR_A UINT32_C({thr[2]})",
         f"#define {P}_THR_E UINT32_C({thr[3]})",
         "",
+        "#ifndef ACN_CLAMP32",
+        "#define ACN_CLAMP32",
+        "/* int64 -> int32, clamped and not counted: a gain after a long gap beyond its format (codegen.follow:",
+        " * the stated bound takes the clamped gain) */",
+        "static inline int32_t acn_clamp32(int64_t x)",
+        "{",
+        "    return x > INT32_MAX ? INT32_MAX : x < INT32_MIN ? INT32_MIN : (int32_t)x;",
+        "}",
+        "#endif",
+        "",
         "/* After a skipped sample: the deviation D = P - P_u of the covariance block from the uninterrupted",
         " * run's, carried until the gains are back on the schedule (codegen.follow). K: in, the schedule's",
         " * gains of this sample [r, v, a, e]; out (valid samples), the gains to use. Rare: not inlined. */",
@@ -206,7 +217,7 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         L += [
             f"        /* dK_{nm} = (D_c{nm} - K_u{nm} dS) / S */",
             f"        num = {sat(num)};",
-            f"        dK[{i}] = {sat(f'ACN_RSHR(acn_mul(num, xs), {o.sh[nm] - 1} - n)')};",
+            f"        dK[{i}] = acn_clamp32(ACN_RSHR(acn_mul(num, xs), {o.sh[nm] - 1} - n));",
         ]
     L += ["        /* D_Pie -= K_ui D_ce + dK_i c_e (the old D_ce); D_c = R dK */"]
     for i, nm in enumerate("rva"):
@@ -225,7 +236,7 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         "        }",
     ]
     for i in range(4):
-        L.append(f"        K[{i}] = acn_add_sat32(K[{i}], dK[{i}], &s->overflow);")
+        L.append(f"        K[{i}] = acn_clamp32((int64_t)K[{i}] + dK[{i}]);")
     L += [
         "    } else {",
         "        /* skipped: D += the update only P_u had: c_i -= K_ui (S_u - R), P_ie -= K_ui c_ue */",
@@ -251,6 +262,10 @@ _M32 = 0xFFFFFFFF
 def _i32(x: int) -> int:
     x &= _M32
     return x - (1 << 32) if x & 0x80000000 else x
+
+
+def _clamp(x: int) -> int:
+    return min(max(x, -(2**31)), 2**31 - 1)
 
 
 def _umulhi(a: int, b: int) -> int:
@@ -339,7 +354,7 @@ class Follow:
             dK = []
             for i, nm in enumerate("rvae"):
                 num = sat(D[ci[nm]] - t(K[i], f["K" + nm], dS, fS, f[ci[nm]]))
-                dK.append(sat(_py_rshr(num * xs, self.o.sh[nm] - 1 - n)))
+                dK.append(_clamp(_py_rshr(num * xs, self.o.sh[nm] - 1 - n)))
             for i, nm in enumerate("rva"):
                 D[pe[nm]] = sat(
                     D[pe[nm]]
@@ -350,7 +365,7 @@ class Follow:
                 D[ci[nm]] = sat(t(q["R"], fS, dK[i], f["K" + nm], f[ci[nm]]))
             if all(abs(dK[i]) <= self.thr[i] for i in range(4)):
                 self.dev = False
-            K = [sat(K[i] + dK[i]) for i in range(4)]
+            K = [_clamp(K[i] + dK[i]) for i in range(4)]
         else:
             sr = Su - q["R"]
             for i, nm in enumerate("rvae"):

@@ -301,9 +301,9 @@ def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPla
     # v gets the format of the products K_v y and Ts^2 a, so they accumulate into it with no shift
     # (one SMLAL each), when that format holds v and one step's increment
     kv_b = 2 * GUARD * float(g.kmax[1]) * Ts  # K_v (Ts u gain) bound, with room for skips
+    p.kv_room = kv_b
     if kb is not None:  # gain schedule: the gains after a gap (codegen.follow) reach kb
         kv_b = max(kv_b, float(kb[1]))
-    p.kv_room = kv_b
     v_step = Ts * Ts * a_b + kv_b * y_b
     p.v_step = v_step
     fv = _require(model, "ranges.max_velocity_m_s", "m", vb + v_step, 64)
@@ -337,9 +337,11 @@ def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPla
         _plan_schedule_follow(p)
     # Ts^2/2 shares the format of K_r, Ts^2 that of K_v: r += v + (Ts^2/2 a + K_r y) needs one shift
     # (when that leaves Ts^2/2 fewer than 20 bits, it gets its own format and a second shift)
+    # (gain schedule: 18 bits, its K_r format being wide enough for the gains after a gap)
+    min_bits = 18 if form == "gain_schedule" else 20
     for nm, kn, val in (("H2", "Kr", Ts * Ts / 2.0), ("T2", "Kv", Ts * Ts)):
         f = p.vars[kn].fmt
-        if val * 2**f.frac < 2**20:
+        if val * 2**f.frac < 2**min_bits:
             f = const_format(val)
         p.consts[nm] = (val, f)
         for fm in (f, p.vars[kn].fmt):
@@ -389,11 +391,12 @@ def _plan_input(p: AxisPlan) -> None:
 def _schedule_gain_bounds(p: AxisPlan) -> np.ndarray:
     """Gain-schedule form: |K| bounds in the C's coordinates [r, v = Ts u, a, eps], wide enough for the
     gains that follow a gap of up to MAX_GAP_S (codegen.follow carries the deviation from the schedule
-    there), with the factor GUARD the covariance form also takes. Sets p.gap and p.gap_run."""
+    there; beyond, it clamps a gain to its format and the stated bound takes the clamped gain), with
+    the margin of the l1 gains. Sets p.gap and p.gap_run (the block's maxima over those gaps)."""
     g = p.gains
     p.gap = max(1, int(round(MAX_GAP_S * p.model.rate_hz)))
     p.gap_run = gap_maxima(p.design, g, p.gap, 4 * p.gap + 50)
-    return GUARD * np.maximum(g.kmax, p.gap_run.kmax) * np.array([1.0, p.design.Ts, 1.0, 1.0])
+    return MARGIN * np.maximum(g.kmax, p.gap_run.kmax) * np.array([1.0, p.design.Ts, 1.0, 1.0])
 
 
 def _gain_format(p: AxisPlan, nm: str, bound: float, note: str, saturates: bool) -> None:
