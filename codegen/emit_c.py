@@ -809,8 +809,12 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             "",
         ]
         from .follow import emit_follow, thresholds
+        from .ranges import RangeError
 
-        src += emit_follow(p, P, T, thresholds(p, sched))
+        try:
+            src += emit_follow(p, P, T, thresholds(p, sched))
+        except ValueError as e:  # a shift the deviation's formats cannot take: this model's ranges
+            raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
     if p.form == "covariance":
         # the covariance block in functions of their own: its registers do not crowd the states'
         src += [f"static void {T}_ppredict({T}_t *s)", "{"]
