@@ -617,12 +617,20 @@ def schedule_of(
     d: AxisDesign, n: int, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0, window: int = 1 << 19
 ) -> Schedule:
     """:func:`schedule` of the Kalman gains of an uninterrupted run of n samples of ``d`` (C coordinates:
-    K_v = Ts K_u), computed window by window: memory O(window) whatever n."""
-    scale = np.array([1.0, d.Ts, 1.0, 1.0])
-    src = _Window(d, n, scale, window)
-    sched = schedule(src, formats, rel_tol, ramp, n=n, window=window)
-    # replays start from sample 0: a fresh source
-    return dataclasses.replace(sched, source=_Window(d, n, scale, window))
+    K_v = Ts K_u), computed window by window: memory O(window) whatever n. Cached: codegen, its report
+    and hil ask for the same schedule."""
+    key = (_key(d), n, tuple(formats), tuple(np.broadcast_to(rel_tol, (4,)).tolist()), ramp, window)
+    if key not in _SCHEDULES:
+        scale = np.array([1.0, d.Ts, 1.0, 1.0])
+        sched = schedule(_Window(d, n, scale, window), formats, rel_tol, ramp, n=n, window=window)
+        # replays start from sample 0: a fresh source
+        _SCHEDULES[key] = dataclasses.replace(sched, source=_Window(d, n, scale, window))
+        while len(_SCHEDULES) > 8:
+            _SCHEDULES.pop(next(iter(_SCHEDULES)))
+    return _SCHEDULES[key]
+
+
+_SCHEDULES: dict = {}
 
 
 def schedule(

@@ -398,6 +398,7 @@ def test_gain_schedule_built_window_by_window():
     run's per-sample arrays take (~30 B per sample per array, 2 GB in all before)."""
     import tracemalloc
 
+    from accelnav.codegen import gains
     from accelnav.codegen.emit_c import SCHEDULE_REL_TOL
     from accelnav.codegen.gains import riccati, schedule, schedule_of
 
@@ -415,6 +416,7 @@ def test_gain_schedule_built_window_by_window():
 
     fast = model_at(1000.0)
     p = plan_axis(fast, 0, "gain_schedule")
+    gains._SCHEDULES.clear()  # built here, not served from the cache
     tracemalloc.start()
     sched = _schedule_for(p)
     peak = tracemalloc.get_traced_memory()[1]
