@@ -109,6 +109,7 @@ def error_bound(
     exact: bool = False,
     K: np.ndarray | None = None,
     dK: np.ndarray | None = None,
+    state: dict | None = None,
 ) -> np.ndarray:
     """(n, 4) bound of |x_C - x_float64| at every sample k < n: [r m, u m/s, a m/s^2, eps m/s^2].
 
@@ -118,6 +119,8 @@ def error_bound(
     (the bound of the C against :func:`quantized_twin`). K: the gains of the run in C coordinates
     (default: the Kalman gains without skips). dK: |K_C - K| per sample (n, 4) when known exactly
     (gain schedule after skips: :func:`schedule_gain_errors`); default: the generator's stated errors.
+    state: a run in pieces (:func:`_schedule_bound_rows`): the recursion starts from it (its "k0" the
+    first sample's index) and leaves its end in it.
     """
     v, d = p.vars, p.design
     Ts, phi = d.Ts, d.phi
@@ -164,11 +167,14 @@ def error_bound(
     Es, Ee = 0.0, lsb_e / 2  # x0: eps0 rounded, a0 = 0 exact
     Ea, Ev, Er = Ee, 0.0, 0.0
     a_prev = 0.0
+    k0 = 0
+    if state:
+        Es, Ee, Ea, Ev, Er, a_prev, k0 = (state[x] for x in ("Es", "Ee", "Ea", "Ev", "Er", "a_prev", "k0"))
     Kl, dKl, yl, al, vl = K.tolist(), np.asarray(dK).tolist(), np.asarray(y_abs).tolist(), np.asarray(a_abs), valid
     al = al.tolist()
     vl = np.asarray(vl).tolist()
     for k in range(n):
-        if k:
+        if k + k0:
             Esm = Es + omp * Ee + d_dec
             Eem = phi * Ee + d_dec
         else:
@@ -194,6 +200,8 @@ def error_bound(
         out[k, 1] = Ev / Ts
         out[k, 2] = Ea
         out[k, 3] = Ee
+    if state is not None:
+        state.update(Es=Es, Ee=Ee, Ea=Ea, Ev=Ev, Er=Er, a_prev=a_prev, k0=k0 + n)
     return out
 
 
@@ -224,7 +232,35 @@ def error_bound_rows(p: AxisPlan, n: int, rows, schedule=None) -> np.ndarray:
             out = bound_rows(_key(d), n, np.array(bp + dc + lsbK), rows)
             if out is not None:
                 return out
+    if p.form == "gain_schedule" and n > len(schedule.head_error):
+        return _schedule_bound_rows(p, n, rows, schedule)
     return error_bound(p, n, schedule)[rows]
+
+
+def _schedule_bound_rows(p: AxisPlan, n: int, rows: list, schedule, chunk: int = 1 << 17) -> np.ndarray:
+    """Gain-schedule form: :func:`error_bound` without data over n samples, a chunk at a time (the
+    Riccati from the prior at each chunk's start, the schedule's integers replayed there): memory
+    O(chunk), whatever n."""
+    from .gains import riccati_chunks
+
+    d, Ts = p.design, p.design.Ts
+    e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(p.gains.sigma_max[3])
+    lsb = np.array([p.vars["K" + c].fmt.lsb for c in "rvae"])
+    scale = np.array([1.0, Ts, 1.0, 1.0])
+    a_abs = np.full(chunk, p.vars["a"].bound)
+    state: dict = {}
+    out = np.empty((len(rows), 4))
+    rows_a = np.asarray(rows)
+    for k0, K, S in riccati_chunks(d, n, chunk):
+        m = len(S)
+        Kc = K * scale
+        dK = np.abs(schedule.gains_int(k0 + m, k0) * lsb - Kc)
+        b = error_bound(
+            p, m, schedule, y_abs=Y_SIGMAS * np.sqrt(S), a_abs=a_abs[:m], e_dev=e_dev, K=Kc, dK=dK, state=state
+        )
+        sel = (rows_a >= k0) & (rows_a < k0 + m)
+        out[sel] = b[rows_a[sel] - k0]
+    return out
 
 
 def worst_case_bound(p: AxisPlan, n: int, schedule=None, rows=None) -> np.ndarray:

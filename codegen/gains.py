@@ -526,25 +526,27 @@ class Schedule:
     def n_segments(self) -> int:
         return len(self.lengths)
 
-    def gains_int(self, n: int) -> np.ndarray:
-        """(n, 4) the integers the C uses as K_r, K_v, K_a, K_e at samples 0 .. n-1 of an uninterrupted run
-        (the high words, in the gains' formats; held after the last segment)."""
+    def gains_int(self, n: int, first: int = 0) -> np.ndarray:
+        """(n - first, 4) the integers the C uses as K_r, K_v, K_a, K_e at samples first .. n-1 of an
+        uninterrupted run (the high words, in the gains' formats; held after the last segment)."""
         ex = np.array(EXTRA, dtype=np.int64)
         hold = np.array(HOLD, dtype=bool)
-        out = np.empty((n, 4), dtype=np.int64)
+        out = np.empty((n - first, 4), dtype=np.int64)
         A = np.array(self.start, dtype=np.int64)
         k0 = 0
         for L, sl in zip(self.lengths, self.slopes, strict=True):
             if k0 >= n:
                 break
-            m = min(L, n - k0)
             sl = np.array(sl, dtype=np.int64)
             lin = np.where(hold, 0, sl)
-            out[k0 : k0 + m] = np.where(hold, sl, A + lin * np.arange(m, dtype=np.int64)[:, None])
+            a, b = max(k0, first), min(k0 + L, n)
+            if a < b:
+                t = np.arange(a - k0, b - k0, dtype=np.int64)[:, None]
+                out[a - first : b - first] = np.where(hold, sl, A + lin * t)
             A = np.where(hold, sl, A + lin * L)
             k0 += L
         if k0 < n:
-            out[k0:] = A
+            out[max(k0, first) - first :] = A
         return out >> ex
 
     def errors(self, n: int) -> np.ndarray:
@@ -611,6 +613,20 @@ class _Window:
         if k0 < self.w0 or k1 > self.w0 + len(self.K):
             self._load(k0)
         return self.K[k0 - self.w0 : k1 - self.w0]
+
+
+def riccati_chunks(d: AxisDesign, n: int, chunk: int):
+    """(k0, K (m, 4), S (m,)) of samples k0 .. k0 + m - 1 of an uninterrupted run of n samples, chunk
+    by chunk (each from the prior at its start): memory O(chunk), whatever n."""
+    key0, P = _key(d)[:-1], _key(d)[-1]
+    k0 = 0
+    while k0 < n:
+        m = min(chunk, n - k0)
+        r = _riccati(key0 + (P,), m + 1 if k0 + m < n else m, None, m, (m,) if k0 + m < n else ())
+        yield k0, np.asarray(r.K), np.asarray(r.S)
+        if k0 + m < n:
+            P = tuple(float(x) for x in r.row_P[r.rows.index(m)])
+        k0 += m
 
 
 def schedule_of(

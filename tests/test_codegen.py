@@ -423,3 +423,16 @@ def test_gain_schedule_built_window_by_window():
     tracemalloc.stop()
     assert sched.n == p.n_run == 3_600_000
     assert peak < 150e6, f"{peak / 1e6:.0f} MB traced while building the 1 kHz schedule"
+
+
+def test_gain_schedule_report_bound_in_pieces():
+    """The report's data-free bound of the gain-schedule form over a long run is the same recursion
+    taken a chunk at a time (memory independent of the run): equal to the whole run's, sample for
+    sample, at the rows asked for."""
+    from accelnav.codegen.bounds import _schedule_bound_rows, error_bound
+
+    p, sched = plan(load_model(), 0, "gain_schedule")
+    n = 20_000
+    rows = [0, 99, 4_095, 4_096, 12_345, n - 1]
+    whole = error_bound(p, n, sched)[rows]
+    assert np.array_equal(_schedule_bound_rows(p, n, rows, sched, chunk=4_096), whole)
