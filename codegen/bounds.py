@@ -55,9 +55,9 @@ beyond a 30 s test. A bit-exact
 Python twin of the integer C would catch those; the bound is the rigorous statement.
 
 What it assumes: the reference is the float64 Kalman filter with the same skips, for both forms;
-the gain errors are the generator's stated ones (for the schedule, those of an uninterrupted run:
-with skips the schedule is not the Kalman gain, so such a run leaves the bound, as it should); the
-float64 arithmetic itself is exact (its own
+the gain errors are the generator's stated ones (for the schedule, those of an uninterrupted run;
+given a run, :func:`twin_bound` takes the gain-schedule C's gains exactly, skips and the deviation it
+carries after them included: :func:`schedule_gain_errors`); the float64 arithmetic itself is exact (its own
 error, ~1e-16 relative, is far below every term here).
 """
 
@@ -76,7 +76,7 @@ def gain_errors(p: AxisPlan, schedule=None, K: np.ndarray | None = None) -> np.n
     (covariance form, given the float64 gains K (n, 4) of the run)."""
     lsbK = np.array([p.vars["K" + n].fmt.lsb for n in "rvae"])
     if p.form == "gain_schedule":
-        return np.asarray(schedule.error.max(0))
+        return np.asarray(schedule.max_error)
     R = p.design.R
     kmax = np.array([p.vars["K" + n].bound for n in "rvae"]) if K is None else np.abs(K)
     dc = CONTRACTION_LSB * np.array([p.vars[n].fmt.lsb for n in ("cr", "cv", "ca", "ce")])
@@ -133,6 +133,8 @@ def error_bound(
     exact: bool = False,
     K: np.ndarray | None = None,
     S: np.ndarray | None = None,
+    dK: np.ndarray | None = None,
+    state: dict | None = None,
 ) -> np.ndarray:
     """(n, 4) bound of |x_C - x_float64| at every sample k < n: [r m, u m/s, a m/s^2, eps m/s^2].
 
@@ -142,7 +144,10 @@ def error_bound(
     (the bound of the C against :func:`quantized_twin`). K: the gains of the run in C coordinates
     (default: the Kalman gains without skips). S: the innovation variance of the run (covariance form:
     the rounding of w = y / S enters as S lsb_w / 2; default: the S of the Kalman run without skips,
-    or S at its range bound when K is given without it).
+    or S at its range bound when K is given without it). dK: |K_C - K| per sample (n, 4) when known
+    exactly (gain schedule after skips: :func:`schedule_gain_errors`); default: the generator's stated
+    errors. state: a run in pieces (:func:`_schedule_bound_rows`): the recursion starts from it (its
+    "k0" the first sample's index) and leaves its end in it.
     """
     v, d = p.vars, p.design
     Ts, phi = d.Ts, d.phi
@@ -152,11 +157,13 @@ def error_bound(
     if K is None:
         K = np.asarray(g.K)[:n] * np.array([1.0, Ts, 1.0, 1.0])
     dz_ = p.z_error
-    sched_err = None if schedule is None else np.asarray(schedule.error)[:n]
+    sched_err = None if schedule is None else schedule.errors(n)
     if exact:  # against the quantized twin: constants exact, the input's only error its final rounding
         dz_ = v["z"].fmt.lsb / 2
-    if p.form == "gain_schedule":
-        dK = sched_err if sched_err is not None else np.asarray(schedule.error)[:n]
+    if dK is not None:
+        dK = np.asarray(dK)[:n]
+    elif p.form == "gain_schedule":
+        dK = sched_err
     else:
         dK = gain_errors(p, K=K[:n])
     if y_abs is None:
@@ -188,12 +195,15 @@ def error_bound(
     Es, Ee = 0.0, lsb_e / 2  # x0: eps0 rounded, a0 = 0 exact
     Ea, Ev, Er = Ee, 0.0, 0.0
     a_prev = 0.0
+    k0 = 0
+    if state:
+        Es, Ee, Ea, Ev, Er, a_prev, k0 = (state[x] for x in ("Es", "Ee", "Ea", "Ev", "Er", "a_prev", "k0"))
     Kl, dKl, yl, al, vl = K.tolist(), np.asarray(dK).tolist(), np.asarray(y_abs).tolist(), np.asarray(a_abs), valid
     dwl = d_w.tolist()
     al = al.tolist()
     vl = np.asarray(vl).tolist()
     for k in range(n):
-        if k:
+        if k + k0:
             Esm = Es + omp * Ee + d_dec
             Eem = phi * Ee + d_dec
         else:
@@ -219,6 +229,8 @@ def error_bound(
         out[k, 1] = Ev / Ts
         out[k, 2] = Ea
         out[k, 3] = Ee
+    if state is not None:
+        state.update(Es=Es, Ee=Ee, Ea=Ea, Ev=Ev, Er=Er, a_prev=a_prev, k0=k0 + n)
     return out
 
 
@@ -248,7 +260,35 @@ def error_bound_rows(p: AxisPlan, n: int, rows, schedule=None) -> np.ndarray:
             out = bound_rows(_key(d), n, np.array(bp + dc + lsbK + [v["w"].fmt.lsb / 2]), rows)
             if out is not None:
                 return out
+    if p.form == "gain_schedule" and n > len(schedule.head_error):
+        return _schedule_bound_rows(p, n, rows, schedule)
     return error_bound(p, n, schedule)[rows]
+
+
+def _schedule_bound_rows(p: AxisPlan, n: int, rows: list, schedule, chunk: int = 1 << 17) -> np.ndarray:
+    """Gain-schedule form: :func:`error_bound` without data over n samples, a chunk at a time (the
+    Riccati from the prior at each chunk's start, the schedule's integers replayed there): memory
+    O(chunk), whatever n."""
+    from .gains import riccati_chunks
+
+    d, Ts = p.design, p.design.Ts
+    e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(p.gains.sigma_max[3])
+    lsb = np.array([p.vars["K" + c].fmt.lsb for c in "rvae"])
+    scale = np.array([1.0, Ts, 1.0, 1.0])
+    a_abs = np.full(chunk, p.vars["a"].bound)
+    state: dict = {}
+    out = np.empty((len(rows), 4))
+    rows_a = np.asarray(rows)
+    for k0, K, S in riccati_chunks(d, n, chunk):
+        m = len(S)
+        Kc = K * scale
+        dK = np.abs(schedule.gains_int(k0 + m, k0) * lsb - Kc)
+        b = error_bound(
+            p, m, schedule, y_abs=Y_SIGMAS * np.sqrt(S), a_abs=a_abs[:m], e_dev=e_dev, K=Kc, dK=dK, state=state
+        )
+        sel = (rows_a >= k0) & (rows_a < k0 + m)
+        out[sel] = b[rows_a[sel] - k0]
+    return out
 
 
 def worst_case_bound(p: AxisPlan, n: int, schedule=None, rows=None) -> np.ndarray:
@@ -303,7 +343,7 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     distance to the C's gains is not taken from the run: it is the generator's stated gain error
     (gain schedule: the compression error of an uninterrupted run; covariance: its rounding bound),
     which stays in :func:`error_bound`. So a C whose gains leave the Kalman gains by more than the
-    generator states (a time-indexed schedule after a skip) departs from the bound. Returns (x (n, 4)
+    generator states (e.g. a time-indexed schedule that ignored a skip) departs from the bound. Returns (x (n, 4)
     in SI units, |y| (n,), |a| (n,), the gains (n, 4)). ``code``: the raw analog codes (None: use z,
     the conversion error stays in the bound).
     """
@@ -352,6 +392,18 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     return out, yabs, np.abs(out[:, 2]), K
 
 
+def schedule_gain_errors(p: AxisPlan, schedule, valid: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Gain-schedule form: |K_C[k] - K[k]| (n, 4) exactly, K the float64 Kalman gains of this skip pattern
+    (C coordinates): K_C is the schedule's integers, and after a skip the C's own deviation recursion
+    (codegen.follow, its integer twin bit for bit, with the C's decisions of when to return)."""
+    from .follow import followed_gains, thresholds
+
+    n = len(valid)
+    Kc, _ = followed_gains(p, schedule.gains_int(n), valid, thresholds(p, schedule))
+    lsb = np.array([p.vars["K" + c].fmt.lsb for c in "rvae"])
+    return np.abs(Kc * lsb - np.asarray(K)[:n])
+
+
 def d_eps_bar(p: AxisPlan) -> float:
     return p.design.eps_mean
 
@@ -370,7 +422,18 @@ def twin_bound(p: AxisPlan, code, z, valid, x_ref: np.ndarray, schedule=None):
         from .gains import riccati
 
         S = np.asarray(riccati(p.design, len(z), valid).S)
+    dK = schedule_gain_errors(p, schedule, valid, K) if p.form == "gain_schedule" else None
     b = error_bound(
-        p, len(z), schedule, y_abs=y_abs, a_abs=a_abs, e_dev=e_dev, valid=valid, exact=code is not None, K=K, S=S
+        p,
+        len(z),
+        schedule,
+        y_abs=y_abs,
+        a_abs=a_abs,
+        e_dev=e_dev,
+        valid=valid,
+        exact=code is not None,
+        K=K,
+        S=S,
+        dK=dK,
     )
     return np.abs(x_tw - x_ref) + b, x_tw

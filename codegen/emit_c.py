@@ -24,7 +24,7 @@ import re
 
 from .design import AnalogConversion
 from .emit_f32 import emit_f32
-from .gains import Schedule, schedule
+from .gains import Schedule
 from .model import Model
 from .package import cdef_of, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
 from .qformat import QFormat, acc_bound, guard_bits, quantize
@@ -126,9 +126,18 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
         f.append(("int32_t", "Ke", f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"))
         f.append(("int32_t", "Ka", f"K_a of the next sample {v['Ka'].fmt}"))
         f.append((f"const struct {T}_seg_s *", "seg", "the schedule's current row"))
+        f += _fields_follow(p)
     f.append(("uint32_t", "k", "samples since init"))
     f.append(("uint32_t", "overflow", "saturations so far"))
     return f
+
+
+def _fields_follow(p: AxisPlan) -> list[tuple[str, str, str]]:
+    """Gain schedule: the deviation from the schedule's covariance block after a skip (codegen.follow)."""
+    from .follow import DEV
+
+    f = [("int32_t", nm, f"{p.vars[nm].note} {p.vars[nm].fmt}") for nm in DEV]
+    return f + [("uint32_t", "dev", "1: following a skip (the deviation above is carried), 0: on the schedule")]
 
 
 def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
@@ -552,7 +561,7 @@ def _core_cov(p: AxisPlan, P: str, T: str) -> list[str]:
     return L
 
 
-def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
+def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     """Body of T_core: predict (k > 0) and update (valid) merged, every state read and written once.
 
     Contract (formats from :mod:`codegen.ranges`): z, y, a in Q.fy (int32); eps int64 in Q.(fy+32)
@@ -624,6 +633,22 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
     else:
         L += ["        Kr = (int32_t)kr;", "        Kv = (int32_t)kv;", "        Ka = s->Ka;"]
         L += ["        Ke = (int32_t)khi;"]
+        if follow:
+            L += [
+                "        if (s->dev) {",
+                "            /* after a skip: the schedule's gains plus the carried deviation (codegen.follow) */",
+                "            int32_t K[4];",
+                "            K[0] = Kr;",
+                "            K[1] = Kv;",
+                "            K[2] = Ka;",
+                "            K[3] = Ke;",
+                f"            {T}_follow(s, true, K);",
+                "            Kr = K[0];",
+                "            Kv = K[1];",
+                "            Ka = K[2];",
+                "            Ke = K[3];",
+                "        }",
+            ]
     L += [
         "        /* y = z - H x = z - a - eps */",
         f"        y = z - a - {eh};",
@@ -634,6 +659,17 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
         f" /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
         f"        e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
     ]
+    if follow:
+        L += [
+            "    } else {",
+            "        /* skipped: the gains of the next samples leave the schedule (codegen.follow) */",
+            "        int32_t K[4];",
+            "        K[0] = (int32_t)kr;",
+            "        K[1] = (int32_t)kv;",
+            "        K[2] = s->Ka;",
+            "        K[3] = (int32_t)khi;",
+            f"        {T}_follow(s, false, K);",
+        ]
     L += [
         "    }",
         "    s->e = e;",
@@ -853,15 +889,12 @@ static inline uint32_t acn_recip_t(uint32_t d, int *n)
 
 
 def _schedule_for(p: AxisPlan) -> Schedule:
-    import numpy as np
+    """The plan's gain schedule over its declared run, computed window by window (memory does not grow
+    with the run)."""
+    from .gains import schedule_of
 
-    from .gains import riccati
-
-    # the whole run's gains, sample by sample: memory linear in the declared run (the covariance form
-    # never needs this; the gain-schedule form is refused for every input that can skip)
-    K = np.array(riccati(p.design, p.n_run).K) * np.array([1.0, p.design.Ts, 1.0, 1.0])
     fm = tuple(p.vars["K" + n].fmt for n in "rvae")
-    return schedule(K, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
+    return schedule_of(p.design, p.n_run, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
 
 
 def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[str], dict]:
@@ -982,6 +1015,8 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         src.append(f"    s->Ke_lo = UINT32_C({ke0 & 0xFFFFFFFF});")
         src.append(f"    s->Ke = {_c_int(ke0 >> 32, 32)};")
         src.append(f"    s->seg = &{T}_seg[0];")
+        src.append("    s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;")
+        src.append("    s->dev = 0u;")
     src += ["    s->k = 0;", "    s->overflow = 0;", "}", ""]
     # convert
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
@@ -1006,6 +1041,13 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             "}",
             "",
         ]
+        from .follow import emit_follow, thresholds
+        from .ranges import RangeError
+
+        try:
+            src += emit_follow(p, P, T, thresholds(p, sched))
+        except ValueError as e:  # a shift the deviation's formats cannot take: this model's ranges
+            raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
     if p.form == "covariance":
         # the predict of the covariance block in a function of its own: its registers do not crowd the states'
         src += [f"static void {T}_ppredict({T}_t *s)", "{"]
@@ -1020,22 +1062,64 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     ]
     src += _core_fixed(p, P, T)
     src += ["}", ""]
+    gs = p.form == "gain_schedule"
+    if gs:  # after a skip: the same sample with the schedule's gains corrected (rare, out of line)
+        src += [
+            "/* One sample while following a skip (codegen.follow): the core with the deviation carried. */",
+            f"static __attribute__((noinline)) void {T}_core_dev({T}_t *s, int32_t z, bool valid)",
+            "{",
+        ]
+        src += _core_fixed(p, P, T, follow=True)
+        src += ["}", ""]
+    dispatch = (
+        [
+            "    if (__builtin_expect(s->dev != 0u, 0)) { /* following a skip */",
+            f"        {T}_core_dev(s, z, true);",
+            "    } else {",
+            f"        {T}_core(s, z, true);",
+            "    }",
+        ]
+        if gs
+        else [f"    {T}_core(s, z, true);"]
+    )
+    src += [f"void {T}_update({T}_t *s, int32_t z)", "{"] + dispatch + ["}", ""]
     src += [
-        f"void {T}_update({T}_t *s, int32_t z)",
-        "{",
-        f"    {T}_core(s, z, true);",
-        "}",
-        "",
         "/* A sample that must be skipped (rail-clipped, missing capture): predict only. */",
         f"void {T}_skip({T}_t *s)",
         "{",
-        f"    {T}_core(s, 0, false);",
+        f"    {T}_core_dev(s, 0, false);" if gs else f"    {T}_core(s, 0, false);",
         "}",
         "",
+    ]
+    if gs:
+        src += [
+            "/* T_step while following a skip: out of line, so that nothing of it",
+            " * reaches the registers of the common path. */",
+            f"static __attribute__((noinline)) bool {T}_step_dev({T}_t *s, {params})",
+            "{",
+            "    int32_t z = 0;",
+            f"    if (!{T}_convert({args}, &z)) {{",
+            f"        {T}_core_dev(s, 0, false);",
+            "        return false;",
+            "    }",
+            f"    {T}_core_dev(s, z, true);",
+            "    return true;",
+            "}",
+            "",
+        ]
+    src += [
         "/* Convert the raw input and run one step; returns false when the sample was skipped. */",
         f"bool {T}_step({T}_t *s, {params})",
         "{",
         "    int32_t z = 0;",
+    ]
+    if gs:
+        src += [
+            "    if (__builtin_expect(s->dev != 0u, 0)) { /* following a skip */",
+            f"        return {T}_step_dev(s, {args});",
+            "    }",
+        ]
+    src += [
         f"    if (!{T}_convert({args}, &z)) {{",
         f"        {T}_skip(s); /* rare: the core inlined once, for valid samples only */",
         "        return false;",
@@ -1044,6 +1128,8 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         "    return true;",
         "}",
         "",
+    ]
+    src += [
         f"void {T}_read(const {T}_t *s, {T}_out_t *o)",
         "{",
         "    o->r = s->r;",
@@ -1077,7 +1163,7 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     if sched is not None:
         man["schedule"] = {
             "segments": sched.n_segments,
-            "max_error": [float(e) for e in sched.error.max(0)],
+            "max_error": [float(e) for e in sched.max_error],
             "rel_tol": list(SCHEDULE_REL_TOL),
             "flash_bytes": (sched.n_segments + 1) * 24,
         }
@@ -1089,34 +1175,15 @@ def plans(model: Model, form: str | None = None) -> list[AxisPlan]:
 
 
 def refuse_schedule_with_skips(model: Model, form: str) -> None:
-    """The gain-schedule form is refused for every input that can skip samples, which is every input
-    the model format describes (analog: the ADC rails; duty cycle: a bad or missing capture).
-
-    Why: the schedule is indexed by time and assumes an uninterrupted run. After a skipped sample the
-    Kalman gain is not the schedule's (a gap of 38 samples at 100 Hz leaves K_a 79 % and K_v 25x off
-    for ~10 samples; the firmware then departed from the float64 filter by 33-75 sigma in a, issue
-    #12), and a schedule that follows skips needs the covariance block at the moment of the skip,
-    which only the covariance form carries. Measured: that block cannot be taken stale from a table
-    (P_re off by a segment leaves K_r 10 % off for good), so the honest choice is the covariance form.
-    """
+    """Kept for callers: the gain-schedule form now follows skipped samples (codegen.follow: after a
+    skip the C carries the deviation of the covariance block from the schedule's until its gains are
+    back on the schedule), so no input that codegen takes is refused for skipping. What it still refuses,
+    as every form does: a sensor codegen does not take at all (calibrated data)."""
     if form != "gain_schedule":
         return
-    from .model import ModelError
     from .ranges import refuse_calibrated
 
-    refuse_calibrated(model)  # a sensor codegen does not take at all is refused as such first
-
-    if model.sensor.kind == "analog":
-        full = 2**model.sensor.analog.adc_bits
-        why = f"this analog input skips rail-clipped samples (ADC codes 0 and {full})"
-    else:
-        why = "this duty-cycle input skips bad captures (no period, a period off nominal, a stuck output)"
-    raise ModelError(
-        model.source,
-        "filter.form",
-        f"'gain_schedule' refused: {why}, and after a skip the Kalman gain is no longer the time-indexed "
-        "schedule's (K_a up to ~80 % off), so the C would depart from the float64 filter; accepted: 'covariance'",
-    )
+    refuse_calibrated(model)
 
 
 def emit(
@@ -1129,12 +1196,10 @@ def emit(
 ) -> dict[str, str]:
     """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json.
 
-    The gain-schedule form is refused (:func:`refuse_schedule_with_skips`) unless the caller
-    guarantees ``assume_no_skips``: an input that never skips a sample (the tests and the bench use it
-    to check the form's arithmetic; the CLI and the firmware build never pass it)."""
+    ``assume_no_skips`` is accepted for older callers and changes nothing: both forms follow skipped
+    samples."""
     form = form or model.filter.form
-    if not assume_no_skips:
-        refuse_schedule_with_skips(model, form)
+    refuse_schedule_with_skips(model, form)
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)
     ps = plans(model, form)
