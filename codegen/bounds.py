@@ -37,7 +37,10 @@ update terms. The gain errors dK: gain-schedule form, the exact |K_stored[k] - K
 schedule; covariance form, per sample (dc + |K[k]| dS) / R + |K[k]| 2^-23 + 1 LSB of K, where dc and
 dS, the errors of the carried c = P H' and of S, are taken as CONTRACTION_LSB of their formats (the
 update contracts c by R / S every sample, so their rounding errors do not accumulate; asserted from
-that argument and checked by the lockstep tests, not derived term by term).
+that argument and checked by the lockstep tests, not derived term by term). The covariance form
+never rounds a gain on its own: it adds c_i w with w = y / S rounded once (codegen.emit_c._gains_cov),
+which is K_i (y + S dw): the rounding dw of w enters like an error of the innovation, S |dw| <= S lsb_w / 2
+per sample (the worst-case bound takes S at its range bound).
 
 For a run in the tests, :func:`twin_bound` splits the error exactly: the float64 filter run with the
 C's quantized constants (:func:`quantized_twin`) carries the whole deterministic effect of the
@@ -52,9 +55,9 @@ beyond a 30 s test. A bit-exact
 Python twin of the integer C would catch those; the bound is the rigorous statement.
 
 What it assumes: the reference is the float64 Kalman filter with the same skips, for both forms;
-the gain errors are the generator's stated ones (for the schedule, those of an uninterrupted run:
-with skips the schedule is not the Kalman gain, so such a run leaves the bound, as it should); the
-float64 arithmetic itself is exact (its own
+the gain errors are the generator's stated ones (for the schedule, those of an uninterrupted run;
+given a run, :func:`twin_bound` takes the gain-schedule C's gains exactly, skips and the deviation it
+carries after them included: :func:`schedule_gain_errors`); the float64 arithmetic itself is exact (its own
 error, ~1e-16 relative, is far below every term here).
 """
 
@@ -73,13 +76,21 @@ def gain_errors(p: AxisPlan, schedule=None, K: np.ndarray | None = None) -> np.n
     (covariance form, given the float64 gains K (n, 4) of the run)."""
     lsbK = np.array([p.vars["K" + n].fmt.lsb for n in "rvae"])
     if p.form == "gain_schedule":
-        return np.asarray(schedule.error.max(0))
+        return np.asarray(schedule.max_error)
     R = p.design.R
     kmax = np.array([p.vars["K" + n].bound for n in "rvae"]) if K is None else np.abs(K)
     dc = CONTRACTION_LSB * np.array([p.vars[n].fmt.lsb for n in ("cr", "cv", "ca", "ce")])
     dS = CONTRACTION_LSB * (p.vars["ca"].fmt.lsb + p.vars["ce"].fmt.lsb)
     # reciprocal: relative 2^-28, and the shifts that align it drop up to 7 of its 30 bits
     return (dc + kmax * dS) / R + kmax * 2.0**-22 + lsbK
+
+
+def w_injection(p: AxisPlan) -> float:
+    """Covariance form: S lsb_w / 2 with S at its range bound, the largest innovation error the
+    rounding of w = y / S makes (0 for the gain-schedule form, which has no w)."""
+    if p.form != "covariance":
+        return 0.0
+    return p.vars["S"].bound * p.vars["w"].fmt.lsb / 2
 
 
 def gains_upto(p: AxisPlan, n: int):
@@ -90,6 +101,19 @@ def gains_upto(p: AxisPlan, n: int):
     if n <= len(p.gains.K):
         return p.gains
     return riccati(p.design, n)
+
+
+def _floors(p: AxisPlan) -> tuple[int, int]:
+    """How many floors (one LSB each at most) the C's step of r and of v = Ts u takes."""
+    v = p.vars
+    fy, fr, fv = v["y"].fmt.frac, v["r"].fmt.frac, v["v"].fmt.frac
+    if p.form == "covariance":  # r += c_r w, then r += v + Ts^2/2 a; v += c_v w, then v += Ts^2 a
+        fw = v["w"].fmt.frac
+        fH2, fT2 = p.consts["H2"][1].frac, p.consts["T2"][1].frac
+        n_r = (fv > fr) + (v["cr"].fmt.frac + fw > fr) + (fH2 + fy > fr)
+        return n_r, (v["cv"].fmt.frac + fw > fv) + (fT2 + fy > fv)
+    n_r = (fv > fr) + (v["Kr"].fmt.frac + fy > fr) + (p.consts["H2"][1] != v["Kr"].fmt)
+    return n_r, (v["Kv"].fmt.frac + fy > fv) + (p.consts["T2"][1] != v["Kv"].fmt)
 
 
 def _const_err(p: AxisPlan, name: str) -> float:
@@ -108,6 +132,9 @@ def error_bound(
     valid: np.ndarray | None = None,
     exact: bool = False,
     K: np.ndarray | None = None,
+    S: np.ndarray | None = None,
+    dK: np.ndarray | None = None,
+    state: dict | None = None,
 ) -> np.ndarray:
     """(n, 4) bound of |x_C - x_float64| at every sample k < n: [r m, u m/s, a m/s^2, eps m/s^2].
 
@@ -115,7 +142,12 @@ def error_bound(
     bound of a. e_dev: max |eps - eps_bar| (default: the prior's offset + 8 sigma of eps). valid:
     which samples update (default all). exact: the constants count as exact
     (the bound of the C against :func:`quantized_twin`). K: the gains of the run in C coordinates
-    (default: the Kalman gains without skips).
+    (default: the Kalman gains without skips). S: the innovation variance of the run (covariance form:
+    the rounding of w = y / S enters as S lsb_w / 2; default: the S of the Kalman run without skips,
+    or S at its range bound when K is given without it). dK: |K_C - K| per sample (n, 4) when known
+    exactly (gain schedule after skips: :func:`schedule_gain_errors`); default: the generator's stated
+    errors. state: a run in pieces (:func:`_schedule_bound_rows`): the recursion starts from it (its
+    "k0" the first sample's index) and leaves its end in it.
     """
     v, d = p.vars, p.design
     Ts, phi = d.Ts, d.phi
@@ -125,11 +157,13 @@ def error_bound(
     if K is None:
         K = np.asarray(g.K)[:n] * np.array([1.0, Ts, 1.0, 1.0])
     dz_ = p.z_error
-    sched_err = None if schedule is None else np.asarray(schedule.error)[:n]
+    sched_err = None if schedule is None else schedule.errors(n)
     if exact:  # against the quantized twin: constants exact, the input's only error its final rounding
         dz_ = v["z"].fmt.lsb / 2
-    if p.form == "gain_schedule":
-        dK = sched_err if sched_err is not None else np.asarray(schedule.error)[:n]
+    if dK is not None:
+        dK = np.asarray(dK)[:n]
+    elif p.form == "gain_schedule":
+        dK = sched_err
     else:
         dK = gain_errors(p, K=K[:n])
     if y_abs is None:
@@ -140,6 +174,9 @@ def error_bound(
         valid = np.ones(n, dtype=bool)
     dz = dz_
     d_y = lsb_y / 2  # eps'_hi rounded
+    d_w = np.full(n, w_injection(p))  # covariance form: the rounding of w = y / S, as an innovation error
+    if p.form == "covariance" and (S is not None or g is not None):
+        d_w = np.asarray(S if S is not None else g.S, dtype=np.float64)[:n] * (v["w"].fmt.lsb / 2)
     d_a = lsb_y / 2  # a += K_a y rounded
     d_e = lsb_e  # eps += K_e y floored
     # decay: eps_hi (1/2 LSB of y) and eps_bar's rounding through (1 - phi), (1 - phi)'s own rounding
@@ -150,21 +187,23 @@ def error_bound(
         e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(np.asarray(g.sigma)[:n, 3].max())
     d_dec = omp * (lsb_y / 2 + e_bar_err) + d_omp * (e_dev + lsb_y) + lsb_e
     dH2, dT2 = (0.0, 0.0) if exact else (_const_err(p, "H2"), _const_err(p, "T2"))
-    # floors: r += (v >> .) + (p >> .) [+ (Ts^2/2 a >> .)]; v += (q >> .) [+ (Ts^2 a >> .)], none if exact
-    fy, fr, fv = v["y"].fmt.frac, v["r"].fmt.frac, v["v"].fmt.frac
-    n_r_floor = (fv > fr) + (v["Kr"].fmt.frac + fy > fr) + (p.consts["H2"][1] != v["Kr"].fmt)
-    n_v_floor = (v["Kv"].fmt.frac + fy > fv) + (p.consts["T2"][1] != v["Kv"].fmt)
+    # floors of the steps of r and v (_floors)
+    n_r_floor, n_v_floor = _floors(p)
     lsb_v = v["v"].fmt.lsb
     H2, T2 = Ts * Ts / 2, Ts * Ts
     out = np.empty((n, 4))
     Es, Ee = 0.0, lsb_e / 2  # x0: eps0 rounded, a0 = 0 exact
     Ea, Ev, Er = Ee, 0.0, 0.0
     a_prev = 0.0
+    k0 = 0
+    if state:
+        Es, Ee, Ea, Ev, Er, a_prev, k0 = (state[x] for x in ("Es", "Ee", "Ea", "Ev", "Er", "a_prev", "k0"))
     Kl, dKl, yl, al, vl = K.tolist(), np.asarray(dK).tolist(), np.asarray(y_abs).tolist(), np.asarray(a_abs), valid
+    dwl = d_w.tolist()
     al = al.tolist()
     vl = np.asarray(vl).tolist()
     for k in range(n):
-        if k:
+        if k + k0:
             Esm = Es + omp * Ee + d_dec
             Eem = phi * Ee + d_dec
         else:
@@ -176,7 +215,7 @@ def error_bound(
         if vl[k]:
             kr, kv, ka, ke = Kl[k]
             dkr, dkv, dka, dke = dKl[k]
-            inj = dz + d_y
+            inj = dz + d_y + dwl[k]
             yc = yl[k] + Esm + inj
             Es = abs(1.0 - ka - ke) * Esm + abs(ka + ke) * inj + (dka + dke) * yc + d_a + d_e
             Ee = Eem + abs(ke) * (Esm + inj) + dke * yc + d_e
@@ -190,6 +229,8 @@ def error_bound(
         out[k, 1] = Ev / Ts
         out[k, 2] = Ea
         out[k, 3] = Ee
+    if state is not None:
+        state.update(Es=Es, Ee=Ee, Ea=Ea, Ev=Ev, Er=Er, a_prev=a_prev, k0=k0 + n)
     return out
 
 
@@ -209,18 +250,45 @@ def error_bound_rows(p: AxisPlan, n: int, rows, schedule=None) -> np.ndarray:
         e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(p.gains.sigma_max[3]) if n == p.n_run else None
         if e_dev is not None:
             d_dec = omp * (lsb_y / 2 + _const_err(p, "EBAR")) + _const_err(p, "OMP") * (e_dev + lsb_y) + lsb_e
-            fy, fr, fv = v["y"].fmt.frac, v["r"].fmt.frac, v["v"].fmt.frac
-            n_r_floor = (fv > fr) + (v["Kr"].fmt.frac + fy > fr) + (p.consts["H2"][1] != v["Kr"].fmt)
-            n_v_floor = (v["Kv"].fmt.frac + fy > fv) + (p.consts["T2"][1] != v["Kv"].fmt)
+            n_r_floor, n_v_floor = _floors(p)
             lsbK = [v["K" + c].fmt.lsb for c in "rvae"]
             dc = [CONTRACTION_LSB * v[c].fmt.lsb for c in ("cr", "cv", "ca", "ce")]
             dS = CONTRACTION_LSB * (v["ca"].fmt.lsb + v["ce"].fmt.lsb)
-            bp = [omp, d.Ts, p.z_error + lsb_y / 2, lsb_y / 2, lsb_e, d_dec, _const_err(p, "H2"), _const_err(p, "T2")]
+            inj = p.z_error + lsb_y / 2
+            bp = [omp, d.Ts, inj, lsb_y / 2, lsb_e, d_dec, _const_err(p, "H2"), _const_err(p, "T2")]
             bp += [n_r_floor * lsb_r, n_v_floor * lsb_v, v["a"].bound, Y_SIGMAS, dS, d.R, 2.0**-22, lsb_e / 2]
-            out = bound_rows(_key(d), n, np.array(bp + dc + lsbK), rows)
+            out = bound_rows(_key(d), n, np.array(bp + dc + lsbK + [v["w"].fmt.lsb / 2]), rows)
             if out is not None:
                 return out
+    if p.form == "gain_schedule" and n > len(schedule.head_error):
+        return _schedule_bound_rows(p, n, rows, schedule)
     return error_bound(p, n, schedule)[rows]
+
+
+def _schedule_bound_rows(p: AxisPlan, n: int, rows: list, schedule, chunk: int = 1 << 17) -> np.ndarray:
+    """Gain-schedule form: :func:`error_bound` without data over n samples, a chunk at a time (the
+    Riccati from the prior at each chunk's start, the schedule's integers replayed there): memory
+    O(chunk), whatever n."""
+    from .gains import riccati_chunks
+
+    d, Ts = p.design, p.design.Ts
+    e_dev = abs(d.x0[3] - d.eps_mean) + Y_SIGMAS * float(p.gains.sigma_max[3])
+    lsb = np.array([p.vars["K" + c].fmt.lsb for c in "rvae"])
+    scale = np.array([1.0, Ts, 1.0, 1.0])
+    a_abs = np.full(chunk, p.vars["a"].bound)
+    state: dict = {}
+    out = np.empty((len(rows), 4))
+    rows_a = np.asarray(rows)
+    for k0, K, S in riccati_chunks(d, n, chunk):
+        m = len(S)
+        Kc = K * scale
+        dK = np.abs(schedule.gains_int(k0 + m, k0) * lsb - Kc)
+        b = error_bound(
+            p, m, schedule, y_abs=Y_SIGMAS * np.sqrt(S), a_abs=a_abs[:m], e_dev=e_dev, K=Kc, dK=dK, state=state
+        )
+        sel = (rows_a >= k0) & (rows_a < k0 + m)
+        out[sel] = b[rows_a[sel] - k0]
+    return out
 
 
 def worst_case_bound(p: AxisPlan, n: int, schedule=None, rows=None) -> np.ndarray:
@@ -234,7 +302,7 @@ def worst_case_bound(p: AxisPlan, n: int, schedule=None, rows=None) -> np.ndarra
     Kmax = p.gains.kmax * np.array([1.0, p.design.Ts, 1.0, 1.0])
     lsb_y, lsb_e, lsb_r = v["y"].fmt.lsb, v["e"].fmt.lsb, v["r"].fmt.lsb
     omp = 1.0 - p.design.phi
-    d_in = p.z_error + lsb_y / 2
+    d_in = p.z_error + lsb_y / 2 + w_injection(p)
     d_a = lsb_y / 2 + dK[2] * ymax
     d_e = (
         2 * lsb_e
@@ -275,7 +343,7 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     distance to the C's gains is not taken from the run: it is the generator's stated gain error
     (gain schedule: the compression error of an uninterrupted run; covariance: its rounding bound),
     which stays in :func:`error_bound`. So a C whose gains leave the Kalman gains by more than the
-    generator states (a time-indexed schedule after a skip) departs from the bound. Returns (x (n, 4)
+    generator states (e.g. a time-indexed schedule that ignored a skip) departs from the bound. Returns (x (n, 4)
     in SI units, |y| (n,), |a| (n,), the gains (n, 4)). ``code``: the raw analog codes (None: use z,
     the conversion error stays in the bound).
     """
@@ -324,6 +392,18 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     return out, yabs, np.abs(out[:, 2]), K
 
 
+def schedule_gain_errors(p: AxisPlan, schedule, valid: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Gain-schedule form: |K_C[k] - K[k]| (n, 4) exactly, K the float64 Kalman gains of this skip pattern
+    (C coordinates): K_C is the schedule's integers, and after a skip the C's own deviation recursion
+    (codegen.follow, its integer twin bit for bit, with the C's decisions of when to return)."""
+    from .follow import followed_gains, thresholds
+
+    n = len(valid)
+    Kc, _ = followed_gains(p, schedule.gains_int(n), valid, thresholds(p, schedule))
+    lsb = np.array([p.vars["K" + c].fmt.lsb for c in "rvae"])
+    return np.abs(Kc * lsb - np.asarray(K)[:n])
+
+
 def d_eps_bar(p: AxisPlan) -> float:
     return p.design.eps_mean
 
@@ -337,7 +417,23 @@ def twin_bound(p: AxisPlan, code, z, valid, x_ref: np.ndarray, schedule=None):
     (accelnav.estimate.kf.run_filter with the same valid mask), never a filter with the C's gains."""
     x_tw, y_abs, a_abs, K = quantized_twin(p, code, z, valid, schedule)
     e_dev = float(np.abs(x_tw[:, 3] - d_eps_bar(p)).max())
+    S = None
+    if p.form == "covariance":
+        from .gains import riccati
+
+        S = np.asarray(riccati(p.design, len(z), valid).S)
+    dK = schedule_gain_errors(p, schedule, valid, K) if p.form == "gain_schedule" else None
     b = error_bound(
-        p, len(z), schedule, y_abs=y_abs, a_abs=a_abs, e_dev=e_dev, valid=valid, exact=code is not None, K=K
+        p,
+        len(z),
+        schedule,
+        y_abs=y_abs,
+        a_abs=a_abs,
+        e_dev=e_dev,
+        valid=valid,
+        exact=code is not None,
+        K=K,
+        S=S,
+        dK=dK,
     )
     return np.abs(x_tw - x_ref) + b, x_tw

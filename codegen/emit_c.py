@@ -24,10 +24,10 @@ import re
 
 from .design import AnalogConversion
 from .emit_f32 import emit_f32
-from .gains import Schedule, schedule
+from .gains import Schedule
 from .model import Model
 from .package import cdef_of, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
-from .qformat import quantize
+from .qformat import QFormat, acc_bound, guard_bits, quantize
 from .ranges import AxisPlan, plan_axis
 
 SCHEDULE_REL_TOL = (1e-4, 3e-4, 2e-7, 1e-4)  # K_r, K_v (no feedback), K_a (held in a segment: tight), K_e
@@ -126,6 +126,7 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
         f.append(("int32_t", "Ke", f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"))
         f.append(("int32_t", "Ka", f"K_a of the next sample {v['Ka'].fmt}"))
         f.append((f"const struct {T}_seg_s *", "seg", "the schedule's current row"))
+        f += _fields_follow(p)
     f.append(("uint32_t", "k", "samples since init"))
     f.append(("uint32_t", "overflow", "saturations so far"))
     return f
@@ -145,6 +146,14 @@ def _struct_bytes(fields: list[tuple[str, str, str]]) -> int | None:
         off = -(-off // n) * n + n
         align = max(align, n)
     return -(-off // align) * align if align else 0
+
+
+def _fields_follow(p: AxisPlan) -> list[tuple[str, str, str]]:
+    """Gain schedule: the deviation from the schedule's covariance block after a skip (codegen.follow)."""
+    from .follow import DEV
+
+    f = [("int32_t", nm, f"{p.vars[nm].note} {p.vars[nm].fmt}") for nm in DEV]
+    return f + [("uint32_t", "dev", "1: following a skip (the deviation above is carried), 0: on the schedule")]
 
 
 def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
@@ -211,25 +220,32 @@ def _hi_round(expr: str) -> str:
     return f"(int32_t)(((uint64_t)({expr}) + UINT64_C(0x80000000)) >> 32)"
 
 
-GUARD_BITS = 16  # bits below the target's LSB at which a sum of three or more terms is formed
-GUARD_BITS_2 = 32  # ... and a sum of one or two: at 32 the rounding is the high word, no shift
-
-
-def _acc(ft: int, terms: list[tuple[str, str, int]]) -> str:
+def _acc(ft: int, terms: list[tuple[str, str, int]], dither: str | None = None) -> str:
     """Sum of int64 terms (sign, expr, frac bits) in Q.ft with one rounding: the terms already in
-    Q.ft add exactly; the finer ones are aligned (floor) to Q.(ft + g), g the most that needs no
-    left shift, at most GUARD_BITS_2 for one or two fine terms (each a product of two int32, neither
-    INT32_MIN, so |term| < 2^62 and two of them plus the rounding half stay below 2^63) and
-    GUARD_BITS for more, summed, and rounded once to Q.ft."""
+    Q.ft add exactly; the finer ones are aligned (floor) to Q.(ft + g) (g: :func:`codegen.qformat.guard_bits`; each fine
+    term a product of two int32, neither INT32_MIN, or an int32 constant, so |term| < 2^62 and two
+    of them plus the rounding offset stay below 2^63), summed, and rounded once to Q.ft.
+
+    The rounding adds half an LSB (to nearest, ties up), or with ``dither`` (the C name of a uint32
+    that runs through its values evenly from sample to sample: the bit-reversed sample count) its top
+    g bits: still one floor of the sum plus an offset below one LSB, so the result is within one LSB
+    of the exact sum, but an increment that holds a steady fraction of an LSB for many samples is no
+    longer rounded the same way every time: over any 2^m consecutive samples the roundings add up to
+    at most about one LSB instead of up to 2^m / 2 (used on the entries whose own change per sample
+    is a small fraction of their LSB)."""
     exact = [(sg, e) for sg, e, fr in terms if fr == ft]
     fine = [(sg, e, fr) for sg, e, fr in terms if fr != ft]
     if any(fr < ft for _, _, fr in fine):
         raise ValueError("a term coarser than its target")
     out = " ".join(f"{sg} {e}" for sg, e in exact).lstrip("+ ")
     if fine:
-        g = min(GUARD_BITS_2 if len(fine) <= 2 else GUARD_BITS, *(fr - ft for _, _, fr in fine))
+        g = guard_bits([fr for _, _, fr in fine], ft)
         parts = " ".join(f"{sg} " + (f"(({e}) >> {fr - ft - g})" if fr - ft > g else f"({e})") for sg, e, fr in fine)
-        out += f" + ACN_RSHR({parts.lstrip('+ ')}, {g}) /* in Q.{ft + g}, rounded once to Q.{ft} */"
+        if dither is not None and g <= 32:
+            off = f"(int64_t)({dither} >> {32 - g})" if g < 32 else f"(int64_t){dither}"
+            out += f" + (({parts.lstrip('+ ')} + {off}) >> {g}) /* in Q.{ft + g}, dithered once to Q.{ft} */"
+        else:
+            out += f" + ACN_RSHR({parts.lstrip('+ ')}, {g}) /* in Q.{ft + g}, rounded once to Q.{ft} */"
     return f"({out})"
 
 
@@ -243,26 +259,133 @@ def _acc_sat(ft: int, terms: list[tuple[str, str, int]], mag) -> str:
     m = re.fullmatch(r"\(int64_t\)((?:s->)?\w+)", e0)
     rest = terms[1:]
     if sg0 == "+" and fr0 == ft and m and rest:
-        exact = [mag(e) for sg, e, fr in rest if fr == ft]
-        fine = [(mag(e), fr) for sg, e, fr in rest if fr != ft]
-        bound = sum(exact)
-        if fine:
-            g = min(GUARD_BITS_2 if len(fine) <= 2 else GUARD_BITS, *(fr - ft for _, fr in fine))
-            tot = sum((mg >> (fr - ft - g)) + 1 for mg, fr in fine) + (1 << (g - 1))
-            bound += (tot >> g) + 1
-        if bound < 2**31 - 1:
+        if acc_bound(ft, [(mag(e), fr) for sg, e, fr in rest]) < 2**31 - 1:
             return f"acn_add_sat32({m.group(1)}, (int32_t){_acc(ft, rest)}, &s->overflow)"
     return f"acn_sat32({_acc(ft, terms)}, &s->overflow)"
 
 
-def _predict_cov(p: AxisPlan, P: str) -> list[str]:
+def _predict_terms(p: AxisPlan, P: str) -> dict[str, tuple[int, list[tuple[str, str, int]]]]:
+    """The predict sums of the carried block: name -> (target frac bits, [(sign, expr, frac bits)]).
+
+    Every constant has its own scaling (Q_ra, Q_ua, Q_aa, Q_ee and 1 - phi are far below the LSB of
+    the entry they feed: in the entry's format Q_ra at 1 kHz was 6 LSB for 5.7, a 5 % error that
+    biased c_r and with it K_r), so each enters as a fine term, aligned with the products. The decay
+    by phi is written as x - (1 - phi) x, (1 - phi) in its own scaling, for the same reason."""
     fcr, fPr, fcv, fPv, fca, fPae, fce = (p.f(n) for n in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"))
-    H2, T2, OMP = (p.consts[n][1].frac for n in ("H2", "T2", "OMP"))
-    PO = p.consts["PHIOMP"][1].frac
+    fq = {n: p.consts[n][1].frac for n in ("H2", "T2", "OMPC", "PHIOMP", "Qra", "Qva", "Qaa", "Qee")}
+    H2, T2, OMP, PO = fq["H2"], fq["T2"], fq["OMPC"], fq["PHIOMP"]
 
     def c(name):  # "-NAME": the constant negated in the literal (no 64-bit negation of the product)
         neg = name.startswith("-")
         return f"(int64_t){'-' if neg else ''}{P}_{name.lstrip('-')}"
+
+    return {
+        "tr": (
+            fPr,
+            [("+", "(int64_t)s->Pre", fPr), ("+", "(int64_t)s->Pve", fPv), ("+", f"{c('H2')} * s->Pae", H2 + fPae)],
+        ),
+        "tv": (fPv, [("+", "(int64_t)s->Pve", fPv), ("+", f"{c('T2')} * s->Pae", T2 + fPae)]),
+        "cr": (
+            fcr,
+            [
+                ("+", "(int64_t)s->cr", fcr),
+                ("+", "(int64_t)s->cv", fcv),
+                ("+", f"{c('H2')} * s->ca", H2 + fca),
+                ("+", c("Qra"), fq["Qra"]),
+                ("+", f"{c('-OMPC')} * tr", OMP + fPr),
+            ],
+        ),
+        "cv": (
+            fcv,
+            [
+                ("+", "(int64_t)s->cv", fcv),
+                ("+", f"{c('T2')} * s->ca", T2 + fca),
+                ("+", c("Qva"), fq["Qva"]),
+                ("+", f"{c('-OMPC')} * tv", OMP + fPv),
+            ],
+        ),
+        "Pre": (fPr, [("+", "(int64_t)tr", fPr), ("+", f"{c('-OMPC')} * tr", OMP + fPr)]),
+        "Pve": (fPv, [("+", "(int64_t)tv", fPv), ("+", f"{c('-OMPC')} * tv", OMP + fPv)]),
+        "ca": (
+            fca,
+            [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fq["Qaa"]), ("+", f"{c('-OMPC')} * s->Pae", OMP + fPae)],
+        ),
+        "ce": (
+            fce,
+            [
+                ("+", f"{c('PHI2')} * s->ce", 31 + fce),
+                ("+", f"{c('PHIOMP')} * s->Pae", PO + fPae),
+                ("+", c("Qee"), fq["Qee"]),
+            ],
+        ),
+        "Pae": (fPae, [("+", "(int64_t)s->Pae", fPae), ("+", f"{c('-OMPC')} * s->Pae", OMP + fPae)]),
+    }
+
+
+DITHERED = ("Pre", "Pve", "Pae")  # entries whose change per sample is a small fraction of their LSB
+
+
+def _hsum(p: AxisPlan, P: str, ft: int, terms, dither: str | None = None):
+    """The sum of ``terms`` (as _acc takes them; int32 variables, constants, constant x variable
+    products) in one int64 accumulator in Q.(ft + 32), its high word the result in Q.ft: each
+    constant of a product is scaled so that the product lands there (one SMLAL, no shift; when that
+    leaves the constant fewer than 20 bits, the variable is first shifted right by the k that best
+    balances the constant's rounding against the variable's floor), each variable by a power of two
+    (one SMLAL), the constants and the rounding offset (half an LSB, or the dither) start the
+    accumulator. Returns (C expression of the int32 result, bound on |result| in LSB of Q.ft for any
+    int32 variables), or None when a term does not fit that scheme (then _acc forms the sum)."""
+    F = ft + 32
+    lit = 0
+    ops = []
+    mag = 0
+    for sg, e, fr in terms:
+        neg = sg == "-"
+        m = re.fullmatch(r"\(int64_t\)(-?)" + P + r"_(\w+)(?: \* (\w+|s->\w+))?", e)
+        if m:
+            val = p.consts[m.group(2)][0] * (-1.0 if m.group(1) else 1.0) * (-1.0 if neg else 1.0)
+            if not m.group(3):  # a constant: into the start of the accumulator
+                lit += quantize(val, QFormat(64, F))
+                continue
+            fv = fr - p.consts[m.group(2)][1].frac  # the variable's own binary point
+            kk = val * 2.0 ** (F - fv)
+            if abs(kk) >= 2**30:
+                return None
+            k = 0
+            if abs(kk) < 2**20:
+                ks = [j for j in range(25) if abs(kk) * 2.0**j < 2**30]
+                k = min(ks, key=lambda j: 2.0 ** (30 - j) + abs(kk) * 2.0**j)
+            ki = quantize(kk * 2.0**k, QFormat(32, 0))
+            x = f"({m.group(3)} >> {k})" if k else m.group(3)
+            ops.append((x, ki, f"{val:.6g} Q.{F - fv + k}"))
+            mag += abs(ki) * 2 ** (31 - k)
+            continue
+        m = re.fullmatch(r"\(int64_t\)(\w+|s->\w+)", e)
+        if m and 0 <= F - fr <= 30:  # an int32 variable times a power of two
+            ops.append((m.group(1), -(1 << (F - fr)) if neg else 1 << (F - fr), f"2^{F - fr}"))
+            mag += 2 ** (31 + F - fr)
+            continue
+        return None
+    total = mag + abs(lit) + 2**32
+    if total >= 2**62:
+        return None
+    acc = f"INT64_C({lit}) + (int64_t){dither}" if dither else _c_int(lit + 2**31, 64)
+    for x, ki, cm in ops:
+        acc = f"acn_mac({acc}, {x}, {_c_int(ki, 32)} /* {cm} */)"
+    return f"(int32_t)(({acc}) >> 32) /* Q.{F} -> Q.{ft}, high word */", (total >> 32) + 1, (lit, ops)
+
+
+def _hsum_at(h, values: dict, offset: int) -> int:
+    """The int32 _hsum computes for the variables in ``values`` (name -> int) and rounding offset."""
+    lit, ops = h[2]
+    acc = lit + offset
+    for x, ki, _ in ops:
+        m = re.fullmatch(r"\(?((?:s->)?\w+)(?: >> (\d+)\))?", x)
+        acc += ki * (values[m.group(1)] >> int(m.group(2) or 0))
+    return acc >> 32
+
+
+def _predict_cov(p: AxisPlan, P: str) -> list[str]:
+    t = _predict_terms(p, P)
 
     def mag(expr: str) -> int:  # a bound on |expr| for any int32 operands
         m = re.fullmatch(r"\(int64_t\)(-?)" + P + r"_(\w+)(?: \* (\w+|s->\w+))?", expr)
@@ -273,119 +396,188 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
             return 2**31
         raise ValueError(f"no bound for {expr}")
 
-    def sat(ft, terms):
+    def sat(name):  # x0 + rest, one saturating 32-bit add when rest fits int32 for any inputs (_acc_sat)
+        ft, terms = t[name]
+        h = _hsum(p, P, ft, terms[1:])
+        x0 = re.fullmatch(r"\(int64_t\)((?:s->)?\w+)", terms[0][1])
+        if h is not None and x0 and terms[0][0] == "+" and terms[0][2] == ft and h[1] < 2**31 - 1:
+            return f"acn_add_sat32({x0.group(1)}, {h[0]}, &s->overflow)"
         return _acc_sat(ft, terms, mag)
 
-    tr = sat(
-        fPr, [("+", "(int64_t)s->Pre", fPr), ("+", "(int64_t)s->Pve", fPv), ("+", f"{c('H2')} * s->Pae", H2 + fPae)]
-    )
-    tv = sat(fPv, [("+", "(int64_t)s->Pve", fPv), ("+", f"{c('T2')} * s->Pae", T2 + fPae)])
-    cr = sat(
-        fcr,
-        [
-            ("+", "(int64_t)s->cr", fcr),
-            ("+", "(int64_t)s->cv", fcv),
-            ("+", f"{c('H2')} * s->ca", H2 + fca),
-            ("+", c("Qra"), fcr),
-            ("+", f"{c('-OMP')} * tr", OMP + fPr),
-        ],
-    )
-    cv = sat(
-        fcv,
-        [
-            ("+", "(int64_t)s->cv", fcv),
-            ("+", f"{c('T2')} * s->ca", T2 + fca),
-            ("+", c("Qva"), fcv),
-            ("+", f"{c('-OMP')} * tv", OMP + fPv),
-        ],
-    )
-    pre = _acc(fPr, [("+", "(int64_t)tr", fPr), ("+", f"{c('-OMP')} * tr", OMP + fPr)])
-    pve = _acc(fPv, [("+", "(int64_t)tv", fPv), ("+", f"{c('-OMP')} * tv", OMP + fPv)])
-    ca = sat(fca, [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fca), ("+", f"{c('-OMP')} * s->Pae", OMP + fPae)])
-    ce = _acc(
-        fce,
-        [("+", f"{c('PHI2')} * s->ce", 31 + fce), ("+", f"{c('PHIOMP')} * s->Pae", PO + fPae), ("+", c("Qee"), fce)],
-    )
+    # x - (1 - phi) x fits int32 for every int32 x: 0 < 1 - phi < 1, the product enters with the sign
+    # opposite to x, and neither its floor nor the rounding offset (below one LSB) can push past x
+    def ce_sum():  # c_e' = c_e - (1 - phi^2) c_e + phi (1 - phi) P_ae + Q_ee with no clamp, when that is
+        # checked here to fit int32 at every corner of the int32 square of (c_e, P_ae) (c_e' is monotone
+        # in each: the coefficient of c_e, 1 - (1 - phi^2), is below one and its floor moves it by < 1)
+        h = _hsum(p, P, t["ce"][0], terms_ce[1:])
+        if h is None or "ce" not in p.sat_free:
+            return None
+        for ce in (-(2**31), 2**31 - 1):
+            for pae in (-(2**31), 2**31 - 1):
+                if not -(2**31) <= ce + _hsum_at(h, {"s->ce": ce, "s->Pae": pae}, 2**31) <= 2**31 - 1:
+                    return None
+        return f"(int32_t)((int64_t)s->ce + {h[0]})"
+
+    fce = p.f("ce")
+    f2 = p.consts["OMP2"][1].frac
+    terms_ce = [("+", "(int64_t)s->ce", fce), ("+", f"(int64_t)-{P}_OMP2 * s->ce", f2 + fce)] + t["ce"][1][1:]
+    ce_h = ce_sum()
+
+    def decay(name):
+        ft, terms = t[name]
+        dz = "dz" if name in DITHERED else None
+        h = _hsum(p, P, ft, terms[1:], dz)
+        if h is not None:
+            return f"(int32_t)({terms[0][1]} + {h[0]})"
+        return f"(int32_t){_acc(ft, terms, dither=dz)}"
+
     return [
         "        /* P = F P F' + Q on the carried block (c = P H' carried directly in fine formats);",
         "         * every right-hand side reads the old values; each sum is rounded once */",
         "        int32_t tr, tv;",
+        "        uint32_t dz = acn_rbit(s->k); /* rounding offsets: the sample count, bit-reversed */",
         "        /* tr = P_re + P_ve + Ts^2/2 P_ae; P_re' = phi tr */",
-        f"        tr = {tr};",
+        f"        tr = {sat('tr')};",
         "        /* tv = P_ve + Ts^2 P_ae; P_ve' = phi tv */",
-        f"        tv = {tv};",
+        f"        tv = {sat('tv')};",
         "        /* c_r' = c_r + c_v + Ts^2/2 c_a + Q_ra - (1 - phi) tr */",
-        f"        s->cr = {cr};",
+        f"        s->cr = {sat('cr')};",
         "        /* c_v' = c_v + Ts^2 c_a + Ts Q_ua - (1 - phi) tv */",
-        f"        s->cv = {cv};",
-        f"        s->Pre = (int32_t){pre};",
-        f"        s->Pve = (int32_t){pve};",
+        f"        s->cv = {sat('cv')};",
+        f"        s->Pre = {decay('Pre')};",
+        f"        s->Pve = {decay('Pve')};",
         "        /* c_a' = c_a + Q_aa - (1 - phi) P_ae */",
-        f"        s->ca = {ca};",
+        f"        s->ca = {sat('ca')};",
         "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
-        f"        s->ce = (int32_t){ce}; /* fits int32 for any c_e, P_ae: see codegen.ranges._predict_sat_free */"
+        f"        s->ce = {ce_h}; /* fits int32 for any c_e, P_ae: checked at the corners */"
+        if ce_h
+        else f"        s->ce = (int32_t){_acc(*t['ce'])}; /* fits int32 for any c_e, P_ae: ranges._predict_sat_free */"
         if "ce" in p.sat_free
-        else f"        s->ce = acn_sat32({ce}, &s->overflow);",
-        "        /* P_ae' = phi P_ae */",
-        f"        s->Pae = (int32_t){_shift(f'(int64_t){P}_PHI * s->Pae', 31 + fPae, fPae)};",
+        else f"        s->ce = acn_sat32({_acc(*t['ce'])}, &s->overflow);",
+        "        /* P_ae' = phi P_ae = P_ae - (1 - phi) P_ae */",
+        f"        s->Pae = {decay('Pae')};",
     ]
+
+
+def cov_fracs(p: AxisPlan) -> dict:
+    """Binary points of the covariance form's update: nmax, the clz of the smallest S (= R); x, the
+    format of xs = 1/S; and per state the product c_i w that it adds."""
+    fca = p.f("ca")
+    nmax = 32 - quantize(p.design.R, p.vars["S"].fmt).bit_length()
+    fw = p.f("w")
+    prod = {"r": p.f("cr") + fw, "v": p.f("cv") + fw, "a": fca + fw, "e": p.f("ce") + fw}
+    return {"nmax": nmax, "x": 61 - nmax - fca, "prod": prod}
 
 
 def _gains_cov(p: AxisPlan, P: str) -> list[str]:
-    """K = c / S from the carried block, then P = P - K c'. Every shift rounds; the posterior
-    entries are not saturated: the update only contracts the block (c_i -> c_i R / S, and the
-    cross terms stay within the diagonal terms, which only shrink)."""
-    fca = p.f("ca")
-    fK = {n: p.f("K" + n) for n in "rvae"}
-    fc = {"r": p.f("cr"), "v": p.f("cv"), "a": fca, "e": p.f("ce")}
+    """Body of T_pupdate(s, y), the measurement update: S = c_a + c_e + R, one reciprocal, w = y / S;
+    every state adds c_i w = K_i y (r and v = Ts u their K y part only; the core adds the rest of
+    their step), so no gain is rounded on its own; then P = P - c c' / S, which for the carried
+    c = P H' is c_i -> c_i (1 - kappa) with kappa = (S - R) / S, and P_ie -= c_i K_e with K_e = c_e / S
+    (all from the prior block). The posterior entries are not saturated: the update only contracts
+    the block (c_i -> c_i R / S, and the cross terms stay within the diagonal terms, which only
+    shrink)."""
+    fca, fce, fKe = p.f("ca"), p.f("ce"), p.f("Ke")
+    cf = cov_fracs(p)
+    nmax, fx = cf["nmax"], cf["x"]
+    d = fce - fca
     R_int = quantize(p.design.R, p.vars["S"].fmt)
-    nmax = 32 - R_int.bit_length()  # clz of the smallest S
+    if d > 0:  # c_e in c_a's format, rounded (ties up) in 32 bits: floor((floor(c_e / 2^(d-1)) + 1) / 2)
+        ce_a = f"(((ce >> {d - 1}) + 1) >> 1) /* Q.{fce} -> Q.{fca}, round */"
+        fits = (2**31 >> d) + 1 + abs(R_int) < 2**31 - 1
+    else:
+        ce_a, fits = "", False
+    fy, fw, fr, fv, fe = p.f("y"), p.f("w"), p.f("r"), p.f("v"), p.f("e")
+    pr = cf["prod"]
+    sw = fy + fx - fw
+    for what, sh in (("kappa", fca + fx - 31), ("K_e", fce + fx - fKe), ("w", sw), ("a", pr["a"] - fy)):
+        if not 1 <= sh <= 62:
+            raise ValueError(f"{what} shift {sh} out of range")
     L = [
+        "    int32_t cr = s->cr, cv = s->cv, ca = s->ca, ce = s->ce, S, xs, w, kap, Ke;",
+        "    uint32_t x;",
+        "    int n;",
         "    /* S = H P H' + R = c_a + c_e + R (>= R by construction) */",
         # one saturating 32-bit add when c_e aligned plus R fits int32 for any c_e (see _acc_sat)
-        f"    S = acn_add_sat32(s->ca, (int32_t)({_shf('(int64_t)s->ce', fc['e'], fca)} + {P}_R), &s->overflow);"
-        if fc["e"] > fca and (2**31 >> (fc["e"] - fca)) + 1 + abs(R_int) < 2**31 - 1
-        else f"    S = acn_sat32((int64_t)s->ca + {_shf('(int64_t)s->ce', fc['e'], fca)} + {P}_R, &s->overflow);",
+        f"    S = acn_add_sat32(ca, {ce_a} + {P}_R, &s->overflow);"
+        if fits
+        else f"    S = acn_sat32((int64_t)ca + {_shift('(int64_t)ce', fce, fca)} + {P}_R, &s->overflow);",
         f"    if (S < {P}_R) {{",
         f"        S = {P}_R;",
         "    }",
-        f"    /* K = c / S: one reciprocal, 1/S = x 2^(n-62) with n = clz(S) in 1..{nmax}; x >> ({nmax} - n)",
-        f"     * puts it at 1/S = x 2^({nmax - 62}) for every S (dropping at most {nmax} of its 30 bits) */",
-        "    x = acn_recip((uint32_t)S, &n);",
+        f"    /* 1/S: one reciprocal, 1/S = x 2^(n-62) with n = clz(S) in 1..{nmax}; x >> ({nmax} - n)",
+        f"     * puts it at 1/S = x 2^({nmax - 62}) for every S (dropping at most {nmax} of its 30 bits):",
+        f"     * xs = 1/S in Q.{fx} */",
+        "    x = acn_recip_t((uint32_t)S, &n);",
         f"    x >>= {nmax} - n;",
-        "    xs = (int32_t)(x >> 1); /* below 2^31: each K is one signed 32x32 product */",
+        "    xs = (int32_t)(x >> 1); /* below 2^31: each product is one signed 32x32 multiply */",
+        "    /* w = y / S (|w| <= max|y| / R: fits, no saturation) */",
+        f"    w = (int32_t)ACN_RSHR(acn_mul(y, xs), {sw}); /* Q.{fy} x Q.{fx} -> {p.vars['w'].fmt}, round */",
+        "    /* x = x + K y = x + c w (K = c / S), c the prior block: r and v = Ts u take K_r y, K_v y here,",
+        "     * the rest of their step in the core */",
+        f"    s->r += {_sh('acn_mul(cr, w)', pr['r'] - fr, 'Q.{} -> Q.{}'.format(pr['r'], fr))};",
+        f"    s->v += {_sh('acn_mul(cv, w)', pr['v'] - fv, 'Q.{} -> Q.{}'.format(pr['v'], fv))};",
+        f"    s->a += (int32_t)ACN_RSHR(acn_mul(ca, w), {pr['a'] - fy}); /* Q.{pr['a']} -> Q.{fy}, round */",
+        f"    s->e = acn_mac(s->e, ce, w); /* Q.{fe}, exact */"
+        if pr["e"] == fe
+        else f"    s->e += {_sh('acn_mul(ce, w)', pr['e'] - fe, 'Q.{} -> Q.{}'.format(pr['e'], fe))};",
+        "    /* P = P - c c' / S: c_i -= c_i kappa with kappa = (S - R) / S in [0, 1), Q0.31;",
+        "     * P_ie -= c_i K_e with K_e = c_e / S */",
+        f"    kap = (int32_t)ACN_RSHR(acn_mul(S - {P}_R, xs), {fca + fx - 31}); /* Q.{fca + fx} -> Q0.31, round */",
+        # 0 < xs <= 2^30 (acn_recip: x <= 2^31): for any int32 c_e the product lies in
+        # [-2^61, (2^31 - 1) 2^30]; when both ends, shifted and rounded, fit int32, K_e needs no saturation
+        f"    Ke = (int32_t)ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}); /* Q.{fce + fx} -> {p.vars['Ke'].fmt},"
+        " round; fits for any c_e */"
+        if ((2**31 - 1) * 2**30 + 2 ** (fce + fx - fKe - 1)) >> (fce + fx - fKe) <= 2**31 - 1
+        and (-(2**61) + 2 ** (fce + fx - fKe - 1)) >> (fce + fx - fKe) >= -(2**31)
+        else f"    Ke = acn_sat32(ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}), &s->overflow);"
+        f" /* Q.{fce + fx} -> {p.vars['Ke'].fmt}, round */",
     ]
-    for nm in "rvae":
-        sh = 62 - fca + fc[nm] - fK[nm] - nmax - 1
-        if sh < 1 or sh > 62:
-            raise ValueError(f"K_{nm} shift {sh} out of range")
-        L.append(
-            f"    K{nm} = acn_sat32(ACN_RSHR((int64_t)s->c{nm} * xs, {sh}), &s->overflow);"
-            f" /* Q.{fc[nm]} x Q.{61 - nmax - fca} -> {p.vars['K' + nm].fmt}, round */"
-        )
-    L.append("    /* P = P - K c'; for a carried c_i = P_ia + P_ie: c_i -= K_i (c_a + c_e) = K_i (S - R) */")
-    L.append(f"    sr = S - {P}_R;")
-    for dst, ki, cj, fcj in (
-        ("cr", "Kr", "sr", fca),
-        ("Pre", "Kr", "s->ce", fc["e"]),
-        ("cv", "Kv", "sr", fca),
-        ("Pve", "Kv", "s->ce", fc["e"]),
-        ("ca", "Ka", "sr", fca),
-        ("Pae", "Ka", "s->ce", fc["e"]),
-    ):
-        L.append(
-            f"    s->{dst} = (int32_t)((int64_t)s->{dst} - "
-            f"{_shift(f'(int64_t){ki} * {cj}', fK[ki[1]] + fcj, p.f(dst))});"
-        )
-    L.append("    /* c_e = c_e - (K_a + K_e) c_e */")
-    L.append(
-        f"    s->ce = (int32_t)((int64_t)s->ce - {_shift('(int64_t)Ka * s->ce', fK['a'] + fc['e'], fc['e'])}"
-        f" - {_shift('(int64_t)Ke * s->ce', fK['e'] + fc['e'], fc['e'])});"
-    )
+    for dst, ci in (("Pre", "cr"), ("Pve", "cv"), ("Pae", "ca")):
+        dec = _shift(f"acn_mul({ci}, Ke)", p.f(ci) + fKe, p.f(dst))
+        L.append(f"    s->{dst} = (int32_t)((int64_t)s->{dst} - {dec});")
+    for ci in ("cr", "cv", "ca", "ce"):
+        L.append(f"    s->{ci} = (int32_t)((int64_t){ci} - {_shift(f'acn_mul({ci}, kap)', p.f(ci) + 31, p.f(ci))});")
     return L
 
 
-def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
+def _core_cov(p: AxisPlan, P: str, T: str) -> list[str]:
+    """Body of T_core for the covariance form: as _core_fixed, with the update of _gains_cov inline
+    (the prior block is read once into registers; the predict of the block stays a function of its own)."""
+    fr, fv, fe, fy = p.f("r"), p.f("v"), p.f("e"), p.f("y")
+    fo = p.consts["OMP"][1].frac
+    eh = _hi_round("e")
+    if p.design.x0[0] != 0 or p.design.x0[1] != 0 or p.design.x0[2] != 0:
+        raise ValueError("the merged predict needs r, u, a of x0 at zero")
+    fH2, fT2 = p.consts["H2"][1].frac, p.consts["T2"][1].frac
+    L = [
+        "    int32_t a = s->a;",
+        "    int64_t e = s->e, v0 = s->v, r, v;",
+        "    if (__builtin_expect(s->k > 0, 1)) {",
+        "        /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar), eps by its rounded high word */",
+        f"        e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
+        if fo != 32
+        else f"        e += (int64_t)-{P}_OMP * ({eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */",
+        f"        {T}_ppredict(s);",
+        "    }",
+        "    s->e = e;",
+        "    if (valid) {",
+        "        /* y = z - H x = z - a - eps; K = P H' / S, x = x + K y and P = P - K H P */",
+        f"        {T}_pupdate(s, z - a - {_hi_round('e')});",
+        "    }",
+        "    /* r += Ts u + Ts^2/2 a,  u += Ts a (K_r y and K_v y are in already); u and a are the previous",
+        "     * posteriors, and at k = 0 both increments are zero (x0 has r = u = a = 0): no test of k */",
+        f"    r = s->r + {_sh('v0', fv - fr, f'Q.{fv} -> Q.{fr}')}"
+        f" + {_sh(f'(int64_t){P}_H2 * a', fH2 + fy - fr, f'Q.{fH2 + fy} -> Q.{fr}')};",
+        f"    v = s->v + {_sh(f'(int64_t){P}_T2 * a', fT2 + fy - fv, f'Q.{fT2 + fy} -> Q.{fv}')};",
+        f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
+        f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
+        "    ++s->k;",
+    ]
+    return L
+
+
+def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     """Body of T_core: predict (k > 0) and update (valid) merged, every state read and written once.
 
     Contract (formats from :mod:`codegen.ranges`): z, y, a in Q.fy (int32); eps int64 in Q.(fy+32)
@@ -394,6 +586,8 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
     every shift is a floor except the two that make y and a (round to nearest). r and v are clamped
     once per step on their high words; nothing else can overflow over the declared ranges.
     """
+    if p.form == "covariance":
+        return _core_cov(p, P, T)
     fr, fv, fy, fe = p.f("r"), p.f("v"), p.f("y"), p.f("e")
     fK = {n: p.f("K" + n) for n in "rvae"}
     fo = p.consts["OMP"][1].frac
@@ -455,6 +649,22 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
     else:
         L += ["        Kr = (int32_t)kr;", "        Kv = (int32_t)kv;", "        Ka = s->Ka;"]
         L += ["        Ke = (int32_t)khi;"]
+        if follow:
+            L += [
+                "        if (s->dev) {",
+                "            /* after a skip: the schedule's gains plus the carried deviation (codegen.follow) */",
+                "            int32_t K[4];",
+                "            K[0] = Kr;",
+                "            K[1] = Kv;",
+                "            K[2] = Ka;",
+                "            K[3] = Ke;",
+                f"            {T}_follow(s, true, K);",
+                "            Kr = K[0];",
+                "            Kv = K[1];",
+                "            Ka = K[2];",
+                "            Ke = K[3];",
+                "        }",
+            ]
     L += [
         "        /* y = z - H x = z - a - eps */",
         f"        y = z - a - {eh};",
@@ -465,6 +675,17 @@ def _core_fixed(p: AxisPlan, P: str, T: str) -> list[str]:
         f" /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
         f"        e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
     ]
+    if follow:
+        L += [
+            "    } else {",
+            "        /* skipped: the gains of the next samples leave the schedule (codegen.follow) */",
+            "        int32_t K[4];",
+            "        K[0] = (int32_t)kr;",
+            "        K[1] = (int32_t)kv;",
+            "        K[2] = s->Ka;",
+            "        K[3] = (int32_t)khi;",
+            f"        {T}_follow(s, false, K);",
+        ]
     L += [
         "    }",
         "    s->e = e;",
@@ -542,6 +763,22 @@ static inline int64_t acn_mac(int64_t acc, int32_t a, int32_t b)
     return (int64_t)(((uint64_t)hi << 32) | lo);
 #else
     return acc + (int64_t)a * b;
+#endif
+}
+
+/* The bits of x in reverse order (one RBIT on Thumb-2): the bit-reversed sample count runs through
+ * the rounding offsets of the covariance predict evenly (see codegen.emit_c._acc). */
+static inline uint32_t acn_rbit(uint32_t x)
+{
+#if defined(__arm__) && defined(__thumb2__)
+    __asm__("rbit %0, %1" : "=r"(x) : "r"(x));
+    return x;
+#else
+    x = ((x >> 1) & UINT32_C(0x55555555)) | ((x & UINT32_C(0x55555555)) << 1);
+    x = ((x >> 2) & UINT32_C(0x33333333)) | ((x & UINT32_C(0x33333333)) << 2);
+    x = ((x >> 4) & UINT32_C(0x0F0F0F0F)) | ((x & UINT32_C(0x0F0F0F0F)) << 4);
+    x = ((x >> 8) & UINT32_C(0x00FF00FF)) | ((x & UINT32_C(0x00FF00FF)) << 8);
+    return (x >> 16) | (x << 16);
 #endif
 }
 
@@ -635,16 +872,45 @@ static inline uint32_t acn_recip(uint32_t d, int *n)
 """
 
 
+RECIP_TABLE_BITS = 7  # the covariance form's reciprocal starts from a table of 2^7 entries
+
+
+def recip_helpers() -> str:
+    """C of acn_recip_t, the covariance form's reciprocal: a table start (relative error below 2^-8)
+    and two Newton-Raphson steps (2^-16, then below 2^-28 with the arithmetic's rounding) instead of
+    acn_recip's linear start and three steps: the same contract, fewer instructions."""
+    nb = RECIP_TABLE_BITS
+    # entry i: 2^30 / D at the middle of D in [1/2 + i 2^-(nb+1), 1/2 + (i+1) 2^-(nb+1)), Q2.30 >> 15
+    tab = [round(2**30 / (0.5 + (i + 0.5) / 2 ** (nb + 1)) / 2**15) for i in range(2**nb)]
+    rows = [", ".join(str(x) for x in tab[j : j + 12]) for j in range(0, len(tab), 12)]
+    body = ",\n    ".join(rows)
+    return f"""
+/* 1/D for D in [1/2, 1) in Q2.30 >> 15, at the middle of each of 2^{nb} equal intervals */
+static const uint16_t acn_rtab[{2**nb}] = {{
+    {body}}};
+
+/* As acn_recip (1/d = x 2^(n-62), x in Q2.30, n = clz(d), d > 0, relative 2^-28): the start from
+ * acn_rtab (relative error below 2^-8), then two Newton-Raphson steps. */
+static inline uint32_t acn_recip_t(uint32_t d, int *n)
+{{
+    uint32_t dn, x;
+    *n = __builtin_clz(d);
+    dn = d << *n;                                                           /* D, Q0.32 */
+    x = (uint32_t)acn_rtab[(dn >> {31 - nb}) & {2**nb - 1}u] << 15; /* Q2.30 */
+    ACN_NR(dn, x);
+    ACN_NR(dn, x);
+    return x;
+}}
+"""
+
+
 def _schedule_for(p: AxisPlan) -> Schedule:
-    import numpy as np
+    """The plan's gain schedule over its declared run, computed window by window (memory does not grow
+    with the run)."""
+    from .gains import schedule_of
 
-    from .gains import riccati
-
-    # the whole run's gains, sample by sample: memory linear in the declared run (the covariance form
-    # never needs this; the gain-schedule form is refused for every input that can skip)
-    K = np.array(riccati(p.design, p.n_run).K) * np.array([1.0, p.design.Ts, 1.0, 1.0])
     fm = tuple(p.vars["K" + n].fmt for n in "rvae")
-    return schedule(K, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
+    return schedule_of(p.design, p.n_run, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
 
 
 def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[str], dict]:
@@ -765,6 +1031,8 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         src.append(f"    s->Ke_lo = UINT32_C({ke0 & 0xFFFFFFFF});")
         src.append(f"    s->Ke = {_c_int(ke0 >> 32, 32)};")
         src.append(f"    s->seg = &{T}_seg[0];")
+        src.append("    s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;")
+        src.append("    s->dev = 0u;")
     src += ["    s->k = 0;", "    s->overflow = 0;", "}", ""]
     # convert
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
@@ -789,20 +1057,19 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             "}",
             "",
         ]
+        from .follow import emit_follow, thresholds
+        from .ranges import RangeError
+
+        try:
+            src += emit_follow(p, P, T, thresholds(p, sched))
+        except ValueError as e:  # a shift the deviation's formats cannot take: this model's ranges
+            raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
     if p.form == "covariance":
-        # the covariance block in functions of their own: its registers do not crowd the states'
+        # the predict of the covariance block in a function of its own: its registers do not crowd the states'
         src += [f"static void {T}_ppredict({T}_t *s)", "{"]
         src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(p, P)]
         src += ["}", ""]
-        src += [
-            f"static void {T}_pupdate({T}_t *s, int32_t K[4])",
-            "{",
-            "    int32_t Kr, Kv, Ka, Ke, S, sr, xs;",
-            "    uint32_t x;",
-            "    int n;",
-        ]
-        src += [_smull(ln) for ln in _gains_cov(p, P)]
-        src += ["    K[0] = Kr;", "    K[1] = Kv;", "    K[2] = Ka;", "    K[3] = Ke;", "}", ""]
+        src += [f"static void {T}_pupdate({T}_t *s, int32_t y)", "{"] + _gains_cov(p, P) + ["}", ""]
     src += [
         "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
         f" * with z [m/s^2] {v['z'].fmt}. Inlined into update, skip and step. */",
@@ -811,22 +1078,64 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     ]
     src += _core_fixed(p, P, T)
     src += ["}", ""]
+    gs = p.form == "gain_schedule"
+    if gs:  # after a skip: the same sample with the schedule's gains corrected (rare, out of line)
+        src += [
+            "/* One sample while following a skip (codegen.follow): the core with the deviation carried. */",
+            f"static __attribute__((noinline)) void {T}_core_dev({T}_t *s, int32_t z, bool valid)",
+            "{",
+        ]
+        src += _core_fixed(p, P, T, follow=True)
+        src += ["}", ""]
+    dispatch = (
+        [
+            "    if (__builtin_expect(s->dev != 0u, 0)) { /* following a skip */",
+            f"        {T}_core_dev(s, z, true);",
+            "    } else {",
+            f"        {T}_core(s, z, true);",
+            "    }",
+        ]
+        if gs
+        else [f"    {T}_core(s, z, true);"]
+    )
+    src += [f"void {T}_update({T}_t *s, int32_t z)", "{"] + dispatch + ["}", ""]
     src += [
-        f"void {T}_update({T}_t *s, int32_t z)",
-        "{",
-        f"    {T}_core(s, z, true);",
-        "}",
-        "",
         "/* A sample that must be skipped (rail-clipped, missing capture): predict only. */",
         f"void {T}_skip({T}_t *s)",
         "{",
-        f"    {T}_core(s, 0, false);",
+        f"    {T}_core_dev(s, 0, false);" if gs else f"    {T}_core(s, 0, false);",
         "}",
         "",
+    ]
+    if gs:
+        src += [
+            "/* T_step while following a skip: out of line, so that nothing of it",
+            " * reaches the registers of the common path. */",
+            f"static __attribute__((noinline)) bool {T}_step_dev({T}_t *s, {params})",
+            "{",
+            "    int32_t z = 0;",
+            f"    if (!{T}_convert({args}, &z)) {{",
+            f"        {T}_core_dev(s, 0, false);",
+            "        return false;",
+            "    }",
+            f"    {T}_core_dev(s, z, true);",
+            "    return true;",
+            "}",
+            "",
+        ]
+    src += [
         "/* Convert the raw input and run one step; returns false when the sample was skipped. */",
         f"bool {T}_step({T}_t *s, {params})",
         "{",
         "    int32_t z = 0;",
+    ]
+    if gs:
+        src += [
+            "    if (__builtin_expect(s->dev != 0u, 0)) { /* following a skip */",
+            f"        return {T}_step_dev(s, {args});",
+            "    }",
+        ]
+    src += [
         f"    if (!{T}_convert({args}, &z)) {{",
         f"        {T}_skip(s); /* rare: the core inlined once, for valid samples only */",
         "        return false;",
@@ -835,6 +1144,8 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         "    return true;",
         "}",
         "",
+    ]
+    src += [
         f"void {T}_read(const {T}_t *s, {T}_out_t *o)",
         "{",
         "    o->r = s->r;",
@@ -869,7 +1180,7 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     if sched is not None:
         man["schedule"] = {
             "segments": sched.n_segments,
-            "max_error": [float(e) for e in sched.error.max(0)],
+            "max_error": [float(e) for e in sched.max_error],
             "rel_tol": list(SCHEDULE_REL_TOL),
             "flash_bytes": (sched.n_segments + 1) * 24,
         }
@@ -881,34 +1192,15 @@ def plans(model: Model, form: str | None = None) -> list[AxisPlan]:
 
 
 def refuse_schedule_with_skips(model: Model, form: str) -> None:
-    """The gain-schedule form is refused for every input that can skip samples, which is every input
-    the model format describes (analog: the ADC rails; duty cycle: a bad or missing capture).
-
-    Why: the schedule is indexed by time and assumes an uninterrupted run. After a skipped sample the
-    Kalman gain is not the schedule's (a gap of 38 samples at 100 Hz leaves K_a 79 % and K_v 25x off
-    for ~10 samples; the firmware then departed from the float64 filter by 33-75 sigma in a, issue
-    #12), and a schedule that follows skips needs the covariance block at the moment of the skip,
-    which only the covariance form carries. Measured: that block cannot be taken stale from a table
-    (P_re off by a segment leaves K_r 10 % off for good), so the honest choice is the covariance form.
-    """
+    """Kept for callers: the gain-schedule form now follows skipped samples (codegen.follow: after a
+    skip the C carries the deviation of the covariance block from the schedule's until its gains are
+    back on the schedule), so no input that codegen takes is refused for skipping. What it still refuses,
+    as every form does: a sensor codegen does not take at all (calibrated data)."""
     if form != "gain_schedule":
         return
-    from .model import ModelError
     from .ranges import refuse_calibrated
 
-    refuse_calibrated(model)  # a sensor codegen does not take at all is refused as such first
-
-    if model.sensor.kind == "analog":
-        full = 2**model.sensor.analog.adc_bits
-        why = f"this analog input skips rail-clipped samples (ADC codes 0 and {full})"
-    else:
-        why = "this duty-cycle input skips bad captures (no period, a period off nominal, a stuck output)"
-    raise ModelError(
-        model.source,
-        "filter.form",
-        f"'gain_schedule' refused: {why}, and after a skip the Kalman gain is no longer the time-indexed "
-        "schedule's (K_a up to ~80 % off), so the C would depart from the float64 filter; accepted: 'covariance'",
-    )
+    refuse_calibrated(model)
 
 
 def emit(
@@ -921,12 +1213,10 @@ def emit(
 ) -> dict[str, str]:
     """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json.
 
-    The gain-schedule form is refused (:func:`refuse_schedule_with_skips`) unless the caller
-    guarantees ``assume_no_skips``: an input that never skips a sample (the tests and the bench use it
-    to check the form's arithmetic; the CLI and the firmware build never pass it)."""
+    ``assume_no_skips`` is accepted for older callers and changes nothing: both forms follow skipped
+    samples."""
     form = form or model.filter.form
-    if not assume_no_skips:
-        refuse_schedule_with_skips(model, form)
+    refuse_schedule_with_skips(model, form)
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)
     ps = plans(model, form)
@@ -943,7 +1233,7 @@ def emit(
         what_c=f"fixed-point {form} filter. No floating point, no division, no heap.",
         declarations=H,
         source_includes="#include <stddef.h> /* offsetof */\n\n",
-        source_prelude=HELPERS + "\n",
+        source_prelude=HELPERS + (recip_helpers() if any(p.form == "covariance" for p in ps) else "") + "\n",
         body=S,
         manifest={"arith": "fixed", "form": form, "axes": MAN},
     )

@@ -18,6 +18,7 @@ integers are simulated here exactly, so the compression error
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from array import array
 from dataclasses import dataclass
@@ -60,6 +61,7 @@ class GainRun:
     sigma_max: np.ndarray | None = None
     S_min: float = 0.0
     S_max: float = 0.0
+    row_P: np.ndarray | None = None  # (len(rows), 16) the prior P of each row
 
     def at(self, k: int) -> tuple[np.ndarray, np.ndarray, float]:
         """(K, sigma, S) of sample k (negative: from the end), kept or a row."""
@@ -231,20 +233,21 @@ void acn_riccati(long n, const double *par, const double *P0, const unsigned cha
  * |y| <= ysig sqrt(S), |a| <= a_abs), the same recursion in the same order, fed by the Riccati above
  * sample by sample: its cost is constant per sample and nothing is stored but the asked-for rows.
  * bp: omp, Ts, dz + d_y, d_a, d_e, d_dec, dH2, dT2, r floors, v floors, a_abs, ysig, dS, R, 2^-22,
- * Ee0, dc[4], lsbK[4]. out: (nrows, 4) [r, u, a, eps]. */
+ * Ee0, dc[4], lsbK[4], lsb_w / 2 (the rounding of w = y / S enters as S lsb_w / 2 of innovation error).
+ * out: (nrows, 4) [r, u, a, eps]. */
 void acn_bound(long n, const double *par, const double *P0, const double *bp, long nrows, const long *rows,
                double *out)
 {
     RIC_STATE;
     double omp = bp[0], inj = bp[2], d_a = bp[3], d_e = bp[4], d_dec = bp[5], dH2 = bp[6], dT2 = bp[7];
     double rfl = bp[8], vfl = bp[9], a_abs = bp[10], ysig = bp[11], dS = bp[12], Rq = bp[13], k22 = bp[14];
-    const double *dc = bp + 16, *lsbK = bp + 20;
+    const double *dc = bp + 16, *lsbK = bp + 20, lw = bp[24];
     double H2 = Ts * Ts / 2, T2 = Ts * Ts;
     double Es = 0.0, Ee = bp[15], Ea, Ev = 0.0, Er = 0.0, a_prev = 0.0, Esm, Eem;
     long k, ir = 0;
     Ea = Ee;
     for (k = 0; k < n; ++k) {
-        double cr, cu, ca, ce, S, kr, ku, ka, ke, Kc[4], dK[4], yc, a_c;
+        double cr, cu, ca, ce, S, kr, ku, ka, ke, Kc[4], dK[4], yc, a_c, injk;
         int i;
         if (k) {
             RIC_PREDICT;
@@ -267,11 +270,12 @@ void acn_bound(long n, const double *par, const double *P0, const double *bp, lo
         a_c = a_prev + Ea;
         Er = Er + Ev + H2 * Ea + dH2 * a_c + rfl;
         Ev = Ev + T2 * Ea + dT2 * a_c + vfl;
-        yc = ysig * sqrt(S) + Esm + inj;
-        Es = fabs(1.0 - Kc[2] - Kc[3]) * Esm + fabs(Kc[2] + Kc[3]) * inj + (dK[2] + dK[3]) * yc + d_a + d_e;
-        Ee = Eem + fabs(Kc[3]) * (Esm + inj) + dK[3] * yc + d_e;
-        Ev += fabs(Kc[1]) * (Esm + inj) + dK[1] * yc;
-        Er += fabs(Kc[0]) * (Esm + inj) + dK[0] * yc;
+        injk = inj + S * lw;
+        yc = ysig * sqrt(S) + Esm + injk;
+        Es = fabs(1.0 - Kc[2] - Kc[3]) * Esm + fabs(Kc[2] + Kc[3]) * injk + (dK[2] + dK[3]) * yc + d_a + d_e;
+        Ee = Eem + fabs(Kc[3]) * (Esm + injk) + dK[3] * yc + d_e;
+        Ev += fabs(Kc[1]) * (Esm + injk) + dK[1] * yc;
+        Er += fabs(Kc[0]) * (Esm + injk) + dK[0] * yc;
         Ea = Es + Ee;
         a_prev = a_abs;
         if (ir < nrows && rows[ir] == k) {
@@ -350,7 +354,7 @@ def _finish(n, keep, K, sigma, S_all, mprior, mpost, mc, rr, rowP, rowK, rowsig,
         a.flags.writeable = False
     return GainRun(
         K, sigma, S_all, mprior, mpost, mc, checkpoints, n, tuple(rr), rowK, rowsig, rowS,
-        ext[:4].copy(), ext[4:8].copy(), float(ext[8]), float(ext[9]),
+        ext[:4].copy(), ext[4:8].copy(), float(ext[8]), float(ext[9]), rowP,
     )  # fmt: skip
 
 
@@ -505,37 +509,75 @@ class Schedule:
     itself; K_e: the high word of an int64, whose slope is far below one LSB of K_e once it
     settles). It starts at start[i] (the gain of sample 0) and adds slope[j][i] after every sample
     of segment j; after the last segment the gains are held.
-    The integers are those of the C, simulated here exactly.
+    The integers are those of the C, simulated here exactly. max_error: the largest |stored - float64|
+    of each gain over the declared run; head_error: that per sample over the first samples (KEEP);
+    :meth:`errors` gives it for any n (replaying the table against the float64 gains).
     """
 
     formats: tuple[QFormat, ...]  # per gain, int32
     start: tuple[int, ...]  # accumulators at sample 0
     lengths: tuple[int, ...]
     slopes: tuple[tuple[int, ...], ...]
-    stored: np.ndarray  # (N, 4) the gains the C uses, as real numbers
-    error: np.ndarray  # (N, 4) |stored - float64|
+    max_error: np.ndarray  # (4,)
+    head_error: np.ndarray  # (m, 4) |stored - float64| of the first m samples
     tol: tuple[float, ...]
+    n: int = 0  # samples the schedule was built over (the declared run)
+    source: object = None  # callable (k0, k1) -> float64 gains K[k0:k1] (C coordinates), for errors(n > m)
 
     @property
     def n_segments(self) -> int:
         return len(self.lengths)
 
+    def gains_int(self, n: int, first: int = 0) -> np.ndarray:
+        """(n - first, 4) the integers the C uses as K_r, K_v, K_a, K_e at samples first .. n-1 of an
+        uninterrupted run (the high words, in the gains' formats; held after the last segment)."""
+        ex = np.array(EXTRA, dtype=np.int64)
+        hold = np.array(HOLD, dtype=bool)
+        out = np.empty((n - first, 4), dtype=np.int64)
+        A = np.array(self.start, dtype=np.int64)
+        k0 = 0
+        for L, sl in zip(self.lengths, self.slopes, strict=True):
+            if k0 >= n:
+                break
+            sl = np.array(sl, dtype=np.int64)
+            lin = np.where(hold, 0, sl)
+            a, b = max(k0, first), min(k0 + L, n)
+            if a < b:
+                t = np.arange(a - k0, b - k0, dtype=np.int64)[:, None]
+                out[a - first : b - first] = np.where(hold, sl, A + lin * t)
+            A = np.where(hold, sl, A + lin * L)
+            k0 += L
+        if k0 < n:
+            out[max(k0, first) - first :] = A
+        return out >> ex
 
-def _segment(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, k0: int, L: int, hold: np.ndarray):
-    """Per-gain numbers (4,) of a segment of L samples from k0 starting at the accumulators A, or
-    None if some gain leaves its tolerance. A linear gain: its per-sample slope, checked on samples
-    k0 .. k0 + L (the endpoint starts the next segment from the accumulator); a held gain (hold[i]):
-    its constant value over the segment, checked on samples k0 .. k0 + L - 1 (the next segment sets
-    its own)."""
-    sl = np.floor((Kq[k0 + L] - A) / L + 0.5).astype(np.int64)
+    def errors(self, n: int) -> np.ndarray:
+        """(n, 4) |stored - float64| at samples 0 .. n-1 of an uninterrupted run."""
+        if n <= len(self.head_error):
+            return self.head_error[:n]
+        lsb = np.array([f.lsb for f in self.formats])
+        return np.abs(self.gains_int(n) * lsb - self.source(0, n))
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.errors(self.n)
+
+
+def _segment(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, L: int, hold: np.ndarray):
+    """Per-gain numbers (4,) of a segment of L samples starting at the accumulators A (Kq, tolq: the
+    samples from the segment's start on), or None if some gain leaves its tolerance. A linear gain: its
+    per-sample slope, checked on samples 0 .. L (the endpoint starts the next segment from the
+    accumulator); a held gain (hold[i]): its constant value over the segment, checked on samples
+    0 .. L - 1 (the next segment sets its own)."""
+    sl = np.floor((Kq[L] - A) / L + 0.5).astype(np.int64)
     t = np.arange(L + 1, dtype=np.int64)[:, None]
-    err = np.abs((A + sl * t).astype(np.float64) - Kq[k0 : k0 + L + 1])
-    ok = err <= tolq[k0 : k0 + L + 1]
+    err = np.abs((A + sl * t).astype(np.float64) - Kq[: L + 1])
+    ok = err <= tolq[: L + 1]
     if not np.all(ok[:, ~hold]):
         return None
     if np.any(hold):
-        lo = np.max(Kq[k0 : k0 + L, hold] - tolq[k0 : k0 + L, hold], axis=0)
-        hi = np.min(Kq[k0 : k0 + L, hold] + tolq[k0 : k0 + L, hold], axis=0)
+        lo = np.max(Kq[:L, hold] - tolq[:L, hold], axis=0)
+        hi = np.min(Kq[:L, hold] + tolq[:L, hold], axis=0)
         v = np.ceil(lo)
         if np.any(v > hi):
             return None
@@ -543,64 +585,180 @@ def _segment(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, k0: int, L: int, h
     return sl
 
 
-def schedule(K: np.ndarray, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0) -> Schedule:
-    """Compress K (N, 4) into a piecewise-linear integer schedule.
+class _Window:
+    """The float64 gains of samples k0 .. k1 of an uninterrupted run, from a window of W samples that
+    moves forward only (the greedy segmentation asks in increasing order): memory O(W), whatever n."""
+
+    def __init__(self, d: AxisDesign, n: int, scale: np.ndarray, W: int):
+        self.key0 = _key(d)[:-1]
+        self.P = _key(d)[-1]
+        self.n, self.scale, self.W = n, scale, W
+        self.w0 = 0
+        self.K = np.zeros((0, 4))
+
+    def _load(self, k0: int) -> None:
+        if k0 < self.w0:
+            raise ValueError("the window only moves forward")
+        if k0 > self.w0:  # the prior at k0, from the window's start
+            r = _riccati(self.key0 + (self.P,), k0 - self.w0 + 1, None, 0, (k0 - self.w0,))
+            self.P = tuple(float(x) for x in r.row_P[r.rows.index(k0 - self.w0)])
+            self.w0 = k0
+        m = min(self.W, self.n - k0)
+        self.K = np.asarray(_riccati(self.key0 + (self.P,), m, None, m, ()).K) * self.scale
+
+    def __call__(self, k0: int, k1: int) -> np.ndarray:
+        if k1 - k0 > self.W:  # a long replay (errors over the declared run): not through the window
+            r = _riccati(self.key0 + (self.P,), k1, None, k1, ()) if k0 == self.w0 == 0 else None
+            if r is None:
+                raise ValueError("the window only moves forward")
+            return np.asarray(r.K) * self.scale
+        if k0 < self.w0 or k1 > self.w0 + len(self.K):
+            self._load(k0)
+        return self.K[k0 - self.w0 : k1 - self.w0]
+
+
+def riccati_chunks(d: AxisDesign, n: int, chunk: int):
+    """(k0, K (m, 4), S (m,)) of samples k0 .. k0 + m - 1 of an uninterrupted run of n samples, chunk
+    by chunk (each from the prior at its start): memory O(chunk), whatever n."""
+    key0, P = _key(d)[:-1], _key(d)[-1]
+    k0 = 0
+    while k0 < n:
+        m = min(chunk, n - k0)
+        r = _riccati(key0 + (P,), m + 1 if k0 + m < n else m, None, m, (m,) if k0 + m < n else ())
+        yield k0, np.asarray(r.K), np.asarray(r.S)
+        if k0 + m < n:
+            P = tuple(float(x) for x in r.row_P[r.rows.index(m)])
+        k0 += m
+
+
+def schedule_of(
+    d: AxisDesign, n: int, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0, window: int = 1 << 19
+) -> Schedule:
+    """:func:`schedule` of the Kalman gains of an uninterrupted run of n samples of ``d`` (C coordinates:
+    K_v = Ts K_u), computed window by window: memory O(window) whatever n. Cached: codegen, its report
+    and hil ask for the same schedule."""
+    key = (_key(d), n, tuple(formats), tuple(np.broadcast_to(rel_tol, (4,)).tolist()), ramp, window)
+    if key not in _SCHEDULES:
+        scale = np.array([1.0, d.Ts, 1.0, 1.0])
+        sched = schedule(_Window(d, n, scale, window), formats, rel_tol, ramp, n=n, window=window)
+        # replays start from sample 0: a fresh source
+        _SCHEDULES[key] = dataclasses.replace(sched, source=_Window(d, n, scale, window))
+        while len(_SCHEDULES) > 8:
+            _SCHEDULES.pop(next(iter(_SCHEDULES)))
+    return _SCHEDULES[key]
+
+
+_SCHEDULES: dict = {}
+
+
+def schedule(
+    K, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0, *, n: int | None = None, window: int = 1 << 19
+) -> Schedule:
+    """Compress the gains K (an (N, 4) array, or a callable (k0, k1) -> K[k0:k1] over n samples) into a
+    piecewise-linear integer schedule.
 
     Tolerance per gain and sample: rel_tol |K[k]| + half an LSB of the accumulator's high word (the
     floor of the high word adds up to one more LSB); for K_r and K_v, rel_tol ramps up from 1/20 over
     the first ``ramp`` samples. Knots are chosen greedily: from each knot the segment grows by
     doubling from the previous segment's length, then bisects; as the gains settle, the segments
-    lengthen geometrically.
+    lengthen geometrically (at most ``window`` - 1 samples each, the span held in memory at a time).
     """
-    n = len(K)
+    if callable(K):
+        get = K
+    else:
+        Karr = np.asarray(K)
+        n = len(Karr)
+
+        def get(k0, k1):
+            return Karr[k0:k1]
+
     ex = np.array(EXTRA, dtype=np.int64)
-    unit = np.array([f.lsb for f in formats]) / 2.0**ex  # one accumulator LSB
-    Kq = K / unit
-    # the high word floors: an accumulator within rel_tol |K| of K leaves the gain within that + 1 LSB
+    lsb = np.array([f.lsb for f in formats])
+    unit = lsb / 2.0**ex  # one accumulator LSB
     rel = np.broadcast_to(np.asarray(rel_tol, dtype=np.float64), (4,))
-    if ramp:  # K_r, K_v feed r and u only, whose sigma grows with time: 20x tighter at the start
-        w = np.clip((np.arange(n) + 1.0) / ramp, 0.05, 1.0)[:, None]
-        rel = rel * np.where(np.arange(4) < 2, w, 1.0)
-    tolq = rel * np.abs(Kq) + np.where(ex > 0, 0.5 * 2.0**ex, 0.5)
+    half = np.where(ex > 0, 0.5 * 2.0**ex, 0.5)
     hold = np.array(HOLD, dtype=bool)
-    A = np.floor(Kq[0] + 0.5).astype(np.int64)
+
+    def q(k0, k1):
+        """Kq and tolq of samples k0 .. k1 - 1."""
+        Kq = get(k0, k1) / unit
+        r = rel
+        if ramp:  # K_r, K_v feed r and u only, whose sigma grows with time: 20x tighter at the start
+            w = np.clip((np.arange(k0, k1) + 1.0) / ramp, 0.05, 1.0)[:, None]
+            r = rel * np.where(np.arange(4) < 2, w, 1.0)
+        return Kq, r * np.abs(Kq) + half
+
+    keep = min(n, KEEP)
+    head = np.empty((keep, 4))
+    max_err = np.zeros(4)
+    A = np.floor(q(0, 1)[0][0] + 0.5).astype(np.int64)
+    A0 = A.copy()
     lengths, slopes = [], []
-    acc = np.empty((n, 4), dtype=np.int64)
     k0, last = 0, 1
-    while k0 < n - 1:
-        good, sl_good = 1, _segment(Kq, tolq, A, k0, 1, hold)
+    cap = max(2, window // 2)
+
+    def account(k, m, acc):
+        """The stored gains of samples k .. k + m - 1 (accumulators acc): their error, kept."""
+        nonlocal max_err
+        hi = acc >> ex
+        if np.any(np.abs(hi) > 2**31 - 1):
+            i = int(np.argmax(np.any(np.abs(hi) > 2**31 - 1, axis=0)))
+            raise ValueError(f"gain {i} leaves its int32 format {formats[i]}")
+        err = np.abs(hi * lsb - get(k, k + m))
+        max_err = np.maximum(max_err, err.max(0))
+        if k < keep:
+            head[k : min(keep, k + m)] = err[: min(keep, k + m) - k]
+
+    def search(Kq, tolq, span):
+        """The longest segment found by doubling then bisecting within span; and whether the doubling
+        stopped at the span rather than at a failure."""
+        good, sl_good = 1, _segment(Kq, tolq, A, 1, hold)
         step = max(1, last // 2)
-        while good + step <= n - 1 - k0:
-            sl = _segment(Kq, tolq, A, k0, good + step, hold)
+        while good + step <= span:
+            sl = _segment(Kq, tolq, A, good + step, hold)
             if sl is None:
                 break
             good, sl_good = good + step, sl
             step *= 2
+        else:
+            if span < min(n - 1 - k0, cap):
+                return good, sl_good, True
         while step > 1:
             step //= 2
-            if good + step <= n - 1 - k0:
-                sl = _segment(Kq, tolq, A, k0, good + step, hold)
+            if good + step <= span:
+                sl = _segment(Kq, tolq, A, good + step, hold)
                 if sl is not None:
                     good, sl_good = good + step, sl
+        return good, sl_good, False
+
+    while k0 < n - 1:
+        span = min(n - 1 - k0, cap, max(64, 4 * last))
+        while True:  # the gains of the samples the search may read, widened until it stops inside them
+            Kq, tolq = q(k0, k0 + span + 1)
+            good, sl_good, short = search(Kq, tolq, span)
+            if not short:
+                break
+            span = min(n - 1 - k0, cap, 4 * span)
         if sl_good is None:  # one sample: the slope lands on the rounded next value
-            sl_good = np.floor(Kq[k0 + 1] + 0.5).astype(np.int64) - A
-            sl_good[hold] = np.floor(Kq[k0, hold] + 0.5).astype(np.int64)
+            sl_good = np.floor(Kq[1] + 0.5).astype(np.int64) - A
+            sl_good[hold] = np.floor(Kq[0, hold] + 0.5).astype(np.int64)
         lin = np.where(hold, 0, sl_good)
-        acc[k0 : k0 + good] = np.where(hold, sl_good, A + lin * np.arange(good, dtype=np.int64)[:, None])
+        account(k0, good, np.where(hold, sl_good, A + lin * np.arange(good, dtype=np.int64)[:, None]))
         A = np.where(hold, sl_good, A + lin * good)
         lengths.append(good)
         slopes.append(tuple(int(x) for x in sl_good))
         k0 += good
         last = good
-    acc[k0:] = A
-    start = tuple(int(x) for x in acc[0])
-    hi = acc >> ex  # the gains the C uses: the high words
-    for i, f in enumerate(formats):
-        if np.any(np.abs(hi[:, i]) > 2**31 - 1):
-            raise ValueError(f"gain {i} leaves its int32 format {f}")
+    if k0 < n:
+        account(k0, n - k0, np.broadcast_to(A, (n - k0, 4)))
+    start = np.array(slopes[0] if slopes else A, dtype=np.int64)
+    start = tuple(int(x) for x in np.where(hold, start, A0))
     for sl in slopes:
         if any(abs(x) > 2**31 - 1 for x, e in zip(sl, EXTRA, strict=True) if e == 0):
             raise ValueError("a slope leaves int32")
-    stored = hi.astype(np.float64) * np.array([f.lsb for f in formats])
-    err = np.abs(stored - K)
-    return Schedule(tuple(formats), start, tuple(lengths), tuple(slopes), stored, err, tuple(np.max(tolq * unit, 0)))
+    head.flags.writeable = False
+    tolmax = rel * 1.0  # per gain: rel_tol at its widest (the absolute part is half an LSB)
+    return Schedule(
+        tuple(formats), start, tuple(lengths), tuple(slopes), max_err, head,
+        tuple(float(x) for x in tolmax), n, get,
+    )  # fmt: skip

@@ -104,3 +104,28 @@ def const_format(value: float, word: int = 32) -> QFormat:
     if value == 0:
         return QFormat(word, word - 2)
     return fit(abs(value) * (1 + 2.0 ** -(word - 2)), word)
+
+
+GUARD_BITS = 16  # bits below the target's LSB at which a sum of three or more fine terms is formed
+GUARD_BITS_2 = 32  # ... and a sum of one or two: at 32 the rounding is the high word, no shift
+
+
+def guard_bits(fine_fracs: list[int], ft: int) -> int:
+    """Guard bits g of a sum rounded once to Q.ft (codegen.emit_c._acc) whose finer terms have
+    ``fine_fracs`` fractional bits: the most that needs no left shift of any of them, at most
+    GUARD_BITS_2 for one or two such terms and GUARD_BITS for more."""
+    return min(GUARD_BITS_2 if len(fine_fracs) <= 2 else GUARD_BITS, *(fr - ft for fr in fine_fracs))
+
+
+def acc_bound(ft: int, terms: list[tuple[int, int]], dither: bool = False) -> int:
+    """A bound, in LSB of Q.ft, on |sum| as codegen.emit_c._acc forms it from terms given as (bound on
+    |term| in its own LSB, its fractional bits): the terms in Q.ft exactly, the finer ones each floored
+    to Q.(ft + g) (one more LSB of that each), the rounding offset (half an LSB, or with ``dither``
+    up to one), then the shift by g (one more LSB for its floor)."""
+    exact = sum(m for m, fr in terms if fr == ft)
+    fine = [(m, fr) for m, fr in terms if fr != ft]
+    if not fine:
+        return exact
+    g = guard_bits([fr for _, fr in fine], ft)
+    tot = sum((m >> (fr - ft - g)) + 1 for m, fr in fine) + ((1 << g) - 1 if dither else 1 << (g - 1))
+    return exact + (tot >> g) + 1

@@ -111,6 +111,7 @@ class AxisPlan:
     sat_free: frozenset = frozenset()  # predict sums that fit int32 for every int32 input (no clamp)
     v_step: float = 0.0  # largest |v| increment of one step
     conv_shift: int = -1  # analog fast path: code << conv_shift (-1: the int64 path)
+    gap_run: GainRun | None = None  # gain schedule: maxima over gaps of `gap` samples (codegen.follow)
 
     def f(self, name: str) -> int:
         return self.vars[name].fmt.frac
@@ -294,16 +295,20 @@ def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPla
     rb = GUARD * model.ranges.max_position_m
     _require(model, "ranges.max_velocity_m_s", "m", vb, 64)
     _require(model, "ranges.max_position_m", "m", rb, 64)
-    kb = _gain_bounds(p) if form == "gain_schedule" else None
+    kb = _schedule_gain_bounds(p) if form == "gain_schedule" else None
     p.step_max = vb + Ts * Ts * a_b + (GUARD * 0.25 + 1) * y_b  # |K_r|, |K_v| < 0.25 (checked below)
     fr = _require(model, "ranges.max_position_m", "m", rb + p.step_max, 64)
     # v gets the format of the products K_v y and Ts^2 a, so they accumulate into it with no shift
     # (one SMLAL each), when that format holds v and one step's increment
     kv_b = 2 * GUARD * float(g.kmax[1]) * Ts  # K_v (Ts u gain) bound, with room for skips
     p.kv_room = kv_b
+    if kb is not None:  # gain schedule: the gains after a gap (codegen.follow) reach kb
+        kv_b = max(kv_b, float(kb[1]))
     v_step = Ts * Ts * a_b + kv_b * y_b
     p.v_step = v_step
     fv = _require(model, "ranges.max_velocity_m_s", "m", vb + v_step, 64)
+    if kb is not None:  # gain schedule: v in the format of K_v y, K_v's format wide enough for its gaps
+        fv = QFormat(64, min(fv.frac, const_format(max(float(kb[1]), Ts * Ts)).frac + fy.frac))
     add("v", Var("v", "m", vb, fv, "Ts*u, 2x max|u|", True))
     add("r", Var("r", "m", rb, fr, "2x max|r|", True))
     ub = GUARD * model.ranges.max_velocity_m_s
@@ -329,11 +334,14 @@ def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPla
         _plan_covariance(p)
     else:
         _plan_gain_formats(p, kb)
+        _plan_schedule_follow(p)
     # Ts^2/2 shares the format of K_r, Ts^2 that of K_v: r += v + (Ts^2/2 a + K_r y) needs one shift
     # (when that leaves Ts^2/2 fewer than 20 bits, it gets its own format and a second shift)
+    # (gain schedule: 18 bits, its K_r format being wide enough for the gains after a gap)
+    min_bits = 18 if form == "gain_schedule" else 20
     for nm, kn, val in (("H2", "Kr", Ts * Ts / 2.0), ("T2", "Kv", Ts * Ts)):
         f = p.vars[kn].fmt
-        if val * 2**f.frac < 2**20:
+        if val * 2**f.frac < 2**min_bits:
             f = const_format(val)
         p.consts[nm] = (val, f)
         for fm in (f, p.vars[kn].fmt):
@@ -380,9 +388,15 @@ def _plan_input(p: AxisPlan) -> None:
         p.z_error = (2.0**-27 + 2.0**-31) * gain + cg.lsb / 2 + 2.0 ** -(31 + cg.frac) + 2.0**-fz / 2
 
 
-def _gain_bounds(p: AxisPlan) -> np.ndarray:
-    """|K| bounds in the C's coordinates [r, v = Ts u, a, eps]."""
-    return p.gains.kmax * np.array([1.0, p.design.Ts, 1.0, 1.0])
+def _schedule_gain_bounds(p: AxisPlan) -> np.ndarray:
+    """Gain-schedule form: |K| bounds in the C's coordinates [r, v = Ts u, a, eps], wide enough for the
+    gains that follow a gap of up to MAX_GAP_S (codegen.follow carries the deviation from the schedule
+    there; beyond, it clamps a gain to its format and the stated bound takes the clamped gain), with
+    the margin of the l1 gains. Sets p.gap and p.gap_run (the block's maxima over those gaps)."""
+    g = p.gains
+    p.gap = max(1, int(round(MAX_GAP_S * p.model.rate_hz)))
+    p.gap_run = gap_maxima(p.design, g, p.gap, 4 * p.gap + 50)
+    return MARGIN * np.maximum(g.kmax, p.gap_run.kmax) * np.array([1.0, p.design.Ts, 1.0, 1.0])
 
 
 def _gain_format(p: AxisPlan, nm: str, bound: float, note: str, saturates: bool) -> None:
@@ -452,13 +466,15 @@ def _plan_covariance(p: AxisPlan) -> None:
     p.consts["PHI"] = (d.phi, QFormat(32, 31))
     p.consts["PHI2"] = (d.phi**2, QFormat(32, 31))
     p.consts["PHIOMP"] = (d.phi * (1 - d.phi), const_format(d.phi * (1 - d.phi)))
+    p.consts["OMPC"] = (1 - d.phi, const_format(1 - d.phi))
+    p.consts["OMP2"] = ((1 - d.phi) * (1 + d.phi), const_format((1 - d.phi) * (1 + d.phi)))
     p.consts["R"] = (d.R, fa)
     p.consts.update(
         {
-            "Qra": (d.Q[0, 2], fmts["cr"]),
-            "Qva": (Ts * d.Q[1, 2], fmts["cv"]),
-            "Qaa": (d.Q[2, 2], fa),
-            "Qee": (d.Q[3, 3], fmts["ce"]),
+            "Qra": (d.Q[0, 2], const_format(d.Q[0, 2])),
+            "Qva": (Ts * d.Q[1, 2], const_format(Ts * d.Q[1, 2])),
+            "Qaa": (d.Q[2, 2], const_format(d.Q[2, 2])),
+            "Qee": (d.Q[3, 3], const_format(d.Q[3, 3])),
         }
     )
     p.sat_free = _predict_sat_free(p)
@@ -470,6 +486,18 @@ def _plan_covariance(p: AxisPlan) -> None:
             f"R = {d.R:.6g} is {R_int} LSB of the covariance format {fa}; needs at least 13 bits below the "
             f"largest covariance {bounds['ca']:.6g}",
         )
+    # w = y / S: the innovation divided once by S; each state then adds c_i w = K_i y, so no gain is
+    # rounded on its own (only K_e is formed, for the update of P_re, P_ve, P_ae). S >= R and y stays
+    # within its analysed bound, so |w| <= max|y| / R and w needs no saturation.
+    wb = p.vars["y"].bound / d.R
+    if bits_for(wb) > 30:
+        raise RangeError(
+            p.model.source,
+            "noise.R",
+            f"R = {d.R:.6g} is too small for the innovation range +-{p.vars['y'].bound:.6g} m/s^2: y / R needs "
+            f"{bits_for(wb) + 1} bits; accepted: R >= {p.vars['y'].bound / 2**30:.3g}",
+        )
+    p.vars["w"] = Var("w", "s^2/m", wb, fit(wb, 32), "y / S, at most max|y| / R")
 
 
 def _predict_sat_free(p: AxisPlan) -> frozenset:
@@ -477,16 +505,16 @@ def _predict_sat_free(p: AxisPlan) -> frozenset:
     entries hold, so they need no saturation: no assumption about the data, the skip pattern or the
     history (the entries are bounded only by their words).
 
-    c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee, formed in the C as Qee + round((PHI2 c_e +
-    (PHIOMP P_ae >> s)) / 2^g) with g = 31 (PHI2 in Q.31) and the PHIOMP product aligned (floor) to
-    Q.(f_ce + 31). In LSB of c_e, for |c_e|, |P_ae| <= 2^31: |c_e'| <= PHI2_int + PHIOMP_int 2^31 /
-    2^(f_PO + f_Pae - f_ce) + 1 (the floor) + Qee_int + 1 (the rounding); phi^2 + phi (1 - phi) = phi
-    < 1 leaves (1 - phi) 2^31 LSB of room, which the model's Qee must not use up.
+    c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee, formed in the C (codegen.emit_c._predict_terms) as
+    one rounding of the three terms, each aligned (floor) to a few guard bits below c_e's LSB. For
+    |c_e|, |P_ae| <= 2^31 it stays below (phi^2 + phi (1 - phi)) 2^31 = phi 2^31 plus Q_ee and a few
+    LSB of flooring and rounding (codegen.qformat.acc_bound adds them up exactly): phi < 1 leaves
+    (1 - phi) 2^31 LSB of room, which the model's Q_ee must not use up.
 
     Every other sum adds to an entry that can sit anywhere in its word (c_a += Q_aa each skipped
     sample; P_re, P_ve follow the unbounded P_ue through gaps of any length): those keep their clamps.
     """
-    from .qformat import quantize
+    from .qformat import acc_bound, quantize
 
     def qi(name):
         val, fmt = p.consts[name]
@@ -495,10 +523,61 @@ def _predict_sat_free(p: AxisPlan) -> frozenset:
     fce, fPae = p.f("ce"), p.f("Pae")
     phi2, f2 = qi("PHI2")
     po, fpo = qi("PHIOMP")
-    qee, _ = qi("Qee")
+    qee, fq = qi("Qee")
     free = set()
-    if f2 == 31 and fpo + fPae - fce >= 31:
-        worst = phi2 + po * 2.0**31 / 2.0 ** (fpo + fPae - fce) + 1 + qee + 1
-        if worst <= 2**31 - 1:
+    if min(f2, fpo + fPae - fce, fq - fce) > 0:  # all three finer than c_e, as emitted
+        if acc_bound(fce, [(phi2 * 2**31, f2 + fce), (po * 2**31, fpo + fPae), (qee, fq)]) <= 2**31 - 1:
             free.add("ce")
     return frozenset(free)
+
+
+# gain schedule after a skip: the deviation of the covariance block from the schedule's (codegen.follow)
+DEV = ("Dcr", "DPre", "Dcv", "DPve", "Dca", "DPae", "Dce")
+DEV_GUARD = 4.0  # |D| <= |P| + |P_u| <= 2 max|P| over the gaps, times the plan's GUARD
+
+
+def _plan_schedule_follow(p: AxisPlan) -> None:
+    """Gain-schedule form: formats of the deviation block that codegen.follow carries after a skip, of S
+    and of the predict constants."""
+    g, gg, Ts = p.gains, p.gap_run, p.design.Ts
+    pm = np.maximum(np.maximum(g.max_prior, g.max_post), np.maximum(gg.max_prior, gg.max_post))
+    mc = np.maximum(g.max_c, gg.max_c)
+    s_max = max(g.S_max, gg.S_max, float(mc[2]))
+    bounds = {
+        "Dcr": mc[0],
+        "DPre": pm[3],
+        "Dcv": Ts * mc[1],
+        "DPve": Ts * pm[4],
+        "Dca": s_max,
+        "DPae": pm[5],
+        "Dce": mc[3],
+    }
+    notes = {
+        "Dcr": "c_r = P_ra + P_re",
+        "DPre": "P_re",
+        "Dcv": "c_v = Ts (P_ua + P_ue)",
+        "DPve": "Ts P_ue",
+        "Dca": "c_a = P_aa + P_ae",
+        "DPae": "P_ae",
+        "Dce": "c_e = P_ae + P_ee",
+    }
+    for nm, b in bounds.items():
+        f = _require(p.model, f"gain schedule: deviation of {notes[nm]}", "(SI units squared)", DEV_GUARD * b, 32)
+        p.vars[nm] = Var(nm, "cov", DEV_GUARD * b, f, f"deviation from the schedule's block: {notes[nm]}", True)
+    fS = _require(p.model, "gain schedule: S", "(m/s^2)^2", GUARD * s_max, 32)
+    p.vars["S"] = Var("S", "(m/s^2)^2", GUARD * s_max, fS, "H P H' + R after a skip, >= R", True)
+    d = p.design
+    p.consts["PHI"] = (d.phi, QFormat(32, 31))
+    p.consts["PHI2"] = (d.phi**2, QFormat(32, 31))
+    p.consts["PHIOMP"] = (d.phi * (1 - d.phi), const_format(d.phi * (1 - d.phi)))
+    p.consts["R"] = (d.R, fS)
+    from .qformat import quantize
+
+    R_int = quantize(d.R, fS)
+    if R_int < 2**12 or d.R / s_max * 2**30 < 2:  # S_u = R / (1 - K_a - K_e), 1 - K_a - K_e in Q.30
+        raise RangeError(
+            p.model.source,
+            "noise.R",
+            f"R = {d.R:.6g} is {R_int} LSB of the gain schedule's S format {fS}; needs at least 13 bits below "
+            f"the largest S {s_max:.6g}",
+        )

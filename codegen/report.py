@@ -82,7 +82,7 @@ def report(model: Model, *, form: str | None, arith: str, files: dict[str, str],
         if sched is not None:
             lines.append(
                 f"  gain schedule: {sched.n_segments} piecewise-linear segments ({sched.n_segments * 24} B), "
-                f"max |K - K64| = " + ", ".join(f"{e:.3g}" for e in sched.error.max(0)) + " [r, v=Ts u, a, eps]"
+                f"max |K - K64| = " + ", ".join(f"{e:.3g}" for e in sched.max_error) + " [r, v=Ts u, a, eps]"
             )
         names = ("r [m]", "u [m/s]", "a [m/s^2]", "eps [m/s^2]")
         at1 = min(int(model.rate_hz), p.n_run - 1)

@@ -53,7 +53,7 @@ def workdir(tmp_path_factory):
 def built(model, form, workdir):
     key = (model.sha256, form)
     if key not in _BUILT:
-        files = emit(model, form=form, assume_no_skips=True)  # the schedule's arithmetic; skips: see below
+        files = emit(model, form=form)
         _BUILT[key] = (files, build(files, workdir))
     return _BUILT[key]
 
@@ -102,12 +102,6 @@ def test_lockstep(rate, form, scenario, workdir):
         assert np.array_equal(res["valid"], valid), "the C and the reference disagree on which samples to skip"
         x_ref = ref.x_post  # always the float64 Kalman filter with the same skips
         err = np.abs(res["x"] - x_ref)
-        if form == "gain_schedule" and not valid.all():
-            # a skip changes the Kalman gain but not the time-indexed schedule: the C departs from the
-            # Kalman filter, and the honest check must say so (codegen refuses this form for that reason)
-            with pytest.raises(AssertionError, match="of the stated bound"):
-                _check_against_bound(p, sched, run.code[:, axis], run.accel[:, axis], valid, x_ref, res["x"], "gs")
-            continue
         _check_against_bound(p, sched, run.code[:, axis], run.accel[:, axis], valid, x_ref, res["x"], f"axis {axis}")
         k1 = int(model.rate_hz)
         ratio = err[k1:] / sig[k1:]
@@ -148,22 +142,59 @@ def test_duty_cycle_part(workdir):
 
 
 @pytest.mark.parametrize("model_file", ["adxl250_default.toml", "adxl202_duty.toml"])
-def test_gain_schedule_refused_for_inputs_that_skip(model_file, tmp_path, capsys):
-    """Every input kind can skip samples (rails, bad captures), after which the Kalman gain leaves the
-    time-indexed schedule: the generator refuses the form in one line saying why (CLI included)."""
+def test_gain_schedule_generated_for_inputs_that_skip(model_file, tmp_path, capsys):
+    """Every input kind can skip samples (rails, bad captures); the gain-schedule form follows them
+    (codegen.follow), so the generator takes it for both, CLI included."""
     from conftest import MODELS
 
     from accelnav.cli import main
-    from accelnav.codegen.model import ModelError
 
     model = load_model(MODELS / model_file)
-    want = r"filter\.form: 'gain_schedule' refused: this .* skips .*accepted: 'covariance'"
-    with pytest.raises(ModelError, match=want):
-        emit(model, form="gain_schedule")
-    assert main(["codegen", model.source, "--form", "gain_schedule", "--out", str(tmp_path)]) != 0
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "gain_schedule' refused" in err and "Traceback" not in err
-    assert not list(tmp_path.iterdir())
+    files = emit(model, form="gain_schedule")
+    assert "_follow(" in files["accelnav.c"]
+    assert main(["codegen", model.source, "--form", "gain_schedule", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "accelnav.c").read_text() == files["accelnav.c"]
+
+
+def _blind(files: dict) -> dict:
+    """The gain-schedule C with its skip-following cut out: it never leaves the schedule (the form as it
+    was before codegen.follow)."""
+    c = files["accelnav.c"]
+    assert c.count("s->dev = 1u;") >= 1, "the entry into the deviation"
+    return {**files, "accelnav.c": c.replace("s->dev = 1u;", "s->dev = 0u;")}
+
+
+def test_gain_schedule_deviation_twin_is_bit_exact_and_the_check_catches_a_blind_schedule(workdir, tmp_path):
+    """On rail-clipped shocks: the C's deviation block equals its integer twin (codegen.follow.Follow,
+    from which the stated bound takes the C's gains) after every sample; and the same C with the
+    skip-following cut out (a time-indexed schedule that ignores skips) leaves the stated bound."""
+    from accelnav.codegen.follow import DEV, Follow, thresholds
+
+    model = model_at(100.0)
+    files, mod = built(model, "gain_schedule", workdir)
+    run, d, valid, ref, sig = reference(model, "shock", 0)
+    assert not valid.all()
+    p, sched = plan(model, 0, "gain_schedule")
+    lib, ffi = mod.lib, mod.ffi
+    s = ffi.new("accelnav_x_t *")
+    lib.accelnav_x_init(s)
+    twin = Follow(p, thresholds(p, sched))
+    G = sched.gains_int(len(valid))
+    followed = 0
+    for k, c in enumerate(run.code[:, 0].tolist()):
+        if twin.dev or not valid[k]:
+            twin.step(k, bool(valid[k]), [int(x) for x in G[k]])
+        lib.accelnav_x_step(s, c)
+        assert bool(s.dev) == twin.dev, f"sample {k}: the C and its twin disagree on following a skip"
+        if twin.dev:
+            followed += 1
+            got = [getattr(s, nm) for nm in DEV]
+            assert got == [twin.D[nm] for nm in DEV], f"sample {k}: deviation block {got}"
+    assert followed > (~valid).sum() and s.overflow == 0 == twin.overflow
+    blind = build(_blind(files), tmp_path)
+    res = AxisRunner(blind, files["accelnav.json"], 0).run(code=run.code[:, 0])
+    with pytest.raises(AssertionError, match="of the stated bound"):
+        _check_against_bound(p, sched, run.code[:, 0], run.accel[:, 0], valid, ref.x_post, res["x"], "blind")
 
 
 def test_skip_table(workdir):
@@ -186,8 +217,8 @@ def test_skip_table(workdir):
 def test_regeneration_is_byte_identical_and_bannered():
     model = load_model()
     for form in ("covariance", "gain_schedule"):
-        a = emit(model, form=form, assume_no_skips=True)
-        b = emit(load_model(), form=form, assume_no_skips=True)
+        a = emit(model, form=form)
+        b = emit(load_model(), form=form)
         assert a == b
         for name in ("accelnav.h", "accelnav.c"):
             assert model.sha256 in a[name].splitlines()[2]
@@ -261,7 +292,7 @@ def test_sanitizers_bit_identical(form, workdir, tmp_path):
 def test_cross_compiles(cpu, tmp_path):
     model = load_model()
     for form, arith in (("covariance", "fixed"), ("gain_schedule", "fixed"), ("covariance", "float32")):
-        files = emit(model, form=form, arith=arith, assume_no_skips=True)
+        files = emit(model, form=form, arith=arith)
         for name, text in files.items():
             (tmp_path / name).write_text(text)
         subprocess.run(
@@ -306,10 +337,15 @@ def test_cli_writes_files_and_report(tmp_path, capsys):
 MUTATIONS = {
     # the input offset one LSB off: a bias of one LSB of z, twice what the conversion may round
     "OFFSET +1 LSB": (r"(#define ACCELNAV_X_OFFSET INT32_C\()(-?\d+)", lambda m: f"{m.group(1)}{int(m.group(2)) + 1}"),
-    # K_a y shifted one bit too far (K_a read in the wrong format)
+    # K_a y shifted one bit too far (K_a read in the wrong format); the covariance form adds c_a w
     "Ka shift +1": (
-        r"(\(\(int64_t\)Ka \* y \+ \(\(int64_t\)1 << )(\d+)(\)\) >> )(\d+)",
-        lambda m: f"{m.group(1)}{int(m.group(2)) + 1}{m.group(3)}{int(m.group(4)) + 1}",
+        r"(\(\(int64_t\)Ka \* y \+ \(\(int64_t\)1 << )(\d+)(\)\) >> )(\d+)"
+        r"|(ACN_RSHR\(acn_mul\(ca, w\), )(\d+)",
+        lambda m: (
+            f"{m.group(1)}{int(m.group(2)) + 1}{m.group(3)}{int(m.group(4)) + 1}"
+            if m.group(1)
+            else f"{m.group(5)}{int(m.group(6)) + 1}"
+        ),
     ),
     # eps_bar off by 1 %: the bias's fixed point
     "EBAR +1 %": (
@@ -358,3 +394,106 @@ def test_unclamped_predict_sums_fit_any_state(workdir):
         want = phi * x + p.consts["Qee"][0] * 2.0 ** p.f("ce")
         assert p.f("Pae") == p.f("ce")
         assert abs(s.ce - want) <= 4, (x, s.ce, want)
+
+
+def test_covariance_reciprocal_within_its_contract(tmp_path):
+    """acn_recip_t (table start, two Newton-Raphson steps: the covariance form's 1/S) keeps acn_recip's
+    contract, 1/d = x 2^(n - 62) to a relative 2^-28, over the whole uint32 range: every power of two
+    and its neighbours, each table interval's ends and middle, and a seeded random sweep."""
+    from accelnav.codegen.cbuild import build_module
+    from accelnav.codegen.emit_c import HELPERS, RECIP_TABLE_BITS, recip_helpers
+
+    src = "#include <stdint.h>\n#include <stdbool.h>\n#include <stddef.h>\n" + HELPERS + recip_helpers()
+    src += "uint32_t t_recip(uint32_t d, int *n) { return acn_recip_t(d, n); }\n"
+    mod = build_module(
+        "acn_recip_test", "uint32_t t_recip(uint32_t d, int *n);", {"r.c": src}, main="r.c", workdir=tmp_path
+    )
+    ds = {1, 2**32 - 1}
+    for k in range(32):
+        ds |= {2**k, 2**k + 1, max(1, 2**k - 1)}
+    step = 2 ** (31 - RECIP_TABLE_BITS)  # the table's intervals of D = d 2^n in [2^31, 2^32)
+    for i in range(2**RECIP_TABLE_BITS):
+        lo = 2**31 + i * step
+        ds |= {lo, lo + step // 2, lo + step - 1}
+    ds |= {int(x) for x in np.random.default_rng(5).integers(1, 2**32, 20000, dtype=np.uint64)}
+    n = mod.ffi.new("int *")
+    worst = 0.0
+    for d in sorted(ds):
+        x = mod.lib.t_recip(d, n)
+        assert n[0] == 32 - d.bit_length()
+        worst = max(worst, abs(x * d * 2.0 ** (n[0] - 62) - 1.0))
+    assert worst <= 2.0**-28, f"relative error {worst:.3g} > 2^-28"
+
+
+SHOCK_1KHZ_SIGMA = 3e-4  # reached 2.7e-4 (a, axis x); main's generator 9.2e-4: issue #12 asks < 2e-4
+
+
+@pytest.mark.parametrize("seed", [9, 11])
+def test_covariance_1khz_shock_margin(seed, workdir):
+    """The covariance form at 1 kHz on rail-clipped shock data against the float64 Kalman filter with
+    the same skips: every state of both axes within SHOCK_1KHZ_SIGMA of the filter's sigma after 1 s,
+    a 3.3x margin to the 1e-3 criterion (issue #12 asks 5x, < 2e-4: not reached; the carried c_a and
+    c_v would need about 4 more bits each, bench/bench_cov_margin.py)."""
+    model = model_at(1000.0)
+    files, mod = built(model, "covariance", workdir)
+    run = sensor.simulate(model, "shock", 3.0, seed=seed)
+    assert run.clipped.any()
+    k1 = int(model.rate_hz)
+    for axis in range(len(model.axes)):
+        valid = ~run.clipped[:, axis]
+        ref = run_filter(axis_design(model, axis), run.accel[:, axis], valid=valid)
+        sig = np.sqrt(np.einsum("kii->ki", ref.P_post))
+        res = AxisRunner(mod, files["accelnav.json"], axis).run(code=run.code[:, axis])
+        assert res["overflow"] == 0
+        ratio = np.abs(res["x"] - ref.x_post)[k1:] / sig[k1:]
+        worst = np.unravel_index(np.argmax(ratio), ratio.shape)
+        assert ratio.max() < SHOCK_1KHZ_SIGMA, (
+            f"axis {axis}: state {worst[1]} at sample {worst[0] + k1}: {ratio.max():.3g} sigma"
+        )
+
+
+def test_gain_schedule_built_window_by_window():
+    """The schedule over a declared run is built from a window of gains that moves forward: the same
+    integers as from the whole run at once (here a 1024-sample window over 60 s at 100 Hz), and at
+    1 kHz over the declared hour (3.6e6 samples) its traced memory stays far below what the whole
+    run's per-sample arrays take (~30 B per sample per array, 2 GB in all before)."""
+    import tracemalloc
+
+    from accelnav.codegen import gains
+    from accelnav.codegen.emit_c import SCHEDULE_REL_TOL
+    from accelnav.codegen.gains import riccati, schedule, schedule_of
+
+    model = load_model()
+    p = plan_axis(model, 0, "gain_schedule")
+    fm = tuple(p.vars["K" + n].fmt for n in "rvae")
+    n = 6000
+    whole = schedule(
+        np.asarray(riccati(p.design, n).K) * np.array([1.0, p.design.Ts, 1.0, 1.0]), fm, SCHEDULE_REL_TOL, ramp=1000
+    )
+    win = schedule_of(p.design, n, fm, SCHEDULE_REL_TOL, ramp=1000, window=1024)
+    assert win.n_segments > 20 and (win.lengths, win.slopes, win.start) == (whole.lengths, whole.slopes, whole.start)
+    assert np.array_equal(win.gains_int(n), whole.gains_int(n))
+    assert np.array_equal(win.errors(n), whole.errors(n))
+
+    fast = model_at(1000.0)
+    p = plan_axis(fast, 0, "gain_schedule")
+    gains._SCHEDULES.clear()  # built here, not served from the cache
+    tracemalloc.start()
+    sched = _schedule_for(p)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert sched.n == p.n_run == 3_600_000
+    assert peak < 150e6, f"{peak / 1e6:.0f} MB traced while building the 1 kHz schedule"
+
+
+def test_gain_schedule_report_bound_in_pieces():
+    """The report's data-free bound of the gain-schedule form over a long run is the same recursion
+    taken a chunk at a time (memory independent of the run): equal to the whole run's, sample for
+    sample, at the rows asked for."""
+    from accelnav.codegen.bounds import _schedule_bound_rows, error_bound
+
+    p, sched = plan(load_model(), 0, "gain_schedule")
+    n = 20_000
+    rows = [0, 99, 4_095, 4_096, 12_345, n - 1]
+    whole = error_bound(p, n, sched)[rows]
+    assert np.array_equal(_schedule_bound_rows(p, n, rows, sched, chunk=4_096), whole)

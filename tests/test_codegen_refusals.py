@@ -29,6 +29,7 @@ UNREPRESENTABLE = [
     ("max_position_m = 20000.0", "max_position_m = 1e30", "ranges.max_position_m: range +-2e+30 m needs 102 bits"),
     ("max_velocity_m_s = 60.0", "max_velocity_m_s = 1e25", "ranges.max_velocity_m_s: range +-2e+23 m needs 79 bits"),
     ("R = 0.0160", "R = 1e-13", "noise.R: R = 1e-13 is 0 LSB of the covariance format"),
+    ("R = 0.0160", "R = 2.3e-6", "noise.R: R = 2.3e-06 is too small for the innovation range"),
     ("R = 0.0160", "R = 1e12", "covariance c_a = P_aa + P_ae (and S): range +-2e+12"),
     ("sigma_n = 1.0", "sigma_n = 1e7", "covariance c_r = P_ra + P_re: range"),
     (

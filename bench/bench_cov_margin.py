@@ -1,0 +1,116 @@
+"""Precision margin of the fixed-point covariance form against the float64 Kalman filter.
+
+For every shipped scenario (accelnav.hil_sim.trajectories.SCENARIOS), a few seeds and every axis of the
+model, the generated C runs in-process (cffi) beside the float64 filter with the same skips
+(rail-clipped samples); the figure is the largest |x_C - x_float64| / sigma_float64 over the samples
+after the first second, per state, and the margin is the 1e-3 sigma criterion divided by it.
+
+    .venv/bin/python bench/bench_cov_margin.py [MODEL.toml] [--rate HZ] [--duration S] [--seeds 11 9 3]
+        [--baseline PYTHON]
+
+--baseline runs this same script under another interpreter (e.g. /work/main/.venv/bin/python, whose
+editable install is main's generator) and prints its figures beside this one's, measured in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+CRITERION = 1e-3
+STATES = ("r", "u", "a", "eps")
+
+
+def measure(model_path, rate, duration, seeds, workdir) -> dict:
+    from accelnav.codegen.design import axis_design
+    from accelnav.codegen.emit_c import emit
+    from accelnav.codegen.harness import AxisRunner, build
+    from accelnav.codegen.model import load_model, loads_model
+    from accelnav.estimate.kf import run_filter
+    from accelnav.hil_sim.sensor import simulate
+    from accelnav.hil_sim.trajectories import SCENARIOS
+
+    model = load_model(model_path)
+    if rate is not None and rate != model.rate_hz:
+        text = model.text.replace(f"rate_hz = {model.rate_hz!r}", f"rate_hz = {rate!r}")
+        model = loads_model(text, source=f"{model.source}@{rate:g}Hz")
+        assert model.rate_hz == rate, "rate_hz not found in the model text"
+    files = emit(model, form="covariance")
+    mod = build(files, workdir)
+    k1 = int(model.rate_hz)
+    out = {}
+    for sc in SCENARIOS:
+        worst = np.zeros(4)
+        clipped = 0
+        overflow = 0
+        for seed in seeds:
+            run = simulate(model, sc, duration, seed=seed)
+            for axis in range(len(model.axes)):
+                valid = ~run.clipped[:, axis]
+                clipped += int((~valid).sum())
+                ref = run_filter(axis_design(model, axis), run.accel[:, axis], valid=valid, progress=False)
+                sig = np.sqrt(np.einsum("kii->ki", ref.P_post))
+                if model.sensor.kind == "analog":
+                    res = AxisRunner(mod, files["accelnav.json"], axis).run(code=run.code[:, axis])
+                else:
+                    res = AxisRunner(mod, files["accelnav.json"], axis).run(t1=run.t1[:, axis], t2=run.t2[:, axis])
+                overflow += res["overflow"]
+                worst = np.maximum(worst, (np.abs(res["x"] - ref.x_post)[k1:] / sig[k1:]).max(0))
+        out[sc] = {"sigma": worst.tolist(), "clipped": clipped, "overflow": overflow}
+    return {"model": model.name, "rate": model.rate_hz, "scenarios": out}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("model", nargs="?", default=None)
+    ap.add_argument("--rate", type=float, default=1000.0)
+    ap.add_argument("--duration", type=float, default=3.0)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[11, 9, 3])
+    ap.add_argument("--baseline", help="a Python whose accelnav is the generator to compare with")
+    ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # one process's raw figures
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="acn_margin_") as tmp:
+        now = measure(args.model, args.rate, args.duration, args.seeds, Path(tmp))
+    if args.json:
+        print(json.dumps(now))
+        return 0
+    base = None
+    if args.baseline:
+        cmd = [args.baseline, __file__, "--json", "--rate", str(args.rate), "--duration", str(args.duration)]
+        cmd += ["--seeds", *map(str, args.seeds)] + ([args.model] if args.model else [])
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, cwd=tempfile.gettempdir())
+        if done.returncode:
+            raise SystemExit(f"baseline failed: {done.stderr.strip().splitlines()[-1:]}")
+        base = json.loads(done.stdout)
+    print(
+        f"model {now['model']}, {now['rate']:g} Hz, {args.duration:g} s, seeds {args.seeds}, every axis: "
+        f"max |x_C - x_float64| / sigma after 1 s (criterion {CRITERION:g}; margin = criterion / worst state)"
+    )
+    head = f"{'scenario':<12} {'clipped':>7} " + " ".join(f"{s:>8}" for s in STATES) + f" {'margin':>7}"
+    print(head + (f"   {'baseline: ' + ' '.join(f'{s:>8}' for s in STATES)} {'margin':>7}" if base else ""))
+    for sc, v in now["scenarios"].items():
+        row = f"{sc:<12} {v['clipped']:7d} " + " ".join(f"{x:8.2e}" for x in v["sigma"])
+        row += f" {CRITERION / max(v['sigma']):6.1f}x"
+        if base:
+            b = base["scenarios"][sc]
+            row += "   " + " " * 10 + " ".join(f"{x:8.2e}" for x in b["sigma"])
+            row += f" {CRITERION / max(b['sigma']):6.1f}x"
+        if v["overflow"]:
+            row += f"  overflow {v['overflow']}"
+        print(row)
+    worst = min(CRITERION / max(v["sigma"]) for v in now["scenarios"].values())
+    line = f"smallest margin: {worst:.1f}x (target >= 5x: {'met' if worst >= 5 else 'NOT met'})"
+    if base:
+        line += f"; baseline {min(CRITERION / max(v['sigma']) for v in base['scenarios'].values()):.1f}x"
+    print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,403 @@
+"""The gain schedule after skipped samples: the deviation of the covariance block from the schedule's.
+
+A time-indexed schedule holds the Kalman gain of an uninterrupted run. After a skipped sample (ADC
+rail, bad capture) the Kalman gain is no longer that (a gap of 38 samples at 100 Hz leaves K_a 79 %
+and K_v 25x off for about 10 samples), so the gain-schedule C follows the skip: from the first
+skipped sample it carries the deviation D = P - P_u of the seven-entry block of P (codegen.gains,
+carried as in the covariance form: c = P H' per state and P_re, P_ve, P_ae; v = Ts u) from the
+block P_u of the uninterrupted run, and uses K = K_u + dK (clamped to the gain's format after a long
+gap). Once dK is back within the schedule's own stated accuracy, it drops D and returns to the
+schedule.
+
+Why a deviation and not the block itself: the block at the moment of the skip is not available
+(P_re grows to ~34 while c_r stays ~1e-3: taken from a table even one segment stale, it leaves
+K_r 10 % off for good). The deviation needs none of it. The predict P = F P F' + Q is linear and
+the same Q enters both runs, so D = F D F' exactly; the update only needs c_u = P_u H' and
+S_u = H P_u H' + R of the uninterrupted run, which the schedule's gains give: S_u = R / (1 - K_ua -
+K_ue), c_u = K_u S_u. Per sample, with c = c_u + D_c and S = S_u + D_ca + D_ce:
+
+    valid:   dK = (D_c - K_u (D_ca + D_ce)) / S;  K = K_u + dK
+             D_c' = R dK                    (c^+ = c R / S = K R in both runs)
+             D_Pie' = D_Pie - (K_ui D_ce + dK_i c_e),  i = r, v, a
+    skipped: D_c' = D_c + K_u (S_u - R);  D_Pie' = D_Pie + K_ui c_ue   (the update only P_u had)
+
+At D = 0 every term is exactly zero, whatever the schedule's compression error: the deviation decays
+to zero as the Kalman gain returns to the uninterrupted one (measured: within the schedule's
+tolerance 0.05-0.2 s after gaps of 1-38 samples at 100 Hz). The return is decided by that
+measurement on the MCU: at a valid sample whose |dK| are all within THR (the schedule's largest
+compression error of each gain, in LSB), D is dropped and the next sample takes the schedule's
+gains again.
+
+:func:`emit_follow` writes the C; :class:`Follow` is its integer twin (same operations on Python
+ints, bit for bit), from which :func:`followed_gains` gives the exact gains the C uses on a run:
+codegen.bounds then takes |K_C - K_float64| per sample exactly, for any skip pattern.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .qformat import quantize
+from .ranges import DEV  # the deviation entries, planned in codegen.ranges._plan_schedule_follow
+
+# --------------------------------------------------------------------------
+# The operations, spelled once for C and once for Python ints
+
+
+class _Ops:
+    """Helpers shared by the emitter and the twin: the frac bits of every quantity."""
+
+    def __init__(self, p):
+        self.p = p
+        f = {nm: p.f(nm) for nm in DEV}
+        f["S"] = p.f("S")
+        for n in "rvae":
+            f["K" + n] = p.f("K" + n)
+        for c in ("H2", "T2", "OMP", "PHI", "PHI2", "PHIOMP", "R"):
+            f[c] = p.consts[c][1].frac
+        self.f = f
+        self.ci = {"r": "Dcr", "v": "Dcv", "a": "Dca", "e": "Dce"}
+        self.pe = {"r": "DPre", "v": "DPve", "a": "DPae"}
+        fS = f["S"]
+        R_int = quantize(p.design.R, p.vars["S"].fmt)
+        smax = p.vars["S"].fmt.qmax
+        self.n_lo = 32 - smax.bit_length()  # clz of the largest S
+        self.n_hi = 32 - R_int.bit_length()  # clz of the smallest (R)
+        # dK_i = num_i x 2^(n-62) 2^(-fS) in Q.f_ci -> Q.fK_i: right shift SH_i - n
+        self.sh = {n: 62 - fS - f["K" + n] + f[self.ci[n]] for n in "rvae"}
+        for n, s in self.sh.items():  # the product num x uses x >> 1: the shift is s - 1 - n
+            if s - 1 - self.n_hi < 1 or s - 1 - self.n_lo > 62:
+                raise ValueError(f"dK_{n} shift {s} - n out of range for n in {self.n_lo}..{self.n_hi}")
+        self.thr = None
+
+    def shift(self, frm: int, to: int) -> int:
+        s = frm - to
+        if s < 0:
+            raise ValueError(f"a left shift Q.{frm} -> Q.{to}")
+        return s
+
+
+def _py_rshr(x: int, s: int) -> int:
+    return (x + (1 << (s - 1))) >> s if s > 0 else x
+
+
+def _c_term(a: str, fa: int, b: str, fb: int, fo: int) -> str:
+    """(int64_t)a * b rounded from Q.(fa + fb) to Q.fo."""
+    s = fa + fb - fo
+    if s < 0:
+        raise ValueError(f"product {a} * {b}: left shift")
+    if s == 0:
+        return f"acn_mul({a}, {b})"
+    if s >= 63:
+        return "0"
+    return f"ACN_RSHR(acn_mul({a}, {b}), {s})"
+
+
+def _py_term(a: int, fa: int, b: int, fb: int, fo: int) -> int:
+    s = fa + fb - fo
+    if s >= 63:
+        return 0
+    return _py_rshr(a * b, s)
+
+
+def _c_align(a: str, fa: int, fo: int) -> str:
+    if fa > fo:
+        return f"ACN_RSHR((int64_t){a}, {fa - fo})"
+    return f"((int64_t){a} * ((int64_t)1 << {fo - fa}))"
+
+
+def _py_align(a: int, fa: int, fo: int) -> int:
+    return _py_rshr(a, fa - fo) if fa > fo else a << (fo - fa)
+
+
+def thresholds(p, sched) -> tuple[int, ...]:
+    """THR per gain [r, v, a, e] in LSB of its format: the schedule's largest compression error
+    (at least one LSB): the deviation is dropped once every |dK| is within it."""
+    out = []
+    for i, n in enumerate("rvae"):
+        lsb = p.vars["K" + n].fmt.lsb
+        out.append(max(1, int(float(sched.max_error[i]) / lsb)))
+    return tuple(out)
+
+
+def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
+    """C: T_follow(s, valid, K): one sample of the deviation recursion (see the module docstring). K in:
+    the schedule's gains K_u of this sample; out (valid): the gains to use."""
+    o = _Ops(p)
+    f = o.f
+    fS = f["S"]
+
+    def sat(expr):
+        return f"acn_sat32({expr}, &s->overflow)"
+
+    def k(name):
+        return f"{P}_{name}"
+
+    H2, T2, OMP, PHI, PHI2, PHIOMP, R = (k(n) for n in ("H2", "T2", "OMP", "PHI", "PHI2", "PHIOMP", "R"))
+    fH2, fT2, fO, fP, fP2, fPO = (f[n] for n in ("H2", "T2", "OMP", "PHI", "PHI2", "PHIOMP"))
+    tr = "(int64_t)s->DPre + " + _c_align("s->DPve", f["DPve"], f["DPre"]) + " + "
+    tr += _c_term(H2, fH2, "s->DPae", f["DPae"], f["DPre"])
+    tv = "(int64_t)s->DPve + " + _c_term(T2, fT2, "s->DPae", f["DPae"], f["DPve"])
+    dcr = "(int64_t)s->Dcr + " + _c_align("s->Dcv", f["Dcv"], f["Dcr"]) + " + "
+    dcr += _c_term(H2, fH2, "s->Dca", f["Dca"], f["Dcr"]) + " - " + _c_term(OMP, fO, "tr", f["DPre"], f["Dcr"])
+    dcv = "(int64_t)s->Dcv + " + _c_term(T2, fT2, "s->Dca", f["Dca"], f["Dcv"])
+    dcv += " - " + _c_term(OMP, fO, "tv", f["DPve"], f["Dcv"])
+    dca = "(int64_t)s->Dca - " + _c_term(OMP, fO, "s->DPae", f["DPae"], f["Dca"])
+    dce = (
+        _c_term(PHI2, fP2, "s->Dce", f["Dce"], f["Dce"]) + " + " + _c_term(PHIOMP, fPO, "s->DPae", f["DPae"], f["Dce"])
+    )
+    wa = _c_align("K[2]", f["Ka"], 30)
+    we = _c_align("K[3]", f["Ke"], 30)
+    L = [
+        f"#define {P}_THR_R UINT32_C({thr[0]}) /* |dK| within these (LSB of each K): back on the schedule */",
+        f"#define {P}_THR_V UINT32_C({thr[1]})",
+        f"#define {P}_THR_A UINT32_C({thr[2]})",
+        f"#define {P}_THR_E UINT32_C({thr[3]})",
+        "",
+        "#ifndef ACN_CLAMP32",
+        "#define ACN_CLAMP32",
+        "/* int64 -> int32, clamped and not counted: a gain after a long gap beyond its format (codegen.follow:",
+        " * the stated bound takes the clamped gain) */",
+        "static inline int32_t acn_clamp32(int64_t x)",
+        "{",
+        "    return x > INT32_MAX ? INT32_MAX : x < INT32_MIN ? INT32_MIN : (int32_t)x;",
+        "}",
+        "#endif",
+        "",
+        "/* After a skipped sample: the deviation D = P - P_u of the covariance block from the uninterrupted",
+        " * run's, carried until the gains are back on the schedule (codegen.follow). K: in, the schedule's",
+        " * gains of this sample [r, v, a, e]; out (valid samples), the gains to use. Rare: not inlined. */",
+        f"static __attribute__((noinline)) void {T}_follow({T}_t *s, bool valid, int32_t K[4])",
+        "{",
+        "    int32_t w, Su, cu[4];",
+        "    uint32_t x;",
+        "    int n;",
+        "    if (s->dev) {",
+        "        if (s->k > 0) {",
+        "            /* D = F D F' (the same Q enters both runs); right-hand sides read the old values */",
+        "            int32_t tr, tv;",
+        f"            tr = {sat(tr)};",
+        f"            tv = {sat(tv)};",
+        f"            s->Dcr = {sat(dcr)};",
+        f"            s->Dcv = {sat(dcv)};",
+        f"            s->DPre = (int32_t){_c_term(PHI, fP, 'tr', f['DPre'], f['DPre'])};",
+        f"            s->DPve = (int32_t){_c_term(PHI, fP, 'tv', f['DPve'], f['DPve'])};",
+        f"            s->Dca = {sat(dca)};",
+        f"            s->Dce = {sat(dce)};",
+        f"            s->DPae = (int32_t){_c_term(PHI, fP, 's->DPae', f['DPae'], f['DPae'])};",
+        "        }",
+        "    } else {",
+        "        /* the first skip of an excursion: P equals P_u here */",
+        "        s->dev = 1u;",
+        "        s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;",
+        "    }",
+        "    /* S_u = R / (1 - K_ua - K_ue), 1 - K_ua - K_ue in Q.30; c_u = K_u S_u */",
+        f"    w = (int32_t)((int64_t)((int64_t)1 << 30) - (int32_t){wa} - (int32_t){we});",
+        "    x = acn_recip((uint32_t)w, &n); /* 1/w = x 2^(n-62) */",
+        f"    Su = {sat(f'ACN_RSHR((int64_t){R} * (int64_t)x, 32 - n)')}; /* Q.{fS} */",
+    ]
+    for i, nm in enumerate("rvae"):
+        L.append(f"    cu[{i}] = {sat(_c_term(f'K[{i}]', f['K' + nm], 'Su', fS, f[o.ci[nm]]))};")
+    dS = _c_align("s->Dca", f["Dca"], fS) + " + " + _c_align("s->Dce", f["Dce"], fS)
+    L += [
+        "    if (valid) {",
+        "        int32_t dS, S, xs, dK[4], num, ce;",
+        f"        dS = {sat(dS)};",
+        "        S = acn_add_sat32(Su, dS, &s->overflow);",
+        f"        if (S < {R}) {{",
+        f"            S = {R};",
+        "        }",
+        "        x = acn_recip((uint32_t)S, &n); /* 1/S = x 2^(n-62) */",
+        "        xs = (int32_t)(x >> 1); /* x < 2^31 after the shift: a signed 32x32 product */",
+        f"        ce = acn_add_sat32(cu[3], s->Dce, &s->overflow); /* c_e of this prior, Q.{f['Dce']} */",
+    ]
+    for i, nm in enumerate("rvae"):
+        dc = o.ci[nm]
+        num = f"(int64_t)s->{dc} - " + _c_term(f"K[{i}]", f["K" + nm], "dS", fS, f[dc])
+        L += [
+            f"        /* dK_{nm} = (D_c{nm} - K_u{nm} dS) / S */",
+            f"        num = {sat(num)};",
+            f"        dK[{i}] = acn_clamp32(ACN_RSHR(acn_mul(num, xs), {o.sh[nm] - 1} - n));",
+        ]
+    L += ["        /* D_Pie -= K_ui D_ce + dK_i c_e (the old D_ce); D_c = R dK */"]
+    for i, nm in enumerate("rva"):
+        pe = o.pe[nm]
+        t1 = _c_term(f"K[{i}]", f["K" + nm], "s->Dce", f["Dce"], f[pe])
+        t2 = _c_term(f"dK[{i}]", f["K" + nm], "ce", f["Dce"], f[pe])
+        L.append(f"        s->{pe} = {sat(f'(int64_t)s->{pe} - {t1} - {t2}')};")
+    for i, nm in enumerate("rvae"):
+        L.append(f"        s->{o.ci[nm]} = {sat(_c_term(R, fS, f'dK[{i}]', f['K' + nm], f[o.ci[nm]]))};")
+    th = [f"(uint32_t)dK[{i}] + {P}_THR_{c} <= 2u * {P}_THR_{c}" for i, c in enumerate("RVAE")]
+    L += [
+        "        /* back on the schedule once every |dK| is within its threshold */",
+        f"        if ({th[0]} && {th[1]} &&",
+        f"            {th[2]} && {th[3]}) {{",
+        "            s->dev = 0u;",
+        "        }",
+    ]
+    for i in range(4):
+        L.append(f"        K[{i}] = acn_clamp32((int64_t)K[{i}] + dK[{i}]);")
+    L += [
+        "    } else {",
+        "        /* skipped: D += the update only P_u had: c_i -= K_ui (S_u - R), P_ie -= K_ui c_ue */",
+    ]
+    L.append(f"        int32_t sr = Su - {R};")
+    for i, nm in enumerate("rvae"):
+        dc = o.ci[nm]
+        L.append(f"        s->{dc} = {sat(f'(int64_t)s->{dc} + ' + _c_term(f'K[{i}]', f['K' + nm], 'sr', fS, f[dc]))};")
+    for i, nm in enumerate("rva"):
+        pe = o.pe[nm]
+        inc = _c_term(f"K[{i}]", f["K" + nm], "cu[3]", f["Dce"], f[pe])
+        L.append(f"        s->{pe} = {sat(f'(int64_t)s->{pe} + ' + inc)};")
+    L += ["    }", "}", ""]
+    return L
+
+
+# --------------------------------------------------------------------------
+# The integer twin
+
+_M32 = 0xFFFFFFFF
+
+
+def _i32(x: int) -> int:
+    x &= _M32
+    return x - (1 << 32) if x & 0x80000000 else x
+
+
+def _clamp(x: int) -> int:
+    return min(max(x, -(2**31)), 2**31 - 1)
+
+
+def _umulhi(a: int, b: int) -> int:
+    return ((a & _M32) * (b & _M32)) >> 32
+
+
+def recip(d: int) -> tuple[int, int]:
+    """acn_recip of the generated C, on Python ints: (x, n) with 1/d = x 2^(n-62)."""
+    n = 32 - d.bit_length()
+    dn = (d << n) & _M32
+    x = (3031741621 - _umulhi(2021161080, dn)) & _M32
+    for _ in range(3):
+        err = _i32(0x40000000 - _umulhi(dn, x))
+        x = (x + ((_i32(x >> 1) * err) >> 29)) & _M32
+    return x, n
+
+
+class Follow:
+    """The C's T_follow on Python ints, bit for bit (saturations counted in ``overflow``)."""
+
+    def __init__(self, p, thr: tuple[int, ...]):
+        self.o = o = _Ops(p)
+        self.f = o.f
+        self.q = {
+            c: quantize(p.consts[c][0], p.consts[c][1]) for c in ("H2", "T2", "OMP", "PHI", "PHI2", "PHIOMP", "R")
+        }
+        self.thr = thr
+        self.dev = False
+        self.D = dict.fromkeys(DEV, 0)
+        self.overflow = 0
+
+    def _sat(self, x: int) -> int:
+        if x > 2**31 - 1 or x < -(2**31):
+            self.overflow += 1
+            return 2**31 - 1 if x > 0 else -(2**31)
+        return x
+
+    def step(self, k: int, valid: bool, K: list[int]) -> list[int]:
+        f, q, D, sat = self.f, self.q, self.D, self._sat
+        t, al = _py_term, _py_align
+        if self.dev:
+            if k > 0:
+                tr = sat(
+                    D["DPre"]
+                    + al(D["DPve"], f["DPve"], f["DPre"])
+                    + t(q["H2"], f["H2"], D["DPae"], f["DPae"], f["DPre"])
+                )
+                tv = sat(D["DPve"] + t(q["T2"], f["T2"], D["DPae"], f["DPae"], f["DPve"]))
+                D["Dcr"] = sat(
+                    D["Dcr"]
+                    + al(D["Dcv"], f["Dcv"], f["Dcr"])
+                    + t(q["H2"], f["H2"], D["Dca"], f["Dca"], f["Dcr"])
+                    - t(q["OMP"], f["OMP"], tr, f["DPre"], f["Dcr"])
+                )
+                D["Dcv"] = sat(
+                    D["Dcv"]
+                    + t(q["T2"], f["T2"], D["Dca"], f["Dca"], f["Dcv"])
+                    - t(q["OMP"], f["OMP"], tv, f["DPve"], f["Dcv"])
+                )
+                D["DPre"] = _i32(t(q["PHI"], f["PHI"], tr, f["DPre"], f["DPre"]))
+                D["DPve"] = _i32(t(q["PHI"], f["PHI"], tv, f["DPve"], f["DPve"]))
+                D["Dca"] = sat(D["Dca"] - t(q["OMP"], f["OMP"], D["DPae"], f["DPae"], f["Dca"]))
+                D["Dce"] = sat(
+                    t(q["PHI2"], f["PHI2"], D["Dce"], f["Dce"], f["Dce"])
+                    + t(q["PHIOMP"], f["PHIOMP"], D["DPae"], f["DPae"], f["Dce"])
+                )
+                D["DPae"] = _i32(t(q["PHI"], f["PHI"], D["DPae"], f["DPae"], f["DPae"]))
+        else:
+            self.dev = True
+            for nm in DEV:
+                D[nm] = 0
+        fS = f["S"]
+        w = _i32((1 << 30) - _i32(al(K[2], f["Ka"], 30)) - _i32(al(K[3], f["Ke"], 30)))
+        x, n = recip(w & _M32)
+        Su = sat(_py_rshr(q["R"] * x, 32 - n))
+        ci, pe = self.o.ci, self.o.pe
+        cu = [sat(t(K[i], f["K" + nm], Su, fS, f[ci[nm]])) for i, nm in enumerate("rvae")]
+        K = list(K)
+        if valid:
+            dS = sat(al(D["Dca"], f["Dca"], fS) + al(D["Dce"], f["Dce"], fS))
+            S = sat(Su + dS)
+            S = max(S, q["R"])
+            x, n = recip(S)
+            xs = _i32(x >> 1)
+            ce = sat(cu[3] + D["Dce"])
+            dK = []
+            for i, nm in enumerate("rvae"):
+                num = sat(D[ci[nm]] - t(K[i], f["K" + nm], dS, fS, f[ci[nm]]))
+                dK.append(_clamp(_py_rshr(num * xs, self.o.sh[nm] - 1 - n)))
+            for i, nm in enumerate("rva"):
+                D[pe[nm]] = sat(
+                    D[pe[nm]]
+                    - t(K[i], f["K" + nm], D["Dce"], f["Dce"], f[pe[nm]])
+                    - t(dK[i], f["K" + nm], ce, f["Dce"], f[pe[nm]])
+                )
+            for i, nm in enumerate("rvae"):
+                D[ci[nm]] = sat(t(q["R"], fS, dK[i], f["K" + nm], f[ci[nm]]))
+            if all(abs(dK[i]) <= self.thr[i] for i in range(4)):
+                self.dev = False
+            K = [_clamp(K[i] + dK[i]) for i in range(4)]
+        else:
+            sr = Su - q["R"]
+            for i, nm in enumerate("rvae"):
+                D[ci[nm]] = sat(D[ci[nm]] + t(K[i], f["K" + nm], sr, fS, f[ci[nm]]))
+            for i, nm in enumerate("rva"):
+                D[pe[nm]] = sat(D[pe[nm]] + t(K[i], f["K" + nm], cu[3], f["Dce"], f[pe[nm]]))
+        return K
+
+
+def followed_gains(p, sched_int: np.ndarray, valid: np.ndarray, thr: tuple[int, ...]):
+    """The gains the gain-schedule C uses at every sample of a run with this skip pattern: (n, 4) ints
+    in the formats of K_r, K_v, K_a, K_e (C coordinates), and the samples that followed a skip (bool).
+    ``sched_int``: the schedule's integer gains of the first n samples (Schedule.gains_int)."""
+    fl = Follow(p, thr)
+    out = np.array(sched_int, dtype=np.int64, copy=True)
+    dev = np.zeros(len(out), dtype=bool)
+    vl = np.asarray(valid, dtype=bool)
+    skips = np.flatnonzero(~vl)
+    if not len(skips):
+        return out, dev
+    k = int(skips[0])
+    n = len(out)
+    while k < n:
+        if fl.dev or not vl[k]:
+            dev[k] = True
+            K = fl.step(k, bool(vl[k]), [int(x) for x in out[k]])
+            if vl[k]:
+                out[k] = K
+            k += 1
+        else:
+            nxt = np.flatnonzero(~vl[k:])
+            if not len(nxt):
+                break
+            k += int(nxt[0])
+    return out, dev
