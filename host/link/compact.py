@@ -76,11 +76,14 @@ class CompactStream:
         self.checkpoint_repeats = self.unreplayed = 0
 
     # ------------------------------------------------------------------
-    def order(self, kinds, ids, b_index, b_n, b_flags, c_index, c_flags, c_axis, c_state):
+    def order(self, kinds, ids, b_index, b_n, b_flags, c_index, c_flags, c_axis, c_state, runs=None):
         """The per-frame rule over frames in stream order (``kinds`` 0 block, 1 checkpoint; ``ids`` into the
         block or checkpoint arrays): (accepted block ids, break positions, per axis [[position, ck id, verify,
         sync]]): a checkpoint verifies the stretch ending at its position unless a break came first there, and
-        the replay starts from it unless a break follows it there (its state is then the one before a gap)."""
+        the replay starts from it unless a break follows it there (its state is then the one before a gap).
+        ``runs`` (from :meth:`feed`): (run_end, prev_end, nbefore): frames k .. run_end[k] - 1 each continue
+        the one before them in the stream (no flag, no repeated checkpoint), prev_end[k] being where the
+        frame before k left the index; reached with ``end == prev_end[k]``, such a run is taken whole."""
         end = self.end
         acc, breaks = [], []
         events: list[list[list]] = [[] for _ in self.axes]
@@ -95,7 +98,30 @@ class CompactStream:
                         break
                     e[3] = False
 
-        for kind, i in zip(kinds, ids, strict=True):
+        k, K = 0, len(kinds)
+        while k < K:
+            kind, i = kinds[k], ids[k]
+            k += 1
+            bulk = runs is not None and end is not None and runs[0][k - 1] > k - 1 and runs[1][k - 1] == end
+            if bulk and not (breaks and breaks[-1] == pos):  # (a checkpoint right after a break: the rule)
+                r = runs[0][k - 1]  # frames k - 1 .. r - 1 follow on: accepted as the rule would, in bulk
+                nb = runs[2]
+                for q in range(k - 1, r):
+                    if kinds[q] == 1:
+                        j = ids[q]
+                        if self.last_ck[c_axis[j]] == c_index[j]:
+                            r = q  # the checkpoint just taken, again: the rule from here
+                            break
+                        self.last_ck[c_axis[j]] = c_index[j]
+                        events[c_axis[j]].append([pos + nb[q] - nb[k - 1], j, True, True])
+                if r > k - 1:
+                    blk = [ids[q] for q in range(k - 1, r) if kinds[q] == 0]
+                    if blk:
+                        acc.extend(blk)
+                        pos += nb[r] - nb[k - 1]
+                        end = b_index[blk[-1]] + b_n[blk[-1]]
+                    k = r
+                    continue
             if kind == 0:
                 idx, n, fl = b_index[i], b_n[i], b_flags[i]
                 if end is None or (fl & X and idx < end and end - idx > self.window):
@@ -196,9 +222,36 @@ class CompactStream:
                 c_flags.tolist(),
                 c_axis.tolist(),
                 cks["state"],
+                self._runs(kinds, ids, isb, n_sel, b_index, b_n, b_flags, c_index, c_flags, c_axis),
             )
             acc = np.asarray(acc, np.int64)
         return self._rows(blocks[acc], bpos[acc], breaks, events, cks)
+
+    def _runs(self, kinds, ids, isb, n_sel, b_index, b_n, b_flags, c_index, c_flags, c_axis):
+        """For :meth:`order`: which frames continue the one before them in the stream (vectorised)."""
+        K = len(kinds)
+        idx = np.empty(K, np.int64)
+        fl = np.empty(K, np.int64)
+        idx[isb], idx[~isb] = b_index[ids[isb]], c_index[ids[~isb]]
+        fl[isb], fl[~isb] = b_flags[ids[isb]], c_flags[ids[~isb]]
+        # where the frame before left the index: the end of the last block before it in the stream
+        bend = np.where(isb, idx + n_sel, -1)
+        last = np.maximum.accumulate(np.where(isb, np.arange(K), -1))
+        prev = np.r_[-1, last[:-1]]
+        prev_end = np.where(prev >= 0, bend[np.maximum(prev, 0)], -2 if self.end is None else self.end)
+        cont = (idx == prev_end) & ((fl & (self.R | self.X)) == 0)
+        ax = np.where(isb, -1, c_axis[np.where(isb, 0, ids)] if len(c_axis) else -1)
+        for j in range(len(self.axes)):  # a checkpoint again right after itself is no continuation
+            at = np.flatnonzero(ax == j)
+            if len(at):
+                before = np.r_[-1 if self.last_ck[j] is None else self.last_ck[j], idx[at[:-1]]]
+                cont[at[idx[at] == before]] = False
+        # run_end[k]: the first frame at or after k + 1 that does not continue (k itself may start a run)
+        stops = np.r_[np.flatnonzero(~cont), K]
+        nxt = stops[np.searchsorted(stops, np.arange(K) + 1)]
+        run_end = np.where(cont, nxt, np.arange(K))
+        nbefore = np.r_[0, np.cumsum(n_sel)]
+        return run_end.tolist(), prev_end.tolist(), nbefore.tolist()
 
     # ------------------------------------------------------------------
     def _rows(self, blk, bpos, breaks, events, cks):
