@@ -132,6 +132,22 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
     return f
 
 
+_C_SIZES = {"int64_t": 8, "uint64_t": 8, "int32_t": 4, "uint32_t": 4, "int16_t": 2, "uint16_t": 2, "int8_t": 1}
+
+
+def _struct_bytes(fields: list[tuple[str, str, str]]) -> int | None:
+    """sizeof of a struct of these members under natural alignment (the ARM AAPCS and the x86-64 ABI
+    agree on it for these types); None when a member's size depends on the target (a pointer)."""
+    off = align = 0
+    for t, _, _ in fields:
+        n = _C_SIZES.get(t)
+        if n is None:
+            return None
+        off = -(-off // n) * n + n
+        align = max(align, n)
+    return -(-off // align) * align if align else 0
+
+
 def _fields_follow(p: AxisPlan) -> list[tuple[str, str, str]]:
     """Gain schedule: the deviation from the schedule's covariance block after a skip (codegen.follow)."""
     from .follow import DEV
@@ -1159,6 +1175,7 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         "constants": {k: {"value": val, "format": f.name, "int": quantize(val, f)} for k, (val, f) in p.consts.items()},
         "l1": p.l1.__dict__ | {},
         "z_error": p.z_error,
+        "state_bytes": _struct_bytes(fields),  # sizeof(T_t); the telemetry checkpoints carry these bytes
     }
     if sched is not None:
         man["schedule"] = {

@@ -12,13 +12,30 @@ garbage. Every frame is shorter than 254 bytes, so its COBS form is exactly
 one byte longer than ``payload || crc`` whatever the content: all frames of a
 type have the same length on the wire, which the vectorised host decoder uses.
 
-Frame types (MCU -> host): ``sample`` (one per decimated sample: sequence
-number, sample index, flags, counters, per axis the raw input and the filter
-state in the generated fixed-point formats), ``info`` (protocol version, layout
+Frame types (MCU -> host):
+
+* ``block`` (decimation 1, the compact mode, the default): the raw input of up to
+  ``BLOCK_SAMPLES`` consecutive samples (ADC codes, or T1/T2 counts) and per
+  sample and axis a 2-bit code (:data:`AXIS_CODES`: updated, input refused,
+  no capture, sample missed by the board), after the 32-bit index of its
+  first sample, the frame flags and the counters. ``n`` says how many of the
+  slots are used (a partial block is sent on ``flush``, ``stop``, a mode
+  change). The host gets the filter's states by running the firmware's own
+  generated C on these inputs (accelnav.link.replay).
+* ``checkpoint`` (compact mode): the bytes of one axis' generated state
+  struct (``sizeof`` from the filter manifest's ``state_bytes``, checked by
+  the firmware's build) before the sample ``index``: one per axis every
+  ``CHECKPOINT_SAMPLES`` samples and whenever a compact run begins (flag
+  ``resume``). The host's replay must match every one bit for bit; it starts
+  from one after a gap.
+* ``sample`` (the state mode: decimation > 1, or any after ``mode_states``; one per decimated sample:
+  sequence number, sample index, flags, counters, per axis the raw input and
+  the filter state in the generated fixed-point formats), ``info`` (protocol version, layout
 hash, model hash, rate, decimation), ``ack`` (answer to a command). Host -> MCU:
 the commands ``start``, ``stop``, ``reset``, ``decimate``, ``info``,
-``zupt_begin``, ``zupt_end``, and ``stimulus`` (the raw input of one sample,
-used by the emulated and host boards, which have no ADC).
+``zupt_begin``, ``zupt_end``, ``flush``, ``mode_states``, ``mode_compact``, and
+``stimulus`` (the raw input of one sample, used by the emulated and host
+boards, which have no ADC).
 
 The layout is derived from the model (axes, raw input kind) and from the
 filter manifest that :func:`codegen.emit_c.emit` returns (the Q formats of r,
@@ -37,7 +54,7 @@ from pathlib import Path
 
 from .model import Model, load_model
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 MAX_ENCODED = 254  # payload + crc must stay below this (one COBS block)
 
 # name -> (bytes, numpy dtype, C type)
@@ -49,7 +66,9 @@ SCALARS = {
     "i64": (8, "<i8", "int64_t"),
 }
 
-TYPE_SAMPLE, TYPE_INFO, TYPE_ACK = 0x01, 0x02, 0x03
+TYPE_SAMPLE, TYPE_INFO, TYPE_ACK, TYPE_BLOCK, TYPE_CHECKPOINT = 0x01, 0x02, 0x03, 0x04, 0x05
+MAX_BLOCK = 32  # samples per block frame at most (fewer when they do not fit in one COBS block)
+CHECKPOINT_EVERY = 256  # samples between checkpoints, rounded up to whole blocks
 COMMANDS = {  # name -> (type, argument fields, meaning)
     "start": (0x10, (), "start streaming sample frames"),
     "stop": (0x11, (), "stop streaming (the filters keep running)"),
@@ -57,11 +76,14 @@ COMMANDS = {  # name -> (type, argument fields, meaning)
     "decimate": (
         0x13,
         (("factor", "u16"),),
-        "send one sample frame in `factor` (1..1000; others are refused in the ack)",
+        "1: compact block and checkpoint frames; 2..1000: one sample frame in `factor` (others are refused)",
     ),
     "info": (0x14, (), "send an info frame"),
     "zupt_begin": (0x15, (), "mark the start of a zero-velocity interval"),
     "zupt_end": (0x16, (), "mark its end"),
+    "flush": (0x17, (), "send the unfinished block and a checkpoint now (compact mode)"),
+    "mode_states": (0x18, (), "at decimation 1 too, send sample frames with the filter's states (state mode)"),
+    "mode_compact": (0x19, (), "at decimation 1, send block and checkpoint frames (the default)"),
 }
 TYPE_STIMULUS = 0x20
 MAX_DECIMATION = 1000
@@ -72,13 +94,20 @@ FLAGS = {
     "zupt": 1,  # inside a host-marked zero-velocity interval
     "reset": 2,  # first frame after a filter reset
     "overflow": 3,  # a filter saturated since the previous frame
+    "resume": 4,  # block, checkpoint: first of a compact run (after power-on, start, reset, decimate 1)
+    # set by the host decoder only, on the sample rows it rebuilds from block frames
+    "replayed": 5,  # the row's states come from the host's replay of the firmware's filter
+    "mismatch": 6,  # the checkpoint closing the row's stretch differed from the replay
 }
 # bits of each axis' `flags`
 AXIS_FLAGS = {
     "skipped": 0,  # update skipped: the input was on a rail / saturated, or the capture was invalid
     "rail": 1,  # analog: code at 0 or full scale
     "timeout": 2,  # duty cycle: no capture within two periods (sensor unplugged)
+    "missed": 3,  # the board missed the sample (main loop too slow): predicted over, no input
 }
+# the 2-bit per-axis code of every sample in a block frame (bits 2i, 2i+1 of `aflags` for axis i)
+AXIS_CODES = {"updated": 0, "refused": 1, "no_capture": 2, "missed": 3}
 ACK_STATUS = {"ok": 0, "bad_argument": 1}
 BOARDS = {"host": 1, "mps2_an385": 2, "stm32f103": 3, "microbit": 4, "stm32vldiscovery": 5}
 
@@ -86,7 +115,7 @@ BOARDS = {"host": 1, "mps2_an385": 2, "stm32f103": 3, "microbit": 4, "stm32vldis
 @dataclass(frozen=True)
 class Field:
     name: str  # "seq", or "x.r" for axis x
-    kind: str  # a key of SCALARS, or "u8[N]"
+    kind: str  # a key of SCALARS, or "T[N]" (N of a scalar T)
     offset: int
     c_expr: str  # member of the C struct this field packs from / unpacks to
     unit: str = ""
@@ -94,15 +123,22 @@ class Field:
     doc: str = ""
 
     @property
+    def scalar(self) -> str:
+        return self.kind.split("[")[0]
+
+    @property
+    def count(self) -> int:
+        """Elements: 1 for a scalar, N for "T[N]"."""
+        return int(self.kind[self.kind.index("[") + 1 : -1]) if "[" in self.kind else 1
+
+    @property
     def size(self) -> int:
-        if self.kind.startswith("u8["):
-            return int(self.kind[3:-1])
-        return SCALARS[self.kind][0]
+        return self.count * SCALARS[self.scalar][0]
 
     @property
     def dtype(self) -> str:
-        if self.kind.startswith("u8["):
-            return f"({self.size},)u1"
+        if "[" in self.kind:
+            return f"({self.count},){SCALARS[self.scalar][1]}"
         return SCALARS[self.kind][1]
 
 
@@ -118,6 +154,12 @@ class Frame:
     def size(self) -> int:
         """Payload bytes, type byte included, CRC excluded."""
         return 1 + sum(f.size for f in self.fields)
+
+    def field(self, name: str) -> Field:
+        for f in self.fields:
+            if f.name == name:
+                return f
+        raise KeyError(f"{self.name}.{name}")
 
     @property
     def wire_size(self) -> int:
@@ -162,6 +204,14 @@ class Layout:
     t2_nominal: int  # duty: nominal period in counts; analog: 0
     timer_hz: int  # duty: capture timer clock; analog: 0
     frames: tuple[Frame, ...]
+    block_samples: int  # sample slots of a block frame
+    checkpoint_samples: int  # samples between checkpoints (whole blocks)
+    state_bytes: tuple[int, ...]  # per axis: sizeof the generated state struct a checkpoint carries
+    compact: bool  # False when a state struct has no target-independent bytes (a pointer): no compact mode
+
+    def sent(self, f: Frame) -> bool:
+        """Whether frame ``f`` is part of the protocol (block and checkpoint only with the compact mode)."""
+        return self.compact or f.name not in ("block", "checkpoint")
 
     def frame(self, name: str) -> Frame:
         for f in self.frames:
@@ -177,6 +227,10 @@ class Layout:
             "axes": list(self.axes),
             "flags": FLAGS,
             "axis_flags": AXIS_FLAGS,
+            "axis_codes": AXIS_CODES,
+            "block_samples": self.block_samples,
+            "checkpoint_samples": self.checkpoint_samples,
+            "state_bytes": list(self.state_bytes),
             "frames": {
                 f.name: {
                     "type": f.type,
@@ -196,6 +250,7 @@ class Layout:
                     ],
                 }
                 for f in self.frames
+                if self.sent(f)
             },
         }
 
@@ -259,6 +314,46 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
             b.add(f"{ax}.{s}", f"i{word}", f"{a}.{s}", unit=unit, frac=frac)
     frames.append(Frame("sample", TYPE_SAMPLE, "up", tuple(b.fields), "sample_t"))
 
+    # compact mode: raw inputs of a block of samples; the host replays the filter (see the module docstring)
+    # a state struct holding a pointer (the gain-schedule form's row) has no bytes two targets share: such a
+    # filter streams sample frames only (ACNF_COMPACT 0; the block and checkpoint frames stay out of the manifest)
+    state_bytes = [ax.get("state_bytes") for ax in filter_manifest["axes"]]
+    compact = all(isinstance(nb, int) and nb > 0 for nb in state_bytes)
+    if not compact:
+        state_bytes = [1] * len(names)
+    if duty:
+        # the generated convert refuses periods more than 25 % off the nominal one: with 1.5 x nominal
+        # below 2^16 every count it accepts fits a u16 (a larger one is sent as 65535 and is refused too)
+        raw_kind = "u16" if model.sensor.duty_cycle.t2_counts * 3 // 2 < 0xFFFF else "u32"
+        raw_keys = ("t1", "t2")
+    else:
+        if model.sensor.analog.adc_bits > 16:
+            raise ValueError(f"adc_bits {model.sensor.analog.adc_bits}: block frames carry codes of at most 16 bits")
+        raw_kind, raw_keys = "u16", ("code",)
+    per_sample = (1 if len(names) <= 4 else 2) + len(names) * len(raw_keys) * SCALARS[raw_kind][0]
+    head = 1 + 4 + 1 + 1 + 5 * 2
+    nblk = min(MAX_BLOCK, (MAX_ENCODED - 1 - 4 - head) // per_sample)
+    b = _Builder("s")
+    b.add("index", "u32", "s->index", doc="index of the block's first sample")
+    b.add("flags", "u8", "s->flags", doc="FLAGS bits")
+    b.add("n", "u8", "s->n", doc="slots in use (the others are zero)")
+    b.add("tx_drop", "u16", "s->tx_drop", doc="frames the MCU could not queue (link too slow), mod 2^16")
+    b.add("skipped", "u16", "s->skipped", doc="updates skipped (rail, bad capture, timeout), mod 2^16")
+    b.add("overflow", "u16", "s->overflow", doc="filter saturations, all axes, saturating at 65535")
+    b.add("missed", "u16", "s->missed", doc="samples the board missed (main loop too slow), predicted over, mod 2^16")
+    b.add("rx_lost", "u16", "s->rx_lost", doc="bytes the board's receivers lost (overrun, full ring), mod 2^16")
+    b.add("aflags", f"{'u8' if len(names) <= 4 else 'u16'}[{nblk}]", "s->aflags", doc="AXIS_CODES, 2 bits per axis")
+    for i, ax in enumerate(names):
+        for k in raw_keys:
+            b.add(f"{ax}.{k}", f"{raw_kind}[{nblk}]", f"s->{k}[{i}]", unit="count" if duty else "LSB")
+    frames.append(Frame("block", TYPE_BLOCK, "up", tuple(b.fields), "block_t"))
+    b = _Builder("s")
+    b.add("index", "u32", "s->index", doc="the state before this sample")
+    b.add("flags", "u8", "s->flags", doc="FLAGS bits")
+    b.add("axis", "u8", "s->axis", doc="axis number")
+    b.add("state", f"u8[{max(state_bytes)}]", "s->state", doc="the axis' state struct, its bytes (zero padded)")
+    frames.append(Frame("checkpoint", TYPE_CHECKPOINT, "up", tuple(b.fields), "checkpoint_t"))
+
     b = _Builder("s")
     b.add("protocol", "u16", "s->protocol")
     b.add("layout_hash", "u32", "s->layout_hash")
@@ -305,7 +400,19 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
     else:
         full_code, t2n, timer_hz = 2**model.sensor.analog.adc_bits - 1, 0, 0
     return Layout(
-        model.name, model.sha256, model.rate_hz, model.sensor.kind, names, full_code, t2n, timer_hz, tuple(frames)
+        model.name,
+        model.sha256,
+        model.rate_hz,
+        model.sensor.kind,
+        names,
+        full_code,
+        t2n,
+        timer_hz,
+        tuple(frames),
+        nblk,
+        nblk * -(-CHECKPOINT_EVERY // nblk),
+        tuple(state_bytes),
+        compact,
     )
 
 
@@ -324,8 +431,14 @@ def _banner(lay: Layout, what: str) -> str:
 
 def _put(f: Field) -> str:
     if f.kind.startswith("u8["):
-        return f"    memcpy(p + {f.offset}, {f.c_expr}, {f.size});"
-    bits = SCALARS[f.kind][0] * 8
+        return f"    memcpy(p + {f.offset}, {f.c_expr}, {f.size}); /* {f.name} */"
+    bits = SCALARS[f.scalar][0] * 8
+    if f.count > 1:
+        return (
+            f"    for (k = 0; k < {f.count}u; ++k) {{ /* {f.name} {f.kind}{_qnote(f)} */\n"
+            f"        acnf_put{bits}(p + {f.offset}u + {bits // 8}u * k, {f.c_expr}[k]);\n"
+            "    }"
+        )
     cast = f"(uint{bits}_t)" if f.kind.startswith("i") else ""
     return f"    acnf_put{bits}(p + {f.offset}, {cast}{f.c_expr}); /* {f.name} {f.kind}{_qnote(f)} */"
 
@@ -345,8 +458,12 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
     duty = lay.input == "duty_cycle"
     n = len(lay.axes)
     sample, info, ack = lay.frame("sample"), lay.frame("info"), lay.frame("ack")
+    block, ckpt = lay.frame("block"), lay.frame("checkpoint")
+    raw_f = block.fields[-1]
+    raw_t = f"uint{SCALARS[raw_f.scalar][0] * 8}_t"
+    aflags_t = f"uint{SCALARS[block.field('aflags').scalar][0] * 8}_t"
     stim = lay.frame("stimulus")
-    max_up = max(f.size for f in lay.frames if f.direction == "up")
+    max_up = max(f.size for f in lay.frames if f.direction == "up")  # block and checkpoint included
     max_down = max(f.size for f in lay.frames if f.direction == "down")
     period_us = round(1e6 / lay.rate_hz)
     H = [
@@ -375,11 +492,14 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         f"#define ACNF_T_SAMPLE 0x{TYPE_SAMPLE:02x}u",
         f"#define ACNF_T_INFO 0x{TYPE_INFO:02x}u",
         f"#define ACNF_T_ACK 0x{TYPE_ACK:02x}u",
+        f"#define ACNF_T_BLOCK 0x{TYPE_BLOCK:02x}u",
+        f"#define ACNF_T_CHECKPOINT 0x{TYPE_CHECKPOINT:02x}u",
     ]
     H += [f"#define ACNF_CMD_{k.upper()} 0x{v[0]:02x}u /* {v[2]} */" for k, v in COMMANDS.items()]
     H += [f"#define ACNF_T_STIMULUS 0x{TYPE_STIMULUS:02x}u", ""]
     H += [f"#define ACNF_FLAG_{k.upper()} (1u << {v})" for k, v in FLAGS.items()]
     H += [f"#define ACNF_AXIS_{k.upper()} (1u << {v})" for k, v in AXIS_FLAGS.items()]
+    H += [f"#define ACNF_CODE_{k.upper()} {v}u /* block: 2-bit per-axis code */" for k, v in AXIS_CODES.items()]
     H += [f"#define ACNF_ACK_{k.upper()} {v}u" for k, v in ACK_STATUS.items()]
     H += [f"#define ACNF_BOARD_{k.upper()} {v}u" for k, v in BOARDS.items()]
     H += [
@@ -389,6 +509,19 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         f"#define ACNF_INFO_SIZE {info.size}u",
         f"#define ACNF_ACK_SIZE {ack.size}u",
         f"#define ACNF_STIMULUS_SIZE {stim.size}u",
+        f"#define ACNF_BLOCK_SIZE {block.size}u",
+        f"#define ACNF_CHECKPOINT_SIZE {ckpt.size}u",
+        "",
+        "/* compact mode */",
+        f"#define ACNF_COMPACT {int(lay.compact)} /* 0: no compact mode (a state struct with a pointer) */",
+        f"#define ACNF_BLOCK_SAMPLES {lay.block_samples}u /* sample slots of a block frame */",
+        f"#define ACNF_CHECKPOINT_SAMPLES {lay.checkpoint_samples}u /* samples between checkpoints */",
+        f"#define ACNF_STATE_BYTES {max(lay.state_bytes)}u /* the largest axis state struct */",
+        f"#define ACNF_RAW_MAX {2 ** (8 * SCALARS[raw_f.scalar][0]) - 1}u /* block: larger inputs are sent as this */",
+        *[
+            f"#define ACNF_STATE_BYTES_{i} {nb}u /* sizeof axis {a}'s state struct */"
+            for i, (a, nb) in enumerate(zip(lay.axes, lay.state_bytes, strict=True))
+        ],
         f"#define ACNF_MAX_UP_SIZE {max_up}u",
         f"#define ACNF_MAX_DOWN_SIZE {max_down}u",
         "/* bytes on the wire: COBS code byte + payload + CRC-32 + delimiter */",
@@ -437,6 +570,32 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         "    uint8_t model_sha256[32];",
         "} acnf_info_t;",
         "",
+        f"typedef {aflags_t} acnf_aflags_t; /* a block's per-sample axis codes */",
+        "",
+        "typedef struct {",
+        "    uint32_t index; /* first sample */",
+        "    uint8_t flags; /* ACNF_FLAG_* */",
+        "    uint8_t n; /* slots in use */",
+        "    uint16_t tx_drop;",
+        "    uint16_t skipped;",
+        "    uint16_t overflow;",
+        "    uint16_t missed;",
+        "    uint16_t rx_lost;",
+        "    acnf_aflags_t aflags[ACNF_BLOCK_SAMPLES]; /* ACNF_CODE_* of axis i in bits 2i, 2i+1 */",
+        *(
+            [f"    {raw_t} t1[ACNF_NAXES][ACNF_BLOCK_SAMPLES];", f"    {raw_t} t2[ACNF_NAXES][ACNF_BLOCK_SAMPLES];"]
+            if duty
+            else [f"    {raw_t} code[ACNF_NAXES][ACNF_BLOCK_SAMPLES];"]
+        ),
+        "} acnf_block_t;",
+        "",
+        "typedef struct {",
+        "    uint32_t index; /* the state before this sample */",
+        "    uint8_t flags; /* ACNF_FLAG_* */",
+        "    uint8_t axis;",
+        "    uint8_t state[ACNF_STATE_BYTES]; /* the axis' state struct, zero padded */",
+        "} acnf_checkpoint_t;",
+        "",
         "typedef struct {",
         "    uint8_t command;",
         "    uint8_t status; /* ACNF_ACK_* */",
@@ -463,6 +622,8 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         "size_t acnf_pack_sample(const acnf_sample_t *s, uint8_t *p);",
         "size_t acnf_pack_info(const acnf_info_t *s, uint8_t *p);",
         "size_t acnf_pack_ack(const acnf_ack_t *s, uint8_t *p);",
+        "size_t acnf_pack_block(const acnf_block_t *s, uint8_t *p);",
+        "size_t acnf_pack_checkpoint(const acnf_checkpoint_t *s, uint8_t *p);",
         "/* Parsers accept a payload only with a known type and its exact size. */",
         "bool acnf_parse_command(const uint8_t *p, size_t n, acnf_command_t *c);",
         "bool acnf_parse_stimulus(const uint8_t *p, size_t n, acnf_stimulus_t *t);",
@@ -511,8 +672,17 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
             "}",
             "",
         ]
-    for fr, arg in ((sample, "acnf_sample_t"), (info, "acnf_info_t"), (ack, "acnf_ack_t")):
-        C += [f"size_t acnf_pack_{fr.name}(const {arg} *s, uint8_t *p)", "{", f"    p[0] = ACNF_T_{fr.name.upper()};"]
+    for fr, arg in (
+        (sample, "acnf_sample_t"),
+        (info, "acnf_info_t"),
+        (ack, "acnf_ack_t"),
+        (block, "acnf_block_t"),
+        (ckpt, "acnf_checkpoint_t"),
+    ):
+        C += [f"size_t acnf_pack_{fr.name}(const {arg} *s, uint8_t *p)", "{"]
+        if any(f.count > 1 and not f.kind.startswith("u8[") for f in fr.fields):
+            C += ["    size_t k;"]
+        C += [f"    p[0] = ACNF_T_{fr.name.upper()};"]
         C += [_put(f) for f in fr.fields]
         C += [f"    return {fr.size}u;", "}", ""]
     C += [

@@ -36,7 +36,15 @@ from accelnav.codegen.model import Model
 from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.estimate.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from accelnav.estimate.zupt import rest_mask
-from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus, sample_columns
+from accelnav.link.telemetry import (
+    Decoder,
+    Manifest,
+    decode_all,
+    encode_command,
+    encode_stimulus,
+    replay_for,
+    sample_columns,
+)
 
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
 from .qemu import MACHINES, QemuBoard, QemuError, machine_for, run_feed
@@ -47,10 +55,13 @@ PIL_BOARDS = tuple(MACHINES)  # the boards `accelnav hil --target pil --board` r
 
 
 def stimulus(man: Manifest, run: SimRun) -> bytes:
-    """The stimulus frames of a simulated run: one per sample, the raw input of every axis."""
+    """The stimulus frames of a simulated run: one per sample, the raw input of every axis; then a
+    ``flush`` command, so that the compact mode sends its last, partial block and a checkpoint."""
     if run.code is not None:
-        return encode_stimulus(man, code=run.code)
-    return encode_stimulus(man, t1=run.t1, t2=run.t2)
+        stim = encode_stimulus(man, code=run.code)
+    else:
+        stim = encode_stimulus(man, t1=run.t1, t2=run.t2)
+    return stim + (encode_command(man, "flush") if "cmd_flush" in man.frames else b"")
 
 
 def run_sil(model: Model, stim: bytes) -> bytes:
@@ -106,8 +117,9 @@ def run_pil(
         for a in range(0, len(tel), step):
             writer.append(tel[a : a + step])
             writer.flush()
-    dec = Decoder(man)
+    dec = Decoder(man, replay=replay_for(man, model))  # the compact frames' rows need the replay
     dec.feed(tel)
+    dec.release()
     stats = dec.stats.as_dict()
     if stats.get("frames", {}).get("sample", 0) < n_samples:
         raise QemuError(f"PIL run ({board}) ended early (end of the stimulus) after {stats.get('frames', {})} frames")
@@ -171,10 +183,11 @@ class Comparison:
 
     n: int
     pil_equal_sil: bool | None  # None: no PIL run
-    first_difference: int | None
+    first_difference: int | None  # sample row (or, the rows equal, -1: a checkpoint or block frame differs)
     max_err_sigma: dict[str, float]  # firmware vs float64 reference, max |e|/sigma after the first second
     max_of_bound: float  # firmware vs the float64 Kalman filter, max |e| / the generator's stated bound (<= 1 required)
     position_rows: list[PositionErrors] = field(default_factory=list)
+    link: dict = field(default_factory=dict)  # per target ("SIL", "PIL"): the decoder's counts (Stats.as_dict)
     fw: dict[str, np.ndarray] = field(default_factory=dict)
     ref_x: np.ndarray | None = None  # (n_axes, N, 4)
     ref_sd: np.ndarray | None = None
@@ -202,11 +215,14 @@ def stated_bound(model: Model, j: int, run: SimRun, x_ref: np.ndarray) -> np.nda
 def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> Comparison:
     """SIL vs PIL bit for bit, firmware vs float64 reference, truth vs firmware/reference/smoother."""
     man = manifest(model.source)
-    sil_frames, _ = decode_all(man, sil)
+    replay = replay_for(man, model)  # the compact mode's rows get their states from the firmware's own C
+    sil_frames, sil_stats = decode_all(man, sil, replay)
     s = sil_frames["sample"]
+    link = {"SIL": sil_stats.as_dict()}
     equal = first = None
     if pil is not None:
-        pil_frames, _ = decode_all(man, pil)
+        pil_frames, pil_stats = decode_all(man, pil, replay)
+        link["PIL"] = pil_stats.as_dict()
         p = pil_frames["sample"]
         same = min(len(p), len(s))
         # frame by frame, every byte of the decoded record (structured rows viewed as raw bytes)
@@ -215,6 +231,14 @@ def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> 
         bad = np.flatnonzero((rows_p != rows_s).any(axis=1))
         equal = bool(len(p) == len(s) and len(bad) == 0)
         first = int(bad[0]) if len(bad) else (None if len(p) == len(s) else same)
+        # the rows' states are the host's replay: what the boards computed is in the frames themselves
+        for name in ("block", "checkpoint"):
+            if name not in pil_frames:
+                continue
+            a, b = pil_frames[name], sil_frames[name]
+            if len(a) != len(b) or a.tobytes() != b.tobytes():
+                equal = False
+                first = -1 if first is None else first
     cols = sample_columns(man, s)
     n = len(s)
     if n != len(run.t):
@@ -253,14 +277,24 @@ def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> 
             "smoother + ZUPT": zupt_x[:, :, 0],
         },
     )
-    return Comparison(n, equal, first, errs, of_bound, rows, cols, ref_x, ref_sd, smooth_x, zupt_x)
+    return Comparison(n, equal, first, errs, of_bound, rows, link, cols, ref_x, ref_sd, smooth_x, zupt_x)
 
 
 def format_comparison(c: Comparison) -> str:
     lines = []
     if c.pil_equal_sil is not None:
-        verdict = "bit-identical" if c.pil_equal_sil else f"DIFFERENT from frame {c.first_difference}"
-        lines.append(f"PIL vs SIL: {c.n} sample frames, {verdict}")
+        where = "in a block or checkpoint frame" if c.first_difference == -1 else f"from row {c.first_difference}"
+        verdict = "bit-identical" if c.pil_equal_sil else f"DIFFERENT {where}"
+        lines.append(f"PIL vs SIL: {c.n} sample rows, {verdict}")
+    for target, st in c.link.items():
+        if st["frames"].get("block", 0):
+            lines.append(
+                f"{target}: {st['frames']['block']} block frames, replay matched {st['checkpoints']} checkpoints "
+                f"bit for bit, {st['mismatches']} MISMATCHED"
+                if st["mismatches"]
+                else f"{target}: {st['frames']['block']} block frames, replay matched {st['checkpoints']} checkpoints "
+                "bit for bit, no mismatch"
+            )
     errs = ", ".join(f"{k} {v:.2e}" for k, v in c.max_err_sigma.items())
     lines.append(f"firmware vs float64 reference, max |error| / reference sigma after 1 s: {errs}")
     verdict = "within" if c.max_of_bound <= 1.0 else "OUTSIDE"

@@ -21,12 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from accelnav.codegen.model import load_model
 from accelnav.hil_sim.firmware import DUTY_MODEL
 from accelnav.hil_sim.firmware import make_firmware as build_image
 from accelnav.hil_sim.hil import wait_ready
 from accelnav.hil_sim.qemu import MACHINES, Mps2Board, QemuBoard, qemu_command
 from accelnav.link.recorder import Recorder, Status, decode_log
-from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus
+from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus, replay_for
 
 REPO = Path(__file__).resolve().parents[1]
 STM32_FLASH, STM32_RAM = 64 * 1024, 20 * 1024
@@ -52,11 +53,12 @@ def test_host_board_builds_and_runs_as_a_program():
     out = make_firmware("host")
     man = Manifest.load(out / "gen" / "acnframe.json")
     code = 2048 + np.random.default_rng(3).integers(-30, 30, (300, 2))
-    stdin = encode_command(man, "info") + encode_stimulus(man, code=code)
+    stdin = encode_command(man, "info") + encode_stimulus(man, code=code) + encode_command(man, "flush")
     done = subprocess.run([out / "accelnav_fw"], input=stdin, capture_output=True, timeout=60)
     assert done.returncode == 0
-    frames, stats = decode_all(man, done.stdout)
+    frames, stats = decode_all(man, done.stdout, replay_for(man, load_model()))
     assert len(frames["sample"]) == 300 and len(frames["info"]) == 1 and stats.bad_frames == 0
+    assert stats.mismatches == 0 and stats.checkpoints == 4
     print(f"\nhost board: {sizes(out)}")
 
 
@@ -136,11 +138,12 @@ def test_mps2_an385_in_qemu_matches_the_host_board(tmp_path):
     n = 3000
     code = 2048 + np.random.default_rng(4).integers(-80, 80, (n, 2))
     code[100, 1] = 0  # a rail
-    stim = encode_stimulus(man, code=code)
+    stim = encode_stimulus(man, code=code) + encode_command(man, "flush")
     log = tmp_path / "qemu.acnlog"
+    model_text = load_model().text  # the compact frames' states: the host replays the firmware's C
     with Mps2Board(out / "accelnav_fw.elf") as board:
         tel, feed = board.open(0), board.open(1)
-        rec = Recorder(tel, log, man, commands=(("info", {}),), status=Status(enabled=False))
+        rec = Recorder(tel, log, man, commands=(("info", {}),), model_text=model_text, status=Status(enabled=False))
         writer = threading.Thread(target=lambda: (time.sleep(0.2), feed.write(stim)), daemon=True)
         writer.start()
         res = rec.run(max_frames=n, duration=120)
@@ -152,8 +155,11 @@ def test_mps2_an385_in_qemu_matches_the_host_board(tmp_path):
     info = d.frames["info"][0]
     assert info["board"] == man.data["boards"]["mps2_an385"]
     ref = subprocess.run([host / "accelnav_fw"], input=stim, capture_output=True, timeout=60).stdout
-    ref_frames, _ = decode_all(man, ref)
+    ref_frames, _ = decode_all(man, ref, replay_for(man, load_model()))
     np.testing.assert_array_equal(d.frames["sample"], ref_frames["sample"])  # bit-identical on the M3
+    for name in ("block", "checkpoint"):  # what the M3 computed: its checkpoints are the host board's
+        assert d.frames[name].tobytes() == ref_frames[name].tobytes()
+    assert d.stats["mismatches"] == 0 and d.stats["checkpoints"] == 2 * (n // man.data["checkpoint_samples"] + 1)
     assert d.frames["sample"]["y.flags"][100] & 3 == 3
     print(f"\nqemu mps2-an385: {n} samples in {res.seconds:.1f} s ({n / res.seconds:.0f} samples/s)")
 

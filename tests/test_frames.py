@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from accelnav.codegen.cbuild import cache_dir
-from accelnav.codegen.frames import COMMANDS, MAX_ENCODED, layout
+from accelnav.codegen.frames import COMMANDS, MAX_ENCODED, PROTOCOL_VERSION, layout
 from accelnav.codegen.model import load_model
 from accelnav.hil_sim.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
 from accelnav.link.telemetry import (
@@ -29,6 +29,7 @@ from accelnav.link.telemetry import (
     encode_command,
     encode_stimulus,
     frame,
+    replay_for,
     sample_columns,
 )
 
@@ -48,6 +49,16 @@ def fw_mod(kind):
 @pytest.fixture(scope="module")
 def man(kind):
     return manifest(MODELS[kind])
+
+
+@pytest.fixture(scope="module")
+def replay(kind, man):
+    """The host's replay of the firmware's filter: the compact mode's block frames need it."""
+    return replay_for(man, load_model(MODELS[kind]))
+
+
+def _flush(man):
+    return encode_command(man, "flush")
 
 
 # --------------------------------------------------------------------------
@@ -196,7 +207,7 @@ def test_round_trip_sample_frames(fw_mod, man):
     assert [tuple(r) for r in got.tolist()] == naive["sample"]
 
 
-def test_stream_split_anywhere_decodes_the_same(fw_mod, man):
+def test_stream_split_anywhere_decodes_the_same(fw_mod, man, replay):
     fw = HostFirmware(fw_mod)
     rng = np.random.default_rng(6)
     n = 400
@@ -205,15 +216,16 @@ def test_stream_split_anywhere_decodes_the_same(fw_mod, man):
         wire_in = encode_stimulus(man, t1=rng.integers(t2 // 4, 3 * t2 // 4), t2=t2)
     else:
         wire_in = encode_stimulus(man, code=rng.integers(1, 4095, (n, len(man.axes))))
-    fw.rx(wire_in)
+    fw.rx(wire_in + _flush(man))
     data = fw.take()
-    whole, _ = decode_all(man, data)
+    whole, _ = decode_all(man, data, replay)
     assert len(whole["sample"]) == n
-    d = Decoder(man)
+    d = Decoder(man, replay=replay)
     cuts = np.sort(rng.integers(0, len(data), 80))
     parts = [d.feed(data[a:b])["sample"] for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(data)], strict=True)]
     np.testing.assert_array_equal(np.concatenate(parts), whole["sample"])
     assert d.stats.lost == 0 and d.stats.bad_frames == 0
+    assert d.stats.mismatches == 0 and d.stats.checkpoints == 2 * (1 + n // man.data["checkpoint_samples"])
 
 
 # --------------------------------------------------------------------------
@@ -231,7 +243,11 @@ def _run_filter_directly(kind, raw):
     ]
 
 
-def test_streamed_states_are_the_generated_filters(kind, fw_mod, man):
+def test_streamed_states_are_the_generated_filters(kind, fw_mod, man, replay):
+    """The compact mode's round trip through the firmware's C: raw inputs in block frames, the states
+    from the host's replay, every checkpoint (the firmware's own state bytes) matched bit for bit, the
+    rows equal to the generated filter run alone and to the states the firmware itself sends in the
+    state mode (decimation 2)."""
     fw = HostFirmware(fw_mod)
     rng = np.random.default_rng(7)
     n = 600
@@ -246,10 +262,21 @@ def test_streamed_states_are_the_generated_filters(kind, fw_mod, man):
         code[50, 0] = 0  # rails
         code[60, 1] = 4095
         raw = {"code": code}
-    fw.rx(encode_stimulus(man, **raw))
-    frames, stats = decode_all(man, fw.take())
+    fw.rx(encode_stimulus(man, **raw) + _flush(man))
+    frames, stats = decode_all(man, fw.take(), replay)
+    assert stats.mismatches == 0 and stats.lost == 0
+    assert stats.checkpoints == 2 * (1 + n // man.data["checkpoint_samples"])  # all but the first pair
+    assert (frames["sample"]["flags"] & (1 << man.flags["replayed"])).all()
     cols = sample_columns(man, frames["sample"])
     np.testing.assert_array_equal(cols["index"], np.arange(n))
+    # the same input in the state mode: the firmware's own states of every second sample
+    fw2 = HostFirmware(fw_mod)
+    fw2.rx(encode_command(man, "decimate", factor=2) + encode_stimulus(man, **raw))
+    own = decode_all(man, fw2.take())[0]["sample"]
+    np.testing.assert_array_equal(own["index"], np.arange(0, n, 2))
+    for ax in man.axes:
+        for st in "ruae":
+            np.testing.assert_array_equal(frames["sample"][f"{ax}.{st}"][::2], own[f"{ax}.{st}"], err_msg=st)
     ref = _run_filter_directly(kind, raw)
     for j in range(2):
         x = ref[j]["x"]
@@ -265,7 +292,7 @@ def test_streamed_states_are_the_generated_filters(kind, fw_mod, man):
     assert not (frames["sample"]["flags"][1:] & 4).any()
 
 
-def test_missed_samples_are_predicted_over_and_counted(kind, fw_mod, man):
+def test_missed_samples_are_predicted_over_and_counted(kind, fw_mod, man, replay):
     """A board that misses samples (its main loop too slow: the STM32 port's sample overrun) calls
     app_missed: every axis filter predicts over each missed sample, exactly as over a refused input,
     the sample index keeps time, and the `missed` counter says how many. Here the host board misses
@@ -288,18 +315,22 @@ def test_missed_samples_are_predicted_over_and_counted(kind, fw_mod, man):
     for a, b, gap in ((0, 100, 2), (102, 200, 1), (201, n, 0)):
         fw.rx(stim[a * per : b * per])
         fw.lib.app_missed(gap)
-    frames, stats = decode_all(man, fw.take())
+    fw.rx(_flush(man))
+    frames, stats = decode_all(man, fw.take(), replay)
     s = frames["sample"]
-    kept = np.setdiff1d(np.arange(n), missed)
-    np.testing.assert_array_equal(s["index"], kept)  # no frame for a missed sample; the index keeps time
-    assert stats.lost == 0  # nothing was dropped on the link: seq has no gaps
-    np.testing.assert_array_equal(s["missed"], np.select([kept > 200, kept > 101], [3, 2], 0))
+    # compact mode: a row for every sample, the missed ones flagged (no input, predicted over)
+    np.testing.assert_array_equal(s["index"], np.arange(n))
+    assert stats.lost == 0 and stats.mismatches == 0
+    for ax in man.axes:
+        miss = (s[f"{ax}.flags"] & (1 << man.axis_flags["missed"])) != 0
+        np.testing.assert_array_equal(np.flatnonzero(miss), missed)
+    assert s["missed"][-1] == 3
     assert not s["skipped"].any() and not s["rx_lost"].any()
     cols = sample_columns(man, s)
     ref = _run_filter_directly(kind, refused)
     for j in range(2):
         for i, key in enumerate(("r", "u", "a", "eps")):
-            np.testing.assert_allclose(cols[key][:, j], ref[j]["x"][kept, i], rtol=1e-12, atol=1e-12, err_msg=key)
+            np.testing.assert_allclose(cols[key][:, j], ref[j]["x"][:, i], rtol=1e-12, atol=1e-12, err_msg=key)
 
 
 def test_duty_cycle_timeout_is_flagged_and_the_filter_keeps_running():
@@ -310,8 +341,8 @@ def test_duty_cycle_timeout_is_flagged_and_the_filter_keeps_running():
     t2 = np.full((n, 2), man.data["t2_nominal"])
     flags = np.zeros(n, np.uint8)
     flags[20:30] = 1  # axis x unplugged for 10 samples
-    fw.rx(encode_stimulus(man, flags=flags, t1=t2 // 2, t2=t2))
-    s = decode_all(man, fw.take())[0]["sample"]
+    fw.rx(encode_stimulus(man, flags=flags, t1=t2 // 2, t2=t2) + _flush(man))
+    s = decode_all(man, fw.take(), replay_for(man, load_model(MODELS["duty"])))[0]["sample"]
     assert len(s) == n
     timeout = (s["x.flags"] & 4) != 0
     np.testing.assert_array_equal(timeout, flags == 1)
@@ -319,7 +350,7 @@ def test_duty_cycle_timeout_is_flagged_and_the_filter_keeps_running():
     assert s["skipped"][-1] == 10
 
 
-def test_commands(fw_mod, man):
+def test_commands(fw_mod, man, replay):
     fw = HostFirmware(fw_mod)
     n_ax = len(man.axes)
 
@@ -332,36 +363,67 @@ def test_commands(fw_mod, man):
     cmd = lambda name, **a: encode_command(man, name, **a)  # noqa: E731
     fw.rx(cmd("info") + stim(10) + cmd("decimate", factor=4) + stim(20) + cmd("zupt_begin") + stim(4))
     fw.rx(cmd("zupt_end") + stim(4) + cmd("stop") + stim(8) + cmd("start") + cmd("decimate", factor=1) + stim(3))
-    fw.rx(cmd("decimate", factor=0) + cmd("decimate", factor=1001) + cmd("reset") + stim(2))
-    frames, stats = decode_all(man, fw.take())
+    fw.rx(cmd("decimate", factor=0) + cmd("decimate", factor=1001) + cmd("reset") + stim(2) + cmd("flush"))
+    frames, stats = decode_all(man, fw.take(), replay)
     info, ack, s = frames["info"], frames["ack"], frames["sample"]
     assert len(info) == 1
     assert info["layout_hash"][0] == man.layout_hash
     assert bytes(info["model_sha256"][0]).hex() == man.model_sha256
-    assert info["protocol"][0] == 1 and info["board"][0] == man.data["boards"]["host"]
+    assert info["protocol"][0] == PROTOCOL_VERSION and info["board"][0] == man.data["boards"]["host"]
     assert info["rate_mhz"][0] == round(man.rate_hz * 1000)
-    sent = "info decimate zupt_begin zupt_end stop start decimate decimate decimate reset".split()
+    sent = "info decimate zupt_begin zupt_end stop start decimate decimate decimate reset flush".split()
     assert list(ack["command"]) == [COMMANDS[c][0] for c in sent]
-    assert list(ack["status"]) == [0] * 7 + [1, 1, 0]  # factors 0 and 1001 refused
-    # 10 at 1:1, 20 at 1:4 (5), 4 + 4 at 1:4 (2), 8 stopped, 3 at 1:1, then 2 after the reset
+    assert list(ack["status"]) == [0] * 7 + [1, 1, 0, 0]  # factors 0 and 1001 refused
+    # 10 at 1:1 (compact), 20 at 1:4 (5), 4 + 4 at 1:4 (2), 8 stopped, 3 at 1:1, then 2 after the reset
     assert list(s["index"]) == [*range(10), 10, 14, 18, 22, 26, 30, 34, 46, 47, 48, 0, 1]
-    assert stats.lost == 0  # seq runs on across stop and start
+    assert stats.lost == 0 and stats.mismatches == 0  # seq runs on across stop and start; resumes are no loss
     zupt = (s["flags"] & 2) != 0
     assert list(zupt) == [False] * 15 + [True] + [False] * 6
     assert (s["flags"][-2:] & 4).tolist() == [4, 0]  # reset flagged once
 
 
+def test_blocks_the_link_cannot_take_are_counted_and_the_replay_resynchronises(fw_mod, man, replay):
+    """Compact mode: a block the link cannot take is dropped (tx_drop); the host counts its samples lost
+    from the index, has no state for the samples after it until the next checkpoint (counted lost too,
+    exactly) and resynchronises there."""
+    fw = HostFirmware(fw_mod)
+    B, C = man.data["block_samples"], man.data["checkpoint_samples"]
+    n = C + 2 * B
+    n_ax = len(man.axes)
+    if man.input == "duty_cycle":
+        t2 = np.full((n, n_ax), man.data["t2_nominal"])
+        data = encode_stimulus(man, t1=t2 // 2, t2=t2)
+    else:
+        data = encode_stimulus(man, code=np.full((n, n_ax), 2048))
+    per = len(data) // n
+    fw.rx(data[: 2 * B * per])
+    sent = fw.take()
+    fw.lib.board_host_set_tx_limit(0)  # the link takes nothing while the third block fills and goes
+    fw.rx(data[2 * B * per : 3 * B * per])
+    assert fw.take() == b""
+    fw.lib.board_host_set_tx_limit(1 << 16)
+    fw.rx(data[3 * B * per :] + _flush(man))
+    frames, stats = decode_all(man, sent + fw.take(), replay)
+    s = frames["sample"]
+    # delivered: the first two blocks, then from the checkpoint after sample C on
+    np.testing.assert_array_equal(s["index"], np.r_[0 : 2 * B, C:n])
+    assert stats.lost == C - 2 * B  # the dropped block and the samples up to the checkpoint
+    assert stats.mismatches == 0
+    assert s["tx_drop"][-1] == 1
+
+
 def test_frames_the_link_cannot_take_are_counted(fw_mod, man):
     fw = HostFirmware(fw_mod)
+    fw.rx(encode_command(man, "decimate", factor=2))  # the state mode: one sample frame per two samples
     wire = man.frames["sample"]["wire_size"]
     fw.lib.board_host_set_tx_limit(wire * 3 + 10)  # room for three frames between drains
     n_ax = len(man.axes)
     if man.input == "duty_cycle":
-        t2 = np.full((40, n_ax), man.data["t2_nominal"])
+        t2 = np.full((80, n_ax), man.data["t2_nominal"])
         data = encode_stimulus(man, t1=t2 // 2, t2=t2)
     else:
-        data = encode_stimulus(man, code=np.full((40, n_ax), 2048))
-    step = len(data) // 40 * 5  # five samples per piece: two of them find the link full
+        data = encode_stimulus(man, code=np.full((80, n_ax), 2048))
+    step = len(data) // 80 * 10  # five frames per piece: two of them find the link full
     fw.rx(data, step=step)
     frames, stats = decode_all(man, fw.take())
     s = frames["sample"]

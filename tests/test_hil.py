@@ -29,7 +29,7 @@ from accelnav.codegen.model import load_model
 from accelnav.hil_sim import hil, qemu
 from accelnav.hil_sim.firmware import manifest
 from accelnav.hil_sim.sensor import simulate
-from accelnav.link.telemetry import decode_all
+from accelnav.link.telemetry import decode_all, replay_for
 
 SIGMA_FRACTION = 1e-3  # firmware vs float64 reference, in units of the reference's sigma, after 1 s
 
@@ -124,7 +124,8 @@ def test_pil_frames_equal_sil_bit_for_bit(tmp_path, model_in_form, board, model_
         assert err < SIGMA_FRACTION, f"{key}: firmware off the float64 reference by {err:.2e} sigma"
     assert c.max_of_bound <= 1.0, f"firmware at {c.max_of_bound:.3g} of the generator's stated bound"
     assert pil.stats["lost"] == 0 and pil.stats["crc_errors"] == 0
-    fr = decode_all(man, pil.telemetry)[0]
+    fr = decode_all(man, pil.telemetry, replay_for(man, model))[0]
+    assert len(fr["sample"]) == len(run.t)
     assert not fr["sample"]["missed"].any() and not fr["sample"]["rx_lost"].any()
     print(f"\n{board} {model.name} {form} {scenario}: {c.n} samples, {c.n / pil.seconds:.0f} samples/s")
 
@@ -136,15 +137,23 @@ def test_sil_agrees_with_reference_and_compare_catches_a_flipped_bit(default_mod
     c = hil.compare(default_model, run, sil, sil)
     assert c.pil_equal_sil and c.first_difference is None
     assert max(c.max_err_sigma.values()) < SIGMA_FRACTION and c.max_of_bound <= 1.0
-    # one bit of one state in frame 500, re-framed with a valid CRC: must be seen
-    from accelnav.link.telemetry import decode_all, encode_frames
+    # one bit of sample 500's input in its block frame, re-framed with a valid CRC: must be seen
+    from accelnav.link.telemetry import cobs_decode, frame
 
-    frames, _ = decode_all(man, sil)
-    samples = frames["sample"].copy()
-    samples[500]["x.r"] ^= 1
-    tampered = encode_frames(man, "sample", samples)
+    frames = [p + b"\0" for p in sil.split(b"\0")[:-1]]
+    for k, f in enumerate(frames):
+        p = bytearray(cobs_decode(f[:-1])[:-4])
+        first = int.from_bytes(p[1:5], "little")
+        if p[0] == man.frames["block"]["type"] and first <= 500 < first + p[6]:
+            off = man.field("block", "x.code")["offset"] + 2 * (500 - first)
+            p[off] ^= 1
+            frames[k] = frame(bytes(p))
+    tampered = b"".join(frames)
     c = hil.compare(default_model, run, sil, tampered)
-    assert c.pil_equal_sil is False and c.first_difference == 500
+    # the replay then misses the next checkpoint: the rows of the stretch holding sample 500 are flagged
+    C = man.data["checkpoint_samples"]
+    assert c.pil_equal_sil is False and c.first_difference == C * (500 // C)
+    assert c.link["PIL"]["mismatches"] >= 1 and c.link["SIL"]["mismatches"] == 0
 
 
 def test_smoother_with_zupt_beats_filter_in_the_summary(default_model):
@@ -206,7 +215,8 @@ def test_file_feed_takes_commands_as_the_host_board_does(tmp_path, board_name):
     sil = hil.run_sil(model, stim)
     frames = decode_all(man, sil)[0]
     expected = len(range(0, n, 7)) * 2
-    assert len(frames["sample"]) == expected and len(frames["ack"]) == 3
+    # acks: decimate, then stop and start, and the flush that ends each third of the stimulus
+    assert len(frames["sample"]) == expected and len(frames["ack"]) == 6
     assert frames["sample"]["index"][expected // 2] == 2 * n  # the first sample after start
     pil = hil.run_pil(model, stim, expected, tmp_path / "cmd.acnlog", board=board_name)
     assert pil.telemetry == sil
@@ -280,8 +290,9 @@ def test_hil_cli_pil_on_the_m0(tmp_path, capsys):
     )
     out = capsys.readouterr().out
     assert status == 0, out
-    assert "PIL (microbit): 200 samples" in out and "PIL vs SIL: 200 sample frames, bit-identical" in out
-    # the link budget: PIL's telemetry is SIL's, byte for byte (200 frames of the same wire size)
+    assert "PIL (microbit): 200 samples" in out and "PIL vs SIL: 200 sample rows, bit-identical" in out
+    assert "PIL: 7 block frames, replay matched 2 checkpoints bit for bit, no mismatch" in out
+    # the link budget: PIL's telemetry is SIL's, byte for byte
     sil_bytes = int(re.search(r"SIL: 200 samples in, (\d+) bytes of telemetry out", out).group(1))
     assert f"PIL (microbit): 200 samples in, {sil_bytes} bytes of telemetry out" in out
 
@@ -292,8 +303,12 @@ def test_hil_cli_sil(tmp_path, capsys):
     assert status == 0
     assert "firmware vs float64 reference" in out and "smoother + ZUPT" in out
     man = manifest(None)
-    wire = man.frames["sample"]["wire_size"]
-    assert f"SIL: 600 samples in, {600 * wire} bytes of telemetry out ({wire:.1f} B per sample)" in out
+    fr, B, C = man.frames, man.data["block_samples"], man.data["checkpoint_samples"]
+    # compact: 19 blocks (18 full, the flush's), checkpoints at 0, 256, 512 and the flush's, one ack
+    size = 18 * fr["block"]["wire_size"] + fr["block"]["wire_size"] + 4 * 2 * fr["checkpoint"]["wire_size"]
+    size += fr["ack"]["wire_size"]
+    assert 600 // B == 18 and 600 // C == 2
+    assert f"SIL: 600 samples in, {size} bytes of telemetry out ({size / 600:.1f} B per sample)" in out
     assert (tmp_path / "hil.png").stat().st_size > 10_000
     status = main(["hil", "--scenario", "nowhere"])
     assert status == 2 and "unknown scenario" in capsys.readouterr().err
@@ -376,6 +391,7 @@ def test_pil_at_1khz_equals_sil(tmp_path, board_name):
     assert pil.telemetry == hil.run_sil(model, stim)
     assert pil.stats["frames"]["sample"] == len(run.t) == 3000
     assert pil.stats["lost"] == 0 and pil.stats["crc_errors"] == 0
-    fr = decode_all(man, pil.telemetry)[0]
+    fr = decode_all(man, pil.telemetry, replay_for(man, model))[0]
+    assert len(fr["sample"]) == len(run.t)
     assert not fr["sample"]["missed"].any() and not fr["sample"]["rx_lost"].any()
     print(f"\n{board_name} at 1 kHz: {len(run.t)} samples, {len(run.t) / pil.seconds:.0f} samples/s")

@@ -24,7 +24,7 @@ from accelnav.data.runfile import load_run
 from accelnav.hil_sim.firmware import HostFirmware, build_firmware, generated, manifest
 from accelnav.link.logfile import LogError, LogWriter, read_log
 from accelnav.link.recorder import Recorder, Status, decode_log
-from accelnav.link.telemetry import decode_all, encode_stimulus
+from accelnav.link.telemetry import decode_all, encode_command, encode_stimulus
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -36,8 +36,11 @@ def man():
 
 @pytest.fixture(scope="module")
 def telemetry(man):
-    """2000 samples of the default model's firmware (host board, cffi): its telemetry bytes."""
+    """2000 samples of the default model's firmware (host board, cffi) in the state mode (one sample frame
+    per sample, its states included): its telemetry bytes."""
     fw = HostFirmware(build_firmware(None))
+    fw.rx(encode_command(man, "mode_states"))
+    fw.take()  # the ack
     code = 2048 + np.random.default_rng(8).integers(-60, 60, (2000, 2))
     fw.rx(encode_stimulus(man, code=code))
     return fw.take()

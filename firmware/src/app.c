@@ -4,6 +4,69 @@
 
 app_state_t app;
 
+static bool app_compact(void)
+{
+    return ACNF_COMPACT && app.running && app.decimation == 1u && !app.state_mode;
+}
+
+/* One checkpoint per axis: the state before sample app.index. */
+static void app_send_checkpoints(uint8_t flags)
+{
+    acnf_checkpoint_t ck;
+    uint8_t payload[ACNF_CHECKPOINT_SIZE];
+    unsigned i;
+    for (i = 0; i < ACNF_NAXES; ++i) {
+        memset(&ck, 0, sizeof ck);
+        ck.index = app.index;
+        ck.flags = flags;
+        ck.axis = (uint8_t)i;
+        acn_filter_state(&app.filters, i, ck.state);
+        if (!link_send(payload, acnf_pack_checkpoint(&ck, payload))) {
+            ++app.tx_drop; /* the host replays on to the next checkpoint: nothing is lost but a
+                              check */
+        }
+    }
+    app.ck_left = ACNF_CHECKPOINT_SAMPLES;
+}
+
+/* Send the block being filled (if it holds a sample) and begin the next at sample app.index. */
+static void app_send_block(void)
+{
+    acnf_block_t *b = &app.blk;
+    uint32_t overflow = app_overflow_total();
+    if (b->n > 0u) {
+        uint8_t payload[ACNF_BLOCK_SIZE];
+        b->flags |= ACNF_FLAG_RUNNING;
+        if (app.zupt) {
+            b->flags |= ACNF_FLAG_ZUPT;
+        }
+        if (overflow != app.overflow_seen) {
+            b->flags |= ACNF_FLAG_OVERFLOW;
+        }
+        b->tx_drop = app.tx_drop;
+        b->skipped = app.skipped;
+        b->overflow = overflow > 0xffffu ? 0xffffu : (uint16_t)overflow;
+        b->missed = app.missed;
+        b->rx_lost = (uint16_t)board_rx_lost();
+        if (link_send(payload, acnf_pack_block(b, payload))) {
+            app.overflow_seen = overflow;
+        } else {
+            ++app.tx_drop; /* its samples are lost: the host counts them from the index */
+        }
+    }
+    memset(b, 0, sizeof *b);
+    b->index = app.index;
+}
+
+/* Compact mode: what is pending goes out now (a partial block, then a checkpoint). */
+static void app_flush(void)
+{
+    if (app_compact() && !app.resume) {
+        app_send_block();
+        app_send_checkpoints(0);
+    }
+}
+
 static void app_reset_filters(void)
 {
     acn_filters_init(&app.filters);
@@ -11,6 +74,7 @@ static void app_reset_filters(void)
     app.decim_left = 0;
     app.overflow_seen = 0;
     app.reset_pending = true;
+    app.resume = true;
 }
 
 void app_init(void)
@@ -75,18 +139,23 @@ static void app_command(const acnf_command_t *c)
         if (!app.running) { /* seq runs on: the host sees no gap across a stop */
             app.running = true;
             app.decim_left = 0;
+            app.resume = true;
         }
         break;
     case ACNF_CMD_STOP:
+        app_flush();
         app.running = false;
         break;
     case ACNF_CMD_RESET:
+        app_flush();
         app_reset_filters();
         break;
     case ACNF_CMD_DECIMATE:
         if (c->factor >= 1u && c->factor <= ACNF_MAX_DECIMATION) {
+            app_flush();
             app.decimation = c->factor;
             app.decim_left = 0;
+            app.resume = true;
         } else {
             status = ACNF_ACK_BAD_ARGUMENT;
         }
@@ -94,11 +163,28 @@ static void app_command(const acnf_command_t *c)
     case ACNF_CMD_INFO:
         app_send_info();
         break;
-    case ACNF_CMD_ZUPT_BEGIN:
+    case ACNF_CMD_ZUPT_BEGIN: /* a block's zupt flag holds for all its samples: a new block begins
+                               */
+        if (app_compact() && !app.resume) {
+            app_send_block();
+        }
         app.zupt = true;
         break;
     case ACNF_CMD_ZUPT_END:
+        if (app_compact() && !app.resume) {
+            app_send_block();
+        }
         app.zupt = false;
+        break;
+    case ACNF_CMD_FLUSH:
+        app_flush();
+        break;
+    case ACNF_CMD_MODE_STATES:
+    case ACNF_CMD_MODE_COMPACT:
+        app_flush();
+        app.state_mode = c->type == ACNF_CMD_MODE_STATES;
+        app.decim_left = 0;
+        app.resume = true;
         break;
     default:
         status = ACNF_ACK_BAD_ARGUMENT;
@@ -107,11 +193,53 @@ static void app_command(const acnf_command_t *c)
     app_ack(c->type, status, c->factor);
 }
 
+static uint32_t app_raw(uint32_t v)
+{
+    return v > ACNF_RAW_MAX ? ACNF_RAW_MAX : v;
+}
+
+/* Compact mode: before the sample app.index, begin a run (checkpoints) if one is due. */
+static void app_compact_begin(void)
+{
+    if (app.resume) {
+        uint8_t flags = ACNF_FLAG_RUNNING | ACNF_FLAG_RESUME;
+        if (app.reset_pending) {
+            flags |= ACNF_FLAG_RESET;
+        }
+        app_send_checkpoints(flags);
+        memset(&app.blk, 0, sizeof app.blk);
+        app.blk.index = app.index;
+        app.blk.flags = flags;
+        app.resume = false;
+        app.reset_pending = false;
+    }
+}
+
+/* Compact mode: the sample just filtered (app.index already counts it) is in its slot; send what is
+ * due. */
+static void app_compact_end(void)
+{
+    ++app.blk.n;
+    --app.ck_left;
+    if (app.blk.n == ACNF_BLOCK_SAMPLES || app.ck_left == 0u) {
+        app_send_block();
+        if (app.ck_left == 0u) {
+            app_send_checkpoints(0);
+        }
+    }
+}
+
 void app_sample(const acnf_stimulus_t *in)
 {
     acnf_sample_t s;
     unsigned i;
     uint32_t overflow;
+    bool compact = app_compact();
+    unsigned slot;
+    if (compact) {
+        app_compact_begin();
+    }
+    slot = app.blk.n;
     /* input stage and filters, every sample whether streamed or not */
     for (i = 0; i < ACNF_NAXES; ++i) {
         acnf_axis_t *ax = &s.axis[i];
@@ -134,9 +262,29 @@ void app_sample(const acnf_stimulus_t *in)
         if (ax->flags & ACNF_AXIS_SKIPPED) {
             ++app.skipped;
         }
-        acn_filter_read(&app.filters, i, ax);
+        if (compact) {
+            uint32_t code = ACNF_CODE_UPDATED;
+            if (ax->flags & ACNF_AXIS_TIMEOUT) {
+                code = ACNF_CODE_NO_CAPTURE;
+            } else if (ax->flags & ACNF_AXIS_SKIPPED) {
+                code = ACNF_CODE_REFUSED;
+            }
+            app.blk.aflags[slot] |= (acnf_aflags_t)(code << (2u * i));
+#if ACNF_INPUT_DUTY
+            app.blk.t1[i][slot] = app_raw(in->t1[i]);
+            app.blk.t2[i][slot] = app_raw(in->t2[i]);
+#else
+            app.blk.code[i][slot] = app_raw(in->code[i]);
+#endif
+        } else {
+            acn_filter_read(&app.filters, i, ax);
+        }
     }
     s.index = app.index++;
+    if (compact) {
+        app_compact_end();
+        return;
+    }
     if (!app.running) {
         return;
     }
@@ -177,11 +325,21 @@ void app_missed(uint32_t n)
 {
     unsigned i;
     for (; n > 0u; --n) {
+        bool compact = app_compact();
+        if (compact) {
+            app_compact_begin();
+        }
         for (i = 0; i < ACNF_NAXES; ++i) {
             acn_filter_skip(&app.filters, i); /* predict only: x = F x + b, P = F P F' + Q */
+            if (compact) {
+                app.blk.aflags[app.blk.n] |= (acnf_aflags_t)(ACNF_CODE_MISSED << (2u * i));
+            }
         }
         ++app.index;
         ++app.missed;
+        if (compact) {
+            app_compact_end();
+        }
     }
 }
 

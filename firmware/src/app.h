@@ -16,7 +16,7 @@ typedef struct {
     link_rx_t rx[APP_NCH];
     uint32_t index;      /* samples since reset */
     uint16_t seq;        /* sample frames attempted since start */
-    uint16_t decimation; /* 1..ACNF_MAX_DECIMATION */
+    uint16_t decimation; /* 1: compact block frames; 2..ACNF_MAX_DECIMATION: sample frames */
     uint16_t decim_left; /* samples until the next frame */
     uint16_t tx_drop;
     uint16_t skipped;
@@ -25,6 +25,11 @@ typedef struct {
     bool running;
     bool zupt;
     bool reset_pending; /* flag the next frame */
+    /* compact mode (decimation 1) */
+    acnf_block_t blk; /* the block being filled; blk.index: its first sample */
+    uint32_t ck_left; /* samples until the next checkpoint */
+    bool resume;      /* the next sample begins a compact run: checkpoints first */
+    bool state_mode;  /* sample frames at decimation 1 too (command mode_states) */
 } app_state_t;
 
 extern app_state_t app;

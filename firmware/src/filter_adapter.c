@@ -1,5 +1,15 @@
 #include "filter_adapter.h"
 
+#include <string.h>
+
+#if ACNF_COMPACT
+/* the frame layout's state sizes (filter manifest) must be the compiler's, or no build */
+#define ACN_SIZE_CHECK(name, NAME, i)                                                              \
+    typedef char                                                                                   \
+        acn_state_size_##name[sizeof(accelnav_##name##_t) == ACNF_STATE_BYTES_##i ? 1 : -1];
+ACNF_AXES(ACN_SIZE_CHECK)
+#endif
+
 const uint8_t acn_model_sha256[32] = ACNF_MODEL_SHA256_BYTES;
 
 #define ACN_INIT(name, NAME, i) accelnav_##name##_init(&f->name);
@@ -62,6 +72,25 @@ void acn_filter_read(const acn_filters_t *f, unsigned i, acnf_axis_t *out)
     default:
         break;
     }
+}
+
+#define ACN_STATE(name, NAME, i)                                                                   \
+    case i:                                                                                        \
+        memcpy(out, &f->name, sizeof f->name);                                                     \
+        break;
+void acn_filter_state(const acn_filters_t *f, unsigned i, uint8_t *out)
+{
+#if ACNF_COMPACT
+    switch (i) {
+        ACNF_AXES(ACN_STATE)
+    default:
+        break;
+    }
+#else /* no checkpoints: the state struct has no bytes two targets share */
+    (void)f;
+    (void)i;
+    (void)out;
+#endif
 }
 
 #define ACN_OVF(name, NAME, i)                                                                     \

@@ -83,10 +83,10 @@ def _pil_wanted(mode: str) -> tuple[bool, str]:
 def decoded_run(fitted: Model, run, telemetry: bytes) -> dict[str, np.ndarray]:
     """Run-file arrays from the firmware's sample frames (raw input, skip flags) plus the simulated truth."""
     from accelnav.hil_sim.firmware import manifest
-    from accelnav.link.telemetry import decode_all, sample_columns
+    from accelnav.link.telemetry import decode_all, replay_for, sample_columns
 
     man = manifest(fitted.source)
-    frames, stats = decode_all(man, telemetry)
+    frames, stats = decode_all(man, telemetry, replay_for(man, fitted))  # compact frames: the firmware's C replayed
     cols = sample_columns(man, frames["sample"])
     if stats.lost or len(cols["t"]) != len(run.t):
         raise UserError(f"telemetry: {len(cols['t'])} sample frames for {len(run.t)} samples, {stats.lost} lost")

@@ -39,12 +39,28 @@ def register(sub) -> None:
     q = lsub.add_parser("info", help="summary of a log: source, model, frames, losses, errors")
     q.add_argument("log", type=Path)
     q.add_argument("--json", action="store_true", help="print the summary as JSON")
+    q.add_argument("--model", type=Path, help=_MODEL_HELP)
     q.set_defaults(func=cmd_log_info)
     q = lsub.add_parser("export", help="export the sample frames as CSV or as an accelnav run file (NPZ)")
     q.add_argument("log", type=Path)
     q.add_argument("--out", type=Path, required=True, help="FILE.csv or FILE.npz")
+    q.add_argument("--model", type=Path, help=_MODEL_HELP)
     q.set_defaults(func=cmd_log_export)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
+
+
+_MODEL_HELP = (
+    "model file of a log recorded with --manifest (no model text in it): the compact frames' samples need it "
+    "to be replayed"
+)
+
+
+def _model_text(args) -> str:
+    if getattr(args, "model", None) is None:
+        return ""
+    from accelnav.codegen.model import load_model
+
+    return load_model(args.model).text
 
 
 def _manifest(args):
@@ -107,17 +123,17 @@ def cmd_record(args) -> int:
     print(
         f"accelnav record: {args.out}: {s['frames'].get('sample', 0)} sample frames in {res.seconds:.1f} s, "
         f"lost {s['lost']}, duplicates {s['duplicates']}, damaged {s['bad_frames']} "
-        f"(CRC errors {s['crc_errors']}) ({res.reason})"
+        f"(CRC errors {s['crc_errors']}){_compact_counts(s)} ({res.reason})"
     )
     return 1 if res.reason.startswith("link lost") else 0
 
 
-def _summary(path: Path) -> dict:
+def _summary(path: Path, model_text: str = "") -> dict:
     from accelnav.link.logfile import LogError
     from accelnav.link.recorder import decode_log
 
     try:
-        d = decode_log(path)
+        d = decode_log(path, model_text)
     except LogError as exc:
         raise UserError(str(exc)) from None
     s = d.frames["sample"]
@@ -141,6 +157,7 @@ def _summary(path: Path) -> dict:
         "index_first": int(s["index"][0]) if len(s) else None,
         "index_last": int(s["index"][-1]) if len(s) else None,
         "tx_drop_last": int(s["tx_drop"][-1]) if len(s) else None,
+        "warnings": d.warnings,
     }
     if len(d.frames["info"]):
         info = d.frames["info"][-1]
@@ -150,7 +167,7 @@ def _summary(path: Path) -> dict:
 
 
 def cmd_log_info(args) -> int:
-    summary = _summary(args.log)
+    summary = _summary(args.log, _model_text(args))
     if args.json:
         print(json.dumps(summary, indent=1))
         return 0
@@ -168,9 +185,11 @@ def cmd_log_export(args) -> int:
     if suffix not in (".csv", ".npz"):
         raise UserError(f"--out: {args.out}: accepted: a .csv or .npz file name")
     try:
-        d = decode_log(args.log)
+        d = decode_log(args.log, _model_text(args))
     except LogError as exc:
         raise UserError(str(exc)) from None
+    for w in d.warnings:
+        print(f"accelnav log export: warning: {w}")
     cols = sample_columns(d.manifest, d.frames["sample"])
     names = d.manifest.axes
     raw = d.manifest.raw_fields()
@@ -191,7 +210,7 @@ def cmd_log_export(args) -> int:
         print(f"accelnav log export: {args.out}: {len(cols['t'])} rows; {_link_counts(d.stats)}")
         return 0
     # NPZ: an accelnav run file (host/data/runfile.py) plus the firmware's own states
-    arrays, _ = log_run_arrays(args.log, d)
+    arrays, _ = log_run_arrays(args.log, d, _model_text(args))
     tmp = args.out.with_name(args.out.name + ".tmp")
     with open(tmp, "wb") as fh:
         np.savez_compressed(fh, **arrays)
@@ -205,10 +224,25 @@ def cmd_log_export(args) -> int:
 
 
 def _link_counts(stats: dict) -> str:
-    return f"lost {stats['lost']}, duplicates {stats['duplicates']}, damaged {stats['bad_frames']} frames"
+    return (
+        f"lost {stats['lost']}, duplicates {stats['duplicates']}, damaged {stats['bad_frames']} frames"
+        + _compact_counts(stats)
+    )
 
 
-def log_run_arrays(log, d=None) -> tuple[dict[str, np.ndarray], object]:
+def _compact_counts(stats: dict) -> str:
+    """The compact mode's checks, when the stream had block frames."""
+    if not stats["frames"].get("block"):
+        return ""
+    text = f"; replay: {stats['checkpoints']} checkpoints matched, {stats['mismatches']} mismatches"
+    if stats["mismatches"]:
+        text += " (MISMATCH: the host's replay differs from the firmware's filter; rows flagged 'mismatch')"
+    if stats["unreplayed"]:
+        text += f", {stats['unreplayed']} samples unreplayed (no model text)"
+    return text
+
+
+def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndarray], object]:
     """A recorder log as the arrays of an accelnav run file (and its model); what ``log export`` writes."""
     from accelnav.codegen.design import input_conversion
     from accelnav.codegen.model import ModelError, loads_model
@@ -219,14 +253,14 @@ def log_run_arrays(log, d=None) -> tuple[dict[str, np.ndarray], object]:
 
     if d is None:
         try:
-            d = decode_log(log)
+            d = decode_log(log, model_text)
         except LogError as exc:
             raise UserError(str(exc)) from None
     cols = sample_columns(d.manifest, d.frames["sample"])
     names = d.manifest.axes
     raw = d.manifest.raw_fields()
     skipped = (cols["axis_flags"] & (1 << d.manifest.axis_flags["skipped"])) != 0
-    text = d.meta.get("model_toml") or ""
+    text = d.meta.get("model_toml") or model_text
     if not text:
         raise UserError(f"{log}: the log carries no model text (recorded with --manifest); export to .csv instead")
     try:

@@ -28,8 +28,9 @@ from dataclasses import dataclass, field
 import serial
 from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
+from accelnav.codegen.cbuild import BuildError
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import Decoder, Manifest, encode_command
+from accelnav.link.telemetry import Decoder, Manifest, encode_command, replay_for
 
 DEFAULT_BAUD = 921600
 
@@ -72,10 +73,13 @@ class Status:
         if t - t0 >= 1.0:
             self.rate = (n - n0) / (t - t0)
             self._prev = (t, n)
-        return (
+        line = (
             f"{t:7.1f} s  {self.rate:7.1f} frames/s  {n:9d} frames  lost {s.lost}  dup {s.duplicates}  "
             f"CRC errors {s.crc_errors}  bad {s.bad_frames}  {s.bytes / 1024:8.1f} KiB"
         )
+        if s.frames.get("block"):  # compact mode: the replay's checks
+            line += f"  checkpoints {s.checkpoints}" + (f"  MISMATCHES {s.mismatches}" if s.mismatches else "")
+        return line
 
     def update(self, t: float, dec: Decoder, final: bool = False) -> None:
         if not self.enabled:
@@ -113,7 +117,8 @@ class Recorder:
             self.ser = port
             self.ser.timeout = 0.02
         self.commands = commands
-        self.decoder = Decoder(manifest)
+        self.warnings: list[str] = []
+        self.decoder = Decoder(manifest, replay=_replay(manifest, model_text, self.warnings))
         self.status = status or Status()
         meta = {
             "manifest": manifest.data,
@@ -124,7 +129,6 @@ class Recorder:
         }
         self.log = LogWriter(out, meta, flush_s=flush_s, overwrite=overwrite)
         self.info_ok: bool | None = None
-        self.warnings: list[str] = []
         self._stop = False
 
     def _open(self):
@@ -183,11 +187,16 @@ class Recorder:
                 self.log.append(data, now_ns)
                 if data:
                     before = copy.deepcopy(self.decoder.order) if pending is not None else None
+                    lost0 = self.decoder.stats.lost
                     batch = self.decoder.feed(data)
                     if len(batch["info"]):
                         self._check_info(batch["info"])
-                    if pending is not None and len(batch["sample"]):
-                        self._gap_measured(pending, before, batch["sample"][0], time.monotonic() - t0)
+                    rows = batch["sample"]
+                    if pending is not None and self.decoder.compact is not None and pending["index_before"] is not None:
+                        rows = rows[rows["index"] > pending["index_before"]]  # not rows held from before the gap
+                    if pending is not None and len(rows):
+                        lost = self.decoder.stats.lost - lost0
+                        self._gap_measured(pending, before, rows[0], time.monotonic() - t0, lost)
                         pending = None
                 t = time.monotonic() - t0
                 self.status.update(t, self.decoder)
@@ -231,7 +240,7 @@ class Recorder:
         self.ser = None
         self.log.flush()
         self.decoder.finish()
-        gap = {"lost_s": round(t, 3), "error": str(exc), "index_before": self.decoder.order.last_index, "attempts": 0}
+        gap = {"lost_s": round(t, 3), "error": str(exc), "index_before": self.decoder.last_index, "attempts": 0}
         self.status.event(t, f"link lost ({exc}); the log stays open, retrying {self.url}")
         return gap
 
@@ -275,12 +284,19 @@ class Recorder:
             return ""
         return "stopped"
 
-    def _gap_measured(self, gap: dict, before, first, t: float) -> None:
-        """The first sample frame after a reconnection: the frames the gap cost, exactly (the decoder's rule)."""
-        lost0 = before.lost
-        before.step(int(first["seq"]), int(first["index"]), int(first["flags"]))
-        gap["index_after"] = int(first["index"])
-        gap["frames_lost"] = before.lost - lost0
+    def _gap_measured(self, gap: dict, before, first, t: float, batch_lost: int) -> None:
+        """The first sample row after a reconnection: the rows the gap cost, exactly (the decoder's rule).
+        A sample frame is stepped through the state mode's rule; a replayed row (compact mode) takes the
+        samples the decoder counted lost in the batch that brought it (the gap and the stretch to the first
+        checkpoint after it)."""
+        if int(first["flags"]) & (1 << self.man.flags.get("replayed", 99)):
+            gap["index_after"] = int(first["index"])
+            gap["frames_lost"] = batch_lost
+        else:
+            lost0 = before.lost
+            before.step(int(first["seq"]), int(first["index"]), int(first["flags"]))
+            gap["index_after"] = int(first["index"])
+            gap["frames_lost"] = before.lost - lost0
         self.status.event(
             t,
             f"gap recorded: sample index {gap['index_before']} -> {gap['index_after']}, "
@@ -297,6 +313,20 @@ class Recorder:
             pass
 
 
+def _replay(man: Manifest, model_text: str, warnings: list, source: str = "the recording"):
+    """The replay for the compact mode's frames, or None (with a warning when the frames need one)."""
+    if "block" not in man.frames:
+        return None
+    if not model_text:
+        warnings.append(f"{source}: no model text: the compact frames' samples cannot be replayed (unreplayed)")
+        return None
+    try:
+        return replay_for(man, model_text)
+    except (ValueError, BuildError) as exc:  # ReplayError, ModelError, no compiler: one line
+        warnings.append(f"{source}: {str(exc).splitlines()[0]}")
+        return None
+
+
 @dataclass
 class DecodedLog:
     manifest: Manifest
@@ -307,17 +337,22 @@ class DecodedLog:
     chunks: int
     damaged_bytes: int
     torn_bytes: int
+    warnings: list = field(default_factory=list)
 
 
-def decode_log(path) -> DecodedLog:
-    """Read a log and decode its bytes with the manifest stored in it."""
+def decode_log(path, model_text: str = "") -> DecodedLog:
+    """Read a log and decode its bytes with the manifest stored in it; the compact mode's samples are
+    replayed with the model text stored in it, else with ``model_text`` (a log recorded with --manifest)."""
     import numpy as np
 
+    from accelnav.link.compact import concat_records
     from accelnav.link.logfile import read_log
 
     contents = read_log(path)
     man = Manifest(contents.meta["manifest"])
-    dec = Decoder(man)
+    warnings: list[str] = []
+    text = contents.meta.get("model_toml") or model_text
+    dec = Decoder(man, replay=_replay(man, text, warnings, str(path)))
     parts: dict[str, list] = {n: [] for n in dec.names}
     times = []
     for t_ns, data in zip(contents.times, contents.data, strict=True):
@@ -326,7 +361,11 @@ def decode_log(path) -> DecodedLog:
             parts[n].append(batch[n])
         times.append(np.full(len(batch["sample"]), t_ns, np.int64))
     dec.finish()
-    frames = {n: (np.concatenate(p) if p else np.zeros(0, man.dtypes[n])) for n, p in parts.items()}
+    rest = dec.release()  # rows after the last checkpoint: the recording ended before the next one
+    if len(rest):
+        parts["sample"].append(rest)
+        times.append(np.full(len(rest), contents.times[-1], np.int64))
+    frames = {n: concat_records(p, man.dtypes[n]) for n, p in parts.items()}
     host_t = np.concatenate(times) if times else np.zeros(0, np.int64)
     return DecodedLog(
         man,
@@ -337,4 +376,5 @@ def decode_log(path) -> DecodedLog:
         len(contents.data),
         contents.damaged_bytes,
         contents.torn_bytes,
+        warnings,
     )

@@ -19,6 +19,12 @@ same bytes (``bytes.split``, a Python COBS loop, ``zlib.crc32``,
 ``struct.unpack_from``): the benchmark's baseline and a second oracle in the
 tests.
 
+Compact mode (block and checkpoint frames, see :mod:`accelnav.codegen.frames`): the
+decoder turns them into sample rows of the same dtype as the sample frame, their states
+from the replay of the firmware's own filter (:mod:`accelnav.link.replay`, given to
+:class:`Decoder`), every checkpoint held against the replay bit for bit, losses and
+repeats counted in samples from the 32-bit index (:mod:`accelnav.link.compact`).
+
 Lost and repeated frames: sample frames carry a 16-bit sequence number that
 the MCU increments for every sample frame it means to send and the 32-bit
 sample index; :class:`SampleOrder` drops a repeated or older frame (counted
@@ -218,8 +224,12 @@ def _crc_tables(m: int) -> tuple[np.ndarray, int]:
 
 
 def _crc_rows(rows: np.ndarray) -> np.ndarray:
-    """zlib.crc32 of every row of a (n, m) uint8 array, as (n,) uint32."""
+    """zlib.crc32 of every row of a (n, m) uint8 array, as (n,) uint32. Long rows (the compact mode's
+    block frames) go through zlib row by row, which beats the table gathers there (2x at 177 bytes)."""
     n, m = rows.shape
+    if m >= 64:
+        buf = memoryview(np.ascontiguousarray(rows).tobytes())
+        return np.fromiter((zlib.crc32(buf[i : i + m]) for i in range(0, n * m, m)), np.uint32, n)
     T, c0 = _crc_tables(m)
     out = np.empty(n, np.uint32)
     cols = np.arange(m)
@@ -452,6 +462,11 @@ class Stats:
     crc_errors: int = 0  # of those: right length and COBS, wrong CRC
     garbage_bytes: int = 0  # bytes in refused segments
     bytes: int = 0
+    # compact mode (block and checkpoint frames); lost and duplicates count its samples
+    checkpoints: int = 0  # checkpoints the replay matched bit for bit
+    mismatches: int = 0  # checkpoints the replay did not match (and stretches whose step verdicts differed)
+    checkpoint_repeats: int = 0  # repeated or older checkpoints, ignored
+    unreplayed: int = 0  # samples received without a replay to give them states (no model text)
 
     def as_dict(self) -> dict:
         return {
@@ -462,6 +477,10 @@ class Stats:
             "crc_errors": self.crc_errors,
             "garbage_bytes": self.garbage_bytes,
             "bytes": self.bytes,
+            "checkpoints": self.checkpoints,
+            "mismatches": self.mismatches,
+            "checkpoint_repeats": self.checkpoint_repeats,
+            "unreplayed": self.unreplayed,
         }
 
 
@@ -479,7 +498,9 @@ class Batch:
 class Decoder:
     """Streaming, vectorised decoder of the frames in ``manifest``; see the module docstring."""
 
-    def __init__(self, manifest: Manifest, directions: tuple[str, ...] = ("up",)):
+    def __init__(self, manifest: Manifest, directions: tuple[str, ...] = ("up",), replay=None):
+        """``replay``: an :class:`accelnav.link.replay.Replay` of the firmware's filter, which the compact
+        mode's block frames need to become sample rows (:func:`replay_for` builds one from a model)."""
         self.man = manifest
         self.names = [n for n, f in manifest.frames.items() if f["direction"] in directions]
         self.by_len: dict[int, list[str]] = {}
@@ -490,6 +511,11 @@ class Decoder:
         self._overlong = False  # the tail exceeded every frame length: the segment is refused at its delimiter
         self.order = SampleOrder(1 << manifest.flags["reset"], manifest.frames["cmd_stop"]["type"])
         self.stats = Stats(frames={n: 0 for n in self.names})
+        self.compact = None
+        if "block" in self.names and "checkpoint" in self.names:
+            from .compact import CompactStream
+
+            self.compact = CompactStream(manifest, replay)
 
     def feed(self, data: bytes) -> Batch:
         self.stats.bytes += len(data)
@@ -531,6 +557,10 @@ class Decoder:
                 g = good & (dec[:, 0] == self.man.frames[n]["type"])
                 if g.any():
                     recs = np.ascontiguousarray(dec[g, : m - 4]).view(self.man.dtypes[n]).ravel()
+                    sane = self._sane(n, recs)
+                    if not sane.all():  # a right CRC on contents no firmware sends: refused as damaged
+                        recs = recs[sane]
+                        g[np.flatnonzero(g)[~sane]] = False
                     order_parts.append(sel[g])
                     name_parts.append(n)
                     rec_parts.append(recs)
@@ -543,6 +573,8 @@ class Decoder:
             k = np.argsort(o, kind="stable")
             out[n], where[n] = r[k], o[k]  # stream order
         lost = self._account(out, where)
+        if self.compact is not None:
+            lost += self._compact(out, where)
         for n in out:
             self.stats.frames[n] += len(out[n])
         return Batch(out, lost)
@@ -563,10 +595,43 @@ class Decoder:
         keep = self.order.run(smp["seq"], smp["index"], smp["flags"], stops)
         if not keep.all():
             out["sample"] = smp[keep]
+            where["sample"] = where["sample"][keep]
         lost = self.order.lost - lost0
         self.stats.lost += lost
         self.stats.duplicates += self.order.duplicates - dup0
         return lost
+
+    def _sane(self, name: str, recs: np.ndarray) -> np.ndarray:
+        if name == "block":
+            return (recs["n"] >= 1) & (recs["n"] <= self.compact.B)
+        if name == "checkpoint":
+            return recs["axis"] < len(self.man.axes)
+        return np.ones(len(recs), bool)
+
+    def _compact(self, out: dict, where: dict) -> int:
+        """Block and checkpoint frames -> sample rows (:class:`accelnav.link.compact.CompactStream`), merged
+        with the state mode's sample frames in stream order."""
+        c = self.compact
+        e = np.zeros(0, np.int64)
+        before = (c.lost, c.duplicates, c.mismatches, c.checkpoints, c.checkpoint_repeats, c.unreplayed)
+        rows, rpos = c.feed(out["block"], where.get("block", e), out["checkpoint"], where.get("checkpoint", e))
+        if len(rows):
+            if len(out["sample"]):
+                spos = where["sample"]
+                allpos = np.r_[spos, rpos]
+                merged = np.concatenate([out["sample"], rows])
+                out["sample"] = merged[np.argsort(allpos, kind="stable")]
+            else:
+                out["sample"] = rows
+        after = (c.lost, c.duplicates, c.mismatches, c.checkpoints, c.checkpoint_repeats, c.unreplayed)
+        d = [a - b for a, b in zip(after, before, strict=True)]
+        self.stats.lost += d[0]
+        self.stats.duplicates += d[1]
+        self.stats.mismatches += d[2]
+        self.stats.checkpoints += d[3]
+        self.stats.checkpoint_repeats += d[4]
+        self.stats.unreplayed += d[5]
+        return d[0]
 
     def _keep_tail(self, tail: bytes) -> None:
         if len(tail) > self.max_len:
@@ -574,6 +639,24 @@ class Decoder:
             tail = tail[-self.max_len :]
             self._overlong = True
         self._tail = tail
+
+    @property
+    def last_index(self) -> int | None:
+        """The index of the last sample received in order (a sample frame, or a block's last sample)."""
+        ends = [self.order.last_index]
+        if self.compact is not None and self.compact.end is not None:
+            ends.append(self.compact.end - 1)
+        ends = [e for e in ends if e is not None]
+        return max(ends) if ends else None
+
+    def release(self) -> np.ndarray:
+        """End of the stream: the compact mode's sample rows still waiting for the checkpoint that closes
+        their stretch (replayed but never verified: the stream ended first); they count as delivered."""
+        if self.compact is None:
+            return np.zeros(0, self.man.dtypes["sample"])
+        rows = self.compact.release()
+        self.stats.frames["sample"] += len(rows)
+        return rows
 
     def finish(self) -> int:
         """End of stream: the bytes after the last delimiter are an unfinished frame; returns their count."""
@@ -585,28 +668,50 @@ class Decoder:
         return n
 
 
-def decode_all(man: Manifest, data: bytes) -> tuple[dict[str, np.ndarray], Stats]:
-    """Decode a whole byte string at once."""
-    d = Decoder(man)
-    batch = d.feed(data)
-    return batch.frames, d.stats
+def replay_for(man: Manifest, model):
+    """The replay of the firmware's filter (a Model or its TOML text) for ``man``'s compact frames;
+    None when ``man`` has none or ``model`` is empty."""
+    if "block" not in man.frames or not model:
+        return None
+    from .replay import Replay
+
+    return Replay(man, model)
 
 
-def decode_naive(man: Manifest, data: bytes, counts: dict | None = None) -> tuple[dict[str, list[tuple]], int]:
+def decode_all(man: Manifest, data: bytes, replay=None) -> tuple[dict[str, np.ndarray], Stats]:
+    """Decode a whole byte string at once (``replay``: see :class:`Decoder`)."""
+    d = Decoder(man, replay=replay)
+    frames = dict(d.feed(data).frames)
+    rest = d.release()
+    if len(rest):
+        frames["sample"] = np.concatenate([frames["sample"], rest])
+    return frames, d.stats
+
+
+_STRUCT = {"u8": "B", "u16": "H", "u32": "I", "i32": "i", "i64": "q"}
+
+
+def decode_naive(
+    man: Manifest, data: bytes, counts: dict | None = None, replay=None
+) -> tuple[dict[str, list[tuple]], int]:
     """Frame-by-frame reference decode: ({frame: [field tuples]}, lost). The benchmark's baseline.
-    ``counts``, if given, receives ``lost`` and ``duplicates``."""
+    ``counts``, if given, receives ``lost`` and ``duplicates`` (and the compact mode's counts).
+    Compact mode: block frames become sample rows (tuples like a sample frame's) sample by sample, the
+    filter stepped one sample at a time (:func:`_naive_rows`)."""
     fmts = {}
     for name in man.up():
         fr = man.frames[name]
         parts = []
         for f in fr["fields"]:
             kind = f["kind"]
-            parts.append(
-                f"{kind[3:-1]}s"
-                if kind.startswith("u8[")
-                else {"u8": "B", "u16": "H", "u32": "I", "i32": "i", "i64": "q"}[kind]
-            )
+            if kind.startswith("u8["):
+                parts.append(f"{kind[3:-1]}s")
+            elif "[" in kind:
+                parts.append(kind[kind.index("[") + 1 : -1] + _STRUCT[kind.split("[")[0]])
+            else:
+                parts.append(_STRUCT[kind])
         fmts[fr["type"]] = (name, struct.Struct("<B" + "".join(parts)), fr["size"])
+    compact = []  # (frame number, name, record) of block and checkpoint frames
     out: dict[str, list[tuple]] = {n: [] for n in man.up()}
     order = SampleOrder(1 << man.flags["reset"], man.frames["cmd_stop"]["type"])
     names = {n: [f["name"] for f in man.frames[n]["fields"]] for n in ("sample", "ack")}
@@ -630,10 +735,135 @@ def decode_naive(man: Manifest, data: bytes, counts: dict | None = None) -> tupl
             continue
         if kind[0] == "ack":
             order.ack(rec[i_cmd], rec[i_aindex])
+        if kind[0] in ("block", "checkpoint"):
+            if kind[0] == "block" and not 1 <= rec[3] <= man.data["block_samples"]:
+                continue
+            if kind[0] == "checkpoint" and rec[3] >= len(man.axes):
+                continue
+            compact.append((len(out["sample"]), kind[0], rec))
         out[kind[0]].append(rec)
+    lost, dups, extra = order.lost, order.duplicates, {}
+    if compact:
+        rows, extra = _naive_rows(man, compact, replay)
+        lost += extra["lost"]
+        dups += extra["duplicates"]
+        merged = [(i, 0, r) for i, r in enumerate(out["sample"])] + [(p, 1, r) for p, r in rows]
+        out["sample"] = [r for _, _, r in sorted(merged, key=lambda x: (x[0], x[1]))]
     if counts is not None:
-        counts.update(lost=order.lost, duplicates=order.duplicates)
-    return out, order.lost
+        counts.update(extra)
+        counts.update(lost=lost, duplicates=dups)
+    return out, lost
+
+
+def _naive_rows(man: Manifest, frames: list, replay) -> tuple[list, dict]:
+    """Sample rows from block and checkpoint frames, one sample at a time (the oracle of
+    :class:`accelnav.link.compact.CompactStream`, which does the same by stretches)."""
+    from .compact import CompactStream
+
+    cs = CompactStream(man, replay)
+    B, n_ax, raw = cs.B, len(man.axes), man.raw_fields()
+    blocks = [r for _, k, r in frames if k == "block"]
+    cks = [r for _, k, r in frames if k == "checkpoint"]
+    kinds, ids, nb, nc = [], [], 0, 0
+    for _, k, _ in frames:
+        kinds.append(0 if k == "block" else 1)
+        ids.append(nb if k == "block" else nc)
+        nb, nc = (nb + 1, nc) if k == "block" else (nb, nc + 1)
+    # block tuple: type, index, flags, n, 5 counters, aflags (bytes, or B values past 4 axes), then per
+    # axis and raw field B values
+    wide = not isinstance(blocks[0][9], bytes) if blocks else False
+    base0 = 9 + B if wide else 10
+    aflags = [r[9 : 9 + B] if wide else r[9] for r in blocks]
+    bpos = [p for p, k, _ in frames if k == "block"]
+    states = [r[4] for r in cks]
+    acc, breaks, events = cs.order(
+        kinds, ids, [r[1] for r in blocks], [r[3] for r in blocks], [r[2] for r in blocks],
+        [r[1] for r in cks], [r[2] for r in cks], [r[3] for r in cks], [np.frombuffer(s, np.uint8) for s in states],
+    )  # fmt: skip
+    samples = []  # (block number, slot)
+    for i in acc:
+        samples += [(i, k) for k in range(blocks[i][3])]
+    N = len(samples)
+    ok = [True] * N
+    mism = [False] * N
+    x = [[None] * N for _ in range(n_ax)]
+    breakset = set(breaks)
+    for j in range(n_ax):
+        nbj = cs.state_bytes[j]
+        ev_at: dict[int, list] = {}
+        for p, i, verify, sync in events[j]:
+            ev_at.setdefault(p, []).append((i, verify, sync))
+        st, since = None, []
+        for p in range(N + 1):
+            for i, verify, _ in ev_at.get(p, []):  # checkpoints closing the stretch that ends here
+                if verify and st is not None:
+                    if st == states[i][:nbj]:
+                        cs.checkpoints += 1
+                    else:
+                        cs.mismatches += 1
+                        for q in since:
+                            mism[q] = True
+            if p in breakset:
+                st, since = None, []
+            for i, _, sync in ev_at.get(p, []):
+                if sync:
+                    st, since = states[i][:nbj], []
+            if p == N:
+                break
+            if st is None or replay is None:
+                ok[p] = False
+                continue
+            b, k = samples[p]
+            blk = blocks[b]
+            code = (aflags[b][k] >> (2 * j)) & 3
+            base = base0 + j * len(raw) * B
+            in1 = np.array([blk[base + k]], np.uint32)
+            in2 = np.array([blk[base + B + k]], np.uint32) if len(raw) > 1 else None
+            one = np.zeros(1, man.dtypes["sample"])
+            fin, nbad = replay.run(
+                j, np.zeros(1, np.int64), np.ones(1, np.int64), np.frombuffer(st, np.uint8), [code], in1, in2, one
+            )
+            ax = man.axes[j]
+            xs = [[int(one[f"{ax}.{c}"][0]) for c in "ruae"]]
+            if nbad[0]:
+                cs.mismatches += int(nbad[0])
+                for q in [*since, p]:
+                    mism[q] = True
+            st = fin[0].tobytes()
+            since.append(p)
+            x[j][p] = xs[0]
+    if replay is None:
+        cs.unreplayed += N
+    else:
+        cs.lost += ok.count(False)
+    af, duty = man.axis_flags, man.input == "duty_cycle"
+    per_code = [0, (1 << af["skipped"]) | (0 if duty else 1 << af["rail"])]
+    per_code += [(1 << af["skipped"]) | (1 << af["timeout"]), (1 << af["skipped"]) | (1 << af["missed"])]
+    rows = []
+    stype = man.frames["sample"]["type"]
+    for p in range(N):
+        if not ok[p] or replay is None:
+            continue
+        b, k = samples[p]
+        blk = blocks[b]
+        index = blk[1] + k
+        fl = blk[2] if k == 0 else blk[2] & ~(cs.R | cs.X)
+        fl |= cs.REPLAYED | (cs.MISMATCH if mism[p] else 0)
+        row = [stype, index & 0xFFFF, index, fl, *blk[4:9]]
+        for j in range(n_ax):
+            base = base0 + j * len(raw) * B
+            row.append(per_code[(aflags[b][k] >> (2 * j)) & 3])
+            row += [blk[base + m * B + k] for m in range(len(raw))]
+            row += [int(v) for v in x[j][p]]
+        rows.append((bpos[b], tuple(row)))
+    return rows, {
+        "lost": cs.lost,
+        "duplicates": cs.duplicates,
+        "checkpoints": cs.checkpoints,
+        "mismatches": cs.mismatches,
+        "checkpoint_repeats": cs.checkpoint_repeats,
+        "unreplayed": cs.unreplayed,
+    }
 
 
 # --------------------------------------------------------------------------
