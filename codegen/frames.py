@@ -179,6 +179,15 @@ class _Builder:
         self.offset += f.size
 
 
+def _add_counters(b: _Builder) -> None:
+    """The board's health counters, the same in the sample and the block frames."""
+    b.add("tx_drop", "u16", "s->tx_drop", doc="frames the MCU could not queue (link too slow), mod 2^16")
+    b.add("skipped", "u16", "s->skipped", doc="updates skipped (rail, bad capture, timeout), mod 2^16")
+    b.add("overflow", "u16", "s->overflow", doc="filter saturations, all axes, saturating at 65535")
+    b.add("missed", "u16", "s->missed", doc="samples the board missed (main loop too slow), predicted over, mod 2^16")
+    b.add("rx_lost", "u16", "s->rx_lost", doc="bytes the board's receivers lost (overrun, full ring), mod 2^16")
+
+
 def _state_formats(filter_manifest: dict) -> list[dict[str, tuple[int, int, str]]]:
     """Per axis {state: (word, frac, unit)} of what `accelnav_AXIS_read` returns."""
     out = []
@@ -296,11 +305,7 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
     b.add("seq", "u16", "s->seq", doc="sample frames sent since start, mod 2^16 (gaps = lost frames)")
     b.add("index", "u32", "s->index", doc="sample index since reset")
     b.add("flags", "u16", "s->flags", doc="FLAGS bits")
-    b.add("tx_drop", "u16", "s->tx_drop", doc="frames the MCU could not queue (link too slow), mod 2^16")
-    b.add("skipped", "u16", "s->skipped", doc="updates skipped (rail, bad capture, timeout), mod 2^16")
-    b.add("overflow", "u16", "s->overflow", doc="filter saturations, all axes, saturating at 65535")
-    b.add("missed", "u16", "s->missed", doc="samples the board missed (main loop too slow), predicted over, mod 2^16")
-    b.add("rx_lost", "u16", "s->rx_lost", doc="bytes the board's receivers lost (overrun, full ring), mod 2^16")
+    _add_counters(b)
     for i, ax in enumerate(names):
         a = f"s->axis[{i}]"
         b.add(f"{ax}.flags", "u8", f"{a}.flags", doc="AXIS_FLAGS bits")
@@ -337,11 +342,7 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
     b.add("index", "u32", "s->index", doc="index of the block's first sample")
     b.add("flags", "u8", "s->flags", doc="FLAGS bits")
     b.add("n", "u8", "s->n", doc="slots in use (the others are zero)")
-    b.add("tx_drop", "u16", "s->tx_drop", doc="frames the MCU could not queue (link too slow), mod 2^16")
-    b.add("skipped", "u16", "s->skipped", doc="updates skipped (rail, bad capture, timeout), mod 2^16")
-    b.add("overflow", "u16", "s->overflow", doc="filter saturations, all axes, saturating at 65535")
-    b.add("missed", "u16", "s->missed", doc="samples the board missed (main loop too slow), predicted over, mod 2^16")
-    b.add("rx_lost", "u16", "s->rx_lost", doc="bytes the board's receivers lost (overrun, full ring), mod 2^16")
+    _add_counters(b)
     b.add("aflags", f"{'u8' if len(names) <= 4 else 'u16'}[{nblk}]", "s->aflags", doc="AXIS_CODES, 2 bits per axis")
     for i, ax in enumerate(names):
         for k in raw_keys:
