@@ -1191,32 +1191,16 @@ def plans(model: Model, form: str | None = None) -> list[AxisPlan]:
     return [plan_axis(model, i, form) for i in range(len(model.axes))]
 
 
-def refuse_schedule_with_skips(model: Model, form: str) -> None:
-    """Kept for callers: the gain-schedule form now follows skipped samples (codegen.follow: after a
-    skip the C carries the deviation of the covariance block from the schedule's until its gains are
-    back on the schedule), so no input that codegen takes is refused for skipping. What it still refuses,
-    as every form does: a sensor codegen does not take at all (calibrated data)."""
-    if form != "gain_schedule":
-        return
-    from .ranges import refuse_calibrated
-
-    refuse_calibrated(model)
-
-
 def emit(
     model: Model,
     *,
     form: str | None = None,
     arith: str = "fixed",
     prefix: str = "accelnav",
-    assume_no_skips: bool = False,
 ) -> dict[str, str]:
-    """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json.
-
-    ``assume_no_skips`` is accepted for older callers and changes nothing: both forms follow skipped
-    samples."""
+    """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json. Both forms
+    follow skipped samples (the gain schedule through codegen.follow)."""
     form = form or model.filter.form
-    refuse_schedule_with_skips(model, form)
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)
     ps = plans(model, form)

@@ -18,9 +18,7 @@ or a folder the caller names, never into the installed package.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
 import shutil
 import subprocess
 from functools import cache
@@ -37,32 +35,10 @@ DUTY_MODEL = models_dir() / "adxl202_duty.toml"
 @cache
 def generated(model_path: str | None = None) -> dict[str, str]:
     """accelnav.{h,c,json} and acnframe.{h,c,json} of a model (the embedded default if None)."""
-    from accelnav.codegen import emit_c
-    from accelnav.codegen.emit_c import emit
-    from accelnav.codegen.frames import emit_frames
+    from accelnav.codegen.generated import generated_files
     from accelnav.codegen.model import load_model
 
-    model = load_model(model_path)
-    # refused forms are refused before the disk cache is looked at, never served from it
-    emit_c.refuse_schedule_with_skips(model, model.filter.form)
-    # the generator takes seconds: keep its output on disk, keyed by the model and the generator's source
-    key = hashlib.sha256(model.text.encode())
-    import accelnav.codegen
-
-    for p in sorted(Path(accelnav.codegen.__file__).parent.glob("*.py")):
-        key.update(p.read_bytes())
-    from accelnav.codegen.cbuild import cache_dir
-
-    cache = cache_dir() / f"gen-{key.hexdigest()[:20]}.json"
-    if cache.exists():
-        return json.loads(cache.read_text())
-    files = emit(model, assume_no_skips=True)  # checked above
-    files.update(emit_frames(model, json.loads(files["accelnav.json"])))
-    cache.parent.mkdir(parents=True, exist_ok=True)
-    tmp = cache.with_suffix(f".{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(files))
-    os.replace(tmp, cache)
-    return files
+    return generated_files(load_model(model_path))
 
 
 def manifest(model_path: str | None = None):

@@ -17,11 +17,6 @@ Python loop over samples.
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
-from pathlib import Path
-
 import numpy as np
 
 from accelnav.codegen.model import Model, loads_model
@@ -80,26 +75,10 @@ class ReplayError(ValueError):
 
 
 def _filter_sources(model: Model) -> dict[str, str]:
-    """accelnav.{h,c} of the model exactly as the firmware build generates them, cached on disk by the
-    model's text and the generator's source (the generator takes about a second)."""
-    import accelnav.codegen
-    from accelnav.codegen import emit_c
-    from accelnav.codegen.cbuild import cache_dir
+    """accelnav.{h,c} of the model exactly as the firmware build generates them (cached on disk)."""
+    from accelnav.codegen.generated import generated_files
 
-    emit_c.refuse_schedule_with_skips(model, model.filter.form)
-    key = hashlib.sha256(b"replay\0" + model.text.encode())
-    for p in sorted(Path(accelnav.codegen.__file__).parent.glob("*.py")):
-        key.update(p.read_bytes())
-    path = cache_dir() / f"replay-gen-{key.hexdigest()[:20]}.json"
-    if path.exists():
-        return json.loads(path.read_text())
-    files = emit_c.emit(model, assume_no_skips=True)  # the firmware's call (hil_sim.firmware.generated)
-    files = {k: v for k, v in files.items() if k in ("accelnav.h", "accelnav.c")}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(files))
-    os.replace(tmp, path)
-    return files
+    return {k: v for k, v in generated_files(model).items() if k in ("accelnav.h", "accelnav.c")}
 
 
 class Replay:

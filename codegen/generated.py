@@ -1,0 +1,41 @@
+"""Every generated file of a model, cached on disk: what the firmware builds (SIL, PIL) and what the
+host's replay of the firmware's filter compiles are one and the same output of the generator.
+
+The generator takes seconds (the gain schedule's longer), so its output is kept in the cache
+(:func:`accelnav.codegen.cbuild.cache_dir`) keyed by the model's text and the source of every module of
+the generator: an edited generator never serves stale C. A model the generator refuses is refused
+here each time (nothing is cached for it).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+from .cbuild import cache_dir
+from .emit_c import emit
+from .frames import emit_frames
+from .model import Model
+
+
+def _key(model: Model) -> str:
+    key = hashlib.sha256(model.text.encode())
+    for p in sorted(Path(__file__).parent.glob("*.py")):
+        key.update(p.read_bytes())
+    return key.hexdigest()[:20]
+
+
+def generated_files(model: Model) -> dict[str, str]:
+    """accelnav.{h,c,json} (the filter) and acnframe.{h,c,json} (the frames) of ``model``."""
+    path = cache_dir() / f"gen-{_key(model)}.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    files = emit(model)
+    files.update(emit_frames(model, json.loads(files["accelnav.json"])))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(files))
+    os.replace(tmp, path)  # atomic: a concurrent reader sees the whole file or none
+    return files
