@@ -344,8 +344,8 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     (gain schedule: the compression error of an uninterrupted run; covariance: its rounding bound),
     which stays in :func:`error_bound`. So a C whose gains leave the Kalman gains by more than the
     generator states (e.g. a time-indexed schedule that ignored a skip) departs from the bound. Returns (x (n, 4)
-    in SI units, |y| (n,), |a| (n,), the gains (n, 4)). ``code``: the raw analog codes (None: use z,
-    the conversion error stays in the bound).
+    in SI units, |y| (n,), |a| (n,), the gains (n, 4), the innovation variance S (n,) of the same Riccati
+    run). ``code``: the raw analog codes (None: use z, the conversion error stays in the bound).
     """
     from .gains import riccati
     from .qformat import dequantize, quantize
@@ -363,7 +363,8 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
     else:
         zq = np.asarray(z, dtype=np.float64)
     omp, ebar, h2, t2 = q("OMP"), q("EBAR"), q("H2"), q("T2")
-    K = np.asarray(riccati(d, n, valid).K) * np.array([1.0, d.Ts, 1.0, 1.0])
+    g = riccati(d, n, valid)
+    K = np.asarray(g.K) * np.array([1.0, d.Ts, 1.0, 1.0])
     r = dequantize(quantize(d.x0[0], v["r"].fmt), v["r"].fmt)
     vv = dequantize(quantize(d.Ts * d.x0[1], v["v"].fmt), v["v"].fmt)
     a = dequantize(quantize(d.x0[2], v["a"].fmt), v["a"].fmt)
@@ -389,7 +390,7 @@ def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: n
         r = r + vv + pp
         vv = vv + qq
         out[k] = (r, vv / d.Ts, a, e)
-    return out, yabs, np.abs(out[:, 2]), K
+    return out, yabs, np.abs(out[:, 2]), K, np.asarray(g.S)
 
 
 def schedule_gain_errors(p: AxisPlan, schedule, valid: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -415,13 +416,8 @@ def twin_bound(p: AxisPlan, code, z, valid, x_ref: np.ndarray, schedule=None):
     and the generator's stated gain errors of the C propagated through the closed loop
     (:func:`error_bound` with exact constants). ``x_ref``: the float64 Kalman filter on the same input
     (accelnav.estimate.kf.run_filter with the same valid mask), never a filter with the C's gains."""
-    x_tw, y_abs, a_abs, K = quantized_twin(p, code, z, valid, schedule)
+    x_tw, y_abs, a_abs, K, S = quantized_twin(p, code, z, valid, schedule)
     e_dev = float(np.abs(x_tw[:, 3] - d_eps_bar(p)).max())
-    S = None
-    if p.form == "covariance":
-        from .gains import riccati
-
-        S = np.asarray(riccati(p.design, len(z), valid).S)
     dK = schedule_gain_errors(p, schedule, valid, K) if p.form == "gain_schedule" else None
     b = error_bound(
         p,
