@@ -2,14 +2,8 @@
 #include "emu_feed.h"
 
 #include "acn_board.h"
+#include "semihost.h"
 
-#define SYS_OPEN 0x01
-#define SYS_CLOSE 0x02
-#define SYS_WRITE0 0x04
-#define SYS_WRITE 0x05
-#define SYS_READ 0x06
-#define SYS_GET_CMDLINE 0x15
-#define SYS_EXIT 0x18
 #define MODE_RB 1u /* fopen "rb" */
 #define MODE_WB 5u /* fopen "wb" */
 #define MARKER "accelnav-feed "
@@ -23,23 +17,14 @@ static uint8_t in_buf[IN_SIZE];
 static uint32_t in_len, in_pos;
 static uint8_t out_buf[OUT_SIZE];
 
-static int semihost(int op, void *arg)
-{
-    register int r0 __asm__("r0") = op;
-    register void *r1 __asm__("r1") = arg;
-    __asm__ volatile("bkpt 0xab" : "+r"(r0) : "r"(r1) : "memory");
-    return r0;
-}
-
 static void feed_exit(int status, const char *why)
 {
     uint32_t arg;
     if (why) {
-        semihost(SYS_WRITE0, (void *)why);
+        semihost_call(SEMIHOST_SYS_WRITE0, why);
     }
-    /* ADP_Stopped_ApplicationExit (0x20026) or RunTimeErrorUnknown (0x20023) */
-    arg = status == 0 ? 0x20026u : 0x20023u;
-    semihost(SYS_EXIT, (void *)arg);
+    arg = status == 0 ? SEMIHOST_EXIT_OK : SEMIHOST_EXIT_ERROR;
+    semihost_call(SEMIHOST_SYS_EXIT, (const void *)arg);
     for (;;) {
     }
 }
@@ -50,7 +35,7 @@ static int open_file(const char *name, uint32_t len, uint32_t mode)
     args[0] = (uint32_t)name;
     args[1] = mode;
     args[2] = len;
-    return semihost(SYS_OPEN, args);
+    return semihost_call(SEMIHOST_SYS_OPEN, args);
 }
 
 /* The word of s starting at or after *pos (spaces skipped), NUL-terminated in place; *pos moves
@@ -90,7 +75,7 @@ bool emu_feed_start(void)
     const char *in, *out;
     args[0] = (uint32_t)cmd;
     args[1] = IN_SIZE - 1u;
-    if (semihost(SYS_GET_CMDLINE, args) != 0) {
+    if (semihost_call(SEMIHOST_SYS_GET_CMDLINE, args) != 0) {
         return false;
     }
     for (i = 0; i < sizeof MARKER - 1u; ++i) {
@@ -128,7 +113,7 @@ static void flush_out(void)
         args[0] = (uint32_t)fd_out;
         args[1] = (uint32_t)out_buf;
         args[2] = n;
-        if (semihost(SYS_WRITE, args) != 0) { /* the count of bytes not written */
+        if (semihost_call(SEMIHOST_SYS_WRITE, args) != 0) { /* the count of bytes not written */
             feed_exit(1, "accelnav-feed: cannot write the telemetry file\n");
         }
     } while (n == OUT_SIZE);
@@ -139,9 +124,9 @@ static void feed_end(void)
     int fd;
     flush_out();
     fd = fd_in;
-    semihost(SYS_CLOSE, &fd);
+    semihost_call(SEMIHOST_SYS_CLOSE, &fd);
     fd = fd_out;
-    if (semihost(SYS_CLOSE, &fd) != 0) {
+    if (semihost_call(SEMIHOST_SYS_CLOSE, &fd) != 0) {
         feed_exit(1, "accelnav-feed: cannot close the telemetry file\n");
     }
     feed_exit(0, 0);
@@ -159,7 +144,7 @@ void emu_feed_poll(void)
             args[0] = (uint32_t)fd_in;
             args[1] = (uint32_t)in_buf;
             args[2] = IN_SIZE;
-            left = semihost(SYS_READ, args); /* the count of bytes not read */
+            left = semihost_call(SEMIHOST_SYS_READ, args); /* the count of bytes not read */
             if (left < 0 || left > (int)IN_SIZE) {
                 feed_exit(1, "accelnav-feed: cannot read the stimulus file\n");
             }

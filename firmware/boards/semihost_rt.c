@@ -1,19 +1,13 @@
 /* The shared bare-metal runtime of the emulated boards: see semihost_rt.h. */
 #include "semihost_rt.h"
 
-extern uint32_t __data_start, __data_end, __data_load, __bss_start, __bss_end;
+#include "semihost.h"
 
-static int semihost(int op, const void *arg)
-{
-    register int r0 __asm__("r0") = op;
-    register const void *r1 __asm__("r1") = arg;
-    __asm__ volatile("bkpt 0xab" : "+r"(r0) : "r"(r1) : "memory");
-    return r0;
-}
+extern uint32_t __data_start, __data_end, __data_load, __bss_start, __bss_end;
 
 void board_puts(const char *s)
 {
-    semihost(0x04, s); /* SYS_WRITE0 */
+    semihost_call(SEMIHOST_SYS_WRITE0, s);
 }
 
 void board_put_u32(uint32_t v)
@@ -30,8 +24,8 @@ void board_put_u32(uint32_t v)
 
 void board_exit(int status)
 {
-    /* SYS_EXIT with ADP_Stopped_ApplicationExit (0x20026) or RunTimeErrorUnknown (0x20023) */
-    semihost(0x18, (const void *)(status == 0 ? 0x20026u : 0x20023u));
+    semihost_call(SEMIHOST_SYS_EXIT,
+                  (const void *)(status == 0 ? SEMIHOST_EXIT_OK : SEMIHOST_EXIT_ERROR));
     for (;;) {
     }
 }

@@ -1,0 +1,28 @@
+/* The ARM semihosting trap (bkpt 0xab; QEMU started with -semihosting) and the operation numbers
+ * the emulated boards use: one definition for the shared runtime (semihost_rt.c) and the file feed
+ * (emu_feed.c), which the stm32vldiscovery build links without that runtime. */
+#ifndef SEMIHOST_H
+#define SEMIHOST_H
+
+#include <stdint.h>
+
+#define SEMIHOST_SYS_OPEN 0x01
+#define SEMIHOST_SYS_CLOSE 0x02
+#define SEMIHOST_SYS_WRITE0 0x04
+#define SEMIHOST_SYS_WRITE 0x05
+#define SEMIHOST_SYS_READ 0x06
+#define SEMIHOST_SYS_GET_CMDLINE 0x15
+#define SEMIHOST_SYS_EXIT 0x18
+#define SEMIHOST_EXIT_OK 0x20026u    /* ADP_Stopped_ApplicationExit */
+#define SEMIHOST_EXIT_ERROR 0x20023u /* ADP_Stopped_RunTimeErrorUnknown */
+
+/* Operation op with its argument block (or value) arg; returns r0. */
+static inline int semihost_call(int op, const void *arg)
+{
+    register int r0 __asm__("r0") = op;
+    register const void *r1 __asm__("r1") = arg;
+    __asm__ volatile("bkpt 0xab" : "+r"(r0) : "r"(r1) : "memory");
+    return r0;
+}
+
+#endif
