@@ -288,12 +288,10 @@ def format_comparison(c: Comparison) -> str:
         lines.append(f"PIL vs SIL: {c.n} sample rows, {verdict}")
     for target, st in c.link.items():
         if st["frames"].get("block", 0):
+            mism = f"{st['mismatches']} MISMATCHED" if st["mismatches"] else "no mismatch"
             lines.append(
                 f"{target}: {st['frames']['block']} block frames, replay matched {st['checkpoints']} checkpoints "
-                f"bit for bit, {st['mismatches']} MISMATCHED"
-                if st["mismatches"]
-                else f"{target}: {st['frames']['block']} block frames, replay matched {st['checkpoints']} checkpoints "
-                "bit for bit, no mismatch"
+                f"bit for bit, {mism}"
             )
     errs = ", ".join(f"{k} {v:.2e}" for k, v in c.max_err_sigma.items())
     lines.append(f"firmware vs float64 reference, max |error| / reference sigma after 1 s: {errs}")
