@@ -495,6 +495,10 @@ class Batch:
         return self.frames[name]
 
 
+# the counts CompactStream keeps that the decoder's Stats carry under the same names
+_COMPACT_COUNTS = ("lost", "duplicates", "mismatches", "checkpoints", "checkpoint_repeats", "unreplayed")
+
+
 class Decoder:
     """Streaming, vectorised decoder of the frames in ``manifest``; see the module docstring."""
 
@@ -613,7 +617,7 @@ class Decoder:
         with the state mode's sample frames in stream order."""
         c = self.compact
         e = np.zeros(0, np.int64)
-        before = (c.lost, c.duplicates, c.mismatches, c.checkpoints, c.checkpoint_repeats, c.unreplayed)
+        before = {k: getattr(c, k) for k in _COMPACT_COUNTS}
         rows, rpos = c.feed(out["block"], where.get("block", e), out["checkpoint"], where.get("checkpoint", e))
         if len(rows):
             if len(out["sample"]):
@@ -623,15 +627,9 @@ class Decoder:
                 out["sample"] = merged[np.argsort(allpos, kind="stable")]
             else:
                 out["sample"] = rows
-        after = (c.lost, c.duplicates, c.mismatches, c.checkpoints, c.checkpoint_repeats, c.unreplayed)
-        d = [a - b for a, b in zip(after, before, strict=True)]
-        self.stats.lost += d[0]
-        self.stats.duplicates += d[1]
-        self.stats.mismatches += d[2]
-        self.stats.checkpoints += d[3]
-        self.stats.checkpoint_repeats += d[4]
-        self.stats.unreplayed += d[5]
-        return d[0]
+        for k, b in before.items():  # this batch's counts, added to the decoder's
+            setattr(self.stats, k, getattr(self.stats, k) + getattr(c, k) - b)
+        return c.lost - before["lost"]
 
     def _keep_tail(self, tail: bytes) -> None:
         if len(tail) > self.max_len:
