@@ -223,6 +223,27 @@ def _feeder(master_fd, frames: list[bytes], rate_hz: float, sent: list, stop: th
         sent.append((time.monotonic(), k))
 
 
+def test_stop_at_a_frame_count_ends_the_log_on_a_frame_boundary(tmp_path, man, telemetry):
+    """The read that completes the count also brings the start of the next frame (its rest comes 0.1 s
+    later): the recorder reads on to that frame's delimiter, so the log holds no torn frame (which
+    would read as one damaged frame)."""
+    frames = _frames(telemetry)
+    head, extra = b"".join(frames[:20]), frames[20]
+    port = serial.serial_for_url("loop://", timeout=0.02)
+    port.write(head + extra[:30])
+    later = threading.Timer(0.1, port.write, args=(extra[30:],))
+    out = tmp_path / "count.acnlog"
+    rec = Recorder(port, out, man, commands=(), model_text=load_model().text, status=Status(enabled=False))
+    later.start()
+    res = rec.run(max_frames=20, duration=10)
+    rec.close()
+    later.join(5)
+    assert res.reason == "frames"
+    d = decode_log(out)
+    assert d.stats["bad_frames"] == 0 and d.stats["garbage_bytes"] == 0
+    assert len(d.frames["sample"]) == 21
+
+
 def _frames(telemetry: bytes) -> list[bytes]:
     return [p + b"\0" for p in telemetry.split(b"\0")[:-1]]
 

@@ -205,12 +205,29 @@ class Recorder:
                     break
                 if max_frames is not None and self.decoder.stats.frames.get("sample", 0) >= max_frames:
                     reason = "frames"
+                    self._end_of_frame()
                     break
         finally:
             self.log.close()
             self.status.note = ""
             self.status.update(time.monotonic() - t0, self.decoder, final=True)
         return Result(reason, time.monotonic() - t0, self.decoder.stats.as_dict(), self.info_ok, self.warnings, gaps)
+
+    def _end_of_frame(self, wait_s: float = 0.5) -> None:
+        """Stopping at a frame count with a frame under way (the next one began in the same read): read on,
+        at most ``wait_s``, up to its delimiter, so that the log ends on a frame boundary rather than in a
+        torn frame that would read as damage."""
+        end = time.monotonic() + wait_s
+        while self.decoder.mid_frame and time.monotonic() < end:
+            try:
+                data = self._read()
+            except (serial.SerialException, OSError):
+                return  # the link went: the log ends as it is
+            k = data.find(b"\0")
+            data = data if k < 0 else data[: k + 1]
+            if data:
+                self.log.append(data, time.time_ns())
+                self.decoder.feed(data)
 
     def _read(self) -> bytes:
         """What the link has (at most 64 KiB), waiting up to the port's timeout for the first byte."""

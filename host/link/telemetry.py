@@ -631,6 +631,11 @@ class Decoder:
             setattr(self.stats, k, getattr(self.stats, k) + getattr(c, k) - b)
         return c.lost - before["lost"]
 
+    @property
+    def mid_frame(self) -> bool:
+        """Bytes of a frame whose delimiter has not come yet are held."""
+        return bool(self._tail)
+
     def _keep_tail(self, tail: bytes) -> None:
         if len(tail) > self.max_len:
             self.stats.garbage_bytes += len(tail) - self.max_len
