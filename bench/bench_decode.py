@@ -144,6 +144,14 @@ def bench_compact(args) -> None:
         t_vec = min(t_vec, time.perf_counter() - t)
     got = int(sum(len(s) for s in idx))
     st = dec.stats
+    t_np = math.inf  # the same with COBS and CRC in numpy (a machine without a C compiler)
+    for _ in range(args.best_of):
+        t = time.perf_counter()
+        d_np = Decoder(man, replay=replay, kernel=False)
+        n_np = sum(len(d_np.feed(data[a : a + args.piece])["sample"]) for a in range(0, len(data), args.piece))
+        n_np += len(d_np.release())
+        t_np = min(t_np, time.perf_counter() - t)
+    assert n_np == got, "the numpy wire path delivered other rows"
 
     # the naive decoder on a prefix of the same stream (whole frames), and the vectorised one on it again
     cut = data.index(b"\0", int(len(data) * args.naive_fraction)) + 1
@@ -163,6 +171,7 @@ def bench_compact(args) -> None:
     print(f"\n{'decoder':<44}{'seconds':>9}{'samples':>12}{'samples/s':>14}{'x realtime':>12}")
     for name, secs, k in (
         (f"vectorised + replay (whole, best of {args.best_of})", t_vec, got),
+        ("  the same, COBS/CRC in numpy (no compiler)", t_np, got),
         (f"naive frame-by-frame ({args.naive_fraction:.0%} of it)", t_naive, n_naive),
     ):
         print(f"{name:<44}{secs:9.2f}{k:12,}{k / secs:14,.0f}{k / args.rate / secs:12,.0f}")
