@@ -307,3 +307,32 @@ def test_repeats_and_damage_agree_with_the_frame_by_frame_rule(man, replay, tele
         stream[p] ^= 0x5A
     _, c = _check(man, replay, bytes(stream), seed=seed)
     assert c["mismatches"] == 0 and c["duplicates"] > 0
+
+
+def test_replays_on_threads_agree_with_the_frame_by_frame_rule(man, replay, telemetry, monkeypatch):
+    """The axes' replays run on threads for large batches; forced on for this small stream (repeats and
+    damage too), the rows and counts are still the naive decoder's."""
+    import accelnav.link.compact as compact
+
+    monkeypatch.setattr(compact, "THREAD_MIN", 1)
+    f = _frames(telemetry)
+    stream = bytearray(b"".join(f[:40] + f[30:40] + f[40:]))
+    stream[len(stream) // 2] ^= 0x5A
+    _, c = _check(man, replay, bytes(stream), seed=5)
+    assert c["duplicates"] > 0 and c["lost"] > 0 and c["mismatches"] == 0
+
+
+def test_duty_cycle_rows_agree_with_the_frame_by_frame_rule():
+    """The duty-cycle model's block frames (16-bit T1/T2 counts, widened to the rows' 32-bit fields by the
+    row fill; captures that timed out) decode to the naive decoder's rows."""
+    dman = manifest(str(DUTY_MODEL))
+    fw = HostFirmware(build_firmware(str(DUTY_MODEL)))
+    rng = np.random.default_rng(4)
+    t2 = np.full((900, 2), dman.data["t2_nominal"])
+    t1 = t2 // 2 + rng.integers(-3000, 3000, (900, 2))
+    t1[[50, 400], 1] = 0  # no capture: flagged timeout, predicted over
+    fw.rx(encode_stimulus(dman, t1=t1, t2=t2) + encode_command(dman, "flush"))
+    rows, c = _check(dman, replay_for(dman, load_model(str(DUTY_MODEL))), fw.take(), seed=2)
+    assert len(rows) == 900 and c["mismatches"] == 0
+    np.testing.assert_array_equal(rows["x.t1"], t1[:, 0])
+    assert np.count_nonzero(rows["y.flags"]) == 2

@@ -49,6 +49,10 @@ def concat_records(parts: list, dtype) -> np.ndarray:
     return np.concatenate(raw).view(dtype).ravel()
 
 
+CARRY, NONE = -2, -1  # a stretch starts from the carried state, a checkpoint (its id), or nothing
+THREAD_MIN = 20_000  # samples in a batch from which the axes' replays run on threads
+
+
 class CompactStream:
     def __init__(self, man, replay=None):
         self.man = man
@@ -74,6 +78,7 @@ class CompactStream:
         self.held = (np.zeros(0, self.sample_dtype), np.zeros(0, np.int64))  # rows, their g
         self.lost = self.duplicates = self.mismatches = self.checkpoints = 0
         self.checkpoint_repeats = self.unreplayed = 0
+        self._pool = None  # replay threads, made on the first large batch
 
     # ------------------------------------------------------------------
     def order(self, kinds, ids, b_index, b_n, b_flags, c_index, c_flags, c_axis, c_state, runs=None):
@@ -264,16 +269,12 @@ class CompactStream:
             def take(a):
                 return a.reshape(N, *a.shape[2:])
 
-            first = np.zeros(N, bool)
-            first[::B] = True
         else:
             mask = np.arange(B)[None, :] < ns[:, None]
 
             def take(a):
                 return a[mask]
 
-            first = np.zeros(N, bool)
-            first[np.cumsum(ns) - ns] = True
         aflags = take(blk["aflags"])
         codes = [((aflags >> (2 * j)) & 3).astype(np.uint8) for j in range(n_ax)]
         raw = {(j, k): take(blk[f"{ax}.{k}"]) for j, ax in enumerate(self.axes) for k in self.raw}
@@ -288,44 +289,11 @@ class CompactStream:
         g0 = self.g
         held_mism = np.zeros(h, bool)
         ck_states = cks["state"]
-        for j in range(n_ax):
-            nbj = self.state_bytes[j]
-            ev_at: dict[int, list[int]] = {}  # checkpoints verifying the stretch that ends here
-            sync_at: dict[int, int] = {}  # the checkpoint the replay starts from here
-            for p, i, verify, sync in events[j]:
-                if verify:
-                    ev_at.setdefault(p, []).append(i)
-                if sync:
-                    sync_at[p] = i
-            points = sorted(breakset | set(ev_at) | set(sync_at) | {0, N})
-            CARRY, NONE = -2, -1  # a stretch starts from the carried state, a checkpoint (its id), or nothing
-            carry = self.carry[j]
-            src = CARRY if (carry is not None and 0 not in breakset) else NONE
-            opened = self.open_from[j] if src == CARRY else g0  # g where the open stretch began
-            checks = []  # (stretch number or -1 for the carried state, checkpoint id)
-            segs = []  # (start, end, source, g where the stretch began)
-            if carry is not None and 0 in ev_at:  # no break before them: they close the carried stretch
-                checks += [(-1, i) for i in ev_at[0]]
-            if 0 in sync_at:
-                src, opened = sync_at[0], g0
-            for a, b in zip(points[:-1], points[1:], strict=True):
-                segs.append((a, b, src, opened))
-                checks += [(len(segs) - 1, i) for i in ev_at.get(b, [])]
-                if b in sync_at:
-                    src, opened = sync_at[b], g0 + b
-                elif b in breakset:
-                    src, opened = NONE, g0 + b
-                else:
-                    src = "continue"  # only at b == N: the last stretch's final state is carried
-            stale_from = self.open_from[j]
-            self.open_from[j] = opened
-            live = [k for k, sg in enumerate(segs) if sg[2] != NONE]
-            for sg in segs:
-                if sg[2] == NONE:
-                    valid[sg[0] : sg[1]] = False
-            fin = np.zeros((max(len(segs), 1), nbj), np.uint8)  # a row even without a stretch (N == 0)
-            has_fin = np.zeros(len(fin), bool)
-            if self.replay is not None and live:
+        plans = [self._plan(j, N, breakset, events[j], valid, g0) for j in range(n_ax)]
+        jobs = []
+        for j, pl in enumerate(plans):
+            if self.replay is not None and pl["live"]:
+                segs, live, nbj = pl["segs"], pl["live"], self.state_bytes[j]
                 start = np.array([segs[k][0] for k in live], np.int64)
                 length = np.array([segs[k][1] - segs[k][0] for k in live], np.int64)
                 srcs = np.array([segs[k][2] for k in live], np.int64)
@@ -333,10 +301,20 @@ class CompactStream:
                 from_ck = srcs >= 0
                 init[from_ck] = ck_states[srcs[from_ck], :nbj]
                 if not from_ck.all():
-                    init[~from_ck] = np.frombuffer(carry, np.uint8)
+                    init[~from_ck] = np.frombuffer(pl["carry"], np.uint8)
                 in1 = raw[(j, self.raw[0])]
                 in2 = raw[(j, self.raw[1])] if len(self.raw) > 1 else None
-                f, nbad = self.replay.run(j, start, length, init, codes[j], in1, in2, rows)
+                jobs.append((j, start, length, init, codes[j], in1, in2, rows))
+            elif self.replay is None:
+                valid[:] = False
+        results = self._replay_all(jobs)
+        for j, pl in enumerate(plans):
+            nbj = self.state_bytes[j]
+            segs, live, checks, src, carry = pl["segs"], pl["live"], pl["checks"], pl["src"], pl["carry"]
+            fin = np.zeros((max(len(segs), 1), nbj), np.uint8)  # a row even without a stretch (N == 0)
+            has_fin = np.zeros(len(fin), bool)
+            if j in results:
+                f, nbad = results[j]
                 fin[live] = f
                 has_fin[live] = True
                 for m in np.flatnonzero(nbad).tolist():
@@ -344,8 +322,6 @@ class CompactStream:
                     self.mismatches += int(nbad[m])
                     mism[segs[k][0] : segs[k][1]] = True
                     held_mism |= held_g >= segs[k][3]
-            elif self.replay is None:
-                valid[:] = False
             if checks:
                 ks = np.array([k for k, _ in checks], np.int64)
                 ids = np.array([i for _, i in checks], np.int64)
@@ -361,7 +337,7 @@ class CompactStream:
                         mism[segs[k][0] : segs[k][1]] = True
                         held_mism |= held_g >= segs[k][3]
                     else:
-                        held_mism |= held_g >= stale_from
+                        held_mism |= held_g >= pl["stale_from"]
             if src == "continue":
                 self.carry[j] = fin[-1].tobytes() if segs and has_fin[-1] else None
             elif src == CARRY:
@@ -373,7 +349,8 @@ class CompactStream:
         else:
             self.lost += int(np.count_nonzero(~valid))
         self.g = g0 + N
-        self._assemble(rows, blk, ns, first, codes, raw, mism)
+        if self.replay is not None:
+            self._assemble(rows, blk, mism)
         if held_mism.any():
             whole["flags"][:h] |= np.where(held_mism, self.MISMATCH, 0).astype(whole["flags"].dtype)
         # the held rows came before this batch (position -1)
@@ -389,6 +366,56 @@ class CompactStream:
         self.held = (whole[cut:].copy(), g[cut:])
         return whole[:cut], rpos[:cut]
 
+    def _plan(self, j: int, N: int, breakset: set, events: list, valid: np.ndarray, g0: int) -> dict:
+        """Axis j's stretches in a batch of N samples: where the replay starts from the carried state, from a
+        checkpoint or not at all (the samples without a state are cleared in ``valid``), and which
+        checkpoints verify which stretch's final state."""
+        ev_at: dict[int, list[int]] = {}  # checkpoints verifying the stretch that ends here
+        sync_at: dict[int, int] = {}  # the checkpoint the replay starts from here
+        for p, i, verify, sync in events:
+            if verify:
+                ev_at.setdefault(p, []).append(i)
+            if sync:
+                sync_at[p] = i
+        points = sorted(breakset | set(ev_at) | set(sync_at) | {0, N})
+        carry = self.carry[j]
+        src = CARRY if (carry is not None and 0 not in breakset) else NONE
+        opened = self.open_from[j] if src == CARRY else g0  # g where the open stretch began
+        checks = []  # (stretch number or -1 for the carried state, checkpoint id)
+        segs = []  # (start, end, source, g where the stretch began)
+        if carry is not None and 0 in ev_at:  # no break before them: they close the carried stretch
+            checks += [(-1, i) for i in ev_at[0]]
+        if 0 in sync_at:
+            src, opened = sync_at[0], g0
+        for a, b in zip(points[:-1], points[1:], strict=True):
+            segs.append((a, b, src, opened))
+            checks += [(len(segs) - 1, i) for i in ev_at.get(b, [])]
+            if b in sync_at:
+                src, opened = sync_at[b], g0 + b
+            elif b in breakset:
+                src, opened = NONE, g0 + b
+            else:
+                src = "continue"  # only at b == N: the last stretch's final state is carried
+        stale_from = self.open_from[j]
+        self.open_from[j] = opened
+        for sg in segs:
+            if sg[2] == NONE:
+                valid[sg[0] : sg[1]] = False
+        live = [k for k, sg in enumerate(segs) if sg[2] != NONE]
+        return {"segs": segs, "live": live, "checks": checks, "src": src, "carry": carry, "stale_from": stale_from}
+
+    def _replay_all(self, jobs: list) -> dict:
+        """{axis: (final states, verdict mismatches)} of the replay jobs; the axes' replays run on threads
+        (the C releases the GIL) when the batch is large enough to pay for it."""
+        if len(jobs) > 1 and len(jobs[0][4]) >= THREAD_MIN:
+            if self._pool is None:
+                from concurrent.futures import ThreadPoolExecutor
+
+                self._pool = ThreadPoolExecutor(len(self.axes), thread_name_prefix="acn-replay")
+            futs = {job[0]: self._pool.submit(self.replay.run, *job) for job in jobs}
+            return {j: f.result() for j, f in futs.items()}
+        return {job[0]: self.replay.run(*job) for job in jobs}
+
     def release(self) -> np.ndarray:
         """End of the stream: the rows after the last checkpoint (replayed, never verified)."""
         rows = self.held[0]
@@ -396,70 +423,18 @@ class CompactStream:
         self.open_from = [self.g] * len(self.axes)
         return rows
 
-    def _groups(self):
-        """The rows' fields other than the states, as runs of adjacent bytes: [(start, end, dense dtype)]."""
-        if getattr(self, "_group_cache", None) is None:
-            dt = self.sample_dtype
-            states = {f"{ax}.{s}" for ax in self.axes for s in "ruae"}
-            fields = sorted(((o, n, t) for n, (t, o, *_) in dt.fields.items()), key=lambda x: x[0])
-            groups, cur = [], []
-            for o, n, t in fields:
-                if n in states:
-                    if cur:
-                        groups.append(cur)
-                    cur = []
-                else:
-                    cur.append((o, n, t))
-            if cur:
-                groups.append(cur)
-            out = []
-            for grp in groups:
-                a = grp[0][0]
-                b = grp[-1][0] + grp[-1][2].itemsize
-                sub = np.dtype(
-                    {
-                        "names": [n for _, n, _ in grp],
-                        "formats": [t for _, _, t in grp],
-                        "offsets": [o - a for o, _, _ in grp],
-                        "itemsize": b - a,
-                    }
-                )
-                out.append((a, b, sub))
-            self._group_cache = out
-        return self._group_cache
-
-    def _assemble(self, rows, blk, ns, first, codes, raw, mism) -> None:
-        """Every field of the rows but the states (the replay wrote those): filled in dense arrays of the
-        adjacent fields, each copied into the rows in one pass (a pass per field is several times slower)."""
+    def _assemble(self, rows, blk, mism) -> None:
+        """Every field of the rows but the states (the replay wrote those), through the replay's C fill."""
         man = self.man
-        N = len(rows)
-        index = np.repeat(blk["index"].astype(np.int64) - np.cumsum(ns) + ns, ns) + np.arange(N)
-        bfl = blk["flags"].astype(np.uint16)
-        fl = np.repeat(bfl & np.uint16(~(self.R | self.X) & 0xFFFF), ns) | np.uint16(self.REPLAYED)
-        fl[first] |= bfl & np.uint16(self.R | self.X)
-        if mism.any():
-            fl |= np.where(mism, self.MISMATCH, 0).astype(np.uint16)
         af = man.axis_flags
         duty = man.input == "duty_cycle"
-        per_code = np.array(
-            [
-                0,
-                (1 << af["skipped"]) | (0 if duty else 1 << af["rail"]),
-                (1 << af["skipped"]) | (1 << af["timeout"]),
-                (1 << af["skipped"]) | (1 << af["missed"]),
-            ],
-            np.uint8,
-        )
-        cols = {"type": man.frames["sample"]["type"], "index": index, "seq": index & 0xFFFF, "flags": fl}
-        for k in ("tx_drop", "skipped", "overflow", "missed", "rx_lost"):
-            cols[k] = np.repeat(blk[k], ns)
-        for j, ax in enumerate(self.axes):
-            cols[f"{ax}.flags"] = per_code[codes[j]]
-            for k in self.raw:
-                cols[f"{ax}.{k}"] = raw[(j, k)]
-        u8 = rows.view(np.uint8).reshape(N, rows.dtype.itemsize)
-        for a, b, sub in self._groups():
-            dense = np.empty(N, sub)
-            for name in sub.names:
-                dense[name] = cols[name]
-            u8[:, a:b] = dense.view(np.uint8).reshape(N, b - a)
+        per_code = [
+            0,
+            (1 << af["skipped"]) | (0 if duty else 1 << af["rail"]),
+            (1 << af["skipped"]) | (1 << af["timeout"]),
+            (1 << af["skipped"]) | (1 << af["missed"]),
+        ]
+        rx = self.R | self.X
+        self.replay.fill(blk, rows, per_code, ~rx & 0xFFFF, self.REPLAYED, rx)
+        if mism.any():
+            rows["flags"] |= np.where(mism, self.MISMATCH, 0).astype(rows["flags"].dtype)

@@ -62,6 +62,95 @@ size_t acnr_{ax}_size(void)
 }}
 """
 
+_FILL_DECL = (
+    "void acnr_fill(int64_t nblk, const uint8_t *blk, uint8_t *rows, const uint8_t *per_code, uint32_t keep,"
+    " uint32_t set, uint32_t first);\n"
+)
+
+
+def _fill_source(manifest) -> str:
+    """C of ``acnr_fill``: every field of the sample rows but the states, from the accepted block frames.
+
+    Block b (``manifest.dtypes["block"]`` records, ``n`` slots used) gives rows of the samples
+    index + 0 .. index + n - 1, one after another: ``type`` the sample frame's, ``seq`` the index's low
+    16 bits, ``flags`` the block's flags masked by ``keep`` with ``set`` added and, on the block's first
+    row only, its ``first`` bits too; each axis' ``flags`` from its 2-bit code through ``per_code[4]``;
+    the raw inputs from the block's slot; any other field the block's field of the same name. The offsets
+    are this manifest's, written in as constants, and every field is read and written byte by byte in
+    little-endian order (the host's own byte order does not matter). A sample field no rule covers is a
+    ReplayError: the layout changed and this fill no longer knows it."""
+    sdt, bdt = manifest.dtypes["sample"], manifest.dtypes["block"]
+    axes = list(manifest.axes)
+    raw = manifest.raw_fields()
+    states = {f"{ax}.{st}" for ax in axes for st in "ruae"}
+
+    def field(dt, name):
+        t, off = dt.fields[name][:2]
+        base = t.base if t.subdtype else t
+        if base.kind != "u" or base.byteorder == ">":
+            raise ReplayError(f"{name}: not a little-endian unsigned field, which the row fill expects")
+        return off, base.itemsize
+
+    def get(off, size, slot=""):
+        parts = [f"(uint32_t)B[{off}{slot}{f' + {i}' if i else ''}] << {8 * i}" for i in range(size)]
+        return "(" + " | ".join(parts).replace(" << 0", "") + ")"
+
+    def put(name, expr):
+        off, size = field(sdt, name)
+        return [f"    acnr_put(r + {off}, {size}, {expr});"]
+
+    body = []
+    for name in sdt.names:
+        if name in states:
+            continue
+        if name == "type":
+            body += put(name, str(int(manifest.frames["sample"]["type"])))
+        elif name == "seq":
+            body += put(name, "ix & 0xFFFFu")
+        elif name == "index":
+            body += put(name, "ix")
+        elif name == "flags":
+            body += put(name, "fl | (s == 0 ? bf & first : 0u)")
+        elif name.split(".", 1)[0] in axes and name.endswith(".flags"):
+            j = axes.index(name.split(".", 1)[0])
+            body += put(name, f"per_code[(af >> {2 * j}) & 3u]")
+        elif name.split(".", 1)[-1] in raw:
+            off, size = field(bdt, name)
+            body += put(name, get(off, size, f" + s * {size}"))
+        elif name in bdt.names and not bdt.fields[name][0].subdtype:
+            body += put(name, get(*field(bdt, name)))
+        else:
+            raise ReplayError(f"the row fill has no rule for the sample field {name!r}")
+    o_idx, o_fl, o_n, o_af = (field(bdt, k) for k in ("index", "flags", "n", "aflags"))
+    return "\n".join(
+        [
+            "static void acnr_put(uint8_t *p, int size, uint32_t v)",
+            "{",
+            "    int i;",
+            "    for (i = 0; i < size; ++i) p[i] = (uint8_t)(v >> (8 * i));",
+            "}",
+            "",
+            "void acnr_fill(int64_t nblk, const uint8_t *blk, uint8_t *rows, const uint8_t *per_code, uint32_t keep,",
+            "               uint32_t set, uint32_t first)",
+            "{",
+            "    int64_t b;",
+            "    uint32_t s;",
+            "    for (b = 0; b < nblk; ++b) {",
+            f"        const uint8_t *B = blk + b * {bdt.itemsize};",
+            f"        uint32_t n = {get(*o_n)}, i0 = {get(*o_idx)}, bf = {get(*o_fl)}, fl = (bf & keep) | set;",
+            "        for (s = 0; s < n; ++s) {",
+            f"            uint8_t *r = rows + {sdt.itemsize} * s;",
+            f"            uint32_t ix = i0 + s, af = B[{o_af[0]} + s];",
+            *["        " + line for line in body],
+            "        }",
+            f"        rows += {sdt.itemsize} * n;",
+            "    }",
+            "}",
+            "",
+        ]
+    )
+
+
 _DECL = (
     "void acnr_{ax}(int64_t nseg, const int64_t *start, const int64_t *len, const uint8_t *init, uint8_t *fin,"
     " const uint8_t *code, const uint32_t *in1, const uint32_t *in2, uint8_t *rows, int64_t stride,"
@@ -108,14 +197,17 @@ class Replay:
                 "}",
             ]
         src += [_KERNEL.format(ax=ax, args=args) for ax in self.axes]
+        src.append(_fill_source(manifest))
         sources = dict(_filter_sources(model))
         sources["acnreplay.c"] = "\n".join(src)
         mod = build_module(
             "acn_replay",
-            "".join(_DECL.format(ax=ax) for ax in self.axes),
+            "".join(_DECL.format(ax=ax) for ax in self.axes) + _FILL_DECL,
             sources,
             main=["accelnav.c", "acnreplay.c"],
-            preamble="#include <stddef.h>\n#include <stdint.h>\n" + "".join(_DECL.format(ax=ax) for ax in self.axes),
+            preamble="#include <stddef.h>\n#include <stdint.h>\n"
+            + "".join(_DECL.format(ax=ax) for ax in self.axes)
+            + _FILL_DECL,
         )
         self.ffi, self.lib = mod.ffi, mod.lib
         for ax, nb in zip(self.axes, self.state_bytes, strict=True):
@@ -124,6 +216,7 @@ class Replay:
                 raise ReplayError(f"axis {ax}: the state struct is {got} bytes here, the manifest says {nb}")
         dt = manifest.dtypes["sample"]
         self.row_dtype = dt
+        self.block_dtype = manifest.dtypes["block"]
         self.offsets = []
         for ax in self.axes:
             off = []
@@ -175,3 +268,29 @@ class Replay:
             p(nbad, "int64_t[]"),
         )
         return fin, nbad
+
+    def fill(self, blocks: np.ndarray, rows: np.ndarray, per_code, keep: int, set_: int, first: int) -> None:
+        """Every field but the states of ``rows`` (one per sample of the ``blocks``, in order): see
+        :func:`_fill_source` for the rules and what ``per_code``, ``keep``, ``set_``, ``first`` mean."""
+        blocks = np.ascontiguousarray(blocks)
+        if blocks.dtype != self.block_dtype:
+            raise ValueError("blocks: the manifest's block records")
+        ns = blocks["n"].astype(np.int64)
+        if len(ns) and (ns.min() < 0 or ns.max() > self.block_dtype["aflags"].shape[0]):
+            raise ValueError("blocks: a block with more samples than slots")
+        n = int(ns.sum())
+        if rows.dtype != self.row_dtype or len(rows) != n or not rows.flags.c_contiguous:
+            raise ValueError("rows: one contiguous sample row per sample of the blocks")
+        per_code = np.ascontiguousarray(per_code, np.uint8)
+        if per_code.shape != (4,):
+            raise ValueError("per_code: four axis flags")
+        ffi = self.ffi
+        self.lib.acnr_fill(
+            len(blocks),
+            ffi.from_buffer("uint8_t[]", blocks.view(np.uint8).reshape(-1)),
+            ffi.from_buffer("uint8_t[]", rows.view(np.uint8).reshape(-1), require_writable=True),
+            ffi.from_buffer("uint8_t[]", per_code),
+            keep,
+            set_,
+            first,
+        )
