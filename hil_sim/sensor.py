@@ -62,12 +62,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import lfilter
 
 from accelnav.codegen.design import input_conversion
 from accelnav.codegen.model import G0, Model
+from accelnav.lazy import lazy_module
 
 from .trajectories import ALL_SCENARIOS, TUMBLE_HOLD_S, TUMBLE_TURN_S, truth, tumble_any_poses, tumble_specific_force
+
+signal = lazy_module("scipy.signal")
 
 AXIS_GAIN = (1.0, -0.8, 0.6)  # motion seen by model axis 0, 1, 2 (relative to the drawn trajectory)
 MAX_AXES = len(AXIS_GAIN)
@@ -355,7 +357,7 @@ def bias(
     drive = np.empty(n)
     drive[0] = model.filter.initial_sigma[3] * rng_start.standard_normal() if initial_random else 0.0
     drive[1:] = math.sqrt(Ts) * model.noise.sigma_eps * rng_walk.standard_normal(n - 1)
-    g = lfilter([1.0], [1.0, -phi], drive)  # g[k] = phi g[k-1] + drive[k]
+    g = signal.lfilter([1.0], [1.0, -phi], drive)  # g[k] = phi g[k-1] + drive[k]
     return ax.c1 * -np.expm1(-t / ax.T) + ax.c2 + g
 
 
@@ -372,7 +374,7 @@ def sensor_noise(model: Model, n: int, rng: np.random.Generator) -> np.ndarray:
     drive = rng.standard_normal(n)
     drive[0] *= sigma
     drive[1:] *= sigma * math.sqrt(1.0 - rho * rho)
-    return lfilter([1.0], [1.0, -rho], drive)  # n[k] = rho n[k-1] + drive[k]
+    return signal.lfilter([1.0], [1.0, -rho], drive)  # n[k] = rho n[k-1] + drive[k]
 
 
 def read_out(model: Model, axis: int | str, m: np.ndarray, rng_jitter: np.random.Generator) -> tuple[np.ndarray, ...]:

@@ -29,6 +29,7 @@ LAYERS = {
     "accelnav.plots": 1,
     "accelnav.errors": 1,
     "accelnav.progress": 1,
+    "accelnav.lazy": 1,
     "accelnav.codegen": 0,
 }
 

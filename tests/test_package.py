@@ -129,3 +129,27 @@ def test_a_run_time_build_without_a_compiler_is_refused_in_one_line(tmp_path):
     assert "Traceback" not in done.stderr
     (line,) = done.stderr.strip().splitlines()
     assert "not found" in line and "Debian: gcc" in line
+
+
+def test_the_parser_is_built_without_the_heavy_imports():
+    """Every command module is imported to build the parser (``accelnav --help``, any command); scipy's stats
+    and optimize, allantools and matplotlib are imported by the commands that use them, at first use
+    (accelnav.lazy), not at start: they cost most of a second."""
+    code = (
+        "import sys; from accelnav.cli import build_parser; build_parser(); "
+        "print(' '.join(m for m in ('scipy.stats', 'scipy.optimize', 'scipy.signal', 'allantools', 'matplotlib')"
+        " if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == ""
+
+
+def test_a_lazy_module_imports_on_first_use():
+    from accelnav.lazy import lazy_module
+
+    stats = lazy_module("scipy.stats")
+    assert "not imported yet" in repr(stats) or "scipy.stats" in sys.modules
+    assert float(stats.norm.cdf(0.0)) == 0.5
+    assert "imported" in repr(stats) and "not" not in repr(stats)
+    with pytest.raises(ModuleNotFoundError):
+        getattr(lazy_module("no_such_module_here"), "anything")  # noqa: B009

@@ -56,20 +56,25 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
-from scipy import optimize, stats
 
 from accelnav.codegen.design import axis_design
 from accelnav.codegen.model import Model
 from accelnav.codegen.modelfile import revalidate, with_noise
 from accelnav.estimate import fastsmooth
 from accelnav.estimate.kf import Measurement
+from accelnav.lazy import lazy_module
+
+optimize = lazy_module("scipy.optimize")
+stats = lazy_module("scipy.stats")
 
 FIGURES = ("sigma_n", "sigma_eps", "R")
 NOT_IDENTIFIED_SE = 1.0  # se of ln(figure): a 95 % interval wider than a factor e^(2 x 1.96) ~ 50
 MAX_EVALUATIONS = 1500  # search (at most a third), Hessian and profile intervals together
-PROFILE_DROP = 0.5 * float(stats.chi2.ppf(0.95, 1))  # 1.92: the rise of -ln L at a 95 % profile interval end
+# 1.92: the rise of -ln L at a 95 % profile interval end, chi2(1 dof).ppf(0.95) / 2 = z(0.975)^2 / 2
+PROFILE_DROP = 0.5 * NormalDist().inv_cdf(0.975) ** 2
 R95 = math.sqrt(2.0 * PROFILE_DROP)  # 1.96: the signed root at an end
 LN_BOUNDS = {"sigma_n": (1e-4, 1e3), "sigma_eps": (1e-9, 10.0), "R": (1e-10, 1e4)}
 

@@ -70,7 +70,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
+
+from accelnav.lazy import lazy_module
+
+optimize = lazy_module("scipy.optimize")
+
 
 HEAD = 1024  # samples summed exactly at every T
 BLOCK_GROWTH = 0.25  # block length / time of the block's start

@@ -74,9 +74,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, stats
 
 from accelnav.codegen.model import G0
+from accelnav.lazy import lazy_module
+
+optimize = lazy_module("scipy.optimize")
+stats = lazy_module("scipy.stats")
 
 WINDOW_S = 0.5
 MIN_POSE_S = 3.0

@@ -60,9 +60,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
 
 from accelnav.identify.noiseid import FLICKER_FACTOR, MIN_EDF_FOR_MIN, AllanCurve
+from accelnav.lazy import lazy_module
+
+optimize = lazy_module("scipy.optimize")
 
 MAX_GM = 2
 GRID_PER_DECADE = 4

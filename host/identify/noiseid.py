@@ -72,9 +72,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import allantools
 import numpy as np
-from scipy import optimize
+
+from accelnav.lazy import lazy_module
+
+allantools = lazy_module("allantools")
+optimize = lazy_module("scipy.optimize")
+
 
 FLICKER_FACTOR = math.sqrt(2.0 * math.log(2.0) / math.pi)  # 0.664: sigma_min = 0.664 B
 TAUS_PER_DECADE = 8

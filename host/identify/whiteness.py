@@ -29,7 +29,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import fft, stats
+
+from accelnav.lazy import lazy_module
+
+fft = lazy_module("scipy.fft")
+stats = lazy_module("scipy.stats")
+
 
 DEFAULT_LB_LAGS = 20
 DEFAULT_ACF_LAGS = 100
