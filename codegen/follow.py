@@ -172,8 +172,8 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         "    int32_t w, Su, cu[4];",
         "    uint32_t x;",
         "    int n;",
-        "    if (s->dev) {",
-        "        if (s->k > 0) {",
+        f"    if (s->k & {P}_FOLLOWING) {{",
+        f"        if ((s->k & ~{P}_FOLLOWING) > 0) {{",
         "            /* D = F D F' (the same Q enters both runs); right-hand sides read the old values */",
         "            int32_t tr, tv;",
         f"            tr = {sat(tr)};",
@@ -188,7 +188,7 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         "        }",
         "    } else {",
         "        /* the first skip of an excursion: P equals P_u here */",
-        "        s->dev = 1u;",
+        f"        s->k |= {P}_FOLLOWING;",
         "        s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;",
         "    }",
         "    /* S_u = R / (1 - K_ua - K_ue), 1 - K_ua - K_ue in Q.30; c_u = K_u S_u */",
@@ -232,7 +232,7 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         "        /* back on the schedule once every |dK| is within its threshold */",
         f"        if ({th[0]} && {th[1]} &&",
         f"            {th[2]} && {th[3]}) {{",
-        "            s->dev = 0u;",
+        f"            s->k &= ~{P}_FOLLOWING;",
         "        }",
     ]
     for i in range(4):
