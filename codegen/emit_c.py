@@ -616,6 +616,15 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
             post[n] = " + " + _sh(f"(int64_t){P}_{c} * a", fc + fy - ft[n], f"Q.{fc + fy} -> Q.{ft[n]}")
     if any(p.design.x0[:3]):
         raise ValueError("the merged predict needs r, u, a of x0 at zero")
+    # r's increment v + Ts^2/2 a + K_r y in one accumulator (Q.fp, one SMLAL each) when v's format is at
+    # least as fine and the sum cannot leave int64: v at its clamp, a and y at their range bounds
+    fp = fK["r"] + fy
+    v_hi = _clamp_word(p.vars["v"].bound, p.vars["v"].fmt, p.v_step) * 2.0 ** (32 - fv)
+    p_max = v_hi + (0 if post["r"] else p.consts["H2"][0] * p.vars["a"].bound)
+    p_max += p.vars["Kr"].bound * p.vars["y"].bound
+    merge_v = fv >= fp and p_max * 2.0**fp < 2.0**62
+    # v's own increment Ts^2 a + K_v y accumulated onto v when it is already in v's format (the same sum)
+    onto_v = not post["v"] and fK["v"] + fy == fv
     eh = "(int32_t)(e >> 32)"  # eps - eps_bar, rounded: the high word of eb
     predict = (
         f"e = acn_mac(e, -{P}_OMP, {eh}); /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar): Q.{fo + fy} */"
@@ -653,17 +662,22 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     L += [
         "    /* r += Ts u + Ts^2/2 a (+ K_r y),  u += Ts a (+ K_v y); a is the previous posterior, and at",
         "     * k = 0 both increments are zero (x0 has r = u = a = 0), so no test of k is needed */",
-        f"    p = {pre['r']};",
-        f"    q = {pre['v']};",
     ]
+    if merge_v or onto_v:
+        L += [f"    ACN_LD64(lo, hi, s, {T}_t, v);", "    v = (int64_t)(((uint64_t)hi << 32) | lo);"]
+    if merge_v:
+        vp = _sh("v", fv - fp, f"Q.{fv} -> Q.{fp}")
+        L += [f"    p = {vp};" if post["r"] else f"    p = acn_mac({vp}, {P}_H2, a);"]
+    else:
+        L += [f"    p = {pre['r']};"]
+    L += [f"    q = acn_mac(v, {P}_T2, a);" if onto_v else f"    q = {pre['v']};"]
     upd = [
         "    /* y = z - H x = z - a - eps, eps rounded = high word of eb + eps_bar: zb = z - eps_bar */",
         f"    y = (int32_t)((uint32_t)zb - (uint32_t)a - (uint32_t){eh});",
         "    /* x = x + K y */",
         "    p = acn_mac(p, Kr, y); /* p += K_r y */",
         "    q = acn_mac(q, Kv, y); /* q += K_v y */",
-        f"    s->a = a + (int32_t)(((int64_t)Ka * y + ((int64_t)1 << {sa - 1})) >> {sa});"
-        f" /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
+        f"    s->a = a + (int32_t)ACN_RSHR(acn_mul(Ka, y), {sa}); /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
         f"    e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
     ]
     if follow:
@@ -700,14 +714,25 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
         L += ["    }"]
     L += [
         "    s->eb = e;",
-        f"    ACN_LD64(lo, hi, s, {T}_t, v);",
-        "    v = (int64_t)(((uint64_t)hi << 32) | lo);",
-        f"    ACN_LD64(lo, hi, s, {T}_t, r);",
-        f"    r = (int64_t)(((uint64_t)hi << 32) | lo) + {_sh('v', fv - fr, f'Q.{fv} -> Q.{fr}')}"
-        f" + {_sh('p', fK['r'] + fy - fr, conv['r'])}{post['r']};",
-        f"    v += {_sh('q', fK['v'] + fy - fv, conv['v'])}{post['v']};",
+    ]
+    if merge_v:
+        L += [
+            f"    ACN_LD64(lo, hi, s, {T}_t, r);",
+            f"    r = (int64_t)(((uint64_t)hi << 32) | lo) + {_sh('p', fp - fr, f'Q.{fp} -> Q.{fr}')}{post['r']};",
+        ]
+    else:
+        if not onto_v:
+            L += [f"    ACN_LD64(lo, hi, s, {T}_t, v);", "    v = (int64_t)(((uint64_t)hi << 32) | lo);"]
+        L += [
+            f"    ACN_LD64(lo, hi, s, {T}_t, r);",
+            f"    r = (int64_t)(((uint64_t)hi << 32) | lo) + {_sh('v', fv - fr, f'Q.{fv} -> Q.{fr}')}"
+            f" + {_sh('p', fK['r'] + fy - fr, conv['r'])}{post['r']};",
+        ]
+    L += [
+        "    v = q;" if onto_v else f"    v += {_sh('q', fK['v'] + fy - fv, conv['v'])}{post['v']};",
         f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
-        f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
+        f"    v = acn_limit(v, {P}_VHI, &s->overflow);",
+        f"    ACN_ST64(v, s, {T}_t, v);",
         "    ++k;",
     ]
     if follow:
@@ -751,16 +776,22 @@ HELPERS = r"""
 /* An int64 field f of *base in one LDRD, as its low and high word (little-endian only) */
 #if defined(__ARM_BIG_ENDIAN)
 #define ACN_LD64(lo, hi, base, T, f) ((lo) = (uint32_t)(base)->f, (hi) = (uint32_t)((uint64_t)(base)->f >> 32))
+#define ACN_ST64(x, base, T, f) ((base)->f = (x))
 #else
 #define ACN_LD64(lo, hi, base, T, f)                                                                     \
     __asm__("ldrd %0, %1, [%2, #%c3]"                                                                   \
             : "=r"(lo), "=r"(hi)                                                                        \
             : "r"(base), "i"(offsetof(T, f)), "m"(*(const char(*)[8])(const void *)&(base)->f))
+#define ACN_ST64(x, base, T, f)                                                                          \
+    __asm__("strd %1, %2, [%3, #%c4]"                                                                   \
+            : "=m"(*(char(*)[8])(void *)&(base)->f)                                                     \
+            : "r"((uint32_t)(x)), "r"((uint32_t)((uint64_t)(x) >> 32)), "r"(base), "i"(offsetof(T, f)))
 #endif
 #else
 #define ACN_LD2(a, b, base, T, f1, f2) ((a) = (uint32_t)(base)->f1, (b) = (uint32_t)(base)->f2)
 #define ACN_ST2(a, b, base, T, f1, f2) ((base)->f1 = (a), (base)->f2 = (b))
 #define ACN_LD64(lo, hi, base, T, f) ((lo) = (uint32_t)(base)->f, (hi) = (uint32_t)((uint64_t)(base)->f >> 32))
+#define ACN_ST64(x, base, T, f) ((base)->f = (x))
 #endif
 
 /* Round-to-nearest right shift of an int64 by s >= 1 (ties toward +inf). The
@@ -1013,7 +1044,7 @@ def _gs_entries(p: AxisPlan, P: str, T: str, params: str, args: str) -> list[str
         "    if (__builtin_expect((int32_t)k <= 0, 0)) { /* the first sample, or following a skip */",
         f"        return {T}_step_dev(s, {args});",
         "    }",
-        f"    if (!{T}_convert({args}, &z)) {{",
+        f"    if (__builtin_expect(!{T}_convert({args}, &z), 0)) {{",
         f"        {T}_skip(s); /* rare: out of line */",
         "        return false;",
         "    }",

@@ -341,13 +341,8 @@ MUTATIONS = {
     "OFFSET +1 LSB": (r"(#define ACCELNAV_X_OFFSET INT32_C\()(-?\d+)", lambda m: f"{m.group(1)}{int(m.group(2)) + 1}"),
     # K_a y shifted one bit too far (K_a read in the wrong format); the covariance form adds c_a w
     "Ka shift +1": (
-        r"(\(\(int64_t\)Ka \* y \+ \(\(int64_t\)1 << )(\d+)(\)\) >> )(\d+)"
-        r"|(ACN_RSHR\(acn_mul\(ca, w\), )(\d+)",
-        lambda m: (
-            f"{m.group(1)}{int(m.group(2)) + 1}{m.group(3)}{int(m.group(4)) + 1}"
-            if m.group(1)
-            else f"{m.group(5)}{int(m.group(6)) + 1}"
-        ),
+        r"(ACN_RSHR\(acn_mul\((?:Ka, y|ca, w)\), )(\d+)",
+        lambda m: f"{m.group(1)}{int(m.group(2)) + 1}",
     ),
     # eps_bar off by 1 %: the bias's fixed point
     "EBAR +1 %": (
