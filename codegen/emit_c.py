@@ -606,14 +606,11 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     ft = {"r": fr, "v": fv, "e": fe}
     conv = {n: f"Q.{fK[n] + fy} -> Q.{ft[n]}" for n in "rve"}
     # Ts^2/2 a and Ts^2 a: in the accumulator of K_r y (K_v y) when they share its format, else shifted apart
-    pre, post = {}, {}
+    post = {}
     for n, c in (("r", "H2"), ("v", "T2")):
         fc = p.consts[c][1].frac
-        if fc == fK[n]:
-            pre[n], post[n] = f"(int64_t){P}_{c} * a /* Q.{fc + fy} */", ""
-        else:
-            pre[n] = "0"
-            post[n] = " + " + _sh(f"(int64_t){P}_{c} * a", fc + fy - ft[n], f"Q.{fc + fy} -> Q.{ft[n]}")
+        conv_c = f"Q.{fc + fy} -> Q.{ft[n]}"
+        post[n] = "" if fc == fK[n] else " + " + _sh(f"(int64_t){P}_{c} * a", fc + fy - ft[n], conv_c)
     if any(p.design.x0[:3]):
         raise ValueError("the merged predict needs r, u, a of x0 at zero")
     # r's increment v + Ts^2/2 a + K_r y in one accumulator (Q.fp, one SMLAL each) when v's format is at
@@ -665,18 +662,25 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     ]
     if merge_v or onto_v:
         L += [f"    ACN_LD64(lo, hi, s, {T}_t, v);", "    v = (int64_t)(((uint64_t)hi << 32) | lo);"]
+    # (accumulator's start, whether Ts^2/2 a (Ts^2 a) goes into it)
     if merge_v:
-        vp = _sh("v", fv - fp, f"Q.{fv} -> Q.{fp}")
-        L += [f"    p = {vp};" if post["r"] else f"    p = acn_mac({vp}, {P}_H2, a);"]
+        p0 = (_sh("v", fv - fp, f"Q.{fv} -> Q.{fp}"), not post["r"])
     else:
-        L += [f"    p = {pre['r']};"]
-    L += [f"    q = acn_mac(v, {P}_T2, a);" if onto_v else f"    q = {pre['v']};"]
+        p0 = ("0", False) if post["r"] else ("0", True)
+    q0 = ("v", True) if onto_v else ("0", not post["v"])
+    macs = {}
+    for n, (start, with_a), c, kn in (("p", p0, "H2", "Kr"), ("q", q0, "T2", "Kv")):
+        if follow:  # the Ts^2 a term before the update (a skipped sample has only it)
+            L += [f"    {n} = acn_mac({start}, {P}_{c}, a);" if with_a else f"    {n} = {start};"]
+            macs[n] = f"acn_mac({n}, {kn}, y)"
+        else:  # both products in one asm: no register copies between them
+            macs[n] = f"acn_mac2({start}, {P}_{c}, a, {kn}, y)" if with_a else f"acn_mac({start}, {kn}, y)"
     upd = [
         "    /* y = z - H x = z - a - eps, eps rounded = high word of eb + eps_bar: zb = z - eps_bar */",
         f"    y = (int32_t)((uint32_t)zb - (uint32_t)a - (uint32_t){eh});",
         "    /* x = x + K y */",
-        "    p = acn_mac(p, Kr, y); /* p += K_r y */",
-        "    q = acn_mac(q, Kv, y); /* q += K_v y */",
+        f"    p = {macs['p']}; /* p += K_r y */",
+        f"    q = {macs['q']}; /* q += K_v y */",
         f"    s->a = a + (int32_t)ACN_RSHR(acn_mul(Ka, y), {sa}); /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
         f"    e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
     ]
@@ -822,6 +826,18 @@ static inline int64_t acn_mac(int64_t acc, int32_t a, int32_t b)
     return (int64_t)(((uint64_t)hi << 32) | lo);
 #else
     return acc + (int64_t)a * b;
+#endif
+}
+
+/* acc + a b + c d as int64: two SMLAL in a row (the register pair is not copied between them). */
+static inline int64_t acn_mac2(int64_t acc, int32_t a, int32_t b, int32_t c, int32_t d)
+{
+#if defined(__arm__) && defined(__thumb2__)
+    uint32_t lo = (uint32_t)acc, hi = (uint32_t)((uint64_t)acc >> 32);
+    __asm__("smlal %0, %1, %2, %3\n\tsmlal %0, %1, %4, %5" : "+r"(lo), "+r"(hi) : "r"(a), "r"(b), "r"(c), "r"(d));
+    return (int64_t)(((uint64_t)hi << 32) | lo);
+#else
+    return acc + (int64_t)a * b + (int64_t)c * d;
 #endif
 }
 
