@@ -215,6 +215,29 @@ def test_skip_table(workdir):
     assert s.a == before[0] and s.k == before[2] + 1  # predict only: a is a random walk, unchanged
 
 
+def test_gain_schedule_count_restarts_past_2_31_without_leaving_the_schedule(workdir):
+    """k's sign bit is the gain schedule's "following a skip" flag: a count that reaches 2^31 on the
+    schedule restarts at 2^30 (past the schedule's end) in the out-of-line step, with the flag clear and
+    the same integers as a run whose count is simply below it; a skipped sample still sets the flag."""
+    model = load_model()
+    files, mod = built(model, "gain_schedule", workdir)
+    lib, ffi = mod.lib, mod.ffi
+    run = sensor.simulate(model, "vehicle", 1.0, seed=3)
+    codes = [int(c) for c in run.code[:, 0]]
+    a, b = ffi.new("accelnav_x_t *"), ffi.new("accelnav_x_t *")
+    lib.accelnav_x_init(a)
+    for c in codes[:50]:
+        assert lib.accelnav_x_step(a, c)
+    ffi.memmove(b, a, ffi.sizeof("accelnav_x_t"))
+    # a: 2^31 - 1 -> 2^31 (flag bit set by the count) -> restarted at 2^30, + 1 -> 2^30 + 2
+    a.k, b.k = 2**31 - 1, 2**30 - 1
+    for c in codes[50:53]:
+        assert lib.accelnav_x_step(a, c) and lib.accelnav_x_step(b, c)
+    assert a.k == 2**30 + 2 and b.k == 2**30 + 2, (hex(a.k), hex(b.k))
+    assert bytes(ffi.buffer(a)) == bytes(ffi.buffer(b)), "the restart changed more than the count"
+    assert lib.accelnav_x_step(a, 0) is False and a.k >> 31 == 1 and a.k & (2**31 - 1) == 2**30 + 3
+
+
 def test_regeneration_is_byte_identical_and_bannered():
     model = load_model()
     for form in ("covariance", "gain_schedule"):
