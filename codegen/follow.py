@@ -28,6 +28,10 @@ measurement on the MCU: at a valid sample whose |dK| are all within THR (the sch
 compression error of each gain, in LSB), D is dropped and the next sample takes the schedule's
 gains again.
 
+"Following" is bit 31 of the state's sample count k (codegen.emit_c._gs_entries): the common step
+tests one word, k <= 0 (the first sample, or following a skip), and everything else, this module's C
+included, runs out of line. The count itself is k's low 31 bits.
+
 :func:`emit_follow` writes the C; :class:`Follow` is its integer twin (same operations on Python
 ints, bit for bit), from which :func:`followed_gains` gives the exact gains the C uses on a run:
 codegen.bounds then takes |K_C - K_float64| per sample exactly, for any skip pattern.
