@@ -993,6 +993,8 @@ def _gs_defines(p: AxisPlan, P: str) -> list[str]:
     fe = p.f("e")
     if fe != p.f("y") + 32 or p.consts["EBAR"][1].frac != p.f("y") or p.f("z") != p.f("y"):
         raise ValueError("eb needs eps in Q.(fy + 32) and z, eps_bar in Q.fy")
+    if p.n_run >= 2**30:  # the schedule ends within the run: a count restarted at 2^30 is past it
+        raise ValueError("the gain schedule's run must stay below 2^30 samples (k restarts there)")
     ebar = quantize(p.consts["EBAR"][0], p.consts["EBAR"][1])
     eoff = ebar * 2**32 - 2**31
     big = p.vars["e"].bound * 2.0**fe + abs(eoff) + 2.0**32
@@ -1125,8 +1127,6 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     src.append("")
     if p.form == "gain_schedule":
         sched = _schedule_for(p)
-        if sched.lengths and sum(sched.lengths) >= 2**30:
-            raise ValueError("the schedule's end must stay below 2^30 samples (k restarts there, see T_core_dev)")
         src.append(f"#define {P}_NSEG {sched.n_segments}")
         src.append("/* segment j: K_a holds its ka; after every sample of it K_r, K_v and K_e add their slopes;")
         src.append(" * it ends when end[j] samples are done. The last row (zero slopes, the last ka, end 0:")
