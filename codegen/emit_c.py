@@ -670,17 +670,20 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     q0 = ("v", True) if onto_v else ("0", not post["v"])
     macs = {}
     for n, (start, with_a), c, kn in (("p", p0, "H2", "Kr"), ("q", q0, "T2", "Kv")):
+        what = {"p": "r's increment", "q": "v + Ts^2 a + K_v y" if onto_v else "v's increment"}[n]
+        what += f", Q.{fp if n == 'p' else fK['v'] + fy}"
         if follow:  # the Ts^2 a term before the update (a skipped sample has only it)
             L += [f"    {n} = acn_mac({start}, {P}_{c}, a);" if with_a else f"    {n} = {start};"]
-            macs[n] = f"acn_mac({n}, {kn}, y)"
+            macs[n] = f"acn_mac({n}, {kn}, y); /* {what} */"
         else:  # both products in one asm: no register copies between them
-            macs[n] = f"acn_mac2({start}, {P}_{c}, a, {kn}, y)" if with_a else f"acn_mac({start}, {kn}, y)"
+            mac = f"acn_mac2({start}, {P}_{c}, a, {kn}, y)" if with_a else f"acn_mac({start}, {kn}, y)"
+            macs[n] = f"{mac}; /* {what} */"
     upd = [
         "    /* y = z - H x = z - a - eps, eps rounded = high word of eb + eps_bar: zb = z - eps_bar */",
         f"    y = (int32_t)((uint32_t)zb - (uint32_t)a - (uint32_t){eh});",
         "    /* x = x + K y */",
-        f"    p = {macs['p']}; /* p += K_r y */",
-        f"    q = {macs['q']}; /* q += K_v y */",
+        f"    p = {macs['p']}",
+        f"    q = {macs['q']}",
         f"    s->a = a + (int32_t)ACN_RSHR(acn_mul(Ka, y), {sa}); /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
         f"    e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
     ]
