@@ -682,10 +682,12 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
         "    /* y = z - H x = z - a - eps, eps rounded = high word of eb + eps_bar: zb = z - eps_bar */",
         f"    y = (int32_t)((uint32_t)zb - (uint32_t)a - (uint32_t){eh});",
         "    /* x = x + K y */",
+        f"    e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
         f"    p = {macs['p']}",
         f"    q = {macs['q']}",
-        f"    s->a = a + (int32_t)ACN_RSHR(acn_mul(Ka, y), {sa}); /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
-        f"    e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
+        f"    s->a = a + (int32_t)ACN_RSHR(acn_mul(Ka, y), {sa}); /* Q.{fK['a'] + fy} -> Q.{fy}, round */"
+        if not 1 <= sa <= 32
+        else f"    s->a = acn_add_round(a, acn_mul(Ka, y), {sa}); /* a + K_a y: Q.{fK['a'] + fy} -> Q.{fy}, round */",
     ]
     if follow:
         L += [
@@ -842,6 +844,16 @@ static inline int64_t acn_mac2(int64_t acc, int32_t a, int32_t b, int32_t c, int
 #else
     return acc + (int64_t)a * b + (int64_t)c * d;
 #endif
+}
+
+/* a + ((t + 2^(s-1)) >> s) in 32 bits (wrapping as the int32 sum does), 1 <= s <= 32, from t's two
+ * words: t >> s = hi 2^(32-s) + lo >> s, and the half added before the floor is the carry of
+ * ((lo >> (s-1)) + 1) >> 1 (one shifted add each: no 64-bit add). */
+static inline int32_t acn_add_round(int32_t a, int64_t t, int s)
+{
+    uint32_t lo = (uint32_t)t, hi = (uint32_t)((uint64_t)t >> 32);
+    uint32_t h = s == 32 ? hi : hi << (32 - s);
+    return (int32_t)((uint32_t)a + h + (((lo >> (s - 1)) + 1u) >> 1));
 }
 
 /* The bits of x in reverse order (one RBIT on Thumb-2): the bit-reversed sample count runs through
