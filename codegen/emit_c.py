@@ -115,6 +115,8 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
         ("int64_t", "e", f"eps [m/s^2] {v['e'].fmt}"),
         ("int32_t", "a", f"a [m/s^2] {v['a'].fmt}"),
     ]
+    if p.form == "gain_schedule":  # eps carried with eps_bar and the rounding of its high word folded in
+        f[2] = ("int64_t", "eb", f"eps - eps_bar + 2^-{p.f('y') + 1} [m/s^2] {v['e'].fmt} (read() gives eps)")
     if p.form == "covariance":
         for nm in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"):
             f.append(("int32_t", nm, f"{v[nm].note.split(',')[0]} {v[nm].fmt}"))
@@ -127,7 +129,10 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
         f.append(("int32_t", "Ka", f"K_a of the next sample {v['Ka'].fmt}"))
         f.append((f"const struct {T}_seg_s *", "seg", "the schedule's current row"))
         f += _fields_follow(p)
-    f.append(("uint32_t", "k", "samples since init"))
+    if p.form == "gain_schedule":
+        f.append(("uint32_t", "k", "samples since init (bit 31: following a skip, codegen.follow)"))
+    else:
+        f.append(("uint32_t", "k", "samples since init"))
     f.append(("uint32_t", "overflow", "saturations so far"))
     return f
 
@@ -152,8 +157,7 @@ def _fields_follow(p: AxisPlan) -> list[tuple[str, str, str]]:
     """Gain schedule: the deviation from the schedule's covariance block after a skip (codegen.follow)."""
     from .follow import DEV
 
-    f = [("int32_t", nm, f"{p.vars[nm].note} {p.vars[nm].fmt}") for nm in DEV]
-    return f + [("uint32_t", "dev", "1: following a skip (the deviation above is carried), 0: on the schedule")]
+    return [("int32_t", nm, f"{p.vars[nm].note} {p.vars[nm].fmt}") for nm in DEV]
 
 
 def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
@@ -578,13 +582,20 @@ def _core_cov(p: AxisPlan, P: str, T: str) -> list[str]:
 
 
 def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
-    """Body of T_core: predict (k > 0) and update (valid) merged, every state read and written once.
+    """Body of the gain schedule's T_core (follow False) or T_core_dev (follow True): predict and update
+    merged, every state read and written once.
 
-    Contract (formats from :mod:`codegen.ranges`): z, y, a in Q.fy (int32); eps int64 in Q.(fy+32)
-    (its high word is Q.fy); r and v = Ts u int64 in one format Q.fr; K_a, K_e int32 each with its own
-    scaling, K_r (K_v) in the format of Ts^2/2 (Ts^2). Products are 32x32 -> 64 (one SMULL or SMLAL);
-    every shift is a floor except the two that make y and a (round to nearest). r and v are clamped
-    once per step on their high words; nothing else can overflow over the declared ranges.
+    T_core(s, zb, k) is the common sample: valid, k > 0 and on the schedule; zb = z - eps_bar. T_core_dev
+    (s, z, valid) is any other: the first sample, a skipped one, or one while following a skip
+    (codegen.follow), out of line.
+
+    Contract (formats from :mod:`codegen.ranges`): z, y, a in Q.fy (int32); eps carried as eb = eps -
+    eps_bar + 1/2 LSB of its high word (int64 in Q.(fy+32)): the high word of eb is eps - eps_bar
+    rounded, so the predict needs neither the rounding nor eps_bar, and y takes eps_bar with z; r and
+    v = Ts u int64 in one format Q.fr; K_a, K_e int32 each with its own scaling, K_r (K_v) in the format
+    of Ts^2/2 (Ts^2). Products are 32x32 -> 64 (one SMULL or SMLAL); every shift is a floor except the
+    one that makes a (round to nearest). r and v are clamped once per step on their high words; nothing
+    else can overflow over the declared ranges.
     """
     if p.form == "covariance":
         return _core_cov(p, P, T)
@@ -592,113 +603,154 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     fK = {n: p.f("K" + n) for n in "rvae"}
     fo = p.consts["OMP"][1].frac
     sa = fK["a"]  # Q.(fKa + fy) -> Q.fy
-    eh = _hi_round("e")
     ft = {"r": fr, "v": fv, "e": fe}
     conv = {n: f"Q.{fK[n] + fy} -> Q.{ft[n]}" for n in "rve"}
     # Ts^2/2 a and Ts^2 a: in the accumulator of K_r y (K_v y) when they share its format, else shifted apart
-    pre, post = {}, {}
+    post = {}
     for n, c in (("r", "H2"), ("v", "T2")):
         fc = p.consts[c][1].frac
-        if fc == fK[n]:
-            pre[n], post[n] = f"(int64_t){P}_{c} * a /* Q.{fc + fy} */", ""
-        else:
-            pre[n] = "0"
-            post[n] = " + " + _sh(f"(int64_t){P}_{c} * a", fc + fy - ft[n], f"Q.{fc + fy} -> Q.{ft[n]}")
-    x0 = p.design.x0
+        conv_c = f"Q.{fc + fy} -> Q.{ft[n]}"
+        post[n] = "" if fc == fK[n] else " + " + _sh(f"(int64_t){P}_{c} * a", fc + fy - ft[n], conv_c)
+    if any(p.design.x0[:3]):
+        raise ValueError("the merged predict needs r, u, a of x0 at zero")
+    # r's increment v + Ts^2/2 a + K_r y in one accumulator (Q.fp, one SMLAL each) when v's format is at
+    # least as fine and the sum cannot leave int64: v at its clamp, a and y at their range bounds
+    fp = fK["r"] + fy
+    v_hi = _clamp_word(p.vars["v"].bound, p.vars["v"].fmt, p.v_step) * 2.0 ** (32 - fv)
+    p_max = v_hi + (0 if post["r"] else p.consts["H2"][0] * p.vars["a"].bound)
+    p_max += p.vars["Kr"].bound * p.vars["y"].bound
+    merge_v = fv >= fp and p_max * 2.0**fp < 2.0**62
+    # v's own increment Ts^2 a + K_v y accumulated onto v when it is already in v's format (the same sum)
+    onto_v = not post["v"] and fK["v"] + fy == fv
+    eh = "(int32_t)(e >> 32)"  # eps - eps_bar, rounded: the high word of eb
+    predict = (
+        f"e = acn_mac(e, -{P}_OMP, {eh}); /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar): Q.{fo + fy} */"
+        if fo == 32
+        else f"e -= {_sh(f'(int64_t){P}_OMP * {eh}', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
+        " /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar) */"
+    )
     L = [
-        "    int32_t y = 0, a = s->a;",
-        "    int64_t e = s->e, p, q, r, v;",
+        "    int32_t y, a = s->a;",
+        "    int64_t e, p, q, r, v;",
+        "    uint32_t kr, kv, klo, khi; /* K_r, K_v and K_e's accumulator, each pair in one LDRD */",
+        "    uint32_t lo, hi; /* an int64 state's two words, in one LDRD */",
     ]
-    if p.form == "covariance":
-        L += ["    int32_t Kr, Kv, Ka, Ke, K[4];"]
-    else:
+    if follow:
         L += [
             "    int32_t Kr, Kv, Ka, Ke;",
-            "    uint32_t kr, kv, klo, khi; /* K_r, K_v and K_e's accumulator, each pair in one LDRD */",
-            f"    ACN_LD2(kr, kv, s, {T}_t, Kr, Kv);",
-            f"    ACN_LD2(klo, khi, s, {T}_t, Ke_lo, Ke);",
+            "    uint32_t k = s->k;",
+            f"    if (__builtin_expect(k == {P}_FOLLOWING, 0)) {{",
+            "        /* the count reached 2^31 on the schedule: it restarts at 2^30, past the schedule's end */",
+            f"        k = {P}_KWRAP;",
+            "        s->k = k;",
+            "    }",
+            f"    k &= ~{P}_FOLLOWING;",
         ]
     L += [
-        "    if (__builtin_expect(s->k > 0, 1)) {",
-        "        /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar), eps by its rounded high word */",
-        f"        e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
-        if fo != 32
-        else f"        e += (int64_t)-{P}_OMP * ({eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */",
+        f"    ACN_LD2(kr, kv, s, {T}_t, Kr, Kv);",
+        f"    ACN_LD64(lo, hi, s, {T}_t, eb);",
+        "    e = (int64_t)(((uint64_t)hi << 32) | lo);",
     ]
-    if p.form == "covariance":
-        L += [f"        {T}_ppredict(s);"]
-    L += ["    }"]
-    if x0[0] != 0 or x0[1] != 0 or x0[2] != 0:
-        raise ValueError("the merged predict needs r, u, a of x0 at zero")
+    if follow:
+        L += [f"    ACN_LD2(klo, khi, s, {T}_t, Ke_lo, Ke);"]
+        L += ["    if (k > 0) {", f"        {predict}", "    }"]
+    else:
+        L += [f"    {predict}"]
     L += [
         "    /* r += Ts u + Ts^2/2 a (+ K_r y),  u += Ts a (+ K_v y); a is the previous posterior, and at",
         "     * k = 0 both increments are zero (x0 has r = u = a = 0), so no test of k is needed */",
-        f"    p = {pre['r']};",
-        f"    q = {pre['v']};",
-        "    if (valid) {",
     ]
-    if p.form == "covariance":
+    if merge_v or onto_v:
+        L += [f"    ACN_LD64(lo, hi, s, {T}_t, v);", "    v = (int64_t)(((uint64_t)hi << 32) | lo);"]
+    # (accumulator's start, whether Ts^2/2 a (Ts^2 a) goes into it)
+    if merge_v:
+        p0 = (_sh("v", fv - fp, f"Q.{fv} -> Q.{fp}"), not post["r"])
+    else:
+        p0 = ("0", False) if post["r"] else ("0", True)
+    q0 = ("v", True) if onto_v else ("0", not post["v"])
+    macs = {}
+    for n, (start, with_a), c, kn in (("p", p0, "H2", "Kr"), ("q", q0, "T2", "Kv")):
+        what = {"p": "r's increment", "q": "v + Ts^2 a + K_v y" if onto_v else "v's increment"}[n]
+        what += f", Q.{fp if n == 'p' else fK['v'] + fy}"
+        if follow:  # the Ts^2 a term before the update (a skipped sample has only it)
+            L += [f"    {n} = acn_mac({start}, {P}_{c}, a);" if with_a else f"    {n} = {start};"]
+            macs[n] = f"acn_mac({n}, {kn}, y); /* {what} */"
+        else:  # both products in one asm: no register copies between them
+            mac = f"acn_mac2({start}, {P}_{c}, a, {kn}, y)" if with_a else f"acn_mac({start}, {kn}, y)"
+            macs[n] = f"{mac}; /* {what} */"
+    upd = [
+        "    /* y = z - H x = z - a - eps, eps rounded = high word of eb + eps_bar: zb = z - eps_bar */",
+        f"    y = (int32_t)((uint32_t)zb - (uint32_t)a - (uint32_t){eh});",
+        "    /* x = x + K y */",
+        f"    e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
+        f"    p = {macs['p']}",
+        f"    q = {macs['q']}",
+        f"    s->a = a + (int32_t)ACN_RSHR(acn_mul(Ka, y), {sa}); /* Q.{fK['a'] + fy} -> Q.{fy}, round */"
+        if not 1 <= sa <= 32
+        else f"    s->a = acn_add_round(a, acn_mul(Ka, y), {sa}); /* a + K_a y: Q.{fK['a'] + fy} -> Q.{fy}, round */",
+    ]
+    if follow:
         L += [
-            "        /* K = P H' / S and P = P - K c' on the carried block */",
-            f"        {T}_pupdate(s, K);",
+            "    K[0] = (int32_t)kr;",
+            "    K[1] = (int32_t)kv;",
+            "    K[2] = s->Ka;",
+            "    K[3] = (int32_t)khi;",
+            "    if (valid) {",
+            f"        int32_t zb = (int32_t)((uint32_t)z - (uint32_t){P}_EBAR);",
+            f"        if (s->k & {P}_FOLLOWING) {{",
+            "            /* after a skip: the schedule's gains plus the carried deviation (codegen.follow) */",
+            f"            {T}_follow(s, true, K);",
+            "        }",
             "        Kr = K[0];",
             "        Kv = K[1];",
             "        Ka = K[2];",
             "        Ke = K[3];",
         ]
-    else:
-        L += ["        Kr = (int32_t)kr;", "        Kv = (int32_t)kv;", "        Ka = s->Ka;"]
-        L += ["        Ke = (int32_t)khi;"]
-        if follow:
-            L += [
-                "        if (s->dev) {",
-                "            /* after a skip: the schedule's gains plus the carried deviation (codegen.follow) */",
-                "            int32_t K[4];",
-                "            K[0] = Kr;",
-                "            K[1] = Kv;",
-                "            K[2] = Ka;",
-                "            K[3] = Ke;",
-                f"            {T}_follow(s, true, K);",
-                "            Kr = K[0];",
-                "            Kv = K[1];",
-                "            Ka = K[2];",
-                "            Ke = K[3];",
-                "        }",
-            ]
-    L += [
-        "        /* y = z - H x = z - a - eps */",
-        f"        y = z - a - {eh};",
-        "        /* x = x + K y */",
-        "        p = acn_mac(p, Kr, y); /* p += K_r y */",
-        "        q = acn_mac(q, Kv, y); /* q += K_v y */",
-        f"        s->a = a + (int32_t)(((int64_t)Ka * y + ((int64_t)1 << {sa - 1})) >> {sa});"
-        f" /* Q.{fK['a'] + fy} -> Q.{fy}, round */",
-        f"        e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
-    ]
-    if follow:
+        L += ["    " + ln for ln in upd]
         L += [
             "    } else {",
             "        /* skipped: the gains of the next samples leave the schedule (codegen.follow) */",
-            "        int32_t K[4];",
-            "        K[0] = (int32_t)kr;",
-            "        K[1] = (int32_t)kv;",
-            "        K[2] = s->Ka;",
-            "        K[3] = (int32_t)khi;",
             f"        {T}_follow(s, false, K);",
+            "    }",
+        ]
+        L[1:1] = ["    int32_t K[4];"]
+    else:
+        L += [
+            "    {",
+            "        int32_t Kr = (int32_t)kr, Kv = (int32_t)kv, Ka = s->Ka, Ke = s->Ke;",
+        ]
+        L += ["    " + ln for ln in upd]
+        L += ["    }"]
+    L += [
+        "    s->eb = e;",
+    ]
+    if merge_v:
+        L += [
+            f"    ACN_LD64(lo, hi, s, {T}_t, r);",
+            f"    r = (int64_t)(((uint64_t)hi << 32) | lo) + {_sh('p', fp - fr, f'Q.{fp} -> Q.{fr}')}{post['r']};",
+        ]
+    else:
+        if not onto_v:
+            L += [f"    ACN_LD64(lo, hi, s, {T}_t, v);", "    v = (int64_t)(((uint64_t)hi << 32) | lo);"]
+        L += [
+            f"    ACN_LD64(lo, hi, s, {T}_t, r);",
+            f"    r = (int64_t)(((uint64_t)hi << 32) | lo) + {_sh('v', fv - fr, f'Q.{fv} -> Q.{fr}')}"
+            f" + {_sh('p', fK['r'] + fy - fr, conv['r'])}{post['r']};",
         ]
     L += [
-        "    }",
-        "    s->e = e;",
-        f"    r = s->r + {_sh('s->v', fv - fr, f'Q.{fv} -> Q.{fr}')}"
-        f" + {_sh('p', fK['r'] + fy - fr, conv['r'])}{post['r']};",
-        f"    v = s->v + {_sh('q', fK['v'] + fy - fv, conv['v'])}{post['v']};",
+        "    v = q;" if onto_v else f"    v += {_sh('q', fK['v'] + fy - fv, conv['v'])}{post['v']};",
         f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
-        f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
+        f"    v = acn_limit(v, {P}_VHI, &s->overflow);",
+        f"    ACN_ST64(v, s, {T}_t, v);",
+        "    ++k;",
     ]
-    if p.form == "gain_schedule":
-        L += ["    ++s->k;", f"    {T}_gains(s, s->k, kr, kv, klo, khi);"]
+    if follow:
+        L += [f"    s->k = (s->k & {P}_FOLLOWING) | k; /* the flag as the deviation left it */"]
     else:
-        L += ["    ++s->k;"]
+        L += ["    s->k = k;"]
+    if not follow:  # K_e's two words only now: kept from the top they crowd the update's registers
+        L += [f"    ACN_LD2(klo, khi, s, {T}_t, Ke_lo, Ke);"]
+    L += [f"    {T}_gains(s, k, kr, kv, klo, khi);"]
     return L
 
 
@@ -730,9 +782,25 @@ HELPERS = r"""
                 : "=m"(*(char(*)[8])(void *)&(base)->f1)                                                \
                 : "r"(a), "r"(b), "r"(base), "i"(offsetof(T, f1)));                                     \
     } while (0)
+/* An int64 field f of *base in one LDRD, as its low and high word (little-endian only) */
+#if defined(__ARM_BIG_ENDIAN)
+#define ACN_LD64(lo, hi, base, T, f) ((lo) = (uint32_t)(base)->f, (hi) = (uint32_t)((uint64_t)(base)->f >> 32))
+#define ACN_ST64(x, base, T, f) ((base)->f = (x))
+#else
+#define ACN_LD64(lo, hi, base, T, f)                                                                     \
+    __asm__("ldrd %0, %1, [%2, #%c3]"                                                                   \
+            : "=r"(lo), "=r"(hi)                                                                        \
+            : "r"(base), "i"(offsetof(T, f)), "m"(*(const char(*)[8])(const void *)&(base)->f))
+#define ACN_ST64(x, base, T, f)                                                                          \
+    __asm__("strd %1, %2, [%3, #%c4]"                                                                   \
+            : "=m"(*(char(*)[8])(void *)&(base)->f)                                                     \
+            : "r"((uint32_t)(x)), "r"((uint32_t)((uint64_t)(x) >> 32)), "r"(base), "i"(offsetof(T, f)))
+#endif
 #else
 #define ACN_LD2(a, b, base, T, f1, f2) ((a) = (uint32_t)(base)->f1, (b) = (uint32_t)(base)->f2)
 #define ACN_ST2(a, b, base, T, f1, f2) ((base)->f1 = (a), (base)->f2 = (b))
+#define ACN_LD64(lo, hi, base, T, f) ((lo) = (uint32_t)(base)->f, (hi) = (uint32_t)((uint64_t)(base)->f >> 32))
+#define ACN_ST64(x, base, T, f) ((base)->f = (x))
 #endif
 
 /* Round-to-nearest right shift of an int64 by s >= 1 (ties toward +inf). The
@@ -764,6 +832,28 @@ static inline int64_t acn_mac(int64_t acc, int32_t a, int32_t b)
 #else
     return acc + (int64_t)a * b;
 #endif
+}
+
+/* acc + a b + c d as int64: two SMLAL in a row (the register pair is not copied between them). */
+static inline int64_t acn_mac2(int64_t acc, int32_t a, int32_t b, int32_t c, int32_t d)
+{
+#if defined(__arm__) && defined(__thumb2__)
+    uint32_t lo = (uint32_t)acc, hi = (uint32_t)((uint64_t)acc >> 32);
+    __asm__("smlal %0, %1, %2, %3\n\tsmlal %0, %1, %4, %5" : "+r"(lo), "+r"(hi) : "r"(a), "r"(b), "r"(c), "r"(d));
+    return (int64_t)(((uint64_t)hi << 32) | lo);
+#else
+    return acc + (int64_t)a * b + (int64_t)c * d;
+#endif
+}
+
+/* a + ((t + 2^(s-1)) >> s) in 32 bits (wrapping as the int32 sum does), 1 <= s <= 32, from t's two
+ * words: t >> s = hi 2^(32-s) + lo >> s, and the half added before the floor is the carry of
+ * ((lo >> (s-1)) + 1) >> 1 (one shifted add each: no 64-bit add). */
+static inline int32_t acn_add_round(int32_t a, int64_t t, int s)
+{
+    uint32_t lo = (uint32_t)t, hi = (uint32_t)((uint64_t)t >> 32);
+    uint32_t h = s == 32 ? hi : hi << (32 - s);
+    return (int32_t)((uint32_t)a + h + (((lo >> (s - 1)) + 1u) >> 1));
 }
 
 /* The bits of x in reverse order (one RBIT on Thumb-2): the bit-reversed sample count runs through
@@ -913,6 +1003,93 @@ def _schedule_for(p: AxisPlan) -> Schedule:
     return schedule_of(p.design, p.n_run, fm, SCHEDULE_REL_TOL, ramp=int(10 * p.model.rate_hz))
 
 
+def _gs_defines(p: AxisPlan, P: str) -> list[str]:
+    """Gain schedule: the flag of k, its restart value and eps's offset from the state eb."""
+    fe = p.f("e")
+    if fe != p.f("y") + 32 or p.consts["EBAR"][1].frac != p.f("y") or p.f("z") != p.f("y"):
+        raise ValueError("eb needs eps in Q.(fy + 32) and z, eps_bar in Q.fy")
+    if p.n_run >= 2**30:  # the schedule ends within the run: a count restarted at 2^30 is past it
+        raise ValueError("the gain schedule's run must stay below 2^30 samples (k restarts there)")
+    ebar = quantize(p.consts["EBAR"][0], p.consts["EBAR"][1])
+    eoff = ebar * 2**32 - 2**31
+    big = p.vars["e"].bound * 2.0**fe + abs(eoff) + 2.0**32
+    if big >= 2.0**63:
+        raise ValueError(f"eb = eps - eps_bar + 1/2 LSB leaves int64 ({big:.3g} LSB)")
+    return [
+        f"#define {P}_FOLLOWING UINT32_C(0x80000000) /* bit of k: following a skip (codegen.follow) */",
+        f"#define {P}_KWRAP UINT32_C(0x40000000) /* k past 2^31 - 1 samples restarts here, beyond the schedule */",
+        f"#define {P}_EOFF {_c_int(eoff, 64)} /* eps = eb + EOFF: eps_bar 2^32 - 2^31, Q.{fe} */",
+    ]
+
+
+def _gs_entries(p: AxisPlan, P: str, T: str, params: str, args: str) -> list[str]:
+    """Gain schedule: T_core (the common sample, inlined), T_core_dev (any other, out of line), and the
+    entry points update, skip and step. The common path tests one word: k, whose sign bit says
+    "following a skip" and whose zero says "first sample"; both go out of line."""
+    fz = p.f("z")
+    src = [
+        "/* The common sample: valid, not the first (k > 0), on the schedule. zb = z - eps_bar, z [m/s^2]",
+        f" * {p.vars['z'].fmt}. Inlined into update and step. */",
+        f"ACN_INLINE void {T}_core({T}_t *s, int32_t zb, uint32_t k)",
+        "{",
+    ]
+    src += _core_fixed(p, P, T)
+    src += ["}", ""]
+    src += [
+        "/* Any other sample (the first, a skipped one, one while following a skip, codegen.follow):",
+        " * the core with the deviation carried. Rare: out of line. */",
+        f"static __attribute__((noinline)) void {T}_core_dev({T}_t *s, int32_t z, bool valid)",
+        "{",
+    ]
+    src += _core_fixed(p, P, T, follow=True)
+    src += ["}", ""]
+    src += [
+        f"void {T}_update({T}_t *s, int32_t z)",
+        "{",
+        "    uint32_t k = s->k;",
+        "    if (__builtin_expect((int32_t)k <= 0, 0)) { /* the first sample, or following a skip */",
+        f"        {T}_core_dev(s, z, true);",
+        "    } else {",
+        f"        {T}_core(s, (int32_t)((uint32_t)z - (uint32_t){P}_EBAR), k);",
+        "    }",
+        "}",
+        "",
+        "/* A sample that must be skipped (rail-clipped, missing capture): predict only. */",
+        f"void {T}_skip({T}_t *s)",
+        "{",
+        f"    {T}_core_dev(s, 0, false);",
+        "}",
+        "",
+        "/* T_step out of the common path: the first sample, or following a skip. */",
+        f"static __attribute__((noinline)) bool {T}_step_dev({T}_t *s, {params})",
+        "{",
+        "    int32_t z = 0;",
+        f"    bool valid = {T}_convert({args}, &z);",
+        f"    {T}_core_dev(s, z, valid);",
+        "    return valid;",
+        "}",
+        "",
+        "/* Convert the raw input and run one step; returns false when the sample was skipped. */",
+        f"bool {T}_step({T}_t *s, {params})",
+        "{",
+        "    int32_t z = 0;",
+        "    uint32_t k = s->k;",
+        "    if (__builtin_expect((int32_t)k <= 0, 0)) { /* the first sample, or following a skip */",
+        f"        return {T}_step_dev(s, {args});",
+        "    }",
+        f"    if (__builtin_expect(!{T}_convert({args}, &z), 0)) {{",
+        f"        {T}_skip(s); /* rare: out of line */",
+        "        return false;",
+        "    }",
+        f"    /* z - eps_bar in Q.{fz}: the conversion's offset and eps_bar fold into one constant */",
+        f"    {T}_core(s, (int32_t)((uint32_t)z - (uint32_t){P}_EBAR), k);",
+        "    return true;",
+        "}",
+        "",
+    ]
+    return src
+
+
 def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[str], dict]:
     """(header decls, cdef decls, source lines, manifest) of one axis."""
     ax = p.design.axis.name
@@ -958,6 +1135,10 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             f"#define {P}_{nm} INT32_C({h}) /* clamp: |{key}| <= {h} 2^32 LSB"
             f" ({h * 2.0 ** (32 - v[key].fmt.frac):.6g} m >= {v[key].bound:.6g} m) */"
         )
+    eoff = None
+    if p.form == "gain_schedule":
+        src += _gs_defines(p, P)
+        eoff = quantize(p.consts["EBAR"][0], p.consts["EBAR"][1]) * 2**32 - 2**31  # eps = eb + EOFF
     src.append("")
     if p.form == "gain_schedule":
         sched = _schedule_for(p)
@@ -1008,9 +1189,9 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         f"    s->r = {_c_int(x0[0], 64)};",
         f"    s->v = {_c_int(x0[1], 64)};",
         f"    s->a = {_c_int(x0[2], 32)};",
-        f"    s->e = {_c_int(x0[3], 64)};",
     ]
     if p.form == "covariance":
+        src.append(f"    s->e = {_c_int(x0[3], 64)};")
         P0 = d.P0
         Ts = d.Ts
         vals = {
@@ -1031,8 +1212,8 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         src.append(f"    s->Ke_lo = UINT32_C({ke0 & 0xFFFFFFFF});")
         src.append(f"    s->Ke = {_c_int(ke0 >> 32, 32)};")
         src.append(f"    s->seg = &{T}_seg[0];")
+        src.append(f"    s->eb = {_c_int(x0[3] - eoff, 64)}; /* eps0 - EOFF */")
         src.append("    s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;")
-        src.append("    s->dev = 0u;")
     src += ["    s->k = 0;", "    s->overflow = 0;", "}", ""]
     # convert
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
@@ -1070,81 +1251,40 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(p, P)]
         src += ["}", ""]
         src += [f"static void {T}_pupdate({T}_t *s, int32_t y)", "{"] + _gains_cov(p, P) + ["}", ""]
-    src += [
-        "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
-        f" * with z [m/s^2] {v['z'].fmt}. Inlined into update, skip and step. */",
-        f"ACN_INLINE void {T}_core({T}_t *s, int32_t z, bool valid)",
-        "{",
-    ]
-    src += _core_fixed(p, P, T)
-    src += ["}", ""]
-    gs = p.form == "gain_schedule"
-    if gs:  # after a skip: the same sample with the schedule's gains corrected (rare, out of line)
+    if p.form == "gain_schedule":
+        src += _gs_entries(p, P, T, params, args)
+    else:
         src += [
-            "/* One sample while following a skip (codegen.follow): the core with the deviation carried. */",
-            f"static __attribute__((noinline)) void {T}_core_dev({T}_t *s, int32_t z, bool valid)",
+            "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
+            f" * with z [m/s^2] {v['z'].fmt}. Inlined into update, skip and step. */",
+            f"ACN_INLINE void {T}_core({T}_t *s, int32_t z, bool valid)",
             "{",
         ]
-        src += _core_fixed(p, P, T, follow=True)
+        src += _core_fixed(p, P, T)
         src += ["}", ""]
-    dispatch = (
-        [
-            "    if (__builtin_expect(s->dev != 0u, 0)) { /* following a skip */",
-            f"        {T}_core_dev(s, z, true);",
-            "    } else {",
-            f"        {T}_core(s, z, true);",
-            "    }",
-        ]
-        if gs
-        else [f"    {T}_core(s, z, true);"]
-    )
-    src += [f"void {T}_update({T}_t *s, int32_t z)", "{"] + dispatch + ["}", ""]
-    src += [
-        "/* A sample that must be skipped (rail-clipped, missing capture): predict only. */",
-        f"void {T}_skip({T}_t *s)",
-        "{",
-        f"    {T}_core_dev(s, 0, false);" if gs else f"    {T}_core(s, 0, false);",
-        "}",
-        "",
-    ]
-    if gs:
+        src += [f"void {T}_update({T}_t *s, int32_t z)", "{", f"    {T}_core(s, z, true);", "}", ""]
         src += [
-            "/* T_step while following a skip: out of line, so that nothing of it",
-            " * reaches the registers of the common path. */",
-            f"static __attribute__((noinline)) bool {T}_step_dev({T}_t *s, {params})",
+            "/* A sample that must be skipped (rail-clipped, missing capture): predict only. */",
+            f"void {T}_skip({T}_t *s)",
+            "{",
+            f"    {T}_core(s, 0, false);",
+            "}",
+            "",
+        ]
+        src += [
+            "/* Convert the raw input and run one step; returns false when the sample was skipped. */",
+            f"bool {T}_step({T}_t *s, {params})",
             "{",
             "    int32_t z = 0;",
             f"    if (!{T}_convert({args}, &z)) {{",
-            f"        {T}_core_dev(s, 0, false);",
+            f"        {T}_skip(s); /* rare: the core inlined once, for valid samples only */",
             "        return false;",
             "    }",
-            f"    {T}_core_dev(s, z, true);",
+            f"    {T}_core(s, z, true);",
             "    return true;",
             "}",
             "",
         ]
-    src += [
-        "/* Convert the raw input and run one step; returns false when the sample was skipped. */",
-        f"bool {T}_step({T}_t *s, {params})",
-        "{",
-        "    int32_t z = 0;",
-    ]
-    if gs:
-        src += [
-            "    if (__builtin_expect(s->dev != 0u, 0)) { /* following a skip */",
-            f"        return {T}_step_dev(s, {args});",
-            "    }",
-        ]
-    src += [
-        f"    if (!{T}_convert({args}, &z)) {{",
-        f"        {T}_skip(s); /* rare: the core inlined once, for valid samples only */",
-        "        return false;",
-        "    }",
-        f"    {T}_core(s, z, true);",
-        "    return true;",
-        "}",
-        "",
-    ]
     src += [
         f"void {T}_read(const {T}_t *s, {T}_out_t *o)",
         "{",
@@ -1152,7 +1292,7 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         f"    o->u = acn_mul64x32(s->v, {P}_RATE, {p.f('v') + p.consts['RATE'][1].frac - p.f('u_out')});"
         f" /* v / Ts: Q.{p.f('v')} -> {v['u_out'].fmt} */",
         "    o->a = s->a;",
-        "    o->e = s->e;",
+        "    o->e = s->e;" if eoff is None else f"    o->e = s->eb + {P}_EOFF; /* eps */",
         "}",
         "",
     ]
@@ -1176,6 +1316,7 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         "l1": p.l1.__dict__ | {},
         "z_error": p.z_error,
         "state_bytes": _struct_bytes(fields),  # sizeof(T_t); the telemetry checkpoints carry these bytes
+        "e_state_offset": eoff,  # gain schedule: eps = eb + this (LSB of e); None: the state holds eps
     }
     if sched is not None:
         man["schedule"] = {

@@ -28,6 +28,10 @@ measurement on the MCU: at a valid sample whose |dK| are all within THR (the sch
 compression error of each gain, in LSB), D is dropped and the next sample takes the schedule's
 gains again.
 
+"Following" is bit 31 of the state's sample count k (codegen.emit_c._gs_entries): the common step
+tests one word, k <= 0 (the first sample, or following a skip), and everything else, this module's C
+included, runs out of line. The count itself is k's low 31 bits.
+
 :func:`emit_follow` writes the C; :class:`Follow` is its integer twin (same operations on Python
 ints, bit for bit), from which :func:`followed_gains` gives the exact gains the C uses on a run:
 codegen.bounds then takes |K_C - K_float64| per sample exactly, for any skip pattern.
@@ -172,8 +176,8 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         "    int32_t w, Su, cu[4];",
         "    uint32_t x;",
         "    int n;",
-        "    if (s->dev) {",
-        "        if (s->k > 0) {",
+        f"    if (s->k & {P}_FOLLOWING) {{",
+        f"        if ((s->k & ~{P}_FOLLOWING) > 0) {{",
         "            /* D = F D F' (the same Q enters both runs); right-hand sides read the old values */",
         "            int32_t tr, tv;",
         f"            tr = {sat(tr)};",
@@ -188,7 +192,7 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         "        }",
         "    } else {",
         "        /* the first skip of an excursion: P equals P_u here */",
-        "        s->dev = 1u;",
+        f"        s->k |= {P}_FOLLOWING;",
         "        s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;",
         "    }",
         "    /* S_u = R / (1 - K_ua - K_ue), 1 - K_ua - K_ue in Q.30; c_u = K_u S_u */",
@@ -232,7 +236,7 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         "        /* back on the schedule once every |dK| is within its threshold */",
         f"        if ({th[0]} && {th[1]} &&",
         f"            {th[2]} && {th[3]}) {{",
-        "            s->dev = 0u;",
+        f"            s->k &= ~{P}_FOLLOWING;",
         "        }",
     ]
     for i in range(4):

@@ -76,14 +76,18 @@ class AxisRunner:
             fr, fv, fa, fe = (self.frac(v) for v in ("r", "v", "a", "e"))
             sc = np.ldexp(1.0, [-fr, -fv, -fa, -fe]) * np.array([1.0, 1.0 / self.Ts, 1.0, 1.0])
             rows = []
+            # the gain schedule carries eb = eps - e_state_offset (emit_c._gs_defines): eps = eb + offset
+            eoff = self.ax.get("e_state_offset")
+            ef = "e" if eoff is None else "eb"
+            eoff = eoff or 0
             if len(raw) == 1:
                 for k, c in enumerate(raw[0]):
                     ok[k] = step(s, c)
-                    rows.append((s.r, s.v, s.a, s.e))
+                    rows.append((s.r, s.v, s.a, getattr(s, ef) + eoff))
             else:
                 for k, (a, b) in enumerate(zip(raw[0], raw[1], strict=True)):
                     ok[k] = step(s, a, b)
-                    rows.append((s.r, s.v, s.a, s.e))
+                    rows.append((s.r, s.v, s.a, getattr(s, ef) + eoff))
             # exact: the integers are converted in Python (int64 -> float loses nothing that matters here)
             ints = np.array(rows, dtype=object)
             for j in range(4):

@@ -37,3 +37,31 @@ def test_bench_counts_instructions_per_step_on_m0_and_m3(tmp_path, capsys):
         assert m0 > m3 > 20, (name, m3, m0)
         assert ratio == pytest.approx(m0 / m3, abs=0.01)
     assert "overflow counters: M3 0, M0 0" in out
+
+
+# Issue #12's step targets for the gain schedule on the Cortex-M3 (instructions per axis-step, input
+# conversion and loop included, as the bench measures them: 2000 steps). Met at 100 Hz; at 1 kHz
+# (84.2) and for RAM (88 B per axis, target 64) they are NOT met: those two are ceilings at today's
+# figures, so that a regression fails while the gap stays stated.
+GS_STEP_MAX = {100.0: 80.0, 1000.0: 84.5}
+GS_RAM_MAX = 88
+
+
+@pytest.mark.parametrize("rate", [100.0, 1000.0])
+def test_gain_schedule_step_and_ram_targets(rate, tmp_path, capsys):
+    if shutil.which("qemu-system-arm") is None or shutil.which("arm-none-eabi-gcc") is None:
+        reason = "needs qemu-system-arm and arm-none-eabi-gcc (Debian: qemu-system-arm gcc-arm-none-eabi)"
+        if os.environ.get("ACCELNAV_REQUIRE_PIL") == "1":
+            pytest.fail(f"ACCELNAV_REQUIRE_PIL=1 but it {reason}")
+        pytest.skip(reason)
+    spec = importlib.util.spec_from_file_location("bench_codegen_icount", REPO / "bench" / "bench_codegen_icount.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert bench.main(["--rate", str(rate), "--keep", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    line = next(line for line in out.splitlines() if "gain-schedule form" in line)
+    m3 = float(re.findall(r"\d+\.\d+", line)[0])
+    ram = int(line.split()[-1])
+    assert m3 <= GS_STEP_MAX[rate], f"{rate:g} Hz: {m3} instructions per step (ceiling {GS_STEP_MAX[rate]})"
+    assert ram <= GS_RAM_MAX, f"{ram} B per axis (ceiling {GS_RAM_MAX})"
+    assert "overflow counters: M3 0, M0 0" in out

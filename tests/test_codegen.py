@@ -160,8 +160,9 @@ def _blind(files: dict) -> dict:
     """The gain-schedule C with its skip-following cut out: it never leaves the schedule (the form as it
     was before codegen.follow)."""
     c = files["accelnav.c"]
-    assert c.count("s->dev = 1u;") >= 1, "the entry into the deviation"
-    return {**files, "accelnav.c": c.replace("s->dev = 1u;", "s->dev = 0u;")}
+    entry = "s->k |= ACCELNAV_X_FOLLOWING;"
+    assert c.count(entry) >= 1, "the entry into the deviation"
+    return {**files, "accelnav.c": c.replace(entry, "s->k |= 0u;")}
 
 
 def test_gain_schedule_deviation_twin_is_bit_exact_and_the_check_catches_a_blind_schedule(workdir, tmp_path):
@@ -185,7 +186,7 @@ def test_gain_schedule_deviation_twin_is_bit_exact_and_the_check_catches_a_blind
         if twin.dev or not valid[k]:
             twin.step(k, bool(valid[k]), [int(x) for x in G[k]])
         lib.accelnav_x_step(s, c)
-        assert bool(s.dev) == twin.dev, f"sample {k}: the C and its twin disagree on following a skip"
+        assert bool(s.k >> 31) == twin.dev, f"sample {k}: the C and its twin disagree on following a skip"
         if twin.dev:
             followed += 1
             got = [getattr(s, nm) for nm in DEV]
@@ -214,6 +215,29 @@ def test_skip_table(workdir):
     assert s.a == before[0] and s.k == before[2] + 1  # predict only: a is a random walk, unchanged
 
 
+def test_gain_schedule_count_restarts_past_2_31_without_leaving_the_schedule(workdir):
+    """k's sign bit is the gain schedule's "following a skip" flag: a count that reaches 2^31 on the
+    schedule restarts at 2^30 (past the schedule's end) in the out-of-line step, with the flag clear and
+    the same integers as a run whose count is simply below it; a skipped sample still sets the flag."""
+    model = load_model()
+    files, mod = built(model, "gain_schedule", workdir)
+    lib, ffi = mod.lib, mod.ffi
+    run = sensor.simulate(model, "vehicle", 1.0, seed=3)
+    codes = [int(c) for c in run.code[:, 0]]
+    a, b = ffi.new("accelnav_x_t *"), ffi.new("accelnav_x_t *")
+    lib.accelnav_x_init(a)
+    for c in codes[:50]:
+        assert lib.accelnav_x_step(a, c)
+    ffi.memmove(b, a, ffi.sizeof("accelnav_x_t"))
+    # a: 2^31 - 1 -> 2^31 (flag bit set by the count) -> restarted at 2^30, + 1 -> 2^30 + 2
+    a.k, b.k = 2**31 - 1, 2**30 - 1
+    for c in codes[50:53]:
+        assert lib.accelnav_x_step(a, c) and lib.accelnav_x_step(b, c)
+    assert a.k == 2**30 + 2 and b.k == 2**30 + 2, (hex(a.k), hex(b.k))
+    assert bytes(ffi.buffer(a)) == bytes(ffi.buffer(b)), "the restart changed more than the count"
+    assert lib.accelnav_x_step(a, 0) is False and a.k >> 31 == 1 and a.k & (2**31 - 1) == 2**30 + 3
+
+
 def test_regeneration_is_byte_identical_and_bannered():
     model = load_model()
     for form in ("covariance", "gain_schedule"):
@@ -235,7 +259,7 @@ def test_no_float_no_division_in_fixed_point():
         assert bad not in body, bad
 
 
-def _driver(files, prefix, codes, axis_name="x"):
+def _driver(files, prefix, codes, axis_name="x", ef="e"):
     """A stand-alone C program that runs one axis over `codes` and prints the raw states."""
     arr = ", ".join(str(int(c)) for c in codes)
     T = f"{prefix}_{axis_name}"
@@ -249,7 +273,7 @@ int main(void)
     {T}_init(&s);
     for (k = 0; k < sizeof codes / sizeof codes[0]; ++k) {{
         {T}_step(&s, codes[k]);
-        printf("%lld %lld %ld %lld\\n", (long long)s.r, (long long)s.v, (long)s.a, (long long)s.e);
+        printf("%lld %lld %ld %lld\\n", (long long)s.r, (long long)s.v, (long)s.a, (long long)s.{ef});
     }}
     printf("overflow %lu\\n", (unsigned long)s.overflow);
     return 0;
@@ -266,7 +290,8 @@ def test_sanitizers_bit_identical(form, workdir, tmp_path):
         (tmp_path / name).write_text(text)
     for scenario in ("stress", "shock"):
         run = sensor.simulate(model, scenario, 10.0, seed=5)
-        (tmp_path / "drv.c").write_text(_driver(files, "accelnav", run.code[:, 0]))
+        ef = "eb" if form == "gain_schedule" else "e"  # the gain schedule's eps state (emit_c._gs_defines)
+        (tmp_path / "drv.c").write_text(_driver(files, "accelnav", run.code[:, 0], ef=ef))
         exe = tmp_path / "drv"
         flags = [*STRICT, "-fsanitize=undefined,address", "-fno-sanitize-recover=all", "-g"]
         subprocess.run(
@@ -284,7 +309,7 @@ def test_sanitizers_bit_identical(form, workdir, tmp_path):
         for k, c in enumerate(run.code[:, 0]):
             step(r.state, int(c))
             s = r.state
-            assert rows[k] == f"{s.r} {s.v} {s.a} {s.e}", f"sample {k}"
+            assert rows[k] == f"{s.r} {s.v} {s.a} {getattr(s, ef)}", f"sample {k}"
 
 
 @pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None, reason="arm-none-eabi-gcc not installed")
@@ -339,13 +364,8 @@ MUTATIONS = {
     "OFFSET +1 LSB": (r"(#define ACCELNAV_X_OFFSET INT32_C\()(-?\d+)", lambda m: f"{m.group(1)}{int(m.group(2)) + 1}"),
     # K_a y shifted one bit too far (K_a read in the wrong format); the covariance form adds c_a w
     "Ka shift +1": (
-        r"(\(\(int64_t\)Ka \* y \+ \(\(int64_t\)1 << )(\d+)(\)\) >> )(\d+)"
-        r"|(ACN_RSHR\(acn_mul\(ca, w\), )(\d+)",
-        lambda m: (
-            f"{m.group(1)}{int(m.group(2)) + 1}{m.group(3)}{int(m.group(4)) + 1}"
-            if m.group(1)
-            else f"{m.group(5)}{int(m.group(6)) + 1}"
-        ),
+        r"((?:acn_add_round\(a, |ACN_RSHR\()acn_mul\((?:Ka, y|ca, w)\), )(\d+)",
+        lambda m: f"{m.group(1)}{int(m.group(2)) + 1}",
     ),
     # eps_bar off by 1 %: the bias's fixed point
     "EBAR +1 %": (
