@@ -112,6 +112,7 @@ class AxisPlan:
     v_step: float = 0.0  # largest |v| increment of one step
     conv_shift: int = -1  # analog fast path: code << conv_shift (-1: the int64 path)
     gap_run: GainRun | None = None  # gain schedule: maxima over gaps of `gap` samples (codegen.follow)
+    theta: dict = field(default_factory=dict)  # covariance: c_r, c_v, c_a levels of the switch to fine
 
     def f(self, name: str) -> int:
         return self.vars[name].fmt.frac
@@ -498,6 +499,89 @@ def _plan_covariance(p: AxisPlan) -> None:
             f"{bits_for(wb) + 1} bits; accepted: R >= {p.vars['y'].bound / 2**30:.3g}",
         )
     p.vars["w"] = Var("w", "s^2/m", wb, fit(wb, 32), "y / S, at most max|y| / R")
+    _plan_fine(p, g, gap)
+
+
+FINE = ("cr", "cv", "ca")  # the carried entries with a second, finer format (and S with c_a)
+
+
+def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
+    """Fine formats of c_r, c_v and c_a (and S, which shares c_a's) for the samples away from gaps.
+
+    The formats above hold the block during and after a gap of up to MAX_GAP_S, where c_r, c_v and
+    c_a reach 10 to 2000 times what they are in an uninterrupted run; in those formats their steady
+    values keep only 11 to 23 significant bits, and that rounding is what the 1 kHz filter departs
+    from the float64 filter by. So the C carries them in one of two formats, chosen per step by bit 0
+    of the sample counter: the coarse formats above from a skipped sample on, the fine ones below
+    once the block is back (codegen.emit_c._core_cov). The switch to fine is made after an update
+    whose posterior |c_i| are all within theta_i, the largest |c_i| of the uninterrupted run; the
+    fine format of each holds GUARD times the largest |c_i| (and |S| for c_a) of the uninterrupted
+    run and of every gap trajectory (gap lengths 1, 2, 4, ... up to MAX_GAP_S, from each checkpoint
+    of the run, 4 gap + 50 updated samples after it) from the sample where that switch is made. A
+    skipped sample moves the block to the coarse formats before its predict.
+    """
+    from .gains import _key, _riccati
+
+    d, Ts, R = p.design, p.design.Ts, p.design.R
+    cs = np.array([1.0, Ts, 1.0])  # C coordinates: c_v = Ts (P_ua + P_ue)
+    theta = np.asarray(g.max_c)[:3] * cs
+    top = np.r_[theta, g.S_max]  # (c_r, c_v, c_a, S)
+    lengths = sorted({1 << j for j in range(max(1, gap).bit_length()) if 1 << j < gap} | {gap})
+    for _, P0 in g.checkpoints:
+        key = _key(d)[:-1] + (tuple(float(x) for row in P0 for x in row),)
+        for L in lengths:
+            n = L + 4 * L + 50
+            valid = np.r_[np.zeros(L, dtype=bool), np.ones(n - L, dtype=bool)]
+            r = _riccati(key, n, valid, n, ())
+            K = np.asarray(r.K)[:, :3] * cs
+            S = np.asarray(r.S)
+            back = np.flatnonzero(valid & np.all(np.abs(K * R) <= theta, axis=1))
+            if len(back) == 0:
+                continue
+            j = back[0]  # the update that switches; from the next sample on, every prior is fine
+            top = np.maximum(top, np.r_[np.abs(K[j] * R), 0.0])
+            if j + 1 < n:
+                prior = np.abs(K[j + 1 :] * S[j + 1 :, None])
+                top = np.maximum(top, np.r_[prior.max(0), S[j + 1 :].max()])
+    bounds = {"cr": top[0], "cv": top[1], "ca": max(top[2], top[3])}
+    omp = 1.0 - d.phi
+    # the predict sums of codegen.emit_c._predict_cov stay single SMLAL chains into the high word when
+    # each constant, scaled to land its product there, keeps below 2^30: (constant, its variable's frac)
+    terms = {
+        "ca": [(omp, p.f("Pae"))],
+        "cv": [(Ts * Ts, "ca"), (omp, p.f("Pve"))],
+        "cr": [(Ts * Ts / 2, "ca"), (omp, p.f("Pre")), (1.0, "cv")],
+    }
+    fracs: dict[str, int] = {}
+    for nm in ("ca", "cv", "cr"):
+        c = p.vars[nm]
+        f = max(fit(GUARD * bounds[nm], 32).frac, c.fmt.frac)
+        while f > c.fmt.frac and any(
+            val * 2.0 ** (f + 32 - (fracs[fv] if isinstance(fv, str) else fv)) >= 2**30 for val, fv in terms[nm]
+        ):
+            f -= 1
+        fracs[nm] = f
+    for nm in bounds:
+        c = p.vars[nm]
+        f = QFormat(32, fracs[nm])
+        p.vars[nm + "_f"] = Var(
+            nm + "_f", "cov", GUARD * bounds[nm], f, c.note.split(",")[0] + ", away from gaps, x2", True
+        )
+        p.theta[nm] = float(theta[FINE.index(nm)])
+    p.vars["S_f"] = Var("S_f", "(m/s^2)^2", GUARD * bounds["ca"], p.vars["ca_f"].fmt, "S away from gaps", True)
+    p.consts["RF"] = (R, p.vars["S_f"].fmt)
+
+
+def fine_view(p: AxisPlan) -> AxisPlan:
+    """The plan with the fine formats of c_r, c_v, c_a and S (and R in S's) under their usual names:
+    what the covariance form's common path is emitted from."""
+    import copy
+
+    q = copy.copy(p)
+    q.vars = dict(p.vars)
+    for nm in (*FINE, "S"):
+        q.vars[nm] = p.vars[nm + "_f"]
+    return q
 
 
 def _predict_sat_free(p: AxisPlan) -> frozenset:
