@@ -493,6 +493,33 @@ def test_covariance_fine_formats_follow_a_gap(workdir):
     assert modes[back:].all() and back < 1000 + gap + 100, back
 
 
+@pytest.mark.parametrize("rate", [100.0, 1000.0])
+def test_covariance_random_skip_bursts(rate, workdir):
+    """Bursts of skipped samples of random lengths (up to 0.4 s, beyond the 0.25 s the ranges analyse)
+    between valid runs of random lengths, so that the block switches between its coarse and fine
+    formats hundreds of times: nothing saturates and every state stays within 1e-3 of the float64
+    filter's sigma (same skips) after 1 s."""
+    model = model_at(rate)
+    files, mod = built(model, "covariance", workdir)
+    run = sensor.simulate(model, "vehicle", 10.0, seed=4)
+    rng = np.random.default_rng(7)
+    code = run.code[:, 0].copy()
+    valid = ~run.clipped[:, 0]
+    k, n = 0, len(code)
+    while k < n:
+        g = int(rng.integers(1, int(0.4 * rate) + 1)) if rng.random() < 0.5 else int(rng.integers(1, 4))
+        code[k : k + g] = 0
+        valid[k : k + g] = False
+        k += g + int(rng.integers(1, 300))
+    ref = run_filter(axis_design(model, 0), run.accel[:, 0], valid=valid)
+    sig = np.sqrt(np.einsum("kii->ki", ref.P_post))
+    res = AxisRunner(mod, files["accelnav.json"], 0).run(code=code)
+    assert (res["valid"] == valid).all() and res["overflow"] == 0
+    k1 = int(rate)
+    ratio = np.abs(res["x"] - ref.x_post)[k1:] / sig[k1:]
+    assert ratio.max() < 1e-3, ratio.max(0)
+
+
 def test_gain_schedule_built_window_by_window():
     """The schedule over a declared run is built from a window of gains that moves forward: the same
     integers as from the whole run at once (here a 1024-sample window over 60 s at 100 Hz), and at
