@@ -607,7 +607,7 @@ def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
     """Body of T_core_c (out of line): a skipped sample, or a sample while c_r, c_v, c_a are in their
     coarse formats (the ones that hold them through a gap). A skip first moves a fine block to the
     coarse formats (rounded); after an update whose c_r, c_v, c_a are all within the switch levels
-    TH_* (codegen.ranges._plan_fine) they move to the fine formats (exact: a left shift that fits)."""
+    p.theta (codegen.ranges._plan_fine) they move to the fine formats (exact: a left shift that fits)."""
     pf = fine_view(p)
     to_c, to_f, test = [], [], []
     for nm in FINE:
@@ -617,7 +617,7 @@ def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
             to_c.append(f"        s->{nm} = (int32_t)ACN_RSHR((int64_t)s->{nm}, {dd}); /* {ff} -> {fc}, round */")
             to_f.append(f"            s->{nm} *= INT32_C(1) << {dd}; /* {fc} -> {ff}, exact */")
         th = math.floor(p.theta[nm] * 2.0**fc.frac)
-        # |c| <= TH as one unsigned compare; TH 2^dd fits the fine format (it holds theta with GUARD)
+        # |c| <= th as one unsigned compare; th 2^dd fits the fine format (it holds GUARD theta)
         test.append(f"(uint32_t)s->{nm} + {th}u <= {2 * th}u")
     back = [
         "        /* back to the fine formats once c_r, c_v, c_a are within the uninterrupted run's maxima */",

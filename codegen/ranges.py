@@ -514,35 +514,103 @@ def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
     from the float64 filter by. So the C carries them in one of two formats, chosen per step by bit 0
     of the sample counter: the coarse formats above from a skipped sample on, the fine ones below
     once the block is back (codegen.emit_c._core_cov). The switch to fine is made after an update
-    whose posterior |c_i| are all within theta_i, the largest |c_i| of the uninterrupted run; the
-    fine format of each holds GUARD times the largest |c_i| (and |S| for c_a) of the uninterrupted
-    run and of every gap trajectory (gap lengths 1, 2, 4, ... up to MAX_GAP_S, from each checkpoint
-    of the run, 4 gap + 50 updated samples after it) from the sample where that switch is made. A
-    skipped sample moves the block to the coarse formats before its predict.
+    whose posterior |c_i| are all within their levels theta_i. Each fine format holds GUARD times the
+    largest |c_i| (and |S| for c_a) of the uninterrupted run and of every gap trajectory (gap lengths
+    1, 16, 256, ... and MAX_GAP_S, from each checkpoint of the run, 4 gap + 50 updated samples after
+    it) from the sample where that switch is made on. theta_i starts at the uninterrupted run's
+    largest |c_i|, which sets the formats; then each level is raised as far as those formats still
+    hold that condition (the earlier the switch after a gap, the fewer samples the coarse formats
+    round), halved back where a trajectory would break it. A skipped sample moves the block to the
+    coarse formats before its predict.
     """
-    from .gains import _key, _riccati
+    from .gains import _key
 
+    d, R = p.design, p.design.R
+    ck = (_key(d), p.n_run, gap, tuple(p.f(n) for n in ("cr", "cv", "ca", "Pre", "Pve", "Pae")))
+    if ck not in _FINE:  # emit and the report plan the same axis: the analysis once
+        if len(_FINE) > 64:
+            _FINE.clear()
+        _FINE[ck] = _fine_levels(p, g, gap)
+    fracs, theta, top = _FINE[ck]
+    for nm in FINE:
+        c = p.vars[nm]
+        i = FINE.index(nm)
+        b = max(top[i], top[3]) if nm == "ca" else top[i]
+        f = QFormat(32, fracs[nm])
+        p.vars[nm + "_f"] = Var(nm + "_f", "cov", GUARD * b, f, c.note.split(",")[0] + ", away from gaps, x2", True)
+        p.theta[nm] = float(theta[i])
+    p.vars["S_f"] = Var("S_f", "(m/s^2)^2", GUARD * top[3], p.vars["ca_f"].fmt, "S away from gaps", True)
+    p.consts["RF"] = (R, p.vars["S_f"].fmt)
+
+
+_FINE: dict = {}
+
+
+def _gap_trajectories(d: AxisDesign, P0: np.ndarray, gap: int, recover: int) -> tuple[np.ndarray, np.ndarray]:
+    """The float64 Riccati of the seven-entry block (as codegen.gains) from each prior P0[i] (ncp, 4, 4):
+    sample 0 is P0 itself, samples below ``gap`` predict only, the ``recover`` after them predict and
+    update. Returns the prior c = P H' (recover, ncp, 3: r, u, a) and S (recover, ncp) of the updated
+    samples, every trajectory at once."""
+    Ts, phi, R = d.Ts, d.phi, d.R
+    h2 = Ts * Ts / 2.0
+    qra, qua, qaa, qee = float(d.Q[0, 2]), float(d.Q[1, 2]), float(d.Q[2, 2]), float(d.Q[3, 3])
+    pra, pua, paa = P0[:, 0, 2].copy(), P0[:, 1, 2].copy(), P0[:, 2, 2].copy()
+    pre, pue, pae, pee = P0[:, 0, 3].copy(), P0[:, 1, 3].copy(), P0[:, 2, 3].copy(), P0[:, 3, 3].copy()
+    c_out = np.empty((recover, len(P0), 3))
+    S_out = np.empty((recover, len(P0)))
+    for k in range(gap + recover):
+        if k:  # P = F P F' + Q on the block; right-hand sides read the old values
+            pra, pre, pua, pue = (
+                pra + Ts * pua + h2 * paa + qra,
+                phi * (pre + Ts * pue + h2 * pae),
+                pua + Ts * paa + qua,
+                phi * (pue + Ts * pae),
+            )
+            paa, pae, pee = paa + qaa, phi * pae, phi * phi * pee + qee
+        if k >= gap:
+            cr, cu, ca, ce = pra + pre, pua + pue, paa + pae, pae + pee
+            S = ca + ce + R
+            c_out[k - gap, :, 0], c_out[k - gap, :, 1], c_out[k - gap, :, 2] = cr, cu, ca
+            S_out[k - gap] = S
+            kr, ku, ka, ke = cr / S, cu / S, ca / S, ce / S
+            pra, pua, paa = pra - kr * ca, pua - ku * ca, paa - ka * ca
+            pre, pue, pae, pee = pre - kr * ce, pue - ku * ce, pae - ka * ce, pee - ke * ce
+    return c_out, S_out
+
+
+def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
+    """(fine fracs of c_r, c_v, c_a; switch levels theta (3,); largest |c_r|, |c_v|, |c_a|, S (4,) in the
+    fine samples) for :func:`_plan_fine`."""
     d, Ts, R = p.design, p.design.Ts, p.design.R
     cs = np.array([1.0, Ts, 1.0])  # C coordinates: c_v = Ts (P_ua + P_ue)
-    theta = np.asarray(g.max_c)[:3] * cs
-    top = np.r_[theta, g.S_max]  # (c_r, c_v, c_a, S)
-    lengths = sorted({1 << j for j in range(max(1, gap).bit_length()) if 1 << j < gap} | {gap})
-    for _, P0 in g.checkpoints:
-        key = _key(d)[:-1] + (tuple(float(x) for row in P0 for x in row),)
-        for L in lengths:
-            n = L + 4 * L + 50
-            valid = np.r_[np.zeros(L, dtype=bool), np.ones(n - L, dtype=bool)]
-            r = _riccati(key, n, valid, n, ())
-            K = np.asarray(r.K)[:, :3] * cs
-            S = np.asarray(r.S)
-            back = np.flatnonzero(valid & np.all(np.abs(K * R) <= theta, axis=1))
-            if len(back) == 0:
-                continue
-            j = back[0]  # the update that switches; from the next sample on, every prior is fine
-            top = np.maximum(top, np.r_[np.abs(K[j] * R), 0.0])
-            if j + 1 < n:
-                prior = np.abs(K[j + 1 :] * S[j + 1 :, None])
-                top = np.maximum(top, np.r_[prior.max(0), S[j + 1 :].max()])
+    theta0 = np.asarray(g.max_c)[:3] * cs
+    lengths = sorted({1 << j for j in range(0, max(1, gap).bit_length(), 4) if 1 << j < gap} | {gap})
+    P0 = np.array([P for _, P in g.checkpoints])
+    # per gap length: the updated samples of every checkpoint's trajectory, |c| posterior (m, ncp, 3),
+    # and the largest |c| prior and S of the samples after each one (m, ncp, 4; the last row zero)
+    runs = []
+    for L in lengths:
+        c, S = _gap_trajectories(d, P0, L, 4 * L + 50)  # prior c (m, ncp, 3), S (m, ncp)
+        c = np.abs(c * cs)
+        after = np.concatenate([c, S[:, :, None]], axis=2)
+        after = np.maximum.accumulate(after[::-1], axis=0)[::-1]
+        after = np.concatenate([after[1:], np.zeros((1,) + after.shape[1:])], axis=0)
+        runs.append((c * (R / S)[:, :, None], after))  # posterior c = c R / S
+
+    def tops(theta: np.ndarray) -> np.ndarray:
+        """Largest (|c_r|, |c_v|, |c_a|, S) of the fine samples when the switch is at theta."""
+        top = np.r_[theta0, g.S_max]
+        for post, after in runs:
+            ok = np.all(post <= theta, axis=2)  # (m, ncp)
+            j = np.argmax(ok, axis=0)  # per trajectory the update that switches; then every prior is fine
+            cols = np.flatnonzero(ok[j, np.arange(ok.shape[1])])
+            if len(cols):
+                jj = j[cols]
+                top = np.maximum(top, np.r_[post[jj, cols].max(0), 0.0])
+                top = np.maximum(top, after[jj, cols].max(0))
+        return top
+
+    top = tops(theta0)
     bounds = {"cr": top[0], "cv": top[1], "ca": max(top[2], top[3])}
     omp = 1.0 - d.phi
     # the predict sums of codegen.emit_c._predict_cov stay single SMLAL chains into the high word when
@@ -561,15 +629,21 @@ def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
         ):
             f -= 1
         fracs[nm] = f
-    for nm in bounds:
-        c = p.vars[nm]
-        f = QFormat(32, fracs[nm])
-        p.vars[nm + "_f"] = Var(
-            nm + "_f", "cov", GUARD * bounds[nm], f, c.note.split(",")[0] + ", away from gaps, x2", True
-        )
-        p.theta[nm] = float(theta[FINE.index(nm)])
-    p.vars["S_f"] = Var("S_f", "(m/s^2)^2", GUARD * bounds["ca"], p.vars["ca_f"].fmt, "S away from gaps", True)
-    p.consts["RF"] = (R, p.vars["S_f"].fmt)
+    # the largest value each fine format holds with GUARD: c_r, c_v, c_a, S (S in c_a's)
+    room = np.array([2.0 ** (31 - fracs[nm]) * (1 - 2.0**-20) / GUARD for nm in ("cr", "cv", "ca", "ca")])
+    theta = np.maximum(theta0, room[:3] / 2)
+    for _ in range(64):
+        over = tops(theta) > room
+        over = over[:3] | np.array([False, False, over[3]])
+        if not over.any():
+            break
+        theta = np.where(over, np.maximum(theta0, theta / 2), theta)
+    else:
+        theta = theta0
+    top = tops(theta)
+    if np.any(top > room):  # theta0 itself: the formats were chosen to hold it
+        raise AssertionError(f"fine formats do not hold {top} within {room}")
+    return fracs, theta, top
 
 
 def fine_view(p: AxisPlan) -> AxisPlan:

@@ -426,7 +426,7 @@ def test_covariance_reciprocal_within_its_contract(tmp_path):
     assert worst <= 2.0**-28, f"relative error {worst:.3g} > 2^-28"
 
 
-SHOCK_1KHZ_SIGMA = 2e-4  # issue #12: a 5x margin to 1e-3; reached 1.7e-4 (a, axis x); main's generator 2.7e-4
+SHOCK_1KHZ_SIGMA = 2e-4  # issue #12: a 5x margin to 1e-3; reached 8.8e-5 (seed 11); main's generator 2.7e-4
 
 
 @pytest.mark.parametrize("seed", [9, 11])
