@@ -546,36 +546,41 @@ def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
 _FINE: dict = {}
 
 
-def _gap_trajectories(d: AxisDesign, P0: np.ndarray, gap: int, recover: int) -> tuple[np.ndarray, np.ndarray]:
+def _gap_trajectories(d: AxisDesign, P0: np.ndarray, gap: int, recover: int) -> np.ndarray:
     """The float64 Riccati of the seven-entry block (as codegen.gains) from each prior P0[i] (ncp, 4, 4):
     sample 0 is P0 itself, samples below ``gap`` predict only, the ``recover`` after them predict and
-    update. Returns the prior c = P H' (recover, ncp, 3: r, u, a) and S (recover, ncp) of the updated
-    samples, every trajectory at once."""
+    update. Returns the prior c = P H' and S of the updated samples, (recover, ncp, 4: c_r, c_u, c_a, S),
+    every trajectory at once."""
     Ts, phi, R = d.Ts, d.phi, d.R
     h2 = Ts * Ts / 2.0
-    qra, qua, qaa, qee = float(d.Q[0, 2]), float(d.Q[1, 2]), float(d.Q[2, 2]), float(d.Q[3, 3])
-    pra, pua, paa = P0[:, 0, 2].copy(), P0[:, 1, 2].copy(), P0[:, 2, 2].copy()
-    pre, pue, pae, pee = P0[:, 0, 3].copy(), P0[:, 1, 3].copy(), P0[:, 2, 3].copy(), P0[:, 3, 3].copy()
-    c_out = np.empty((recover, len(P0), 3))
-    S_out = np.empty((recover, len(P0)))
+    # rows: P_ra, P_ua, P_aa, P_re, P_ue, P_ae, P_ee; P = F P F' + Q on them is X -> A X + q
+    A = np.zeros((7, 7))
+    A[0, :3] = (1.0, Ts, h2)
+    A[1, 1:3] = (1.0, Ts)
+    A[2, 2] = 1.0
+    A[3, 3:6] = (phi, phi * Ts, phi * h2)
+    A[4, 4:6] = (phi, phi * Ts)
+    A[5, 5] = phi
+    A[6, 6] = phi * phi
+    q = np.array([d.Q[0, 2], d.Q[1, 2], d.Q[2, 2], 0.0, 0.0, 0.0, d.Q[3, 3]])[:, None]
+    Hc = np.array(  # c = P H' = (P_ra + P_re, P_ua + P_ue, P_aa + P_ae, P_ae + P_ee)
+        [[1, 0, 0, 1, 0, 0, 0], [0, 1, 0, 0, 1, 0, 0], [0, 0, 1, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1, 1]], dtype=float
+    )
+    X = np.stack([P0[:, 0, 2], P0[:, 1, 2], P0[:, 2, 2], P0[:, 0, 3], P0[:, 1, 3], P0[:, 2, 3], P0[:, 3, 3]])
+    out = np.empty((recover, len(P0), 4))
     for k in range(gap + recover):
-        if k:  # P = F P F' + Q on the block; right-hand sides read the old values
-            pra, pre, pua, pue = (
-                pra + Ts * pua + h2 * paa + qra,
-                phi * (pre + Ts * pue + h2 * pae),
-                pua + Ts * paa + qua,
-                phi * (pue + Ts * pae),
-            )
-            paa, pae, pee = paa + qaa, phi * pae, phi * phi * pee + qee
+        if k:
+            X = A @ X + q
         if k >= gap:
-            cr, cu, ca, ce = pra + pre, pua + pue, paa + pae, pae + pee
-            S = ca + ce + R
-            c_out[k - gap, :, 0], c_out[k - gap, :, 1], c_out[k - gap, :, 2] = cr, cu, ca
-            S_out[k - gap] = S
-            kr, ku, ka, ke = cr / S, cu / S, ca / S, ce / S
-            pra, pua, paa = pra - kr * ca, pua - ku * ca, paa - ka * ca
-            pre, pue, pae, pee = pre - kr * ce, pue - ku * ce, pae - ka * ce, pee - ke * ce
-    return c_out, S_out
+            c = Hc @ X
+            S = c[2] + c[3] + R
+            o = out[k - gap]
+            o[:, :3] = c[:3].T
+            o[:, 3] = S
+            K = c / S  # P = P - K c': the (r, u, a) rows by c_a, the eps column by c_e
+            X[:3] -= K[:3] * c[2]
+            X[3:] -= K * c[3]
+    return out
 
 
 def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
@@ -590,12 +595,13 @@ def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
     # and the largest |c| prior and S of the samples after each one (m, ncp, 4; the last row zero)
     runs = []
     for L in lengths:
-        c, S = _gap_trajectories(d, P0, L, 4 * L + 50)  # prior c (m, ncp, 3), S (m, ncp)
-        c = np.abs(c * cs)
-        after = np.concatenate([c, S[:, :, None]], axis=2)
-        after = np.maximum.accumulate(after[::-1], axis=0)[::-1]
-        after = np.concatenate([after[1:], np.zeros((1,) + after.shape[1:])], axis=0)
-        runs.append((c * (R / S)[:, :, None], after))  # posterior c = c R / S
+        after = _gap_trajectories(d, P0, L, 4 * L + 50)  # prior c (m, ncp, 3: r, u, a) and S (m, ncp, 1)
+        after[:, :, :3] = np.abs(after[:, :, :3] * cs)
+        post = after[:, :, :3] * (R / after[:, :, 3:])  # posterior c = c R / S
+        np.maximum.accumulate(after[::-1], axis=0, out=after[::-1])  # in place: the largest from each on
+        after[:-1] = after[1:]  # ... after each sample
+        after[-1] = 0.0
+        runs.append((post, after))
 
     def tops(theta: np.ndarray) -> np.ndarray:
         """Largest (|c_r|, |c_v|, |c_a|, S) of the fine samples when the switch is at theta."""
