@@ -79,6 +79,8 @@ def gain_errors(p: AxisPlan, schedule=None, K: np.ndarray | None = None) -> np.n
         return np.asarray(schedule.max_error)
     R = p.design.R
     kmax = np.array([p.vars["K" + n].bound for n in "rvae"]) if K is None else np.abs(K)
+    # c_r, c_v, c_a (and S) in their coarse formats, the LSB they have through and after a gap: away from
+    # gaps the C carries them finer (codegen.ranges._plan_fine), so this holds for both
     dc = CONTRACTION_LSB * np.array([p.vars[n].fmt.lsb for n in ("cr", "cv", "ca", "ce")])
     dS = CONTRACTION_LSB * (p.vars["ca"].fmt.lsb + p.vars["ce"].fmt.lsb)
     # reciprocal: relative 2^-28, and the shifts that align it drop up to 7 of its 30 bits
@@ -110,8 +112,11 @@ def _floors(p: AxisPlan) -> tuple[int, int]:
     if p.form == "covariance":  # r += c_r w, then r += v + Ts^2/2 a; v += c_v w, then v += Ts^2 a
         fw = v["w"].fmt.frac
         fH2, fT2 = p.consts["H2"][1].frac, p.consts["T2"][1].frac
-        n_r = (fv > fr) + (v["cr"].fmt.frac + fw > fr) + (fH2 + fy > fr)
-        return n_r, (v["cv"].fmt.frac + fw > fv) + (fT2 + fy > fv)
+        # c_r, c_v in their coarse or fine formats (codegen.ranges._plan_fine): the more floors of the two
+        fcr = max(v[n].fmt.frac for n in ("cr", "cr_f") if n in v)
+        fcv = max(v[n].fmt.frac for n in ("cv", "cv_f") if n in v)
+        n_r = (fv > fr) + (fcr + fw > fr) + (fH2 + fy > fr)
+        return n_r, (fcv + fw > fv) + (fT2 + fy > fv)
     n_r = (fv > fr) + (v["Kr"].fmt.frac + fy > fr) + (p.consts["H2"][1] != v["Kr"].fmt)
     return n_r, (v["Kv"].fmt.frac + fy > fv) + (p.consts["T2"][1] != v["Kv"].fmt)
 

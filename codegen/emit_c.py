@@ -28,7 +28,7 @@ from .gains import Schedule
 from .model import Model
 from .package import cdef_of, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
 from .qformat import QFormat, acc_bound, guard_bits, quantize
-from .ranges import AxisPlan, plan_axis
+from .ranges import FINE, AxisPlan, fine_view, plan_axis
 
 SCHEDULE_REL_TOL = (1e-4, 3e-4, 2e-7, 1e-4)  # K_r, K_v (no feedback), K_a (held in a segment: tight), K_e
 
@@ -131,6 +131,8 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
         f += _fields_follow(p)
     if p.form == "gain_schedule":
         f.append(("uint32_t", "k", "samples since init (bit 31: following a skip, codegen.follow)"))
+    elif p.form == "covariance":
+        f.append(("uint32_t", "k", "2 x samples since init, + 1 while c_r, c_v, c_a are in their fine formats"))
     else:
         f.append(("uint32_t", "k", "samples since init"))
     f.append(("uint32_t", "overflow", "saturations so far"))
@@ -439,7 +441,7 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
         "        /* P = F P F' + Q on the carried block (c = P H' carried directly in fine formats);",
         "         * every right-hand side reads the old values; each sum is rounded once */",
         "        int32_t tr, tv;",
-        "        uint32_t dz = acn_rbit(s->k); /* rounding offsets: the sample count, bit-reversed */",
+        "        uint32_t dz = acn_rbit(s->k >> 1); /* rounding offsets: the sample count, bit-reversed */",
         "        /* tr = P_re + P_ve + Ts^2/2 P_ae; P_re' = phi tr */",
         f"        tr = {sat('tr')};",
         "        /* tv = P_ve + Ts^2 P_ae; P_ve' = phi tv */",
@@ -486,6 +488,7 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
     nmax, fx = cf["nmax"], cf["x"]
     d = fce - fca
     R_int = quantize(p.design.R, p.vars["S"].fmt)
+    Rn = "RF" if p.vars["S"] is p.vars.get("S_f") else "R"  # R in the format of S: fine or coarse
     if d > 0:  # c_e in c_a's format, rounded (ties up) in 32 bits: floor((floor(c_e / 2^(d-1)) + 1) / 2)
         ce_a = f"(((ce >> {d - 1}) + 1) >> 1) /* Q.{fce} -> Q.{fca}, round */"
         fits = (2**31 >> d) + 1 + abs(R_int) < 2**31 - 1
@@ -503,11 +506,11 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         "    int n;",
         "    /* S = H P H' + R = c_a + c_e + R (>= R by construction) */",
         # one saturating 32-bit add when c_e aligned plus R fits int32 for any c_e (see _acc_sat)
-        f"    S = acn_add_sat32(ca, {ce_a} + {P}_R, &s->overflow);"
+        f"    S = acn_add_sat32(ca, {ce_a} + {P}_{Rn}, &s->overflow);"
         if fits
-        else f"    S = acn_sat32((int64_t)ca + {_shift('(int64_t)ce', fce, fca)} + {P}_R, &s->overflow);",
-        f"    if (S < {P}_R) {{",
-        f"        S = {P}_R;",
+        else f"    S = acn_sat32((int64_t)ca + {_shift('(int64_t)ce', fce, fca)} + {P}_{Rn}, &s->overflow);",
+        f"    if (S < {P}_{Rn}) {{",
+        f"        S = {P}_{Rn};",
         "    }",
         f"    /* 1/S: one reciprocal, 1/S = x 2^(n-62) with n = clz(S) in 1..{nmax}; x >> ({nmax} - n)",
         f"     * puts it at 1/S = x 2^({nmax - 62}) for every S (dropping at most {nmax} of its 30 bits):",
@@ -527,7 +530,7 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         else f"    s->e += {_sh('acn_mul(ce, w)', pr['e'] - fe, 'Q.{} -> Q.{}'.format(pr['e'], fe))};",
         "    /* P = P - c c' / S: c_i -= c_i kappa with kappa = (S - R) / S in [0, 1), Q0.31;",
         "     * P_ie -= c_i K_e with K_e = c_e / S */",
-        f"    kap = (int32_t)ACN_RSHR(acn_mul(S - {P}_R, xs), {fca + fx - 31}); /* Q.{fca + fx} -> Q0.31, round */",
+        f"    kap = (int32_t)ACN_RSHR(acn_mul(S - {P}_{Rn}, xs), {fca + fx - 31}); /* Q.{fca + fx} -> Q0.31, round */",
         # 0 < xs <= 2^30 (acn_recip: x <= 2^31): for any int32 c_e the product lies in
         # [-2^61, (2^31 - 1) 2^30]; when both ends, shifted and rounded, fit int32, K_e needs no saturation
         f"    Ke = (int32_t)ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}); /* Q.{fce + fx} -> {p.vars['Ke'].fmt},"
@@ -547,27 +550,49 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
 
 def _core_cov(p: AxisPlan, P: str, T: str) -> list[str]:
     """Body of T_core for the covariance form: as _core_fixed, with the update of _gains_cov inline
-    (the prior block is read once into registers; the predict of the block stays a function of its own)."""
+    (the prior block is read once into registers; the predict of the block stays a function of its own).
+
+    The common path: a valid sample with c_r, c_v, c_a in their fine formats (bit 0 of k set,
+    codegen.ranges._plan_fine); a skip, or a block still in its coarse formats, goes to T_core_c."""
+    L = [
+        "    int32_t a;",
+        "    int64_t e, v0, r, v;",
+        "    if (!valid || __builtin_expect((int32_t)(s->k << 31) >= 0, 0)) { /* a skip, or coarse formats */",
+        f"        {T}_core_c(s, z, valid);",
+        "        return;",
+        "    }",
+        "    a = s->a;",
+        "    e = s->e;",
+        "    v0 = s->v;",
+    ]
+    return L + _cov_step(p, P, T, "", "    s->k += 2u; /* the sample count, in bits 1..31 */")
+
+
+def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] | None = None) -> list[str]:
+    """One step of the covariance form after its states are loaded: eps decay and the block's predict
+    (T_ppredict{sfx}), the update (T_pupdate{sfx}, then ``back``), the steps of r and v, ``tail``."""
     fr, fv, fe, fy = p.f("r"), p.f("v"), p.f("e"), p.f("y")
     fo = p.consts["OMP"][1].frac
     eh = _hi_round("e")
     if p.design.x0[0] != 0 or p.design.x0[1] != 0 or p.design.x0[2] != 0:
         raise ValueError("the merged predict needs r, u, a of x0 at zero")
     fH2, fT2 = p.consts["H2"][1].frac, p.consts["T2"][1].frac
-    L = [
-        "    int32_t a = s->a;",
-        "    int64_t e = s->e, v0 = s->v, r, v;",
-        "    if (__builtin_expect(s->k > 0, 1)) {",
-        "        /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar), eps by its rounded high word */",
-        f"        e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
+    decay = (
+        f"e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
         if fo != 32
-        else f"        e += (int64_t)-{P}_OMP * ({eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */",
-        f"        {T}_ppredict(s);",
-        "    }",
+        else f"e += (int64_t)-{P}_OMP * ({eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */"
+    )
+    com = "/* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar), eps by its rounded high word */"
+    if sfx:  # the coarse step: the first sample has no predict
+        L = ["    if (k > 1u) {", f"        {com}", f"        {decay}", f"        {T}_ppredict{sfx}(s);", "    }"]
+    else:
+        L = [f"    {com}", f"    {decay}", f"    {T}_ppredict(s);"]
+    L += [
         "    s->e = e;",
         "    if (valid) {",
         "        /* y = z - H x = z - a - eps; K = P H' / S, x = x + K y and P = P - K H P */",
-        f"        {T}_pupdate(s, z - a - {_hi_round('e')});",
+        f"        {T}_pupdate{sfx}(s, z - a - {_hi_round('e')});",
+        *(back or []),
         "    }",
         "    /* r += Ts u + Ts^2/2 a,  u += Ts a (K_r y and K_v y are in already); u and a are the previous",
         "     * posteriors, and at k = 0 both increments are zero (x0 has r = u = a = 0): no test of k */",
@@ -576,9 +601,44 @@ def _core_cov(p: AxisPlan, P: str, T: str) -> list[str]:
         f"    v = s->v + {_sh(f'(int64_t){P}_T2 * a', fT2 + fy - fv, f'Q.{fT2 + fy} -> Q.{fv}')};",
         f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
         f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
-        "    ++s->k;",
+        tail,
     ]
     return L
+
+
+def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
+    """Body of T_core_c (out of line): a skipped sample, or a sample while c_r, c_v, c_a are in their
+    coarse formats (the ones that hold them through a gap). A skip first moves a fine block to the
+    coarse formats (rounded); after an update whose c_r, c_v, c_a are all within the switch levels
+    p.theta (codegen.ranges._plan_fine) they move to the fine formats (exact: a left shift that fits)."""
+    pf = fine_view(p)
+    to_c, to_f, test = [], [], []
+    for nm in FINE:
+        dd = pf.f(nm) - p.f(nm)
+        fc, ff = p.vars[nm].fmt, pf.vars[nm].fmt
+        if dd > 0:
+            to_c.append(f"        s->{nm} = (int32_t)ACN_RSHR((int64_t)s->{nm}, {dd}); /* {ff} -> {fc}, round */")
+            to_f.append(f"            s->{nm} *= INT32_C(1) << {dd}; /* {fc} -> {ff}, exact */")
+        th = math.floor(p.theta[nm] * 2.0**fc.frac)
+        # |c| <= th as one unsigned compare; th 2^dd fits the fine format (it holds GUARD theta)
+        test.append(f"(uint32_t)s->{nm} + {th}u <= {2 * th}u")
+    back = [
+        "        /* back to the fine formats once c_r, c_v, c_a are within the uninterrupted run's maxima */",
+        "        if (" + " && ".join(test) + ") {",
+        *to_f,
+        "            k |= 1u;",
+        "        }",
+    ]
+    L = [
+        "    int32_t a = s->a;",
+        "    int64_t e = s->e, v0 = s->v, r, v;",
+        "    uint32_t k = s->k;",
+        "    if (k & 1u) { /* a skip with the block in its fine formats: to the coarse ones */",
+        *to_c,
+        "        k ^= 1u;",
+        "    }",
+    ]
+    return L + _cov_step(p, P, T, "_c", "    s->k = k + 2u; /* the sample count, in bits 1..31 */", back)
 
 
 def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
@@ -1246,11 +1306,19 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         except ValueError as e:  # a shift the deviation's formats cannot take: this model's ranges
             raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
     if p.form == "covariance":
-        # the predict of the covariance block in a function of its own: its registers do not crowd the states'
-        src += [f"static void {T}_ppredict({T}_t *s)", "{"]
-        src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(p, P)]
-        src += ["}", ""]
-        src += [f"static void {T}_pupdate({T}_t *s, int32_t y)", "{"] + _gains_cov(p, P) + ["}", ""]
+        # the predict of the covariance block in a function of its own: its registers do not crowd the
+        # states'; twice: c_r, c_v, c_a in their fine formats (the common path) and in their coarse ones
+        for sfx, q in (("", fine_view(p)), ("_c", p)):
+            src += [f"static void {T}_ppredict{sfx}({T}_t *s)", "{"]
+            src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(q, P)]
+            src += ["}", ""]
+            src += [f"static void {T}_pupdate{sfx}({T}_t *s, int32_t y)", "{"] + _gains_cov(q, P) + ["}", ""]
+        src += [
+            "/* One sample with c_r, c_v, c_a in their coarse formats, or a skip (rare: out of line). */",
+            f"static __attribute__((noinline)) void {T}_core_c({T}_t *s, int32_t z, bool valid)",
+            "{",
+        ]
+        src += _core_cov_coarse(p, P, T) + ["}", ""]
     if p.form == "gain_schedule":
         src += _gs_entries(p, P, T, params, args)
     else:

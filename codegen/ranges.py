@@ -112,6 +112,7 @@ class AxisPlan:
     v_step: float = 0.0  # largest |v| increment of one step
     conv_shift: int = -1  # analog fast path: code << conv_shift (-1: the int64 path)
     gap_run: GainRun | None = None  # gain schedule: maxima over gaps of `gap` samples (codegen.follow)
+    theta: dict = field(default_factory=dict)  # covariance: c_r, c_v, c_a levels of the switch to fine
 
     def f(self, name: str) -> int:
         return self.vars[name].fmt.frac
@@ -498,6 +499,169 @@ def _plan_covariance(p: AxisPlan) -> None:
             f"{bits_for(wb) + 1} bits; accepted: R >= {p.vars['y'].bound / 2**30:.3g}",
         )
     p.vars["w"] = Var("w", "s^2/m", wb, fit(wb, 32), "y / S, at most max|y| / R")
+    _plan_fine(p, g, gap)
+
+
+FINE = ("cr", "cv", "ca")  # the carried entries with a second, finer format (and S with c_a)
+
+
+def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
+    """Fine formats of c_r, c_v and c_a (and S, which shares c_a's) for the samples away from gaps.
+
+    The formats above hold the block during and after a gap of up to MAX_GAP_S, where c_r, c_v and
+    c_a reach 10 to 2000 times what they are in an uninterrupted run; in those formats their steady
+    values keep only 11 to 23 significant bits, and that rounding is what the 1 kHz filter departs
+    from the float64 filter by. So the C carries them in one of two formats, chosen per step by bit 0
+    of the sample counter: the coarse formats above from a skipped sample on, the fine ones below
+    once the block is back (codegen.emit_c._core_cov). The switch to fine is made after an update
+    whose posterior |c_i| are all within their levels theta_i. Each fine format holds GUARD times the
+    largest |c_i| (and |S| for c_a) of the uninterrupted run and of every gap trajectory (gap lengths
+    1, 16, 256, ... and MAX_GAP_S, from each checkpoint of the run, 4 gap + 50 updated samples after
+    it) from the sample where that switch is made on. theta_i starts at the uninterrupted run's
+    largest |c_i|, which sets the formats; then each level is raised as far as those formats still
+    hold that condition (the earlier the switch after a gap, the fewer samples the coarse formats
+    round), halved back where a trajectory would break it. A skipped sample moves the block to the
+    coarse formats before its predict.
+    """
+    from .gains import _key
+
+    d, R = p.design, p.design.R
+    ck = (_key(d), p.n_run, gap, tuple(p.f(n) for n in ("cr", "cv", "ca", "Pre", "Pve", "Pae")))
+    if ck not in _FINE:  # emit and the report plan the same axis: the analysis once
+        if len(_FINE) > 64:
+            _FINE.clear()
+        _FINE[ck] = _fine_levels(p, g, gap)
+    fracs, theta, top = _FINE[ck]
+    for nm in FINE:
+        c = p.vars[nm]
+        i = FINE.index(nm)
+        b = max(top[i], top[3]) if nm == "ca" else top[i]
+        f = QFormat(32, fracs[nm])
+        p.vars[nm + "_f"] = Var(nm + "_f", "cov", GUARD * b, f, c.note.split(",")[0] + ", away from gaps, x2", True)
+        p.theta[nm] = float(theta[i])
+    p.vars["S_f"] = Var("S_f", "(m/s^2)^2", GUARD * top[3], p.vars["ca_f"].fmt, "S away from gaps", True)
+    p.consts["RF"] = (R, p.vars["S_f"].fmt)
+
+
+_FINE: dict = {}
+
+
+def _gap_trajectories(d: AxisDesign, P0: np.ndarray, gap: int, recover: int) -> np.ndarray:
+    """The float64 Riccati of the seven-entry block (as codegen.gains) from each prior P0[i] (ncp, 4, 4):
+    sample 0 is P0 itself, samples below ``gap`` predict only, the ``recover`` after them predict and
+    update. Returns the prior c = P H' and S of the updated samples, (recover, ncp, 4: c_r, c_u, c_a, S),
+    every trajectory at once."""
+    Ts, phi, R = d.Ts, d.phi, d.R
+    h2 = Ts * Ts / 2.0
+    # rows: P_ra, P_ua, P_aa, P_re, P_ue, P_ae, P_ee; P = F P F' + Q on them is X -> A X + q
+    A = np.zeros((7, 7))
+    A[0, :3] = (1.0, Ts, h2)
+    A[1, 1:3] = (1.0, Ts)
+    A[2, 2] = 1.0
+    A[3, 3:6] = (phi, phi * Ts, phi * h2)
+    A[4, 4:6] = (phi, phi * Ts)
+    A[5, 5] = phi
+    A[6, 6] = phi * phi
+    q = np.array([d.Q[0, 2], d.Q[1, 2], d.Q[2, 2], 0.0, 0.0, 0.0, d.Q[3, 3]])[:, None]
+    Hc = np.array(  # c = P H' = (P_ra + P_re, P_ua + P_ue, P_aa + P_ae, P_ae + P_ee)
+        [[1, 0, 0, 1, 0, 0, 0], [0, 1, 0, 0, 1, 0, 0], [0, 0, 1, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1, 1]], dtype=float
+    )
+    X = np.stack([P0[:, 0, 2], P0[:, 1, 2], P0[:, 2, 2], P0[:, 0, 3], P0[:, 1, 3], P0[:, 2, 3], P0[:, 3, 3]])
+    out = np.empty((recover, len(P0), 4))
+    for k in range(gap + recover):
+        if k:
+            X = A @ X + q
+        if k >= gap:
+            c = Hc @ X
+            S = c[2] + c[3] + R
+            o = out[k - gap]
+            o[:, :3] = c[:3].T
+            o[:, 3] = S
+            K = c / S  # P = P - K c': the (r, u, a) rows by c_a, the eps column by c_e
+            X[:3] -= K[:3] * c[2]
+            X[3:] -= K * c[3]
+    return out
+
+
+def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
+    """(fine fracs of c_r, c_v, c_a; switch levels theta (3,); largest |c_r|, |c_v|, |c_a|, S (4,) in the
+    fine samples) for :func:`_plan_fine`."""
+    d, Ts, R = p.design, p.design.Ts, p.design.R
+    cs = np.array([1.0, Ts, 1.0])  # C coordinates: c_v = Ts (P_ua + P_ue)
+    theta0 = np.asarray(g.max_c)[:3] * cs
+    lengths = sorted({1 << j for j in range(0, max(1, gap).bit_length(), 4) if 1 << j < gap} | {gap})
+    P0 = np.array([P for _, P in g.checkpoints])
+    # per gap length: the updated samples of every checkpoint's trajectory, |c| posterior (m, ncp, 3),
+    # and the largest |c| prior and S of the samples after each one (m, ncp, 4; the last row zero)
+    runs = []
+    for L in lengths:
+        after = _gap_trajectories(d, P0, L, 4 * L + 50)  # prior c (m, ncp, 3: r, u, a) and S (m, ncp, 1)
+        after[:, :, :3] = np.abs(after[:, :, :3] * cs)
+        post = after[:, :, :3] * (R / after[:, :, 3:])  # posterior c = c R / S
+        np.maximum.accumulate(after[::-1], axis=0, out=after[::-1])  # in place: the largest from each on
+        after[:-1] = after[1:]  # ... after each sample
+        after[-1] = 0.0
+        runs.append((post, after))
+
+    def tops(theta: np.ndarray) -> np.ndarray:
+        """Largest (|c_r|, |c_v|, |c_a|, S) of the fine samples when the switch is at theta."""
+        top = np.r_[theta0, g.S_max]
+        for post, after in runs:
+            ok = np.all(post <= theta, axis=2)  # (m, ncp)
+            j = np.argmax(ok, axis=0)  # per trajectory the update that switches; then every prior is fine
+            cols = np.flatnonzero(ok[j, np.arange(ok.shape[1])])
+            if len(cols):
+                jj = j[cols]
+                top = np.maximum(top, np.r_[post[jj, cols].max(0), 0.0])
+                top = np.maximum(top, after[jj, cols].max(0))
+        return top
+
+    top = tops(theta0)
+    bounds = {"cr": top[0], "cv": top[1], "ca": max(top[2], top[3])}
+    omp = 1.0 - d.phi
+    # the predict sums of codegen.emit_c._predict_cov stay single SMLAL chains into the high word when
+    # each constant, scaled to land its product there, keeps below 2^30: (constant, its variable's frac)
+    terms = {
+        "ca": [(omp, p.f("Pae"))],
+        "cv": [(Ts * Ts, "ca"), (omp, p.f("Pve"))],
+        "cr": [(Ts * Ts / 2, "ca"), (omp, p.f("Pre")), (1.0, "cv")],
+    }
+    fracs: dict[str, int] = {}
+    for nm in ("ca", "cv", "cr"):
+        c = p.vars[nm]
+        f = max(fit(GUARD * bounds[nm], 32).frac, c.fmt.frac)
+        while f > c.fmt.frac and any(
+            val * 2.0 ** (f + 32 - (fracs[fv] if isinstance(fv, str) else fv)) >= 2**30 for val, fv in terms[nm]
+        ):
+            f -= 1
+        fracs[nm] = f
+    # the largest value each fine format holds with GUARD: c_r, c_v, c_a, S (S in c_a's)
+    room = np.array([2.0 ** (31 - fracs[nm]) * (1 - 2.0**-20) / GUARD for nm in ("cr", "cv", "ca", "ca")])
+    theta = np.maximum(theta0, room[:3] / 2)
+    for _ in range(64):
+        over = tops(theta) > room
+        over = over[:3] | np.array([False, False, over[3]])
+        if not over.any():
+            break
+        theta = np.where(over, np.maximum(theta0, theta / 2), theta)
+    else:
+        theta = theta0
+    top = tops(theta)
+    if np.any(top > room):  # theta0 itself: the formats were chosen to hold it
+        raise AssertionError(f"fine formats do not hold {top} within {room}")
+    return fracs, theta, top
+
+
+def fine_view(p: AxisPlan) -> AxisPlan:
+    """The plan with the fine formats of c_r, c_v, c_a and S (and R in S's) under their usual names:
+    what the covariance form's common path is emitted from."""
+    import copy
+
+    q = copy.copy(p)
+    q.vars = dict(p.vars)
+    for nm in (*FINE, "S"):
+        q.vars[nm] = p.vars[nm + "_f"]
+    return q
 
 
 def _predict_sat_free(p: AxisPlan) -> frozenset:

@@ -212,7 +212,8 @@ def test_skip_table(workdir):
     lib.accelnav_x_step(s, 2048)
     before = (s.a, s.e, s.k)
     assert lib.accelnav_x_step(s, 0) is False
-    assert s.a == before[0] and s.k == before[2] + 1  # predict only: a is a random walk, unchanged
+    # predict only: a is a random walk, unchanged; k counts samples in bits 1..31
+    assert s.a == before[0] and s.k >> 1 == (before[2] >> 1) + 1
 
 
 def test_gain_schedule_count_restarts_past_2_31_without_leaving_the_schedule(workdir):
@@ -406,7 +407,7 @@ def test_unclamped_predict_sums_fit_any_state(workdir):
     for x in (2**31 - 1, -(2**31)):
         s = mod.ffi.new("accelnav_x_t *")
         mod.lib.accelnav_x_init(s)
-        s.k = 1
+        s.k = 2  # one sample done, the block in its coarse formats
         s.ce = x
         s.Pae = x
         mod.lib.accelnav_x_skip(s)
@@ -445,15 +446,15 @@ def test_covariance_reciprocal_within_its_contract(tmp_path):
     assert worst <= 2.0**-28, f"relative error {worst:.3g} > 2^-28"
 
 
-SHOCK_1KHZ_SIGMA = 3e-4  # reached 2.7e-4 (a, axis x); main's generator 9.2e-4: issue #12 asks < 2e-4
+SHOCK_1KHZ_SIGMA = 2e-4  # issue #12: a 5x margin to 1e-3; reached 8.8e-5 (seed 11); main's generator 2.7e-4
 
 
 @pytest.mark.parametrize("seed", [9, 11])
 def test_covariance_1khz_shock_margin(seed, workdir):
     """The covariance form at 1 kHz on rail-clipped shock data against the float64 Kalman filter with
     the same skips: every state of both axes within SHOCK_1KHZ_SIGMA of the filter's sigma after 1 s,
-    a 3.3x margin to the 1e-3 criterion (issue #12 asks 5x, < 2e-4: not reached; the carried c_a and
-    c_v would need about 4 more bits each, bench/bench_cov_margin.py)."""
+    the 5x margin to the 1e-3 criterion that issue #12 asks (c_r, c_v, c_a in their fine formats away
+    from gaps, codegen.ranges._plan_fine; bench/bench_cov_margin.py for every scenario)."""
     model = model_at(1000.0)
     files, mod = built(model, "covariance", workdir)
     run = sensor.simulate(model, "shock", 3.0, seed=seed)
@@ -470,6 +471,73 @@ def test_covariance_1khz_shock_margin(seed, workdir):
         assert ratio.max() < SHOCK_1KHZ_SIGMA, (
             f"axis {axis}: state {worst[1]} at sample {worst[0] + k1}: {ratio.max():.3g} sigma"
         )
+
+
+def test_covariance_fine_formats_follow_a_gap(workdir):
+    """c_r, c_v, c_a are carried in their fine formats away from gaps (bit 0 of k) and in the coarse
+    ones from a skipped sample on, back to the fine ones once they are within the uninterrupted run's
+    maxima: at each stage the carried entries, read in the format of their mode, are the float64
+    Riccati's posterior c = K R to a few parts in a million, and nothing saturates."""
+    model = model_at(1000.0)
+    files, mod = built(model, "covariance", workdir)
+    p, _ = plan(model, 0, "covariance")
+    gap = p.gap
+    n = 1000 + gap + 200
+    valid = np.ones(n, dtype=bool)
+    valid[1000 : 1000 + gap] = False
+    from accelnav.codegen.gains import riccati
+
+    g = riccati(p.design, n, valid)
+    cs = np.array([1.0, p.design.Ts, 1.0])
+    s = mod.ffi.new("accelnav_x_t *")
+    mod.lib.accelnav_x_init(s)
+    modes = []
+    for k in range(n):
+        if valid[k]:
+            mod.lib.accelnav_x_update(s, 0)
+        else:
+            mod.lib.accelnav_x_skip(s)
+        fine = bool(s.k & 1)
+        modes.append(fine)
+        if valid[k]:
+            want = g.K[k, :3] * cs * p.design.R  # posterior c = K R
+            for i, nm in enumerate(("cr", "cv", "ca")):
+                f = p.vars[nm + "_f" if fine else nm].fmt
+                got = getattr(s, nm) * f.lsb
+                assert abs(got - want[i]) <= 1e-5 * abs(want[i]) + 64 * f.lsb, (k, nm, fine, got, want[i])
+    modes = np.array(modes)
+    assert s.k >> 1 == n and s.overflow == 0
+    assert modes[:1000].all(), "fine from the first sample on"
+    assert not modes[1000 : 1000 + gap].any(), "coarse through the gap"
+    back = 1000 + gap + int(np.argmax(modes[1000 + gap :]))
+    assert modes[back:].all() and back < 1000 + gap + 100, back
+
+
+@pytest.mark.parametrize("rate", [100.0, 1000.0])
+def test_covariance_random_skip_bursts(rate, workdir):
+    """Bursts of skipped samples of random lengths (up to 0.4 s, beyond the 0.25 s the ranges analyse)
+    between valid runs of random lengths, so that the block switches between its coarse and fine
+    formats hundreds of times: nothing saturates and every state stays within 1e-3 of the float64
+    filter's sigma (same skips) after 1 s."""
+    model = model_at(rate)
+    files, mod = built(model, "covariance", workdir)
+    run = sensor.simulate(model, "vehicle", 10.0, seed=4)
+    rng = np.random.default_rng(7)
+    code = run.code[:, 0].copy()
+    valid = ~run.clipped[:, 0]
+    k, n = 0, len(code)
+    while k < n:
+        g = int(rng.integers(1, int(0.4 * rate) + 1)) if rng.random() < 0.5 else int(rng.integers(1, 4))
+        code[k : k + g] = 0
+        valid[k : k + g] = False
+        k += g + int(rng.integers(1, 300))
+    ref = run_filter(axis_design(model, 0), run.accel[:, 0], valid=valid)
+    sig = np.sqrt(np.einsum("kii->ki", ref.P_post))
+    res = AxisRunner(mod, files["accelnav.json"], 0).run(code=code)
+    assert (res["valid"] == valid).all() and res["overflow"] == 0
+    k1 = int(rate)
+    ratio = np.abs(res["x"] - ref.x_post)[k1:] / sig[k1:]
+    assert ratio.max() < 1e-3, ratio.max(0)
 
 
 def test_gain_schedule_built_window_by_window():
