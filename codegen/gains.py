@@ -284,12 +284,98 @@ void acn_bound(long n, const double *par, const double *P0, const double *bp, lo
         }
     }
 }
+
+/* codegen.bounds.error_bound's recursion over m samples given its per-sample inputs (K, dK (m, 4) in C
+ * coordinates, |y|, |a|, the w injection, valid): the same operations in the same order as its Python
+ * loop, so the same doubles. bp: omp, phi, d_dec, H2, T2, dH2, dT2, r floor, v floor, dz, d_y, d_a, d_e,
+ * Ts. st: Es, Ee, Ea, Ev, Er, a_prev in, and out at the end; k0 the first sample's index. out: (m, 4). */
+void acn_bound_loop(long m, long k0, const double *bp, const double *K, const double *dK, const double *y,
+                    const double *a, const double *dw, const unsigned char *valid, double *st, double *out)
+{
+    double omp = bp[0], phi = bp[1], d_dec = bp[2], H2 = bp[3], T2 = bp[4], dH2 = bp[5], dT2 = bp[6];
+    double rfl = bp[7], vfl = bp[8], dz = bp[9], d_y = bp[10], d_a = bp[11], d_e = bp[12], Ts = bp[13];
+    double Es = st[0], Ee = st[1], Ea = st[2], Ev = st[3], Er = st[4], a_prev = st[5];
+    long k;
+    for (k = 0; k < m; ++k) {
+        double Esm, Eem, a_c;
+        if (k + k0) {
+            Esm = Es + omp * Ee + d_dec;
+            Eem = phi * Ee + d_dec;
+        } else {
+            Esm = Es;
+            Eem = Ee;
+        }
+        a_c = a_prev + Ea;
+        Er = Er + Ev + H2 * Ea + dH2 * a_c + rfl;
+        Ev = Ev + T2 * Ea + dT2 * a_c + vfl;
+        if (valid[k]) {
+            const double *Kk = K + 4 * k, *dKk = dK + 4 * k;
+            double inj = dz + d_y + dw[k];
+            double yc = y[k] + Esm + inj;
+            Es = fabs(1.0 - Kk[2] - Kk[3]) * Esm + fabs(Kk[2] + Kk[3]) * inj + (dKk[2] + dKk[3]) * yc + d_a + d_e;
+            Ee = Eem + fabs(Kk[3]) * (Esm + inj) + dKk[3] * yc + d_e;
+            Ev += fabs(Kk[1]) * (Esm + inj) + dKk[1] * yc;
+            Er += fabs(Kk[0]) * (Esm + inj) + dKk[0] * yc;
+        } else {
+            Es = Esm;
+            Ee = Eem;
+        }
+        Ea = Es + Ee;
+        a_prev = a[k];
+        out[4 * k] = Er; out[4 * k + 1] = Ev / Ts; out[4 * k + 2] = Ea; out[4 * k + 3] = Ee;
+    }
+    st[0] = Es; st[1] = Ee; st[2] = Ea; st[3] = Ev; st[4] = Er; st[5] = a_prev;
+}
+
+/* codegen.gains._cone and the search of schedule() over m samples at once: the longest segment from the
+ * accumulators A (as doubles) whose every gain keeps an integer in its interval. Kq, tolq: (m, 4), row t
+ * = sample t of the segment (row 0 its start). hold[i]: a held gain (its value within tolerance at
+ * t = 0 .. L - 1), otherwise linear (its slope s: A + s t within tolerance at t = 1 .. L). lohi: in, the
+ * intervals of the lengths below L0 (4 lo then 4 hi); out, those of the longest length found. Returns
+ * that length, at most m - 1 (L0 - 1 if even L0 does not fit). */
+long acn_cone(long m, long L0, const double *Kq, const double *tolq, const double *A, const unsigned char *hold,
+              double *lohi)
+{
+    double lo[4], hi[4];
+    long L;
+    int i;
+    for (i = 0; i < 4; ++i) { lo[i] = lohi[i]; hi[i] = lohi[4 + i]; }
+    for (L = L0; L < m; ++L) {
+        double nlo[4], nhi[4];
+        for (i = 0; i < 4; ++i) {
+            double l, h;
+            if (hold[i]) {
+                l = Kq[4 * (L - 1) + i] - tolq[4 * (L - 1) + i];
+                h = Kq[4 * (L - 1) + i] + tolq[4 * (L - 1) + i];
+            } else {
+                double d = Kq[4 * L + i] - A[i];
+                l = (d - tolq[4 * L + i]) / (double)L;
+                h = (d + tolq[4 * L + i]) / (double)L;
+            }
+            nlo[i] = l > lo[i] ? l : lo[i];
+            nhi[i] = h < hi[i] ? h : hi[i];
+            if (ceil(nlo[i]) > floor(nhi[i])) {
+                break;
+            }
+        }
+        if (i < 4) {
+            break;
+        }
+        for (i = 0; i < 4; ++i) { lo[i] = nlo[i]; hi[i] = nhi[i]; }
+    }
+    for (i = 0; i < 4; ++i) { lohi[i] = lo[i]; lohi[4 + i] = hi[i]; }
+    return L - 1;
+}
 """
 _CDEF = """void acn_riccati(long n, const double *par, const double *P0, const unsigned char *valid, long keep,
     long nrows, const long *rows, double *K, double *sig, double *S_all, double *mprior, double *mpost,
     double *mc, double *rowP, double *rowK, double *rowsig, double *rowS, double *ext);
 void acn_bound(long n, const double *par, const double *P0, const double *bp, long nrows, const long *rows,
-    double *out);"""
+    double *out);
+void acn_bound_loop(long m, long k0, const double *bp, const double *K, const double *dK, const double *y,
+    const double *a, const double *dw, const unsigned char *valid, double *st, double *out);
+long acn_cone(long m, long L0, const double *Kq, const double *tolq, const double *A, const unsigned char *hold,
+    double *lohi);"""
 
 
 @functools.lru_cache(maxsize=1)
@@ -337,6 +423,27 @@ def bound_rows(key: tuple, n: int, bp: np.ndarray, rows) -> np.ndarray | None:
 
     C.acn_bound(n, ptr(par), ptr(P0), ptr(bp), len(ridx), ptr(ridx, "long *"), ptr(out))
     return out[: len(ridx)]
+
+
+def bound_loop(k0: int, bp, K, dK, y, a, dw, valid, st: list) -> np.ndarray | None:
+    """codegen.bounds.error_bound's recursion in C (see acn_bound_loop): (m, 4), and ``st`` (Es, Ee, Ea, Ev,
+    Er, a_prev) carried to its end; None without a C compiler (the caller then runs the Python one)."""
+    lib = _riccati_lib()
+    if lib is None:
+        return None
+    ffi, C = lib
+    m = len(y)
+    arrs = [np.ascontiguousarray(x, dtype=np.float64) for x in (bp, K, dK, y, a, dw)]
+    v = np.ascontiguousarray(valid, dtype=np.uint8)
+    s = np.array(st, dtype=np.float64)
+    out = np.empty((m, 4))
+
+    def ptr(x, t="double *"):
+        return ffi.cast(t, x.ctypes.data)
+
+    C.acn_bound_loop(m, k0, *(ptr(x) for x in arrs), ptr(v, "unsigned char *"), ptr(s), ptr(out))
+    st[:] = s.tolist()
+    return out
 
 
 def _all_rows(n: int, rows: tuple) -> tuple[list[int], list[int]]:
@@ -563,26 +670,53 @@ class Schedule:
         return self.errors(self.n)
 
 
-def _segment(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, L: int, hold: np.ndarray):
-    """Per-gain numbers (4,) of a segment of L samples starting at the accumulators A (Kq, tolq: the
-    samples from the segment's start on), or None if some gain leaves its tolerance. A linear gain: its
-    per-sample slope, checked on samples 0 .. L (the endpoint starts the next segment from the
-    accumulator); a held gain (hold[i]): its constant value over the segment, checked on samples
-    0 .. L - 1 (the next segment sets its own)."""
-    sl = np.floor((Kq[L] - A) / L + 0.5).astype(np.int64)
-    t = np.arange(L + 1, dtype=np.int64)[:, None]
-    err = np.abs((A + sl * t).astype(np.float64) - Kq[: L + 1])
-    ok = err <= tolq[: L + 1]
-    if not np.all(ok[:, ~hold]):
-        return None
-    if np.any(hold):
-        lo = np.max(Kq[:L, hold] - tolq[:L, hold], axis=0)
-        hi = np.min(Kq[:L, hold] + tolq[:L, hold], axis=0)
-        v = np.ceil(lo)
-        if np.any(v > hi):
-            return None
-        sl[hold] = v.astype(np.int64)
-    return sl
+def _cone(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, hold: np.ndarray, L0: int, lo0, hi0):
+    """The slopes a segment from the accumulators A may take, for the lengths L = L0 .. L0 + m - 1 given
+    the samples L0 - 1 .. L0 + m - 1 of it (Kq, tolq: m + 1 rows) and the intervals (lo0, hi0) of the
+    shorter lengths: (lo, hi) (m, 4), running. A linear gain's integer slope s keeps A + s t within
+    tolerance at t = 1 .. L (t = 0 is A itself, the previous segment's end): s lies in the intersection of
+    [(Kq[t] - tolq[t] - A) / t, (Kq[t] + tolq[t] - A) / t], a cone that narrows with t. A held gain
+    (hold[i]): its value lies within tolerance at t = 0 .. L - 1. A length fits while every interval
+    holds an integer."""
+    t = np.arange(L0, L0 + len(Kq) - 1, dtype=np.float64)[:, None]
+    d = Kq[1:] - A.astype(np.float64)
+    lo = np.where(hold, Kq[:-1] - tolq[:-1], (d - tolq[1:]) / t)
+    hi = np.where(hold, Kq[:-1] + tolq[:-1], (d + tolq[1:]) / t)
+    lo[0] = np.maximum(lo[0], lo0)
+    hi[0] = np.minimum(hi[0], hi0)
+    return np.maximum.accumulate(lo, axis=0), np.minimum.accumulate(hi, axis=0)
+
+
+def _longest(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, hold: np.ndarray, L0: int, lohi: np.ndarray) -> int:
+    """The longest segment (< len(Kq)) from the accumulators A, given the samples 0 .. m - 1 of it and
+    ``lohi`` (8,), the intervals [lo (4), hi (4)] of the lengths below L0 that fit: L0 - 1 if L0 does
+    not fit; ``lohi`` is left at the intervals of the length returned. In C when a compiler is there
+    (acn_cone), else :func:`_cone`: the same doubles."""
+    lib = _riccati_lib()
+    if lib is not None:
+        ffi, C = lib
+        Kc, tc = np.ascontiguousarray(Kq, dtype=np.float64), np.ascontiguousarray(tolq, dtype=np.float64)
+        Ac, hc = A.astype(np.float64), np.ascontiguousarray(hold, dtype=np.uint8)
+
+        def ptr(x, t="double *"):
+            return ffi.cast(t, x.ctypes.data)
+
+        return int(C.acn_cone(len(Kc), L0, ptr(Kc), ptr(tc), ptr(Ac), ptr(hc, "unsigned char *"), ptr(lohi)))
+    lo, hi = _cone(Kq[L0 - 1 :], tolq[L0 - 1 :], A, hold, L0, lohi[:4], lohi[4:])
+    ok = np.all(np.ceil(lo) <= np.floor(hi), axis=1)
+    j = int(np.argmin(ok)) if not ok.all() else len(ok)
+    if j:
+        lohi[:4], lohi[4:] = lo[j - 1], hi[j - 1]
+    return L0 - 1 + j
+
+
+def _pick(lo, hi, K_end, A, L, hold) -> np.ndarray:
+    """The numbers of a segment of L samples within its intervals: a linear gain, the slope whose end lands
+    nearest the float64 gain K_end (sample L); a held gain, the lowest of its interval (as before the cone:
+    the firmware's departure from the float64 filter after a gap is sensitive to it, measured)."""
+    lo_i, hi_i = np.ceil(lo), np.floor(hi)
+    want = np.where(hold, lo_i, np.floor((K_end - A) / L + 0.5))
+    return np.clip(want, lo_i, hi_i).astype(np.int64)
 
 
 class _Window:
@@ -594,6 +728,7 @@ class _Window:
         self.P = _key(d)[-1]
         self.n, self.scale, self.W = n, scale, W
         self.w0 = 0
+        self.anchor = 0  # a reload starts here (the caller's current segment), at or before any request
         self.K = np.zeros((0, 4))
 
     def _load(self, k0: int) -> None:
@@ -613,7 +748,7 @@ class _Window:
                 raise ValueError("the window only moves forward")
             return np.asarray(r.K) * self.scale
         if k0 < self.w0 or k1 > self.w0 + len(self.K):
-            self._load(k0)
+            self._load(min(k0, self.anchor))
         return self.K[k0 - self.w0 : k1 - self.w0]
 
 
@@ -632,7 +767,12 @@ def riccati_chunks(d: AxisDesign, n: int, chunk: int):
 
 
 def schedule_of(
-    d: AxisDesign, n: int, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0, window: int = 1 << 19
+    d: AxisDesign,
+    n: int,
+    formats: tuple[QFormat, ...],
+    rel_tol=1e-4,
+    ramp: int = 0,
+    window: int = 1 << 19,
 ) -> Schedule:
     """:func:`schedule` of the Kalman gains of an uninterrupted run of n samples of ``d`` (C coordinates:
     K_v = Ts K_u), computed window by window: memory O(window) whatever n. Cached: codegen, its report
@@ -652,7 +792,13 @@ _SCHEDULES: dict = {}
 
 
 def schedule(
-    K, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0, *, n: int | None = None, window: int = 1 << 19
+    K,
+    formats: tuple[QFormat, ...],
+    rel_tol=1e-4,
+    ramp: int = 0,
+    *,
+    n: int | None = None,
+    window: int = 1 << 19,
 ) -> Schedule:
     """Compress the gains K (an (N, 4) array, or a callable (k0, k1) -> K[k0:k1] over n samples) into a
     piecewise-linear integer schedule.
@@ -709,39 +855,27 @@ def schedule(
         if k < keep:
             head[k : min(keep, k + m)] = err[: min(keep, k + m) - k]
 
-    def search(Kq, tolq, span):
-        """The longest segment found by doubling then bisecting within span; and whether the doubling
-        stopped at the span rather than at a failure."""
-        good, sl_good = 1, _segment(Kq, tolq, A, 1, hold)
-        step = max(1, last // 2)
-        while good + step <= span:
-            sl = _segment(Kq, tolq, A, good + step, hold)
-            if sl is None:
-                break
-            good, sl_good = good + step, sl
-            step *= 2
-        else:
-            if span < min(n - 1 - k0, cap):
-                return good, sl_good, True
-        while step > 1:
-            step //= 2
-            if good + step <= span:
-                sl = _segment(Kq, tolq, A, good + step, hold)
-                if sl is not None:
-                    good, sl_good = good + step, sl
-        return good, sl_good, False
-
     while k0 < n - 1:
-        span = min(n - 1 - k0, cap, max(64, 4 * last))
-        while True:  # the gains of the samples the search may read, widened until it stops inside them
-            Kq, tolq = q(k0, k0 + span + 1)
-            good, sl_good, short = search(Kq, tolq, span)
-            if not short:
+        # the cone, from the segment's start until no integer is left in it, over spans that double from
+        # twice the last segment's length: the work is a few times the segment's length
+        if isinstance(get, _Window):
+            get.anchor = k0
+        top = min(n - 1 - k0, cap)  # the longest segment: the data, and the span held in memory
+        L0, chunk = 1, max(64, 2 * last)
+        lohi = np.array([-np.inf] * 4 + [np.inf] * 4)  # the intervals of the longest length so far
+        while True:
+            L1 = min(top, L0 + chunk - 1)
+            Kq, tolq = q(k0, k0 + L1 + 1)  # samples 0 .. L1 of the segment
+            good = _longest(Kq, tolq, A, hold, L0, lohi)
+            if good < L1 or L1 == top:
                 break
-            span = min(n - 1 - k0, cap, 4 * span)
-        if sl_good is None:  # one sample: the slope lands on the rounded next value
+            L0, chunk = L1 + 1, 2 * chunk
+        if good == 0:  # not even one sample (a float64 tie): the slope lands on the rounded next value
+            good = 1
             sl_good = np.floor(Kq[1] + 0.5).astype(np.int64) - A
             sl_good[hold] = np.floor(Kq[0, hold] + 0.5).astype(np.int64)
+        else:
+            sl_good = _pick(lohi[:4], lohi[4:], Kq[good], A, good, hold)
         lin = np.where(hold, 0, sl_good)
         account(k0, good, np.where(hold, sl_good, A + lin * np.arange(good, dtype=np.int64)[:, None]))
         A = np.where(hold, sl_good, A + lin * good)
