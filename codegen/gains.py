@@ -773,14 +773,16 @@ def schedule_of(
     rel_tol=1e-4,
     ramp: int = 0,
     window: int = 1 << 19,
+    floor=0.0,
 ) -> Schedule:
     """:func:`schedule` of the Kalman gains of an uninterrupted run of n samples of ``d`` (C coordinates:
     K_v = Ts K_u), computed window by window: memory O(window) whatever n. Cached: codegen, its report
     and hil ask for the same schedule."""
-    key = (_key(d), n, tuple(formats), tuple(np.broadcast_to(rel_tol, (4,)).tolist()), ramp, window)
+    fl = tuple(np.broadcast_to(floor, (4,)).tolist())
+    key = (_key(d), n, tuple(formats), tuple(np.broadcast_to(rel_tol, (4,)).tolist()), ramp, window, fl)
     if key not in _SCHEDULES:
         scale = np.array([1.0, d.Ts, 1.0, 1.0])
-        sched = schedule(_Window(d, n, scale, window), formats, rel_tol, ramp, n=n, window=window)
+        sched = schedule(_Window(d, n, scale, window), formats, rel_tol, ramp, n=n, window=window, floor=fl)
         # replays start from sample 0: a fresh source
         _SCHEDULES[key] = dataclasses.replace(sched, source=_Window(d, n, scale, window))
         while len(_SCHEDULES) > 8:
@@ -799,15 +801,17 @@ def schedule(
     *,
     n: int | None = None,
     window: int = 1 << 19,
+    floor=0.0,
 ) -> Schedule:
     """Compress the gains K (an (N, 4) array, or a callable (k0, k1) -> K[k0:k1] over n samples) into a
     piecewise-linear integer schedule.
 
-    Tolerance per gain and sample: rel_tol |K[k]| + half an LSB of the accumulator's high word (the
-    floor of the high word adds up to one more LSB); for K_r and K_v, rel_tol ramps up from 1/20 over
-    the first ``ramp`` samples. Knots are chosen greedily: from each knot the segment grows by
-    doubling from the previous segment's length, then bisects; as the gains settle, the segments
-    lengthen geometrically (at most ``window`` - 1 samples each, the span held in memory at a time).
+    Tolerance per gain and sample: max(rel_tol |K[k]|, ``floor`` LSB) + half an LSB of the accumulator's
+    high word (the floor of the high word adds up to one more LSB); for K_r and K_v, rel_tol ramps up
+    from 1/20 over the first ``ramp`` samples. Knots are chosen greedily: from each knot the segment is
+    the longest for which every gain keeps a whole-number slope (held: value) within tolerance at every
+    sample, found in one pass over the narrowing interval of feasible slopes (:func:`_cone`); as the
+    gains settle, the segments lengthen (at most ``window`` // 2 samples each: the span held in memory).
     """
     if callable(K):
         get = K
@@ -824,6 +828,7 @@ def schedule(
     rel = np.broadcast_to(np.asarray(rel_tol, dtype=np.float64), (4,))
     half = np.where(ex > 0, 0.5 * 2.0**ex, 0.5)
     hold = np.array(HOLD, dtype=bool)
+    floor_q = np.broadcast_to(np.asarray(floor, dtype=np.float64), (4,)) * 2.0**ex  # in accumulator LSB
 
     def q(k0, k1):
         """Kq and tolq of samples k0 .. k1 - 1."""
@@ -832,7 +837,7 @@ def schedule(
         if ramp:  # K_r, K_v feed r and u only, whose sigma grows with time: 20x tighter at the start
             w = np.clip((np.arange(k0, k1) + 1.0) / ramp, 0.05, 1.0)[:, None]
             r = rel * np.where(np.arange(4) < 2, w, 1.0)
-        return Kq, r * np.abs(Kq) + half
+        return Kq, np.maximum(r * np.abs(Kq), floor_q) + half
 
     keep = min(n, KEEP)
     head = np.empty((keep, 4))
