@@ -730,16 +730,23 @@ class _Window:
         self.w0 = 0
         self.anchor = 0  # a reload starts here (the caller's current segment), at or before any request
         self.K = np.zeros((0, 4))
+        self.step = max(1, W // 64)
+        self.marks: dict = {}  # sample -> prior P, every `step` samples of the window (a reload starts there)
 
     def _load(self, k0: int) -> None:
         if k0 < self.w0:
             raise ValueError("the window only moves forward")
-        if k0 > self.w0:  # the prior at k0, from the window's start
-            r = _riccati(self.key0 + (self.P,), k0 - self.w0 + 1, None, 0, (k0 - self.w0,))
-            self.P = tuple(float(x) for x in r.row_P[r.rows.index(k0 - self.w0)])
-            self.w0 = k0
+        if k0 > self.w0:  # the prior at k0, from the nearest prior kept at or before it
+            c = max((j for j in self.marks if j <= k0), default=self.w0)
+            P = self.marks.get(c, self.P)
+            if c < k0:
+                r = _riccati(self.key0 + (P,), k0 - c + 1, None, 0, (k0 - c,))
+                P = tuple(float(x) for x in r.row_P[r.rows.index(k0 - c)])
+            self.P, self.w0 = P, k0
         m = min(self.W, self.n - k0)
-        self.K = np.asarray(_riccati(self.key0 + (self.P,), m, None, m, ()).K) * self.scale
+        r = _riccati(self.key0 + (self.P,), m, None, m, tuple(range(self.step, m, self.step)))
+        self.K = np.asarray(r.K) * self.scale
+        self.marks = {k0 + j: tuple(float(x) for x in r.row_P[r.rows.index(j)]) for j in range(self.step, m, self.step)}
 
     def __call__(self, k0: int, k1: int) -> np.ndarray:
         if k1 - k0 > self.W:  # a long replay (errors over the declared run): not through the window
@@ -830,19 +837,28 @@ def schedule(
     hold = np.array(HOLD, dtype=bool)
     floor_q = np.broadcast_to(np.asarray(floor, dtype=np.float64), (4,)) * 2.0**ex  # in accumulator LSB
 
-    def q(k0, k1):
+    def q_of(k0, k1):
         """Kq and tolq of samples k0 .. k1 - 1."""
         Kq = get(k0, k1) / unit
         r = rel
-        if ramp:  # K_r, K_v feed r and u only, whose sigma grows with time: 20x tighter at the start
+        if ramp and k0 < ramp:  # K_r, K_v feed r and u only, whose sigma grows with time: 20x tighter at first
             w = np.clip((np.arange(k0, k1) + 1.0) / ramp, 0.05, 1.0)[:, None]
             r = rel * np.where(np.arange(4) < 2, w, 1.0)
         return Kq, np.maximum(r * np.abs(Kq), floor_q) + half
 
+    qc = [0, np.zeros((0, 4)), np.zeros((0, 4))]  # Kq, tolq of the samples from qc[0] on, computed ahead
+
+    def q(k0, k1):
+        """q_of(k0, k1), from a block of samples computed once (the search reads a segment's samples
+        again as its span widens)."""
+        if k0 < qc[0] or k1 > qc[0] + len(qc[1]):
+            qc[:] = [k0, *q_of(k0, min(n, max(k1, k0 + cap + 1)))]
+        return qc[1][k0 - qc[0] : k1 - qc[0]], qc[2][k0 - qc[0] : k1 - qc[0]]
+
     keep = min(n, KEEP)
     head = np.empty((keep, 4))
     max_err = np.zeros(4)
-    A = np.floor(q(0, 1)[0][0] + 0.5).astype(np.int64)
+    A = np.floor(q_of(0, 1)[0][0] + 0.5).astype(np.int64)
     A0 = A.copy()
     lengths, slopes = [], []
     k0, last = 0, 1
