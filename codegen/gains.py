@@ -328,12 +328,29 @@ void acn_bound_loop(long m, long k0, const double *bp, const double *K, const do
 }
 
 /* codegen.gains._cone and the search of schedule() over m samples at once: the longest segment from the
- * accumulators A (as doubles) whose every gain keeps an integer in its interval. Kq, tolq: (m, 4), row t
- * = sample t of the segment (row 0 its start). hold[i]: a held gain (its value within tolerance at
+ * accumulators A (as doubles) whose every gain keeps an integer in its interval. K: (m, 4) the float64
+ * gains in C coordinates, row t = sample t of the segment (row 0 its start, sample k0 of the run); each
+ * in accumulator LSB, Kq = K / unit, with the tolerance of schedule()'s q_of, the same doubles:
+ * max(rel w |Kq|, floor) + half, w = clip((k0 + t + 1) / ramp, 0.05, 1) for K_r, K_v (1 without a ramp).
+ * par: unit[4], rel[4], floor[4], half[4], ramp, k0. hold[i]: a held gain (its value within tolerance at
  * t = 0 .. L - 1), otherwise linear (its slope s: A + s t within tolerance at t = 1 .. L). lohi: in, the
  * intervals of the lengths below L0 (4 lo then 4 hi); out, those of the longest length found. Returns
  * that length, at most m - 1 (L0 - 1 if even L0 does not fit). */
-long acn_cone(long m, long L0, const double *Kq, const double *tolq, const double *A, const unsigned char *hold,
+static void cone_q(const double *K, const double *par, long t, int i, double *kq, double *tq)
+{
+    double ramp = par[16], w = 1.0, r, x;
+    *kq = K[4 * t + i] / par[i];
+    r = par[4 + i];
+    if (ramp > 0.0 && par[17] < ramp && i < 2) {
+        w = ((double)((long)par[17] + t) + 1.0) / ramp;
+        w = w < 0.05 ? 0.05 : (w > 1.0 ? 1.0 : w);
+        r = r * w;
+    }
+    x = r * fabs(*kq);
+    *tq = (x > par[8 + i] ? x : par[8 + i]) + par[12 + i];
+}
+
+long acn_cone(long m, long L0, const double *K, const double *par, const double *A, const unsigned char *hold,
               double *lohi)
 {
     double lo[4], hi[4];
@@ -343,14 +360,17 @@ long acn_cone(long m, long L0, const double *Kq, const double *tolq, const doubl
     for (L = L0; L < m; ++L) {
         double nlo[4], nhi[4];
         for (i = 0; i < 4; ++i) {
-            double l, h;
+            double l, h, kq, tq;
             if (hold[i]) {
-                l = Kq[4 * (L - 1) + i] - tolq[4 * (L - 1) + i];
-                h = Kq[4 * (L - 1) + i] + tolq[4 * (L - 1) + i];
+                cone_q(K, par, L - 1, i, &kq, &tq);
+                l = kq - tq;
+                h = kq + tq;
             } else {
-                double d = Kq[4 * L + i] - A[i];
-                l = (d - tolq[4 * L + i]) / (double)L;
-                h = (d + tolq[4 * L + i]) / (double)L;
+                double d;
+                cone_q(K, par, L, i, &kq, &tq);
+                d = kq - A[i];
+                l = (d - tq) / (double)L;
+                h = (d + tq) / (double)L;
             }
             nlo[i] = l > lo[i] ? l : lo[i];
             nhi[i] = h < hi[i] ? h : hi[i];
@@ -366,6 +386,30 @@ long acn_cone(long m, long L0, const double *Kq, const double *tolq, const doubl
     for (i = 0; i < 4; ++i) { lohi[i] = lo[i]; lohi[4 + i] = hi[i]; }
     return L - 1;
 }
+
+/* schedule()'s account of m samples: the stored gain of gain i at sample t is the high word (>> ex[i])
+ * of acc = A[i] + sl[i] t (sl[i] = 0: A[i] throughout); err = |hi lsb - K| (the same doubles as numpy).
+ * maxerr[4] updated; head (nhead, 4): the errors of the first nhead samples. Returns 0, or 1 + the first
+ * gain whose high word leaves int32. */
+int acn_account(long m, const long long *A, const long long *sl, const long long *ex, const double *lsb,
+                const double *K, double *maxerr, long nhead, double *head)
+{
+    long t;
+    int i;
+    for (t = 0; t < m; ++t) {
+        for (i = 0; i < 4; ++i) {
+            long long hi = (A[i] + sl[i] * (long long)t) >> ex[i];
+            double e;
+            if (hi > 2147483647LL || hi < -2147483647LL) {
+                return 1 + i;
+            }
+            e = fabs((double)hi * lsb[i] - K[4 * t + i]);
+            if (e > maxerr[i]) { maxerr[i] = e; }
+            if (t < nhead) { head[4 * t + i] = e; }
+        }
+    }
+    return 0;
+}
 """
 _CDEF = """void acn_riccati(long n, const double *par, const double *P0, const unsigned char *valid, long keep,
     long nrows, const long *rows, double *K, double *sig, double *S_all, double *mprior, double *mpost,
@@ -374,8 +418,10 @@ void acn_bound(long n, const double *par, const double *P0, const double *bp, lo
     double *out);
 void acn_bound_loop(long m, long k0, const double *bp, const double *K, const double *dK, const double *y,
     const double *a, const double *dw, const unsigned char *valid, double *st, double *out);
-long acn_cone(long m, long L0, const double *Kq, const double *tolq, const double *A, const unsigned char *hold,
-    double *lohi);"""
+long acn_cone(long m, long L0, const double *K, const double *par, const double *A, const unsigned char *hold,
+    double *lohi);
+int acn_account(long m, const long long *A, const long long *sl, const long long *ex, const double *lsb,
+    const double *K, double *maxerr, long nhead, double *head);"""
 
 
 @functools.lru_cache(maxsize=1)
@@ -690,18 +736,7 @@ def _cone(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, hold: np.ndarray, L0:
 def _longest(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, hold: np.ndarray, L0: int, lohi: np.ndarray) -> int:
     """The longest segment (< len(Kq)) from the accumulators A, given the samples 0 .. m - 1 of it and
     ``lohi`` (8,), the intervals [lo (4), hi (4)] of the lengths below L0 that fit: L0 - 1 if L0 does
-    not fit; ``lohi`` is left at the intervals of the length returned. In C when a compiler is there
-    (acn_cone), else :func:`_cone`: the same doubles."""
-    lib = _riccati_lib()
-    if lib is not None:
-        ffi, C = lib
-        Kc, tc = np.ascontiguousarray(Kq, dtype=np.float64), np.ascontiguousarray(tolq, dtype=np.float64)
-        Ac, hc = A.astype(np.float64), np.ascontiguousarray(hold, dtype=np.uint8)
-
-        def ptr(x, t="double *"):
-            return ffi.cast(t, x.ctypes.data)
-
-        return int(C.acn_cone(len(Kc), L0, ptr(Kc), ptr(tc), ptr(Ac), ptr(hc, "unsigned char *"), ptr(lohi)))
+    not fit; ``lohi`` is left at the intervals of the length returned. acn_cone does the same in C."""
     lo, hi = _cone(Kq[L0 - 1 :], tolq[L0 - 1 :], A, hold, L0, lohi[:4], lohi[4:])
     ok = np.all(np.ceil(lo) <= np.floor(hi), axis=1)
     j = int(np.argmin(ok)) if not ok.all() else len(ok)
@@ -864,17 +899,36 @@ def schedule(
     k0, last = 0, 1
     cap = max(2, window // 2)
 
-    def account(k, m, acc):
-        """The stored gains of samples k .. k + m - 1 (accumulators acc): their error, kept."""
+    lib = _riccati_lib()  # the search and the account in C (the same doubles), or numpy
+    par = np.concatenate([unit, rel, floor_q, half, [float(ramp), 0.0]])
+    hold8 = hold.astype(np.uint8)
+
+    def account(k, m, A_k, sl):
+        """The stored gains of samples k .. k + m - 1 (accumulators A_k + sl t; sl = 0: A_k throughout):
+        their error, kept."""
         nonlocal max_err
-        hi = acc >> ex
-        if np.any(np.abs(hi) > 2**31 - 1):
-            i = int(np.argmax(np.any(np.abs(hi) > 2**31 - 1, axis=0)))
-            raise ValueError(f"gain {i} leaves its int32 format {formats[i]}")
-        err = np.abs(hi * lsb - get(k, k + m))
-        max_err = np.maximum(max_err, err.max(0))
-        if k < keep:
-            head[k : min(keep, k + m)] = err[: min(keep, k + m) - k]
+        if lib is not None:
+            ffi, C = lib
+            i64 = [np.ascontiguousarray(x, dtype=np.int64) for x in (A_k, sl, ex)]
+            Kk = np.ascontiguousarray(get(k, k + m), dtype=np.float64)
+            me = np.ascontiguousarray(max_err, dtype=np.float64)
+            nh = max(0, min(keep - k, m))
+            hp = ffi.cast("double *", head[k:].ctypes.data) if nh else ffi.NULL
+            cs = [ffi.cast("long long *", x.ctypes.data) for x in i64]
+            bad = C.acn_account(m, *cs, ffi.cast("double *", lsb.ctypes.data), ffi.cast("double *", Kk.ctypes.data),
+                                ffi.cast("double *", me.ctypes.data), nh, hp)  # fmt: skip
+            max_err = me
+        else:
+            hi = (A_k + sl * np.arange(m, dtype=np.int64)[:, None]) >> ex
+            big = np.abs(hi) > 2**31 - 1
+            bad = 1 + int(np.argmax(np.any(big, axis=0))) if big.any() else 0
+            if not bad:
+                err = np.abs(hi * lsb - get(k, k + m))
+                max_err = np.maximum(max_err, err.max(0))
+                if k < keep:
+                    head[k : min(keep, k + m)] = err[: min(keep, k + m) - k]
+        if bad:
+            raise ValueError(f"gain {bad - 1} leaves its int32 format {formats[bad - 1]}")
 
     while k0 < n - 1:
         # the cone, from the segment's start until no integer is left in it, over spans that double from
@@ -886,8 +940,18 @@ def schedule(
         lohi = np.array([-np.inf] * 4 + [np.inf] * 4)  # the intervals of the longest length so far
         while True:
             L1 = min(top, L0 + chunk - 1)
-            Kq, tolq = q(k0, k0 + L1 + 1)  # samples 0 .. L1 of the segment
-            good = _longest(Kq, tolq, A, hold, L0, lohi)
+            if lib is not None:  # samples 0 .. L1 of the segment
+                ffi, C = lib
+                Kq = np.ascontiguousarray(get(k0, k0 + L1 + 1), dtype=np.float64)
+                par[17] = k0
+                Ad = A.astype(np.float64)
+                ptr = [ffi.cast("double *", x.ctypes.data) for x in (Kq, par, Ad)]
+                good = int(C.acn_cone(len(Kq), L0, *ptr, ffi.cast("unsigned char *", hold8.ctypes.data),
+                                      ffi.cast("double *", lohi.ctypes.data)))  # fmt: skip
+                Kq = Kq[: good + 2] / unit  # the rows read below, in accumulator LSB as q_of gives them
+            else:
+                Kq, tolq = q(k0, k0 + L1 + 1)
+                good = _longest(Kq, tolq, A, hold, L0, lohi)
             if good < L1 or L1 == top:
                 break
             L0, chunk = L1 + 1, 2 * chunk
@@ -898,14 +962,14 @@ def schedule(
         else:
             sl_good = _pick(lohi[:4], lohi[4:], Kq[good], A, good, hold)
         lin = np.where(hold, 0, sl_good)
-        account(k0, good, np.where(hold, sl_good, A + lin * np.arange(good, dtype=np.int64)[:, None]))
+        account(k0, good, np.where(hold, sl_good, A), lin)
         A = np.where(hold, sl_good, A + lin * good)
         lengths.append(good)
         slopes.append(tuple(int(x) for x in sl_good))
         k0 += good
         last = good
     if k0 < n:
-        account(k0, n - k0, np.broadcast_to(A, (n - k0, 4)))
+        account(k0, n - k0, A, np.zeros(4, dtype=np.int64))
     start = np.array(slopes[0] if slopes else A, dtype=np.int64)
     start = tuple(int(x) for x in np.where(hold, start, A0))
     for sl in slopes:
