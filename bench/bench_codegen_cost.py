@@ -8,8 +8,16 @@ under an address-space cap, so a run that would take the machine's memory is rep
 
     .venv/bin/python bench/bench_codegen_cost.py [--base COMMIT] [--cap-mb MB] [--form gain_schedule]
 
-Gain-schedule form, issue #12 (table and codegen time), same run, --base c6b42e5 (main before it):
-FIGURES
+Gain-schedule form, issue #12 (the schedule's search and the report's bound), one run of
+`--form gain_schedule --base c6b42e5` (main before it) on the shared 2-core machine; seconds with the
+report (without it), peak RSS:
+
+| model | c6b42e5 | now |
+|---|---|---|
+| 100 Hz, 2 axes, 1 h | 7.96 s (1.99 s), 170 MB | 2.02 s (0.60 s), 102 MB |
+| 1 kHz, 2 axes, 1 h | 66.75 s (16.91 s), 172 MB | 5.80 s (2.49 s), 150 MB |
+| 1 kHz, 3 axes, 1 h | 70.54 s (16.48 s), 185 MB | 7.87 s (3.59 s), 168 MB |
+| 10 kHz, 2 axes, 839 s | 112.03 s (33.70 s), 179 MB | 9.72 s (3.21 s), 152 MB |
 """
 
 from __future__ import annotations

@@ -26,6 +26,10 @@ RAM 64 B per axis both; flash 2250 -> 2084 B per axis at 100 Hz (the reciprocal'
 included, shared by the axes). Gain schedule after issue #12 (following skips; its gain formats hold
 the gains after a gap): 94.5 instructions per step at 100 Hz (89.5 before, same run), 106.8 at 1 kHz
 (98.7); RAM 96 B per axis (64); flash 13648 B per axis at 100 Hz (9852), 27622 B at 1 kHz (13904).
+Gain-schedule table, issue #12 (main c6b42e5 measured at the start of the same session -> this
+generator): 100 Hz 94.5 -> 94.2 instructions per step, flash 13648 -> 9440 B per axis, of which table
+8424 -> 4272 B (axis x; y 4440); 1 kHz 106.8 -> 105.6, flash 27622 -> 14490 B, table 26328 -> 9912 B
+(y 8856); RAM 96 B both. The 2 KB table target is not met.
 """
 
 from __future__ import annotations
