@@ -683,25 +683,30 @@ class Schedule:
 
     def gains_int(self, n: int, first: int = 0) -> np.ndarray:
         """(n - first, 4) the integers the C uses as K_r, K_v, K_a, K_e at samples first .. n-1 of an
-        uninterrupted run (the high words, in the gains' formats; held after the last segment)."""
+        uninterrupted run (the high words, in the gains' formats; held after the last segment). Only the
+        segments that meet first .. n - 1 are walked (the accumulators at every segment's start are
+        one cumulative sum): a chunk of a long run costs its own length."""
         ex = np.array(EXTRA, dtype=np.int64)
         hold = np.array(HOLD, dtype=bool)
         out = np.empty((n - first, 4), dtype=np.int64)
-        A = np.array(self.start, dtype=np.int64)
-        k0 = 0
-        for L, sl in zip(self.lengths, self.slopes, strict=True):
-            if k0 >= n:
-                break
-            sl = np.array(sl, dtype=np.int64)
-            lin = np.where(hold, 0, sl)
-            a, b = max(k0, first), min(k0 + L, n)
+        L = np.array(self.lengths, dtype=np.int64)
+        S = np.array(self.slopes, dtype=np.int64).reshape(-1, 4)
+        lin = np.where(hold, 0, S)
+        k_at = np.concatenate([[0], np.cumsum(L)])  # segment j: samples k_at[j] .. k_at[j + 1] - 1
+        # the linear accumulators at each segment's start (and after the last); held: their own values
+        A_at = np.array(self.start, dtype=np.int64) + np.concatenate(
+            [np.zeros((1, 4), np.int64), np.cumsum(lin * L[:, None], axis=0)]
+        )
+        j = max(0, int(np.searchsorted(k_at, first, side="right")) - 1)
+        while j < len(L) and k_at[j] < n:
+            a, b = max(int(k_at[j]), first), min(int(k_at[j + 1]), n)
             if a < b:
-                t = np.arange(a - k0, b - k0, dtype=np.int64)[:, None]
-                out[a - first : b - first] = np.where(hold, sl, A + lin * t)
-            A = np.where(hold, sl, A + lin * L)
-            k0 += L
-        if k0 < n:
-            out[max(k0, first) - first :] = A
+                t = np.arange(a - k_at[j], b - k_at[j], dtype=np.int64)[:, None]
+                out[a - first : b - first] = np.where(hold, S[j], A_at[j] + lin[j] * t)
+            j += 1
+        if k_at[-1] < n:
+            end = np.where(hold, S[-1], A_at[-1]) if len(L) else A_at[-1]
+            out[max(int(k_at[-1]), first) - first :] = end
         return out >> ex
 
     def errors(self, n: int) -> np.ndarray:
