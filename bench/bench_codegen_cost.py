@@ -6,7 +6,18 @@ the longest run accepted, and at 100 kHz for 30 min, which the validator accepts
 runs the generator of BASE_COMMIT (extracted from git into a temporary package; the issue #12 "before")
 under an address-space cap, so a run that would take the machine's memory is reported as such.
 
-    .venv/bin/python bench/bench_codegen_cost.py [--base COMMIT] [--cap-mb MB]
+    .venv/bin/python bench/bench_codegen_cost.py [--base COMMIT] [--cap-mb MB] [--form gain_schedule]
+
+Gain-schedule form, issue #12 (the schedule's search and the report's bound), one run of
+`--form gain_schedule --base c6b42e5` (main before it) on the shared 2-core machine; seconds with the
+report (without it), peak RSS:
+
+| model | c6b42e5 | now |
+|---|---|---|
+| 100 Hz, 2 axes, 1 h | 7.96 s (1.99 s), 170 MB | 2.02 s (0.60 s), 102 MB |
+| 1 kHz, 2 axes, 1 h | 66.75 s (16.91 s), 172 MB | 5.80 s (2.49 s), 150 MB |
+| 1 kHz, 3 axes, 1 h | 70.54 s (16.48 s), 185 MB | 7.87 s (3.59 s), 168 MB |
+| 10 kHz, 2 axes, 839 s | 112.03 s (33.70 s), 179 MB | 9.72 s (3.21 s), 152 MB |
 """
 
 from __future__ import annotations
@@ -40,6 +51,7 @@ try:
     t0 = time.perf_counter()
     model = m.loads_model(text, source="bench.toml")
     files = e.emit(model)
+    out["emit_s"] = time.perf_counter() - t0
     r.report(model, form=None, arith="fixed", files=files, prefix="accelnav")
     out["ok"] = True
 except MemoryError:
@@ -58,11 +70,12 @@ print(json.dumps(out))
 Z_AXIS = '[[axes]]\nname = "z"\nc1 = 0.03\nc2 = -0.02\nT = 200.0\n\n[noise]'
 
 
-def model_text(rate: float, run_s: float, three_axes: bool = False) -> str:
+def model_text(rate: float, run_s: float, three_axes: bool = False, form: str = "covariance") -> str:
     text = (ROOT / "models" / "adxl250_default.toml").read_text()
     text = text.replace("rate_hz = 100.0", f"rate_hz = {rate:.1f}").replace(
         "max_run_s = 3600.0", f"max_run_s = {run_s!r}"
     )
+    text = text.replace('form = "covariance" ', f'form = "{form}" ')
     return text.replace("[noise]", Z_AXIS, 1) if three_axes else text
 
 
@@ -101,28 +114,31 @@ def fmt(r: dict) -> str:
         return f"{r['error']} ({r.get('seconds', float('nan')):.1f} s, {r.get('rss_mb', float('nan')):.0f} MB)"
     if "refused" in r:
         return f"refused in {r['seconds']:.2f} s, {r['rss_mb']:.0f} MB"
-    return f"{r['seconds']:.2f} s, {r['rss_mb']:.0f} MB"
+    return f"{r['seconds']:.2f} s ({r['emit_s']:.2f} s without the report), {r['rss_mb']:.0f} MB"
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", default=BASE_COMMIT, help="the previous generator's commit")
     ap.add_argument("--cap-mb", type=int, default=1500, help="address-space cap of the previous generator's child")
+    ap.add_argument("--form", default="covariance", choices=("covariance", "gain_schedule"))
     args = ap.parse_args(argv)
     from accelnav.codegen.ranges import MAX_RUN_SAMPLES
 
+    f = args.form
     cases = [
-        ("100 Hz, 2 axes, 1 h", model_text(100.0, 3600.0)),
-        ("1 kHz, 3 axes, 1 h", model_text(1000.0, 3600.0, True)),
+        ("100 Hz, 2 axes, 1 h", model_text(100.0, 3600.0, form=f)),
+        ("1 kHz, 2 axes, 1 h", model_text(1000.0, 3600.0, form=f)),
+        ("1 kHz, 3 axes, 1 h", model_text(1000.0, 3600.0, True, form=f)),
         (
             f"10 kHz, 2 axes, {MAX_RUN_SAMPLES / 1e4:.0f} s (longest accepted)",
-            model_text(10000.0, MAX_RUN_SAMPLES / 1e4),
+            model_text(10000.0, MAX_RUN_SAMPLES / 1e4, form=f),
         ),
-        ("100 kHz, 2 axes, 1800 s", model_text(100000.0, 1800.0)),
+        ("100 kHz, 2 axes, 1800 s", model_text(100000.0, 1800.0, form=f)),
     ]
     with tempfile.TemporaryDirectory(prefix="acn_base_") as tmp:
         base_pkg = extract_base(args.base, Path(tmp))
-        print("codegen + --report (fixed point, the model's covariance form), child process; previous generator")
+        print(f"codegen + --report (fixed point, {args.form} form), child process; previous generator")
         print(f"= {args.base} capped at {args.cap_mb} MB of address space; peak RSS of the child")
         print()
         print(f"| model | previous ({args.base}) | now | limit |")

@@ -203,6 +203,17 @@ def error_bound(
     k0 = 0
     if state:
         Es, Ee, Ea, Ev, Er, a_prev, k0 = (state[x] for x in ("Es", "Ee", "Ea", "Ev", "Er", "a_prev", "k0"))
+    from .gains import bound_loop
+
+    st = [Es, Ee, Ea, Ev, Er, a_prev]
+    bp = [omp, phi, d_dec, H2, T2, dH2, dT2, n_r_floor * lsb_r, n_v_floor * lsb_v, dz, d_y, d_a, d_e, Ts]
+    vb = np.broadcast_to(np.asarray(valid, dtype=bool), (n,))
+    ya, aa = np.broadcast_to(np.asarray(y_abs, dtype=np.float64), (n,)), np.broadcast_to(a_abs, (n,))
+    res = bound_loop(k0, bp, np.asarray(K)[:n], np.asarray(dK)[:n], ya, aa, d_w, vb, st)
+    if res is not None:  # the same recursion in C, the same doubles (its loop below)
+        if state is not None:
+            state.update(zip(("Es", "Ee", "Ea", "Ev", "Er", "a_prev"), st, strict=True), k0=k0 + n)
+        return res
     Kl, dKl, yl, al, vl = K.tolist(), np.asarray(dK).tolist(), np.asarray(y_abs).tolist(), np.asarray(a_abs), valid
     dwl = d_w.tolist()
     al = al.tolist()

@@ -284,12 +284,144 @@ void acn_bound(long n, const double *par, const double *P0, const double *bp, lo
         }
     }
 }
+
+/* codegen.bounds.error_bound's recursion over m samples given its per-sample inputs (K, dK (m, 4) in C
+ * coordinates, |y|, |a|, the w injection, valid): the same operations in the same order as its Python
+ * loop, so the same doubles. bp: omp, phi, d_dec, H2, T2, dH2, dT2, r floor, v floor, dz, d_y, d_a, d_e,
+ * Ts. st: Es, Ee, Ea, Ev, Er, a_prev in, and out at the end; k0 the first sample's index. out: (m, 4). */
+void acn_bound_loop(long m, long k0, const double *bp, const double *K, const double *dK, const double *y,
+                    const double *a, const double *dw, const unsigned char *valid, double *st, double *out)
+{
+    double omp = bp[0], phi = bp[1], d_dec = bp[2], H2 = bp[3], T2 = bp[4], dH2 = bp[5], dT2 = bp[6];
+    double rfl = bp[7], vfl = bp[8], dz = bp[9], d_y = bp[10], d_a = bp[11], d_e = bp[12], Ts = bp[13];
+    double Es = st[0], Ee = st[1], Ea = st[2], Ev = st[3], Er = st[4], a_prev = st[5];
+    long k;
+    for (k = 0; k < m; ++k) {
+        double Esm, Eem, a_c;
+        if (k + k0) {
+            Esm = Es + omp * Ee + d_dec;
+            Eem = phi * Ee + d_dec;
+        } else {
+            Esm = Es;
+            Eem = Ee;
+        }
+        a_c = a_prev + Ea;
+        Er = Er + Ev + H2 * Ea + dH2 * a_c + rfl;
+        Ev = Ev + T2 * Ea + dT2 * a_c + vfl;
+        if (valid[k]) {
+            const double *Kk = K + 4 * k, *dKk = dK + 4 * k;
+            double inj = dz + d_y + dw[k];
+            double yc = y[k] + Esm + inj;
+            Es = fabs(1.0 - Kk[2] - Kk[3]) * Esm + fabs(Kk[2] + Kk[3]) * inj + (dKk[2] + dKk[3]) * yc + d_a + d_e;
+            Ee = Eem + fabs(Kk[3]) * (Esm + inj) + dKk[3] * yc + d_e;
+            Ev += fabs(Kk[1]) * (Esm + inj) + dKk[1] * yc;
+            Er += fabs(Kk[0]) * (Esm + inj) + dKk[0] * yc;
+        } else {
+            Es = Esm;
+            Ee = Eem;
+        }
+        Ea = Es + Ee;
+        a_prev = a[k];
+        out[4 * k] = Er; out[4 * k + 1] = Ev / Ts; out[4 * k + 2] = Ea; out[4 * k + 3] = Ee;
+    }
+    st[0] = Es; st[1] = Ee; st[2] = Ea; st[3] = Ev; st[4] = Er; st[5] = a_prev;
+}
+
+/* codegen.gains._cone and the search of schedule() over m samples at once: the longest segment from the
+ * accumulators A (as doubles) whose every gain keeps an integer in its interval. K: (m, 4) the float64
+ * gains in C coordinates, row t = sample t of the segment (row 0 its start, sample k0 of the run); each
+ * in accumulator LSB, Kq = K / unit, with the tolerance of schedule()'s q_of, the same doubles:
+ * max(rel w |Kq|, floor) + half, w = clip((k0 + t + 1) / ramp, 0.05, 1) for K_r, K_v (1 without a ramp).
+ * par: unit[4], rel[4], floor[4], half[4], ramp, k0. hold[i]: a held gain (its value within tolerance at
+ * t = 0 .. L - 1), otherwise linear (its slope s: A + s t within tolerance at t = 1 .. L). lohi: in, the
+ * intervals of the lengths below L0 (4 lo then 4 hi); out, those of the longest length found. Returns
+ * that length, at most m - 1 (L0 - 1 if even L0 does not fit). */
+static void cone_q(const double *K, const double *par, long t, int i, double *kq, double *tq)
+{
+    double ramp = par[16], w = 1.0, r, x;
+    *kq = K[4 * t + i] / par[i];
+    r = par[4 + i];
+    if (ramp > 0.0 && par[17] < ramp && i < 2) {
+        w = ((double)((long)par[17] + t) + 1.0) / ramp;
+        w = w < 0.05 ? 0.05 : (w > 1.0 ? 1.0 : w);
+        r = r * w;
+    }
+    x = r * fabs(*kq);
+    *tq = (x > par[8 + i] ? x : par[8 + i]) + par[12 + i];
+}
+
+long acn_cone(long m, long L0, const double *K, const double *par, const double *A, const unsigned char *hold,
+              double *lohi)
+{
+    double lo[4], hi[4];
+    long L;
+    int i;
+    for (i = 0; i < 4; ++i) { lo[i] = lohi[i]; hi[i] = lohi[4 + i]; }
+    for (L = L0; L < m; ++L) {
+        double nlo[4], nhi[4];
+        for (i = 0; i < 4; ++i) {
+            double l, h, kq, tq;
+            if (hold[i]) {
+                cone_q(K, par, L - 1, i, &kq, &tq);
+                l = kq - tq;
+                h = kq + tq;
+            } else {
+                double d;
+                cone_q(K, par, L, i, &kq, &tq);
+                d = kq - A[i];
+                l = (d - tq) / (double)L;
+                h = (d + tq) / (double)L;
+            }
+            nlo[i] = l > lo[i] ? l : lo[i];
+            nhi[i] = h < hi[i] ? h : hi[i];
+            if (ceil(nlo[i]) > floor(nhi[i])) {
+                break;
+            }
+        }
+        if (i < 4) {
+            break;
+        }
+        for (i = 0; i < 4; ++i) { lo[i] = nlo[i]; hi[i] = nhi[i]; }
+    }
+    for (i = 0; i < 4; ++i) { lohi[i] = lo[i]; lohi[4 + i] = hi[i]; }
+    return L - 1;
+}
+
+/* schedule()'s account of m samples: the stored gain of gain i at sample t is the high word (>> ex[i])
+ * of acc = A[i] + sl[i] t (sl[i] = 0: A[i] throughout); err = |hi lsb - K| (the same doubles as numpy).
+ * maxerr[4] updated; head (nhead, 4): the errors of the first nhead samples. Returns 0, or 1 + the first
+ * gain whose high word leaves int32. */
+int acn_account(long m, const long long *A, const long long *sl, const long long *ex, const double *lsb,
+                const double *K, double *maxerr, long nhead, double *head)
+{
+    long t;
+    int i;
+    for (t = 0; t < m; ++t) {
+        for (i = 0; i < 4; ++i) {
+            long long hi = (A[i] + sl[i] * (long long)t) >> ex[i];
+            double e;
+            if (hi > 2147483647LL || hi < -2147483647LL) {
+                return 1 + i;
+            }
+            e = fabs((double)hi * lsb[i] - K[4 * t + i]);
+            if (e > maxerr[i]) { maxerr[i] = e; }
+            if (t < nhead) { head[4 * t + i] = e; }
+        }
+    }
+    return 0;
+}
 """
 _CDEF = """void acn_riccati(long n, const double *par, const double *P0, const unsigned char *valid, long keep,
     long nrows, const long *rows, double *K, double *sig, double *S_all, double *mprior, double *mpost,
     double *mc, double *rowP, double *rowK, double *rowsig, double *rowS, double *ext);
 void acn_bound(long n, const double *par, const double *P0, const double *bp, long nrows, const long *rows,
-    double *out);"""
+    double *out);
+void acn_bound_loop(long m, long k0, const double *bp, const double *K, const double *dK, const double *y,
+    const double *a, const double *dw, const unsigned char *valid, double *st, double *out);
+long acn_cone(long m, long L0, const double *K, const double *par, const double *A, const unsigned char *hold,
+    double *lohi);
+int acn_account(long m, const long long *A, const long long *sl, const long long *ex, const double *lsb,
+    const double *K, double *maxerr, long nhead, double *head);"""
 
 
 @functools.lru_cache(maxsize=1)
@@ -337,6 +469,27 @@ def bound_rows(key: tuple, n: int, bp: np.ndarray, rows) -> np.ndarray | None:
 
     C.acn_bound(n, ptr(par), ptr(P0), ptr(bp), len(ridx), ptr(ridx, "long *"), ptr(out))
     return out[: len(ridx)]
+
+
+def bound_loop(k0: int, bp, K, dK, y, a, dw, valid, st: list) -> np.ndarray | None:
+    """codegen.bounds.error_bound's recursion in C (see acn_bound_loop): (m, 4), and ``st`` (Es, Ee, Ea, Ev,
+    Er, a_prev) carried to its end; None without a C compiler (the caller then runs the Python one)."""
+    lib = _riccati_lib()
+    if lib is None:
+        return None
+    ffi, C = lib
+    m = len(y)
+    arrs = [np.ascontiguousarray(x, dtype=np.float64) for x in (bp, K, dK, y, a, dw)]
+    v = np.ascontiguousarray(valid, dtype=np.uint8)
+    s = np.array(st, dtype=np.float64)
+    out = np.empty((m, 4))
+
+    def ptr(x, t="double *"):
+        return ffi.cast(t, x.ctypes.data)
+
+    C.acn_bound_loop(m, k0, *(ptr(x) for x in arrs), ptr(v, "unsigned char *"), ptr(s), ptr(out))
+    st[:] = s.tolist()
+    return out
 
 
 def _all_rows(n: int, rows: tuple) -> tuple[list[int], list[int]]:
@@ -530,25 +683,30 @@ class Schedule:
 
     def gains_int(self, n: int, first: int = 0) -> np.ndarray:
         """(n - first, 4) the integers the C uses as K_r, K_v, K_a, K_e at samples first .. n-1 of an
-        uninterrupted run (the high words, in the gains' formats; held after the last segment)."""
+        uninterrupted run (the high words, in the gains' formats; held after the last segment). Only the
+        segments that meet first .. n - 1 are walked (the accumulators at every segment's start are
+        one cumulative sum): a chunk of a long run costs its own length."""
         ex = np.array(EXTRA, dtype=np.int64)
         hold = np.array(HOLD, dtype=bool)
         out = np.empty((n - first, 4), dtype=np.int64)
-        A = np.array(self.start, dtype=np.int64)
-        k0 = 0
-        for L, sl in zip(self.lengths, self.slopes, strict=True):
-            if k0 >= n:
-                break
-            sl = np.array(sl, dtype=np.int64)
-            lin = np.where(hold, 0, sl)
-            a, b = max(k0, first), min(k0 + L, n)
+        L = np.array(self.lengths, dtype=np.int64)
+        S = np.array(self.slopes, dtype=np.int64).reshape(-1, 4)
+        lin = np.where(hold, 0, S)
+        k_at = np.concatenate([[0], np.cumsum(L)])  # segment j: samples k_at[j] .. k_at[j + 1] - 1
+        # the linear accumulators at each segment's start (and after the last); held: their own values
+        A_at = np.array(self.start, dtype=np.int64) + np.concatenate(
+            [np.zeros((1, 4), np.int64), np.cumsum(lin * L[:, None], axis=0)]
+        )
+        j = max(0, int(np.searchsorted(k_at, first, side="right")) - 1)
+        while j < len(L) and k_at[j] < n:
+            a, b = max(int(k_at[j]), first), min(int(k_at[j + 1]), n)
             if a < b:
-                t = np.arange(a - k0, b - k0, dtype=np.int64)[:, None]
-                out[a - first : b - first] = np.where(hold, sl, A + lin * t)
-            A = np.where(hold, sl, A + lin * L)
-            k0 += L
-        if k0 < n:
-            out[max(k0, first) - first :] = A
+                t = np.arange(a - k_at[j], b - k_at[j], dtype=np.int64)[:, None]
+                out[a - first : b - first] = np.where(hold, S[j], A_at[j] + lin[j] * t)
+            j += 1
+        if k_at[-1] < n:
+            end = np.where(hold, S[-1], A_at[-1]) if len(L) else A_at[-1]
+            out[max(int(k_at[-1]), first) - first :] = end
         return out >> ex
 
     def errors(self, n: int) -> np.ndarray:
@@ -563,26 +721,42 @@ class Schedule:
         return self.errors(self.n)
 
 
-def _segment(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, L: int, hold: np.ndarray):
-    """Per-gain numbers (4,) of a segment of L samples starting at the accumulators A (Kq, tolq: the
-    samples from the segment's start on), or None if some gain leaves its tolerance. A linear gain: its
-    per-sample slope, checked on samples 0 .. L (the endpoint starts the next segment from the
-    accumulator); a held gain (hold[i]): its constant value over the segment, checked on samples
-    0 .. L - 1 (the next segment sets its own)."""
-    sl = np.floor((Kq[L] - A) / L + 0.5).astype(np.int64)
-    t = np.arange(L + 1, dtype=np.int64)[:, None]
-    err = np.abs((A + sl * t).astype(np.float64) - Kq[: L + 1])
-    ok = err <= tolq[: L + 1]
-    if not np.all(ok[:, ~hold]):
-        return None
-    if np.any(hold):
-        lo = np.max(Kq[:L, hold] - tolq[:L, hold], axis=0)
-        hi = np.min(Kq[:L, hold] + tolq[:L, hold], axis=0)
-        v = np.ceil(lo)
-        if np.any(v > hi):
-            return None
-        sl[hold] = v.astype(np.int64)
-    return sl
+def _cone(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, hold: np.ndarray, L0: int, lo0, hi0):
+    """The slopes a segment from the accumulators A may take, for the lengths L = L0 .. L0 + m - 1 given
+    the samples L0 - 1 .. L0 + m - 1 of it (Kq, tolq: m + 1 rows) and the intervals (lo0, hi0) of the
+    shorter lengths: (lo, hi) (m, 4), running. A linear gain's integer slope s keeps A + s t within
+    tolerance at t = 1 .. L (t = 0 is A itself, the previous segment's end): s lies in the intersection of
+    [(Kq[t] - tolq[t] - A) / t, (Kq[t] + tolq[t] - A) / t], a cone that narrows with t. A held gain
+    (hold[i]): its value lies within tolerance at t = 0 .. L - 1. A length fits while every interval
+    holds an integer."""
+    t = np.arange(L0, L0 + len(Kq) - 1, dtype=np.float64)[:, None]
+    d = Kq[1:] - A.astype(np.float64)
+    lo = np.where(hold, Kq[:-1] - tolq[:-1], (d - tolq[1:]) / t)
+    hi = np.where(hold, Kq[:-1] + tolq[:-1], (d + tolq[1:]) / t)
+    lo[0] = np.maximum(lo[0], lo0)
+    hi[0] = np.minimum(hi[0], hi0)
+    return np.maximum.accumulate(lo, axis=0), np.minimum.accumulate(hi, axis=0)
+
+
+def _longest(Kq: np.ndarray, tolq: np.ndarray, A: np.ndarray, hold: np.ndarray, L0: int, lohi: np.ndarray) -> int:
+    """The longest segment (< len(Kq)) from the accumulators A, given the samples 0 .. m - 1 of it and
+    ``lohi`` (8,), the intervals [lo (4), hi (4)] of the lengths below L0 that fit: L0 - 1 if L0 does
+    not fit; ``lohi`` is left at the intervals of the length returned. acn_cone does the same in C."""
+    lo, hi = _cone(Kq[L0 - 1 :], tolq[L0 - 1 :], A, hold, L0, lohi[:4], lohi[4:])
+    ok = np.all(np.ceil(lo) <= np.floor(hi), axis=1)
+    j = int(np.argmin(ok)) if not ok.all() else len(ok)
+    if j:
+        lohi[:4], lohi[4:] = lo[j - 1], hi[j - 1]
+    return L0 - 1 + j
+
+
+def _pick(lo, hi, K_end, A, L, hold) -> np.ndarray:
+    """The numbers of a segment of L samples within its intervals: a linear gain, the slope whose end lands
+    nearest the float64 gain K_end (sample L); a held gain, the lowest of its interval (as before the cone:
+    the firmware's departure from the float64 filter after a gap is sensitive to it, measured)."""
+    lo_i, hi_i = np.ceil(lo), np.floor(hi)
+    want = np.where(hold, lo_i, np.floor((K_end - A) / L + 0.5))
+    return np.clip(want, lo_i, hi_i).astype(np.int64)
 
 
 class _Window:
@@ -594,17 +768,25 @@ class _Window:
         self.P = _key(d)[-1]
         self.n, self.scale, self.W = n, scale, W
         self.w0 = 0
+        self.anchor = 0  # a reload starts here (the caller's current segment), at or before any request
         self.K = np.zeros((0, 4))
+        self.step = max(1, W // 64)
+        self.marks: dict = {}  # sample -> prior P, every `step` samples of the window (a reload starts there)
 
     def _load(self, k0: int) -> None:
         if k0 < self.w0:
             raise ValueError("the window only moves forward")
-        if k0 > self.w0:  # the prior at k0, from the window's start
-            r = _riccati(self.key0 + (self.P,), k0 - self.w0 + 1, None, 0, (k0 - self.w0,))
-            self.P = tuple(float(x) for x in r.row_P[r.rows.index(k0 - self.w0)])
-            self.w0 = k0
+        if k0 > self.w0:  # the prior at k0, from the nearest prior kept at or before it
+            c = max((j for j in self.marks if j <= k0), default=self.w0)
+            P = self.marks.get(c, self.P)
+            if c < k0:
+                r = _riccati(self.key0 + (P,), k0 - c + 1, None, 0, (k0 - c,))
+                P = tuple(float(x) for x in r.row_P[r.rows.index(k0 - c)])
+            self.P, self.w0 = P, k0
         m = min(self.W, self.n - k0)
-        self.K = np.asarray(_riccati(self.key0 + (self.P,), m, None, m, ()).K) * self.scale
+        r = _riccati(self.key0 + (self.P,), m, None, m, tuple(range(self.step, m, self.step)))
+        self.K = np.asarray(r.K) * self.scale
+        self.marks = {k0 + j: tuple(float(x) for x in r.row_P[r.rows.index(j)]) for j in range(self.step, m, self.step)}
 
     def __call__(self, k0: int, k1: int) -> np.ndarray:
         if k1 - k0 > self.W:  # a long replay (errors over the declared run): not through the window
@@ -613,7 +795,7 @@ class _Window:
                 raise ValueError("the window only moves forward")
             return np.asarray(r.K) * self.scale
         if k0 < self.w0 or k1 > self.w0 + len(self.K):
-            self._load(k0)
+            self._load(min(k0, self.anchor))
         return self.K[k0 - self.w0 : k1 - self.w0]
 
 
@@ -632,15 +814,22 @@ def riccati_chunks(d: AxisDesign, n: int, chunk: int):
 
 
 def schedule_of(
-    d: AxisDesign, n: int, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0, window: int = 1 << 19
+    d: AxisDesign,
+    n: int,
+    formats: tuple[QFormat, ...],
+    rel_tol=1e-4,
+    ramp: int = 0,
+    window: int = 1 << 19,
+    floor=0.0,
 ) -> Schedule:
     """:func:`schedule` of the Kalman gains of an uninterrupted run of n samples of ``d`` (C coordinates:
     K_v = Ts K_u), computed window by window: memory O(window) whatever n. Cached: codegen, its report
     and hil ask for the same schedule."""
-    key = (_key(d), n, tuple(formats), tuple(np.broadcast_to(rel_tol, (4,)).tolist()), ramp, window)
+    fl = tuple(np.broadcast_to(floor, (4,)).tolist())
+    key = (_key(d), n, tuple(formats), tuple(np.broadcast_to(rel_tol, (4,)).tolist()), ramp, window, fl)
     if key not in _SCHEDULES:
         scale = np.array([1.0, d.Ts, 1.0, 1.0])
-        sched = schedule(_Window(d, n, scale, window), formats, rel_tol, ramp, n=n, window=window)
+        sched = schedule(_Window(d, n, scale, window), formats, rel_tol, ramp, n=n, window=window, floor=fl)
         # replays start from sample 0: a fresh source
         _SCHEDULES[key] = dataclasses.replace(sched, source=_Window(d, n, scale, window))
         while len(_SCHEDULES) > 8:
@@ -652,16 +841,24 @@ _SCHEDULES: dict = {}
 
 
 def schedule(
-    K, formats: tuple[QFormat, ...], rel_tol=1e-4, ramp: int = 0, *, n: int | None = None, window: int = 1 << 19
+    K,
+    formats: tuple[QFormat, ...],
+    rel_tol=1e-4,
+    ramp: int = 0,
+    *,
+    n: int | None = None,
+    window: int = 1 << 19,
+    floor=0.0,
 ) -> Schedule:
     """Compress the gains K (an (N, 4) array, or a callable (k0, k1) -> K[k0:k1] over n samples) into a
     piecewise-linear integer schedule.
 
-    Tolerance per gain and sample: rel_tol |K[k]| + half an LSB of the accumulator's high word (the
-    floor of the high word adds up to one more LSB); for K_r and K_v, rel_tol ramps up from 1/20 over
-    the first ``ramp`` samples. Knots are chosen greedily: from each knot the segment grows by
-    doubling from the previous segment's length, then bisects; as the gains settle, the segments
-    lengthen geometrically (at most ``window`` - 1 samples each, the span held in memory at a time).
+    Tolerance per gain and sample: max(rel_tol |K[k]|, ``floor`` LSB) + half an LSB of the accumulator's
+    high word (the floor of the high word adds up to one more LSB); for K_r and K_v, rel_tol ramps up
+    from 1/20 over the first ``ramp`` samples. Knots are chosen greedily: from each knot the segment is
+    the longest for which every gain keeps a whole-number slope (held: value) within tolerance at every
+    sample, found in one pass over the narrowing interval of feasible slopes (:func:`_cone`); as the
+    gains settle, the segments lengthen (at most ``window`` // 2 samples each: the span held in memory).
     """
     if callable(K):
         get = K
@@ -678,79 +875,106 @@ def schedule(
     rel = np.broadcast_to(np.asarray(rel_tol, dtype=np.float64), (4,))
     half = np.where(ex > 0, 0.5 * 2.0**ex, 0.5)
     hold = np.array(HOLD, dtype=bool)
+    floor_q = np.broadcast_to(np.asarray(floor, dtype=np.float64), (4,)) * 2.0**ex  # in accumulator LSB
 
-    def q(k0, k1):
+    def q_of(k0, k1):
         """Kq and tolq of samples k0 .. k1 - 1."""
         Kq = get(k0, k1) / unit
         r = rel
-        if ramp:  # K_r, K_v feed r and u only, whose sigma grows with time: 20x tighter at the start
+        if ramp and k0 < ramp:  # K_r, K_v feed r and u only, whose sigma grows with time: 20x tighter at first
             w = np.clip((np.arange(k0, k1) + 1.0) / ramp, 0.05, 1.0)[:, None]
             r = rel * np.where(np.arange(4) < 2, w, 1.0)
-        return Kq, r * np.abs(Kq) + half
+        return Kq, np.maximum(r * np.abs(Kq), floor_q) + half
+
+    qc = [0, np.zeros((0, 4)), np.zeros((0, 4))]  # Kq, tolq of the samples from qc[0] on, computed ahead
+
+    def q(k0, k1):
+        """q_of(k0, k1), from a block of samples computed once (the search reads a segment's samples
+        again as its span widens)."""
+        if k0 < qc[0] or k1 > qc[0] + len(qc[1]):
+            qc[:] = [k0, *q_of(k0, min(n, max(k1, k0 + cap + 1)))]
+        return qc[1][k0 - qc[0] : k1 - qc[0]], qc[2][k0 - qc[0] : k1 - qc[0]]
 
     keep = min(n, KEEP)
     head = np.empty((keep, 4))
     max_err = np.zeros(4)
-    A = np.floor(q(0, 1)[0][0] + 0.5).astype(np.int64)
+    A = np.floor(q_of(0, 1)[0][0] + 0.5).astype(np.int64)
     A0 = A.copy()
     lengths, slopes = [], []
     k0, last = 0, 1
     cap = max(2, window // 2)
 
-    def account(k, m, acc):
-        """The stored gains of samples k .. k + m - 1 (accumulators acc): their error, kept."""
-        nonlocal max_err
-        hi = acc >> ex
-        if np.any(np.abs(hi) > 2**31 - 1):
-            i = int(np.argmax(np.any(np.abs(hi) > 2**31 - 1, axis=0)))
-            raise ValueError(f"gain {i} leaves its int32 format {formats[i]}")
-        err = np.abs(hi * lsb - get(k, k + m))
-        max_err = np.maximum(max_err, err.max(0))
-        if k < keep:
-            head[k : min(keep, k + m)] = err[: min(keep, k + m) - k]
+    lib = _riccati_lib()  # the search and the account in C (the same doubles), or numpy
+    par = np.concatenate([unit, rel, floor_q, half, [float(ramp), 0.0]])
+    hold8 = hold.astype(np.uint8)
 
-    def search(Kq, tolq, span):
-        """The longest segment found by doubling then bisecting within span; and whether the doubling
-        stopped at the span rather than at a failure."""
-        good, sl_good = 1, _segment(Kq, tolq, A, 1, hold)
-        step = max(1, last // 2)
-        while good + step <= span:
-            sl = _segment(Kq, tolq, A, good + step, hold)
-            if sl is None:
-                break
-            good, sl_good = good + step, sl
-            step *= 2
+    def account(k, m, A_k, sl):
+        """The stored gains of samples k .. k + m - 1 (accumulators A_k + sl t; sl = 0: A_k throughout):
+        their error, kept."""
+        nonlocal max_err
+        if lib is not None:
+            ffi, C = lib
+            i64 = [np.ascontiguousarray(x, dtype=np.int64) for x in (A_k, sl, ex)]
+            Kk = np.ascontiguousarray(get(k, k + m), dtype=np.float64)
+            me = np.ascontiguousarray(max_err, dtype=np.float64)
+            nh = max(0, min(keep - k, m))
+            hp = ffi.cast("double *", head[k:].ctypes.data) if nh else ffi.NULL
+            cs = [ffi.cast("long long *", x.ctypes.data) for x in i64]
+            bad = C.acn_account(m, *cs, ffi.cast("double *", lsb.ctypes.data), ffi.cast("double *", Kk.ctypes.data),
+                                ffi.cast("double *", me.ctypes.data), nh, hp)  # fmt: skip
+            max_err = me
         else:
-            if span < min(n - 1 - k0, cap):
-                return good, sl_good, True
-        while step > 1:
-            step //= 2
-            if good + step <= span:
-                sl = _segment(Kq, tolq, A, good + step, hold)
-                if sl is not None:
-                    good, sl_good = good + step, sl
-        return good, sl_good, False
+            hi = (A_k + sl * np.arange(m, dtype=np.int64)[:, None]) >> ex
+            big = np.abs(hi) > 2**31 - 1
+            bad = 1 + int(np.argmax(np.any(big, axis=0))) if big.any() else 0
+            if not bad:
+                err = np.abs(hi * lsb - get(k, k + m))
+                max_err = np.maximum(max_err, err.max(0))
+                if k < keep:
+                    head[k : min(keep, k + m)] = err[: min(keep, k + m) - k]
+        if bad:
+            raise ValueError(f"gain {bad - 1} leaves its int32 format {formats[bad - 1]}")
 
     while k0 < n - 1:
-        span = min(n - 1 - k0, cap, max(64, 4 * last))
-        while True:  # the gains of the samples the search may read, widened until it stops inside them
-            Kq, tolq = q(k0, k0 + span + 1)
-            good, sl_good, short = search(Kq, tolq, span)
-            if not short:
+        # the cone, from the segment's start until no integer is left in it, over spans that double from
+        # twice the last segment's length: the work is a few times the segment's length
+        if isinstance(get, _Window):
+            get.anchor = k0
+        top = min(n - 1 - k0, cap)  # the longest segment: the data, and the span held in memory
+        L0, chunk = 1, max(64, 2 * last)
+        lohi = np.array([-np.inf] * 4 + [np.inf] * 4)  # the intervals of the longest length so far
+        while True:
+            L1 = min(top, L0 + chunk - 1)
+            if lib is not None:  # samples 0 .. L1 of the segment
+                ffi, C = lib
+                Kq = np.ascontiguousarray(get(k0, k0 + L1 + 1), dtype=np.float64)
+                par[17] = k0
+                Ad = A.astype(np.float64)
+                ptr = [ffi.cast("double *", x.ctypes.data) for x in (Kq, par, Ad)]
+                good = int(C.acn_cone(len(Kq), L0, *ptr, ffi.cast("unsigned char *", hold8.ctypes.data),
+                                      ffi.cast("double *", lohi.ctypes.data)))  # fmt: skip
+                Kq = Kq[: good + 2] / unit  # the rows read below, in accumulator LSB as q_of gives them
+            else:
+                Kq, tolq = q(k0, k0 + L1 + 1)
+                good = _longest(Kq, tolq, A, hold, L0, lohi)
+            if good < L1 or L1 == top:
                 break
-            span = min(n - 1 - k0, cap, 4 * span)
-        if sl_good is None:  # one sample: the slope lands on the rounded next value
+            L0, chunk = L1 + 1, 2 * chunk
+        if good == 0:  # not even one sample (a float64 tie): the slope lands on the rounded next value
+            good = 1
             sl_good = np.floor(Kq[1] + 0.5).astype(np.int64) - A
             sl_good[hold] = np.floor(Kq[0, hold] + 0.5).astype(np.int64)
+        else:
+            sl_good = _pick(lohi[:4], lohi[4:], Kq[good], A, good, hold)
         lin = np.where(hold, 0, sl_good)
-        account(k0, good, np.where(hold, sl_good, A + lin * np.arange(good, dtype=np.int64)[:, None]))
+        account(k0, good, np.where(hold, sl_good, A), lin)
         A = np.where(hold, sl_good, A + lin * good)
         lengths.append(good)
         slopes.append(tuple(int(x) for x in sl_good))
         k0 += good
         last = good
     if k0 < n:
-        account(k0, n - k0, np.broadcast_to(A, (n - k0, 4)))
+        account(k0, n - k0, A, np.zeros(4, dtype=np.int64))
     start = np.array(slopes[0] if slopes else A, dtype=np.int64)
     start = tuple(int(x) for x in np.where(hold, start, A0))
     for sl in slopes:

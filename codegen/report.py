@@ -81,7 +81,8 @@ def report(model: Model, *, form: str | None, arith: str, files: dict[str, str],
         sched = _schedule_for(p) if form == "gain_schedule" else None
         if sched is not None:
             lines.append(
-                f"  gain schedule: {sched.n_segments} piecewise-linear segments ({sched.n_segments * 24} B), "
+                f"  gain schedule: {sched.n_segments} piecewise-linear segments ({(sched.n_segments + 1) * 24} B of "
+                "table with its closing row), "
                 f"max |K - K64| = " + ", ".join(f"{e:.3g}" for e in sched.max_error) + " [r, v=Ts u, a, eps]"
             )
         names = ("r [m]", "u [m/s]", "a [m/s^2]", "eps [m/s^2]")
