@@ -229,6 +229,22 @@ void acn_riccati(long n, const double *par, const double *P0, const unsigned cha
     for (i = 0; i < 4; ++i) { ext[4 + i] = sqrt(vmax[i]); }
 }
 
+/* The stated bound's predict of one sample, shared by acn_bound and acn_bound_loop: eps' error through
+ * its decay (none at sample 0: later is 0), then r's and v's through a's. */
+#define BOUND_PREDICT(later)                      \
+    do {                                          \
+        if (later) {                              \
+            Esm = Es + omp * Ee + d_dec;          \
+            Eem = phi * Ee + d_dec;               \
+        } else {                                  \
+            Esm = Es;                             \
+            Eem = Ee;                             \
+        }                                         \
+        a_c = a_prev + Ea;                        \
+        Er = Er + Ev + H2 * Ea + dH2 * a_c + rfl; \
+        Ev = Ev + T2 * Ea + dT2 * a_c + vfl;      \
+    } while (0)
+
 /* The data-free stated bound of codegen.bounds.error_bound (covariance form, every sample valid,
  * |y| <= ysig sqrt(S), |a| <= a_abs), the same recursion in the same order, fed by the Riccati above
  * sample by sample: its cost is constant per sample and nothing is stored but the asked-for rows.
@@ -260,16 +276,7 @@ void acn_bound(long n, const double *par, const double *P0, const double *bp, lo
             double ak = fabs(Kc[i]);
             dK[i] = (dc[i] + ak * dS) / Rq + ak * k22 + lsbK[i];
         }
-        if (k) {
-            Esm = Es + omp * Ee + d_dec;
-            Eem = phi * Ee + d_dec;
-        } else {
-            Esm = Es;
-            Eem = Ee;
-        }
-        a_c = a_prev + Ea;
-        Er = Er + Ev + H2 * Ea + dH2 * a_c + rfl;
-        Ev = Ev + T2 * Ea + dT2 * a_c + vfl;
+        BOUND_PREDICT(k);
         injk = inj + S * lw;
         yc = ysig * sqrt(S) + Esm + injk;
         Es = fabs(1.0 - Kc[2] - Kc[3]) * Esm + fabs(Kc[2] + Kc[3]) * injk + (dK[2] + dK[3]) * yc + d_a + d_e;
@@ -298,16 +305,7 @@ void acn_bound_loop(long m, long k0, const double *bp, const double *K, const do
     long k;
     for (k = 0; k < m; ++k) {
         double Esm, Eem, a_c;
-        if (k + k0) {
-            Esm = Es + omp * Ee + d_dec;
-            Eem = phi * Ee + d_dec;
-        } else {
-            Esm = Es;
-            Eem = Ee;
-        }
-        a_c = a_prev + Ea;
-        Er = Er + Ev + H2 * Ea + dH2 * a_c + rfl;
-        Ev = Ev + T2 * Ea + dT2 * a_c + vfl;
+        BOUND_PREDICT(k + k0);
         if (valid[k]) {
             const double *Kk = K + 4 * k, *dKk = dK + 4 * k;
             double inj = dz + d_y + dw[k];
