@@ -117,7 +117,9 @@ def _floors(p: AxisPlan) -> tuple[int, int]:
         fcv = max(v[n].fmt.frac for n in ("cv", "cv_f") if n in v)
         n_r = (fv > fr) + (fcr + fw > fr) + (fH2 + fy > fr)
         return n_r, (fcv + fw > fv) + (fT2 + fy > fv)
-    n_r = (fv > fr) + (v["Kr"].fmt.frac + fy > fr) + (p.consts["H2"][1] != v["Kr"].fmt)
+    # Ts^2/2 a: in K_r y's accumulator, or onto v before v's shift (its format Q.(fv - fy)), or its own shift
+    fH2 = p.consts["H2"][1]
+    n_r = (fv > fr) + (v["Kr"].fmt.frac + fy > fr) + (fH2 != v["Kr"].fmt and fH2.frac + fy != fv)
     return n_r, (v["Kv"].fmt.frac + fy > fv) + (p.consts["T2"][1] != v["Kv"].fmt)
 
 

@@ -663,7 +663,9 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     eps_bar + 1/2 LSB of its high word (int64 in Q.(fy+32)): the high word of eb is eps - eps_bar
     rounded, so the predict needs neither the rounding nor eps_bar, and y takes eps_bar with z; r and
     v = Ts u int64 in one format Q.fr; K_a, K_e int32 each with its own scaling, K_r (K_v) in the format
-    of Ts^2/2 (Ts^2). Products are 32x32 -> 64 (one SMULL or SMLAL); every shift is a floor except the
+    of Ts^2/2 (Ts^2), or Ts^2/2 in v's product format Q.(fv - fy) (codegen.ranges): then w = v + Ts^2/2 a
+    starts both increments, r's shifted to K_r y's format, v's with (Ts^2 - Ts^2/2) a, the same integer
+    sum as Ts^2 a. Products are 32x32 -> 64 (one SMULL or SMLAL); every shift is a floor except the
     one that makes a (round to nearest). r and v are clamped once per step on their high words; nothing
     else can overflow over the declared ranges.
     """
@@ -683,6 +685,11 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
         post[n] = "" if fc == fK[n] else " + " + _sh(f"(int64_t){P}_{c} * a", fc + fy - ft[n], conv_c)
     if any(p.design.x0[:3]):
         raise ValueError("the merged predict needs r, u, a of x0 at zero")
+    # Ts^2/2 in v's product format (codegen.ranges, when K_r's would leave it too few bits): w = v + Ts^2/2 a
+    # in Q.fv (one SMLAL) starts both increments, r's shifted, v's with the rest (Ts^2 - Ts^2/2) a
+    a_in_v = bool(post["r"]) and p.consts["H2"][1].frac + fy == fv
+    if a_in_v:
+        post["r"] = ""
     # r's increment v + Ts^2/2 a + K_r y in one accumulator (Q.fp, one SMLAL each) when v's format is at
     # least as fine and the sum cannot leave int64: v at its clamp, a and y at their range bounds
     fp = fK["r"] + fy
@@ -692,6 +699,10 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     merge_v = fv >= fp and p_max * 2.0**fp < 2.0**62
     # v's own increment Ts^2 a + K_v y accumulated onto v when it is already in v's format (the same sum)
     onto_v = not post["v"] and fK["v"] + fy == fv
+    if a_in_v and not (merge_v and onto_v and (v_hi + p.consts["H2"][0] * p.vars["a"].bound) * 2.0**fv < 2.0**63):
+        raise ValueError("Ts^2/2 a onto v needs v in r's and v's increments and v + Ts^2/2 a within int64")
+    # the constant of a in v's increment: Ts^2, or Ts^2 - Ts^2/2 (the same integer sum) after w
+    cq = f"({P}_T2 - {P}_H2)" if a_in_v else f"{P}_T2"
     eh = "(int32_t)(e >> 32)"  # eps - eps_bar, rounded: the high word of eb
     predict = (
         f"e = acn_mac(e, -{P}_OMP, {eh}); /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar): Q.{fo + fy} */"
@@ -731,29 +742,47 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
         "     * k = 0 both increments are zero (x0 has r = u = a = 0), so no test of k is needed */",
     ]
     if merge_v or onto_v:
-        L += [f"    ACN_LD64(lo, hi, s, {T}_t, v);", "    v = (int64_t)(((uint64_t)hi << 32) | lo);"]
+        L += [f"    ACN_LD64(lo, hi, s, {T}_t, v);"]
+        L += [] if a_in_v and not follow else ["    v = (int64_t)(((uint64_t)hi << 32) | lo);"]
     # (accumulator's start, whether Ts^2/2 a (Ts^2 a) goes into it)
-    if merge_v:
-        p0 = (_sh("v", fv - fp, f"Q.{fv} -> Q.{fp}"), not post["r"])
+    if a_in_v and not follow:  # w, its shift and K_r y in one asm (the update below): no register copies
+        p0 = ("", False)
     else:
-        p0 = ("0", False) if post["r"] else ("0", True)
+        if a_in_v:
+            L += [f"    v = acn_mac(v, {P}_H2, a); /* w = v + Ts^2/2 a, Q.{fv}: both increments start from it */"]
+        if merge_v:
+            p0 = (_sh("v", fv - fp, f"Q.{fv} -> Q.{fp}"), not post["r"] and not a_in_v)
+        else:
+            p0 = ("0", False) if post["r"] else ("0", True)
     q0 = ("v", True) if onto_v else ("0", not post["v"])
     macs = {}
-    for n, (start, with_a), c, kn in (("p", p0, "H2", "Kr"), ("q", q0, "T2", "Kv")):
+    for n, (start, with_a), c, kn in (("p", p0, f"{P}_H2", "Kr"), ("q", q0, cq, "Kv")):
         what = {"p": "r's increment", "q": "v + Ts^2 a + K_v y" if onto_v else "v's increment"}[n]
         what += f", Q.{fp if n == 'p' else fK['v'] + fy}"
         if follow:  # the Ts^2 a term before the update (a skipped sample has only it)
-            L += [f"    {n} = acn_mac({start}, {P}_{c}, a);" if with_a else f"    {n} = {start};"]
+            L += [f"    {n} = acn_mac({start}, {c}, a);" if with_a else f"    {n} = {start};"]
             macs[n] = f"acn_mac({n}, {kn}, y); /* {what} */"
         else:  # both products in one asm: no register copies between them
-            mac = f"acn_mac2({start}, {P}_{c}, a, {kn}, y)" if with_a else f"acn_mac({start}, {kn}, y)"
+            mac = f"acn_mac2({start}, {c}, a, {kn}, y)" if with_a else f"acn_mac({start}, {kn}, y)"
             macs[n] = f"{mac}; /* {what} */"
     upd = [
         "    /* y = z - H x = z - a - eps, eps rounded = high word of eb + eps_bar: zb = z - eps_bar */",
         f"    y = (int32_t)((uint32_t)zb - (uint32_t)a - (uint32_t){eh});",
         "    /* x = x + K y */",
         f"    e += {_sh('(int64_t)Ke * y', fK['e'] - 32, conv['e'])};",
-        f"    p = {macs['p']}",
+        *(
+            [f"    p = {macs['p']}"]
+            if p0[0]
+            else [
+                "    {",
+                "        uint32_t plo, phi;",
+                f"        /* w = v + Ts^2/2 a in Q.{fv}; p = (w >> {fv - fp}: Q.{fv} -> Q.{fp}, floor) + K_r y */",
+                f"        ACN_MAC_SHR_MAC(lo, hi, {P}_H2, a, {fv - fp}, Kr, y, plo, phi);",
+                f"        p = (int64_t)(((uint64_t)phi << 32) | plo); /* r's increment, Q.{fp} */",
+                "        v = (int64_t)(((uint64_t)hi << 32) | lo);",
+                "    }",
+            ]
+        ),
         f"    q = {macs['q']}",
         f"    s->a = a + (int32_t)ACN_RSHR(acn_mul(Ka, y), {sa}); /* Q.{fK['a'] + fy} -> Q.{fy}, round */"
         if not 1 <= sa <= 32
@@ -915,6 +944,27 @@ static inline int64_t acn_mac2(int64_t acc, int32_t a, int32_t b, int32_t c, int
     return acc + (int64_t)a * b + (int64_t)c * d;
 #endif
 }
+
+/* w += c a on w's two words (lo, hi) in place, then p = (w >> s) + k y (p's words plo, phi; the shift
+ * a floor, 1 <= s <= 31): two SMLAL and three shifts in one asm, w left in its registers for a later
+ * SMLAL (apart, gcc copies w's and p's register pairs between them); the same integers everywhere. */
+#if defined(__arm__) && defined(__thumb2__)
+#define ACN_MAC_SHR_MAC(lo, hi, c, a, s, k, y, plo, phi)                                                 \
+    __asm__("smlal %0, %1, %4, %5\n\tlsr %2, %0, #%c6\n\torr %2, %2, %1, lsl #%c7\n\tasr %3, %1, #%c6\n\t" \
+            "smlal %2, %3, %8, %9"                                                                      \
+            : "+r"(lo), "+r"(hi), "=&r"(plo), "=&r"(phi)                                               \
+            : "r"(c), "r"(a), "i"(s), "i"(32 - (s)), "r"(k), "r"(y))
+#else
+#define ACN_MAC_SHR_MAC(lo, hi, c, a, s, k, y, plo, phi)                                                 \
+    do {                                                                                                \
+        int64_t w_ = (int64_t)(((uint64_t)(hi) << 32) | (lo)) + (int64_t)(c) * (a);                     \
+        int64_t p_ = (w_ >> (s)) + (int64_t)(k) * (y);                                                  \
+        (lo) = (uint32_t)w_;                                                                            \
+        (hi) = (uint32_t)((uint64_t)w_ >> 32);                                                          \
+        (plo) = (uint32_t)p_;                                                                           \
+        (phi) = (uint32_t)((uint64_t)p_ >> 32);                                                         \
+    } while (0)
+#endif
 
 /* a + ((t + 2^(s-1)) >> s) in 32 bits (wrapping as the int32 sum does), 1 <= s <= 32, from t's two
  * words: t >> s = hi 2^(32-s) + lo >> s, and the half added before the floor is the carry of

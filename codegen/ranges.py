@@ -338,12 +338,18 @@ def plan_axis(model: Model, axis: int | str, form: str | None = None) -> AxisPla
         _plan_schedule_follow(p)
     # Ts^2/2 shares the format of K_r, Ts^2 that of K_v: r += v + (Ts^2/2 a + K_r y) needs one shift
     # (when that leaves Ts^2/2 fewer than 20 bits, it gets its own format and a second shift)
-    # (gain schedule: 18 bits, its K_r format being wide enough for the gains after a gap)
+    # (gain schedule: 18 bits, its K_r format being wide enough for the gains after a gap; there
+    # Ts^2/2 too small for K_r's format takes v's product format Q.(fv - fy) when v is in K_v's and it
+    # keeps 18 bits there: Ts^2/2 a accumulates onto v before v is shifted into r's increment, one
+    # SMLAL and no shift of its own, codegen.emit_c._core_fixed)
     min_bits = 18 if form == "gain_schedule" else 20
+    fva = p.vars["v"].fmt.frac - fy.frac
+    gs_v = form == "gain_schedule" and p.vars["Kv"].fmt.frac == fva and fva >= p.vars["Kr"].fmt.frac
     for nm, kn, val in (("H2", "Kr", Ts * Ts / 2.0), ("T2", "Kv", Ts * Ts)):
         f = p.vars[kn].fmt
         if val * 2**f.frac < 2**min_bits:
-            f = const_format(val)
+            on_v = nm == "H2" and gs_v and 2**min_bits <= val * 2**fva < 2**31
+            f = QFormat(32, fva) if on_v else const_format(val)
         p.consts[nm] = (val, f)
         for fm in (f, p.vars[kn].fmt):
             if fm.frac + fy.frac - fr.frac < 1:
