@@ -33,6 +33,9 @@ Gain-schedule table, issue #12 (main c6b42e5 measured at the start of the same s
 generator): 100 Hz 94.5 -> 94.2 instructions per step, flash 13648 -> 9440 B per axis, of which table
 8424 -> 4272 B (axis x; y 4440); 1 kHz 106.8 -> 105.6, flash 27622 -> 14490 B, table 26328 -> 9912 B
 (y 8856); RAM 96 B both. The 2 KB table target is not met.
+Gain schedule at 1 kHz, Ts^2/2 a onto v before v's shift (main 0b32d51 -> this generator, same run):
+82.8 -> 78.8 instructions per step, flash 14448 -> 14426 B per axis; 100 Hz unchanged (78.3, 9398 B);
+RAM 88 B both.
 """
 
 from __future__ import annotations
