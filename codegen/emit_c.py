@@ -438,6 +438,11 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
     f2 = p.consts["OMP2"][1].frac
     terms_ce = [("+", "(int64_t)s->ce", fce), ("+", f"(int64_t)-{P}_OMP2 * s->ce", f2 + fce)] + t["ce"][1][1:]
     ce_h = ce_sum()
+    if ce_h is None:  # c_e in a format too fine for that (the fine one, codegen.ranges._plan_fine): one
+        # saturating 32-bit add of c_e and the rest, when the rest fits int32 for any int32 inputs
+        h = _hsum(p, P, fce, terms_ce[1:])
+        if h is not None and h[1] < 2**31 - 1:
+            ce_h = f"acn_add_sat32(s->ce, {h[0]}, &s->overflow)"
 
     def decay(name):
         ft, terms = t[name]
@@ -466,6 +471,8 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
         f"        s->ca = {sat('ca')};",
         "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
         f"        s->ce = {ce_h}; /* fits int32 for any c_e, P_ae: checked at the corners */"
+        if ce_h and "ce" in p.sat_free
+        else f"        s->ce = {ce_h};"
         if ce_h
         else f"        s->ce = (int32_t){_acc(*t['ce'])}; /* fits int32 for any c_e, P_ae: ranges._predict_sat_free */"
         if "ce" in p.sat_free
@@ -537,6 +544,13 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         f"    s->a += (int32_t)ACN_RSHR(acn_mul(ca, w), {pr['a'] - fy}); /* Q.{pr['a']} -> Q.{fy}, round */",
         f"    s->e = acn_mac(s->e, ce, w); /* Q.{fe}, exact */"
         if pr["e"] == fe
+        # c_e in a format finer than the one whose product with w lands in eps's (its fine format,
+        # codegen.ranges._plan_fine): floored to that one, which is no finer than its coarse format,
+        # so eps takes c_e to within one LSB of its coarse format and still in one SMLAL; the carried c_e, S and
+        # K_e keep the fine format
+        else f"    s->e = acn_mac(s->e, ce >> {pr['e'] - fe}, w); /* c_e Q.{p.f('ce')} -> Q.{fe - fw}, floor;"
+        f" Q.{fe}, exact */"
+        if pr["e"] > fe and fe - fw >= p.vars.get("ce_c", p.vars["ce"]).fmt.frac
         else f"    s->e += {_sh('acn_mul(ce, w)', pr['e'] - fe, 'Q.{} -> Q.{}'.format(pr['e'], fe))};",
         "    /* P = P - c c' / S: c_i -= c_i kappa with kappa = (S - R) / S in [0, 1), Q0.31;",
         "     * P_ie -= c_i K_e with K_e = c_e / S */",
