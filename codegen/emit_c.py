@@ -142,7 +142,7 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
     if p.form == "gain_schedule":
         f.append(("uint32_t", "k", "samples since init (bit 31: following a skip, codegen.follow)"))
     elif p.form == "covariance":
-        f.append(("uint32_t", "k", "2 x samples since init, + 1 while c_r, c_v, c_a are in their fine formats"))
+        f.append(("uint32_t", "k", "2 x samples since init, + 1 while c_r, c_v, c_a, c_e are in their fine formats"))
     else:
         f.append(("uint32_t", "k", "samples since init"))
     f.append(("uint32_t", "overflow", "saturations so far"))
@@ -576,7 +576,7 @@ def _core_cov(p: AxisPlan, P: str, T: str) -> list[str]:
     """Body of T_core for the covariance form: as _core_fixed, with the update of _gains_cov inline
     (the prior block is read once into registers; the predict of the block stays a function of its own).
 
-    The common path: a valid sample with c_r, c_v, c_a in their fine formats (bit 0 of k set,
+    The common path: a valid sample with c_r, c_v, c_a, c_e in their fine formats (bit 0 of k set,
     codegen.ranges._plan_fine); a skip, or a block still in its coarse formats, goes to T_core_c."""
     L = [
         "    int32_t a;",
@@ -631,9 +631,9 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
 
 
 def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
-    """Body of T_core_c (out of line): a skipped sample, or a sample while c_r, c_v, c_a are in their
+    """Body of T_core_c (out of line): a skipped sample, or a sample while c_r, c_v, c_a, c_e are in their
     coarse formats (the ones that hold them through a gap). A skip first moves a fine block to the
-    coarse formats (rounded); after an update whose c_r, c_v, c_a are all within the switch levels
+    coarse formats (rounded); after an update whose c_r, c_v, c_a, c_e are all within the switch levels
     p.theta (codegen.ranges._plan_fine) they move to the fine formats (exact: a left shift that fits)."""
     pf = fine_view(p)
     to_c, to_f, test = [], [], []
@@ -647,7 +647,7 @@ def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
         # |c| <= th as one unsigned compare; th 2^dd fits the fine format (it holds GUARD theta)
         test.append(f"(uint32_t)s->{nm} + {th}u <= {2 * th}u")
     back = [
-        "        /* back to the fine formats once c_r, c_v, c_a are within the uninterrupted run's maxima */",
+        "        /* back to the fine formats once c_r, c_v, c_a, c_e are within their switch levels */",
         "        if (" + " && ".join(test) + ") {",
         *to_f,
         "            k |= 1u;",
@@ -1333,14 +1333,14 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
     if p.form == "covariance":
         # the predict of the covariance block in a function of its own: its registers do not crowd the
-        # states'; twice: c_r, c_v, c_a in their fine formats (the common path) and in their coarse ones
+        # states'; twice: c_r, c_v, c_a, c_e in their fine formats (the common path) and in their coarse ones
         for sfx, q in (("", fine_view(p)), ("_c", p)):
             src += [f"static void {T}_ppredict{sfx}({T}_t *s)", "{"]
             src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(q, P)]
             src += ["}", ""]
             src += [f"static void {T}_pupdate{sfx}({T}_t *s, int32_t y)", "{"] + _gains_cov(q, P) + ["}", ""]
         src += [
-            "/* One sample with c_r, c_v, c_a in their coarse formats, or a skip (rare: out of line). */",
+            "/* One sample with c_r, c_v, c_a, c_e in their coarse formats, or a skip (rare: out of line). */",
             f"static __attribute__((noinline)) void {T}_core_c({T}_t *s, int32_t z, bool valid)",
             "{",
         ]

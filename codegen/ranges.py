@@ -112,7 +112,7 @@ class AxisPlan:
     v_step: float = 0.0  # largest |v| increment of one step
     conv_shift: int = -1  # analog fast path: code << conv_shift (-1: the int64 path)
     gap_run: GainRun | None = None  # gain schedule: maxima over gaps of `gap` samples (codegen.follow)
-    theta: dict = field(default_factory=dict)  # covariance: c_r, c_v, c_a levels of the switch to fine
+    theta: dict = field(default_factory=dict)  # covariance: c_r, c_v, c_a, c_e levels of the switch to fine
 
     def f(self, name: str) -> int:
         return self.vars[name].fmt.frac
@@ -506,7 +506,7 @@ FINE = ("cr", "cv", "ca", "ce")  # the carried entries with a second, finer form
 
 
 def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
-    """Fine formats of c_r, c_v and c_a (and S, which shares c_a's) for the samples away from gaps.
+    """Fine formats of c_r, c_v, c_a and c_e (and S, which shares c_a's) for the samples away from gaps.
 
     The formats above hold the block during and after a gap of up to MAX_GAP_S, where c_r, c_v and
     c_a reach 10 to 2000 times what they are in an uninterrupted run; in those formats their steady
@@ -522,6 +522,11 @@ def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
     hold that condition (the earlier the switch after a gap, the fewer samples the coarse formats
     round), halved back where a trajectory would break it. A skipped sample moves the block to the
     coarse formats before its predict.
+
+    c_e's coarse format is set by its prior P0 (P_ae + P_ee at sample 0, 1e5 times its steady value
+    at 1 kHz, where it kept ~12 bits and held eps at 2e-4 sigma on stress data): the uninterrupted run
+    from P0 is one more trajectory (:func:`_start_run`), so it starts coarse and switches once c_e has
+    come down to theta_e, which starts at the largest |c_e| of the run after its first 1024 samples.
     """
     from .gains import _key
 
@@ -616,7 +621,7 @@ def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
     # the uninterrupted run switches to fine once c_e, whose prior P0 sets its coarse format, has come
     # down from it: the samples before that run the coarse path, and c_e's level starts at the largest
     # |c_e| after a settling stretch of the run (c_r, c_v, c_a: at their largest over the whole run)
-    head, tail = _start_run(d, p.n_run, max(1024, 4 * gap + 50))
+    head, tail = _start_run(d, p.n_run, 1024)
     theta0 = np.asarray(g.max_c, dtype=float) * cs
     theta0[3] = tail[3] if p.n_run > len(head) else float(np.abs(head[-1, 0, 3]))
     lengths = sorted({1 << j for j in range(0, max(1, gap).bit_length(), 4) if 1 << j < gap} | {gap})
@@ -684,7 +689,7 @@ def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
 
 
 def fine_view(p: AxisPlan) -> AxisPlan:
-    """The plan with the fine formats of c_r, c_v, c_a and S (and R in S's) under their usual names:
+    """The plan with the fine formats of c_r, c_v, c_a, c_e and S (and R in S's) under their usual names:
     what the covariance form's common path is emitted from."""
     import copy
 
