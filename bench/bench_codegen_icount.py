@@ -36,6 +36,9 @@ generator): 100 Hz 94.5 -> 94.2 instructions per step, flash 13648 -> 9440 B per
 Gain schedule at 1 kHz, Ts^2/2 a onto v before v's shift (main 0b32d51 -> this generator, same run):
 82.8 -> 78.8 instructions per step, flash 14448 -> 14426 B per axis; 100 Hz unchanged (78.3, 9398 B);
 RAM 88 B both.
+Covariance form with c_e in a fine format away from gaps (issue #12's margin; main 0b32d51 in its own
+venv, same run): 298.0 -> 298.2 at 100 Hz, 298.0 -> 298.9 at 1 kHz (the first ~40 samples, until c_e
+settles, take the out-of-line path); RAM 64 B per axis both; flash 3384 -> 3436 B per axis at 100 Hz.
 """
 
 from __future__ import annotations

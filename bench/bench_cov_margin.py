@@ -17,6 +17,10 @@ shock r, u, a 3.6e-5, 6.1e-5, 1.08e-4 sigma (2.65e-4, 2.32e-4, 2.68e-4), eps unc
 now the largest. Seeds 1 2 4 5 6 7 8 10 12 13: 4.9x (stress, eps 2.06e-4, the same before: c_e keeps
 the format its initial value sets); shock 5.9x. At 100 Hz (--rate 100 --duration 10) 16.7x (11.0x).
 adxl202_duty at 100 Hz: 3.0x (2.8x), a on shock at 3.4e-4, a limit this change does not touch.
+Then c_e in a fine format too (away from gaps, from its settling on), against main 0b32d51 in the same run
+(--baseline): 1 kHz, seeds 1..13: 9.3x (4.9x), stress eps 3.0e-5 sigma (2.06e-4), shock 9.3x (5.9x) now
+held by a at 1.08e-4; 100 Hz, --duration 10, seeds 11 9 3: 22.5x (16.7x); adxl202_duty at 100 Hz,
+--duration 3, seeds 11 9 3: 5.6x (5.5x), a at 1.8e-4.
 """
 
 from __future__ import annotations

@@ -79,8 +79,10 @@ def gain_errors(p: AxisPlan, schedule=None, K: np.ndarray | None = None) -> np.n
         return np.asarray(schedule.max_error)
     R = p.design.R
     kmax = np.array([p.vars["K" + n].bound for n in "rvae"]) if K is None else np.abs(K)
-    # c_r, c_v, c_a (and S) in their coarse formats, the LSB they have through and after a gap: away from
-    # gaps the C carries them finer (codegen.ranges._plan_fine), so this holds for both
+    # c_r, c_v, c_a, c_e (and S) in their coarse formats, the LSB they have through and after a gap: away
+    # from gaps the C carries them finer (codegen.ranges._plan_fine), so this holds for both (the eps
+    # update reads a fine c_e floored to a format no finer than its coarse one: one LSB of that, within
+    # the CONTRACTION_LSB taken here)
     dc = CONTRACTION_LSB * np.array([p.vars[n].fmt.lsb for n in ("cr", "cv", "ca", "ce")])
     dS = CONTRACTION_LSB * (p.vars["ca"].fmt.lsb + p.vars["ce"].fmt.lsb)
     # reciprocal: relative 2^-28, and the shifts that align it drop up to 7 of its 30 bits

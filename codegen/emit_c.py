@@ -142,7 +142,7 @@ def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
     if p.form == "gain_schedule":
         f.append(("uint32_t", "k", "samples since init (bit 31: following a skip, codegen.follow)"))
     elif p.form == "covariance":
-        f.append(("uint32_t", "k", "2 x samples since init, + 1 while c_r, c_v, c_a are in their fine formats"))
+        f.append(("uint32_t", "k", "2 x samples since init, + 1 while c_r, c_v, c_a, c_e are in their fine formats"))
     else:
         f.append(("uint32_t", "k", "samples since init"))
     f.append(("uint32_t", "overflow", "saturations so far"))
@@ -438,6 +438,11 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
     f2 = p.consts["OMP2"][1].frac
     terms_ce = [("+", "(int64_t)s->ce", fce), ("+", f"(int64_t)-{P}_OMP2 * s->ce", f2 + fce)] + t["ce"][1][1:]
     ce_h = ce_sum()
+    if ce_h is None:  # c_e in a format too fine for that (the fine one, codegen.ranges._plan_fine): one
+        # saturating 32-bit add of c_e and the rest, when the rest fits int32 for any int32 inputs
+        h = _hsum(p, P, fce, terms_ce[1:])
+        if h is not None and h[1] < 2**31 - 1:
+            ce_h = f"acn_add_sat32(s->ce, {h[0]}, &s->overflow)"
 
     def decay(name):
         ft, terms = t[name]
@@ -466,6 +471,8 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
         f"        s->ca = {sat('ca')};",
         "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
         f"        s->ce = {ce_h}; /* fits int32 for any c_e, P_ae: checked at the corners */"
+        if ce_h and "ce" in p.sat_free
+        else f"        s->ce = {ce_h};"
         if ce_h
         else f"        s->ce = (int32_t){_acc(*t['ce'])}; /* fits int32 for any c_e, P_ae: ranges._predict_sat_free */"
         if "ce" in p.sat_free
@@ -537,6 +544,13 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         f"    s->a += (int32_t)ACN_RSHR(acn_mul(ca, w), {pr['a'] - fy}); /* Q.{pr['a']} -> Q.{fy}, round */",
         f"    s->e = acn_mac(s->e, ce, w); /* Q.{fe}, exact */"
         if pr["e"] == fe
+        # c_e in a format finer than the one whose product with w lands in eps's (its fine format,
+        # codegen.ranges._plan_fine): floored to that one, which is no finer than its coarse format,
+        # so eps takes c_e to within one LSB of its coarse format and still in one SMLAL; the carried c_e, S and
+        # K_e keep the fine format
+        else f"    s->e = acn_mac(s->e, ce >> {pr['e'] - fe}, w); /* c_e Q.{p.f('ce')} -> Q.{fe - fw}, floor;"
+        f" Q.{fe}, exact */"
+        if pr["e"] > fe and fe - fw >= p.vars.get("ce_c", p.vars["ce"]).fmt.frac
         else f"    s->e += {_sh('acn_mul(ce, w)', pr['e'] - fe, 'Q.{} -> Q.{}'.format(pr['e'], fe))};",
         "    /* P = P - c c' / S: c_i -= c_i kappa with kappa = (S - R) / S in [0, 1), Q0.31;",
         "     * P_ie -= c_i K_e with K_e = c_e / S */",
@@ -562,7 +576,7 @@ def _core_cov(p: AxisPlan, P: str, T: str) -> list[str]:
     """Body of T_core for the covariance form: as _core_fixed, with the update of _gains_cov inline
     (the prior block is read once into registers; the predict of the block stays a function of its own).
 
-    The common path: a valid sample with c_r, c_v, c_a in their fine formats (bit 0 of k set,
+    The common path: a valid sample with c_r, c_v, c_a, c_e in their fine formats (bit 0 of k set,
     codegen.ranges._plan_fine); a skip, or a block still in its coarse formats, goes to T_core_c."""
     L = [
         "    int32_t a;",
@@ -617,9 +631,9 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
 
 
 def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
-    """Body of T_core_c (out of line): a skipped sample, or a sample while c_r, c_v, c_a are in their
+    """Body of T_core_c (out of line): a skipped sample, or a sample while c_r, c_v, c_a, c_e are in their
     coarse formats (the ones that hold them through a gap). A skip first moves a fine block to the
-    coarse formats (rounded); after an update whose c_r, c_v, c_a are all within the switch levels
+    coarse formats (rounded); after an update whose c_r, c_v, c_a, c_e are all within the switch levels
     p.theta (codegen.ranges._plan_fine) they move to the fine formats (exact: a left shift that fits)."""
     pf = fine_view(p)
     to_c, to_f, test = [], [], []
@@ -633,7 +647,7 @@ def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
         # |c| <= th as one unsigned compare; th 2^dd fits the fine format (it holds GUARD theta)
         test.append(f"(uint32_t)s->{nm} + {th}u <= {2 * th}u")
     back = [
-        "        /* back to the fine formats once c_r, c_v, c_a are within the uninterrupted run's maxima */",
+        "        /* back to the fine formats once c_r, c_v, c_a, c_e are within their switch levels */",
         "        if (" + " && ".join(test) + ") {",
         *to_f,
         "            k |= 1u;",
@@ -1369,14 +1383,14 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
     if p.form == "covariance":
         # the predict of the covariance block in a function of its own: its registers do not crowd the
-        # states'; twice: c_r, c_v, c_a in their fine formats (the common path) and in their coarse ones
+        # states'; twice: c_r, c_v, c_a, c_e in their fine formats (the common path) and in their coarse ones
         for sfx, q in (("", fine_view(p)), ("_c", p)):
             src += [f"static void {T}_ppredict{sfx}({T}_t *s)", "{"]
             src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(q, P)]
             src += ["}", ""]
             src += [f"static void {T}_pupdate{sfx}({T}_t *s, int32_t y)", "{"] + _gains_cov(q, P) + ["}", ""]
         src += [
-            "/* One sample with c_r, c_v, c_a in their coarse formats, or a skip (rare: out of line). */",
+            "/* One sample with c_r, c_v, c_a, c_e in their coarse formats, or a skip (rare: out of line). */",
             f"static __attribute__((noinline)) void {T}_core_c({T}_t *s, int32_t z, bool valid)",
             "{",
         ]

@@ -112,7 +112,7 @@ class AxisPlan:
     v_step: float = 0.0  # largest |v| increment of one step
     conv_shift: int = -1  # analog fast path: code << conv_shift (-1: the int64 path)
     gap_run: GainRun | None = None  # gain schedule: maxima over gaps of `gap` samples (codegen.follow)
-    theta: dict = field(default_factory=dict)  # covariance: c_r, c_v, c_a levels of the switch to fine
+    theta: dict = field(default_factory=dict)  # covariance: c_r, c_v, c_a, c_e levels of the switch to fine
 
     def f(self, name: str) -> int:
         return self.vars[name].fmt.frac
@@ -508,11 +508,11 @@ def _plan_covariance(p: AxisPlan) -> None:
     _plan_fine(p, g, gap)
 
 
-FINE = ("cr", "cv", "ca")  # the carried entries with a second, finer format (and S with c_a)
+FINE = ("cr", "cv", "ca", "ce")  # the carried entries with a second, finer format (and S with c_a)
 
 
 def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
-    """Fine formats of c_r, c_v and c_a (and S, which shares c_a's) for the samples away from gaps.
+    """Fine formats of c_r, c_v, c_a and c_e (and S, which shares c_a's) for the samples away from gaps.
 
     The formats above hold the block during and after a gap of up to MAX_GAP_S, where c_r, c_v and
     c_a reach 10 to 2000 times what they are in an uninterrupted run; in those formats their steady
@@ -528,11 +528,16 @@ def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
     hold that condition (the earlier the switch after a gap, the fewer samples the coarse formats
     round), halved back where a trajectory would break it. A skipped sample moves the block to the
     coarse formats before its predict.
+
+    c_e's coarse format is set by its prior P0 (P_ae + P_ee at sample 0, 1e5 times its steady value
+    at 1 kHz, where it kept ~12 bits and held eps at 2e-4 sigma on stress data): the uninterrupted run
+    from P0 is one more trajectory (:func:`_start_run`), so it starts coarse and switches once c_e has
+    come down to theta_e, which starts at the largest |c_e| of the run after its first 1024 samples.
     """
     from .gains import _key
 
     d, R = p.design, p.design.R
-    ck = (_key(d), p.n_run, gap, tuple(p.f(n) for n in ("cr", "cv", "ca", "Pre", "Pve", "Pae")))
+    ck = (_key(d), p.n_run, gap, tuple(p.f(n) for n in ("cr", "cv", "ca", "ce", "Pre", "Pve", "Pae")))
     if ck not in _FINE:  # emit and the report plan the same axis: the analysis once
         if len(_FINE) > 64:
             _FINE.clear()
@@ -541,11 +546,11 @@ def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
     for nm in FINE:
         c = p.vars[nm]
         i = FINE.index(nm)
-        b = max(top[i], top[3]) if nm == "ca" else top[i]
+        b = max(top[i], top[4]) if nm == "ca" else top[i]
         f = QFormat(32, fracs[nm])
         p.vars[nm + "_f"] = Var(nm + "_f", "cov", GUARD * b, f, c.note.split(",")[0] + ", away from gaps, x2", True)
         p.theta[nm] = float(theta[i])
-    p.vars["S_f"] = Var("S_f", "(m/s^2)^2", GUARD * top[3], p.vars["ca_f"].fmt, "S away from gaps", True)
+    p.vars["S_f"] = Var("S_f", "(m/s^2)^2", GUARD * top[4], p.vars["ca_f"].fmt, "S away from gaps", True)
     p.consts["RF"] = (R, p.vars["S_f"].fmt)
 
 
@@ -555,8 +560,8 @@ _FINE: dict = {}
 def _gap_trajectories(d: AxisDesign, P0: np.ndarray, gap: int, recover: int) -> np.ndarray:
     """The float64 Riccati of the seven-entry block (as codegen.gains) from each prior P0[i] (ncp, 4, 4):
     sample 0 is P0 itself, samples below ``gap`` predict only, the ``recover`` after them predict and
-    update. Returns the prior c = P H' and S of the updated samples, (recover, ncp, 4: c_r, c_u, c_a, S),
-    every trajectory at once."""
+    update. Returns the prior c = P H' and S of the updated samples, (recover, ncp, 5: c_r, c_u, c_a, c_e,
+    S), every trajectory at once."""
     Ts, phi, R = d.Ts, d.phi, d.R
     h2 = Ts * Ts / 2.0
     # rows: P_ra, P_ua, P_aa, P_re, P_ue, P_ae, P_ee; P = F P F' + Q on them is X -> A X + q
@@ -573,7 +578,7 @@ def _gap_trajectories(d: AxisDesign, P0: np.ndarray, gap: int, recover: int) -> 
         [[1, 0, 0, 1, 0, 0, 0], [0, 1, 0, 0, 1, 0, 0], [0, 0, 1, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1, 1]], dtype=float
     )
     X = np.stack([P0[:, 0, 2], P0[:, 1, 2], P0[:, 2, 2], P0[:, 0, 3], P0[:, 1, 3], P0[:, 2, 3], P0[:, 3, 3]])
-    out = np.empty((recover, len(P0), 4))
+    out = np.empty((recover, len(P0), 5))
     for k in range(gap + recover):
         if k:
             X = A @ X + q
@@ -581,36 +586,66 @@ def _gap_trajectories(d: AxisDesign, P0: np.ndarray, gap: int, recover: int) -> 
             c = Hc @ X
             S = c[2] + c[3] + R
             o = out[k - gap]
-            o[:, :3] = c[:3].T
-            o[:, 3] = S
+            o[:, :4] = c.T
+            o[:, 4] = S
             K = c / S  # P = P - K c': the (r, u, a) rows by c_a, the eps column by c_e
             X[:3] -= K[:3] * c[2]
             X[3:] -= K * c[3]
     return out
 
 
+def _start_run(d: AxisDesign, n_run: int, m: int):
+    """The uninterrupted run from its prior P0 as one more trajectory for :func:`_fine_levels`: its first
+    m updated samples (prior c and S, (m, 1, 5) as :func:`_gap_trajectories`), and the largest |c| and S
+    of the samples after them ((5,); zero when the run has no more), from the Riccati started at the
+    prior of sample m (the filter is time invariant: the same samples)."""
+    import dataclasses
+
+    from .gains import riccati
+
+    m = min(m, n_run)
+    head = _gap_trajectories(d, d.P0[None], 0, m)
+    tail = np.zeros(5)
+    if n_run > m:
+        P, H = d.P0.copy(), d.H[0]
+        for k in range(m + 1):  # the prior of sample m
+            if k:
+                P = d.F @ P @ d.F.T + d.Q
+            if k < m:
+                c = P @ H
+                P = P - np.outer(c, c) / (c[2] + c[3] + d.R)
+        g = riccati(dataclasses.replace(d, P0=P), n_run - m, keep=1)  # its maxima only: O(1) memory
+        tail = np.r_[np.asarray(g.max_c, dtype=float), g.S_max]
+    return head, tail
+
+
 def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
-    """(fine fracs of c_r, c_v, c_a; switch levels theta (3,); largest |c_r|, |c_v|, |c_a|, S (4,) in the
-    fine samples) for :func:`_plan_fine`."""
+    """(fine fracs of c_r, c_v, c_a, c_e; switch levels theta (4,); largest |c_r|, |c_v|, |c_a|, |c_e|, S
+    (5,) in the fine samples) for :func:`_plan_fine`."""
     d, Ts, R = p.design, p.design.Ts, p.design.R
-    cs = np.array([1.0, Ts, 1.0])  # C coordinates: c_v = Ts (P_ua + P_ue)
-    theta0 = np.asarray(g.max_c)[:3] * cs
+    cs = np.array([1.0, Ts, 1.0, 1.0])  # C coordinates: c_v = Ts (P_ua + P_ue)
+    # the uninterrupted run switches to fine once c_e, whose prior P0 sets its coarse format, has come
+    # down from it: the samples before that run the coarse path, and c_e's level starts at the largest
+    # |c_e| after a settling stretch of the run (c_r, c_v, c_a: at their largest over the whole run)
+    head, tail = _start_run(d, p.n_run, 1024)
+    theta0 = np.asarray(g.max_c, dtype=float) * cs
+    theta0[3] = tail[3] if p.n_run > len(head) else float(np.abs(head[-1, 0, 3]))
     lengths = sorted({1 << j for j in range(0, max(1, gap).bit_length(), 4) if 1 << j < gap} | {gap})
     P0 = np.array([P for _, P in g.checkpoints])
-    # per gap length: the updated samples of every checkpoint's trajectory, |c| posterior (m, ncp, 3),
-    # and the largest |c| prior and S of the samples after each one (m, ncp, 4; the last row zero)
+    # per trajectory set: the updated samples of every trajectory, |c| posterior (m, ncp, 4), and the
+    # largest |c| prior and S of the samples after each one (m, ncp, 5; the last row: what follows)
     runs = []
-    for L in lengths:
-        after = _gap_trajectories(d, P0, L, 4 * L + 50)  # prior c (m, ncp, 3: r, u, a) and S (m, ncp, 1)
-        after[:, :, :3] = np.abs(after[:, :, :3] * cs)
-        post = after[:, :, :3] * (R / after[:, :, 3:])  # posterior c = c R / S
+    for after, rest in [(_gap_trajectories(d, P0, L, 4 * L + 50), np.zeros(5)) for L in lengths] + [(head, tail)]:
+        after[:, :, :4] = np.abs(after[:, :, :4] * cs)  # prior c (m, ncp, 4: r, u, a, e), S (m, ncp, 1)
+        post = after[:, :, :4] * (R / after[:, :, 4:])  # posterior c = c R / S
         np.maximum.accumulate(after[::-1], axis=0, out=after[::-1])  # in place: the largest from each on
         after[:-1] = after[1:]  # ... after each sample
-        after[-1] = 0.0
+        after[-1] = rest * np.r_[cs, 1.0]
+        after[:-1] = np.maximum(after[:-1], after[-1])
         runs.append((post, after))
 
     def tops(theta: np.ndarray) -> np.ndarray:
-        """Largest (|c_r|, |c_v|, |c_a|, S) of the fine samples when the switch is at theta."""
+        """Largest (|c_r|, |c_v|, |c_a|, |c_e|, S) of the fine samples when the switch is at theta."""
         top = np.r_[theta0, g.S_max]
         for post, after in runs:
             ok = np.all(post <= theta, axis=2)  # (m, ncp)
@@ -623,7 +658,7 @@ def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
         return top
 
     top = tops(theta0)
-    bounds = {"cr": top[0], "cv": top[1], "ca": max(top[2], top[3])}
+    bounds = {"cr": top[0], "cv": top[1], "ca": max(top[2], top[4]), "ce": top[3]}
     omp = 1.0 - d.phi
     # the predict sums of codegen.emit_c._predict_cov stay single SMLAL chains into the high word when
     # each constant, scaled to land its product there, keeps below 2^30: (constant, its variable's frac)
@@ -631,9 +666,10 @@ def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
         "ca": [(omp, p.f("Pae"))],
         "cv": [(Ts * Ts, "ca"), (omp, p.f("Pve"))],
         "cr": [(Ts * Ts / 2, "ca"), (omp, p.f("Pre")), (1.0, "cv")],
+        "ce": [(d.phi * omp, p.f("Pae"))],
     }
     fracs: dict[str, int] = {}
-    for nm in ("ca", "cv", "cr"):
+    for nm in ("ca", "cv", "cr", "ce"):
         c = p.vars[nm]
         f = max(fit(GUARD * bounds[nm], 32).frac, c.fmt.frac)
         while f > c.fmt.frac and any(
@@ -641,12 +677,12 @@ def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
         ):
             f -= 1
         fracs[nm] = f
-    # the largest value each fine format holds with GUARD: c_r, c_v, c_a, S (S in c_a's)
-    room = np.array([2.0 ** (31 - fracs[nm]) * (1 - 2.0**-20) / GUARD for nm in ("cr", "cv", "ca", "ca")])
-    theta = np.maximum(theta0, room[:3] / 2)
+    # the largest value each fine format holds with GUARD: c_r, c_v, c_a, c_e, S (S in c_a's)
+    room = np.array([2.0 ** (31 - fracs[nm]) * (1 - 2.0**-20) / GUARD for nm in ("cr", "cv", "ca", "ce", "ca")])
+    theta = np.maximum(theta0, room[:4] / 2)
     for _ in range(64):
         over = tops(theta) > room
-        over = over[:3] | np.array([False, False, over[3]])
+        over = over[:4] | np.array([False, False, over[4], False])
         if not over.any():
             break
         theta = np.where(over, np.maximum(theta0, theta / 2), theta)
@@ -659,14 +695,16 @@ def _fine_levels(p: AxisPlan, g: GainRun, gap: int):
 
 
 def fine_view(p: AxisPlan) -> AxisPlan:
-    """The plan with the fine formats of c_r, c_v, c_a and S (and R in S's) under their usual names:
+    """The plan with the fine formats of c_r, c_v, c_a, c_e and S (and R in S's) under their usual names:
     what the covariance form's common path is emitted from."""
     import copy
 
     q = copy.copy(p)
     q.vars = dict(p.vars)
     for nm in (*FINE, "S"):
+        q.vars[nm + "_c"] = p.vars[nm]  # the coarse ones stay readable
         q.vars[nm] = p.vars[nm + "_f"]
+    q.sat_free = _predict_sat_free(q)  # c_e's predict: its own check in the fine format
     return q
 
 
