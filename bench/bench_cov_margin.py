@@ -86,8 +86,14 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline", help="a Python whose accelnav is the generator to compare with")
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # one process's raw figures
     args = ap.parse_args(argv)
-    with tempfile.TemporaryDirectory(prefix="acn_margin_") as tmp:
-        now = measure(args.model, args.rate, args.duration, args.seeds, Path(tmp))
+    from accelnav.codegen.model import ModelError
+    from accelnav.codegen.ranges import RangeError
+
+    try:
+        with tempfile.TemporaryDirectory(prefix="acn_margin_") as tmp:
+            now = measure(args.model, args.rate, args.duration, args.seeds, Path(tmp))
+    except (ModelError, RangeError, OSError) as e:  # a model this generator refuses or cannot read
+        raise SystemExit(f"bench_cov_margin: {str(e).splitlines()[0]}") from None
     if args.json:
         print(json.dumps(now))
         return 0
