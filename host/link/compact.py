@@ -289,7 +289,15 @@ class CompactStream:
         g0 = self.g
         held_mism = np.zeros(h, bool)
         ck_states = cks["state"]
+
+        def flag(seg):
+            """A stretch the replay disagreed on: its rows in this batch, and the held ones it began with."""
+            mism[seg[0] : seg[1]] = True
+            held_mism[held_g >= seg[3]] = True
+
         plans = [self._plan(j, N, breakset, events[j], valid, g0) for j in range(n_ax)]
+        if self.replay is None:
+            valid[:] = False
         jobs = []
         for j, pl in enumerate(plans):
             if self.replay is not None and pl["live"]:
@@ -305,9 +313,7 @@ class CompactStream:
                 in1 = raw[(j, self.raw[0])]
                 in2 = raw[(j, self.raw[1])] if len(self.raw) > 1 else None
                 jobs.append((j, start, length, init, codes[j], in1, in2, rows))
-            elif self.replay is None:
-                valid[:] = False
-        results = self._replay_all(jobs)
+        results = self._replay_all(jobs, N)
         for j, pl in enumerate(plans):
             nbj = self.state_bytes[j]
             segs, live, checks, src, carry = pl["segs"], pl["live"], pl["checks"], pl["src"], pl["carry"]
@@ -318,10 +324,8 @@ class CompactStream:
                 fin[live] = f
                 has_fin[live] = True
                 for m in np.flatnonzero(nbad).tolist():
-                    k = live[m]
                     self.mismatches += int(nbad[m])
-                    mism[segs[k][0] : segs[k][1]] = True
-                    held_mism |= held_g >= segs[k][3]
+                    flag(segs[live[m]])
             if checks:
                 ks = np.array([k for k, _ in checks], np.int64)
                 ids = np.array([i for _, i in checks], np.int64)
@@ -334,10 +338,9 @@ class CompactStream:
                 for k in ks[ok & ~same].tolist():
                     self.mismatches += 1
                     if k >= 0:
-                        mism[segs[k][0] : segs[k][1]] = True
-                        held_mism |= held_g >= segs[k][3]
-                    else:
-                        held_mism |= held_g >= pl["stale_from"]
+                        flag(segs[k])
+                    else:  # the carried stretch: only held rows
+                        held_mism[held_g >= pl["stale_from"]] = True
             if src == "continue":
                 self.carry[j] = fin[-1].tobytes() if segs and has_fin[-1] else None
             elif src == CARRY:
@@ -404,10 +407,10 @@ class CompactStream:
         live = [k for k, sg in enumerate(segs) if sg[2] != NONE]
         return {"segs": segs, "live": live, "checks": checks, "src": src, "carry": carry, "stale_from": stale_from}
 
-    def _replay_all(self, jobs: list) -> dict:
-        """{axis: (final states, verdict mismatches)} of the replay jobs; the axes' replays run on threads
-        (the C releases the GIL) when the batch is large enough to pay for it."""
-        if len(jobs) > 1 and len(jobs[0][4]) >= THREAD_MIN:
+    def _replay_all(self, jobs: list, n: int) -> dict:
+        """{axis: (final states, verdict mismatches)} of the replay jobs over a batch of n samples; the axes'
+        replays run on threads (the C releases the GIL) when the batch is large enough to pay for it."""
+        if len(jobs) > 1 and n >= THREAD_MIN:
             if self._pool is None:
                 from concurrent.futures import ThreadPoolExecutor
 
@@ -425,16 +428,7 @@ class CompactStream:
 
     def _assemble(self, rows, blk, mism) -> None:
         """Every field of the rows but the states (the replay wrote those), through the replay's C fill."""
-        man = self.man
-        af = man.axis_flags
-        duty = man.input == "duty_cycle"
-        per_code = [
-            0,
-            (1 << af["skipped"]) | (0 if duty else 1 << af["rail"]),
-            (1 << af["skipped"]) | (1 << af["timeout"]),
-            (1 << af["skipped"]) | (1 << af["missed"]),
-        ]
         rx = self.R | self.X
-        self.replay.fill(blk, rows, per_code, ~rx & 0xFFFF, self.REPLAYED, rx)
+        self.replay.fill(blk, rows, self.man.code_flags(), ~rx & 0xFFFF, self.REPLAYED, rx)
         if mism.any():
             rows["flags"] |= np.where(mism, self.MISMATCH, 0).astype(rows["flags"].dtype)

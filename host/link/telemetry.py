@@ -111,6 +111,14 @@ class Manifest:
     def raw_fields(self) -> tuple[str, ...]:
         return ("t1", "t2") if self.input == "duty_cycle" else ("code",)
 
+    def code_flags(self) -> list[int]:
+        """The axis flags of a sample row for each 2-bit code of a compact block frame (0 updated,
+        1 input refused: a rail, 2 no capture: a timeout, 3 missed by the board)."""
+        af = self.axis_flags
+        rail = 0 if self.input == "duty_cycle" else 1 << af["rail"]
+        skip = 1 << af["skipped"]
+        return [0, skip | rail, skip | (1 << af["timeout"]), skip | (1 << af["missed"])]
+
 
 # --------------------------------------------------------------------------
 # Framing primitives (Python side)
@@ -854,9 +862,7 @@ def _naive_rows(man: Manifest, frames: list, replay) -> tuple[list, dict]:
         cs.unreplayed += N
     else:
         cs.lost += ok.count(False)
-    af, duty = man.axis_flags, man.input == "duty_cycle"
-    per_code = [0, (1 << af["skipped"]) | (0 if duty else 1 << af["rail"])]
-    per_code += [(1 << af["skipped"]) | (1 << af["timeout"]), (1 << af["skipped"]) | (1 << af["missed"])]
+    per_code = man.code_flags()
     rows = []
     stype = man.frames["sample"]["type"]
     for p in range(N):
