@@ -420,7 +420,7 @@ def schedule_gain_errors(p: AxisPlan, schedule, valid: np.ndarray, K: np.ndarray
     from .follow import followed_gains, thresholds
 
     n = len(valid)
-    Kc, _ = followed_gains(p, schedule.gains_int(n), valid, thresholds(p, schedule))
+    Kc, _ = followed_gains(p, schedule.gains_int(n), valid, thresholds(schedule))
     lsb = np.array([p.vars["K" + c].fmt.lsb for c in "rvae"])
     return np.abs(Kc * lsb - np.asarray(K)[:n])
 

@@ -24,9 +24,21 @@ K_ue), c_u = K_u S_u. Per sample, with c = c_u + D_c and S = S_u + D_ca + D_ce:
 At D = 0 every term is exactly zero, whatever the schedule's compression error: the deviation decays
 to zero as the Kalman gain returns to the uninterrupted one (measured: within the schedule's
 tolerance 0.05-0.2 s after gaps of 1-38 samples at 100 Hz). The return is decided by that
-measurement on the MCU: at a valid sample whose |dK| are all within THR (the schedule's largest
-compression error of each gain, in LSB), D is dropped and the next sample takes the schedule's
-gains again.
+measurement on the MCU: at a valid sample whose |dK| are all within the schedule's own tolerance at
+that sample (:class:`Thresholds`: a fraction of |K_u| no larger than rel_tol, ramped like the schedule
+for K_r and K_v, and a floor of an LSB or two), D is dropped and the next sample takes the schedule's
+gains again. The threshold used to be each gain's largest compression error over the whole run: K_r
+grows 600x over an hour, so a gap in the first seconds handed back with K_r up to ~20 % off and left
+r and u 1.6-2.1e-3 sigma from the float64 filter (100 Hz shock, seeds 2 and 13).
+
+The deviation entries are carried 2^z times their value (z <= ZOOM_MAX, in the state): their formats
+hold the largest deviation after the longest gap planned, and as D decays after a short gap it would
+sink to a few LSB of them (dK_r resolved to ~1e-3 of K_r at 1 kHz: the C followed for good, and r and a
+ended 1.2-1.3e-3 sigma off). After each valid sample z grows while every entry is below 2^26; a skip
+brings D back to z = 0 before its update, which is not small. The update is linear in D, so the zoom
+only enters where D meets a quantity of its own scale: dS into S, D_ce into c_e, and dK out (rounded
+from int64, then clamped); D_c = R dK and the D_Pie update are taken from num = S dK (num R / S, num
+c_e / S), which stays within int32 at any zoom.
 
 "Following" is bit 31 of the state's sample count k (codegen.emit_c._gs_entries): the common step
 tests one word, k <= 0 (the first sample, or following a skip), and everything else, this module's C
@@ -39,10 +51,18 @@ codegen.bounds then takes |K_C - K_float64| per sample exactly, for any skip pat
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from .qformat import quantize
 from .ranges import DEV  # the deviation entries, planned in codegen.ranges._plan_schedule_follow
+
+# the deviation entries are carried 2^z times their value, z <= ZOOM_MAX: as the deviation decays after a
+# gap its entries fall far below the formats planned for its largest (a gap of many samples), and dK,
+# which the return to the schedule waits on, would be resolved to a few parts in 1e3 of K_r at 1 kHz
+ZOOM_MAX = 24
 
 # --------------------------------------------------------------------------
 # The operations, spelled once for C and once for Python ints
@@ -72,6 +92,8 @@ class _Ops:
         for n, s in self.sh.items():  # the product num x uses x >> 1: the shift is s - 1 - n
             if s - 1 - self.n_hi < 1 or s - 1 - self.n_lo > 62:
                 raise ValueError(f"dK_{n} shift {s} - n out of range for n in {self.n_lo}..{self.n_hi}")
+        # c_e / S (the update's K_e of this prior), Q.fces: |c_e| < 2^(31 - f_ce), S >= R
+        f["CES"] = f["Dce"] + math.floor(math.log2(p.design.R))
         self.thr = None
 
     def shift(self, frm: int, to: int) -> int:
@@ -114,17 +136,44 @@ def _py_align(a: int, fa: int, fo: int) -> int:
     return _py_rshr(a, fa - fo) if fa > fo else a << (fo - fa)
 
 
-def thresholds(p, sched) -> tuple[int, ...]:
-    """THR per gain [r, v, a, e] in LSB of its format: the schedule's largest compression error
-    (at least one LSB): the deviation is dropped once every |dK| is within it."""
-    out = []
-    for i, n in enumerate("rvae"):
-        lsb = p.vars["K" + n].fmt.lsb
-        out.append(max(1, int(float(sched.max_error[i]) / lsb)))
-    return tuple(out)
+@dataclass(frozen=True)
+class Thresholds:
+    """When the C drops the deviation and returns to the schedule: at a valid sample where every gain's
+    |dK_i| <= max(floor[i], |K_u,i| >> (shift[i] + extra)), K_u the schedule's gain of that sample, in LSB
+    of its format; extra = 0, except for K_r and K_v (ramp[i]) before sample ``ramp``: the least e <= 5
+    with (k + 1) 2^e >= ramp, as the schedule's own tolerance on them is tighter there (x (k + 1) / ramp,
+    at least 1/20). The relative part 2^-shift is at most the schedule's rel_tol: after the return the
+    dropped |dK| is within the schedule's own tolerance at that sample."""
+
+    floor: tuple[int, ...]
+    shift: tuple[int, ...]
+    ramped: tuple[bool, ...]
+    ramp: int
+
+    def extra(self, k: int) -> int:
+        e = 0
+        while e < 5 and (k + 1) << e < self.ramp:
+            e += 1
+        return e
+
+    def at(self, k: int, K) -> list[int]:
+        """The threshold of each gain at sample k, schedule gains K (ints)."""
+        e = self.extra(k)
+        return [
+            max(self.floor[i], abs(int(K[i])) >> min(31, self.shift[i] + (e if self.ramped[i] else 0)))
+            for i in range(4)
+        ]
 
 
-def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
+def thresholds(sched) -> Thresholds:
+    """The return thresholds of this plan's schedule (:class:`Thresholds`): relative ones from the
+    schedule's rel_tol, the floor its absolute floor (at least one LSB)."""
+    shift = tuple(min(31, max(0, math.ceil(-math.log2(r)))) if r > 0 else 31 for r in sched.tol)
+    floor = tuple(max(1, math.ceil(f)) for f in sched.floor)
+    return Thresholds(floor, shift, (True, True, False, False), max(1, sched.ramp))
+
+
+def emit_follow(p, P: str, T: str, thr: Thresholds) -> list[str]:
     """C: T_follow(s, valid, K): one sample of the deviation recursion (see the module docstring). K in:
     the schedule's gains K_u of this sample; out (valid): the gains to use."""
     o = _Ops(p)
@@ -150,16 +199,27 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
     dce = (
         _c_term(PHI2, fP2, "s->Dce", f["Dce"], f["Dce"]) + " + " + _c_term(PHIOMP, fPO, "s->DPae", f["DPae"], f["Dce"])
     )
+    zmax = ZOOM_MAX
     wa = _c_align("K[2]", f["Ka"], 30)
     we = _c_align("K[3]", f["Ke"], 30)
     L = [
-        f"#define {P}_THR_R UINT32_C({thr[0]}) /* |dK| within these (LSB of each K): back on the schedule */",
-        f"#define {P}_THR_V UINT32_C({thr[1]})",
-        f"#define {P}_THR_A UINT32_C({thr[2]})",
-        f"#define {P}_THR_E UINT32_C({thr[3]})",
+        "/* back on the schedule once every |dK| <= max(FLOOR, |K_u| >> (SH + e)), e > 0 for K_r and K_v",
+        " * before sample RAMP (codegen.follow.Thresholds) */",
+        *(f"#define {P}_FLOOR_{c} UINT32_C({thr.floor[i]})" for i, c in enumerate("RVAE")),
+        *(f"#define {P}_SH_{c} {thr.shift[i]}" for i, c in enumerate("RVAE")),
+        f"#define {P}_RAMP UINT32_C({thr.ramp})",
         "",
         "#ifndef ACN_CLAMP32",
         "#define ACN_CLAMP32",
+        "/* x / 2^z, rounded (z >= 0) */",
+        "static inline int32_t acn_unzoom(int32_t x, int z)",
+        "{",
+        "    return z ? (int32_t)(((int64_t)x + ((int64_t)1 << (z - 1))) >> z) : x;",
+        "}",
+        "static inline int64_t acn_unzoom64(int64_t x, int z)",
+        "{",
+        "    return z ? (x + ((int64_t)1 << (z - 1))) >> z : x;",
+        "}",
         "/* int64 -> int32, clamped and not counted: a gain after a long gap beyond its format (codegen.follow:",
         " * the stated bound takes the clamped gain) */",
         "static inline int32_t acn_clamp32(int64_t x)",
@@ -194,6 +254,7 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
         "        /* the first skip of an excursion: P equals P_u here */",
         f"        s->k |= {P}_FOLLOWING;",
         "        s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;",
+        "        s->z = 0;",
         "    }",
         "    /* S_u = R / (1 - K_ua - K_ue), 1 - K_ua - K_ue in Q.30; c_u = K_u S_u */",
         f"    w = (int32_t)((int64_t)((int64_t)1 << 30) - (int32_t){wa} - (int32_t){we});",
@@ -203,47 +264,95 @@ def emit_follow(p, P: str, T: str, thr: tuple[int, ...]) -> list[str]:
     for i, nm in enumerate("rvae"):
         L.append(f"    cu[{i}] = {sat(_c_term(f'K[{i}]', f['K' + nm], 'Su', fS, f[o.ci[nm]]))};")
     dS = _c_align("s->Dca", f["Dca"], fS) + " + " + _c_align("s->Dce", f["Dce"], fS)
+    ces_sh = 61 - fS + f["Dce"] - f["CES"]  # 1/S = x 2^(n - 62 + fS), x = 2 xs
     L += [
         "    if (valid) {",
-        "        int32_t dS, S, xs, dK[4], num, ce;",
+        "        int32_t dS, S, xs, dK[4], num[4], ce, rs, ces;",
+        "        int z = (int)s->z; /* the D entries, dS and num below are 2^z times their values */",
         f"        dS = {sat(dS)};",
-        "        S = acn_add_sat32(Su, dS, &s->overflow);",
+        "        S = acn_add_sat32(Su, acn_unzoom(dS, z), &s->overflow);",
         f"        if (S < {R}) {{",
         f"            S = {R};",
         "        }",
         "        x = acn_recip((uint32_t)S, &n); /* 1/S = x 2^(n-62) */",
         "        xs = (int32_t)(x >> 1); /* x < 2^31 after the shift: a signed 32x32 product */",
-        f"        ce = acn_add_sat32(cu[3], s->Dce, &s->overflow); /* c_e of this prior, Q.{f['Dce']} */",
+        "        ce = acn_add_sat32(cu[3], acn_unzoom(s->Dce, z), &s->overflow);"
+        f" /* c_e of this prior, Q.{f['Dce']} */",
+        f"        rs = (int32_t)ACN_RSHR(acn_mul({R}, xs), 31 - n); /* R / S, Q1.30 */",
+        f"        ces = {sat(f'ACN_RSHR(acn_mul(ce, xs), {ces_sh} - n)')}; /* c_e / S, Q.{f['CES']} */",
     ]
     for i, nm in enumerate("rvae"):
         dc = o.ci[nm]
         num = f"(int64_t)s->{dc} - " + _c_term(f"K[{i}]", f["K" + nm], "dS", fS, f[dc])
         L += [
-            f"        /* dK_{nm} = (D_c{nm} - K_u{nm} dS) / S */",
-            f"        num = {sat(num)};",
-            f"        dK[{i}] = acn_clamp32(ACN_RSHR(acn_mul(num, xs), {o.sh[nm] - 1} - n));",
+            f"        /* dK_{nm} = (D_c{nm} - K_u{nm} dS) / S = num / S */",
+            f"        num[{i}] = {sat(num)};",
+            f"        dK[{i}] = acn_clamp32(acn_unzoom64(ACN_RSHR(acn_mul(num[{i}], xs), {o.sh[nm] - 1} - n), z));",
         ]
-    L += ["        /* D_Pie -= K_ui D_ce + dK_i c_e (the old D_ce); D_c = R dK */"]
+    L += ["        /* D_Pie -= K_ui D_ce + dK_i c_e (the old D_ce); D_c = R dK = num R / S */"]
     for i, nm in enumerate("rva"):
         pe = o.pe[nm]
         t1 = _c_term(f"K[{i}]", f["K" + nm], "s->Dce", f["Dce"], f[pe])
-        t2 = _c_term(f"dK[{i}]", f["K" + nm], "ce", f["Dce"], f[pe])
+        t2 = _c_term(f"num[{i}]", f[o.ci[nm]], "ces", f["CES"], f[pe])
         L.append(f"        s->{pe} = {sat(f'(int64_t)s->{pe} - {t1} - {t2}')};")
     for i, nm in enumerate("rvae"):
-        L.append(f"        s->{o.ci[nm]} = {sat(_c_term(R, fS, f'dK[{i}]', f['K' + nm], f[o.ci[nm]]))};")
-    th = [f"(uint32_t)dK[{i}] + {P}_THR_{c} <= 2u * {P}_THR_{c}" for i, c in enumerate("RVAE")]
+        L.append(f"        s->{o.ci[nm]} = {sat(_c_term(f'num[{i}]', f[o.ci[nm]], 'rs', 30, f[o.ci[nm]]))};")
     L += [
         "        /* back on the schedule once every |dK| is within its threshold */",
-        f"        if ({th[0]} && {th[1]} &&",
-        f"            {th[2]} && {th[3]}) {{",
-        f"            s->k &= ~{P}_FOLLOWING;",
+        "        {",
+        "            uint32_t kk = (s->k & ~" + P + "_FOLLOWING) + 1u, t[4];",
+        "            int e = 0, back = 1;",
+        f"            while (e < 5 && kk < {P}_RAMP) {{ /* (k + 1) 2^e >= RAMP */",
+        "                kk <<= 1;",
+        "                e++;",
+        "            }",
+    ]
+    for i, c in enumerate("RVAE"):
+        sh = f"({P}_SH_{c} + e)" if thr.ramped[i] else f"{P}_SH_{c}"
+        cap = f"({sh} > 31 ? 31 : {sh})" if thr.shift[i] + 5 > 31 and thr.ramped[i] else sh
+        L += [
+            f"            t[{i}] = (K[{i}] < 0 ? 0u - (uint32_t)K[{i}] : (uint32_t)K[{i}]) >> {cap};",
+            f"            t[{i}] = t[{i}] < {P}_FLOOR_{c} ? {P}_FLOOR_{c} : t[{i}];",
+        ]
+    L += [
+        "            for (int i = 0; i < 4; i++) {",
+        "                back &= (uint32_t)dK[i] + t[i] <= 2u * t[i];",
+        "            }",
+        "            if (back) {",
+        f"                s->k &= ~{P}_FOLLOWING;",
+        "            }",
+        "        }",
+        "        {",
+        "            /* zoom in while every D entry is below 2^27 (they shrink as the deviation decays) */",
+        "            int32_t *d[7] = {&s->Dcr, &s->DPre, &s->Dcv, &s->DPve, &s->Dca, &s->DPae, &s->Dce};",
+        "            uint32_t m = 0;",
+        "            int g = 0;",
+        "            for (int i = 0; i < 7; i++) {",
+        "                m |= *d[i] < 0 ? 0u - (uint32_t)*d[i] : (uint32_t)*d[i];",
+        "            }",
+        f"            while (z + g < {zmax} && m < (UINT32_C(1) << 26)) {{",
+        "                m <<= 1;",
+        "                g++;",
+        "            }",
+        "            for (int i = 0; i < 7; i++) {",
+        "                *d[i] = (int32_t)((uint32_t)*d[i] << g);",
+        "            }",
+        "            s->z = (uint32_t)(z + g);",
         "        }",
     ]
     for i in range(4):
         L.append(f"        K[{i}] = acn_clamp32((int64_t)K[{i}] + dK[{i}]);")
     L += [
         "    } else {",
-        "        /* skipped: D += the update only P_u had: c_i -= K_ui (S_u - R), P_ie -= K_ui c_ue */",
+        "        /* skipped: D += the update only P_u had: c_i -= K_ui (S_u - R), P_ie -= K_ui c_ue; D at",
+        "         * zoom 0 first (the update is not small) */",
+        "        if (s->z) {",
+        "            int32_t *d[7] = {&s->Dcr, &s->DPre, &s->Dcv, &s->DPve, &s->Dca, &s->DPae, &s->Dce};",
+        "            for (int i = 0; i < 7; i++) {",
+        "                *d[i] = acn_unzoom(*d[i], (int)s->z);",
+        "            }",
+        "            s->z = 0;",
+        "        }",
     ]
     L.append(f"        int32_t sr = Su - {R};")
     for i, nm in enumerate("rvae"):
@@ -290,7 +399,7 @@ def recip(d: int) -> tuple[int, int]:
 class Follow:
     """The C's T_follow on Python ints, bit for bit (saturations counted in ``overflow``)."""
 
-    def __init__(self, p, thr: tuple[int, ...]):
+    def __init__(self, p, thr: Thresholds):
         self.o = o = _Ops(p)
         self.f = o.f
         self.q = {
@@ -299,6 +408,7 @@ class Follow:
         self.thr = thr
         self.dev = False
         self.D = dict.fromkeys(DEV, 0)
+        self.z = 0
         self.overflow = 0
 
     def _sat(self, x: int) -> int:
@@ -341,6 +451,7 @@ class Follow:
             self.dev = True
             for nm in DEV:
                 D[nm] = 0
+            self.z = 0
         fS = f["S"]
         w = _i32((1 << 30) - _i32(al(K[2], f["Ka"], 30)) - _i32(al(K[3], f["Ke"], 30)))
         x, n = recip(w & _M32)
@@ -349,28 +460,46 @@ class Follow:
         cu = [sat(t(K[i], f["K" + nm], Su, fS, f[ci[nm]])) for i, nm in enumerate("rvae")]
         K = list(K)
         if valid:
+            z = self.z
             dS = sat(al(D["Dca"], f["Dca"], fS) + al(D["Dce"], f["Dce"], fS))
-            S = sat(Su + dS)
+            S = sat(Su + _py_rshr(dS, z))
             S = max(S, q["R"])
             x, n = recip(S)
             xs = _i32(x >> 1)
-            ce = sat(cu[3] + D["Dce"])
-            dK = []
+            ce = sat(cu[3] + _py_rshr(D["Dce"], z))
+            rs = _i32(_py_rshr(q["R"] * xs, 31 - n))
+            ces = sat(_py_rshr(ce * xs, 61 - fS + f["Dce"] - f["CES"] - n))
+            num, dK = [], []
             for i, nm in enumerate("rvae"):
-                num = sat(D[ci[nm]] - t(K[i], f["K" + nm], dS, fS, f[ci[nm]]))
-                dK.append(_clamp(_py_rshr(num * xs, self.o.sh[nm] - 1 - n)))
+                num.append(sat(D[ci[nm]] - t(K[i], f["K" + nm], dS, fS, f[ci[nm]])))
+                dK.append(_clamp(_py_rshr(_py_rshr(num[i] * xs, self.o.sh[nm] - 1 - n), z)))
             for i, nm in enumerate("rva"):
                 D[pe[nm]] = sat(
                     D[pe[nm]]
                     - t(K[i], f["K" + nm], D["Dce"], f["Dce"], f[pe[nm]])
-                    - t(dK[i], f["K" + nm], ce, f["Dce"], f[pe[nm]])
+                    - t(num[i], f[ci[nm]], ces, f["CES"], f[pe[nm]])
                 )
             for i, nm in enumerate("rvae"):
-                D[ci[nm]] = sat(t(q["R"], fS, dK[i], f["K" + nm], f[ci[nm]]))
-            if all(abs(dK[i]) <= self.thr[i] for i in range(4)):
+                D[ci[nm]] = sat(t(num[i], f[ci[nm]], rs, 30, f[ci[nm]]))
+            back = self.thr.at(k, K)
+            if all(abs(dK[i]) <= back[i] for i in range(4)):
                 self.dev = False
+            m = 0
+            for nm in DEV:
+                m |= abs(D[nm])
+            g = 0
+            while z + g < ZOOM_MAX and m < 1 << 26:
+                m <<= 1
+                g += 1
+            for nm in DEV:
+                D[nm] = _i32(D[nm] << g)
+            self.z = z + g
             K = [_clamp(K[i] + dK[i]) for i in range(4)]
         else:
+            if self.z:
+                for nm in DEV:
+                    D[nm] = _py_rshr(D[nm], self.z)
+                self.z = 0
             sr = Su - q["R"]
             for i, nm in enumerate("rvae"):
                 D[ci[nm]] = sat(D[ci[nm]] + t(K[i], f["K" + nm], sr, fS, f[ci[nm]]))
@@ -379,7 +508,7 @@ class Follow:
         return K
 
 
-def followed_gains(p, sched_int: np.ndarray, valid: np.ndarray, thr: tuple[int, ...]):
+def followed_gains(p, sched_int: np.ndarray, valid: np.ndarray, thr: Thresholds):
     """The gains the gain-schedule C uses at every sample of a run with this skip pattern: (n, 4) ints
     in the formats of K_r, K_v, K_a, K_e (C coordinates), and the samples that followed a skip (bool).
     ``sched_int``: the schedule's integer gains of the first n samples (Schedule.gains_int)."""

@@ -674,6 +674,8 @@ class Schedule:
     tol: tuple[float, ...]
     n: int = 0  # samples the schedule was built over (the declared run)
     source: object = None  # callable (k0, k1) -> float64 gains K[k0:k1] (C coordinates), for errors(n > m)
+    floor: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)  # the tolerance's floor per gain, LSB of its format
+    ramp: int = 0  # samples over which K_r and K_v's tolerance ramps up from 1/20
 
     @property
     def n_segments(self) -> int:
@@ -982,5 +984,5 @@ def schedule(
     tolmax = rel * 1.0  # per gain: rel_tol at its widest (the absolute part is half an LSB)
     return Schedule(
         tuple(formats), start, tuple(lengths), tuple(slopes), max_err, head,
-        tuple(float(x) for x in tolmax), n, get,
+        tuple(float(x) for x in tolmax), n, get, tuple(float(x) for x in np.broadcast_to(floor, (4,))), ramp,
     )  # fmt: skip
