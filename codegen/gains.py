@@ -167,13 +167,18 @@ def _riccati_built():
 
 
 @functools.lru_cache(maxsize=1)
-def _riccati_lib():
-    """(ffi, lib) of the C twin of :func:`_riccati_py` (same operations in the same order, IEEE double, no
-    contraction): the package's own build, else built on first use; None without either, or with
-    ``ACCELNAV_PURE_PYTHON`` set (the callers then run the Python twins)."""
+def _riccati_module():
+    """The compiled kernel's module: the package's own build, else built on first use; None without
+    either, or with ``ACCELNAV_PURE_PYTHON`` set."""
     if os.environ.get("ACCELNAV_PURE_PYTHON"):
         return None
-    mod = _riccati_prebuilt() or _riccati_built()
+    return _riccati_prebuilt() or _riccati_built()
+
+
+def _riccati_lib():
+    """(ffi, lib) of the C twin of :func:`_riccati_py` (same operations in the same order, IEEE double, no
+    contraction), or None: the callers then run the Python twins."""
+    mod = _riccati_module()
     return None if mod is None else (mod.ffi, mod.lib)
 
 
