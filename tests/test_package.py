@@ -141,7 +141,7 @@ def test_a_run_time_build_without_a_compiler_is_refused_in_one_line(tmp_path):
     """SIL compiles the user's generated C: with no compiler that is one line naming Debian's package."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env.update(CC=str(tmp_path / "no-such-cc"), ACCELNAV_CACHE_DIR=str(tmp_path / "cache"))
-    # a 60 s declared run: without a compiler the generator's Riccati runs in Python, over the whole run
+    # a 60 s declared run: quick even where the generator's Riccati kernel is not prebuilt and runs in Python
     from accelnav.codegen.resources import models_dir
 
     text = (models_dir() / "adxl250_default.toml").read_text()
