@@ -16,7 +16,10 @@ include firmware/firmware.mk
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml
+# the editable install also compiles the C kernels of setup.py's cffi_modules: redo it when they change
+KERNELS := setup.py $(wildcard host/estimate/csrc/* codegen/csrc/* host/link/csrc/* */*_build.py */*/*_build.py)
+
+$(STAMP): pyproject.toml $(KERNELS)
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'

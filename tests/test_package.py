@@ -31,7 +31,13 @@ DATA = (
     "accelnav/firmware/boards/stm32f103/stm32f103c8.ld",
     "accelnav/estimate/csrc/fastsmooth.c",
     "accelnav/estimate/csrc/fastsmooth.h",
+    "accelnav/codegen/csrc/riccati.c",
+    "accelnav/codegen/csrc/riccati.h",
+    "accelnav/link/csrc/acnwire.c",
+    "accelnav/link/csrc/acnwire.h",
 )
+# the C kernels compiled into the wheel (setup.py's cffi_modules): used with no C compiler on the machine
+KERNELS = ("accelnav.estimate._fastsmooth", "accelnav.codegen._riccati", "accelnav.link._acnwire")
 
 
 @pytest.fixture(scope="module")
@@ -60,9 +66,9 @@ def test_wheel_has_one_top_level_name_and_its_data(wheel):
     assert tops == {"accelnav"}
     missing = [d for d in DATA if d not in names]
     assert not missing, missing
-    assert any(n.startswith("accelnav/estimate/_fastsmooth") and n.endswith(".so") for n in names), (
-        "the smoother kernel is not compiled into the wheel"
-    )
+    for mod in KERNELS:
+        stem = mod.replace(".", "/")
+        assert any(n.startswith(stem + ".") and n.endswith(".so") for n in names), f"{mod} is not in the wheel"
 
 
 def _run(site: Path, cwd: Path, cache: Path, *args: str, env_extra: dict | None = None, timeout: int = 300):
@@ -104,7 +110,24 @@ def test_commands_work_from_an_empty_folder(wheel, tmp_path):
     assert "smoother" in out.lower()
     _run(site, work, cache, "sim", "--scenario", "stationary", "--duration", "300", "--seed", "4", "--out", "st.npz")
     _run(site, work, cache, "fit-bias", "st.npz", "--out", "fitted.toml")
-    _run(site, work, cache, "codegen", "fitted.toml", "--out", "gen")
+    # the same for codegen's Riccati kernel (in Python its codegen takes 30x longer) and the decoder's frame kernel
+    code = (
+        "from accelnav.codegen import gains; from accelnav.link import wirekernel; "
+        "from accelnav.estimate import fastsmooth; "
+        "used = fastsmooth._lib(), gains._riccati_module(), wirekernel.wire_lib(); "
+        "print(*(getattr(m, '__name__', m) for m in used))"
+    )
+    used = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=work,
+        env={**env, "CC": "false", "ACCELNAV_CACHE_DIR": str(cache)},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert used.returncode == 0, used.stderr[-3000:]
+    assert used.stdout.split() == list(KERNELS), f"kernels used with no compiler: {used.stdout}"
+    _run(site, work, cache, "codegen", "fitted.toml", "--out", "gen", env_extra={"CC": "false"})
     assert {"accelnav.c", "accelnav.h", "accelnav.json"} <= {p.name for p in (work / "gen").iterdir()}
     out = _run(site, work, cache, "hil", "--target", "sil", "--scenario", "stop_and_go", "--duration", "10")
     assert "firmware vs float64 reference" in out
@@ -118,7 +141,7 @@ def test_a_run_time_build_without_a_compiler_is_refused_in_one_line(tmp_path):
     """SIL compiles the user's generated C: with no compiler that is one line naming Debian's package."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env.update(CC=str(tmp_path / "no-such-cc"), ACCELNAV_CACHE_DIR=str(tmp_path / "cache"))
-    # a 60 s declared run: without a compiler the generator's Riccati runs in Python, over the whole run
+    # a 60 s declared run: quick even where the generator's Riccati kernel is not prebuilt and runs in Python
     from accelnav.codegen.resources import models_dir
 
     text = (models_dir() / "adxl250_default.toml").read_text()

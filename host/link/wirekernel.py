@@ -9,101 +9,63 @@ the frames where they lie in the received buffer (no gathered copy), and
 returns the same three arrays: the decoded bytes, whether the COBS chain was
 well formed, and whether the CRC matched.
 
-It is compiled on first use with the project's cffi builder
-(:func:`accelnav.codegen.cbuild.build_module`, cached on disk); where no C
-compiler is found :func:`wire_lib` returns None and the decoder keeps its
-numpy path, so reading logs never needs a compiler. The tests hold both
-paths to each other on random, damaged and truncated frames.
+The C is csrc/acnwire.c (package data). It is compiled into the wheel
+(wirekernel_build.py, named in setup.py), so an installed package decodes
+fast with no C compiler; a source checkout whose C was edited since builds it
+on first use with the project's cffi builder
+(:func:`accelnav.codegen.cbuild.build_module`, cached on disk). Without
+either, :func:`wire_lib` returns None and the decoder keeps its numpy path,
+so reading logs never needs a compiler. The tests hold both paths to each
+other on random, damaged and truncated frames, and the C's CRC table to
+zlib.
 """
 
 from __future__ import annotations
 
 import threading
-import zlib
 
 import numpy as np
 
+from accelnav.codegen.cbuild import BuildError, build_module
+from accelnav.codegen.resources import package_dir
+from accelnav.link.wirekernel_build import kernel_cdef, source_hash
 
-def _crc_table() -> list[int]:
-    """The 256 entries of the reflected CRC-32 table (polynomial 0xEDB88320, zlib's), checked against zlib."""
-    table = []
-    for b in range(256):
-        c = b
-        for _ in range(8):
-            c = (c >> 1) ^ (0xEDB88320 if c & 1 else 0)
-        table.append(c)
-    crc = 0xFFFFFFFF
-    for b in b"accelnav":
-        crc = table[(crc ^ b) & 0xFF] ^ (crc >> 8)
-    if crc ^ 0xFFFFFFFF != zlib.crc32(b"accelnav"):
-        raise AssertionError("CRC-32 table does not reproduce zlib")
-    return table
-
-
-def _source() -> str:
-    rows = [", ".join(f"0x{v:08x}u" for v in _crc_table()[i : i + 6]) for i in range(0, 256, 6)]
-    table = ",\n    ".join(rows)
-    return f"""#include <stdint.h>
-#include <string.h>
-
-static const uint32_t acnw_table[256] = {{
-    {table}
-}};
-
-/* Frame i is the L bytes at buf + start[i] (no delimiter, no zero byte inside). Its COBS
- * decoding (L - 1 bytes) goes to dec + i * (L - 1); ok[i] = 1 when every code byte points
- * inside the frame or exactly at its end (a code of 0xFF always points past it: frames are
- * shorter than 254 bytes); crc[i] = 1 when the CRC-32 of the first L - 5 decoded bytes equals
- * the last four (little-endian). A chain that breaks leaves the zeros placed so far. */
-void acnw_decode(const uint8_t *buf, const int64_t *start, int64_t n, int64_t L, uint8_t *dec, uint8_t *ok,
-                 uint8_t *crc)
-{{
-    int64_t i, k, m = L - 1;
-    for (i = 0; i < n; ++i) {{
-        const uint8_t *f = buf + start[i];
-        uint8_t *d = dec + i * m;
-        int64_t pos = 0;
-        uint32_t c = 0xFFFFFFFFu, want;
-        uint8_t good = 1;
-        memcpy(d, f + 1, (size_t)m);
-        for (;;) {{
-            int64_t nxt = pos + f[pos];
-            if (f[pos] == 0u || nxt > L) {{
-                good = 0;
-                break;
-            }}
-            if (nxt == L) break;
-            d[nxt - 1] = 0;
-            pos = nxt;
-        }}
-        ok[i] = good;
-        for (k = 0; k < m - 4; ++k) c = acnw_table[(c ^ d[k]) & 0xFFu] ^ (c >> 8);
-        want = (uint32_t)d[m - 4] | (uint32_t)d[m - 3] << 8 | (uint32_t)d[m - 2] << 16 | (uint32_t)d[m - 1] << 24;
-        crc[i] = (uint8_t)((c ^ 0xFFFFFFFFu) == want);
-    }}
-}}
-"""
-
-
-_CDEF = (
-    "void acnw_decode(const uint8_t *buf, const int64_t *start, int64_t n, int64_t L, uint8_t *dec, uint8_t *ok,"
-    " uint8_t *crc);\n"
-)
+CSRC = package_dir("accelnav.link") / "csrc"  # package data: acnwire.c, acnwire.h
 
 _lock = threading.Lock()
 _built: list = []  # [module or None] once tried
 
 
+def _prebuilt():
+    """The kernel compiled with the package (wirekernel_build.py), if it was built from this very C."""
+    try:
+        from accelnav.link import _acnwire
+    except ImportError:
+        return None
+    built = _acnwire.ffi.string(_acnwire.lib.acnw_source()).decode()
+    return _acnwire if built == source_hash(CSRC) else None
+
+
+def _builder_built():
+    """The kernel built from csrc/ by the project's cffi builder (once per source, cached on disk); None
+    where that cannot be done (no C compiler)."""
+    header = (CSRC / "acnwire.h").read_text()
+    try:
+        return build_module(
+            "acn_wire",
+            kernel_cdef(header),
+            {"acnwire.c": (CSRC / "acnwire.c").read_text(), "acnwire.h": header},
+            main="acnwire.c",
+        )
+    except (OSError, BuildError):
+        return None
+
+
 def wire_lib():
-    """The compiled kernel module, or None when it cannot be built here (no C compiler)."""
+    """The kernel module: the package's own build, else built on first use; None without either."""
     with _lock:
         if not _built:
-            from accelnav.codegen.cbuild import BuildError, build_module
-
-            try:
-                _built.append(build_module("acn_wire", _CDEF, {"acnwire.c": _source()}, main="acnwire.c"))
-            except BuildError:
-                _built.append(None)
+            _built.append(_prebuilt() or _builder_built())
         return _built[0]
 
 
