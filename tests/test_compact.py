@@ -506,6 +506,16 @@ def test_gain_schedule_load_refuses_a_row_outside_the_table(gs):
         back = ffi.new(f"uint8_t[{nb}]")
         lib.accelnav_x_save(t, back)
         assert bytes(ffi.buffer(back)) == img2
+    # the host's replay kernel given such an image: the stretch runs from init, reported (never past the table)
+    bad = np.frombuffer(good[:off] + nrows.to_bytes(4, "little") + good[off + 4 :], np.uint8)
+    replay = gs["replay"]
+    rows = np.zeros(4, man.dtypes["sample"])
+    code = np.zeros(4, np.uint8)
+    one = (np.zeros(1, np.int64), np.full(1, 4, np.int64))  # one stretch: samples 0..3
+    fin, nbad = replay.run(0, *one, bad[None], code, np.full(4, 2100), None, rows)
+    assert nbad.tolist() == [1] and int.from_bytes(fin[0, off : off + 4].tobytes(), "little") < nrows
+    fin, nbad = replay.run(0, *one, np.frombuffer(good, np.uint8)[None], code, np.full(4, 2100), None, rows)
+    assert nbad.tolist() == [0]
     # the loaded state steps exactly as the one it was saved from
     lib.accelnav_x_load(t, ffi.new(f"uint8_t[{nb}]", good))
     for code in (2100, 0, 0, 2100, 1990):  # a skip included

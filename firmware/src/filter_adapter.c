@@ -2,7 +2,7 @@
 
 #if ACNF_COMPACT
 /* the frame layout's checkpoint sizes (filter manifest) must be the generated filter's, or no build
- * (the generated C checks its own image against the compiler's sizeof) */
+ * (accelnav_<axis>_save writes ACCELNAV_<AXIS>_CK_BYTES bytes, whatever the struct's layout) */
 #define ACN_SIZE_CHECK(name, NAME, i)                                                              \
     typedef char acn_state_size_##name[ACCELNAV_##NAME##_CK_BYTES == ACNF_STATE_BYTES_##i ? 1 : -1];
 ACNF_AXES(ACN_SIZE_CHECK)
