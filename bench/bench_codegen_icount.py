@@ -39,6 +39,11 @@ RAM 88 B both.
 Covariance form with c_e in a fine format away from gaps (issue #12's margin; main 0b32d51 in its own
 venv, same run): 298.0 -> 298.2 at 100 Hz, 298.0 -> 298.9 at 1 kHz (the first ~40 samples, until c_e
 settles, take the out-of-line path); RAM 64 B per axis both; flash 3384 -> 3436 B per axis at 100 Hz.
+Checkpoint images for the compact telemetry (accelnav_AXIS_save / _load, both forms; main 2ef5af7 in
+its own venv, same session): instructions per step unchanged, gain schedule 78.3 / 78.7 and covariance
+298.2 / 298.9 at 100 Hz / 1 kHz; RAM unchanged; flash per axis at 100 Hz (this bench's -O2 object, load
+included, which the firmware's --gc-sections drops) 3436 -> 3580 B covariance, 9398 -> 9636 B gain
+schedule on the M3, 5534 -> 6282 and 12616 -> 13744 B on the M0.
 """
 
 from __future__ import annotations
