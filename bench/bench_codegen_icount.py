@@ -42,6 +42,11 @@ settles, take the out-of-line path); RAM 64 B per axis both; flash 3384 -> 3436 
 Gain schedule after the follow fix (the deviation's zoom z added to the state, K_a read from the
 schedule's row instead of a state copy so that the state stays 88 B; main 2ef5af7 in the same session):
 79.3 instructions per step at 100 Hz (78.3), 79.6 at 1 kHz (78.7); RAM 88 B per axis (88).
+Checkpoint images for the compact telemetry (accelnav_AXIS_save / _load, both forms; main 2ef5af7 in
+its own venv, same session): instructions per step unchanged, gain schedule 78.3 / 78.7 and covariance
+298.2 / 298.9 at 100 Hz / 1 kHz; RAM unchanged; flash per axis at 100 Hz (this bench's -O2 object, load
+included, which the firmware's --gc-sections drops) 3436 -> 3580 B covariance, 9398 -> 9636 B gain
+schedule on the M3, 5534 -> 6282 and 12616 -> 13744 B on the M0.
 """
 
 from __future__ import annotations

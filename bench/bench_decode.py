@@ -16,7 +16,10 @@
    compact one measured on a firmware stream, checkpoints included), and the
    samples per second (all axes) each link rate carries.
 
-    .venv/bin/python bench/bench_decode.py [--minutes 60] [--rate 1000]
+    .venv/bin/python bench/bench_decode.py [--minutes 60] [--rate 1000] [--form gain_schedule]
+
+``--form`` builds the default model's firmware in that filter form for part 1 (both forms have the
+compact mode; the gain schedule's checkpoints carry its row as an index); part 3 lists both forms.
 """
 
 from __future__ import annotations
@@ -24,7 +27,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -118,16 +123,33 @@ def repeat_frames(data: bytes, rng, n: int) -> bytes:
     return b"".join(parts)
 
 
+def model_in_form(path, form: str | None):
+    """``path`` (None: the embedded model) as a model file in filter form ``form`` (a temporary copy when
+    it is not already in it)."""
+    model = load_model(path)
+    if form is None or model.filter.form == form:
+        return path
+    text, old = model.text, f'form = "{model.filter.form}"'
+    if text.count(old) != 1:
+        raise SystemExit(f"bench_decode: {model.source}: cannot set [filter] form = {form!r}")
+    out = Path(tempfile.mkdtemp(prefix="acn-bench-decode-")) / f"{model.name}_{form}.toml"
+    out.write_text(text.replace(old, f'form = "{form}"'))
+    return str(out)
+
+
 def bench_compact(args) -> None:
-    man = manifest(None)
+    path = model_in_form(None, args.form)
+    man = manifest(path)
     n = int(args.minutes * 60 * args.rate)
     rng = np.random.default_rng(2)
     t = time.perf_counter()
-    clean = compact_stream(None, n, rng)
+    clean = compact_stream(path, n, rng)
     data = damage(repeat_frames(clean, rng, args.repeats), rng, 100)
     t_make = time.perf_counter() - t
-    replay = replay_for(man, load_model())
+    model = load_model(path)
+    replay = replay_for(man, model)
     print(
+        f"filter form: {model.filter.form}\n"
         f"compact stream: {n:,} samples ({args.minutes:g} min at {args.rate:g} Hz, {len(man.axes)} axes), "
         f"{len(data) / 1e6:.1f} MB ({len(clean) / n:.2f} B per sample), {args.repeats} repeated runs of frames, "
         f"100 damaged bytes; made by the firmware (SIL) in {t_make:.1f} s"
@@ -198,6 +220,7 @@ def main(argv=None) -> int:
     ap.add_argument("--naive-fraction", type=float, default=0.05, help="share of the compact stream decoded naively")
     ap.add_argument("--best-of", type=int, default=3, help="runs of the vectorised compact decode (the best counts)")
     ap.add_argument("--skip-state", action="store_true", help="leave out the state mode's (slow) part")
+    ap.add_argument("--form", choices=("covariance", "gain_schedule"), help="filter form (default: the model's)")
     args = ap.parse_args(argv)
 
     print("== compact mode (block frames of raw inputs, checkpoints, host replay) ==")
@@ -258,18 +281,20 @@ def bench_state(args) -> None:
 def bytes_table() -> None:
     print("\nbytes per sample on the wire (COBS + CRC-32 + delimiter; compact: checkpoints included, measured on")
     print("100 000 samples of the firmware's stream) and the samples per second (every axis) a link carries (8N1)")
-    print(f"{'model':<20}{'mode':<9}{'B/sample':>9}" + "".join(f"{b:>12} Bd" for b in BAUDS))
+    print(f"{'model':<20}{'mode':<23}{'B/sample':>9}" + "".join(f"{b:>12} Bd" for b in BAUDS))
     for label, path in (("adxl250 (2 analog)", None), ("adxl202 (2 duty)", str(DUTY_MODEL))):
         m = json.loads(generated(path)["acnframe.json"])
+        gs = model_in_form(path, "gain_schedule")
         per = {
             "state": m["frames"]["sample"]["wire_size"],
             "compact": len(compact_stream(path, 100_000, np.random.default_rng(3))) / 100_000,
+            "compact, gain sched.": len(compact_stream(gs, 100_000, np.random.default_rng(3))) / 100_000,
         }
         for mode, b in per.items():
             sps = [baud / 10 / b for baud in BAUDS]
-            print(f"{label:<20}{mode:<9}{b:9.2f}" + "".join(f"{x:11,.0f} S/s" for x in sps))
+            print(f"{label:<20}{mode:<23}{b:9.2f}" + "".join(f"{x:11,.0f} S/s" for x in sps))
             print(
-                f"{'':<20}{'':<9}{'1 kHz:':>9}"
+                f"{'':<20}{'':<23}{'1 kHz:':>9}"
                 + "".join(f"{'whole' if x >= 1000 else 'decimate ' + str(math.ceil(1000 / x)):>15}" for x in sps)
             )
 

@@ -169,6 +169,85 @@ def _struct_bytes(fields: list[tuple[str, str, str]]) -> int | None:
     return -(-off // align) * align if align else 0
 
 
+def _struct_offsets(fields: list[tuple[str, str, str]]) -> dict[str, int]:
+    """Offset of every member under natural alignment (every member's size must be known)."""
+    out, off = {}, 0
+    for t, nm, _ in fields:
+        n = _C_SIZES[t]
+        off = -(-off // n) * n
+        out[nm] = off
+        off += n
+    return out
+
+
+def _fields_checkpoint(fields: list[tuple[str, str, str]], T: str) -> list[tuple[str, str, str]]:
+    """The members of a checkpoint image (T_save, T_load): the state's, in its order, with the gain
+    schedule's row pointer as its index in T_seg: the same bytes on every target."""
+    return [
+        ("uint32_t", nm, f"the schedule's current row, as its index in {T}_seg") if nm == "seg" else (t, nm, c)
+        for t, nm, c in fields
+    ]
+
+
+def _checkpoint_c(p: AxisPlan, P: str, T: str, fields: list[tuple[str, str, str]]) -> list[str]:
+    """C of T_save and T_load: the state to and from its checkpoint image of P_CK_BYTES bytes (the
+    telemetry's checkpoint frames, accelnav.link.replay): every member little-endian at its offset under
+    natural alignment, which is the covariance state struct's own bytes on a little-endian target; the
+    gain schedule's row pointer goes as its index in T_seg. T_load refuses an index outside the table
+    (and leaves the state as it was), so no image makes the filter read past it. Only checkpoints call
+    these, never the step."""
+    ck = _fields_checkpoint(fields, T)
+    if any(_C_SIZES[t] not in (4, 8) for t, _, _ in ck):
+        raise ValueError("a checkpoint image takes 32- and 64-bit members only")
+    off = _struct_offsets(ck)
+    gs = p.form == "gain_schedule"
+
+    def put(t, nm):
+        o = off[nm]
+        if nm == "seg":
+            return [f"    acn_put32(out + {o}, (uint32_t)(s->seg - {T}_seg)); /* the row's index, 0 .. {P}_NSEG */"]
+        if _C_SIZES[t] == 8:
+            return [
+                f"    acn_put32(out + {o}, (uint32_t)(uint64_t)s->{nm}); /* {nm}, low word */",
+                f"    acn_put32(out + {o + 4}, (uint32_t)((uint64_t)s->{nm} >> 32));",
+            ]
+        return [f"    acn_put32(out + {o}, (uint32_t)s->{nm});"]
+
+    def get(t, nm):
+        o = off[nm]
+        if nm == "seg":
+            return [f"    s->seg = &{T}_seg[row];"]
+        if _C_SIZES[t] == 8:
+            return [f"    s->{nm} = ({t})((uint64_t)acn_get32(in + {o + 4}) << 32 | acn_get32(in + {o}));"]
+        return [f"    s->{nm} = ({t})acn_get32(in + {o});"]
+
+    what = "with the row as its index in the table" if gs else "the state struct's bytes on a little-endian target"
+    src = [f"/* The checkpoint image ({P}_CK_BYTES bytes, {what}). */"]
+    src += [f"void {T}_save(const {T}_t *s, uint8_t *out)", "{"]
+    for t, nm, _ in ck:
+        src += put(t, nm)
+    src += ["}", ""]
+    if gs:
+        src += [
+            "/* false (s untouched) for a row index outside the table or a deviation zoom past ZOOM_MAX: a damaged",
+            " * image, never a firmware's. */",
+        ]
+    src += [f"bool {T}_load({T}_t *s, const uint8_t *in)", "{"]
+    if gs:
+        from .follow import ZOOM_MAX
+
+        src += [
+            f"    uint32_t row = acn_get32(in + {off['seg']});",
+            f"    if (row > (uint32_t){P}_NSEG || acn_get32(in + {off['z']}) > {ZOOM_MAX}u) {{",
+            "        return false; /* a row outside the table, or a zoom no shift can take */",
+            "    }",
+        ]
+    for t, nm, _ in ck:
+        src += get(t, nm)
+    src += ["    return true;", "}", ""]
+    return src
+
+
 def _fields_follow(p: AxisPlan) -> list[tuple[str, str, str]]:
     """Gain schedule: the deviation from the schedule's covariance block after a skip (codegen.follow)."""
     from .follow import DEV
@@ -1099,6 +1178,37 @@ static inline uint32_t acn_recip(uint32_t d, int *n)
     ACN_NR(dn, x);
     return x;
 }
+
+/* Checkpoint images (T_save, T_load): little-endian words at any alignment, no libc. A little-endian
+ * target with unaligned access (Cortex-M3, x86) moves a word with one STR / LDR (a 4-byte
+ * __builtin_memcpy); any other byte by byte (on the Cortex-M0 gcc would call memcpy). */
+#if defined(__GNUC__) && defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__ &&                  \
+    (defined(__ARM_FEATURE_UNALIGNED) || defined(__x86_64__) || defined(__i386__))
+static inline void acn_put32(uint8_t *p, uint32_t v)
+{
+    __builtin_memcpy(p, &v, 4);
+}
+
+static inline uint32_t acn_get32(const uint8_t *p)
+{
+    uint32_t v;
+    __builtin_memcpy(&v, p, 4);
+    return v;
+}
+#else
+static inline void acn_put32(uint8_t *p, uint32_t v)
+{
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+    p[2] = (uint8_t)(v >> 16);
+    p[3] = (uint8_t)(v >> 24);
+}
+
+static inline uint32_t acn_get32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+#endif
 """
 
 
@@ -1261,13 +1371,20 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         f"void {T}_skip({T}_t *s);",
         f"void {T}_update({T}_t *s, int32_t z);",
         f"void {T}_read(const {T}_t *s, {T}_out_t *o);",
+        f"void {T}_save(const {T}_t *s, uint8_t *out);",
+        f"bool {T}_load({T}_t *s, const uint8_t *in);",
     ]
+    ck_fields = _fields_checkpoint(fields, T)
+    ck_bytes = _struct_bytes(ck_fields)
+    if ck_bytes is None or ck_bytes != sum(_C_SIZES[t] for t, _, _ in ck_fields):
+        raise ValueError(f"axis {ax}: the checkpoint image must be fixed-size members without padding")
     fmt_defs = [
         f"#define {P}_R_FRAC {p.f('r')}",
         f"#define {P}_U_FRAC {p.f('u_out')}",
         f"#define {P}_A_FRAC {p.f('a')}",
         f"#define {P}_E_FRAC {p.f('e')}",
         f"#define {P}_Z_FRAC {p.f('z')}",
+        f"#define {P}_CK_BYTES {ck_bytes} /* bytes of the state's checkpoint image ({T}_save, {T}_load) */",
     ]
     header = fmt_defs + [""] + struct + [""] + out_struct + [""] + protos
     cdef = struct + out_struct + protos
@@ -1451,6 +1568,7 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         "}",
         "",
     ]
+    src += _checkpoint_c(p, P, T, fields)
     man = {
         "axis": ax,
         "form": p.form,
@@ -1470,7 +1588,18 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         "constants": {k: {"value": val, "format": f.name, "int": quantize(val, f)} for k, (val, f) in p.consts.items()},
         "l1": p.l1.__dict__ | {},
         "z_error": p.z_error,
-        "state_bytes": _struct_bytes(fields),  # sizeof(T_t); the telemetry checkpoints carry these bytes
+        "state_bytes": _struct_bytes(fields),  # sizeof(T_t); None when it depends on the target (a pointer)
+        # what the telemetry's checkpoint frames carry (codegen.frames, accelnav.link.replay): the image of
+        # T_save / T_load; "row": where the gain schedule's row index lies in it and how many rows there are
+        # (an index >= rows is a damaged image: T_load and the host decoder refuse it)
+        "checkpoint": {
+            "bytes": ck_bytes,
+            "save": f"{T}_save",
+            "load": f"{T}_load",
+            "row": None
+            if sched is None
+            else {"offset": _struct_offsets(ck_fields)["seg"], "rows": sched.n_segments + 1, "table": f"{T}_seg"},
+        },
         "e_state_offset": eoff,  # gain schedule: eps = eb + this (LSB of e); None: the state holds eps
     }
     if sched is not None:

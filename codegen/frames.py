@@ -22,9 +22,14 @@ Frame types (MCU -> host):
   slots are used (a partial block is sent on ``flush``, ``stop``, a mode
   change). The host gets the filter's states by running the firmware's own
   generated C on these inputs (accelnav.link.replay).
-* ``checkpoint`` (compact mode): the bytes of one axis' generated state
-  struct (``sizeof`` from the filter manifest's ``state_bytes``, checked by
-  the firmware's build) before the sample ``index``: one per axis every
+* ``checkpoint`` (compact mode): one axis' state before the sample ``index``
+  as its checkpoint image, the bytes the generated ``accelnav_AXIS_save``
+  writes (the filter manifest's ``checkpoint.bytes``, checked by the
+  firmware's build): the state struct's own bytes for the covariance form;
+  for the gain schedule the same members with the schedule's row as its
+  index in the table instead of a pointer, so that both ends read the same
+  bytes (``checkpoint_rows`` in the manifest says where that index lies; one
+  outside the table is refused as damaged). One per axis every
   ``CHECKPOINT_SAMPLES`` samples and whenever a compact run begins (flag
   ``resume``). The host's replay must match every one bit for bit; it starts
   from one after a gap.
@@ -215,12 +220,19 @@ class Layout:
     frames: tuple[Frame, ...]
     block_samples: int  # sample slots of a block frame
     checkpoint_samples: int  # samples between checkpoints (whole blocks)
-    state_bytes: tuple[int, ...]  # per axis: sizeof the generated state struct a checkpoint carries
-    compact: bool  # False when a state struct has no target-independent bytes (a pointer): no compact mode
+    state_bytes: tuple[int, ...]  # per axis: bytes of the state's checkpoint image (accelnav_AXIS_save)
+    compact: bool  # False when a filter has no checkpoint image (the float32 variant): no compact mode
+    # per axis: (offset, rows) of the gain schedule's row index in the image, None for the covariance form
+    checkpoint_rows: tuple[tuple[int, int] | None, ...] = ()
 
     def sent(self, f: Frame) -> bool:
         """Whether frame ``f`` is part of the protocol (block and checkpoint only with the compact mode)."""
         return self.compact or f.name not in ("block", "checkpoint")
+
+    def _rows_json(self) -> list[dict | None]:
+        """Per axis where the gain schedule's row index lies in a checkpoint image: offset (u32,
+        little-endian) and rows (an index must be below it), or None."""
+        return [None if r is None else {"offset": r[0], "rows": r[1]} for r in self.checkpoint_rows]
 
     def frame(self, name: str) -> Frame:
         for f in self.frames:
@@ -240,6 +252,8 @@ class Layout:
             "block_samples": self.block_samples,
             "checkpoint_samples": self.checkpoint_samples,
             "state_bytes": list(self.state_bytes),
+            # only with a gain-schedule axis (a covariance build's layout and hash stay as they were)
+            **({"checkpoint_rows": self._rows_json()} if any(r is not None for r in self.checkpoint_rows) else {}),
             "frames": {
                 f.name: {
                     "type": f.type,
@@ -319,13 +333,17 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
             b.add(f"{ax}.{s}", f"i{word}", f"{a}.{s}", unit=unit, frac=frac)
     frames.append(Frame("sample", TYPE_SAMPLE, "up", tuple(b.fields), "sample_t"))
 
-    # compact mode: raw inputs of a block of samples; the host replays the filter (see the module docstring)
-    # a state struct holding a pointer (the gain-schedule form's row) has no bytes two targets share: such a
-    # filter streams sample frames only (ACNF_COMPACT 0; the block and checkpoint frames stay out of the manifest)
-    state_bytes = [ax.get("state_bytes") for ax in filter_manifest["axes"]]
+    # compact mode: raw inputs of a block of samples; the host replays the filter (see the module docstring).
+    # A checkpoint carries the state's image (accelnav_AXIS_save: the gain schedule's row as an index, not a
+    # pointer); a filter without one (float32) streams sample frames only (ACNF_COMPACT 0; the block and
+    # checkpoint frames stay out of the manifest)
+    cks = [ax.get("checkpoint") or {} for ax in filter_manifest["axes"]]
+    state_bytes = [ck.get("bytes") for ck in cks]
     compact = all(isinstance(nb, int) and nb > 0 for nb in state_bytes)
+    rows = tuple(None if ck.get("row") is None else (int(ck["row"]["offset"]), int(ck["row"]["rows"])) for ck in cks)
     if not compact:
         state_bytes = [1] * len(names)
+        rows = (None,) * len(names)
     if duty:
         # the generated convert refuses periods more than 25 % off the nominal one: with 1.5 x nominal
         # below 2^16 every count it accepts fits a u16 (a larger one is sent as 65535 and is refused too)
@@ -352,7 +370,7 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
     b.add("index", "u32", "s->index", doc="the state before this sample")
     b.add("flags", "u8", "s->flags", doc="FLAGS bits")
     b.add("axis", "u8", "s->axis", doc="axis number")
-    b.add("state", f"u8[{max(state_bytes)}]", "s->state", doc="the axis' state struct, its bytes (zero padded)")
+    b.add("state", f"u8[{max(state_bytes)}]", "s->state", doc="the axis' checkpoint image (zero padded)")
     frames.append(Frame("checkpoint", TYPE_CHECKPOINT, "up", tuple(b.fields), "checkpoint_t"))
 
     b = _Builder("s")
@@ -414,6 +432,7 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
         nblk * -(-CHECKPOINT_EVERY // nblk),
         tuple(state_bytes),
         compact,
+        rows,
     )
 
 
@@ -486,8 +505,9 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         f"#define ACNF_PERIOD_US {period_us}u /* sample period, us (rounded) */",
         f"#define ACNF_MAX_DECIMATION {MAX_DECIMATION}u",
         "#define ACNF_MODEL_SHA256_BYTES {" + ", ".join(f"0x{b:02x}u" for b in bytes.fromhex(lay.model_sha256)) + "}",
-        "/* X-macro over the axes: X(name, NAME, index) */",
-        "#define ACNF_AXES(X) " + " ".join(f"X({a}, {a.upper()}, {i})" for i, a in enumerate(lay.axes)),
+        "/* X-macro over the axes: M(name, NAME, index) (a parameter no axis name can be: axis x is X) */",
+        "#define ACNF_AXES(ACNF_AXIS_M) "
+        + " ".join(f"ACNF_AXIS_M({a}, {a.upper()}, {i})" for i, a in enumerate(lay.axes)),
         "",
         "/* frame types */",
         f"#define ACNF_T_SAMPLE 0x{TYPE_SAMPLE:02x}u",
@@ -514,13 +534,13 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         f"#define ACNF_CHECKPOINT_SIZE {ckpt.size}u",
         "",
         "/* compact mode */",
-        f"#define ACNF_COMPACT {int(lay.compact)} /* 0: no compact mode (a state struct with a pointer) */",
+        f"#define ACNF_COMPACT {int(lay.compact)} /* 0: no compact mode (a filter without a checkpoint image) */",
         f"#define ACNF_BLOCK_SAMPLES {lay.block_samples}u /* sample slots of a block frame */",
         f"#define ACNF_CHECKPOINT_SAMPLES {lay.checkpoint_samples}u /* samples between checkpoints */",
-        f"#define ACNF_STATE_BYTES {max(lay.state_bytes)}u /* the largest axis state struct */",
+        f"#define ACNF_STATE_BYTES {max(lay.state_bytes)}u /* the largest axis checkpoint image */",
         f"#define ACNF_RAW_MAX {2 ** (8 * SCALARS[raw_f.scalar][0]) - 1}u /* block: larger inputs are sent as this */",
         *[
-            f"#define ACNF_STATE_BYTES_{i} {nb}u /* sizeof axis {a}'s state struct */"
+            f"#define ACNF_STATE_BYTES_{i} {nb}u /* axis {a}'s checkpoint image (accelnav_{a}_save) */"
             for i, (a, nb) in enumerate(zip(lay.axes, lay.state_bytes, strict=True))
         ],
         f"#define ACNF_MAX_UP_SIZE {max_up}u",
@@ -594,7 +614,7 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         "    uint32_t index; /* the state before this sample */",
         "    uint8_t flags; /* ACNF_FLAG_* */",
         "    uint8_t axis;",
-        "    uint8_t state[ACNF_STATE_BYTES]; /* the axis' state struct, zero padded */",
+        "    uint8_t state[ACNF_STATE_BYTES]; /* the axis' checkpoint image, zero padded */",
         "} acnf_checkpoint_t;",
         "",
         "typedef struct {",

@@ -336,3 +336,222 @@ def test_duty_cycle_rows_agree_with_the_frame_by_frame_rule():
     assert len(rows) == 900 and c["mismatches"] == 0
     np.testing.assert_array_equal(rows["x.t1"], t1[:, 0])
     assert np.count_nonzero(rows["y.flags"]) == 2
+
+
+# --------------------------------------------------------------------------
+# gain-schedule builds: the state holds a pointer to its schedule row; the checkpoint carries the row's
+# index instead (the generated accelnav_AXIS_save / _load), with the skip-following state
+
+
+@pytest.fixture(scope="module")
+def gs(tmp_path_factory):
+    """The default model in the gain-schedule form: manifest, replay, and the firmware's compact telemetry of
+    N samples with a rail burst on x right before the second checkpoint (the checkpoint is taken while the
+    filter follows the skip), single rails later; and the firmware's own states of every sample."""
+    from accelnav.hil_sim.firmware import generated
+
+    text = load_model().text
+    assert 'form = "covariance" ' in text
+    path = tmp_path_factory.mktemp("gs") / "gs.toml"
+    path.write_text(text.replace('form = "covariance" ', 'form = "gain_schedule" ', 1))
+    model = load_model(path)
+    assert model.filter.form == "gain_schedule"
+    gman = manifest(str(path))
+    C = gman.data["checkpoint_samples"]
+    code = 2048 + np.random.default_rng(22).integers(-300, 300, (N, 2))
+    code[C - 3 : C, 0] = 0  # rails: skipped, the filter follows them past the checkpoint at C
+    code[700, 0] = 4095
+    code[3 * C - 1, 1] = 0
+    mod = build_firmware(str(path))
+    fw = HostFirmware(mod)
+    fw.rx(encode_stimulus(gman, code=code) + encode_command(gman, "flush"))
+    own = HostFirmware(mod)  # the state mode at decimation 1: the firmware's own states of every sample
+    own.rx(encode_command(gman, "mode_states") + encode_stimulus(gman, code=code))
+    states = decode_all(gman, own.take())[0]["sample"]
+    assert len(states) == N
+    return {
+        "man": gman,
+        "replay": replay_for(gman, model),
+        "stream": fw.take(),
+        "states": states,
+        "files": generated(str(path)),
+        "model": model,
+    }
+
+
+def _ck_image(man, f: bytes) -> tuple[int, int, bytes]:
+    """(index, axis, image bytes) of a checkpoint frame."""
+    p = _payload(f)
+    return int.from_bytes(p[1:5], "little"), p[6], p[7:]
+
+
+def _gs_row_at(man, axis: int) -> tuple[int, int]:
+    r = man.data["checkpoint_rows"][axis]
+    return r["offset"], r["rows"]
+
+
+def _assert_own_states(man, rows, states) -> None:
+    """The replayed rows carry the firmware's own states of their samples, bit for bit."""
+    want = states[np.searchsorted(states["index"], rows["index"])]
+    np.testing.assert_array_equal(want["index"], rows["index"])
+    for ax in man.axes:
+        for st in "ruae":
+            np.testing.assert_array_equal(rows[f"{ax}.{st}"], want[f"{ax}.{st}"], err_msg=f"{ax}.{st}")
+
+
+def test_gain_schedule_compact_round_trip_follows_skips(gs):
+    """A gain-schedule build streams block and checkpoint frames; the host's replay matches every checkpoint
+    (a pointer-free image), and its rows are the firmware's own states. The checkpoint taken while the
+    filter follows the rail burst carries the following flag (k's bit 31) and a non-zero deviation block;
+    after a gap the replay starts from that very checkpoint and still matches the firmware bit for bit."""
+    man, replay = gs["man"], gs["replay"]
+    C, B = man.data["checkpoint_samples"], man.data["block_samples"]
+    assert man.frames["checkpoint"]["size"] == 7 + 88  # the image: 88 B per axis, the row a u32 index
+    rows, c = _check(man, replay, gs["stream"], seed=3)
+    np.testing.assert_array_equal(rows["index"], np.arange(N))
+    assert c["mismatches"] == 0 and c["lost"] == 0 and c["checkpoints"] == 2 * (N // C + 1)
+    _assert_own_states(man, rows, gs["states"])
+    assert (rows["x.flags"][C - 3 : C] & 1).all() and rows["x.flags"][700] & 2  # skipped, rail
+    # the image of x before sample C: following (k's bit 31) with a deviation; its row an index in the table
+    f = _frames(gs["stream"])
+    ck = {(i, a): img for i, a, img in (_ck_image(man, x) for x in f if _kind(man, x) == "checkpoint")}
+    off, nrows = _gs_row_at(man, 0)
+    nb = man.data["state_bytes"][0]
+    img = ck[(C, 0)]
+    k = int.from_bytes(img[nb - 8 : nb - 4], "little")  # the image ends with k and overflow
+    assert k == 0x80000000 | C, hex(k)
+    assert any(img[off + 4 : nb - 8]), "no deviation carried"  # the seven deviation words follow the row
+    assert 0 < int.from_bytes(img[off : off + 4], "little") < nrows
+    assert int.from_bytes(ck[(C, 1)][nb - 8 : nb - 4], "little") == C  # y: not following
+    # blocks before C lost: the replay starts from the following checkpoint, and still matches
+    kinds = [_kind(man, x) for x in f]
+    blocks = [k for k, x in enumerate(kinds) if x == "block"]
+    cut = blocks[C // B - 3 : C // B]  # the three blocks before sample C
+    rows, c = _check(man, replay, b"".join(x for k, x in enumerate(f) if k not in cut), seed=4)
+    np.testing.assert_array_equal(rows["index"], np.r_[0 : C - 3 * B, C:N])
+    assert c["mismatches"] == 0 and c["lost"] == 3 * B
+    _assert_own_states(man, rows, gs["states"])
+
+
+def _with_row(man, f: bytes, row: int) -> bytes:
+    """The checkpoint frame with its image's row index set to ``row``, its CRC made good."""
+    p = bytearray(_payload(f))
+    off, _ = _gs_row_at(man, p[6])
+    p[7 + off : 7 + off + 4] = row.to_bytes(4, "little")
+    return frame(bytes(p))
+
+
+@pytest.mark.parametrize("bad", ["rows", "2**32-1"])
+def test_gain_schedule_checkpoint_with_a_row_outside_the_table_is_refused(gs, bad):
+    """A checkpoint whose row index lies outside the schedule's table (its CRC good) is refused as damaged
+    by both decoders: the replay goes on from its own state and the next checkpoint matches; when that
+    checkpoint was to restart the replay after a gap, the samples wait for the next good one (counted
+    lost). The index just inside the table is taken (and then disagrees: a mismatch)."""
+    man, replay = gs["man"], gs["replay"]
+    C, B = man.data["checkpoint_samples"], man.data["block_samples"]
+    f = _frames(gs["stream"])
+    kinds = [_kind(man, x) for x in f]
+    at = next(k for k, x in enumerate(f) if kinds[k] == "checkpoint" and _ck_image(man, x)[:2] == (2 * C, 0))
+    _, nrows = _gs_row_at(man, 0)
+    value = nrows if bad == "rows" else 2**32 - 1
+    tampered = f[:at] + [_with_row(man, f[at], value)] + f[at + 1 :]
+    rows, c = _check(man, replay, b"".join(tampered), seed=5)
+    np.testing.assert_array_equal(rows["index"], np.arange(N))
+    assert c["mismatches"] == 0 and c["lost"] == 0 and c["checkpoints"] == 2 * (N // C + 1) - 1
+    assert decode_all(man, b"".join(tampered), replay)[1].bad_frames == 1
+    _assert_own_states(man, rows, gs["states"])
+    # after a gap: the refused checkpoint cannot restart the replay; the next good one does
+    blocks = [k for k, x in enumerate(kinds) if x == "block" and k < at]
+    gap = tampered[: blocks[-2]] + tampered[blocks[-1] + 1 :]  # the last two blocks before it lost
+    rows, c = _check(man, replay, b"".join(gap), seed=6)
+    np.testing.assert_array_equal(rows["index"], np.r_[0 : 2 * C - 2 * B, 3 * C : N])
+    assert c["lost"] == C + 2 * B and c["mismatches"] == 0
+    _assert_own_states(man, rows, gs["states"])
+    # the last row of the table is an index a firmware may send: taken, and the replay disagrees
+    inside = f[:at] + [_with_row(man, f[at], nrows - 1)] + f[at + 1 :]
+    _, c = _check(man, replay, b"".join(inside), seed=7)
+    assert c["mismatches"] >= 1
+
+
+def test_gain_schedule_load_refuses_a_row_outside_the_table(gs):
+    """The generated accelnav_x_load (the host's replay and any reader of a checkpoint) refuses an image
+    whose row index is outside the table and leaves the state untouched; an image inside it loads, and
+    saving gives the same bytes back (the pointer became the index and back)."""
+    from accelnav.codegen.cbuild import cache_dir
+    from accelnav.codegen.harness import build
+
+    files = gs["files"]
+    lib, ffi = (m := build(files, cache_dir() / "harness")).lib, m.ffi
+    man = gs["man"]
+    off, nrows = _gs_row_at(man, 0)
+    nb = man.data["state_bytes"][0]
+    assert json.loads(files["accelnav.json"])["axes"][0]["checkpoint"]["bytes"] == nb
+    s = ffi.new("accelnav_x_t *")
+    lib.accelnav_x_init(s)
+    for _ in range(300):  # past the first rows of the schedule
+        lib.accelnav_x_step(s, 2100)
+    img = ffi.new(f"uint8_t[{nb}]")
+    lib.accelnav_x_save(s, img)
+    good = bytes(ffi.buffer(img))
+    row = int.from_bytes(good[off : off + 4], "little")
+    assert 0 < row < nrows
+    t = ffi.new("accelnav_x_t *")
+    for value in (nrows, nrows + 1, 2**31, 2**32 - 1):
+        bad = ffi.new(f"uint8_t[{nb}]", good[:off] + value.to_bytes(4, "little") + good[off + 4 :])
+        before = bytes(ffi.buffer(t))
+        assert not lib.accelnav_x_load(t, bad), value
+        assert bytes(ffi.buffer(t)) == before  # untouched
+    # the deviation's zoom past codegen.follow.ZOOM_MAX: no shift in the follow C could take it
+    from accelnav.codegen.emit_c import _fields_checkpoint, _fields_fixed, _struct_offsets
+    from accelnav.codegen.follow import ZOOM_MAX
+    from accelnav.codegen.ranges import plan_axis
+
+    T = "accelnav_x"
+    zoff = _struct_offsets(_fields_checkpoint(_fields_fixed(plan_axis(gs["model"], 0, "gain_schedule"), T), T))["z"]
+    for value in (ZOOM_MAX + 1, 2**32 - 1):
+        bad = ffi.new(f"uint8_t[{nb}]", good[:zoff] + value.to_bytes(4, "little") + good[zoff + 4 :])
+        assert not lib.accelnav_x_load(t, bad), value
+    img2 = good[:zoff] + ZOOM_MAX.to_bytes(4, "little") + good[zoff + 4 :]
+    assert lib.accelnav_x_load(t, ffi.new(f"uint8_t[{nb}]", img2))
+    for value in (row, nrows - 1, 0):
+        img2 = good[:off] + value.to_bytes(4, "little") + good[off + 4 :]
+        assert lib.accelnav_x_load(t, ffi.new(f"uint8_t[{nb}]", img2))
+        back = ffi.new(f"uint8_t[{nb}]")
+        lib.accelnav_x_save(t, back)
+        assert bytes(ffi.buffer(back)) == img2
+    # the host's replay kernel given such an image: the stretch runs from init, reported (never past the table)
+    bad = np.frombuffer(good[:off] + nrows.to_bytes(4, "little") + good[off + 4 :], np.uint8)
+    replay = gs["replay"]
+    rows = np.zeros(4, man.dtypes["sample"])
+    code = np.zeros(4, np.uint8)
+    one = (np.zeros(1, np.int64), np.full(1, 4, np.int64))  # one stretch: samples 0..3
+    fin, nbad = replay.run(0, *one, bad[None], code, np.full(4, 2100), None, rows)
+    assert nbad.tolist() == [1] and int.from_bytes(fin[0, off : off + 4].tobytes(), "little") < nrows
+    fin, nbad = replay.run(0, *one, np.frombuffer(good, np.uint8)[None], code, np.full(4, 2100), None, rows)
+    assert nbad.tolist() == [0]
+    # the loaded state steps exactly as the one it was saved from
+    lib.accelnav_x_load(t, ffi.new(f"uint8_t[{nb}]", good))
+    for code in (2100, 0, 0, 2100, 1990):  # a skip included
+        assert lib.accelnav_x_step(s, code) == lib.accelnav_x_step(t, code)
+        lib.accelnav_x_save(s, img)
+        lib.accelnav_x_save(t, back)
+        assert bytes(ffi.buffer(img)) == bytes(ffi.buffer(back))
+
+
+def test_covariance_checkpoint_image_is_the_state_struct(man):
+    """The covariance form's checkpoint image (accelnav_x_save) is its state struct's bytes, as the firmware
+    sent them before images existed: older compact logs replay as before."""
+    from accelnav.codegen.cbuild import cache_dir
+    from accelnav.codegen.harness import build
+    from accelnav.hil_sim.firmware import generated
+
+    m = build(generated(None), cache_dir() / "harness")
+    lib, ffi = m.lib, m.ffi
+    s = ffi.new("accelnav_x_t *")
+    lib.accelnav_x_init(s)
+    img = ffi.new(f"uint8_t[{man.data['state_bytes'][0]}]")
+    for code in (2100, 0, 2000, 2300):
+        lib.accelnav_x_step(s, code)
+        lib.accelnav_x_save(s, img)
+        assert bytes(ffi.buffer(img)) == bytes(ffi.buffer(s))
+    assert "checkpoint_rows" not in man.data

@@ -124,6 +124,8 @@ def test_pil_frames_equal_sil_bit_for_bit(tmp_path, model_in_form, board, model_
         assert err < SIGMA_FRACTION, f"{key}: firmware off the float64 reference by {err:.2e} sigma"
     assert c.max_of_bound <= 1.0, f"firmware at {c.max_of_bound:.3g} of the generator's stated bound"
     assert pil.stats["lost"] == 0 and pil.stats["crc_errors"] == 0
+    # both forms stream compact frames: every checkpoint the board sent matched the host's replay
+    assert c.link["PIL"]["mismatches"] == 0 and c.link["PIL"]["checkpoints"] >= len(model.axes)
     fr = decode_all(man, pil.telemetry, replay_for(man, model))[0]
     assert len(fr["sample"]) == len(run.t)
     assert not fr["sample"]["missed"].any() and not fr["sample"]["rx_lost"].any()

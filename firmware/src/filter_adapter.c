@@ -1,12 +1,10 @@
 #include "filter_adapter.h"
 
-#include <string.h>
-
 #if ACNF_COMPACT
-/* the frame layout's state sizes (filter manifest) must be the compiler's, or no build */
+/* the frame layout's checkpoint sizes (filter manifest) must be the generated filter's, or no build
+ * (accelnav_<axis>_save writes ACCELNAV_<AXIS>_CK_BYTES bytes, whatever the struct's layout) */
 #define ACN_SIZE_CHECK(name, NAME, i)                                                              \
-    typedef char                                                                                   \
-        acn_state_size_##name[sizeof(accelnav_##name##_t) == ACNF_STATE_BYTES_##i ? 1 : -1];
+    typedef char acn_state_size_##name[ACCELNAV_##NAME##_CK_BYTES == ACNF_STATE_BYTES_##i ? 1 : -1];
 ACNF_AXES(ACN_SIZE_CHECK)
 #endif
 
@@ -76,7 +74,7 @@ void acn_filter_read(const acn_filters_t *f, unsigned i, acnf_axis_t *out)
 
 #define ACN_STATE(name, NAME, i)                                                                   \
     case i:                                                                                        \
-        memcpy(out, &f->name, sizeof f->name);                                                     \
+        accelnav_##name##_save(&f->name, out);                                                     \
         break;
 void acn_filter_state(const acn_filters_t *f, unsigned i, uint8_t *out)
 {
@@ -86,7 +84,7 @@ void acn_filter_state(const acn_filters_t *f, unsigned i, uint8_t *out)
     default:
         break;
     }
-#else /* no checkpoints: the state struct has no bytes two targets share */
+#else /* no checkpoints: the filter has no checkpoint image (the float32 variant) */
     (void)f;
     (void)i;
     (void)out;

@@ -27,8 +27,8 @@ void acn_filter_skip(acn_filters_t *f, unsigned i);
 /* The state of axis i in its fixed-point formats, into the frame's axis record. */
 void acn_filter_read(const acn_filters_t *f, unsigned i, acnf_axis_t *out);
 
-/* The bytes of axis i's state struct (ACNF_STATE_BYTES_<AXIS> of them) into out, for a checkpoint.
- */
+/* Axis i's state as its checkpoint image (accelnav_<axis>_save: ACNF_STATE_BYTES_<i> bytes) into
+ * out, for a checkpoint. */
 void acn_filter_state(const acn_filters_t *f, unsigned i, uint8_t *out);
 
 /* Saturations counted by the filter of axis i since init. */

@@ -29,6 +29,12 @@ batch holds nothing but the next frames in order, which is the common case):
   back (then it is a repeat). A repeated older checkpoint is ignored
   (``checkpoint_repeats``).
 
+A checkpoint the decoder refused never reaches this class: a damaged frame, or
+one whose contents no firmware sends (an axis that does not exist, a
+gain-schedule row index outside the table:
+:meth:`accelnav.link.telemetry.Manifest.checkpoints_sane`). It counts in
+``bad_frames`` and the stream goes on as if it had been lost.
+
 Without a replay (no model text: a log recorded with ``--manifest``), the
 ordering and the counts are the same but no row is delivered; the samples
 are counted in ``unreplayed``.

@@ -2,14 +2,17 @@
 
 Block frames carry the raw input of every sample (ADC codes or T1/T2 counts)
 and a 2-bit code per axis (updated, input refused, no capture, missed by the
-board); checkpoint frames carry the bytes of each axis' generated state
-struct. :class:`Replay` compiles the very C the firmware runs (the generated
+board); checkpoint frames carry each axis' state as its checkpoint image
+(the generated ``accelnav_AXIS_save``: the covariance form's state struct
+bytes; the gain schedule's with its row as an index into the table).
+:class:`Replay` compiles the very C the firmware runs (the generated
 ``accelnav.c`` of the model, :mod:`accelnav.codegen.emit_c`, built with
 :mod:`accelnav.codegen.cbuild` like SIL) together with a small loop that,
-for many stretches at once, starts from a state's bytes, steps the filter
+for many stretches at once, starts from a state's image (``accelnav_AXIS_load``,
+which refuses a gain-schedule row outside the table), steps the filter
 through the stretch's inputs exactly as ``firmware/src/app.c`` does (``step``
 on the input for codes 0 and 1, ``skip`` for 2 and 3), writes ``r, u, a, e``
-of every sample as ``accelnav_AXIS_read`` gives them, and returns the bytes
+of every sample as ``accelnav_AXIS_read`` gives them, and returns the image
 of the state at the end of each stretch, for the decoder to hold against the
 next checkpoint bit for bit. One C call per axis and decoded batch: no
 Python loop over samples.
@@ -22,11 +25,13 @@ import numpy as np
 from accelnav.codegen.model import Model, loads_model
 
 _KERNEL = """
-/* Replay of axis {ax}: stretch j starts from the state bytes init[j], runs samples
- * start[j] .. start[j] + len[j] - 1 and leaves its final state's bytes in fin[j];
+/* Replay of axis {ax}: stretch j starts from the checkpoint image init[j], runs samples
+ * start[j] .. start[j] + len[j] - 1 and leaves its final state's image in fin[j];
  * r, u, a, e of sample k (accelnav_{ax}_read) go to rows + k * stride + off[0..3]
  * (little-endian, as the fields of the host's sample rows), nbad[j] counts the
- * samples whose step verdict (input taken or refused) differs from the code sent. */
+ * samples whose step verdict (input taken or refused) differs from the code sent, plus
+ * one for an image the filter refuses (a row outside the table: the decoder refuses such
+ * a checkpoint first; here the stretch runs from init and is reported, never past the table). */
 void acnr_{ax}(int64_t nseg, const int64_t *start, const int64_t *len, const uint8_t *init, uint8_t *fin,
                const uint8_t *code, const uint32_t *in1, const uint32_t *in2, uint8_t *rows, int64_t stride,
                const int64_t *off, int64_t *nbad)
@@ -36,7 +41,10 @@ void acnr_{ax}(int64_t nseg, const int64_t *start, const int64_t *len, const uin
     for (j = 0; j < nseg; ++j) {{
         accelnav_{ax}_t s;
         int64_t bad = 0;
-        memcpy(&s, init + j * (int64_t)sizeof s, sizeof s);
+        if (!accelnav_{ax}_load(&s, init + j * (int64_t)ACCELNAV_{AX}_CK_BYTES)) {{
+            accelnav_{ax}_init(&s);
+            bad = 1;
+        }}
         for (k = start[j]; k < start[j] + len[j]; ++k) {{
             accelnav_{ax}_out_t o;
             if (code[k] <= 1u) {{ /* updated or refused: app.c called step on this input */
@@ -51,14 +59,14 @@ void acnr_{ax}(int64_t nseg, const int64_t *start, const int64_t *len, const uin
             memcpy(rows + k * stride + off[2], &o.a, sizeof o.a);
             memcpy(rows + k * stride + off[3], &o.e, sizeof o.e);
         }}
-        memcpy(fin + j * (int64_t)sizeof s, &s, sizeof s);
+        accelnav_{ax}_save(&s, fin + j * (int64_t)ACCELNAV_{AX}_CK_BYTES);
         nbad[j] = bad;
     }}
 }}
 
 size_t acnr_{ax}_size(void)
 {{
-    return sizeof(accelnav_{ax}_t);
+    return ACCELNAV_{AX}_CK_BYTES;
 }}
 """
 
@@ -196,7 +204,7 @@ class Replay:
                 "    return c > (uint32_t)INT32_MAX ? INT32_MAX : (int32_t)c;",
                 "}",
             ]
-        src += [_KERNEL.format(ax=ax, args=args) for ax in self.axes]
+        src += [_KERNEL.format(ax=ax, AX=ax.upper(), args=args) for ax in self.axes]
         src.append(_fill_source(manifest))
         sources = dict(_filter_sources(model))
         sources["acnreplay.c"] = "\n".join(src)
@@ -213,7 +221,7 @@ class Replay:
         for ax, nb in zip(self.axes, self.state_bytes, strict=True):
             got = getattr(self.lib, f"acnr_{ax}_size")()
             if got != nb:
-                raise ReplayError(f"axis {ax}: the state struct is {got} bytes here, the manifest says {nb}")
+                raise ReplayError(f"axis {ax}: the checkpoint image is {got} bytes here, the manifest says {nb}")
         dt = manifest.dtypes["sample"]
         self.row_dtype = dt
         self.block_dtype = manifest.dtypes["block"]

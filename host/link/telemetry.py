@@ -111,6 +111,22 @@ class Manifest:
     def raw_fields(self) -> tuple[str, ...]:
         return ("t1", "t2") if self.input == "duty_cycle" else ("code",)
 
+    def checkpoints_sane(self, axis: np.ndarray, state: np.ndarray) -> np.ndarray:
+        """Per checkpoint (``axis`` numbers, ``state`` images as rows of bytes) whether a firmware could
+        have sent it: the axis exists and, for a gain-schedule axis, the row index in its image
+        (``checkpoint_rows``: offset and rows per axis) lies inside the schedule's table."""
+        axis = np.asarray(axis, np.int64)
+        ok = axis < len(self.axes)
+        for j, r in enumerate(self.data.get("checkpoint_rows") or ()):
+            if r is None:
+                continue
+            at = np.flatnonzero(axis == j)
+            if len(at):
+                o = int(r["offset"])
+                row = np.ascontiguousarray(np.asarray(state, np.uint8)[at, o : o + 4]).view("<u4").ravel()
+                ok[at] = row < int(r["rows"])
+        return ok
+
     def code_flags(self) -> list[int]:
         """The axis flags of a sample row for each 2-bit code of a compact block frame (0 updated,
         1 input refused: a rail, 2 no capture: a timeout, 3 missed by the board)."""
@@ -471,7 +487,7 @@ class Stats:
     frames: dict[str, int] = field(default_factory=dict)
     lost: int = 0  # sample frames missing between delivered ones
     duplicates: int = 0  # sample frames dropped as repeated or older than the last delivered one
-    bad_frames: int = 0  # delimited segments refused (length, COBS, type, CRC)
+    bad_frames: int = 0  # delimited segments refused (length, COBS, type, CRC, contents no firmware sends)
     crc_errors: int = 0  # of those: right length and COBS, wrong CRC
     garbage_bytes: int = 0  # bytes in refused segments
     bytes: int = 0
@@ -586,8 +602,10 @@ class Decoder:
                     recs = np.ascontiguousarray(dec[g, : m - 4]).view(self.man.dtypes[n]).ravel()
                     sane = self._sane(n, recs)
                     if not sane.all():  # a right CRC on contents no firmware sends: refused as damaged
+                        drop = np.flatnonzero(g)[~sane]
                         recs = recs[sane]
-                        g[np.flatnonzero(g)[~sane]] = False
+                        g[drop] = False
+                        accepted[sel[drop]] = False
                     order_parts.append(sel[g])
                     name_parts.append(n)
                     rec_parts.append(recs)
@@ -632,7 +650,7 @@ class Decoder:
         if name == "block":
             return (recs["n"] >= 1) & (recs["n"] <= self.compact.B)
         if name == "checkpoint":
-            return recs["axis"] < len(self.man.axes)
+            return self.man.checkpoints_sane(recs["axis"], recs["state"])
         return np.ones(len(recs), bool)
 
     def _compact(self, out: dict, where: dict) -> int:
@@ -764,7 +782,7 @@ def decode_naive(
         if kind[0] in ("block", "checkpoint"):
             if kind[0] == "block" and not 1 <= rec[3] <= man.data["block_samples"]:
                 continue
-            if kind[0] == "checkpoint" and rec[3] >= len(man.axes):
+            if kind[0] == "checkpoint" and not man.checkpoints_sane([rec[3]], [np.frombuffer(rec[4], np.uint8)])[0]:
                 continue
             compact.append((len(out["sample"]), kind[0], rec))
         out[kind[0]].append(rec)
