@@ -14,7 +14,8 @@ from pathlib import Path
 from .model import Model
 
 GENERATOR_VERSION = "0.1.0"
-RUNTIME_API = 1
+# 2: accelnav_<axis>_save / _load (the checkpoint image of a state, compact telemetry) joined the API
+RUNTIME_API = 2
 
 
 def _banner(model: Model, what: str) -> str:

@@ -119,6 +119,38 @@ def test_firmware_c_is_clang_formatted():
     assert done.returncode == 0, done.stderr[-3000:]
 
 
+def test_firmware_refuses_a_generated_filter_of_another_runtime_api(tmp_path):
+    """filter_adapter.h is written against the generated API (RUNTIME_API 2: the checkpoint image,
+    accelnav_<axis>_save): an accelnav.h of another API stops the build with one line saying to
+    regenerate, rather than at the link."""
+    from accelnav.codegen.package import RUNTIME_API
+    from accelnav.hil_sim.firmware import generated
+
+    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    if cc is None:
+        pytest.skip("no C compiler")
+    files = generated()
+    (tmp_path / "main.c").write_text('#include "filter_adapter.h"\nint main(void) { return 0; }\n')
+    for api in (RUNTIME_API, RUNTIME_API - 1):
+        for name in ("accelnav.h", "acnframe.h"):
+            text = files[name]
+            if name == "accelnav.h":
+                text = text.replace(
+                    f"#define ACCELNAV_RUNTIME_API {RUNTIME_API}\n", f"#define ACCELNAV_RUNTIME_API {api}\n"
+                )
+            (tmp_path / name).write_text(text)
+        done = subprocess.run(
+            [cc, "-std=c99", "-fsyntax-only", "-I", str(tmp_path), "-I", str(REPO / "firmware" / "src"), "main.c"],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+        )
+        if api == RUNTIME_API:
+            assert done.returncode == 0, done.stderr[-2000:]
+        else:
+            assert done.returncode != 0 and "another runtime API" in done.stderr
+
+
 # --------------------------------------------------------------------------
 # QEMU
 

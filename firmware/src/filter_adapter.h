@@ -9,6 +9,12 @@
 #include "acnframe.h"
 #include "accelnav.h"
 
+/* The generated API this adapter is written against (2: the checkpoint image,
+ * accelnav_<axis>_save). */
+#if ACCELNAV_RUNTIME_API != 2
+#error "accelnav.h is from another runtime API: regenerate it with this accelnav (accelnav codegen)"
+#endif
+
 #define ACN_STATE_MEMBER(name, NAME, i) accelnav_##name##_t name;
 typedef struct {
     ACNF_AXES(ACN_STATE_MEMBER)
