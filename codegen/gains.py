@@ -26,12 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cbuild import STRICT_FLAGS, BuildError, build_module
+from .cbuild import STRICT_FLAGS, BuildError
 from .design import AxisDesign
+from .kernel_build import RICCATI, RICCATI_FLAGS, build, prebuilt
 from .qformat import QFormat
 from .resources import package_dir
-from .riccati_build import FLAGS as KERNEL_FLAGS
-from .riccati_build import kernel_cdef, source_hash
 
 BLOCK_NAMES = ("ra", "ua", "aa", "re", "ue", "ae", "ee")
 
@@ -136,32 +135,20 @@ def _riccati_cached(key: tuple, n: int, keep: int, rows: tuple) -> GainRun:
 
 
 CSRC = package_dir("accelnav.codegen") / "csrc"  # package data: riccati.c, riccati.h
-# the run-time build: the strict flags plus those that decide the doubles (riccati_build.FLAGS)
-_BUILD_FLAGS = (*STRICT_FLAGS, *(f for f in KERNEL_FLAGS if f not in STRICT_FLAGS))
+# the run-time build: the strict flags plus those that decide the doubles (kernel_build.RICCATI_FLAGS)
+_BUILD_FLAGS = (*STRICT_FLAGS, *(f for f in RICCATI_FLAGS if f not in STRICT_FLAGS))
 
 
 def _riccati_prebuilt():
-    """The kernel compiled with the package (riccati_build.py), if it was built from this very C."""
-    try:
-        from . import _riccati
-    except ImportError:
-        return None
-    built = _riccati.ffi.string(_riccati.lib.acn_riccati_source()).decode()
-    return _riccati if built == source_hash(CSRC) else None
+    """The kernel compiled with the package (kernel_build.py), if it was built from this very C."""
+    return prebuilt(RICCATI, CSRC)
 
 
 def _riccati_built():
-    """The kernel built from csrc/ by the project's cffi builder (once per source, cached on disk); None
-    where that cannot be done (no C compiler)."""
-    header = (CSRC / "riccati.h").read_text()
+    """The kernel built from csrc/ by the project's cffi builder; None where that cannot be done (no C
+    compiler)."""
     try:
-        return build_module(
-            "acn_riccati",
-            kernel_cdef(header),
-            {"riccati.c": (CSRC / "riccati.c").read_text(), "riccati.h": header},
-            main="riccati.c",
-            extra_compile_args=_BUILD_FLAGS,
-        )
+        return build(RICCATI, CSRC, _BUILD_FLAGS, "acn_riccati")
     except (OSError, BuildError):
         return None
 

@@ -19,9 +19,9 @@ from conftest import MODELS
 from accelnav.codegen import gains
 from accelnav.codegen.bounds import error_bound
 from accelnav.codegen.cbuild import STRICT_FLAGS
+from accelnav.codegen.kernel_build import RICCATI_FLAGS as WHEEL_FLAGS
 from accelnav.codegen.model import load_model
 from accelnav.codegen.ranges import plan_axis
-from accelnav.codegen.riccati_build import FLAGS as WHEEL_FLAGS
 from accelnav.estimate import fastsmooth
 from accelnav.link import wirekernel
 
@@ -66,7 +66,7 @@ def test_the_crc_table_in_the_c_reproduces_zlib():
 
 
 def test_the_wheel_build_keeps_the_flags_that_decide_the_doubles():
-    """riccati_build.FLAGS (the wheel) are among the run-time build's flags, and name no contraction and
+    """kernel_build.RICCATI_FLAGS (the wheel) are among the run-time build's flags, and name no contraction and
     no fast math: both builds compute the same doubles."""
     assert {"-ffp-contract=off", "-fno-fast-math", "-std=c99"} <= set(WHEEL_FLAGS)
     assert set(WHEEL_FLAGS) <= set(gains._BUILD_FLAGS)

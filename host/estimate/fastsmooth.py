@@ -4,7 +4,7 @@ Both return the same :class:`AxisSmooth` and agree with the reference
 (:func:`accelnav.estimate.kf.run_filter` then :func:`accelnav.estimate.kf.rts_smooth`) to rounding;
 tests/test_fastsmooth.py asserts 1e-9 relative, sigma-scaled, for states and
 covariances. The C is csrc/fastsmooth.c, compiled when the package is built
-(fastsmooth_build.py); a source checkout whose C was edited since builds it on
+(codegen/kernel_build.py); a source checkout whose C was edited since builds it on
 first use with :mod:`accelnav.codegen.cbuild`.
 
 General path (:func:`smooth_general`)
@@ -76,10 +76,10 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.cbuild import STRICT_FLAGS, build_module
+from accelnav.codegen.cbuild import STRICT_FLAGS
 from accelnav.codegen.design import AxisDesign
+from accelnav.codegen.kernel_build import SMOOTHER, build, prebuilt
 from accelnav.codegen.resources import package_dir
-from accelnav.estimate.fastsmooth_build import kernel_cdef, source_hash
 from accelnav.estimate.kf import Measurement
 
 CSRC = package_dir("accelnav.estimate") / "csrc"  # package data
@@ -93,13 +93,8 @@ _module = None
 
 
 def _prebuilt():
-    """The kernel compiled with the package (fastsmooth_build.py), if it was built from this very C."""
-    try:
-        from accelnav.estimate import _fastsmooth
-    except ImportError:
-        return None
-    built = _fastsmooth.ffi.string(_fastsmooth.lib.acn_fastsmooth_source()).decode()
-    return _fastsmooth if built == source_hash(CSRC) else None
+    """The kernel compiled with the package (codegen/kernel_build.py), if it was built from this very C."""
+    return prebuilt(SMOOTHER, CSRC)
 
 
 def _lib():
@@ -109,14 +104,7 @@ def _lib():
         if _module is None:
             _module = _prebuilt()
         if _module is None:
-            header = (CSRC / "fastsmooth.h").read_text()
-            _module = build_module(
-                "acn_fastsmooth",
-                kernel_cdef(header),
-                {"fastsmooth.c": (CSRC / "fastsmooth.c").read_text(), "fastsmooth.h": header},
-                main="fastsmooth.c",
-                extra_compile_args=(*STRICT_FLAGS, "-O3"),
-            )
+            _module = build(SMOOTHER, CSRC, (*STRICT_FLAGS, "-O3"), "acn_fastsmooth")
         return _module
 
 

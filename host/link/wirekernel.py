@@ -10,7 +10,7 @@ returns the same three arrays: the decoded bytes, whether the COBS chain was
 well formed, and whether the CRC matched.
 
 The C is csrc/acnwire.c (package data). It is compiled into the wheel
-(wirekernel_build.py, named in setup.py), so an installed package decodes
+(codegen/kernel_build.py, named in setup.py), so an installed package decodes
 fast with no C compiler; a source checkout whose C was edited since builds it
 on first use with the project's cffi builder
 (:func:`accelnav.codegen.cbuild.build_module`, cached on disk). Without
@@ -26,9 +26,9 @@ import threading
 
 import numpy as np
 
-from accelnav.codegen.cbuild import BuildError, build_module
+from accelnav.codegen.cbuild import STRICT_FLAGS, BuildError
+from accelnav.codegen.kernel_build import WIRE, build, prebuilt
 from accelnav.codegen.resources import package_dir
-from accelnav.link.wirekernel_build import kernel_cdef, source_hash
 
 CSRC = package_dir("accelnav.link") / "csrc"  # package data: acnwire.c, acnwire.h
 
@@ -37,26 +37,15 @@ _built: list = []  # [module or None] once tried
 
 
 def _prebuilt():
-    """The kernel compiled with the package (wirekernel_build.py), if it was built from this very C."""
-    try:
-        from accelnav.link import _acnwire
-    except ImportError:
-        return None
-    built = _acnwire.ffi.string(_acnwire.lib.acnw_source()).decode()
-    return _acnwire if built == source_hash(CSRC) else None
+    """The kernel compiled with the package (codegen/kernel_build.py), if it was built from this very C."""
+    return prebuilt(WIRE, CSRC)
 
 
 def _builder_built():
-    """The kernel built from csrc/ by the project's cffi builder (once per source, cached on disk); None
-    where that cannot be done (no C compiler)."""
-    header = (CSRC / "acnwire.h").read_text()
+    """The kernel built from csrc/ by the project's cffi builder; None where that cannot be done (no C
+    compiler)."""
     try:
-        return build_module(
-            "acn_wire",
-            kernel_cdef(header),
-            {"acnwire.c": (CSRC / "acnwire.c").read_text(), "acnwire.h": header},
-            main="acnwire.c",
-        )
+        return build(WIRE, CSRC, STRICT_FLAGS, "acn_wire")
     except (OSError, BuildError):
         return None
 
