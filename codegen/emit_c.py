@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import re
+from concurrent.futures import ThreadPoolExecutor
 
 from .design import AnalogConversion
 from .emit_f32 import emit_f32
@@ -1614,7 +1615,18 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
 
 
 def plans(model: Model, form: str | None = None) -> list[AxisPlan]:
-    return [plan_axis(model, i, form) for i in range(len(model.axes))]
+    """Every axis' plan, and its gain schedule when that is the form: the axes at once, on two threads
+    (their Riccati recursions and schedule searches run in C, off the interpreter lock; the schedules
+    land in codegen.gains' cache for the emitter and the report)."""
+
+    def one(i: int) -> AxisPlan:
+        p = plan_axis(model, i, form)
+        if p.form == "gain_schedule":
+            _schedule_for(p)
+        return p
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        return list(pool.map(one, range(len(model.axes))))
 
 
 def emit(

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
+import threading
 from array import array
 from dataclasses import dataclass
 
@@ -548,17 +549,21 @@ def schedule_of(
     and hil ask for the same schedule."""
     fl = tuple(np.broadcast_to(floor, (4,)).tolist())
     key = (_key(d), n, tuple(formats), tuple(np.broadcast_to(rel_tol, (4,)).tolist()), ramp, window, fl)
-    if key not in _SCHEDULES:
+    hit = _SCHEDULES.get(key)
+    if hit is None:
         scale = np.array([1.0, d.Ts, 1.0, 1.0])
         sched = schedule(_Window(d, n, scale, window), formats, rel_tol, ramp, n=n, window=window, floor=fl)
         # replays start from sample 0: a fresh source
-        _SCHEDULES[key] = dataclasses.replace(sched, source=_Window(d, n, scale, window))
-        while len(_SCHEDULES) > 8:
-            _SCHEDULES.pop(next(iter(_SCHEDULES)))
-    return _SCHEDULES[key]
+        hit = dataclasses.replace(sched, source=_Window(d, n, scale, window))
+        with _SCHEDULES_LOCK:  # the report plans its axes on threads
+            _SCHEDULES[key] = hit
+            while len(_SCHEDULES) > 8:
+                _SCHEDULES.pop(next(iter(_SCHEDULES)))
+    return hit
 
 
 _SCHEDULES: dict = {}
+_SCHEDULES_LOCK = threading.Lock()
 
 
 def schedule(

@@ -538,11 +538,13 @@ def _plan_fine(p: AxisPlan, g: GainRun, gap: int) -> None:
 
     d, R = p.design, p.design.R
     ck = (_key(d), p.n_run, gap, tuple(p.f(n) for n in ("cr", "cv", "ca", "ce", "Pre", "Pve", "Pae")))
-    if ck not in _FINE:  # emit and the report plan the same axis: the analysis once
+    hit = _FINE.get(ck)  # emit and the report plan the same axis: the analysis once (a local: thread safe)
+    if hit is None:
+        hit = _fine_levels(p, g, gap)
         if len(_FINE) > 64:
             _FINE.clear()
-        _FINE[ck] = _fine_levels(p, g, gap)
-    fracs, theta, top = _FINE[ck]
+        _FINE[ck] = hit
+    fracs, theta, top = hit
     for nm in FINE:
         c = p.vars[nm]
         i = FINE.index(nm)

@@ -11,6 +11,7 @@ import re
 import shutil
 import subprocess
 import tempfile
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -50,27 +51,51 @@ def struct_size(header: str, tname: str) -> int:
 
 
 def report(model: Model, *, form: str | None, arith: str, files: dict[str, str], prefix: str) -> str:
-    from .emit_c import _schedule_for
-    from .ranges import plan_axis
-
     form = form or model.filter.form
     lines = [f"accelnav codegen report: model {model.name} ({model.sha256[:12]}), {arith}, {form} form"]
     lines.append(f"rate {model.rate_hz:g} Hz, declared run {model.ranges.max_run_s:g} s")
-    sz = arm_size(files, prefix)
-    n_ax = len(model.axes)
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        # the cross-compile (a second of arm-none-eabi-gcc) runs while the bounds below are computed
+        sized = pool.submit(arm_size, files, prefix)
+        flash_at = _axes(model, form, arith, files, prefix, lines)
+        sz = sized.result()
+    if sz:  # each axis' flash line, after its RAM line
+        n_ax = len(model.axes)
+        flash = (
+            f"  flash (Cortex-M3 -O2, all {n_ax} axes): text {sz['text']} B, data {sz['data']} B, "
+            f"bss {sz['bss']} B; per axis ~{(sz['text'] + sz['data']) // n_ax} B"
+        )
+        for at in reversed(flash_at):
+            lines.insert(at, flash)
+    return "\n".join(lines)
+
+
+def _axes(model: Model, form: str, arith: str, files: dict[str, str], prefix: str, lines: list[str]) -> list[int]:
+    """The report's per-axis blocks, appended to ``lines``; where each axis' flash line goes."""
+    from .emit_c import _schedule_for
+    from .ranges import plan_axis
+
+    def bounds(i: int):
+        """The axis' plan, schedule, sample rows (1 s, the run's end) and its two bounds there."""
+        p = plan_axis(model, i, form)
+        sched = _schedule_for(p) if form == "gain_schedule" else None
+        at = sorted({min(int(model.rate_hz), p.n_run - 1), p.n_run - 1})
+        return p, sched, at, error_bound_rows(p, p.n_run, at, sched), worst_case_bound(p, p.n_run, sched, rows=at)
+
+    done = []
+    if arith == "fixed":  # the axes' bounds at once: their recursions run in C, off the interpreter lock
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            done = list(pool.map(bounds, range(len(model.axes))))
+    flash_at = []
     for i, ax in enumerate(model.axes):
         tname = f"{prefix}_{ax.name}_t"
         ram = struct_size(files[f"{prefix}.h"], tname)
         lines.append("")
         lines.append(f"axis {ax.name}: RAM {ram} B (state struct)")
-        if sz:
-            lines.append(
-                f"  flash (Cortex-M3 -O2, all {n_ax} axes): text {sz['text']} B, data {sz['data']} B, "
-                f"bss {sz['bss']} B; per axis ~{(sz['text'] + sz['data']) // n_ax} B"
-            )
+        flash_at.append(len(lines))
         if arith != "fixed":
             continue
-        p = plan_axis(model, i, form)
+        p, sched, at, b, w = done[i]
         lines.append(f"  {'variable':<8} {'range':>12} {'format':>9} {'resolution':>11}  note")
         for v in p.vars.values():
             sat = " (saturates, counted)" if v.saturates else ""
@@ -78,7 +103,6 @@ def report(model: Model, *, form: str | None, arith: str, files: dict[str, str],
         lines.append(f"  {'constant':<8} {'value':>12} {'format':>9}")
         for k, (val, f) in sorted(p.consts.items()):
             lines.append(f"  {k:<8} {val:12.6g} {f.name:>9}")
-        sched = _schedule_for(p) if form == "gain_schedule" else None
         if sched is not None:
             lines.append(
                 f"  gain schedule: {sched.n_segments} piecewise-linear segments ({(sched.n_segments + 1) * 24} B of "
@@ -87,9 +111,6 @@ def report(model: Model, *, form: str | None, arith: str, files: dict[str, str],
             )
         names = ("r [m]", "u [m/s]", "a [m/s^2]", "eps [m/s^2]")
         at1 = min(int(model.rate_hz), p.n_run - 1)
-        at = sorted({at1, p.n_run - 1})
-        b = error_bound_rows(p, p.n_run, at, sched)
-        w = worst_case_bound(p, p.n_run, sched, rows=at)
         sig = np.array([p.gains.at(k)[1] for k in at])
         at1 = at.index(at1)
         lines.append(
@@ -108,4 +129,4 @@ def report(model: Model, *, form: str | None, arith: str, files: dict[str, str],
             f"  l1 gains of the (a, eps) loop: z->a {p.l1.z_a:.3g}, z->eps {p.l1.z_e:.3g}, "
             f"eps-push->eps {p.l1.e_e:.3g}; skipped-sample gap covered: {p.gap} samples"
         )
-    return "\n".join(lines)
+    return flash_at
