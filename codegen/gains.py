@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cbuild import STRICT_FLAGS, BuildError
+from .cbuild import STRICT_FLAGS
 from .design import AxisDesign
 from .kernel_build import RICCATI, RICCATI_FLAGS, build, prebuilt
 from .qformat import QFormat
@@ -148,10 +148,7 @@ def _riccati_prebuilt():
 def _riccati_built():
     """The kernel built from csrc/ by the project's cffi builder; None where that cannot be done (no C
     compiler)."""
-    try:
-        return build(RICCATI, CSRC, _BUILD_FLAGS, "acn_riccati")
-    except (OSError, BuildError):
-        return None
+    return build(RICCATI, CSRC, _BUILD_FLAGS, "acn_riccati", required=False)
 
 
 @functools.lru_cache(maxsize=1)

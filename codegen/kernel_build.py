@@ -69,8 +69,8 @@ def kernel_cdef(header: str) -> str:
 def _ffibuilder(k: Kernel):
     import cffi
 
-    # paths relative to the project root (setup.py's folder), as setuptools wants them
-    csrc = Path(__file__).parent.parent / k.folder
+    # setuptools runs the build in the project root (setup.py's folder) and wants paths relative to it
+    csrc = Path(k.folder)
     c, h = k.files
     ffi = cffi.FFI()
     ffi.cdef(kernel_cdef((csrc / h).read_text()) + f"const char *{k.stamp}(void);\n")
@@ -107,13 +107,19 @@ def prebuilt(k: Kernel, csrc: Path):
     return mod if built == source_hash(k, csrc) else None
 
 
-def build(k: Kernel, csrc: Path, flags, stem: str):
-    """The kernel built from ``csrc`` by the project's cffi builder (once per source, cached on disk);
-    raises :class:`accelnav.codegen.cbuild.BuildError` (or OSError) where that cannot be done."""
-    from accelnav.codegen.cbuild import build_module
+def build(k: Kernel, csrc: Path, flags, stem: str, *, required: bool = True):
+    """The kernel built from ``csrc`` by the project's cffi builder (once per source, cached on disk).
+    Where that cannot be done (no C compiler): :class:`accelnav.codegen.cbuild.BuildError` (or OSError),
+    or None when not ``required`` (the caller then has a Python path)."""
+    from accelnav.codegen.cbuild import BuildError, build_module
 
     c, h = k.files
     header = (csrc / h).read_text()
-    return build_module(
-        stem, kernel_cdef(header), {c: (csrc / c).read_text(), h: header}, main=c, extra_compile_args=flags
-    )
+    try:
+        return build_module(
+            stem, kernel_cdef(header), {c: (csrc / c).read_text(), h: header}, main=c, extra_compile_args=flags
+        )
+    except (OSError, BuildError):
+        if required:
+            raise
+        return None

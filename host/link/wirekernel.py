@@ -26,7 +26,7 @@ import threading
 
 import numpy as np
 
-from accelnav.codegen.cbuild import STRICT_FLAGS, BuildError
+from accelnav.codegen.cbuild import STRICT_FLAGS
 from accelnav.codegen.kernel_build import WIRE, build, prebuilt
 from accelnav.codegen.resources import package_dir
 
@@ -44,10 +44,7 @@ def _prebuilt():
 def _builder_built():
     """The kernel built from csrc/ by the project's cffi builder; None where that cannot be done (no C
     compiler)."""
-    try:
-        return build(WIRE, CSRC, STRICT_FLAGS, "acn_wire")
-    except (OSError, BuildError):
-        return None
+    return build(WIRE, CSRC, STRICT_FLAGS, "acn_wire", required=False)
 
 
 def wire_lib():
