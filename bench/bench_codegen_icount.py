@@ -59,10 +59,10 @@ import tempfile
 from pathlib import Path
 
 from accelnav.codegen.emit_c import emit
-from accelnav.codegen.model import load_model
+from accelnav.model.load import load_model
 from accelnav.codegen.report import struct_size
-from accelnav.codegen.resources import firmware_dir
-from accelnav.hil_sim.qemu import run_to_exit
+from accelnav.resources import firmware_dir
+from accelnav.hil_sim.targets.qemu import run_to_exit
 
 CFLAGS = ["-mthumb", "-masm-syntax-unified", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
 # core -> (gcc -mcpu, runtime folder, linker script, qemu machine)
@@ -187,14 +187,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     model = load_model(args.model)
     if args.rate is not None:
-        from accelnav.codegen.model import loads_model
+        from accelnav.model.load import loads_model
 
         text = model.text.replace(f"rate_hz = {model.rate_hz!r}", f"rate_hz = {args.rate!r}")
         model = loads_model(text, source=f"{model.source}@{args.rate:g}Hz")
         assert model.rate_hz == args.rate, "rate_hz not found in the model text"
     if model.sensor.kind != "analog":
         raise SystemExit("bench: analog models only for now")
-    from accelnav.hil_sim.sensor import simulate
+    from accelnav.hil_sim.sim.sensor import simulate
 
     run = simulate(model, args.scenario, args.samples / model.rate_hz, seed=1)
     codes = run.code[: args.samples, 0]

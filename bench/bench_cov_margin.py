@@ -1,7 +1,7 @@
 """Precision margin of the fixed-point filters (the covariance form, or --form gain_schedule) against the
 float64 Kalman filter.
 
-For every shipped scenario (accelnav.hil_sim.trajectories.SCENARIOS), a few seeds and every axis of the
+For every shipped scenario (accelnav.hil_sim.sim.trajectories.SCENARIOS), a few seeds and every axis of the
 model, the generated C runs in-process (cffi) beside the float64 filter with the same skips
 (rail-clipped samples); the figure is the largest |x_C - x_float64| / sigma_float64 over the samples
 after the first second, per state, and the margin is the 1e-3 sigma criterion divided by it.
@@ -47,13 +47,13 @@ STATES = ("r", "u", "a", "eps")
 
 
 def measure(model_path, rate, duration, seeds, workdir, form="covariance") -> dict:
-    from accelnav.codegen.design import axis_design
+    from accelnav.model.design import axis_design
     from accelnav.codegen.emit_c import emit
-    from accelnav.codegen.harness import AxisRunner, build
-    from accelnav.codegen.model import load_model, loads_model
+    from accelnav.hil_sim.targets.harness import AxisRunner, build
+    from accelnav.model.load import load_model, loads_model
     from accelnav.estimate.kf import run_filter
-    from accelnav.hil_sim.sensor import simulate
-    from accelnav.hil_sim.trajectories import SCENARIOS
+    from accelnav.hil_sim.sim.sensor import simulate
+    from accelnav.hil_sim.sim.trajectories import SCENARIOS
 
     model = load_model(model_path)
     if rate is not None and rate != model.rate_hz:
@@ -95,7 +95,7 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline", help="a Python whose accelnav is the generator to compare with")
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # one process's raw figures
     args = ap.parse_args(argv)
-    from accelnav.codegen.model import ModelError
+    from accelnav.model.load import ModelError
     from accelnav.codegen.ranges import RangeError
 
     try:

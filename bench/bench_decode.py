@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.model import load_model
-from accelnav.hil_sim.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
+from accelnav.model.load import load_model
+from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
 from accelnav.link.telemetry import (
     Decoder,
     Manifest,

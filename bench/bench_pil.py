@@ -22,12 +22,12 @@ from pathlib import Path
 
 from baselines import best_of
 
-from accelnav.codegen.model import load_model
-from accelnav.codegen.resources import models_dir
+from accelnav.model.load import load_model
+from accelnav.resources import models_dir
 from accelnav.hil_sim import hil
-from accelnav.hil_sim.firmware import manifest
-from accelnav.hil_sim.qemu import MACHINES
-from accelnav.hil_sim.sensor import simulate
+from accelnav.hil_sim.targets.firmware import manifest
+from accelnav.hil_sim.targets.qemu import MACHINES
+from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.link.telemetry import decode_all
 
 

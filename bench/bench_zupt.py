@@ -25,11 +25,11 @@ import time
 
 import numpy as np
 
-from accelnav.codegen.model import load_model
-from accelnav.codegen.resources import models_dir
+from accelnav.model.load import load_model
+from accelnav.resources import models_dir
 from accelnav.estimate import zupt
 from accelnav.estimate.pipeline import dead_reckoning, smooth_run, stride_errors
-from accelnav.hil_sim.sensor import simulate
+from accelnav.hil_sim.sim.sensor import simulate
 
 STOP_AND_GO_BEFORE_RMS = (0.1267, 0.1012)  # m, the detector before issue #11, same seeds (see tests/test_zupt.py)
 

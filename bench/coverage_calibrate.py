@@ -22,7 +22,7 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 
 from test_calibrate import any_recording, calibrate_any, nominal, perturbed, truth_offset_scale  # noqa: E402
 
-from accelnav.codegen.model import G0  # noqa: E402
+from accelnav.model.load import G0  # noqa: E402
 from accelnav.identify.calibrate import CalibrationError  # noqa: E402
 
 

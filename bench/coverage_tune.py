@@ -21,7 +21,7 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 
 from test_tune import TRUE, one_axis_model, process  # noqa: E402
 
-from accelnav.codegen.modelfile import with_noise  # noqa: E402
+from accelnav.model.edit import with_noise  # noqa: E402
 
 
 def main() -> int:

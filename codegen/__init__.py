@@ -1,1 +1,1 @@
-"""Model file -> design numbers -> Q formats -> C text (pure functions), and the one cffi builder."""
+"""Model -> Q formats -> C text (pure functions). Stands on accelnav.model and accelnav.native only."""

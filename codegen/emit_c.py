@@ -23,10 +23,10 @@ import math
 import re
 from concurrent.futures import ThreadPoolExecutor
 
-from .design import AnalogConversion
+from accelnav.model.design import AnalogConversion
 from .emit_f32 import emit_f32
 from .gains import Schedule
-from .model import Model
+from accelnav.model.load import Model
 from .package import cdef_of, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
 from .qformat import QFormat, acc_bound, guard_bits, quantize
 from .ranges import FINE, AxisPlan, fine_view, plan_axis

@@ -9,8 +9,8 @@ a wider word.
 
 from __future__ import annotations
 
-from .design import AnalogConversion, axis_design, input_conversion
-from .model import G0, Model
+from accelnav.model.design import AnalogConversion, axis_design, input_conversion
+from accelnav.model.load import G0, Model
 from .package import package
 
 

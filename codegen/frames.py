@@ -57,7 +57,7 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
-from .model import Model, load_model
+from accelnav.model.load import Model, load_model
 
 PROTOCOL_VERSION = 2
 MAX_ENCODED = 254  # payload + crc must stay below this (one COBS block)

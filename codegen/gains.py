@@ -27,11 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cbuild import STRICT_FLAGS
-from .design import AxisDesign
-from .kernel_build import RICCATI, RICCATI_FLAGS, build, prebuilt
+from accelnav.native.cbuild import STRICT_FLAGS
+from accelnav.model.design import AxisDesign
+from accelnav.native.kernels import RICCATI, RICCATI_FLAGS, build, prebuilt
 from .qformat import QFormat
-from .resources import package_dir
+from accelnav.resources import package_dir
 
 BLOCK_NAMES = ("ra", "ua", "aa", "re", "ue", "ae", "ee")
 

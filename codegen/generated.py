@@ -2,7 +2,7 @@
 host's replay of the firmware's filter compiles are one and the same output of the generator.
 
 The generator takes seconds (the gain schedule's longer), so its output is kept in the cache
-(:func:`accelnav.codegen.cbuild.cache_dir`) keyed by the model's text and the source of every module of
+(:func:`accelnav.native.cbuild.cache_dir`) keyed by the model's text and the source of every module of
 the generator: an edited generator never serves stale C. A model the generator refuses is refused
 here each time (nothing is cached for it).
 """
@@ -14,10 +14,10 @@ import json
 import os
 from pathlib import Path
 
-from .cbuild import cache_dir
+from accelnav.native.cbuild import cache_dir
 from .emit_c import emit
 from .frames import emit_frames
-from .model import Model
+from accelnav.model.load import Model
 
 
 def _key(model: Model) -> str:

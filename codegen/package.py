@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .model import Model
+from accelnav.model.load import Model
 
 GENERATOR_VERSION = "0.1.0"
 # 2: accelnav_<axis>_save / _load (the checkpoint image of a state, compact telemetry) joined the API

@@ -40,9 +40,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .design import AnalogConversion, AxisDesign, DutyConversion, axis_design, input_conversion
+from accelnav.model.design import AnalogConversion, AxisDesign, DutyConversion, axis_design, input_conversion
 from .gains import KEEP, GainRun, gap_maxima, riccati
-from .model import G0, Model, ModelError
+from accelnav.model.load import G0, Model, ModelError
 from .qformat import QFormat, bits_for, const_format, fit
 
 N_TRANSIENT = 600  # samples whose time-varying gains are analysed row by row

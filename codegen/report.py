@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .bounds import Y_SIGMAS, error_bound_rows, worst_case_bound
-from .model import Model
+from accelnav.model.load import Model
 
 ARM_FLAGS = ["-mcpu=cortex-m3", "-mthumb", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
 

@@ -1,4 +1,4 @@
 """The firmware sources (C, board files, firmware.mk), shipped as package data.
 
-Nothing here is Python: see firmware/README.md and accelnav.hil_sim.firmware.
+Nothing here is Python: see firmware/README.md and accelnav.hil_sim.targets.firmware.
 """

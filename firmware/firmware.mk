@@ -7,7 +7,7 @@
 # generated into build/firmware/gen/MODEL_NAME/ first; the board's image goes to
 # build/firmware/BOARD/ with a size report (size.txt).
 #
-# The installed package runs this file on its own (accelnav.hil_sim.firmware):
+# The installed package runs this file on its own (accelnav.hil_sim.targets.firmware):
 #   make -f FW_DIR/firmware.mk firmware BOARD=... FW_DIR=... FW_OUT=... FW_GEN=... FW_PREGEN=1
 # with the generated C already written to FW_GEN, so that nothing depends on
 # the source checkout's layout and every output lands in the folder it names.

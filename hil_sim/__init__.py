@@ -1,1 +1,1 @@
-"""Sensor and trajectory simulator, SIL (cffi) and PIL (QEMU) runners."""
+"""The simulator (sim/) and the runners that drive the generated C in-process and on emulated boards (targets/)."""

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from accelnav.codegen.model import DEFAULT_MODEL, load_model, loads_model
-from accelnav.codegen.resources import models_dir
+from accelnav.model.load import DEFAULT_MODEL, load_model, loads_model
+from accelnav.resources import models_dir
 
 REPO = Path(__file__).resolve().parents[1]  # the checkout: for ../shared and for reading docs only
 MODELS = models_dir()

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sys
 
-from accelnav.hil_sim.firmware import HostFirmware, build_firmware, manifest
+from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
 
 
 def fuzz(examples: int, random_inputs: int, seed: int = 5) -> dict:

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from accelnav.codegen.model import Axis
-from accelnav.codegen.modelfile import revalidate
-from accelnav.hil_sim.sensor import simulate
+from accelnav.model.load import Axis
+from accelnav.model.edit import revalidate
+from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.identify.biasfit import FitError, ProfileSums, fit_bias, profile_rss_exact
 
 

@@ -9,11 +9,11 @@ import pytest
 
 from accelnav.cli import main
 from accelnav.cli.calibrate import steps_and_noise
-from accelnav.codegen.design import input_conversion
-from accelnav.codegen.model import DEFAULT_MODEL, G0, load_model
-from accelnav.codegen.modelfile import revalidate, with_axis_bias, with_noise
-from accelnav.hil_sim.sensor import simulate
-from accelnav.hil_sim.trajectories import (
+from accelnav.model.design import input_conversion
+from accelnav.model.load import DEFAULT_MODEL, G0, load_model
+from accelnav.model.edit import revalidate, with_axis_bias, with_noise
+from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.hil_sim.sim.trajectories import (
     TUMBLE_ANY_MIN_TURN_DEG,
     TUMBLE_HOLD_S,
     TUMBLE_TURN_S,
@@ -145,7 +145,7 @@ def test_native_units_round_trip():
 def test_cli_writes_the_calibration(tmp_path, capsys):
     nom = nominal()
     model_path = tmp_path / "nominal.toml"
-    from accelnav.codegen.modelfile import dump_model
+    from accelnav.model.edit import dump_model
 
     model_path.write_text(dump_model(nom))
     true = perturbed(nom, np.random.default_rng(11))
@@ -178,7 +178,7 @@ def _cli_error(args, capsys) -> str:
 def test_refusals(tmp_path, capsys):
     nom = nominal()
     model_path = tmp_path / "nominal.toml"
-    from accelnav.codegen.modelfile import dump_model
+    from accelnav.model.edit import dump_model
 
     model_path.write_text(dump_model(nom))
     run, acc = tumble_recording(nom, nom, 2)
@@ -377,7 +377,7 @@ def test_degenerate_random_pose_sets_are_refused(ups, message):
 
 
 def test_cli_random_poses(tmp_path, capsys):
-    from accelnav.codegen.modelfile import dump_model
+    from accelnav.model.edit import dump_model
 
     nom = nominal(3)
     model_path = tmp_path / "nominal3.toml"

@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from accelnav.codegen.model import load_model, loads_model
+from accelnav.model.load import load_model, loads_model
 from accelnav.codegen.ranges import MAX_RUN_SAMPLES, RangeError
 
 LIMIT_MB = 300.0
@@ -28,7 +28,7 @@ def peak_rss():
     except OSError:
         pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-from accelnav.codegen.model import loads_model
+from accelnav.model.load import loads_model
 from accelnav.codegen.emit_c import emit
 from accelnav.codegen.report import report
 model = loads_model(sys.stdin.read(), source="cost.toml")

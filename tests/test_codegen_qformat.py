@@ -55,7 +55,7 @@ def test_compiled_riccati_is_bit_identical_to_python(default_model):
     import numpy as np
 
     from accelnav.codegen import gains
-    from accelnav.codegen.design import axis_design
+    from accelnav.model.design import axis_design
 
     assert gains._riccati_lib() is not None, "a C compiler is on this machine: the compiled path must build"
     key = gains._key(axis_design(default_model, 1))
@@ -79,7 +79,7 @@ def test_streamed_bound_is_the_python_bound(default_model):
     import numpy as np
 
     from accelnav.codegen.bounds import error_bound, error_bound_rows
-    from accelnav.codegen.model import loads_model
+    from accelnav.model.load import loads_model
     from accelnav.codegen.ranges import plan_axis
 
     model = loads_model(default_model.text.replace("max_run_s = 3600.0", "max_run_s = 60.0"), source="60s")

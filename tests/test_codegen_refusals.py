@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 
 from accelnav.codegen.emit_c import emit
-from accelnav.codegen.model import ModelError, load_model, loads_model
+from accelnav.model.load import ModelError, load_model, loads_model
 
 BASE = open(load_model().source).read()
 

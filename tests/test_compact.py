@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from accelnav.cli import main as cli_main
-from accelnav.codegen.model import load_model
-from accelnav.hil_sim.firmware import DUTY_MODEL, HostFirmware, build_firmware, manifest
+from accelnav.model.load import load_model
+from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, manifest
 from accelnav.link.logfile import LogWriter
 from accelnav.link.telemetry import (
     Decoder,
@@ -189,7 +189,7 @@ def test_log_info_and_export_show_a_mismatch(tmp_path, man, telemetry, capsys):
 
 def test_hil_reports_a_mismatch(man, telemetry):
     from accelnav.hil_sim import hil
-    from accelnav.hil_sim.sensor import simulate
+    from accelnav.hil_sim.sim.sensor import simulate
 
     model = load_model()
     run = simulate(model, "stop_and_go", 6.0, 4)
@@ -348,7 +348,7 @@ def gs(tmp_path_factory):
     """The default model in the gain-schedule form: manifest, replay, and the firmware's compact telemetry of
     N samples with a rail burst on x right before the second checkpoint (the checkpoint is taken while the
     filter follows the skip), single rails later; and the firmware's own states of every sample."""
-    from accelnav.hil_sim.firmware import generated
+    from accelnav.hil_sim.targets.firmware import generated
 
     text = load_model().text
     assert 'form = "covariance" ' in text
@@ -477,8 +477,8 @@ def test_gain_schedule_load_refuses_a_row_outside_the_table(gs):
     """The generated accelnav_x_load (the host's replay and any reader of a checkpoint) refuses an image
     whose row index is outside the table and leaves the state untouched; an image inside it loads, and
     saving gives the same bytes back (the pointer became the index and back)."""
-    from accelnav.codegen.cbuild import cache_dir
-    from accelnav.codegen.harness import build
+    from accelnav.native.cbuild import cache_dir
+    from accelnav.hil_sim.targets.harness import build
 
     files = gs["files"]
     lib, ffi = (m := build(files, cache_dir() / "harness")).lib, m.ffi
@@ -541,9 +541,9 @@ def test_gain_schedule_load_refuses_a_row_outside_the_table(gs):
 def test_covariance_checkpoint_image_is_the_state_struct(man):
     """The covariance form's checkpoint image (accelnav_x_save) is its state struct's bytes, as the firmware
     sent them before images existed: older compact logs replay as before."""
-    from accelnav.codegen.cbuild import cache_dir
-    from accelnav.codegen.harness import build
-    from accelnav.hil_sim.firmware import generated
+    from accelnav.native.cbuild import cache_dir
+    from accelnav.hil_sim.targets.harness import build
+    from accelnav.hil_sim.targets.firmware import generated
 
     m = build(generated(None), cache_dir() / "harness")
     lib, ffi = m.lib, m.ffi

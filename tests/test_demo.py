@@ -7,7 +7,7 @@ import shutil
 import pytest
 
 from accelnav.cli import main
-from accelnav.codegen.model import load_model
+from accelnav.model.load import load_model
 
 
 def test_demo_runs_the_whole_chain(tmp_path, capsys):

@@ -21,11 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from accelnav.codegen.model import load_model
-from accelnav.hil_sim.firmware import DUTY_MODEL
-from accelnav.hil_sim.firmware import make_firmware as build_image
-from accelnav.hil_sim.hil import wait_ready
-from accelnav.hil_sim.qemu import MACHINES, Mps2Board, QemuBoard, qemu_command
+from accelnav.model.load import load_model
+from accelnav.hil_sim.targets.firmware import DUTY_MODEL
+from accelnav.hil_sim.targets.firmware import make_firmware as build_image
+from accelnav.hil_sim.targets.hil import wait_ready
+from accelnav.hil_sim.targets.qemu import MACHINES, Mps2Board, QemuBoard, qemu_command
 from accelnav.link.recorder import Recorder, Status, decode_log
 from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus, replay_for
 
@@ -124,7 +124,7 @@ def test_firmware_refuses_a_generated_filter_of_another_runtime_api(tmp_path):
     accelnav_<axis>_save): an accelnav.h of another API stops the build with one line saying to
     regenerate, rather than at the link."""
     from accelnav.codegen.package import RUNTIME_API
-    from accelnav.hil_sim.firmware import generated
+    from accelnav.hil_sim.targets.firmware import generated
 
     cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
     if cc is None:

@@ -16,10 +16,10 @@ import zlib
 import numpy as np
 import pytest
 
-from accelnav.codegen.cbuild import cache_dir
+from accelnav.native.cbuild import cache_dir
 from accelnav.codegen.frames import COMMANDS, MAX_ENCODED, PROTOCOL_VERSION, layout
-from accelnav.codegen.model import load_model
-from accelnav.hil_sim.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
+from accelnav.model.load import load_model
+from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
 from accelnav.link.telemetry import (
     Decoder,
     cobs_decode,
@@ -234,7 +234,7 @@ def test_stream_split_anywhere_decodes_the_same(fw_mod, man, replay):
 
 def _run_filter_directly(kind, raw):
     """The generated filter alone (codegen.harness), for comparison with what the firmware streams."""
-    from accelnav.codegen.harness import AxisRunner, build
+    from accelnav.hil_sim.targets.harness import AxisRunner, build
 
     files = {k: v for k, v in generated(MODELS[kind]).items() if k.startswith("accelnav.")}
     mod = build(files, cache_dir() / "harness")

@@ -25,10 +25,10 @@ import pytest
 from conftest import MODELS
 
 from accelnav.cli import main
-from accelnav.codegen.model import load_model
+from accelnav.model.load import load_model
 from accelnav.hil_sim import hil, qemu
-from accelnav.hil_sim.firmware import manifest
-from accelnav.hil_sim.sensor import simulate
+from accelnav.hil_sim.targets.firmware import manifest
+from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.link.telemetry import decode_all, replay_for
 
 SIGMA_FRACTION = 1e-3  # firmware vs float64 reference, in units of the reference's sigma, after 1 s
@@ -63,7 +63,7 @@ def _simulate(model, scenario: str, seconds: float, seed: int):
 
     import numpy as np
 
-    from accelnav.codegen.design import input_conversion
+    from accelnav.model.design import input_conversion
 
     t2 = np.array(run.t2)
     t2[list(BAD_CAPTURES), :] = 0
@@ -317,7 +317,7 @@ def test_hil_cli_sil(tmp_path, capsys):
 
 
 def _schedule_model(tmp_path):
-    from accelnav.codegen.model import load_model as load
+    from accelnav.model.load import load_model as load
 
     text = (MODELS / "adxl250_default.toml").read_text().replace('form = "covariance" ', 'form = "gain_schedule" ')
     path = tmp_path / "gs.toml"
@@ -334,9 +334,9 @@ def test_stated_bound_is_against_the_kalman_filter_and_catches_a_blind_schedule(
     import numpy as np
     from test_codegen import _blind
 
-    from accelnav.codegen.design import axis_design
+    from accelnav.model.design import axis_design
     from accelnav.codegen.emit_c import emit
-    from accelnav.codegen.harness import AxisRunner, build
+    from accelnav.hil_sim.targets.harness import AxisRunner, build
     from accelnav.estimate.kf import run_filter
 
     model = _schedule_model(tmp_path)
@@ -359,7 +359,7 @@ def test_stated_bound_is_against_the_kalman_filter_and_catches_a_blind_schedule(
 def test_sil_shock_against_the_float64_filter(tmp_path, rate, form):
     """The firmware in-process on rail-clipped shock data at 1 kHz, both forms: within the stated bound
     of the float64 Kalman filter (same skips) at every sample, and < 1e-3 of its sigma after 1 s."""
-    from accelnav.codegen.model import load_model as load
+    from accelnav.model.load import load_model as load
 
     text = (MODELS / "adxl250_default.toml").read_text().replace("rate_hz = 100.0", f"rate_hz = {rate!r}")
     text = text.replace('form = "covariance" ', f'form = "{form}" ')

@@ -10,8 +10,8 @@ import pytest
 from conftest import MODELS, edited_model, model_text
 
 from accelnav.cli import main
-from accelnav.codegen.design import axis_design, input_conversion, process_noise
-from accelnav.codegen.model import G0, ModelError, load_model, loads_model
+from accelnav.model.design import axis_design, input_conversion, process_noise
+from accelnav.model.load import G0, ModelError, load_model, loads_model
 
 
 def test_default_model_loads(default_model):

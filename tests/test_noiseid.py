@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from accelnav.codegen.model import G0
-from accelnav.codegen.modelfile import revalidate
-from accelnav.hil_sim.sensor import noise_sigma_rho, simulate
+from accelnav.model.load import G0
+from accelnav.model.edit import revalidate
+from accelnav.hil_sim.sim.sensor import noise_sigma_rho, simulate
 from accelnav.identify.noiseid import allan_deviation, derivative_variance, identify_noise
 
 

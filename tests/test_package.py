@@ -142,7 +142,7 @@ def test_a_run_time_build_without_a_compiler_is_refused_in_one_line(tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env.update(CC=str(tmp_path / "no-such-cc"), ACCELNAV_CACHE_DIR=str(tmp_path / "cache"))
     # a 60 s declared run: quick even where the generator's Riccati kernel is not prebuilt and runs in Python
-    from accelnav.codegen.resources import models_dir
+    from accelnav.resources import models_dir
 
     text = (models_dir() / "adxl250_default.toml").read_text()
     short, n = re.subn(r"^max_run_s = .*$", "max_run_s = 60.0", text, flags=re.M)

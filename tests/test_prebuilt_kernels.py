@@ -18,9 +18,9 @@ from conftest import MODELS
 
 from accelnav.codegen import gains
 from accelnav.codegen.bounds import error_bound
-from accelnav.codegen.cbuild import STRICT_FLAGS
-from accelnav.codegen.kernel_build import RICCATI_FLAGS as WHEEL_FLAGS
-from accelnav.codegen.model import load_model
+from accelnav.native.cbuild import STRICT_FLAGS
+from accelnav.native.kernels import RICCATI_FLAGS as WHEEL_FLAGS
+from accelnav.model.load import load_model
 from accelnav.codegen.ranges import plan_axis
 from accelnav.estimate import fastsmooth
 from accelnav.link import wirekernel

@@ -23,7 +23,7 @@ import pytest
 import realdata
 
 from accelnav.cli import main
-from accelnav.codegen.resources import models_dir
+from accelnav.resources import models_dir
 from accelnav.data.runfile import load_run
 from accelnav.estimate.pipeline import dead_reckoning
 from accelnav.estimate.zupt import intervals

@@ -30,7 +30,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from accelnav.hil_sim.firmware import manifest
+from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.link.telemetry import Decoder, decode_naive, encode_frames
 
 EXAMPLES = 440  # about 250 damage operations each: comfortably over the 1e5 the issue asks for

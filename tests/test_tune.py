@@ -16,9 +16,9 @@ import pytest
 from scipy import optimize
 
 from accelnav.cli import main
-from accelnav.codegen.design import axis_design
-from accelnav.codegen.model import DEFAULT_MODEL, load_model
-from accelnav.codegen.modelfile import dump_model, revalidate, with_noise
+from accelnav.model.design import axis_design
+from accelnav.model.load import DEFAULT_MODEL, load_model
+from accelnav.model.edit import dump_model, revalidate, with_noise
 from accelnav.estimate.kf import position_fix
 from accelnav.estimate.tune import all_figures, loglik, tune, with_figures
 

@@ -9,7 +9,7 @@ import zlib
 import numpy as np
 import pytest
 
-from accelnav.hil_sim.firmware import manifest
+from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.link import telemetry as tm
 from accelnav.link.wirekernel import decode_frames, wire_lib
 

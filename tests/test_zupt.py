@@ -9,7 +9,7 @@ import pytest
 
 from accelnav.estimate import zupt
 from accelnav.estimate.pipeline import smooth_run
-from accelnav.hil_sim.sensor import simulate
+from accelnav.hil_sim.sim.sensor import simulate
 
 SEEDS = (101, 102, 103)
 
@@ -206,8 +206,8 @@ def test_a_swaying_stance_is_still_a_stance(seed):
     On the foot IMU model (R = 1.4e-3, 0.037 m/s^2 rms) that sway is 30 R and more: the quiet test must
     allow for it (``tremor``), or the stances are lost and the strides with them.
     """
-    from accelnav.codegen.model import load_model
-    from accelnav.codegen.resources import models_dir
+    from accelnav.model.load import load_model
+    from accelnav.resources import models_dir
     from accelnav.estimate.pipeline import stride_errors
 
     model = load_model(models_dir() / "foot_imu.toml")

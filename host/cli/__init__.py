@@ -13,8 +13,8 @@ import argparse
 import importlib
 import sys
 
-from accelnav.codegen.cbuild import BuildError
-from accelnav.codegen.model import ModelError
+from accelnav.native.cbuild import BuildError
+from accelnav.model.load import ModelError
 from accelnav.errors import UserError
 
 # Modules that provide subcommands, in the order `accelnav --help` lists them.

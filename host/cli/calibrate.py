@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.design import input_conversion
-from accelnav.codegen.model import DEFAULT_MODEL, G0, Model, load_model, loads_model
-from accelnav.codegen.modelfile import dump_model, revalidate
+from accelnav.model.design import input_conversion
+from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
+from accelnav.model.edit import dump_model, revalidate
 from accelnav.data.recording import read_recording
 from accelnav.errors import UserError
 from accelnav.identify.calibrate import GRAVITY, Calibration, CalibrationError, calibrate, detect_poses, native

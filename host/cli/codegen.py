@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from accelnav.codegen.emit_c import emit, write
-from accelnav.codegen.model import load_model
+from accelnav.model.load import load_model
 
 
 def register(sub) -> None:

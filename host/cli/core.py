@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.model import DEFAULT_MODEL, Model, load_model, loads_model
+from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model
 from accelnav.data.runfile import STATE, export_csv, load_run, save_run
 from accelnav.errors import UserError
 from accelnav.estimate.pipeline import (
@@ -148,14 +148,14 @@ def register(sub) -> None:
 
 def require_scenario(name: str) -> None:
     """UserError for a --scenario the simulator does not have (shared by sim, hil and demo)."""
-    from accelnav.hil_sim.trajectories import ALL_SCENARIOS as SCENARIOS
+    from accelnav.hil_sim.sim.trajectories import ALL_SCENARIOS as SCENARIOS
 
     if name not in SCENARIOS:
         raise UserError(f"--scenario: unknown scenario {name!r}; accepted: {', '.join(SCENARIOS)}")
 
 
 def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[str, np.ndarray]:
-    from accelnav.hil_sim.sensor import simulate
+    from accelnav.hil_sim.sim.sensor import simulate
 
     require_scenario(scenario)
     try:
@@ -292,7 +292,7 @@ def _summary(arrays: dict[str, np.ndarray]) -> str:
 
 def cmd_sim(args) -> int:
     if args.list_scenarios:
-        from accelnav.hil_sim.trajectories import ALL_SCENARIOS as SCENARIOS
+        from accelnav.hil_sim.sim.trajectories import ALL_SCENARIOS as SCENARIOS
 
         print("\n".join(SCENARIOS))
         return 0

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.design import input_conversion
-from accelnav.codegen.model import DEFAULT_MODEL, Model, load_model
+from accelnav.model.design import input_conversion
+from accelnav.model.load import DEFAULT_MODEL, Model, load_model
 from accelnav.errors import UserError
 
 
@@ -82,7 +82,7 @@ def _pil_wanted(mode: str) -> tuple[bool, str]:
 
 def decoded_run(fitted: Model, run, telemetry: bytes) -> dict[str, np.ndarray]:
     """Run-file arrays from the firmware's sample frames (raw input, skip flags) plus the simulated truth."""
-    from accelnav.hil_sim.firmware import manifest
+    from accelnav.hil_sim.targets.firmware import manifest
     from accelnav.link.telemetry import decode_all, replay_for, sample_columns
 
     man = manifest(fitted.source)
@@ -116,9 +116,9 @@ def cmd_demo(args) -> int:
     from accelnav.estimate.pipeline import dead_reckoning, error_rows, format_errors, smooth_run
     from accelnav.estimate.zupt import rest_mask
     from accelnav.hil_sim import hil
-    from accelnav.hil_sim.firmware import FirmwareError, manifest
-    from accelnav.hil_sim.qemu import QemuError
-    from accelnav.hil_sim.sensor import simulate
+    from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
+    from accelnav.hil_sim.targets.qemu import QemuError
+    from accelnav.hil_sim.sim.sensor import simulate
     from accelnav.plots.run import plot_smoothing
 
     true_model = load_model(args.model)

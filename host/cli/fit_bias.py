@@ -31,8 +31,8 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from accelnav.codegen.model import DEFAULT_MODEL, G0, Model, load_model, loads_model
-from accelnav.codegen.modelfile import dump_model, revalidate, with_axis_bias, with_noise
+from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
+from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
 from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, read_recording
 from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.model import DEFAULT_MODEL, load_model
+from accelnav.model.load import DEFAULT_MODEL, load_model
 from accelnav.errors import UserError
-from accelnav.hil_sim.qemu import MACHINES
+from accelnav.hil_sim.targets.qemu import MACHINES
 
 
 def register(sub) -> None:
@@ -35,9 +35,9 @@ def register(sub) -> None:
 def cmd_hil(args) -> int:
     from accelnav.cli.core import require_scenario
     from accelnav.hil_sim import hil
-    from accelnav.hil_sim.firmware import FirmwareError, manifest
-    from accelnav.hil_sim.qemu import QemuError
-    from accelnav.hil_sim.sensor import simulate
+    from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
+    from accelnav.hil_sim.targets.qemu import QemuError
+    from accelnav.hil_sim.sim.sensor import simulate
     from accelnav.progress import Progress
 
     if args.board is not None and args.target != "pil":

@@ -58,13 +58,13 @@ _MODEL_HELP = (
 def _model_text(args) -> str:
     if getattr(args, "model", None) is None:
         return ""
-    from accelnav.codegen.model import load_model
+    from accelnav.model.load import load_model
 
     return load_model(args.model).text
 
 
 def _manifest(args):
-    from accelnav.codegen.model import load_model
+    from accelnav.model.load import load_model
     from accelnav.link.telemetry import Manifest
 
     if args.manifest is not None:
@@ -244,8 +244,8 @@ def _compact_counts(stats: dict) -> str:
 
 def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndarray], object]:
     """A recorder log as the arrays of an accelnav run file (and its model); what ``log export`` writes."""
-    from accelnav.codegen.design import input_conversion
-    from accelnav.codegen.model import ModelError, loads_model
+    from accelnav.model.design import input_conversion
+    from accelnav.model.load import ModelError, loads_model
     from accelnav.data.runfile import FORMAT
     from accelnav.link.logfile import LogError
     from accelnav.link.recorder import decode_log

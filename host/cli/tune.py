@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.cli.core import INPUT_HELP, _input_args, _load
-from accelnav.codegen.model import loads_model
-from accelnav.codegen.modelfile import dump_model
+from accelnav.model.load import loads_model
+from accelnav.model.edit import dump_model
 from accelnav.errors import UserError
 from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, tune, with_figures
 from accelnav.estimate.zupt import ZuptParams

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.model import G0, ModelError, loads_model
+from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.errors import UserError
 from accelnav.progress import Progress
 

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.model import Model, ModelError, loads_model
+from accelnav.model.load import Model, ModelError, loads_model
 from accelnav.errors import UserError
 
 FORMAT = "accelnav-run/1"

@@ -5,7 +5,7 @@ Both return the same :class:`AxisSmooth` and agree with the reference
 tests/test_fastsmooth.py asserts 1e-9 relative, sigma-scaled, for states and
 covariances. The C is csrc/fastsmooth.c, compiled when the package is built
 (codegen/kernel_build.py); a source checkout whose C was edited since builds it on
-first use with :mod:`accelnav.codegen.cbuild`.
+first use with :mod:`accelnav.native.cbuild`.
 
 General path (:func:`smooth_general`)
 -------------------------------------
@@ -76,10 +76,10 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.cbuild import STRICT_FLAGS
-from accelnav.codegen.design import AxisDesign
-from accelnav.codegen.kernel_build import SMOOTHER, build, prebuilt
-from accelnav.codegen.resources import package_dir
+from accelnav.native.cbuild import STRICT_FLAGS
+from accelnav.model.design import AxisDesign
+from accelnav.native.kernels import SMOOTHER, build, prebuilt
+from accelnav.resources import package_dir
 from accelnav.estimate.kf import Measurement
 
 CSRC = package_dir("accelnav.estimate") / "csrc"  # package data

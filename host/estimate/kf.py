@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from accelnav.codegen.design import AxisDesign
+from accelnav.model.design import AxisDesign
 from accelnav.progress import Progress
 
 

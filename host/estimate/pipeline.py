@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from accelnav.codegen.design import axis_design
-from accelnav.codegen.model import Model
+from accelnav.model.design import axis_design
+from accelnav.model.load import Model
 from accelnav.estimate.kf import double_integrate, run_filter
 
 

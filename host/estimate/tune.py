@@ -60,9 +60,9 @@ from statistics import NormalDist
 
 import numpy as np
 
-from accelnav.codegen.design import axis_design
-from accelnav.codegen.model import Model
-from accelnav.codegen.modelfile import revalidate, with_noise
+from accelnav.model.design import axis_design
+from accelnav.model.load import Model
+from accelnav.model.edit import revalidate, with_noise
 from accelnav.estimate import fastsmooth
 from accelnav.estimate.kf import Measurement
 from accelnav.lazy import lazy_module

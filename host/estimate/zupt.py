@@ -103,8 +103,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from accelnav.codegen.design import axis_design
-from accelnav.codegen.model import Model
+from accelnav.model.design import axis_design
+from accelnav.model.load import Model
 from accelnav.estimate.kf import Measurement, bias_model, zero_velocity
 
 

@@ -75,7 +75,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from accelnav.codegen.model import G0
+from accelnav.model.load import G0
 from accelnav.lazy import lazy_module
 
 optimize = lazy_module("scipy.optimize")

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import serial
 from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
-from accelnav.codegen.cbuild import BuildError
+from accelnav.native.cbuild import BuildError
 from accelnav.link.logfile import LogWriter
 from accelnav.link.telemetry import Decoder, Manifest, encode_command, replay_for
 

@@ -7,7 +7,7 @@ board); checkpoint frames carry each axis' state as its checkpoint image
 bytes; the gain schedule's with its row as an index into the table).
 :class:`Replay` compiles the very C the firmware runs (the generated
 ``accelnav.c`` of the model, :mod:`accelnav.codegen.emit_c`, built with
-:mod:`accelnav.codegen.cbuild` like SIL) together with a small loop that,
+:mod:`accelnav.native.cbuild` like SIL) together with a small loop that,
 for many stretches at once, starts from a state's image (``accelnav_AXIS_load``,
 which refuses a gain-schedule row outside the table), steps the filter
 through the stretch's inputs exactly as ``firmware/src/app.c`` does (``step``
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from accelnav.codegen.model import Model, loads_model
+from accelnav.model.load import Model, loads_model
 
 _KERNEL = """
 /* Replay of axis {ax}: stretch j starts from the checkpoint image init[j], runs samples
@@ -182,7 +182,7 @@ class Replay:
     """The firmware's filter for the axes of ``manifest``, from ``model`` (a Model or its TOML text)."""
 
     def __init__(self, manifest, model: Model | str):
-        from accelnav.codegen.cbuild import build_module
+        from accelnav.native.cbuild import build_module
 
         if isinstance(model, str):
             model = loads_model(model, source="the model text of the recording")

@@ -13,7 +13,7 @@ The C is csrc/acnwire.c (package data). It is compiled into the wheel
 (codegen/kernel_build.py, named in setup.py), so an installed package decodes
 fast with no C compiler; a source checkout whose C was edited since builds it
 on first use with the project's cffi builder
-(:func:`accelnav.codegen.cbuild.build_module`, cached on disk). Without
+(:func:`accelnav.native.cbuild.build_module`, cached on disk). Without
 either, :func:`wire_lib` returns None and the decoder keeps its numpy path,
 so reading logs never needs a compiler. The tests hold both paths to each
 other on random, damaged and truncated frames, and the C's CRC table to
@@ -26,9 +26,9 @@ import threading
 
 import numpy as np
 
-from accelnav.codegen.cbuild import STRICT_FLAGS
-from accelnav.codegen.kernel_build import WIRE, build, prebuilt
-from accelnav.codegen.resources import package_dir
+from accelnav.native.cbuild import STRICT_FLAGS
+from accelnav.native.kernels import WIRE, build, prebuilt
+from accelnav.resources import package_dir
 
 CSRC = package_dir("accelnav.link") / "csrc"  # package data: acnwire.c, acnwire.h
 

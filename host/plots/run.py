@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.model import Model
+from accelnav.model.load import Model
 from accelnav.estimate.pipeline import dead_reckoning
 
 
@@ -112,7 +112,7 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
     * fig12_position_smoother.png: position from the filter and the smoother
       (+-1 sigma), and the truth; zero-velocity updates shaded, fixes as dots.
     """
-    from accelnav.codegen.design import axis_design
+    from accelnav.model.design import axis_design
     from accelnav.estimate.kf import bias_model
 
     plt = _pyplot()

@@ -11,8 +11,8 @@
   Makefile fragment (the one ``make firmware BOARD=...`` uses), e.g. the
   mps2-an385 ELF that hil_sim.qemu runs (PIL).
 
-The firmware sources are package data (:func:`accelnav.codegen.resources.firmware_dir`);
-what is built goes to the cache (:func:`accelnav.codegen.resources.cache_root`)
+The firmware sources are package data (:func:`accelnav.resources.firmware_dir`);
+what is built goes to the cache (:func:`accelnav.resources.cache_root`)
 or a folder the caller names, never into the installed package.
 """
 
@@ -24,7 +24,7 @@ import subprocess
 from functools import cache
 from pathlib import Path
 
-from accelnav.codegen.resources import cache_root, firmware_dir, models_dir
+from accelnav.resources import cache_root, firmware_dir, models_dir
 
 FW = firmware_dir()
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g"]
@@ -36,7 +36,7 @@ DUTY_MODEL = models_dir() / "adxl202_duty.toml"
 def generated(model_path: str | None = None) -> dict[str, str]:
     """accelnav.{h,c,json} and acnframe.{h,c,json} of a model (the embedded default if None)."""
     from accelnav.codegen.generated import generated_files
-    from accelnav.codegen.model import load_model
+    from accelnav.model.load import load_model
 
     return generated_files(load_model(model_path))
 
@@ -78,7 +78,7 @@ void app_rx(unsigned ch, const uint8_t *p, size_t n);
 
 def build_firmware(model_path: str | None = None, *, sanitize: bool = False, workdir: Path | None = None):
     """The host-board firmware as a cffi module (``.ffi``, ``.lib``), built once per source text."""
-    from accelnav.codegen.cbuild import build_module
+    from accelnav.native.cbuild import build_module
 
     files = generated(model_path)
     sources = {p.name: p.read_text() for p in sorted((FW / "src").glob("*.[ch]"))}
@@ -108,7 +108,7 @@ def make_firmware(board: str, model_path: str | Path | None = None, out: Path | 
     defaults to a folder in the cache named by the board and the model's
     hash, so images of different models never overwrite each other.
     """
-    from accelnav.codegen.model import load_model
+    from accelnav.model.load import load_model
 
     model = load_model(model_path)
     if out is None:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import G0, Axis, Model
+from .load import G0, Axis, Model
 
 STATE_NAMES = ("r", "u", "a", "eps")
 STATE_UNITS = ("m", "m/s", "m/s^2", "m/s^2")

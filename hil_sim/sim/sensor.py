@@ -39,9 +39,9 @@ longer one, simulating a subset of the axes gives the same columns, and
 
 The ``tumble`` scenario (the six-position calibration test) is the exception: each
 axis sees its own share of gravity as the part is turned through the poses of
-:func:`accelnav.hil_sim.trajectories.tumble_poses`, and r = u = 0. ``tumble_any``
+:func:`accelnav.hil_sim.sim.trajectories.tumble_poses`, and r = u = 0. ``tumble_any``
 does the same through random still orientations
-(:func:`accelnav.hil_sim.trajectories.tumble_any_poses`, drawn from the motion
+(:func:`accelnav.hil_sim.sim.trajectories.tumble_any_poses`, drawn from the motion
 stream: one per ``TUMBLE_HOLD_S + TUMBLE_TURN_S``), for the gravity-magnitude
 calibration of a 3-axis part (a 2-axis part sees only their in-plane components).
 
@@ -49,7 +49,7 @@ Motion of several axes: one trajectory is drawn and axis i of the model sees
 it scaled by AXIS_GAIN[i] = (1.0, -0.8, 0.6)[i], as a rigid body moving along
 a fixed direction would. Rests, and rest times, are thus common to all axes.
 The ``walking`` scenario is the exception: it is a horizontal walk
-(:mod:`accelnav.hil_sim.walking`), axes 0 and 1 see its two horizontal
+(:mod:`accelnav.hil_sim.sim.walking`), axes 0 and 1 see its two horizontal
 components plus the gravity leaking through its tilt error, a third axis sees
 no motion, and the run carries the true stance mask (``stance``) from which
 stride lengths are scored.
@@ -63,8 +63,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from accelnav.codegen.design import input_conversion
-from accelnav.codegen.model import G0, Model
+from accelnav.model.design import input_conversion
+from accelnav.model.load import G0, Model
 from accelnav.lazy import lazy_module
 
 from .trajectories import ALL_SCENARIOS, TUMBLE_HOLD_S, TUMBLE_TURN_S, truth, tumble_any_poses, tumble_specific_force

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .emit_c import cdef_of
+from accelnav.codegen.emit_c import cdef_of
 
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
 SANITIZE = ["-fsanitize=undefined,address", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g"]
@@ -27,8 +27,8 @@ SANITIZE = ["-fsanitize=undefined,address", "-fno-sanitize-recover=all", "-fno-o
 
 def build(files: dict[str, str], workdir: str | Path, *, prefix: str = "accelnav", sanitize: bool = False):
     """Compile ``PREFIX.c`` with the strict flags and the declarations cut from ``PREFIX.h``, through the
-    project's one cffi builder (accelnav.codegen.cbuild), cached in ``workdir`` by the hash of the generated text."""
-    from accelnav.codegen.cbuild import build_module
+    project's one cffi builder (accelnav.native.cbuild), cached in ``workdir`` by the hash of the generated text."""
+    from accelnav.native.cbuild import build_module
 
     return build_module(
         f"acn_{prefix}",

@@ -9,7 +9,7 @@ folder. The compile happens in a private temporary folder and the finished
 ``.so`` is moved into place with an atomic rename, so two processes building
 the same module at once cannot see a half-written file.
 
-Cache folder: ``cffi/`` under :func:`accelnav.codegen.resources.cache_root`
+Cache folder: ``cffi/`` under :func:`accelnav.resources.cache_root`
 (``$ACCELNAV_CACHE_DIR``, else ``~/.cache/accelnav``): never inside the
 installed package or the source checkout.
 
@@ -33,7 +33,7 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-from .resources import cache_root
+from accelnav.resources import cache_root
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2")
 

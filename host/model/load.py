@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .resources import models_dir
+from accelnav.resources import models_dir
 
 G0 = 9.80665  # standard gravity, m/s^2
 

@@ -21,7 +21,7 @@ import dataclasses
 import json
 import math
 
-from .model import Axis, Model, loads_model
+from .load import Axis, Model, loads_model
 
 
 def _float(x: float) -> str:

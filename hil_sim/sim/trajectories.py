@@ -88,9 +88,9 @@ def truth(name: str, t: np.ndarray, rng: np.random.Generator, amax: float) -> tu
     * ``shock``: as ``stress``, but a quarter of the pulse pairs are impacts
       of +-2.5 amax (10 ms edges, a flat top of max(10 ms, one sample
       period), velocity swing at most 30 m/s), beyond the sensor's rails.
-    * ``walking``: a foot during a walk with turns (:mod:`accelnav.hil_sim.walking`);
+    * ``walking``: a foot during a walk with turns (:mod:`accelnav.hil_sim.sim.walking`);
       this function returns its first horizontal axis, :func:`simulate
-      <accelnav.hil_sim.sensor.simulate>` uses both and the stance mask.
+      <accelnav.hil_sim.sim.sensor.simulate>` uses both and the stance mask.
     """
     if name not in SCENARIOS:
         accepted = ", ".join(repr(s) for s in SCENARIOS)

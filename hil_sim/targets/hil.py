@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.codegen.design import axis_design
-from accelnav.codegen.model import Model
+from accelnav.model.design import axis_design
+from accelnav.model.load import Model
 from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.estimate.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from accelnav.estimate.zupt import rest_mask
@@ -48,7 +48,7 @@ from accelnav.link.telemetry import (
 
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
 from .qemu import MACHINES, QemuBoard, QemuError, machine_for, run_feed
-from .sensor import SimRun
+from accelnav.hil_sim.sim.sensor import SimRun
 
 STATES = ("r", "u", "a", "eps")
 PIL_BOARDS = tuple(MACHINES)  # the boards `accelnav hil --target pil --board` runs

@@ -9,7 +9,7 @@ nothing but the standard library (cffi and the project's builder are imported in
 Every prebuilt module carries the sha256 of the C it was built from (its ``stamp`` function):
 :func:`prebuilt` serves it only when that equals the C beside it, so an edited kernel in a source
 checkout is never served by a stale build; :func:`build` then compiles the same C through the
-project's cffi builder (:func:`accelnav.codegen.cbuild.build_module`, cached on disk).
+project's cffi builder (:func:`accelnav.native.cbuild.build_module`, cached on disk).
 
 The Riccati kernel must give the very doubles of its Python twin, so its flags (:data:`RICCATI_FLAGS`:
 ISO C99, no contraction, no fast math) are those of the run-time build too. They apply to cffi's wrapper
@@ -109,9 +109,9 @@ def prebuilt(k: Kernel, csrc: Path):
 
 def build(k: Kernel, csrc: Path, flags, stem: str, *, required: bool = True):
     """The kernel built from ``csrc`` by the project's cffi builder (once per source, cached on disk).
-    Where that cannot be done (no C compiler): :class:`accelnav.codegen.cbuild.BuildError` (or OSError),
+    Where that cannot be done (no C compiler): :class:`accelnav.native.cbuild.BuildError` (or OSError),
     or None when not ``required`` (the caller then has a Python path)."""
-    from accelnav.codegen.cbuild import BuildError, build_module
+    from accelnav.native.cbuild import BuildError, build_module
 
     c, h = k.files
     header = (csrc / h).read_text()

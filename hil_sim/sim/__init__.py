@@ -1,0 +1,1 @@
+"""The simulated world: trajectories, walking, and the sensor that turns them into samples."""
