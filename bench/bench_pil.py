@@ -24,7 +24,7 @@ from baselines import best_of
 
 from accelnav.model.load import load_model
 from accelnav.resources import models_dir
-from accelnav.hil_sim import hil
+from accelnav.hil_sim.targets import hil
 from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.hil_sim.targets.qemu import MACHINES
 from accelnav.hil_sim.sim.sensor import simulate

@@ -16,7 +16,7 @@ from accelnav.model.design import axis_design
 from accelnav.hil_sim.targets.harness import AxisRunner
 from accelnav.model.load import load_model, loads_model
 from accelnav.estimate.kf import run_filter
-from accelnav.hil_sim import sensor
+from accelnav.hil_sim.sim import sensor
 
 
 @pytest.fixture(scope="module")

@@ -188,7 +188,7 @@ def test_log_info_and_export_show_a_mismatch(tmp_path, man, telemetry, capsys):
 
 
 def test_hil_reports_a_mismatch(man, telemetry):
-    from accelnav.hil_sim import hil
+    from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.sim.sensor import simulate
 
     model = load_model()

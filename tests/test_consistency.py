@@ -17,7 +17,7 @@ from scipy.stats import chi2
 
 from accelnav.model.design import axis_design, input_conversion
 from accelnav.estimate.kf import position_fix, rts_smooth, run_filter
-from accelnav.hil_sim import sensor
+from accelnav.hil_sim.sim import sensor
 from accelnav.hil_sim.sim.sensor import simulate
 
 M_RUNS = 60

@@ -26,7 +26,7 @@ from conftest import MODELS
 
 from accelnav.cli import main
 from accelnav.model.load import load_model
-from accelnav.hil_sim import hil, qemu
+from accelnav.hil_sim.targets import hil, qemu
 from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.link.telemetry import decode_all, replay_for

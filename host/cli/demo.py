@@ -115,7 +115,7 @@ def cmd_demo(args) -> int:
     from accelnav.data.runfile import save_run
     from accelnav.estimate.pipeline import dead_reckoning, error_rows, format_errors, smooth_run
     from accelnav.estimate.zupt import rest_mask
-    from accelnav.hil_sim import hil
+    from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
     from accelnav.hil_sim.targets.qemu import QemuError
     from accelnav.hil_sim.sim.sensor import simulate

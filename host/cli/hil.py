@@ -34,7 +34,7 @@ def register(sub) -> None:
 
 def cmd_hil(args) -> int:
     from accelnav.cli.core import require_scenario
-    from accelnav.hil_sim import hil
+    from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
     from accelnav.hil_sim.targets.qemu import QemuError
     from accelnav.hil_sim.sim.sensor import simulate

@@ -4,7 +4,7 @@ Both return the same :class:`AxisSmooth` and agree with the reference
 (:func:`accelnav.estimate.kf.run_filter` then :func:`accelnav.estimate.kf.rts_smooth`) to rounding;
 tests/test_fastsmooth.py asserts 1e-9 relative, sigma-scaled, for states and
 covariances. The C is csrc/fastsmooth.c, compiled when the package is built
-(codegen/kernel_build.py); a source checkout whose C was edited since builds it on
+(host/native/kernels.py); a source checkout whose C was edited since builds it on
 first use with :mod:`accelnav.native.cbuild`.
 
 General path (:func:`smooth_general`)
@@ -93,7 +93,7 @@ _module = None
 
 
 def _prebuilt():
-    """The kernel compiled with the package (codegen/kernel_build.py), if it was built from this very C."""
+    """The kernel compiled with the package (host/native/kernels.py), if it was built from this very C."""
     return prebuilt(SMOOTHER, CSRC)
 
 

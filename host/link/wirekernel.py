@@ -10,7 +10,7 @@ returns the same three arrays: the decoded bytes, whether the COBS chain was
 well formed, and whether the CRC matched.
 
 The C is csrc/acnwire.c (package data). It is compiled into the wheel
-(codegen/kernel_build.py, named in setup.py), so an installed package decodes
+(host/native/kernels.py, named in setup.py), so an installed package decodes
 fast with no C compiler; a source checkout whose C was edited since builds it
 on first use with the project's cffi builder
 (:func:`accelnav.native.cbuild.build_module`, cached on disk). Without
@@ -37,7 +37,7 @@ _built: list = []  # [module or None] once tried
 
 
 def _prebuilt():
-    """The kernel compiled with the package (codegen/kernel_build.py), if it was built from this very C."""
+    """The kernel compiled with the package (host/native/kernels.py), if it was built from this very C."""
     return prebuilt(WIRE, CSRC)
 
 
