@@ -152,9 +152,13 @@ def read_header(buf: bytes, source: str) -> tuple[dict, int]:
     (crc,) = struct.unpack_from("<I", buf, start + n)
     if zlib.crc32(head) != crc:
         raise LogError(f"{source}: the header is damaged (CRC)")
-    meta = json.loads(head)
-    if meta.get("format") != FORMAT:
-        raise LogError(f"{source}: format {meta.get('format')!r}; accepted: {FORMAT!r}")
+    try:
+        meta = json.loads(head)
+    except ValueError:  # JSONDecodeError and UnicodeDecodeError alike
+        raise LogError(f"{source}: the header is not JSON") from None
+    fmt = meta.get("format") if isinstance(meta, dict) else None
+    if fmt != FORMAT:
+        raise LogError(f"{source}: format {repr(fmt)[:60]}; accepted: {FORMAT!r}")
     return meta, start + n + 4
 
 

@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 import serial
 from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
-from accelnav.native.cbuild import BuildError
 from accelnav.link.logfile import LogWriter
 from accelnav.link.telemetry import Decoder, Manifest, encode_command, replay_for
+from accelnav.native.cbuild import BuildError
 
 DEFAULT_BAUD = 921600
 
@@ -363,12 +363,16 @@ def decode_log(path, model_text: str = "") -> DecodedLog:
     import numpy as np
 
     from accelnav.link.compact import concat_records
-    from accelnav.link.logfile import read_log
+    from accelnav.link.logfile import LogError, read_log
 
     contents = read_log(path)
-    man = Manifest(contents.meta["manifest"])
+    try:
+        man = Manifest(contents.meta.get("manifest"))
+    except ValueError as exc:  # the header is someone else's: a refusal in one line, never a traceback
+        raise LogError(f"{path}: the header's manifest: {exc}") from None
     warnings: list[str] = []
-    text = contents.meta.get("model_toml") or model_text
+    text = contents.meta.get("model_toml")
+    text = text if isinstance(text, str) and text else model_text
     dec = Decoder(man, replay=_replay(man, text, warnings, str(path)))
     parts: dict[str, list] = {n: [] for n in dec.names}
     times = []

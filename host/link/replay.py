@@ -191,6 +191,8 @@ class Replay:
                 f"the model text (sha256 {model.sha256[:12]}) is not the firmware's model "
                 f"({manifest.model_sha256[:12]}): no replay"
             )
+        if list(manifest.axes) != [a.name for a in model.axes]:  # the names below become C identifiers
+            raise ReplayError(f"the manifest's axes {manifest.axes} are not the model's: no replay")
         self.axes = list(manifest.axes)
         self.state_bytes = [int(n) for n in manifest.data["state_bytes"]]
         duty = manifest.input == "duty_cycle"
