@@ -33,11 +33,12 @@ import re
 import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
+from tokenize import TokenError
 
 import numpy as np
 
-from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.errors import UserError
+from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.progress import Progress
 
 UNITS = {"g": G0, "mg": G0 * 1e-3, "m/s^2": 1.0}
@@ -144,13 +145,15 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
     try:
         with np.load(path, allow_pickle=False) as npz:
             data = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise UserError(f"{src}: not a readable NPZ file: {exc}") from None
+    # a damaged member header fails in numpy's header parser (SyntaxError, TokenError), an unknown
+    # compression in zipfile (NotImplementedError): all of them say the same thing to the user
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, SyntaxError, TokenError, NotImplementedError) as exc:
+        raise UserError(f"{src}: not a readable NPZ file: {str(exc)[:200]}") from None
     if "accel" not in data:
         raise UserError(
             f"{src}: no 'accel' array; keys: {', '.join(sorted(data)) or 'none'} (expected accelnav sim's layout)"
         )
-    accel = np.asarray(data["accel"], dtype=np.float64)
+    accel = _numbers(data, "accel", src)
     if accel.ndim == 1:
         accel = accel[:, None]
     if accel.ndim != 2 or accel.shape[0] < 2:
@@ -165,15 +168,21 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
     model_toml = str(data["model_toml"][()]) if "model_toml" in data else None
     clipped = None
     if "clipped" in data:
-        clipped = np.asarray(data["clipped"], dtype=bool).reshape(n, -1)
+        clipped = _numbers(data, "clipped", src, bool)
+        if clipped.shape != (n, k) and not (k == 1 and clipped.shape == (n,)):  # one flag per sample and axis
+            raise UserError(f"{src}: 'clipped' has shape {clipped.shape}; 'accel' has {(n, k)}")
+        clipped = clipped.reshape(n, k)
     if "t" in data:
-        t = np.asarray(data["t"], dtype=np.float64).reshape(-1)
+        t = _numbers(data, "t", src).reshape(-1)
         if len(t) != n:
             raise UserError(f"{src}: 't' has {len(t)} samples, 'accel' {n}")
     else:
         rate = rate_hz
         if rate is None and "rate_hz" in data:
-            rate = float(data["rate_hz"])
+            rate = _numbers(data, "rate_hz", src)
+            if rate.size != 1:
+                raise UserError(f"{src}: 'rate_hz' has shape {rate.shape}; accepted: one number")
+            rate = float(rate.reshape(-1)[0])
         if rate is None and model_toml is not None:
             rate = _model(model_toml, src).rate_hz
         if rate is None:
@@ -193,6 +202,14 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
         cols = names
         clipped = None if clipped is None else clipped[:, idx]
     return _finish(src, t, accel, names, cols, (u,) * len(names), model_toml, clipped)
+
+
+def _numbers(data: dict, key: str, src: str, dtype=np.float64) -> np.ndarray:
+    """data[key] as an array of dtype; an array that is not numbers (strings, objects) is refused."""
+    a = data[key]
+    if a.dtype.kind not in "biuf":  # complex too: no acceleration or time is complex
+        raise UserError(f"{src}: {key!r} holds {a.dtype} values; accepted: real numbers")
+    return np.asarray(a, dtype=dtype)
 
 
 def _model(text: str, src: str):
@@ -276,7 +293,7 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
     if len(set(names)) != len(names):
         names = list(chosen)
 
-    use = ([cols.index(tcol)] if tcol else []) + [cols.index(c) for c in chosen]
+    use = ([cols.index(tcol)] if tcol is not None else []) + [cols.index(c) for c in chosen]
     # every data row must have the header's number of fields: an extra or a missing cell is refused
     # (loadtxt with usecols would drop an extra one silently); the line of each sample is kept for messages
     all_lines = text.splitlines()
@@ -296,7 +313,7 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
     if table.shape[0] < 2:
         raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
     time_unit = None
-    if tcol:
+    if tcol is not None:
         m = _TIME_NAME.match(tcol)
         time_unit = m.group(2).lower() if m and m.group(2) else None
         t = table[:, 0] * _TIME_SCALE[time_unit]
