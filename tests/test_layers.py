@@ -34,6 +34,7 @@ LAYERS = {
     "accelnav.native": 1,
     "accelnav.resources": 0,
     "accelnav.errors": 0,
+    "accelnav.fileio": 0,
     "accelnav.progress": 0,
     "accelnav.lazy": 0,
 }
