@@ -555,7 +555,8 @@ def check_axis(
         if out.any():
             k = int(np.argmax(out))
             raise UserError(
-                f"{where}: {rec.where(k)} is {y[k]:.6g} m/s^2, beyond the range +-{sensor_range[0]:.6g} m/s^2 of "
+                f"{where}: {rec.where(k)}, column {excerpt(rec.columns[j], 40)}: {y[k]:.6g} m/s^2 is beyond the "
+                f"range +-{sensor_range[0]:.6g} m/s^2 of "
                 f"{sensor_range[1]} ({int(out.sum())} such samples): a glitch, or the wrong unit"
             )
     if rec.duration < min_duration_s or rec.n < min_samples:
