@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from accelnav.fileio import write_text
 from accelnav.model.load import Model
 
 GENERATOR_VERSION = "0.1.0"
@@ -91,6 +92,6 @@ def write(files: dict[str, str], out: Path) -> list[Path]:
     paths = []
     for name, text in sorted(files.items()):
         path = out / name
-        path.write_text(text)
+        write_text(path, text)  # renamed into place: an interrupted run leaves no half-written C
         paths.append(path)
     return paths

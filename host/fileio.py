@@ -172,13 +172,14 @@ def npz_members(path: str | Path, source: str | None = None) -> list[str]:
         raise UserError(f"{src}: cannot read: {exc.strerror or exc}") from None
 
 
-def load_npz(path: str | Path, source: str | None = None) -> dict:
+def load_npz(path: str | Path, source: str | None = None, then: str = "") -> dict:
     """Every array of an NPZ, each checked against :func:`input_limit` before it is inflated.
 
     Checked in turn: the zip directory's declared sizes (``file_size``, and its ratio to
     ``compress_size`` is then bounded by the limit too), each member's ``.npy`` header (an object dtype
     is refused: no pickles), and ``shape * itemsize`` against the member's declared size, so neither a
-    lying header nor a zip bomb allocates more than the limit.
+    lying header nor a zip bomb allocates more than the limit. ``then`` ends the message for a file that is
+    not a zip archive at all (what the caller expected).
     """
     from numpy.lib import format as npy
 
@@ -223,8 +224,9 @@ def load_npz(path: str | Path, source: str | None = None) -> dict:
     except UserError:
         raise
     except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, ValueError, NotImplementedError) as exc:
-        kind = "not an NPZ file (not a readable zip archive)" if not opened else f"damaged NPZ: {excerpt(str(exc))}"
-        raise UserError(f"{src}: {kind}") from None
+        if not opened:
+            raise UserError(f"{src}: not an NPZ file (not a readable zip archive){then}") from None
+        raise UserError(f"{src}: damaged NPZ: {excerpt(str(exc))}") from None
     except OSError as exc:
         raise UserError(f"{src}: cannot read: {exc.strerror or exc}") from None
     return out

@@ -43,7 +43,7 @@ LAYERS = {
 NEVER_CODEGEN = ("accelnav.model", "accelnav.native", "accelnav.estimate", "accelnav.identify", "accelnav.data",
                  "accelnav.hil_sim.sim", "accelnav.plots")  # fmt: skip
 # what the generator may stand on
-CODEGEN_BASE = ("accelnav.codegen", "accelnav.model", "accelnav.native", "accelnav.resources")
+CODEGEN_BASE = ("accelnav.codegen", "accelnav.model", "accelnav.native", "accelnav.resources", "accelnav.fileio")
 
 
 def _modules() -> dict[str, Path]:

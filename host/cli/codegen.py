@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from accelnav.codegen.emit_c import emit, write
+from accelnav.errors import UserError
 from accelnav.model.load import load_model
 
 
@@ -25,6 +26,8 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.out.exists() and not args.out.is_dir():
+        raise UserError(f"--out: {args.out} is a file; give a directory for the generated files")
     model = load_model(args.model)
     arith = "float32" if args.float32 else "fixed"
     files = emit(model, form=args.form, arith=arith, prefix=args.prefix)

@@ -58,11 +58,11 @@ def save_run(path: str | Path, arrays: dict[str, np.ndarray], model: Model) -> N
 def load_run(path: str | Path) -> tuple[dict[str, np.ndarray], Model]:
     """Read a run file; returns (arrays, model). Refuses anything else with one line."""
     path = Path(path)
-    arrays = load_npz(path)  # sizes checked before inflating
+    arrays = load_npz(path, then=", so not an accelnav run file")  # sizes checked before inflating
     fmt = str(arrays.get("format", ""))
     if fmt != FORMAT:
         raise UserError(
-            f"{path}: format is {excerpt(fmt) if fmt else 'missing'}; accepted: {FORMAT!r} (written by accelnav sim)"
+            f"{path}: format is {excerpt(fmt or 'missing')}; accepted: {FORMAT!r} (written by accelnav sim)"
         )
     for key in ("model_toml", "t", "axis_names", "accel", "clipped"):
         if key not in arrays:
