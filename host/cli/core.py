@@ -43,7 +43,20 @@ def _input_args(p: argparse.ArgumentParser) -> None:
         help="CSV/NPZ: a column to use as an axis, in the model's axis order; repeat for each axis",
     )
     p.add_argument("--time-column", default=None, metavar="NAME", help="CSV: the time column; default t, t_s, time")
-    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="CSV without a time column: sample rate")
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="sample rate: without a time column, the rate; with one, the nominal rate it is checked against, "
+        "overriding it (samples taken as consecutive, said in a note) where its stamps do not fit",
+    )
+    p.add_argument(
+        "--time-unit",
+        choices=("s", "ms", "us"),
+        default=None,
+        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
+    )
     p.add_argument(
         "--unit",
         default=None,
@@ -214,8 +227,16 @@ def _load(args) -> tuple[dict[str, np.ndarray], Model]:
     if unit is None and model is not None and model.sensor.kind == "calibrated":
         unit = model.sensor.calibrated.unit
     rec = read_recording(
-        path, axes=args.axis, unit=unit, rate_hz=args.rate, time_column=args.time_column, allow_gaps=args.allow_gaps
+        path,
+        axes=args.axis,
+        unit=unit,
+        rate_hz=args.rate,
+        time_column=args.time_column,
+        allow_gaps=args.allow_gaps,
+        time_unit=args.time_unit,
     )
+    for note in rec.notes:
+        print(note)
     if model is None:
         model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
     check_rate(rec, model.rate_hz, str(model.source))
@@ -260,7 +281,7 @@ def _is_recording_npz(path: Path) -> bool:
 def _with_model(path, arrays, model: Model, override: Model | None, args) -> tuple[dict[str, np.ndarray], Model]:
     from accelnav.data.recording import GAP_FACTOR
 
-    for flag in ("axis", "time_column", "rate", "unit"):
+    for flag in ("axis", "time_column", "rate", "unit", "time_unit"):
         if getattr(args, flag) not in (None, []):
             raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
     if override is not None:
