@@ -24,7 +24,9 @@ def _run(argv, capsys):
 
 
 def _write(path, t, accel, t_name="t", cols=("ax", "ay")):
-    lines = [",".join((t_name, *cols))] + [f"{float(ti)!r},{float(a)!r},{float(b)!r}" for ti, (a, b) in zip(t, accel, strict=True)]
+    lines = [",".join((t_name, *cols))] + [
+        f"{float(ti)!r},{float(a)!r},{float(b)!r}" for ti, (a, b) in zip(t, accel, strict=True)
+    ]
     path.write_text("\n".join(lines) + "\n")
     return path
 
