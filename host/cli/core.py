@@ -478,7 +478,8 @@ def _consistency(arrays, model: Model, inputs, fixes, smooth_kw) -> None:
     from accelnav.estimate.consistency import nis_check
     from accelnav.estimate.pipeline import holdout
 
-    for kind, nis in (("fixes", arrays["fix_nis"]), ("rests", arrays["zupt_nis"][:, 2])):
+    first = arrays["zupt_nis"][:, 3] > 0  # each rest's first update (see smooth_run)
+    for kind, nis in (("fixes", arrays["fix_nis"]), ("rests", arrays["zupt_nis"][first, 2])):
         if len(nis):
             print(nis_check(kind, nis).line())
     if fixes is None:

@@ -111,7 +111,7 @@ class NisCheck:
 
     def line(self) -> str:
         """One line: the figure, and what it says about the model."""
-        what = "position fixes" if self.kind == "fixes" else "zero-velocity updates"
+        what = "position fixes" if self.kind == "fixes" else "rests (first zero-velocity update of each)"
         head = f"{what}: mean NIS {self.mean:.3g} over {self.n}"
         if self.verdict == "stiff":
             return (

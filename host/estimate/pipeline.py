@@ -56,7 +56,7 @@ def smooth_run(
     Adds ``zupt`` (N, n_axes) bool, the samples whose zero-velocity update
     was applied, ``fixes`` (M, 4) [t, axis column, position, sigma], and the normalised innovation
     squared y^2 / S of every aid the filter applied (accelnav.estimate.consistency): ``fix_nis`` (M,)
-    beside ``fixes``, ``zupt_nis`` (K, 3) [t, axis column, NIS].
+    beside ``fixes``, ``zupt_nis`` (K, 4) [t, axis column, NIS, 1 for the first update of its rest].
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
     from accelnav.estimate import fastsmooth, zupt
@@ -99,14 +99,21 @@ def smooth_run(
             nis = y * y / S
             n_fix_used = int(np.sum(res.applied[: len(fx)]))  # fixes are never gated: all of them
             fix_nis += list(nis[:n_fix_used])
-            zupt_nis += [(arrays["t"][m.k], j, v) for m, v in zip(used[n_fix_used:], nis[n_fix_used:], strict=True)]
+            zk = np.array([m.k for m in used[n_fix_used:]], dtype=np.int64)
+            if len(zk):
+                # the first update of each rest carries the velocity gathered since the last aid: the test of
+                # the model; the later ones mostly test the zero-velocity sigma, a chosen pseudo-noise
+                moving = np.concatenate(([0], np.cumsum(~rest2[:, j])))  # non-rest samples before each sample
+                first = np.ones(len(zk), dtype=bool)
+                first[1:] = moving[zk[1:]] != moving[zk[:-1]]
+                zupt_nis += list(zip(arrays["t"][zk], [j] * len(zk), nis[n_fix_used:], first, strict=True))
     out = dict(arrays)
     for k, v in keys.items():
         out[k] = np.stack(v)
     out["zupt"] = applied
     out["fixes"] = np.array(fix_rows, dtype=np.float64).reshape(-1, 4)
     out["fix_nis"] = np.array(fix_nis, dtype=np.float64)
-    out["zupt_nis"] = np.array(zupt_nis, dtype=np.float64).reshape(-1, 3)
+    out["zupt_nis"] = np.array(zupt_nis, dtype=np.float64).reshape(-1, 4)
     return out
 
 

@@ -162,3 +162,20 @@ def _files(tmp_path, run, model, fixes):
         rows += [f"{float(run['t'][m.k])!r},{run['axis_names'][j]},{m.z!r},{float(np.sqrt(m.R))!r}" for m in fx]
     fx_csv.write_text("\n".join(rows) + "\n")
     return path, fx_csv
+
+
+@pytest.mark.parametrize("seed", [4, 5, 6])
+def test_rest_nis_fires_on_a_model_30x_too_stiff_and_is_quiet_on_the_right_one(default_model, seed):
+    """Stop-and-go with its true rests: the first update of each rest tests the velocity the model let grow."""
+    run = simulate(default_model, "stop_and_go", 120.0, seed).to_arrays()
+    rest = np.abs(run["u"][:, 0]) < 1e-9
+    m = default_model.noise
+    stiff = with_noise(default_model, sigma_n=m.sigma_n / STIFF, sigma_eps=m.sigma_eps / STIFF)
+    checks = {}
+    for name, model in (("right", default_model), ("stiff", stiff)):
+        z = smooth_run(run, model, rest=rest)["zupt_nis"]
+        first = z[:, 3] > 0
+        assert 0 < first.sum() < len(z)  # one per rest and axis, of thousands of updates
+        checks[name] = nis_check("rests", z[first, 2])
+    assert checks["right"].verdict == "" and checks["stiff"].verdict == "stiff"
+    assert checks["stiff"].line().startswith("rests disagree with the model: mean NIS")
