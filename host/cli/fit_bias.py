@@ -31,7 +31,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, read_recording
+from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, read_recording
 from accelnav.errors import UserError
 from accelnav.fileio import check_output, write_text
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
@@ -72,7 +72,20 @@ def register(sub) -> None:
     p.add_argument(
         "--unit", default=None, help="unit of the acceleration columns: g, mg or m/s^2; default: from the name"
     )
-    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="sample rate if there is no time column")
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="sample rate if there is no time column; with one, the nominal rate it is checked against "
+        "(overriding stamps that do not fit it, said in a note)",
+    )
+    p.add_argument(
+        "--time-unit",
+        choices=("s", "ms", "us"),
+        default=None,
+        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
+    )
     p.add_argument("--time-column", default=None, metavar="NAME", help="time column; default: t, t_s, time, ...")
     p.add_argument(
         "--min-duration",
@@ -154,12 +167,17 @@ def _read(args: argparse.Namespace) -> Recording:
         from accelnav.cli.record import log_run_arrays
         from accelnav.data.recording import from_arrays
 
-        for flag in ("unit", "rate", "time_column"):
+        for flag in ("unit", "rate", "time_column", "time_unit"):
             if getattr(args, flag) is not None:
                 raise UserError(f"--{flag.replace('_', '-')}: not for a recorder log, which says its own")
         arrays, _ = log_run_arrays(path)
         return from_arrays(str(path), arrays, args.axis)
-    return read_recording(path, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column)
+    rec = read_recording(
+        path, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column, time_unit=args.time_unit
+    )
+    for note in rec.notes:
+        print(note)
+    return rec
 
 
 def cmd_fit_bias(args: argparse.Namespace) -> int:
@@ -172,6 +190,8 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
     rec = _read(args)
     base, base_label, given = _base_model(args.model, rec)
     full_scale = base.max_accel_m_s2 if given else None
+    if given:  # the model keeps its rate: the recording must have it (the check filter and smooth make)
+        check_rate(rec, base.rate_hz, base_label)
 
     print(
         f"{rec.source}: {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s), "
