@@ -6,25 +6,26 @@ extracted into the cache (ACCELNAV_CACHE_DIR, else ~/.cache/accelnav) and the
 archive is kept there, as tests/realdata.py does for gaitmap's walk.
 
 1. **Lower-back walks** (:func:`load_lowback_walks`): mobgap 1.2.0's source
-   distribution (Mobilise-D, Apache-2.0 for the package; its example_data/
-   carries no licence of its own; the full Mobilise-D technical-validation
-   data set it is cut from was published under CC BY 4.0), folder
-   example_data/data/lab/: test 5 ("straight walk", about 4-5 m at the
-   subject's own pace) of a healthy adult (HA/002, trial 2) and a person with
-   multiple sclerosis (MS/001, trials 1 and 2). A McRoberts DynaPort MM+ on
+   distribution (Mobilise-D; the only licence it ships is the package's
+   Apache-2.0, none separate for example_data/, which is cut from the
+   Mobilise-D technical-validation study), folder example_data/data/lab/:
+   test 5 of the lab protocol, a straight walk of about 4 m, of a healthy
+   adult (HA/002, trial 2) and a person with multiple sclerosis (MS/001,
+   trials 1 and 2). A McRoberts DynaPort MM+ on
    the lower back, 100 Hz, acceleration in g and gyroscope in deg/s; the
    subject stands still, walks, stands still. Reference: the stereophotogrammetric
    (optical motion capture) walking bout, whose ``Start`` and ``End`` are the
    first and last initial contact and ``Length`` the sum of its step lengths,
    i.e. how far the body moved between those two instants; the INDIP system
    (foot-mounted IMUs and pressure insoles) gives the same bout independently
-   for the MS/001 trials. HA/001 (whose
-   "standing" before the walk turns at 40-75 deg/s) and HA/002 trial 1 (no
+   for the MS/001 trials. HA/001 (who moves at 10-75 deg/s before the
+   walk: no quiet standing) and HA/002 trial 1 (no
    reference walking bout) are left out.
    Turned into: the two horizontal axes of a level frame, gravity removed
-   (gyroscope strapdown, levelled on gravity at the start and at the final
-   standing, heading kept: tests/realdata.py's :func:`level_frame`, after
-   removing the gyroscope's offset measured during the first standing); reference
+   (gyroscope strapdown, levelled on gravity at the start, where the first
+   standing ends and where the final one begins, heading kept:
+   tests/realdata.py's :func:`level_frame`, after removing the gyroscope's
+   offset measured during the first standing); reference
    rests: the standing before the bout's start and after its end, as far as
    the 0.25 s mean |gyro| stays below 5 deg/s (quiet standing reads 1-3 deg/s,
    walking 10-50).
