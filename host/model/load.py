@@ -42,6 +42,7 @@ MAX_RUN_S = 1e6
 # --------------------------------------------------------------------------
 # The one rule for strings that reach generated C (identifiers, comments), a report, a path.
 
+_C_IDENT = (re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}"), "a C identifier of 1 to 32 of A-Z a-z 0-9 _, first a letter")
 _NAME_RULES = {
     # model name: printed in C comments, the report, manifests; no '/' or '*' (no comment can open or
     # close), no quote, backslash, '?' (trigraphs), '$', ';', '&', '|', '<', '>', no newline, ASCII only
@@ -49,11 +50,14 @@ _NAME_RULES = {
         re.compile(r"[A-Za-z0-9][A-Za-z0-9 _.,:+=()-]{0,63}"),
         "1 to 64 of A-Z a-z 0-9 space _ . , : + = ( ) -, starting with a letter or digit",
     ),
-    # axis names and the C prefix become parts of C identifiers and macro names
-    "axis name": (re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}"), "a C identifier of 1 to 32 of A-Z a-z 0-9 _, first a letter"),
-    "C prefix": (re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}"), "a C identifier of 1 to 32 of A-Z a-z 0-9 _, first a letter"),
+    # axis names and the C prefix become parts of C identifiers, macro and file names
+    "axis name": _C_IDENT,
+    "C prefix": _C_IDENT,
     # free text inside a generated /* ... */ comment (the emitters' banner): printable ASCII on one line
-    "comment": (re.compile(r"[ -~]{0,200}"), "at most 200 printable ASCII characters on one line"),
+    "comment": (
+        re.compile(r"[^\\?\x00-\x1f\x7f-\U0010ffff]{0,200}"),
+        "at most 200 printable ASCII but \\ and ? on one line",
+    ),
 }
 
 # C89..C23 keywords, and the macros of <stdbool.h>/<stddef.h>/<errno.h> the generated C sits beside
