@@ -175,8 +175,8 @@ def _l1_steady(A: np.ndarray, B: np.ndarray, horizon: int) -> np.ndarray:
             for i in range(B.shape[1]):
                 coef = V[o, :] * (Vi @ B[:, i])
                 out[o, i] += np.abs(coef @ pw).sum()
-        m0 += chunk
-        if np.max(np.abs(lam)) ** m0 < 1e-13:
+        m0 = min(exact, m0 + chunk)
+        if np.max(np.abs(lam)) ** m0 < 1e-13:  # what is left is below rounding: no tail
             return out
     if exact < horizon:  # |c0 lam0^m + c1 lam1^m| <= |c0| |lam0|^m + |c1| |lam1|^m, summed in closed form
         tail = [_geo_abs(abs(float(x)), exact, horizon - 1) for x in lam]
