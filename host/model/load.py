@@ -84,6 +84,16 @@ def name_problem(kind: str, value: object) -> str | None:
     return None
 
 
+def model_name_from(text: str) -> str:
+    """A model name that passes the rule, made from free text (a recording's file name): every other
+    character becomes _, cut to the rule's 64."""
+    pattern = _NAME_RULES["model name"][0]
+    name = "".join(c if pattern.fullmatch("a" + c) else "_" for c in text)
+    if not pattern.fullmatch(name[:1]):
+        name = "m" + name
+    return name[:64]
+
+
 class ModelError(ValueError):
     """A model file that cannot be used; ``str()`` is one line for the user."""
 

@@ -10,7 +10,7 @@ import pytest
 from conftest import model_text
 
 from accelnav.cli import main
-from accelnav.model.load import MAX_RUN_S, MAX_T_S, ModelError, loads_model
+from accelnav.model.load import MAX_RUN_S, MAX_T_S, ModelError, loads_model, model_name_from, name_problem
 
 NAME = 'name = "adxl250_default"'
 
@@ -102,3 +102,10 @@ def test_cli_refuses_hostile_model_before_any_build(tmp_path, monkeypatch, capsy
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "model.name" in err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("text", ["données 2.csv_fit", "*/x/*_fit", "-run;#3\n_fit", "_" * 100, ""])
+def test_model_name_from_free_text_passes_the_rule(text):
+    """fit-bias names its model after the recording's file, which may hold anything a file name can."""
+    name = model_name_from(text)
+    assert name_problem("model name", name) is None, name
