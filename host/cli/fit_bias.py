@@ -31,14 +31,14 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
-from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
 from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, read_recording
 from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
+from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
+from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model, model_name_from
 from accelnav.progress import Progress
 
 
@@ -247,7 +247,7 @@ def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: st
         stem = Path(rec.source).name.split(".")[0]
         model = dataclasses.replace(
             model,
-            name=f"{stem}_fit",
+            name=model_name_from(f"{stem}_fit"),  # a file name may hold what the name rule refuses
             description=f"bias and noise fitted from {Path(rec.source).name} by accelnav fit-bias; "
             f"sensor, ranges and filter from {base.name}",
         )
