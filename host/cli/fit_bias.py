@@ -39,7 +39,7 @@ from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO, BandCheck, C
 from accelnav.identify.noiseid import NoiseId, identify_noise
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
 from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
+from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model, model_name_from
 from accelnav.progress import Progress
 
 
@@ -257,7 +257,7 @@ def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: st
         stem = Path(rec.source).name.split(".")[0]
         model = dataclasses.replace(
             model,
-            name=f"{stem}_fit",
+            name=model_name_from(f"{stem}_fit"),  # a file name may hold what the name rule refuses
             description=f"bias and noise fitted from {Path(rec.source).name} by accelnav fit-bias; "
             f"sensor, ranges and filter from {base.name}",
         )

@@ -371,18 +371,22 @@ def decode_log(path, model_text: str = "", *, rows: bool = True) -> DecodedLog:
 
     from accelnav.link.compact import concat_records
     from accelnav.link.logfile import LogError, LogReader
+    from accelnav.model.load import loads_model
 
     with LogReader(path) as log:
         if not isinstance(log.meta.get("manifest"), dict):
             raise LogError(f"{path}: the header has no frame manifest (an object under 'manifest')")
-        if not isinstance(log.meta.get("model_toml") or "", str):
+        own = log.meta.get("model_toml")
+        if own is not None and not isinstance(own, str):
             raise LogError(f"{path}: the header's model_toml is not text")
         try:
             man = Manifest(log.meta["manifest"])
         except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
             raise LogError(f"{path}: the header's frame manifest is not valid ({str(exc)[:60]})") from None
         warnings: list[str] = []
-        text = log.meta.get("model_toml") or model_text
+        if own:  # the log's model is someone else's file: the loader's rule first, or nothing is read (ModelError)
+            loads_model(own, source=f"{path}:model_toml")
+        text = own or model_text
         dec = Decoder(man, replay=_replay(man, text, warnings, str(path)))
         parts: dict[str, list] = {n: [] for n in dec.names}
         times: list = []
