@@ -137,7 +137,7 @@ class Manifest:
         return [0, skip | rail, skip | (1 << af["timeout"]), skip | (1 << af["missed"])]
 
 
-_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,31}\Z")  # axis names reach the replay's C source
+_NAME = re.compile(r"[^\x00-\x1f\x7f]{1,32}\Z")  # an axis name: it reaches field names and messages
 _MAX_PAYLOAD = 249  # payload + CRC under 254 bytes: COBS adds exactly one byte (the decoder relies on it)
 _NEEDED = {  # frame -> fields the decoder, the compact stream and the replay read (axis fields added below)
     "sample": ("seq", "index", "flags"),
@@ -157,9 +157,9 @@ def check_manifest(data) -> None:
 
     A log carries its manifest, so this is untrusted input: the types and ranges of every key the
     decoder, :mod:`accelnav.link.compact` and :mod:`accelnav.link.replay` read are checked here,
-    axis names must be plain C identifiers (the replay writes them into C), field dtypes must be
-    plain numbers inside their frame, and the frames those modules need must be there with the
-    fields they read. What the generator writes always passes."""
+    axis names must be short printable names, field dtypes must be plain numbers inside their
+    frame, and the frames those modules need must be there with the fields they read. What the
+    generator writes always passes."""
 
     def bad(what: str) -> ValueError:
         return ValueError(f"not a usable accelnav telemetry manifest: {what}")
@@ -169,8 +169,10 @@ def check_manifest(data) -> None:
     axes = data.get("axes")
     if not isinstance(axes, list) or not 1 <= len(axes) <= 3:
         raise bad("'axes' is not a list of 1 to 3 names")
-    if not all(isinstance(a, str) and _IDENT.match(a) for a in axes) or len({a.lower() for a in axes}) < len(axes):
-        raise bad(f"'axes' {str(axes)[:80]}: accepted: distinct C identifiers (ASCII letters, digits, _)")
+    # names only: what reaches C is the model's, and the replay takes a manifest only when it is the
+    # one the model generates (accelnav.link.replay)
+    if not all(isinstance(a, str) and _NAME.match(a) for a in axes) or len(set(axes)) < len(axes):
+        raise bad(f"'axes' {str(axes)[:80]}: accepted: distinct names of 1 to 32 printable characters")
     if data.get("input") not in ("analog", "duty_cycle"):
         raise bad("'input' is not 'analog' or 'duty_cycle'")
     rate = data.get("sample_rate_hz")

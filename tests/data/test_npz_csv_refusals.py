@@ -60,7 +60,7 @@ def test_a_damaged_npy_header_is_refused_in_one_line(tmp_path):
         z.writestr("accel.npy", member)
     path = tmp_path / "d.npz"
     path.write_bytes(buf.getvalue())
-    with pytest.raises(UserError, match="not a readable NPZ"):
+    with pytest.raises(UserError, match="not a .npy array"):
         read_recording(path)
 
 
