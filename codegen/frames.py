@@ -59,7 +59,7 @@ from pathlib import Path
 
 from accelnav.model.load import Model, load_model
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3  # 3: run ids, paused_at and seq in the compact frames
 MAX_ENCODED = 254  # payload + crc must stay below this (one COBS block)
 
 # name -> (bytes, numpy dtype, C type)
@@ -354,12 +354,13 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
             raise ValueError(f"adc_bits {model.sensor.analog.adc_bits}: block frames carry codes of at most 16 bits")
         raw_kind, raw_keys = "u16", ("code",)
     per_sample = (1 if len(names) <= 4 else 2) + len(names) * len(raw_keys) * SCALARS[raw_kind][0]
-    head = 1 + 4 + 1 + 1 + 5 * 2
+    head = 1 + 4 + 1 + 1 + 2 + 5 * 2
     nblk = min(MAX_BLOCK, (MAX_ENCODED - 1 - 4 - head) // per_sample)
     b = _Builder("s")
     b.add("index", "u32", "s->index", doc="index of the block's first sample")
     b.add("flags", "u8", "s->flags", doc="FLAGS bits")
     b.add("n", "u8", "s->n", doc="slots in use (the others are zero)")
+    b.add("run", "u16", "s->run", doc="run id: the board's boot id, plus one per reset command, mod 2^16")
     _add_counters(b)
     b.add("aflags", f"{'u8' if len(names) <= 4 else 'u16'}[{nblk}]", "s->aflags", doc="AXIS_CODES, 2 bits per axis")
     for i, ax in enumerate(names):
@@ -370,6 +371,9 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
     b.add("index", "u32", "s->index", doc="the state before this sample")
     b.add("flags", "u8", "s->flags", doc="FLAGS bits")
     b.add("axis", "u8", "s->axis", doc="axis number")
+    b.add("run", "u16", "s->run", doc="run id, as in the block frames")
+    b.add("paused_at", "u32", "s->paused_at", doc="index where the compact stream last paused (0 after a reset)")
+    b.add("seq", "u16", "s->seq", doc="seq the next sample frame will carry (state mode)")
     b.add("state", f"u8[{max(state_bytes)}]", "s->state", doc="the axis' checkpoint image (zero padded)")
     frames.append(Frame("checkpoint", TYPE_CHECKPOINT, "up", tuple(b.fields), "checkpoint_t"))
 
@@ -597,6 +601,7 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         "    uint32_t index; /* first sample */",
         "    uint8_t flags; /* ACNF_FLAG_* */",
         "    uint8_t n; /* slots in use */",
+        "    uint16_t run; /* boot id + resets */",
         "    uint16_t tx_drop;",
         "    uint16_t skipped;",
         "    uint16_t overflow;",
@@ -614,6 +619,9 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         "    uint32_t index; /* the state before this sample */",
         "    uint8_t flags; /* ACNF_FLAG_* */",
         "    uint8_t axis;",
+        "    uint16_t run; /* boot id + resets */",
+        "    uint32_t paused_at; /* index where the compact stream last paused */",
+        "    uint16_t seq; /* seq of the next sample frame */",
         "    uint8_t state[ACNF_STATE_BYTES]; /* the axis' checkpoint image, zero padded */",
         "} acnf_checkpoint_t;",
         "",

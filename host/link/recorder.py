@@ -363,10 +363,13 @@ def decode_log(path, model_text: str = "") -> DecodedLog:
     import numpy as np
 
     from accelnav.link.compact import concat_records
-    from accelnav.link.logfile import read_log
+    from accelnav.link.logfile import LogError, read_log
 
     contents = read_log(path)
-    man = Manifest(contents.meta["manifest"])
+    try:
+        man = Manifest(contents.meta["manifest"])
+    except (ValueError, KeyError, TypeError) as exc:  # another protocol's manifest, or a damaged one
+        raise LogError(f"{path}: {exc}") from None
     warnings: list[str] = []
     text = contents.meta.get("model_toml") or model_text
     dec = Decoder(man, replay=_replay(man, text, warnings, str(path)))
