@@ -30,7 +30,7 @@ from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
 from accelnav.native.cbuild import BuildError
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import Decoder, Manifest, encode_command, replay_for
+from accelnav.link.telemetry import Decoder, Manifest, encode_command, end_of_stream, replay_for
 
 DEFAULT_BAUD = 921600
 
@@ -209,6 +209,7 @@ class Recorder:
                     break
         finally:
             self.log.close()
+            end_of_stream(self.decoder)  # as every reader of the log ends it: the same counts
             self.status.note = ""
             self.status.update(time.monotonic() - t0, self.decoder, final=True)
         return Result(reason, time.monotonic() - t0, self.decoder.stats.as_dict(), self.info_ok, self.warnings, gaps)
@@ -380,8 +381,7 @@ def decode_log(path, model_text: str = "") -> DecodedLog:
         for n in parts:
             parts[n].append(batch[n])
         times.append(np.full(len(batch["sample"]), t_ns, np.int64))
-    dec.finish()
-    rest = dec.release()  # rows after the last checkpoint: the recording ended before the next one
+    rest = end_of_stream(dec)  # rows after the last checkpoint: the recording ended before the next one
     if len(rest):
         parts["sample"].append(rest)
         times.append(np.full(len(rest), contents.times[-1], np.int64))

@@ -765,6 +765,46 @@ class Decoder:
         return n
 
 
+def end_of_stream(dec: Decoder) -> np.ndarray:
+    """A recording ends: the bytes after the last delimiter refused as an unfinished frame, the compact rows
+    still waiting for a checkpoint released (and counted). The recorder and every reader of a log end a
+    stream this one way, so that their counts (:func:`link_counts`) agree."""
+    dec.finish()
+    return dec.release()
+
+
+def link_counts(stats: Stats | dict) -> dict:
+    """The counts a user is shown for a link or a log: the one definition the recorder's summary and
+    ``accelnav log info`` both print."""
+    s = stats.as_dict() if isinstance(stats, Stats) else stats
+    return {
+        "samples": int(s["frames"].get("sample", 0)),
+        "lost": s["lost"],
+        "duplicates": s["duplicates"],
+        "damaged_frames": s["bad_frames"],
+        "crc_errors": s["crc_errors"],
+        "garbage_bytes": s["garbage_bytes"],
+        **(
+            {k: s[k] for k in ("checkpoints", "mismatches", "checkpoint_repeats", "unreplayed")}
+            if s["frames"].get("block")
+            else {}
+        ),
+    }
+
+
+def format_counts(c: dict) -> str:
+    """:func:`link_counts` as the one line both the recorder and ``log info`` print."""
+    text = (
+        f"{c['samples']} samples, lost {c['lost']}, duplicates {c['duplicates']}, "
+        f"damaged {c['damaged_frames']} frames (CRC errors {c['crc_errors']}, {c['garbage_bytes']} bytes)"
+    )
+    if "checkpoints" in c:
+        text += f"; replay: {c['checkpoints']} checkpoints matched, {c['mismatches']} mismatches"
+        if c["unreplayed"]:
+            text += f", {c['unreplayed']} samples unreplayed (no model text)"
+    return text
+
+
 def replay_for(man: Manifest, model):
     """The replay of the firmware's filter (a Model or its TOML text) for ``man``'s compact frames;
     None when ``man`` has none or ``model`` is empty."""
