@@ -28,9 +28,10 @@ batch holds nothing but the next frames in order, which is the common case):
   reboot); a frame of a run before it is a repeat (re-sent power-on frames),
   dropped and counted. Within a run a checkpoint before the end is a repeat
   (``checkpoint_repeats``), whatever its flags.
-* A frame that opens a new run or jumps more than ``4 x checkpoint_samples``
-  ahead is taken only when the next frame agrees with it (same run, where it
-  left the index); otherwise it is damage (``damaged``, the decoder's
+* The stream's first frame, a frame that opens a new run, or one that jumps
+  more than ``4 x checkpoint_samples`` ahead is taken only when one of the
+  next frames agrees with it (same run, a little after it) before one agrees
+  with the run so far; otherwise it is damage (``damaged``, the decoder's
   ``bad_frames``), not the new truth. The last frame of a batch waits for the
   next batch to decide; at the end of the stream it is damage.
 * A pause (frames flagged ``resume`` after a gap) counts nothing lost by
@@ -66,6 +67,7 @@ def concat_records(parts: list, dtype) -> np.ndarray:
     return np.concatenate(raw).view(dtype).ravel()
 
 
+LOOKAHEAD = 8  # frames after a doubtful one that may confirm or refute it
 CARRY, NONE = -2, -1  # a stretch starts from the carried state, a checkpoint (its id), or nothing
 THREAD_MIN = 20_000  # samples in a batch from which the axes' replays run on threads
 
@@ -160,14 +162,20 @@ class CompactStream:
             j = ids[q]
             return c_run[j], c_index[j], c_index[j]
 
-        def plausible(q) -> bool | None:
-            """Frame q opens a new run or jumps far ahead: True when the next frame agrees with it (the same
-            run, where q left the index), False when it does not, None when no frame follows in this batch."""
+        def plausible(q, end) -> bool | None:
+            """Frame q opens the stream or a new run, or jumps far ahead: decided by the first of the next
+            frames that agrees with it (the same run, within a window after it: True) or with the run so far
+            (False); None when no frame follows in this batch. Frames damaged beyond that: False."""
+            r, idx, after = where(q)
             if q + 1 >= K:
                 return None
-            r, idx, after = where(q)
-            r2, idx2, _ = where(q + 1)
-            return r2 == r and idx2 in (idx, after)
+            for q2 in range(q + 1, min(K, q + 1 + LOOKAHEAD)):
+                r2, idx2, _ = where(q2)
+                if r2 == r and idx <= idx2 <= after + self.window:
+                    return True
+                if end is not None and r2 == self.run and idx2 <= end + self.window:
+                    return False
+            return False
 
         k = 0
         while k < K:
@@ -203,8 +211,8 @@ class CompactStream:
                 else:
                     self.checkpoint_repeats += 1
                 continue
-            if new_run or (end is not None and idx > end + self.window):
-                ok = plausible(k - 1)
+            if new_run or end is None or idx > end + self.window:
+                ok = plausible(k - 1, end)
                 if ok is None:
                     self.defer = (kind, i)  # decided by the next frame, in the next batch
                     break
