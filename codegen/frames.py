@@ -21,7 +21,9 @@ Frame types (MCU -> host):
   first sample, the frame flags and the counters. ``n`` says how many of the
   slots are used (a partial block is sent on ``flush``, ``stop``, a mode
   change). The host gets the filter's states by running the firmware's own
-  generated C on these inputs (accelnav.link.replay).
+  generated C on these inputs (accelnav.link.replay). Its ``run`` (the board's
+  boot id plus one per reset, as in the checkpoints) tells a reset or a reboot
+  from frames of an earlier run sent again.
 * ``checkpoint`` (compact mode): one axis' state before the sample ``index``
   as its checkpoint image, the bytes the generated ``accelnav_AXIS_save``
   writes (the filter manifest's ``checkpoint.bytes``, checked by the
@@ -32,7 +34,10 @@ Frame types (MCU -> host):
   outside the table is refused as damaged). One per axis every
   ``CHECKPOINT_SAMPLES`` samples and whenever a compact run begins (flag
   ``resume``). The host's replay must match every one bit for bit; it starts
-  from one after a gap.
+  from one after a gap. It also carries ``run``, ``paused_at`` (where the
+  compact stream last paused: the host counts the samples sent before it that
+  never came) and ``seq`` (the next sample frame's: the host counts the state
+  mode's first frames when they are lost).
 * ``sample`` (the state mode: decimation > 1, or any after ``mode_states``; one per decimated sample:
   sequence number, sample index, flags, counters, per axis the raw input and
   the filter state in the generated fixed-point formats), ``info`` (protocol version, layout
