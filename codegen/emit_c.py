@@ -24,10 +24,11 @@ import re
 from concurrent.futures import ThreadPoolExecutor
 
 from accelnav.model.design import AnalogConversion
+from accelnav.model.load import Model
+
 from .emit_f32 import emit_f32
 from .gains import Schedule
-from accelnav.model.load import Model
-from .package import cdef_of, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
+from .package import cdef_of, check_prefix, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
 from .qformat import QFormat, acc_bound, guard_bits, quantize
 from .ranges import FINE, AxisPlan, fine_view, plan_axis
 
@@ -1670,6 +1671,7 @@ def emit(
 ) -> dict[str, str]:
     """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json. Both forms
     follow skipped samples (the gain schedule through codegen.follow)."""
+    check_prefix(prefix)  # before any planning: a prefix that is no C identifier is refused outright
     form = form or model.filter.form
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)

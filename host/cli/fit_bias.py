@@ -31,14 +31,14 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
-from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
-from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, read_recording
+from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, read_recording
 from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
+from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
+from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model, model_name_from
 from accelnav.progress import Progress
 
 
@@ -71,7 +71,20 @@ def register(sub) -> None:
     p.add_argument(
         "--unit", default=None, help="unit of the acceleration columns: g, mg or m/s^2; default: from the name"
     )
-    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="sample rate if there is no time column")
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="sample rate if there is no time column; with one, the nominal rate it is checked against "
+        "(overriding stamps that do not fit it, said in a note)",
+    )
+    p.add_argument(
+        "--time-unit",
+        choices=("s", "ms", "us"),
+        default=None,
+        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
+    )
     p.add_argument("--time-column", default=None, metavar="NAME", help="time column; default: t, t_s, time, ...")
     p.add_argument(
         "--min-duration",
@@ -147,12 +160,17 @@ def _read(args: argparse.Namespace) -> Recording:
         from accelnav.cli.record import log_run_arrays
         from accelnav.data.recording import from_arrays
 
-        for flag in ("unit", "rate", "time_column"):
+        for flag in ("unit", "rate", "time_column", "time_unit"):
             if getattr(args, flag) is not None:
                 raise UserError(f"--{flag.replace('_', '-')}: not for a recorder log, which says its own")
         arrays, _ = log_run_arrays(path)
         return from_arrays(str(path), arrays, args.axis)
-    return read_recording(path, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column)
+    rec = read_recording(
+        path, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column, time_unit=args.time_unit
+    )
+    for note in rec.notes:
+        print(note)
+    return rec
 
 
 def cmd_fit_bias(args: argparse.Namespace) -> int:
@@ -164,6 +182,8 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
     rec = _read(args)
     base, base_label, given = _base_model(args.model, rec)
     full_scale = base.max_accel_m_s2 if given else None
+    if given:  # the model keeps its rate: the recording must have it (the check filter and smooth make)
+        check_rate(rec, base.rate_hz, base_label)
 
     print(
         f"{rec.source}: {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s), "
@@ -227,7 +247,7 @@ def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: st
         stem = Path(rec.source).name.split(".")[0]
         model = dataclasses.replace(
             model,
-            name=f"{stem}_fit",
+            name=model_name_from(f"{stem}_fit"),  # a file name may hold what the name rule refuses
             description=f"bias and noise fitted from {Path(rec.source).name} by accelnav fit-bias; "
             f"sensor, ranges and filter from {base.name}",
         )

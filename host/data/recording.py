@@ -56,6 +56,10 @@ _TIME_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6}
 _ACC_PREFIX = re.compile(r"^(acceleration|accel|acc)_?", re.IGNORECASE)
 
 GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap
+SNAP_TOL = 0.01  # a clock within 1 % of a whole number of Hz (>= 10 Hz) is taken as that nominal rate
+MAX_LAG_PERIODS = 5.0  # stamps that jitter more than half a period may still be read by order, within this
+MIN_CLOCK_HZ = 5.0  # a time column in seconds slower than this is no accelerometer's: a ms clock, say
+TIME_UNITS = ("s", "ms", "us")
 MIN_DURATION_S = 60.0
 MIN_SAMPLES = 1000
 CHUNK_CHARS = 1 << 22  # CSV text parsed per piece (progress granularity)
@@ -77,6 +81,8 @@ class Recording:
     clipped: np.ndarray | None = None  # (N, n_axes) from the file, if it had one
     lines: np.ndarray | None = None  # (N,) the file line of each sample (CSV only), for messages
     time_unit: str | None = None  # the time column's unit as its name says ("s", "ms", "us"), None: unsaid
+    time_column: str | None = None  # where t came from (a CSV column, the NPZ key); None: from the rate
+    notes: tuple[str, ...] = ()  # one line each, for the caller to print: how the clock was read
 
     def where(self, k: int) -> str:
         """Where sample k is in the file: its line (CSV) or its index."""
@@ -115,10 +121,14 @@ def read_recording(
     rate_hz: float | None = None,
     time_column: str | None = None,
     allow_gaps: bool = False,
+    time_unit: str | None = None,
 ) -> Recording:
     """Read ``path`` (CSV, gzip CSV or NPZ); see the module notes. Checks the format, not the content.
 
-    ``allow_gaps`` lets gaps in time through (the caller fills them, see :func:`on_grid`).
+    ``allow_gaps`` lets gaps in time through (the caller fills them, see :func:`on_grid`). ``time_unit``
+    (s, ms, us) is the time column's unit when its name does not say it. ``rate_hz`` with a time column
+    is the nominal rate the clock is checked against (and overridden by, see :func:`_check_time`). The
+    clock is read as :func:`_check_time` says; ``notes`` of the result tell the caller how, one line each.
     """
     path = Path(path)
     if not path.is_file():
@@ -129,10 +139,21 @@ def read_recording(
         raise UserError(f"{path}: cannot read: {exc.strerror}") from None
     if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
         raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise UserError(f"--time-unit: got {time_unit!r}; accepted: {', '.join(TIME_UNITS)}")
     if head.startswith(b"PK"):
         rec = _read_npz(path, axes, unit, rate_hz)
     else:
         rec = _read_csv(path, axes, unit, rate_hz, time_column, gz=head.startswith(b"\x1f\x8b"))
+    if time_unit is not None:
+        if rec.time_column is None:
+            raise UserError(f"--time-unit: {path} has no time column (its time comes from the rate)")
+        if rec.time_unit not in (None, time_unit):
+            raise UserError(
+                f"--time-unit {time_unit}: the time column {rec.time_column!r} says its unit is {rec.time_unit}"
+            )
+        if rec.time_unit is None:
+            rec = replace(rec, t=rec.t * _TIME_SCALE[time_unit], time_unit=time_unit)
     return _check_time(rec, rate_hz, allow_gaps)
 
 
@@ -192,7 +213,8 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
         names = tuple(names[i] for i in idx)
         cols = names
         clipped = None if clipped is None else clipped[:, idx]
-    return _finish(src, t, accel, names, cols, (u,) * len(names), model_toml, clipped)
+    rec = _finish(src, t, accel, names, cols, (u,) * len(names), model_toml, clipped)
+    return replace(rec, time_column="t" if "t" in data else None, time_unit=None if "t" in data else "s")
 
 
 def _model(text: str, src: str):
@@ -308,7 +330,7 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
     accel = data * np.array([UNITS[u] for u in units])
     rec = _finish(src, t, accel, tuple(names), tuple(chosen), tuple(units), None, None)
     lines = np.asarray(data_lines, dtype=np.int64) if len(data_lines) == len(t) else None
-    return replace(rec, lines=lines, time_unit=time_unit)
+    return replace(rec, lines=lines, time_unit=time_unit, time_column=tcol)
 
 
 def _parse_rows(text: str, skiprows: int, delim: str, use: list[int], src: str) -> np.ndarray:
@@ -389,11 +411,21 @@ def from_arrays(source: str, arrays: dict[str, np.ndarray], axes: list[str] | No
         str(arrays["model_toml"]) if "model_toml" in arrays else None,
         np.asarray(arrays["clipped"], dtype=bool)[:, idx] if "clipped" in arrays else None,
     )
-    return _check_time(replace(rec, time_unit="s"), None, False)
+    return _check_time(replace(rec, time_unit="s", time_column="t"), None, False)
 
 
 def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> Recording:
-    """Finite, increasing time without gaps (unless allowed); the rate from the mean step."""
+    """Finite, increasing time; the rate and the samples' places on its grid; gaps refused unless allowed.
+
+    A regular clock (every step within GAP_FACTOR of the median) keeps its stamps and its mean rate. Any
+    other clock is placed on a nominal grid t0 + k / f: f is ``rate_given``, else the first of the mean
+    regular step, the median step and the mean over the run (the last two rounded to whole Hz within
+    SNAP_TOL) on whose grid the stamps fit, each within half a period of its own grid point (gaps: the
+    points between are missing), or failing that, stamps that jitter by more (bunched by a USB or OS
+    buffer) but stay within MAX_LAG_PERIODS of their order, sample i at t0 + i / f. What fits neither
+    is refused, saying how to resample. ``rate_given`` with a time column is checked against it the same
+    way; if the stamps do not fit it, it overrides them (samples taken as consecutive), said in a note.
+    """
     src, t = rec.source, rec.t
     if not np.isfinite(t).all():
         k = int(np.argmax(~np.isfinite(t)))
@@ -407,20 +439,86 @@ def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> R
             f"{int(back.sum())} such steps"
         )
     step = float(np.median(dt))
-    gaps = dt > GAP_FACTOR * step
-    if gaps.any() and not allow_gaps:
-        k = int(np.argmax(gaps))
+    clock = rec.time_column
+    if clock is None:  # the time came from the rate: a perfect grid
+        return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]))
+    if rec.time_unit is None and 1.0 / step < MIN_CLOCK_HZ:
         raise UserError(
-            f"{src}: gap in time of {dt[k]:.6g} s at t = {t[k]:.6g} s (after {rec.where(k)}; the usual step is "
-            f"{step:.6g} s); {int(gaps.sum())} gaps in all"
+            f"{src}: the time column {clock!r} steps by {step:.6g} (median): read as seconds that is "
+            f"{1.0 / step:.6g} Hz, too slow for an accelerometer; it looks like milliseconds: give --time-unit ms "
+            "(or name the column t_ms), or convert it to seconds"
         )
-    if gaps.any():  # the rate from the usual step, the gaps left out
-        rate = 1.0 / float(np.mean(dt[~gaps]))
+    regular = bool(np.all(dt <= GAP_FACTOR * step) and np.all(dt >= step / GAP_FACTOR))
+    if regular and rate_given is None:
+        return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]))  # the mean step: less rounding
+    gap = dt > GAP_FACTOR * step
+    if rate_given is not None:
+        candidates = [rate_given]
     else:
-        rate = (len(t) - 1) / float(t[-1] - t[0])  # the mean step: less rounding than the median
-    if rate_given is not None and abs(rate / rate_given - 1) > 0.01:
-        raise UserError(f"{src}: the time column says {rate:.6g} Hz but --rate says {rate_given:g} Hz")
-    return replace(rec, rate_hz=rate)
+        reg = dt[~gap & (dt >= step / GAP_FACTOR)]
+        candidates = [1.0 / float(np.mean(reg))] if len(reg) else []
+        candidates += [_snap(1.0 / step), _snap((len(t) - 1) / float(t[-1] - t[0]))]
+    span = f"steps {1e3 * dt.min():.3g} to {1e3 * dt.max():.3g} ms, median {1e3 * step:.4g} ms"
+    # each candidate's placement, by stamp or else by order; the one that leaves the fewest samples missing
+    # wins (a median step from bunched stamps is tiny, and its grid fits them with almost every point empty)
+    placements = [p for p in (_grid_place(t, f) or _order_place(t, f) for f in candidates) if p is not None]
+    placed = min(placements, key=lambda p: int(p[0][-1]) + 1 - len(t), default=None)
+    if placed is None:
+        if rate_given is not None:
+            note = (
+                f"{src}: --rate {rate_given:g} Hz overrides the time column {clock!r} ({span}; its stamps do not fit "
+                f"a {rate_given:g} Hz grid): the samples are taken as consecutive at {rate_given:g} Hz"
+            )
+            t_new = t[0] + np.arange(len(t)) / rate_given
+            return replace(rec, t=t_new, rate_hz=float(rate_given), notes=rec.notes + (note,))
+        raise UserError(
+            f"{src}: the time column {clock!r} fits no fixed sample rate ({span}; tried "
+            f"{', '.join(f'{f:.6g}' for f in candidates)} Hz): resample the recording onto a uniform grid, or give "
+            "--rate HZ to take the samples as consecutive at HZ"
+        )
+    k, f, how = placed
+    jumps = np.diff(k) > 1
+    if jumps.any() and not allow_gaps:
+        i = int(np.argmax(jumps))
+        raise UserError(
+            f"{src}: gap in time of {dt[i]:.6g} s at t = {t[i]:.6g} s (after {rec.where(i)}; the usual step is "
+            f"{step:.6g} s); {int(jumps.sum())} gaps in all"
+        )
+    notes = rec.notes
+    if rate_given is not None:
+        notes += (f"{src}: --rate {rate_given:g} Hz checked against the time column {clock!r}: it fits",)
+    if np.any(dt < step / GAP_FACTOR) or how.startswith("by their order"):
+        off = t - t[0] - k / f
+        notes += (
+            f"{src}: the clock {clock!r} jitters ({span}, {1e3 * float(np.sqrt(np.mean(off**2))):.3g} ms rms off the "
+            f"grid): samples placed on the {f:.6g} Hz grid {how}",
+        )
+    if regular and not jumps.any():  # a regular clock the rate agrees with: its stamps as they are
+        return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]), notes=notes)
+    return replace(rec, t=t[0] + k / f, rate_hz=float(f), notes=notes)
+
+
+def _order_place(t: np.ndarray, f: float):
+    """(k, f, how) with sample i at t0 + i / f when no stamp lags its order by MAX_LAG_PERIODS; else None."""
+    lag = (t - t[0]) * f - np.arange(len(t))
+    if np.ptp(lag) > MAX_LAG_PERIODS:
+        return None
+    return np.arange(len(t)), f, f"by their order (the stamps within {1e3 * float(np.ptp(lag)) / f:.3g} ms of it)"
+
+
+def _snap(f: float) -> float:
+    """``f`` rounded to whole Hz when within SNAP_TOL of it (from 10 Hz up), else ``f``."""
+    r = float(round(f))
+    return r if f >= 10 and abs(f / r - 1) <= SNAP_TOL else f
+
+
+def _grid_place(t: np.ndarray, f: float):
+    """(k, f, how) when every stamp is within half a period of its point t0 + k / f, k increasing; else None."""
+    k = np.rint((t - t[0]) * f).astype(np.int64)
+    off = np.abs(t - t[0] - k / f)
+    if np.any(off >= 0.5 / f) or np.any(np.diff(k) < 1):
+        return None
+    return k, f, f"by time stamp (each within {1e3 * float(off.max()):.3g} ms of its point)"
 
 
 def check_rate(rec: Recording, model_rate_hz: float, model_source: str) -> None:

@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 import serial
 from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
-from accelnav.native.cbuild import BuildError
 from accelnav.link.logfile import LogWriter
 from accelnav.link.telemetry import Decoder, Manifest, encode_command, replay_for
+from accelnav.native.cbuild import BuildError
 
 DEFAULT_BAUD = 921600
 
@@ -363,12 +363,18 @@ def decode_log(path, model_text: str = "") -> DecodedLog:
     import numpy as np
 
     from accelnav.link.compact import concat_records
-    from accelnav.link.logfile import read_log
+    from accelnav.link.logfile import LogError, read_log
+    from accelnav.model.load import loads_model
 
     contents = read_log(path)
     man = Manifest(contents.meta["manifest"])
     warnings: list[str] = []
-    text = contents.meta.get("model_toml") or model_text
+    own = contents.meta.get("model_toml")
+    if own is not None and not isinstance(own, str):
+        raise LogError(f"{path}: the header's model_toml is not text")
+    if own:  # the log's model is someone else's file: the loader's rule first, or nothing is read (ModelError)
+        loads_model(own, source=f"{path}:model_toml")
+    text = own or model_text
     dec = Decoder(man, replay=_replay(man, text, warnings, str(path)))
     parts: dict[str, list] = {n: [] for n in dec.names}
     times = []
