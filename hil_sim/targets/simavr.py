@@ -18,7 +18,7 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -166,7 +166,17 @@ def driver_c(header_name: str, header: str, stimulus: np.ndarray, *, duty: bool,
             "            out(';');",
             "        }",
         ]
-    R += ["        out('\\n');", "    }", "}"]
+    R += [
+        "        out('\\n');",
+        "    }",
+        "    out('C'); /* the phase's cycles: total, largest sample, samples */",
+        "    hex64(cycles);",
+        "    hex64(cycles_max);",
+        "    hex64(n);",
+        "    out(';');",
+        "    cycles = cycles_max = 0;",
+        "}",
+    ]
     L += ([] if warm_steps else R) + ["int main(void)", "{"]
     L += [f"    {a}_init(&s_{i});" for i, a in enumerate(axes)]
     if warm_steps:
@@ -191,10 +201,6 @@ def driver_c(header_name: str, header: str, stimulus: np.ndarray, *, duty: bool,
             L += [f"    if (!{a}_load(&s_{i}, warm_{i})) {{", "        out('!');", "    }"]
         L += ["    run(N, 'L');"]
     L += [
-        "    out('C');",
-        "    hex64(cycles);",
-        "    hex64(cycles_max);",
-        "    out(';');",
         "    out('E');",
         "    out(';');",
         "    out('\\n');",
@@ -210,14 +216,13 @@ def driver_c(header_name: str, header: str, stimulus: np.ndarray, *, duty: bool,
 
 @dataclass
 class Run:
-    """One run of the driver: its records (every ``R``/``L`` sample record, in order), the total and
-    largest cycle count of a sample's filter calls (AVR only; 0 on the host), and for the AVR the
+    """One run of the driver: its records (every ``R``/``L`` sample record, one per axis and sample, in
+    order); per phase (from init, then from the checkpoint) the total and the largest cycle count of a
+    sample's filter calls (all axes) and the samples (AVR only; zeros on the host); for the AVR the
     flash and RAM of the image (avr-size: .text + .data, .data + .bss)."""
 
     records: list[str]
-    cycles: int = 0
-    cycles_max: int = 0
-    samples: int = 0
+    phases: list[tuple[int, int, int]] = field(default_factory=list)
     flash: int = 0
     ram: int = 0
 
@@ -233,10 +238,7 @@ def parse(text: str) -> Run:
     if any(t == "!" for t, _ in recs):
         raise AvrError("the driver refused a checkpoint image (T_load returned false)")
     run = Run(records=[t + r for t, r in recs if t in "RLW"])
-    c = [r for t, r in recs if t == "C"]
-    if c:
-        run.cycles, run.cycles_max = int(c[0][:16], 16), int(c[0][16:], 16)
-        run.samples = sum(1 for t, _ in recs if t in "RL")
+    run.phases = [(int(r[:16], 16), int(r[16:32], 16), int(r[32:], 16)) for t, r in recs if t == "C"]
     return run
 
 
@@ -289,3 +291,21 @@ def run_avr(files: dict[str, str], driver: str, workdir: Path, *, timeout: float
     run = parse(done.stderr)
     run.flash, run.ram = flash, ram
     return run
+
+
+def object_size(files: dict[str, str], workdir: Path, name: str = "accelnav.c") -> tuple[int, int]:
+    """Flash and static RAM of one generated source alone, built for the ATmega328P (-Os): constant
+    tables not placed in flash are copied to RAM at start, so .rodata counts in both."""
+    tools = require_avr()
+    workdir.mkdir(parents=True, exist_ok=True)
+    for n, text in files.items():
+        (workdir / n).write_text(text)
+    obj = workdir / (Path(name).stem + ".o")
+    subprocess.run([tools["avr-gcc"], *AVR_CFLAGS, "-c", str(workdir / name), "-o", str(obj)], check=True,
+                   capture_output=True)  # fmt: skip
+    size = subprocess.run([tools["avr-size"], "-A", str(obj)], capture_output=True, text=True, check=True).stdout
+    sec: dict[str, int] = {}
+    for m in re.findall(r"^(\.\w+)(?:\.\S*)?\s+(\d+)", size, re.M):
+        sec[m[0]] = sec.get(m[0], 0) + int(m[1])
+    ro, data, bss = sec.get(".rodata", 0), sec.get(".data", 0), sec.get(".bss", 0)
+    return sec.get(".text", 0) + data + ro, data + ro + bss
