@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from accelnav.fileio import write_text
 from accelnav.model.load import Model, name_problem
 
 GENERATOR_VERSION = "0.1.0"
@@ -122,5 +123,5 @@ def write(files: dict[str, str], out: Path) -> list[Path]:
         paths.append((path, text))
     out.mkdir(parents=True, exist_ok=True)
     for path, text in paths:
-        path.write_text(text)
+        write_text(path, text)  # renamed into place: an interrupted run leaves no half-written C
     return [p for p, _ in paths]

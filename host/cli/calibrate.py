@@ -28,12 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.model.design import input_conversion
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
-from accelnav.model.edit import dump_model, revalidate
 from accelnav.data.recording import read_recording
 from accelnav.errors import UserError
+from accelnav.fileio import write_text
 from accelnav.identify.calibrate import GRAVITY, Calibration, CalibrationError, calibrate, detect_poses, native
+from accelnav.model.design import input_conversion
+from accelnav.model.edit import dump_model, revalidate
+from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
 from accelnav.progress import Progress
 
 MAX_SAMPLES = 10_000_000  # about 28 h at 100 Hz; the pose search holds a few copies of the samples
@@ -153,8 +154,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     out_model = apply(model, cal, args.since_power_on)
     text = dump_model(out_model, header=provenance(rec, cal, label))
     loads_model(text, source=str(args.out))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    write_text(args.out, text)  # whole or not at all
     unit_z, unit_s = ("V", "V/g") if model.sensor.kind == "analog" else ("duty", "duty/g")
     print(f"model written to {args.out} (from {label}):")
     for old, new in zip(model.axes, out_model.axes, strict=True):

@@ -26,6 +26,8 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.out.exists() and not args.out.is_dir():
+        raise UserError(f"--out: {args.out} is a file; give a directory for the generated files")
     # the prefix names the files and every symbol: a C identifier (no path, no code), by the model's rule
     problem = name_problem("C prefix", args.prefix)
     if problem is not None:

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model
 from accelnav.data.runfile import STATE, export_csv, load_run, save_run
 from accelnav.errors import UserError
 from accelnav.estimate.pipeline import (
@@ -19,6 +18,8 @@ from accelnav.estimate.pipeline import (
     stride_table,
 )
 from accelnav.estimate.zupt import ZuptParams
+from accelnav.fileio import check_input, check_output
+from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model
 
 
 TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
@@ -207,9 +208,10 @@ def _load(args) -> tuple[dict[str, np.ndarray], Model]:
     from accelnav.data.recording import check_rate, on_grid, read_recording
     from accelnav.link.logfile import is_log
 
-    path = args.run
-    if not path.is_file():
-        raise UserError(f"{path}: no such file")
+    path = check_input(args.run)  # what it is, when not a readable file (a FIFO is refused before a read)
+    for flag in ("out", "csv"):  # an output that cannot be written is refused before the work
+        if getattr(args, flag, None) is not None:
+            check_output(getattr(args, flag), f"--{flag}")
     override = load_model(args.model) if args.model is not None else None
     if is_log(path):
         from accelnav.cli.record import log_run_arrays

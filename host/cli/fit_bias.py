@@ -33,6 +33,7 @@ from pathlib import Path
 
 from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, read_recording
 from accelnav.errors import UserError
+from accelnav.fileio import check_output, write_text
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
@@ -126,10 +127,16 @@ class AxisResult:
 
 
 def analyse_axis(
-    rec: Recording, axis: str, *, min_duration_s: float, full_scale: float | None, lags: int
+    rec: Recording,
+    axis: str,
+    *,
+    min_duration_s: float,
+    full_scale: float | None,
+    lags: int,
+    sensor_range: tuple[float, str] | None = None,
 ) -> AxisResult:
     """Check, fit, test and identify one axis of ``rec`` (with progress on stderr)."""
-    y = check_axis(rec, axis, min_duration_s=min_duration_s, full_scale=full_scale)
+    y = check_axis(rec, axis, min_duration_s=min_duration_s, full_scale=full_scale, sensor_range=sensor_range)
     j = rec.column(axis)
     name = rec.axis_names[j]
     try:
@@ -179,6 +186,7 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
     lo, hi = args.noise_band
     if not (0 < lo < hi):
         raise UserError(f"--noise-band: got {lo:g} {hi:g}; accepted: two times in s, 0 < LO < HI")
+    check_output(args.out)  # a directory named as the model to write is refused before the work
     rec = _read(args)
     base, base_label, given = _base_model(args.model, rec)
     full_scale = base.max_accel_m_s2 if given else None
@@ -189,8 +197,11 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
         f"{rec.source}: {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s), "
         f"axes {', '.join(rec.axis_names)}"
     )
+    sensor_range = (base.max_accel_m_s2, f"the sensor of {base_label}")  # the range the written model claims
     results = [
-        analyse_axis(rec, a, min_duration_s=args.min_duration, full_scale=full_scale, lags=args.lags)
+        analyse_axis(
+            rec, a, min_duration_s=args.min_duration, full_scale=full_scale, lags=args.lags, sensor_range=sensor_range
+        )
         for a in rec.axis_names
     ]
     model = merge(base, rec, results, sigma_n=args.sigma_n, keep_rate=given)
@@ -202,8 +213,7 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
     header = provenance(rec, results, base_label)
     text = dump_model(model, header=header)
     loads_model(text, source=str(args.out))  # a result the loader refuses is not written
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    write_text(args.out, text)  # whole or not at all
     print()
     print("\n".join(model_report(model, base, base_label, rec, results, args.sigma_n, args.out)))
 

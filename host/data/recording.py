@@ -30,14 +30,14 @@ from __future__ import annotations
 import gzip
 import io
 import re
-import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.errors import UserError
+from accelnav.fileio import EXCERPT_CHARS, check_input, excerpt, input_limit, load_npz
+from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.progress import Progress
 
 UNITS = {"g": G0, "mg": G0 * 1e-3, "m/s^2": 1.0}
@@ -62,7 +62,8 @@ MIN_CLOCK_HZ = 5.0  # a time column in seconds slower than this is no accelerome
 TIME_UNITS = ("s", "ms", "us")
 MIN_DURATION_S = 60.0
 MIN_SAMPLES = 1000
-CHUNK_CHARS = 1 << 22  # CSV text parsed per piece (progress granularity)
+CHUNK_CHARS = 1 << 18  # CSV text parsed per piece: the reader's memory beyond the numbers it keeps
+MAX_LINE_CHARS = 1 << 16  # a longer line is not a CSV row (a binary file, a file without newlines)
 PILEUP_FRACTION = 0.005  # an extreme value holding this share of the samples, more than its neighbour: a rail
 
 
@@ -130,11 +131,10 @@ def read_recording(
     is the nominal rate the clock is checked against (and overridden by, see :func:`_check_time`). The
     clock is read as :func:`_check_time` says; ``notes`` of the result tell the caller how, one line each.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise UserError(f"{path}: no such file")
+    path = check_input(path)  # a regular file: a FIFO or /dev/zero is refused before it is read
     try:
-        head = path.open("rb").read(4)
+        with path.open("rb") as fh:
+            head = fh.read(4)
     except OSError as exc:
         raise UserError(f"{path}: cannot read: {exc.strerror}") from None
     if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
@@ -162,11 +162,7 @@ def read_recording(
 
 def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
     src = str(path)
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise UserError(f"{src}: not a readable NPZ file: {exc}") from None
+    data = load_npz(path, src)  # sizes checked before anything is inflated; no pickles
     if "accel" not in data:
         raise UserError(
             f"{src}: no 'accel' array; keys: {', '.join(sorted(data)) or 'none'} (expected accelnav sim's layout)"
@@ -231,36 +227,146 @@ def _pick(axis: str, names, cols, src: str) -> int:
     raise UserError(f"{src}: no axis or column {axis!r}; available: {', '.join(cols)}")
 
 
-def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recording:
-    src = str(path)
+def _open_text(path: Path, gz: bool):
+    """The file as text in universal-newline mode (``\n``, ``\r\n`` and a lone ``\r`` all end a line)."""
+    raw = gzip.open(path, "rb") if gz else open(path, "rb")
+    return raw, io.TextIOWrapper(raw, encoding="utf-8-sig", newline=None)
+
+
+def _blocks(path: Path, gz: bool, src: str):
+    """(number of the first line, lines) per piece of about CHUNK_CHARS; memory is bounded by the piece, and
+    a line longer than MAX_LINE_CHARS or a NUL byte (binary data) is refused where it is met."""
+    kind = "gzip " if gz else ""
     try:
-        raw = gzip.open(path, "rb").read() if gz else path.read_bytes()
-        text = raw.decode("utf-8-sig")
-    except (OSError, EOFError) as exc:
-        raise UserError(f"{src}: cannot read as {'gzip ' if gz else ''}text: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise UserError(f"{src}: not UTF-8 text (byte {exc.start}); accepted: CSV, gzip CSV or NPZ") from None
-    lines = text[: 1 << 16].splitlines()  # enough for the header
-    skip = 0
-    while skip < len(lines) and (not lines[skip].strip() or lines[skip].lstrip().startswith("#")):
-        skip += 1
-    if skip >= len(lines):
+        raw, fh = _open_text(path, gz)
+    except OSError as exc:
+        raise UserError(f"{src}: cannot read: {exc.strerror or exc}") from None
+    size = path.stat().st_size
+    pos = raw.fileobj if gz else raw
+    first, rest = 1, ""
+    with fh, Progress("read", total=size, unit="bytes") as p:
+        while True:
+            try:
+                block = fh.read(CHUNK_CHARS)
+            except UnicodeDecodeError:
+                raise UserError(f"{src}: not UTF-8 text (after line {first}); accepted: CSV, gzip CSV or NPZ") from None
+            except (OSError, EOFError) as exc:
+                raise UserError(f"{src}: cannot read as {kind}text: {excerpt(str(exc))}") from None
+            text = rest + block
+            nul = text.find("\0")
+            if nul >= 0:
+                raise UserError(
+                    f"{src}: line {first + text.count(chr(10), 0, nul)} holds a NUL byte: binary data, not CSV text"
+                )
+            lines = text.split("\n")
+            rest = lines.pop() if block else ""
+            if len(rest) > MAX_LINE_CHARS:
+                raise UserError(
+                    f"{src}: line {first + len(lines)} is longer than {MAX_LINE_CHARS} characters "
+                    f"({excerpt(rest)}); accepted: CSV text"
+                )
+            if lines or (not block and rest):
+                if not block and rest:
+                    lines.append(rest)
+                yield first, lines
+                first += len(lines)
+            p.update(pos.tell())
+            if not block:
+                return
+
+
+def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recording:
+    """Streamed: the text is parsed piece by piece, only the numbers (and each sample's line) are kept."""
+    src = str(path)
+    head = None
+    pieces: list[np.ndarray] = []
+    line_nos: list[np.ndarray] = []
+    held = 0
+    limit = input_limit()
+    for first, lines in _blocks(path, gz, src):
+        rows, nums = [], []
+        for i, line in enumerate(lines):
+            s = line.strip()
+            if not s or s.startswith("#"):
+                continue
+            if head is None:
+                head = _header(line, first + i, src, axes, unit, rate_hz, time_column)
+                continue
+            if line.count(head.delim) != len(head.cols) - 1:
+                raise UserError(
+                    f"{src}: line {first + i}: {line.count(head.delim) + 1} fields; the header has {len(head.cols)}"
+                )
+            rows.append(line)
+            nums.append(first + i)
+        if not rows:
+            continue
+        try:
+            chunk = np.loadtxt(rows, delimiter=head.delim, usecols=head.use, ndmin=2, dtype=np.float64, comments="#")
+        except ValueError:
+            _locate_bad_cell(rows, nums, head.delim, head.cols, head.use, src)
+            raise  # _locate_bad_cell always raises; this keeps linters quiet
+        pieces.append(chunk.reshape(-1, len(head.use)))
+        line_nos.append(np.asarray(nums, dtype=np.int64))
+        held += pieces[-1].nbytes + line_nos[-1].nbytes
+        if held > limit:
+            raise UserError(
+                f"{src}: more than {sum(len(n) for n in line_nos)} samples by line {nums[-1]}; accepted: at most "
+                f"{limit >> 20} MiB of samples (ACCELNAV_MAX_INPUT_BYTES); cut the recording"
+            )
+    if head is None:
         raise UserError(f"{src}: no header row (the file is empty)")
-    header = lines[skip]
+    table = np.concatenate(pieces) if pieces else np.empty((0, len(head.use)))
+    data_lines = np.concatenate(line_nos) if line_nos else np.empty(0, np.int64)
+    del pieces, line_nos
+    if table.shape[0] < 2:
+        raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
+    time_unit = None
+    if head.tcol:
+        m = _TIME_NAME.match(head.tcol)
+        time_unit = m.group(2).lower() if m and m.group(2) else None
+        t = table[:, 0] * _TIME_SCALE[time_unit]
+        data = table[:, 1:]
+    else:
+        t = np.arange(table.shape[0]) / rate_hz
+        data = table
+        time_unit = "s"
+    accel = data * np.array([UNITS[u] for u in head.units])
+    rec = _finish(src, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
+    return replace(rec, lines=data_lines, time_unit=time_unit, time_column=head.tcol)
+
+
+@dataclass(frozen=True)
+class _Header:
+    delim: str
+    cols: list[str]
+    tcol: str | None
+    chosen: list[str]
+    units: list[str]
+    names: list[str]
+    use: list[int]
+
+
+def _cols(cols) -> str:
+    """The column names for a message, each and all of them capped."""
+    text = ", ".join(c if len(c) <= 40 else c[:37] + "..." for c in cols)
+    return text if len(text) <= 4 * EXCERPT_CHARS else text[: 4 * EXCERPT_CHARS - 3] + "..."
+
+
+def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_column) -> _Header:
     delim = max((",", ";", "\t"), key=header.count)
     if header.count(delim) == 0:
         delim = ","
     cols = [c.strip().strip('"').strip() for c in header.split(delim)]
     if any(_is_number(c) for c in cols):
-        raise UserError(f"{src}: line {skip + 1} should be a header of column names, got {header[:60]!r}")
+        raise UserError(f"{src}: line {line_no} should be a header of column names, got {excerpt(header)}")
     if len(set(cols)) != len(cols):
-        raise UserError(f"{src}: duplicate column names in the header: {cols}")
+        raise UserError(f"{src}: duplicate column names in the header: {_cols(cols)}")
 
     # time column
     tcol = None
     if time_column is not None:
         if time_column not in cols:
-            raise UserError(f"{src}: no time column {time_column!r}; columns: {', '.join(cols)}")
+            raise UserError(f"{src}: no time column {excerpt(time_column)}; columns: {_cols(cols)}")
         tcol = time_column
     else:
         for c in cols:
@@ -268,7 +374,7 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
                 tcol = c
                 break
     if tcol is None and rate_hz is None:
-        raise UserError(f"{src}: no time column (t, t_s, time, ...) and no --rate; columns: {', '.join(cols)}")
+        raise UserError(f"{src}: no time column (t, t_s, time, ...) and no --rate; columns: {_cols(cols)}")
 
     # acceleration columns and their short names
     short = {c: _short_name(c) for c in cols}
@@ -277,12 +383,12 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
         for a in axes:
             hits = [c for c in cols if a in (c, short[c])]
             if not hits:
-                raise UserError(f"{src}: no column {a!r}; columns: {', '.join(cols)}")
+                raise UserError(f"{src}: no column {excerpt(a)}; columns: {_cols(cols)}")
             chosen.append(hits[0])
     else:
         chosen = [c for c in cols if _ACC_PREFIX.match(c) and c != tcol]
         if not chosen:
-            raise UserError(f"{src}: no acceleration column (acc...); name one with --axis; columns: {', '.join(cols)}")
+            raise UserError(f"{src}: no acceleration column (acc...); name one with --axis; columns: {_cols(cols)}")
     units = []
     for c in chosen:
         if unit is not None:
@@ -291,68 +397,16 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
         m = _UNIT_SUFFIX.search(c)
         if not m:
             raise UserError(
-                f"{src}: column {c!r} does not say its unit (suffix _g, _mg, _m_s2); give --unit g or m/s^2"
+                f"{src}: column {excerpt(c)} does not say its unit (suffix _g, _mg, _m_s2); give --unit g or m/s^2"
             )
         units.append(parse_unit(m.group(1)))
     names = [short[c] for c in chosen]
     if len(set(names)) != len(names):
         names = list(chosen)
-
-    use = ([cols.index(tcol)] if tcol else []) + [cols.index(c) for c in chosen]
     # every data row must have the header's number of fields: an extra or a missing cell is refused
     # (loadtxt with usecols would drop an extra one silently); the line of each sample is kept for messages
-    all_lines = text.splitlines()
-    data_lines = []
-    for i in range(skip + 1, len(all_lines)):
-        line = all_lines[i]
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        if line.count(delim) != len(cols) - 1:
-            raise UserError(f"{src}: line {i + 1}: {line.count(delim) + 1} fields; the header has {len(cols)}")
-        data_lines.append(i + 1)
-    try:
-        table = _parse_rows(text, skip + 1, delim, use, src)
-    except ValueError:
-        _locate_bad_cell(text.splitlines(), skip, delim, cols, use, src)
-        raise  # _locate_bad_cell always raises; this keeps linters quiet
-    if table.shape[0] < 2:
-        raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
-    time_unit = None
-    if tcol:
-        m = _TIME_NAME.match(tcol)
-        time_unit = m.group(2).lower() if m and m.group(2) else None
-        t = table[:, 0] * _TIME_SCALE[time_unit]
-        data = table[:, 1:]
-    else:
-        t = np.arange(table.shape[0]) / rate_hz
-        data = table
-        time_unit = "s"
-    accel = data * np.array([UNITS[u] for u in units])
-    rec = _finish(src, t, accel, tuple(names), tuple(chosen), tuple(units), None, None)
-    lines = np.asarray(data_lines, dtype=np.int64) if len(data_lines) == len(t) else None
-    return replace(rec, lines=lines, time_unit=time_unit, time_column=tcol)
-
-
-def _parse_rows(text: str, skiprows: int, delim: str, use: list[int], src: str) -> np.ndarray:
-    """The numbers of the data rows, parsed in pieces of about CHUNK_CHARS with a progress display."""
-    pos = 0
-    for _ in range(skiprows):
-        nl = text.find("\n", pos)
-        pos = len(text) if nl < 0 else nl + 1
-    pieces = []
-    with Progress("read", total=len(text) - pos, unit="chars") as p:
-        start = pos
-        while start < len(text):
-            end = text.find("\n", min(start + CHUNK_CHARS, len(text)))
-            end = len(text) if end < 0 else end + 1
-            chunk = np.loadtxt(
-                io.StringIO(text[start:end]), delimiter=delim, usecols=use, ndmin=2, dtype=np.float64, comments="#"
-            )
-            if chunk.size:
-                pieces.append(chunk.reshape(-1, len(use)))
-            start = end
-            p.update(start - pos)
-    return np.concatenate(pieces) if pieces else np.empty((0, len(use)))
+    use = ([cols.index(tcol)] if tcol else []) + [cols.index(c) for c in chosen]
+    return _Header(delim, cols, tcol, chosen, units, names, use)
 
 
 def _is_number(s: str) -> bool:
@@ -369,17 +423,16 @@ def _short_name(col: str) -> str:
     return name.strip("_") or col
 
 
-def _locate_bad_cell(lines, skip, delim, cols, use, src) -> None:
-    for i in range(skip + 1, len(lines)):
-        line = lines[i]
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
+def _locate_bad_cell(lines, nums, delim, cols, use, src) -> None:
+    for line, no in zip(lines, nums, strict=True):
         cells = line.split(delim)
         for j in use:
             cell = cells[j].strip() if j < len(cells) else ""
             if not _is_number(cell):
-                what = "is empty" if not cell else f"is not a number ({cell[:20]!r})"
-                raise UserError(f"{src}: line {i + 1}, column {cols[j]!r} {what}; a gap in the data is not accepted")
+                what = "is empty" if not cell else f"is not a number ({excerpt(cell, 24)})"
+                raise UserError(
+                    f"{src}: line {no}, column {excerpt(cols[j], 40)} {what}; a gap in the data is not accepted"
+                )
     raise UserError(f"{src}: cannot parse the numbers (rows of unequal length?)")
 
 
@@ -579,8 +632,12 @@ def check_axis(
     min_duration_s: float = MIN_DURATION_S,
     min_samples: int = MIN_SAMPLES,
     full_scale: float | None = None,
+    sensor_range: tuple[float, str] | None = None,
 ) -> np.ndarray:
-    """The samples of ``axis`` if the bias fit can use them; otherwise a UserError saying what and where."""
+    """The samples of ``axis`` if the bias fit can use them; otherwise a UserError saying what and where.
+
+    ``sensor_range``: (largest |a| in m/s^2, whose range it is); a sample beyond it is a glitch or a wrong
+    unit, named by its place, rather than left to wreck the fit."""
     j = rec.column(axis)
     y = rec.accel[:, j]
     where = f"{rec.source}: axis {rec.axis_names[j]!r}"
@@ -591,6 +648,15 @@ def check_axis(
             f"{where}: {int(bad.sum())} samples are not numbers (NaN/inf), the first at sample {k} "
             f"(t = {rec.t[k]:.6g} s); gaps in the data are not accepted"
         )
+    if sensor_range is not None:
+        out = np.abs(y) > sensor_range[0]
+        if out.any():
+            k = int(np.argmax(out))
+            raise UserError(
+                f"{where}: {rec.where(k)}, column {excerpt(rec.columns[j], 40)}: {y[k]:.6g} m/s^2 is beyond the "
+                f"range +-{sensor_range[0]:.6g} m/s^2 of "
+                f"{sensor_range[1]} ({int(out.sum())} such samples): a glitch, or the wrong unit"
+            )
     if rec.duration < min_duration_s or rec.n < min_samples:
         raise UserError(
             f"{where}: too short: {rec.duration:.4g} s, {rec.n} samples; identifying the warm-up time constant T "

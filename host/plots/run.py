@@ -6,8 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.model.load import Model
 from accelnav.estimate.pipeline import dead_reckoning
+from accelnav.fileio import atomic_output
+from accelnav.model.load import Model
 
 
 def _pyplot():
@@ -61,8 +62,8 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
     fig.suptitle(title or f"accelnav: {model.name}")
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    with atomic_output(path, flag="--plots") as fh:  # a plot appears whole or not at all
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return path
 
@@ -75,8 +76,8 @@ def _axis_columns(plt, n_axes: int, title: str):
 
 def _save(plt, fig, path: Path) -> Path:
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    with atomic_output(path, flag="--plots") as fh:
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return path
 
@@ -112,8 +113,8 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
     * fig12_position_smoother.png: position from the filter and the smoother
       (+-1 sigma), and the truth; zero-velocity updates shaded, fixes as dots.
     """
-    from accelnav.model.design import axis_design
     from accelnav.estimate.kf import bias_model
+    from accelnav.model.design import axis_design
 
     plt = _pyplot()
     folder = Path(folder)
