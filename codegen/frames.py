@@ -21,7 +21,9 @@ Frame types (MCU -> host):
   first sample, the frame flags and the counters. ``n`` says how many of the
   slots are used (a partial block is sent on ``flush``, ``stop``, a mode
   change). The host gets the filter's states by running the firmware's own
-  generated C on these inputs (accelnav.link.replay).
+  generated C on these inputs (accelnav.link.replay). Its ``run`` (the board's
+  boot id plus one per reset, as in the checkpoints) tells a reset or a reboot
+  from frames of an earlier run sent again.
 * ``checkpoint`` (compact mode): one axis' state before the sample ``index``
   as its checkpoint image, the bytes the generated ``accelnav_AXIS_save``
   writes (the filter manifest's ``checkpoint.bytes``, checked by the
@@ -32,7 +34,10 @@ Frame types (MCU -> host):
   outside the table is refused as damaged). One per axis every
   ``CHECKPOINT_SAMPLES`` samples and whenever a compact run begins (flag
   ``resume``). The host's replay must match every one bit for bit; it starts
-  from one after a gap.
+  from one after a gap. It also carries ``run``, ``paused_at`` (where the
+  compact stream last paused: the host counts the samples sent before it that
+  never came) and ``seq`` (the next sample frame's: the host counts the state
+  mode's first frames when they are lost).
 * ``sample`` (the state mode: decimation > 1, or any after ``mode_states``; one per decimated sample:
   sequence number, sample index, flags, counters, per axis the raw input and
   the filter state in the generated fixed-point formats), ``info`` (protocol version, layout
@@ -61,7 +66,7 @@ from accelnav.model.load import Model, load_model
 
 from .package import banner, check_prefix
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3  # 3: run ids, paused_at and seq in the compact frames
 MAX_ENCODED = 254  # payload + crc must stay below this (one COBS block)
 
 # name -> (bytes, numpy dtype, C type)
@@ -356,12 +361,13 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
             raise ValueError(f"adc_bits {model.sensor.analog.adc_bits}: block frames carry codes of at most 16 bits")
         raw_kind, raw_keys = "u16", ("code",)
     per_sample = (1 if len(names) <= 4 else 2) + len(names) * len(raw_keys) * SCALARS[raw_kind][0]
-    head = 1 + 4 + 1 + 1 + 5 * 2
+    head = 1 + 4 + 1 + 1 + 2 + 5 * 2
     nblk = min(MAX_BLOCK, (MAX_ENCODED - 1 - 4 - head) // per_sample)
     b = _Builder("s")
     b.add("index", "u32", "s->index", doc="index of the block's first sample")
     b.add("flags", "u8", "s->flags", doc="FLAGS bits")
     b.add("n", "u8", "s->n", doc="slots in use (the others are zero)")
+    b.add("run", "u16", "s->run", doc="run id: the board's boot id, plus one per reset command, mod 2^16")
     _add_counters(b)
     b.add("aflags", f"{'u8' if len(names) <= 4 else 'u16'}[{nblk}]", "s->aflags", doc="AXIS_CODES, 2 bits per axis")
     for i, ax in enumerate(names):
@@ -372,6 +378,9 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
     b.add("index", "u32", "s->index", doc="the state before this sample")
     b.add("flags", "u8", "s->flags", doc="FLAGS bits")
     b.add("axis", "u8", "s->axis", doc="axis number")
+    b.add("run", "u16", "s->run", doc="run id, as in the block frames")
+    b.add("paused_at", "u32", "s->paused_at", doc="index where the compact stream last paused (0 after a reset)")
+    b.add("seq", "u16", "s->seq", doc="seq the next sample frame will carry (state mode)")
     b.add("state", f"u8[{max(state_bytes)}]", "s->state", doc="the axis' checkpoint image (zero padded)")
     frames.append(Frame("checkpoint", TYPE_CHECKPOINT, "up", tuple(b.fields), "checkpoint_t"))
 
@@ -498,10 +507,10 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         f"#define ACNF_NAXES {n}",
         f"#define ACNF_INPUT_DUTY {int(duty)} /* 0: ADC code per axis, 1: T1/T2 capture counts */",
         f"#define ACNF_FULL_CODE {lay.full_code} /* analog: codes 0 and this are rails */",
-        f"#define ACNF_T2_NOMINAL {lay.t2_nominal}u /* duty: nominal period, counts */",
-        f"#define ACNF_TIMER_HZ {lay.timer_hz}u /* duty: capture timer clock, Hz */",
-        f"#define ACNF_RATE_MHZ {round(lay.rate_hz * 1000)}u /* sample rate, mHz */",
-        f"#define ACNF_PERIOD_US {period_us}u /* sample period, us (rounded) */",
+        f"#define ACNF_T2_NOMINAL UINT32_C({lay.t2_nominal}) /* duty: nominal period, counts */",
+        f"#define ACNF_TIMER_HZ UINT32_C({lay.timer_hz}) /* duty: capture timer clock, Hz */",
+        f"#define ACNF_RATE_MHZ UINT32_C({round(lay.rate_hz * 1000)}) /* sample rate, mHz */",
+        f"#define ACNF_PERIOD_US UINT32_C({period_us}) /* sample period, us (rounded) */",
         f"#define ACNF_MAX_DECIMATION {MAX_DECIMATION}u",
         "#define ACNF_MODEL_SHA256_BYTES {" + ", ".join(f"0x{b:02x}u" for b in bytes.fromhex(lay.model_sha256)) + "}",
         "/* X-macro over the axes: M(name, NAME, index) (a parameter no axis name can be: axis x is X) */",
@@ -596,6 +605,7 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         "    uint32_t index; /* first sample */",
         "    uint8_t flags; /* ACNF_FLAG_* */",
         "    uint8_t n; /* slots in use */",
+        "    uint16_t run; /* boot id + resets */",
         "    uint16_t tx_drop;",
         "    uint16_t skipped;",
         "    uint16_t overflow;",
@@ -613,6 +623,9 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         "    uint32_t index; /* the state before this sample */",
         "    uint8_t flags; /* ACNF_FLAG_* */",
         "    uint8_t axis;",
+        "    uint16_t run; /* boot id + resets */",
+        "    uint32_t paused_at; /* index where the compact stream last paused */",
+        "    uint16_t seq; /* seq of the next sample frame */",
         "    uint8_t state[ACNF_STATE_BYTES]; /* the axis' checkpoint image, zero padded */",
         "} acnf_checkpoint_t;",
         "",

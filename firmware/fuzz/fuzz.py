@@ -39,6 +39,23 @@ def clang() -> str | None:
     return shutil.which("clang")
 
 
+def runtime_missing(out: Path) -> str | None:
+    """Why clang cannot link a libFuzzer target here (no clang, no fuzzer runtime), or None if it can."""
+    cc = clang()
+    if cc is None:
+        return "clang not found (Debian: clang libclang-rt-14-dev)"
+    out.mkdir(parents=True, exist_ok=True)
+    probe = out / "probe.c"
+    probe.write_text(
+        "#include <stddef.h>\nint LLVMFuzzerTestOneInput(const unsigned char *d, size_t n)\n"
+        "{\n    (void)d;\n    (void)n;\n    return 0;\n}\n"
+    )
+    done = subprocess.run([cc, *SANITIZE, str(probe), "-o", str(out / "probe")], capture_output=True, text=True)
+    if done.returncode != 0:
+        return f"clang cannot link -fsanitize=fuzzer (Debian: libclang-rt-14-dev): {done.stderr.strip()[-200:]}"
+    return None
+
+
 def build(out: Path, model: str | None = None) -> Path:
     """Generate the model's C into out/gen and link the harness to out/fuzz_rx; returns its path."""
     from accelnav.hil_sim.targets.firmware import generated

@@ -81,6 +81,11 @@ uint8_t board_id(void)
     return ACNF_BOARD_HOST;
 }
 
+uint16_t board_boot_id(void)
+{
+    return 1u; /* as the host and emulated boards: one power-on per input (app_init) */
+}
+
 uint32_t board_rx_lost(void)
 {
     return 0;

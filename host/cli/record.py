@@ -83,6 +83,7 @@ def cmd_record(args) -> int:
     import serial
 
     from accelnav.link.recorder import Recorder, Status
+    from accelnav.link.telemetry import format_counts, link_counts
 
     if args.out.exists() and not args.force:
         raise UserError(f"--out: {args.out} exists; give --force to overwrite it")
@@ -121,12 +122,7 @@ def cmd_record(args) -> int:
         back = f"back at {g['back_s']:.1f} s" if "back_s" in g else "not back"
         lost = f", {g['frames_lost']} frames lost" if "frames_lost" in g else ""
         print(f"accelnav record: link lost at {g['lost_s']:.1f} s, {back} ({g['attempts']} attempts){lost}")
-    s = res.stats
-    print(
-        f"accelnav record: {args.out}: {s['frames'].get('sample', 0)} sample frames in {res.seconds:.1f} s, "
-        f"lost {s['lost']}, duplicates {s['duplicates']}, damaged {s['bad_frames']} "
-        f"(CRC errors {s['crc_errors']}){_compact_counts(s)} ({res.reason})"
-    )
+    print(f"accelnav record: {args.out}: {res.seconds:.1f} s: {format_counts(link_counts(res.stats))} ({res.reason})")
     if res.reason.startswith("log write failed"):
         print(f"accelnav record: error: {args.out}: {res.reason}; the recording ended there", file=sys.stderr)
     return 1 if res.reason.startswith(("link lost", "log write failed")) else 0
@@ -135,6 +131,7 @@ def cmd_record(args) -> int:
 def _summary(path: Path, model_text: str = "") -> dict:
     from accelnav.link.logfile import LogError
     from accelnav.link.recorder import decode_log
+    from accelnav.link.telemetry import format_counts, link_counts
 
     try:
         d = decode_log(path, model_text, rows=False)  # streamed: memory does not grow with the log
@@ -156,7 +153,8 @@ def _summary(path: Path, model_text: str = "") -> dict:
         "damaged_bytes": d.damaged_bytes,
         "torn_bytes": d.torn_bytes,
         **d.stats,
-        "damaged_frames": d.stats["bad_frames"],
+        **link_counts(d.stats),
+        "counts": format_counts(link_counts(d.stats)),
         "host_seconds": float((d.host_t_ns[-1] - d.host_t_ns[0]) / 1e9) if len(s) else 0.0,
         "index_first": int(s["index"][0]) if len(s) else None,
         "index_last": int(s["index"][-1]) if len(s) else None,

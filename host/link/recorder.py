@@ -29,7 +29,7 @@ import serial
 from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import Decoder, Manifest, encode_command, replay_for
+from accelnav.link.telemetry import Decoder, Manifest, encode_command, end_of_stream, replay_for
 from accelnav.native.cbuild import BuildError
 
 DEFAULT_BAUD = 921600
@@ -213,6 +213,7 @@ class Recorder:
             reason = f"log write failed: {exc.strerror or exc}"  # a full disk: end here, the log stays readable
         finally:
             self.log.close()
+            end_of_stream(self.decoder)  # as every reader of the log ends it: the same counts
             self.status.note = ""
             self.status.update(time.monotonic() - t0, self.decoder, final=True)
         return Result(reason, time.monotonic() - t0, self.decoder.stats.as_dict(), self.info_ok, self.warnings, gaps)
@@ -397,8 +398,7 @@ def decode_log(path, model_text: str = "", *, rows: bool = True) -> DecodedLog:
                 _keep(parts[n], batch[n], rows)
             _keep(times, np.full(len(batch["sample"]), t_ns, np.int64), rows)
             t_last = t_ns
-    dec.finish()
-    rest = dec.release()  # rows after the last checkpoint: the recording ended before the next one
+    rest = end_of_stream(dec)  # rows after the last checkpoint: the recording ended before the next one
     if len(rest):
         _keep(parts["sample"], rest, rows)
         _keep(times, np.full(len(rest), t_last, np.int64), rows)

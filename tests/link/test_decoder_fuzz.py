@@ -8,8 +8,9 @@ moved, fields rewritten, indices shifted, plus plain bit flips, garbage and cut 
 stream fed in pieces of random size. The log fuzz wraps such streams in a recorder log and then
 damages the log's own structure (chunk and header, again mostly with valid CRCs).
 
-Property: no exception but the documented refusal (LogError for a file that is not a readable
-log), and output bounded by the input (no more sample rows than block frames can carry).
+Property: no exception but the documented refusals (LogError for a file that is not a readable
+log, ModelError for a model text the loader refuses), and output bounded by the input (no more
+sample rows than block frames can carry).
 
 The seed is random per run and printed; ACCELNAV_FUZZ_SEED=N reruns one exactly.
 """
@@ -32,7 +33,7 @@ from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, mani
 from accelnav.link.logfile import CHUNK, MAGIC, LogError, LogWriter
 from accelnav.link.recorder import decode_log
 from accelnav.link.telemetry import Decoder, cobs_decode, encode_command, encode_stimulus, frame, replay_for
-from accelnav.model.load import DEFAULT_MODEL
+from accelnav.model.load import DEFAULT_MODEL, ModelError
 
 SEED = int(os.environ.get("ACCELNAV_FUZZ_SEED") or random.SystemRandom().randrange(2**32))
 # no shrinking: a failure is reported at once with its seed and example (shrinking one took minutes)
@@ -323,7 +324,7 @@ def test_log_reader_takes_damaged_logs(ops, cuts, header, file_ops):
     path.write_bytes(bytes(buf))
     try:
         d = decode_log(path)
-    except LogError as exc:
+    except (LogError, ModelError) as exc:  # the log's model text goes through the model loader's rule first
         assert "\n" not in str(exc) and str(exc)
         return
     assert len(d.frames["sample"]) <= SLOTS * (len(buf) // 2 + 1)
