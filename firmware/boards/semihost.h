@@ -20,12 +20,15 @@
 #if defined(__riscv)
 /* RISC-V semihosting (sifive_e): op in a0, arg in a1, the result in a0. The debugger knows the trap
  * by the uncompressed three-instruction sequence around ebreak, so it must not be compressed
- * (norvc) and is kept 16-byte aligned, inside one page. */
+ * (norvc) and is kept 16-byte aligned, inside one page. The alignment comes before norvc: under
+ * norvc the assembler reserves too little padding for the linker's relaxation to align the
+ * sequence, and the link fails ("bytes required for alignment") where the code before it ends on
+ * 2 bytes. */
 static inline int semihost_call(int op, const void *arg)
 {
     register int a0 __asm__("a0") = op;
     register const void *a1 __asm__("a1") = arg;
-    __asm__ volatile(".option push\n.option norvc\n.balign 16\n"
+    __asm__ volatile(".option push\n.balign 16\n.option norvc\n"
                      "slli x0, x0, 0x1f\nebreak\nsrai x0, x0, 7\n.option pop"
                      : "+r"(a0)
                      : "r"(a1)
