@@ -84,3 +84,31 @@ def test_missing_riscv_tools_are_one_line_errors(monkeypatch, tmp_path):
         qemu.run_feed(elf, "sifive_e", b"")
     with pytest.raises(firmware.FirmwareError, match="riscv64-unknown-elf-gcc not found.*picolibc-riscv64-unknown-elf"):
         firmware.make_firmware("sifive_e", None, tmp_path / "out")
+
+
+def test_bench_counts_rv32_instructions_beside_the_m3(tmp_path, capsys):
+    """bench/bench_rv32_icount.py: both cores count a known loop right, compute the same final states
+    (checkpoint images) for both forms, and RV32IMAC, without the M3's 32x32->64 multiply-accumulate,
+    needs more instructions per 2-axis sample than the M3 for each form."""
+    import importlib.util
+
+    _require_riscv()
+    if shutil.which("arm-none-eabi-gcc") is None or shutil.which("qemu-system-arm") is None:
+        reason = "the M3 side needs arm-none-eabi-gcc and qemu-system-arm (Debian: gcc-arm-none-eabi qemu-system-arm)"
+        if os.environ.get("ACCELNAV_REQUIRE_PIL") == "1":
+            pytest.fail(f"ACCELNAV_REQUIRE_PIL=1 but {reason}")
+        pytest.skip(reason)
+    spec = importlib.util.spec_from_file_location("bench_rv32_icount", REPO / "bench" / "bench_rv32_icount.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert bench.main(["--samples", "300", "--keep", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "M3: calibration loop 2000000 of 2000000 instructions" in out
+    calib = int(re.search(r"RV32: calibration loop (\d+) of 2000000", out).group(1))
+    assert 2_000_000 <= calib <= 2_000_010  # the loop and the few instructions of its call
+    assert "final states, M3 vs RV32: bit-identical" in out and "overflow counters: M3 0, RV32 0" in out
+    for form in ("covariance", "gain_schedule"):
+        row = next(line for line in out.splitlines() if line.startswith(f"| {form} |"))
+        m3, rv32, ratio = (float(x) for x in row.split("|")[2:5])
+        assert rv32 > m3 > 20, row
+        assert ratio == pytest.approx(rv32 / m3, abs=0.01)
