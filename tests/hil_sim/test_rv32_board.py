@@ -112,3 +112,40 @@ def test_bench_counts_rv32_instructions_beside_the_m3(tmp_path, capsys):
         m3, rv32, ratio = (float(x) for x in row.split("|")[2:5])
         assert rv32 > m3 > 20, row
         assert ratio == pytest.approx(rv32 / m3, abs=0.01)
+
+
+def test_a_trap_ends_the_run_with_fault_not_a_hang(tmp_path):
+    """startup.c points mtvec at board_fault: an illegal instruction says 'fault' and exits 1 at once."""
+    _require_riscv()
+    if shutil.which("qemu-system-riscv32") is None:
+        pytest.skip("needs qemu-system-riscv32 (Debian: qemu-system-misc)")
+    boards = REPO / "firmware" / "boards"
+    (tmp_path / "main.c").write_text(
+        '#include "board.h"\nint main(void)\n{\n    board_puts("before\\n");\n'
+        '    __asm__ volatile(".word 0"); /* an illegal instruction */\n    board_puts("after\\n");\n    return 0;\n}\n'
+    )
+    elf = tmp_path / "fault.elf"
+    cmd = ["riscv64-unknown-elf-gcc", "-march=rv32imac", "-mabi=ilp32", "-O2", "--specs=picolibc.specs"]
+    cmd += [
+        "-nostartfiles",
+        "-I",
+        str(boards / "sifive_e"),
+        "-I",
+        str(boards),
+        "-T",
+        str(boards / "sifive_e" / "sifive_e.ld"),
+    ]
+    cmd += [
+        str(tmp_path / "main.c"),
+        str(boards / "sifive_e" / "startup.c"),
+        str(boards / "semihost_rt.c"),
+        "-o",
+        str(elf),
+    ]
+    subprocess.run(cmd, check=True)
+    m = qemu.machine_for("sifive_e")
+    with pytest.raises(qemu.QemuError, match="exited with status 1"):
+        qemu.run_to_exit(elf, icount=False, timeout=20, machine=m.machine, qemu=m.qemu)
+    cmd = qemu.qemu_command(elf, machine=m.machine, qemu=m.qemu)
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=20)
+    assert done.returncode == 1 and done.stdout + done.stderr == "before\nfault\n"
