@@ -1,6 +1,6 @@
 # Firmware build, included by the top-level Makefile.
 #
-#   make firmware BOARD=host|mps2_an385|microbit|stm32f103|stm32vldiscovery [MODEL=models/x.toml]
+#   make firmware BOARD=host|mps2_an385|microbit|stm32f103|stm32vldiscovery|sifive_e [MODEL=models/x.toml]
 #   make flash BOARD=stm32f103 [FLASH_TOOL=openocd|st-flash]
 #
 # The filter (accelnav.*) and the frame code (acnframe.*) of MODEL are
@@ -63,8 +63,21 @@ FW_LD      := $(if $(filter stm32vldiscovery,$(BOARD)),stm32f100rb_qemu.ld,stm32
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -L$(FW_DIR)/boards/stm32f103 -T$(FW_DIR)/boards/stm32f103/$(FW_LD) \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size
+else ifeq ($(BOARD),sifive_e)
+# QEMU's sifive_e: SiFive FE310 (HiFive1), RV32IMAC without FPU; picolibc for string.h and libgcc's
+# multilib for rv32imac/ilp32 (an -march with _zicsr would pick the default multilib: the runtime's
+# CSR accesses enable zicsr in their own asm instead)
+RV_CC      ?= riscv64-unknown-elf-gcc
+FW_CC      := $(RV_CC)
+FW_CFLAGS  := $(FW_WARN) -march=rv32imac -mabi=ilp32 -Os -ffunction-sections -fdata-sections -ffreestanding -g \
+              --specs=picolibc.specs -I$(FW_DIR)/boards/sifive_e
+FW_SRCS    := $(FW_DIR)/boards/sifive_e/board_sifive_e.c $(FW_DIR)/boards/emu_txq.c $(FW_DIR)/boards/emu_feed.c
+FW_LOOSE   := $(FW_DIR)/boards/sifive_e/startup.c $(FW_DIR)/boards/semihost_rt.c
+FW_LDFLAGS := -nostartfiles -T$(FW_DIR)/boards/sifive_e/sifive_e.ld \
+              -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
+FW_SIZE    := riscv64-unknown-elf-size
 else
-$(error BOARD=$(BOARD): accepted: host, mps2_an385, microbit, stm32f103, stm32vldiscovery)
+$(error BOARD=$(BOARD): accepted: host, mps2_an385, microbit, stm32f103, stm32vldiscovery, sifive_e)
 endif
 
 FW_ELF := $(FW_OUT)/accelnav_fw$(if $(filter host,$(BOARD)),,.elf)

@@ -1,14 +1,16 @@
 """SIL and PIL: the same firmware in-process and on the emulated boards, bit for bit.
 
 PIL runs on every board hil_sim.qemu knows: mps2-an385 (Cortex-M3), microbit
-(Cortex-M0) and stm32vldiscovery (the STM32 port's code on QEMU's STM32F100),
+(Cortex-M0), stm32vldiscovery (the STM32 port's code on QEMU's STM32F100) and
+sifive_e (SiFive FE310, RV32IMAC without FPU, in qemu-system-riscv32),
 for both shipped models, each built in both filter forms, on two short
 scenarios each (one with rail-clipped samples for the analog model), and a
 1 kHz model. PIL runs through the boards' file feed over semihosting (the
 path `accelnav hil --target pil` takes); test_qemu_left_behind_by_no_pil_run
 also runs it over the UARTs with the recorder (the real link's path).
 
-The PIL tests need qemu-system-arm and arm-none-eabi-gcc. Where they are
+The PIL tests need qemu-system-arm and arm-none-eabi-gcc (sifive_e:
+qemu-system-riscv32, riscv64-unknown-elf-gcc and picolibc). Where they are
 missing the tests skip and say why; with ACCELNAV_REQUIRE_PIL=1 (set by
 .ci/run) a missing tool is a failure instead, so CI cannot pass by skipping.
 """
@@ -34,10 +36,21 @@ from accelnav.link.telemetry import decode_all, replay_for
 SIGMA_FRACTION = 1e-3  # firmware vs float64 reference, in units of the reference's sigma, after 1 s
 
 
-def _require_pil():
-    missing = [tool for tool in ("qemu-system-arm", "arm-none-eabi-gcc") if shutil.which(tool) is None]
+# what PIL needs on each board, and its Debian packages; the boards not named are ARM
+ARM_TOOLS = (("qemu-system-arm", "arm-none-eabi-gcc"), "qemu-system-arm gcc-arm-none-eabi libnewlib-arm-none-eabi")
+PIL_TOOLS = {
+    "sifive_e": (
+        ("qemu-system-riscv32", "riscv64-unknown-elf-gcc"),
+        "qemu-system-misc gcc-riscv64-unknown-elf picolibc-riscv64-unknown-elf",
+    ),
+}
+
+
+def _require_pil(board: str = "mps2_an385"):
+    tools, packages = PIL_TOOLS.get(board, ARM_TOOLS)
+    missing = [tool for tool in tools if shutil.which(tool) is None]
     if missing:
-        reason = f"PIL needs {', '.join(missing)} (Debian: qemu-system-arm gcc-arm-none-eabi libnewlib-arm-none-eabi)"
+        reason = f"PIL on {board} needs {', '.join(missing)} (Debian: {packages})"
         if os.environ.get("ACCELNAV_REQUIRE_PIL") == "1":
             pytest.fail(f"ACCELNAV_REQUIRE_PIL=1 but {reason}")
         pytest.skip(reason)
@@ -104,7 +117,7 @@ def model_in_form(tmp_path_factory):
 
 @pytest.mark.parametrize("board,model_file,form,scenario,seconds", PIL_CASES)
 def test_pil_frames_equal_sil_bit_for_bit(tmp_path, model_in_form, board, model_file, form, scenario, seconds):
-    _require_pil()
+    _require_pil(board)
     model = load_model(model_in_form(model_file, form))
     assert model.filter.form == form
     run = _simulate(model, scenario, seconds, seed=9)
@@ -169,7 +182,7 @@ def test_smoother_with_zupt_beats_filter_in_the_summary(default_model):
 
 @pytest.mark.parametrize("board_name", BOARDS)
 def test_qemu_is_never_left_behind(tmp_path, board_name):
-    _require_pil()
+    _require_pil(board_name)
     elf = hil.make_firmware(board_name) / "accelnav_fw.elf"
     with pytest.raises(RuntimeError, match="inside"):
         with qemu.QemuBoard(elf, board_name) as board:
@@ -203,7 +216,7 @@ def test_qemu_left_behind_by_no_pil_run(tmp_path, link):
 def test_file_feed_takes_commands_as_the_host_board_does(tmp_path, board_name):
     """The feed's input is the host board's stdin: command frames in it act as in SIL (decimate 7: a
     frame every 7th sample; stop, then start: no frames in between), byte for byte; the log holds it."""
-    _require_pil()
+    _require_pil(board_name)
     from accelnav.link.logfile import read_log
     from accelnav.link.telemetry import encode_command
 
@@ -379,7 +392,7 @@ def test_sil_shock_against_the_float64_filter(tmp_path, rate, form):
 def test_pil_at_1khz_equals_sil(tmp_path, board_name):
     """A 1 kHz model (rail-clipped shock, 3 s: 3 000 samples) on every emulated board: the telemetry is
     SIL's byte for byte, nothing lost or missed."""
-    _require_pil()
+    _require_pil(board_name)
     text = (MODELS / "adxl250_default.toml").read_text().replace("rate_hz = 100.0", "rate_hz = 1000.0")
     path = tmp_path / "fast.toml"
     path.write_text(text)

@@ -30,6 +30,9 @@ FW = firmware_dir()
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g"]
 SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
 DUTY_MODEL = models_dir() / "adxl202_duty.toml"
+# the cross compiler of each board (firmware.mk's FW_CC) and its Debian packages; the boards not named are ARM
+ARM_TOOLCHAIN = ("arm-none-eabi-gcc", "gcc-arm-none-eabi libnewlib-arm-none-eabi")
+TOOLCHAINS = {"sifive_e": ("riscv64-unknown-elf-gcc", "gcc-riscv64-unknown-elf picolibc-riscv64-unknown-elf")}
 
 
 @cache
@@ -115,10 +118,10 @@ def make_firmware(board: str, model_path: str | Path | None = None, out: Path | 
     if out is None:
         out = cache_root() / "firmware" / f"{board}-{model.sha256[:16]}"
     out = Path(out).resolve()
-    if board != "host" and shutil.which("arm-none-eabi-gcc") is None:
-        raise FirmwareError(
-            f"board {board}: arm-none-eabi-gcc not found (Debian: gcc-arm-none-eabi libnewlib-arm-none-eabi)"
-        )
+    if board != "host":
+        cc, packages = TOOLCHAINS.get(board, ARM_TOOLCHAIN)
+        if shutil.which(cc) is None:
+            raise FirmwareError(f"board {board}: {cc} not found (Debian: {packages})")
     if shutil.which("make") is None:
         raise FirmwareError(f"board {board}: make not found (Debian: make)")
     gen = out / "gen"

@@ -3,9 +3,10 @@
 * SIL: the firmware's input stage, generated filter and frame packer (host
   board), in-process through cffi (:mod:`hil_sim.firmware`), fed the
   simulator's raw ADC codes or T1/T2 counts as stimulus frames.
-* PIL: the same sources built for an emulated board and run in
-  qemu-system-arm (:mod:`hil_sim.qemu`): mps2-an385 (Cortex-M3), microbit
-  (Cortex-M0) or stm32vldiscovery (the STM32 port's code on an STM32F100). By
+* PIL: the same sources built for an emulated board and run in QEMU
+  (:mod:`hil_sim.qemu`): mps2-an385 (Cortex-M3), microbit (Cortex-M0),
+  stm32vldiscovery (the STM32 port's code on an STM32F100) or sifive_e
+  (SiFive FE310, RV32IMAC, in qemu-system-riscv32). By
   default (``link="feed"``) the stimulus goes in and the telemetry comes out
   through files over semihosting, a block per trap (:func:`hil_sim.qemu.run_feed`),
   and the telemetry is written to the recorder's log format

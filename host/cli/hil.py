@@ -26,7 +26,7 @@ def register(sub) -> None:
         choices=tuple(MACHINES),
         default=None,
         help="emulated board for --target pil: mps2_an385 (Cortex-M3, default), microbit (Cortex-M0), "
-        "stm32vldiscovery (the STM32 port's code on an STM32F100)",
+        "stm32vldiscovery (the STM32 port's code on an STM32F100), sifive_e (RV32IMAC, SiFive FE310)",
     )
     p.add_argument("--out", type=Path, default=Path("build/hil"), help="folder for the PIL log; default build/hil")
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write hil.png into DIR")
