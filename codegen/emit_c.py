@@ -955,6 +955,17 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
 
 
 HELPERS = r"""
+/* Constant tables the filter only reads: in flash on AVR (its .rodata would be copied into the few
+ * KiB of RAM at start, leaving less for the state and the stack), read through pgm_read_*; plain
+ * const arrays everywhere else. */
+#if defined(__AVR__)
+#include <avr/pgmspace.h>
+#define ACN_ROM PROGMEM
+#define ACN_ROM_U16(p) ((uint16_t)pgm_read_word(p))
+#else
+#define ACN_ROM
+#define ACN_ROM_U16(p) (*(p))
+#endif
 /* The per-sample core is inlined into each entry point (it is small, and a call costs a register
  * save and restore every sample). */
 #if defined(__GNUC__)
@@ -1260,7 +1271,7 @@ def recip_helpers() -> str:
     body = ",\n    ".join(rows)
     return f"""
 /* 1/D for D in [1/2, 1) in Q2.30 >> 15, at the middle of each of 2^{nb} equal intervals */
-static const uint16_t acn_rtab[{2**nb}] = {{
+static const uint16_t acn_rtab[{2**nb}] ACN_ROM = {{
     {body}}};
 
 /* As acn_recip (1/d = x 2^(n-62), x in Q2.30, n = clz(d), d > 0, relative 2^-28): the start from
@@ -1270,7 +1281,7 @@ static inline uint32_t acn_recip_t(uint32_t d, int *n)
     uint32_t dn, x;
     *n = acn_clz32(d);
     dn = d << *n;                                                           /* D, Q0.32 */
-    x = (uint32_t)acn_rtab[(dn >> {31 - nb}) & {2**nb - 1}u] << 15; /* Q2.30 */
+    x = (uint32_t)ACN_ROM_U16(&acn_rtab[(dn >> {31 - nb}) & {2**nb - 1}u]) << 15; /* Q2.30, from flash on AVR */
     ACN_NR(dn, x);
     ACN_NR(dn, x);
     return x;
