@@ -19,6 +19,7 @@ or a folder the caller names, never into the installed package.
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 from functools import cache
@@ -115,7 +116,10 @@ def make_firmware(board: str, model_path: str | Path | None = None, out: Path | 
     if out is None:
         out = cache_root() / "firmware" / f"{board}-{model.sha256[:16]}"
     out = Path(out).resolve()
-    if board != "host" and shutil.which("arm-none-eabi-gcc") is None:
+    if board == "atmega328p":
+        if shutil.which("avr-gcc") is None or shutil.which("avr-size") is None:
+            raise FirmwareError(f"board {board}: avr-gcc not found (Debian: gcc-avr avr-libc)")
+    elif board != "host" and shutil.which("arm-none-eabi-gcc") is None:
         raise FirmwareError(
             f"board {board}: arm-none-eabi-gcc not found (Debian: gcc-arm-none-eabi libnewlib-arm-none-eabi)"
         )
@@ -141,6 +145,10 @@ def make_firmware(board: str, model_path: str | Path | None = None, out: Path | 
     ]
     done = subprocess.run(cmd, cwd=out, capture_output=True, text=True, timeout=600)
     if done.returncode != 0:
+        # a model too big for the part: firmware.mk's size check says so in one line, which is the error
+        fit = re.search(r"^BOARD=\S+: this model needs .*$", done.stderr, re.M)
+        if fit:
+            raise FirmwareError(fit[0])
         raise FirmwareError(f"{' '.join(cmd)} failed:\n{done.stdout[-2000:]}{done.stderr[-4000:]}")
     return out
 

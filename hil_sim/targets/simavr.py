@@ -309,3 +309,72 @@ def object_size(files: dict[str, str], workdir: Path, name: str = "accelnav.c") 
         sec[m[0]] = sec.get(m[0], 0) + int(m[1])
     ro, data, bss = sec.get(".rodata", 0), sec.get(".data", 0), sec.get(".bss", 0)
     return sec.get(".text", 0) + data + ro, data + ro + bss
+
+
+# ---- the atmega328p firmware board in simavr (PIL) -------------------------------------------------
+
+BOARDS = ("atmega328p",)  # the firmware boards that run in simavr (`accelnav hil --target pil --board`)
+MAX_RUN_CYCLES = 10**12  # a run that never ends is stopped by its wall-clock timeout first
+
+
+@dataclass(frozen=True)
+class FeedRun:
+    """One PIL run in simavr: the telemetry, the CPU cycles from reset to the end, the deepest stack."""
+
+    telemetry: bytes
+    cycles: int
+    stack: int
+
+
+def harness() -> Path:
+    """The simavr feed program (firmware/boards/atmega328p/simavr_feed.c) built with the host's cc
+    against libsimavr, once per source text, into the cache. AvrError names what to install."""
+    import hashlib
+
+    from accelnav.resources import cache_root, firmware_dir
+
+    src = firmware_dir() / "boards" / "atmega328p" / "simavr_feed.c"
+    text = src.read_bytes()
+    exe = cache_root() / "simavr" / f"simavr_feed-{hashlib.sha256(text).hexdigest()[:16]}"
+    if exe.is_file():
+        return exe
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise AvrError("no host C compiler (cc) to build the simavr feed program: install Debian's gcc")
+    exe.parent.mkdir(parents=True, exist_ok=True)
+    tmp = exe.with_name(exe.name + ".tmp")
+    done = subprocess.run([cc, "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", str(src), "-lsimavr", "-o", str(tmp)],
+                          capture_output=True, text=True)  # fmt: skip
+    if done.returncode:
+        err = done.stderr
+        if ("simavr/" in err and "No such file" in err) or "cannot find -lsimavr" in err:
+            raise AvrError("libsimavr's headers or library not found: install Debian's libsimavr-dev")
+        raise AvrError("cc (simavr feed program): " + (done.stderr.strip().splitlines() or ["failed"])[0])
+    tmp.replace(exe)  # whole or not at all: a parallel build never runs half a file
+    return exe
+
+
+def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0) -> FeedRun:
+    """Run a firmware image of the atmega328p board in simavr with ``stimulus`` on its UART (the host
+    board's stdin bytes: stimulus and command frames) and return what it sent back, to the end of the
+    stimulus (firmware/boards/atmega328p/simavr_feed.c says how the end is found)."""
+    import tempfile
+
+    elf = Path(elf).resolve()
+    if not elf.is_file():
+        raise AvrError(f"{elf}: no firmware image (build it with 'make firmware BOARD=atmega328p')")
+    exe = harness()
+    with tempfile.TemporaryDirectory(prefix="accelnav-simavr-") as tmp:
+        folder = Path(tmp)
+        (folder / "stim.bin").write_bytes(stimulus)
+        cmd = [str(exe), str(elf), str(folder / "stim.bin"), str(folder / "tel.bin"), str(MAX_RUN_CYCLES)]
+        try:
+            done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise AvrError(f"simavr ({MCU}): the run did not finish within {timeout:g} s") from None
+        if done.returncode:
+            raise AvrError(f"simavr ({MCU}): " + (done.stderr.strip().splitlines() or ["failed"])[-1])
+        m = re.search(r"^cycles (\d+) stack (\d+)$", done.stdout, re.M)
+        if m is None:
+            raise AvrError(f"simavr ({MCU}): the feed program printed no summary: {done.stdout[-200:]!r}")
+        return FeedRun((folder / "tel.bin").read_bytes(), int(m[1]), int(m[2]))
