@@ -359,10 +359,13 @@ def harness() -> Path:
     return exe
 
 
-def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0) -> FeedRun:
+def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0, adc: np.ndarray | None = None) -> FeedRun:
     """Run a firmware image of the atmega328p board in simavr with ``stimulus`` on its UART (the host
     board's stdin bytes: stimulus and command frames) and return what it sent back, to the end of the
-    stimulus (firmware/boards/atmega328p/simavr_feed.c says how the end is found)."""
+    stimulus (firmware/boards/atmega328p/simavr_feed.c says how the end is found).
+
+    ``adc``: (samples, axes) ADC codes for a sketch that reads analogRead (accelnav codegen --arduino):
+    each conversion of channel i gets axis i's next code, and ``stimulus`` (commands) follows them."""
     import tempfile
 
     elf = Path(elf).resolve()
@@ -373,6 +376,12 @@ def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0) -> Fee
         folder = Path(tmp)
         (folder / "stim.bin").write_bytes(stimulus)
         cmd = [str(exe), str(elf), str(folder / "stim.bin"), str(folder / "tel.bin"), str(MAX_RUN_CYCLES)]
+        if adc is not None:
+            codes = np.asarray(adc)
+            if codes.ndim != 2 or not 1 <= codes.shape[1] <= 8 or codes.min() < 0 or codes.max() > 1023:
+                raise ValueError(f"adc: (samples, 1..8 axes) codes of 0..1023; got shape {codes.shape}")
+            (folder / "codes.bin").write_bytes(codes.astype("<u2").tobytes())
+            cmd += [str(folder / "codes.bin"), str(codes.shape[1])]
         try:
             done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
         except subprocess.TimeoutExpired:

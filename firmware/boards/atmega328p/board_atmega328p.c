@@ -39,8 +39,8 @@
 #elif TX_NEED <= 512u
 #define TX_SIZE 512u
 #else
-#define TX_SIZE 1024u /* more than the part's RAM leaves beside the rest: the size check says so   \
-                       */
+/* more than the part's RAM leaves beside the rest: firmware.mk's size check says so */
+#define TX_SIZE 1024u
 #endif
 
 static uint8_t tx_ring[TX_SIZE]; /* TX_SIZE a power of two: the indices wrap through it */

@@ -11,6 +11,15 @@
  * last byte has been fed and PB5 has risen again and stayed high for several byte times, the run
  * ends, after the time of a few more bytes on the line so that the last one is out.
  *
+ *     simavr_feed SKETCH.elf COMMANDS.bin TELEMETRY.bin MAX_CYCLES CODES.bin AXES
+ *
+ * The second form runs an Arduino sketch that reads its input with analogRead (accelnav codegen
+ * --arduino): CODES.bin holds AXES little-endian uint16 ADC codes per sample, and each conversion
+ * the sketch starts on channel i (simavr's ADC trigger) gets the next code of axis i: AVCC is set
+ * to 1023 "mV", so that simavr's conversion (mV * 1023 / AVCC) gives the code itself. Once every
+ * code has been converted, COMMANDS.bin is fed into USART0 (e.g. a stop, which flushes the last
+ * block); the run ends when nothing has come out of the UART for 20 ms of simulated time.
+ *
  * On stdout, one line: "cycles N stack S" (the CPU cycles of the run; the deepest stack seen, in
  * bytes below RAMEND). Exit status 0; 1 with a one-line reason on stderr if the image cannot be
  * loaded, the core crashes or sleeps for good, or MAX_CYCLES pass before the end. */
@@ -19,6 +28,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <simavr/avr_adc.h>
 #include <simavr/avr_ioport.h>
 #include <simavr/avr_uart.h>
 #include <simavr/sim_avr.h>
@@ -40,11 +50,17 @@ static unsigned idle_rises; /* PB5 rising edges */
 static int idle;
 static avr_t *avr;
 static unsigned long long idle_since; /* the cycle of PB5's last rise */
+static unsigned long long last_out;   /* the cycle of the last byte sent */
+static uint8_t *codes; /* the ADC mode's codes: samples x axes, little-endian uint16 */
+static unsigned long n_codes, axes, next_code[8];
+static int adc_done;
+static avr_irq_t *adc_in;
 
 static void on_output(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
     (void)param;
+    last_out = avr->cycle;
     if (fputc((int)(value & 0xffu), out) == EOF) {
         fprintf(stderr, "simavr_feed: cannot write the telemetry file\n");
         exit(1);
@@ -78,6 +94,30 @@ static void on_pb5(struct avr_irq_t *irq, uint32_t value, void *param)
     idle = value != 0;
 }
 
+/* a conversion starts: give its channel the next code of that axis (the last one, past the end) */
+static void on_adc_start(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    union {
+        avr_adc_mux_t mux;
+        uint32_t v;
+    } e;
+    unsigned long ch, k, at, done = 0;
+    (void)irq;
+    (void)param;
+    e.v = value;
+    ch = e.mux.src;
+    if (e.mux.kind != ADC_MUX_SINGLE || ch >= axes) {
+        return;
+    }
+    k = next_code[ch] < n_codes ? next_code[ch]++ : n_codes - 1u;
+    at = 2u * (k * axes + ch);
+    avr_raise_irq(adc_in + ch, (uint32_t)(codes[at] | codes[at + 1u] << 8));
+    for (ch = 0; ch < axes; ++ch) {
+        done += next_code[ch] == n_codes;
+    }
+    adc_done = done == axes;
+}
+
 static void fail(const char *why)
 {
     fprintf(stderr, "simavr_feed: %s\n", why);
@@ -89,13 +129,14 @@ int main(int argc, char **argv)
     elf_firmware_t fw;
     FILE *in;
     uint32_t flags = 0;
-    unsigned long long max_cycles, end_at = 0;
+    unsigned long long max_cycles, end_at = 0, fed_at = 0;
     unsigned rises_at_last = 0;
     int c, fed_all = 0;
     uint16_t sp, sp_min = 0xffffu;
     avr_irq_t *uart_in;
-    if (argc != 5) {
-        fail("usage: simavr_feed FIRMWARE.elf STIMULUS.bin TELEMETRY.bin MAX_CYCLES");
+    if (argc != 5 && argc != 7) {
+        fail("usage: simavr_feed FIRMWARE.elf STIMULUS.bin TELEMETRY.bin MAX_CYCLES [CODES.bin "
+             "AXES]");
     }
     max_cycles = strtoull(argv[4], 0, 10);
     memset(&fw, 0, sizeof fw);
@@ -126,13 +167,37 @@ int main(int argc, char **argv)
                             on_xoff, 0);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), IOPORT_IRQ_PIN5),
                             on_pb5, 0);
+    if (argc == 7) {
+        FILE *f = fopen(argv[5], "rb");
+        long size = -1;
+        axes = strtoul(argv[6], 0, 10);
+        if (!f || fseek(f, 0, SEEK_END) != 0 || (size = ftell(f)) <= 0 ||
+            fseek(f, 0, SEEK_SET) != 0) {
+            fail("cannot read the ADC codes");
+        }
+        if (axes < 1u || axes > 8u || (unsigned long)size % (2u * axes) != 0u) {
+            fail("the ADC codes are not AXES uint16 per sample");
+        }
+        codes = malloc((size_t)size);
+        if (!codes || fread(codes, 1, (size_t)size, f) != (size_t)size) {
+            fail("cannot read the ADC codes");
+        }
+        fclose(f);
+        n_codes = (unsigned long)size / (2u * axes);
+        avr->avcc = avr->aref = avr->vcc = 1023; /* "mV" = code */
+        adc_in = avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0);
+        avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_OUT_TRIGGER),
+                                on_adc_start, 0);
+    }
     for (;;) {
         int state;
-        if (!fed_all && xon &&
-            idle_rises > 0) { /* from the first rise: the board set up its UART */
+        /* the board: from PB5's first rise (its UART is set up); the sketch: once its codes are
+         * taken */
+        if (!fed_all && xon && (codes ? adc_done : idle_rises > 0)) {
             c = fgetc(in);
             if (c == EOF) {
                 fed_all = 1;
+                fed_at = avr->cycle;
                 rises_at_last = idle_rises;
             } else {
                 avr_raise_irq(uart_in, (uint32_t)c);
@@ -146,7 +211,11 @@ int main(int argc, char **argv)
         if (sp < sp_min) {
             sp_min = sp;
         }
-        if (fed_all && !end_at && idle && idle_rises > rises_at_last &&
+        if (codes && fed_all && !end_at && avr->cycle - last_out >= F_CPU / 50u &&
+            avr->cycle - fed_at >= F_CPU / 50u) {
+            end_at = avr->cycle;
+        }
+        if (!codes && fed_all && !end_at && idle && idle_rises > rises_at_last &&
             avr->cycle - idle_since >= QUIET_CYCLES) {
             end_at = avr->cycle + TAIL_CYCLES;
         }
