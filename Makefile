@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.accelnav-installed
 # 2-core machine (measured: a fit took 8x the CPU); one thread is faster.
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: setup demo test lint format bench clean
+.PHONY: setup demo test lint format bench fuzz fuzz-corpus clean
 
 include firmware/firmware.mk
 
@@ -46,6 +46,17 @@ format: setup
 # every bench/bench_*.py; their markdown tables collected in build/bench/results.md
 bench: setup
 	$(PY) bench/run_all.py --out build/bench/results.md
+
+# libFuzzer on the firmware's receive path (clang + libclang-rt-14-dev): FUZZ_SECONDS of fuzzing from
+# the seed corpus; the corpus it grows and any failing input stay in build/fuzz/. CI runs a
+# bounded run of the same harness (tests/firmware/test_fuzz_rx.py).
+FUZZ_SECONDS ?= 600
+fuzz: setup
+	$(PY) firmware/fuzz/fuzz.py run --seconds $(FUZZ_SECONDS) --out build/fuzz
+
+# rewrite firmware/fuzz/corpus from the frame layout (after a layout change)
+fuzz-corpus: setup
+	$(PY) firmware/fuzz/fuzz.py corpus
 
 clean:
 	rm -rf build .pytest_cache

@@ -24,6 +24,7 @@ import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from tokenize import TokenError
 
 from accelnav.errors import UserError
 
@@ -206,7 +207,7 @@ def load_npz(path: str | Path, source: str | None = None, then: str = "") -> dic
                         version = npy.read_magic(fh)
                         reader = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
                         shape, _, dtype = reader(fh)
-                    except ValueError as exc:
+                    except (ValueError, SyntaxError, TokenError) as exc:  # numpy's header parser lets the last two out
                         raise UserError(
                             f"{src}: array {excerpt(name)} is not a .npy array: {excerpt(str(exc))}"
                         ) from None

@@ -167,7 +167,7 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
         raise UserError(
             f"{src}: no 'accel' array; keys: {', '.join(sorted(data)) or 'none'} (expected accelnav sim's layout)"
         )
-    accel = np.asarray(data["accel"], dtype=np.float64)
+    accel = _numbers(data, "accel", src)
     if accel.ndim == 1:
         accel = accel[:, None]
     if accel.ndim != 2 or accel.shape[0] < 2:
@@ -182,15 +182,21 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
     model_toml = str(data["model_toml"][()]) if "model_toml" in data else None
     clipped = None
     if "clipped" in data:
-        clipped = np.asarray(data["clipped"], dtype=bool).reshape(n, -1)
+        clipped = _numbers(data, "clipped", src, bool)
+        if clipped.shape != (n, k) and not (k == 1 and clipped.shape == (n,)):  # one flag per sample and axis
+            raise UserError(f"{src}: 'clipped' has shape {clipped.shape}; 'accel' has {(n, k)}")
+        clipped = clipped.reshape(n, k)
     if "t" in data:
-        t = np.asarray(data["t"], dtype=np.float64).reshape(-1)
+        t = _numbers(data, "t", src).reshape(-1)
         if len(t) != n:
             raise UserError(f"{src}: 't' has {len(t)} samples, 'accel' {n}")
     else:
         rate = rate_hz
         if rate is None and "rate_hz" in data:
-            rate = float(data["rate_hz"])
+            rate = _numbers(data, "rate_hz", src)
+            if rate.size != 1:
+                raise UserError(f"{src}: 'rate_hz' has shape {rate.shape}; accepted: one number")
+            rate = float(rate.reshape(-1)[0])
         if rate is None and model_toml is not None:
             rate = _model(model_toml, src).rate_hz
         if rate is None:
@@ -211,6 +217,14 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
         clipped = None if clipped is None else clipped[:, idx]
     rec = _finish(src, t, accel, names, cols, (u,) * len(names), model_toml, clipped)
     return replace(rec, time_column="t" if "t" in data else None, time_unit=None if "t" in data else "s")
+
+
+def _numbers(data: dict, key: str, src: str, dtype=np.float64) -> np.ndarray:
+    """data[key] as an array of dtype; an array that is not numbers (strings, objects) is refused."""
+    a = data[key]
+    if a.dtype.kind not in "biuf":  # complex too: no acceleration or time is complex
+        raise UserError(f"{src}: {key!r} holds {a.dtype} values; accepted: real numbers")
+    return np.asarray(a, dtype=dtype)
 
 
 def _model(text: str, src: str):
@@ -321,7 +335,7 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
     if table.shape[0] < 2:
         raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
     time_unit = None
-    if head.tcol:
+    if head.tcol is not None:  # a column may be named "" (--time-column '')
         m = _TIME_NAME.match(head.tcol)
         time_unit = m.group(2).lower() if m and m.group(2) else None
         t = table[:, 0] * _TIME_SCALE[time_unit]
@@ -405,7 +419,7 @@ def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_colum
         names = list(chosen)
     # every data row must have the header's number of fields: an extra or a missing cell is refused
     # (loadtxt with usecols would drop an extra one silently); the line of each sample is kept for messages
-    use = ([cols.index(tcol)] if tcol else []) + [cols.index(c) for c in chosen]
+    use = ([cols.index(tcol)] if tcol is not None else []) + [cols.index(c) for c in chosen]
     return _Header(delim, cols, tcol, chosen, units, names, use)
 
 

@@ -38,6 +38,8 @@ gap exactly, the index telling how many times seq wrapped.
 from __future__ import annotations
 
 import json
+import math
+import re
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -59,13 +61,13 @@ class Manifest:
     """The frame layout the MCU was built with (the JSON from codegen.frames)."""
 
     def __init__(self, data: dict):
-        if data.get("protocol") != "accelnav-telemetry":
-            raise ValueError("not an accelnav telemetry manifest (key 'protocol')")
-        if data.get("protocol_version") != PROTOCOL:
-            raise ValueError(
-                f"telemetry protocol {data.get('protocol_version')!r}: this accelnav reads protocol {PROTOCOL} "
-                "only (regenerate the firmware and record again, or read it with the accelnav that recorded it)"
-            )
+        if isinstance(data, dict) and data.get("protocol") == "accelnav-telemetry":
+            if data.get("protocol_version") != PROTOCOL:
+                raise ValueError(
+                    f"telemetry protocol {data.get('protocol_version')!r}: this accelnav reads protocol {PROTOCOL} "
+                    "only (regenerate the firmware and record again, or read it with the accelnav that recorded it)"
+                )
+        check_manifest(data)  # it may come from someone else's log: nothing unchecked reaches numpy or C
         self.data = data
         self.axes: list[str] = list(data["axes"])
         self.input: str = data["input"]
@@ -140,6 +142,129 @@ class Manifest:
         rail = 0 if self.input == "duty_cycle" else 1 << af["rail"]
         skip = 1 << af["skipped"]
         return [0, skip | rail, skip | (1 << af["timeout"]), skip | (1 << af["missed"])]
+
+
+_NAME = re.compile(r"[^\x00-\x1f\x7f]{1,32}\Z")  # an axis name: it reaches field names and messages
+_MAX_PAYLOAD = 249  # payload + CRC under 254 bytes: COBS adds exactly one byte (the decoder relies on it)
+_NEEDED = {  # frame -> fields the decoder, the compact stream and the replay read (axis fields added below)
+    "sample": ("seq", "index", "flags"),
+    "ack": ("command", "index"),
+    "cmd_stop": (),
+    "block": ("index", "flags", "n", "run", "aflags"),
+    "checkpoint": ("index", "flags", "axis", "run", "paused_at", "seq", "state"),
+}
+
+
+def _int(v, lo: int, hi: int) -> bool:
+    return type(v) is int and lo <= v <= hi
+
+
+def check_manifest(data) -> None:
+    """Refuse, with a ValueError of one line, a manifest whose shape the decoder cannot trust.
+
+    A log carries its manifest, so this is untrusted input: the types and ranges of every key the
+    decoder, :mod:`accelnav.link.compact` and :mod:`accelnav.link.replay` read are checked here,
+    axis names must be short printable names, field dtypes must be plain numbers inside their
+    frame, and the frames those modules need must be there with the fields they read. What the
+    generator writes always passes."""
+
+    def bad(what: str) -> ValueError:
+        return ValueError(f"not a usable accelnav telemetry manifest: {what}")
+
+    if not isinstance(data, dict) or data.get("protocol") != "accelnav-telemetry":
+        raise ValueError("not an accelnav telemetry manifest (key 'protocol')")
+    axes = data.get("axes")
+    if not isinstance(axes, list) or not 1 <= len(axes) <= 3:
+        raise bad("'axes' is not a list of 1 to 3 names")
+    # names only: what reaches C is the model's, and the replay takes a manifest only when it is the
+    # one the model generates (accelnav.link.replay)
+    if not all(isinstance(a, str) and _NAME.match(a) for a in axes) or len(set(axes)) < len(axes):
+        raise bad(f"'axes' {str(axes)[:80]}: accepted: distinct names of 1 to 32 printable characters")
+    if data.get("input") not in ("analog", "duty_cycle"):
+        raise bad("'input' is not 'analog' or 'duty_cycle'")
+    rate = data.get("sample_rate_hz")
+    if type(rate) not in (int, float) or not (math.isfinite(rate) and rate > 0):
+        raise bad("'sample_rate_hz' is not a positive number")
+    if not _int(data.get("layout_hash"), 0, 2**32 - 1) or not isinstance(data.get("model_sha256"), str):
+        raise bad("'layout_hash' or 'model_sha256' has the wrong type")
+    for key, names, hi in (
+        ("flags", ("reset", "resume", "replayed", "mismatch"), 15),
+        ("axis_flags", ("rail", "skipped", "timeout", "missed"), 7),
+    ):
+        table = data.get(key)
+        if not isinstance(table, dict) or not all(_int(v, 0, hi) for v in table.values()):
+            raise bad(f"{key!r} is not a table of bit numbers 0..{hi}")
+        if not all(k in table for k in names):
+            raise bad(f"{key!r} lacks one of {', '.join(names)}")
+    frames = data.get("frames")
+    if not isinstance(frames, dict):
+        raise bad("'frames' is not a table")
+    types = set()
+    for name, fr in frames.items():
+        if not isinstance(fr, dict) or fr.get("direction") not in ("up", "down"):
+            raise bad(f"frame {name!r} has no direction 'up' or 'down'")
+        if not _int(fr.get("type"), 0, 255) or fr["type"] in types or not _int(fr.get("size"), 1, _MAX_PAYLOAD):
+            raise bad(f"frame {name!r}: 'type' (a distinct byte) or 'size' (1..{_MAX_PAYLOAD}) is wrong")
+        types.add(fr["type"])
+        fields = fr.get("fields")
+        if not isinstance(fields, list):
+            raise bad(f"frame {name!r}: 'fields' is not a list")
+        for f in fields:
+            if not isinstance(f, dict):
+                raise bad(f"frame {name!r}: a field is not a table")
+            try:
+                dt = np.dtype(f["dtype"]) if isinstance(f.get("dtype"), str) else None
+            except (TypeError, ValueError, SyntaxError):
+                dt = None
+            if (
+                dt is None
+                or (dt.base.kind not in "ui")
+                or not isinstance(f.get("name"), str)
+                or not _int(f.get("offset"), 1, fr["size"] - dt.itemsize)
+            ):
+                raise bad(f"frame {name!r}: a field is not a plain integer inside the frame")
+    compact = "block" in frames or "checkpoint" in frames
+    for name, need in _NEEDED.items():
+        if name in ("block", "checkpoint") and not compact:
+            continue
+        if name not in frames:
+            raise bad(f"no {name!r} frame")
+        have = {f["name"] for f in frames[name]["fields"]}
+        if name in ("sample", "block"):
+            need = need + tuple(f"{ax}.{k}" for ax in axes for k in _raw_fields(data["input"]))
+        if name == "sample":
+            need = need + tuple(f"{ax}.{k}" for ax in axes for k in ("flags", "r", "u", "a", "e"))
+        missing = [n for n in need if n not in have]
+        if missing:
+            raise bad(f"frame {name!r} lacks {', '.join(missing)}")
+    if compact:
+        sb = data.get("state_bytes")
+        if not _int(data.get("block_samples"), 1, 255) or not _int(data.get("checkpoint_samples"), 1, 2**24):
+            raise bad("'block_samples' or 'checkpoint_samples' is out of range")
+        if not isinstance(sb, list) or len(sb) != len(axes) or not all(_int(n, 1, 4096) for n in sb):
+            raise bad("'state_bytes' is not one size per axis")
+        shapes = {f["name"]: np.dtype(f["dtype"]).shape for f in frames["block"]["fields"]}
+        slots = [n for n in _block_slots(axes, data["input"]) if shapes[n] != (data["block_samples"],)]
+        ck = {f["name"]: np.dtype(f["dtype"]) for f in frames["checkpoint"]["fields"]}["state"]
+        if slots or ck.shape != (max(sb),) or ck.base.itemsize != 1:
+            raise bad("the block's slots or the checkpoint's state do not match 'block_samples' / 'state_bytes'")
+        rows = data.get("checkpoint_rows")
+        if rows is not None and (not isinstance(rows, list) or len(rows) != len(axes)):
+            raise bad("'checkpoint_rows' is not one entry per axis")
+        for r in rows or ():
+            if r is not None and not (
+                isinstance(r, dict) and _int(r.get("offset"), 0, 4092) and _int(r.get("rows"), 0, 2**32)
+            ):
+                raise bad("a 'checkpoint_rows' entry is not an offset and a row count")
+
+
+def _block_slots(axes, kind: str) -> list[str]:
+    """The block frame's per-slot arrays: the axis codes and each axis' raw inputs."""
+    return ["aflags"] + [f"{ax}.{k}" for ax in axes for k in _raw_fields(kind)]
+
+
+def _raw_fields(kind: str) -> tuple[str, ...]:
+    return ("t1", "t2") if kind == "duty_cycle" else ("code",)
 
 
 # --------------------------------------------------------------------------
