@@ -42,7 +42,10 @@ first 0.1 m/s^2), and that is where a rest must end; a constant-acceleration
 hold becomes a piece of its own (refused below for its level). Its ends are
 trimmed once more against the piece's own measured noise where that is
 below the tremor allowance (a parked car, a resting cart). Each piece is
-widened by ``widen`` * (W // 2) samples each side, pieces at the same level
+widened by up to ``widen`` * (W // 2) samples each side (every sample of a
+passing window was quiet), sample by sample while each stays within
+``trim_k`` sd of the piece's level (the piece's own per-sample noise): a
+heel strike or a ramp's start ends it. Pieces at the same level
 less than ``bridge_s`` apart across a break that failed the quiet test are joined (a knock fails every window that
 holds it), and pieces shorter than ``min_rest_s`` are dropped.
 
@@ -129,7 +132,7 @@ class ZuptParams:
     still_k: float = 3.0  # a run's first rest: mean window variance <= still_k R (no tremor allowance)
     min_rest_s: float = 0.1  # s, shortest rest kept (after widening)
     bridge_s: float = 0.1  # s, a break in a rest this short (a knock, a glitch) does not split it
-    widen: float = 0.5  # runs of window centres are widened by widen * (W // 2) samples on both sides
+    widen: float = 1.0  # pieces widened by up to widen * (W // 2) samples each side, while samples stay level
     sigma: float = 0.02  # m/s, standard deviation of each zero-velocity update
     every_s: float = 0.0  # s, one update per every_s within a rest; 0: every sample
     gate: float = 16.0  # per-rest chi-square bound (mean over axes); 0 accepts every candidate rest
@@ -218,22 +221,33 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
     bound2 = p.trim_k**2 * total / w
     runs = intervals(centre)
     pieces = sorted((*q, k) for k, (a, b) in enumerate(runs) for q in _steady_pieces(means, a, b, bound2, x, total, w))
-    # widen each piece towards the windows' extent; join pieces at one level across short breaks (a knock
-    # fails every window that holds it, W samples of centres)
+    # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
+    # sample while a sample stays within trim_k sd of the piece's level: a heel strike or the start of a ramp
+    # ends it. Join pieces at one level across short breaks (a knock fails every window that holds it);
+    # pieces at two levels stay apart by a sample at least, so each is judged on its own
     h = int(round(p.widen * (w // 2)))
     bridge = int(round(p.bridge_s * model.rate_hz))
+    usable = ok.all(axis=1)
     merged: list[list] = []
-    for a, b, ref, run in pieces:
-        a, b = max(0, a - h), min(n, b + h)
+    for a, b, ref, own, run in pieces:
+        lim2 = p.trim_k**2 * own
+        lo, hi = max(0, a - h), min(n, b + h)
+        while a > lo and usable[a - 1] and np.sum((x[a - 1] - ref) ** 2) <= lim2:
+            a -= 1
+        while b < hi and usable[b] and np.sum((x[b] - ref) ** 2) <= lim2:
+            b += 1
         if (
             merged
             and run != merged[-1][3]  # a break that failed the quiet test, not a change of level
             and a - merged[-1][1] <= bridge
             and np.sum((ref - merged[-1][2]) ** 2) <= bound2
+            and usable[merged[-1][1] : a].all()  # a knock, not clipped or missing samples
         ):
             merged[-1][1] = b
             merged[-1][3] = run
         else:
+            if merged:
+                a = max(a, merged[-1][1] + 1)
             merged.append([a, b, ref, run])
     rest = np.zeros(n, dtype=bool)
     shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
@@ -251,7 +265,7 @@ def _steady_pieces(
     again. The ends of a piece are trimmed again with the bound scaled to the piece's own variance (of ``x``,
     summed over axes, against ``total``, the sum of R + tremor^2) when that is smaller; a piece whose first
     and last thirds differ by more than trim_k sd of a window mean (from the piece's own variance) is a
-    stretch of a ramp and dropped. Returns (first, last + 1, median level) per piece."""
+    stretch of a ramp and dropped. Returns (first, last + 1, median level, own variance) per piece."""
     out = []
     todo = [(a, b)]
     while todo:
@@ -281,7 +295,7 @@ def _steady_pieces(
             bound2 * own / total
         ):
             continue
-        out.append((p, q, ref))
+        out.append((p, q, ref, own))
     return out
 
 
