@@ -420,6 +420,11 @@ def cmd_smooth(args) -> int:
     elif args.zupt is not None:
         rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
     arrays = smooth_run(arrays, model, fixes=fixes, rest=rest, zupt_params=params, rest_sigma=rest_sigma)
+    if args.zupt == "auto":  # kept in the run file for the plots: [start_s, end_s, accepted] per candidate
+        t = arrays["t"]
+        arrays["zupt_candidates"] = np.array(
+            [[t[d.start], t[d.stop - 1], float(d.accepted)] for d in decisions], dtype=np.float64
+        ).reshape(-1, 3)
     if rest is not None:
         print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
     if fixes is not None:
