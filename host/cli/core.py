@@ -409,10 +409,7 @@ def cmd_smooth(args) -> int:
     if args.zupt == "auto":
         cand = zupt.candidates(arrays["accel"], arrays["clipped"], model, params)
         decisions = zupt.gate_rests(arrays["accel"], arrays["clipped"], cand, model, params)
-        rest = np.zeros(len(cand), dtype=bool)
-        for d in decisions:
-            if d.accepted:
-                rest[d.start : d.stop] = True
+        rest = zupt.accepted_mask(decisions, len(cand))
         print(_zupt_summary(decisions, params, rest))
         if args.zupt_report is not None:
             _write_text(args.zupt_report, zupt.report_csv(decisions, arrays["t"]))

@@ -34,7 +34,8 @@ measured acceleration z_j of every axis minus the model's bias mean:
 
 Runs of passing centres are **split into pieces of steady level**: the
 longest stretch whose window means stay within ``trim_k`` (3) standard
-deviations of a window mean (sqrt((R + tremor^2) / W)) of the run's median is
+deviations of a window mean (sqrt((R + tremor^2) / W), or of the run's own
+median window variance where a body sways more than that) of the run's median is
 one piece, the parts either side are split again; a piece whose first and
 last thirds differ by more than their own noise allows is part of a ramp and dropped. The gentle start of a move
 is quiet, but its mean walks away from the rest's (a vehicle's, a cart's
@@ -58,11 +59,18 @@ Each candidate is judged against its **anchor**, the last accepted rest
 mean b1:
 
 * **level**: |b1 - b0| <= min(``level`` + ``level_rate`` D, ``level_max``),
-  D the time since the anchor: the tilt or grade leak may change by 0.3
-  m/s^2 (1.75 degrees) plus 0.1 m/s^2 a second, never by more than 1 m/s^2
-  (6 degrees). A vehicle's hold (1 m/s^2 and more, reached within a second or
+  D the time since the anchor: the tilt or grade leak may change by 0.5
+  m/s^2 (3 degrees: a real foot's level frame moves that much from one
+  stance to the next on gaitmap's walk, where 0.3 refused one stance in six)
+  plus 0.1 m/s^2 a second, never by more than 1 m/s^2 (6 degrees). A
+  vehicle's hold (1 m/s^2 and more, reached within a second or
   two) is refused; a stop on a road whose grade changed by more than 6
   degrees since the last stop is refused too (no update rather than a wrong one).
+* **continues the rest**: a candidate within ``recover_s`` of the anchor with
+  no motion between (the largest |v| between them within sqrt(gate) s) and a
+  level within ``level`` of it is the same rest, broken by a knock or a foot
+  rolling from heel to toe; it is accepted and the rest keeps the level it
+  started with (a chain of such pieces cannot walk up a ramp).
 * **velocity closes**: v_j = Ts sum (z_j - b_j(k)) from the anchor's end to
   the candidate's start, b_j(k) linear from b0 to b1 (a slowly changing tilt
   or grade is absorbed), is within ``gate`` (16, mean over axes of v^2/s^2,
@@ -71,10 +79,12 @@ mean b1:
   m/s^2) of mean acceleration error that no rest re-measures (a coarse ADC's
   steps while the signal moves, a scale-factor error, a tilt that changed
   during the move: on the simulated 10-bit cart 0.1-0.4 m/s after a push).
-  A coast or a cruise keeps its speed and is refused. ``rel`` > 0 also
-  accepts a velocity back to that share of its peak since the anchor (the
-  previous design's rule, 0.5, for heel strikes sampled on three points); off
-  by default: it accepted pieces of a push's ramp at 0.7 m/s.
+  A coast or a cruise keeps its speed and is refused. The velocity may also
+  have come back to ``rel`` (0.5) of its peak since the anchor: on gaitmap's
+  real walk a heel strike leaves 0.3-1 m/s in the integral, chi-square
+  refuses a third of the stances there, and the simulated walks never show
+  it. The price: a short piece at the end of a braking ramp can pass it (a
+  cart's, at 0.7 m/s); the rest that follows it supersedes it (below).
 * no anchor yet: a candidate that holds the run's first window is accepted
   when it is **still** (mean window variance <= ``still_k`` R, no tremor
   allowance): the run starts at rest, as the filter's prior u = 0 says.
@@ -88,12 +98,12 @@ them, the level moved little, the velocity closes, *and* the body visibly
 moved (the largest |v| between them above sqrt(gate) s: a stride, a push);
 the previous candidate is then accepted too ("confirmed by the next").
 
-**Adjacent rests at two levels.** When a candidate's level differs from an
-anchor that ended less than ``recover_s`` before it with no motion between
-(the tail of a braking ramp, then the stop), the longer of the two is the
-rest: a shorter anchor is withdrawn ("superseded by a longer rest") and the
-candidate judged against the rest before it, so one short wrong anchor does
-not make every later stop "move".
+**Adjacent rests.** When a candidate follows an anchor within ``recover_s``
+with no motion between, and its level differs by more than ``level`` or the
+anchor is short (under three windows: the tail of a braking ramp, then the
+stop), the longer of the two is the rest: a shorter anchor is withdrawn
+("superseded by a longer rest") and the candidate judged against the rest
+before it, so one short wrong anchor does not make every later stop "move".
 So one missed run of stances no longer poisons the rest of a walk (issue 23:
 27 of 29 later candidates refused), while a cruise, whose quiet spells
 close on each other without any motion between, gives no rest.
@@ -126,7 +136,7 @@ class ZuptParams:
     var_k: float = 10.0  # quiet if mean over axes of window variance / (R + tremor^2) <= var_k
     tremor: float = 0.12  # m/s^2 rms, the motion of a body at rest (a stance's sway, an idling engine)
     trim_k: float = 3.0  # rest ends trimmed while the window mean is this many sd off the rest's own
-    level: float = 0.3  # m/s^2, change of the rest level (tilt leak) allowed since the last rest ...
+    level: float = 0.5  # m/s^2, change of the rest level (tilt leak) allowed since the last rest ...
     level_rate: float = 0.1  # m/s^3, ... plus this per second since it ...
     level_max: float = 1.0  # m/s^2, ... never more than this
     still_k: float = 3.0  # a run's first rest: mean window variance <= still_k R (no tremor allowance)
@@ -137,7 +147,7 @@ class ZuptParams:
     every_s: float = 0.0  # s, one update per every_s within a rest; 0: every sample
     gate: float = 16.0  # per-rest chi-square bound (mean over axes); 0 accepts every candidate rest
     drift: float = 0.02  # m/s^2, unmodelled mean acceleration error between rests (ADC steps, scale, tilt)
-    rel: float = 0.0  # per-rest: also accepted if |v| <= rel * the largest |v| since the anchor (0: off)
+    rel: float = 0.5  # per-rest: also accepted if |v| <= rel * the largest |v| since the anchor (0: off)
     recover_s: float = 3.0  # s, a refused candidate this recent may anchor the next one (with motion between)
 
 
@@ -207,20 +217,29 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
     w = window_samples(model, p)
     bad = _moving((~ok.all(axis=1)).astype(np.float64), w)
     quiet = np.zeros(n)
+    wvar = np.zeros(n)  # window variance, summed over the axes
     means = np.empty((n, n_axes))
     for j in range(n_axes):
         s1 = _moving(x[:, j], w)
         s2 = _moving(x[:, j] * x[:, j], w)
         with np.errstate(invalid="ignore"):
             means[:, j] = s1 / w
-            quiet += (s2 - w * means[:, j] ** 2) / (w - 1) / (R[j] + p.tremor**2)
+            v = (s2 - w * means[:, j] ** 2) / (w - 1)
+            quiet += v / (R[j] + p.tremor**2)
+            wvar += v
     with np.errstate(invalid="ignore"):
         centre = (bad == 0) & (quiet / n_axes <= p.var_k)
     # split each run into pieces of steady level: a move that starts gently is quiet, but its mean walks away
     total = float(np.sum(R + p.tremor**2))
     bound2 = p.trim_k**2 * total / w
     runs = intervals(centre)
-    pieces = sorted((*q, k) for k, (a, b) in enumerate(runs) for q in _steady_pieces(means, a, b, bound2, x, total, w))
+    # a body swaying more than the tremor allowance (a real stance) has a level that wanders as much: the bound
+    # grows with the run's own typical window variance (not with a ramp, whose windows stay quiet)
+    pieces = sorted(
+        (*q, k)
+        for k, (a, b) in enumerate(runs)
+        for q in _steady_pieces(means, a, b, bound2 * max(1.0, float(np.median(wvar[a:b])) / total), x, total, w)
+    )
     # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
     # sample while a sample stays within trim_k sd of the piece's level: a heel strike or the start of a ramp
     # ends it. Join pieces at one level across short breaks (a knock fails every window that holds it);
@@ -300,7 +319,7 @@ def _steady_pieces(
 
 
 # why a candidate was accepted or refused (the report's reason column)
-ACCEPT_REASONS = ("closes", "still at start", "recovered", "confirmed by the next", "gate off")
+ACCEPT_REASONS = ("closes", "continues the rest", "still at start", "recovered", "confirmed by the next", "gate off")
 REFUSE_REASONS = (
     "level moved",
     "velocity does not close",
@@ -365,7 +384,6 @@ def gate_rests(
     Ts = model.Ts
     w = window_samples(model, p)
     nan = float("nan")
-    still_bound = p.trim_k * math.sqrt(float(np.sum(R + p.tremor**2)) / w)  # a window mean's noise, trim_k sd
     still_len = 3 * w  # a rest shorter than this next to a longer one, nothing moving between: the longer wins
     anchors: list[tuple[_Anchor, int]] = []  # accepted rests (as anchors) and their index in ``out``
     prev: tuple[_Anchor, str] | None = None  # the previous candidate, as a possible anchor, and its verdict
@@ -394,9 +412,12 @@ def gate_rests(
                     used = anchor.end
                     chi2, speed, peak, peak_chi2 = _closure(x, ok, R, Ts, p, anchor, a, b1, sd1)
                     moved = peak_chi2 > p.gate
-                    lev, bound = _level(p, anchor, b1, a, Ts, None if moved else still_bound)
+                    near = not moved and (a - anchor.end) * Ts <= p.recover_s
+                    lev, bound = _level(p, anchor, b1, a, Ts, p.level if near else None)
                     if lev > bound:
                         reason = "level moved"
+                    elif near:  # the same rest, broken by a knock or a roll of the foot
+                        accepted, reason = True, "continues the rest"
                     else:
                         accepted = chi2 <= p.gate or speed <= p.rel * peak
                         reason = "closes" if accepted else "velocity does not close"
@@ -427,7 +448,9 @@ def gate_rests(
                     out[-1] = replace(out[-1], accepted=True, reason="confirmed by the next")
                     anchors.append((cand, len(out) - 1))
         out.append(RestDecision(a, stop, bool(accepted), reason, chi2, speed, peak, lev, bound, still, used))
-        if accepted:
+        if accepted and reason == "continues the rest":  # the rest goes on at the level it started with
+            anchors[-1][0].end = stop
+        elif accepted:
             anchors.append((here, len(out) - 1))
         prev = (here, reason)
     return out
@@ -437,7 +460,7 @@ def _level(
     p: ZuptParams, anc: _Anchor, b1: np.ndarray, a: int, Ts: float, still: float | None = None
 ) -> tuple[float, float]:
     """(|b1 - b0|, its bound) for a candidate starting at sample a; ``still``: the bound when nothing moved
-    between them (the noise of a window mean: a level cannot change without a move)."""
+    between them (no allowance for the time between: a level does not drift while the body stands)."""
     D = max(0, a - anc.end) * Ts
     bound = min(p.level + p.level_rate * D, p.level_max) if still is None else still
     return float(np.sqrt(np.sum((b1 - anc.b) ** 2))), bound
@@ -483,10 +506,24 @@ def _robust_mean(x: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def rest_mask(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams = ZuptParams()) -> np.ndarray:
     """(N,) bool: samples of the accepted rests (detector, then the per-rest gate)."""
     rest = candidates(accel, clipped, model, params)
-    mask = np.zeros(len(rest), dtype=bool)
-    for r in gate_rests(accel, clipped, rest, model, params):
-        if r.accepted:
-            mask[r.start : r.stop] = True
+    return accepted_mask(gate_rests(accel, clipped, rest, model, params), len(rest))
+
+
+def accepted_mask(decisions: list[RestDecision], n: int) -> np.ndarray:
+    """(N,) bool: the samples of the accepted rests; a rest's continuation is joined to it across the one
+    sample that keeps two pieces at two levels apart (:func:`candidates`), not across a break that failed
+    the quiet test or a clipped sample."""
+    mask = np.zeros(n, dtype=bool)
+    bridge = 1
+    last = None
+    for d in decisions:
+        if not d.accepted:
+            continue
+        start = d.start
+        if d.reason == "continues the rest" and last is not None and d.start - last <= bridge:
+            start = last
+        mask[start : d.stop] = True
+        last = d.stop
     return mask
 
 
