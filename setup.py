@@ -6,6 +6,8 @@
 from setuptools import setup
 
 setup(
+    # the kernels use only Python's limited API (cffi builds them so): one wheel serves 3.11 and later
+    options={"bdist_wheel": {"py_limited_api": "cp311"}},
     cffi_modules=[
         "host/native/kernels.py:smoother",
         "host/native/kernels.py:riccati",

@@ -24,10 +24,11 @@ import re
 from concurrent.futures import ThreadPoolExecutor
 
 from accelnav.model.design import AnalogConversion
+from accelnav.model.load import Model
+
 from .emit_f32 import emit_f32
 from .gains import Schedule
-from accelnav.model.load import Model
-from .package import cdef_of, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
+from .package import cdef_of, check_prefix, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
 from .qformat import QFormat, acc_bound, guard_bits, quantize
 from .ranges import FINE, AxisPlan, fine_view, plan_axis
 
@@ -1137,13 +1138,45 @@ static inline int64_t acn_limit(int64_t x, int32_t hmax, uint32_t *overflow)
 static inline int64_t acn_mul64x32(int64_t x, int32_t c, int s)
 {
     int64_t hi = (x >> 32) * c;                          /* |.| < 2^62 */
-    int64_t t = (int64_t)(uint32_t)(x & 0xFFFFFFFF) * c; /* |.| < 2^63 */
+    int64_t t = (int64_t)(uint32_t)(x & UINT32_C(0xFFFFFFFF)) * c; /* |.| < 2^63 */
     int64_t m = hi + (t >> 32);                          /* x c = m 2^32 + (t mod 2^32) */
     if (s > 32) {
         return (m + ((int64_t)1 << (s - 33))) >> (s - 32);
     }
     return m * ((int64_t)1 << (32 - s)) +
-           (int64_t)((((uint64_t)(uint32_t)(t & 0xFFFFFFFF)) + ((uint64_t)1 << (s - 1))) >> s);
+           (int64_t)((((uint64_t)(uint32_t)(t & UINT32_C(0xFFFFFFFF))) + ((uint64_t)1 << (s - 1))) >> s);
+}
+
+/* The leading zeros of a 32-bit d > 0. __builtin_clz counts them in an unsigned int, which is 16 bits
+ * on AVR (it would count the zeros of d's low half): the builtin whose operand is exactly 32 bits is
+ * chosen at compile time, and a plain binary search serves any other compiler or width (and
+ * ACN_PLAIN_CLZ, which the tests use to check it). */
+static inline int acn_clz32(uint32_t d)
+{
+#if defined(__GNUC__) && !defined(ACN_PLAIN_CLZ) && UINT_MAX == 0xFFFFFFFF
+    return __builtin_clz(d);
+#elif defined(__GNUC__) && !defined(ACN_PLAIN_CLZ) && ULONG_MAX == 0xFFFFFFFF
+    return __builtin_clzl(d);
+#else
+    int n = 0;
+    if (d < UINT32_C(0x10000)) {
+        n += 16;
+        d <<= 16;
+    }
+    if (d < UINT32_C(0x1000000)) {
+        n += 8;
+        d <<= 8;
+    }
+    if (d < UINT32_C(0x10000000)) {
+        n += 4;
+        d <<= 4;
+    }
+    if (d < UINT32_C(0x40000000)) {
+        n += 2;
+        d <<= 2;
+    }
+    return d < UINT32_C(0x80000000) ? n + 1 : n;
+#endif
 }
 
 /* Reciprocal without a divide: for d > 0 returns x (Q2.30, 1 < x <= 2) and n = clz(d)
@@ -1171,7 +1204,7 @@ static inline uint32_t acn_umulhi(uint32_t a, uint32_t b)
 static inline uint32_t acn_recip(uint32_t d, int *n)
 {
     uint32_t dn, x;
-    *n = __builtin_clz(d);
+    *n = acn_clz32(d);
     dn = d << *n;                                                        /* D, Q0.32 */
     x = UINT32_C(3031741621) - acn_umulhi(UINT32_C(2021161080), dn); /* Q2.30 */
     ACN_NR(dn, x); /* three steps, unrolled */
@@ -1235,7 +1268,7 @@ static const uint16_t acn_rtab[{2**nb}] = {{
 static inline uint32_t acn_recip_t(uint32_t d, int *n)
 {{
     uint32_t dn, x;
-    *n = __builtin_clz(d);
+    *n = acn_clz32(d);
     dn = d << *n;                                                           /* D, Q0.32 */
     x = (uint32_t)acn_rtab[(dn >> {31 - nb}) & {2**nb - 1}u] << 15; /* Q2.30 */
     ACN_NR(dn, x);
@@ -1638,6 +1671,7 @@ def emit(
 ) -> dict[str, str]:
     """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json. Both forms
     follow skipped samples (the gain schedule through codegen.follow)."""
+    check_prefix(prefix)  # before any planning: a prefix that is no C identifier is refused outright
     form = form or model.filter.form
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)
@@ -1654,7 +1688,7 @@ def emit(
         what_h=f"fixed-point {form} filter, one set per axis",
         what_c=f"fixed-point {form} filter. No floating point, no division, no heap.",
         declarations=H,
-        source_includes="#include <stddef.h> /* offsetof */\n\n",
+        source_includes="#include <limits.h> /* UINT_MAX: acn_clz32 */\n#include <stddef.h> /* offsetof */\n\n",
         source_prelude=HELPERS + (recip_helpers() if any(p.form == "covariance" for p in ps) else "") + "\n",
         body=S,
         manifest={"arith": "fixed", "form": form, "axes": MAN},

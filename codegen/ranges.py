@@ -41,8 +41,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from accelnav.model.design import AnalogConversion, AxisDesign, DutyConversion, axis_design, input_conversion
-from .gains import KEEP, GainRun, gap_maxima, riccati
 from accelnav.model.load import G0, Model, ModelError
+
+from .gains import KEEP, GainRun, gap_maxima, riccati
 from .qformat import QFormat, bits_for, const_format, fit
 
 N_TRANSIENT = 600  # samples whose time-varying gains are analysed row by row
@@ -143,8 +144,16 @@ def _closed(K2: np.ndarray, phi: float) -> np.ndarray:
     return (np.eye(2) - np.outer(K2, [1.0, 1.0])) @ F2
 
 
+# terms of the l1 sum added one by one when the poles allow no closed form; the rest of the horizon
+# gets a closed-form upper bound, so the work is bounded whatever the horizon (issue 21 item 6: a horizon
+# of 40/(1 - phi) with phi rounded to 1.0 ran for hours)
+L1_EXACT_TERMS = 1 << 20
+
+
 def _l1_steady(A: np.ndarray, B: np.ndarray, horizon: int) -> np.ndarray:
-    """sum_{m>=0} |A^m B| (2x2 result: rows = output a/eps, cols = input), by eigen-decomposition."""
+    """sum_{m<horizon} |A^m B| (2x2 result: rows = output a/eps, cols = input), by eigen-decomposition:
+    exact in closed form for two distinct poles in (0, 1); otherwise exact over the first
+    L1_EXACT_TERMS terms and bounded above past them (never below the true sum)."""
     lam, V = np.linalg.eig(A)
     Vi = np.linalg.inv(V)
     out = np.zeros((2, B.shape[1]))
@@ -156,19 +165,39 @@ def _l1_steady(A: np.ndarray, B: np.ndarray, horizon: int) -> np.ndarray:
     if np.all(lam > 0) and np.all(lam < 1) and lam[0] != lam[1]:
         return _l1_two_geometric(lam, V, Vi, B, horizon)
     chunk = 1 << 18
+    exact = min(horizon, L1_EXACT_TERMS)
     m0 = 0
-    while m0 < horizon:
-        m = np.arange(m0, min(horizon, m0 + chunk), dtype=np.float64)
+    while m0 < exact:
+        m = np.arange(m0, min(exact, m0 + chunk), dtype=np.float64)
         pw = np.power(lam[:, None], m[None, :])
         # h[m] = V diag(lam^m) Vi B
         for o in range(2):
             for i in range(B.shape[1]):
                 coef = V[o, :] * (Vi @ B[:, i])
                 out[o, i] += np.abs(coef @ pw).sum()
-        m0 += chunk
-        if np.max(np.abs(lam)) ** m0 < 1e-13:
-            break
+        m0 = min(exact, m0 + chunk)
+        if np.max(np.abs(lam)) ** m0 < 1e-13:  # what is left is below rounding: no tail
+            return out
+    if exact < horizon:  # |c0 lam0^m + c1 lam1^m| <= |c0| |lam0|^m + |c1| |lam1|^m, summed in closed form
+        tail = [_geo_abs(abs(float(x)), exact, horizon - 1) for x in lam]
+        for o in range(2):
+            for i in range(B.shape[1]):
+                coef = V[o, :] * (Vi @ B[:, i])
+                out[o, i] += float(np.abs(coef) @ tail)
     return out
+
+
+def _geo_abs(lm: float, a: int, b: int) -> float:
+    """sum_{m=a}^{b} lm^m for lm >= 0 (inf when it overflows)."""
+    n = b - a + 1
+    if n <= 0:
+        return 0.0
+    if lm == 1.0:
+        return float(n)
+    with np.errstate(over="ignore", divide="ignore"):
+        if lm < 1.0:
+            return float(np.float64(lm) ** a * -math.expm1(n * math.log(lm)) / (1.0 - lm)) if lm > 0 else 0.0
+        return float(np.float64(lm) ** a * np.expm1(n * np.log(lm)) / (lm - 1.0))
 
 
 def _l1_two_geometric(lam, V, Vi, B, horizon: int) -> np.ndarray:

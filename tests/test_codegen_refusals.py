@@ -54,9 +54,10 @@ def test_unrepresentable(old, new, message):
 
 
 def test_run_too_long_for_the_generator():
-    """(Also far beyond the 31-bit sample counter, which the generator's own limit stays below.)"""
-    text = variant(("max_run_s = 3600.0", "max_run_s = 1e9"), short=False)
-    with pytest.raises(ModelError, match=r"sampling.rate_hz x ranges.max_run_s: 100 Hz x 1e\+09 s = 1e\+11 samples"):
+    """(Also far beyond the 31-bit sample counter, which the generator's own limit stays below; both keys at
+    the most the loader accepts, which alone bounds neither the samples nor the generator's time.)"""
+    text = variant(("max_run_s = 3600.0", "max_run_s = 1e6"), ("rate_hz = 100.0", "rate_hz = 1e5"), short=False)
+    with pytest.raises(ModelError, match=r"sampling.rate_hz x ranges.max_run_s: 100000 Hz x 1e\+06 s = 1e\+11 samples"):
         emit(loads_model(text, source="bad.toml"))
 
 

@@ -145,7 +145,7 @@ def _tampered(man, telemetry, which: int = 3) -> tuple[bytes, int]:
     ck = [k for k, x in enumerate(f) if _kind(man, x) == "checkpoint"]
     k = ck[which]
     p = bytearray(_payload(f[k]))
-    p[7 + 20] ^= 0x04  # inside the state bytes
+    p[man.field("checkpoint", "state")["offset"] + 20] ^= 0x04  # inside the state bytes
     f[k] = frame(bytes(p))
     return b"".join(f), int.from_bytes(p[1:5], "little")
 
@@ -382,7 +382,7 @@ def gs(tmp_path_factory):
 def _ck_image(man, f: bytes) -> tuple[int, int, bytes]:
     """(index, axis, image bytes) of a checkpoint frame."""
     p = _payload(f)
-    return int.from_bytes(p[1:5], "little"), p[6], p[7:]
+    return int.from_bytes(p[1:5], "little"), p[6], p[man.field("checkpoint", "state")["offset"] :]
 
 
 def _gs_row_at(man, axis: int) -> tuple[int, int]:
@@ -406,7 +406,9 @@ def test_gain_schedule_compact_round_trip_follows_skips(gs):
     after a gap the replay starts from that very checkpoint and still matches the firmware bit for bit."""
     man, replay = gs["man"], gs["replay"]
     C, B = man.data["checkpoint_samples"], man.data["block_samples"]
-    assert man.frames["checkpoint"]["size"] == 7 + 88  # the image: 88 B per axis, the row a u32 index
+    assert (
+        man.frames["checkpoint"]["size"] == man.field("checkpoint", "state")["offset"] + 88
+    )  # the image: 88 B per axis, the row a u32 index
     rows, c = _check(man, replay, gs["stream"], seed=3)
     np.testing.assert_array_equal(rows["index"], np.arange(N))
     assert c["mismatches"] == 0 and c["lost"] == 0 and c["checkpoints"] == 2 * (N // C + 1)
@@ -437,7 +439,8 @@ def _with_row(man, f: bytes, row: int) -> bytes:
     """The checkpoint frame with its image's row index set to ``row``, its CRC made good."""
     p = bytearray(_payload(f))
     off, _ = _gs_row_at(man, p[6])
-    p[7 + off : 7 + off + 4] = row.to_bytes(4, "little")
+    at = man.field("checkpoint", "state")["offset"] + off
+    p[at : at + 4] = row.to_bytes(4, "little")
     return frame(bytes(p))
 
 

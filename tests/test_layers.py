@@ -34,6 +34,7 @@ LAYERS = {
     "accelnav.native": 1,
     "accelnav.resources": 0,
     "accelnav.errors": 0,
+    "accelnav.fileio": 0,
     "accelnav.progress": 0,
     "accelnav.lazy": 0,
 }
@@ -42,7 +43,7 @@ LAYERS = {
 NEVER_CODEGEN = ("accelnav.model", "accelnav.native", "accelnav.estimate", "accelnav.identify", "accelnav.data",
                  "accelnav.hil_sim.sim", "accelnav.plots")  # fmt: skip
 # what the generator may stand on
-CODEGEN_BASE = ("accelnav.codegen", "accelnav.model", "accelnav.native", "accelnav.resources")
+CODEGEN_BASE = ("accelnav.codegen", "accelnav.model", "accelnav.native", "accelnav.resources", "accelnav.fileio")
 
 
 def _modules() -> dict[str, Path]:

@@ -31,6 +31,12 @@ uint32_t board_time_ms(void);
 /* ACNF_BOARD_* of this board. */
 uint8_t board_id(void);
 
+/* An id that differs from one power-on to the next (a counter kept over resets, a hardware
+ * random number); the compact frames carry it so that the host tells a reboot from re-sent
+ * power-on frames. Boards without either return a fixed value, the same on the host board and
+ * every emulated one, so that SIL and PIL telemetry stay bit-identical. */
+uint16_t board_boot_id(void);
+
 /* Bytes the board's receivers lost since board_init (hardware overrun, full ring), wrapping. */
 uint32_t board_rx_lost(void);
 

@@ -20,6 +20,9 @@ static void app_send_checkpoints(uint8_t flags)
         ck.index = app.index;
         ck.flags = flags;
         ck.axis = (uint8_t)i;
+        ck.run = app.run;
+        ck.paused_at = app.paused_at;
+        ck.seq = app.seq;
         acn_filter_state(&app.filters, i, ck.state);
         if (!link_send(payload, acnf_pack_checkpoint(&ck, payload))) {
             ++app.tx_drop; /* the host replays on to the next checkpoint: nothing is lost but a
@@ -56,6 +59,7 @@ static void app_send_block(void)
     }
     memset(b, 0, sizeof *b);
     b->index = app.index;
+    b->run = app.run;
 }
 
 /* Compact mode: what is pending goes out now (a partial block, then a checkpoint). */
@@ -67,10 +71,21 @@ static void app_flush(void)
     }
 }
 
+/* The compact stream pauses (stop, decimate, a mode change): flush, and remember where it ended, so
+ * that the next run's checkpoints tell the host which samples before the pause were sent. */
+static void app_pause(void)
+{
+    if (app_compact() && !app.resume) {
+        app_flush();
+        app.paused_at = app.index;
+    }
+}
+
 static void app_reset_filters(void)
 {
     acn_filters_init(&app.filters);
     app.index = 0;
+    app.paused_at = 0;
     app.decim_left = 0;
     app.overflow_seen = 0;
     app.reset_pending = true;
@@ -85,6 +100,8 @@ void app_init(void)
         link_rx_init(&app.rx[ch]);
     }
     app.decimation = 1;
+    /* differs from boot to boot: re-sent power-on frames are not a reboot */
+    app.run = board_boot_id();
     app.running = true; /* stream from power-on; the host may send stop */
     app_reset_filters();
 }
@@ -143,16 +160,17 @@ static void app_command(const acnf_command_t *c)
         }
         break;
     case ACNF_CMD_STOP:
-        app_flush();
+        app_pause();
         app.running = false;
         break;
     case ACNF_CMD_RESET:
         app_flush();
+        ++app.run; /* a new run: its frames differ from the last one's even at the same index */
         app_reset_filters();
         break;
     case ACNF_CMD_DECIMATE:
         if (c->factor >= 1u && c->factor <= ACNF_MAX_DECIMATION) {
-            app_flush();
+            app_pause();
             app.decimation = c->factor;
             app.decim_left = 0;
             app.resume = true;
@@ -181,7 +199,7 @@ static void app_command(const acnf_command_t *c)
         break;
     case ACNF_CMD_MODE_STATES:
     case ACNF_CMD_MODE_COMPACT:
-        app_flush();
+        app_pause();
         app.state_mode = c->type == ACNF_CMD_MODE_STATES;
         app.decim_left = 0;
         app.resume = true;
@@ -210,6 +228,7 @@ static void app_compact_begin(void)
         memset(&app.blk, 0, sizeof app.blk);
         app.blk.index = app.index;
         app.blk.flags = flags;
+        app.blk.run = app.run;
         app.resume = false;
         app.reset_pending = false;
     }

@@ -15,6 +15,8 @@ typedef struct {
     acn_filters_t filters;
     link_rx_t rx[APP_NCH];
     uint32_t index;      /* samples since reset */
+    uint16_t run;        /* run id: the board's boot id, plus one per reset command */
+    uint32_t paused_at;  /* index where the compact stream last paused (0 after a reset) */
     uint16_t seq;        /* sample frames attempted since start */
     uint16_t decimation; /* 1: compact block frames; 2..ACNF_MAX_DECIMATION: sample frames */
     uint16_t decim_left; /* samples until the next frame */

@@ -69,6 +69,7 @@ uint32_t crc32_update(uint32_t crc, const uint8_t *p, size_t n);
 void board_init(void);
 size_t board_host_take(uint8_t *out, size_t max);
 void board_host_set_tx_limit(size_t limit);
+void board_host_set_boot_id(uint16_t id);
 void app_init(void);
 void app_sample(const acnf_stimulus_t *in);
 void app_missed(uint32_t n);
@@ -151,8 +152,10 @@ class FirmwareError(RuntimeError):
 class HostFirmware:
     """The firmware in-process: feed bytes, collect telemetry."""
 
-    def __init__(self, mod):
+    def __init__(self, mod, boot_id: int = 1):
+        """``boot_id``: what the board says at power-on (1 on every board without a retained counter)."""
         self.ffi, self.lib = mod.ffi, mod.lib
+        self.lib.board_host_set_boot_id(boot_id)
         self.lib.board_init()
         self.lib.board_host_set_tx_limit(1 << 16)
         self.lib.app_init()

@@ -28,12 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.model.design import input_conversion
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
-from accelnav.model.edit import dump_model, revalidate
 from accelnav.data.recording import read_recording
 from accelnav.errors import UserError
+from accelnav.fileio import write_text
 from accelnav.identify.calibrate import GRAVITY, Calibration, CalibrationError, calibrate, detect_poses, native
+from accelnav.model.design import input_conversion
+from accelnav.model.edit import dump_model, revalidate
+from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
 from accelnav.progress import Progress
 
 MAX_SAMPLES = 10_000_000  # about 28 h at 100 Hz; the pose search holds a few copies of the samples
@@ -58,7 +59,20 @@ def register(sub) -> None:
     )
     p.add_argument("--out", type=Path, required=True, metavar="OUT.toml", help="model file to write")
     p.add_argument("--unit", default=None, help="unit of the acceleration columns: g, mg or m/s^2")
-    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="sample rate if there is no time column")
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="sample rate if there is no time column; with one, the nominal rate it is checked against "
+        "(overriding stamps that do not fit it, said in a note)",
+    )
+    p.add_argument(
+        "--time-unit",
+        choices=("s", "ms", "us"),
+        default=None,
+        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
+    )
     p.add_argument("--time-column", default=None, metavar="NAME", help="time column; default: t, t_s, time, ...")
     p.add_argument("--min-pose", type=float, default=3.0, metavar="S", help="shortest still pose, s; default: 3")
     p.add_argument(
@@ -99,7 +113,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise UserError(f"--min-pose: got {args.min_pose:g}; accepted: seconds > 0")
     if args.since_power_on is not None and args.since_power_on < 0:
         raise UserError(f"--since-power-on: got {args.since_power_on:g}; accepted: seconds >= 0")
-    rec = read_recording(args.recording, axes=None, unit=args.unit, rate_hz=args.rate, time_column=args.time_column)
+    rec = read_recording(
+        args.recording,
+        axes=None,
+        unit=args.unit,
+        rate_hz=args.rate,
+        time_column=args.time_column,
+        time_unit=args.time_unit,
+    )
+    for note in rec.notes:
+        print(note)
     if rec.n > MAX_SAMPLES:
         raise UserError(f"{rec.source}: {rec.n} samples; accepted: at most {MAX_SAMPLES} (cut the recording)")
     model, label = _base_model(args.model, rec.model_toml, rec.source)
@@ -131,8 +154,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     out_model = apply(model, cal, args.since_power_on)
     text = dump_model(out_model, header=provenance(rec, cal, label))
     loads_model(text, source=str(args.out))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    write_text(args.out, text)  # whole or not at all
     unit_z, unit_s = ("V", "V/g") if model.sensor.kind == "analog" else ("duty", "duty/g")
     print(f"model written to {args.out} (from {label}):")
     for old, new in zip(model.axes, out_model.axes, strict=True):

@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 
 from accelnav.codegen.emit_c import emit, write
-from accelnav.model.load import load_model
+from accelnav.errors import UserError
+from accelnav.model.load import load_model, name_problem
 
 
 def register(sub) -> None:
@@ -25,6 +26,12 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.out.exists() and not args.out.is_dir():
+        raise UserError(f"--out: {args.out} is a file; give a directory for the generated files")
+    # the prefix names the files and every symbol: a C identifier (no path, no code), by the model's rule
+    problem = name_problem("C prefix", args.prefix)
+    if problem is not None:
+        raise UserError(f"--prefix: got {ascii(args.prefix[:80])}; accepted: {problem}")
     model = load_model(args.model)
     arith = "float32" if args.float32 else "fixed"
     files = emit(model, form=args.form, arith=arith, prefix=args.prefix)

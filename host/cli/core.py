@@ -18,7 +18,11 @@ from accelnav.estimate.pipeline import (
     stride_table,
 )
 from accelnav.estimate.zupt import ZuptParams
+from accelnav.fileio import check_input, check_output, write_text
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model
+
+TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
+TUNE_SECONDS = 60.0
 
 
 def _model_arg(p: argparse.ArgumentParser, help_extra: str = "") -> None:
@@ -39,7 +43,20 @@ def _input_args(p: argparse.ArgumentParser) -> None:
         help="CSV/NPZ: a column to use as an axis, in the model's axis order; repeat for each axis",
     )
     p.add_argument("--time-column", default=None, metavar="NAME", help="CSV: the time column; default t, t_s, time")
-    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="CSV without a time column: sample rate")
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="sample rate: without a time column, the rate; with one, the nominal rate it is checked against, "
+        "overriding it (samples taken as consecutive, said in a note) where its stamps do not fit",
+    )
+    p.add_argument(
+        "--time-unit",
+        choices=("s", "ms", "us"),
+        default=None,
+        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
+    )
     p.add_argument(
         "--unit",
         default=None,
@@ -176,6 +193,26 @@ def register(sub) -> None:
         help="with --zupt auto: one CSV row per candidate rest (start_s, end_s, samples, decision, reason, "
         "the statistics it was judged on)",
     )
+    p.add_argument(
+        "--tune",
+        action="store_true",
+        help="first fit sigma_n, sigma_eps and R to this recording (maximum likelihood of the innovations, as "
+        "accelnav tune, using its fixes and rests), then smooth with them",
+    )
+    p.add_argument(
+        "--tune-evaluations",
+        type=int,
+        default=TUNE_EVALUATIONS,
+        metavar="N",
+        help=f"--tune: likelihood evaluations at most; default {TUNE_EVALUATIONS}",
+    )
+    p.add_argument(
+        "--tune-seconds",
+        type=float,
+        default=TUNE_SECONDS,
+        metavar="S",
+        help=f"--tune: wall time of the search at most (the best figures by then are used); default {TUNE_SECONDS:g}",
+    )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     _csv_arg(p)
     p.set_defaults(func=cmd_smooth)
@@ -205,9 +242,10 @@ def _load(args) -> tuple[dict[str, np.ndarray], Model]:
     from accelnav.data.recording import check_rate, on_grid, read_recording
     from accelnav.link.logfile import is_log
 
-    path = args.run
-    if not path.is_file():
-        raise UserError(f"{path}: no such file")
+    path = check_input(args.run)  # what it is, when not a readable file (a FIFO is refused before a read)
+    for flag in ("out", "csv"):  # an output that cannot be written is refused before the work
+        if getattr(args, flag, None) is not None:
+            check_output(getattr(args, flag), f"--{flag}")
     override = load_model(args.model) if args.model is not None else None
     if is_log(path):
         from accelnav.cli.record import log_run_arrays
@@ -225,8 +263,16 @@ def _load(args) -> tuple[dict[str, np.ndarray], Model]:
     if unit is None and model is not None and model.sensor.kind == "calibrated":
         unit = model.sensor.calibrated.unit
     rec = read_recording(
-        path, axes=args.axis, unit=unit, rate_hz=args.rate, time_column=args.time_column, allow_gaps=args.allow_gaps
+        path,
+        axes=args.axis,
+        unit=unit,
+        rate_hz=args.rate,
+        time_column=args.time_column,
+        allow_gaps=args.allow_gaps,
+        time_unit=args.time_unit,
     )
+    for note in rec.notes:
+        print(note)
     if model is None:
         model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
     check_rate(rec, model.rate_hz, str(model.source))
@@ -271,7 +317,7 @@ def _is_recording_npz(path: Path) -> bool:
 def _with_model(path, arrays, model: Model, override: Model | None, args) -> tuple[dict[str, np.ndarray], Model]:
     from accelnav.data.recording import GAP_FACTOR
 
-    for flag in ("axis", "time_column", "rate", "unit"):
+    for flag in ("axis", "time_column", "rate", "unit", "time_unit"):
         if getattr(args, flag) not in (None, []):
             raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
     if override is not None:
@@ -369,14 +415,6 @@ def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray) -> str:
     )
 
 
-def _write_text(path: Path, text: str) -> None:
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write: {exc.strerror}") from None
-
-
 def cmd_smooth(args) -> int:
     from accelnav.estimate import zupt
     from accelnav.estimate.fixes import read_fixes
@@ -412,10 +450,13 @@ def cmd_smooth(args) -> int:
         rest = zupt.accepted_mask(decisions, len(cand))
         print(_zupt_summary(decisions, params, rest))
         if args.zupt_report is not None:
-            _write_text(args.zupt_report, zupt.report_csv(decisions, arrays["t"]))
+            write_text(args.zupt_report, zupt.report_csv(decisions, arrays["t"]), flag="--zupt-report")
             print(f"wrote {args.zupt_report}")
     elif args.zupt is not None:
         rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
+    if args.tune:
+        model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
+    inputs = arrays
     arrays = smooth_run(arrays, model, fixes=fixes, rest=rest, zupt_params=params, rest_sigma=rest_sigma)
     if args.zupt == "auto":  # kept in the run file for the plots: [start_s, end_s, accepted] per candidate
         t = arrays["t"]
@@ -426,10 +467,12 @@ def cmd_smooth(args) -> int:
         print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
     if fixes is not None:
         print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
+    _consistency(arrays, model, inputs, fixes, dict(rest=rest, zupt_params=params, rest_sigma=rest_sigma))
     print(_summary(arrays))
     rows = position_errors(arrays, model)
     if rows:
         print(format_errors(rows))
+        _truth_versus_baselines(rows)
     strides = stride_table(arrays, model)
     if strides:
         print(format_strides(strides))
@@ -441,3 +484,92 @@ def cmd_smooth(args) -> int:
         for path in plot_smoothing(arrays, model, args.plots):
             print(f"wrote {path}")
     return 0
+
+
+def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) -> Model:
+    """smooth --tune: the model with the maximum-likelihood noise figures of this recording, in a stated budget."""
+    import time
+
+    from accelnav.estimate import zupt
+    from accelnav.estimate.tune import FIGURES, tune, with_figures
+
+    if args.tune_evaluations < 10:
+        raise UserError(f"--tune-evaluations: got {args.tune_evaluations}; accepted: 10 or more")
+    if not args.tune_seconds > 0:
+        raise UserError(f"--tune-seconds: got {args.tune_seconds:g}; accepted: a time > 0 s")
+    accel = np.asarray(arrays["accel"], dtype=np.float64)
+    n, m = accel.shape
+    extras = [list(fixes[j]) if fixes is not None else [] for j in range(m)]
+    if rest is not None:
+        r2 = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, m))
+        for j in range(m):
+            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
+            extras[j] += zupt.axis_updates(r2[:, j], sigma, model, params)[1]
+    print(
+        f"tune: fitting {', '.join(FIGURES)} to {n} samples x {m} axes with {sum(map(len, extras))} aids; budget "
+        f"{args.tune_evaluations} evaluations, {args.tune_seconds:g} s"
+    )
+    t0 = time.monotonic()
+    try:
+        r = tune(
+            model,
+            accel,
+            ~np.asarray(arrays["clipped"], dtype=bool),
+            extras,
+            max_evaluations=args.tune_evaluations,
+            max_seconds=args.tune_seconds,
+            intervals=False,
+        )
+    except ValueError as exc:
+        raise UserError(f"{args.run}: --tune: {exc}") from None
+    figs = ", ".join(f"{f} {r.start[f]:.4g} -> {r.estimate[f]:.4g}" for f in FIGURES)
+    stop = "converged" if r.converged else "stopped at its budget"
+    verdict = "used" if r.adopted else "not significantly better (p >= 0.05): the model's figures kept"
+    print(
+        f"tune: {figs}; ln L +{r.ll_estimate - r.ll_start:.4g} (p = {r.p_value:.3g}); {r.evaluations} evaluations, "
+        f"{time.monotonic() - t0:.1f} s, {stop}; {verdict}"
+    )
+    return with_figures(model, {f: float(f"{v:.6g}") for f, v in r.chosen.items()})
+
+
+def _consistency(arrays, model: Model, inputs, fixes, smooth_kw) -> None:
+    """The NIS of the aids against their chi^2 bounds, and with fixes the held-out comparison: a line each."""
+    from accelnav.estimate.consistency import nis_check
+    from accelnav.estimate.pipeline import holdout
+
+    first = arrays["zupt_nis"][:, 3] > 0  # each rest's first update (see smooth_run)
+    for kind, nis in (("fixes", arrays["fix_nis"]), ("rests", arrays["zupt_nis"][first, 2])):
+        if len(nis):
+            print(nis_check(kind, nis).line())
+    if fixes is None:
+        return
+    h = holdout(inputs, model, fixes, **smooth_kw)
+    if h is None:
+        return
+    print(
+        f"held-out fixes (every other one left out, {h.n} predicted): rms miss "
+        + ", ".join(f"{k} {v:.3g} m" for k, v in h.rms.items())
+    )
+    worse = h.worse_than()
+    if worse:
+        print(
+            f"the smoother misses the held-out fixes more than {' and '.join(worse)} "
+            f"({h.rms['smoother']:.3g} m against {min(h.rms[b] for b in worse):.3g} m): its model does not fit "
+            "this recording: try --tune"
+        )
+
+
+def _truth_versus_baselines(rows) -> None:
+    """With truth and fixes: one line if the smoother is worse than a fix-only baseline (rms over the axes)."""
+    from accelnav.estimate.pipeline import BASELINES
+
+    rms = {}
+    for row in rows:
+        rms.setdefault(row.method, []).append(row.rms**2)
+    rms = {k: float(np.sqrt(np.mean(v))) for k, v in rms.items()}
+    worse = [b for b in BASELINES if b in rms and rms["smoother"] > rms[b]]
+    if worse:
+        print(
+            f"against the truth the smoother ({rms['smoother']:.3g} m rms) is worse than {' and '.join(worse)} "
+            f"({min(rms[b] for b in worse):.3g} m): its model does not fit this recording: try --tune"
+        )

@@ -31,14 +31,15 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
-from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
-from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, read_recording
+from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, read_recording
 from accelnav.errors import UserError
+from accelnav.fileio import check_output, write_text
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
+from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
+from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model, model_name_from
 from accelnav.progress import Progress
 
 
@@ -71,7 +72,20 @@ def register(sub) -> None:
     p.add_argument(
         "--unit", default=None, help="unit of the acceleration columns: g, mg or m/s^2; default: from the name"
     )
-    p.add_argument("--rate", type=float, default=None, metavar="HZ", help="sample rate if there is no time column")
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="sample rate if there is no time column; with one, the nominal rate it is checked against "
+        "(overriding stamps that do not fit it, said in a note)",
+    )
+    p.add_argument(
+        "--time-unit",
+        choices=("s", "ms", "us"),
+        default=None,
+        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
+    )
     p.add_argument("--time-column", default=None, metavar="NAME", help="time column; default: t, t_s, time, ...")
     p.add_argument(
         "--min-duration",
@@ -113,10 +127,16 @@ class AxisResult:
 
 
 def analyse_axis(
-    rec: Recording, axis: str, *, min_duration_s: float, full_scale: float | None, lags: int
+    rec: Recording,
+    axis: str,
+    *,
+    min_duration_s: float,
+    full_scale: float | None,
+    lags: int,
+    sensor_range: tuple[float, str] | None = None,
 ) -> AxisResult:
     """Check, fit, test and identify one axis of ``rec`` (with progress on stderr)."""
-    y = check_axis(rec, axis, min_duration_s=min_duration_s, full_scale=full_scale)
+    y = check_axis(rec, axis, min_duration_s=min_duration_s, full_scale=full_scale, sensor_range=sensor_range)
     j = rec.column(axis)
     name = rec.axis_names[j]
     try:
@@ -147,12 +167,17 @@ def _read(args: argparse.Namespace) -> Recording:
         from accelnav.cli.record import log_run_arrays
         from accelnav.data.recording import from_arrays
 
-        for flag in ("unit", "rate", "time_column"):
+        for flag in ("unit", "rate", "time_column", "time_unit"):
             if getattr(args, flag) is not None:
                 raise UserError(f"--{flag.replace('_', '-')}: not for a recorder log, which says its own")
         arrays, _ = log_run_arrays(path)
         return from_arrays(str(path), arrays, args.axis)
-    return read_recording(path, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column)
+    rec = read_recording(
+        path, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column, time_unit=args.time_unit
+    )
+    for note in rec.notes:
+        print(note)
+    return rec
 
 
 def cmd_fit_bias(args: argparse.Namespace) -> int:
@@ -161,16 +186,22 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
     lo, hi = args.noise_band
     if not (0 < lo < hi):
         raise UserError(f"--noise-band: got {lo:g} {hi:g}; accepted: two times in s, 0 < LO < HI")
+    check_output(args.out)  # a directory named as the model to write is refused before the work
     rec = _read(args)
     base, base_label, given = _base_model(args.model, rec)
     full_scale = base.max_accel_m_s2 if given else None
+    if given:  # the model keeps its rate: the recording must have it (the check filter and smooth make)
+        check_rate(rec, base.rate_hz, base_label)
 
     print(
         f"{rec.source}: {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s), "
         f"axes {', '.join(rec.axis_names)}"
     )
+    sensor_range = (base.max_accel_m_s2, f"the sensor of {base_label}")  # the range the written model claims
     results = [
-        analyse_axis(rec, a, min_duration_s=args.min_duration, full_scale=full_scale, lags=args.lags)
+        analyse_axis(
+            rec, a, min_duration_s=args.min_duration, full_scale=full_scale, lags=args.lags, sensor_range=sensor_range
+        )
         for a in rec.axis_names
     ]
     model = merge(base, rec, results, sigma_n=args.sigma_n, keep_rate=given)
@@ -182,8 +213,7 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
     header = provenance(rec, results, base_label)
     text = dump_model(model, header=header)
     loads_model(text, source=str(args.out))  # a result the loader refuses is not written
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    write_text(args.out, text)  # whole or not at all
     print()
     print("\n".join(model_report(model, base, base_label, rec, results, args.sigma_n, args.out)))
 
@@ -227,7 +257,7 @@ def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: st
         stem = Path(rec.source).name.split(".")[0]
         model = dataclasses.replace(
             model,
-            name=f"{stem}_fit",
+            name=model_name_from(f"{stem}_fit"),  # a file name may hold what the name rule refuses
             description=f"bias and noise fitted from {Path(rec.source).name} by accelnav fit-bias; "
             f"sensor, ranges and filter from {base.name}",
         )

@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.model.load import DEFAULT_MODEL, load_model
 from accelnav.errors import UserError
+from accelnav.fileio import atomic_output
 from accelnav.hil_sim.targets.qemu import MACHINES
+from accelnav.model.load import DEFAULT_MODEL, load_model
 
 
 def register(sub) -> None:
@@ -34,10 +35,10 @@ def register(sub) -> None:
 
 def cmd_hil(args) -> int:
     from accelnav.cli.core import require_scenario
+    from accelnav.hil_sim.sim.sensor import simulate
     from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
     from accelnav.hil_sim.targets.qemu import QemuError
-    from accelnav.hil_sim.sim.sensor import simulate
     from accelnav.progress import Progress
 
     if args.board is not None and args.target != "pil":
@@ -104,7 +105,7 @@ def plot_hil(run, c, path: Path, title: str) -> Path:
     axes[1, 0].legend(fontsize=8, ncol=4)
     fig.suptitle(title)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    with atomic_output(path, flag="--plots") as fh:  # a plot appears whole or not at all
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return path

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import json
 import signal
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from accelnav.errors import UserError
+from accelnav.fileio import atomic_output, check_output
 
 
 def register(sub) -> None:
@@ -64,8 +66,8 @@ def _model_text(args) -> str:
 
 
 def _manifest(args):
-    from accelnav.model.load import load_model
     from accelnav.link.telemetry import Manifest
+    from accelnav.model.load import load_model
 
     if args.manifest is not None:
         try:
@@ -81,6 +83,7 @@ def cmd_record(args) -> int:
     import serial
 
     from accelnav.link.recorder import Recorder, Status
+    from accelnav.link.telemetry import format_counts, link_counts
 
     if args.out.exists() and not args.force:
         raise UserError(f"--out: {args.out} exists; give --force to overwrite it")
@@ -119,21 +122,19 @@ def cmd_record(args) -> int:
         back = f"back at {g['back_s']:.1f} s" if "back_s" in g else "not back"
         lost = f", {g['frames_lost']} frames lost" if "frames_lost" in g else ""
         print(f"accelnav record: link lost at {g['lost_s']:.1f} s, {back} ({g['attempts']} attempts){lost}")
-    s = res.stats
-    print(
-        f"accelnav record: {args.out}: {s['frames'].get('sample', 0)} sample frames in {res.seconds:.1f} s, "
-        f"lost {s['lost']}, duplicates {s['duplicates']}, damaged {s['bad_frames']} "
-        f"(CRC errors {s['crc_errors']}){_compact_counts(s)} ({res.reason})"
-    )
-    return 1 if res.reason.startswith("link lost") else 0
+    print(f"accelnav record: {args.out}: {res.seconds:.1f} s: {format_counts(link_counts(res.stats))} ({res.reason})")
+    if res.reason.startswith("log write failed"):
+        print(f"accelnav record: error: {args.out}: {res.reason}; the recording ended there", file=sys.stderr)
+    return 1 if res.reason.startswith(("link lost", "log write failed")) else 0
 
 
 def _summary(path: Path, model_text: str = "") -> dict:
     from accelnav.link.logfile import LogError
     from accelnav.link.recorder import decode_log
+    from accelnav.link.telemetry import format_counts, link_counts
 
     try:
-        d = decode_log(path, model_text)
+        d = decode_log(path, model_text, rows=False)  # streamed: memory does not grow with the log
     except LogError as exc:
         raise UserError(str(exc)) from None
     s = d.frames["sample"]
@@ -152,7 +153,8 @@ def _summary(path: Path, model_text: str = "") -> dict:
         "damaged_bytes": d.damaged_bytes,
         "torn_bytes": d.torn_bytes,
         **d.stats,
-        "damaged_frames": d.stats["bad_frames"],
+        **link_counts(d.stats),
+        "counts": format_counts(link_counts(d.stats)),
         "host_seconds": float((d.host_t_ns[-1] - d.host_t_ns[0]) / 1e9) if len(s) else 0.0,
         "index_first": int(s["index"][0]) if len(s) else None,
         "index_last": int(s["index"][-1]) if len(s) else None,
@@ -177,23 +179,18 @@ def cmd_log_info(args) -> int:
 
 
 def cmd_log_export(args) -> int:
-    from accelnav.link.logfile import LogError
-    from accelnav.link.recorder import decode_log
     from accelnav.link.telemetry import sample_columns
 
     suffix = args.out.suffix.lower()
     if suffix not in (".csv", ".npz"):
         raise UserError(f"--out: {args.out}: accepted: a .csv or .npz file name")
-    try:
-        d = decode_log(args.log, _model_text(args))
-    except LogError as exc:
-        raise UserError(str(exc)) from None
+    check_output(args.out)  # before the work: a directory named as the output is refused at once
+    d = _decoded(args.log, _model_text(args))
     for w in d.warnings:
         print(f"accelnav log export: warning: {w}")
     cols = sample_columns(d.manifest, d.frames["sample"])
     names = d.manifest.axes
     raw = d.manifest.raw_fields()
-    args.out.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".csv":
         header = ["t_s", "index", "seq", "flags", "host_time_s"]
         table = [cols["t"], cols["index"], cols["seq"], cols["flags"], d.host_t_ns / 1e9]
@@ -206,15 +203,14 @@ def cmd_log_export(args) -> int:
             for s in ("r", "u", "a", "eps"):
                 header.append(f"{ax}_fw_{s}")
                 table.append(cols[s][:, j])
-        np.savetxt(args.out, np.column_stack(table), delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+        with atomic_output(args.out) as fh:  # a kill leaves no partial CSV under the name asked for
+            np.savetxt(fh, np.column_stack(table), delimiter=",", header=",".join(header), comments="", fmt="%.17g")
         print(f"accelnav log export: {args.out}: {len(cols['t'])} rows; {_link_counts(d.stats)}")
         return 0
     # NPZ: an accelnav run file (host/data/runfile.py) plus the firmware's own states
     arrays, _ = log_run_arrays(args.log, d, _model_text(args))
-    tmp = args.out.with_name(args.out.name + ".tmp")
-    with open(tmp, "wb") as fh:
+    with atomic_output(args.out) as fh:
         np.savez_compressed(fh, **arrays)
-    tmp.replace(args.out)
     gaps = int(np.count_nonzero(np.diff(cols["index"]) != 1)) if len(cols["index"]) > 1 else 0
     print(
         f"accelnav log export: {args.out}: {len(cols['t'])} samples; {_link_counts(d.stats)}"
@@ -242,20 +238,32 @@ def _compact_counts(stats: dict) -> str:
     return text
 
 
-def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndarray], object]:
-    """A recorder log as the arrays of an accelnav run file (and its model); what ``log export`` writes."""
-    from accelnav.model.design import input_conversion
-    from accelnav.model.load import ModelError, loads_model
-    from accelnav.data.runfile import FORMAT
+def _decoded(log, model_text: str):
+    """The decoded log, refused in one line when it holds no sample frame (every command on it needs one)."""
     from accelnav.link.logfile import LogError
     from accelnav.link.recorder import decode_log
+
+    try:
+        d = decode_log(log, model_text)
+    except LogError as exc:
+        raise UserError(str(exc)) from None
+    if not len(d.frames["sample"]):
+        raise UserError(
+            f"{log}: 0 sample frames in {d.chunks} chunks ({d.stats['bytes']} bytes): a silent device or a "
+            "recording stopped at once; nothing to process"
+        )
+    return d
+
+
+def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndarray], object]:
+    """A recorder log as the arrays of an accelnav run file (and its model); what ``log export`` writes."""
+    from accelnav.data.runfile import FORMAT
     from accelnav.link.telemetry import sample_columns
+    from accelnav.model.design import input_conversion
+    from accelnav.model.load import ModelError, loads_model
 
     if d is None:
-        try:
-            d = decode_log(log, model_text)
-        except LogError as exc:
-            raise UserError(str(exc)) from None
+        d = _decoded(log, model_text)
     cols = sample_columns(d.manifest, d.frames["sample"])
     names = d.manifest.axes
     raw = d.manifest.raw_fields()

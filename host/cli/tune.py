@@ -15,11 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.cli.core import INPUT_HELP, _input_args, _load
-from accelnav.model.load import loads_model
-from accelnav.model.edit import dump_model
 from accelnav.errors import UserError
 from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, tune, with_figures
 from accelnav.estimate.zupt import ZuptParams
+from accelnav.fileio import write_text
+from accelnav.model.edit import dump_model
+from accelnav.model.load import loads_model
 from accelnav.progress import Progress
 
 MAX_SAMPLES = 500_000  # samples x axes: every likelihood evaluation runs filter and smoother (~340 B per sample)
@@ -123,8 +124,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     out_model = with_figures(model, {f: float(f"{v:.6g}") for f, v in result.chosen.items()})
     text = dump_model(out_model, header=provenance(args, result))
     loads_model(text, source=str(args.out))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    write_text(args.out, text)  # whole or not at all
     print(f"model written to {args.out}")
     return 0
 

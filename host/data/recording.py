@@ -30,14 +30,14 @@ from __future__ import annotations
 import gzip
 import io
 import re
-import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.errors import UserError
+from accelnav.fileio import EXCERPT_CHARS, check_input, excerpt, input_limit, load_npz
+from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.progress import Progress
 
 UNITS = {"g": G0, "mg": G0 * 1e-3, "m/s^2": 1.0}
@@ -56,9 +56,14 @@ _TIME_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6}
 _ACC_PREFIX = re.compile(r"^(acceleration|accel|acc)_?", re.IGNORECASE)
 
 GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap
+SNAP_TOL = 0.01  # a clock within 1 % of a whole number of Hz (>= 10 Hz) is taken as that nominal rate
+MAX_LAG_PERIODS = 5.0  # stamps that jitter more than half a period may still be read by order, within this
+MIN_CLOCK_HZ = 5.0  # a time column in seconds slower than this is no accelerometer's: a ms clock, say
+TIME_UNITS = ("s", "ms", "us")
 MIN_DURATION_S = 60.0
 MIN_SAMPLES = 1000
-CHUNK_CHARS = 1 << 22  # CSV text parsed per piece (progress granularity)
+CHUNK_CHARS = 1 << 18  # CSV text parsed per piece: the reader's memory beyond the numbers it keeps
+MAX_LINE_CHARS = 1 << 16  # a longer line is not a CSV row (a binary file, a file without newlines)
 PILEUP_FRACTION = 0.005  # an extreme value holding this share of the samples, more than its neighbour: a rail
 
 
@@ -77,6 +82,8 @@ class Recording:
     clipped: np.ndarray | None = None  # (N, n_axes) from the file, if it had one
     lines: np.ndarray | None = None  # (N,) the file line of each sample (CSV only), for messages
     time_unit: str | None = None  # the time column's unit as its name says ("s", "ms", "us"), None: unsaid
+    time_column: str | None = None  # where t came from (a CSV column, the NPZ key); None: from the rate
+    notes: tuple[str, ...] = ()  # one line each, for the caller to print: how the clock was read
 
     def where(self, k: int) -> str:
         """Where sample k is in the file: its line (CSV) or its index."""
@@ -115,24 +122,38 @@ def read_recording(
     rate_hz: float | None = None,
     time_column: str | None = None,
     allow_gaps: bool = False,
+    time_unit: str | None = None,
 ) -> Recording:
     """Read ``path`` (CSV, gzip CSV or NPZ); see the module notes. Checks the format, not the content.
 
-    ``allow_gaps`` lets gaps in time through (the caller fills them, see :func:`on_grid`).
+    ``allow_gaps`` lets gaps in time through (the caller fills them, see :func:`on_grid`). ``time_unit``
+    (s, ms, us) is the time column's unit when its name does not say it. ``rate_hz`` with a time column
+    is the nominal rate the clock is checked against (and overridden by, see :func:`_check_time`). The
+    clock is read as :func:`_check_time` says; ``notes`` of the result tell the caller how, one line each.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise UserError(f"{path}: no such file")
+    path = check_input(path)  # a regular file: a FIFO or /dev/zero is refused before it is read
     try:
-        head = path.open("rb").read(4)
+        with path.open("rb") as fh:
+            head = fh.read(4)
     except OSError as exc:
         raise UserError(f"{path}: cannot read: {exc.strerror}") from None
     if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
         raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise UserError(f"--time-unit: got {time_unit!r}; accepted: {', '.join(TIME_UNITS)}")
     if head.startswith(b"PK"):
         rec = _read_npz(path, axes, unit, rate_hz)
     else:
         rec = _read_csv(path, axes, unit, rate_hz, time_column, gz=head.startswith(b"\x1f\x8b"))
+    if time_unit is not None:
+        if rec.time_column is None:
+            raise UserError(f"--time-unit: {path} has no time column (its time comes from the rate)")
+        if rec.time_unit not in (None, time_unit):
+            raise UserError(
+                f"--time-unit {time_unit}: the time column {rec.time_column!r} says its unit is {rec.time_unit}"
+            )
+        if rec.time_unit is None:
+            rec = replace(rec, t=rec.t * _TIME_SCALE[time_unit], time_unit=time_unit)
     return _check_time(rec, rate_hz, allow_gaps)
 
 
@@ -141,11 +162,7 @@ def read_recording(
 
 def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
     src = str(path)
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise UserError(f"{src}: not a readable NPZ file: {exc}") from None
+    data = load_npz(path, src)  # sizes checked before anything is inflated; no pickles
     if "accel" not in data:
         raise UserError(
             f"{src}: no 'accel' array; keys: {', '.join(sorted(data)) or 'none'} (expected accelnav sim's layout)"
@@ -192,7 +209,8 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
         names = tuple(names[i] for i in idx)
         cols = names
         clipped = None if clipped is None else clipped[:, idx]
-    return _finish(src, t, accel, names, cols, (u,) * len(names), model_toml, clipped)
+    rec = _finish(src, t, accel, names, cols, (u,) * len(names), model_toml, clipped)
+    return replace(rec, time_column="t" if "t" in data else None, time_unit=None if "t" in data else "s")
 
 
 def _model(text: str, src: str):
@@ -209,36 +227,146 @@ def _pick(axis: str, names, cols, src: str) -> int:
     raise UserError(f"{src}: no axis or column {axis!r}; available: {', '.join(cols)}")
 
 
-def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recording:
-    src = str(path)
+def _open_text(path: Path, gz: bool):
+    """The file as text in universal-newline mode (``\n``, ``\r\n`` and a lone ``\r`` all end a line)."""
+    raw = gzip.open(path, "rb") if gz else open(path, "rb")
+    return raw, io.TextIOWrapper(raw, encoding="utf-8-sig", newline=None)
+
+
+def _blocks(path: Path, gz: bool, src: str):
+    """(number of the first line, lines) per piece of about CHUNK_CHARS; memory is bounded by the piece, and
+    a line longer than MAX_LINE_CHARS or a NUL byte (binary data) is refused where it is met."""
+    kind = "gzip " if gz else ""
     try:
-        raw = gzip.open(path, "rb").read() if gz else path.read_bytes()
-        text = raw.decode("utf-8-sig")
-    except (OSError, EOFError) as exc:
-        raise UserError(f"{src}: cannot read as {'gzip ' if gz else ''}text: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise UserError(f"{src}: not UTF-8 text (byte {exc.start}); accepted: CSV, gzip CSV or NPZ") from None
-    lines = text[: 1 << 16].splitlines()  # enough for the header
-    skip = 0
-    while skip < len(lines) and (not lines[skip].strip() or lines[skip].lstrip().startswith("#")):
-        skip += 1
-    if skip >= len(lines):
+        raw, fh = _open_text(path, gz)
+    except OSError as exc:
+        raise UserError(f"{src}: cannot read: {exc.strerror or exc}") from None
+    size = path.stat().st_size
+    pos = raw.fileobj if gz else raw
+    first, rest = 1, ""
+    with fh, Progress("read", total=size, unit="bytes") as p:
+        while True:
+            try:
+                block = fh.read(CHUNK_CHARS)
+            except UnicodeDecodeError:
+                raise UserError(f"{src}: not UTF-8 text (after line {first}); accepted: CSV, gzip CSV or NPZ") from None
+            except (OSError, EOFError) as exc:
+                raise UserError(f"{src}: cannot read as {kind}text: {excerpt(str(exc))}") from None
+            text = rest + block
+            nul = text.find("\0")
+            if nul >= 0:
+                raise UserError(
+                    f"{src}: line {first + text.count(chr(10), 0, nul)} holds a NUL byte: binary data, not CSV text"
+                )
+            lines = text.split("\n")
+            rest = lines.pop() if block else ""
+            if len(rest) > MAX_LINE_CHARS:
+                raise UserError(
+                    f"{src}: line {first + len(lines)} is longer than {MAX_LINE_CHARS} characters "
+                    f"({excerpt(rest)}); accepted: CSV text"
+                )
+            if lines or (not block and rest):
+                if not block and rest:
+                    lines.append(rest)
+                yield first, lines
+                first += len(lines)
+            p.update(pos.tell())
+            if not block:
+                return
+
+
+def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recording:
+    """Streamed: the text is parsed piece by piece, only the numbers (and each sample's line) are kept."""
+    src = str(path)
+    head = None
+    pieces: list[np.ndarray] = []
+    line_nos: list[np.ndarray] = []
+    held = 0
+    limit = input_limit()
+    for first, lines in _blocks(path, gz, src):
+        rows, nums = [], []
+        for i, line in enumerate(lines):
+            s = line.strip()
+            if not s or s.startswith("#"):
+                continue
+            if head is None:
+                head = _header(line, first + i, src, axes, unit, rate_hz, time_column)
+                continue
+            if line.count(head.delim) != len(head.cols) - 1:
+                raise UserError(
+                    f"{src}: line {first + i}: {line.count(head.delim) + 1} fields; the header has {len(head.cols)}"
+                )
+            rows.append(line)
+            nums.append(first + i)
+        if not rows:
+            continue
+        try:
+            chunk = np.loadtxt(rows, delimiter=head.delim, usecols=head.use, ndmin=2, dtype=np.float64, comments="#")
+        except ValueError:
+            _locate_bad_cell(rows, nums, head.delim, head.cols, head.use, src)
+            raise  # _locate_bad_cell always raises; this keeps linters quiet
+        pieces.append(chunk.reshape(-1, len(head.use)))
+        line_nos.append(np.asarray(nums, dtype=np.int64))
+        held += pieces[-1].nbytes + line_nos[-1].nbytes
+        if held > limit:
+            raise UserError(
+                f"{src}: more than {sum(len(n) for n in line_nos)} samples by line {nums[-1]}; accepted: at most "
+                f"{limit >> 20} MiB of samples (ACCELNAV_MAX_INPUT_BYTES); cut the recording"
+            )
+    if head is None:
         raise UserError(f"{src}: no header row (the file is empty)")
-    header = lines[skip]
+    table = np.concatenate(pieces) if pieces else np.empty((0, len(head.use)))
+    data_lines = np.concatenate(line_nos) if line_nos else np.empty(0, np.int64)
+    del pieces, line_nos
+    if table.shape[0] < 2:
+        raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
+    time_unit = None
+    if head.tcol:
+        m = _TIME_NAME.match(head.tcol)
+        time_unit = m.group(2).lower() if m and m.group(2) else None
+        t = table[:, 0] * _TIME_SCALE[time_unit]
+        data = table[:, 1:]
+    else:
+        t = np.arange(table.shape[0]) / rate_hz
+        data = table
+        time_unit = "s"
+    accel = data * np.array([UNITS[u] for u in head.units])
+    rec = _finish(src, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
+    return replace(rec, lines=data_lines, time_unit=time_unit, time_column=head.tcol)
+
+
+@dataclass(frozen=True)
+class _Header:
+    delim: str
+    cols: list[str]
+    tcol: str | None
+    chosen: list[str]
+    units: list[str]
+    names: list[str]
+    use: list[int]
+
+
+def _cols(cols) -> str:
+    """The column names for a message, each and all of them capped."""
+    text = ", ".join(c if len(c) <= 40 else c[:37] + "..." for c in cols)
+    return text if len(text) <= 4 * EXCERPT_CHARS else text[: 4 * EXCERPT_CHARS - 3] + "..."
+
+
+def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_column) -> _Header:
     delim = max((",", ";", "\t"), key=header.count)
     if header.count(delim) == 0:
         delim = ","
     cols = [c.strip().strip('"').strip() for c in header.split(delim)]
     if any(_is_number(c) for c in cols):
-        raise UserError(f"{src}: line {skip + 1} should be a header of column names, got {header[:60]!r}")
+        raise UserError(f"{src}: line {line_no} should be a header of column names, got {excerpt(header)}")
     if len(set(cols)) != len(cols):
-        raise UserError(f"{src}: duplicate column names in the header: {cols}")
+        raise UserError(f"{src}: duplicate column names in the header: {_cols(cols)}")
 
     # time column
     tcol = None
     if time_column is not None:
         if time_column not in cols:
-            raise UserError(f"{src}: no time column {time_column!r}; columns: {', '.join(cols)}")
+            raise UserError(f"{src}: no time column {excerpt(time_column)}; columns: {_cols(cols)}")
         tcol = time_column
     else:
         for c in cols:
@@ -246,7 +374,7 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
                 tcol = c
                 break
     if tcol is None and rate_hz is None:
-        raise UserError(f"{src}: no time column (t, t_s, time, ...) and no --rate; columns: {', '.join(cols)}")
+        raise UserError(f"{src}: no time column (t, t_s, time, ...) and no --rate; columns: {_cols(cols)}")
 
     # acceleration columns and their short names
     short = {c: _short_name(c) for c in cols}
@@ -255,12 +383,12 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
         for a in axes:
             hits = [c for c in cols if a in (c, short[c])]
             if not hits:
-                raise UserError(f"{src}: no column {a!r}; columns: {', '.join(cols)}")
+                raise UserError(f"{src}: no column {excerpt(a)}; columns: {_cols(cols)}")
             chosen.append(hits[0])
     else:
         chosen = [c for c in cols if _ACC_PREFIX.match(c) and c != tcol]
         if not chosen:
-            raise UserError(f"{src}: no acceleration column (acc...); name one with --axis; columns: {', '.join(cols)}")
+            raise UserError(f"{src}: no acceleration column (acc...); name one with --axis; columns: {_cols(cols)}")
     units = []
     for c in chosen:
         if unit is not None:
@@ -269,68 +397,16 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
         m = _UNIT_SUFFIX.search(c)
         if not m:
             raise UserError(
-                f"{src}: column {c!r} does not say its unit (suffix _g, _mg, _m_s2); give --unit g or m/s^2"
+                f"{src}: column {excerpt(c)} does not say its unit (suffix _g, _mg, _m_s2); give --unit g or m/s^2"
             )
         units.append(parse_unit(m.group(1)))
     names = [short[c] for c in chosen]
     if len(set(names)) != len(names):
         names = list(chosen)
-
-    use = ([cols.index(tcol)] if tcol else []) + [cols.index(c) for c in chosen]
     # every data row must have the header's number of fields: an extra or a missing cell is refused
     # (loadtxt with usecols would drop an extra one silently); the line of each sample is kept for messages
-    all_lines = text.splitlines()
-    data_lines = []
-    for i in range(skip + 1, len(all_lines)):
-        line = all_lines[i]
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        if line.count(delim) != len(cols) - 1:
-            raise UserError(f"{src}: line {i + 1}: {line.count(delim) + 1} fields; the header has {len(cols)}")
-        data_lines.append(i + 1)
-    try:
-        table = _parse_rows(text, skip + 1, delim, use, src)
-    except ValueError:
-        _locate_bad_cell(text.splitlines(), skip, delim, cols, use, src)
-        raise  # _locate_bad_cell always raises; this keeps linters quiet
-    if table.shape[0] < 2:
-        raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
-    time_unit = None
-    if tcol:
-        m = _TIME_NAME.match(tcol)
-        time_unit = m.group(2).lower() if m and m.group(2) else None
-        t = table[:, 0] * _TIME_SCALE[time_unit]
-        data = table[:, 1:]
-    else:
-        t = np.arange(table.shape[0]) / rate_hz
-        data = table
-        time_unit = "s"
-    accel = data * np.array([UNITS[u] for u in units])
-    rec = _finish(src, t, accel, tuple(names), tuple(chosen), tuple(units), None, None)
-    lines = np.asarray(data_lines, dtype=np.int64) if len(data_lines) == len(t) else None
-    return replace(rec, lines=lines, time_unit=time_unit)
-
-
-def _parse_rows(text: str, skiprows: int, delim: str, use: list[int], src: str) -> np.ndarray:
-    """The numbers of the data rows, parsed in pieces of about CHUNK_CHARS with a progress display."""
-    pos = 0
-    for _ in range(skiprows):
-        nl = text.find("\n", pos)
-        pos = len(text) if nl < 0 else nl + 1
-    pieces = []
-    with Progress("read", total=len(text) - pos, unit="chars") as p:
-        start = pos
-        while start < len(text):
-            end = text.find("\n", min(start + CHUNK_CHARS, len(text)))
-            end = len(text) if end < 0 else end + 1
-            chunk = np.loadtxt(
-                io.StringIO(text[start:end]), delimiter=delim, usecols=use, ndmin=2, dtype=np.float64, comments="#"
-            )
-            if chunk.size:
-                pieces.append(chunk.reshape(-1, len(use)))
-            start = end
-            p.update(start - pos)
-    return np.concatenate(pieces) if pieces else np.empty((0, len(use)))
+    use = ([cols.index(tcol)] if tcol else []) + [cols.index(c) for c in chosen]
+    return _Header(delim, cols, tcol, chosen, units, names, use)
 
 
 def _is_number(s: str) -> bool:
@@ -347,17 +423,16 @@ def _short_name(col: str) -> str:
     return name.strip("_") or col
 
 
-def _locate_bad_cell(lines, skip, delim, cols, use, src) -> None:
-    for i in range(skip + 1, len(lines)):
-        line = lines[i]
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
+def _locate_bad_cell(lines, nums, delim, cols, use, src) -> None:
+    for line, no in zip(lines, nums, strict=True):
         cells = line.split(delim)
         for j in use:
             cell = cells[j].strip() if j < len(cells) else ""
             if not _is_number(cell):
-                what = "is empty" if not cell else f"is not a number ({cell[:20]!r})"
-                raise UserError(f"{src}: line {i + 1}, column {cols[j]!r} {what}; a gap in the data is not accepted")
+                what = "is empty" if not cell else f"is not a number ({excerpt(cell, 24)})"
+                raise UserError(
+                    f"{src}: line {no}, column {excerpt(cols[j], 40)} {what}; a gap in the data is not accepted"
+                )
     raise UserError(f"{src}: cannot parse the numbers (rows of unequal length?)")
 
 
@@ -389,11 +464,21 @@ def from_arrays(source: str, arrays: dict[str, np.ndarray], axes: list[str] | No
         str(arrays["model_toml"]) if "model_toml" in arrays else None,
         np.asarray(arrays["clipped"], dtype=bool)[:, idx] if "clipped" in arrays else None,
     )
-    return _check_time(replace(rec, time_unit="s"), None, False)
+    return _check_time(replace(rec, time_unit="s", time_column="t"), None, False)
 
 
 def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> Recording:
-    """Finite, increasing time without gaps (unless allowed); the rate from the mean step."""
+    """Finite, increasing time; the rate and the samples' places on its grid; gaps refused unless allowed.
+
+    A regular clock (every step within GAP_FACTOR of the median) keeps its stamps and its mean rate. Any
+    other clock is placed on a nominal grid t0 + k / f: f is ``rate_given``, else the first of the mean
+    regular step, the median step and the mean over the run (the last two rounded to whole Hz within
+    SNAP_TOL) on whose grid the stamps fit, each within half a period of its own grid point (gaps: the
+    points between are missing), or failing that, stamps that jitter by more (bunched by a USB or OS
+    buffer) but stay within MAX_LAG_PERIODS of their order, sample i at t0 + i / f. What fits neither
+    is refused, saying how to resample. ``rate_given`` with a time column is checked against it the same
+    way; if the stamps do not fit it, it overrides them (samples taken as consecutive), said in a note.
+    """
     src, t = rec.source, rec.t
     if not np.isfinite(t).all():
         k = int(np.argmax(~np.isfinite(t)))
@@ -407,20 +492,86 @@ def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> R
             f"{int(back.sum())} such steps"
         )
     step = float(np.median(dt))
-    gaps = dt > GAP_FACTOR * step
-    if gaps.any() and not allow_gaps:
-        k = int(np.argmax(gaps))
+    clock = rec.time_column
+    if clock is None:  # the time came from the rate: a perfect grid
+        return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]))
+    if rec.time_unit is None and 1.0 / step < MIN_CLOCK_HZ:
         raise UserError(
-            f"{src}: gap in time of {dt[k]:.6g} s at t = {t[k]:.6g} s (after {rec.where(k)}; the usual step is "
-            f"{step:.6g} s); {int(gaps.sum())} gaps in all"
+            f"{src}: the time column {clock!r} steps by {step:.6g} (median): read as seconds that is "
+            f"{1.0 / step:.6g} Hz, too slow for an accelerometer; it looks like milliseconds: give --time-unit ms "
+            "(or name the column t_ms), or convert it to seconds"
         )
-    if gaps.any():  # the rate from the usual step, the gaps left out
-        rate = 1.0 / float(np.mean(dt[~gaps]))
+    regular = bool(np.all(dt <= GAP_FACTOR * step) and np.all(dt >= step / GAP_FACTOR))
+    if regular and rate_given is None:
+        return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]))  # the mean step: less rounding
+    gap = dt > GAP_FACTOR * step
+    if rate_given is not None:
+        candidates = [rate_given]
     else:
-        rate = (len(t) - 1) / float(t[-1] - t[0])  # the mean step: less rounding than the median
-    if rate_given is not None and abs(rate / rate_given - 1) > 0.01:
-        raise UserError(f"{src}: the time column says {rate:.6g} Hz but --rate says {rate_given:g} Hz")
-    return replace(rec, rate_hz=rate)
+        reg = dt[~gap & (dt >= step / GAP_FACTOR)]
+        candidates = [1.0 / float(np.mean(reg))] if len(reg) else []
+        candidates += [_snap(1.0 / step), _snap((len(t) - 1) / float(t[-1] - t[0]))]
+    span = f"steps {1e3 * dt.min():.3g} to {1e3 * dt.max():.3g} ms, median {1e3 * step:.4g} ms"
+    # each candidate's placement, by stamp or else by order; the one that leaves the fewest samples missing
+    # wins (a median step from bunched stamps is tiny, and its grid fits them with almost every point empty)
+    placements = [p for p in (_grid_place(t, f) or _order_place(t, f) for f in candidates) if p is not None]
+    placed = min(placements, key=lambda p: int(p[0][-1]) + 1 - len(t), default=None)
+    if placed is None:
+        if rate_given is not None:
+            note = (
+                f"{src}: --rate {rate_given:g} Hz overrides the time column {clock!r} ({span}; its stamps do not fit "
+                f"a {rate_given:g} Hz grid): the samples are taken as consecutive at {rate_given:g} Hz"
+            )
+            t_new = t[0] + np.arange(len(t)) / rate_given
+            return replace(rec, t=t_new, rate_hz=float(rate_given), notes=rec.notes + (note,))
+        raise UserError(
+            f"{src}: the time column {clock!r} fits no fixed sample rate ({span}; tried "
+            f"{', '.join(f'{f:.6g}' for f in candidates)} Hz): resample the recording onto a uniform grid, or give "
+            "--rate HZ to take the samples as consecutive at HZ"
+        )
+    k, f, how = placed
+    jumps = np.diff(k) > 1
+    if jumps.any() and not allow_gaps:
+        i = int(np.argmax(jumps))
+        raise UserError(
+            f"{src}: gap in time of {dt[i]:.6g} s at t = {t[i]:.6g} s (after {rec.where(i)}; the usual step is "
+            f"{step:.6g} s); {int(jumps.sum())} gaps in all"
+        )
+    notes = rec.notes
+    if rate_given is not None:
+        notes += (f"{src}: --rate {rate_given:g} Hz checked against the time column {clock!r}: it fits",)
+    if np.any(dt < step / GAP_FACTOR) or how.startswith("by their order"):
+        off = t - t[0] - k / f
+        notes += (
+            f"{src}: the clock {clock!r} jitters ({span}, {1e3 * float(np.sqrt(np.mean(off**2))):.3g} ms rms off the "
+            f"grid): samples placed on the {f:.6g} Hz grid {how}",
+        )
+    if regular and not jumps.any():  # a regular clock the rate agrees with: its stamps as they are
+        return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]), notes=notes)
+    return replace(rec, t=t[0] + k / f, rate_hz=float(f), notes=notes)
+
+
+def _order_place(t: np.ndarray, f: float):
+    """(k, f, how) with sample i at t0 + i / f when no stamp lags its order by MAX_LAG_PERIODS; else None."""
+    lag = (t - t[0]) * f - np.arange(len(t))
+    if np.ptp(lag) > MAX_LAG_PERIODS:
+        return None
+    return np.arange(len(t)), f, f"by their order (the stamps within {1e3 * float(np.ptp(lag)) / f:.3g} ms of it)"
+
+
+def _snap(f: float) -> float:
+    """``f`` rounded to whole Hz when within SNAP_TOL of it (from 10 Hz up), else ``f``."""
+    r = float(round(f))
+    return r if f >= 10 and abs(f / r - 1) <= SNAP_TOL else f
+
+
+def _grid_place(t: np.ndarray, f: float):
+    """(k, f, how) when every stamp is within half a period of its point t0 + k / f, k increasing; else None."""
+    k = np.rint((t - t[0]) * f).astype(np.int64)
+    off = np.abs(t - t[0] - k / f)
+    if np.any(off >= 0.5 / f) or np.any(np.diff(k) < 1):
+        return None
+    return k, f, f"by time stamp (each within {1e3 * float(off.max()):.3g} ms of its point)"
 
 
 def check_rate(rec: Recording, model_rate_hz: float, model_source: str) -> None:
@@ -481,8 +632,12 @@ def check_axis(
     min_duration_s: float = MIN_DURATION_S,
     min_samples: int = MIN_SAMPLES,
     full_scale: float | None = None,
+    sensor_range: tuple[float, str] | None = None,
 ) -> np.ndarray:
-    """The samples of ``axis`` if the bias fit can use them; otherwise a UserError saying what and where."""
+    """The samples of ``axis`` if the bias fit can use them; otherwise a UserError saying what and where.
+
+    ``sensor_range``: (largest |a| in m/s^2, whose range it is); a sample beyond it is a glitch or a wrong
+    unit, named by its place, rather than left to wreck the fit."""
     j = rec.column(axis)
     y = rec.accel[:, j]
     where = f"{rec.source}: axis {rec.axis_names[j]!r}"
@@ -493,6 +648,15 @@ def check_axis(
             f"{where}: {int(bad.sum())} samples are not numbers (NaN/inf), the first at sample {k} "
             f"(t = {rec.t[k]:.6g} s); gaps in the data are not accepted"
         )
+    if sensor_range is not None:
+        out = np.abs(y) > sensor_range[0]
+        if out.any():
+            k = int(np.argmax(out))
+            raise UserError(
+                f"{where}: {rec.where(k)}, column {excerpt(rec.columns[j], 40)}: {y[k]:.6g} m/s^2 is beyond the "
+                f"range +-{sensor_range[0]:.6g} m/s^2 of "
+                f"{sensor_range[1]} ({int(out.sum())} such samples): a glitch, or the wrong unit"
+            )
     if rec.duration < min_duration_s or rec.n < min_samples:
         raise UserError(
             f"{where}: too short: {rec.duration:.4g} s, {rec.n} samples; identifying the warm-up time constant T "

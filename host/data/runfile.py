@@ -34,14 +34,12 @@ their standard deviations) as CSV for spreadsheets and other tools.
 
 from __future__ import annotations
 
-import io
-import os
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from accelnav.errors import UserError
+from accelnav.fileio import atomic_output, excerpt, load_npz
 from accelnav.model.load import Model, ModelError, loads_model
 
 FORMAT = "accelnav-run/1"
@@ -50,31 +48,23 @@ STATE = ("r", "u", "a", "eps")
 
 def save_run(path: str | Path, arrays: dict[str, np.ndarray], model: Model) -> None:
     """Write ``arrays`` and the model's text to ``path`` atomically (write, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     data = dict(arrays)
     data["format"] = np.array(FORMAT)
     data["model_toml"] = np.array(model.text)
     data["model_source"] = np.array(str(model.source))
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
+    with atomic_output(path) as fh:
         np.savez_compressed(fh, **data)
-    os.replace(tmp, path)
 
 
 def load_run(path: str | Path) -> tuple[dict[str, np.ndarray], Model]:
     """Read a run file; returns (arrays, model). Refuses anything else with one line."""
     path = Path(path)
-    if not path.is_file():
-        raise UserError(f"{path}: no such file")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise UserError(f"{path}: not an accelnav run file (NPZ): {exc}") from None
+    arrays = load_npz(path, then=", so not an accelnav run file")  # sizes checked before inflating
     fmt = str(arrays.get("format", ""))
     if fmt != FORMAT:
-        raise UserError(f"{path}: format is {fmt or 'missing'!r}; accepted: {FORMAT!r} (written by accelnav sim)")
+        raise UserError(
+            f"{path}: format is {excerpt(fmt or 'missing')}; accepted: {FORMAT!r} (written by accelnav sim)"
+        )
     for key in ("model_toml", "t", "axis_names", "accel", "clipped"):
         if key not in arrays:
             raise UserError(f"{path}: key {key!r} is missing; the file is damaged or not from accelnav")
@@ -82,7 +72,11 @@ def load_run(path: str | Path) -> tuple[dict[str, np.ndarray], Model]:
         model = loads_model(str(arrays["model_toml"]), source=f"{path}:model_toml")
     except ModelError as exc:
         raise UserError(str(exc)) from None
+    if arrays["accel"].ndim != 2:
+        raise UserError(f"{path}: 'accel' has shape {arrays['accel'].shape}; accepted: (N, n_axes)")
     n, n_axes = arrays["accel"].shape
+    if n == 0:
+        raise UserError(f"{path}: 0 samples; nothing to process (was the device silent?)")
     if arrays["t"].shape != (n,) or arrays["clipped"].shape != (n, n_axes) or len(arrays["axis_names"]) != n_axes:
         raise UserError(f"{path}: array shapes disagree (t, accel, clipped, axis_names); the file is damaged")
     return arrays, model
@@ -108,6 +102,5 @@ def export_csv(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
                     cols.append((f"{name}_{stage}_{s}", x[:, i]))
                     cols.append((f"{name}_{stage}_{s}_sd", sd[:, i]))
     table = np.column_stack([c for _, c in cols])
-    buf = io.StringIO()
-    np.savetxt(buf, table, delimiter=",", header=",".join(n for n, _ in cols), comments="", fmt="%.10g")
-    Path(path).write_text(buf.getvalue())
+    with atomic_output(path, flag="--csv") as fh:
+        np.savetxt(fh, table, delimiter=",", header=",".join(n for n, _ in cols), comments="", fmt="%.10g")

@@ -54,10 +54,13 @@ def smooth_run(
     kernel's per-update innovation gate, which the detector no longer uses). The filter keys are
     rewritten too, so that filter and smoother saw the same measurements.
     Adds ``zupt`` (N, n_axes) bool, the samples whose zero-velocity update
-    was applied, and ``fixes`` (M, 4) [t, axis column, position, sigma].
+    was applied, ``fixes`` (M, 4) [t, axis column, position, sigma], and the normalised innovation
+    squared y^2 / S of every aid the filter applied (accelnav.estimate.consistency): ``fix_nis`` (M,)
+    beside ``fixes``, ``zupt_nis`` (K, 4) [t, axis column, NIS, 1 for the first update of its rest].
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
     from accelnav.estimate import fastsmooth, zupt
+    from accelnav.estimate.consistency import aid_innovations
 
     params = zupt.ZuptParams() if zupt_params is None else zupt_params
     n = len(arrays["t"])
@@ -68,7 +71,7 @@ def smooth_run(
         rest2 = np.broadcast_to(rest2[:, None] if rest2.ndim == 1 else rest2, (n, n_axes))
     keys = {k: [] for k in ("filt_x", "filt_P", "filt_x_prior", "filt_P_prior", "smooth_x", "smooth_P")}
     applied = np.zeros((n, n_axes), dtype=bool)
-    fix_rows = []
+    fix_rows, fix_nis, zupt_nis = [], [], []
     for j in range(n_axes):
         d = axis_design(model, j)
         fx = list(fixes[j]) if fixes is not None else []
@@ -83,17 +86,34 @@ def smooth_run(
         keys["filt_x"].append(res.x_post)
         keys["filt_P"].append(fastsmooth.unpack(res.P_post))
         keys["filt_x_prior"].append(res.x_prior)
-        keys["filt_P_prior"].append(fastsmooth.unpack(res.P_prior))
+        P_prior = fastsmooth.unpack(res.P_prior)
+        keys["filt_P_prior"].append(P_prior)
         keys["smooth_x"].append(res.xs)
         keys["smooth_P"].append(fastsmooth.unpack(res.Ps))
         if len(zupt_ks):
             applied[zupt_ks[res.applied[len(fx) :]], j] = True
         fix_rows += [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for m in fx]
+        if extras:  # NIS only where there are aids: the plain path pays nothing
+            used = [m for m, a in zip(extras, res.applied, strict=True) if a]
+            y, S = aid_innovations(d, arrays["accel"][:, j], ~arrays["clipped"][:, j], res.x_prior, P_prior, used)
+            nis = y * y / S
+            n_fix_used = int(np.sum(res.applied[: len(fx)]))  # fixes are never gated: all of them
+            fix_nis += list(nis[:n_fix_used])
+            zk = np.array([m.k for m in used[n_fix_used:]], dtype=np.int64)
+            if len(zk):
+                # the first update of each rest carries the velocity gathered since the last aid: the test of
+                # the model; the later ones mostly test the zero-velocity sigma, a chosen pseudo-noise
+                moving = np.concatenate(([0], np.cumsum(~rest2[:, j])))  # non-rest samples before each sample
+                first = np.ones(len(zk), dtype=bool)
+                first[1:] = moving[zk[1:]] != moving[zk[:-1]]
+                zupt_nis += list(zip(arrays["t"][zk], [j] * len(zk), nis[n_fix_used:], first, strict=True))
     out = dict(arrays)
     for k, v in keys.items():
         out[k] = np.stack(v)
     out["zupt"] = applied
     out["fixes"] = np.array(fix_rows, dtype=np.float64).reshape(-1, 4)
+    out["fix_nis"] = np.array(fix_nis, dtype=np.float64)
+    out["zupt_nis"] = np.array(zupt_nis, dtype=np.float64).reshape(-1, 4)
     return out
 
 
@@ -150,14 +170,15 @@ def _position_estimates(arrays: dict[str, np.ndarray], model: Model) -> dict[str
         estimates["filter"] = arrays["filt_x"][:, :, 0]
     if "smooth_x" in arrays:
         estimates["smoother"] = arrays["smooth_x"][:, :, 0]
+        estimates.update(fix_baselines(arrays, model))
     return estimates
 
 
 def format_errors(rows: list[PositionErrors]) -> str:
     """A plain-text table of :func:`position_errors`."""
-    lines = [f"{'axis':<6}{'method':<20}{'rms [m]':>12}{'final [m]':>12}{'max |e| [m]':>13}"]
+    lines = [f"{'axis':<6}{'method':<24}{'rms [m]':>12}{'final [m]':>12}{'max |e| [m]':>13}"]
     for row in rows:
-        lines.append(f"{row.axis:<6}{row.method:<20}{row.rms:12.3f}{row.final:12.3f}{row.max_abs:13.3f}")
+        lines.append(f"{row.axis:<6}{row.method:<24}{row.rms:12.3f}{row.final:12.3f}{row.max_abs:13.3f}")
     return "\n".join(lines)
 
 
@@ -233,3 +254,79 @@ def stride_table(arrays: dict[str, np.ndarray], model: Model) -> list[StrideErro
     if "stance" not in arrays or "r" not in arrays:
         return []
     return stride_errors(arrays, _position_estimates(arrays, model))
+
+
+BASELINES = ("fix interpolation", "fix-to-fix integration")
+
+
+def fixes_per_axis(arrays: dict[str, np.ndarray]) -> list[list]:
+    """The fixes of a smoothed run (its ``fixes`` rows) as measurements per axis column."""
+    from accelnav.estimate.kf import position_fix
+
+    out: list[list] = [[] for _ in arrays["axis_names"]]
+    rows = np.asarray(arrays.get("fixes", np.zeros((0, 4)))).reshape(-1, 4)
+    t = np.asarray(arrays["t"])
+    for tf, j, r, s in rows:
+        k = int(np.clip(np.searchsorted(t, tf), 0, len(t) - 1))
+        if k > 0 and abs(t[k - 1] - tf) <= abs(t[k] - tf):
+            k -= 1
+        out[int(j)].append(position_fix(k, r, s))
+    return out
+
+
+def fix_baselines(
+    arrays: dict[str, np.ndarray], model: Model, fixes: list[list] | None = None
+) -> dict[str, np.ndarray]:
+    """(n_axes, N) positions of the two fix-only baselines (accelnav.estimate.consistency); {} without fixes."""
+    from accelnav.estimate.consistency import fix_to_fix_integration, interpolate_fixes
+
+    fixes = fixes_per_axis(arrays) if fixes is None else fixes
+    if not any(fixes):
+        return {}
+    t = arrays["t"]
+    interp, f2f = [], []
+    for j, fx in enumerate(fixes):
+        interp.append(interpolate_fixes(t, fx))
+        f2f.append(
+            fix_to_fix_integration(axis_design(model, j), t, arrays["accel"][:, j], ~arrays["clipped"][:, j], fx)
+        )
+    return dict(zip(BASELINES, (np.stack(interp), np.stack(f2f)), strict=True))
+
+
+@dataclass(frozen=True)
+class Holdout:
+    """RMS miss [m] of each method at fixes it was not given (every other fix of each axis left out)."""
+
+    n: int  # fixes left out, all axes
+    rms: dict[str, float]  # "smoother" and the BASELINES
+
+    def worse_than(self) -> list[str]:
+        """The baselines that beat the smoother here."""
+        return [b for b in BASELINES if self.rms["smoother"] > self.rms[b]]
+
+
+def holdout(arrays: dict[str, np.ndarray], model: Model, fixes: list[list], **smooth_kw) -> Holdout | None:
+    """Smoother and baselines given every other fix, scored on the others; None with < 3 fixes on every axis.
+
+    ``smooth_kw`` (rest, zupt_params, rest_sigma) is passed to :func:`smooth_run`, so the smoother keeps
+    its rests. Truth-free: the misses include the fixes' own noise, the same for every method.
+    """
+    if max((len(f) for f in fixes), default=0) < 3:
+        return None
+    given, held = [], []
+    for fx in fixes:
+        fx = sorted(fx, key=lambda m: m.k)
+        if len(fx) < 3:
+            given.append(fx)
+            held.append([])
+            continue
+        given.append(fx[0::2])
+        held.append(fx[1::2])
+    base = {k: arrays[k] for k in ("t", "axis_names", "accel", "clipped")}
+    sm = smooth_run(base, model, fixes=given, **smooth_kw)
+    estimates = {"smoother": sm["smooth_x"][:, :, 0], **fix_baselines(base, model, given)}
+    rms = {}
+    for name, r in estimates.items():
+        e = [r[j, m.k] - m.z for j, h in enumerate(held) for m in h]
+        rms[name] = float(np.sqrt(np.mean(np.square(e))))
+    return Holdout(sum(len(h) for h in held), rms)

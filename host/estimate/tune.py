@@ -216,8 +216,17 @@ def tune(
     figures: Sequence[str] = FIGURES,
     progress=None,
     max_evaluations: int = MAX_EVALUATIONS,
+    max_seconds: float | None = None,
+    intervals: bool = True,
 ) -> TuneResult:
-    """Maximum-likelihood figures (of sigma_n, sigma_eps, R, and "c2" for every axis's c2) from ``accel``."""
+    """Maximum-likelihood figures (of sigma_n, sigma_eps, R, and "c2" for every axis's c2) from ``accel``.
+
+    ``max_seconds`` bounds the search's wall time (the best point found by then is the estimate; the
+    intervals are then skipped); ``intervals=False`` skips the Hessian and the profile intervals (se and
+    intervals are NaN), for a caller that only wants the estimate.
+    """
+    import time
+
     names = []
     for f in figures:
         if f == "c2":
@@ -236,12 +245,16 @@ def tune(
     lo = np.array([-span if _is_c2(f) else math.log(LN_BOUNDS[f][0]) for f in figures])
     hi = np.array([span if _is_c2(f) else math.log(LN_BOUNDS[f][1]) for f in figures])
     count = [0]
+    deadline = None  # set once the start is evaluated, so that there is always a best point
+    best = [math.inf, None]
 
     def values(theta) -> dict[str, float]:
         th = np.clip(theta, lo, hi)
         return {f: float(t * C2_SCALE if _is_c2(f) else math.exp(t)) for f, t in zip(figures, th, strict=True)}
 
     def nll(theta) -> float:
+        if deadline is not None and time.monotonic() > deadline:
+            raise _OutOfTime
         count[0] += 1
         if progress is not None:
             progress.update(min(count[0], progress.total))
@@ -251,25 +264,57 @@ def tune(
         except ValueError:  # a covariance that is not positive definite at an extreme theta
             return 1e300
         # outside the bounds: the clipped value plus a penalty, so the search turns back
-        return v + 1e3 * float(np.sum(np.maximum(lo - theta, 0) ** 2 + np.maximum(theta - hi, 0) ** 2))
+        v += 1e3 * float(np.sum(np.maximum(lo - theta, 0) ** 2 + np.maximum(theta - hi, 0) ** 2))
+        if v < best[0]:
+            best[0], best[1] = v, np.array(theta, dtype=np.float64)
+        return v
 
     theta0 = np.array([first[f] / C2_SCALE if _is_c2(f) else math.log(first[f]) for f in figures])
     ll0 = -nll(theta0)
-    res = optimize.minimize(
-        nll,
-        theta0,
-        method="Nelder-Mead",
-        options={
-            "xatol": 1e-3,
-            "fatol": 1e-3,
-            "maxfev": max(10, max_evaluations // 3),
-            "initial_simplex": np.vstack([theta0] + [theta0 + 0.5 * e for e in np.eye(len(figures))]),
-        },
-    )
-    theta = np.clip(res.x, lo, hi)
-    ll1 = -nll(theta)
+    deadline = None if max_seconds is None else time.monotonic() + max_seconds
+    try:
+        res = optimize.minimize(
+            nll,
+            theta0,
+            method="Nelder-Mead",
+            options={
+                "xatol": 1e-3,
+                "fatol": 1e-3,
+                "maxfev": max(10, max_evaluations // (3 if intervals else 1)),
+                "initial_simplex": np.vstack([theta0] + [theta0 + 0.5 * e for e in np.eye(len(figures))]),
+            },
+        )
+        converged = bool(res.success)
+        theta = np.clip(res.x, lo, hi)
+        deadline = None  # what follows is bounded by evaluations
+        ll1 = -nll(theta)
+    except _OutOfTime:  # the best point so far (its ln L is known: no further evaluation)
+        converged, intervals = False, False
+        theta, ll1 = np.clip(best[1], lo, hi), -best[0]
+    deadline = None
     if ll1 < ll0:
         theta, ll1 = theta0, ll0
+    if not intervals:
+        est = dict(start)
+        est.update(values(theta))
+        nan = float("nan")
+        lr = max(0.0, 2.0 * (ll1 - ll0))
+        p = float(stats.chi2.sf(lr, len(figures)))
+        return TuneResult(
+            figures=figures,
+            start=start,
+            estimate=est,
+            se_ln={f: nan for f in figures},
+            ci95={f: (nan, nan) for f in figures},
+            ll_start=ll0,
+            ll_estimate=ll1,
+            lr=lr,
+            p_value=p,
+            adopted=p < 0.05,
+            evaluations=count[0],
+            converged=converged,
+            at_bound=_at_bound(figures, theta, lo, hi),
+        )
     # observed information: central differences of -ln L in theta
     h = 0.02
     k = len(figures)
@@ -339,10 +384,18 @@ def tune(
         p_value=p,
         adopted=p < 0.05,
         evaluations=count[0],
-        converged=bool(res.success),
-        at_bound=tuple(f for f, t, a, b in zip(figures, theta, lo, hi, strict=True) if t <= a + 0.05 or t >= b - 0.05),
+        converged=converged,
+        at_bound=_at_bound(figures, theta, lo, hi),
         ends=ends,
     )
+
+
+class _OutOfTime(Exception):
+    """The search's wall-time budget ran out (caught in tune)."""
+
+
+def _at_bound(figures, theta, lo, hi) -> tuple[str, ...]:
+    return tuple(f for f, t, a, b in zip(figures, theta, lo, hi, strict=True) if t <= a + 0.05 or t >= b - 0.05)
 
 
 def _profile_end(nll, theta, f0, i, direction, se, bound, lo, hi, H, count, limit) -> tuple[float, str]:

@@ -126,6 +126,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from accelnav.estimate.kf import Measurement, bias_model, zero_velocity
+from accelnav.fileio import check_input, excerpt, load_npz
 from accelnav.model.design import axis_design
 from accelnav.model.load import Model
 
@@ -588,21 +589,17 @@ def read_zupt_file(path, t: np.ndarray, axis_names: list[str]) -> tuple[np.ndarr
     n, n_axes = len(t), len(axis_names)
     path_s = str(path)
     sig = np.full((n, n_axes), np.nan)
+    check_input(path)  # a FIFO or a device is refused before it is read
     try:
-        head = open(path, "rb").read(2)
-    except FileNotFoundError:
-        raise UserError(f"{path_s}: no such file") from None
+        with open(path, "rb") as fh:
+            head = fh.read(2)
     except OSError as exc:
         raise UserError(f"{path_s}: cannot read: {exc.strerror}") from None
     if head == b"PK":
-        try:
-            with np.load(path, allow_pickle=False) as f:
-                if "rest" not in f.files:
-                    raise UserError(f"{path_s}: no 'rest' array; keys: {', '.join(f.files) or 'none'}")
-                m = np.asarray(f["rest"])
-        except (OSError, ValueError) as exc:
-            raise UserError(f"{path_s}: not a readable NPZ file: {exc}") from None
-        return _mask_from(m, n, n_axes, path_s), sig
+        f = load_npz(path)  # sizes checked before anything is inflated
+        if "rest" not in f:
+            raise UserError(f"{path_s}: no 'rest' array; keys: {excerpt(', '.join(f)) if f else 'none'}")
+        return _mask_from(np.asarray(f["rest"]), n, n_axes, path_s), sig
     with open(path, encoding="utf-8", errors="replace") as fh:
         first = fh.readline().strip().replace(" ", "")
     if first in ("rest", "t_s,rest", "t,rest"):

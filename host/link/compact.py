@@ -23,11 +23,23 @@ batch holds nothing but the next frames in order, which is the common case):
   checkpoint: the samples received in between have no state and are counted
   in ``lost`` as well, so ``lost`` is exactly the samples of the run that
   were not delivered.
-* A checkpoint flagged ``reset`` before the end of the run starts a new run
-  (a reset command, a reboot), unless it is byte for byte the checkpoint that
-  opened the current run and less than ``4 x checkpoint_samples`` samples
-  back (then it is a repeat). A repeated older checkpoint is ignored
-  (``checkpoint_repeats``).
+* Every block and checkpoint carries its run id (the board's boot id plus one
+  per reset command). A frame of another run starts a new run (a reset, a
+  reboot); a frame of a run before it is a repeat (re-sent power-on frames),
+  dropped and counted. Within a run a checkpoint before the end is a repeat
+  (``checkpoint_repeats``), whatever its flags.
+* The stream's first frame, a frame that opens a new run, or one that jumps
+  more than ``4 x checkpoint_samples`` ahead is taken only when one of the
+  next frames agrees with it (same run, a little after it) before one agrees
+  with the run so far; otherwise it is damage (``damaged``, the decoder's
+  ``bad_frames``), not the new truth. The last frame of a batch waits for the
+  next batch to decide; at the end of the stream it is damage.
+* A pause (frames flagged ``resume`` after a gap) counts nothing lost by
+  itself; the run's checkpoints say where the firmware paused (``paused_at``),
+  so the samples it sent before the pause that never arrived count in
+  ``lost``. Rows held before a pause go out before any state-mode row that
+  followed it (:meth:`CompactStream.release_before`): the index of the rows
+  delivered only grows within a run, however the bytes were cut.
 
 A checkpoint the decoder refused never reaches this class: a damaged frame, or
 one whose contents no firmware sends (an axis that does not exist, a
@@ -55,6 +67,7 @@ def concat_records(parts: list, dtype) -> np.ndarray:
     return np.concatenate(raw).view(dtype).ravel()
 
 
+LOOKAHEAD = 8  # frames after a doubtful one that may confirm or refute it
 CARRY, NONE = -2, -1  # a stretch starts from the carried state, a checkpoint (its id), or nothing
 THREAD_MIN = 20_000  # samples in a batch from which the axes' replays run on threads
 
@@ -75,31 +88,63 @@ class CompactStream:
         self.sample_dtype = man.dtypes["sample"]
         self.end: int | None = None  # the index after the run's last sample so far
         self.carry: list[bytes | None] = [None] * len(self.axes)  # replay state at `end`, per axis
-        self.opener: list[tuple[int, bytes] | None] = [None] * len(self.axes)
+        self.run: int | None = None  # the run id (boot id + resets) of the run being decoded
+        self.past_runs: set[int] = set()  # runs before it: their frames, re-sent, are repeats
+        self.pause_from: int | None = None  # end of the run at a pause, until a checkpoint's paused_at says more
+        self.pending = None  # (kind, record): a frame waiting for the next batch to confirm it
+        self.defer = None
+        self.seg_len = [int(man.frames[n]["size"]) + 5 for n in ("block", "checkpoint")]  # bytes, no delimiter
+        self.damaged_bytes = 0
+        self.damaged = 0  # CRC-valid frames refused: a run or an index no frame after them agreed with
         self.last_ck: list[int | None] = [None] * len(self.axes)  # index of the axis' last checkpoint taken
         # rows wait until the checkpoint closing their stretch came (so that a mismatch flags them all):
         # samples are numbered g = 0, 1, ... as accepted; open_from[j]: g where axis j's open stretch began
         self.g = 0
         self.open_from = [0] * len(self.axes)
         self.held = (np.zeros(0, self.sample_dtype), np.zeros(0, np.int64))  # rows, their g
+        self.held_pos = np.zeros(0, np.int64)  # their stream positions (-1: an earlier batch)
         self.lost = self.duplicates = self.mismatches = self.checkpoints = 0
         self.checkpoint_repeats = self.unreplayed = 0
         self._pool = None  # replay threads, made on the first large batch
 
     # ------------------------------------------------------------------
-    def order(self, kinds, ids, b_index, b_n, b_flags, c_index, c_flags, c_axis, c_state, runs=None):
+    def order(
+        self,
+        kinds,
+        ids,
+        b_index,
+        b_n,
+        b_flags,
+        c_index,
+        c_flags,
+        c_axis,
+        c_state,
+        runs=None,
+        b_run=None,
+        c_run=None,
+        c_paused=None,
+    ):
         """The per-frame rule over frames in stream order (``kinds`` 0 block, 1 checkpoint; ``ids`` into the
         block or checkpoint arrays): (accepted block ids, break positions, per axis [[position, ck id, verify,
         sync]]): a checkpoint verifies the stretch ending at its position unless a break came first there, and
         the replay starts from it unless a break follows it there (its state is then the one before a gap).
-        ``runs`` (from :meth:`feed`): (run_end, prev_end, nbefore): frames k .. run_end[k] - 1 each continue
-        the one before them in the stream (no flag, no repeated checkpoint), prev_end[k] being where the
-        frame before k left the index; reached with ``end == prev_end[k]``, such a run is taken whole."""
+        ``runs`` (from :meth:`feed`): (run_end, prev_end, nbefore, run ids): frames k .. run_end[k] - 1 each
+        continue the one before them in the stream (no flag, no repeated checkpoint, the same run id),
+        prev_end[k] being where the frame before k left the index; reached with ``end == prev_end[k]`` in
+        that run, such a run is taken whole. ``b_run``, ``c_run``: the frames' run ids; ``c_paused``: the
+        checkpoints' ``paused_at``. A frame that opens a new run or jumps more than ``window`` samples ahead
+        is taken only once the next frame agrees with it (else it is damage, counted in ``damaged``); the
+        batch's last frame waits in ``self.defer`` for the next batch."""
         end = self.end
         acc, breaks = [], []
         events: list[list[list]] = [[] for _ in self.axes]
         pos = 0
         R, X = self.R, self.X
+        K = len(kinds)
+        b_run = b_run if b_run is not None else [0] * len(b_index)
+        c_run = c_run if c_run is not None else [0] * len(c_index)
+        c_paused = c_paused if c_paused is not None else [None] * len(c_index)
+        self.defer = None
 
         def brk(p):
             breaks.append(p)
@@ -109,11 +154,35 @@ class CompactStream:
                         break
                     e[3] = False
 
-        k, K = 0, len(kinds)
+        def where(q):
+            """(run id, index, index after it) of frame q."""
+            if kinds[q] == 0:
+                j = ids[q]
+                return b_run[j], b_index[j], b_index[j] + b_n[j]
+            j = ids[q]
+            return c_run[j], c_index[j], c_index[j]
+
+        def plausible(q, end) -> bool | None:
+            """Frame q opens the stream or a new run, or jumps far ahead: decided by the first of the next
+            frames that agrees with it (the same run, within a window after it: True) or with the run so far
+            (False); None when no frame follows in this batch. Frames damaged beyond that: False."""
+            r, idx, after = where(q)
+            if q + 1 >= K:
+                return None
+            for q2 in range(q + 1, min(K, q + 1 + LOOKAHEAD)):
+                r2, idx2, _ = where(q2)
+                if r2 == r and idx <= idx2 <= after + self.window:
+                    return True
+                if end is not None and r2 == self.run and idx2 <= end + self.window:
+                    return False
+            return False
+
+        k = 0
         while k < K:
             kind, i = kinds[k], ids[k]
             k += 1
             bulk = runs is not None and end is not None and runs[0][k - 1] > k - 1 and runs[1][k - 1] == end
+            bulk = bulk and runs[3][k - 1] == self.run
             if bulk and not (breaks and breaks[-1] == pos):  # (a checkpoint right after a break: the rule)
                 r = runs[0][k - 1]  # frames k - 1 .. r - 1 follow on: accepted as the rule would, in bulk
                 nb = runs[2]
@@ -133,44 +202,70 @@ class CompactStream:
                         end = b_index[blk[-1]] + b_n[blk[-1]]
                     k = r
                     continue
+            run, idx, _ = where(k - 1)
+            fl = b_flags[i] if kind == 0 else c_flags[i]
+            new_run = end is not None and run != self.run
+            if new_run and run in self.past_runs:  # a frame of an earlier run, sent again
+                if kind == 0:
+                    self.duplicates += b_n[i]
+                else:
+                    self.checkpoint_repeats += 1
+                continue
+            if new_run or end is None or idx > end + self.window:
+                ok = plausible(k - 1, end)
+                if ok is None:
+                    self.defer = (kind, i)  # decided by the next frame, in the next batch
+                    break
+                if not ok:
+                    self.damaged += 1  # a CRC-valid frame no firmware sent here: not the new truth
+                    self.damaged_bytes += self.seg_len[kind]
+                    continue
+            if new_run:
+                self.past_runs = self.past_runs | {self.run}
+                if len(self.past_runs) > 64:
+                    self.past_runs = set(sorted(self.past_runs)[-64:])
+                self.run = run
+                self.pause_from = None
+                brk(pos)
+                end = None  # the new run's first frame: no gap counted against the old run
+            if end is None:
+                self.run = run
             if kind == 0:
-                idx, n, fl = b_index[i], b_n[i], b_flags[i]
-                if end is None or (fl & X and idx < end and end - idx > self.window):
-                    brk(pos)  # the first frame seen, or a reset whose checkpoints were lost
+                n = b_n[i]
+                if end is None:
+                    brk(pos)  # the first frame seen, or a new run whose checkpoints were lost
                 elif idx < end:
                     self.duplicates += n
                     continue
                 elif idx > end:
-                    if not fl & R:
+                    if fl & R:
+                        self.pause_from = end  # a pause: paused_at will tell what was lost before it
+                    else:
                         self.lost += idx - end
                     brk(pos)
                 acc.append(i)
                 pos += n
                 end = idx + n
                 continue
-            idx, fl, ax = c_index[i], c_flags[i], c_axis[i]
+            ax = c_axis[i]
             if end is not None and idx < end:
-                st = bytes(c_state[i])
-                op = self.opener[ax]
-                if fl & X and not (op is not None and op == (idx, st) and end - idx <= self.window):
-                    brk(pos)  # a new run: a reset or a reboot
-                    end = idx
-                    self.opener[ax] = (idx, st)
-                    self.last_ck[ax] = idx
-                    events[ax].append([pos, i, False, True])
-                else:
-                    self.checkpoint_repeats += 1
+                self.checkpoint_repeats += 1  # an older checkpoint of this run
                 continue
             if end is not None and idx == end and self.last_ck[ax] == idx and not fl & X:
                 self.checkpoint_repeats += 1  # the one just taken, again
                 continue
             if end is None or idx > end:
-                if end is not None and not fl & R:
-                    self.lost += idx - end
+                if end is not None:
+                    if fl & R:
+                        self.pause_from = end
+                    else:
+                        self.lost += idx - end
                 brk(pos)
                 end = idx
-            if fl & (R | X):
-                self.opener[ax] = (idx, bytes(c_state[i]))
+            if self.pause_from is not None and c_paused[i] is not None:
+                # samples the firmware sent before the pause that never arrived
+                self.lost += max(0, min(int(c_paused[i]), idx) - self.pause_from)
+                self.pause_from = None
             self.last_ck[ax] = idx
             events[ax].append([pos, i, not (breaks and breaks[-1] == pos), True])
         self.end = end
@@ -179,10 +274,20 @@ class CompactStream:
     # ------------------------------------------------------------------
     def feed(self, blocks: np.ndarray, bpos: np.ndarray, cks: np.ndarray, cpos: np.ndarray):
         """Accepted block and checkpoint frames of one batch with their stream positions: (rows, row positions)."""
+        self.held_pos = np.full(len(self.held_pos), -1, np.int64)  # held rows: from before this batch now
+        if self.pending is not None:  # the frame the last batch left undecided goes first (before position 0)
+            kind, rec = self.pending
+            self.pending = None
+            if kind == 0:
+                blocks, bpos = np.concatenate([rec, blocks]), np.r_[-1, bpos].astype(np.int64)
+            else:
+                cks, cpos = np.concatenate([rec, cks]), np.r_[-1, cpos].astype(np.int64)
         nb, nc = len(blocks), len(cks)
         empty = np.zeros(0, self.sample_dtype), np.zeros(0, np.int64)
         if nb + nc == 0:
             return empty
+        b_run = blocks["run"].astype(np.int64)
+        c_run = cks["run"].astype(np.int64)
         b_index = blocks["index"].astype(np.int64)
         b_n = blocks["n"].astype(np.int64)
         b_flags = blocks["flags"].astype(np.int64)
@@ -204,6 +309,7 @@ class CompactStream:
             idx[isb], idx[~isb] = b_index[ids[isb]], c_index[ids[~isb]]
             fl[isb], fl[~isb] = b_flags[ids[isb]], c_flags[ids[~isb]]
             regular = bool(np.all(idx == self.end + nbefore) and not np.any(fl & (self.R | self.X)))
+            regular = regular and bool(np.all(b_run == self.run) and np.all(c_run == self.run))
             if regular and nc:  # and no checkpoint twice (the rule counts a repeat)
                 ax_o, idx_o = c_axis[ids[~isb]], c_index[ids[~isb]]
                 for j in range(len(self.axes)):
@@ -233,16 +339,24 @@ class CompactStream:
                 c_flags.tolist(),
                 c_axis.tolist(),
                 cks["state"],
-                self._runs(kinds, ids, isb, n_sel, b_index, b_n, b_flags, c_index, c_flags, c_axis),
+                self._runs(kinds, ids, isb, n_sel, b_index, b_n, b_flags, c_index, c_flags, c_axis, b_run, c_run),
+                b_run.tolist(),
+                c_run.tolist(),
+                cks["paused_at"].astype(np.int64).tolist(),
             )
             acc = np.asarray(acc, np.int64)
+            if self.defer is not None:
+                kind, i = self.defer
+                self.pending = (kind, (blocks if kind == 0 else cks)[i : i + 1].copy())
         return self._rows(blocks[acc], bpos[acc], breaks, events, cks)
 
-    def _runs(self, kinds, ids, isb, n_sel, b_index, b_n, b_flags, c_index, c_flags, c_axis):
+    def _runs(self, kinds, ids, isb, n_sel, b_index, b_n, b_flags, c_index, c_flags, c_axis, b_run, c_run):
         """For :meth:`order`: which frames continue the one before them in the stream (vectorised)."""
         K = len(kinds)
         idx = np.empty(K, np.int64)
         fl = np.empty(K, np.int64)
+        run = np.empty(K, np.int64)
+        run[isb], run[~isb] = b_run[ids[isb]], c_run[ids[~isb]]
         idx[isb], idx[~isb] = b_index[ids[isb]], c_index[ids[~isb]]
         fl[isb], fl[~isb] = b_flags[ids[isb]], c_flags[ids[~isb]]
         # where the frame before left the index: the end of the last block before it in the stream
@@ -251,6 +365,7 @@ class CompactStream:
         prev = np.r_[-1, last[:-1]]
         prev_end = np.where(prev >= 0, bend[np.maximum(prev, 0)], -2 if self.end is None else self.end)
         cont = (idx == prev_end) & ((fl & (self.R | self.X)) == 0)
+        cont &= run == np.r_[-1 if self.run is None else self.run, run[:-1]]  # the run of the frame before
         ax = np.where(isb, -1, c_axis[np.where(isb, 0, ids)] if len(c_axis) else -1)
         for j in range(len(self.axes)):  # a checkpoint again right after itself is no continuation
             at = np.flatnonzero(ax == j)
@@ -262,7 +377,7 @@ class CompactStream:
         nxt = stops[np.searchsorted(stops, np.arange(K) + 1)]
         run_end = np.where(cont, nxt, np.arange(K))
         nbefore = np.r_[0, np.cumsum(n_sel)]
-        return run_end.tolist(), prev_end.tolist(), nbefore.tolist()
+        return run_end.tolist(), prev_end.tolist(), nbefore.tolist(), run.tolist()
 
     # ------------------------------------------------------------------
     def _rows(self, blk, bpos, breaks, events, cks):
@@ -373,6 +488,7 @@ class CompactStream:
             rpos, g = rpos[keep], g[keep]
         cut = int(np.searchsorted(g, min(self.open_from)))  # g increases: deliver what no open stretch holds
         self.held = (whole[cut:].copy(), g[cut:])
+        self.held_pos = rpos[cut:]
         return whole[:cut], rpos[:cut]
 
     def _plan(self, j: int, N: int, breakset: set, events: list, valid: np.ndarray, g0: int) -> dict:
@@ -426,11 +542,32 @@ class CompactStream:
         return {job[0]: self.replay.run(*job) for job in jobs}
 
     def release(self) -> np.ndarray:
-        """End of the stream: the rows after the last checkpoint (replayed, never verified)."""
+        """End of the stream: the rows after the last checkpoint (replayed, never verified). A frame still
+        waiting for one to confirm it never got one: damage."""
+        if self.pending is not None:
+            self.damaged += 1
+            self.damaged_bytes += self.seg_len[self.pending[0]]
+            self.pending = None
         rows = self.held[0]
         self.held = (np.zeros(0, self.sample_dtype), np.zeros(0, np.int64))
+        self.held_pos = np.zeros(0, np.int64)
         self.open_from = [self.g] * len(self.axes)
         return rows
+
+    def release_before(self, pos: int) -> tuple[np.ndarray, np.ndarray]:
+        """The held rows of frames before stream position ``pos`` of the last batch (earlier batches: all),
+        with their positions: the state mode's sample frames after them must not overtake them (a pause
+        whose checkpoints were lost leaves them waiting for a checkpoint that will not come). They go out
+        replayed and unverified, as at the end of a stream."""
+        k = int(np.searchsorted(self.held_pos, pos))
+        if k == 0:
+            return np.zeros(0, self.sample_dtype), np.zeros(0, np.int64)
+        rows, g = self.held
+        out, out_pos = rows[:k], self.held_pos[:k]
+        self.held = (rows[k:].copy(), g[k:])
+        self.held_pos = self.held_pos[k:]
+        self.open_from = [max(o, int(g[k - 1]) + 1) for o in self.open_from]
+        return out, out_pos
 
     def _assemble(self, rows, blk, mism) -> None:
         """Every field of the rows but the states (the replay wrote those), through the replay's C fill."""

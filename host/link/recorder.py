@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 import serial
 from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
-from accelnav.native.cbuild import BuildError
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import Decoder, Manifest, encode_command, replay_for
+from accelnav.link.telemetry import Decoder, Manifest, encode_command, end_of_stream, replay_for
+from accelnav.native.cbuild import BuildError
 
 DEFAULT_BAUD = 921600
 
@@ -207,8 +207,13 @@ class Recorder:
                     reason = "frames"
                     self._end_of_frame()
                     break
+        except OSError as exc:
+            if self.log.error is None:  # not the log's write: not ours to explain
+                raise
+            reason = f"log write failed: {exc.strerror or exc}"  # a full disk: end here, the log stays readable
         finally:
             self.log.close()
+            end_of_stream(self.decoder)  # as every reader of the log ends it: the same counts
             self.status.note = ""
             self.status.update(time.monotonic() - t0, self.decoder, final=True)
         return Result(reason, time.monotonic() - t0, self.decoder.stats.as_dict(), self.info_ok, self.warnings, gaps)
@@ -357,41 +362,66 @@ class DecodedLog:
     warnings: list = field(default_factory=list)
 
 
-def decode_log(path, model_text: str = "") -> DecodedLog:
+def decode_log(path, model_text: str = "", *, rows: bool = True) -> DecodedLog:
     """Read a log and decode its bytes with the manifest stored in it; the compact mode's samples are
-    replayed with the model text stored in it, else with ``model_text`` (a log recorded with --manifest)."""
+    replayed with the model text stored in it, else with ``model_text`` (a log recorded with --manifest).
+
+    The log is streamed; ``rows=False`` keeps only the first and last row of each frame kind (what a
+    summary needs), so memory does not grow with the log."""
     import numpy as np
 
     from accelnav.link.compact import concat_records
-    from accelnav.link.logfile import read_log
+    from accelnav.link.logfile import LogError, LogReader
+    from accelnav.model.load import loads_model
 
-    contents = read_log(path)
-    man = Manifest(contents.meta["manifest"])
-    warnings: list[str] = []
-    text = contents.meta.get("model_toml") or model_text
-    dec = Decoder(man, replay=_replay(man, text, warnings, str(path)))
-    parts: dict[str, list] = {n: [] for n in dec.names}
-    times = []
-    for t_ns, data in zip(contents.times, contents.data, strict=True):
-        batch = dec.feed(data)
-        for n in parts:
-            parts[n].append(batch[n])
-        times.append(np.full(len(batch["sample"]), t_ns, np.int64))
-    dec.finish()
-    rest = dec.release()  # rows after the last checkpoint: the recording ended before the next one
+    with LogReader(path) as log:
+        if not isinstance(log.meta.get("manifest"), dict):
+            raise LogError(f"{path}: the header has no frame manifest (an object under 'manifest')")
+        own = log.meta.get("model_toml")
+        if own is not None and not isinstance(own, str):
+            raise LogError(f"{path}: the header's model_toml is not text")
+        try:
+            man = Manifest(log.meta["manifest"])
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+            raise LogError(f"{path}: the header's frame manifest is not valid ({str(exc)[:60]})") from None
+        warnings: list[str] = []
+        if own:  # the log's model is someone else's file: the loader's rule first, or nothing is read (ModelError)
+            loads_model(own, source=f"{path}:model_toml")
+        text = own or model_text
+        dec = Decoder(man, replay=_replay(man, text, warnings, str(path)))
+        parts: dict[str, list] = {n: [] for n in dec.names}
+        times: list = []
+        t_last = 0
+        for t_ns, data in log:
+            batch = dec.feed(data)
+            for n in parts:
+                _keep(parts[n], batch[n], rows)
+            _keep(times, np.full(len(batch["sample"]), t_ns, np.int64), rows)
+            t_last = t_ns
+    rest = end_of_stream(dec)  # rows after the last checkpoint: the recording ended before the next one
     if len(rest):
-        parts["sample"].append(rest)
-        times.append(np.full(len(rest), contents.times[-1], np.int64))
+        _keep(parts["sample"], rest, rows)
+        _keep(times, np.full(len(rest), t_last, np.int64), rows)
     frames = {n: concat_records(p, man.dtypes[n]) for n, p in parts.items()}
     host_t = np.concatenate(times) if times else np.zeros(0, np.int64)
     return DecodedLog(
         man,
-        contents.meta,
+        log.meta,
         frames,
         host_t,
         dec.stats.as_dict(),
-        len(contents.data),
-        contents.damaged_bytes,
-        contents.torn_bytes,
+        log.chunks,
+        log.damaged_bytes,
+        log.torn_bytes,
         warnings,
     )
+
+
+def _keep(parts: list, rows, every: bool) -> None:
+    """Collect ``rows``: all of them, or only the first row seen and the last."""
+    if every:
+        parts.append(rows)
+    elif len(rows):
+        if not parts:
+            parts.append(rows[:1])
+        parts[1:] = [rows[-1:]]

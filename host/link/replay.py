@@ -20,6 +20,8 @@ Python loop over samples.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from accelnav.model.load import Model, loads_model
@@ -171,17 +173,15 @@ class ReplayError(ValueError):
     """The replay cannot be built for this manifest and model; ``str()`` is one line."""
 
 
-def _filter_sources(model: Model) -> dict[str, str]:
-    """accelnav.{h,c} of the model exactly as the firmware build generates them (cached on disk)."""
-    from accelnav.codegen.generated import generated_files
-
-    return {k: v for k, v in generated_files(model).items() if k in ("accelnav.h", "accelnav.c")}
-
-
 class Replay:
-    """The firmware's filter for the axes of ``manifest``, from ``model`` (a Model or its TOML text)."""
+    """The firmware's filter for the axes of ``manifest``, from ``model`` (a Model or its TOML text).
+
+    A log is data from someone else: its manifest and model text are both untrusted. Only C generated
+    from a model that passed the loader is compiled, and the manifest must be the very one that model
+    generates, so nothing of the log but the loader-checked model shapes the C built here."""
 
     def __init__(self, manifest, model: Model | str):
+        from accelnav.codegen.generated import generated_files
         from accelnav.native.cbuild import build_module
 
         if isinstance(model, str):
@@ -191,7 +191,10 @@ class Replay:
                 f"the model text (sha256 {model.sha256[:12]}) is not the firmware's model "
                 f"({manifest.model_sha256[:12]}): no replay"
             )
-        self.axes = list(manifest.axes)
+        files = generated_files(model)
+        if json.loads(files["acnframe.json"]) != manifest.data:
+            raise ReplayError("the frame manifest is not the one its model generates: no replay")
+        self.axes = [a.name for a in model.axes]  # names the loader checked; the manifest's are the same
         self.state_bytes = [int(n) for n in manifest.data["state_bytes"]]
         duty = manifest.input == "duty_cycle"
         args = "acnr_count(in1[k]), acnr_count(in2[k])" if duty else "(int32_t)in1[k]"
@@ -206,7 +209,7 @@ class Replay:
             ]
         src += [_KERNEL.format(ax=ax, AX=ax.upper(), args=args) for ax in self.axes]
         src.append(_fill_source(manifest))
-        sources = dict(_filter_sources(model))
+        sources = {k: v for k, v in files.items() if k in ("accelnav.h", "accelnav.c")}
         sources["acnreplay.c"] = "\n".join(src)
         mod = build_module(
             "acn_replay",

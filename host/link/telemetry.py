@@ -48,6 +48,7 @@ import numpy as np
 from .wirekernel import decode_frames
 
 CHUNK_ROWS = 16384  # frames per vectorised block (bounds the temporaries to a few MB)
+PROTOCOL = 3  # the manifest's protocol_version this decoder reads (codegen.frames.PROTOCOL_VERSION)
 
 
 # --------------------------------------------------------------------------
@@ -60,6 +61,11 @@ class Manifest:
     def __init__(self, data: dict):
         if data.get("protocol") != "accelnav-telemetry":
             raise ValueError("not an accelnav telemetry manifest (key 'protocol')")
+        if data.get("protocol_version") != PROTOCOL:
+            raise ValueError(
+                f"telemetry protocol {data.get('protocol_version')!r}: this accelnav reads protocol {PROTOCOL} "
+                "only (regenerate the firmware and record again, or read it with the accelnav that recorded it)"
+            )
         self.data = data
         self.axes: list[str] = list(data["axes"])
         self.input: str = data["input"]
@@ -347,8 +353,17 @@ class SampleOrder:
         # after a reset: (seq of its first frame, seq, index and decimation of the last frame before it)
         self.before_reset: tuple[int, int, int, int] | None = None
         self._since_reset = 0
+        self.mark: tuple[int, int] | None = None  # (seq, index) the next sample frame starts from
         self.lost = 0
         self.duplicates = 0
+
+    def compact(self, seq: int, index: int) -> None:
+        """A compact-mode checkpoint, in stream order with the sample frames: the firmware had sent sample
+        frames up to ``seq`` (the next one's) when the compact stream reached ``index``. The first sample
+        frame after it counts the frames it missed from there (a mode change whose first frames were lost),
+        however long the compact stretch was."""
+        if self.last_index is None or index > self.last_index:
+            self.mark = (seq, index)
 
     def ack(self, command: int, index: int) -> None:
         """An ack frame, in stream order with the sample frames."""
@@ -363,6 +378,14 @@ class SampleOrder:
 
     def step(self, seq: int, index: int, flags: int) -> bool:
         """One accepted sample frame, in stream order: True to deliver it."""
+        if self.mark is not None and index >= self.mark[1]:
+            ms, mi = self.mark
+            self.mark = None
+            if self.last_index is None or mi > self.last_index:
+                self.lost += (seq - ms) % _WRAP  # the frames sent between the compact stretch and this one
+                self.last_seq, self.last_index = seq, index
+                self.decimation, self.stops = None, []
+                return True
         if self.last_seq is None:
             self.last_seq, self.last_index = seq, index
             return True
@@ -415,14 +438,18 @@ class SampleOrder:
         back = (ls - seq) % _WRAP
         return index <= li and back < _HALF and abs(((li - index) / d - back + _HALF) % _WRAP - _HALF) <= 16
 
-    def run(self, seq, index, flags, stops: list[tuple[int, int]] = ()) -> np.ndarray:
+    def run(self, seq, index, flags, stops: list[tuple[int, int]] = (), marks: list = ()) -> np.ndarray:
         """:meth:`step` over arrays (stream order), vectorised between irregular frames: the keep mask.
-        ``stops``: (number of these sample frames before the ack in the stream, index) of stop acks."""
+        ``stops``: (number of these sample frames before the ack in the stream, index) of stop acks;
+        ``marks``: (number of sample frames before it, seq, index) of compact checkpoints (:meth:`compact`)."""
         n = len(seq)
         keep = np.ones(n, bool)
+        marks = sorted(marks)
         if n == 0:
             for _, s in stops:
                 self.stops.append(s)
+            for _, ms, mi in marks:
+                self.compact(ms, mi)
             return keep
         seq = seq.astype(np.int64)
         index = index.astype(np.int64)
@@ -437,12 +464,17 @@ class SampleOrder:
             hit = (prev < s) & (s <= index)
             hit[:p] = False
             regular &= ~hit
+        for p, _, _ in marks:
+            if p < n:
+                regular[p] = False
         pending = sorted(stops)
         irregular = np.flatnonzero(~regular)
         i = 0
         while i < n:
             while pending and pending[0][0] <= i:
                 self.stops.append(pending.pop(0)[1])
+            while marks and marks[0][0] <= i:
+                self.compact(*marks.pop(0)[1:])
             keep[i] = self.step(int(seq[i]), int(index[i]), int(flags[i]))
             i += 1
             if not keep[i - 1] or i == n or self.before_reset:
@@ -450,11 +482,15 @@ class SampleOrder:
             nb = irregular[np.searchsorted(irregular, i)] if irregular.size and irregular[-1] >= i else n
             if pending:
                 nb = min(nb, max(pending[0][0], i))
+            if marks:
+                nb = min(nb, max(marks[0][0], i))
             if nb > i:
                 self._regular(seq[i - 1 : nb], index[i - 1 : nb])
                 i = nb
         for _, s in pending:
             self.stops.append(s)
+        for _, ms, mi in marks:
+            self.compact(ms, mi)
         return keep
 
     def _regular(self, s: np.ndarray, x: np.ndarray) -> None:
@@ -570,7 +606,8 @@ class Decoder:
         starts[0] = 0
         starts[1:] = zeros[:-1] + 1
         lengths = zeros - starts
-        if self._overlong:  # the first segment began before the kept tail
+        if self._overlong:  # the first segment began before the kept tail: refused, counted at its full length
+            self.stats.garbage_bytes += int(lengths[0]) - (self.max_len + 1)  # (the dropped part: _keep_tail)
             lengths[0] = self.max_len + 1
             self._overlong = False
         self._keep_tail(buf[zeros[-1] + 1 :])
@@ -636,8 +673,13 @@ class Decoder:
                 before = np.searchsorted(where.get("sample", np.zeros(0, np.int64)), where["ack"][is_stop])
                 stops = list(zip(before.tolist(), acks["index"][is_stop].tolist(), strict=True))
         smp = out["sample"]
+        marks = []
+        cks = out.get("checkpoint")
+        if cks is not None and len(cks):
+            before = np.searchsorted(where.get("sample", np.zeros(0, np.int64)), where["checkpoint"])
+            marks = list(zip(before.tolist(), cks["seq"].tolist(), cks["index"].tolist(), strict=True))
         lost0, dup0 = self.order.lost, self.order.duplicates
-        keep = self.order.run(smp["seq"], smp["index"], smp["flags"], stops)
+        keep = self.order.run(smp["seq"], smp["index"], smp["flags"], stops, marks)
         if not keep.all():
             out["sample"] = smp[keep]
             where["sample"] = where["sample"][keep]
@@ -659,7 +701,15 @@ class Decoder:
         c = self.compact
         e = np.zeros(0, np.int64)
         before = {k: getattr(c, k) for k in _COMPACT_COUNTS}
+        dmg0 = c.damaged, c.damaged_bytes
         rows, rpos = c.feed(out["block"], where.get("block", e), out["checkpoint"], where.get("checkpoint", e))
+        if len(out["sample"]):  # held rows before a state-mode frame go out before it, never after
+            early, epos = c.release_before(int(where["sample"][-1]))
+            if len(early):
+                k = np.argsort(np.r_[rpos, epos], kind="stable")
+                rows, rpos = np.concatenate([rows, early])[k], np.r_[rpos, epos][k]
+        self.stats.bad_frames += c.damaged - dmg0[0]
+        self.stats.garbage_bytes += c.damaged_bytes - dmg0[1]
         if len(rows):
             if len(out["sample"]):
                 spos = where["sample"]
@@ -698,7 +748,10 @@ class Decoder:
         their stretch (replayed but never verified: the stream ended first); they count as delivered."""
         if self.compact is None:
             return np.zeros(0, self.man.dtypes["sample"])
+        dmg0 = self.compact.damaged, self.compact.damaged_bytes
         rows = self.compact.release()
+        self.stats.bad_frames += self.compact.damaged - dmg0[0]
+        self.stats.garbage_bytes += self.compact.damaged_bytes - dmg0[1]
         self.stats.frames["sample"] += len(rows)
         return rows
 
@@ -710,6 +763,46 @@ class Decoder:
             self.stats.garbage_bytes += n
         self._tail = b""
         return n
+
+
+def end_of_stream(dec: Decoder) -> np.ndarray:
+    """A recording ends: the bytes after the last delimiter refused as an unfinished frame, the compact rows
+    still waiting for a checkpoint released (and counted). The recorder and every reader of a log end a
+    stream this one way, so that their counts (:func:`link_counts`) agree."""
+    dec.finish()
+    return dec.release()
+
+
+def link_counts(stats: Stats | dict) -> dict:
+    """The counts a user is shown for a link or a log: the one definition the recorder's summary and
+    ``accelnav log info`` both print."""
+    s = stats.as_dict() if isinstance(stats, Stats) else stats
+    return {
+        "samples": int(s["frames"].get("sample", 0)),
+        "lost": s["lost"],
+        "duplicates": s["duplicates"],
+        "damaged_frames": s["bad_frames"],
+        "crc_errors": s["crc_errors"],
+        "garbage_bytes": s["garbage_bytes"],
+        **(
+            {k: s[k] for k in ("checkpoints", "mismatches", "checkpoint_repeats", "unreplayed")}
+            if s["frames"].get("block")
+            else {}
+        ),
+    }
+
+
+def format_counts(c: dict) -> str:
+    """:func:`link_counts` as the one line both the recorder and ``log info`` print."""
+    text = (
+        f"{c['samples']} samples, lost {c['lost']}, duplicates {c['duplicates']}, "
+        f"damaged {c['damaged_frames']} frames (CRC errors {c['crc_errors']}, {c['garbage_bytes']} bytes)"
+    )
+    if "checkpoints" in c:
+        text += f"; replay: {c['checkpoints']} checkpoints matched, {c['mismatches']} mismatches"
+        if c["unreplayed"]:
+            text += f", {c['unreplayed']} samples unreplayed (no model text)"
+    return text
 
 
 def replay_for(man: Manifest, model):
@@ -761,6 +854,8 @@ def decode_naive(
     names = {n: [f["name"] for f in man.frames[n]["fields"]] for n in ("sample", "ack")}
     i_seq, i_index, i_flags = (1 + names["sample"].index(k) for k in ("seq", "index", "flags"))
     i_cmd, i_aindex = (1 + names["ack"].index(k) for k in ("command", "index"))
+    ck_names = [f["name"] for f in man.frames["checkpoint"]["fields"]] if "checkpoint" in man.frames else []
+    i_cseq = 1 + ck_names.index("seq") if ck_names else None
     segments = data.split(b"\0")[:-1]  # the piece after the last delimiter is unfinished
     for seg in segments:
         if not seg:
@@ -779,10 +874,12 @@ def decode_naive(
             continue
         if kind[0] == "ack":
             order.ack(rec[i_cmd], rec[i_aindex])
+        if kind[0] == "checkpoint":
+            order.compact(rec[i_cseq], rec[1])
         if kind[0] in ("block", "checkpoint"):
             if kind[0] == "block" and not 1 <= rec[3] <= man.data["block_samples"]:
                 continue
-            if kind[0] == "checkpoint" and not man.checkpoints_sane([rec[3]], [np.frombuffer(rec[4], np.uint8)])[0]:
+            if kind[0] == "checkpoint" and not man.checkpoints_sane([rec[3]], [np.frombuffer(rec[-1], np.uint8)])[0]:
                 continue
             compact.append((len(out["sample"]), kind[0], rec))
         out[kind[0]].append(rec)
@@ -791,7 +888,8 @@ def decode_naive(
         rows, extra = _naive_rows(man, compact, replay)
         lost += extra["lost"]
         dups += extra["duplicates"]
-        merged = [(i, 0, r) for i, r in enumerate(out["sample"])] + [(p, 1, r) for p, r in rows]
+        # a compact row whose block came after p sample frames goes before sample frame p (stream order)
+        merged = [(i, 1, r) for i, r in enumerate(out["sample"])] + [(p, 0, r) for p, r in rows]
         out["sample"] = [r for _, _, r in sorted(merged, key=lambda x: (x[0], x[1]))]
     if counts is not None:
         counts.update(extra)
@@ -813,17 +911,21 @@ def _naive_rows(man: Manifest, frames: list, replay) -> tuple[list, dict]:
         kinds.append(0 if k == "block" else 1)
         ids.append(nb if k == "block" else nc)
         nb, nc = (nb + 1, nc) if k == "block" else (nb, nc + 1)
-    # block tuple: type, index, flags, n, 5 counters, aflags (bytes, or B values past 4 axes), then per
-    # axis and raw field B values
-    wide = not isinstance(blocks[0][9], bytes) if blocks else False
-    base0 = 9 + B if wide else 10
-    aflags = [r[9 : 9 + B] if wide else r[9] for r in blocks]
+    # block tuple: type, index, flags, n, run, 5 counters, aflags (bytes, or B values past 4 axes), then
+    # per axis and raw field B values; checkpoint: type, index, flags, axis, run, paused_at, seq, state
+    i_af = 10
+    wide = not isinstance(blocks[0][i_af], bytes) if blocks else False
+    base0 = i_af + B if wide else i_af + 1
+    aflags = [r[i_af : i_af + B] if wide else r[i_af] for r in blocks]
     bpos = [p for p, k, _ in frames if k == "block"]
-    states = [r[4] for r in cks]
+    states = [r[7] for r in cks]
     acc, breaks, events = cs.order(
         kinds, ids, [r[1] for r in blocks], [r[3] for r in blocks], [r[2] for r in blocks],
         [r[1] for r in cks], [r[2] for r in cks], [r[3] for r in cks], [np.frombuffer(s, np.uint8) for s in states],
+        None, [r[4] for r in blocks], [r[4] for r in cks], [r[5] for r in cks],
     )  # fmt: skip
+    if cs.defer is not None:  # the stream's last frame, never confirmed: damage
+        cs.damaged += 1
     samples = []  # (block number, slot)
     for i in acc:
         samples += [(i, k) for k in range(blocks[i][3])]
@@ -891,7 +993,7 @@ def _naive_rows(man: Manifest, frames: list, replay) -> tuple[list, dict]:
         index = blk[1] + k
         fl = blk[2] if k == 0 else blk[2] & ~(cs.R | cs.X)
         fl |= cs.REPLAYED | (cs.MISMATCH if mism[p] else 0)
-        row = [stype, index & 0xFFFF, index, fl, *blk[4:9]]
+        row = [stype, index & 0xFFFF, index, fl, *blk[5:10]]
         for j in range(n_ax):
             base = base0 + j * len(raw) * B
             row.append(per_code[(aflags[b][k] >> (2 * j)) & 3])
@@ -905,6 +1007,7 @@ def _naive_rows(man: Manifest, frames: list, replay) -> tuple[list, dict]:
         "mismatches": cs.mismatches,
         "checkpoint_repeats": cs.checkpoint_repeats,
         "unreplayed": cs.unreplayed,
+        "damaged": cs.damaged,
     }
 
 

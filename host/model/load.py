@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +32,66 @@ DEFAULT_MODEL = models_dir() / "adxl250_default.toml"
 SENSOR_KINDS = ("analog", "duty_cycle", "calibrated")
 CALIBRATED_UNITS = ("g", "m/s^2")
 FILTER_FORMS = ("covariance", "gain_schedule")
+
+# Physical bounds on the keys that set a loop's length in the generator (the Riccati run, the l1 sums):
+# a bias time constant beyond 1e7 s (116 days) is a constant bias over any run accepted here, and a
+# dead-reckoning run of 1e6 s (11.6 days) is far past what position from an accelerometer is good for.
+MAX_T_S = 1e7
+MAX_RUN_S = 1e6
+
+# --------------------------------------------------------------------------
+# The one rule for strings that reach generated C (identifiers, comments), a report, a path.
+
+_C_IDENT = (re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}"), "a C identifier of 1 to 32 of A-Z a-z 0-9 _, first a letter")
+_NAME_RULES = {
+    # model name: printed in C comments, the report, manifests; no '/' or '*' (no comment can open or
+    # close), no quote, backslash, '?' (trigraphs), '$', ';', '&', '|', '<', '>', no newline, ASCII only
+    "model name": (
+        re.compile(r"[A-Za-z0-9][A-Za-z0-9 _.,:+=()-]{0,63}"),
+        "1 to 64 of A-Z a-z 0-9 space _ . , : + = ( ) -, starting with a letter or digit",
+    ),
+    # axis names and the C prefix become parts of C identifiers, macro and file names
+    "axis name": _C_IDENT,
+    "C prefix": _C_IDENT,
+    # free text inside a generated /* ... */ comment (the emitters' banner): printable ASCII on one line
+    "comment": (
+        re.compile(r"[^\\?\x00-\x1f\x7f-\U0010ffff]{0,200}"),
+        "at most 200 printable ASCII but \\ and ? on one line",
+    ),
+}
+
+# C89..C23 keywords, and the macros of <stdbool.h>/<stddef.h>/<errno.h> the generated C sits beside
+C_RESERVED = frozenset(
+    """auto break case char const continue default do double else enum extern float for goto if inline int
+    long register restrict return short signed sizeof static struct switch typedef union unsigned void
+    volatile while alignas alignof bool constexpr false nullptr static_assert thread_local true typeof
+    typeof_unqual asm fortran NULL EOF errno assert offsetof""".split()
+)
+
+
+def name_problem(kind: str, value: object) -> str | None:
+    """None when ``value`` is safe as a ``kind`` (a key of _NAME_RULES), else what is accepted (one line).
+
+    The loader refuses a model with it, the codegen CLI a --prefix, and the emitters check their
+    banner text with it again, so nothing reaches C that could close a comment or leave an identifier."""
+    pattern, accepted = _NAME_RULES[kind]
+    if not isinstance(value, str) or not pattern.fullmatch(value):
+        return accepted
+    if "*/" in value or "/*" in value:  # the comment rule's printable ASCII still holds these
+        return accepted + ", without */ or /*"
+    if kind in ("axis name", "C prefix") and value in C_RESERVED:
+        return accepted + ", not a C keyword or standard macro"
+    return None
+
+
+def model_name_from(text: str) -> str:
+    """A model name that passes the rule, made from free text (a recording's file name): every other
+    character becomes _, cut to the rule's 64."""
+    pattern = _NAME_RULES["model name"][0]
+    name = "".join(c if pattern.fullmatch("a" + c) else "_" for c in text)
+    if not pattern.fullmatch(name[:1]):
+        name = "m" + name
+    return name[:64]
 
 
 class ModelError(ValueError):
@@ -251,6 +312,13 @@ class _Table:
             raise self.fail(unknown[0], f"unknown key; accepted here: {accepted}")
 
 
+def _check_name(t: _Table, key: str, value: str, kind: str) -> None:
+    problem = name_problem(kind, value)
+    if problem is not None:
+        shown = ascii(value) if len(value) <= 80 else ascii(value[:80]) + "..."  # ascii(): one line, no escapes
+        raise t.fail(key, f"got {shown}; accepted: {problem}")
+
+
 def _kind(value: object) -> str:
     if isinstance(value, bool):
         return f"a boolean ({str(value).lower()})"
@@ -309,6 +377,7 @@ def _parse(data: dict, source: str, sha: str) -> Model:
 
     meta = top.table("model")
     name = meta.string("name")
+    _check_name(meta, "name", name, "model name")
     description = meta.string("description", "")
     meta.done()
 
@@ -338,7 +407,7 @@ def _parse(data: dict, source: str, sha: str) -> Model:
     ranges = Ranges(
         max_velocity_m_s=rng.number("max_velocity_m_s", lo=0.0, lo_open=True),
         max_position_m=rng.number("max_position_m", lo=0.0, lo_open=True),
-        max_run_s=rng.number("max_run_s", lo=0.0, lo_open=True),
+        max_run_s=rng.number("max_run_s", lo=0.0, lo_open=True, hi=MAX_RUN_S),
     )
     rng.done()
 
@@ -444,14 +513,13 @@ def _parse_axes(top: _Table, sensor: Sensor, source: str) -> tuple[Axis, ...]:
     for i, item in enumerate(raw):
         t = _Table(source, f"axes[{i}]", item)
         name = t.string("name")
-        if not name.isidentifier():
-            raise t.fail("name", f"got {name!r}; accepted: a C identifier (letters, digits, _)")
+        _check_name(t, "name", name, "axis name")
         axes.append(
             Axis(
                 name=name,
                 c1=t.number("c1"),
                 c2=t.number("c2"),
-                T=t.number("T", lo=0.0, lo_open=True),
+                T=t.number("T", lo=0.0, lo_open=True, hi=MAX_T_S),
                 sensitivity=t.number(sens_key, sens_default, lo=0.0, lo_open=True) if sens_key else sens_default,
                 zero_g=t.number(zero_key, zero_default, lo=0.0) if zero_key else zero_default,
             )
@@ -476,4 +544,16 @@ def _parse_axes(top: _Table, sensor: Sensor, source: str) -> tuple[Axis, ...]:
     names = [a.name for a in axes]
     if len(set(names)) != len(names):
         raise ModelError(source, "axes", f"axis names must differ, got {names}")
+    # the C upper-cases names into macros (x and X collide) and appends suffixes to them
+    # (accelnav_x_out_t is axis x's output type and axis x_out's state type)
+    folded = [n.casefold() for n in names]
+    for i, a in enumerate(folded):
+        for j, b in enumerate(folded):
+            if i != j and (a == b or b.startswith(a + "_")):
+                raise ModelError(
+                    source,
+                    f"axes[{j}].name",
+                    f"{names[j]!r} collides with axis {names[i]!r} in the generated C; accepted: names that "
+                    "differ ignoring case, none another's name followed by _",
+                )
     return tuple(axes)

@@ -102,17 +102,22 @@ def build_module(
                 if done.returncode != 0:
                     raise BuildError(f"{' '.join(cmd)} failed:\n{done.stderr}")
                 objs.append(str(obj))
+            # cffi writes the wrapper's C; we compile and link it ourselves, as ffi.compile would through
+            # setuptools, which Python 3.12 and later no longer carry (and a user's venv need not have).
             ffi = cffi.FFI()
             ffi.cdef(cdef)
-            ffi.set_source(
-                modname,
-                preamble,
-                include_dirs=[str(tmp)],
-                extra_objects=objs,
-                extra_link_args=list(extra_link_args),
-                libraries=["m"],
-            )
-            built = Path(ffi.compile(tmpdir=str(tmp), verbose=False))
+            ffi.set_source(modname, preamble)
+            wrapper = tmp / f"{modname}.c"
+            ffi.emit_c_code(str(wrapper))
+            built = tmp / f"{modname}{suffix}"
+            cmd = [
+                cc, "-O2", "-fPIC", "-shared", str(wrapper), *objs, f"-I{tmp}",
+                f"-I{sysconfig.get_paths()['include']}", "-o", str(built), *extra_link_args, "-lm",
+                *(["-undefined", "dynamic_lookup"] if sys.platform == "darwin" else []),
+            ]  # fmt: skip
+            done = subprocess.run(cmd, capture_output=True, text=True)
+            if done.returncode != 0:
+                raise BuildError(f"{' '.join(cmd)} failed:\n{done.stderr}")
             os.replace(built, so)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -17,6 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from scipy import signal
 
+from accelnav.fileio import atomic_output
 from accelnav.identify.biasfit import BiasFit
 from accelnav.identify.noiseid import FLICKER_FACTOR, NoiseId
 from accelnav.identify.whiteness import Whiteness
@@ -31,7 +32,8 @@ def _figure(w: float = 8.0, h: float = 4.8) -> Figure:
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    fig.savefig(path, dpi=110)
+    with atomic_output(path, flag="--plots") as fh:  # a plot appears whole or not at all
+        fig.savefig(fh, format="png", dpi=110)
     return path
 
 

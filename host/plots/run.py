@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.estimate.pipeline import dead_reckoning
+from accelnav.fileio import atomic_output
 from accelnav.model.load import Model
 
 
@@ -64,8 +65,8 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
     fig.suptitle(title or f"accelnav: {model.name}")
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    with atomic_output(path, flag="--plots") as fh:  # a plot appears whole or not at all
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return path
 
@@ -78,8 +79,8 @@ def _axis_columns(plt, n_axes: int, title: str):
 
 def _save(plt, fig, path: Path) -> Path:
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    with atomic_output(path, flag="--plots") as fh:
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return path
 

@@ -32,6 +32,18 @@ uint8_t board_id(void)
     return ACNF_BOARD_HOST;
 }
 
+static uint16_t boot_id = 1u;
+
+uint16_t board_boot_id(void)
+{
+    return boot_id; /* 1, as on the emulated boards, unless a test simulates another power-on */
+}
+
+void board_host_set_boot_id(uint16_t id)
+{
+    boot_id = id;
+}
+
 uint32_t board_rx_lost(void)
 {
     return 0; /* stdin and the in-process buffer lose nothing */

@@ -64,6 +64,11 @@ uint8_t board_id(void)
     return ACNF_BOARD_MICROBIT;
 }
 
+uint16_t board_boot_id(void)
+{
+    return 1u; /* no retained counter set up on this board yet: the value the host board uses too */
+}
+
 uint32_t board_rx_lost(void)
 {
     return rx_lost;
