@@ -37,7 +37,10 @@ longest stretch whose window means stay within ``trim_k`` (3) standard
 deviations of a window mean (sqrt((R + tremor^2) / W), or of the run's own
 median window variance where a body sways more than that) of the run's median is
 one piece, the parts either side are split again; a piece whose first and
-last thirds differ by more than their own noise allows is part of a ramp and dropped. The gentle start of a move
+last thirds differ by more than their own noise allows, and faster than a
+tilt may drift beyond its first second (``level_rate``, 0.1 m/s^2 a second:
+a person standing leans that slowly; over a second a drift cannot be told
+from a vehicle's or a cart's ramp), is part of a ramp and dropped. The gentle start of a move
 is quiet, but its mean walks away from the rest's (a vehicle's, a cart's
 first 0.1 m/s^2), and that is where a rest must end; a constant-acceleration
 hold becomes a piece of its own (refused below for its level). Its ends are
@@ -239,7 +242,17 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
     pieces = sorted(
         (*q, k)
         for k, (a, b) in enumerate(runs)
-        for q in _steady_pieces(means, a, b, bound2 * max(1.0, float(np.median(wvar[a:b])) / total), x, total, w)
+        for q in _steady_pieces(
+            means,
+            a,
+            b,
+            bound2 * max(1.0, float(np.median(wvar[a:b])) / total),
+            x,
+            total,
+            w,
+            p.level_rate * model.Ts,
+            int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
+        )
     )
     # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
     # sample while a sample stays within trim_k sd of the piece's level: a heel strike or the start of a ramp
@@ -278,14 +291,24 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
 
 
 def _steady_pieces(
-    means: np.ndarray, a: int, b: int, bound2: float, x: np.ndarray, total: float, w: int
+    means: np.ndarray,
+    a: int,
+    b: int,
+    bound2: float,
+    x: np.ndarray,
+    total: float,
+    w: int,
+    tilt_rate: float,
+    lean: int,
 ) -> list[tuple[int, int, np.ndarray]]:
     """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
     piece's median: the longest such stretch about the run's median is kept, the parts either side are split
     again. The ends of a piece are trimmed again with the bound scaled to the piece's own variance (of ``x``,
     summed over axes, against ``total``, the sum of R + tremor^2) when that is smaller; a piece whose first
-    and last thirds differ by more than trim_k sd of a window mean (from the piece's own variance) is a
-    stretch of a ramp and dropped. Returns (first, last + 1, median level, own variance) per piece."""
+    and last thirds differ by more than trim_k sd of a window mean (from the piece's own variance) plus
+    ``tilt_rate`` (m/s^2 per sample) times their distance beyond ``lean`` samples is a stretch of a ramp
+    and dropped.
+    Returns (first, last + 1, median level, own variance) per piece."""
     out = []
     todo = [(a, b)]
     while todo:
@@ -309,11 +332,12 @@ def _steady_pieces(
             continue
         p, q = p + int(near[0]), p + int(near[-1]) + 1
         # the level still moving across the piece: part of a ramp, not a rest (trim_k sd of a window mean, from
-        # the piece's own variance: a sway beyond the tremor allowance is noise here, not a ramp)
+        # the piece's own variance: a sway beyond the tremor allowance is noise here, not a ramp), unless it
+        # moves no faster than a tilt may over more than ``lean`` samples (level_rate: a person standing leans
+        # over seconds; over a second or less a drift cannot be told from a vehicle's or a cart's ramp)
         third = (q - p) // 3
-        if third and np.sum((means[p : p + third].mean(axis=0) - means[q - third : q].mean(axis=0)) ** 2) > (
-            bound2 * own / total
-        ):
+        allowed = math.sqrt(bound2 * own / total) + tilt_rate * max(0, q - p - third - lean)
+        if third and np.sum((means[p : p + third].mean(axis=0) - means[q - third : q].mean(axis=0)) ** 2) > allowed**2:
             continue
         out.append((p, q, ref, own))
     return out
