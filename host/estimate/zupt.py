@@ -90,9 +90,12 @@ mean b1:
   cart's, at 0.7 m/s); the rest that follows it supersedes it (below).
 * no anchor yet: a candidate that holds the run's first window is accepted
   when it is **still** (mean window variance <= ``still_k`` R, no tremor
-  allowance): the run starts at rest, as the filter's prior u = 0 says.
-  A run that starts moving (a recording begun on a highway, whose road
-  vibration passes the quiet test) is not still, and gives no anchor.
+  allowance) for at least ``start_s`` (1 s): the run starts at rest, as the
+  filter's prior u = 0 says. A run that starts moving gives no anchor when
+  its road vibration fails the stillness (the simulated highway); KITTI's
+  real drive starts at 8 m/s on a road smooth enough to look still for half
+  a second, hence the duration. A short first stance is not lost: the next
+  one recovers it (below).
 
 **Recovery.** A candidate refused because its velocity does not close (or
 for want of an anchor) can still serve as anchor for the next candidate when
@@ -143,7 +146,8 @@ class ZuptParams:
     level: float = 0.5  # m/s^2, change of the rest level (tilt leak) allowed since the last rest ...
     level_rate: float = 0.1  # m/s^3, ... plus this per second since it ...
     level_max: float = 1.0  # m/s^2, ... never more than this
-    still_k: float = 3.0  # a run's first rest: mean window variance <= still_k R (no tremor allowance)
+    still_k: float = 3.0  # a run's first rest: mean window variance <= still_k R (no tremor allowance) ...
+    start_s: float = 1.0  # s, ... and lasting this long (a car at a smooth cruise is still for a moment)
     min_rest_s: float = 0.1  # s, shortest rest kept (after widening)
     bridge_s: float = 0.1  # s, a break in a rest this short (a knock, a glitch) does not split it
     widen: float = 1.0  # pieces widened by up to widen * (W // 2) samples each side, while samples stay level
@@ -170,7 +174,7 @@ def resolved(model: Model, p: ZuptParams) -> ZuptParams:
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
-    for name in ("recover_s", "drift"):
+    for name in ("recover_s", "drift", "start_s"):
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
@@ -429,7 +433,7 @@ def gate_rests(
             if p.gate == 0:
                 accepted, reason = True, "gate off"
             elif anchor is None and a <= w:
-                accepted = still <= p.still_k
+                accepted = still <= p.still_k and (stop - a) * Ts >= p.start_s
                 reason = "still at start" if accepted else "not still at start"
             else:
                 accepted, reason = False, "no rest before"
