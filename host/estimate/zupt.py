@@ -45,7 +45,14 @@ is quiet, but its mean walks away from the rest's (a vehicle's, a cart's
 first 0.1 m/s^2), and that is where a rest must end; a constant-acceleration
 hold becomes a piece of its own (refused below for its level). Its ends are
 trimmed once more against the piece's own measured noise where that is
-below the tremor allowance (a parked car, a resting cart). Each piece is
+below the tremor allowance (a parked car, a resting cart). What that trim
+cuts off is split again, and a piece of it is kept when it holds three
+windows at least (its thirds a window each: shorter, a ramp's start cannot be
+told from a step) and its level does not walk away from the rest it was cut
+from by more than that noise allows (a ramp leaves a rest's level; a body that
+settled at a new level, or sways about it, does not). On mobgap's MS_001/Trial2
+the standing's level steps by 0.11 m/s^2 at 1.7 s, with no rotation on the
+gyroscope, and stays there; without this its last 0.7 s were lost. Each piece is
 widened by up to ``widen`` * (W // 2) samples each side (every sample of a
 passing window was quiet), sample by sample while each stays within
 ``trim_k`` sd of the piece's level (the piece's own per-sample noise): a
@@ -311,12 +318,13 @@ def _steady_pieces(
     summed over axes, against ``total``, the sum of R + tremor^2) when that is smaller; a piece whose first
     and last thirds differ by more than trim_k sd of a window mean (from the piece's own variance) plus
     ``tilt_rate`` (m/s^2 per sample) times their distance beyond ``lean`` samples is a stretch of a ramp
-    and dropped.
+    and dropped. What the trim cuts off a piece is split again; a piece from it is kept when it holds three
+    windows at least and its level does not walk away from the piece it was cut from (see below).
     Returns (first, last + 1, median level, own variance) per piece."""
     out = []
-    todo = [(a, b)]
+    todo: list[tuple[int, int, np.ndarray | None, int]] = [(a, b, None, 0)]
     while todo:
-        a, b = todo.pop()
+        a, b, parent, side = todo.pop()
         if b <= a:
             continue
         ref = np.median(means[a:b], axis=0)
@@ -325,7 +333,7 @@ def _steady_pieces(
         if not runs:
             continue
         p, q = max(runs, key=lambda r: r[1] - r[0])
-        todo += [(a, a + p), (a + q, b)]
+        todo += [(a, a + p, None, 0), (a + q, b, None, 0)]
         p, q = a + p, a + q
         # the ends, once more, against the piece's own noise (quieter than the tremor allows, on most rests)
         ref = np.median(means[p:q], axis=0)
@@ -334,6 +342,9 @@ def _steady_pieces(
         near = np.flatnonzero(np.sum((means[p:q] - ref) ** 2, axis=1) <= own2)
         if not len(near):
             continue
+        # what the trim cuts off is split again: a standing whose level stepped (by 0.1 m/s^2 on a real
+        # lower-back recording, no rotation on the gyroscope) keeps its second level as a piece of its own
+        todo += [(p, p + int(near[0]), ref, -1), (p + int(near[-1]) + 1, q, ref, 1)]
         p, q = p + int(near[0]), p + int(near[-1]) + 1
         # the level still moving across the piece: part of a ramp, not a rest (trim_k sd of a window mean, from
         # the piece's own variance: a sway beyond the tremor allowance is noise here, not a ramp), unless it
@@ -341,7 +352,20 @@ def _steady_pieces(
         # over seconds; over a second or less a drift cannot be told from a vehicle's or a cart's ramp)
         third = (q - p) // 3
         allowed = math.sqrt(bound2 * own / total) + tilt_rate * max(0, q - p - third - lean)
-        if third and np.sum((means[p : p + third].mean(axis=0) - means[q - third : q].mean(axis=0)) ** 2) > allowed**2:
+        if not third:  # too short to tell: kept as a piece of the run, not as a trimmed end
+            if parent is None:
+                out.append((p, q, ref, own))
+            continue
+        first, last = means[p : p + third].mean(axis=0), means[q - third : q].mean(axis=0)
+        if parent is not None:
+            # cut off a quieter piece beside it: a ramp leaving (or reaching) that rest walks away from its level,
+            # a body that settled at a new level (a lean) or sways about it does not. The thirds must hold a
+            # window each, or a ramp's start cannot be told from a step (a cart's first 0.2 s of a push)
+            near_third, far_third = (first, last) if side > 0 else (last, first)
+            away = math.sqrt(np.sum((far_third - parent) ** 2)) - math.sqrt(np.sum((near_third - parent) ** 2))
+            if third < w or away > allowed:
+                continue
+        elif np.sum((first - last) ** 2) > allowed**2:
             continue
         out.append((p, q, ref, own))
     return out
