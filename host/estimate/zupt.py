@@ -84,8 +84,14 @@ mean b1:
 * **velocity closes**: v_j = Ts sum (z_j - b_j(k)) from the anchor's end to
   the candidate's start, b_j(k) linear from b0 to b1 (a slowly changing tilt
   or grade is absorbed), is within ``gate`` (16, mean over axes of v^2/s^2,
-  s^2 = R Ts^2 m + sigma^2 + (D/2)^2 (sd(b0)^2 + sd(b1)^2) + (drift D)^2):
-  besides white noise and the two levels' uncertainty, ``drift`` (0.02
+  s^2 = R Ts^2 m + sigma^2 + (D/2)^2 (sd(b0)^2 + sd(b1)^2) + (drift D)^2,
+  sd(b) = sqrt(R / n) over the rest's n samples): besides white noise and the
+  two levels' uncertainty from the sensor's noise (not from the rest's own
+  spread: that is the body's sway, and a body at rest keeps its velocity near
+  zero, so the sway leaves its mean far faster than white noise would; taken
+  as white, the spread of a short noisy piece inside a real walk, 88 R over
+  0.12 s, let it "close" at 0.8 m/s and hid 1 m/s of trunk motion from the
+  "no motion between" test above), ``drift`` (0.02
   m/s^2) of mean acceleration error that no rest re-measures (a coarse ADC's
   steps while the signal moves, a scale-factor error, a tilt that changed
   during the move: on the simulated 10-bit cart 0.1-0.4 m/s after a push).
@@ -404,12 +410,13 @@ class _Anchor:
     start: int
     end: int
     b: np.ndarray
-    sd: np.ndarray
+    sd: np.ndarray  # sd of b from the sensor's noise: sqrt(R / samples)
 
 
-def _closure(x, ok, R, Ts, p: ZuptParams, anc: _Anchor, a: int, b1: np.ndarray, sd1: np.ndarray):
+def _closure(x, ok, R, Ts, p: ZuptParams, anc: _Anchor, a: int, here: _Anchor):
     """(chi2, |v|, peak |v|, peak chi2) of the velocity integrated from the anchor to sample a, the bias linear
     from the anchor's level to the candidate's."""
+    b1 = here.b
     m = a - anc.end
     if m <= 0:
         return 0.0, 0.0, 0.0, 0.0
@@ -419,7 +426,7 @@ def _closure(x, ok, R, Ts, p: ZuptParams, anc: _Anchor, a: int, b1: np.ndarray, 
     v_path = np.cumsum(seg, axis=0) * Ts
     v = v_path[-1]
     D = m * Ts
-    s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + sd1**2) + (p.drift * D) ** 2
+    s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
     chi2 = float(np.mean(v * v / s2))
     speeds = np.sqrt((v_path**2).sum(axis=1))
     peak = float(speeds.max())
@@ -446,9 +453,11 @@ def gate_rests(
         xs = x[a:stop][use] if use.any() else np.zeros((1, n_axes))
         b1, kept = _robust_mean(xs, R)
         var = xs.var(axis=0) if len(xs) > 1 else R.copy()
-        sd1 = np.sqrt(np.maximum(var, R) / kept)
         still = float(np.mean(var / R))
-        here = _Anchor(a, stop, b1, sd1)
+        # the level's uncertainty is the sensor's noise averaged over the rest, not the rest's own spread: a body
+        # at rest sways, but its velocity stays near zero, so the sway averages out of its mean far faster than
+        # white noise would; taken as white, it let a noisy 0.12 s piece in a walk "close" at 0.8 m/s
+        here = _Anchor(a, stop, b1, np.sqrt(R / kept))
         while True:
             anchor = anchors[-1][0] if anchors else None
             chi2 = speed = peak = lev = bound = nan
@@ -463,7 +472,7 @@ def gate_rests(
                 accepted, reason = False, "no rest before"
                 if anchor is not None:
                     used = anchor.end
-                    chi2, speed, peak, peak_chi2 = _closure(x, ok, R, Ts, p, anchor, a, b1, sd1)
+                    chi2, speed, peak, peak_chi2 = _closure(x, ok, R, Ts, p, anchor, a, here)
                     moved = peak_chi2 > p.gate
                     near = not moved and (a - anchor.end) * Ts <= p.recover_s
                     lev, bound = _level(p, anchor, b1, a, Ts, p.level if near else None)
@@ -493,7 +502,7 @@ def gate_rests(
             cand = prev[0]
             lev2, bound2 = _level(p, cand, b1, a, Ts)
             if (a - cand.end) * Ts <= p.recover_s and lev2 <= bound2:
-                c2, sp2, pk2, pk_chi2 = _closure(x, ok, R, Ts, p, cand, a, b1, sd1)
+                c2, sp2, pk2, pk_chi2 = _closure(x, ok, R, Ts, p, cand, a, here)
                 if (c2 <= p.gate or sp2 <= p.rel * pk2) and pk_chi2 > p.gate:
                     accepted, reason = True, "recovered"
                     chi2, speed, peak, lev, bound, used = c2, sp2, pk2, lev2, bound2, cand.end
