@@ -958,8 +958,7 @@ HELPERS = r"""
 /* Constant tables the filter only reads: in flash on AVR (its .rodata would be copied into the few
  * KiB of RAM at start, leaving less for the state and the stack), read through pgm_read_*; plain
  * const arrays everywhere else. */
-#if defined(__AVR__)
-#include <avr/pgmspace.h>
+#if defined(__AVR__) /* <avr/pgmspace.h> is included with the other headers, above */
 #define ACN_ROM PROGMEM
 #define ACN_ROM_U16(p) ((uint16_t)pgm_read_word(p))
 #define ACN_ROM_U32(p) ((uint32_t)pgm_read_dword(p))
@@ -1707,7 +1706,10 @@ def emit(
         what_h=f"fixed-point {form} filter, one set per axis",
         what_c=f"fixed-point {form} filter. No floating point, no division, no heap.",
         declarations=H,
-        source_includes="#include <limits.h> /* UINT_MAX: acn_clz32 */\n#include <stddef.h> /* offsetof */\n\n",
+        source_includes=(
+            "#include <limits.h> /* UINT_MAX: acn_clz32 */\n#include <stddef.h> /* offsetof */\n"
+            "#if defined(__AVR__)\n#include <avr/pgmspace.h> /* PROGMEM, pgm_read_*: the tables in flash */\n#endif\n\n"
+        ),
         source_prelude=HELPERS + (recip_helpers() if any(p.form == "covariance" for p in ps) else "") + "\n",
         body=S,
         manifest={"arith": "fixed", "form": form, "axes": MAN},

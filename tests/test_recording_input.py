@@ -46,7 +46,7 @@ def test_smooth_a_csv_on_a_calibrated_model_with_auto_zupt(rec, tmp_path, capsys
     argv = ["smooth", rec, "--model", FOOT, "--time-column", "t", "--axis", "ax", "--axis", "ay", "--zupt", "auto"]
     status, out, err = _run([*argv, "--out", tmp_path / "o.npz"], capsys)
     assert status == 0, err
-    assert "columns ax, ay -> model axes x, y" in out and "accepted by the per-rest gate" in out
+    assert "columns ax, ay -> model axes x, y" in out and "zero-velocity detector:" in out and " accepted" in out
     arrays, model = load_run(tmp_path / "o.npz")
     assert model.name == "foot_imu" and arrays["smooth_x"].shape == (2, len(walk.t), 4)
     # the strides come out right (the CSV has no truth; score against the simulation's)
