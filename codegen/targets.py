@@ -199,7 +199,7 @@ class Fit:
             mark = " (asked for)" if form == self.form else ""
             out.append(f"  {form:<14} {s.flash:8d} {s.ram:6d}  {verdict:<13} {s.static_ram} + {axes}{mark}")
         verdict = self.refusal() or f"the {self.form} form fits the {p.key}"
-        out.append(f"  {verdict} (the application needs its own share)")
+        out.append(f"  {verdict} (the filter object alone: libgcc's helpers and the application need their own share)")
         return out
 
 
