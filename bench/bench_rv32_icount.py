@@ -180,9 +180,10 @@ def driver(model, codes) -> str:
     return text.replace("HASH_COV", hashes["cov"]).replace("HASH_GS", hashes["gs"])
 
 
-def run_core(core: str, model, main_c: str, tmp: Path) -> tuple[dict, dict]:
-    """Build both forms and the driver for ``core``, run it; returns (printed counts, flash per form)."""
-    cc, flags, board_name, ld, link_flags, size, machine, qemu = CORES[core]
+def run_core(core: str, model, main_c: str, tmp: Path, spec: tuple | None = None) -> tuple[dict, dict]:
+    """Build both forms and the driver for ``core`` (or ``spec``, a tuple like CORES' values), run it;
+    returns (printed counts, flash per form)."""
+    cc, flags, board_name, ld, link_flags, size, machine, qemu = spec or CORES[core]
     board = firmware_dir() / "boards" / board_name
     tmp.mkdir(parents=True, exist_ok=True)
     cflags = [*flags, *COMMON]

@@ -17,20 +17,19 @@ MODEL      ?= models/adxl250_default.toml
 FW_DIR     ?= firmware
 FW_GEN     ?= build/firmware/gen/$(basename $(notdir $(MODEL)))
 FW_OUT     ?= build/firmware/$(BOARD)
-FW_WARN    := -std=c99 -Wall -Wextra -Werror -pedantic
+# FW_WARN and each part's compiler, flags and memories (one table, read by the codegen report too)
+include $(FW_DIR)/parts.mk
 FW_INC     := -I$(FW_DIR)/src -I$(FW_DIR)/boards -I$(FW_GEN)
 FW_COMMON  := $(wildcard $(FW_DIR)/src/*.c) $(FW_GEN)/accelnav.c $(FW_GEN)/acnframe.c
 # the folder of the board's sources: stm32vldiscovery is the stm32f103 port built for QEMU's STM32F100
 FW_BOARD_DIR := $(FW_DIR)/boards/$(if $(filter stm32vldiscovery,$(BOARD)),stm32f103,$(BOARD))
 FW_HEADERS := $(wildcard $(FW_DIR)/src/*.h $(FW_DIR)/boards/*.h $(FW_BOARD_DIR)/*.h)
-ARM_CC     ?= arm-none-eabi-gcc
-AVR_CC     ?= avr-gcc
+ARM_CC     ?= $(PART_CC_mps2_an385)
+AVR_CC     ?= $(PART_CC_atmega328p)
 # the ATmega328P: flash, and RAM less what the stack needs (measured in simavr: firmware/README.md)
-AVR_FLASH  := 32768
-AVR_RAM    := 2048
+AVR_FLASH  := $(PART_FLASH_atmega328p)
+AVR_RAM    := $(PART_RAM_atmega328p)
 AVR_STACK  ?= 768
-ARM_CPU    := $(if $(filter microbit,$(BOARD)),-mcpu=cortex-m0,-mcpu=cortex-m3)
-ARM_FLAGS  := $(ARM_CPU) -mthumb -Os -ffunction-sections -fdata-sections -ffreestanding -g
 
 ifeq ($(BOARD),host)
 FW_CC      := $(CC)
@@ -40,7 +39,7 @@ FW_LDFLAGS :=
 FW_SIZE    := size
 else ifeq ($(BOARD),mps2_an385)
 FW_CC      := $(ARM_CC)
-FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/mps2_an385
+FW_CFLAGS  := $(FW_WARN) $(PART_CFLAGS_mps2_an385) -I$(FW_DIR)/boards/mps2_an385
 FW_SRCS    := $(FW_DIR)/boards/mps2_an385/board_mps2.c $(FW_DIR)/boards/emu_txq.c $(FW_DIR)/boards/emu_feed.c
 # the runtime's startup.c (not ours) casts function pointers to void * in its vector
 # table, which -pedantic refuses: it is built with the same flags minus -pedantic
@@ -51,7 +50,7 @@ FW_SIZE    := arm-none-eabi-size
 else ifeq ($(BOARD),microbit)
 # QEMU's BBC micro:bit: nRF51822, Cortex-M0 (no 32x32->64 multiply: 64-bit products go through libgcc)
 FW_CC      := $(ARM_CC)
-FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -masm-syntax-unified -I$(FW_DIR)/boards/microbit
+FW_CFLAGS  := $(FW_WARN) $(PART_CFLAGS_microbit) -I$(FW_DIR)/boards/microbit
 FW_SRCS    := $(FW_DIR)/boards/microbit/board_microbit.c $(FW_DIR)/boards/emu_txq.c $(FW_DIR)/boards/emu_feed.c
 FW_LOOSE   := $(FW_DIR)/boards/microbit/startup.c $(FW_DIR)/boards/semihost_rt.c
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -T$(FW_DIR)/boards/microbit/nrf51822.ld \
@@ -60,7 +59,7 @@ FW_SIZE    := arm-none-eabi-size
 else ifneq ($(filter stm32f103 stm32vldiscovery,$(BOARD)),)
 # stm32vldiscovery: the same sources and layout for QEMU's STM32F100 (see board_stm32.c, ACN_STM32_QEMU)
 FW_CC      := $(ARM_CC)
-FW_CFLAGS  := $(FW_WARN) $(ARM_FLAGS) -I$(FW_DIR)/boards/stm32f103 \
+FW_CFLAGS  := $(FW_WARN) $(PART_CFLAGS_stm32f103) -I$(FW_DIR)/boards/stm32f103 \
               $(if $(filter stm32vldiscovery,$(BOARD)),-DACN_STM32_QEMU)
 FW_SRCS    := $(FW_DIR)/boards/stm32f103/startup_stm32f103.c $(FW_DIR)/boards/stm32f103/board_stm32.c \
               $(if $(filter stm32vldiscovery,$(BOARD)),$(FW_DIR)/boards/emu_feed.c)
@@ -72,20 +71,19 @@ else ifeq ($(BOARD),sifive_e)
 # QEMU's sifive_e: SiFive FE310 (HiFive1), RV32IMAC without FPU; picolibc for string.h and libgcc's
 # multilib for rv32imac/ilp32 (an -march with _zicsr would pick the default multilib: the runtime's
 # CSR accesses enable zicsr in their own asm instead)
-RV_CC      ?= riscv64-unknown-elf-gcc
+RV_CC      ?= $(PART_CC_sifive_e)
 FW_CC      := $(RV_CC)
-FW_CFLAGS  := $(FW_WARN) -march=rv32imac -mabi=ilp32 -Os -ffunction-sections -fdata-sections -ffreestanding -g \
-              --specs=picolibc.specs -I$(FW_DIR)/boards/sifive_e
+FW_CFLAGS  := $(FW_WARN) $(PART_CFLAGS_sifive_e) -I$(FW_DIR)/boards/sifive_e
 FW_SRCS    := $(FW_DIR)/boards/sifive_e/board_sifive_e.c $(FW_DIR)/boards/emu_txq.c $(FW_DIR)/boards/emu_feed.c
 FW_LOOSE   := $(FW_DIR)/boards/sifive_e/startup.c $(FW_DIR)/boards/semihost_rt.c
 FW_LDFLAGS := -nostartfiles -T$(FW_DIR)/boards/sifive_e/sifive_e.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
-FW_SIZE    := riscv64-unknown-elf-size
+FW_SIZE    := $(PART_SIZE_sifive_e)
 else ifeq ($(BOARD),atmega328p)
 # Arduino Uno's ATmega328P (8-bit AVR, 16-bit int), run in simavr. Linked against generous memory
 # regions so that a build too big still links and the size check below can say what it needs.
 FW_CC      := $(AVR_CC)
-FW_CFLAGS  := $(FW_WARN) -mmcu=atmega328p -DF_CPU=16000000UL -Os -ffunction-sections -fdata-sections -g
+FW_CFLAGS  := $(FW_WARN) $(PART_CFLAGS_atmega328p)
 FW_SRCS    := $(FW_DIR)/boards/atmega328p/board_atmega328p.c
 FW_LDFLAGS := -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map \
               -Wl,--defsym=__TEXT_REGION_LENGTH__=0x40000 -Wl,--defsym=__DATA_REGION_LENGTH__=0xff00

@@ -24,6 +24,7 @@ DATA = (
     "accelnav/models/adxl250_default.toml",
     "accelnav/models/adxl202_duty.toml",
     "accelnav/firmware/firmware.mk",
+    "accelnav/firmware/parts.mk",  # the part table firmware.mk and the codegen report share
     "accelnav/firmware/src/app.c",
     "accelnav/firmware/boards/acn_board.h",
     "accelnav/firmware/boards/host/board_host.c",

@@ -1,4 +1,4 @@
-"""``accelnav codegen MODEL.toml --out DIR [--report]``: write the generated C and its manifest."""
+"""``accelnav codegen MODEL.toml --out DIR [--report] [--target PART]``: write the generated C and its manifest."""
 
 from __future__ import annotations
 
@@ -29,6 +29,13 @@ def register(sub) -> None:
     p.add_argument("--float32", action="store_true", help="emit the float32 variant instead of fixed point")
     p.add_argument("--prefix", default="accelnav", help="file and symbol prefix (default: accelnav)")
     p.add_argument("--report", action="store_true", help="print ranges, formats, error bounds, flash and RAM")
+    p.add_argument(
+        "--target",
+        metavar="PART",
+        help="check the filter fits PART's flash and RAM (compiled with its compiler and the firmware's flags): "
+        "atmega328p/uno, sifive_e/fe310, mps2_an385/cortex-m3, microbit/nrf51, stm32f103; a form that does not "
+        "fit is refused, naming the form that does",
+    )
     p.set_defaults(func=run)
 
 
@@ -43,15 +50,33 @@ def run(args: argparse.Namespace) -> int:
     problem = name_problem("C prefix", args.prefix)
     if problem is not None:
         raise UserError(f"--prefix: got {ascii(args.prefix[:80])}; accepted: {problem}")
+    part = None
+    if args.target is not None:
+        from accelnav.codegen import targets
+
+        try:
+            part = targets.part(args.target)  # an unknown part is refused before any work
+        except targets.TargetError as e:
+            raise UserError(str(e)) from None
     model = load_model(args.model)
     arith = "float32" if args.float32 else "fixed"
     files = emit(model, form=args.form, arith=arith, prefix=args.prefix)
+    fit = None
+    if part is not None:  # measured before anything is written: a filter that does not fit is not written
+        try:
+            fit = targets.fit(part, model, args.form or model.filter.form, arith, files, args.prefix)
+        except targets.TargetError as e:
+            raise UserError(str(e)) from None
+        if fit.refusal():
+            raise UserError(fit.refusal())
     for path in write(files, args.out):
         print(path)
     if args.report:
         from accelnav.codegen.report import report
 
         print(report(model, form=args.form, arith=arith, files=files, prefix=args.prefix))
+    if fit is not None:
+        print("\n".join(fit.lines()))
     return 0
 
 

@@ -1,0 +1,122 @@
+"""``accelnav codegen MODEL --report --target PART`` (issue 26): does the filter fit the part?
+
+The sizes are measured with the part's compiler and the firmware's flags; the part table is
+firmware/parts.mk, which firmware.mk includes too, so the build's size check and this report read the
+same numbers (checked here against the build's commands and the linker scripts). The compile-based
+tests skip, with the reason, without the part's toolchain; under ACCELNAV_REQUIRE_AVR=1 (avr-gcc) or
+ACCELNAV_REQUIRE_PIL=1 (arm-none-eabi-gcc, riscv64-unknown-elf-gcc) they fail instead.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+
+import pytest
+from conftest import MODELS
+
+from accelnav.cli import main
+from accelnav.codegen import targets
+from accelnav.resources import firmware_dir
+
+DEFAULT = str(MODELS / "adxl250_default.toml")
+
+
+def _need(part: str, env: str) -> targets.Part:
+    p = targets.part(part)
+    missing = targets.missing_tools(p)
+    if missing:
+        if os.environ.get(env) == "1":
+            pytest.fail(f"{env}=1 but {missing}")
+        pytest.skip(missing)
+    return p
+
+
+def _codegen(tmp_path, capsys, *extra):
+    rc = main(["codegen", DEFAULT, "--out", str(tmp_path / "gen"), *extra])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_gain_schedule_on_atmega328p_is_refused_naming_the_covariance_form(tmp_path, capsys):
+    p = _need("atmega328p", "ACCELNAV_REQUIRE_AVR")
+    rc, _, err = _codegen(tmp_path, capsys, "--form", "gain_schedule", "--report", "--target", "atmega328p")
+    assert rc == 2 and err.count("\n") == 1, err
+    m = re.search(r"does not fit: needs (\d+) B flash of (\d+); the covariance form fits: (\d+) B flash", err)
+    assert m, err
+    assert int(m[2]) == p.flash == 32768
+    assert int(m[1]) > p.flash >= int(m[3]) > 0
+    assert not (tmp_path / "gen").exists(), "a filter that does not fit is not written"
+
+
+def test_covariance_form_fits_atmega328p(tmp_path, capsys):
+    p = _need("uno", "ACCELNAV_REQUIRE_AVR")  # the alias names the same part
+    rc, out, _ = _codegen(tmp_path, capsys, "--form", "covariance", "--report", "--target", "uno")
+    assert rc == 0
+    row = re.search(r"^  covariance\s+(\d+)\s+(\d+)\s+fits\s", out, re.M)
+    assert row, out
+    assert 0 < int(row[1]) <= p.flash and 0 < int(row[2]) <= p.ram
+    assert re.search(r"^  gain_schedule\s+\d+\s+\d+\s+does not fit\s", out, re.M), out
+    assert "the covariance form fits the atmega328p" in out
+
+
+@pytest.mark.parametrize("name", ["sifive_e", "cortex-m3", "nrf51", "stm32f103"])
+def test_the_32_bit_parts_hold_both_forms(tmp_path, capsys, name):
+    p = _need(name, "ACCELNAV_REQUIRE_PIL")
+    rc, out, _ = _codegen(tmp_path, capsys, "--form", "gain_schedule", "--target", name)
+    assert rc == 0
+    rows = dict(re.findall(r"^  (covariance|gain_schedule)\s+(\d+)\s+\d+\s+fits\s", out, re.M))
+    assert set(rows) == {"covariance", "gain_schedule"}, out
+    # the gain schedule carries its tables: more flash than the covariance form, on every part
+    assert 0 < int(rows["covariance"]) < int(rows["gain_schedule"]) <= p.flash
+
+
+def test_unknown_part_is_one_line_listing_the_known_ones(tmp_path, capsys):
+    rc, _, err = _codegen(tmp_path, capsys, "--target", "pic16f84")
+    assert rc == 2 and err.count("\n") == 1, err
+    assert "unknown part 'pic16f84'" in err
+    for key in ("atmega328p", "sifive_e/fe310", "mps2_an385/cortex-m3", "microbit/nrf51", "stm32f103"):
+        assert key in err
+    assert not (tmp_path / "gen").exists()
+
+
+def test_a_missing_toolchain_is_said_and_gives_no_figure(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    rc, out, _ = _codegen(tmp_path, capsys, "--form", "gain_schedule", "--target", "atmega328p")
+    assert rc == 0  # not measured, so not refused
+    block = out[out.index("target atmega328p:") :].splitlines()
+    assert block[1:] == ["  avr-gcc, avr-size not found: no figure for the atmega328p"], block
+
+
+def test_the_build_compiles_and_checks_with_the_part_table(tmp_path):
+    """firmware.mk's commands use each part's compiler and flags from the table, and the ATmega328P's
+    size check its flash and RAM: the report and the build cannot disagree on a number."""
+    gen = tmp_path / "gen"
+    gen.mkdir()
+    for name in ("accelnav.c", "accelnav.h", "acnframe.c", "acnframe.h"):
+        (gen / name).write_text("")
+    warn = " ".join(targets.warn_flags())
+    for key, p in targets.parts().items():
+        cmd = ["make", "-n", "-B", "--no-print-directory", "-f", str(firmware_dir() / "firmware.mk"), "firmware"]
+        cmd += [f"BOARD={key}", f"FW_DIR={firmware_dir()}", f"FW_GEN={gen}", f"FW_OUT={tmp_path / key}", "FW_PREGEN=1"]
+        text = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=tmp_path).stdout
+        assert f"{p.cc} {warn} {' '.join(p.cflags)} " in text, (key, text[:400])
+        if key == "atmega328p":
+            assert f"flash > {p.flash} || ram + " in text and f"> {p.ram})" in text, text
+
+
+@pytest.mark.parametrize(
+    ("key", "script", "flash", "ram"),
+    [("mps2_an385", "mps2_an385/mps2_an385.ld", "CODE", "DATA"), ("microbit", "microbit/nrf51822.ld", "CODE", "DATA"),
+     ("sifive_e", "sifive_e/sifive_e.ld", "FLASH", "RAM"), ("stm32f103", "stm32f103/stm32f103c8.ld", "FLASH", "RAM")],
+)  # fmt: skip
+def test_the_linker_scripts_agree_with_the_part_table(key, script, flash, ram):
+    text = (firmware_dir() / "boards" / script).read_text()
+
+    def length(region: str) -> int:
+        n, unit = re.search(rf"^\s*{region}\s*\(\w+\)\s*:.*LENGTH = (\d+)([KM]?)", text, re.M).groups()
+        return int(n) * {"": 1, "K": 1024, "M": 1024 * 1024}[unit]
+
+    p = targets.parts()[key]
+    assert (length(flash), length(ram)) == (p.flash, p.ram)
