@@ -416,3 +416,176 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
     }
     return 0;
 }
+
+/* ------------------------------------------------------------------------- */
+/* Plain path in bounded memory: acn_plain_cov + acn_plain_data split into      */
+/* chunks, every number computed by the same operations in the same order, so  */
+/* the chunked output equals the whole-array one. Store row of sample k:        */
+/*   0 a  1 eps        filter posterior (after acn_chunk_bwd: smoothed)          */
+/*   2..5 C[k]         (a, eps) smoother gain c00 c01 c10 c11 (0 at the last)    */
+/*   6..8 aa ae ee     filter posterior covariance (after acn_chunk_bwd: smoothed) */
+/*   9..11 aa ae ee    prior covariance of sample k + 1                          */
+
+/*
+ * Forward pass over samples k0 .. k0 + n - 1 (last: the chunk ends the run).
+ * carry[0..3] is the prior mean of the chunk's first sample, carry[4..13] its
+ * prior covariance (packed): (x0, P0) for k0 = 0; on return, those of the
+ * sample after the chunk. Writes the store rows, the filter means xf (n x 4)
+ * and standard deviations sdf (n x 4); Pf0 gets the packed posterior of sample
+ * 0 (when k0 = 0), Pfn that of the run's last sample (when last).
+ * Returns 0, or -(k + 1) if the (a, eps) prior is singular after sample k.
+ */
+int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
+                  const unsigned char *valid, double *carry, double *store, double *xf,
+                  double *sdf, double *Pf0, double *Pfn)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    double F[4][4], P[4][4], dummy[4] = {0.0, 0.0, 0.0, 0.0}, Kk[4], S;
+    double r = carry[0], u = carry[1], a = carry[2], ep = carry[3], e;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (long k = 0; k < n; k++) {
+        double *row = store + ACN_ROW * k;
+        /* the covariance filter, as acn_plain_cov: K[k] = 0 where sample k is skipped */
+        if (valid == NULL || valid[k]) {
+            update(dummy, P, H_ACC, 0.0, m->R, &S, Kk);
+            /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
+            double y = z[k] - a - ep;
+            r += Kk[0] * y;
+            u += Kk[1] * y;
+            double ka = Kk[2], ke = Kk[3], zk = z[k];
+            double an = (a - ka * a) + ka * (zk - ep);
+            e = (ep - ke * ep) + ke * (zk - a);
+            a = an;
+        } else {
+            e = ep;
+        }
+        double *o = xf + 4 * k, *sd = sdf + 4 * k;
+        o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        for (int i = 0; i < 4; i++)
+            sd[i] = sqrt(P[i][i]);
+        if (k0 + k == 0)
+            pack(P, Pf0);
+        row[0] = a, row[1] = e;
+        row[6] = P[2][2], row[7] = P[2][3], row[8] = P[3][3];
+        if (last && k == n - 1) {
+            pack(P, Pfn);
+            for (int i = 2; i < 6; i++)
+                row[i] = 0.0;
+            row[9] = row[10] = row[11] = 0.0;
+            break;
+        }
+        /* x = F x + b, P = F P F' + Q: the prior of sample k + 1 */
+        double paa = P[2][2], pae = P[2][3], pee = P[3][3];
+        predict_cov(m, F, P);
+        r = r + f01 * u + f02 * a;
+        u = u + f12 * a;
+        ep = phi * e + b;
+        /* C = Pf Fs' inv(Pp), as in acn_plain_cov */
+        double qaa = P[2][2], qae = P[2][3], qee = P[3][3];
+        double sa = sqrt(qaa), se = sqrt(qee);
+        double rho = qae / (sa * se);
+        double det = (1.0 - rho * rho) * qaa * qee;
+        if (!(det > 0.0)) {
+            long at = k0 + k + 1;
+            return -(int)(at > 1000000000L ? 1000000000L : at);
+        }
+        double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee; /* Pf Fs' */
+        row[2] = (m00 * qee - m01 * qae) / det, row[3] = (m01 * qaa - m00 * qae) / det;
+        row[4] = (m10 * qee - m11 * qae) / det, row[5] = (m11 * qaa - m10 * qae) / det;
+        row[9] = qaa, row[10] = qae, row[11] = qee;
+    }
+    carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
+    pack(P, carry + 4);
+    return 0;
+}
+
+/*
+ * Backward pass over the n store rows of one chunk, last to first (last: the
+ * chunk ends the run, whose last sample is the filter's). carry holds the
+ * smoothed a, eps, P_aa, P_ae, P_ee of the sample after the chunk; on return,
+ * those of the chunk's first sample. Rows get the smoothed values in place.
+ */
+void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry)
+{
+    const double phi = m->phi, b = m->b_eps;
+    double as = carry[0], es = carry[1], saa = carry[2], sae = carry[3], see = carry[4];
+    long k = n - 1;
+    if (last) {
+        const double *row = store + ACN_ROW * k;
+        as = row[0], es = row[1], saa = row[6], sae = row[7], see = row[8];
+        k--;
+    }
+    for (; k >= 0; k--) {
+        double *row = store + ACN_ROW * k;
+        double c00 = row[2], c01 = row[3], c10 = row[4], c11 = row[5];
+        /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
+        double fa = row[0], fe = phi * row[1] + b;
+        double ca = row[0] - (c00 * fa + c01 * fe), ce = row[1] - (c10 * fa + c11 * fe);
+        double an = c00 * as + c01 * es + ca;
+        es = c10 * as + c11 * es + ce;
+        as = an;
+        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
+        double daa = saa - row[9], dae = sae - row[10], dee = see - row[11];
+        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
+        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
+        double paa = row[6], pae = row[7], pee = row[8];
+        saa = paa + t00 * c00 + t01 * c01;
+        sae = pae + t00 * c10 + t01 * c11;
+        see = pee + t10 * c10 + t11 * c11;
+        row[0] = as, row[1] = es, row[6] = saa, row[7] = sae, row[8] = see;
+    }
+    carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
+}
+
+/*
+ * Forward pass of smoothed r, u over n samples of one chunk: writes xs and the
+ * standard deviations sds (n x 4) of each, reading store rows 0 .. n (row n is
+ * the next chunk's first; the run's last sample is the caller's, the filter's).
+ * carry: r, u, P_rr, P_ru, P_ra, P_uu, P_ua and beta_r (2), beta_u (2) of the
+ * chunk's first sample (see acn_plain_cov); on return, of the sample after it.
+ */
+void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
+                  double *sds)
+{
+    const double gr = m->gr, gu = m->gu, f01 = m->f01, f02 = m->f02, f12 = m->f12;
+    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
+    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
+    const double qe_uu = m->q[4] - gu * m->q[5];
+    double r = carry[0], u = carry[1], rr = carry[2], ru = carry[3], ra = carry[4];
+    double uu = carry[5], ua = carry[6];
+    double br0 = carry[7], br1 = carry[8], bu0 = carry[9], bu1 = carry[10];
+    for (long k = 0; k < n; k++) {
+        const double *row = store + ACN_ROW * k, *nx = row + ACN_ROW;
+        double *o = xs + 4 * k, *sd = sds + 4 * k;
+        o[0] = r, o[1] = u, o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(rr), sd[1] = sqrt(uu), sd[2] = sqrt(row[6]), sd[3] = sqrt(row[8]);
+        /* the covariance recursion of acn_plain_cov, term by term */
+        double aa = row[6];
+        double vpr =
+            rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
+        double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
+        double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
+        double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
+        double pu0 = bu0 + c2u, pu1 = bu1;
+        double gr0 = row[2] * pr0 + row[4] * pr1, gr1 = row[3] * pr0 + row[5] * pr1;
+        double gu0 = row[2] * pu0 + row[4] * pu1, gu1 = row[3] * pu0 + row[5] * pu1;
+        double aa1 = nx[6], ae1 = nx[7];
+        double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1;
+        br0 = gr0 + gr, br1 = gr1;
+        bu0 = gu0 + gu, bu1 = gu1;
+        double rr1 = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
+        double uu1 = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
+        ru = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
+        rr = rr1, uu = uu1;
+        ra = br0 * aa1 + br1 * ae1;
+        ua = bu0 * aa1 + bu1 * ae1;
+        /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise */
+        double a0 = row[0], a1 = nx[0];
+        double dw = a1 - a0;
+        r = r + (f01 * u + (f02 * a0 + gr * dw));
+        u = u + (f12 * a0 + gu * dw);
+    }
+    carry[0] = r, carry[1] = u, carry[2] = rr, carry[3] = ru, carry[4] = ra;
+    carry[5] = uu, carry[6] = ua, carry[7] = br0, carry[8] = br1, carry[9] = bu0, carry[10] = bu1;
+}

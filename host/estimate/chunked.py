@@ -1,0 +1,315 @@
+"""The plain smoother for a run of any length in bounded memory: chunks, a store on disk, streamed output.
+
+The whole-array path (:func:`accelnav.estimate.fastsmooth.smooth_plain`) holds
+gains and covariances for every sample, a few hundred bytes per sample and axis,
+so its memory grows with the run. Here the same numbers are computed in three
+passes over chunks (the C is acn_chunk_fwd, acn_chunk_bwd, acn_chunk_ru in
+csrc/fastsmooth.c, the split of acn_plain_cov + acn_plain_data):
+
+1. forward, chunk by chunk: filter means and covariances, the (a, eps) smoother
+   gains; per sample 12 doubles (``ROW``) go to a store file on disk;
+2. backward, chunk by chunk, last first: the smoothed (a, eps) and their
+   covariances, written back into the store;
+3. forward: smoothed r, u and their covariances, in closed form from the store.
+
+Between chunks only a few numbers are carried (the filter's prior, the
+smoother's state), so memory is the chunk buffers, whatever the run's length.
+The chunk size comes from a memory budget (:data:`BUDGET`, 256 MB by default):
+about 190 bytes per sample and axis are held per chunk.
+
+Every number is computed by the same operations in the same order as on the
+whole-array path, so the two agree to the last bit on one machine (the tests
+allow 1e-12 relative, room for a compiler that contracts the two kernels'
+multiply-adds differently).
+
+Output: an uncompressed ``accelnav-run/1`` NPZ with ``t``, ``axis_names``,
+``accel``, ``clipped``, the filter's and smoother's states ``filt_x``,
+``smooth_x`` (n_axes, N, 4) and their standard deviations ``filt_sd``,
+``smooth_sd`` (n_axes, N, 4) instead of full covariances (at 1e8 samples each
+covariance array would be 13 GB per axis). Each array is written in chunks to a
+temporary ``.npy`` beside the output, then streamed into the NPZ. Disk needed:
+the store plus twice the output; it is checked before any work starts, and the
+temporary files are removed on success and on error.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import zipfile
+from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from accelnav.errors import UserError
+from accelnav.estimate import fastsmooth
+from accelnav.model.design import AxisDesign, axis_design
+from accelnav.model.load import Model
+
+BUDGET = 256 << 20  # bytes of chunk buffers
+# peak bytes per sample and axis of `accelnav smooth` on the whole-array path (issue 24 measured 2.5 KB per
+# two-axis sample at 1e6): what decides that a run goes to the bounded path
+WHOLE_BYTES = 1250
+ROW = 12  # doubles per sample and axis in the store (csrc/fastsmooth.c, ACN_ROW)
+# held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
+CHUNK_BYTES = 8 * ROW + 8 + 1 + 2 * 32 + 2 * 8
+OUT_KEYS = ("filt_x", "filt_sd", "smooth_x", "smooth_sd")
+RUN_FORMAT = "accelnav-run/1"
+
+# read rows s..e of the input: (t (e-s,), accel (e-s, n_axes), clipped (e-s, n_axes) bool)
+Reader = Callable[[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+def chunk_samples(n_axes: int, budget: int = BUDGET) -> int:
+    """Samples per chunk so that the chunk buffers of all axes fit ``budget`` bytes (2 at least)."""
+    return max(2, int(budget) // sample_bytes(n_axes))
+
+
+def sample_bytes(n_axes: int) -> int:
+    """Bytes held in memory per sample of a chunk: every axis's buffers and the input's t, accel, clipped."""
+    return n_axes * CHUNK_BYTES + 8 + n_axes * 9
+
+
+def memory_available() -> int:
+    """Bytes of memory this machine can give now (MemAvailable; else physical memory)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def whole_bytes(n: int, n_axes: int) -> int:
+    """Estimated peak memory of the whole-array path for n samples (see WHOLE_BYTES)."""
+    return int(n) * n_axes * WHOLE_BYTES
+
+
+def disk_needed(n: int, n_axes: int) -> int:
+    """Bytes of disk the bounded path needs at its peak: the store and the output twice over."""
+    out = 8 * n * (1 + 4 * len(OUT_KEYS) * n_axes + n_axes) + n * n_axes
+    return 8 * ROW * n * n_axes + 2 * out
+
+
+def array_reader(t: np.ndarray, accel: np.ndarray, clipped: np.ndarray) -> Reader:
+    """A reader over arrays already in memory."""
+    return lambda s, e: (t[s:e], accel[s:e], clipped[s:e])
+
+
+class _NpyOut:
+    """A .npy file of known shape filled by writes at offsets (no mapping: memory stays the caller's buffer)."""
+
+    def __init__(self, path: Path, shape: tuple[int, ...], dtype) -> None:
+        self.path, self.shape, self.dtype = path, shape, np.dtype(dtype)
+        with open(path, "wb") as fh:
+            np.lib.format.write_array_header_1_0(
+                fh, {"descr": np.lib.format.dtype_to_descr(self.dtype), "fortran_order": False, "shape": shape}
+            )
+            self.offset = fh.tell()
+        self.fd = os.open(path, os.O_RDWR)
+        os.ftruncate(self.fd, self.offset + self.dtype.itemsize * int(np.prod(shape)))
+
+    def write(self, item_index: int, data: np.ndarray) -> None:
+        """Write ``data`` starting at flat element ``item_index``."""
+        _pwrite(self.fd, np.asarray(data, dtype=self.dtype), self.offset + item_index * self.dtype.itemsize)
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+
+def write_npz_streamed(path: Path, members: dict[str, Path | np.ndarray], *, block: int = 16 << 20) -> None:
+    """An uncompressed NPZ at ``path`` from .npy files (copied in blocks) and small arrays."""
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+        for name, src in members.items():
+            if isinstance(src, Path):
+                with open(src, "rb") as fin, zf.open(f"{name}.npy", "w", force_zip64=True) as fout:
+                    shutil.copyfileobj(fin, fout, block)
+                src.unlink()
+            else:
+                with zf.open(f"{name}.npy", "w", force_zip64=True) as fout:
+                    np.lib.format.write_array(fout, np.asanyarray(src), allow_pickle=False)
+
+
+@dataclass
+class _Axis:
+    d: AxisDesign
+    m: object  # acn_axis
+    store: int  # fd of the store file
+    carry_f: np.ndarray  # (14,) forward carry
+    carry_b: np.ndarray  # (5,) backward carry
+    carry_r: np.ndarray  # (11,) r, u carry
+    Pf0: np.ndarray  # (10,)
+    Pfn: np.ndarray  # (10,)
+    xfn: np.ndarray  # (4,) the run's last filter mean
+
+
+def _pread(fd: int, buf: np.ndarray, pos: int) -> None:
+    if buf.size == 0:
+        return
+    view = memoryview(buf).cast("B")
+    while view:
+        got = os.preadv(fd, [view], pos)
+        if got <= 0:
+            raise OSError(f"store: short read at byte {pos}")
+        view, pos = view[got:], pos + got
+
+
+def _pwrite(fd: int, buf: np.ndarray, pos: int) -> None:
+    if buf.size == 0:
+        return
+    view = memoryview(np.ascontiguousarray(buf)).cast("B")
+    while view:
+        done = os.pwrite(fd, view, pos)
+        view, pos = view[done:], pos + done
+
+
+def smooth_bounded(
+    model: Model,
+    n: int,
+    read: Reader,
+    out: str | Path,
+    *,
+    axis_names: np.ndarray | None = None,
+    budget: int = BUDGET,
+    chunk: int | None = None,
+    workdir: str | Path | None = None,
+) -> dict[str, int]:
+    """Filter and RTS-smooth every axis of an n-sample run with no extras in bounded memory; write ``out``.
+
+    ``read(s, e)`` gives rows s..e of (t, accel, clipped) (:func:`array_reader`, or a file reader);
+    ``chunk`` overrides the chunk size from ``budget``; temporary files go to ``workdir``
+    (default: beside ``out``). Returns {"chunk": samples per chunk, "chunks": how many}.
+    Refuses in one line (UserError) before any work when the disk cannot hold the store and the output.
+    """
+    n = int(n)
+    if n < 1:
+        raise UserError("bounded smoother: at least one sample is needed")
+    out = Path(out)
+    n_axes = len(model.axes)
+    names = np.array([a.name for a in model.axes]) if axis_names is None else np.asarray(axis_names)
+    chunk = int(chunk) if chunk is not None else chunk_samples(n_axes, budget)
+    if chunk < 2:
+        raise ValueError("chunk: at least 2 samples")
+    workdir = Path(workdir) if workdir is not None else out.resolve().parent
+    need = disk_needed(n, n_axes)
+    free = shutil.disk_usage(workdir).free
+    if need > free:
+        raise UserError(
+            f"bounded smoother: {n} samples x {n_axes} axes need {need / 1e9:.3g} GB of disk in {workdir} for the "
+            f"store and the output; {free / 1e9:.3g} GB are free"
+        )
+    mod = fastsmooth._lib()
+    ffi, lib = mod.ffi, mod.lib
+    with ExitStack() as stack:
+        tmp = Path(tempfile.mkdtemp(prefix=".accelnav-smooth-", dir=workdir))
+        stack.callback(shutil.rmtree, tmp, True)
+        outs = {k: _NpyOut(tmp / f"{k}.npy", (n_axes, n, 4), np.float64) for k in OUT_KEYS}
+        t_out = _NpyOut(tmp / "t.npy", (n,), np.float64)
+        a_out = _NpyOut(tmp / "accel.npy", (n, n_axes), np.float64)
+        c_out = _NpyOut(tmp / "clipped.npy", (n, n_axes), np.bool_)
+        for o in (*outs.values(), t_out, a_out, c_out):
+            stack.callback(o.close)
+        axes = []
+        for j in range(n_axes):
+            d = axis_design(model, j)
+            if np.any(np.asarray(d.P0)[:2, 2:] != 0):
+                raise UserError("bounded smoother: the model's P0 has (r, u)-(a, eps) cross terms; not the plain path")
+            fd = os.open(tmp / f"store-{j}.bin", os.O_RDWR | os.O_CREAT, 0o600)
+            stack.callback(os.close, fd)
+            cf = np.concatenate([np.asarray(d.x0, dtype=np.float64), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
+            axes.append(
+                _Axis(d, fastsmooth._axis_struct(ffi, d), fd, cf, np.zeros(5), np.zeros(11), *np.zeros((3, 10)))
+            )
+        for ax in axes:
+            ax.xfn = np.zeros(4)
+        starts = list(range(0, n, chunk))
+        store = np.empty((chunk + 1, ROW))
+        xa, sa = np.empty((chunk, 4)), np.empty((chunk, 4))
+        p = fastsmooth._ptr
+
+        # 1. forward: filter, gains, store
+        for s in starts:
+            e = min(s + chunk, n)
+            last = int(e == n)
+            t, accel, clipped = read(s, e)
+            t_out.write(s, t)
+            a_out.write(s * n_axes, accel)
+            c_out.write(s * n_axes, clipped)
+            for j, ax in enumerate(axes):
+                z = np.ascontiguousarray(accel[:, j], dtype=np.float64)
+                ok = np.isfinite(z) & ~np.asarray(clipped[:, j], dtype=bool)
+                zc = np.where(ok, z, 0.0)
+                vm = ok.view(np.uint8)
+                m = e - s
+                rc = lib.acn_chunk_fwd(
+                    ax.m, s, m, last, p(ffi, zc, "double *"), p(ffi, vm, "unsigned char *"),
+                    p(ffi, ax.carry_f, "double *"), p(ffi, store, "double *"), p(ffi, xa, "double *"),
+                    p(ffi, sa, "double *"), p(ffi, ax.Pf0, "double *"), p(ffi, ax.Pfn, "double *"),
+                )  # fmt: skip
+                if rc != 0:
+                    raise UserError(f"bounded smoother: the (a, eps) prior covariance is singular at sample {-rc}")
+                _pwrite(ax.store, store[:m], 8 * ROW * s)
+                outs["filt_x"].write(4 * (j * n + s), xa[:m])
+                outs["filt_sd"].write(4 * (j * n + s), sa[:m])
+                if last:
+                    ax.xfn = xa[m - 1].copy()
+
+        # 2. backward: smoothed (a, eps) into the store
+        for s in reversed(starts):
+            e = min(s + chunk, n)
+            m = e - s
+            for ax in axes:
+                _pread(ax.store, store[:m], 8 * ROW * s)
+                lib.acn_chunk_bwd(ax.m, m, int(e == n), p(ffi, store, "double *"), p(ffi, ax.carry_b, "double *"))
+                _pwrite(ax.store, store[:m], 8 * ROW * s)
+
+        # 3. forward: smoothed r, u; the run's last sample is the filter's (the whole path's convention)
+        for ax in axes:
+            ax.carry_r[0:2] = 0.0
+            ax.carry_r[2], ax.carry_r[3], ax.carry_r[5] = ax.Pf0[0], ax.Pf0[1], ax.Pf0[4]
+        for s in starts:
+            e = min(s + chunk, n)
+            m = e - s if e < n else e - s - 1  # transitions to the next sample; the last sample is written below
+            rows = m + 1 if e < n else e - s
+            for j, ax in enumerate(axes):
+                if s == 0:
+                    ax.carry_r[0:2] = _first_xf(outs["filt_x"], j, n)
+                _pread(ax.store, store[:rows], 8 * ROW * s)
+                lib.acn_chunk_ru(
+                    ax.m, m, p(ffi, store, "double *"), p(ffi, ax.carry_r, "double *"), p(ffi, xa, "double *"),
+                    p(ffi, sa, "double *"),
+                )  # fmt: skip
+                outs["smooth_x"].write(4 * (j * n + s), xa[:m])
+                outs["smooth_sd"].write(4 * (j * n + s), sa[:m])
+                if e == n:
+                    outs["smooth_x"].write(4 * (j * n + n - 1), ax.xfn)
+                    outs["smooth_sd"].write(4 * (j * n + n - 1), np.sqrt(ax.Pfn[fastsmooth._DIAG]))
+        for ax in axes:
+            os.ftruncate(ax.store, 0)  # free the store's disk before the output is assembled
+        members: dict[str, Path | np.ndarray] = {
+            "format": np.array(RUN_FORMAT),
+            "model_toml": np.array(model.text),
+            "model_source": np.array(str(model.source)),
+            "axis_names": names,
+            "t": t_out.path,
+            "accel": a_out.path,
+            "clipped": c_out.path,
+            **{k: o.path for k, o in outs.items()},
+        }
+        part = tmp / "out.npz"
+        write_npz_streamed(part, members)
+        os.replace(part, out)
+    return {"chunk": chunk, "chunks": len(starts)}
+
+
+def _first_xf(f: _NpyOut, j: int, n: int) -> np.ndarray:
+    """r, u of the filter at sample 0 of axis j, read back from the output being written."""
+    buf = np.empty(2)
+    _pread(f.fd, buf, f.offset + 8 * 4 * j * n)
+    return buf
