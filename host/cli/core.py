@@ -9,6 +9,7 @@ import numpy as np
 
 from accelnav.data.runfile import STATE, export_csv, load_run, save_run
 from accelnav.errors import UserError
+from accelnav.estimate.chunked import memory_available, whole_bytes
 from accelnav.estimate.pipeline import (
     filter_run,
     format_errors,
@@ -20,7 +21,6 @@ from accelnav.estimate.pipeline import (
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.fileio import check_input, check_output
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model
-
 
 TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
 TUNE_SECONDS = 60.0
@@ -180,6 +180,15 @@ def register(sub) -> None:
         help=f"--tune: wall time of the search at most (the best figures by then are used); default {TUNE_SECONDS:g}",
     )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
+    p.add_argument(
+        "--memory-budget",
+        type=float,
+        default=None,
+        metavar="MB",
+        help="memory the whole-array smoother may take; a longer run is smoothed in bounded memory (chunks, a "
+        "store on disk beside --out; plain smoothing only; the output keeps standard deviations, not "
+        "covariances); default: half the memory free",
+    )
     _csv_arg(p)
     p.set_defaults(func=cmd_smooth)
 
@@ -252,8 +261,11 @@ def _load(args) -> tuple[dict[str, np.ndarray], Model]:
     if bad.any():
         k = int(np.argmax(bad.any(axis=1)))
         raise UserError(f"{path}: {rec.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
-    max_n = int(np.ceil(model.ranges.max_run_s * model.rate_hz))
-    t, accel, missing = on_grid(rec, rec.rate_hz, max_n)  # its own clock: within 1 % of the model by now
+    # ranges.max_run_s bounds the fixed-point C's range proof, not these float64 tools: the bound here is the
+    # memory that the filled-in input arrays (t, accel, clipped, twice while filling) take
+    max_n = memory_available() // (2 * (8 + 9 * len(names)) + 1)
+    limit = "the input arrays this machine's free memory holds number at most"
+    t, accel, missing = on_grid(rec, rec.rate_hz, max_n, limit)  # its own clock: within 1 % of the model by now
     # at the sensor's declared full scale a sample is clipped (as a digital part saturates); missing ones too
     with np.errstate(invalid="ignore"):
         clipped = np.abs(accel) >= model.max_accel_m_s2 * (1 - 1e-9)
@@ -368,6 +380,10 @@ def cmd_smooth(args) -> int:
     from accelnav.estimate.fixes import read_fixes
 
     arrays, model = _load(args)
+    budget = _memory_budget(args.memory_budget)
+    n, n_axes = arrays["accel"].shape
+    if whole_bytes(n, n_axes) > budget:
+        return _smooth_bounded(args, arrays, model, budget)
     names = [str(a) for a in arrays["axis_names"]]
     fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
     params = ZuptParams(
@@ -426,6 +442,42 @@ def cmd_smooth(args) -> int:
         print(f"wrote {plot_run(arrays, model, args.plots / 'smooth.png')}")
         for path in plot_smoothing(arrays, model, args.plots):
             print(f"wrote {path}")
+    return 0
+
+
+def _memory_budget(mb: float | None) -> int:
+    if mb is None:
+        return memory_available() // 2
+    if not mb > 0:
+        raise UserError(f"--memory-budget: got {mb:g}; accepted: megabytes > 0")
+    return int(mb * (1 << 20))
+
+
+def _smooth_bounded(args, arrays, model: Model, budget: int) -> int:
+    """smooth of a run over the memory budget: the plain path in chunks (accelnav.estimate.chunked)."""
+    from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
+
+    n, n_axes = arrays["accel"].shape
+    over = (
+        f"{args.run}: {n} samples x {n_axes} axes need about {whole_bytes(n, n_axes) / 1e9:.3g} GB on the "
+        f"whole-array path, over the memory budget of {budget / 1e9:.3g} GB (--memory-budget)"
+    )
+    given = [
+        f
+        for f, v in (("--fixes", args.fixes), ("--zupt", args.zupt), ("--plots", args.plots), ("--csv", args.csv))
+        if v
+    ]
+    if args.tune:
+        given.append("--tune")
+    if given:
+        raise UserError(f"{over}; only plain smoothing runs in bounded memory, not {', '.join(given)}")
+    read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
+    info = smooth_bounded(model, n, read, args.out, axis_names=arrays["axis_names"], budget=min(BUDGET, budget))
+    print(
+        f"{over}: smoothed in bounded memory, {info['chunks']} chunks of {info['chunk']} samples with a store on "
+        "disk; the output has standard deviations (filt_sd, smooth_sd), not covariances"
+    )
+    print(f"wrote {args.out}")
     return 0
 
 
