@@ -102,6 +102,79 @@ def array_reader(t: np.ndarray, accel: np.ndarray, clipped: np.ndarray) -> Reade
     return lambda s, e: (t[s:e], accel[s:e], clipped[s:e])
 
 
+def _stored_member(path: Path, zf: zipfile.ZipFile, name: str) -> tuple[int, tuple[int, ...], np.dtype]:
+    """(offset of the data in the file, shape, dtype) of the uncompressed .npy member ``name``."""
+    info = zf.getinfo(f"{name}.npy")
+    if info.compress_type != zipfile.ZIP_STORED:
+        raise UserError(f"{path}: {name!r} is compressed; reading in bounded memory needs it stored (np.savez)")
+    with open(path, "rb") as fh:
+        fh.seek(info.header_offset)
+        local = fh.read(30)
+        if local[:4] != b"PK\x03\x04":
+            raise UserError(f"{path}: the zip entry of {name!r} is damaged")
+        fh.seek(
+            info.header_offset + 30 + int.from_bytes(local[26:28], "little") + int.from_bytes(local[28:30], "little")
+        )
+        try:
+            version = np.lib.format.read_magic(fh)
+            header = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+            if version not in header:
+                raise ValueError(f"npy format version {version}")
+            shape, fortran, dtype = header[version](fh)
+        except ValueError as exc:
+            raise UserError(f"{path}: {name!r} is not a plain array ({exc})") from None
+        if fortran or dtype.hasobject:
+            raise UserError(f"{path}: {name!r} is Fortran-ordered or of objects; not read in bounded memory")
+        return fh.tell(), shape, dtype
+
+
+class NpzReader:
+    """A :data:`Reader` over an uncompressed NPZ recording of ``t`` (N,) and ``accel`` (N, n_axes), with
+    ``clipped`` (N, n_axes) if present: each call reads its rows from the file, never a whole array.
+    Use as a context manager (it holds the file open); ``n`` is the number of samples."""
+
+    def __init__(self, path: str | Path) -> None:
+        path = Path(path)
+        try:
+            with zipfile.ZipFile(path) as zf:
+                names = zf.namelist()
+                self.members = {
+                    k: _stored_member(path, zf, k) for k in ("t", "accel", "clipped") if f"{k}.npy" in names
+                }
+        except (OSError, zipfile.BadZipFile) as exc:
+            raise UserError(f"{path}: not a readable NPZ recording ({exc})") from None
+        if "t" not in self.members or "accel" not in self.members:
+            raise UserError(f"{path}: an NPZ recording needs 't' and 'accel'")
+        t_shape, shape = self.members["t"][1], self.members["accel"][1]
+        n = t_shape[0] if len(t_shape) == 1 else 0
+        clip_ok = "clipped" not in self.members or self.members["clipped"][1] == shape
+        if n < 1 or len(shape) != 2 or shape[0] != n or not clip_ok:
+            raise UserError(f"{path}: shapes of t {t_shape} and accel {shape} disagree; accepted (N,), (N, n_axes)")
+        self.n, self.n_axes = n, shape[1]
+        self.fd = os.open(path, os.O_RDONLY)
+
+    def _part(self, key: str, s: int, e: int) -> np.ndarray:
+        offset, shape, dtype = self.members[key]
+        buf = np.empty((e - s, *shape[1:]), dtype=dtype)
+        _pread(self.fd, buf, offset + s * int(np.prod(shape[1:])) * dtype.itemsize)
+        return buf
+
+    def __call__(self, s: int, e: int):
+        t, accel = self._part("t", s, e).astype(np.float64), self._part("accel", s, e).astype(np.float64)
+        if "clipped" in self.members:
+            return t, accel, self._part("clipped", s, e).astype(bool)
+        return t, accel, np.zeros((e - s, self.n_axes), dtype=bool)
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+    def __enter__(self) -> NpzReader:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 class _NpyOut:
     """A .npy file of known shape filled by writes at offsets (no mapping: memory stays the caller's buffer)."""
 

@@ -151,3 +151,24 @@ def test_a_recording_longer_than_max_run_s_is_smoothed(tmp_path, capsys):
     argv = ["smooth", tmp_path / "rec.npz", "--model", tmp_path / "short.toml", "--out", tmp_path / "b.npz"]
     status, out, err = _run([*argv, "--memory-budget", "0.05"], capsys)
     assert status == 0 and "bounded memory" in out, err
+
+
+def test_an_npz_recording_is_read_chunk_by_chunk_from_the_file(tmp_path):
+    model = load_model()
+    t, accel, clipped = _data(model, 700)
+    np.savez(tmp_path / "rec.npz", t=t, accel=accel.astype(np.float32), clipped=clipped)
+    with chunked.NpzReader(tmp_path / "rec.npz") as read:
+        assert (read.n, read.n_axes) == (700, 2)
+        got = read(123, 456)
+        chunked.smooth_bounded(model, read.n, read, tmp_path / "o.npz", chunk=64)
+    np.testing.assert_array_equal(got[0], t[123:456])
+    np.testing.assert_array_equal(got[1], accel[123:456].astype(np.float32))
+    np.testing.assert_array_equal(got[2], clipped[123:456])
+    _check_against_whole(model, tmp_path / "o.npz", accel.astype(np.float32).astype(np.float64), clipped)
+
+
+def test_a_compressed_npz_is_refused_in_one_line(tmp_path):
+    np.savez_compressed(tmp_path / "rec.npz", t=np.arange(10.0), accel=np.zeros((10, 2)))
+    with pytest.raises(chunked.UserError, match="compressed") as exc:
+        chunked.NpzReader(tmp_path / "rec.npz")
+    assert "\n" not in str(exc.value)
