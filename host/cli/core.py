@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.runfile import STATE, export_csv, load_run, save_run
+from accelnav.data.runfile import FORMAT, STATE, export_csv, load_run, save_run
 from accelnav.errors import UserError
 from accelnav.estimate.chunked import memory_available, whole_bytes
 from accelnav.estimate.pipeline import (
@@ -472,7 +472,9 @@ def _smooth_bounded(args, arrays, model: Model, budget: int) -> int:
     if given:
         raise UserError(f"{over}; only plain smoothing runs in bounded memory, not {', '.join(given)}")
     read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
-    info = smooth_bounded(model, n, read, args.out, axis_names=arrays["axis_names"], budget=min(BUDGET, budget))
+    info = smooth_bounded(
+        model, n, read, args.out, axis_names=arrays["axis_names"], budget=min(BUDGET, budget), run_format=FORMAT
+    )
     print(
         f"{over}: smoothed in bounded memory, {info['chunks']} chunks of {info['chunk']} samples with a store on "
         "disk; the output has standard deviations (filt_sd, smooth_sd), not covariances"

@@ -58,7 +58,7 @@ ROW = 12  # doubles per sample and axis in the store (csrc/fastsmooth.c, ACN_ROW
 # held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
 CHUNK_BYTES = 8 * ROW + 8 + 1 + 2 * 32 + 2 * 8
 OUT_KEYS = ("filt_x", "filt_sd", "smooth_x", "smooth_sd")
-RUN_FORMAT = "accelnav-run/1"
+RUN_FORMAT = "accelnav-run/1"  # the CLI passes accelnav.data.runfile.FORMAT (a layer above this one)
 
 # read rows s..e of the input: (t (e-s,), accel (e-s, n_axes), clipped (e-s, n_axes) bool)
 Reader = Callable[[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]
@@ -252,13 +252,15 @@ def smooth_bounded(
     budget: int = BUDGET,
     chunk: int | None = None,
     workdir: str | Path | None = None,
+    run_format: str = RUN_FORMAT,
 ) -> dict[str, int]:
     """Filter and RTS-smooth every axis of an n-sample run with no extras in bounded memory; write ``out``.
 
     ``read(s, e)`` gives rows s..e of (t, accel, clipped) (:func:`array_reader`, or a file reader);
     ``chunk`` overrides the chunk size from ``budget``; temporary files go to ``workdir``
-    (default: beside ``out``). Returns {"chunk": samples per chunk, "chunks": how many}.
-    Refuses in one line (UserError) before any work when the disk cannot hold the store and the output.
+    (default: beside ``out``); ``run_format`` is the run file's format string.
+    Returns {"chunk": samples per chunk, "chunks": how many}. Refuses in one line (UserError) before any
+    work when the disk cannot hold the store and the output.
     """
     n = int(n)
     if n < 1:
@@ -366,7 +368,7 @@ def smooth_bounded(
         for ax in axes:
             os.ftruncate(ax.store, 0)  # free the store's disk before the output is assembled
         members: dict[str, Path | np.ndarray] = {
-            "format": np.array(RUN_FORMAT),
+            "format": np.array(run_format),
             "model_toml": np.array(model.text),
             "model_source": np.array(str(model.source)),
             "axis_names": names,
