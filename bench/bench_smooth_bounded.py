@@ -93,7 +93,7 @@ def run(kind: str, rec: Path, out: Path, model: Path) -> tuple[float, float, str
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=float, nargs="+", default=[1e6, 1e7])
+    ap.add_argument("--sizes", type=float, nargs="*", default=[1e6, 1e7])
     ap.add_argument("--whole", type=float, nargs="*", default=[3e5, 1e6], help="sizes for the whole-array path")
     ap.add_argument("--big", action="store_true", help="add 1e8 samples")
     ap.add_argument("--axes", type=int, choices=(1, 2), default=2, help="axes of the recording and model")
