@@ -38,15 +38,16 @@ import os
 import shutil
 import tempfile
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from accelnav.errors import UserError
 from accelnav.estimate import fastsmooth
+from accelnav.estimate.kf import Measurement
 from accelnav.model.design import AxisDesign, axis_design
 from accelnav.model.load import Model
 
@@ -55,8 +56,9 @@ BUDGET = 256 << 20  # bytes of chunk buffers
 # two-axis sample at 1e6): what decides that a run goes to the bounded path
 WHOLE_BYTES = 1250
 ROW = 12  # doubles per sample and axis in the store (csrc/fastsmooth.c, ACN_ROW)
+GROW = 28  # the same for the general path (ACN_GROW): posterior, and the prior of the next sample
 # held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
-CHUNK_BYTES = 8 * ROW + 8 + 1 + 2 * 32 + 2 * 8
+CHUNK_BYTES = 8 * GROW + 8 + 1 + 2 * 32 + 2 * 8
 OUT_KEYS = ("filt_x", "filt_sd", "smooth_x", "smooth_sd")
 RUN_FORMAT = "accelnav-run/1"  # the CLI passes accelnav.data.runfile.FORMAT (a layer above this one)
 
@@ -91,10 +93,11 @@ def whole_bytes(n: int, n_axes: int) -> int:
     return int(n) * n_axes * WHOLE_BYTES
 
 
-def disk_needed(n: int, n_axes: int) -> int:
-    """Bytes of disk the bounded path needs at its peak: the store and the output twice over."""
-    out = 8 * n * (1 + 4 * len(OUT_KEYS) * n_axes + n_axes) + n * n_axes
-    return 8 * ROW * n * n_axes + 2 * out
+def disk_needed(n: int, n_axes: int, n_general: int = 0) -> int:
+    """Bytes of disk the bounded path needs at its peak: the store and the output twice over
+    (``n_general`` of the axes on the general path, whose store is wider)."""
+    out = 8 * n * (1 + 4 * len(OUT_KEYS) * n_axes + n_axes) + 2 * n * n_axes
+    return 8 * n * (ROW * (n_axes - n_general) + GROW * n_general) + 2 * out
 
 
 def array_reader(t: np.ndarray, accel: np.ndarray, clipped: np.ndarray) -> Reader:
@@ -214,12 +217,22 @@ class _Axis:
     d: AxisDesign
     m: object  # acn_axis
     store: int  # fd of the store file
-    carry_f: np.ndarray  # (14,) forward carry
-    carry_b: np.ndarray  # (5,) backward carry
-    carry_r: np.ndarray  # (11,) r, u carry
-    Pf0: np.ndarray  # (10,)
-    Pfn: np.ndarray  # (10,)
-    xfn: np.ndarray  # (4,) the run's last filter mean
+    width: int  # doubles per store row: ROW (plain) or GROW (general)
+    carry_f: np.ndarray  # (14,) forward carry: the prior of the next sample
+    ex: fastsmooth.Extras | None  # general path: its extras, sorted by sample
+    gates: np.ndarray  # (n_extras,) in the sorted order
+    applied: np.ndarray  # (n_extras,) uint8 in the sorted order
+    carry_b: np.ndarray = field(default_factory=lambda: np.zeros(14))  # backward carry
+    carry_r: np.ndarray = field(default_factory=lambda: np.zeros(11))  # r, u carry (plain)
+    Pf0: np.ndarray = field(default_factory=lambda: np.zeros(10))
+    Pfn: np.ndarray = field(default_factory=lambda: np.zeros(10))
+    xfn: np.ndarray = field(default_factory=lambda: np.zeros(4))  # the run's last filter mean
+
+    def extras_in(self, s: int, e: int) -> slice:
+        """The sorted extras of samples s..e-1."""
+        if self.ex is None:
+            return slice(0, 0)
+        return slice(int(np.searchsorted(self.ex.k, s)), int(np.searchsorted(self.ex.k, e)))
 
 
 def _pread(fd: int, buf: np.ndarray, pos: int) -> None:
@@ -249,18 +262,23 @@ def smooth_bounded(
     out: str | Path,
     *,
     axis_names: np.ndarray | None = None,
+    extras: Sequence[Sequence[Measurement] | fastsmooth.Extras] | None = None,
+    gates: Sequence[Sequence[float] | None] | None = None,
     budget: int = BUDGET,
     chunk: int | None = None,
     workdir: str | Path | None = None,
     run_format: str = RUN_FORMAT,
-) -> dict[str, int]:
-    """Filter and RTS-smooth every axis of an n-sample run with no extras in bounded memory; write ``out``.
+) -> dict:
+    """Filter and RTS-smooth every axis of an n-sample run in bounded memory; write ``out``.
 
-    ``read(s, e)`` gives rows s..e of (t, accel, clipped) (:func:`array_reader`, or a file reader);
-    ``chunk`` overrides the chunk size from ``budget``; temporary files go to ``workdir``
-    (default: beside ``out``); ``run_format`` is the run file's format string.
-    Returns {"chunk": samples per chunk, "chunks": how many}. Refuses in one line (UserError) before any
-    work when the disk cannot hold the store and the output.
+    ``read(s, e)`` gives rows s..e of (t, accel, clipped) (:func:`array_reader`, :class:`NpzReader`);
+    ``extras[j]`` are axis j's extra measurements (fixes, zero-velocity updates) with ``gates[j]`` as in
+    :func:`accelnav.estimate.fastsmooth.smooth_general`: an axis with extras takes the general path
+    (a wider store), one without the plain path. ``chunk`` overrides the chunk size from ``budget``;
+    temporary files go to ``workdir`` (default: beside ``out``); ``run_format`` is the run file's format.
+    Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras were
+    applied, in their given order}. Refuses in one line (UserError) before any work when the disk
+    cannot hold the store and the output.
     """
     n = int(n)
     if n < 1:
@@ -271,8 +289,16 @@ def smooth_bounded(
     chunk = int(chunk) if chunk is not None else chunk_samples(n_axes, budget)
     if chunk < 2:
         raise ValueError("chunk: at least 2 samples")
+    exs = [None] * n_axes
+    for j, e in enumerate(extras or []):
+        ex = fastsmooth.Extras.of(e)
+        if len(ex) and (ex.k[0] < 0 or ex.k[-1] >= n):
+            raise UserError(f"bounded smoother: axis {j}: an extra measurement is outside samples 0..{n - 1}")
+        exs[j] = ex if len(ex) else None
+    designs = [axis_design(model, j) for j in range(n_axes)]
+    general = [exs[j] is not None or bool(np.any(np.asarray(d.P0)[:2, 2:] != 0)) for j, d in enumerate(designs)]
     workdir = Path(workdir) if workdir is not None else out.resolve().parent
-    need = disk_needed(n, n_axes)
+    need = disk_needed(n, n_axes, sum(general))
     free = shutil.disk_usage(workdir).free
     if need > free:
         raise UserError(
@@ -281,6 +307,7 @@ def smooth_bounded(
         )
     mod = fastsmooth._lib()
     ffi, lib = mod.ffi, mod.lib
+    p = fastsmooth._ptr
     with ExitStack() as stack:
         tmp = Path(tempfile.mkdtemp(prefix=".accelnav-smooth-", dir=workdir))
         stack.callback(shutil.rmtree, tmp, True)
@@ -291,27 +318,30 @@ def smooth_bounded(
         for o in (*outs.values(), t_out, a_out, c_out):
             stack.callback(o.close)
         axes = []
-        for j in range(n_axes):
-            d = axis_design(model, j)
-            if np.any(np.asarray(d.P0)[:2, 2:] != 0):
-                raise UserError("bounded smoother: the model's P0 has (r, u)-(a, eps) cross terms; not the plain path")
+        for j, d in enumerate(designs):
             fd = os.open(tmp / f"store-{j}.bin", os.O_RDWR | os.O_CREAT, 0o600)
             stack.callback(os.close, fd)
             cf = np.concatenate([np.asarray(d.x0, dtype=np.float64), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
+            ex = exs[j]
+            ne = 0 if ex is None else len(ex)
+            g = gates[j] if gates is not None and j < len(gates) and gates[j] is not None else None
+            eg = np.zeros(ne) if g is None else np.asarray(g, dtype=np.float64).reshape(ne)[ex.order]
             axes.append(
-                _Axis(d, fastsmooth._axis_struct(ffi, d), fd, cf, np.zeros(5), np.zeros(11), *np.zeros((3, 10)))
-            )
-        for ax in axes:
-            ax.xfn = np.zeros(4)
+                _Axis(d, fastsmooth._axis_struct(ffi, d), fd, GROW if general[j] else ROW, cf,
+                      ex, np.ascontiguousarray(eg), np.zeros(max(ne, 1), dtype=np.uint8))
+            )  # fmt: skip
         starts = list(range(0, n, chunk))
-        store = np.empty((chunk + 1, ROW))
+        store = np.empty((chunk + 1) * GROW)
         xa, sa = np.empty((chunk, 4)), np.empty((chunk, 4))
-        p = fastsmooth._ptr
 
-        # 1. forward: filter, gains, store
+        def rows(ax: _Axis, count: int) -> np.ndarray:
+            return store[: count * ax.width].reshape(count, ax.width)
+
+        # 1. forward: filter (and for the plain path the smoother gains), rows into each axis's store
         for s in starts:
             e = min(s + chunk, n)
             last = int(e == n)
+            m = e - s
             t, accel, clipped = read(s, e)
             t_out.write(s, t)
             a_out.write(s * n_axes, accel)
@@ -321,43 +351,68 @@ def smooth_bounded(
                 ok = np.isfinite(z) & ~np.asarray(clipped[:, j], dtype=bool)
                 zc = np.where(ok, z, 0.0)
                 vm = ok.view(np.uint8)
-                m = e - s
-                rc = lib.acn_chunk_fwd(
-                    ax.m, s, m, last, p(ffi, zc, "double *"), p(ffi, vm, "unsigned char *"),
-                    p(ffi, ax.carry_f, "double *"), p(ffi, store, "double *"), p(ffi, xa, "double *"),
-                    p(ffi, sa, "double *"), p(ffi, ax.Pf0, "double *"), p(ffi, ax.Pfn, "double *"),
-                )  # fmt: skip
-                if rc != 0:
-                    raise UserError(f"bounded smoother: the (a, eps) prior covariance is singular at sample {-rc}")
-                _pwrite(ax.store, store[:m], 8 * ROW * s)
+                buf = rows(ax, m)
+                if ax.width == GROW:
+                    sl = ax.extras_in(s, e)
+                    ne = sl.stop - sl.start
+                    ek = np.ascontiguousarray(ax.ex.k[sl] - s) if ne else np.zeros(1, dtype=np.int64)
+                    arrs = [ax.ex.h[sl], ax.ex.z[sl], ax.ex.R[sl], ax.gates[sl]] if ne else [np.zeros(4)] * 4
+                    arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
+                    applied = ax.applied[sl.start : sl.start + max(ne, 1)] if ne else np.zeros(1, dtype=np.uint8)
+                    lib.acn_chunkg_fwd(
+                        ax.m, m, last, p(ffi, zc, "double *"), p(ffi, vm, "unsigned char *"), ne,
+                        ffi.from_buffer("long[]", ek), *(p(ffi, a, "double *") for a in arrs),
+                        p(ffi, applied, "unsigned char *"), p(ffi, ax.carry_f, "double *"), p(ffi, buf, "double *"),
+                        p(ffi, xa, "double *"), p(ffi, sa, "double *"),
+                    )  # fmt: skip
+                else:
+                    rc = lib.acn_chunk_fwd(
+                        ax.m, s, m, last, p(ffi, zc, "double *"), p(ffi, vm, "unsigned char *"),
+                        p(ffi, ax.carry_f, "double *"), p(ffi, buf, "double *"), p(ffi, xa, "double *"),
+                        p(ffi, sa, "double *"), p(ffi, ax.Pf0, "double *"), p(ffi, ax.Pfn, "double *"),
+                    )  # fmt: skip
+                    if rc != 0:
+                        raise UserError(f"bounded smoother: the (a, eps) prior covariance is singular at sample {-rc}")
+                _pwrite(ax.store, buf, 8 * ax.width * s)
                 outs["filt_x"].write(4 * (j * n + s), xa[:m])
                 outs["filt_sd"].write(4 * (j * n + s), sa[:m])
                 if last:
                     ax.xfn = xa[m - 1].copy()
 
-        # 2. backward: smoothed (a, eps) into the store
+        # 2. backward: the general path's smoother outright; the plain path's (a, eps) into its store
         for s in reversed(starts):
             e = min(s + chunk, n)
             m = e - s
-            for ax in axes:
-                _pread(ax.store, store[:m], 8 * ROW * s)
-                lib.acn_chunk_bwd(ax.m, m, int(e == n), p(ffi, store, "double *"), p(ffi, ax.carry_b, "double *"))
-                _pwrite(ax.store, store[:m], 8 * ROW * s)
+            for j, ax in enumerate(axes):
+                buf = rows(ax, m)
+                _pread(ax.store, buf, 8 * ax.width * s)
+                if ax.width == GROW:
+                    rc = lib.acn_chunkg_bwd(
+                        ax.m, s, m, int(e == n), p(ffi, buf, "double *"), p(ffi, ax.carry_b, "double *"),
+                        p(ffi, xa, "double *"), p(ffi, sa, "double *"),
+                    )  # fmt: skip
+                    if rc != 0:
+                        raise UserError(f"bounded smoother: the prior covariance is not positive definite at {-rc}")
+                    outs["smooth_x"].write(4 * (j * n + s), xa[:m])
+                    outs["smooth_sd"].write(4 * (j * n + s), sa[:m])
+                else:
+                    lib.acn_chunk_bwd(ax.m, m, int(e == n), p(ffi, buf, "double *"), p(ffi, ax.carry_b, "double *"))
+                    _pwrite(ax.store, buf, 8 * ax.width * s)
 
-        # 3. forward: smoothed r, u; the run's last sample is the filter's (the whole path's convention)
-        for ax in axes:
-            ax.carry_r[0:2] = 0.0
+        # 3. plain path, forward: smoothed r, u; the run's last sample is the filter's (the whole path's convention)
+        plain = [(j, ax) for j, ax in enumerate(axes) if ax.width == ROW]
+        for _, ax in plain:
             ax.carry_r[2], ax.carry_r[3], ax.carry_r[5] = ax.Pf0[0], ax.Pf0[1], ax.Pf0[4]
-        for s in starts:
+        for s in starts if plain else []:
             e = min(s + chunk, n)
             m = e - s if e < n else e - s - 1  # transitions to the next sample; the last sample is written below
-            rows = m + 1 if e < n else e - s
-            for j, ax in enumerate(axes):
+            for j, ax in plain:
                 if s == 0:
                     ax.carry_r[0:2] = _first_xf(outs["filt_x"], j, n)
-                _pread(ax.store, store[:rows], 8 * ROW * s)
+                buf = rows(ax, m + 1)
+                _pread(ax.store, buf, 8 * ROW * s)
                 lib.acn_chunk_ru(
-                    ax.m, m, p(ffi, store, "double *"), p(ffi, ax.carry_r, "double *"), p(ffi, xa, "double *"),
+                    ax.m, m, p(ffi, buf, "double *"), p(ffi, ax.carry_r, "double *"), p(ffi, xa, "double *"),
                     p(ffi, sa, "double *"),
                 )  # fmt: skip
                 outs["smooth_x"].write(4 * (j * n + s), xa[:m])
@@ -380,7 +435,13 @@ def smooth_bounded(
         part = tmp / "out.npz"
         write_npz_streamed(part, members)
         os.replace(part, out)
-    return {"chunk": chunk, "chunks": len(starts)}
+    applied = []
+    for ax in axes:
+        done = np.zeros(0 if ax.ex is None else len(ax.ex), dtype=bool)
+        if ax.ex is not None:
+            done[ax.ex.order] = ax.applied[: len(ax.ex)].astype(bool)
+        applied.append(done)
+    return {"chunk": chunk, "chunks": len(starts), "applied": applied}
 
 
 def _first_xf(f: _NpyOut, j: int, n: int) -> np.ndarray:

@@ -172,3 +172,45 @@ def test_a_compressed_npz_is_refused_in_one_line(tmp_path):
     with pytest.raises(chunked.UserError, match="compressed") as exc:
         chunked.NpzReader(tmp_path / "rec.npz")
     assert "\n" not in str(exc.value)
+
+
+def _aids(model, n, seed=5):
+    """Per axis: position fixes, and zero-velocity updates (gated, some rejected) over rests across chunk edges."""
+    from accelnav.estimate.kf import position_fix, zero_velocity
+
+    rng = np.random.default_rng(seed)
+    extras, gates = [], []
+    for j in range(len(model.axes)):
+        fixes = [position_fix(int(k), float(rng.normal(0, 5)), 2.0) for k in rng.choice(n, 6)]  # repeats too
+        rest = [zero_velocity(k, 0.05) for k in range(n // 4, min(n, n // 4 + 40))]
+        wild = position_fix(n // 2, 1e4, 1.0)  # an outlier its gate rejects
+        extras.append(fixes + rest + [position_fix(n - 1, 1.0, 3.0), position_fix(0, 0.0, 1.0), wild])
+        gates.append([0.0] * 6 + [9.0 if j == 0 else 0.0] * len(rest) + [0.0, 0.0, 9.0])
+    if len(model.axes) > 1:
+        extras[-1], gates[-1] = [], None  # one axis with none: the plain path beside the general one
+    return extras, gates
+
+
+@pytest.mark.parametrize("n, chunk", [(1000, 97), (1000, 2), (1000, 999), (3, 2)])
+def test_chunked_general_path_equals_the_whole_array_path(tmp_path, n, chunk):
+    """Fixes and zero-velocity updates (gated on axis 0) split across chunks: the same numbers as smooth_general."""
+    model = load_model()
+    t, accel, clipped = _data(model, n)
+    extras, gates = _aids(model, n)
+    out = tmp_path / "o.npz"
+    read = chunked.array_reader(t, accel, clipped)
+    info = chunked.smooth_bounded(model, n, read, out, chunk=chunk, extras=extras, gates=gates)
+    f = np.load(out)
+    for j in range(len(model.axes)):
+        d = axis_design(model, j)
+        if extras[j]:
+            ref = fs.smooth_general(d, accel[:, j], valid=~clipped[:, j], extras=extras[j], gates=gates[j])
+            np.testing.assert_array_equal(info["applied"][j], ref.applied)
+            assert not ref.applied[-1]  # the outlier: a rejection is compared too
+        else:
+            ref = fs.smooth_plain(d, accel[:, j], valid=~clipped[:, j])
+        for key, x, P in (("filt", ref.x_post, ref.P_post), ("smooth", ref.xs, ref.Ps)):
+            sd = fs.packed_sd(P)
+            assert_rel_close(f[f"{key}_x"][j], x, sd, RTOL, f"{key}_x axis {j}")
+            assert_rel_close(f[f"{key}_sd"][j], sd, 0.0, RTOL, f"{key}_sd axis {j}")
+    assert [p.name for p in tmp_path.iterdir()] == ["o.npz"]

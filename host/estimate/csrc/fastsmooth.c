@@ -320,12 +320,99 @@ static int chol_solve4(double M[4][4], double B[4][4])
     return 0;
 }
 
+/*
+ * The measurements of sample k once its prior is in (x, P): the acceleration
+ * if ok, then the extras ek[ei] == k in order. Returns the index of the first
+ * extra of a later sample.
+ */
+static long general_update(const acn_axis *m, long k, int ok, double zk, double x[4], double P[4][4],
+                           long ei, long n_extra, const long *ek, const double *eh, const double *ez,
+                           const double *eR, const double *egate, unsigned char *applied)
+{
+    double K[4], S;
+    if (ok)
+        update(x, P, H_ACC, zk, m->R, &S, K);
+    for (; ei < n_extra && ek[ei] == k; ei++) {
+        const double *h = eh + 4 * ei;
+        if (egate[ei] > 0.0) {
+            /* gated: apply only if y^2 / S <= gate (a chi-square test of the innovation) */
+            double y = ez[ei] - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3]);
+            double s = eR[ei];
+            for (int i = 0; i < 4; i++)
+                for (int j = 0; j < 4; j++)
+                    s += h[i] * P[i][j] * h[j];
+            if (y * y > egate[ei] * s) {
+                applied[ei] = 0;
+                continue;
+            }
+        }
+        update(x, P, h, ez[ei], eR[ei], &S, K);
+        applied[ei] = 1;
+    }
+    return ei;
+}
+
+/*
+ * One RTS step: the smoothed (xs, Psm) of sample k from the filter's posterior
+ * (xpost, Ppost) at k, its prior (xprior1, Pprior1) at k + 1 and the smoothed
+ * (xs1, Psm1) at k + 1; covariances packed. Returns -1 if that prior is not
+ * positive definite.
+ */
+static int rts_step(double F[4][4], const double *xpost, const double *Ppost, const double *xprior1,
+                    const double *Pprior1, const double *xs1, const double *Psm1, double *xs, double *Psm)
+{
+    double Pp[4][4], Pf[4][4], Ps1[4][4], B[4][4], C[4][4], sd[4], dx[4], T[4][4];
+    unpack(Pprior1, Pp);
+    unpack(Ppost, Pf);
+    unpack(Psm1, Ps1);
+    /* C = Pf F' inv(Pp)  <=>  C' = inv(Pp) F Pf, solved on the equilibrated Pp */
+    for (int i = 0; i < 4; i++)
+        sd[i] = Pp[i][i] > 0.0 ? sqrt(Pp[i][i]) : 1.0;
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++) {
+            double s = 0.0;
+            for (int l = i; l < 4; l++)
+                s += F[i][l] * Pf[l][j];
+            B[i][j] = s / sd[i];
+        }
+    double Mq[4][4];
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            Mq[i][j] = Pp[i][j] / (sd[i] * sd[j]);
+    if (chol_solve4(Mq, B) != 0)
+        return -1;
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            C[j][i] = B[i][j] / sd[i];
+    /* xs = x_post + C (xs[k+1] - x_prior[k+1]) */
+    for (int i = 0; i < 4; i++)
+        dx[i] = xs1[i] - xprior1[i];
+    for (int i = 0; i < 4; i++)
+        xs[i] = xpost[i] + C[i][0] * dx[0] + C[i][1] * dx[1] + C[i][2] * dx[2] + C[i][3] * dx[3];
+    /* Ps = P_post + C (Ps[k+1] - P_prior[k+1]) C' */
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++) {
+            double s = 0.0;
+            for (int l = 0; l < 4; l++)
+                s += C[i][l] * (Ps1[l][j] - Pp[l][j]);
+            T[i][j] = s;
+        }
+    for (int i = 0; i < 4; i++)
+        for (int j = i; j < 4; j++) {
+            double s = 0.0;
+            for (int l = 0; l < 4; l++)
+                s += T[i][l] * C[j][l];
+            Psm[PK[i][j]] = Pf[i][j] + s;
+        }
+    return 0;
+}
+
 int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
                 long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
                 const double *egate, unsigned char *applied, double *xprior, double *Pprior,
                 double *xpost, double *Ppost, double *xs, double *Psm)
 {
-    double F[4][4], P[4][4], x[4], K[4], S;
+    double F[4][4], P[4][4], x[4];
     long ei = 0;
     transition(m, F);
     unpack(m->p0, P);
@@ -340,25 +427,8 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
         for (int i = 0; i < 4; i++)
             xprior[4 * k + i] = x[i];
         pack(P, Pprior + 10 * k);
-        if (valid == NULL || valid[k])
-            update(x, P, H_ACC, z[k], m->R, &S, K);
-        for (; ei < n_extra && ek[ei] == k; ei++) {
-            const double *h = eh + 4 * ei;
-            if (egate[ei] > 0.0) {
-                /* gated: apply only if y^2 / S <= gate (a chi-square test of the innovation) */
-                double y = ez[ei] - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3]);
-                double s = eR[ei];
-                for (int i = 0; i < 4; i++)
-                    for (int j = 0; j < 4; j++)
-                        s += h[i] * P[i][j] * h[j];
-                if (y * y > egate[ei] * s) {
-                    applied[ei] = 0;
-                    continue;
-                }
-            }
-            update(x, P, h, ez[ei], eR[ei], &S, K);
-            applied[ei] = 1;
-        }
+        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
+                            eR, egate, applied);
         for (int i = 0; i < 4; i++)
             xpost[4 * k + i] = x[i];
         pack(P, Ppost + 10 * k);
@@ -369,50 +439,9 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
     for (int i = 0; i < 10; i++)
         Psm[10 * (n - 1) + i] = Ppost[10 * (n - 1) + i];
     for (long k = n - 2; k >= 0; k--) {
-        double Pp[4][4], Pf[4][4], Ps1[4][4], B[4][4], C[4][4], sd[4], dx[4], T[4][4];
-        unpack(Pprior + 10 * (k + 1), Pp);
-        unpack(Ppost + 10 * k, Pf);
-        unpack(Psm + 10 * (k + 1), Ps1);
-        /* C = Pf F' inv(Pp)  <=>  C' = inv(Pp) F Pf, solved on the equilibrated Pp */
-        for (int i = 0; i < 4; i++)
-            sd[i] = Pp[i][i] > 0.0 ? sqrt(Pp[i][i]) : 1.0;
-        for (int i = 0; i < 4; i++)
-            for (int j = 0; j < 4; j++) {
-                double s = 0.0;
-                for (int l = i; l < 4; l++)
-                    s += F[i][l] * Pf[l][j];
-                B[i][j] = s / sd[i];
-            }
-        double Mq[4][4];
-        for (int i = 0; i < 4; i++)
-            for (int j = 0; j < 4; j++)
-                Mq[i][j] = Pp[i][j] / (sd[i] * sd[j]);
-        if (chol_solve4(Mq, B) != 0)
+        if (rts_step(F, xpost + 4 * k, Ppost + 10 * k, xprior + 4 * (k + 1), Pprior + 10 * (k + 1),
+                     xs + 4 * (k + 1), Psm + 10 * (k + 1), xs + 4 * k, Psm + 10 * k) != 0)
             return -(int)(k + 1 > 1000000000L ? 1000000000L : k + 1);
-        for (int i = 0; i < 4; i++)
-            for (int j = 0; j < 4; j++)
-                C[j][i] = B[i][j] / sd[i];
-        /* xs = x_post + C (xs[k+1] - x_prior[k+1]) */
-        for (int i = 0; i < 4; i++)
-            dx[i] = xs[4 * (k + 1) + i] - xprior[4 * (k + 1) + i];
-        for (int i = 0; i < 4; i++)
-            xs[4 * k + i] = xpost[4 * k + i] + C[i][0] * dx[0] + C[i][1] * dx[1] + C[i][2] * dx[2] +
-                            C[i][3] * dx[3];
-        /* Ps = P_post + C (Ps[k+1] - P_prior[k+1]) C' */
-        for (int i = 0; i < 4; i++)
-            for (int j = 0; j < 4; j++) {
-                double s = 0.0;
-                for (int l = 0; l < 4; l++)
-                    s += C[i][l] * (Ps1[l][j] - Pp[l][j]);
-                T[i][j] = s;
-            }
-        for (int i = 0; i < 4; i++)
-            for (int j = i; j < 4; j++) {
-                double s = 0.0;
-                for (int l = 0; l < 4; l++)
-                    s += T[i][l] * C[j][l];
-                Psm[10 * k + PK[i][j]] = Pf[i][j] + s;
-            }
     }
     return 0;
 }
@@ -588,4 +617,101 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
     }
     carry[0] = r, carry[1] = u, carry[2] = rr, carry[3] = ru, carry[4] = ra;
     carry[5] = uu, carry[6] = ua, carry[7] = br0, carry[8] = br1, carry[9] = bu0, carry[10] = bu1;
+}
+
+/* ------------------------------------------------------------------------- */
+/* General path in bounded memory: acn_general split into chunks, the same     */
+/* steps (general_update, rts_step) in the same order. Store row of sample k:  */
+/*   0..3 x_post[k]  4..13 P_post[k]  14..17 x_prior[k+1]  18..27 P_prior[k+1] */
+/* (the prior fields are 0 at the run's last sample).                           */
+
+/*
+ * Forward over samples k0 .. k0 + n - 1, extras as in acn_general with ek
+ * counted from the chunk's first sample. carry: the prior mean (4) and packed
+ * covariance (10) of the chunk's first sample; on return, of the next sample.
+ * Writes the store rows and the filter means xf and standard deviations sdf (n x 4).
+ */
+void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
+                    const unsigned char *valid, long n_extra, const long *ek, const double *eh,
+                    const double *ez, const double *eR, const double *egate, unsigned char *applied,
+                    double *carry, double *store, double *xf, double *sdf)
+{
+    double F[4][4], P[4][4], x[4];
+    long ei = 0;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (int i = 0; i < 4; i++)
+        x[i] = carry[i];
+    for (long k = 0; k < n; k++) {
+        double *row = store + ACN_GROW * k;
+        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
+                            eR, egate, applied);
+        for (int i = 0; i < 4; i++) {
+            row[i] = xf[4 * k + i] = x[i];
+            sdf[4 * k + i] = sqrt(P[i][i]);
+        }
+        pack(P, row + 4);
+        if (last && k == n - 1) {
+            for (int i = 14; i < ACN_GROW; i++)
+                row[i] = 0.0;
+            break;
+        }
+        predict_mean(m, x);
+        predict_cov(m, F, P);
+        for (int i = 0; i < 4; i++)
+            row[14 + i] = x[i];
+        pack(P, row + 18);
+    }
+    for (int i = 0; i < 4; i++)
+        carry[i] = x[i];
+    pack(P, carry + 4);
+}
+
+/*
+ * Backward over the n store rows of one chunk (last: it ends the run, whose
+ * last sample is the filter's). carry: the smoothed mean (4) and packed
+ * covariance (10) of the sample after the chunk; on return, of its first.
+ * Writes xs and the standard deviations sds (n x 4). k0 names samples in the
+ * error: returns -(k + 1) if the prior of sample k + 1 is not positive definite.
+ */
+int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
+                   double *xs, double *sds)
+{
+    double F[4][4], x1[4], P1[10], x[4], Pk[10];
+    transition(m, F);
+    for (int i = 0; i < 4; i++)
+        x1[i] = carry[i];
+    for (int i = 0; i < 10; i++)
+        P1[i] = carry[4 + i];
+    long k = n - 1;
+    if (last) {
+        const double *row = store + ACN_GROW * k;
+        for (int i = 0; i < 4; i++)
+            x1[i] = row[i];
+        for (int i = 0; i < 10; i++)
+            P1[i] = row[4 + i];
+        for (int i = 0; i < 4; i++) {
+            xs[4 * k + i] = x1[i];
+            sds[4 * k + i] = sqrt(P1[PK[i][i]]);
+        }
+        k--;
+    }
+    for (; k >= 0; k--) {
+        const double *row = store + ACN_GROW * k;
+        if (rts_step(F, row, row + 4, row + 14, row + 18, x1, P1, x, Pk) != 0) {
+            long at = k0 + k + 1;
+            return -(int)(at > 1000000000L ? 1000000000L : at);
+        }
+        for (int i = 0; i < 4; i++) {
+            x1[i] = xs[4 * k + i] = x[i];
+            sds[4 * k + i] = sqrt(Pk[PK[i][i]]);
+        }
+        for (int i = 0; i < 10; i++)
+            P1[i] = Pk[i];
+    }
+    for (int i = 0; i < 4; i++)
+        carry[i] = x1[i];
+    for (int i = 0; i < 10; i++)
+        carry[4 + i] = P1[i];
+    return 0;
 }
