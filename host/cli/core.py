@@ -221,8 +221,8 @@ def register(sub) -> None:
         default=None,
         metavar="MB",
         help="memory the whole-array smoother may take; a longer run is smoothed in bounded memory (chunks, a "
-        "store on disk beside --out; plain smoothing only; the output keeps standard deviations, not "
-        "covariances); default: half the memory free",
+        "store on disk beside --out; not with --tune, --plots, --csv; the output keeps standard deviations, "
+        "not covariances, and the aids' consistency checks are skipped); default: half the memory free",
     )
     _csv_arg(p)
     p.set_defaults(func=cmd_smooth)
@@ -434,9 +434,9 @@ def cmd_smooth(args) -> int:
 
     arrays, model = _load(args)
     budget = _memory_budget(args.memory_budget)
-    n, n_axes = arrays["accel"].shape
-    if whole_bytes(n, n_axes) > budget:
-        return _smooth_bounded(args, arrays, model, budget)
+    bounded = whole_bytes(*arrays["accel"].shape) > budget
+    if bounded:  # what the bounded path cannot do is refused before any work
+        _bounded_refusals(args, arrays, budget)
     names = [str(a) for a in arrays["axis_names"]]
     fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
     params = ZuptParams(
@@ -471,6 +471,8 @@ def cmd_smooth(args) -> int:
             print(f"wrote {args.zupt_report}")
     elif args.zupt is not None:
         rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
+    if bounded:
+        return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays
@@ -511,32 +513,61 @@ def _memory_budget(mb: float | None) -> int:
     return int(mb * (1 << 20))
 
 
-def _smooth_bounded(args, arrays, model: Model, budget: int) -> int:
-    """smooth of a run over the memory budget: the plain path in chunks (accelnav.estimate.chunked)."""
-    from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
-
+def _over_budget(args, arrays, budget: int) -> str:
     n, n_axes = arrays["accel"].shape
-    over = (
+    return (
         f"{args.run}: {n} samples x {n_axes} axes need about {whole_bytes(n, n_axes) / 1e9:.3g} GB on the "
         f"whole-array path, over the memory budget of {budget / 1e9:.3g} GB (--memory-budget)"
     )
-    given = [
-        f
-        for f, v in (("--fixes", args.fixes), ("--zupt", args.zupt), ("--plots", args.plots), ("--csv", args.csv))
-        if v
-    ]
-    if args.tune:
-        given.append("--tune")
+
+
+def _bounded_refusals(args, arrays, budget: int) -> None:
+    given = [f for f, v in (("--plots", args.plots), ("--csv", args.csv), ("--tune", args.tune)) if v]
     if given:
-        raise UserError(f"{over}; only plain smoothing runs in bounded memory, not {', '.join(given)}")
+        raise UserError(f"{_over_budget(args, arrays, budget)}; bounded memory does not do {', '.join(given)}")
+
+
+def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_sigma, params) -> int:
+    """smooth of a run over the memory budget, in chunks with a store on disk (accelnav.estimate.chunked)."""
+    from accelnav.estimate import zupt
+    from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
+
+    n, n_axes = arrays["accel"].shape
+    extras = [list(fixes[j]) if fixes is not None else [] for j in range(n_axes)]
+    gates: list[list[float]] = [[0.0] * len(e) for e in extras]
+    zupt_ks = [np.zeros(0, dtype=np.int64)] * n_axes
+    if rest is not None:
+        r2 = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, n_axes))
+        for j in range(n_axes):
+            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
+            zupt_ks[j], upd = zupt.axis_updates(r2[:, j], sigma, model, params)
+            extras[j] += upd
+            gates[j] += [0.0] * len(upd)
+    n_fix = [len(fixes[j]) if fixes is not None else 0 for j in range(n_axes)]
+
+    def more(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
+        """The run file's zupt mask and fixes rows, as the whole-array path writes them."""
+        mask = np.zeros((n, n_axes), dtype=bool)
+        for j in range(n_axes):
+            mask[zupt_ks[j][applied[j][n_fix[j] :]], j] = True
+        rows = [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for j in range(n_axes) for m in extras[j][: n_fix[j]]]
+        return {"zupt": mask, "fixes": np.array(rows, dtype=np.float64).reshape(-1, 4)}
+
     read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
     info = smooth_bounded(
-        model, n, read, args.out, axis_names=arrays["axis_names"], budget=min(BUDGET, budget), run_format=FORMAT
-    )
+        model, n, read, args.out, axis_names=arrays["axis_names"], extras=extras, gates=gates,
+        budget=min(BUDGET, budget), run_format=FORMAT, more=more,
+    )  # fmt: skip
     print(
-        f"{over}: smoothed in bounded memory, {info['chunks']} chunks of {info['chunk']} samples with a store on "
-        "disk; the output has standard deviations (filt_sd, smooth_sd), not covariances"
+        f"{_over_budget(args, arrays, budget)}: smoothed in bounded memory, {info['chunks']} chunks of "
+        f"{info['chunk']} samples with a store on disk; the output has standard deviations (filt_sd, smooth_sd), "
+        "not covariances, and no consistency checks"
     )
+    if rest is not None:
+        counts = [int(a[k:].sum()) for a, k in zip(info["applied"], n_fix, strict=True)]
+        print(f"zero-velocity updates applied per axis: {', '.join(map(str, counts))}")
+    if fixes is not None:
+        print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
     print(f"wrote {args.out}")
     return 0
 

@@ -268,6 +268,7 @@ def smooth_bounded(
     chunk: int | None = None,
     workdir: str | Path | None = None,
     run_format: str = RUN_FORMAT,
+    more: Callable[[list[np.ndarray]], dict[str, np.ndarray]] | None = None,
 ) -> dict:
     """Filter and RTS-smooth every axis of an n-sample run in bounded memory; write ``out``.
 
@@ -275,7 +276,8 @@ def smooth_bounded(
     ``extras[j]`` are axis j's extra measurements (fixes, zero-velocity updates) with ``gates[j]`` as in
     :func:`accelnav.estimate.fastsmooth.smooth_general`: an axis with extras takes the general path
     (a wider store), one without the plain path. ``chunk`` overrides the chunk size from ``budget``;
-    temporary files go to ``workdir`` (default: beside ``out``); ``run_format`` is the run file's format.
+    temporary files go to ``workdir`` (default: beside ``out``); ``run_format`` is the run file's format;
+    ``more(applied)`` may give small arrays to write beside the others, from which extras were applied.
     Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras were
     applied, in their given order}. Refuses in one line (UserError) before any work when the disk
     cannot hold the store and the output.
@@ -324,7 +326,8 @@ def smooth_bounded(
             cf = np.concatenate([np.asarray(d.x0, dtype=np.float64), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
             ex = exs[j]
             ne = 0 if ex is None else len(ex)
-            g = gates[j] if gates is not None and j < len(gates) and gates[j] is not None else None
+            g = gates[j] if gates is not None and j < len(gates) and ex is not None else None
+            g = None if g is None or len(g) == 0 else g
             eg = np.zeros(ne) if g is None else np.asarray(g, dtype=np.float64).reshape(ne)[ex.order]
             axes.append(
                 _Axis(d, fastsmooth._axis_struct(ffi, d), fd, GROW if general[j] else ROW, cf,
@@ -422,6 +425,12 @@ def smooth_bounded(
                     outs["smooth_sd"].write(4 * (j * n + n - 1), np.sqrt(ax.Pfn[fastsmooth._DIAG]))
         for ax in axes:
             os.ftruncate(ax.store, 0)  # free the store's disk before the output is assembled
+        applied = []
+        for ax in axes:
+            done = np.zeros(0 if ax.ex is None else len(ax.ex), dtype=bool)
+            if ax.ex is not None:
+                done[ax.ex.order] = ax.applied[: len(ax.ex)].astype(bool)
+            applied.append(done)
         members: dict[str, Path | np.ndarray] = {
             "format": np.array(run_format),
             "model_toml": np.array(model.text),
@@ -431,16 +440,11 @@ def smooth_bounded(
             "accel": a_out.path,
             "clipped": c_out.path,
             **{k: o.path for k, o in outs.items()},
+            **(more(applied) if more is not None else {}),
         }
         part = tmp / "out.npz"
         write_npz_streamed(part, members)
         os.replace(part, out)
-    applied = []
-    for ax in axes:
-        done = np.zeros(0 if ax.ex is None else len(ax.ex), dtype=bool)
-        if ax.ex is not None:
-            done[ax.ex.order] = ax.applied[: len(ax.ex)].astype(bool)
-        applied.append(done)
     return {"chunk": chunk, "chunks": len(starts), "applied": applied}
 
 

@@ -123,7 +123,7 @@ def test_smooth_over_its_memory_budget_runs_the_bounded_path(sim, tmp_path, caps
         assert_rel_close(b[f"{key}_sd"], sd, 0.0, RTOL, f"{key}_sd")
 
 
-@pytest.mark.parametrize("flags", [["--zupt", "auto"], ["--tune"], ["--plots", "PLOTS"]])
+@pytest.mark.parametrize("flags", [["--csv", "PLOTS"], ["--tune"], ["--plots", "PLOTS"]])
 def test_a_run_too_large_for_what_was_asked_is_refused_in_one_line(sim, tmp_path, capsys, flags):
     flags = [str(tmp_path / "p") if f == "PLOTS" else f for f in flags]
     status, out, err = _run(["smooth", sim, "--out", tmp_path / "x.npz", "--memory-budget", "0.02", *flags], capsys)
@@ -131,6 +131,30 @@ def test_a_run_too_large_for_what_was_asked_is_refused_in_one_line(sim, tmp_path
     (line,) = err.strip().splitlines()
     assert "over the memory budget" in line and flags[0] in line
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_fixes_and_auto_zupt_over_the_budget_give_the_whole_paths_numbers(sim, tmp_path, capsys):
+    arrays, _ = load_run(sim)
+    t, r = arrays["t"], arrays["r"]
+    rows = ["time_s,axis,position_m,sigma_m"]
+    for k in (1000, 1500, 2999):
+        rows += [f"{t[k]:.4f},x,{r[k, 0]:.6f},0.05", f"{t[k]:.4f},y,{r[k, 1]:.6f},0.05"]
+    (tmp_path / "fixes.csv").write_text("\n".join(rows) + "\n")
+    argv = ["smooth", sim, "--fixes", tmp_path / "fixes.csv", "--zupt", "auto"]
+    status, out, err = _run([*argv, "--out", tmp_path / "b.npz", "--memory-budget", "0.05"], capsys)
+    assert status == 0, err
+    assert "smoothed in bounded memory" in out and "position fixes per axis: 3, 3" in out
+    status, _, err = _run([*argv, "--out", tmp_path / "w.npz"], capsys)
+    assert status == 0, err
+    b, _ = load_run(tmp_path / "b.npz")
+    w, _ = load_run(tmp_path / "w.npz")
+    assert b["zupt"].sum() > 100
+    np.testing.assert_array_equal(b["zupt"], w["zupt"])
+    np.testing.assert_array_equal(b["fixes"], w["fixes"])
+    for key in ("filt", "smooth"):
+        sd = np.sqrt(np.einsum("akii->aki", w[f"{key}_P"]))
+        assert_rel_close(b[f"{key}_x"], w[f"{key}_x"], sd, RTOL, f"{key}_x")
+        assert_rel_close(b[f"{key}_sd"], sd, 0.0, RTOL, f"{key}_sd")
 
 
 def test_a_recording_longer_than_max_run_s_is_smoothed(tmp_path, capsys):
