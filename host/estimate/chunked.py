@@ -12,6 +12,10 @@ csrc/fastsmooth.c, the split of acn_plain_cov + acn_plain_data):
    covariances, written back into the store;
 3. forward: smoothed r, u and their covariances, in closed form from the store.
 
+With extra measurements (fixes, zero-velocity updates; :class:`fastsmooth.Extras`, sliced per
+chunk) an axis takes the general path instead, in two passes (acn_chunkg_fwd, acn_chunkg_bwd: the
+steps of acn_general) over a store of 28 doubles per sample (``GROW``).
+
 Between chunks only a few numbers are carried (the filter's prior, the
 smoother's state), so memory is the chunk buffers, whatever the run's length.
 The chunk size comes from a memory budget (:data:`BUDGET`, 256 MB by default):
