@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.runfile import STATE, export_csv, load_run, save_run
+from accelnav.data.runfile import FORMAT, STATE, export_csv, load_run, save_run
 from accelnav.errors import UserError
+from accelnav.estimate.chunked import memory_available, whole_bytes
 from accelnav.estimate.pipeline import (
     filter_run,
     format_errors,
@@ -214,6 +215,15 @@ def register(sub) -> None:
         help=f"--tune: wall time of the search at most (the best figures by then are used); default {TUNE_SECONDS:g}",
     )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
+    p.add_argument(
+        "--memory-budget",
+        type=float,
+        default=None,
+        metavar="MB",
+        help="memory the whole-array smoother may take; a longer run is smoothed in bounded memory (chunks, a "
+        "store on disk beside --out; not with --tune, --plots, --csv; the output keeps standard deviations, "
+        "not covariances, and the aids' consistency checks are skipped); default: half the memory free",
+    )
     _csv_arg(p)
     p.set_defaults(func=cmd_smooth)
 
@@ -286,8 +296,11 @@ def _load(args) -> tuple[dict[str, np.ndarray], Model]:
     if bad.any():
         k = int(np.argmax(bad.any(axis=1)))
         raise UserError(f"{path}: {rec.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
-    max_n = int(np.ceil(model.ranges.max_run_s * model.rate_hz))
-    t, accel, missing = on_grid(rec, rec.rate_hz, max_n)  # its own clock: within 1 % of the model by now
+    # ranges.max_run_s bounds the fixed-point C's range proof, not these float64 tools: the bound here is the
+    # memory that the filled-in input arrays (t, accel, clipped, twice while filling) take
+    max_n = memory_available() // (2 * (8 + 9 * len(names)) + 1)
+    limit = "the input arrays this machine's free memory holds number at most"
+    t, accel, missing = on_grid(rec, rec.rate_hz, max_n, limit)  # its own clock: within 1 % of the model by now
     # at the sensor's declared full scale a sample is clipped (as a digital part saturates); missing ones too
     with np.errstate(invalid="ignore"):
         clipped = np.abs(accel) >= model.max_accel_m_s2 * (1 - 1e-9)
@@ -420,6 +433,10 @@ def cmd_smooth(args) -> int:
     from accelnav.estimate.fixes import read_fixes
 
     arrays, model = _load(args)
+    budget = _memory_budget(args.memory_budget)
+    bounded = whole_bytes(*arrays["accel"].shape) > budget
+    if bounded:  # what the bounded path cannot do is refused before any work
+        _bounded_refusals(args, arrays, budget)
     names = [str(a) for a in arrays["axis_names"]]
     fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
     params = ZuptParams(
@@ -454,6 +471,8 @@ def cmd_smooth(args) -> int:
             print(f"wrote {args.zupt_report}")
     elif args.zupt is not None:
         rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
+    if bounded:
+        return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays
@@ -483,6 +502,73 @@ def cmd_smooth(args) -> int:
         print(f"wrote {plot_run(arrays, model, args.plots / 'smooth.png')}")
         for path in plot_smoothing(arrays, model, args.plots):
             print(f"wrote {path}")
+    return 0
+
+
+def _memory_budget(mb: float | None) -> int:
+    if mb is None:
+        return memory_available() // 2
+    if not mb > 0:
+        raise UserError(f"--memory-budget: got {mb:g}; accepted: megabytes > 0")
+    return int(mb * (1 << 20))
+
+
+def _over_budget(args, arrays, budget: int) -> str:
+    n, n_axes = arrays["accel"].shape
+    return (
+        f"{args.run}: {n} samples x {n_axes} axes need about {whole_bytes(n, n_axes) / 1e9:.3g} GB on the "
+        f"whole-array path, over the memory budget of {budget / 1e9:.3g} GB (--memory-budget)"
+    )
+
+
+def _bounded_refusals(args, arrays, budget: int) -> None:
+    given = [f for f, v in (("--plots", args.plots), ("--csv", args.csv), ("--tune", args.tune)) if v]
+    if given:
+        raise UserError(f"{_over_budget(args, arrays, budget)}; bounded memory does not do {', '.join(given)}")
+
+
+def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_sigma, params) -> int:
+    """smooth of a run over the memory budget, in chunks with a store on disk (accelnav.estimate.chunked)."""
+    from accelnav.estimate import zupt
+    from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
+
+    n, n_axes = arrays["accel"].shape
+    extras = [list(fixes[j]) if fixes is not None else [] for j in range(n_axes)]
+    gates: list[list[float]] = [[0.0] * len(e) for e in extras]
+    zupt_ks = [np.zeros(0, dtype=np.int64)] * n_axes
+    if rest is not None:
+        r2 = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, n_axes))
+        for j in range(n_axes):
+            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
+            zupt_ks[j], upd = zupt.axis_updates(r2[:, j], sigma, model, params)
+            extras[j] += upd
+            gates[j] += [0.0] * len(upd)
+    n_fix = [len(fixes[j]) if fixes is not None else 0 for j in range(n_axes)]
+
+    def more(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
+        """The run file's zupt mask and fixes rows, as the whole-array path writes them."""
+        mask = np.zeros((n, n_axes), dtype=bool)
+        for j in range(n_axes):
+            mask[zupt_ks[j][applied[j][n_fix[j] :]], j] = True
+        rows = [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for j in range(n_axes) for m in extras[j][: n_fix[j]]]
+        return {"zupt": mask, "fixes": np.array(rows, dtype=np.float64).reshape(-1, 4)}
+
+    read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
+    info = smooth_bounded(
+        model, n, read, args.out, axis_names=arrays["axis_names"], extras=extras, gates=gates,
+        budget=min(BUDGET, budget), run_format=FORMAT, more=more,
+    )  # fmt: skip
+    print(
+        f"{_over_budget(args, arrays, budget)}: smoothed in bounded memory, {info['chunks']} chunks of "
+        f"{info['chunk']} samples with a store on disk; the output has standard deviations (filt_sd, smooth_sd), "
+        "not covariances, and no consistency checks"
+    )
+    if rest is not None:
+        counts = [int(a[k:].sum()) for a, k in zip(info["applied"], n_fix, strict=True)]
+        print(f"zero-velocity updates applied per axis: {', '.join(map(str, counts))}")
+    if fixes is not None:
+        print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
+    print(f"wrote {args.out}")
     return 0
 
 

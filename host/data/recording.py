@@ -609,12 +609,15 @@ def check_rate(rec: Recording, model_rate_hz: float, model_source: str) -> None:
     )
 
 
-def on_grid(rec: Recording, rate_hz: float, max_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def on_grid(
+    rec: Recording, rate_hz: float, max_samples: int, limit: str = "the model's ranges.max_run_s allows"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, accel, missing): the samples placed on the uniform grid t0 + k / rate_hz, gaps filled with NaN.
 
     Each sample must lie within a quarter period of its grid point (the
     recording's timing jitter, checked whether or not there are gaps); a filled
-    run longer than ``max_samples`` samples in all is refused (memory bound).
+    run longer than ``max_samples`` samples in all is refused (memory bound), the line saying ``limit``
+    before the number.
     """
     Ts = 1.0 / rate_hz
     k = np.rint((rec.t - rec.t[0]) / Ts).astype(np.int64)
@@ -630,10 +633,7 @@ def on_grid(rec: Recording, rate_hz: float, max_samples: int) -> tuple[np.ndarra
         raise UserError(f"{rec.source}: {rec.where(i)} falls on the same sample period as the one before it")
     n = int(k[-1]) + 1
     if n > max_samples:
-        raise UserError(
-            f"{rec.source}: with its gaps filled the recording is {n} samples; the model's ranges.max_run_s "
-            f"allows {max_samples}"
-        )
+        raise UserError(f"{rec.source}: with its gaps filled the recording is {n} samples; {limit} {max_samples}")
     t = rec.t[0] + np.arange(n) * Ts
     accel = np.full((n, rec.accel.shape[1]), np.nan)
     accel[k] = rec.accel

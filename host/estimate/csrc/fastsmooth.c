@@ -320,12 +320,99 @@ static int chol_solve4(double M[4][4], double B[4][4])
     return 0;
 }
 
+/*
+ * The measurements of sample k once its prior is in (x, P): the acceleration
+ * if ok, then the extras ek[ei] == k in order. Returns the index of the first
+ * extra of a later sample.
+ */
+static long general_update(const acn_axis *m, long k, int ok, double zk, double x[4], double P[4][4],
+                           long ei, long n_extra, const long *ek, const double *eh, const double *ez,
+                           const double *eR, const double *egate, unsigned char *applied)
+{
+    double K[4], S;
+    if (ok)
+        update(x, P, H_ACC, zk, m->R, &S, K);
+    for (; ei < n_extra && ek[ei] == k; ei++) {
+        const double *h = eh + 4 * ei;
+        if (egate[ei] > 0.0) {
+            /* gated: apply only if y^2 / S <= gate (a chi-square test of the innovation) */
+            double y = ez[ei] - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3]);
+            double s = eR[ei];
+            for (int i = 0; i < 4; i++)
+                for (int j = 0; j < 4; j++)
+                    s += h[i] * P[i][j] * h[j];
+            if (y * y > egate[ei] * s) {
+                applied[ei] = 0;
+                continue;
+            }
+        }
+        update(x, P, h, ez[ei], eR[ei], &S, K);
+        applied[ei] = 1;
+    }
+    return ei;
+}
+
+/*
+ * One RTS step: the smoothed (xs, Psm) of sample k from the filter's posterior
+ * (xpost, Ppost) at k, its prior (xprior1, Pprior1) at k + 1 and the smoothed
+ * (xs1, Psm1) at k + 1; covariances packed. Returns -1 if that prior is not
+ * positive definite.
+ */
+static int rts_step(double F[4][4], const double *xpost, const double *Ppost, const double *xprior1,
+                    const double *Pprior1, const double *xs1, const double *Psm1, double *xs, double *Psm)
+{
+    double Pp[4][4], Pf[4][4], Ps1[4][4], B[4][4], C[4][4], sd[4], dx[4], T[4][4];
+    unpack(Pprior1, Pp);
+    unpack(Ppost, Pf);
+    unpack(Psm1, Ps1);
+    /* C = Pf F' inv(Pp)  <=>  C' = inv(Pp) F Pf, solved on the equilibrated Pp */
+    for (int i = 0; i < 4; i++)
+        sd[i] = Pp[i][i] > 0.0 ? sqrt(Pp[i][i]) : 1.0;
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++) {
+            double s = 0.0;
+            for (int l = i; l < 4; l++)
+                s += F[i][l] * Pf[l][j];
+            B[i][j] = s / sd[i];
+        }
+    double Mq[4][4];
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            Mq[i][j] = Pp[i][j] / (sd[i] * sd[j]);
+    if (chol_solve4(Mq, B) != 0)
+        return -1;
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            C[j][i] = B[i][j] / sd[i];
+    /* xs = x_post + C (xs[k+1] - x_prior[k+1]) */
+    for (int i = 0; i < 4; i++)
+        dx[i] = xs1[i] - xprior1[i];
+    for (int i = 0; i < 4; i++)
+        xs[i] = xpost[i] + C[i][0] * dx[0] + C[i][1] * dx[1] + C[i][2] * dx[2] + C[i][3] * dx[3];
+    /* Ps = P_post + C (Ps[k+1] - P_prior[k+1]) C' */
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++) {
+            double s = 0.0;
+            for (int l = 0; l < 4; l++)
+                s += C[i][l] * (Ps1[l][j] - Pp[l][j]);
+            T[i][j] = s;
+        }
+    for (int i = 0; i < 4; i++)
+        for (int j = i; j < 4; j++) {
+            double s = 0.0;
+            for (int l = 0; l < 4; l++)
+                s += T[i][l] * C[j][l];
+            Psm[PK[i][j]] = Pf[i][j] + s;
+        }
+    return 0;
+}
+
 int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
                 long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
                 const double *egate, unsigned char *applied, double *xprior, double *Pprior,
                 double *xpost, double *Ppost, double *xs, double *Psm)
 {
-    double F[4][4], P[4][4], x[4], K[4], S;
+    double F[4][4], P[4][4], x[4];
     long ei = 0;
     transition(m, F);
     unpack(m->p0, P);
@@ -340,25 +427,8 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
         for (int i = 0; i < 4; i++)
             xprior[4 * k + i] = x[i];
         pack(P, Pprior + 10 * k);
-        if (valid == NULL || valid[k])
-            update(x, P, H_ACC, z[k], m->R, &S, K);
-        for (; ei < n_extra && ek[ei] == k; ei++) {
-            const double *h = eh + 4 * ei;
-            if (egate[ei] > 0.0) {
-                /* gated: apply only if y^2 / S <= gate (a chi-square test of the innovation) */
-                double y = ez[ei] - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3]);
-                double s = eR[ei];
-                for (int i = 0; i < 4; i++)
-                    for (int j = 0; j < 4; j++)
-                        s += h[i] * P[i][j] * h[j];
-                if (y * y > egate[ei] * s) {
-                    applied[ei] = 0;
-                    continue;
-                }
-            }
-            update(x, P, h, ez[ei], eR[ei], &S, K);
-            applied[ei] = 1;
-        }
+        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
+                            eR, egate, applied);
         for (int i = 0; i < 4; i++)
             xpost[4 * k + i] = x[i];
         pack(P, Ppost + 10 * k);
@@ -369,50 +439,279 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
     for (int i = 0; i < 10; i++)
         Psm[10 * (n - 1) + i] = Ppost[10 * (n - 1) + i];
     for (long k = n - 2; k >= 0; k--) {
-        double Pp[4][4], Pf[4][4], Ps1[4][4], B[4][4], C[4][4], sd[4], dx[4], T[4][4];
-        unpack(Pprior + 10 * (k + 1), Pp);
-        unpack(Ppost + 10 * k, Pf);
-        unpack(Psm + 10 * (k + 1), Ps1);
-        /* C = Pf F' inv(Pp)  <=>  C' = inv(Pp) F Pf, solved on the equilibrated Pp */
-        for (int i = 0; i < 4; i++)
-            sd[i] = Pp[i][i] > 0.0 ? sqrt(Pp[i][i]) : 1.0;
-        for (int i = 0; i < 4; i++)
-            for (int j = 0; j < 4; j++) {
-                double s = 0.0;
-                for (int l = i; l < 4; l++)
-                    s += F[i][l] * Pf[l][j];
-                B[i][j] = s / sd[i];
-            }
-        double Mq[4][4];
-        for (int i = 0; i < 4; i++)
-            for (int j = 0; j < 4; j++)
-                Mq[i][j] = Pp[i][j] / (sd[i] * sd[j]);
-        if (chol_solve4(Mq, B) != 0)
+        if (rts_step(F, xpost + 4 * k, Ppost + 10 * k, xprior + 4 * (k + 1), Pprior + 10 * (k + 1),
+                     xs + 4 * (k + 1), Psm + 10 * (k + 1), xs + 4 * k, Psm + 10 * k) != 0)
             return -(int)(k + 1 > 1000000000L ? 1000000000L : k + 1);
-        for (int i = 0; i < 4; i++)
-            for (int j = 0; j < 4; j++)
-                C[j][i] = B[i][j] / sd[i];
-        /* xs = x_post + C (xs[k+1] - x_prior[k+1]) */
-        for (int i = 0; i < 4; i++)
-            dx[i] = xs[4 * (k + 1) + i] - xprior[4 * (k + 1) + i];
-        for (int i = 0; i < 4; i++)
-            xs[4 * k + i] = xpost[4 * k + i] + C[i][0] * dx[0] + C[i][1] * dx[1] + C[i][2] * dx[2] +
-                            C[i][3] * dx[3];
-        /* Ps = P_post + C (Ps[k+1] - P_prior[k+1]) C' */
-        for (int i = 0; i < 4; i++)
-            for (int j = 0; j < 4; j++) {
-                double s = 0.0;
-                for (int l = 0; l < 4; l++)
-                    s += C[i][l] * (Ps1[l][j] - Pp[l][j]);
-                T[i][j] = s;
-            }
-        for (int i = 0; i < 4; i++)
-            for (int j = i; j < 4; j++) {
-                double s = 0.0;
-                for (int l = 0; l < 4; l++)
-                    s += T[i][l] * C[j][l];
-                Psm[10 * k + PK[i][j]] = Pf[i][j] + s;
-            }
     }
+    return 0;
+}
+
+/* ------------------------------------------------------------------------- */
+/* Plain path in bounded memory: acn_plain_cov + acn_plain_data split into      */
+/* chunks, every number computed by the same operations in the same order, so  */
+/* the chunked output equals the whole-array one. Store row of sample k:        */
+/*   0 a  1 eps        filter posterior (after acn_chunk_bwd: smoothed)          */
+/*   2..5 C[k]         (a, eps) smoother gain c00 c01 c10 c11 (0 at the last)    */
+/*   6..8 aa ae ee     filter posterior covariance (after acn_chunk_bwd: smoothed) */
+/*   9..11 aa ae ee    prior covariance of sample k + 1                          */
+
+/*
+ * Forward pass over samples k0 .. k0 + n - 1 (last: the chunk ends the run).
+ * carry[0..3] is the prior mean of the chunk's first sample, carry[4..13] its
+ * prior covariance (packed): (x0, P0) for k0 = 0; on return, those of the
+ * sample after the chunk. Writes the store rows, the filter means xf (n x 4)
+ * and standard deviations sdf (n x 4); Pf0 gets the packed posterior of sample
+ * 0 (when k0 = 0), Pfn that of the run's last sample (when last).
+ * Returns 0, or -(k + 1) if the (a, eps) prior is singular after sample k.
+ */
+int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
+                  const unsigned char *valid, double *carry, double *store, double *xf,
+                  double *sdf, double *Pf0, double *Pfn)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    double F[4][4], P[4][4], dummy[4] = {0.0, 0.0, 0.0, 0.0}, Kk[4], S;
+    double r = carry[0], u = carry[1], a = carry[2], ep = carry[3], e;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (long k = 0; k < n; k++) {
+        double *row = store + ACN_ROW * k;
+        /* the covariance filter, as acn_plain_cov: K[k] = 0 where sample k is skipped */
+        if (valid == NULL || valid[k]) {
+            update(dummy, P, H_ACC, 0.0, m->R, &S, Kk);
+            /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
+            double y = z[k] - a - ep;
+            r += Kk[0] * y;
+            u += Kk[1] * y;
+            double ka = Kk[2], ke = Kk[3], zk = z[k];
+            double an = (a - ka * a) + ka * (zk - ep);
+            e = (ep - ke * ep) + ke * (zk - a);
+            a = an;
+        } else {
+            e = ep;
+        }
+        double *o = xf + 4 * k, *sd = sdf + 4 * k;
+        o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        for (int i = 0; i < 4; i++)
+            sd[i] = sqrt(P[i][i]);
+        if (k0 + k == 0)
+            pack(P, Pf0);
+        row[0] = a, row[1] = e;
+        row[6] = P[2][2], row[7] = P[2][3], row[8] = P[3][3];
+        if (last && k == n - 1) {
+            pack(P, Pfn);
+            for (int i = 2; i < 6; i++)
+                row[i] = 0.0;
+            row[9] = row[10] = row[11] = 0.0;
+            break;
+        }
+        /* x = F x + b, P = F P F' + Q: the prior of sample k + 1 */
+        double paa = P[2][2], pae = P[2][3], pee = P[3][3];
+        predict_cov(m, F, P);
+        r = r + f01 * u + f02 * a;
+        u = u + f12 * a;
+        ep = phi * e + b;
+        /* C = Pf Fs' inv(Pp), as in acn_plain_cov */
+        double qaa = P[2][2], qae = P[2][3], qee = P[3][3];
+        double sa = sqrt(qaa), se = sqrt(qee);
+        double rho = qae / (sa * se);
+        double det = (1.0 - rho * rho) * qaa * qee;
+        if (!(det > 0.0)) {
+            long at = k0 + k + 1;
+            return -(int)(at > 1000000000L ? 1000000000L : at);
+        }
+        double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee; /* Pf Fs' */
+        row[2] = (m00 * qee - m01 * qae) / det, row[3] = (m01 * qaa - m00 * qae) / det;
+        row[4] = (m10 * qee - m11 * qae) / det, row[5] = (m11 * qaa - m10 * qae) / det;
+        row[9] = qaa, row[10] = qae, row[11] = qee;
+    }
+    carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
+    pack(P, carry + 4);
+    return 0;
+}
+
+/*
+ * Backward pass over the n store rows of one chunk, last to first (last: the
+ * chunk ends the run, whose last sample is the filter's). carry holds the
+ * smoothed a, eps, P_aa, P_ae, P_ee of the sample after the chunk; on return,
+ * those of the chunk's first sample. Rows get the smoothed values in place.
+ */
+void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry)
+{
+    const double phi = m->phi, b = m->b_eps;
+    double as = carry[0], es = carry[1], saa = carry[2], sae = carry[3], see = carry[4];
+    long k = n - 1;
+    if (last) {
+        const double *row = store + ACN_ROW * k;
+        as = row[0], es = row[1], saa = row[6], sae = row[7], see = row[8];
+        k--;
+    }
+    for (; k >= 0; k--) {
+        double *row = store + ACN_ROW * k;
+        double c00 = row[2], c01 = row[3], c10 = row[4], c11 = row[5];
+        /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
+        double fa = row[0], fe = phi * row[1] + b;
+        double ca = row[0] - (c00 * fa + c01 * fe), ce = row[1] - (c10 * fa + c11 * fe);
+        double an = c00 * as + c01 * es + ca;
+        es = c10 * as + c11 * es + ce;
+        as = an;
+        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
+        double daa = saa - row[9], dae = sae - row[10], dee = see - row[11];
+        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
+        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
+        double paa = row[6], pae = row[7], pee = row[8];
+        saa = paa + t00 * c00 + t01 * c01;
+        sae = pae + t00 * c10 + t01 * c11;
+        see = pee + t10 * c10 + t11 * c11;
+        row[0] = as, row[1] = es, row[6] = saa, row[7] = sae, row[8] = see;
+    }
+    carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
+}
+
+/*
+ * Forward pass of smoothed r, u over n samples of one chunk: writes xs and the
+ * standard deviations sds (n x 4) of each, reading store rows 0 .. n (row n is
+ * the next chunk's first; the run's last sample is the caller's, the filter's).
+ * carry: r, u, P_rr, P_ru, P_ra, P_uu, P_ua and beta_r (2), beta_u (2) of the
+ * chunk's first sample (see acn_plain_cov); on return, of the sample after it.
+ */
+void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
+                  double *sds)
+{
+    const double gr = m->gr, gu = m->gu, f01 = m->f01, f02 = m->f02, f12 = m->f12;
+    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
+    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
+    const double qe_uu = m->q[4] - gu * m->q[5];
+    double r = carry[0], u = carry[1], rr = carry[2], ru = carry[3], ra = carry[4];
+    double uu = carry[5], ua = carry[6];
+    double br0 = carry[7], br1 = carry[8], bu0 = carry[9], bu1 = carry[10];
+    for (long k = 0; k < n; k++) {
+        const double *row = store + ACN_ROW * k, *nx = row + ACN_ROW;
+        double *o = xs + 4 * k, *sd = sds + 4 * k;
+        o[0] = r, o[1] = u, o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(rr), sd[1] = sqrt(uu), sd[2] = sqrt(row[6]), sd[3] = sqrt(row[8]);
+        /* the covariance recursion of acn_plain_cov, term by term */
+        double aa = row[6];
+        double vpr =
+            rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
+        double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
+        double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
+        double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
+        double pu0 = bu0 + c2u, pu1 = bu1;
+        double gr0 = row[2] * pr0 + row[4] * pr1, gr1 = row[3] * pr0 + row[5] * pr1;
+        double gu0 = row[2] * pu0 + row[4] * pu1, gu1 = row[3] * pu0 + row[5] * pu1;
+        double aa1 = nx[6], ae1 = nx[7];
+        double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1;
+        br0 = gr0 + gr, br1 = gr1;
+        bu0 = gu0 + gu, bu1 = gu1;
+        double rr1 = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
+        double uu1 = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
+        ru = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
+        rr = rr1, uu = uu1;
+        ra = br0 * aa1 + br1 * ae1;
+        ua = bu0 * aa1 + bu1 * ae1;
+        /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise */
+        double a0 = row[0], a1 = nx[0];
+        double dw = a1 - a0;
+        r = r + (f01 * u + (f02 * a0 + gr * dw));
+        u = u + (f12 * a0 + gu * dw);
+    }
+    carry[0] = r, carry[1] = u, carry[2] = rr, carry[3] = ru, carry[4] = ra;
+    carry[5] = uu, carry[6] = ua, carry[7] = br0, carry[8] = br1, carry[9] = bu0, carry[10] = bu1;
+}
+
+/* ------------------------------------------------------------------------- */
+/* General path in bounded memory: acn_general split into chunks, the same     */
+/* steps (general_update, rts_step) in the same order. Store row of sample k:  */
+/*   0..3 x_post[k]  4..13 P_post[k]  14..17 x_prior[k+1]  18..27 P_prior[k+1] */
+/* (the prior fields are 0 at the run's last sample).                           */
+
+/*
+ * Forward over samples k0 .. k0 + n - 1, extras as in acn_general with ek
+ * counted from the chunk's first sample. carry: the prior mean (4) and packed
+ * covariance (10) of the chunk's first sample; on return, of the next sample.
+ * Writes the store rows and the filter means xf and standard deviations sdf (n x 4).
+ */
+void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
+                    const unsigned char *valid, long n_extra, const long *ek, const double *eh,
+                    const double *ez, const double *eR, const double *egate, unsigned char *applied,
+                    double *carry, double *store, double *xf, double *sdf)
+{
+    double F[4][4], P[4][4], x[4];
+    long ei = 0;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (int i = 0; i < 4; i++)
+        x[i] = carry[i];
+    for (long k = 0; k < n; k++) {
+        double *row = store + ACN_GROW * k;
+        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
+                            eR, egate, applied);
+        for (int i = 0; i < 4; i++) {
+            row[i] = xf[4 * k + i] = x[i];
+            sdf[4 * k + i] = sqrt(P[i][i]);
+        }
+        pack(P, row + 4);
+        if (last && k == n - 1) {
+            for (int i = 14; i < ACN_GROW; i++)
+                row[i] = 0.0;
+            break;
+        }
+        predict_mean(m, x);
+        predict_cov(m, F, P);
+        for (int i = 0; i < 4; i++)
+            row[14 + i] = x[i];
+        pack(P, row + 18);
+    }
+    for (int i = 0; i < 4; i++)
+        carry[i] = x[i];
+    pack(P, carry + 4);
+}
+
+/*
+ * Backward over the n store rows of one chunk (last: it ends the run, whose
+ * last sample is the filter's). carry: the smoothed mean (4) and packed
+ * covariance (10) of the sample after the chunk; on return, of its first.
+ * Writes xs and the standard deviations sds (n x 4). k0 names samples in the
+ * error: returns -(k + 1) if the prior of sample k + 1 is not positive definite.
+ */
+int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
+                   double *xs, double *sds)
+{
+    double F[4][4], x1[4], P1[10], x[4], Pk[10];
+    transition(m, F);
+    for (int i = 0; i < 4; i++)
+        x1[i] = carry[i];
+    for (int i = 0; i < 10; i++)
+        P1[i] = carry[4 + i];
+    long k = n - 1;
+    if (last) {
+        const double *row = store + ACN_GROW * k;
+        for (int i = 0; i < 4; i++)
+            x1[i] = row[i];
+        for (int i = 0; i < 10; i++)
+            P1[i] = row[4 + i];
+        for (int i = 0; i < 4; i++) {
+            xs[4 * k + i] = x1[i];
+            sds[4 * k + i] = sqrt(P1[PK[i][i]]);
+        }
+        k--;
+    }
+    for (; k >= 0; k--) {
+        const double *row = store + ACN_GROW * k;
+        if (rts_step(F, row, row + 4, row + 14, row + 18, x1, P1, x, Pk) != 0) {
+            long at = k0 + k + 1;
+            return -(int)(at > 1000000000L ? 1000000000L : at);
+        }
+        for (int i = 0; i < 4; i++) {
+            x1[i] = xs[4 * k + i] = x[i];
+            sds[4 * k + i] = sqrt(Pk[PK[i][i]]);
+        }
+        for (int i = 0; i < 10; i++)
+            P1[i] = Pk[i];
+    }
+    for (int i = 0; i < 4; i++)
+        carry[i] = x1[i];
+    for (int i = 0; i < 10; i++)
+        carry[4 + i] = P1[i];
     return 0;
 }

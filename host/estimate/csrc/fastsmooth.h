@@ -45,6 +45,36 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
                 long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
                 const double *egate, unsigned char *applied, double *xprior, double *Pprior,
                 double *xpost, double *Ppost, double *xs, double *Psm);
+
+/*
+ * Plain path in bounded memory (host/estimate/chunked.py): the same numbers as
+ * acn_plain_cov + acn_plain_data, computed chunk by chunk in three passes over
+ * a store of ACN_ROW doubles per sample (kept on disk by the caller):
+ *   acn_chunk_fwd  forward, filter means and covariances, smoother gains;
+ *   acn_chunk_bwd  backward, (a, eps) smoothed means and covariances;
+ *   acn_chunk_ru   forward, smoothed r, u and their covariances.
+ * The general path likewise in two passes over ACN_GROW doubles per sample
+ * (acn_chunkg_fwd, acn_chunkg_bwd): the same steps as acn_general.
+ * The carried state between chunks is a small array documented at each call.
+ */
+enum { ACN_ROW = 12, ACN_GROW = 28 };
+
+int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
+                  const unsigned char *valid, double *carry, double *store, double *xf,
+                  double *sdf, double *Pf0, double *Pfn);
+
+void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry);
+
+void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
+                    const unsigned char *valid, long n_extra, const long *ek, const double *eh,
+                    const double *ez, const double *eR, const double *egate, unsigned char *applied,
+                    double *carry, double *store, double *xf, double *sdf);
+
+int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
+                   double *xs, double *sds);
+
+void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
+                  double *sds);
 /* ACN-CDEF-END */
 
 #endif

@@ -1,0 +1,240 @@
+"""The bounded-memory smoother (accelnav.estimate.chunked) and the host tools freed from max_run_s (issue 24).
+
+Chunked and whole-array smoothing run the same operations in the same order, so they agree to the last bit
+on one machine; the tests allow 1e-12 relative (to |value| + its sigma), room for a compiler that contracts
+the multiply-adds of the two kernels differently, and a million times tighter than the 1e-9 at which both
+are checked against the float64 reference (tests/test_fastsmooth.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_rel_close, edited_model
+
+from accelnav.cli import main
+from accelnav.data.runfile import load_run
+from accelnav.estimate import chunked
+from accelnav.estimate import fastsmooth as fs
+from accelnav.model.design import axis_design
+from accelnav.model.load import load_model
+
+RTOL = 1e-12
+
+
+def _data(model, n, seed=3):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / model.rate_hz
+    accel = np.cumsum(rng.normal(0, 0.05, (n, len(model.axes))), axis=0) + rng.normal(0, 0.02, (n, len(model.axes)))
+    clipped = np.zeros(accel.shape, dtype=bool)
+    clipped[n // 3 : n // 3 + 11, 0] = True  # a clipped stretch across chunk edges
+    clipped[n // 2, -1] = True
+    accel[(n - 1) // 2, 0] = np.nan  # a missing value is skipped as on the whole path
+    return t, accel, clipped
+
+
+def _check_against_whole(model, out, accel, clipped):
+    f = np.load(out)
+    for j in range(len(model.axes)):
+        ref = fs.smooth_plain(axis_design(model, j), accel[:, j], valid=~clipped[:, j])
+        for key, x, P in (("filt", ref.x_post, ref.P_post), ("smooth", ref.xs, ref.Ps)):
+            sd = fs.packed_sd(P)
+            assert_rel_close(f[f"{key}_x"][j], x, sd, RTOL, f"{key}_x axis {j}")
+            assert_rel_close(f[f"{key}_sd"][j], sd, 0.0, RTOL, f"{key}_sd axis {j}")
+
+
+@pytest.mark.parametrize("n, chunk", [(1000, 97), (1000, 2), (1000, 999), (1000, 5000), (1, 4), (2, 2)])
+def test_chunked_smoothing_equals_the_whole_array_path(tmp_path, n, chunk):
+    """Split into many chunks (97, 2), a last chunk of one sample (999), one chunk, and the shortest runs."""
+    model = load_model()
+    t, accel, clipped = _data(model, n)
+    out = tmp_path / "o.npz"
+    info = chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), out, chunk=chunk)
+    assert info["chunks"] == -(-n // chunk)
+    _check_against_whole(model, out, accel, clipped)
+    f = np.load(out)
+    np.testing.assert_array_equal(f["t"], t)
+    np.testing.assert_array_equal(f["accel"], accel)
+    assert [p.name for p in tmp_path.iterdir()] == ["o.npz"], "temporary files left behind"
+
+
+def test_the_chunk_size_comes_from_the_budget():
+    for n_axes in (1, 2, 3):
+        per = chunked.sample_bytes(n_axes)
+        for budget in (1 << 20, 256 << 20):
+            k = chunked.chunk_samples(n_axes, budget)
+            assert k * per <= budget < (k + 1) * per
+    assert chunked.chunk_samples(2, 10) == 2  # never below the two samples a chunk needs
+
+
+def test_temporary_files_are_removed_on_error(tmp_path):
+    model = load_model()
+    t, accel, clipped = _data(model, 500)
+
+    def failing(s, e):
+        if s >= 200:
+            raise OSError("input went away")
+        return t[s:e], accel[s:e], clipped[s:e]
+
+    with pytest.raises(OSError):
+        chunked.smooth_bounded(model, 500, failing, tmp_path / "o.npz", chunk=100)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_too_little_disk_is_refused_in_one_line_before_work(tmp_path, monkeypatch):
+    from collections import namedtuple
+
+    model = load_model()
+    t, accel, clipped = _data(model, 100)
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(chunked.shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 1000, 1000))
+    called = []
+    with pytest.raises(chunked.UserError, match=r"need .* GB of disk .* are free") as exc:
+        chunked.smooth_bounded(model, 100, lambda s, e: called.append(s), tmp_path / "o.npz")
+    assert "\n" not in str(exc.value) and not called
+    assert list(tmp_path.iterdir()) == []
+
+
+def _run(argv, capsys):
+    status = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return status, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    path = tmp_path_factory.mktemp("bounded") / "sim.npz"
+    assert main(["sim", "--scenario", "stop_and_go", "--duration", "30", "--seed", "4", "--out", str(path)]) == 0
+    return path
+
+
+def test_smooth_over_its_memory_budget_runs_the_bounded_path(sim, tmp_path, capsys):
+    """A budget of 0.02 MB sends a 3000-sample run to the chunked path; it gives the whole path's numbers."""
+    status, out, err = _run(["smooth", sim, "--out", tmp_path / "b.npz", "--memory-budget", "0.02"], capsys)
+    assert status == 0, err
+    assert "smoothed in bounded memory" in out and "chunks of" in out
+    status, _, err = _run(["smooth", sim, "--out", tmp_path / "w.npz"], capsys)
+    assert status == 0, err
+    b, _ = load_run(tmp_path / "b.npz")
+    w, _ = load_run(tmp_path / "w.npz")
+    for key in ("filt", "smooth"):
+        sd = np.sqrt(np.einsum("akii->aki", w[f"{key}_P"]))
+        assert_rel_close(b[f"{key}_x"], w[f"{key}_x"], sd, RTOL, f"{key}_x")
+        assert_rel_close(b[f"{key}_sd"], sd, 0.0, RTOL, f"{key}_sd")
+
+
+@pytest.mark.parametrize("flags", [["--csv", "PLOTS"], ["--tune"], ["--plots", "PLOTS"]])
+def test_a_run_too_large_for_what_was_asked_is_refused_in_one_line(sim, tmp_path, capsys, flags):
+    flags = [str(tmp_path / "p") if f == "PLOTS" else f for f in flags]
+    status, out, err = _run(["smooth", sim, "--out", tmp_path / "x.npz", "--memory-budget", "0.02", *flags], capsys)
+    assert status == 2 and "Traceback" not in err
+    (line,) = err.strip().splitlines()
+    assert "over the memory budget" in line and flags[0] in line
+    assert not (tmp_path / "x.npz").exists()
+
+
+def test_fixes_and_auto_zupt_over_the_budget_give_the_whole_paths_numbers(sim, tmp_path, capsys):
+    arrays, _ = load_run(sim)
+    t, r = arrays["t"], arrays["r"]
+    rows = ["time_s,axis,position_m,sigma_m"]
+    for k in (1000, 1500, 2999):
+        rows += [f"{t[k]:.4f},x,{r[k, 0]:.6f},0.05", f"{t[k]:.4f},y,{r[k, 1]:.6f},0.05"]
+    (tmp_path / "fixes.csv").write_text("\n".join(rows) + "\n")
+    argv = ["smooth", sim, "--fixes", tmp_path / "fixes.csv", "--zupt", "auto"]
+    status, out, err = _run([*argv, "--out", tmp_path / "b.npz", "--memory-budget", "0.05"], capsys)
+    assert status == 0, err
+    assert "smoothed in bounded memory" in out and "position fixes per axis: 3, 3" in out
+    status, _, err = _run([*argv, "--out", tmp_path / "w.npz"], capsys)
+    assert status == 0, err
+    b, _ = load_run(tmp_path / "b.npz")
+    w, _ = load_run(tmp_path / "w.npz")
+    assert b["zupt"].sum() > 100
+    np.testing.assert_array_equal(b["zupt"], w["zupt"])
+    np.testing.assert_array_equal(b["fixes"], w["fixes"])
+    for key in ("filt", "smooth"):
+        sd = np.sqrt(np.einsum("akii->aki", w[f"{key}_P"]))
+        assert_rel_close(b[f"{key}_x"], w[f"{key}_x"], sd, RTOL, f"{key}_x")
+        assert_rel_close(b[f"{key}_sd"], sd, 0.0, RTOL, f"{key}_sd")
+
+
+def test_a_recording_longer_than_max_run_s_is_smoothed(tmp_path, capsys):
+    """max_run_s is the fixed-point C's range proof; the float64 host tools do not stop at it (fails before)."""
+    short = edited_model([("max_run_s = 3600.0", "max_run_s = 10.0")])
+    (tmp_path / "short.toml").write_text(short.text)
+    n = 3000  # 30 s at 100 Hz, three times max_run_s
+    t, accel, _ = _data(short, n)
+    accel[np.isnan(accel)] = 0.0
+    np.savez(tmp_path / "rec.npz", t=t, accel=accel)
+    for cmd in ("smooth", "filter"):
+        argv = [cmd, tmp_path / "rec.npz", "--model", tmp_path / "short.toml", "--out", tmp_path / f"{cmd}.npz"]
+        status, _, err = _run(argv, capsys)
+        assert status == 0, err
+        arrays, _ = load_run(tmp_path / f"{cmd}.npz")
+        assert len(arrays["t"]) == n
+    # and the bounded path too
+    argv = ["smooth", tmp_path / "rec.npz", "--model", tmp_path / "short.toml", "--out", tmp_path / "b.npz"]
+    status, out, err = _run([*argv, "--memory-budget", "0.05"], capsys)
+    assert status == 0 and "bounded memory" in out, err
+
+
+def test_an_npz_recording_is_read_chunk_by_chunk_from_the_file(tmp_path):
+    model = load_model()
+    t, accel, clipped = _data(model, 700)
+    np.savez(tmp_path / "rec.npz", t=t, accel=accel.astype(np.float32), clipped=clipped)
+    with chunked.NpzReader(tmp_path / "rec.npz") as read:
+        assert (read.n, read.n_axes) == (700, 2)
+        got = read(123, 456)
+        chunked.smooth_bounded(model, read.n, read, tmp_path / "o.npz", chunk=64)
+    np.testing.assert_array_equal(got[0], t[123:456])
+    np.testing.assert_array_equal(got[1], accel[123:456].astype(np.float32))
+    np.testing.assert_array_equal(got[2], clipped[123:456])
+    _check_against_whole(model, tmp_path / "o.npz", accel.astype(np.float32).astype(np.float64), clipped)
+
+
+def test_a_compressed_npz_is_refused_in_one_line(tmp_path):
+    np.savez_compressed(tmp_path / "rec.npz", t=np.arange(10.0), accel=np.zeros((10, 2)))
+    with pytest.raises(chunked.UserError, match="compressed") as exc:
+        chunked.NpzReader(tmp_path / "rec.npz")
+    assert "\n" not in str(exc.value)
+
+
+def _aids(model, n, seed=5):
+    """Per axis: position fixes, and zero-velocity updates (gated, some rejected) over rests across chunk edges."""
+    from accelnav.estimate.kf import position_fix, zero_velocity
+
+    rng = np.random.default_rng(seed)
+    extras, gates = [], []
+    for j in range(len(model.axes)):
+        fixes = [position_fix(int(k), float(rng.normal(0, 5)), 2.0) for k in rng.choice(n, 6)]  # repeats too
+        rest = [zero_velocity(k, 0.05) for k in range(n // 4, min(n, n // 4 + 40))]
+        wild = position_fix(n // 2, 1e4, 1.0)  # an outlier its gate rejects
+        extras.append(fixes + rest + [position_fix(n - 1, 1.0, 3.0), position_fix(0, 0.0, 1.0), wild])
+        gates.append([0.0] * 6 + [9.0 if j == 0 else 0.0] * len(rest) + [0.0, 0.0, 9.0])
+    if len(model.axes) > 1:
+        extras[-1], gates[-1] = [], None  # one axis with none: the plain path beside the general one
+    return extras, gates
+
+
+@pytest.mark.parametrize("n, chunk", [(1000, 97), (1000, 2), (1000, 999), (3, 2)])
+def test_chunked_general_path_equals_the_whole_array_path(tmp_path, n, chunk):
+    """Fixes and zero-velocity updates (gated on axis 0) split across chunks: the same numbers as smooth_general."""
+    model = load_model()
+    t, accel, clipped = _data(model, n)
+    extras, gates = _aids(model, n)
+    out = tmp_path / "o.npz"
+    read = chunked.array_reader(t, accel, clipped)
+    info = chunked.smooth_bounded(model, n, read, out, chunk=chunk, extras=extras, gates=gates)
+    f = np.load(out)
+    for j in range(len(model.axes)):
+        d = axis_design(model, j)
+        if extras[j]:
+            ref = fs.smooth_general(d, accel[:, j], valid=~clipped[:, j], extras=extras[j], gates=gates[j])
+            np.testing.assert_array_equal(info["applied"][j], ref.applied)
+            assert not ref.applied[-1]  # the outlier: a rejection is compared too
+        else:
+            ref = fs.smooth_plain(d, accel[:, j], valid=~clipped[:, j])
+        for key, x, P in (("filt", ref.x_post, ref.P_post), ("smooth", ref.xs, ref.Ps)):
+            sd = fs.packed_sd(P)
+            assert_rel_close(f[f"{key}_x"][j], x, sd, RTOL, f"{key}_x axis {j}")
+            assert_rel_close(f[f"{key}_sd"][j], sd, 0.0, RTOL, f"{key}_sd axis {j}")
+    assert [p.name for p in tmp_path.iterdir()] == ["o.npz"]
