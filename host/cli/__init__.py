@@ -44,8 +44,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
 ALL = "*"
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The parser, with the full arguments of ``command`` (ALL: of every command; None: of none, the help)."""
+def build_parser(command: str | None = ALL) -> argparse.ArgumentParser:
+    """The parser, with the full arguments of ``command`` (ALL, the default: of every command, as the docs
+    need; None: of none, enough for ``accelnav --help``)."""
     parser = argparse.ArgumentParser(
         prog="accelnav",
         description="Short-duration position from a cheap accelerometer: simulate, fit, filter, smooth.",
