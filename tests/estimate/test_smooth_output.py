@@ -112,3 +112,44 @@ def test_run_file_versions(tmp_path, walk, default_model):
     a0, _ = load_run(tmp_path / "old.npz")
     for key in ("filt_sd", "smooth_sd"):
         assert np.array_equal(a0[key], full[key]) and np.array_equal(a2[key], full[key])
+
+
+def _fixes_row_by_row(rows, t, axis_names):
+    """read_fixes' placement as it was, one row at a time: the oracle of the array version."""
+    n, Ts = len(t), float(np.median(np.diff(t)))
+    per_axis = [[] for _ in axis_names]
+    for ts, ax, r, s in rows:
+        k = int(np.clip(np.searchsorted(t, ts), 1, max(n - 1, 1)))
+        if n > 1 and abs(t[k - 1] - ts) <= abs(t[k] - ts):
+            k -= 1
+        per_axis[axis_names.index(ax)].append(position_fix(min(k, n - 1), r, s))
+    assert all(t[0] - Ts / 2 <= ts <= t[-1] + Ts / 2 for ts, *_ in rows)
+    return per_axis
+
+
+def test_fixes_read_as_arrays_land_where_row_by_row_did(tmp_path):
+    from accelnav.errors import UserError
+    from accelnav.estimate.fixes import read_fixes
+
+    t = np.arange(1000) * 0.01 + 3.0
+    rng = np.random.default_rng(4)
+    ts = np.concatenate((rng.uniform(t[0] - 0.005, t[-1] + 0.005, 300), t[:5] + 0.005, [t[0] - 0.005, t[-1] + 0.005]))
+    rows = [(float(x), "xy"[i % 2], float(rng.normal()), float(rng.uniform(0.1, 2))) for i, x in enumerate(ts)]
+    path = tmp_path / "fixes.csv"
+    path.write_text("time_s,axis,position_m,sigma_m\n" + "".join(f"{a!r},{b},{c!r},{d!r}\n" for a, b, c, d in rows))
+    assert read_fixes(path, t, ["x", "y"]) == _fixes_row_by_row(rows, t, ["x", "y"])
+    # the first bad row, with its first fault
+    lines = path.read_text().splitlines()
+    lines[40] = f"{t[-1] + 1},z,1.0,-1"
+    lines[90] = f"{t[-1] + 1},x,1.0,1"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(UserError, match=r"row 41: axis 'z'; accepted: x, y"):
+        read_fixes(path, t, ["x", "y"])
+    lines[40] = f"{t[-1] + 1},x,1.0,-1"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(UserError, match=r"row 41: sigma_m is -1"):
+        read_fixes(path, t, ["x", "y"])
+    lines[40] = f"{t[0]},x,1.0,1"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(UserError, match=r"row 91: time_s 13\.99 is outside the run"):
+        read_fixes(path, t, ["x", "y"])
