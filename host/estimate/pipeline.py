@@ -35,20 +35,48 @@ class _Out:
             self.arrays["filt_x_prior"] = np.empty((n_axes, n, 4))
             self.arrays["filt_P_prior"] = np.empty((n_axes, n, 4, 4))
 
-    def put(self, j: int, key: str, x: np.ndarray, Pp: np.ndarray | None = None) -> None:
+    def plain(self, j: int, d, z: np.ndarray, valid: np.ndarray) -> None:
+        """Axis j by the compiled plain path, its means written straight into the output rows: what
+        fastsmooth.smooth_plain does, without its two (N, 4) copies and without the priors (a matmul over
+        every sample) unless the covariances were asked for."""
+        from accelnav.estimate import fastsmooth
+
+        a = self.arrays
+        z = np.asarray(z, dtype=np.float64)
+        ok = np.isfinite(z) & np.asarray(valid, dtype=bool)
+        mask = None if ok.all() else ok
+        g = fastsmooth.plain_gains(d, len(z), mask)
+        xf = a["filt_x"][j]
+        xs = a["smooth_x"][j] if "smooth_x" in a else np.empty_like(xf)
+        fastsmooth.plain_data(d, np.where(ok, z, 0.0), mask, g, out=(xf, xs))
+        self.put(j, "filt", None, g.P_post)
+        self.put(j, "smooth", None, g.Ps)
+        if "filt_x_prior" in a:
+            x_prior = a["filt_x_prior"][j]
+            x_prior[0] = d.x0
+            x_prior[1:] = xf[:-1] @ np.asarray(d.F).T + np.asarray(d.b)
+            self.put(j, "filt_prior", None, g.P_prior)
+
+    def put(self, j: int, key: str, x: np.ndarray | None, Pp: np.ndarray | None = None) -> None:
         """Axis j of ``key`` (a state, e.g. "smooth") from its (N, 4) means and (N, 10) packed covariances."""
         a = self.arrays
         suffix = "_prior" if key.endswith("_prior") else ""
         stage = key.removesuffix("_prior")
         if f"{stage}_x{suffix}" not in a:
             return
-        a[f"{stage}_x{suffix}"][j] = x
+        if x is not None:  # None: already written in place
+            a[f"{stage}_x{suffix}"][j] = x
         if not suffix:
             sd = a[f"{stage}_sd"][j]
             np.take(Pp, _DIAG, axis=1, out=sd)
             np.sqrt(sd, out=sd)
         if f"{stage}_P{suffix}" in a:
             np.take(Pp, _FULL, axis=1, out=a[f"{stage}_P{suffix}"][j].reshape(len(Pp), 16))
+
+
+def _plain_ok(d) -> bool:
+    """The plain path needs P0 without (r, u)-(a, eps) cross terms (accelnav.estimate.fastsmooth.smooth)."""
+    return not np.any(np.asarray(d.P0)[:2, 2:] != 0)
 
 
 def _kernel_extras(a: Aids):
@@ -84,7 +112,12 @@ def filter_run(
     n, n_axes = arrays["accel"].shape
     res_out = _Out(n_axes, n, ("filt",), covariances)
     for j in range(n_axes):
-        res = fastsmooth.smooth(axis_design(model, j), arrays["accel"][:, j], valid=~arrays["clipped"][:, j])
+        d = axis_design(model, j)
+        z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
+        if _plain_ok(d):
+            res_out.plain(j, d, z, valid)
+            continue
+        res = fastsmooth.smooth_general(d, z, valid=valid)
         res_out.put(j, "filt", res.x_post, res.P_post)
         res_out.put(j, "filt_prior", res.x_prior, res.P_prior)
         del res
@@ -164,10 +197,10 @@ def smooth_run(
         extras = fx.concat(za)
         gates = np.concatenate((np.zeros(len(fx)), np.full(len(za), params.gate if zupt_gated else 0.0)))
         z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
-        if len(extras) or np.any(np.asarray(d.P0)[:2, 2:] != 0):
-            res = fastsmooth.smooth_general(d, z, valid=valid, extras=_kernel_extras(extras), gates=gates)
-        else:
-            res = fastsmooth.smooth_plain(d, z, valid=valid)
+        if not len(extras) and _plain_ok(d):
+            res_out.plain(j, d, z, valid)
+            continue
+        res = fastsmooth.smooth_general(d, z, valid=valid, extras=_kernel_extras(extras), gates=gates)
         res_out.put(j, "filt", res.x_post, res.P_post)
         res_out.put(j, "filt_prior", res.x_prior, res.P_prior)
         res_out.put(j, "smooth", res.xs, res.Ps)
