@@ -68,10 +68,10 @@ class _Out:
             a[f"{stage}_x{suffix}"][j] = x
         if not suffix:
             sd = a[f"{stage}_sd"][j]
-            np.take(Pp, _DIAG, axis=1, out=sd)
+            np.take(Pp, _DIAG, axis=1, out=sd, mode="clip")  # "raise" would buffer out
             np.sqrt(sd, out=sd)
         if f"{stage}_P{suffix}" in a:
-            np.take(Pp, _FULL, axis=1, out=a[f"{stage}_P{suffix}"][j].reshape(len(Pp), 16))
+            np.take(Pp, _FULL, axis=1, out=a[f"{stage}_P{suffix}"][j].reshape(len(Pp), 16), mode="clip")
 
 
 def _plain_ok(d) -> bool:
