@@ -9,7 +9,7 @@ import pytest
 from conftest import MODELS
 
 from accelnav.cli import main
-from accelnav.data.runfile import FORMAT, load_run
+from accelnav.data.runfile import FORMAT, FORMAT_V1, load_run
 
 
 def _run(argv, capsys):
@@ -23,14 +23,16 @@ def test_sim_filter_smooth_chain(tmp_path, capsys):
     status, out, _ = _run(["sim", "--scenario", "stop_and_go", "--duration", 5, "--seed", 4, "--out", sim], capsys)
     assert status == 0 and "500 samples" in out
     arrays, model = load_run(sim)
-    assert str(arrays["format"]) == FORMAT and model.name == "adxl250_default"
+    # nothing a /1 reader lacks: written as /1, which older readers take
+    assert str(arrays["format"]) == FORMAT_V1 and model.name == "adxl250_default"
     assert arrays["code"].dtype == np.int32 and arrays["accel"].shape == (500, 2)
 
     status, out, _ = _run(["filter", sim, "--out", filt, "--csv", tmp_path / "f.csv"], capsys)
     assert status == 0 and "filter at end" in out and "double integration" in out
     arrays, _ = load_run(filt)
-    assert arrays["filt_x"].shape == (2, 500, 4) and arrays["filt_P"].shape == (2, 500, 4, 4)
-    assert "smooth_x" not in arrays
+    assert arrays["filt_x"].shape == (2, 500, 4) and arrays["filt_sd"].shape == (2, 500, 4)
+    assert "smooth_x" not in arrays and "filt_P" not in arrays  # the covariances only on request
+    assert str(arrays["format"]) == FORMAT
 
     status, out, _ = _run(["smooth", filt, "--out", smooth, "--plots", tmp_path / "plots"], capsys)
     assert status == 0 and "smoother at start" in out

@@ -25,17 +25,21 @@ def sim(tmp_path_factory):
     return path
 
 
-def test_plain_smooth_matches_reference(sim, tmp_path, capsys):
-    status, out, _ = _run(["smooth", sim, "--out", tmp_path / "s.npz"], capsys)
+@pytest.mark.parametrize("flags", [[], ["--covariances"]], ids=["states-and-sds", "covariances"])
+def test_plain_smooth_matches_reference(sim, tmp_path, capsys, flags):
+    status, out, _ = _run(["smooth", sim, "--out", tmp_path / "s.npz", *flags], capsys)
     assert status == 0
     arrays, model = load_run(tmp_path / "s.npz")
+    assert ("smooth_P" in arrays) == bool(flags)  # the covariances only on request
     for j in range(2):
         d = axis_design(model, j)
         f = run_filter(d, arrays["accel"][:, j], valid=~arrays["clipped"][:, j])
         s = rts_smooth(d, f)
         sd = np.sqrt(np.einsum("kii->ki", s.P))
         assert_rel_close(arrays["smooth_x"][j], s.x, sd, 1e-9, "smooth_x")
-        assert_rel_close(arrays["smooth_P"][j], s.P, sd[:, :, None] * sd[:, None, :], 1e-9, "smooth_P")
+        assert_rel_close(arrays["smooth_sd"][j], sd, sd, 1e-9, "smooth_sd")
+        if flags:
+            assert_rel_close(arrays["smooth_P"][j], s.P, sd[:, :, None] * sd[:, None, :], 1e-9, "smooth_P")
     assert not arrays["zupt"].any() and arrays["fixes"].shape == (0, 4)
 
 
@@ -112,7 +116,7 @@ def test_zupt_file_with_axis_and_sigma_columns(sim, tmp_path, capsys):
     assert arrays["zupt"][:, 0].sum() == 151 and arrays["zupt"][:, 1].sum() == 21
     assert not arrays["zupt"][1000:1021, 0].any() and arrays["zupt"][1000:1021, 1].all()
     # sigma is honoured: a tight update pins the velocity, a loose one hardly moves it
-    assert np.sqrt(arrays["smooth_P"][0, 100, 1, 1]) < 0.002
+    assert arrays["smooth_sd"][0, 100, 1] < 0.002
     bad = tmp_path / "bad.csv"
     bad.write_text("start_s,end_s,axis,sigma\n0,1,x,0\n")
     status, _, err = _run(["smooth", sim, "--zupt", bad, "--out", tmp_path / "s.npz"], capsys)

@@ -1,9 +1,11 @@
 """The ``accelnav`` command.
 
-Each subcommand lives in its own module that exposes ``register(sub)``: it
-adds its parser to the argparse sub-parsers and sets ``func`` to a callable
-taking the parsed arguments and returning an exit status. Bad input raises
-:class:`accelnav.errors.UserError` or :class:`codegen.model.ModelError`; main()
+Each subcommand lives in a module that exposes ``register(sub)``: it adds its parser to the argparse
+sub-parsers and sets ``func`` to a callable taking the parsed arguments and returning an exit status.
+Only the module of the command being run is imported: the others appear in ``accelnav --help`` from
+:data:`COMMANDS` (their name and one line), so that the help and a bad command name cost no numpy, no
+estimator and no compiler module (tests/cli/test_lazy_parser.py checks the lines against the modules).
+Bad input raises :class:`accelnav.errors.UserError` or :class:`accelnav.model.ModelError`; main()
 prints those as one line and exits 2.
 """
 
@@ -13,46 +15,75 @@ import argparse
 import importlib
 import sys
 
-from accelnav.native.cbuild import BuildError
-from accelnav.model.load import ModelError
 from accelnav.errors import UserError
 
-# Modules that provide subcommands, in the order `accelnav --help` lists them.
-COMMAND_MODULES = (
-    "accelnav.cli.core",  # sim, filter, smooth
-    "accelnav.cli.fit_bias",  # fit-bias
-    "accelnav.cli.calibrate",  # calibrate
-    "accelnav.cli.tune",  # tune
-    "accelnav.cli.codegen",  # codegen
-    "accelnav.cli.record",  # record, log info|export
-    "accelnav.cli.hil",  # hil
-    "accelnav.cli.demo",  # demo
-)
+# command -> (module that registers it, its line in `accelnav --help`), in the order the help lists them
+COMMANDS: dict[str, tuple[str, str]] = {
+    "sim": ("accelnav.cli.core", "simulate a trajectory and the raw sensor output"),
+    "filter": ("accelnav.cli.core", "run the forward filter (compiled, float64) over a recording or run file"),
+    "smooth": (
+        "accelnav.cli.core",
+        "filter and RTS-smooth a run file (compiled), optionally with position fixes and zero-velocity updates",
+    ),
+    "fit-bias": ("accelnav.cli.fit_bias", "identify the bias model and noise figures from a stationary recording"),
+    "calibrate": (
+        "accelnav.cli.calibrate",
+        "zero-g offset and sensitivity per axis from a recording of still poses (six-position test, or any "
+        "orientations of a 3-axis part)",
+    ),
+    "tune": (
+        "accelnav.cli.tune",
+        "estimate sigma_n, sigma_eps and R from a motion recording (maximum likelihood of the innovations)",
+    ),
+    "codegen": ("accelnav.cli.codegen", "generate the per-axis filter in C (fixed point or float32) and its manifest"),
+    "record": ("accelnav.cli.record", "record a telemetry link (serial port, pty, socket://, loop://) to a log"),
+    "log": ("accelnav.cli.record", "inspect or export a recorded log"),
+    "hil": ("accelnav.cli.hil", "run the firmware on simulated sensor data: SIL (cffi) or PIL (QEMU)"),
+    "demo": ("accelnav.cli.demo", "the whole chain on the default model: warm-up, fit, codegen, SIL/PIL, smooth"),
+}
+ALL = "*"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = ALL) -> argparse.ArgumentParser:
+    """The parser, with the full arguments of ``command`` (ALL, the default: of every command, as the docs
+    need; None: of none, enough for ``accelnav --help``)."""
     parser = argparse.ArgumentParser(
         prog="accelnav",
         description="Short-duration position from a cheap accelerometer: simulate, fit, filter, smooth.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name == name:  # a command not built yet
-                continue
-            raise
-        module.register(sub)
+    chosen = {module for name, (module, _) in COMMANDS.items() if command in (name, ALL)}
+    for module_name in dict.fromkeys(module for module, _ in COMMANDS.values()):
+        if module_name in chosen:
+            importlib.import_module(module_name).register(sub)
+    for name, (_, help_line) in COMMANDS.items():
+        if name not in sub.choices:  # a placeholder: parsed again with its module when chosen
+            sub.add_parser(name, help=help_line)
+    _in_table_order(sub)
     return parser
 
 
+def _in_table_order(sub) -> None:
+    """A module registers all of its commands at once (core: sim, filter, smooth): put the help back in order."""
+    order = list(COMMANDS)
+    sub._choices_actions.sort(key=lambda a: order.index(a.dest) if a.dest in order else len(order))
+
+
+def _command_of(argv: list[str]) -> str | None:
+    """The command named in ``argv`` (its first word; the top-level parser has no options but --help)."""
+    return argv[0] if argv and argv[0] in COMMANDS else None
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_command_of(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from accelnav.model.load import ModelError
+    from accelnav.native.cbuild import BuildError
+
     try:
         return int(args.func(args) or 0)
     except (UserError, ModelError) as exc:

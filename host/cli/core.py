@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.runfile import FORMAT, STATE, export_csv, load_run, save_run
+from accelnav.data.runfile import FORMAT, STATE, export_csv, load_run, save_run, state_sd
 from accelnav.errors import UserError
 from accelnav.estimate.chunked import memory_available, whole_bytes
 from accelnav.estimate.pipeline import (
@@ -75,6 +75,16 @@ def _csv_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--csv", type=Path, default=None, metavar="CSV", help="also export the samples as CSV")
 
 
+def _output_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--covariances",
+        action="store_true",
+        help="also write the full 4x4 covariances and the filter's priors (default: the states and their "
+        "standard deviations; the covariances are two thirds of the file)",
+    )
+    p.add_argument("--compress", action="store_true", help="deflate the run file (smaller, several times slower)")
+
+
 def register(sub) -> None:
     p = sub.add_parser("sim", help="simulate a trajectory and the raw sensor output")
     _model_arg(p, f"; default: the embedded {DEFAULT_MODEL.name}")
@@ -86,11 +96,17 @@ def register(sub) -> None:
     _csv_arg(p)
     p.set_defaults(func=cmd_sim)
 
-    p = sub.add_parser("filter", help="run the float64 reference filter over a recording or run file")
+    p = sub.add_parser(
+        "filter",
+        help="run the forward filter (compiled, float64) over a recording or run file",
+        description="Float64 forward filter per axis (accelnav.estimate.fastsmooth), agreeing with the reference "
+        "accelnav.estimate.kf to 1e-9.",
+    )
     p.add_argument("run", type=Path, help=INPUT_HELP)
     _model_arg(p, "; default: the model embedded in the input, else the embedded default")
     _input_args(p)
     p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
+    _output_args(p)
     _csv_arg(p)
     p.set_defaults(func=cmd_filter)
 
@@ -224,6 +240,7 @@ def register(sub) -> None:
         "store on disk beside --out; not with --tune, --plots, --csv; the output keeps standard deviations, "
         "not covariances, and the aids' consistency checks are skipped); default: half the memory free",
     )
+    _output_args(p)
     _csv_arg(p)
     p.set_defaults(func=cmd_smooth)
 
@@ -359,7 +376,7 @@ def _with_model(path, arrays, model: Model, override: Model | None, args) -> tup
 
 
 def _save(args, arrays, model) -> None:
-    save_run(args.out, arrays, model)
+    save_run(args.out, arrays, model, compress=getattr(args, "compress", False))
     print(f"wrote {args.out}")
     if args.csv is not None:
         export_csv(args.csv, arrays)
@@ -376,7 +393,7 @@ def _summary(arrays: dict[str, np.ndarray]) -> str:
             if f"{stage}_x" in arrays:
                 k = -1 if stage == "filt" else 0
                 x = arrays[f"{stage}_x"][j, k]
-                sd = np.sqrt(np.diag(arrays[f"{stage}_P"][j, k]))
+                sd = state_sd(arrays, stage)[j, k]
                 at = "end" if k == -1 else "start"
                 est = ", ".join(f"{s}={v:.4g}+-{e:.2g}" for s, v, e in zip(STATE, x, sd, strict=True))
                 parts.append(f"{'filter' if stage == 'filt' else 'smoother'} at {at}: {est}")
@@ -401,7 +418,7 @@ def cmd_sim(args) -> int:
 
 def cmd_filter(args) -> int:
     arrays, model = _load(args)
-    arrays = filter_run(arrays, model)
+    arrays = filter_run(arrays, model, covariances=args.covariances)
     print(_summary(arrays))
     rows = position_errors(arrays, model)
     if rows:
@@ -476,7 +493,9 @@ def cmd_smooth(args) -> int:
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays
-    arrays = smooth_run(arrays, model, fixes=fixes, rest=rest, zupt_params=params, rest_sigma=rest_sigma)
+    arrays = smooth_run(
+        arrays, model, fixes=fixes, rest=rest, zupt_params=params, rest_sigma=rest_sigma, covariances=args.covariances
+    )
     if args.zupt == "auto":  # kept in the run file for the plots: [start_s, end_s, accepted] per candidate
         t = arrays["t"]
         arrays["zupt_candidates"] = np.array(
@@ -522,7 +541,8 @@ def _over_budget(args, arrays, budget: int) -> str:
 
 
 def _bounded_refusals(args, arrays, budget: int) -> None:
-    given = [f for f, v in (("--plots", args.plots), ("--csv", args.csv), ("--tune", args.tune)) if v]
+    flags = (("--plots", args.plots), ("--csv", args.csv), ("--tune", args.tune), ("--covariances", args.covariances))
+    given = [f for f, v in flags if v]
     if given:
         raise UserError(f"{_over_budget(args, arrays, budget)}; bounded memory does not do {', '.join(given)}")
 

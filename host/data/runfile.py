@@ -1,11 +1,12 @@
 """The accelnav run file: one NPZ that each stage reads and extends.
 
-Format ``accelnav-run/1`` (numpy ``.npz``, no pickled objects):
+Format ``accelnav-run/2`` (numpy ``.npz``, no pickled objects; stored, not compressed, unless the
+user asks for compression):
 
 ========================  =====================  ===============================================
 key                       shape, dtype           meaning
 ========================  =====================  ===============================================
-``format``                (), str                ``"accelnav-run/1"``
+``format``                (), str                ``"accelnav-run/2"`` (or ``/1``, see below)
 ``model_toml``            (), str                the model file's text (the run is self-contained)
 ``model_source``          (), str                where that text came from
 ``t``                     (N,), float64          sample time, s
@@ -18,15 +19,23 @@ key                       shape, dtype           meaning
 ``scenario``, ``seed``    ()                     simulation settings (``accelnav sim`` only)
 ``stance``                (N,), bool             the foot is on the ground (``walking`` scenario only)
 ``filt_x``                (n_axes, N, 4)         filter posterior x[k|k] = [r, u, a, eps]
-``filt_P``                (n_axes, N, 4, 4)      its covariance
-``filt_x_prior``          (n_axes, N, 4)         filter prior x[k|k-1]
-``filt_P_prior``          (n_axes, N, 4, 4)      its covariance
+``filt_sd``               (n_axes, N, 4)         its standard deviations
+``filt_P``                (n_axes, N, 4, 4)      its covariance (on request)
+``filt_x_prior``          (n_axes, N, 4)         filter prior x[k|k-1] (on request)
+``filt_P_prior``          (n_axes, N, 4, 4)      its covariance (on request)
 ``smooth_x``              (n_axes, N, 4)         RTS-smoothed x[k|N-1]
-``smooth_P``              (n_axes, N, 4, 4)      its covariance
+``smooth_sd``             (n_axes, N, 4)         its standard deviations
+``smooth_P``              (n_axes, N, 4, 4)      its covariance (on request)
 ``zupt``                  (N, n_axes), bool      samples whose zero-velocity update was applied
 ``fixes``                 (M, 4), float64        position fixes used: [t, axis column, r, sigma]
 ``zupt_candidates``       (K, 3), float64        ``--zupt auto``'s candidate rests: [start_s, end_s, accepted]
 ========================  =====================  ===============================================
+
+Versions: ``/1`` always held the full covariances beside the means. ``/2`` holds the standard
+deviations ``*_sd`` and the covariances only when asked (``--covariances``: at 1e6 samples they were
+three quarters of the time and of the file). A file whose every stage has its covariance is written as
+``/1``, so that older readers still take it; :func:`load_run` reads both and adds the ``*_sd`` of a
+``/1`` file.
 
 :func:`export_csv` writes the per-sample columns (not the covariances, only
 their standard deviations) as CSV for spreadsheets and other tools.
@@ -42,18 +51,34 @@ from accelnav.errors import UserError
 from accelnav.fileio import atomic_output, excerpt, load_npz
 from accelnav.model.load import Model, ModelError, loads_model
 
-FORMAT = "accelnav-run/1"
+FORMAT = "accelnav-run/2"
+FORMAT_V1 = "accelnav-run/1"
+FORMATS = (FORMAT, FORMAT_V1)
 STATE = ("r", "u", "a", "eps")
+STAGES = ("filt", "smooth")
 
 
-def save_run(path: str | Path, arrays: dict[str, np.ndarray], model: Model) -> None:
-    """Write ``arrays`` and the model's text to ``path`` atomically (write, then rename)."""
+def save_run(path: str | Path, arrays: dict[str, np.ndarray], model: Model, *, compress: bool = False) -> None:
+    """Write ``arrays`` and the model's text to ``path`` atomically (write, then rename).
+
+    Stored uncompressed unless ``compress``: deflate ran at a few MB/s, most of a smooth's time, for a
+    file of float64 noise that shrinks by a few per cent. The format is the oldest that holds the
+    contents (see the module docstring).
+    """
     data = dict(arrays)
-    data["format"] = np.array(FORMAT)
+    v1 = all(f"{st}_P" in data for st in STAGES if f"{st}_x" in data)
+    data["format"] = np.array(FORMAT_V1 if v1 else FORMAT)
     data["model_toml"] = np.array(model.text)
     data["model_source"] = np.array(str(model.source))
     with atomic_output(path) as fh:
-        np.savez_compressed(fh, **data)
+        (np.savez_compressed if compress else np.savez)(fh, **data)
+
+
+def state_sd(arrays: dict[str, np.ndarray], stage: str) -> np.ndarray:
+    """(n_axes, N, 4) standard deviations of ``stage`` ("filt" or "smooth"), from whichever key holds them."""
+    if f"{stage}_sd" in arrays:
+        return arrays[f"{stage}_sd"]
+    return np.sqrt(np.einsum("akii->aki", arrays[f"{stage}_P"]))
 
 
 def load_run(path: str | Path) -> tuple[dict[str, np.ndarray], Model]:
@@ -61,9 +86,10 @@ def load_run(path: str | Path) -> tuple[dict[str, np.ndarray], Model]:
     path = Path(path)
     arrays = load_npz(path, then=", so not an accelnav run file")  # sizes checked before inflating
     fmt = str(arrays.get("format", ""))
-    if fmt != FORMAT:
+    if fmt not in FORMATS:
         raise UserError(
-            f"{path}: format is {excerpt(fmt or 'missing')}; accepted: {FORMAT!r} (written by accelnav sim)"
+            f"{path}: format is {excerpt(fmt or 'missing')}; accepted: {' or '.join(map(repr, FORMATS))} "
+            "(written by accelnav sim)"
         )
     for key in ("model_toml", "t", "axis_names", "accel", "clipped"):
         if key not in arrays:
@@ -79,6 +105,15 @@ def load_run(path: str | Path) -> tuple[dict[str, np.ndarray], Model]:
         raise UserError(f"{path}: 0 samples; nothing to process (was the device silent?)")
     if arrays["t"].shape != (n,) or arrays["clipped"].shape != (n, n_axes) or len(arrays["axis_names"]) != n_axes:
         raise UserError(f"{path}: array shapes disagree (t, accel, clipped, axis_names); the file is damaged")
+    for st in STAGES:
+        if f"{st}_x" not in arrays:
+            continue
+        if f"{st}_sd" not in arrays and f"{st}_P" not in arrays:
+            raise UserError(f"{path}: {st}_x without {st}_sd or {st}_P; the file is damaged")
+        if f"{st}_sd" not in arrays:  # a /1 file: its sds from the covariances
+            arrays[f"{st}_sd"] = state_sd(arrays, st)
+        if arrays[f"{st}_x"].shape != (n_axes, n, 4) or arrays[f"{st}_sd"].shape != (n_axes, n, 4):
+            raise UserError(f"{path}: {st}_x or {st}_sd is not (n_axes, N, 4); the file is damaged")
     return arrays, model
 
 
@@ -97,7 +132,7 @@ def export_csv(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
         for stage in ("filt", "smooth"):
             if f"{stage}_x" in arrays:
                 x = arrays[f"{stage}_x"][j]
-                sd = np.sqrt(np.einsum("kii->ki", arrays[f"{stage}_P"][j]))
+                sd = state_sd(arrays, stage)[j]
                 for i, s in enumerate(STATE):
                     cols.append((f"{name}_{stage}_{s}", x[:, i]))
                     cols.append((f"{name}_{stage}_{s}_sd", sd[:, i]))

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from accelnav.estimate.kf import Measurement, double_integrate
+from accelnav.estimate.kf import Aids, Measurement, double_integrate
 from accelnav.lazy import lazy_module
 from accelnav.model.design import AxisDesign
 
@@ -51,21 +51,33 @@ def aid_innovations(
     """(y, S) of each aid in ``extras`` (its given order), replayed from the priors of the forward pass.
 
     ``P_prior`` is (N, 4, 4). Every aid must have been applied by the filter (a gated-out one changed
-    nothing: leave it out). Samples are independent of each other given their priors, so all are replayed
-    at once, one rank of same-sample aids after the other.
+    nothing: leave it out). See :func:`aid_innovations_arrays`.
     """
-    ne = len(extras)
+    a = Aids.of(extras)
+    return aid_innovations_arrays(d, z, valid, x_prior, P_prior, a.k, a.h, a.z, a.R)
+
+
+# packed index (accelnav.estimate.fastsmooth.PACKED) of each entry of a 4x4, row-major
+_FULL = np.array([0, 1, 2, 3, 1, 4, 5, 6, 2, 5, 7, 8, 3, 6, 8, 9])
+
+
+def aid_innovations_arrays(d: AxisDesign, z, valid, x_prior, P_prior, ks, hs, zs, rs) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`aid_innovations` of aids given as arrays (samples ``ks``, rows ``hs``, values ``zs``, variances
+    ``rs``). ``P_prior`` is (N, 4, 4) or packed (N, 10) as the compiled smoother returns it: only the rows
+    of the aids' samples are unpacked. Samples are independent of each other given their priors, so all
+    are replayed at once, one rank of same-sample aids after the other.
+    """
+    ks = np.asarray(ks, dtype=np.int64)
+    ne = len(ks)
     if ne == 0:
         return np.zeros(0), np.zeros(0)
-    ks = np.array([m.k for m in extras], dtype=np.int64)
-    hs = np.array([m.h for m in extras], dtype=np.float64)
-    zs = np.array([m.z for m in extras], dtype=np.float64)
-    rs = np.array([m.R for m in extras], dtype=np.float64)
+    hs, zs, rs = (np.asarray(v, dtype=np.float64) for v in (hs, zs, rs))
     order = np.argsort(ks, kind="stable")
     uk, first, group = np.unique(ks[order], return_index=True, return_inverse=True)
     rank = np.arange(ne) - first[group]
     X = np.array(x_prior[uk], dtype=np.float64)
-    P = np.array(P_prior[uk], dtype=np.float64)
+    P = np.asarray(P_prior)[uk]
+    P = np.array(P.take(_FULL, axis=1).reshape(-1, 4, 4) if P.ndim == 2 else P, dtype=np.float64)
     ok = np.asarray(valid, dtype=bool)[uk] & np.isfinite(z[uk])
     # the sample's acceleration update comes first: z = a + eps + v
     h_acc = np.broadcast_to(np.array([0.0, 0.0, 1.0, 1.0]), (int(ok.sum()), 4))

@@ -50,6 +50,58 @@ def zero_velocity(k: int, sigma: float = 1e-3) -> Measurement:
 
 
 @dataclass(frozen=True)
+class Aids:
+    """Scalar measurements as arrays, in their given order: a list of :class:`Measurement` without one
+    Python object per measurement (a long walk has 1e5 and more zero-velocity updates, and building and
+    unbuilding their objects cost more than the smoother)."""
+
+    k: np.ndarray  # (n,) int64 sample
+    h: np.ndarray  # (n, 4)
+    z: np.ndarray  # (n,)
+    R: np.ndarray  # (n,)
+
+    @classmethod
+    def of(cls, ms: Sequence[Measurement] | Aids) -> Aids:
+        if isinstance(ms, Aids):
+            return ms
+        n = len(ms)
+        return cls(
+            np.array([m.k for m in ms], dtype=np.int64).reshape(n),
+            np.array([m.h for m in ms], dtype=np.float64).reshape(n, 4),
+            np.array([m.z for m in ms], dtype=np.float64).reshape(n),
+            np.array([m.R for m in ms], dtype=np.float64).reshape(n),
+        )
+
+    @classmethod
+    def zero_velocity(cls, ks: np.ndarray, sigma: np.ndarray | float) -> Aids:
+        """:func:`zero_velocity` at every sample of ``ks``, with standard deviations ``sigma`` [m/s]."""
+        ks = np.asarray(ks, dtype=np.int64).reshape(-1)
+        h = np.zeros((len(ks), 4))
+        h[:, 1] = 1.0
+        R = np.broadcast_to(np.asarray(sigma, dtype=np.float64) ** 2, ks.shape).copy()
+        return cls(ks, h, np.zeros(len(ks)), R)
+
+    def concat(self, other: Aids) -> Aids:
+        """These, then ``other``."""
+        return Aids(*(np.concatenate((a, b)) for a, b in zip(self._parts(), other._parts(), strict=True)))
+
+    def take(self, idx: np.ndarray) -> Aids:
+        return Aids(*(a[idx] for a in self._parts()))
+
+    def measurements(self) -> list[Measurement]:
+        return [
+            Measurement(int(k), tuple(float(v) for v in h), float(z), float(r))
+            for k, h, z, r in zip(self.k, self.h, self.z, self.R, strict=True)
+        ]
+
+    def _parts(self) -> tuple[np.ndarray, ...]:
+        return self.k, self.h, self.z, self.R
+
+    def __len__(self) -> int:
+        return len(self.k)
+
+
+@dataclass(frozen=True)
 class FilterResult:
     """Priors and posteriors of every sample (see the module docstring)."""
 

@@ -1,7 +1,7 @@
 """Run the filter and smoother over every axis of a run (no I/O here).
 
-filter_run uses the float64 reference (accelnav.estimate.kf); smooth_run the compiled
-filter and smoother of accelnav.estimate.fastsmooth, which agree with it to 1e-9.
+filter_run and smooth_run use the compiled filter and smoother of accelnav.estimate.fastsmooth, which
+agree with the float64 reference (accelnav.estimate.kf, :func:`reference_filter_run`) to 1e-9.
 """
 
 from __future__ import annotations
@@ -10,13 +10,127 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from accelnav.estimate.kf import Aids, double_integrate, run_filter
 from accelnav.model.design import axis_design
 from accelnav.model.load import Model
-from accelnav.estimate.kf import double_integrate, run_filter
+
+# packed index (accelnav.estimate.fastsmooth.PACKED, upper triangle by rows) of each entry of a 4x4,
+# row-major: np.take with it unpacks (N, 10) into (N, 16) in one pass, no fancy-index scatter
+_FULL = np.array([0, 1, 2, 3, 1, 4, 5, 6, 2, 5, 7, 8, 3, 6, 8, 9])
+_DIAG = np.array([0, 4, 7, 9])
 
 
-def filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None) -> dict[str, np.ndarray]:
-    """Return ``arrays`` with the filter's posteriors and priors added (keys filt_*)."""
+class _Out:
+    """The per-axis outputs, written axis by axis into arrays allocated once (no list then np.stack,
+    which held every array twice at the peak)."""
+
+    def __init__(self, n_axes: int, n: int, stages: tuple[str, ...], covariances: bool):
+        self.arrays: dict[str, np.ndarray] = {}
+        for st in stages:
+            self.arrays[f"{st}_x"] = np.empty((n_axes, n, 4))
+            self.arrays[f"{st}_sd"] = np.empty((n_axes, n, 4))
+            if covariances:
+                self.arrays[f"{st}_P"] = np.empty((n_axes, n, 4, 4))
+        if covariances and "filt" in stages:
+            self.arrays["filt_x_prior"] = np.empty((n_axes, n, 4))
+            self.arrays["filt_P_prior"] = np.empty((n_axes, n, 4, 4))
+
+    def plain(self, j: int, d, z: np.ndarray, valid: np.ndarray) -> None:
+        """Axis j by the compiled plain path, its means written straight into the output rows: what
+        fastsmooth.smooth_plain does, without its two (N, 4) copies and without the priors (a matmul over
+        every sample) unless the covariances were asked for."""
+        from accelnav.estimate import fastsmooth
+
+        a = self.arrays
+        z = np.asarray(z, dtype=np.float64)
+        ok = np.isfinite(z) & np.asarray(valid, dtype=bool)
+        mask = None if ok.all() else ok
+        g = fastsmooth.plain_gains(d, len(z), mask)
+        xf = a["filt_x"][j]
+        xs = a["smooth_x"][j] if "smooth_x" in a else np.empty_like(xf)
+        fastsmooth.plain_data(d, np.where(ok, z, 0.0), mask, g, out=(xf, xs))
+        self.put(j, "filt", None, g.P_post)
+        self.put(j, "smooth", None, g.Ps)
+        if "filt_x_prior" in a:
+            x_prior = a["filt_x_prior"][j]
+            x_prior[0] = d.x0
+            x_prior[1:] = xf[:-1] @ np.asarray(d.F).T + np.asarray(d.b)
+            self.put(j, "filt_prior", None, g.P_prior)
+
+    def put(self, j: int, key: str, x: np.ndarray | None, Pp: np.ndarray | None = None) -> None:
+        """Axis j of ``key`` (a state, e.g. "smooth") from its (N, 4) means and (N, 10) packed covariances."""
+        a = self.arrays
+        suffix = "_prior" if key.endswith("_prior") else ""
+        stage = key.removesuffix("_prior")
+        if f"{stage}_x{suffix}" not in a:
+            return
+        if x is not None:  # None: already written in place
+            a[f"{stage}_x{suffix}"][j] = x
+        if not suffix:
+            sd = a[f"{stage}_sd"][j]
+            np.take(Pp, _DIAG, axis=1, out=sd, mode="clip")  # "raise" would buffer out
+            np.sqrt(sd, out=sd)
+        if f"{stage}_P{suffix}" in a:
+            np.take(Pp, _FULL, axis=1, out=a[f"{stage}_P{suffix}"][j].reshape(len(Pp), 16), mode="clip")
+
+
+def _plain_ok(d) -> bool:
+    """The plain path needs P0 without (r, u)-(a, eps) cross terms (accelnav.estimate.fastsmooth.smooth)."""
+    return not np.any(np.asarray(d.P0)[:2, 2:] != 0)
+
+
+def _kernel_extras(a: Aids):
+    """``a`` as the sorted arrays the compiled general path takes (what fastsmooth.Extras.of makes of the same
+    measurements as objects, without the objects)."""
+    from accelnav.estimate.fastsmooth import Extras
+
+    if len(a) and not np.all(a.R > 0):
+        raise ValueError(f"extra measurement at sample {int(a.k[~(a.R > 0)][0])} has variance <= 0")
+    order = np.argsort(a.k, kind="stable")
+    c = np.ascontiguousarray
+    return Extras(c(a.k[order]), c(a.h[order]), c(a.z[order]), c(a.R[order]), order)
+
+
+def _stale(out: dict, stage: str) -> None:
+    """Drop a previous run's keys of ``stage``, so that no old covariance sits beside new means."""
+    for k in [k for k in out if k.startswith(f"{stage}_")]:
+        del out[k]
+
+
+def filter_run(
+    arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None, covariances: bool = True
+) -> dict[str, np.ndarray]:
+    """Return ``arrays`` with the filter's posteriors (keys filt_x, filt_sd; with ``covariances`` also filt_P
+    and the priors filt_x_prior, filt_P_prior).
+
+    Compiled (accelnav.estimate.fastsmooth, whose filter agrees with the float64 reference
+    accelnav.estimate.kf.run_filter to 1e-9; tests/estimate/test_smooth_output.py compares the two).
+    ``progress`` is accepted for symmetry (the C is quick).
+    """
+    from accelnav.estimate import fastsmooth
+
+    n, n_axes = arrays["accel"].shape
+    res_out = _Out(n_axes, n, ("filt",), covariances)
+    for j in range(n_axes):
+        d = axis_design(model, j)
+        z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
+        if _plain_ok(d):
+            res_out.plain(j, d, z, valid)
+            continue
+        res = fastsmooth.smooth_general(d, z, valid=valid)
+        res_out.put(j, "filt", res.x_post, res.P_post)
+        res_out.put(j, "filt_prior", res.x_prior, res.P_prior)
+        del res
+    out = dict(arrays)
+    for stage in ("filt", "smooth"):  # a new filter run makes an old smoothing stale
+        _stale(out, stage)
+    out.update(res_out.arrays)
+    return out
+
+
+def reference_filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None) -> dict:
+    """The float64 reference filter (accelnav.estimate.kf.run_filter) over every axis: the oracle of
+    :func:`filter_run` in tests, with today's full output keys."""
     results = [
         run_filter(axis_design(model, j), arrays["accel"][:, j], valid=~arrays["clipped"][:, j], progress=progress)
         for j in range(len(arrays["axis_names"]))
@@ -26,8 +140,6 @@ def filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | 
     out["filt_P"] = np.stack([f.P_post for f in results])
     out["filt_x_prior"] = np.stack([f.x_prior for f in results])
     out["filt_P_prior"] = np.stack([f.P_prior for f in results])
-    for key in ("smooth_x", "smooth_P"):  # a new filter run makes an old smoothing stale
-        out.pop(key, None)
     return out
 
 
@@ -41,6 +153,7 @@ def smooth_run(
     zupt_params=None,
     zupt_gated: bool = False,
     rest_sigma: np.ndarray | None = None,
+    covariances: bool = True,
 ) -> dict[str, np.ndarray]:
     """Return ``arrays`` with the filter's and the RTS smoother's output (keys filt_*, smooth_*).
 
@@ -53,6 +166,8 @@ def smooth_run(
     params' sigma) (automatic rests are already gated per rest by rest_mask; ``zupt_gated`` adds the
     kernel's per-update innovation gate, which the detector no longer uses). The filter keys are
     rewritten too, so that filter and smoother saw the same measurements.
+    Always: the means filt_x, smooth_x (n_axes, N, 4) and their standard deviations filt_sd, smooth_sd;
+    with ``covariances`` also filt_P, smooth_P (n_axes, N, 4, 4) and the priors filt_x_prior, filt_P_prior.
     Adds ``zupt`` (N, n_axes) bool, the samples whose zero-velocity update
     was applied, ``fixes`` (M, 4) [t, axis column, position, sigma], and the normalised innovation
     squared y^2 / S of every aid the filter applied (accelnav.estimate.consistency): ``fix_nis`` (M,)
@@ -60,7 +175,7 @@ def smooth_run(
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
     from accelnav.estimate import fastsmooth, zupt
-    from accelnav.estimate.consistency import aid_innovations
+    from accelnav.estimate.consistency import aid_innovations_arrays
 
     params = zupt.ZuptParams() if zupt_params is None else zupt_params
     n = len(arrays["t"])
@@ -69,51 +184,52 @@ def smooth_run(
     if rest is not None:
         rest2 = np.asarray(rest, dtype=bool)
         rest2 = np.broadcast_to(rest2[:, None] if rest2.ndim == 1 else rest2, (n, n_axes))
-    keys = {k: [] for k in ("filt_x", "filt_P", "filt_x_prior", "filt_P_prior", "smooth_x", "smooth_P")}
+    res_out = _Out(n_axes, n, ("filt", "smooth"), covariances)
     applied = np.zeros((n, n_axes), dtype=bool)
     fix_rows, fix_nis, zupt_nis = [], [], []
     for j in range(n_axes):
         d = axis_design(model, j)
-        fx = list(fixes[j]) if fixes is not None else []
-        zupt_ks, zupt_extras = np.zeros(0, dtype=np.int64), []
+        fx = Aids.of(fixes[j] if fixes is not None else [])
+        za = Aids.of([])
         if rest2 is not None:
             sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
-            zupt_ks, zupt_extras = zupt.axis_updates(rest2[:, j], sigma, model, params)
-        zupt_gates = [params.gate if zupt_gated else 0.0] * len(zupt_extras)
-        extras = fx + zupt_extras
-        gates = [0.0] * len(fx) + list(zupt_gates)
-        res = fastsmooth.smooth(d, arrays["accel"][:, j], valid=~arrays["clipped"][:, j], extras=extras, gates=gates)
-        keys["filt_x"].append(res.x_post)
-        keys["filt_P"].append(fastsmooth.unpack(res.P_post))
-        keys["filt_x_prior"].append(res.x_prior)
-        P_prior = fastsmooth.unpack(res.P_prior)
-        keys["filt_P_prior"].append(P_prior)
-        keys["smooth_x"].append(res.xs)
-        keys["smooth_P"].append(fastsmooth.unpack(res.Ps))
-        if len(zupt_ks):
-            applied[zupt_ks[res.applied[len(fx) :]], j] = True
-        fix_rows += [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for m in fx]
-        if extras:  # NIS only where there are aids: the plain path pays nothing
-            used = [m for m, a in zip(extras, res.applied, strict=True) if a]
-            y, S = aid_innovations(d, arrays["accel"][:, j], ~arrays["clipped"][:, j], res.x_prior, P_prior, used)
+            za = zupt.axis_aids(rest2[:, j], sigma, model, params)
+        extras = fx.concat(za)
+        gates = np.concatenate((np.zeros(len(fx)), np.full(len(za), params.gate if zupt_gated else 0.0)))
+        z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
+        if not len(extras) and _plain_ok(d):
+            res_out.plain(j, d, z, valid)
+            continue
+        res = fastsmooth.smooth_general(d, z, valid=valid, extras=_kernel_extras(extras), gates=gates)
+        res_out.put(j, "filt", res.x_post, res.P_post)
+        res_out.put(j, "filt_prior", res.x_prior, res.P_prior)
+        res_out.put(j, "smooth", res.xs, res.Ps)
+        if len(za):
+            applied[za.k[res.applied[len(fx) :]], j] = True
+        fix_rows += list(zip(arrays["t"][fx.k], [j] * len(fx), fx.z, np.sqrt(fx.R), strict=True))
+        if len(extras):  # NIS only where there are aids: the plain path pays nothing
+            used = extras.take(np.flatnonzero(res.applied))
+            y, S = aid_innovations_arrays(d, z, valid, res.x_prior, res.P_prior, used.k, used.h, used.z, used.R)
             nis = y * y / S
             n_fix_used = int(np.sum(res.applied[: len(fx)]))  # fixes are never gated: all of them
             fix_nis += list(nis[:n_fix_used])
-            zk = np.array([m.k for m in used[n_fix_used:]], dtype=np.int64)
+            zk = used.k[n_fix_used:]
             if len(zk):
                 # the first update of each rest carries the velocity gathered since the last aid: the test of
                 # the model; the later ones mostly test the zero-velocity sigma, a chosen pseudo-noise
                 moving = np.concatenate(([0], np.cumsum(~rest2[:, j])))  # non-rest samples before each sample
                 first = np.ones(len(zk), dtype=bool)
                 first[1:] = moving[zk[1:]] != moving[zk[:-1]]
-                zupt_nis += list(zip(arrays["t"][zk], [j] * len(zk), nis[n_fix_used:], first, strict=True))
+                zupt_nis.append(np.column_stack((arrays["t"][zk], np.full(len(zk), j), nis[n_fix_used:], first)))
+        del res
     out = dict(arrays)
-    for k, v in keys.items():
-        out[k] = np.stack(v)
+    for stage in ("filt", "smooth"):
+        _stale(out, stage)
+    out.update(res_out.arrays)
     out["zupt"] = applied
     out["fixes"] = np.array(fix_rows, dtype=np.float64).reshape(-1, 4)
     out["fix_nis"] = np.array(fix_nis, dtype=np.float64)
-    out["zupt_nis"] = np.array(zupt_nis, dtype=np.float64).reshape(-1, 4)
+    out["zupt_nis"] = np.concatenate(zupt_nis) if zupt_nis else np.zeros((0, 4))
     return out
 
 
@@ -323,7 +439,7 @@ def holdout(arrays: dict[str, np.ndarray], model: Model, fixes: list[list], **sm
         given.append(fx[0::2])
         held.append(fx[1::2])
     base = {k: arrays[k] for k in ("t", "axis_names", "accel", "clipped")}
-    sm = smooth_run(base, model, fixes=given, **smooth_kw)
+    sm = smooth_run(base, model, fixes=given, covariances=False, **smooth_kw)
     estimates = {"smoother": sm["smooth_x"][:, :, 0], **fix_baselines(base, model, given)}
     rms = {}
     for name, r in estimates.items():

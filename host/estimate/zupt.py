@@ -144,7 +144,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from accelnav.estimate.kf import Measurement, bias_model, zero_velocity
+from accelnav.estimate.kf import Aids, Measurement, bias_model
 from accelnav.fileio import check_input, excerpt, load_npz
 from accelnav.model.design import axis_design
 from accelnav.model.load import Model
@@ -597,31 +597,43 @@ def intervals(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def update_samples(mask: np.ndarray, model: Model, params: ZuptParams = ZuptParams()) -> np.ndarray:
-    """Sample indices that get a zero-velocity update: every sample of each rest run, or every every_s seconds."""
+    """Sample indices that get a zero-velocity update: every sample of each rest run, or every every_s seconds
+    (counted from the run's first sample). Whole-array operations: no Python loop over the rests."""
     step = max(1, int(round(params.every_s * model.rate_hz)))
-    ks = [np.arange(a, b, step) for a, b in intervals(mask)]
-    return np.concatenate(ks) if ks else np.zeros(0, dtype=np.int64)
+    m = np.asarray(mask, dtype=bool).reshape(-1)
+    idx = np.flatnonzero(m).astype(np.int64)
+    if step == 1 or not len(idx):
+        return idx
+    starts = m.copy()
+    starts[1:] &= ~m[:-1]
+    run_start = np.maximum.accumulate(np.where(starts, np.arange(len(m)), 0))[idx]
+    return idx[(idx - run_start) % step == 0]
 
 
 def measurements(ks: np.ndarray, params: ZuptParams = ZuptParams()) -> tuple[list[Measurement], list[float]]:
     """Zero-velocity updates at samples ``ks`` and their gates (for accelnav.estimate.fastsmooth.smooth)."""
-    extras = [zero_velocity(int(k), params.sigma) for k in ks]
+    extras = Aids.zero_velocity(ks, params.sigma).measurements()
     return extras, [params.gate] * len(extras)
+
+
+def axis_aids(rest: np.ndarray, sigma: np.ndarray | None, model: Model, params: ZuptParams = ZuptParams()) -> Aids:
+    """The zero-velocity updates of one axis as arrays: at the samples of its (N,) rest mask that get one
+    (:func:`update_samples`), with the per-sample ``sigma`` of a ZUPT file where it gives one (NaN or None:
+    ``params.sigma``)."""
+    ks = update_samples(rest, model, params)
+    sd = np.full(len(ks), float(params.sigma))
+    if sigma is not None:
+        given = np.asarray(sigma, dtype=np.float64)[ks]
+        sd = np.where(np.isfinite(given), given, sd)
+    return Aids.zero_velocity(ks, sd)
 
 
 def axis_updates(
     rest: np.ndarray, sigma: np.ndarray | None, model: Model, params: ZuptParams = ZuptParams()
 ) -> tuple[np.ndarray, list[Measurement]]:
-    """The zero-velocity updates of one axis: the samples ``ks`` of its (N,) rest mask that get one
-    (:func:`update_samples`) and their measurements, with the per-sample ``sigma`` of a ZUPT file
-    where it gives one (NaN or None: ``params.sigma``)."""
-    ks = update_samples(rest, model, params)
-    if sigma is None:
-        return ks, [zero_velocity(int(k), params.sigma) for k in ks]
-    sd = np.asarray(sigma)[ks]
-    return ks, [
-        zero_velocity(int(k), float(s) if np.isfinite(s) else params.sigma) for k, s in zip(ks, sd, strict=True)
-    ]
+    """:func:`axis_aids` as (samples, one :class:`Measurement` each), for callers that mix them with fixes."""
+    a = axis_aids(rest, sigma, model, params)
+    return a.k, a.measurements()
 
 
 def intervals_from_csv(path, t: np.ndarray) -> np.ndarray:

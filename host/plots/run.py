@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from accelnav.data.runfile import state_sd
 from accelnav.estimate.pipeline import dead_reckoning
 from accelnav.fileio import atomic_output
 from accelnav.model.load import Model
@@ -46,7 +47,7 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
             for stage, color, lab, ls in (("smooth", "tab:red", "smoother", "-"), ("filt", "tab:blue", "filter", "--")):
                 if f"{stage}_x" in arrays:
                     x = arrays[f"{stage}_x"][j, :, i]
-                    sd = np.sqrt(arrays[f"{stage}_P"][j, :, i, i])
+                    sd = state_sd(arrays, stage)[j, :, i]
                     _band(ax, t, x, sd, color, f"{lab} +-1 sigma", ls)
             if i == 1:
                 _rest_marks(ax, arrays)
@@ -156,7 +157,7 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
                 ax,
                 t,
                 arrays[f"{stage}_x"][j, :, 3],
-                np.sqrt(arrays[f"{stage}_P"][j, :, 3, 3]),
+                state_sd(arrays, stage)[j, :, 3],
                 color,
                 f"{lab} +-1 sigma",
                 ls,
@@ -173,7 +174,7 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
         if has_truth:
             ax.plot(t, arrays["r"][:, j], color="black", lw=1.4, label="truth")
         ax.plot(t, plain[j, :, 0], color="tab:gray", ls="--", lw=1.0, label="double integration")
-        _band(ax, t, arrays["filt_x"][j, :, 0], np.sqrt(arrays["filt_P"][j, :, 0, 0]), "tab:blue", "filter +-1 sigma")
+        _band(ax, t, arrays["filt_x"][j, :, 0], state_sd(arrays, "filt")[j, :, 0], "tab:blue", "filter +-1 sigma")
         _marks(ax, arrays, j, t)
         ax.set_title(f"axis {names[j]}")
         ax.set_xlabel("time [s]")
@@ -191,14 +192,12 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
             ax,
             t,
             arrays["filt_x"][j, :, 0],
-            np.sqrt(arrays["filt_P"][j, :, 0, 0]),
+            state_sd(arrays, "filt")[j, :, 0],
             "tab:blue",
             "filter +-1 sigma",
             "--",
         )
-        _band(
-            ax, t, arrays["smooth_x"][j, :, 0], np.sqrt(arrays["smooth_P"][j, :, 0, 0]), "tab:red", "smoother +-1 sigma"
-        )
+        _band(ax, t, arrays["smooth_x"][j, :, 0], state_sd(arrays, "smooth")[j, :, 0], "tab:red", "smoother +-1 sigma")
         _marks(ax, arrays, j, t)
         _rest_marks(ax, arrays)
         span = np.ptp(ref) if len(ref) else 1.0

@@ -1,0 +1,172 @@
+"""Benchmark: `accelnav smooth` and `accelnav filter` end to end, run as a user runs them, same run.
+
+Each command is a subprocess (start-up, reading, gains, kernel, writing: all of it); its wall time
+gives samples/s (rows of the recording, every axis) and GNU time its peak RSS. Beside them, from the
+same run and the same data:
+
+* the kernel alone: the plain path's data pass (fastsmooth.plain_data) with its gains cached, every axis;
+* FilterPy's batch_filter + rts_smoother on a prefix of --n-baseline rows (it is ~1000x slower:
+  subsampled, said in its row), every axis;
+* pandas.read_csv of the same CSV, when pandas is installed (it comes with statsmodels' test extras).
+
+Data: the default model's stop_and_go simulation (rests for --zupt auto), tiled to N rows; the model
+is the default with ranges.max_run_s raised to the run (the shipped 3600 s is the fixed-point C's
+range proof, not a limit of the host tools). Sizes 1e5, 1e6, 1e7 rows; 1e8 only with --big.
+Usage: python bench/bench_smooth_e2e.py [--sizes 1e5 1e6 1e7] [--big] [--n-baseline 20000] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from baselines import best_of, filterpy_smooth
+
+from accelnav.estimate import fastsmooth as fs
+from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.design import axis_design
+from accelnav.model.load import DEFAULT_MODEL, load_model
+
+
+def make_data(folder: Path, n: int, model) -> tuple[Path, Path, Path]:
+    """(NPZ, CSV, model file) of n rows, written once per size into ``folder``."""
+    npz, csv, toml = folder / f"rec-{n}.npz", folder / f"rec-{n}.csv", folder / f"model-{n}.toml"
+    if not toml.exists():
+        run_s = max(model.ranges.max_run_s, n / model.rate_hz * 1.01)
+        text = DEFAULT_MODEL.read_text().replace(f"max_run_s = {model.ranges.max_run_s!r}", f"max_run_s = {run_s!r}")
+        assert f"max_run_s = {run_s!r}" in text, "the default model's max_run_s line moved"
+        toml.write_text(text)
+    if npz.exists() and csv.exists():
+        return npz, csv, toml
+    sim = simulate(model, "stop_and_go", min(model.ranges.max_run_s, n / model.rate_hz), seed=7)
+    accel = np.resize(sim.accel, (n, sim.accel.shape[1]))  # tiled: rests recur all along
+    t = np.arange(n) / model.rate_hz
+    np.savez(npz, t=t, accel=accel, axis_names=np.array([a.name for a in model.axes]))
+    with open(csv, "w") as fh:
+        fh.write("t_s," + ",".join(f"acc_{a.name}_m_s2" for a in model.axes) + "\n")
+        step = 1_000_000
+        for i in range(0, n, step):
+            np.savetxt(fh, np.column_stack((t[i : i + step], accel[i : i + step])), delimiter=",", fmt="%.9g")
+    return npz, csv, toml
+
+
+def run(argv: list[str], folder: Path) -> tuple[float, float, int, str]:
+    """(wall s, peak RSS MB, exit status, last stderr line) of one command. The RSS comes from GNU time
+    between us and the command: a child forked from this big process would count our pages until exec."""
+    rss_file = folder / "rss.txt"
+    timer = ["/usr/bin/time", "-q", "-f", "%M", "-o", str(rss_file)] if Path("/usr/bin/time").exists() else []
+    t0 = time.perf_counter()
+    p = subprocess.run([*timer, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    wall = time.perf_counter() - t0
+    rss = float(rss_file.read_text().split()[-1]) / 1024 if timer else float("nan")
+    return wall, rss, p.returncode, (p.stderr.strip().splitlines() or [""])[-1]
+
+
+def kernel_alone(model, accel: np.ndarray, repeat: int) -> float:
+    """Seconds of the plain data pass over every axis, gains cached (computed before the timing)."""
+    total = 0.0
+    for j in range(accel.shape[1]):
+        d = axis_design(model, j)
+        z = np.ascontiguousarray(accel[:, j])
+        g = fs.plain_gains(d, len(z))
+        out = (np.empty((len(z), 4)), np.empty((len(z), 4)))
+        total += best_of(lambda d=d, z=z, g=g, out=out: fs.plain_data(d, z, None, g, out=out), repeat)
+        fs.clear_gain_cache()  # one axis's gains at a time: 300 B per sample
+    return total
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", nargs="*", type=float, default=[1e5, 1e6, 1e7])
+    ap.add_argument("--big", action="store_true", help="also 1e8 rows (the bounded-memory path)")
+    ap.add_argument("--n-baseline", type=int, default=20_000, help="rows FilterPy smooths (it is slow)")
+    ap.add_argument("--repeat", type=int, default=3, help="kernel timings: best of this many")
+    ap.add_argument("--keep", type=Path, default=None, help="keep the data in DIR (default: a temporary folder)")
+    args = ap.parse_args()
+    sizes = [int(s) for s in args.sizes] + ([100_000_000] if args.big else [])
+    model = load_model(None)
+    n_axes = len(model.axes)
+    folder = args.keep or Path(tempfile.mkdtemp(prefix="accelnav-bench-e2e-"))
+    folder.mkdir(parents=True, exist_ok=True)
+    exe = [sys.executable, "-m", "accelnav.cli"]
+    try:
+        import pandas as pd
+    except ImportError:
+        pd = None
+
+    # FilterPy once, on a prefix, every axis: rows/s
+    sim = simulate(model, "stop_and_go", min(model.ranges.max_run_s, args.n_baseline / model.rate_hz), seed=7)
+    zb = np.resize(sim.accel, (args.n_baseline, n_axes))
+    t_fp = sum(best_of(lambda j=j: filterpy_smooth(axis_design(model, j), zb[:, j]), 1) for j in range(n_axes))
+    fp_rate = args.n_baseline / t_fp
+
+    print(f"{n_axes} axes; samples/s counts rows of the recording (every axis). FilterPy: {args.n_baseline:,} rows "
+          f"(subsampled: it is slow), {fp_rate:,.0f} rows/s.")  # fmt: skip
+    print()
+    print("| N | case | s | samples/s | x kernel | x FilterPy | peak RSS MB | note |")
+    print("|---|---|---|---|---|---|---|---|")
+    targets = []
+    for n in sizes:
+        npz, csv, toml = make_data(folder, n, model)
+        data = np.load(npz)
+        t_kernel = kernel_alone(model, np.asarray(data["accel"]), args.repeat)
+        del data
+        k_rate = n / t_kernel
+        results = {"kernel alone (plain data pass, gains cached)": (t_kernel, float("nan"), 0, "")}
+        if pd is not None:
+            t0 = time.perf_counter()
+            pd.read_csv(csv)
+            results["pandas.read_csv of the CSV"] = (time.perf_counter() - t0, float("nan"), 0, "in process")
+        out = folder / "out.npz"
+        cases = {
+            "smooth NPZ": ["smooth", npz],
+            "smooth CSV": ["smooth", csv],
+            "smooth NPZ --zupt auto": ["smooth", npz, "--zupt", "auto"],
+            "filter NPZ": ["filter", npz],
+        }
+        for name, argv in cases.items():
+            results[name] = run([*exe, *map(str, argv), "--model", str(toml), "--out", str(out)], folder)
+            out.unlink(missing_ok=True)
+        for name, (sec, rss, status, err) in results.items():
+            note = err if status else ""
+            rate = n / sec
+            rss_s = "" if rss != rss else f"{rss:,.0f}"
+            print(f"| {n:.0e} | {name} | {sec:.2f} | {rate:,.0f} | {rate / k_rate:.3f} | {rate / fp_rate:,.1f} | "
+                  f"{rss_s} | {note[:80]} |")  # fmt: skip
+        sec = {k: v[0] for k, v in results.items()}
+        ok = {k: v[2] == 0 for k, v in results.items()}
+        targets.append((n, sec, ok, k_rate))
+        sys.stdout.flush()
+
+    n, sec, ok, k_rate = targets[-1]
+    print()
+    print(f"Targets at N = {n:.0e} (goal, measured, met):")
+    print()
+    print("| goal | measured | met |")
+    print("|---|---|---|")
+
+    def line(goal, value, met, good):
+        print(f"| {goal} | {value} | {'yes' if good and met else 'no'} |")
+
+    r = (n / sec["smooth NPZ"]) / k_rate
+    line("smooth from NPZ >= 10 % of the kernel's speed", f"{100 * r:.1f} %", ok["smooth NPZ"], r >= 0.10)
+    if "pandas.read_csv of the CSV" in sec:
+        r = sec["smooth CSV"] / sec["pandas.read_csv of the CSV"]
+        line("smooth from CSV within 3x of pandas reading it", f"{r:.1f}x", ok["smooth CSV"], r <= 3)
+    r = sec["smooth NPZ --zupt auto"] / sec["smooth NPZ"]
+    line("--zupt auto within 2x of plain", f"{r:.2f}x", ok["smooth NPZ --zupt auto"], r <= 2)
+    r = (n / sec["filter NPZ"]) / k_rate
+    line("filter >= 1/5 of the smoother kernel's speed", f"{r:.3f}", ok["filter NPZ"], r >= 0.2)
+    if args.keep is None:
+        shutil.rmtree(folder, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
