@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from accelnav.data.logs import _decoded, log_run_arrays
 from accelnav.errors import UserError
 from accelnav.fileio import atomic_output, check_output
 
@@ -236,67 +237,3 @@ def _compact_counts(stats: dict) -> str:
     if stats["unreplayed"]:
         text += f", {stats['unreplayed']} samples unreplayed (no model text)"
     return text
-
-
-def _decoded(log, model_text: str):
-    """The decoded log, refused in one line when it holds no sample frame (every command on it needs one)."""
-    from accelnav.link.logfile import LogError
-    from accelnav.link.recorder import decode_log
-
-    try:
-        d = decode_log(log, model_text)
-    except LogError as exc:
-        raise UserError(str(exc)) from None
-    if not len(d.frames["sample"]):
-        raise UserError(
-            f"{log}: 0 sample frames in {d.chunks} chunks ({d.stats['bytes']} bytes): a silent device or a "
-            "recording stopped at once; nothing to process"
-        )
-    return d
-
-
-def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndarray], object]:
-    """A recorder log as the arrays of an accelnav run file (and its model); what ``log export`` writes."""
-    from accelnav.data.runfile import FORMAT
-    from accelnav.link.telemetry import sample_columns
-    from accelnav.model.design import input_conversion
-    from accelnav.model.load import ModelError, loads_model
-
-    if d is None:
-        d = _decoded(log, model_text)
-    cols = sample_columns(d.manifest, d.frames["sample"])
-    names = d.manifest.axes
-    raw = d.manifest.raw_fields()
-    skipped = (cols["axis_flags"] & (1 << d.manifest.axis_flags["skipped"])) != 0
-    text = d.meta.get("model_toml") or model_text
-    if not text:
-        raise UserError(f"{log}: the log carries no model text (recorded with --manifest); export to .csv instead")
-    try:
-        model = loads_model(text, source=f"{log}:model_toml")
-    except ModelError as exc:
-        raise UserError(str(exc)) from None
-    accel = np.empty((len(cols["t"]), len(names)))
-    for j in range(len(names)):
-        conv = input_conversion(model, j)
-        accel[:, j] = (
-            conv.accel(cols["code"][:, j]) if "code" in cols else conv.accel(cols["t1"][:, j], cols["t2"][:, j])
-        )
-    arrays = {
-        "format": np.array(FORMAT),
-        "model_toml": np.array(text),
-        "model_source": np.array(f"{log}:model_toml"),
-        "t": cols["t"],
-        "axis_names": np.array(names),
-        "accel": accel,
-        "clipped": skipped,
-        **{r: cols[r].astype(np.int32) for r in raw},
-        "fw_x": np.stack(
-            [np.stack([cols[s][:, j] for s in ("r", "u", "a", "eps")], axis=1) for j in range(len(names))]
-        ),
-        "fw_index": cols["index"],
-        "fw_seq": cols["seq"],
-        "fw_flags": cols["flags"],
-        "fw_axis_flags": cols["axis_flags"],
-        "host_time_ns": d.host_t_ns,
-    }
-    return arrays, model

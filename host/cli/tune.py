@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.cli.core import INPUT_HELP, _input_args, _load
+from accelnav.cli.core import INPUT_HELP, _input_args
+from accelnav.data.inputs import _load
 from accelnav.errors import UserError
 from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, tune, with_figures
 from accelnav.estimate.zupt import ZuptParams
