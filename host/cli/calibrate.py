@@ -30,10 +30,9 @@ import numpy as np
 
 from accelnav.data.recording import read_recording
 from accelnav.errors import UserError
-from accelnav.fileio import write_text
 from accelnav.identify.calibrate import GRAVITY, Calibration, CalibrationError, calibrate, detect_poses, native
 from accelnav.model.design import input_conversion
-from accelnav.model.edit import dump_model, revalidate
+from accelnav.model.edit import revalidate, save_model
 from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
 from accelnav.progress import Progress
 
@@ -152,9 +151,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise UserError(f"{rec.source}: {exc}") from None
     print("\n".join(report(cal, names)))
     out_model = apply(model, cal, args.since_power_on)
-    text = dump_model(out_model, header=provenance(rec, cal, label))
-    loads_model(text, source=str(args.out))
-    write_text(args.out, text)  # whole or not at all
+    save_model(args.out, out_model, header=provenance(rec, cal, label))  # whole or not at all
     unit_z, unit_s = ("V", "V/g") if model.sensor.kind == "analog" else ("duty", "duty/g")
     print(f"model written to {args.out} (from {label}):")
     for old, new in zip(model.axes, out_model.axes, strict=True):

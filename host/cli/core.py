@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.inputs import _load
+from accelnav.data.inputs import read_input
 from accelnav.data.runfile import STATE, export_csv, save_run
 from accelnav.errors import UserError
 from accelnav.estimate.pipeline import (
@@ -19,6 +19,7 @@ from accelnav.estimate.pipeline import (
     stride_table,
 )
 from accelnav.estimate.zupt import ZuptParams
+from accelnav.fileio import check_output
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model
 
 TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
@@ -228,6 +229,23 @@ def _summary(arrays: dict[str, np.ndarray]) -> str:
     return "\n".join(lines)
 
 
+def read_args(args) -> tuple[dict[str, np.ndarray], Model]:
+    """read_input with the command's flags; outputs that cannot be written are refused before the work."""
+    for flag in ("out", "csv"):
+        if getattr(args, flag, None) is not None:
+            check_output(getattr(args, flag), f"--{flag}")
+    return read_input(
+        args.run,
+        args.model,
+        axes=args.axis,
+        time_column=args.time_column,
+        rate_hz=args.rate,
+        time_unit=args.time_unit,
+        unit=args.unit,
+        allow_gaps=args.allow_gaps,
+    )
+
+
 def cmd_sim(args) -> int:
     if args.list_scenarios:
         from accelnav.hil_sim.sim.trajectories import ALL_SCENARIOS as SCENARIOS
@@ -244,7 +262,7 @@ def cmd_sim(args) -> int:
 
 
 def cmd_filter(args) -> int:
-    arrays, model = _load(args)
+    arrays, model = read_args(args)
     arrays = filter_run(arrays, model)
     print(_summary(arrays))
     rows = position_errors(arrays, model)
@@ -258,7 +276,7 @@ def cmd_smooth(args) -> int:
     from accelnav.estimate import zupt
     from accelnav.estimate.fixes import read_fixes
 
-    arrays, model = _load(args)
+    arrays, model = read_args(args)
     names = [str(a) for a in arrays["axis_names"]]
     fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
     params = ZuptParams(
@@ -324,8 +342,7 @@ def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) ->
     """smooth --tune: the model with the maximum-likelihood noise figures of this recording, in a stated budget."""
     import time
 
-    from accelnav.estimate import zupt
-    from accelnav.estimate.tune import FIGURES, tune, with_figures
+    from accelnav.estimate.tune import FIGURES, aid_measurements, tune, with_figures
 
     if args.tune_evaluations < 10:
         raise UserError(f"--tune-evaluations: got {args.tune_evaluations}; accepted: 10 or more")
@@ -333,12 +350,7 @@ def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) ->
         raise UserError(f"--tune-seconds: got {args.tune_seconds:g}; accepted: a time > 0 s")
     accel = np.asarray(arrays["accel"], dtype=np.float64)
     n, m = accel.shape
-    extras = [list(fixes[j]) if fixes is not None else [] for j in range(m)]
-    if rest is not None:
-        r2 = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, m))
-        for j in range(m):
-            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
-            extras[j] += zupt.axis_updates(r2[:, j], sigma, model, params)[1]
+    extras, _ = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
     print(
         f"tune: fitting {', '.join(FIGURES)} to {n} samples x {m} axes with {sum(map(len, extras))} aids; budget "
         f"{args.tune_evaluations} evaluations, {args.tune_seconds:g} s"

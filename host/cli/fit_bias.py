@@ -29,14 +29,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from accelnav.data.recording import MIN_DURATION_S, Recording, check_rate
-from accelnav.errors import UserError
-from accelnav.fileio import check_output, write_text
-from accelnav.identify.characterise import AxisResult, _base_model, _read, analyse_axis, check_noise_band, merge
+from accelnav.data.recording import MIN_DURATION_S, Recording
+from accelnav.fileio import check_output
+from accelnav.identify.characterise import AxisResult, characterise
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS
-from accelnav.model.edit import dump_model
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, loads_model
+from accelnav.model.edit import save_model
+from accelnav.model.load import DEFAULT_MODEL, G0, Model
 from accelnav.progress import Progress
 
 
@@ -112,41 +111,27 @@ def register(sub) -> None:
 
 
 def cmd_fit_bias(args: argparse.Namespace) -> int:
-    if args.lags < 1:
-        raise UserError(f"--lags: got {args.lags}; accepted: a positive number of lags")
-    lo, hi = args.noise_band
-    if not (0 < lo < hi):
-        raise UserError(f"--noise-band: got {lo:g} {hi:g}; accepted: two times in s, 0 < LO < HI")
     check_output(args.out)  # a directory named as the model to write is refused before the work
-    rec = _read(args)
-    base, base_label, given = _base_model(args.model, rec)
-    full_scale = base.max_accel_m_s2 if given else None
-    if given:  # the model keeps its rate: the recording must have it (the check filter and smooth make)
-        check_rate(rec, base.rate_hz, base_label)
-
-    print(
-        f"{rec.source}: {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s), "
-        f"axes {', '.join(rec.axis_names)}"
+    ch = characterise(
+        args.recording,
+        args.model,
+        axes=args.axis,
+        unit=args.unit,
+        rate_hz=args.rate,
+        time_column=args.time_column,
+        time_unit=args.time_unit,
+        min_duration_s=args.min_duration,
+        sigma_n=args.sigma_n,
+        noise_band=tuple(args.noise_band),
+        lags=args.lags,
     )
-    sensor_range = (base.max_accel_m_s2, f"the sensor of {base_label}")  # the range the written model claims
-    results = [
-        analyse_axis(
-            rec, a, min_duration_s=args.min_duration, full_scale=full_scale, lags=args.lags, sensor_range=sensor_range
-        )
-        for a in rec.axis_names
-    ]
-    model = merge(base, rec, results, sigma_n=args.sigma_n, keep_rate=given)
-    results, model = check_noise_band(model, rec, results, tuple(args.noise_band))
+    model, rec, results = ch.model, ch.recording, ch.axes
     for r in results:
         print()
         print("\n".join(axis_report(r)))
-
-    header = provenance(rec, results, base_label)
-    text = dump_model(model, header=header)
-    loads_model(text, source=str(args.out))  # a result the loader refuses is not written
-    write_text(args.out, text)  # whole or not at all
+    save_model(args.out, model, header=provenance(rec, results, ch.base_label))  # whole or not at all
     print()
-    print("\n".join(model_report(model, base, base_label, rec, results, args.sigma_n, args.out)))
+    print("\n".join(model_report(model, ch.base, ch.base_label, rec, results, args.sigma_n, args.out)))
 
     if args.plots is not None:
         from accelnav.plots.biasfit import plot_all

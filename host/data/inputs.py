@@ -1,57 +1,126 @@
 """Every input of filter, smooth and tune, whatever its form, checked against the model.
 
-Moved from the CLI so that the library makes the same checks (rate, axes, units, gaps,
-clipping, NaN) as the command.
+One reader for the command and the library alike, so both make the same checks: the model's rate, its
+axes, units, gaps (refused, or filled in and flagged with ``allow_gaps``), NaN, and samples at the
+sensor's full scale (flagged as clipped). Notes on how a clock was read go to
+:func:`accelnav.progress.note`.
 """
 
 from __future__ import annotations
 
+import os
+from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Union
 
 import numpy as np
 
+from accelnav.data.run import Run
 from accelnav.data.runfile import load_run
 from accelnav.errors import UserError
-from accelnav.fileio import check_input, check_output
+from accelnav.estimate.checks import check_run
+from accelnav.fileio import check_input
 from accelnav.model.load import Model, load_model, loads_model
+from accelnav.progress import note
+
+if TYPE_CHECKING:
+    import pandas
+
+Source = Union[str, "os.PathLike[str]", Mapping[str, Any], "pandas.DataFrame"]
+# option -> the command's flag, which the messages name (the library's keywords map one to one)
+FLAGS = {"axes": "axis", "time_column": "time_column", "rate_hz": "rate", "unit": "unit", "time_unit": "time_unit"}
 
 
-def _load(args) -> tuple[dict[str, np.ndarray], Model]:
-    """The input of filter and smooth, whatever its form, checked against the model (see INPUT_HELP)."""
-    from accelnav.data.recording import check_rate, on_grid, read_recording
+def read_input(
+    source: Source,
+    model: Model | str | os.PathLike[str] | None = None,
+    *,
+    axes: list[str] | None = None,
+    time_column: str | None = None,
+    rate_hz: float | None = None,
+    time_unit: str | None = None,
+    unit: str | None = None,
+    allow_gaps: bool = False,
+) -> tuple[Run, Model]:
+    """Read a run or recording and check it against the model; returns (run, model).
+
+    ``source``: a path (an accelnav run file, a recorder log, a CSV or gzip CSV, an NPZ of t and
+    accel), a mapping of named columns (numpy arrays, read as a CSV with that header: ``t`` or
+    ``t_ms``, ``acc_x_g``, ...), or a pandas DataFrame of such columns. ``model``: a Model, a model
+    file, or None for the model embedded in the input, else the embedded default. The keywords are
+    the command's ``--axis``, ``--time-column``, ``--rate``, ``--time-unit``, ``--unit`` and
+    ``--allow-gaps``. Anything refused raises :class:`accelnav.errors.UserError` (or ModelError) in
+    one line.
+    """
+    opts = dict(axes=axes, time_column=time_column, rate_hz=rate_hz, time_unit=time_unit, unit=unit)
+    override = model if isinstance(model, Model) or model is None else load_model(model)
+    if not isinstance(source, (str, os.PathLike)):
+        return _from_memory(source, override, opts, allow_gaps)
+    path = check_input(source)  # what it is, when not a readable file (a FIFO is refused before a read)
     from accelnav.link.logfile import is_log
 
-    path = check_input(args.run)  # what it is, when not a readable file (a FIFO is refused before a read)
-    for flag in ("out", "csv"):  # an output that cannot be written is refused before the work
-        if getattr(args, flag, None) is not None:
-            check_output(getattr(args, flag), f"--{flag}")
-    override = load_model(args.model) if args.model is not None else None
     if is_log(path):
         from accelnav.data.logs import log_run_arrays
 
         arrays, model = log_run_arrays(path)
-        return _with_model(path, arrays, model, override, args)
+        return _with_model(path, arrays, model, override, opts)
     with open(path, "rb") as fh:
         zipped = fh.read(2) == b"PK"  # an NPZ, whatever its name
     if (zipped or path.suffix.lower() == ".npz") and not _is_recording_npz(path):
         arrays, model = load_run(path)
-        return _with_model(path, arrays, model, override, args)
+        return _with_model(path, arrays, model, override, opts)
     # a recording: CSV, gzip CSV, or an NPZ of t and accel
-    model = override
-    unit = args.unit
+    from accelnav.data.recording import read_recording
+
+    unit = _unit(unit, override)
+    rec = read_recording(path, **{**opts, "unit": unit}, allow_gaps=allow_gaps)
+    return _on_model(path, rec, override)
+
+
+def _unit(unit: str | None, model: Model | None) -> str | None:
     if unit is None and model is not None and model.sensor.kind == "calibrated":
-        unit = model.sensor.calibrated.unit
-    rec = read_recording(
-        path,
-        axes=args.axis,
-        unit=unit,
-        rate_hz=args.rate,
-        time_column=args.time_column,
-        allow_gaps=args.allow_gaps,
-        time_unit=args.time_unit,
-    )
-    for note in rec.notes:
-        print(note)
+        return model.sensor.calibrated.unit
+    return unit
+
+
+def _from_memory(source, override: Model | None, opts: dict, allow_gaps: bool) -> tuple[Run, Model]:
+    """Columns in memory: a run's arrays (with ``accel`` and ``axis_names``), or named columns as a CSV has."""
+    from accelnav.data.recording import from_columns
+
+    if hasattr(source, "columns") and hasattr(source, "index"):  # a pandas DataFrame
+        label = "<DataFrame>"
+        columns = {str(c): source[c].to_numpy() for c in source.columns}
+        if source.index.name is not None and str(source.index.name) not in columns:  # time as the index
+            columns = {str(source.index.name): source.index.to_numpy(), **columns}
+    elif isinstance(source, Mapping):
+        label = "<arrays>"
+        columns = {str(k): v for k, v in source.items()}
+    else:
+        raise UserError(
+            f"read_input: got a {type(source).__name__}; accepted: a path, a mapping of arrays or a pandas DataFrame"
+        )
+    if "accel" in columns and "axis_names" in columns:  # a run's arrays (simulate, load_run)
+        arrays = {k: np.asarray(v) for k, v in columns.items()}
+        for key in ("t", "clipped"):
+            if key not in arrays:
+                raise UserError(f"{label}: a run's arrays need {key!r}; keys: {', '.join(sorted(arrays))}")
+        if override is not None:
+            model = override
+        elif "model_toml" in arrays:
+            model = loads_model(str(arrays["model_toml"]), source=f"{label}:model_toml")
+        else:
+            model = load_model(None)
+        return _with_model(label, arrays, model, None, opts)
+    rec = from_columns(label, columns, **{**opts, "unit": _unit(opts["unit"], override)}, allow_gaps=allow_gaps)
+    return _on_model(label, rec, override)
+
+
+def _on_model(path, rec, model: Model | None) -> tuple[Run, Model]:
+    """A recording checked against the model and placed on its grid: rate, axes, NaN, gaps, full scale."""
+    from accelnav.data.recording import check_rate, on_grid
+
+    for text in rec.notes:
+        note(text)
     if model is None:
         model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
     check_rate(rec, model.rate_hz, str(model.source))
@@ -74,11 +143,11 @@ def _load(args) -> tuple[dict[str, np.ndarray], Model]:
     if rec.clipped is not None and not missing.any():
         clipped |= rec.clipped
     if missing.any():
-        print(f"{path}: {int(missing.sum())} missing samples filled in (predict only)")
+        note(f"{path}: {int(missing.sum())} missing samples filled in (predict only)")
     if len(rec.axis_names) and list(rec.axis_names) != names:
-        print(f"{path}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
+        note(f"{path}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
     arrays = {"t": t, "axis_names": np.array(names), "accel": accel, "clipped": clipped}
-    return arrays, model
+    return Run(arrays), model
 
 
 def _is_recording_npz(path: Path) -> bool:
@@ -93,32 +162,29 @@ def _is_recording_npz(path: Path) -> bool:
     return "accel.npy" in names and "format.npy" not in names
 
 
-def _with_model(path, arrays, model: Model, override: Model | None, args) -> tuple[dict[str, np.ndarray], Model]:
+def _with_model(path, arrays, model: Model, override: Model | None, opts: dict) -> tuple[Run, Model]:
+    """A run's arrays against its model (or the one given): the same axes, the model's rate, no gap."""
     from accelnav.data.recording import GAP_FACTOR
 
-    for flag in ("axis", "time_column", "rate", "unit", "time_unit"):
-        if getattr(args, flag) not in (None, []):
+    for key, flag in FLAGS.items():
+        if opts[key] not in (None, []):
             raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
     if override is not None:
         if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:
             raise UserError(
-                f"{args.model}: axes {[a.name for a in override.axes]} do not match the run's "
+                f"{override.source}: axes {[a.name for a in override.axes]} do not match the run's "
                 f"{[str(a) for a in arrays['axis_names']]}"
             )
         model = override
+    check_run(arrays, model, str(path))
     t = arrays["t"]
     if len(t) > 2:
         dt = np.diff(t)
         step = float(np.median(dt))
-        if abs(step * model.rate_hz - 1) > 0.01:
-            raise UserError(
-                f"{path}: the run is sampled at {1 / step:.6g} Hz but the model {model.source} has "
-                f"sampling.rate_hz = {model.rate_hz:g} Hz"
-            )
         if np.any(dt > GAP_FACTOR * step):
             k = int(np.argmax(dt > GAP_FACTOR * step))
             raise UserError(
                 f"{path}: gap in time of {dt[k]:.6g} s after sample {k}; a run file is not filled in "
                 "(--allow-gaps is for CSV and NPZ recordings: export the samples with --csv)"
             )
-    return arrays, model
+    return Run(arrays), model

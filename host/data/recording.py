@@ -704,3 +704,62 @@ def check_axis(
                     f"(first at sample {k}, t = {rec.t[k]:.6g} s)"
                 )
     return y
+
+
+def from_columns(
+    source: str,
+    columns: dict[str, np.ndarray],
+    *,
+    axes: list[str] | None = None,
+    unit: str | None = None,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    allow_gaps: bool = False,
+    time_unit: str | None = None,
+) -> Recording:
+    """A recording from named columns held in memory (numpy arrays, a DataFrame's columns).
+
+    The columns are read as a CSV with that header would be: the same names pick the time and the
+    acceleration columns and say their units, and the same clock, rate and gap checks follow.
+    """
+    names = [str(c) for c in columns]
+    bad = [c for c in names if any(d in c for d in ",;\t\n")]
+    if bad:
+        raise UserError(f"{source}: column name {excerpt(bad[0])} holds a separator; rename it")
+    if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise UserError(f"--time-unit: got {time_unit!r}; accepted: {', '.join(TIME_UNITS)}")
+    head = _header(",".join(names), 1, source, axes, unit, rate_hz, time_column)
+    table = []
+    for j in head.use:
+        try:
+            col = np.asarray(columns[list(columns)[j]], dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise UserError(f"{source}: column {excerpt(head.cols[j])} is not numbers") from None
+        table.append(col)
+    if len({len(c) for c in table}) != 1:
+        raise UserError(f"{source}: columns of unequal length: {', '.join(str(len(c)) for c in table)}")
+    table = np.column_stack(table)
+    if table.shape[0] < 2:
+        raise UserError(f"{source}: {table.shape[0]} samples; a recording needs many more")
+    tu = None
+    if head.tcol is not None:
+        m = _TIME_NAME.match(head.tcol)
+        tu = m.group(2).lower() if m and m.group(2) else None
+        t, data = table[:, 0] * _TIME_SCALE[tu], table[:, 1:]
+    else:
+        t, data, tu = np.arange(table.shape[0]) / rate_hz, table, "s"
+    accel = data * np.array([UNITS[u] for u in head.units])
+    rec = _finish(source, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
+    rec = replace(rec, time_unit=tu, time_column=head.tcol)
+    if time_unit is not None:
+        if rec.time_column is None:
+            raise UserError(f"--time-unit: {source} has no time column (its time comes from the rate)")
+        if rec.time_unit not in (None, time_unit):
+            raise UserError(
+                f"--time-unit {time_unit}: the time column {rec.time_column!r} says its unit is {rec.time_unit}"
+            )
+        if rec.time_unit is None:
+            rec = replace(rec, t=rec.t * _TIME_SCALE[time_unit], time_unit=time_unit)
+    return _check_time(rec, rate_hz, allow_gaps)

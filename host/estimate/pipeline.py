@@ -12,11 +12,13 @@ import numpy as np
 
 from accelnav.model.design import axis_design
 from accelnav.model.load import Model
+from accelnav.estimate.checks import check_run
 from accelnav.estimate.kf import double_integrate, run_filter
 
 
 def filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None) -> dict[str, np.ndarray]:
     """Return ``arrays`` with the filter's posteriors and priors added (keys filt_*)."""
+    check_run(arrays, model, "filter_run")
     results = [
         run_filter(axis_design(model, j), arrays["accel"][:, j], valid=~arrays["clipped"][:, j], progress=progress)
         for j in range(len(arrays["axis_names"]))
@@ -62,6 +64,7 @@ def smooth_run(
     from accelnav.estimate import fastsmooth, zupt
     from accelnav.estimate.consistency import aid_innovations
 
+    check_run(arrays, model, "smooth_run")
     params = zupt.ZuptParams() if zupt_params is None else zupt_params
     n = len(arrays["t"])
     n_axes = len(arrays["axis_names"])

@@ -1,25 +1,24 @@
 """The characterisation chain of a stationary recording: bias fit, whiteness, noise figures, merged model.
 
-Moved from ``accelnav fit-bias`` (see its module notes for the rules) so that the library
-runs the same chain and the same rule that raises R.
+:func:`characterise` is what ``accelnav fit-bias`` runs (see that command's module notes for the
+rules, the one that raises R included); the command only adds the report and the file.
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from accelnav.data.recording import Recording, check_axis, read_recording
+from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, read_recording
 from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
-from accelnav.identify.noisecomp import BandCheck, Composite, check_band, fit_composite
+from accelnav.identify.noisecomp import DEFAULT_BAND_S, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
-from accelnav.identify.whiteness import Whiteness, whiteness
+from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
 from accelnav.model.edit import revalidate, with_axis_bias, with_noise
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model, model_name_from
-from accelnav.progress import Progress
+from accelnav.progress import Progress, note
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,29 +65,36 @@ def analyse_axis(
     return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise, comp)
 
 
-def _read(args: argparse.Namespace) -> Recording:
+def read_stationary(
+    source: str | Path,
+    *,
+    axes: list[str] | None = None,
+    unit: str | None = None,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    time_unit: str | None = None,
+) -> Recording:
     """The recording: a CSV, gzip CSV or NPZ through the checked reader, or a recorder log read directly."""
     from accelnav.link.logfile import is_log
 
-    path = args.recording
+    path = Path(source)
     if is_log(path):  # else read_recording says what is wrong with the path, if anything
         from accelnav.data.logs import log_run_arrays
         from accelnav.data.recording import from_arrays
 
-        for flag in ("unit", "rate", "time_column", "time_unit"):
-            if getattr(args, flag) is not None:
+        given = {"unit": unit, "rate": rate_hz, "time_column": time_column, "time_unit": time_unit}
+        for flag, value in given.items():
+            if value is not None:
                 raise UserError(f"--{flag.replace('_', '-')}: not for a recorder log, which says its own")
         arrays, _ = log_run_arrays(path)
-        return from_arrays(str(path), arrays, args.axis)
-    rec = read_recording(
-        path, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column, time_unit=args.time_unit
-    )
-    for note in rec.notes:
-        print(note)
+        return from_arrays(str(path), arrays, axes)
+    rec = read_recording(path, axes=axes, unit=unit, rate_hz=rate_hz, time_column=time_column, time_unit=time_unit)
+    for text in rec.notes:
+        note(text)
     return rec
 
 
-def _base_model(path: Path | None, rec: Recording) -> tuple[Model, str, bool]:
+def base_model(path: Path | None, rec: Recording) -> tuple[Model, str, bool]:
     """(model, how to name it, whether it describes this sensor)."""
     if path is not None:
         return load_model(path), str(path), True
@@ -164,3 +170,90 @@ def check_noise_band(model: Model, rec: Recording, results: list[AxisResult], ba
     if R > model.noise.R:
         model = revalidate(with_noise(model, R=_sig(R)))
     return out, model
+
+
+@dataclass(frozen=True, eq=False)
+class Characterisation:
+    """What :func:`characterise` found: the merged model, and per axis the fit, whiteness and noise."""
+
+    model: Model  # the base model with the fitted bias and noise figures merged in
+    base: Model
+    base_label: str  # how the base model is named in reports
+    recording: Recording
+    axes: list[AxisResult]
+
+    def to_dataframe(self):
+        """One row per axis: the bias constants, the noise terms and the band check, in SI units."""
+        from accelnav.data.run import pandas_or_error
+
+        pd = pandas_or_error()
+        rows = []
+        for r in self.axes:
+            f, k = r.fit, r.noise.terms
+            rows.append(
+                {
+                    "axis": r.name,
+                    "column": r.column,
+                    "T_identified": f.T_identified,
+                    "c1": f.c1 if f.T_identified else 0.0,
+                    "c2": f.c2,
+                    "T": f.T if f.T_identified else float("nan"),
+                    "white": r.white.white,
+                    "N": k.N,
+                    "B": k.B,
+                    "K": k.K,
+                    "K_is_bound": k.K_is_bound,
+                    "R_white": r.check.R_white if r.check is not None else float("nan"),
+                    "R_chosen": r.check.R_chosen if r.check is not None else float("nan"),
+                }
+            )
+        return pd.DataFrame(rows).set_index("axis")
+
+
+def characterise(
+    source: str | Path,
+    model: Model | str | Path | None = None,
+    *,
+    axes: list[str] | None = None,
+    unit: str | None = None,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    time_unit: str | None = None,
+    min_duration_s: float = MIN_DURATION_S,
+    sigma_n: str = "keep",
+    noise_band: tuple[float, float] = DEFAULT_BAND_S,
+    lags: int = DEFAULT_LB_LAGS,
+) -> Characterisation:
+    """Bias fit, whiteness and noise figures of a stationary recording, merged into a model.
+
+    ``model``: the model to merge into (a Model or a file); None: the one embedded in the recording,
+    else the embedded default (whose rate then becomes the recording's). ``sigma_n``: "keep" the base
+    model's, or "paper" for the derivative-variance rule. Refusals raise UserError in one line.
+    """
+    if lags < 1:
+        raise UserError(f"--lags: got {lags}; accepted: a positive number of lags")
+    lo, hi = noise_band
+    if not (0 < lo < hi):
+        raise UserError(f"--noise-band: got {lo:g} {hi:g}; accepted: two times in s, 0 < LO < HI")
+    if sigma_n not in ("keep", "paper"):
+        raise UserError(f"--sigma-n: got {sigma_n!r}; accepted: keep, paper")
+    rec = read_stationary(source, axes=axes, unit=unit, rate_hz=rate_hz, time_column=time_column, time_unit=time_unit)
+    if isinstance(model, Model):
+        base, base_label, given = model, str(model.source), True
+    else:
+        base, base_label, given = base_model(None if model is None else Path(model), rec)
+    full_scale = base.max_accel_m_s2 if given else None
+    if given:  # the model keeps its rate: the recording must have it (the check filter and smooth make)
+        check_rate(rec, base.rate_hz, base_label)
+    note(
+        f"{rec.source}: {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s), "
+        f"axes {', '.join(rec.axis_names)}"
+    )
+    sensor_range = (base.max_accel_m_s2, f"the sensor of {base_label}")  # the range the written model claims
+    results = [
+        analyse_axis(rec, a, min_duration_s=min_duration_s, full_scale=full_scale, lags=lags, sensor_range=sensor_range)
+        for a in rec.axis_names
+    ]
+    merged = merge(base, rec, results, sigma_n=sigma_n, keep_rate=given)
+    results, merged = check_noise_band(merged, rec, results, (float(lo), float(hi)))
+    return Characterisation(merged, base, base_label, rec, results)
