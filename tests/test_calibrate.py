@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from accelnav.cli import main
-from accelnav.cli.calibrate import steps_and_noise
+from accelnav.identify.calibration import steps_and_noise
 from accelnav.model.design import input_conversion
 from accelnav.model.load import DEFAULT_MODEL, G0, load_model
 from accelnav.model.edit import revalidate, with_axis_bias, with_noise

@@ -16,6 +16,7 @@ import sys
 from accelnav.native.cbuild import BuildError
 from accelnav.model.load import ModelError
 from accelnav.errors import UserError
+from accelnav.progress import set_verbosity
 
 # Modules that provide subcommands, in the order `accelnav --help` lists them.
 COMMAND_MODULES = (
@@ -35,6 +36,12 @@ def build_parser() -> argparse.ArgumentParser:
         prog="accelnav",
         description="Short-duration position from a cheap accelerometer: simulate, fit, filter, smooth.",
     )
+    from accelnav import __version__
+
+    parser.add_argument("--version", action="version", version=f"accelnav {__version__}")
+    talk = parser.add_mutually_exclusive_group()
+    talk.add_argument("-v", "--verbose", action="store_true", help="progress bars even when stderr is not a terminal")
+    talk.add_argument("-q", "--quiet", action="store_true", help="no notes and no progress, only results and errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         try:
@@ -50,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    set_verbosity(2 if args.verbose else 0 if args.quiet else 1)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

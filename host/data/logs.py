@@ -1,4 +1,8 @@
-"""A recorder log, or the firmware's telemetry, as the arrays of a run file."""
+"""A recorder log, or the firmware's telemetry, as the arrays of a run file.
+
+Both go through :func:`run_arrays`: the sample frames' columns, converted by the model as the firmware
+converts them, with its skip flags as the clipped samples and its own states as ``fw_x``.
+"""
 
 from __future__ import annotations
 
@@ -35,9 +39,6 @@ def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndar
     if d is None:
         d = _decoded(log, model_text)
     cols = sample_columns(d.manifest, d.frames["sample"])
-    names = d.manifest.axes
-    raw = d.manifest.raw_fields()
-    skipped = (cols["axis_flags"] & (1 << d.manifest.axis_flags["skipped"])) != 0
     text = d.meta.get("model_toml") or model_text
     if not text:
         raise UserError(f"{log}: the log carries no model text (recorded with --manifest); export to .csv instead")
@@ -45,24 +46,11 @@ def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndar
         model = loads_model(text, source=f"{log}:model_toml")
     except ModelError as exc:
         raise UserError(str(exc)) from None
-    accel = np.empty((len(cols["t"]), len(names)))
-    for j in range(len(names)):
-        conv = input_conversion(model, j)
-        accel[:, j] = (
-            conv.accel(cols["code"][:, j]) if "code" in cols else conv.accel(cols["t1"][:, j], cols["t2"][:, j])
-        )
     arrays = {
         "format": np.array(FORMAT),
         "model_toml": np.array(text),
         "model_source": np.array(f"{log}:model_toml"),
-        "t": cols["t"],
-        "axis_names": np.array(names),
-        "accel": accel,
-        "clipped": skipped,
-        **{r: cols[r].astype(np.int32) for r in raw},
-        "fw_x": np.stack(
-            [np.stack([cols[s][:, j] for s in ("r", "u", "a", "eps")], axis=1) for j in range(len(names))]
-        ),
+        **run_arrays(d.manifest, cols, model),
         "fw_index": cols["index"],
         "fw_seq": cols["seq"],
         "fw_flags": cols["flags"],
@@ -83,21 +71,28 @@ def decoded_run(fitted: Model, run, telemetry: bytes, man) -> dict[str, np.ndarr
     cols = sample_columns(man, frames["sample"])
     if stats.lost or len(cols["t"]) != len(run.t):
         raise UserError(f"telemetry: {len(cols['t'])} sample frames for {len(run.t)} samples, {stats.lost} lost")
-    raw = [cols[k] for k in man.raw_fields()]
-    skipped = (cols["axis_flags"] >> man.data["axis_flags"]["skipped"]) & 1
-    arrays = {
-        "t": cols["t"],
-        "axis_names": np.array(run.axis_names),
-        "accel": np.column_stack(
-            [input_conversion(fitted, j).accel(*(r[:, j] for r in raw)) for j in range(len(run.axis_names))]
-        ),
-        "clipped": skipped.astype(bool),
-        "fw_x": np.stack(
-            [np.column_stack([cols[k][:, j] for k in ("r", "u", "a", "eps")]) for j in range(raw[0].shape[1])]
-        ),
-    }
-    for k, r in zip(man.raw_fields(), raw, strict=True):
-        arrays[k] = r.astype(np.int32)
+    arrays = run_arrays(man, cols, fitted)
     for key in ("r", "u", "a", "eps"):
         arrays[key] = getattr(run, key)
     return arrays
+
+
+def run_arrays(man, cols: dict[str, np.ndarray], model: Model) -> dict[str, np.ndarray]:
+    """t, axis_names, accel (the model's conversion of the raw input), clipped (the firmware's skip flag),
+    the raw fields (int32) and fw_x (n_axes, N, 4), from the sample columns of manifest ``man``."""
+    names = list(man.axes)
+    raw = man.raw_fields()
+    skipped = (cols["axis_flags"] & (1 << man.axis_flags["skipped"])) != 0
+    accel = np.empty((len(cols["t"]), len(names)))
+    for j in range(len(names)):
+        accel[:, j] = input_conversion(model, j).accel(*(cols[r][:, j] for r in raw))
+    return {
+        "t": cols["t"],
+        "axis_names": np.array(names),
+        "accel": accel,
+        "clipped": skipped,
+        **{r: cols[r].astype(np.int32) for r in raw},
+        "fw_x": np.stack(
+            [np.stack([cols[s][:, j] for s in ("r", "u", "a", "eps")], axis=1) for j in range(len(names))]
+        ),
+    }
