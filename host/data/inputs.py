@@ -72,15 +72,15 @@ def read_input(
     # a recording: CSV, gzip CSV, or an NPZ of t and accel
     from accelnav.data.recording import read_recording
 
-    unit = _unit(unit, override)
-    rec = read_recording(path, **{**opts, "unit": unit}, allow_gaps=allow_gaps)
+    rec = read_recording(path, **opts, allow_gaps=allow_gaps, default_unit=_unit(override))
     return _on_model(path, rec, override)
 
 
-def _unit(unit: str | None, model: Model | None) -> str | None:
-    if unit is None and model is not None and model.sensor.kind == "calibrated":
+def _unit(model: Model | None) -> str | None:
+    """The unit a column that does not name one is in: a calibrated model's (its samples' unit)."""
+    if model is not None and model.sensor.kind == "calibrated":
         return model.sensor.calibrated.unit
-    return unit
+    return None
 
 
 def _from_memory(source, override: Model | None, opts: dict, allow_gaps: bool) -> tuple[Run, Model]:
@@ -111,7 +111,7 @@ def _from_memory(source, override: Model | None, opts: dict, allow_gaps: bool) -
         else:
             model = load_model(None)
         return _with_model(label, arrays, model, None, opts)
-    rec = from_columns(label, columns, **{**opts, "unit": _unit(opts["unit"], override)}, allow_gaps=allow_gaps)
+    rec = from_columns(label, columns, **opts, allow_gaps=allow_gaps, default_unit=_unit(override))
     return _on_model(label, rec, override)
 
 
