@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.accelnav-installed
 # 2-core machine (measured: a fit took 8x the CPU); one thread is faster.
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: setup demo test lint format bench fuzz fuzz-corpus clean
+.PHONY: setup demo test docs lint format bench fuzz fuzz-corpus clean
 
 include firmware/firmware.mk
 
@@ -22,7 +22,7 @@ KERNELS := setup.py $(wildcard host/estimate/csrc/* codegen/csrc/* host/link/csr
 $(STAMP): pyproject.toml $(KERNELS)
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test,docs]'
 	touch $@
 
 demo: setup
@@ -30,6 +30,13 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest -q
+
+# the documentation site into build/docs; -W: a warning (a broken reference, a docstring that is not
+# valid markup, a model key or a command without its page) fails the build. -E: every page re-read, so
+# a warning is not hidden by the last build's cache.
+docs: setup
+	$(PY) -m sphinx -W --keep-going -E -q -b html docs build/docs
+	@echo "docs: build/docs/index.html"
 
 lint: setup
 	$(PY) -m ruff check .

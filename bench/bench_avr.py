@@ -6,8 +6,13 @@ accelnav.hil_sim.targets.simavr (200 samples from init, 200 from a checkpoint 10
 run at rest), run in simavr; Timer1 at the CPU clock counts each sample's filter calls (all axes,
 input conversion included, the UART output excluded). Baseline in the same run: the same C with
 __builtin_clz on the 32-bit divisor (the generator before issue 26), which also builds without a
-warning but does not give the host's bits. The gain-schedule form's filter alone is sized too: it
-needs more than the part has (its tables are not placed in flash).
+warning but does not give the host's bits. The gain-schedule form's filter alone is sized too: its
+rows are in flash (PROGMEM), and it needs more flash than the part has.
+
+Then the whole firmware (BOARD=atmega328p) in simavr, fed a 2 s shock run of stimulus frames over
+its UART at 250000 baud: CPU cycles per sample for everything (UART bytes in, frame parsing, both
+filters, compact telemetry out, the loop's idle polling), static RAM and the deepest stack; beside it
+(baseline, same run) the filter calls alone from the first table.
 
     .venv/bin/python bench/bench_avr.py
 
@@ -72,12 +77,52 @@ def main() -> int:
             flash, ram = simavr.object_size(gs, wd / "gs_obj")
             print(f"| {name} | gain_schedule | acn_clz32 | - | - | - | {flash} | {ram} | does not fit | - |")
     print(
-        f"\nflash, RAM: the generated filter alone (avr-size of its object; constant tables are copied to RAM at"
-        f" start). image: the driver's whole ELF ({SAMPLES}-sample stimulus table in flash, UART output). CPU at"
+        f"\nflash, RAM: the generated filter alone (avr-size of its object; its constant tables are in flash, so"
+        f" RAM is 0: the state lives with the caller). image: the driver's whole ELF ({SAMPLES}-sample stimulus"
+        f" table in flash, UART output). CPU at"
         f" rate: the largest sample's cycles at the model's rate. The part: {simavr.FLASH_BYTES} B flash,"
         f" {simavr.RAM_BYTES} B RAM."
     )
+    _board()
     return 0
+
+
+def _board() -> None:
+    """The firmware board in simavr: cycles per sample of the whole loop, RAM and stack."""
+    import subprocess
+
+    from accelnav.hil_sim.targets import hil
+    from accelnav.hil_sim.targets.firmware import make_firmware, manifest
+
+    print(
+        "\nBOARD=atmega328p (the whole firmware, stimulus over the UART), 2 s of shock (vehicle for the duty"
+        " cycle), covariance form:\n"
+    )
+    print(
+        "| model | samples | cycles per sample, whole loop | the filters alone (baseline) | flash B | RAM B | stack B |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for name in ("adxl250_default", "adxl202_duty"):
+        model = load_model(models_dir() / f"{name}.toml")
+        if model.filter.form != "covariance":
+            continue  # the gain schedule does not fit the part
+        run = simulate(model, "shock" if model.sensor.kind == "analog" else "vehicle", 2.0, seed=9)
+        stim = hil.stimulus(manifest(model.source), run)
+        out = make_firmware("atmega328p", model.source)
+        res = simavr.run_feed(out / "accelnav_fw.elf", stim, timeout=300)
+        same = "= SIL" if res.telemetry == hil.run_sil(model, stim) else "DIFFERS from SIL"
+        size = subprocess.run(["avr-size", "-A", str(out / "accelnav_fw.elf")], capture_output=True, text=True).stdout
+        sec = {a: int(b) for a, b in (ln.split()[:2] for ln in size.splitlines() if ln.startswith("."))}
+        files = {k: v for k, v in emit(model, form="covariance").items() if k.endswith((".c", ".h"))}
+        stim_codes, duty = _stimulus(model)
+        with tempfile.TemporaryDirectory() as tmp:
+            avr = simavr.run_avr(files, simavr.driver_c("accelnav.h", files["accelnav.h"], stim_codes, duty=duty),
+                                 Path(tmp))  # fmt: skip
+        filt = avr.phases[0][0] / avr.phases[0][2]
+        print(f"| {name} ({same}) | {len(run.t)} | {res.cycles / len(run.t):.0f} | {filt:.0f} | "
+              f"{sec['.text'] + sec['.data']} | {sec['.data'] + sec['.bss']} | {res.stack} |")  # fmt: skip
+    print("\ncycles per sample, whole loop: simavr's cycles from reset to the end of the run over the samples; the")
+    print("loop waits for the UART's bytes (250000 baud) too, so this bounds the rate from above, not the CPU load.")
 
 
 if __name__ == "__main__":

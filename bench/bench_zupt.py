@@ -4,8 +4,10 @@
    (accelnav.estimate.zupt.candidates, the moving-window tests) and its
    per-rest gate (gate_rests), beside the compiled smoother on the same run,
    plain (no updates) and with the detector's updates (every sample of each
-   rest). Runs: stop_and_go (long rests, coasts) and walking (a rest per
-   second), --minutes long, default model at 100 Hz.
+   rest). Runs: stop_and_go (long rests, coasts), walking (a rest per
+   second), stop_and_go_graded and highway (issue 23's scenarios), --minutes
+   long, default model at 100 Hz. With --old FILE.py (another zupt.py, e.g.
+   main's saved aside), its detector + gate on the same run, as a baseline.
 2. Walking, --seeds seeds of 60 s, mean absolute stride-length error: the
    smoother with the shipped detector defaults, with the true stance
    intervals (same update settings), without updates, and plain double
@@ -15,7 +17,7 @@
    the shipped defaults, beside the figure the previous detector gave on the
    same runs (tests/test_zupt.py STOP_AND_GO_BEFORE_RMS).
 
-Usage: python bench/bench_zupt.py [--minutes 60] [--seeds 5] [--repeat 3]
+Usage: python bench/bench_zupt.py [--minutes 60] [--seeds 5] [--repeat 3] [--old /tmp/old_zupt.py]
 """
 
 from __future__ import annotations
@@ -25,11 +27,11 @@ import time
 
 import numpy as np
 
-from accelnav.model.load import load_model
-from accelnav.resources import models_dir
 from accelnav.estimate import zupt
 from accelnav.estimate.pipeline import dead_reckoning, smooth_run, stride_errors
 from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.load import load_model
+from accelnav.resources import models_dir
 
 STOP_AND_GO_BEFORE_RMS = (0.1267, 0.1012)  # m, the detector before issue #11, same seeds (see tests/test_zupt.py)
 
@@ -43,12 +45,24 @@ def best_of(fn, repeat: int) -> float:
     return best
 
 
-def cost_table(minutes: float, repeat: int) -> None:
+def _module(path: str):
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location("other_zupt", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["other_zupt"] = mod  # dataclasses look their module up there
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def cost_table(minutes: float, repeat: int, old: str | None = None) -> None:
     model = load_model()
+    other = _module(old) if old else None
     print("| run | N | detector ns/sample | gate ns/sample | smoother plain ns/sample | smoother + updates ns/sample "
-          "| detector + gate / smoother + updates |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|")
-    for scenario in ("stop_and_go", "walking"):
+          "| detector + gate / smoother + updates | --old detector + gate ns/sample |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|")
+    for scenario in ("stop_and_go", "walking", "stop_and_go_graded", "highway"):
         run = simulate(model, scenario, minutes * 60.0, 3).to_arrays()
         n = len(run["t"])
         acc, clip = run["accel"], run["clipped"]
@@ -60,9 +74,12 @@ def cost_table(minutes: float, repeat: int) -> None:
         t_plain = best_of(lambda: smooth_run(run, model), repeat)  # noqa: B023
         t_upd = best_of(lambda: smooth_run(run, model, rest=rest), repeat)  # noqa: B023
         ns = 1e9 / n
+        t_old = float("nan")
+        if other is not None:
+            t_old = best_of(lambda: other.rest_mask(acc, clip, model), repeat)  # noqa: B023
         print(
             f"| {scenario}, {minutes:g} min | {n:,} | {t_det * ns:.0f} | {t_gate * ns:.0f} | {t_plain * ns:.0f} | "
-            f"{t_upd * ns:.0f} | {(t_det + t_gate) / t_upd:.2f} |"
+            f"{t_upd * ns:.0f} | {(t_det + t_gate) / t_upd:.2f} | {t_old * ns:.0f} |"
         )
     print()
     print("Per sample of the run (both axes together). The smoother rows include building the run's output arrays.")
@@ -124,8 +141,9 @@ def main() -> None:
     ap.add_argument("--minutes", type=float, default=60.0)
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--old", default=None, help="another zupt.py whose rest_mask is timed on the same runs")
     args = ap.parse_args()
-    cost_table(args.minutes, args.repeat)
+    cost_table(args.minutes, args.repeat, args.old)
     stride_table(args.seeds)
     stop_and_go_table()
 

@@ -893,7 +893,7 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
         L += [
             "    K[0] = (int32_t)kr;",
             "    K[1] = (int32_t)kv;",
-            "    K[2] = s->seg->ka; /* K_a: held over the row */",
+            "    K[2] = ACN_ROM_I32(&s->seg->ka); /* K_a: held over the row */",
             "    K[3] = (int32_t)khi;",
             "    if (valid) {",
             f"        int32_t zb = (int32_t)((uint32_t)z - (uint32_t){P}_EBAR);",
@@ -917,7 +917,7 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
     else:
         L += [
             "    {",
-            "        int32_t Kr = (int32_t)kr, Kv = (int32_t)kv, Ka = s->seg->ka, Ke = s->Ke;",
+            "        int32_t Kr = (int32_t)kr, Kv = (int32_t)kv, Ka = ACN_ROM_I32(&s->seg->ka), Ke = s->Ke;",
         ]
         L += ["    " + ln for ln in upd]
         L += ["    }"]
@@ -955,6 +955,24 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
 
 
 HELPERS = r"""
+/* Constant tables the filter only reads: in flash on AVR (its .rodata would be copied into the few
+ * KiB of RAM at start, leaving less for the state and the stack), read through pgm_read_*; plain
+ * const arrays everywhere else. */
+#if defined(__AVR__)
+#include <avr/pgmspace.h>
+#define ACN_ROM PROGMEM
+#define ACN_ROM_U16(p) ((uint16_t)pgm_read_word(p))
+#define ACN_ROM_U32(p) ((uint32_t)pgm_read_dword(p))
+#define ACN_ROM_I32(p) ((int32_t)pgm_read_dword(p))
+/* two 32-bit fields of a gain-schedule row, as ACN_LD2 (below) reads them from RAM */
+#define ACN_SEG2(a, b, base, T, f1, f2) ((a) = ACN_ROM_U32(&(base)->f1), (b) = ACN_ROM_U32(&(base)->f2))
+#else
+#define ACN_ROM
+#define ACN_ROM_U16(p) (*(p))
+#define ACN_ROM_U32(p) (*(p))
+#define ACN_ROM_I32(p) (*(p))
+#define ACN_SEG2(a, b, base, T, f1, f2) ACN_LD2(a, b, base, T, f1, f2)
+#endif
 /* The per-sample core is inlined into each entry point (it is small, and a call costs a register
  * save and restore every sample). */
 #if defined(__GNUC__)
@@ -1260,7 +1278,7 @@ def recip_helpers() -> str:
     body = ",\n    ".join(rows)
     return f"""
 /* 1/D for D in [1/2, 1) in Q2.30 >> 15, at the middle of each of 2^{nb} equal intervals */
-static const uint16_t acn_rtab[{2**nb}] = {{
+static const uint16_t acn_rtab[{2**nb}] ACN_ROM = {{
     {body}}};
 
 /* As acn_recip (1/d = x 2^(n-62), x in Q2.30, n = clz(d), d > 0, relative 2^-28): the start from
@@ -1270,7 +1288,7 @@ static inline uint32_t acn_recip_t(uint32_t d, int *n)
     uint32_t dn, x;
     *n = acn_clz32(d);
     dn = d << *n;                                                           /* D, Q0.32 */
-    x = (uint32_t)acn_rtab[(dn >> {31 - nb}) & {2**nb - 1}u] << 15; /* Q2.30 */
+    x = (uint32_t)ACN_ROM_U16(&acn_rtab[(dn >> {31 - nb}) & {2**nb - 1}u]) << 15; /* Q2.30, from flash on AVR */
     ACN_NR(dn, x);
     ACN_NR(dn, x);
     return x;
@@ -1457,7 +1475,8 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             + ", ".join(str(f) for f in sched.formats)
             + f"; K_e's is Q.{sched.formats[3].frac + 32}) */"
         )
-        src.append(f"static const {T}_seg_t {T}_seg[{P}_NSEG + 1] = {{")
+        src.append("/* in flash on AVR (ACN_ROM): kilobytes the 2 KiB of an ATmega328P's RAM could not hold */")
+        src.append(f"static const {T}_seg_t {T}_seg[{P}_NSEG + 1] ACN_ROM = {{")
         end = 0
         for L, sl in zip(sched.lengths, sched.slopes, strict=True):
             end += L
@@ -1525,12 +1544,12 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
             f"    const {T}_seg_t *d = s->seg;",
             "    uint32_t dr, dv, dlo, dhi;",
             "    uint64_t ke;",
-            f"    ACN_LD2(dr, dv, d, {T}_seg_t, dr, dv);",
-            f"    ACN_LD2(dlo, dhi, d, {T}_seg_t, de_lo, de_hi);",
+            f"    ACN_SEG2(dr, dv, d, {T}_seg_t, dr, dv); /* the row is in flash on AVR */",
+            f"    ACN_SEG2(dlo, dhi, d, {T}_seg_t, de_lo, de_hi);",
             "    ke = (((uint64_t)khi << 32) | klo) + (((uint64_t)dhi << 32) | dlo); /* wraps like int64 */",
             f"    ACN_ST2(kr + dr, kv + dv, s, {T}_t, Kr, Kv); /* wraps like int32 (never does: a gain) */",
             f"    ACN_ST2((uint32_t)ke, (uint32_t)(ke >> 32), s, {T}_t, Ke_lo, Ke);",
-            f"    if (k == d->end && d != &{T}_seg[{P}_NSEG]) {{",
+            f"    if (k == ACN_ROM_U32(&d->end) && d != &{T}_seg[{P}_NSEG]) {{",
             "        s->seg = ++d; /* K_a is read from the row */",
             "    }",
             "}",

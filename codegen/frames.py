@@ -121,7 +121,16 @@ AXIS_FLAGS = {
 # the 2-bit per-axis code of every sample in a block frame (bits 2i, 2i+1 of `aflags` for axis i)
 AXIS_CODES = {"updated": 0, "refused": 1, "no_capture": 2, "missed": 3}
 ACK_STATUS = {"ok": 0, "bad_argument": 1}
-BOARDS = {"host": 1, "mps2_an385": 2, "stm32f103": 3, "microbit": 4, "stm32vldiscovery": 5}
+BOARDS = {
+    "host": 1,
+    "mps2_an385": 2,
+    "stm32f103": 3,
+    "microbit": 4,
+    "stm32vldiscovery": 5,
+    "sifive_e": 6,
+    "atmega328p": 7,
+    "arduino": 8,
+}
 
 
 @dataclass(frozen=True)

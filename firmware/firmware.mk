@@ -1,6 +1,6 @@
 # Firmware build, included by the top-level Makefile.
 #
-#   make firmware BOARD=host|mps2_an385|microbit|stm32f103|stm32vldiscovery [MODEL=models/x.toml]
+#   make firmware BOARD=host|mps2_an385|microbit|stm32f103|stm32vldiscovery|sifive_e|atmega328p [MODEL=models/x.toml]
 #   make flash BOARD=stm32f103 [FLASH_TOOL=openocd|st-flash]
 #
 # The filter (accelnav.*) and the frame code (acnframe.*) of MODEL are
@@ -24,6 +24,11 @@ FW_COMMON  := $(wildcard $(FW_DIR)/src/*.c) $(FW_GEN)/accelnav.c $(FW_GEN)/acnfr
 FW_BOARD_DIR := $(FW_DIR)/boards/$(if $(filter stm32vldiscovery,$(BOARD)),stm32f103,$(BOARD))
 FW_HEADERS := $(wildcard $(FW_DIR)/src/*.h $(FW_DIR)/boards/*.h $(FW_BOARD_DIR)/*.h)
 ARM_CC     ?= arm-none-eabi-gcc
+AVR_CC     ?= avr-gcc
+# the ATmega328P: flash, and RAM less what the stack needs (measured in simavr: firmware/README.md)
+AVR_FLASH  := 32768
+AVR_RAM    := 2048
+AVR_STACK  ?= 768
 ARM_CPU    := $(if $(filter microbit,$(BOARD)),-mcpu=cortex-m0,-mcpu=cortex-m3)
 ARM_FLAGS  := $(ARM_CPU) -mthumb -Os -ffunction-sections -fdata-sections -ffreestanding -g
 
@@ -63,8 +68,30 @@ FW_LD      := $(if $(filter stm32vldiscovery,$(BOARD)),stm32f100rb_qemu.ld,stm32
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -L$(FW_DIR)/boards/stm32f103 -T$(FW_DIR)/boards/stm32f103/$(FW_LD) \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size
+else ifeq ($(BOARD),sifive_e)
+# QEMU's sifive_e: SiFive FE310 (HiFive1), RV32IMAC without FPU; picolibc for string.h and libgcc's
+# multilib for rv32imac/ilp32 (an -march with _zicsr would pick the default multilib: the runtime's
+# CSR accesses enable zicsr in their own asm instead)
+RV_CC      ?= riscv64-unknown-elf-gcc
+FW_CC      := $(RV_CC)
+FW_CFLAGS  := $(FW_WARN) -march=rv32imac -mabi=ilp32 -Os -ffunction-sections -fdata-sections -ffreestanding -g \
+              --specs=picolibc.specs -I$(FW_DIR)/boards/sifive_e
+FW_SRCS    := $(FW_DIR)/boards/sifive_e/board_sifive_e.c $(FW_DIR)/boards/emu_txq.c $(FW_DIR)/boards/emu_feed.c
+FW_LOOSE   := $(FW_DIR)/boards/sifive_e/startup.c $(FW_DIR)/boards/semihost_rt.c
+FW_LDFLAGS := -nostartfiles -T$(FW_DIR)/boards/sifive_e/sifive_e.ld \
+              -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
+FW_SIZE    := riscv64-unknown-elf-size
+else ifeq ($(BOARD),atmega328p)
+# Arduino Uno's ATmega328P (8-bit AVR, 16-bit int), run in simavr. Linked against generous memory
+# regions so that a build too big still links and the size check below can say what it needs.
+FW_CC      := $(AVR_CC)
+FW_CFLAGS  := $(FW_WARN) -mmcu=atmega328p -DF_CPU=16000000UL -Os -ffunction-sections -fdata-sections -g
+FW_SRCS    := $(FW_DIR)/boards/atmega328p/board_atmega328p.c
+FW_LDFLAGS := -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map \
+              -Wl,--defsym=__TEXT_REGION_LENGTH__=0x40000 -Wl,--defsym=__DATA_REGION_LENGTH__=0xff00
+FW_SIZE    := avr-size
 else
-$(error BOARD=$(BOARD): accepted: host, mps2_an385, microbit, stm32f103, stm32vldiscovery)
+$(error BOARD=$(BOARD): accepted: host, mps2_an385, microbit, stm32f103, stm32vldiscovery, sifive_e, atmega328p)
 endif
 
 FW_ELF := $(FW_OUT)/accelnav_fw$(if $(filter host,$(BOARD)),,.elf)
@@ -107,6 +134,14 @@ $(FW_ELF): $(FW_COMMON) $(FW_SRCS) $(FW_LOOSE_OBJ) $(FW_HEADERS) $(wildcard $(FW
 ifneq ($(filter stm32f103 stm32vldiscovery,$(BOARD)),)
 	arm-none-eabi-objcopy -O binary $@ $(FW_OUT)/accelnav_fw.bin
 	arm-none-eabi-objcopy -O ihex $@ $(FW_OUT)/accelnav_fw.hex
+endif
+ifeq ($(BOARD),atmega328p)
+	@avr-size -A $@ | awk '/^\.text|^\.data|^\.bss/ {s[$$1] = $$2} END { \
+	    flash = s[".text"] + s[".data"]; ram = s[".data"] + s[".bss"]; \
+	    if (flash > $(AVR_FLASH) || ram + $(AVR_STACK) > $(AVR_RAM)) { \
+	        printf "BOARD=atmega328p: this model needs %d B flash and %d B RAM + %d B stack; the ATmega328P has $(AVR_FLASH) B flash and $(AVR_RAM) B RAM\n", \
+	            flash, ram, $(AVR_STACK) > "/dev/stderr"; exit 1 } }' || { rm -f $@; exit 1; }
+	avr-objcopy -O ihex -R .eeprom $@ $(FW_OUT)/accelnav_fw.hex
 endif
 
 # Not run here (no board attached); with an ST-Link on SWD:

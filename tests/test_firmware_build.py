@@ -114,6 +114,7 @@ def test_firmware_c_is_clang_formatted():
         REPO / "firmware" / "boards" / "mps2_an385" / "board_mps2.c",
         *sorted((REPO / "firmware" / "boards" / "microbit").glob("*.[ch]")),
         *sorted((REPO / "firmware" / "boards" / "stm32f103").glob("*.[ch]")),
+        *sorted((REPO / "firmware" / "boards" / "sifive_e").glob("*.[ch]")),
     ]
     done = subprocess.run(["clang-format", "--dry-run", "-Werror", *ours], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]

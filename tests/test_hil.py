@@ -1,14 +1,16 @@
 """SIL and PIL: the same firmware in-process and on the emulated boards, bit for bit.
 
 PIL runs on every board hil_sim.qemu knows: mps2-an385 (Cortex-M3), microbit
-(Cortex-M0) and stm32vldiscovery (the STM32 port's code on QEMU's STM32F100),
+(Cortex-M0), stm32vldiscovery (the STM32 port's code on QEMU's STM32F100) and
+sifive_e (SiFive FE310, RV32IMAC without FPU, in qemu-system-riscv32),
 for both shipped models, each built in both filter forms, on two short
 scenarios each (one with rail-clipped samples for the analog model), and a
 1 kHz model. PIL runs through the boards' file feed over semihosting (the
 path `accelnav hil --target pil` takes); test_qemu_left_behind_by_no_pil_run
 also runs it over the UARTs with the recorder (the real link's path).
 
-The PIL tests need qemu-system-arm and arm-none-eabi-gcc. Where they are
+The PIL tests need qemu-system-arm and arm-none-eabi-gcc (sifive_e:
+qemu-system-riscv32, riscv64-unknown-elf-gcc and picolibc). Where they are
 missing the tests skip and say why; with ACCELNAV_REQUIRE_PIL=1 (set by
 .ci/run) a missing tool is a failure instead, so CI cannot pass by skipping.
 """
@@ -26,7 +28,7 @@ from conftest import MODELS
 
 from accelnav.cli import main
 from accelnav.model.load import load_model
-from accelnav.hil_sim.targets import hil, qemu
+from accelnav.hil_sim.targets import hil, qemu, simavr
 from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.link.telemetry import decode_all, replay_for
@@ -34,16 +36,46 @@ from accelnav.link.telemetry import decode_all, replay_for
 SIGMA_FRACTION = 1e-3  # firmware vs float64 reference, in units of the reference's sigma, after 1 s
 
 
-def _require_pil():
-    missing = [tool for tool in ("qemu-system-arm", "arm-none-eabi-gcc") if shutil.which(tool) is None]
+# what PIL needs on each board, and its Debian packages; the boards not named are ARM
+ARM_TOOLS = (("qemu-system-arm", "arm-none-eabi-gcc"), "qemu-system-arm gcc-arm-none-eabi libnewlib-arm-none-eabi")
+PIL_TOOLS = {
+    "sifive_e": (
+        ("qemu-system-riscv32", "riscv64-unknown-elf-gcc"),
+        "qemu-system-misc gcc-riscv64-unknown-elf picolibc-riscv64-unknown-elf",
+    ),
+}
+
+
+def _require_pil(board: str = "mps2_an385"):
+    tools, packages = PIL_TOOLS.get(board, ARM_TOOLS)
+    missing = [tool for tool in tools if shutil.which(tool) is None]
     if missing:
-        reason = f"PIL needs {', '.join(missing)} (Debian: qemu-system-arm gcc-arm-none-eabi libnewlib-arm-none-eabi)"
+        reason = f"PIL on {board} needs {', '.join(missing)} (Debian: {packages})"
         if os.environ.get("ACCELNAV_REQUIRE_PIL") == "1":
             pytest.fail(f"ACCELNAV_REQUIRE_PIL=1 but {reason}")
         pytest.skip(reason)
 
 
 BOARDS = tuple(qemu.MACHINES)
+AVR_BOARDS = simavr.BOARDS  # in simavr: the covariance form (the gain schedule does not fit the part)
+
+
+def _require_avr():
+    """avr-gcc and simavr's library for the atmega328p board; skipped with the reason, or a failure under
+    ACCELNAV_REQUIRE_AVR=1 (set by .ci/run)."""
+    try:
+        simavr.require_avr()
+        simavr.harness()
+    except simavr.AvrError as e:
+        if os.environ.get("ACCELNAV_REQUIRE_AVR") == "1":
+            pytest.fail(f"ACCELNAV_REQUIRE_AVR=1 but {e}")
+        pytest.skip(str(e))
+
+
+def _require_board(board: str):
+    _require_avr() if board in AVR_BOARDS else _require_pil(board)
+
+
 FORMS = ("covariance", "gain_schedule")
 SCENARIOS = {  # model -> two short scenarios (seconds of samples)
     "adxl250_default.toml": (("shock", 2.0), ("stop_and_go", 3.0)),  # shock: rail-clipped samples
@@ -80,6 +112,11 @@ PIL_CASES = [
     for model_file, scenarios in SCENARIOS.items()
     for form in FORMS
     for scenario, seconds in scenarios
+] + [
+    (board, model_file, "covariance", scenario, seconds)
+    for board in AVR_BOARDS
+    for model_file, scenarios in SCENARIOS.items()
+    for scenario, seconds in scenarios
 ]
 
 
@@ -104,7 +141,7 @@ def model_in_form(tmp_path_factory):
 
 @pytest.mark.parametrize("board,model_file,form,scenario,seconds", PIL_CASES)
 def test_pil_frames_equal_sil_bit_for_bit(tmp_path, model_in_form, board, model_file, form, scenario, seconds):
-    _require_pil()
+    _require_board(board)
     model = load_model(model_in_form(model_file, form))
     assert model.filter.form == form
     run = _simulate(model, scenario, seconds, seed=9)
@@ -169,7 +206,7 @@ def test_smoother_with_zupt_beats_filter_in_the_summary(default_model):
 
 @pytest.mark.parametrize("board_name", BOARDS)
 def test_qemu_is_never_left_behind(tmp_path, board_name):
-    _require_pil()
+    _require_pil(board_name)
     elf = hil.make_firmware(board_name) / "accelnav_fw.elf"
     with pytest.raises(RuntimeError, match="inside"):
         with qemu.QemuBoard(elf, board_name) as board:
@@ -203,7 +240,7 @@ def test_qemu_left_behind_by_no_pil_run(tmp_path, link):
 def test_file_feed_takes_commands_as_the_host_board_does(tmp_path, board_name):
     """The feed's input is the host board's stdin: command frames in it act as in SIL (decimate 7: a
     frame every 7th sample; stop, then start: no frames in between), byte for byte; the log holds it."""
-    _require_pil()
+    _require_pil(board_name)
     from accelnav.link.logfile import read_log
     from accelnav.link.telemetry import encode_command
 
@@ -379,7 +416,7 @@ def test_sil_shock_against_the_float64_filter(tmp_path, rate, form):
 def test_pil_at_1khz_equals_sil(tmp_path, board_name):
     """A 1 kHz model (rail-clipped shock, 3 s: 3 000 samples) on every emulated board: the telemetry is
     SIL's byte for byte, nothing lost or missed."""
-    _require_pil()
+    _require_pil(board_name)
     text = (MODELS / "adxl250_default.toml").read_text().replace("rate_hz = 100.0", "rate_hz = 1000.0")
     path = tmp_path / "fast.toml"
     path.write_text(text)
@@ -397,3 +434,56 @@ def test_pil_at_1khz_equals_sil(tmp_path, board_name):
     assert len(fr["sample"]) == len(run.t)
     assert not fr["sample"]["missed"].any() and not fr["sample"]["rx_lost"].any()
     print(f"\n{board_name} at 1 kHz: {len(run.t)} samples, {len(run.t) / pil.seconds:.0f} samples/s")
+
+
+@pytest.mark.parametrize("model_file", ["adxl250_default.toml", "adxl202_duty.toml"])
+def test_avr_board_fits_its_ram_with_the_stack_it_measured(tmp_path, model_file):
+    """The atmega328p image's static RAM plus the deepest stack simavr saw (a run through blocks,
+    checkpoints and every command that sends) stays inside the part's 2 KiB, and inside the stack
+    reserve firmware.mk checks every build against."""
+    _require_avr()
+    from accelnav.hil_sim.targets.firmware import FW
+    from accelnav.link.telemetry import cobs_decode, encode_command
+
+    model = load_model(MODELS / model_file)
+    man = manifest(model.source)
+    run = simulate(model, "shock", 3.0, seed=3)
+    cmds = b"".join(encode_command(man, c) for c in ("info", "mode_states", "zupt_begin", "zupt_end", "reset"))
+    stim = hil.stimulus(man, run) + cmds + hil.stimulus(man, run) + encode_command(man, "decimate", factor=3)
+    out = hil.make_firmware("atmega328p", model.source)
+    res = simavr.run_feed(out / "accelnav_fw.elf", stim, timeout=120)
+    info = man.frames["info"]["type"]
+    frames = {}
+    for name, tel in (("pil", res.telemetry), ("sil", hil.run_sil(model, stim))):
+        frames[name] = [cobs_decode(f)[:-4] for f in tel.split(b"\0")[:-1]]
+    # the info frame names the board (and its uptime): the only frame the AVR and the host board send apart
+    assert [f for f in frames["pil"] if f[0] != info] == [f for f in frames["sil"] if f[0] != info]
+    board = [f for f in frames["pil"] if f[0] == info]
+    assert len(board) == 1 and man.data["boards"]["atmega328p"] in board[0]
+    size = subprocess.run(["avr-size", "-A", str(out / "accelnav_fw.elf")], capture_output=True, text=True).stdout
+    sec = {m[0]: int(m[1]) for m in re.findall(r"^(\.\w+)\s+(\d+)", size, re.M)}
+    reserve = int(re.search(r"^AVR_STACK\s*\?=\s*(\d+)", (FW / "firmware.mk").read_text(), re.M)[1])
+    assert 0 < res.stack <= reserve, f"the deepest stack, {res.stack} B, is beyond firmware.mk's reserve {reserve} B"
+    assert sec[".data"] + sec[".bss"] + res.stack <= simavr.RAM_BYTES
+    print(f"\natmega328p {model.name}: {sec['.data'] + sec['.bss']} B static RAM + {res.stack} B stack")
+
+
+def test_avr_gain_schedule_refused_in_one_line_naming_flash_and_ram(tmp_path, model_in_form, capsys):
+    _require_avr()
+    path = model_in_form("adxl250_default.toml", "gain_schedule")
+    status = main(["hil", "--model", str(path), "--target", "pil", "--board", "atmega328p", "--duration", "1",
+                   "--out", str(tmp_path)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1, err
+    m = re.search(r"BOARD=atmega328p: this model needs (\d+) B flash and (\d+) B RAM \+ (\d+) B stack", err)
+    assert m and int(m[1]) > simavr.FLASH_BYTES, err
+    assert "the ATmega328P has 32768 B flash and 2048 B RAM" in err
+
+
+def test_avr_hil_cli_pil(tmp_path, capsys):
+    _require_avr()
+    status = main(["hil", "--target", "pil", "--board", "atmega328p", "--scenario", "shock", "--duration", "2",
+                   "--out", str(tmp_path)])  # fmt: skip
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert "PIL (atmega328p): 200 samples" in out and "PIL vs SIL: 200 sample rows, bit-identical" in out

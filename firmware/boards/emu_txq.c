@@ -4,6 +4,11 @@
 #include "acn_board.h"
 #include "board.h"
 
+/* the rate of board_ticks(): the core clock on the Cortex-M boards (SysTick), another on RV32 */
+#ifndef BOARD_TICK_HZ
+#define BOARD_TICK_HZ BOARD_CPU_HZ
+#endif
+
 #define TX_SIZE 2048u /* power of two */
 static uint8_t tx_ring[TX_SIZE];
 static uint32_t tx_head; /* next write */
@@ -56,6 +61,6 @@ void emu_clock_update(void)
     uint32_t now = board_ticks();
     tick_rem += (now - tick_last) & 0x00ffffffu; /* 24-bit counter */
     tick_last = now;
-    time_ms += tick_rem / (BOARD_CPU_HZ / 1000u);
-    tick_rem %= BOARD_CPU_HZ / 1000u;
+    time_ms += tick_rem / (BOARD_TICK_HZ / 1000u);
+    tick_rem %= BOARD_TICK_HZ / 1000u;
 }

@@ -1,6 +1,7 @@
-/* The ARM semihosting trap (bkpt 0xab; QEMU started with -semihosting) and the operation numbers
- * the emulated boards use: one definition for the shared runtime (semihost_rt.c) and the file feed
- * (emu_feed.c), which the stm32vldiscovery build links without that runtime. */
+/* The semihosting trap (ARM: bkpt 0xab; RISC-V: the ebreak sequence; QEMU started with
+ * -semihosting) and the operation numbers the emulated boards use: one definition for the shared
+ * runtime (semihost_rt.c) and the file feed (emu_feed.c), which the stm32vldiscovery build links
+ * without that runtime. */
 #ifndef SEMIHOST_H
 #define SEMIHOST_H
 
@@ -16,6 +17,25 @@
 #define SEMIHOST_EXIT_OK 0x20026u    /* ADP_Stopped_ApplicationExit */
 #define SEMIHOST_EXIT_ERROR 0x20023u /* ADP_Stopped_RunTimeErrorUnknown */
 
+#if defined(__riscv)
+/* RISC-V semihosting (sifive_e): op in a0, arg in a1, the result in a0. The debugger knows the trap
+ * by the uncompressed three-instruction sequence around ebreak, so it must not be compressed
+ * (norvc) and is kept 16-byte aligned, inside one page. The alignment comes before norvc: under
+ * norvc the assembler reserves too little padding for the linker's relaxation to align the
+ * sequence, and the link fails ("bytes required for alignment") where the code before it ends on
+ * 2 bytes. */
+static inline int semihost_call(int op, const void *arg)
+{
+    register int a0 __asm__("a0") = op;
+    register const void *a1 __asm__("a1") = arg;
+    __asm__ volatile(".option push\n.balign 16\n.option norvc\n"
+                     "slli x0, x0, 0x1f\nebreak\nsrai x0, x0, 7\n.option pop"
+                     : "+r"(a0)
+                     : "r"(a1)
+                     : "memory");
+    return a0;
+}
+#else
 /* Operation op with its argument block (or value) arg; returns r0. */
 static inline int semihost_call(int op, const void *arg)
 {
@@ -24,5 +44,6 @@ static inline int semihost_call(int op, const void *arg)
     __asm__ volatile("bkpt 0xab" : "+r"(r0) : "r"(r1) : "memory");
     return r0;
 }
+#endif
 
 #endif

@@ -4,13 +4,22 @@
 
 app_state_t app;
 
+/* A frame's buffers (payload, then the framed copy) should be on the stack only while that frame is
+ * sent. Inlined into their callers, the senders' buffers add up along a call path: 900 B of stack
+ * on an ATmega328P, whose 2 KiB of RAM also hold the state and the telemetry ring. */
+#if defined(__GNUC__)
+#define APP_OUT_OF_LINE __attribute__((noinline))
+#else
+#define APP_OUT_OF_LINE
+#endif
+
 static bool app_compact(void)
 {
     return ACNF_COMPACT && app.running && app.decimation == 1u && !app.state_mode;
 }
 
 /* One checkpoint per axis: the state before sample app.index. */
-static void app_send_checkpoints(uint8_t flags)
+APP_OUT_OF_LINE static void app_send_checkpoints(uint8_t flags)
 {
     acnf_checkpoint_t ck;
     uint8_t payload[ACNF_CHECKPOINT_SIZE];
@@ -33,7 +42,7 @@ static void app_send_checkpoints(uint8_t flags)
 }
 
 /* Send the block being filled (if it holds a sample) and begin the next at sample app.index. */
-static void app_send_block(void)
+APP_OUT_OF_LINE static void app_send_block(void)
 {
     acnf_block_t *b = &app.blk;
     uint32_t overflow = app_overflow_total();
@@ -117,7 +126,7 @@ uint32_t app_overflow_total(void)
     return total;
 }
 
-static void app_send_info(void)
+APP_OUT_OF_LINE static void app_send_info(void)
 {
     acnf_info_t info;
     uint8_t payload[ACNF_INFO_SIZE];
@@ -137,7 +146,7 @@ static void app_send_info(void)
     (void)link_send(payload, acnf_pack_info(&info, payload));
 }
 
-static void app_ack(uint8_t command, uint8_t status, uint16_t arg)
+APP_OUT_OF_LINE static void app_ack(uint8_t command, uint8_t status, uint16_t arg)
 {
     acnf_ack_t ack;
     uint8_t payload[ACNF_ACK_SIZE];
@@ -148,7 +157,7 @@ static void app_ack(uint8_t command, uint8_t status, uint16_t arg)
     (void)link_send(payload, acnf_pack_ack(&ack, payload));
 }
 
-static void app_command(const acnf_command_t *c)
+APP_OUT_OF_LINE static void app_command(const acnf_command_t *c)
 {
     uint8_t status = ACNF_ACK_OK;
     switch (c->type) {
@@ -248,6 +257,12 @@ static void app_compact_end(void)
     }
 }
 
+APP_OUT_OF_LINE static bool app_send_sample(const acnf_sample_t *s)
+{
+    uint8_t payload[ACNF_SAMPLE_SIZE];
+    return link_send(payload, acnf_pack_sample(s, payload));
+}
+
 void app_sample(const acnf_stimulus_t *in)
 {
     acnf_sample_t s;
@@ -329,14 +344,11 @@ void app_sample(const acnf_stimulus_t *in)
     s.overflow = overflow > 0xffffu ? 0xffffu : (uint16_t)overflow;
     s.missed = app.missed;
     s.rx_lost = (uint16_t)board_rx_lost();
-    {
-        uint8_t payload[ACNF_SAMPLE_SIZE];
-        if (link_send(payload, acnf_pack_sample(&s, payload))) {
-            app.reset_pending = false;
-            app.overflow_seen = overflow;
-        } else {
-            ++app.tx_drop; /* its seq is spent: the host counts it lost, tx_drop says why */
-        }
+    if (app_send_sample(&s)) {
+        app.reset_pending = false;
+        app.overflow_seen = overflow;
+    } else {
+        ++app.tx_drop; /* its seq is spent: the host counts it lost, tx_drop says why */
     }
 }
 

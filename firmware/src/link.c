@@ -53,18 +53,21 @@ size_t link_rx_byte(link_rx_t *rx, uint8_t b)
 
 size_t link_frame(const uint8_t *payload, size_t n, uint8_t *out)
 {
-    uint8_t raw[ACNF_MAX_UP_SIZE + 4u];
+    uint8_t *raw = out + 1; /* payload || CRC, encoded in place: no third copy on the stack (2 KiB
+                               of RAM on an ATmega328P) */
     uint32_t crc;
     size_t w;
     if (n > ACNF_MAX_UP_SIZE) {
         return 0;
     }
-    memcpy(raw, payload, n);
     crc = crc32_update(0u, payload, n);
+    memmove(raw, payload, n);
     raw[n] = (uint8_t)crc;
     raw[n + 1u] = (uint8_t)(crc >> 8);
     raw[n + 2u] = (uint8_t)(crc >> 16);
     raw[n + 3u] = (uint8_t)(crc >> 24);
+    /* in place: encoding byte i writes out[i + 1] (a frame is shorter than one 254-byte COBS group)
+     * or an earlier code byte, never a byte not yet read */
     w = cobs_encode(raw, n + 4u, out);
     out[w++] = 0u;
     return w;

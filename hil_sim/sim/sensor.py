@@ -53,21 +53,36 @@ The ``walking`` scenario is the exception: it is a horizontal walk
 components plus the gravity leaking through its tilt error, a third axis sees
 no motion, and the run carries the true stance mask (``stance``) from which
 stride lengths are scored.
+
+The rest-detection scenarios (:data:`accelnav.hil_sim.sim.trajectories.REST_SCENARIOS`: ``walking_drift``,
+``walking_fast``, ``stop_and_go_graded``, ``highway``, ``cart_push``) carry the true rests as ``rest``
+(and the walks their ``stance`` as well); what the sensor reads beside the motion (a drifting level, a
+grade, vibration) is added like the walk's tilt leak, to the measurement and not to the truth.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from accelnav.lazy import lazy_module
 from accelnav.model.design import input_conversion
 from accelnav.model.load import G0, Model
-from accelnav.lazy import lazy_module
 
-from .trajectories import ALL_SCENARIOS, TUMBLE_HOLD_S, TUMBLE_TURN_S, truth, tumble_any_poses, tumble_specific_force
+from .trajectories import (
+    ALL_SCENARIOS,
+    REST_SCENARIOS,
+    TUMBLE_HOLD_S,
+    TUMBLE_TURN_S,
+    WALK_SCENARIOS,
+    rest_truth,
+    truth,
+    tumble_any_poses,
+    tumble_specific_force,
+)
 
 signal = lazy_module("scipy.signal")
 
@@ -103,6 +118,7 @@ class SimRun:
     accel: np.ndarray
     initial_random: bool = field(default=True)
     stance: np.ndarray | None = None  # (N,) bool, walking only: the foot is on the ground
+    rest: np.ndarray | None = None  # (N,) bool, rest scenarios only: the true rests (the body is still)
 
     @property
     def n_axes(self) -> int:
@@ -138,6 +154,8 @@ class SimRun:
         }
         if self.stance is not None:
             d["stance"] = self.stance
+        if self.rest is not None:
+            d["rest"] = self.rest
         if self.code is not None:
             d["code"] = self.code
         elif self.t1 is not None:
@@ -196,6 +214,7 @@ class SimRun:
             accel=arrays["accel"],
             initial_random=bool(np.asarray(d.get("initial_random", True))[()]),
             stance=_readonly(np.asarray(d["stance"], dtype=bool)) if "stance" in d else None,
+            rest=_readonly(np.asarray(d["rest"], dtype=bool)) if "rest" in d else None,
         )
 
 
@@ -244,12 +263,19 @@ def simulate(
     n = max(1, math.ceil(float(duration_s) * model.rate_hz - 1e-9))
     t = np.arange(n, dtype=np.float64) / model.rate_hz
     motion_ss, *axis_ss = np.random.SeedSequence(int(seed)).spawn(1 + MAX_AXES)
-    stance = turned = None
-    if scenario == "walking":
-        from .walking import walk
+    stance = turned = rest = extra = None
+    if scenario == "walking" or scenario in WALK_SCENARIOS:
+        from .walking import level_drift, walk
 
-        w = walk(t, np.random.default_rng(motion_ss), model.max_accel_m_s2)
+        gait = "fast" if scenario == "walking_fast" else "normal"
+        w = walk(t, np.random.default_rng(motion_ss), model.max_accel_m_s2, gait)
+        if scenario == "walking_drift":  # its own stream: the strides are those of the same seed's walk
+            w = replace(w, leak=w.leak + level_drift(t, np.random.default_rng(motion_ss.spawn(1)[0])))
         stance = w.stance
+        rest = None if scenario == "walking" else stance
+    elif scenario in REST_SCENARIOS:
+        v = rest_truth(scenario, t, motion_ss, model.max_accel_m_s2, MAX_AXES)
+        r1, u1, a1, extra, rest = v.r, v.u, v.a, v.extra, v.rest
     elif scenario == "tumble":
         r1 = u1 = a1 = np.zeros_like(t)
         turned = tumble_specific_force(t, len(model.axes), G0)
@@ -274,6 +300,8 @@ def simulate(
         else:
             gain = AXIS_GAIN[i]
             r_i, u_i, a_i, leak = gain * r1, gain * u1, gain * a1, 0.0
+            if extra is not None:  # a grade's leak, vibration: read by the sensor, not motion
+                leak = extra[:, i]
         a = a_i
         raw = read_out(model, i, a + eps + leak + noise, np.random.default_rng(jitter_ss))
         conv = input_conversion(model, i)
@@ -308,6 +336,7 @@ def simulate(
         accel=stack("accel", np.float64),
         initial_random=initial_random,
         stance=None if stance is None else _readonly(np.array(stance)),
+        rest=None if rest is None else _readonly(np.array(rest)),
     )
 
 

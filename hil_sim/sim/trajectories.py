@@ -50,7 +50,11 @@ import numpy as np
 SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shock", "walking")
 # Scenarios whose truth differs per axis and is not a motion along one line (see tumble_specific_force)
 MULTI_AXIS_SCENARIOS = ("tumble", "tumble_any")
-ALL_SCENARIOS = SCENARIOS + MULTI_AXIS_SCENARIOS
+# Scenarios made to test rest detection (issue 23), with a truth rest mask and sensor-side disturbances
+# (tilt and grade leaks, vibration); see rest_truth and accelnav.hil_sim.sim.walking
+WALK_SCENARIOS = ("walking_drift", "walking_fast")
+REST_SCENARIOS = (*WALK_SCENARIOS, "stop_and_go_graded", "highway", "cart_push")
+ALL_SCENARIOS = SCENARIOS + MULTI_AXIS_SCENARIOS + REST_SCENARIOS
 
 TUMBLE_HOLD_S = 8.0  # each pose is held this long ...
 TUMBLE_TURN_S = 3.0  # ... and the turn to the next one takes this long
@@ -336,3 +340,113 @@ def tumble_specific_force(t: np.ndarray, n_axes: int, g0: float, poses: np.ndarr
     angle = np.where(opposite, np.pi, np.arccos(dot)) * w
     up = np.cos(angle) * cur + np.sin(angle) * other
     return g0 * up[:, :n_axes]
+
+
+# --------------------------------------------------------------------------
+# Rest-detection scenarios (issue 23): truth of one line of motion, what the sensor sees beside it, and the
+# true rests.
+
+GRADE_MAX_DEG = 4.0  # stop_and_go_graded: the road's grade stays within +-this
+GRADE_KNOTS_M = (30.0, 80.0)  # ... and is piecewise linear in position, knots this far apart
+HIGHWAY_SPEED = (8.0, 20.0)  # m/s, highway: the speed stays within this band (never stops)
+CART_PUSH_M = 5.0  # cart_push: every push moves the cart this far, back and forth
+
+
+class RestTruth:
+    """Truth of a rest scenario: r, u, a (N,) along the line of motion; ``extra`` (N, n) m/s^2 the sensor
+    reads beside the motion on each of n axes (a grade's g sin(theta), road or wheel vibration: real
+    specific force, but not the motion the filter estimates); ``rest`` (N,) bool, the body is still."""
+
+    def __init__(self, r, u, a, extra, rest):
+        self.r, self.u, self.a, self.extra, self.rest = r, u, a, extra, rest
+
+
+def rest_truth(name: str, t: np.ndarray, ss: np.random.SeedSequence, amax: float, n_axes: int) -> RestTruth:
+    """Truth of ``stop_and_go_graded``, ``highway`` or ``cart_push`` at the instants ``t``.
+
+    ``ss`` gives the motion's stream (as the other scenarios use it: the graded run moves exactly as
+    ``stop_and_go`` of the same seed) and, spawned from it, the disturbance's; both are drawn in fixed
+    chunks, so a shorter run is a prefix of a longer one.
+
+    * ``stop_and_go_graded``: ``stop_and_go``'s motion (same seed, same moves) on a road whose grade theta
+      is piecewise linear in position (knots every 30-80 m, values within +-4 degrees); axis x reads
+      g sin(theta) on top of the motion, at rest too (the car stops on a slope).
+    * ``highway``: a car already at cruise at t = 0 that never stops: u = 14 + 4 sin(2 pi t/P1 + p1) + 2
+      sin(2 pi t/P2 + p2) m/s (P1 30-90 s, P2 10-25 s; within 8-20 m/s), plus road vibration on every
+      axis: broadband (one pole at 15 Hz), rms 0.03 m/s^2 per m/s of speed (0.24-0.6 m/s^2). It breaks the
+      convention that a run starts at rest, as a recording started on the road does; no true rest.
+    * ``cart_push``: a hand-pushed cart: a pause of 3-5 s, then pushes of exactly 5 m (u = 5/d (1 - cos 2 pi
+      s/d) over d = 5-8 s, alternately forward and back) with pauses of 2-5 s between; rolling vibration
+      while it moves (broadband, rms 0.15 m/s^2 per m/s). For an ADXL335-class part at 100 Hz.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    rng, rng_x = np.random.default_rng(ss), np.random.default_rng(ss.spawn(1)[0])
+    n = len(t)
+    extra = np.zeros((n, n_axes))
+    if name == "stop_and_go_graded":
+        r, u, a = truth("stop_and_go", t, rng, amax)
+        extra[:, 0] = 9.80665 * np.sin(_grade(r, rng_x))
+        return RestTruth(r, u, a, extra, u == 0)
+    if name == "highway":
+        P = np.array([rng.uniform(30.0, 90.0), rng.uniform(10.0, 25.0)])
+        ph = rng.uniform(0.0, 2 * np.pi, 2)
+        amp = np.array([4.0, 2.0])
+        w = 2 * np.pi / P
+        arg = w * t[:, None] + ph
+        u = 14.0 + (amp * np.sin(arg)).sum(axis=1)
+        a = (amp * w * np.cos(arg)).sum(axis=1)
+        r = 14.0 * t + (amp / w * (np.cos(ph) - np.cos(arg))).sum(axis=1)
+        extra = 0.03 * u[:, None] * _vibration(rng_x, n, n_axes, t)
+        return RestTruth(r, u, a, extra, np.zeros(n, dtype=bool))
+    if name == "cart_push":
+        r, u, a = _cart(t, rng)
+        extra = 0.15 * np.abs(u)[:, None] * _vibration(rng_x, n, n_axes, t)
+        return RestTruth(r, u, a, extra, u == 0)
+    raise ValueError(f"name: {name!r} is not one of {', '.join(REST_SCENARIOS[2:])}")
+
+
+def _grade(r: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """theta(r) [rad]: piecewise linear in position, knots 30-80 m apart from -2 km, within +-4 degrees."""
+    lo = min(-2000.0, float(np.min(r, initial=0.0)) - 100.0)
+    hi = max(2000.0, float(np.max(r, initial=0.0)) + 100.0)
+    knots = [lo]
+    while knots[-1] < hi:
+        knots.extend((knots[-1] + np.cumsum(rng.uniform(*GRADE_KNOTS_M, _CHUNK))).tolist())
+    theta = rng.uniform(-1.0, 1.0, len(knots)) * np.radians(GRADE_MAX_DEG)
+    return np.interp(r, knots, theta)
+
+
+def _vibration(rng: np.random.Generator, n: int, n_axes: int, t: np.ndarray) -> np.ndarray:
+    """(n, n_axes) unit-rms broadband noise: white through one pole at 15 Hz, stationary from the start."""
+    import scipy.signal as sig
+
+    dt = float(t[1] - t[0]) if n > 1 else 0.01
+    rho = np.exp(-2 * np.pi * 15.0 * dt)
+    drive = rng.standard_normal((n, n_axes))
+    drive[1:] *= np.sqrt(1 - rho * rho)
+    return sig.lfilter([1.0], [1.0, -rho], drive, axis=0)
+
+
+def _cart(t: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    t_end = float(t[-1]) if len(t) else 0.0
+    pauses, pushes = [rng.uniform(3.0, 5.0)], []
+    total = pauses[0]
+    while total <= t_end + 1.0:
+        d = rng.uniform(5.0, 8.0, _CHUNK)
+        p = rng.uniform(2.0, 5.0, _CHUNK)
+        pushes.extend(d.tolist())
+        pauses.extend(p.tolist())
+        total += float(d.sum() + p.sum())
+    d = np.array(pushes)
+    start = pauses[0] + np.concatenate(([0.0], np.cumsum(d + np.array(pauses[1 : len(d) + 1]))[:-1]))
+    sign = np.where(np.arange(len(d)) % 2 == 0, 1.0, -1.0)
+    i = np.clip(np.searchsorted(start, t, side="right") - 1, 0, len(d) - 1)
+    s = t - start[i]
+    on = (s >= 0) & (s < d[i])
+    x = np.clip(s / d[i], 0.0, 1.0)
+    L, di, w = CART_PUSH_M * sign[i], d[i], 2 * np.pi * np.clip(s / d[i], 0.0, 1.0)
+    u = np.where(on, L / di * (1 - np.cos(w)), 0.0)
+    a = np.where(on, 2 * np.pi * L / di**2 * np.sin(w), 0.0)
+    done = np.where(s >= 0, L * np.where(on, x - np.sin(w) / (2 * np.pi), 1.0), 0.0)
+    base = np.concatenate(([0.0], np.cumsum(CART_PUSH_M * sign)))[i]  # where push i starts
+    return base + done, u, a

@@ -40,6 +40,10 @@ theta_j(t) = theta0_j + A_j sin(2 pi t/P_j + phi_j) per axis (theta0 up to
 0.5 degrees, A up to 0.5 degrees, P 20-60 s), which leaks g sin(theta_j) into
 the horizontal axis: a sensor error, not motion, returned as ``leak``.
 
+Level drift (``walking_drift``, :func:`level_drift`): a cheap attitude solution whose level frame
+wanders, so that the gravity leak grows from about 0.2 m/s^2 at the start to 0.9 m/s^2 after a minute,
+in a direction that turns slowly; added on top of the tilt leak above.
+
 Random numbers: the tilt parameters first (a fixed count), then strides in
 chunks of a fixed size, so a shorter run is a prefix of a longer one.
 """
@@ -66,10 +70,15 @@ class Walk:
     stance: np.ndarray  # bool, the foot is on the ground (u == a == 0 exactly)
 
 
-def _draw_strides(rng: np.random.Generator, amax: float) -> dict[str, np.ndarray]:
+# (cycle time s, stance share of the cycle) ranges of a gait
+GAITS = {"normal": ((0.95, 1.10), (0.30, 0.40)), "fast": ((0.70, 0.80), (0.20, 0.26))}
+
+
+def _draw_strides(rng: np.random.Generator, amax: float, gait: str = "normal") -> dict[str, np.ndarray]:
     n = _CHUNK
-    cycle = rng.uniform(0.95, 1.10, n)
-    frac = rng.uniform(0.30, 0.40, n)
+    cycle_range, frac_range = GAITS[gait]
+    cycle = rng.uniform(*cycle_range, n)
+    frac = rng.uniform(*frac_range, n)
     length = rng.uniform(1.2, 1.5, n)
     turn_every = rng.integers(6, 13, n)
     turn = rng.uniform(np.pi / 3, 2 * np.pi / 3, n) * rng.choice([-1.0, 1.0], n)
@@ -81,8 +90,12 @@ def _draw_strides(rng: np.random.Generator, amax: float) -> dict[str, np.ndarray
     )
 
 
-def walk(t: np.ndarray, rng: np.random.Generator, amax: float) -> Walk:
-    """The walk at the instants ``t`` (s, from 0); ``amax`` is the sensor's full scale in m/s^2."""
+def walk(t: np.ndarray, rng: np.random.Generator, amax: float, gait: str = "normal") -> Walk:
+    """The walk at the instants ``t`` (s, from 0); ``amax`` is the sensor's full scale in m/s^2.
+
+    ``gait``: "normal" (the module docstring) or "fast" (cycle 0.70-0.80 s, stance 20-26 % of it:
+    0.14-0.21 s on the ground, the short stances a brisk walker's foot-flat phase gives).
+    """
     t = np.asarray(t, dtype=np.float64)
     n = len(t)
     theta0 = np.radians(rng.uniform(-0.5, 0.5, 2))
@@ -96,7 +109,7 @@ def walk(t: np.ndarray, rng: np.random.Generator, amax: float) -> Walk:
     covered = 0.0
     t_end = float(t[-1]) if n else 0.0
     while covered <= t_end + 2.0:
-        c = _draw_strides(rng, amax)
+        c = _draw_strides(rng, amax, gait)
         covered += float(c["cycle"].sum())
         chunks.append(c)
     s = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]}
@@ -155,3 +168,14 @@ def walk(t: np.ndarray, rng: np.random.Generator, amax: float) -> Walk:
     u = u1[:, None] * dirs
     a = a1[:, None] * dirs
     return Walk(r=r, u=u, a=a, leak=leak, stance=~in_swing)
+
+
+def level_drift(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(N, 2) gravity leak [m/s^2] of a drifting level frame: |leak| = 0.2 + 0.7 min(t / 60 s, 1), its
+    direction starting at a random angle and turning by 30-90 degrees a minute (drawn from ``rng``)."""
+    t = np.asarray(t, dtype=np.float64)
+    angle0 = rng.uniform(0.0, 2 * np.pi)
+    turn = np.radians(rng.uniform(30.0, 90.0)) * rng.choice([-1.0, 1.0]) / 60.0
+    size = 0.2 + 0.7 * np.minimum(t / 60.0, 1.0)
+    angle = angle0 + turn * t
+    return np.stack([size * np.cos(angle), size * np.sin(angle)], axis=1)

@@ -19,6 +19,7 @@ or a folder the caller names, never into the installed package.
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 from functools import cache
@@ -30,6 +31,9 @@ FW = firmware_dir()
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g"]
 SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
 DUTY_MODEL = models_dir() / "adxl202_duty.toml"
+# the cross compiler of each board (firmware.mk's FW_CC) and its Debian packages; the boards not named are ARM
+ARM_TOOLCHAIN = ("arm-none-eabi-gcc", "gcc-arm-none-eabi libnewlib-arm-none-eabi")
+TOOLCHAINS = {"sifive_e": ("riscv64-unknown-elf-gcc", "gcc-riscv64-unknown-elf picolibc-riscv64-unknown-elf")}
 
 
 @cache
@@ -115,10 +119,13 @@ def make_firmware(board: str, model_path: str | Path | None = None, out: Path | 
     if out is None:
         out = cache_root() / "firmware" / f"{board}-{model.sha256[:16]}"
     out = Path(out).resolve()
-    if board != "host" and shutil.which("arm-none-eabi-gcc") is None:
-        raise FirmwareError(
-            f"board {board}: arm-none-eabi-gcc not found (Debian: gcc-arm-none-eabi libnewlib-arm-none-eabi)"
-        )
+    if board == "atmega328p":
+        if shutil.which("avr-gcc") is None or shutil.which("avr-size") is None:
+            raise FirmwareError(f"board {board}: avr-gcc not found (Debian: gcc-avr avr-libc)")
+    elif board != "host":
+        cc, packages = TOOLCHAINS.get(board, ARM_TOOLCHAIN)
+        if shutil.which(cc) is None:
+            raise FirmwareError(f"board {board}: {cc} not found (Debian: {packages})")
     if shutil.which("make") is None:
         raise FirmwareError(f"board {board}: make not found (Debian: make)")
     gen = out / "gen"
@@ -141,6 +148,10 @@ def make_firmware(board: str, model_path: str | Path | None = None, out: Path | 
     ]
     done = subprocess.run(cmd, cwd=out, capture_output=True, text=True, timeout=600)
     if done.returncode != 0:
+        # a model too big for the part: firmware.mk's size check says so in one line, which is the error
+        fit = re.search(r"^BOARD=\S+: this model needs .*$", done.stderr, re.M)
+        if fit:
+            raise FirmwareError(fit[0])
         raise FirmwareError(f"{' '.join(cmd)} failed:\n{done.stdout[-2000:]}{done.stderr[-4000:]}")
     return out
 

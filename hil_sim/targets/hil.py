@@ -3,9 +3,12 @@
 * SIL: the firmware's input stage, generated filter and frame packer (host
   board), in-process through cffi (:mod:`hil_sim.firmware`), fed the
   simulator's raw ADC codes or T1/T2 counts as stimulus frames.
-* PIL: the same sources built for an emulated board and run in
-  qemu-system-arm (:mod:`hil_sim.qemu`): mps2-an385 (Cortex-M3), microbit
-  (Cortex-M0) or stm32vldiscovery (the STM32 port's code on an STM32F100). By
+* PIL: the same sources built for an emulated board and run in QEMU
+  (:mod:`hil_sim.qemu`): mps2-an385 (Cortex-M3), microbit (Cortex-M0),
+  stm32vldiscovery (the STM32 port's code on an STM32F100) or sifive_e
+  (SiFive FE310, RV32IMAC, in qemu-system-riscv32), or in simavr
+  (:mod:`hil_sim.simavr`): atmega328p (8-bit AVR, its one UART fed
+  from a file by a libsimavr program, firmware/boards/atmega328p/simavr_feed.c). By
   default (``link="feed"``) the stimulus goes in and the telemetry comes out
   through files over semihosting, a block per trap (:func:`hil_sim.qemu.run_feed`),
   and the telemetry is written to the recorder's log format
@@ -48,10 +51,11 @@ from accelnav.link.telemetry import (
 
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
 from .qemu import MACHINES, QemuBoard, QemuError, machine_for, run_feed
+from . import simavr
 from accelnav.hil_sim.sim.sensor import SimRun
 
 STATES = ("r", "u", "a", "eps")
-PIL_BOARDS = tuple(MACHINES)  # the boards `accelnav hil --target pil --board` runs
+PIL_BOARDS = (*MACHINES, *simavr.BOARDS)  # the boards `accelnav hil --target pil --board` runs
 
 
 def stimulus(man: Manifest, run: SimRun) -> bytes:
@@ -100,18 +104,25 @@ def run_pil(
         raise ValueError(f"link {link!r}: accepted: feed, uart")
     from accelnav.link.logfile import LogWriter, read_log
 
-    m = machine_for(board)
-    elf = make_firmware(board, model.source) / "accelnav_fw.elf"
+    if board in simavr.BOARDS:  # the AVR in simavr: its UART fed from a file by a libsimavr program
+        elf = make_firmware(board, model.source) / "accelnav_fw.elf"
+        source = f"simavr {simavr.MCU} (UART fed from a file)"
+        t0 = time.monotonic()
+        tel = simavr.run_feed(elf, stim, timeout=timeout_s).telemetry
+    else:
+        m = machine_for(board)
+        elf = make_firmware(board, model.source) / "accelnav_fw.elf"
+        source = f"qemu {m.machine} (file feed over semihosting)"
+        t0 = time.monotonic()
+        tel = run_feed(elf, board, stim, timeout=timeout_s)
+    seconds = time.monotonic() - t0
     man = manifest(model.source)
     meta = {
         "manifest": man.data,
         "model_toml": model.text,
-        "source": f"qemu {m.machine} (file feed over semihosting)",
+        "source": source,
         "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
-    t0 = time.monotonic()
-    tel = run_feed(elf, board, stim, timeout=timeout_s)
-    seconds = time.monotonic() - t0
     with LogWriter(log, meta, overwrite=True, fsync_s=None) as writer:
         step = writer.max_chunk
         for a in range(0, len(tel), step):

@@ -1,9 +1,10 @@
-"""The one way accelnav runs code on an emulated Cortex-M (qemu-system-arm).
+"""The one way accelnav runs code on an emulated MCU (qemu-system-arm, qemu-system-riscv32).
 
 The machines (:data:`MACHINES`), one per firmware board that runs in QEMU:
 ``mps2_an385`` (Cortex-M3, CMSDK UARTs), ``microbit`` (nRF51822, Cortex-M0,
-one UART) and ``stm32vldiscovery`` (STM32F100, Cortex-M3: the stm32f103
-port's code, see firmware/boards/stm32f103/board_stm32.c).
+one UART), ``stm32vldiscovery`` (STM32F100, Cortex-M3: the stm32f103
+port's code, see firmware/boards/stm32f103/board_stm32.c) and ``sifive_e``
+(SiFive FE310, RV32IMAC without FPU, one UART; qemu-system-riscv32).
 
 Two uses, one command line (:func:`qemu_command`):
 
@@ -14,9 +15,9 @@ Two uses, one command line (:func:`qemu_command`):
   context manager: leaving it kills QEMU and waits for it, so no process is
   left behind, whatever happens inside. :class:`Mps2Board` is the mps2-an385 one.
 * :func:`run_feed`: the firmware in feed mode, the way PIL runs it: the
-  stimulus read from a file and the telemetry written to one through ARM
-  semihosting, a block per trap, so the emulated core runs flat out instead
-  of waiting for QEMU to move one UART byte per poll of its socket
+  stimulus read from a file and the telemetry written to one through
+  semihosting (ARM's, or RISC-V's, which QEMU serves alike), a block per
+  trap, so the emulated core runs flat out instead of waiting for QEMU to move one UART byte per poll of its socket
   (firmware/boards/emu_feed.h). The same image runs on its UARTs when the
   command line names no feed.
 * :func:`run_to_exit`: a bare-metal program that prints over semihosting and
@@ -39,6 +40,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 QEMU = "qemu-system-arm"
+# the Debian package of each emulator, for the one-line error when it is missing
+QEMU_PACKAGES = {"qemu-system-arm": "qemu-system-arm", "qemu-system-riscv32": "qemu-system-misc"}
 MACHINE = "mps2-an385"  # Cortex-M3; UART0 at 0x40004000, UART1 at 0x40005000
 
 
@@ -52,6 +55,7 @@ class Machine:
     uarts: int  # -serial devices, in the machine's order
     telemetry: int  # telemetry out, commands in
     stimulus: int  # the stimulus feed (may be the telemetry UART)
+    qemu: str = QEMU  # the emulator binary
 
 
 MACHINES = {
@@ -60,6 +64,7 @@ MACHINES = {
         Machine("mps2_an385", "mps2-an385", "Cortex-M3", 2, 0, 1),  # CMSDK UART0 / UART1
         Machine("microbit", "microbit", "Cortex-M0 (nRF51822)", 1, 0, 0),  # the nRF51's one UART
         Machine("stm32vldiscovery", "stm32vldiscovery", "Cortex-M3 (STM32F100)", 2, 0, 1),  # USART1 / USART2
+        Machine("sifive_e", "sifive_e", "RV32IMAC (SiFive FE310)", 1, 0, 0, "qemu-system-riscv32"),  # UART0 only
     )
 }
 
@@ -76,11 +81,12 @@ class QemuError(RuntimeError):
     """The emulator could not be started or did not behave."""
 
 
-def require_qemu() -> str:
-    """Path of qemu-system-arm, or QemuError saying how to get it."""
-    path = shutil.which(QEMU)
+def require_qemu(qemu: str = QEMU) -> str:
+    """Path of the emulator ``qemu`` (qemu-system-arm by default), or QemuError saying how to get it."""
+    path = shutil.which(qemu)
     if path is None:
-        raise QemuError(f"{QEMU} not found: install Debian's qemu-system-arm (PIL needs the emulator)")
+        package = QEMU_PACKAGES.get(qemu, qemu)
+        raise QemuError(f"{qemu} not found: install Debian's {package} (PIL needs the emulator)")
     return path
 
 
@@ -94,12 +100,14 @@ def qemu_command(
     icount: bool = False,
     machine: str = MACHINE,
     feed: tuple[str, str] | None = None,
+    qemu: str = QEMU,
 ) -> list[str]:
     """The emulator's command line: ``elf`` on ``machine``, UARTs as loopback TCP servers in port order.
 
     ``feed``: the names of the stimulus and telemetry files, relative to the emulator's working folder,
-    for the board's file feed over semihosting (firmware/boards/emu_feed.h) instead of its UARTs."""
-    cmd = [QEMU, "-M", machine, "-display", "none", "-monitor", "none"]
+    for the board's file feed over semihosting (firmware/boards/emu_feed.h) instead of its UARTs.
+    ``qemu``: the emulator binary (the machine's :attr:`Machine.qemu`)."""
+    cmd = [qemu, "-M", machine, "-display", "none", "-monitor", "none"]
     semi = "enable=on,target=native"
     if feed is not None:
         for name in feed:
@@ -136,7 +144,7 @@ class QemuBoard:
         self.elf = Path(elf)
         if not self.elf.is_file():
             raise QemuError(f"{self.elf}: no firmware image (build it with 'make firmware BOARD={board}')")
-        require_qemu()
+        require_qemu(self.machine.qemu)
         self.ports = tuple(free_port() for _ in range(self.machine.uarts))
         self.start_timeout = start_timeout
         self.proc: subprocess.Popen | None = None
@@ -146,7 +154,7 @@ class QemuBoard:
         return f"socket://127.0.0.1:{self.ports[uart]}"
 
     def __enter__(self) -> QemuBoard:
-        cmd = qemu_command(self.elf, uart_ports=self.ports, machine=self.machine.machine)
+        cmd = qemu_command(self.elf, uart_ports=self.ports, machine=self.machine.machine, qemu=self.machine.qemu)
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         return self
 
@@ -160,14 +168,16 @@ class QemuBoard:
         while True:
             if self.proc is not None and self.proc.poll() is not None:
                 err = self.proc.stderr.read().decode(errors="replace").strip() if self.proc.stderr else ""
-                raise QemuError(f"{QEMU} exited with status {self.proc.returncode}: {err[-500:]}")
+                raise QemuError(f"{self.machine.qemu} exited with status {self.proc.returncode}: {err[-500:]}")
             try:
                 port = serial.serial_for_url(self.url(uart), timeout=timeout)
                 self._opened.append(port)
                 return port
             except serial.SerialException:
                 if time.monotonic() > deadline:
-                    raise QemuError(f"{QEMU}: UART{uart} on {self.url(uart)} did not open in time") from None
+                    raise QemuError(
+                        f"{self.machine.qemu}: UART{uart} on {self.url(uart)} did not open in time"
+                    ) from None
                 time.sleep(0.05)
 
     def close(self) -> None:
@@ -211,33 +221,40 @@ def run_feed(elf: str | Path, board: str, stimulus: bytes, *, timeout: float = 6
     elf = Path(elf).resolve()
     if not elf.is_file():
         raise QemuError(f"{elf}: no firmware image (build it with 'make firmware BOARD={board}')")
-    require_qemu()
+    require_qemu(m.qemu)
     with tempfile.TemporaryDirectory(prefix="accelnav-feed-") as tmp:
         folder = Path(tmp)
         (folder / "stim.bin").write_bytes(stimulus)
-        cmd = qemu_command(elf, machine=m.machine, feed=("stim.bin", "tel.bin"))
+        cmd = qemu_command(elf, machine=m.machine, feed=("stim.bin", "tel.bin"), qemu=m.qemu)
         try:
             done = subprocess.run(cmd, cwd=folder, capture_output=True, timeout=timeout)
         except subprocess.TimeoutExpired:
-            raise QemuError(f"{QEMU} ({board}): the file feed did not finish within {timeout:g} s") from None
+            raise QemuError(f"{m.qemu} ({board}): the file feed did not finish within {timeout:g} s") from None
         err = (done.stdout + done.stderr).decode(errors="replace").strip()
         if done.returncode != 0:
-            raise QemuError(f"{QEMU} ({board}) exited with status {done.returncode}: {err[-500:]}")
+            raise QemuError(f"{m.qemu} ({board}) exited with status {done.returncode}: {err[-500:]}")
         out = folder / "tel.bin"
         if not out.is_file():
-            raise QemuError(f"{QEMU} ({board}): the firmware wrote no telemetry file (an image without the file feed?)")
+            raise QemuError(
+                f"{m.qemu} ({board}): the firmware wrote no telemetry file (an image without the file feed?)"
+            )
         return out.read_bytes()
 
 
-def run_to_exit(elf: str | Path, *, icount: bool = True, timeout: float = 300.0, machine: str = MACHINE) -> str:
+def run_to_exit(
+    elf: str | Path, *, icount: bool = True, timeout: float = 300.0, machine: str = MACHINE, qemu: str = QEMU
+) -> str:
     """Run a semihosting program to its exit; returns what it printed. Non-zero exit is a QemuError."""
-    require_qemu()
+    require_qemu(qemu)
     try:
         done = subprocess.run(
-            qemu_command(elf, icount=icount, machine=machine), capture_output=True, text=True, timeout=timeout
+            qemu_command(elf, icount=icount, machine=machine, qemu=qemu),
+            capture_output=True,
+            text=True,
+            timeout=timeout,
         )
     except subprocess.TimeoutExpired:
-        raise QemuError(f"{QEMU}: {elf} did not exit within {timeout:g} s") from None
+        raise QemuError(f"{qemu}: {elf} did not exit within {timeout:g} s") from None
     if done.returncode != 0:
-        raise QemuError(f"{QEMU}: {elf} exited with status {done.returncode}: {done.stderr.strip()[-500:]}")
+        raise QemuError(f"{qemu}: {elf} exited with status {done.returncode}: {done.stderr.strip()[-500:]}")
     return done.stdout + done.stderr

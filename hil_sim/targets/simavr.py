@@ -28,6 +28,9 @@ F_CPU = 16_000_000
 FLASH_BYTES = 32 * 1024
 RAM_BYTES = 2 * 1024
 AVR_CFLAGS = [f"-mmcu={MCU}", "-Os", "-std=c99", "-Wall", "-Wextra", "-Werror"]
+# parts the driver may be built for: flash and RAM in bytes. The ATmega1284P runs what the 328P's flash
+# cannot hold (the gain schedule), so that its tables are checked in flash too.
+PARTS = {MCU: (FLASH_BYTES, RAM_BYTES), "atmega1284p": (128 * 1024, 16 * 1024)}
 HOST_CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror"]
 SKIP_EVERY, SKIP_AT = 29, 11  # sample k is skipped (predict only) when k % 29 == 11
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
@@ -261,18 +264,20 @@ def run_host(files: dict[str, str], driver: str, workdir: Path, *, cflags: list[
     return parse(done.stdout)
 
 
-def build_avr(files: dict[str, str], driver: str, workdir: Path) -> tuple[Path, int, int]:
-    """The driver and the generated C built for the ATmega328P with -Werror: (elf, flash, ram)."""
+def build_avr(files: dict[str, str], driver: str, workdir: Path, *, mcu: str = MCU) -> tuple[Path, int, int]:
+    """The driver and the generated C built for the ATmega328P (or another of PARTS) with -Werror:
+    (elf, flash, ram)."""
     tools = require_avr()
     srcs = _write(files, driver, workdir)
     elf = workdir / "driver_avr.elf"
-    done = subprocess.run([tools["avr-gcc"], *AVR_CFLAGS, *map(str, srcs), "-o", str(elf)], capture_output=True,
+    flags = [f"-mmcu={mcu}", *AVR_CFLAGS[1:]]
+    done = subprocess.run([tools["avr-gcc"], *flags, *map(str, srcs), "-o", str(elf)], capture_output=True,
                           text=True)  # fmt: skip
     over = re.search(r"region `(\w+)' overflowed by (\d+) bytes", done.stderr)
     if over:  # the linker knows the part's memories: say what the build needs
-        have = FLASH_BYTES if over[1] == "text" else RAM_BYTES
+        have = PARTS[mcu][0] if over[1] == "text" else PARTS[mcu][1]
         what = "flash" if over[1] == "text" else "RAM"
-        raise AvrError(f"does not fit the {MCU}: needs {have + int(over[2])} B {what}, the part has {have} B")
+        raise AvrError(f"does not fit the {mcu}: needs {have + int(over[2])} B {what}, the part has {have} B")
     if done.returncode:
         raise AvrError("avr-gcc: " + (done.stderr.strip().splitlines() or ["failed"])[0])
     size = subprocess.run([tools["avr-size"], "-A", str(elf)], capture_output=True, text=True, check=True).stdout
@@ -280,13 +285,13 @@ def build_avr(files: dict[str, str], driver: str, workdir: Path) -> tuple[Path, 
     return elf, sec.get(".text", 0) + sec.get(".data", 0), sec.get(".data", 0) + sec.get(".bss", 0)
 
 
-def run_avr(files: dict[str, str], driver: str, workdir: Path, *, timeout: float = 120.0) -> Run:
-    """Build the driver for the ATmega328P and run it in simavr to its end."""
-    elf, flash, ram = build_avr(files, driver, workdir)
-    if flash > FLASH_BYTES or ram > RAM_BYTES:
-        raise AvrError(f"the {MCU} has {FLASH_BYTES} B flash and {RAM_BYTES} B RAM: this build needs {flash} B "
+def run_avr(files: dict[str, str], driver: str, workdir: Path, *, timeout: float = 120.0, mcu: str = MCU) -> Run:
+    """Build the driver for the ATmega328P (or another of PARTS) and run it in simavr to its end."""
+    elf, flash, ram = build_avr(files, driver, workdir, mcu=mcu)
+    if flash > PARTS[mcu][0] or ram > PARTS[mcu][1]:
+        raise AvrError(f"the {mcu} has {PARTS[mcu][0]} B flash and {PARTS[mcu][1]} B RAM: this build needs {flash} B "
                        f"flash and {ram} B RAM")  # fmt: skip
-    done = subprocess.run([require_avr()["simavr"], "-m", MCU, "-f", str(F_CPU), str(elf)], capture_output=True,
+    done = subprocess.run([require_avr()["simavr"], "-m", mcu, "-f", str(F_CPU), str(elf)], capture_output=True,
                           text=True, timeout=timeout)  # fmt: skip
     run = parse(done.stderr)
     run.flash, run.ram = flash, ram
@@ -309,3 +314,81 @@ def object_size(files: dict[str, str], workdir: Path, name: str = "accelnav.c") 
         sec[m[0]] = sec.get(m[0], 0) + int(m[1])
     ro, data, bss = sec.get(".rodata", 0), sec.get(".data", 0), sec.get(".bss", 0)
     return sec.get(".text", 0) + data + ro, data + ro + bss
+
+
+# ---- the atmega328p firmware board in simavr (PIL) -------------------------------------------------
+
+BOARDS = ("atmega328p",)  # the firmware boards that run in simavr (`accelnav hil --target pil --board`)
+MAX_RUN_CYCLES = 10**12  # a run that never ends is stopped by its wall-clock timeout first
+
+
+@dataclass(frozen=True)
+class FeedRun:
+    """One PIL run in simavr: the telemetry, the CPU cycles from reset to the end, the deepest stack."""
+
+    telemetry: bytes
+    cycles: int
+    stack: int
+
+
+def harness() -> Path:
+    """The simavr feed program (firmware/boards/atmega328p/simavr_feed.c) built with the host's cc
+    against libsimavr, once per source text, into the cache. AvrError names what to install."""
+    import hashlib
+
+    from accelnav.resources import cache_root, firmware_dir
+
+    src = firmware_dir() / "boards" / "atmega328p" / "simavr_feed.c"
+    text = src.read_bytes()
+    exe = cache_root() / "simavr" / f"simavr_feed-{hashlib.sha256(text).hexdigest()[:16]}"
+    if exe.is_file():
+        return exe
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise AvrError("no host C compiler (cc) to build the simavr feed program: install Debian's gcc")
+    exe.parent.mkdir(parents=True, exist_ok=True)
+    tmp = exe.with_name(exe.name + ".tmp")
+    done = subprocess.run([cc, "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", str(src), "-lsimavr", "-o", str(tmp)],
+                          capture_output=True, text=True)  # fmt: skip
+    if done.returncode:
+        err = done.stderr
+        if ("simavr/" in err and "No such file" in err) or "cannot find -lsimavr" in err:
+            raise AvrError("libsimavr's headers or library not found: install Debian's libsimavr-dev")
+        raise AvrError("cc (simavr feed program): " + (done.stderr.strip().splitlines() or ["failed"])[0])
+    tmp.replace(exe)  # whole or not at all: a parallel build never runs half a file
+    return exe
+
+
+def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0, adc: np.ndarray | None = None) -> FeedRun:
+    """Run a firmware image of the atmega328p board in simavr with ``stimulus`` on its UART (the host
+    board's stdin bytes: stimulus and command frames) and return what it sent back, to the end of the
+    stimulus (firmware/boards/atmega328p/simavr_feed.c says how the end is found).
+
+    ``adc``: (samples, axes) ADC codes for a sketch that reads analogRead (accelnav codegen --arduino):
+    each conversion of channel i gets axis i's next code, and ``stimulus`` (commands) follows them."""
+    import tempfile
+
+    elf = Path(elf).resolve()
+    if not elf.is_file():
+        raise AvrError(f"{elf}: no firmware image (build it with 'make firmware BOARD=atmega328p')")
+    exe = harness()
+    with tempfile.TemporaryDirectory(prefix="accelnav-simavr-") as tmp:
+        folder = Path(tmp)
+        (folder / "stim.bin").write_bytes(stimulus)
+        cmd = [str(exe), str(elf), str(folder / "stim.bin"), str(folder / "tel.bin"), str(MAX_RUN_CYCLES)]
+        if adc is not None:
+            codes = np.asarray(adc)
+            if codes.ndim != 2 or not 1 <= codes.shape[1] <= 8 or codes.min() < 0 or codes.max() > 1023:
+                raise ValueError(f"adc: (samples, 1..8 axes) codes of 0..1023; got shape {codes.shape}")
+            (folder / "codes.bin").write_bytes(codes.astype("<u2").tobytes())
+            cmd += [str(folder / "codes.bin"), str(codes.shape[1])]
+        try:
+            done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise AvrError(f"simavr ({MCU}): the run did not finish within {timeout:g} s") from None
+        if done.returncode:
+            raise AvrError(f"simavr ({MCU}): " + (done.stderr.strip().splitlines() or ["failed"])[-1])
+        m = re.search(r"^cycles (\d+) stack (\d+)$", done.stdout, re.M)
+        if m is None:
+            raise AvrError(f"simavr ({MCU}): the feed program printed no summary: {done.stdout[-200:]!r}")
+        return FeedRun((folder / "tel.bin").read_bytes(), int(m[1]), int(m[2]))

@@ -17,7 +17,14 @@ def register(sub) -> None:
         description="Generate PREFIX.h, PREFIX.c and PREFIX.json for every axis of the model.",
     )
     p.add_argument("model", type=Path, help="model file (TOML)")
-    p.add_argument("--out", type=Path, required=True, help="output directory (created if missing)")
+    p.add_argument("--out", type=Path, help="output directory (created if missing)")
+    p.add_argument(
+        "--arduino",
+        type=Path,
+        metavar="DIR",
+        help="write an Arduino library instead: DIR/accelnav_MODELNAME/ (library.properties, src/, an example "
+        "sketch reading analogRead at the model's rate and streaming the telemetry)",
+    )
     p.add_argument("--form", choices=("covariance", "gain_schedule"), help="override [filter] form of the model")
     p.add_argument("--float32", action="store_true", help="emit the float32 variant instead of fixed point")
     p.add_argument("--prefix", default="accelnav", help="file and symbol prefix (default: accelnav)")
@@ -26,6 +33,10 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.arduino is not None:
+        return run_arduino(args)
+    if args.out is None:
+        raise UserError("codegen: give --out DIR (the generated C) or --arduino DIR (an Arduino library)")
     if args.out.exists() and not args.out.is_dir():
         raise UserError(f"--out: {args.out} is a file; give a directory for the generated files")
     # the prefix names the files and every symbol: a C identifier (no path, no code), by the model's rule
@@ -41,4 +52,26 @@ def run(args: argparse.Namespace) -> int:
         from accelnav.codegen.report import report
 
         print(report(model, form=args.form, arith=arith, files=files, prefix=args.prefix))
+    return 0
+
+
+def run_arduino(args: argparse.Namespace) -> int:
+    """The model's Arduino library in DIR/accelnav_MODELNAME/: each folder written by the generator's writer."""
+    from accelnav.codegen.arduino import library, library_name
+
+    if args.out is not None or args.float32 or args.prefix != "accelnav":
+        raise UserError("--arduino DIR: the library's folder and names are fixed; drop --out, --float32 and --prefix")
+    if args.arduino.exists() and not args.arduino.is_dir():
+        raise UserError(f"--arduino: {args.arduino} is a file; give a directory for the library")
+    model = load_model(args.model)
+    files = library(model, form=args.form)
+    root = args.arduino / library_name(model)
+    folders: dict[str, dict[str, str]] = {}
+    for path, text in files.items():
+        folder, _, name = path.rpartition("/")
+        folders.setdefault(folder, {})[name] = text
+    for folder, group in sorted(folders.items()):
+        for path in write(group, root / folder if folder else root):
+            print(path)
+    print(f"Arduino library {root.name} in {root}: open examples/*/ in the IDE, or `make` there (arduino-mk)")
     return 0

@@ -19,7 +19,7 @@ from accelnav.estimate.pipeline import (
     stride_table,
 )
 from accelnav.estimate.zupt import ZuptParams
-from accelnav.fileio import check_output
+from accelnav.fileio import check_output, write_text
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model
 
 TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
@@ -140,7 +140,33 @@ def register(sub) -> None:
             "--zupt-level",
             "level",
             "A",
-            f"at rest if |window means - bias| <= A m/s^2; default: from the model, at least {z.level_min:g}",
+            f"a rest's level (tilt or grade leak) may differ from the last rest's by A m/s^2, plus "
+            f"{z.level_rate:g} m/s^2 per second between them, at most {z.level_max:g}; default {z.level:g}",
+        ),
+        (
+            "--zupt-trim",
+            "trim_k",
+            "K",
+            f"a rest ends where its window mean is K sd off its own level; default {z.trim_k:g}",
+        ),
+        (
+            "--zupt-still",
+            "still_k",
+            "K",
+            f"a run's first rest (no rest before to check it against): variance <= K R; default {z.still_k:g}",
+        ),
+        (
+            "--zupt-drift",
+            "drift",
+            "A",
+            f"unmodelled mean acceleration error between two rests, m/s^2 (widens the gate); default {z.drift:g}",
+        ),
+        (
+            "--zupt-recover",
+            "recover_s",
+            "S",
+            f"a refused candidate S s or less before the next may anchor it, if the body moved between; "
+            f"default {z.recover_s:g}",
         ),
         ("--zupt-sigma", "sigma", "V", f"update std, m/s; default {z.sigma:g}"),
         ("--zupt-every", "every_s", "S", "one update per S s of rest; default 0: every sample"),
@@ -148,17 +174,26 @@ def register(sub) -> None:
             "--zupt-gate",
             "gate",
             "G",
-            f"per-rest chi-square bound on the velocity since the last rest, 0 = none; default {z.gate:g}",
+            f"per-rest chi-square bound on the velocity since the last rest, 0 = accept every candidate; "
+            f"default {z.gate:g}",
         ),
         (
             "--zupt-rel",
             "rel",
             "F",
-            f"per-rest: also accept when the speed fell to F of its peak since the last rest; default {z.rel:g}",
+            f"per-rest: also accept when the speed fell to F of its peak since the last rest; default {z.rel:g} (off)",
         ),
     ]
     for flag, field, metavar, text in zupt_opts:
         p.add_argument(flag, type=float, default=getattr(z, field), dest=f"zupt_{field}", metavar=metavar, help=text)
+    p.add_argument(
+        "--zupt-report",
+        type=Path,
+        default=None,
+        metavar="FILE.csv",
+        help="with --zupt auto: one CSV row per candidate rest (start_s, end_s, samples, decision, reason, "
+        "the statistics it was judged on)",
+    )
     p.add_argument(
         "--tune",
         action="store_true",
@@ -272,6 +307,24 @@ def cmd_filter(args) -> int:
     return 0
 
 
+def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray) -> str:
+    """One line: the detector's settings, candidates, accepted and refused with their counts per reason."""
+    from accelnav.estimate import zupt
+
+    counts = zupt.reason_counts(decisions)
+    acc = {r: c for r, c in counts.items() if r in zupt.ACCEPT_REASONS}
+    ref = {r: c for r, c in counts.items() if r in zupt.REFUSE_REASONS}
+
+    def listed(d: dict[str, int]) -> str:
+        return f" ({', '.join(f'{r} {c}' for r, c in d.items())})" if d else ""
+
+    return (
+        f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} (R + "
+        f"{params.tremor:g}^2): {len(decisions)} candidate rests, {sum(acc.values())} accepted{listed(acc)}, "
+        f"{sum(ref.values())} refused{listed(ref)}; {100 * rest.mean():.1f} % of the run at rest"
+    )
+
+
 def cmd_smooth(args) -> int:
     from accelnav.estimate import zupt
     from accelnav.estimate.fixes import read_fixes
@@ -284,11 +337,17 @@ def cmd_smooth(args) -> int:
         var_k=args.zupt_var_k,
         tremor=args.zupt_tremor,
         level=args.zupt_level,
+        trim_k=args.zupt_trim_k,
+        still_k=args.zupt_still_k,
+        drift=args.zupt_drift,
+        recover_s=args.zupt_recover_s,
         sigma=args.zupt_sigma,
         every_s=args.zupt_every_s,
         gate=args.zupt_gate,
         rel=args.zupt_rel,
     )
+    if args.zupt_report is not None and args.zupt != "auto":
+        raise UserError("--zupt-report: only with --zupt auto (it lists the detector's candidates)")
     rest = rest_sigma = None
     if args.zupt is not None:
         try:
@@ -298,23 +357,22 @@ def cmd_smooth(args) -> int:
     if args.zupt == "auto":
         cand = zupt.candidates(arrays["accel"], arrays["clipped"], model, params)
         decisions = zupt.gate_rests(arrays["accel"], arrays["clipped"], cand, model, params)
-        rest = np.zeros(len(cand), dtype=bool)
-        for d in decisions:
-            if d.accepted:
-                rest[d.start : d.stop] = True
-        kept = sum(d.accepted for d in decisions)
-        print(
-            f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} (R + "
-            f"{params.tremor:g}^2), "
-            f"|mean - bias| <= {params.level:.3g} m/s^2: {len(decisions)} candidate rests, {kept} accepted by the "
-            f"per-rest gate, {100 * rest.mean():.1f} % of the run"
-        )
+        rest = zupt.accepted_mask(decisions, len(cand))
+        print(_zupt_summary(decisions, params, rest))
+        if args.zupt_report is not None:
+            write_text(args.zupt_report, zupt.report_csv(decisions, arrays["t"]), flag="--zupt-report")
+            print(f"wrote {args.zupt_report}")
     elif args.zupt is not None:
         rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays
     arrays = smooth_run(arrays, model, fixes=fixes, rest=rest, zupt_params=params, rest_sigma=rest_sigma)
+    if args.zupt == "auto":  # kept in the run file for the plots: [start_s, end_s, accepted] per candidate
+        t = arrays["t"]
+        arrays["zupt_candidates"] = np.array(
+            [[t[d.start], t[d.stop - 1], float(d.accepted)] for d in decisions], dtype=np.float64
+        ).reshape(-1, 3)
     if rest is not None:
         print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
     if fixes is not None:

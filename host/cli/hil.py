@@ -9,6 +9,7 @@ import numpy as np
 from accelnav.errors import UserError
 from accelnav.fileio import atomic_output
 from accelnav.hil_sim.targets.qemu import MACHINES
+from accelnav.hil_sim.targets.simavr import BOARDS as AVR_BOARDS
 from accelnav.model.load import DEFAULT_MODEL, load_model
 
 
@@ -23,10 +24,11 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--board",
-        choices=tuple(MACHINES),
+        choices=(*MACHINES, *AVR_BOARDS),
         default=None,
         help="emulated board for --target pil: mps2_an385 (Cortex-M3, default), microbit (Cortex-M0), "
-        "stm32vldiscovery (the STM32 port's code on an STM32F100)",
+        "stm32vldiscovery (the STM32 port's code on an STM32F100), sifive_e (RV32IMAC, SiFive FE310), "
+        "atmega328p (AVR in simavr)",
     )
     p.add_argument("--out", type=Path, default=Path("build/hil"), help="folder for the PIL log; default build/hil")
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write hil.png into DIR")
@@ -39,6 +41,7 @@ def cmd_hil(args) -> int:
     from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
     from accelnav.hil_sim.targets.qemu import QemuError
+    from accelnav.hil_sim.targets.simavr import AvrError
     from accelnav.progress import Progress
 
     if args.board is not None and args.target != "pil":
@@ -67,7 +70,7 @@ def cmd_hil(args) -> int:
             pil = res.telemetry
             print(f"PIL ({board}): {n} samples in {res.seconds:.1f} s ({n / res.seconds:,.0f} samples/s), log {log}")
             print(f"PIL ({board}): {n} samples in, {len(pil)} bytes of telemetry out")
-    except (QemuError, FirmwareError) as exc:
+    except (QemuError, FirmwareError, AvrError) as exc:
         raise UserError(str(exc).splitlines()[0]) from None
     c = hil.compare(model, run, sil, pil)
     print(hil.format_comparison(c))

@@ -590,7 +590,10 @@ def _snap(f: float) -> float:
 
 def _grid_place(t: np.ndarray, f: float):
     """(k, f, how) when every stamp is within half a period of its point t0 + k / f, k increasing; else None."""
-    k = np.rint((t - t[0]) * f).astype(np.int64)
+    pos = np.rint((t - t[0]) * f)
+    if not np.all(np.abs(pos) < 2.0**62):  # a span no sample index reaches: no grid (and no int64 overflow)
+        return None
+    k = pos.astype(np.int64)
     off = np.abs(t - t[0] - k / f)
     if np.any(off >= 0.5 / f) or np.any(np.diff(k) < 1):
         return None

@@ -25,6 +25,7 @@ key                       shape, dtype           meaning
 ``smooth_P``              (n_axes, N, 4, 4)      its covariance
 ``zupt``                  (N, n_axes), bool      samples whose zero-velocity update was applied
 ``fixes``                 (M, 4), float64        position fixes used: [t, axis column, r, sigma]
+``zupt_candidates``       (K, 3), float64        ``--zupt auto``'s candidate rests: [start_s, end_s, accepted]
 ========================  =====================  ===============================================
 
 :func:`export_csv` writes the per-sample columns (not the covariances, only

@@ -2,96 +2,137 @@
 
 Which detector, and why
 -----------------------
-A moving-variance and magnitude test on acceleration alone: the accelerometer
-half of the generalised likelihood-ratio (GLRT) detectors of Skog et al.
-(2010, "Zero-velocity detection: an algorithm evaluation"), whose SHOE
-detector adds a gyroscope term accelnav does not have. For a sample window
-the GLRT of "the body is at rest" against "it moves" compares the readings
-with what a rest predicts; with the rest's acceleration unknown in direction
-(gravity leaking through a tilt error, an unmodelled bias) the accelerometer
-term becomes the spread of the window about its own mean (the MV detector),
-and a rest of a horizontal, gravity-removed axis must also read near zero
-(the MAG detector's role). One short window serves a car that waits for
-seconds and a foot whose stance lasts a quarter of a second, because both
-tests are normalised by the sensor's own noise R rather than tuned to a
-motion.
+A moving-variance test on acceleration alone: the accelerometer half of the
+generalised likelihood-ratio (GLRT) detectors of Skog et al. (2010,
+"Zero-velocity detection: an algorithm evaluation"), whose SHOE detector adds
+a gyroscope term accelnav does not have. With the rest's acceleration unknown
+(gravity leaking through a tilt error, a grade, an unmodelled bias) the
+accelerometer term is the spread of a window about its own mean (MV). What
+the rest reads is then not compared with the model's bias: a one-axis,
+gyro-free sensor cannot tell a tilt leak from its bias, so each rest's own
+mean is taken as the bias there (the filter's bias state absorbs it), and
+the tests ask whether the rest is *plausible as a stop* instead: it is still,
+its level is steady, its level moved little since the last rest, and the
+velocity integrated from the last rest closes. No threshold hangs on the
+model's ``initial_sigma`` (issue 23: a tuned model's bias prior admitted
+anything); when a candidate cannot be checked, it is refused (no update
+rather than a wrong one).
 
-The detector (one decision per sample, for the body as a whole)
-----------------------------------------------------------------
+Candidates (one decision per sample, for the body as a whole)
+------------------------------------------------------------
 Over a centred window of W = round(window_s * rate) samples (odd, at least 3,
-default 0.1 s: a 0.25 s stance still holds 15 window centres), on the
-measured acceleration z_j of every axis j minus the model's bias mean
-eps_j(k) = (c1 + c2) - c1 phi^k:
+default 0.1 s: a 0.15 s stance still holds several window centres), on the
+measured acceleration z_j of every axis minus the model's bias mean:
 
 1. **quiet**: the mean over the axes of window variance / (R_j + tremor^2)
-   is at most ``var_k`` (default 10). The rest hypothesis's noise is the
-   sensor's R plus the motion of a body at rest, ``tremor`` (default
-   0.12 m/s^2 rms): a foot in stance sways, an engine idles, and on a good
-   sensor that motion, not the sensor, sets the floor. On gaitmap's real
-   foot-mounted walk (204.8 Hz, R = 1.4e-3) the stances' windows reach 20 to
-   150 R and the swings' 1e3 to 1e4 R: a bound on R alone (10 R, 0.12 m/s^2
-   rms) found 13 rests for the right foot's 30 stances, 18 % of their
-   samples (stride error 12.4 %, against 4.6 % with reference stances); with
-   the tremor term 33 rests and 5.2 % (tests/test_real_walk.py; tremor 0.1
-   to 0.2 give the same within 0.2 %).
-   On pure sensor noise the statistic is chi2(n (W - 1)) / (n (W - 1)) or
-   less, whose 0.1 % upper quantile is 2.3 for W = 11 and two axes. For the
-   ADXL250 default (R = 0.016) the bound moves from 10 R to 19 R, which the
-   simulated walks and stop-and-go runs do not notice (they have no tremor;
-   3 to 30 R gave the same results there). The price is on a very quiet
-   sensor in a vehicle (the ADXL202 duty-cycle model, R = 6.2e-5, 2300 R):
-   the first 2 cm/s of a gentle start now pass the quiet test and only the
-   level test trims them (stop-and-go rms 2.0 / 2.3 cm against 2.0 / 1.7 cm);
-2. **level**: the length of the vector of window means is at most
-   ``level``: the larger of three standard deviations of the bias about its
-   model plus three of the window mean (as before), and ``level_min``
-   (0.3 m/s^2, the gravity leaking through about 1.75 degrees of tilt
-   error). This refuses the constant-acceleration holds of a vehicle
-   (1 m/s^2 and more), which pass the quiet test, and most of the gentle
-   start of a move;
-3. every sample of the window valid (not clipped, finite) on every axis.
+   is at most ``var_k`` (10). The noise of a body at rest is the sensor's R
+   plus its own motion, ``tremor`` (0.12 m/s^2 rms: a stance's sway, an idling
+   engine). On gaitmap's real walk the stances' windows reach 20 to 150 R, the
+   swings' 1e3 to 1e4 R (tests/test_real_walk.py). On pure noise the statistic
+   is chi2(n (W - 1)) / (n (W - 1)) or less (0.1 % quantile 2.3 for W = 11).
+2. every sample of the window valid (not clipped, finite) on every axis.
 
-Samples whose window passes are rest candidates; runs of them less than
-``bridge_s`` (0.1 s, one window) apart are joined, so that a knock or a
-glitch inside a rest, which fails every window holding it, does not split
-the rest in two (whose second half the gate would then judge on a velocity
-integral that carries the knock); each run is widened
-by ``widen`` * (W // 2) samples on both sides (default half of the window's
-half-width: every sample of a passing window was quiet, but a vehicle's move
-starts so gently that the full width puts updates on its first few cm/s) and
-kept if it lasts at least ``min_rest_s``. An impact spike fails the quiet test in
-every window that holds it, so it can end a rest but never lengthen one.
+Runs of passing centres are **split into pieces of steady level**: the
+longest stretch whose window means stay within ``trim_k`` (3) standard
+deviations of a window mean (sqrt((R + tremor^2) / W), or of the run's own
+median window variance where a body sways more than that) of the run's median is
+one piece, the parts either side are split again; a piece whose first and
+last thirds differ by more than their own noise allows, and faster than a
+tilt may drift beyond its first second (``level_rate``, 0.1 m/s^2 a second:
+a person standing leans that slowly; over a second a drift cannot be told
+from a vehicle's or a cart's ramp), is part of a ramp and dropped. The gentle start of a move
+is quiet, but its mean walks away from the rest's (a vehicle's, a cart's
+first 0.1 m/s^2), and that is where a rest must end; a constant-acceleration
+hold becomes a piece of its own (refused below for its level). Its ends are
+trimmed once more against the piece's own measured noise where that is
+below the tremor allowance (a parked car, a resting cart). What that trim
+cuts off is split again, and a piece of it is kept when it holds three
+windows at least (its thirds a window each: shorter, a ramp's start cannot be
+told from a step) and its level does not walk away from the rest it was cut
+from by more than that noise allows (a ramp leaves a rest's level; a body that
+settled at a new level, or sways about it, does not). On mobgap's MS_001/Trial2
+the standing's level steps by 0.11 m/s^2 at 1.7 s, with no rotation on the
+gyroscope, and stays there; without this its last 0.7 s were lost. Each piece is
+widened by up to ``widen`` * (W // 2) samples each side (every sample of a
+passing window was quiet), sample by sample while each stays within
+``trim_k`` sd of the piece's level (the piece's own per-sample noise): a
+heel strike or a ramp's start ends it. Pieces at the same level
+less than ``bridge_s`` apart across a break that failed the quiet test are joined (a knock fails every window that
+holds it), and pieces shorter than ``min_rest_s`` are dropped.
 
-The gate (once per rest, for every axis at once)
--------------------------------------------------
-Quiet and level cannot tell a rest from coasting at constant velocity. Each
-candidate rest is therefore tested once, on the velocity v_j that its start
-would have if the body had been at rest at the end of the previous accepted
-rest: v_j = Ts sum (z_j - b_j) over the samples in between, where b_j is the
-mean reading of axis j over that previous rest, leaving out samples more
-than 5 sqrt(R_j) from the rest's median (a knock) (the model's bias mean before
-the first rest). Re-measuring the bias at every rest absorbs a slowly changing
-tilt leak, and nothing here depends on the Kalman filter's own velocity, so a
-filter that drifted during a swing never makes a rest be refused. The rest
-is accepted when either
+The decision (once per candidate, for every axis at once)
+---------------------------------------------------------
+A quiet window cannot tell a rest from a constant-velocity coast or cruise,
+nor (once the bias is re-measured) a constant-acceleration hold from a tilt.
+Each candidate is judged against its **anchor**, the last accepted rest
+(bias b0 = its robust mean, see :func:`_robust_mean`), with its own robust
+mean b1:
 
-* mean_j v_j^2 / s_j^2 <= ``gate`` (default 16), with
-  s_j^2 = (sd(b_j) D)^2 + R_j Ts^2 m + sigma^2 over a span of m samples,
-  D = m Ts, sd(b_j) = sqrt(R_j / samples kept) (the model's bias spread
-  before the first rest), or
-* |v| <= ``rel`` |v|_max (default 0.5): the speed has come back to half of
-  the largest speed reached since the previous rest. A coast, a cruise keep
-  their peak speed; a foot that landed has come back from it, even when a
-  heel strike sampled on three or four points left a velocity error of a
-  good fraction of a metre per second in the integral.
+* **level**: |b1 - b0| <= min(``level`` + ``level_rate`` D, ``level_max``),
+  D the time since the anchor: the tilt or grade leak may change by 0.5
+  m/s^2 (3 degrees: a real foot's level frame moves that much from one
+  stance to the next on gaitmap's walk, where 0.3 refused one stance in six)
+  plus 0.1 m/s^2 a second, never by more than 1 m/s^2 (6 degrees). A
+  vehicle's hold (1 m/s^2 and more, reached within a second or
+  two) is refused; a stop on a road whose grade changed by more than 6
+  degrees since the last stop is refused too (no update rather than a wrong one).
+* **continues the rest**: a candidate within ``recover_s`` of the anchor with
+  no motion between (the largest |v| between them within sqrt(gate) s) and a
+  level within ``level`` of it is the same rest, broken by a knock or a foot
+  rolling from heel to toe; it is accepted and the rest keeps the level it
+  started with (a chain of such pieces cannot walk up a ramp).
+* **velocity closes**: v_j = Ts sum (z_j - b_j(k)) from the anchor's end to
+  the candidate's start, b_j(k) linear from b0 to b1 (a slowly changing tilt
+  or grade is absorbed), is within ``gate`` (16, mean over axes of v^2/s^2,
+  s^2 = R Ts^2 m + sigma^2 + (D/2)^2 (sd(b0)^2 + sd(b1)^2) + (drift D)^2,
+  sd(b) = sqrt(R / n) over the rest's n samples): besides white noise and the
+  two levels' uncertainty from the sensor's noise (not from the rest's own
+  spread: that is the body's sway, and a body at rest keeps its velocity near
+  zero, so the sway leaves its mean far faster than white noise would; taken
+  as white, the spread of a short noisy piece inside a real walk, 88 R over
+  0.12 s, let it "close" at 0.8 m/s and hid 1 m/s of trunk motion from the
+  "no motion between" test above), ``drift`` (0.02
+  m/s^2) of mean acceleration error that no rest re-measures (a coarse ADC's
+  steps while the signal moves, a scale-factor error, a tilt that changed
+  during the move: on the simulated 10-bit cart 0.1-0.4 m/s after a push).
+  A coast or a cruise keeps its speed and is refused. The velocity may also
+  have come back to ``rel`` (0.5) of its peak since the anchor: on gaitmap's
+  real walk a heel strike leaves 0.3-1 m/s in the integral, chi-square
+  refuses a third of the stances there, and the simulated walks never show
+  it. The price: a short piece at the end of a braking ramp can pass it (a
+  cart's, at 0.7 m/s); the rest that follows it supersedes it (below).
+* no anchor yet: a candidate that holds the run's first window is accepted
+  when it is **still** (mean window variance <= ``still_k`` R, no tremor
+  allowance) for at least ``start_s`` (1 s): the run starts at rest, as the
+  filter's prior u = 0 says. A run that starts moving gives no anchor when
+  its road vibration fails the stillness (the simulated highway); KITTI's
+  real drive starts at 8 m/s on a road smooth enough to look still for half
+  a second, hence the duration. A short first stance is not lost: the next
+  one recovers it (below).
 
-``gate = 0`` accepts every candidate.
+**Recovery.** A candidate refused because its velocity does not close (or
+for want of an anchor) can still serve as anchor for the next candidate when
+that one comes within ``recover_s`` (3 s): the pair is accepted if, between
+them, the level moved little, the velocity closes, *and* the body visibly
+moved (the largest |v| between them above sqrt(gate) s: a stride, a push);
+the previous candidate is then accepted too ("confirmed by the next").
+
+**Adjacent rests.** When a candidate follows an anchor within ``recover_s``
+with no motion between, and its level differs by more than ``level`` or the
+anchor is short (under three windows: the tail of a braking ramp, then the
+stop), the longer of the two is the rest: a shorter anchor is withdrawn
+("superseded by a longer rest") and the candidate judged against the rest
+before it, so one short wrong anchor does not make every later stop "move".
+So one missed run of stances no longer poisons the rest of a walk (issue 23:
+27 of 29 later candidates refused), while a cruise, whose quiet spells
+close on each other without any motion between, gives no rest.
+
+``gate = 0`` accepts every candidate. Every decision carries its reason and
+statistics (:class:`RestDecision`, :func:`report_csv`).
 
 Measurements: every sample of an accepted rest gets a zero-velocity update
 (:func:`accelnav.estimate.kf.zero_velocity`, u = 0 with standard deviation
-``sigma``), applied to every axis (``every_s`` > 0 thins them to one per
-every_s seconds). Dense updates matter on short stances: one per 0.1 s gives
-a 0.35 s stance three or four.
+``sigma``), on every axis (``every_s`` > 0 thins them to one per every_s).
 
 All thresholds have command-line overrides (``accelnav smooth --zupt-*``).
 """
@@ -114,15 +155,21 @@ class ZuptParams:
     window_s: float = 0.1  # s, centred window of the moving mean and variance
     var_k: float = 10.0  # quiet if mean over axes of window variance / (R + tremor^2) <= var_k
     tremor: float = 0.12  # m/s^2 rms, the motion of a body at rest (a stance's sway, an idling engine)
-    level: float | None = None  # m/s^2, bound on |window means - bias means|; None: from the model
-    level_min: float = 0.3  # m/s^2, the model-derived level is raised to at least this
+    trim_k: float = 3.0  # rest ends trimmed while the window mean is this many sd off the rest's own
+    level: float = 0.5  # m/s^2, change of the rest level (tilt leak) allowed since the last rest ...
+    level_rate: float = 0.1  # m/s^3, ... plus this per second since it ...
+    level_max: float = 1.0  # m/s^2, ... never more than this
+    still_k: float = 3.0  # a run's first rest: mean window variance <= still_k R (no tremor allowance) ...
+    start_s: float = 1.0  # s, ... and lasting this long (a car at a smooth cruise is still for a moment)
     min_rest_s: float = 0.1  # s, shortest rest kept (after widening)
     bridge_s: float = 0.1  # s, a break in a rest this short (a knock, a glitch) does not split it
-    widen: float = 0.5  # runs of window centres are widened by widen * (W // 2) samples on both sides
+    widen: float = 1.0  # pieces widened by up to widen * (W // 2) samples each side, while samples stay level
     sigma: float = 0.02  # m/s, standard deviation of each zero-velocity update
     every_s: float = 0.0  # s, one update per every_s within a rest; 0: every sample
     gate: float = 16.0  # per-rest chi-square bound (mean over axes); 0 accepts every candidate rest
-    rel: float = 0.5  # per-rest: also accepted if |v| <= rel * the largest |v| since the previous rest
+    drift: float = 0.02  # m/s^2, unmodelled mean acceleration error between rests (ADC steps, scale, tilt)
+    rel: float = 0.5  # per-rest: also accepted if |v| <= rel * the largest |v| since the anchor (0: off)
+    recover_s: float = 3.0  # s, a refused candidate this recent may anchor the next one (with motion between)
 
 
 def window_samples(model: Model, p: ZuptParams) -> int:
@@ -131,31 +178,26 @@ def window_samples(model: Model, p: ZuptParams) -> int:
 
 
 def resolved(model: Model, p: ZuptParams) -> ZuptParams:
-    """``p`` with the level threshold filled in from the model (see the module docstring)."""
-    for name in ("window_s", "var_k", "sigma"):
+    """``p`` checked (ValueError naming the field); nothing is taken from the model any more."""
+    for name in ("window_s", "var_k", "sigma", "still_k"):
         v = getattr(p, name)
         if not (math.isfinite(v) and v > 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number > 0")
-    for name in ("every_s", "min_rest_s", "level_min", "rel", "widen", "bridge_s", "tremor"):
+    for name in ("every_s", "min_rest_s", "rel", "widen", "bridge_s", "tremor", "trim_k", "level_rate"):
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
+    for name in ("recover_s", "drift", "start_s"):
+        v = getattr(p, name)
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
+    for name in ("level", "level_max"):
+        v = getattr(p, name)
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"zupt {name}: got {v}; accepted: a number > 0 (m/s^2)")
     if not (math.isfinite(p.gate) and p.gate >= 0):
         raise ValueError(f"zupt gate: got {p.gate}; accepted: a number >= 0 (0: no gate)")
-    if p.level is not None:
-        if not (math.isfinite(p.level) and p.level > 0):
-            raise ValueError(f"zupt level: got {p.level}; accepted: a number > 0 (m/s^2)")
-        return p
-    return replace(p, level=max(model_level(model, p), p.level_min))
-
-
-def model_level(model: Model, p: ZuptParams) -> float:
-    """Three standard deviations of the bias about its model plus three of a window mean, m/s^2."""
-    w = window_samples(model, p)
-    T = max(ax.T for ax in model.axes)
-    s0 = model.filter.initial_sigma[3]
-    spread = math.sqrt(s0**2 + model.noise.sigma_eps**2 * T / 2.0)
-    return 3.0 * spread + 3.0 * math.sqrt(model.noise.R / w)
+    return p
 
 
 def _moving(x: np.ndarray, w: int) -> np.ndarray:
@@ -186,7 +228,7 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
 
 
 def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams = ZuptParams()) -> np.ndarray:
-    """(N,) bool: samples the detector calls rest, before the per-rest gate (see the module docstring).
+    """(N,) bool: samples the detector calls rest, before the per-rest decision (see the module docstring).
 
     ``accel``, ``clipped`` are (N, n_axes) as in a run file; columns are the model's axes in order.
     """
@@ -196,45 +238,200 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
     w = window_samples(model, p)
     bad = _moving((~ok.all(axis=1)).astype(np.float64), w)
     quiet = np.zeros(n)
-    mean2 = np.zeros(n)
+    wvar = np.zeros(n)  # window variance, summed over the axes
+    means = np.empty((n, n_axes))
     for j in range(n_axes):
         s1 = _moving(x[:, j], w)
         s2 = _moving(x[:, j] * x[:, j], w)
         with np.errstate(invalid="ignore"):
-            mean = s1 / w
-            quiet += (s2 - w * mean * mean) / (w - 1) / (R[j] + p.tremor**2)
-            mean2 += mean * mean
+            means[:, j] = s1 / w
+            v = (s2 - w * means[:, j] ** 2) / (w - 1)
+            quiet += v / (R[j] + p.tremor**2)
+            wvar += v
     with np.errstate(invalid="ignore"):
-        centre = (bad == 0) & (quiet / n_axes <= p.var_k) & (mean2 <= p.level**2)
-    # widen each run of passing window centres to the windows' extent, drop the short ones
+        centre = (bad == 0) & (quiet / n_axes <= p.var_k)
+    # split each run into pieces of steady level: a move that starts gently is quiet, but its mean walks away
+    total = float(np.sum(R + p.tremor**2))
+    bound2 = p.trim_k**2 * total / w
+    runs = intervals(centre)
+    # a body swaying more than the tremor allowance (a real stance) has a level that wanders as much: the bound
+    # grows with the run's own typical window variance (not with a ramp, whose windows stay quiet)
+    pieces = sorted(
+        (*q, k)
+        for k, (a, b) in enumerate(runs)
+        for q in _steady_pieces(
+            means,
+            a,
+            b,
+            bound2 * max(1.0, float(np.median(wvar[a:b])) / total),
+            x,
+            total,
+            w,
+            p.level_rate * model.Ts,
+            int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
+        )
+    )
+    # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
+    # sample while a sample stays within trim_k sd of the piece's level: a heel strike or the start of a ramp
+    # ends it. Join pieces at one level across short breaks (a knock fails every window that holds it);
+    # pieces at two levels stay apart by a sample at least, so each is judged on its own
     h = int(round(p.widen * (w // 2)))
-    runs = [(max(0, a - h), min(n, b + h)) for a, b in intervals(centre)]
-    # bridge short breaks: one spike fails every window that holds it, W samples of centres
     bridge = int(round(p.bridge_s * model.rate_hz))
-    merged: list[list[int]] = []
-    for a, b in runs:
-        if merged and a - merged[-1][1] <= bridge:
+    usable = ok.all(axis=1)
+    merged: list[list] = []
+    for a, b, ref, own, run in pieces:
+        lim2 = p.trim_k**2 * own
+        lo, hi = max(0, a - h), min(n, b + h)
+        while a > lo and usable[a - 1] and np.sum((x[a - 1] - ref) ** 2) <= lim2:
+            a -= 1
+        while b < hi and usable[b] and np.sum((x[b] - ref) ** 2) <= lim2:
+            b += 1
+        if (
+            merged
+            and run != merged[-1][3]  # a break that failed the quiet test, not a change of level
+            and a - merged[-1][1] <= bridge
+            and np.sum((ref - merged[-1][2]) ** 2) <= bound2
+            and usable[merged[-1][1] : a].all()  # a knock, not clipped or missing samples
+        ):
             merged[-1][1] = b
+            merged[-1][3] = run
         else:
-            merged.append([a, b])
+            if merged:
+                a = max(a, merged[-1][1] + 1)
+            merged.append([a, b, ref, run])
     rest = np.zeros(n, dtype=bool)
     shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
-    for a, b in merged:
+    for a, b, _, _ in merged:
         if b - a >= shortest:
             rest[a:b] = True
     return rest
 
 
+def _steady_pieces(
+    means: np.ndarray,
+    a: int,
+    b: int,
+    bound2: float,
+    x: np.ndarray,
+    total: float,
+    w: int,
+    tilt_rate: float,
+    lean: int,
+) -> list[tuple[int, int, np.ndarray]]:
+    """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
+    piece's median: the longest such stretch about the run's median is kept, the parts either side are split
+    again. The ends of a piece are trimmed again with the bound scaled to the piece's own variance (of ``x``,
+    summed over axes, against ``total``, the sum of R + tremor^2) when that is smaller; a piece whose first
+    and last thirds differ by more than trim_k sd of a window mean (from the piece's own variance) plus
+    ``tilt_rate`` (m/s^2 per sample) times their distance beyond ``lean`` samples is a stretch of a ramp
+    and dropped. What the trim cuts off a piece is split again; a piece from it is kept when it holds three
+    windows at least and its level does not walk away from the piece it was cut from (see below).
+    Returns (first, last + 1, median level, own variance) per piece."""
+    out = []
+    todo: list[tuple[int, int, np.ndarray | None, int]] = [(a, b, None, 0)]
+    while todo:
+        a, b, parent, side = todo.pop()
+        if b <= a:
+            continue
+        ref = np.median(means[a:b], axis=0)
+        near = np.sum((means[a:b] - ref) ** 2, axis=1) <= bound2
+        runs = intervals(near)
+        if not runs:
+            continue
+        p, q = max(runs, key=lambda r: r[1] - r[0])
+        todo += [(a, a + p, None, 0), (a + q, b, None, 0)]
+        p, q = a + p, a + q
+        # the ends, once more, against the piece's own noise (quieter than the tremor allows, on most rests)
+        ref = np.median(means[p:q], axis=0)
+        own = float(np.sum(x[p:q].var(axis=0)))
+        own2 = min(bound2, bound2 * own / total)
+        near = np.flatnonzero(np.sum((means[p:q] - ref) ** 2, axis=1) <= own2)
+        if not len(near):
+            continue
+        # what the trim cuts off is split again: a standing whose level stepped (by 0.1 m/s^2 on a real
+        # lower-back recording, no rotation on the gyroscope) keeps its second level as a piece of its own
+        todo += [(p, p + int(near[0]), ref, -1), (p + int(near[-1]) + 1, q, ref, 1)]
+        p, q = p + int(near[0]), p + int(near[-1]) + 1
+        # the level still moving across the piece: part of a ramp, not a rest (trim_k sd of a window mean, from
+        # the piece's own variance: a sway beyond the tremor allowance is noise here, not a ramp), unless it
+        # moves no faster than a tilt may over more than ``lean`` samples (level_rate: a person standing leans
+        # over seconds; over a second or less a drift cannot be told from a vehicle's or a cart's ramp)
+        third = (q - p) // 3
+        allowed = math.sqrt(bound2 * own / total) + tilt_rate * max(0, q - p - third - lean)
+        if not third:  # too short to tell: kept as a piece of the run, not as a trimmed end
+            if parent is None:
+                out.append((p, q, ref, own))
+            continue
+        first, last = means[p : p + third].mean(axis=0), means[q - third : q].mean(axis=0)
+        if parent is not None:
+            # cut off a quieter piece beside it: a ramp leaving (or reaching) that rest walks away from its level,
+            # a body that settled at a new level (a lean) or sways about it does not. The thirds must hold a
+            # window each, or a ramp's start cannot be told from a step (a cart's first 0.2 s of a push)
+            near_third, far_third = (first, last) if side > 0 else (last, first)
+            away = math.sqrt(np.sum((far_third - parent) ** 2)) - math.sqrt(np.sum((near_third - parent) ** 2))
+            if third < w or away > allowed:
+                continue
+        elif np.sum((first - last) ** 2) > allowed**2:
+            continue
+        out.append((p, q, ref, own))
+    return out
+
+
+# why a candidate was accepted or refused (the report's reason column)
+ACCEPT_REASONS = ("closes", "continues the rest", "still at start", "recovered", "confirmed by the next", "gate off")
+REFUSE_REASONS = (
+    "level moved",
+    "velocity does not close",
+    "not still at start",
+    "no rest before",
+    "superseded by a longer rest",
+)
+
+
 @dataclass(frozen=True)
 class RestDecision:
-    """The gate's verdict on one candidate rest [start, stop)."""
+    """The verdict on one candidate rest [start, stop), with the statistics it rests on."""
 
     start: int
     stop: int
     accepted: bool
-    chi2: float  # mean over axes of v_j^2 / s_j^2
-    speed: float  # |v| at the rest's start, m/s
-    peak: float  # largest |v| since the previous accepted rest, m/s
+    reason: str  # one of ACCEPT_REASONS or REFUSE_REASONS
+    chi2: float  # mean over axes of v_j^2 / s_j^2 against the anchor (NaN: not computed)
+    speed: float  # |v| at the rest's start, m/s (NaN: not computed)
+    peak: float  # largest |v| since the anchor, m/s (NaN: not computed)
+    level: float  # |b1 - b0|, m/s^2, change of the rest level since the anchor (NaN: no anchor)
+    level_bound: float  # m/s^2, the bound it was held to (NaN: no anchor)
+    still: float  # mean over axes of the rest's variance / R
+    anchor: int  # sample where the velocity integral started (end of the anchor rest); -1: none
+
+
+@dataclass
+class _Anchor:
+    start: int
+    end: int
+    b: np.ndarray
+    sd: np.ndarray  # sd of b from the sensor's noise: sqrt(R / samples)
+
+
+def _closure(x, ok, R, Ts, p: ZuptParams, anc: _Anchor, a: int, here: _Anchor):
+    """(chi2, |v|, peak |v|, peak chi2) of the velocity integrated from the anchor to sample a, the bias linear
+    from the anchor's level to the candidate's."""
+    b1 = here.b
+    m = a - anc.end
+    if m <= 0:
+        return 0.0, 0.0, 0.0, 0.0
+    frac = (np.arange(m) + 0.5)[:, None] / m
+    seg = x[anc.end : a] - (anc.b + frac * (b1 - anc.b))
+    seg[~ok[anc.end : a]] = 0.0
+    v_path = np.cumsum(seg, axis=0) * Ts
+    v = v_path[-1]
+    D = m * Ts
+    s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
+    chi2 = float(np.mean(v * v / s2))
+    speeds = np.sqrt((v_path**2).sum(axis=1))
+    peak = float(speeds.max())
+    peak_chi2 = float(np.max(np.mean(v_path**2 / s2, axis=1)))
+    return chi2, float(np.sqrt(v @ v)), peak, peak_chi2
 
 
 def gate_rests(
@@ -243,32 +440,118 @@ def gate_rests(
     """Decide once per candidate rest, for all axes together (see the module docstring)."""
     p = resolved(model, params)
     x, ok, R = _prepared(accel, clipped, model)
-    n, n_axes = x.shape
+    n_axes = x.shape[1]
     Ts = model.Ts
-    b = np.zeros(n_axes)  # bias correction on top of the model's bias mean
-    sd_b = np.full(n_axes, model.filter.initial_sigma[3])
-    u0 = model.filter.initial_sigma[1]
-    since = 0
-    out = []
+    w = window_samples(model, p)
+    nan = float("nan")
+    still_len = 3 * w  # a rest shorter than this next to a longer one, nothing moving between: the longer wins
+    anchors: list[tuple[_Anchor, int]] = []  # accepted rests (as anchors) and their index in ``out``
+    prev: tuple[_Anchor, str] | None = None  # the previous candidate, as a possible anchor, and its verdict
+    out: list[RestDecision] = []
     for a, stop in intervals(rest):
-        seg = x[since:a] - b
-        seg[~ok[since:a]] = 0.0
-        m = a - since
-        v_path = np.cumsum(seg, axis=0) * Ts
-        v = v_path[-1] if m else np.zeros(n_axes)
-        peak = float(np.sqrt((v_path**2).sum(axis=1)).max()) if m else 0.0
-        s2 = (sd_b * m * Ts) ** 2 + R * Ts * Ts * m + p.sigma**2 + u0**2
-        chi2 = float(np.mean(v * v / s2))
-        speed = float(np.sqrt(v @ v))
-        accepted = p.gate == 0 or chi2 <= p.gate or speed <= p.rel * peak
-        out.append(RestDecision(a, stop, bool(accepted), chi2, speed, peak))
-        if accepted:
-            use = ok[a:stop].all(axis=1)
-            if use.any():
-                b, kept = _robust_mean(x[a:stop][use], R)
-                sd_b = np.sqrt(R / kept)
-            since, u0 = stop, 0.0
+        use = ok[a:stop].all(axis=1)
+        xs = x[a:stop][use] if use.any() else np.zeros((1, n_axes))
+        b1, kept = _robust_mean(xs, R)
+        var = xs.var(axis=0) if len(xs) > 1 else R.copy()
+        still = float(np.mean(var / R))
+        # the level's uncertainty is the sensor's noise averaged over the rest, not the rest's own spread: a body
+        # at rest sways, but its velocity stays near zero, so the sway averages out of its mean far faster than
+        # white noise would; taken as white, it let a noisy 0.12 s piece in a walk "close" at 0.8 m/s
+        here = _Anchor(a, stop, b1, np.sqrt(R / kept))
+        while True:
+            anchor = anchors[-1][0] if anchors else None
+            chi2 = speed = peak = lev = bound = nan
+            used = -1
+            moved = True
+            if p.gate == 0:
+                accepted, reason = True, "gate off"
+            elif anchor is None and a <= w:
+                accepted = still <= p.still_k and (stop - a) * Ts >= p.start_s
+                reason = "still at start" if accepted else "not still at start"
+            else:
+                accepted, reason = False, "no rest before"
+                if anchor is not None:
+                    used = anchor.end
+                    chi2, speed, peak, peak_chi2 = _closure(x, ok, R, Ts, p, anchor, a, here)
+                    moved = peak_chi2 > p.gate
+                    near = not moved and (a - anchor.end) * Ts <= p.recover_s
+                    lev, bound = _level(p, anchor, b1, a, Ts, p.level if near else None)
+                    if lev > bound:
+                        reason = "level moved"
+                    elif near:  # the same rest, broken by a knock or a roll of the foot
+                        accepted, reason = True, "continues the rest"
+                    else:
+                        accepted = chi2 <= p.gate or speed <= p.rel * peak
+                        reason = "closes" if accepted else "velocity does not close"
+            if (
+                anchor is not None
+                and not moved
+                and (a - anchor.end) * Ts <= p.recover_s
+                and stop - a > anchor.end - anchor.start
+                and len(anchors) > 1
+                and (reason == "level moved" or anchor.end - anchor.start < still_len)
+            ):
+                # two rests with no motion between at different levels: the longer one is the stop, the short
+                # one before it the tail of a ramp; it gives up its place, and this one is judged without it
+                k = anchors.pop()[1]
+                out[k] = replace(out[k], accepted=False, reason="superseded by a longer rest")
+                continue
+            break
+        if not accepted and prev is not None and prev[1] in ("velocity does not close", "no rest before",
+                                                             "not still at start"):  # fmt: skip
+            cand = prev[0]
+            lev2, bound2 = _level(p, cand, b1, a, Ts)
+            if (a - cand.end) * Ts <= p.recover_s and lev2 <= bound2:
+                c2, sp2, pk2, pk_chi2 = _closure(x, ok, R, Ts, p, cand, a, here)
+                if (c2 <= p.gate or sp2 <= p.rel * pk2) and pk_chi2 > p.gate:
+                    accepted, reason = True, "recovered"
+                    chi2, speed, peak, lev, bound, used = c2, sp2, pk2, lev2, bound2, cand.end
+                    # the pair closes on itself: the previous candidate was a rest too
+                    out[-1] = replace(out[-1], accepted=True, reason="confirmed by the next")
+                    anchors.append((cand, len(out) - 1))
+        out.append(RestDecision(a, stop, bool(accepted), reason, chi2, speed, peak, lev, bound, still, used))
+        if accepted and reason == "continues the rest":  # the rest goes on at the level it started with
+            anchors[-1][0].end = stop
+        elif accepted:
+            anchors.append((here, len(out) - 1))
+        prev = (here, reason)
     return out
+
+
+def _level(
+    p: ZuptParams, anc: _Anchor, b1: np.ndarray, a: int, Ts: float, still: float | None = None
+) -> tuple[float, float]:
+    """(|b1 - b0|, its bound) for a candidate starting at sample a; ``still``: the bound when nothing moved
+    between them (no allowance for the time between: a level does not drift while the body stands)."""
+    D = max(0, a - anc.end) * Ts
+    bound = min(p.level + p.level_rate * D, p.level_max) if still is None else still
+    return float(np.sqrt(np.sum((b1 - anc.b) ** 2))), bound
+
+
+def reason_counts(decisions: list[RestDecision]) -> dict[str, int]:
+    """How many candidates each reason decided, accepted reasons first, in a fixed order; zero counts left out."""
+    counts = {r: 0 for r in (*ACCEPT_REASONS, *REFUSE_REASONS)}
+    for d in decisions:
+        counts[d.reason] += 1
+    return {r: c for r, c in counts.items() if c}
+
+
+def report_csv(decisions: list[RestDecision], t: np.ndarray) -> str:
+    """One CSV row per candidate: times, samples, statistics, decision and reason (``smooth --zupt-report``)."""
+    t = np.asarray(t, dtype=np.float64)
+    head = "start_s,end_s,samples,decision,reason,still_R,level_m_s2,level_bound_m_s2,speed_m_s,peak_m_s,chi2,anchor_s"
+    lines = [head]
+
+    def f(v: float) -> str:
+        return "" if not math.isfinite(v) else f"{v:.6g}"
+
+    for d in decisions:
+        anchor = f"{t[d.anchor - 1]:.6f}" if d.anchor > 0 else ""
+        lines.append(
+            f"{t[d.start]:.6f},{t[d.stop - 1]:.6f},{d.stop - d.start},{'accepted' if d.accepted else 'refused'},"
+            f"{d.reason},{f(d.still)},{f(d.level)},{f(d.level_bound)},{f(d.speed)},{f(d.peak)},{f(d.chi2)},{anchor}"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def _robust_mean(x: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -285,10 +568,24 @@ def _robust_mean(x: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def rest_mask(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams = ZuptParams()) -> np.ndarray:
     """(N,) bool: samples of the accepted rests (detector, then the per-rest gate)."""
     rest = candidates(accel, clipped, model, params)
-    mask = np.zeros(len(rest), dtype=bool)
-    for r in gate_rests(accel, clipped, rest, model, params):
-        if r.accepted:
-            mask[r.start : r.stop] = True
+    return accepted_mask(gate_rests(accel, clipped, rest, model, params), len(rest))
+
+
+def accepted_mask(decisions: list[RestDecision], n: int) -> np.ndarray:
+    """(N,) bool: the samples of the accepted rests; a rest's continuation is joined to it across the one
+    sample that keeps two pieces at two levels apart (:func:`candidates`), not across a break that failed
+    the quiet test or a clipped sample."""
+    mask = np.zeros(n, dtype=bool)
+    bridge = 1
+    last = None
+    for d in decisions:
+        if not d.accepted:
+            continue
+        start = d.start
+        if d.reason == "continues the rest" and last is not None and d.start - last <= bridge:
+            start = last
+        mask[start : d.stop] = True
+        last = d.stop
     return mask
 
 

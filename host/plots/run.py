@@ -26,7 +26,8 @@ def _band(ax, t, x, sd, color, label, ls="-"):
 
 
 def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, title: str = "") -> Path:
-    """Position, velocity and bias of every axis: truth, double integration, filter and smoother (+-1 sigma)."""
+    """Position, velocity and bias of every axis: truth, double integration, filter and smoother (+-1 sigma);
+    on the velocity row, the detector's accepted and refused rests when the run has ``zupt_candidates``."""
     plt = _pyplot()
     t = arrays["t"]
     names = [str(a) for a in arrays["axis_names"]]
@@ -47,6 +48,8 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
                     x = arrays[f"{stage}_x"][j, :, i]
                     sd = np.sqrt(arrays[f"{stage}_P"][j, :, i, i])
                     _band(ax, t, x, sd, color, f"{lab} +-1 sigma", ls)
+            if i == 1:
+                _rest_marks(ax, arrays)
             if i < 2 and "r" in arrays:
                 # keep the truth readable when dead reckoning runs away
                 span = np.ptp(arrays[truth_keys[i]][:, j])
@@ -82,6 +85,23 @@ def _save(plt, fig, path: Path) -> Path:
     return path
 
 
+def _rest_marks(ax, arrays) -> None:
+    """The detector's candidate rests (key ``zupt_candidates``, rows [start_s, end_s, accepted]): accepted ones
+    shaded green, refused ones hatched red, so that a refused stop or an accepted 'rest' at speed shows."""
+    rows = arrays.get("zupt_candidates")
+    if rows is None or not len(rows):
+        return
+    first = {True: True, False: True}
+    for t0, t1, acc in np.asarray(rows, dtype=np.float64).reshape(-1, 3):
+        ok = bool(acc)
+        label = ("rest accepted" if ok else "rest refused") if first[ok] else None
+        first[ok] = False
+        if ok:
+            ax.axvspan(t0, t1, color="tab:green", alpha=0.15, lw=0, label=label)
+        else:
+            ax.axvspan(t0, t1, facecolor="none", edgecolor="tab:red", hatch="///", alpha=0.5, lw=0, label=label)
+
+
 def _marks(ax, arrays, j, t, y_of_k=None):
     """Shade the samples whose zero-velocity update was applied; dots for position fixes."""
     if "zupt" in arrays and arrays["zupt"][:, j].any():
@@ -111,7 +131,8 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
     * fig11_position_filter.png: position from plain double integration and
       from the filter (+-1 sigma), and the truth.
     * fig12_position_smoother.png: position from the filter and the smoother
-      (+-1 sigma), and the truth; zero-velocity updates shaded, fixes as dots.
+      (+-1 sigma), and the truth; zero-velocity updates shaded, fixes as dots, and the detector's
+      candidate rests (accepted green, refused hatched red) when ``zupt_candidates`` is present.
     """
     from accelnav.estimate.kf import bias_model
     from accelnav.model.design import axis_design
@@ -179,6 +200,7 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
             ax, t, arrays["smooth_x"][j, :, 0], np.sqrt(arrays["smooth_P"][j, :, 0, 0]), "tab:red", "smoother +-1 sigma"
         )
         _marks(ax, arrays, j, t)
+        _rest_marks(ax, arrays)
         span = np.ptp(ref) if len(ref) else 1.0
         ax.set_ylim(ref.min() - 0.5 * span - 1.0, ref.max() + 0.5 * span + 1.0)  # the filter may run far away
         ax.set_title(f"axis {names[j]}")
