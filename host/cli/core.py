@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from accelnav.api import simulate
 from accelnav.data.inputs import read_input
 from accelnav.data.runfile import STATE, export_csv, save_run
 from accelnav.errors import UserError
@@ -227,17 +228,6 @@ def require_scenario(name: str) -> None:
         raise UserError(f"--scenario: unknown scenario {name!r}; accepted: {', '.join(SCENARIOS)}")
 
 
-def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[str, np.ndarray]:
-    from accelnav.hil_sim.sim.sensor import simulate
-
-    require_scenario(scenario)
-    try:
-        run = simulate(model, scenario, duration, seed)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
-    return run.to_arrays()
-
-
 def _save(args, arrays, model) -> None:
     save_run(args.out, arrays, model)
     print(f"wrote {args.out}")
@@ -290,7 +280,8 @@ def cmd_sim(args) -> int:
     if args.out is None:
         raise UserError("--out: a run file to write is required")
     model = load_model(args.model)
-    arrays = _simulate(model, args.scenario, args.duration, args.seed)
+    require_scenario(args.scenario)
+    arrays = simulate(model, args.scenario, args.duration, args.seed)
     print(_summary(arrays))
     _save(args, arrays, model)
     return 0

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.logs import _decoded, log_run_arrays
+from accelnav.data.logs import _decoded, log_run_arrays, log_summary
 from accelnav.errors import UserError
 from accelnav.fileio import atomic_output, check_output
 
@@ -129,48 +129,8 @@ def cmd_record(args) -> int:
     return 1 if res.reason.startswith(("link lost", "log write failed")) else 0
 
 
-def _summary(path: Path, model_text: str = "") -> dict:
-    from accelnav.link.logfile import LogError
-    from accelnav.link.recorder import decode_log
-    from accelnav.link.telemetry import format_counts, link_counts
-
-    try:
-        d = decode_log(path, model_text, rows=False)  # streamed: memory does not grow with the log
-    except LogError as exc:
-        raise UserError(str(exc)) from None
-    s = d.frames["sample"]
-    man = d.manifest
-    out = {
-        "log": str(path),
-        "source": d.meta.get("source"),
-        "started_utc": d.meta.get("started_utc"),
-        "model": man.data.get("model"),
-        "model_sha256": man.model_sha256,
-        "layout_hash": f"0x{man.layout_hash:08x}",
-        "axes": man.axes,
-        "input": man.input,
-        "rate_hz": man.rate_hz,
-        "chunks": d.chunks,
-        "damaged_bytes": d.damaged_bytes,
-        "torn_bytes": d.torn_bytes,
-        **d.stats,
-        **link_counts(d.stats),
-        "counts": format_counts(link_counts(d.stats)),
-        "host_seconds": float((d.host_t_ns[-1] - d.host_t_ns[0]) / 1e9) if len(s) else 0.0,
-        "index_first": int(s["index"][0]) if len(s) else None,
-        "index_last": int(s["index"][-1]) if len(s) else None,
-        "tx_drop_last": int(s["tx_drop"][-1]) if len(s) else None,
-        "warnings": d.warnings,
-    }
-    if len(d.frames["info"]):
-        info = d.frames["info"][-1]
-        out["device_layout_ok"] = int(info["layout_hash"]) == man.layout_hash
-        out["device_decimation"] = int(info["decimation"])
-    return out
-
-
 def cmd_log_info(args) -> int:
-    summary = _summary(args.log, _model_text(args))
+    summary = log_summary(args.log, _model_text(args))
     if args.json:
         print(json.dumps(summary, indent=1))
         return 0
