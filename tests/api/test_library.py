@@ -35,7 +35,7 @@ def _phone_csv(path, walk) -> None:
     path.write_text("\n".join(rows) + "\n")
 
 
-@pytest.mark.parametrize("call", ["smooth_run", "filter_run", "detect_rests"])
+@pytest.mark.parametrize("call", ["smooth_run", "filter_run", "detect_rests", "tune"])
 def test_a_model_made_for_another_rate_is_refused_through_the_library(walk, call):
     """200 Hz data and the 100 Hz default model: the command refuses it; so does every library entry."""
     default = accelnav.load_model(None)
@@ -214,3 +214,19 @@ def test_characterise_gives_the_model_fit_bias_writes(tmp_path, capsys):
     pd = pytest.importorskip("pandas")
     df = ch.to_dataframe()
     assert isinstance(df, pd.DataFrame) and list(df.index) == ["x", "y"] and bool(df.loc["x", "T_identified"])
+
+
+def test_run_sil_gives_the_firmwares_states_as_hil_compares_them():
+    from accelnav.hil_sim.sim.sensor import SimRun
+    from accelnav.hil_sim.targets import hil
+    from accelnav.hil_sim.targets.firmware import manifest
+
+    model = accelnav.load_model(None)
+    run = accelnav.simulate(model, "stop_and_go", 10.0, 1)
+    out = accelnav.run_sil(model, run)
+    sim = SimRun.from_arrays(model, dict(run))
+    c = hil.compare(model, sim, hil.run_sil(model, hil.stimulus(manifest(model.source), sim)))
+    assert c.max_of_bound <= 1.0  # within the generator's stated bound of the float64 filter
+    for i, key in enumerate(("r", "u", "a", "eps")):
+        np.testing.assert_array_equal(out["fw_x"][:, :, i].T, c.fw[key])
+    np.testing.assert_array_equal(out["r"], run["r"])  # the truth rides along
