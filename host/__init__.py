@@ -24,13 +24,8 @@ The packages behind them, lowest first: ``model``, ``native`` -> ``estimate``, `
 from __future__ import annotations
 
 import importlib
-from importlib import metadata
-from typing import TYPE_CHECKING
 
-try:
-    __version__ = metadata.version("accelnav")
-except metadata.PackageNotFoundError:  # run from a source tree that was never installed
-    __version__ = "0+unknown"
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing (2 ms, more than the rest)
 
 # public name -> (module, name in it)
 _FACE = {
@@ -80,7 +75,21 @@ __all__ = [
 ]
 
 
+def _version() -> str:
+    """The installed distribution's version (pyproject.toml is its one source); read on first use, since
+    importlib.metadata alone costs more than the rest of ``import accelnav``."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("accelnav")
+    except metadata.PackageNotFoundError:  # a source tree that was never installed
+        return "0+unknown"
+
+
 def __getattr__(name: str):
+    if name == "__version__":
+        globals()[name] = value = _version()
+        return value
     if name in _FACE:
         module, attr = _FACE[name]
         value = getattr(importlib.import_module(module), attr)
