@@ -11,9 +11,11 @@ reason, when PyPI cannot be reached.
 Per foot (28 left, 29 right strides of 2 x 20 m with a turn), four estimates of
 the stride length: the smoother with the detector's shipped defaults, with the
 reference stances given as a per-sample mask file, without ZUPT, and plain
-double integration. Targets, from issue #11: with the defaults, mean
-|stride-length error| <= 1.5 x what the reference stances give, and <= 5 % of
-the stride length.
+double integration. The behaviour asserted: with the defaults, mean
+|stride-length error| <= 1.5 x what the reference stances give. The targets in
+% of the stride length (issue #11's 5 %, issue #23's 3 % of distance) are
+targets, not behaviour: bench/study_real_rests.py prints them (goal, measured,
+met) beside the reference stances' own figure.
 """
 
 from __future__ import annotations
@@ -126,17 +128,6 @@ def test_the_quiet_test_without_the_tremor_term_fails_on_this_walk(walk):
     """The test can fail: the detector as merged (variance bound from the sensor noise alone) misses stances."""
     worse = [_mean_abs(r, "tremor 0 (before)") > 1.5 * _mean_abs(r, "reference stances") for r in walk.values()]
     assert any(worse)
-
-
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue #11's 5 % is not met on this real walk: defaults 5.4 % (left) / 5.2 % (right); the reference "
-    "stances themselves give 5.4 % / 4.6 %, so the floor is the level frame and the one-axis filters, not the detector",
-)
-def test_defaults_within_five_percent(walk):
-    for name, r in walk.items():
-        pct = 100 * _mean_abs(r, "defaults") / r["foot"].true_length.mean()
-        assert pct <= 5.0, f"{name}: {pct:.1f} %"
 
 
 def test_truth_agrees_with_the_data_sets_own_per_stride_positions(walk):
