@@ -36,7 +36,8 @@ print(f"{{rss:.0f}}\t{{dt:.2f}}\t{{out.splitlines()[0][:90] if out else ''}}")
 
 CASES = {
     "csv": "from accelnav.data.recording import read_recording\n    res = read_recording(sys.argv[1]).n",
-    "log info": "from accelnav.cli.record import _summary\n    res = _summary(__import__('pathlib').Path(sys.argv[1]))"
+    "log info": "from accelnav.data.logs import log_summary\n"
+    "    res = log_summary(__import__('pathlib').Path(sys.argv[1]))"
     "['bytes']",
     "npz bomb": "from accelnav.data.recording import read_recording\n    res = read_recording(sys.argv[1]).n",
     "npy header 16 GiB": "from accelnav.data.recording import read_recording\n    res = read_recording(sys.argv[1]).n",

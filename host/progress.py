@@ -10,6 +10,20 @@ from __future__ import annotations
 import sys
 import time
 
+VERBOSITY = 1  # 0: quiet (no notes, no progress), 1: notes, progress on a terminal, 2: progress always
+
+
+def set_verbosity(level: int) -> None:
+    """How much the library says on its own: 0 nothing, 1 notes (and progress on a terminal), 2 progress always."""
+    global VERBOSITY
+    VERBOSITY = int(level)
+
+
+def note(text: str) -> None:
+    """A note for the user (how a clock was read, samples filled in) on stdout, unless quiet."""
+    if VERBOSITY >= 1:
+        print(text)
+
 
 class Progress:
     """``with Progress("filter", total=n) as p: ... p.update(done)``"""
@@ -20,7 +34,7 @@ class Progress:
         self.unit = unit
         self.stream = stream if stream is not None else sys.stderr
         if enabled is None:
-            enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+            enabled = VERBOSITY >= 2 or (VERBOSITY >= 1 and bool(getattr(self.stream, "isatty", lambda: False)()))
         self.enabled = enabled
         self._t0 = time.monotonic()
         self._last = 0.0

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -54,3 +57,24 @@ def assert_rel_close(actual, ref, scale, rtol, what=""):
             f"{what}: {int(bad.sum())} of {err.size} values off; worst at {idx}: "
             f"actual {actual[idx]!r}, reference {ref[idx]!r}, bound {bound[idx]:.3g}"
         )
+
+
+@pytest.fixture(scope="session")
+def wheel(tmp_path_factory):
+    """(wheel file, its member names, a folder it is unpacked into): built once per session from the checkout."""
+    if not (REPO / "pyproject.toml").is_file():
+        pytest.skip("not a source checkout: no wheel to build")
+    out = tmp_path_factory.mktemp("dist")
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(out), str(REPO)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    (whl,) = out.glob("accelnav-*.whl")
+    site = tmp_path_factory.mktemp("site")
+    with zipfile.ZipFile(whl) as z:
+        z.extractall(site)
+        names = z.namelist()
+    return whl, names, site

@@ -8,10 +8,6 @@ import numpy as np
 import pytest
 
 from accelnav.cli import main
-from accelnav.cli.calibrate import steps_and_noise
-from accelnav.model.design import input_conversion
-from accelnav.model.load import DEFAULT_MODEL, G0, load_model
-from accelnav.model.edit import revalidate, with_axis_bias, with_noise
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.sim.trajectories import (
     TUMBLE_ANY_MIN_TURN_DEG,
@@ -22,6 +18,10 @@ from accelnav.hil_sim.sim.trajectories import (
     tumble_specific_force,
 )
 from accelnav.identify.calibrate import GRAVITY, CalibrationError, calibrate, detect_poses, fit_axes, native
+from accelnav.identify.calibration import steps_and_noise
+from accelnav.model.design import input_conversion
+from accelnav.model.edit import revalidate, with_axis_bias, with_noise
+from accelnav.model.load import DEFAULT_MODEL, G0, load_model
 
 POSE_S = TUMBLE_HOLD_S + TUMBLE_TURN_S
 

@@ -13,11 +13,11 @@ import pytest
 from conftest import MODELS, SHARED_DATA
 
 from accelnav.cli import main
-from accelnav.cli.fit_bias import analyse_axis
-from accelnav.model.load import DEFAULT_MODEL, G0, ModelError, load_model, loads_model
-from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
 from accelnav.data.recording import read_recording
 from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.identify.characterise import analyse_axis
+from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
+from accelnav.model.load import DEFAULT_MODEL, G0, ModelError, load_model, loads_model
 
 ADIS = SHARED_DATA / "adis16405_stationary" / "adis_16405_imu1.csv.gz"
 

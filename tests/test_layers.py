@@ -21,6 +21,7 @@ ROOT = Path(accelnav.__file__).parent  # host/ in a checkout, accelnav/ in a whe
 LAYERS = {
     "accelnav.cli": 7,
     "accelnav.__main__": 7,
+    "accelnav.api": 6,  # the library's face: calls into every stage below, imported only by accelnav/__init__
     "accelnav.plots": 6,
     "accelnav.identify": 5,
     "accelnav.hil_sim.targets": 5,

@@ -14,13 +14,13 @@ import re
 import shutil
 import subprocess
 import sys
-import zipfile
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = (
+    "accelnav/py.typed",  # the public API is typed (PEP 561)
     "accelnav/models/adxl250_default.toml",
     "accelnav/models/adxl202_duty.toml",
     "accelnav/firmware/firmware.mk",
@@ -40,26 +40,6 @@ DATA = (
 )
 # the C kernels compiled into the wheel (setup.py's cffi_modules): used with no C compiler on the machine
 KERNELS = ("accelnav.estimate._fastsmooth", "accelnav.codegen._riccati", "accelnav.link._acnwire")
-
-
-@pytest.fixture(scope="module")
-def wheel(tmp_path_factory):
-    if not (REPO / "pyproject.toml").is_file():
-        pytest.skip("not a source checkout: no wheel to build")
-    out = tmp_path_factory.mktemp("dist")
-    done = subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(out), str(REPO)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert done.returncode == 0, done.stderr[-3000:]
-    (whl,) = out.glob("accelnav-*.whl")
-    site = tmp_path_factory.mktemp("site")
-    with zipfile.ZipFile(whl) as z:
-        z.extractall(site)
-        names = z.namelist()
-    return whl, names, site
 
 
 def test_wheel_has_one_top_level_name_and_its_data(wheel):

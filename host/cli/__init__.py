@@ -16,6 +16,7 @@ import importlib
 import sys
 
 from accelnav.errors import UserError
+from accelnav.progress import set_verbosity
 
 # command -> (module that registers it, its line in `accelnav --help`), in the order the help lists them
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -51,6 +52,12 @@ def build_parser(command: str | None = ALL) -> argparse.ArgumentParser:
         prog="accelnav",
         description="Short-duration position from a cheap accelerometer: simulate, fit, filter, smooth.",
     )
+    from accelnav import __version__
+
+    parser.add_argument("--version", action="version", version=f"accelnav {__version__}")
+    talk = parser.add_mutually_exclusive_group()
+    talk.add_argument("-v", "--verbose", action="store_true", help="progress bars even when stderr is not a terminal")
+    talk.add_argument("-q", "--quiet", action="store_true", help="no notes and no progress, only results and errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     chosen = {module for name, (module, _) in COMMANDS.items() if command in (name, ALL)}
     for module_name in dict.fromkeys(module for module, _ in COMMANDS.values()):
@@ -78,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_of(argv))
     args = parser.parse_args(argv)
+    set_verbosity(2 if args.verbose else 0 if args.quiet else 1)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

@@ -22,22 +22,13 @@ Cross-axis terms are reported, not written: the model file has no key for them.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 from pathlib import Path
 
-import numpy as np
-
-from accelnav.data.recording import read_recording
-from accelnav.errors import UserError
-from accelnav.fileio import write_text
-from accelnav.identify.calibrate import GRAVITY, Calibration, CalibrationError, calibrate, detect_poses, native
-from accelnav.model.design import input_conversion
-from accelnav.model.edit import dump_model, revalidate
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
-from accelnav.progress import Progress
-
-MAX_SAMPLES = 10_000_000  # about 28 h at 100 Hz; the pose search holds a few copies of the samples
+from accelnav.identify.calibrate import GRAVITY, Calibration
+from accelnav.identify.calibration import calibrate_recording
+from accelnav.model.edit import save_model
+from accelnav.model.load import DEFAULT_MODEL, G0
 
 
 def register(sub) -> None:
@@ -86,75 +77,22 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_calibrate)
 
 
-def _base_model(path: Path | None, model_toml: str | None, source: str) -> tuple[Model, str]:
-    if path is not None:
-        return load_model(path), str(path)
-    if model_toml is not None:
-        return loads_model(model_toml, source=f"{source}:model_toml"), f"the model embedded in {source}"
-    return load_model(DEFAULT_MODEL), f"the embedded default {DEFAULT_MODEL.name}"
-
-
-def steps_and_noise(model: Model) -> tuple[np.ndarray, float]:
-    """Read-out step per model axis [m/s^2] and the analog noise sd in front of it [m/s^2]."""
-    steps = []
-    for i in range(len(model.axes)):
-        conv = input_conversion(model, i)
-        if model.sensor.kind == "analog":
-            steps.append(conv.scale)
-        else:
-            steps.append(G0 / (model.sensor.duty_cycle.t2_counts * model.axes[i].sensitivity))
-    s = model.sensor
-    noise = s.noise_density_g_rthz * G0 * math.sqrt(math.pi / 2.0 * s.bandwidth_hz)
-    return np.array(steps), noise
-
-
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    if args.min_pose <= 0:
-        raise UserError(f"--min-pose: got {args.min_pose:g}; accepted: seconds > 0")
-    if args.since_power_on is not None and args.since_power_on < 0:
-        raise UserError(f"--since-power-on: got {args.since_power_on:g}; accepted: seconds >= 0")
-    rec = read_recording(
+    run = calibrate_recording(
         args.recording,
-        axes=None,
+        args.model,
         unit=args.unit,
         rate_hz=args.rate,
         time_column=args.time_column,
         time_unit=args.time_unit,
+        min_pose_s=args.min_pose,
+        since_power_on=args.since_power_on,
+        cross=not args.no_cross,
     )
-    for note in rec.notes:
-        print(note)
-    if rec.n > MAX_SAMPLES:
-        raise UserError(f"{rec.source}: {rec.n} samples; accepted: at most {MAX_SAMPLES} (cut the recording)")
-    model, label = _base_model(args.model, rec.model_toml, rec.source)
+    rec, cal, model, out_model, label = run.recording, run.calibration, run.base, run.model, run.base_label
     names = tuple(a.name for a in model.axes)
-    missing = [n for n in names if n not in rec.axis_names]
-    if missing:
-        raise UserError(
-            f"{rec.source}: the model's axes {', '.join(names)} must all be in the recording; missing "
-            f"{', '.join(missing)} (the recording has {', '.join(rec.axis_names)})"
-        )
-    acc = np.column_stack([rec.axis(n) for n in names])
-    bad = ~np.isfinite(acc)
-    if bad.any():
-        k = int(np.argmax(bad.any(axis=1)))
-        raise UserError(f"{rec.source}: samples that are not numbers, the first at sample {k} (t = {rec.t[k]:.6g} s)")
-    steps, noise = steps_and_noise(model)
-    print(
-        f"{rec.source}: {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s); model axes {', '.join(names)}"
-    )
-    try:
-        with Progress("poses", total=2, unit="stages") as p:
-            poses = detect_poses(acc, rec.rate_hz, steps=steps, noise_sd=noise, min_pose_s=args.min_pose)
-            p.update(1)
-            cal = calibrate(poses, names, cross=not args.no_cross)
-            p.update(2)
-    except CalibrationError as exc:
-        raise UserError(f"{rec.source}: {exc}") from None
     print("\n".join(report(cal, names)))
-    out_model = apply(model, cal, args.since_power_on)
-    text = dump_model(out_model, header=provenance(rec, cal, label))
-    loads_model(text, source=str(args.out))
-    write_text(args.out, text)  # whole or not at all
+    save_model(args.out, out_model, header=provenance(rec, cal, label))  # whole or not at all
     unit_z, unit_s = ("V", "V/g") if model.sensor.kind == "analog" else ("duty", "duty/g")
     print(f"model written to {args.out} (from {label}):")
     for old, new in zip(model.axes, out_model.axes, strict=True):
@@ -164,21 +102,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "(zero at the calibration: its offset is now in zero_g)"
         )
     return 0
-
-
-def apply(model: Model, cal: Calibration, since_power_on: float | None) -> Model:
-    axes = []
-    for ax in model.axes:
-        c = next(a for a in cal.axes if a.name == ax.name)
-        zero, sens = native(ax, c.offset, c.scale)
-        settled = 1.0 if since_power_on is None else -math.expm1(-since_power_on / ax.T)
-        axes.append(
-            dataclasses.replace(ax, zero_g=float(f"{zero:.9g}"), sensitivity=float(f"{sens:.9g}"), c2=-ax.c1 * settled)
-        )
-    try:
-        return revalidate(dataclasses.replace(model, axes=tuple(axes)))
-    except Exception as exc:  # a calibration far outside the part's read-out span
-        raise UserError(f"the calibrated model is not valid: {exc}") from None
 
 
 def _ci(ci) -> str:

@@ -7,7 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.runfile import FORMAT, STATE, export_csv, load_run, save_run, state_sd
+from accelnav.api import simulate
+from accelnav.data.inputs import read_input
+from accelnav.data.runfile import FORMAT, STATE, export_csv, save_run, state_sd
 from accelnav.errors import UserError
 from accelnav.estimate.chunked import memory_available, whole_bytes
 from accelnav.estimate.pipeline import (
@@ -19,8 +21,8 @@ from accelnav.estimate.pipeline import (
     stride_table,
 )
 from accelnav.estimate.zupt import ZuptParams
-from accelnav.fileio import check_input, check_output, write_text
-from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model
+from accelnav.fileio import check_output, write_text
+from accelnav.model.load import DEFAULT_MODEL, Model, load_model
 
 TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
 TUNE_SECONDS = 60.0
@@ -253,128 +255,6 @@ def require_scenario(name: str) -> None:
         raise UserError(f"--scenario: unknown scenario {name!r}; accepted: {', '.join(SCENARIOS)}")
 
 
-def _simulate(model: Model, scenario: str, duration: float, seed: int) -> dict[str, np.ndarray]:
-    from accelnav.hil_sim.sim.sensor import simulate
-
-    require_scenario(scenario)
-    try:
-        run = simulate(model, scenario, duration, seed)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
-    return run.to_arrays()
-
-
-def _load(args) -> tuple[dict[str, np.ndarray], Model]:
-    """The input of filter and smooth, whatever its form, checked against the model (see INPUT_HELP)."""
-    from accelnav.data.recording import check_rate, on_grid, read_recording
-    from accelnav.link.logfile import is_log
-
-    path = check_input(args.run)  # what it is, when not a readable file (a FIFO is refused before a read)
-    for flag in ("out", "csv"):  # an output that cannot be written is refused before the work
-        if getattr(args, flag, None) is not None:
-            check_output(getattr(args, flag), f"--{flag}")
-    override = load_model(args.model) if args.model is not None else None
-    if is_log(path):
-        from accelnav.cli.record import log_run_arrays
-
-        arrays, model = log_run_arrays(path)
-        return _with_model(path, arrays, model, override, args)
-    with open(path, "rb") as fh:
-        zipped = fh.read(2) == b"PK"  # an NPZ, whatever its name
-    if (zipped or path.suffix.lower() == ".npz") and not _is_recording_npz(path):
-        arrays, model = load_run(path)
-        return _with_model(path, arrays, model, override, args)
-    # a recording: CSV, gzip CSV, or an NPZ of t and accel
-    model = override
-    unit = args.unit
-    if unit is None and model is not None and model.sensor.kind == "calibrated":
-        unit = model.sensor.calibrated.unit
-    rec = read_recording(
-        path,
-        axes=args.axis,
-        unit=unit,
-        rate_hz=args.rate,
-        time_column=args.time_column,
-        allow_gaps=args.allow_gaps,
-        time_unit=args.time_unit,
-    )
-    for note in rec.notes:
-        print(note)
-    if model is None:
-        model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
-    check_rate(rec, model.rate_hz, str(model.source))
-    names = [a.name for a in model.axes]
-    if len(rec.axis_names) != len(names):
-        raise UserError(
-            f"{path}: {len(rec.axis_names)} axes ({', '.join(rec.columns)}) for the model's {len(names)} "
-            f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
-        )
-    bad = ~np.isfinite(rec.accel)
-    if bad.any():
-        k = int(np.argmax(bad.any(axis=1)))
-        raise UserError(f"{path}: {rec.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
-    # ranges.max_run_s bounds the fixed-point C's range proof, not these float64 tools: the bound here is the
-    # memory that the filled-in input arrays (t, accel, clipped, twice while filling) take
-    max_n = memory_available() // (2 * (8 + 9 * len(names)) + 1)
-    limit = "the input arrays this machine's free memory holds number at most"
-    t, accel, missing = on_grid(rec, rec.rate_hz, max_n, limit)  # its own clock: within 1 % of the model by now
-    # at the sensor's declared full scale a sample is clipped (as a digital part saturates); missing ones too
-    with np.errstate(invalid="ignore"):
-        clipped = np.abs(accel) >= model.max_accel_m_s2 * (1 - 1e-9)
-    clipped |= missing[:, None]
-    if rec.clipped is not None and not missing.any():
-        clipped |= rec.clipped
-    if missing.any():
-        print(f"{path}: {int(missing.sum())} missing samples filled in (predict only)")
-    if len(rec.axis_names) and list(rec.axis_names) != names:
-        print(f"{path}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
-    arrays = {"t": t, "axis_names": np.array(names), "accel": accel, "clipped": clipped}
-    return arrays, model
-
-
-def _is_recording_npz(path: Path) -> bool:
-    """An NPZ of t and accel without the run file's format key (else it is read, and refused, as a run file)."""
-    import zipfile
-
-    try:
-        with zipfile.ZipFile(path) as z:
-            names = z.namelist()
-    except (OSError, zipfile.BadZipFile):
-        return False
-    return "accel.npy" in names and "format.npy" not in names
-
-
-def _with_model(path, arrays, model: Model, override: Model | None, args) -> tuple[dict[str, np.ndarray], Model]:
-    from accelnav.data.recording import GAP_FACTOR
-
-    for flag in ("axis", "time_column", "rate", "unit", "time_unit"):
-        if getattr(args, flag) not in (None, []):
-            raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
-    if override is not None:
-        if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:
-            raise UserError(
-                f"{args.model}: axes {[a.name for a in override.axes]} do not match the run's "
-                f"{[str(a) for a in arrays['axis_names']]}"
-            )
-        model = override
-    t = arrays["t"]
-    if len(t) > 2:
-        dt = np.diff(t)
-        step = float(np.median(dt))
-        if abs(step * model.rate_hz - 1) > 0.01:
-            raise UserError(
-                f"{path}: the run is sampled at {1 / step:.6g} Hz but the model {model.source} has "
-                f"sampling.rate_hz = {model.rate_hz:g} Hz"
-            )
-        if np.any(dt > GAP_FACTOR * step):
-            k = int(np.argmax(dt > GAP_FACTOR * step))
-            raise UserError(
-                f"{path}: gap in time of {dt[k]:.6g} s after sample {k}; a run file is not filled in "
-                "(--allow-gaps is for CSV and NPZ recordings: export the samples with --csv)"
-            )
-    return arrays, model
-
-
 def _save(args, arrays, model) -> None:
     save_run(args.out, arrays, model, compress=getattr(args, "compress", False))
     print(f"wrote {args.out}")
@@ -401,6 +281,23 @@ def _summary(arrays: dict[str, np.ndarray]) -> str:
     return "\n".join(lines)
 
 
+def read_args(args) -> tuple[dict[str, np.ndarray], Model]:
+    """read_input with the command's flags; outputs that cannot be written are refused before the work."""
+    for flag in ("out", "csv"):
+        if getattr(args, flag, None) is not None:
+            check_output(getattr(args, flag), f"--{flag}")
+    return read_input(
+        args.run,
+        args.model,
+        axes=args.axis,
+        time_column=args.time_column,
+        rate_hz=args.rate,
+        time_unit=args.time_unit,
+        unit=args.unit,
+        allow_gaps=args.allow_gaps,
+    )
+
+
 def cmd_sim(args) -> int:
     if args.list_scenarios:
         from accelnav.hil_sim.sim.trajectories import ALL_SCENARIOS as SCENARIOS
@@ -410,14 +307,15 @@ def cmd_sim(args) -> int:
     if args.out is None:
         raise UserError("--out: a run file to write is required")
     model = load_model(args.model)
-    arrays = _simulate(model, args.scenario, args.duration, args.seed)
+    require_scenario(args.scenario)
+    arrays = simulate(model, args.scenario, args.duration, args.seed)
     print(_summary(arrays))
     _save(args, arrays, model)
     return 0
 
 
 def cmd_filter(args) -> int:
-    arrays, model = _load(args)
+    arrays, model = read_args(args)
     arrays = filter_run(arrays, model, covariances=args.covariances)
     print(_summary(arrays))
     rows = position_errors(arrays, model)
@@ -449,7 +347,7 @@ def cmd_smooth(args) -> int:
     from accelnav.estimate import zupt
     from accelnav.estimate.fixes import read_fixes
 
-    arrays, model = _load(args)
+    arrays, model = read_args(args)
     budget = _memory_budget(args.memory_budget)
     bounded = whole_bytes(*arrays["accel"].shape) > budget
     if bounded:  # what the bounded path cannot do is refused before any work
@@ -596,8 +494,7 @@ def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) ->
     """smooth --tune: the model with the maximum-likelihood noise figures of this recording, in a stated budget."""
     import time
 
-    from accelnav.estimate import zupt
-    from accelnav.estimate.tune import FIGURES, tune, with_figures
+    from accelnav.estimate.tune import FIGURES, aid_measurements, tune, with_figures
 
     if args.tune_evaluations < 10:
         raise UserError(f"--tune-evaluations: got {args.tune_evaluations}; accepted: 10 or more")
@@ -605,12 +502,7 @@ def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) ->
         raise UserError(f"--tune-seconds: got {args.tune_seconds:g}; accepted: a time > 0 s")
     accel = np.asarray(arrays["accel"], dtype=np.float64)
     n, m = accel.shape
-    extras = [list(fixes[j]) if fixes is not None else [] for j in range(m)]
-    if rest is not None:
-        r2 = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, m))
-        for j in range(m):
-            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
-            extras[j] += zupt.axis_updates(r2[:, j], sigma, model, params)[1]
+    extras, _ = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
     print(
         f"tune: fitting {', '.join(FIGURES)} to {n} samples x {m} axes with {sum(map(len, extras))} aids; budget "
         f"{args.tune_evaluations} evaluations, {args.tune_seconds:g} s"

@@ -22,11 +22,9 @@ import shutil
 import time
 from pathlib import Path
 
-import numpy as np
-
-from accelnav.model.design import input_conversion
-from accelnav.model.load import DEFAULT_MODEL, Model, load_model
+from accelnav.data.logs import decoded_run
 from accelnav.errors import UserError
+from accelnav.model.load import DEFAULT_MODEL, load_model
 
 
 def register(sub) -> None:
@@ -80,45 +78,15 @@ def _pil_wanted(mode: str) -> tuple[bool, str]:
     return True, ""
 
 
-def decoded_run(fitted: Model, run, telemetry: bytes) -> dict[str, np.ndarray]:
-    """Run-file arrays from the firmware's sample frames (raw input, skip flags) plus the simulated truth."""
-    from accelnav.hil_sim.targets.firmware import manifest
-    from accelnav.link.telemetry import decode_all, replay_for, sample_columns
-
-    man = manifest(fitted.source)
-    frames, stats = decode_all(man, telemetry, replay_for(man, fitted))  # compact frames: the firmware's C replayed
-    cols = sample_columns(man, frames["sample"])
-    if stats.lost or len(cols["t"]) != len(run.t):
-        raise UserError(f"telemetry: {len(cols['t'])} sample frames for {len(run.t)} samples, {stats.lost} lost")
-    raw = [cols[k] for k in man.raw_fields()]
-    skipped = (cols["axis_flags"] >> man.data["axis_flags"]["skipped"]) & 1
-    arrays = {
-        "t": cols["t"],
-        "axis_names": np.array(run.axis_names),
-        "accel": np.column_stack(
-            [input_conversion(fitted, j).accel(*(r[:, j] for r in raw)) for j in range(len(run.axis_names))]
-        ),
-        "clipped": skipped.astype(bool),
-        "fw_x": np.stack(
-            [np.column_stack([cols[k][:, j] for k in ("r", "u", "a", "eps")]) for j in range(raw[0].shape[1])]
-        ),
-    }
-    for k, r in zip(man.raw_fields(), raw, strict=True):
-        arrays[k] = r.astype(np.int32)
-    for key in ("r", "u", "a", "eps"):
-        arrays[key] = getattr(run, key)
-    return arrays
-
-
 def cmd_demo(args) -> int:
     from accelnav.cli.core import require_scenario
     from accelnav.data.runfile import save_run
     from accelnav.estimate.pipeline import dead_reckoning, error_rows, format_errors, smooth_run
     from accelnav.estimate.zupt import rest_mask
+    from accelnav.hil_sim.sim.sensor import simulate
     from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
     from accelnav.hil_sim.targets.qemu import QemuError
-    from accelnav.hil_sim.sim.sensor import simulate
     from accelnav.plots.run import plot_smoothing
 
     true_model = load_model(args.model)
@@ -180,10 +148,10 @@ def cmd_demo(args) -> int:
         print(f"    ({pil_note})")
 
     with steps.step("decode the telemetry, filter and smooth with automatic zero-velocity updates"):
-        arrays = decoded_run(fitted, run, pil if pil is not None else sil)
+        arrays = decoded_run(fitted, run, pil if pil is not None else sil, manifest(fitted.source))
         rest = rest_mask(arrays["accel"], arrays["clipped"], fitted)
         arrays = smooth_run(arrays, fitted, rest=rest)
-        plain_only = smooth_run(decoded_run(fitted, run, sil), fitted)
+        plain_only = smooth_run(decoded_run(fitted, run, sil, manifest(fitted.source)), fitted)
         save_run(out / "run.npz", arrays, fitted)
         figures = plot_smoothing(arrays, fitted, out)
 

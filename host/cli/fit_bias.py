@@ -27,19 +27,15 @@ default) with the fitted axes merged in and the noise figures replaced:
 from __future__ import annotations
 
 import argparse
-import dataclasses
-from dataclasses import dataclass
 from pathlib import Path
 
-from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, read_recording
-from accelnav.errors import UserError
-from accelnav.fileio import check_output, write_text
-from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
-from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO, BandCheck, Composite, check_band, fit_composite
-from accelnav.identify.noiseid import NoiseId, identify_noise
-from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
-from accelnav.model.edit import dump_model, revalidate, with_axis_bias, with_noise
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model, model_name_from
+from accelnav.data.recording import MIN_DURATION_S, Recording
+from accelnav.fileio import check_output
+from accelnav.identify.characterise import AxisResult, characterise
+from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO
+from accelnav.identify.whiteness import DEFAULT_LB_LAGS
+from accelnav.model.edit import save_model
+from accelnav.model.load import DEFAULT_MODEL, G0, Model
 from accelnav.progress import Progress
 
 
@@ -114,108 +110,28 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_fit_bias)
 
 
-@dataclass(frozen=True, eq=False)
-class AxisResult:
-    name: str
-    column: str
-    unit: str
-    fit: BiasFit
-    white: Whiteness
-    noise: NoiseId
-    composite: Composite
-    check: BandCheck | None = None
-
-
-def analyse_axis(
-    rec: Recording,
-    axis: str,
-    *,
-    min_duration_s: float,
-    full_scale: float | None,
-    lags: int,
-    sensor_range: tuple[float, str] | None = None,
-) -> AxisResult:
-    """Check, fit, test and identify one axis of ``rec`` (with progress on stderr)."""
-    y = check_axis(rec, axis, min_duration_s=min_duration_s, full_scale=full_scale, sensor_range=sensor_range)
-    j = rec.column(axis)
-    name = rec.axis_names[j]
-    try:
-        with Progress(f"fit {name}", total=4, unit="stages") as p:
-            fit = fit_bias(rec.t, y, progress=p)
-    except FitError as exc:
-        raise UserError(f"{rec.source}: axis {name!r}: {exc}") from None
-    with Progress(f"white {name}", total=1, unit="tests") as p:
-        white = whiteness(fit.residuals, lb_lags=lags)
-        p.update(1)
-    with Progress(f"allan {name}", total=1, unit="taus") as p:
-        noise = identify_noise(fit.residuals, rec.rate_hz, progress=p)
-    with Progress(f"noise model {name}", total=1, unit="fits") as p:
-        try:
-            comp = fit_composite(noise.curve, 1.0 / rec.rate_hz)
-        except ValueError as exc:
-            raise UserError(f"{rec.source}: axis {name!r}: composite noise model: {exc}") from None
-        p.update(1)
-    return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise, comp)
-
-
-def _read(args: argparse.Namespace) -> Recording:
-    """The recording: a CSV, gzip CSV or NPZ through the checked reader, or a recorder log read directly."""
-    from accelnav.link.logfile import is_log
-
-    path = args.recording
-    if is_log(path):  # else read_recording says what is wrong with the path, if anything
-        from accelnav.cli.record import log_run_arrays
-        from accelnav.data.recording import from_arrays
-
-        for flag in ("unit", "rate", "time_column", "time_unit"):
-            if getattr(args, flag) is not None:
-                raise UserError(f"--{flag.replace('_', '-')}: not for a recorder log, which says its own")
-        arrays, _ = log_run_arrays(path)
-        return from_arrays(str(path), arrays, args.axis)
-    rec = read_recording(
-        path, axes=args.axis, unit=args.unit, rate_hz=args.rate, time_column=args.time_column, time_unit=args.time_unit
-    )
-    for note in rec.notes:
-        print(note)
-    return rec
-
-
 def cmd_fit_bias(args: argparse.Namespace) -> int:
-    if args.lags < 1:
-        raise UserError(f"--lags: got {args.lags}; accepted: a positive number of lags")
-    lo, hi = args.noise_band
-    if not (0 < lo < hi):
-        raise UserError(f"--noise-band: got {lo:g} {hi:g}; accepted: two times in s, 0 < LO < HI")
     check_output(args.out)  # a directory named as the model to write is refused before the work
-    rec = _read(args)
-    base, base_label, given = _base_model(args.model, rec)
-    full_scale = base.max_accel_m_s2 if given else None
-    if given:  # the model keeps its rate: the recording must have it (the check filter and smooth make)
-        check_rate(rec, base.rate_hz, base_label)
-
-    print(
-        f"{rec.source}: {rec.n} samples at {rec.rate_hz:.6g} Hz ({rec.duration:.6g} s), "
-        f"axes {', '.join(rec.axis_names)}"
+    ch = characterise(
+        args.recording,
+        args.model,
+        axes=args.axis,
+        unit=args.unit,
+        rate_hz=args.rate,
+        time_column=args.time_column,
+        time_unit=args.time_unit,
+        min_duration_s=args.min_duration,
+        sigma_n=args.sigma_n,
+        noise_band=tuple(args.noise_band),
+        lags=args.lags,
     )
-    sensor_range = (base.max_accel_m_s2, f"the sensor of {base_label}")  # the range the written model claims
-    results = [
-        analyse_axis(
-            rec, a, min_duration_s=args.min_duration, full_scale=full_scale, lags=args.lags, sensor_range=sensor_range
-        )
-        for a in rec.axis_names
-    ]
-    model = merge(base, rec, results, sigma_n=args.sigma_n, keep_rate=given)
-    results, model = check_noise_band(model, rec, results, tuple(args.noise_band))
+    model, rec, results = ch.model, ch.recording, ch.axes
     for r in results:
         print()
         print("\n".join(axis_report(r)))
-
-    header = provenance(rec, results, base_label)
-    text = dump_model(model, header=header)
-    loads_model(text, source=str(args.out))  # a result the loader refuses is not written
-    write_text(args.out, text)  # whole or not at all
+    save_model(args.out, model, header=provenance(rec, results, ch.base_label))  # whole or not at all
     print()
-    print("\n".join(model_report(model, base, base_label, rec, results, args.sigma_n, args.out)))
+    print("\n".join(model_report(model, ch.base, ch.base_label, rec, results, args.sigma_n, args.out)))
 
     if args.plots is not None:
         from accelnav.plots.biasfit import plot_all
@@ -230,84 +146,6 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
                 p.update(i + 1)
         print(f"figures: {', '.join(str(p) for p in paths)}")
     return 0
-
-
-def _base_model(path: Path | None, rec: Recording) -> tuple[Model, str, bool]:
-    """(model, how to name it, whether it describes this sensor)."""
-    if path is not None:
-        return load_model(path), str(path), True
-    if rec.model_toml is not None:
-        return (
-            loads_model(rec.model_toml, source=f"{rec.source}:model_toml"),
-            f"the model embedded in {rec.source}",
-            True,
-        )
-    return load_model(DEFAULT_MODEL), f"the embedded default {DEFAULT_MODEL.name}", False
-
-
-def _sig(x: float, digits: int = 6) -> float:
-    return float(f"{x:.{digits}g}")
-
-
-def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: str, keep_rate: bool) -> Model:
-    """The base model with the fitted axes and noise figures merged in (see the module notes)."""
-    model = base
-    if not keep_rate:
-        model = dataclasses.replace(model, rate_hz=_sig(rec.rate_hz, 9))
-        stem = Path(rec.source).name.split(".")[0]
-        model = dataclasses.replace(
-            model,
-            name=model_name_from(f"{stem}_fit"),  # a file name may hold what the name rule refuses
-            description=f"bias and noise fitted from {Path(rec.source).name} by accelnav fit-bias; "
-            f"sensor, ranges and filter from {base.name}",
-        )
-    names = [a.name for a in model.axes]
-    for r in results:
-        f = r.fit
-        if f.T_identified:
-            c1, c2, T = f.c1, f.c2, f.T
-        else:
-            T = model.axis(r.name).T if r.name in names else float(round(rec.duration))
-            c1, c2 = 0.0, f.c2
-        if not r.name.isidentifier():
-            raise UserError(f"axis name {r.name!r} cannot name a model axis (it must be a C identifier); use --axis")
-        model = with_axis_bias(model, r.name, _sig(c1), _sig(c2), _sig(T))
-    Ts = model.Ts
-    R = max(r.noise.R(Ts) for r in results)
-    sigma_eps = max(r.noise.sigma_eps for r in results)
-    values = {"R": _sig(R), "sigma_eps": _sig(sigma_eps)}
-    if sigma_n == "paper":
-        values["sigma_n"] = _sig(max(r.noise.sigma_n_paper for r in results))
-    model = with_noise(model, **values)
-    if len(model.axes) > 3:
-        raise UserError(
-            f"the model would have {len(model.axes)} axes ({', '.join(a.name for a in model.axes)}); "
-            "accepted: 1 to 3; choose axes with --axis"
-        )
-    return revalidate(model)
-
-
-def check_noise_band(model: Model, rec: Recording, results: list[AxisResult], band: tuple[float, float]):
-    """Check each axis's composite noise against the merged model's noise over ``band``; raise R where needed."""
-    out = []
-    for r in results:
-        try:
-            chk = check_band(
-                r.noise.curve,
-                r.composite,
-                R=model.noise.R,
-                Ts_filter=model.Ts,
-                sigma_eps=model.noise.sigma_eps,
-                T_bias=model.axis(r.name).T,
-                band=band,
-            )
-        except ValueError as exc:
-            raise UserError(f"{rec.source}: axis {r.name!r}: --noise-band: {exc}") from None
-        out.append(dataclasses.replace(r, check=chk))
-    R = max(r.check.R_chosen for r in out)
-    if R > model.noise.R:
-        model = revalidate(with_noise(model, R=_sig(R)))
-    return out, model
 
 
 def composite_table(r: AxisResult) -> list[str]:

@@ -4,10 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from accelnav.errors import UserError
-from accelnav.fileio import atomic_output
 from accelnav.hil_sim.targets.qemu import MACHINES
 from accelnav.hil_sim.targets.simavr import BOARDS as AVR_BOARDS
 from accelnav.model.load import DEFAULT_MODEL, load_model
@@ -75,40 +72,8 @@ def cmd_hil(args) -> int:
     c = hil.compare(model, run, sil, pil)
     print(hil.format_comparison(c))
     if args.plots is not None:
+        from accelnav.plots.hil import plot_hil
+
         path = plot_hil(run, c, args.plots / "hil.png", f"accelnav hil ({args.target}): {model.name}, {args.scenario}")
         print(f"wrote {path}")
     return 0 if c.pil_equal_sil in (None, True) and c.max_of_bound <= 1.0 else 1
-
-
-def plot_hil(run, c, path: Path, title: str) -> Path:
-    from accelnav.plots.run import _pyplot
-
-    plt = _pyplot()
-    t = run.t
-    n_axes = len(run.axis_names)
-    fig, axes = plt.subplots(2, n_axes, figsize=(6.5 * n_axes, 7), sharex=True, squeeze=False)
-    for j, name in enumerate(run.axis_names):
-        ax = axes[0, j]
-        ax.plot(t, run.r[:, j], color="black", lw=1.6, label="truth")
-        ax.plot(t, c.fw["r"][:, j], color="tab:blue", lw=1.2, label="firmware filter")
-        ax.plot(t, c.smooth_x[j, :, 0], color="tab:red", lw=1.0, ls="--", label="smoother")
-        ax.plot(t, c.zupt_x[j, :, 0], color="tab:green", lw=1.2, label="smoother + ZUPT")
-        ax.set_ylabel("position r [m]")
-        ax.set_title(f"axis {name}")
-        ax.grid(True, alpha=0.3)
-        ax = axes[1, j]
-        for i, key in enumerate(("r", "u", "a", "eps")):
-            sd = c.ref_sd[j, :, i]
-            e = np.abs(c.fw[key][:, j] - c.ref_x[j, :, i]) / np.where(sd > 0, sd, np.inf)  # r, u known at k = 0
-            ax.semilogy(t, np.maximum(e, 1e-12), lw=0.8, label=key)
-        ax.set_ylabel("|firmware - float64| / sigma")
-        ax.set_xlabel("time [s]")
-        ax.grid(True, alpha=0.3, which="both")
-    axes[0, 0].legend(fontsize=8)
-    axes[1, 0].legend(fontsize=8, ncol=4)
-    fig.suptitle(title)
-    fig.tight_layout()
-    with atomic_output(path, flag="--plots") as fh:  # a plot appears whole or not at all
-        fig.savefig(fh, format="png", dpi=110)
-    plt.close(fig)
-    return path

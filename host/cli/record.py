@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from accelnav.data.logs import _decoded, log_run_arrays, log_summary
 from accelnav.errors import UserError
 from accelnav.fileio import atomic_output, check_output
 
@@ -128,48 +129,8 @@ def cmd_record(args) -> int:
     return 1 if res.reason.startswith(("link lost", "log write failed")) else 0
 
 
-def _summary(path: Path, model_text: str = "") -> dict:
-    from accelnav.link.logfile import LogError
-    from accelnav.link.recorder import decode_log
-    from accelnav.link.telemetry import format_counts, link_counts
-
-    try:
-        d = decode_log(path, model_text, rows=False)  # streamed: memory does not grow with the log
-    except LogError as exc:
-        raise UserError(str(exc)) from None
-    s = d.frames["sample"]
-    man = d.manifest
-    out = {
-        "log": str(path),
-        "source": d.meta.get("source"),
-        "started_utc": d.meta.get("started_utc"),
-        "model": man.data.get("model"),
-        "model_sha256": man.model_sha256,
-        "layout_hash": f"0x{man.layout_hash:08x}",
-        "axes": man.axes,
-        "input": man.input,
-        "rate_hz": man.rate_hz,
-        "chunks": d.chunks,
-        "damaged_bytes": d.damaged_bytes,
-        "torn_bytes": d.torn_bytes,
-        **d.stats,
-        **link_counts(d.stats),
-        "counts": format_counts(link_counts(d.stats)),
-        "host_seconds": float((d.host_t_ns[-1] - d.host_t_ns[0]) / 1e9) if len(s) else 0.0,
-        "index_first": int(s["index"][0]) if len(s) else None,
-        "index_last": int(s["index"][-1]) if len(s) else None,
-        "tx_drop_last": int(s["tx_drop"][-1]) if len(s) else None,
-        "warnings": d.warnings,
-    }
-    if len(d.frames["info"]):
-        info = d.frames["info"][-1]
-        out["device_layout_ok"] = int(info["layout_hash"]) == man.layout_hash
-        out["device_decimation"] = int(info["decimation"])
-    return out
-
-
 def cmd_log_info(args) -> int:
-    summary = _summary(args.log, _model_text(args))
+    summary = log_summary(args.log, _model_text(args))
     if args.json:
         print(json.dumps(summary, indent=1))
         return 0
@@ -236,67 +197,3 @@ def _compact_counts(stats: dict) -> str:
     if stats["unreplayed"]:
         text += f", {stats['unreplayed']} samples unreplayed (no model text)"
     return text
-
-
-def _decoded(log, model_text: str):
-    """The decoded log, refused in one line when it holds no sample frame (every command on it needs one)."""
-    from accelnav.link.logfile import LogError
-    from accelnav.link.recorder import decode_log
-
-    try:
-        d = decode_log(log, model_text)
-    except LogError as exc:
-        raise UserError(str(exc)) from None
-    if not len(d.frames["sample"]):
-        raise UserError(
-            f"{log}: 0 sample frames in {d.chunks} chunks ({d.stats['bytes']} bytes): a silent device or a "
-            "recording stopped at once; nothing to process"
-        )
-    return d
-
-
-def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndarray], object]:
-    """A recorder log as the arrays of an accelnav run file (and its model); what ``log export`` writes."""
-    from accelnav.data.runfile import FORMAT
-    from accelnav.link.telemetry import sample_columns
-    from accelnav.model.design import input_conversion
-    from accelnav.model.load import ModelError, loads_model
-
-    if d is None:
-        d = _decoded(log, model_text)
-    cols = sample_columns(d.manifest, d.frames["sample"])
-    names = d.manifest.axes
-    raw = d.manifest.raw_fields()
-    skipped = (cols["axis_flags"] & (1 << d.manifest.axis_flags["skipped"])) != 0
-    text = d.meta.get("model_toml") or model_text
-    if not text:
-        raise UserError(f"{log}: the log carries no model text (recorded with --manifest); export to .csv instead")
-    try:
-        model = loads_model(text, source=f"{log}:model_toml")
-    except ModelError as exc:
-        raise UserError(str(exc)) from None
-    accel = np.empty((len(cols["t"]), len(names)))
-    for j in range(len(names)):
-        conv = input_conversion(model, j)
-        accel[:, j] = (
-            conv.accel(cols["code"][:, j]) if "code" in cols else conv.accel(cols["t1"][:, j], cols["t2"][:, j])
-        )
-    arrays = {
-        "format": np.array(FORMAT),
-        "model_toml": np.array(text),
-        "model_source": np.array(f"{log}:model_toml"),
-        "t": cols["t"],
-        "axis_names": np.array(names),
-        "accel": accel,
-        "clipped": skipped,
-        **{r: cols[r].astype(np.int32) for r in raw},
-        "fw_x": np.stack(
-            [np.stack([cols[s][:, j] for s in ("r", "u", "a", "eps")], axis=1) for j in range(len(names))]
-        ),
-        "fw_index": cols["index"],
-        "fw_seq": cols["seq"],
-        "fw_flags": cols["flags"],
-        "fw_axis_flags": cols["axis_flags"],
-        "host_time_ns": d.host_t_ns,
-    }
-    return arrays, model

@@ -14,13 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.cli.core import INPUT_HELP, _input_args, _load
+from accelnav.cli.core import INPUT_HELP, _input_args, read_args
 from accelnav.errors import UserError
-from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, tune, with_figures
+from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, aid_measurements, tune, with_figures
 from accelnav.estimate.zupt import ZuptParams
-from accelnav.fileio import write_text
-from accelnav.model.edit import dump_model
-from accelnav.model.load import loads_model
+from accelnav.model.edit import save_model
 from accelnav.progress import Progress
 
 MAX_SAMPLES = 500_000  # samples x axes: every likelihood evaluation runs filter and smoother (~340 B per sample)
@@ -77,7 +75,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
         raise UserError(f"--max-evaluations: got {args.max_evaluations}; accepted: 10 or more")
     if args.zupt_sigma <= 0:
         raise UserError(f"--zupt-sigma: got {args.zupt_sigma:g}; accepted: a standard deviation > 0 m/s")
-    arrays, model = _load(args)
+    arrays, model = read_args(args)
     names = [str(a) for a in arrays["axis_names"]]
     accel = np.asarray(arrays["accel"], dtype=np.float64)
     valid = ~np.asarray(arrays["clipped"], dtype=bool)
@@ -87,25 +85,15 @@ def cmd_tune(args: argparse.Namespace) -> int:
             f"{args.run}: {n} samples x {m} axes; accepted: at most {MAX_SAMPLES} (tune runs the filter a few "
             "hundred times: cut the run)"
         )
-    extras = [[] for _ in range(m)]
-    if args.fixes is not None:
-        fixes = read_fixes(args.fixes, arrays["t"], names)
-        for j in range(m):
-            extras[j] += list(fixes[j])
-    n_zupt = [0] * m
+    fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
+    rest = rest_sigma = params = None
     if args.zupt is not None:
         params = zupt.resolved(model, ZuptParams(sigma=args.zupt_sigma))
-        rest_sigma = None
         if args.zupt == "auto":
             rest = zupt.rest_mask(accel, arrays["clipped"], model, params)  # gated once per rest, for every axis
         else:
             rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
-        rest = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, m))
-        for j in range(m):
-            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
-            _, zs = zupt.axis_updates(rest[:, j], sigma, model, params)
-            extras[j] += zs
-            n_zupt[j] = len(zs)
+    extras, n_zupt = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
     n_fix = [len(e) - z for e, z in zip(extras, n_zupt, strict=True)]
     print(
         f"{args.run}: {n} samples, axes {', '.join(names)}; zero-velocity updates per axis "
@@ -122,9 +110,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
             raise UserError(f"{args.run}: {exc}") from None
     print("\n".join(report(result)))
     out_model = with_figures(model, {f: float(f"{v:.6g}") for f, v in result.chosen.items()})
-    text = dump_model(out_model, header=provenance(args, result))
-    loads_model(text, source=str(args.out))
-    write_text(args.out, text)  # whole or not at all
+    save_model(args.out, out_model, header=provenance(args, result))  # whole or not at all
     print(f"model written to {args.out}")
     return 0
 

@@ -123,8 +123,12 @@ def read_recording(
     time_column: str | None = None,
     allow_gaps: bool = False,
     time_unit: str | None = None,
+    default_unit: str | None = None,
 ) -> Recording:
     """Read ``path`` (CSV, gzip CSV or NPZ); see the module notes. Checks the format, not the content.
+
+    ``unit`` is the unit of every acceleration column; without it each column's name says its unit,
+    and ``default_unit`` (a calibrated model's) serves a column whose name does not.
 
     ``allow_gaps`` lets gaps in time through (the caller fills them, see :func:`on_grid`). ``time_unit``
     (s, ms, us) is the time column's unit when its name does not say it. ``rate_hz`` with a time column
@@ -142,9 +146,9 @@ def read_recording(
     if time_unit is not None and time_unit not in TIME_UNITS:
         raise UserError(f"--time-unit: got {time_unit!r}; accepted: {', '.join(TIME_UNITS)}")
     if head.startswith(b"PK"):
-        rec = _read_npz(path, axes, unit, rate_hz)
+        rec = _read_npz(path, axes, unit, rate_hz, default_unit)
     else:
-        rec = _read_csv(path, axes, unit, rate_hz, time_column, gz=head.startswith(b"\x1f\x8b"))
+        rec = _read_csv(path, axes, unit, rate_hz, time_column, gz=head.startswith(b"\x1f\x8b"), default=default_unit)
     if time_unit is not None:
         if rec.time_column is None:
             raise UserError(f"--time-unit: {path} has no time column (its time comes from the rate)")
@@ -160,7 +164,7 @@ def read_recording(
 # --------------------------------------------------------------------------
 
 
-def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
+def _read_npz(path: Path, axes, unit, rate_hz, default_unit=None) -> Recording:
     src = str(path)
     data = load_npz(path, src)  # sizes checked before anything is inflated; no pickles
     if "accel" not in data:
@@ -207,6 +211,8 @@ def _read_npz(path: Path, axes, unit, rate_hz) -> Recording:
         u = parse_unit(unit)
     elif "unit" in data:
         u = parse_unit(str(data["unit"][()]))
+    elif default_unit is not None:
+        u = parse_unit(default_unit)
     accel = accel * UNITS[u]
     cols = names
     if axes:
@@ -302,7 +308,7 @@ def _fields_per_line(text: str, delim: str) -> np.ndarray:
     return np.diff(bounds)
 
 
-def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recording:
+def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: str | None = None) -> Recording:
     """Streamed: the text is parsed piece by piece, only the numbers (and each sample's line) are kept."""
     src = str(path)
     head = None
@@ -328,7 +334,7 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool) -> Recordi
             if not s or s.startswith("#"):
                 continue
             if head is None:
-                head = _header(line, first + i, src, axes, unit, rate_hz, time_column)
+                head = _header(line, first + i, src, axes, unit, rate_hz, time_column, default)
                 continue
             if line.count(head.delim) != len(head.cols) - 1:
                 raise UserError(
@@ -407,7 +413,7 @@ def _cols(cols) -> str:
     return text if len(text) <= 4 * EXCERPT_CHARS else text[: 4 * EXCERPT_CHARS - 3] + "..."
 
 
-def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_column) -> _Header:
+def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_column, default=None) -> _Header:
     delim = max((",", ";", "\t"), key=header.count)
     if header.count(delim) == 0:
         delim = ","
@@ -450,6 +456,9 @@ def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_colum
             units.append(parse_unit(unit))
             continue
         m = _UNIT_SUFFIX.search(c)
+        if not m and default is not None:  # the name does not say it: the calibrated model's unit
+            units.append(parse_unit(default))
+            continue
         if not m:
             raise UserError(
                 f"{src}: column {excerpt(c)} does not say its unit (suffix _g, _mg, _m_s2); give --unit g or m/s^2"
@@ -748,3 +757,63 @@ def check_axis(
                     f"(first at sample {k}, t = {rec.t[k]:.6g} s)"
                 )
     return y
+
+
+def from_columns(
+    source: str,
+    columns: dict[str, np.ndarray],
+    *,
+    axes: list[str] | None = None,
+    unit: str | None = None,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    allow_gaps: bool = False,
+    time_unit: str | None = None,
+    default_unit: str | None = None,
+) -> Recording:
+    """A recording from named columns held in memory (numpy arrays, a DataFrame's columns).
+
+    The columns are read as a CSV with that header would be: the same names pick the time and the
+    acceleration columns and say their units, and the same clock, rate and gap checks follow.
+    """
+    names = [str(c) for c in columns]
+    bad = [c for c in names if any(d in c for d in ",;\t\n")]
+    if bad:
+        raise UserError(f"{source}: column name {excerpt(bad[0])} holds a separator; rename it")
+    if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise UserError(f"--time-unit: got {time_unit!r}; accepted: {', '.join(TIME_UNITS)}")
+    head = _header(",".join(names), 1, source, axes, unit, rate_hz, time_column, default_unit)
+    table = []
+    for j in head.use:
+        try:
+            col = np.asarray(columns[list(columns)[j]], dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise UserError(f"{source}: column {excerpt(head.cols[j])} is not numbers") from None
+        table.append(col)
+    if len({len(c) for c in table}) != 1:
+        raise UserError(f"{source}: columns of unequal length: {', '.join(str(len(c)) for c in table)}")
+    table = np.column_stack(table)
+    if table.shape[0] < 2:
+        raise UserError(f"{source}: {table.shape[0]} samples; a recording needs many more")
+    tu = None
+    if head.tcol is not None:
+        m = _TIME_NAME.match(head.tcol)
+        tu = m.group(2).lower() if m and m.group(2) else None
+        t, data = table[:, 0] * _TIME_SCALE[tu], table[:, 1:]
+    else:
+        t, data, tu = np.arange(table.shape[0]) / rate_hz, table, "s"
+    accel = data * np.array([UNITS[u] for u in head.units])
+    rec = _finish(source, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
+    rec = replace(rec, time_unit=tu, time_column=head.tcol)
+    if time_unit is not None:
+        if rec.time_column is None:
+            raise UserError(f"--time-unit: {source} has no time column (its time comes from the rate)")
+        if rec.time_unit not in (None, time_unit):
+            raise UserError(
+                f"--time-unit {time_unit}: the time column {rec.time_column!r} says its unit is {rec.time_unit}"
+            )
+        if rec.time_unit is None:
+            rec = replace(rec, t=rec.t * _TIME_SCALE[time_unit], time_unit=time_unit)
+    return _check_time(rec, rate_hz, allow_gaps)

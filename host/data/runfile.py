@@ -119,6 +119,14 @@ def load_run(path: str | Path) -> tuple[dict[str, np.ndarray], Model]:
 
 def export_csv(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
     """Write one row per sample: time, then per axis the raw input, truth, filter and smoother columns."""
+    cols = csv_columns(arrays)
+    table = np.column_stack([c for _, c in cols])
+    with atomic_output(path, flag="--csv") as fh:
+        np.savetxt(fh, table, delimiter=",", header=",".join(n for n, _ in cols), comments="", fmt="%.10g")
+
+
+def csv_columns(arrays: dict[str, np.ndarray]) -> list[tuple[str, np.ndarray]]:
+    """(name, column) of every per-sample quantity, t_s first: what export_csv writes and to_dataframe shows."""
     cols: list[tuple[str, np.ndarray]] = [("t_s", arrays["t"])]
     for j, name in enumerate(str(a) for a in arrays["axis_names"]):
         for raw in ("code", "t1", "t2"):
@@ -136,6 +144,4 @@ def export_csv(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
                 for i, s in enumerate(STATE):
                     cols.append((f"{name}_{stage}_{s}", x[:, i]))
                     cols.append((f"{name}_{stage}_{s}_sd", sd[:, i]))
-    table = np.column_stack([c for _, c in cols])
-    with atomic_output(path, flag="--csv") as fh:
-        np.savetxt(fh, table, delimiter=",", header=",".join(n for n, _ in cols), comments="", fmt="%.10g")
+    return cols

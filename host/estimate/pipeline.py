@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from accelnav.estimate.checks import check_run
 from accelnav.estimate.kf import Aids, double_integrate, run_filter
 from accelnav.model.design import axis_design
 from accelnav.model.load import Model
@@ -109,6 +110,7 @@ def filter_run(
     """
     from accelnav.estimate import fastsmooth
 
+    check_run(arrays, model, "filter_run")
     n, n_axes = arrays["accel"].shape
     res_out = _Out(n_axes, n, ("filt",), covariances)
     for j in range(n_axes):
@@ -177,6 +179,7 @@ def smooth_run(
     from accelnav.estimate import fastsmooth, zupt
     from accelnav.estimate.consistency import aid_innovations_arrays
 
+    check_run(arrays, model, "smooth_run")
     params = zupt.ZuptParams() if zupt_params is None else zupt_params
     n = len(arrays["t"])
     n_axes = len(arrays["axis_names"])

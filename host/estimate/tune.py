@@ -60,12 +60,12 @@ from statistics import NormalDist
 
 import numpy as np
 
-from accelnav.model.design import axis_design
-from accelnav.model.load import Model
-from accelnav.model.edit import revalidate, with_noise
 from accelnav.estimate import fastsmooth
 from accelnav.estimate.kf import Measurement
 from accelnav.lazy import lazy_module
+from accelnav.model.design import axis_design
+from accelnav.model.edit import revalidate, with_noise
+from accelnav.model.load import Model
 
 optimize = lazy_module("scipy.optimize")
 stats = lazy_module("scipy.stats")
@@ -499,3 +499,30 @@ def _profile_end(nll, theta, f0, i, direction, se, bound, lo, hi, H, count, limi
         (p1, r1) = above
         return p0 + (p1 - p0) * (R95 - r0) / (r1 - r0), "closed"
     return float("nan"), "budget"
+
+
+def aid_measurements(
+    n: int,
+    n_axes: int,
+    model: Model,
+    *,
+    fixes: Sequence[Sequence[Measurement]] | None = None,
+    rest: np.ndarray | None = None,
+    rest_sigma: np.ndarray | None = None,
+    params=None,
+) -> tuple[list[list[Measurement]], list[int]]:
+    """Per axis: the position fixes, then the zero-velocity updates of ``rest`` ((N,) or (N, n_axes)), as the
+    extra measurements tune and the smoother take; and the number of zero-velocity updates per axis."""
+    from accelnav.estimate import zupt
+
+    params = zupt.ZuptParams() if params is None else params
+    extras = [list(fixes[j]) if fixes is not None else [] for j in range(n_axes)]
+    n_zupt = [0] * n_axes
+    if rest is not None:
+        r2 = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, n_axes))
+        for j in range(n_axes):
+            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
+            zs = zupt.axis_updates(r2[:, j], sigma, model, params)[1]
+            extras[j] += zs
+            n_zupt[j] = len(zs)
+    return extras, n_zupt

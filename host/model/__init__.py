@@ -5,6 +5,7 @@ the fixed-point C are derived from one source without depending on each other.
 """
 
 from .design import AnalogConversion, AxisDesign, DutyConversion, axis_design, input_conversion
+from .edit import save_model
 from .load import DEFAULT_MODEL, G0, Axis, Model, ModelError, load_model, loads_model
 
 __all__ = [
@@ -20,4 +21,5 @@ __all__ = [
     "input_conversion",
     "load_model",
     "loads_model",
+    "save_model",
 ]

@@ -20,6 +20,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
+
+from accelnav.fileio import write_text
 
 from .load import Axis, Model, loads_model
 
@@ -171,3 +174,15 @@ def with_noise(model: Model, **values: float) -> Model:
     return dataclasses.replace(
         model, noise=dataclasses.replace(model.noise, **{k: float(v) for k, v in values.items()})
     )
+
+
+def save_model(path: str | Path, model: Model, header: str = "") -> Model:
+    """Write ``model`` as TOML to ``path``, whole or not at all; returns the model as read back.
+
+    The text is read back through the loader before anything is written, so a model the loader would
+    refuse never reaches the disk (the refusal names ``path``). ``header`` becomes comment lines on top.
+    """
+    text = dump_model(model, header=header)
+    saved = loads_model(text, source=str(path))
+    write_text(path, text)
+    return saved

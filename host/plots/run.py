@@ -209,3 +209,6 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
     axes[0].legend(loc="best", fontsize=8)
     paths.append(_save(plt, fig, folder / "fig12_position_smoother.png"))
     return paths
+
+
+pyplot = _pyplot  # public: the other figure modules draw with the same backend set-up

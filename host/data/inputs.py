@@ -1,0 +1,196 @@
+"""Every input of filter, smooth and tune, whatever its form, checked against the model.
+
+One reader for the command and the library alike, so both make the same checks: the model's rate, its
+axes, units, gaps (refused, or filled in and flagged with ``allow_gaps``), NaN, and samples at the
+sensor's full scale (flagged as clipped). Notes on how a clock was read go to
+:func:`accelnav.progress.note`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Union
+
+import numpy as np
+
+from accelnav.data.run import Run
+from accelnav.data.runfile import load_run
+from accelnav.errors import UserError
+from accelnav.estimate.checks import check_run
+from accelnav.fileio import check_input
+from accelnav.model.load import Model, load_model, loads_model
+from accelnav.progress import note
+
+if TYPE_CHECKING:
+    import pandas
+
+Source = Union[str, "os.PathLike[str]", Mapping[str, Any], "pandas.DataFrame"]
+# option -> the command's flag, which the messages name (the library's keywords map one to one)
+FLAGS = {"axes": "axis", "time_column": "time_column", "rate_hz": "rate", "unit": "unit", "time_unit": "time_unit"}
+
+
+def read_input(
+    source: Source,
+    model: Model | str | os.PathLike[str] | None = None,
+    *,
+    axes: list[str] | None = None,
+    time_column: str | None = None,
+    rate_hz: float | None = None,
+    time_unit: str | None = None,
+    unit: str | None = None,
+    allow_gaps: bool = False,
+) -> tuple[Run, Model]:
+    """Read a run or recording and check it against the model; returns (run, model).
+
+    ``source``: a path (an accelnav run file, a recorder log, a CSV or gzip CSV, an NPZ of t and
+    accel), a mapping of named columns (numpy arrays, read as a CSV with that header: ``t`` or
+    ``t_ms``, ``acc_x_g``, ...), or a pandas DataFrame of such columns. ``model``: a Model, a model
+    file, or None for the model embedded in the input, else the embedded default. The keywords are
+    the command's ``--axis``, ``--time-column``, ``--rate``, ``--time-unit``, ``--unit`` and
+    ``--allow-gaps``. Anything refused raises :class:`accelnav.errors.UserError` (or ModelError) in
+    one line.
+    """
+    opts = dict(axes=axes, time_column=time_column, rate_hz=rate_hz, time_unit=time_unit, unit=unit)
+    override = model if isinstance(model, Model) or model is None else load_model(model)
+    if not isinstance(source, (str, os.PathLike)):
+        return _from_memory(source, override, opts, allow_gaps)
+    path = check_input(source)  # what it is, when not a readable file (a FIFO is refused before a read)
+    from accelnav.link.logfile import is_log
+
+    if is_log(path):
+        from accelnav.data.logs import log_run_arrays
+
+        arrays, model = log_run_arrays(path)
+        return _with_model(path, arrays, model, override, opts)
+    with open(path, "rb") as fh:
+        zipped = fh.read(2) == b"PK"  # an NPZ, whatever its name
+    if (zipped or path.suffix.lower() == ".npz") and not _is_recording_npz(path):
+        arrays, model = load_run(path)
+        return _with_model(path, arrays, model, override, opts)
+    # a recording: CSV, gzip CSV, or an NPZ of t and accel
+    from accelnav.data.recording import read_recording
+
+    rec = read_recording(path, **opts, allow_gaps=allow_gaps, default_unit=_unit(override))
+    return _on_model(path, rec, override)
+
+
+def _unit(model: Model | None) -> str | None:
+    """The unit a column that does not name one is in: a calibrated model's (its samples' unit)."""
+    if model is not None and model.sensor.kind == "calibrated":
+        return model.sensor.calibrated.unit
+    return None
+
+
+def _from_memory(source, override: Model | None, opts: dict, allow_gaps: bool) -> tuple[Run, Model]:
+    """Columns in memory: a run's arrays (with ``accel`` and ``axis_names``), or named columns as a CSV has."""
+    from accelnav.data.recording import from_columns
+
+    if hasattr(source, "columns") and hasattr(source, "index"):  # a pandas DataFrame
+        label = "<DataFrame>"
+        columns = {str(c): source[c].to_numpy() for c in source.columns}
+        if source.index.name is not None and str(source.index.name) not in columns:  # time as the index
+            columns = {str(source.index.name): source.index.to_numpy(), **columns}
+    elif isinstance(source, Mapping):
+        label = "<arrays>"
+        columns = {str(k): v for k, v in source.items()}
+    else:
+        raise UserError(
+            f"read_input: got a {type(source).__name__}; accepted: a path, a mapping of arrays or a pandas DataFrame"
+        )
+    if "accel" in columns and "axis_names" in columns:  # a run's arrays (simulate, load_run)
+        arrays = {k: np.asarray(v) for k, v in columns.items()}
+        for key in ("t", "clipped"):
+            if key not in arrays:
+                raise UserError(f"{label}: a run's arrays need {key!r}; keys: {', '.join(sorted(arrays))}")
+        if override is not None:
+            model = override
+        elif "model_toml" in arrays:
+            model = loads_model(str(arrays["model_toml"]), source=f"{label}:model_toml")
+        else:
+            model = load_model(None)
+        return _with_model(label, arrays, model, None, opts)
+    rec = from_columns(label, columns, **opts, allow_gaps=allow_gaps, default_unit=_unit(override))
+    return _on_model(label, rec, override)
+
+
+def _on_model(path, rec, model: Model | None) -> tuple[Run, Model]:
+    """A recording checked against the model and placed on its grid: rate, axes, NaN, gaps, full scale."""
+    from accelnav.data.recording import check_rate, on_grid
+
+    for text in rec.notes:
+        note(text)
+    if model is None:
+        model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
+    check_rate(rec, model.rate_hz, str(model.source))
+    names = [a.name for a in model.axes]
+    if len(rec.axis_names) != len(names):
+        raise UserError(
+            f"{path}: {len(rec.axis_names)} axes ({', '.join(rec.columns)}) for the model's {len(names)} "
+            f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
+        )
+    bad = ~np.isfinite(rec.accel)
+    if bad.any():
+        k = int(np.argmax(bad.any(axis=1)))
+        raise UserError(f"{path}: {rec.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
+    # ranges.max_run_s bounds the fixed-point C's range proof, not these float64 tools: the bound here is the
+    # memory that the filled-in input arrays (t, accel, clipped, twice while filling) take
+    from accelnav.estimate.chunked import memory_available
+
+    names = [a.name for a in model.axes]
+    max_n = memory_available() // (2 * (8 + 9 * len(names)) + 1)
+    limit = "the input arrays this machine's free memory holds number at most"
+    t, accel, missing = on_grid(rec, rec.rate_hz, max_n, limit)  # its own clock: within 1 % of the model by now
+    # at the sensor's declared full scale a sample is clipped (as a digital part saturates); missing ones too
+    with np.errstate(invalid="ignore"):
+        clipped = np.abs(accel) >= model.max_accel_m_s2 * (1 - 1e-9)
+    clipped |= missing[:, None]
+    if rec.clipped is not None and not missing.any():
+        clipped |= rec.clipped
+    if missing.any():
+        note(f"{path}: {int(missing.sum())} missing samples filled in (predict only)")
+    if len(rec.axis_names) and list(rec.axis_names) != names:
+        note(f"{path}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
+    arrays = {"t": t, "axis_names": np.array(names), "accel": accel, "clipped": clipped}
+    return Run(arrays), model
+
+
+def _is_recording_npz(path: Path) -> bool:
+    """An NPZ of t and accel without the run file's format key (else it is read, and refused, as a run file)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (OSError, zipfile.BadZipFile):
+        return False
+    return "accel.npy" in names and "format.npy" not in names
+
+
+def _with_model(path, arrays, model: Model, override: Model | None, opts: dict) -> tuple[Run, Model]:
+    """A run's arrays against its model (or the one given): the same axes, the model's rate, no gap."""
+    from accelnav.data.recording import GAP_FACTOR
+
+    for key, flag in FLAGS.items():
+        if opts[key] not in (None, []):
+            raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
+    if override is not None:
+        if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:
+            raise UserError(
+                f"{override.source}: axes {[a.name for a in override.axes]} do not match the run's "
+                f"{[str(a) for a in arrays['axis_names']]}"
+            )
+        model = override
+    check_run(arrays, model, str(path))
+    t = arrays["t"]
+    if len(t) > 2:
+        dt = np.diff(t)
+        step = float(np.median(dt))
+        if np.any(dt > GAP_FACTOR * step):
+            k = int(np.argmax(dt > GAP_FACTOR * step))
+            raise UserError(
+                f"{path}: gap in time of {dt[k]:.6g} s after sample {k}; a run file is not filled in "
+                "(--allow-gaps is for CSV and NPZ recordings: export the samples with --csv)"
+            )
+    return Run(arrays), model
