@@ -77,8 +77,10 @@ def _in_table_order(sub) -> None:
 
 
 def _command_of(argv: list[str]) -> str | None:
-    """The command named in ``argv`` (its first word; the top-level parser has no options but --help)."""
-    return argv[0] if argv and argv[0] in COMMANDS else None
+    """The command named in ``argv``: its first word that is not an option (the top-level options, -v, -q,
+    --version and --help, take no value, so nothing else can stand before the command)."""
+    first = next((a for a in argv if not a.startswith("-")), None)
+    return first if first in COMMANDS else None
 
 
 def main(argv: list[str] | None = None) -> int:
