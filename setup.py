@@ -12,5 +12,5 @@ setup(
         "host/native/kernels.py:smoother",
         "host/native/kernels.py:riccati",
         "host/native/kernels.py:wire",
-    ]
+    ],
 )

@@ -59,10 +59,10 @@ import tempfile
 from pathlib import Path
 
 from accelnav.codegen.emit_c import emit
-from accelnav.model.load import load_model
 from accelnav.codegen.report import struct_size
-from accelnav.resources import firmware_dir
 from accelnav.hil_sim.targets.qemu import run_to_exit
+from accelnav.model.load import load_model
+from accelnav.resources import firmware_dir
 
 CFLAGS = ["-mthumb", "-masm-syntax-unified", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
 # core -> (gcc -mcpu, runtime folder, linker script, qemu machine)

@@ -47,13 +47,13 @@ STATES = ("r", "u", "a", "eps")
 
 
 def measure(model_path, rate, duration, seeds, workdir, form="covariance") -> dict:
-    from accelnav.model.design import axis_design
     from accelnav.codegen.emit_c import emit
-    from accelnav.hil_sim.targets.harness import AxisRunner, build
-    from accelnav.model.load import load_model, loads_model
     from accelnav.estimate.kf import run_filter
     from accelnav.hil_sim.sim.sensor import simulate
     from accelnav.hil_sim.sim.trajectories import SCENARIOS
+    from accelnav.hil_sim.targets.harness import AxisRunner, build
+    from accelnav.model.design import axis_design
+    from accelnav.model.load import load_model, loads_model
 
     model = load_model(model_path)
     if rate is not None and rate != model.rate_hz:
@@ -95,8 +95,8 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline", help="a Python whose accelnav is the generator to compare with")
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # one process's raw figures
     args = ap.parse_args(argv)
-    from accelnav.model.load import ModelError
     from accelnav.codegen.ranges import RangeError
+    from accelnav.model.load import ModelError
 
     try:
         with tempfile.TemporaryDirectory(prefix="acn_margin_") as tmp:

@@ -33,7 +33,6 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.model.load import load_model
 from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
 from accelnav.link.telemetry import (
     Decoder,
@@ -44,6 +43,7 @@ from accelnav.link.telemetry import (
     encode_stimulus,
     replay_for,
 )
+from accelnav.model.load import load_model
 
 BAUDS = (115200, 230400, 460800, 921600)
 

@@ -24,12 +24,12 @@ import time
 import numpy as np
 from baselines import best_of, filterpy_smooth
 
-from accelnav.model.design import axis_design
-from accelnav.model.load import load_model
 from accelnav.estimate import fastsmooth as fs
 from accelnav.estimate import zupt
 from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.design import axis_design
+from accelnav.model.load import load_model
 
 
 def rel_err(x, x_ref, P_ref) -> float:

@@ -22,13 +22,13 @@ from pathlib import Path
 
 from baselines import best_of
 
-from accelnav.model.load import load_model
-from accelnav.resources import models_dir
+from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.targets import hil
 from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.hil_sim.targets.qemu import MACHINES
-from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.link.telemetry import decode_all
+from accelnav.model.load import load_model
+from accelnav.resources import models_dir
 
 
 def models(tmp: Path) -> list[tuple[str, Path]]:

@@ -14,10 +14,10 @@ import time
 import numpy as np
 from baselines import filterpy_smooth, pykalman_smooth
 
-from accelnav.model.design import axis_design
-from accelnav.model.load import load_model
 from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.design import axis_design
+from accelnav.model.load import load_model
 
 
 def ours(d, z):

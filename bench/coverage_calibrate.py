@@ -22,8 +22,8 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 
 from test_calibrate import any_recording, calibrate_any, nominal, perturbed, truth_offset_scale  # noqa: E402
 
-from accelnav.model.load import G0  # noqa: E402
 from accelnav.identify.calibrate import CalibrationError  # noqa: E402
+from accelnav.model.load import G0  # noqa: E402
 
 
 def main() -> int:

@@ -47,8 +47,8 @@ import numpy as np
 
 from accelnav.codegen.emit_c import SCHEDULE_FLOOR_LSB, SCHEDULE_REL_TOL, _schedule_for
 from accelnav.codegen.gains import riccati
-from accelnav.model.load import ModelError, load_model, loads_model
 from accelnav.codegen.ranges import RangeError, plan_axis
+from accelnav.model.load import ModelError, load_model, loads_model
 from accelnav.resources import models_dir
 
 TABLE_LIMIT = 2048

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from accelnav.model.design import AnalogConversion, axis_design, input_conversion
 from accelnav.model.load import G0, Model
+
 from .package import package
 
 

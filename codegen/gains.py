@@ -27,11 +27,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from accelnav.native.cbuild import STRICT_FLAGS
 from accelnav.model.design import AxisDesign
+from accelnav.native.cbuild import STRICT_FLAGS
 from accelnav.native.kernels import RICCATI, RICCATI_FLAGS, build, prebuilt
-from .qformat import QFormat
 from accelnav.resources import package_dir
+
+from .qformat import QFormat
 
 BLOCK_NAMES = ("ra", "ua", "aa", "re", "ue", "ae", "ee")
 

@@ -14,10 +14,11 @@ import json
 import os
 from pathlib import Path
 
+from accelnav.model.load import Model
 from accelnav.native.cbuild import cache_dir
+
 from .emit_c import emit
 from .frames import emit_frames
-from accelnav.model.load import Model
 
 
 def _key(model: Model) -> str:

@@ -16,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .bounds import Y_SIGMAS, error_bound_rows, worst_case_bound
 from accelnav.model.load import Model
+
+from .bounds import Y_SIGMAS, error_bound_rows, worst_case_bound
 
 ARM_FLAGS = ["-mcpu=cortex-m3", "-mthumb", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
 

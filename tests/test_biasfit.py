@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from accelnav.model.load import Axis
-from accelnav.model.edit import revalidate
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.identify.biasfit import FitError, ProfileSums, fit_bias, profile_rss_exact
+from accelnav.model.edit import revalidate
+from accelnav.model.load import Axis
 
 
 def synthetic(seed: int, *, c1=0.08, c2=0.05, T=40.0, duration=None, sigma=0.126, rate=100.0, offset=0.0):

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import MODELS
 
+from accelnav.hil_sim.sim.sensor import SimRun, simulate
 from accelnav.model.design import input_conversion
 from accelnav.model.load import G0, ModelError, load_model, loads_model
-from accelnav.hil_sim.sim.sensor import SimRun, simulate
 
 FOOT = MODELS / "foot_imu.toml"
 

@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 
 from accelnav.codegen.bounds import twin_bound
-from accelnav.model.design import axis_design
 from accelnav.codegen.emit_c import _schedule_for, emit
-from accelnav.hil_sim.targets.harness import STRICT, AxisRunner, build
-from accelnav.model.load import load_model, loads_model
 from accelnav.codegen.ranges import plan_axis
 from accelnav.estimate.kf import run_filter
+from accelnav.hil_sim.targets.harness import STRICT, AxisRunner, build
+from accelnav.model.design import axis_design
+from accelnav.model.load import load_model, loads_model
 
 sensor = pytest.importorskip("accelnav.hil_sim.sim.sensor")
 
@@ -421,8 +421,8 @@ def test_covariance_reciprocal_within_its_contract(tmp_path):
     """acn_recip_t (table start, two Newton-Raphson steps: the covariance form's 1/S) keeps acn_recip's
     contract, 1/d = x 2^(n - 62) to a relative 2^-28, over the whole uint32 range: every power of two
     and its neighbours, each table interval's ends and middle, and a seeded random sweep."""
-    from accelnav.native.cbuild import build_module
     from accelnav.codegen.emit_c import HELPERS, RECIP_TABLE_BITS, recip_helpers
+    from accelnav.native.cbuild import build_module
 
     src = "#include <stdint.h>\n#include <stdbool.h>\n#include <stddef.h>\n" + HELPERS + recip_helpers()
     src += "uint32_t t_recip(uint32_t d, int *n) { return acn_recip_t(d, n); }\n"

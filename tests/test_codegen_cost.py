@@ -12,8 +12,8 @@ import sys
 
 import pytest
 
-from accelnav.model.load import load_model, loads_model
 from accelnav.codegen.ranges import MAX_RUN_SAMPLES, RangeError
+from accelnav.model.load import load_model, loads_model
 
 LIMIT_MB = 300.0
 

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from test_codegen import SIGMA_FRACTION, _check_against_bound, built, plan
 
-from accelnav.model.design import axis_design
-from accelnav.hil_sim.targets.harness import AxisRunner
-from accelnav.model.load import load_model, loads_model
 from accelnav.estimate.kf import run_filter
 from accelnav.hil_sim.sim import sensor
+from accelnav.hil_sim.targets.harness import AxisRunner
+from accelnav.model.design import axis_design
+from accelnav.model.load import load_model, loads_model
 
 
 @pytest.fixture(scope="module")

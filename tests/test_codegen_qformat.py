@@ -79,8 +79,8 @@ def test_streamed_bound_is_the_python_bound(default_model):
     import numpy as np
 
     from accelnav.codegen.bounds import error_bound, error_bound_rows
-    from accelnav.model.load import loads_model
     from accelnav.codegen.ranges import plan_axis
+    from accelnav.model.load import loads_model
 
     model = loads_model(default_model.text.replace("max_run_s = 3600.0", "max_run_s = 60.0"), source="60s")
     p = plan_axis(model, 1, "covariance")

@@ -22,8 +22,8 @@ from accelnav.codegen import gains
 from accelnav.codegen.bounds import error_bound, error_bound_rows
 from accelnav.codegen.emit_c import SCHEDULE_FLOOR_LSB, SCHEDULE_REL_TOL, _schedule_for, emit
 from accelnav.codegen.gains import EXTRA, riccati
-from accelnav.model.load import load_model, loads_model
 from accelnav.codegen.ranges import plan_axis
+from accelnav.model.load import load_model, loads_model
 
 ROW_BYTES = 24  # one row of the C table: dr, dv, de_lo, de_hi, ka, end
 

@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 from accelnav.cli import main as cli_main
-from accelnav.model.load import load_model
 from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, manifest
 from accelnav.link.logfile import LogWriter
 from accelnav.link.telemetry import (
@@ -31,6 +30,7 @@ from accelnav.link.telemetry import (
     frame,
     replay_for,
 )
+from accelnav.model.load import load_model
 
 N = 1500
 
@@ -188,8 +188,8 @@ def test_log_info_and_export_show_a_mismatch(tmp_path, man, telemetry, capsys):
 
 
 def test_hil_reports_a_mismatch(man, telemetry):
-    from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.sim.sensor import simulate
+    from accelnav.hil_sim.targets import hil
 
     model = load_model()
     run = simulate(model, "stop_and_go", 6.0, 4)
@@ -480,8 +480,8 @@ def test_gain_schedule_load_refuses_a_row_outside_the_table(gs):
     """The generated accelnav_x_load (the host's replay and any reader of a checkpoint) refuses an image
     whose row index is outside the table and leaves the state untouched; an image inside it loads, and
     saving gives the same bytes back (the pointer became the index and back)."""
-    from accelnav.native.cbuild import cache_dir
     from accelnav.hil_sim.targets.harness import build
+    from accelnav.native.cbuild import cache_dir
 
     files = gs["files"]
     lib, ffi = (m := build(files, cache_dir() / "harness")).lib, m.ffi
@@ -544,9 +544,9 @@ def test_gain_schedule_load_refuses_a_row_outside_the_table(gs):
 def test_covariance_checkpoint_image_is_the_state_struct(man):
     """The covariance form's checkpoint image (accelnav_x_save) is its state struct's bytes, as the firmware
     sent them before images existed: older compact logs replay as before."""
-    from accelnav.native.cbuild import cache_dir
-    from accelnav.hil_sim.targets.harness import build
     from accelnav.hil_sim.targets.firmware import generated
+    from accelnav.hil_sim.targets.harness import build
+    from accelnav.native.cbuild import cache_dir
 
     m = build(generated(None), cache_dir() / "harness")
     lib, ffi = m.lib, m.ffi

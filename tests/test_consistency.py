@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from accelnav.model.design import axis_design, input_conversion
 from accelnav.estimate.kf import position_fix, rts_smooth, run_filter
 from accelnav.hil_sim.sim import sensor
 from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.design import axis_design, input_conversion
 
 M_RUNS = 60
 N_SAMPLES = 1500  # 15 s at 100 Hz

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from conftest import assert_rel_close
 
-from accelnav.model.design import axis_design
 from accelnav.estimate import fastsmooth as fs
 from accelnav.estimate.kf import position_fix, rts_smooth, run_filter, zero_velocity
 from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.design import axis_design
 
 RTOL = 1e-9
 

@@ -16,9 +16,7 @@ import zlib
 import numpy as np
 import pytest
 
-from accelnav.native.cbuild import cache_dir
 from accelnav.codegen.frames import COMMANDS, MAX_ENCODED, PROTOCOL_VERSION, layout
-from accelnav.model.load import load_model
 from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
 from accelnav.link.telemetry import (
     Decoder,
@@ -32,6 +30,8 @@ from accelnav.link.telemetry import (
     replay_for,
     sample_columns,
 )
+from accelnav.model.load import load_model
+from accelnav.native.cbuild import cache_dir
 
 MODELS = {"analog": None, "duty": str(DUTY_MODEL)}
 

@@ -27,11 +27,11 @@ import pytest
 from conftest import MODELS
 
 from accelnav.cli import main
-from accelnav.model.load import load_model
+from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.targets import hil, qemu, simavr
 from accelnav.hil_sim.targets.firmware import manifest
-from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.link.telemetry import decode_all, replay_for
+from accelnav.model.load import load_model
 
 SIGMA_FRACTION = 1e-3  # firmware vs float64 reference, in units of the reference's sigma, after 1 s
 
@@ -371,10 +371,10 @@ def test_stated_bound_is_against_the_kalman_filter_and_catches_a_blind_schedule(
     import numpy as np
     from test_codegen import _blind
 
-    from accelnav.model.design import axis_design
     from accelnav.codegen.emit_c import emit
-    from accelnav.hil_sim.targets.harness import AxisRunner, build
     from accelnav.estimate.kf import run_filter
+    from accelnav.hil_sim.targets.harness import AxisRunner, build
+    from accelnav.model.design import axis_design
 
     model = _schedule_model(tmp_path)
     run = simulate(model, "shock", 4.0, seed=9)

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from accelnav.model.load import G0
-from accelnav.model.edit import revalidate
 from accelnav.hil_sim.sim.sensor import noise_sigma_rho, simulate
 from accelnav.identify.noiseid import allan_deviation, derivative_variance, identify_noise
+from accelnav.model.edit import revalidate
+from accelnav.model.load import G0
 
 
 def oadev_by_definition(y: np.ndarray, rate: float, m: int) -> float:

@@ -18,12 +18,12 @@ from conftest import MODELS
 
 from accelnav.codegen import gains
 from accelnav.codegen.bounds import error_bound
-from accelnav.native.cbuild import STRICT_FLAGS
-from accelnav.native.kernels import RICCATI_FLAGS as WHEEL_FLAGS
-from accelnav.model.load import load_model
 from accelnav.codegen.ranges import plan_axis
 from accelnav.estimate import fastsmooth
 from accelnav.link import wirekernel
+from accelnav.model.load import load_model
+from accelnav.native.cbuild import STRICT_FLAGS
+from accelnav.native.kernels import RICCATI_FLAGS as WHEEL_FLAGS
 
 # (module holding CSRC and the prebuilt check, the check, the kernel's C file)
 KERNELS = {

@@ -25,10 +25,10 @@ import pytest
 import realdata
 
 from accelnav.cli import main
-from accelnav.resources import models_dir
 from accelnav.data.runfile import load_run
 from accelnav.estimate.pipeline import dead_reckoning
 from accelnav.estimate.zupt import intervals
+from accelnav.resources import models_dir
 
 METHODS = ("defaults", "reference stances", "no ZUPT", "double integration")
 

@@ -19,12 +19,12 @@ import pytest
 import serial
 
 from accelnav.cli import main as cli_main
-from accelnav.model.load import load_model
 from accelnav.data.runfile import load_run
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, generated, manifest
 from accelnav.link.logfile import LogError, LogWriter, read_log
 from accelnav.link.recorder import Recorder, Status, decode_log
 from accelnav.link.telemetry import decode_all, encode_command, encode_stimulus
+from accelnav.model.load import load_model
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -9,10 +9,10 @@ import pytest
 from conftest import MODELS
 
 from accelnav.cli import main
-from accelnav.model.load import load_model
 from accelnav.data.runfile import load_run
 from accelnav.estimate.pipeline import stance_midpoints, stride_lengths
 from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.load import load_model
 
 FOOT = MODELS / "foot_imu.toml"
 

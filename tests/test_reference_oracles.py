@@ -23,9 +23,9 @@ from conftest import assert_rel_close
 from filterpy.kalman import KalmanFilter as FilterPyKF
 from pykalman import KalmanFilter as PyKalmanKF
 
-from accelnav.model.design import axis_design
 from accelnav.estimate.kf import position_fix, rts_smooth, run_filter, zero_velocity
 from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.design import axis_design
 
 RTOL = 1e-9
 SCENARIOS = [("stationary", 11), ("stop_and_go", 12), ("vehicle", 13), ("shock", 14)]

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from accelnav.model.design import input_conversion
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
 from accelnav.hil_sim.sim.sensor import AXIS_GAIN, JITTER_FRACTION, SimRun, simulate
 from accelnav.hil_sim.sim.trajectories import SCENARIOS, truth
+from accelnav.model.design import input_conversion
+from accelnav.model.load import DEFAULT_MODEL, G0, Model, load_model, loads_model
 
 N_SE = 4.0
 

@@ -7,9 +7,9 @@ import pytest
 from conftest import assert_rel_close
 
 from accelnav.cli import main
-from accelnav.model.design import axis_design
 from accelnav.data.runfile import load_run
 from accelnav.estimate.kf import rts_smooth, run_filter
+from accelnav.model.design import axis_design
 
 
 def _run(argv, capsys):

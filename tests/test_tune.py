@@ -16,11 +16,11 @@ import pytest
 from scipy import optimize
 
 from accelnav.cli import main
-from accelnav.model.design import axis_design
-from accelnav.model.load import DEFAULT_MODEL, load_model
-from accelnav.model.edit import dump_model, revalidate, with_noise
 from accelnav.estimate.kf import position_fix
 from accelnav.estimate.tune import all_figures, loglik, tune, with_figures
+from accelnav.model.design import axis_design
+from accelnav.model.edit import dump_model, revalidate, with_noise
+from accelnav.model.load import DEFAULT_MODEL, load_model
 
 TRUE = {"sigma_n": 1.0, "sigma_eps": 0.01, "R": 0.016}
 

@@ -69,7 +69,7 @@ KEY_MEANINGS = {
     "ranges": "Declared ranges: every fixed-point format of the generated C is chosen for them.",
     "ranges.max_velocity_m_s": "Largest speed abs(u), m/s.",
     "ranges.max_position_m": "Largest distance abs(r) from the start, m.",
-    "ranges.max_run_s": "Longest run the generated C's range proof covers, s (the float64 host tools take longer runs).",
+    "ranges.max_run_s": "Longest run the generated C's range proof covers, s (host tools take longer runs).",
     "filter": "Filter options.",
     "filter.form": "Form of the generated filter: the covariance block, or a table of gains.",
     "filter.initial_sigma": "One-sigma uncertainty of the initial state [r, u, a, eps], an array of 4 numbers >= 0.",

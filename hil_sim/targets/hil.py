@@ -34,11 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.model.design import axis_design
-from accelnav.model.load import Model
 from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.estimate.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from accelnav.estimate.zupt import rest_mask
+from accelnav.hil_sim.sim.sensor import SimRun
 from accelnav.link.telemetry import (
     Decoder,
     Manifest,
@@ -48,11 +47,12 @@ from accelnav.link.telemetry import (
     replay_for,
     sample_columns,
 )
+from accelnav.model.design import axis_design
+from accelnav.model.load import Model
 
+from . import simavr
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
 from .qemu import MACHINES, QemuBoard, QemuError, machine_for, run_feed
-from . import simavr
-from accelnav.hil_sim.sim.sensor import SimRun
 
 STATES = ("r", "u", "a", "eps")
 PIL_BOARDS = (*MACHINES, *simavr.BOARDS)  # the boards `accelnav hil --target pil --board` runs

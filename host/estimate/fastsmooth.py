@@ -76,11 +76,11 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.native.cbuild import STRICT_FLAGS
+from accelnav.estimate.kf import Measurement
 from accelnav.model.design import AxisDesign
+from accelnav.native.cbuild import STRICT_FLAGS
 from accelnav.native.kernels import SMOOTHER, build, prebuilt
 from accelnav.resources import package_dir
-from accelnav.estimate.kf import Measurement
 
 CSRC = package_dir("accelnav.estimate") / "csrc"  # package data
 PACKED = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))

@@ -75,8 +75,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from accelnav.model.load import G0
 from accelnav.lazy import lazy_module
+from accelnav.model.load import G0
 
 optimize = lazy_module("scipy.optimize")
 stats = lazy_module("scipy.stats")

@@ -325,9 +325,10 @@ static int chol_solve4(double M[4][4], double B[4][4])
  * if ok, then the extras ek[ei] == k in order. Returns the index of the first
  * extra of a later sample.
  */
-static long general_update(const acn_axis *m, long k, int ok, double zk, double x[4], double P[4][4],
-                           long ei, long n_extra, const long *ek, const double *eh, const double *ez,
-                           const double *eR, const double *egate, unsigned char *applied)
+static long general_update(const acn_axis *m, long k, int ok, double zk, double x[4],
+                           double P[4][4], long ei, long n_extra, const long *ek, const double *eh,
+                           const double *ez, const double *eR, const double *egate,
+                           unsigned char *applied)
 {
     double K[4], S;
     if (ok)
@@ -359,7 +360,8 @@ static long general_update(const acn_axis *m, long k, int ok, double zk, double 
  * positive definite.
  */
 static int rts_step(double F[4][4], const double *xpost, const double *Ppost, const double *xprior1,
-                    const double *Pprior1, const double *xs1, const double *Psm1, double *xs, double *Psm)
+                    const double *Pprior1, const double *xs1, const double *Psm1, double *xs,
+                    double *Psm)
 {
     double Pp[4][4], Pf[4][4], Ps1[4][4], B[4][4], C[4][4], sd[4], dx[4], T[4][4];
     unpack(Pprior1, Pp);
@@ -465,8 +467,8 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
  * Returns 0, or -(k + 1) if the (a, eps) prior is singular after sample k.
  */
 int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
-                  const unsigned char *valid, double *carry, double *store, double *xf,
-                  double *sdf, double *Pf0, double *Pfn)
+                  const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
+                  double *Pf0, double *Pfn)
 {
     const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
     double F[4][4], P[4][4], dummy[4] = {0.0, 0.0, 0.0, 0.0}, Kk[4], S;

@@ -60,8 +60,8 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
 enum { ACN_ROW = 12, ACN_GROW = 28 };
 
 int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
-                  const unsigned char *valid, double *carry, double *store, double *xf,
-                  double *sdf, double *Pf0, double *Pfn);
+                  const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
+                  double *Pf0, double *Pfn);
 
 void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry);
 
