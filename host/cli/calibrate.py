@@ -25,6 +25,7 @@ import argparse
 import math
 from pathlib import Path
 
+from accelnav.cli.args import clock_args
 from accelnav.identify.calibrate import GRAVITY, Calibration
 from accelnav.identify.calibration import calibrate_recording
 from accelnav.model.edit import save_model
@@ -50,20 +51,7 @@ def register(sub) -> None:
     )
     p.add_argument("--out", type=Path, required=True, metavar="OUT.toml", help="model file to write")
     p.add_argument("--unit", default=None, help="unit of the acceleration columns: g, mg or m/s^2")
-    p.add_argument(
-        "--rate",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help="sample rate if there is no time column; with one, the nominal rate it is checked against "
-        "(overriding stamps that do not fit it, said in a note)",
-    )
-    p.add_argument(
-        "--time-unit",
-        choices=("s", "ms", "us"),
-        default=None,
-        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
-    )
+    clock_args(p)
     p.add_argument("--time-column", default=None, metavar="NAME", help="time column; default: t, t_s, time, ...")
     p.add_argument("--min-pose", type=float, default=3.0, metavar="S", help="shortest still pose, s; default: 3")
     p.add_argument(

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.api import simulate
+from accelnav.cli.args import clock_args
 from accelnav.data.inputs import read_input
 from accelnav.data.runfile import FORMAT, STATE, export_csv, save_run, state_sd
 from accelnav.errors import UserError
@@ -46,20 +47,7 @@ def _input_args(p: argparse.ArgumentParser) -> None:
         help="CSV/NPZ: a column to use as an axis, in the model's axis order; repeat for each axis",
     )
     p.add_argument("--time-column", default=None, metavar="NAME", help="CSV: the time column; default t, t_s, time")
-    p.add_argument(
-        "--rate",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help="sample rate: without a time column, the rate; with one, the nominal rate it is checked against, "
-        "overriding it (samples taken as consecutive, said in a note) where its stamps do not fit",
-    )
-    p.add_argument(
-        "--time-unit",
-        choices=("s", "ms", "us"),
-        default=None,
-        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
-    )
+    clock_args(p)
     p.add_argument(
         "--unit",
         default=None,

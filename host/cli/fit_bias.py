@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from accelnav.cli.args import clock_args
 from accelnav.data.recording import MIN_DURATION_S, Recording
 from accelnav.fileio import check_output
 from accelnav.identify.characterise import AxisResult, characterise
@@ -68,20 +69,7 @@ def register(sub) -> None:
     p.add_argument(
         "--unit", default=None, help="unit of the acceleration columns: g, mg or m/s^2; default: from the name"
     )
-    p.add_argument(
-        "--rate",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help="sample rate if there is no time column; with one, the nominal rate it is checked against "
-        "(overriding stamps that do not fit it, said in a note)",
-    )
-    p.add_argument(
-        "--time-unit",
-        choices=("s", "ms", "us"),
-        default=None,
-        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
-    )
+    clock_args(p)
     p.add_argument("--time-column", default=None, metavar="NAME", help="time column; default: t, t_s, time, ...")
     p.add_argument(
         "--min-duration",

@@ -149,16 +149,7 @@ def read_recording(
         rec = _read_npz(path, axes, unit, rate_hz, default_unit)
     else:
         rec = _read_csv(path, axes, unit, rate_hz, time_column, gz=head.startswith(b"\x1f\x8b"), default=default_unit)
-    if time_unit is not None:
-        if rec.time_column is None:
-            raise UserError(f"--time-unit: {path} has no time column (its time comes from the rate)")
-        if rec.time_unit not in (None, time_unit):
-            raise UserError(
-                f"--time-unit {time_unit}: the time column {rec.time_column!r} says its unit is {rec.time_unit}"
-            )
-        if rec.time_unit is None:
-            rec = replace(rec, t=rec.t * _TIME_SCALE[time_unit], time_unit=time_unit)
-    return _check_time(rec, rate_hz, allow_gaps)
+    return _check_time(_with_time_unit(rec, time_unit, path), rate_hz, allow_gaps)
 
 
 # --------------------------------------------------------------------------
@@ -531,6 +522,21 @@ def from_arrays(source: str, arrays: dict[str, np.ndarray], axes: list[str] | No
     return _check_time(replace(rec, time_unit="s", time_column="t"), None, False)
 
 
+def _with_time_unit(rec: Recording, time_unit: str | None, where) -> Recording:
+    """``rec`` with its time column in seconds by --time-unit, where the column's name does not say its unit."""
+    if time_unit is None:
+        return rec
+    if rec.time_column is None:
+        raise UserError(f"--time-unit: {where} has no time column (its time comes from the rate)")
+    if rec.time_unit not in (None, time_unit):
+        raise UserError(
+            f"--time-unit {time_unit}: the time column {rec.time_column!r} says its unit is {rec.time_unit}"
+        )
+    if rec.time_unit is None:
+        rec = replace(rec, t=rec.t * _TIME_SCALE[time_unit], time_unit=time_unit)
+    return rec
+
+
 def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> Recording:
     """Finite, increasing time; the rate and the samples' places on its grid; gaps refused unless allowed.
 
@@ -807,13 +813,4 @@ def from_columns(
     accel = data * np.array([UNITS[u] for u in head.units])
     rec = _finish(source, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
     rec = replace(rec, time_unit=tu, time_column=head.tcol)
-    if time_unit is not None:
-        if rec.time_column is None:
-            raise UserError(f"--time-unit: {source} has no time column (its time comes from the rate)")
-        if rec.time_unit not in (None, time_unit):
-            raise UserError(
-                f"--time-unit {time_unit}: the time column {rec.time_column!r} says its unit is {rec.time_unit}"
-            )
-        if rec.time_unit is None:
-            rec = replace(rec, t=rec.t * _TIME_SCALE[time_unit], time_unit=time_unit)
-    return _check_time(rec, rate_hz, allow_gaps)
+    return _check_time(_with_time_unit(rec, time_unit, source), rate_hz, allow_gaps)
