@@ -24,6 +24,7 @@ from accelnav.estimate.pipeline import (
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.fileio import check_output, write_text
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model
+from accelnav.progress import note
 
 TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
 TUNE_SECONDS = 60.0
@@ -51,7 +52,8 @@ def _input_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--unit",
         default=None,
-        help="CSV: unit of the acceleration columns, g, mg or m/s^2; default: from the column names, else "
+        help="CSV: unit of the acceleration columns, g, mg, m/s^2 or counts (raw codes, converted by the model's "
+        "own read-out and calibration); default: from the column names, else counts for an analog model, else "
         "the unit of a calibrated model",
     )
     p.add_argument(
@@ -222,6 +224,12 @@ def register(sub) -> None:
     )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     p.add_argument(
+        "--warm-start",
+        action="store_true",
+        help="the recording begins after the warm-up, not at power-on: the bias starts at its settled value "
+        "c1 + c2 instead of c2",
+    )
+    p.add_argument(
         "--memory-budget",
         type=float,
         default=None,
@@ -336,6 +344,11 @@ def cmd_smooth(args) -> int:
     from accelnav.estimate.fixes import read_fixes
 
     arrays, model = read_args(args)
+    if args.warm_start:  # the same for every path below (bounded, --tune, the aids' checks) and the run file
+        from accelnav.model.edit import warm_started
+
+        model = warm_started(model)
+        note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
     budget = _memory_budget(args.memory_budget)
     bounded = whole_bytes(*arrays["accel"].shape) > budget
     if bounded:  # what the bounded path cannot do is refused before any work
