@@ -321,8 +321,9 @@ def cmd_filter(args) -> int:
     return 0
 
 
-def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray) -> str:
-    """One line: the detector's settings, candidates, accepted and refused with their counts per reason."""
+def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray, gravity: list[str] = ()) -> str:
+    """One line: the detector's settings, candidates, accepted and refused with their counts per reason;
+    when none was accepted and an axis carries gravity (``gravity``, zupt.gravity_axes), it says so."""
     from accelnav.estimate import zupt
 
     counts = zupt.reason_counts(decisions)
@@ -336,6 +337,12 @@ def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray) -> str:
         f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} (R + "
         f"{params.tremor:g}^2): {len(decisions)} candidate rests, {sum(acc.values())} accepted{listed(acc)}, "
         f"{sum(ref.values())} refused{listed(ref)}; {100 * rest.mean():.1f} % of the run at rest"
+        + (
+            f"; axis {', '.join(gravity)} reads about 1 g (gravity), which the model takes as removed: "
+            "drop it with --axis (the others' names)"
+            if gravity and not acc
+            else ""
+        )
     )
 
 
@@ -381,7 +388,8 @@ def cmd_smooth(args) -> int:
         cand = zupt.candidates(arrays["accel"], arrays["clipped"], model, params)
         decisions = zupt.gate_rests(arrays["accel"], arrays["clipped"], cand, model, params)
         rest = zupt.accepted_mask(decisions, len(cand))
-        print(_zupt_summary(decisions, params, rest))
+        gravity = zupt.gravity_axes(arrays["accel"], arrays["clipped"], model) if not rest.any() else []
+        print(_zupt_summary(decisions, params, rest, gravity))
         if args.zupt_report is not None:
             write_text(args.zupt_report, zupt.report_csv(decisions, arrays["t"]), flag="--zupt-report")
             print(f"wrote {args.zupt_report}")
