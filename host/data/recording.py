@@ -355,7 +355,8 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: s
         t = np.arange(table.shape[0]) / rate_hz
         data = table
         time_unit = "s"
-    accel = data * np.array([UNITS[u] for u in head.units])
+    with np.errstate(over="ignore"):  # a number beyond float64 once in m/s^2 becomes inf, refused by name below
+        accel = data * np.array([UNITS[u] for u in head.units])
     rec = _finish(src, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
     return replace(rec, lines=data_lines, time_unit=time_unit, time_column=head.tcol)
 
