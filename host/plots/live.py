@@ -39,7 +39,9 @@ class LivePlot:
         self._a = np.full((self.capacity, n_axes), np.nan)
         self._r = np.full((self.capacity, n_axes), np.nan)
         self._n = 0  # rows pushed so far; the newest sits at (_n - 1) % capacity
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # the ring: the recorder writes, the drawing thread reads
+        self._draw_lock = threading.Lock()  # the figure: one drawer at a time
+        self._fig = None
         self._conv = None
         if model is not None:
             from accelnav.model import input_conversion
@@ -77,18 +79,40 @@ class LivePlot:
             return self._t[k].copy(), self._a[k].copy(), self._r[k].copy()
 
     def figure(self):
-        """A new matplotlib Figure (Agg canvas: no GUI, any thread) of what the buffer holds."""
+        """The matplotlib Figure (Agg canvas: no GUI, any thread) showing what the buffer holds now.
+
+        Built once, then only its lines' data, limits and title change: a fresh figure with its layout
+        cost several times the redraw itself."""
+        t, a, r = self.snapshot()
+        with self._draw_lock:
+            if self._fig is None:
+                self._fig = self._build()
+            fig = self._fig
+            ax_a, ax_r = fig.axes
+            for j in range(len(self.man.axes)):
+                ax_a.get_lines()[j].set_data(t, a[:, j])
+                ax_r.get_lines()[j].set_data(t, r[:, j])
+            for ax in (ax_a, ax_r):
+                ax.relim()
+                ax.autoscale_view()
+            last = "no samples yet"
+            if len(t):
+                last = ", ".join(f"{n}={v:+.3f} m" for n, v in zip(self.man.axes, r[-1], strict=True))
+            fig.texts[0].set_text(f"accelnav live: {self._n} samples; last r: {last}")
+            return fig
+
+    def _build(self):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
-        t, a, r = self.snapshot()
         fig = Figure(figsize=(9, 6.5), dpi=90)
+        fig.subplots_adjust(left=0.09, right=0.98, top=0.9, bottom=0.08, hspace=0.28)  # fixed: no layout per redraw
         FigureCanvasAgg(fig)
         ax_a, ax_r = fig.subplots(2, 1, sharex=True)
         unit = "m/s^2" if self._conv is not None else self.man.raw_fields()[0]
-        for j, name in enumerate(self.man.axes):
-            ax_a.plot(t, a[:, j], lw=0.8, label=name)
-            ax_r.plot(t, r[:, j], lw=1.4, label=name)
+        for name in self.man.axes:
+            ax_a.plot([], [], lw=0.8, label=name)
+            ax_r.plot([], [], lw=1.4, label=name)
         ax_a.set_title(f"raw acceleration [{unit}]" if self._conv is not None else f"raw input [{unit}]")
         ax_r.set_title("firmware position estimate r [m]")
         ax_a.set_ylabel(unit)
@@ -97,20 +121,17 @@ class LivePlot:
         for ax in (ax_a, ax_r):
             ax.grid(True, alpha=0.3)
             ax.legend(loc="upper left", fontsize=8)
-        last = "no samples yet"
-        if len(t):
-            last = ", ".join(f"{n}={v:+.3f} m" for n, v in zip(self.man.axes, r[-1], strict=True))
-        fig.suptitle(f"accelnav live: {self._n} samples; last r: {last}")
-        fig.tight_layout()
+        fig.suptitle("accelnav live")
         return fig
 
     def save(self, path: str | Path) -> Path:
         """Draw and write a PNG in place: to a hidden file beside it, then renamed, so a viewer never reads
         half a file. No fsync: this is a view, redrawn a moment later, not data."""
         path = Path(path)
-        fig = self.figure()
         tmp = path.with_name(f".{path.name}.part")
-        fig.savefig(tmp, format="png")
+        fig = self.figure()
+        with self._draw_lock:
+            fig.savefig(tmp, format="png")
         os.replace(tmp, path)
         return path
 
