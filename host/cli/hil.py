@@ -1,4 +1,5 @@
-"""``accelnav hil``: the firmware on simulated data, in-process (SIL) or on an emulated board (PIL)."""
+"""``accelnav hil``: the firmware on simulated data or a user's recording, in-process (SIL) or on an emulated
+board (PIL)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from accelnav.model.load import DEFAULT_MODEL, load_model
 
 
 def register(sub) -> None:
-    p = sub.add_parser("hil", help="run the firmware on simulated sensor data: SIL (cffi) or PIL (QEMU)")
+    p = sub.add_parser("hil", help="run the firmware on simulated data or your recording: SIL (cffi) or PIL (QEMU)")
     p.add_argument("--model", type=Path, default=None, help=f"model file; default: the embedded {DEFAULT_MODEL.name}")
     p.add_argument("--scenario", default=None, help="trajectory (accelnav sim --list-scenarios); default: stop_and_go")
     p.add_argument("--duration", type=float, default=None, help="seconds; default: 20")
