@@ -3,7 +3,6 @@ replayed from its log; the figure's axes and lines checked, the PNG written unde
 
 from __future__ import annotations
 
-import os
 import threading
 import urllib.request
 
@@ -19,7 +18,6 @@ from accelnav.model import input_conversion
 from accelnav.model.load import load_model
 from accelnav.plots.live import LivePlot, LiveView, plot_log
 
-os.environ.setdefault("MPLBACKEND", "Agg")
 N = 1500
 SECONDS = 4.0  # the ring holds fewer samples than the stream: the plot shows only its end
 
