@@ -139,11 +139,14 @@ def test_nan_and_backwards_time_are_refused_with_their_line(tmp_path, capsys, wa
 
 
 def test_axis_count_must_match_the_model(tmp_path, capsys, walk):
+    # "ax" is the model's axis x now (issue 25), and naming one model axis narrows the model to it;
+    # a column that is no model axis still has to match the model's count
     path = tmp_path / "one.csv"
-    path.write_text("\n".join(_csv_lines(walk.t, walk.accel)) + "\n")
-    argv = ["filter", path, "--model", FOOT, "--axis", "ax", "--out", tmp_path / "f.npz"]
+    lines = _csv_lines(walk.t, walk.accel)
+    path.write_text("\n".join(["t,acc_p,acc_q", *lines[1:]]) + "\n")
+    argv = ["filter", path, "--model", FOOT, "--axis", "acc_p", "--out", tmp_path / "f.npz"]
     status, _, err = _run(argv, capsys)
-    assert status == 2 and "1 axes (ax) for the model's 2 (x, y)" in err
+    assert status == 2 and "1 axes (acc_p) for the model's 2 (x, y)" in err
 
 
 def test_fit_bias_refuses_a_ragged_row_too(tmp_path, capsys):

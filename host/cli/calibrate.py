@@ -38,7 +38,7 @@ def register(sub) -> None:
         help="zero-g offset and sensitivity per axis from a recording of still poses (six-position test, or any "
         "orientations of a 3-axis part)",
         description="Find the still poses in a recording, fit each axis's zero-g offset, sensitivity and "
-        "cross-axis terms with 95 %% intervals, and write them into a model file.",
+        "cross-axis terms with 95 % intervals, and write them into a model file.",
     )
     p.add_argument("recording", type=Path, help="CSV (plain or gzip), NPZ or accelnav run file")
     p.add_argument(

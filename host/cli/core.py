@@ -271,7 +271,11 @@ def _summary(arrays: dict[str, np.ndarray]) -> str:
                 x = arrays[f"{stage}_x"][j, k]
                 sd = state_sd(arrays, stage)[j, k]
                 at = "end" if k == -1 else "start"
-                est = ", ".join(f"{s}={v:.4g}+-{e:.2g}" for s, v, e in zip(STATE, x, sd, strict=True))
+                # a state known exactly (r = u = 0 at the start, by the filter's prior) has no estimate to show
+                known = [s for s, v, e in zip(STATE, x, sd, strict=True) if e == 0 and v == 0]
+                est = ", ".join(f"{s}={v:.4g}+-{e:.2g}" for s, v, e in zip(STATE, x, sd, strict=True) if s not in known)
+                if known:
+                    est += f" ({' = '.join(known)} = 0 there by definition)"
                 parts.append(f"{'filter' if stage == 'filt' else 'smoother'} at {at}: {est}")
         lines.append("; ".join(parts))
     return "\n".join(lines)

@@ -164,7 +164,7 @@ def _on_model(path, rec, model: Model | None, chosen: bool = False) -> tuple[Run
         clipped |= rec.clipped
     if missing.any():
         note(f"{path}: {int(missing.sum())} missing samples filled in (predict only)")
-    if len(rec.axis_names) and list(rec.axis_names) != names:
+    if len(rec.axis_names) and list(rec.columns) != names:  # say how the file's columns were taken
         note(f"{path}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
     arrays = {"t": t, "axis_names": np.array(names), "accel": accel, "clipped": clipped}
     return Run(arrays), model

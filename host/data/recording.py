@@ -6,12 +6,14 @@ Formats
   row of column names, then numbers; ``#`` comment lines before the header
   are skipped; comma, semicolon or tab separated. Acceleration columns are
   the ones named with ``--axis`` (a column name, or its short axis name), by
-  default every column whose name starts with ``acc``. Their unit comes from
+  default every column whose name starts with ``acc`` or is ``a`` and an
+  axis letter (``ax``, ``a_y``, ``az_g``). Their unit comes from
   the name's suffix (``_g``, ``_mg``, ``_m_s2``, ``_mps2``, ``_ms2``) or
   from ``unit``. Time comes from a column ``t``/``time`` (suffix ``_s``,
   ``_ms`` or ``_us`` for its unit, seconds without one) or from ``rate_hz``.
   The short axis name drops an ``acc_``/``accel_`` prefix and the unit
-  suffix: ``acc_x_g`` is axis ``x``.
+  suffix: ``acc_x_g`` is axis ``x``, and so is ``ax_g``. With ``;`` or tab
+  as separator a decimal comma (``0,01188``) is read as a decimal point.
 * **NPZ** as written by ``accelnav sim``: ``t`` (N,), ``axis_names``
   (n_axes,), ``accel`` (N, n_axes) in m/s^2, optionally a 0-d
   ``model_toml`` string and a ``clipped`` (N, n_axes) mask. ``accel`` may be
@@ -59,6 +61,8 @@ _UNIT_SUFFIX = re.compile(r"(?:_|\[|\()(g|mg|m_s2|mps2|ms2|m/s\^?2|counts|count|
 _TIME_NAME = re.compile(r"^(t|time|timestamp)(?:_(s|ms|us))?$", re.IGNORECASE)
 _TIME_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6}
 _ACC_PREFIX = re.compile(r"^(acceleration|accel|acc)_?", re.IGNORECASE)
+# the other common spelling: "a" and one axis letter (ax, a_y, az_g), as phone and logger apps write it
+_A_AXIS = re.compile(r"^a_?([xyz])$", re.IGNORECASE)
 
 GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap
 SNAP_TOL = 0.01  # a clock within 1 % of a whole number of Hz (>= 10 Hz) is taken as that nominal rate
@@ -334,8 +338,16 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: s
                 head = _header(line, first + i, src, axes, unit, rate_hz, time_column, default)
                 continue
             if line.count(head.delim) != len(head.cols) - 1:
+                hint = ""
+                if head.delim == "," and line.count(",") > len(head.cols) - 1:
+                    # "0,01188" between commas cannot be told from two fields
+                    hint = (
+                        "; if the numbers have a decimal comma (0,01188), separate the fields with ';' "
+                        "(read as decimal commas) or write decimal points"
+                    )
                 raise UserError(
-                    f"{src}: line {first + i}: {line.count(head.delim) + 1} fields; the header has {len(head.cols)}"
+                    f"{src}: line {first + i}: {line.count(head.delim) + 1} fields; "
+                    f"the header has {len(head.cols)}{hint}"
                 )
             rows.append(line)
             nums.append(first + i)
@@ -370,9 +382,14 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: s
 def _parse_piece(rows, nums, head, src: str, pieces: list, line_nos: list) -> None:
     """The numbers of ``rows`` (a list of lines, or whole lines as one text) appended to ``pieces``."""
     text = rows if isinstance(rows, str) else None
+    comma = head.delim != ","  # with ';' or tab between fields a comma can only be a decimal comma
+    if comma:
+        parsed = text.replace(",", ".") if text is not None else [r.replace(",", ".") for r in rows]
+    else:
+        parsed = text if text is not None else rows
     try:
         chunk = np.loadtxt(
-            io.StringIO(text) if text is not None else rows,
+            io.StringIO(parsed) if text is not None else parsed,
             delimiter=head.delim,
             usecols=head.use,
             ndmin=2,
@@ -380,7 +397,8 @@ def _parse_piece(rows, nums, head, src: str, pieces: list, line_nos: list) -> No
             comments="#",
         )
     except ValueError:
-        _locate_bad_cell(text.split("\n") if text is not None else rows, nums, head.delim, head.cols, head.use, src)
+        lines = text.split("\n") if text is not None else rows
+        _locate_bad_cell(lines, nums, head.delim, head.cols, head.use, src, comma)
         raise  # _locate_bad_cell always raises; this keeps linters quiet
     pieces.append(chunk.reshape(-1, len(head.use)))
     line_nos.append(np.asarray(nums, dtype=np.int64))
@@ -445,9 +463,11 @@ def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_colum
                 raise UserError(f"{src}: no column {excerpt(a)}; columns: {_cols(cols)}")
             chosen.append(hits[0])
     else:
-        chosen = [c for c in cols if _ACC_PREFIX.match(c) and c != tcol]
+        chosen = [c for c in cols if _is_accel_name(c) and c != tcol]
         if not chosen:
-            raise UserError(f"{src}: no acceleration column (acc...); name one with --axis; columns: {_cols(cols)}")
+            raise UserError(
+                f"{src}: no acceleration column (acc..., ax/ay/az); name one with --axis; columns: {_cols(cols)}"
+            )
     units = []
     for c in chosen:
         if unit is not None:
@@ -480,18 +500,25 @@ def _is_number(s: str) -> bool:
     return True
 
 
+def _is_accel_name(col: str) -> bool:
+    return bool(_ACC_PREFIX.match(col) or _A_AXIS.match(_UNIT_SUFFIX.sub("", col)))
+
+
 def _short_name(col: str) -> str:
     name = _UNIT_SUFFIX.sub("", col)
+    m = _A_AXIS.match(name)
+    if m:
+        return m.group(1)
     name = _ACC_PREFIX.sub("", name) or name
     return name.strip("_") or col
 
 
-def _locate_bad_cell(lines, nums, delim, cols, use, src) -> None:
+def _locate_bad_cell(lines, nums, delim, cols, use, src, comma=False) -> None:
     for line, no in zip(lines, nums, strict=True):
         cells = line.split(delim)
         for j in use:
             cell = cells[j].strip() if j < len(cells) else ""
-            if not _is_number(cell):
+            if not _is_number(cell.replace(",", ".") if comma else cell):
                 what = "is empty" if not cell else f"is not a number ({excerpt(cell, 24)})"
                 raise UserError(
                     f"{src}: line {no}, column {excerpt(cols[j], 40)} {what}; a gap in the data is not accepted"

@@ -30,7 +30,7 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
     """Position, velocity and bias of every axis: truth, double integration, filter and smoother (+-1 sigma);
     on the velocity row, the detector's accepted and refused rests when the run has ``zupt_candidates``."""
     plt = _pyplot()
-    t = arrays["t"]
+    t, start = _from_start(arrays["t"])
     names = [str(a) for a in arrays["axis_names"]]
     plain = dead_reckoning(arrays, model)
     fig, axes = plt.subplots(3, len(names), figsize=(6.5 * len(names), 9.5), sharex=True, squeeze=False)
@@ -42,7 +42,7 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
             if truth_keys[i] in arrays:
                 ax.plot(t, arrays[truth_keys[i]][:, j], color="black", lw=1.6, label="truth")
             if i < 2:
-                ax.plot(t, plain[j, :, i], color="tab:gray", lw=1.0, ls="--", label="double integration")
+                dr = ax.plot(t, plain[j, :, i], color="tab:gray", lw=1.0, ls="--", label="double integration")[0]
             # the smoother underneath, the filter dashed on top: they coincide where no future data helps
             for stage, color, lab, ls in (("smooth", "tab:red", "smoother", "-"), ("filt", "tab:blue", "filter", "--")):
                 if f"{stage}_x" in arrays:
@@ -50,7 +50,11 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
                     sd = state_sd(arrays, stage)[j, :, i]
                     _band(ax, t, x, sd, color, f"{lab} +-1 sigma", ls)
             if i == 1:
-                _rest_marks(ax, arrays)
+                _rest_marks(ax, arrays, start)
+            if i < 2 and "r" not in arrays:
+                stage = "smooth" if "smooth_x" in arrays else "filt"
+                if f"{stage}_x" in arrays:
+                    _clip_to_track(ax, dr, arrays[f"{stage}_x"][j, :, i], state_sd(arrays, stage)[j, :, i])
             if i < 2 and "r" in arrays:
                 # keep the truth readable when dead reckoning runs away
                 span = np.ptp(arrays[truth_keys[i]][:, j])
@@ -61,7 +65,7 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
             ax.grid(True, alpha=0.3)
             if row == 0:
                 ax.set_title(f"axis {name}")
-        axes[-1, j].set_xlabel("time [s]")
+        axes[-1, j].set_xlabel(_TIME_LABEL)
     axes[0, 0].legend(loc="best", fontsize=8)
     fig.suptitle(title or f"accelnav: {model.name}")
     fig.tight_layout()
@@ -70,6 +74,29 @@ def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, titl
         fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return path
+
+
+_TIME_LABEL = "time from the recording's start [s]"
+
+
+def _from_start(t: np.ndarray) -> tuple[np.ndarray, float]:
+    """Time from the first sample, and that sample's time: a recording stamped in Unix seconds would
+    otherwise label its axis "+1.73253e9" and hide the seconds that matter."""
+    start = float(t[0]) if len(t) else 0.0
+    return t - start, start
+
+
+def _clip_to_track(ax, line, x: np.ndarray, sd: np.ndarray) -> None:
+    """Limit the y range to an estimate's track (+-1 sigma, with a margin) so that double integration,
+    which runs away quadratically, does not flatten it; the curve's label says when it leaves the plot."""
+    lo, hi = float(np.min(x - sd)), float(np.max(x + sd))
+    pad = 0.15 * (hi - lo) + 1e-3
+    lo, hi = lo - pad, hi + pad
+    y = np.asarray(line.get_ydata(), dtype=np.float64)
+    ax.set_ylim(lo, hi)
+    if len(y) and (y.min() < lo or y.max() > hi):
+        worst = float(np.max(np.abs(y)))
+        line.set_label(f"{line.get_label()} (leaves the plot, reaches {worst:.3g})")
 
 
 def _axis_columns(plt, n_axes: int, title: str):
@@ -86,7 +113,7 @@ def _save(plt, fig, path: Path) -> Path:
     return path
 
 
-def _rest_marks(ax, arrays) -> None:
+def _rest_marks(ax, arrays, start: float = 0.0) -> None:
     """The detector's candidate rests (key ``zupt_candidates``, rows [start_s, end_s, accepted]): accepted ones
     shaded green, refused ones hatched red, so that a refused stop or an accepted 'rest' at speed shows."""
     rows = arrays.get("zupt_candidates")
@@ -97,13 +124,14 @@ def _rest_marks(ax, arrays) -> None:
         ok = bool(acc)
         label = ("rest accepted" if ok else "rest refused") if first[ok] else None
         first[ok] = False
+        t0, t1 = t0 - start, t1 - start
         if ok:
             ax.axvspan(t0, t1, color="tab:green", alpha=0.15, lw=0, label=label)
         else:
             ax.axvspan(t0, t1, facecolor="none", edgecolor="tab:red", hatch="///", alpha=0.5, lw=0, label=label)
 
 
-def _marks(ax, arrays, j, t, y_of_k=None):
+def _marks(ax, arrays, j, t, start: float = 0.0):
     """Shade the samples whose zero-velocity update was applied; dots for position fixes."""
     if "zupt" in arrays and arrays["zupt"][:, j].any():
         from accelnav.estimate.zupt import intervals
@@ -120,7 +148,13 @@ def _marks(ax, arrays, j, t, y_of_k=None):
         f = arrays["fixes"][arrays["fixes"][:, 1] == j]
         if len(f):
             ax.errorbar(
-                f[:, 0], f[:, 2], yerr=f[:, 3], fmt="o", color="tab:purple", ms=4, label="position fix +-1 sigma"
+                f[:, 0] - start,
+                f[:, 2],
+                yerr=f[:, 3],
+                fmt="o",
+                color="tab:purple",
+                ms=4,
+                label="position fix +-1 sigma",
             )
 
 
@@ -140,7 +174,7 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
 
     plt = _pyplot()
     folder = Path(folder)
-    t = arrays["t"]
+    t, start = _from_start(arrays["t"])
     names = [str(a) for a in arrays["axis_names"]]
     plain = dead_reckoning(arrays, model)
     has_truth = "r" in arrays
@@ -163,7 +197,7 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
                 ls,
             )
         ax.set_title(f"axis {names[j]}")
-        ax.set_xlabel("time [s]")
+        ax.set_xlabel(_TIME_LABEL)
         ax.set_ylabel("bias eps [m/s^2]")
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="best", fontsize=8)
@@ -173,11 +207,13 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
     for j, ax in enumerate(axes):
         if has_truth:
             ax.plot(t, arrays["r"][:, j], color="black", lw=1.4, label="truth")
-        ax.plot(t, plain[j, :, 0], color="tab:gray", ls="--", lw=1.0, label="double integration")
+        dr = ax.plot(t, plain[j, :, 0], color="tab:gray", ls="--", lw=1.0, label="double integration")[0]
         _band(ax, t, arrays["filt_x"][j, :, 0], state_sd(arrays, "filt")[j, :, 0], "tab:blue", "filter +-1 sigma")
-        _marks(ax, arrays, j, t)
+        if not has_truth:
+            _clip_to_track(ax, dr, arrays["filt_x"][j, :, 0], state_sd(arrays, "filt")[j, :, 0])
+        _marks(ax, arrays, j, t, start)
         ax.set_title(f"axis {names[j]}")
-        ax.set_xlabel("time [s]")
+        ax.set_xlabel(_TIME_LABEL)
         ax.set_ylabel("position r [m]")
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="best", fontsize=8)
@@ -198,12 +234,12 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
             "--",
         )
         _band(ax, t, arrays["smooth_x"][j, :, 0], state_sd(arrays, "smooth")[j, :, 0], "tab:red", "smoother +-1 sigma")
-        _marks(ax, arrays, j, t)
-        _rest_marks(ax, arrays)
+        _marks(ax, arrays, j, t, start)
+        _rest_marks(ax, arrays, start)
         span = np.ptp(ref) if len(ref) else 1.0
         ax.set_ylim(ref.min() - 0.5 * span - 1.0, ref.max() + 0.5 * span + 1.0)  # the filter may run far away
         ax.set_title(f"axis {names[j]}")
-        ax.set_xlabel("time [s]")
+        ax.set_xlabel(_TIME_LABEL)
         ax.set_ylabel("position r [m]")
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="best", fontsize=8)
