@@ -1,4 +1,4 @@
-"""Noise identification: the Allan deviation (allantools) and its intervals, the terms, the filter mapping."""
+"""Noise identification: the Allan deviation and its intervals, the terms, the filter mapping."""
 
 from __future__ import annotations
 

@@ -2,10 +2,10 @@
 
 Allan deviation
 ---------------
-The overlapping Allan deviation comes from allantools (``oadev`` on the
-samples as "frequency" data, so the result is in the samples' own units,
-m/s^2). Its 95 % confidence interval uses the equivalent degrees of freedom
-of Greenhall (allantools ``edf_greenhall``) for the noise type read from the
+The overlapping Allan deviation comes from accelnav.identify.allan, the estimator
+of allantools' ``oadev`` on the samples as "frequency" data, so the result is in
+the samples' own units, m/s^2. Its 95 % confidence interval uses the equivalent degrees of freedom
+of Greenhall (allantools' ``edf_greenhall``) for the noise type read from the
 local log-log slope mu of the curve (alpha = -2 mu - 1, rounded into -2 .. 0:
 white, flicker and random-walk rate noise).
 
@@ -74,9 +74,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from accelnav.identify import allan
 from accelnav.lazy import lazy_module
 
-allantools = lazy_module("allantools")
 optimize = lazy_module("scipy.optimize")
 
 
@@ -161,28 +161,18 @@ def allan_deviation(y, rate_hz: float, *, taus_per_decade: int = TAUS_PER_DECADE
     taus = ms / rate_hz
     if progress is not None:
         progress.total = len(ms)
+    x = allan.phase(y, rate_hz)
     dev = np.empty(len(ms))
-    ns = np.empty(len(ms))
-    # Several taus per call keeps the progress moving without re-integrating the data too often.
-    chunks = np.array_split(np.arange(len(ms)), max(1, min(len(ms), 6)))
-    done = 0
-    for idx in chunks:
-        if len(idx) == 0:
-            continue
-        t_out, d, _, nn = allantools.oadev(y, rate=rate_hz, data_type="freq", taus=taus[idx])
-        got = np.round(t_out * rate_hz).astype(np.int64)
-        pos = np.searchsorted(ms, got)
-        dev[pos] = d
-        ns[pos] = nn
-        done += len(idx)
+    for i, m in enumerate(ms):
+        dev[i], _ = allan.oadev_phase(x, rate_hz, int(m))
         if progress is not None:
-            progress.update(done)
+            progress.update(i + 1)
     alpha = _noise_alpha(taus, dev)
     edf = np.array([_edf(int(a), int(m), n + 1) for a, m in zip(alpha, ms, strict=True)])
     lo = np.empty(len(ms))
     hi = np.empty(len(ms))
     for i in range(len(ms)):
-        lo[i], hi[i] = allantools.confidence_interval(dev[i], edf[i], ci=CI)
+        lo[i], hi[i] = allan.confidence_interval(dev[i], edf[i], CI)
     return AllanCurve(tau=taus, adev=dev, lo=lo, hi=hi, edf=edf, alpha=alpha)
 
 
@@ -204,11 +194,11 @@ def _noise_alpha(tau: np.ndarray, dev: np.ndarray) -> np.ndarray:
 
 def _edf(alpha: int, m: int, n_phase: int) -> float:
     try:
-        edf = float(allantools.edf_greenhall(alpha=alpha, d=2, m=m, N=n_phase, overlapping=True, modified=False))
-    except (NotImplementedError, AssertionError, ZeroDivisionError, ValueError):
+        edf = allan.edf_greenhall(alpha, m, n_phase)
+    except (ZeroDivisionError, ValueError):
         edf = float("nan")
     if not math.isfinite(edf) or edf <= 0:
-        edf = float(allantools.edf_simple(n_phase - 1, m, alpha))
+        edf = allan.edf_simple(n_phase - 1, m, alpha)
     return max(edf, 1.0)
 
 
