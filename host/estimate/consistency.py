@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from accelnav.estimate.kf import Aids, Measurement, double_integrate
+from accelnav.estimate.kf import Aids, Measurement, batch_update, double_integrate
 from accelnav.lazy import lazy_module
 from accelnav.model.design import AxisDesign
 
@@ -81,27 +81,15 @@ def aid_innovations_arrays(d: AxisDesign, z, valid, x_prior, P_prior, ks, hs, zs
     ok = np.asarray(valid, dtype=bool)[uk] & np.isfinite(z[uk])
     # the sample's acceleration update comes first: z = a + eps + v
     h_acc = np.broadcast_to(np.array([0.0, 0.0, 1.0, 1.0]), (int(ok.sum()), 4))
-    X[ok], P[ok], _, _ = _update(X[ok], P[ok], h_acc, z[uk][ok], np.full(int(ok.sum()), d.R))
+    X[ok], P[ok], _, _ = batch_update(X[ok], P[ok], h_acc, z[uk][ok], np.full(int(ok.sum()), d.R))
     y_out, S_out = np.empty(ne), np.empty(ne)
     for r in range(int(rank.max()) + 1):
         sel = np.flatnonzero(rank == r)
         g = group[sel]
         idx = order[sel]
-        X[g], P[g], y, S = _update(X[g], P[g], hs[idx], zs[idx], rs[idx])
+        X[g], P[g], y, S = batch_update(X[g], P[g], hs[idx], zs[idx], rs[idx])
         y_out[idx], S_out[idx] = y, S
     return y_out, S_out
-
-
-def _update(X, P, H, z, R):
-    """Scalar updates of many (x, P) at once; returns (x, P, y, S)."""
-    # S = H P H' + R;  K = P H' / S;  x += K y;  P -= K H P
-    Ph = np.einsum("nij,nj->ni", P, H)
-    S = np.einsum("ni,ni->n", H, Ph) + R
-    y = z - np.einsum("ni,ni->n", H, X)
-    K = Ph / S[:, None]
-    X = X + K * y[:, None]
-    P = P - K[:, :, None] * Ph[:, None, :]
-    return X, 0.5 * (P + np.swapaxes(P, 1, 2)), y, S
 
 
 @dataclass(frozen=True)

@@ -277,3 +277,18 @@ def double_integrate(d: AxisDesign, a: np.ndarray, valid: np.ndarray | None = No
     u = np.concatenate(([0.0], np.cumsum(a[:-1]) * Ts))
     r = np.concatenate(([0.0], np.cumsum(Ts * u[:-1] + 0.5 * Ts * Ts * a[:-1])))
     return np.stack([r, u], axis=1)
+
+
+def batch_update(X, P, H, z, R):
+    """Scalar measurement updates of many independent (x, P) at once, one row each: (x, P, y, S).
+
+    The update of :func:`run_filter`, vectorised over rows (the aids' replay for NIS in
+    accelnav.estimate.consistency and the likelihood of accelnav.estimate.tune)."""
+    # S = H P H' + R;  K = P H' / S;  x += K y;  P -= K H P
+    Ph = np.einsum("nij,nj->ni", P, H)
+    S = np.einsum("ni,ni->n", H, Ph) + R
+    y = z - np.einsum("ni,ni->n", H, X)
+    K = Ph / S[:, None]
+    X = X + K * y[:, None]
+    P = P - K[:, :, None] * Ph[:, None, :]
+    return X, 0.5 * (P + np.swapaxes(P, 1, 2)), y, S
