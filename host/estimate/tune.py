@@ -61,7 +61,7 @@ from statistics import NormalDist
 import numpy as np
 
 from accelnav.estimate import fastsmooth
-from accelnav.estimate.kf import Measurement
+from accelnav.estimate.kf import Measurement, batch_update
 from accelnav.lazy import lazy_module
 from accelnav.model.design import axis_design
 from accelnav.model.edit import revalidate, with_noise
@@ -115,13 +115,7 @@ def _axis_loglik(
 
 def _update_many(X, P, H, z, R):
     """Scalar updates of many (x, P) at once: (x, P, log(2 pi S) + y^2 / S) per row."""
-    Ph = np.einsum("nij,nj->ni", P, H)
-    S = np.einsum("ni,ni->n", H, Ph) + R
-    y = z - np.einsum("ni,ni->n", H, X)
-    K = Ph / S[:, None]
-    X = X + K * y[:, None]
-    P = P - K[:, :, None] * Ph[:, None, :]
-    P = 0.5 * (P + np.swapaxes(P, 1, 2))
+    X, P, y, S = batch_update(X, P, H, z, R)
     return X, P, np.log(2.0 * math.pi * S) + y * y / S
 
 
@@ -294,82 +288,65 @@ def tune(
     deadline = None
     if ll1 < ll0:
         theta, ll1 = theta0, ll0
-    if not intervals:
-        est = dict(start)
-        est.update(values(theta))
-        nan = float("nan")
-        lr = max(0.0, 2.0 * (ll1 - ll0))
-        p = float(stats.chi2.sf(lr, len(figures)))
-        return TuneResult(
-            figures=figures,
-            start=start,
-            estimate=est,
-            se_ln={f: nan for f in figures},
-            ci95={f: (nan, nan) for f in figures},
-            ll_start=ll0,
-            ll_estimate=ll1,
-            lr=lr,
-            p_value=p,
-            adopted=p < 0.05,
-            evaluations=count[0],
-            converged=converged,
-            at_bound=_at_bound(figures, theta, lo, hi),
-        )
-    # observed information: central differences of -ln L in theta
-    h = 0.02
-    k = len(figures)
-    H = np.empty((k, k))
-    f0 = -ll1
-    for i in range(k):
-        for j in range(i, k):
-            ei, ej = np.eye(k)[i] * h, np.eye(k)[j] * h
-            if i == j:
-                H[i, i] = (nll(theta + ei) - 2 * f0 + nll(theta - ei)) / h**2
-            else:
-                H[i, j] = H[j, i] = (
-                    nll(theta + ei + ej) - nll(theta + ei - ej) - nll(theta - ei + ej) + nll(theta - ei - ej)
-                ) / (4 * h**2)
-    # covariance on the well-determined directions; a figure that leans on a flat or curved-the-wrong-way
-    # direction of -ln L (eigenvalue <= 0) gets no Wald se
-    try:
-        w, V = np.linalg.eigh(H)
-    except np.linalg.LinAlgError:
-        w, V = np.full(k, np.nan), np.eye(k)
-    good = np.isfinite(w) & (w > 0)
-    cov = (V[:, good] / w[good]) @ V[:, good].T
-    weak = np.sum(V[:, ~good] ** 2, axis=1) > 0.1
-    se = {}
-    for i, f in enumerate(figures):
-        se[f] = math.sqrt(cov[i, i]) if cov[i, i] > 0 and not weak[i] else float("nan")
     est = dict(start)
     est.update(values(theta))
-    ci = {}
+    k = len(figures)
+    nan = float("nan")
+    se = {f: nan for f in figures}
+    ci = {f: (nan, nan) for f in figures}
     ends: dict[str, tuple[str, str]] = {}
-    noise_figs = [f for f in figures if not _is_c2(f)]
-    # profiles, best-determined figure first (cheap: its ends are near), so that what they leave goes to the
-    # weakest (an undefined se counts as the weakest), whose profile may have to walk to a search bound
-    noise_figs.sort(key=lambda f: se[f] if math.isfinite(se[f]) else math.inf)
-    total = max_evaluations + 20  # the Hessian may take the search's evaluations past its share
-    for n_fig, f in enumerate(noise_figs):
-        i = figures.index(f)
-        sides = []
-        for side, direction in enumerate((-1.0, 1.0)):
-            # a fair share of what is left, so that a figure whose profile wanders far cannot starve the others
-            left = (len(noise_figs) - n_fig) * 2 - side
-            limit = count[0] + max(0, total - count[0]) // left
-            bound = lo[i] if direction < 0 else hi[i]
-            psi, how = _profile_end(nll, theta, f0, i, direction, se[f], bound, lo, hi, H, count, limit)
-            sides.append((psi, how))
-        ends[f] = (sides[0][1], sides[1][1])
-        ci[f] = tuple(math.exp(psi) if how != "budget" else float("nan") for psi, how in sides)
-    for f in figures:
-        if not _is_c2(f):
-            continue
-        if not math.isfinite(se[f]):
-            ci[f] = (float("nan"), float("nan"))
-        else:
-            se[f] *= C2_SCALE
-            ci[f] = (est[f] - 1.96 * se[f], est[f] + 1.96 * se[f])
+    if intervals:
+        # observed information: central differences of -ln L in theta
+        h = 0.02
+        H = np.empty((k, k))
+        f0 = -ll1
+        for i in range(k):
+            for j in range(i, k):
+                ei, ej = np.eye(k)[i] * h, np.eye(k)[j] * h
+                if i == j:
+                    H[i, i] = (nll(theta + ei) - 2 * f0 + nll(theta - ei)) / h**2
+                else:
+                    H[i, j] = H[j, i] = (
+                        nll(theta + ei + ej) - nll(theta + ei - ej) - nll(theta - ei + ej) + nll(theta - ei - ej)
+                    ) / (4 * h**2)
+        # covariance on the well-determined directions; a figure that leans on a flat or curved-the-wrong-way
+        # direction of -ln L (eigenvalue <= 0) gets no Wald se
+        try:
+            w, V = np.linalg.eigh(H)
+        except np.linalg.LinAlgError:
+            w, V = np.full(k, np.nan), np.eye(k)
+        good = np.isfinite(w) & (w > 0)
+        cov = (V[:, good] / w[good]) @ V[:, good].T
+        weak = np.sum(V[:, ~good] ** 2, axis=1) > 0.1
+        se = {}
+        for i, f in enumerate(figures):
+            se[f] = math.sqrt(cov[i, i]) if cov[i, i] > 0 and not weak[i] else float("nan")
+        ci = {}
+        noise_figs = [f for f in figures if not _is_c2(f)]
+        # profiles, best-determined figure first (cheap: its ends are near), so that what they leave goes to the
+        # weakest (an undefined se counts as the weakest), whose profile may have to walk to a search bound
+        noise_figs.sort(key=lambda f: se[f] if math.isfinite(se[f]) else math.inf)
+        total = max_evaluations + 20  # the Hessian may take the search's evaluations past its share
+        for n_fig, f in enumerate(noise_figs):
+            i = figures.index(f)
+            sides = []
+            for side, direction in enumerate((-1.0, 1.0)):
+                # a fair share of what is left, so that a figure whose profile wanders far cannot starve the others
+                left = (len(noise_figs) - n_fig) * 2 - side
+                limit = count[0] + max(0, total - count[0]) // left
+                bound = lo[i] if direction < 0 else hi[i]
+                psi, how = _profile_end(nll, theta, f0, i, direction, se[f], bound, lo, hi, H, count, limit)
+                sides.append((psi, how))
+            ends[f] = (sides[0][1], sides[1][1])
+            ci[f] = tuple(math.exp(psi) if how != "budget" else float("nan") for psi, how in sides)
+        for f in figures:
+            if not _is_c2(f):
+                continue
+            if not math.isfinite(se[f]):
+                ci[f] = (float("nan"), float("nan"))
+            else:
+                se[f] *= C2_SCALE
+                ci[f] = (est[f] - 1.96 * se[f], est[f] + 1.96 * se[f])
     lr = max(0.0, 2.0 * (ll1 - ll0))
     p = float(stats.chi2.sf(lr, k))
     return TuneResult(
