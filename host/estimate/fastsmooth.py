@@ -76,7 +76,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.estimate.kf import Measurement
+from accelnav.estimate.kf import Aids, Measurement
 from accelnav.model.design import AxisDesign
 from accelnav.native.cbuild import STRICT_FLAGS
 from accelnav.native.kernels import SMOOTHER, build, prebuilt
@@ -364,9 +364,17 @@ class Extras:
     order: np.ndarray  # position i of the sorted arrays holds the given measurement order[i]
 
     @classmethod
-    def of(cls, extras: Sequence[Measurement] | Extras) -> Extras:
+    def of(cls, extras: Sequence[Measurement] | Aids | Extras) -> Extras:
+        """Sorted arrays of ``extras``; :class:`accelnav.estimate.kf.Aids` go through as arrays (a long run's
+        rests are 1e6 zero-velocity updates and more: no object per update)."""
         if isinstance(extras, Extras):
             return extras
+        if isinstance(extras, Aids):
+            if len(extras) and not np.all(extras.R > 0):
+                raise ValueError(f"extra measurement at sample {int(extras.k[~(extras.R > 0)][0])} has variance <= 0")
+            order = np.argsort(extras.k, kind="stable")
+            c = np.ascontiguousarray
+            return cls(c(extras.k[order]), c(extras.h[order]), c(extras.z[order]), c(extras.R[order]), order)
         ne = len(extras)
         ek = np.array([m.k for m in extras], dtype=np.int64).reshape(ne)
         eR = np.array([m.R for m in extras], dtype=np.float64).reshape(ne)
