@@ -142,6 +142,10 @@ class AxisSmooth:
     Ps: np.ndarray  # (N, 10) packed
     applied: np.ndarray  # (n_extras,) bool, in the order the extras were given
     path: str  # "plain" or "general"
+    # general path: each extra's innovation y and its variance S as the filter saw them (given order; for a
+    # gated-out one, at its gate): y^2 / S is the aid's NIS, without replaying the filter
+    y: np.ndarray | None = None
+    S: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.xs)
@@ -425,6 +429,7 @@ def smooth_general(
     eg = np.zeros(ne) if gates is None else np.asarray(gates, dtype=np.float64).reshape(ne)
     eg = np.ascontiguousarray(eg[order])
     applied = np.zeros(max(ne, 1), dtype=np.uint8)
+    ey, eS = np.zeros(max(ne, 1)), np.zeros(max(ne, 1))
     if out is not None and len(out) == n and out.path == "general":
         xp, Pp, xf, Pf, xs, Ps = out.x_prior, out.P_prior, out.x_post, out.P_post, out.xs, out.Ps
     else:
@@ -440,13 +445,15 @@ def smooth_general(
         ffi.from_buffer("long[]", eks) if ne else ffi.NULL,
         *((_ptr(ffi, a, "double *") if ne else ffi.NULL) for a in keep[1:]),
         _ptr(ffi, applied, "unsigned char *"),
-        *(_ptr(ffi, a, "double *") for a in (xp, Pp, xf, Pf, xs, Ps)),
+        *(_ptr(ffi, a, "double *") for a in (ey, eS, xp, Pp, xf, Pf, xs, Ps)),
     )
     if rc != 0:
         raise ValueError(f"general path: the prior covariance is not positive definite at sample {-rc}")
     done = np.zeros(ne, dtype=bool)
     done[order] = applied[:ne].astype(bool)
-    return AxisSmooth(xp, Pp, xf, Pf, xs, Ps, done, "general")
+    y, S = np.empty(ne), np.empty(ne)
+    y[order], S[order] = ey[:ne], eS[:ne]
+    return AxisSmooth(xp, Pp, xf, Pf, xs, Ps, done, "general", y, S)
 
 
 def smooth(

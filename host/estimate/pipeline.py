@@ -182,7 +182,6 @@ def smooth_run(
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
     from accelnav.estimate import fastsmooth, zupt
-    from accelnav.estimate.consistency import aid_innovations_arrays
 
     check_run(arrays, model, "smooth_run")
     if warm_start:
@@ -218,8 +217,10 @@ def smooth_run(
             applied[za.k[res.applied[len(fx) :]], j] = True
         fix_rows += list(zip(arrays["t"][fx.k], [j] * len(fx), fx.z, np.sqrt(fx.R), strict=True))
         if len(extras):  # NIS only where there are aids: the plain path pays nothing
-            used = extras.take(np.flatnonzero(res.applied))
-            y, S = aid_innovations_arrays(d, z, valid, res.x_prior, res.P_prior, used.k, used.h, used.z, used.R)
+            # the innovations as the compiled filter met them (consistency.aid_innovations replays the same)
+            sel = np.flatnonzero(res.applied)
+            used = extras.take(sel)
+            y, S = res.y[sel], res.S[sel]
             nis = y * y / S
             n_fix_used = int(np.sum(res.applied[: len(fx)]))  # fixes are never gated: all of them
             fix_nis += list(nis[:n_fix_used])

@@ -325,12 +325,14 @@ static int chol_solve4(double M[4][4], double B[4][4])
 /*
  * The measurements of sample k once its prior is in (x, P): the acceleration
  * if ok, then the extras ek[ei] == k in order. Returns the index of the first
- * extra of a later sample.
+ * extra of a later sample. ey, eS (or NULL) get each extra's innovation y and
+ * its variance S as the filter saw them: y^2 / S is the aid's NIS, with no
+ * replay of the filter (accelnav.estimate.consistency).
  */
 static long general_update(const acn_axis *m, long k, int ok, double zk, double x[4],
                            double P[4][4], long ei, long n_extra, const long *ek, const double *eh,
                            const double *ez, const double *eR, const double *egate,
-                           unsigned char *applied)
+                           unsigned char *applied, double *ey, double *eS)
 {
     double K[4], S;
     if (ok)
@@ -346,11 +348,19 @@ static long general_update(const acn_axis *m, long k, int ok, double zk, double 
                     s += h[i] * P[i][j] * h[j];
             if (y * y > egate[ei] * s) {
                 applied[ei] = 0;
+                if (ey != NULL) {
+                    ey[ei] = y;
+                    eS[ei] = s;
+                }
                 continue;
             }
         }
-        update(x, P, h, ez[ei], eR[ei], &S, K);
+        double y = update(x, P, h, ez[ei], eR[ei], &S, K);
         applied[ei] = 1;
+        if (ey != NULL) {
+            ey[ei] = y;
+            eS[ei] = S;
+        }
     }
     return ei;
 }
@@ -413,8 +423,8 @@ static int rts_step(double F[4][4], const double *xpost, const double *Ppost, co
 
 int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
                 long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
-                const double *egate, unsigned char *applied, double *xprior, double *Pprior,
-                double *xpost, double *Ppost, double *xs, double *Psm)
+                const double *egate, unsigned char *applied, double *ey, double *eS, double *xprior,
+                double *Pprior, double *xpost, double *Ppost, double *xs, double *Psm)
 {
     double F[4][4], P[4][4], x[4];
     long ei = 0;
@@ -432,7 +442,7 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
             xprior[4 * k + i] = x[i];
         pack(P, Pprior + 10 * k);
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
-                            eR, egate, applied);
+                            eR, egate, applied, ey, eS);
         for (int i = 0; i < 4; i++)
             xpost[4 * k + i] = x[i];
         pack(P, Ppost + 10 * k);
@@ -867,7 +877,7 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
     for (long k = 0; k < n; k++) {
         double *row = store + ACN_GROW * k;
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
-                            eR, egate, applied);
+                            eR, egate, applied, NULL, NULL);
         for (int i = 0; i < 4; i++) {
             row[i] = xf[4 * k + i] = x[i];
             sdf[4 * k + i] = sqrt(P[i][i]);

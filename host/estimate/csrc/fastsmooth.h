@@ -43,8 +43,8 @@ void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned c
 
 int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
                 long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
-                const double *egate, unsigned char *applied, double *xprior, double *Pprior,
-                double *xpost, double *Ppost, double *xs, double *Psm);
+                const double *egate, unsigned char *applied, double *ey, double *eS, double *xprior,
+                double *Pprior, double *xpost, double *Ppost, double *xs, double *Psm);
 
 /*
  * The rest detector's split of one run of n quiet window centres into pieces of
