@@ -432,25 +432,45 @@ class _Anchor:
     sd: np.ndarray  # sd of b from the sensor's noise: sqrt(R / samples)
 
 
-def _closure(x, ok, R, Ts, p: ZuptParams, anc: _Anchor, a: int, here: _Anchor):
-    """(chi2, |v|, peak |v|, peak chi2) of the velocity integrated from the anchor to sample a, the bias linear
-    from the anchor's level to the candidate's."""
-    b1 = here.b
-    m = a - anc.end
-    if m <= 0:
-        return 0.0, 0.0, 0.0, 0.0
-    frac = (np.arange(m) + 0.5)[:, None] / m
-    seg = x[anc.end : a] - (anc.b + frac * (b1 - anc.b))
-    seg[~ok[anc.end : a]] = 0.0
-    v_path = np.cumsum(seg, axis=0) * Ts
-    v = v_path[-1]
-    D = m * Ts
-    s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
-    chi2 = float(np.mean(v * v / s2))
-    speeds = np.sqrt((v_path**2).sum(axis=1))
-    peak = float(speeds.max())
-    peak_chi2 = float(np.max(np.mean(v_path**2 / s2, axis=1)))
-    return chi2, float(np.sqrt(v @ v)), peak, peak_chi2
+class _Closure:
+    """The velocity closure of :func:`gate_rests` over one recording: the per-sample sum runs in C
+    (acn_rest_closure, numpy's steps in numpy's order: the same numbers as the array code it replaced, which
+    spent as long on its dozen array calls per candidate as on the sums)."""
+
+    def __init__(self, x: np.ndarray, ok: np.ndarray, R: np.ndarray, Ts: float, p: ZuptParams):
+        from accelnav.estimate.fastsmooth import _lib
+
+        if x.shape[1] > _MAX_AXES:
+            raise ValueError(f"rest detector: {x.shape[1]} axes; accepted: at most {_MAX_AXES}")
+        mod = _lib()
+        self.ffi, self.lib = mod.ffi, mod.lib
+        self.x = np.ascontiguousarray(x, dtype=np.float64)
+        self.ok = np.ascontiguousarray(ok, dtype=bool).view(np.uint8)
+        self.px = self.ffi.cast("double *", self.ffi.from_buffer(self.x))
+        self.pok = self.ffi.cast("unsigned char *", self.ffi.from_buffer(self.ok))
+        self.R, self.Ts, self.p = R, Ts, p
+        self.n_axes = x.shape[1]
+        self.v = np.empty(self.n_axes)
+        self.peaks = self.ffi.new("double[2]")
+
+    def __call__(self, anc: _Anchor, a: int, here: _Anchor) -> tuple[float, float, float, float]:
+        """(chi2, |v|, peak |v|, peak chi2) of the velocity integrated from the anchor to sample a, the bias
+        linear from the anchor's level to the candidate's."""
+        m = a - anc.end
+        if m <= 0:
+            return 0.0, 0.0, 0.0, 0.0
+        R, Ts, p, ffi = self.R, self.Ts, self.p, self.ffi
+        D = m * Ts
+        s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
+        b0, b1, s2 = (np.ascontiguousarray(v, dtype=np.float64) for v in (anc.b, here.b, s2))
+        k = anc.end * self.n_axes
+        self.lib.acn_rest_closure(
+            m, self.n_axes, self.px + k, self.pok + k, ffi.from_buffer("double[]", b0), ffi.from_buffer("double[]", b1),
+            Ts, ffi.from_buffer("double[]", s2), ffi.from_buffer("double[]", self.v), self.peaks, self.peaks + 1,
+        )  # fmt: skip
+        v = self.v.copy()
+        chi2 = float(np.mean(v * v / s2))
+        return chi2, float(np.sqrt(v @ v)), float(self.peaks[0]), float(self.peaks[1])
 
 
 def gate_rests(
@@ -467,9 +487,11 @@ def gate_rests(
     anchors: list[tuple[_Anchor, int]] = []  # accepted rests (as anchors) and their index in ``out``
     prev: tuple[_Anchor, str] | None = None  # the previous candidate, as a possible anchor, and its verdict
     out: list[RestDecision] = []
+    closure = _Closure(x, ok, R, Ts, p)
+    usable = ok.all(axis=1)
     for a, stop in intervals(rest):
-        use = ok[a:stop].all(axis=1)
-        xs = x[a:stop][use] if use.any() else np.zeros((1, n_axes))
+        use = usable[a:stop]
+        xs = x[a:stop] if use.all() else x[a:stop][use] if use.any() else np.zeros((1, n_axes))
         b1, kept = _robust_mean(xs, R)
         var = xs.var(axis=0) if len(xs) > 1 else R.copy()
         still = float(np.mean(var / R))
@@ -491,7 +513,7 @@ def gate_rests(
                 accepted, reason = False, "no rest before"
                 if anchor is not None:
                     used = anchor.end
-                    chi2, speed, peak, peak_chi2 = _closure(x, ok, R, Ts, p, anchor, a, here)
+                    chi2, speed, peak, peak_chi2 = closure(anchor, a, here)
                     moved = peak_chi2 > p.gate
                     near = not moved and (a - anchor.end) * Ts <= p.recover_s
                     lev, bound = _level(p, anchor, b1, a, Ts, p.level if near else None)
@@ -521,7 +543,7 @@ def gate_rests(
             cand = prev[0]
             lev2, bound2 = _level(p, cand, b1, a, Ts)
             if (a - cand.end) * Ts <= p.recover_s and lev2 <= bound2:
-                c2, sp2, pk2, pk_chi2 = _closure(x, ok, R, Ts, p, cand, a, here)
+                c2, sp2, pk2, pk_chi2 = closure(cand, a, here)
                 if (c2 <= p.gate or sp2 <= p.rel * pk2) and pk_chi2 > p.gate:
                     accepted, reason = True, "recovered"
                     chi2, speed, peak, lev, bound, used = c2, sp2, pk2, lev2, bound2, cand.end
@@ -578,7 +600,12 @@ def _robust_mean(x: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Not the median itself: a coarse ADC (the default's step is 3.6 sqrt(R)) puts the median on a code.
     """
-    med = np.median(x, axis=0)
+    k = len(x)  # the median as np.median computes it, without its overhead per call
+    if k % 2:
+        med = np.partition(x, k // 2, axis=0)[k // 2]
+    else:
+        part = np.partition(x, (k // 2 - 1, k // 2), axis=0)
+        med = (part[k // 2 - 1] + part[k // 2]) / 2.0
     near = np.abs(x - med) <= 5.0 * np.sqrt(R)
     kept = np.maximum(near.sum(axis=0), 1)
     return np.where(near, x, 0.0).sum(axis=0) / kept, kept
