@@ -44,3 +44,15 @@ def test_nis_equals_the_replay_of_the_filter(default_model, gated):
         np.testing.assert_allclose(out["fix_nis"][seen : seen + nf], want[:nf], rtol=1e-12)
         np.testing.assert_allclose(zn[zn[:, 1] == j, 2], want[nf:], rtol=1e-12)
         seen += nf
+
+
+def test_nis_bounds_are_the_chi2_quantiles():
+    """nis_check's bounds come from scipy.special (a tenth of scipy.stats' import time): the same numbers."""
+    from scipy import stats
+
+    from accelnav.estimate.consistency import NIS_QUANTILE, nis_check
+
+    for n in (1, 2, 7, 100, 12_345, 10**6):
+        c = nis_check("rests", np.ones(n))
+        np.testing.assert_allclose(c.low * n, stats.chi2.ppf(1 - NIS_QUANTILE, n), rtol=1e-12)
+        np.testing.assert_allclose(c.high * n, stats.chi2.ppf(NIS_QUANTILE, n), rtol=1e-12)
