@@ -450,7 +450,9 @@ class _Closure:
         self.pok = self.ffi.cast("unsigned char *", self.ffi.from_buffer(self.ok))
         self.R, self.Ts, self.p = R, Ts, p
         self.n_axes = x.shape[1]
-        self.v = np.empty(self.n_axes)
+        # b0, b1, s2 in, v out: buffers made once, each call copies its few numbers in
+        self.buf = np.empty((4, self.n_axes))
+        self.pbuf = [self.ffi.cast("double *", self.ffi.from_buffer(self.buf[i])) for i in range(4)]
         self.peaks = self.ffi.new("double[2]")
 
     def __call__(self, anc: _Anchor, a: int, here: _Anchor) -> tuple[float, float, float, float]:
@@ -459,16 +461,16 @@ class _Closure:
         m = a - anc.end
         if m <= 0:
             return 0.0, 0.0, 0.0, 0.0
-        R, Ts, p, ffi = self.R, self.Ts, self.p, self.ffi
+        R, Ts, p = self.R, self.Ts, self.p
         D = m * Ts
         s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
-        b0, b1, s2 = (np.ascontiguousarray(v, dtype=np.float64) for v in (anc.b, here.b, s2))
+        buf, pb = self.buf, self.pbuf
+        buf[0], buf[1], buf[2] = anc.b, here.b, s2
         k = anc.end * self.n_axes
         self.lib.acn_rest_closure(
-            m, self.n_axes, self.px + k, self.pok + k, ffi.from_buffer("double[]", b0), ffi.from_buffer("double[]", b1),
-            Ts, ffi.from_buffer("double[]", s2), ffi.from_buffer("double[]", self.v), self.peaks, self.peaks + 1,
-        )  # fmt: skip
-        v = self.v.copy()
+            m, self.n_axes, self.px + k, self.pok + k, pb[0], pb[1], Ts, pb[2], pb[3], self.peaks, self.peaks + 1
+        )
+        v = buf[3].copy()
         chi2 = float(np.mean(v * v / s2))
         return chi2, float(np.sqrt(v @ v)), float(self.peaks[0]), float(self.peaks[1])
 
