@@ -79,7 +79,7 @@ void acn_rest_closure(long m, int n_axes, const double *x, const unsigned char *
  * (acn_chunkg_fwd, acn_chunkg_bwd): the same steps as acn_general.
  * The carried state between chunks is a small array documented at each call.
  */
-enum { ACN_ROW = 12, ACN_GROW = 28 };
+enum { ACN_ROW = 12, ACN_GROW = 14 };
 
 int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
                   const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
