@@ -82,15 +82,10 @@ def _plain_ok(d) -> bool:
 
 
 def _kernel_extras(a: Aids):
-    """``a`` as the sorted arrays the compiled general path takes (what fastsmooth.Extras.of makes of the same
-    measurements as objects, without the objects)."""
+    """``a`` as the sorted arrays the compiled general path takes (fastsmooth.Extras.of, without objects)."""
     from accelnav.estimate.fastsmooth import Extras
 
-    if len(a) and not np.all(a.R > 0):
-        raise ValueError(f"extra measurement at sample {int(a.k[~(a.R > 0)][0])} has variance <= 0")
-    order = np.argsort(a.k, kind="stable")
-    c = np.ascontiguousarray
-    return Extras(c(a.k[order]), c(a.h[order]), c(a.z[order]), c(a.R[order]), order)
+    return Extras.of(a)
 
 
 def _stale(out: dict, stage: str) -> None:
