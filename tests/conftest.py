@@ -14,6 +14,9 @@ from accelnav.model.load import DEFAULT_MODEL, load_model, loads_model
 from accelnav.resources import models_dir
 
 REPO = Path(__file__).resolve().parents[1]  # the checkout: for ../shared and for reading docs only
+# helpers the tests share (never tests themselves): imported as ``from support import realdata``, since
+# pytest puts this folder (the root conftest's) on sys.path; SUPPORT for the scripts run as programs
+SUPPORT = Path(__file__).resolve().parent / "support"
 MODELS = models_dir()
 SHARED_DATA = REPO.parent / "shared" / "data"
 

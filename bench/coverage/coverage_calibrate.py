@@ -1,11 +1,11 @@
 """Coverage of ``accelnav calibrate``'s 95 % intervals for still poses in any orientation (3-axis part).
 
-The setting of tests/test_calibrate.py: the default model with a third axis, a 'true' part within 5 mV
+The setting of tests/identify/test_calibrate.py: the default model with a third axis, a 'true' part within 5 mV
 (0.13 g) of zero-g and 3 % of sensitivity of it, the tumble_any scenario (random still orientations, 8 s
 holds, 3 s turns) converted with the nominal calibration, the gravity-magnitude fit. Prints how many
 offset and sensitivity intervals hold the truth, the angle terms' coverage of 0 (the simulated axes are
 square), the median |error / se| (0.67 for a standard normal) and the largest errors.
-Usage: python bench/coverage_calibrate.py [--seeds 0 200] [--poses 16]
+Usage: python bench/coverage/coverage_calibrate.py [--seeds 0 200] [--poses 16]
 """
 
 from __future__ import annotations

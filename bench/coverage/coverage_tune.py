@@ -1,11 +1,11 @@
-"""Coverage of ``accelnav tune``'s 95 % intervals over seeds (the setting of tests/test_tune.py).
+"""Coverage of ``accelnav tune``'s 95 % intervals over seeds (the setting of tests/estimate/test_tune.py).
 
 One axis, data from the filter's own process model (sigma_n 1, sigma_eps 0.01, R 0.016), a position fix
 every second, the search started from (3, 0.05, 0.05). Prints, per figure, how many intervals hold the
 truth, how many figures were reported identified, and the worst relative error of the estimate.
 ``--module PATH`` runs another version of accelnav/estimate/tune.py instead (e.g. the one before the
 profile-likelihood intervals, ``git show 25ca259:host/estimate/tune.py``).
-Usage: python bench/coverage_tune.py [--seeds 0 100] [--samples 6000] [--module PATH]
+Usage: python bench/coverage/coverage_tune.py [--seeds 0 100] [--samples 6000] [--module PATH]
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ memories: firmware/parts.mk (16 MHz Uno, 320 MHz HiFive1, 25 MHz MPS2 FPGA, 16 M
 Cortex-M3 counts are also shown at the STM32F103's 72 MHz). Baseline in the same run: the Cortex-M3
 (ratio column) and each core's loop and call overhead.
 
-    .venv/bin/python bench/bench_arch.py [MODEL.toml] [--samples N] [--cpi X]
+    .venv/bin/python bench/speed/bench_arch.py [MODEL.toml] [--samples N] [--cpi X]
 """
 
 from __future__ import annotations

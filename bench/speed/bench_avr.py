@@ -14,7 +14,7 @@ its UART at 250000 baud: CPU cycles per sample for everything (UART bytes in, fr
 filters, compact telemetry out, the loop's idle polling), static RAM and the deepest stack; beside it
 (baseline, same run) the filter calls alone from the first table.
 
-    .venv/bin/python bench/bench_avr.py
+    .venv/bin/python bench/speed/bench_avr.py
 
 Issue 26's note (before the fix, with __builtin_clzl typed in by hand): about 30.8 k cycles per
 2-axis sample, 26 KB of the 32 KB flash for two axes; gain schedule 45.9 KB.

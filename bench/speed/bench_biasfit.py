@@ -11,7 +11,7 @@ The recording: 100 Hz, c1 = 0.08 m/s^2, c2 = 0.05 m/s^2, T = 300 s (the
 default ADXL250 model), white noise of 0.126 m/s^2 rms; 1e6 samples is 2.8 h,
 1e7 samples 28 h, so the warm-up fills 3 % and 0.3 % of the record.
 
-    .venv/bin/python bench/bench_biasfit.py [--sizes 1e6 1e7] [--no-curve-fit]
+    .venv/bin/python bench/speed/bench_biasfit.py [--sizes 1e6 1e7] [--no-curve-fit]
 """
 
 from __future__ import annotations

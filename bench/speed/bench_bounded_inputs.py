@@ -1,6 +1,6 @@
 """Peak memory of the readers on large inputs (issue 21, item 10), beside a baseline build of accelnav.
 
-    python bench/bench_bounded_inputs.py [--csv-rows N] [--log-mib M] [--bomb-mib B] [--baseline DIR]
+    python bench/speed/bench_bounded_inputs.py [--csv-rows N] [--log-mib M] [--bomb-mib B] [--baseline DIR]
 
 Each case runs in a fresh child process and reports its peak RSS (ru_maxrss), wall time and the first
 line of its outcome. ``--baseline DIR`` is a folder whose ``accelnav`` package is an older build (for

@@ -6,7 +6,7 @@ the longest run accepted, and at 100 kHz for 30 min, which the validator accepts
 runs the generator of BASE_COMMIT (extracted from git into a temporary package; the issue #12 "before")
 under an address-space cap, so a run that would take the machine's memory is reported as such.
 
-    .venv/bin/python bench/bench_codegen_cost.py [--base COMMIT] [--cap-mb MB] [--form gain_schedule]
+    .venv/bin/python bench/speed/bench_codegen_cost.py [--base COMMIT] [--cap-mb MB] [--form gain_schedule]
                                                  [--no-cc] [--case TEXT ...]
 
 ``--no-cc``: both children run with no C compiler reachable (CC=false, an empty cache folder of their

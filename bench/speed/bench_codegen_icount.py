@@ -15,7 +15,7 @@ overhead is measured with an empty function of the same signature and
 reported separately. Flash and RAM come from arm-none-eabi-size and the state
 struct.
 
-    .venv/bin/python bench/bench_codegen_icount.py [MODEL.toml] [--rate HZ] [--samples N] [--scenario NAME]
+    .venv/bin/python bench/speed/bench_codegen_icount.py [MODEL.toml] [--rate HZ] [--samples N] [--scenario NAME]
 
 The scenario has no clipped sample: the figures are those of the common path (the gain-schedule
 form follows a skipped sample out of line, codegen.follow). Previous figures (issue #4's closing

@@ -6,7 +6,7 @@ model, the generated C runs in-process (cffi) beside the float64 filter with the
 (rail-clipped samples); the figure is the largest |x_C - x_float64| / sigma_float64 over the samples
 after the first second, per state, and the margin is the 1e-3 sigma criterion divided by it.
 
-    .venv/bin/python bench/bench_cov_margin.py [MODEL.toml] [--rate HZ] [--duration S] [--seeds 11 9 3]
+    .venv/bin/python bench/speed/bench_cov_margin.py [MODEL.toml] [--rate HZ] [--duration S] [--seeds 11 9 3]
         [--form covariance|gain_schedule] [--baseline PYTHON]
 
 --baseline runs this same script under another interpreter (e.g. /work/main/.venv/bin/python, whose

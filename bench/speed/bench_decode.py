@@ -16,7 +16,7 @@
    compact one measured on a firmware stream, checkpoints included), and the
    samples per second (all axes) each link rate carries.
 
-    .venv/bin/python bench/bench_decode.py [--minutes 60] [--rate 1000] [--form gain_schedule]
+    .venv/bin/python bench/speed/bench_decode.py [--minutes 60] [--rate 1000] [--form gain_schedule]
 
 ``--form`` builds the default model's firmware in that filter form for part 1 (both forms have the
 compact mode; the gain schedule's checkpoints carry its row as an index); part 3 lists both forms.

@@ -12,7 +12,7 @@ on the true rests (|u| = 0), so the detector is not in question. Three roads:
 Prints the smoothed position rms of axis x per seed and the mean. The difference between the last two
 is what the filter cannot know between rests: a grade change while moving reads as acceleration.
 
-Usage: python bench/bench_grade_cost.py [--seeds 5]
+Usage: python bench/speed/bench_grade_cost.py [--seeds 5]
 """
 
 from __future__ import annotations

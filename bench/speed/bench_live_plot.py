@@ -6,7 +6,7 @@ LivePlot.push on every batch (the loop with --live-plot). The redraw happens in 
 recorder pays only the push; the redraw's time is printed too, as the share of one core it takes at the
 default refresh.
 
-    .venv/bin/python bench/bench_live_plot.py [--seconds 120] [--piece 4096]
+    .venv/bin/python bench/speed/bench_live_plot.py [--seconds 120] [--piece 4096]
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ the true rests as the mask, and with no zero-velocity update; optionally with an
 of the horizontal vector (all axes), rms over the run and at its end, m, mean over the seeds; rests
 accepted / true rests.
 
-Usage: python bench/bench_rest_scenarios.py [--seeds 3] [--duration 60] [--old /tmp/old_zupt.py]
+Usage: python bench/speed/bench_rest_scenarios.py [--seeds 3] [--duration 60] [--old /tmp/old_zupt.py]
 """
 
 from __future__ import annotations

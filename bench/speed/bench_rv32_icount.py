@@ -12,7 +12,7 @@ The loop and call overhead (an empty step per axis) is reported separately. Each
 an FNV-1a hash of every axis' final state struct: equal hashes mean the two cores computed the same
 bits. Flash is the filter object's text + data (riscv64-unknown-elf-size, arm-none-eabi-size).
 
-    .venv/bin/python bench/bench_rv32_icount.py [MODEL.toml] [--samples N] [--scenario NAME]
+    .venv/bin/python bench/speed/bench_rv32_icount.py [MODEL.toml] [--samples N] [--scenario NAME]
 
 Issue 26's figures (default model, 100 Hz, vehicle, 2000 samples; arm-none-eabi-gcc and
 riscv64-unknown-elf-gcc 12.2, QEMU 7.2), instructions per 2-axis sample, M3 -> RV32 in the same

@@ -3,10 +3,10 @@
 A target, not a behaviour, so it lives here rather than in the test suite: the table's size is what the
 planner gives today (codegen.ranges.plan_axis -> emit_c._schedule_for), rows of 24 B (dr, dv, de_lo,
 de_hi, ka, end) plus the closing row. Above 100 Hz only axis 0 is planned (the axes share the time).
-Issue #12 was declared blocked on this target (bench/study_schedule_table.py: no piecewise table up to
+Issue #12 was declared blocked on this target (bench/studies/study_schedule_table.py: no piecewise table up to
 cubic pieces meets it under the 1e-3 sigma accuracy), so 'met' reading 'no' is the known state.
 
-Usage: python bench/bench_schedule_table.py
+Usage: python bench/speed/bench_schedule_table.py
 """
 
 from __future__ import annotations

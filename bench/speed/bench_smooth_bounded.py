@@ -12,7 +12,7 @@ blocks, so the generator is bounded too; deleted afterwards). Rows:
 * whole, CLI: ``accelnav smooth rec.npz`` with an unlimited budget, the
   whole-array path, at the sizes this machine can hold (``--whole``).
 
-Usage: python bench/bench_smooth_bounded.py [--sizes 1e6 1e7] [--whole 3e5 1e6] [--big] [--axes 1|2] [--dir DIR]
+Usage: python bench/speed/bench_smooth_bounded.py [--sizes 1e6 1e7] [--whole 3e5 1e6] [--big] [--axes 1|2] [--dir DIR]
 (--big adds 1e8: about 50 GB of disk with two axes, 27 GB with --axes 1, for the input, store and output.)
 """
 

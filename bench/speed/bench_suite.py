@@ -6,7 +6,7 @@ with a JUnit report, then prints the wall time beside the budget, the time
 per test file, the emulator's share (tests whose name or file says qemu or
 pil) against the rest, and the slowest tests.
 
-    .venv/bin/python bench/bench_suite.py [--budget 300] [-- PYTEST ARGS]
+    .venv/bin/python bench/speed/bench_suite.py [--budget 300] [-- PYTEST ARGS]
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ bias walk 30x the model's so that tuning has something to find), one core, best 
 * smooth --tune's search (accelnav.estimate.tune.tune, intervals off, the CLI's budget of 300 evaluations
   and 60 s), per sample of the run and per evaluation.
 
-Usage: python bench/bench_tune_cost.py [--minutes 2] [--repeat 3]
+Usage: python bench/speed/bench_tune_cost.py [--minutes 2] [--repeat 3]
 """
 
 from __future__ import annotations

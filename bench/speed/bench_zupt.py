@@ -15,9 +15,9 @@
    foot IMU (200 Hz).
 3. stop_and_go, seeds 101-106 (120 s): smoothed position rms per axis with
    the shipped defaults, beside the figure the previous detector gave on the
-   same runs (tests/test_zupt.py STOP_AND_GO_BEFORE_RMS).
+   same runs (tests/estimate/test_zupt.py STOP_AND_GO_BEFORE_RMS).
 
-Usage: python bench/bench_zupt.py [--minutes 60] [--seeds 5] [--repeat 3] [--old /tmp/old_zupt.py]
+Usage: python bench/speed/bench_zupt.py [--minutes 60] [--seeds 5] [--repeat 3] [--old /tmp/old_zupt.py]
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.load import load_model
 from accelnav.resources import models_dir
 
-STOP_AND_GO_BEFORE_RMS = (0.1267, 0.1012)  # m, the detector before issue #11, same seeds (see tests/test_zupt.py)
+# m, the detector before issue #11, same seeds (see tests/estimate/test_zupt.py)
+STOP_AND_GO_BEFORE_RMS = (0.1267, 0.1012)
 
 
 def best_of(fn, repeat: int) -> float:

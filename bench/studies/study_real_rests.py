@@ -4,8 +4,8 @@ Per recording, ``accelnav smooth`` run as a user would (the CLI, a CSV, a
 shipped model at the recording's rate) three ways: ``--zupt auto`` (the
 defaults), the reference rests as a mask file, and no ZUPT; the car also with
 a GNSS fix every 10 s (the other epochs held out) beside interpolating those
-fixes. The data, their references and licences: tests/realdata.py (gaitmap's
-foot-mounted walk) and tests/realdata_more.py (mobgap's lower-back walks,
+fixes. The data, their references and licences: tests/support/realdata.py (gaitmap's
+foot-mounted walk) and tests/support/realdata_more.py (mobgap's lower-back walks,
 gtsam's KITTI drive); they are fetched from PyPI by version and sha256 into
 ACCELNAV_CACHE_DIR (else ~/.cache/accelnav).
 
@@ -20,7 +20,7 @@ Figures:
 
 Then the targets table (goal, measured, met). The baselines (reference rests,
 no ZUPT, interpolated fixes) come from the same run.
-Usage: python bench/study_real_rests.py [--verbose-cli]
+Usage: python bench/studies/study_real_rests.py [--verbose-cli]
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ row of each family: an end word, one 4-byte number per coefficient (8 for K_e, w
 to 2^28 LSB per sample), a straight or curved gain carrying its value from the previous piece (degree d:
 d numbers), a held one its value.
 
-    .venv/bin/python bench/study_schedule_table.py [MODEL.toml] [--rate HZ] [--axis N] [--margin 1.0]
+    .venv/bin/python bench/studies/study_schedule_table.py [MODEL.toml] [--rate HZ] [--axis N] [--margin 1.0]
         [--family today quad_re quad cubic] [--per-gain]
 
 Figures (2026-11-23, axis x, margin 1.0; pieces and table bytes; in brackets the pieces that fall in the

@@ -7,21 +7,21 @@ import importlib.util
 import os
 import re
 import shutil
-from pathlib import Path
 
 import pytest
-
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO
 
 
 def _bench():
-    """bench/bench_codegen_icount.py as a module; skips (fails under ACCELNAV_REQUIRE_PIL=1) without the tools."""
+    """bench/speed/bench_codegen_icount.py as a module; skips (fails under ACCELNAV_REQUIRE_PIL=1) without the tools."""
     if shutil.which("qemu-system-arm") is None or shutil.which("arm-none-eabi-gcc") is None:
         reason = "needs qemu-system-arm and arm-none-eabi-gcc (Debian: qemu-system-arm gcc-arm-none-eabi)"
         if os.environ.get("ACCELNAV_REQUIRE_PIL") == "1":
             pytest.fail(f"ACCELNAV_REQUIRE_PIL=1 but it {reason}")
         pytest.skip(reason)
-    spec = importlib.util.spec_from_file_location("bench_codegen_icount", REPO / "bench" / "bench_codegen_icount.py")
+    spec = importlib.util.spec_from_file_location(
+        "bench_codegen_icount", REPO / "bench" / "speed" / "bench_codegen_icount.py"
+    )
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     return bench

@@ -455,7 +455,7 @@ def test_covariance_1khz_shock_margin(scenario, seed, workdir):
     of both axes within SHOCK_1KHZ_SIGMA of the filter's sigma after 1 s, the 5x margin to the 1e-3
     criterion that issue #12 asks, on rail-clipped shock data (c_r, c_v, c_a in their fine formats away
     from gaps, codegen.ranges._plan_fine) and on stress data (eps at 2.06e-4 sigma while c_e kept the
-    format its prior sets; 3.0e-5 with c_e in a fine format too); bench/bench_cov_margin.py for every
+    format its prior sets; 3.0e-5 with c_e in a fine format too); bench/speed/bench_cov_margin.py for every
     scenario."""
     model = model_at(1000.0)
     run = sensor.simulate(model, scenario, 3.0, seed=seed)
@@ -491,7 +491,7 @@ def test_gain_schedule_after_skips_over_seeds(rate, seed, workdir):
     schedule's own tolerance at each sample and its deviation entries carried a zoom, 100 Hz seeds 2 and
     13 gave r 1.6e-3 and u 2.1e-3 sigma (a gap early in the run, a return to the schedule with K_r still
     ~20 % off), and 1 kHz seed 5 r 1.3e-3, seed 13 a 1.2e-3 (dK resolved to ~1e-3 of K_r: the C never
-    returned to the schedule); bench/bench_cov_margin.py --form gain_schedule for every seed and scenario."""
+    returned to the schedule); bench/speed/bench_cov_margin.py --form gain_schedule for every seed and scenario."""
     model = model_at(rate)
     run = sensor.simulate(model, "shock", 10.0 if rate == 100.0 else 3.0, seed=seed)
     assert run.clipped.any()

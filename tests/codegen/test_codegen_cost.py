@@ -2,7 +2,7 @@
 (C and --report) within 300 MB, measured with tracemalloc and the child's peak RSS; a rate x run-length
 product beyond what the generator accepts is refused in one line before anything is allocated.
 
-Time is not asserted here (bench/bench_codegen_cost.py measures it beside the previous generator)."""
+Time is not asserted here (bench/speed/bench_codegen_cost.py measures it beside the previous generator)."""
 
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ against a float64 Riccati run of its own over the whole declared run: the stated
 the largest |stored - float64|, every sample is within its tolerance, and the stated bound after 1 s
 stays below the 1e-3 sigma the lockstep tests ask of the firmware. The segment search and the bound's
 recursion run in C where a compiler is there: the same numbers as their numpy / Python twins. The
-table's size against issue #12's 2 KB target is a target, not a behaviour: bench/bench_schedule_table.py
+table's size against issue #12's 2 KB target is a target, not a behaviour: bench/speed/bench_schedule_table.py
 prints it (goal, measured, met).
 """
 
@@ -97,7 +97,7 @@ def test_c_search_and_bound_loop_equal_their_python_twins(monkeypatch):
 
 def test_codegen_of_a_1khz_three_axis_model_within_300_mb():
     """emit() and its report over the declared hour at 1 kHz, three axes in gain-schedule form: traced
-    peak memory under the 300 MB of issue #12 (its time: bench/bench_codegen_cost.py)."""
+    peak memory under the 300 MB of issue #12 (its time: bench/speed/bench_codegen_cost.py)."""
     import tracemalloc
 
     from accelnav.codegen.report import report
@@ -122,7 +122,7 @@ def test_codegen_of_a_1khz_three_axis_model_within_300_mb():
 def test_stated_bound_after_1s_below_the_lockstep_criterion(name, rate):
     """The stated bound (the exact compression error through the closed loop, roundings included) after
     1 s is below 1e-3 of the filter's own sigma in every state: what the SIL lockstep asks of the
-    firmware (tests/test_hil.py) holds by the bound alone, with the budget the schedule takes."""
+    firmware (tests/hil_sim/test_hil.py) holds by the bound alone, with the budget the schedule takes."""
     model = _model(name, rate)
     p = plan_axis(model, 0, "gain_schedule")
     sched = _schedule_for(p)

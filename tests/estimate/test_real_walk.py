@@ -5,7 +5,7 @@ PyPI with pip, sha256-checked, never copied into this project; what it is, how
 it is turned into two level-frame horizontal axes with gravity removed (the
 input of issue #11's user), the truth (motion-capture heel marker at consecutive
 midstances) and the reference stances (gyroscope-quiet, within the motion
-capture's heel strike and toe-off): tests/realdata.py. Skipped, with the
+capture's heel strike and toe-off): tests/support/realdata.py. Skipped, with the
 reason, when PyPI cannot be reached.
 
 Per foot (28 left, 29 right strides of 2 x 20 m with a turn), four estimates of
@@ -14,7 +14,7 @@ reference stances given as a per-sample mask file, without ZUPT, and plain
 double integration. The behaviour asserted: with the defaults, mean
 |stride-length error| <= 1.5 x what the reference stances give. The targets in
 % of the stride length (issue #11's 5 %, issue #23's 3 % of distance) are
-targets, not behaviour: bench/study_real_rests.py prints them (goal, measured,
+targets, not behaviour: bench/studies/study_real_rests.py prints them (goal, measured,
 met) beside the reference stances' own figure.
 """
 
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import realdata
+from support import realdata
 
 from accelnav.cli import main
 from accelnav.data.runfile import load_run

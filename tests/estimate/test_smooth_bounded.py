@@ -3,7 +3,7 @@
 Chunked and whole-array smoothing run the same operations in the same order, so they agree to the last bit
 on one machine; the tests allow 1e-12 relative (to |value| + its sigma), room for a compiler that contracts
 the multiply-adds of the two kernels differently, and a million times tighter than the 1e-9 at which both
-are checked against the float64 reference (tests/test_fastsmooth.py).
+are checked against the float64 reference (tests/estimate/test_fastsmooth.py).
 """
 
 from __future__ import annotations

@@ -207,7 +207,8 @@ def test_a_knock_inside_each_rest_splits_none_and_costs_little(default_model):
 
 @pytest.mark.parametrize("seed", (1, 2))
 def test_a_swaying_stance_is_still_a_stance(seed):
-    """A real foot sways in stance (0.15-0.3 m/s^2 rms in the level frame of gaitmap's walk, tests/test_real_walk.py).
+    """A real foot sways in stance (0.15-0.3 m/s^2 rms in the level frame of gaitmap's walk,
+    tests/estimate/test_real_walk.py).
 
     On the foot IMU model (R = 1.4e-3, 0.037 m/s^2 rms) that sway is 30 R and more: the quiet test must
     allow for it (``tremor``), or the stances are lost and the strides with them.

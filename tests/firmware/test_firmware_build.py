@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REPO
 
 from accelnav.hil_sim.targets.firmware import DUTY_MODEL
 from accelnav.hil_sim.targets.firmware import make_firmware as build_image
@@ -29,7 +30,6 @@ from accelnav.link.recorder import Recorder, Status, decode_log
 from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus, replay_for
 from accelnav.model.load import load_model
 
-REPO = Path(__file__).resolve().parents[1]
 STM32_FLASH, STM32_RAM = 64 * 1024, 20 * 1024
 # flash, RAM of the emulated parts: nRF51822 (microbit), STM32F100RB (stm32vldiscovery)
 EMULATED_MEMORY = {"microbit": (256 * 1024, 16 * 1024), "stm32vldiscovery": (128 * 1024, 8 * 1024)}

@@ -2,7 +2,7 @@
 (32-bit RISC-V, compressed instructions, soft-float ABI, no F or D extension, entry where the mask
 ROM jumps) and fits the FE310's 16 KiB DTIM for both shipped models in both forms; the README
 documents the command line hil_sim.qemu runs; a missing RISC-V tool is one line naming its Debian
-package. Its PIL runs (bit for bit against SIL) are in tests/test_hil.py's matrix.
+package. Its PIL runs (bit for bit against SIL) are in tests/hil_sim/test_hil.py's matrix.
 
 Skipped, with the reason, without riscv64-unknown-elf-gcc; a failure under ACCELNAV_REQUIRE_PIL=1 (CI).
 """
@@ -87,7 +87,7 @@ def test_missing_riscv_tools_are_one_line_errors(monkeypatch, tmp_path):
 
 
 def test_bench_counts_rv32_instructions_beside_the_m3(tmp_path, capsys):
-    """bench/bench_rv32_icount.py: both cores count a known loop right, compute the same final states
+    """bench/speed/bench_rv32_icount.py: both cores count a known loop right, compute the same final states
     (checkpoint images) for both forms, and RV32IMAC, without the M3's 32x32->64 multiply-accumulate,
     needs more instructions per 2-axis sample than the M3 for each form."""
     import importlib.util
@@ -98,7 +98,9 @@ def test_bench_counts_rv32_instructions_beside_the_m3(tmp_path, capsys):
         if os.environ.get("ACCELNAV_REQUIRE_PIL") == "1":
             pytest.fail(f"ACCELNAV_REQUIRE_PIL=1 but {reason}")
         pytest.skip(reason)
-    spec = importlib.util.spec_from_file_location("bench_rv32_icount", REPO / "bench" / "bench_rv32_icount.py")
+    spec = importlib.util.spec_from_file_location(
+        "bench_rv32_icount", REPO / "bench" / "speed" / "bench_rv32_icount.py"
+    )
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     assert bench.main(["--samples", "300", "--keep", str(tmp_path)]) == 0

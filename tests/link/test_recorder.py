@@ -12,11 +12,11 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 import serial
+from conftest import REPO
 
 from accelnav.cli import main as cli_main
 from accelnav.data.runfile import load_run
@@ -25,8 +25,6 @@ from accelnav.link.logfile import LogError, LogWriter, read_log
 from accelnav.link.recorder import Recorder, Status, decode_log
 from accelnav.link.telemetry import decode_all, encode_command, encode_stimulus
 from accelnav.model.load import load_model
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")

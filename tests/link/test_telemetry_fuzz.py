@@ -12,7 +12,7 @@ random pieces equal to the frame-by-frame one.
 Firmware receive path and command parser (firmware/src/link.c, app.c and the
 generated acnf_parse_*): compiled for the host board with AddressSanitizer and
 UndefinedBehaviorSanitizer into a cffi module and fuzzed in a child process
-with libasan preloaded (tests/firmware_fuzz.py), by hypothesis-built inputs
+with libasan preloaded (tests/support/firmware_fuzz.py), by hypothesis-built inputs
 (valid, damaged and random frames on both channels) and by plain random bytes.
 """
 
@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SUPPORT
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -201,8 +202,7 @@ def test_command_parser_fuzz_under_sanitizers():
     env["LD_PRELOAD"] = libasan
     env["ASAN_OPTIONS"] = "detect_leaks=0:abort_on_error=1"
     env["UBSAN_OPTIONS"] = "halt_on_error=1:print_stacktrace=1"
-    env["PYTHONPATH"] = str(Path(__file__).parent)
-    script = Path(__file__).with_name("firmware_fuzz.py")
+    script = SUPPORT / "firmware_fuzz.py"
     done = subprocess.run(
         [sys.executable, str(script), "3000", "60000"], capture_output=True, text=True, env=env, timeout=600
     )

