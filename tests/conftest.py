@@ -13,10 +13,14 @@ import pytest
 from accelnav.model.load import DEFAULT_MODEL, load_model, loads_model
 from accelnav.resources import models_dir
 
+# asserts in the shared helpers report their operands as the tests' own do
+pytest.register_assert_rewrite("support")
+
 REPO = Path(__file__).resolve().parents[1]  # the checkout: for ../shared and for reading docs only
+TESTS = Path(__file__).resolve().parent
 # helpers the tests share (never tests themselves): imported as ``from support import realdata``, since
 # pytest puts this folder (the root conftest's) on sys.path; SUPPORT for the scripts run as programs
-SUPPORT = Path(__file__).resolve().parent / "support"
+SUPPORT = TESTS / "support"
 MODELS = models_dir()
 SHARED_DATA = REPO.parent / "shared" / "data"
 

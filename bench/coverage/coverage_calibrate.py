@@ -5,25 +5,21 @@ The setting of tests/identify/test_calibrate.py: the default model with a third 
 holds, 3 s turns) converted with the nominal calibration, the gravity-magnitude fit. Prints how many
 offset and sensitivity intervals hold the truth, the angle terms' coverage of 0 (the simulated axes are
 square), the median |error / se| (0.67 for a standard normal) and the largest errors.
-Usage: python bench/coverage/coverage_calibrate.py [--seeds 0 200] [--poses 16]
+Usage: python bench/run_all.py bench/coverage/coverage_calibrate.py [--seeds 0 200] [--poses 16]
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tests"))
+# tests/support, on the path bench/run_all.py sets
+from support.calibrate_cases import any_recording, calibrate_any, nominal, perturbed, truth_offset_scale
 
-from test_calibrate import any_recording, calibrate_any, nominal, perturbed, truth_offset_scale  # noqa: E402
-
-from accelnav.identify.calibrate import CalibrationError  # noqa: E402
-from accelnav.model.load import G0  # noqa: E402
+from accelnav.identify.calibrate import CalibrationError
+from accelnav.model.load import G0
 
 
 def main() -> int:

@@ -5,7 +5,7 @@ every second, the search started from (3, 0.05, 0.05). Prints, per figure, how m
 truth, how many figures were reported identified, and the worst relative error of the estimate.
 ``--module PATH`` runs another version of accelnav/estimate/tune.py instead (e.g. the one before the
 profile-likelihood intervals, ``git show 25ca259:host/estimate/tune.py``).
-Usage: python bench/coverage/coverage_tune.py [--seeds 0 100] [--samples 6000] [--module PATH]
+Usage: python bench/run_all.py bench/coverage/coverage_tune.py [--seeds 0 100] [--samples 6000] [--module PATH]
 """
 
 from __future__ import annotations
@@ -16,12 +16,9 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tests"))
+from support.tune_cases import TRUE, one_axis_model, process  # tests/support, on the path bench/run_all.py sets
 
-from test_tune import TRUE, one_axis_model, process  # noqa: E402
-
-from accelnav.model.edit import with_noise  # noqa: E402
+from accelnav.model.edit import with_noise
 
 
 def main() -> int:

@@ -16,8 +16,8 @@ import subprocess
 
 import numpy as np
 import pytest
+from support.codegen_lockstep import SIGMA_FRACTION, blind_schedule, built, check_against_bound, plan
 
-from accelnav.codegen.bounds import twin_bound
 from accelnav.codegen.emit_c import _schedule_for, emit
 from accelnav.codegen.ranges import plan_axis
 from accelnav.estimate.kf import run_filter
@@ -29,7 +29,6 @@ sensor = pytest.importorskip("accelnav.hil_sim.sim.sensor")
 
 SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shock")
 DURATION = {100.0: 30.0, 1000.0: 3.0}
-SIGMA_FRACTION = 1e-3
 
 
 def model_at(rate: float):
@@ -40,30 +39,12 @@ def model_at(rate: float):
     return loads_model(text, source=f"adxl250_default@{rate:g}Hz")
 
 
-_BUILT: dict = {}
 _REF: dict = {}
-_PLAN: dict = {}
 
 
 @pytest.fixture(scope="session")
 def workdir(tmp_path_factory):
     return tmp_path_factory.mktemp("codegen")
-
-
-def built(model, form, workdir):
-    key = (model.sha256, form)
-    if key not in _BUILT:
-        files = emit(model, form=form)
-        _BUILT[key] = (files, build(files, workdir))
-    return _BUILT[key]
-
-
-def plan(model, axis, form):
-    key = (model.sha256, axis, form)
-    if key not in _PLAN:
-        p = plan_axis(model, axis, form)
-        _PLAN[key] = (p, _schedule_for(p) if form == "gain_schedule" else None)
-    return _PLAN[key]
 
 
 def reference(model, scenario, axis):
@@ -76,16 +57,6 @@ def reference(model, scenario, axis):
         sig = np.sqrt(np.einsum("kii->ki", ref.P_post))
         _REF[key] = (run, d, valid, ref, sig)
     return _REF[key]
-
-
-def _check_against_bound(p, sched, code, z, valid, x_ref, x_c, what):
-    """Every state within the stated bound at every step (codegen.bounds.twin_bound: the exact effect
-    of the quantized constants plus a rigorous bound on the roundings of this run)."""
-    bound, _ = twin_bound(p, code, z, valid, x_ref, sched)
-    ratio = np.abs(x_c - x_ref) / bound
-    worst = np.unravel_index(np.argmax(ratio), ratio.shape)
-    assert ratio.max() <= 1.0, f"{what}: state {worst[1]} at sample {worst[0]} at {ratio.max():.3g} of the stated bound"
-    return ratio
 
 
 @pytest.mark.parametrize("rate", [100.0, 1000.0])
@@ -102,7 +73,7 @@ def test_lockstep(rate, form, scenario, workdir):
         assert np.array_equal(res["valid"], valid), "the C and the reference disagree on which samples to skip"
         x_ref = ref.x_post  # always the float64 Kalman filter with the same skips
         err = np.abs(res["x"] - x_ref)
-        _check_against_bound(p, sched, run.code[:, axis], run.accel[:, axis], valid, x_ref, res["x"], f"axis {axis}")
+        check_against_bound(p, sched, run.code[:, axis], run.accel[:, axis], valid, x_ref, res["x"], f"axis {axis}")
         k1 = int(model.rate_hz)
         ratio = err[k1:] / sig[k1:]
         worst = np.unravel_index(np.argmax(ratio), ratio.shape)
@@ -135,7 +106,7 @@ def test_duty_cycle_part(workdir):
     assert res["overflow"] == 0
     assert np.array_equal(res["valid"], valid)
     err = np.abs(res["x"] - ref.x_post)
-    _check_against_bound(
+    check_against_bound(
         plan(model, 0, "covariance")[0], None, None, run.accel[:, 0], valid, ref.x_post, res["x"], "duty"
     )
     assert (err[100:] / sig[100:]).max() <= SIGMA_FRACTION
@@ -154,15 +125,6 @@ def test_gain_schedule_generated_for_inputs_that_skip(model_file, tmp_path, caps
     assert "_follow(" in files["accelnav.c"]
     assert main(["codegen", model.source, "--form", "gain_schedule", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "accelnav.c").read_text() == files["accelnav.c"]
-
-
-def _blind(files: dict) -> dict:
-    """The gain-schedule C with its skip-following cut out: it never leaves the schedule (the form as it
-    was before codegen.follow)."""
-    c = files["accelnav.c"]
-    entry = "s->k |= ACCELNAV_X_FOLLOWING;"
-    assert c.count(entry) >= 1, "the entry into the deviation"
-    return {**files, "accelnav.c": c.replace(entry, "s->k |= 0u;")}
 
 
 def test_gain_schedule_deviation_twin_is_bit_exact_and_the_check_catches_a_blind_schedule(workdir, tmp_path):
@@ -192,10 +154,10 @@ def test_gain_schedule_deviation_twin_is_bit_exact_and_the_check_catches_a_blind
             got = [getattr(s, nm) for nm in DEV]
             assert got == [twin.D[nm] for nm in DEV], f"sample {k}: deviation block {got}"
     assert followed > (~valid).sum() and s.overflow == 0 == twin.overflow
-    blind = build(_blind(files), tmp_path)
+    blind = build(blind_schedule(files), tmp_path)
     res = AxisRunner(blind, files["accelnav.json"], 0).run(code=run.code[:, 0])
     with pytest.raises(AssertionError, match="of the stated bound"):
-        _check_against_bound(p, sched, run.code[:, 0], run.accel[:, 0], valid, ref.x_post, res["x"], "blind")
+        check_against_bound(p, sched, run.code[:, 0], run.accel[:, 0], valid, ref.x_post, res["x"], "blind")
 
 
 def test_skip_table(workdir):
@@ -393,7 +355,7 @@ def test_mutations_break_the_lockstep(form, mutation, workdir):
     p, sched = plan(model, 0, form)
     res = AxisRunner(mod, files["accelnav.json"], 0).run(code=run.code[:, 0])
     with pytest.raises(AssertionError):
-        _check_against_bound(p, sched, run.code[:, 0], run.accel[:, 0], valid, ref.x_post, res["x"], mutation)
+        check_against_bound(p, sched, run.code[:, 0], run.accel[:, 0], valid, ref.x_post, res["x"], mutation)
 
 
 def test_unclamped_predict_sums_fit_any_state(workdir):
@@ -477,7 +439,7 @@ def _within_sigma_of_float64(model, form, run, workdir, limit: float, bound: boo
         assert res["overflow"] == 0
         if bound:
             p, sched = plan(model, axis, form)
-            _check_against_bound(p, sched, run.code[:, axis], run.accel[:, axis], valid, ref.x_post, res["x"], form)
+            check_against_bound(p, sched, run.code[:, axis], run.accel[:, axis], valid, ref.x_post, res["x"], form)
         ratio = np.abs(res["x"] - ref.x_post)[k1:] / sig[k1:]
         worst = np.unravel_index(np.argmax(ratio), ratio.shape)
         assert ratio.max() <= limit, f"axis {axis}: state {worst[1]} at sample {worst[0] + k1}: {ratio.max():.3g} sigma"

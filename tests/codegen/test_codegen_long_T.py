@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_codegen import SIGMA_FRACTION, _check_against_bound, built, plan
+from support.codegen_lockstep import SIGMA_FRACTION, built, check_against_bound, plan
 
 from accelnav.estimate.kf import run_filter
 from accelnav.hil_sim.sim import sensor
@@ -45,6 +45,6 @@ def test_long_bias_time_constant_lockstep(T, form, scenario, workdir):
     res = AxisRunner(mod, files["accelnav.json"], 0).run(code=run.code[:, 0])
     assert res["overflow"] == 0
     x_ref = ref.x_post  # the float64 Kalman filter with the same skips (both forms follow them)
-    _check_against_bound(p, sched, run.code[:, 0], run.accel[:, 0], valid, x_ref, res["x"], f"T={T:g}")
+    check_against_bound(p, sched, run.code[:, 0], run.accel[:, 0], valid, x_ref, res["x"], f"T={T:g}")
     err = np.abs(res["x"] - x_ref)[100:] / sig[100:]
     assert err.max() <= SIGMA_FRACTION, f"max error {err.max():.3g} sigma"

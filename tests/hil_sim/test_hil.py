@@ -369,7 +369,7 @@ def test_stated_bound_is_against_the_kalman_filter_and_catches_a_blind_schedule(
     shock run (rail-clipped samples) departs from the float64 Kalman filter by more than the stated
     bound, which hil.compare uses; the generated one stays within it, and `accelnav hil` runs it."""
     import numpy as np
-    from test_codegen import _blind
+    from support.codegen_lockstep import blind_schedule
 
     from accelnav.codegen.emit_c import emit
     from accelnav.estimate.kf import run_filter
@@ -383,7 +383,7 @@ def test_stated_bound_is_against_the_kalman_filter_and_catches_a_blind_schedule(
     files = emit(model)
     kf = run_filter(axis_design(model, 0), run.accel[:, 0], valid=valid, progress=False)
     bound = hil.stated_bound(model, 0, run, kf.x_post)
-    for c_files, within in ((files, True), (_blind(files), False)):
+    for c_files, within in ((files, True), (blind_schedule(files), False)):
         res = AxisRunner(build(c_files, tmp_path / str(within)), files["accelnav.json"], 0).run(code=run.code[:, 0])
         assert bool((np.abs(res["x"] - kf.x_post) / bound).max() <= 1.0) == within
     status = main(["hil", "--model", str(tmp_path / "gs.toml"), "--target", "sil", "--duration", "2"])

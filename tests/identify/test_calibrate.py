@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
+from support.calibrate_cases import (
+    POSE_S,
+    any_recording,
+    calibrate_any,
+    nominal,
+    perturbed,
+    truth_offset_scale,
+)
 
 from accelnav.cli import main
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.sim.trajectories import (
     TUMBLE_ANY_MIN_TURN_DEG,
     TUMBLE_HOLD_S,
-    TUMBLE_TURN_S,
     tumble_any_poses,
     tumble_poses,
     tumble_specific_force,
@@ -20,32 +25,7 @@ from accelnav.hil_sim.sim.trajectories import (
 from accelnav.identify.calibrate import GRAVITY, CalibrationError, calibrate, detect_poses, fit_axes, native
 from accelnav.identify.calibration import steps_and_noise
 from accelnav.model.design import input_conversion
-from accelnav.model.edit import revalidate, with_axis_bias, with_noise
-from accelnav.model.load import DEFAULT_MODEL, G0, load_model
-
-POSE_S = TUMBLE_HOLD_S + TUMBLE_TURN_S
-
-
-def nominal(n_axes: int = 2):
-    """The default model with no warm-up and a small bias walk: the calibration's constant-offset assumption holds."""
-    m = load_model(DEFAULT_MODEL)
-    if n_axes == 3:
-        m = with_axis_bias(m, "z", 0.0, 0.0, 300.0)
-    m = dataclasses.replace(
-        with_noise(m, sigma_eps=1e-4), axes=tuple(dataclasses.replace(a, c1=0.0, c2=0.0) for a in m.axes)
-    )
-    return revalidate(m)
-
-
-def perturbed(nom, rng):
-    """A 'true' part: zero-g within +-5 mV (+-0.13 g) and sensitivity within +-3 % of the nominal."""
-    axes = tuple(
-        dataclasses.replace(
-            a, zero_g=a.zero_g + rng.uniform(-0.005, 0.005), sensitivity=a.sensitivity * (1 + rng.uniform(-0.03, 0.03))
-        )
-        for a in nom.axes
-    )
-    return revalidate(dataclasses.replace(nom, axes=axes))
+from accelnav.model.load import G0, load_model
 
 
 def tumble_recording(nom, true, seed: int, duration: float | None = None):
@@ -55,11 +35,6 @@ def tumble_recording(nom, true, seed: int, duration: float | None = None):
     run = simulate(true, "tumble", duration, seed, initial_random=False)
     acc = np.column_stack([input_conversion(nom, i).accel(run.code[:, i]) for i in range(n)])
     return run, acc
-
-
-def truth_offset_scale(nom, true, i):
-    a0, a1 = nom.axes[i], true.axes[i]
-    return (a1.zero_g - a0.zero_g) / a0.sensitivity * G0, a1.sensitivity / a0.sensitivity
 
 
 def calibrate_arrays(nom, acc):
@@ -227,12 +202,6 @@ def test_calibration_error_is_a_value_error():
 # poses in any orientation (3 axes): the gravity-magnitude fit
 
 
-def any_recording(nom, true, seed: int, n_poses: int = 12):
-    """tumble_any on the true 3-axis part, converted with the nominal calibration."""
-    run = simulate(true, "tumble_any", n_poses * POSE_S, seed, initial_random=False)
-    return run, np.column_stack([input_conversion(nom, i).accel(run.code[:, i]) for i in range(len(nom.axes))])
-
-
 def test_tumble_any_scenario_holds_random_still_poses():
     rng = np.random.default_rng(5)
     poses = tumble_any_poses(rng, 30)
@@ -278,12 +247,6 @@ def test_recovers_offsets_and_scales_from_random_poses_with_coverage_over_seeds(
     # 120 nominal 95 % intervals: the binomial 99 % band is about [0.90, 0.99]
     assert covered >= 0.90, covered
     assert np.median(np.abs([v for _, v in z])) > 0.35  # not covering by being far too wide
-
-
-def calibrate_any(nom, acc):
-    steps, noise = steps_and_noise(nom)
-    poses = detect_poses(acc, nom.rate_hz, steps=steps, noise_sd=noise)
-    return calibrate(poses, tuple(a.name for a in nom.axes))
 
 
 def test_random_poses_recover_an_angle_between_axes():

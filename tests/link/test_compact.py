@@ -267,7 +267,7 @@ def test_recorder_reconnects_and_counts_the_gap_in_samples(tmp_path, man, teleme
     after it before the next checkpoint too, and the log decodes to the same rows."""
     import io
 
-    from test_recorder import _server
+    from support.link_server import server
 
     from accelnav.link.recorder import Recorder, Status, decode_log
 
@@ -275,7 +275,7 @@ def test_recorder_reconnects_and_counts_the_gap_in_samples(tmp_path, man, teleme
     kinds = [_kind(man, x) for x in f]
     blocks = [k for k, x in enumerate(kinds) if x == "block"]
     a, b = blocks[12], blocks[20]  # blocks 12..19 never arrive; the second connection repeats 3 frames
-    url, th, _ = _server([b"".join(f[:a]), b"".join(f[a - 3 : a] + f[b:])], down_s=0.5)
+    url, th, _ = server([b"".join(f[:a]), b"".join(f[a - 3 : a] + f[b:])], down_s=0.5)
     rec = Recorder(url, tmp_path / "c.acnlog", man, model_text=load_model().text, status=Status(io.StringIO()))
     C, B = man.data["checkpoint_samples"], man.data["block_samples"]
     resync = C * (20 * B // C + 1)

@@ -7,7 +7,6 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -17,6 +16,7 @@ import numpy as np
 import pytest
 import serial
 from conftest import REPO
+from support.link_server import server
 
 from accelnav.cli import main as cli_main
 from accelnav.data.runfile import load_run
@@ -304,54 +304,10 @@ def test_pulled_cable_for_good_closes_the_log_cleanly(tmp_path, manifest_file, t
 # a link that goes away and comes back: a TCP server on 127.0.0.1 (pyserial's socket://)
 
 
-def _serve(srv: socket.socket, parts: list[bytes], down_s: float, log: list) -> None:
-    """Serve ``parts`` one connection each on ``srv``'s port, the port closed for ``down_s`` between them."""
-    port = srv.getsockname()[1]
-    for k, data in enumerate(parts):
-        if k:
-            time.sleep(down_s)  # nobody listens: the recorder's attempts are refused
-            srv = socket.socket()
-            srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            srv.bind(("127.0.0.1", port))
-            srv.listen(1)
-        srv.settimeout(20)
-        try:
-            conn, _ = srv.accept()
-        except OSError:
-            srv.close()
-            return
-        conn.settimeout(0.3)
-        try:  # the recorder's commands, or a pause: pyserial drops what arrives while it opens the socket
-            conn.recv(4096)
-        except OSError:
-            pass
-        conn.sendall(data)
-        try:  # read what the recorder sends (its commands) until it is quiet: closing on unread bytes resets
-            while conn.recv(4096):
-                pass
-        except OSError:
-            pass
-        conn.shutdown(socket.SHUT_RDWR)  # the cable is pulled
-        conn.close()
-        srv.close()
-        log.append(time.monotonic())
-
-
-def _server(parts, down_s):
-    srv = socket.socket()
-    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    srv.bind(("127.0.0.1", 0))
-    srv.listen(1)
-    log: list = []
-    th = threading.Thread(target=_serve, args=(srv, parts, down_s, log), daemon=True)
-    th.start()
-    return f"socket://127.0.0.1:{srv.getsockname()[1]}", th, log
-
-
 def test_recorder_reconnects_and_records_the_gap(tmp_path, man, telemetry):
     frames = _frames(telemetry)
     # the second connection starts with 50 frames the first one carried (an adapter's buffer replayed)
-    url, th, _ = _server([b"".join(frames[:500]), b"".join(frames[450:500] + frames[700:])], down_s=2.0)
+    url, th, _ = server([b"".join(frames[:500]), b"".join(frames[450:500] + frames[700:])], down_s=2.0)
     shown = io.StringIO()
     out = tmp_path / "reconnect.acnlog"
     rec = Recorder(url, out, man, commands=(("info", {}),), status=Status(shown, enabled=False))
@@ -381,7 +337,7 @@ def test_status_line_says_the_link_is_being_retried(man):
 
 def test_ctrl_c_while_the_link_is_away_closes_cleanly(tmp_path, manifest_file, telemetry):
     frames = _frames(telemetry)
-    url, th, served = _server([b"".join(frames[:300])], down_s=0)
+    url, th, served = server([b"".join(frames[:300])], down_s=0)
     out = tmp_path / "ctrl_c.acnlog"
     proc = _start_recorder(tmp_path, manifest_file, url, out)
     deadline = time.monotonic() + 30

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import REPO, TESTS
 
 import accelnav
 
@@ -205,3 +206,32 @@ def test_one_import_name(tmp_path):
     done = subprocess.run([sys.executable, "-I", "-c", code], cwd=tmp_path, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def _imported_test_modules(path: Path) -> list[tuple[str, int]]:
+    """(module, line) for each import of a test_* module in one file, lazy ones and importlib's included."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names = [node.module]
+        elif (
+            isinstance(node, ast.Call)
+            and getattr(node.func, "attr", getattr(node.func, "id", None)) == "import_module"
+            and node.args
+            and isinstance(node.args[0], ast.Constant)
+        ):
+            names = [str(node.args[0].value)]
+        else:
+            continue
+        found += [(n, node.lineno) for n in names if any(part.startswith("test_") for part in n.split("."))]
+    return found
+
+
+def test_no_test_imports_another_test():
+    """Shared code lives in tests/support (or conftest), never in a test module another file imports: a test
+    file is collected, not imported, and its helpers would run under two names. The bench scripts too."""
+    files = sorted(TESTS.rglob("*.py")) + sorted((REPO / "bench").rglob("*.py"))
+    bad = [f"{f.relative_to(REPO)}:{line} imports {mod}" for f in files for mod, line in _imported_test_modules(f)]
+    assert not bad, "\n".join(bad)
