@@ -47,7 +47,8 @@ import tempfile
 from io import BytesIO
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from accelnav.resources import models_dir
+
 BASE_COMMIT = "3cab69e"  # main before issue #12
 
 CHILD = r"""
@@ -88,7 +89,7 @@ Z_AXIS = '[[axes]]\nname = "z"\nc1 = 0.03\nc2 = -0.02\nT = 200.0\n\n[noise]'
 
 
 def model_text(rate: float, run_s: float, three_axes: bool = False, form: str = "covariance") -> str:
-    text = (ROOT / "models" / "adxl250_default.toml").read_text()
+    text = (models_dir() / "adxl250_default.toml").read_text()
     text = text.replace("rate_hz = 100.0", f"rate_hz = {rate:.1f}").replace(
         "max_run_s = 3600.0", f"max_run_s = {run_s!r}"
     )
@@ -96,9 +97,16 @@ def model_text(rate: float, run_s: float, three_axes: bool = False, form: str = 
     return text.replace("[noise]", Z_AXIS, 1) if three_axes else text
 
 
+def _checkout() -> str:
+    """The git work tree holding this script (the base commit's codegen comes from its history)."""
+    here = Path(__file__).resolve().parent
+    done = subprocess.run(["git", "-C", str(here), "rev-parse", "--show-toplevel"], check=True, capture_output=True)
+    return done.stdout.decode().strip()
+
+
 def extract_base(commit: str, dest: Path) -> str:
     """The codegen package of ``commit`` as the importable package ``acn_base_codegen`` under dest."""
-    tar = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "codegen"], check=True, capture_output=True)
+    tar = subprocess.run(["git", "-C", str(_checkout()), "archive", commit, "codegen"], check=True, capture_output=True)
     with tarfile.open(fileobj=BytesIO(tar.stdout)) as tf:
         tf.extractall(dest, filter="data")
     (dest / "codegen").rename(dest / "acn_base_codegen")

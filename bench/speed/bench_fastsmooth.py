@@ -12,7 +12,7 @@ One axis of the default model, one core. Rows:
   at a smaller N (they are 1000x slower), same data prefix.
 
 Agreement: max over samples and states of |ours - ref| / (|ref| + sigma)
-against the reference at N = 4000. Usage: python bench/speed/bench_fastsmooth.py
+against the reference at N = 4000. Usage: python bench/run_all.py bench/speed/bench_fastsmooth.py
 [--n 1000000] [--n-baseline 20000] [--repeat 5]
 """
 

@@ -9,7 +9,8 @@ board's UARTs recorded by accelnav.link.recorder (the path PIL took before).
 Every time includes framing and decode; PIL includes QEMU's start and exit.
 "real time" is samples/s over the model's rate: 10x at 100 Hz is 1 000
 samples/s, 1x at 1 kHz is 1 000 samples/s.
-Usage: python bench/speed/bench_pil.py [--seconds 20] [--boards mps2_an385,microbit,stm32vldiscovery] [--no-uart]
+Usage: python bench/run_all.py bench/speed/bench_pil.py [--seconds 20] [--no-uart]
+           [--boards mps2_an385,microbit,stm32vldiscovery]
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 Same data, same run: a simulated vehicle recording on the default model, one
 axis, N = 1e4 and 1e5 samples. Each library does a full forward filter and
 backward smoothing pass. Prints samples/s and our speed relative to each.
-Usage: python bench/speed/bench_smoother.py [--sizes 10000 100000] [--repeat 1]
+Usage: python bench/run_all.py bench/speed/bench_smoother.py [--sizes 10000 100000] [--repeat 1]
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ Figures:
 
 Then the targets table (goal, measured, met). The baselines (reference rests,
 no ZUPT, interpolated fixes) come from the same run.
-Usage: python bench/studies/study_real_rests.py [--verbose-cli]
+Usage: python bench/run_all.py bench/studies/study_real_rests.py [--verbose-cli]
 """
 
 from __future__ import annotations
@@ -28,18 +28,14 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
-import sys
 import tempfile
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tests"))
+import pytest
+from support import realdata  # tests/support, on the path bench/run_all.py sets
+from support import realdata_more as rm
 
-import pytest  # noqa: E402
-import realdata  # noqa: E402
-import realdata_more as rm  # noqa: E402
-
-from accelnav.estimate.zupt import intervals  # noqa: E402
+from accelnav.estimate.zupt import intervals
 
 METHODS = rm.WALK_METHODS
 MOVING = 1.0  # m/s: a "rest" held while the GNSS track is faster than this is a false rest
@@ -135,9 +131,12 @@ def main() -> int:
         )
 
     print("\nIssue 23 targets, shipped defaults:")
-    print(f"{'recording':<22}{'goal':<40}{'measured':<28}met")
+    print()
+    print("| recording | goal | measured | met |")
+    print("|---|---|---|---|")
     for name, goal, measured, met in targets:
-        print(f"{name:<22}{goal:<40}{measured:<28}{'yes' if met else 'NO'}")
+        print(f"| {name} | {goal} | {measured} | {'yes' if met else 'NO'} |")
+    print()
     print(f"met {sum(t[3] for t in targets)} of {len(targets)}")
     return 0
 
