@@ -35,6 +35,22 @@ def duty_model():
     return load_model(MODELS / "adxl202_duty.toml")
 
 
+@pytest.fixture(scope="module")
+def man():
+    """The default model's frame manifest (a module may override it, as test_frames does per model)."""
+    from accelnav.hil_sim.targets.firmware import manifest
+
+    return manifest(None)
+
+
+@pytest.fixture(scope="module")
+def replay(man):
+    """The host's replay of the default firmware's filter: the compact mode's block frames need it."""
+    from accelnav.link.telemetry import replay_for
+
+    return replay_for(man, load_model())
+
+
 def model_text(path: Path = DEFAULT_MODEL) -> str:
     return Path(path).read_text()
 

@@ -16,6 +16,7 @@ import json
 
 import numpy as np
 import pytest
+from support.frames import frame_kind, split_frames
 
 from accelnav.cli import main as cli_main
 from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, manifest
@@ -36,16 +37,6 @@ N = 1500
 
 
 @pytest.fixture(scope="module")
-def man():
-    return manifest(None)
-
-
-@pytest.fixture(scope="module")
-def replay(man):
-    return replay_for(man, load_model())
-
-
-@pytest.fixture(scope="module")
 def telemetry(man):
     fw = HostFirmware(build_firmware(None))
     code = 2048 + np.random.default_rng(21).integers(-300, 300, (N, 2))
@@ -55,16 +46,8 @@ def telemetry(man):
     return fw.take()
 
 
-def _frames(data: bytes) -> list[bytes]:
-    return [p + b"\0" for p in data.split(b"\0")[:-1]]
-
-
 def _payload(f: bytes) -> bytes:
     return cobs_decode(f[:-1])[:-4]
-
-
-def _kind(man, f: bytes) -> str:
-    return {fr["type"]: n for n, fr in man.frames.items() if fr["direction"] == "up"}[_payload(f)[0]]
 
 
 def _with_index(f: bytes, delta: int) -> bytes:
@@ -107,8 +90,8 @@ def test_a_clean_stream_delivers_every_sample_and_matches_every_checkpoint(man, 
 
 
 def test_repeated_frames_are_dropped_and_counted(man, replay, telemetry):
-    f = _frames(telemetry)
-    kinds = [_kind(man, x) for x in f]
+    f = split_frames(telemetry)
+    kinds = [frame_kind(man, x) for x in f]
     ck = [k for k, x in enumerate(kinds) if x == "checkpoint"]
     a, b = ck[4] - 3, ck[6] + 2  # a chunk with blocks and checkpoint pairs, repeated as an adapter might
     stale = next(k for k in range(20, len(f)) if kinds[k] == "block")
@@ -125,8 +108,8 @@ def test_a_gap_of_100000_block_frames_is_counted_exactly(man, replay, telemetry)
     """Frames lost for 100 000 block frames (3.2 million samples: the old 16-bit seq wrapped 48 times):
     the index says how many samples; the replay has no state until the next checkpoint, and the samples
     received before it are counted lost too, exactly."""
-    f = _frames(telemetry)
-    kinds = [_kind(man, x) for x in f]
+    f = split_frames(telemetry)
+    kinds = [frame_kind(man, x) for x in f]
     B, C = man.data["block_samples"], man.data["checkpoint_samples"]
     blocks = [k for k, x in enumerate(kinds) if x == "block"]
     cut_from, cut_to = blocks[10], blocks[13]  # blocks 10..12 lost, then the link skips 100 000 blocks
@@ -141,8 +124,8 @@ def test_a_gap_of_100000_block_frames_is_counted_exactly(man, replay, telemetry)
 
 def _tampered(man, telemetry, which: int = 3) -> tuple[bytes, int]:
     """The stream with one bit of checkpoint number ``which`` (a periodic one) flipped, its CRC made good."""
-    f = _frames(telemetry)
-    ck = [k for k, x in enumerate(f) if _kind(man, x) == "checkpoint"]
+    f = split_frames(telemetry)
+    ck = [k for k, x in enumerate(f) if frame_kind(man, x) == "checkpoint"]
     k = ck[which]
     p = bytearray(_payload(f[k]))
     p[man.field("checkpoint", "state")["offset"] + 20] ^= 0x04  # inside the state bytes
@@ -224,7 +207,7 @@ def test_damaged_compact_frames_are_never_accepted(man, replay, telemetry, seed)
     The rows are then exactly those of the surviving frames, and the replay never disagrees with a
     checkpoint (it would if a damaged input or state got through)."""
     rng = np.random.default_rng(seed)
-    original = {x[:-1] for x in _frames(telemetry)}
+    original = {x[:-1] for x in split_frames(telemetry)}
     stream = _damage(telemetry, rng, 60)
     survivors = b"".join(seg + b"\0" for seg in stream.split(b"\0")[:-1] if seg in original)
     got, stats = decode_all(man, stream, replay)
@@ -250,8 +233,8 @@ def test_bytes_per_sample_meet_the_budget(model):
 def test_a_block_lost_right_after_a_checkpoint(man, replay, telemetry):
     """The checkpoint before the gap closes the stretch before it (checked) but is no state for the samples
     after the gap: the replay waits for the next one."""
-    f = _frames(telemetry)
-    kinds = [_kind(man, x) for x in f]
+    f = split_frames(telemetry)
+    kinds = [frame_kind(man, x) for x in f]
     k = next(k for k in range(len(f)) if kinds[k] == "checkpoint" and kinds[k + 1] == "checkpoint" and k > 10)
     at = int.from_bytes(_payload(f[k])[1:5], "little")
     rows, c = _check(man, replay, b"".join(f[: k + 2] + f[k + 3 :]))
@@ -271,8 +254,8 @@ def test_recorder_reconnects_and_counts_the_gap_in_samples(tmp_path, man, teleme
 
     from accelnav.link.recorder import Recorder, Status, decode_log
 
-    f = _frames(telemetry)
-    kinds = [_kind(man, x) for x in f]
+    f = split_frames(telemetry)
+    kinds = [frame_kind(man, x) for x in f]
     blocks = [k for k, x in enumerate(kinds) if x == "block"]
     a, b = blocks[12], blocks[20]  # blocks 12..19 never arrive; the second connection repeats 3 frames
     url, th, _ = server([b"".join(f[:a]), b"".join(f[a - 3 : a] + f[b:])], down_s=0.5)
@@ -296,7 +279,7 @@ def test_repeats_and_damage_agree_with_the_frame_by_frame_rule(man, replay, tele
     frames that follow on in bulk), fed whole and in pieces, and the naive one (the rule frame by frame)
     deliver the same rows and counts, and no checkpoint disagrees with the replay."""
     rng = np.random.default_rng(100 + seed)
-    f = _frames(telemetry)
+    f = split_frames(telemetry)
     parts, at = [], 0
     for e in np.sort(rng.choice(np.arange(20, len(f)), 6, replace=False)).tolist():
         k = int(rng.integers(1, 15))
@@ -315,7 +298,7 @@ def test_replays_on_threads_agree_with_the_frame_by_frame_rule(man, replay, tele
     import accelnav.link.compact as compact
 
     monkeypatch.setattr(compact, "THREAD_MIN", 1)
-    f = _frames(telemetry)
+    f = split_frames(telemetry)
     stream = bytearray(b"".join(f[:40] + f[30:40] + f[40:]))
     stream[len(stream) // 2] ^= 0x5A
     _, c = _check(man, replay, bytes(stream), seed=5)
@@ -415,8 +398,8 @@ def test_gain_schedule_compact_round_trip_follows_skips(gs):
     _assert_own_states(man, rows, gs["states"])
     assert (rows["x.flags"][C - 3 : C] & 1).all() and rows["x.flags"][700] & 2  # skipped, rail
     # the image of x before sample C: following (k's bit 31) with a deviation; its row an index in the table
-    f = _frames(gs["stream"])
-    ck = {(i, a): img for i, a, img in (_ck_image(man, x) for x in f if _kind(man, x) == "checkpoint")}
+    f = split_frames(gs["stream"])
+    ck = {(i, a): img for i, a, img in (_ck_image(man, x) for x in f if frame_kind(man, x) == "checkpoint")}
     off, nrows = _gs_row_at(man, 0)
     nb = man.data["state_bytes"][0]
     img = ck[(C, 0)]
@@ -426,7 +409,7 @@ def test_gain_schedule_compact_round_trip_follows_skips(gs):
     assert 0 < int.from_bytes(img[off : off + 4], "little") < nrows
     assert int.from_bytes(ck[(C, 1)][nb - 8 : nb - 4], "little") == C  # y: not following
     # blocks before C lost: the replay starts from the following checkpoint, and still matches
-    kinds = [_kind(man, x) for x in f]
+    kinds = [frame_kind(man, x) for x in f]
     blocks = [k for k, x in enumerate(kinds) if x == "block"]
     cut = blocks[C // B - 3 : C // B]  # the three blocks before sample C
     rows, c = _check(man, replay, b"".join(x for k, x in enumerate(f) if k not in cut), seed=4)
@@ -452,8 +435,8 @@ def test_gain_schedule_checkpoint_with_a_row_outside_the_table_is_refused(gs, ba
     lost). The index just inside the table is taken (and then disagrees: a mismatch)."""
     man, replay = gs["man"], gs["replay"]
     C, B = man.data["checkpoint_samples"], man.data["block_samples"]
-    f = _frames(gs["stream"])
-    kinds = [_kind(man, x) for x in f]
+    f = split_frames(gs["stream"])
+    kinds = [frame_kind(man, x) for x in f]
     at = next(k for k, x in enumerate(f) if kinds[k] == "checkpoint" and _ck_image(man, x)[:2] == (2 * C, 0))
     _, nrows = _gs_row_at(man, 0)
     value = nrows if bad == "rows" else 2**32 - 1

@@ -5,13 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.link.telemetry import Decoder, decode_all, decode_naive, encode_command, encode_frames
-
-
-@pytest.fixture(scope="module")
-def man():
-    return manifest(None)
 
 
 def _frames(man, seq, index, flags=None) -> list[bytes]:

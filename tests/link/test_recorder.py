@@ -16,20 +16,16 @@ import numpy as np
 import pytest
 import serial
 from conftest import REPO
+from support.frames import split_frames
 from support.link_server import server
 
 from accelnav.cli import main as cli_main
 from accelnav.data.runfile import load_run
-from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, generated, manifest
+from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, generated
 from accelnav.link.logfile import LogError, LogWriter, read_log
 from accelnav.link.recorder import Recorder, Status, decode_log
 from accelnav.link.telemetry import decode_all, encode_command, encode_stimulus
 from accelnav.model.load import load_model
-
-
-@pytest.fixture(scope="module")
-def man():
-    return manifest(None)
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +161,7 @@ def test_log_info_and_export(tmp_path, man, telemetry, capsys):
 
 
 def test_log_info_and_export_show_lost_duplicate_and_damaged_frames(tmp_path, man, telemetry, capsys):
-    frames = _frames(telemetry)
+    frames = split_frames(telemetry)
     damaged = bytearray(frames[1500])
     damaged[10] ^= 0x40  # refused and counted as damaged
     # frames 100..109 repeated, 1000..1003 lost, 1500 damaged (so lost too)
@@ -225,7 +221,7 @@ def test_stop_at_a_frame_count_ends_the_log_on_a_frame_boundary(tmp_path, man, t
     """The read that completes the count also brings the start of the next frame (its rest comes 0.1 s
     later): the recorder reads on to that frame's delimiter, so the log holds no torn frame (which
     would read as one damaged frame)."""
-    frames = _frames(telemetry)
+    frames = split_frames(telemetry)
     head, extra = b"".join(frames[:20]), frames[20]
     port = serial.serial_for_url("loop://", timeout=0.02)
     port.write(head + extra[:30])
@@ -242,10 +238,6 @@ def test_stop_at_a_frame_count_ends_the_log_on_a_frame_boundary(tmp_path, man, t
     assert len(d.frames["sample"]) == 21
 
 
-def _frames(telemetry: bytes) -> list[bytes]:
-    return [p + b"\0" for p in telemetry.split(b"\0")[:-1]]
-
-
 def _pty():
     import tty
 
@@ -259,7 +251,7 @@ def test_kill_9_mid_stream_loses_at_most_the_last_tenth_of_a_second(tmp_path, ma
     master, slave, name = _pty()
     out = tmp_path / "kill.acnlog"
     proc = _start_recorder(tmp_path, manifest_file, name, out)
-    frames = _frames(telemetry)
+    frames = split_frames(telemetry)
     sent: list = []
     stop = threading.Event()
     feeder = threading.Thread(target=_feeder, args=(master, frames, 1000.0, sent, stop))
@@ -289,7 +281,7 @@ def test_pulled_cable_for_good_closes_the_log_cleanly(tmp_path, manifest_file, t
     out = tmp_path / "pulled.acnlog"
     proc = _start_recorder(tmp_path, manifest_file, name, out, "--give-up-after", "1")
     os.close(slave)
-    frames = _frames(telemetry)[:300]
+    frames = split_frames(telemetry)[:300]
     os.write(master, b"".join(frames))
     time.sleep(0.5)
     os.close(master)  # the cable is pulled
@@ -305,7 +297,7 @@ def test_pulled_cable_for_good_closes_the_log_cleanly(tmp_path, manifest_file, t
 
 
 def test_recorder_reconnects_and_records_the_gap(tmp_path, man, telemetry):
-    frames = _frames(telemetry)
+    frames = split_frames(telemetry)
     # the second connection starts with 50 frames the first one carried (an adapter's buffer replayed)
     url, th, _ = server([b"".join(frames[:500]), b"".join(frames[450:500] + frames[700:])], down_s=2.0)
     shown = io.StringIO()
@@ -336,7 +328,7 @@ def test_status_line_says_the_link_is_being_retried(man):
 
 
 def test_ctrl_c_while_the_link_is_away_closes_cleanly(tmp_path, manifest_file, telemetry):
-    frames = _frames(telemetry)
+    frames = split_frames(telemetry)
     url, th, served = server([b"".join(frames[:300])], down_s=0)
     out = tmp_path / "ctrl_c.acnlog"
     proc = _start_recorder(tmp_path, manifest_file, url, out)

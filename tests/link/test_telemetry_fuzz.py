@@ -31,18 +31,12 @@ from conftest import SUPPORT
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.link.telemetry import Decoder, decode_naive, encode_frames
 
 EXAMPLES = 440  # about 250 damage operations each: comfortably over the 1e5 the issue asks for
 BULK_OPS = (200, 300)  # numpy-driven damage per example, on top of hypothesis' own list
 FRAMES = 600
 COUNTS = {"examples": 0, "frames": 0, "damage_ops": 0, "accepted": 0, "lost": 0}
-
-
-@pytest.fixture(scope="module")
-def man():
-    return manifest(None)
 
 
 def _pristine(man, n, rng):

@@ -9,7 +9,6 @@ import zlib
 import numpy as np
 import pytest
 
-from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.link import telemetry as tm
 from accelnav.link.wirekernel import decode_frames, wire_lib
 
@@ -20,11 +19,6 @@ def mod():
     if lib is None:
         pytest.skip("no C compiler: the decoder uses its numpy path")
     return lib
-
-
-@pytest.fixture(scope="module")
-def man():
-    return manifest(None)
 
 
 def _numpy(buf: np.ndarray, starts: np.ndarray, L: int):
