@@ -73,9 +73,9 @@ def target_rows(script: str, text: str) -> list[tuple[str, str, str, str, str]]:
             cells = _cells(body)
             if len(cells) != len(head):
                 break
-            what = ", ".join(
-                f"{h} {v}" for h, v, f in zip(head, cells, first, strict=True) if f and f not in TARGET_COLUMNS
-            )
+            named = [(h, v) for h, v, f in zip(head, cells, first, strict=True) if f and f not in TARGET_COLUMNS]
+            # one naming column is the name itself; several (model, rate, axis) say which is which
+            what = named[0][1] if len(named) == 1 else ", ".join(f"{h} {v}" for h, v in named)
             goal, measured = (f"{cells[idx[c]]} {units[c]}".strip() for c in ("goal", "measured"))
             rows.append((script, what, goal, measured, cells[idx["met"]]))
     return rows

@@ -52,129 +52,14 @@ schedule on the M3, 5534 -> 6282 and 12616 -> 13744 B on the M0.
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-from accelnav.codegen.emit_c import emit
-from accelnav.codegen.report import struct_size
-from accelnav.hil_sim.targets.qemu import run_to_exit
+from accelnav.hil_sim.targets.icount import CORES, counts
 from accelnav.model.load import load_model
-from accelnav.resources import firmware_dir
 
-CFLAGS = ["-mthumb", "-masm-syntax-unified", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
-# core -> (gcc -mcpu, runtime folder, linker script, qemu machine)
-CORES = {
-    "M3": ("cortex-m3", "mps2_an385", "mps2_an385.ld", "mps2-an385"),
-    "M0": ("cortex-m0", "microbit", "nrf51822.ld", "microbit"),
-}
-VARIANTS = (("cov", "covariance", "fixed"), ("gs", "gain_schedule", "fixed"), ("f32", "covariance", "float32"))
-
-MAIN = r"""
-#include "board.h"
-#include "accelnav_cov.h"
-#include "accelnav_gs.h"
-#include "accelnav_f32.h"
-
-static const int32_t codes[] = {CODES};
-#define N (sizeof codes / sizeof codes[0])
-
-__attribute__((noinline)) static bool empty_step(accelnav_cov_AX_t *s, int32_t code)
-{
-    __asm__ volatile("" ::"r"(s), "r"(code) : "memory");
-    return code > 0;
-}
-
-static void report(const char *name, uint32_t ticks)
-{
-    board_puts(name);
-    board_puts(" ");
-    board_put_u32(ticks);
-    board_puts("\n");
-}
-
-/* a loop of exactly 2 instructions per iteration (subs, bne): checks 40 instructions per tick */
-__attribute__((noinline)) static void known_loop(uint32_t n)
-{
-    __asm__ volatile("1: subs %0, %0, #1\n bne 1b\n" : "+r"(n)::"cc");
-}
-
-int main(void)
-{
-    static accelnav_cov_AX_t cov;
-    static accelnav_gs_AX_t gs;
-    static accelnav_f32_AX_t f32;
-    uint32_t k, t0;
-    board_ticks_start();
-    t0 = board_ticks();
-    known_loop(1000000u);
-    report("calib_2M", board_ticks_since(t0));
-    accelnav_cov_AX_init(&cov);
-    t0 = board_ticks();
-    for (k = 0; k < N; ++k) {
-        empty_step(&cov, codes[k]);
-    }
-    report("empty", board_ticks_since(t0));
-    t0 = board_ticks();
-    for (k = 0; k < N; ++k) {
-        accelnav_cov_AX_step(&cov, codes[k]);
-    }
-    report("cov", board_ticks_since(t0));
-    accelnav_gs_AX_init(&gs);
-    t0 = board_ticks();
-    for (k = 0; k < N; ++k) {
-        accelnav_gs_AX_step(&gs, codes[k]);
-    }
-    report("gs", board_ticks_since(t0));
-    accelnav_f32_AX_init(&f32);
-    t0 = board_ticks();
-    for (k = 0; k < N; ++k) {
-        accelnav_f32_AX_step(&f32, codes[k]);
-    }
-    report("f32", board_ticks_since(t0));
-    report("n", N);
-    report("overflow", cov.overflow + gs.overflow);
-    return 0;
-}
-"""
-
-
-def run_core(core: str, model, codes, tmp: Path) -> tuple[dict, dict, float]:
-    """Build the three variants for ``core`` and run them; returns (tick counts, sizes, instructions per tick)."""
-    cpu, board_name, ld, machine = CORES[core]
-    board = firmware_dir() / "boards" / board_name
-    cflags = [f"-mcpu={cpu}", *CFLAGS]
-    ax = model.axes[0].name
-    tmp.mkdir(parents=True, exist_ok=True)
-    sizes = {}
-    for tag, form, arith in VARIANTS:
-        files = emit(model, form=form, arith=arith, prefix=f"accelnav_{tag}")
-        for name, text in files.items():
-            (tmp / name).write_text(text)
-        obj = tmp / f"accelnav_{tag}.o"
-        subprocess.run(["arm-none-eabi-gcc", *cflags, "-c", str(tmp / f"accelnav_{tag}.c"), "-o", str(obj)], check=True)
-        out = subprocess.run(["arm-none-eabi-size", str(obj)], check=True, capture_output=True, text=True).stdout
-        text, data, bss = (int(x) for x in out.splitlines()[1].split()[:3])
-        ram = struct_size(files[f"accelnav_{tag}.h"], f"accelnav_{tag}_{ax}_t")
-        sizes[tag] = (text, data, bss, ram)
-        if form == "gain_schedule":  # the schedule's table per axis (codegen.gains), part of the flash above
-            man = json.loads(files[f"accelnav_{tag}.json"])
-            sizes["table"] = [a["schedule"]["flash_bytes"] for a in man["axes"]]
-    main_c = MAIN.replace("CODES", ", ".join(str(int(c)) for c in codes)).replace("_AX_", f"_{ax}_")
-    (tmp / "main.c").write_text(main_c)
-    elf = tmp / "bench.elf"
-    runtime = board.parent / "semihost_rt.c"  # the runtime the emulated boards share
-    srcs = [tmp / "main.c", board / "startup.c", runtime] + [tmp / f"accelnav_{t}.c" for t, _, _ in VARIANTS]
-    inc = ["-I", str(board), "-I", str(board.parent), "-I", str(tmp)]
-    link = ["arm-none-eabi-gcc", *cflags, "-nostdlib", *inc, "-T", str(board / ld)]
-    subprocess.run([*link, *map(str, srcs), "-lgcc", "-o", str(elf)], check=True)
-    # the one way accelnav runs code on the emulator (hil_sim.qemu), with -icount shift=0
-    text_out = run_to_exit(elf, icount=True, timeout=300, machine=machine)
-    vals = dict(line.split() for line in text_out.splitlines() if len(line.split()) == 2)
-    vals = {k: int(v) for k, v in vals.items()}
-    return vals, sizes, 2_000_000 / vals["calib_2M"]
+NAMES = {"cov": "fixed point, covariance form", "gs": "fixed point, gain-schedule form", "f32": "float32 (soft float)"}
 
 
 def main(argv=None) -> int:
@@ -198,52 +83,49 @@ def main(argv=None) -> int:
 
     run = simulate(model, args.scenario, args.samples / model.rate_hz, seed=1)
     codes = run.code[: args.samples, 0]
-    tmp = args.keep or Path(tempfile.mkdtemp(prefix="acn_bench_"))
-    results = {core: run_core(core, model, codes, tmp / core) for core in CORES}
-    n = results["M3"][0]["n"]
-    print(f"model {model.name} ({model.sha256[:12]}), {model.rate_hz:g} Hz, scenario {args.scenario}, {n} steps,")
+    res = counts(model, codes, args.keep or Path(tempfile.mkdtemp(prefix="acn_bench_")))
+    m3, m0 = res["M3"], res["M0"]
+    print(
+        f"model {model.name} ({model.sha256[:12]}), {model.rate_hz:g} Hz, scenario {args.scenario}, {m3.steps} steps,"
+    )
     print("arm-none-eabi-gcc -O2, qemu-system-arm -icount shift=0: Cortex-M3 on mps2-an385, Cortex-M0 on microbit")
-    for core, (vals, _, ipt) in results.items():
-        empty = vals["empty"] * ipt / vals["n"]
-        print(f"{core}: {ipt:.2f} instructions per tick; loop + call overhead (empty step) {empty:.1f} per step")
-    names = {
-        "cov": "fixed point, covariance form",
-        "gs": "fixed point, gain-schedule form",
-        "f32": "float32 (soft float)",
-    }
+    for core, c in res.items():
+        print(
+            f"{core}: {c.instructions_per_tick:.2f} instructions per tick; loop + call overhead (empty step) "
+            f"{c.empty:.1f} per step"
+        )
     print(
         f"{'variant':<34} {'M3 insn':>8} {'net':>8} {'M0 insn':>8} {'net':>8} {'M0/M3':>6}"
         f" {'flash M3':>8} {'flash M0':>8} {'RAM B':>6}"
     )
-    per = {core: {} for core in CORES}
-    for tag in ("cov", "gs", "f32"):
-        row = f"{names[tag]:<34}"
-        for core, (vals, _, ipt) in results.items():
-            tot = vals[tag] * ipt / vals["n"]
-            per[core][tag] = tot
-            row += f" {tot:8.1f} {tot - vals['empty'] * ipt / vals['n']:8.1f}"
-        row += f" {per['M0'][tag] / per['M3'][tag]:6.2f}"
-        for core in CORES:
-            text, data, _bss, ram = results[core][1][tag]
-            row += f" {(text + data) // len(model.axes):8d}"
-        print(row + f" {ram:6d}")
+    for tag in NAMES:
+        row = f"{NAMES[tag]:<34}"
+        for c in res.values():
+            row += f" {c.per_step[tag]:8.1f} {c.net[tag]:8.1f}"
+        row += f" {m0.per_step[tag] / m3.per_step[tag]:6.2f}"
+        row += "".join(f" {res[core].flash_per_axis[tag]:8d}" for core in CORES)
+        print(row + f" {m0.ram[tag]:6d}")
     print(f"flash is per axis (object size / {len(model.axes)} axes; libgcc routines not included)")
-    table = results["M3"][1]["table"]
-    print(f"gain-schedule table (in its flash): {', '.join(str(b) for b in table)} B per axis (target <= 2048)")
-    m3 = per["M3"]
-    ratio = f"float32 / gain-schedule: {m3['f32'] / m3['gs']:.1f}x;  float32 / covariance: {m3['f32'] / m3['cov']:.1f}x"
-    print(f"M3: {ratio}")
-    print(
-        f"M3 targets: covariance <= 300 ({'met' if m3['cov'] <= 300 else 'NOT met'}), gain schedule <= 80 "
-        f"({'met' if m3['gs'] <= 80 else 'NOT met'}), float32 >= 12x gain schedule "
-        f"({'met' if m3['f32'] >= 12 * m3['gs'] else 'NOT met'})"
-    )
-    ram = {tag: results["M3"][1][tag][3] for tag in ("cov", "gs")}
-    print(
-        "RAM targets (<= 64 B per axis): "
-        + ", ".join(f"{names[t].split(', ')[-1]} {ram[t]} B ({'met' if ram[t] <= 64 else 'NOT met'})" for t in ram)
-    )
-    print("overflow counters: " + ", ".join(f"{core} {results[core][0]['overflow']}" for core in CORES))
+    table = m3.table_bytes
+    print(f"gain-schedule table (in its flash): {', '.join(str(b) for b in table)} B per axis")
+    per = m3.per_step
+    f32 = per["f32"]
+    print(f"M3: float32 / gain-schedule: {f32 / per['gs']:.1f}x;  float32 / covariance: {f32 / per['cov']:.1f}x")
+    print("overflow counters: " + ", ".join(f"{core} {c.overflow}" for core, c in res.items()))
+    rate = f"{model.rate_hz:g} Hz"
+    print()
+    print("| target | goal | measured | met |")
+    print("|---|---|---|---|")
+    rows = [
+        (f"M3 covariance step, {rate}", "<= 300 instructions", per["cov"], per["cov"] <= 300),
+        (f"M3 gain-schedule step, {rate}", "<= 80 instructions", per["gs"], per["gs"] <= 80),
+        (f"M3 float32 over gain schedule, {rate}", ">= 12x", per["f32"] / per["gs"], per["f32"] >= 12 * per["gs"]),
+        (f"covariance RAM per axis, {rate}", "<= 64 B", m3.ram["cov"], m3.ram["cov"] <= 64),
+        (f"gain-schedule RAM per axis, {rate}", "<= 64 B", m3.ram["gs"], m3.ram["gs"] <= 64),
+    ]
+    rows += [(f"gain-schedule table, axis {i}, {rate}", "<= 2048 B", b, b <= 2048) for i, b in enumerate(table)]
+    for what, goal, value, met in rows:
+        print(f"| {what} | {goal} | {f'{value:.1f}'.removesuffix('.0')} | {'yes' if met else 'no'} |")
     return 0
 
 
