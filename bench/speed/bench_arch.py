@@ -10,7 +10,7 @@ One model (default: the shipped default, 2 axes), both fixed-point forms, the sa
   328P's flash: its cycles are counted on an ATmega1284P (same AVR core and instruction timings,
   16-bit program counter, 128 KB flash), its sizes still compiled for the 328P.
 * RV32IMAC (SiFive FE310, QEMU sifive_e), Cortex-M3 (QEMU mps2-an385) and Cortex-M0 (nRF51822, QEMU
-  microbit): instructions, counted under -icount shift=0 by bench_rv32_icount's driver (-O2; a known
+  microbit): instructions, counted under -icount shift=0 by hil_sim.targets.icount_sample's driver (-O2; a known
   2 000 000-instruction loop calibrates each core's counter). An instruction count is not a cycle
   count: the CPU load and the rates below assume CPI instructions per cycle (--cpi, default 1.5;
   one-cycle ALU ops, two-cycle loads, taken branches refilling the pipeline, multi-cycle long
@@ -36,16 +36,15 @@ import sys
 import tempfile
 from pathlib import Path
 
-import bench_rv32_icount as icount
-
 from accelnav.codegen import targets
 from accelnav.codegen.emit_c import emit
 from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.hil_sim.targets import icount_sample as icount
 from accelnav.hil_sim.targets import simavr
 from accelnav.model.load import load_model
 
 FORMS = (("cov", "covariance"), ("gs", "gain_schedule"))
-# the micro:bit's Cortex-M0, in the shape of bench_rv32_icount.CORES (its driver runs unchanged)
+# the micro:bit's Cortex-M0, in the shape of icount_sample.CORES (its driver runs unchanged)
 M0 = ("arm-none-eabi-gcc", ["-mcpu=cortex-m0", "-mthumb", "-masm-syntax-unified"], "microbit", "nrf51822.ld",
       ["-nostdlib"], "arm-none-eabi-size", "microbit", "qemu-system-arm")  # fmt: skip
 # rows: label, part (parts.mk: clock, memories, compiler), where the count comes from
