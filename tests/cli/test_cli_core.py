@@ -7,15 +7,9 @@ import csv
 import numpy as np
 import pytest
 from conftest import MODELS
+from support.cli import run_cli as _run
 
-from accelnav.cli import main
 from accelnav.data.runfile import FORMAT, FORMAT_V1, load_run
-
-
-def _run(argv, capsys):
-    status = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return status, out.out, out.err
 
 
 def test_sim_filter_smooth_chain(tmp_path, capsys):

@@ -4,16 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.cli import run_cli as _run
 
 import accelnav
 from accelnav.cli import main
 from accelnav.data.runfile import load_run
-
-
-def _run(argv, capsys):
-    status = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return status, out.out, out.err
 
 
 @pytest.fixture(scope="module")

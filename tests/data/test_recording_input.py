@@ -7,20 +7,14 @@ import gzip
 import numpy as np
 import pytest
 from conftest import MODELS
+from support.cli import run_cli as _run
 
-from accelnav.cli import main
 from accelnav.data.runfile import load_run
 from accelnav.estimate.pipeline import stance_midpoints, stride_lengths
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.load import load_model
 
 FOOT = MODELS / "foot_imu.toml"
-
-
-def _run(argv, capsys):
-    status = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return status, out.out, out.err
 
 
 def _csv_lines(t, accel, t_name="t") -> list[str]:
