@@ -235,3 +235,20 @@ def test_no_test_imports_another_test():
     files = sorted(TESTS.rglob("*.py")) + sorted((REPO / "bench").rglob("*.py"))
     bad = [f"{f.relative_to(REPO)}:{line} imports {mod}" for f in files for mod, line in _imported_test_modules(f)]
     assert not bad, "\n".join(bad)
+
+
+def test_test_files_mirror_the_packages():
+    """Test files sit in a folder per package (none loose in tests/), with names unique across tests/ and no
+    __init__.py: pytest imports them by basename, and two test_x.py would collide."""
+    files = sorted(p for p in TESTS.rglob("test_*.py"))
+    loose = [p.name for p in files if p.parent == TESTS]
+    assert not loose, f"move these into the folder of the package they test: {loose}"
+    seen: dict[str, Path] = {}
+    twins = [
+        f"{p.relative_to(TESTS)} and {seen[p.name].relative_to(TESTS)}"
+        for p in files
+        if seen.setdefault(p.name, p) != p
+    ]
+    assert not twins, f"test files with one name: {twins}"
+    inits = [str(p.relative_to(TESTS)) for p in TESTS.rglob("__init__.py")]
+    assert not inits, f"no __init__.py under tests/: {inits}"
