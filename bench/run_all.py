@@ -11,7 +11,7 @@ the tail of its stderr, and the runner exits non-zero after writing the file.
 The scripts import the shared baselines (bench/common) and the tests' simulated cases (tests/support)
 by module name: this runner puts both folders on their PYTHONPATH, so run a single script through it:
 
-    python bench/run_all.py speed [--out FILE] [--only bench_fastsmooth ...]
+    python bench/run_all.py speed [--out FILE] [--only bench_fastsmooth ...] [--also bench/studies/X.py ...]
     python bench/run_all.py bench/coverage/coverage_tune.py --seeds 0 10     # one script, its own arguments
 """
 
@@ -102,11 +102,13 @@ def main(argv=None) -> int:
     ap.add_argument("set", choices=sorted(SETS), nargs="?", default="speed")
     ap.add_argument("--out", type=Path, help="results file (default build/bench/<set>.md)")
     ap.add_argument("--only", nargs="*", default=None, help="script names (e.g. bench_fastsmooth) to run")
+    ap.add_argument("--also", nargs="*", type=Path, default=[], help="scripts of other sets to run after these")
     args = ap.parse_args(argv)
     out = args.out or CHECKOUT / "build" / "bench" / f"{args.set}.md"
     scripts = sorted((HERE / args.set).glob(SETS[args.set]))
     if args.only:
         scripts = [s for s in scripts if s.stem in args.only]
+    scripts += [s if s.is_absolute() else CHECKOUT / s for s in args.also]
     parts = [
         f"# accelnav benchmarks: {args.set}",
         "",
