@@ -493,6 +493,5 @@ def test_sim_cli_walking_and_smooth_prints_strides(tmp_path, capsys):
     assert main(["sim", "--scenario", "walking", "--duration", "20", "--seed", "2", "--out", str(path)]) == 0
     assert main(["smooth", str(path), "--zupt", "auto", "--out", str(tmp_path / "s.npz")]) == 0
     out = capsys.readouterr().out
-    assert "stride length" in out and "smoother" in out
-    row = [ln for ln in out.splitlines() if ln.startswith("smoother")][-1].split()
-    assert float(row[3]) < 5.0  # mean |error| in % of the stride
+    # the figures themselves through the library: tests/estimate/test_stride_errors.py
+    assert "stride length" in out and any(ln.startswith("smoother") for ln in out.splitlines())
