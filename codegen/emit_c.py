@@ -43,7 +43,7 @@ SCHEDULE_REL_TOL = (3e-4, 1e-3, 1e-7, 1e-4)
 # tolerance floor of each gain in LSB of its format: K_r's slope is a whole number of LSB per sample (no
 # bits below it), so under ~1 LSB of tolerance a segment lasts only a few samples wherever the true slope
 # is not near a whole number (at 1 kHz K_r is ~3e4 LSB from 0.1 s to 10 s: 751 of the 1084 segments).
-# Measured (tests/test_codegen.py lockstep, 1 kHz shock): r and u stay within 4.2e-4 sigma with 2 LSB.
+# Measured (tests/codegen/test_codegen.py lockstep, 1 kHz shock): r and u stay within 4.2e-4 sigma with 2 LSB.
 SCHEDULE_FLOOR_LSB = (2.0, 0.0, 0.0, 0.0)
 # K_r and K_v's tolerance ramps up from 1/20 over the first this many seconds (codegen.gains.schedule;
 # codegen.follow's return threshold follows the same ramp)
