@@ -344,16 +344,6 @@ def worst_case_bound(p: AxisPlan, n: int, schedule=None, rows=None) -> np.ndarra
     return out
 
 
-def reference_data(d, z: np.ndarray, x_post: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """|y[k]| and |a[k]| of a float64 run from its posteriors (prior k: F x_post[k-1] + b)."""
-    n = len(z)
-    prior = np.empty((n, 4))
-    prior[0] = d.x0
-    prior[1:] = x_post[:-1] @ np.asarray(d.F).T + np.asarray(d.b)
-    y = np.where(valid, np.abs(z - prior[:, 2] - prior[:, 3]), 0.0)
-    return y, np.abs(x_post[:, 2])
-
-
 def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: np.ndarray, schedule=None):
     """The float64 filter with the C's constants: what the C computes, minus its per-step roundings.
 

@@ -73,18 +73,6 @@ def _shift(expr: str, frm: int, to: int, comment: str = "") -> str:
     return f"(({expr}) * ((int64_t)1 << {-s})){c}"
 
 
-def _shf(expr: str, frm: int, to: int) -> str:
-    """expr (int64, frac bits frm) -> frac bits to, floor (an arithmetic right shift)."""
-    s = frm - to
-    if s >= 64:
-        return f"0 /* ({expr}) Q.{frm} -> Q.{to}: below one LSB, dropped */"
-    if s > 0:
-        return f"(({expr}) >> {s}) /* Q.{frm} -> Q.{to}, floor */"
-    if s == 0:
-        return f"({expr}) /* Q.{frm} -> Q.{to}, exact */"
-    return f"(({expr}) * ((int64_t)1 << {-s})) /* Q.{frm} -> Q.{to}, exact */"
-
-
 _PRODUCT = re.compile(r"\(int64_t\)(-?[A-Za-z_][\w>.-]*) \* ([A-Za-z_][\w>.-]*)")
 
 
