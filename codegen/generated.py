@@ -23,7 +23,8 @@ from .frames import emit_frames
 
 def _key(model: Model) -> str:
     key = hashlib.sha256(model.text.encode())
-    for p in sorted(Path(__file__).parent.glob("*.py")):
+    here = Path(__file__).parent  # the generator's modules and the C runtime it copies (csrc/)
+    for p in sorted([*here.glob("*.py"), *here.glob("csrc/*.h")]):
         key.update(p.read_bytes())
     return key.hexdigest()[:20]
 
