@@ -50,19 +50,17 @@ boards, which have no ADC).
 The layout is derived from the model (axes, raw input kind) and from the
 filter manifest that :func:`codegen.emit_c.emit` returns (the Q formats of r,
 u, a, eps): :func:`layout` computes it, :func:`emit_frames` returns
-``{"acnframe.h", "acnframe.c", "acnframe.json"}``. Only :func:`main` (the
-``python -m accelnav.codegen.frames`` CLI) writes files.
+``{"acnframe.h", "acnframe.c", "acnframe.json"}``; :func:`codegen.generated.generate`
+returns them with the filter, and only the CLI (``accelnav codegen``) writes files.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import zlib
 from dataclasses import dataclass
-from pathlib import Path
 
-from accelnav.model.load import Model, load_model
+from accelnav.model.load import Model
 
 from .package import banner, check_prefix
 
@@ -462,7 +460,7 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
 
 def _banner(lay: Layout, what: str) -> str:
     by = f"accelnav codegen.frames (protocol {PROTOCOL_VERSION}, layout 0x{lay.layout_hash:08x})"
-    return banner(what, by, lay.model_name, lay.model_sha256, "python -m accelnav.codegen.frames")
+    return banner(what, by, lay.model_name, lay.model_sha256)
 
 
 def _put(f: Field) -> str:
@@ -765,31 +763,3 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         f"{prefix}.c": "\n".join(C),
         f"{prefix}.json": json.dumps(man, indent=1, sort_keys=True) + "\n",
     }
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Generate the filter (accelnav.*) and the frame code (acnframe.*) of a model into a folder."""
-    from .emit_c import emit
-
-    ap = argparse.ArgumentParser(prog="python -m accelnav.codegen.frames", description=main.__doc__)
-    ap.add_argument("--model", type=Path, default=None, help="model file; default: the embedded model")
-    ap.add_argument("--out", type=Path, required=True, help="output folder")
-    args = ap.parse_args(argv)
-    model = load_model(args.model)
-    files = emit(model)
-    files.update(emit_frames(model, json.loads(files["accelnav.json"])))
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    changed = {}
-    for name, text in files.items():  # rewrite only what changed, so make does not rebuild needlessly
-        path = out / name
-        if not path.exists() or path.read_text() != text:
-            changed[name] = text
-    for name, text in changed.items():
-        (out / name).write_text(text)
-    print(f"accelnav.codegen.frames: {len(files)} files in {out} ({len(changed)} changed)")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
