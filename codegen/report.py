@@ -74,7 +74,7 @@ def report(model: Model, *, form: str | None, arith: str, files: dict[str, str],
 
 def _axes(model: Model, form: str, arith: str, files: dict[str, str], prefix: str, lines: list[str]) -> list[int]:
     """The report's per-axis blocks, appended to ``lines``; where each axis' flash line goes."""
-    from .emit_c import _schedule_for
+    from .plan import schedule_for as _schedule_for
     from .ranges import plan_axis
 
     def bounds(i: int):
