@@ -355,7 +355,8 @@ def test_cli_writes_files_and_report(tmp_path, capsys):
     model = load_model()
     assert main(["codegen", model.source, "--out", str(tmp_path), "--report"]) == 0
     out = capsys.readouterr().out
-    assert {p.name for p in tmp_path.iterdir()} == {"accelnav.c", "accelnav.h", "accelnav.json"}
+    names = {"accelnav.c", "accelnav.h", "accelnav.json", "acnframe.c", "acnframe.h", "acnframe.json"}
+    assert {p.name for p in tmp_path.iterdir()} == names  # the filter and the frames: what the firmware needs
     for needle in ("Q16.47", "predicted error bound", "RAM", "resolution"):
         assert needle in out
 
