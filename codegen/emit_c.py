@@ -35,6 +35,7 @@ from .plan import (  # noqa: F401  (the schedule's settings and schedule_for: re
     SCHEDULE_RAMP_S,
     SCHEDULE_REL_TOL,
     AxisCode,
+    cov_fracs,
     plan,
     recip_table,
     schedule_for,
@@ -528,16 +529,6 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
     ]
 
 
-def cov_fracs(p: AxisPlan) -> dict:
-    """Binary points of the covariance form's update: nmax, the clz of the smallest S (= R); x, the
-    format of xs = 1/S; and per state the product c_i w that it adds."""
-    fca = p.f("ca")
-    nmax = 32 - quantize(p.design.R, p.vars["S"].fmt).bit_length()
-    fw = p.f("w")
-    prod = {"r": p.f("cr") + fw, "v": p.f("cv") + fw, "a": fca + fw, "e": p.f("ce") + fw}
-    return {"nmax": nmax, "x": 61 - nmax - fca, "prod": prod}
-
-
 def _gains_cov(p: AxisPlan, P: str) -> list[str]:
     """Body of T_pupdate(s, y), the measurement update: S = c_a + c_e + R, one reciprocal, w = y / S;
     every state adds c_i w = K_i y (r and v = Ts u their K y part only; the core adds the rest of
@@ -559,10 +550,7 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         ce_a, fits = "", False
     fy, fw, fr, fv, fe = p.f("y"), p.f("w"), p.f("r"), p.f("v"), p.f("e")
     pr = cf["prod"]
-    sw = fy + fx - fw
-    for what, sh in (("kappa", fca + fx - 31), ("K_e", fce + fx - fKe), ("w", sw), ("a", pr["a"] - fy)):
-        if not 1 <= sh <= 62:
-            raise ValueError(f"{what} shift {sh} out of range")
+    sw = fy + fx - fw  # its shifts, and kappa's, K_e's and a's, are checked in range by the planner
     L = [
         "    int32_t cr = s->cr, cv = s->cv, ca = s->ca, ce = s->ce, S, xs, w, kap, Ke;",
         "    uint32_t x;",

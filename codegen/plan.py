@@ -17,7 +17,7 @@ from accelnav.model.load import Model
 
 from .gains import Schedule
 from .qformat import QFormat, quantize
-from .ranges import AxisPlan, RangeError, plan_axis
+from .ranges import AxisPlan, RangeError, fine_view, plan_axis
 
 # K_r, K_v (no feedback: 3e-4 and 1e-3 took the 100 Hz table from 259 to 177 segments, 1 kHz from 673 to
 # 412, the firmware's departure from the float64 filter on the shock and stress lockstep runs unchanged
@@ -160,6 +160,27 @@ def _follow(p: AxisPlan, sched: Schedule):
     return thr
 
 
+def cov_fracs(p: AxisPlan) -> dict:
+    """Binary points of the covariance form's update: nmax, the clz of the smallest S (= R); x, the
+    format of xs = 1/S; and per state the product c_i w that it adds."""
+    fca = p.f("ca")
+    nmax = 32 - quantize(p.design.R, p.vars["S"].fmt).bit_length()
+    fw = p.f("w")
+    prod = {"r": p.f("cr") + fw, "v": p.f("cv") + fw, "a": fca + fw, "e": p.f("ce") + fw}
+    return {"nmax": nmax, "x": 61 - nmax - fca, "prod": prod}
+
+
+def _check_cov_shifts(p: AxisPlan) -> None:
+    """The covariance update's right shifts (codegen.emit_c._gains_cov) lie in 1..62 for these formats."""
+    cf = cov_fracs(p)
+    fx, fca, fy = cf["x"], p.f("ca"), p.f("y")
+    sw = fy + fx - p.f("w")
+    for what, sh in (("kappa", fca + fx - 31), ("K_e", p.f("ce") + fx - p.f("Ke")), ("w", sw),
+                     ("a", cf["prod"]["a"] - fy)):  # fmt: skip
+        if not 1 <= sh <= 62:
+            raise ValueError(f"{what} shift {sh} out of range")
+
+
 def _cov0(p: AxisPlan) -> dict[str, tuple[float, int]]:
     d = p.design
     P0, Ts = d.P0, d.Ts
@@ -195,6 +216,8 @@ def axis_code(p: AxisPlan) -> AxisCode:
         sched = schedule_for(p)
         merge = gs_merge(p, clamps["VHI"][2])
         return AxisCode(p, consts, clamps, x0, {}, _eps_offset(p), sched, _follow(p, sched), merge)
+    for q in (fine_view(p), p):  # the update in the fine and in the coarse formats
+        _check_cov_shifts(q)
     return AxisCode(p, consts, clamps, x0, _cov0(p), None, None, None, None)
 
 
