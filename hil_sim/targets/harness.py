@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.codegen.emit_c import cdef_of
+from accelnav.native.cbuild import STRICT_FLAGS
 
-STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
+STRICT = list(STRICT_FLAGS)
 SANITIZE = ["-fsanitize=undefined,address", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g"]
 
 

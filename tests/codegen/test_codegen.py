@@ -317,7 +317,8 @@ def test_cli_writes_files_and_report(tmp_path, capsys):
     model = load_model()
     assert main(["codegen", model.source, "--out", str(tmp_path), "--report"]) == 0
     out = capsys.readouterr().out
-    assert {p.name for p in tmp_path.iterdir()} == {"accelnav.c", "accelnav.h", "accelnav.json"}
+    names = {"accelnav.c", "accelnav.h", "accelnav.json", "acnframe.c", "acnframe.h", "acnframe.json"}
+    assert {p.name for p in tmp_path.iterdir()} == names  # the filter and the frames: what the firmware needs
     for needle in ("Q16.47", "predicted error bound", "RAM", "resolution"):
         assert needle in out
 
@@ -383,10 +384,10 @@ def test_covariance_reciprocal_within_its_contract(tmp_path):
     """acn_recip_t (table start, two Newton-Raphson steps: the covariance form's 1/S) keeps acn_recip's
     contract, 1/d = x 2^(n - 62) to a relative 2^-28, over the whole uint32 range: every power of two
     and its neighbours, each table interval's ends and middle, and a seeded random sweep."""
-    from accelnav.codegen.emit_c import HELPERS, RECIP_TABLE_BITS, recip_helpers
+    from accelnav.codegen.emit_c import RECIP_TABLE_BITS, recip_helpers, runtime_text
     from accelnav.native.cbuild import build_module
 
-    src = "#include <stdint.h>\n#include <stdbool.h>\n#include <stddef.h>\n" + HELPERS + recip_helpers()
+    src = "#include <stdint.h>\n#include <stdbool.h>\n#include <stddef.h>\n" + runtime_text() + recip_helpers()
     src += "uint32_t t_recip(uint32_t d, int *n) { return acn_recip_t(d, n); }\n"
     mod = build_module(
         "acn_recip_test", "uint32_t t_recip(uint32_t d, int *n);", {"r.c": src}, main="r.c", workdir=tmp_path

@@ -34,6 +34,7 @@ DATA = (
     "accelnav/estimate/csrc/fastsmooth.h",
     "accelnav/codegen/csrc/riccati.c",
     "accelnav/codegen/csrc/riccati.h",
+    "accelnav/codegen/csrc/acn_runtime.h",  # the fixed-point runtime the generator copies into every filter
     "accelnav/link/csrc/acnwire.c",
     "accelnav/link/csrc/acnwire.h",
 )
