@@ -6,7 +6,8 @@ checkout's python and with a baseline checkout's (default /work/main: its own .v
 --repeat. Prints wall seconds, peak RSS and the ratio zupt / plain per build: the ratio, not the seconds,
 is what holds on a loaded machine. Also the detector alone in this process (candidates, then the
 per-rest decisions), and how many candidates it decided.
-Usage: python bench/bench_zupt_speed.py [--sizes 1e6 1e7] [--baseline /work/main] [--keep DIR] [--repeat 1]
+Usage: python bench/run_all.py speed --only bench_zupt_speed, or from bench/speed:
+  PYTHONPATH=../common python bench_zupt_speed.py [--sizes 1e6 1e7] [--baseline /work/main] [--keep DIR] [--repeat 1]
 """
 
 from __future__ import annotations
