@@ -1,6 +1,6 @@
 """Issue 24: the rest detector made array code (and C) decides exactly as the Python it replaced.
 
-The oracle is main's detector before the rewrite, kept verbatim in tests/estimate/zupt_oracle.py. On the
+The oracle is main's detector before the rewrite, kept verbatim in tests/support/zupt_oracle.py. On the
 simulated scenarios of issue 23, on the bench's tiled stop-and-go, with clipped and missing samples, with
 other parameters, and on the real recordings (gaitmap's foot, mobgap's lower back, KITTI's car, the shared
 ADIS16405 stationary run): the same candidate mask, the same decisions (every field of every decision,
@@ -14,10 +14,10 @@ import gzip
 
 import numpy as np
 import pytest
-import realdata
-import realdata_more as rm
-import zupt_oracle as oracle
 from conftest import MODELS, SHARED_DATA, edited_model
+from support import realdata
+from support import realdata_more as rm
+from support import zupt_oracle as oracle
 from test_rest_scenarios import ADXL335_EDITS
 
 from accelnav.estimate import zupt
