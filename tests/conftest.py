@@ -14,6 +14,8 @@ from accelnav.model.load import DEFAULT_MODEL, load_model, loads_model
 from accelnav.resources import models_dir
 
 REPO = Path(__file__).resolve().parents[1]  # the checkout: for ../shared and for reading docs only
+# test helpers that are not the package's (the naive decoder oracle): importable by their module name
+sys.path.insert(0, str(Path(__file__).resolve().parent / "support"))
 MODELS = models_dir()
 SHARED_DATA = REPO.parent / "shared" / "data"
 

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from naive_decoder import decode_naive
 
 from accelnav.hil_sim.targets.firmware import manifest
-from accelnav.link.telemetry import Decoder, decode_all, decode_naive, encode_command, encode_frames
+from accelnav.link.codec import encode_command, encode_frames
+from accelnav.link.decoder import Decoder, decode_all
 
 
 @pytest.fixture(scope="module")

@@ -87,7 +87,7 @@ def _model_text(args) -> str:
 
 
 def _manifest(args):
-    from accelnav.link.telemetry import Manifest
+    from accelnav.link.manifest import Manifest
     from accelnav.model.load import load_model
 
     if args.manifest is not None:
@@ -103,8 +103,8 @@ def _manifest(args):
 def cmd_record(args) -> int:
     import serial
 
+    from accelnav.link.accounting import format_counts, link_counts
     from accelnav.link.recorder import Recorder, Status
-    from accelnav.link.telemetry import format_counts, link_counts
 
     if args.out.exists() and not args.force:
         raise UserError(f"--out: {args.out} exists; give --force to overwrite it")
@@ -205,7 +205,7 @@ def cmd_log_info(args) -> int:
 
 
 def cmd_log_export(args) -> int:
-    from accelnav.link.telemetry import sample_columns
+    from accelnav.link.manifest import sample_columns
 
     suffix = args.out.suffix.lower()
     if suffix not in (".csv", ".npz"):

@@ -44,7 +44,7 @@ batch holds nothing but the next frames in order, which is the common case):
 A checkpoint the decoder refused never reaches this class: a damaged frame, or
 one whose contents no firmware sends (an axis that does not exist, a
 gain-schedule row index outside the table:
-:meth:`accelnav.link.telemetry.Manifest.checkpoints_sane`). It counts in
+:meth:`accelnav.link.manifest.Manifest.checkpoints_sane`). It counts in
 ``bad_frames`` and the stream goes on as if it had been lost.
 
 Without a replay (no model text: a log recorded with ``--manifest``), the

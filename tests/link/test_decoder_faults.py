@@ -15,21 +15,14 @@ import json
 
 import numpy as np
 import pytest
+from naive_decoder import decode_naive
 
 from accelnav.cli import main as cli_main
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
+from accelnav.link.codec import cobs_decode, encode_command, encode_stimulus, frame
+from accelnav.link.decoder import Decoder, decode_all, replay_for
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import (
-    Decoder,
-    Manifest,
-    cobs_decode,
-    decode_all,
-    decode_naive,
-    encode_command,
-    encode_stimulus,
-    frame,
-    replay_for,
-)
+from accelnav.link.manifest import Manifest
 from accelnav.model.load import load_model
 
 
@@ -231,7 +224,7 @@ def test_a_manifest_of_another_protocol_is_refused_in_one_line(man, tmp_path, ca
 
 def test_the_decoder_reads_the_generator_s_protocol():
     from accelnav.codegen.frames import PROTOCOL_VERSION
-    from accelnav.link.telemetry import PROTOCOL
+    from accelnav.link.manifest import PROTOCOL
 
     assert PROTOCOL == PROTOCOL_VERSION
     assert json.loads(json.dumps(manifest(None).data))["protocol_version"] == PROTOCOL
