@@ -118,6 +118,10 @@ def _int(v, lo: int, hi: int) -> bool:
     return type(v) is int and lo <= v <= hi
 
 
+def _bad(what: str) -> ValueError:
+    return ValueError(f"not a usable accelnav telemetry manifest: {what}")
+
+
 def check_manifest(data) -> None:
     """Refuse, with a ValueError of one line, a manifest whose shape the decoder cannot trust.
 
@@ -126,68 +130,83 @@ def check_manifest(data) -> None:
     axis names must be short printable names, field dtypes must be plain numbers inside their
     frame, and the frames those modules need must be there with the fields they read. What the
     generator writes always passes."""
-
-    def bad(what: str) -> ValueError:
-        return ValueError(f"not a usable accelnav telemetry manifest: {what}")
-
     if not isinstance(data, dict) or data.get("protocol") != "accelnav-telemetry":
         raise ValueError("not an accelnav telemetry manifest (key 'protocol')")
+    _check_header(data)
+    frames = data.get("frames")
+    if not isinstance(frames, dict):
+        raise _bad("'frames' is not a table")
+    types = set()
+    for name, fr in frames.items():
+        _check_frame(name, fr, types)
+    compact = "block" in frames or "checkpoint" in frames
+    _check_needed(data, frames, compact)
+    if compact:
+        _check_compact(data, frames)
+
+
+def _check_header(data: dict) -> None:
+    """The keys outside the frames: axes, input, rate, hashes, the flag bit tables."""
     axes = data.get("axes")
     if not isinstance(axes, list) or not 1 <= len(axes) <= 3:
-        raise bad("'axes' is not a list of 1 to 3 names")
+        raise _bad("'axes' is not a list of 1 to 3 names")
     # names only: what reaches C is the model's, and the replay takes a manifest only when it is the
     # one the model generates (accelnav.link.replay)
     if not all(isinstance(a, str) and _NAME.match(a) for a in axes) or len(set(axes)) < len(axes):
-        raise bad(f"'axes' {str(axes)[:80]}: accepted: distinct names of 1 to 32 printable characters")
+        raise _bad(f"'axes' {str(axes)[:80]}: accepted: distinct names of 1 to 32 printable characters")
     if data.get("input") not in ("analog", "duty_cycle"):
-        raise bad("'input' is not 'analog' or 'duty_cycle'")
+        raise _bad("'input' is not 'analog' or 'duty_cycle'")
     rate = data.get("sample_rate_hz")
     if type(rate) not in (int, float) or not (math.isfinite(rate) and rate > 0):
-        raise bad("'sample_rate_hz' is not a positive number")
+        raise _bad("'sample_rate_hz' is not a positive number")
     if not _int(data.get("layout_hash"), 0, 2**32 - 1) or not isinstance(data.get("model_sha256"), str):
-        raise bad("'layout_hash' or 'model_sha256' has the wrong type")
+        raise _bad("'layout_hash' or 'model_sha256' has the wrong type")
     for key, names, hi in (
         ("flags", ("reset", "resume", "replayed", "mismatch"), 15),
         ("axis_flags", ("rail", "skipped", "timeout", "missed"), 7),
     ):
         table = data.get(key)
         if not isinstance(table, dict) or not all(_int(v, 0, hi) for v in table.values()):
-            raise bad(f"{key!r} is not a table of bit numbers 0..{hi}")
+            raise _bad(f"{key!r} is not a table of bit numbers 0..{hi}")
         if not all(k in table for k in names):
-            raise bad(f"{key!r} lacks one of {', '.join(names)}")
-    frames = data.get("frames")
-    if not isinstance(frames, dict):
-        raise bad("'frames' is not a table")
-    types = set()
-    for name, fr in frames.items():
-        if not isinstance(fr, dict) or fr.get("direction") not in ("up", "down"):
-            raise bad(f"frame {name!r} has no direction 'up' or 'down'")
-        if not _int(fr.get("type"), 0, 255) or fr["type"] in types or not _int(fr.get("size"), 1, _MAX_PAYLOAD):
-            raise bad(f"frame {name!r}: 'type' (a distinct byte) or 'size' (1..{_MAX_PAYLOAD}) is wrong")
-        types.add(fr["type"])
-        fields = fr.get("fields")
-        if not isinstance(fields, list):
-            raise bad(f"frame {name!r}: 'fields' is not a list")
-        for f in fields:
-            if not isinstance(f, dict):
-                raise bad(f"frame {name!r}: a field is not a table")
-            try:
-                dt = np.dtype(f["dtype"]) if isinstance(f.get("dtype"), str) else None
-            except (TypeError, ValueError, SyntaxError):
-                dt = None
-            if (
-                dt is None
-                or (dt.base.kind not in "ui")
-                or not isinstance(f.get("name"), str)
-                or not _int(f.get("offset"), 1, fr["size"] - dt.itemsize)
-            ):
-                raise bad(f"frame {name!r}: a field is not a plain integer inside the frame")
-    compact = "block" in frames or "checkpoint" in frames
+            raise _bad(f"{key!r} lacks one of {', '.join(names)}")
+
+
+def _check_frame(name: str, fr, types: set) -> None:
+    """One frame: a direction, a type byte no other frame has (added to ``types``), a size, and fields
+    that are plain integers inside it."""
+    if not isinstance(fr, dict) or fr.get("direction") not in ("up", "down"):
+        raise _bad(f"frame {name!r} has no direction 'up' or 'down'")
+    if not _int(fr.get("type"), 0, 255) or fr["type"] in types or not _int(fr.get("size"), 1, _MAX_PAYLOAD):
+        raise _bad(f"frame {name!r}: 'type' (a distinct byte) or 'size' (1..{_MAX_PAYLOAD}) is wrong")
+    types.add(fr["type"])
+    fields = fr.get("fields")
+    if not isinstance(fields, list):
+        raise _bad(f"frame {name!r}: 'fields' is not a list")
+    for f in fields:
+        if not isinstance(f, dict):
+            raise _bad(f"frame {name!r}: a field is not a table")
+        try:
+            dt = np.dtype(f["dtype"]) if isinstance(f.get("dtype"), str) else None
+        except (TypeError, ValueError, SyntaxError):
+            dt = None
+        if (
+            dt is None
+            or (dt.base.kind not in "ui")
+            or not isinstance(f.get("name"), str)
+            or not _int(f.get("offset"), 1, fr["size"] - dt.itemsize)
+        ):
+            raise _bad(f"frame {name!r}: a field is not a plain integer inside the frame")
+
+
+def _check_needed(data: dict, frames: dict, compact: bool) -> None:
+    """The frames the decoder, the compact stream and the replay read, with the fields they read."""
+    axes = data["axes"]
     for name, need in _NEEDED.items():
         if name in ("block", "checkpoint") and not compact:
             continue
         if name not in frames:
-            raise bad(f"no {name!r} frame")
+            raise _bad(f"no {name!r} frame")
         have = {f["name"] for f in frames[name]["fields"]}
         if name in ("sample", "block"):
             need = need + tuple(f"{ax}.{k}" for ax in axes for k in _raw_fields(data["input"]))
@@ -195,26 +214,30 @@ def check_manifest(data) -> None:
             need = need + tuple(f"{ax}.{k}" for ax in axes for k in ("flags", "r", "u", "a", "e"))
         missing = [n for n in need if n not in have]
         if missing:
-            raise bad(f"frame {name!r} lacks {', '.join(missing)}")
-    if compact:
-        sb = data.get("state_bytes")
-        if not _int(data.get("block_samples"), 1, 255) or not _int(data.get("checkpoint_samples"), 1, 2**24):
-            raise bad("'block_samples' or 'checkpoint_samples' is out of range")
-        if not isinstance(sb, list) or len(sb) != len(axes) or not all(_int(n, 1, 4096) for n in sb):
-            raise bad("'state_bytes' is not one size per axis")
-        shapes = {f["name"]: np.dtype(f["dtype"]).shape for f in frames["block"]["fields"]}
-        slots = [n for n in _block_slots(axes, data["input"]) if shapes[n] != (data["block_samples"],)]
-        ck = {f["name"]: np.dtype(f["dtype"]) for f in frames["checkpoint"]["fields"]}["state"]
-        if slots or ck.shape != (max(sb),) or ck.base.itemsize != 1:
-            raise bad("the block's slots or the checkpoint's state do not match 'block_samples' / 'state_bytes'")
-        rows = data.get("checkpoint_rows")
-        if rows is not None and (not isinstance(rows, list) or len(rows) != len(axes)):
-            raise bad("'checkpoint_rows' is not one entry per axis")
-        for r in rows or ():
-            if r is not None and not (
-                isinstance(r, dict) and _int(r.get("offset"), 0, 4092) and _int(r.get("rows"), 0, 2**32)
-            ):
-                raise bad("a 'checkpoint_rows' entry is not an offset and a row count")
+            raise _bad(f"frame {name!r} lacks {', '.join(missing)}")
+
+
+def _check_compact(data: dict, frames: dict) -> None:
+    """The compact mode's sizes: block slots, state bytes per axis, the checkpoint's row entries."""
+    axes = data["axes"]
+    sb = data.get("state_bytes")
+    if not _int(data.get("block_samples"), 1, 255) or not _int(data.get("checkpoint_samples"), 1, 2**24):
+        raise _bad("'block_samples' or 'checkpoint_samples' is out of range")
+    if not isinstance(sb, list) or len(sb) != len(axes) or not all(_int(n, 1, 4096) for n in sb):
+        raise _bad("'state_bytes' is not one size per axis")
+    shapes = {f["name"]: np.dtype(f["dtype"]).shape for f in frames["block"]["fields"]}
+    slots = [n for n in _block_slots(axes, data["input"]) if shapes[n] != (data["block_samples"],)]
+    ck = {f["name"]: np.dtype(f["dtype"]) for f in frames["checkpoint"]["fields"]}["state"]
+    if slots or ck.shape != (max(sb),) or ck.base.itemsize != 1:
+        raise _bad("the block's slots or the checkpoint's state do not match 'block_samples' / 'state_bytes'")
+    rows = data.get("checkpoint_rows")
+    if rows is not None and (not isinstance(rows, list) or len(rows) != len(axes)):
+        raise _bad("'checkpoint_rows' is not one entry per axis")
+    for r in rows or ():
+        if r is not None and not (
+            isinstance(r, dict) and _int(r.get("offset"), 0, 4092) and _int(r.get("rows"), 0, 2**32)
+        ):
+            raise _bad("a 'checkpoint_rows' entry is not an offset and a row count")
 
 
 def _block_slots(axes, kind: str) -> list[str]:
