@@ -123,52 +123,11 @@ def _naive_rows(man: Manifest, frames: list, replay) -> tuple[list, dict]:
     N = len(samples)
     ok = [True] * N
     mism = [False] * N
-    x = [[None] * N for _ in range(n_ax)]
-    breakset = set(breaks)
-    for j in range(n_ax):
-        nbj = cs.state_bytes[j]
-        ev_at: dict[int, list] = {}
-        for p, i, verify, sync in events[j]:
-            ev_at.setdefault(p, []).append((i, verify, sync))
-        st, since = None, []
-        for p in range(N + 1):
-            for i, verify, _ in ev_at.get(p, []):  # checkpoints closing the stretch that ends here
-                if verify and st is not None:
-                    if st == states[i][:nbj]:
-                        cs.checkpoints += 1
-                    else:
-                        cs.mismatches += 1
-                        for q in since:
-                            mism[q] = True
-            if p in breakset:
-                st, since = None, []
-            for i, _, sync in ev_at.get(p, []):
-                if sync:
-                    st, since = states[i][:nbj], []
-            if p == N:
-                break
-            if st is None or replay is None:
-                ok[p] = False
-                continue
-            b, k = samples[p]
-            blk = blocks[b]
-            code = (aflags[b][k] >> (2 * j)) & 3
-            base = base0 + j * len(raw) * B
-            in1 = np.array([blk[base + k]], np.uint32)
-            in2 = np.array([blk[base + B + k]], np.uint32) if len(raw) > 1 else None
-            one = np.zeros(1, man.dtypes["sample"])
-            fin, nbad = replay.run(
-                j, np.zeros(1, np.int64), np.ones(1, np.int64), np.frombuffer(st, np.uint8), [code], in1, in2, one
-            )
-            ax = man.axes[j]
-            xs = [[int(one[f"{ax}.{c}"][0]) for c in "ruae"]]
-            if nbad[0]:
-                cs.mismatches += int(nbad[0])
-                for q in [*since, p]:
-                    mism[q] = True
-            st = fin[0].tobytes()
-            since.append(p)
-            x[j][p] = xs[0]
+    codes_at = (aflags, base0)
+    x = [
+        _naive_axis(man, cs, replay, j, events[j], breaks, samples, blocks, codes_at, states, ok, mism)
+        for j in range(n_ax)
+    ]
     if replay is None:
         cs.unreplayed += N
     else:
@@ -200,3 +159,58 @@ def _naive_rows(man: Manifest, frames: list, replay) -> tuple[list, dict]:
         "unreplayed": cs.unreplayed,
         "damaged": cs.damaged,
     }
+
+
+def _naive_axis(man, cs, replay, j, events, breaks, samples, blocks, codes_at, states, ok, mism) -> list:
+    """Axis j's states, one sample at a time: each stretch replayed from its checkpoint, each checkpoint
+    that closes one held against the replay (counts into ``cs``; ``ok`` cleared for a sample without a
+    state, ``mism`` set for the stretch of a mismatch). ``codes_at``: (axis codes per block, where the
+    raw inputs start in a block tuple)."""
+    aflags, base0 = codes_at
+    raw, B, N = man.raw_fields(), cs.B, len(samples)
+    x = [None] * N
+    breakset = set(breaks)
+    nbj = cs.state_bytes[j]
+    ev_at: dict[int, list] = {}
+    for p, i, verify, sync in events:
+        ev_at.setdefault(p, []).append((i, verify, sync))
+    st, since = None, []
+    for p in range(N + 1):
+        for i, verify, _ in ev_at.get(p, []):  # checkpoints closing the stretch that ends here
+            if verify and st is not None:
+                if st == states[i][:nbj]:
+                    cs.checkpoints += 1
+                else:
+                    cs.mismatches += 1
+                    for q in since:
+                        mism[q] = True
+        if p in breakset:
+            st, since = None, []
+        for i, _, sync in ev_at.get(p, []):
+            if sync:
+                st, since = states[i][:nbj], []
+        if p == N:
+            break
+        if st is None or replay is None:
+            ok[p] = False
+            continue
+        b, k = samples[p]
+        blk = blocks[b]
+        code = (aflags[b][k] >> (2 * j)) & 3
+        base = base0 + j * len(raw) * B
+        in1 = np.array([blk[base + k]], np.uint32)
+        in2 = np.array([blk[base + B + k]], np.uint32) if len(raw) > 1 else None
+        one = np.zeros(1, man.dtypes["sample"])
+        fin, nbad = replay.run(
+            j, np.zeros(1, np.int64), np.ones(1, np.int64), np.frombuffer(st, np.uint8), [code], in1, in2, one
+        )
+        ax = man.axes[j]
+        xs = [[int(one[f"{ax}.{c}"][0]) for c in "ruae"]]
+        if nbad[0]:
+            cs.mismatches += int(nbad[0])
+            for q in [*since, p]:
+                mism[q] = True
+        st = fin[0].tobytes()
+        since.append(p)
+        x[p] = xs[0]
+    return x
