@@ -385,6 +385,44 @@ def _intervals(nll, theta, f0, figures, est, lo, hi, count, max_evaluations):
     return se, ci, ends
 
 
+def tune_for_smoothing(
+    model: Model,
+    run,
+    *,
+    fixes=None,
+    rest: np.ndarray | None = None,
+    rest_sigma: np.ndarray | None = None,
+    params=None,
+    max_evaluations: int = MAX_EVALUATIONS,
+    max_seconds: float | None = None,
+    announce=None,
+) -> tuple[Model, TuneResult]:
+    """``accelnav smooth --tune``: the model with this run's maximum-likelihood noise figures, found with the
+    smoother's own aids (fixes, rests) in a stated budget, the estimate only (no intervals); and the result.
+
+    The figures are rounded to 6 digits, as a model file holds them. ``announce(samples, axes, aids)`` is
+    called once before the search, which may take the whole budget."""
+    if max_evaluations < 10:
+        raise ValueError(f"max_evaluations: got {max_evaluations}; accepted: 10 or more")
+    if max_seconds is not None and not max_seconds > 0:
+        raise ValueError(f"max_seconds: got {max_seconds:g}; accepted: a time > 0 s")
+    accel = np.asarray(run["accel"], dtype=np.float64)
+    n, m = accel.shape
+    extras, _ = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
+    if announce is not None:
+        announce(n, m, sum(map(len, extras)))
+    r = tune(
+        model,
+        accel,
+        ~np.asarray(run["clipped"], dtype=bool),
+        extras,
+        max_evaluations=max_evaluations,
+        max_seconds=max_seconds,
+        intervals=False,
+    )
+    return with_figures(model, {f: float(f"{v:.6g}") for f, v in r.chosen.items()}), r
+
+
 class _OutOfTime(Exception):
     """The search's wall-time budget ran out (caught in tune)."""
 
