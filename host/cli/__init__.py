@@ -60,6 +60,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 ALL = "*"
 
+__all__ = ["ALL", "COMMANDS", "build_parser", "main"]
+
 
 def build_parser(command: str | None = ALL) -> argparse.ArgumentParser:
     """The parser, with the full arguments of ``command`` (ALL, the default: of every command, as the docs

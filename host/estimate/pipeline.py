@@ -158,7 +158,6 @@ def smooth_run(
     fixes: list[list] | None = None,
     rest: np.ndarray | None = None,
     zupt_params=None,
-    zupt_gated: bool = False,
     rest_sigma: np.ndarray | None = None,
     covariances: bool = True,
     warm_start: bool = False,
@@ -174,8 +173,7 @@ def smooth_run(
     rest (accelnav.estimate.zupt.rest_mask, or intervals from a file) that become
     zero-velocity updates, the same on every axis ((N,)) or per axis ((N, n_axes), from a
     ZUPT file), with ``rest_sigma`` (N, n_axes) their standard deviations (NaN: the
-    params' sigma) (automatic rests are already gated per rest by rest_mask; ``zupt_gated`` adds the
-    kernel's per-update innovation gate, which the detector no longer uses). The filter keys are
+    params' sigma) (automatic rests are already gated per rest by rest_mask: no update is gated). The filter keys are
     rewritten too, so that filter and smoother saw the same measurements.
     Always: the means filt_x, smooth_x (n_axes, N, 4) and their standard deviations filt_sd, smooth_sd;
     with ``covariances`` also filt_P, smooth_P (n_axes, N, 4, 4) and the priors filt_x_prior, filt_P_prior.
@@ -209,7 +207,7 @@ def smooth_run(
             sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
             za = zupt.axis_aids(rest2[:, j], sigma, model, params)
         extras = fx.concat(za)
-        gates = np.concatenate((np.zeros(len(fx)), np.full(len(za), params.gate if zupt_gated else 0.0)))
+        gates = np.zeros(len(fx) + len(za))  # no innovation gate: rests are gated whole by the detector
         z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
         if not len(extras) and _plain_ok(d):
             res_out.plain(j, d, z, valid)
