@@ -493,14 +493,25 @@ class _Walk:
         self.events: list[list[list]] = [[] for _ in cs.axes]
 
     def walk(self) -> None:
-        k, K = 0, len(self.f.kinds)
+        cs, f, runs = self.cs, self.f, self.runs
+        k, K = 0, len(f.kinds)
         while k < K:
-            r = self._bulk(k)
-            if r is not None:
-                k = r
-                continue
+            # frames k .. that continue the one before, from where the stream is (a checkpoint right after a
+            # break goes by the rule)
+            if (
+                runs is not None
+                and self.end is not None
+                and runs[0][k] > k
+                and runs[1][k] == self.end
+                and runs[3][k] == cs.run
+                and not self._broken_here()
+            ):
+                r = self._bulk(k)
+                if r is not None:
+                    k = r
+                    continue
             if self._frame(k) is None:
-                self.cs.defer = (self.f.kinds[k], self.f.ids[k])  # decided by the next frame, in the next batch
+                cs.defer = (f.kinds[k], f.ids[k])  # decided by the next frame, in the next batch
                 break
             k += 1
 
@@ -533,13 +544,9 @@ class _Walk:
         return False
 
     def _bulk(self, q: int) -> int | None:
-        """Frames q .. r - 1 that each continue the one before (``runs``), taken as the rule would take
-        them, in bulk: r, or None when frame q goes by the rule."""
+        """Frames q .. r - 1 that each continue the one before (``runs``, checked by :meth:`walk`), taken as
+        the rule would take them, in bulk: r, or None when frame q goes by the rule (a repeated checkpoint)."""
         cs, f, runs = self.cs, self.f, self.runs
-        if runs is None or self.end is None or runs[0][q] <= q or runs[1][q] != self.end or runs[3][q] != cs.run:
-            return None
-        if self._broken_here():  # (a checkpoint right after a break: the rule)
-            return None
         r, nb = runs[0][q], runs[2]
         for p in range(q, r):
             if f.kinds[p] == 1:
@@ -562,7 +569,7 @@ class _Walk:
         """The rule for frame q: True taken, False refused (a repeat or damage), None deferred."""
         cs, f = self.cs, self.f
         kind, i = f.kinds[q], f.ids[q]
-        run, idx, _ = f.where(q)
+        run, idx = (f.b_run[i], f.b_index[i]) if kind == 0 else (f.c_run[i], f.c_index[i])
         new_run = self.end is not None and run != cs.run
         if new_run and run in cs.past_runs:  # a frame of an earlier run, sent again
             if kind == 0:
