@@ -65,9 +65,11 @@ def cmd_hil(args) -> int:
         n = len(run.t)
         print(f"model {model.name}, {model.sensor.kind} input, recording {args.input}, {n} samples")
     else:
-        for flag in ("axis", "time_column", "rate", "time_unit", "unit"):
-            if getattr(args, flag) is not None:
-                raise UserError(f"--{flag.replace('_', '-')}: only with --input (a recording)")
+        from accelnav.data.inputs import FLAGS
+
+        for key, value in reader_options(args).items():  # the reader's flags: nothing to read without --input
+            if value is not None:
+                raise UserError(f"--{FLAGS[key].replace('_', '-')}: only with --input (a recording)")
         scenario = args.scenario or "stop_and_go"
         seed = 1 if args.seed is None else args.seed
         model = load_model(args.model)
