@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.api import simulate
-from accelnav.cli.args import clock_args
+from accelnav.cli.args import clock_args, reader_options
 from accelnav.data.inputs import read_input
 from accelnav.data.runfile import FORMAT, STATE, export_csv, save_run, state_sd
 from accelnav.errors import UserError
@@ -243,15 +243,7 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_smooth)
 
 
-def require_scenario(name: str) -> None:
-    """UserError for a --scenario the simulator does not have (shared by sim, hil and demo)."""
-    from accelnav.hil_sim.sim.trajectories import ALL_SCENARIOS as SCENARIOS
-
-    if name not in SCENARIOS:
-        raise UserError(f"--scenario: unknown scenario {name!r}; accepted: {', '.join(SCENARIOS)}")
-
-
-def _save(args, arrays, model) -> None:
+def write_outputs(args, arrays, model) -> None:
     save_run(args.out, arrays, model, compress=getattr(args, "compress", False))
     print(f"wrote {args.out}")
     if args.csv is not None:
@@ -286,16 +278,7 @@ def read_args(args) -> tuple[dict[str, np.ndarray], Model]:
     for flag in ("out", "csv"):
         if getattr(args, flag, None) is not None:
             check_output(getattr(args, flag), f"--{flag}")
-    return read_input(
-        args.run,
-        args.model,
-        axes=args.axis,
-        time_column=args.time_column,
-        rate_hz=args.rate,
-        time_unit=args.time_unit,
-        unit=args.unit,
-        allow_gaps=args.allow_gaps,
-    )
+    return read_input(args.run, args.model, allow_gaps=args.allow_gaps, **reader_options(args))
 
 
 def cmd_sim(args) -> int:
@@ -306,11 +289,13 @@ def cmd_sim(args) -> int:
         return 0
     if args.out is None:
         raise UserError("--out: a run file to write is required")
+    from accelnav.hil_sim.sim.trajectories import require_scenario
+
     model = load_model(args.model)
-    require_scenario(args.scenario)
+    require_scenario(args.scenario, "--scenario", UserError)
     arrays = simulate(model, args.scenario, args.duration, args.seed)
     print(_summary(arrays))
-    _save(args, arrays, model)
+    write_outputs(args, arrays, model)
     return 0
 
 
@@ -321,7 +306,7 @@ def cmd_filter(args) -> int:
     rows = position_errors(arrays, model)
     if rows:
         print(format_errors(rows))
-    _save(args, arrays, model)
+    write_outputs(args, arrays, model)
     return 0
 
 
@@ -360,10 +345,10 @@ def cmd_smooth(args) -> int:
 
         model = warm_started(model)
         note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
-    budget = _memory_budget(args.memory_budget)
+    budget = _memory_budget_arg(args.memory_budget)
     bounded = whole_bytes(*arrays["accel"].shape) > budget
     if bounded:  # what the bounded path cannot do is refused before any work
-        _bounded_refusals(args, arrays, budget)
+        _bounded_args(args, arrays, budget)
     names = [str(a) for a in arrays["axis_names"]]
     fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
     params = ZuptParams(
@@ -416,16 +401,16 @@ def cmd_smooth(args) -> int:
         print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
     if fixes is not None:
         print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
-    _consistency(arrays, model, inputs, fixes, dict(rest=rest, zupt_params=params, rest_sigma=rest_sigma))
+    print_checks(arrays, model, inputs, fixes, dict(rest=rest, zupt_params=params, rest_sigma=rest_sigma))
     print(_summary(arrays))
     rows = position_errors(arrays, model)
     if rows:
         print(format_errors(rows))
-        _truth_versus_baselines(rows)
+        print_truth_versus_baselines(rows)
     strides = stride_table(arrays, model)
     if strides:
         print(format_strides(strides))
-    _save(args, arrays, model)
+    write_outputs(args, arrays, model)
     if args.plots is not None:
         from accelnav.plots.run import plot_run, plot_smoothing
 
@@ -435,7 +420,7 @@ def cmd_smooth(args) -> int:
     return 0
 
 
-def _memory_budget(mb: float | None) -> int:
+def _memory_budget_arg(mb: float | None) -> int:
     if mb is None:
         return memory_available() // 2
     if not mb > 0:
@@ -443,7 +428,7 @@ def _memory_budget(mb: float | None) -> int:
     return int(mb * (1 << 20))
 
 
-def _over_budget(args, arrays, budget: int) -> str:
+def format_over_budget(args, arrays, budget: int) -> str:
     n, n_axes = arrays["accel"].shape
     return (
         f"{args.run}: {n} samples x {n_axes} axes need about {whole_bytes(n, n_axes) / 1e9:.3g} GB on the "
@@ -451,11 +436,11 @@ def _over_budget(args, arrays, budget: int) -> str:
     )
 
 
-def _bounded_refusals(args, arrays, budget: int) -> None:
+def _bounded_args(args, arrays, budget: int) -> None:
     flags = (("--plots", args.plots), ("--csv", args.csv), ("--tune", args.tune), ("--covariances", args.covariances))
     given = [f for f, v in flags if v]
     if given:
-        raise UserError(f"{_over_budget(args, arrays, budget)}; bounded memory does not do {', '.join(given)}")
+        raise UserError(f"{format_over_budget(args, arrays, budget)}; bounded memory does not do {', '.join(given)}")
 
 
 def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_sigma, params) -> int:
@@ -492,7 +477,7 @@ def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_s
         budget=min(BUDGET, budget), run_format=FORMAT, more=more,
     )  # fmt: skip
     print(
-        f"{_over_budget(args, arrays, budget)}: smoothed in bounded memory, {info['chunks']} chunks of "
+        f"{format_over_budget(args, arrays, budget)}: smoothed in bounded memory, {info['chunks']} chunks of "
         f"{info['chunk']} samples with a store on disk; the output has standard deviations (filt_sd, smooth_sd), "
         "not covariances, and no consistency checks"
     )
@@ -506,33 +491,29 @@ def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_s
 
 
 def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) -> Model:
-    """smooth --tune: the model with the maximum-likelihood noise figures of this recording, in a stated budget."""
+    """smooth --tune: its flags checked, the search run (estimate.tune.tune_for_smoothing), its two lines printed."""
     import time
 
-    from accelnav.estimate.tune import FIGURES, aid_measurements, tune, with_figures
+    from accelnav.estimate.tune import FIGURES, tune_for_smoothing
 
     if args.tune_evaluations < 10:
         raise UserError(f"--tune-evaluations: got {args.tune_evaluations}; accepted: 10 or more")
     if not args.tune_seconds > 0:
         raise UserError(f"--tune-seconds: got {args.tune_seconds:g}; accepted: a time > 0 s")
-    accel = np.asarray(arrays["accel"], dtype=np.float64)
-    n, m = accel.shape
-    extras, _ = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
-    print(
-        f"tune: fitting {', '.join(FIGURES)} to {n} samples x {m} axes with {sum(map(len, extras))} aids; budget "
-        f"{args.tune_evaluations} evaluations, {args.tune_seconds:g} s"
-    )
-    t0 = time.monotonic()
-    try:
-        r = tune(
-            model,
-            accel,
-            ~np.asarray(arrays["clipped"], dtype=bool),
-            extras,
-            max_evaluations=args.tune_evaluations,
-            max_seconds=args.tune_seconds,
-            intervals=False,
+    t0 = [time.monotonic()]
+
+    def announce(n: int, m: int, aids: int) -> None:
+        print(
+            f"tune: fitting {', '.join(FIGURES)} to {n} samples x {m} axes with {aids} aids; budget "
+            f"{args.tune_evaluations} evaluations, {args.tune_seconds:g} s"
         )
+        t0[0] = time.monotonic()
+
+    try:
+        tuned, r = tune_for_smoothing(
+            model, arrays, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params,
+            max_evaluations=args.tune_evaluations, max_seconds=args.tune_seconds, announce=announce,
+        )  # fmt: skip
     except ValueError as exc:
         raise UserError(f"{args.run}: --tune: {exc}") from None
     figs = ", ".join(f"{f} {r.start[f]:.4g} -> {r.estimate[f]:.4g}" for f in FIGURES)
@@ -540,46 +521,24 @@ def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) ->
     verdict = "used" if r.adopted else "not significantly better (p >= 0.05): the model's figures kept"
     print(
         f"tune: {figs}; ln L +{r.ll_estimate - r.ll_start:.4g} (p = {r.p_value:.3g}); {r.evaluations} evaluations, "
-        f"{time.monotonic() - t0:.1f} s, {stop}; {verdict}"
+        f"{time.monotonic() - t0[0]:.1f} s, {stop}; {verdict}"
     )
-    return with_figures(model, {f: float(f"{v:.6g}") for f, v in r.chosen.items()})
+    return tuned
 
 
-def _consistency(arrays, model: Model, inputs, fixes, smooth_kw) -> None:
+def print_checks(arrays, model: Model, inputs, fixes, smooth_kw) -> None:
     """The NIS of the aids against their chi^2 bounds, and with fixes the held-out comparison: a line each."""
-    from accelnav.estimate.consistency import nis_check
-    from accelnav.estimate.pipeline import holdout
+    from accelnav.estimate.pipeline import smooth_checks
 
-    first = arrays["zupt_nis"][:, 3] > 0  # each rest's first update (see smooth_run)
-    for kind, nis in (("fixes", arrays["fix_nis"]), ("rests", arrays["zupt_nis"][first, 2])):
-        if len(nis):
-            print(nis_check(kind, nis).line())
-    if fixes is None:
-        return
-    h = holdout(inputs, model, fixes, **smooth_kw)
-    if h is None:
-        return
-    print(
-        f"held-out fixes (every other one left out, {h.n} predicted): rms miss "
-        + ", ".join(f"{k} {v:.3g} m" for k, v in h.rms.items())
-    )
-    worse = h.worse_than()
-    if worse:
-        print(
-            f"the smoother misses the held-out fixes more than {' and '.join(worse)} "
-            f"({h.rms['smoother']:.3g} m against {min(h.rms[b] for b in worse):.3g} m): its model does not fit "
-            "this recording: try --tune"
-        )
+    for line in smooth_checks(arrays, model, inputs, fixes, **smooth_kw).lines():
+        print(line)
 
 
-def _truth_versus_baselines(rows) -> None:
+def print_truth_versus_baselines(rows) -> None:
     """With truth and fixes: one line if the smoother is worse than a fix-only baseline (rms over the axes)."""
-    from accelnav.estimate.pipeline import BASELINES
+    from accelnav.estimate.pipeline import BASELINES, rms_by_method
 
-    rms = {}
-    for row in rows:
-        rms.setdefault(row.method, []).append(row.rms**2)
-    rms = {k: float(np.sqrt(np.mean(v))) for k, v in rms.items()}
+    rms = rms_by_method(rows)
     worse = [b for b in BASELINES if b in rms and rms["smoother"] > rms[b]]
     if worse:
         print(
