@@ -45,7 +45,11 @@ def _z(d, n, seed=3):
 def _assert_same(g, ref, d, z, what):
     xf0, xs0 = fs.plain_data(d, z, None, ref)
     xf1, xs1 = fs.plain_data(d, z, None, g)
-    for P, P0, name in ((g.P_prior, ref.P_prior, "prior"), (g.P_post, ref.P_post, "filter"), (g.Ps, ref.Ps, "smoother")):
+    for P, P0, name in (
+        (g.P_prior, ref.P_prior, "prior"),
+        (g.P_post, ref.P_post, "filter"),
+        (g.Ps, ref.Ps, "smoother"),
+    ):
         sd0 = fs.packed_sd(P0)
         scale = np.sqrt(fs.unpack(P0)[..., fs._ROWS, fs._ROWS] * fs.unpack(P0)[..., fs._COLS, fs._COLS])
         assert_rel_close(P, P0, scale, RTOL, f"{what} {name} P")
@@ -145,3 +149,35 @@ def test_masked_runs_keep_per_sample_gains(fast_design):
     mask[[5, 1500, 2999]] = False
     g = fs.plain_gains(fast_design, n, mask)
     assert len(g.K) == n and g.rows is None and g.K[1500].tolist() == [0.0] * 4
+
+
+@pytest.mark.parametrize("chunk", [97, 1000, 100_000])
+def test_chunked_path_uses_the_steady_rows_and_equals_the_full_computation(default_model, tmp_path, chunk):
+    """Axis 0 all valid (steady rows throughout); axis 1 loses a sample after the transient, from which
+    chunk on the chunked path returns to the per-sample update."""
+    from accelnav.estimate import chunked
+
+    m = default_model
+    for ax in m.axes:
+        m = with_axis_bias(m, ax.name, ax.c1, ax.c2, 0.5)
+    m = with_noise(m, sigma_eps=0.05)
+    nt = len(fs.steady_gains(axis_design(m, 0)).rows)
+    n = 3 * nt + 11
+    rng = np.random.default_rng(5)
+    t = np.arange(n) / m.rate_hz
+    accel = np.cumsum(rng.normal(0, 0.05, (n, len(m.axes))), axis=0)
+    clipped = np.zeros(accel.shape, dtype=bool)
+    clipped[2 * nt + 3, 1] = True
+    out = tmp_path / "o.npz"
+    chunked.smooth_bounded(m, n, chunked.array_reader(t, accel, clipped), out, chunk=chunk)
+    f = np.load(out)
+    for j in range(len(m.axes)):
+        d = axis_design(m, j)
+        ok = ~clipped[:, j]
+        mask = None if ok.all() else ok
+        ref = fs.plain_gains(d, n, mask, steady=False)
+        xf, xs = fs.plain_data(d, np.where(ok, accel[:, j], 0.0), mask, ref)
+        for key, x, P in (("filt", xf, ref.P_post), ("smooth", xs, ref.Ps)):
+            sd = fs.packed_sd(P)
+            assert_rel_close(f[f"{key}_x"][j], x, sd, RTOL, f"{key}_x axis {j}")
+            assert_rel_close(f[f"{key}_sd"][j], sd, 0.0, RTOL, f"{key}_sd axis {j}")

@@ -243,7 +243,7 @@ static int plain_smooth_cov(const acn_axis *m, long n, double *Cs, long stride, 
         double c10 = (m10 * qee - m11 * qae) / det, c11 = (m11 * qaa - m10 * qae) / det;
         if (write_cs)
             Cs[stride * k + 0] = c00, Cs[stride * k + 1] = c01, Cs[stride * k + 2] = c10,
-            Cs[stride * k + 3] = c11;
+                            Cs[stride * k + 3] = c11;
         /* Ps = Pf + C (Ps[k+1] - Pp) C' */
         double daa = s1[7] - qaa, dae = s1[8] - qae, dee = s1[9] - qee;
         double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
@@ -618,6 +618,72 @@ int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
         row[2] = (m00 * qee - m01 * qae) / det, row[3] = (m01 * qaa - m00 * qae) / det;
         row[4] = (m10 * qee - m11 * qae) / det, row[5] = (m11 * qaa - m10 * qae) / det;
         row[9] = qaa, row[10] = qae, row[11] = qee;
+    }
+    carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
+    pack(P, carry + 4);
+    return 0;
+}
+
+/*
+ * acn_chunk_fwd for a chunk of valid samples that follows only valid ones, from
+ * the rows of acn_plain_rows (nt of them, the last steady): the gains, smoother
+ * gains and (a, eps) blocks are read, the r, u rows of P propagated as in
+ * acn_plain_cov_steady. Same arguments otherwise, same store rows and outputs.
+ */
+int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
+                         const double *srows, long nt, double *carry, double *store, double *xf,
+                         double *sdf, double *Pf0, double *Pfn)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    double F[4][4], P[4][4], PHt[4];
+    double r = carry[0], u = carry[1], a = carry[2], ep = carry[3], e;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (long k = 0; k < n; k++) {
+        long g = k0 + k;
+        const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
+        double *row = store + ACN_ROW * k;
+        /* the prior's (a, eps) block is the stored one (as acn_plain_cov_steady) */
+        P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9], P[3][3] = sr[10];
+        double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
+        for (int i = 0; i < 4; i++)
+            PHt[i] = P[i][2] + P[i][3];
+        for (int i = 0; i < 2; i++)
+            for (int j = i; j < 4; j++) {
+                P[i][j] -= sr[i] * PHt[j] + PHt[i] * sr[j] - sr[i] * sr[j] * S;
+                P[j][i] = P[i][j];
+            }
+        P[2][2] = sr[11], P[2][3] = P[3][2] = sr[12], P[3][3] = sr[13];
+        /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
+        double y = z[k] - a - ep;
+        r += sr[0] * y;
+        u += sr[1] * y;
+        double ka = sr[2], ke = sr[3], zk = z[k];
+        double an = (a - ka * a) + ka * (zk - ep);
+        e = (ep - ke * ep) + ke * (zk - a);
+        a = an;
+        double *o = xf + 4 * k, *sd = sdf + 4 * k;
+        o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        for (int i = 0; i < 4; i++)
+            sd[i] = sqrt(P[i][i]);
+        if (g == 0)
+            pack(P, Pf0);
+        row[0] = a, row[1] = e;
+        row[6] = P[2][2], row[7] = P[2][3], row[8] = P[3][3];
+        if (last && k == n - 1) {
+            pack(P, Pfn);
+            for (int i = 2; i < 6; i++)
+                row[i] = 0.0;
+            row[9] = row[10] = row[11] = 0.0;
+            break;
+        }
+        predict_cov(m, F, P);
+        r = r + f01 * u + f02 * a;
+        u = u + f12 * a;
+        ep = phi * e + b;
+        const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
+        row[2] = sr[4], row[3] = sr[5], row[4] = sr[6], row[5] = sr[7];
+        row[9] = sn[8], row[10] = sn[9], row[11] = sn[10];
     }
     carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
     pack(P, carry + 4);

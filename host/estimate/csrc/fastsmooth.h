@@ -45,7 +45,8 @@ int acn_plain_cov_steady(const acn_axis *m, long n, long nt, const double *rows,
 
 /* K, Cs: rows stride doubles apart; sample k >= nk uses row nk - 1 (a stored steady row) */
 void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned char *valid,
-                    const double *K, const double *Cs, long stride, long nk, double *xf, double *xs);
+                    const double *K, const double *Cs, long stride, long nk, double *xf,
+                    double *xs);
 
 int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
                 long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
@@ -69,6 +70,9 @@ int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
                   const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
                   double *Pf0, double *Pfn);
 
+int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
+                         const double *srows, long nt, double *carry, double *store, double *xf,
+                         double *sdf, double *Pf0, double *Pfn);
 void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry);
 
 void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
