@@ -26,6 +26,11 @@ to (r, u) cross terms in the eps row). Hence:
 1. The covariances and gains depend on the model and the valid mask only,
    never on z. They are computed once (:func:`plain_gains`) and cached in
    memory, keyed on the design numbers, N and the mask (and optionally on disk).
+   With every sample valid, the forward part (K, C and the (a, eps) covariance
+   blocks) reaches a steady state and never depends on N: it is computed once
+   per design up to that state and kept on disk (:func:`steady_gains`), every
+   later sample reading its last row; only the r, u rows of P, which never
+   settle, are propagated per run (acn_plain_cov_steady).
 2. The smoothed (a, eps) of the 4-state RTS smoother are those of the 2-state
    RTS smoother of s, because the marginal of s given all z is the 2-state
    smoothing posterior (s is Markov and z depends on s alone).
