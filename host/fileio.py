@@ -109,10 +109,9 @@ def check_output(path: str | Path, flag: str = "--out") -> Path:
     path = Path(path)
     if path.is_dir():
         raise UserError(f"{flag}: {path} is a directory; give a file name")
-    parent = path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if parent.exists() and not parent.is_dir():
+    # the nearest ancestor of the user's output that exists must be a folder
+    parent = next((a for a in path.parents if a.exists()), None)
+    if parent is not None and not parent.is_dir():
         raise UserError(f"{flag}: {path}: {parent} is not a directory")
     return path
 

@@ -26,6 +26,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "accelnav.cli.core",
         "filter and RTS-smooth a run file (compiled), optionally with position fixes and zero-velocity updates",
     ),
+    "init": (
+        "accelnav.cli.init",
+        "describe a new part (analog, duty-cycle, digital, calibrated) and write its model file",
+    ),
     "fit-bias": ("accelnav.cli.fit_bias", "identify the bias model and noise figures from a stationary recording"),
     "calibrate": (
         "accelnav.cli.calibrate",

@@ -24,6 +24,7 @@ from accelnav.estimate.pipeline import (
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.fileio import check_output, write_text
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model
+from accelnav.progress import note
 
 TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
 TUNE_SECONDS = 60.0
@@ -51,7 +52,8 @@ def _input_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--unit",
         default=None,
-        help="CSV: unit of the acceleration columns, g, mg or m/s^2; default: from the column names, else "
+        help="CSV: unit of the acceleration columns, g, mg, m/s^2 or counts (raw codes, converted by the model's "
+        "own read-out and calibration); default: from the column names, else counts for an analog model, else "
         "the unit of a calibrated model",
     )
     p.add_argument(
@@ -222,6 +224,12 @@ def register(sub) -> None:
     )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     p.add_argument(
+        "--warm-start",
+        action="store_true",
+        help="the recording begins after the warm-up, not at power-on: the bias starts at its settled value "
+        "c1 + c2 instead of c2",
+    )
+    p.add_argument(
         "--memory-budget",
         type=float,
         default=None,
@@ -313,8 +321,9 @@ def cmd_filter(args) -> int:
     return 0
 
 
-def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray) -> str:
-    """One line: the detector's settings, candidates, accepted and refused with their counts per reason."""
+def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray, gravity: list[str] = ()) -> str:
+    """One line: the detector's settings, candidates, accepted and refused with their counts per reason;
+    when none was accepted and an axis carries gravity (``gravity``, zupt.gravity_axes), it says so."""
     from accelnav.estimate import zupt
 
     counts = zupt.reason_counts(decisions)
@@ -328,6 +337,12 @@ def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray) -> str:
         f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} (R + "
         f"{params.tremor:g}^2): {len(decisions)} candidate rests, {sum(acc.values())} accepted{listed(acc)}, "
         f"{sum(ref.values())} refused{listed(ref)}; {100 * rest.mean():.1f} % of the run at rest"
+        + (
+            f"; axis {', '.join(gravity)} reads about 1 g (gravity), which the model takes as removed: "
+            "drop it with --axis (the others' names)"
+            if gravity and not acc
+            else ""
+        )
     )
 
 
@@ -336,6 +351,11 @@ def cmd_smooth(args) -> int:
     from accelnav.estimate.fixes import read_fixes
 
     arrays, model = read_args(args)
+    if args.warm_start:  # the same for every path below (bounded, --tune, the aids' checks) and the run file
+        from accelnav.model.edit import warm_started
+
+        model = warm_started(model)
+        note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
     budget = _memory_budget(args.memory_budget)
     bounded = whole_bytes(*arrays["accel"].shape) > budget
     if bounded:  # what the bounded path cannot do is refused before any work
@@ -368,7 +388,8 @@ def cmd_smooth(args) -> int:
         cand = zupt.candidates(arrays["accel"], arrays["clipped"], model, params)
         decisions = zupt.gate_rests(arrays["accel"], arrays["clipped"], cand, model, params)
         rest = zupt.accepted_mask(decisions, len(cand))
-        print(_zupt_summary(decisions, params, rest))
+        gravity = zupt.gravity_axes(arrays["accel"], arrays["clipped"], model) if not rest.any() else []
+        print(_zupt_summary(decisions, params, rest, gravity))
         if args.zupt_report is not None:
             write_text(args.zupt_report, zupt.report_csv(decisions, arrays["t"]), flag="--zupt-report")
             print(f"wrote {args.zupt_report}")

@@ -73,13 +73,16 @@ def read_input(
     from accelnav.data.recording import read_recording
 
     rec = read_recording(path, **opts, allow_gaps=allow_gaps, default_unit=_unit(override))
-    return _on_model(path, rec, override)
+    return _on_model(path, rec, override, chosen=bool(axes))
 
 
 def _unit(model: Model | None) -> str | None:
-    """The unit a column that does not name one is in: a calibrated model's (its samples' unit)."""
+    """The unit a column that does not name one is in: a calibrated model's (its samples' unit), or raw ADC
+    counts for an analog model (what its firmware samples)."""
     if model is not None and model.sensor.kind == "calibrated":
         return model.sensor.calibrated.unit
+    if model is not None and model.sensor.kind == "analog":
+        return "counts"
     return None
 
 
@@ -112,12 +115,15 @@ def _from_memory(source, override: Model | None, opts: dict, allow_gaps: bool) -
             model = load_model(None)
         return _with_model(label, arrays, model, None, opts)
     rec = from_columns(label, columns, **opts, allow_gaps=allow_gaps, default_unit=_unit(override))
-    return _on_model(label, rec, override)
+    return _on_model(label, rec, override, chosen=bool(opts["axes"]))
 
 
-def _on_model(path, rec, model: Model | None) -> tuple[Run, Model]:
-    """A recording checked against the model and placed on its grid: rate, axes, NaN, gaps, full scale."""
-    from accelnav.data.recording import check_rate, on_grid
+def _on_model(path, rec, model: Model | None, chosen: bool = False) -> tuple[Run, Model]:
+    """A recording checked against the model and placed on its grid: rate, axes, NaN, gaps, full scale.
+
+    ``chosen``: the columns were named with --axis; naming fewer than the model has, each by a model
+    axis's name, narrows the model to those axes (a 3-axis part with one axis on gravity, say)."""
+    from accelnav.data.recording import check_rate, in_accel, on_grid
 
     for text in rec.notes:
         note(text)
@@ -125,11 +131,16 @@ def _on_model(path, rec, model: Model | None) -> tuple[Run, Model]:
         model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
     check_rate(rec, model.rate_hz, str(model.source))
     names = [a.name for a in model.axes]
+    if chosen and len(rec.axis_names) < len(names) and set(rec.axis_names) <= set(names):
+        model = narrowed(model, list(rec.axis_names))
+        note(f"{path}: model {model.name} narrowed to axes {', '.join(rec.axis_names)}")
+        names = list(rec.axis_names)
     if len(rec.axis_names) != len(names):
         raise UserError(
             f"{path}: {len(rec.axis_names)} axes ({', '.join(rec.columns)}) for the model's {len(names)} "
             f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
         )
+    rec = in_accel(rec, model)  # raw counts -> m/s^2 by the model's own read-out and calibration
     bad = ~np.isfinite(rec.accel)
     if bad.any():
         k = int(np.argmax(bad.any(axis=1)))
@@ -154,6 +165,16 @@ def _on_model(path, rec, model: Model | None) -> tuple[Run, Model]:
         note(f"{path}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
     arrays = {"t": t, "axis_names": np.array(names), "accel": accel, "clipped": clipped}
     return Run(arrays), model
+
+
+def narrowed(model: Model, axes: list[str]) -> Model:
+    """``model`` with only ``axes`` (model axis names, in that order), validated again by the loader."""
+    import dataclasses
+
+    from accelnav.model.edit import revalidate
+
+    kept = tuple(model.axis(a) for a in axes)
+    return revalidate(dataclasses.replace(model, axes=kept), source=f"{model.source} (axes {', '.join(axes)})")
 
 
 def _is_recording_npz(path: Path) -> bool:

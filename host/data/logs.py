@@ -24,6 +24,11 @@ def _decoded(log, model_text: str):
         d = decode_log(log, model_text)
     except LogError as exc:
         raise UserError(str(exc)) from None
+    if d.stats["unreplayed"] and not len(d.frames["sample"]):  # compact frames, no model: samples but no rows
+        raise UserError(
+            f"{log}: its {d.stats['unreplayed']} samples came in compact frames, which only the model the "
+            "firmware was built with turns into rows: give --model M.toml"
+        )
     if not len(d.frames["sample"]):
         raise UserError(
             f"{log}: 0 sample frames in {d.chunks} chunks ({d.stats['bytes']} bytes): a silent device or a "
@@ -43,7 +48,10 @@ def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndar
     cols = sample_columns(d.manifest, d.frames["sample"])
     text = d.meta.get("model_toml") or model_text
     if not text:
-        raise UserError(f"{log}: the log carries no model text (recorded with --manifest); export to .csv instead")
+        raise UserError(
+            f"{log}: the log carries no model text (recorded with --manifest): give --model M.toml, the model the "
+            "firmware was built with (a run file needs it)"
+        )
     try:
         model = loads_model(text, source=f"{log}:model_toml")
     except ModelError as exc:

@@ -40,8 +40,13 @@ from accelnav.fileio import EXCERPT_CHARS, check_input, excerpt, input_limit, lo
 from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.progress import Progress
 
-UNITS = {"g": G0, "mg": G0 * 1e-3, "m/s^2": 1.0}
+# "counts": raw read-out codes (ADC, digital LSB), kept as they are here; the model's own conversion turns
+# them into acceleration (accelnav.data.inputs), so the scale is 1
+UNITS = {"g": G0, "mg": G0 * 1e-3, "m/s^2": 1.0, "counts": 1.0}
 UNIT_ALIASES = {
+    "counts": "counts",
+    "count": "counts",
+    "lsb": "counts",
     "g": "g",
     "mg": "mg",
     "m/s^2": "m/s^2",
@@ -50,7 +55,7 @@ UNIT_ALIASES = {
     "m_s2": "m/s^2",
     "ms2": "m/s^2",
 }
-_UNIT_SUFFIX = re.compile(r"(?:_|\[|\()(g|mg|m_s2|mps2|ms2|m/s\^?2)[\])]?$", re.IGNORECASE)
+_UNIT_SUFFIX = re.compile(r"(?:_|\[|\()(g|mg|m_s2|mps2|ms2|m/s\^?2|counts|count|lsb)[\])]?$", re.IGNORECASE)
 _TIME_NAME = re.compile(r"^(t|time|timestamp)(?:_(s|ms|us))?$", re.IGNORECASE)
 _TIME_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6}
 _ACC_PREFIX = re.compile(r"^(acceleration|accel|acc)_?", re.IGNORECASE)
@@ -110,7 +115,7 @@ class Recording:
 def parse_unit(unit: str) -> str:
     key = unit.strip().lower()
     if key not in UNIT_ALIASES:
-        raise UserError(f"unit {unit!r} is not known; accepted: g, mg, m/s^2")
+        raise UserError(f"unit {unit!r} is not known; accepted: g, mg, m/s^2, counts")
     return UNIT_ALIASES[key]
 
 
@@ -355,7 +360,8 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: s
         t = np.arange(table.shape[0]) / rate_hz
         data = table
         time_unit = "s"
-    accel = data * np.array([UNITS[u] for u in head.units])
+    with np.errstate(over="ignore"):  # a number beyond float64 once in m/s^2 becomes inf, refused by name below
+        accel = data * np.array([UNITS[u] for u in head.units])
     rec = _finish(src, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
     return replace(rec, lines=data_lines, time_unit=time_unit, time_column=head.tcol)
 
@@ -452,7 +458,8 @@ def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_colum
             continue
         if not m:
             raise UserError(
-                f"{src}: column {excerpt(c)} does not say its unit (suffix _g, _mg, _m_s2); give --unit g or m/s^2"
+                f"{src}: column {excerpt(c)} does not say its unit (suffix _g, _mg, _m_s2, _counts); "
+                "give --unit g, m/s^2 or counts"
             )
         units.append(parse_unit(m.group(1)))
     names = [short[c] for c in chosen]
@@ -814,3 +821,51 @@ def from_columns(
     rec = _finish(source, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
     rec = replace(rec, time_unit=tu, time_column=head.tcol)
     return _check_time(_with_time_unit(rec, time_unit, source), rate_hz, allow_gaps)
+
+
+def in_accel(rec: Recording, model) -> Recording:
+    """``rec`` with its raw columns (unit "counts") turned into m/s^2 by the model's own read-out.
+
+    The conversion is :func:`accelnav.model.design.input_conversion`, the arithmetic the generated C and
+    the simulator use, with each axis's calibration (zero-g, sensitivity, as ``calibrate`` wrote them). A
+    column maps to the model axis of its name, else to the axis at its place. Codes at the ADC's rails
+    are flagged as clipped, as the firmware skips them. Columns already in g or m/s^2 pass unchanged.
+    """
+    raw = [u == "counts" for u in rec.units]
+    if not any(raw):
+        return rec
+    if not all(raw):
+        raise UserError(f"{rec.source}: raw counts mixed with columns in g or m/s^2; give every axis in one unit")
+    from accelnav.model.design import input_conversion
+
+    names = [a.name for a in model.axes]
+    if model.sensor.kind == "duty_cycle":
+        raise UserError(
+            f"{rec.source}: counts: {model.source} is a duty-cycle part, whose raw sample is a (T1, T2) pair, "
+            "not one count per axis; give the acceleration in g or m/s^2"
+        )
+    if model.sensor.kind == "calibrated" and model.sensor.calibrated.lsb_per_g <= 0:
+        raise UserError(f"{rec.source}: counts: {model.source} gives no sensor.calibrated.lsb_per_g to scale them")
+    accel = np.empty_like(rec.accel)
+    clipped = np.zeros(rec.accel.shape, dtype=bool) if rec.clipped is None else rec.clipped.copy()
+    for j, name in enumerate(rec.axis_names):
+        axis = name if name in names else j
+        if isinstance(axis, int) and axis >= len(names):
+            raise UserError(f"{rec.source}: counts column {rec.columns[j]!r} has no model axis to convert it")
+        codes = rec.accel[:, j]
+        if model.sensor.kind == "calibrated":
+            accel[:, j] = codes / model.sensor.calibrated.lsb_per_g * G0
+            continue
+        conv = input_conversion(model, axis)
+        finite = np.isfinite(codes)
+        bad = finite & ((codes < 0) | (codes > conv.full_code) | (codes != np.round(codes)))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise UserError(
+                f"{rec.source}: {rec.where(k)}: {rec.columns[j]} = {codes[k]:g} is not an ADC code of "
+                f"{model.source} (whole numbers 0..{conv.full_code})"
+            )
+        accel[:, j] = conv.accel(codes)
+        clipped[:, j] |= conv.clipped(np.where(finite, codes, 1))
+    units = tuple("m/s^2" for _ in rec.units)
+    return replace(rec, accel=accel, clipped=clipped, units=units)

@@ -13,6 +13,7 @@ import numpy as np
 from accelnav.estimate.checks import check_run
 from accelnav.estimate.kf import Aids, double_integrate, run_filter
 from accelnav.model.design import axis_design
+from accelnav.model.edit import warm_started
 from accelnav.model.load import Model
 
 # packed index (accelnav.estimate.fastsmooth.PACKED, upper triangle by rows) of each entry of a 4x4,
@@ -156,8 +157,12 @@ def smooth_run(
     zupt_gated: bool = False,
     rest_sigma: np.ndarray | None = None,
     covariances: bool = True,
+    warm_start: bool = False,
 ) -> dict[str, np.ndarray]:
     """Return ``arrays`` with the filter's and the RTS smoother's output (keys filt_*, smooth_*).
+
+    ``warm_start``: the recording does not begin at power-on, so the bias prior is the settled c1 + c2
+    rather than c2 (accelnav.model.edit.warm_started).
 
     Compiled (accelnav.estimate.fastsmooth): the plain path when there are no extras, else
     the general path. ``fixes[j]`` are position-fix measurements of axis
@@ -180,6 +185,8 @@ def smooth_run(
     from accelnav.estimate.consistency import aid_innovations_arrays
 
     check_run(arrays, model, "smooth_run")
+    if warm_start:
+        model = warm_started(model)
     params = zupt.ZuptParams() if zupt_params is None else zupt_params
     n = len(arrays["t"])
     n_axes = len(arrays["axis_names"])

@@ -147,7 +147,7 @@ import numpy as np
 from accelnav.estimate.kf import Aids, Measurement, bias_model
 from accelnav.fileio import check_input, excerpt, load_npz
 from accelnav.model.design import axis_design
-from accelnav.model.load import Model
+from accelnav.model.load import G0, Model
 
 
 @dataclass(frozen=True)
@@ -225,6 +225,23 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
         x[:, j] = np.where(ok[:, j], accel[:, j] - bias_model(d, n), 0.0)
         R[j] = d.R
     return x, ok, R
+
+
+GRAVITY_TOL = 0.25  # g: an axis whose median reads within this of +-1 g is taken as carrying gravity
+
+
+def gravity_axes(accel: np.ndarray, clipped: np.ndarray, model: Model) -> list[str]:
+    """Names of the axes whose median acceleration (bias removed) is about +-1 g: gravity on them.
+
+    The model takes gravity as removed (a level frame, or the axis held horizontal); a tilt of such an
+    axis moves its reading by the whole of g, which the detector sees as motion or a level change. Only
+    for the summary: the detector's decisions do not read this."""
+    x, ok, _ = _prepared(accel, clipped, model)
+    out = []
+    for j, ax in enumerate(model.axes):
+        if ok[:, j].any() and abs(abs(float(np.median(x[ok[:, j], j]))) - G0) <= GRAVITY_TOL * G0:
+            out.append(ax.name)
+    return out
 
 
 def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams = ZuptParams()) -> np.ndarray:

@@ -10,7 +10,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, read_recording
+from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, in_accel, read_recording
 from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, BandCheck, Composite, check_band, fit_composite
@@ -242,6 +242,10 @@ def characterise(
         base, base_label, given = model, str(model.source), True
     else:
         base, base_label, given = base_model(None if model is None else Path(model), rec)
+    if "counts" in rec.units:
+        if not given:
+            raise UserError(f"{rec.source}: raw counts need the model of their read-out: give --model")
+        rec = in_accel(rec, base)  # the model's own conversion, as the firmware's
     full_scale = base.max_accel_m_s2 if given else None
     if given:  # the model keeps its rate: the recording must have it (the check filter and smooth make)
         check_rate(rec, base.rate_hz, base_label)

@@ -49,14 +49,21 @@ BACKOFF_S = (0.1, 2.0)  # first retry delay, longest delay
 
 
 class Status:
-    """The live status line (stderr, redrawn at most 4 times a second)."""
+    """The live status line (stderr, redrawn at most 4 times a second).
+
+    It counts the samples received (:attr:`Decoder.received`), not the rows delivered: in the compact mode
+    rows go out only when a checkpoint closes their stretch, so a count of delivered rows reads 0 for the
+    first checkpoint interval and then jumps. The rate is taken between arrivals (the moments the count
+    grew) over the last ``RATE_WINDOW_S``: bytes come a block at a time, so a rate between fixed redraw
+    moments swings by a block per window."""
+
+    RATE_WINDOW_S = 2.0
 
     def __init__(self, stream=None, enabled: bool | None = None):
         self.stream = stream if stream is not None else sys.stderr
         self.enabled = bool(getattr(self.stream, "isatty", lambda: False)()) if enabled is None else enabled
         self._last = 0.0
-        self._prev = (0.0, 0)
-        self.rate = 0.0
+        self._arrivals: list[tuple[float, int]] = []  # (time, samples received) when the count grew
         self.note = ""  # shown instead of the counters while set (link lost, retrying)
 
     def event(self, t: float, text: str) -> None:
@@ -64,26 +71,40 @@ class Status:
         self.stream.write(("\r" if self.enabled else "") + f"{t:7.1f} s  {text}\n")
         self.stream.flush()
 
+    def seen(self, t: float, dec: Decoder) -> None:
+        """Note the samples received by time ``t`` (after every read)."""
+        n = dec.received
+        if not self._arrivals or n > self._arrivals[-1][1]:
+            self._arrivals.append((t, n))
+        while len(self._arrivals) > 2 and self._arrivals[1][0] < t - self.RATE_WINDOW_S:
+            self._arrivals.pop(0)
+
+    def rate(self, t: float) -> float:
+        """Samples per second between the first and last arrival in the window (0 once nothing came for a
+        window, or before two arrivals)."""
+        a = [x for x in self._arrivals if x[0] >= t - self.RATE_WINDOW_S]
+        if len(a) < 2 or a[-1][0] <= a[0][0]:
+            return 0.0
+        return (a[-1][1] - a[0][1]) / (a[-1][0] - a[0][0])
+
     def line(self, t: float, dec: Decoder) -> str:
         if self.note:
             return f"{t:7.1f} s  {self.note}"
         s = dec.stats
-        n = s.frames.get("sample", 0)
-        t0, n0 = self._prev
-        if t - t0 >= 1.0:
-            self.rate = (n - n0) / (t - t0)
-            self._prev = (t, n)
         line = (
-            f"{t:7.1f} s  {self.rate:7.1f} frames/s  {n:9d} frames  lost {s.lost}  dup {s.duplicates}  "
-            f"CRC errors {s.crc_errors}  bad {s.bad_frames}  {s.bytes / 1024:8.1f} KiB"
+            f"{t:7.1f} s  {self.rate(t):7.1f} frames/s  {dec.received:9d} frames  lost {s.lost}  "
+            f"dup {s.duplicates}  CRC errors {s.crc_errors}  bad {s.bad_frames}  {s.bytes / 1024:8.1f} KiB"
         )
         if s.frames.get("block"):  # compact mode: the replay's checks
             line += f"  checkpoints {s.checkpoints}" + (f"  MISMATCHES {s.mismatches}" if s.mismatches else "")
+            if s.unreplayed:
+                line += "  (not replayed: no model text)"
         return line
 
     def update(self, t: float, dec: Decoder, final: bool = False) -> None:
         if not self.enabled:
             return
+        self.seen(t, dec)
         if final or t - self._last >= 0.25:
             self._last = t
             self.stream.write("\r" + self.line(t, dec) + ("\n" if final else ""))
@@ -132,7 +153,18 @@ class Recorder:
         self._stop = False
 
     def _open(self):
-        return serial.serial_for_url(self.url, baudrate=self.baud, timeout=0.02, do_not_open=False)
+        ser = serial.serial_for_url(self.url, baudrate=self.baud, timeout=0.02, do_not_open=True)
+        if isinstance(ser, SocketSerial):
+            # pyserial's socket open() ends by discarding what already arrived: a device that starts
+            # sending on connection (QEMU's serial socket) lost its first frames to it
+            ser.reset_input_buffer = lambda: None
+            try:
+                ser.open()
+            finally:
+                del ser.reset_input_buffer
+        else:
+            ser.open()
+        return ser
 
     def stop(self) -> None:
         """Ask run() to finish (from a signal handler or another thread)."""

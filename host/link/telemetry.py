@@ -848,6 +848,16 @@ class Decoder:
         return c.lost - before["lost"]
 
     @property
+    def received(self) -> int:
+        """Samples received so far, delivered or not yet: sample rows out, plus the compact mode's rows held
+        until the checkpoint closing their stretch and its samples with no replay (no model text). What a
+        live view counts: rows wait up to a checkpoint interval (2.56 s at 100 Hz) before they go out."""
+        n = self.stats.frames.get("sample", 0) + self.stats.unreplayed
+        if self.compact is not None:
+            n += len(self.compact.held[0])
+        return n
+
+    @property
     def mid_frame(self) -> bool:
         """Bytes of a frame whose delimiter has not come yet are held."""
         return bool(self._tail)

@@ -169,6 +169,17 @@ def with_axis_bias(model: Model, name: str, c1: float, c2: float, T: float) -> M
     return dataclasses.replace(model, axes=tuple(axes))
 
 
+def warm_started(model: Model) -> Model:
+    """``model`` for a recording that begins after the warm-up: each axis's bias starts at its settled value.
+
+    eps(t) = c1 (1 - exp(-t/T)) + c2 assumes sample 0 is power-on; long after it the bias sits at c1 + c2.
+    Moving all of it into c2 (c1 = 0) puts the prior at c1 + c2 and keeps the recursion's fixed point
+    (b depends on c1 + c2 only), so nothing else of the filter changes.
+    """
+    axes = tuple(dataclasses.replace(ax, c1=0.0, c2=ax.c1 + ax.c2) for ax in model.axes)
+    return dataclasses.replace(model, axes=axes)
+
+
 def with_noise(model: Model, **values: float) -> Model:
     """``model`` with some of sigma_n, sigma_eps, R replaced."""
     return dataclasses.replace(
