@@ -351,8 +351,10 @@ _STEADY_MAGIC = b"ACNSTDY1"
 
 
 def steady_key(d: AxisDesign) -> str:
-    """Every design number and the tolerances, not N: the transient does not depend on the run's length."""
-    h = hashlib.sha256(b"steady\0" + _design_key(d))
+    """The numbers the rows depend on (F, Q, H, R, P0) and the tolerances. Not N (the transient does not
+    depend on the run's length), nor x0 and b, which move only the means: a warm start shares the rows."""
+    parts = [np.asarray(v, dtype=np.float64).tobytes() for v in (d.F, d.Q, d.H, d.R, d.P0)]
+    h = hashlib.sha256(b"steady\0" + b"".join(parts))
     h.update(np.array([STEADY_RTOL, GAIN_RU_RTOL, SROW], dtype=np.float64).tobytes())
     return h.hexdigest()[:24]
 

@@ -181,3 +181,17 @@ def test_chunked_path_uses_the_steady_rows_and_equals_the_full_computation(defau
             sd = fs.packed_sd(P)
             assert_rel_close(f[f"{key}_x"][j], x, sd, RTOL, f"{key}_x axis {j}")
             assert_rel_close(f[f"{key}_sd"][j], sd, 0.0, RTOL, f"{key}_sd axis {j}")
+
+
+def test_the_key_follows_what_the_rows_depend_on(fast_design):
+    import dataclasses
+
+    d = fast_design
+    moved = dataclasses.replace(d, x0=np.asarray(d.x0) + 1.0, b=np.asarray(d.b) * 2.0)  # means only
+    assert fs.steady_key(moved) == fs.steady_key(d)
+    assert fs.steady_key(dataclasses.replace(d, R=d.R * 2.0)) != fs.steady_key(d)
+    assert fs.steady_key(dataclasses.replace(d, P0=np.asarray(d.P0) * 2.0)) != fs.steady_key(d)
+    n = 3 * len(fs.steady_gains(d).rows)
+    g = fs.plain_gains(moved, n)
+    ref = fs.plain_gains(moved, n, steady=False)
+    _assert_same(g, ref, moved, _z(moved, n), "shifted x0, b")
