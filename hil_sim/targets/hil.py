@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from accelnav.errors import UserError
 from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.estimate.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from accelnav.estimate.zupt import rest_mask
@@ -48,7 +49,7 @@ from accelnav.link.telemetry import (
     sample_columns,
 )
 from accelnav.model.design import axis_design
-from accelnav.model.load import Model
+from accelnav.model.load import G0, Model
 
 from . import simavr
 from .firmware import HostFirmware, build_firmware, make_firmware, manifest
@@ -58,7 +59,99 @@ STATES = ("r", "u", "a", "eps")
 PIL_BOARDS = (*MACHINES, *simavr.BOARDS)  # the boards `accelnav hil --target pil --board` runs
 
 
-def stimulus(man: Manifest, run: SimRun) -> bytes:
+@dataclass(frozen=True, eq=False)
+class RecordedRun:
+    """A user's recording as the firmware's input: the raw samples the firmware would have read (``code``, or
+    ``t1``/``t2``), their conversion ``accel`` [m/s^2] and ``clipped`` verdict, as in a SimRun; no truth
+    (``r`` is None), so a comparison has no position-error rows."""
+
+    source: str
+    t: np.ndarray
+    axis_names: tuple[str, ...]
+    code: np.ndarray | None
+    t1: np.ndarray | None
+    t2: np.ndarray | None
+    clipped: np.ndarray
+    accel: np.ndarray
+    r: None = None
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        return {"t": self.t, "axis_names": np.array(self.axis_names), "accel": self.accel, "clipped": self.clipped}
+
+
+def recorded_input(source, model: Model | None = None, **opts) -> tuple[RecordedRun, Model]:
+    """Read a recording (any form :func:`accelnav.data.inputs.read_input` takes, ``opts`` its keywords) and
+    turn it into the firmware's raw input for ``model``.
+
+    Raw counts (``unit="counts"``, or an analog model's default) come back as the very codes of the file: the
+    reader converts them with the model's own read-out, and the read-out of that acceleration is the code
+    again. An acceleration in g or m/s^2 is read out as the sensor would have: rounded to the ADC's step (a
+    duty-cycle part: T1 over the nominal T2), railed at the ends. Refusals raise UserError in one line."""
+    from accelnav.data.inputs import read_input
+    from accelnav.hil_sim.sim.sensor import read_out
+    from accelnav.model.design import input_conversion
+
+    run, model = read_input(source, model, **opts)
+    model = _on_file(model)
+    kind = model.sensor.kind
+    if kind == "calibrated":
+        raise UserError(
+            f"{model.source}: a calibrated (digital) part; the firmware runs on an ADC or a timer's raw samples "
+            "(sensor.kind analog or duty_cycle)"
+        )
+    accel = np.asarray(run["accel"], dtype=np.float64)
+    n, n_axes = accel.shape
+    raw = []
+    for j in range(n_axes):
+        if kind == "analog":
+            raw.append(read_out(model, j, accel[:, j], None))
+        else:  # no jitter: T2 at its nominal count, T1 the duty of the acceleration
+            ax, t2 = model.axis(j), model.sensor.duty_cycle.t2_counts
+            duty = np.clip(ax.zero_g + ax.sensitivity * accel[:, j] / G0, 0.0, 1.0)
+            raw.append((np.rint(duty * t2).astype(np.int32), np.full(n, t2, dtype=np.int32)))
+    convs = [input_conversion(model, j) for j in range(n_axes)]
+    # what the firmware will see: the conversion of these raw samples, and its own verdict on them
+    z = np.column_stack([c.accel(*r) for c, r in zip(convs, raw, strict=True)])
+    clipped = np.column_stack([c.clipped(*r) for c, r in zip(convs, raw, strict=True)])
+
+    def col(k: int) -> np.ndarray:
+        return np.column_stack([r[k] for r in raw]).astype(np.int32)
+
+    analog = kind == "analog"
+    rec = RecordedRun(
+        source=str(source),
+        t=np.asarray(run["t"], dtype=np.float64),
+        axis_names=tuple(str(a) for a in run["axis_names"]),
+        code=col(0) if analog else None,
+        t1=None if analog else col(0),
+        t2=None if analog else col(1),
+        clipped=clipped,
+        accel=z,
+    )
+    return rec, model
+
+
+def _on_file(model: Model) -> Model:
+    """``model`` read from a file, as the firmware is built from one: the model embedded in a run file or
+    log is written to a private temporary file; a model narrowed to fewer axes is refused."""
+    from accelnav.model.load import load_model, loads_model
+
+    if Path(str(model.source)).is_file():
+        return model
+    whole = loads_model(model.text, source=str(model.source))
+    if [a.name for a in whole.axes] != [a.name for a in model.axes]:
+        names = ", ".join(a.name for a in model.axes)
+        raise UserError(
+            f"{model.source}: the firmware is built from a model file; give --model with the axes {names} only"
+        )
+    import tempfile
+
+    path = Path(tempfile.mkdtemp(prefix="accelnav-hil-")) / f"{model.name}.toml"
+    path.write_text(model.text)
+    return load_model(path)
+
+
+def stimulus(man: Manifest, run: SimRun | RecordedRun) -> bytes:
     """The stimulus frames of a simulated run: one per sample, the raw input of every axis; then a
     ``flush`` command, so that the compact mode sends its last, partial block and a checkpoint."""
     if run.code is not None:
@@ -206,7 +299,7 @@ class Comparison:
     zupt_x: np.ndarray | None = None
 
 
-def stated_bound(model: Model, j: int, run: SimRun, x_ref: np.ndarray) -> np.ndarray:
+def stated_bound(model: Model, j: int, run: SimRun | RecordedRun, x_ref: np.ndarray) -> np.ndarray:
     """The generator's stated bound of |firmware - float64 Kalman filter| for axis column j of this
     run; ``x_ref`` is that filter (accelnav.estimate.kf.run_filter on the same input, same skips) for
     either form. See codegen.bounds.twin_bound."""
@@ -223,8 +316,9 @@ def stated_bound(model: Model, j: int, run: SimRun, x_ref: np.ndarray) -> np.nda
     return bound
 
 
-def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> Comparison:
-    """SIL vs PIL bit for bit, firmware vs float64 reference, truth vs firmware/reference/smoother."""
+def compare(model: Model, run: SimRun | RecordedRun, sil: bytes, pil: bytes | None = None) -> Comparison:
+    """SIL vs PIL bit for bit, firmware vs float64 reference, truth vs firmware/reference/smoother (when the
+    run has a truth: a RecordedRun has none, and no position-error rows)."""
     man = manifest(model.source)
     replay = replay_for(man, model)  # the compact mode's rows get their states from the firmware's own C
     sil_frames, sil_stats = decode_all(man, sil, replay)
@@ -278,16 +372,13 @@ def compare(model: Model, run: SimRun, sil: bytes, pil: bytes | None = None) -> 
             errs[key] = max(errs[key], float(e.max()) if len(e) else 0.0)
         bound = stated_bound(model, j, run, f.x_post)
         of_bound = max(of_bound, float((np.abs(fw_x - f.x_post) / bound).max()))
-    rows = error_rows(
-        run.axis_names,
-        run.r,
-        {
-            "firmware filter": cols["r"].T,
-            "float64 filter": ref_x[:, :, 0],
-            "smoother": smooth_x[:, :, 0],
-            "smoother + ZUPT": zupt_x[:, :, 0],
-        },
-    )
+    estimates = {
+        "firmware filter": cols["r"].T,
+        "float64 filter": ref_x[:, :, 0],
+        "smoother": smooth_x[:, :, 0],
+        "smoother + ZUPT": zupt_x[:, :, 0],
+    }
+    rows = [] if run.r is None else error_rows(run.axis_names, run.r, estimates)
     return Comparison(n, equal, first, errs, of_bound, rows, link, cols, ref_x, ref_sd, smooth_x, zupt_x)
 
 
@@ -310,6 +401,7 @@ def format_comparison(c: Comparison) -> str:
     lines.append(
         f"firmware vs float64 reference: {verdict} the generator's stated bound (at most {c.max_of_bound:.2f} of it)"
     )
-    lines.append("")
-    lines.append(format_errors(c.position_rows))
+    if c.position_rows:  # none for a recording: no truth to measure them against
+        lines.append("")
+        lines.append(format_errors(c.position_rows))
     return "\n".join(lines)

@@ -43,7 +43,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "codegen": ("accelnav.cli.codegen", "generate the per-axis filter in C (fixed point or float32) and its manifest"),
     "record": ("accelnav.cli.record", "record a telemetry link (serial port, pty, socket://, loop://) to a log"),
     "log": ("accelnav.cli.record", "inspect or export a recorded log"),
-    "hil": ("accelnav.cli.hil", "run the firmware on simulated sensor data: SIL (cffi) or PIL (QEMU)"),
+    "hil": ("accelnav.cli.hil", "run the firmware on simulated data or your recording: SIL (cffi) or PIL (QEMU)"),
     "demo": ("accelnav.cli.demo", "the whole chain on the default model: warm-up, fit, codegen, SIL/PIL, smooth"),
 }
 ALL = "*"

@@ -50,7 +50,11 @@ def register(sub) -> None:
         f"recording, else the embedded {DEFAULT_MODEL.name}",
     )
     p.add_argument("--out", type=Path, required=True, metavar="OUT.toml", help="model file to write")
-    p.add_argument("--unit", default=None, help="unit of the acceleration columns: g, mg or m/s^2")
+    p.add_argument(
+        "--unit",
+        default=None,
+        help="unit of the acceleration columns: g, mg, m/s^2 or counts (raw read-out codes, converted by --model)",
+    )
     clock_args(p)
     p.add_argument("--time-column", default=None, metavar="NAME", help="time column; default: t, t_s, time, ...")
     p.add_argument("--min-pose", type=float, default=3.0, metavar="S", help="shortest still pose, s; default: 3")

@@ -1,9 +1,11 @@
-"""``accelnav hil``: the firmware on simulated data, in-process (SIL) or on an emulated board (PIL)."""
+"""``accelnav hil``: the firmware on simulated data or a user's recording, in-process (SIL) or on an emulated
+board (PIL)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from accelnav.cli.args import clock_args
 from accelnav.errors import UserError
 from accelnav.hil_sim.targets.qemu import MACHINES
 from accelnav.hil_sim.targets.simavr import BOARDS as AVR_BOARDS
@@ -11,11 +13,24 @@ from accelnav.model.load import DEFAULT_MODEL, load_model
 
 
 def register(sub) -> None:
-    p = sub.add_parser("hil", help="run the firmware on simulated sensor data: SIL (cffi) or PIL (QEMU)")
+    p = sub.add_parser("hil", help="run the firmware on simulated data or your recording: SIL (cffi) or PIL (QEMU)")
     p.add_argument("--model", type=Path, default=None, help=f"model file; default: the embedded {DEFAULT_MODEL.name}")
-    p.add_argument("--scenario", default="stop_and_go", help="trajectory (accelnav sim --list-scenarios)")
-    p.add_argument("--duration", type=float, default=20.0, help="seconds; default: 20")
-    p.add_argument("--seed", type=int, default=1, help="random seed; default: 1")
+    p.add_argument("--scenario", default=None, help="trajectory (accelnav sim --list-scenarios); default: stop_and_go")
+    p.add_argument("--duration", type=float, default=None, help="seconds; default: 20")
+    p.add_argument("--seed", type=int, default=None, help="random seed; default: 1")
+    p.add_argument(
+        "--input",
+        type=Path,
+        default=None,
+        metavar="REC",
+        help="your own recording instead of a simulation (CSV, gzip CSV, NPZ, run file or recorder log): "
+        "raw counts are fed as they are, an acceleration is read out as the sensor would; no truth, so no "
+        "position errors",
+    )
+    p.add_argument("--axis", action="append", metavar="NAME", help="--input: a column to use as an axis; repeat")
+    p.add_argument("--time-column", default=None, metavar="NAME", help="--input CSV: the time column")
+    clock_args(p)
+    p.add_argument("--unit", default=None, help="--input: unit of the acceleration columns, g, mg, m/s^2 or counts")
     p.add_argument(
         "--target", choices=("sil", "pil"), default="sil", help="sil: in-process; pil: QEMU, compared with SIL"
     )
@@ -44,14 +59,25 @@ def cmd_hil(args) -> int:
     if args.board is not None and args.target != "pil":
         raise UserError(f"--board {args.board}: a board is emulated only with --target pil")
     board = args.board or "mps2_an385"
-    model = load_model(args.model)
-    require_scenario(args.scenario)
-    try:
-        run = simulate(model, args.scenario, args.duration, args.seed)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
-    n = len(run.t)
-    print(f"model {model.name}, {model.sensor.kind} input, scenario {args.scenario}, {n} samples, seed {args.seed}")
+    if args.input is not None:
+        run, model = _recorded(args)
+        scenario = args.input.name
+        n = len(run.t)
+        print(f"model {model.name}, {model.sensor.kind} input, recording {args.input}, {n} samples")
+    else:
+        for flag in ("axis", "time_column", "rate", "time_unit", "unit"):
+            if getattr(args, flag) is not None:
+                raise UserError(f"--{flag.replace('_', '-')}: only with --input (a recording)")
+        scenario = args.scenario or "stop_and_go"
+        seed = 1 if args.seed is None else args.seed
+        model = load_model(args.model)
+        require_scenario(scenario)
+        try:
+            run = simulate(model, scenario, 20.0 if args.duration is None else args.duration, seed)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+        n = len(run.t)
+        print(f"model {model.name}, {model.sensor.kind} input, scenario {scenario}, {n} samples, seed {seed}")
     try:
         man = manifest(model.source)
         stim = hil.stimulus(man, run)
@@ -59,7 +85,7 @@ def cmd_hil(args) -> int:
         print(f"SIL: {n} samples in, {len(sil)} bytes of telemetry out ({len(sil) / max(n, 1):.1f} B per sample)")
         pil = None
         if args.target == "pil":
-            log = args.out / f"pil_{board}_{model.name}_{args.scenario}.acnlog"
+            log = args.out / f"pil_{board}_{model.name}_{_stem(scenario)}.acnlog"
             log.parent.mkdir(parents=True, exist_ok=True)
             with Progress("pil", n, unit="samples", enabled=None) as bar:
                 res = hil.run_pil(model, stim, n, log, board=board)
@@ -74,6 +100,31 @@ def cmd_hil(args) -> int:
     if args.plots is not None:
         from accelnav.plots.hil import plot_hil
 
-        path = plot_hil(run, c, args.plots / "hil.png", f"accelnav hil ({args.target}): {model.name}, {args.scenario}")
+        path = plot_hil(run, c, args.plots / "hil.png", f"accelnav hil ({args.target}): {model.name}, {scenario}")
         print(f"wrote {path}")
     return 0 if c.pil_equal_sil in (None, True) and c.max_of_bound <= 1.0 else 1
+
+
+def _recorded(args):
+    """(RecordedRun, model) of --input; the simulation's options make no sense beside it."""
+    from accelnav.hil_sim.targets.hil import recorded_input
+
+    for flag in ("scenario", "duration", "seed"):
+        if getattr(args, flag) is not None:
+            raise UserError(f"--{flag}: not with --input (the recording is the input)")
+    return recorded_input(
+        args.input,
+        args.model,
+        axes=args.axis,
+        time_column=args.time_column,
+        rate_hz=args.rate,
+        time_unit=args.time_unit,
+        unit=args.unit,
+    )
+
+
+def _stem(name: str) -> str:
+    """A recording's name as a safe part of the log's file name."""
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", name.split(".")[0])[:40] or "input"

@@ -35,6 +35,17 @@ def register(sub) -> None:
     p.add_argument("--no-commands", action="store_true", help="send nothing to the device (not even an info request)")
     p.add_argument("--force", action="store_true", help="overwrite an existing log")
     p.add_argument("--status", action="store_true", help="show the status line even when stderr is not a terminal")
+    p.add_argument(
+        "--live-plot",
+        nargs="?",
+        const=_LIVE_PORT,
+        type=int,
+        default=None,
+        metavar="PORT",
+        help=f"draw the raw acceleration and the firmware's position (last {RING_SECONDS:g} s) to OUT.live.png, "
+        f"redrawn twice a second, and serve it as a self-reloading page on http://127.0.0.1:PORT/ "
+        f"(default port {_LIVE_PORT}; 0: any free port)",
+    )
     p.set_defaults(func=cmd_record)
 
     p = sub.add_parser("log", help="inspect or export a recorded log")
@@ -49,8 +60,17 @@ def register(sub) -> None:
     q.add_argument("--out", type=Path, required=True, help="FILE.csv or FILE.npz")
     q.add_argument("--model", type=Path, help=_MODEL_HELP)
     q.set_defaults(func=cmd_log_export)
+    q = lsub.add_parser("plot", help="the live plot as it stood at the end of a log (raw acceleration, firmware r)")
+    q.add_argument("log", type=Path)
+    q.add_argument("--out", type=Path, required=True, help="FILE.png")
+    q.add_argument("--seconds", type=float, default=RING_SECONDS, help=f"seconds shown; default {RING_SECONDS:g}")
+    q.add_argument("--model", type=Path, help=_MODEL_HELP)
+    q.set_defaults(func=cmd_log_plot)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
+
+_LIVE_PORT = 8765
+RING_SECONDS = 10.0  # accelnav.plots.live.RING_SECONDS; not imported here: the parser stays light
 
 _MODEL_HELP = (
     "model file of a log recorded with --manifest (no model text in it): the compact frames' samples need it "
@@ -98,6 +118,9 @@ def cmd_record(args) -> int:
         commands = (("info", {}),)
         if args.decimate is not None:
             commands = (("decimate", {"factor": args.decimate}), ("start", {}), ("info", {}))
+    live = None
+    if args.live_plot is not None:
+        live = _live_view(args, man, model_text)
     try:
         rec = Recorder(
             args.port,
@@ -108,8 +131,11 @@ def cmd_record(args) -> int:
             commands=commands,
             overwrite=args.force,
             status=Status(enabled=True if args.status else None),
+            on_rows=live.plot.push if live is not None else None,
         )
     except (serial.SerialException, OSError, ValueError) as exc:
+        if live is not None:
+            live.close()
         raise UserError(f"{args.port}: cannot open: {exc}") from None
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: rec.stop())
@@ -117,6 +143,12 @@ def cmd_record(args) -> int:
         res = rec.run(duration=args.duration, max_frames=args.frames, give_up_after=args.give_up_after)
     finally:
         rec.close()
+        if live is not None:
+            live.close()
+    if live is not None:
+        print(f"accelnav record: live plot: {live.png} ({live.frames_drawn} redraws)")
+        if live.error:
+            print(f"accelnav record: warning: the live plot stopped: {live.error}; the recording went on")
     for w in res.warnings[:5]:
         print(f"accelnav record: warning: {w}")
     for g in res.gaps:
@@ -127,6 +159,39 @@ def cmd_record(args) -> int:
     if res.reason.startswith("log write failed"):
         print(f"accelnav record: error: {args.out}: {res.reason}; the recording ended there", file=sys.stderr)
     return 1 if res.reason.startswith(("link lost", "log write failed")) else 0
+
+
+def _live_view(args, man, model_text: str):
+    """The live plot beside the log, drawn from its own thread (the recorder never waits for it)."""
+    from accelnav.model.load import loads_model
+    from accelnav.plots.live import LivePlot, LiveView
+
+    if not 0 <= args.live_plot <= 65535:
+        raise UserError(f"--live-plot: port {args.live_plot}; accepted: 0 to 65535")
+    model = loads_model(model_text, source=str(args.model)) if model_text else None
+    png = args.out.with_name(args.out.name + ".live.png")
+    try:
+        view = LiveView(LivePlot(man, model), png, port=args.live_plot)
+    except OSError as exc:
+        raise UserError(f"--live-plot: 127.0.0.1:{args.live_plot}: cannot serve: {exc.strerror or exc}") from None
+    print(f"accelnav record: live plot: {view.url} (also {png})", file=sys.stderr)
+    return view.start()
+
+
+def cmd_log_plot(args) -> int:
+    from accelnav.plots.live import plot_log
+
+    if args.out.suffix.lower() != ".png":
+        raise UserError(f"--out: {args.out}: accepted: a .png file name")
+    if not args.seconds > 0:
+        raise UserError(f"--seconds: got {args.seconds}; accepted: more than 0")
+    check_output(args.out)
+    try:
+        plot = plot_log(args.log, args.out, _model_text(args), args.seconds)
+    except OSError as exc:
+        raise UserError(f"--out: {args.out}: cannot write: {exc.strerror or exc}") from None
+    print(f"accelnav log plot: {args.out}: the last {min(plot.pushed, plot.capacity)} of {plot.pushed} samples")
+    return 0
 
 
 def cmd_log_info(args) -> int:

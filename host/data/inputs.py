@@ -140,7 +140,10 @@ def _on_model(path, rec, model: Model | None, chosen: bool = False) -> tuple[Run
             f"{path}: {len(rec.axis_names)} axes ({', '.join(rec.columns)}) for the model's {len(names)} "
             f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
         )
+    said = len(rec.notes)
     rec = in_accel(rec, model)  # raw counts -> m/s^2 by the model's own read-out and calibration
+    for text in rec.notes[said:]:
+        note(text)
     bad = ~np.isfinite(rec.accel)
     if bad.any():
         k = int(np.argmax(bad.any(axis=1)))

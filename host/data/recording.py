@@ -207,7 +207,8 @@ def _read_npz(path: Path, axes, unit, rate_hz, default_unit=None) -> Recording:
         u = parse_unit(unit)
     elif "unit" in data:
         u = parse_unit(str(data["unit"][()]))
-    elif default_unit is not None:
+    elif default_unit is not None and default_unit != "counts":
+        # an NPZ's accel is in m/s^2 unless it says otherwise: raw counts only when asked (--unit, 'unit')
         u = parse_unit(default_unit)
     accel = accel * UNITS[u]
     cols = names
@@ -868,4 +869,6 @@ def in_accel(rec: Recording, model) -> Recording:
         accel[:, j] = conv.accel(codes)
         clipped[:, j] |= conv.clipped(np.where(finite, codes, 1))
     units = tuple("m/s^2" for _ in rec.units)
-    return replace(rec, accel=accel, clipped=clipped, units=units)
+    said = (f"{rec.source}: columns {', '.join(rec.columns)} read as raw ADC codes of {model.source} "
+            "(converted by its read-out and calibration; give --unit g or m/s^2 if they are not codes)")  # fmt: skip
+    return replace(rec, accel=accel, clipped=clipped, units=units, notes=rec.notes + (said,))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.recording import Recording, read_recording
+from accelnav.data.recording import Recording, in_accel, read_recording
 from accelnav.errors import UserError
 from accelnav.identify.calibrate import Calibration, CalibrationError, calibrate, detect_poses, native
 from accelnav.model.design import input_conversion
@@ -121,6 +121,10 @@ def calibrate_recording(
         base, label = model, str(model.source)
     else:
         base, label = base_model(None if model is None else Path(model), rec.model_toml, rec.source)
+    if "counts" in rec.units:
+        if model is None and rec.model_toml is None:
+            raise UserError(f"{rec.source}: raw counts need the model of their read-out: give --model")
+        rec = in_accel(rec, base)  # the model's own conversion (its current zero-g and sensitivity), as the firmware's
     names = tuple(a.name for a in base.axes)
     missing = [n for n in names if n not in rec.axis_names]
     if missing:

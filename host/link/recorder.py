@@ -126,8 +126,10 @@ class Recorder:
         overwrite: bool = False,
         flush_s: float = 0.1,
         status: Status | None = None,
+        on_rows=None,
     ):
         self.man = manifest
+        self.on_rows = on_rows  # called with each batch of decoded sample rows (a live plot): must be quick
         self.baud = baud
         self.reopen = isinstance(port, str)  # a URL can be opened again after the link is lost
         if isinstance(port, str):
@@ -224,6 +226,8 @@ class Recorder:
                     if len(batch["info"]):
                         self._check_info(batch["info"])
                     rows = batch["sample"]
+                    if self.on_rows is not None and len(rows):
+                        self.on_rows(rows)
                     if pending is not None and self.decoder.compact is not None and pending["index_before"] is not None:
                         rows = rows[rows["index"] > pending["index_before"]]  # not rows held from before the gap
                     if pending is not None and len(rows):
@@ -245,7 +249,9 @@ class Recorder:
             reason = f"log write failed: {exc.strerror or exc}"  # a full disk: end here, the log stays readable
         finally:
             self.log.close()
-            end_of_stream(self.decoder)  # as every reader of the log ends it: the same counts
+            rest = end_of_stream(self.decoder)  # as every reader of the log ends it: the same counts
+            if self.on_rows is not None and len(rest):
+                self.on_rows(rest)
             self.status.note = ""
             self.status.update(time.monotonic() - t0, self.decoder, final=True)
         return Result(reason, time.monotonic() - t0, self.decoder.stats.as_dict(), self.info_ok, self.warnings, gaps)
@@ -264,7 +270,9 @@ class Recorder:
             data = data if k < 0 else data[: k + 1]
             if data:
                 self.log.append(data, time.time_ns())
-                self.decoder.feed(data)
+                rows = self.decoder.feed(data)["sample"]
+                if self.on_rows is not None and len(rows):
+                    self.on_rows(rows)
 
     def _read(self) -> bytes:
         """What the link has (at most 64 KiB), waiting up to the port's timeout for the first byte."""

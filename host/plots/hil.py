@@ -12,15 +12,16 @@ from accelnav.plots.run import pyplot
 
 def plot_hil(run, c, path: Path, title: str) -> Path:
     """Per axis: position of the truth, the firmware's filter, the smoother with and without ZUPTs (top), and
-    the firmware's distance from the float64 filter in units of its sigma (bottom). ``run`` is the SimRun,
-    ``c`` the :func:`accelnav.hil_sim.targets.hil.compare` result."""
+    the firmware's distance from the float64 filter in units of its sigma (bottom). ``run``: a SimRun or a
+    RecordedRun (no truth), ``c`` the :func:`accelnav.hil_sim.targets.hil.compare` result."""
     plt = pyplot()
     t = run.t
     n_axes = len(run.axis_names)
     fig, axes = plt.subplots(2, n_axes, figsize=(6.5 * n_axes, 7), sharex=True, squeeze=False)
     for j, name in enumerate(run.axis_names):
         ax = axes[0, j]
-        ax.plot(t, run.r[:, j], color="black", lw=1.6, label="truth")
+        if run.r is not None:  # a recording has no truth
+            ax.plot(t, run.r[:, j], color="black", lw=1.6, label="truth")
         ax.plot(t, c.fw["r"][:, j], color="tab:blue", lw=1.2, label="firmware filter")
         ax.plot(t, c.smooth_x[j, :, 0], color="tab:red", lw=1.0, ls="--", label="smoother")
         ax.plot(t, c.zupt_x[j, :, 0], color="tab:green", lw=1.2, label="smoother + ZUPT")
