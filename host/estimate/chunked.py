@@ -231,6 +231,9 @@ class _Axis:
     Pf0: np.ndarray = field(default_factory=lambda: np.zeros(10))
     Pfn: np.ndarray = field(default_factory=lambda: np.zeros(10))
     xfn: np.ndarray = field(default_factory=lambda: np.zeros(4))  # the run's last filter mean
+    # plain path: the stored transient (fastsmooth.steady_gains), used while every sample so far was valid
+    # (the forward rows depend on the mask's prefix only); None after the first invalid one
+    steady: fastsmooth.SteadyGains | None = None
 
     def extras_in(self, s: int, e: int) -> slice:
         """The sorted extras of samples s..e-1."""
@@ -335,7 +338,8 @@ def smooth_bounded(
             eg = np.zeros(ne) if g is None else np.asarray(g, dtype=np.float64).reshape(ne)[ex.order]
             axes.append(
                 _Axis(d, fastsmooth._axis_struct(ffi, d), fd, GROW if general[j] else ROW, cf,
-                      ex, np.ascontiguousarray(eg), np.zeros(max(ne, 1), dtype=np.uint8))
+                      ex, np.ascontiguousarray(eg), np.zeros(max(ne, 1), dtype=np.uint8),
+                      steady=None if general[j] else fastsmooth.steady_gains(d))
             )  # fmt: skip
         starts = list(range(0, n, chunk))
         store = np.empty((chunk + 1) * GROW)
@@ -373,11 +377,21 @@ def smooth_bounded(
                         p(ffi, xa, "double *"), p(ffi, sa, "double *"),
                     )  # fmt: skip
                 else:
-                    rc = lib.acn_chunk_fwd(
-                        ax.m, s, m, last, p(ffi, zc, "double *"), p(ffi, vm, "unsigned char *"),
-                        p(ffi, ax.carry_f, "double *"), p(ffi, buf, "double *"), p(ffi, xa, "double *"),
-                        p(ffi, sa, "double *"), p(ffi, ax.Pf0, "double *"), p(ffi, ax.Pfn, "double *"),
-                    )  # fmt: skip
+                    if ax.steady is not None and not ok.all():
+                        ax.steady = None  # from here on the covariances differ from the all-valid ones
+                    if ax.steady is not None:
+                        sr = ax.steady.rows
+                        rc = lib.acn_chunk_fwd_steady(
+                            ax.m, s, m, last, p(ffi, zc, "double *"), p(ffi, sr, "double *"), len(sr),
+                            p(ffi, ax.carry_f, "double *"), p(ffi, buf, "double *"), p(ffi, xa, "double *"),
+                            p(ffi, sa, "double *"), p(ffi, ax.Pf0, "double *"), p(ffi, ax.Pfn, "double *"),
+                        )  # fmt: skip
+                    else:
+                        rc = lib.acn_chunk_fwd(
+                            ax.m, s, m, last, p(ffi, zc, "double *"), p(ffi, vm, "unsigned char *"),
+                            p(ffi, ax.carry_f, "double *"), p(ffi, buf, "double *"), p(ffi, xa, "double *"),
+                            p(ffi, sa, "double *"), p(ffi, ax.Pf0, "double *"), p(ffi, ax.Pfn, "double *"),
+                        )  # fmt: skip
                     if rc != 0:
                         raise UserError(f"bounded smoother: the (a, eps) prior covariance is singular at sample {-rc}")
                 _pwrite(ax.store, buf, 8 * ax.width * s)

@@ -109,6 +109,9 @@ static const double H_ACC[4] = {0.0, 0.0, 1.0, 1.0};
 /* ------------------------------------------------------------------------- */
 /* Plain path, data-independent part: gains, covariances, smoother gains.      */
 
+static int plain_smooth_cov(const acn_axis *m, long n, double *Cs, long stride, long ncs,
+                            int write_cs, const double *Pprior, const double *Ppost, double *Psm);
+
 int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double *K, double *Cs,
                   double *Pprior, double *Ppost, double *Psm)
 {
@@ -130,15 +133,103 @@ int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double 
         pack(P, Ppost + 10 * k);
     }
 
+    return plain_smooth_cov(m, n, Cs, 4, n, 1, Pprior, Ppost, Psm);
+}
+
+/*
+ * The forward rows of an all-valid run, ACN_SROW doubles per sample k:
+ *   0..3 K[k]   4..7 C[k] (0 at the last sample)   8..10 prior aa ae ee   11..13 posterior aa ae ee
+ * the numbers acn_plain_cov computes, none of which depends on the run's length.
+ */
+int acn_plain_rows(const acn_axis *m, long n, double *rows)
+{
+    double F[4][4], P[4][4], x[4] = {0.0, 0.0, 0.0, 0.0}, S;
+    const double phi = m->phi;
+    transition(m, F);
+    unpack(m->p0, P);
+    for (long k = 0; k < n; k++) {
+        double *row = rows + ACN_SROW * k;
+        if (k > 0)
+            predict_cov(m, F, P);
+        row[8] = P[2][2], row[9] = P[2][3], row[10] = P[3][3];
+        if (k > 0) { /* C[k-1] = Pf[k-1] Fs' inv(Pp[k]), as in acn_plain_cov */
+            double *prev = row - ACN_SROW;
+            double paa = prev[11], pae = prev[12], pee = prev[13];
+            double qaa = row[8], qae = row[9], qee = row[10];
+            double sa = sqrt(qaa), se = sqrt(qee);
+            double rho = qae / (sa * se);
+            double det = (1.0 - rho * rho) * qaa * qee;
+            if (!(det > 0.0))
+                return -(int)(k > 1000000000L ? 1000000000L : k);
+            double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee;
+            prev[4] = (m00 * qee - m01 * qae) / det, prev[5] = (m01 * qaa - m00 * qae) / det;
+            prev[6] = (m10 * qee - m11 * qae) / det, prev[7] = (m11 * qaa - m10 * qae) / det;
+        }
+        update(x, P, H_ACC, 0.0, m->R, &S, row);
+        row[11] = P[2][2], row[12] = P[2][3], row[13] = P[3][3];
+    }
+    double *lastrow = rows + ACN_SROW * (n - 1);
+    lastrow[4] = lastrow[5] = lastrow[6] = lastrow[7] = 0.0;
+    return 0;
+}
+
+/*
+ * acn_plain_cov of an all-valid run from the rows of acn_plain_rows: sample k
+ * reads row min(k, nt - 1), the last stored row being steady (the caller checks
+ * that). The (a, eps) blocks come from the rows; the r, u rows of P (which never
+ * settle: r, u are not observable) are propagated with the row's gain,
+ *   P = F P F' + Q;  P_ij -= K_i (P H')_j + (P H')_i K_j - K_i K_j S   (i in r, u)
+ * which is the Joseph update expanded (K = P H' / S). No 4x4 Joseph update per
+ * sample: what made acn_plain_cov the largest cost of a run.
+ */
+int acn_plain_cov_steady(const acn_axis *m, long n, long nt, const double *rows, double *Pprior,
+                         double *Ppost, double *Psm)
+{
+    double F[4][4], P[4][4], PHt[4];
+    transition(m, F);
+    unpack(m->p0, P);
+    for (long k = 0; k < n; k++) {
+        const double *row = rows + ACN_SROW * (k < nt ? k : nt - 1);
+        if (k > 0)
+            predict_cov(m, F, P);
+        P[2][2] = row[8], P[2][3] = P[3][2] = row[9], P[3][3] = row[10];
+        pack(P, Pprior + 10 * k);
+        /* S = H P H' + R */
+        double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
+        for (int i = 0; i < 4; i++)
+            PHt[i] = P[i][2] + P[i][3];
+        for (int i = 0; i < 2; i++)
+            for (int j = i; j < 4; j++) {
+                P[i][j] -= row[i] * PHt[j] + PHt[i] * row[j] - row[i] * row[j] * S;
+                P[j][i] = P[i][j];
+            }
+        P[2][2] = row[11], P[2][3] = P[3][2] = row[12], P[3][3] = row[13];
+        pack(P, Ppost + 10 * k);
+    }
+    return plain_smooth_cov(m, n, (double *)rows + 4, ACN_SROW, nt, 0, Pprior, Ppost, Psm);
+}
+
+/*
+ * The smoother's covariances from the filter's (Pprior, Ppost): the (a, eps)
+ * block backward, then the r, u rows forward. The smoother gain of sample k is
+ * computed backward (written to Cs[k] if write_cs) and read forward from row
+ * min(k, ncs - 1) of Cs, rows stride doubles apart (ncs < n: a stored
+ * transient whose last row is steady).
+ */
+static int plain_smooth_cov(const acn_axis *m, long n, double *Cs, long stride, long ncs,
+                            int write_cs, const double *Pprior, const double *Ppost, double *Psm)
+{
     /* Backward: the 2-state RTS smoother of s = (a, eps), Fs = diag(1, phi). */
     const double phi = m->phi;
     double *last = Psm + 10 * (n - 1);
     for (int i = 0; i < 10; i++)
         last[i] = Ppost[10 * (n - 1) + i];
-    Cs[4 * (n - 1) + 0] = Cs[4 * (n - 1) + 1] = Cs[4 * (n - 1) + 2] = Cs[4 * (n - 1) + 3] = 0.0;
+    if (write_cs)
+        Cs[stride * (n - 1) + 0] = Cs[stride * (n - 1) + 1] = Cs[stride * (n - 1) + 2] =
+            Cs[stride * (n - 1) + 3] = 0.0;
     for (long k = n - 2; k >= 0; k--) {
         const double *pf = Ppost + 10 * k, *pp = Pprior + 10 * (k + 1), *s1 = Psm + 10 * (k + 1);
-        double *ps = Psm + 10 * k, *C = Cs + 4 * k;
+        double *ps = Psm + 10 * k;
         double paa = pf[7], pae = pf[8], pee = pf[9];
         double qaa = pp[7], qae = pp[8], qee = pp[9];
         /* C = Pf Fs' inv(Pp), inv(Pp) = [qee, -qae; -qae, qaa] / det, det on the equilibrated Pp */
@@ -150,7 +241,9 @@ int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double 
         double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee; /* Pf Fs' */
         double c00 = (m00 * qee - m01 * qae) / det, c01 = (m01 * qaa - m00 * qae) / det;
         double c10 = (m10 * qee - m11 * qae) / det, c11 = (m11 * qaa - m10 * qae) / det;
-        C[0] = c00, C[1] = c01, C[2] = c10, C[3] = c11;
+        if (write_cs)
+            Cs[stride * k + 0] = c00, Cs[stride * k + 1] = c01, Cs[stride * k + 2] = c10,
+                            Cs[stride * k + 3] = c11;
         /* Ps = Pf + C (Ps[k+1] - Pp) C' */
         double daa = s1[7] - qaa, dae = s1[8] - qae, dee = s1[9] - qee;
         double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
@@ -182,7 +275,7 @@ int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double 
         }
     }
     for (long k = 0; k + 1 < n; k++) {
-        const double *p = Psm + 10 * k, *C = Cs + 4 * k;
+        const double *p = Psm + 10 * k, *C = Cs + stride * (k < ncs ? k : ncs - 1);
         double *q = Psm + 10 * (k + 1);
         double rr = p[0], ru = p[1], ra = p[2], uu = p[4], ua = p[5], aa = p[7];
         /* Var and Cov of p_r, p_u (time-k quantities) */
@@ -218,7 +311,7 @@ int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double 
 /* RTS means, then r, u of the smoother in closed form.                        */
 
 void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned char *valid,
-                    const double *K, const double *Cs, double *xf, double *xs)
+                    const double *K, const double *Cs, long stride, long nk, double *xf, double *xs)
 {
     const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
     const double gr = m->gr, gu = m->gu;
@@ -232,7 +325,7 @@ void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned c
      * (the same numbers up to rounding).
      */
     for (long k = 0; k < n; k++) {
-        const double *Kk = K + 4 * k;
+        const double *Kk = K + stride * (k < nk ? k : nk - 1); /* steady after row nk - 1 */
         double ep = e;
         if (k > 0) {
             r = r + f01 * u + f02 * a;
@@ -258,7 +351,7 @@ void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned c
     double as = xf[4 * (n - 1) + 2], es = xf[4 * (n - 1) + 3];
     xs[4 * (n - 1) + 2] = as, xs[4 * (n - 1) + 3] = es;
     for (long k = n - 2; k >= 0; k--) {
-        const double *f = xf + 4 * k, *C = Cs + 4 * k;
+        const double *f = xf + 4 * k, *C = Cs + stride * (k < nk ? k : nk - 1);
         /* = C s[k+1] + (s_post[k] - C (Fs s_post[k] + b)): the chain through s is one mul-add */
         double fa = f[2], fe = phi * f[3] + b;
         double ca = f[2] - (C[0] * fa + C[1] * fe), ce = f[3] - (C[2] * fa + C[3] * fe);
@@ -525,6 +618,72 @@ int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
         row[2] = (m00 * qee - m01 * qae) / det, row[3] = (m01 * qaa - m00 * qae) / det;
         row[4] = (m10 * qee - m11 * qae) / det, row[5] = (m11 * qaa - m10 * qae) / det;
         row[9] = qaa, row[10] = qae, row[11] = qee;
+    }
+    carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
+    pack(P, carry + 4);
+    return 0;
+}
+
+/*
+ * acn_chunk_fwd for a chunk of valid samples that follows only valid ones, from
+ * the rows of acn_plain_rows (nt of them, the last steady): the gains, smoother
+ * gains and (a, eps) blocks are read, the r, u rows of P propagated as in
+ * acn_plain_cov_steady. Same arguments otherwise, same store rows and outputs.
+ */
+int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
+                         const double *srows, long nt, double *carry, double *store, double *xf,
+                         double *sdf, double *Pf0, double *Pfn)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    double F[4][4], P[4][4], PHt[4];
+    double r = carry[0], u = carry[1], a = carry[2], ep = carry[3], e;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (long k = 0; k < n; k++) {
+        long g = k0 + k;
+        const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
+        double *row = store + ACN_ROW * k;
+        /* the prior's (a, eps) block is the stored one (as acn_plain_cov_steady) */
+        P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9], P[3][3] = sr[10];
+        double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
+        for (int i = 0; i < 4; i++)
+            PHt[i] = P[i][2] + P[i][3];
+        for (int i = 0; i < 2; i++)
+            for (int j = i; j < 4; j++) {
+                P[i][j] -= sr[i] * PHt[j] + PHt[i] * sr[j] - sr[i] * sr[j] * S;
+                P[j][i] = P[i][j];
+            }
+        P[2][2] = sr[11], P[2][3] = P[3][2] = sr[12], P[3][3] = sr[13];
+        /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
+        double y = z[k] - a - ep;
+        r += sr[0] * y;
+        u += sr[1] * y;
+        double ka = sr[2], ke = sr[3], zk = z[k];
+        double an = (a - ka * a) + ka * (zk - ep);
+        e = (ep - ke * ep) + ke * (zk - a);
+        a = an;
+        double *o = xf + 4 * k, *sd = sdf + 4 * k;
+        o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        for (int i = 0; i < 4; i++)
+            sd[i] = sqrt(P[i][i]);
+        if (g == 0)
+            pack(P, Pf0);
+        row[0] = a, row[1] = e;
+        row[6] = P[2][2], row[7] = P[2][3], row[8] = P[3][3];
+        if (last && k == n - 1) {
+            pack(P, Pfn);
+            for (int i = 2; i < 6; i++)
+                row[i] = 0.0;
+            row[9] = row[10] = row[11] = 0.0;
+            break;
+        }
+        predict_cov(m, F, P);
+        r = r + f01 * u + f02 * a;
+        u = u + f12 * a;
+        ep = phi * e + b;
+        const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
+        row[2] = sr[4], row[3] = sr[5], row[4] = sr[6], row[5] = sr[7];
+        row[9] = sn[8], row[10] = sn[9], row[11] = sn[10];
     }
     carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
     pack(P, carry + 4);
