@@ -339,7 +339,7 @@ def smooth_bounded(
             axes.append(
                 _Axis(d, fastsmooth._axis_struct(ffi, d), fd, GROW if general[j] else ROW, cf,
                       ex, np.ascontiguousarray(eg), np.zeros(max(ne, 1), dtype=np.uint8),
-                      steady=None if general[j] else fastsmooth.steady_gains(d))
+                      steady=None if general[j] else fastsmooth.steady_gains(d, n))
             )  # fmt: skip
         starts = list(range(0, n, chunk))
         store = np.empty((chunk + 1) * GROW)

@@ -279,7 +279,7 @@ def clear_gain_cache() -> None:
 def _compute_gains(d: AxisDesign, n: int, valid: np.ndarray | None, key: str, steady: bool = True) -> PlainGains:
     _check_p0(d)
     if valid is None and steady:
-        st = steady_gains(d)
+        st = steady_gains(d, n)
         if st is not None:
             return _from_steady(d, n, st, key)
     mod = _lib()
@@ -333,6 +333,9 @@ class SteadyGains:
 
     key: str
     rows: np.ndarray  # (nt, SROW)
+    # False: the rows of one run too short to show the steady state (nt = its N, every row exact for it);
+    # such rows are never cached, since a longer run would take their last row for a steady one
+    settled: bool = True
 
 
 SROW = 14  # csrc/fastsmooth.h ACN_SROW
@@ -388,6 +391,7 @@ def _plain_rows(d: AxisDesign, n: int) -> np.ndarray:
 
 
 def _probe_steady(d: AxisDesign, key: str, probe_max: int) -> SteadyGains | None:
+    """Rows up to the steady state, probing at most ``probe_max`` rows (doubling from _PROBE0)."""
     n = min(_PROBE0, probe_max)
     while True:
         rows = _plain_rows(d, n)
@@ -401,10 +405,16 @@ def _probe_steady(d: AxisDesign, key: str, probe_max: int) -> SteadyGains | None
         n = min(2 * n, probe_max)
 
 
-def steady_gains(d: AxisDesign, *, cache_dir: Path | None = None) -> SteadyGains | None:
-    """The steady rows of ``d`` (None when it does not settle within PROBE_MAX samples): from memory,
-    else from ``cache_dir`` (default :func:`steady_cache_dir`) if the file checks out, else computed
-    once and written there atomically. A damaged or foreign file is ignored and replaced."""
+def steady_gains(d: AxisDesign, n: int | None = None, *, cache_dir: Path | None = None) -> SteadyGains | None:
+    """The steady rows of ``d`` for a run of ``n`` samples (None: any length): from memory, else from
+    ``cache_dir`` (default :func:`steady_cache_dir`) if the file checks out, else computed once and written
+    there atomically. A damaged or foreign file is ignored and replaced (it is a cache: never trusted).
+
+    Never more rows than the run has: a run of n <= PROBE_MAX samples computes its n rows once; if they
+    show the steady state (n >= _PROBE0 at least) it is kept as for any run, else they are returned
+    unsettled (exact for this run, not kept). None when the design does not settle within PROBE_MAX
+    samples (per-run gains then).
+    """
     key = steady_key(d)
     with _cache_lock:
         if key in _STEADY:
@@ -413,7 +423,17 @@ def steady_gains(d: AxisDesign, *, cache_dir: Path | None = None) -> SteadyGains
     cache_dir = Path(cache_dir) if cache_dir is not None else steady_cache_dir()
     path = cache_dir / f"steady-{key}.bin"
     st = _load_steady(path, key)
-    if st is None:
+    if st is None and n is not None and n <= PROBE_MAX:
+        rows = _plain_rows(d, int(n))
+        nt = steady_len(rows) if n >= _PROBE0 else None  # a shorter run cannot show a steady state
+        if nt is None:  # this run ends inside the transient: its own rows, kept by nobody
+            rows.flags.writeable = False
+            return SteadyGains(key, rows, settled=False)
+        rows = np.array(rows[:nt])
+        rows.flags.writeable = False
+        st = SteadyGains(key, rows)
+        _save_steady(path, st)
+    elif st is None:
         st = _probe_steady(d, key, PROBE_MAX)
         if st is not None:
             _save_steady(path, st)

@@ -195,3 +195,38 @@ def test_the_key_follows_what_the_rows_depend_on(fast_design):
     g = fs.plain_gains(moved, n)
     ref = fs.plain_gains(moved, n, steady=False)
     _assert_same(g, ref, moved, _z(moved, n), "shifted x0, b")
+
+
+def test_a_run_shorter_than_the_transient_computes_only_its_own_rows(fast_design, monkeypatch):
+    """Fails on the unbounded probe: it computed 2^17 rows or more for any run, and kept them."""
+    calls = []
+    real = fs._plain_rows
+    monkeypatch.setattr(fs, "_plain_rows", lambda d, n: calls.append(n) or real(d, n))
+    n = 300
+    g = fs.plain_gains(fast_design, n)
+    assert calls == [n] and len(g.K) == n and g.rows is not None
+    assert not list(fs.steady_cache_dir().glob("steady-*.bin"))  # unsettled rows are nobody's steady state
+    _assert_same(g, fs.plain_gains(fast_design, n, steady=False), fast_design, _z(fast_design, n), "short")
+    fs.clear_gain_cache()
+    assert len(fs.plain_gains(fast_design, 5 * n).K) == 5 * n  # a longer run is not given the short one's rows
+
+
+def test_a_run_longer_than_the_probe_is_steady_and_equals_the_full_computation(fast_design, monkeypatch):
+    monkeypatch.setattr(fs, "_PROBE0", 1024)
+    monkeypatch.setattr(fs, "PROBE_MAX", 4096)
+    n = 3 * 4096 + 5
+    g = fs.plain_gains(fast_design, n)
+    assert g.rows is not None and len(g.K) < 4096 and fs.steady_gains(fast_design).settled
+    assert len(list(fs.steady_cache_dir().glob("steady-*.bin"))) == 1
+    _assert_same(g, fs.plain_gains(fast_design, n, steady=False), fast_design, _z(fast_design, n), "long")
+
+
+def test_a_run_within_the_probe_settles_from_its_own_rows(fast_design, monkeypatch):
+    monkeypatch.setattr(fs, "_PROBE0", 1024)
+    calls = []
+    real = fs._plain_rows
+    monkeypatch.setattr(fs, "_plain_rows", lambda d, n: calls.append(n) or real(d, n))
+    n = 5000
+    g = fs.plain_gains(fast_design, n)
+    assert calls == [n] and len(g.K) < n and fs.steady_gains(fast_design).settled
+    _assert_same(g, fs.plain_gains(fast_design, n, steady=False), fast_design, _z(fast_design, n), "within")
