@@ -628,7 +628,10 @@ int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
  * acn_chunk_fwd for a chunk of valid samples that follows only valid ones, from
  * the rows of acn_plain_rows (nt of them, the last steady): the gains, smoother
  * gains and (a, eps) blocks are read, the r, u rows of P propagated as in
- * acn_plain_cov_steady. Same arguments otherwise, same store rows and outputs.
+ * acn_plain_cov_steady. Same arguments and outputs, but a lean store of
+ * ACN_LROW doubles per sample: the filter's a, eps (0, 1); acn_chunk_bwd_lean
+ * adds the smoothed ones and their covariance (0..4). Everything else the
+ * backward passes need is data-independent: they read it from the rows.
  */
 int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
                          const double *srows, long nt, double *carry, double *store, double *xf,
@@ -642,7 +645,7 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
     for (long k = 0; k < n; k++) {
         long g = k0 + k;
         const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
-        double *row = store + ACN_ROW * k;
+        double *row = store + ACN_LROW * k;
         /* the prior's (a, eps) block is the stored one (as acn_plain_cov_steady) */
         P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9], P[3][3] = sr[10];
         double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
@@ -669,25 +672,63 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
         if (g == 0)
             pack(P, Pf0);
         row[0] = a, row[1] = e;
-        row[6] = P[2][2], row[7] = P[2][3], row[8] = P[3][3];
         if (last && k == n - 1) {
             pack(P, Pfn);
-            for (int i = 2; i < 6; i++)
-                row[i] = 0.0;
-            row[9] = row[10] = row[11] = 0.0;
             break;
         }
         predict_cov(m, F, P);
         r = r + f01 * u + f02 * a;
         u = u + f12 * a;
         ep = phi * e + b;
-        const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
-        row[2] = sr[4], row[3] = sr[5], row[4] = sr[6], row[5] = sr[7];
-        row[9] = sn[8], row[10] = sn[9], row[11] = sn[10];
     }
     carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
     pack(P, carry + 4);
     return 0;
+}
+
+/*
+ * acn_chunk_bwd over a lean store (acn_chunk_fwd_steady's) of samples k0 ..
+ * k0 + n - 1: the smoother gain, the filter's (a, eps) covariance and the next
+ * prior's from the rows (row min(k, nt - 1)), the same operations in the same
+ * order as acn_chunk_bwd. Writes the smoothed a, eps, P_aa, P_ae, P_ee into the
+ * store row; carry as in acn_chunk_bwd.
+ */
+void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
+                        double *store, double *carry)
+{
+    const double phi = m->phi, b = m->b_eps;
+    double as = carry[0], es = carry[1], saa = carry[2], sae = carry[3], see = carry[4];
+    long k = n - 1;
+    if (last) { /* the run's last sample is the filter's */
+        double *row = store + ACN_LROW * k;
+        const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
+        as = row[0], es = row[1], saa = sr[11], sae = sr[12], see = sr[13];
+        row[2] = saa, row[3] = sae, row[4] = see;
+        k--;
+    }
+    for (; k >= 0; k--) {
+        double *row = store + ACN_LROW * k;
+        long g = k0 + k;
+        const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
+        const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
+        double c00 = sr[4], c01 = sr[5], c10 = sr[6], c11 = sr[7];
+        /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
+        double fa = row[0], fe = phi * row[1] + b;
+        double ca = row[0] - (c00 * fa + c01 * fe), ce = row[1] - (c10 * fa + c11 * fe);
+        double an = c00 * as + c01 * es + ca;
+        es = c10 * as + c11 * es + ce;
+        as = an;
+        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
+        double daa = saa - sn[8], dae = sae - sn[9], dee = see - sn[10];
+        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
+        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
+        double paa = sr[11], pae = sr[12], pee = sr[13];
+        saa = paa + t00 * c00 + t01 * c01;
+        sae = pae + t00 * c10 + t01 * c11;
+        see = pee + t10 * c10 + t11 * c11;
+        row[0] = as, row[1] = es, row[2] = saa, row[3] = sae, row[4] = see;
+    }
+    carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
 }
 
 /*
@@ -729,6 +770,46 @@ void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *c
 }
 
 /*
+ * One step of the smoothed r, u recursion of acn_plain_cov, term by term:
+ * v = (r, u, P_rr, P_ru, P_ra, P_uu, P_ua, beta_r (2), beta_u (2)) of sample k
+ * to sample k + 1, from the smoothed a, P_aa at k, a, P_aa, P_ae at k + 1 and
+ * the smoother gain C[k].
+ */
+static void ru_step(const acn_axis *m, double v[11], double a0, double aa, double a1, double aa1,
+                    double ae1, const double *C)
+{
+    const double gr = m->gr, gu = m->gu, f01 = m->f01, f02 = m->f02, f12 = m->f12;
+    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
+    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
+    const double qe_uu = m->q[4] - gu * m->q[5];
+    double r = v[0], u = v[1], rr = v[2], ru = v[3], ra = v[4], uu = v[5], ua = v[6];
+    double br0 = v[7], br1 = v[8], bu0 = v[9], bu1 = v[10];
+    double vpr =
+        rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
+    double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
+    double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
+    double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
+    double pu0 = bu0 + c2u, pu1 = bu1;
+    double gr0 = C[0] * pr0 + C[2] * pr1, gr1 = C[1] * pr0 + C[3] * pr1;
+    double gu0 = C[0] * pu0 + C[2] * pu1, gu1 = C[1] * pu0 + C[3] * pu1;
+    double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1;
+    br0 = gr0 + gr, br1 = gr1;
+    bu0 = gu0 + gu, bu1 = gu1;
+    double rr1 = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
+    double uu1 = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
+    ru = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
+    rr = rr1, uu = uu1;
+    ra = br0 * aa1 + br1 * ae1;
+    ua = bu0 * aa1 + bu1 * ae1;
+    /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise */
+    double dw = a1 - a0;
+    r = r + (f01 * u + (f02 * a0 + gr * dw));
+    u = u + (f12 * a0 + gu * dw);
+    v[0] = r, v[1] = u, v[2] = rr, v[3] = ru, v[4] = ra, v[5] = uu, v[6] = ua;
+    v[7] = br0, v[8] = br1, v[9] = bu0, v[10] = bu1;
+}
+
+/*
  * Forward pass of smoothed r, u over n samples of one chunk: writes xs and the
  * standard deviations sds (n x 4) of each, reading store rows 0 .. n (row n is
  * the next chunk's first; the run's last sample is the caller's, the filter's).
@@ -738,46 +819,27 @@ void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *c
 void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
                   double *sds)
 {
-    const double gr = m->gr, gu = m->gu, f01 = m->f01, f02 = m->f02, f12 = m->f12;
-    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
-    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
-    const double qe_uu = m->q[4] - gu * m->q[5];
-    double r = carry[0], u = carry[1], rr = carry[2], ru = carry[3], ra = carry[4];
-    double uu = carry[5], ua = carry[6];
-    double br0 = carry[7], br1 = carry[8], bu0 = carry[9], bu1 = carry[10];
     for (long k = 0; k < n; k++) {
         const double *row = store + ACN_ROW * k, *nx = row + ACN_ROW;
         double *o = xs + 4 * k, *sd = sds + 4 * k;
-        o[0] = r, o[1] = u, o[2] = row[0], o[3] = row[1];
-        sd[0] = sqrt(rr), sd[1] = sqrt(uu), sd[2] = sqrt(row[6]), sd[3] = sqrt(row[8]);
-        /* the covariance recursion of acn_plain_cov, term by term */
-        double aa = row[6];
-        double vpr =
-            rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
-        double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
-        double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
-        double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
-        double pu0 = bu0 + c2u, pu1 = bu1;
-        double gr0 = row[2] * pr0 + row[4] * pr1, gr1 = row[3] * pr0 + row[5] * pr1;
-        double gu0 = row[2] * pu0 + row[4] * pu1, gu1 = row[3] * pu0 + row[5] * pu1;
-        double aa1 = nx[6], ae1 = nx[7];
-        double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1;
-        br0 = gr0 + gr, br1 = gr1;
-        bu0 = gu0 + gu, bu1 = gu1;
-        double rr1 = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
-        double uu1 = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
-        ru = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
-        rr = rr1, uu = uu1;
-        ra = br0 * aa1 + br1 * ae1;
-        ua = bu0 * aa1 + bu1 * ae1;
-        /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise */
-        double a0 = row[0], a1 = nx[0];
-        double dw = a1 - a0;
-        r = r + (f01 * u + (f02 * a0 + gr * dw));
-        u = u + (f12 * a0 + gu * dw);
+        o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(row[6]), sd[3] = sqrt(row[8]);
+        ru_step(m, carry, row[0], row[6], nx[0], nx[6], nx[7], row + 2);
     }
-    carry[0] = r, carry[1] = u, carry[2] = rr, carry[3] = ru, carry[4] = ra;
-    carry[5] = uu, carry[6] = ua, carry[7] = br0, carry[8] = br1, carry[9] = bu0, carry[10] = bu1;
+}
+
+/* acn_chunk_ru over a lean store (after acn_chunk_bwd_lean) of samples k0 .., C from the rows. */
+void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *srows,
+                       long nt, double *carry, double *xs, double *sds)
+{
+    for (long k = 0; k < n; k++) {
+        const double *row = store + ACN_LROW * k, *nx = row + ACN_LROW;
+        const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
+        double *o = xs + 4 * k, *sd = sds + 4 * k;
+        o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(row[2]), sd[3] = sqrt(row[4]);
+        ru_step(m, carry, row[0], row[2], nx[0], nx[2], nx[3], sr + 4);
+    }
 }
 
 /* ------------------------------------------------------------------------- */
