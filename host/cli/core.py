@@ -314,8 +314,42 @@ def cmd_sim(args) -> int:
     return 0
 
 
+# keys of a run the streaming path writes again (the recording's) or recomputes (a previous stage's output)
+_STREAM_KEYS = {"t", "accel", "clipped", "axis_names", "format", "model_toml", "model_source"}
+_STAGE_KEYS = ("filt_", "smooth_", "zupt", "fixes", "fix_nis")
+
+
+def _streams(args, arrays: dict[str, np.ndarray]) -> bool:
+    """Plain filtering or smoothing streams through the chunked kernels (accelnav.estimate.chunked: the
+    input read once, the output written once, in place, at any length) unless a feature needs every
+    sample in memory: covariances, CSV export, compression, and keys of the input the run file keeps
+    (raw codes, a simulation's truth, which the truth tables print)."""
+    if args.covariances or args.csv is not None or getattr(args, "compress", False):
+        return False
+    return all(k in _STREAM_KEYS or k.startswith(_STAGE_KEYS) for k in arrays)
+
+
+def _stream(args, arrays: dict[str, np.ndarray], model: Model, stages: tuple[str, ...]) -> int:
+    """filter or smooth of a plain run in chunks; the same numbers as the whole-array path (to 1e-12)."""
+    from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
+
+    n = len(arrays["t"])
+    read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
+    info = smooth_bounded(
+        model, n, read, args.out, axis_names=arrays["axis_names"], run_format=FORMAT, stages=stages,
+        budget=min(BUDGET, _memory_budget(getattr(args, "memory_budget", None))),
+    )  # fmt: skip
+    ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
+    ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
+    print(_summary({"t": arrays["t"], "axis_names": arrays["axis_names"], "clipped": arrays["clipped"], **ends}))
+    print(f"wrote {args.out}")
+    return 0
+
+
 def cmd_filter(args) -> int:
     arrays, model = read_args(args)
+    if _streams(args, arrays):
+        return _stream(args, arrays, model, ("filt",))
     arrays = filter_run(arrays, model, covariances=args.covariances)
     print(_summary(arrays))
     rows = position_errors(arrays, model)
@@ -401,6 +435,8 @@ def cmd_smooth(args) -> int:
         rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
     if bounded:
         return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
+    if fixes is None and rest is None and not args.tune and args.plots is None and _streams(args, arrays):
+        return _stream(args, arrays, model, ("filt", "smooth"))
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays

@@ -229,6 +229,8 @@ class _Run:
     store: np.ndarray = field(init=False)
     xa: np.ndarray = field(init=False)
     sa: np.ndarray = field(init=False)
+    first: dict[str, np.ndarray] = field(default_factory=dict)  # each output's sample 0, (n_axes, 4)
+    last: dict[str, np.ndarray] = field(default_factory=dict)  # and its sample N-1 (for a summary line)
 
     def __post_init__(self) -> None:
         self.store = np.empty((self.chunk + 1) * GROW)
@@ -243,6 +245,10 @@ class _Run:
     def put(self, key: str, j: int, s: int, data: np.ndarray) -> None:
         """Rows s.. of axis j of the (n_axes, N, 4) output ``key``."""
         self.out.write(key, 4 * (j * self.n + s), data)
+        if len(data) and s == 0:
+            self.first.setdefault(key, np.zeros((len(self.axes), 4)))[j] = data[0]
+        if len(data) and s + len(data) == self.n:
+            self.last.setdefault(key, np.zeros((len(self.axes), 4)))[j] = data[-1]
 
 
 def _pread(fd: int, buf: np.ndarray, pos: int) -> None:
@@ -292,8 +298,8 @@ def smooth_bounded(
     ``stages``: the states written, ``filt`` (x[k|k]: filt_x, filt_sd) and ``smooth`` (x[k|N-1]:
     smooth_x, smooth_sd); without ``smooth`` only the forward pass runs (the filter, no store).
     Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras were
-    applied, in their given order}. Refuses in one line (UserError) before any work when the disk
-    cannot hold the store and the output.
+    applied, in their given order, "first", "last": {output key: its (n_axes, 4) values at sample 0, N-1}}.
+    Refuses in one line (UserError) before any work when the disk cannot hold the store and the output.
     """
     n = int(n)
     if n < 1:
@@ -351,7 +357,7 @@ def smooth_bounded(
             applied.append(done)
         for key, arr in (more(applied) if more is not None else {}).items():
             writer.add(key, arr)
-    return {"chunk": chunk, "chunks": len(starts), "applied": applied}
+    return {"chunk": chunk, "chunks": len(starts), "applied": applied, "first": run.first, "last": run.last}
 
 
 def _sorted_extras(extras, n_axes: int, n: int) -> list[fastsmooth.Extras | None]:
