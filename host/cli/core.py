@@ -224,6 +224,13 @@ def register(sub) -> None:
     )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     p.add_argument(
+        "--filter-states",
+        action="store_true",
+        help="also write the forward filter's states filt_x, filt_sd when the run streams (by default it writes "
+        "the smoother's alone: the filter's doubled the file and its writing time; accelnav filter writes "
+        "them, and runs that keep every sample in memory (--plots, --covariances, aids, ...) always do)",
+    )
+    p.add_argument(
         "--warm-start",
         action="store_true",
         help="the recording begins after the warm-up, not at power-on: the bias starts at its settled value "
@@ -436,7 +443,7 @@ def cmd_smooth(args) -> int:
     if bounded:
         return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
     if fixes is None and rest is None and not args.tune and args.plots is None and _streams(args, arrays):
-        return _stream(args, arrays, model, ("filt", "smooth"))
+        return _stream(args, arrays, model, ("filt", "smooth") if args.filter_states else ("smooth",))
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays
