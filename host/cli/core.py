@@ -342,13 +342,17 @@ def _stream(args, arrays: dict[str, np.ndarray], model: Model, stages: tuple[str
 
     n = len(arrays["t"])
     read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
+    budget = _memory_budget(getattr(args, "memory_budget", None))
     info = smooth_bounded(
         model, n, read, args.out, axis_names=arrays["axis_names"], run_format=FORMAT, stages=stages,
-        budget=min(BUDGET, _memory_budget(getattr(args, "memory_budget", None))),
+        budget=min(BUDGET, budget), store_memory=budget,
     )  # fmt: skip
     ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
     ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
     print(_summary({"t": arrays["t"], "axis_names": arrays["axis_names"], "clipped": arrays["clipped"], **ends}))
+    where = "in memory" if info["store_in_memory"] else f"on disk beside {args.out}"
+    store = f", the store {where}" if "smooth" in stages else ""
+    print(f"streamed in bounded memory: {info['chunks']} chunks of {info['chunk']} samples{store}")
     print(f"wrote {args.out}")
     return 0
 
@@ -440,10 +444,10 @@ def cmd_smooth(args) -> int:
             print(f"wrote {args.zupt_report}")
     elif args.zupt is not None:
         rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
-    if bounded:
-        return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
     if fixes is None and rest is None and not args.tune and args.plots is None and _streams(args, arrays):
         return _stream(args, arrays, model, ("filt", "smooth") if args.filter_states else ("smooth",))
+    if bounded:
+        return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays

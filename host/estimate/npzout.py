@@ -16,6 +16,7 @@ import io
 import os
 import struct
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +79,7 @@ class NpzWriter:
         self.path = Path(path)
         self.part = self.path.with_name(self.path.name + ".part")
         self.fd = os.open(self.part, os.O_RDWR | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._pool = ThreadPoolExecutor(1)
         self.members: dict[str, _Member] = {}
         self.dtypes: dict[str, np.dtype] = {}
         small: list[tuple[str, np.ndarray]] = []
@@ -105,11 +107,14 @@ class NpzWriter:
         view = memoryview(data).cast("B")
         if at < 0 or at + len(view) > m.size:
             raise ValueError(f"{m.name.decode()}: bytes {at}..{at + len(view)} outside 0..{m.size}")
-        m.pieces.append((at, len(view), zlib.crc32(view)))
-        pos = m.data + at
-        while view:
-            done = os.pwrite(self.fd, view, pos)
-            view, pos = view[done:], pos + done
+        # the CRC on a second thread while this one writes (both release the GIL on large buffers): the
+        # CRC ran at 0.4-1 GB/s here, a third of the run's time at 1e7 samples when done in turn
+        crc = self._pool.submit(zlib.crc32, view) if len(view) >= 1 << 20 else None
+        pos, rest = m.data + at, view
+        while rest:
+            done = os.pwrite(self.fd, rest, pos)
+            rest, pos = rest[done:], pos + done
+        m.pieces.append((at, len(view), zlib.crc32(view) if crc is None else crc.result()))
 
     def write(self, name: str, item: int, data: np.ndarray) -> None:
         """Write ``data`` (cast to the member's dtype) starting at flat element ``item`` of member ``name``."""
@@ -177,9 +182,11 @@ class NpzWriter:
         os.pwrite(self.fd, tail, self.end)
         os.close(self.fd)
         self.fd = -1
+        self._pool.shutdown()
         os.replace(self.part, self.path)
 
     def abort(self) -> None:
+        self._pool.shutdown()
         if self.fd >= 0:
             os.close(self.fd)
             self.fd = -1
