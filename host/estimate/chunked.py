@@ -26,13 +26,20 @@ whole-array path, so the two agree to the last bit on one machine (the tests
 allow 1e-12 relative, room for a compiler that contracts the two kernels'
 multiply-adds differently).
 
-Output: an uncompressed ``accelnav-run/1`` NPZ with ``t``, ``axis_names``,
-``accel``, ``clipped``, the filter's and smoother's states ``filt_x``,
-``smooth_x`` (n_axes, N, 4) and their standard deviations ``filt_sd``,
-``smooth_sd`` (n_axes, N, 4) instead of full covariances (at 1e8 samples each
-covariance array would be 13 GB per axis). Each array is written in chunks to a
-temporary ``.npy`` beside the output, then streamed into the NPZ. Disk needed:
-the store plus twice the output; it is checked before any work starts, and the
+Output: an uncompressed run-file NPZ with ``t``, ``axis_names``, ``accel``, ``clipped`` and the states
+asked for (``stages``): the filter's and/or the smoother's ``filt_x``, ``smooth_x`` (n_axes, N, 4) and
+their standard deviations ``filt_sd``, ``smooth_sd``, not full covariances (at 1e8 samples each
+covariance array would be 13 GB per axis). Every member's size is known before the first chunk, so the
+file is laid out up front and each chunk written once, in place (:mod:`accelnav.estimate.npzout`).
+
+Where every sample so far was valid and the design's steady rows exist (fastsmooth.steady_gains), the
+plain path's forward pass keeps a lean store (``LROW`` = 5 doubles: the filter's, then the smoothed,
+a and eps, and the smoothed (a, eps) covariance) and the backward passes read the rest (gains,
+smoother gains, the filter's (a, eps) covariances) from those rows, the same numbers in the same order.
+
+The store is in memory when ``store_memory`` holds it (on disk, the write-back of a store the size of
+the output throttled the run: 8 s of 17 at 1e7 samples, measured), else in a file in ``workdir``.
+Disk needed: the output, plus the store when it is on disk; checked before any work starts, and the
 temporary files are removed on success and on error.
 """
 
