@@ -61,6 +61,31 @@ static void predict_cov(const acn_axis *m, double F[4][4], double P[4][4])
             P[i][j] = P[j][i];
 }
 
+/*
+ * The r and u rows of P = F P F' + Q alone (rows 0, 1 and their mirror), by the
+ * very operations of predict_cov: where the (a, eps) block comes from stored
+ * rows, the rest of predict_cov was computed only to be overwritten.
+ */
+static void predict_ru(const acn_axis *m, double P[4][4])
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
+    double G[2][4]; /* rows 0, 1 of G = F P */
+    for (int j = 0; j < 4; j++) {
+        G[0][j] = P[0][j] + f01 * P[1][j] + f02 * P[2][j];
+        G[1][j] = P[1][j] + f12 * P[2][j];
+    }
+    for (int i = 0; i < 2; i++) {
+        double g0 = G[i][0] + f01 * G[i][1] + f02 * G[i][2];
+        double g1 = G[i][1] + f12 * G[i][2];
+        double row[4] = {g0, g1, G[i][2], phi * G[i][3]};
+        for (int j = i; j < 4; j++)
+            P[i][j] = row[j] + m->q[PK[i][j]];
+    }
+    for (int i = 0; i < 2; i++)
+        for (int j = i + 1; j < 4; j++)
+            P[j][i] = P[i][j];
+}
+
 /* x = F x + b */
 static void predict_mean(const acn_axis *m, double x[4])
 {
@@ -676,7 +701,9 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
             pack(P, Pfn);
             break;
         }
-        predict_cov(m, F, P);
+        predict_ru(m, P);
+        const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1); /* the next prior's (a, eps) */
+        P[2][2] = sn[8], P[2][3] = P[3][2] = sn[9], P[3][3] = sn[10];
         r = r + f01 * u + f02 * a;
         u = u + f12 * a;
         ep = phi * e + b;
