@@ -412,8 +412,8 @@ def steady_gains(d: AxisDesign, n: int | None = None, *, cache_dir: Path | None 
 
     Never more rows than the run has: a run of n <= PROBE_MAX samples computes its n rows once; if they
     show the steady state (n >= _PROBE0 at least) it is kept as for any run, else they are returned
-    unsettled (exact for this run, not kept). None when the design does not settle within PROBE_MAX
-    samples (per-run gains then).
+    unsettled (exact for this run; kept apart as a prefix that runs no longer than it read). None when
+    the design does not settle within PROBE_MAX samples (per-run gains then).
     """
     key = steady_key(d)
     with _cache_lock:
@@ -424,10 +424,17 @@ def steady_gains(d: AxisDesign, n: int | None = None, *, cache_dir: Path | None 
     path = cache_dir / f"steady-{key}.bin"
     st = _load_steady(path, key)
     if st is None and n is not None and n <= PROBE_MAX:
-        rows = _plain_rows(d, int(n))
+        n = int(n)
+        prefix = cache_dir / f"prefix-{key}.bin"  # the longest unsettled run's rows: exact for any shorter one
+        pre = _load_steady(prefix, key) if n >= _PROBE0 else None
+        if pre is not None and len(pre.rows) >= n:
+            return SteadyGains(key, pre.rows[:n], settled=False)
+        rows = _plain_rows(d, n)
         nt = steady_len(rows) if n >= _PROBE0 else None  # a shorter run cannot show a steady state
-        if nt is None:  # this run ends inside the transient: its own rows, kept by nobody
+        if nt is None:  # this run ends inside the transient: its own rows, never taken for steady ones
             rows.flags.writeable = False
+            if n >= _PROBE0:  # worth keeping: the next run of this length or less reads instead of computing
+                _save_steady(prefix, SteadyGains(key, rows, settled=False))
             return SteadyGains(key, rows, settled=False)
         rows = np.array(rows[:nt])
         rows.flags.writeable = False

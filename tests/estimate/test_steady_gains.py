@@ -230,3 +230,23 @@ def test_a_run_within_the_probe_settles_from_its_own_rows(fast_design, monkeypat
     g = fs.plain_gains(fast_design, n)
     assert calls == [n] and len(g.K) < n and fs.steady_gains(fast_design).settled
     _assert_same(g, fs.plain_gains(fast_design, n, steady=False), fast_design, _z(fast_design, n), "within")
+
+
+def test_an_unsettled_run_keeps_its_rows_apart_for_runs_no_longer(fast_design, monkeypatch):
+    """A run longer than _PROBE0 that ends inside the transient: its rows are kept as a prefix that a run of
+    its length or less reads; never as steady rows, and a longer run computes its own."""
+    monkeypatch.setattr(fs, "_PROBE0", 256)
+    calls = []
+    real = fs._plain_rows
+    monkeypatch.setattr(fs, "_plain_rows", lambda d, n: calls.append(n) or real(d, n))
+    n = 900  # inside the ~1 200-sample transient
+    first = fs.steady_gains(fast_design, n)
+    assert not first.settled and calls == [n]
+    assert not list(fs.steady_cache_dir().glob("steady-*.bin")) and list(fs.steady_cache_dir().glob("prefix-*"))
+    again = fs.steady_gains(fast_design, n - 100)
+    assert calls == [n] and np.array_equal(again.rows, first.rows[: n - 100]) and not again.settled
+    fs.plain_gains(fast_design, n + 50)
+    assert calls == [n, n + 50]
+    m = n - 100
+    g = fs.plain_gains(fast_design, m)
+    _assert_same(g, fs.plain_gains(fast_design, m, steady=False), fast_design, _z(fast_design, m), "prefix")
