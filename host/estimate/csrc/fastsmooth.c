@@ -702,7 +702,8 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
             break;
         }
         predict_ru(m, P);
-        const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1); /* the next prior's (a, eps) */
+        const double *sn =
+            srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1); /* the next prior's (a, eps) */
         P[2][2] = sn[8], P[2][3] = P[3][2] = sn[9], P[3][3] = sn[10];
         r = r + f01 * u + f02 * a;
         u = u + f12 * a;
