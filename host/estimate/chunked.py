@@ -278,12 +278,20 @@ class _Store:
             flat = buf.reshape(-1).view(np.uint8)
             flat[:] = self.mem[pos : pos + flat.size]
 
-    def write(self, buf: np.ndarray, pos: int) -> None:
+    def rows(self, scratch: np.ndarray, width: int, s: int, count: int, fill: bool = True) -> np.ndarray:
+        """Rows s..s+count-1 to work on: in memory, the store's own (the kernels work in place, no copy);
+        on disk, ``scratch`` filled from the file (if ``fill``), to be written back by :meth:`done`."""
+        if self.mem is not None:
+            return self.mem[8 * width * s : 8 * width * (s + count)].view(np.float64).reshape(count, width)
+        buf = scratch[: count * width].reshape(count, width)
+        if fill:
+            _pread(self.fd, buf, 8 * width * s)
+        return buf
+
+    def done(self, buf: np.ndarray, s: int) -> None:
+        """Rows from :meth:`rows` starting at sample s, changed: back to the file (in memory: already there)."""
         if self.mem is None:
-            _pwrite(self.fd, buf, pos)
-        else:
-            flat = np.ascontiguousarray(buf).reshape(-1).view(np.uint8)
-            self.mem[pos : pos + flat.size] = flat
+            _pwrite(self.fd, buf, 8 * buf.shape[1] * s)
 
     def close(self) -> None:
         """Free the store (its memory, or its disk before the output is finished)."""
@@ -459,21 +467,21 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         ok &= bad
         np.logical_not(ok, out=bad)
         np.copyto(zc, 0.0, where=bad)
+        if ax.width == ROW and ax.steady is not None and not ok.all():
+            ax.steady = None  # from here on the covariances differ from the all-valid ones
+        lean = ax.width == ROW and ax.steady is not None
+        width = LROW if lean else ax.width
+        store = ax.lean if lean else ax.store
+        # the filter alone keeps no store: its rows go to the scratch buffer and are dropped
+        buf = store.rows(run.store, width, s, m, fill=False) if run.smooth else run.rows(width, m)
         if ax.width == GROW:
-            buf = run.rows(GROW, m)
-            _forward_general(run, ax, s, e, zc, ok)
-            store = ax.store
+            _forward_general(run, ax, s, e, zc, ok, buf)
         else:
-            if ax.steady is not None and not ok.all():
-                ax.steady = None  # from here on the covariances differ from the all-valid ones
-            lean = ax.steady is not None
-            buf = run.rows(LROW if lean else ROW, m)
             _forward_plain(run, ax, s, e, zc, ok, buf)
             if lean:
                 ax.lean_end = e
-            store = ax.lean if lean else ax.store
         if run.smooth:
-            store.write(buf, 8 * buf.shape[1] * s)
+            store.done(buf, s)
         if write_filt:
             run.put("filt_x", ax.j, s, run.xa[:m])
             run.put("filt_sd", ax.j, s, run.sa[:m])
@@ -483,7 +491,7 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
             ax.xfn = run.xa[m - 1].copy()
 
 
-def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray) -> None:
+def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:
     p, m = run.ptr, e - s
     sl = ax.extras_in(s, e)
     ne = sl.stop - sl.start
@@ -494,7 +502,7 @@ def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: n
     run.lib.acn_chunkg_fwd(
         ax.m, m, int(e == run.n), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne,
         run.ffi.from_buffer("long[]", ek), *(p(a) for a in arrs), p(applied, "unsigned char *"),
-        p(ax.carry_f), p(run.rows(GROW, m)), p(run.xa), p(run.sa),
+        p(ax.carry_f), p(buf), p(run.xa), p(run.sa),
     )  # fmt: skip
 
 
@@ -514,24 +522,21 @@ def _backward(run: _Run, ax: _Axis, s: int, e: int) -> None:
     """Samples e-1..s: the general path's smoother outright, the plain path's (a, eps) into its store."""
     p, m, last = run.ptr, e - s, int(e == run.n)
     if ax.width == GROW:
-        buf = run.rows(GROW, m)
-        ax.store.read(buf, 8 * GROW * s)
+        buf = ax.store.rows(run.store, GROW, s, m)
         rc = run.lib.acn_chunkg_bwd(ax.m, s, m, last, p(buf), p(ax.carry_b), p(run.xa), p(run.sa))
         if rc != 0:
             raise UserError(f"bounded smoother: the prior covariance is not positive definite at {-rc}")
         run.put("smooth_x", ax.j, s, run.xa[:m])
         run.put("smooth_sd", ax.j, s, run.sa[:m])
     elif s < ax.lean_end:
-        buf = run.rows(LROW, m)
-        ax.lean.read(buf, 8 * LROW * s)
+        buf = ax.lean.rows(run.store, LROW, s, m)
         sr = ax.steady_rows
         run.lib.acn_chunk_bwd_lean(ax.m, s, m, last, p(sr), len(sr), p(buf), p(ax.carry_b))
-        ax.lean.write(buf, 8 * LROW * s)
+        ax.lean.done(buf, s)
     else:
-        buf = run.rows(ROW, m)
-        ax.store.read(buf, 8 * ROW * s)
+        buf = ax.store.rows(run.store, ROW, s, m)
         run.lib.acn_chunk_bwd(ax.m, m, last, p(buf), p(ax.carry_b))
-        ax.store.write(buf, 8 * ROW * s)
+        ax.store.done(buf, s)
 
 
 def _smooth_ru(run: _Run, ax: _Axis, starts: list[int]) -> None:
@@ -543,19 +548,18 @@ def _smooth_ru(run: _Run, ax: _Axis, starts: list[int]) -> None:
         e = min(s + run.chunk, n)
         m = e - s if e < n else e - s - 1  # transitions to the next sample; the last sample is written below
         if s < ax.lean_end:
-            buf = run.rows(LROW, m + 1)
             if e == ax.lean_end and e < n:  # the next sample is in the full store: its fields, lean order
+                buf = run.rows(LROW, m + 1)
                 ax.lean.read(buf[:m], 8 * LROW * s)
                 nx = np.empty(ROW)
                 ax.store.read(nx, 8 * ROW * e)
                 buf[m] = nx[[0, 1, 6, 7, 8]]
             else:
-                ax.lean.read(buf, 8 * LROW * s)
+                buf = ax.lean.rows(run.store, LROW, s, m + 1)
             sr = ax.steady_rows
             run.lib.acn_chunk_ru_lean(ax.m, s, m, p(buf), p(sr), len(sr), p(ax.carry_r), p(run.xa), p(run.sa))
         else:
-            buf = run.rows(ROW, m + 1)
-            ax.store.read(buf, 8 * ROW * s)
+            buf = ax.store.rows(run.store, ROW, s, m + 1)
             run.lib.acn_chunk_ru(ax.m, m, p(buf), p(ax.carry_r), p(run.xa), p(run.sa))
         run.put("smooth_x", ax.j, s, run.xa[:m])
         run.put("smooth_sd", ax.j, s, run.sa[:m])

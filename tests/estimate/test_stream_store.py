@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from accelnav.estimate import chunked
+from accelnav.estimate.kf import position_fix
 from accelnav.model.load import load_model
 
 
@@ -16,12 +18,16 @@ def _data(model, n):
     return np.arange(n) / model.rate_hz, accel, clipped
 
 
-def test_store_in_memory_and_on_disk_give_the_same_file(tmp_path):
+@pytest.mark.parametrize("aided", [False, True], ids=["plain", "a fix on axis 0"])
+def test_store_in_memory_and_on_disk_give_the_same_file(tmp_path, aided):
+    """Axis 1 leaves the lean store at a clipped sample; with a fix, axis 0 takes the general path's store."""
     model = load_model()
     n = 3000
     read = chunked.array_reader(*_data(model, n))
-    a = chunked.smooth_bounded(model, n, read, tmp_path / "mem.npz", chunk=701, store_memory=1 << 30)
-    b = chunked.smooth_bounded(model, n, read, tmp_path / "disk.npz", chunk=701)
+    extras = [[position_fix(2000, 1.0, 0.1)], []] if aided else None
+    kw = dict(chunk=701, extras=extras)
+    a = chunked.smooth_bounded(model, n, read, tmp_path / "mem.npz", store_memory=1 << 30, **kw)
+    b = chunked.smooth_bounded(model, n, read, tmp_path / "disk.npz", **kw)
     assert a["store_in_memory"] and not b["store_in_memory"]
     assert (tmp_path / "mem.npz").read_bytes() == (tmp_path / "disk.npz").read_bytes()
 
