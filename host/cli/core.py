@@ -224,6 +224,13 @@ def register(sub) -> None:
     )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     p.add_argument(
+        "--filter-states",
+        action="store_true",
+        help="also write the forward filter's states filt_x, filt_sd when the run streams (by default it writes "
+        "the smoother's alone: the filter's doubled the file and its writing time; accelnav filter writes "
+        "them, and runs that keep every sample in memory (--plots, --covariances, aids, ...) always do)",
+    )
+    p.add_argument(
         "--warm-start",
         action="store_true",
         help="the recording begins after the warm-up, not at power-on: the bias starts at its settled value "
@@ -299,8 +306,46 @@ def cmd_sim(args) -> int:
     return 0
 
 
+# keys of a run the streaming path writes again (the recording's) or recomputes (a previous stage's output)
+_STREAM_KEYS = {"t", "accel", "clipped", "axis_names", "format", "model_toml", "model_source"}
+_STAGE_KEYS = ("filt_", "smooth_", "zupt", "fixes", "fix_nis")
+
+
+def _stream_args(args, arrays: dict[str, np.ndarray]) -> bool:
+    """Plain filtering or smoothing streams through the chunked kernels (accelnav.estimate.chunked: the
+    input read once, the output written once, in place, at any length) unless a feature needs every
+    sample in memory: covariances, CSV export, compression, and keys of the input the run file keeps
+    (raw codes, a simulation's truth, which the truth tables print)."""
+    if args.covariances or args.csv is not None or getattr(args, "compress", False):
+        return False
+    return all(k in _STREAM_KEYS or k.startswith(_STAGE_KEYS) for k in arrays)
+
+
+def _cmd_streamed(args, arrays: dict[str, np.ndarray], model: Model, stages: tuple[str, ...]) -> int:
+    """filter or smooth of a plain run in chunks; the same numbers as the whole-array path (to 1e-12)."""
+    from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
+
+    n = len(arrays["t"])
+    read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
+    budget = _memory_budget_arg(getattr(args, "memory_budget", None))
+    info = smooth_bounded(
+        model, n, read, args.out, axis_names=arrays["axis_names"], run_format=FORMAT, stages=stages,
+        budget=min(BUDGET, budget), store_memory=budget,
+    )  # fmt: skip
+    ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
+    ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
+    print(_summary({"t": arrays["t"], "axis_names": arrays["axis_names"], "clipped": arrays["clipped"], **ends}))
+    where = "in memory" if info["store_in_memory"] else f"on disk beside {args.out}"
+    store = f", the store {where}" if "smooth" in stages else ""
+    print(f"streamed in bounded memory: {info['chunks']} chunks of {info['chunk']} samples{store}")
+    print(f"wrote {args.out}")
+    return 0
+
+
 def cmd_filter(args) -> int:
     arrays, model = read_args(args)
+    if _stream_args(args, arrays):
+        return _cmd_streamed(args, arrays, model, ("filt",))
     arrays = filter_run(arrays, model, covariances=args.covariances)
     print(_summary(arrays))
     rows = position_errors(arrays, model)
@@ -384,6 +429,8 @@ def cmd_smooth(args) -> int:
             print(f"wrote {args.zupt_report}")
     elif args.zupt is not None:
         rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
+    if fixes is None and rest is None and not args.tune and args.plots is None and _stream_args(args, arrays):
+        return _cmd_streamed(args, arrays, model, ("filt", "smooth") if args.filter_states else ("smooth",))
     if bounded:
         return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
     if args.tune:
