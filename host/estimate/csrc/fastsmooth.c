@@ -504,6 +504,31 @@ static inline double update_sparse(double x[4], double *p, const double h[4], co
 }
 
 static const int NZ_ACC[2] = {2, 3};
+static const double H_UNIT[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}};
+static const int NZ_UNIT[4][1] = {{0}, {1}, {2}, {3}};
+
+/*
+ * An aid's update: a rest (h = e_u) or a fix (h = e_r) with h and nz as
+ * constants, so that the compiler unrolls update_sparse for them (same numbers:
+ * h[c] is exactly 1 there); any other h through the general loop.
+ */
+static double update_aid(double x[4], double *p, const double h[4], const int *nz, int nn, double z,
+                         double R, double *S)
+{
+    if (nn == 1 && h[nz[0]] == 1.0) {
+        switch (nz[0]) {
+        case 0:
+            return update_sparse(x, p, H_UNIT[0], NZ_UNIT[0], 1, z, R, S);
+        case 1:
+            return update_sparse(x, p, H_UNIT[1], NZ_UNIT[1], 1, z, R, S);
+        case 2:
+            return update_sparse(x, p, H_UNIT[2], NZ_UNIT[2], 1, z, R, S);
+        default:
+            return update_sparse(x, p, H_UNIT[3], NZ_UNIT[3], 1, z, R, S);
+        }
+    }
+    return update_sparse(x, p, h, nz, nn, z, R, S);
+}
 
 /*
  * The measurements of sample k once its prior is in (x, p): the acceleration
@@ -546,7 +571,7 @@ static long general_update(const acn_axis *m, long k, int ok, double zk, double 
                 continue;
             }
         }
-        double y = update_sparse(x, p, h, nz, nn, ez[ei], eR[ei], &S);
+        double y = update_aid(x, p, h, nz, nn, ez[ei], eR[ei], &S);
         applied[ei] = 1;
         if (ey != NULL) {
             ey[ei] = y;
