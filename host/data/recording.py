@@ -366,6 +366,10 @@ def csv_pieces(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: 
     head = None
     for first, text in _blocks(path, gz, src):
         if head is not None and len(head.cols) > 1 and "#" not in text:
+            table = _every_column(text, head)
+            if table is not None:
+                yield head, table, np.arange(first, first + len(table), dtype=np.int64)
+                continue
             # fast path: no comment, and every line has the header's delimiters (so none is blank)
             n_delims = _fields_per_line(text, head.delim)
             if np.all(n_delims == len(head.cols) - 1):
@@ -400,6 +404,21 @@ def csv_pieces(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: 
             yield head, _parse_piece(rows, nums, head, src), nums
     if head is None:
         raise UserError(f"{src}: no header row (the file is empty)")
+
+
+def _every_column(text: str, head: _Header) -> np.ndarray | None:
+    """The numbers of a piece whose every column is wanted, when each of its lines is a row of the header's
+    fields (None: let the line-checking paths find what is wrong, and say it). loadtxt refuses a row whose
+    field count differs from the first's, and the shape catches a piece of blank lines or wrong counts
+    throughout: no per-line Python and no count of delimiters (a fifth of the reader's time)."""
+    if head.use != list(range(len(head.cols))):
+        return None
+    parsed = text.replace(",", ".") if head.delim != "," else text  # ';' or tab between fields: decimal commas
+    try:
+        table = np.loadtxt(io.StringIO(parsed), delimiter=head.delim, ndmin=2, dtype=np.float64, comments=None)
+    except ValueError:
+        return None
+    return table if table.shape == (text.count("\n") + 1, len(head.cols)) else None
 
 
 def _parse_piece(rows, nums, head, src: str) -> np.ndarray:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import errno
 import os
 import shutil
+import stat
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -129,9 +130,12 @@ def estimate_rows(path: str | os.PathLike[str]) -> int | None:
     before anything is parsed: what decides whether the input is streamed."""
     path = Path(path)
     try:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode):  # a FIFO or a device: a read could block or never end
+            return None
         with open(path, "rb") as fh:
             head = fh.read(1 << 16)
-        size = path.stat().st_size
+        size = info.st_size
     except OSError:
         return None
     if head[:2] in (b"PK", b"\x1f\x8b") or b"\0" in head:
