@@ -2,8 +2,9 @@
 
 Per size: pandas.read_csv of the CSV (in process, the floor of issue 24's 3x target), accelnav's
 whole-file reader (read_recording, in process), the streamed reader's first pass (open_stream: parse
-into the store and every check), and `accelnav smooth CSV` as a subprocess under GNU time (wall and
-peak RSS; over the memory budget it streams). 1e8 rows (about 3.5 GB of text, 4 GB more of disk while
+into the store and every check), the streamed input alone as a subprocess (open_stream, then every row
+read back as the chunked smoother reads them), and `accelnav smooth CSV` as a subprocess, both under
+GNU time (wall and peak RSS; over the memory budget the command streams). 1e8 rows (about 3.5 GB of text, 4 GB more of disk while
 it runs) only with --big, and only the command runs there unless --big-peers.
 
 Data: the default model's two axes, noise of 0.3 m/s^2, 100 Hz, written once per size into --keep DIR
@@ -52,15 +53,32 @@ def timed(fn) -> float:
     return time.perf_counter() - t0
 
 
+# the streamed input alone, as the chunked smoother takes it: the first pass, then every row read back
+STREAM_ALL = """
+import sys
+from accelnav.data.stream import open_stream
+with open_stream(sys.argv[1], workdir=sys.argv[2]) as st:
+    for s in range(0, st.n, 1 << 20):
+        st(s, min(s + (1 << 20), st.n))
+"""
+
+
 def smooth(csv: Path, folder: Path) -> tuple[float, float, int, str]:
     """(wall s, peak RSS MB, exit status, last stderr line) of `accelnav smooth` under GNU time."""
+    return subprocess_rss([sys.executable, "-m", "accelnav.cli", "smooth", str(csv), "--out", str(folder / "out.npz")],
+                          folder)  # fmt: skip
+
+
+def stream_all(csv: Path, folder: Path) -> tuple[float, float, int, str]:
+    """The same for the streamed input alone (no smoother, no output: only the store's disk)."""
+    return subprocess_rss([sys.executable, "-c", STREAM_ALL, str(csv), str(folder)], folder)
+
+
+def subprocess_rss(argv: list[str], folder: Path) -> tuple[float, float, int, str]:
     out, rss_file = folder / "out.npz", folder / "rss.txt"
     timer = ["/usr/bin/time", "-q", "-f", "%M", "-o", str(rss_file)] if Path("/usr/bin/time").exists() else []
     t0 = time.perf_counter()
-    p = subprocess.run(
-        [*timer, sys.executable, "-m", "accelnav.cli", "smooth", str(csv), "--out", str(out)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+    p = subprocess.run([*timer, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     wall = time.perf_counter() - t0
     rss = float(rss_file.read_text().split()[-1]) / 1024 if timer else float("nan")
     out.unlink(missing_ok=True)
@@ -106,6 +124,7 @@ def main() -> int:
 
             if peers:
                 rows["open_stream (parse + checks)"] = (timed(stream_pass), float("nan"), 0, "in process")
+            rows["streamed input: open_stream, every row read (subprocess)"] = stream_all(csv, folder)
             rows["accelnav smooth CSV"] = smooth(csv, folder)
             base = rows.get("pandas.read_csv", (float("nan"),))[0]
             for name, (sec, rss, status, err) in rows.items():
