@@ -219,3 +219,24 @@ def test_cli_streams_a_csv_over_budget_to_the_whole_paths_numbers(tmp_path, caps
         assert a[key].shape == b[key].shape, key
         np.testing.assert_allclose(a[key], b[key], rtol=1e-12, atol=0, err_msg=key)
     assert not list(tmp_path.glob(".accelnav-*"))
+
+
+@pytest.mark.parametrize(
+    "argv,said",
+    [
+        (["filter"], "filter holds the run in memory"),
+        (["smooth", "--zupt", "auto", "--memory-budget", "0.01"], "--zupt need(s) every sample in memory"),
+    ],
+)
+def test_what_must_hold_the_input_whole_is_refused_before_reading(tmp_path, monkeypatch, capsys, argv, said):
+    path = _write(tmp_path, CASES["comma"])
+    monkeypatch.setenv("ACCELNAV_MAX_INPUT_BYTES", "1000")  # the reader's own limit: it would stop mid-file
+    from accelnav.data import recording
+
+    def unread(*a, **k):
+        raise AssertionError("the CSV was parsed")
+
+    monkeypatch.setattr(recording, "csv_pieces", unread)
+    assert main([argv[0], str(path), *argv[1:], "--out", str(tmp_path / "o.npz")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert said in err and "ACCELNAV_MAX_INPUT_BYTES" in err and len(err.splitlines()) == 1
