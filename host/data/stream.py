@@ -35,6 +35,7 @@ from accelnav.model.load import Model, load_model
 from accelnav.progress import note
 
 BLOCK = 1 << 20  # rows per block of the check passes and the largest read: the pass's memory
+SAMPLE = 1 << 16  # bytes read at the start, middle and end of a CSV to estimate its rows
 MAX_STEPS = 1 << 20  # distinct time steps counted for the exact median; a clock with more is read whole
 
 
@@ -133,17 +134,23 @@ def estimate_rows(path: str | os.PathLike[str]) -> int | None:
         info = path.stat()
         if not stat.S_ISREG(info.st_mode):  # a FIFO or a device: a read could block or never end
             return None
-        with open(path, "rb") as fh:
-            head = fh.read(1 << 16)
         size = info.st_size
+        with open(path, "rb") as fh:
+            head = fh.read(SAMPLE)
+            # lines grow along a file (its time stamps get longer): sample its middle and end as well
+            parts = [head]
+            for at in (size // 2, size - SAMPLE):
+                if at > SAMPLE:
+                    fh.seek(at)
+                    parts.append(fh.read(SAMPLE))
     except OSError:
         return None
     if head[:2] in (b"PK", b"\x1f\x8b") or b"\0" in head:
         return None
-    lines = head.count(b"\n") + head.count(b"\r") - head.count(b"\r\n")
+    lines = sum(p.count(b"\n") + p.count(b"\r") - p.count(b"\r\n") for p in parts)
     if lines == 0:
         return 0
-    return int(size * lines / len(head))
+    return int(size * lines / sum(map(len, parts)))
 
 
 def open_stream(
