@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.accelnav-installed
 # 2-core machine (measured: a fit took 8x the CPU); one thread is faster.
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: setup demo test docs lint format bench fuzz fuzz-corpus clean
+.PHONY: setup demo test docs lint format bench bench-coverage bench-studies fuzz fuzz-corpus clean
 
 include firmware/firmware.mk
 
@@ -50,9 +50,19 @@ format: setup
 	@files=$$(git ls-files '*.c' '*.h'); \
 	if [ -n "$$files" ]; then clang-format -i $$files; fi
 
-# every bench/bench_*.py; their markdown tables collected in build/bench/results.md
+# bench/speed/bench_*.py: their markdown in build/bench/results.md, ending with one targets table
+# (goal, measured, met) gathered from the scripts that state targets; the real recordings' targets
+# (study_real_rests, about 10 s once its data is cached) join them there
 bench: setup
-	$(PY) bench/run_all.py --out build/bench/results.md
+	$(PY) bench/run_all.py speed --also bench/studies/study_real_rests.py --out build/bench/results.md
+
+# bench/coverage/coverage_*.py: interval coverage over many seeds (minutes each)
+bench-coverage: setup
+	$(PY) bench/run_all.py coverage --out build/bench/coverage.md
+
+# bench/studies/study_*.py: design studies and the real recordings (these download from PyPI)
+bench-studies: setup
+	$(PY) bench/run_all.py studies --out build/bench/studies.md
 
 # libFuzzer on the firmware's receive path (clang + libclang-rt-14-dev): FUZZ_SECONDS of fuzzing from
 # the seed corpus; the corpus it grows and any failing input stay in build/fuzz/. CI runs a

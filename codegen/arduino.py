@@ -14,13 +14,10 @@ not a 10-bit ADC is refused in one line (ModelError), as the Uno has six analog 
 
 from __future__ import annotations
 
-import json
-
 from accelnav.model.load import Model, ModelError
 from accelnav.resources import firmware_dir
 
-from .emit_c import emit
-from .frames import emit_frames
+from .generated import generate
 
 EXAMPLE = "AccelnavStream"
 ANALOG_PINS = 6  # A0..A5 on an Uno
@@ -45,8 +42,7 @@ def library(model: Model, form: str | None = None) -> dict[str, str]:
     n = len(model.axes)
     if n > ANALOG_PINS:
         raise ModelError(model.source, "axes", f"--arduino: {n} axes, an Uno has {ANALOG_PINS} analog pins")
-    gen = emit(model, form=form)
-    gen.update(emit_frames(model, json.loads(gen["accelnav.json"])))
+    gen = generate(model, form=form)
     fw = firmware_dir()
     name = library_name(model)
     files = {f"src/{k}": v for k, v in gen.items() if k.endswith((".c", ".h"))}

@@ -200,7 +200,6 @@ def error_bound(
     n_r_floor, n_v_floor = _floors(p)
     lsb_v = v["v"].fmt.lsb
     H2, T2 = Ts * Ts / 2, Ts * Ts
-    out = np.empty((n, 4))
     Es, Ee = 0.0, lsb_e / 2  # x0: eps0 rounded, a0 = 0 exact
     Ea, Ev, Er = Ee, 0.0, 0.0
     a_prev = 0.0
@@ -218,6 +217,18 @@ def error_bound(
         if state is not None:
             state.update(zip(("Es", "Ee", "Ea", "Ev", "Er", "a_prev"), st, strict=True), k0=k0 + n)
         return res
+    out, st = _bound_loop_py(n, k0, bp, K, dK, y_abs, a_abs, d_w, valid, st)
+    if state is not None:
+        state.update(zip(("Es", "Ee", "Ea", "Ev", "Er", "a_prev"), st, strict=True), k0=k0 + n)
+    return out
+
+
+def _bound_loop_py(n: int, k0: int, bp, K, dK, y_abs, a_abs, d_w, valid, st):
+    """:func:`error_bound`'s recursion in Python, where its C twin (gains.bound_loop) is not built:
+    (the (n, 4) bounds, the errors at the end [Es, Ee, Ea, Ev, Er, a_prev])."""
+    omp, phi, d_dec, H2, T2, dH2, dT2, r_floor, v_floor, dz, d_y, d_a, d_e, Ts = bp
+    Es, Ee, Ea, Ev, Er, a_prev = st
+    out = np.empty((n, 4))
     Kl, dKl, yl, al, vl = K.tolist(), np.asarray(dK).tolist(), np.asarray(y_abs).tolist(), np.asarray(a_abs), valid
     dwl = d_w.tolist()
     al = al.tolist()
@@ -230,8 +241,8 @@ def error_bound(
             Esm, Eem = Es, Ee
         # r and v: the previous posterior a (its error Ea), the constants' rounding on |a|
         a_c = a_prev + Ea
-        Er = Er + Ev + H2 * Ea + dH2 * a_c + n_r_floor * lsb_r
-        Ev = Ev + T2 * Ea + dT2 * a_c + n_v_floor * lsb_v
+        Er = Er + Ev + H2 * Ea + dH2 * a_c + r_floor
+        Ev = Ev + T2 * Ea + dT2 * a_c + v_floor
         if vl[k]:
             kr, kv, ka, ke = Kl[k]
             dkr, dkv, dka, dke = dKl[k]
@@ -249,9 +260,7 @@ def error_bound(
         out[k, 1] = Ev / Ts
         out[k, 2] = Ea
         out[k, 3] = Ee
-    if state is not None:
-        state.update(Es=Es, Ee=Ee, Ea=Ea, Ev=Ev, Er=Er, a_prev=a_prev, k0=k0 + n)
-    return out
+    return out, [Es, Ee, Ea, Ev, Er, a_prev]
 
 
 def error_bound_rows(p: AxisPlan, n: int, rows, schedule=None) -> np.ndarray:
@@ -342,16 +351,6 @@ def worst_case_bound(p: AxisPlan, n: int, schedule=None, rows=None) -> np.ndarra
     out[:, 2] = Ea
     out[:, 3] = Ee
     return out
-
-
-def reference_data(d, z: np.ndarray, x_post: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """|y[k]| and |a[k]| of a float64 run from its posteriors (prior k: F x_post[k-1] + b)."""
-    n = len(z)
-    prior = np.empty((n, 4))
-    prior[0] = d.x0
-    prior[1:] = x_post[:-1] @ np.asarray(d.F).T + np.asarray(d.b)
-    y = np.where(valid, np.abs(z - prior[:, 2] - prior[:, 3]), 0.0)
-    return y, np.abs(x_post[:, 2])
 
 
 def quantized_twin(p: AxisPlan, code: np.ndarray | None, z: np.ndarray, valid: np.ndarray, schedule=None):

@@ -19,35 +19,29 @@ The header carries the plain declarations between ``ACCELNAV-CDEF-BEGIN`` /
 
 from __future__ import annotations
 
+import functools
 import math
 import re
-from concurrent.futures import ThreadPoolExecutor
 
 from accelnav.model.design import AnalogConversion
 from accelnav.model.load import Model
+from accelnav.resources import package_dir
 
 from .emit_f32 import emit_f32
-from .gains import Schedule
 from .package import cdef_of, check_prefix, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
+from .plan import (  # noqa: F401  (the schedule's settings and schedule_for: re-exported for tests and bench/)
+    RECIP_TABLE_BITS,
+    SCHEDULE_FLOOR_LSB,
+    SCHEDULE_RAMP_S,
+    SCHEDULE_REL_TOL,
+    AxisCode,
+    cov_fracs,
+    plan,
+    recip_table,
+    schedule_for,
+)
 from .qformat import QFormat, acc_bound, guard_bits, quantize
-from .ranges import FINE, AxisPlan, fine_view, plan_axis
-
-# K_r, K_v (no feedback: 3e-4 and 1e-3 took the 100 Hz table from 259 to 177 segments, 1 kHz from 673 to
-# 412, the firmware's departure from the float64 filter on the shock and stress lockstep runs unchanged
-# within 1e-4 sigma; K_r at 1e-3 halved it again but moved u after a gap from 2e-4 to 8.4e-4 sigma, the
-# schedule's largest K_r error being the threshold at which codegen.follow returns to the schedule),
-# K_a (held in a segment: tight; it sets how the innovation splits between a and eps, a mode that
-# decays over ~1/K_e samples: 2e-7, about 5 % of K_e, left a at 9.5e-4 sigma on shock and stress
-# at 100 Hz over 13 seeds, 1e-7 4.5e-4 with the same segment counts at 100 Hz and 1 kHz), K_e (as before)
-SCHEDULE_REL_TOL = (3e-4, 1e-3, 1e-7, 1e-4)
-# tolerance floor of each gain in LSB of its format: K_r's slope is a whole number of LSB per sample (no
-# bits below it), so under ~1 LSB of tolerance a segment lasts only a few samples wherever the true slope
-# is not near a whole number (at 1 kHz K_r is ~3e4 LSB from 0.1 s to 10 s: 751 of the 1084 segments).
-# Measured (tests/test_codegen.py lockstep, 1 kHz shock): r and u stay within 4.2e-4 sigma with 2 LSB.
-SCHEDULE_FLOOR_LSB = (2.0, 0.0, 0.0, 0.0)
-# K_r and K_v's tolerance ramps up from 1/20 over the first this many seconds (codegen.gains.schedule;
-# codegen.follow's return threshold follows the same ramp)
-SCHEDULE_RAMP_S = 10.0
+from .ranges import FINE, AxisPlan, fine_view
 
 
 def _c_int(v: int, word: int) -> str:
@@ -73,18 +67,6 @@ def _shift(expr: str, frm: int, to: int, comment: str = "") -> str:
     return f"(({expr}) * ((int64_t)1 << {-s})){c}"
 
 
-def _shf(expr: str, frm: int, to: int) -> str:
-    """expr (int64, frac bits frm) -> frac bits to, floor (an arithmetic right shift)."""
-    s = frm - to
-    if s >= 64:
-        return f"0 /* ({expr}) Q.{frm} -> Q.{to}: below one LSB, dropped */"
-    if s > 0:
-        return f"(({expr}) >> {s}) /* Q.{frm} -> Q.{to}, floor */"
-    if s == 0:
-        return f"({expr}) /* Q.{frm} -> Q.{to}, exact */"
-    return f"(({expr}) * ((int64_t)1 << {-s})) /* Q.{frm} -> Q.{to}, exact */"
-
-
 _PRODUCT = re.compile(r"\(int64_t\)(-?[A-Za-z_][\w>.-]*) \* ([A-Za-z_][\w>.-]*)")
 
 
@@ -93,34 +75,12 @@ def _smull(line: str) -> str:
     return _PRODUCT.sub(r"acn_mul(\1, \2)", line)
 
 
-def _fixed_consts(p: AxisPlan, P: str) -> list[str]:
+def _fixed_consts(c: AxisCode, P: str) -> list[str]:
     out = []
-    for name, (value, fmt) in sorted(p.consts.items()):
-        q = quantize(value, fmt)
+    for name, (value, fmt, q) in sorted(c.consts.items()):
         lit = f"UINT32_C({q})" if fmt.word == 33 else _c_int(q, fmt.word)  # 33: an unsigned 32-bit mantissa
         out.append(f"#define {P}_{name} {lit} /* {value:.17g} {'UQ0.' + str(fmt.frac) if fmt.word == 33 else fmt} */")
     return out
-
-
-def _thumb_imm(x: int) -> bool:
-    """x is a Thumb-2 modified immediate of the shifted-byte kind (an 8-bit value shifted left)."""
-    if x == 0:
-        return True
-    while x % 2 == 0:
-        x //= 2
-    return x < 256
-
-
-def _clamp_word(bound: float, fmt, step: float) -> int:
-    """High-word clamp h >= bound (in 2^32 LSB of fmt) of acn_limit; rounded up to a value whose
-    double is a Thumb-2 immediate (one ADD and one CMP with immediates, no literal loads) when
-    h 2^32 plus one step still fits the int64 (the format was chosen to hold bound + step)."""
-    h = math.ceil(bound * 2.0 ** (fmt.frac - 32))
-    k = max(0, h.bit_length() - 8)
-    hi = -(-h >> k) << k  # h rounded up to 8 significant bits
-    if _thumb_imm(2 * hi) and 2 * hi < 2**32 and hi * 2.0**32 + step * 2.0**fmt.frac < 2.0**63 - 2.0**40:
-        return hi
-    return h
 
 
 def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
@@ -569,16 +529,6 @@ def _predict_cov(p: AxisPlan, P: str) -> list[str]:
     ]
 
 
-def cov_fracs(p: AxisPlan) -> dict:
-    """Binary points of the covariance form's update: nmax, the clz of the smallest S (= R); x, the
-    format of xs = 1/S; and per state the product c_i w that it adds."""
-    fca = p.f("ca")
-    nmax = 32 - quantize(p.design.R, p.vars["S"].fmt).bit_length()
-    fw = p.f("w")
-    prod = {"r": p.f("cr") + fw, "v": p.f("cv") + fw, "a": fca + fw, "e": p.f("ce") + fw}
-    return {"nmax": nmax, "x": 61 - nmax - fca, "prod": prod}
-
-
 def _gains_cov(p: AxisPlan, P: str) -> list[str]:
     """Body of T_pupdate(s, y), the measurement update: S = c_a + c_e + R, one reciprocal, w = y / S;
     every state adds c_i w = K_i y (r and v = Ts u their K y part only; the core adds the rest of
@@ -600,10 +550,7 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         ce_a, fits = "", False
     fy, fw, fr, fv, fe = p.f("y"), p.f("w"), p.f("r"), p.f("v"), p.f("e")
     pr = cf["prod"]
-    sw = fy + fx - fw
-    for what, sh in (("kappa", fca + fx - 31), ("K_e", fce + fx - fKe), ("w", sw), ("a", pr["a"] - fy)):
-        if not 1 <= sh <= 62:
-            raise ValueError(f"{what} shift {sh} out of range")
+    sw = fy + fx - fw  # its shifts, and kappa's, K_e's and a's, are checked in range by the planner
     L = [
         "    int32_t cr = s->cr, cv = s->cv, ca = s->ca, ce = s->ce, S, xs, w, kap, Ke;",
         "    uint32_t x;",
@@ -685,8 +632,6 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
     fr, fv, fe, fy = p.f("r"), p.f("v"), p.f("e"), p.f("y")
     fo = p.consts["OMP"][1].frac
     eh = _hi_round("e")
-    if p.design.x0[0] != 0 or p.design.x0[1] != 0 or p.design.x0[2] != 0:
-        raise ValueError("the merged predict needs r, u, a of x0 at zero")
     fH2, fT2 = p.consts["H2"][1].frac, p.consts["T2"][1].frac
     decay = (
         f"e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
@@ -752,65 +697,8 @@ def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
     return L + _cov_step(p, P, T, "_c", "    s->k = k + 2u; /* the sample count, in bits 1..31 */", back)
 
 
-def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
-    """Body of the gain schedule's T_core (follow False) or T_core_dev (follow True): predict and update
-    merged, every state read and written once.
-
-    T_core(s, zb, k) is the common sample: valid, k > 0 and on the schedule; zb = z - eps_bar. T_core_dev
-    (s, z, valid) is any other: the first sample, a skipped one, or one while following a skip
-    (codegen.follow), out of line.
-
-    Contract (formats from :mod:`codegen.ranges`): z, y, a in Q.fy (int32); eps carried as eb = eps -
-    eps_bar + 1/2 LSB of its high word (int64 in Q.(fy+32)): the high word of eb is eps - eps_bar
-    rounded, so the predict needs neither the rounding nor eps_bar, and y takes eps_bar with z; r and
-    v = Ts u int64 in one format Q.fr; K_a, K_e int32 each with its own scaling, K_r (K_v) in the format
-    of Ts^2/2 (Ts^2), or Ts^2/2 in v's product format Q.(fv - fy) (codegen.ranges): then w = v + Ts^2/2 a
-    starts both increments, r's shifted to K_r y's format, v's with (Ts^2 - Ts^2/2) a, the same integer
-    sum as Ts^2 a. Products are 32x32 -> 64 (one SMULL or SMLAL); every shift is a floor except the
-    one that makes a (round to nearest). r and v are clamped once per step on their high words; nothing
-    else can overflow over the declared ranges.
-    """
-    if p.form == "covariance":
-        return _core_cov(p, P, T)
-    fr, fv, fy, fe = p.f("r"), p.f("v"), p.f("y"), p.f("e")
-    fK = {n: p.f("K" + n) for n in "rvae"}
-    fo = p.consts["OMP"][1].frac
-    sa = fK["a"]  # Q.(fKa + fy) -> Q.fy
-    ft = {"r": fr, "v": fv, "e": fe}
-    conv = {n: f"Q.{fK[n] + fy} -> Q.{ft[n]}" for n in "rve"}
-    # Ts^2/2 a and Ts^2 a: in the accumulator of K_r y (K_v y) when they share its format, else shifted apart
-    post = {}
-    for n, c in (("r", "H2"), ("v", "T2")):
-        fc = p.consts[c][1].frac
-        conv_c = f"Q.{fc + fy} -> Q.{ft[n]}"
-        post[n] = "" if fc == fK[n] else " + " + _sh(f"(int64_t){P}_{c} * a", fc + fy - ft[n], conv_c)
-    if any(p.design.x0[:3]):
-        raise ValueError("the merged predict needs r, u, a of x0 at zero")
-    # Ts^2/2 in v's product format (codegen.ranges, when K_r's would leave it too few bits): w = v + Ts^2/2 a
-    # in Q.fv (one SMLAL) starts both increments, r's shifted, v's with the rest (Ts^2 - Ts^2/2) a
-    a_in_v = bool(post["r"]) and p.consts["H2"][1].frac + fy == fv
-    if a_in_v:
-        post["r"] = ""
-    # r's increment v + Ts^2/2 a + K_r y in one accumulator (Q.fp, one SMLAL each) when v's format is at
-    # least as fine and the sum cannot leave int64: v at its clamp, a and y at their range bounds
-    fp = fK["r"] + fy
-    v_hi = _clamp_word(p.vars["v"].bound, p.vars["v"].fmt, p.v_step) * 2.0 ** (32 - fv)
-    p_max = v_hi + (0 if post["r"] else p.consts["H2"][0] * p.vars["a"].bound)
-    p_max += p.vars["Kr"].bound * p.vars["y"].bound
-    merge_v = fv >= fp and p_max * 2.0**fp < 2.0**62
-    # v's own increment Ts^2 a + K_v y accumulated onto v when it is already in v's format (the same sum)
-    onto_v = not post["v"] and fK["v"] + fy == fv
-    if a_in_v and not (merge_v and onto_v and (v_hi + p.consts["H2"][0] * p.vars["a"].bound) * 2.0**fv < 2.0**63):
-        raise ValueError("Ts^2/2 a onto v needs v in r's and v's increments and v + Ts^2/2 a within int64")
-    # the constant of a in v's increment: Ts^2, or Ts^2 - Ts^2/2 (the same integer sum) after w
-    cq = f"({P}_T2 - {P}_H2)" if a_in_v else f"{P}_T2"
-    eh = "(int32_t)(e >> 32)"  # eps - eps_bar, rounded: the high word of eb
-    predict = (
-        f"e = acn_mac(e, -{P}_OMP, {eh}); /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar): Q.{fo + fy} */"
-        if fo == 32
-        else f"e -= {_sh(f'(int64_t){P}_OMP * {eh}', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
-        " /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar) */"
-    )
+def _gs_load(P: str, T: str, predict: str, follow: bool) -> list[str]:
+    """The gain schedule's step up to its predict of eps: declarations, the gains and eb loaded."""
     L = [
         "    int32_t y, a = s->a;",
         "    int64_t e, p, q, r, v;",
@@ -838,6 +726,70 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
         L += ["    if (k > 0) {", f"        {predict}", "    }"]
     else:
         L += [f"    {predict}"]
+    return L
+
+
+def _gs_tail(P: str, T: str, follow: bool) -> list[str]:
+    """The gain schedule's step after r and v: the clamps, the count, and the next sample's gains."""
+    L = [
+        f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
+        f"    v = acn_limit(v, {P}_VHI, &s->overflow);",
+        f"    ACN_ST64(v, s, {T}_t, v);",
+        "    ++k;",
+    ]
+    if follow:
+        L += [f"    s->k = (s->k & {P}_FOLLOWING) | k; /* the flag as the deviation left it */"]
+    else:
+        L += ["    s->k = k;"]
+    if not follow:  # K_e's two words only now: kept from the top they crowd the update's registers
+        L += [f"    ACN_LD2(klo, khi, s, {T}_t, Ke_lo, Ke);"]
+    L += [f"    {T}_gains(s, k, kr, kv, klo, khi);"]
+    return L
+
+
+def _core_fixed(c: AxisCode, P: str, T: str, follow: bool = False) -> list[str]:
+    """Body of the gain schedule's T_core (follow False) or T_core_dev (follow True): predict and update
+    merged, every state read and written once.
+
+    T_core(s, zb, k) is the common sample: valid, k > 0 and on the schedule; zb = z - eps_bar. T_core_dev
+    (s, z, valid) is any other: the first sample, a skipped one, or one while following a skip
+    (codegen.follow), out of line.
+
+    Contract (formats from :mod:`codegen.ranges`): z, y, a in Q.fy (int32); eps carried as eb = eps -
+    eps_bar + 1/2 LSB of its high word (int64 in Q.(fy+32)): the high word of eb is eps - eps_bar
+    rounded, so the predict needs neither the rounding nor eps_bar, and y takes eps_bar with z; r and
+    v = Ts u int64 in one format Q.fr; K_a, K_e int32 each with its own scaling, K_r (K_v) in the format
+    of Ts^2/2 (Ts^2), or Ts^2/2 in v's product format Q.(fv - fy) (codegen.ranges): then w = v + Ts^2/2 a
+    starts both increments, r's shifted to K_r y's format, v's with (Ts^2 - Ts^2/2) a, the same integer
+    sum as Ts^2 a. Products are 32x32 -> 64 (one SMULL or SMLAL); every shift is a floor except the
+    one that makes a (round to nearest). r and v are clamped once per step on their high words; nothing
+    else can overflow over the declared ranges.
+    """
+    p, m = c.p, c.merge
+    if p.form == "covariance":
+        return _core_cov(p, P, T)
+    fr, fv, fy, fe = p.f("r"), p.f("v"), p.f("y"), p.f("e")
+    fK = {n: p.f("K" + n) for n in "rvae"}
+    fo = p.consts["OMP"][1].frac
+    sa = fK["a"]  # Q.(fKa + fy) -> Q.fy
+    ft = {"r": fr, "v": fv, "e": fe}
+    conv = {n: f"Q.{fK[n] + fy} -> Q.{ft[n]}" for n in "rve"}
+    # Ts^2/2 a and Ts^2 a: in the accumulator of K_r y (K_v y) when they share its format, else shifted apart
+    post = {}  # the planner's choice of sums (codegen.plan.Merge): Ts^2/2 a, Ts^2 a shifted in apart or not
+    for n, cn, apart in (("r", "H2", m.h2_apart), ("v", "T2", m.t2_apart)):
+        fc = p.consts[cn][1].frac
+        post[n] = " + " + _sh(f"(int64_t){P}_{cn} * a", fc + fy - ft[n], f"Q.{fc + fy} -> Q.{ft[n]}") if apart else ""
+    a_in_v, merge_v, onto_v, fp = m.a_in_v, m.merge_v, m.onto_v, m.fp
+    # the constant of a in v's increment: Ts^2, or Ts^2 - Ts^2/2 (the same integer sum) after w
+    cq = f"({P}_T2 - {P}_H2)" if a_in_v else f"{P}_T2"
+    eh = "(int32_t)(e >> 32)"  # eps - eps_bar, rounded: the high word of eb
+    predict = (
+        f"e = acn_mac(e, -{P}_OMP, {eh}); /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar): Q.{fo + fy} */"
+        if fo == 32
+        else f"e -= {_sh(f'(int64_t){P}_OMP * {eh}', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
+        " /* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar) */"
+    )
+    L = _gs_load(P, T, predict, follow)
     L += [
         "    /* r += Ts u + Ts^2/2 a (+ K_r y),  u += Ts a (+ K_v y); a is the previous posterior, and at",
         "     * k = 0 both increments are zero (x0 has r = u = a = 0), so no test of k is needed */",
@@ -857,14 +809,14 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
             p0 = ("0", False) if post["r"] else ("0", True)
     q0 = ("v", True) if onto_v else ("0", not post["v"])
     macs = {}
-    for n, (start, with_a), c, kn in (("p", p0, f"{P}_H2", "Kr"), ("q", q0, cq, "Kv")):
+    for n, (start, with_a), cn, kn in (("p", p0, f"{P}_H2", "Kr"), ("q", q0, cq, "Kv")):
         what = {"p": "r's increment", "q": "v + Ts^2 a + K_v y" if onto_v else "v's increment"}[n]
         what += f", Q.{fp if n == 'p' else fK['v'] + fy}"
         if follow:  # the Ts^2 a term before the update (a skipped sample has only it)
-            L += [f"    {n} = acn_mac({start}, {c}, a);" if with_a else f"    {n} = {start};"]
+            L += [f"    {n} = acn_mac({start}, {cn}, a);" if with_a else f"    {n} = {start};"]
             macs[n] = f"acn_mac({n}, {kn}, y); /* {what} */"
         else:  # both products in one asm: no register copies between them
-            mac = f"acn_mac2({start}, {c}, a, {kn}, y)" if with_a else f"acn_mac({start}, {kn}, y)"
+            mac = f"acn_mac2({start}, {cn}, a, {kn}, y)" if with_a else f"acn_mac({start}, {kn}, y)"
             macs[n] = f"{mac}; /* {what} */"
     upd = [
         "    /* y = z - H x = z - a - eps, eps rounded = high word of eb + eps_bar: zb = z - eps_bar */",
@@ -937,333 +889,20 @@ def _core_fixed(p: AxisPlan, P: str, T: str, follow: bool = False) -> list[str]:
             f"    r = (int64_t)(((uint64_t)hi << 32) | lo) + {_sh('v', fv - fr, f'Q.{fv} -> Q.{fr}')}"
             f" + {_sh('p', fK['r'] + fy - fr, conv['r'])}{post['r']};",
         ]
-    L += [
-        "    v = q;" if onto_v else f"    v += {_sh('q', fK['v'] + fy - fv, conv['v'])}{post['v']};",
-        f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
-        f"    v = acn_limit(v, {P}_VHI, &s->overflow);",
-        f"    ACN_ST64(v, s, {T}_t, v);",
-        "    ++k;",
-    ]
-    if follow:
-        L += [f"    s->k = (s->k & {P}_FOLLOWING) | k; /* the flag as the deviation left it */"]
-    else:
-        L += ["    s->k = k;"]
-    if not follow:  # K_e's two words only now: kept from the top they crowd the update's registers
-        L += [f"    ACN_LD2(klo, khi, s, {T}_t, Ke_lo, Ke);"]
-    L += [f"    {T}_gains(s, k, kr, kv, klo, khi);"]
-    return L
+    L += ["    v = q;" if onto_v else f"    v += {_sh('q', fK['v'] + fy - fv, conv['v'])}{post['v']};"]
+    return L + _gs_tail(P, T, follow)
 
 
-HELPERS = r"""
-/* Constant tables the filter only reads: in flash on AVR (its .rodata would be copied into the few
- * KiB of RAM at start, leaving less for the state and the stack), read through pgm_read_*; plain
- * const arrays everywhere else. */
-#if defined(__AVR__) /* <avr/pgmspace.h> is included with the other headers, above */
-#define ACN_ROM PROGMEM
-#define ACN_ROM_U16(p) ((uint16_t)pgm_read_word(p))
-#define ACN_ROM_U32(p) ((uint32_t)pgm_read_dword(p))
-#define ACN_ROM_I32(p) ((int32_t)pgm_read_dword(p))
-/* two 32-bit fields of a gain-schedule row, as ACN_LD2 (below) reads them from RAM */
-#define ACN_SEG2(a, b, base, T, f1, f2) ((a) = ACN_ROM_U32(&(base)->f1), (b) = ACN_ROM_U32(&(base)->f2))
-#else
-#define ACN_ROM
-#define ACN_ROM_U16(p) (*(p))
-#define ACN_ROM_U32(p) (*(p))
-#define ACN_ROM_I32(p) (*(p))
-#define ACN_SEG2(a, b, base, T, f1, f2) ACN_LD2(a, b, base, T, f1, f2)
-#endif
-/* The per-sample core is inlined into each entry point (it is small, and a call costs a register
- * save and restore every sample). */
-#if defined(__GNUC__)
-#define ACN_INLINE static inline __attribute__((always_inline))
-#else
-#define ACN_INLINE static inline
-#endif
-/* Two adjacent 32-bit fields f1, f2 of *base (f2 four bytes after f1, checked at compile time) in one
- * LDRD (STRD): gcc for Cortex-M3 moves them one word at a time. Word by word, so the same values on
- * any endianness; elsewhere (and with clang, whose operand modifiers are not checked here) plain member
- * accesses. */
-#if defined(__arm__) && defined(__thumb2__) && !defined(__clang__)
-#define ACN_ADJ(T, f1, f2) ((void)sizeof(char[offsetof(T, f2) == offsetof(T, f1) + 4 ? 1 : -1]))
-#define ACN_LD2(a, b, base, T, f1, f2)                                                                   \
-    do {                                                                                                \
-        ACN_ADJ(T, f1, f2);                                                                             \
-        __asm__("ldrd %0, %1, [%2, #%c3]"                                                               \
-                : "=r"(a), "=r"(b)                                                                      \
-                : "r"(base), "i"(offsetof(T, f1)), "m"(*(const char(*)[8])(const void *)&(base)->f1));  \
-    } while (0)
-#define ACN_ST2(a, b, base, T, f1, f2)                                                                   \
-    do {                                                                                                \
-        ACN_ADJ(T, f1, f2);                                                                             \
-        __asm__("strd %1, %2, [%3, #%c4]"                                                               \
-                : "=m"(*(char(*)[8])(void *)&(base)->f1)                                                \
-                : "r"(a), "r"(b), "r"(base), "i"(offsetof(T, f1)));                                     \
-    } while (0)
-/* An int64 field f of *base in one LDRD, as its low and high word (little-endian only) */
-#if defined(__ARM_BIG_ENDIAN)
-#define ACN_LD64(lo, hi, base, T, f) ((lo) = (uint32_t)(base)->f, (hi) = (uint32_t)((uint64_t)(base)->f >> 32))
-#define ACN_ST64(x, base, T, f) ((base)->f = (x))
-#else
-#define ACN_LD64(lo, hi, base, T, f)                                                                     \
-    __asm__("ldrd %0, %1, [%2, #%c3]"                                                                   \
-            : "=r"(lo), "=r"(hi)                                                                        \
-            : "r"(base), "i"(offsetof(T, f)), "m"(*(const char(*)[8])(const void *)&(base)->f))
-#define ACN_ST64(x, base, T, f)                                                                          \
-    __asm__("strd %1, %2, [%3, #%c4]"                                                                   \
-            : "=m"(*(char(*)[8])(void *)&(base)->f)                                                     \
-            : "r"((uint32_t)(x)), "r"((uint32_t)((uint64_t)(x) >> 32)), "r"(base), "i"(offsetof(T, f)))
-#endif
-#else
-#define ACN_LD2(a, b, base, T, f1, f2) ((a) = (uint32_t)(base)->f1, (b) = (uint32_t)(base)->f2)
-#define ACN_ST2(a, b, base, T, f1, f2) ((base)->f1 = (a), (base)->f2 = (b))
-#define ACN_LD64(lo, hi, base, T, f) ((lo) = (uint32_t)(base)->f, (hi) = (uint32_t)((uint64_t)(base)->f >> 32))
-#define ACN_ST64(x, base, T, f) ((base)->f = (x))
-#endif
-
-/* Round-to-nearest right shift of an int64 by s >= 1 (ties toward +inf). The
- * right shift of a negative value is arithmetic on every compiler accelnav
- * supports (gcc, clang, arm-none-eabi-gcc); it is checked in the tests. */
-#define ACN_RSHR(x, s) (((x) + ((int64_t)1 << ((s) - 1))) >> (s))
-
-/* a b as int64: one SMULL. gcc for Cortex-M3 sometimes builds it from UMULL and two MLA (a 64x64
- * product), so on Thumb-2 it is spelled out; the result is the same integer everywhere. */
-static inline int64_t acn_mul(int32_t a, int32_t b)
-{
-#if defined(__arm__) && defined(__thumb2__)
-    uint32_t lo, hi;
-    __asm__("smull %0, %1, %2, %3" : "=&r"(lo), "=&r"(hi) : "r"(a), "r"(b));
-    return (int64_t)(((uint64_t)hi << 32) | lo);
-#else
-    return (int64_t)a * b;
-#endif
-}
-
-/* acc + a b as int64: one SMLAL (gcc for Cortex-M3 often forms the product with SMULL and adds it
- * with ADDS/ADC); the same integer everywhere. */
-static inline int64_t acn_mac(int64_t acc, int32_t a, int32_t b)
-{
-#if defined(__arm__) && defined(__thumb2__)
-    uint32_t lo = (uint32_t)acc, hi = (uint32_t)((uint64_t)acc >> 32);
-    __asm__("smlal %0, %1, %2, %3" : "+r"(lo), "+r"(hi) : "r"(a), "r"(b));
-    return (int64_t)(((uint64_t)hi << 32) | lo);
-#else
-    return acc + (int64_t)a * b;
-#endif
-}
-
-/* acc + a b + c d as int64: two SMLAL in a row (the register pair is not copied between them). */
-static inline int64_t acn_mac2(int64_t acc, int32_t a, int32_t b, int32_t c, int32_t d)
-{
-#if defined(__arm__) && defined(__thumb2__)
-    uint32_t lo = (uint32_t)acc, hi = (uint32_t)((uint64_t)acc >> 32);
-    __asm__("smlal %0, %1, %2, %3\n\tsmlal %0, %1, %4, %5" : "+r"(lo), "+r"(hi) : "r"(a), "r"(b), "r"(c), "r"(d));
-    return (int64_t)(((uint64_t)hi << 32) | lo);
-#else
-    return acc + (int64_t)a * b + (int64_t)c * d;
-#endif
-}
-
-/* w += c a on w's two words (lo, hi) in place, then p = (w >> s) + k y (p's words plo, phi; the shift
- * a floor, 1 <= s <= 31): two SMLAL and three shifts in one asm, w left in its registers for a later
- * SMLAL (apart, gcc copies w's and p's register pairs between them); the same integers everywhere. */
-#if defined(__arm__) && defined(__thumb2__)
-#define ACN_MAC_SHR_MAC(lo, hi, c, a, s, k, y, plo, phi)                                                 \
-    __asm__("smlal %0, %1, %4, %5\n\tlsr %2, %0, #%c6\n\torr %2, %2, %1, lsl #%c7\n\tasr %3, %1, #%c6\n\t" \
-            "smlal %2, %3, %8, %9"                                                                      \
-            : "+r"(lo), "+r"(hi), "=&r"(plo), "=&r"(phi)                                               \
-            : "r"(c), "r"(a), "i"(s), "i"(32 - (s)), "r"(k), "r"(y))
-#else
-#define ACN_MAC_SHR_MAC(lo, hi, c, a, s, k, y, plo, phi)                                                 \
-    do {                                                                                                \
-        int64_t w_ = (int64_t)(((uint64_t)(hi) << 32) | (lo)) + (int64_t)(c) * (a);                     \
-        int64_t p_ = (w_ >> (s)) + (int64_t)(k) * (y);                                                  \
-        (lo) = (uint32_t)w_;                                                                            \
-        (hi) = (uint32_t)((uint64_t)w_ >> 32);                                                          \
-        (plo) = (uint32_t)p_;                                                                           \
-        (phi) = (uint32_t)((uint64_t)p_ >> 32);                                                         \
-    } while (0)
-#endif
-
-/* a + ((t + 2^(s-1)) >> s) in 32 bits (wrapping as the int32 sum does), 1 <= s <= 32, from t's two
- * words: t >> s = hi 2^(32-s) + lo >> s, and the half added before the floor is the carry of
- * ((lo >> (s-1)) + 1) >> 1 (one shifted add each: no 64-bit add). */
-static inline int32_t acn_add_round(int32_t a, int64_t t, int s)
-{
-    uint32_t lo = (uint32_t)t, hi = (uint32_t)((uint64_t)t >> 32);
-    uint32_t h = s == 32 ? hi : hi << (32 - s);
-    return (int32_t)((uint32_t)a + h + (((lo >> (s - 1)) + 1u) >> 1));
-}
-
-/* The bits of x in reverse order (one RBIT on Thumb-2): the bit-reversed sample count runs through
- * the rounding offsets of the covariance predict evenly (see codegen.emit_c._acc). */
-static inline uint32_t acn_rbit(uint32_t x)
-{
-#if defined(__arm__) && defined(__thumb2__)
-    __asm__("rbit %0, %1" : "=r"(x) : "r"(x));
-    return x;
-#else
-    x = ((x >> 1) & UINT32_C(0x55555555)) | ((x & UINT32_C(0x55555555)) << 1);
-    x = ((x >> 2) & UINT32_C(0x33333333)) | ((x & UINT32_C(0x33333333)) << 2);
-    x = ((x >> 4) & UINT32_C(0x0F0F0F0F)) | ((x & UINT32_C(0x0F0F0F0F)) << 4);
-    x = ((x >> 8) & UINT32_C(0x00FF00FF)) | ((x & UINT32_C(0x00FF00FF)) << 8);
-    return (x >> 16) | (x << 16);
-#endif
-}
-
-/* Narrow an int64 to int32, saturating and counting. x fits int32 exactly when its high word is the
- * sign extension of its low word: one compare on the common path. */
-static inline int32_t acn_sat32(int64_t x, uint32_t *overflow)
-{
-    int32_t lo = (int32_t)(uint32_t)x, hi = (int32_t)(x >> 32);
-    if (__builtin_expect(hi != (lo >> 31), 0)) {
-        ++*overflow;
-        return hi < 0 ? INT32_MIN : INT32_MAX;
-    }
-    return lo;
-}
-
-/* a + b saturated to int32, counting: the same value and count as acn_sat32((int64_t)a + b) (the
- * 32-bit add overflows exactly when the sum leaves int32, and then the sum has a's sign); one ADDS
- * and one branch on the overflow flag in the common case. */
-static inline int32_t acn_add_sat32(int32_t a, int32_t b, uint32_t *overflow)
-{
-#if defined(__GNUC__)
-    int32_t r;
-    if (__builtin_expect(__builtin_add_overflow(a, b, &r), 0)) {
-        ++*overflow;
-        return a < 0 ? INT32_MIN : INT32_MAX;
-    }
-    return r;
-#else
-    return acn_sat32((int64_t)a + b, overflow);
-#endif
-}
-
-/* Clamp an int64 to +-hmax 2^32 when its high word leaves [-hmax, hmax], counting: one add and
- * one compare on the high word in the common case. */
-static inline int64_t acn_limit(int64_t x, int32_t hmax, uint32_t *overflow)
-{
-    if ((uint32_t)(x >> 32) + (uint32_t)hmax > 2u * (uint32_t)hmax) {
-        ++*overflow;
-        return x < 0 ? -(int64_t)hmax * ((int64_t)1 << 32) : (int64_t)hmax * ((int64_t)1 << 32);
-    }
-    return x;
-}
-
-/* round(x * c / 2^s) for int64 x, int32 c, 1 <= s <= 62, without a 96-bit
- * product: x = hi 2^32 + lo, lo unsigned. Contract: the result fits int64. */
-static inline int64_t acn_mul64x32(int64_t x, int32_t c, int s)
-{
-    int64_t hi = (x >> 32) * c;                          /* |.| < 2^62 */
-    int64_t t = (int64_t)(uint32_t)(x & UINT32_C(0xFFFFFFFF)) * c; /* |.| < 2^63 */
-    int64_t m = hi + (t >> 32);                          /* x c = m 2^32 + (t mod 2^32) */
-    if (s > 32) {
-        return (m + ((int64_t)1 << (s - 33))) >> (s - 32);
-    }
-    return m * ((int64_t)1 << (32 - s)) +
-           (int64_t)((((uint64_t)(uint32_t)(t & UINT32_C(0xFFFFFFFF))) + ((uint64_t)1 << (s - 1))) >> s);
-}
-
-/* The leading zeros of a 32-bit d > 0. __builtin_clz counts them in an unsigned int, which is 16 bits
- * on AVR (it would count the zeros of d's low half): the builtin whose operand is exactly 32 bits is
- * chosen at compile time, and a plain binary search serves any other compiler or width (and
- * ACN_PLAIN_CLZ, which the tests use to check it). */
-static inline int acn_clz32(uint32_t d)
-{
-#if defined(__GNUC__) && !defined(ACN_PLAIN_CLZ) && UINT_MAX == 0xFFFFFFFF
-    return __builtin_clz(d);
-#elif defined(__GNUC__) && !defined(ACN_PLAIN_CLZ) && ULONG_MAX == 0xFFFFFFFF
-    return __builtin_clzl(d);
-#else
-    int n = 0;
-    if (d < UINT32_C(0x10000)) {
-        n += 16;
-        d <<= 16;
-    }
-    if (d < UINT32_C(0x1000000)) {
-        n += 8;
-        d <<= 8;
-    }
-    if (d < UINT32_C(0x10000000)) {
-        n += 4;
-        d <<= 4;
-    }
-    if (d < UINT32_C(0x40000000)) {
-        n += 2;
-        d <<= 2;
-    }
-    return d < UINT32_C(0x80000000) ? n + 1 : n;
-#endif
-}
-
-/* Reciprocal without a divide: for d > 0 returns x (Q2.30, 1 < x <= 2) and n = clz(d)
- * with 1/d = x 2^(n-62) to a relative 2^-28. Newton-Raphson, three steps from
- * the linear start 48/17 - 32/17 D, D = d 2^(n-32) in [0.5, 1). */
-static inline uint32_t acn_umulhi(uint32_t a, uint32_t b)
-{
-#if defined(__arm__) && defined(__thumb2__)
-    uint32_t lo, hi;
-    __asm__("umull %0, %1, %2, %3" : "=&r"(lo), "=&r"(hi) : "r"(a), "r"(b));
-    (void)lo;
-    return hi;
-#else
-    return (uint32_t)(((uint64_t)a * b) >> 32);
-#endif
-}
-
-/* One Newton-Raphson step x += x (1 - D x) of the reciprocal below. */
-#define ACN_NR(dn, x)                                                                        \
-    do {                                                                                     \
-        int32_t err_ = (int32_t)(UINT32_C(0x40000000) - acn_umulhi((dn), (x))); /* 1 - D x */ \
-        (x) = (uint32_t)((int64_t)(x) + (acn_mul((int32_t)((x) >> 1), err_) >> 29));         \
-    } while (0)
-
-static inline uint32_t acn_recip(uint32_t d, int *n)
-{
-    uint32_t dn, x;
-    *n = acn_clz32(d);
-    dn = d << *n;                                                        /* D, Q0.32 */
-    x = UINT32_C(3031741621) - acn_umulhi(UINT32_C(2021161080), dn); /* Q2.30 */
-    ACN_NR(dn, x); /* three steps, unrolled */
-    ACN_NR(dn, x);
-    ACN_NR(dn, x);
-    return x;
-}
-
-/* Checkpoint images (T_save, T_load): little-endian words at any alignment, no libc. A little-endian
- * target with unaligned access (Cortex-M3, x86) moves a word with one STR / LDR (a 4-byte
- * __builtin_memcpy); any other byte by byte (on the Cortex-M0 gcc would call memcpy). */
-#if defined(__GNUC__) && defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__ &&                  \
-    (defined(__ARM_FEATURE_UNALIGNED) || defined(__x86_64__) || defined(__i386__))
-static inline void acn_put32(uint8_t *p, uint32_t v)
-{
-    __builtin_memcpy(p, &v, 4);
-}
-
-static inline uint32_t acn_get32(const uint8_t *p)
-{
-    uint32_t v;
-    __builtin_memcpy(&v, p, 4);
-    return v;
-}
-#else
-static inline void acn_put32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
-
-static inline uint32_t acn_get32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-#endif
-"""
+RUNTIME_HEADER = "acn_runtime.h"  # codegen/csrc: the runtime every fixed-point filter carries
 
 
-RECIP_TABLE_BITS = 7  # the covariance form's reciprocal starts from a table of 2^7 entries
+@functools.cache
+def runtime_text() -> str:
+    """The C runtime (acn_runtime.h, package data) between its clang-format markers: copied into every
+    generated .c, so that a generated filter needs no other file."""
+    text = (package_dir("accelnav.codegen") / "csrc" / RUNTIME_HEADER).read_text()
+    begin, end = "/* clang-format off */\n", "/* clang-format on */\n"
+    return text[text.index(begin) + len(begin) : text.index(end)]
 
 
 def recip_helpers() -> str:
@@ -1271,8 +910,7 @@ def recip_helpers() -> str:
     and two Newton-Raphson steps (2^-16, then below 2^-28 with the arithmetic's rounding) instead of
     acn_recip's linear start and three steps: the same contract, fewer instructions."""
     nb = RECIP_TABLE_BITS
-    # entry i: 2^30 / D at the middle of D in [1/2 + i 2^-(nb+1), 1/2 + (i+1) 2^-(nb+1)), Q2.30 >> 15
-    tab = [round(2**30 / (0.5 + (i + 0.5) / 2 ** (nb + 1)) / 2**15) for i in range(2**nb)]
+    tab = recip_table(nb)
     rows = [", ".join(str(x) for x in tab[j : j + 12]) for j in range(0, len(tab), 12)]
     body = ",\n    ".join(rows)
     return f"""
@@ -1295,34 +933,12 @@ static inline uint32_t acn_recip_t(uint32_t d, int *n)
 """
 
 
-def _schedule_for(p: AxisPlan) -> Schedule:
-    """The plan's gain schedule over its declared run, computed window by window (memory does not grow
-    with the run)."""
-    from .gains import schedule_of
-
-    fm = tuple(p.vars["K" + n].fmt for n in "rvae")
-    return schedule_of(
-        p.design,
-        p.n_run,
-        fm,
-        SCHEDULE_REL_TOL,
-        ramp=int(SCHEDULE_RAMP_S * p.model.rate_hz),
-        floor=SCHEDULE_FLOOR_LSB,
-    )
+_schedule_for = schedule_for  # its name before codegen.plan: tests and bench/ import it from here
 
 
-def _gs_defines(p: AxisPlan, P: str) -> list[str]:
+def _gs_defines(c: AxisCode, P: str) -> list[str]:
     """Gain schedule: the flag of k, its restart value and eps's offset from the state eb."""
-    fe = p.f("e")
-    if fe != p.f("y") + 32 or p.consts["EBAR"][1].frac != p.f("y") or p.f("z") != p.f("y"):
-        raise ValueError("eb needs eps in Q.(fy + 32) and z, eps_bar in Q.fy")
-    if p.n_run >= 2**30:  # the schedule ends within the run: a count restarted at 2^30 is past it
-        raise ValueError("the gain schedule's run must stay below 2^30 samples (k restarts there)")
-    ebar = quantize(p.consts["EBAR"][0], p.consts["EBAR"][1])
-    eoff = ebar * 2**32 - 2**31
-    big = p.vars["e"].bound * 2.0**fe + abs(eoff) + 2.0**32
-    if big >= 2.0**63:
-        raise ValueError(f"eb = eps - eps_bar + 1/2 LSB leaves int64 ({big:.3g} LSB)")
+    fe, eoff = c.p.f("e"), c.eoff
     return [
         f"#define {P}_FOLLOWING UINT32_C(0x80000000) /* bit of k: following a skip (codegen.follow) */",
         f"#define {P}_KWRAP UINT32_C(0x40000000) /* k past 2^31 - 1 samples restarts here, beyond the schedule */",
@@ -1330,10 +946,11 @@ def _gs_defines(p: AxisPlan, P: str) -> list[str]:
     ]
 
 
-def _gs_entries(p: AxisPlan, P: str, T: str, params: str, args: str) -> list[str]:
+def _gs_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[str]:
     """Gain schedule: T_core (the common sample, inlined), T_core_dev (any other, out of line), and the
     entry points update, skip and step. The common path tests one word: k, whose sign bit says
     "following a skip" and whose zero says "first sample"; both go out of line."""
+    p = c.p
     fz = p.f("z")
     src = [
         "/* The common sample: valid, not the first (k > 0), on the schedule. zb = z - eps_bar, z [m/s^2]",
@@ -1341,7 +958,7 @@ def _gs_entries(p: AxisPlan, P: str, T: str, params: str, args: str) -> list[str
         f"ACN_INLINE void {T}_core({T}_t *s, int32_t zb, uint32_t k)",
         "{",
     ]
-    src += _core_fixed(p, P, T)
+    src += _core_fixed(c, P, T)
     src += ["}", ""]
     src += [
         "/* Any other sample (the first, a skipped one, one while following a skip, codegen.follow):",
@@ -1349,7 +966,7 @@ def _gs_entries(p: AxisPlan, P: str, T: str, params: str, args: str) -> list[str
         f"static __attribute__((noinline)) void {T}_core_dev({T}_t *s, int32_t z, bool valid)",
         "{",
     ]
-    src += _core_fixed(p, P, T, follow=True)
+    src += _core_fixed(c, P, T, follow=True)
     src += ["}", ""]
     src += [
         f"void {T}_update({T}_t *s, int32_t z)",
@@ -1398,12 +1015,8 @@ def _gs_entries(p: AxisPlan, P: str, T: str, params: str, args: str) -> list[str
     return src
 
 
-def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[str], dict]:
-    """(header decls, cdef decls, source lines, manifest) of one axis."""
-    ax = p.design.axis.name
-    P = f"{prefix.upper()}_{ax.upper()}"
-    T = f"{prefix}_{ax}"
-    fields = _fields_fixed(p, T)
+def _axis_decls(p: AxisPlan, T: str, fields, params: str) -> tuple[list[str], list[str], list[str]]:
+    """The state struct, the output struct and the prototypes of one axis: (struct, out_struct, protos)."""
     struct = ["typedef struct {"] + [f"    {t}{'' if t.endswith('*') else ' '}{n}; /* {c} */" for t, n, c in fields]
     struct += [f"}} {T}_t;"]
     out_struct = [
@@ -1414,7 +1027,6 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         f"    int64_t e; /* [m/s^2] {p.vars['e'].fmt} */",
         f"}} {T}_out_t;",
     ]
-    params, args, in_body = _input_fixed(p, P)
     protos = [
         f"void {T}_init({T}_t *s);",
         f"bool {T}_convert({params}, int32_t *z);",
@@ -1425,6 +1037,226 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
         f"void {T}_save(const {T}_t *s, uint8_t *out);",
         f"bool {T}_load({T}_t *s, const uint8_t *in);",
     ]
+    return struct, out_struct, protos
+
+
+def _gs_table(c: AxisCode, P: str, T: str) -> list[str]:
+    """The gain schedule's table of rows (in flash on AVR) and its size."""
+    sched = c.sched
+    src = [f"#define {P}_NSEG {sched.n_segments}"]
+    src.append("/* segment j: K_a holds its ka; after every sample of it K_r, K_v and K_e add their slopes;")
+    src.append(" * it ends when end[j] samples are done. The last row (zero slopes, the last ka, end 0:")
+    src.append(" * never reached) holds the gains. */")
+    src.append(f"struct {T}_seg_s {{")
+    src.append("    int32_t dr, dv; /* per-sample slopes of K_r, K_v */")
+    src.append("    uint32_t de_lo; /* K_e's per-sample slope: int64, low word */")
+    src.append("    int32_t de_hi; /* ... and high word */")
+    src.append("    int32_t ka; /* K_a over the segment */")
+    src.append("    uint32_t end; /* samples done when the segment ends */")
+    src.append("};")
+    src.append(f"typedef struct {T}_seg_s {T}_seg_t;")
+    src.append(
+        "/* K_r, K_v, K_a, K_e in LSB of ("
+        + ", ".join(str(f) for f in sched.formats)
+        + f"; K_e's is Q.{sched.formats[3].frac + 32}) */"
+    )
+    src.append("/* in flash on AVR (ACN_ROM): kilobytes the 2 KiB of an ATmega328P's RAM could not hold */")
+    src.append(f"static const {T}_seg_t {T}_seg[{P}_NSEG + 1] ACN_ROM = {{")
+    end = 0
+    for L, sl in zip(sched.lengths, sched.slopes, strict=True):
+        end += L
+        e64 = sl[3] & 0xFFFFFFFFFFFFFFFF
+        src.append(
+            "    {"
+            + ", ".join(_c_int(x, 32) for x in sl[:2])
+            + f", UINT32_C({e64 & 0xFFFFFFFF}), {_c_int((e64 >> 32) - ((e64 >> 63) << 32), 32)}"
+            + f", {_c_int(sl[2], 32)}, {end}u}},"
+            + f" /* K_e slope {sl[3]} */"
+        )
+    last = sched.slopes[-1] if sched.n_segments else (0, 0, sched.start[2], 0)
+    src.append(f"    {{0, 0, 0u, 0, {_c_int(last[2], 32)}, 0u}},")
+    src.append("};")
+    src.append("")
+    return src
+
+
+def _init_c(c: AxisCode, T: str) -> list[str]:
+    """T_init: the initial state in its formats."""
+    x0 = c.x0
+    src = [
+        f"void {T}_init({T}_t *s)",
+        "{",
+        f"    s->r = {_c_int(x0[0], 64)};",
+        f"    s->v = {_c_int(x0[1], 64)};",
+        f"    s->a = {_c_int(x0[2], 32)};",
+    ]
+    if c.p.form == "covariance":
+        src.append(f"    s->e = {_c_int(x0[3], 64)};")
+        for nm, (val, q) in c.cov0.items():
+            src.append(f"    s->{nm} = {_c_int(q, 32)}; /* {val:.17g} */")
+    else:
+        sched = c.sched
+        for i, nm in enumerate("rv"):
+            src.append(f"    s->K{nm} = {_c_int(sched.start[i], 32)};")
+        ke0 = sched.start[3]
+        src.append(f"    s->Ke_lo = UINT32_C({ke0 & 0xFFFFFFFF});")
+        src.append(f"    s->Ke = {_c_int(ke0 >> 32, 32)};")
+        src.append(f"    s->seg = &{T}_seg[0];")
+        src.append(f"    s->eb = {_c_int(x0[3] - c.eoff, 64)}; /* eps0 - EOFF */")
+        src.append("    s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;")
+        src.append("    s->z = 0;")
+    return src + ["    s->k = 0;", "    s->overflow = 0;", "}", ""]
+
+
+def _gs_gains_c(c: AxisCode, P: str, T: str) -> list[str]:
+    """T_gains (one step along the schedule) and T_follow (codegen.follow, planned and checked)."""
+    from .follow import emit_follow
+
+    return [
+        "/* The gains of the next sample: one step along the schedule; k = samples done, kr, kv, klo, khi",
+        " * the current K_r, K_v and K_e's accumulator words (already loaded by the core). */",
+        f"ACN_INLINE void {T}_gains({T}_t *s, uint32_t k, uint32_t kr, uint32_t kv, uint32_t klo, uint32_t khi)",
+        "{",
+        f"    const {T}_seg_t *d = s->seg;",
+        "    uint32_t dr, dv, dlo, dhi;",
+        "    uint64_t ke;",
+        f"    ACN_SEG2(dr, dv, d, {T}_seg_t, dr, dv); /* the row is in flash on AVR */",
+        f"    ACN_SEG2(dlo, dhi, d, {T}_seg_t, de_lo, de_hi);",
+        "    ke = (((uint64_t)khi << 32) | klo) + (((uint64_t)dhi << 32) | dlo); /* wraps like int64 */",
+        f"    ACN_ST2(kr + dr, kv + dv, s, {T}_t, Kr, Kv); /* wraps like int32 (never does: a gain) */",
+        f"    ACN_ST2((uint32_t)ke, (uint32_t)(ke >> 32), s, {T}_t, Ke_lo, Ke);",
+        f"    if (k == ACN_ROM_U32(&d->end) && d != &{T}_seg[{P}_NSEG]) {{",
+        "        s->seg = ++d; /* K_a is read from the row */",
+        "    }",
+        "}",
+        "",
+    ] + emit_follow(c.p, P, T, c.follow)
+
+
+def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[str]:
+    """The covariance form: its block's predict and update (fine and coarse formats), T_core_c, T_core and
+    the entry points update, skip and step."""
+    p = c.p
+    src = []
+    # the predict of the covariance block in a function of its own: its registers do not crowd the
+    # states'; twice: c_r, c_v, c_a, c_e in their fine formats (the common path) and in their coarse ones
+    for sfx, q in (("", fine_view(p)), ("_c", p)):
+        src += [f"static void {T}_ppredict{sfx}({T}_t *s)", "{"]
+        src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(q, P)]
+        src += ["}", ""]
+        src += [f"static void {T}_pupdate{sfx}({T}_t *s, int32_t y)", "{"] + _gains_cov(q, P) + ["}", ""]
+    src += [
+        "/* One sample with c_r, c_v, c_a, c_e in their coarse formats, or a skip (rare: out of line). */",
+        f"static __attribute__((noinline)) void {T}_core_c({T}_t *s, int32_t z, bool valid)",
+        "{",
+    ]
+    src += _core_cov_coarse(p, P, T) + ["}", ""]
+    src += [
+        "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
+        f" * with z [m/s^2] {p.vars['z'].fmt}. Inlined into update, skip and step. */",
+        f"ACN_INLINE void {T}_core({T}_t *s, int32_t z, bool valid)",
+        "{",
+    ]
+    src += _core_fixed(c, P, T)
+    src += ["}", ""]
+    src += [f"void {T}_update({T}_t *s, int32_t z)", "{", f"    {T}_core(s, z, true);", "}", ""]
+    src += [
+        "/* A sample that must be skipped (rail-clipped, missing capture): predict only. */",
+        f"void {T}_skip({T}_t *s)",
+        "{",
+        f"    {T}_core(s, 0, false);",
+        "}",
+        "",
+    ]
+    src += [
+        "/* Convert the raw input and run one step; returns false when the sample was skipped. */",
+        f"bool {T}_step({T}_t *s, {params})",
+        "{",
+        "    int32_t z = 0;",
+        f"    if (!{T}_convert({args}, &z)) {{",
+        f"        {T}_skip(s); /* rare: the core inlined once, for valid samples only */",
+        "        return false;",
+        "    }",
+        f"    {T}_core(s, z, true);",
+        "    return true;",
+        "}",
+        "",
+    ]
+    return src
+
+
+def _read_c(c: AxisCode, P: str, T: str) -> list[str]:
+    """T_read: the states in their output formats (u = v / Ts)."""
+    p, v = c.p, c.p.vars
+    return [
+        f"void {T}_read(const {T}_t *s, {T}_out_t *o)",
+        "{",
+        "    o->r = s->r;",
+        f"    o->u = acn_mul64x32(s->v, {P}_RATE, {p.f('v') + p.consts['RATE'][1].frac - p.f('u_out')});"
+        f" /* v / Ts: Q.{p.f('v')} -> {v['u_out'].fmt} */",
+        "    o->a = s->a;",
+        "    o->e = s->e;" if c.eoff is None else f"    o->e = s->eb + {P}_EOFF; /* eps */",
+        "}",
+        "",
+    ]
+
+
+def _manifest(c: AxisCode, T: str, fields, ck_fields, ck_bytes: int) -> dict:
+    """The axis' entry of PREFIX.json: formats, constants, bounds, the checkpoint image, the schedule."""
+    p, sched = c.p, c.sched
+    man = {
+        "axis": p.design.axis.name,
+        "form": p.form,
+        "variables": {
+            k: {
+                "unit": x.unit,
+                "bound": x.bound,
+                "format": x.fmt.name,
+                "word": x.fmt.word,
+                "frac": x.fmt.frac,
+                "resolution": x.fmt.lsb,
+                "saturates": x.saturates,
+                "note": x.note,
+            }
+            for k, x in p.vars.items()
+        },
+        "constants": {k: {"value": val, "format": f.name, "int": q} for k, (val, f, q) in c.consts.items()},
+        "l1": p.l1.__dict__ | {},
+        "z_error": p.z_error,
+        "state_bytes": _struct_bytes(fields),  # sizeof(T_t); None when it depends on the target (a pointer)
+        # what the telemetry's checkpoint frames carry (codegen.frames, accelnav.link.replay): the image of
+        # T_save / T_load; "row": where the gain schedule's row index lies in it and how many rows there are
+        # (an index >= rows is a damaged image: T_load and the host decoder refuse it)
+        "checkpoint": {
+            "bytes": ck_bytes,
+            "save": f"{T}_save",
+            "load": f"{T}_load",
+            "row": None
+            if sched is None
+            else {"offset": _struct_offsets(ck_fields)["seg"], "rows": sched.n_segments + 1, "table": f"{T}_seg"},
+        },
+        "e_state_offset": c.eoff,  # gain schedule: eps = eb + this (LSB of e); None: the state holds eps
+    }
+    if sched is not None:
+        man["schedule"] = {
+            "segments": sched.n_segments,
+            "max_error": [float(e) for e in sched.max_error],
+            "rel_tol": list(SCHEDULE_REL_TOL),
+            "floor_lsb": list(SCHEDULE_FLOOR_LSB),
+            "flash_bytes": (sched.n_segments + 1) * 24,
+        }
+    return man
+
+
+def _axis_fixed(c: AxisCode, prefix: str) -> tuple[list[str], list[str], list[str], dict]:
+    """(header decls, cdef decls, source lines, manifest) of one planned axis."""
+    p = c.p
+    ax = p.design.axis.name
+    P = f"{prefix.upper()}_{ax.upper()}"
+    T = f"{prefix}_{ax}"
+    fields = _fields_fixed(p, T)
+    params, args, in_body = _input_fixed(p, P)
+    struct, out_struct, protos = _axis_decls(p, T, fields, params)
     ck_fields = _fields_checkpoint(fields, T)
     ck_bytes = _struct_bytes(ck_fields)
     if ck_bytes is None or ck_bytes != sum(_C_SIZES[t] for t, _, _ in ck_fields):
@@ -1440,244 +1272,21 @@ def _axis_fixed(p: AxisPlan, prefix: str) -> tuple[list[str], list[str], list[st
     header = fmt_defs + [""] + struct + [""] + out_struct + [""] + protos
     cdef = struct + out_struct + protos
 
-    d = p.design
-    src = [f"/* ---- axis {ax}: {p.form} form ---- */", ""] + _fixed_consts(p, P) + [""]
-    sched = None
-    v = p.vars
-    for nm, key, step in (("RHI", "r", p.step_max), ("VHI", "v", p.v_step)):
-        h = _clamp_word(v[key].bound, v[key].fmt, step)
+    src = [f"/* ---- axis {ax}: {p.form} form ---- */", ""] + _fixed_consts(c, P) + [""]
+    for nm, (key, bound, h) in c.clamps.items():
         src.append(
             f"#define {P}_{nm} INT32_C({h}) /* clamp: |{key}| <= {h} 2^32 LSB"
-            f" ({h * 2.0 ** (32 - v[key].fmt.frac):.6g} m >= {v[key].bound:.6g} m) */"
+            f" ({h * 2.0 ** (32 - p.vars[key].fmt.frac):.6g} m >= {bound:.6g} m) */"
         )
-    eoff = None
-    if p.form == "gain_schedule":
-        src += _gs_defines(p, P)
-        eoff = quantize(p.consts["EBAR"][0], p.consts["EBAR"][1]) * 2**32 - 2**31  # eps = eb + EOFF
-    src.append("")
-    if p.form == "gain_schedule":
-        sched = _schedule_for(p)
-        src.append(f"#define {P}_NSEG {sched.n_segments}")
-        src.append("/* segment j: K_a holds its ka; after every sample of it K_r, K_v and K_e add their slopes;")
-        src.append(" * it ends when end[j] samples are done. The last row (zero slopes, the last ka, end 0:")
-        src.append(" * never reached) holds the gains. */")
-        src.append(f"struct {T}_seg_s {{")
-        src.append("    int32_t dr, dv; /* per-sample slopes of K_r, K_v */")
-        src.append("    uint32_t de_lo; /* K_e's per-sample slope: int64, low word */")
-        src.append("    int32_t de_hi; /* ... and high word */")
-        src.append("    int32_t ka; /* K_a over the segment */")
-        src.append("    uint32_t end; /* samples done when the segment ends */")
-        src.append("};")
-        src.append(f"typedef struct {T}_seg_s {T}_seg_t;")
-        src.append(
-            "/* K_r, K_v, K_a, K_e in LSB of ("
-            + ", ".join(str(f) for f in sched.formats)
-            + f"; K_e's is Q.{sched.formats[3].frac + 32}) */"
-        )
-        src.append("/* in flash on AVR (ACN_ROM): kilobytes the 2 KiB of an ATmega328P's RAM could not hold */")
-        src.append(f"static const {T}_seg_t {T}_seg[{P}_NSEG + 1] ACN_ROM = {{")
-        end = 0
-        for L, sl in zip(sched.lengths, sched.slopes, strict=True):
-            end += L
-            e64 = sl[3] & 0xFFFFFFFFFFFFFFFF
-            src.append(
-                "    {"
-                + ", ".join(_c_int(x, 32) for x in sl[:2])
-                + f", UINT32_C({e64 & 0xFFFFFFFF}), {_c_int((e64 >> 32) - ((e64 >> 63) << 32), 32)}"
-                + f", {_c_int(sl[2], 32)}, {end}u}},"
-                + f" /* K_e slope {sl[3]} */"
-            )
-        last = sched.slopes[-1] if sched.n_segments else (0, 0, sched.start[2], 0)
-        src.append(f"    {{0, 0, 0u, 0, {_c_int(last[2], 32)}, 0u}},")
-        src.append("};")
-        src.append("")
-    # init
-    v = p.vars
-    x0 = [
-        quantize(d.x0[0], v["r"].fmt),
-        quantize(d.Ts * d.x0[1], v["v"].fmt),
-        quantize(d.x0[2], v["a"].fmt),
-        quantize(d.x0[3], v["e"].fmt),
-    ]
-    src += [
-        f"void {T}_init({T}_t *s)",
-        "{",
-        f"    s->r = {_c_int(x0[0], 64)};",
-        f"    s->v = {_c_int(x0[1], 64)};",
-        f"    s->a = {_c_int(x0[2], 32)};",
-    ]
-    if p.form == "covariance":
-        src.append(f"    s->e = {_c_int(x0[3], 64)};")
-        P0 = d.P0
-        Ts = d.Ts
-        vals = {
-            "cr": P0[0, 2] + P0[0, 3],
-            "Pre": P0[0, 3],
-            "cv": Ts * (P0[1, 2] + P0[1, 3]),
-            "Pve": Ts * P0[1, 3],
-            "ca": P0[2, 2] + P0[2, 3],
-            "Pae": P0[2, 3],
-            "ce": P0[2, 3] + P0[3, 3],
-        }
-        for nm, val in vals.items():
-            src.append(f"    s->{nm} = {_c_int(quantize(val, v[nm].fmt), 32)}; /* {val:.17g} */")
-    else:
-        for i, nm in enumerate("rv"):
-            src.append(f"    s->K{nm} = {_c_int(sched.start[i], 32)};")
-        ke0 = sched.start[3]
-        src.append(f"    s->Ke_lo = UINT32_C({ke0 & 0xFFFFFFFF});")
-        src.append(f"    s->Ke = {_c_int(ke0 >> 32, 32)};")
-        src.append(f"    s->seg = &{T}_seg[0];")
-        src.append(f"    s->eb = {_c_int(x0[3] - eoff, 64)}; /* eps0 - EOFF */")
-        src.append("    s->Dcr = s->DPre = s->Dcv = s->DPve = s->Dca = s->DPae = s->Dce = 0;")
-        src.append("    s->z = 0;")
-    src += ["    s->k = 0;", "    s->overflow = 0;", "}", ""]
-    # convert
+    gs = p.form == "gain_schedule"
+    src += (_gs_defines(c, P) if gs else []) + [""]
+    src += _gs_table(c, P, T) if gs else []
+    src += _init_c(c, T)
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
-    if p.form == "gain_schedule":
-        src += [
-            "/* The gains of the next sample: one step along the schedule; k = samples done, kr, kv, klo, khi",
-            " * the current K_r, K_v and K_e's accumulator words (already loaded by the core). */",
-            f"ACN_INLINE void {T}_gains({T}_t *s, uint32_t k, uint32_t kr, uint32_t kv, uint32_t klo, uint32_t khi)",
-            "{",
-            f"    const {T}_seg_t *d = s->seg;",
-            "    uint32_t dr, dv, dlo, dhi;",
-            "    uint64_t ke;",
-            f"    ACN_SEG2(dr, dv, d, {T}_seg_t, dr, dv); /* the row is in flash on AVR */",
-            f"    ACN_SEG2(dlo, dhi, d, {T}_seg_t, de_lo, de_hi);",
-            "    ke = (((uint64_t)khi << 32) | klo) + (((uint64_t)dhi << 32) | dlo); /* wraps like int64 */",
-            f"    ACN_ST2(kr + dr, kv + dv, s, {T}_t, Kr, Kv); /* wraps like int32 (never does: a gain) */",
-            f"    ACN_ST2((uint32_t)ke, (uint32_t)(ke >> 32), s, {T}_t, Ke_lo, Ke);",
-            f"    if (k == ACN_ROM_U32(&d->end) && d != &{T}_seg[{P}_NSEG]) {{",
-            "        s->seg = ++d; /* K_a is read from the row */",
-            "    }",
-            "}",
-            "",
-        ]
-        from .follow import emit_follow, thresholds
-        from .ranges import RangeError
-
-        try:
-            src += emit_follow(p, P, T, thresholds(sched))
-        except ValueError as e:  # a shift the deviation's formats cannot take: this model's ranges
-            raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
-    if p.form == "covariance":
-        # the predict of the covariance block in a function of its own: its registers do not crowd the
-        # states'; twice: c_r, c_v, c_a, c_e in their fine formats (the common path) and in their coarse ones
-        for sfx, q in (("", fine_view(p)), ("_c", p)):
-            src += [f"static void {T}_ppredict{sfx}({T}_t *s)", "{"]
-            src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(q, P)]
-            src += ["}", ""]
-            src += [f"static void {T}_pupdate{sfx}({T}_t *s, int32_t y)", "{"] + _gains_cov(q, P) + ["}", ""]
-        src += [
-            "/* One sample with c_r, c_v, c_a, c_e in their coarse formats, or a skip (rare: out of line). */",
-            f"static __attribute__((noinline)) void {T}_core_c({T}_t *s, int32_t z, bool valid)",
-            "{",
-        ]
-        src += _core_cov_coarse(p, P, T) + ["}", ""]
-    if p.form == "gain_schedule":
-        src += _gs_entries(p, P, T, params, args)
-    else:
-        src += [
-            "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
-            f" * with z [m/s^2] {v['z'].fmt}. Inlined into update, skip and step. */",
-            f"ACN_INLINE void {T}_core({T}_t *s, int32_t z, bool valid)",
-            "{",
-        ]
-        src += _core_fixed(p, P, T)
-        src += ["}", ""]
-        src += [f"void {T}_update({T}_t *s, int32_t z)", "{", f"    {T}_core(s, z, true);", "}", ""]
-        src += [
-            "/* A sample that must be skipped (rail-clipped, missing capture): predict only. */",
-            f"void {T}_skip({T}_t *s)",
-            "{",
-            f"    {T}_core(s, 0, false);",
-            "}",
-            "",
-        ]
-        src += [
-            "/* Convert the raw input and run one step; returns false when the sample was skipped. */",
-            f"bool {T}_step({T}_t *s, {params})",
-            "{",
-            "    int32_t z = 0;",
-            f"    if (!{T}_convert({args}, &z)) {{",
-            f"        {T}_skip(s); /* rare: the core inlined once, for valid samples only */",
-            "        return false;",
-            "    }",
-            f"    {T}_core(s, z, true);",
-            "    return true;",
-            "}",
-            "",
-        ]
-    src += [
-        f"void {T}_read(const {T}_t *s, {T}_out_t *o)",
-        "{",
-        "    o->r = s->r;",
-        f"    o->u = acn_mul64x32(s->v, {P}_RATE, {p.f('v') + p.consts['RATE'][1].frac - p.f('u_out')});"
-        f" /* v / Ts: Q.{p.f('v')} -> {v['u_out'].fmt} */",
-        "    o->a = s->a;",
-        "    o->e = s->e;" if eoff is None else f"    o->e = s->eb + {P}_EOFF; /* eps */",
-        "}",
-        "",
-    ]
+    src += _gs_gains_c(c, P, T) + _gs_entries(c, P, T, params, args) if gs else _cov_entries(c, P, T, params, args)
+    src += _read_c(c, P, T)
     src += _checkpoint_c(p, P, T, fields)
-    man = {
-        "axis": ax,
-        "form": p.form,
-        "variables": {
-            k: {
-                "unit": x.unit,
-                "bound": x.bound,
-                "format": x.fmt.name,
-                "word": x.fmt.word,
-                "frac": x.fmt.frac,
-                "resolution": x.fmt.lsb,
-                "saturates": x.saturates,
-                "note": x.note,
-            }
-            for k, x in v.items()
-        },
-        "constants": {k: {"value": val, "format": f.name, "int": quantize(val, f)} for k, (val, f) in p.consts.items()},
-        "l1": p.l1.__dict__ | {},
-        "z_error": p.z_error,
-        "state_bytes": _struct_bytes(fields),  # sizeof(T_t); None when it depends on the target (a pointer)
-        # what the telemetry's checkpoint frames carry (codegen.frames, accelnav.link.replay): the image of
-        # T_save / T_load; "row": where the gain schedule's row index lies in it and how many rows there are
-        # (an index >= rows is a damaged image: T_load and the host decoder refuse it)
-        "checkpoint": {
-            "bytes": ck_bytes,
-            "save": f"{T}_save",
-            "load": f"{T}_load",
-            "row": None
-            if sched is None
-            else {"offset": _struct_offsets(ck_fields)["seg"], "rows": sched.n_segments + 1, "table": f"{T}_seg"},
-        },
-        "e_state_offset": eoff,  # gain schedule: eps = eb + this (LSB of e); None: the state holds eps
-    }
-    if sched is not None:
-        man["schedule"] = {
-            "segments": sched.n_segments,
-            "max_error": [float(e) for e in sched.max_error],
-            "rel_tol": list(SCHEDULE_REL_TOL),
-            "floor_lsb": list(SCHEDULE_FLOOR_LSB),
-            "flash_bytes": (sched.n_segments + 1) * 24,
-        }
-    return header, cdef, src, man
-
-
-def plans(model: Model, form: str | None = None) -> list[AxisPlan]:
-    """Every axis' plan, and its gain schedule when that is the form: the axes at once, on two threads
-    (their Riccati recursions and schedule searches run in C, off the interpreter lock; the schedules
-    land in codegen.gains' cache for the emitter and the report)."""
-
-    def one(i: int) -> AxisPlan:
-        p = plan_axis(model, i, form)
-        if p.form == "gain_schedule":
-            _schedule_for(p)
-        return p
-
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        return list(pool.map(one, range(len(model.axes))))
+    return header, cdef, src, _manifest(c, T, fields, ck_fields, ck_bytes)
 
 
 def emit(
@@ -1693,10 +1302,10 @@ def emit(
     form = form or model.filter.form
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)
-    ps = plans(model, form)
+    codes = plan(model, form)  # every number and every range check, before any text
     H, S, MAN = [], [], []
-    for p in ps:
-        h, _, s, man = _axis_fixed(p, prefix)
+    for c in codes:
+        h, _, s, man = _axis_fixed(c, prefix)
         H += h + [""]
         S += s
         MAN.append(man)
@@ -1710,7 +1319,9 @@ def emit(
             "#include <limits.h> /* UINT_MAX: acn_clz32 */\n#include <stddef.h> /* offsetof */\n"
             "#if defined(__AVR__)\n#include <avr/pgmspace.h> /* PROGMEM, pgm_read_*: the tables in flash */\n#endif\n\n"
         ),
-        source_prelude=HELPERS + (recip_helpers() if any(p.form == "covariance" for p in ps) else "") + "\n",
+        source_prelude=runtime_text()
+        + (recip_helpers() if any(c.p.form == "covariance" for c in codes) else "")
+        + "\n",
         body=S,
         manifest={"arith": "fixed", "form": form, "axes": MAN},
     )

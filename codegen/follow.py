@@ -173,6 +173,13 @@ def thresholds(sched) -> Thresholds:
     return Thresholds(floor, shift, (True, True, False, False), max(1, sched.ramp))
 
 
+def check_follow(p, thr: Thresholds) -> None:
+    """ValueError when the deviation's formats of this plan need a shift the C cannot take: the dK shifts
+    (:class:`_Ops`), then every product and alignment of :func:`emit_follow`, whose text is dropped (the
+    shifts are worked out where they are spelled, so the planner runs that arithmetic once here)."""
+    emit_follow(p, "P", "T", thr)
+
+
 def emit_follow(p, P: str, T: str, thr: Thresholds) -> list[str]:
     """C: T_follow(s, valid, K): one sample of the deviation recursion (see the module docstring). K in:
     the schedule's gains K_u of this sample; out (valid): the gains to use."""

@@ -50,19 +50,17 @@ boards, which have no ADC).
 The layout is derived from the model (axes, raw input kind) and from the
 filter manifest that :func:`codegen.emit_c.emit` returns (the Q formats of r,
 u, a, eps): :func:`layout` computes it, :func:`emit_frames` returns
-``{"acnframe.h", "acnframe.c", "acnframe.json"}``. Only :func:`main` (the
-``python -m accelnav.codegen.frames`` CLI) writes files.
+``{"acnframe.h", "acnframe.c", "acnframe.json"}``; :func:`codegen.generated.generate`
+returns them with the filter, and only the CLI (``accelnav codegen``) writes files.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import zlib
 from dataclasses import dataclass
-from pathlib import Path
 
-from accelnav.model.load import Model, load_model
+from accelnav.model.load import Model
 
 from .package import banner, check_prefix
 
@@ -319,18 +317,8 @@ class Layout:
         return d
 
 
-def layout(model: Model, filter_manifest: dict) -> Layout:
-    """The frame layout of ``model`` with the state formats of its generated filter."""
-    from .ranges import refuse_calibrated
-
-    refuse_calibrated(model)
-    names = tuple(a.name for a in model.axes)
-    if [a["axis"] for a in filter_manifest["axes"]] != list(names):
-        raise ValueError("the filter manifest's axes differ from the model's: regenerate the filter")
-    fmts = _state_formats(filter_manifest)
-    duty = model.sensor.kind == "duty_cycle"
-    frames = []
-
+def _sample_frame(names: tuple[str, ...], fmts, duty: bool) -> Frame:
+    """The state mode's sample frame: counters, then per axis its flags, raw input and states."""
     b = _Builder("s")
     b.add("seq", "u16", "s->seq", doc="sample frames sent since start, mod 2^16 (gaps = lost frames)")
     b.add("index", "u32", "s->index", doc="sample index since reset")
@@ -347,7 +335,68 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
         for s in ("r", "u", "a", "e"):
             word, frac, unit = fmts[i][s]
             b.add(f"{ax}.{s}", f"i{word}", f"{a}.{s}", unit=unit, frac=frac)
-    frames.append(Frame("sample", TYPE_SAMPLE, "up", tuple(b.fields), "sample_t"))
+    return Frame("sample", TYPE_SAMPLE, "up", tuple(b.fields), "sample_t")
+
+
+def _fixed_frames() -> list[Frame]:
+    """The frames that do not depend on the model: info, ack and the commands."""
+    frames = []
+    b = _Builder("s")
+    b.add("protocol", "u16", "s->protocol")
+    b.add("layout_hash", "u32", "s->layout_hash")
+    b.add("runtime_api", "u16", "s->runtime_api")
+    b.add("board", "u8", "s->board")
+    b.add("running", "u8", "s->running")
+    b.add("decimation", "u16", "s->decimation")
+    b.add("rate_mhz", "u32", "s->rate_mhz", unit="mHz")
+    b.add("index", "u32", "s->index")
+    b.add("seq", "u16", "s->seq", doc="seq of the next sample frame")
+    b.add("uptime_ms", "u32", "s->uptime_ms", unit="ms", doc="board time base")
+    b.add("rx_errors", "u16", "s->rx_errors", doc="received frames refused (CRC, COBS, type, size), mod 2^16")
+    b.add("model_sha256", "u8[32]", "s->model_sha256")
+    frames.append(Frame("info", TYPE_INFO, "up", tuple(b.fields), "info_t"))
+
+    b = _Builder("s")
+    b.add("command", "u8", "s->command")
+    b.add("status", "u8", "s->status")
+    b.add("arg", "u16", "s->arg")
+    b.add("index", "u32", "s->index")
+    frames.append(Frame("ack", TYPE_ACK, "up", tuple(b.fields), "ack_t"))
+
+    for name, (code, args, _doc) in COMMANDS.items():
+        b = _Builder("c")
+        for an, kind in args:
+            b.add(an, kind, f"c->{an}")
+        frames.append(Frame(f"cmd_{name}", code, "down", tuple(b.fields), "command_t"))
+    return frames
+
+
+def _stimulus_frame(names: tuple[str, ...], duty: bool) -> Frame:
+    """The raw input of one sample, host to board (the emulated and host boards have no ADC)."""
+    b = _Builder("t")
+    b.add("flags", "u8", "t->flags", doc="bit i: axis i has no capture (duty cycle timeout)")
+    for i, ax in enumerate(names):
+        if duty:
+            b.add(f"{ax}.t1", "u32", f"t->t1[{i}]", unit="count")
+            b.add(f"{ax}.t2", "u32", f"t->t2[{i}]", unit="count")
+        else:
+            b.add(f"{ax}.code", "u16", f"t->code[{i}]", unit="LSB")
+    return Frame("stimulus", TYPE_STIMULUS, "down", tuple(b.fields), "stimulus_t")
+
+
+def layout(model: Model, filter_manifest: dict) -> Layout:
+    """The frame layout of ``model`` with the state formats of its generated filter."""
+    from .ranges import refuse_calibrated
+
+    refuse_calibrated(model)
+    names = tuple(a.name for a in model.axes)
+    if [a["axis"] for a in filter_manifest["axes"]] != list(names):
+        raise ValueError("the filter manifest's axes differ from the model's: regenerate the filter")
+    fmts = _state_formats(filter_manifest)
+    duty = model.sensor.kind == "duty_cycle"
+    frames = []
+
+    frames.append(_sample_frame(names, fmts, duty))
 
     # compact mode: raw inputs of a block of samples; the host replays the filter (see the module docstring).
     # A checkpoint carries the state's image (accelnav_AXIS_save: the gain schedule's row as an index, not a
@@ -392,44 +441,8 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
     b.add("seq", "u16", "s->seq", doc="seq the next sample frame will carry (state mode)")
     b.add("state", f"u8[{max(state_bytes)}]", "s->state", doc="the axis' checkpoint image (zero padded)")
     frames.append(Frame("checkpoint", TYPE_CHECKPOINT, "up", tuple(b.fields), "checkpoint_t"))
-
-    b = _Builder("s")
-    b.add("protocol", "u16", "s->protocol")
-    b.add("layout_hash", "u32", "s->layout_hash")
-    b.add("runtime_api", "u16", "s->runtime_api")
-    b.add("board", "u8", "s->board")
-    b.add("running", "u8", "s->running")
-    b.add("decimation", "u16", "s->decimation")
-    b.add("rate_mhz", "u32", "s->rate_mhz", unit="mHz")
-    b.add("index", "u32", "s->index")
-    b.add("seq", "u16", "s->seq", doc="seq of the next sample frame")
-    b.add("uptime_ms", "u32", "s->uptime_ms", unit="ms", doc="board time base")
-    b.add("rx_errors", "u16", "s->rx_errors", doc="received frames refused (CRC, COBS, type, size), mod 2^16")
-    b.add("model_sha256", "u8[32]", "s->model_sha256")
-    frames.append(Frame("info", TYPE_INFO, "up", tuple(b.fields), "info_t"))
-
-    b = _Builder("s")
-    b.add("command", "u8", "s->command")
-    b.add("status", "u8", "s->status")
-    b.add("arg", "u16", "s->arg")
-    b.add("index", "u32", "s->index")
-    frames.append(Frame("ack", TYPE_ACK, "up", tuple(b.fields), "ack_t"))
-
-    for name, (code, args, _doc) in COMMANDS.items():
-        b = _Builder("c")
-        for an, kind in args:
-            b.add(an, kind, f"c->{an}")
-        frames.append(Frame(f"cmd_{name}", code, "down", tuple(b.fields), "command_t"))
-
-    b = _Builder("t")
-    b.add("flags", "u8", "t->flags", doc="bit i: axis i has no capture (duty cycle timeout)")
-    for i, ax in enumerate(names):
-        if duty:
-            b.add(f"{ax}.t1", "u32", f"t->t1[{i}]", unit="count")
-            b.add(f"{ax}.t2", "u32", f"t->t2[{i}]", unit="count")
-        else:
-            b.add(f"{ax}.code", "u16", f"t->code[{i}]", unit="LSB")
-    frames.append(Frame("stimulus", TYPE_STIMULUS, "down", tuple(b.fields), "stimulus_t"))
+    frames += _fixed_frames()
+    frames.append(_stimulus_frame(names, duty))
 
     for f in frames:
         if f.size + 4 >= MAX_ENCODED:
@@ -462,7 +475,7 @@ def layout(model: Model, filter_manifest: dict) -> Layout:
 
 def _banner(lay: Layout, what: str) -> str:
     by = f"accelnav codegen.frames (protocol {PROTOCOL_VERSION}, layout 0x{lay.layout_hash:08x})"
-    return banner(what, by, lay.model_name, lay.model_sha256, "python -m accelnav.codegen.frames")
+    return banner(what, by, lay.model_name, lay.model_sha256)
 
 
 def _put(f: Field) -> str:
@@ -765,31 +778,3 @@ def emit_frames(model: Model, filter_manifest: dict, prefix: str = "acnframe") -
         f"{prefix}.c": "\n".join(C),
         f"{prefix}.json": json.dumps(man, indent=1, sort_keys=True) + "\n",
     }
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Generate the filter (accelnav.*) and the frame code (acnframe.*) of a model into a folder."""
-    from .emit_c import emit
-
-    ap = argparse.ArgumentParser(prog="python -m accelnav.codegen.frames", description=main.__doc__)
-    ap.add_argument("--model", type=Path, default=None, help="model file; default: the embedded model")
-    ap.add_argument("--out", type=Path, required=True, help="output folder")
-    args = ap.parse_args(argv)
-    model = load_model(args.model)
-    files = emit(model)
-    files.update(emit_frames(model, json.loads(files["accelnav.json"])))
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    changed = {}
-    for name, text in files.items():  # rewrite only what changed, so make does not rebuild needlessly
-        path = out / name
-        if not path.exists() or path.read_text() != text:
-            changed[name] = text
-    for name, text in changed.items():
-        (out / name).write_text(text)
-    print(f"accelnav.codegen.frames: {len(files)} files in {out} ({len(changed)} changed)")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

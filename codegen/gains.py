@@ -564,6 +564,71 @@ _SCHEDULES: dict = {}
 _SCHEDULES_LOCK = threading.Lock()
 
 
+# The longest segment from sample k0 (at most ``top`` samples) over which every gain keeps a whole-number
+# slope within its tolerance: the cone of feasible slopes, widened over spans that double from twice the
+# last segment's length (the work is a few times the segment's length). Returns (its length, the rows
+# of K read in accumulator LSB, the slope intervals lohi of that length). Twice: in C and in numpy.
+
+
+def _segment_c(lib, get, par, unit, A, hold8, k0: int, top: int, last: int):
+    ffi, C = lib
+    L0, chunk = 1, max(64, 2 * last)
+    lohi = np.array([-np.inf] * 4 + [np.inf] * 4)  # the intervals of the longest length so far
+    while True:
+        L1 = min(top, L0 + chunk - 1)  # samples 0 .. L1 of the segment
+        Kq = np.ascontiguousarray(get(k0, k0 + L1 + 1), dtype=np.float64)
+        par[17] = k0
+        Ad = A.astype(np.float64)
+        ptr = [ffi.cast("double *", x.ctypes.data) for x in (Kq, par, Ad)]
+        good = int(C.acn_cone(len(Kq), L0, *ptr, ffi.cast("unsigned char *", hold8.ctypes.data),
+                              ffi.cast("double *", lohi.ctypes.data)))  # fmt: skip
+        Kq = Kq[: good + 2] / unit  # the rows read below, in accumulator LSB as q_of gives them
+        if good < L1 or L1 == top:
+            return good, Kq, lohi
+        L0, chunk = L1 + 1, 2 * chunk
+
+
+def _segment_py(q, A, hold, k0: int, top: int, last: int):
+    L0, chunk = 1, max(64, 2 * last)
+    lohi = np.array([-np.inf] * 4 + [np.inf] * 4)
+    while True:
+        L1 = min(top, L0 + chunk - 1)
+        Kq, tolq = q(k0, k0 + L1 + 1)
+        good = _longest(Kq, tolq, A, hold, L0, lohi)
+        if good < L1 or L1 == top:
+            return good, Kq, lohi
+        L0, chunk = L1 + 1, 2 * chunk
+
+
+def _account(lib, get, k: int, m: int, A_k, sl, ex, lsb, formats, max_err, head):
+    """The stored gains of samples k .. k + m - 1 (accumulators A_k + sl t; sl = 0: A_k throughout): their
+    error, kept in ``head`` (its first rows) and returned as the new per-gain maximum. In C or numpy."""
+    keep = len(head)
+    if lib is not None:
+        ffi, C = lib
+        i64 = [np.ascontiguousarray(x, dtype=np.int64) for x in (A_k, sl, ex)]
+        Kk = np.ascontiguousarray(get(k, k + m), dtype=np.float64)
+        me = np.ascontiguousarray(max_err, dtype=np.float64)
+        nh = max(0, min(keep - k, m))
+        hp = ffi.cast("double *", head[k:].ctypes.data) if nh else ffi.NULL
+        cs = [ffi.cast("long long *", x.ctypes.data) for x in i64]
+        bad = C.acn_account(m, *cs, ffi.cast("double *", lsb.ctypes.data), ffi.cast("double *", Kk.ctypes.data),
+                            ffi.cast("double *", me.ctypes.data), nh, hp)  # fmt: skip
+        max_err = me
+    else:
+        hi = (A_k + sl * np.arange(m, dtype=np.int64)[:, None]) >> ex
+        big = np.abs(hi) > 2**31 - 1
+        bad = 1 + int(np.argmax(np.any(big, axis=0))) if big.any() else 0
+        if not bad:
+            err = np.abs(hi * lsb - get(k, k + m))
+            max_err = np.maximum(max_err, err.max(0))
+            if k < keep:
+                head[k : min(keep, k + m)] = err[: min(keep, k + m) - k]
+    if bad:
+        raise ValueError(f"gain {bad - 1} leaves its int32 format {formats[bad - 1]}")
+    return max_err
+
+
 def schedule(
     K,
     formats: tuple[QFormat, ...],
@@ -633,31 +698,8 @@ def schedule(
     hold8 = hold.astype(np.uint8)
 
     def account(k, m, A_k, sl):
-        """The stored gains of samples k .. k + m - 1 (accumulators A_k + sl t; sl = 0: A_k throughout):
-        their error, kept."""
         nonlocal max_err
-        if lib is not None:
-            ffi, C = lib
-            i64 = [np.ascontiguousarray(x, dtype=np.int64) for x in (A_k, sl, ex)]
-            Kk = np.ascontiguousarray(get(k, k + m), dtype=np.float64)
-            me = np.ascontiguousarray(max_err, dtype=np.float64)
-            nh = max(0, min(keep - k, m))
-            hp = ffi.cast("double *", head[k:].ctypes.data) if nh else ffi.NULL
-            cs = [ffi.cast("long long *", x.ctypes.data) for x in i64]
-            bad = C.acn_account(m, *cs, ffi.cast("double *", lsb.ctypes.data), ffi.cast("double *", Kk.ctypes.data),
-                                ffi.cast("double *", me.ctypes.data), nh, hp)  # fmt: skip
-            max_err = me
-        else:
-            hi = (A_k + sl * np.arange(m, dtype=np.int64)[:, None]) >> ex
-            big = np.abs(hi) > 2**31 - 1
-            bad = 1 + int(np.argmax(np.any(big, axis=0))) if big.any() else 0
-            if not bad:
-                err = np.abs(hi * lsb - get(k, k + m))
-                max_err = np.maximum(max_err, err.max(0))
-                if k < keep:
-                    head[k : min(keep, k + m)] = err[: min(keep, k + m) - k]
-        if bad:
-            raise ValueError(f"gain {bad - 1} leaves its int32 format {formats[bad - 1]}")
+        max_err = _account(lib, get, k, m, A_k, sl, ex, lsb, formats, max_err, head)
 
     while k0 < n - 1:
         # the cone, from the segment's start until no integer is left in it, over spans that double from
@@ -665,25 +707,10 @@ def schedule(
         if isinstance(get, _Window):
             get.anchor = k0
         top = min(n - 1 - k0, cap)  # the longest segment: the data, and the span held in memory
-        L0, chunk = 1, max(64, 2 * last)
-        lohi = np.array([-np.inf] * 4 + [np.inf] * 4)  # the intervals of the longest length so far
-        while True:
-            L1 = min(top, L0 + chunk - 1)
-            if lib is not None:  # samples 0 .. L1 of the segment
-                ffi, C = lib
-                Kq = np.ascontiguousarray(get(k0, k0 + L1 + 1), dtype=np.float64)
-                par[17] = k0
-                Ad = A.astype(np.float64)
-                ptr = [ffi.cast("double *", x.ctypes.data) for x in (Kq, par, Ad)]
-                good = int(C.acn_cone(len(Kq), L0, *ptr, ffi.cast("unsigned char *", hold8.ctypes.data),
-                                      ffi.cast("double *", lohi.ctypes.data)))  # fmt: skip
-                Kq = Kq[: good + 2] / unit  # the rows read below, in accumulator LSB as q_of gives them
-            else:
-                Kq, tolq = q(k0, k0 + L1 + 1)
-                good = _longest(Kq, tolq, A, hold, L0, lohi)
-            if good < L1 or L1 == top:
-                break
-            L0, chunk = L1 + 1, 2 * chunk
+        if lib is not None:
+            good, Kq, lohi = _segment_c(lib, get, par, unit, A, hold8, k0, top, last)
+        else:
+            good, Kq, lohi = _segment_py(q, A, hold, k0, top, last)
         if good == 0:  # not even one sample (a float64 tie): the slope lands on the rounded next value
             good = 1
             sl_good = np.floor(Kq[1] + 0.5).astype(np.int64) - A

@@ -1,5 +1,8 @@
-"""Every generated file of a model, cached on disk: what the firmware builds (SIL, PIL) and what the
-host's replay of the firmware's filter compiles are one and the same output of the generator.
+"""Every generated file of a model: :func:`generate`, the one function that writes what the firmware build
+needs (the filter and the frame code; ``accelnav codegen``, ``accelnav.generate``, the firmware's make
+files and the SIL/PIL runners all call it), and :func:`generated_files`, its output cached on disk: what
+the firmware builds (SIL, PIL) and what the host's replay of the firmware's filter compiles are one and
+the same output of the generator.
 
 The generator takes seconds (the gain schedule's longer), so its output is kept in the cache
 (:func:`accelnav.native.cbuild.cache_dir`) keyed by the model's text and the source of every module of
@@ -21,9 +24,21 @@ from .emit_c import emit
 from .frames import emit_frames
 
 
+def generate(
+    model: Model, *, form: str | None = None, arith: str = "fixed", prefix: str = "accelnav"
+) -> dict[str, str]:
+    """PREFIX.{h,c,json} (the filter) and, for the fixed-point filter the firmware runs, acnframe.{h,c,json}
+    (the frame layout the firmware and the host's decoder share, derived from the filter's manifest)."""
+    files = emit(model, form=form, arith=arith, prefix=prefix)
+    if arith == "fixed":
+        files.update(emit_frames(model, json.loads(files[f"{prefix}.json"])))
+    return files
+
+
 def _key(model: Model) -> str:
     key = hashlib.sha256(model.text.encode())
-    for p in sorted(Path(__file__).parent.glob("*.py")):
+    here = Path(__file__).parent  # the generator's modules and the C runtime it copies (csrc/)
+    for p in sorted([*here.glob("*.py"), *here.glob("csrc/*.h")]):
         key.update(p.read_bytes())
     return key.hexdigest()[:20]
 
@@ -33,8 +48,7 @@ def generated_files(model: Model) -> dict[str, str]:
     path = cache_dir() / f"gen-{_key(model)}.json"
     if path.exists():
         return json.loads(path.read_text())
-    files = emit(model)
-    files.update(emit_frames(model, json.loads(files["accelnav.json"])))
+    files = generate(model)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text(json.dumps(files))

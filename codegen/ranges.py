@@ -271,7 +271,7 @@ def z_bound(conv) -> float:
 
 
 # rate_hz x max_run_s per axis the generator accepts: its time is linear in it (~1.5 s for 3 axes at the
-# limit on the 2-core build machine, bench/bench_codegen_cost.py), its memory is not; and below the C's
+# limit on the 2-core build machine, bench/speed/bench_codegen_cost.py), its memory is not; and below the C's
 # 31-bit sample counter
 MAX_RUN_SAMPLES = 2**23
 assert MAX_RUN_SAMPLES < 2**31

@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.model.load import Model
+from accelnav.native.cbuild import STRICT_WARN
 
 from .bounds import Y_SIGMAS, error_bound_rows, worst_case_bound
 
-ARM_FLAGS = ["-mcpu=cortex-m3", "-mthumb", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
+ARM_FLAGS = ["-mcpu=cortex-m3", "-mthumb", "-O2", "-ffreestanding", *STRICT_WARN]
 
 
 def arm_size(files: dict[str, str], prefix: str) -> dict[str, int] | None:
@@ -73,7 +74,7 @@ def report(model: Model, *, form: str | None, arith: str, files: dict[str, str],
 
 def _axes(model: Model, form: str, arith: str, files: dict[str, str], prefix: str, lines: list[str]) -> list[int]:
     """The report's per-axis blocks, appended to ``lines``; where each axis' flash line goes."""
-    from .emit_c import _schedule_for
+    from .plan import schedule_for as _schedule_for
     from .ranges import plan_axis
 
     def bounds(i: int):

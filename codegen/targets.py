@@ -18,6 +18,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
+from accelnav.native.cbuild import STRICT_WARN
 from accelnav.resources import firmware_dir
 
 FORMS = ("covariance", "gain_schedule")
@@ -45,12 +46,11 @@ class Part:
 
 
 @functools.cache
-def _table(path: Path) -> tuple[dict[str, Part], tuple[str, ...]]:
+def _table(path: Path) -> dict[str, Part]:
     text = path.read_text()
     fields: dict[str, dict[str, str]] = {}
     for field, key, value in _FIELD.findall(text):
         fields.setdefault(key, {})[field] = value
-    warn = re.search(r"^FW_WARN\s*:=[ \t]*(.*?)\s*$", text, re.M)
     parts = {
         key: Part(
             key,
@@ -65,17 +65,17 @@ def _table(path: Path) -> tuple[dict[str, Part], tuple[str, ...]]:
         )  # fmt: skip
         for key, f in fields.items()
     }
-    return parts, tuple(warn[1].split())
+    return parts
 
 
 def parts() -> dict[str, Part]:
     """The part table of firmware/parts.mk, by BOARD name."""
-    return _table(firmware_dir() / "parts.mk")[0]
+    return _table(firmware_dir() / "parts.mk")
 
 
 def warn_flags() -> tuple[str, ...]:
     """FW_WARN: the flags every firmware source is compiled with."""
-    return _table(firmware_dir() / "parts.mk")[1]
+    return STRICT_WARN
 
 
 def known() -> str:

@@ -110,8 +110,8 @@ firmware-gen: $(FW_GEN)/acnframe.h
 
 # FW_PREGEN: the caller wrote the generated C to FW_GEN itself (the installed package does)
 ifndef FW_PREGEN
-$(FW_GEN)/acnframe.h $(FW_GEN)/acnframe.c $(FW_GEN)/accelnav.c: $(MODEL) $(wildcard codegen/*.py) | $(STAMP)
-	$(PY) -m accelnav.codegen.frames --model $(MODEL) --out $(FW_GEN)
+$(FW_GEN)/acnframe.h $(FW_GEN)/acnframe.c $(FW_GEN)/accelnav.c: $(MODEL) $(wildcard codegen/*.py codegen/csrc/*.h) | $(STAMP)
+	$(PY) -m accelnav codegen $(MODEL) --out $(FW_GEN)
 	@touch $(FW_GEN)/acnframe.h
 endif
 

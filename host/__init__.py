@@ -18,7 +18,7 @@ stays quick)::
 
 The packages behind them, lowest first: ``model``, ``native`` -> ``estimate``, ``codegen``,
 ``hil_sim.sim`` -> ``link`` -> ``data`` -> ``identify``, ``hil_sim.targets`` -> ``plots`` -> ``cli``
-(the ``accelnav`` command). Nothing imports upward and nothing imports the CLI (tests/test_layers.py).
+(the ``accelnav`` command). Nothing imports upward and nothing imports the CLI (tests/package/test_layers.py).
 """
 
 from __future__ import annotations

@@ -13,7 +13,14 @@ import pytest
 from accelnav.model.load import DEFAULT_MODEL, load_model, loads_model
 from accelnav.resources import models_dir
 
+# asserts in the shared helpers report their operands as the tests' own do
+pytest.register_assert_rewrite("support")
+
 REPO = Path(__file__).resolve().parents[1]  # the checkout: for ../shared and for reading docs only
+TESTS = Path(__file__).resolve().parent
+# helpers the tests share (never tests themselves): imported as ``from support import realdata``, since
+# pytest puts this folder (the root conftest's) on sys.path; SUPPORT for the scripts run as programs
+SUPPORT = TESTS / "support"
 MODELS = models_dir()
 SHARED_DATA = REPO.parent / "shared" / "data"
 
@@ -26,6 +33,22 @@ def default_model():
 @pytest.fixture(scope="session")
 def duty_model():
     return load_model(MODELS / "adxl202_duty.toml")
+
+
+@pytest.fixture(scope="module")
+def man():
+    """The default model's frame manifest (a module may override it, as test_frames does per model)."""
+    from accelnav.hil_sim.targets.firmware import manifest
+
+    return manifest(None)
+
+
+@pytest.fixture(scope="module")
+def replay(man):
+    """The host's replay of the default firmware's filter: the compact mode's block frames need it."""
+    from accelnav.link.telemetry import replay_for
+
+    return replay_for(man, load_model())
 
 
 def model_text(path: Path = DEFAULT_MODEL) -> str:

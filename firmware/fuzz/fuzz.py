@@ -28,7 +28,6 @@ HARNESS = HERE / "fuzz_rx.c"
 SEEDS = HERE / "corpus"
 FW_SRC = ("app.c", "link.c", "cobs.c", "crc32.c", "filter_adapter.c")
 SANITIZE = ["-fsanitize=fuzzer,address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
-STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g"]
 
 
 class FuzzError(RuntimeError):
@@ -58,7 +57,7 @@ def runtime_missing(out: Path) -> str | None:
 
 def build(out: Path, model: str | None = None) -> Path:
     """Generate the model's C into out/gen and link the harness to out/fuzz_rx; returns its path."""
-    from accelnav.hil_sim.targets.firmware import generated
+    from accelnav.hil_sim.targets.firmware import STRICT, generated
     from accelnav.resources import firmware_dir
 
     cc = clang()

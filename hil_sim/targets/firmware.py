@@ -25,10 +25,11 @@ import subprocess
 from functools import cache
 from pathlib import Path
 
+from accelnav.native.cbuild import STRICT_WARN
 from accelnav.resources import cache_root, firmware_dir, models_dir
 
 FW = firmware_dir()
-STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g"]
+STRICT = [*STRICT_WARN, "-O1", "-g"]
 SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
 DUTY_MODEL = models_dir() / "adxl202_duty.toml"
 # the cross compiler of each board (firmware.mk's FW_CC) and its Debian packages; the boards not named are ARM

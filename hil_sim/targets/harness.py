@@ -5,7 +5,7 @@ declarations cut from ``PREFIX.h`` (so the C and Python cannot drift) and
 returns the imported module (``.ffi``, ``.lib``). Modules are keyed by the
 hash of the generated text and cached in ``workdir``: the same model builds
 once. ``sanitize=True`` adds -fsanitize=undefined,address (the test process
-must then preload libasan; tests/test_codegen.py builds its sanitized run as a program instead).
+must then preload libasan; tests/codegen/test_codegen.py builds its sanitized run as a program instead).
 
 :class:`AxisRunner` drives one axis sample by sample and returns the states
 as float64 arrays in SI units (r, u, a, eps), for the lockstep tests and for
@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.codegen.emit_c import cdef_of
+from accelnav.native.cbuild import STRICT_FLAGS
 
-STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
+STRICT = list(STRICT_FLAGS)
 SANITIZE = ["-fsanitize=undefined,address", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g"]
 
 

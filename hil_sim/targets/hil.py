@@ -304,7 +304,7 @@ def stated_bound(model: Model, j: int, run: SimRun | RecordedRun, x_ref: np.ndar
     run; ``x_ref`` is that filter (accelnav.estimate.kf.run_filter on the same input, same skips) for
     either form. See codegen.bounds.twin_bound."""
     from accelnav.codegen.bounds import twin_bound
-    from accelnav.codegen.emit_c import _schedule_for
+    from accelnav.codegen.plan import schedule_for as _schedule_for
     from accelnav.codegen.ranges import plan_axis
 
     form = model.filter.form

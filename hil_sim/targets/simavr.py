@@ -23,15 +23,17 @@ from pathlib import Path
 
 import numpy as np
 
+from accelnav.native.cbuild import STRICT_WARN
+
 MCU = "atmega328p"
 F_CPU = 16_000_000
 FLASH_BYTES = 32 * 1024
 RAM_BYTES = 2 * 1024
-AVR_CFLAGS = [f"-mmcu={MCU}", "-Os", "-std=c99", "-Wall", "-Wextra", "-Werror"]
+AVR_CFLAGS = [f"-mmcu={MCU}", "-Os", *STRICT_WARN]
 # parts the driver may be built for: flash and RAM in bytes. The ATmega1284P runs what the 328P's flash
 # cannot hold (the gain schedule), so that its tables are checked in flash too.
 PARTS = {MCU: (FLASH_BYTES, RAM_BYTES), "atmega1284p": (128 * 1024, 16 * 1024)}
-HOST_CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror"]
+HOST_CFLAGS = [*STRICT_WARN, "-O2"]
 SKIP_EVERY, SKIP_AT = 29, 11  # sample k is skipped (predict only) when k % 29 == 11
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
@@ -348,7 +350,7 @@ def harness() -> Path:
         raise AvrError("no host C compiler (cc) to build the simavr feed program: install Debian's gcc")
     exe.parent.mkdir(parents=True, exist_ok=True)
     tmp = exe.with_name(exe.name + ".tmp")
-    done = subprocess.run([cc, "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", str(src), "-lsimavr", "-o", str(tmp)],
+    done = subprocess.run([cc, *HOST_CFLAGS, str(src), "-lsimavr", "-o", str(tmp)],
                           capture_output=True, text=True)  # fmt: skip
     if done.returncode:
         err = done.stderr

@@ -1,11 +1,13 @@
-"""``accelnav codegen MODEL.toml --out DIR [--report] [--target PART]``: write the generated C and its manifest."""
+"""``accelnav codegen MODEL.toml --out DIR [--report] [--target PART]``: write the generated C and its manifests:
+the filter and (fixed point) the frame code, every generated file the firmware build needs."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from accelnav.codegen.emit_c import emit, write
+from accelnav.codegen.generated import generate
+from accelnav.codegen.package import write
 from accelnav.errors import UserError
 from accelnav.model.load import load_model, name_problem
 
@@ -14,7 +16,8 @@ def register(sub) -> None:
     p = sub.add_parser(
         "codegen",
         help="generate the per-axis filter in C (fixed point or float32) and its manifest",
-        description="Generate PREFIX.h, PREFIX.c and PREFIX.json for every axis of the model.",
+        description="Generate PREFIX.h, PREFIX.c and PREFIX.json for every axis of the model and, for the fixed-point "
+        "filter, the telemetry frame code acnframe.{h,c,json}: every generated file the firmware build needs.",
     )
     p.add_argument("model", type=Path, help="model file (TOML)")
     p.add_argument("--out", type=Path, help="output directory (created if missing)")
@@ -60,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(str(e)) from None
     model = load_model(args.model)
     arith = "float32" if args.float32 else "fixed"
-    files = emit(model, form=args.form, arith=arith, prefix=args.prefix)
+    files = generate(model, form=args.form, arith=arith, prefix=args.prefix)
     fit = None
     if part is not None:  # measured before anything is written: a filter that does not fit is not written
         try:

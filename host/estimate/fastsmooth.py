@@ -2,7 +2,7 @@
 
 Both return the same :class:`AxisSmooth` and agree with the reference
 (:func:`accelnav.estimate.kf.run_filter` then :func:`accelnav.estimate.kf.rts_smooth`) to rounding;
-tests/test_fastsmooth.py asserts 1e-9 relative, sigma-scaled, for states and
+tests/estimate/test_fastsmooth.py asserts 1e-9 relative, sigma-scaled, for states and
 covariances. The C is csrc/fastsmooth.c, compiled when the package is built
 (host/native/kernels.py); a source checkout whose C was edited since builds it on
 first use with :mod:`accelnav.native.cbuild`.

@@ -28,7 +28,7 @@ measured acceleration z_j of every axis minus the model's bias mean:
    is at most ``var_k`` (10). The noise of a body at rest is the sensor's R
    plus its own motion, ``tremor`` (0.12 m/s^2 rms: a stance's sway, an idling
    engine). On gaitmap's real walk the stances' windows reach 20 to 150 R, the
-   swings' 1e3 to 1e4 R (tests/test_real_walk.py). On pure noise the statistic
+   swings' 1e3 to 1e4 R (tests/estimate/test_real_walk.py). On pure noise the statistic
    is chi2(n (W - 1)) / (n (W - 1)) or less (0.1 % quantile 2.3 for W = 11).
 2. every sample of the window valid (not clipped, finite) on every axis.
 

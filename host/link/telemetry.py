@@ -97,12 +97,9 @@ class Manifest:
     @classmethod
     def for_model(cls, model, form: str | None = None) -> Manifest:
         """Generate the manifest of ``model`` (runs the filter generator: a few seconds)."""
-        from accelnav.codegen.emit_c import emit
-        from accelnav.codegen.frames import emit_frames
+        from accelnav.codegen.generated import generate
 
-        files = emit(model, form=form)
-        frames = emit_frames(model, json.loads(files["accelnav.json"]))
-        return cls(json.loads(frames["acnframe.json"]))
+        return cls(json.loads(generate(model, form=form)["acnframe.json"]))
 
     def text(self) -> str:
         return json.dumps(self.data, sort_keys=True)

@@ -24,6 +24,7 @@ import hashlib
 import importlib.util
 import os
 import platform
+import re
 import shlex
 import shutil
 import subprocess
@@ -33,9 +34,22 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-from accelnav.resources import cache_root
+from accelnav.resources import cache_root, firmware_dir
 
-STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2")
+
+def _fw_warn() -> tuple[str, ...]:
+    """FW_WARN of firmware/parts.mk (package data): the one definition of the strict flags, which the
+    firmware's make files include and every Python build reads from here."""
+    text = (firmware_dir() / "parts.mk").read_text()
+    found = re.search(r"^FW_WARN\s*:=[ \t]*(.*?)\s*$", text, re.M)
+    if found is None:
+        raise RuntimeError(f"{firmware_dir() / 'parts.mk'}: no FW_WARN line; reinstall accelnav")
+    return tuple(found[1].split())
+
+
+# the warnings every strict build of accelnav's C uses (firmware, generated filter, kernels, harnesses)
+STRICT_WARN = _fw_warn()
+STRICT_FLAGS = (*STRICT_WARN, "-O2")
 
 
 class BuildError(RuntimeError):

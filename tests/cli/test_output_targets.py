@@ -21,7 +21,7 @@ def test_codegen_leaves_no_temporary_beside_its_files(tmp_path, capsys):
     out = tmp_path / "gen"
     assert main(["codegen", str(MODELS / "adxl250_default.toml"), "--out", str(out)]) == 0
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["accelnav.c", "accelnav.h", "accelnav.json"], names
+    assert names == ["accelnav.c", "accelnav.h", "accelnav.json", "acnframe.c", "acnframe.h", "acnframe.json"], names
 
 
 def test_a_zupt_file_that_is_a_directory_is_named(tmp_path, capsys):

@@ -13,7 +13,7 @@ import serial
 
 import accelnav.link.logfile as logfile
 from accelnav.cli import main
-from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
+from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware
 from accelnav.link.recorder import Recorder, Status, decode_log
 from accelnav.link.telemetry import encode_command, encode_stimulus
 from accelnav.model.load import load_model
@@ -34,11 +34,6 @@ class _FullDisk:
         n = os.write(fd, bytes(data[: self.room]))
         self.room -= n
         return n
-
-
-@pytest.fixture(scope="module")
-def man():
-    return manifest(None)
 
 
 @pytest.fixture(scope="module")

@@ -7,16 +7,11 @@ import re
 
 import numpy as np
 import pytest
+from support.cli import run_cli as _run
 
 from accelnav.cli import main
 from accelnav.data.runfile import load_run
 from accelnav.estimate import zupt
-
-
-def _run(argv, capsys):
-    status = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return status, out.out, out.err
 
 
 @pytest.fixture(scope="module")

@@ -7,20 +7,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import MODELS
+from support.cli import run_cli as _run
 
-from accelnav.cli import main
 from accelnav.data.recording import read_recording
 from accelnav.data.runfile import load_run
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.load import G0, load_model
 
 FOOT = MODELS / "foot_imu.toml"  # 200 Hz, calibrated, axes x and y
-
-
-def _run(argv, capsys):
-    status = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return status, out.out, out.err
 
 
 def _write(path, t, accel, t_name="t", cols=("ax", "ay")):

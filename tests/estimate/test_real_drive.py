@@ -3,11 +3,11 @@
 Data: gtsam 4.3.0's wheel ships the KITTI drive its IMU examples use; fetched
 from PyPI by version and sha256, never copied here (KITTI is CC BY-NC-SA 3.0);
 what it is, the 100 Hz grid, the along-track reference and the one stop:
-tests/realdata_more.py. Skipped without PyPI, failed then when
+tests/support/realdata_more.py. Skipped without PyPI, failed then when
 ACCELNAV_REQUIRE_REALDATA=1.
 
 Issue 23's targets for the defaults (within 1.5 x the reference rests; no rest
-while the car moves) are printed by bench/study_real_rests.py, not asserted
+while the car moves) are printed by bench/studies/study_real_rests.py, not asserted
 here. Asserted: the accelerometer and the GNSS track describe the same motion
 on the same clock, the reference stop is a stop, and with a fix every 10 s and
 the reference rests the smoother beats interpolating the fixes, which is what
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import realdata_more as rm
+from support import realdata_more as rm
 
 from accelnav.estimate.zupt import intervals
 

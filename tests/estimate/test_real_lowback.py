@@ -3,11 +3,11 @@
 Data: mobgap 1.2.0's example data (Mobilise-D), fetched from PyPI by version and
 sha256, never copied here; what it is, how it becomes two level-frame axes with
 gravity removed, and the references (motion-capture walking bout; quiet
-standing before and after it): tests/realdata_more.py. Skipped without PyPI,
+standing before and after it): tests/support/realdata_more.py. Skipped without PyPI,
 failed then when ACCELNAV_REQUIRE_REALDATA=1.
 
 Issue 23's targets (defaults within 1.5 x the reference rests, and within 3 % of
-the distance walked) are not asserted here: bench/study_real_rests.py prints
+the distance walked) are not asserted here: bench/studies/study_real_rests.py prints
 them beside today's figures. What is asserted holds for any sound estimator on
 this data: the references agree with each other and with the recording, a
 long quiet standing is found, and the smoother given the reference rests
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import realdata_more as rm
+from support import realdata_more as rm
 
 from accelnav.estimate.zupt import intervals
 

@@ -16,7 +16,7 @@ from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.load import load_model
 
 # An ADXL335 (+-3.6 g, 300 mV/g at 3.3 V, about 150 ug/sqrt(Hz)) on a 10-bit ratiometric ADC at 100 Hz, the
-# issue's cart; R = (1.3 mg noise)^2 + (9.8 mg LSB / sqrt(12))^2 = (3.1 mg)^2. As bench/bench_rest_scenarios.py.
+# issue's cart; R = (1.3 mg noise)^2 + (9.8 mg LSB / sqrt(12))^2 = (3.1 mg)^2. As bench/speed/bench_rest_scenarios.py.
 ADXL335_EDITS = [
     ('name = "adxl250_default"', 'name = "adxl335_cart"'),
     ('part = "ADXL250"', 'part = "ADXL335"'),

@@ -3,7 +3,7 @@
 Chunked and whole-array smoothing run the same operations in the same order, so they agree to the last bit
 on one machine; the tests allow 1e-12 relative (to |value| + its sigma), room for a compiler that contracts
 the multiply-adds of the two kernels differently, and a million times tighter than the 1e-9 at which both
-are checked against the float64 reference (tests/test_fastsmooth.py).
+are checked against the float64 reference (tests/estimate/test_fastsmooth.py).
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import assert_rel_close, edited_model
+from support.cli import run_cli as _run
 
 from accelnav.cli import main
 from accelnav.data.runfile import load_run
@@ -93,12 +94,6 @@ def test_too_little_disk_is_refused_in_one_line_before_work(tmp_path, monkeypatc
         chunked.smooth_bounded(model, 100, lambda s, e: called.append(s), tmp_path / "o.npz")
     assert "\n" not in str(exc.value) and not called
     assert list(tmp_path.iterdir()) == []
-
-
-def _run(argv, capsys):
-    status = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return status, out.out, out.err
 
 
 @pytest.fixture(scope="module")

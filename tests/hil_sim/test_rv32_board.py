@@ -2,7 +2,7 @@
 (32-bit RISC-V, compressed instructions, soft-float ABI, no F or D extension, entry where the mask
 ROM jumps) and fits the FE310's 16 KiB DTIM for both shipped models in both forms; the README
 documents the command line hil_sim.qemu runs; a missing RISC-V tool is one line naming its Debian
-package. Its PIL runs (bit for bit against SIL) are in tests/test_hil.py's matrix.
+package. Its PIL runs (bit for bit against SIL) are in tests/hil_sim/test_hil.py's matrix.
 
 Skipped, with the reason, without riscv64-unknown-elf-gcc; a failure under ACCELNAV_REQUIRE_PIL=1 (CI).
 """
@@ -16,12 +16,11 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from conftest import MODELS
+from conftest import MODELS, REPO
 
 from accelnav.hil_sim.targets import firmware, qemu
 from accelnav.model.load import load_model
 
-REPO = Path(__file__).resolve().parents[2]
 DTIM = 16 * 1024  # the FE310's data RAM; sifive_e.ld also keeps 2 KiB of it for the stack
 ENTRY = 0x20400000  # where QEMU's sifive_e mask ROM jumps (the HiFive1's program flash)
 
@@ -86,32 +85,30 @@ def test_missing_riscv_tools_are_one_line_errors(monkeypatch, tmp_path):
         firmware.make_firmware("sifive_e", None, tmp_path / "out")
 
 
-def test_bench_counts_rv32_instructions_beside_the_m3(tmp_path, capsys):
-    """bench/bench_rv32_icount.py: both cores count a known loop right, compute the same final states
-    (checkpoint images) for both forms, and RV32IMAC, without the M3's 32x32->64 multiply-accumulate,
-    needs more instructions per 2-axis sample than the M3 for each form."""
-    import importlib.util
-
+def test_bench_counts_rv32_instructions_beside_the_m3(tmp_path):
+    """hil_sim.targets.icount_sample (what bench/speed/bench_rv32_icount.py prints): both cores count a known
+    loop right, compute the same final states (checkpoint images) for both forms, and RV32IMAC, without the
+    M3's 32x32->64 multiply-accumulate, needs more instructions per 2-axis sample than the M3 for each form."""
     _require_riscv()
     if shutil.which("arm-none-eabi-gcc") is None or shutil.which("qemu-system-arm") is None:
         reason = "the M3 side needs arm-none-eabi-gcc and qemu-system-arm (Debian: gcc-arm-none-eabi qemu-system-arm)"
         if os.environ.get("ACCELNAV_REQUIRE_PIL") == "1":
             pytest.fail(f"ACCELNAV_REQUIRE_PIL=1 but {reason}")
         pytest.skip(reason)
-    spec = importlib.util.spec_from_file_location("bench_rv32_icount", REPO / "bench" / "bench_rv32_icount.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    assert bench.main(["--samples", "300", "--keep", str(tmp_path)]) == 0
-    out = capsys.readouterr().out
-    assert "M3: calibration loop 2000000 of 2000000 instructions" in out
-    calib = int(re.search(r"RV32: calibration loop (\d+) of 2000000", out).group(1))
-    assert 2_000_000 <= calib <= 2_000_010  # the loop and the few instructions of its call
-    assert "final states, M3 vs RV32: bit-identical" in out and "overflow counters: M3 0, RV32 0" in out
-    for form in ("covariance", "gain_schedule"):
-        row = next(line for line in out.splitlines() if line.startswith(f"| {form} |"))
-        m3, rv32, ratio = (float(x) for x in row.split("|")[2:5])
-        assert rv32 > m3 > 20, row
-        assert ratio == pytest.approx(rv32 / m3, abs=0.01)
+    from accelnav.hil_sim.sim.sensor import simulate
+    from accelnav.hil_sim.targets.icount_sample import driver, run_core
+
+    model = load_model()
+    main_c = driver(model, simulate(model, "vehicle", 300 / model.rate_hz, seed=1).code[:300])
+    vals = {core: run_core(core, model, main_c, tmp_path / core)[0] for core in ("M3", "RV32")}
+    m3, rv32 = vals["M3"], vals["RV32"]
+    assert m3["calib_2M"] == 2_000_000
+    assert 2_000_000 <= rv32["calib_2M"] <= 2_000_010  # the loop and the few instructions of its call
+    assert (m3["hash_cov"], m3["hash_gs"]) == (rv32["hash_cov"], rv32["hash_gs"]), "final states differ"
+    assert m3["overflow"] == 0 and rv32["overflow"] == 0
+    for tag in ("cov", "gs"):
+        per_m3, per_rv32 = m3[tag] / m3["n"], rv32[tag] / rv32["n"]
+        assert per_rv32 > per_m3 > 20, (tag, per_m3, per_rv32)
 
 
 def test_a_trap_ends_the_run_with_fault_not_a_hang(tmp_path):

@@ -15,6 +15,7 @@ import json
 
 import numpy as np
 import pytest
+from support.frames import frame_kind, split_frames
 
 from accelnav.cli import main as cli_main
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
@@ -28,19 +29,7 @@ from accelnav.link.telemetry import (
     encode_command,
     encode_stimulus,
     frame,
-    replay_for,
 )
-from accelnav.model.load import load_model
-
-
-@pytest.fixture(scope="module")
-def man():
-    return manifest(None)
-
-
-@pytest.fixture(scope="module")
-def replay(man):
-    return replay_for(man, load_model())
 
 
 @pytest.fixture(scope="module")
@@ -50,15 +39,6 @@ def mod():
 
 def _stim(man, n: int, seed: int) -> bytes:
     return encode_stimulus(man, code=2048 + np.random.default_rng(seed).integers(-300, 300, (n, 2)))
-
-
-def _frames(data: bytes) -> list[bytes]:
-    return [p + b"\0" for p in data.split(b"\0")[:-1]]
-
-
-def _kind(man, f: bytes) -> str:
-    t = cobs_decode(f[:-1])[0]
-    return next(n for n, fr in man.frames.items() if fr["type"] == t and fr["direction"] == "up")
 
 
 def _in_pieces(man, replay, stream: bytes, seed: int, pieces: int):
@@ -95,7 +75,7 @@ def test_rows_held_over_a_pause_whose_checkpoints_were_lost_stay_in_order(man, r
     fw.rx(_stim(man, 1000, 1))
     a = fw.take()
     fw.rx(encode_command(man, "stop"))
-    stop = [f for f in _frames(fw.take()) if _kind(man, f) != "checkpoint"]  # the flush's checkpoints lost
+    stop = [f for f in split_frames(fw.take()) if frame_kind(man, f) != "checkpoint"]  # the flush's checkpoints lost
     fw.rx(encode_command(man, "mode_states") + encode_command(man, "start") + _stim(man, 1000, 2))
     fw.rx(encode_command(man, "mode_compact") + _stim(man, 1000, 3) + encode_command(man, "flush"))
     stream = a + b"".join(stop) + fw.take()
@@ -113,8 +93,8 @@ def test_one_crc_valid_frame_far_in_the_future_is_damage(man, replay, mod, where
     frame (nothing after it to agree) it is refused too."""
     fw = HostFirmware(mod)
     fw.rx(_stim(man, 6000, 4) + encode_command(man, "flush"))
-    f = _frames(fw.take())
-    kinds = [_kind(man, x) for x in f]
+    f = split_frames(fw.take())
+    kinds = [frame_kind(man, x) for x in f]
     k = {"block": [i for i, x in enumerate(kinds) if x == "block"][40], "checkpoint": kinds.index("checkpoint", 30)}
     k["last"] = max(i for i, x in enumerate(kinds) if x in ("block", "checkpoint"))
     at = k[where]
@@ -137,14 +117,14 @@ def test_power_on_frames_sent_again_are_repeats_not_a_reboot(man, replay, mod):
     says they belong to the run under way: repeats, dropped and counted."""
     fw = HostFirmware(mod)
     fw.rx(_stim(man, 4000, 5))
-    f = _frames(fw.take())
+    f = split_frames(fw.take())
     fw.rx(_stim(man, 3000, 6) + encode_command(man, "flush"))
     again = f[:12]
     stream = b"".join(f + again) + fw.take()
     rows, stats = _all_ways(man, replay, stream)
     np.testing.assert_array_equal(rows["index"], np.arange(7000))
     B = man.data["block_samples"]
-    assert stats.lost == 0 and stats.duplicates == B * sum(_kind(man, x) == "block" for x in again)
+    assert stats.lost == 0 and stats.duplicates == B * sum(frame_kind(man, x) == "block" for x in again)
 
 
 def test_a_reboot_and_a_reset_start_new_runs(man, replay, mod):
@@ -155,8 +135,8 @@ def test_a_reboot_and_a_reset_start_new_runs(man, replay, mod):
     first = fw.take()
     fw2 = HostFirmware(mod, boot_id=8)
     fw2.rx(_stim(man, 1000, 8) + encode_command(man, "reset") + _stim(man, 500, 9) + encode_command(man, "flush"))
-    second = _frames(fw2.take())
-    stream = first + b"".join(second) + b"".join(_frames(first)[:6])  # and the first boot's frames again
+    second = split_frames(fw2.take())
+    stream = first + b"".join(second) + b"".join(split_frames(first)[:6])  # and the first boot's frames again
     rows, stats = _all_ways(man, replay, stream, runs=3)
     np.testing.assert_array_equal(rows["index"], np.r_[0:2000, 0:1000, 0:500])
     assert stats.lost == 0 and stats.duplicates > 0
@@ -169,8 +149,8 @@ def test_samples_lost_before_a_pause_are_counted(man, replay, mod):
     fw.rx(_stim(man, 1000, 10))
     a = fw.take()
     fw.rx(encode_command(man, "stop"))
-    stop = _frames(fw.take())
-    assert [_kind(man, x) for x in stop] == ["block", "checkpoint", "checkpoint", "ack"]
+    stop = split_frames(fw.take())
+    assert [frame_kind(man, x) for x in stop] == ["block", "checkpoint", "checkpoint", "ack"]
     fw.rx(_stim(man, 300, 11) + encode_command(man, "start") + _stim(man, 1000, 12) + encode_command(man, "flush"))
     stream = a + stop[-1] + fw.take()
     rows, stats = _all_ways(man, replay, stream)
@@ -187,8 +167,8 @@ def test_the_first_state_frame_after_a_mode_change_is_counted_lost(man, replay, 
     fw.rx(_stim(man, 1000, 13))
     a = fw.take()
     fw.rx(encode_command(man, "mode_states") + _stim(man, 500, 14))
-    f = _frames(fw.take())
-    first = next(i for i, x in enumerate(f) if _kind(man, x) == "sample")
+    f = split_frames(fw.take())
+    first = next(i for i, x in enumerate(f) if frame_kind(man, x) == "sample")
     stream = a + b"".join(f[:first] + f[first + 1 :])
     rows, stats = _all_ways(man, replay, stream)
     np.testing.assert_array_equal(rows["index"], np.r_[0:1000, 1001:1500])

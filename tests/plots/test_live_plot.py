@@ -11,7 +11,7 @@ import pytest
 import serial
 
 from accelnav.cli import main as cli_main
-from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
+from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware
 from accelnav.link.recorder import Recorder, Status, decode_log
 from accelnav.link.telemetry import encode_command, encode_stimulus, sample_columns
 from accelnav.model import input_conversion
@@ -20,11 +20,6 @@ from accelnav.plots.live import LivePlot, LiveView, plot_log
 
 N = 1500
 SECONDS = 4.0  # the ring holds fewer samples than the stream: the plot shows only its end
-
-
-@pytest.fixture(scope="module")
-def man():
-    return manifest(None)
 
 
 @pytest.fixture(scope="module")

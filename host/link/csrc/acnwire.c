@@ -1,5 +1,5 @@
 /* COBS and CRC-32 of frames: see acnwire.h. The CRC table is zlib's (reflected polynomial
- * 0xEDB88320); tests/test_wirekernel.py checks that it reproduces zlib.crc32. */
+ * 0xEDB88320); tests/link/test_wirekernel.py checks that it reproduces zlib.crc32. */
 #include "acnwire.h"
 #include <stdint.h>
 #include <string.h>

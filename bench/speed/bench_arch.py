@@ -1,0 +1,154 @@
+"""The generated filter per architecture, one table from one run: cost per axis-step, flash and RAM
+per axis, and the highest rate x axes each part sustains at 50 % CPU at its usual clock.
+
+One model (default: the shipped default, 2 axes), both fixed-point forms, the same simulated ADC codes
+(scenario vehicle, seed 1, no clipped sample) on every architecture:
+
+* AVR ATmega328P at 16 MHz: CPU cycles, counted by Timer1 at the CPU clock in simavr around each
+  sample's filter calls (accelnav.hil_sim.targets.simavr's driver, avr-gcc -Os; it predicts over one
+  sample in 29 instead of updating, as that driver always does). The gain schedule does not fit the
+  328P's flash: its cycles are counted on an ATmega1284P (same AVR core and instruction timings,
+  16-bit program counter, 128 KB flash), its sizes still compiled for the 328P.
+* RV32IMAC (SiFive FE310, QEMU sifive_e), Cortex-M3 (QEMU mps2-an385) and Cortex-M0 (nRF51822, QEMU
+  microbit): instructions, counted under -icount shift=0 by hil_sim.targets.icount_sample's driver (-O2; a known
+  2 000 000-instruction loop calibrates each core's counter). An instruction count is not a cycle
+  count: the CPU load and the rates below assume CPI instructions per cycle (--cpi, default 1.5;
+  one-cycle ALU ops, two-cycle loads, taken branches refilling the pipeline, multi-cycle long
+  multiplies on the M3 and M0; flash wait states and the FE310's instruction-cache misses not
+  counted: the FE310 reads constant tables from off-chip SPI flash with no data cache, so the gain
+  schedule's row loads there cost far more than one cycle). At CPI 1 every rate is 1.5x higher, an
+  upper bound.
+
+Flash and RAM per axis: codegen.targets.measure, the figures of `accelnav codegen --target PART`
+(the part's compiler and the firmware's own flags, -Os; the filter object over the axes, its shared
+reciprocal table included; RAM: the axis' state struct plus its share of static data). Clocks and
+memories: firmware/parts.mk (16 MHz Uno, 320 MHz HiFive1, 25 MHz MPS2 FPGA, 16 MHz micro:bit; the
+Cortex-M3 counts are also shown at the STM32F103's 72 MHz). Baseline in the same run: the Cortex-M3
+(ratio column) and each core's loop and call overhead.
+
+    .venv/bin/python bench/speed/bench_arch.py [MODEL.toml] [--samples N] [--cpi X]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+from accelnav.codegen import targets
+from accelnav.codegen.emit_c import emit
+from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.hil_sim.targets import icount_sample as icount
+from accelnav.hil_sim.targets import simavr
+from accelnav.model.load import load_model
+
+FORMS = (("cov", "covariance"), ("gs", "gain_schedule"))
+# the micro:bit's Cortex-M0, in the shape of icount_sample.CORES (its driver runs unchanged)
+M0 = ("arm-none-eabi-gcc", ["-mcpu=cortex-m0", "-mthumb", "-masm-syntax-unified"], "microbit", "nrf51822.ld",
+      ["-nostdlib"], "arm-none-eabi-size", "microbit", "qemu-system-arm")  # fmt: skip
+# rows: label, part (parts.mk: clock, memories, compiler), where the count comes from
+ROWS = (
+    ("AVR ATmega328P", "atmega328p", "AVR"),
+    ("RV32IMAC FE310", "sifive_e", "RV32"),
+    ("Cortex-M3 MPS2 AN385", "mps2_an385", "M3"),
+    ("Cortex-M3 STM32F103", "stm32f103", "M3"),
+    ("Cortex-M0 nRF51822", "microbit", "M0"),
+)
+
+
+def qemu_counts(model, codes, tmp: Path) -> dict[str, dict]:
+    """Instructions per axis-step per form on each QEMU core, its loop overhead and state hashes."""
+    main_c = icount.driver(model, codes)
+    nax = len(model.axes)
+    out = {}
+    for core, spec in (("M3", None), ("RV32", None), ("M0", M0)):
+        vals, _ = icount.run_core(core, model, main_c, tmp / core, spec)
+        k = 2_000_000 / vals["calib_2M"]  # the counter's instructions per unit (40 per tick at 25 MHz, ...)
+        n = vals["n"]
+        out[core] = {t: vals[t] * k / n / nax for t, _ in FORMS}
+        out[core]["empty"] = vals["empty"] * k / n / nax
+        out[core]["scale"] = k
+        out[core]["hash"] = (vals["hash_cov"], vals["hash_gs"])
+        out[core]["overflow"] = vals["overflow"]
+    return out
+
+
+def avr_counts(model, codes, tmp: Path) -> dict[str, float]:
+    """Cycles per axis-step per form in simavr (the gain schedule on the ATmega1284P)."""
+    out = {}
+    for tag, form in FORMS:
+        files = {k: v for k, v in emit(model, form=form).items() if k.endswith((".c", ".h"))}
+        drv = simavr.driver_c("accelnav.h", files["accelnav.h"], codes, duty=False)
+        mcu = simavr.MCU if form == "covariance" else "atmega1284p"
+        run = simavr.run_avr(files, drv, tmp / f"avr_{tag}", mcu=mcu, timeout=600)
+        total, _, n = run.phases[0]
+        out[tag] = total / n / len(model.axes)
+    return out
+
+
+def sizes(model) -> dict[str, dict[str, targets.Sized]]:
+    """Flash and RAM of each form on each part, as the codegen report measures them."""
+    files = {form: emit(model, form=form) for _, form in FORMS}
+    out = {}
+    for key in {r[1] for r in ROWS}:
+        p = targets.part(key)
+        missing = targets.missing_tools(p)
+        if missing:
+            raise SystemExit(f"bench: {missing}")
+        out[key] = {form: targets.measure(p, files[form], "accelnav", form) for _, form in FORMS}
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("model", nargs="?", default=None)
+    ap.add_argument("--samples", type=int, default=600)
+    ap.add_argument("--cpi", type=float, default=1.5, help="cycles per instruction assumed for the QEMU counts")
+    args = ap.parse_args(argv)
+    model = load_model(args.model)
+    if model.sensor.kind != "analog":
+        raise SystemExit("bench: analog models only (the QEMU driver feeds ADC codes)")
+    try:
+        simavr.require_avr()
+    except simavr.AvrError as e:
+        raise SystemExit(f"bench: {e}") from None
+    run = simulate(model, "vehicle", args.samples / model.rate_hz, seed=1)
+    codes = run.code[: args.samples]
+    nax = len(model.axes)
+    with tempfile.TemporaryDirectory(prefix="acn_bench_arch_") as tmp:
+        q = qemu_counts(model, codes, Path(tmp))
+        avr = avr_counts(model, codes, Path(tmp))
+    sz = sizes(model)
+    print(f"model {model.name} ({model.sha256[:12]}), {nax} axes, {model.rate_hz:g} Hz, scenario vehicle, "
+          f"{len(codes)} samples, same codes on every core")  # fmt: skip
+    for core in q:
+        print(f"{core}: {q[core]['scale']:.4f} instructions per counted unit (from the 2 000 000-instruction loop); "
+              f"loop + call overhead {q[core]['empty']:.1f} instructions per axis-step (included below)")  # fmt: skip
+    print(f"QEMU counts are instructions; CPU % and rates assume CPI {args.cpi:g} (see the script's docstring).\n")
+    print("| architecture | clock | form | per axis-step | vs M3 | flash B/axis | RAM B/axis | fits | "
+          f"axis-samples/s at 50 % CPU | = Hz for {nax} axes |")  # fmt: skip
+    print("|---|---:|---|---:|---:|---:|---:|---|---:|---:|")
+    for label, key, src in ROWS:
+        p = targets.part(key)
+        for tag, form in FORMS:
+            if src == "AVR":
+                count, unit, cycles = avr[tag], "cycles", avr[tag]
+            else:
+                count, unit, cycles = q[src][tag], "insns", q[src][tag] * args.cpi
+            ratio = "-" if src == "AVR" else f"{count / q['M3'][tag]:.2f}"  # instructions against instructions only
+            s = sz[key][form]
+            fits = "yes" if s.flash <= p.flash and s.ram <= p.ram else f"no ({s.flash} B > {p.flash})"
+            axis_rate = 0.5 * p.mhz * 1e6 / cycles
+            print(f"| {label} | {p.mhz:g} MHz | {form} | {count:.0f} {unit} | {ratio} | {s.flash // nax} | "
+                  f"{s.ram // nax} | {fits} | {axis_rate:,.0f} | {axis_rate / nax:,.0f} |")  # fmt: skip
+    same = all(q[c]["hash"] == q["M3"]["hash"] for c in q)
+    print(f"\nfinal states M3 / RV32 / M0: {'bit-identical' if same else 'DIFFERENT'}; overflow counters "
+          + ", ".join(f"{c} {q[c]['overflow']}" for c in q))  # fmt: skip
+    print("AVR gain schedule: cycles counted on an ATmega1284P (it does not fit the 328P). vs M3: instruction counts")
+    print("against the M3's, not time; the AVR's count is cycles.")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
