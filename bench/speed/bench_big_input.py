@@ -11,7 +11,7 @@ disk lacks them it is refused in one line before reading, and that row says so.
 
 Data: the default model's two axes, noise of 0.3 m/s^2, 100 Hz, written once per size into --keep DIR
 (default: a temporary folder, removed afterwards).
-Usage: nice python bench/bench_big_input.py [--sizes 1e6 1e7] [--big] [--keep DIR]
+Usage: nice python bench/run_all.py bench/speed/bench_big_input.py [--sizes 1e6 1e7] [--big] [--keep DIR]
 """
 
 from __future__ import annotations
