@@ -240,3 +240,20 @@ def test_what_must_hold_the_input_whole_is_refused_before_reading(tmp_path, monk
     assert main([argv[0], str(path), *argv[1:], "--out", str(tmp_path / "o.npz")]) != 0
     err = capsys.readouterr().err.strip()
     assert said in err and "ACCELNAV_MAX_INPUT_BYTES" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("where", ["_parse", "_check"])
+def test_ctrl_c_removes_the_store(tmp_path, monkeypatch, where):
+    from accelnav.data import stream
+
+    real = getattr(stream, where)
+
+    def interrupted(*a, **k):
+        real(*a, **k)  # the store is on disk by now
+        assert list(tmp_path.glob(".accelnav-input-*/store.bin"))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(stream, where, interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        open_stream(_write(tmp_path, CASES["comma"]), workdir=tmp_path)
+    assert not list(tmp_path.glob(".accelnav-input-*"))
