@@ -23,7 +23,7 @@ import os
 import shutil
 import stat
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -74,14 +74,15 @@ class Stream:
     def width(self) -> int:
         return len(self.head.use)
 
-    def rows(self, s: int, e: int) -> tuple[np.ndarray, np.ndarray]:
-        """(numbers (e-s, width), file lines (e-s,)) of rows s..e as parsed."""
+    def rows(self, s: int, e: int, lines: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """(numbers (e-s, width), file lines (e-s,) or None without ``lines``) of rows s..e as parsed."""
         table = np.empty((e - s, self.width))
-        lines = np.empty(e - s, dtype=np.int64)
+        nums = np.empty(e - s, dtype=np.int64) if lines else None
         if e > s:
             _pread(self._fds["store"], table, 8 * self.width * s)
-            _pread(self._fds["lines"], lines, 8 * s)
-        return table, lines
+            if lines:
+                _pread(self._fds["lines"], nums, 8 * s)
+        return table, nums
 
     def raw_time(self, table: np.ndarray, s: int) -> np.ndarray:
         """Time of rows s.. in seconds, as read_recording makes it (column or rate, then --time-unit)."""
@@ -90,9 +91,10 @@ class Stream:
             t = t * rc._TIME_SCALE[self.time_unit]
         return t
 
-    def block(self, s: int, e: int) -> rc.Recording:
-        """Rows s..e as a Recording in m/s^2 on the model (counts converted), its messages placed in the file."""
-        table, lines = self.rows(s, e)
+    def block(self, s: int, e: int, lines: bool = True) -> rc.Recording:
+        """Rows s..e as a Recording in m/s^2 on the model (counts converted), its messages placed in the file
+        (without ``lines``: by sample only, for rows checked already)."""
+        table, lines = self.rows(s, e, lines)
         with np.errstate(over="ignore"):  # beyond float64 in m/s^2: inf, refused by name as not a number
             accel = rc.csv_accel(self.head, table)
         h = self.head
@@ -105,7 +107,7 @@ class Stream:
 
     def __call__(self, s: int, e: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(t on the grid, accel [m/s^2], clipped) of rows s..e, as read_input's run holds them."""
-        rec = self.block(s, e)
+        rec = self.block(s, e, lines=False)  # checked by open_stream: no message will need a line
         t = self.t0 + np.arange(s, e) * self.Ts
         with np.errstate(invalid="ignore"):
             clipped = np.abs(rec.accel) >= self.model.max_accel_m_s2 * (1 - 1e-9)
@@ -250,7 +252,7 @@ def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narro
     dmin, dmax = np.inf, -np.inf
     for s in range(0, n, block):
         e = min(s + block, n)
-        t = st.raw_time(st.rows(s, e)[0], s)
+        t = st.raw_time(st.rows(s, e, lines=False)[0], s)
         if s == 0:
             t0 = float(t[0])
         tl = float(t[-1])
@@ -313,17 +315,23 @@ def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narro
     said, k_prev = False, -1
     for s in range(0, n, block):
         e = min(s + block, n)
-        rec = st.block(s, e)
+        try:
+            rec = st.block(s, e, lines=False)  # the lines are read only for a message
+        except UserError:
+            st.block(s, e)  # the same refusal, naming the line
+            raise
         if not said and rec.notes:
             note(rec.notes[-1])  # the counts' conversion, once
             said = True
         nan = ~np.isfinite(rec.accel)
         if nan.any():
+            rec = replace(rec, lines=st.rows(s, e)[1])
             k = int(np.argmax(nan.any(axis=1)))
             raise UserError(f"{src}: {rec.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
         k = np.rint((rec.t - t0) / st.Ts).astype(np.int64)
         off = np.abs(rec.t - t0 - k * st.Ts) > 0.25 * st.Ts
         if off.any():
+            rec = replace(rec, lines=st.rows(s, e)[1])
             i = int(np.argmax(off))
             raise UserError(
                 f"{src}: {rec.where(i)} (t = {rec.t[i]:.6g} s) is off the {rate:.6g} Hz sample grid by more "
@@ -331,6 +339,7 @@ def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narro
             )
         dk = np.diff(np.concatenate(([k_prev], k))) if s else np.diff(k)
         if np.any(dk < 1):
+            rec = replace(rec, lines=st.rows(s, e)[1])
             i = int(np.argmax(dk < 1)) + (0 if s else 1)
             raise UserError(f"{src}: {rec.where(i)} falls on the same sample period as the one before it")
         if np.any(dk > 1):
