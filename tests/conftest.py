@@ -46,7 +46,7 @@ def man():
 @pytest.fixture(scope="module")
 def replay(man):
     """The host's replay of the default firmware's filter: the compact mode's block frames need it."""
-    from accelnav.link.telemetry import replay_for
+    from accelnav.link.decoder import replay_for
 
     return replay_for(man, load_model())
 

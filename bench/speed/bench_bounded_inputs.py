@@ -56,7 +56,7 @@ def make_csv(path: Path, rows: int) -> None:
 
 def make_log(path: Path, mib: int) -> None:
     from accelnav.link.logfile import LogWriter
-    from accelnav.link.telemetry import Manifest
+    from accelnav.link.manifest import Manifest
     from accelnav.model.load import load_model
 
     model = load_model()

@@ -4,7 +4,7 @@
    telemetry (3.6 million samples; the default model's firmware run in-process
    on them, so the block frames, checkpoints and states are the real ones; a
    few runs of frames repeated, a few damaged bytes) is decoded by
-   accelnav.link.telemetry.Decoder (vectorised, with the replay of the
+   accelnav.link.decoder.Decoder (vectorised, with the replay of the
    firmware's filter, fed in 1 MiB pieces as a log is read) and by
    decode_naive (frame by frame: split, COBS loop, zlib.crc32, struct.unpack,
    then the filter stepped one sample at a time through the same C) on the
@@ -33,16 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
+# the frame-by-frame baseline is test code, not the package's: tests/support, on the path bench/run_all.py sets
+from support.naive_decoder import decode_naive
+
 from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
-from accelnav.link.telemetry import (
-    Decoder,
-    Manifest,
-    decode_naive,
-    encode_command,
-    encode_frames,
-    encode_stimulus,
-    replay_for,
-)
+from accelnav.link.codec import encode_command, encode_frames, encode_stimulus
+from accelnav.link.decoder import Decoder, replay_for
+from accelnav.link.manifest import Manifest
 from accelnav.model.load import load_model
 
 BAUDS = (115200, 230400, 460800, 921600)
@@ -267,7 +264,7 @@ def bench_state(args) -> None:
     print()
     print(f"{'decoder':<34}{'seconds':>9}{'frames/s':>14}{'MB/s':>9}{'x realtime':>12}")
     for name, secs in (
-        ("vectorised (link.telemetry.Decoder)", t_vec),
+        ("vectorised (link.decoder.Decoder)", t_vec),
         ("naive frame-by-frame (baseline)", t_naive),
     ):
         print(f"{name:<34}{secs:9.2f}{got / secs:14,.0f}{len(data) / 1e6 / secs:9.1f}{n / args.rate / secs:12,.0f}")

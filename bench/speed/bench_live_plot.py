@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
-from accelnav.link.telemetry import Decoder, encode_command, encode_stimulus
+from accelnav.link.codec import encode_command, encode_stimulus
+from accelnav.link.decoder import Decoder
 from accelnav.model.load import load_model
 from accelnav.plots.live import REFRESH_S, LivePlot
 

@@ -27,7 +27,7 @@ from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.targets import hil
 from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.hil_sim.targets.qemu import MACHINES
-from accelnav.link.telemetry import decode_all
+from accelnav.link.decoder import decode_all
 from accelnav.model.load import load_model
 from accelnav.resources import models_dir
 

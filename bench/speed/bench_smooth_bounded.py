@@ -63,22 +63,17 @@ def one_axis_model(path: Path) -> Path:
 
 def make_recording(path: Path, n: int, n_axes: int, seed: int = 1, block: int = 1 << 22) -> None:
     """A 100 Hz recording (a slow random walk plus noise, m/s^2) as an uncompressed NPZ."""
-    from accelnav.estimate.chunked import _NpyOut, write_npz_streamed
+    from accelnav.estimate.npzout import NpzWriter
 
     rng = np.random.default_rng(seed)
-    tmp = Path(tempfile.mkdtemp(dir=path.parent))
-    t_out, a_out = _NpyOut(tmp / "t.npy", (n,), np.float64), _NpyOut(tmp / "accel.npy", (n, n_axes), np.float64)
     level = np.zeros(n_axes)
-    for s in range(0, n, block):
-        e = min(s + block, n)
-        walk = level + np.cumsum(rng.normal(0, 1e-3, (e - s, n_axes)), axis=0)
-        level = walk[-1]
-        t_out.write(s, np.arange(s, e) / 100.0)
-        a_out.write(n_axes * s, walk + rng.normal(0, 0.02, (e - s, n_axes)))
-    t_out.close()
-    a_out.close()
-    write_npz_streamed(path, {"t": t_out.path, "accel": a_out.path})
-    shutil.rmtree(tmp)
+    with NpzWriter(path, {"t": ((n,), np.float64), "accel": ((n, n_axes), np.float64)}) as w:
+        for s in range(0, n, block):
+            e = min(s + block, n)
+            walk = level + np.cumsum(rng.normal(0, 1e-3, (e - s, n_axes)), axis=0)
+            level = walk[-1]
+            w.write("t", s, np.arange(s, e) / 100.0)
+            w.write("accel", n_axes * s, walk + rng.normal(0, 0.02, (e - s, n_axes)))
 
 
 def run(kind: str, rec: Path, out: Path, model: Path) -> tuple[float, float, str]:

@@ -13,6 +13,9 @@ Data: the default model's stop_and_go simulation (rests for --zupt auto), tiled 
 is the default with ranges.max_run_s raised to the run (the shipped 3600 s is the fixed-point C's
 range proof, not a limit of the host tools). Sizes 1e5, 1e6, 1e7 rows; 1e8 only with --big.
 Usage: python bench/bench_smooth_e2e.py [--sizes 1e5 1e6 1e7] [--big] [--n-baseline 20000] [--keep DIR]
+       [--cases "smooth NPZ" ...] [--python EXE]
+--python runs the commands with another interpreter (another build of accelnav: before/after in one
+session); the kernel-alone row is always this interpreter's.
 """
 
 from __future__ import annotations
@@ -34,20 +37,22 @@ from accelnav.model.design import axis_design
 from accelnav.model.load import DEFAULT_MODEL, load_model
 
 
-def make_data(folder: Path, n: int, model) -> tuple[Path, Path, Path]:
-    """(NPZ, CSV, model file) of n rows, written once per size into ``folder``."""
+def make_data(folder: Path, n: int, model, with_csv: bool = True) -> tuple[Path, Path, Path]:
+    """(NPZ, CSV, model file) of n rows, written once per size into ``folder`` (the CSV only if asked)."""
     npz, csv, toml = folder / f"rec-{n}.npz", folder / f"rec-{n}.csv", folder / f"model-{n}.toml"
     if not toml.exists():
         run_s = max(model.ranges.max_run_s, n / model.rate_hz * 1.01)
         text = DEFAULT_MODEL.read_text().replace(f"max_run_s = {model.ranges.max_run_s!r}", f"max_run_s = {run_s!r}")
         assert f"max_run_s = {run_s!r}" in text, "the default model's max_run_s line moved"
         toml.write_text(text)
-    if npz.exists() and csv.exists():
+    if npz.exists() and (csv.exists() or not with_csv):
         return npz, csv, toml
     sim = simulate(model, "stop_and_go", min(model.ranges.max_run_s, n / model.rate_hz), seed=7)
     accel = np.resize(sim.accel, (n, sim.accel.shape[1]))  # tiled: rests recur all along
     t = np.arange(n) / model.rate_hz
     np.savez(npz, t=t, accel=accel, axis_names=np.array([a.name for a in model.axes]))
+    if not with_csv:
+        return npz, csv, toml
     with open(csv, "w") as fh:
         fh.write("t_s," + ",".join(f"acc_{a.name}_m_s2" for a in model.axes) + "\n")
         step = 1_000_000
@@ -88,13 +93,15 @@ def main() -> int:
     ap.add_argument("--n-baseline", type=int, default=20_000, help="rows FilterPy smooths (it is slow)")
     ap.add_argument("--repeat", type=int, default=3, help="kernel timings: best of this many")
     ap.add_argument("--keep", type=Path, default=None, help="keep the data in DIR (default: a temporary folder)")
+    ap.add_argument("--cases", nargs="*", default=None, help="only these command rows (names as printed)")
+    ap.add_argument("--python", default=sys.executable, help="interpreter that runs the commands")
     args = ap.parse_args()
     sizes = [int(s) for s in args.sizes] + ([100_000_000] if args.big else [])
     model = load_model(None)
     n_axes = len(model.axes)
     folder = args.keep or Path(tempfile.mkdtemp(prefix="accelnav-bench-e2e-"))
     folder.mkdir(parents=True, exist_ok=True)
-    exe = [sys.executable, "-m", "accelnav.cli"]
+    exe = [args.python, "-m", "accelnav.cli"]
     try:
         import pandas as pd
     except ImportError:
@@ -113,13 +120,14 @@ def main() -> int:
     print("|---|---|---|---|---|---|---|---|")
     targets = []
     for n in sizes:
-        npz, csv, toml = make_data(folder, n, model)
+        with_csv = args.cases is None or "smooth CSV" in args.cases
+        npz, csv, toml = make_data(folder, n, model, with_csv)
         data = np.load(npz)
         t_kernel = kernel_alone(model, np.asarray(data["accel"]), args.repeat)
         del data
         k_rate = n / t_kernel
         results = {"kernel alone (plain data pass, gains cached)": (t_kernel, float("nan"), 0, "")}
-        if pd is not None:
+        if pd is not None and with_csv:
             t0 = time.perf_counter()
             pd.read_csv(csv)
             results["pandas.read_csv of the CSV"] = (time.perf_counter() - t0, float("nan"), 0, "in process")
@@ -130,6 +138,8 @@ def main() -> int:
             "smooth NPZ --zupt auto": ["smooth", npz, "--zupt", "auto"],
             "filter NPZ": ["filter", npz],
         }
+        if args.cases is not None:
+            cases = {k: v for k, v in cases.items() if k in args.cases}
         for name, argv in cases.items():
             results[name] = run([*exe, *map(str, argv), "--model", str(toml), "--out", str(out)], folder)
             out.unlink(missing_ok=True)
@@ -145,6 +155,8 @@ def main() -> int:
         sys.stdout.flush()
 
     n, sec, ok, k_rate = targets[-1]
+    if args.cases is not None:
+        return 0
     print()
     print(f"Targets at N = {n:.0e} (goal, measured, met):")
     print()

@@ -142,7 +142,7 @@ def seeds(model: str | None = None) -> dict[str, bytes]:
     import numpy as np
 
     from accelnav.hil_sim.targets.firmware import manifest
-    from accelnav.link.telemetry import encode_command, encode_stimulus, pack_payload
+    from accelnav.link.codec import encode_command, encode_stimulus, pack_payload
 
     man = manifest(model)
     n_axes = len(man.axes)

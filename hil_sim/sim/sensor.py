@@ -73,11 +73,11 @@ from accelnav.model.design import input_conversion
 from accelnav.model.load import G0, Model
 
 from .trajectories import (
-    ALL_SCENARIOS,
     REST_SCENARIOS,
     TUMBLE_HOLD_S,
     TUMBLE_TURN_S,
     WALK_SCENARIOS,
+    require_scenario,
     rest_truth,
     truth,
     tumble_any_poses,
@@ -242,9 +242,7 @@ def simulate(
     order). ``seed`` is a non-negative integer. See the module docstring for
     the sensor model and the random streams.
     """
-    if scenario not in ALL_SCENARIOS:
-        accepted = ", ".join(repr(s) for s in ALL_SCENARIOS)
-        raise ValueError(f"scenario: unknown scenario {scenario!r}; accepted: {accepted}")
+    require_scenario(scenario)
     max_run = model.ranges.max_run_s
     if (
         isinstance(duration_s, bool)

@@ -56,6 +56,14 @@ WALK_SCENARIOS = ("walking_drift", "walking_fast")
 REST_SCENARIOS = (*WALK_SCENARIOS, "stop_and_go_graded", "highway", "cart_push")
 ALL_SCENARIOS = SCENARIOS + MULTI_AXIS_SCENARIOS + REST_SCENARIOS
 
+
+def require_scenario(name: str, what: str = "scenario", error: type[Exception] = ValueError) -> None:
+    """Refuse, in one line naming ``what``, a scenario the simulator does not have (``error``: the caller's
+    exception type, e.g. the CLI's UserError with ``what="--scenario"``)."""
+    if name not in ALL_SCENARIOS:
+        raise error(f"{what}: unknown scenario {name!r}; accepted: {', '.join(repr(s) for s in ALL_SCENARIOS)}")
+
+
 TUMBLE_HOLD_S = 8.0  # each pose is held this long ...
 TUMBLE_TURN_S = 3.0  # ... and the turn to the next one takes this long
 TUMBLE_ANY_MIN_TURN_DEG = 45.0  # tumble_any: consecutive random poses differ by at least this much

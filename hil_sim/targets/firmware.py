@@ -47,7 +47,7 @@ def generated(model_path: str | None = None) -> dict[str, str]:
 
 
 def manifest(model_path: str | None = None):
-    from accelnav.link.telemetry import Manifest
+    from accelnav.link.manifest import Manifest
 
     return Manifest(json.loads(generated(model_path)["acnframe.json"]))
 

@@ -39,15 +39,9 @@ from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.estimate.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from accelnav.estimate.zupt import rest_mask
 from accelnav.hil_sim.sim.sensor import SimRun
-from accelnav.link.telemetry import (
-    Decoder,
-    Manifest,
-    decode_all,
-    encode_command,
-    encode_stimulus,
-    replay_for,
-    sample_columns,
-)
+from accelnav.link.codec import encode_command, encode_stimulus
+from accelnav.link.decoder import Decoder, decode_all, replay_for
+from accelnav.link.manifest import Manifest, sample_columns
 from accelnav.model.design import axis_design
 from accelnav.model.load import G0, Model
 

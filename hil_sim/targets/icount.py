@@ -22,9 +22,19 @@ import numpy as np
 from accelnav.codegen.emit_c import emit
 from accelnav.codegen.report import struct_size
 from accelnav.hil_sim.targets.qemu import run_to_exit
+from accelnav.native.cbuild import STRICT_WARN
 from accelnav.resources import firmware_dir
 
-CFLAGS = ["-mthumb", "-masm-syntax-unified", "-O2", "-std=c99", "-ffreestanding", "-Wall", "-Wextra", "-Werror"]
+# the strict flags but -pedantic, which refuses the board's startup.c (a vector table of function
+# pointers), as firmware.mk does for the same file
+CFLAGS = [
+    "-mthumb",
+    "-masm-syntax-unified",
+    "-O2",
+    "-std=c99",
+    "-ffreestanding",
+    *(f for f in STRICT_WARN if f != "-pedantic"),
+]
 
 
 # core -> (gcc -mcpu, runtime folder, linker script, qemu machine)

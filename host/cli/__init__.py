@@ -7,6 +7,18 @@ Only the module of the command being run is imported: the others appear in ``acc
 estimator and no compiler module (tests/cli/test_lazy_parser.py checks the lines against the modules).
 Bad input raises :class:`accelnav.errors.UserError` or :class:`accelnav.model.ModelError`; main()
 prints those as one line and exits 2.
+
+The CLI only parses, runs commands over the library and presents; what computes lives in the library.
+Its top-level functions say which by their names (tests/cli/test_cli_names.py holds every module to it;
+a leading underscore does not count):
+
+* parsing: ``register``, ``main``, ``build_parser``, ``*_parser``, ``*_args`` / ``*_arg`` (argument groups,
+  and readers and checks of the parsed arguments), ``*_options`` (parsed arguments as a library's keywords);
+* commands: ``cmd_<command>``, and a part of one named after its command, ``_<command>_*``
+  (``_smooth_tune``, ``_hil_recorded``);
+* presentation: ``format_*`` / ``fmt_*`` (text), ``print_*`` (lines on stdout), ``write_*`` (the output files
+  asked for, and a line saying so), ``*_report``, ``*_table`` / ``table_*``, ``*_summary``, ``report``,
+  ``summary``, ``provenance`` (a model file's header).
 """
 
 from __future__ import annotations
@@ -48,6 +60,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 ALL = "*"
 
+__all__ = ["ALL", "COMMANDS", "build_parser", "main"]
+
 
 def build_parser(command: str | None = ALL) -> argparse.ArgumentParser:
     """The parser, with the full arguments of ``command`` (ALL, the default: of every command, as the docs
@@ -70,17 +84,17 @@ def build_parser(command: str | None = ALL) -> argparse.ArgumentParser:
     for name, (_, help_line) in COMMANDS.items():
         if name not in sub.choices:  # a placeholder: parsed again with its module when chosen
             sub.add_parser(name, help=help_line)
-    _in_table_order(sub)
+    _sort_parser(sub)
     return parser
 
 
-def _in_table_order(sub) -> None:
+def _sort_parser(sub) -> None:
     """A module registers all of its commands at once (core: sim, filter, smooth): put the help back in order."""
     order = list(COMMANDS)
     sub._choices_actions.sort(key=lambda a: order.index(a.dest) if a.dest in order else len(order))
 
 
-def _command_of(argv: list[str]) -> str | None:
+def _command_arg(argv: list[str]) -> str | None:
     """The command named in ``argv``: its first word that is not an option (the top-level options, -v, -q,
     --version and --help, take no value, so nothing else can stand before the command)."""
     first = next((a for a in argv if not a.startswith("-")), None)
@@ -89,7 +103,7 @@ def _command_of(argv: list[str]) -> str | None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(_command_of(argv))
+    parser = build_parser(_command_arg(argv))
     args = parser.parse_args(argv)
     set_verbosity(2 if args.verbose else 0 if args.quiet else 1)
     if not getattr(args, "func", None):

@@ -25,7 +25,7 @@ import argparse
 import math
 from pathlib import Path
 
-from accelnav.cli.args import clock_args
+from accelnav.cli.args import clock_args, reader_options
 from accelnav.identify.calibrate import GRAVITY, Calibration
 from accelnav.identify.calibration import calibrate_recording
 from accelnav.model.edit import save_model
@@ -73,10 +73,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     run = calibrate_recording(
         args.recording,
         args.model,
-        unit=args.unit,
-        rate_hz=args.rate,
-        time_column=args.time_column,
-        time_unit=args.time_unit,
+        **reader_options(args),
         min_pose_s=args.min_pose,
         since_power_on=args.since_power_on,
         cross=not args.no_cross,
@@ -96,7 +93,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _ci(ci) -> str:
+def _fmt_ci(ci) -> str:
     return f"[{ci[0]:.6g}, {ci[1]:.6g}]"
 
 
@@ -112,13 +109,15 @@ def report(cal: Calibration, names: tuple[str, ...]) -> list[str]:
         out.append(f"axis {a.name}:")
         out.append(
             f"  zero-g offset {a.offset:+.6g} m/s^2 ({a.offset / G0 * 1e3:+.4g} mg)  se {a.se['offset']:.3g}  "
-            f"95 % {_ci(a.ci95['offset'])}"
+            f"95 % {_fmt_ci(a.ci95['offset'])}"
         )
-        out.append(f"  sensitivity x{a.scale:.6f} of the model's  se {a.se['scale']:.3g}  95 % {_ci(a.ci95['scale'])}")
+        out.append(
+            f"  sensitivity x{a.scale:.6f} of the model's  se {a.se['scale']:.3g}  95 % {_fmt_ci(a.ci95['scale'])}"
+        )
         for k, v in a.cross.items():
             out.append(
                 f"  cross-axis to {k}: {v:+.5f} (a {k} of 1 g reads {v * 1e3:+.3g} mg on {a.name})  se "
-                f"{a.se[k]:.3g}  95 % {_ci(a.ci95[k])}  (reported, not written: the model has no cross-axis key)"
+                f"{a.se[k]:.3g}  95 % {_fmt_ci(a.ci95[k])}  (reported, not written: the model has no cross-axis key)"
             )
         for m in a.not_identified:
             out.append(f"  not identifiable: {m}")
@@ -131,7 +130,7 @@ def report(cal: Calibration, names: tuple[str, ...]) -> list[str]:
     for pc in cal.pairs:
         out.append(
             f"axes {pc.name}: cosine of the angle between them {pc.value:+.5f} "
-            f"({math.degrees(math.asin(pc.value)):+.3f} deg from square)  se {pc.se:.3g}  95 % {_ci(pc.ci95)}  "
+            f"({math.degrees(math.asin(pc.value)):+.3f} deg from square)  se {pc.se:.3g}  95 % {_fmt_ci(pc.ci95)}  "
             "(reported, not written)"
         )
     return out

@@ -39,12 +39,12 @@ def register(sub) -> None:
         "atmega328p/uno, sifive_e/fe310, mps2_an385/cortex-m3, microbit/nrf51, stm32f103; a form that does not "
         "fit is refused, naming the form that does",
     )
-    p.set_defaults(func=run)
+    p.set_defaults(func=cmd_codegen)
 
 
-def run(args: argparse.Namespace) -> int:
+def cmd_codegen(args: argparse.Namespace) -> int:
     if args.arduino is not None:
-        return run_arduino(args)
+        return _codegen_arduino(args)
     if args.out is None:
         raise UserError("codegen: give --out DIR (the generated C) or --arduino DIR (an Arduino library)")
     if args.out.exists() and not args.out.is_dir():
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_arduino(args: argparse.Namespace) -> int:
+def _codegen_arduino(args: argparse.Namespace) -> int:
     """The model's Arduino library in DIR/accelnav_MODELNAME/: each folder written by the generator's writer."""
     from accelnav.codegen.arduino import library, library_name
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.api import simulate
-from accelnav.cli.args import clock_args
+from accelnav.cli.args import clock_args, reader_options
 from accelnav.data.inputs import read_input
 from accelnav.data.runfile import FORMAT, STATE, export_csv, save_run, state_sd
 from accelnav.errors import UserError
@@ -225,6 +225,13 @@ def register(sub) -> None:
     )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     p.add_argument(
+        "--filter-states",
+        action="store_true",
+        help="also write the forward filter's states filt_x, filt_sd when the run streams (by default it writes "
+        "the smoother's alone: the filter's doubled the file and its writing time; accelnav filter writes "
+        "them, and runs that keep every sample in memory (--plots, --covariances, aids, ...) always do)",
+    )
+    p.add_argument(
         "--warm-start",
         action="store_true",
         help="the recording begins after the warm-up, not at power-on: the bias starts at its settled value "
@@ -244,15 +251,7 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_smooth)
 
 
-def require_scenario(name: str) -> None:
-    """UserError for a --scenario the simulator does not have (shared by sim, hil and demo)."""
-    from accelnav.hil_sim.sim.trajectories import ALL_SCENARIOS as SCENARIOS
-
-    if name not in SCENARIOS:
-        raise UserError(f"--scenario: unknown scenario {name!r}; accepted: {', '.join(SCENARIOS)}")
-
-
-def _save(args, arrays, model) -> None:
+def write_outputs(args, arrays, model) -> None:
     save_run(args.out, arrays, model, compress=getattr(args, "compress", False))
     print(f"wrote {args.out}")
     if args.csv is not None:
@@ -260,8 +259,9 @@ def _save(args, arrays, model) -> None:
         print(f"wrote {args.csv}")
 
 
-def _summary(arrays: dict[str, np.ndarray]) -> str:
-    n = len(arrays["t"])
+def _summary(arrays: dict[str, np.ndarray], n: int | None = None) -> str:
+    """``n``: the run's samples when ``arrays`` hold only its ends (t first and last, clipped counts)."""
+    n = len(arrays["t"]) if n is None else n
     dur = arrays["t"][-1] - arrays["t"][0] if n > 1 else 0.0
     lines = [f"{n} samples, {dur:.2f} s, axes {', '.join(str(a) for a in arrays['axis_names'])}"]
     for j, name in enumerate(str(a) for a in arrays["axis_names"]):
@@ -287,16 +287,7 @@ def read_args(args) -> tuple[dict[str, np.ndarray], Model]:
     for flag in ("out", "csv"):
         if getattr(args, flag, None) is not None:
             check_output(getattr(args, flag), f"--{flag}")
-    return read_input(
-        args.run,
-        args.model,
-        axes=args.axis,
-        time_column=args.time_column,
-        rate_hz=args.rate,
-        time_unit=args.time_unit,
-        unit=args.unit,
-        allow_gaps=args.allow_gaps,
-    )
+    return read_input(args.run, args.model, allow_gaps=args.allow_gaps, **reader_options(args))
 
 
 def _csv_rows(args) -> tuple[int, int] | None:
@@ -366,8 +357,16 @@ def stream_args(args, budget: int):
 
 
 def _smooth_streamed(args, stream) -> int:
-    """Plain smooth of a streamed CSV: its rows go from the store to the chunked smoother, never all in memory."""
+    """Plain smooth of a streamed CSV: its rows go from the store to the chunked smoother, never all in memory;
+    the same stages, store and summary as _cmd_streamed, which takes a run held in memory."""
     from accelnav.estimate.chunked import BUDGET, smooth_bounded
+
+    clipped: dict[int, np.ndarray] = {}
+
+    def read(s: int, e: int):
+        t, accel, c = stream(s, e)
+        clipped[s] = c.sum(axis=0)  # by chunk start: a chunk read twice counts once
+        return t, accel, c
 
     with stream:
         model = stream.model
@@ -376,15 +375,21 @@ def _smooth_streamed(args, stream) -> int:
 
             model = warm_started(model)
             note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
-        budget = _memory_budget(args.memory_budget)
+        budget = _memory_budget_arg(args.memory_budget)
+        stages = ("filt", "smooth") if args.filter_states else ("smooth",)
         info = smooth_bounded(
-            model, stream.n, stream, args.out, axis_names=stream.axis_names, budget=min(BUDGET, budget),
-            run_format=FORMAT,
+            model, stream.n, read, args.out, axis_names=stream.axis_names, run_format=FORMAT, stages=stages,
+            budget=min(BUDGET, budget), store_memory=budget,
         )  # fmt: skip
+        ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
+        ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
+        t_ends = np.array([stream.t0, stream.t0 + (stream.n - 1) * stream.Ts])
+        counts = np.sum(list(clipped.values()), axis=0)[None, :]
+        print(_summary({"t": t_ends, "axis_names": stream.axis_names, "clipped": counts, **ends}, n=stream.n))
+    where = "in memory" if info["store_in_memory"] else f"on disk beside {args.out}"
     print(
-        f"{args.run}: {stream.n} samples x {len(stream.axis_names)} axes streamed from the CSV and smoothed in "
-        f"bounded memory, {info['chunks']} chunks of {info['chunk']} samples with a store on disk; the output has "
-        "standard deviations (filt_sd, smooth_sd), not covariances, and no consistency checks"
+        f"{args.run}: streamed from the CSV (its numbers in a store on disk while it ran) and smoothed in bounded "
+        f"memory: {info['chunks']} chunks of {info['chunk']} samples, the smoother's store {where}"
     )
     print(f"wrote {args.out}")
     return 0
@@ -398,23 +403,63 @@ def cmd_sim(args) -> int:
         return 0
     if args.out is None:
         raise UserError("--out: a run file to write is required")
+    from accelnav.hil_sim.sim.trajectories import require_scenario
+
     model = load_model(args.model)
-    require_scenario(args.scenario)
+    require_scenario(args.scenario, "--scenario", UserError)
     arrays = simulate(model, args.scenario, args.duration, args.seed)
     print(_summary(arrays))
-    _save(args, arrays, model)
+    write_outputs(args, arrays, model)
+    return 0
+
+
+# keys of a run the streaming path writes again (the recording's) or recomputes (a previous stage's output)
+_STREAM_KEYS = {"t", "accel", "clipped", "axis_names", "format", "model_toml", "model_source"}
+_STAGE_KEYS = ("filt_", "smooth_", "zupt", "fixes", "fix_nis")
+
+
+def _stream_args(args, arrays: dict[str, np.ndarray]) -> bool:
+    """Plain filtering or smoothing streams through the chunked kernels (accelnav.estimate.chunked: the
+    input read once, the output written once, in place, at any length) unless a feature needs every
+    sample in memory: covariances, CSV export, compression, and keys of the input the run file keeps
+    (raw codes, a simulation's truth, which the truth tables print)."""
+    if args.covariances or args.csv is not None or getattr(args, "compress", False):
+        return False
+    return all(k in _STREAM_KEYS or k.startswith(_STAGE_KEYS) for k in arrays)
+
+
+def _cmd_streamed(args, arrays: dict[str, np.ndarray], model: Model, stages: tuple[str, ...]) -> int:
+    """filter or smooth of a plain run in chunks; the same numbers as the whole-array path (to 1e-12)."""
+    from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
+
+    n = len(arrays["t"])
+    read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
+    budget = _memory_budget_arg(getattr(args, "memory_budget", None))
+    info = smooth_bounded(
+        model, n, read, args.out, axis_names=arrays["axis_names"], run_format=FORMAT, stages=stages,
+        budget=min(BUDGET, budget), store_memory=budget,
+    )  # fmt: skip
+    ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
+    ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
+    print(_summary({"t": arrays["t"], "axis_names": arrays["axis_names"], "clipped": arrays["clipped"], **ends}))
+    where = "in memory" if info["store_in_memory"] else f"on disk beside {args.out}"
+    store = f", the store {where}" if "smooth" in stages else ""
+    print(f"streamed in bounded memory: {info['chunks']} chunks of {info['chunk']} samples{store}")
+    print(f"wrote {args.out}")
     return 0
 
 
 def cmd_filter(args) -> int:
     _whole_input_fits(args, "filter holds the run in memory")
     arrays, model = read_args(args)
+    if _stream_args(args, arrays):
+        return _cmd_streamed(args, arrays, model, ("filt",))
     arrays = filter_run(arrays, model, covariances=args.covariances)
     print(_summary(arrays))
     rows = position_errors(arrays, model)
     if rows:
         print(format_errors(rows))
-    _save(args, arrays, model)
+    write_outputs(args, arrays, model)
     return 0
 
 
@@ -447,7 +492,7 @@ def cmd_smooth(args) -> int:
     from accelnav.estimate import zupt
     from accelnav.estimate.fixes import read_fixes
 
-    stream = stream_args(args, _memory_budget(args.memory_budget))
+    stream = stream_args(args, _memory_budget_arg(args.memory_budget))
     if stream is not None:
         return _smooth_streamed(args, stream)
     arrays, model = read_args(args)
@@ -456,10 +501,10 @@ def cmd_smooth(args) -> int:
 
         model = warm_started(model)
         note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
-    budget = _memory_budget(args.memory_budget)
+    budget = _memory_budget_arg(args.memory_budget)
     bounded = whole_bytes(*arrays["accel"].shape) > budget
     if bounded:  # what the bounded path cannot do is refused before any work
-        _bounded_refusals(args, arrays, budget)
+        _bounded_args(args, arrays, budget)
     names = [str(a) for a in arrays["axis_names"]]
     fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
     params = ZuptParams(
@@ -495,6 +540,8 @@ def cmd_smooth(args) -> int:
             print(f"wrote {args.zupt_report}")
     elif args.zupt is not None:
         rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
+    if fixes is None and rest is None and not args.tune and args.plots is None and _stream_args(args, arrays):
+        return _cmd_streamed(args, arrays, model, ("filt", "smooth") if args.filter_states else ("smooth",))
     if bounded:
         return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
     if args.tune:
@@ -512,16 +559,16 @@ def cmd_smooth(args) -> int:
         print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
     if fixes is not None:
         print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
-    _consistency(arrays, model, inputs, fixes, dict(rest=rest, zupt_params=params, rest_sigma=rest_sigma))
+    print_checks(arrays, model, inputs, fixes, dict(rest=rest, zupt_params=params, rest_sigma=rest_sigma))
     print(_summary(arrays))
     rows = position_errors(arrays, model)
     if rows:
         print(format_errors(rows))
-        _truth_versus_baselines(rows)
+        print_truth_versus_baselines(rows)
     strides = stride_table(arrays, model)
     if strides:
         print(format_strides(strides))
-    _save(args, arrays, model)
+    write_outputs(args, arrays, model)
     if args.plots is not None:
         from accelnav.plots.run import plot_run, plot_smoothing
 
@@ -531,7 +578,7 @@ def cmd_smooth(args) -> int:
     return 0
 
 
-def _memory_budget(mb: float | None) -> int:
+def _memory_budget_arg(mb: float | None) -> int:
     if mb is None:
         return memory_available() // 2
     if not mb > 0:
@@ -539,7 +586,7 @@ def _memory_budget(mb: float | None) -> int:
     return int(mb * (1 << 20))
 
 
-def _over_budget(args, arrays, budget: int) -> str:
+def format_over_budget(args, arrays, budget: int) -> str:
     n, n_axes = arrays["accel"].shape
     return (
         f"{args.run}: {n} samples x {n_axes} axes need about {whole_bytes(n, n_axes) / 1e9:.3g} GB on the "
@@ -547,11 +594,11 @@ def _over_budget(args, arrays, budget: int) -> str:
     )
 
 
-def _bounded_refusals(args, arrays, budget: int) -> None:
+def _bounded_args(args, arrays, budget: int) -> None:
     flags = (("--plots", args.plots), ("--csv", args.csv), ("--tune", args.tune), ("--covariances", args.covariances))
     given = [f for f, v in flags if v]
     if given:
-        raise UserError(f"{_over_budget(args, arrays, budget)}; bounded memory does not do {', '.join(given)}")
+        raise UserError(f"{format_over_budget(args, arrays, budget)}; bounded memory does not do {', '.join(given)}")
 
 
 def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_sigma, params) -> int:
@@ -586,7 +633,7 @@ def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_s
         budget=min(BUDGET, budget), run_format=FORMAT, more=more,
     )  # fmt: skip
     print(
-        f"{_over_budget(args, arrays, budget)}: smoothed in bounded memory, {info['chunks']} chunks of "
+        f"{format_over_budget(args, arrays, budget)}: smoothed in bounded memory, {info['chunks']} chunks of "
         f"{info['chunk']} samples with a store on disk; the output has standard deviations (filt_sd, smooth_sd), "
         "not covariances, and no consistency checks"
     )
@@ -600,33 +647,29 @@ def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_s
 
 
 def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) -> Model:
-    """smooth --tune: the model with the maximum-likelihood noise figures of this recording, in a stated budget."""
+    """smooth --tune: its flags checked, the search run (estimate.tune.tune_for_smoothing), its two lines printed."""
     import time
 
-    from accelnav.estimate.tune import FIGURES, aid_measurements, tune, with_figures
+    from accelnav.estimate.tune import FIGURES, tune_for_smoothing
 
     if args.tune_evaluations < 10:
         raise UserError(f"--tune-evaluations: got {args.tune_evaluations}; accepted: 10 or more")
     if not args.tune_seconds > 0:
         raise UserError(f"--tune-seconds: got {args.tune_seconds:g}; accepted: a time > 0 s")
-    accel = np.asarray(arrays["accel"], dtype=np.float64)
-    n, m = accel.shape
-    extras, _ = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
-    print(
-        f"tune: fitting {', '.join(FIGURES)} to {n} samples x {m} axes with {sum(map(len, extras))} aids; budget "
-        f"{args.tune_evaluations} evaluations, {args.tune_seconds:g} s"
-    )
-    t0 = time.monotonic()
-    try:
-        r = tune(
-            model,
-            accel,
-            ~np.asarray(arrays["clipped"], dtype=bool),
-            extras,
-            max_evaluations=args.tune_evaluations,
-            max_seconds=args.tune_seconds,
-            intervals=False,
+    t0 = [time.monotonic()]
+
+    def announce(n: int, m: int, aids: int) -> None:
+        print(
+            f"tune: fitting {', '.join(FIGURES)} to {n} samples x {m} axes with {aids} aids; budget "
+            f"{args.tune_evaluations} evaluations, {args.tune_seconds:g} s"
         )
+        t0[0] = time.monotonic()
+
+    try:
+        tuned, r = tune_for_smoothing(
+            model, arrays, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params,
+            max_evaluations=args.tune_evaluations, max_seconds=args.tune_seconds, announce=announce,
+        )  # fmt: skip
     except ValueError as exc:
         raise UserError(f"{args.run}: --tune: {exc}") from None
     figs = ", ".join(f"{f} {r.start[f]:.4g} -> {r.estimate[f]:.4g}" for f in FIGURES)
@@ -634,46 +677,24 @@ def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) ->
     verdict = "used" if r.adopted else "not significantly better (p >= 0.05): the model's figures kept"
     print(
         f"tune: {figs}; ln L +{r.ll_estimate - r.ll_start:.4g} (p = {r.p_value:.3g}); {r.evaluations} evaluations, "
-        f"{time.monotonic() - t0:.1f} s, {stop}; {verdict}"
+        f"{time.monotonic() - t0[0]:.1f} s, {stop}; {verdict}"
     )
-    return with_figures(model, {f: float(f"{v:.6g}") for f, v in r.chosen.items()})
+    return tuned
 
 
-def _consistency(arrays, model: Model, inputs, fixes, smooth_kw) -> None:
+def print_checks(arrays, model: Model, inputs, fixes, smooth_kw) -> None:
     """The NIS of the aids against their chi^2 bounds, and with fixes the held-out comparison: a line each."""
-    from accelnav.estimate.consistency import nis_check
-    from accelnav.estimate.pipeline import holdout
+    from accelnav.estimate.pipeline import smooth_checks
 
-    first = arrays["zupt_nis"][:, 3] > 0  # each rest's first update (see smooth_run)
-    for kind, nis in (("fixes", arrays["fix_nis"]), ("rests", arrays["zupt_nis"][first, 2])):
-        if len(nis):
-            print(nis_check(kind, nis).line())
-    if fixes is None:
-        return
-    h = holdout(inputs, model, fixes, **smooth_kw)
-    if h is None:
-        return
-    print(
-        f"held-out fixes (every other one left out, {h.n} predicted): rms miss "
-        + ", ".join(f"{k} {v:.3g} m" for k, v in h.rms.items())
-    )
-    worse = h.worse_than()
-    if worse:
-        print(
-            f"the smoother misses the held-out fixes more than {' and '.join(worse)} "
-            f"({h.rms['smoother']:.3g} m against {min(h.rms[b] for b in worse):.3g} m): its model does not fit "
-            "this recording: try --tune"
-        )
+    for line in smooth_checks(arrays, model, inputs, fixes, **smooth_kw).lines():
+        print(line)
 
 
-def _truth_versus_baselines(rows) -> None:
+def print_truth_versus_baselines(rows) -> None:
     """With truth and fixes: one line if the smoother is worse than a fix-only baseline (rms over the axes)."""
-    from accelnav.estimate.pipeline import BASELINES
+    from accelnav.estimate.pipeline import BASELINES, rms_by_method
 
-    rms = {}
-    for row in rows:
-        rms.setdefault(row.method, []).append(row.rms**2)
-    rms = {k: float(np.sqrt(np.mean(v))) for k, v in rms.items()}
+    rms = rms_by_method(rows)
     worse = [b for b in BASELINES if b in rms and rms["smoother"] > rms[b]]
     if worse:
         print(

@@ -57,7 +57,7 @@ class _Steps:
         print(f"    done in {time.monotonic() - t:.1f} s", flush=True)
 
 
-def _quiet(argv: list[str], log: Path) -> None:
+def _demo_quiet(argv: list[str], log: Path) -> None:
     """Run an accelnav command with its report going to ``log``; its errors still raise."""
     from accelnav.cli import main
 
@@ -69,7 +69,7 @@ def _quiet(argv: list[str], log: Path) -> None:
         raise UserError(f"accelnav {argv[0]} failed (status {status}); see {log}")
 
 
-def _pil_wanted(mode: str) -> tuple[bool, str]:
+def _demo_pil_wanted(mode: str) -> tuple[bool, str]:
     missing = [t for t in ("qemu-system-arm", "arm-none-eabi-gcc") if shutil.which(t) is None]
     if mode == "off":
         return False, "PIL off (--pil off)"
@@ -83,19 +83,19 @@ def _pil_wanted(mode: str) -> tuple[bool, str]:
 def cmd_demo(args) -> int:
     import numpy as np
 
-    from accelnav.cli.core import require_scenario
     from accelnav.data.runfile import save_run
     from accelnav.estimate.kf import position_fix
     from accelnav.estimate.pipeline import dead_reckoning, error_rows, format_errors, smooth_run
     from accelnav.estimate.zupt import rest_mask
     from accelnav.hil_sim.sim.sensor import simulate
+    from accelnav.hil_sim.sim.trajectories import require_scenario
     from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
     from accelnav.hil_sim.targets.qemu import QemuError
     from accelnav.plots.run import plot_smoothing
 
     true_model = load_model(args.model)
-    require_scenario(args.scenario)
+    require_scenario(args.scenario, "--scenario", UserError)
     limit = true_model.ranges.max_run_s
     for name, value in (("--duration", args.duration), ("--warmup", args.warmup)):
         if not 0 < value <= limit:
@@ -103,7 +103,7 @@ def cmd_demo(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     steps = _Steps()
-    pil_on, pil_note = _pil_wanted(args.pil)
+    pil_on, pil_note = _demo_pil_wanted(args.pil)
     print(f"accelnav demo: true sensor {true_model.name}; everything after step 2 knows only the fitted model")
 
     with steps.step(f"simulate a {args.warmup:g} s stationary warm-up recording"):
@@ -114,7 +114,7 @@ def cmd_demo(args) -> int:
 
     with steps.step("fit the bias model and noise figures (accelnav fit-bias)"):
         fitted_path = out / "fitted.toml"
-        _quiet(
+        _demo_quiet(
             ["fit-bias", str(out / "warmup.npz"), "--out", str(fitted_path), "--plots", str(out / "fit")],
             out / "fit-bias.txt",
         )
@@ -129,7 +129,7 @@ def cmd_demo(args) -> int:
         print(f"    R {noise.R:.4g} (m/s^2)^2, sigma_eps {noise.sigma_eps:.3g}; report {out / 'fit-bias.txt'}")
 
     with steps.step("generate the fixed-point C (accelnav codegen --report)"):
-        _quiet(["codegen", str(fitted_path), "--out", str(out / "gen"), "--report"], out / "codegen-report.txt")
+        _demo_quiet(["codegen", str(fitted_path), "--out", str(out / "gen"), "--report"], out / "codegen-report.txt")
         print(f"    {', '.join(sorted(p.name for p in (out / 'gen').iterdir()))}; report {out / 'codegen-report.txt'}")
 
     with steps.step(f"run {args.duration:g} s of {args.scenario} through the firmware in-process (SIL)"):

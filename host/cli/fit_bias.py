@@ -29,7 +29,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from accelnav.cli.args import clock_args
+from accelnav.cli.args import clock_args, reader_options
 from accelnav.data.recording import MIN_DURATION_S, Recording
 from accelnav.fileio import check_output
 from accelnav.identify.characterise import AxisResult, characterise
@@ -103,11 +103,7 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
     ch = characterise(
         args.recording,
         args.model,
-        axes=args.axis,
-        unit=args.unit,
-        rate_hz=args.rate,
-        time_column=args.time_column,
-        time_unit=args.time_unit,
+        **reader_options(args),
         min_duration_s=args.min_duration,
         sigma_n=args.sigma_n,
         noise_band=tuple(args.noise_band),
@@ -196,11 +192,11 @@ def band_report(r: AxisResult) -> list[str]:
 # Report
 
 
-def _mg(x: float) -> str:
+def _fmt_mg(x: float) -> str:
     return f"{x / G0 * 1e3:.3g} mg"
 
 
-def _ci(ci: tuple[float, float], fmt: str = ".6g") -> str:
+def _fmt_ci(ci: tuple[float, float], fmt: str = ".6g") -> str:
     return f"[{ci[0]:{fmt}}, {ci[1]:{fmt}}]"
 
 
@@ -210,17 +206,19 @@ def axis_report(r: AxisResult) -> list[str]:
     out = [f"axis {r.name} (column {r.column}, in {r.unit}): {f.n} samples"]
     out.append(f"  bias fit: {f.verdict}")
     if f.T_identified:
-        out.append(f"    c1 = {f.c1:.6g} m/s^2  se {f.se[0]:.3g}  95 % {_ci(f.ci95[0])}  ({_mg(f.c1)})")
-        out.append(f"    c2 = {f.c2:.6g} m/s^2  se {f.se[1]:.3g}  95 % {_ci(f.ci95[1])}  ({_mg(f.c2)})")
-        out.append(f"    T  = {f.T:.6g} s  se {f.se[2]:.3g}  95 % profile {_ci(f.ci95[2], '.4g')}")
+        out.append(f"    c1 = {f.c1:.6g} m/s^2  se {f.se[0]:.3g}  95 % {_fmt_ci(f.ci95[0])}  ({_fmt_mg(f.c1)})")
+        out.append(f"    c2 = {f.c2:.6g} m/s^2  se {f.se[1]:.3g}  95 % {_fmt_ci(f.ci95[1])}  ({_fmt_mg(f.c2)})")
+        out.append(f"    T  = {f.T:.6g} s  se {f.se[2]:.3g}  95 % profile {_fmt_ci(f.ci95[2], '.4g')}")
     else:
-        out.append(f"    constant bias c2 = {f.c2:.6g} m/s^2  se {f.se[1]:.3g}  95 % {_ci(f.ci95[1])}  ({_mg(f.c2)})")
+        out.append(
+            f"    constant bias c2 = {f.c2:.6g} m/s^2  se {f.se[1]:.3g}  95 % {_fmt_ci(f.ci95[1])}  ({_fmt_mg(f.c2)})"
+        )
         out.append(
             f"    (rejected exponential: c1 = {e.c1:.4g} m/s^2, c2 = {e.c2:.6g} m/s^2, T = {e.T:.4g} s, "
-            f"T profile 95 % {_ci(e.ci95[2], '.4g')}{'' if all(e.T_ci_closed) else ' open'})"
+            f"T profile 95 % {_fmt_ci(e.ci95[2], '.4g')}{'' if all(e.T_ci_closed) else ' open'})"
         )
     out.append(
-        f"    residual rms {f.sigma:.4g} m/s^2 ({_mg(f.sigma)}); variance factors for residual correlation: "
+        f"    residual rms {f.sigma:.4g} m/s^2 ({_fmt_mg(f.sigma)}); variance factors for residual correlation: "
         f"short-range srf = {f.srf:.3g}, long-run vif = {f.vif:.3g} (both 1 for white residuals)"
     )
     out.append(f"  whiteness of the residuals ({w.n} samples):")
@@ -233,19 +231,19 @@ def axis_report(r: AxisResult) -> list[str]:
         )
         lr = f.ci95_lr
         if f.T_identified:
-            out.append(f"       c1 {_ci(lr[0])}, c2 {_ci(lr[1])} m/s^2, T {_ci(lr[2], '.4g')} s")
+            out.append(f"       c1 {_fmt_ci(lr[0])}, c2 {_fmt_ci(lr[1])} m/s^2, T {_fmt_ci(lr[2], '.4g')} s")
         else:
-            out.append(f"       c2 {_ci(lr[1])} m/s^2")
+            out.append(f"       c2 {_fmt_ci(lr[1])} m/s^2")
     k = nz.terms
     c = nz.curve
     out.append(f"  noise (overlapping Allan deviation of the residual, tau {c.tau[0]:.3g} .. {c.tau[-1]:.4g} s):")
     out.append(
         f"    white noise N = {k.N:.4g} m/s^2/sqrt(Hz) at tau = 1 s; one-sided density sqrt(2) N = "
-        f"{k.density_one_sided:.4g} m/s^2/sqrt(Hz) ({_mg(k.density_one_sided)}/sqrt(Hz))"
+        f"{k.density_one_sided:.4g} m/s^2/sqrt(Hz) ({_fmt_mg(k.density_one_sided)}/sqrt(Hz))"
     )
     out.append(
-        f"    Allan minimum {k.adev_min:.4g} m/s^2 ({_mg(k.adev_min)}) at tau = {k.tau_min:.4g} s, "
-        f"95 % {_ci(k.adev_min_ci, '.3g')}; bias instability B = min/0.664 = {k.B:.4g} m/s^2 ({_mg(k.B)})"
+        f"    Allan minimum {k.adev_min:.4g} m/s^2 ({_fmt_mg(k.adev_min)}) at tau = {k.tau_min:.4g} s, "
+        f"95 % {_fmt_ci(k.adev_min_ci, '.3g')}; bias instability B = min/0.664 = {k.B:.4g} m/s^2 ({_fmt_mg(k.B)})"
     )
     if k.K_is_bound:
         out.append(

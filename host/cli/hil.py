@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from accelnav.cli.args import clock_args
+from accelnav.cli.args import clock_args, reader_options
 from accelnav.errors import UserError
 from accelnav.hil_sim.targets.qemu import MACHINES
 from accelnav.hil_sim.targets.simavr import BOARDS as AVR_BOARDS
@@ -48,8 +48,8 @@ def register(sub) -> None:
 
 
 def cmd_hil(args) -> int:
-    from accelnav.cli.core import require_scenario
     from accelnav.hil_sim.sim.sensor import simulate
+    from accelnav.hil_sim.sim.trajectories import require_scenario
     from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
     from accelnav.hil_sim.targets.qemu import QemuError
@@ -60,18 +60,20 @@ def cmd_hil(args) -> int:
         raise UserError(f"--board {args.board}: a board is emulated only with --target pil")
     board = args.board or "mps2_an385"
     if args.input is not None:
-        run, model = _recorded(args)
+        run, model = _hil_recorded(args)
         scenario = args.input.name
         n = len(run.t)
         print(f"model {model.name}, {model.sensor.kind} input, recording {args.input}, {n} samples")
     else:
-        for flag in ("axis", "time_column", "rate", "time_unit", "unit"):
-            if getattr(args, flag) is not None:
-                raise UserError(f"--{flag.replace('_', '-')}: only with --input (a recording)")
+        from accelnav.data.inputs import FLAGS
+
+        for key, value in reader_options(args).items():  # the reader's flags: nothing to read without --input
+            if value is not None:
+                raise UserError(f"--{FLAGS[key].replace('_', '-')}: only with --input (a recording)")
         scenario = args.scenario or "stop_and_go"
         seed = 1 if args.seed is None else args.seed
         model = load_model(args.model)
-        require_scenario(scenario)
+        require_scenario(scenario, "--scenario", UserError)
         try:
             run = simulate(model, scenario, 20.0 if args.duration is None else args.duration, seed)
         except ValueError as exc:
@@ -85,7 +87,7 @@ def cmd_hil(args) -> int:
         print(f"SIL: {n} samples in, {len(sil)} bytes of telemetry out ({len(sil) / max(n, 1):.1f} B per sample)")
         pil = None
         if args.target == "pil":
-            log = args.out / f"pil_{board}_{model.name}_{_stem(scenario)}.acnlog"
+            log = args.out / f"pil_{board}_{model.name}_{_hil_stem(scenario)}.acnlog"
             log.parent.mkdir(parents=True, exist_ok=True)
             with Progress("pil", n, unit="samples", enabled=None) as bar:
                 res = hil.run_pil(model, stim, n, log, board=board)
@@ -105,25 +107,17 @@ def cmd_hil(args) -> int:
     return 0 if c.pil_equal_sil in (None, True) and c.max_of_bound <= 1.0 else 1
 
 
-def _recorded(args):
+def _hil_recorded(args):
     """(RecordedRun, model) of --input; the simulation's options make no sense beside it."""
     from accelnav.hil_sim.targets.hil import recorded_input
 
     for flag in ("scenario", "duration", "seed"):
         if getattr(args, flag) is not None:
             raise UserError(f"--{flag}: not with --input (the recording is the input)")
-    return recorded_input(
-        args.input,
-        args.model,
-        axes=args.axis,
-        time_column=args.time_column,
-        rate_hz=args.rate,
-        time_unit=args.time_unit,
-        unit=args.unit,
-    )
+    return recorded_input(args.input, args.model, **reader_options(args))
 
 
-def _stem(name: str) -> str:
+def _hil_stem(name: str) -> str:
     """A recording's name as a safe part of the log's file name."""
     import re
 

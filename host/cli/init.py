@@ -53,7 +53,7 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_init)
 
 
-def _ask(text: str, kind=float):
+def _init_ask(text: str, kind=float):
     answer = input(f"{text}: ").strip()
     try:
         return kind(answer)
@@ -86,9 +86,9 @@ def cmd_init(args: argparse.Namespace) -> int:
         raise UserError(f"init: {kind} part: give {', '.join('--' + m.replace('_', '-') for m in missing)}")
     for dest in missing:
         if dest == "rate":
-            rate = _ask("sample rate, Hz")
+            rate = _init_ask("sample rate, Hz")
         else:
-            values[FIELDS[dest][0]] = _ask(FIELDS[dest][1], int if dest == "adc_bits" else float)
+            values[FIELDS[dest][0]] = _init_ask(FIELDS[dest][1], int if dest == "adc_bits" else float)
     axes = values.pop("axes", ("x", "y"))
     if args.axes:
         axes = tuple(a.strip() for a in args.axes.split(","))

@@ -78,7 +78,7 @@ _MODEL_HELP = (
 )
 
 
-def _model_text(args) -> str:
+def _record_model_text(args) -> str:
     if getattr(args, "model", None) is None:
         return ""
     from accelnav.model.load import load_model
@@ -86,8 +86,8 @@ def _model_text(args) -> str:
     return load_model(args.model).text
 
 
-def _manifest(args):
-    from accelnav.link.telemetry import Manifest
+def _record_manifest(args):
+    from accelnav.link.manifest import Manifest
     from accelnav.model.load import load_model
 
     if args.manifest is not None:
@@ -103,8 +103,8 @@ def _manifest(args):
 def cmd_record(args) -> int:
     import serial
 
+    from accelnav.link.accounting import format_counts, link_counts
     from accelnav.link.recorder import Recorder, Status
-    from accelnav.link.telemetry import format_counts, link_counts
 
     if args.out.exists() and not args.force:
         raise UserError(f"--out: {args.out} exists; give --force to overwrite it")
@@ -112,7 +112,7 @@ def cmd_record(args) -> int:
         raise UserError(f"--give-up-after: got {args.give_up_after}; accepted: 0 or more seconds")
     if args.decimate is not None and not 1 <= args.decimate <= 1000:
         raise UserError(f"--decimate: got {args.decimate}; accepted: 1 to 1000")
-    man, model_text = _manifest(args)
+    man, model_text = _record_manifest(args)
     commands: tuple = ()
     if not args.no_commands:
         commands = (("info", {}),)
@@ -120,7 +120,7 @@ def cmd_record(args) -> int:
             commands = (("decimate", {"factor": args.decimate}), ("start", {}), ("info", {}))
     live = None
     if args.live_plot is not None:
-        live = _live_view(args, man, model_text)
+        live = _record_live_view(args, man, model_text)
     try:
         rec = Recorder(
             args.port,
@@ -161,7 +161,7 @@ def cmd_record(args) -> int:
     return 1 if res.reason.startswith(("link lost", "log write failed")) else 0
 
 
-def _live_view(args, man, model_text: str):
+def _record_live_view(args, man, model_text: str):
     """The live plot beside the log, drawn from its own thread (the recorder never waits for it)."""
     from accelnav.model.load import loads_model
     from accelnav.plots.live import LivePlot, LiveView
@@ -187,7 +187,7 @@ def cmd_log_plot(args) -> int:
         raise UserError(f"--seconds: got {args.seconds}; accepted: more than 0")
     check_output(args.out)
     try:
-        plot = plot_log(args.log, args.out, _model_text(args), args.seconds)
+        plot = plot_log(args.log, args.out, _record_model_text(args), args.seconds)
     except OSError as exc:
         raise UserError(f"--out: {args.out}: cannot write: {exc.strerror or exc}") from None
     print(f"accelnav log plot: {args.out}: the last {min(plot.pushed, plot.capacity)} of {plot.pushed} samples")
@@ -195,7 +195,7 @@ def cmd_log_plot(args) -> int:
 
 
 def cmd_log_info(args) -> int:
-    summary = log_summary(args.log, _model_text(args))
+    summary = log_summary(args.log, _record_model_text(args))
     if args.json:
         print(json.dumps(summary, indent=1))
         return 0
@@ -205,13 +205,13 @@ def cmd_log_info(args) -> int:
 
 
 def cmd_log_export(args) -> int:
-    from accelnav.link.telemetry import sample_columns
+    from accelnav.link.manifest import sample_columns
 
     suffix = args.out.suffix.lower()
     if suffix not in (".csv", ".npz"):
         raise UserError(f"--out: {args.out}: accepted: a .csv or .npz file name")
     check_output(args.out)  # before the work: a directory named as the output is refused at once
-    d = _decoded(args.log, _model_text(args))
+    d = _decoded(args.log, _record_model_text(args))
     for w in d.warnings:
         print(f"accelnav log export: warning: {w}")
     cols = sample_columns(d.manifest, d.frames["sample"])
@@ -231,28 +231,28 @@ def cmd_log_export(args) -> int:
                 table.append(cols[s][:, j])
         with atomic_output(args.out) as fh:  # a kill leaves no partial CSV under the name asked for
             np.savetxt(fh, np.column_stack(table), delimiter=",", header=",".join(header), comments="", fmt="%.17g")
-        print(f"accelnav log export: {args.out}: {len(cols['t'])} rows; {_link_counts(d.stats)}")
+        print(f"accelnav log export: {args.out}: {len(cols['t'])} rows; {format_link_counts(d.stats)}")
         return 0
     # NPZ: an accelnav run file (host/data/runfile.py) plus the firmware's own states
-    arrays, _ = log_run_arrays(args.log, d, _model_text(args))
+    arrays, _ = log_run_arrays(args.log, d, _record_model_text(args))
     with atomic_output(args.out) as fh:
         np.savez_compressed(fh, **arrays)
     gaps = int(np.count_nonzero(np.diff(cols["index"]) != 1)) if len(cols["index"]) > 1 else 0
     print(
-        f"accelnav log export: {args.out}: {len(cols['t'])} samples; {_link_counts(d.stats)}"
+        f"accelnav log export: {args.out}: {len(cols['t'])} samples; {format_link_counts(d.stats)}"
         + (f" ({gaps} gaps in the sample index: decimation or lost frames; t is from the index)" if gaps else "")
     )
     return 0
 
 
-def _link_counts(stats: dict) -> str:
+def format_link_counts(stats: dict) -> str:
     return (
         f"lost {stats['lost']}, duplicates {stats['duplicates']}, damaged {stats['bad_frames']} frames"
-        + _compact_counts(stats)
+        + format_compact_counts(stats)
     )
 
 
-def _compact_counts(stats: dict) -> str:
+def format_compact_counts(stats: dict) -> str:
     """The compact mode's checks, when the stream had block frames."""
     if not stats["frames"].get("block"):
         return ""

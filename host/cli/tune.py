@@ -122,7 +122,7 @@ def report(r: TuneResult) -> list[str]:
         if f in r.figures:
             why = r.why_not_identified(f)
             ident = "yes" if not why else f"NO ({why})"
-            lines.append(f"| {f} | {r.start[f]:.4g} | {r.estimate[f]:.4g} | {_interval(r, f)} | {ident} |")
+            lines.append(f"| {f} | {r.start[f]:.4g} | {r.estimate[f]:.4g} | {_fmt_interval(r, f)} | {ident} |")
         else:
             if not f.startswith("c2."):
                 lines.append(f"| {f} | {r.start[f]:.4g} | (kept) | | |")
@@ -139,7 +139,7 @@ def report(r: TuneResult) -> list[str]:
     return lines
 
 
-def _interval(r: TuneResult, f: str) -> str:
+def _fmt_interval(r: TuneResult, f: str) -> str:
     """The 95 % interval; an open end of a profile interval is the search bound, marked as such."""
     lo, hi = r.ci95[f]
     ends = r.ends.get(f, ("closed", "closed"))
@@ -157,5 +157,5 @@ def provenance(args, r: TuneResult) -> str:
     ]
     for f in r.figures:
         kind = "normal" if f.startswith("c2.") else "profile likelihood"
-        lines.append(f"{f}: estimate {r.estimate[f]:.4g}, 95 % ({kind}) {_interval(r, f)}, start {r.start[f]:.4g}")
+        lines.append(f"{f}: estimate {r.estimate[f]:.4g}, 95 % ({kind}) {_fmt_interval(r, f)}, start {r.start[f]:.4g}")
     return "\n".join(lines)

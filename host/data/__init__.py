@@ -1,1 +1,11 @@
 """Files a user brings or keeps: recordings in (recording) and accelnav run files (runfile)."""
+
+# its modules, which users import by name (``from accelnav.data import inputs``)
+__all__ = [
+    "inputs",
+    "logs",
+    "recording",
+    "run",
+    "runfile",
+    "stream",
+]

@@ -40,7 +40,7 @@ def _decoded(log, model_text: str):
 def log_run_arrays(log, d=None, model_text: str = "") -> tuple[dict[str, np.ndarray], object]:
     """A recorder log as the arrays of an accelnav run file (and its model); what ``log export`` writes."""
     from accelnav.data.runfile import FORMAT
-    from accelnav.link.telemetry import sample_columns
+    from accelnav.link.manifest import sample_columns
     from accelnav.model.load import ModelError, loads_model
 
     if d is None:
@@ -75,7 +75,8 @@ def decoded_run(fitted: Model, run, telemetry: bytes, man) -> dict[str, np.ndarr
 
     ``man`` is the frame manifest of the firmware built from ``fitted`` (the caller builds it).
     """
-    from accelnav.link.telemetry import decode_all, replay_for, sample_columns
+    from accelnav.link.decoder import decode_all, replay_for
+    from accelnav.link.manifest import sample_columns
 
     frames, stats = decode_all(man, telemetry, replay_for(man, fitted))  # compact frames: the firmware's C replayed
     cols = sample_columns(man, frames["sample"])
@@ -110,9 +111,9 @@ def run_arrays(man, cols: dict[str, np.ndarray], model: Model) -> dict[str, np.n
 
 def log_summary(path: str | Path, model_text: str = "") -> dict:
     """What ``accelnav log info`` prints: the log's header, its manifest and link counts, streamed."""
+    from accelnav.link.accounting import format_counts, link_counts
     from accelnav.link.logfile import LogError
     from accelnav.link.recorder import decode_log
-    from accelnav.link.telemetry import format_counts, link_counts
 
     try:
         d = decode_log(path, model_text, rows=False)  # streamed: memory does not grow with the log

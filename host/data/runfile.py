@@ -18,7 +18,8 @@ key                       shape, dtype           meaning
 ``r u a eps``             (N, n_axes), float64   simulated truth (``accelnav sim`` only)
 ``scenario``, ``seed``    ()                     simulation settings (``accelnav sim`` only)
 ``stance``                (N,), bool             the foot is on the ground (``walking`` scenario only)
-``filt_x``                (n_axes, N, 4)         filter posterior x[k|k] = [r, u, a, eps]
+``filt_x``                (n_axes, N, 4)         filter posterior x[k|k] = [r, u, a, eps] (a streamed smooth:
+                                                 with ``--filter-states``)
 ``filt_sd``               (n_axes, N, 4)         its standard deviations
 ``filt_P``                (n_axes, N, 4, 4)      its covariance (on request)
 ``filt_x_prior``          (n_axes, N, 4)         filter prior x[k|k-1] (on request)

@@ -237,7 +237,7 @@ def _where(st: Stream, k: int) -> str:
 
 def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narrowed, block: int) -> None:
     """read_recording's time checks and read_input's model checks (inputs._on_model), block by block."""
-    src, h, n = st.source, st.head, st.n
+    src, h = st.source, st.head
     tu = rc.csv_time_unit(h)
     if time_unit is not None:  # recording._with_time_unit
         if h.tcol is None:
@@ -245,58 +245,9 @@ def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narro
         if tu not in (None, time_unit):
             raise UserError(f"--time-unit {time_unit}: the time column {h.tcol!r} says its unit is {tu}")
         tu = time_unit if tu is None else tu
-    # pass 1, time (recording._check_time): finite, increasing, its distinct steps for the exact median
-    bad = back = None
-    n_back, prev, t0, tl = 0, None, 0.0, 0.0
-    vals, counts = np.empty(0), np.empty(0, dtype=np.int64)
-    dmin, dmax = np.inf, -np.inf
-    for s in range(0, n, block):
-        e = min(s + block, n)
-        t = st.raw_time(st.rows(s, e, lines=False)[0], s)
-        if s == 0:
-            t0 = float(t[0])
-        tl = float(t[-1])
-        if bad is None and not np.isfinite(t).all():
-            bad = s + int(np.argmax(~np.isfinite(t)))
-        dt = np.diff(t) if prev is None else np.diff(np.concatenate(([prev], t)))
-        first = s - (prev is not None)  # sample index of dt[0]'s first sample
-        prev = t[-1]
-        b = dt <= 0
-        if b.any():
-            if back is None:
-                back = first + int(np.argmax(b))  # dt index k: samples k, k + 1
-            n_back += int(b.sum())
-        if len(dt) and bad is None:
-            dmin, dmax = min(dmin, float(dt.min())), max(dmax, float(dt.max()))
-            u, c = np.unique(dt, return_counts=True)
-            vals, inv = np.unique(np.concatenate((vals, u)), return_inverse=True)
-            counts = np.bincount(inv, weights=np.concatenate((counts, c)), minlength=len(vals)).astype(np.int64)
-            if len(vals) > MAX_STEPS:
-                raise NotStreamed(f"{src}: more than {MAX_STEPS} distinct time steps: its clock is read whole")
-    if bad is not None:
-        raise UserError(f"{src}: time is not a finite number at {_where(st, bad)}")
-    if back is not None:
-        ta, tb = (float(x) for x in st.raw_time(st.rows(back, back + 2)[0], back))
-        raise UserError(
-            f"{src}: time does not increase at {_where(st, back + 1)} (t = {ta:.6g} s, then {tb:.6g} s); "
-            f"{n_back} such steps"
-        )
-    m = n - 1
-    cum = np.cumsum(counts)
-    v1, v2 = (float(vals[np.searchsorted(cum, r, side="right")]) for r in ((m - 1) // 2, m // 2))
-    step = float(np.mean([v1, v2])) if m % 2 == 0 else v1  # as np.median takes it
-    clock = h.tcol
-    if clock is not None:
-        if tu is None and 1.0 / step < rc.MIN_CLOCK_HZ:
-            raise UserError(
-                f"{src}: the time column {clock!r} steps by {step:.6g} (median): read as seconds that is "
-                f"{1.0 / step:.6g} Hz, too slow for an accelerometer; it looks like milliseconds: give --time-unit "
-                "ms (or name the column t_ms), or convert it to seconds"
-            )
-        regular = dmax <= rc.GAP_FACTOR * step and dmin >= step / rc.GAP_FACTOR
-        if not regular or st.rate_hz is not None:
-            raise NotStreamed(f"{src}: its clock is placed on a grid by the whole reader (irregular, or --rate given)")
-    rate = (n - 1) / (tl - t0)
+    clock = _time_pass(st, block)
+    step = _clock_verdict(st, clock, tu)
+    rate = (st.n - 1) / (clock.tl - clock.t0)
     # read_input._on_model: the model, its rate, its axes
     model = override if override is not None else load_model(None)
     rc.check_step(src, step, tu, model.rate_hz, str(model.source))
@@ -310,8 +261,91 @@ def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narro
             f"{src}: {len(h.names)} axes ({', '.join(h.chosen)}) for the model's {len(names)} "
             f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
         )
-    st.model, st.axis_names, st.t0, st.Ts = model, np.array(names), t0, 1.0 / rate
-    # pass 2: counts, NaN, each sample on the grid (recording.on_grid), as the reader will give them
+    st.model, st.axis_names, st.t0, st.Ts = model, np.array(names), clock.t0, 1.0 / rate
+    _grid_pass(st, rate, block)
+    if list(h.chosen) != names:
+        note(f"{src}: columns {', '.join(h.chosen)} -> model axes {', '.join(names)}")
+
+
+@dataclass
+class _Clock:
+    """What the time pass learns: first and last stamp, the extreme steps, the distinct steps and their counts."""
+
+    t0: float = 0.0
+    tl: float = 0.0
+    dmin: float = np.inf
+    dmax: float = -np.inf
+    vals: np.ndarray = field(default_factory=lambda: np.empty(0))
+    counts: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
+
+    def add(self, dt: np.ndarray) -> int:
+        """Count the steps ``dt``; returns how many distinct steps there are so far."""
+        self.dmin, self.dmax = min(self.dmin, float(dt.min())), max(self.dmax, float(dt.max()))
+        u, c = np.unique(dt, return_counts=True)
+        self.vals, inv = np.unique(np.concatenate((self.vals, u)), return_inverse=True)
+        both = np.concatenate((self.counts, c))
+        self.counts = np.bincount(inv, weights=both, minlength=len(self.vals)).astype(np.int64)
+        return len(self.vals)
+
+    def median(self, m: int) -> float:
+        """The median of the m steps, as np.median takes it (the mean of the middle two for even m)."""
+        cum = np.cumsum(self.counts)
+        v1, v2 = (float(self.vals[np.searchsorted(cum, r, side="right")]) for r in ((m - 1) // 2, m // 2))
+        return float(np.mean([v1, v2])) if m % 2 == 0 else v1
+
+
+def _time_pass(st: Stream, block: int) -> _Clock:
+    """recording._check_time's first checks over the store: time finite and increasing; the steps counted."""
+    src, n = st.source, st.n
+    clock, bad, back, n_back, prev = _Clock(), None, None, 0, None
+    for s in range(0, n, block):
+        t = st.raw_time(st.rows(s, min(s + block, n), lines=False)[0], s)
+        if s == 0:
+            clock.t0 = float(t[0])
+        clock.tl = float(t[-1])
+        if bad is None and not np.isfinite(t).all():
+            bad = s + int(np.argmax(~np.isfinite(t)))
+        dt = np.diff(t) if prev is None else np.diff(np.concatenate(([prev], t)))
+        first = s - (prev is not None)  # the sample index of dt[0]'s first sample
+        prev = t[-1]
+        b = dt <= 0
+        if b.any():
+            back = first + int(np.argmax(b)) if back is None else back  # dt index k: samples k, k + 1
+            n_back += int(b.sum())
+        if len(dt) and bad is None and clock.add(dt) > MAX_STEPS:
+            raise NotStreamed(f"{src}: more than {MAX_STEPS} distinct time steps: its clock is read whole")
+    if bad is not None:
+        raise UserError(f"{src}: time is not a finite number at {_where(st, bad)}")
+    if back is not None:
+        ta, tb = (float(x) for x in st.raw_time(st.rows(back, back + 2)[0], back))
+        raise UserError(
+            f"{src}: time does not increase at {_where(st, back + 1)} (t = {ta:.6g} s, then {tb:.6g} s); "
+            f"{n_back} such steps"
+        )
+    return clock
+
+
+def _clock_verdict(st: Stream, clock: _Clock, tu: str | None) -> float:
+    """The median step; a clock too slow for seconds refused, one the whole reader must place not streamed."""
+    src, col = st.source, st.head.tcol
+    step = clock.median(st.n - 1)
+    if col is None:
+        return step
+    if tu is None and 1.0 / step < rc.MIN_CLOCK_HZ:
+        raise UserError(
+            f"{src}: the time column {col!r} steps by {step:.6g} (median): read as seconds that is "
+            f"{1.0 / step:.6g} Hz, too slow for an accelerometer; it looks like milliseconds: give --time-unit "
+            "ms (or name the column t_ms), or convert it to seconds"
+        )
+    regular = clock.dmax <= rc.GAP_FACTOR * step and clock.dmin >= step / rc.GAP_FACTOR
+    if not regular or st.rate_hz is not None:
+        raise NotStreamed(f"{src}: its clock is placed on a grid by the whole reader (irregular, or --rate given)")
+    return step
+
+
+def _grid_pass(st: Stream, rate: float, block: int) -> None:
+    """Counts converted, NaN, each sample on the grid (recording.on_grid), as the reader will give them."""
+    src, n, t0 = st.source, st.n, st.t0
     said, k_prev = False, -1
     for s in range(0, n, block):
         e = min(s + block, n)
@@ -323,27 +357,25 @@ def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narro
         if not said and rec.notes:
             note(rec.notes[-1])  # the counts' conversion, once
             said = True
+        located = replace(rec, lines=None)
         nan = ~np.isfinite(rec.accel)
-        if nan.any():
-            rec = replace(rec, lines=st.rows(s, e)[1])
-            k = int(np.argmax(nan.any(axis=1)))
-            raise UserError(f"{src}: {rec.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
         k = np.rint((rec.t - t0) / st.Ts).astype(np.int64)
         off = np.abs(rec.t - t0 - k * st.Ts) > 0.25 * st.Ts
+        dk = np.diff(np.concatenate(([k_prev], k))) if s else np.diff(k)
+        if nan.any() or off.any() or np.any(dk < 1):
+            located = replace(rec, lines=st.rows(s, e)[1])
+        if nan.any():
+            k = int(np.argmax(nan.any(axis=1)))
+            raise UserError(f"{src}: {located.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
         if off.any():
-            rec = replace(rec, lines=st.rows(s, e)[1])
             i = int(np.argmax(off))
             raise UserError(
-                f"{src}: {rec.where(i)} (t = {rec.t[i]:.6g} s) is off the {rate:.6g} Hz sample grid by more "
+                f"{src}: {located.where(i)} (t = {rec.t[i]:.6g} s) is off the {rate:.6g} Hz sample grid by more "
                 "than a quarter period: the timing jitters too much for a fixed-rate filter"
             )
-        dk = np.diff(np.concatenate(([k_prev], k))) if s else np.diff(k)
         if np.any(dk < 1):
-            rec = replace(rec, lines=st.rows(s, e)[1])
             i = int(np.argmax(dk < 1)) + (0 if s else 1)
-            raise UserError(f"{src}: {rec.where(i)} falls on the same sample period as the one before it")
+            raise UserError(f"{src}: {located.where(i)} falls on the same sample period as the one before it")
         if np.any(dk > 1):
             raise NotStreamed(f"{src}: samples missing from its clock are filled in by the whole reader")
         k_prev = int(k[-1])
-    if list(h.chosen) != names:
-        note(f"{src}: columns {', '.join(h.chosen)} -> model axes {', '.join(names)}")

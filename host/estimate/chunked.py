@@ -26,13 +26,20 @@ whole-array path, so the two agree to the last bit on one machine (the tests
 allow 1e-12 relative, room for a compiler that contracts the two kernels'
 multiply-adds differently).
 
-Output: an uncompressed ``accelnav-run/1`` NPZ with ``t``, ``axis_names``,
-``accel``, ``clipped``, the filter's and smoother's states ``filt_x``,
-``smooth_x`` (n_axes, N, 4) and their standard deviations ``filt_sd``,
-``smooth_sd`` (n_axes, N, 4) instead of full covariances (at 1e8 samples each
-covariance array would be 13 GB per axis). Each array is written in chunks to a
-temporary ``.npy`` beside the output, then streamed into the NPZ. Disk needed:
-the store plus twice the output; it is checked before any work starts, and the
+Output: an uncompressed run-file NPZ with ``t``, ``axis_names``, ``accel``, ``clipped`` and the states
+asked for (``stages``): the filter's and/or the smoother's ``filt_x``, ``smooth_x`` (n_axes, N, 4) and
+their standard deviations ``filt_sd``, ``smooth_sd``, not full covariances (at 1e8 samples each
+covariance array would be 13 GB per axis). Every member's size is known before the first chunk, so the
+file is laid out up front and each chunk written once, in place (:mod:`accelnav.estimate.npzout`).
+
+Where every sample so far was valid and the design's steady rows exist (fastsmooth.steady_gains), the
+plain path's forward pass keeps a lean store (``LROW`` = 5 doubles: the filter's, then the smoothed,
+a and eps, and the smoothed (a, eps) covariance) and the backward passes read the rest (gains,
+smoother gains, the filter's (a, eps) covariances) from those rows, the same numbers in the same order.
+
+The store is in memory when ``store_memory`` holds it (on disk, the write-back of a store the size of
+the output throttled the run: 8 s of 17 at 1e7 samples, measured), else in a file in ``workdir``.
+Disk needed: the output, plus the store when it is on disk; checked before any work starts, and the
 temporary files are removed on success and on error.
 """
 
@@ -52,6 +59,7 @@ import numpy as np
 from accelnav.errors import UserError
 from accelnav.estimate import fastsmooth
 from accelnav.estimate.kf import Measurement
+from accelnav.estimate.npzout import NpzWriter
 from accelnav.model.design import AxisDesign, axis_design
 from accelnav.model.load import Model
 
@@ -60,6 +68,7 @@ BUDGET = 256 << 20  # bytes of chunk buffers
 # two-axis sample at 1e6): what decides that a run goes to the bounded path
 WHOLE_BYTES = 1250
 ROW = 12  # doubles per sample and axis in the store (csrc/fastsmooth.c, ACN_ROW)
+LROW = 5  # the same for all-valid samples of the plain path with steady rows (ACN_LROW)
 GROW = 28  # the same for the general path (ACN_GROW): posterior, and the prior of the next sample
 # held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
 CHUNK_BYTES = 8 * GROW + 8 + 1 + 2 * 32 + 2 * 8
@@ -97,11 +106,11 @@ def whole_bytes(n: int, n_axes: int) -> int:
     return int(n) * n_axes * WHOLE_BYTES
 
 
-def disk_needed(n: int, n_axes: int, n_general: int = 0) -> int:
-    """Bytes of disk the bounded path needs at its peak: the store and the output twice over
-    (``n_general`` of the axes on the general path, whose store is wider)."""
-    out = 8 * n * (1 + 4 * len(OUT_KEYS) * n_axes + n_axes) + 2 * n * n_axes
-    return 8 * n * (ROW * (n_axes - n_general) + GROW * n_general) + 2 * out
+def disk_needed(n: int, n_axes: int, n_general: int = 0, *, n_stages: int = 2, store: bool = True) -> int:
+    """Bytes of disk the bounded path needs at its peak: the store (``store``: smoothing; ``n_general`` of
+    the axes on the general path, whose store is wider) and the output, written once in place."""
+    out = 8 * n * (1 + n_axes) + n * n_axes + 8 * n * n_axes * 8 * n_stages
+    return (8 * n * (ROW * (n_axes - n_general) + GROW * n_general) if store else 0) + out
 
 
 def array_reader(t: np.ndarray, accel: np.ndarray, clipped: np.ndarray) -> Reader:
@@ -182,54 +191,28 @@ class NpzReader:
         self.close()
 
 
-class _NpyOut:
-    """A .npy file of known shape filled by writes at offsets (no mapping: memory stays the caller's buffer)."""
-
-    def __init__(self, path: Path, shape: tuple[int, ...], dtype) -> None:
-        self.path, self.shape, self.dtype = path, shape, np.dtype(dtype)
-        with open(path, "wb") as fh:
-            np.lib.format.write_array_header_1_0(
-                fh, {"descr": np.lib.format.dtype_to_descr(self.dtype), "fortran_order": False, "shape": shape}
-            )
-            self.offset = fh.tell()
-        self.fd = os.open(path, os.O_RDWR)
-        os.ftruncate(self.fd, self.offset + self.dtype.itemsize * int(np.prod(shape)))
-
-    def write(self, item_index: int, data: np.ndarray) -> None:
-        """Write ``data`` starting at flat element ``item_index``."""
-        _pwrite(self.fd, np.asarray(data, dtype=self.dtype), self.offset + item_index * self.dtype.itemsize)
-
-    def close(self) -> None:
-        os.close(self.fd)
-
-
-def write_npz_streamed(path: Path, members: dict[str, Path | np.ndarray], *, block: int = 16 << 20) -> None:
-    """An uncompressed NPZ at ``path`` from .npy files (copied in blocks) and small arrays."""
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
-        for name, src in members.items():
-            if isinstance(src, Path):
-                with open(src, "rb") as fin, zf.open(f"{name}.npy", "w", force_zip64=True) as fout:
-                    shutil.copyfileobj(fin, fout, block)
-                src.unlink()
-            else:
-                with zf.open(f"{name}.npy", "w", force_zip64=True) as fout:
-                    np.lib.format.write_array(fout, np.asanyarray(src), allow_pickle=False)
-
-
 @dataclass
 class _Axis:
+    j: int
     d: AxisDesign
     m: object  # acn_axis
-    store: int  # fd of the store file
     width: int  # doubles per store row: ROW (plain) or GROW (general)
     carry_f: np.ndarray  # (14,) forward carry: the prior of the next sample
     ex: fastsmooth.Extras | None  # general path: its extras, sorted by sample
     gates: np.ndarray  # (n_extras,) in the sorted order
     applied: np.ndarray  # (n_extras,) uint8 in the sorted order
+    # plain path: the stored transient (fastsmooth.steady_gains), used while every sample so far was valid
+    # (the forward rows depend on the mask's prefix only); None after the first invalid one
+    steady: fastsmooth.SteadyGains | None = None
+    steady_rows: np.ndarray | None = None  # the same rows, kept for the backward passes of the lean chunks
+    store: _Store | None = None  # rows of `width` doubles, sample s at byte 8 * width * s
+    lean: _Store | None = None  # the lean store (LROW doubles per sample) of samples before lean_end
+    lean_end: int = 0  # samples 0 .. lean_end - 1 went through acn_chunk_fwd_steady (all valid)
     carry_b: np.ndarray = field(default_factory=lambda: np.zeros(14))  # backward carry
     carry_r: np.ndarray = field(default_factory=lambda: np.zeros(11))  # r, u carry (plain)
     Pf0: np.ndarray = field(default_factory=lambda: np.zeros(10))
     Pfn: np.ndarray = field(default_factory=lambda: np.zeros(10))
+    xf0: np.ndarray = field(default_factory=lambda: np.zeros(4))  # the run's first filter mean
     xfn: np.ndarray = field(default_factory=lambda: np.zeros(4))  # the run's last filter mean
 
     def extras_in(self, s: int, e: int) -> slice:
@@ -237,6 +220,86 @@ class _Axis:
         if self.ex is None:
             return slice(0, 0)
         return slice(int(np.searchsorted(self.ex.k, s)), int(np.searchsorted(self.ex.k, e)))
+
+
+@dataclass
+class _Run:
+    """What the passes share: the kernels, the sizes, the output and the chunk buffers."""
+
+    ffi: object
+    lib: object
+    n: int
+    chunk: int
+    out: NpzWriter
+    axes: list[_Axis]
+    smooth: bool  # False: the filter alone (no store, no backward passes)
+    store: np.ndarray = field(init=False)
+    xa: np.ndarray = field(init=False)
+    sa: np.ndarray = field(init=False)
+    first: dict[str, np.ndarray] = field(default_factory=dict)  # each output's sample 0, (n_axes, 4)
+    last: dict[str, np.ndarray] = field(default_factory=dict)  # and its sample N-1 (for a summary line)
+
+    def __post_init__(self) -> None:
+        # allocated once and reused by every chunk: fresh pages cost more than the kernels here (a page
+        # fault per 4 KiB: fresh memory filled at 0.2-0.8 GB/s against 2.5 GB/s for pages in use, measured)
+        self.store = np.empty((self.chunk + 1) * GROW)
+        self.xa, self.sa = np.empty((self.chunk, 4)), np.empty((self.chunk, 4))
+        self.zc, self.ok = np.empty(self.chunk), np.empty(self.chunk, dtype=bool)
+        self.bad = np.empty(self.chunk, dtype=bool)
+
+    def rows(self, width: int, count: int) -> np.ndarray:
+        return self.store[: count * width].reshape(count, width)
+
+    def ptr(self, a: np.ndarray, ctype: str = "double *"):
+        return fastsmooth._ptr(self.ffi, a, ctype)
+
+    def put(self, key: str, j: int, s: int, data: np.ndarray) -> None:
+        """Rows s.. of axis j of the (n_axes, N, 4) output ``key``."""
+        self.out.write(key, 4 * (j * self.n + s), data)
+        if len(data) and s == 0:
+            self.first.setdefault(key, np.zeros((len(self.axes), 4)))[j] = data[0]
+        if len(data) and s + len(data) == self.n:
+            self.last.setdefault(key, np.zeros((len(self.axes), 4)))[j] = data[-1]
+
+
+class _Store:
+    """One axis's store: in memory when the caller's budget holds it (the disk's write-back then never
+    throttles the run: at 1e7 samples its 1.6 GB on disk cost 8 s here, measured), else a file in the work
+    folder. Memory is taken page by page as rows are written (an untouched page costs nothing)."""
+
+    def __init__(self, path: Path, nbytes: int, in_memory: bool) -> None:
+        self.mem = np.empty(nbytes, dtype=np.uint8) if in_memory else None
+        self.fd = -1 if in_memory else os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+
+    def read(self, buf: np.ndarray, pos: int) -> None:
+        if self.mem is None:
+            _pread(self.fd, buf, pos)
+        else:
+            flat = buf.reshape(-1).view(np.uint8)
+            flat[:] = self.mem[pos : pos + flat.size]
+
+    def rows(self, scratch: np.ndarray, width: int, s: int, count: int, fill: bool = True) -> np.ndarray:
+        """Rows s..s+count-1 to work on: in memory, the store's own (the kernels work in place, no copy);
+        on disk, ``scratch`` filled from the file (if ``fill``), to be written back by :meth:`done`."""
+        if self.mem is not None:
+            return self.mem[8 * width * s : 8 * width * (s + count)].view(np.float64).reshape(count, width)
+        buf = scratch[: count * width].reshape(count, width)
+        if fill:
+            _pread(self.fd, buf, 8 * width * s)
+        return buf
+
+    def done(self, buf: np.ndarray, s: int) -> None:
+        """Rows from :meth:`rows` starting at sample s, changed: back to the file (in memory: already there)."""
+        if self.mem is None:
+            _pwrite(self.fd, buf, 8 * buf.shape[1] * s)
+
+    def close(self) -> None:
+        """Free the store (its memory, or its disk before the output is finished)."""
+        self.mem = None
+        if self.fd >= 0:
+            os.ftruncate(self.fd, 0)
+            os.close(self.fd)
+            self.fd = -1
 
 
 def _pread(fd: int, buf: np.ndarray, pos: int) -> None:
@@ -273,6 +336,8 @@ def smooth_bounded(
     workdir: str | Path | None = None,
     run_format: str = RUN_FORMAT,
     more: Callable[[list[np.ndarray]], dict[str, np.ndarray]] | None = None,
+    stages: tuple[str, ...] = ("filt", "smooth"),
+    store_memory: int = 0,
 ) -> dict:
     """Filter and RTS-smooth every axis of an n-sample run in bounded memory; write ``out``.
 
@@ -282,178 +347,221 @@ def smooth_bounded(
     (a wider store), one without the plain path. ``chunk`` overrides the chunk size from ``budget``;
     temporary files go to ``workdir`` (default: beside ``out``); ``run_format`` is the run file's format;
     ``more(applied)`` may give small arrays to write beside the others, from which extras were applied.
+    ``stages``: the states written, ``filt`` (x[k|k]: filt_x, filt_sd) and ``smooth`` (x[k|N-1]:
+    smooth_x, smooth_sd); without ``smooth`` only the forward pass runs (the filter, no store).
+    ``store_memory``: bytes the store may take in memory (default 0: on disk, in ``workdir``).
     Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras were
-    applied, in their given order}. Refuses in one line (UserError) before any work when the disk
-    cannot hold the store and the output.
+    applied, in their given order, "first", "last": {output key: its (n_axes, 4) values at sample 0, N-1},
+    "store_in_memory": where the store was}.
+    Refuses in one line (UserError) before any work when the disk cannot hold the store and the output.
     """
     n = int(n)
     if n < 1:
         raise UserError("bounded smoother: at least one sample is needed")
+    if not set(stages) <= {"filt", "smooth"} or not stages:
+        raise ValueError(f"stages: {stages!r}; accepted: filt, smooth or both")
     out = Path(out)
     n_axes = len(model.axes)
     names = np.array([a.name for a in model.axes]) if axis_names is None else np.asarray(axis_names)
     chunk = int(chunk) if chunk is not None else chunk_samples(n_axes, budget)
     if chunk < 2:
         raise ValueError("chunk: at least 2 samples")
-    exs = [None] * n_axes
-    for j, e in enumerate(extras or []):
-        ex = fastsmooth.Extras.of(e)
-        if len(ex) and (ex.k[0] < 0 or ex.k[-1] >= n):
-            raise UserError(f"bounded smoother: axis {j}: an extra measurement is outside samples 0..{n - 1}")
-        exs[j] = ex if len(ex) else None
+    exs = _sorted_extras(extras, n_axes, n)
     designs = [axis_design(model, j) for j in range(n_axes)]
     general = [exs[j] is not None or bool(np.any(np.asarray(d.P0)[:2, 2:] != 0)) for j, d in enumerate(designs)]
     workdir = Path(workdir) if workdir is not None else out.resolve().parent
-    need = disk_needed(n, n_axes, sum(general))
-    free = shutil.disk_usage(workdir).free
-    if need > free:
-        raise UserError(
-            f"bounded smoother: {n} samples x {n_axes} axes need {need / 1e9:.3g} GB of disk in {workdir} for the "
-            f"store and the output; {free / 1e9:.3g} GB are free"
-        )
+    smooth = "smooth" in stages
+    in_memory = smooth and 8 * n * (ROW * (n_axes - sum(general)) + GROW * sum(general)) <= store_memory
+    _check_disk(n, n_axes, sum(general), workdir, len(stages), smooth and not in_memory)
     mod = fastsmooth._lib()
     ffi, lib = mod.ffi, mod.lib
-    p = fastsmooth._ptr
+    small = {"format": np.array(run_format), "model_toml": np.array(model.text),
+             "model_source": np.array(str(model.source)), "axis_names": names}  # fmt: skip
+    big = {"t": ((n,), np.float64), "accel": ((n, n_axes), np.float64), "clipped": ((n, n_axes), np.bool_)}
+    for st in stages:
+        big[f"{st}_x"] = big[f"{st}_sd"] = ((n_axes, n, 4), np.float64)
     with ExitStack() as stack:
         tmp = Path(tempfile.mkdtemp(prefix=".accelnav-smooth-", dir=workdir))
         stack.callback(shutil.rmtree, tmp, True)
-        outs = {k: _NpyOut(tmp / f"{k}.npy", (n_axes, n, 4), np.float64) for k in OUT_KEYS}
-        t_out = _NpyOut(tmp / "t.npy", (n,), np.float64)
-        a_out = _NpyOut(tmp / "accel.npy", (n, n_axes), np.float64)
-        c_out = _NpyOut(tmp / "clipped.npy", (n, n_axes), np.bool_)
-        for o in (*outs.values(), t_out, a_out, c_out):
-            stack.callback(o.close)
-        axes = []
-        for j, d in enumerate(designs):
-            fd = os.open(tmp / f"store-{j}.bin", os.O_RDWR | os.O_CREAT, 0o600)
-            stack.callback(os.close, fd)
-            cf = np.concatenate([np.asarray(d.x0, dtype=np.float64), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
-            ex = exs[j]
-            ne = 0 if ex is None else len(ex)
-            g = gates[j] if gates is not None and j < len(gates) and ex is not None else None
-            g = None if g is None or len(g) == 0 else g
-            eg = np.zeros(ne) if g is None else np.asarray(g, dtype=np.float64).reshape(ne)[ex.order]
-            axes.append(
-                _Axis(d, fastsmooth._axis_struct(ffi, d), fd, GROW if general[j] else ROW, cf,
-                      ex, np.ascontiguousarray(eg), np.zeros(max(ne, 1), dtype=np.uint8))
-            )  # fmt: skip
-        starts = list(range(0, n, chunk))
-        store = np.empty((chunk + 1) * GROW)
-        xa, sa = np.empty((chunk, 4)), np.empty((chunk, 4))
-
-        def rows(ax: _Axis, count: int) -> np.ndarray:
-            return store[: count * ax.width].reshape(count, ax.width)
-
-        # 1. forward: filter (and for the plain path the smoother gains), rows into each axis's store
-        for s in starts:
-            e = min(s + chunk, n)
-            last = int(e == n)
-            m = e - s
-            t, accel, clipped = read(s, e)
-            t_out.write(s, t)
-            a_out.write(s * n_axes, accel)
-            c_out.write(s * n_axes, clipped)
-            for j, ax in enumerate(axes):
-                z = np.ascontiguousarray(accel[:, j], dtype=np.float64)
-                ok = np.isfinite(z) & ~np.asarray(clipped[:, j], dtype=bool)
-                zc = np.where(ok, z, 0.0)
-                vm = ok.view(np.uint8)
-                buf = rows(ax, m)
-                if ax.width == GROW:
-                    sl = ax.extras_in(s, e)
-                    ne = sl.stop - sl.start
-                    ek = np.ascontiguousarray(ax.ex.k[sl] - s) if ne else np.zeros(1, dtype=np.int64)
-                    arrs = [ax.ex.h[sl], ax.ex.z[sl], ax.ex.R[sl], ax.gates[sl]] if ne else [np.zeros(4)] * 4
-                    arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
-                    applied = ax.applied[sl.start : sl.start + max(ne, 1)] if ne else np.zeros(1, dtype=np.uint8)
-                    lib.acn_chunkg_fwd(
-                        ax.m, m, last, p(ffi, zc, "double *"), p(ffi, vm, "unsigned char *"), ne,
-                        ffi.from_buffer("long[]", ek), *(p(ffi, a, "double *") for a in arrs),
-                        p(ffi, applied, "unsigned char *"), p(ffi, ax.carry_f, "double *"), p(ffi, buf, "double *"),
-                        p(ffi, xa, "double *"), p(ffi, sa, "double *"),
-                    )  # fmt: skip
-                else:
-                    rc = lib.acn_chunk_fwd(
-                        ax.m, s, m, last, p(ffi, zc, "double *"), p(ffi, vm, "unsigned char *"),
-                        p(ffi, ax.carry_f, "double *"), p(ffi, buf, "double *"), p(ffi, xa, "double *"),
-                        p(ffi, sa, "double *"), p(ffi, ax.Pf0, "double *"), p(ffi, ax.Pfn, "double *"),
-                    )  # fmt: skip
-                    if rc != 0:
-                        raise UserError(f"bounded smoother: the (a, eps) prior covariance is singular at sample {-rc}")
-                _pwrite(ax.store, buf, 8 * ax.width * s)
-                outs["filt_x"].write(4 * (j * n + s), xa[:m])
-                outs["filt_sd"].write(4 * (j * n + s), sa[:m])
-                if last:
-                    ax.xfn = xa[m - 1].copy()
-
-        # 2. backward: the general path's smoother outright; the plain path's (a, eps) into its store
-        for s in reversed(starts):
-            e = min(s + chunk, n)
-            m = e - s
-            for j, ax in enumerate(axes):
-                buf = rows(ax, m)
-                _pread(ax.store, buf, 8 * ax.width * s)
-                if ax.width == GROW:
-                    rc = lib.acn_chunkg_bwd(
-                        ax.m, s, m, int(e == n), p(ffi, buf, "double *"), p(ffi, ax.carry_b, "double *"),
-                        p(ffi, xa, "double *"), p(ffi, sa, "double *"),
-                    )  # fmt: skip
-                    if rc != 0:
-                        raise UserError(f"bounded smoother: the prior covariance is not positive definite at {-rc}")
-                    outs["smooth_x"].write(4 * (j * n + s), xa[:m])
-                    outs["smooth_sd"].write(4 * (j * n + s), sa[:m])
-                else:
-                    lib.acn_chunk_bwd(ax.m, m, int(e == n), p(ffi, buf, "double *"), p(ffi, ax.carry_b, "double *"))
-                    _pwrite(ax.store, buf, 8 * ax.width * s)
-
-        # 3. plain path, forward: smoothed r, u; the run's last sample is the filter's (the whole path's convention)
-        plain = [(j, ax) for j, ax in enumerate(axes) if ax.width == ROW]
-        for _, ax in plain:
-            ax.carry_r[2], ax.carry_r[3], ax.carry_r[5] = ax.Pf0[0], ax.Pf0[1], ax.Pf0[4]
-        for s in starts if plain else []:
-            e = min(s + chunk, n)
-            m = e - s if e < n else e - s - 1  # transitions to the next sample; the last sample is written below
-            for j, ax in plain:
-                if s == 0:
-                    ax.carry_r[0:2] = _first_xf(outs["filt_x"], j, n)
-                buf = rows(ax, m + 1)
-                _pread(ax.store, buf, 8 * ROW * s)
-                lib.acn_chunk_ru(
-                    ax.m, m, p(ffi, buf, "double *"), p(ffi, ax.carry_r, "double *"), p(ffi, xa, "double *"),
-                    p(ffi, sa, "double *"),
-                )  # fmt: skip
-                outs["smooth_x"].write(4 * (j * n + s), xa[:m])
-                outs["smooth_sd"].write(4 * (j * n + s), sa[:m])
-                if e == n:
-                    outs["smooth_x"].write(4 * (j * n + n - 1), ax.xfn)
-                    outs["smooth_sd"].write(4 * (j * n + n - 1), np.sqrt(ax.Pfn[fastsmooth._DIAG]))
+        writer = stack.enter_context(NpzWriter(out, {**small, **big}))
+        axes = [_axis(ffi, j, d, exs[j], gates, general[j], n) for j, d in enumerate(designs)]
         for ax in axes:
-            os.ftruncate(ax.store, 0)  # free the store's disk before the output is assembled
+            if smooth:
+                ax.store = _Store(tmp / f"store-{ax.j}.bin", 8 * ax.width * n, in_memory)
+                ax.lean = _Store(tmp / f"lean-{ax.j}.bin", 8 * LROW * n if ax.width == ROW else 0, in_memory)
+                stack.callback(ax.store.close)
+                stack.callback(ax.lean.close)
+        run = _Run(ffi, lib, n, chunk, writer, axes, smooth)
+        starts = list(range(0, n, chunk))
+        for s in starts:  # 1. forward: the filter; for the smoother, rows into each axis's store
+            _forward(run, s, min(s + chunk, n), read, "filt" in stages)
+        if smooth:
+            for s in reversed(starts):  # 2. backward: the general smoother; the plain (a, eps) into the store
+                for ax in axes:
+                    _backward(run, ax, s, min(s + chunk, n))
+            for ax in axes:  # 3. plain path, forward: smoothed r, u
+                if ax.width == ROW:
+                    _smooth_ru(run, ax, starts)
+                ax.store.close()  # freed before the small arrays are added
+                ax.lean.close()
         applied = []
         for ax in axes:
             done = np.zeros(0 if ax.ex is None else len(ax.ex), dtype=bool)
             if ax.ex is not None:
                 done[ax.ex.order] = ax.applied[: len(ax.ex)].astype(bool)
             applied.append(done)
-        members: dict[str, Path | np.ndarray] = {
-            "format": np.array(run_format),
-            "model_toml": np.array(model.text),
-            "model_source": np.array(str(model.source)),
-            "axis_names": names,
-            "t": t_out.path,
-            "accel": a_out.path,
-            "clipped": c_out.path,
-            **{k: o.path for k, o in outs.items()},
-            **(more(applied) if more is not None else {}),
-        }
-        part = tmp / "out.npz"
-        write_npz_streamed(part, members)
-        os.replace(part, out)
-    return {"chunk": chunk, "chunks": len(starts), "applied": applied}
+        for key, arr in (more(applied) if more is not None else {}).items():
+            writer.add(key, arr)
+    return {
+        "chunk": chunk, "chunks": len(starts), "applied": applied, "first": run.first, "last": run.last,
+        "store_in_memory": in_memory,
+    }  # fmt: skip
 
 
-def _first_xf(f: _NpyOut, j: int, n: int) -> np.ndarray:
-    """r, u of the filter at sample 0 of axis j, read back from the output being written."""
-    buf = np.empty(2)
-    _pread(f.fd, buf, f.offset + 8 * 4 * j * n)
-    return buf
+def _sorted_extras(extras, n_axes: int, n: int) -> list[fastsmooth.Extras | None]:
+    exs: list[fastsmooth.Extras | None] = [None] * n_axes
+    for j, e in enumerate(extras or []):
+        ex = fastsmooth.Extras.of(e)
+        if len(ex) and (ex.k[0] < 0 or ex.k[-1] >= n):
+            raise UserError(f"bounded smoother: axis {j}: an extra measurement is outside samples 0..{n - 1}")
+        exs[j] = ex if len(ex) else None
+    return exs
+
+
+def _check_disk(n: int, n_axes: int, n_general: int, workdir: Path, n_stages: int, smooth: bool) -> None:
+    need = disk_needed(n, n_axes, n_general, n_stages=n_stages, store=smooth)
+    free = shutil.disk_usage(workdir).free
+    if need > free:
+        raise UserError(
+            f"bounded smoother: {n} samples x {n_axes} axes need {need / 1e9:.3g} GB of disk in {workdir} for the "
+            f"store and the output; {free / 1e9:.3g} GB are free"
+        )
+
+
+def _axis(ffi, j: int, d: AxisDesign, ex, gates, general: bool, n: int) -> _Axis:
+    cf = np.concatenate([np.asarray(d.x0, dtype=np.float64), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
+    ne = 0 if ex is None else len(ex)
+    g = gates[j] if gates is not None and j < len(gates) and ex is not None else None
+    g = None if g is None or len(g) == 0 else g
+    eg = np.zeros(ne) if g is None else np.asarray(g, dtype=np.float64).reshape(ne)[ex.order]
+    st = None if general else fastsmooth.steady_gains(d, n)
+    return _Axis(
+        j, d, fastsmooth._axis_struct(ffi, d), GROW if general else ROW, cf, ex, np.ascontiguousarray(eg),
+        np.zeros(max(ne, 1), dtype=np.uint8), steady=st, steady_rows=None if st is None else st.rows,
+    )  # fmt: skip
+
+
+def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
+    """Samples s..e-1 of every axis through the filter; the input and the filter's output written."""
+    n_axes = len(run.axes)
+    t, accel, clipped = read(s, e)
+    run.out.write("t", s, t)
+    run.out.write("accel", s * n_axes, accel)
+    run.out.write("clipped", s * n_axes, clipped)
+    m = e - s
+    zc, ok, bad = run.zc[:m], run.ok[:m], run.bad[:m]
+    for ax in run.axes:
+        zc[:] = accel[:, ax.j]
+        np.isfinite(zc, out=ok)
+        np.logical_not(clipped[:, ax.j], out=bad)
+        ok &= bad
+        np.logical_not(ok, out=bad)
+        np.copyto(zc, 0.0, where=bad)
+        if ax.width == ROW and ax.steady is not None and not ok.all():
+            ax.steady = None  # from here on the covariances differ from the all-valid ones
+        lean = ax.width == ROW and ax.steady is not None
+        width = LROW if lean else ax.width
+        store = ax.lean if lean else ax.store
+        # the filter alone keeps no store: its rows go to the scratch buffer and are dropped
+        buf = store.rows(run.store, width, s, m, fill=False) if run.smooth else run.rows(width, m)
+        if ax.width == GROW:
+            _forward_general(run, ax, s, e, zc, ok, buf)
+        else:
+            _forward_plain(run, ax, s, e, zc, ok, buf)
+            if lean:
+                ax.lean_end = e
+        if run.smooth:
+            store.done(buf, s)
+        if write_filt:
+            run.put("filt_x", ax.j, s, run.xa[:m])
+            run.put("filt_sd", ax.j, s, run.sa[:m])
+        if s == 0:
+            ax.xf0 = run.xa[0].copy()
+        if e == run.n:
+            ax.xfn = run.xa[m - 1].copy()
+
+
+def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:
+    p, m = run.ptr, e - s
+    sl = ax.extras_in(s, e)
+    ne = sl.stop - sl.start
+    ek = np.ascontiguousarray(ax.ex.k[sl] - s) if ne else np.zeros(1, dtype=np.int64)
+    arrs = [ax.ex.h[sl], ax.ex.z[sl], ax.ex.R[sl], ax.gates[sl]] if ne else [np.zeros(4)] * 4
+    arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
+    applied = ax.applied[sl.start : sl.start + max(ne, 1)] if ne else np.zeros(1, dtype=np.uint8)
+    run.lib.acn_chunkg_fwd(
+        ax.m, m, int(e == run.n), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne,
+        run.ffi.from_buffer("long[]", ek), *(p(a) for a in arrs), p(applied, "unsigned char *"),
+        p(ax.carry_f), p(buf), p(run.xa), p(run.sa),
+    )  # fmt: skip
+
+
+def _forward_plain(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:
+    p, m, last = run.ptr, e - s, int(e == run.n)
+    tail = (p(ax.carry_f), p(buf), p(run.xa), p(run.sa), p(ax.Pf0), p(ax.Pfn))
+    if ax.steady is not None:
+        sr = ax.steady.rows
+        rc = run.lib.acn_chunk_fwd_steady(ax.m, s, m, last, p(zc), p(sr), len(sr), *tail)
+    else:
+        rc = run.lib.acn_chunk_fwd(ax.m, s, m, last, p(zc), p(ok.view(np.uint8), "unsigned char *"), *tail)
+    if rc != 0:
+        raise UserError(f"bounded smoother: the (a, eps) prior covariance is singular at sample {-rc}")
+
+
+def _backward(run: _Run, ax: _Axis, s: int, e: int) -> None:
+    """Samples e-1..s: the general path's smoother outright, the plain path's (a, eps) into its store."""
+    p, m, last = run.ptr, e - s, int(e == run.n)
+    if ax.width == GROW:
+        buf = ax.store.rows(run.store, GROW, s, m)
+        rc = run.lib.acn_chunkg_bwd(ax.m, s, m, last, p(buf), p(ax.carry_b), p(run.xa), p(run.sa))
+        if rc != 0:
+            raise UserError(f"bounded smoother: the prior covariance is not positive definite at {-rc}")
+        run.put("smooth_x", ax.j, s, run.xa[:m])
+        run.put("smooth_sd", ax.j, s, run.sa[:m])
+    elif s < ax.lean_end:
+        buf = ax.lean.rows(run.store, LROW, s, m)
+        sr = ax.steady_rows
+        run.lib.acn_chunk_bwd_lean(ax.m, s, m, last, p(sr), len(sr), p(buf), p(ax.carry_b))
+        ax.lean.done(buf, s)
+    else:
+        buf = ax.store.rows(run.store, ROW, s, m)
+        run.lib.acn_chunk_bwd(ax.m, m, last, p(buf), p(ax.carry_b))
+        ax.store.done(buf, s)
+
+
+def _smooth_ru(run: _Run, ax: _Axis, starts: list[int]) -> None:
+    """The plain path's third pass over one axis: smoothed r, u; the run's last sample is the filter's."""
+    p, n = run.ptr, run.n
+    ax.carry_r[0:2] = ax.xf0[0:2]
+    ax.carry_r[2], ax.carry_r[3], ax.carry_r[5] = ax.Pf0[0], ax.Pf0[1], ax.Pf0[4]
+    for s in starts:
+        e = min(s + run.chunk, n)
+        m = e - s if e < n else e - s - 1  # transitions to the next sample; the last sample is written below
+        if s < ax.lean_end:
+            if e == ax.lean_end and e < n:  # the next sample is in the full store: its fields, lean order
+                buf = run.rows(LROW, m + 1)
+                ax.lean.read(buf[:m], 8 * LROW * s)
+                nx = np.empty(ROW)
+                ax.store.read(nx, 8 * ROW * e)
+                buf[m] = nx[[0, 1, 6, 7, 8]]
+            else:
+                buf = ax.lean.rows(run.store, LROW, s, m + 1)
+            sr = ax.steady_rows
+            run.lib.acn_chunk_ru_lean(ax.m, s, m, p(buf), p(sr), len(sr), p(ax.carry_r), p(run.xa), p(run.sa))
+        else:
+            buf = ax.store.rows(run.store, ROW, s, m + 1)
+            run.lib.acn_chunk_ru(ax.m, m, p(buf), p(ax.carry_r), p(run.xa), p(run.sa))
+        run.put("smooth_x", ax.j, s, run.xa[:m])
+        run.put("smooth_sd", ax.j, s, run.sa[:m])
+    run.put("smooth_x", ax.j, n - 1, ax.xfn)
+    run.put("smooth_sd", ax.j, n - 1, np.sqrt(ax.Pfn[fastsmooth._DIAG]))

@@ -137,6 +137,35 @@ def nis_check(kind: str, nis: np.ndarray) -> NisCheck:
     return NisCheck(kind, n, float(np.mean(nis)), lo, hi)
 
 
+@dataclass(frozen=True)
+class SmoothChecks:
+    """What a smoothed run says about its model: the NIS of each kind of aid, and with fixes the held-out
+    comparison (:func:`accelnav.estimate.pipeline.holdout`, or None); :func:`accelnav.estimate.pipeline.smooth_checks`
+    makes one."""
+
+    nis: tuple[NisCheck, ...]
+    holdout: object | None
+
+    def lines(self) -> list[str]:
+        """A line per check, as ``accelnav smooth`` prints them."""
+        out = [c.line() for c in self.nis]
+        h = self.holdout
+        if h is None:
+            return out
+        out.append(
+            f"held-out fixes (every other one left out, {h.n} predicted): rms miss "
+            + ", ".join(f"{k} {v:.3g} m" for k, v in h.rms.items())
+        )
+        worse = h.worse_than()
+        if worse:
+            out.append(
+                f"the smoother misses the held-out fixes more than {' and '.join(worse)} "
+                f"({h.rms['smoother']:.3g} m against {min(h.rms[b] for b in worse):.3g} m): its model does not "
+                "fit this recording: try --tune"
+            )
+        return out
+
+
 def _fix_points(t: np.ndarray, fixes: Sequence[Measurement]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(k, t, z) of the fixes by time; of several fixes on one sample, their mean."""
     ks = np.array([m.k for m in fixes], dtype=np.int64)

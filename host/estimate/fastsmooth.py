@@ -26,6 +26,11 @@ to (r, u) cross terms in the eps row). Hence:
 1. The covariances and gains depend on the model and the valid mask only,
    never on z. They are computed once (:func:`plain_gains`) and cached in
    memory, keyed on the design numbers, N and the mask (and optionally on disk).
+   With every sample valid, the forward part (K, C and the (a, eps) covariance
+   blocks) reaches a steady state and never depends on N: it is computed once
+   per design up to that state and kept on disk (:func:`steady_gains`), every
+   later sample reading its last row; only the r, u rows of P, which never
+   settle, are propagated per run (acn_plain_cov_steady).
 2. The smoothed (a, eps) of the 4-state RTS smoother are those of the 2-state
    RTS smoother of s, because the marginal of s given all z is the 2-state
    smoothing posterior (s is Markov and z depends on s alone).
@@ -76,11 +81,13 @@ from pathlib import Path
 
 import numpy as np
 
+from accelnav.errors import UserError
 from accelnav.estimate.kf import Measurement
+from accelnav.fileio import atomic_output
 from accelnav.model.design import AxisDesign
 from accelnav.native.cbuild import STRICT_FLAGS
 from accelnav.native.kernels import SMOOTHER, build, prebuilt
-from accelnav.resources import package_dir
+from accelnav.resources import cache_root, package_dir
 
 CSRC = package_dir("accelnav.estimate") / "csrc"  # package data
 PACKED = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))
@@ -198,12 +205,15 @@ class PlainGains:
     """The data-independent part of the plain path for one (design, N, mask)."""
 
     key: str
-    K: np.ndarray  # (N, 4) filter gain [K_r, K_u, K_a, K_eps]; 0 on skipped samples
-    Cs: np.ndarray  # (N, 4) (a, eps) smoother gain C[k] = [[c00, c01], [c10, c11]]; last row 0
+    # K, Cs have N rows, or (all valid, :class:`SteadyGains`) the transient's nt rows, the last one
+    # standing for every later sample (the data pass holds it)
+    K: np.ndarray  # (N or nt, 4) filter gain [K_r, K_u, K_a, K_eps]; 0 on skipped samples
+    Cs: np.ndarray  # (N or nt, 4) (a, eps) smoother gain C[k] = [[c00, c01], [c10, c11]]; last row 0
     P_prior: np.ndarray  # (N, 10)
     P_post: np.ndarray  # (N, 10)
     Ps: np.ndarray  # (N, 10)
     all_valid: bool
+    rows: np.ndarray | None = None  # SteadyGains.rows when K, Cs are views of them (the data pass reads rows)
 
 
 _CACHE: OrderedDict[str, PlainGains] = OrderedDict()
@@ -217,13 +227,17 @@ def gain_cache_dir() -> Path | None:
     return Path(env) if env else None
 
 
-def plain_gains(d: AxisDesign, n: int, valid: np.ndarray | None = None, *, cache_dir: Path | None = None) -> PlainGains:
+def plain_gains(
+    d: AxisDesign, n: int, valid: np.ndarray | None = None, *, cache_dir: Path | None = None, steady: bool = True
+) -> PlainGains:
     """Gains and covariances of the plain path for N = n samples (cached; see the module docstring).
 
     ``valid`` is the mask of samples whose acceleration is used (None: all).
     The key hashes every design number, n and the mask, so a model with the
     same numbers (whatever its file) shares the entry and an x0/P0 override
     does not. ``cache_dir`` (default :func:`gain_cache_dir`) also keeps them on disk.
+    All valid and ``steady``: from the stored transient (:func:`steady_gains`), K and Cs then having
+    its nt rows; ``steady=False`` is the full per-sample computation (the oracle of the tests).
     """
     n = int(n)
     if n < 1:
@@ -236,6 +250,7 @@ def plain_gains(d: AxisDesign, n: int, valid: np.ndarray | None = None, *, cache
             valid = None
     h = hashlib.sha256(_design_key(d))
     h.update(n.to_bytes(8, "little"))
+    h.update(b"steady" if steady else b"full")
     if valid is not None:
         h.update(np.packbits(valid).tobytes())
     key = h.hexdigest()[:24]
@@ -246,7 +261,7 @@ def plain_gains(d: AxisDesign, n: int, valid: np.ndarray | None = None, *, cache
     cache_dir = cache_dir if cache_dir is not None else gain_cache_dir()
     g = _load_gains(cache_dir, key) if cache_dir is not None else None
     if g is None:
-        g = _compute_gains(d, n, valid, key)
+        g = _compute_gains(d, n, valid, key, steady)
         if cache_dir is not None:
             _save_gains(cache_dir, g)
     with _cache_lock:
@@ -261,12 +276,14 @@ def clear_gain_cache() -> None:
         _CACHE.clear()
 
 
-def _compute_gains(d: AxisDesign, n: int, valid: np.ndarray | None, key: str) -> PlainGains:
+def _compute_gains(d: AxisDesign, n: int, valid: np.ndarray | None, key: str, steady: bool = True) -> PlainGains:
+    _check_p0(d)
+    if valid is None and steady:
+        st = steady_gains(d, n)
+        if st is not None:
+            return _from_steady(d, n, st, key)
     mod = _lib()
     ffi, lib = mod.ffi, mod.lib
-    P0 = np.asarray(d.P0)
-    if np.any(P0[:2, 2:] != 0):
-        raise ValueError("design: the plain path needs P0 without (r, u)-(a, eps) cross terms; use smooth_general")
     m = _axis_struct(ffi, d)
     K = np.empty((n, 4))
     Cs = np.empty((n, 4))
@@ -280,6 +297,225 @@ def _compute_gains(d: AxisDesign, n: int, valid: np.ndarray | None, key: str) ->
     for a in (K, Cs, Pp, Pf, Ps):
         a.flags.writeable = False
     return PlainGains(key, K, Cs, Pp, Pf, Ps, valid is None)
+
+
+def _check_p0(d: AxisDesign) -> None:
+    if np.any(np.asarray(d.P0)[:2, 2:] != 0):
+        raise ValueError("design: the plain path needs P0 without (r, u)-(a, eps) cross terms; use smooth_general")
+
+
+def _from_steady(d: AxisDesign, n: int, st: SteadyGains, key: str) -> PlainGains:
+    """An all-valid run's covariances from the stored rows (acn_plain_cov_steady); K and Cs stay the
+    rows' nt entries (the data pass holds the last one for every later sample)."""
+    mod = _lib()
+    ffi, lib = mod.ffi, mod.lib
+    Pp, Pf, Ps = np.empty((n, 10)), np.empty((n, 10)), np.empty((n, 10))
+    rc = lib.acn_plain_cov_steady(
+        _axis_struct(ffi, d), n, len(st.rows), _ptr(ffi, st.rows, "double *"),
+        *(_ptr(ffi, a, "double *") for a in (Pp, Pf, Ps)),
+    )  # fmt: skip
+    if rc != 0:
+        raise ValueError(f"plain path: the (a, eps) prior covariance is singular at sample {-rc}")
+    for a in (Pp, Pf, Ps):
+        a.flags.writeable = False
+    return PlainGains(key, st.rows[:, 0:4], st.rows[:, 4:8], Pp, Pf, Ps, True, st.rows)
+
+
+# --------------------------------------------------------------------------
+# Steady state of the all-valid plain path
+
+
+@dataclass(frozen=True)
+class SteadyGains:
+    """The data-independent forward rows of an all-valid run (acn_plain_rows, ``SROW`` doubles per sample:
+    K, C, the (a, eps) blocks of the prior and posterior covariance) up to the steady state; the last row
+    stands for every later sample. None of them depends on N (the forward recursion never looks ahead)."""
+
+    key: str
+    rows: np.ndarray  # (nt, SROW)
+    # False: the rows of one run too short to show the steady state (nt = its N, every row exact for it);
+    # such rows are never cached, since a longer run would take their last row for a steady one
+    settled: bool = True
+
+
+SROW = 14  # csrc/fastsmooth.h ACN_SROW
+# Steady from row nt - 1 on: over a probe at least 1.5 nt long, every later row stays within a tolerance
+# (relative) of the probe's final row: STEADY_RTOL for K_a, K_eps, C and the (a, eps) blocks, GAIN_RU_RTOL
+# for K_r, K_u. Those two converge far more slowly (K_r = (P_ra + P_re) / S, the difference of two
+# drifting numbers near 13.5: 1e-8 off after 7.2e5 samples, 1e-12 after 9.8e5, default model) while
+# they move the outputs little: cut at 1e-8 the outputs stayed within 2e-14 of the full computation
+# (measured; tests/estimate/test_steady_gains.py asserts 1e-12).
+STEADY_RTOL = 1e-13
+GAIN_RU_RTOL = 1e-9
+_PROBE0 = 1 << 17
+PROBE_MAX = 1 << 21  # samples (235 MB of rows, once per design); not steady within it: per-run gains
+_STEADY: OrderedDict[str, SteadyGains | None] = OrderedDict()
+_STEADY_MAGIC = b"ACNSTDY1"
+
+
+def steady_key(d: AxisDesign) -> str:
+    """The numbers the rows depend on (F, Q, H, R, P0) and the tolerances. Not N (the transient does not
+    depend on the run's length), nor x0 and b, which move only the means: a warm start shares the rows."""
+    parts = [np.asarray(v, dtype=np.float64).tobytes() for v in (d.F, d.Q, d.H, d.R, d.P0)]
+    h = hashlib.sha256(b"steady\0" + b"".join(parts))
+    h.update(np.array([STEADY_RTOL, GAIN_RU_RTOL, SROW], dtype=np.float64).tobytes())
+    return h.hexdigest()[:24]
+
+
+def steady_cache_dir() -> Path:
+    """Where the steady rows are kept between runs: ``accelnav.resources.cache_root()/gains``."""
+    return cache_root() / "gains"
+
+
+def steady_len(rows: np.ndarray) -> int | None:
+    """nt (see STEADY_RTOL) of a probe's rows, or None if the probe is too short to show a steady state."""
+    L = len(rows) - 1  # the last row's C is 0 (no sample after it): not a steady value
+    W = rows[:L]
+    fin = W[-1]
+    tol = np.full(SROW, STEADY_RTOL)
+    tol[:2] = GAIN_RU_RTOL
+    off = np.abs(W - fin) > tol * np.abs(fin)
+    bad = np.nonzero(off.any(axis=1))[0]
+    nt = int(bad[-1]) + 2 if len(bad) else 1
+    return nt if L - nt >= nt // 2 else None
+
+
+def _plain_rows(d: AxisDesign, n: int) -> np.ndarray:
+    mod = _lib()
+    ffi, lib = mod.ffi, mod.lib
+    rows = np.empty((n, SROW))
+    rc = lib.acn_plain_rows(_axis_struct(ffi, d), n, _ptr(ffi, rows, "double *"))
+    if rc != 0:
+        raise ValueError(f"plain path: the (a, eps) prior covariance is singular at sample {-rc}")
+    return rows
+
+
+def _probe_steady(d: AxisDesign, key: str, probe_max: int) -> SteadyGains | None:
+    """Rows up to the steady state, probing at most ``probe_max`` rows (doubling from _PROBE0)."""
+    n = min(_PROBE0, probe_max)
+    while True:
+        rows = _plain_rows(d, n)
+        nt = steady_len(rows)
+        if nt is not None:
+            rows = np.array(rows[:nt])
+            rows.flags.writeable = False
+            return SteadyGains(key, rows)
+        if n >= probe_max:
+            return None
+        n = min(2 * n, probe_max)
+
+
+def steady_gains(d: AxisDesign, n: int | None = None, *, cache_dir: Path | None = None) -> SteadyGains | None:
+    """The steady rows of ``d`` for a run of ``n`` samples (None: any length): from memory, else from
+    ``cache_dir`` (default :func:`steady_cache_dir`) if the file checks out, else computed once and written
+    there atomically. A damaged or foreign file is ignored and replaced (it is a cache: never trusted).
+
+    Never more rows than the run has: a run of n <= PROBE_MAX samples computes its n rows once; if they
+    show the steady state (n >= _PROBE0 at least) it is kept as for any run, else they are returned
+    unsettled (exact for this run; kept apart as a prefix that runs no longer than it read). None when
+    the design does not settle within PROBE_MAX samples (per-run gains then).
+    """
+    key = steady_key(d)
+    with _cache_lock:
+        if key in _STEADY:
+            _STEADY.move_to_end(key)
+            return _STEADY[key]
+    cache_dir = Path(cache_dir) if cache_dir is not None else steady_cache_dir()
+    path = cache_dir / f"steady-{key}.bin"
+    st = _load_steady(path, key)
+    if st is None and n is not None and n <= PROBE_MAX:
+        n = int(n)
+        prefix = cache_dir / f"prefix-{key}.bin"  # the longest unsettled run's rows: exact for any shorter one
+        pre = _load_steady(prefix, key) if n >= _PROBE0 else None
+        if pre is not None and len(pre.rows) >= n:
+            return SteadyGains(key, pre.rows[:n], settled=False)
+        rows = _plain_rows(d, n)
+        nt = steady_len(rows) if n >= _PROBE0 else None  # a shorter run cannot show a steady state
+        if nt is None:  # this run ends inside the transient: its own rows, never taken for steady ones
+            rows.flags.writeable = False
+            if n >= _PROBE0:  # worth keeping: the next run of this length or less reads instead of computing
+                _save_steady(prefix, SteadyGains(key, rows, settled=False))
+            return SteadyGains(key, rows, settled=False)
+        rows = np.array(rows[:nt])
+        rows.flags.writeable = False
+        st = SteadyGains(key, rows)
+        _save_steady(path, st)
+    elif st is None:
+        st = _probe_steady(d, key, PROBE_MAX)
+        if st is not None:
+            _save_steady(path, st)
+    with _cache_lock:
+        _STEADY[key] = st
+        while len(_STEADY) > _CACHE_SIZE:
+            _STEADY.popitem(last=False)
+    return st
+
+
+# file: magic (8), nt (int64 LE), sha256 of key + nt + payload (32), payload: the rows as float64 LE.
+# Trusted only if the size and the hash agree; anything else is recomputed and overwritten.
+
+
+def _steady_digest(key: str, nt: bytes, payload) -> bytes:
+    h = hashlib.sha256(key.encode() + nt)
+    h.update(payload)  # a buffer (bytes or the mapped rows): never concatenated into a copy
+    return h.digest()
+
+
+def _load_steady(path: Path, key: str) -> SteadyGains | None:
+    """The rows mapped from the file, not read into fresh memory: reading and copying 90 MB cost more
+    (1.2 s per axis, measured) than the whole data pass of a million samples. The hash is checked first."""
+    try:
+        size = path.stat().st_size
+        head = len(_STEADY_MAGIC) + 8 + 32
+        if size < head:
+            return None
+        with open(path, "rb") as fh:
+            blob = fh.read(head)
+        if blob[:8] != _STEADY_MAGIC:
+            return None
+        nt_b, digest = blob[8:16], blob[16:head]
+        nt = int.from_bytes(nt_b, "little")
+        if nt < 1 or size - head != nt * SROW * 8:
+            return None
+        rows = np.memmap(path, dtype="<f8", mode="r", offset=head, shape=(nt, SROW))
+        stamp = _stamp(path, digest)
+        seen = path.with_name(path.name + ".ok")
+        if seen.is_file() and seen.read_bytes() == stamp:  # hashed before, and untouched since
+            return SteadyGains(key, rows)
+    except (OSError, ValueError):
+        return None
+    if _steady_digest(key, nt_b, rows) != digest:
+        return None
+    try:  # hashing 90 MB took 0.2-0.4 s of every run; the stamp says the file has not changed since
+        with atomic_output(seen, "wb", "gain cache") as fh:
+            fh.write(stamp)
+    except (OSError, UserError):
+        pass
+    return SteadyGains(key, rows)
+
+
+def _stamp(path: Path, digest: bytes) -> bytes:
+    """What changes whenever the file does: its inode, size and status-change time (which no user call
+    sets back, unlike the modification time), with the digest it carries."""
+    st = path.stat()
+    return digest + b"%d %d %d" % (st.st_ino, st.st_size, st.st_ctime_ns)
+
+
+def _save_steady(path: Path, st: SteadyGains) -> None:
+    """Best effort: a cache that cannot be written (read-only home, full disk) costs only time."""
+    payload = st.rows.astype("<f8").tobytes()
+    nt_b = len(st.rows).to_bytes(8, "little")
+    try:
+        with atomic_output(path, "wb", "gain cache") as fh:
+            fh.write(_STEADY_MAGIC + nt_b + _steady_digest(st.key, nt_b, payload) + payload)
+    except (OSError, UserError):
+        pass
+
+
+def clear_steady_cache() -> None:
+    """Forget the steady rows held in memory (the files stay)."""
+    with _cache_lock:
+        _STEADY.clear()
 
 
 def _load_gains(cache_dir: Path, key: str) -> PlainGains | None:
@@ -316,13 +552,20 @@ def plain_data(d: AxisDesign, z: np.ndarray, valid: np.ndarray | None, g: PlainG
     xf, xs = out if out is not None else (np.empty((n, 4)), np.empty((n, 4)))
     vbytes = None if valid is None else np.ascontiguousarray(valid, dtype=bool).view(np.uint8)
     vmask = ffi.NULL if vbytes is None else _ptr(ffi, vbytes, "unsigned char *")
+    if g.rows is not None:  # K, Cs are columns 0..3 and 4..7 of the steady rows
+        rows = _ptr(ffi, g.rows, "double *")
+        K, Cs, stride = rows, rows + 4, SROW
+    else:
+        K, Cs, stride = _ptr(ffi, g.K, "double *"), _ptr(ffi, g.Cs, "double *"), 4
     lib.acn_plain_data(
         _axis_struct(ffi, d),
         n,
         _ptr(ffi, z, "double *"),
         vmask,
-        _ptr(ffi, g.K, "double *"),
-        _ptr(ffi, g.Cs, "double *"),
+        K,
+        Cs,
+        stride,
+        len(g.K),
         _ptr(ffi, xf, "double *"),
         _ptr(ffi, xs, "double *"),
     )

@@ -7,6 +7,7 @@ agree with the float64 reference (accelnav.estimate.kf, :func:`reference_filter_
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,6 +16,9 @@ from accelnav.estimate.kf import Aids, double_integrate, run_filter
 from accelnav.model.design import axis_design
 from accelnav.model.edit import warm_started
 from accelnav.model.load import Model
+
+if TYPE_CHECKING:  # consistency loads scipy: imported where it is used
+    from accelnav.estimate.consistency import SmoothChecks
 
 # packed index (accelnav.estimate.fastsmooth.PACKED, upper triangle by rows) of each entry of a 4x4,
 # row-major: np.take with it unpacks (N, 10) into (N, 16) in one pass, no fancy-index scatter
@@ -154,7 +158,6 @@ def smooth_run(
     fixes: list[list] | None = None,
     rest: np.ndarray | None = None,
     zupt_params=None,
-    zupt_gated: bool = False,
     rest_sigma: np.ndarray | None = None,
     covariances: bool = True,
     warm_start: bool = False,
@@ -170,8 +173,7 @@ def smooth_run(
     rest (accelnav.estimate.zupt.rest_mask, or intervals from a file) that become
     zero-velocity updates, the same on every axis ((N,)) or per axis ((N, n_axes), from a
     ZUPT file), with ``rest_sigma`` (N, n_axes) their standard deviations (NaN: the
-    params' sigma) (automatic rests are already gated per rest by rest_mask; ``zupt_gated`` adds the
-    kernel's per-update innovation gate, which the detector no longer uses). The filter keys are
+    params' sigma) (automatic rests are already gated per rest by rest_mask: no update is gated). The filter keys are
     rewritten too, so that filter and smoother saw the same measurements.
     Always: the means filt_x, smooth_x (n_axes, N, 4) and their standard deviations filt_sd, smooth_sd;
     with ``covariances`` also filt_P, smooth_P (n_axes, N, 4, 4) and the priors filt_x_prior, filt_P_prior.
@@ -205,7 +207,7 @@ def smooth_run(
             sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
             za = zupt.axis_aids(rest2[:, j], sigma, model, params)
         extras = fx.concat(za)
-        gates = np.concatenate((np.zeros(len(fx)), np.full(len(za), params.gate if zupt_gated else 0.0)))
+        gates = np.zeros(len(fx) + len(za))  # no innovation gate: rests are gated whole by the detector
         z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
         if not len(extras) and _plain_ok(d):
             res_out.plain(j, d, z, valid)
@@ -385,6 +387,14 @@ def stride_table(arrays: dict[str, np.ndarray], model: Model) -> list[StrideErro
 BASELINES = ("fix interpolation", "fix-to-fix integration")
 
 
+def rms_by_method(rows: list[PositionErrors]) -> dict[str, float]:
+    """The rms position error of each method over all axes (``rows``: :func:`position_errors`)."""
+    sq: dict[str, list[float]] = {}
+    for row in rows:
+        sq.setdefault(row.method, []).append(row.rms**2)
+    return {k: float(np.sqrt(np.mean(v))) for k, v in sq.items()}
+
+
 def fixes_per_axis(arrays: dict[str, np.ndarray]) -> list[list]:
     """The fixes of a smoothed run (its ``fixes`` rows) as measurements per axis column."""
     from accelnav.estimate.kf import position_fix
@@ -456,3 +466,15 @@ def holdout(arrays: dict[str, np.ndarray], model: Model, fixes: list[list], **sm
         e = [r[j, m.k] - m.z for j, h in enumerate(held) for m in h]
         rms[name] = float(np.sqrt(np.mean(np.square(e))))
     return Holdout(sum(len(h) for h in held), rms)
+
+
+def smooth_checks(smoothed: dict, model, inputs: dict, fixes=None, **smooth_kw) -> SmoothChecks:
+    """The consistency checks of a smoothed run (``smoothed``, from ``inputs`` with ``fixes`` and
+    ``smooth_kw`` as :func:`accelnav.estimate.pipeline.smooth_run` took them)."""
+    from accelnav.estimate.consistency import SmoothChecks, nis_check
+
+    first = smoothed["zupt_nis"][:, 3] > 0  # each rest's first update (see smooth_run)
+    kinds = (("fixes", smoothed["fix_nis"]), ("rests", smoothed["zupt_nis"][first, 2]))
+    nis = tuple(nis_check(kind, v) for kind, v in kinds if len(v))
+    h = None if fixes is None else holdout(inputs, model, fixes, **smooth_kw)
+    return SmoothChecks(nis, h)

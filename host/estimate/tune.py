@@ -221,15 +221,7 @@ def tune(
     """
     import time
 
-    names = []
-    for f in figures:
-        if f == "c2":
-            names += [f"c2.{a.name}" for a in model.axes]
-        elif f in FIGURES:
-            names.append(f)
-        else:
-            raise ValueError(f"figure {f!r}; accepted: {', '.join(FIGURES)}, c2")
-    figures = tuple(names)
+    figures = _figure_names(model, figures)
     extras = [fastsmooth.Extras.of(e) for e in extras]  # once: the search filters them hundreds of times
     start = all_figures(model)
     first = dict(start)
@@ -296,57 +288,7 @@ def tune(
     ci = {f: (nan, nan) for f in figures}
     ends: dict[str, tuple[str, str]] = {}
     if intervals:
-        # observed information: central differences of -ln L in theta
-        h = 0.02
-        H = np.empty((k, k))
-        f0 = -ll1
-        for i in range(k):
-            for j in range(i, k):
-                ei, ej = np.eye(k)[i] * h, np.eye(k)[j] * h
-                if i == j:
-                    H[i, i] = (nll(theta + ei) - 2 * f0 + nll(theta - ei)) / h**2
-                else:
-                    H[i, j] = H[j, i] = (
-                        nll(theta + ei + ej) - nll(theta + ei - ej) - nll(theta - ei + ej) + nll(theta - ei - ej)
-                    ) / (4 * h**2)
-        # covariance on the well-determined directions; a figure that leans on a flat or curved-the-wrong-way
-        # direction of -ln L (eigenvalue <= 0) gets no Wald se
-        try:
-            w, V = np.linalg.eigh(H)
-        except np.linalg.LinAlgError:
-            w, V = np.full(k, np.nan), np.eye(k)
-        good = np.isfinite(w) & (w > 0)
-        cov = (V[:, good] / w[good]) @ V[:, good].T
-        weak = np.sum(V[:, ~good] ** 2, axis=1) > 0.1
-        se = {}
-        for i, f in enumerate(figures):
-            se[f] = math.sqrt(cov[i, i]) if cov[i, i] > 0 and not weak[i] else float("nan")
-        ci = {}
-        noise_figs = [f for f in figures if not _is_c2(f)]
-        # profiles, best-determined figure first (cheap: its ends are near), so that what they leave goes to the
-        # weakest (an undefined se counts as the weakest), whose profile may have to walk to a search bound
-        noise_figs.sort(key=lambda f: se[f] if math.isfinite(se[f]) else math.inf)
-        total = max_evaluations + 20  # the Hessian may take the search's evaluations past its share
-        for n_fig, f in enumerate(noise_figs):
-            i = figures.index(f)
-            sides = []
-            for side, direction in enumerate((-1.0, 1.0)):
-                # a fair share of what is left, so that a figure whose profile wanders far cannot starve the others
-                left = (len(noise_figs) - n_fig) * 2 - side
-                limit = count[0] + max(0, total - count[0]) // left
-                bound = lo[i] if direction < 0 else hi[i]
-                psi, how = _profile_end(nll, theta, f0, i, direction, se[f], bound, lo, hi, H, count, limit)
-                sides.append((psi, how))
-            ends[f] = (sides[0][1], sides[1][1])
-            ci[f] = tuple(math.exp(psi) if how != "budget" else float("nan") for psi, how in sides)
-        for f in figures:
-            if not _is_c2(f):
-                continue
-            if not math.isfinite(se[f]):
-                ci[f] = (float("nan"), float("nan"))
-            else:
-                se[f] *= C2_SCALE
-                ci[f] = (est[f] - 1.96 * se[f], est[f] + 1.96 * se[f])
+        se, ci, ends = _intervals(nll, theta, -ll1, figures, est, lo, hi, count, max_evaluations)
     lr = max(0.0, 2.0 * (ll1 - ll0))
     p = float(stats.chi2.sf(lr, k))
     return TuneResult(
@@ -365,6 +307,120 @@ def tune(
         at_bound=_at_bound(figures, theta, lo, hi),
         ends=ends,
     )
+
+
+def _figure_names(model: Model, figures: Sequence[str]) -> tuple[str, ...]:
+    """The figures asked for, "c2" expanded to one per axis; an unknown one refused."""
+    names = []
+    for f in figures:
+        if f == "c2":
+            names += [f"c2.{a.name}" for a in model.axes]
+        elif f in FIGURES:
+            names.append(f)
+        else:
+            raise ValueError(f"figure {f!r}; accepted: {', '.join(FIGURES)}, c2")
+    return tuple(names)
+
+
+def _hessian(nll, theta, f0, h: float = 0.02) -> np.ndarray:
+    """The observed information: central differences of -ln L (``nll``, ``f0`` at ``theta``) in theta."""
+    k = len(theta)
+    H = np.empty((k, k))
+    for i in range(k):
+        for j in range(i, k):
+            ei, ej = np.eye(k)[i] * h, np.eye(k)[j] * h
+            if i == j:
+                H[i, i] = (nll(theta + ei) - 2 * f0 + nll(theta - ei)) / h**2
+            else:
+                H[i, j] = H[j, i] = (
+                    nll(theta + ei + ej) - nll(theta + ei - ej) - nll(theta - ei + ej) + nll(theta - ei - ej)
+                ) / (4 * h**2)
+    return H
+
+
+def _intervals(nll, theta, f0, figures, est, lo, hi, count, max_evaluations):
+    """(se, 95 % intervals, how each profile ended) at the estimate ``theta`` (-ln L there: ``f0``): the
+    Wald se from the observed information, profile intervals for the noise figures, Wald ones for c2."""
+    k = len(figures)
+    H = _hessian(nll, theta, f0)
+    # covariance on the well-determined directions; a figure that leans on a flat or curved-the-wrong-way
+    # direction of -ln L (eigenvalue <= 0) gets no Wald se
+    try:
+        w, V = np.linalg.eigh(H)
+    except np.linalg.LinAlgError:
+        w, V = np.full(k, np.nan), np.eye(k)
+    good = np.isfinite(w) & (w > 0)
+    cov = (V[:, good] / w[good]) @ V[:, good].T
+    weak = np.sum(V[:, ~good] ** 2, axis=1) > 0.1
+    se = {}
+    for i, f in enumerate(figures):
+        se[f] = math.sqrt(cov[i, i]) if cov[i, i] > 0 and not weak[i] else float("nan")
+    ci: dict[str, tuple[float, float]] = {}
+    ends: dict[str, tuple[str, str]] = {}
+    noise_figs = [f for f in figures if not _is_c2(f)]
+    # profiles, best-determined figure first (cheap: its ends are near), so that what they leave goes to the
+    # weakest (an undefined se counts as the weakest), whose profile may have to walk to a search bound
+    noise_figs.sort(key=lambda f: se[f] if math.isfinite(se[f]) else math.inf)
+    total = max_evaluations + 20  # the Hessian may take the search's evaluations past its share
+    for n_fig, f in enumerate(noise_figs):
+        i = figures.index(f)
+        sides = []
+        for side, direction in enumerate((-1.0, 1.0)):
+            # a fair share of what is left, so that a figure whose profile wanders far cannot starve the others
+            left = (len(noise_figs) - n_fig) * 2 - side
+            limit = count[0] + max(0, total - count[0]) // left
+            bound = lo[i] if direction < 0 else hi[i]
+            psi, how = _profile_end(nll, theta, f0, i, direction, se[f], bound, lo, hi, H, count, limit)
+            sides.append((psi, how))
+        ends[f] = (sides[0][1], sides[1][1])
+        ci[f] = tuple(math.exp(psi) if how != "budget" else float("nan") for psi, how in sides)
+    for f in figures:
+        if not _is_c2(f):
+            continue
+        if not math.isfinite(se[f]):
+            ci[f] = (float("nan"), float("nan"))
+        else:
+            se[f] *= C2_SCALE
+            ci[f] = (est[f] - 1.96 * se[f], est[f] + 1.96 * se[f])
+    return se, ci, ends
+
+
+def tune_for_smoothing(
+    model: Model,
+    run,
+    *,
+    fixes=None,
+    rest: np.ndarray | None = None,
+    rest_sigma: np.ndarray | None = None,
+    params=None,
+    max_evaluations: int = MAX_EVALUATIONS,
+    max_seconds: float | None = None,
+    announce=None,
+) -> tuple[Model, TuneResult]:
+    """``accelnav smooth --tune``: the model with this run's maximum-likelihood noise figures, found with the
+    smoother's own aids (fixes, rests) in a stated budget, the estimate only (no intervals); and the result.
+
+    The figures are rounded to 6 digits, as a model file holds them. ``announce(samples, axes, aids)`` is
+    called once before the search, which may take the whole budget."""
+    if max_evaluations < 10:
+        raise ValueError(f"max_evaluations: got {max_evaluations}; accepted: 10 or more")
+    if max_seconds is not None and not max_seconds > 0:
+        raise ValueError(f"max_seconds: got {max_seconds:g}; accepted: a time > 0 s")
+    accel = np.asarray(run["accel"], dtype=np.float64)
+    n, m = accel.shape
+    extras, _ = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
+    if announce is not None:
+        announce(n, m, sum(map(len, extras)))
+    r = tune(
+        model,
+        accel,
+        ~np.asarray(run["clipped"], dtype=bool),
+        extras,
+        max_evaluations=max_evaluations,
+        max_seconds=max_seconds,
+        intervals=False,
+    )
+    return with_figures(model, {f: float(f"{v:.6g}") for f, v in r.chosen.items()}), r
 
 
 class _OutOfTime(Exception):

@@ -653,12 +653,6 @@ def axis_updates(
     return a.k, a.measurements()
 
 
-def intervals_from_csv(path, t: np.ndarray) -> np.ndarray:
-    """A rest mask from a CSV of intervals (columns start_s, end_s; inclusive), on the sample times t."""
-    mask, _ = read_zupt_file(path, t, ["_"])
-    return mask[:, 0]
-
-
 def read_zupt_file(path, t: np.ndarray, axis_names: list[str]) -> tuple[np.ndarray, np.ndarray]:
     """Zero-velocity updates given by the user: ((N, n_axes) bool mask, (N, n_axes) sigma [m/s], NaN = default).
 

@@ -364,6 +364,78 @@ def _exact_pass(t, y, c1, c2, T, r_out: np.ndarray) -> tuple[np.ndarray, np.ndar
     return A, b, rss
 
 
+def _polish(tr, y, c1, c2, T_hat, T_range):
+    """Gauss-Newton from the profile's optimum on the exact residuals, each step kept inside ``T_range`` and
+    only if it lowers the RSS (halved otherwise): (c1, c2, T, normal matrix, RSS, residuals, converged)."""
+    n, dof = len(tr), len(tr) - 3
+    T_lo, T_hi = T_range
+    converged = False
+    r = np.empty(n)
+    spare = np.empty(n)
+    A, b, rss = _exact_pass(tr, y, c1, c2, T_hat, r)
+    for _ in range(8):
+        sigma2 = rss / dof
+        cov = _cov_from_normal(A, sigma2)
+        se = np.sqrt(np.abs(np.diag(cov)))
+        if not (np.all(np.isfinite(se)) and sigma2 > 0):
+            break
+        step = cov @ b / sigma2  # Gauss-Newton: (J^T J)^-1 J^T r
+        if np.all(np.abs(step) <= 1e-4 * se):
+            converged = True
+            break
+        # take the step only inside the searched range and only if it lowers the RSS; halve it otherwise
+        for _half in range(30):
+            new_T = T_hat + step[2]
+            if T_lo <= new_T <= T_hi:
+                new_c1, new_c2 = c1 + step[0], c2 + step[1]
+                new_A, new_b, new_rss = _exact_pass(tr, y, new_c1, new_c2, new_T, spare)
+                if new_rss <= rss:
+                    c1, c2, T_hat, A, b, rss = new_c1, new_c2, new_T, new_A, new_b, new_rss
+                    r, spare = spare, r
+                    break
+            step = step / 2
+        else:
+            break
+    return c1, c2, T_hat, A, rss, r, converged
+
+
+def _verdict(*, at_lo, at_hi, converged, closed_lr, c1, c1_ci_lr, T_ci, T_range, duration, inflate) -> str:
+    """Why T is or is not identified, in one sentence (it starts "T identified" only when it is)."""
+    T_lo, T_hi = T_range
+    if at_hi:
+        return (
+            f"T not identified: the best T is at the top of the search ({T_hi:.4g} s, "
+            f"{T_hi / duration:.3g}x the record); the data show a drift that does not level off"
+        )
+    if at_lo:
+        return (
+            f"T not identified: the best T is at the bottom of the search ({T_lo:.4g} s); "
+            f"no warm-up longer than a few samples"
+        )
+    if not converged:
+        return "T not identified: the three-parameter fit did not converge (c1 and T are confounded)"
+    if not all(closed_lr):
+        side = "above" if not closed_lr[1] else "below"
+        why = (
+            "the warm-up is not seen to level off; only c1/T is determined"
+            if side == "above"
+            else "a much faster warm-up fits as well"
+        )
+        return (
+            f"T not identified: its 95 % profile interval is open {side} within [{T_lo:.4g}, {T_hi:.4g}] s "
+            f"(allowing for residual correlation: variances x {inflate:.3g}); {why}"
+        )
+    if c1_ci_lr[0] <= 0.0 <= c1_ci_lr[1]:
+        return (
+            f"T not identified: c1 = {c1:.4g} is not distinguishable from zero (95 % interval "
+            f"[{c1_ci_lr[0]:.4g}, {c1_ci_lr[1]:.4g}] allowing for residual correlation): no visible warm-up"
+        )
+    return (
+        f"T identified: 95 % profile interval [{T_ci[0]:.4g}, {T_ci[1]:.4g}] s "
+        f"inside the search range [{T_lo:.4g}, {T_hi:.4g}] s"
+    )
+
+
 def fit_bias(
     t,
     y,
@@ -419,33 +491,7 @@ def fit_bias(
 
     # 3. exact pass at the optimum: residuals, Jacobian, Gauss-Newton polish if needed
     dof = n - 3
-    converged = False
-    r = np.empty(n)
-    spare = np.empty(n)
-    A, b, rss = _exact_pass(tr, y, c1, c2, T_hat, r)
-    for _ in range(8):
-        sigma2 = rss / dof
-        cov = _cov_from_normal(A, sigma2)
-        se = np.sqrt(np.abs(np.diag(cov)))
-        if not (np.all(np.isfinite(se)) and sigma2 > 0):
-            break
-        step = cov @ b / sigma2  # Gauss-Newton: (J^T J)^-1 J^T r
-        if np.all(np.abs(step) <= 1e-4 * se):
-            converged = True
-            break
-        # take the step only inside the searched range and only if it lowers the RSS; halve it otherwise
-        for _half in range(30):
-            new_T = T_hat + step[2]
-            if T_lo <= new_T <= T_hi:
-                new_c1, new_c2 = c1 + step[0], c2 + step[1]
-                new_A, new_b, new_rss = _exact_pass(tr, y, new_c1, new_c2, new_T, spare)
-                if new_rss <= rss:
-                    c1, c2, T_hat, A, b, rss = new_c1, new_c2, new_T, new_A, new_b, new_rss
-                    r, spare = spare, r
-                    break
-            step = step / 2
-        else:
-            break
+    c1, c2, T_hat, A, rss, r, converged = _polish(tr, y, c1, c2, T_hat, (T_lo, T_hi))
     c1, c2, T_hat = float(c1), float(c2), float(T_hat)
     _advance(progress, 3)
 
@@ -485,41 +531,18 @@ def fit_bias(
         rss_grid=_readonly(rss_grid),
     )
 
-    at_lo = i == 0
-    at_hi = i == n_grid - 1
-    if at_hi:
-        verdict = (
-            f"T not identified: the best T is at the top of the search ({T_hi:.4g} s, "
-            f"{T_hi / duration:.3g}x the record); the data show a drift that does not level off"
-        )
-    elif at_lo:
-        verdict = (
-            f"T not identified: the best T is at the bottom of the search ({T_lo:.4g} s); "
-            f"no warm-up longer than a few samples"
-        )
-    elif not converged:
-        verdict = "T not identified: the three-parameter fit did not converge (c1 and T are confounded)"
-    elif not all(closed_lr):
-        side = "above" if not closed_lr[1] else "below"
-        why = (
-            "the warm-up is not seen to level off; only c1/T is determined"
-            if side == "above"
-            else "a much faster warm-up fits as well"
-        )
-        verdict = (
-            f"T not identified: its 95 % profile interval is open {side} within [{T_lo:.4g}, {T_hi:.4g}] s "
-            f"(allowing for residual correlation: variances x {inflate:.3g}); {why}"
-        )
-    elif ci95_lr[0][0] <= 0.0 <= ci95_lr[0][1]:
-        verdict = (
-            f"T not identified: c1 = {c1:.4g} is not distinguishable from zero (95 % interval "
-            f"[{ci95_lr[0][0]:.4g}, {ci95_lr[0][1]:.4g}] allowing for residual correlation): no visible warm-up"
-        )
-    else:
-        verdict = (
-            f"T identified: 95 % profile interval [{T_ci[0]:.4g}, {T_ci[1]:.4g}] s "
-            f"inside the search range [{T_lo:.4g}, {T_hi:.4g}] s"
-        )
+    verdict = _verdict(
+        at_lo=i == 0,
+        at_hi=i == n_grid - 1,
+        converged=converged,
+        closed_lr=closed_lr,
+        c1=c1,
+        c1_ci_lr=ci95_lr[0],
+        T_ci=T_ci,
+        T_range=(T_lo, T_hi),
+        duration=duration,
+        inflate=inflate,
+    )
     identified = verdict.startswith("T identified")
     _advance(progress, 4)
 

@@ -107,10 +107,6 @@ class Pose:
     quant: np.ndarray  # (axes,) m/s^2, amplitude of the possible rounding error of the mean
     level: np.ndarray  # (axes,) in g: -1, 0 or +1
 
-    @property
-    def se_total(self) -> np.ndarray:
-        return np.sqrt(self.se**2 + self.quant**2 / 2.0)
-
 
 @dataclass(frozen=True)
 class AxisCal:

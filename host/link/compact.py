@@ -44,7 +44,7 @@ batch holds nothing but the next frames in order, which is the common case):
 A checkpoint the decoder refused never reaches this class: a damaged frame, or
 one whose contents no firmware sends (an axis that does not exist, a
 gain-schedule row index outside the table:
-:meth:`accelnav.link.telemetry.Manifest.checkpoints_sane`). It counts in
+:meth:`accelnav.link.manifest.Manifest.checkpoints_sane`). It counts in
 ``bad_frames`` and the stream goes on as if it had been lost.
 
 Without a replay (no model text: a log recorded with ``--manifest``), the
@@ -135,141 +135,12 @@ class CompactStream:
         checkpoints' ``paused_at``. A frame that opens a new run or jumps more than ``window`` samples ahead
         is taken only once the next frame agrees with it (else it is damage, counted in ``damaged``); the
         batch's last frame waits in ``self.defer`` for the next batch."""
-        end = self.end
-        acc, breaks = [], []
-        events: list[list[list]] = [[] for _ in self.axes]
-        pos = 0
-        R, X = self.R, self.X
-        K = len(kinds)
-        b_run = b_run if b_run is not None else [0] * len(b_index)
-        c_run = c_run if c_run is not None else [0] * len(c_index)
-        c_paused = c_paused if c_paused is not None else [None] * len(c_index)
+        f = _Frames(kinds, ids, b_index, b_n, b_flags, c_index, c_flags, c_axis, b_run, c_run, c_paused)
+        w = _Walk(self, f, runs)
         self.defer = None
-
-        def brk(p):
-            breaks.append(p)
-            for ev in events:
-                for e in ev[::-1]:
-                    if e[0] != p:
-                        break
-                    e[3] = False
-
-        def where(q):
-            """(run id, index, index after it) of frame q."""
-            if kinds[q] == 0:
-                j = ids[q]
-                return b_run[j], b_index[j], b_index[j] + b_n[j]
-            j = ids[q]
-            return c_run[j], c_index[j], c_index[j]
-
-        def plausible(q, end) -> bool | None:
-            """Frame q opens the stream or a new run, or jumps far ahead: decided by the first of the next
-            frames that agrees with it (the same run, within a window after it: True) or with the run so far
-            (False); None when no frame follows in this batch. Frames damaged beyond that: False."""
-            r, idx, after = where(q)
-            if q + 1 >= K:
-                return None
-            for q2 in range(q + 1, min(K, q + 1 + LOOKAHEAD)):
-                r2, idx2, _ = where(q2)
-                if r2 == r and idx <= idx2 <= after + self.window:
-                    return True
-                if end is not None and r2 == self.run and idx2 <= end + self.window:
-                    return False
-            return False
-
-        k = 0
-        while k < K:
-            kind, i = kinds[k], ids[k]
-            k += 1
-            bulk = runs is not None and end is not None and runs[0][k - 1] > k - 1 and runs[1][k - 1] == end
-            bulk = bulk and runs[3][k - 1] == self.run
-            if bulk and not (breaks and breaks[-1] == pos):  # (a checkpoint right after a break: the rule)
-                r = runs[0][k - 1]  # frames k - 1 .. r - 1 follow on: accepted as the rule would, in bulk
-                nb = runs[2]
-                for q in range(k - 1, r):
-                    if kinds[q] == 1:
-                        j = ids[q]
-                        if self.last_ck[c_axis[j]] == c_index[j]:
-                            r = q  # the checkpoint just taken, again: the rule from here
-                            break
-                        self.last_ck[c_axis[j]] = c_index[j]
-                        events[c_axis[j]].append([pos + nb[q] - nb[k - 1], j, True, True])
-                if r > k - 1:
-                    blk = [ids[q] for q in range(k - 1, r) if kinds[q] == 0]
-                    if blk:
-                        acc.extend(blk)
-                        pos += nb[r] - nb[k - 1]
-                        end = b_index[blk[-1]] + b_n[blk[-1]]
-                    k = r
-                    continue
-            run, idx, _ = where(k - 1)
-            fl = b_flags[i] if kind == 0 else c_flags[i]
-            new_run = end is not None and run != self.run
-            if new_run and run in self.past_runs:  # a frame of an earlier run, sent again
-                if kind == 0:
-                    self.duplicates += b_n[i]
-                else:
-                    self.checkpoint_repeats += 1
-                continue
-            if new_run or end is None or idx > end + self.window:
-                ok = plausible(k - 1, end)
-                if ok is None:
-                    self.defer = (kind, i)  # decided by the next frame, in the next batch
-                    break
-                if not ok:
-                    self.damaged += 1  # a CRC-valid frame no firmware sent here: not the new truth
-                    self.damaged_bytes += self.seg_len[kind]
-                    continue
-            if new_run:
-                self.past_runs = self.past_runs | {self.run}
-                if len(self.past_runs) > 64:
-                    self.past_runs = set(sorted(self.past_runs)[-64:])
-                self.run = run
-                self.pause_from = None
-                brk(pos)
-                end = None  # the new run's first frame: no gap counted against the old run
-            if end is None:
-                self.run = run
-            if kind == 0:
-                n = b_n[i]
-                if end is None:
-                    brk(pos)  # the first frame seen, or a new run whose checkpoints were lost
-                elif idx < end:
-                    self.duplicates += n
-                    continue
-                elif idx > end:
-                    if fl & R:
-                        self.pause_from = end  # a pause: paused_at will tell what was lost before it
-                    else:
-                        self.lost += idx - end
-                    brk(pos)
-                acc.append(i)
-                pos += n
-                end = idx + n
-                continue
-            ax = c_axis[i]
-            if end is not None and idx < end:
-                self.checkpoint_repeats += 1  # an older checkpoint of this run
-                continue
-            if end is not None and idx == end and self.last_ck[ax] == idx and not fl & X:
-                self.checkpoint_repeats += 1  # the one just taken, again
-                continue
-            if end is None or idx > end:
-                if end is not None:
-                    if fl & R:
-                        self.pause_from = end
-                    else:
-                        self.lost += idx - end
-                brk(pos)
-                end = idx
-            if self.pause_from is not None and c_paused[i] is not None:
-                # samples the firmware sent before the pause that never arrived
-                self.lost += max(0, min(int(c_paused[i]), idx) - self.pause_from)
-                self.pause_from = None
-            self.last_ck[ax] = idx
-            events[ax].append([pos, i, not (breaks and breaks[-1] == pos), True])
-        self.end = end
-        return acc, breaks, events
+        w.walk()
+        self.end = w.end
+        return w.acc, w.breaks, w.events
 
     # ------------------------------------------------------------------
     def feed(self, blocks: np.ndarray, bpos: np.ndarray, cks: np.ndarray, cpos: np.ndarray):
@@ -420,54 +291,15 @@ class CompactStream:
         if self.replay is None:
             valid[:] = False
         jobs = []
-        for j, pl in enumerate(plans):
-            if self.replay is not None and pl["live"]:
-                segs, live, nbj = pl["segs"], pl["live"], self.state_bytes[j]
-                start = np.array([segs[k][0] for k in live], np.int64)
-                length = np.array([segs[k][1] - segs[k][0] for k in live], np.int64)
-                srcs = np.array([segs[k][2] for k in live], np.int64)
-                init = np.empty((len(live), nbj), np.uint8)
-                from_ck = srcs >= 0
-                init[from_ck] = ck_states[srcs[from_ck], :nbj]
-                if not from_ck.all():
-                    init[~from_ck] = np.frombuffer(pl["carry"], np.uint8)
-                in1 = raw[(j, self.raw[0])]
-                in2 = raw[(j, self.raw[1])] if len(self.raw) > 1 else None
-                jobs.append((j, start, length, init, codes[j], in1, in2, rows))
+        if self.replay is not None:
+            for j, pl in enumerate(plans):
+                if pl["live"]:
+                    in1 = raw[(j, self.raw[0])]
+                    in2 = raw[(j, self.raw[1])] if len(self.raw) > 1 else None
+                    jobs.append((j, *self._starts(j, pl, ck_states), codes[j], in1, in2, rows))
         results = self._replay_all(jobs, N)
         for j, pl in enumerate(plans):
-            nbj = self.state_bytes[j]
-            segs, live, checks, src, carry = pl["segs"], pl["live"], pl["checks"], pl["src"], pl["carry"]
-            fin = np.zeros((max(len(segs), 1), nbj), np.uint8)  # a row even without a stretch (N == 0)
-            has_fin = np.zeros(len(fin), bool)
-            if j in results:
-                f, nbad = results[j]
-                fin[live] = f
-                has_fin[live] = True
-                for m in np.flatnonzero(nbad).tolist():
-                    self.mismatches += int(nbad[m])
-                    flag(segs[live[m]])
-            if checks:
-                ks = np.array([k for k, _ in checks], np.int64)
-                ids = np.array([i for _, i in checks], np.int64)
-                ok = np.where(ks >= 0, has_fin[np.maximum(ks, 0)], True)
-                got = fin[np.maximum(ks, 0)]
-                if (ks < 0).any():
-                    got[ks < 0] = np.frombuffer(carry, np.uint8)
-                same = (got == ck_states[ids, :nbj]).all(axis=1)
-                self.checkpoints += int(np.count_nonzero(ok & same))
-                for k in ks[ok & ~same].tolist():
-                    self.mismatches += 1
-                    if k >= 0:
-                        flag(segs[k])
-                    else:  # the carried stretch: only held rows
-                        held_mism[held_g >= pl["stale_from"]] = True
-            if src == "continue":
-                self.carry[j] = fin[-1].tobytes() if segs and has_fin[-1] else None
-            elif src == CARRY:
-                pass  # no sample and no checkpoint in this batch: the carried state stays
-            else:
-                self.carry[j] = None if src == NONE else ck_states[src, :nbj].tobytes()
+            self._verify(j, pl, results.get(j), ck_states, flag, held_mism, held_g)
         if self.replay is None:
             self.unreplayed += N
         else:
@@ -490,6 +322,56 @@ class CompactStream:
         self.held = (whole[cut:].copy(), g[cut:])
         self.held_pos = rpos[cut:]
         return whole[:cut], rpos[:cut]
+
+    def _starts(self, j: int, pl: dict, ck_states: np.ndarray):
+        """Axis j's replay stretches: (start, length, initial state) of each live one, the state from its
+        checkpoint or the carried one."""
+        segs, live, nbj = pl["segs"], pl["live"], self.state_bytes[j]
+        start = np.array([segs[k][0] for k in live], np.int64)
+        length = np.array([segs[k][1] - segs[k][0] for k in live], np.int64)
+        srcs = np.array([segs[k][2] for k in live], np.int64)
+        init = np.empty((len(live), nbj), np.uint8)
+        from_ck = srcs >= 0
+        init[from_ck] = ck_states[srcs[from_ck], :nbj]
+        if not from_ck.all():
+            init[~from_ck] = np.frombuffer(pl["carry"], np.uint8)
+        return start, length, init
+
+    def _verify(self, j: int, pl: dict, result, ck_states: np.ndarray, flag, held_mism, held_g) -> None:
+        """Axis j after its replay (``result``: final states and step verdicts, or None): the checkpoints held
+        against the final states, disagreements flagged (``flag``, ``held_mism``), the carried state kept."""
+        nbj = self.state_bytes[j]
+        segs, live, checks, src, carry = pl["segs"], pl["live"], pl["checks"], pl["src"], pl["carry"]
+        fin = np.zeros((max(len(segs), 1), nbj), np.uint8)  # a row even without a stretch (N == 0)
+        has_fin = np.zeros(len(fin), bool)
+        if result is not None:
+            f, nbad = result
+            fin[live] = f
+            has_fin[live] = True
+            for m in np.flatnonzero(nbad).tolist():
+                self.mismatches += int(nbad[m])
+                flag(segs[live[m]])
+        if checks:
+            ks = np.array([k for k, _ in checks], np.int64)
+            ids = np.array([i for _, i in checks], np.int64)
+            ok = np.where(ks >= 0, has_fin[np.maximum(ks, 0)], True)
+            got = fin[np.maximum(ks, 0)]
+            if (ks < 0).any():
+                got[ks < 0] = np.frombuffer(carry, np.uint8)
+            same = (got == ck_states[ids, :nbj]).all(axis=1)
+            self.checkpoints += int(np.count_nonzero(ok & same))
+            for k in ks[ok & ~same].tolist():
+                self.mismatches += 1
+                if k >= 0:
+                    flag(segs[k])
+                else:  # the carried stretch: only held rows
+                    held_mism[held_g >= pl["stale_from"]] = True
+        if src == "continue":
+            self.carry[j] = fin[-1].tobytes() if segs and has_fin[-1] else None
+        elif src == CARRY:
+            pass  # no sample and no checkpoint in this batch: the carried state stays
+        else:
+            self.carry[j] = None if src == NONE else ck_states[src, :nbj].tobytes()
 
     def _plan(self, j: int, N: int, breakset: set, events: list, valid: np.ndarray, g0: int) -> dict:
         """Axis j's stretches in a batch of N samples: where the replay starts from the carried state, from a
@@ -575,3 +457,187 @@ class CompactStream:
         self.replay.fill(blk, rows, self.man.code_flags(), ~rx & 0xFFFF, self.REPLAYED, rx)
         if mism.any():
             rows["flags"] |= np.where(mism, self.MISMATCH, 0).astype(rows["flags"].dtype)
+
+
+class _Frames:
+    """The frames :meth:`CompactStream.order` walks, as lists (one ``kinds``/``ids`` entry per frame in stream
+    order; the other lists per block or per checkpoint)."""
+
+    def __init__(self, kinds, ids, b_index, b_n, b_flags, c_index, c_flags, c_axis, b_run, c_run, c_paused):
+        self.kinds, self.ids = kinds, ids
+        self.b_index, self.b_n, self.b_flags = b_index, b_n, b_flags
+        self.c_index, self.c_flags, self.c_axis = c_index, c_flags, c_axis
+        self.b_run = b_run if b_run is not None else [0] * len(b_index)
+        self.c_run = c_run if c_run is not None else [0] * len(c_index)
+        self.c_paused = c_paused if c_paused is not None else [None] * len(c_index)
+
+    def where(self, q: int) -> tuple[int, int, int]:
+        """(run id, index, index after it) of frame q."""
+        j = self.ids[q]
+        if self.kinds[q] == 0:
+            return self.b_run[j], self.b_index[j], self.b_index[j] + self.b_n[j]
+        return self.c_run[j], self.c_index[j], self.c_index[j]
+
+
+class _Walk:
+    """One pass of :meth:`CompactStream.order`: the index reached (``end``), the sample position in the
+    batch (``pos``), the accepted blocks, the breaks and the per-axis checkpoint events so far. The
+    stream's own state and counts stay on the :class:`CompactStream` (``cs``)."""
+
+    def __init__(self, cs: CompactStream, f: _Frames, runs):
+        self.cs, self.f, self.runs = cs, f, runs
+        self.end = cs.end
+        self.pos = 0
+        self.acc: list[int] = []
+        self.breaks: list[int] = []
+        self.events: list[list[list]] = [[] for _ in cs.axes]
+
+    def walk(self) -> None:
+        cs, f, runs = self.cs, self.f, self.runs
+        k, K = 0, len(f.kinds)
+        while k < K:
+            # frames k .. that continue the one before, from where the stream is (a checkpoint right after a
+            # break goes by the rule)
+            if (
+                runs is not None
+                and self.end is not None
+                and runs[0][k] > k
+                and runs[1][k] == self.end
+                and runs[3][k] == cs.run
+                and not self._broken_here()
+            ):
+                r = self._bulk(k)
+                if r is not None:
+                    k = r
+                    continue
+            if self._frame(k) is None:
+                cs.defer = (f.kinds[k], f.ids[k])  # decided by the next frame, in the next batch
+                break
+            k += 1
+
+    def _brk(self, p: int) -> None:
+        """A break at position p: the checkpoints there no longer start the replay (a gap follows them)."""
+        self.breaks.append(p)
+        for ev in self.events:
+            for e in ev[::-1]:
+                if e[0] != p:
+                    break
+                e[3] = False
+
+    def _broken_here(self) -> bool:
+        return bool(self.breaks) and self.breaks[-1] == self.pos
+
+    def _plausible(self, q: int) -> bool | None:
+        """Frame q opens the stream or a new run, or jumps far ahead: decided by the first of the next
+        frames that agrees with it (the same run, within a window after it: True) or with the run so far
+        (False); None when no frame follows in this batch. Frames damaged beyond that: False."""
+        cs, K = self.cs, len(self.f.kinds)
+        r, idx, after = self.f.where(q)
+        if q + 1 >= K:
+            return None
+        for q2 in range(q + 1, min(K, q + 1 + LOOKAHEAD)):
+            r2, idx2, _ = self.f.where(q2)
+            if r2 == r and idx <= idx2 <= after + cs.window:
+                return True
+            if self.end is not None and r2 == cs.run and idx2 <= self.end + cs.window:
+                return False
+        return False
+
+    def _bulk(self, q: int) -> int | None:
+        """Frames q .. r - 1 that each continue the one before (``runs``, checked by :meth:`walk`), taken as
+        the rule would take them, in bulk: r, or None when frame q goes by the rule (a repeated checkpoint)."""
+        cs, f, runs = self.cs, self.f, self.runs
+        r, nb = runs[0][q], runs[2]
+        for p in range(q, r):
+            if f.kinds[p] == 1:
+                j = f.ids[p]
+                if cs.last_ck[f.c_axis[j]] == f.c_index[j]:
+                    r = p  # the checkpoint just taken, again: the rule from here
+                    break
+                cs.last_ck[f.c_axis[j]] = f.c_index[j]
+                self.events[f.c_axis[j]].append([self.pos + nb[p] - nb[q], j, True, True])
+        if r <= q:
+            return None
+        blk = [f.ids[p] for p in range(q, r) if f.kinds[p] == 0]
+        if blk:
+            self.acc.extend(blk)
+            self.pos += nb[r] - nb[q]
+            self.end = f.b_index[blk[-1]] + f.b_n[blk[-1]]
+        return r
+
+    def _frame(self, q: int) -> bool | None:
+        """The rule for frame q: True taken, False refused (a repeat or damage), None deferred."""
+        cs, f = self.cs, self.f
+        kind, i = f.kinds[q], f.ids[q]
+        run, idx = (f.b_run[i], f.b_index[i]) if kind == 0 else (f.c_run[i], f.c_index[i])
+        new_run = self.end is not None and run != cs.run
+        if new_run and run in cs.past_runs:  # a frame of an earlier run, sent again
+            if kind == 0:
+                cs.duplicates += f.b_n[i]
+            else:
+                cs.checkpoint_repeats += 1
+            return False
+        if new_run or self.end is None or idx > self.end + cs.window:
+            ok = self._plausible(q)
+            if ok is None:
+                return None
+            if not ok:
+                cs.damaged += 1  # a CRC-valid frame no firmware sent here: not the new truth
+                cs.damaged_bytes += cs.seg_len[kind]
+                return False
+        if new_run:
+            cs.past_runs = cs.past_runs | {cs.run}
+            if len(cs.past_runs) > 64:
+                cs.past_runs = set(sorted(cs.past_runs)[-64:])
+            cs.run = run
+            cs.pause_from = None
+            self._brk(self.pos)
+            self.end = None  # the new run's first frame: no gap counted against the old run
+        if self.end is None:
+            cs.run = run
+        return self._block(i, idx) if kind == 0 else self._checkpoint(i, idx)
+
+    def _gap(self, flags: int, idx: int) -> None:
+        """The stream jumps from ``end`` to ``idx``: a pause (resume flag) or lost samples; a break."""
+        if flags & self.cs.R:
+            self.cs.pause_from = self.end  # a pause: paused_at will tell what was lost before it
+        else:
+            self.cs.lost += idx - self.end
+        self._brk(self.pos)
+
+    def _block(self, i: int, idx: int) -> bool:
+        n = self.f.b_n[i]
+        if self.end is None:
+            self._brk(self.pos)  # the first frame seen, or a new run whose checkpoints were lost
+        elif idx < self.end:
+            self.cs.duplicates += n
+            return False
+        elif idx > self.end:
+            self._gap(self.f.b_flags[i], idx)
+        self.acc.append(i)
+        self.pos += n
+        self.end = idx + n
+        return True
+
+    def _checkpoint(self, i: int, idx: int) -> bool:
+        cs, f, end = self.cs, self.f, self.end
+        ax, fl = f.c_axis[i], f.c_flags[i]
+        if end is not None and idx < end:
+            cs.checkpoint_repeats += 1  # an older checkpoint of this run
+            return False
+        if end is not None and idx == end and cs.last_ck[ax] == idx and not fl & cs.X:
+            cs.checkpoint_repeats += 1  # the one just taken, again
+            return False
+        if end is None or idx > end:
+            if end is None:
+                self._brk(self.pos)
+            else:
+                self._gap(fl, idx)
+            self.end = idx
+        if cs.pause_from is not None and f.c_paused[i] is not None:
+            # samples the firmware sent before the pause that never arrived
+            cs.lost += max(0, min(int(f.c_paused[i]), idx) - cs.pause_from)
+            cs.pause_from = None
+        cs.last_ck[ax] = idx
+        self.events[ax].append([self.pos, i, not self._broken_here(), True])
+        return True

@@ -4,7 +4,7 @@ Every link goes through ``serial.serial_for_url``: a real port (``/dev/ttyUSB0``
 ``COM3``), a pty (``/dev/pts/7``), a TCP socket such as QEMU's ``-serial``
 (``socket://localhost:5760``) or ``loop://`` for tests. The recorder writes
 the raw bytes to the log (nothing is lost to a decoding problem), decodes them
-as they come with :class:`accelnav.link.telemetry.Decoder` for the status line (rate,
+as they come with :class:`accelnav.link.decoder.Decoder` for the status line (rate,
 frames, lost frames, CRC errors), checks the info frame against its manifest,
 and stops on SIGINT/SIGTERM or after ``duration`` or ``max_frames`` (the log
 is closed cleanly in every case).
@@ -28,8 +28,10 @@ from dataclasses import dataclass, field
 import serial
 from serial.urlhandler.protocol_socket import Serial as SocketSerial
 
+from accelnav.link.codec import encode_command
+from accelnav.link.decoder import Decoder, end_of_stream, replay_for
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import Decoder, Manifest, encode_command, end_of_stream, replay_for
+from accelnav.link.manifest import Manifest
 from accelnav.native.cbuild import BuildError
 
 DEFAULT_BAUD = 921600

@@ -1,7 +1,7 @@
 """COBS decoding and CRC-32 checking of many equal-length frames in one C call.
 
-The decoder's numpy path (:func:`accelnav.link.telemetry._cobs_decode_rows`
-and ``_crc_rows``) walks every frame's COBS chain in lockstep and checks the
+The decoder's numpy path (:func:`accelnav.link.codec.cobs_decode_rows`
+and ``crc_rows``) walks every frame's COBS chain in lockstep and checks the
 CRC of long frames through ``zlib.crc32`` one frame at a time; for an hour of
 1 kHz compact telemetry (140 000 frames of 177 bytes) those two cost about a
 third of the whole decode. This kernel does the same per frame in C, reading

@@ -2,3 +2,9 @@
 
 It knows no filter; the estimators and the generator both use it.
 """
+
+# its modules, which users import by name (``from accelnav.native import cbuild``)
+__all__ = [
+    "cbuild",
+    "kernels",
+]

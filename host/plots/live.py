@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.link.telemetry import Manifest, sample_columns
+from accelnav.link.manifest import Manifest, sample_columns
 
 RING_SECONDS = 10.0  # what a person on a bench watches: the last few seconds
 REFRESH_S = 0.5

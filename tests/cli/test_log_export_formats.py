@@ -10,8 +10,8 @@ import pytest
 from accelnav.cli import main as cli_main
 from accelnav.data.runfile import load_run
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
+from accelnav.link.codec import encode_command, encode_stimulus
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import encode_command, encode_stimulus
 from accelnav.model.load import DEFAULT_MODEL, load_model
 
 N = 700  # samples sent

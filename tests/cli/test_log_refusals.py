@@ -13,8 +13,9 @@ import pytest
 
 from accelnav.cli import main
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware
+from accelnav.link.codec import encode_command, encode_stimulus
 from accelnav.link.logfile import MAGIC, LogWriter
-from accelnav.link.telemetry import Manifest, encode_command, encode_stimulus
+from accelnav.link.manifest import Manifest
 from accelnav.model.load import load_model
 
 

@@ -17,7 +17,7 @@ from conftest import REPO
 
 from accelnav.data.runfile import load_run
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
-from accelnav.link.telemetry import encode_command, encode_stimulus
+from accelnav.link.codec import encode_command, encode_stimulus
 from accelnav.model.load import DEFAULT_MODEL
 
 N = 600

@@ -14,8 +14,8 @@ import serial
 import accelnav.link.logfile as logfile
 from accelnav.cli import main
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware
+from accelnav.link.codec import encode_command, encode_stimulus
 from accelnav.link.recorder import Recorder, Status, decode_log
-from accelnav.link.telemetry import encode_command, encode_stimulus
 from accelnav.model.load import load_model
 
 

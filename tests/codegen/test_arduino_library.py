@@ -25,7 +25,8 @@ from accelnav.cli import main
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.targets import hil, simavr
 from accelnav.hil_sim.targets.firmware import manifest
-from accelnav.link.telemetry import decode_all, encode_command, encode_stimulus
+from accelnav.link.codec import encode_command, encode_stimulus
+from accelnav.link.decoder import decode_all
 from accelnav.model.load import loads_model
 
 ARDUINO_DIR = Path("/usr/share/arduino")  # Debian's arduino-core-avr and arduino-mk

@@ -15,21 +15,13 @@ import zlib
 
 import numpy as np
 import pytest
+from support.naive_decoder import decode_naive
 
 from accelnav.codegen.frames import COMMANDS, MAX_ENCODED, PROTOCOL_VERSION, layout
 from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, generated, manifest
-from accelnav.link.telemetry import (
-    Decoder,
-    cobs_decode,
-    cobs_encode,
-    decode_all,
-    decode_naive,
-    encode_command,
-    encode_stimulus,
-    frame,
-    replay_for,
-    sample_columns,
-)
+from accelnav.link.codec import cobs_decode, cobs_encode, encode_command, encode_stimulus, frame
+from accelnav.link.decoder import Decoder, decode_all, replay_for
+from accelnav.link.manifest import sample_columns
 from accelnav.model.load import load_model
 from accelnav.native.cbuild import cache_dir
 

@@ -210,10 +210,18 @@ def test_cli_streams_a_csv_over_budget_to_the_whole_paths_numbers(tmp_path, caps
         fh.write("t_s,acc_x_m_s2,acc_y_m_s2\n")
         np.savetxt(fh, np.column_stack((np.arange(n) / 100.0, rng.normal(0, 0.3, (n, 2)))), delimiter=",", fmt="%.9g")
     small, whole = tmp_path / "small.npz", tmp_path / "whole.npz"
-    assert main(["smooth", str(path), "--out", str(small), "--memory-budget", "16"]) == 0
-    assert "streamed from the CSV" in capsys.readouterr().out
-    assert main(["smooth", str(path), "--out", str(whole), "--memory-budget", "1e6"]) == 0
-    assert "streamed" not in capsys.readouterr().out
+    flags = ["--filter-states"]  # both stages, so that the filter's numbers are compared too
+    assert main(["smooth", str(path), "--out", str(small), "--memory-budget", "16", *flags]) == 0
+    said = capsys.readouterr().out
+    assert "streamed from the CSV" in said
+    assert main(["smooth", str(path), "--out", str(whole), "--memory-budget", "1e6", *flags]) == 0
+    said_whole = capsys.readouterr().out
+    assert "from the CSV" not in said_whole  # read whole (the smoother may still chunk it)
+
+    def summary(out):  # the run's length and span, and per axis its clipped count and the estimates at the ends
+        return [line for line in out.splitlines() if line.startswith("axis ") or line.split()[1:2] == ["samples,"]]
+
+    assert summary(said) == summary(said_whole) and len(summary(said)) == 3
     a, b = np.load(small), np.load(whole)
     for key in ("t", "accel", "clipped", "filt_x", "filt_sd", "smooth_x", "smooth_sd"):
         assert a[key].shape == b[key].shape, key

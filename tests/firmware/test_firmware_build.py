@@ -26,8 +26,10 @@ from accelnav.hil_sim.targets.firmware import DUTY_MODEL
 from accelnav.hil_sim.targets.firmware import make_firmware as build_image
 from accelnav.hil_sim.targets.hil import wait_ready
 from accelnav.hil_sim.targets.qemu import MACHINES, Mps2Board, QemuBoard, qemu_command
+from accelnav.link.codec import encode_command, encode_stimulus
+from accelnav.link.decoder import Decoder, decode_all, replay_for
+from accelnav.link.manifest import Manifest
 from accelnav.link.recorder import Recorder, Status, decode_log
-from accelnav.link.telemetry import Decoder, Manifest, decode_all, encode_command, encode_stimulus, replay_for
 from accelnav.model.load import load_model
 
 STM32_FLASH, STM32_RAM = 64 * 1024, 20 * 1024

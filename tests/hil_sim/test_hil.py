@@ -30,7 +30,7 @@ from accelnav.cli import main
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.targets import hil, qemu, simavr
 from accelnav.hil_sim.targets.firmware import manifest
-from accelnav.link.telemetry import decode_all, replay_for
+from accelnav.link.decoder import decode_all, replay_for
 from accelnav.model.load import load_model
 
 SIGMA_FRACTION = 1e-3  # firmware vs float64 reference, in units of the reference's sigma, after 1 s
@@ -177,7 +177,7 @@ def test_sil_agrees_with_reference_and_compare_catches_a_flipped_bit(default_mod
     assert c.pil_equal_sil and c.first_difference is None
     assert max(c.max_err_sigma.values()) < SIGMA_FRACTION and c.max_of_bound <= 1.0
     # one bit of sample 500's input in its block frame, re-framed with a valid CRC: must be seen
-    from accelnav.link.telemetry import cobs_decode, frame
+    from accelnav.link.codec import cobs_decode, frame
 
     frames = [p + b"\0" for p in sil.split(b"\0")[:-1]]
     for k, f in enumerate(frames):
@@ -241,8 +241,8 @@ def test_file_feed_takes_commands_as_the_host_board_does(tmp_path, board_name):
     """The feed's input is the host board's stdin: command frames in it act as in SIL (decimate 7: a
     frame every 7th sample; stop, then start: no frames in between), byte for byte; the log holds it."""
     _require_pil(board_name)
+    from accelnav.link.codec import encode_command
     from accelnav.link.logfile import read_log
-    from accelnav.link.telemetry import encode_command
 
     model = load_model(MODELS / "adxl250_default.toml")
     man = manifest(model.source)
@@ -443,7 +443,7 @@ def test_avr_board_fits_its_ram_with_the_stack_it_measured(tmp_path, model_file)
     reserve firmware.mk checks every build against."""
     _require_avr()
     from accelnav.hil_sim.targets.firmware import FW
-    from accelnav.link.telemetry import cobs_decode, encode_command
+    from accelnav.link.codec import cobs_decode, encode_command
 
     model = load_model(MODELS / model_file)
     man = manifest(model.source)

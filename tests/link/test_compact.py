@@ -17,20 +17,13 @@ import json
 import numpy as np
 import pytest
 from support.frames import frame_kind, split_frames
+from support.naive_decoder import decode_naive
 
 from accelnav.cli import main as cli_main
 from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, manifest
+from accelnav.link.codec import cobs_decode, encode_command, encode_stimulus, frame
+from accelnav.link.decoder import Decoder, decode_all, replay_for
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import (
-    Decoder,
-    cobs_decode,
-    decode_all,
-    decode_naive,
-    encode_command,
-    encode_stimulus,
-    frame,
-    replay_for,
-)
 from accelnav.model.load import load_model
 
 N = 1500

@@ -145,7 +145,7 @@ def corrupt(kind: str, frames: list[bytes], rng: np.random.Generator) -> bytes:
 
 
 def decode_in_pieces(man, replay, data: bytes, rng: np.random.Generator):
-    from accelnav.link.telemetry import Decoder
+    from accelnav.link.decoder import Decoder
 
     d = Decoder(man, replay=replay)
     cuts = np.sort(rng.integers(0, len(data) + 1, int(rng.integers(1, 60))))
@@ -183,7 +183,8 @@ def check(man, truth: np.ndarray, frames: list[bytes], data: bytes, rows, stats)
 @cache
 def _telemetry():
     from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
-    from accelnav.link.telemetry import decode_all, encode_command, encode_stimulus, replay_for
+    from accelnav.link.codec import encode_command, encode_stimulus
+    from accelnav.link.decoder import decode_all, replay_for
     from accelnav.model.load import load_model
 
     man = manifest(None)

@@ -16,20 +16,14 @@ import json
 import numpy as np
 import pytest
 from support.frames import frame_kind, split_frames
+from support.naive_decoder import decode_naive
 
 from accelnav.cli import main as cli_main
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
+from accelnav.link.codec import cobs_decode, encode_command, encode_stimulus, frame
+from accelnav.link.decoder import Decoder, decode_all
 from accelnav.link.logfile import LogWriter
-from accelnav.link.telemetry import (
-    Decoder,
-    Manifest,
-    cobs_decode,
-    decode_all,
-    decode_naive,
-    encode_command,
-    encode_stimulus,
-    frame,
-)
+from accelnav.link.manifest import Manifest
 
 
 @pytest.fixture(scope="module")
@@ -211,7 +205,7 @@ def test_a_manifest_of_another_protocol_is_refused_in_one_line(man, tmp_path, ca
 
 def test_the_decoder_reads_the_generator_s_protocol():
     from accelnav.codegen.frames import PROTOCOL_VERSION
-    from accelnav.link.telemetry import PROTOCOL
+    from accelnav.link.manifest import PROTOCOL
 
     assert PROTOCOL == PROTOCOL_VERSION
     assert json.loads(json.dumps(manifest(None).data))["protocol_version"] == PROTOCOL

@@ -30,9 +30,10 @@ from hypothesis import HealthCheck, Phase, given, seed, settings
 from hypothesis import strategies as st
 
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
+from accelnav.link.codec import cobs_decode, encode_command, encode_stimulus, frame
+from accelnav.link.decoder import Decoder, replay_for
 from accelnav.link.logfile import CHUNK, MAGIC, LogError, LogWriter
 from accelnav.link.recorder import decode_log
-from accelnav.link.telemetry import Decoder, cobs_decode, encode_command, encode_stimulus, frame, replay_for
 from accelnav.model.load import DEFAULT_MODEL, ModelError
 
 SEED = int(os.environ.get("ACCELNAV_FUZZ_SEED") or random.SystemRandom().randrange(2**32))

@@ -12,8 +12,8 @@ import serial
 
 from accelnav.cli import main as cli_main
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
+from accelnav.link.codec import encode_stimulus
 from accelnav.link.recorder import Recorder, Status
-from accelnav.link.telemetry import encode_stimulus
 from accelnav.model.load import load_model
 
 
@@ -37,7 +37,7 @@ def test_recorder_summary_and_log_info_agree(tmp_path, capsys):
     for k in ("lost", "duplicates", "bad_frames", "garbage_bytes"):
         assert res.stats[k] == info[k], k
     assert res.stats["frames"] == info["frames"]
-    from accelnav.link.telemetry import link_counts
+    from accelnav.link.accounting import link_counts
 
     counts = link_counts(res.stats)
     assert counts == {k: info[k] for k in counts}

@@ -19,9 +19,9 @@ from conftest import MODELS
 
 from accelnav.hil_sim.targets.firmware import manifest
 from accelnav.link.logfile import MAGIC, LogError, LogWriter
+from accelnav.link.manifest import Manifest, check_manifest
 from accelnav.link.recorder import decode_log
 from accelnav.link.replay import Replay, ReplayError
-from accelnav.link.telemetry import Manifest, check_manifest
 from accelnav.model.load import DEFAULT_MODEL, load_model
 
 

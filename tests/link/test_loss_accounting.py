@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.naive_decoder import decode_naive
 
-from accelnav.link.telemetry import Decoder, decode_all, decode_naive, encode_command, encode_frames
+from accelnav.link.codec import encode_command, encode_frames
+from accelnav.link.decoder import Decoder, decode_all
 
 
 def _frames(man, seq, index, flags=None) -> list[bytes]:

@@ -22,9 +22,10 @@ from support.link_server import server
 from accelnav.cli import main as cli_main
 from accelnav.data.runfile import load_run
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, generated
+from accelnav.link.codec import encode_command, encode_stimulus
+from accelnav.link.decoder import decode_all
 from accelnav.link.logfile import LogError, LogWriter, read_log
 from accelnav.link.recorder import Recorder, Status, decode_log
-from accelnav.link.telemetry import decode_all, encode_command, encode_stimulus
 from accelnav.model.load import load_model
 
 

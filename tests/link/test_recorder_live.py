@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
+from accelnav.link.codec import encode_command, encode_stimulus
 from accelnav.link.recorder import Recorder, Status
-from accelnav.link.telemetry import encode_command, encode_stimulus
 from accelnav.model.load import load_model
 
 RATE = 200.0  # samples/s served

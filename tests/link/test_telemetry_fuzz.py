@@ -1,6 +1,6 @@
 """Corruption and fuzz tests of the telemetry link.
 
-Decoder (host/link/telemetry.py), hypothesis-driven with a fixed derandomised
+Decoder (host/link/decoder.py), hypothesis-driven with a fixed derandomised
 seed: streams of frames suffer bit flips, dropped and inserted bytes, garbage
 bursts (with and without zero bytes) and truncated frames. The oracle is
 independent of the decoder: a frame must be received if and only if its
@@ -30,8 +30,10 @@ import pytest
 from conftest import SUPPORT
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support.naive_decoder import decode_naive
 
-from accelnav.link.telemetry import Decoder, decode_naive, encode_frames
+from accelnav.link.codec import encode_frames
+from accelnav.link.decoder import Decoder
 
 EXAMPLES = 440  # about 250 damage operations each: comfortably over the 1e5 the issue asks for
 BULK_OPS = (200, 300)  # numpy-driven damage per example, on top of hypothesis' own list

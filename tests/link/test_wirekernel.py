@@ -9,7 +9,8 @@ import zlib
 import numpy as np
 import pytest
 
-from accelnav.link import telemetry as tm
+from accelnav.link.codec import cobs_decode_rows, crc_rows, encode_frames
+from accelnav.link.decoder import Decoder
 from accelnav.link.wirekernel import decode_frames, wire_lib
 
 
@@ -23,9 +24,9 @@ def mod():
 
 def _numpy(buf: np.ndarray, starts: np.ndarray, L: int):
     rows = np.lib.stride_tricks.sliding_window_view(buf, L)[starts]
-    dec, ok = tm._cobs_decode_rows(rows)
+    dec, ok = cobs_decode_rows(rows)
     m = L - 1
-    return dec, ok, tm._crc_rows(dec[:, : m - 4]) == dec[:, m - 4 :].copy().view("<u4").ravel()
+    return dec, ok, crc_rows(dec[:, : m - 4]) == dec[:, m - 4 :].copy().view("<u4").ravel()
 
 
 @pytest.mark.parametrize("name", ["sample", "block", "checkpoint", "ack"])
@@ -37,7 +38,7 @@ def test_kernel_equals_the_numpy_path_and_zlib(mod, man, name):
     dt = man.dtypes[name]
     n = 400
     recs = rng.integers(0, 256, (n, dt.itemsize), dtype=np.uint8).view(dt).ravel()
-    wire = np.frombuffer(tm.encode_frames(man, name, recs), np.uint8).reshape(n, -1)[:, :-1].copy()
+    wire = np.frombuffer(encode_frames(man, name, recs), np.uint8).reshape(n, -1)[:, :-1].copy()
     L = wire.shape[1]
     hit = wire[n // 3 : 2 * n // 3]
     cols = rng.integers(0, L, len(hit))
@@ -78,7 +79,7 @@ def test_decoder_with_and_without_the_kernel_agree(mod, man):
     recs = recs.ravel().copy()
     recs["seq"] = np.arange(n)
     recs["index"] = np.arange(n)
-    buf = bytearray(tm.encode_frames(man, "sample", recs))
+    buf = bytearray(encode_frames(man, "sample", recs))
     for p in rng.integers(0, len(buf), 60):
         buf[p] = int(rng.integers(0, 256))
     del buf[5000:5100]
@@ -86,7 +87,7 @@ def test_decoder_with_and_without_the_kernel_agree(mod, man):
     data = bytes(buf)
     out = []
     for kernel in (True, False):
-        d = tm.Decoder(man, kernel=kernel)
+        d = Decoder(man, kernel=kernel)
         assert (d._wire is not None) == kernel
         cuts = np.r_[0, np.sort(rng.integers(0, len(data), 7)), len(data)]
         got = [d.feed(data[a:b])["sample"] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]

@@ -12,8 +12,9 @@ import serial
 
 from accelnav.cli import main as cli_main
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware
+from accelnav.link.codec import encode_command, encode_stimulus
+from accelnav.link.manifest import sample_columns
 from accelnav.link.recorder import Recorder, Status, decode_log
-from accelnav.link.telemetry import encode_command, encode_stimulus, sample_columns
 from accelnav.model import input_conversion
 from accelnav.model.load import load_model
 from accelnav.plots.live import LivePlot, LiveView, plot_log

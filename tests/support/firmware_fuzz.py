@@ -20,7 +20,7 @@ def fuzz(examples: int, random_inputs: int, seed: int = 5) -> dict:
     from hypothesis import HealthCheck, given, settings
     from hypothesis import strategies as st
 
-    from accelnav.link.telemetry import encode_command, encode_stimulus, frame
+    from accelnav.link.codec import encode_command, encode_stimulus, frame
 
     mod = build_firmware(sanitize=True)
     fw = HostFirmware(mod)

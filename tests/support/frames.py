@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from accelnav.link.telemetry import cobs_decode
+from accelnav.link.codec import cobs_decode
 
 
 def split_frames(data: bytes) -> list[bytes]:

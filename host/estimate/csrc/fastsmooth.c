@@ -61,6 +61,31 @@ static void predict_cov(const acn_axis *m, double F[4][4], double P[4][4])
             P[i][j] = P[j][i];
 }
 
+/*
+ * The r and u rows of P = F P F' + Q alone (rows 0, 1 and their mirror), by the
+ * very operations of predict_cov: where the (a, eps) block comes from stored
+ * rows, the rest of predict_cov was computed only to be overwritten.
+ */
+static void predict_ru(const acn_axis *m, double P[4][4])
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
+    double G[2][4]; /* rows 0, 1 of G = F P */
+    for (int j = 0; j < 4; j++) {
+        G[0][j] = P[0][j] + f01 * P[1][j] + f02 * P[2][j];
+        G[1][j] = P[1][j] + f12 * P[2][j];
+    }
+    for (int i = 0; i < 2; i++) {
+        double g0 = G[i][0] + f01 * G[i][1] + f02 * G[i][2];
+        double g1 = G[i][1] + f12 * G[i][2];
+        double row[4] = {g0, g1, G[i][2], phi * G[i][3]};
+        for (int j = i; j < 4; j++)
+            P[i][j] = row[j] + m->q[PK[i][j]];
+    }
+    for (int i = 0; i < 2; i++)
+        for (int j = i + 1; j < 4; j++)
+            P[j][i] = P[i][j];
+}
+
 /* x = F x + b */
 static void predict_mean(const acn_axis *m, double x[4])
 {
@@ -109,6 +134,9 @@ static const double H_ACC[4] = {0.0, 0.0, 1.0, 1.0};
 /* ------------------------------------------------------------------------- */
 /* Plain path, data-independent part: gains, covariances, smoother gains.      */
 
+static int plain_smooth_cov(const acn_axis *m, long n, double *Cs, long stride, long ncs,
+                            int write_cs, const double *Pprior, const double *Ppost, double *Psm);
+
 int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double *K, double *Cs,
                   double *Pprior, double *Ppost, double *Psm)
 {
@@ -130,15 +158,103 @@ int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double 
         pack(P, Ppost + 10 * k);
     }
 
+    return plain_smooth_cov(m, n, Cs, 4, n, 1, Pprior, Ppost, Psm);
+}
+
+/*
+ * The forward rows of an all-valid run, ACN_SROW doubles per sample k:
+ *   0..3 K[k]   4..7 C[k] (0 at the last sample)   8..10 prior aa ae ee   11..13 posterior aa ae ee
+ * the numbers acn_plain_cov computes, none of which depends on the run's length.
+ */
+int acn_plain_rows(const acn_axis *m, long n, double *rows)
+{
+    double F[4][4], P[4][4], x[4] = {0.0, 0.0, 0.0, 0.0}, S;
+    const double phi = m->phi;
+    transition(m, F);
+    unpack(m->p0, P);
+    for (long k = 0; k < n; k++) {
+        double *row = rows + ACN_SROW * k;
+        if (k > 0)
+            predict_cov(m, F, P);
+        row[8] = P[2][2], row[9] = P[2][3], row[10] = P[3][3];
+        if (k > 0) { /* C[k-1] = Pf[k-1] Fs' inv(Pp[k]), as in acn_plain_cov */
+            double *prev = row - ACN_SROW;
+            double paa = prev[11], pae = prev[12], pee = prev[13];
+            double qaa = row[8], qae = row[9], qee = row[10];
+            double sa = sqrt(qaa), se = sqrt(qee);
+            double rho = qae / (sa * se);
+            double det = (1.0 - rho * rho) * qaa * qee;
+            if (!(det > 0.0))
+                return -(int)(k > 1000000000L ? 1000000000L : k);
+            double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee;
+            prev[4] = (m00 * qee - m01 * qae) / det, prev[5] = (m01 * qaa - m00 * qae) / det;
+            prev[6] = (m10 * qee - m11 * qae) / det, prev[7] = (m11 * qaa - m10 * qae) / det;
+        }
+        update(x, P, H_ACC, 0.0, m->R, &S, row);
+        row[11] = P[2][2], row[12] = P[2][3], row[13] = P[3][3];
+    }
+    double *lastrow = rows + ACN_SROW * (n - 1);
+    lastrow[4] = lastrow[5] = lastrow[6] = lastrow[7] = 0.0;
+    return 0;
+}
+
+/*
+ * acn_plain_cov of an all-valid run from the rows of acn_plain_rows: sample k
+ * reads row min(k, nt - 1), the last stored row being steady (the caller checks
+ * that). The (a, eps) blocks come from the rows; the r, u rows of P (which never
+ * settle: r, u are not observable) are propagated with the row's gain,
+ *   P = F P F' + Q;  P_ij -= K_i (P H')_j + (P H')_i K_j - K_i K_j S   (i in r, u)
+ * which is the Joseph update expanded (K = P H' / S). No 4x4 Joseph update per
+ * sample: what made acn_plain_cov the largest cost of a run.
+ */
+int acn_plain_cov_steady(const acn_axis *m, long n, long nt, const double *rows, double *Pprior,
+                         double *Ppost, double *Psm)
+{
+    double F[4][4], P[4][4], PHt[4];
+    transition(m, F);
+    unpack(m->p0, P);
+    for (long k = 0; k < n; k++) {
+        const double *row = rows + ACN_SROW * (k < nt ? k : nt - 1);
+        if (k > 0)
+            predict_cov(m, F, P);
+        P[2][2] = row[8], P[2][3] = P[3][2] = row[9], P[3][3] = row[10];
+        pack(P, Pprior + 10 * k);
+        /* S = H P H' + R */
+        double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
+        for (int i = 0; i < 4; i++)
+            PHt[i] = P[i][2] + P[i][3];
+        for (int i = 0; i < 2; i++)
+            for (int j = i; j < 4; j++) {
+                P[i][j] -= row[i] * PHt[j] + PHt[i] * row[j] - row[i] * row[j] * S;
+                P[j][i] = P[i][j];
+            }
+        P[2][2] = row[11], P[2][3] = P[3][2] = row[12], P[3][3] = row[13];
+        pack(P, Ppost + 10 * k);
+    }
+    return plain_smooth_cov(m, n, (double *)rows + 4, ACN_SROW, nt, 0, Pprior, Ppost, Psm);
+}
+
+/*
+ * The smoother's covariances from the filter's (Pprior, Ppost): the (a, eps)
+ * block backward, then the r, u rows forward. The smoother gain of sample k is
+ * computed backward (written to Cs[k] if write_cs) and read forward from row
+ * min(k, ncs - 1) of Cs, rows stride doubles apart (ncs < n: a stored
+ * transient whose last row is steady).
+ */
+static int plain_smooth_cov(const acn_axis *m, long n, double *Cs, long stride, long ncs,
+                            int write_cs, const double *Pprior, const double *Ppost, double *Psm)
+{
     /* Backward: the 2-state RTS smoother of s = (a, eps), Fs = diag(1, phi). */
     const double phi = m->phi;
     double *last = Psm + 10 * (n - 1);
     for (int i = 0; i < 10; i++)
         last[i] = Ppost[10 * (n - 1) + i];
-    Cs[4 * (n - 1) + 0] = Cs[4 * (n - 1) + 1] = Cs[4 * (n - 1) + 2] = Cs[4 * (n - 1) + 3] = 0.0;
+    if (write_cs)
+        Cs[stride * (n - 1) + 0] = Cs[stride * (n - 1) + 1] = Cs[stride * (n - 1) + 2] =
+            Cs[stride * (n - 1) + 3] = 0.0;
     for (long k = n - 2; k >= 0; k--) {
         const double *pf = Ppost + 10 * k, *pp = Pprior + 10 * (k + 1), *s1 = Psm + 10 * (k + 1);
-        double *ps = Psm + 10 * k, *C = Cs + 4 * k;
+        double *ps = Psm + 10 * k;
         double paa = pf[7], pae = pf[8], pee = pf[9];
         double qaa = pp[7], qae = pp[8], qee = pp[9];
         /* C = Pf Fs' inv(Pp), inv(Pp) = [qee, -qae; -qae, qaa] / det, det on the equilibrated Pp */
@@ -150,7 +266,9 @@ int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double 
         double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee; /* Pf Fs' */
         double c00 = (m00 * qee - m01 * qae) / det, c01 = (m01 * qaa - m00 * qae) / det;
         double c10 = (m10 * qee - m11 * qae) / det, c11 = (m11 * qaa - m10 * qae) / det;
-        C[0] = c00, C[1] = c01, C[2] = c10, C[3] = c11;
+        if (write_cs)
+            Cs[stride * k + 0] = c00, Cs[stride * k + 1] = c01, Cs[stride * k + 2] = c10,
+                            Cs[stride * k + 3] = c11;
         /* Ps = Pf + C (Ps[k+1] - Pp) C' */
         double daa = s1[7] - qaa, dae = s1[8] - qae, dee = s1[9] - qee;
         double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
@@ -182,7 +300,7 @@ int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double 
         }
     }
     for (long k = 0; k + 1 < n; k++) {
-        const double *p = Psm + 10 * k, *C = Cs + 4 * k;
+        const double *p = Psm + 10 * k, *C = Cs + stride * (k < ncs ? k : ncs - 1);
         double *q = Psm + 10 * (k + 1);
         double rr = p[0], ru = p[1], ra = p[2], uu = p[4], ua = p[5], aa = p[7];
         /* Var and Cov of p_r, p_u (time-k quantities) */
@@ -218,7 +336,7 @@ int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double 
 /* RTS means, then r, u of the smoother in closed form.                        */
 
 void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned char *valid,
-                    const double *K, const double *Cs, double *xf, double *xs)
+                    const double *K, const double *Cs, long stride, long nk, double *xf, double *xs)
 {
     const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
     const double gr = m->gr, gu = m->gu;
@@ -232,7 +350,7 @@ void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned c
      * (the same numbers up to rounding).
      */
     for (long k = 0; k < n; k++) {
-        const double *Kk = K + 4 * k;
+        const double *Kk = K + stride * (k < nk ? k : nk - 1); /* steady after row nk - 1 */
         double ep = e;
         if (k > 0) {
             r = r + f01 * u + f02 * a;
@@ -258,7 +376,7 @@ void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned c
     double as = xf[4 * (n - 1) + 2], es = xf[4 * (n - 1) + 3];
     xs[4 * (n - 1) + 2] = as, xs[4 * (n - 1) + 3] = es;
     for (long k = n - 2; k >= 0; k--) {
-        const double *f = xf + 4 * k, *C = Cs + 4 * k;
+        const double *f = xf + 4 * k, *C = Cs + stride * (k < nk ? k : nk - 1);
         /* = C s[k+1] + (s_post[k] - C (Fs s_post[k] + b)): the chain through s is one mul-add */
         double fa = f[2], fe = phi * f[3] + b;
         double ca = f[2] - (C[0] * fa + C[1] * fe), ce = f[3] - (C[2] * fa + C[3] * fe);
@@ -532,6 +650,116 @@ int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
 }
 
 /*
+ * acn_chunk_fwd for a chunk of valid samples that follows only valid ones, from
+ * the rows of acn_plain_rows (nt of them, the last steady): the gains, smoother
+ * gains and (a, eps) blocks are read, the r, u rows of P propagated as in
+ * acn_plain_cov_steady. Same arguments and outputs, but a lean store of
+ * ACN_LROW doubles per sample: the filter's a, eps (0, 1); acn_chunk_bwd_lean
+ * adds the smoothed ones and their covariance (0..4). Everything else the
+ * backward passes need is data-independent: they read it from the rows.
+ */
+int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
+                         const double *srows, long nt, double *carry, double *store, double *xf,
+                         double *sdf, double *Pf0, double *Pfn)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    double F[4][4], P[4][4], PHt[4];
+    double r = carry[0], u = carry[1], a = carry[2], ep = carry[3], e;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (long k = 0; k < n; k++) {
+        long g = k0 + k;
+        const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
+        double *row = store + ACN_LROW * k;
+        /* the prior's (a, eps) block is the stored one (as acn_plain_cov_steady) */
+        P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9], P[3][3] = sr[10];
+        double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
+        for (int i = 0; i < 4; i++)
+            PHt[i] = P[i][2] + P[i][3];
+        for (int i = 0; i < 2; i++)
+            for (int j = i; j < 4; j++) {
+                P[i][j] -= sr[i] * PHt[j] + PHt[i] * sr[j] - sr[i] * sr[j] * S;
+                P[j][i] = P[i][j];
+            }
+        P[2][2] = sr[11], P[2][3] = P[3][2] = sr[12], P[3][3] = sr[13];
+        /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
+        double y = z[k] - a - ep;
+        r += sr[0] * y;
+        u += sr[1] * y;
+        double ka = sr[2], ke = sr[3], zk = z[k];
+        double an = (a - ka * a) + ka * (zk - ep);
+        e = (ep - ke * ep) + ke * (zk - a);
+        a = an;
+        double *o = xf + 4 * k, *sd = sdf + 4 * k;
+        o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        for (int i = 0; i < 4; i++)
+            sd[i] = sqrt(P[i][i]);
+        if (g == 0)
+            pack(P, Pf0);
+        row[0] = a, row[1] = e;
+        if (last && k == n - 1) {
+            pack(P, Pfn);
+            break;
+        }
+        predict_ru(m, P);
+        const double *sn =
+            srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1); /* the next prior's (a, eps) */
+        P[2][2] = sn[8], P[2][3] = P[3][2] = sn[9], P[3][3] = sn[10];
+        r = r + f01 * u + f02 * a;
+        u = u + f12 * a;
+        ep = phi * e + b;
+    }
+    carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
+    pack(P, carry + 4);
+    return 0;
+}
+
+/*
+ * acn_chunk_bwd over a lean store (acn_chunk_fwd_steady's) of samples k0 ..
+ * k0 + n - 1: the smoother gain, the filter's (a, eps) covariance and the next
+ * prior's from the rows (row min(k, nt - 1)), the same operations in the same
+ * order as acn_chunk_bwd. Writes the smoothed a, eps, P_aa, P_ae, P_ee into the
+ * store row; carry as in acn_chunk_bwd.
+ */
+void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
+                        double *store, double *carry)
+{
+    const double phi = m->phi, b = m->b_eps;
+    double as = carry[0], es = carry[1], saa = carry[2], sae = carry[3], see = carry[4];
+    long k = n - 1;
+    if (last) { /* the run's last sample is the filter's */
+        double *row = store + ACN_LROW * k;
+        const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
+        as = row[0], es = row[1], saa = sr[11], sae = sr[12], see = sr[13];
+        row[2] = saa, row[3] = sae, row[4] = see;
+        k--;
+    }
+    for (; k >= 0; k--) {
+        double *row = store + ACN_LROW * k;
+        long g = k0 + k;
+        const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
+        const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
+        double c00 = sr[4], c01 = sr[5], c10 = sr[6], c11 = sr[7];
+        /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
+        double fa = row[0], fe = phi * row[1] + b;
+        double ca = row[0] - (c00 * fa + c01 * fe), ce = row[1] - (c10 * fa + c11 * fe);
+        double an = c00 * as + c01 * es + ca;
+        es = c10 * as + c11 * es + ce;
+        as = an;
+        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
+        double daa = saa - sn[8], dae = sae - sn[9], dee = see - sn[10];
+        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
+        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
+        double paa = sr[11], pae = sr[12], pee = sr[13];
+        saa = paa + t00 * c00 + t01 * c01;
+        sae = pae + t00 * c10 + t01 * c11;
+        see = pee + t10 * c10 + t11 * c11;
+        row[0] = as, row[1] = es, row[2] = saa, row[3] = sae, row[4] = see;
+    }
+    carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
+}
+
+/*
  * Backward pass over the n store rows of one chunk, last to first (last: the
  * chunk ends the run, whose last sample is the filter's). carry holds the
  * smoothed a, eps, P_aa, P_ae, P_ee of the sample after the chunk; on return,
@@ -570,6 +798,46 @@ void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *c
 }
 
 /*
+ * One step of the smoothed r, u recursion of acn_plain_cov, term by term:
+ * v = (r, u, P_rr, P_ru, P_ra, P_uu, P_ua, beta_r (2), beta_u (2)) of sample k
+ * to sample k + 1, from the smoothed a, P_aa at k, a, P_aa, P_ae at k + 1 and
+ * the smoother gain C[k].
+ */
+static void ru_step(const acn_axis *m, double v[11], double a0, double aa, double a1, double aa1,
+                    double ae1, const double *C)
+{
+    const double gr = m->gr, gu = m->gu, f01 = m->f01, f02 = m->f02, f12 = m->f12;
+    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
+    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
+    const double qe_uu = m->q[4] - gu * m->q[5];
+    double r = v[0], u = v[1], rr = v[2], ru = v[3], ra = v[4], uu = v[5], ua = v[6];
+    double br0 = v[7], br1 = v[8], bu0 = v[9], bu1 = v[10];
+    double vpr =
+        rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
+    double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
+    double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
+    double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
+    double pu0 = bu0 + c2u, pu1 = bu1;
+    double gr0 = C[0] * pr0 + C[2] * pr1, gr1 = C[1] * pr0 + C[3] * pr1;
+    double gu0 = C[0] * pu0 + C[2] * pu1, gu1 = C[1] * pu0 + C[3] * pu1;
+    double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1;
+    br0 = gr0 + gr, br1 = gr1;
+    bu0 = gu0 + gu, bu1 = gu1;
+    double rr1 = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
+    double uu1 = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
+    ru = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
+    rr = rr1, uu = uu1;
+    ra = br0 * aa1 + br1 * ae1;
+    ua = bu0 * aa1 + bu1 * ae1;
+    /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise */
+    double dw = a1 - a0;
+    r = r + (f01 * u + (f02 * a0 + gr * dw));
+    u = u + (f12 * a0 + gu * dw);
+    v[0] = r, v[1] = u, v[2] = rr, v[3] = ru, v[4] = ra, v[5] = uu, v[6] = ua;
+    v[7] = br0, v[8] = br1, v[9] = bu0, v[10] = bu1;
+}
+
+/*
  * Forward pass of smoothed r, u over n samples of one chunk: writes xs and the
  * standard deviations sds (n x 4) of each, reading store rows 0 .. n (row n is
  * the next chunk's first; the run's last sample is the caller's, the filter's).
@@ -579,46 +847,27 @@ void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *c
 void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
                   double *sds)
 {
-    const double gr = m->gr, gu = m->gu, f01 = m->f01, f02 = m->f02, f12 = m->f12;
-    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
-    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
-    const double qe_uu = m->q[4] - gu * m->q[5];
-    double r = carry[0], u = carry[1], rr = carry[2], ru = carry[3], ra = carry[4];
-    double uu = carry[5], ua = carry[6];
-    double br0 = carry[7], br1 = carry[8], bu0 = carry[9], bu1 = carry[10];
     for (long k = 0; k < n; k++) {
         const double *row = store + ACN_ROW * k, *nx = row + ACN_ROW;
         double *o = xs + 4 * k, *sd = sds + 4 * k;
-        o[0] = r, o[1] = u, o[2] = row[0], o[3] = row[1];
-        sd[0] = sqrt(rr), sd[1] = sqrt(uu), sd[2] = sqrt(row[6]), sd[3] = sqrt(row[8]);
-        /* the covariance recursion of acn_plain_cov, term by term */
-        double aa = row[6];
-        double vpr =
-            rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
-        double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
-        double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
-        double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
-        double pu0 = bu0 + c2u, pu1 = bu1;
-        double gr0 = row[2] * pr0 + row[4] * pr1, gr1 = row[3] * pr0 + row[5] * pr1;
-        double gu0 = row[2] * pu0 + row[4] * pu1, gu1 = row[3] * pu0 + row[5] * pu1;
-        double aa1 = nx[6], ae1 = nx[7];
-        double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1;
-        br0 = gr0 + gr, br1 = gr1;
-        bu0 = gu0 + gu, bu1 = gu1;
-        double rr1 = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
-        double uu1 = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
-        ru = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
-        rr = rr1, uu = uu1;
-        ra = br0 * aa1 + br1 * ae1;
-        ua = bu0 * aa1 + bu1 * ae1;
-        /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise */
-        double a0 = row[0], a1 = nx[0];
-        double dw = a1 - a0;
-        r = r + (f01 * u + (f02 * a0 + gr * dw));
-        u = u + (f12 * a0 + gu * dw);
+        o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(row[6]), sd[3] = sqrt(row[8]);
+        ru_step(m, carry, row[0], row[6], nx[0], nx[6], nx[7], row + 2);
     }
-    carry[0] = r, carry[1] = u, carry[2] = rr, carry[3] = ru, carry[4] = ra;
-    carry[5] = uu, carry[6] = ua, carry[7] = br0, carry[8] = br1, carry[9] = bu0, carry[10] = bu1;
+}
+
+/* acn_chunk_ru over a lean store (after acn_chunk_bwd_lean) of samples k0 .., C from the rows. */
+void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *srows,
+                       long nt, double *carry, double *xs, double *sds)
+{
+    for (long k = 0; k < n; k++) {
+        const double *row = store + ACN_LROW * k, *nx = row + ACN_LROW;
+        const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
+        double *o = xs + 4 * k, *sd = sds + 4 * k;
+        o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(row[2]), sd[3] = sqrt(row[4]);
+        ru_step(m, carry, row[0], row[2], nx[0], nx[2], nx[3], sr + 4);
+    }
 }
 
 /* ------------------------------------------------------------------------- */

@@ -38,8 +38,15 @@ typedef struct {
 int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double *K, double *Cs,
                   double *Pprior, double *Ppost, double *Psm);
 
+int acn_plain_rows(const acn_axis *m, long n, double *rows);
+
+int acn_plain_cov_steady(const acn_axis *m, long n, long nt, const double *rows, double *Pprior,
+                         double *Ppost, double *Psm);
+
+/* K, Cs: rows stride doubles apart; sample k >= nk uses row nk - 1 (a stored steady row) */
 void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned char *valid,
-                    const double *K, const double *Cs, double *xf, double *xs);
+                    const double *K, const double *Cs, long stride, long nk, double *xf,
+                    double *xs);
 
 int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
                 long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
@@ -57,13 +64,23 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
  * (acn_chunkg_fwd, acn_chunkg_bwd): the same steps as acn_general.
  * The carried state between chunks is a small array documented at each call.
  */
-enum { ACN_ROW = 12, ACN_GROW = 28 };
+enum { ACN_ROW = 12, ACN_GROW = 28, ACN_SROW = 14, ACN_LROW = 5 };
 
 int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
                   const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
                   double *Pf0, double *Pfn);
 
+int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
+                         const double *srows, long nt, double *carry, double *store, double *xf,
+                         double *sdf, double *Pf0, double *Pfn);
 void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry);
+
+/* all-valid samples from the steady rows: a lean store of ACN_LROW doubles per sample */
+void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
+                        double *store, double *carry);
+
+void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *srows,
+                       long nt, double *carry, double *xs, double *sds);
 
 void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                     const unsigned char *valid, long n_extra, const long *ek, const double *eh,

@@ -1,0 +1,47 @@
+"""accelnav.estimate.npzout: an NPZ written in pieces, in any order, that numpy and zipfile read and check."""
+
+from __future__ import annotations
+
+import zipfile
+import zlib
+
+import numpy as np
+import pytest
+
+from accelnav.estimate.npzout import NpzWriter, crc32_combine
+
+
+@pytest.mark.parametrize("split", [0, 1, 7, 1000, 4096])
+def test_crc32_combine_equals_the_crc_of_the_whole(split):
+    rng = np.random.default_rng(split)
+    data = rng.integers(0, 256, 4096 + 13, dtype=np.uint8).tobytes()
+    a, b = data[:split], data[split:]
+    assert crc32_combine(zlib.crc32(a), zlib.crc32(b), len(b)) == zlib.crc32(data)
+
+
+def test_pieces_in_any_order_give_a_valid_npz(tmp_path):
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(3, 1001, 4))
+    c = rng.random((1001, 3)) < 0.5
+    path = tmp_path / "o.npz"
+    with NpzWriter(path, {"format": np.array("accelnav-run/2"), "x": (x.shape, np.float64), "c": (c.shape, bool)}) as w:
+        for j in (2, 0, 1):  # axes out of order, chunks backward
+            for s in reversed(range(0, 1001, 97)):
+                w.write("x", 4 * (j * 1001 + s), x[j, s : s + 97])
+        w.write("c", 0, c)
+    assert not (tmp_path / "o.npz.part").exists()
+    with zipfile.ZipFile(path) as zf:
+        assert zf.testzip() is None  # every member's CRC checks
+    with np.load(path) as f:
+        assert str(f["format"]) == "accelnav-run/2"
+        assert np.array_equal(f["x"], x) and np.array_equal(f["c"], c)
+
+
+def test_a_member_not_fully_written_is_an_error_and_leaves_no_file(tmp_path):
+    path = tmp_path / "o.npz"
+    with pytest.raises(ValueError, match="never written"):
+        with NpzWriter(path, {"x": ((10,), np.float64)}) as w:
+            w.write("x", 0, np.zeros(9))
+            w.close()
+    w.abort()
+    assert not path.exists() and not (tmp_path / "o.npz.part").exists()
