@@ -121,7 +121,7 @@ class Recording:
 def parse_unit(unit: str) -> str:
     key = unit.strip().lower()
     if key not in UNIT_ALIASES:
-        raise UserError(f"unit {unit!r} is not known; accepted: g, mg, m/s^2, counts")
+        raise UserError(f"unit {excerpt(unit)} is not known; accepted: g, mg, m/s^2, counts")
     return UNIT_ALIASES[key]
 
 
