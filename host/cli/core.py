@@ -605,26 +605,28 @@ def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_s
     """smooth of a run over the memory budget, in chunks with a store on disk (accelnav.estimate.chunked)."""
     from accelnav.estimate import zupt
     from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
+    from accelnav.estimate.kf import Aids
 
     n, n_axes = arrays["accel"].shape
-    extras = [list(fixes[j]) if fixes is not None else [] for j in range(n_axes)]
-    gates: list[list[float]] = [[0.0] * len(e) for e in extras]
+    fix_lists = [list(fixes[j]) if fixes is not None else [] for j in range(n_axes)]
+    extras = [Aids.of(f) for f in fix_lists]  # fixes first, then the rests' updates, as arrays (no object each)
     zupt_ks = [np.zeros(0, dtype=np.int64)] * n_axes
     if rest is not None:
         r2 = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, n_axes))
         for j in range(n_axes):
             sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
-            zupt_ks[j], upd = zupt.axis_updates(r2[:, j], sigma, model, params)
-            extras[j] += upd
-            gates[j] += [0.0] * len(upd)
-    n_fix = [len(fixes[j]) if fixes is not None else 0 for j in range(n_axes)]
+            za = zupt.axis_aids(r2[:, j], sigma, model, params)
+            zupt_ks[j] = za.k
+            extras[j] = extras[j].concat(za)
+    gates = [np.zeros(len(e)) for e in extras]
+    n_fix = [len(f) for f in fix_lists]
 
     def more(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
         """The run file's zupt mask and fixes rows, as the whole-array path writes them."""
         mask = np.zeros((n, n_axes), dtype=bool)
         for j in range(n_axes):
             mask[zupt_ks[j][applied[j][n_fix[j] :]], j] = True
-        rows = [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for j in range(n_axes) for m in extras[j][: n_fix[j]]]
+        rows = [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for j in range(n_axes) for m in fix_lists[j]]
         return {"zupt": mask, "fixes": np.array(rows, dtype=np.float64).reshape(-1, 4)}
 
     read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
