@@ -339,7 +339,9 @@ def stream_args(args, budget: int):
             check_output(getattr(args, flag), f"--{flag}")
     rows, n_axes = size
     workdir = Path(args.out).resolve().parent
-    need = rows * 8 * (2 + n_axes) + disk_needed(rows, n_axes)  # the input's store, then the smoother's
+    need = rows * 8 * (2 + n_axes) + disk_needed(
+        rows, n_axes, n_stages=1 + bool(args.filter_states)
+    )  # input store + smoother
     free = shutil.disk_usage(workdir).free
     if need > free:
         raise UserError(
