@@ -404,6 +404,182 @@ void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned c
 
 /* ------------------------------------------------------------------------- */
 /* General path: 4-state filter with extras, 4-state RTS smoother.            */
+/*                                                                            */
+/* Per sample this path once cost about 1.2 us per axis: full 4x4 products,    */
+/* a packed/unpacked copy of every matrix and an equilibrated Cholesky with    */
+/* some 70 divisions and 8 square roots. Here the same equations act on the    */
+/* packed P (10 numbers) with F written out (r, u integrate; a holds; eps      */
+/* decays): the filter does the very operations of the 4x4 code in the same    */
+/* order, minus those whose operand is an exact 0 or 1, so its numbers are     */
+/* bit-identical; only the smoother gain's solve rounds differently.          */
+
+/* Names of the packed entries (fastsmooth.h). */
+enum { RR, RU, RA, RE, UU, UA, UE, AA, AE, EE };
+
+/* B = F P, all 16 entries (rows 2 and 3 are P's own, the last scaled by phi). */
+static void fp_rows(const acn_axis *m, const double *p, double B[4][4])
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
+    const double P0[4] = {p[RR], p[RU], p[RA], p[RE]}, P1[4] = {p[RU], p[UU], p[UA], p[UE]};
+    const double P2[4] = {p[RA], p[UA], p[AA], p[AE]}, P3[4] = {p[RE], p[UE], p[AE], p[EE]};
+    for (int j = 0; j < 4; j++) {
+        B[0][j] = P0[j] + f01 * P1[j] + f02 * P2[j];
+        B[1][j] = P1[j] + f12 * P2[j];
+        B[2][j] = P2[j];
+        B[3][j] = phi * P3[j];
+    }
+}
+
+/* P = B F' + Q with B = F P: the upper triangle of predict_cov's second half. */
+static void predict_packed(const acn_axis *m, const double B[4][4], double *p)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
+    const double *q = m->q;
+    p[RR] = B[0][0] + f01 * B[0][1] + f02 * B[0][2] + q[RR];
+    p[RU] = B[0][1] + f12 * B[0][2] + q[RU];
+    p[RA] = B[0][2] + q[RA];
+    p[RE] = phi * B[0][3] + q[RE];
+    p[UU] = B[1][1] + f12 * B[1][2] + q[UU];
+    p[UA] = B[1][2] + q[UA];
+    p[UE] = phi * B[1][3] + q[UE];
+    p[AA] = B[2][2] + q[AA];
+    p[AE] = phi * B[2][3] + q[AE];
+    p[EE] = phi * B[3][3] + q[EE];
+}
+
+/* P = F P F' + Q on the packed P */
+static void predict_p(const acn_axis *m, double *p)
+{
+    double B[4][4];
+    fp_rows(m, p, B);
+    predict_packed(m, B, p);
+}
+
+/*
+ * One scalar update z = h x + v, v ~ N(0, R), Joseph form, on the packed P.
+ * nz lists the nn indices where h is not 0 (ascending): a term h_j P_ij with
+ * h_j = 0 adds an exact 0, so the sums over nz alone are update()'s sums to the
+ * bit. Returns the innovation y; *S gets its variance.
+ */
+static inline double update_sparse(double x[4], double *p, const double h[4], const int *nz, int nn,
+                                   double z, double R, double *S)
+{
+    double PHt[4], K[4], hI[4], hx = 0.0, s = 0.0;
+    /* y = z - H x */
+    for (int t = 0; t < nn; t++)
+        hx = t ? hx + h[nz[t]] * x[nz[t]] : h[nz[t]] * x[nz[t]];
+    double y = z - hx;
+    /* S = H P H' + R */
+    for (int i = 0; i < 4; i++) {
+        double v = 0.0;
+        for (int t = 0; t < nn; t++)
+            v = t ? v + p[PK[i][nz[t]]] * h[nz[t]] : p[PK[i][nz[t]]] * h[nz[t]];
+        PHt[i] = v;
+    }
+    for (int t = 0; t < nn; t++)
+        s = t ? s + h[nz[t]] * PHt[nz[t]] : h[nz[t]] * PHt[nz[t]];
+    s += R;
+    /* K = P H' / S;  x = x + K y */
+    for (int i = 0; i < 4; i++) {
+        K[i] = PHt[i] / s;
+        x[i] += K[i] * y;
+    }
+    /* P = (I - K H) P (I - K H)' + K R K':  with IKH_P = P - K PHt', hI = IKH_P H' */
+    for (int i = 0; i < 4; i++) {
+        double v = 0.0;
+        for (int t = 0; t < nn; t++) {
+            int c = nz[t];
+            double w = (p[PK[i][c]] - K[i] * PHt[c]) * h[c];
+            v = t ? v + w : w;
+        }
+        hI[i] = v;
+    }
+    for (int i = 0; i < 4; i++)
+        for (int j = i; j < 4; j++) {
+            double *pij = p + PK[i][j];
+            *pij = (*pij - K[i] * PHt[j]) - hI[i] * K[j] + R * K[i] * K[j];
+        }
+    *S = s;
+    return y;
+}
+
+static const int NZ_ACC[2] = {2, 3};
+static const double H_UNIT[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}};
+static const int NZ_UNIT[4][1] = {{0}, {1}, {2}, {3}};
+
+/*
+ * An aid's update: a rest (h = e_u) or a fix (h = e_r) with h and nz as
+ * constants, so that the compiler unrolls update_sparse for them (same numbers:
+ * h[c] is exactly 1 there); any other h through the general loop.
+ */
+static double update_aid(double x[4], double *p, const double h[4], const int *nz, int nn, double z,
+                         double R, double *S)
+{
+    if (nn == 1 && h[nz[0]] == 1.0) {
+        switch (nz[0]) {
+        case 0:
+            return update_sparse(x, p, H_UNIT[0], NZ_UNIT[0], 1, z, R, S);
+        case 1:
+            return update_sparse(x, p, H_UNIT[1], NZ_UNIT[1], 1, z, R, S);
+        case 2:
+            return update_sparse(x, p, H_UNIT[2], NZ_UNIT[2], 1, z, R, S);
+        default:
+            return update_sparse(x, p, H_UNIT[3], NZ_UNIT[3], 1, z, R, S);
+        }
+    }
+    return update_sparse(x, p, h, nz, nn, z, R, S);
+}
+
+/*
+ * The measurements of sample k once its prior is in (x, p): the acceleration
+ * if ok, then the extras ek[ei] == k in order. Returns the index of the first
+ * extra of a later sample. ey, eS (or NULL) get each extra's innovation y and
+ * its variance S as the filter saw them: y^2 / S is the aid's NIS, with no
+ * replay of the filter (accelnav.estimate.consistency). A sample with neither
+ * is left alone: its posterior is its prior.
+ */
+static long general_update(const acn_axis *m, long k, int ok, double zk, double x[4], double *p,
+                           long ei, long n_extra, const long *ek, const double *eh,
+                           const double *ez, const double *eR, const double *egate,
+                           unsigned char *applied, double *ey, double *eS)
+{
+    double S;
+    if (ok)
+        update_sparse(x, p, H_ACC, NZ_ACC, 2, zk, m->R, &S);
+    for (; ei < n_extra && ek[ei] == k; ei++) {
+        const double *h = eh + 4 * ei;
+        int nz[4], nn = 0; /* fixes and rests have one or two nonzeros in h */
+        for (int j = 0; j < 4; j++)
+            if (h[j] != 0.0)
+                nz[nn++] = j;
+        if (egate[ei] > 0.0) {
+            /* gated: apply only if y^2 / S <= gate (a chi-square test of the innovation) */
+            double hx = 0.0;
+            for (int t = 0; t < nn; t++)
+                hx = t ? hx + h[nz[t]] * x[nz[t]] : h[nz[t]] * x[nz[t]];
+            double y = ez[ei] - hx;
+            double s = eR[ei];
+            for (int a = 0; a < nn; a++)
+                for (int b = 0; b < nn; b++)
+                    s += h[nz[a]] * p[PK[nz[a]][nz[b]]] * h[nz[b]];
+            if (y * y > egate[ei] * s) {
+                applied[ei] = 0;
+                if (ey != NULL) {
+                    ey[ei] = y;
+                    eS[ei] = s;
+                }
+                continue;
+            }
+        }
+        double y = update_aid(x, p, h, nz, nn, ez[ei], eR[ei], &S);
+        applied[ei] = 1;
+        if (ey != NULL) {
+            ey[ei] = y;
+            eS[ei] = S;
+        }
+    }
+    return ei;
+}
 
 /* Solve M Y = B for symmetric positive definite 4x4 M (Cholesky), B 4x4. */
 static int chol_solve4(double M[4][4], double B[4][4])
@@ -441,101 +617,111 @@ static int chol_solve4(double M[4][4], double B[4][4])
 }
 
 /*
- * The measurements of sample k once its prior is in (x, P): the acceleration
- * if ok, then the extras ek[ei] == k in order. Returns the index of the first
- * extra of a later sample. ey, eS (or NULL) get each extra's innovation y and
- * its variance S as the filter saw them: y^2 / S is the aid's NIS, with no
- * replay of the filter (accelnav.estimate.consistency).
+ * The fallback gain C = Pf F' inv(Pp) by the former route: Cholesky of the
+ * equilibrated Pp (unit diagonal). Returns -1 if Pp is not positive definite.
  */
-static long general_update(const acn_axis *m, long k, int ok, double zk, double x[4],
-                           double P[4][4], long ei, long n_extra, const long *ek, const double *eh,
-                           const double *ez, const double *eR, const double *egate,
-                           unsigned char *applied, double *ey, double *eS)
+static int gain_equilibrated(const double *pp, double B[4][4], double C[4][4])
 {
-    double K[4], S;
-    if (ok)
-        update(x, P, H_ACC, zk, m->R, &S, K);
-    for (; ei < n_extra && ek[ei] == k; ei++) {
-        const double *h = eh + 4 * ei;
-        if (egate[ei] > 0.0) {
-            /* gated: apply only if y^2 / S <= gate (a chi-square test of the innovation) */
-            double y = ez[ei] - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3]);
-            double s = eR[ei];
-            for (int i = 0; i < 4; i++)
-                for (int j = 0; j < 4; j++)
-                    s += h[i] * P[i][j] * h[j];
-            if (y * y > egate[ei] * s) {
-                applied[ei] = 0;
-                if (ey != NULL) {
-                    ey[ei] = y;
-                    eS[ei] = s;
-                }
-                continue;
-            }
-        }
-        double y = update(x, P, h, ez[ei], eR[ei], &S, K);
-        applied[ei] = 1;
-        if (ey != NULL) {
-            ey[ei] = y;
-            eS[ei] = S;
-        }
-    }
-    return ei;
-}
-
-/*
- * One RTS step: the smoothed (xs, Psm) of sample k from the filter's posterior
- * (xpost, Ppost) at k, its prior (xprior1, Pprior1) at k + 1 and the smoothed
- * (xs1, Psm1) at k + 1; covariances packed. Returns -1 if that prior is not
- * positive definite.
- */
-static int rts_step(double F[4][4], const double *xpost, const double *Ppost, const double *xprior1,
-                    const double *Pprior1, const double *xs1, const double *Psm1, double *xs,
-                    double *Psm)
-{
-    double Pp[4][4], Pf[4][4], Ps1[4][4], B[4][4], C[4][4], sd[4], dx[4], T[4][4];
-    unpack(Pprior1, Pp);
-    unpack(Ppost, Pf);
-    unpack(Psm1, Ps1);
-    /* C = Pf F' inv(Pp)  <=>  C' = inv(Pp) F Pf, solved on the equilibrated Pp */
+    double Pp[4][4], Mq[4][4], sd[4];
+    unpack(pp, Pp);
     for (int i = 0; i < 4; i++)
         sd[i] = Pp[i][i] > 0.0 ? sqrt(Pp[i][i]) : 1.0;
     for (int i = 0; i < 4; i++)
         for (int j = 0; j < 4; j++) {
-            double s = 0.0;
-            for (int l = i; l < 4; l++)
-                s += F[i][l] * Pf[l][j];
-            B[i][j] = s / sd[i];
-        }
-    double Mq[4][4];
-    for (int i = 0; i < 4; i++)
-        for (int j = 0; j < 4; j++)
+            B[i][j] /= sd[i];
             Mq[i][j] = Pp[i][j] / (sd[i] * sd[j]);
+        }
     if (chol_solve4(Mq, B) != 0)
         return -1;
     for (int i = 0; i < 4; i++)
         for (int j = 0; j < 4; j++)
             C[j][i] = B[i][j] / sd[i];
+    return 0;
+}
+
+/*
+ * The smoother gain C = Pf F' inv(Pp), i.e. C' = inv(Pp) B with B = F Pf:
+ * Pp = L D L' (unit lower L) unrolled, four reciprocals and no square root,
+ * then four forward and back substitutions. Eliminating r, u first is the block
+ * form: (a, eps) are left with the Schur complement of the (r, u) block. No
+ * equilibration: LDL' of an SPD matrix is invariant to diagonal scaling up to
+ * rounding (what the former sqrt(diag) scaling bought was eight square roots
+ * and 32 divisions). Against the recursion in extended precision this solve
+ * is the closer of the two (tests/estimate/test_general_structured.py).
+ * Guarded fallback: when a pivot keeps under 1e-12 of its diagonal (r and u, or
+ * a and eps, nearly collinear: most digits cancelled) or is not positive, the
+ * former equilibrated Cholesky decides that step, and its refusal stands when
+ * the prior is not positive definite. Both routes are inaccurate on so
+ * ill-conditioned a prior; the fallback keeps the former behaviour there.
+ */
+static int smoother_gain(const double *pp, double B[4][4], double C[4][4])
+{
+    const double tol = 1e-12;
+    const double a00 = pp[RR], a10 = pp[RU], a20 = pp[RA], a30 = pp[RE];
+    double d0 = a00;
+    if (!(d0 > 0.0))
+        return gain_equilibrated(pp, B, C);
+    double i0 = 1.0 / d0;
+    double l10 = a10 * i0, l20 = a20 * i0, l30 = a30 * i0;
+    double d1 = pp[UU] - l10 * a10;
+    if (!(d1 > tol * pp[UU]))
+        return gain_equilibrated(pp, B, C);
+    double i1 = 1.0 / d1;
+    double t21 = pp[UA] - l20 * a10, t31 = pp[UE] - l30 * a10; /* L21 d1, L31 d1 */
+    double l21 = t21 * i1, l31 = t31 * i1;
+    double d2 = pp[AA] - l20 * a20 - l21 * t21;
+    if (!(d2 > tol * pp[AA]))
+        return gain_equilibrated(pp, B, C);
+    double i2 = 1.0 / d2;
+    double t32 = pp[AE] - l30 * a20 - l31 * t21; /* L32 d2 */
+    double l32 = t32 * i2;
+    double d3 = pp[EE] - l30 * a30 - l31 * t31 - l32 * t32;
+    if (!(d3 > tol * pp[EE]))
+        return gain_equilibrated(pp, B, C);
+    double i3 = 1.0 / d3;
+    for (int c = 0; c < 4; c++) {
+        /* L y = b, then L' x = y / d */
+        double y0 = B[0][c];
+        double y1 = B[1][c] - l10 * y0;
+        double y2 = B[2][c] - l20 * y0 - l21 * y1;
+        double y3 = B[3][c] - l30 * y0 - l31 * y1 - l32 * y2;
+        double x3 = y3 * i3;
+        double x2 = y2 * i2 - l32 * x3;
+        double x1 = y1 * i1 - l21 * x2 - l31 * x3;
+        double x0 = y0 * i0 - l10 * x1 - l20 * x2 - l30 * x3;
+        C[c][0] = x0, C[c][1] = x1, C[c][2] = x2, C[c][3] = x3;
+    }
+    return 0;
+}
+
+/*
+ * One RTS step: the smoothed (xs, psm) of sample k from the filter's posterior
+ * (xpost, pf) at k, its prior (xprior1, pp) at k + 1 and the smoothed
+ * (xs1, ps1) at k + 1; covariances packed. B = F Pf (fp_rows of pf). Returns -1
+ * if that prior is not positive definite.
+ */
+static int rts_step(double B[4][4], const double *xpost, const double *pf, const double *xprior1,
+                    const double *pp, const double *xs1, const double *ps1, double *xs, double *psm)
+{
+    double C[4][4], dx[4], D[4][4], T[4][4];
+    if (smoother_gain(pp, B, C) != 0)
+        return -1;
     /* xs = x_post + C (xs[k+1] - x_prior[k+1]) */
     for (int i = 0; i < 4; i++)
         dx[i] = xs1[i] - xprior1[i];
     for (int i = 0; i < 4; i++)
         xs[i] = xpost[i] + C[i][0] * dx[0] + C[i][1] * dx[1] + C[i][2] * dx[2] + C[i][3] * dx[3];
-    /* Ps = P_post + C (Ps[k+1] - P_prior[k+1]) C' */
+    /* Ps = P_post + C (Ps[k+1] - P_prior[k+1]) C', upper triangle */
     for (int i = 0; i < 4; i++)
-        for (int j = 0; j < 4; j++) {
-            double s = 0.0;
-            for (int l = 0; l < 4; l++)
-                s += C[i][l] * (Ps1[l][j] - Pp[l][j]);
-            T[i][j] = s;
-        }
+        for (int j = i; j < 4; j++)
+            D[i][j] = D[j][i] = ps1[PK[i][j]] - pp[PK[i][j]];
     for (int i = 0; i < 4; i++)
-        for (int j = i; j < 4; j++) {
-            double s = 0.0;
-            for (int l = 0; l < 4; l++)
-                s += T[i][l] * C[j][l];
-            Psm[PK[i][j]] = Pf[i][j] + s;
-        }
+        for (int j = 0; j < 4; j++)
+            T[i][j] = C[i][0] * D[0][j] + C[i][1] * D[1][j] + C[i][2] * D[2][j] + C[i][3] * D[3][j];
+    for (int i = 0; i < 4; i++)
+        for (int j = i; j < 4; j++)
+            psm[PK[i][j]] = pf[PK[i][j]] + (T[i][0] * C[j][0] + T[i][1] * C[j][1] +
+                                            T[i][2] * C[j][2] + T[i][3] * C[j][3]);
     return 0;
 }
 
@@ -544,34 +730,30 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
                 const double *egate, unsigned char *applied, double *ey, double *eS, double *xprior,
                 double *Pprior, double *xpost, double *Ppost, double *xs, double *Psm)
 {
-    double F[4][4], P[4][4], x[4];
+    double p[10], x[4];
     long ei = 0;
-    transition(m, F);
-    unpack(m->p0, P);
-    for (int i = 0; i < 4; i++)
-        x[i] = m->x0[i];
+    memcpy(p, m->p0, sizeof p);
+    memcpy(x, m->x0, sizeof x);
 
     for (long k = 0; k < n; k++) {
         if (k > 0) {
             predict_mean(m, x);
-            predict_cov(m, F, P);
+            predict_p(m, p);
         }
-        for (int i = 0; i < 4; i++)
-            xprior[4 * k + i] = x[i];
-        pack(P, Pprior + 10 * k);
-        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
+        memcpy(xprior + 4 * k, x, sizeof x);
+        memcpy(Pprior + 10 * k, p, sizeof p);
+        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, p, ei, n_extra, ek, eh, ez,
                             eR, egate, applied, ey, eS);
-        for (int i = 0; i < 4; i++)
-            xpost[4 * k + i] = x[i];
-        pack(P, Ppost + 10 * k);
+        memcpy(xpost + 4 * k, x, sizeof x);
+        memcpy(Ppost + 10 * k, p, sizeof p);
     }
 
-    for (int i = 0; i < 4; i++)
-        xs[4 * (n - 1) + i] = xpost[4 * (n - 1) + i];
-    for (int i = 0; i < 10; i++)
-        Psm[10 * (n - 1) + i] = Ppost[10 * (n - 1) + i];
+    memcpy(xs + 4 * (n - 1), xpost + 4 * (n - 1), 4 * sizeof(double));
+    memcpy(Psm + 10 * (n - 1), Ppost + 10 * (n - 1), 10 * sizeof(double));
     for (long k = n - 2; k >= 0; k--) {
-        if (rts_step(F, xpost + 4 * k, Ppost + 10 * k, xprior + 4 * (k + 1), Pprior + 10 * (k + 1),
+        double B[4][4];
+        fp_rows(m, Ppost + 10 * k, B);
+        if (rts_step(B, xpost + 4 * k, Ppost + 10 * k, xprior + 4 * (k + 1), Pprior + 10 * (k + 1),
                      xs + 4 * (k + 1), Psm + 10 * (k + 1), xs + 4 * k, Psm + 10 * k) != 0)
             return -(int)(k + 1 > 1000000000L ? 1000000000L : k + 1);
     }
@@ -1147,8 +1329,8 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
 /* steps (general_update, rts_step) in the same order. Store row of sample k:  */
 /*   0..3 x_post[k]  4..13 P_post[k]                                            */
 /* The backward pass predicts the prior of k + 1 from them again, with the     */
-/* forward pass's own predict_mean and predict_cov: the same numbers, and half */
-/* the store (its writes were a third of `smooth --zupt auto` at 1e7 samples).  */
+/* forward pass's own predict_mean and predict_packed: the same numbers, and   */
+/* half the store (its writes were a third of `smooth --zupt auto` at 1e7).    */
 
 /*
  * Forward over samples k0 .. k0 + n - 1, extras as in acn_general with ek
@@ -1161,29 +1343,26 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                     const double *ez, const double *eR, const double *egate, unsigned char *applied,
                     double *carry, double *store, double *xf, double *sdf)
 {
-    double F[4][4], P[4][4], x[4];
+    double p[10], x[4];
     long ei = 0;
-    transition(m, F);
-    unpack(carry + 4, P);
-    for (int i = 0; i < 4; i++)
-        x[i] = carry[i];
+    memcpy(x, carry, sizeof x);
+    memcpy(p, carry + 4, sizeof p);
     for (long k = 0; k < n; k++) {
         double *row = store + ACN_GROW * k;
-        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
+        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, p, ei, n_extra, ek, eh, ez,
                             eR, egate, applied, NULL, NULL);
-        for (int i = 0; i < 4; i++) {
+        for (int i = 0; i < 4; i++)
             row[i] = xf[4 * k + i] = x[i];
-            sdf[4 * k + i] = sqrt(P[i][i]);
-        }
-        pack(P, row + 4);
+        sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
+        sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
+        memcpy(row + 4, p, sizeof p);
         if (last && k == n - 1)
             break;
         predict_mean(m, x);
-        predict_cov(m, F, P);
+        predict_p(m, p);
     }
-    for (int i = 0; i < 4; i++)
-        carry[i] = x[i];
-    pack(P, carry + 4);
+    memcpy(carry, x, sizeof x);
+    memcpy(carry + 4, p, sizeof p);
 }
 
 /*
@@ -1196,48 +1375,35 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
 int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
                    double *xs, double *sds)
 {
-    double F[4][4], x1[4], P1[10], x[4], Pk[10];
-    transition(m, F);
-    for (int i = 0; i < 4; i++)
-        x1[i] = carry[i];
-    for (int i = 0; i < 10; i++)
-        P1[i] = carry[4 + i];
+    double x1[4], P1[10];
+    memcpy(x1, carry, sizeof x1);
+    memcpy(P1, carry + 4, sizeof P1);
     long k = n - 1;
     if (last) {
         const double *row = store + ACN_GROW * k;
-        for (int i = 0; i < 4; i++)
-            x1[i] = row[i];
-        for (int i = 0; i < 10; i++)
-            P1[i] = row[4 + i];
-        for (int i = 0; i < 4; i++) {
-            xs[4 * k + i] = x1[i];
-            sds[4 * k + i] = sqrt(P1[PK[i][i]]);
-        }
+        memcpy(x1, row, sizeof x1);
+        memcpy(P1, row + 4, sizeof P1);
+        memcpy(xs + 4 * k, x1, sizeof x1);
+        sds[4 * k + 0] = sqrt(P1[RR]), sds[4 * k + 1] = sqrt(P1[UU]);
+        sds[4 * k + 2] = sqrt(P1[AA]), sds[4 * k + 3] = sqrt(P1[EE]);
         k--;
     }
     for (; k >= 0; k--) {
         const double *row = store + ACN_GROW * k;
-        double xp[4], Pp[4][4], Ppk[10]; /* the prior of k + 1, predicted again from row k */
-        for (int i = 0; i < 4; i++)
-            xp[i] = row[i];
-        unpack(row + 4, Pp);
+        double xp[4], pp[10], B[4][4]; /* the prior of k + 1, predicted again from row k */
+        memcpy(xp, row, sizeof xp);
         predict_mean(m, xp);
-        predict_cov(m, F, Pp);
-        pack(Pp, Ppk);
-        if (rts_step(F, row, row + 4, xp, Ppk, x1, P1, x, Pk) != 0) {
+        fp_rows(m, row + 4, B);
+        predict_packed(m, B, pp);
+        if (rts_step(B, row, row + 4, xp, pp, x1, P1, x1, P1) != 0) {
             long at = k0 + k + 1;
             return -(int)(at > 1000000000L ? 1000000000L : at);
         }
-        for (int i = 0; i < 4; i++) {
-            x1[i] = xs[4 * k + i] = x[i];
-            sds[4 * k + i] = sqrt(Pk[PK[i][i]]);
-        }
-        for (int i = 0; i < 10; i++)
-            P1[i] = Pk[i];
+        memcpy(xs + 4 * k, x1, sizeof x1);
+        sds[4 * k + 0] = sqrt(P1[RR]), sds[4 * k + 1] = sqrt(P1[UU]);
+        sds[4 * k + 2] = sqrt(P1[AA]), sds[4 * k + 3] = sqrt(P1[EE]);
     }
-    for (int i = 0; i < 4; i++)
-        carry[i] = x1[i];
-    for (int i = 0; i < 10; i++)
-        carry[4 + i] = P1[i];
+    memcpy(carry, x1, sizeof x1);
+    memcpy(carry + 4, P1, sizeof P1);
     return 0;
 }

@@ -1,0 +1,108 @@
+"""Benchmark (issue 24): the general smoother kernel alone, ns per sample per axis, this build beside a baseline.
+
+The general path (fixes, rests) as `smooth --zupt auto` drives it: half the samples in rests (a
+zero-velocity update each), a position fix every 1e4 samples, one sample in 37 invalid. Times, best of
+--repeat, with buffers reused (no page faults): acn_general (filter, store, smoother, whole run) and the
+bounded path's acn_chunkg_fwd and acn_chunkg_bwd over one chunk. The baseline runs this very script with
+its own python (default /work/main/.venv) in a subprocess, interleaved; ratios hold on a loaded machine.
+Usage: python bench/run_all.py speed --only bench_general_kernel, or from bench/speed:
+  python bench_general_kernel.py [--n 1e6] [--baseline /work/main] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def measure(n: int, repeat: int) -> dict[str, float]:
+    from accelnav.estimate import fastsmooth
+    from accelnav.estimate.fastsmooth import Extras
+    from accelnav.estimate.kf import position_fix, zero_velocity
+    from accelnav.model.design import axis_design
+    from accelnav.model.load import load_model
+
+    d = axis_design(load_model(None), 0)
+    rng = np.random.default_rng(1)
+    z = rng.normal(0.0, 0.05, n)
+    valid = np.ones(n, dtype=bool)
+    valid[::37] = False
+    k = np.arange(n)
+    rest = k[(k // 500) % 2 == 0]
+    aids = [zero_velocity(int(i), 1e-3) for i in rest] + [position_fix(i, 0.0, 1.0) for i in range(100, n, 10_000)]
+    ex = Extras.of(aids)
+    best = {"acn_general": np.inf, "acn_chunkg_fwd": np.inf, "acn_chunkg_bwd": np.inf}
+    out = fastsmooth.smooth_general(d, z, valid=valid, extras=ex)
+    mod = fastsmooth._lib()
+    ffi, lib = mod.ffi, mod.lib
+
+    def p(a, t="double *"):
+        return ffi.cast(t, ffi.from_buffer(a))
+
+    ax = fastsmooth._axis_struct(ffi, d)
+    store, xa, sa = np.empty((n, 14)), np.empty((n, 4)), np.empty((n, 4))
+    gates, applied = np.zeros(len(ex)), np.zeros(len(ex), dtype=np.uint8)
+    ek = ffi.from_buffer("long[]", ex.k)
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fastsmooth.smooth_general(d, z, valid=valid, extras=ex, out=out)
+        best["acn_general"] = min(best["acn_general"], time.perf_counter() - t)
+        carry_f = np.concatenate([np.asarray(d.x0, dtype=float), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
+        carry_b = np.zeros(14)
+        t0 = time.perf_counter()
+        lib.acn_chunkg_fwd(
+            ax, n, 1, p(z), p(valid.view(np.uint8), "unsigned char *"), len(ex), ek, p(ex.h), p(ex.z), p(ex.R),
+            p(gates), p(applied, "unsigned char *"), p(carry_f), p(store), p(xa), p(sa),
+        )  # fmt: skip
+        t1 = time.perf_counter()
+        if lib.acn_chunkg_bwd(ax, 0, n, 1, p(store), p(carry_b), p(xa), p(sa)) != 0:
+            raise SystemExit("acn_chunkg_bwd refused the run")
+        t2 = time.perf_counter()
+        best["acn_chunkg_fwd"] = min(best["acn_chunkg_fwd"], t1 - t0)
+        best["acn_chunkg_bwd"] = min(best["acn_chunkg_bwd"], t2 - t1)
+    return {key: v * 1e9 / n for key, v in best.items()}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=float, default=1e6)
+    ap.add_argument("--baseline", type=Path, default=Path("/work/main"), help="checkout with its own .venv")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--inner", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    n = int(args.n)
+    if args.inner:
+        print(json.dumps(measure(n, args.repeat)))
+        return 0
+    builds = {"this": sys.executable}
+    base_py = args.baseline / ".venv" / "bin" / "python"
+    if base_py.exists():
+        builds["baseline"] = str(base_py)
+    else:
+        print(f"no baseline: {base_py} is absent")
+    res: dict[str, dict[str, float]] = {}
+    for build, py in builds.items():
+        cmd = [py, __file__, "--inner", "--n", str(n), "--repeat", str(args.repeat)]
+        got = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if got.returncode:
+            print(f"{build} failed: {got.stderr.strip().splitlines()[-1:]}")
+            continue
+        res[build] = json.loads(got.stdout.strip().splitlines()[-1])
+    print(f"General smoother kernel, N = {n:.0e}, ns per sample per axis (best of {args.repeat}):\n")
+    print("| kernel | " + " | ".join(res) + (" | baseline / this |" if len(res) == 2 else " |"))
+    print("|---|" + "---|" * (len(res) + (len(res) == 2)))
+    for key in next(iter(res.values()), {}):
+        row = " | ".join(f"{res[b][key]:.0f}" for b in res)
+        ratio = f" | {res['baseline'][key] / res['this'][key]:.2f}" if len(res) == 2 else ""
+        print(f"| {key} | {row}{ratio} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1243 @@
+/*
+ * Float64 filter and RTS smoother of one accelnav axis: see fastsmooth.h for
+ * the conventions and host/fastsmooth.py for the derivation of the plain path.
+ *
+ * Every block carries the equation it computes, as in host/kf.py.
+ */
+#include "fastsmooth.h"
+
+#include <math.h>
+#include <stddef.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Index of (i, j) in a packed symmetric 4x4 matrix. */
+static const int PK[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
+
+static void unpack(const double *p, double M[4][4])
+{
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            M[i][j] = p[PK[i][j]];
+}
+
+static void pack(double M[4][4], double *p)
+{
+    for (int i = 0; i < 4; i++)
+        for (int j = i; j < 4; j++)
+            p[PK[i][j]] = M[i][j];
+}
+
+static void transition(const acn_axis *m, double F[4][4])
+{
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            F[i][j] = (i == j) ? 1.0 : 0.0;
+    F[0][1] = m->f01;
+    F[0][2] = m->f02;
+    F[1][2] = m->f12;
+    F[3][3] = m->phi;
+}
+
+/* P = F P F' + Q, with F = [[1, f01, f02, 0], [0, 1, f12, 0], [0, 0, 1, 0], [0, 0, 0, phi]] */
+static void predict_cov(const acn_axis *m, double F[4][4], double P[4][4])
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
+    double G[4][4]; /* G = F P */
+    (void)F;
+    for (int j = 0; j < 4; j++) {
+        G[0][j] = P[0][j] + f01 * P[1][j] + f02 * P[2][j];
+        G[1][j] = P[1][j] + f12 * P[2][j];
+        G[2][j] = P[2][j];
+        G[3][j] = phi * P[3][j];
+    }
+    for (int i = 0; i < 4; i++) { /* P = G F' + Q, upper triangle then mirrored */
+        double g0 = G[i][0] + f01 * G[i][1] + f02 * G[i][2];
+        double g1 = G[i][1] + f12 * G[i][2];
+        double row[4] = {g0, g1, G[i][2], phi * G[i][3]};
+        for (int j = i; j < 4; j++)
+            P[i][j] = row[j] + m->q[PK[i][j]];
+    }
+    for (int i = 1; i < 4; i++)
+        for (int j = 0; j < i; j++)
+            P[i][j] = P[j][i];
+}
+
+/*
+ * The r and u rows of P = F P F' + Q alone (rows 0, 1 and their mirror), by the
+ * very operations of predict_cov: where the (a, eps) block comes from stored
+ * rows, the rest of predict_cov was computed only to be overwritten.
+ */
+static void predict_ru(const acn_axis *m, double P[4][4])
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
+    double G[2][4]; /* rows 0, 1 of G = F P */
+    for (int j = 0; j < 4; j++) {
+        G[0][j] = P[0][j] + f01 * P[1][j] + f02 * P[2][j];
+        G[1][j] = P[1][j] + f12 * P[2][j];
+    }
+    for (int i = 0; i < 2; i++) {
+        double g0 = G[i][0] + f01 * G[i][1] + f02 * G[i][2];
+        double g1 = G[i][1] + f12 * G[i][2];
+        double row[4] = {g0, g1, G[i][2], phi * G[i][3]};
+        for (int j = i; j < 4; j++)
+            P[i][j] = row[j] + m->q[PK[i][j]];
+    }
+    for (int i = 0; i < 2; i++)
+        for (int j = i + 1; j < 4; j++)
+            P[j][i] = P[i][j];
+}
+
+/* x = F x + b */
+static void predict_mean(const acn_axis *m, double x[4])
+{
+    x[0] = x[0] + m->f01 * x[1] + m->f02 * x[2];
+    x[1] = x[1] + m->f12 * x[2];
+    x[3] = m->phi * x[3] + m->b_eps;
+}
+
+/*
+ * One scalar update z = h x + v, v ~ N(0, R), Joseph form. Writes K.
+ * Returns the innovation y; *S gets its variance.
+ */
+static double update(double x[4], double P[4][4], const double h[4], double z, double R, double *S,
+                     double K[4])
+{
+    double PHt[4], IKH_P[4][4], hIKH_P[4];
+    /* y = z - H x */
+    double y = z - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3]);
+    /* S = H P H' + R */
+    for (int i = 0; i < 4; i++)
+        PHt[i] = P[i][0] * h[0] + P[i][1] * h[1] + P[i][2] * h[2] + P[i][3] * h[3];
+    double s = h[0] * PHt[0] + h[1] * PHt[1] + h[2] * PHt[2] + h[3] * PHt[3] + R;
+    /* K = P H' / S;  x = x + K y */
+    for (int i = 0; i < 4; i++) {
+        K[i] = PHt[i] / s;
+        x[i] += K[i] * y;
+    }
+    /* P = (I - K H) P (I - K H)' + K R K'   (P H' = PHt, P symmetric) */
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            IKH_P[i][j] = P[i][j] - K[i] * PHt[j];
+    for (int i = 0; i < 4; i++)
+        hIKH_P[i] =
+            IKH_P[i][0] * h[0] + IKH_P[i][1] * h[1] + IKH_P[i][2] * h[2] + IKH_P[i][3] * h[3];
+    for (int i = 0; i < 4; i++)
+        for (int j = i; j < 4; j++) {
+            P[i][j] = IKH_P[i][j] - hIKH_P[i] * K[j] + R * K[i] * K[j];
+            P[j][i] = P[i][j];
+        }
+    *S = s;
+    return y;
+}
+
+static const double H_ACC[4] = {0.0, 0.0, 1.0, 1.0};
+
+/* ------------------------------------------------------------------------- */
+/* Plain path, data-independent part: gains, covariances, smoother gains.      */
+
+static int plain_smooth_cov(const acn_axis *m, long n, double *Cs, long stride, long ncs,
+                            int write_cs, const double *Pprior, const double *Ppost, double *Psm);
+
+int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double *K, double *Cs,
+                  double *Pprior, double *Ppost, double *Psm)
+{
+    double F[4][4], P[4][4], x[4] = {0.0, 0.0, 0.0, 0.0}, S;
+    transition(m, F);
+    unpack(m->p0, P);
+
+    /* Forward: the 4-state covariance filter; K[k] = 0 where sample k is skipped. */
+    for (long k = 0; k < n; k++) {
+        double *Kk = K + 4 * k;
+        if (k > 0)
+            predict_cov(m, F, P);
+        pack(P, Pprior + 10 * k);
+        if (valid == NULL || valid[k]) {
+            update(x, P, H_ACC, 0.0, m->R, &S, Kk);
+        } else {
+            Kk[0] = Kk[1] = Kk[2] = Kk[3] = 0.0;
+        }
+        pack(P, Ppost + 10 * k);
+    }
+
+    return plain_smooth_cov(m, n, Cs, 4, n, 1, Pprior, Ppost, Psm);
+}
+
+/*
+ * The forward rows of an all-valid run, ACN_SROW doubles per sample k:
+ *   0..3 K[k]   4..7 C[k] (0 at the last sample)   8..10 prior aa ae ee   11..13 posterior aa ae ee
+ * the numbers acn_plain_cov computes, none of which depends on the run's length.
+ */
+int acn_plain_rows(const acn_axis *m, long n, double *rows)
+{
+    double F[4][4], P[4][4], x[4] = {0.0, 0.0, 0.0, 0.0}, S;
+    const double phi = m->phi;
+    transition(m, F);
+    unpack(m->p0, P);
+    for (long k = 0; k < n; k++) {
+        double *row = rows + ACN_SROW * k;
+        if (k > 0)
+            predict_cov(m, F, P);
+        row[8] = P[2][2], row[9] = P[2][3], row[10] = P[3][3];
+        if (k > 0) { /* C[k-1] = Pf[k-1] Fs' inv(Pp[k]), as in acn_plain_cov */
+            double *prev = row - ACN_SROW;
+            double paa = prev[11], pae = prev[12], pee = prev[13];
+            double qaa = row[8], qae = row[9], qee = row[10];
+            double sa = sqrt(qaa), se = sqrt(qee);
+            double rho = qae / (sa * se);
+            double det = (1.0 - rho * rho) * qaa * qee;
+            if (!(det > 0.0))
+                return -(int)(k > 1000000000L ? 1000000000L : k);
+            double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee;
+            prev[4] = (m00 * qee - m01 * qae) / det, prev[5] = (m01 * qaa - m00 * qae) / det;
+            prev[6] = (m10 * qee - m11 * qae) / det, prev[7] = (m11 * qaa - m10 * qae) / det;
+        }
+        update(x, P, H_ACC, 0.0, m->R, &S, row);
+        row[11] = P[2][2], row[12] = P[2][3], row[13] = P[3][3];
+    }
+    double *lastrow = rows + ACN_SROW * (n - 1);
+    lastrow[4] = lastrow[5] = lastrow[6] = lastrow[7] = 0.0;
+    return 0;
+}
+
+/*
+ * acn_plain_cov of an all-valid run from the rows of acn_plain_rows: sample k
+ * reads row min(k, nt - 1), the last stored row being steady (the caller checks
+ * that). The (a, eps) blocks come from the rows; the r, u rows of P (which never
+ * settle: r, u are not observable) are propagated with the row's gain,
+ *   P = F P F' + Q;  P_ij -= K_i (P H')_j + (P H')_i K_j - K_i K_j S   (i in r, u)
+ * which is the Joseph update expanded (K = P H' / S). No 4x4 Joseph update per
+ * sample: what made acn_plain_cov the largest cost of a run.
+ */
+int acn_plain_cov_steady(const acn_axis *m, long n, long nt, const double *rows, double *Pprior,
+                         double *Ppost, double *Psm)
+{
+    double F[4][4], P[4][4], PHt[4];
+    transition(m, F);
+    unpack(m->p0, P);
+    for (long k = 0; k < n; k++) {
+        const double *row = rows + ACN_SROW * (k < nt ? k : nt - 1);
+        if (k > 0)
+            predict_cov(m, F, P);
+        P[2][2] = row[8], P[2][3] = P[3][2] = row[9], P[3][3] = row[10];
+        pack(P, Pprior + 10 * k);
+        /* S = H P H' + R */
+        double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
+        for (int i = 0; i < 4; i++)
+            PHt[i] = P[i][2] + P[i][3];
+        for (int i = 0; i < 2; i++)
+            for (int j = i; j < 4; j++) {
+                P[i][j] -= row[i] * PHt[j] + PHt[i] * row[j] - row[i] * row[j] * S;
+                P[j][i] = P[i][j];
+            }
+        P[2][2] = row[11], P[2][3] = P[3][2] = row[12], P[3][3] = row[13];
+        pack(P, Ppost + 10 * k);
+    }
+    return plain_smooth_cov(m, n, (double *)rows + 4, ACN_SROW, nt, 0, Pprior, Ppost, Psm);
+}
+
+/*
+ * The smoother's covariances from the filter's (Pprior, Ppost): the (a, eps)
+ * block backward, then the r, u rows forward. The smoother gain of sample k is
+ * computed backward (written to Cs[k] if write_cs) and read forward from row
+ * min(k, ncs - 1) of Cs, rows stride doubles apart (ncs < n: a stored
+ * transient whose last row is steady).
+ */
+static int plain_smooth_cov(const acn_axis *m, long n, double *Cs, long stride, long ncs,
+                            int write_cs, const double *Pprior, const double *Ppost, double *Psm)
+{
+    /* Backward: the 2-state RTS smoother of s = (a, eps), Fs = diag(1, phi). */
+    const double phi = m->phi;
+    double *last = Psm + 10 * (n - 1);
+    for (int i = 0; i < 10; i++)
+        last[i] = Ppost[10 * (n - 1) + i];
+    if (write_cs)
+        Cs[stride * (n - 1) + 0] = Cs[stride * (n - 1) + 1] = Cs[stride * (n - 1) + 2] =
+            Cs[stride * (n - 1) + 3] = 0.0;
+    for (long k = n - 2; k >= 0; k--) {
+        const double *pf = Ppost + 10 * k, *pp = Pprior + 10 * (k + 1), *s1 = Psm + 10 * (k + 1);
+        double *ps = Psm + 10 * k;
+        double paa = pf[7], pae = pf[8], pee = pf[9];
+        double qaa = pp[7], qae = pp[8], qee = pp[9];
+        /* C = Pf Fs' inv(Pp), inv(Pp) = [qee, -qae; -qae, qaa] / det, det on the equilibrated Pp */
+        double sa = sqrt(qaa), se = sqrt(qee);
+        double rho = qae / (sa * se);
+        double det = (1.0 - rho * rho) * qaa * qee;
+        if (!(det > 0.0))
+            return -(int)(k + 1 > 1000000000L ? 1000000000L : k + 1);
+        double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee; /* Pf Fs' */
+        double c00 = (m00 * qee - m01 * qae) / det, c01 = (m01 * qaa - m00 * qae) / det;
+        double c10 = (m10 * qee - m11 * qae) / det, c11 = (m11 * qaa - m10 * qae) / det;
+        if (write_cs)
+            Cs[stride * k + 0] = c00, Cs[stride * k + 1] = c01, Cs[stride * k + 2] = c10,
+                            Cs[stride * k + 3] = c11;
+        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
+        double daa = s1[7] - qaa, dae = s1[8] - qae, dee = s1[9] - qee;
+        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
+        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
+        ps[7] = paa + t00 * c00 + t01 * c01;
+        ps[8] = pae + t00 * c10 + t01 * c11;
+        ps[9] = pee + t10 * c10 + t11 * c11;
+    }
+
+    /*
+     * Forward: the r, u rows of the smoothed covariance. With s~ the smoothing
+     * error of s, Cov(x~_k, s~_j) = beta_x' Cov(s~_k, s~_j) for every j >= k;
+     * moving to k+1 maps beta to Cs[k]' beta (Cov(s~_k, s~_j) = C_k Cov(s~_k+1, s~_j)).
+     *   u~' = p_u + gu a~' + e_u,   p_u = u~ + (f12 - gu) a~
+     *   r~' = p_r + gr a~' + e_r,   p_r = r~ + f01 u~ + (f02 - gr) a~
+     * e = (e_r, e_u) is the part of w_(r,u) independent of w_a, covariance Qe.
+     */
+    const double gr = m->gr, gu = m->gu, f01 = m->f01;
+    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
+    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
+    const double qe_uu = m->q[4] - gu * m->q[5];
+    double br0 = 0.0, br1 = 0.0, bu0 = 0.0, bu1 = 0.0;
+    {
+        double *ps = Psm + 0;
+        const double *pf = Ppost + 0;
+        if (n > 1) { /* r, u of sample 0 are independent of every measurement */
+            ps[0] = pf[0], ps[1] = pf[1], ps[4] = pf[4];
+            ps[2] = ps[3] = ps[5] = ps[6] = 0.0;
+        }
+    }
+    for (long k = 0; k + 1 < n; k++) {
+        const double *p = Psm + 10 * k, *C = Cs + stride * (k < ncs ? k : ncs - 1);
+        double *q = Psm + 10 * (k + 1);
+        double rr = p[0], ru = p[1], ra = p[2], uu = p[4], ua = p[5], aa = p[7];
+        /* Var and Cov of p_r, p_u (time-k quantities) */
+        double vpr =
+            rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
+        double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
+        double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
+        /* beta of p_r, p_u at k, then mapped to k+1: gamma = C' beta */
+        double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
+        double pu0 = bu0 + c2u, pu1 = bu1;
+        double gr0 = C[0] * pr0 + C[2] * pr1, gr1 = C[1] * pr0 + C[3] * pr1;
+        double gu0 = C[0] * pu0 + C[2] * pu1, gu1 = C[1] * pu0 + C[3] * pu1;
+        double aa1 = q[7], ae1 = q[8], ee1 = q[9];
+        double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1; /* Cov(p, a~') */
+        br0 = gr0 + gr, br1 = gr1;
+        bu0 = gu0 + gu, bu1 = gu1;
+        /* Var(r~'), Var(u~'), Cov(r~', u~') */
+        q[0] = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
+        q[4] = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
+        q[1] = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
+        /* Cov(r~', s~') = beta_r' Ps_s, Cov(u~', s~') = beta_u' Ps_s */
+        q[2] = br0 * aa1 + br1 * ae1, q[3] = br0 * ae1 + br1 * ee1;
+        q[5] = bu0 * aa1 + bu1 * ae1, q[6] = bu0 * ae1 + bu1 * ee1;
+    }
+    /* the smoother's last sample is the filter's, exactly (the reference's convention) */
+    for (int i = 0; i < 10; i++)
+        last[i] = Ppost[10 * (n - 1) + i];
+    return 0;
+}
+
+/* ------------------------------------------------------------------------- */
+/* Plain path, data pass: filter means with the precomputed gains, the (a, eps) */
+/* RTS means, then r, u of the smoother in closed form.                        */
+
+void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned char *valid,
+                    const double *K, const double *Cs, long stride, long nk, double *xf, double *xs)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    const double gr = m->gr, gu = m->gu;
+    double r = m->x0[0], u = m->x0[1], a = m->x0[2], e = m->x0[3];
+
+    /*
+     * x = F x + b, then y = z - (a + eps), x = x + K y. Written so that the
+     * loop-carried chain through (a, eps) is short: with ep = phi eps + b,
+     *   a'   = (1 - Ka) a - Ka ep + Ka z
+     *   eps' = -Ke a + (1 - Ke) ep + Ke z
+     * (the same numbers up to rounding).
+     */
+    for (long k = 0; k < n; k++) {
+        const double *Kk = K + stride * (k < nk ? k : nk - 1); /* steady after row nk - 1 */
+        double ep = e;
+        if (k > 0) {
+            r = r + f01 * u + f02 * a;
+            u = u + f12 * a;
+            ep = phi * e + b;
+        }
+        if (valid == NULL || valid[k]) {
+            double y = z[k] - a - ep;
+            r += Kk[0] * y;
+            u += Kk[1] * y;
+            double ka = Kk[2], ke = Kk[3], zk = z[k];
+            double an = (a - ka * a) + ka * (zk - ep);
+            e = (ep - ke * ep) + ke * (zk - a);
+            a = an;
+        } else {
+            e = ep;
+        }
+        double *o = xf + 4 * k;
+        o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+    }
+
+    /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b),  s = (a, eps) */
+    double as = xf[4 * (n - 1) + 2], es = xf[4 * (n - 1) + 3];
+    xs[4 * (n - 1) + 2] = as, xs[4 * (n - 1) + 3] = es;
+    for (long k = n - 2; k >= 0; k--) {
+        const double *f = xf + 4 * k, *C = Cs + stride * (k < nk ? k : nk - 1);
+        /* = C s[k+1] + (s_post[k] - C (Fs s_post[k] + b)): the chain through s is one mul-add */
+        double fa = f[2], fe = phi * f[3] + b;
+        double ca = f[2] - (C[0] * fa + C[1] * fe), ce = f[3] - (C[2] * fa + C[3] * fe);
+        double an = C[0] * as + C[1] * es + ca;
+        es = C[2] * as + C[3] * es + ce;
+        as = an;
+        xs[4 * k + 2] = as, xs[4 * k + 3] = es;
+    }
+
+    /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise, from r[0], u[0] of the filter */
+    r = xf[0], u = xf[1];
+    xs[0] = r, xs[1] = u;
+    for (long k = 0; k + 1 < n; k++) {
+        double a0 = xs[4 * k + 2], a1 = xs[4 * k + 6];
+        double dw = a1 - a0;
+        r = r + (f01 * u + (f02 * a0 + gr * dw));
+        u = u + (f12 * a0 + gu * dw);
+        xs[4 * k + 4] = r, xs[4 * k + 5] = u;
+    }
+    xs[4 * (n - 1) + 0] = xf[4 * (n - 1) + 0]; /* the smoother's last sample is the filter's */
+    xs[4 * (n - 1) + 1] = xf[4 * (n - 1) + 1];
+}
+
+/* ------------------------------------------------------------------------- */
+/* General path: 4-state filter with extras, 4-state RTS smoother.            */
+
+/* Solve M Y = B for symmetric positive definite 4x4 M (Cholesky), B 4x4. */
+static int chol_solve4(double M[4][4], double B[4][4])
+{
+    double L[4][4] = {{0.0}};
+    for (int j = 0; j < 4; j++) {
+        double d = M[j][j];
+        for (int l = 0; l < j; l++)
+            d -= L[j][l] * L[j][l];
+        if (!(d > 0.0))
+            return -1;
+        L[j][j] = sqrt(d);
+        for (int i = j + 1; i < 4; i++) {
+            double s = M[i][j];
+            for (int l = 0; l < j; l++)
+                s -= L[i][l] * L[j][l];
+            L[i][j] = s / L[j][j];
+        }
+    }
+    for (int c = 0; c < 4; c++) {
+        for (int i = 0; i < 4; i++) { /* L y = b */
+            double s = B[i][c];
+            for (int l = 0; l < i; l++)
+                s -= L[i][l] * B[l][c];
+            B[i][c] = s / L[i][i];
+        }
+        for (int i = 3; i >= 0; i--) { /* L' x = y */
+            double s = B[i][c];
+            for (int l = i + 1; l < 4; l++)
+                s -= L[l][i] * B[l][c];
+            B[i][c] = s / L[i][i];
+        }
+    }
+    return 0;
+}
+
+/*
+ * The measurements of sample k once its prior is in (x, P): the acceleration
+ * if ok, then the extras ek[ei] == k in order. Returns the index of the first
+ * extra of a later sample. ey, eS (or NULL) get each extra's innovation y and
+ * its variance S as the filter saw them: y^2 / S is the aid's NIS, with no
+ * replay of the filter (accelnav.estimate.consistency).
+ */
+static long general_update(const acn_axis *m, long k, int ok, double zk, double x[4],
+                           double P[4][4], long ei, long n_extra, const long *ek, const double *eh,
+                           const double *ez, const double *eR, const double *egate,
+                           unsigned char *applied, double *ey, double *eS)
+{
+    double K[4], S;
+    if (ok)
+        update(x, P, H_ACC, zk, m->R, &S, K);
+    for (; ei < n_extra && ek[ei] == k; ei++) {
+        const double *h = eh + 4 * ei;
+        if (egate[ei] > 0.0) {
+            /* gated: apply only if y^2 / S <= gate (a chi-square test of the innovation) */
+            double y = ez[ei] - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3]);
+            double s = eR[ei];
+            for (int i = 0; i < 4; i++)
+                for (int j = 0; j < 4; j++)
+                    s += h[i] * P[i][j] * h[j];
+            if (y * y > egate[ei] * s) {
+                applied[ei] = 0;
+                if (ey != NULL) {
+                    ey[ei] = y;
+                    eS[ei] = s;
+                }
+                continue;
+            }
+        }
+        double y = update(x, P, h, ez[ei], eR[ei], &S, K);
+        applied[ei] = 1;
+        if (ey != NULL) {
+            ey[ei] = y;
+            eS[ei] = S;
+        }
+    }
+    return ei;
+}
+
+/*
+ * One RTS step: the smoothed (xs, Psm) of sample k from the filter's posterior
+ * (xpost, Ppost) at k, its prior (xprior1, Pprior1) at k + 1 and the smoothed
+ * (xs1, Psm1) at k + 1; covariances packed. Returns -1 if that prior is not
+ * positive definite.
+ */
+static int rts_step(double F[4][4], const double *xpost, const double *Ppost, const double *xprior1,
+                    const double *Pprior1, const double *xs1, const double *Psm1, double *xs,
+                    double *Psm)
+{
+    double Pp[4][4], Pf[4][4], Ps1[4][4], B[4][4], C[4][4], sd[4], dx[4], T[4][4];
+    unpack(Pprior1, Pp);
+    unpack(Ppost, Pf);
+    unpack(Psm1, Ps1);
+    /* C = Pf F' inv(Pp)  <=>  C' = inv(Pp) F Pf, solved on the equilibrated Pp */
+    for (int i = 0; i < 4; i++)
+        sd[i] = Pp[i][i] > 0.0 ? sqrt(Pp[i][i]) : 1.0;
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++) {
+            double s = 0.0;
+            for (int l = i; l < 4; l++)
+                s += F[i][l] * Pf[l][j];
+            B[i][j] = s / sd[i];
+        }
+    double Mq[4][4];
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            Mq[i][j] = Pp[i][j] / (sd[i] * sd[j]);
+    if (chol_solve4(Mq, B) != 0)
+        return -1;
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++)
+            C[j][i] = B[i][j] / sd[i];
+    /* xs = x_post + C (xs[k+1] - x_prior[k+1]) */
+    for (int i = 0; i < 4; i++)
+        dx[i] = xs1[i] - xprior1[i];
+    for (int i = 0; i < 4; i++)
+        xs[i] = xpost[i] + C[i][0] * dx[0] + C[i][1] * dx[1] + C[i][2] * dx[2] + C[i][3] * dx[3];
+    /* Ps = P_post + C (Ps[k+1] - P_prior[k+1]) C' */
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++) {
+            double s = 0.0;
+            for (int l = 0; l < 4; l++)
+                s += C[i][l] * (Ps1[l][j] - Pp[l][j]);
+            T[i][j] = s;
+        }
+    for (int i = 0; i < 4; i++)
+        for (int j = i; j < 4; j++) {
+            double s = 0.0;
+            for (int l = 0; l < 4; l++)
+                s += T[i][l] * C[j][l];
+            Psm[PK[i][j]] = Pf[i][j] + s;
+        }
+    return 0;
+}
+
+int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
+                long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
+                const double *egate, unsigned char *applied, double *ey, double *eS, double *xprior,
+                double *Pprior, double *xpost, double *Ppost, double *xs, double *Psm)
+{
+    double F[4][4], P[4][4], x[4];
+    long ei = 0;
+    transition(m, F);
+    unpack(m->p0, P);
+    for (int i = 0; i < 4; i++)
+        x[i] = m->x0[i];
+
+    for (long k = 0; k < n; k++) {
+        if (k > 0) {
+            predict_mean(m, x);
+            predict_cov(m, F, P);
+        }
+        for (int i = 0; i < 4; i++)
+            xprior[4 * k + i] = x[i];
+        pack(P, Pprior + 10 * k);
+        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
+                            eR, egate, applied, ey, eS);
+        for (int i = 0; i < 4; i++)
+            xpost[4 * k + i] = x[i];
+        pack(P, Ppost + 10 * k);
+    }
+
+    for (int i = 0; i < 4; i++)
+        xs[4 * (n - 1) + i] = xpost[4 * (n - 1) + i];
+    for (int i = 0; i < 10; i++)
+        Psm[10 * (n - 1) + i] = Ppost[10 * (n - 1) + i];
+    for (long k = n - 2; k >= 0; k--) {
+        if (rts_step(F, xpost + 4 * k, Ppost + 10 * k, xprior + 4 * (k + 1), Pprior + 10 * (k + 1),
+                     xs + 4 * (k + 1), Psm + 10 * (k + 1), xs + 4 * k, Psm + 10 * k) != 0)
+            return -(int)(k + 1 > 1000000000L ? 1000000000L : k + 1);
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------------------- */
+/* Rest detector: a run of quiet window centres split into pieces of steady   */
+/* level (host/estimate/zupt.py, _steady_pieces: what and why is said there). */
+/* The same steps in the same order as numpy takes them there, so the pieces  */
+/* are the same numbers: medians are order statistics (the mean of the two    */
+/* middle ones for an even count), sums over rows run row by row, sums over   */
+/* axes axis by axis (numpy's order for these shapes, up to 8 axes).          */
+
+/* The k-th smallest of v[0..n-1] (v reordered: v[0..k-1] <= v[k] <= v[k+1..]). */
+static double select_kth(double *v, long n, long k)
+{
+    long lo = 0, hi = n - 1;
+    while (hi > lo) {
+        double pivot = v[lo + (hi - lo) / 2];
+        long i = lo, j = hi;
+        while (i <= j) {
+            while (v[i] < pivot)
+                i++;
+            while (v[j] > pivot)
+                j--;
+            if (i <= j) {
+                double t = v[i];
+                v[i] = v[j];
+                v[j] = t;
+                i++;
+                j--;
+            }
+        }
+        if (k <= j)
+            hi = j;
+        else if (k >= i)
+            lo = i;
+        else
+            break;
+    }
+    return v[k];
+}
+
+/* Per axis, the median of rows a..b-1 of means (n_axes columns), as np.median(means[a:b], axis=0).
+ */
+static void median_rows(const double *means, int n_axes, long a, long b, double *scratch,
+                        double *ref)
+{
+    long k = b - a, h = k / 2;
+    for (int j = 0; j < n_axes; j++) {
+        for (long i = 0; i < k; i++)
+            scratch[i] = means[(a + i) * n_axes + j];
+        double hi = select_kth(scratch, k, h);
+        if (k % 2) {
+            ref[j] = hi;
+        } else {
+            double lo = scratch[0];
+            for (long i = 1; i < h; i++)
+                lo = scratch[i] > lo ? scratch[i] : lo;
+            ref[j] = (lo + hi) / 2.0;
+        }
+    }
+}
+
+/* sum over axes of (row - ref)^2 */
+static double dist2(const double *row, const double *ref, int n_axes)
+{
+    double s = (row[0] - ref[0]) * (row[0] - ref[0]);
+    for (int j = 1; j < n_axes; j++)
+        s += (row[j] - ref[j]) * (row[j] - ref[j]);
+    return s;
+}
+
+/* Per axis, the mean of rows a..b-1 (b > a). */
+static void mean_rows(const double *v, int n_axes, long a, long b, double *out)
+{
+    for (int j = 0; j < n_axes; j++)
+        out[j] = v[a * n_axes + j];
+    for (long i = a + 1; i < b; i++)
+        for (int j = 0; j < n_axes; j++)
+            out[j] += v[i * n_axes + j];
+    for (int j = 0; j < n_axes; j++)
+        out[j] /= (double)(b - a);
+}
+
+typedef struct {
+    long a, b;
+    int side; /* 0: a part of the run; -1, 1: trimmed off the start, the end of a piece */
+    double parent[ACN_REST_MAX_AXES];
+} rest_item;
+
+long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, double bound2,
+                     double total, long w, double tilt_rate, long lean, long *pstart, long *pstop,
+                     double *pref, double *pown)
+{
+    if (n < 1)
+        return 0;
+    if (n_axes < 1 || n_axes > ACN_REST_MAX_AXES)
+        return -2;
+    /* the items on the stack are disjoint, non-empty ranges of the run: at most n of them */
+    rest_item *todo = malloc((size_t)n * sizeof *todo);
+    double *scratch = malloc((size_t)n * sizeof *scratch);
+    double *var = malloc((size_t)n_axes * sizeof *var);
+    if (todo == NULL || scratch == NULL || var == NULL) {
+        free(todo);
+        free(scratch);
+        free(var);
+        return -1;
+    }
+    long top = 0, count = 0;
+    todo[top].a = 0;
+    todo[top].b = n;
+    todo[top].side = 0;
+    top++;
+    double ref[ACN_REST_MAX_AXES], first[ACN_REST_MAX_AXES], last[ACN_REST_MAX_AXES];
+    while (top > 0) {
+        rest_item it = todo[--top];
+        long a = it.a, b = it.b;
+        /* the longest stretch within sqrt(bound2) of the median; the parts either side are split
+         * again */
+        median_rows(means, n_axes, a, b, scratch, ref);
+        long best_p = -1, best_len = 0, run = -1;
+        for (long i = a; i <= b; i++) {
+            int near = i < b && dist2(means + i * n_axes, ref, n_axes) <= bound2;
+            if (near && run < 0)
+                run = i;
+            if (!near && run >= 0) {
+                if (i - run > best_len) {
+                    best_len = i - run;
+                    best_p = run;
+                }
+                run = -1;
+            }
+        }
+        if (best_p < 0)
+            continue;
+        long p = best_p, q = best_p + best_len;
+        if (p > a) {
+            todo[top].a = a;
+            todo[top].b = p;
+            todo[top].side = 0;
+            top++;
+        }
+        if (b > q) {
+            todo[top].a = q;
+            todo[top].b = b;
+            todo[top].side = 0;
+            top++;
+        }
+        /* the ends, once more, against the piece's own noise */
+        median_rows(means, n_axes, p, q, scratch, ref);
+        mean_rows(x, n_axes, p, q, first);
+        for (int j = 0; j < n_axes; j++)
+            var[j] = 0.0;
+        for (long i = p; i < q; i++)
+            for (int j = 0; j < n_axes; j++) {
+                double d = x[i * n_axes + j] - first[j];
+                var[j] = i == p ? d * d : var[j] + d * d;
+            }
+        double own = var[0] / (double)(q - p);
+        for (int j = 1; j < n_axes; j++)
+            own += var[j] / (double)(q - p);
+        double own2 = bound2 * own / total;
+        own2 = own2 < bound2 ? own2 : bound2;
+        long lo = -1, hi = -1;
+        for (long i = p; i < q; i++)
+            if (dist2(means + i * n_axes, ref, n_axes) <= own2) {
+                if (lo < 0)
+                    lo = i;
+                hi = i;
+            }
+        if (lo < 0)
+            continue;
+        /* what the trim cuts off is split again, remembering the level it was cut from */
+        if (lo > p) {
+            todo[top].a = p;
+            todo[top].b = lo;
+            todo[top].side = -1;
+            memcpy(todo[top].parent, ref, (size_t)n_axes * sizeof *ref);
+            top++;
+        }
+        if (q > hi + 1) {
+            todo[top].a = hi + 1;
+            todo[top].b = q;
+            todo[top].side = 1;
+            memcpy(todo[top].parent, ref, (size_t)n_axes * sizeof *ref);
+            top++;
+        }
+        p = lo;
+        q = hi + 1;
+        long third = (q - p) / 3;
+        if (third == 0) { /* too short to tell: kept as a piece of the run, not as a trimmed end */
+            if (it.side != 0)
+                continue;
+        } else {
+            long beyond = q - p - third - lean;
+            double allowed =
+                sqrt(bound2 * own / total) + tilt_rate * (double)(beyond > 0 ? beyond : 0);
+            mean_rows(means, n_axes, p, p + third, first);
+            mean_rows(means, n_axes, q - third, q, last);
+            if (it.side != 0) {
+                const double *near_third = it.side > 0 ? first : last,
+                             *far_third = it.side > 0 ? last : first;
+                double away = sqrt(dist2(far_third, it.parent, n_axes)) -
+                              sqrt(dist2(near_third, it.parent, n_axes));
+                if (third < w || away > allowed)
+                    continue;
+            } else if (dist2(first, last, n_axes) > allowed * allowed) {
+                continue;
+            }
+        }
+        pstart[count] = p;
+        pstop[count] = q;
+        memcpy(pref + count * n_axes, ref, (size_t)n_axes * sizeof *ref);
+        pown[count] = own;
+        count++;
+    }
+    free(todo);
+    free(scratch);
+    free(var);
+    return count;
+}
+
+/*
+ * The rest detector's velocity closure (host/estimate/zupt.py, _closure): the
+ * velocity integrated over the m samples x[0..m-1] (n_axes columns) between
+ * an anchor rest and a candidate, the bias linear from b0 to b1 across them,
+ * unusable values (ok[i * n_axes + j] == 0) adding nothing:
+ *   v[i] = Ts sum_{l <= i} (x[l] - (b0 + (l + 0.5) / m (b1 - b0)))
+ * Writes v at the last sample (n_axes), the largest |v[i]| and the largest
+ * mean over axes of v[i]^2 / s2. numpy's steps in numpy's order (a running
+ * sum row by row, sums over axes axis by axis), so the same numbers.
+ */
+void acn_rest_closure(long m, int n_axes, const double *x, const unsigned char *ok,
+                      const double *b0, const double *b1, double Ts, const double *s2, double *v,
+                      double *peak, double *peak_chi2)
+{
+    double c[ACN_REST_MAX_AXES], db[ACN_REST_MAX_AXES];
+    double best = 0.0, best_chi2 = 0.0;
+    for (int j = 0; j < n_axes; j++)
+        db[j] = b1[j] - b0[j];
+    for (long i = 0; i < m; i++) {
+        double frac = ((double)i + 0.5) / (double)m;
+        double sp = 0.0, ch = 0.0;
+        for (int j = 0; j < n_axes; j++) {
+            double seg = ok[i * n_axes + j] ? x[i * n_axes + j] - (b0[j] + frac * db[j]) : 0.0;
+            c[j] = i == 0 ? seg : c[j] + seg;
+            double vj = c[j] * Ts;
+            double v2 = vj * vj;
+            sp = j == 0 ? v2 : sp + v2;
+            ch = j == 0 ? v2 / s2[j] : ch + v2 / s2[j];
+        }
+        sp = sqrt(sp);
+        ch = ch / (double)n_axes;
+        if (i == 0 || sp > best)
+            best = sp;
+        if (i == 0 || ch > best_chi2)
+            best_chi2 = ch;
+    }
+    for (int j = 0; j < n_axes; j++)
+        v[j] = c[j] * Ts;
+    *peak = best;
+    *peak_chi2 = best_chi2;
+}
+
+/* ------------------------------------------------------------------------- */
+/* Plain path in bounded memory: acn_plain_cov + acn_plain_data split into      */
+/* chunks, every number computed by the same operations in the same order, so  */
+/* the chunked output equals the whole-array one. Store row of sample k:        */
+/*   0 a  1 eps        filter posterior (after acn_chunk_bwd: smoothed)          */
+/*   2..5 C[k]         (a, eps) smoother gain c00 c01 c10 c11 (0 at the last)    */
+/*   6..8 aa ae ee     filter posterior covariance (after acn_chunk_bwd: smoothed) */
+/*   9..11 aa ae ee    prior covariance of sample k + 1                          */
+
+/*
+ * Forward pass over samples k0 .. k0 + n - 1 (last: the chunk ends the run).
+ * carry[0..3] is the prior mean of the chunk's first sample, carry[4..13] its
+ * prior covariance (packed): (x0, P0) for k0 = 0; on return, those of the
+ * sample after the chunk. Writes the store rows, the filter means xf (n x 4)
+ * and standard deviations sdf (n x 4); Pf0 gets the packed posterior of sample
+ * 0 (when k0 = 0), Pfn that of the run's last sample (when last).
+ * Returns 0, or -(k + 1) if the (a, eps) prior is singular after sample k.
+ */
+int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
+                  const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
+                  double *Pf0, double *Pfn)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    double F[4][4], P[4][4], dummy[4] = {0.0, 0.0, 0.0, 0.0}, Kk[4], S;
+    double r = carry[0], u = carry[1], a = carry[2], ep = carry[3], e;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (long k = 0; k < n; k++) {
+        double *row = store + ACN_ROW * k;
+        /* the covariance filter, as acn_plain_cov: K[k] = 0 where sample k is skipped */
+        if (valid == NULL || valid[k]) {
+            update(dummy, P, H_ACC, 0.0, m->R, &S, Kk);
+            /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
+            double y = z[k] - a - ep;
+            r += Kk[0] * y;
+            u += Kk[1] * y;
+            double ka = Kk[2], ke = Kk[3], zk = z[k];
+            double an = (a - ka * a) + ka * (zk - ep);
+            e = (ep - ke * ep) + ke * (zk - a);
+            a = an;
+        } else {
+            e = ep;
+        }
+        double *o = xf + 4 * k, *sd = sdf + 4 * k;
+        o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        for (int i = 0; i < 4; i++)
+            sd[i] = sqrt(P[i][i]);
+        if (k0 + k == 0)
+            pack(P, Pf0);
+        row[0] = a, row[1] = e;
+        row[6] = P[2][2], row[7] = P[2][3], row[8] = P[3][3];
+        if (last && k == n - 1) {
+            pack(P, Pfn);
+            for (int i = 2; i < 6; i++)
+                row[i] = 0.0;
+            row[9] = row[10] = row[11] = 0.0;
+            break;
+        }
+        /* x = F x + b, P = F P F' + Q: the prior of sample k + 1 */
+        double paa = P[2][2], pae = P[2][3], pee = P[3][3];
+        predict_cov(m, F, P);
+        r = r + f01 * u + f02 * a;
+        u = u + f12 * a;
+        ep = phi * e + b;
+        /* C = Pf Fs' inv(Pp), as in acn_plain_cov */
+        double qaa = P[2][2], qae = P[2][3], qee = P[3][3];
+        double sa = sqrt(qaa), se = sqrt(qee);
+        double rho = qae / (sa * se);
+        double det = (1.0 - rho * rho) * qaa * qee;
+        if (!(det > 0.0)) {
+            long at = k0 + k + 1;
+            return -(int)(at > 1000000000L ? 1000000000L : at);
+        }
+        double m00 = paa, m01 = phi * pae, m10 = pae, m11 = phi * pee; /* Pf Fs' */
+        row[2] = (m00 * qee - m01 * qae) / det, row[3] = (m01 * qaa - m00 * qae) / det;
+        row[4] = (m10 * qee - m11 * qae) / det, row[5] = (m11 * qaa - m10 * qae) / det;
+        row[9] = qaa, row[10] = qae, row[11] = qee;
+    }
+    carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
+    pack(P, carry + 4);
+    return 0;
+}
+
+/*
+ * acn_chunk_fwd for a chunk of valid samples that follows only valid ones, from
+ * the rows of acn_plain_rows (nt of them, the last steady): the gains, smoother
+ * gains and (a, eps) blocks are read, the r, u rows of P propagated as in
+ * acn_plain_cov_steady. Same arguments and outputs, but a lean store of
+ * ACN_LROW doubles per sample: the filter's a, eps (0, 1); acn_chunk_bwd_lean
+ * adds the smoothed ones and their covariance (0..4). Everything else the
+ * backward passes need is data-independent: they read it from the rows.
+ */
+int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
+                         const double *srows, long nt, double *carry, double *store, double *xf,
+                         double *sdf, double *Pf0, double *Pfn)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    double F[4][4], P[4][4], PHt[4];
+    double r = carry[0], u = carry[1], a = carry[2], ep = carry[3], e;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (long k = 0; k < n; k++) {
+        long g = k0 + k;
+        const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
+        double *row = store + ACN_LROW * k;
+        /* the prior's (a, eps) block is the stored one (as acn_plain_cov_steady) */
+        P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9], P[3][3] = sr[10];
+        double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
+        for (int i = 0; i < 4; i++)
+            PHt[i] = P[i][2] + P[i][3];
+        for (int i = 0; i < 2; i++)
+            for (int j = i; j < 4; j++) {
+                P[i][j] -= sr[i] * PHt[j] + PHt[i] * sr[j] - sr[i] * sr[j] * S;
+                P[j][i] = P[i][j];
+            }
+        P[2][2] = sr[11], P[2][3] = P[3][2] = sr[12], P[3][3] = sr[13];
+        /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
+        double y = z[k] - a - ep;
+        r += sr[0] * y;
+        u += sr[1] * y;
+        double ka = sr[2], ke = sr[3], zk = z[k];
+        double an = (a - ka * a) + ka * (zk - ep);
+        e = (ep - ke * ep) + ke * (zk - a);
+        a = an;
+        double *o = xf + 4 * k, *sd = sdf + 4 * k;
+        o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        for (int i = 0; i < 4; i++)
+            sd[i] = sqrt(P[i][i]);
+        if (g == 0)
+            pack(P, Pf0);
+        row[0] = a, row[1] = e;
+        if (last && k == n - 1) {
+            pack(P, Pfn);
+            break;
+        }
+        predict_ru(m, P);
+        const double *sn =
+            srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1); /* the next prior's (a, eps) */
+        P[2][2] = sn[8], P[2][3] = P[3][2] = sn[9], P[3][3] = sn[10];
+        r = r + f01 * u + f02 * a;
+        u = u + f12 * a;
+        ep = phi * e + b;
+    }
+    carry[0] = r, carry[1] = u, carry[2] = a, carry[3] = ep;
+    pack(P, carry + 4);
+    return 0;
+}
+
+/*
+ * acn_chunk_bwd over a lean store (acn_chunk_fwd_steady's) of samples k0 ..
+ * k0 + n - 1: the smoother gain, the filter's (a, eps) covariance and the next
+ * prior's from the rows (row min(k, nt - 1)), the same operations in the same
+ * order as acn_chunk_bwd. Writes the smoothed a, eps, P_aa, P_ae, P_ee into the
+ * store row; carry as in acn_chunk_bwd.
+ */
+void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
+                        double *store, double *carry)
+{
+    const double phi = m->phi, b = m->b_eps;
+    double as = carry[0], es = carry[1], saa = carry[2], sae = carry[3], see = carry[4];
+    long k = n - 1;
+    if (last) { /* the run's last sample is the filter's */
+        double *row = store + ACN_LROW * k;
+        const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
+        as = row[0], es = row[1], saa = sr[11], sae = sr[12], see = sr[13];
+        row[2] = saa, row[3] = sae, row[4] = see;
+        k--;
+    }
+    for (; k >= 0; k--) {
+        double *row = store + ACN_LROW * k;
+        long g = k0 + k;
+        const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
+        const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
+        double c00 = sr[4], c01 = sr[5], c10 = sr[6], c11 = sr[7];
+        /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
+        double fa = row[0], fe = phi * row[1] + b;
+        double ca = row[0] - (c00 * fa + c01 * fe), ce = row[1] - (c10 * fa + c11 * fe);
+        double an = c00 * as + c01 * es + ca;
+        es = c10 * as + c11 * es + ce;
+        as = an;
+        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
+        double daa = saa - sn[8], dae = sae - sn[9], dee = see - sn[10];
+        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
+        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
+        double paa = sr[11], pae = sr[12], pee = sr[13];
+        saa = paa + t00 * c00 + t01 * c01;
+        sae = pae + t00 * c10 + t01 * c11;
+        see = pee + t10 * c10 + t11 * c11;
+        row[0] = as, row[1] = es, row[2] = saa, row[3] = sae, row[4] = see;
+    }
+    carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
+}
+
+/*
+ * Backward pass over the n store rows of one chunk, last to first (last: the
+ * chunk ends the run, whose last sample is the filter's). carry holds the
+ * smoothed a, eps, P_aa, P_ae, P_ee of the sample after the chunk; on return,
+ * those of the chunk's first sample. Rows get the smoothed values in place.
+ */
+void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry)
+{
+    const double phi = m->phi, b = m->b_eps;
+    double as = carry[0], es = carry[1], saa = carry[2], sae = carry[3], see = carry[4];
+    long k = n - 1;
+    if (last) {
+        const double *row = store + ACN_ROW * k;
+        as = row[0], es = row[1], saa = row[6], sae = row[7], see = row[8];
+        k--;
+    }
+    for (; k >= 0; k--) {
+        double *row = store + ACN_ROW * k;
+        double c00 = row[2], c01 = row[3], c10 = row[4], c11 = row[5];
+        /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
+        double fa = row[0], fe = phi * row[1] + b;
+        double ca = row[0] - (c00 * fa + c01 * fe), ce = row[1] - (c10 * fa + c11 * fe);
+        double an = c00 * as + c01 * es + ca;
+        es = c10 * as + c11 * es + ce;
+        as = an;
+        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
+        double daa = saa - row[9], dae = sae - row[10], dee = see - row[11];
+        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
+        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
+        double paa = row[6], pae = row[7], pee = row[8];
+        saa = paa + t00 * c00 + t01 * c01;
+        sae = pae + t00 * c10 + t01 * c11;
+        see = pee + t10 * c10 + t11 * c11;
+        row[0] = as, row[1] = es, row[6] = saa, row[7] = sae, row[8] = see;
+    }
+    carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
+}
+
+/*
+ * One step of the smoothed r, u recursion of acn_plain_cov, term by term:
+ * v = (r, u, P_rr, P_ru, P_ra, P_uu, P_ua, beta_r (2), beta_u (2)) of sample k
+ * to sample k + 1, from the smoothed a, P_aa at k, a, P_aa, P_ae at k + 1 and
+ * the smoother gain C[k].
+ */
+static void ru_step(const acn_axis *m, double v[11], double a0, double aa, double a1, double aa1,
+                    double ae1, const double *C)
+{
+    const double gr = m->gr, gu = m->gu, f01 = m->f01, f02 = m->f02, f12 = m->f12;
+    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
+    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
+    const double qe_uu = m->q[4] - gu * m->q[5];
+    double r = v[0], u = v[1], rr = v[2], ru = v[3], ra = v[4], uu = v[5], ua = v[6];
+    double br0 = v[7], br1 = v[8], bu0 = v[9], bu1 = v[10];
+    double vpr =
+        rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
+    double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
+    double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
+    double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
+    double pu0 = bu0 + c2u, pu1 = bu1;
+    double gr0 = C[0] * pr0 + C[2] * pr1, gr1 = C[1] * pr0 + C[3] * pr1;
+    double gu0 = C[0] * pu0 + C[2] * pu1, gu1 = C[1] * pu0 + C[3] * pu1;
+    double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1;
+    br0 = gr0 + gr, br1 = gr1;
+    bu0 = gu0 + gu, bu1 = gu1;
+    double rr1 = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
+    double uu1 = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
+    ru = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
+    rr = rr1, uu = uu1;
+    ra = br0 * aa1 + br1 * ae1;
+    ua = bu0 * aa1 + bu1 * ae1;
+    /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise */
+    double dw = a1 - a0;
+    r = r + (f01 * u + (f02 * a0 + gr * dw));
+    u = u + (f12 * a0 + gu * dw);
+    v[0] = r, v[1] = u, v[2] = rr, v[3] = ru, v[4] = ra, v[5] = uu, v[6] = ua;
+    v[7] = br0, v[8] = br1, v[9] = bu0, v[10] = bu1;
+}
+
+/*
+ * Forward pass of smoothed r, u over n samples of one chunk: writes xs and the
+ * standard deviations sds (n x 4) of each, reading store rows 0 .. n (row n is
+ * the next chunk's first; the run's last sample is the caller's, the filter's).
+ * carry: r, u, P_rr, P_ru, P_ra, P_uu, P_ua and beta_r (2), beta_u (2) of the
+ * chunk's first sample (see acn_plain_cov); on return, of the sample after it.
+ */
+void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
+                  double *sds)
+{
+    for (long k = 0; k < n; k++) {
+        const double *row = store + ACN_ROW * k, *nx = row + ACN_ROW;
+        double *o = xs + 4 * k, *sd = sds + 4 * k;
+        o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(row[6]), sd[3] = sqrt(row[8]);
+        ru_step(m, carry, row[0], row[6], nx[0], nx[6], nx[7], row + 2);
+    }
+}
+
+/* acn_chunk_ru over a lean store (after acn_chunk_bwd_lean) of samples k0 .., C from the rows. */
+void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *srows,
+                       long nt, double *carry, double *xs, double *sds)
+{
+    for (long k = 0; k < n; k++) {
+        const double *row = store + ACN_LROW * k, *nx = row + ACN_LROW;
+        const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
+        double *o = xs + 4 * k, *sd = sds + 4 * k;
+        o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(row[2]), sd[3] = sqrt(row[4]);
+        ru_step(m, carry, row[0], row[2], nx[0], nx[2], nx[3], sr + 4);
+    }
+}
+
+/* ------------------------------------------------------------------------- */
+/* General path in bounded memory: acn_general split into chunks, the same     */
+/* steps (general_update, rts_step) in the same order. Store row of sample k:  */
+/*   0..3 x_post[k]  4..13 P_post[k]                                            */
+/* The backward pass predicts the prior of k + 1 from them again, with the     */
+/* forward pass's own predict_mean and predict_cov: the same numbers, and half */
+/* the store (its writes were a third of `smooth --zupt auto` at 1e7 samples).  */
+
+/*
+ * Forward over samples k0 .. k0 + n - 1, extras as in acn_general with ek
+ * counted from the chunk's first sample. carry: the prior mean (4) and packed
+ * covariance (10) of the chunk's first sample; on return, of the next sample.
+ * Writes the store rows and the filter means xf and standard deviations sdf (n x 4).
+ */
+void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
+                    const unsigned char *valid, long n_extra, const long *ek, const double *eh,
+                    const double *ez, const double *eR, const double *egate, unsigned char *applied,
+                    double *carry, double *store, double *xf, double *sdf)
+{
+    double F[4][4], P[4][4], x[4];
+    long ei = 0;
+    transition(m, F);
+    unpack(carry + 4, P);
+    for (int i = 0; i < 4; i++)
+        x[i] = carry[i];
+    for (long k = 0; k < n; k++) {
+        double *row = store + ACN_GROW * k;
+        ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
+                            eR, egate, applied, NULL, NULL);
+        for (int i = 0; i < 4; i++) {
+            row[i] = xf[4 * k + i] = x[i];
+            sdf[4 * k + i] = sqrt(P[i][i]);
+        }
+        pack(P, row + 4);
+        if (last && k == n - 1)
+            break;
+        predict_mean(m, x);
+        predict_cov(m, F, P);
+    }
+    for (int i = 0; i < 4; i++)
+        carry[i] = x[i];
+    pack(P, carry + 4);
+}
+
+/*
+ * Backward over the n store rows of one chunk (last: it ends the run, whose
+ * last sample is the filter's). carry: the smoothed mean (4) and packed
+ * covariance (10) of the sample after the chunk; on return, of its first.
+ * Writes xs and the standard deviations sds (n x 4). k0 names samples in the
+ * error: returns -(k + 1) if the prior of sample k + 1 is not positive definite.
+ */
+int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
+                   double *xs, double *sds)
+{
+    double F[4][4], x1[4], P1[10], x[4], Pk[10];
+    transition(m, F);
+    for (int i = 0; i < 4; i++)
+        x1[i] = carry[i];
+    for (int i = 0; i < 10; i++)
+        P1[i] = carry[4 + i];
+    long k = n - 1;
+    if (last) {
+        const double *row = store + ACN_GROW * k;
+        for (int i = 0; i < 4; i++)
+            x1[i] = row[i];
+        for (int i = 0; i < 10; i++)
+            P1[i] = row[4 + i];
+        for (int i = 0; i < 4; i++) {
+            xs[4 * k + i] = x1[i];
+            sds[4 * k + i] = sqrt(P1[PK[i][i]]);
+        }
+        k--;
+    }
+    for (; k >= 0; k--) {
+        const double *row = store + ACN_GROW * k;
+        double xp[4], Pp[4][4], Ppk[10]; /* the prior of k + 1, predicted again from row k */
+        for (int i = 0; i < 4; i++)
+            xp[i] = row[i];
+        unpack(row + 4, Pp);
+        predict_mean(m, xp);
+        predict_cov(m, F, Pp);
+        pack(Pp, Ppk);
+        if (rts_step(F, row, row + 4, xp, Ppk, x1, P1, x, Pk) != 0) {
+            long at = k0 + k + 1;
+            return -(int)(at > 1000000000L ? 1000000000L : at);
+        }
+        for (int i = 0; i < 4; i++) {
+            x1[i] = xs[4 * k + i] = x[i];
+            sds[4 * k + i] = sqrt(Pk[PK[i][i]]);
+        }
+        for (int i = 0; i < 10; i++)
+            P1[i] = Pk[i];
+    }
+    for (int i = 0; i < 4; i++)
+        carry[i] = x1[i];
+    for (int i = 0; i < 10; i++)
+        carry[4 + i] = P1[i];
+    return 0;
+}

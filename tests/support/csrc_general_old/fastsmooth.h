@@ -1,0 +1,119 @@
+/*
+ * Float64 Kalman filter and Rauch-Tung-Striebel smoother of one accelnav axis,
+ * state x = [r, u, a, eps] (position, velocity, acceleration, bias).
+ *
+ * Conventions are those of host/kf.py (the reference): F maps x[k] to x[k+1],
+ * x[k+1] = F x[k] + b + w, w ~ N(0, Q); the prior of sample 0 is (x0, P0); at
+ * sample k the filter predicts (k >= 1), applies z[k] = a + eps + v unless the
+ * sample is invalid, then the extra scalar measurements of sample k in order.
+ *
+ * Symmetric 4x4 matrices are stored packed, 10 doubles, upper triangle by rows:
+ *   rr ru ra re  uu ua ue  aa ae  ee
+ *
+ * Two paths:
+ *   plain:   no extra measurements. The covariances and gains do not depend on
+ *            the data (only on the model and the valid mask), so they are
+ *            computed once (acn_plain_cov) and reused by a cheap data pass
+ *            (acn_plain_data). See host/fastsmooth.py for the proof that the
+ *            reduced smoother is the 4-state RTS smoother.
+ *   general: any scalar extras (position fixes, zero-velocity updates), full
+ *            4-state filter and RTS smoother (acn_general).
+ */
+#ifndef ACCELNAV_FASTSMOOTH_H
+#define ACCELNAV_FASTSMOOTH_H
+
+#define ACN_FASTSMOOTH_API 1
+
+/* ACN-CDEF-BEGIN */
+typedef struct {
+    double f01, f02, f12; /* F[0][1] = Ts, F[0][2] = Ts^2/2, F[1][2] = Ts */
+    double phi, b_eps;    /* eps[k+1] = phi eps[k] + b_eps */
+    double q[10];         /* Q, packed */
+    double R;             /* variance of the acceleration measurement */
+    double x0[4];         /* prior mean of sample 0 */
+    double p0[10];        /* prior covariance of sample 0, packed */
+    double gr, gu;        /* Q_ra / Q_aa, Q_ua / Q_aa: E[w_r | w_a] = gr w_a */
+} acn_axis;
+
+int acn_plain_cov(const acn_axis *m, long n, const unsigned char *valid, double *K, double *Cs,
+                  double *Pprior, double *Ppost, double *Psm);
+
+int acn_plain_rows(const acn_axis *m, long n, double *rows);
+
+int acn_plain_cov_steady(const acn_axis *m, long n, long nt, const double *rows, double *Pprior,
+                         double *Ppost, double *Psm);
+
+/* K, Cs: rows stride doubles apart; sample k >= nk uses row nk - 1 (a stored steady row) */
+void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned char *valid,
+                    const double *K, const double *Cs, long stride, long nk, double *xf,
+                    double *xs);
+
+int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
+                long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
+                const double *egate, unsigned char *applied, double *ey, double *eS, double *xprior,
+                double *Pprior, double *xpost, double *Ppost, double *xs, double *Psm);
+
+/*
+ * The rest detector's split of one run of n quiet window centres into pieces of
+ * steady level (host/estimate/zupt.py, _steady_pieces). means, x: n rows of
+ * n_axes (at most ACN_REST_MAX_AXES) window means and samples of the run. Writes
+ * each piece's first and last + 1 row, its median level (n_axes) and its own
+ * variance (summed over axes) into arrays of n; returns the number of pieces,
+ * -1 when out of memory, -2 for too many axes.
+ */
+enum { ACN_REST_MAX_AXES = 8 };
+
+long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, double bound2,
+                     double total, long w, double tilt_rate, long lean, long *pstart, long *pstop,
+                     double *pref, double *pown);
+
+/*
+ * The rest detector's velocity closure over m samples (host/estimate/zupt.py,
+ * _Closure): v at the last sample, the largest |v| and mean v^2 / s2 on the way.
+ */
+void acn_rest_closure(long m, int n_axes, const double *x, const unsigned char *ok,
+                      const double *b0, const double *b1, double Ts, const double *s2, double *v,
+                      double *peak, double *peak_chi2);
+
+/*
+ * Plain path in bounded memory (host/estimate/chunked.py): the same numbers as
+ * acn_plain_cov + acn_plain_data, computed chunk by chunk in three passes over
+ * a store of ACN_ROW doubles per sample (kept on disk by the caller):
+ *   acn_chunk_fwd  forward, filter means and covariances, smoother gains;
+ *   acn_chunk_bwd  backward, (a, eps) smoothed means and covariances;
+ *   acn_chunk_ru   forward, smoothed r, u and their covariances.
+ * The general path likewise in two passes over ACN_GROW doubles per sample
+ * (acn_chunkg_fwd, acn_chunkg_bwd): the same steps as acn_general.
+ * The carried state between chunks is a small array documented at each call.
+ */
+enum { ACN_ROW = 12, ACN_GROW = 14, ACN_SROW = 14, ACN_LROW = 5 };
+
+int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
+                  const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
+                  double *Pf0, double *Pfn);
+
+int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
+                         const double *srows, long nt, double *carry, double *store, double *xf,
+                         double *sdf, double *Pf0, double *Pfn);
+void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry);
+
+/* all-valid samples from the steady rows: a lean store of ACN_LROW doubles per sample */
+void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
+                        double *store, double *carry);
+
+void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *srows,
+                       long nt, double *carry, double *xs, double *sds);
+
+void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
+                    const unsigned char *valid, long n_extra, const long *ek, const double *eh,
+                    const double *ez, const double *eR, const double *egate, unsigned char *applied,
+                    double *carry, double *store, double *xf, double *sdf);
+
+int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
+                   double *xs, double *sds);
+
+void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
+                  double *sds);
+/* ACN-CDEF-END */
+
+#endif
