@@ -41,7 +41,7 @@ from .plan import (  # noqa: F401  (the schedule's settings and schedule_for: re
     schedule_for,
 )
 from .qformat import QFormat, acc_bound, guard_bits, quantize
-from .ranges import FINE, AxisPlan, fine_view
+from .ranges import FINE, AxisPlan, fine_view, refuse_calibrated
 
 
 def _c_int(v: int, word: int) -> str:
@@ -1299,6 +1299,7 @@ def emit(
     """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json. Both forms
     follow skipped samples (the gain schedule through codegen.follow)."""
     check_prefix(prefix)  # before any planning: a prefix that is no C identifier is refused outright
+    refuse_calibrated(model)  # both arithmetics start from the MCU's raw input (an ADC code, a capture)
     form = form or model.filter.form
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)
