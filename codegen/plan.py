@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from accelnav.model.load import Model
 
 from .gains import Schedule
+from .plan_cov import CovSums, cov_sums
 from .qformat import QFormat, quantize
 from .ranges import AxisPlan, RangeError, fine_view, plan_axis
 
@@ -132,6 +133,7 @@ class AxisCode:
     sched: Schedule | None  # gain schedule: its table
     follow: object | None  # gain schedule: codegen.follow.Thresholds of the return after a skip
     merge: Merge | None  # gain schedule: how its step sums the increments
+    cov: tuple[CovSums, CovSums] | None = None  # covariance form: its sums in the fine and coarse formats
 
 
 def _eps_offset(p: AxisPlan) -> int:
@@ -216,9 +218,11 @@ def axis_code(p: AxisPlan) -> AxisCode:
         sched = schedule_for(p)
         merge = gs_merge(p, clamps["VHI"][2])
         return AxisCode(p, consts, clamps, x0, {}, _eps_offset(p), sched, _follow(p, sched), merge)
-    for q in (fine_view(p), p):  # the update in the fine and in the coarse formats
+    views = (fine_view(p), p)  # the predict and update in the fine and in the coarse formats
+    for q in views:
         _check_cov_shifts(q)
-    return AxisCode(p, consts, clamps, x0, _cov0(p), None, None, None, None)
+    cov = tuple(cov_sums(q) for q in views)
+    return AxisCode(p, consts, clamps, x0, _cov0(p), None, None, None, None, cov)
 
 
 def plan(model: Model, form: str | None = None) -> list[AxisCode]:
