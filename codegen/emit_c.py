@@ -979,7 +979,7 @@ def _gs_gains_c(c: AxisCode, P: str, T: str) -> list[str]:
         "    }",
         "}",
         "",
-    ] + emit_follow(c.p, P, T, c.follow)
+    ] + emit_follow(c.follow, P, T)
 
 
 def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[str]:

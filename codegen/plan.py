@@ -131,7 +131,7 @@ class AxisCode:
     cov0: dict[str, tuple[float, int]]  # covariance form: the initial block of P (value, integer)
     eoff: int | None  # gain schedule: eps = eb + eoff (LSB of e); None: the state holds eps
     sched: Schedule | None  # gain schedule: its table
-    follow: object | None  # gain schedule: codegen.follow.Thresholds of the return after a skip
+    follow: object | None  # gain schedule: codegen.follow.FollowPlan of the step after a skip
     merge: Merge | None  # gain schedule: how its step sums the increments
     cov: tuple[CovSums, CovSums] | None = None  # covariance form: its sums in the fine and coarse formats
 
@@ -151,15 +151,14 @@ def _eps_offset(p: AxisPlan) -> int:
 
 
 def _follow(p: AxisPlan, sched: Schedule):
-    """The return thresholds after a skip, once the deviation's shifts are known to fit this model."""
-    from .follow import check_follow, thresholds
+    """The follow step after a skip (codegen.follow.FollowPlan: its return thresholds and every shift),
+    once the deviation's shifts are known to fit this model."""
+    from .follow import follow_plan, thresholds
 
-    thr = thresholds(sched)
     try:
-        check_follow(p, thr)
+        return follow_plan(p, thresholds(sched))
     except ValueError as e:  # a shift the deviation's formats cannot take: this model's ranges
         raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
-    return thr
 
 
 def cov_fracs(p: AxisPlan) -> dict:
