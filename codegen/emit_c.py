@@ -28,6 +28,7 @@ from accelnav.model.load import Model
 from accelnav.resources import package_dir
 
 from .emit_f32 import emit_f32
+from .layout import C_SIZES, COV_BLOCK, SEG, state_members, struct_offsets
 from .package import cdef_of, check_prefix, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
 from .plan import (  # noqa: F401  (the schedule's settings and schedule_for: re-exported for tests and bench/)
     RECIP_TABLE_BITS,
@@ -41,7 +42,7 @@ from .plan import (  # noqa: F401  (the schedule's settings and schedule_for: re
     schedule_for,
 )
 from .plan_cov import Acc, CovSums, HSum, Term
-from .ranges import FINE, AxisPlan, fine_view, refuse_calibrated
+from .ranges import DEV, FINE, AxisPlan, fine_view, refuse_calibrated
 
 
 def _c_int(v: int, word: int) -> str:
@@ -84,62 +85,32 @@ def _fixed_consts(c: AxisCode, P: str) -> list[str]:
 
 
 def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
+    """(C type, name, comment) of the state's members, in the planned order (codegen.layout)."""
     v = p.vars
-    # the three int64 first, then the int32: no padding word after a (the covariance state is 64 B, not 72)
-    f = [
-        ("int64_t", "r", f"r [m] {v['r'].fmt}"),
-        ("int64_t", "v", f"Ts*u [m] {v['v'].fmt}"),
-        ("int64_t", "e", f"eps [m/s^2] {v['e'].fmt}"),
-        ("int32_t", "a", f"a [m/s^2] {v['a'].fmt}"),
-    ]
-    if p.form == "gain_schedule":  # eps carried with eps_bar and the rounding of its high word folded in
-        f[2] = ("int64_t", "eb", f"eps - eps_bar + 2^-{p.f('y') + 1} [m/s^2] {v['e'].fmt} (read() gives eps)")
+    com = {
+        "r": f"r [m] {v['r'].fmt}",
+        "v": f"Ts*u [m] {v['v'].fmt}",
+        "e": f"eps [m/s^2] {v['e'].fmt}",
+        # eps carried with eps_bar and the rounding of its high word folded in
+        "eb": f"eps - eps_bar + 2^-{p.f('y') + 1} [m/s^2] {v['e'].fmt} (read() gives eps)",
+        "a": f"a [m/s^2] {v['a'].fmt}",
+        "seg": "the schedule's current row",
+        "z": "the deviation entries hold D 2^z (codegen.follow.ZOOM_MAX)",
+        "overflow": "saturations so far",
+    }
     if p.form == "covariance":
-        for nm in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"):
-            f.append(("int32_t", nm, f"{v[nm].note.split(',')[0]} {v[nm].fmt}"))
+        com |= {nm: f"{v[nm].note.split(',')[0]} {v[nm].fmt}" for nm in COV_BLOCK}
+        com["k"] = "2 x samples since init, + 1 while c_r, c_v, c_a, c_e are in their fine formats"
     else:
-        # K_r, K_v and K_e's two words in adjacent pairs: one LDRD and one STRD each (ACN_LD2, ACN_ST2)
-        for nm in ("r", "v"):
-            f.append(("int32_t", "K" + nm, f"K_{nm} of the next sample {v['K' + nm].fmt}"))
-        f.append(("uint32_t", "Ke_lo", f"K_e accumulator, low word (Q.{v['Ke'].fmt.frac + 32} with Ke)"))
-        f.append(("int32_t", "Ke", f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"))
-        f.append((f"const struct {T}_seg_s *", "seg", "the schedule's current row"))
-        f += _fields_follow(p)
-    if p.form == "gain_schedule":
-        f.append(("uint32_t", "k", "samples since init (bit 31: following a skip, codegen.follow)"))
-    elif p.form == "covariance":
-        f.append(("uint32_t", "k", "2 x samples since init, + 1 while c_r, c_v, c_a, c_e are in their fine formats"))
-    else:
-        f.append(("uint32_t", "k", "samples since init"))
-    f.append(("uint32_t", "overflow", "saturations so far"))
-    return f
+        com |= {"K" + nm: f"K_{nm} of the next sample {v['K' + nm].fmt}" for nm in "rv"}
+        com["Ke_lo"] = f"K_e accumulator, low word (Q.{v['Ke'].fmt.frac + 32} with Ke)"
+        com["Ke"] = f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"
+        com |= {nm: f"{v[nm].note} {v[nm].fmt}" for nm in DEV}
+        com["k"] = "samples since init (bit 31: following a skip, codegen.follow)"
+    return [(f"const struct {T}_seg_s *" if t == SEG else t, nm, com[nm]) for t, nm in state_members(p.form)]
 
 
-_C_SIZES = {"int64_t": 8, "uint64_t": 8, "int32_t": 4, "uint32_t": 4, "int16_t": 2, "uint16_t": 2, "int8_t": 1}
-
-
-def _struct_bytes(fields: list[tuple[str, str, str]]) -> int | None:
-    """sizeof of a struct of these members under natural alignment (the ARM AAPCS and the x86-64 ABI
-    agree on it for these types); None when a member's size depends on the target (a pointer)."""
-    off = align = 0
-    for t, _, _ in fields:
-        n = _C_SIZES.get(t)
-        if n is None:
-            return None
-        off = -(-off // n) * n + n
-        align = max(align, n)
-    return -(-off // align) * align if align else 0
-
-
-def _struct_offsets(fields: list[tuple[str, str, str]]) -> dict[str, int]:
-    """Offset of every member under natural alignment (every member's size must be known)."""
-    out, off = {}, 0
-    for t, nm, _ in fields:
-        n = _C_SIZES[t]
-        off = -(-off // n) * n
-        out[nm] = off
-        off += n
-    return out
+_struct_offsets = struct_offsets  # its name before codegen.layout: tests import it from here
 
 
 def _fields_checkpoint(fields: list[tuple[str, str, str]], T: str) -> list[tuple[str, str, str]]:
@@ -151,7 +122,7 @@ def _fields_checkpoint(fields: list[tuple[str, str, str]], T: str) -> list[tuple
     ]
 
 
-def _checkpoint_c(p: AxisPlan, P: str, T: str, fields: list[tuple[str, str, str]]) -> list[str]:
+def _checkpoint_c(c: AxisCode, P: str, T: str, fields: list[tuple[str, str, str]]) -> list[str]:
     """C of T_save and T_load: the state to and from its checkpoint image of P_CK_BYTES bytes (the
     telemetry's checkpoint frames, accelnav.link.replay): every member little-endian at its offset under
     natural alignment, which is the covariance state struct's own bytes on a little-endian target; the
@@ -159,16 +130,14 @@ def _checkpoint_c(p: AxisPlan, P: str, T: str, fields: list[tuple[str, str, str]
     (and leaves the state as it was), so no image makes the filter read past it. Only checkpoints call
     these, never the step."""
     ck = _fields_checkpoint(fields, T)
-    if any(_C_SIZES[t] not in (4, 8) for t, _, _ in ck):
-        raise ValueError("a checkpoint image takes 32- and 64-bit members only")
-    off = _struct_offsets(ck)
-    gs = p.form == "gain_schedule"
+    off = c.layout.ck_offsets
+    gs = c.p.form == "gain_schedule"
 
     def put(t, nm):
         o = off[nm]
         if nm == "seg":
             return [f"    acn_put32(out + {o}, (uint32_t)(s->seg - {T}_seg)); /* the row's index, 0 .. {P}_NSEG */"]
-        if _C_SIZES[t] == 8:
+        if C_SIZES[t] == 8:
             return [
                 f"    acn_put32(out + {o}, (uint32_t)(uint64_t)s->{nm}); /* {nm}, low word */",
                 f"    acn_put32(out + {o + 4}, (uint32_t)((uint64_t)s->{nm} >> 32));",
@@ -179,7 +148,7 @@ def _checkpoint_c(p: AxisPlan, P: str, T: str, fields: list[tuple[str, str, str]
         o = off[nm]
         if nm == "seg":
             return [f"    s->seg = &{T}_seg[row];"]
-        if _C_SIZES[t] == 8:
+        if C_SIZES[t] == 8:
             return [f"    s->{nm} = ({t})((uint64_t)acn_get32(in + {o + 4}) << 32 | acn_get32(in + {o}));"]
         return [f"    s->{nm} = ({t})acn_get32(in + {o});"]
 
@@ -208,15 +177,6 @@ def _checkpoint_c(p: AxisPlan, P: str, T: str, fields: list[tuple[str, str, str]
         src += get(t, nm)
     src += ["    return true;", "}", ""]
     return src
-
-
-def _fields_follow(p: AxisPlan) -> list[tuple[str, str, str]]:
-    """Gain schedule: the deviation from the schedule's covariance block after a skip (codegen.follow)."""
-    from .follow import DEV
-
-    return [("int32_t", nm, f"{p.vars[nm].note} {p.vars[nm].fmt}") for nm in DEV] + [
-        ("uint32_t", "z", "the deviation entries hold D 2^z (codegen.follow.ZOOM_MAX)")
-    ]
 
 
 def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
@@ -1050,7 +1010,7 @@ def _read_c(c: AxisCode, P: str, T: str) -> list[str]:
     ]
 
 
-def _manifest(c: AxisCode, T: str, fields, ck_fields, ck_bytes: int) -> dict:
+def _manifest(c: AxisCode, T: str) -> dict:
     """The axis' entry of PREFIX.json: formats, constants, bounds, the checkpoint image, the schedule."""
     p, sched = c.p, c.sched
     man = {
@@ -1072,17 +1032,17 @@ def _manifest(c: AxisCode, T: str, fields, ck_fields, ck_bytes: int) -> dict:
         "constants": {k: {"value": val, "format": f.name, "int": q} for k, (val, f, q) in c.consts.items()},
         "l1": p.l1.__dict__ | {},
         "z_error": p.z_error,
-        "state_bytes": _struct_bytes(fields),  # sizeof(T_t); None when it depends on the target (a pointer)
+        "state_bytes": c.layout.state_bytes,  # sizeof(T_t); None when it depends on the target (a pointer)
         # what the telemetry's checkpoint frames carry (codegen.frames, accelnav.link.replay): the image of
         # T_save / T_load; "row": where the gain schedule's row index lies in it and how many rows there are
         # (an index >= rows is a damaged image: T_load and the host decoder refuse it)
         "checkpoint": {
-            "bytes": ck_bytes,
+            "bytes": c.layout.ck_bytes,
             "save": f"{T}_save",
             "load": f"{T}_load",
             "row": None
             if sched is None
-            else {"offset": _struct_offsets(ck_fields)["seg"], "rows": sched.n_segments + 1, "table": f"{T}_seg"},
+            else {"offset": c.layout.ck_offsets["seg"], "rows": sched.n_segments + 1, "table": f"{T}_seg"},
         },
         "e_state_offset": c.eoff,  # gain schedule: eps = eb + this (LSB of e); None: the state holds eps
     }
@@ -1106,10 +1066,7 @@ def _axis_fixed(c: AxisCode, prefix: str) -> tuple[list[str], list[str], list[st
     fields = _fields_fixed(p, T)
     params, args, in_body = _input_fixed(p, P)
     struct, out_struct, protos = _axis_decls(p, T, fields, params)
-    ck_fields = _fields_checkpoint(fields, T)
-    ck_bytes = _struct_bytes(ck_fields)
-    if ck_bytes is None or ck_bytes != sum(_C_SIZES[t] for t, _, _ in ck_fields):
-        raise ValueError(f"axis {ax}: the checkpoint image must be fixed-size members without padding")
+    ck_bytes = c.layout.ck_bytes
     fmt_defs = [
         f"#define {P}_R_FRAC {p.f('r')}",
         f"#define {P}_U_FRAC {p.f('u_out')}",
@@ -1134,8 +1091,8 @@ def _axis_fixed(c: AxisCode, prefix: str) -> tuple[list[str], list[str], list[st
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
     src += _gs_gains_c(c, P, T) + _gs_entries(c, P, T, params, args) if gs else _cov_entries(c, P, T, params, args)
     src += _read_c(c, P, T)
-    src += _checkpoint_c(p, P, T, fields)
-    return header, cdef, src, _manifest(c, T, fields, ck_fields, ck_bytes)
+    src += _checkpoint_c(c, P, T, fields)
+    return header, cdef, src, _manifest(c, T)
 
 
 def emit(

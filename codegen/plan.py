@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from accelnav.model.load import Model
 
 from .gains import Schedule
+from .layout import Layout, layout
 from .plan_cov import CovSums, cov_sums
 from .qformat import QFormat, quantize
 from .ranges import AxisPlan, RangeError, fine_view, plan_axis
@@ -133,6 +134,7 @@ class AxisCode:
     sched: Schedule | None  # gain schedule: its table
     follow: object | None  # gain schedule: codegen.follow.FollowPlan of the step after a skip
     merge: Merge | None  # gain schedule: how its step sums the increments
+    layout: Layout  # the state struct and its checkpoint image
     cov: tuple[CovSums, CovSums] | None = None  # covariance form: its sums in the fine and coarse formats
 
 
@@ -216,12 +218,12 @@ def axis_code(p: AxisPlan) -> AxisCode:
     if p.form == "gain_schedule":
         sched = schedule_for(p)
         merge = gs_merge(p, clamps["VHI"][2])
-        return AxisCode(p, consts, clamps, x0, {}, _eps_offset(p), sched, _follow(p, sched), merge)
+        return AxisCode(p, consts, clamps, x0, {}, _eps_offset(p), sched, _follow(p, sched), merge, layout(p.form))
     views = (fine_view(p), p)  # the predict and update in the fine and in the coarse formats
     for q in views:
         _check_cov_shifts(q)
     cov = tuple(cov_sums(q) for q in views)
-    return AxisCode(p, consts, clamps, x0, _cov0(p), None, None, None, None, cov)
+    return AxisCode(p, consts, clamps, x0, _cov0(p), None, None, None, None, layout(p.form), cov)
 
 
 def plan(model: Model, form: str | None = None) -> list[AxisCode]:
