@@ -20,7 +20,6 @@ The header carries the plain declarations between ``ACCELNAV-CDEF-BEGIN`` /
 from __future__ import annotations
 
 import functools
-import math
 import re
 
 from accelnav.model.design import AnalogConversion
@@ -36,13 +35,12 @@ from .plan import (  # noqa: F401  (the schedule's settings and schedule_for: re
     SCHEDULE_RAMP_S,
     SCHEDULE_REL_TOL,
     AxisCode,
-    cov_fracs,
     plan,
     recip_table,
     schedule_for,
 )
 from .plan_cov import Acc, CovSums, HSum, Term
-from .ranges import DEV, FINE, AxisPlan, fine_view, refuse_calibrated
+from .ranges import DEV, FINE, AxisPlan, refuse_calibrated
 
 
 def _c_int(v: int, word: int) -> str:
@@ -353,7 +351,7 @@ def _gains_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
     the block (c_i -> c_i R / S, and the cross terms stay within the diagonal terms, which only
     shrink)."""
     fca, fce, fKe = p.f("ca"), p.f("ce"), p.f("Ke")
-    cf = cov_fracs(p)
+    cf = sums.fracs
     nmax, fx = cf["nmax"], cf["x"]
     d = fce - fca
     Rn = "RF" if p.vars["S"] is p.vars.get("S_f") else "R"  # R in the format of S: fine or coarse
@@ -471,12 +469,13 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
     return L
 
 
-def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
+def _core_cov_coarse(c: AxisCode, P: str, T: str) -> list[str]:
     """Body of T_core_c (out of line): a skipped sample, or a sample while c_r, c_v, c_a, c_e are in their
     coarse formats (the ones that hold them through a gap). A skip first moves a fine block to the
     coarse formats (rounded); after an update whose c_r, c_v, c_a, c_e are all within the switch levels
     p.theta (codegen.ranges._plan_fine) they move to the fine formats (exact: a left shift that fits)."""
-    pf = fine_view(p)
+    p = c.p
+    pf = c.cov[0].view
     to_c, to_f, test = [], [], []
     for nm in FINE:
         dd = pf.f(nm) - p.f(nm)
@@ -484,7 +483,7 @@ def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
         if dd > 0:
             to_c.append(f"        s->{nm} = (int32_t)ACN_RSHR((int64_t)s->{nm}, {dd}); /* {ff} -> {fc}, round */")
             to_f.append(f"            s->{nm} *= INT32_C(1) << {dd}; /* {fc} -> {ff}, exact */")
-        th = math.floor(p.theta[nm] * 2.0**fc.frac)
+        th = c.switch[nm]
         # |c| <= th as one unsigned compare; th 2^dd fits the fine format (it holds GUARD theta)
         test.append(f"(uint32_t)s->{nm} + {th}u <= {2 * th}u")
     back = [
@@ -949,7 +948,8 @@ def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[st
     src = []
     # the predict of the covariance block in a function of its own: its registers do not crowd the
     # states'; twice: c_r, c_v, c_a, c_e in their fine formats (the common path) and in their coarse ones
-    for sfx, q, sums in (("", fine_view(p), c.cov[0]), ("_c", p, c.cov[1])):
+    for sfx, sums in (("", c.cov[0]), ("_c", c.cov[1])):
+        q = sums.view
         src += [f"static void {T}_ppredict{sfx}({T}_t *s)", "{"]
         src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(sums, q, P)]
         src += ["}", ""]
@@ -959,7 +959,7 @@ def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[st
         f"static __attribute__((noinline)) void {T}_core_c({T}_t *s, int32_t z, bool valid)",
         "{",
     ]
-    src += _core_cov_coarse(p, P, T) + ["}", ""]
+    src += _core_cov_coarse(c, P, T) + ["}", ""]
     src += [
         "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
         f" * with z [m/s^2] {p.vars['z'].fmt}. Inlined into update, skip and step. */",

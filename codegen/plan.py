@@ -19,7 +19,7 @@ from .gains import Schedule
 from .layout import Layout, layout
 from .plan_cov import CovSums, cov_sums
 from .qformat import QFormat, quantize
-from .ranges import AxisPlan, RangeError, fine_view, plan_axis
+from .ranges import FINE, AxisPlan, RangeError, fine_view, plan_axis
 
 # K_r, K_v (no feedback: 3e-4 and 1e-3 took the 100 Hz table from 259 to 177 segments, 1 kHz from 673 to
 # 412, the firmware's departure from the float64 filter on the shock and stress lockstep runs unchanged
@@ -136,6 +136,7 @@ class AxisCode:
     merge: Merge | None  # gain schedule: how its step sums the increments
     layout: Layout  # the state struct and its checkpoint image
     cov: tuple[CovSums, CovSums] | None = None  # covariance form: its sums in the fine and coarse formats
+    switch: dict[str, int] | None = None  # covariance form: the switch levels theta in LSB of the coarse formats
 
 
 def _eps_offset(p: AxisPlan) -> int:
@@ -223,7 +224,8 @@ def axis_code(p: AxisPlan) -> AxisCode:
     for q in views:
         _check_cov_shifts(q)
     cov = tuple(cov_sums(q) for q in views)
-    return AxisCode(p, consts, clamps, x0, _cov0(p), None, None, None, None, layout(p.form), cov)
+    switch = {nm: math.floor(p.theta[nm] * 2.0 ** p.vars[nm].fmt.frac) for nm in FINE}
+    return AxisCode(p, consts, clamps, x0, _cov0(p), None, None, None, None, layout(p.form), cov, switch)
 
 
 def plan(model: Model, form: str | None = None) -> list[AxisCode]:

@@ -79,9 +79,11 @@ class CovSums:
     HSum, no saturation: a decay), "acc" (an Acc, no saturation), and for c_e "free" (c_e plus an HSum
     checked to fit int32 at the corners)."""
 
+    view: AxisPlan  # the plan in the formats these sums are in (codegen.ranges.fine_view, or the coarse one)
     predict: dict[str, tuple[str, str | None, HSum | Acc]]
     s_fits: bool  # S = c_a + c_e aligned + R as one saturating 32-bit add
     ke_free: bool  # K_e = c_e / S fits int32 for any c_e: no saturation
+    fracs: dict  # the update's binary points (codegen.plan.cov_fracs)
 
 
 def acc_of(ft: int, terms: list[Term], dither: str | None = None) -> Acc:
@@ -216,12 +218,13 @@ def _ce(p: AxisPlan, t: dict):
     return ("acc" if "ce" in p.sat_free else "sat", None, acc_of(*t["ce"]))
 
 
-def _update_fits(p: AxisPlan) -> tuple[bool, bool]:
-    """(S's add fits one saturating 32-bit add, K_e needs no saturation) for the update's formats."""
+def _update_fits(p: AxisPlan) -> tuple[bool, bool, dict]:
+    """(S's add fits one saturating 32-bit add, K_e needs no saturation, the update's binary points)."""
     from .plan import cov_fracs
 
     fca, fce, fKe = p.f("ca"), p.f("ce"), p.f("Ke")
-    fx = cov_fracs(p)["x"]
+    cf = cov_fracs(p)
+    fx = cf["x"]
     d = fce - fca
     R_int = quantize(p.design.R, p.vars["S"].fmt)
     # c_e in c_a's format, rounded in 32 bits, plus R fits int32 for any c_e
@@ -230,7 +233,7 @@ def _update_fits(p: AxisPlan) -> tuple[bool, bool]:
     # when both ends, shifted and rounded, fit int32, K_e needs no saturation
     sh = fce + fx - fKe
     ke_free = ((2**31 - 1) * 2**30 + 2 ** (sh - 1)) >> sh <= 2**31 - 1 and (-(2**61) + 2 ** (sh - 1)) >> sh >= -(2**31)
-    return s_fits, ke_free
+    return s_fits, ke_free, cf
 
 
 def cov_sums(p: AxisPlan) -> CovSums:
@@ -243,4 +246,4 @@ def cov_sums(p: AxisPlan) -> CovSums:
         h = hsum_of(p, ft, terms[1:], dz)
         pred[n] = ("h", terms[0].var, h) if h is not None else ("acc", None, acc_of(ft, terms, dither=dz))
     pred["ce"] = _ce(p, t)
-    return CovSums(pred, *_update_fits(p))
+    return CovSums(p, pred, *_update_fits(p))
