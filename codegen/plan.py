@@ -17,7 +17,7 @@ from accelnav.model.load import Model
 
 from .gains import Schedule
 from .layout import Layout, layout
-from .plan_cov import CovSums, cov_sums
+from .plan_cov import CovSums, cov_fracs, cov_sums
 from .qformat import QFormat, quantize
 from .ranges import FINE, AxisPlan, RangeError, fine_view, plan_axis
 
@@ -162,16 +162,6 @@ def _follow(p: AxisPlan, sched: Schedule):
         return follow_plan(p, thresholds(sched))
     except ValueError as e:  # a shift the deviation's formats cannot take: this model's ranges
         raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
-
-
-def cov_fracs(p: AxisPlan) -> dict:
-    """Binary points of the covariance form's update: nmax, the clz of the smallest S (= R); x, the
-    format of xs = 1/S; and per state the product c_i w that it adds."""
-    fca = p.f("ca")
-    nmax = 32 - quantize(p.design.R, p.vars["S"].fmt).bit_length()
-    fw = p.f("w")
-    prod = {"r": p.f("cr") + fw, "v": p.f("cv") + fw, "a": fca + fw, "e": p.f("ce") + fw}
-    return {"nmax": nmax, "x": 61 - nmax - fca, "prod": prod}
 
 
 def _check_cov_shifts(p: AxisPlan) -> None:

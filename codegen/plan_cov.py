@@ -83,7 +83,7 @@ class CovSums:
     predict: dict[str, tuple[str, str | None, HSum | Acc]]
     s_fits: bool  # S = c_a + c_e aligned + R as one saturating 32-bit add
     ke_free: bool  # K_e = c_e / S fits int32 for any c_e: no saturation
-    fracs: dict  # the update's binary points (codegen.plan.cov_fracs)
+    fracs: dict  # the update's binary points (cov_fracs)
 
 
 def acc_of(ft: int, terms: list[Term], dither: str | None = None) -> Acc:
@@ -218,10 +218,18 @@ def _ce(p: AxisPlan, t: dict):
     return ("acc" if "ce" in p.sat_free else "sat", None, acc_of(*t["ce"]))
 
 
+def cov_fracs(p: AxisPlan) -> dict:
+    """Binary points of the covariance form's update: nmax, the clz of the smallest S (= R); x, the
+    format of xs = 1/S; and per state the product c_i w that it adds."""
+    fca = p.f("ca")
+    nmax = 32 - quantize(p.design.R, p.vars["S"].fmt).bit_length()
+    fw = p.f("w")
+    prod = {"r": p.f("cr") + fw, "v": p.f("cv") + fw, "a": fca + fw, "e": p.f("ce") + fw}
+    return {"nmax": nmax, "x": 61 - nmax - fca, "prod": prod}
+
+
 def _update_fits(p: AxisPlan) -> tuple[bool, bool, dict]:
     """(S's add fits one saturating 32-bit add, K_e needs no saturation, the update's binary points)."""
-    from .plan import cov_fracs
-
     fca, fce, fKe = p.f("ca"), p.f("ce"), p.f("Ke")
     cf = cov_fracs(p)
     fx = cf["x"]
