@@ -97,12 +97,6 @@ class _Ops:
         f["CES"] = f["Dce"] + math.floor(math.log2(p.design.R))
         self.thr = None
 
-    def shift(self, frm: int, to: int) -> int:
-        s = frm - to
-        if s < 0:
-            raise ValueError(f"a left shift Q.{frm} -> Q.{to}")
-        return s
-
 
 def _py_rshr(x: int, s: int) -> int:
     return (x + (1 << (s - 1))) >> s if s > 0 else x

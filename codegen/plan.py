@@ -2,9 +2,12 @@
 
 :func:`plan` takes a model to one :class:`AxisCode` per axis: the Q formats and bounds of
 :func:`codegen.ranges.plan_axis`, the gain schedule (gain-schedule form), the quantised constants and
-initial state, the clamp words, the offset of the gain schedule's bias state and the thresholds of its
-return after a skip. Every refusal of a model whose ranges the C cannot carry is raised here, as a
-:class:`~codegen.ranges.RangeError`, so :mod:`codegen.emit_c` only formats a plan that is known to fit.
+initial state, the clamp words, the offset of the gain schedule's bias state, its step after a skip
+(:class:`codegen.follow.FollowPlan`: return thresholds and every shift), the covariance form's sums
+(:mod:`codegen.plan_cov`: constants folded, shifts, guard bits, saturations) and the state's layout and
+checkpoint image (:mod:`codegen.layout`). Every refusal of a model whose ranges the C cannot carry is
+raised here, as a :class:`~codegen.ranges.RangeError`, so :mod:`codegen.emit_c` only formats a plan that
+is known to fit.
 """
 
 from __future__ import annotations
