@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -258,8 +259,9 @@ def write_outputs(args, arrays, model) -> None:
         print(f"wrote {args.csv}")
 
 
-def _summary(arrays: dict[str, np.ndarray]) -> str:
-    n = len(arrays["t"])
+def _summary(arrays: dict[str, np.ndarray], n: int | None = None) -> str:
+    """``n``: the run's samples when ``arrays`` hold only its ends (t first and last, clipped counts)."""
+    n = len(arrays["t"]) if n is None else n
     dur = arrays["t"][-1] - arrays["t"][0] if n > 1 else 0.0
     lines = [f"{n} samples, {dur:.2f} s, axes {', '.join(str(a) for a in arrays['axis_names'])}"]
     for j, name in enumerate(str(a) for a in arrays["axis_names"]):
@@ -286,6 +288,113 @@ def read_args(args) -> tuple[dict[str, np.ndarray], Model]:
         if getattr(args, flag, None) is not None:
             check_output(getattr(args, flag), f"--{flag}")
     return read_input(args.run, args.model, allow_gaps=args.allow_gaps, **reader_options(args))
+
+
+def _csv_rows(args) -> tuple[int, int] | None:
+    """(estimated rows, axes) of a plain CSV input, from its size and first lines; None for another input."""
+    from accelnav.data.stream import estimate_rows
+
+    rows = estimate_rows(args.run)
+    if rows is None:
+        return None
+    return rows, len(args.axis) if args.axis else len(load_model(args.model).axes)
+
+
+def _whole_input_fits(args, why: str) -> None:
+    """Refuse, before reading it, a CSV whose numbers exceed what one input may hold in memory."""
+    from accelnav.fileio import input_limit
+
+    size = _csv_rows(args)
+    if size is None:
+        return
+    rows, n_axes = size
+    need, limit = rows * 8 * (2 + n_axes), input_limit()
+    if need > limit:
+        raise UserError(
+            f"{args.run}: about {rows} rows x {n_axes} axes need about {need / 1e9:.3g} GB in memory; {why} and "
+            f"may take {limit / 1e9:.3g} GB here (ACCELNAV_MAX_INPUT_BYTES); plain smooth streams any length"
+        )
+
+
+def stream_args(args, budget: int):
+    """A CSV input smoothed in bounded memory, opened as a stream (accelnav.data.stream) before anything is
+    read whole, or None: read it whole (not a CSV, within the budget, or not streamed: see NotStreamed).
+
+    Decided from the file's size: the whole-array smoother's memory against ``budget``. Only the plain
+    smoother streams; the aids (--fixes, --zupt, --tune) and --plots, --csv, --covariances need every
+    sample in memory, so with them an input that cannot be held is refused here in one line."""
+    from accelnav.data.stream import NotStreamed, open_stream
+    from accelnav.estimate.chunked import disk_needed
+
+    size = _csv_rows(args)
+    if size is None or whole_bytes(*size) <= budget:
+        return None
+    flags = (("--fixes", args.fixes), ("--zupt", args.zupt), ("--tune", args.tune), ("--plots", args.plots),
+             ("--csv", args.csv), ("--covariances", args.covariances))  # fmt: skip
+    if any(v for _, v in flags):
+        _whole_input_fits(args, f"{', '.join(f for f, v in flags if v)} need(s) every sample in memory, which")
+        return None
+    for flag in ("out", "csv"):
+        if getattr(args, flag, None) is not None:
+            check_output(getattr(args, flag), f"--{flag}")
+    rows, n_axes = size
+    workdir = Path(args.out).resolve().parent
+    need = rows * 8 * (2 + n_axes) + disk_needed(
+        rows, n_axes, n_stages=1 + bool(args.filter_states)
+    )  # input store + smoother
+    free = shutil.disk_usage(workdir).free
+    if need > free:
+        raise UserError(
+            f"{args.run}: about {rows} rows x {n_axes} axes need about {need / 1e9:.3g} GB of disk in {workdir} "
+            f"to be smoothed in bounded memory; {free / 1e9:.3g} GB are free"
+        )
+    try:
+        return open_stream(
+            args.run, args.model, axes=args.axis, time_column=args.time_column, rate_hz=args.rate,
+            time_unit=args.time_unit, unit=args.unit, allow_gaps=args.allow_gaps, workdir=workdir,
+        )  # fmt: skip
+    except NotStreamed as exc:
+        note(f"{exc}; reading it whole")
+        return None
+
+
+def _smooth_streamed(args, stream) -> int:
+    """Plain smooth of a streamed CSV: its rows go from the store to the chunked smoother, never all in memory;
+    the same stages, store and summary as _cmd_streamed, which takes a run held in memory."""
+    from accelnav.estimate.chunked import BUDGET, smooth_bounded
+
+    clipped: dict[int, np.ndarray] = {}
+
+    def read(s: int, e: int):
+        t, accel, c = stream(s, e)
+        clipped[s] = c.sum(axis=0)  # by chunk start: a chunk read twice counts once
+        return t, accel, c
+
+    with stream:
+        model = stream.model
+        if args.warm_start:
+            from accelnav.model.edit import warm_started
+
+            model = warm_started(model)
+            note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
+        budget = _memory_budget_arg(args.memory_budget)
+        stages = ("filt", "smooth") if args.filter_states else ("smooth",)
+        info = smooth_bounded(
+            model, stream.n, read, args.out, axis_names=stream.axis_names, run_format=FORMAT, stages=stages,
+            budget=min(BUDGET, budget), store_memory=budget,
+        )  # fmt: skip
+        ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
+        ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
+        t_ends = np.array([stream.t0, stream.t0 + (stream.n - 1) * stream.Ts])
+        counts = np.sum(list(clipped.values()), axis=0)[None, :]
+        print(_summary({"t": t_ends, "axis_names": stream.axis_names, "clipped": counts, **ends}, n=stream.n))
+    where = "in memory" if info["store_in_memory"] else f"on disk beside {args.out}"
+    print(
+        f"{args.run}: streamed from the CSV (its numbers in a store on disk while it ran) and smoothed in bounded "
+        f"memory: {info['chunks']} chunks of {info['chunk']} samples, the smoother's store {where}"
+    )
+    print(f"wrote {args.out}")
+    return 0
 
 
 def cmd_sim(args) -> int:
@@ -343,6 +452,7 @@ def _cmd_streamed(args, arrays: dict[str, np.ndarray], model: Model, stages: tup
 
 
 def cmd_filter(args) -> int:
+    _whole_input_fits(args, "filter holds the run in memory")
     arrays, model = read_args(args)
     if _stream_args(args, arrays):
         return _cmd_streamed(args, arrays, model, ("filt",))
@@ -384,6 +494,9 @@ def cmd_smooth(args) -> int:
     from accelnav.estimate import zupt
     from accelnav.estimate.fixes import read_fixes
 
+    stream = stream_args(args, _memory_budget_arg(args.memory_budget))
+    if stream is not None:
+        return _smooth_streamed(args, stream)
     arrays, model = read_args(args)
     if args.warm_start:  # the same for every path below (bounded, --tune, the aids' checks) and the run file
         from accelnav.model.edit import warm_started
@@ -494,26 +607,28 @@ def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_s
     """smooth of a run over the memory budget, in chunks with a store on disk (accelnav.estimate.chunked)."""
     from accelnav.estimate import zupt
     from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
+    from accelnav.estimate.kf import Aids
 
     n, n_axes = arrays["accel"].shape
-    extras = [list(fixes[j]) if fixes is not None else [] for j in range(n_axes)]
-    gates: list[list[float]] = [[0.0] * len(e) for e in extras]
+    fix_lists = [list(fixes[j]) if fixes is not None else [] for j in range(n_axes)]
+    extras = [Aids.of(f) for f in fix_lists]  # fixes first, then the rests' updates, as arrays (no object each)
     zupt_ks = [np.zeros(0, dtype=np.int64)] * n_axes
     if rest is not None:
         r2 = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, n_axes))
         for j in range(n_axes):
             sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
-            zupt_ks[j], upd = zupt.axis_updates(r2[:, j], sigma, model, params)
-            extras[j] += upd
-            gates[j] += [0.0] * len(upd)
-    n_fix = [len(fixes[j]) if fixes is not None else 0 for j in range(n_axes)]
+            za = zupt.axis_aids(r2[:, j], sigma, model, params)
+            zupt_ks[j] = za.k
+            extras[j] = extras[j].concat(za)
+    gates = [np.zeros(len(e)) for e in extras]
+    n_fix = [len(f) for f in fix_lists]
 
     def more(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
         """The run file's zupt mask and fixes rows, as the whole-array path writes them."""
         mask = np.zeros((n, n_axes), dtype=bool)
         for j in range(n_axes):
             mask[zupt_ks[j][applied[j][n_fix[j] :]], j] = True
-        rows = [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for j in range(n_axes) for m in extras[j][: n_fix[j]]]
+        rows = [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for j in range(n_axes) for m in fix_lists[j]]
         return {"zupt": mask, "fixes": np.array(rows, dtype=np.float64).reshape(-1, 4)}
 
     read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])

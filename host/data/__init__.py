@@ -7,4 +7,5 @@ __all__ = [
     "recording",
     "run",
     "runfile",
+    "stream",
 ]

@@ -93,10 +93,12 @@ class Recording:
     time_unit: str | None = None  # the time column's unit as its name says ("s", "ms", "us"), None: unsaid
     time_column: str | None = None  # where t came from (a CSV column, the NPZ key); None: from the rate
     notes: tuple[str, ...] = ()  # one line each, for the caller to print: how the clock was read
+    first: int = 0  # the index in the whole file of sample 0 here (a block of a streamed input)
 
     def where(self, k: int) -> str:
         """Where sample k is in the file: its line (CSV) or its index."""
-        return f"sample {k} (line {int(self.lines[k])})" if self.lines is not None else f"sample {k}"
+        i = k + self.first
+        return f"sample {i} (line {int(self.lines[k])})" if self.lines is not None else f"sample {i}"
 
     @property
     def n(self) -> int:
@@ -119,7 +121,7 @@ class Recording:
 def parse_unit(unit: str) -> str:
     key = unit.strip().lower()
     if key not in UNIT_ALIASES:
-        raise UserError(f"unit {unit!r} is not known; accepted: g, mg, m/s^2, counts")
+        raise UserError(f"unit {excerpt(unit)} is not known; accepted: g, mg, m/s^2, counts")
     return UNIT_ALIASES[key]
 
 
@@ -317,16 +319,62 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: s
     line_nos: list[np.ndarray] = []
     held = 0
     limit = input_limit()
+    for h, table, nums in csv_pieces(path, axes, unit, rate_hz, time_column, gz, default):
+        head = h
+        pieces.append(table)
+        line_nos.append(nums)
+        held += table.nbytes + nums.nbytes
+        _check_held(held, limit, line_nos, src)
+    table = np.concatenate(pieces) if pieces else np.empty((0, 0))
+    data_lines = np.concatenate(line_nos) if line_nos else np.empty(0, np.int64)
+    del pieces, line_nos
+    if table.shape[0] < 2:
+        raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
+    time_unit = csv_time_unit(head)
+    t = csv_time(head, table, 0, rate_hz)
+    with np.errstate(over="ignore"):  # a number beyond float64 once in m/s^2 becomes inf, refused by name below
+        accel = csv_accel(head, table)
+    rec = _finish(src, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
+    return replace(rec, lines=data_lines, time_unit=time_unit, time_column=head.tcol)
+
+
+def csv_time_unit(head: _Header) -> str:
+    """The unit of the time column as its name says it (None: unsaid), "s" for time from the rate."""
+    if head.tcol is None:
+        return "s"
+    m = _TIME_NAME.match(head.tcol)  # a column may be named "" (--time-column '')
+    return m.group(2).lower() if m and m.group(2) else None
+
+
+def csv_time(head: _Header, table: np.ndarray, first: int, rate_hz: float | None) -> np.ndarray:
+    """Time [s, or the column's unsaid unit] of parsed rows ``first``.. of a CSV: its column, or from the rate."""
+    if head.tcol is None:
+        return np.arange(first, first + table.shape[0]) / rate_hz
+    return table[:, 0] * _TIME_SCALE[csv_time_unit(head)]
+
+
+def csv_accel(head: _Header, table: np.ndarray) -> np.ndarray:
+    """Acceleration [m/s^2, or raw counts] of parsed CSV rows, each column by its unit."""
+    data = table[:, 1:] if head.tcol is not None else table
+    return data * np.array([UNITS[u] for u in head.units])
+
+
+def csv_pieces(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: str | None = None):
+    """(header, numbers (rows, len(header.use)), their file lines) per piece of the CSV's text: the one
+    parser of the format, for the whole-file reader and the streamed one (accelnav.data.stream)."""
+    src = str(path)
+    head = None
     for first, text in _blocks(path, gz, src):
         if head is not None and len(head.cols) > 1 and "#" not in text:
+            table = _every_column(text, head)
+            if table is not None:
+                yield head, table, np.arange(first, first + len(table), dtype=np.int64)
+                continue
             # fast path: no comment, and every line has the header's delimiters (so none is blank)
             n_delims = _fields_per_line(text, head.delim)
             if np.all(n_delims == len(head.cols) - 1):
-                rows = text
                 nums = np.arange(first, first + len(n_delims), dtype=np.int64)
-                _parse_piece(rows, nums, head, src, pieces, line_nos)
-                held += pieces[-1].nbytes + line_nos[-1].nbytes
-                _check_held(held, limit, line_nos, src)
+                yield head, _parse_piece(text, nums, head, src), nums
                 continue
         lines = text.split("\n")
         rows, nums = [], []
@@ -351,47 +399,43 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: s
                 )
             rows.append(line)
             nums.append(first + i)
-        if not rows:
-            continue
-        _parse_piece(rows, nums, head, src, pieces, line_nos)
-        held += pieces[-1].nbytes + line_nos[-1].nbytes
-        _check_held(held, limit, line_nos, src)
+        if rows:
+            nums = np.asarray(nums, dtype=np.int64)
+            yield head, _parse_piece(rows, nums, head, src), nums
     if head is None:
         raise UserError(f"{src}: no header row (the file is empty)")
-    table = np.concatenate(pieces) if pieces else np.empty((0, len(head.use)))
-    data_lines = np.concatenate(line_nos) if line_nos else np.empty(0, np.int64)
-    del pieces, line_nos
-    if table.shape[0] < 2:
-        raise UserError(f"{src}: {table.shape[0]} data rows; a recording needs many more")
-    time_unit = None
-    if head.tcol is not None:  # a column may be named "" (--time-column '')
-        m = _TIME_NAME.match(head.tcol)
-        time_unit = m.group(2).lower() if m and m.group(2) else None
-        t = table[:, 0] * _TIME_SCALE[time_unit]
-        data = table[:, 1:]
-    else:
-        t = np.arange(table.shape[0]) / rate_hz
-        data = table
-        time_unit = "s"
-    with np.errstate(over="ignore"):  # a number beyond float64 once in m/s^2 becomes inf, refused by name below
-        accel = data * np.array([UNITS[u] for u in head.units])
-    rec = _finish(src, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
-    return replace(rec, lines=data_lines, time_unit=time_unit, time_column=head.tcol)
 
 
-def _parse_piece(rows, nums, head, src: str, pieces: list, line_nos: list) -> None:
-    """The numbers of ``rows`` (a list of lines, or whole lines as one text) appended to ``pieces``."""
+def _every_column(text: str, head: _Header) -> np.ndarray | None:
+    """The numbers of a piece whose every column is wanted, when each of its lines is a row of the header's
+    fields (None: let the line-checking paths find what is wrong, and say it). loadtxt refuses a row whose
+    field count differs from the first's, and the shape catches a piece of blank lines or wrong counts
+    throughout: no per-line Python and no count of delimiters (a fifth of the reader's time)."""
+    if head.use != list(range(len(head.cols))):
+        return None
+    parsed = text.replace(",", ".") if head.delim != "," else text  # ';' or tab between fields: decimal commas
+    try:
+        table = np.loadtxt(io.StringIO(parsed), delimiter=head.delim, ndmin=2, dtype=np.float64, comments=None)
+    except ValueError:
+        return None
+    return table if table.shape == (text.count("\n") + 1, len(head.cols)) else None
+
+
+def _parse_piece(rows, nums, head, src: str) -> np.ndarray:
+    """The numbers of ``rows`` (a list of lines, or whole lines as one text), (len(rows), len(head.use))."""
     text = rows if isinstance(rows, str) else None
     comma = head.delim != ","  # with ';' or tab between fields a comma can only be a decimal comma
     if comma:
         parsed = text.replace(",", ".") if text is not None else [r.replace(",", ".") for r in rows]
     else:
         parsed = text if text is not None else rows
+    # every line has the header's fields by now: with every column wanted, usecols is only a cost
+    use = None if head.use == list(range(len(head.cols))) else head.use
     try:
         chunk = np.loadtxt(
             io.StringIO(parsed) if text is not None else parsed,
             delimiter=head.delim,
-            usecols=head.use,
+            usecols=use,
             ndmin=2,
             dtype=np.float64,
             comments="#",
@@ -400,8 +444,7 @@ def _parse_piece(rows, nums, head, src: str, pieces: list, line_nos: list) -> No
         lines = text.split("\n") if text is not None else rows
         _locate_bad_cell(lines, nums, head.delim, head.cols, head.use, src, comma)
         raise  # _locate_bad_cell always raises; this keeps linters quiet
-    pieces.append(chunk.reshape(-1, len(head.use)))
-    line_nos.append(np.asarray(nums, dtype=np.int64))
+    return chunk.reshape(-1, len(head.use))
 
 
 def _check_held(held: int, limit: int, line_nos: list, src: str) -> None:
@@ -684,18 +727,21 @@ def _grid_place(t: np.ndarray, f: float):
 
 def check_rate(rec: Recording, model_rate_hz: float, model_source: str) -> None:
     """Refuse a recording whose sample rate is not the model's, in one line (naming a millisecond clock)."""
-    dt = np.diff(rec.t)
-    step = float(np.median(dt))
+    check_step(rec.source, float(np.median(np.diff(rec.t))), rec.time_unit, model_rate_hz, model_source)
+
+
+def check_step(source: str, step: float, time_unit: str | None, model_rate_hz: float, model_source: str) -> None:
+    """:func:`check_rate` from the median step [s] (a streamed input has no whole time array)."""
     rate = 1.0 / step
     if abs(rate / model_rate_hz - 1) <= 0.01:
         return
-    if rec.time_unit is None and abs(rate * 1000.0 / model_rate_hz - 1) <= 0.01:
+    if time_unit is None and abs(rate * 1000.0 / model_rate_hz - 1) <= 0.01:
         raise UserError(
-            f"{rec.source}: the time column looks like milliseconds (median step {step:.6g}, the model's "
+            f"{source}: the time column looks like milliseconds (median step {step:.6g}, the model's "
             f"{model_rate_hz:g} Hz is a step of {1000.0 / model_rate_hz:.6g} ms); name it t_ms or give seconds"
         )
     raise UserError(
-        f"{rec.source}: the recording is sampled at {rate:.6g} Hz (median step {step:.6g} s) but the model "
+        f"{source}: the recording is sampled at {rate:.6g} Hz (median step {step:.6g} s) but the model "
         f"{model_source} has sampling.rate_hz = {model_rate_hz:g} Hz; use a model made for {rate:.6g} Hz"
     )
 

@@ -14,7 +14,7 @@ csrc/fastsmooth.c, the split of acn_plain_cov + acn_plain_data):
 
 With extra measurements (fixes, zero-velocity updates; :class:`fastsmooth.Extras`, sliced per
 chunk) an axis takes the general path instead, in two passes (acn_chunkg_fwd, acn_chunkg_bwd: the
-steps of acn_general) over a store of 28 doubles per sample (``GROW``).
+steps of acn_general) over a store of 14 doubles per sample (``GROW``).
 
 Between chunks only a few numbers are carried (the filter's prior, the
 smoother's state), so memory is the chunk buffers, whatever the run's length.
@@ -69,7 +69,7 @@ BUDGET = 256 << 20  # bytes of chunk buffers
 WHOLE_BYTES = 1250
 ROW = 12  # doubles per sample and axis in the store (csrc/fastsmooth.c, ACN_ROW)
 LROW = 5  # the same for all-valid samples of the plain path with steady rows (ACN_LROW)
-GROW = 28  # the same for the general path (ACN_GROW): posterior, and the prior of the next sample
+GROW = 14  # the same for the general path (ACN_GROW): the posterior (the backward pass predicts again)
 # held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
 CHUNK_BYTES = 8 * GROW + 8 + 1 + 2 * 32 + 2 * 8
 OUT_KEYS = ("filt_x", "filt_sd", "smooth_x", "smooth_sd")

@@ -82,7 +82,7 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.errors import UserError
-from accelnav.estimate.kf import Measurement
+from accelnav.estimate.kf import Aids, Measurement
 from accelnav.fileio import atomic_output
 from accelnav.model.design import AxisDesign
 from accelnav.native.cbuild import STRICT_FLAGS
@@ -149,6 +149,10 @@ class AxisSmooth:
     Ps: np.ndarray  # (N, 10) packed
     applied: np.ndarray  # (n_extras,) bool, in the order the extras were given
     path: str  # "plain" or "general"
+    # general path: each extra's innovation y and its variance S as the filter saw them (given order; for a
+    # gated-out one, at its gate): y^2 / S is the aid's NIS, without replaying the filter
+    y: np.ndarray | None = None
+    S: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.xs)
@@ -607,9 +611,18 @@ class Extras:
     order: np.ndarray  # position i of the sorted arrays holds the given measurement order[i]
 
     @classmethod
-    def of(cls, extras: Sequence[Measurement] | Extras) -> Extras:
+    def of(cls, extras: Sequence[Measurement] | Aids | Extras) -> Extras:
+        """Sorted arrays of ``extras``; :class:`accelnav.estimate.kf.Aids` go through as arrays (a long run's
+        rests are 1e6 zero-velocity updates and more: no object per update)."""
         if isinstance(extras, Extras):
             return extras
+        if isinstance(extras, Aids):
+            if len(extras) and not np.all(extras.R > 0):
+                raise ValueError(f"extra measurement at sample {int(extras.k[~(extras.R > 0)][0])} has variance <= 0")
+            k = extras.k  # rests' updates come sorted: no sort of 1e6 and more of them then
+            order = np.arange(len(k)) if np.all(k[1:] >= k[:-1]) else np.argsort(k, kind="stable")
+            c = np.ascontiguousarray
+            return cls(c(extras.k[order]), c(extras.h[order]), c(extras.z[order]), c(extras.R[order]), order)
         ne = len(extras)
         ek = np.array([m.k for m in extras], dtype=np.int64).reshape(ne)
         eR = np.array([m.R for m in extras], dtype=np.float64).reshape(ne)
@@ -660,6 +673,7 @@ def smooth_general(
     eg = np.zeros(ne) if gates is None else np.asarray(gates, dtype=np.float64).reshape(ne)
     eg = np.ascontiguousarray(eg[order])
     applied = np.zeros(max(ne, 1), dtype=np.uint8)
+    ey, eS = np.zeros(max(ne, 1)), np.zeros(max(ne, 1))
     if out is not None and len(out) == n and out.path == "general":
         xp, Pp, xf, Pf, xs, Ps = out.x_prior, out.P_prior, out.x_post, out.P_post, out.xs, out.Ps
     else:
@@ -675,13 +689,15 @@ def smooth_general(
         ffi.from_buffer("long[]", eks) if ne else ffi.NULL,
         *((_ptr(ffi, a, "double *") if ne else ffi.NULL) for a in keep[1:]),
         _ptr(ffi, applied, "unsigned char *"),
-        *(_ptr(ffi, a, "double *") for a in (xp, Pp, xf, Pf, xs, Ps)),
+        *(_ptr(ffi, a, "double *") for a in (ey, eS, xp, Pp, xf, Pf, xs, Ps)),
     )
     if rc != 0:
         raise ValueError(f"general path: the prior covariance is not positive definite at sample {-rc}")
     done = np.zeros(ne, dtype=bool)
     done[order] = applied[:ne].astype(bool)
-    return AxisSmooth(xp, Pp, xf, Pf, xs, Ps, done, "general")
+    y, S = np.empty(ne), np.empty(ne)
+    y[order], S[order] = ey[:ne], eS[:ne]
+    return AxisSmooth(xp, Pp, xf, Pf, xs, Ps, done, "general", y, S)
 
 
 def smooth(

@@ -86,15 +86,10 @@ def _plain_ok(d) -> bool:
 
 
 def _kernel_extras(a: Aids):
-    """``a`` as the sorted arrays the compiled general path takes (what fastsmooth.Extras.of makes of the same
-    measurements as objects, without the objects)."""
+    """``a`` as the sorted arrays the compiled general path takes (fastsmooth.Extras.of, without objects)."""
     from accelnav.estimate.fastsmooth import Extras
 
-    if len(a) and not np.all(a.R > 0):
-        raise ValueError(f"extra measurement at sample {int(a.k[~(a.R > 0)][0])} has variance <= 0")
-    order = np.argsort(a.k, kind="stable")
-    c = np.ascontiguousarray
-    return Extras(c(a.k[order]), c(a.h[order]), c(a.z[order]), c(a.R[order]), order)
+    return Extras.of(a)
 
 
 def _stale(out: dict, stage: str) -> None:
@@ -184,7 +179,6 @@ def smooth_run(
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
     from accelnav.estimate import fastsmooth, zupt
-    from accelnav.estimate.consistency import aid_innovations_arrays
 
     check_run(arrays, model, "smooth_run")
     if warm_start:
@@ -220,8 +214,10 @@ def smooth_run(
             applied[za.k[res.applied[len(fx) :]], j] = True
         fix_rows += list(zip(arrays["t"][fx.k], [j] * len(fx), fx.z, np.sqrt(fx.R), strict=True))
         if len(extras):  # NIS only where there are aids: the plain path pays nothing
-            used = extras.take(np.flatnonzero(res.applied))
-            y, S = aid_innovations_arrays(d, z, valid, res.x_prior, res.P_prior, used.k, used.h, used.z, used.R)
+            # the innovations as the compiled filter met them (consistency.aid_innovations replays the same)
+            sel = np.flatnonzero(res.applied)
+            used = extras.take(sel)
+            y, S = res.y[sel], res.S[sel]
             nis = y * y / S
             n_fix_used = int(np.sum(res.applied[: len(fx)]))  # fixes are never gated: all of them
             fix_nis += list(nis[:n_fix_used])

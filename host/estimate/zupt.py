@@ -273,7 +273,7 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
     runs = intervals(centre)
     # a body swaying more than the tremor allowance (a real stance) has a level that wanders as much: the bound
     # grows with the run's own typical window variance (not with a ramp, whose windows stay quiet)
-    pieces = sorted(
+    pieces = [
         (*q, k)
         for k, (a, b) in enumerate(runs)
         for q in _steady_pieces(
@@ -287,7 +287,7 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
             p.level_rate * model.Ts,
             int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
         )
-    )
+    ]  # in sample order: runs are, and so are the pieces of each
     # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
     # sample while a sample stays within trim_k sd of the piece's level: a heel strike or the start of a ramp
     # ends it. Join pieces at one level across short breaks (a knock fails every window that holds it);
@@ -295,14 +295,14 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
     h = int(round(p.widen * (w // 2)))
     bridge = int(round(p.bridge_s * model.rate_hz))
     usable = ok.all(axis=1)
+    starts = np.array([q[0] for q in pieces], dtype=np.int64)
+    stops = np.array([q[1] for q in pieces], dtype=np.int64)
+    refs = np.array([q[2] for q in pieces]).reshape(len(pieces), n_axes)
+    lim2 = p.trim_k**2 * np.array([q[3] for q in pieces])
+    starts = starts - _level_steps(x, usable, refs, lim2, starts, -1, h)
+    stops = stops + _level_steps(x, usable, refs, lim2, stops - 1, 1, h)
     merged: list[list] = []
-    for a, b, ref, own, run in pieces:
-        lim2 = p.trim_k**2 * own
-        lo, hi = max(0, a - h), min(n, b + h)
-        while a > lo and usable[a - 1] and np.sum((x[a - 1] - ref) ** 2) <= lim2:
-            a -= 1
-        while b < hi and usable[b] and np.sum((x[b] - ref) ** 2) <= lim2:
-            b += 1
+    for (_, _, ref, _, run), a, b in zip(pieces, starts.tolist(), stops.tolist(), strict=True):
         if (
             merged
             and run != merged[-1][3]  # a break that failed the quiet test, not a change of level
@@ -316,12 +316,28 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
             if merged:
                 a = max(a, merged[-1][1] + 1)
             merged.append([a, b, ref, run])
-    rest = np.zeros(n, dtype=bool)
     shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
-    for a, b, _, _ in merged:
-        if b - a >= shortest:
-            rest[a:b] = True
-    return rest
+    kept = np.array([(a, b) for a, b, _, _ in merged if b - a >= shortest], dtype=np.int64).reshape(-1, 2)
+    edges = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(edges, kept[:, 0], 1)
+    np.add.at(edges, kept[:, 1], -1)
+    return np.cumsum(edges[:n]) > 0
+
+
+def _level_steps(
+    x: np.ndarray, usable: np.ndarray, refs: np.ndarray, lim2: np.ndarray, edge: np.ndarray, step: int, h: int
+) -> np.ndarray:
+    """Per piece, how many samples past its ``edge`` sample (walking by ``step``, -1 or 1, at most h, not off
+    the run) stay usable and within sqrt(lim2) of the piece's level ``refs`` before the first that does not:
+    the widening of every piece at once."""
+    n = len(x)
+    if h < 1 or not len(edge):
+        return np.zeros(len(edge), dtype=np.int64)
+    idx = edge[:, None] + step * np.arange(1, h + 1)  # (pieces, h)
+    inside = (idx >= 0) & (idx < n)
+    idx = np.clip(idx, 0, n - 1)
+    fits = inside & usable[idx] & (np.sum((x[idx] - refs[:, None, :]) ** 2, axis=2) <= lim2[:, None])
+    return np.where(fits.all(axis=1), h, np.argmin(fits, axis=1))
 
 
 def _steady_pieces(
@@ -334,64 +350,50 @@ def _steady_pieces(
     w: int,
     tilt_rate: float,
     lean: int,
-) -> list[tuple[int, int, np.ndarray]]:
+) -> list[tuple[int, int, np.ndarray, float]]:
     """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
     piece's median: the longest such stretch about the run's median is kept, the parts either side are split
     again. The ends of a piece are trimmed again with the bound scaled to the piece's own variance (of ``x``,
     summed over axes, against ``total``, the sum of R + tremor^2) when that is smaller; a piece whose first
     and last thirds differ by more than trim_k sd of a window mean (from the piece's own variance) plus
     ``tilt_rate`` (m/s^2 per sample) times their distance beyond ``lean`` samples is a stretch of a ramp
-    and dropped. What the trim cuts off a piece is split again; a piece from it is kept when it holds three
-    windows at least and its level does not walk away from the piece it was cut from (see below).
-    Returns (first, last + 1, median level, own variance) per piece."""
-    out = []
-    todo: list[tuple[int, int, np.ndarray | None, int]] = [(a, b, None, 0)]
-    while todo:
-        a, b, parent, side = todo.pop()
-        if b <= a:
-            continue
-        ref = np.median(means[a:b], axis=0)
-        near = np.sum((means[a:b] - ref) ** 2, axis=1) <= bound2
-        runs = intervals(near)
-        if not runs:
-            continue
-        p, q = max(runs, key=lambda r: r[1] - r[0])
-        todo += [(a, a + p, None, 0), (a + q, b, None, 0)]
-        p, q = a + p, a + q
-        # the ends, once more, against the piece's own noise (quieter than the tremor allows, on most rests)
-        ref = np.median(means[p:q], axis=0)
-        own = float(np.sum(x[p:q].var(axis=0)))
-        own2 = min(bound2, bound2 * own / total)
-        near = np.flatnonzero(np.sum((means[p:q] - ref) ** 2, axis=1) <= own2)
-        if not len(near):
-            continue
-        # what the trim cuts off is split again: a standing whose level stepped (by 0.1 m/s^2 on a real
-        # lower-back recording, no rotation on the gyroscope) keeps its second level as a piece of its own
-        todo += [(p, p + int(near[0]), ref, -1), (p + int(near[-1]) + 1, q, ref, 1)]
-        p, q = p + int(near[0]), p + int(near[-1]) + 1
-        # the level still moving across the piece: part of a ramp, not a rest (trim_k sd of a window mean, from
-        # the piece's own variance: a sway beyond the tremor allowance is noise here, not a ramp), unless it
-        # moves no faster than a tilt may over more than ``lean`` samples (level_rate: a person standing leans
-        # over seconds; over a second or less a drift cannot be told from a vehicle's or a cart's ramp)
-        third = (q - p) // 3
-        allowed = math.sqrt(bound2 * own / total) + tilt_rate * max(0, q - p - third - lean)
-        if not third:  # too short to tell: kept as a piece of the run, not as a trimmed end
-            if parent is None:
-                out.append((p, q, ref, own))
-            continue
-        first, last = means[p : p + third].mean(axis=0), means[q - third : q].mean(axis=0)
-        if parent is not None:
-            # cut off a quieter piece beside it: a ramp leaving (or reaching) that rest walks away from its level,
-            # a body that settled at a new level (a lean) or sways about it does not. The thirds must hold a
-            # window each, or a ramp's start cannot be told from a step (a cart's first 0.2 s of a push)
-            near_third, far_third = (first, last) if side > 0 else (last, first)
-            away = math.sqrt(np.sum((far_third - parent) ** 2)) - math.sqrt(np.sum((near_third - parent) ** 2))
-            if third < w or away > allowed:
-                continue
-        elif np.sum((first - last) ** 2) > allowed**2:
-            continue
-        out.append((p, q, ref, own))
-    return out
+    and dropped (the level moving across it no faster than a tilt may, over more than ``lean`` samples, is a
+    lean: a person standing leans over seconds; over a second or less a drift cannot be told from a
+    vehicle's or a cart's ramp). What the trim cuts off is split again (a standing whose level stepped, by
+    0.1 m/s^2 on a real lower-back recording, keeps its second level as a piece of its own); a piece from it
+    is kept when it holds three windows at least (thirds of a window each: shorter, a ramp's start cannot be
+    told from a step) and its level does not walk away from the piece it was cut from (a ramp leaving a
+    rest does; a body that settled at a new level, or sways about it, does not).
+    Returns (first, last + 1, median level, own variance) per piece, in sample order.
+
+    Compiled (acn_rest_pieces in csrc/fastsmooth.c): a ramp is cut into pieces of a sample or two, tens of
+    thousands per million samples, each a few array calls in Python. The C takes numpy's steps in numpy's
+    order, so the pieces are the same numbers (tests/estimate/test_zupt_arrays.py holds it to the Python
+    this replaced)."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    n_axes = means.shape[1]
+    if n_axes > _MAX_AXES:
+        raise ValueError(f"rest detector: {n_axes} axes; accepted: at most {_MAX_AXES}")
+    m = b - a
+    mod = _lib()
+    ffi = mod.ffi
+    mc = np.ascontiguousarray(means[a:b], dtype=np.float64)
+    xc = np.ascontiguousarray(x[a:b], dtype=np.float64)
+    start, stop = np.empty(max(m, 1), dtype=np.int64), np.empty(max(m, 1), dtype=np.int64)
+    ref, own = np.empty((max(m, 1), n_axes)), np.empty(max(m, 1))
+    count = mod.lib.acn_rest_pieces(
+        m, n_axes, ffi.from_buffer("double[]", mc), ffi.from_buffer("double[]", xc), bound2, total, w,
+        tilt_rate, lean, ffi.from_buffer("long[]", start), ffi.from_buffer("long[]", stop),
+        ffi.from_buffer("double[]", ref), ffi.from_buffer("double[]", own),
+    )  # fmt: skip
+    if count < 0:
+        raise MemoryError("rest detector: no memory for a run's pieces")
+    order = np.argsort(start[:count], kind="stable")
+    return [(a + int(start[i]), a + int(stop[i]), ref[i], float(own[i])) for i in order]
+
+
+_MAX_AXES = 8  # acn_rest_pieces: sums over axes are numpy's sequential ones up to 8 terms
 
 
 # why a candidate was accepted or refused (the report's reason column)
@@ -430,25 +432,47 @@ class _Anchor:
     sd: np.ndarray  # sd of b from the sensor's noise: sqrt(R / samples)
 
 
-def _closure(x, ok, R, Ts, p: ZuptParams, anc: _Anchor, a: int, here: _Anchor):
-    """(chi2, |v|, peak |v|, peak chi2) of the velocity integrated from the anchor to sample a, the bias linear
-    from the anchor's level to the candidate's."""
-    b1 = here.b
-    m = a - anc.end
-    if m <= 0:
-        return 0.0, 0.0, 0.0, 0.0
-    frac = (np.arange(m) + 0.5)[:, None] / m
-    seg = x[anc.end : a] - (anc.b + frac * (b1 - anc.b))
-    seg[~ok[anc.end : a]] = 0.0
-    v_path = np.cumsum(seg, axis=0) * Ts
-    v = v_path[-1]
-    D = m * Ts
-    s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
-    chi2 = float(np.mean(v * v / s2))
-    speeds = np.sqrt((v_path**2).sum(axis=1))
-    peak = float(speeds.max())
-    peak_chi2 = float(np.max(np.mean(v_path**2 / s2, axis=1)))
-    return chi2, float(np.sqrt(v @ v)), peak, peak_chi2
+class _Closure:
+    """The velocity closure of :func:`gate_rests` over one recording: the per-sample sum runs in C
+    (acn_rest_closure, numpy's steps in numpy's order: the same numbers as the array code it replaced, which
+    spent as long on its dozen array calls per candidate as on the sums)."""
+
+    def __init__(self, x: np.ndarray, ok: np.ndarray, R: np.ndarray, Ts: float, p: ZuptParams):
+        from accelnav.estimate.fastsmooth import _lib
+
+        if x.shape[1] > _MAX_AXES:
+            raise ValueError(f"rest detector: {x.shape[1]} axes; accepted: at most {_MAX_AXES}")
+        mod = _lib()
+        self.ffi, self.lib = mod.ffi, mod.lib
+        self.x = np.ascontiguousarray(x, dtype=np.float64)
+        self.ok = np.ascontiguousarray(ok, dtype=bool).view(np.uint8)
+        self.px = self.ffi.cast("double *", self.ffi.from_buffer(self.x))
+        self.pok = self.ffi.cast("unsigned char *", self.ffi.from_buffer(self.ok))
+        self.R, self.Ts, self.p = R, Ts, p
+        self.n_axes = x.shape[1]
+        # b0, b1, s2 in, v out: buffers made once, each call copies its few numbers in
+        self.buf = np.empty((4, self.n_axes))
+        self.pbuf = [self.ffi.cast("double *", self.ffi.from_buffer(self.buf[i])) for i in range(4)]
+        self.peaks = self.ffi.new("double[2]")
+
+    def __call__(self, anc: _Anchor, a: int, here: _Anchor) -> tuple[float, float, float, float]:
+        """(chi2, |v|, peak |v|, peak chi2) of the velocity integrated from the anchor to sample a, the bias
+        linear from the anchor's level to the candidate's."""
+        m = a - anc.end
+        if m <= 0:
+            return 0.0, 0.0, 0.0, 0.0
+        R, Ts, p = self.R, self.Ts, self.p
+        D = m * Ts
+        s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
+        buf, pb = self.buf, self.pbuf
+        buf[0], buf[1], buf[2] = anc.b, here.b, s2
+        k = anc.end * self.n_axes
+        self.lib.acn_rest_closure(
+            m, self.n_axes, self.px + k, self.pok + k, pb[0], pb[1], Ts, pb[2], pb[3], self.peaks, self.peaks + 1
+        )
+        v = buf[3].copy()
+        chi2 = float(np.mean(v * v / s2))
+        return chi2, float(np.sqrt(v @ v)), float(self.peaks[0]), float(self.peaks[1])
 
 
 def gate_rests(
@@ -465,9 +489,11 @@ def gate_rests(
     anchors: list[tuple[_Anchor, int]] = []  # accepted rests (as anchors) and their index in ``out``
     prev: tuple[_Anchor, str] | None = None  # the previous candidate, as a possible anchor, and its verdict
     out: list[RestDecision] = []
+    closure = _Closure(x, ok, R, Ts, p)
+    usable = ok.all(axis=1)
     for a, stop in intervals(rest):
-        use = ok[a:stop].all(axis=1)
-        xs = x[a:stop][use] if use.any() else np.zeros((1, n_axes))
+        use = usable[a:stop]
+        xs = x[a:stop] if use.all() else x[a:stop][use] if use.any() else np.zeros((1, n_axes))
         b1, kept = _robust_mean(xs, R)
         var = xs.var(axis=0) if len(xs) > 1 else R.copy()
         still = float(np.mean(var / R))
@@ -489,7 +515,7 @@ def gate_rests(
                 accepted, reason = False, "no rest before"
                 if anchor is not None:
                     used = anchor.end
-                    chi2, speed, peak, peak_chi2 = _closure(x, ok, R, Ts, p, anchor, a, here)
+                    chi2, speed, peak, peak_chi2 = closure(anchor, a, here)
                     moved = peak_chi2 > p.gate
                     near = not moved and (a - anchor.end) * Ts <= p.recover_s
                     lev, bound = _level(p, anchor, b1, a, Ts, p.level if near else None)
@@ -519,7 +545,7 @@ def gate_rests(
             cand = prev[0]
             lev2, bound2 = _level(p, cand, b1, a, Ts)
             if (a - cand.end) * Ts <= p.recover_s and lev2 <= bound2:
-                c2, sp2, pk2, pk_chi2 = _closure(x, ok, R, Ts, p, cand, a, here)
+                c2, sp2, pk2, pk_chi2 = closure(cand, a, here)
                 if (c2 <= p.gate or sp2 <= p.rel * pk2) and pk_chi2 > p.gate:
                     accepted, reason = True, "recovered"
                     chi2, speed, peak, lev, bound, used = c2, sp2, pk2, lev2, bound2, cand.end
@@ -576,7 +602,12 @@ def _robust_mean(x: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Not the median itself: a coarse ADC (the default's step is 3.6 sqrt(R)) puts the median on a code.
     """
-    med = np.median(x, axis=0)
+    k = len(x)  # the median as np.median computes it, without its overhead per call
+    if k % 2:
+        med = np.partition(x, k // 2, axis=0)[k // 2]
+    else:
+        part = np.partition(x, (k // 2 - 1, k // 2), axis=0)
+        med = (part[k // 2 - 1] + part[k // 2]) / 2.0
     near = np.abs(x - med) <= 5.0 * np.sqrt(R)
     kept = np.maximum(near.sum(axis=0), 1)
     return np.where(near, x, 0.0).sum(axis=0) / kept, kept

@@ -8,6 +8,8 @@
 
 #include <math.h>
 #include <stddef.h>
+#include <stdlib.h>
+#include <string.h>
 
 /* Index of (i, j) in a packed symmetric 4x4 matrix. */
 static const int PK[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
@@ -441,12 +443,14 @@ static int chol_solve4(double M[4][4], double B[4][4])
 /*
  * The measurements of sample k once its prior is in (x, P): the acceleration
  * if ok, then the extras ek[ei] == k in order. Returns the index of the first
- * extra of a later sample.
+ * extra of a later sample. ey, eS (or NULL) get each extra's innovation y and
+ * its variance S as the filter saw them: y^2 / S is the aid's NIS, with no
+ * replay of the filter (accelnav.estimate.consistency).
  */
 static long general_update(const acn_axis *m, long k, int ok, double zk, double x[4],
                            double P[4][4], long ei, long n_extra, const long *ek, const double *eh,
                            const double *ez, const double *eR, const double *egate,
-                           unsigned char *applied)
+                           unsigned char *applied, double *ey, double *eS)
 {
     double K[4], S;
     if (ok)
@@ -462,11 +466,19 @@ static long general_update(const acn_axis *m, long k, int ok, double zk, double 
                     s += h[i] * P[i][j] * h[j];
             if (y * y > egate[ei] * s) {
                 applied[ei] = 0;
+                if (ey != NULL) {
+                    ey[ei] = y;
+                    eS[ei] = s;
+                }
                 continue;
             }
         }
-        update(x, P, h, ez[ei], eR[ei], &S, K);
+        double y = update(x, P, h, ez[ei], eR[ei], &S, K);
         applied[ei] = 1;
+        if (ey != NULL) {
+            ey[ei] = y;
+            eS[ei] = S;
+        }
     }
     return ei;
 }
@@ -529,8 +541,8 @@ static int rts_step(double F[4][4], const double *xpost, const double *Ppost, co
 
 int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
                 long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
-                const double *egate, unsigned char *applied, double *xprior, double *Pprior,
-                double *xpost, double *Ppost, double *xs, double *Psm)
+                const double *egate, unsigned char *applied, double *ey, double *eS, double *xprior,
+                double *Pprior, double *xpost, double *Ppost, double *xs, double *Psm)
 {
     double F[4][4], P[4][4], x[4];
     long ei = 0;
@@ -548,7 +560,7 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
             xprior[4 * k + i] = x[i];
         pack(P, Pprior + 10 * k);
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
-                            eR, egate, applied);
+                            eR, egate, applied, ey, eS);
         for (int i = 0; i < 4; i++)
             xpost[4 * k + i] = x[i];
         pack(P, Ppost + 10 * k);
@@ -564,6 +576,266 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
             return -(int)(k + 1 > 1000000000L ? 1000000000L : k + 1);
     }
     return 0;
+}
+
+/* ------------------------------------------------------------------------- */
+/* Rest detector: a run of quiet window centres split into pieces of steady   */
+/* level (host/estimate/zupt.py, _steady_pieces: what and why is said there). */
+/* The same steps in the same order as numpy takes them there, so the pieces  */
+/* are the same numbers: medians are order statistics (the mean of the two    */
+/* middle ones for an even count), sums over rows run row by row, sums over   */
+/* axes axis by axis (numpy's order for these shapes, up to 8 axes).          */
+
+/* The k-th smallest of v[0..n-1] (v reordered: v[0..k-1] <= v[k] <= v[k+1..]). */
+static double select_kth(double *v, long n, long k)
+{
+    long lo = 0, hi = n - 1;
+    while (hi > lo) {
+        double pivot = v[lo + (hi - lo) / 2];
+        long i = lo, j = hi;
+        while (i <= j) {
+            while (v[i] < pivot)
+                i++;
+            while (v[j] > pivot)
+                j--;
+            if (i <= j) {
+                double t = v[i];
+                v[i] = v[j];
+                v[j] = t;
+                i++;
+                j--;
+            }
+        }
+        if (k <= j)
+            hi = j;
+        else if (k >= i)
+            lo = i;
+        else
+            break;
+    }
+    return v[k];
+}
+
+/* Per axis, the median of rows a..b-1 of means (n_axes columns), as np.median(means[a:b], axis=0).
+ */
+static void median_rows(const double *means, int n_axes, long a, long b, double *scratch,
+                        double *ref)
+{
+    long k = b - a, h = k / 2;
+    for (int j = 0; j < n_axes; j++) {
+        for (long i = 0; i < k; i++)
+            scratch[i] = means[(a + i) * n_axes + j];
+        double hi = select_kth(scratch, k, h);
+        if (k % 2) {
+            ref[j] = hi;
+        } else {
+            double lo = scratch[0];
+            for (long i = 1; i < h; i++)
+                lo = scratch[i] > lo ? scratch[i] : lo;
+            ref[j] = (lo + hi) / 2.0;
+        }
+    }
+}
+
+/* sum over axes of (row - ref)^2 */
+static double dist2(const double *row, const double *ref, int n_axes)
+{
+    double s = (row[0] - ref[0]) * (row[0] - ref[0]);
+    for (int j = 1; j < n_axes; j++)
+        s += (row[j] - ref[j]) * (row[j] - ref[j]);
+    return s;
+}
+
+/* Per axis, the mean of rows a..b-1 (b > a). */
+static void mean_rows(const double *v, int n_axes, long a, long b, double *out)
+{
+    for (int j = 0; j < n_axes; j++)
+        out[j] = v[a * n_axes + j];
+    for (long i = a + 1; i < b; i++)
+        for (int j = 0; j < n_axes; j++)
+            out[j] += v[i * n_axes + j];
+    for (int j = 0; j < n_axes; j++)
+        out[j] /= (double)(b - a);
+}
+
+typedef struct {
+    long a, b;
+    int side; /* 0: a part of the run; -1, 1: trimmed off the start, the end of a piece */
+    double parent[ACN_REST_MAX_AXES];
+} rest_item;
+
+long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, double bound2,
+                     double total, long w, double tilt_rate, long lean, long *pstart, long *pstop,
+                     double *pref, double *pown)
+{
+    if (n < 1)
+        return 0;
+    if (n_axes < 1 || n_axes > ACN_REST_MAX_AXES)
+        return -2;
+    /* the items on the stack are disjoint, non-empty ranges of the run: at most n of them */
+    rest_item *todo = malloc((size_t)n * sizeof *todo);
+    double *scratch = malloc((size_t)n * sizeof *scratch);
+    double *var = malloc((size_t)n_axes * sizeof *var);
+    if (todo == NULL || scratch == NULL || var == NULL) {
+        free(todo);
+        free(scratch);
+        free(var);
+        return -1;
+    }
+    long top = 0, count = 0;
+    todo[top].a = 0;
+    todo[top].b = n;
+    todo[top].side = 0;
+    top++;
+    double ref[ACN_REST_MAX_AXES], first[ACN_REST_MAX_AXES], last[ACN_REST_MAX_AXES];
+    while (top > 0) {
+        rest_item it = todo[--top];
+        long a = it.a, b = it.b;
+        /* the longest stretch within sqrt(bound2) of the median; the parts either side are split
+         * again */
+        median_rows(means, n_axes, a, b, scratch, ref);
+        long best_p = -1, best_len = 0, run = -1;
+        for (long i = a; i <= b; i++) {
+            int near = i < b && dist2(means + i * n_axes, ref, n_axes) <= bound2;
+            if (near && run < 0)
+                run = i;
+            if (!near && run >= 0) {
+                if (i - run > best_len) {
+                    best_len = i - run;
+                    best_p = run;
+                }
+                run = -1;
+            }
+        }
+        if (best_p < 0)
+            continue;
+        long p = best_p, q = best_p + best_len;
+        if (p > a) {
+            todo[top].a = a;
+            todo[top].b = p;
+            todo[top].side = 0;
+            top++;
+        }
+        if (b > q) {
+            todo[top].a = q;
+            todo[top].b = b;
+            todo[top].side = 0;
+            top++;
+        }
+        /* the ends, once more, against the piece's own noise */
+        median_rows(means, n_axes, p, q, scratch, ref);
+        mean_rows(x, n_axes, p, q, first);
+        for (int j = 0; j < n_axes; j++)
+            var[j] = 0.0;
+        for (long i = p; i < q; i++)
+            for (int j = 0; j < n_axes; j++) {
+                double d = x[i * n_axes + j] - first[j];
+                var[j] = i == p ? d * d : var[j] + d * d;
+            }
+        double own = var[0] / (double)(q - p);
+        for (int j = 1; j < n_axes; j++)
+            own += var[j] / (double)(q - p);
+        double own2 = bound2 * own / total;
+        own2 = own2 < bound2 ? own2 : bound2;
+        long lo = -1, hi = -1;
+        for (long i = p; i < q; i++)
+            if (dist2(means + i * n_axes, ref, n_axes) <= own2) {
+                if (lo < 0)
+                    lo = i;
+                hi = i;
+            }
+        if (lo < 0)
+            continue;
+        /* what the trim cuts off is split again, remembering the level it was cut from */
+        if (lo > p) {
+            todo[top].a = p;
+            todo[top].b = lo;
+            todo[top].side = -1;
+            memcpy(todo[top].parent, ref, (size_t)n_axes * sizeof *ref);
+            top++;
+        }
+        if (q > hi + 1) {
+            todo[top].a = hi + 1;
+            todo[top].b = q;
+            todo[top].side = 1;
+            memcpy(todo[top].parent, ref, (size_t)n_axes * sizeof *ref);
+            top++;
+        }
+        p = lo;
+        q = hi + 1;
+        long third = (q - p) / 3;
+        if (third == 0) { /* too short to tell: kept as a piece of the run, not as a trimmed end */
+            if (it.side != 0)
+                continue;
+        } else {
+            long beyond = q - p - third - lean;
+            double allowed =
+                sqrt(bound2 * own / total) + tilt_rate * (double)(beyond > 0 ? beyond : 0);
+            mean_rows(means, n_axes, p, p + third, first);
+            mean_rows(means, n_axes, q - third, q, last);
+            if (it.side != 0) {
+                const double *near_third = it.side > 0 ? first : last,
+                             *far_third = it.side > 0 ? last : first;
+                double away = sqrt(dist2(far_third, it.parent, n_axes)) -
+                              sqrt(dist2(near_third, it.parent, n_axes));
+                if (third < w || away > allowed)
+                    continue;
+            } else if (dist2(first, last, n_axes) > allowed * allowed) {
+                continue;
+            }
+        }
+        pstart[count] = p;
+        pstop[count] = q;
+        memcpy(pref + count * n_axes, ref, (size_t)n_axes * sizeof *ref);
+        pown[count] = own;
+        count++;
+    }
+    free(todo);
+    free(scratch);
+    free(var);
+    return count;
+}
+
+/*
+ * The rest detector's velocity closure (host/estimate/zupt.py, _closure): the
+ * velocity integrated over the m samples x[0..m-1] (n_axes columns) between
+ * an anchor rest and a candidate, the bias linear from b0 to b1 across them,
+ * unusable values (ok[i * n_axes + j] == 0) adding nothing:
+ *   v[i] = Ts sum_{l <= i} (x[l] - (b0 + (l + 0.5) / m (b1 - b0)))
+ * Writes v at the last sample (n_axes), the largest |v[i]| and the largest
+ * mean over axes of v[i]^2 / s2. numpy's steps in numpy's order (a running
+ * sum row by row, sums over axes axis by axis), so the same numbers.
+ */
+void acn_rest_closure(long m, int n_axes, const double *x, const unsigned char *ok,
+                      const double *b0, const double *b1, double Ts, const double *s2, double *v,
+                      double *peak, double *peak_chi2)
+{
+    double c[ACN_REST_MAX_AXES], db[ACN_REST_MAX_AXES];
+    double best = 0.0, best_chi2 = 0.0;
+    for (int j = 0; j < n_axes; j++)
+        db[j] = b1[j] - b0[j];
+    for (long i = 0; i < m; i++) {
+        double frac = ((double)i + 0.5) / (double)m;
+        double sp = 0.0, ch = 0.0;
+        for (int j = 0; j < n_axes; j++) {
+            double seg = ok[i * n_axes + j] ? x[i * n_axes + j] - (b0[j] + frac * db[j]) : 0.0;
+            c[j] = i == 0 ? seg : c[j] + seg;
+            double vj = c[j] * Ts;
+            double v2 = vj * vj;
+            sp = j == 0 ? v2 : sp + v2;
+            ch = j == 0 ? v2 / s2[j] : ch + v2 / s2[j];
+        }
+        sp = sqrt(sp);
+        ch = ch / (double)n_axes;
+        if (i == 0 || sp > best)
+            best = sp;
+        if (i == 0 || ch > best_chi2)
+            best_chi2 = ch;
+    }
+    for (int j = 0; j < n_axes; j++)
+        v[j] = c[j] * Ts;
+    *peak = best;
+    *peak_chi2 = best_chi2;
 }
 
 /* ------------------------------------------------------------------------- */
@@ -873,8 +1145,10 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
 /* ------------------------------------------------------------------------- */
 /* General path in bounded memory: acn_general split into chunks, the same     */
 /* steps (general_update, rts_step) in the same order. Store row of sample k:  */
-/*   0..3 x_post[k]  4..13 P_post[k]  14..17 x_prior[k+1]  18..27 P_prior[k+1] */
-/* (the prior fields are 0 at the run's last sample).                           */
+/*   0..3 x_post[k]  4..13 P_post[k]                                            */
+/* The backward pass predicts the prior of k + 1 from them again, with the     */
+/* forward pass's own predict_mean and predict_cov: the same numbers, and half */
+/* the store (its writes were a third of `smooth --zupt auto` at 1e7 samples).  */
 
 /*
  * Forward over samples k0 .. k0 + n - 1, extras as in acn_general with ek
@@ -896,22 +1170,16 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
     for (long k = 0; k < n; k++) {
         double *row = store + ACN_GROW * k;
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, P, ei, n_extra, ek, eh, ez,
-                            eR, egate, applied);
+                            eR, egate, applied, NULL, NULL);
         for (int i = 0; i < 4; i++) {
             row[i] = xf[4 * k + i] = x[i];
             sdf[4 * k + i] = sqrt(P[i][i]);
         }
         pack(P, row + 4);
-        if (last && k == n - 1) {
-            for (int i = 14; i < ACN_GROW; i++)
-                row[i] = 0.0;
+        if (last && k == n - 1)
             break;
-        }
         predict_mean(m, x);
         predict_cov(m, F, P);
-        for (int i = 0; i < 4; i++)
-            row[14 + i] = x[i];
-        pack(P, row + 18);
     }
     for (int i = 0; i < 4; i++)
         carry[i] = x[i];
@@ -949,7 +1217,14 @@ int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *s
     }
     for (; k >= 0; k--) {
         const double *row = store + ACN_GROW * k;
-        if (rts_step(F, row, row + 4, row + 14, row + 18, x1, P1, x, Pk) != 0) {
+        double xp[4], Pp[4][4], Ppk[10]; /* the prior of k + 1, predicted again from row k */
+        for (int i = 0; i < 4; i++)
+            xp[i] = row[i];
+        unpack(row + 4, Pp);
+        predict_mean(m, xp);
+        predict_cov(m, F, Pp);
+        pack(Pp, Ppk);
+        if (rts_step(F, row, row + 4, xp, Ppk, x1, P1, x, Pk) != 0) {
             long at = k0 + k + 1;
             return -(int)(at > 1000000000L ? 1000000000L : at);
         }

@@ -50,8 +50,30 @@ void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned c
 
 int acn_general(const acn_axis *m, long n, const double *z, const unsigned char *valid,
                 long n_extra, const long *ek, const double *eh, const double *ez, const double *eR,
-                const double *egate, unsigned char *applied, double *xprior, double *Pprior,
-                double *xpost, double *Ppost, double *xs, double *Psm);
+                const double *egate, unsigned char *applied, double *ey, double *eS, double *xprior,
+                double *Pprior, double *xpost, double *Ppost, double *xs, double *Psm);
+
+/*
+ * The rest detector's split of one run of n quiet window centres into pieces of
+ * steady level (host/estimate/zupt.py, _steady_pieces). means, x: n rows of
+ * n_axes (at most ACN_REST_MAX_AXES) window means and samples of the run. Writes
+ * each piece's first and last + 1 row, its median level (n_axes) and its own
+ * variance (summed over axes) into arrays of n; returns the number of pieces,
+ * -1 when out of memory, -2 for too many axes.
+ */
+enum { ACN_REST_MAX_AXES = 8 };
+
+long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, double bound2,
+                     double total, long w, double tilt_rate, long lean, long *pstart, long *pstop,
+                     double *pref, double *pown);
+
+/*
+ * The rest detector's velocity closure over m samples (host/estimate/zupt.py,
+ * _Closure): v at the last sample, the largest |v| and mean v^2 / s2 on the way.
+ */
+void acn_rest_closure(long m, int n_axes, const double *x, const unsigned char *ok,
+                      const double *b0, const double *b1, double Ts, const double *s2, double *v,
+                      double *peak, double *peak_chi2);
 
 /*
  * Plain path in bounded memory (host/estimate/chunked.py): the same numbers as
@@ -64,7 +86,7 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
  * (acn_chunkg_fwd, acn_chunkg_bwd): the same steps as acn_general.
  * The carried state between chunks is a small array documented at each call.
  */
-enum { ACN_ROW = 12, ACN_GROW = 28, ACN_SROW = 14, ACN_LROW = 5 };
+enum { ACN_ROW = 12, ACN_GROW = 14, ACN_SROW = 14, ACN_LROW = 5 };
 
 int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
                   const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,

@@ -1,0 +1,381 @@
+"""A CSV recording of any length, checked as read_input checks it, in bounded memory.
+
+:func:`read_input` holds the whole recording in arrays (about 70 bytes per sample, more while it
+parses), so a 1e8-row CSV cannot go through it. :func:`open_stream` instead parses the CSV once with
+the same parser (:func:`accelnav.data.recording.csv_pieces`: one CSV dialect for both) into a binary
+store of its numbers and their file lines in a temporary folder, makes read_input's checks over that
+store block by block (time finite and increasing, the clock's median step and regularity, the rate
+against the model, the axes, counts converted by the model's read-out, NaN, each sample on the grid),
+and returns a :class:`Stream`: the number of rows and ``read(s, e) -> (t, accel, clipped)`` for
+:func:`accelnav.estimate.chunked.smooth_bounded`. Rows come back with the very numbers read_input
+gives. The store is re-read rather than the text re-parsed: parsing is most of the cost, and the
+store is a few times smaller than the text is to scan.
+
+What needs the whole time array at once (a clock placed on a grid by :func:`_check_time`: jitter,
+--rate with a time column, gaps filled in) raises :class:`NotStreamed`; the caller reads such an
+input whole, where it fits.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import stat
+import tempfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from accelnav.data import recording as rc
+from accelnav.errors import UserError
+from accelnav.fileio import check_input
+from accelnav.model.load import Model, load_model
+from accelnav.progress import note
+
+BLOCK = 1 << 20  # rows per block of the check passes and the largest read: the pass's memory
+SAMPLE = 1 << 16  # bytes read at the start, middle and end of a CSV to estimate its rows
+MAX_STEPS = 1 << 20  # distinct time steps counted for the exact median; a clock with more is read whole
+
+
+class NotStreamed(UserError):
+    """The input is valid as far as read, but only the whole-array reader handles it (the reason, one line)."""
+
+
+def _pread(fd: int, buf: np.ndarray, pos: int) -> None:
+    view = memoryview(buf).cast("B")
+    while view:
+        got = os.preadv(fd, [view], pos)
+        if got <= 0:
+            raise UserError(f"input store: short read at byte {pos}")
+        view, pos = view[got:], pos + got
+
+
+@dataclass
+class Stream:
+    """A checked recording on disk: ``n`` rows of ``model``'s axes; call it as ``read(s, e)``.
+
+    Use as a context manager: closing removes the store."""
+
+    source: str
+    n: int
+    model: Model
+    axis_names: np.ndarray
+    head: object  # recording._Header
+    folder: Path
+    rate_hz: float | None  # --rate (time from the rate)
+    time_unit: str | None  # --time-unit applied to an unsaid time column
+    t0: float = 0.0
+    Ts: float = 0.0
+    _fds: dict = field(default_factory=dict)
+
+    @property
+    def width(self) -> int:
+        return len(self.head.use)
+
+    def rows(self, s: int, e: int, lines: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """(numbers (e-s, width), file lines (e-s,) or None without ``lines``) of rows s..e as parsed."""
+        table = np.empty((e - s, self.width))
+        nums = np.empty(e - s, dtype=np.int64) if lines else None
+        if e > s:
+            _pread(self._fds["store"], table, 8 * self.width * s)
+            if lines:
+                _pread(self._fds["lines"], nums, 8 * s)
+        return table, nums
+
+    def raw_time(self, table: np.ndarray, s: int) -> np.ndarray:
+        """Time of rows s.. in seconds, as read_recording makes it (column or rate, then --time-unit)."""
+        t = rc.csv_time(self.head, table, s, self.rate_hz)
+        if self.time_unit is not None and self.head.tcol is not None and rc.csv_time_unit(self.head) is None:
+            t = t * rc._TIME_SCALE[self.time_unit]
+        return t
+
+    def block(self, s: int, e: int, lines: bool = True) -> rc.Recording:
+        """Rows s..e as a Recording in m/s^2 on the model (counts converted), its messages placed in the file
+        (without ``lines``: by sample only, for rows checked already)."""
+        table, lines = self.rows(s, e, lines)
+        with np.errstate(over="ignore"):  # beyond float64 in m/s^2: inf, refused by name as not a number
+            accel = rc.csv_accel(self.head, table)
+        h = self.head
+        rec = rc.Recording(
+            source=self.source, t=self.raw_time(table, s), accel=np.ascontiguousarray(accel),
+            axis_names=tuple(h.names), columns=tuple(h.chosen), units=tuple(h.units), rate_hz=float("nan"),
+            lines=lines, first=s,
+        )  # fmt: skip
+        return rc.in_accel(rec, self.model)
+
+    def __call__(self, s: int, e: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t on the grid, accel [m/s^2], clipped) of rows s..e, as read_input's run holds them."""
+        rec = self.block(s, e, lines=False)  # checked by open_stream: no message will need a line
+        t = self.t0 + np.arange(s, e) * self.Ts
+        with np.errstate(invalid="ignore"):
+            clipped = np.abs(rec.accel) >= self.model.max_accel_m_s2 * (1 - 1e-9)
+        if rec.clipped is not None:
+            clipped |= rec.clipped
+        return t, rec.accel, clipped
+
+    def close(self) -> None:
+        for fd in self._fds.values():
+            os.close(fd)
+        self._fds.clear()
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+    def __enter__(self) -> Stream:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def estimate_rows(path: str | os.PathLike[str]) -> int | None:
+    """Rows of a plain CSV estimated from its size and its first lines (None: not a plain CSV), read
+    before anything is parsed: what decides whether the input is streamed."""
+    path = Path(path)
+    try:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode):  # a FIFO or a device: a read could block or never end
+            return None
+        size = info.st_size
+        with open(path, "rb") as fh:
+            head = fh.read(SAMPLE)
+            # lines grow along a file (its time stamps get longer): sample its middle and end as well
+            parts = [head]
+            for at in (size // 2, size - SAMPLE):
+                if at > SAMPLE:
+                    fh.seek(at)
+                    parts.append(fh.read(SAMPLE))
+    except OSError:
+        return None
+    if head[:2] in (b"PK", b"\x1f\x8b") or b"\0" in head:
+        return None
+    lines = sum(p.count(b"\n") + p.count(b"\r") - p.count(b"\r\n") for p in parts)
+    if lines == 0:
+        return 0
+    return int(size * lines / sum(map(len, parts)))
+
+
+def open_stream(
+    path: str | os.PathLike[str],
+    model: Model | str | os.PathLike[str] | None = None,
+    *,
+    axes: list[str] | None = None,
+    time_column: str | None = None,
+    rate_hz: float | None = None,
+    time_unit: str | None = None,
+    unit: str | None = None,
+    allow_gaps: bool = False,
+    workdir: str | os.PathLike[str] | None = None,
+    block: int = BLOCK,
+) -> Stream:
+    """A CSV or gzip CSV recording parsed into a store in ``workdir`` (default: the temporary folder) and
+    checked as :func:`accelnav.data.inputs.read_input` checks it; the keywords are its own. Refusals
+    are UserError in one line (the same as read_input's); NotStreamed when only the whole reader can
+    take it. ``allow_gaps`` is accepted for the same signature; a gap refuses or goes to the whole
+    reader, as it would there. Close the result (or use it in a ``with``) to remove the store."""
+    from accelnav.data.inputs import _unit, narrowed
+    from accelnav.link.logfile import is_log
+
+    override = model if isinstance(model, Model) or model is None else load_model(model)
+    path = check_input(path)
+    src = str(path)
+    if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
+    if time_unit is not None and time_unit not in rc.TIME_UNITS:
+        raise UserError(f"--time-unit: got {time_unit!r}; accepted: {', '.join(rc.TIME_UNITS)}")
+    with open(path, "rb") as fh:
+        magic = fh.read(2)
+    if magic == b"PK" or is_log(path):
+        raise NotStreamed(f"{src}: not a CSV (a run file, NPZ or recorder log is read whole)")
+    folder = Path(tempfile.mkdtemp(prefix=".accelnav-input-", dir=workdir))
+    st = None
+    try:
+        st = _parse(path, folder, magic == b"\x1f\x8b", override, _unit(override), axes, unit, rate_hz, time_column)
+        st.rate_hz, st.time_unit = rate_hz, time_unit
+        _check(st, override, time_unit, chosen=bool(axes), narrowed=narrowed, block=block)
+    except BaseException:  # Ctrl-C too: the store goes with the error
+        if st is not None:
+            st.close()
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    return st
+
+
+def _parse(path: Path, folder: Path, gz: bool, override, default, axes, unit, rate_hz, time_column) -> Stream:
+    """The CSV's numbers and lines into the store, by the whole reader's parser."""
+    src = str(path)
+    size = path.stat().st_size
+    n, head = 0, None
+    with open(folder / "store.bin", "wb") as fs, open(folder / "lines.bin", "wb") as fl:
+        for head, table, nums in rc.csv_pieces(path, axes, unit, rate_hz, time_column, gz, default):  # noqa: B007
+            if n == 0 and not gz:  # disk: the whole store from the first piece's rows per character
+                est = int(len(nums) * max(1.0, size / rc.CHUNK_CHARS) * 1.05)
+                need, free = est * 8 * (table.shape[1] + 1), shutil.disk_usage(folder).free
+                if need > free:
+                    raise UserError(
+                        f"{src}: about {est} rows need {need / 1e9:.3g} GB of disk in {folder.parent} to be read "
+                        f"in bounded memory; {free / 1e9:.3g} GB are free"
+                    )
+            try:
+                fs.write(np.ascontiguousarray(table, dtype=np.float64).data)
+                fl.write(np.ascontiguousarray(nums, dtype=np.int64).data)
+            except OSError as exc:
+                if exc.errno == errno.ENOSPC:
+                    raise UserError(f"{src}: the disk in {folder.parent} filled up at row {n} of its store") from None
+                raise
+            n += len(nums)
+    if n < 2:
+        raise UserError(f"{src}: {n} data rows; a recording needs many more")
+    st = Stream(src, n, override, np.array([]), head, folder, rate_hz, None)
+    st._fds = {k: os.open(folder / f"{k}.bin", os.O_RDONLY) for k in ("store", "lines")}
+    return st
+
+
+def _where(st: Stream, k: int) -> str:
+    return f"sample {k} (line {int(st.rows(k, k + 1)[1][0])})"
+
+
+def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narrowed, block: int) -> None:
+    """read_recording's time checks and read_input's model checks (inputs._on_model), block by block."""
+    src, h = st.source, st.head
+    tu = rc.csv_time_unit(h)
+    if time_unit is not None:  # recording._with_time_unit
+        if h.tcol is None:
+            raise UserError(f"--time-unit: {src} has no time column (its time comes from the rate)")
+        if tu not in (None, time_unit):
+            raise UserError(f"--time-unit {time_unit}: the time column {h.tcol!r} says its unit is {tu}")
+        tu = time_unit if tu is None else tu
+    clock = _time_pass(st, block)
+    step = _clock_verdict(st, clock, tu)
+    rate = (st.n - 1) / (clock.tl - clock.t0)
+    # read_input._on_model: the model, its rate, its axes
+    model = override if override is not None else load_model(None)
+    rc.check_step(src, step, tu, model.rate_hz, str(model.source))
+    names = [a.name for a in model.axes]
+    if chosen and len(h.names) < len(names) and set(h.names) <= set(names):
+        model = narrowed(model, list(h.names))
+        note(f"{src}: model {model.name} narrowed to axes {', '.join(h.names)}")
+        names = list(h.names)
+    if len(h.names) != len(names):
+        raise UserError(
+            f"{src}: {len(h.names)} axes ({', '.join(h.chosen)}) for the model's {len(names)} "
+            f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
+        )
+    st.model, st.axis_names, st.t0, st.Ts = model, np.array(names), clock.t0, 1.0 / rate
+    _grid_pass(st, rate, block)
+    if list(h.chosen) != names:
+        note(f"{src}: columns {', '.join(h.chosen)} -> model axes {', '.join(names)}")
+
+
+@dataclass
+class _Clock:
+    """What the time pass learns: first and last stamp, the extreme steps, the distinct steps and their counts."""
+
+    t0: float = 0.0
+    tl: float = 0.0
+    dmin: float = np.inf
+    dmax: float = -np.inf
+    vals: np.ndarray = field(default_factory=lambda: np.empty(0))
+    counts: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
+
+    def add(self, dt: np.ndarray) -> int:
+        """Count the steps ``dt``; returns how many distinct steps there are so far."""
+        self.dmin, self.dmax = min(self.dmin, float(dt.min())), max(self.dmax, float(dt.max()))
+        u, c = np.unique(dt, return_counts=True)
+        self.vals, inv = np.unique(np.concatenate((self.vals, u)), return_inverse=True)
+        both = np.concatenate((self.counts, c))
+        self.counts = np.bincount(inv, weights=both, minlength=len(self.vals)).astype(np.int64)
+        return len(self.vals)
+
+    def median(self, m: int) -> float:
+        """The median of the m steps, as np.median takes it (the mean of the middle two for even m)."""
+        cum = np.cumsum(self.counts)
+        v1, v2 = (float(self.vals[np.searchsorted(cum, r, side="right")]) for r in ((m - 1) // 2, m // 2))
+        return float(np.mean([v1, v2])) if m % 2 == 0 else v1
+
+
+def _time_pass(st: Stream, block: int) -> _Clock:
+    """recording._check_time's first checks over the store: time finite and increasing; the steps counted."""
+    src, n = st.source, st.n
+    clock, bad, back, n_back, prev = _Clock(), None, None, 0, None
+    for s in range(0, n, block):
+        t = st.raw_time(st.rows(s, min(s + block, n), lines=False)[0], s)
+        if s == 0:
+            clock.t0 = float(t[0])
+        clock.tl = float(t[-1])
+        if bad is None and not np.isfinite(t).all():
+            bad = s + int(np.argmax(~np.isfinite(t)))
+        dt = np.diff(t) if prev is None else np.diff(np.concatenate(([prev], t)))
+        first = s - (prev is not None)  # the sample index of dt[0]'s first sample
+        prev = t[-1]
+        b = dt <= 0
+        if b.any():
+            back = first + int(np.argmax(b)) if back is None else back  # dt index k: samples k, k + 1
+            n_back += int(b.sum())
+        if len(dt) and bad is None and clock.add(dt) > MAX_STEPS:
+            raise NotStreamed(f"{src}: more than {MAX_STEPS} distinct time steps: its clock is read whole")
+    if bad is not None:
+        raise UserError(f"{src}: time is not a finite number at {_where(st, bad)}")
+    if back is not None:
+        ta, tb = (float(x) for x in st.raw_time(st.rows(back, back + 2)[0], back))
+        raise UserError(
+            f"{src}: time does not increase at {_where(st, back + 1)} (t = {ta:.6g} s, then {tb:.6g} s); "
+            f"{n_back} such steps"
+        )
+    return clock
+
+
+def _clock_verdict(st: Stream, clock: _Clock, tu: str | None) -> float:
+    """The median step; a clock too slow for seconds refused, one the whole reader must place not streamed."""
+    src, col = st.source, st.head.tcol
+    step = clock.median(st.n - 1)
+    if col is None:
+        return step
+    if tu is None and 1.0 / step < rc.MIN_CLOCK_HZ:
+        raise UserError(
+            f"{src}: the time column {col!r} steps by {step:.6g} (median): read as seconds that is "
+            f"{1.0 / step:.6g} Hz, too slow for an accelerometer; it looks like milliseconds: give --time-unit "
+            "ms (or name the column t_ms), or convert it to seconds"
+        )
+    regular = clock.dmax <= rc.GAP_FACTOR * step and clock.dmin >= step / rc.GAP_FACTOR
+    if not regular or st.rate_hz is not None:
+        raise NotStreamed(f"{src}: its clock is placed on a grid by the whole reader (irregular, or --rate given)")
+    return step
+
+
+def _grid_pass(st: Stream, rate: float, block: int) -> None:
+    """Counts converted, NaN, each sample on the grid (recording.on_grid), as the reader will give them."""
+    src, n, t0 = st.source, st.n, st.t0
+    said, k_prev = False, -1
+    for s in range(0, n, block):
+        e = min(s + block, n)
+        try:
+            rec = st.block(s, e, lines=False)  # the lines are read only for a message
+        except UserError:
+            st.block(s, e)  # the same refusal, naming the line
+            raise
+        if not said and rec.notes:
+            note(rec.notes[-1])  # the counts' conversion, once
+            said = True
+        located = replace(rec, lines=None)
+        nan = ~np.isfinite(rec.accel)
+        k = np.rint((rec.t - t0) / st.Ts).astype(np.int64)
+        off = np.abs(rec.t - t0 - k * st.Ts) > 0.25 * st.Ts
+        dk = np.diff(np.concatenate(([k_prev], k))) if s else np.diff(k)
+        if nan.any() or off.any() or np.any(dk < 1):
+            located = replace(rec, lines=st.rows(s, e)[1])
+        if nan.any():
+            k = int(np.argmax(nan.any(axis=1)))
+            raise UserError(f"{src}: {located.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
+        if off.any():
+            i = int(np.argmax(off))
+            raise UserError(
+                f"{src}: {located.where(i)} (t = {rec.t[i]:.6g} s) is off the {rate:.6g} Hz sample grid by more "
+                "than a quarter period: the timing jitters too much for a fixed-rate filter"
+            )
+        if np.any(dk < 1):
+            i = int(np.argmax(dk < 1)) + (0 if s else 1)
+            raise UserError(f"{src}: {located.where(i)} falls on the same sample period as the one before it")
+        if np.any(dk > 1):
+            raise NotStreamed(f"{src}: samples missing from its clock are filled in by the whole reader")
+        k_prev = int(k[-1])

@@ -1,0 +1,358 @@
+"""The rest detector as it was before issue 24 made it array code (main at 03f236d, accelnav.estimate.zupt):
+the oracle the new one must agree with, decision for decision and field for field. Test support only;
+not part of the package. Copied verbatim (docstrings shortened); do not "fix" it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from accelnav.estimate.kf import bias_model
+from accelnav.estimate.zupt import RestDecision, ZuptParams, resolved, window_samples
+from accelnav.model.design import axis_design
+from accelnav.model.load import Model
+
+
+def _moving(x: np.ndarray, w: int) -> np.ndarray:
+    """Centred moving sum over w (odd) samples; NaN where the window leaves the run."""
+    n = len(x)
+    out = np.full(n, np.nan)
+    if n < w:
+        return out
+    c = np.concatenate(([0.0], np.cumsum(x)))
+    h = w // 2
+    out[h : n - h] = c[w:] - c[: n - w + 1]
+    return out
+
+
+def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, ok, R): acceleration minus the bias mean (0 where unusable), the usable mask, R per axis."""
+    accel = np.asarray(accel, dtype=np.float64)
+    clipped = np.asarray(clipped, dtype=bool)
+    n, n_axes = accel.shape
+    x = np.empty((n, n_axes))
+    ok = ~clipped & np.isfinite(accel)
+    R = np.empty(n_axes)
+    for j in range(n_axes):
+        d = axis_design(model, j)
+        x[:, j] = np.where(ok[:, j], accel[:, j] - bias_model(d, n), 0.0)
+        R[j] = d.R
+    return x, ok, R
+
+
+def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams) -> np.ndarray:
+    """(N,) bool: samples the detector calls rest, before the per-rest decision (see the module docstring).
+
+    ``accel``, ``clipped`` are (N, n_axes) as in a run file; columns are the model's axes in order.
+    """
+    p = resolved(model, params)
+    x, ok, R = _prepared(accel, clipped, model)
+    n, n_axes = x.shape
+    w = window_samples(model, p)
+    bad = _moving((~ok.all(axis=1)).astype(np.float64), w)
+    quiet = np.zeros(n)
+    wvar = np.zeros(n)  # window variance, summed over the axes
+    means = np.empty((n, n_axes))
+    for j in range(n_axes):
+        s1 = _moving(x[:, j], w)
+        s2 = _moving(x[:, j] * x[:, j], w)
+        with np.errstate(invalid="ignore"):
+            means[:, j] = s1 / w
+            v = (s2 - w * means[:, j] ** 2) / (w - 1)
+            quiet += v / (R[j] + p.tremor**2)
+            wvar += v
+    with np.errstate(invalid="ignore"):
+        centre = (bad == 0) & (quiet / n_axes <= p.var_k)
+    # split each run into pieces of steady level: a move that starts gently is quiet, but its mean walks away
+    total = float(np.sum(R + p.tremor**2))
+    bound2 = p.trim_k**2 * total / w
+    runs = intervals(centre)
+    # a body swaying more than the tremor allowance (a real stance) has a level that wanders as much: the bound
+    # grows with the run's own typical window variance (not with a ramp, whose windows stay quiet)
+    pieces = sorted(
+        (*q, k)
+        for k, (a, b) in enumerate(runs)
+        for q in _steady_pieces(
+            means,
+            a,
+            b,
+            bound2 * max(1.0, float(np.median(wvar[a:b])) / total),
+            x,
+            total,
+            w,
+            p.level_rate * model.Ts,
+            int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
+        )
+    )
+    # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
+    # sample while a sample stays within trim_k sd of the piece's level: a heel strike or the start of a ramp
+    # ends it. Join pieces at one level across short breaks (a knock fails every window that holds it);
+    # pieces at two levels stay apart by a sample at least, so each is judged on its own
+    h = int(round(p.widen * (w // 2)))
+    bridge = int(round(p.bridge_s * model.rate_hz))
+    usable = ok.all(axis=1)
+    merged: list[list] = []
+    for a, b, ref, own, run in pieces:
+        lim2 = p.trim_k**2 * own
+        lo, hi = max(0, a - h), min(n, b + h)
+        while a > lo and usable[a - 1] and np.sum((x[a - 1] - ref) ** 2) <= lim2:
+            a -= 1
+        while b < hi and usable[b] and np.sum((x[b] - ref) ** 2) <= lim2:
+            b += 1
+        if (
+            merged
+            and run != merged[-1][3]  # a break that failed the quiet test, not a change of level
+            and a - merged[-1][1] <= bridge
+            and np.sum((ref - merged[-1][2]) ** 2) <= bound2
+            and usable[merged[-1][1] : a].all()  # a knock, not clipped or missing samples
+        ):
+            merged[-1][1] = b
+            merged[-1][3] = run
+        else:
+            if merged:
+                a = max(a, merged[-1][1] + 1)
+            merged.append([a, b, ref, run])
+    rest = np.zeros(n, dtype=bool)
+    shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
+    for a, b, _, _ in merged:
+        if b - a >= shortest:
+            rest[a:b] = True
+    return rest
+
+
+def _steady_pieces(
+    means: np.ndarray,
+    a: int,
+    b: int,
+    bound2: float,
+    x: np.ndarray,
+    total: float,
+    w: int,
+    tilt_rate: float,
+    lean: int,
+) -> list[tuple[int, int, np.ndarray]]:
+    """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
+    piece's median: the longest such stretch about the run's median is kept, the parts either side are split
+    again. The ends of a piece are trimmed again with the bound scaled to the piece's own variance (of ``x``,
+    summed over axes, against ``total``, the sum of R + tremor^2) when that is smaller; a piece whose first
+    and last thirds differ by more than trim_k sd of a window mean (from the piece's own variance) plus
+    ``tilt_rate`` (m/s^2 per sample) times their distance beyond ``lean`` samples is a stretch of a ramp
+    and dropped. What the trim cuts off a piece is split again; a piece from it is kept when it holds three
+    windows at least and its level does not walk away from the piece it was cut from (see below).
+    Returns (first, last + 1, median level, own variance) per piece."""
+    out = []
+    todo: list[tuple[int, int, np.ndarray | None, int]] = [(a, b, None, 0)]
+    while todo:
+        a, b, parent, side = todo.pop()
+        if b <= a:
+            continue
+        ref = np.median(means[a:b], axis=0)
+        near = np.sum((means[a:b] - ref) ** 2, axis=1) <= bound2
+        runs = intervals(near)
+        if not runs:
+            continue
+        p, q = max(runs, key=lambda r: r[1] - r[0])
+        todo += [(a, a + p, None, 0), (a + q, b, None, 0)]
+        p, q = a + p, a + q
+        # the ends, once more, against the piece's own noise (quieter than the tremor allows, on most rests)
+        ref = np.median(means[p:q], axis=0)
+        own = float(np.sum(x[p:q].var(axis=0)))
+        own2 = min(bound2, bound2 * own / total)
+        near = np.flatnonzero(np.sum((means[p:q] - ref) ** 2, axis=1) <= own2)
+        if not len(near):
+            continue
+        # what the trim cuts off is split again: a standing whose level stepped (by 0.1 m/s^2 on a real
+        # lower-back recording, no rotation on the gyroscope) keeps its second level as a piece of its own
+        todo += [(p, p + int(near[0]), ref, -1), (p + int(near[-1]) + 1, q, ref, 1)]
+        p, q = p + int(near[0]), p + int(near[-1]) + 1
+        # the level still moving across the piece: part of a ramp, not a rest (trim_k sd of a window mean, from
+        # the piece's own variance: a sway beyond the tremor allowance is noise here, not a ramp), unless it
+        # moves no faster than a tilt may over more than ``lean`` samples (level_rate: a person standing leans
+        # over seconds; over a second or less a drift cannot be told from a vehicle's or a cart's ramp)
+        third = (q - p) // 3
+        allowed = math.sqrt(bound2 * own / total) + tilt_rate * max(0, q - p - third - lean)
+        if not third:  # too short to tell: kept as a piece of the run, not as a trimmed end
+            if parent is None:
+                out.append((p, q, ref, own))
+            continue
+        first, last = means[p : p + third].mean(axis=0), means[q - third : q].mean(axis=0)
+        if parent is not None:
+            # cut off a quieter piece beside it: a ramp leaving (or reaching) that rest walks away from its level,
+            # a body that settled at a new level (a lean) or sways about it does not. The thirds must hold a
+            # window each, or a ramp's start cannot be told from a step (a cart's first 0.2 s of a push)
+            near_third, far_third = (first, last) if side > 0 else (last, first)
+            away = math.sqrt(np.sum((far_third - parent) ** 2)) - math.sqrt(np.sum((near_third - parent) ** 2))
+            if third < w or away > allowed:
+                continue
+        elif np.sum((first - last) ** 2) > allowed**2:
+            continue
+        out.append((p, q, ref, own))
+    return out
+
+
+@dataclass
+class _Anchor:
+    start: int
+    end: int
+    b: np.ndarray
+    sd: np.ndarray  # sd of b from the sensor's noise: sqrt(R / samples)
+
+
+def _closure(x, ok, R, Ts, p: ZuptParams, anc: _Anchor, a: int, here: _Anchor):
+    """(chi2, |v|, peak |v|, peak chi2) of the velocity integrated from the anchor to sample a, the bias linear
+    from the anchor's level to the candidate's."""
+    b1 = here.b
+    m = a - anc.end
+    if m <= 0:
+        return 0.0, 0.0, 0.0, 0.0
+    frac = (np.arange(m) + 0.5)[:, None] / m
+    seg = x[anc.end : a] - (anc.b + frac * (b1 - anc.b))
+    seg[~ok[anc.end : a]] = 0.0
+    v_path = np.cumsum(seg, axis=0) * Ts
+    v = v_path[-1]
+    D = m * Ts
+    s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
+    chi2 = float(np.mean(v * v / s2))
+    speeds = np.sqrt((v_path**2).sum(axis=1))
+    peak = float(speeds.max())
+    peak_chi2 = float(np.max(np.mean(v_path**2 / s2, axis=1)))
+    return chi2, float(np.sqrt(v @ v)), peak, peak_chi2
+
+
+def gate_rests(
+    accel: np.ndarray, clipped: np.ndarray, rest: np.ndarray, model: Model, params: ZuptParams
+) -> list[RestDecision]:
+    """Decide once per candidate rest, for all axes together (see the module docstring)."""
+    p = resolved(model, params)
+    x, ok, R = _prepared(accel, clipped, model)
+    n_axes = x.shape[1]
+    Ts = model.Ts
+    w = window_samples(model, p)
+    nan = float("nan")
+    still_len = 3 * w  # a rest shorter than this next to a longer one, nothing moving between: the longer wins
+    anchors: list[tuple[_Anchor, int]] = []  # accepted rests (as anchors) and their index in ``out``
+    prev: tuple[_Anchor, str] | None = None  # the previous candidate, as a possible anchor, and its verdict
+    out: list[RestDecision] = []
+    for a, stop in intervals(rest):
+        use = ok[a:stop].all(axis=1)
+        xs = x[a:stop][use] if use.any() else np.zeros((1, n_axes))
+        b1, kept = _robust_mean(xs, R)
+        var = xs.var(axis=0) if len(xs) > 1 else R.copy()
+        still = float(np.mean(var / R))
+        # the level's uncertainty is the sensor's noise averaged over the rest, not the rest's own spread: a body
+        # at rest sways, but its velocity stays near zero, so the sway averages out of its mean far faster than
+        # white noise would; taken as white, it let a noisy 0.12 s piece in a walk "close" at 0.8 m/s
+        here = _Anchor(a, stop, b1, np.sqrt(R / kept))
+        while True:
+            anchor = anchors[-1][0] if anchors else None
+            chi2 = speed = peak = lev = bound = nan
+            used = -1
+            moved = True
+            if p.gate == 0:
+                accepted, reason = True, "gate off"
+            elif anchor is None and a <= w:
+                accepted = still <= p.still_k and (stop - a) * Ts >= p.start_s
+                reason = "still at start" if accepted else "not still at start"
+            else:
+                accepted, reason = False, "no rest before"
+                if anchor is not None:
+                    used = anchor.end
+                    chi2, speed, peak, peak_chi2 = _closure(x, ok, R, Ts, p, anchor, a, here)
+                    moved = peak_chi2 > p.gate
+                    near = not moved and (a - anchor.end) * Ts <= p.recover_s
+                    lev, bound = _level(p, anchor, b1, a, Ts, p.level if near else None)
+                    if lev > bound:
+                        reason = "level moved"
+                    elif near:  # the same rest, broken by a knock or a roll of the foot
+                        accepted, reason = True, "continues the rest"
+                    else:
+                        accepted = chi2 <= p.gate or speed <= p.rel * peak
+                        reason = "closes" if accepted else "velocity does not close"
+            if (
+                anchor is not None
+                and not moved
+                and (a - anchor.end) * Ts <= p.recover_s
+                and stop - a > anchor.end - anchor.start
+                and len(anchors) > 1
+                and (reason == "level moved" or anchor.end - anchor.start < still_len)
+            ):
+                # two rests with no motion between at different levels: the longer one is the stop, the short
+                # one before it the tail of a ramp; it gives up its place, and this one is judged without it
+                k = anchors.pop()[1]
+                out[k] = replace(out[k], accepted=False, reason="superseded by a longer rest")
+                continue
+            break
+        if not accepted and prev is not None and prev[1] in ("velocity does not close", "no rest before",
+                                                             "not still at start"):  # fmt: skip
+            cand = prev[0]
+            lev2, bound2 = _level(p, cand, b1, a, Ts)
+            if (a - cand.end) * Ts <= p.recover_s and lev2 <= bound2:
+                c2, sp2, pk2, pk_chi2 = _closure(x, ok, R, Ts, p, cand, a, here)
+                if (c2 <= p.gate or sp2 <= p.rel * pk2) and pk_chi2 > p.gate:
+                    accepted, reason = True, "recovered"
+                    chi2, speed, peak, lev, bound, used = c2, sp2, pk2, lev2, bound2, cand.end
+                    # the pair closes on itself: the previous candidate was a rest too
+                    out[-1] = replace(out[-1], accepted=True, reason="confirmed by the next")
+                    anchors.append((cand, len(out) - 1))
+        out.append(RestDecision(a, stop, bool(accepted), reason, chi2, speed, peak, lev, bound, still, used))
+        if accepted and reason == "continues the rest":  # the rest goes on at the level it started with
+            anchors[-1][0].end = stop
+        elif accepted:
+            anchors.append((here, len(out) - 1))
+        prev = (here, reason)
+    return out
+
+
+def _level(
+    p: ZuptParams, anc: _Anchor, b1: np.ndarray, a: int, Ts: float, still: float | None = None
+) -> tuple[float, float]:
+    """(|b1 - b0|, its bound) for a candidate starting at sample a; ``still``: the bound when nothing moved
+    between them (no allowance for the time between: a level does not drift while the body stands)."""
+    D = max(0, a - anc.end) * Ts
+    bound = min(p.level + p.level_rate * D, p.level_max) if still is None else still
+    return float(np.sqrt(np.sum((b1 - anc.b) ** 2))), bound
+
+
+def _robust_mean(x: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per column, the mean of the samples within 5 sqrt(R) of the median (a knock left out), and their count.
+
+    Not the median itself: a coarse ADC (the default's step is 3.6 sqrt(R)) puts the median on a code.
+    """
+    med = np.median(x, axis=0)
+    near = np.abs(x - med) <= 5.0 * np.sqrt(R)
+    kept = np.maximum(near.sum(axis=0), 1)
+    return np.where(near, x, 0.0).sum(axis=0) / kept, kept
+
+
+def rest_mask(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams) -> np.ndarray:
+    """(N,) bool: samples of the accepted rests (detector, then the per-rest gate)."""
+    rest = candidates(accel, clipped, model, params)
+    return accepted_mask(gate_rests(accel, clipped, rest, model, params), len(rest))
+
+
+def accepted_mask(decisions: list[RestDecision], n: int) -> np.ndarray:
+    """(N,) bool: the samples of the accepted rests; a rest's continuation is joined to it across the one
+    sample that keeps two pieces at two levels apart (:func:`candidates`), not across a break that failed
+    the quiet test or a clipped sample."""
+    mask = np.zeros(n, dtype=bool)
+    bridge = 1
+    last = None
+    for d in decisions:
+        if not d.accepted:
+            continue
+        start = d.start
+        if d.reason == "continues the rest" and last is not None and d.start - last <= bridge:
+            start = last
+        mask[start : d.stop] = True
+        last = d.stop
+    return mask
+
+
+def intervals(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Runs of True in ``mask`` as (first, last + 1) sample pairs."""
+    m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
