@@ -125,27 +125,24 @@ def tune(
     """Maximum-likelihood noise figures of this run (``accelnav tune``); returns (model with the chosen
     figures, the result with estimates, intervals and the likelihood-ratio verdict)."""
     from accelnav.estimate import zupt
-    from accelnav.estimate.tune import MAX_EVALUATIONS, aid_measurements, with_figures
-    from accelnav.estimate.tune import tune as _tune
+    from accelnav.estimate.tune import MAX_EVALUATIONS, tune_run
 
     arrays = dict(run)
     _check(arrays, model, "tune")
-    accel = np.asarray(arrays["accel"], dtype=np.float64)
-    n, m = accel.shape
     params = zupt.resolved(model, zupt.ZuptParams()) if rest is not None else None
-    extras, _ = aid_measurements(n, m, model, fixes=_fixes(fixes, arrays), rest=rest, params=params)
     try:
-        result = _tune(
+        return tune_run(
             model,
-            accel,
-            ~np.asarray(arrays["clipped"], dtype=bool),
-            extras,
-            figures=tuple(figures),
+            arrays,
+            fixes=_fixes(fixes, arrays),
+            rest=rest,
+            params=params,
+            figures=figures,
             max_evaluations=MAX_EVALUATIONS if max_evaluations is None else max_evaluations,
+            intervals=True,
         )
     except ValueError as exc:
         raise UserError(f"tune: {exc}") from None
-    return with_figures(model, {f: float(f"{v:.6g}") for f, v in result.chosen.items()}), result
 
 
 def generate(model: Model) -> dict[str, str]:

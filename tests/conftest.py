@@ -35,6 +35,27 @@ def duty_model():
     return load_model(MODELS / "adxl202_duty.toml")
 
 
+@pytest.fixture(scope="module", params=["default", "duty"])
+def model(request, default_model, duty_model):
+    """Each example sensor in turn, the analog default and the duty-cycle part (a module may override it)."""
+    return default_model if request.param == "default" else duty_model
+
+
+@pytest.fixture(scope="module")
+def avr_tools():
+    """simavr and avr-gcc, or a skip saying what is missing (a failure under ACCELNAV_REQUIRE_AVR=1)."""
+    import os
+
+    from accelnav.hil_sim.targets import simavr
+
+    try:
+        return simavr.require_avr()
+    except simavr.AvrError as e:
+        if os.environ.get("ACCELNAV_REQUIRE_AVR") == "1":
+            pytest.fail(f"ACCELNAV_REQUIRE_AVR=1 but {e}")
+        pytest.skip(str(e))
+
+
 @pytest.fixture(scope="module")
 def man():
     """The default model's frame manifest (a module may override it, as test_frames does per model)."""
@@ -62,6 +83,19 @@ def edited_model(replacements: list[tuple[str, str]], base: Path = DEFAULT_MODEL
         assert text.count(old) == 1, f"test setup: {old!r} must occur once in {base.name}"
         text = text.replace(old, new)
     return loads_model(text, source=source)
+
+
+def state_sd(P):
+    """The standard deviations sqrt(P_ii) of a covariance (or a stack of them)."""
+    return np.sqrt(np.einsum("...ii->...i", P))
+
+
+def assert_states(x, P, x_ref, P_ref, rtol, what=""):
+    """States and covariances equal the reference's within rtol, scaled by the reference's own sigma
+    (sqrt(P_ii P_jj) for a covariance entry)."""
+    sd = state_sd(P_ref)
+    assert_rel_close(x, x_ref, sd, rtol, f"{what} x")
+    assert_rel_close(P, P_ref, sd[..., :, None] * sd[..., None, :], rtol, f"{what} P")
 
 
 def assert_rel_close(actual, ref, scale, rtol, what=""):

@@ -651,10 +651,10 @@ def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_s
 
 
 def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) -> Model:
-    """smooth --tune: its flags checked, the search run (estimate.tune.tune_for_smoothing), its two lines printed."""
+    """smooth --tune: its flags checked, the search run (estimate.tune.tune_run), its two lines printed."""
     import time
 
-    from accelnav.estimate.tune import FIGURES, tune_for_smoothing
+    from accelnav.estimate.tune import FIGURES, tune_run
 
     if args.tune_evaluations < 10:
         raise UserError(f"--tune-evaluations: got {args.tune_evaluations}; accepted: 10 or more")
@@ -670,7 +670,7 @@ def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) ->
         t0[0] = time.monotonic()
 
     try:
-        tuned, r = tune_for_smoothing(
+        tuned, r = tune_run(
             model, arrays, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params,
             max_evaluations=args.tune_evaluations, max_seconds=args.tune_seconds, announce=announce,
         )  # fmt: skip

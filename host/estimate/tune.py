@@ -385,7 +385,7 @@ def _intervals(nll, theta, f0, figures, est, lo, hi, count, max_evaluations):
     return se, ci, ends
 
 
-def tune_for_smoothing(
+def tune_run(
     model: Model,
     run,
     *,
@@ -393,12 +393,15 @@ def tune_for_smoothing(
     rest: np.ndarray | None = None,
     rest_sigma: np.ndarray | None = None,
     params=None,
+    figures: Sequence[str] = FIGURES,
     max_evaluations: int = MAX_EVALUATIONS,
     max_seconds: float | None = None,
+    intervals: bool = False,
     announce=None,
 ) -> tuple[Model, TuneResult]:
-    """``accelnav smooth --tune``: the model with this run's maximum-likelihood noise figures, found with the
-    smoother's own aids (fixes, rests) in a stated budget, the estimate only (no intervals); and the result.
+    """The model with this run's maximum-likelihood noise figures, found with the run's aids (fixes, rests)
+    in a stated budget; and the result. ``accelnav.tune`` asks for the intervals too, ``accelnav smooth
+    --tune`` only for the estimate.
 
     The figures are rounded to 6 digits, as a model file holds them. ``announce(samples, axes, aids)`` is
     called once before the search, which may take the whole budget."""
@@ -416,9 +419,10 @@ def tune_for_smoothing(
         accel,
         ~np.asarray(run["clipped"], dtype=bool),
         extras,
+        figures=tuple(figures),
         max_evaluations=max_evaluations,
         max_seconds=max_seconds,
-        intervals=False,
+        intervals=intervals,
     )
     return with_figures(model, {f: float(f"{v:.6g}") for f, v in r.chosen.items()}), r
 

@@ -10,8 +10,6 @@ Skipped, with the reason, without avr-gcc / simavr; under ACCELNAV_REQUIRE_AVR=1
 
 from __future__ import annotations
 
-import os
-
 import pytest
 from conftest import MODELS
 
@@ -23,14 +21,7 @@ from accelnav.model.load import load_model
 SAMPLES = 120
 
 
-@pytest.fixture(scope="module", autouse=True)
-def avr_tools():
-    try:
-        return simavr.require_avr()
-    except simavr.AvrError as e:
-        if os.environ.get("ACCELNAV_REQUIRE_AVR") == "1":
-            pytest.fail(f"ACCELNAV_REQUIRE_AVR=1 but {e}")
-        pytest.skip(str(e))
+pytestmark = pytest.mark.usefixtures("avr_tools")  # simavr and avr-gcc, or a skip
 
 
 def _files(name: str, form: str) -> tuple[dict[str, str], object]:

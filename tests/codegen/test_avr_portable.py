@@ -14,8 +14,6 @@ Skipped, with the reason, without avr-gcc / simavr; under ACCELNAV_REQUIRE_AVR=1
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import pytest
 from conftest import MODELS
@@ -29,14 +27,7 @@ SAMPLES = 200  # per phase: from init, then from the late checkpoint
 WARM = 100_000  # samples at rest before the second phase's checkpoint
 
 
-@pytest.fixture(scope="module", autouse=True)
-def avr_tools():
-    try:
-        return simavr.require_avr()
-    except simavr.AvrError as e:
-        if os.environ.get("ACCELNAV_REQUIRE_AVR") == "1":
-            pytest.fail(f"ACCELNAV_REQUIRE_AVR=1 but {e}")
-        pytest.skip(str(e))
+pytestmark = pytest.mark.usefixtures("avr_tools")  # simavr and avr-gcc, or a skip
 
 
 def _case(name: str, form: str = "covariance"):

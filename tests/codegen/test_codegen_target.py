@@ -18,6 +18,8 @@ from conftest import MODELS
 
 from accelnav.cli import main
 from accelnav.codegen import targets
+from accelnav.codegen.generated import generate
+from accelnav.model.load import load_model
 from accelnav.resources import firmware_dir
 
 DEFAULT = str(MODELS / "adxl250_default.toml")
@@ -50,26 +52,36 @@ def test_gain_schedule_on_atmega328p_is_refused_naming_the_covariance_form(tmp_p
     assert not (tmp_path / "gen").exists(), "a filter that does not fit is not written"
 
 
-def test_covariance_form_fits_atmega328p(tmp_path, capsys):
+def _fit(p: targets.Part, form: str) -> targets.Fit:
+    """What ``accelnav codegen DEFAULT --form FORM --target PART`` measures, through the library."""
+    model = load_model(DEFAULT)
+    return targets.fit(p, model, form, "fixed", generate(model, form=form), "accelnav")
+
+
+def test_covariance_form_fits_atmega328p():
+    p = _need("atmega328p", "ACCELNAV_REQUIRE_AVR")
+    fit = _fit(p, "covariance")
+    s = fit.sized["covariance"]
+    assert fit.fits("covariance") and 0 < s.flash <= p.flash and 0 < s.ram <= p.ram
+    assert not fit.fits("gain_schedule") and fit.refusal() is None
+    assert "the covariance form fits the atmega328p" in fit.lines()[-1]
+
+
+def test_the_report_prints_the_librarys_fit(tmp_path, capsys):
     p = _need("uno", "ACCELNAV_REQUIRE_AVR")  # the alias names the same part
     rc, out, _ = _codegen(tmp_path, capsys, "--form", "covariance", "--report", "--target", "uno")
     assert rc == 0
-    row = re.search(r"^  covariance\s+(\d+)\s+(\d+)\s+fits\s", out, re.M)
-    assert row, out
-    assert 0 < int(row[1]) <= p.flash and 0 < int(row[2]) <= p.ram
-    assert re.search(r"^  gain_schedule\s+\d+\s+\d+\s+does not fit\s", out, re.M), out
-    assert "the covariance form fits the atmega328p" in out
+    assert "\n".join(_fit(p, "covariance").lines()) in out
 
 
 @pytest.mark.parametrize("name", ["sifive_e", "cortex-m3", "nrf51", "stm32f103"])
-def test_the_32_bit_parts_hold_both_forms(tmp_path, capsys, name):
+def test_the_32_bit_parts_hold_both_forms(name):
     p = _need(name, "ACCELNAV_REQUIRE_PIL")
-    rc, out, _ = _codegen(tmp_path, capsys, "--form", "gain_schedule", "--target", name)
-    assert rc == 0
-    rows = dict(re.findall(r"^  (covariance|gain_schedule)\s+(\d+)\s+\d+\s+fits\s", out, re.M))
-    assert set(rows) == {"covariance", "gain_schedule"}, out
+    fit = _fit(p, "gain_schedule")
+    assert set(fit.sized) == {"covariance", "gain_schedule"} and all(map(fit.fits, fit.sized))
+    rows = {form: s.flash for form, s in fit.sized.items()}
     # the gain schedule carries its tables: more flash than the covariance form, on every part
-    assert 0 < int(rows["covariance"]) < int(rows["gain_schedule"]) <= p.flash
+    assert 0 < rows["covariance"] < rows["gain_schedule"] <= p.flash
 
 
 def test_unknown_part_is_one_line_listing_the_known_ones(tmp_path, capsys):

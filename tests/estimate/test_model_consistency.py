@@ -10,40 +10,27 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.vehicle_fixes import STIFF, rms_vs_truth, vehicle_case
 
-from accelnav.cli import main
-from accelnav.data.runfile import load_run, save_run
 from accelnav.estimate.consistency import aid_innovations, fix_to_fix_integration, interpolate_fixes, nis_check
 from accelnav.estimate.kf import double_integrate, position_fix, run_filter
-from accelnav.estimate.pipeline import BASELINES, fix_baselines, smooth_run
+from accelnav.estimate.pipeline import BASELINES, fix_baselines, smooth_checks, smooth_run
+from accelnav.estimate.tune import tune_run
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.design import axis_design
-from accelnav.model.edit import dump_model, with_noise
-from accelnav.model.load import load_model
-
-STIFF = 30.0
-FIX_SIGMA = 0.5
+from accelnav.model.edit import with_noise
 
 
 @pytest.fixture(scope="module")
 def vehicle():
-    shipped = load_model(None)
-    right = with_noise(shipped, sigma_eps=shipped.noise.sigma_eps * STIFF)
-    run = simulate(right, "vehicle", 60.0, 4).to_arrays()
-    rng = np.random.default_rng(1)
-    step = int(round(shipped.rate_hz))  # 1 Hz
-    fixes = [
-        [
-            position_fix(k, run["r"][k, j] + FIX_SIGMA * rng.standard_normal(), FIX_SIGMA)
-            for k in range(0, len(run["t"]), step)
-        ]
-        for j in range(len(run["axis_names"]))
-    ]
-    return run, shipped, right, fixes
+    return vehicle_case()
 
 
-def _rms_vs_truth(run, est):
-    return float(np.sqrt(np.mean((np.asarray(est) - run["r"].T) ** 2)))
+@pytest.fixture(scope="module")
+def tuned(vehicle):
+    """smooth --tune's search through the library: the shipped model tuned on the run with its fixes."""
+    run, shipped, _, fixes = vehicle
+    return tune_run(shipped, run, fixes=fixes, max_evaluations=300)
 
 
 def test_nis_fires_on_a_model_30x_too_stiff_and_is_quiet_on_the_right_one(vehicle):
@@ -91,77 +78,28 @@ def test_fix_to_fix_integration_lands_on_every_fix_and_is_exact_without_noise(de
     np.testing.assert_allclose(interp[[f.k for f in fixes]], [f.z for f in fixes], atol=1e-12)
 
 
-def test_the_stiff_model_loses_to_the_baselines_and_smooth_says_so(vehicle, tmp_path, capsys):
+def test_the_stiff_model_loses_to_the_baselines(vehicle):
     run, shipped, right, fixes = vehicle
     out = smooth_run(run, shipped, fixes=fixes)
     base = fix_baselines(out, shipped)
     assert set(base) == set(BASELINES)
-    worst_base = max(_rms_vs_truth(run, b) for b in base.values())
-    assert _rms_vs_truth(run, out["smooth_x"][:, :, 0]) > worst_base  # the failure the check must report
-    path, fx_csv = _files(tmp_path, run, shipped, fixes)
-    assert main(["smooth", str(path), "--fixes", str(fx_csv), "--out", str(tmp_path / "o.npz")]) == 0
-    text = capsys.readouterr().out
-    assert "fixes disagree with the model: mean NIS" in text and "too stiff" in text
-    assert "the smoother misses the held-out fixes more than" in text
-    assert "against the truth the smoother" in text
-    for name in BASELINES:
-        assert name in text
+    worst_base = max(rms_vs_truth(run, b) for b in base.values())
+    assert rms_vs_truth(run, out["smooth_x"][:, :, 0]) > worst_base  # the failure the check must report
 
 
-def test_right_model_is_quiet_and_tune_beats_both_baselines(vehicle, tmp_path, capsys):
+def test_right_model_is_quiet_and_tune_beats_both_baselines(vehicle, tuned):
     run, shipped, right, fixes = vehicle
-    path, fx_csv = _files(tmp_path, run, shipped, fixes)
-    model_path = tmp_path / "right.toml"
-    model_path.write_text(dump_model(right))
-    assert (
-        main(
-            ["smooth", str(path), "--model", str(model_path), "--fixes", str(fx_csv), "--out", str(tmp_path / "r.npz")]
-        )
-        == 0
-    )
-    text = capsys.readouterr().out
-    assert "consistent with the model" in text and "try --tune" not in text
-
-    assert main(["smooth", str(path), "--fixes", str(fx_csv), "--tune", "--out", str(tmp_path / "t.npz")]) == 0
-    text = capsys.readouterr().out
-    assert "budget 300 evaluations, 60 s" in text and "; used" in text
-    assert "try --tune" not in text
-    tuned, model = load_run(tmp_path / "t.npz")
-    assert model.noise.sigma_eps > 10 * shipped.noise.sigma_eps  # the saved run carries the tuned model
-    smoother = _rms_vs_truth(run, tuned["smooth_x"][:, :, 0])
-    for name, r in fix_baselines(tuned, model).items():
-        assert smoother < _rms_vs_truth(run, r), name
-
-
-def test_tune_stops_at_its_time_budget(vehicle, tmp_path, capsys):
-    run, shipped, _, fixes = vehicle
-    path, fx_csv = _files(tmp_path, run, shipped, fixes)
-    argv = [
-        "smooth",
-        str(path),
-        "--fixes",
-        str(fx_csv),
-        "--tune",
-        "--tune-seconds",
-        "1e-6",
-        "--out",
-        str(tmp_path / "b.npz"),
-    ]
-    assert main(argv) == 0
-    assert "stopped at its budget" in capsys.readouterr().out
-    assert main(argv[:-2] + ["--tune-evaluations", "3", "--out", str(tmp_path / "c.npz")]) == 2
-    assert "--tune-evaluations: got 3" in capsys.readouterr().err
-
-
-def _files(tmp_path, run, model, fixes):
-    path = tmp_path / "veh.npz"
-    save_run(path, run, model)
-    fx_csv = tmp_path / "fixes.csv"
-    rows = ["time_s,axis,position_m,sigma_m"]
-    for j, fx in enumerate(fixes):
-        rows += [f"{float(run['t'][m.k])!r},{run['axis_names'][j]},{m.z!r},{float(np.sqrt(m.R))!r}" for m in fx]
-    fx_csv.write_text("\n".join(rows) + "\n")
-    return path, fx_csv
+    tuned, result = tuned
+    assert result.adopted  # smooth --tune says "used"
+    checks = smooth_checks(smooth_run(run, right, fixes=fixes), right, run, fixes)
+    assert "consistent with the model" in checks.nis[0].line()
+    assert not any("try --tune" in line for line in checks.lines())
+    assert tuned.noise.sigma_eps > 10 * shipped.noise.sigma_eps
+    out = smooth_run(run, tuned, fixes=fixes)
+    assert not any("try --tune" in line for line in smooth_checks(out, tuned, run, fixes).lines())
+    smoother = rms_vs_truth(run, out["smooth_x"][:, :, 0])
+    for name, r in fix_baselines(out, tuned).items():
+        assert smoother < rms_vs_truth(run, r), name
 
 
 @pytest.mark.parametrize("seed", [4, 5, 6])

@@ -1,4 +1,5 @@
-"""A REAL car with GNSS (KITTI, 470 s, 3.7 km), its longitudinal axis run through ``accelnav smooth``.
+"""A REAL car with GNSS (KITTI, 470 s, 3.7 km), its longitudinal axis smoothed by the library
+(``accelnav.read_input``, ``detect_rests``, ``smooth_run``: what ``accelnav smooth`` runs).
 
 Data: gtsam 4.3.0's wheel ships the KITTI drive its IMU examples use; fetched
 from PyPI by version and sha256, never copied here (KITTI is CC BY-NC-SA 3.0);

@@ -1,4 +1,5 @@
-"""Three REAL straight walks of a lower-back IMU, run through ``accelnav smooth`` as a user would.
+"""Three REAL straight walks of a lower-back IMU, smoothed through the library
+(``accelnav.read_input``, ``detect_rests``, ``smooth_run``: what ``accelnav smooth`` runs).
 
 Data: mobgap 1.2.0's example data (Mobilise-D), fetched from PyPI by version and
 sha256, never copied here; what it is, how it becomes two level-frame axes with

@@ -1,4 +1,5 @@
-"""The ZUPT detector on a REAL foot-mounted IMU walk, run as a user would: ``accelnav smooth walk.csv ...``.
+"""The ZUPT detector on a REAL foot-mounted IMU walk, through the library as a notebook user would call it
+(``accelnav.read_input`` of walk.csv, ``detect_rests``, ``smooth_run``: what ``accelnav smooth`` runs).
 
 Data: gaitmap 2.6.0's example data (MaD-Lab Erlangen, MIT licence), fetched from
 PyPI with pip, sha256-checked, never copied into this project; what it is, how
@@ -24,10 +25,9 @@ import numpy as np
 import pytest
 from support import realdata
 
-from accelnav.cli import main
-from accelnav.data.runfile import load_run
+import accelnav
 from accelnav.estimate.pipeline import dead_reckoning
-from accelnav.estimate.zupt import intervals
+from accelnav.estimate.zupt import ZuptParams, intervals
 from accelnav.resources import models_dir
 
 METHODS = ("defaults", "reference stances", "no ZUPT", "double integration")
@@ -40,11 +40,12 @@ def _model_text() -> str:
     return text.replace("rate_hz = 200.0", f"rate_hz = {realdata.RATE}")
 
 
-def _smooth(csv, model, out, *zupt_args) -> dict:
-    argv = ["smooth", csv, "--model", model, "--time-column", "t", "--axis", "ax", "--axis", "ay", *zupt_args]
-    assert main([str(a) for a in [*argv, "--out", out]]) == 0
-    arrays, _ = load_run(out)
-    return arrays
+def _smooth(run, model, rest=None, params=None) -> dict:
+    """What ``accelnav smooth --zupt auto|FILE`` computes, through the library: rests detected with ``params``
+    when ``rest`` is "auto", read from a mask file when a path."""
+    if isinstance(rest, str):
+        rest = accelnav.detect_rests(run, model, params)
+    return accelnav.smooth_run(run, model, rest=rest, zupt_params=params)
 
 
 def _lengths(r: np.ndarray, mid: np.ndarray) -> np.ndarray:
@@ -66,11 +67,11 @@ def walk(tmp_path_factory):
         np.savetxt(csv, table, delimiter=",", header="t,ax,ay", comments="", fmt="%.7g")
         mask = tmp / f"{foot.name}_stances.csv"
         np.savetxt(mask, foot.reference.astype(int), header="rest", comments="", fmt="%d")
-        auto = _smooth(csv, model, tmp / f"{foot.name}_auto.npz", "--zupt", "auto")
-        ref = _smooth(csv, model, tmp / f"{foot.name}_ref.npz", "--zupt", mask)
-        plain = _smooth(csv, model, tmp / f"{foot.name}_plain.npz")
-        old = _smooth(csv, model, tmp / f"{foot.name}_old.npz", "--zupt", "auto", "--zupt-tremor", "0")
-        _, m = load_run(tmp / f"{foot.name}_plain.npz")
+        run, m = accelnav.read_input(csv, model, axes=["ax", "ay"], time_column="t")
+        auto = _smooth(run, m, "auto")
+        ref = _smooth(run, m, mask)
+        plain = _smooth(run, m)
+        old = _smooth(run, m, "auto", ZuptParams(tremor=0.0))
         estimates = {
             "defaults": auto["smooth_x"][:, :, 0],
             "reference stances": ref["smooth_x"][:, :, 0],

@@ -1,5 +1,5 @@
 """What ``accelnav smooth`` used to compute in the CLI, called as the library: the consistency checks of a
-smoothed run (pipeline.smooth_checks) and the tuning of its noise figures (tune.tune_for_smoothing)."""
+smoothed run (pipeline.smooth_checks) and the tuning of its noise figures (tune.tune_run)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 from accelnav.estimate.kf import position_fix
 from accelnav.estimate.pipeline import smooth_checks, smooth_run
-from accelnav.estimate.tune import FIGURES, tune_for_smoothing
+from accelnav.estimate.tune import FIGURES, tune_run
 from accelnav.hil_sim.sim.sensor import simulate
 
 FIX_SIGMA = 0.05
@@ -43,12 +43,10 @@ def test_checks_without_aids_say_nothing(run, default_model):
     assert c.nis == () and c.holdout is None and c.lines() == []
 
 
-def test_tune_for_smoothing_returns_the_rounded_model_of_its_result(run, default_model):
+def test_tune_run_returns_the_rounded_model_of_its_result(run, default_model):
     arrays, fixes = run
     seen = []
-    model, r = tune_for_smoothing(
-        default_model, arrays, fixes=fixes, max_evaluations=30, announce=lambda *a: seen.append(a)
-    )
+    model, r = tune_run(default_model, arrays, fixes=fixes, max_evaluations=30, announce=lambda *a: seen.append(a))
     assert seen == [(len(arrays["t"]), len(default_model.axes), sum(map(len, fixes)))]
     assert set(r.figures) == set(FIGURES) and not r.converged  # 30 evaluations: stopped at the budget
     for f in FIGURES:  # as a model file holds them: 6 digits
@@ -57,6 +55,6 @@ def test_tune_for_smoothing_returns_the_rounded_model_of_its_result(run, default
 
 @pytest.mark.parametrize(("kw", "words"), [({"max_evaluations": 5}, "max_evaluations: got 5"),
                                            ({"max_seconds": 0.0}, "max_seconds: got 0")])  # fmt: skip
-def test_tune_for_smoothing_refuses_a_budget_it_cannot_search_in(run, default_model, kw, words):
+def test_tune_run_refuses_a_budget_it_cannot_search_in(run, default_model, kw, words):
     with pytest.raises(ValueError, match=f"^{words}"):
-        tune_for_smoothing(default_model, run[0], **kw)
+        tune_run(default_model, run[0], **kw)

@@ -10,15 +10,13 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 from scipy import optimize
 from support.tune_cases import TRUE, one_axis_model, process
 
-from accelnav.cli import main
+import accelnav
 from accelnav.estimate.tune import all_figures, loglik, tune, with_figures
-from accelnav.model.edit import dump_model, revalidate, with_noise
-from accelnav.model.load import DEFAULT_MODEL, load_model
+from accelnav.model.edit import revalidate, with_noise
 
 
 @pytest.mark.parametrize("seed", [1, 2])
@@ -128,56 +126,15 @@ def test_interval_coverage_over_seeds():
     assert covered >= 21, covered
 
 
-def test_cli_on_a_simulated_stop_and_go(tmp_path, capsys):
-    run = tmp_path / "sg.npz"
-    assert main(["sim", "--scenario", "stop_and_go", "--duration", "30", "--seed", "3", "--out", str(run)]) == 0
-    start = tmp_path / "start.toml"
-    start.write_text(dump_model(revalidate(with_noise(load_model(DEFAULT_MODEL), sigma_n=5.0, R=0.05))))
-    out = tmp_path / "tuned.toml"
-    capsys.readouterr()
-    assert main(["tune", str(run), "--model", str(start), "--zupt", "auto", "--out", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert "| sigma_n |" in text and "significantly better" in text and "written" in text
-    m = load_model(out)
+def test_tunes_a_simulated_stop_and_go_from_a_bad_start(default_model):
+    """accelnav.tune (what ``accelnav tune --zupt auto`` runs) on a simulated run, from sigma_n and R far off."""
+    run = accelnav.simulate(default_model, "stop_and_go", 30.0, seed=3)
+    start = revalidate(with_noise(default_model, sigma_n=5.0, R=0.05))
+    rest = accelnav.detect_rests(run, start)
+    m, r = accelnav.tune(run, start, rest=rest)
+    assert "sigma_n" in r.figures and r.adopted  # significantly better: the estimate is written
     # the simulator's noise: 8.9 mg analog + the ADC's rounding; R is far below the bad start's 0.05
     assert 0.005 < m.noise.R < 0.025 and m.noise.sigma_n < 5.0
-    assert out.read_text().startswith("# accelnav model written by accelnav tune\n")
     # with sigma_n held at the bad 5, the likelihood drives R to its search bound: said, not called identified
-    assert (
-        main(["tune", str(run), "--model", str(start), "--zupt", "auto", "--figures", "R,c2", "--out", str(out)]) == 0
-    )
-    text = capsys.readouterr().out
-    assert "| R | 0.05 |" in text and "NO (at the search bound)" in text and "| c2.y |" in text
-
-
-def test_cli_refusals(tmp_path, capsys):
-    run = tmp_path / "s.npz"
-    assert main(["sim", "--scenario", "stationary", "--duration", "5", "--out", str(run)]) == 0
-    capsys.readouterr()
-    assert main(["tune", str(run), "--figures", "sigma_x", "--out", str(tmp_path / "o.toml")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "--figures: sigma_x unknown" in err and "\n" not in err
-
-
-def test_cli_takes_a_csv_recording_and_a_zupt_file(tmp_path, capsys):
-    """tune reads recordings through the same checked reader as filter and smooth, and ZUPT files in smooth's form."""
-    run = tmp_path / "sg.npz"
-    assert main(["sim", "--scenario", "stop_and_go", "--duration", "30", "--seed", "3", "--out", str(run)]) == 0
-    d = np.load(run)
-    csv = tmp_path / "rec.csv"
-    rows = np.column_stack([d["t"], d["accel"]])
-    np.savetxt(csv, rows, delimiter=",", header="t,ax_m_s2,ay_m_s2", comments="", fmt="%.9g")
-    rest = np.all(d["u"] == 0, axis=1).astype(int)
-    zfile = tmp_path / "rest.csv"
-    np.savetxt(zfile, rest, header="rest", comments="", fmt="%d")
-    out = tmp_path / "tuned.toml"
-    capsys.readouterr()
-    args = ["tune", str(csv), "--time-column", "t", "--axis", "ax_m_s2", "--axis", "ay_m_s2", "--unit", "m/s^2"]
-    assert main([*args, "--zupt", str(zfile), "--figures", "R", "--out", str(out)]) == 0
-    text = capsys.readouterr().out
-    n_rest = int(rest.sum())
-    assert f"zero-velocity updates per axis {n_rest}, {n_rest}" in text
-    assert 0.005 < load_model(out).noise.R < 0.025
-    # a rate that is not the model's is refused in one line, as for smooth
-    assert main([*args[:2], "--rate", "50", "--axis", "ax_m_s2", "--out", str(out)]) == 2
-    assert "\n" not in capsys.readouterr().err.strip()
+    _, r = accelnav.tune(run, start, rest=rest, figures=("R", "c2"))
+    assert r.start["R"] == 0.05 and r.why_not_identified("R") == "at the search bound" and "c2.y" in r.figures

@@ -10,10 +10,12 @@ from support.calibrate_cases import (
     calibrate_any,
     nominal,
     perturbed,
+    save_g_csv,
     truth_offset_scale,
+    tumble_recording,
 )
 
-from accelnav.cli import main
+import accelnav
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.sim.trajectories import (
     TUMBLE_ANY_MIN_TURN_DEG,
@@ -24,17 +26,7 @@ from accelnav.hil_sim.sim.trajectories import (
 )
 from accelnav.identify.calibrate import GRAVITY, CalibrationError, calibrate, detect_poses, fit_axes, native
 from accelnav.identify.calibration import steps_and_noise
-from accelnav.model.design import input_conversion
-from accelnav.model.load import G0, load_model
-
-
-def tumble_recording(nom, true, seed: int, duration: float | None = None):
-    """Tumble on the true part, converted with the nominal calibration (what the user's recording holds)."""
-    n = len(nom.axes)
-    duration = duration or len(tumble_poses(n)) * POSE_S
-    run = simulate(true, "tumble", duration, seed, initial_random=False)
-    acc = np.column_stack([input_conversion(nom, i).accel(run.code[:, i]) for i in range(n)])
-    return run, acc
+from accelnav.model.load import G0
 
 
 def calibrate_arrays(nom, acc):
@@ -115,82 +107,6 @@ def test_native_units_round_trip():
         o, s = truth_offset_scale(nom, true, i)
         z, sens = native(nom.axes[i], o, s)
         assert z == pytest.approx(true.axes[i].zero_g, rel=1e-12) and sens == pytest.approx(true.axes[i].sensitivity)
-
-
-def test_cli_writes_the_calibration(tmp_path, capsys):
-    nom = nominal()
-    model_path = tmp_path / "nominal.toml"
-    from accelnav.model.edit import dump_model
-
-    model_path.write_text(dump_model(nom))
-    true = perturbed(nom, np.random.default_rng(11))
-    run, acc = tumble_recording(nom, true, 11)
-    csv = tmp_path / "tumble.csv"
-    np.savetxt(
-        csv, np.column_stack([run.t, acc / G0]), delimiter=",", header="t_s,acc_x_g,acc_y_g", comments="", fmt="%.8g"
-    )
-    out = tmp_path / "cal.toml"
-    assert main(["calibrate", str(csv), "--model", str(model_path), "--out", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert "6 still poses" in text and "not identifiable" in text
-    m = load_model(out)
-    for i, a in enumerate(m.axes):
-        t = true.axes[i]
-        # 4.5 standard errors of the offset in volts (se ~ 1 mg = 0.04 mV) and of the sensitivity
-        assert a.zero_g == pytest.approx(t.zero_g, abs=3e-4)
-        assert a.sensitivity == pytest.approx(t.sensitivity, rel=5e-3)
-        assert a.c2 == -a.c1
-    assert out.read_text().startswith("# accelnav model written by accelnav calibrate\n")
-
-
-def _cli_error(args, capsys) -> str:
-    assert main(args) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "Traceback" not in err
-    return err
-
-
-def test_refusals(tmp_path, capsys):
-    nom = nominal()
-    model_path = tmp_path / "nominal.toml"
-    from accelnav.model.edit import dump_model
-
-    model_path.write_text(dump_model(nom))
-    run, acc = tumble_recording(nom, nom, 2)
-
-    def write(name, a, t=run.t):
-        p = tmp_path / name
-        np.savetxt(
-            p, np.column_stack([t, a / G0]), delimiter=",", header="t_s,acc_x_g,acc_y_g", comments="", fmt="%.8g"
-        )
-        return str(p)
-
-    base = ["--model", str(model_path), "--out", str(tmp_path / "o.toml")]
-    # too few poses: only the first three
-    n3 = int(3 * POSE_S * nom.rate_hz)
-    err = _cli_error(["calibrate", write("short.csv", acc[:n3], run.t[:n3]), *base], capsys)
-    assert "found 3 still pose(s), need at least 4" in err
-    # a pose that is not still: pose 2 creeps by 20 mg over its hold (slow enough to pass as still per window)
-    bad = acc.copy()
-    k0, k1 = int(POSE_S * nom.rate_hz), int((POSE_S + TUMBLE_HOLD_S) * nom.rate_hz)
-    bad[k0:k1, 1] += np.linspace(0, 0.02 * G0, k1 - k0)
-    err = _cli_error(["calibrate", write("creep.csv", bad), *base], capsys)
-    assert "is not still" in err and "mg between its halves" in err
-    # a tilted pose (30 degrees): not aligned
-    tilt = acc.copy()
-    tilt[k0:k1, 1] += 0.5 * G0
-    err = _cli_error(["calibrate", write("tilt.csv", tilt), *base], capsys)
-    assert "not within 0.2 g of an aligned pose" in err and "a 2-axis part cannot use tilted poses" in err
-    # y never turned: every pose reads it at 0 g (x up, x down, flat, flat, ...)
-    flat_y = acc.copy()
-    flat_y[:, 1] = acc[:, 1] - G0 * np.round(acc[:, 1] / G0)
-    err = _cli_error(["calibrate", write("noy.csv", flat_y), *base], capsys)
-    assert "axis y: every pose reads it at +0 g" in err
-    # the model's axes must be in the recording
-    only_x = tmp_path / "x.csv"
-    np.savetxt(only_x, np.column_stack([run.t, acc[:, 0] / G0]), delimiter=",", header="t_s,acc_x_g", comments="")
-    err = _cli_error(["calibrate", str(only_x), *base], capsys)
-    assert "missing y" in err
 
 
 def test_calibration_error_is_a_value_error():
@@ -339,40 +255,30 @@ def test_degenerate_random_pose_sets_are_refused(ups, message):
     assert "\n" not in str(exc.value)
 
 
-def test_cli_random_poses(tmp_path, capsys):
-    from accelnav.model.edit import dump_model
+def test_calibrate_recording_of_a_tumble(tmp_path):
+    """accelnav.calibrate (what ``accelnav calibrate tumble.csv --model nominal.toml`` writes) on the six poses."""
+    nom = nominal()
+    true = perturbed(nom, np.random.default_rng(11))
+    run, acc = tumble_recording(nom, true, 11)
+    r = accelnav.calibrate(save_g_csv(tmp_path / "tumble.csv", run.t, acc), nom)
+    assert len(r.calibration.poses) == 6 and any(a.not_identified for a in r.calibration.axes)
+    for i, a in enumerate(r.model.axes):
+        t = true.axes[i]
+        # 4.5 standard errors of the offset in volts (se ~ 1 mg = 0.04 mV) and of the sensitivity
+        assert a.zero_g == pytest.approx(t.zero_g, abs=3e-4)
+        assert a.sensitivity == pytest.approx(t.sensitivity, rel=5e-3)
+        assert a.c2 == -a.c1
 
+
+def test_calibrate_recording_of_random_poses(tmp_path):
+    """accelnav.calibrate on twelve random still poses of a 3-axis part: the gravity-magnitude method."""
     nom = nominal(3)
-    model_path = tmp_path / "nominal3.toml"
-    model_path.write_text(dump_model(nom))
     true = perturbed(nom, np.random.default_rng(12))
     run, acc = any_recording(nom, true, 12)
-    csv = tmp_path / "any.csv"
-    np.savetxt(
-        csv,
-        np.column_stack([run.t, acc / G0]),
-        delimiter=",",
-        header="t_s,acc_x_g,acc_y_g,acc_z_g",
-        comments="",
-        fmt="%.8g",
-    )
-    out = tmp_path / "cal.toml"
-    assert main(["calibrate", str(csv), "--model", str(model_path), "--out", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert "12 still poses" in text and "method: gravity magnitude" in text and "axes x-y: cosine" in text
-    m = load_model(out)
-    for i, a in enumerate(m.axes):
+    r = accelnav.calibrate(save_g_csv(tmp_path / "any.csv", run.t, acc), nom)
+    cal = r.calibration
+    assert len(cal.poses) == 12 and cal.method == GRAVITY and "x-y" in [pc.name for pc in cal.pairs]
+    for i, a in enumerate(r.model.axes):
         t = true.axes[i]
         assert a.zero_g == pytest.approx(t.zero_g, abs=4e-4)  # 10 mg in volts
         assert a.sensitivity == pytest.approx(t.sensitivity, rel=0.01)
-    assert "method: gravity magnitude" in out.read_text()
-    # a 2-axis part: the same kind of recording is refused, saying why and what to do instead
-    nom2 = nominal()
-    model2 = tmp_path / "nominal2.toml"
-    model2.write_text(dump_model(nom2))
-    csv2 = tmp_path / "any2.csv"
-    np.savetxt(
-        csv2, np.column_stack([run.t, acc[:, :2] / G0]), delimiter=",", header="t_s,acc_x_g,acc_y_g", comments=""
-    )
-    err = _cli_error(["calibrate", str(csv2), "--model", str(model2), "--out", str(out)], capsys)
-    assert "a 2-axis part cannot use tilted poses" in err and "x up, x down, y up, y down and flat" in err

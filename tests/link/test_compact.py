@@ -20,6 +20,7 @@ from support.frames import frame_kind, split_frames
 from support.naive_decoder import decode_naive
 
 from accelnav.cli import main as cli_main
+from accelnav.data.logs import log_summary
 from accelnav.hil_sim.targets.firmware import DUTY_MODEL, HostFirmware, build_firmware, manifest
 from accelnav.link.codec import cobs_decode, encode_command, encode_stimulus, frame
 from accelnav.link.decoder import Decoder, decode_all, replay_for
@@ -138,29 +139,41 @@ def test_a_checkpoint_mismatch_is_reported(man, replay, telemetry):
     assert len(rows) == N  # reported, not hidden: the rows are still there, flagged
 
 
-def test_log_info_and_export_show_a_mismatch(tmp_path, man, telemetry, capsys):
+def _mismatch_log(path, man, telemetry, model_text: str | None = None):
     stream, _ = _tampered(man, telemetry)
-    path = tmp_path / "mismatch.acnlog"
-    with LogWriter(path, {"manifest": man.data, "model_toml": load_model().text}, fsync_s=None) as log:
+    meta = {"manifest": man.data} | ({} if model_text is None else {"model_toml": model_text})
+    with LogWriter(path, meta, fsync_s=None) as log:
         log.append(stream)
-    assert cli_main(["log", "info", str(path), "--json"]) == 0
-    info = json.loads(capsys.readouterr().out)
+    return path
+
+
+def test_log_info_shows_a_mismatch(tmp_path, man, telemetry):
+    """log_summary, what ``accelnav log info`` prints, counts the mismatches, and replays with a model given later."""
+    info = log_summary(_mismatch_log(tmp_path / "mismatch.acnlog", man, telemetry, load_model().text))
     assert info["mismatches"] == 2 and info["frames"]["sample"] == N and info["lost"] == 0
     assert info["checkpoints"] > 0
+    # without the model text the samples cannot be replayed: said, counted, nothing made up
+    path2 = _mismatch_log(tmp_path / "nomodel.acnlog", man, telemetry)
+    info = log_summary(path2)
+    assert info["unreplayed"] == N and info["frames"]["sample"] == 0 and info["warnings"]
+    info = log_summary(path2, load_model().text)  # the model given afterwards replays them
+    assert info["unreplayed"] == 0 and info["frames"]["sample"] == N and info["mismatches"] == 2
+
+
+def test_log_info_and_export_commands_say_the_mismatch(tmp_path, man, telemetry, capsys):
+    """The commands over it: ``log info --json`` prints log_summary, ``log export`` says the mismatches,
+    ``--model`` is the model given afterwards."""
+    path = _mismatch_log(tmp_path / "mismatch.acnlog", man, telemetry, load_model().text)
+    assert cli_main(["log", "info", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == json.loads(json.dumps(log_summary(path)))
     assert cli_main(["log", "export", str(path), "--out", str(tmp_path / "m.csv")]) == 0
     assert "2 mismatches (MISMATCH" in capsys.readouterr().out
-    # without the model text the samples cannot be replayed: said, counted, nothing made up
-    path2 = tmp_path / "nomodel.acnlog"
-    with LogWriter(path2, {"manifest": man.data}, fsync_s=None) as log:
-        log.append(stream)
-    assert cli_main(["log", "info", str(path2), "--json"]) == 0
-    info = json.loads(capsys.readouterr().out)
-    assert info["unreplayed"] == N and info["frames"]["sample"] == 0 and info["warnings"]
-    model_file = tmp_path / "model.toml"  # the model given afterwards replays them
+    path2 = _mismatch_log(tmp_path / "nomodel.acnlog", man, telemetry)
+    model_file = tmp_path / "model.toml"
     model_file.write_text(load_model().text)
     assert cli_main(["log", "info", str(path2), "--json", "--model", str(model_file)]) == 0
     info = json.loads(capsys.readouterr().out)
-    assert info["unreplayed"] == 0 and info["frames"]["sample"] == N and info["mismatches"] == 2
+    assert info["unreplayed"] == 0 and info["mismatches"] == 2
 
 
 def test_hil_reports_a_mismatch(man, telemetry):

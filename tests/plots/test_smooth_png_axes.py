@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from conftest import MODELS
 
-from accelnav.cli import main
+import accelnav
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.load import load_model
+from accelnav.plots.run import plot_run, plot_smoothing
 
 FOOT = MODELS / "foot_imu.toml"
 UNIX_START = 1732530000.0  # a recording stamped in Unix seconds, as loggers write
@@ -25,22 +26,15 @@ def figures(tmp_path_factory):
     accel = run.accel + OFFSET  # an offset the rests reveal to the smoother; double integration runs away on it
     lines = ["t,ax,ay"] + [f"{UNIX_START + ti:.3f},{a:.6f},{b:.6f}" for ti, (a, b) in zip(run.t, accel, strict=True)]
     (tmp_path / "rec.csv").write_text("\n".join(lines) + "\n")
+    # what ``accelnav smooth rec.csv --model FOOT --zupt auto --plots DIR`` draws, through the library
+    smoothed, model = accelnav.read_input(tmp_path / "rec.csv", FOOT, axes=["ax", "ay"], time_column="t")
+    smoothed = accelnav.smooth_run(smoothed, model, rest=accelnav.detect_rests(smoothed, model))
+    (tmp_path / "p").mkdir()
     kept, close = [], plt.close
-    argv = [
-        "smooth",
-        tmp_path / "rec.csv",
-        "--model",
-        FOOT,
-        "--zupt",
-        "auto",
-        "--plots",
-        tmp_path / "p",
-        "--out",
-        tmp_path / "o.npz",
-    ]
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(plt, "close", lambda fig=None: kept.append(fig))  # keep each figure to look at
-        assert main([str(a) for a in argv]) == 0
+        plot_run(smoothed, model, tmp_path / "p" / "smooth.png")
+        plot_smoothing(smoothed, model, tmp_path / "p")
     yield {f._suptitle.get_text(): f for f in kept}
     for f in kept:
         close(f)

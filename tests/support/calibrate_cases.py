@@ -1,6 +1,6 @@
 """Simulated parts for the calibration: the nominal model, a 'true' part off it, tumbles recorded on the true
-part and converted with the nominal calibration. Shared by tests/identify/test_calibrate.py and
-bench/coverage/coverage_calibrate.py."""
+part and converted with the nominal calibration. Shared by tests/identify/test_calibrate.py,
+tests/cli/test_calibrate_cli.py and bench/coverage/coverage_calibrate.py."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 
 from accelnav.hil_sim.sim.sensor import simulate
-from accelnav.hil_sim.sim.trajectories import TUMBLE_HOLD_S, TUMBLE_TURN_S
+from accelnav.hil_sim.sim.trajectories import TUMBLE_HOLD_S, TUMBLE_TURN_S, tumble_poses
 from accelnav.identify.calibrate import calibrate, detect_poses
 from accelnav.identify.calibration import steps_and_noise
 from accelnav.model.design import input_conversion
@@ -56,3 +56,29 @@ def calibrate_any(nom, acc):
     steps, noise = steps_and_noise(nom)
     poses = detect_poses(acc, nom.rate_hz, steps=steps, noise_sd=noise)
     return calibrate(poses, tuple(a.name for a in nom.axes))
+
+
+def tumble_recording(nom, true, seed: int, duration: float | None = None):
+    """Tumble on the true part, converted with the nominal calibration (what the user's recording holds)."""
+    n = len(nom.axes)
+    duration = duration or len(tumble_poses(n)) * POSE_S
+    run = simulate(true, "tumble", duration, seed, initial_random=False)
+    acc = np.column_stack([input_conversion(nom, i).accel(run.code[:, i]) for i in range(n)])
+    return run, acc
+
+
+def save_g_csv(path, t, acc, fmt: str = "%.8g"):
+    """A recording as a user's logger writes it: t_s and one acc_<axis>_g column per axis (x, y, z)."""
+    header = ",".join(["t_s", *(f"acc_{n}_g" for n in "xyz"[: acc.shape[1]])])
+    np.savetxt(path, np.column_stack([t, acc / G0]), delimiter=",", header=header, comments="", fmt=fmt)
+    return path
+
+
+def nominal_file(tmp_path, n_axes: int = 2):
+    """(the nominal model, its file): what ``accelnav calibrate --model`` is given."""
+    from accelnav.model.edit import dump_model
+
+    nom = nominal(n_axes)
+    path = tmp_path / f"nominal{n_axes}.toml"
+    path.write_text(dump_model(nom))
+    return nom, path

@@ -300,17 +300,15 @@ def model_text(rate: float, axes: tuple[str, ...], max_velocity: float, max_posi
     return head + blocks + tail
 
 
-def smooth(csv: Path, model: Path, out: Path, axes: tuple[str, ...], *args) -> dict[str, np.ndarray]:
-    """``accelnav smooth csv --model model --axis ... args --out out``; the run file's arrays."""
-    from accelnav.cli import main
-    from accelnav.data.runfile import load_run
+def smooth(csv: Path, model: Path, axes: tuple[str, ...], *, rest=None, fixes: Path | None = None) -> dict:
+    """What ``accelnav smooth csv --model model --axis ... [--zupt auto|FILE] [--fixes FILE]`` computes, through
+    the library: the recording read and checked, rests detected ("auto") or read from a mask file, smoothed."""
+    import accelnav
 
-    argv = ["smooth", csv, "--model", model, "--time-column", "t"]
-    for a in axes:
-        argv += ["--axis", a]
-    assert main([str(a) for a in [*argv, *args, "--out", out]]) == 0
-    arrays, _ = load_run(out)
-    return arrays
+    run, m = accelnav.read_input(csv, model, axes=list(axes), time_column="t")
+    if isinstance(rest, str):
+        rest = accelnav.detect_rests(run, m)
+    return accelnav.smooth_run(run, m, rest=rest, fixes=fixes)
 
 
 def study_walk(walk: Walk, tmp: Path) -> dict:
@@ -326,9 +324,9 @@ def study_walk(walk: Walk, tmp: Path) -> dict:
     mask = tmp / f"{tag}_rests.csv"
     np.savetxt(mask, walk.rest.astype(int), header="rest", comments="", fmt="%d")
     runs = {
-        "defaults": smooth(csv, model, tmp / f"{tag}_auto.npz", axes, "--zupt", "auto"),
-        "reference rests": smooth(csv, model, tmp / f"{tag}_ref.npz", axes, "--zupt", mask),
-        "no ZUPT": smooth(csv, model, tmp / f"{tag}_plain.npz", axes),
+        "defaults": smooth(csv, model, axes, rest="auto"),
+        "reference rests": smooth(csv, model, axes, rest=mask),
+        "no ZUPT": smooth(csv, model, axes),
     }
     i0, i1 = int(round(walk.start * WALK_RATE)), int(round(walk.end * WALK_RATE))
     res = {"walk": walk, "distance": {}, "error": {}, "rest": runs["defaults"]["zupt"][:, 0].astype(bool)}
@@ -360,18 +358,17 @@ def study_drive(drive: Drive, tmp: Path, free: bool = True) -> dict:
         f"{t:.4f},{s:.4f},{FIX_SIGMA_M}" for t, s in zip(drive.fix_t[given], drive.fix_distance[given], strict=True)
     ]
     fixes.write_text("time_s,position_m,sigma_m\n" + "\n".join(rows) + "\n")
-    zupt = {"defaults": ("--zupt", "auto"), "reference rests": ("--zupt", mask), "no ZUPT": ()}
+    zupt = {"defaults": "auto", "reference rests": mask, "no ZUPT": None}
     held = np.searchsorted(drive.t, drive.fix_t[~given])
     held = np.minimum(held, len(drive.t) - 1)
     res = {"drive": drive, "free": {}, "fixed": {}, "rests": {}}
-    for k, args in zupt.items():
-        tag = k.replace(" ", "_")
-        fixed = smooth(csv, model, tmp / f"drive_{tag}_fix.npz", axes, "--fixes", fixes, *args)
+    for k, rest in zupt.items():
+        fixed = smooth(csv, model, axes, rest=rest, fixes=fixes)
         ef = np.asarray(fixed["smooth_x"])[0, :, 0][held] - drive.distance[held]
         res["fixed"][k] = float(np.sqrt(np.mean(ef**2)))
         res["rests"][k] = fixed["zupt"][:, 0].astype(bool)
         if free:
-            alone = smooth(csv, model, tmp / f"drive_{tag}.npz", axes, *args)
+            alone = smooth(csv, model, axes, rest=rest)
             e = np.asarray(alone["smooth_x"])[0, :, 0] - drive.distance
             res["free"][k] = (float(np.sqrt(np.mean(e**2))), float(e[-1]))
     interp = np.interp(drive.t[held], drive.fix_t[given], drive.fix_distance[given])
@@ -390,10 +387,10 @@ def study_foot(foot, tmp: Path) -> dict:
     )
     mask = tmp / f"{foot.name}_stances.csv"
     np.savetxt(mask, foot.reference.astype(int), header="rest", comments="", fmt="%d")
-    zupt = {"defaults": ("--zupt", "auto"), "reference rests": ("--zupt", mask), "no ZUPT": ()}
+    zupt = {"defaults": "auto", "reference rests": mask, "no ZUPT": None}
     res = {"foot": foot, "error": {}}
-    for k, args in zupt.items():
-        arrays = smooth(csv, model, tmp / f"{foot.name}_{k.replace(' ', '_')}.npz", axes, *args)
+    for k, rest in zupt.items():
+        arrays = smooth(csv, model, axes, rest=rest)
         r = np.asarray(arrays["smooth_x"])[:, :, 0].T[foot.midstance]
         lengths = np.linalg.norm(np.diff(r, axis=0), axis=1)
         res["error"][k] = float(np.mean(np.abs(lengths - foot.true_length)))
