@@ -20,7 +20,6 @@ The header carries the plain declarations between ``ACCELNAV-CDEF-BEGIN`` /
 from __future__ import annotations
 
 import functools
-import math
 import re
 
 from accelnav.model.design import AnalogConversion
@@ -28,6 +27,7 @@ from accelnav.model.load import Model
 from accelnav.resources import package_dir
 
 from .emit_f32 import emit_f32
+from .layout import C_SIZES, COV_BLOCK, SEG, state_members, struct_offsets
 from .package import cdef_of, check_prefix, package, write  # noqa: F401  (cdef_of, write: re-exported for callers)
 from .plan import (  # noqa: F401  (the schedule's settings and schedule_for: re-exported for tests and bench/)
     RECIP_TABLE_BITS,
@@ -35,13 +35,12 @@ from .plan import (  # noqa: F401  (the schedule's settings and schedule_for: re
     SCHEDULE_RAMP_S,
     SCHEDULE_REL_TOL,
     AxisCode,
-    cov_fracs,
     plan,
     recip_table,
     schedule_for,
 )
-from .qformat import QFormat, acc_bound, guard_bits, quantize
-from .ranges import FINE, AxisPlan, fine_view
+from .plan_cov import Acc, CovSums, HSum, Term
+from .ranges import DEV, FINE, AxisPlan, refuse_calibrated
 
 
 def _c_int(v: int, word: int) -> str:
@@ -84,62 +83,32 @@ def _fixed_consts(c: AxisCode, P: str) -> list[str]:
 
 
 def _fields_fixed(p: AxisPlan, T: str) -> list[tuple[str, str, str]]:
+    """(C type, name, comment) of the state's members, in the planned order (codegen.layout)."""
     v = p.vars
-    # the three int64 first, then the int32: no padding word after a (the covariance state is 64 B, not 72)
-    f = [
-        ("int64_t", "r", f"r [m] {v['r'].fmt}"),
-        ("int64_t", "v", f"Ts*u [m] {v['v'].fmt}"),
-        ("int64_t", "e", f"eps [m/s^2] {v['e'].fmt}"),
-        ("int32_t", "a", f"a [m/s^2] {v['a'].fmt}"),
-    ]
-    if p.form == "gain_schedule":  # eps carried with eps_bar and the rounding of its high word folded in
-        f[2] = ("int64_t", "eb", f"eps - eps_bar + 2^-{p.f('y') + 1} [m/s^2] {v['e'].fmt} (read() gives eps)")
+    com = {
+        "r": f"r [m] {v['r'].fmt}",
+        "v": f"Ts*u [m] {v['v'].fmt}",
+        "e": f"eps [m/s^2] {v['e'].fmt}",
+        # eps carried with eps_bar and the rounding of its high word folded in
+        "eb": f"eps - eps_bar + 2^-{p.f('y') + 1} [m/s^2] {v['e'].fmt} (read() gives eps)",
+        "a": f"a [m/s^2] {v['a'].fmt}",
+        "seg": "the schedule's current row",
+        "z": "the deviation entries hold D 2^z (codegen.follow.ZOOM_MAX)",
+        "overflow": "saturations so far",
+    }
     if p.form == "covariance":
-        for nm in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"):
-            f.append(("int32_t", nm, f"{v[nm].note.split(',')[0]} {v[nm].fmt}"))
+        com |= {nm: f"{v[nm].note.split(',')[0]} {v[nm].fmt}" for nm in COV_BLOCK}
+        com["k"] = "2 x samples since init, + 1 while c_r, c_v, c_a, c_e are in their fine formats"
     else:
-        # K_r, K_v and K_e's two words in adjacent pairs: one LDRD and one STRD each (ACN_LD2, ACN_ST2)
-        for nm in ("r", "v"):
-            f.append(("int32_t", "K" + nm, f"K_{nm} of the next sample {v['K' + nm].fmt}"))
-        f.append(("uint32_t", "Ke_lo", f"K_e accumulator, low word (Q.{v['Ke'].fmt.frac + 32} with Ke)"))
-        f.append(("int32_t", "Ke", f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"))
-        f.append((f"const struct {T}_seg_s *", "seg", "the schedule's current row"))
-        f += _fields_follow(p)
-    if p.form == "gain_schedule":
-        f.append(("uint32_t", "k", "samples since init (bit 31: following a skip, codegen.follow)"))
-    elif p.form == "covariance":
-        f.append(("uint32_t", "k", "2 x samples since init, + 1 while c_r, c_v, c_a, c_e are in their fine formats"))
-    else:
-        f.append(("uint32_t", "k", "samples since init"))
-    f.append(("uint32_t", "overflow", "saturations so far"))
-    return f
+        com |= {"K" + nm: f"K_{nm} of the next sample {v['K' + nm].fmt}" for nm in "rv"}
+        com["Ke_lo"] = f"K_e accumulator, low word (Q.{v['Ke'].fmt.frac + 32} with Ke)"
+        com["Ke"] = f"K_e of the next sample {v['Ke'].fmt}: the accumulator's high word"
+        com |= {nm: f"{v[nm].note} {v[nm].fmt}" for nm in DEV}
+        com["k"] = "samples since init (bit 31: following a skip, codegen.follow)"
+    return [(f"const struct {T}_seg_s *" if t == SEG else t, nm, com[nm]) for t, nm in state_members(p.form)]
 
 
-_C_SIZES = {"int64_t": 8, "uint64_t": 8, "int32_t": 4, "uint32_t": 4, "int16_t": 2, "uint16_t": 2, "int8_t": 1}
-
-
-def _struct_bytes(fields: list[tuple[str, str, str]]) -> int | None:
-    """sizeof of a struct of these members under natural alignment (the ARM AAPCS and the x86-64 ABI
-    agree on it for these types); None when a member's size depends on the target (a pointer)."""
-    off = align = 0
-    for t, _, _ in fields:
-        n = _C_SIZES.get(t)
-        if n is None:
-            return None
-        off = -(-off // n) * n + n
-        align = max(align, n)
-    return -(-off // align) * align if align else 0
-
-
-def _struct_offsets(fields: list[tuple[str, str, str]]) -> dict[str, int]:
-    """Offset of every member under natural alignment (every member's size must be known)."""
-    out, off = {}, 0
-    for t, nm, _ in fields:
-        n = _C_SIZES[t]
-        off = -(-off // n) * n
-        out[nm] = off
-        off += n
-    return out
+_struct_offsets = struct_offsets  # its name before codegen.layout: tests import it from here
 
 
 def _fields_checkpoint(fields: list[tuple[str, str, str]], T: str) -> list[tuple[str, str, str]]:
@@ -151,7 +120,7 @@ def _fields_checkpoint(fields: list[tuple[str, str, str]], T: str) -> list[tuple
     ]
 
 
-def _checkpoint_c(p: AxisPlan, P: str, T: str, fields: list[tuple[str, str, str]]) -> list[str]:
+def _checkpoint_c(c: AxisCode, P: str, T: str, fields: list[tuple[str, str, str]]) -> list[str]:
     """C of T_save and T_load: the state to and from its checkpoint image of P_CK_BYTES bytes (the
     telemetry's checkpoint frames, accelnav.link.replay): every member little-endian at its offset under
     natural alignment, which is the covariance state struct's own bytes on a little-endian target; the
@@ -159,16 +128,14 @@ def _checkpoint_c(p: AxisPlan, P: str, T: str, fields: list[tuple[str, str, str]
     (and leaves the state as it was), so no image makes the filter read past it. Only checkpoints call
     these, never the step."""
     ck = _fields_checkpoint(fields, T)
-    if any(_C_SIZES[t] not in (4, 8) for t, _, _ in ck):
-        raise ValueError("a checkpoint image takes 32- and 64-bit members only")
-    off = _struct_offsets(ck)
-    gs = p.form == "gain_schedule"
+    off = c.layout.ck_offsets
+    gs = c.p.form == "gain_schedule"
 
     def put(t, nm):
         o = off[nm]
         if nm == "seg":
             return [f"    acn_put32(out + {o}, (uint32_t)(s->seg - {T}_seg)); /* the row's index, 0 .. {P}_NSEG */"]
-        if _C_SIZES[t] == 8:
+        if C_SIZES[t] == 8:
             return [
                 f"    acn_put32(out + {o}, (uint32_t)(uint64_t)s->{nm}); /* {nm}, low word */",
                 f"    acn_put32(out + {o + 4}, (uint32_t)((uint64_t)s->{nm} >> 32));",
@@ -179,7 +146,7 @@ def _checkpoint_c(p: AxisPlan, P: str, T: str, fields: list[tuple[str, str, str]
         o = off[nm]
         if nm == "seg":
             return [f"    s->seg = &{T}_seg[row];"]
-        if _C_SIZES[t] == 8:
+        if C_SIZES[t] == 8:
             return [f"    s->{nm} = ({t})((uint64_t)acn_get32(in + {o + 4}) << 32 | acn_get32(in + {o}));"]
         return [f"    s->{nm} = ({t})acn_get32(in + {o});"]
 
@@ -208,15 +175,6 @@ def _checkpoint_c(p: AxisPlan, P: str, T: str, fields: list[tuple[str, str, str]
         src += get(t, nm)
     src += ["    return true;", "}", ""]
     return src
-
-
-def _fields_follow(p: AxisPlan) -> list[tuple[str, str, str]]:
-    """Gain schedule: the deviation from the schedule's covariance block after a skip (codegen.follow)."""
-    from .follow import DEV
-
-    return [("int32_t", nm, f"{p.vars[nm].note} {p.vars[nm].fmt}") for nm in DEV] + [
-        ("uint32_t", "z", "the deviation entries hold D 2^z (codegen.follow.ZOOM_MAX)")
-    ]
 
 
 def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
@@ -283,253 +241,108 @@ def _hi_round(expr: str) -> str:
     return f"(int32_t)(((uint64_t)({expr}) + UINT64_C(0x80000000)) >> 32)"
 
 
-def _acc(ft: int, terms: list[tuple[str, str, int]], dither: str | None = None) -> str:
-    """Sum of int64 terms (sign, expr, frac bits) in Q.ft with one rounding: the terms already in
-    Q.ft add exactly; the finer ones are aligned (floor) to Q.(ft + g) (g: :func:`codegen.qformat.guard_bits`; each fine
-    term a product of two int32, neither INT32_MIN, or an int32 constant, so |term| < 2^62 and two
-    of them plus the rounding offset stay below 2^63), summed, and rounded once to Q.ft.
+def _term(t: Term, P: str) -> str:
+    """C of one term of a planned sum (codegen.plan_cov.Term)."""
+    if t.const is None:
+        return f"(int64_t){t.var}"
+    c = f"(int64_t){'-' if t.neg else ''}{P}_{t.name}"
+    return f"{c} * {t.var}" if t.var else c
 
-    The rounding adds half an LSB (to nearest, ties up), or with ``dither`` (the C name of a uint32
-    that runs through its values evenly from sample to sample: the bit-reversed sample count) its top
-    g bits: still one floor of the sum plus an offset below one LSB, so the result is within one LSB
-    of the exact sum, but an increment that holds a steady fraction of an LSB for many samples is no
-    longer rounded the same way every time: over any 2^m consecutive samples the roundings add up to
-    at most about one LSB instead of up to 2^m / 2 (used on the entries whose own change per sample
-    is a small fraction of their LSB)."""
-    exact = [(sg, e) for sg, e, fr in terms if fr == ft]
-    fine = [(sg, e, fr) for sg, e, fr in terms if fr != ft]
-    if any(fr < ft for _, _, fr in fine):
-        raise ValueError("a term coarser than its target")
-    out = " ".join(f"{sg} {e}" for sg, e in exact).lstrip("+ ")
-    if fine:
-        g = guard_bits([fr for _, _, fr in fine], ft)
-        parts = " ".join(f"{sg} " + (f"(({e}) >> {fr - ft - g})" if fr - ft > g else f"({e})") for sg, e, fr in fine)
-        if dither is not None and g <= 32:
-            off = f"(int64_t)({dither} >> {32 - g})" if g < 32 else f"(int64_t){dither}"
+
+def _acc(a: Acc, P: str) -> str:
+    """C of a sum rounded once (codegen.plan_cov.Acc): the terms already in Q.ft add exactly; the finer
+    ones are aligned (floor) to Q.(ft + g) (each fine term a product of two int32, neither INT32_MIN, or
+    an int32 constant, so |term| < 2^62 and two of them plus the rounding offset stay below 2^63), summed,
+    and rounded once to Q.ft.
+
+    The rounding adds half an LSB (to nearest, ties up), or with a dither (the C name of a uint32 that
+    runs through its values evenly from sample to sample: the bit-reversed sample count) its top g bits:
+    still one floor of the sum plus an offset below one LSB, so the result is within one LSB of the
+    exact sum, but an increment that holds a steady fraction of an LSB for many samples is no longer
+    rounded the same way every time: over any 2^m consecutive samples the roundings add up to at most
+    about one LSB instead of up to 2^m / 2 (used on the entries whose own change per sample is a small
+    fraction of their LSB)."""
+    ft, g = a.ft, a.g
+    out = " ".join(f"{t.sign} {_term(t, P)}" for t in a.exact).lstrip("+ ")
+    if a.fine:
+        parts = " ".join(
+            f"{t.sign} " + (f"(({_term(t, P)}) >> {sh})" if sh else f"({_term(t, P)})") for t, sh in a.fine
+        )
+        if a.dither is not None:
+            off = f"(int64_t)({a.dither} >> {32 - g})" if g < 32 else f"(int64_t){a.dither}"
             out += f" + (({parts.lstrip('+ ')} + {off}) >> {g}) /* in Q.{ft + g}, dithered once to Q.{ft} */"
         else:
             out += f" + ACN_RSHR({parts.lstrip('+ ')}, {g}) /* in Q.{ft + g}, rounded once to Q.{ft} */"
     return f"({out})"
 
 
-def _acc_sat(ft: int, terms: list[tuple[str, str, int]], mag) -> str:
-    """acn_sat32 of _acc(ft, terms) whose first term is an int32 already in Q.ft, spelled as one
-    saturating 32-bit add of that int32 and the rest: the same integer and the same overflow count
-    (a sum of two int32 leaves int32 exactly when the 32-bit add overflows, and then its sign is the
-    first operand's), provided the rest fits int32 for every int32 input. That is checked here from
-    mag(expr), a bound on |term| before its alignment shift; otherwise the 64-bit form is kept."""
-    sg0, e0, fr0 = terms[0]
-    m = re.fullmatch(r"\(int64_t\)((?:s->)?\w+)", e0)
-    rest = terms[1:]
-    if sg0 == "+" and fr0 == ft and m and rest:
-        if acc_bound(ft, [(mag(e), fr) for sg, e, fr in rest]) < 2**31 - 1:
-            return f"acn_add_sat32({m.group(1)}, (int32_t){_acc(ft, rest)}, &s->overflow)"
-    return f"acn_sat32({_acc(ft, terms)}, &s->overflow)"
+def _hsum(h: HSum) -> str:
+    """C of a sum in one int64 accumulator whose high word is the int32 result (codegen.plan_cov.HSum):
+    the folded constants and the rounding offset (half an LSB, or the dither) start it, then one SMLAL
+    per variable."""
+    acc = f"INT64_C({h.lit}) + (int64_t){h.dither}" if h.dither else _c_int(h.lit + 2**31, 64)
+    for x, k, ki, (val, q) in h.ops:
+        cm = f"2^{q}" if val is None else f"{val:.6g} Q.{q}"
+        acc = f"acn_mac({acc}, {f'({x} >> {k})' if k else x}, {_c_int(ki, 32)} /* {cm} */)"
+    return f"(int32_t)(({acc}) >> 32) /* Q.{h.F} -> Q.{h.ft}, high word */"
 
 
-def _predict_terms(p: AxisPlan, P: str) -> dict[str, tuple[int, list[tuple[str, str, int]]]]:
-    """The predict sums of the carried block: name -> (target frac bits, [(sign, expr, frac bits)]).
-
-    Every constant has its own scaling (Q_ra, Q_ua, Q_aa, Q_ee and 1 - phi are far below the LSB of
-    the entry they feed: in the entry's format Q_ra at 1 kHz was 6 LSB for 5.7, a 5 % error that
-    biased c_r and with it K_r), so each enters as a fine term, aligned with the products. The decay
-    by phi is written as x - (1 - phi) x, (1 - phi) in its own scaling, for the same reason."""
-    fcr, fPr, fcv, fPv, fca, fPae, fce = (p.f(n) for n in ("cr", "Pre", "cv", "Pve", "ca", "Pae", "ce"))
-    fq = {n: p.consts[n][1].frac for n in ("H2", "T2", "OMPC", "PHIOMP", "Qra", "Qva", "Qaa", "Qee")}
-    H2, T2, OMP, PO = fq["H2"], fq["T2"], fq["OMPC"], fq["PHIOMP"]
-
-    def c(name):  # "-NAME": the constant negated in the literal (no 64-bit negation of the product)
-        neg = name.startswith("-")
-        return f"(int64_t){'-' if neg else ''}{P}_{name.lstrip('-')}"
-
-    return {
-        "tr": (
-            fPr,
-            [("+", "(int64_t)s->Pre", fPr), ("+", "(int64_t)s->Pve", fPv), ("+", f"{c('H2')} * s->Pae", H2 + fPae)],
-        ),
-        "tv": (fPv, [("+", "(int64_t)s->Pve", fPv), ("+", f"{c('T2')} * s->Pae", T2 + fPae)]),
-        "cr": (
-            fcr,
-            [
-                ("+", "(int64_t)s->cr", fcr),
-                ("+", "(int64_t)s->cv", fcv),
-                ("+", f"{c('H2')} * s->ca", H2 + fca),
-                ("+", c("Qra"), fq["Qra"]),
-                ("+", f"{c('-OMPC')} * tr", OMP + fPr),
-            ],
-        ),
-        "cv": (
-            fcv,
-            [
-                ("+", "(int64_t)s->cv", fcv),
-                ("+", f"{c('T2')} * s->ca", T2 + fca),
-                ("+", c("Qva"), fq["Qva"]),
-                ("+", f"{c('-OMPC')} * tv", OMP + fPv),
-            ],
-        ),
-        "Pre": (fPr, [("+", "(int64_t)tr", fPr), ("+", f"{c('-OMPC')} * tr", OMP + fPr)]),
-        "Pve": (fPv, [("+", "(int64_t)tv", fPv), ("+", f"{c('-OMPC')} * tv", OMP + fPv)]),
-        "ca": (
-            fca,
-            [("+", "(int64_t)s->ca", fca), ("+", c("Qaa"), fq["Qaa"]), ("+", f"{c('-OMPC')} * s->Pae", OMP + fPae)],
-        ),
-        "ce": (
-            fce,
-            [
-                ("+", f"{c('PHI2')} * s->ce", 31 + fce),
-                ("+", f"{c('PHIOMP')} * s->Pae", PO + fPae),
-                ("+", c("Qee"), fq["Qee"]),
-            ],
-        ),
-        "Pae": (fPae, [("+", "(int64_t)s->Pae", fPae), ("+", f"{c('-OMPC')} * s->Pae", OMP + fPae)]),
-    }
+def _entry(how, P: str) -> str:
+    """C of one planned predict entry (codegen.plan_cov.CovSums.predict)."""
+    shape, x0, s = how
+    if shape == "hadd":  # x0 + rest: one saturating 32-bit add, the rest fits int32 for any inputs
+        return f"acn_add_sat32({x0}, {_hsum(s)}, &s->overflow)"
+    if shape == "addsat":
+        return f"acn_add_sat32({x0}, (int32_t){_acc(s, P)}, &s->overflow)"
+    if shape == "sat":
+        return f"acn_sat32({_acc(s, P)}, &s->overflow)"
+    if shape == "h":  # x - (1 - phi) x fits int32 for every int32 x (see _predict_cov)
+        return f"(int32_t)((int64_t){x0} + {_hsum(s)})"
+    if shape == "free":
+        return f"(int32_t)((int64_t){x0} + {_hsum(s)})"
+    return f"(int32_t){_acc(s, P)}"
 
 
-DITHERED = ("Pre", "Pve", "Pae")  # entries whose change per sample is a small fraction of their LSB
+def _predict_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
+    """The predict of the carried block, as planned (codegen.plan_cov.cov_sums).
 
-
-def _hsum(p: AxisPlan, P: str, ft: int, terms, dither: str | None = None):
-    """The sum of ``terms`` (as _acc takes them; int32 variables, constants, constant x variable
-    products) in one int64 accumulator in Q.(ft + 32), its high word the result in Q.ft: each
-    constant of a product is scaled so that the product lands there (one SMLAL, no shift; when that
-    leaves the constant fewer than 20 bits, the variable is first shifted right by the k that best
-    balances the constant's rounding against the variable's floor), each variable by a power of two
-    (one SMLAL), the constants and the rounding offset (half an LSB, or the dither) start the
-    accumulator. Returns (C expression of the int32 result, bound on |result| in LSB of Q.ft for any
-    int32 variables), or None when a term does not fit that scheme (then _acc forms the sum)."""
-    F = ft + 32
-    lit = 0
-    ops = []
-    mag = 0
-    for sg, e, fr in terms:
-        neg = sg == "-"
-        m = re.fullmatch(r"\(int64_t\)(-?)" + P + r"_(\w+)(?: \* (\w+|s->\w+))?", e)
-        if m:
-            val = p.consts[m.group(2)][0] * (-1.0 if m.group(1) else 1.0) * (-1.0 if neg else 1.0)
-            if not m.group(3):  # a constant: into the start of the accumulator
-                lit += quantize(val, QFormat(64, F))
-                continue
-            fv = fr - p.consts[m.group(2)][1].frac  # the variable's own binary point
-            kk = val * 2.0 ** (F - fv)
-            if abs(kk) >= 2**30:
-                return None
-            k = 0
-            if abs(kk) < 2**20:
-                ks = [j for j in range(25) if abs(kk) * 2.0**j < 2**30]
-                k = min(ks, key=lambda j: 2.0 ** (30 - j) + abs(kk) * 2.0**j)
-            ki = quantize(kk * 2.0**k, QFormat(32, 0))
-            x = f"({m.group(3)} >> {k})" if k else m.group(3)
-            ops.append((x, ki, f"{val:.6g} Q.{F - fv + k}"))
-            mag += abs(ki) * 2 ** (31 - k)
-            continue
-        m = re.fullmatch(r"\(int64_t\)(\w+|s->\w+)", e)
-        if m and 0 <= F - fr <= 30:  # an int32 variable times a power of two
-            ops.append((m.group(1), -(1 << (F - fr)) if neg else 1 << (F - fr), f"2^{F - fr}"))
-            mag += 2 ** (31 + F - fr)
-            continue
-        return None
-    total = mag + abs(lit) + 2**32
-    if total >= 2**62:
-        return None
-    acc = f"INT64_C({lit}) + (int64_t){dither}" if dither else _c_int(lit + 2**31, 64)
-    for x, ki, cm in ops:
-        acc = f"acn_mac({acc}, {x}, {_c_int(ki, 32)} /* {cm} */)"
-    return f"(int32_t)(({acc}) >> 32) /* Q.{F} -> Q.{ft}, high word */", (total >> 32) + 1, (lit, ops)
-
-
-def _hsum_at(h, values: dict, offset: int) -> int:
-    """The int32 _hsum computes for the variables in ``values`` (name -> int) and rounding offset."""
-    lit, ops = h[2]
-    acc = lit + offset
-    for x, ki, _ in ops:
-        m = re.fullmatch(r"\(?((?:s->)?\w+)(?: >> (\d+)\))?", x)
-        acc += ki * (values[m.group(1)] >> int(m.group(2) or 0))
-    return acc >> 32
-
-
-def _predict_cov(p: AxisPlan, P: str) -> list[str]:
-    t = _predict_terms(p, P)
-
-    def mag(expr: str) -> int:  # a bound on |expr| for any int32 operands
-        m = re.fullmatch(r"\(int64_t\)(-?)" + P + r"_(\w+)(?: \* (\w+|s->\w+))?", expr)
-        if m:
-            v, fmt = p.consts[m.group(2)]
-            return abs(quantize(v, fmt)) * (2**31 if m.group(3) else 1)
-        if re.fullmatch(r"\(int64_t\)(\w+|s->\w+)", expr):
-            return 2**31
-        raise ValueError(f"no bound for {expr}")
-
-    def sat(name):  # x0 + rest, one saturating 32-bit add when rest fits int32 for any inputs (_acc_sat)
-        ft, terms = t[name]
-        h = _hsum(p, P, ft, terms[1:])
-        x0 = re.fullmatch(r"\(int64_t\)((?:s->)?\w+)", terms[0][1])
-        if h is not None and x0 and terms[0][0] == "+" and terms[0][2] == ft and h[1] < 2**31 - 1:
-            return f"acn_add_sat32({x0.group(1)}, {h[0]}, &s->overflow)"
-        return _acc_sat(ft, terms, mag)
-
-    # x - (1 - phi) x fits int32 for every int32 x: 0 < 1 - phi < 1, the product enters with the sign
-    # opposite to x, and neither its floor nor the rounding offset (below one LSB) can push past x
-    def ce_sum():  # c_e' = c_e - (1 - phi^2) c_e + phi (1 - phi) P_ae + Q_ee with no clamp, when that is
-        # checked here to fit int32 at every corner of the int32 square of (c_e, P_ae) (c_e' is monotone
-        # in each: the coefficient of c_e, 1 - (1 - phi^2), is below one and its floor moves it by < 1)
-        h = _hsum(p, P, t["ce"][0], terms_ce[1:])
-        if h is None or "ce" not in p.sat_free:
-            return None
-        for ce in (-(2**31), 2**31 - 1):
-            for pae in (-(2**31), 2**31 - 1):
-                if not -(2**31) <= ce + _hsum_at(h, {"s->ce": ce, "s->Pae": pae}, 2**31) <= 2**31 - 1:
-                    return None
-        return f"(int32_t)((int64_t)s->ce + {h[0]})"
-
-    fce = p.f("ce")
-    f2 = p.consts["OMP2"][1].frac
-    terms_ce = [("+", "(int64_t)s->ce", fce), ("+", f"(int64_t)-{P}_OMP2 * s->ce", f2 + fce)] + t["ce"][1][1:]
-    ce_h = ce_sum()
-    if ce_h is None:  # c_e in a format too fine for that (the fine one, codegen.ranges._plan_fine): one
-        # saturating 32-bit add of c_e and the rest, when the rest fits int32 for any int32 inputs
-        h = _hsum(p, P, fce, terms_ce[1:])
-        if h is not None and h[1] < 2**31 - 1:
-            ce_h = f"acn_add_sat32(s->ce, {h[0]}, &s->overflow)"
-
-    def decay(name):
-        ft, terms = t[name]
-        dz = "dz" if name in DITHERED else None
-        h = _hsum(p, P, ft, terms[1:], dz)
-        if h is not None:
-            return f"(int32_t)({terms[0][1]} + {h[0]})"
-        return f"(int32_t){_acc(ft, terms, dither=dz)}"
-
+    x - (1 - phi) x fits int32 for every int32 x: 0 < 1 - phi < 1, the product enters with the sign
+    opposite to x, and neither its floor nor the rounding offset (below one LSB) can push past x."""
+    t = {n: _entry(how, P) for n, how in sums.predict.items()}
+    ce_shape = sums.predict["ce"][0]
+    if ce_shape in ("free", "hadd"):
+        ce = f"        s->ce = {t['ce']};" + (
+            " /* fits int32 for any c_e, P_ae: checked at the corners */" if "ce" in p.sat_free else ""
+        )
+    elif ce_shape == "acc":
+        ce = f"        s->ce = {t['ce']}; /* fits int32 for any c_e, P_ae: ranges._predict_sat_free */"
+    else:
+        ce = f"        s->ce = {t['ce']};"
     return [
         "        /* P = F P F' + Q on the carried block (c = P H' carried directly in fine formats);",
         "         * every right-hand side reads the old values; each sum is rounded once */",
         "        int32_t tr, tv;",
         "        uint32_t dz = acn_rbit(s->k >> 1); /* rounding offsets: the sample count, bit-reversed */",
         "        /* tr = P_re + P_ve + Ts^2/2 P_ae; P_re' = phi tr */",
-        f"        tr = {sat('tr')};",
+        f"        tr = {t['tr']};",
         "        /* tv = P_ve + Ts^2 P_ae; P_ve' = phi tv */",
-        f"        tv = {sat('tv')};",
+        f"        tv = {t['tv']};",
         "        /* c_r' = c_r + c_v + Ts^2/2 c_a + Q_ra - (1 - phi) tr */",
-        f"        s->cr = {sat('cr')};",
+        f"        s->cr = {t['cr']};",
         "        /* c_v' = c_v + Ts^2 c_a + Ts Q_ua - (1 - phi) tv */",
-        f"        s->cv = {sat('cv')};",
-        f"        s->Pre = {decay('Pre')};",
-        f"        s->Pve = {decay('Pve')};",
+        f"        s->cv = {t['cv']};",
+        f"        s->Pre = {t['Pre']};",
+        f"        s->Pve = {t['Pve']};",
         "        /* c_a' = c_a + Q_aa - (1 - phi) P_ae */",
-        f"        s->ca = {sat('ca')};",
+        f"        s->ca = {t['ca']};",
         "        /* c_e' = phi^2 c_e + phi (1 - phi) P_ae + Q_ee */",
-        f"        s->ce = {ce_h}; /* fits int32 for any c_e, P_ae: checked at the corners */"
-        if ce_h and "ce" in p.sat_free
-        else f"        s->ce = {ce_h};"
-        if ce_h
-        else f"        s->ce = (int32_t){_acc(*t['ce'])}; /* fits int32 for any c_e, P_ae: ranges._predict_sat_free */"
-        if "ce" in p.sat_free
-        else f"        s->ce = acn_sat32({_acc(*t['ce'])}, &s->overflow);",
+        ce,
         "        /* P_ae' = phi P_ae = P_ae - (1 - phi) P_ae */",
-        f"        s->Pae = {decay('Pae')};",
+        f"        s->Pae = {t['Pae']};",
     ]
 
 
-def _gains_cov(p: AxisPlan, P: str) -> list[str]:
+def _gains_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
     """Body of T_pupdate(s, y), the measurement update: S = c_a + c_e + R, one reciprocal, w = y / S;
     every state adds c_i w = K_i y (r and v = Ts u their K y part only; the core adds the rest of
     their step), so no gain is rounded on its own; then P = P - c c' / S, which for the carried
@@ -538,16 +351,12 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
     the block (c_i -> c_i R / S, and the cross terms stay within the diagonal terms, which only
     shrink)."""
     fca, fce, fKe = p.f("ca"), p.f("ce"), p.f("Ke")
-    cf = cov_fracs(p)
+    cf = sums.fracs
     nmax, fx = cf["nmax"], cf["x"]
     d = fce - fca
-    R_int = quantize(p.design.R, p.vars["S"].fmt)
     Rn = "RF" if p.vars["S"] is p.vars.get("S_f") else "R"  # R in the format of S: fine or coarse
-    if d > 0:  # c_e in c_a's format, rounded (ties up) in 32 bits: floor((floor(c_e / 2^(d-1)) + 1) / 2)
-        ce_a = f"(((ce >> {d - 1}) + 1) >> 1) /* Q.{fce} -> Q.{fca}, round */"
-        fits = (2**31 >> d) + 1 + abs(R_int) < 2**31 - 1
-    else:
-        ce_a, fits = "", False
+    # c_e in c_a's format, rounded (ties up) in 32 bits: floor((floor(c_e / 2^(d-1)) + 1) / 2)
+    ce_a = f"(((ce >> {d - 1}) + 1) >> 1) /* Q.{fce} -> Q.{fca}, round */" if d > 0 else ""
     fy, fw, fr, fv, fe = p.f("y"), p.f("w"), p.f("r"), p.f("v"), p.f("e")
     pr = cf["prod"]
     sw = fy + fx - fw  # its shifts, and kappa's, K_e's and a's, are checked in range by the planner
@@ -558,7 +367,7 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         "    /* S = H P H' + R = c_a + c_e + R (>= R by construction) */",
         # one saturating 32-bit add when c_e aligned plus R fits int32 for any c_e (see _acc_sat)
         f"    S = acn_add_sat32(ca, {ce_a} + {P}_{Rn}, &s->overflow);"
-        if fits
+        if sums.s_fits
         else f"    S = acn_sat32((int64_t)ca + {_shift('(int64_t)ce', fce, fca)} + {P}_{Rn}, &s->overflow);",
         f"    if (S < {P}_{Rn}) {{",
         f"        S = {P}_{Rn};",
@@ -589,12 +398,10 @@ def _gains_cov(p: AxisPlan, P: str) -> list[str]:
         "    /* P = P - c c' / S: c_i -= c_i kappa with kappa = (S - R) / S in [0, 1), Q0.31;",
         "     * P_ie -= c_i K_e with K_e = c_e / S */",
         f"    kap = (int32_t)ACN_RSHR(acn_mul(S - {P}_{Rn}, xs), {fca + fx - 31}); /* Q.{fca + fx} -> Q0.31, round */",
-        # 0 < xs <= 2^30 (acn_recip: x <= 2^31): for any int32 c_e the product lies in
-        # [-2^61, (2^31 - 1) 2^30]; when both ends, shifted and rounded, fit int32, K_e needs no saturation
+        # K_e without saturation when the planner found it fits int32 for any c_e (codegen.plan_cov)
         f"    Ke = (int32_t)ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}); /* Q.{fce + fx} -> {p.vars['Ke'].fmt},"
         " round; fits for any c_e */"
-        if ((2**31 - 1) * 2**30 + 2 ** (fce + fx - fKe - 1)) >> (fce + fx - fKe) <= 2**31 - 1
-        and (-(2**61) + 2 ** (fce + fx - fKe - 1)) >> (fce + fx - fKe) >= -(2**31)
+        if sums.ke_free
         else f"    Ke = acn_sat32(ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}), &s->overflow);"
         f" /* Q.{fce + fx} -> {p.vars['Ke'].fmt}, round */",
     ]
@@ -662,12 +469,13 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
     return L
 
 
-def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
+def _core_cov_coarse(c: AxisCode, P: str, T: str) -> list[str]:
     """Body of T_core_c (out of line): a skipped sample, or a sample while c_r, c_v, c_a, c_e are in their
     coarse formats (the ones that hold them through a gap). A skip first moves a fine block to the
     coarse formats (rounded); after an update whose c_r, c_v, c_a, c_e are all within the switch levels
     p.theta (codegen.ranges._plan_fine) they move to the fine formats (exact: a left shift that fits)."""
-    pf = fine_view(p)
+    p = c.p
+    pf = c.cov[0].view
     to_c, to_f, test = [], [], []
     for nm in FINE:
         dd = pf.f(nm) - p.f(nm)
@@ -675,7 +483,7 @@ def _core_cov_coarse(p: AxisPlan, P: str, T: str) -> list[str]:
         if dd > 0:
             to_c.append(f"        s->{nm} = (int32_t)ACN_RSHR((int64_t)s->{nm}, {dd}); /* {ff} -> {fc}, round */")
             to_f.append(f"            s->{nm} *= INT32_C(1) << {dd}; /* {fc} -> {ff}, exact */")
-        th = math.floor(p.theta[nm] * 2.0**fc.frac)
+        th = c.switch[nm]
         # |c| <= th as one unsigned compare; th 2^dd fits the fine format (it holds GUARD theta)
         test.append(f"(uint32_t)s->{nm} + {th}u <= {2 * th}u")
     back = [
@@ -1130,7 +938,7 @@ def _gs_gains_c(c: AxisCode, P: str, T: str) -> list[str]:
         "    }",
         "}",
         "",
-    ] + emit_follow(c.p, P, T, c.follow)
+    ] + emit_follow(c.follow, P, T)
 
 
 def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[str]:
@@ -1140,17 +948,18 @@ def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[st
     src = []
     # the predict of the covariance block in a function of its own: its registers do not crowd the
     # states'; twice: c_r, c_v, c_a, c_e in their fine formats (the common path) and in their coarse ones
-    for sfx, q in (("", fine_view(p)), ("_c", p)):
+    for sfx, sums in (("", c.cov[0]), ("_c", c.cov[1])):
+        q = sums.view
         src += [f"static void {T}_ppredict{sfx}({T}_t *s)", "{"]
-        src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(q, P)]
+        src += [_smull(ln[4:] if ln.startswith("    ") else ln) for ln in _predict_cov(sums, q, P)]
         src += ["}", ""]
-        src += [f"static void {T}_pupdate{sfx}({T}_t *s, int32_t y)", "{"] + _gains_cov(q, P) + ["}", ""]
+        src += [f"static void {T}_pupdate{sfx}({T}_t *s, int32_t y)", "{"] + _gains_cov(sums, q, P) + ["}", ""]
     src += [
         "/* One sample with c_r, c_v, c_a, c_e in their coarse formats, or a skip (rare: out of line). */",
         f"static __attribute__((noinline)) void {T}_core_c({T}_t *s, int32_t z, bool valid)",
         "{",
     ]
-    src += _core_cov_coarse(p, P, T) + ["}", ""]
+    src += _core_cov_coarse(c, P, T) + ["}", ""]
     src += [
         "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
         f" * with z [m/s^2] {p.vars['z'].fmt}. Inlined into update, skip and step. */",
@@ -1201,7 +1010,7 @@ def _read_c(c: AxisCode, P: str, T: str) -> list[str]:
     ]
 
 
-def _manifest(c: AxisCode, T: str, fields, ck_fields, ck_bytes: int) -> dict:
+def _manifest(c: AxisCode, T: str) -> dict:
     """The axis' entry of PREFIX.json: formats, constants, bounds, the checkpoint image, the schedule."""
     p, sched = c.p, c.sched
     man = {
@@ -1223,17 +1032,17 @@ def _manifest(c: AxisCode, T: str, fields, ck_fields, ck_bytes: int) -> dict:
         "constants": {k: {"value": val, "format": f.name, "int": q} for k, (val, f, q) in c.consts.items()},
         "l1": p.l1.__dict__ | {},
         "z_error": p.z_error,
-        "state_bytes": _struct_bytes(fields),  # sizeof(T_t); None when it depends on the target (a pointer)
+        "state_bytes": c.layout.state_bytes,  # sizeof(T_t); None when it depends on the target (a pointer)
         # what the telemetry's checkpoint frames carry (codegen.frames, accelnav.link.replay): the image of
         # T_save / T_load; "row": where the gain schedule's row index lies in it and how many rows there are
         # (an index >= rows is a damaged image: T_load and the host decoder refuse it)
         "checkpoint": {
-            "bytes": ck_bytes,
+            "bytes": c.layout.ck_bytes,
             "save": f"{T}_save",
             "load": f"{T}_load",
             "row": None
             if sched is None
-            else {"offset": _struct_offsets(ck_fields)["seg"], "rows": sched.n_segments + 1, "table": f"{T}_seg"},
+            else {"offset": c.layout.ck_offsets["seg"], "rows": sched.n_segments + 1, "table": f"{T}_seg"},
         },
         "e_state_offset": c.eoff,  # gain schedule: eps = eb + this (LSB of e); None: the state holds eps
     }
@@ -1257,10 +1066,7 @@ def _axis_fixed(c: AxisCode, prefix: str) -> tuple[list[str], list[str], list[st
     fields = _fields_fixed(p, T)
     params, args, in_body = _input_fixed(p, P)
     struct, out_struct, protos = _axis_decls(p, T, fields, params)
-    ck_fields = _fields_checkpoint(fields, T)
-    ck_bytes = _struct_bytes(ck_fields)
-    if ck_bytes is None or ck_bytes != sum(_C_SIZES[t] for t, _, _ in ck_fields):
-        raise ValueError(f"axis {ax}: the checkpoint image must be fixed-size members without padding")
+    ck_bytes = c.layout.ck_bytes
     fmt_defs = [
         f"#define {P}_R_FRAC {p.f('r')}",
         f"#define {P}_U_FRAC {p.f('u_out')}",
@@ -1285,8 +1091,8 @@ def _axis_fixed(c: AxisCode, prefix: str) -> tuple[list[str], list[str], list[st
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
     src += _gs_gains_c(c, P, T) + _gs_entries(c, P, T, params, args) if gs else _cov_entries(c, P, T, params, args)
     src += _read_c(c, P, T)
-    src += _checkpoint_c(p, P, T, fields)
-    return header, cdef, src, _manifest(c, T, fields, ck_fields, ck_bytes)
+    src += _checkpoint_c(c, P, T, fields)
+    return header, cdef, src, _manifest(c, T)
 
 
 def emit(
@@ -1299,6 +1105,7 @@ def emit(
     """All generated files of ``model`` as {name: text}: PREFIX.h, PREFIX.c, PREFIX.json. Both forms
     follow skipped samples (the gain schedule through codegen.follow)."""
     check_prefix(prefix)  # before any planning: a prefix that is no C identifier is refused outright
+    refuse_calibrated(model)  # both arithmetics start from the MCU's raw input (an ADC code, a capture)
     form = form or model.filter.form
     if arith == "float32":
         return emit_f32(model, form=form, prefix=prefix)

@@ -44,9 +44,10 @@ c_e / S), which stays within int32 at any zoom.
 tests one word, k <= 0 (the first sample, or following a skip), and everything else, this module's C
 included, runs out of line. The count itself is k's low 31 bits.
 
-:func:`emit_follow` writes the C; :class:`Follow` is its integer twin (same operations on Python
-ints, bit for bit), from which :func:`followed_gains` gives the exact gains the C uses on a run:
-codegen.bounds then takes |K_C - K_float64| per sample exactly, for any skip pattern.
+:func:`follow_plan` works out its numbers, :func:`emit_follow` writes the C from them; :class:`Follow`
+is its integer twin (same operations on Python ints, bit for bit), from which :func:`followed_gains`
+gives the exact gains the C uses on a run: codegen.bounds then takes |K_C - K_float64| per sample
+exactly, for any skip pattern.
 """
 
 from __future__ import annotations
@@ -96,27 +97,9 @@ class _Ops:
         f["CES"] = f["Dce"] + math.floor(math.log2(p.design.R))
         self.thr = None
 
-    def shift(self, frm: int, to: int) -> int:
-        s = frm - to
-        if s < 0:
-            raise ValueError(f"a left shift Q.{frm} -> Q.{to}")
-        return s
-
 
 def _py_rshr(x: int, s: int) -> int:
     return (x + (1 << (s - 1))) >> s if s > 0 else x
-
-
-def _c_term(a: str, fa: int, b: str, fb: int, fo: int) -> str:
-    """(int64_t)a * b rounded from Q.(fa + fb) to Q.fo."""
-    s = fa + fb - fo
-    if s < 0:
-        raise ValueError(f"product {a} * {b}: left shift")
-    if s == 0:
-        return f"acn_mul({a}, {b})"
-    if s >= 63:
-        return "0"
-    return f"ACN_RSHR(acn_mul({a}, {b}), {s})"
 
 
 def _py_term(a: int, fa: int, b: int, fb: int, fo: int) -> int:
@@ -124,12 +107,6 @@ def _py_term(a: int, fa: int, b: int, fb: int, fo: int) -> int:
     if s >= 63:
         return 0
     return _py_rshr(a * b, s)
-
-
-def _c_align(a: str, fa: int, fo: int) -> str:
-    if fa > fo:
-        return f"ACN_RSHR((int64_t){a}, {fa - fo})"
-    return f"((int64_t){a} * ((int64_t)1 << {fo - fa}))"
 
 
 def _py_align(a: int, fa: int, fo: int) -> int:
@@ -173,19 +150,60 @@ def thresholds(sched) -> Thresholds:
     return Thresholds(floor, shift, (True, True, False, False), max(1, sched.ramp))
 
 
-def check_follow(p, thr: Thresholds) -> None:
-    """ValueError when the deviation's formats of this plan need a shift the C cannot take: the dK shifts
-    (:class:`_Ops`), then every product and alignment of :func:`emit_follow`, whose text is dropped (the
-    shifts are worked out where they are spelled, so the planner runs that arithmetic once here)."""
-    emit_follow(p, "P", "T", thr)
+# Every product of T_follow: (a, b, out) names of _Ops.f, a x b rounded from Q.(f_a + f_b) to Q.f_out; and
+# every alignment (a, out). Listed once: follow_plan works out their shifts, emit_follow spells them.
+_PRODUCTS = (
+    ("H2", "DPae", "DPre"), ("T2", "DPae", "DPve"), ("H2", "Dca", "Dcr"), ("OMP", "DPre", "Dcr"),
+    ("T2", "Dca", "Dcv"), ("OMP", "DPve", "Dcv"), ("OMP", "DPae", "Dca"), ("PHI2", "Dce", "Dce"),
+    ("PHIOMP", "DPae", "Dce"), ("PHI", "DPre", "DPre"), ("PHI", "DPve", "DPve"), ("PHI", "DPae", "DPae"),
+    ("Kr", "S", "Dcr"), ("Kv", "S", "Dcv"), ("Ka", "S", "Dca"), ("Ke", "S", "Dce"),
+    ("Kr", "Dce", "DPre"), ("Kv", "Dce", "DPve"), ("Ka", "Dce", "DPae"),
+    ("Dcr", "CES", "DPre"), ("Dcv", "CES", "DPve"), ("Dca", "CES", "DPae"),
+    ("Dcr", "RS", "Dcr"), ("Dcv", "RS", "Dcv"), ("Dca", "RS", "Dca"), ("Dce", "RS", "Dce"),
+)  # fmt: skip
+_ALIGNS = (("DPve", "DPre"), ("Dcv", "Dcr"), ("Ka", "W"), ("Ke", "W"), ("Dca", "S"), ("Dce", "S"))
 
 
-def emit_follow(p, P: str, T: str, thr: Thresholds) -> list[str]:
-    """C: T_follow(s, valid, K): one sample of the deviation recursion (see the module docstring). K in:
-    the schedule's gains K_u of this sample; out (valid): the gains to use."""
+@dataclass(frozen=True)
+class FollowPlan:
+    """Every number T_follow's C carries, worked out and checked before any text: the return thresholds,
+    the frac bits, the right shift of every product (>= 63: below one LSB of its target, dropped), the
+    alignment of every sum's terms (> 0 a right shift, else a left one), the dK shifts SH_i (the C takes
+    SH_i - 1 - n) and c_e / S's, and which ramped threshold shifts need a cap at 31."""
+
+    thr: Thresholds
+    f: dict[str, int]
+    products: dict[tuple[str, str, str], int]
+    aligns: dict[tuple[str, str], int]
+    dk_shift: dict[str, int]
+    ces_shift: int
+    capped: tuple[bool, ...]
+
+
+def follow_plan(p, thr: Thresholds) -> FollowPlan:
+    """The plan of T_follow for these formats; ValueError when the deviation's formats need a shift the C
+    cannot take (a dK shift out of 1..62 for some clz of S, :class:`_Ops`, or a left-shifted product)."""
     o = _Ops(p)
-    f = o.f
+    f = o.f | {"RS": 30, "W": 30}  # R / S in Q1.30; 1 - K_ua - K_ue in Q.30
+    products = {}
+    for a, b, out in _PRODUCTS:
+        s = f[a] + f[b] - f[out]
+        if s < 0:
+            raise ValueError(f"product {a} * {b}: left shift")
+        products[(a, b, out)] = s
+    aligns = {(a, out): f[a] - f[out] for a, out in _ALIGNS}
+    capped = tuple(thr.shift[i] + 5 > 31 and thr.ramped[i] for i in range(4))
+    ces_shift = 61 - f["S"] + f["Dce"] - f["CES"]  # 1/S = x 2^(n - 62 + fS), x = 2 xs
+    return FollowPlan(thr, f, products, aligns, dict(o.sh), ces_shift, capped)
+
+
+def emit_follow(fp: FollowPlan, P: str, T: str) -> list[str]:
+    """C: T_follow(s, valid, K): one sample of the deviation recursion (see the module docstring), spelled
+    from its plan. K in: the schedule's gains K_u of this sample; out (valid): the gains to use."""
+    f, thr = fp.f, fp.thr
     fS = f["S"]
+    ci = {"r": "Dcr", "v": "Dcv", "a": "Dca", "e": "Dce"}
+    pe = {"r": "DPre", "v": "DPve", "a": "DPae"}
 
     def sat(expr):
         return f"acn_sat32({expr}, &s->overflow)"
@@ -193,22 +211,34 @@ def emit_follow(p, P: str, T: str, thr: Thresholds) -> list[str]:
     def k(name):
         return f"{P}_{name}"
 
+    def term(a: str, b: str, key: tuple[str, str, str]) -> str:
+        """(int64_t)a * b rounded to the key's target (codegen.follow._PRODUCTS)."""
+        s = fp.products[key]
+        if s == 0:
+            return f"acn_mul({a}, {b})"
+        if s >= 63:
+            return "0"
+        return f"ACN_RSHR(acn_mul({a}, {b}), {s})"
+
+    def align(a: str, key: tuple[str, str]) -> str:
+        s = fp.aligns[key]
+        if s > 0:
+            return f"ACN_RSHR((int64_t){a}, {s})"
+        return f"((int64_t){a} * ((int64_t)1 << {-s}))"
+
     H2, T2, OMP, PHI, PHI2, PHIOMP, R = (k(n) for n in ("H2", "T2", "OMP", "PHI", "PHI2", "PHIOMP", "R"))
-    fH2, fT2, fO, fP, fP2, fPO = (f[n] for n in ("H2", "T2", "OMP", "PHI", "PHI2", "PHIOMP"))
-    tr = "(int64_t)s->DPre + " + _c_align("s->DPve", f["DPve"], f["DPre"]) + " + "
-    tr += _c_term(H2, fH2, "s->DPae", f["DPae"], f["DPre"])
-    tv = "(int64_t)s->DPve + " + _c_term(T2, fT2, "s->DPae", f["DPae"], f["DPve"])
-    dcr = "(int64_t)s->Dcr + " + _c_align("s->Dcv", f["Dcv"], f["Dcr"]) + " + "
-    dcr += _c_term(H2, fH2, "s->Dca", f["Dca"], f["Dcr"]) + " - " + _c_term(OMP, fO, "tr", f["DPre"], f["Dcr"])
-    dcv = "(int64_t)s->Dcv + " + _c_term(T2, fT2, "s->Dca", f["Dca"], f["Dcv"])
-    dcv += " - " + _c_term(OMP, fO, "tv", f["DPve"], f["Dcv"])
-    dca = "(int64_t)s->Dca - " + _c_term(OMP, fO, "s->DPae", f["DPae"], f["Dca"])
-    dce = (
-        _c_term(PHI2, fP2, "s->Dce", f["Dce"], f["Dce"]) + " + " + _c_term(PHIOMP, fPO, "s->DPae", f["DPae"], f["Dce"])
-    )
+    tr = "(int64_t)s->DPre + " + align("s->DPve", ("DPve", "DPre")) + " + "
+    tr += term(H2, "s->DPae", ("H2", "DPae", "DPre"))
+    tv = "(int64_t)s->DPve + " + term(T2, "s->DPae", ("T2", "DPae", "DPve"))
+    dcr = "(int64_t)s->Dcr + " + align("s->Dcv", ("Dcv", "Dcr")) + " + "
+    dcr += term(H2, "s->Dca", ("H2", "Dca", "Dcr")) + " - " + term(OMP, "tr", ("OMP", "DPre", "Dcr"))
+    dcv = "(int64_t)s->Dcv + " + term(T2, "s->Dca", ("T2", "Dca", "Dcv"))
+    dcv += " - " + term(OMP, "tv", ("OMP", "DPve", "Dcv"))
+    dca = "(int64_t)s->Dca - " + term(OMP, "s->DPae", ("OMP", "DPae", "Dca"))
+    dce = term(PHI2, "s->Dce", ("PHI2", "Dce", "Dce")) + " + " + term(PHIOMP, "s->DPae", ("PHIOMP", "DPae", "Dce"))
     zmax = ZOOM_MAX
-    wa = _c_align("K[2]", f["Ka"], 30)
-    we = _c_align("K[3]", f["Ke"], 30)
+    wa = align("K[2]", ("Ka", "W"))
+    we = align("K[3]", ("Ke", "W"))
     L = [
         "/* back on the schedule once every |dK| <= max(FLOOR, |K_u| >> (SH + e)), e > 0 for K_r and K_v",
         " * before sample RAMP (codegen.follow.Thresholds) */",
@@ -252,11 +282,11 @@ def emit_follow(p, P: str, T: str, thr: Thresholds) -> list[str]:
         f"            tv = {sat(tv)};",
         f"            s->Dcr = {sat(dcr)};",
         f"            s->Dcv = {sat(dcv)};",
-        f"            s->DPre = (int32_t){_c_term(PHI, fP, 'tr', f['DPre'], f['DPre'])};",
-        f"            s->DPve = (int32_t){_c_term(PHI, fP, 'tv', f['DPve'], f['DPve'])};",
+        f"            s->DPre = (int32_t){term(PHI, 'tr', ('PHI', 'DPre', 'DPre'))};",
+        f"            s->DPve = (int32_t){term(PHI, 'tv', ('PHI', 'DPve', 'DPve'))};",
         f"            s->Dca = {sat(dca)};",
         f"            s->Dce = {sat(dce)};",
-        f"            s->DPae = (int32_t){_c_term(PHI, fP, 's->DPae', f['DPae'], f['DPae'])};",
+        f"            s->DPae = (int32_t){term(PHI, 's->DPae', ('PHI', 'DPae', 'DPae'))};",
         "        }",
         "    } else {",
         "        /* the first skip of an excursion: P equals P_u here */",
@@ -270,9 +300,9 @@ def emit_follow(p, P: str, T: str, thr: Thresholds) -> list[str]:
         f"    Su = {sat(f'ACN_RSHR((int64_t){R} * (int64_t)x, 32 - n)')}; /* Q.{fS} */",
     ]
     for i, nm in enumerate("rvae"):
-        L.append(f"    cu[{i}] = {sat(_c_term(f'K[{i}]', f['K' + nm], 'Su', fS, f[o.ci[nm]]))};")
-    dS = _c_align("s->Dca", f["Dca"], fS) + " + " + _c_align("s->Dce", f["Dce"], fS)
-    ces_sh = 61 - fS + f["Dce"] - f["CES"]  # 1/S = x 2^(n - 62 + fS), x = 2 xs
+        L.append(f"    cu[{i}] = {sat(term(f'K[{i}]', 'Su', ('K' + nm, 'S', ci[nm])))};")
+    dS = align("s->Dca", ("Dca", "S")) + " + " + align("s->Dce", ("Dce", "S"))
+    ces_sh = fp.ces_shift
     L += [
         "    if (valid) {",
         "        int32_t dS, S, xs, dK[4], num[4], ce, rs, ces;",
@@ -290,21 +320,21 @@ def emit_follow(p, P: str, T: str, thr: Thresholds) -> list[str]:
         f"        ces = {sat(f'ACN_RSHR(acn_mul(ce, xs), {ces_sh} - n)')}; /* c_e / S, Q.{f['CES']} */",
     ]
     for i, nm in enumerate("rvae"):
-        dc = o.ci[nm]
-        num = f"(int64_t)s->{dc} - " + _c_term(f"K[{i}]", f["K" + nm], "dS", fS, f[dc])
+        dc = ci[nm]
+        num = f"(int64_t)s->{dc} - " + term(f"K[{i}]", "dS", ("K" + nm, "S", dc))
+        dks = fp.dk_shift[nm] - 1
         L += [
             f"        /* dK_{nm} = (D_c{nm} - K_u{nm} dS) / S = num / S */",
             f"        num[{i}] = {sat(num)};",
-            f"        dK[{i}] = acn_clamp32(acn_unzoom64(ACN_RSHR(acn_mul(num[{i}], xs), {o.sh[nm] - 1} - n), z));",
+            f"        dK[{i}] = acn_clamp32(acn_unzoom64(ACN_RSHR(acn_mul(num[{i}], xs), {dks} - n), z));",
         ]
     L += ["        /* D_Pie -= K_ui D_ce + dK_i c_e (the old D_ce); D_c = R dK = num R / S */"]
     for i, nm in enumerate("rva"):
-        pe = o.pe[nm]
-        t1 = _c_term(f"K[{i}]", f["K" + nm], "s->Dce", f["Dce"], f[pe])
-        t2 = _c_term(f"num[{i}]", f[o.ci[nm]], "ces", f["CES"], f[pe])
-        L.append(f"        s->{pe} = {sat(f'(int64_t)s->{pe} - {t1} - {t2}')};")
+        t1 = term(f"K[{i}]", "s->Dce", ("K" + nm, "Dce", pe[nm]))
+        t2 = term(f"num[{i}]", "ces", (ci[nm], "CES", pe[nm]))
+        L.append(f"        s->{pe[nm]} = {sat(f'(int64_t)s->{pe[nm]} - {t1} - {t2}')};")
     for i, nm in enumerate("rvae"):
-        L.append(f"        s->{o.ci[nm]} = {sat(_c_term(f'num[{i}]', f[o.ci[nm]], 'rs', 30, f[o.ci[nm]]))};")
+        L.append(f"        s->{ci[nm]} = {sat(term(f'num[{i}]', 'rs', (ci[nm], 'RS', ci[nm])))};")
     L += [
         "        /* back on the schedule once every |dK| is within its threshold */",
         "        {",
@@ -317,7 +347,7 @@ def emit_follow(p, P: str, T: str, thr: Thresholds) -> list[str]:
     ]
     for i, c in enumerate("RVAE"):
         sh = f"({P}_SH_{c} + e)" if thr.ramped[i] else f"{P}_SH_{c}"
-        cap = f"({sh} > 31 ? 31 : {sh})" if thr.shift[i] + 5 > 31 and thr.ramped[i] else sh
+        cap = f"({sh} > 31 ? 31 : {sh})" if fp.capped[i] else sh
         L += [
             f"            t[{i}] = (K[{i}] < 0 ? 0u - (uint32_t)K[{i}] : (uint32_t)K[{i}]) >> {cap};",
             f"            t[{i}] = t[{i}] < {P}_FLOOR_{c} ? {P}_FLOOR_{c} : t[{i}];",
@@ -362,12 +392,11 @@ def emit_follow(p, P: str, T: str, thr: Thresholds) -> list[str]:
     ]
     L.append(f"        int32_t sr = Su - {R};")
     for i, nm in enumerate("rvae"):
-        dc = o.ci[nm]
-        L.append(f"        s->{dc} = {sat(f'(int64_t)s->{dc} + ' + _c_term(f'K[{i}]', f['K' + nm], 'sr', fS, f[dc]))};")
+        dc = ci[nm]
+        L.append(f"        s->{dc} = {sat(f'(int64_t)s->{dc} + ' + term(f'K[{i}]', 'sr', ('K' + nm, 'S', dc)))};")
     for i, nm in enumerate("rva"):
-        pe = o.pe[nm]
-        inc = _c_term(f"K[{i}]", f["K" + nm], "cu[3]", f["Dce"], f[pe])
-        L.append(f"        s->{pe} = {sat(f'(int64_t)s->{pe} + ' + inc)};")
+        inc = term(f"K[{i}]", "cu[3]", ("K" + nm, "Dce", pe[nm]))
+        L.append(f"        s->{pe[nm]} = {sat(f'(int64_t)s->{pe[nm]} + ' + inc)};")
     L += ["    }", "}", ""]
     return L
 

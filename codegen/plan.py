@@ -2,9 +2,12 @@
 
 :func:`plan` takes a model to one :class:`AxisCode` per axis: the Q formats and bounds of
 :func:`codegen.ranges.plan_axis`, the gain schedule (gain-schedule form), the quantised constants and
-initial state, the clamp words, the offset of the gain schedule's bias state and the thresholds of its
-return after a skip. Every refusal of a model whose ranges the C cannot carry is raised here, as a
-:class:`~codegen.ranges.RangeError`, so :mod:`codegen.emit_c` only formats a plan that is known to fit.
+initial state, the clamp words, the offset of the gain schedule's bias state, its step after a skip
+(:class:`codegen.follow.FollowPlan`: return thresholds and every shift), the covariance form's sums
+(:mod:`codegen.plan_cov`: constants folded, shifts, guard bits, saturations) and the state's layout and
+checkpoint image (:mod:`codegen.layout`). Every refusal of a model whose ranges the C cannot carry is
+raised here, as a :class:`~codegen.ranges.RangeError`, so :mod:`codegen.emit_c` only formats a plan that
+is known to fit.
 """
 
 from __future__ import annotations
@@ -16,8 +19,10 @@ from dataclasses import dataclass
 from accelnav.model.load import Model
 
 from .gains import Schedule
+from .layout import Layout, layout
+from .plan_cov import CovSums, cov_fracs, cov_sums
 from .qformat import QFormat, quantize
-from .ranges import AxisPlan, RangeError, fine_view, plan_axis
+from .ranges import FINE, AxisPlan, RangeError, fine_view, plan_axis
 
 # K_r, K_v (no feedback: 3e-4 and 1e-3 took the 100 Hz table from 259 to 177 segments, 1 kHz from 673 to
 # 412, the firmware's departure from the float64 filter on the shock and stress lockstep runs unchanged
@@ -130,8 +135,11 @@ class AxisCode:
     cov0: dict[str, tuple[float, int]]  # covariance form: the initial block of P (value, integer)
     eoff: int | None  # gain schedule: eps = eb + eoff (LSB of e); None: the state holds eps
     sched: Schedule | None  # gain schedule: its table
-    follow: object | None  # gain schedule: codegen.follow.Thresholds of the return after a skip
+    follow: object | None  # gain schedule: codegen.follow.FollowPlan of the step after a skip
     merge: Merge | None  # gain schedule: how its step sums the increments
+    layout: Layout  # the state struct and its checkpoint image
+    cov: tuple[CovSums, CovSums] | None = None  # covariance form: its sums in the fine and coarse formats
+    switch: dict[str, int] | None = None  # covariance form: the switch levels theta in LSB of the coarse formats
 
 
 def _eps_offset(p: AxisPlan) -> int:
@@ -149,25 +157,14 @@ def _eps_offset(p: AxisPlan) -> int:
 
 
 def _follow(p: AxisPlan, sched: Schedule):
-    """The return thresholds after a skip, once the deviation's shifts are known to fit this model."""
-    from .follow import check_follow, thresholds
+    """The follow step after a skip (codegen.follow.FollowPlan: its return thresholds and every shift),
+    once the deviation's shifts are known to fit this model."""
+    from .follow import follow_plan, thresholds
 
-    thr = thresholds(sched)
     try:
-        check_follow(p, thr)
+        return follow_plan(p, thresholds(sched))
     except ValueError as e:  # a shift the deviation's formats cannot take: this model's ranges
         raise RangeError(p.model.source, "filter.form", f"'gain_schedule' after a skip: {e}") from None
-    return thr
-
-
-def cov_fracs(p: AxisPlan) -> dict:
-    """Binary points of the covariance form's update: nmax, the clz of the smallest S (= R); x, the
-    format of xs = 1/S; and per state the product c_i w that it adds."""
-    fca = p.f("ca")
-    nmax = 32 - quantize(p.design.R, p.vars["S"].fmt).bit_length()
-    fw = p.f("w")
-    prod = {"r": p.f("cr") + fw, "v": p.f("cv") + fw, "a": fca + fw, "e": p.f("ce") + fw}
-    return {"nmax": nmax, "x": 61 - nmax - fca, "prod": prod}
 
 
 def _check_cov_shifts(p: AxisPlan) -> None:
@@ -215,10 +212,13 @@ def axis_code(p: AxisPlan) -> AxisCode:
     if p.form == "gain_schedule":
         sched = schedule_for(p)
         merge = gs_merge(p, clamps["VHI"][2])
-        return AxisCode(p, consts, clamps, x0, {}, _eps_offset(p), sched, _follow(p, sched), merge)
-    for q in (fine_view(p), p):  # the update in the fine and in the coarse formats
+        return AxisCode(p, consts, clamps, x0, {}, _eps_offset(p), sched, _follow(p, sched), merge, layout(p.form))
+    views = (fine_view(p), p)  # the predict and update in the fine and in the coarse formats
+    for q in views:
         _check_cov_shifts(q)
-    return AxisCode(p, consts, clamps, x0, _cov0(p), None, None, None, None)
+    cov = tuple(cov_sums(q) for q in views)
+    switch = {nm: math.floor(p.theta[nm] * 2.0 ** p.vars[nm].fmt.frac) for nm in FINE}
+    return AxisCode(p, consts, clamps, x0, _cov0(p), None, None, None, None, layout(p.form), cov, switch)
 
 
 def plan(model: Model, form: str | None = None) -> list[AxisCode]:

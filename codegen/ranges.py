@@ -57,7 +57,8 @@ class RangeError(ModelError):
 
 
 def refuse_calibrated(model: Model) -> None:
-    """The fixed-point C starts from the MCU's raw input; a calibrated sensor has none to describe."""
+    """The generated C (fixed point or float32) starts from the MCU's raw input; a calibrated sensor has
+    none to describe."""
     if model.sensor.kind == "calibrated":
         raise RangeError(
             model.source,

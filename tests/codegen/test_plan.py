@@ -42,7 +42,7 @@ def test_a_range_refusal_comes_from_the_planner_before_any_text(monkeypatch):
     def cannot(p, thr):
         raise ValueError("dK_r shift 70 - n out of range")
 
-    monkeypatch.setattr(follow, "check_follow", cannot)
+    monkeypatch.setattr(follow, "follow_plan", cannot)
     with pytest.raises(RangeError, match="filter.form: 'gain_schedule' after a skip: dK_r shift") as e:
         emit_c.emit(model, form="gain_schedule")
     assert "\n" not in str(e.value) and model.source in str(e.value)
