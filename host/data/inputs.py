@@ -130,16 +130,7 @@ def _on_model(path, rec, model: Model | None, chosen: bool = False) -> tuple[Run
     if model is None:
         model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
     check_rate(rec, model.rate_hz, str(model.source))
-    names = [a.name for a in model.axes]
-    if chosen and len(rec.axis_names) < len(names) and set(rec.axis_names) <= set(names):
-        model = narrowed(model, list(rec.axis_names))
-        note(f"{path}: model {model.name} narrowed to axes {', '.join(rec.axis_names)}")
-        names = list(rec.axis_names)
-    if len(rec.axis_names) != len(names):
-        raise UserError(
-            f"{path}: {len(rec.axis_names)} axes ({', '.join(rec.columns)}) for the model's {len(names)} "
-            f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
-        )
+    model, names = model_axes(path, model, list(rec.axis_names), list(rec.columns), chosen)
     said = len(rec.notes)
     rec = in_accel(rec, model)  # raw counts -> m/s^2 by the model's own read-out and calibration
     for text in rec.notes[said:]:
@@ -168,6 +159,23 @@ def _on_model(path, rec, model: Model | None, chosen: bool = False) -> tuple[Run
         note(f"{path}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
     arrays = {"t": t, "axis_names": np.array(names), "accel": accel, "clipped": clipped}
     return Run(arrays), model
+
+
+def model_axes(src, model: Model, axis_names: list[str], columns: list[str], chosen: bool) -> tuple[Model, list[str]]:
+    """(model, its axis names) for a recording's axes: narrowed to them when they were chosen (--axis)
+    by the names of fewer model axes; a count that still differs is refused in one line. The whole and
+    the streamed readers both decide here."""
+    names = [a.name for a in model.axes]
+    if chosen and len(axis_names) < len(names) and set(axis_names) <= set(names):
+        model = narrowed(model, axis_names)
+        note(f"{src}: model {model.name} narrowed to axes {', '.join(axis_names)}")
+        names = list(axis_names)
+    if len(axis_names) != len(names):
+        raise UserError(
+            f"{src}: {len(axis_names)} axes ({', '.join(columns)}) for the model's {len(names)} "
+            f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
+        )
+    return model, names
 
 
 def narrowed(model: Model, axes: list[str]) -> Model:

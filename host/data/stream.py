@@ -173,7 +173,7 @@ def open_stream(
     are UserError in one line (the same as read_input's); NotStreamed when only the whole reader can
     take it. ``allow_gaps`` is accepted for the same signature; a gap refuses or goes to the whole
     reader, as it would there. Close the result (or use it in a ``with``) to remove the store."""
-    from accelnav.data.inputs import _unit, narrowed
+    from accelnav.data.inputs import _unit, model_axes
     from accelnav.link.logfile import is_log
 
     override = model if isinstance(model, Model) or model is None else load_model(model)
@@ -192,7 +192,7 @@ def open_stream(
     try:
         st = _parse(path, folder, magic == b"\x1f\x8b", override, _unit(override), axes, unit, rate_hz, time_column)
         st.rate_hz, st.time_unit = rate_hz, time_unit
-        _check(st, override, time_unit, chosen=bool(axes), narrowed=narrowed, block=block)
+        _check(st, override, time_unit, chosen=bool(axes), model_axes=model_axes, block=block)
     except BaseException:  # Ctrl-C too: the store goes with the error
         if st is not None:
             st.close()
@@ -235,7 +235,7 @@ def _where(st: Stream, k: int) -> str:
     return f"sample {k} (line {int(st.rows(k, k + 1)[1][0])})"
 
 
-def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narrowed, block: int) -> None:
+def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, model_axes, block: int) -> None:
     """read_recording's time checks and read_input's model checks (inputs._on_model), block by block."""
     src, h = st.source, st.head
     tu = rc.csv_time_unit(h)
@@ -251,16 +251,7 @@ def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, narro
     # read_input._on_model: the model, its rate, its axes
     model = override if override is not None else load_model(None)
     rc.check_step(src, step, tu, model.rate_hz, str(model.source))
-    names = [a.name for a in model.axes]
-    if chosen and len(h.names) < len(names) and set(h.names) <= set(names):
-        model = narrowed(model, list(h.names))
-        note(f"{src}: model {model.name} narrowed to axes {', '.join(h.names)}")
-        names = list(h.names)
-    if len(h.names) != len(names):
-        raise UserError(
-            f"{src}: {len(h.names)} axes ({', '.join(h.chosen)}) for the model's {len(names)} "
-            f"({', '.join(names)}); choose the columns with --axis, one per model axis, in its order"
-        )
+    model, names = model_axes(src, model, list(h.names), list(h.chosen), chosen)
     st.model, st.axis_names, st.t0, st.Ts = model, np.array(names), clock.t0, 1.0 / rate
     _grid_pass(st, rate, block)
     if list(h.chosen) != names:
