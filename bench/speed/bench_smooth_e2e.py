@@ -12,8 +12,8 @@ same run and the same data:
 Data: the default model's stop_and_go simulation (rests for --zupt auto), tiled to N rows; the model
 is the default with ranges.max_run_s raised to the run (the shipped 3600 s is the fixed-point C's
 range proof, not a limit of the host tools). Sizes 1e5, 1e6, 1e7 rows; 1e8 only with --big.
-Usage: python bench/run_all.py bench/speed/bench_smooth_e2e.py [--sizes 1e5 1e6 1e7] [--big] [--n-baseline 20000] [--keep DIR]
-       [--cases "smooth NPZ" ...] [--python EXE]
+Usage: python bench/run_all.py bench/speed/bench_smooth_e2e.py [--sizes 1e5 1e6 1e7] [--big]
+       [--n-baseline 20000] [--keep DIR] [--cases "smooth NPZ" ...] [--python EXE]
 --python runs the commands with another interpreter (another build of accelnav: before/after in one
 session); the kernel-alone row is always this interpreter's.
 """
