@@ -42,3 +42,23 @@ def test_no_python_module_spells_the_flags_again():
         if path.name not in NOT_STRICT and '"-Wextra"' in path.read_text()
     )
     assert not spelled, f"strict flags spelled outside firmware/parts.mk: {spelled}"
+
+
+@pytest.mark.parametrize(
+    "module", ["accelnav.estimate.fastsmooth", "accelnav.link.wirekernel", "accelnav.codegen.gains"]
+)
+def test_each_host_kernel_compiles_with_the_strict_flags(module, tmp_path):
+    """A kernel whose prebuilt module is stale (an edited checkout, another compiler) is compiled at run time
+    with STRICT_FLAGS: its C must pass them, -pedantic included (a merge once put C99-invalid const
+    array parameters into the smoother, which only the run-time build refused)."""
+    import importlib
+
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        pytest.skip("no C compiler (Debian: gcc)")
+    csrc = importlib.import_module(module).CSRC
+    for c in sorted(csrc.glob("*.c")):
+        done = subprocess.run(
+            [cc, *STRICT_FLAGS, "-fsyntax-only", f"-I{csrc}", str(c)], capture_output=True, text=True, cwd=tmp_path
+        )
+        assert done.returncode == 0, f"{c.name}:\n{done.stderr}"

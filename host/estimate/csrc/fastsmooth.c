@@ -431,7 +431,7 @@ static void fp_rows(const acn_axis *m, const double *p, double B[4][4])
 }
 
 /* P = B F' + Q with B = F P: the upper triangle of predict_cov's second half. */
-static void predict_packed(const acn_axis *m, const double B[4][4], double *p)
+static void predict_packed(const acn_axis *m, double B[4][4], double *p)
 {
     const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
     const double *q = m->q;
