@@ -1169,6 +1169,32 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
 }
 
 /*
+ * One backward step of the smoothed (a, eps) means and covariance: C the
+ * smoother gain (c00, c01, c10, c11), x the filter's (a, eps) posterior, pf
+ * its covariance (aa, ae, ee) and pn the next prior's. Updates the smoothed
+ * values in place; the full and the lean chunk stores lay these out apart.
+ */
+static inline void bwd_ae_step(double phi, double b, const double *c, const double *x,
+                               const double *pf, const double *pn, double *as, double *es,
+                               double *saa, double *sae, double *see)
+{
+    double c00 = c[0], c01 = c[1], c10 = c[2], c11 = c[3];
+    /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
+    double fa = x[0], fe = phi * x[1] + b;
+    double ca = x[0] - (c00 * fa + c01 * fe), ce = x[1] - (c10 * fa + c11 * fe);
+    double an = c00 * *as + c01 * *es + ca;
+    *es = c10 * *as + c11 * *es + ce;
+    *as = an;
+    /* Ps = Pf + C (Ps[k+1] - Pp) C' */
+    double daa = *saa - pn[0], dae = *sae - pn[1], dee = *see - pn[2];
+    double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
+    double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
+    *saa = pf[0] + t00 * c00 + t01 * c01;
+    *sae = pf[1] + t00 * c10 + t01 * c11;
+    *see = pf[2] + t10 * c10 + t11 * c11;
+}
+
+/*
  * acn_chunk_bwd over a lean store (acn_chunk_fwd_steady's) of samples k0 ..
  * k0 + n - 1: the smoother gain, the filter's (a, eps) covariance and the next
  * prior's from the rows (row min(k, nt - 1)), the same operations in the same
@@ -1193,21 +1219,7 @@ void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const doub
         long g = k0 + k;
         const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
         const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
-        double c00 = sr[4], c01 = sr[5], c10 = sr[6], c11 = sr[7];
-        /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
-        double fa = row[0], fe = phi * row[1] + b;
-        double ca = row[0] - (c00 * fa + c01 * fe), ce = row[1] - (c10 * fa + c11 * fe);
-        double an = c00 * as + c01 * es + ca;
-        es = c10 * as + c11 * es + ce;
-        as = an;
-        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
-        double daa = saa - sn[8], dae = sae - sn[9], dee = see - sn[10];
-        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
-        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
-        double paa = sr[11], pae = sr[12], pee = sr[13];
-        saa = paa + t00 * c00 + t01 * c01;
-        sae = pae + t00 * c10 + t01 * c11;
-        see = pee + t10 * c10 + t11 * c11;
+        bwd_ae_step(phi, b, sr + 4, row, sr + 11, sn + 8, &as, &es, &saa, &sae, &see);
         row[0] = as, row[1] = es, row[2] = saa, row[3] = sae, row[4] = see;
     }
     carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
@@ -1231,21 +1243,7 @@ void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *c
     }
     for (; k >= 0; k--) {
         double *row = store + ACN_ROW * k;
-        double c00 = row[2], c01 = row[3], c10 = row[4], c11 = row[5];
-        /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
-        double fa = row[0], fe = phi * row[1] + b;
-        double ca = row[0] - (c00 * fa + c01 * fe), ce = row[1] - (c10 * fa + c11 * fe);
-        double an = c00 * as + c01 * es + ca;
-        es = c10 * as + c11 * es + ce;
-        as = an;
-        /* Ps = Pf + C (Ps[k+1] - Pp) C' */
-        double daa = saa - row[9], dae = sae - row[10], dee = see - row[11];
-        double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
-        double t10 = c10 * daa + c11 * dae, t11 = c10 * dae + c11 * dee;
-        double paa = row[6], pae = row[7], pee = row[8];
-        saa = paa + t00 * c00 + t01 * c01;
-        sae = pae + t00 * c10 + t01 * c11;
-        see = pee + t10 * c10 + t11 * c11;
+        bwd_ae_step(phi, b, row + 2, row, row + 6, row + 9, &as, &es, &saa, &sae, &see);
         row[0] = as, row[1] = es, row[6] = saa, row[7] = sae, row[8] = see;
     }
     carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
