@@ -45,3 +45,43 @@ def test_a_member_not_fully_written_is_an_error_and_leaves_no_file(tmp_path):
             w.close()
     w.abort()
     assert not path.exists() and not (tmp_path / "o.npz.part").exists()
+
+
+def test_large_pieces_written_behind_the_caller_still_tile_and_check(tmp_path):
+    """Pieces of 1 MiB and more go through the writer thread (two slots, the caller's buffer reused at
+    once): overwriting the caller's buffer after write() must not change what lands in the file."""
+    n = 3 * (1 << 17) + 5  # doubles: pieces of 1 MiB and a short tail
+    want = np.random.default_rng(1).normal(size=n)
+    buf = np.empty(1 << 17)
+    with NpzWriter(tmp_path / "big.npz", {"x": ((n,), np.float64)}) as w:
+        for s in range(0, n, len(buf)):
+            e = min(s + len(buf), n)
+            buf[: e - s] = want[s:e]
+            w.write("x", s, buf[: e - s])
+            buf[:] = np.nan  # the caller reuses its buffer at once
+    with zipfile.ZipFile(tmp_path / "big.npz") as z:
+        assert z.testzip() is None
+    np.testing.assert_array_equal(np.load(tmp_path / "big.npz")["x"], want)
+
+
+def test_a_write_error_on_the_writer_thread_is_raised_and_leaves_no_file(tmp_path, monkeypatch):
+    """A full disk while a piece is written behind the caller: the error reaches the caller (at the next
+    write or at close), and neither the output nor its .part remains."""
+    import errno
+    import os
+
+    real = os.pwrite
+
+    def full(fd, data, pos):
+        if len(data) >= 1 << 20:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(fd, data, pos)
+
+    monkeypatch.setattr(os, "pwrite", full)
+    n = 4 * (1 << 17)
+    with pytest.raises(OSError, match="No space"):
+        with NpzWriter(tmp_path / "full.npz", {"x": ((n,), np.float64)}) as w:
+            for s in range(0, n, 1 << 17):
+                w.write("x", s, np.ones(1 << 17))
+    assert not (tmp_path / "full.npz").exists()
+    assert not list(tmp_path.iterdir()), list(tmp_path.iterdir())
