@@ -290,7 +290,7 @@ def read_args(args) -> tuple[dict[str, np.ndarray], Model]:
     return read_input(args.run, args.model, allow_gaps=args.allow_gaps, **reader_options(args))
 
 
-def _csv_rows(args) -> tuple[int, int] | None:
+def _csv_size_args(args) -> tuple[int, int] | None:
     """(estimated rows, axes) of a plain CSV input, from its size and first lines; None for another input."""
     from accelnav.data.stream import estimate_rows
 
@@ -300,11 +300,11 @@ def _csv_rows(args) -> tuple[int, int] | None:
     return rows, len(args.axis) if args.axis else len(load_model(args.model).axes)
 
 
-def _whole_input_fits(args, why: str) -> None:
+def _whole_input_args(args, why: str) -> None:
     """Refuse, before reading it, a CSV whose numbers exceed what one input may hold in memory."""
     from accelnav.fileio import input_limit
 
-    size = _csv_rows(args)
+    size = _csv_size_args(args)
     if size is None:
         return
     rows, n_axes = size
@@ -326,13 +326,13 @@ def stream_args(args, budget: int):
     from accelnav.data.stream import NotStreamed, open_stream
     from accelnav.estimate.chunked import disk_needed
 
-    size = _csv_rows(args)
+    size = _csv_size_args(args)
     if size is None or whole_bytes(*size) <= budget:
         return None
     flags = (("--fixes", args.fixes), ("--zupt", args.zupt), ("--tune", args.tune), ("--plots", args.plots),
              ("--csv", args.csv), ("--covariances", args.covariances))  # fmt: skip
     if any(v for _, v in flags):
-        _whole_input_fits(args, f"{', '.join(f for f, v in flags if v)} need(s) every sample in memory, which")
+        _whole_input_args(args, f"{', '.join(f for f, v in flags if v)} need(s) every sample in memory, which")
         return None
     for flag in ("out", "csv"):
         if getattr(args, flag, None) is not None:
@@ -452,7 +452,7 @@ def _cmd_streamed(args, arrays: dict[str, np.ndarray], model: Model, stages: tup
 
 
 def cmd_filter(args) -> int:
-    _whole_input_fits(args, "filter holds the run in memory")
+    _whole_input_args(args, "filter holds the run in memory")
     arrays, model = read_args(args)
     if _stream_args(args, arrays):
         return _cmd_streamed(args, arrays, model, ("filt",))
