@@ -201,6 +201,25 @@ int acn_plain_rows(const acn_axis *m, long n, double *rows)
 }
 
 /*
+ * The acceleration update of P with a stored steady row (K in row[0..3], the
+ * posterior's (a, eps) block in row[11..13]): the r, u rows by
+ * P -= K PH' + PH K' - K K' S, with S = H P H' + R (H = [0 0 1 1]).
+ */
+static void steady_update(double P[4][4], const double *row, double R)
+{
+    double PHt[4];
+    double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + R;
+    for (int i = 0; i < 4; i++)
+        PHt[i] = P[i][2] + P[i][3];
+    for (int i = 0; i < 2; i++)
+        for (int j = i; j < 4; j++) {
+            P[i][j] -= row[i] * PHt[j] + PHt[i] * row[j] - row[i] * row[j] * S;
+            P[j][i] = P[i][j];
+        }
+    P[2][2] = row[11], P[2][3] = P[3][2] = row[12], P[3][3] = row[13];
+}
+
+/*
  * acn_plain_cov of an all-valid run from the rows of acn_plain_rows: sample k
  * reads row min(k, nt - 1), the last stored row being steady (the caller checks
  * that). The (a, eps) blocks come from the rows; the r, u rows of P (which never
@@ -212,7 +231,7 @@ int acn_plain_rows(const acn_axis *m, long n, double *rows)
 int acn_plain_cov_steady(const acn_axis *m, long n, long nt, const double *rows, double *Pprior,
                          double *Ppost, double *Psm)
 {
-    double F[4][4], P[4][4], PHt[4];
+    double F[4][4], P[4][4];
     transition(m, F);
     unpack(m->p0, P);
     for (long k = 0; k < n; k++) {
@@ -221,16 +240,7 @@ int acn_plain_cov_steady(const acn_axis *m, long n, long nt, const double *rows,
             predict_cov(m, F, P);
         P[2][2] = row[8], P[2][3] = P[3][2] = row[9], P[3][3] = row[10];
         pack(P, Pprior + 10 * k);
-        /* S = H P H' + R */
-        double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
-        for (int i = 0; i < 4; i++)
-            PHt[i] = P[i][2] + P[i][3];
-        for (int i = 0; i < 2; i++)
-            for (int j = i; j < 4; j++) {
-                P[i][j] -= row[i] * PHt[j] + PHt[i] * row[j] - row[i] * row[j] * S;
-                P[j][i] = P[i][j];
-            }
-        P[2][2] = row[11], P[2][3] = P[3][2] = row[12], P[3][3] = row[13];
+        steady_update(P, row, m->R);
         pack(P, Ppost + 10 * k);
     }
     return plain_smooth_cov(m, n, (double *)rows + 4, ACN_SROW, nt, 0, Pprior, Ppost, Psm);
@@ -1117,7 +1127,7 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
                          double *sdf, double *Pf0, double *Pfn)
 {
     const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
-    double F[4][4], P[4][4], PHt[4];
+    double F[4][4], P[4][4];
     double r = carry[0], u = carry[1], a = carry[2], ep = carry[3], e;
     transition(m, F);
     unpack(carry + 4, P);
@@ -1127,15 +1137,7 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
         double *row = store + ACN_LROW * k;
         /* the prior's (a, eps) block is the stored one (as acn_plain_cov_steady) */
         P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9], P[3][3] = sr[10];
-        double S = P[2][2] + 2.0 * P[2][3] + P[3][3] + m->R;
-        for (int i = 0; i < 4; i++)
-            PHt[i] = P[i][2] + P[i][3];
-        for (int i = 0; i < 2; i++)
-            for (int j = i; j < 4; j++) {
-                P[i][j] -= sr[i] * PHt[j] + PHt[i] * sr[j] - sr[i] * sr[j] * S;
-                P[j][i] = P[i][j];
-            }
-        P[2][2] = sr[11], P[2][3] = P[3][2] = sr[12], P[3][3] = sr[13];
+        steady_update(P, sr, m->R);
         /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
         double y = z[k] - a - ep;
         r += sr[0] * y;
