@@ -2,3 +2,5 @@
 
 Nothing here is Python: see firmware/README.md and accelnav.hil_sim.targets.firmware.
 """
+
+__all__: list[str] = []  # data only: nothing to import
