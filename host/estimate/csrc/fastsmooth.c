@@ -247,6 +247,41 @@ int acn_plain_cov_steady(const acn_axis *m, long n, long nt, const double *rows,
 }
 
 /*
+ * The covariance part of one step of the smoothed r, u recursion (see
+ * plain_smooth_cov): from P_rr, P_ru, P_ra, P_uu, P_ua, P_aa of sample k
+ * (s[0..5]), beta = (beta_r, beta_u) of k (updated to k + 1 in place), the
+ * smoother gain C[k] and P_aa, P_ae of sample k + 1, the new P_rr, P_uu, P_ru
+ * (out[0..2]).
+ */
+static inline void ru_cov_step(const acn_axis *m, const double s[6], double beta[4],
+                               const double *C, double aa1, double ae1, double out[3])
+{
+    const double gr = m->gr, gu = m->gu, f01 = m->f01;
+    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
+    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
+    const double qe_uu = m->q[4] - gu * m->q[5];
+    double rr = s[0], ru = s[1], ra = s[2], uu = s[3], ua = s[4], aa = s[5];
+    double br0 = beta[0], br1 = beta[1], bu0 = beta[2], bu1 = beta[3];
+    /* Var and Cov of p_r, p_u (time-k quantities) */
+    double vpr =
+        rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
+    double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
+    double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
+    /* beta of p_r, p_u at k, then mapped to k+1: gamma = C' beta */
+    double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
+    double pu0 = bu0 + c2u, pu1 = bu1;
+    double gr0 = C[0] * pr0 + C[2] * pr1, gr1 = C[1] * pr0 + C[3] * pr1;
+    double gu0 = C[0] * pu0 + C[2] * pu1, gu1 = C[1] * pu0 + C[3] * pu1;
+    double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1; /* Cov(p, a~') */
+    beta[0] = gr0 + gr, beta[1] = gr1;
+    beta[2] = gu0 + gu, beta[3] = gu1;
+    /* Var(r~'), Var(u~'), Cov(r~', u~') */
+    out[0] = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
+    out[1] = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
+    out[2] = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
+}
+
+/*
  * The smoother's covariances from the filter's (Pprior, Ppost): the (a, eps)
  * block backward, then the r, u rows forward. The smoother gain of sample k is
  * computed backward (written to Cs[k] if write_cs) and read forward from row
@@ -298,11 +333,7 @@ static int plain_smooth_cov(const acn_axis *m, long n, double *Cs, long stride, 
      *   r~' = p_r + gr a~' + e_r,   p_r = r~ + f01 u~ + (f02 - gr) a~
      * e = (e_r, e_u) is the part of w_(r,u) independent of w_a, covariance Qe.
      */
-    const double gr = m->gr, gu = m->gu, f01 = m->f01;
-    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
-    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
-    const double qe_uu = m->q[4] - gu * m->q[5];
-    double br0 = 0.0, br1 = 0.0, bu0 = 0.0, bu1 = 0.0;
+    double beta[4] = {0.0, 0.0, 0.0, 0.0};
     {
         double *ps = Psm + 0;
         const double *pf = Ppost + 0;
@@ -314,28 +345,13 @@ static int plain_smooth_cov(const acn_axis *m, long n, double *Cs, long stride, 
     for (long k = 0; k + 1 < n; k++) {
         const double *p = Psm + 10 * k, *C = Cs + stride * (k < ncs ? k : ncs - 1);
         double *q = Psm + 10 * (k + 1);
-        double rr = p[0], ru = p[1], ra = p[2], uu = p[4], ua = p[5], aa = p[7];
-        /* Var and Cov of p_r, p_u (time-k quantities) */
-        double vpr =
-            rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
-        double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
-        double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
-        /* beta of p_r, p_u at k, then mapped to k+1: gamma = C' beta */
-        double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
-        double pu0 = bu0 + c2u, pu1 = bu1;
-        double gr0 = C[0] * pr0 + C[2] * pr1, gr1 = C[1] * pr0 + C[3] * pr1;
-        double gu0 = C[0] * pu0 + C[2] * pu1, gu1 = C[1] * pu0 + C[3] * pu1;
-        double aa1 = q[7], ae1 = q[8], ee1 = q[9];
-        double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1; /* Cov(p, a~') */
-        br0 = gr0 + gr, br1 = gr1;
-        bu0 = gu0 + gu, bu1 = gu1;
-        /* Var(r~'), Var(u~'), Cov(r~', u~') */
-        q[0] = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
-        q[4] = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
-        q[1] = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
+        const double s[6] = {p[0], p[1], p[2], p[4], p[5], p[7]};
+        double aa1 = q[7], ae1 = q[8], ee1 = q[9], out[3];
+        ru_cov_step(m, s, beta, C, aa1, ae1, out);
+        q[0] = out[0], q[4] = out[1], q[1] = out[2];
         /* Cov(r~', s~') = beta_r' Ps_s, Cov(u~', s~') = beta_u' Ps_s */
-        q[2] = br0 * aa1 + br1 * ae1, q[3] = br0 * ae1 + br1 * ee1;
-        q[5] = bu0 * aa1 + bu1 * ae1, q[6] = bu0 * ae1 + bu1 * ee1;
+        q[2] = beta[0] * aa1 + beta[1] * ae1, q[3] = beta[0] * ae1 + beta[1] * ee1;
+        q[5] = beta[2] * aa1 + beta[3] * ae1, q[6] = beta[2] * ae1 + beta[3] * ee1;
     }
     /* the smoother's last sample is the filter's, exactly (the reference's convention) */
     for (int i = 0; i < 10; i++)
@@ -1261,34 +1277,17 @@ static void ru_step(const acn_axis *m, double v[11], double a0, double aa, doubl
                     double ae1, const double *C)
 {
     const double gr = m->gr, gu = m->gu, f01 = m->f01, f02 = m->f02, f12 = m->f12;
-    const double c2r = m->f02 - gr, c2u = m->f12 - gu;
-    const double qe_rr = m->q[0] - gr * m->q[2], qe_ru = m->q[1] - gr * m->q[5];
-    const double qe_uu = m->q[4] - gu * m->q[5];
-    double r = v[0], u = v[1], rr = v[2], ru = v[3], ra = v[4], uu = v[5], ua = v[6];
-    double br0 = v[7], br1 = v[8], bu0 = v[9], bu1 = v[10];
-    double vpr =
-        rr + f01 * f01 * uu + c2r * c2r * aa + 2.0 * (f01 * ru + c2r * ra + f01 * c2r * ua);
-    double vpu = uu + c2u * c2u * aa + 2.0 * c2u * ua;
-    double cpp = ru + c2u * ra + f01 * uu + f01 * c2u * ua + c2r * ua + c2r * c2u * aa;
-    double pr0 = br0 + f01 * bu0 + c2r, pr1 = br1 + f01 * bu1;
-    double pu0 = bu0 + c2u, pu1 = bu1;
-    double gr0 = C[0] * pr0 + C[2] * pr1, gr1 = C[1] * pr0 + C[3] * pr1;
-    double gu0 = C[0] * pu0 + C[2] * pu1, gu1 = C[1] * pu0 + C[3] * pu1;
-    double cra = gr0 * aa1 + gr1 * ae1, cua = gu0 * aa1 + gu1 * ae1;
-    br0 = gr0 + gr, br1 = gr1;
-    bu0 = gu0 + gu, bu1 = gu1;
-    double rr1 = vpr + 2.0 * gr * cra + gr * gr * aa1 + qe_rr;
-    double uu1 = vpu + 2.0 * gu * cua + gu * gu * aa1 + qe_uu;
-    ru = cpp + gu * cra + gr * cua + gr * gu * aa1 + qe_ru;
-    rr = rr1, uu = uu1;
-    ra = br0 * aa1 + br1 * ae1;
-    ua = bu0 * aa1 + bu1 * ae1;
+    const double s[6] = {v[2], v[3], v[4], v[5], v[6], aa};
+    double beta[4] = {v[7], v[8], v[9], v[10]}, out[3];
+    ru_cov_step(m, s, beta, C, aa1, ae1, out);
     /* u[k+1] = u[k] + f12 a[k] + gu (a[k+1] - a[k]);  r likewise */
-    double dw = a1 - a0;
+    double r = v[0], u = v[1], dw = a1 - a0;
     r = r + (f01 * u + (f02 * a0 + gr * dw));
     u = u + (f12 * a0 + gu * dw);
-    v[0] = r, v[1] = u, v[2] = rr, v[3] = ru, v[4] = ra, v[5] = uu, v[6] = ua;
-    v[7] = br0, v[8] = br1, v[9] = bu0, v[10] = bu1;
+    v[0] = r, v[1] = u, v[2] = out[0], v[3] = out[2], v[5] = out[1];
+    v[4] = beta[0] * aa1 + beta[1] * ae1; /* P_ra */
+    v[6] = beta[2] * aa1 + beta[3] * ae1; /* P_ua */
+    v[7] = beta[0], v[8] = beta[1], v[9] = beta[2], v[10] = beta[3];
 }
 
 /*
