@@ -9,32 +9,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import MODELS, edited_model
+from support.cart_model import adxl335_model
 
 from accelnav.estimate import zupt
 from accelnav.estimate.pipeline import smooth_run
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.load import load_model
 
-# An ADXL335 (+-3.6 g, 300 mV/g at 3.3 V, about 150 ug/sqrt(Hz)) on a 10-bit ratiometric ADC at 100 Hz, the
-# issue's cart; R = (1.3 mg noise)^2 + (9.8 mg LSB / sqrt(12))^2 = (3.1 mg)^2. As bench/speed/bench_rest_scenarios.py.
-ADXL335_EDITS = [
-    ('name = "adxl250_default"', 'name = "adxl335_cart"'),
-    ('part = "ADXL250"', 'part = "ADXL335"'),
-    ("range_g = 50.0", "range_g = 3.6"),
-    ("noise_density_g_rthz = 1.0e-3", "noise_density_g_rthz = 1.5e-4"),
-    ("supply_v = 5.0", "supply_v = 3.3"),
-    ("adc_bits = 12", "adc_bits = 10"),
-    ("adc_ref_v = 5.0", "adc_ref_v = 3.3"),
-    ("sensitivity_v_per_g = 0.038", "sensitivity_v_per_g = 0.33"),
-    ("zero_g_v = 2.5 ", "zero_g_v = 1.65 "),
-    ("zero_g_v = 2.501", "zero_g_v = 1.651"),
-    ("R = 0.0160", "R = 9.4e-4"),
-]
-
 
 def _model(name: str):
     if name == "adxl335":
-        return edited_model(ADXL335_EDITS, source="adxl335_cart.toml")
+        return adxl335_model()
     return load_model(None if name == "default" else MODELS / f"{name}.toml")
 
 
