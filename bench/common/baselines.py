@@ -7,7 +7,9 @@ pykalman applies b (transition_offsets) in both passes.
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -50,3 +52,15 @@ def pykalman_smooth(d, z):
         initial_state_covariance=np.array(d.P0),
     )
     return kf.smooth(z.reshape(-1, 1))[0]
+
+
+def builds(baseline: Path) -> dict[str, str]:
+    """{"this": this interpreter, "baseline": the .venv python of the checkout ``baseline``, if it has one}:
+    a before/after pair run by one bench on the same data."""
+    out = {"this": sys.executable}
+    base_py = baseline / ".venv" / "bin" / "python"
+    if base_py.exists():
+        out["baseline"] = str(base_py)
+    else:
+        print(f"no baseline: {base_py} is absent")
+    return out

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from baselines import builds as baseline_builds  # bench/common, on the path bench/run_all.py sets
 
 
 def measure(n: int, repeat: int) -> dict[str, float]:
@@ -80,12 +81,7 @@ def main() -> int:
     if args.inner:
         print(json.dumps(measure(n, args.repeat)))
         return 0
-    builds = {"this": sys.executable}
-    base_py = args.baseline / ".venv" / "bin" / "python"
-    if base_py.exists():
-        builds["baseline"] = str(base_py)
-    else:
-        print(f"no baseline: {base_py} is absent")
+    builds = baseline_builds(args.baseline)
     res: dict[str, dict[str, float]] = {}
     for build, py in builds.items():
         cmd = [py, __file__, "--inner", "--n", str(n), "--repeat", str(args.repeat)]

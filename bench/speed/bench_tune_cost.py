@@ -19,6 +19,7 @@ import argparse
 import time
 
 import numpy as np
+from baselines import best_of  # bench/common, on the path bench/run_all.py sets
 
 from accelnav.cli.core import TUNE_EVALUATIONS, TUNE_SECONDS
 from accelnav.estimate import fastsmooth
@@ -30,15 +31,6 @@ from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.design import axis_design
 from accelnav.model.edit import with_noise
 from accelnav.model.load import load_model
-
-
-def best_of(fn, repeat: int) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def main() -> None:

@@ -23,9 +23,9 @@ Usage: python bench/speed/bench_zupt.py [--minutes 60] [--seeds 5] [--repeat 3] 
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
+from baselines import best_of  # bench/common, on the path bench/run_all.py sets
 
 from accelnav.estimate import zupt
 from accelnav.estimate.pipeline import dead_reckoning, smooth_run, stride_errors
@@ -35,15 +35,6 @@ from accelnav.resources import models_dir
 
 # m, the detector before issue #11, same seeds (see tests/estimate/test_zupt.py)
 STOP_AND_GO_BEFORE_RMS = (0.1267, 0.1012)
-
-
-def best_of(fn, repeat: int) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def _module(path: str):

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from baselines import builds as baseline_builds  # bench/common, on the path bench/run_all.py sets
 from bench_smooth_e2e import make_data, run
 
 from accelnav.estimate import zupt
@@ -34,12 +35,7 @@ def main() -> int:
     args = ap.parse_args()
     folder = args.keep or Path(tempfile.mkdtemp(prefix="accelnav-bench-zupt-"))
     folder.mkdir(parents=True, exist_ok=True)
-    builds = {"this": sys.executable}
-    base_py = args.baseline / ".venv" / "bin" / "python"
-    if base_py.exists():
-        builds["baseline"] = str(base_py)
-    else:
-        print(f"no baseline: {base_py} is absent")
+    builds = baseline_builds(args.baseline)
     model = load_model(None)
     print("| N | build | plain s | --zupt auto s | ratio | plain RSS MB | zupt RSS MB |")
     print("|---|---|---|---|---|---|---|")
