@@ -230,3 +230,22 @@ def load_npz(path: str | Path, source: str | None = None, then: str = "") -> dic
     except OSError as exc:
         raise UserError(f"{src}: cannot read: {exc.strerror or exc}") from None
     return out
+
+
+def pread_exact(fd: int, buf, pos: int, what: str = "store", error: type[Exception] = OSError) -> None:
+    """Fill ``buf`` (any buffer, e.g. a C-contiguous array) from byte ``pos`` of ``fd``; a file that ends
+    first raises ``error`` naming ``what`` (a store truncated under us, say)."""
+    view = memoryview(buf).cast("B")
+    while view:
+        got = os.preadv(fd, [view], pos)
+        if got <= 0:
+            raise error(f"{what}: short read at byte {pos}")
+        view, pos = view[got:], pos + got
+
+
+def pwrite_all(fd: int, buf, pos: int) -> None:
+    """Write all of ``buf`` (any C-contiguous buffer) at byte ``pos`` of ``fd``, however the kernel splits it."""
+    view = memoryview(buf).cast("B")
+    while view:
+        done = os.pwrite(fd, view, pos)
+        view, pos = view[done:], pos + done

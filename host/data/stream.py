@@ -30,7 +30,7 @@ import numpy as np
 
 from accelnav.data import recording as rc
 from accelnav.errors import UserError
-from accelnav.fileio import check_input
+from accelnav.fileio import check_input, pread_exact
 from accelnav.model.load import Model, load_model
 from accelnav.progress import note
 
@@ -41,15 +41,6 @@ MAX_STEPS = 1 << 20  # distinct time steps counted for the exact median; a clock
 
 class NotStreamed(UserError):
     """The input is valid as far as read, but only the whole-array reader handles it (the reason, one line)."""
-
-
-def _pread(fd: int, buf: np.ndarray, pos: int) -> None:
-    view = memoryview(buf).cast("B")
-    while view:
-        got = os.preadv(fd, [view], pos)
-        if got <= 0:
-            raise UserError(f"input store: short read at byte {pos}")
-        view, pos = view[got:], pos + got
 
 
 @dataclass
@@ -79,9 +70,9 @@ class Stream:
         table = np.empty((e - s, self.width))
         nums = np.empty(e - s, dtype=np.int64) if lines else None
         if e > s:
-            _pread(self._fds["store"], table, 8 * self.width * s)
+            pread_exact(self._fds["store"], table, 8 * self.width * s, "input store", UserError)
             if lines:
-                _pread(self._fds["lines"], nums, 8 * s)
+                pread_exact(self._fds["lines"], nums, 8 * s, "input store", UserError)
         return table, nums
 
     def raw_time(self, table: np.ndarray, s: int) -> np.ndarray:

@@ -60,6 +60,7 @@ from accelnav.errors import UserError
 from accelnav.estimate import fastsmooth
 from accelnav.estimate.kf import Measurement
 from accelnav.estimate.npzout import NpzWriter
+from accelnav.fileio import pread_exact, pwrite_all
 from accelnav.model.design import AxisDesign, axis_design
 from accelnav.model.load import Model
 
@@ -172,7 +173,7 @@ class NpzReader:
     def _part(self, key: str, s: int, e: int) -> np.ndarray:
         offset, shape, dtype = self.members[key]
         buf = np.empty((e - s, *shape[1:]), dtype=dtype)
-        _pread(self.fd, buf, offset + s * int(np.prod(shape[1:])) * dtype.itemsize)
+        pread_exact(self.fd, buf, offset + s * int(np.prod(shape[1:])) * dtype.itemsize)
         return buf
 
     def __call__(self, s: int, e: int):
@@ -273,7 +274,7 @@ class _Store:
 
     def read(self, buf: np.ndarray, pos: int) -> None:
         if self.mem is None:
-            _pread(self.fd, buf, pos)
+            pread_exact(self.fd, buf, pos)
         else:
             flat = buf.reshape(-1).view(np.uint8)
             flat[:] = self.mem[pos : pos + flat.size]
@@ -285,13 +286,13 @@ class _Store:
             return self.mem[8 * width * s : 8 * width * (s + count)].view(np.float64).reshape(count, width)
         buf = scratch[: count * width].reshape(count, width)
         if fill:
-            _pread(self.fd, buf, 8 * width * s)
+            pread_exact(self.fd, buf, 8 * width * s)
         return buf
 
     def done(self, buf: np.ndarray, s: int) -> None:
         """Rows from :meth:`rows` starting at sample s, changed: back to the file (in memory: already there)."""
         if self.mem is None:
-            _pwrite(self.fd, buf, 8 * buf.shape[1] * s)
+            pwrite_all(self.fd, np.ascontiguousarray(buf), 8 * buf.shape[1] * s)
 
     def close(self) -> None:
         """Free the store (its memory, or its disk before the output is finished)."""
@@ -300,26 +301,6 @@ class _Store:
             os.ftruncate(self.fd, 0)
             os.close(self.fd)
             self.fd = -1
-
-
-def _pread(fd: int, buf: np.ndarray, pos: int) -> None:
-    if buf.size == 0:
-        return
-    view = memoryview(buf).cast("B")
-    while view:
-        got = os.preadv(fd, [view], pos)
-        if got <= 0:
-            raise OSError(f"store: short read at byte {pos}")
-        view, pos = view[got:], pos + got
-
-
-def _pwrite(fd: int, buf: np.ndarray, pos: int) -> None:
-    if buf.size == 0:
-        return
-    view = memoryview(np.ascontiguousarray(buf)).cast("B")
-    while view:
-        done = os.pwrite(fd, view, pos)
-        view, pos = view[done:], pos + done
 
 
 def smooth_bounded(

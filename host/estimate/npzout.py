@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from accelnav.fileio import pwrite_all
+
 _POLY = 0xEDB88320  # CRC-32 (zip), reflected
 SLOTS = 3  # pieces in flight behind the caller (each a copy of one write: memory is SLOTS pieces)
 
@@ -129,10 +131,7 @@ class NpzWriter:
         slot[1] = self._writer.submit(self._write_piece, m, at, piece, crc)
 
     def _write_piece(self, m: _Member, at: int, view: memoryview, crc=None) -> None:
-        pos, rest = m.data + at, view
-        while rest:
-            done = os.pwrite(self.fd, rest, pos)
-            rest, pos = rest[done:], pos + done
+        pwrite_all(self.fd, view, m.data + at)
         m.pieces.append((at, len(view), zlib.crc32(view) if crc is None else crc.result()))
 
     def _drain(self) -> None:
