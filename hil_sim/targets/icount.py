@@ -22,18 +22,16 @@ import numpy as np
 from accelnav.codegen.emit_c import emit
 from accelnav.codegen.report import struct_size
 from accelnav.hil_sim.targets.qemu import run_to_exit
-from accelnav.native.cbuild import STRICT_WARN
+from accelnav.native.cbuild import BOARD_WARN
 from accelnav.resources import firmware_dir
 
-# the strict flags but -pedantic, which refuses the board's startup.c (a vector table of function
-# pointers), as firmware.mk does for the same file
 CFLAGS = [
     "-mthumb",
     "-masm-syntax-unified",
     "-O2",
     "-std=c99",
     "-ffreestanding",
-    *(f for f in STRICT_WARN if f != "-pedantic"),
+    *BOARD_WARN,
 ]
 
 

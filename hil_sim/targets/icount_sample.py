@@ -18,15 +18,13 @@ from pathlib import Path
 
 from accelnav.codegen.emit_c import emit
 from accelnav.hil_sim.targets.qemu import run_to_exit
-from accelnav.native.cbuild import STRICT_WARN
+from accelnav.native.cbuild import BOARD_WARN
 from accelnav.resources import firmware_dir
 
 FORMS = (("cov", "covariance"), ("gs", "gain_schedule"))
 
 
-# the strict flags but -pedantic, which refuses the board's startup.c (a vector table of function
-# pointers), as firmware.mk does for the same file
-COMMON = ["-O2", "-std=c99", "-ffreestanding", *(f for f in STRICT_WARN if f != "-pedantic")]
+COMMON = ["-O2", "-std=c99", "-ffreestanding", *BOARD_WARN]
 
 
 # core -> compiler, flags, runtime folder, linker script, link flags, size tool, qemu machine and binary
