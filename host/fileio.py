@@ -18,6 +18,7 @@ from __future__ import annotations
 import errno
 import fcntl
 import hashlib
+import io
 import math
 import os
 import re
@@ -165,6 +166,11 @@ def _check_names(path: Path, flag: str) -> None:
             )
 
 
+def written_through(path: Path, mode: int) -> bool:
+    """The rule's test for what is written through, never replaced: a FIFO or a device (``mode``: its stat)."""
+    return stat.S_ISFIFO(mode) or stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+
+
 def output_target(
     path: str | Path, flag: str = "--out", *, inputs: Iterable[str | Path | None] = (), stdout: bool | str = True
 ) -> Output:
@@ -193,6 +199,9 @@ def output_target(
     except FileNotFoundError:
         st = None
     except OSError as exc:
+        if exc.errno == errno.ENOTDIR:  # a file on the way where a folder should be
+            parent = next((a for a in p.parents if a.exists() and not a.is_dir()), p.parent)
+            raise UserError(f"{flag}: {given}: {parent} is not a directory") from None
         raise UserError(f"{flag}: {given}: cannot use: {exc.strerror or exc}") from None
     target = p
     if st is not None and stat.S_ISLNK(st.st_mode):
@@ -212,7 +221,7 @@ def output_target(
         return Output(given, target, FILE, flag)
     if stat.S_ISDIR(st.st_mode):
         raise UserError(f"{flag}: {given} is a directory; give a file name")
-    if stat.S_ISFIFO(st.st_mode) or stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode):
+    if written_through(target, st.st_mode):
         return Output(given, target, THROUGH, flag)
     if not stat.S_ISREG(st.st_mode):
         raise UserError(f"{flag}: {given}: {_what(st.st_mode)}; give a file name")
@@ -257,20 +266,21 @@ def check_output_folder(path: str | Path, flag: str) -> Path:
     return p
 
 
-def _owner_alive(path: Path, is_dir: bool) -> bool:
+def _owner_alive(path: Path, is_dir: bool) -> bool | None:
     """Whether the run that made a temporary entry still runs: it holds an flock on it while it lives (the
-    kernel drops it when the process ends, however it ends, so a reused pid cannot fake it)."""
+    kernel drops it when the process ends, however it ends, so a reused pid cannot fake it). None: cannot
+    tell (a planted link, no permission): such an entry is neither removed nor taken for a writer."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | (os.O_DIRECTORY if is_dir else 0))
     except OSError:
-        return True  # not ours to judge (a planted link, no permission): left alone
+        return None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         return False
     except BlockingIOError:
         return True
     except OSError:
-        return True
+        return None
     finally:
         os.close(fd)
 
@@ -310,7 +320,7 @@ def _clean(folder: Path) -> None:
     gone = []
     for name, pid, is_dir in _leftovers(folder):
         path = folder / name
-        if os.path.islink(path) or _owner_alive(path, is_dir):
+        if os.path.islink(path) or _owner_alive(path, is_dir) is not False:
             continue
         if is_dir:
             shutil.rmtree(path, ignore_errors=True)
@@ -376,7 +386,7 @@ class OutputFile:
                     _clean(folder)
                     for name, pid, is_dir in _leftovers(folder):
                         m = _TEMP.match(name)
-                        if not is_dir and m["stem"] == stem and _owner_alive(folder / name, False):
+                        if not is_dir and m["stem"] == stem and _owner_alive(folder / name, False) is True:
                             raise UserError(f"{flag}: {given}: another run (pid {pid}) is writing it now; wait for "
                                             "it to finish or give another name")  # fmt: skip
                     self.fd, self.tmp = _create_temp(folder, stem)
@@ -384,7 +394,8 @@ class OutputFile:
                 sink = os.dup(1) if self.out.kind == STDOUT else os.open(self.out.path, os.O_WRONLY | os.O_CLOEXEC)
                 if seekable:
                     self._sink = sink
-                    self.fd = os.dup(tempfile.TemporaryFile().fileno())
+                    with tempfile.TemporaryFile() as anon:  # unnamed: a kill leaves nothing of it
+                        self.fd = os.dup(anon.fileno())
                 else:
                     self.fd = sink
         except UserError:
@@ -439,6 +450,31 @@ class OutputFile:
                          "behind")  # fmt: skip
 
 
+class _Unseekable(io.RawIOBase):
+    """A FIFO's, a device's or stdout's descriptor as a stream that cannot seek: a writer that would seek
+    back (zipfile, numpy's savez) then writes straight through instead (a device's position lies: /dev/null
+    stays at 0)."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, b) -> int:
+        return os.write(self.fd, b)
+
+    def close(self) -> None:
+        if not self.closed:
+            os.close(self.fd)
+        super().close()
+
+
+def _through(fd: int, mode: str):
+    buffered = io.BufferedWriter(_Unseekable(os.dup(fd)))
+    return buffered if "b" in mode else io.TextIOWrapper(buffered)
+
+
 @contextmanager
 def atomic_output(
     path: str | Path | Output, mode: str = "wb", flag: str = "--out", *, inputs=(), fsync: bool = True
@@ -449,7 +485,7 @@ def atomic_output(
     out = path if isinstance(path, Output) else output_target(path, flag, inputs=inputs)
     w = OutputFile(out, fsync=fsync)
     try:
-        with os.fdopen(os.dup(w.fd), mode, closefd=True) as fh:
+        with os.fdopen(os.dup(w.fd), mode) if out.kind == FILE else _through(w.fd, mode) as fh:
             yield fh
             fh.flush()
     except OSError as exc:

@@ -111,11 +111,10 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    from accelnav.model.load import ModelError
-    from accelnav.native.cbuild import BuildError
-
     from accelnav.cli.args import outputs_args
     from accelnav.fileio import input_limit
+    from accelnav.model.load import ModelError
+    from accelnav.native.cbuild import BuildError
 
     try:
         input_limit()  # a bad ACCELNAV_MAX_INPUT_BYTES is refused before any work, whatever the command
