@@ -5,12 +5,27 @@ outputs that appear whole or not at all.
   ``/dev/zero`` would block or fill memory), naming what the path is.
 * :func:`load_npz` reads an NPZ only after its zip headers and each array's ``.npy`` header say it fits
   in :func:`input_limit`; pickles are never loaded.
-* :func:`atomic_output` writes to a temporary name in the target folder and renames on success, so a
-  kill or an error never leaves a partial file under the name the user gave.
+* :func:`output_target` is the one output rule, :class:`OutputFile` (and :func:`atomic_output` over it)
+  the one writer; every command and library writer goes through them:
+
+  - a regular file, or nothing, is replaced atomically: written to ``.NAME.PID-TAG.part`` beside it
+    (``O_CREAT | O_EXCL | O_NOFOLLOW``: never a planted link, never another run's file), then renamed;
+  - a FIFO or a device is written through, never replaced (``/dev/null`` discards); ``-`` is stdout;
+  - a symlink is followed: its target is replaced, the link stays;
+  - an output that is one of the inputs (same device and inode, through links) is refused;
+  - missing folders are created when the output is opened; a name too long is refused up front;
+  - a second run writing the same output while the first writes is refused, naming the first's pid.
+
+  A run holds an ``flock`` on each temporary file and scratch folder (:class:`TempFolder`) while it
+  lives; the next writer in a folder removes those whose lock is free (their run ended, however: the
+  kernel drops the lock with the process, which a reused pid cannot fake) and says so in one line.
+  Creating an entry and judging others' happen under an flock on the folder. An OSError while writing
+  (a full disk) becomes one line, with nothing left behind.
 * :func:`excerpt` caps what a message echoes of the input.
 
-The input limit is ``ACCELNAV_MAX_INPUT_BYTES`` (bytes) if set, else :data:`MAX_INPUT_BYTES`, and never
-more than half the memory the machine has available.
+The input limit is ``ACCELNAV_MAX_INPUT_BYTES`` (a whole number of bytes > 0; anything else is refused in
+one line) if set, else :data:`MAX_INPUT_BYTES`, and never more than half the memory the machine has
+available.
 """
 
 from __future__ import annotations

@@ -46,6 +46,7 @@ def outputs_args(args: argparse.Namespace) -> bool:
     ``-`` (standard output), the command's own lines then going to stderr."""
     from pathlib import Path
 
+    from accelnav.errors import UserError
     from accelnav.fileio import check_output_folder, output_target
 
     folders = dict(FOLDER_OUTPUTS)
@@ -56,12 +57,14 @@ def outputs_args(args: argparse.Namespace) -> bool:
     inputs = [v for k, v in vars(args).items() if k not in skip and isinstance(v, Path)]
     inputs += [v for k, words in KEYWORD_INPUTS.items() if (v := getattr(args, k, None)) and v not in words]
     stdout = NO_STDOUT.get(getattr(args, "command", None), True)
-    to_stdout = False
+    to_stdout = None
     for dest, flag in files.items():
         value = getattr(args, dest, None)
-        if value is not None:
-            to_stdout |= output_target(value, flag, inputs=inputs, stdout=stdout).kind == "stdout"
+        if value is not None and output_target(value, flag, inputs=inputs, stdout=stdout).kind == "stdout":
+            if to_stdout:
+                raise UserError(f"{flag}: '-' is already {to_stdout}'s; one output at most goes to standard output")
+            to_stdout = flag
     for dest, flag in folders.items():
         if getattr(args, dest, None) is not None:
             check_output_folder(getattr(args, dest), flag)
-    return to_stdout
+    return to_stdout is not None

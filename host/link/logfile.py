@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from accelnav.errors import UserError
-from accelnav.fileio import OutputFile, check_input, output_target, write_all
+from accelnav.fileio import OutputFile, check_input, output_target
 
 MAGIC = b"ACNLOG1\n"
 CHUNK = b"ACNK"
@@ -84,8 +84,10 @@ class LogWriter:
         out = output_target(path, stdout="a recording goes to a file, a FIFO or a device")
         w = OutputFile(out)
         head = json.dumps({"format": FORMAT, **meta}, sort_keys=True).encode()
+        view = memoryview(MAGIC + struct.pack("<I", len(head)) + head + struct.pack("<I", zlib.crc32(head)))
         try:
-            write_all(w.fd, MAGIC + struct.pack("<I", len(head)) + head + struct.pack("<I", zlib.crc32(head)))
+            while view:  # os.write here, as for the chunks: one place where this module meets the disk
+                view = view[os.write(w.fd, view) :]
         except OSError as exc:
             w.abort()
             raise w.error(exc) from None

@@ -226,3 +226,9 @@ def test_a_bad_input_limit_is_refused_before_any_command_runs(value, tmp_path, c
     status, out, err = _run(["sim", "--duration", "1", "--out", str(tmp_path / "s.npz")], capsys)
     assert status == 2 and out == ""
     assert err == f"accelnav: error: ACCELNAV_MAX_INPUT_BYTES: got '{value}'; accepted: a whole number of bytes > 0\n"
+
+
+def test_one_output_at_most_goes_to_standard_output(inputs, capsys):
+    status, out, err = _run(["smooth", str(inputs["RUN"]), "--out", "-", "--csv", "-"], capsys)
+    assert status == 2 and out == ""
+    assert err == "accelnav: error: --csv: '-' is already --out's; one output at most goes to standard output\n"
