@@ -237,7 +237,9 @@ def output_target(
     if stat.S_ISDIR(st.st_mode):
         raise UserError(f"{flag}: {given} is a directory; give a file name")
     if written_through(target, st.st_mode):
-        return Output(given, target, THROUGH, flag)
+        # opened by the name given, the kernel following any link: a link's text may name no path
+        # (/dev/stdout -> /proc/self/fd/1 -> "pipe:[...]")
+        return Output(given, p, THROUGH, flag)
     if not stat.S_ISREG(st.st_mode):
         raise UserError(f"{flag}: {given}: {_what(st.st_mode)}; give a file name")
     for src in inputs:

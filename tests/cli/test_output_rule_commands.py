@@ -52,8 +52,11 @@ COMMANDS = {
         "RUN",
         "csv",
     ),
-    "init": (["init", "--part", "adxl335", "--supply", "3", "--adc-bits", "10", "--rate", "100", "--out", "OUT"],
-             None, "toml"),  # fmt: skip
+    "init": (
+        ["init", "--part", "adxl335", "--supply", "3", "--adc-bits", "10", "--rate", "100", "--out", "OUT"],
+        None,
+        "toml",
+    ),
     "fit-bias": (["fit-bias", "STILL", "--out", "OUT"], "STILL", "toml"),
     "calibrate": (["calibrate", "TUMBLE", "--model", "NOM", "--out", "OUT"], "NOM", "toml"),
     "tune": (["tune", "RUN", "--max-evaluations", "12", "--out", "OUT"], "RUN", "toml"),
