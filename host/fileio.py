@@ -254,6 +254,15 @@ def output_target(
     return Output(given, target, FILE, flag)
 
 
+WRITE_FAILURES = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO)
+
+
+def write_failure(exc: OSError) -> bool:
+    """An OSError that says the disk took no more (full, over quota, too big, failing): said in one line by
+    the writer; other OSErrors (a reader's, say) are not the output's to explain."""
+    return exc.errno in WRITE_FAILURES
+
+
 def free_bytes(folder: str | Path) -> int:
     """Free disk where files in ``folder`` will go: of its nearest existing ancestor (it may not exist yet)."""
     folder = Path(folder).absolute()

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import errno
 import importlib
 import sys
 
@@ -135,7 +134,9 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.close()
         return 0
     except OSError as exc:
-        if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        from accelnav.fileio import write_failure
+
+        if not write_failure(exc):
             raise
         # a full disk where no writer turned it into its own line (a scratch file, say): still one line
         print(f"accelnav: error: {exc.filename or 'writing'}: {exc.strerror}", file=sys.stderr)

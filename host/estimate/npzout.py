@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.fileio import Output, OutputFile, pwrite_all
+from accelnav.fileio import Output, OutputFile, pwrite_all, write_failure
 
 _POLY = 0xEDB88320  # CRC-32 (zip), reflected
 SLOTS = 3  # pieces in flight behind the caller (each a copy of one write: memory is SLOTS pieces)
@@ -248,8 +248,10 @@ class NpzWriter:
                 self.close()
             except OSError as err:
                 self.abort()
+                if not write_failure(err):
+                    raise
                 raise self.output.error(err) from None
             return
         self.abort()
-        if isinstance(exc, OSError):
+        if isinstance(exc, OSError) and write_failure(exc):  # a full disk here or in a store beside it
             raise self.output.error(exc) from None
