@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +22,7 @@ from accelnav.estimate.pipeline import (
     stride_table,
 )
 from accelnav.estimate.zupt import ZuptParams
-from accelnav.fileio import check_output, write_text
+from accelnav.fileio import check_output, free_bytes, output_target, write_text
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model
 from accelnav.progress import note
 
@@ -338,11 +337,11 @@ def stream_args(args, budget: int):
         if getattr(args, flag, None) is not None:
             check_output(getattr(args, flag), f"--{flag}")
     rows, n_axes = size
-    workdir = Path(args.out).resolve().parent
+    workdir = output_target(args.out).workdir  # a new folder is made when the store goes in it
     need = rows * 8 * (2 + n_axes) + disk_needed(
         rows, n_axes, n_stages=1 + bool(args.filter_states)
     )  # input store + smoother
-    free = shutil.disk_usage(workdir).free
+    free = free_bytes(workdir)
     if need > free:
         raise UserError(
             f"{args.run}: about {rows} rows x {n_axes} axes need about {need / 1e9:.3g} GB of disk in {workdir} "
