@@ -72,8 +72,10 @@ sample, upper triangle by rows: rr ru ra re uu ua ue aa ae ee); use
 from __future__ import annotations
 
 import hashlib
+import io
 import os
 import threading
+import zipfile
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -81,9 +83,8 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.errors import UserError
+from accelnav import cachefile
 from accelnav.estimate.kf import Aids, Measurement
-from accelnav.fileio import atomic_output
 from accelnav.model.design import AxisDesign
 from accelnav.native.cbuild import STRICT_FLAGS
 from accelnav.native.kernels import SMOOTHER, build, prebuilt
@@ -263,11 +264,11 @@ def plain_gains(
             _CACHE.move_to_end(key)
             return _CACHE[key]
     cache_dir = cache_dir if cache_dir is not None else gain_cache_dir()
-    g = _load_gains(cache_dir, key) if cache_dir is not None else None
-    if g is None:
+    if cache_dir is None:
         g = _compute_gains(d, n, valid, key, steady)
-        if cache_dir is not None:
-            _save_gains(cache_dir, g)
+    else:
+        path = Path(cache_dir) / f"gains-{key}.npz"
+        g = _cached_gains(path, key, n, lambda: _compute_gains(d, n, valid, key, steady))
     with _cache_lock:
         _CACHE[key] = g
         while len(_CACHE) > _CACHE_SIZE:
@@ -455,65 +456,38 @@ def steady_gains(d: AxisDesign, n: int | None = None, *, cache_dir: Path | None 
     return st
 
 
-# file: magic (8), nt (int64 LE), sha256 of key + nt + payload (32), payload: the rows as float64 LE.
-# Trusted only if the size and the hash agree; anything else is recomputed and overwritten.
-
-
-def _steady_digest(key: str, nt: bytes, payload) -> bytes:
-    h = hashlib.sha256(key.encode() + nt)
-    h.update(payload)  # a buffer (bytes or the mapped rows): never concatenated into a copy
-    return h.digest()
+# file: a sealed cache entry (accelnav.cachefile: HMAC under the user's key, read whole, never mapped)
+# whose payload is magic (8), the key (24 ASCII), nt (int64 LE), then the rows as float64 LE. Anything
+# that does not verify or does not fit is recomputed and overwritten, said in one line.
 
 
 def _load_steady(path: Path, key: str) -> SteadyGains | None:
-    """The rows mapped from the file, not read into fresh memory: reading and copying 90 MB cost more
-    (1.2 s per axis, measured) than the whole data pass of a million samples. The hash is checked first."""
+    """The rows of a verified file, read into memory. Not mapped: a file truncated under a mapping raises
+    SIGBUS in whatever touches the rows next, and a cache is a file anyone may truncate. Reading and
+    verifying cost about what hashing the mapped file did (bench/speed/bench_cache_warm.py)."""
+    head = len(_STEADY_MAGIC) + 24 + 8
     try:
-        size = path.stat().st_size
-        head = len(_STEADY_MAGIC) + 8 + 32
-        if size < head:
-            return None
-        with open(path, "rb") as fh:
-            blob = fh.read(head)
-        if blob[:8] != _STEADY_MAGIC:
-            return None
-        nt_b, digest = blob[8:16], blob[16:head]
-        nt = int.from_bytes(nt_b, "little")
-        if nt < 1 or size - head != nt * SROW * 8:
-            return None
-        rows = np.memmap(path, dtype="<f8", mode="r", offset=head, shape=(nt, SROW))
-        stamp = _stamp(path, digest)
-        seen = path.with_name(path.name + ".ok")
-        if seen.is_file() and seen.read_bytes() == stamp:  # hashed before, and untouched since
-            return SteadyGains(key, rows)
-    except (OSError, ValueError):
+        data = cachefile.read_sealed(path, head + PROBE_MAX * SROW * 8)
+        if bytes(data[:8]) != _STEADY_MAGIC or bytes(data[8:32]) != key.encode():
+            raise ValueError("not the rows of this design")
+        nt = int.from_bytes(data[32:head], "little")
+        if not 1 <= nt <= PROBE_MAX or len(data) - head != nt * SROW * 8:
+            raise ValueError(f"{len(data) - head} bytes of rows where nt = {nt} needs {nt * SROW * 8}")
+    except FileNotFoundError:
         return None
-    if _steady_digest(key, nt_b, rows) != digest:
+    except (OSError, ValueError) as exc:
+        cachefile.cache_note(path, getattr(exc, "strerror", None) or str(exc))
         return None
-    try:  # hashing 90 MB took 0.2-0.4 s of every run; the stamp says the file has not changed since
-        with atomic_output(seen, "wb", "gain cache") as fh:
-            fh.write(stamp)
-    except (OSError, UserError):
-        pass
+    rows = np.frombuffer(data, dtype="<f8", offset=head).reshape(nt, SROW)
+    rows.flags.writeable = False
     return SteadyGains(key, rows)
-
-
-def _stamp(path: Path, digest: bytes) -> bytes:
-    """What changes whenever the file does: its inode, size and status-change time (which no user call
-    sets back, unlike the modification time), with the digest it carries."""
-    st = path.stat()
-    return digest + b"%d %d %d" % (st.st_ino, st.st_size, st.st_ctime_ns)
 
 
 def _save_steady(path: Path, st: SteadyGains) -> None:
     """Best effort: a cache that cannot be written (read-only home, full disk) costs only time."""
-    payload = st.rows.astype("<f8").tobytes()
-    nt_b = len(st.rows).to_bytes(8, "little")
-    try:
-        with atomic_output(path, "wb", "gain cache") as fh:
-            fh.write(_STEADY_MAGIC + nt_b + _steady_digest(st.key, nt_b, payload) + payload)
-    except (OSError, UserError):
-        pass
+    rows = np.ascontiguousarray(st.rows, dtype="<f8")
+    head = _STEADY_MAGIC + st.key.encode() + len(rows).to_bytes(8, "little")
+    cachefile.write_sealed(path, head, memoryview(rows).cast("B"))
 
 
 def clear_steady_cache() -> None:
@@ -522,25 +496,49 @@ def clear_steady_cache() -> None:
         _STEADY.clear()
 
 
-def _load_gains(cache_dir: Path, key: str) -> PlainGains | None:
-    path = Path(cache_dir) / f"gains-{key}.npz"
+_GAIN_NAMES = ("K", "Cs", "P_prior", "P_post", "Ps")
+
+
+def _cached_gains(path: Path, key: str, n: int, compute) -> PlainGains:
+    """``compute()``'s gains through the sealed entry at ``path`` (``$ACCELNAV_GAIN_CACHE``): read back only
+    if it verifies and every array has the shape and type the C kernels will assume for ``n`` samples."""
+    made: list[PlainGains] = []
+
+    def build() -> bytes:
+        made.append(compute())
+        buf = io.BytesIO()
+        g = made[0]
+        np.savez(buf, **{k: getattr(g, k) for k in _GAIN_NAMES}, all_valid=np.bool_(g.all_valid))
+        return buf.getvalue()
+
+    limit = (2 * 4 + 3 * 10) * 8 * n + (1 << 16)  # the arrays of n samples and the zip's headers
+    data = cachefile.cached(path, build, limit=limit, check=lambda b: _gains_from(b, key, n))
+    return made[0] if made else _gains_from(data, key, n)
+
+
+def _gains_from(data, key: str, n: int) -> PlainGains:
+    """The gains of a cached entry, refused (ValueError) unless each array is what the kernels read: K and
+    Cs (m, 4) float64 with m = n (or 1 <= m <= n, all valid: the steady transient), P (n, 10) float64."""
     try:
-        with np.load(path, allow_pickle=False) as f:
-            arrays = [f[k] for k in ("K", "Cs", "P_prior", "P_post", "Ps")]
-            all_valid = bool(f["all_valid"])
-    except (OSError, KeyError, ValueError):
-        return None
-    for a in arrays:
+        with np.load(io.BytesIO(data), allow_pickle=False) as f:
+            if sorted(f.files) != sorted((*_GAIN_NAMES, "all_valid")):
+                raise ValueError(f"arrays {', '.join(f.files)}")
+            arrays = {k: f[k] for k in _GAIN_NAMES}
+            all_valid = f["all_valid"]
+    except (OSError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"not the gains' NPZ ({exc})") from None
+    if all_valid.shape != () or all_valid.dtype != np.bool_:
+        raise ValueError("all_valid: not one bool")
+    m = len(arrays["K"]) if arrays["K"].ndim else 0
+    for k, a in arrays.items():
+        want = (m, 4) if k in ("K", "Cs") else (n, 10)
+        if a.dtype != np.float64 or a.shape != want or not a.flags.c_contiguous:
+            raise ValueError(f"{k}: {a.dtype} {a.shape}, expected float64 {want}")
+    if not (m == n or (bool(all_valid) and 1 <= m <= n)):
+        raise ValueError(f"K: {m} rows for {n} samples")
+    for a in arrays.values():
         a.flags.writeable = False
-    return PlainGains(key, *arrays, all_valid)
-
-
-def _save_gains(cache_dir: Path, g: PlainGains) -> None:
-    cache_dir = Path(cache_dir)
-    cache_dir.mkdir(parents=True, exist_ok=True)
-    tmp = cache_dir / f"gains-{g.key}.{os.getpid()}.tmp.npz"
-    np.savez(tmp, K=g.K, Cs=g.Cs, P_prior=g.P_prior, P_post=g.P_post, Ps=g.Ps, all_valid=g.all_valid)
-    os.replace(tmp, cache_dir / f"gains-{g.key}.npz")
+    return PlainGains(key, *arrays.values(), bool(all_valid))
 
 
 def plain_data(d: AxisDesign, z: np.ndarray, valid: np.ndarray | None, g: PlainGains, *, out=None):
