@@ -20,7 +20,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from accelnav import cachefile
+from accelnav.cachefile import cached
 from accelnav.model.load import Model
 from accelnav.native.cbuild import cache_dir
 
@@ -67,5 +67,5 @@ def _files(data) -> dict[str, str]:
 def generated_files(model: Model) -> dict[str, str]:
     """accelnav.{h,c,json} (the filter) and acnframe.{h,c,json} (the frames) of ``model``."""
     path = cache_dir() / f"gen-{_key(model)}.json"
-    data = cachefile.cached(path, lambda: json.dumps(generate(model)).encode(), limit=MAX_GENERATED_BYTES, check=_files)
+    data = cached(path, lambda: json.dumps(generate(model)).encode(), limit=MAX_GENERATED_BYTES, check=_files)
     return _files(data)

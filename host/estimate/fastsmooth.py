@@ -83,7 +83,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav import cachefile
+from accelnav.cachefile import cache_note, cached, read_sealed, write_sealed
 from accelnav.estimate.kf import Aids, Measurement
 from accelnav.model.design import AxisDesign
 from accelnav.native.cbuild import STRICT_FLAGS
@@ -467,7 +467,7 @@ def _load_steady(path: Path, key: str) -> SteadyGains | None:
     verifying cost about what hashing the mapped file did (bench/speed/bench_cache_warm.py)."""
     head = len(_STEADY_MAGIC) + 24 + 8
     try:
-        data = cachefile.read_sealed(path, head + PROBE_MAX * SROW * 8)
+        data = read_sealed(path, head + PROBE_MAX * SROW * 8)
         if bytes(data[:8]) != _STEADY_MAGIC or bytes(data[8:32]) != key.encode():
             raise ValueError("not the rows of this design")
         nt = int.from_bytes(data[32:head], "little")
@@ -476,7 +476,7 @@ def _load_steady(path: Path, key: str) -> SteadyGains | None:
     except FileNotFoundError:
         return None
     except (OSError, ValueError) as exc:
-        cachefile.cache_note(path, getattr(exc, "strerror", None) or str(exc))
+        cache_note(path, getattr(exc, "strerror", None) or str(exc))
         return None
     rows = np.frombuffer(data, dtype="<f8", offset=head).reshape(nt, SROW)
     rows.flags.writeable = False
@@ -487,7 +487,7 @@ def _save_steady(path: Path, st: SteadyGains) -> None:
     """Best effort: a cache that cannot be written (read-only home, full disk) costs only time."""
     rows = np.ascontiguousarray(st.rows, dtype="<f8")
     head = _STEADY_MAGIC + st.key.encode() + len(rows).to_bytes(8, "little")
-    cachefile.write_sealed(path, head, memoryview(rows).cast("B"))
+    write_sealed(path, head, memoryview(rows).cast("B"))
 
 
 def clear_steady_cache() -> None:
@@ -512,7 +512,7 @@ def _cached_gains(path: Path, key: str, n: int, compute) -> PlainGains:
         return buf.getvalue()
 
     limit = (2 * 4 + 3 * 10) * 8 * n + (1 << 16)  # the arrays of n samples and the zip's headers
-    data = cachefile.cached(path, build, limit=limit, check=lambda b: _gains_from(b, key, n))
+    data = cached(path, build, limit=limit, check=lambda b: _gains_from(b, key, n))
     return made[0] if made else _gains_from(data, key, n)
 
 

@@ -43,7 +43,7 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-from accelnav import cachefile
+from accelnav.cachefile import cached
 from accelnav.resources import cache_root, firmware_dir
 
 
@@ -154,7 +154,7 @@ def build_module(
             shutil.rmtree(tmp, ignore_errors=True)
 
     # the module's bytes, verified (sealed with the user's key) before anything of them is loaded
-    data = cachefile.cached(root / f"{modname}{suffix}.sealed", compile_so, limit=MAX_MODULE_BYTES)
+    data = cached(root / f"{modname}{suffix}.sealed", compile_so, limit=MAX_MODULE_BYTES)
     mod = _load_extension(modname, data, suffix)
     sys.modules[modname] = mod
     return mod
