@@ -158,10 +158,11 @@ def cache_note(path: Path, reason: str) -> None:
     _note(f"cache entry {path}: {reason}; rebuilt")
 
 
-def read_whole(path: Path, limit: int) -> bytearray:
-    """Every byte of a regular file of at most ``limit`` bytes, by read() (never mapped: a file truncated
-    meanwhile gives a short read, not SIGBUS). FileNotFoundError if there is none; ValueError (one line)
-    for a symlink, a non-regular file, one too big, or one that changed size while read."""
+@contextmanager
+def open_entry(path: Path, limit: int) -> Iterator:
+    """An entry's file opened for reading, unbuffered, after checking what it is: FileNotFoundError if there
+    is none; ValueError (one line) for a symlink (never followed), a non-regular file (never waited on), or
+    one of more than ``limit`` bytes. Yields (file, size)."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as exc:
@@ -174,13 +175,26 @@ def read_whole(path: Path, limit: int) -> bytearray:
             raise ValueError("not a regular file")
         if st.st_size > limit:
             raise ValueError(f"{st.st_size} bytes, more than an entry of its kind can be ({limit})")
-        buf = bytearray(st.st_size)
-        view, got = memoryview(buf), 0
-        while got < len(buf):
-            n = fh.readinto(view[got:])
-            if not n:
-                raise ValueError(f"truncated while read ({got} of {len(buf)} bytes)")
-            got += n
+        yield fh, st.st_size
+
+
+def read_into(fh, buf) -> None:
+    """Fill ``buf`` (a writable buffer) from ``fh`` by read(), never mapped: a file truncated meanwhile
+    gives a short read (ValueError), not SIGBUS."""
+    view = memoryview(buf).cast("B")
+    got = 0
+    while got < len(view):
+        n = fh.readinto(view[got:])
+        if not n:
+            raise ValueError(f"truncated while read ({got} of {len(view)} bytes)")
+        got += n
+
+
+def read_whole(path: Path, limit: int) -> bytearray:
+    """Every byte of a regular file of at most ``limit`` bytes (see :func:`open_entry`, :func:`read_into`)."""
+    with open_entry(path, limit) as (fh, size):
+        buf = bytearray(size)
+        read_into(fh, buf)
         if fh.read(1):
             raise ValueError("grew while read")
     return buf
@@ -200,9 +214,14 @@ def read_sealed(path: Path, limit: int) -> memoryview:
 
 
 def write_sealed(path: Path, *payload) -> bool:
-    """Seal ``payload`` (buffers, one after the other) under ``path``'s name and put it in place whole (a
-    unique O_EXCL temporary name in the same folder, then a rename). Best effort: False (said in one line)
-    when the folder cannot take it."""
+    """Seal ``payload`` (buffers, one after the other) under ``path``'s name and put it in place whole
+    (:func:`write_entry`)."""
+    return write_entry(path, MAGIC + tag(path.name, *payload), *payload)
+
+
+def write_entry(path: Path, *parts) -> bool:
+    """Put ``parts`` (buffers) at ``path`` whole: a unique O_EXCL temporary name in the same folder, then a
+    rename. Best effort: False (said in one line) when the folder cannot take it."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -211,8 +230,7 @@ def write_sealed(path: Path, *payload) -> bool:
         return False
     try:
         with os.fdopen(fd, "wb") as fh:
-            fh.write(MAGIC + tag(path.name, *payload))
-            for part in payload:
+            for part in parts:
                 fh.write(part)
         os.chmod(tmp, 0o644)  # nothing secret in it; others holding a shared key may read it
         os.replace(tmp, path)

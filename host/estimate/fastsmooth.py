@@ -72,6 +72,7 @@ sample, upper triangle by rows: rr ru ra re uu ua ue aa ae ee); use
 from __future__ import annotations
 
 import hashlib
+import hmac
 import io
 import os
 import threading
@@ -83,7 +84,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.cachefile import cache_note, cached, read_sealed, write_sealed
+from accelnav.cachefile import cache_note, cached, open_entry, read_into, tag, write_entry
 from accelnav.estimate.kf import Aids, Measurement
 from accelnav.model.design import AxisDesign
 from accelnav.native.cbuild import STRICT_FLAGS
@@ -355,7 +356,7 @@ GAIN_RU_RTOL = 1e-9
 _PROBE0 = 1 << 17
 PROBE_MAX = 1 << 21  # samples (235 MB of rows, once per design); not steady within it: per-run gains
 _STEADY: OrderedDict[str, SteadyGains | None] = OrderedDict()
-_STEADY_MAGIC = b"ACNSTDY1"
+_STEADY_MAGIC = b"ACNSTDY2"
 
 
 def steady_key(d: AxisDesign) -> str:
@@ -427,11 +428,13 @@ def steady_gains(d: AxisDesign, n: int | None = None, *, cache_dir: Path | None 
             return _STEADY[key]
     cache_dir = Path(cache_dir) if cache_dir is not None else steady_cache_dir()
     path = cache_dir / f"steady-{key}.bin"
-    st = _load_steady(path, key)
+    st = _load_steady(path, key, n)
+    if st is not None and not st.settled:  # the file's first rows, enough for this run: read no more
+        return st
     if st is None and n is not None and n <= PROBE_MAX:
         n = int(n)
         prefix = cache_dir / f"prefix-{key}.bin"  # the longest unsettled run's rows: exact for any shorter one
-        pre = _load_steady(prefix, key) if n >= _PROBE0 else None
+        pre = _load_steady(prefix, key, n) if n >= _PROBE0 else None
         if pre is not None and len(pre.rows) >= n:
             return SteadyGains(key, pre.rows[:n], settled=False)
         rows = _plain_rows(d, n)
@@ -456,38 +459,64 @@ def steady_gains(d: AxisDesign, n: int | None = None, *, cache_dir: Path | None 
     return st
 
 
-# file: a sealed cache entry (accelnav.cachefile: HMAC under the user's key, read whole, never mapped)
-# whose payload is magic (8), the key (24 ASCII), nt (int64 LE), then the rows as float64 LE. Anything
-# that does not verify or does not fit is recomputed and overwritten, said in one line.
+# file: header = magic (8), the key (24 ASCII), nt (int64 LE), nb (int64 LE); the header's tag (32); nb block
+# tags (32 each); the rows as float64 LE. Tags are HMACs under the user's key (accelnav.cachefile.tag), bound
+# to the file's name: the header's covers the header and every block tag, block i's covers its index and
+# its _BLOCK_ROWS rows (the last block fewer). A run of n samples reads and verifies only the blocks holding
+# its first n rows; a file that does not verify or does not fit is recomputed and overwritten, in one line.
+_BLOCK_ROWS = 1 << 16  # 7.3 MB of rows: a short run reads one block, not the whole 90 MB transient
+_STEADY_HEAD = len(_STEADY_MAGIC) + 24 + 8 + 8
 
 
-def _load_steady(path: Path, key: str) -> SteadyGains | None:
-    """The rows of a verified file, read into memory. Not mapped: a file truncated under a mapping raises
-    SIGBUS in whatever touches the rows next, and a cache is a file anyone may truncate. Reading and
-    verifying cost about what hashing the mapped file did (bench/speed/bench_cache_warm.py)."""
-    head = len(_STEADY_MAGIC) + 24 + 8
+def _block_tag(name: str, i: int, rows) -> bytes:
+    return tag(name, b"block", i.to_bytes(8, "little"), rows)
+
+
+def _load_steady(path: Path, key: str, need: int | None = None) -> SteadyGains | None:
+    """The rows of a verified file, read into memory: all of them, or (``need``) at least the first ``need``
+    (whole blocks), then marked unsettled (exact for runs of that length or less, never kept as the
+    design's steady state). Never mapped: a file truncated under a mapping raises SIGBUS in whatever touches
+    the rows next, and a cache is a file anyone may truncate (bench/speed/bench_cache_warm.py: the cost)."""
     try:
-        data = read_sealed(path, head + PROBE_MAX * SROW * 8)
-        if bytes(data[:8]) != _STEADY_MAGIC or bytes(data[8:32]) != key.encode():
-            raise ValueError("not the rows of this design")
-        nt = int.from_bytes(data[32:head], "little")
-        if not 1 <= nt <= PROBE_MAX or len(data) - head != nt * SROW * 8:
-            raise ValueError(f"{len(data) - head} bytes of rows where nt = {nt} needs {nt * SROW * 8}")
+        with open_entry(path, _STEADY_HEAD + 32 * (1 + PROBE_MAX) + PROBE_MAX * SROW * 8) as (fh, size):
+            head = bytearray(_STEADY_HEAD + 32)
+            read_into(fh, head)
+            if head[:8] != _STEADY_MAGIC or head[8:32] != key.encode():
+                raise ValueError("not the rows of this design")
+            nt, nb = (int.from_bytes(head[i : i + 8], "little") for i in (32, 40))
+            if not 1 <= nt <= PROBE_MAX or nb != -(-nt // _BLOCK_ROWS):
+                raise ValueError(f"nt = {nt} rows in {nb} blocks")
+            if size != _STEADY_HEAD + 32 * (1 + nb) + nt * SROW * 8:
+                raise ValueError(f"{size} bytes where nt = {nt} needs {_STEADY_HEAD + 32 * (1 + nb) + nt * SROW * 8}")
+            table = bytearray(32 * nb)
+            read_into(fh, table)
+            if not hmac.compare_digest(head[_STEADY_HEAD:], tag(path.name, head[:_STEADY_HEAD], table)):
+                raise ValueError("its seal does not verify (edited, damaged, or sealed under another key)")
+            blocks = nb if need is None else min(nb, -(-int(need) // _BLOCK_ROWS))
+            m = min(nt, blocks * _BLOCK_ROWS)
+            rows = np.empty((m, SROW), dtype="<f8")
+            read_into(fh, rows)
+            for i in range(blocks):
+                part = rows[i * _BLOCK_ROWS : (i + 1) * _BLOCK_ROWS]
+                if not hmac.compare_digest(table[32 * i : 32 * (i + 1)], _block_tag(path.name, i, part)):
+                    raise ValueError(f"rows block {i} does not verify (edited, damaged, or sealed under another key)")
     except FileNotFoundError:
         return None
     except (OSError, ValueError) as exc:
         cache_note(path, getattr(exc, "strerror", None) or str(exc))
         return None
-    rows = np.frombuffer(data, dtype="<f8", offset=head).reshape(nt, SROW)
     rows.flags.writeable = False
-    return SteadyGains(key, rows)
+    return SteadyGains(key, rows, settled=m == nt)
 
 
 def _save_steady(path: Path, st: SteadyGains) -> None:
     """Best effort: a cache that cannot be written (read-only home, full disk) costs only time."""
     rows = np.ascontiguousarray(st.rows, dtype="<f8")
-    head = _STEADY_MAGIC + st.key.encode() + len(rows).to_bytes(8, "little")
-    write_sealed(path, head, memoryview(rows).cast("B"))
+    nt = len(rows)
+    nb = -(-nt // _BLOCK_ROWS)
+    head = _STEADY_MAGIC + st.key.encode() + nt.to_bytes(8, "little") + nb.to_bytes(8, "little")
+    table = b"".join(_block_tag(path.name, i, rows[i * _BLOCK_ROWS : (i + 1) * _BLOCK_ROWS]) for i in range(nb))
+    write_entry(path, head, tag(path.name, head, table), table, memoryview(rows).cast("B"))
 
 
 def clear_steady_cache() -> None:

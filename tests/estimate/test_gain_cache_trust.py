@@ -13,7 +13,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from support.cachekey import private_cache, seal_with_other_key
+from support.cachekey import private_cache
 
 from accelnav import cachefile
 from accelnav.estimate import fastsmooth as fs
@@ -56,19 +56,53 @@ def test_edited_steady_rows_are_refused_and_the_result_is_a_clean_runs(
 ):
     (xf0, xs0), g0 = _smooth(design)
     (path,) = fs.steady_cache_dir().glob("steady-*.bin")
-    payload = bytearray(cachefile.read_sealed(path, 1 << 30))
-    rows = np.frombuffer(payload, "<f8", offset=40).reshape(-1, fs.SROW)
+    st = fs._load_steady(path, fs.steady_key(design))
+    rows = st.rows.copy()
     rows[:, 0:2] *= 1.5  # K_r, K_u: what moved the position by 4.3e6 m in the issue's probe
-    if forgery == "sha256 recomputed":  # the file as the old format wanted it, its digest made to match
-        digest = hashlib.sha256(bytes(payload[8:32]) + bytes(payload[32:40]) + bytes(payload[40:])).digest()
-        path.write_bytes(path.read_bytes()[:8] + digest + bytes(payload))
+    if forgery == "sha256 recomputed":  # every tag where the file keeps it, made to match with a plain hash
+        nt = len(rows)
+        head = fs._STEADY_MAGIC + st.key.encode() + nt.to_bytes(8, "little") + (1).to_bytes(8, "little")
+        table = hashlib.sha256(rows.tobytes()).digest()
+        path.write_bytes(head + hashlib.sha256(head + table).digest() + table + rows.tobytes())
     else:
-        seal_with_other_key(path, bytes(payload), tmp_path, monkeypatch)
+        with monkeypatch.context() as m:
+            m.setenv(cachefile.KEY_ENV, str(tmp_path / "attacker.key"))
+            cachefile.forget_secret()
+            fs._save_steady(path, fs.SteadyGains(st.key, rows))
+        cachefile.forget_secret()
     _forget()
     (xf1, xs1), g1 = _smooth(design)
     assert np.array_equal(xf1, xf0) and np.array_equal(xs1, xs0) and np.array_equal(g1.P_post, g0.P_post)
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"cache entry {path}: its seal does not verify" in err and "rebuilt" in err
+
+
+def test_a_short_run_reads_and_verifies_only_its_blocks(cache, design, monkeypatch, capsys):
+    """Rows are sealed in blocks: a run of n samples reads the blocks holding its n rows, exact for it, and a
+    longer run reads (and checks) every block."""
+    monkeypatch.setattr(fs, "_BLOCK_ROWS", 256)
+    full = fs.steady_gains(design)
+    nt = len(full.rows)
+    assert nt > 3 * 256
+    (path,) = fs.steady_cache_dir().glob("steady-*.bin")
+    short = fs._load_steady(path, full.key, 300)
+    assert len(short.rows) == 512 and not short.settled and np.array_equal(short.rows, full.rows[:512])
+    blob = bytearray(path.read_bytes())
+    blob[-8:] = np.float64(1e300).tobytes()  # a value in the last block
+    path.write_bytes(bytes(blob))
+    assert np.array_equal(fs._load_steady(path, full.key, 300).rows, full.rows[:512])
+    assert capsys.readouterr().err == ""
+    assert fs._load_steady(path, full.key) is None  # the whole transient: the edited block is found
+    assert f"rows block {(nt - 1) // 256} does not verify" in capsys.readouterr().err
+    _forget()
+    for n in (100, nt + 50):
+        ref = fs.plain_gains(design, n, steady=False)
+        z = np.random.default_rng(2).normal(0, 0.1, n)
+        got = fs.plain_data(design, z, None, fs.plain_gains(design, n))
+        assert all(
+            np.allclose(a, b, rtol=1e-12, atol=1e-12)
+            for a, b in zip(got, fs.plain_data(design, z, None, ref), strict=True)
+        )
 
 
 def _sealed_gains(path, **change):
@@ -140,4 +174,4 @@ def test_truncating_the_steady_file_under_a_run_is_no_signal(cache, tmp_path):
     done = subprocess.run([sys.executable, "-c", textwrap.dedent(SCRIPT)], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, f"exit {done.returncode} (SIGBUS is -7): {done.stderr[-2000:]}"
     assert done.stdout.split() == ["True", "True"]
-    assert done.stderr.count("\n") == 1 and "not a sealed entry (0 bytes" in done.stderr
+    assert done.stderr.count("\n") == 1 and "truncated while read (0 of" in done.stderr

@@ -1,0 +1,124 @@
+"""Benchmark (issue 30): what verifying the cache costs on a warm cache, this build beside a baseline.
+
+Every cache entry is now read whole and its HMAC checked before use (accelnav.cachefile), where the
+baseline imported its modules straight from the cache file and mapped the steady gains. Measured in a
+fresh process each time (what a user's command pays), warm cache, best of --repeat, this build and a
+baseline checkout's (default /work/main: its own .venv), interleaved, each with its own cache folder:
+
+* ``accelnav --version`` (wall);
+* the SIL firmware module: the generated C (a cached JSON) and the compiled module (about 180 kB), loaded;
+* the default model's steady gains (about 90 MB of rows per axis), read back;
+* ``accelnav smooth`` of a 60 s and a 1400 s simulated run (wall; the second reads the stored rows).
+
+Usage: python bench/run_all.py speed --only bench_cache_warm, or from bench/speed:
+  PYTHONPATH=../common python bench_cache_warm.py [--baseline /work/main] [--repeat 5] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+# the verification's share of a command: at most this much over the baseline (s), or this ratio
+GOALS = {"module": 0.03, "steady": 1.5, "smooth 60 s": 1.10, "smooth 1400 s": 1.25, "--version": 1.10}
+
+
+def inner(what: str) -> float:
+    """One timing in this (fresh) process, s."""
+    t0 = time.perf_counter()
+    if what == "module":
+        from accelnav.hil_sim.targets.firmware import build_firmware
+
+        build_firmware()
+    elif what == "steady":
+        from accelnav.estimate import fastsmooth as fs
+        from accelnav.model.design import axis_design
+        from accelnav.model.load import load_model
+
+        d = axis_design(load_model(None), 0)
+        t0 = time.perf_counter()
+        st = fs.steady_gains(d)
+        st.rows.sum()  # touch every row, as a long run's data pass does
+    return time.perf_counter() - t0
+
+
+def timed(py: str, env: dict, args: list[str], cwd: Path) -> float:
+    t0 = time.perf_counter()
+    done = subprocess.run([py, *args], env=env, cwd=cwd, capture_output=True, text=True, timeout=900)
+    wall = time.perf_counter() - t0
+    if done.returncode:
+        raise SystemExit(f"{py} {' '.join(args)}: exit {done.returncode}: {done.stderr[-500:]}")
+    return float(done.stdout.strip().splitlines()[-1]) if args[0] == __file__ else wall
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--baseline", type=Path, default=Path("/work/main"), help="checkout with its own .venv")
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--keep", type=Path, default=None, help="caches and data in DIR (default: a temporary folder)")
+    ap.add_argument("--inner", default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.inner:
+        print(inner(args.inner))
+        return 0
+    from baselines import builds as baseline_builds  # bench/common, on the path bench/run_all.py sets
+
+    folder = args.keep or Path(tempfile.mkdtemp(prefix="accelnav-bench-cache-"))
+    folder.mkdir(parents=True, exist_ok=True)
+    builds = baseline_builds(args.baseline)
+    envs = {}
+    for b in builds:
+        env = {k: v for k, v in os.environ.items() if k != "ACCELNAV_GAIN_CACHE"}
+        env.update(ACCELNAV_CACHE_DIR=str(folder / f"cache-{b}"), ACCELNAV_CACHE_KEY_FILE=str(folder / "cache.key"))
+        envs[b] = env
+    this = builds["this"]
+    for secs in (60, 1400):
+        run = folder / f"run{secs}.npz"
+        if not run.exists():
+            cmd = ["-m", "accelnav", "sim", "--scenario", "stop_and_go", "--duration", str(secs), "--out", str(run)]
+            timed(this, envs["this"], cmd, folder)
+    cases = {
+        "--version": ["-m", "accelnav", "--version"],
+        "module": [__file__, "--inner", "module"],
+        "steady": [__file__, "--inner", "steady"],
+        "smooth 60 s": ["-m", "accelnav", "smooth", "run60.npz", "--out", "o60.npz"],
+        "smooth 1400 s": ["-m", "accelnav", "smooth", "run1400.npz", "--out", "o1400.npz"],
+    }
+    best = {b: dict.fromkeys(cases, float("inf")) for b in builds}
+    for b, py in builds.items():  # warm each cache first (builds, generates, probes the steady rows)
+        for args_ in cases.values():
+            timed(py, envs[b], args_, folder)
+    for _ in range(args.repeat):
+        for name, args_ in cases.items():
+            for b, py in builds.items():
+                best[b][name] = min(best[b][name], timed(py, envs[b], args_, folder))
+    print(f"Warm cache, fresh process each, best of {args.repeat} (s):\n")
+    print("| case | " + " | ".join(builds) + " | goal | measured | met |")
+    print("|---|" + "---|" * len(builds) + "---|---|---|")
+    for name in cases:
+        row = " | ".join(f"{best[b][name]:.3f}" for b in builds)
+        if "baseline" not in best:
+            print(f"| {name} | {row} | - | - | - |")
+            continue
+        t, base, goal = best["this"][name], best["baseline"][name], GOALS[name]
+        if goal < 1:  # an absolute allowance over the baseline
+            measured, met = f"+{t - base:.3f} s", t - base <= goal
+            goal_s = f"<= +{goal:.2f} s"
+        else:
+            measured, met = f"{t / base:.2f}x", t / base <= goal
+            goal_s = f"<= {goal:.2f}x baseline"
+        print(f"| {name} | {row} | {goal_s} | {measured} | {'yes' if met else 'no'} |")
+    sizes = {b: sum(p.stat().st_size for p in (folder / f"cache-{b}").rglob("*") if p.is_file()) for b in builds}
+    print("\ncache folder after the runs (MB): " + ", ".join(f"{b} {s / 1e6:.0f}" for b, s in sizes.items()))
+    print(json.dumps({b: {k: round(v, 4) for k, v in best[b].items()} for b in builds}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
