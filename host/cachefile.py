@@ -53,6 +53,7 @@ KEY_ENV = "ACCELNAV_CACHE_KEY_FILE"
 LOCK_TIMEOUT_S = 900.0  # the longest build waited for (a sanitized firmware build takes minutes on a slow machine)
 
 _secret: bytes | None = None
+_ephemeral = False  # the key is this process's own (none could be read or made): entries are not kept
 
 
 def key_path() -> Path:
@@ -112,7 +113,7 @@ def _make_key(path: Path) -> None:
 def secret() -> bytes:
     """The user's cache key (made on first use). Where it can be neither read nor made (a read-only home),
     a key for this process only: nothing on disk verifies then, and every entry is rebuilt once per run."""
-    global _secret
+    global _secret, _ephemeral
     if _secret is not None:
         return _secret
     path = key_path()
@@ -129,15 +130,15 @@ def secret() -> bytes:
             _make_key(path)
             _secret = _read_key(path)
     except OSError as exc:
-        _note(f"cache key {path}: {exc.strerror or exc}; cached entries are rebuilt for this run only")
-        _secret = os.urandom(32)
+        _note(f"cache key {path}: {exc.strerror or exc}; nothing is read from or kept in the cache this run")
+        _secret, _ephemeral = os.urandom(32), True
     return _secret
 
 
 def forget_secret() -> None:
     """Read the key again on next use (tests point :data:`KEY_ENV` elsewhere)."""
-    global _secret
-    _secret = None
+    global _secret, _ephemeral
+    _secret, _ephemeral = None, False
 
 
 def tag(name: str, *parts) -> bytes:
@@ -221,7 +222,11 @@ def write_sealed(path: Path, *payload) -> bool:
 
 def write_entry(path: Path, *parts) -> bool:
     """Put ``parts`` (buffers) at ``path`` whole: a unique O_EXCL temporary name in the same folder, then a
-    rename. Best effort: False (said in one line) when the folder cannot take it."""
+    rename. Best effort: False (said in one line) when the folder cannot take it; False, silently, when the
+    key is this process's own (an entry no later run could verify)."""
+    secret()
+    if _ephemeral:
+        return False
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)

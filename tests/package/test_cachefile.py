@@ -36,6 +36,18 @@ def test_the_xdg_config_folder_holds_the_key_by_default(cache, tmp_path, monkeyp
     assert cachefile.key_path() == tmp_path / "xdg" / "accelnav" / "cache.key"
 
 
+def test_no_key_to_be_had_keeps_nothing_and_says_so_once(cache, tmp_path, monkeypatch, capsys):
+    """A home that cannot take the key (here a file where its folder should be): each entry is built, used,
+    and not kept, since no later run could verify it."""
+    (tmp_path / "config").write_text("not a folder")
+    path = cache / "entry"
+    assert bytes(cachefile.cached(path, lambda: b"built", limit=100)) == b"built"
+    assert bytes(cachefile.cached(path, lambda: b"built", limit=100)) == b"built"
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "nothing is read from or kept in the cache this run" in err
+    assert not path.exists()
+
+
 def test_a_key_inside_the_cache_folder_is_refused(cache, monkeypatch):
     monkeypatch.setenv(cachefile.KEY_ENV, str(cache / "cache.key"))
     with pytest.raises(UserError, match="lies inside the cache folder"):

@@ -14,6 +14,7 @@ def private_cache(tmp_path: Path, monkeypatch) -> Path:
     monkeypatch.setenv("ACCELNAV_CACHE_DIR", str(cache))
     monkeypatch.setenv(cachefile.KEY_ENV, str(tmp_path / "config" / "cache.key"))
     monkeypatch.setattr(cachefile, "_secret", None)  # read afresh now; the key before restored afterwards
+    monkeypatch.setattr(cachefile, "_ephemeral", False)
     return cache
 
 
