@@ -30,7 +30,10 @@ to (r, u) cross terms in the eps row). Hence:
    blocks) reaches a steady state and never depends on N: it is computed once
    per design up to that state and kept on disk (:func:`steady_gains`), every
    later sample reading its last row; only the r, u rows of P, which never
-   settle, are propagated per run (acn_plain_cov_steady).
+   settle, are propagated per run (acn_plain_cov_steady). What is kept on disk
+   is a cache entry like any (:mod:`accelnav.cachefile`): sealed with the user's
+   key in blocks of rows, read (never mapped) and verified block by block, so an
+   edited file is recomputed and a truncated one cannot raise SIGBUS.
 2. The smoothed (a, eps) of the 4-state RTS smoother are those of the 2-state
    RTS smoother of s, because the marginal of s given all z is the 2-state
    smoothing posterior (s is Markov and z depends on s alone).
@@ -228,7 +231,10 @@ _cache_lock = threading.Lock()
 
 
 def gain_cache_dir() -> Path | None:
-    """Optional disk cache for :func:`plain_gains`: ``$ACCELNAV_GAIN_CACHE`` (off when unset)."""
+    """Optional disk cache for :func:`plain_gains`: ``$ACCELNAV_GAIN_CACHE`` (off when unset). Its entries are
+    sealed like every cache entry (:mod:`accelnav.cachefile`) and their arrays checked for the shapes and
+    types the kernels assume before any reaches them: a folder others can write costs rebuilds, not reads
+    past an array."""
     env = os.environ.get("ACCELNAV_GAIN_CACHE")
     return Path(env) if env else None
 
