@@ -568,7 +568,8 @@ def _gains_from(data, key: str, n: int) -> PlainGains:
     for k, a in arrays.items():
         want = (m, 4) if k in ("K", "Cs") else (n, 10)
         if a.dtype != np.float64 or a.shape != want or not a.flags.c_contiguous:
-            raise ValueError(f"{k}: {a.dtype} {a.shape}, expected float64 {want}")
+            said = "(rows, 4)" if k in ("K", "Cs") else str(want)
+            raise ValueError(f"{k}: {a.dtype} {a.shape}, expected C-ordered float64 {said}")
     if not (m == n or (bool(all_valid) and 1 <= m <= n)):
         raise ValueError(f"K: {m} rows for {n} samples")
     for a in arrays.values():
