@@ -487,7 +487,9 @@ def _load_steady(path: Path, key: str, need: int | None = None) -> SteadyGains |
         with open_entry(path, _STEADY_HEAD + 32 * (1 + PROBE_MAX) + PROBE_MAX * SROW * 8) as (fh, size):
             head = bytearray(_STEADY_HEAD + 32)
             read_into(fh, head)
-            if head[:8] != _STEADY_MAGIC or head[8:32] != key.encode():
+            if head[:8] != _STEADY_MAGIC:
+                raise ValueError("not steady rows of this accelnav version (an older layout, or something else)")
+            if head[8:32] != key.encode():
                 raise ValueError("not the rows of this design")
             nt, nb = (int.from_bytes(head[i : i + 8], "little") for i in (32, 40))
             if not 1 <= nt <= PROBE_MAX or nb != -(-nt // _BLOCK_ROWS):
