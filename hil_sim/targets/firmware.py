@@ -14,6 +14,12 @@
 The firmware sources are package data (:func:`accelnav.resources.firmware_dir`);
 what is built goes to the cache (:func:`accelnav.resources.cache_root`)
 or a folder the caller names, never into the installed package.
+
+Unlike the other cache entries (:mod:`accelnav.cachefile`), a board's image
+folder is not sealed: ``make`` builds in it incrementally and trusts the
+objects it finds there, so whoever can write the cache folder can change the
+image the emulator runs. Builds of one folder take a lock, one at a time; the
+user guide ("The cache folder") says to keep PIL's cache private.
 """
 
 from __future__ import annotations
