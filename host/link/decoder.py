@@ -26,6 +26,7 @@ import numpy as np
 
 from .accounting import SampleOrder, Stats
 from .codec import cobs_decode_rows, crc_rows
+from .compact import concat_records
 from .manifest import Manifest
 from .wirekernel import decode_frames
 
@@ -183,7 +184,7 @@ class Decoder:
         e = np.zeros(0, np.int64)
         before = {k: getattr(c, k) for k in _COMPACT_COUNTS}
         dmg0 = c.damaged, c.damaged_bytes
-        rows, rpos = c.feed(out["block"], where.get("block", e), out["checkpoint"], where.get("checkpoint", e))
+        rows, rpos = self._compact_around_states(out, where, e)
         if len(out["sample"]):  # held rows before a state-mode frame go out before it, never after
             early, epos = c.release_before(int(where["sample"][-1]))
             if len(early):
@@ -202,6 +203,29 @@ class Decoder:
         for k, b in before.items():  # this batch's counts, added to the decoder's
             setattr(self.stats, k, getattr(self.stats, k) + getattr(c, k) - b)
         return c.lost - before["lost"]
+
+    def _compact_around_states(self, out: dict, where: dict, e: np.ndarray):
+        """:meth:`CompactStream.feed` of the batch's block and checkpoint frames, in groups split where the
+        state mode's sample frames came between them (:meth:`CompactStream.state_frames` told each time)."""
+        c = self.compact
+        blk, bpos = out["block"], where.get("block", e)
+        cks, cpos = out["checkpoint"], where.get("checkpoint", e)
+        spos = where.get("sample", e)
+        if not len(spos):
+            return c.feed(blk, bpos, cks, cpos)
+        sidx = out["sample"]["index"].astype(np.int64)
+        gb, gc = np.searchsorted(spos, bpos), np.searchsorted(spos, cpos)  # sample frames before each frame
+        rows, rpos, done = [], [], 0
+        for g in np.unique(np.r_[gb, gc]).tolist():
+            if g > done:
+                c.state_frames(int(sidx[done:g].max()))
+                done = g
+            r, p = c.feed(blk[gb == g], bpos[gb == g], cks[gc == g], cpos[gc == g], more=bool(rows))
+            rows.append(r)
+            rpos.append(p)
+        if done < len(spos):
+            c.state_frames(int(sidx[done:].max()))
+        return concat_records(rows, c.sample_dtype), np.concatenate(rpos) if rpos else e
 
     @property
     def received(self) -> int:
