@@ -22,6 +22,7 @@ from accelnav.cli import main as cli_main
 from accelnav.data.logs import log_summary
 from accelnav.data.runfile import load_run
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, generated
+from accelnav.link.accounting import format_counts, link_counts
 from accelnav.link.codec import encode_command, encode_stimulus
 from accelnav.link.decoder import decode_all
 from accelnav.link.logfile import LogError, LogWriter, read_log
@@ -237,6 +238,45 @@ def test_stop_at_a_frame_count_ends_the_log_on_a_frame_boundary(tmp_path, man, t
     assert len(d.frames["sample"]) == 21
 
 
+def test_stop_at_the_duration_ends_the_log_on_a_frame_boundary(tmp_path, man, telemetry):
+    """A clean --duration stop with a frame under way was summed up as "damaged 1 frames": the recorder
+    reads on to that frame's delimiter (at most 0.5 s), as at a frame count."""
+    frames = split_frames(telemetry)
+    head, extra = b"".join(frames[:20]), frames[20]
+    port = serial.serial_for_url("loop://", timeout=0.02)
+    port.write(head + extra[:30])
+    later = threading.Timer(0.45, port.write, args=(extra[30:],))
+    out = tmp_path / "duration.acnlog"
+    rec = Recorder(port, out, man, commands=(), model_text=load_model().text, status=Status(enabled=False))
+    later.start()
+    res = rec.run(duration=0.3)
+    rec.close()
+    later.join(5)
+    assert res.reason == "duration"
+    assert res.stats["bad_frames"] == 0 and res.stats["frames"]["sample"] == 21
+    assert "damaged 0 frames" in format_counts(link_counts(res.stats))
+    assert decode_log(out).stats["bad_frames"] == 0
+
+
+@pytest.mark.parametrize("zeros", [False, True])
+def test_a_device_sending_only_garbage_gets_a_hint(tmp_path, man, zeros):
+    """Bytes and not one frame: the summary said only "0 samples ... damaged N frames". It says what came
+    and what to check: no delimiter at all points at the baud rate, segments at another layout too."""
+    junk = np.random.default_rng(3).integers(1, 256, 20_000, dtype=np.uint8)
+    if zeros:
+        junk[::97] = 0
+    port = serial.serial_for_url("loop://", timeout=0.02)
+    writer = threading.Thread(target=port.write, args=(junk.tobytes(),), daemon=True)  # loop:// holds 4 KiB
+    rec = Recorder(port, tmp_path / "junk.acnlog", man, commands=(), status=Status(enabled=False), baud=115200)
+    writer.start()
+    res = rec.run(duration=1.0)
+    rec.close()
+    writer.join(5)
+    (hint,) = [w for w in res.warnings if "baud" in w]
+    assert "\n" not in hint and "now 115200" in hint and "20000 bytes" in hint
+    assert ("none a frame of this manifest" in hint) == zeros and ("no frame delimiter" in hint) != zeros
+
+
 def _pty():
     import tty
 
@@ -318,6 +358,29 @@ def test_recorder_reconnects_and_records_the_gap(tmp_path, man, telemetry):
     assert (d.stats["lost"], d.stats["duplicates"], d.stats["crc_errors"]) == (200, 50, 0)
     assert res.stats["lost"] == 200 and res.stats["duplicates"] == 50
     print(f"\nreconnect: {g}")
+
+
+def test_damage_at_outages_is_counted_as_the_log_counts_it(tmp_path, man, telemetry):
+    """Each connection ends inside a frame and the next begins inside one: the recorder refused the torn end
+    at each outage and then the torn start (5 damaged frames over two outages), the log reads both as one
+    segment (3). The recorder now counts what the log holds, one way."""
+    f = split_frames(telemetry)
+    parts = [
+        b"".join(f[:300]) + f[300][:20],
+        f[310][30:] + b"".join(f[311:600]) + f[600][:10],
+        f[605][5:] + b"".join(f[606:]),
+    ]
+    url, th, _ = server(parts, down_s=0.3)
+    out = tmp_path / "outages.acnlog"
+    rec = Recorder(url, out, man, commands=(), status=Status(io.StringIO(), enabled=False))
+    res = rec.run(max_frames=300 + len(f[311:600]) + len(f[606:]), duration=60)
+    rec.close()
+    th.join(30)
+    assert len(res.gaps) == 2, res.gaps
+    d = decode_log(out)
+    keys = ("bad_frames", "garbage_bytes", "crc_errors", "lost", "duplicates")
+    assert {k: res.stats[k] for k in keys} == {k: d.stats[k] for k in keys}
+    assert d.stats["bad_frames"] == 2  # one joined segment per outage
 
 
 def test_status_line_says_the_link_is_being_retried(man):
