@@ -233,9 +233,11 @@ class CompactStream:
         """Sample frames of the state mode reached ``index`` (the last one's) since the frames fed before: the
         run went on there. Its samples are the state mode's to count, not a gap of the compact stream, and
         the replay's carried state is stale (a break)."""
-        if self.end is None or index < self.end or self.pending is not None:
+        if self.pending is not None or (self.end is not None and index < self.end):
             return
-        self.end = index + 1
+        if self.end is None and self.run is not None:
+            return  # a new run's first frames were judged damage: its start is not known
+        self.end = index + 1  # (the stream's first frames: the run is the next compact frame's)
         self.carry = [None] * len(self.axes)
         self.pause_from = self.blind_gap = None
 
@@ -592,7 +594,7 @@ class _Walk:
         cs, f = self.cs, self.f
         kind, i = f.kinds[q], f.ids[q]
         run, idx = (f.b_run[i], f.b_index[i]) if kind == 0 else (f.c_run[i], f.c_index[i])
-        new_run = self.end is not None and run != cs.run
+        new_run = self.end is not None and cs.run is not None and run != cs.run
         if new_run and run in cs.past_runs:  # a frame of an earlier run, sent again
             if kind == 0:
                 cs.duplicates += f.b_n[i]
@@ -616,7 +618,7 @@ class _Walk:
             cs.known_pause = -1
             self._brk(self.pos)
             self.end = None  # the new run's first frame: no gap counted against the old run
-        if self.end is None:
+        if self.end is None or cs.run is None:
             cs.run = run
         return self._block(i, idx) if kind == 0 else self._checkpoint(i, idx)
 

@@ -68,6 +68,7 @@ class Decoder:
         self._tail = b""
         self._overlong = False  # the tail exceeded every frame length: the segment is refused at its delimiter
         self.order = SampleOrder(1 << manifest.flags["reset"], manifest.frames["cmd_stop"]["type"])
+        self.mode_compact = manifest.frames.get("cmd_mode_compact", {}).get("type")
         self.stats = Stats(frames={n: 0 for n in self.names})
         self.compact = None
         if "block" in self.names and "checkpoint" in self.names:
@@ -160,6 +161,11 @@ class Decoder:
         if cks is not None and len(cks):
             before = np.searchsorted(where.get("sample", np.zeros(0, np.int64)), where["checkpoint"])
             marks = list(zip(before.tolist(), cks["seq"].tolist(), cks["index"].tolist(), strict=True))
+        if acks is not None and len(acks) and self.mode_compact is not None:
+            is_mc = acks["command"] == self.mode_compact
+            if is_mc.any():
+                before = np.searchsorted(where.get("sample", np.zeros(0, np.int64)), where["ack"][is_mc])
+                marks += [(p, None, i) for p, i in zip(before.tolist(), acks["index"][is_mc].tolist(), strict=True)]
         lost0, dup0 = self.order.lost, self.order.duplicates
         keep = self.order.run(smp["seq"], smp["index"], smp["flags"], stops, marks)
         if not keep.all():

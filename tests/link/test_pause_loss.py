@@ -74,3 +74,16 @@ def test_the_last_state_frame_lost_before_the_compact_mode_is_counted():
     at = next(i for i in _resumes() if (extent(frames[i - 2]) or (0,))[0] == 1)
     rows, stats, broken, total = _decode_without({at - 2})
     assert not broken and stats.lost == 1
+
+
+def test_the_last_state_frame_lost_and_the_stream_cut_before_any_checkpoint():
+    """The last sample frame of the state mode lost with the resume checkpoints, and the stream cut before the
+    next checkpoint (no seq comes to count it): the ack of the mode change says where the state mode ended
+    (trial 97 of the bench)."""
+    man, replay, frames, truth = _session()
+    at = next(i for i in _resumes() if (extent(frames[i - 2]) or (0,))[0] == 1)
+    data = b"".join(f for i, f in enumerate(frames[: at + 4]) if i not in {at - 2, at, at + 1})
+    d = Decoder(man, replay=replay)
+    rows = np.concatenate([d.feed(data)["sample"], end_of_stream(d)])
+    assert not check(man, truth, frames, data, rows, d.stats)
+    assert d.stats.lost == 1 + 2 * 32  # the state frame, and the two blocks without a checkpoint to replay from
