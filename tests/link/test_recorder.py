@@ -17,6 +17,7 @@ import serial
 from conftest import REPO
 from support.frames import split_frames
 from support.link_server import server
+from support.loop_record import record_loop
 
 from accelnav.cli import main as cli_main
 from accelnav.data.logs import log_summary
@@ -217,45 +218,24 @@ def _feeder(master_fd, frames: list[bytes], rate_hz: float, sent: list, stop: th
         sent.append((time.monotonic(), k))
 
 
-def test_stop_at_a_frame_count_ends_the_log_on_a_frame_boundary(tmp_path, man, telemetry):
-    """The read that completes the count also brings the start of the next frame (its rest comes 0.1 s
-    later): the recorder reads on to that frame's delimiter, so the log holds no torn frame (which
-    would read as one damaged frame)."""
+@pytest.mark.parametrize("stop", ["frames", "duration"])
+def test_a_stop_ends_the_log_on_a_frame_boundary(tmp_path, man, telemetry, stop):
+    """The read that completes the count, or the duration's last read, also brings the start of the next frame
+    (its rest comes a moment later): the recorder reads on to that frame's delimiter (at most 0.5 s), so the
+    log holds no torn frame. A clean --duration stop was summed up as "damaged 1 frames"."""
     frames = split_frames(telemetry)
     head, extra = b"".join(frames[:20]), frames[20]
-    port = serial.serial_for_url("loop://", timeout=0.02)
-    port.write(head + extra[:30])
-    later = threading.Timer(0.1, port.write, args=(extra[30:],))
-    out = tmp_path / "count.acnlog"
-    rec = Recorder(port, out, man, commands=(), model_text=load_model().text, status=Status(enabled=False))
-    later.start()
-    res = rec.run(max_frames=20, duration=10)
-    rec.close()
-    later.join(5)
-    assert res.reason == "frames"
+    out = tmp_path / f"{stop}.acnlog"
+    run = {"max_frames": 20, "duration": 10} if stop == "frames" else {"duration": 0.3}
+    later_s = 0.1 if stop == "frames" else 0.45
+    text = load_model().text
+    res = record_loop(man, out, head + extra[:30], later=extra[30:], later_s=later_s, model_text=text, **run)
+    assert res.reason == stop
+    assert res.stats["bad_frames"] == 0 and res.stats["frames"]["sample"] == 21
+    assert "damaged 0 frames" in format_counts(link_counts(res.stats))
     d = decode_log(out)
     assert d.stats["bad_frames"] == 0 and d.stats["garbage_bytes"] == 0
     assert len(d.frames["sample"]) == 21
-
-
-def test_stop_at_the_duration_ends_the_log_on_a_frame_boundary(tmp_path, man, telemetry):
-    """A clean --duration stop with a frame under way was summed up as "damaged 1 frames": the recorder
-    reads on to that frame's delimiter (at most 0.5 s), as at a frame count."""
-    frames = split_frames(telemetry)
-    head, extra = b"".join(frames[:20]), frames[20]
-    port = serial.serial_for_url("loop://", timeout=0.02)
-    port.write(head + extra[:30])
-    later = threading.Timer(0.45, port.write, args=(extra[30:],))
-    out = tmp_path / "duration.acnlog"
-    rec = Recorder(port, out, man, commands=(), model_text=load_model().text, status=Status(enabled=False))
-    later.start()
-    res = rec.run(duration=0.3)
-    rec.close()
-    later.join(5)
-    assert res.reason == "duration"
-    assert res.stats["bad_frames"] == 0 and res.stats["frames"]["sample"] == 21
-    assert "damaged 0 frames" in format_counts(link_counts(res.stats))
-    assert decode_log(out).stats["bad_frames"] == 0
 
 
 @pytest.mark.parametrize("zeros", [False, True])
@@ -265,13 +245,7 @@ def test_a_device_sending_only_garbage_gets_a_hint(tmp_path, man, zeros):
     junk = np.random.default_rng(3).integers(1, 256, 20_000, dtype=np.uint8)
     if zeros:
         junk[::97] = 0
-    port = serial.serial_for_url("loop://", timeout=0.02)
-    writer = threading.Thread(target=port.write, args=(junk.tobytes(),), daemon=True)  # loop:// holds 4 KiB
-    rec = Recorder(port, tmp_path / "junk.acnlog", man, commands=(), status=Status(enabled=False), baud=115200)
-    writer.start()
-    res = rec.run(duration=1.0)
-    rec.close()
-    writer.join(5)
+    res = record_loop(man, tmp_path / "junk.acnlog", junk.tobytes(), baud=115200, duration=1.0)
     (hint,) = [w for w in res.warnings if "baud" in w]
     assert "\n" not in hint and "now 115200" in hint and "20000 bytes" in hint
     assert ("none a frame of this manifest" in hint) == zeros and ("no frame delimiter" in hint) != zeros
