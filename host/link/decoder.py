@@ -222,7 +222,9 @@ class Decoder:
         sidx = out["sample"]["index"].astype(np.int64)
         gb, gc = np.searchsorted(spos, bpos), np.searchsorted(spos, cpos)  # sample frames before each frame
         rows, rpos, done = [], [], 0
-        for g in np.unique(np.r_[gb, gc]).tolist():
+        # group 0 even when empty: the frame an earlier batch left pending and the held rows' positions (from
+        # an earlier batch now) are settled before the sample frames move the stream on
+        for g in np.unique(np.r_[0, gb, gc]).tolist():
             if g > done:
                 c.state_frames(int(sidx[done:g].max()))
                 done = g

@@ -32,6 +32,15 @@ def test_lost_is_exact_under_the_corruptor_with_pauses(t):
     assert not broken, (kind, t)
 
 
+@pytest.mark.parametrize("t", [97, 799, 826, 837])
+def test_trials_that_found_a_fault_beyond_the_subset(t):
+    """97: a stream cut before any checkpoint; 799: the last state frames lost before the mode change's ack;
+    826, 837: a batch of state-mode frames only, after rows held by the batch before (their positions were
+    that batch's: the rows went out after the state frames, 2522 then 2476)."""
+    kind, broken, _ = pause_trial(t, _session())
+    assert not broken, (kind, t)
+
+
 def _decode_without(drop: set[int]):
     man, replay, frames, truth = _session()
     data = b"".join(f for i, f in enumerate(frames) if i not in drop)

@@ -25,7 +25,8 @@ import zlib
 
 import numpy as np
 
-BLOCK, CHECKPOINT, SAMPLE = 0x04, 0x05, 0x01  # codegen.frames' frame types, as the protocol document gives them
+BLOCK, CHECKPOINT, SAMPLE, ACK = 0x04, 0x05, 0x01, 0x03  # codegen.frames' frame types (the protocol document)
+MODE_COMPACT = 0x19  # the command type of mode_compact, which an ack names in its byte 1
 RESUME = 1 << 4  # the resume flag (the protocol document's flag bits)
 FAULTS = ("bitflip", "drop", "duplicate", "reorder", "truncate", "poweron", "future", "mixed")
 PAUSE_FAULTS = (*FAULTS, "pause")  # "pause": the frames around a resume or a mode change lost together
@@ -113,7 +114,8 @@ def sent(frames: list[bytes]) -> np.ndarray:
 
 def span(segs: list[bytes], original: set[bytes]) -> tuple[int, int]:
     """(S, E): the index of the first original frame among ``segs`` in stream order and the furthest index
-    one of them reaches."""
+    one of them reaches; the ack of a change to the compact mode reaches its index too (the state mode's
+    samples before it had their frames)."""
     first, ends = None, [0]
     for f in segs:
         if f in original:
@@ -121,6 +123,8 @@ def span(segs: list[bytes], original: set[bytes]) -> tuple[int, int]:
             if e is not None:
                 first = e[1] if first is None else first
                 ends.append(e[2])
+            elif (p := payload(f)) is not None and p[0] == ACK and p[1] == MODE_COMPACT:
+                ends.append(struct.unpack_from("<I", p, 5)[0])
     return first or 0, max(ends)
 
 
