@@ -188,8 +188,12 @@ def cmd_log_plot(args) -> int:
     if not args.seconds > 0:
         raise UserError(f"--seconds: got {args.seconds}; accepted: more than 0")
     check_output(args.out)
+    from accelnav.link.logfile import LogError
+
     try:
         plot = plot_log(args.log, args.out, _record_model_text(args), args.seconds)
+    except LogError as exc:
+        raise UserError(str(exc)) from None
     except OSError as exc:
         raise UserError(f"--out: {args.out}: cannot write: {exc.strerror or exc}") from None
     print(f"accelnav log plot: {args.out}: the last {min(plot.pushed, plot.capacity)} of {plot.pushed} samples")
