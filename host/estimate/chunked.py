@@ -170,16 +170,16 @@ class NpzReader:
         self.n, self.n_axes = n, shape[1]
         self.fd = os.open(path, os.O_RDONLY)
 
-    def _part(self, key: str, s: int, e: int) -> np.ndarray:
+    def part(self, key: str, s: int, e: int) -> np.ndarray:
         offset, shape, dtype = self.members[key]
         buf = np.empty((e - s, *shape[1:]), dtype=dtype)
         pread_exact(self.fd, buf, offset + s * int(np.prod(shape[1:])) * dtype.itemsize)
         return buf
 
     def __call__(self, s: int, e: int):
-        t, accel = self._part("t", s, e).astype(np.float64), self._part("accel", s, e).astype(np.float64)
+        t, accel = self.part("t", s, e).astype(np.float64), self.part("accel", s, e).astype(np.float64)
         if "clipped" in self.members:
-            return t, accel, self._part("clipped", s, e).astype(bool)
+            return t, accel, self.part("clipped", s, e).astype(bool)
         return t, accel, np.zeros((e - s, self.n_axes), dtype=bool)
 
     def close(self) -> None:

@@ -1,0 +1,168 @@
+"""filter and smooth of a file: the input opened (streamed or whole), the engine run, the outputs written.
+
+The engine (:mod:`accelnav.estimate.engine`) decides how the passes are cut; here only how the input
+is read: a CSV or gzip CSV whose whole-array run would exceed the memory budget, or whose numbers
+exceed what one input may hold in memory, is streamed (:func:`accelnav.data.stream.open_stream`), as
+is such an NPZ (:func:`accelnav.data.stream.open_npz_stream`); anything else is read whole by
+:func:`accelnav.data.inputs.read_input`. Aids (fixes, rests) and what the engine runs as one chunk need
+the input in memory: over the input limit they are refused in one line before anything is parsed.
+"""
+
+from __future__ import annotations
+
+import shutil
+from contextlib import ExitStack
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from accelnav.data.inputs import read_input
+from accelnav.data.runfile import export_csv, save_run
+from accelnav.errors import UserError
+from accelnav.estimate import engine
+from accelnav.estimate.chunked import disk_needed, whole_bytes
+from accelnav.fileio import check_output, input_limit, write_text
+from accelnav.model.load import Model, load_model
+from accelnav.progress import note
+
+
+def smooth_file(
+    path: str | Path,
+    out: str | Path,
+    model: Model | str | Path | None = None,
+    *,
+    job: engine.Job | None = None,
+    fixes: str | Path | None = None,
+    zupt: str | Path | None = None,
+    zupt_params=None,
+    zupt_report: str | Path | None = None,
+    csv: str | Path | None = None,
+    compress: bool = False,
+    **read,
+) -> engine.Outcome:
+    """Filter or smooth the recording or run file ``path`` as ``job`` says; write the run file ``out``
+    (and ``csv``, ``zupt_report``). ``fixes``: a fixes CSV (accelnav.estimate.fixes.read_fixes); ``zupt``:
+    "auto" (the rest decision, with ``zupt_params``) or a rest file (accelnav.estimate.zupt.read_zupt_file);
+    ``read``: read_input's keywords (axes, time_column, rate_hz, time_unit, unit, allow_gaps).
+    Returns the engine's :class:`~accelnav.estimate.engine.Outcome`; ``Outcome.written`` lists the files."""
+    from accelnav.estimate import zupt as zu
+
+    job = engine.Job() if job is None else job
+    for p, flag in ((out, "--out"), (csv, "--csv"), (zupt_report, "--zupt-report")):
+        if p is not None:
+            check_output(p, flag)
+    if zupt_report is not None and zupt != "auto":
+        raise UserError("--zupt-report: only with --zupt auto (it lists the detector's candidates)")
+    in_memory = tuple(f for f, v in (("--csv", csv), ("--compress", compress)) if v) + job.in_memory
+    smooth = "smooth" in job.stages
+    rests = None
+    if smooth and zupt is not None:
+        rests = engine.Rests(zupt_params, detect=zupt == "auto")
+    # the plan before any reading: what cannot be done within the budget is refused now
+    job = replace(job, in_memory=in_memory, rests=rests, fixes=[] if smooth and fixes is not None else None)
+    whole = _whole_reasons(job, fixes, zupt)
+    out = Path(out)
+    with ExitStack() as stack:
+        source, model = _open(path, model, job, whole, read, out.resolve().parent, stack)
+        if job.aided:
+            arrays = source.whole()
+            names = [str(a) for a in arrays["axis_names"]]
+            if fixes is not None:
+                from accelnav.estimate.fixes import read_fixes
+
+                job = replace(job, fixes=read_fixes(fixes, arrays["t"], names))
+            if zupt is not None and zupt != "auto":
+                mask, sigma = zu.read_zupt_file(zupt, arrays["t"], names)
+                job = replace(job, rests=replace(rests, mask=mask, sigma=sigma))
+        outcome = engine.run(model, source, job, out, workdir=out.resolve().parent)
+        written = [out]
+        if outcome.arrays is not None:
+            save_run(out, outcome.arrays, outcome.model, compress=compress)
+            if csv is not None:
+                export_csv(csv, outcome.arrays)
+                written.append(Path(csv))
+        if zupt_report is not None and outcome.rests is not None:
+            write_text(zupt_report, zu.report_csv(outcome.rests.decisions, source.whole()["t"]), flag="--zupt-report")
+            written.append(Path(zupt_report))
+        outcome.written = written
+        return outcome
+
+
+def _whole_reasons(job: engine.Job, fixes, zupt) -> str:
+    """The flags for which the input is read whole (the aids are placed on its clock), in words."""
+    flags = [f for f, v in (("--fixes", fixes), ("--zupt", zupt), ("--tune", job.tune)) if v is not None]
+    flags += [f for f in job.in_memory if f not in flags]
+    if job.covariances:
+        flags.append("--covariances")
+    return ", ".join(flags)
+
+
+def input_size(path, model: Model | str | Path | None, axes) -> tuple[int, int] | None:
+    """(estimated rows, axes) of a CSV, gzip CSV or NPZ input from its size and first bytes, before it is
+    parsed; None for another input (a recorder log, an unreadable file: read whole, which says why)."""
+    from accelnav.data.stream import estimate_rows, npz_rows
+
+    rows = estimate_rows(path)
+    if rows is None:
+        rows = npz_rows(path)
+    if rows is None:
+        return None
+    if axes:
+        return rows, len(axes)
+    m = model if isinstance(model, Model) else load_model(model)
+    return rows, len(m.axes)
+
+
+def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, stack: ExitStack):
+    """(engine.Source, model): the input streamed when it is large and nothing needs it whole, else read whole."""
+    if not isinstance(path, (str, Path)):
+        run, m = read_input(path, model, **read)
+        return engine.Source.of(run, "<arrays>"), m
+    size = input_size(path, model, read.get("axes"))
+    if size is not None:
+        rows, n_axes = size
+        engine.plan(rows, n_axes, job, label=str(path))  # refuses before reading what the budget cannot do
+        big = whole_bytes(rows, n_axes) > engine.budget_bytes(job.budget)
+        held, limit = rows * 8 * (2 + n_axes), input_limit()
+        if (big or held > limit) and whole:
+            if held > limit:
+                raise UserError(
+                    f"{path}: about {rows} rows x {n_axes} axes need about {held / 1e9:.3g} GB in memory; {whole} "
+                    f"need(s) every sample in memory, which may take {limit / 1e9:.3g} GB here "
+                    "(ACCELNAV_MAX_INPUT_BYTES); plain smooth streams any length"
+                )
+        elif big or held > limit:
+            source = _stream(path, model, job, read, rows, n_axes, workdir, stack)
+            if source is not None:
+                return source
+    run, m = read_input(path, model, **read)
+    return engine.Source.of(run, str(path)), m
+
+
+def _stream(path, model, job: engine.Job, read: dict, rows: int, n_axes: int, workdir: Path, stack: ExitStack):
+    """The input opened as a stream (its store in ``workdir``), or None when only the whole reader takes it."""
+    from accelnav.data.stream import NotStreamed, open_stream
+
+    need = rows * 8 * (2 + n_axes) + disk_needed(rows, n_axes, n_stages=len(job.stages))
+    free = shutil.disk_usage(workdir).free
+    if need > free:
+        raise UserError(
+            f"{path}: about {rows} rows x {n_axes} axes need about {need / 1e9:.3g} GB of disk in {workdir} "
+            f"to be smoothed in bounded memory; {free / 1e9:.3g} GB are free"
+        )
+    try:
+        st = stack.enter_context(open_stream(path, model, workdir=workdir, **read))
+    except NotStreamed as exc:
+        note(f"{exc}; reading it whole")
+        return None
+    t_ends = (st.t0, st.t0 + (st.n - 1) * st.Ts)
+    return engine.Source(st.n, st.axis_names, st, None, str(path), t_ends, streamed=st.kind), st.model
+
+
+def summary_arrays(outcome: engine.Outcome) -> tuple[dict[str, np.ndarray], int]:
+    """(arrays, samples) for a summary of the run: the whole run, or its outputs' ends when it was chunked."""
+    if outcome.arrays is not None:
+        return outcome.arrays, outcome.n
+    t = np.array(outcome.t_ends)
+    return {"t": t, "axis_names": outcome.axis_names, "clipped": outcome.clipped[None, :], **outcome.ends}, outcome.n
