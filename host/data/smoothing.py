@@ -76,6 +76,8 @@ def smooth_file(
                 mask, sigma = zu.read_zupt_file(zupt, arrays["t"], names)
                 job = replace(job, rests=replace(rests, mask=mask, sigma=sigma))
         outcome = engine.run(model, source, job, out, workdir=out.resolve().parent)
+        if outcome.arrays is not None and job.aided and job.checks and "smooth" in job.stages:
+            outcome.checks = _checks(outcome, source.whole(), job.fixes)
         written = [out]
         if outcome.arrays is not None:
             save_run(out, outcome.arrays, outcome.model, compress=compress)
@@ -87,6 +89,17 @@ def smooth_file(
             written.append(Path(zupt_report))
         outcome.written = written
         return outcome
+
+
+def _checks(outcome: engine.Outcome, inputs: dict, fixes):
+    """The aids' consistency checks of a run smoothed in memory (accelnav.estimate.pipeline.smooth_checks)."""
+    from accelnav.estimate.pipeline import smooth_checks
+
+    r = outcome.rests
+    kw = dict(rest=None, zupt_params=None, rest_sigma=None)
+    if r is not None:
+        kw = dict(rest=r.mask, zupt_params=r.params, rest_sigma=r.sigma)
+    return smooth_checks(outcome.arrays, outcome.model, inputs, fixes, **kw)
 
 
 def _whole_reasons(job: engine.Job, fixes, zupt) -> str:

@@ -170,7 +170,7 @@ class Outcome:
     applied: list[int] | None = None  # zero-velocity updates applied per axis
     fixes: list[int] | None = None  # fixes per axis
     tune: object = None  # (TuneResult, seconds)
-    checks: object = None  # consistency.SmoothChecks
+    checks: object = None  # consistency.SmoothChecks (accelnav.data.smoothing adds them)
     store_in_memory: bool = True
     streamed: str = ""
     written: list = field(default_factory=list)  # files written (filled in by the caller that writes them)
@@ -304,13 +304,6 @@ def _whole(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, outco
             outcome.applied = [int(c) for c in res["zupt"].sum(axis=0)]
         if job.fixes is not None:
             outcome.fixes = [len(f) for f in job.fixes]
-        if job.aided and job.checks:
-            from accelnav.estimate.pipeline import smooth_checks
-
-            kw = dict(rest=None, zupt_params=None, rest_sigma=None)
-            if rest is not None:
-                kw = dict(rest=rest.mask, zupt_params=rest.params, rest_sigma=rest.sigma)
-            outcome.checks = smooth_checks(res, model, arrays, job.fixes, **kw)
     else:
         res = filter_arrays(arrays, model, covariances=job.covariances)
     outcome.arrays = res

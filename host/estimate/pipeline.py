@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from accelnav.estimate import engine
 from accelnav.estimate.checks import check_run
 from accelnav.estimate.kf import double_integrate, run_filter
 from accelnav.model.design import axis_design
@@ -30,15 +31,11 @@ def filter_run(
     accelnav.estimate.kf.run_filter to 1e-9; tests/estimate/test_smooth_output.py compares the two).
     ``progress`` is accepted for symmetry (the C is quick).
     """
-    from accelnav.estimate import engine
-
     return _engine_run(engine.Job(stages=("filt",), covariances=covariances), arrays, model)
 
 
 def _engine_run(job, arrays: dict[str, np.ndarray], model: Model) -> dict[str, np.ndarray]:
     """One run of the engine over arrays in memory, its outputs returned (one chunk)."""
-    from accelnav.estimate import engine
-
     check_run(arrays, model, "smooth_run" if "smooth" in job.stages else "filter_run")
     return engine.run(model, engine.Source.of(arrays), job).arrays
 
@@ -91,8 +88,6 @@ def smooth_run(
     beside ``fixes``, ``zupt_nis`` (K, 4) [t, axis column, NIS, 1 for the first update of its rest].
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
-    from accelnav.estimate import engine
-
     rests = None if rest is None else engine.Rests(zupt_params, mask=rest, sigma=rest_sigma)
     job = engine.Job(fixes=fixes, rests=rests, covariances=covariances, checks=False, warm_start=warm_start)
     return _engine_run(job, arrays, model)
