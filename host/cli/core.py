@@ -238,9 +238,16 @@ def register(sub) -> None:
         type=float,
         default=None,
         metavar="MB",
-        help="memory the whole-array smoother may take; a longer run is smoothed in bounded memory (chunks, a "
-        "store on disk beside --out; not with --tune, --plots, --csv; the output keeps standard deviations, "
-        "not covariances, and the aids' consistency checks are skipped); default: half the memory free",
+        help="memory the run may take; a longer run is smoothed in chunks (its store in memory within the budget, "
+        "else on disk beside --out; the aids' consistency checks are skipped); --covariances, --tune, --plots, "
+        "--csv and --compress need the whole run in memory and are refused over it; default: half the memory free",
+    )
+    p.add_argument(
+        "--full",
+        action="store_true",
+        help="write every state (r, u, a, eps) and its sd at float64 and echo the input (accel, clipped, raw counts, "
+        "truth): the run file accelnav-run/2, about 77 B per sample per axis; default: r, u and their sd at float32 "
+        "beside t, 20 B per sample per axis at 2 axes (accelnav-run/3)",
     )
     _output_args(p)
     _csv_arg(p)
@@ -308,7 +315,12 @@ def _job(args, **kw):
     """The engine's Job from the command's flags."""
     from accelnav.estimate.engine import Job
 
-    return Job(covariances=args.covariances, budget=_memory_budget_arg(getattr(args, "memory_budget", None)), **kw)
+    return Job(
+        covariances=args.covariances,
+        full=getattr(args, "full", True),  # filter: its file is smooth's input (sim -> filter -> smooth)
+        budget=_memory_budget_arg(getattr(args, "memory_budget", None)),
+        **kw,
+    )
 
 
 def _read_kw(args) -> dict:

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.data.inputs import read_input
-from accelnav.data.runfile import export_csv, save_run
+from accelnav.data.runfile import FORMAT, FORMAT_V3, compact, export_csv, save_run
 from accelnav.errors import UserError
 from accelnav.estimate import engine
 from accelnav.estimate.chunked import disk_needed, whole_bytes
@@ -60,7 +60,8 @@ def smooth_file(
     if smooth and zupt is not None:
         rests = engine.Rests(zupt_params, detect=zupt == "auto")
     # the plan before any reading: what cannot be done within the budget is refused now
-    job = replace(job, in_memory=in_memory, rests=rests, fixes=[] if smooth and fixes is not None else None)
+    job = replace(job, in_memory=in_memory, rests=rests, fixes=[] if smooth and fixes is not None else None,
+                  full=job.full or job.covariances)  # fmt: skip
     whole = _whole_reasons(job, fixes, zupt)
     out = Path(out)
     with ExitStack() as stack:
@@ -75,12 +76,14 @@ def smooth_file(
             if zupt is not None and zupt != "auto":
                 mask, sigma = zu.read_zupt_file(zupt, arrays["t"], names)
                 job = replace(job, rests=replace(rests, mask=mask, sigma=sigma))
-        outcome = engine.run(model, source, job, out, workdir=out.resolve().parent)
+        fmt = FORMAT if job.full else FORMAT_V3
+        outcome = engine.run(model, source, job, out, workdir=out.resolve().parent, run_format=fmt)
         if outcome.arrays is not None and job.aided and job.checks and "smooth" in job.stages:
             outcome.checks = _checks(outcome, source.whole(), job.fixes)
         written = [out]
         if outcome.arrays is not None:
-            save_run(out, outcome.arrays, outcome.model, compress=compress)
+            kept = outcome.arrays if job.full else compact(outcome.arrays, job.stages)
+            save_run(out, kept, outcome.model, compress=compress)
             if csv is not None:
                 export_csv(csv, outcome.arrays)
                 written.append(Path(csv))

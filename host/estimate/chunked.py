@@ -74,6 +74,9 @@ GROW = 14  # the same for the general path (ACN_GROW): the posterior (the backwa
 # held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
 CHUNK_BYTES = 8 * GROW + 8 + 1 + 2 * 32 + 2 * 8
 OUT_KEYS = ("filt_x", "filt_sd", "smooth_x", "smooth_sd")
+# the compact output: states r, u (of r, u, a, eps) and their standard deviations, at float32 (24-bit
+# mantissa: 6e-8 relative, 0.6 mm at 10 km); with t, 8 + 16 n_axes bytes per sample
+COMPACT = (2, np.float32)
 RUN_FORMAT = "accelnav-run/1"  # the CLI passes accelnav.data.runfile.FORMAT (a layer above this one)
 
 # read rows s..e of the input: (t (e-s,), accel (e-s, n_axes), clipped (e-s, n_axes) bool)
@@ -234,6 +237,7 @@ class _Run:
     out: NpzWriter
     axes: list[_Axis]
     smooth: bool  # False: the filter alone (no store, no backward passes)
+    states: int  # states written per sample: 4 (r, u, a, eps) or 2 (r, u)
     store: np.ndarray = field(init=False)
     xa: np.ndarray = field(init=False)
     sa: np.ndarray = field(init=False)
@@ -255,8 +259,9 @@ class _Run:
         return fastsmooth._ptr(self.ffi, a, ctype)
 
     def put(self, key: str, j: int, s: int, data: np.ndarray) -> None:
-        """Rows s.. of axis j of the (n_axes, N, 4) output ``key``."""
-        self.out.write(key, 4 * (j * self.n + s), data)
+        """Rows s.. of axis j of the (n_axes, N, states) output ``key``, from their (m, 4) values."""
+        k, data = self.states, np.atleast_2d(data)
+        self.out.write(key, k * (j * self.n + s), data if k == 4 else data[:, :k])
         if len(data) and s == 0:
             self.first.setdefault(key, np.zeros((len(self.axes), 4)))[j] = data[0]
         if len(data) and s + len(data) == self.n:
@@ -319,6 +324,7 @@ def smooth_bounded(
     more: Callable[[list[np.ndarray]], dict[str, np.ndarray]] | None = None,
     stages: tuple[str, ...] = ("filt", "smooth"),
     store_memory: int = 0,
+    full: bool = True,
 ) -> dict:
     """Filter and RTS-smooth every axis of an n-sample run in bounded memory; write ``out``.
 
@@ -331,6 +337,8 @@ def smooth_bounded(
     ``stages``: the states written, ``filt`` (x[k|k]: filt_x, filt_sd) and ``smooth`` (x[k|N-1]:
     smooth_x, smooth_sd); without ``smooth`` only the forward pass runs (the filter, no store).
     ``store_memory``: bytes the store may take in memory (default 0: on disk, in ``workdir``).
+    ``full``: write every state (r, u, a, eps) at float64 and the input (accel, clipped); else r and u and
+    their standard deviations at float32 beside t (:data:`COMPACT`, the run file's ``/3`` form).
     Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras were
     applied, in their given order, "first", "last": {output key: its (n_axes, 4) values at sample 0, N-1},
     "store_in_memory": where the store was}.
@@ -358,9 +366,12 @@ def smooth_bounded(
     ffi, lib = mod.ffi, mod.lib
     small = {"format": np.array(run_format), "model_toml": np.array(model.text),
              "model_source": np.array(str(model.source)), "axis_names": names}  # fmt: skip
-    big = {"t": ((n,), np.float64), "accel": ((n, n_axes), np.float64), "clipped": ((n, n_axes), np.bool_)}
+    big = {"t": ((n,), np.float64)}
+    if full:
+        big.update(accel=((n, n_axes), np.float64), clipped=((n, n_axes), np.bool_))
+    k, dtype = (4, np.float64) if full else COMPACT
     for st in stages:
-        big[f"{st}_x"] = big[f"{st}_sd"] = ((n_axes, n, 4), np.float64)
+        big[f"{st}_x"] = big[f"{st}_sd"] = ((n_axes, n, k), dtype)
     with ExitStack() as stack:
         tmp = Path(tempfile.mkdtemp(prefix=".accelnav-smooth-", dir=workdir))
         stack.callback(shutil.rmtree, tmp, True)
@@ -372,7 +383,7 @@ def smooth_bounded(
                 ax.lean = _Store(tmp / f"lean-{ax.j}.bin", 8 * LROW * n if ax.width == ROW else 0, in_memory)
                 stack.callback(ax.store.close)
                 stack.callback(ax.lean.close)
-        run = _Run(ffi, lib, n, chunk, writer, axes, smooth)
+        run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k)
         starts = list(range(0, n, chunk))
         for s in starts:  # 1. forward: the filter; for the smoother, rows into each axis's store
             _forward(run, s, min(s + chunk, n), read, "filt" in stages)
@@ -437,8 +448,9 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
     n_axes = len(run.axes)
     t, accel, clipped = read(s, e)
     run.out.write("t", s, t)
-    run.out.write("accel", s * n_axes, accel)
-    run.out.write("clipped", s * n_axes, clipped)
+    if "accel" in run.out.members:
+        run.out.write("accel", s * n_axes, accel)
+        run.out.write("clipped", s * n_axes, clipped)
     m = e - s
     zc, ok, bad = run.zc[:m], run.ok[:m], run.bad[:m]
     for ax in run.axes:

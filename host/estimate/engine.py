@@ -80,7 +80,7 @@ class Job:
     ``--compress``), so that the plan can refuse it over the budget; ``budget``: bytes (None: half the
     memory available); ``checks``: compute the aids' consistency checks (in memory) when the run fits."""
 
-    stages: tuple[str, ...] = ("filt", "smooth")
+    stages: tuple[str, ...] = ("smooth",)
     fixes: Sequence[Sequence[Measurement]] | None = None
     rests: Rests | None = None
     tune: Tune | None = None
@@ -89,6 +89,7 @@ class Job:
     budget: int | None = None
     checks: bool = True
     warm_start: bool = False
+    full: bool = False  # write every state at float64 and echo the input (else r, u and sds at float32)
 
     @property
     def aided(self) -> bool:
@@ -241,10 +242,13 @@ def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None) -
     return fx, zupt.axis_aids(np.broadcast_to(col, (n,)), sigma, model, rest.params)
 
 
-def run(model: Model, source: Source, job: Job, out: str | Path | None = None, *, workdir=None) -> Outcome:
-    """Filter or smooth ``source`` as ``job`` asks. With ``out`` the chunked path writes the run file itself
-    (run_format accelnav-run/2); on the one-chunk path (and without ``out``) the whole run with its outputs
-    comes back in ``Outcome.arrays`` for the caller to write."""
+def run(
+    model: Model, source: Source, job: Job, out: str | Path | None = None, *, workdir=None, run_format: str = ""
+) -> Outcome:
+    """Filter or smooth ``source`` as ``job`` asks. With ``out`` the chunked path writes the run file
+    itself (its format string ``run_format``: the caller's, a layer above); on the one-chunk path (and
+    without ``out``) the whole run with its outputs comes back in ``Outcome.arrays`` for the caller to
+    write."""
     n, n_axes = source.n, len(source.axis_names)
     if n < 1:
         raise UserError(f"{source.label}: 0 samples; nothing to process")
@@ -254,7 +258,8 @@ def run(model: Model, source: Source, job: Job, out: str | Path | None = None, *
         model = warm_started(model)
         note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
     smooth = "smooth" in job.stages
-    p = plan(n, n_axes, job, label=source.label, to_file=out is not None, echo=bool(source.extra_keys()))
+    echo = job.full and bool(source.extra_keys())
+    p = plan(n, n_axes, job, label=source.label, to_file=out is not None, echo=echo)
     arrays = source.whole() if (p.whole or job.aided) else None
     rest = None
     if smooth and job.rests is not None:
@@ -266,7 +271,7 @@ def run(model: Model, source: Source, job: Job, out: str | Path | None = None, *
     if p.whole:
         _whole(model, arrays, job, rest, outcome)
     else:
-        _chunked(model, source, job, rest, Path(out), workdir, outcome)
+        _chunked(model, source, job, rest, Path(out), workdir, outcome, run_format)
     return outcome
 
 
@@ -310,7 +315,7 @@ def _whole(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, outco
     outcome.clipped = res["clipped"].sum(axis=0)
 
 
-def _chunked(model, source: Source, job: Job, rest, out: Path, workdir, outcome: Outcome) -> None:
+def _chunked(model, source: Source, job: Job, rest, out: Path, workdir, outcome: Outcome, run_format: str) -> None:
     """The passes over chunks, the output written in place (accelnav.estimate.chunked)."""
     n, n_axes = source.n, len(source.axis_names)
     smooth = "smooth" in job.stages
@@ -318,7 +323,7 @@ def _chunked(model, source: Source, job: Job, rest, out: Path, workdir, outcome:
     aids = [axis_extras(model, n, j, fixes, rest) for j in range(n_axes)] if smooth else []
     extras = [fx.concat(za) for fx, za in aids] or None
     gates = [np.zeros(len(e)) for e in extras] if extras else None  # rests are gated whole by the decision
-    echo = source.extra_keys()
+    echo = source.extra_keys() if job.full else {}
     counts: dict[int, np.ndarray] = {}
 
     def read(s: int, e: int):
@@ -347,7 +352,8 @@ def _chunked(model, source: Source, job: Job, rest, out: Path, workdir, outcome:
 
     info = chunked.smooth_bounded(
         model, n, read, out, axis_names=source.axis_names, extras=extras, gates=gates, chunk=outcome.plan.chunk,
-        workdir=workdir, run_format="accelnav-run/2", more=more, stages=job.stages, store_memory=outcome.plan.budget,
+        workdir=workdir, run_format=run_format, more=more, stages=job.stages, store_memory=outcome.plan.budget,
+        full=job.full,
     )  # fmt: skip
     ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
     ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})

@@ -89,7 +89,7 @@ def smooth_run(
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
     rests = None if rest is None else engine.Rests(zupt_params, mask=rest, sigma=rest_sigma)
-    job = engine.Job(fixes=fixes, rests=rests, covariances=covariances, checks=False, warm_start=warm_start)
+    job = engine.Job(("filt", "smooth"), fixes, rests, covariances=covariances, checks=False, warm_start=warm_start)
     return _engine_run(job, arrays, model)
 
 

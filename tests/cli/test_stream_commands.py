@@ -34,7 +34,7 @@ def _run(argv, capsys):
 
 @pytest.mark.parametrize("flags", [[], ["--filter-states"]])
 def test_smooth_streams_and_equals_the_whole_array_path(rec, tmp_path, capsys, flags):
-    status, out, err = _run(["smooth", rec, "--out", tmp_path / "s.npz", *flags], capsys)
+    status, out, err = _run(["smooth", rec, "--out", tmp_path / "s.npz", "--full", *flags], capsys)
     assert status == 0, err
     assert "in bounded memory, streamed" in out and "smoother at start" in out
     got, model = load_run(tmp_path / "s.npz")

@@ -49,8 +49,8 @@ def inputs(tmp_path_factory):
 
 def _pair(inputs, tmp_path, source, stages=("filt", "smooth"), **kw):
     """(chunked outcome, its file, one-chunk outcome, its file) of the same request."""
-    a = smooth_file(inputs / source, tmp_path / "a.npz", job=Job(stages=stages, budget=SMALL), **kw)
-    b = smooth_file(inputs / source, tmp_path / "b.npz", job=Job(stages=stages, budget=LARGE), **kw)
+    a = smooth_file(inputs / source, tmp_path / "a.npz", job=Job(stages=stages, budget=SMALL, full=True), **kw)
+    b = smooth_file(inputs / source, tmp_path / "b.npz", job=Job(stages=stages, budget=LARGE, full=True), **kw)
     assert not a.plan.whole and a.plan.chunks > 3, a.plan
     assert b.plan.chunks == 1, b.plan
     return a, load_run(tmp_path / "a.npz")[0], b, load_run(tmp_path / "b.npz")[0]
@@ -120,3 +120,31 @@ def test_what_needs_every_sample_in_memory_is_refused_over_the_budget(inputs, tm
         smooth_file(inputs / "rec.npz", tmp_path / "o.npz", **kw)
     assert "over the memory budget" in str(exc.value) and flag in str(exc.value) and "\n" not in str(exc.value)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("source", ["rec.npz", "sim.npz"])
+@pytest.mark.parametrize("budget", [SMALL, LARGE])
+def test_the_default_output_is_r_u_and_their_sds_at_float32_without_the_input(inputs, tmp_path, source, budget):
+    """20 B per sample per axis at 2 axes (t's 8 B shared), the full file's r, u rounded to float32, no echo."""
+    import zipfile
+
+    from accelnav.data.runfile import csv_columns
+
+    kw = {"zupt": "auto"} if source == "sim.npz" else {}
+    smooth_file(inputs / source, tmp_path / "c.npz", job=Job(budget=budget), **kw)
+    smooth_file(inputs / source, tmp_path / "f.npz", job=Job(budget=budget, full=True), **kw)
+    c, _ = load_run(tmp_path / "c.npz")
+    f, _ = load_run(tmp_path / "f.npz")
+    assert str(c["format"]) == "accelnav-run/3" and str(f["format"]) == "accelnav-run/2"
+    per_sample = {"t", "smooth_x", "smooth_sd"} | ({"zupt"} if kw else set())
+    assert {k for k in c if np.ndim(c[k]) and len(c[k]) and k != "axis_names"} >= per_sample
+    assert not {"accel", "clipped", "r", "u", "code", "filt_x"} & set(c)
+    for key in ("smooth_x", "smooth_sd"):
+        assert c[key].dtype == np.float32 and c[key].shape == (2, 3000, 2)
+        np.testing.assert_array_equal(c[key], f[key][..., :2].astype(np.float32), err_msg=key)
+    with zipfile.ZipFile(tmp_path / "c.npz") as z:
+        data = sum(i.file_size for i in z.infolist() if i.filename.removesuffix(".npy") in per_sample)
+    assert data / (3000 * 2) <= 24 - (0 if kw else 1)  # ~128 B of npy headers per member on top of 20 (21 with rests)
+    names = [n for n, _ in csv_columns(c)]
+    assert names == ["t_s", "x_smooth_r", "x_smooth_r_sd", "x_smooth_u", "x_smooth_u_sd"] + [
+        "y_smooth_r", "y_smooth_r_sd", "y_smooth_u", "y_smooth_u_sd"]  # fmt: skip

@@ -105,11 +105,11 @@ def sim(tmp_path_factory):
 
 def test_smooth_over_its_memory_budget_runs_the_bounded_path(sim, tmp_path, capsys):
     """A budget of 0.02 MB sends a 3000-sample run to the chunked path; it gives the whole path's numbers."""
-    argv = ["smooth", sim, "--out", tmp_path / "b.npz", "--memory-budget", "0.02", "--filter-states"]
+    argv = ["smooth", sim, "--out", tmp_path / "b.npz", "--memory-budget", "0.02", "--filter-states", "--full"]
     status, out, err = _run(argv, capsys)
     assert status == 0, err
     assert "smoothed in bounded memory" in out and "chunks of" in out
-    status, _, err = _run(["smooth", sim, "--out", tmp_path / "w.npz"], capsys)
+    status, _, err = _run(["smooth", sim, "--out", tmp_path / "w.npz", "--full"], capsys)
     assert status == 0, err
     b, _ = load_run(tmp_path / "b.npz")
     w, _ = load_run(tmp_path / "w.npz")
@@ -136,7 +136,7 @@ def test_fixes_and_auto_zupt_over_the_budget_give_the_whole_paths_numbers(sim, t
     for k in (1000, 1500, 2999):
         rows += [f"{t[k]:.4f},x,{r[k, 0]:.6f},0.05", f"{t[k]:.4f},y,{r[k, 1]:.6f},0.05"]
     (tmp_path / "fixes.csv").write_text("\n".join(rows) + "\n")
-    argv = ["smooth", sim, "--fixes", tmp_path / "fixes.csv", "--zupt", "auto", "--filter-states"]
+    argv = ["smooth", sim, "--fixes", tmp_path / "fixes.csv", "--zupt", "auto", "--filter-states", "--full"]
     status, out, err = _run([*argv, "--out", tmp_path / "b.npz", "--memory-budget", "0.05"], capsys)
     assert status == 0, err
     assert "smoothed in bounded memory" in out and "position fixes per axis: 3, 3" in out
