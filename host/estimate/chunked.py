@@ -48,6 +48,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import time
 import zipfile
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
@@ -63,8 +64,10 @@ from accelnav.estimate.npzout import NpzWriter
 from accelnav.fileio import pread_exact, pwrite_all
 from accelnav.model.design import AxisDesign, axis_design
 from accelnav.model.load import Model
+from accelnav.progress import Progress
 
 BUDGET = 256 << 20  # bytes of chunk buffers
+PROGRESS_AFTER = 2.0  # s: a run that takes longer shows its passes' progress (accelnav.progress: stderr, not -q)
 # peak bytes per sample and axis of `accelnav smooth` on the whole-array path (issue 24 measured 2.5 KB per
 # two-axis sample at 1e6): what decides that a run goes to the bounded path
 WHOLE_BYTES = 1250
@@ -385,17 +388,28 @@ def smooth_bounded(
                 stack.callback(ax.lean.close)
         run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k)
         starts = list(range(0, n, chunk))
-        for s in starts:  # 1. forward: the filter; for the smoother, rows into each axis's store
-            _forward(run, s, min(s + chunk, n), read, "filt" in stages)
+        t0 = time.monotonic()
+
+        def bar(label: str, total: int, unit: str = "samples") -> Progress:  # drawn after PROGRESS_AFTER s
+            return Progress(label, total, unit=unit, after=max(0.0, PROGRESS_AFTER - (time.monotonic() - t0)))
+
+        with bar("forward" if smooth else "filter", n) as p:
+            for s in starts:  # 1. forward: the filter; for the smoother, rows into each axis's store
+                _forward(run, s, min(s + chunk, n), read, "filt" in stages)
+                p.update(min(s + chunk, n))
         if smooth:
-            for s in reversed(starts):  # 2. backward: the general smoother; the plain (a, eps) into the store
-                for ax in axes:
-                    _backward(run, ax, s, min(s + chunk, n))
-            for ax in axes:  # 3. plain path, forward: smoothed r, u
-                if ax.width == ROW:
-                    _smooth_ru(run, ax, starts)
-                ax.store.close()  # freed before the small arrays are added
-                ax.lean.close()
+            with bar("backward", n) as p:
+                for s in reversed(starts):  # 2. backward: the general smoother; the plain (a, eps) into the store
+                    for ax in axes:
+                        _backward(run, ax, s, min(s + chunk, n))
+                    p.update(n - s)
+            with bar("r, u", n_axes, "axes") as p:
+                for ax in axes:  # 3. plain path, forward: smoothed r, u
+                    if ax.width == ROW:
+                        _smooth_ru(run, ax, starts)
+                    ax.store.close()  # freed before the small arrays are added
+                    ax.lean.close()
+                    p.update(ax.j + 1)
         applied = []
         for ax in axes:
             done = np.zeros(0 if ax.ex is None else len(ax.ex), dtype=bool)

@@ -234,3 +234,19 @@ def test_chunked_general_path_equals_the_whole_array_path(tmp_path, n, chunk):
             assert_rel_close(f[f"{key}_x"][j], x, sd, RTOL, f"{key}_x axis {j}")
             assert_rel_close(f[f"{key}_sd"][j], sd, 0.0, RTOL, f"{key}_sd axis {j}")
     assert [p.name for p in tmp_path.iterdir()] == ["o.npz"]
+
+
+@pytest.mark.parametrize("verbosity, drawn", [(2, True), (0, False)])
+def test_each_pass_shows_its_progress_unless_quiet(tmp_path, monkeypatch, capsys, verbosity, drawn):
+    """A run past PROGRESS_AFTER seconds (here 0) draws the forward, backward and r, u passes on stderr; -q none."""
+    from accelnav import progress
+
+    model = load_model()
+    t, accel, clipped = _data(model, 1000)
+    monkeypatch.setattr(chunked, "PROGRESS_AFTER", 0.0)
+    monkeypatch.setattr(progress, "VERBOSITY", verbosity)
+    chunked.smooth_bounded(model, 1000, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz", chunk=97)
+    err = capsys.readouterr().err
+    for label in ("forward", "backward", "r, u"):
+        assert (f"{label} [" in err) == drawn, err
+    assert ("100.0%" in err) == drawn
