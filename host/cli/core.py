@@ -107,10 +107,25 @@ def register(sub) -> None:
         "computed once per model and run length, then a few operations per sample. Zero-velocity detection: "
         "accelnav.estimate.zupt.",
     )
-    p.add_argument("run", type=Path, help=INPUT_HELP)
+    p.add_argument("run", type=Path, nargs="+", help=INPUT_HELP + "; several with --out-dir (a fleet)")
     _model_arg(p, "; default: the model embedded in the input, else the embedded default")
     _input_args(p)
-    p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
+    p.add_argument("--out", type=Path, default=None, help="run file to write (.npz); one input")
+    p.add_argument(
+        "--out-dir",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="a run file per input, DIR/<input name>.npz: many recordings in one command; a file that fails is "
+        "reported and the others finish (exit status 1 if any failed)",
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="with --out-dir: smooth N inputs at a time in worker processes (the memory budget shared); default 1",
+    )
     p.add_argument(
         "--fixes",
         type=Path,
@@ -421,6 +436,11 @@ def cmd_smooth(args) -> int:
 
         tune = Tune(args.tune_evaluations, args.tune_seconds, announce)
     stages = ("filt", "smooth") if args.filter_states else ("smooth",)
+    if args.out_dir is not None or len(args.run) > 1:
+        return _smooth_fleet(args, params, stages)
+    if args.out is None:
+        raise UserError("--out: a run file to write is required (or --out-dir DIR for several inputs)")
+    args.run = args.run[0]
     job = _job(args, stages=stages, tune=tune, warm_start=args.warm_start,
                in_memory=("--plots",) if args.plots is not None else ())  # fmt: skip
     outcome = smooth_file(
@@ -447,6 +467,34 @@ def cmd_smooth(args) -> int:
         for path in plot_smoothing(outcome.arrays, outcome.model, args.plots):
             print(f"wrote {path}")
     return 0
+
+
+def _smooth_fleet(args, params: ZuptParams, stages: tuple[str, ...]) -> int:
+    """smooth over many inputs (accelnav.data.smoothing.smooth_files): a line per input as it finishes."""
+    from accelnav.data.smoothing import smooth_files
+
+    if args.out_dir is None:
+        raise UserError(f"{len(args.run)} inputs: give --out-dir DIR (a run file per input), not --out")
+    single = [f for f, v in (("--out", args.out), ("--csv", args.csv), ("--plots", args.plots),
+                             ("--zupt-report", args.zupt_report), ("--fixes", args.fixes), ("--tune", args.tune))
+              if v]  # fmt: skip
+    if args.zupt not in (None, "auto"):
+        single.append("--zupt FILE")
+    if single:
+        raise UserError(f"--out-dir: {', '.join(single)} belong(s) to one input; accepted with a fleet: --zupt auto")
+    job = _job(args, stages=stages, warm_start=args.warm_start)
+
+    def done(r) -> None:
+        print(f"{'ok' if r.ok else 'FAILED'} {r.path}: {r.message}" + (f" -> {r.out}" if r.ok else ""), flush=True)
+
+    results = smooth_files(
+        args.run, args.out_dir, jobs=args.jobs, done=done, model=args.model, job=job, zupt=args.zupt,
+        zupt_params=params, compress=args.compress, **_read_kw(args),
+    )  # fmt: skip
+    failed = [r for r in results if not r.ok]
+    print(f"{len(results) - len(failed)} of {len(results)} inputs smoothed into {args.out_dir}"
+          + (f"; {len(failed)} failed: {', '.join(r.path for r in failed)}" if failed else ""))  # fmt: skip
+    return 1 if failed else 0
 
 
 def _memory_budget_arg(mb: float | None) -> int:

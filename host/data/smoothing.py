@@ -11,8 +11,9 @@ the input in memory: over the input limit they are refused in one line before an
 from __future__ import annotations
 
 import shutil
+from collections.abc import Sequence
 from contextlib import ExitStack
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -182,3 +183,83 @@ def summary_arrays(outcome: engine.Outcome) -> tuple[dict[str, np.ndarray], int]
         return outcome.arrays, outcome.n
     t = np.array(outcome.t_ends)
     return {"t": t, "axis_names": outcome.axis_names, "clipped": outcome.clipped[None, :], **outcome.ends}, outcome.n
+
+
+@dataclass(frozen=True)
+class FileResult:
+    """One input of :func:`smooth_files`: where it went, and on failure the one-line reason."""
+
+    path: str
+    out: str
+    ok: bool
+    message: str  # "N samples, S s" or the error's line
+    seconds: float
+
+
+def fleet_outputs(paths: Sequence[str | Path], out_dir: str | Path) -> list[Path]:
+    """``out_dir/<input name without its extensions>.npz`` for each input; two inputs that would share an
+    output are refused in one line before any work."""
+    out_dir = Path(out_dir)
+    outs, seen = [], {}
+    for p in map(Path, paths):
+        stem = p.name.split(".")[0] or p.name
+        out = out_dir / f"{stem}.npz"
+        if out in seen:
+            raise UserError(f"--out-dir: {seen[out]} and {p} would both write {out}; rename one of them")
+        seen[out] = p
+        outs.append(out)
+    return outs
+
+
+def smooth_one(path: str | Path, out: str | Path, kw: dict) -> FileResult:
+    """:func:`smooth_file` of one input of a fleet, its failure caught and said in one line (a worker's task:
+    top level, so that a process pool or Dask can send it)."""
+    import time
+
+    t0 = time.monotonic()
+    try:
+        outcome = smooth_file(path, out, **kw)
+    except UserError as exc:
+        return FileResult(str(path), str(out), False, str(exc), time.monotonic() - t0)
+    except Exception as exc:  # a file that breaks something else must not stop the others
+        return FileResult(str(path), str(out), False, f"{type(exc).__name__}: {exc}", time.monotonic() - t0)
+    sec = time.monotonic() - t0
+    return FileResult(str(path), str(out), True, f"{outcome.n} samples, {sec:.2f} s", sec)
+
+
+def _quiet_worker() -> None:
+    from accelnav import progress
+
+    progress.set_verbosity(0)  # the parent reports each file; a worker's notes and bars would interleave
+
+
+def smooth_files(
+    paths: Sequence[str | Path], out_dir: str | Path, *, jobs: int = 1, done=None, **kw
+) -> list[FileResult]:
+    """:func:`smooth_file` over many inputs, each to ``out_dir`` (:func:`fleet_outputs`), ``jobs`` at a time
+    in worker processes (concurrent.futures; the memory budget is shared among them). A failed input is
+    reported in its :class:`FileResult` and the others go on. ``done(result)`` is called as each finishes.
+    For a cluster, map :func:`smooth_one` over the inputs with Dask (see docs/python.rst)."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from multiprocessing import get_context
+
+    if jobs < 1:
+        raise UserError(f"--jobs: got {jobs}; accepted: 1 or more")
+    outs = fleet_outputs(paths, out_dir)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    job = kw.get("job") or engine.Job()
+    kw["job"] = replace(job, budget=engine.budget_bytes(job.budget) // jobs)
+    results: dict[int, FileResult] = {}
+    if jobs == 1:
+        for i, (p, o) in enumerate(zip(paths, outs, strict=True)):
+            results[i] = smooth_one(p, o, kw)
+            if done is not None:
+                done(results[i])
+    else:
+        with ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=_quiet_worker) as pool:
+            futures = {pool.submit(smooth_one, p, o, kw): i for i, (p, o) in enumerate(zip(paths, outs, strict=True))}
+            for f in as_completed(futures):
+                results[futures[f]] = f.result()
+                if done is not None:
+                    done(results[futures[f]])
+    return [results[i] for i in range(len(outs))]
