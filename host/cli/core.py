@@ -326,7 +326,7 @@ def cmd_sim(args) -> int:
     return 0
 
 
-def _job(args, **kw):
+def _job_options(args, **kw):
     """The engine's Job from the command's flags."""
     from accelnav.estimate.engine import Job
 
@@ -338,7 +338,7 @@ def _job(args, **kw):
     )
 
 
-def _read_kw(args) -> dict:
+def _read_options(args) -> dict:
     return dict(allow_gaps=args.allow_gaps, **reader_options(args))
 
 
@@ -370,8 +370,8 @@ def _print_run(args, outcome) -> None:
 def cmd_filter(args) -> int:
     from accelnav.data.smoothing import smooth_file
 
-    outcome = smooth_file(args.run, args.out, args.model, job=_job(args, stages=("filt",)), csv=args.csv,
-                          compress=args.compress, **_read_kw(args))  # fmt: skip
+    outcome = smooth_file(args.run, args.out, args.model, job=_job_options(args, stages=("filt",)), csv=args.csv,
+                          compress=args.compress, **_read_options(args))  # fmt: skip
     _print_run(args, outcome)
     return 0
 
@@ -441,11 +441,11 @@ def cmd_smooth(args) -> int:
     if args.out is None:
         raise UserError("--out: a run file to write is required (or --out-dir DIR for several inputs)")
     args.run = args.run[0]
-    job = _job(args, stages=stages, tune=tune, warm_start=args.warm_start,
+    job = _job_options(args, stages=stages, tune=tune, warm_start=args.warm_start,
                in_memory=("--plots",) if args.plots is not None else ())  # fmt: skip
     outcome = smooth_file(
         args.run, args.out, args.model, job=job, fixes=args.fixes, zupt=args.zupt, zupt_params=params,
-        zupt_report=args.zupt_report, csv=args.csv, compress=args.compress, **_read_kw(args),
+        zupt_report=args.zupt_report, csv=args.csv, compress=args.compress, **_read_options(args),
     )  # fmt: skip
     if outcome.tune is not None:
         _print_tune(outcome.tune, outcome.model)
@@ -482,14 +482,14 @@ def _smooth_fleet(args, params: ZuptParams, stages: tuple[str, ...]) -> int:
         single.append("--zupt FILE")
     if single:
         raise UserError(f"--out-dir: {', '.join(single)} belong(s) to one input; accepted with a fleet: --zupt auto")
-    job = _job(args, stages=stages, warm_start=args.warm_start)
+    job = _job_options(args, stages=stages, warm_start=args.warm_start)
 
     def done(r) -> None:
         print(f"{'ok' if r.ok else 'FAILED'} {r.path}: {r.message}" + (f" -> {r.out}" if r.ok else ""), flush=True)
 
     results = smooth_files(
         args.run, args.out_dir, jobs=args.jobs, done=done, model=args.model, job=job, zupt=args.zupt,
-        zupt_params=params, compress=args.compress, **_read_kw(args),
+        zupt_params=params, compress=args.compress, **_read_options(args),
     )  # fmt: skip
     failed = [r for r in results if not r.ok]
     print(f"{len(results) - len(failed)} of {len(results)} inputs smoothed into {args.out_dir}"
