@@ -12,7 +12,6 @@ from accelnav.cli.args import clock_args, reader_options
 from accelnav.data.inputs import read_input
 from accelnav.data.runfile import STATE, export_csv, save_run, state_sd
 from accelnav.errors import UserError
-from accelnav.estimate.chunked import memory_available
 from accelnav.estimate.pipeline import (
     format_errors,
     format_strides,
@@ -254,8 +253,9 @@ def register(sub) -> None:
         default=None,
         metavar="MB",
         help="memory the run may take; a longer run is smoothed in chunks (its store in memory within the budget, "
-        "else on disk beside --out; the aids' consistency checks are skipped); --covariances, --tune, --plots, "
-        "--csv and --compress need the whole run in memory and are refused over it; default: half the memory free",
+        "without one within 1 GiB, else on disk beside --out; the aids' consistency checks are skipped); "
+        "--covariances, --tune, --plots, --csv and --compress need the whole run in memory and are refused over "
+        "it; default: half the memory free",
     )
     p.add_argument(
         "--full",
@@ -497,9 +497,9 @@ def _smooth_fleet(args, params: ZuptParams, stages: tuple[str, ...]) -> int:
     return 1 if failed else 0
 
 
-def _memory_budget_arg(mb: float | None) -> int:
+def _memory_budget_arg(mb: float | None) -> int | None:
     if mb is None:
-        return memory_available() // 2
+        return None  # the engine's default
     if not mb > 0:
         raise UserError(f"--memory-budget: got {mb:g}; accepted: megabytes > 0")
     return int(mb * (1 << 20))

@@ -237,7 +237,7 @@ def smooth_files(
     paths: Sequence[str | Path], out_dir: str | Path, *, jobs: int = 1, done=None, **kw
 ) -> list[FileResult]:
     """:func:`smooth_file` over many inputs, each to ``out_dir`` (:func:`fleet_outputs`), ``jobs`` at a time
-    in worker processes (concurrent.futures; the memory budget is shared among them). A failed input is
+    in worker processes (concurrent.futures; a budget given is shared among them). A failed input is
     reported in its :class:`FileResult` and the others go on. ``done(result)`` is called as each finishes.
     For a cluster, map :func:`smooth_one` over the inputs with Dask (see docs/python.rst)."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -248,7 +248,7 @@ def smooth_files(
     outs = fleet_outputs(paths, out_dir)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     job = kw.get("job") or engine.Job()
-    kw["job"] = replace(job, budget=engine.budget_bytes(job.budget) // jobs)
+    kw["job"] = replace(job, budget=engine.budget_bytes(job.budget) // jobs if job.budget else None)
     results: dict[int, FileResult] = {}
     if jobs == 1:
         for i, (p, o) in enumerate(zip(paths, outs, strict=True)):
