@@ -198,6 +198,42 @@ class NpzReader:
         self.close()
 
 
+class NpzMember:
+    """One uncompressed (n_axes, N, k) member of an NPZ, read at chosen samples without loading it."""
+
+    def __init__(self, path: str | Path, name: str) -> None:
+        path = Path(path)
+        with zipfile.ZipFile(path) as zf:
+            self.offset, self.shape, self.dtype = _stored_member(path, zf, name)
+        self.fd = os.open(path, os.O_RDONLY)
+
+    def rows_at(self, at: np.ndarray, state: int, span: int = 1 << 16) -> np.ndarray:
+        """(n_axes, len(at)) values of ``state`` at samples ``at``: one read per group of them within ``span``
+        samples, so that memory is ``span`` rows whatever ``at`` covers."""
+        n_axes, n, k = self.shape
+        out = np.empty((n_axes, len(at)))
+        order = np.argsort(at, kind="stable")
+        sa = np.asarray(at)[order]
+        if len(sa) and (sa[0] < 0 or sa[-1] >= n):
+            raise IndexError(f"samples {sa[0]}..{sa[-1]} outside 0..{n - 1}")
+        for j in range(n_axes):
+            i = 0
+            while i < len(sa):
+                lo = int(sa[i])
+                e = int(np.searchsorted(sa, lo + span))
+                buf = np.empty((int(sa[e - 1]) - lo + 1, k), dtype=self.dtype)
+                pread_exact(self.fd, buf, self.offset + (j * n + lo) * k * self.dtype.itemsize)
+                out[j, order[i:e]] = buf[sa[i:e] - lo, state]
+                i = e
+        return out
+
+    def __enter__(self) -> NpzMember:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        os.close(self.fd)
+
+
 @dataclass
 class _Axis:
     j: int

@@ -19,7 +19,7 @@ The stages are called from one place each: the rest decision (:func:`rest_stage`
 the run is given ``smooth_pass`` (a callable running the bounded passes with trial aids and returning
 per-axis smoothed velocities at chosen samples) so that it never holds the run's outputs whole.
 
-Both paths agree to 1e-12 relative (tests/estimate/test_engine.py runs each option chunked at a small
+Both paths agree to 1e-12 relative (tests/data/test_smoothing.py runs each option chunked at a small
 budget against one chunk).
 """
 
@@ -217,9 +217,11 @@ def plan(n: int, n_axes: int, job: Job, *, label: str = "the run", to_file: bool
     return Plan(False, chunk, chunks, budget, f"{why} (memory budget {budget / 1e9:.3g} GB)")
 
 
-def rest_stage(model: Model, arrays: dict, rests: Rests, *, fixes=None) -> RestOutcome:
+def rest_stage(model: Model, arrays: dict, rests: Rests, *, fixes=None, smooth_pass=None) -> RestOutcome:
     """The rest decision, called here and nowhere else: detected rests (``rests.detect``) or the given mask.
-    ``fixes`` are the run's position fixes, which a decision may weigh the candidates against."""
+    ``fixes`` are the run's position fixes, which a decision may weigh the candidates against;
+    ``smooth_pass(extras, at)`` (:func:`smoother_pass` bound to this run) smooths it with trial aids in
+    bounded memory and gives the velocities at samples ``at``, for a decision that needs a smoother pass."""
     from accelnav.estimate import zupt
 
     params = zupt.ZuptParams() if rests.params is None else rests.params
@@ -235,6 +237,24 @@ def rest_stage(model: Model, arrays: dict, rests: Rests, *, fixes=None) -> RestO
     mask = zupt.accepted_mask(decisions, len(cand))
     gravity = zupt.gravity_axes(accel, clipped, model) if not mask.any() else []
     return RestOutcome(mask, None, params, decisions, gravity, detected=True)
+
+
+def smoother_pass(model: Model, source: Source, extras, at: np.ndarray, *, workdir, budget: int | None = None):
+    """One more pass of the chunked smoother over ``source`` with ``extras[j]`` (kf.Aids or measurements) per
+    axis, in bounded memory (its output in a temporary file in ``workdir``, removed after); returns the
+    smoothed velocity and its sd at samples ``at``, (n_axes, len(at), 2) [u, sd_u], float64."""
+    import tempfile
+
+    at = np.asarray(at, dtype=np.int64)
+    exs = [Aids.of(e) if not isinstance(e, Aids) else e for e in extras]
+    with tempfile.TemporaryDirectory(prefix=".accelnav-pass-", dir=workdir) as tmp:
+        out = Path(tmp) / "pass.npz"
+        chunk = chunked.chunk_samples(len(exs), min(chunked.BUDGET, budget_bytes(budget)))
+        chunked.smooth_bounded(model, source.n, source.read, out, extras=exs, gates=[np.zeros(len(e)) for e in exs],
+                               chunk=chunk, workdir=tmp, stages=("smooth",), store_memory=min(
+                                   budget_bytes(budget), STORE_MEMORY))  # fmt: skip
+        with chunked.NpzMember(out, "smooth_x") as x, chunked.NpzMember(out, "smooth_sd") as sd:
+            return np.stack([x.rows_at(at, 1), sd.rows_at(at, 1)], axis=-1)
 
 
 def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None) -> tuple[Aids, Aids]:
@@ -271,7 +291,11 @@ def run(
     arrays = source.whole() if (p.whole or job.aided) else None
     rest = None
     if smooth and job.rests is not None:
-        rest = rest_stage(model, arrays, job.rests, fixes=job.fixes)
+
+        def smooth_pass(extras, at):
+            return smoother_pass(model, source, extras, at, workdir=workdir or Path(out or ".").resolve().parent)
+
+        rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass)
     outcome = Outcome(model, p, n, source.axis_names, source.t_ends, np.zeros(n_axes, dtype=np.int64), rests=rest,
                       streamed=source.streamed)  # fmt: skip
     if smooth and job.tune is not None:
