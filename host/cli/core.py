@@ -254,8 +254,8 @@ def register(sub) -> None:
         metavar="MB",
         help="memory the run may take; a longer run is smoothed in chunks (its store in memory within the budget, "
         "without one within 1 GiB, else on disk beside --out; the aids' consistency checks are skipped); "
-        "--covariances, --tune, --plots, --csv and --compress need the whole run in memory and are refused over "
-        "it; default: half the memory free",
+        "--covariances, --tune and --plots need the whole run in memory and are refused over it; default: half "
+        "the memory free",
     )
     p.add_argument(
         "--full",

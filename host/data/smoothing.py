@@ -10,6 +10,7 @@ the input in memory: over the input limit they are refused in one line before an
 
 from __future__ import annotations
 
+import os
 import shutil
 from collections.abc import Sequence
 from contextlib import ExitStack
@@ -23,7 +24,7 @@ from accelnav.data.runfile import FORMAT, FORMAT_V3, compact, export_csv, save_r
 from accelnav.errors import UserError
 from accelnav.estimate import engine
 from accelnav.estimate.chunked import disk_needed, whole_bytes
-from accelnav.fileio import check_output, input_limit, write_text
+from accelnav.fileio import atomic_output, check_output, input_limit, write_text
 from accelnav.model.load import Model, load_model
 from accelnav.progress import note
 
@@ -55,7 +56,7 @@ def smooth_file(
             check_output(p, flag)
     if zupt_report is not None and zupt != "auto":
         raise UserError("--zupt-report: only with --zupt auto (it lists the detector's candidates)")
-    in_memory = tuple(f for f, v in (("--csv", csv), ("--compress", compress)) if v) + job.in_memory
+    in_memory = job.in_memory
     smooth = "smooth" in job.stages
     rests = None
     if smooth and zupt is not None:
@@ -87,12 +88,71 @@ def smooth_file(
             save_run(out, kept, outcome.model, compress=compress)
             if csv is not None:
                 export_csv(csv, outcome.arrays)
-                written.append(Path(csv))
+        else:  # written in place by the chunked passes: the CSV and the deflated copy read it back in pieces
+            if csv is not None:
+                csv_in_pieces(out, csv)
+            if compress:
+                deflate_in_pieces(out)
+        if csv is not None:
+            written.append(Path(csv))
         if zupt_report is not None and outcome.rests is not None:
             write_text(zupt_report, zu.report_csv(outcome.rests.decisions, source.whole()["t"]), flag="--zupt-report")
             written.append(Path(zupt_report))
         outcome.written = written
         return outcome
+
+
+PIECE = 1 << 16  # samples per piece of csv_in_pieces (and 64 MiB of bytes per piece of deflate_in_pieces)
+
+
+def deflate_in_pieces(path: Path) -> None:
+    """Rewrite the stored NPZ ``path`` deflated, member by member, a piece at a time (bounded memory)."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as src, atomic_output(path) as fh, zipfile.ZipFile(fh, "w", zipfile.ZIP_DEFLATED) as dst:
+        for info in src.infolist():
+            with src.open(info) as r, dst.open(info.filename, "w", force_zip64=True) as w:
+                shutil.copyfileobj(r, w, PIECE << 10)
+
+
+def csv_in_pieces(npz: Path, csv: str | Path) -> None:
+    """export_csv of a run file written by the chunked passes, reading ``PIECE`` samples of it at a time."""
+    import zipfile
+
+    from accelnav.data.runfile import csv_columns
+    from accelnav.estimate.chunked import _stored_member
+    from accelnav.fileio import pread_exact
+
+    with zipfile.ZipFile(npz) as zf:
+        names = [i.filename.removesuffix(".npy") for i in zf.infolist()]
+        members = {k: _stored_member(npz, zf, k) for k in names}
+    n = members["t"][1][0]
+    small = {k: np.load(npz)[k] for k in ("axis_names",)}
+    n_axes = len(small["axis_names"])
+    per_sample = {k: m for k, m in members.items() if m[1][:1] == (n,) or m[1][:2] == (n_axes, n)}
+    fd = os.open(npz, os.O_RDONLY)
+    try:
+        with atomic_output(csv, "w", "--csv") as fh:
+            for s in range(0, n, PIECE):
+                e = min(s + PIECE, n)
+                piece = dict(small)
+                for k, (off, shape, dtype) in per_sample.items():
+                    if shape[:1] == (n,) and k != "axis_names":
+                        row = int(np.prod(shape[1:], dtype=np.int64)) * dtype.itemsize
+                        buf = np.empty((e - s, *shape[1:]), dtype=dtype)
+                        pread_exact(fd, buf, off + s * row)
+                    else:  # (n_axes, N, k): a slice per axis
+                        row = int(np.prod(shape[2:], dtype=np.int64)) * dtype.itemsize
+                        buf = np.empty((shape[0], e - s, *shape[2:]), dtype=dtype)
+                        for j in range(shape[0]):
+                            pread_exact(fd, buf[j], off + (j * n + s) * row)
+                    piece[k] = buf
+                cols = csv_columns(piece)
+                header = ",".join(c for c, _ in cols) if s == 0 else ""
+                np.savetxt(fh, np.column_stack([c for _, c in cols]), delimiter=",", header=header, comments="",
+                           fmt="%.10g")  # fmt: skip
+    finally:
+        os.close(fd)
 
 
 def _checks(outcome: engine.Outcome, inputs: dict, fixes):

@@ -6,7 +6,9 @@ budget and from what was asked, how the passes are cut (:func:`plan`), and says 
 * **chunked** (:func:`accelnav.estimate.chunked.smooth_bounded`): the passes over chunks of the input,
   the store in memory or on disk, the output written in place into the run file. A run that fits the
   budget is one chunk. Plain runs, ``--filter-states``, fixes, given and detected rests, raw counts and
-  truth columns of an input held in memory (echoed into the file) take this path at any length.
+  truth columns of an input held in memory (echoed into the file) take this path at any length; the
+  caller then writes ``--csv`` and ``--compress`` from the file a piece at a time
+  (:mod:`accelnav.data.smoothing`).
 * **one chunk in memory** (:func:`smooth_arrays`, :func:`filter_arrays`: the same kernels' whole-array
   entry points): what needs every output sample in memory at once, namely full covariances and the
   filter's priors, the aids' consistency checks (NIS of each aid, the held-out fixes), ``--tune``

@@ -9,6 +9,7 @@ is the room the bounded tests leave for a compiler's contractions (tests/estimat
 from __future__ import annotations
 
 import gzip
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -109,13 +110,10 @@ def test_every_input_format_streams_to_the_one_chunk_numbers(inputs, tmp_path, s
     [
         ("--covariances", {"job": Job(covariances=True, budget=SMALL)}),
         ("--tune", {"job": Job(tune=Tune(), budget=SMALL)}),
-        ("--csv", {"csv": "out.csv"}),
-        ("--compress", {"compress": True}),
+        ("--plots", {"job": Job(in_memory=("--plots",), budget=SMALL)}),
     ],
 )
 def test_what_needs_every_sample_in_memory_is_refused_over_the_budget(inputs, tmp_path, flag, kw):
-    kw = {k: (tmp_path / v if k == "csv" else v) for k, v in kw.items()}
-    kw.setdefault("job", Job(budget=SMALL))
     with pytest.raises(UserError) as exc:
         smooth_file(inputs / "rec.npz", tmp_path / "o.npz", **kw)
     assert "over the memory budget" in str(exc.value) and flag in str(exc.value) and "\n" not in str(exc.value)
@@ -148,3 +146,34 @@ def test_the_default_output_is_r_u_and_their_sds_at_float32_without_the_input(in
     names = [n for n, _ in csv_columns(c)]
     assert names == ["t_s", "x_smooth_r", "x_smooth_r_sd", "x_smooth_u", "x_smooth_u_sd"] + [
         "y_smooth_r", "y_smooth_r_sd", "y_smooth_u", "y_smooth_u_sd"]  # fmt: skip
+
+
+def test_csv_and_compression_of_a_chunked_run_are_those_of_one_chunk(inputs, tmp_path, monkeypatch):
+    """Written from the run file a piece at a time: the CSV's text and the deflated file's arrays are the one
+    chunk's (every state, the truth columns too: --full --filter-states)."""
+    import zipfile
+
+    from accelnav.data import smoothing
+
+    kw = {"zupt": "auto", "compress": True}
+    job = Job(stages=("filt", "smooth"), full=True)
+    old = smoothing.PIECE
+    smoothing.PIECE = 700  # several pieces of the 3000 samples
+    try:
+        a = smooth_file(
+            inputs / "sim.npz", tmp_path / "a.npz", job=replace(job, budget=SMALL), csv=tmp_path / "a.csv", **kw
+        )
+    finally:
+        smoothing.PIECE = old
+    b = smooth_file(
+        inputs / "sim.npz", tmp_path / "b.npz", job=replace(job, budget=LARGE), csv=tmp_path / "b.csv", **kw
+    )
+    assert not a.plan.whole and b.plan.whole
+    ta, tb = (tmp_path / "a.csv").read_text().splitlines(), (tmp_path / "b.csv").read_text().splitlines()
+    assert ta[0] == tb[0] and "x_true_r" in ta[0] and "y_smooth_eps_sd" in ta[0] and len(ta) == len(tb) == 3001
+    ra, rb = np.loadtxt(ta[1:], delimiter=","), np.loadtxt(tb[1:], delimiter=",")
+    np.testing.assert_allclose(ra, rb, rtol=1e-9, atol=1e-300)  # %.10g text: the same digits but a last-bit tie
+    with zipfile.ZipFile(tmp_path / "a.npz") as z:
+        assert {i.compress_type for i in z.infolist()} == {zipfile.ZIP_DEFLATED}
+    got, ref = load_run(tmp_path / "a.npz")[0], load_run(tmp_path / "b.npz")[0]
+    _same(got, ref, ("filt", "smooth"))
