@@ -62,14 +62,21 @@ def make_data(folder: Path, n: int, model, with_csv: bool = True) -> tuple[Path,
     return npz, csv, toml
 
 
-def make_aids(folder: Path, n: int, model) -> tuple[Path, Path]:
-    """(fixes CSV, rest intervals CSV) for the n-row data: a fix per axis every 60 s, a rest every 30 s (1 s)."""
-    fixes, rests = folder / f"fixes-{n}.csv", folder / f"rests-{n}.csv"
+def make_aids(folder: Path, n: int, model) -> tuple[Path, Path, Path]:
+    """(fixes CSV, rest intervals CSV, the same rests as a per-sample mask NPZ) for the n-row data: a fix per
+    axis every 60 s, a rest of 1 s every 30 s."""
+    fixes, rests, mask = folder / f"fixes-{n}.csv", folder / f"rests-{n}.csv", folder / f"rests-{n}.npz"
     span = (n - 1) / model.rate_hz
     rows = [f"{t:.2f},{a.name},0.0,5.0" for t in np.arange(1.0, span, 60.0) for a in model.axes]
     fixes.write_text("time_s,axis,position_m,sigma_m\n" + "\n".join(rows) + "\n")
-    rests.write_text("start_s,end_s\n" + "".join(f"{t:.2f},{t + 1:.2f}\n" for t in np.arange(5.0, span - 2, 30.0)))
-    return fixes, rests
+    starts = np.arange(5.0, span - 2, 30.0)
+    rests.write_text("start_s,end_s\n" + "".join(f"{t:.2f},{t + 1:.2f}\n" for t in starts))
+    k = np.round(np.arange(n) / model.rate_hz, 9)
+    rest = np.zeros(n, dtype=np.uint8)
+    for a in starts:
+        rest[np.searchsorted(k, a) : np.searchsorted(k, a + 1, side="right")] = 1
+    np.savez(mask, rest=rest)
+    return fixes, rests, mask
 
 
 def make_fleet(folder: Path, count: int, n: int, model) -> list[Path]:
@@ -188,9 +195,9 @@ def print_targets(last, fleet: dict, count: int, rows: int, n_axes: int) -> None
     line("--zupt auto within 2x of plain", f"{r:.2f}x", ok["smooth NPZ --zupt auto"], r <= 2)
     r = (n / sec["filter NPZ"]) / k_rate
     line("filter >= 1/5 of the smoother kernel's speed", f"{r:.3f}", ok["filter NPZ"], r >= 0.2)
-    name = "smooth NPZ --fixes --zupt FILE"
-    r = sec[name] / sec["smooth NPZ"]
-    line("fixes + rests (given) within 2x of plain", f"{r:.2f}x", ok[name], r <= 2)
+    for name, what in (("smooth NPZ --fixes --zupt FILE", "intervals"), ("smooth NPZ --fixes --zupt MASK", "a mask")):
+        r = sec[name] / sec["smooth NPZ"]
+        line(f"fixes + rests (given as {what}) within 2x of plain", f"{r:.2f}x", ok[name], r <= 2)
     b = out_bytes["smooth NPZ"] / (n * n_axes)
     line("default output <= 24 B per sample per axis", f"{b:.1f} B", ok["smooth NPZ"], b <= 24)
     for name in (k for k in sec if k.startswith(("smooth ", "filter "))):
@@ -257,12 +264,13 @@ def main() -> int:
             pd.read_csv(csv)
             results["pandas.read_csv of the CSV"] = (time.perf_counter() - t0, float("nan"), 0, "in process")
         out = folder / "out.npz"
-        fixes, rests = make_aids(folder, n, model)
+        fixes, rests, mask = make_aids(folder, n, model)
         cases = {
             "smooth NPZ": ["smooth", npz],
             "smooth CSV": ["smooth", csv],
             "smooth NPZ --zupt auto": ["smooth", npz, "--zupt", "auto"],
             "smooth NPZ --fixes --zupt FILE": ["smooth", npz, "--fixes", fixes, "--zupt", rests],
+            "smooth NPZ --fixes --zupt MASK": ["smooth", npz, "--fixes", fixes, "--zupt", mask],
             "smooth NPZ --filter-states": ["smooth", npz, "--filter-states"],
             "smooth NPZ --full": ["smooth", npz, "--full"],
             "filter NPZ": ["filter", npz],

@@ -1,9 +1,9 @@
 """filter and smooth of a file: the input opened (streamed or whole), the engine run, the outputs written.
 
 The engine (:mod:`accelnav.estimate.engine`) decides how the passes are cut; here only how the input
-is read: a CSV or gzip CSV whose whole-array run would exceed the memory budget, or whose numbers
-exceed what one input may hold in memory, is streamed (:func:`accelnav.data.stream.open_stream`), as
-is such an NPZ (:func:`accelnav.data.stream.open_npz_stream`); anything else is read whole by
+is read: a CSV, gzip CSV or uncompressed NPZ whose numbers exceed what one input may hold in memory
+(:data:`STREAM_ABOVE` without a budget; with one, when the whole-array run would exceed it) is streamed
+(:func:`accelnav.data.stream.open_stream`); anything else is read whole by
 :func:`accelnav.data.inputs.read_input`. Aids (fixes, rests) and what the engine runs as one chunk need
 the input in memory: over the input limit they are refused in one line before anything is parsed.
 """
@@ -102,6 +102,7 @@ def smooth_file(
         return outcome
 
 
+STREAM_ABOVE = 1 << 30  # bytes of input in memory above which an input is streamed, without a budget given
 PIECE = 1 << 16  # samples per piece of csv_in_pieces (and 64 MiB of bytes per piece of deflate_in_pieces)
 
 
@@ -200,8 +201,10 @@ def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, s
     if size is not None:
         rows, n_axes = size
         engine.plan(rows, n_axes, job, label=str(path))  # refuses before reading what the budget cannot do
-        big = whole_bytes(rows, n_axes) > engine.budget_bytes(job.budget)
         held, limit = rows * 8 * (2 + n_axes), input_limit()
+        # with a budget given, an input whose whole-array run exceeds it streams; without one, an input over
+        # STREAM_ABOVE in memory (a store read again three times costs more than reading it whole once)
+        big = whole_bytes(rows, n_axes) > job.budget if job.budget is not None else held > STREAM_ABOVE
         if (big or held > limit) and whole:
             if held > limit:
                 raise UserError(
