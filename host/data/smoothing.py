@@ -24,7 +24,7 @@ from accelnav.data.runfile import FORMAT, FORMAT_V3, compact, export_csv, save_r
 from accelnav.errors import UserError
 from accelnav.estimate import engine
 from accelnav.estimate.chunked import disk_needed, whole_bytes
-from accelnav.fileio import atomic_output, check_output, input_limit, write_text
+from accelnav.fileio import atomic_output, check_output, free_bytes, input_limit, output_target, write_text
 from accelnav.model.load import Model, load_model
 from accelnav.progress import note
 
@@ -65,9 +65,10 @@ def smooth_file(
     job = replace(job, in_memory=in_memory, rests=rests, fixes=[] if smooth and fixes is not None else None,
                   full=job.full or job.covariances)  # fmt: skip
     whole = _whole_reasons(job, fixes, zupt)
+    workdir = output_target(out).workdir  # the output rule (accelnav.fileio): where its temporaries go
     out = Path(out)
     with ExitStack() as stack:
-        source, model = _open(path, model, job, whole, read, out.resolve().parent, stack)
+        source, model = _open(path, model, job, whole, read, workdir, stack)
         if job.aided:
             arrays = source.whole()
             names = [str(a) for a in arrays["axis_names"]]
@@ -79,7 +80,7 @@ def smooth_file(
                 mask, sigma = zu.read_zupt_file(zupt, arrays["t"], names)
                 job = replace(job, rests=replace(rests, mask=mask, sigma=sigma))
         fmt = FORMAT if job.full else FORMAT_V3
-        outcome = engine.run(model, source, job, out, workdir=out.resolve().parent, run_format=fmt)
+        outcome = engine.run(model, source, job, out, workdir=workdir, run_format=fmt)
         if outcome.arrays is not None and job.aided and job.checks and "smooth" in job.stages:
             outcome.checks = _checks(outcome, source.whole(), job.fixes)
         written = [out]
@@ -225,7 +226,7 @@ def _stream(path, model, job: engine.Job, read: dict, rows: int, n_axes: int, wo
     from accelnav.data.stream import NotStreamed, open_stream
 
     need = rows * 8 * (2 + n_axes) + disk_needed(rows, n_axes, n_stages=len(job.stages))
-    free = shutil.disk_usage(workdir).free
+    free = free_bytes(workdir)
     if need > free:
         raise UserError(
             f"{path}: about {rows} rows x {n_axes} axes need about {need / 1e9:.3g} GB of disk in {workdir} "

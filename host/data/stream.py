@@ -22,7 +22,6 @@ import errno
 import os
 import shutil
 import stat
-import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -30,7 +29,7 @@ import numpy as np
 
 from accelnav.data import recording as rc
 from accelnav.errors import UserError
-from accelnav.fileio import check_input, pread_exact
+from accelnav.fileio import TempFolder, check_input, pread_exact
 from accelnav.model.load import Model, load_model
 from accelnav.progress import note
 
@@ -60,6 +59,7 @@ class Stream:
     t0: float = 0.0
     Ts: float = 0.0
     _fds: dict = field(default_factory=dict)
+    _scratch: TempFolder | None = None  # the store's folder (fileio.TempFolder: removed on close)
     kind: str = "CSV"
 
     @property
@@ -111,7 +111,8 @@ class Stream:
         for fd in self._fds.values():
             os.close(fd)
         self._fds.clear()
-        shutil.rmtree(self.folder, ignore_errors=True)
+        if self._scratch is not None:
+            self._scratch.close()
 
     def __enter__(self) -> Stream:
         return self
@@ -210,22 +211,23 @@ def open_stream(
         return _npz_stream(path, override, axes, time_column, rate_hz, time_unit, unit, block)
     if is_log(path):
         raise NotStreamed(f"{src}: a recorder log is read whole")
-    folder = Path(tempfile.mkdtemp(prefix=".accelnav-input-", dir=workdir))
+    scratch = TempFolder("input", workdir)
     st = None
     try:
-        st = _parse(path, folder, magic == b"\x1f\x8b", override, _unit(override), axes, unit, rate_hz, time_column)
+        st = _parse(path, scratch, magic == b"\x1f\x8b", override, _unit(override), axes, unit, rate_hz, time_column)
         st.rate_hz, st.time_unit = rate_hz, time_unit
         _check(st, override, time_unit, chosen=bool(axes), model_axes=model_axes, block=block)
     except BaseException:  # Ctrl-C too: the store goes with the error
         if st is not None:
             st.close()
-        shutil.rmtree(folder, ignore_errors=True)
+        scratch.close()
         raise
     return st
 
 
-def _parse(path: Path, folder: Path, gz: bool, override, default, axes, unit, rate_hz, time_column) -> Stream:
+def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, unit, rate_hz, time_column) -> Stream:
     """The CSV's numbers and lines into the store, by the whole reader's parser."""
+    folder = scratch.path
     src = str(path)
     size = path.stat().st_size
     n, head = 0, None
@@ -250,6 +252,7 @@ def _parse(path: Path, folder: Path, gz: bool, override, default, axes, unit, ra
     if n < 2:
         raise UserError(f"{src}: {n} data rows; a recording needs many more")
     st = Stream(src, n, override, np.array([]), head, folder, rate_hz, None)
+    st._scratch = scratch
     st._fds = {k: os.open(folder / f"{k}.bin", os.O_RDONLY) for k in ("store", "lines")}
     return st
 

@@ -46,8 +46,6 @@ temporary files are removed on success and on error.
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
 import time
 import zipfile
 from collections.abc import Callable, Sequence
@@ -61,7 +59,7 @@ from accelnav.errors import UserError
 from accelnav.estimate import fastsmooth
 from accelnav.estimate.kf import Measurement
 from accelnav.estimate.npzout import NpzWriter
-from accelnav.fileio import pread_exact, pwrite_all
+from accelnav.fileio import Output, TempFolder, free_bytes, output_target, pread_exact, pwrite_all
 from accelnav.model.design import AxisDesign, axis_design
 from accelnav.model.load import Model
 from accelnav.progress import Progress
@@ -351,7 +349,7 @@ def smooth_bounded(
     model: Model,
     n: int,
     read: Reader,
-    out: str | Path,
+    out: str | Path | Output,
     *,
     axis_names: np.ndarray | None = None,
     extras: Sequence[Sequence[Measurement] | fastsmooth.Extras] | None = None,
@@ -388,7 +386,6 @@ def smooth_bounded(
         raise UserError("bounded smoother: at least one sample is needed")
     if not set(stages) <= {"filt", "smooth"} or not stages:
         raise ValueError(f"stages: {stages!r}; accepted: filt, smooth or both")
-    out = Path(out)
     n_axes = len(model.axes)
     names = np.array([a.name for a in model.axes]) if axis_names is None else np.asarray(axis_names)
     chunk = int(chunk) if chunk is not None else chunk_samples(n_axes, budget)
@@ -397,7 +394,8 @@ def smooth_bounded(
     exs = _sorted_extras(extras, n_axes, n)
     designs = [axis_design(model, j) for j in range(n_axes)]
     general = [exs[j] is not None or bool(np.any(np.asarray(d.P0)[:2, 2:] != 0)) for j, d in enumerate(designs)]
-    workdir = Path(workdir) if workdir is not None else out.resolve().parent
+    out = output_target(out)  # the output rule (accelnav.fileio), refused before any work
+    workdir = Path(workdir) if workdir is not None else out.workdir
     smooth = "smooth" in stages
     in_memory = smooth and 8 * n * (ROW * (n_axes - sum(general)) + GROW * sum(general)) <= store_memory
     _check_disk(n, n_axes, sum(general), workdir, len(stages), smooth and not in_memory)
@@ -412,8 +410,7 @@ def smooth_bounded(
     for st in stages:
         big[f"{st}_x"] = big[f"{st}_sd"] = ((n_axes, n, k), dtype)
     with ExitStack() as stack:
-        tmp = Path(tempfile.mkdtemp(prefix=".accelnav-smooth-", dir=workdir))
-        stack.callback(shutil.rmtree, tmp, True)
+        tmp = stack.enter_context(TempFolder("smooth", workdir))
         writer = stack.enter_context(NpzWriter(out, {**small, **big}))
         axes = [_axis(ffi, j, d, exs[j], gates, general[j], n) for j, d in enumerate(designs)]
         for ax in axes:
@@ -472,7 +469,7 @@ def _sorted_extras(extras, n_axes: int, n: int) -> list[fastsmooth.Extras | None
 
 def _check_disk(n: int, n_axes: int, n_general: int, workdir: Path, n_stages: int, smooth: bool) -> None:
     need = disk_needed(n, n_axes, n_general, n_stages=n_stages, store=smooth)
-    free = shutil.disk_usage(workdir).free
+    free = free_bytes(workdir)
     if need > free:
         raise UserError(
             f"bounded smoother: {n} samples x {n_axes} axes need {need / 1e9:.3g} GB of disk in {workdir} for the "

@@ -245,18 +245,22 @@ def smoother_pass(model: Model, source: Source, extras, at: np.ndarray, *, workd
     """One more pass of the chunked smoother over ``source`` with ``extras[j]`` (kf.Aids or measurements) per
     axis, in bounded memory (its output in a temporary file in ``workdir``, removed after); returns the
     smoothed velocity and its sd at samples ``at``, (n_axes, len(at), 2) [u, sd_u], float64."""
-    import tempfile
+    import os
+    import uuid
 
     at = np.asarray(at, dtype=np.int64)
     exs = [Aids.of(e) if not isinstance(e, Aids) else e for e in extras]
-    with tempfile.TemporaryDirectory(prefix=".accelnav-pass-", dir=workdir) as tmp:
-        out = Path(tmp) / "pass.npz"
+    # a file beside the others, not inside a TempFolder: the writer locks the folder it writes in
+    out = Path(workdir) / f".accelnav-pass-{os.getpid()}-{uuid.uuid4().hex[:8]}.npz"
+    try:
         chunk = chunked.chunk_samples(len(exs), min(chunked.BUDGET, budget_bytes(budget)))
         chunked.smooth_bounded(model, source.n, source.read, out, extras=exs, gates=[np.zeros(len(e)) for e in exs],
-                               chunk=chunk, workdir=tmp, stages=("smooth",), store_memory=min(
+                               chunk=chunk, workdir=workdir, stages=("smooth",), store_memory=min(
                                    budget_bytes(budget), STORE_MEMORY))  # fmt: skip
         with chunked.NpzMember(out, "smooth_x") as x, chunked.NpzMember(out, "smooth_sd") as sd:
             return np.stack([x.rows_at(at, 1), sd.rows_at(at, 1)], axis=-1)
+    finally:
+        out.unlink(missing_ok=True)
 
 
 def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None) -> tuple[Aids, Aids]:
@@ -305,7 +309,7 @@ def run(
     if p.whole:
         _whole(model, arrays, job, rest, outcome)
     else:
-        _chunked(model, source, job, rest, Path(out), workdir, outcome, run_format)
+        _chunked(model, source, job, rest, out, workdir, outcome, run_format)
     return outcome
 
 
@@ -349,7 +353,7 @@ def _whole(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, outco
     outcome.clipped = res["clipped"].sum(axis=0)
 
 
-def _chunked(model, source: Source, job: Job, rest, out: Path, workdir, outcome: Outcome, run_format: str) -> None:
+def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outcome, run_format: str) -> None:
     """The passes over chunks, the output written in place (accelnav.estimate.chunked)."""
     n, n_axes = source.n, len(source.axis_names)
     smooth = "smooth" in job.stages

@@ -13,12 +13,13 @@ daemon thread redraws at most ``1 / interval_s`` times a second from a snapshot 
 from __future__ import annotations
 
 import http.server
-import os
 import threading
 from pathlib import Path
 
 import numpy as np
 
+from accelnav.errors import UserError
+from accelnav.fileio import atomic_output
 from accelnav.link.manifest import Manifest, sample_columns
 
 RING_SECONDS = 10.0  # what a person on a bench watches: the last few seconds
@@ -127,13 +128,10 @@ class LivePlot:
     def save(self, path: str | Path) -> Path:
         """Draw and write a PNG in place: to a hidden file beside it, then renamed, so a viewer never reads
         half a file. No fsync: this is a view, redrawn a moment later, not data."""
-        path = Path(path)
-        tmp = path.with_name(f".{path.name}.part")
         fig = self.figure()
-        with self._draw_lock:
-            fig.savefig(tmp, format="png")
-        os.replace(tmp, path)
-        return path
+        with self._draw_lock, atomic_output(path, flag="live plot", fsync=False) as fh:  # the output rule
+            fig.savefig(fh, format="png")
+        return Path(path)
 
 
 class LiveView:
@@ -172,6 +170,8 @@ class LiveView:
             self.frames_drawn += 1
         except OSError as exc:
             self.error = f"{self.png}: {exc.strerror or exc}"
+        except UserError as exc:  # the output rule's one line (a full disk, another writer)
+            self.error = str(exc)
 
     def close(self) -> None:
         """Stop the thread, draw the final state once, stop the page."""

@@ -83,12 +83,13 @@ def test_temporary_files_are_removed_on_error(tmp_path):
 
 
 def test_too_little_disk_is_refused_in_one_line_before_work(tmp_path, monkeypatch):
+    import shutil
     from collections import namedtuple
 
     model = load_model()
     t, accel, clipped = _data(model, 100)
     usage = namedtuple("usage", "total used free")
-    monkeypatch.setattr(chunked.shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 1000, 1000))
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 1000, 1000))
     called = []
     with pytest.raises(chunked.UserError, match=r"need .* GB of disk .* are free") as exc:
         chunked.smooth_bounded(model, 100, lambda s, e: called.append(s), tmp_path / "o.npz")

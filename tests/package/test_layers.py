@@ -42,6 +42,7 @@ LAYERS: dict[str, float] = {
     "accelnav.resources": 0,
     "accelnav.errors": 0,
     "accelnav.fileio": 0,
+    "accelnav.cachefile": 0,
     "accelnav.progress": 0,
     "accelnav.lazy": 0,
 }
@@ -50,7 +51,8 @@ LAYERS: dict[str, float] = {
 NEVER_CODEGEN = ("accelnav.model", "accelnav.native", "accelnav.estimate", "accelnav.identify", "accelnav.data",
                  "accelnav.hil_sim.sim", "accelnav.plots")  # fmt: skip
 # what the generator may stand on
-CODEGEN_BASE = ("accelnav.codegen", "accelnav.model", "accelnav.native", "accelnav.resources", "accelnav.fileio")
+CODEGEN_BASE = ("accelnav.codegen", "accelnav.model", "accelnav.native", "accelnav.resources", "accelnav.fileio",
+                "accelnav.cachefile")  # fmt: skip
 
 
 def _modules() -> dict[str, Path]:
