@@ -54,7 +54,9 @@ def outputs_args(args: argparse.Namespace) -> bool:
     if getattr(args, "command", None) in OUT_FOLDER_COMMANDS:
         folders["out"] = files.pop("out")
     skip = set(files) | set(folders)
-    inputs = [v for k, v in vars(args).items() if k not in skip and isinstance(v, Path)]
+    # an option may name one input or several (nargs: a fleet's recordings, --fixes given twice)
+    given = [v for k, v in vars(args).items() if k not in skip]
+    inputs = [p for v in given for p in (v if isinstance(v, list | tuple) else [v]) if isinstance(p, Path)]
     inputs += [v for k, words in KEYWORD_INPUTS.items() if (v := getattr(args, k, None)) and v not in words]
     stdout = NO_STDOUT.get(getattr(args, "command", None), True)
     to_stdout = None

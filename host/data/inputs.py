@@ -63,6 +63,8 @@ def read_input(
         from accelnav.data.logs import log_run_arrays
 
         arrays, model = log_run_arrays(path)
+        if override is not None:  # a log's frames came from firmware built for its part: another kind is wrong
+            _other_part(path, override, model)
         return _with_model(path, arrays, model, override, opts)
     with open(path, "rb") as fh:
         zipped = fh.read(2) == b"PK"  # an NPZ, whatever its name
@@ -205,6 +207,17 @@ def _is_recording_npz(path: Path) -> bool:
     return "accel.npy" in names and "format.npy" not in names
 
 
+def _other_part(path, override: Model, recorded: Model) -> None:
+    """A --model that does not fit the run because it is of another kind of part is refused naming that
+    cause, not the rate or the axes it gets wrong (a run holds acceleration: a model of another kind with
+    the same axes and rate is a legitimate override of the numbers; a log's is not, see read_input)."""
+    if override.sensor.kind != recorded.sensor.kind:
+        raise UserError(
+            f"{override.source}: {_part(override)}, but {path} was recorded from {_part(recorded)} "
+            f"({recorded.source}): give a model of that part"
+        )
+
+
 def _with_model(path, arrays, model: Model, override: Model | None, opts: dict) -> tuple[Run, Model]:
     """A run's arrays against its model (or the one given): the same axes, the model's rate, no gap."""
     from accelnav.data.recording import GAP_FACTOR
@@ -212,19 +225,21 @@ def _with_model(path, arrays, model: Model, override: Model | None, opts: dict) 
     for key, flag in FLAGS.items():
         if opts[key] not in (None, []):
             raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
+    recorded = model
     if override is not None:
-        if override.sensor.kind != model.sensor.kind:  # before the rate and axes, which would name a symptom
-            raise UserError(
-                f"{override.source}: {_part(override)}, but {path} was recorded from {_part(model)} "
-                f"({model.source}): give a model of that part"
-            )
         if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:
+            _other_part(path, override, recorded)
             raise UserError(
                 f"{override.source}: axes {[a.name for a in override.axes]} do not match the run's "
                 f"{[str(a) for a in arrays['axis_names']]}"
             )
         model = override
-    check_run(arrays, model, str(path))
+    try:
+        check_run(arrays, model, str(path))
+    except UserError:
+        if override is not None:
+            _other_part(path, override, recorded)
+        raise
     t = arrays["t"]
     if len(t) > 2:
         dt = np.diff(t)

@@ -51,9 +51,11 @@ def smooth_file(
     from accelnav.estimate import zupt as zu
 
     job = engine.Job() if job is None else job
+    # the output rule against every file this run reads (a fleet's output named like its input, say)
+    given = [path, fixes, None if zupt == "auto" else zupt, model if isinstance(model, str | Path) else None]
     for p, flag in ((out, "--out"), (csv, "--csv"), (zupt_report, "--zupt-report")):
         if p is not None:
-            check_output(p, flag)
+            check_output(p, flag, inputs=given)
     if zupt_report is not None and zupt != "auto":
         raise UserError("--zupt-report: only with --zupt auto (it lists the detector's candidates)")
     in_memory = job.in_memory

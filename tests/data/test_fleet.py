@@ -86,3 +86,15 @@ def test_the_library_under_dask(fleet, tmp_path, capsys):
     assert [r.ok for r in results] == [True, True, True, False]
     assert "line 2" in results[-1].message
     _same_as_alone(outs[1], paths[1], tmp_path, capsys)
+
+
+def test_an_output_named_like_its_input_is_refused_and_the_input_kept(fleet, capsys):
+    """--out-dir being the inputs' own folder would make each output the file it reads (a.npz -> a.npz): each is
+    refused by the output rule in one line, and the recordings stay as they were."""
+    paths, _ = fleet
+    before = [p.read_bytes() for p in paths]
+    status, out, err = run_cli(["smooth", *paths, "--out-dir", paths[0].parent], capsys)
+    assert status == 1
+    for p in paths:
+        assert f"{p.name}: --out: {p} is the input {p} (the same file); give another name" in out + err
+    assert [p.read_bytes() for p in paths] == before
