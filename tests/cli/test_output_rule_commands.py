@@ -292,4 +292,3 @@ def test_hil_refuses_its_input_as_the_pil_log_before_any_work(needs_pil, inputs,
     assert status == 2 and err.count("\n") == 1, err
     assert f"--out: {link} is the input {src} (the same file); give another name" in err, err
     assert "SIL:" not in out and src.read_bytes() == before
-
