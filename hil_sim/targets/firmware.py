@@ -7,9 +7,10 @@
   compiled with the strict flags (optionally with AddressSanitizer and
   UndefinedBehaviorSanitizer) into a cffi module: the firmware in-process
   (SIL), driven through :class:`HostFirmware`.
-* :func:`make_firmware`: an image for a board through the firmware's own
+* :func:`firmware_images`: a board's image through the firmware's own
   Makefile fragment (the one ``make firmware BOARD=...`` uses), e.g. the
-  mps2-an385 ELF that hil_sim.qemu runs (PIL).
+  mps2-an385 ELF that hil_sim.qemu runs (PIL); :func:`private_firmware`
+  hands a runner verified copies, :func:`make_firmware` copies into a folder.
 
 The firmware sources are package data (:func:`accelnav.resources.firmware_dir`);
 what is built goes to the cache (:func:`accelnav.resources.cache_root`)
@@ -145,9 +146,11 @@ def _compiler(board: str) -> str:
 
 @cache
 def _sources_hash() -> bytes:
-    """The firmware's files (sources, Makefile fragment, linker scripts): package data, fixed for a run."""
+    """The firmware's files (sources, Makefile fragments, linker scripts): package data, fixed for a run.
+    Not the fuzzers' growing corpus (``fuzz/``), which no image is built from."""
     h = hashlib.sha256()
-    for p in sorted(q for q in FW.rglob("*") if q.is_file() and "__pycache__" not in q.parts):
+    files = (q for q in FW.rglob("*") if q.is_file() and not {"__pycache__", "fuzz"} & set(q.relative_to(FW).parts))
+    for p in sorted(files):
         h.update(str(p.relative_to(FW)).encode() + b"\0" + p.read_bytes() + b"\0")
     return h.digest()
 
