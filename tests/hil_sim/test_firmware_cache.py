@@ -142,3 +142,29 @@ def test_a_feed_program_replaced_in_the_cache_is_never_run(tmp_path, monkeypatch
     assert err.count("\n") == 1 and f"cache entry {entry}: its seal does not verify" in err
     entry.write_bytes(entry.read_bytes()[:40] + hostile)  # our header, their program
     assert simavr.harness() == good and not marker.exists()
+
+
+def test_pil_runs_only_the_sealed_image_of_its_model(tmp_path, monkeypatch, capfd):
+    """The emulated board, whose semihosting reaches host files: a valid image of another model planted in
+    the cache is rebuilt, and the run equals SIL bit for bit."""
+    if shutil.which("qemu-system-arm") is None or shutil.which("arm-none-eabi-gcc") is None:
+        pytest.skip("PIL on mps2_an385 needs qemu-system-arm and arm-none-eabi-gcc")
+    from accelnav.hil_sim.sim.sensor import simulate
+    from accelnav.hil_sim.targets import hil
+    from accelnav.model.load import load_model
+
+    private_cache(tmp_path, monkeypatch)
+    duty = models_dir() / "adxl202_duty.toml"
+    firmware.firmware_images("mps2_an385", duty)
+    model = load_model()
+    run = simulate(model, "shock", 1.0, seed=2)
+    stim = hil.stimulus(firmware.manifest(model.source), run)
+    sil = hil.run_sil(model, stim)
+    entry = firmware.image_entry("mps2_an385", model.source)
+    entry.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(firmware.image_entry("mps2_an385", duty), entry)
+    capfd.readouterr()
+    pil = hil.run_pil(model, stim, len(run.t), tmp_path / "p.acnlog", board="mps2_an385")
+    assert pil.telemetry == sil
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and f"cache entry {entry}: its seal does not verify" in err and "rebuilt" in err
