@@ -249,6 +249,17 @@ def write_entry(path: Path, *parts) -> bool:
         return False
 
 
+def private_copy(folder: Path, name: str, data, mode: int = 0o700) -> Path:
+    """Verified bytes of an entry written to a new file ``name`` in a private folder of this user's (a
+    TempFolder, mode 0700), never through a planted name (O_EXCL, O_NOFOLLOW). What is run or loaded is
+    this copy, never the cache file, which anyone who can write the cache may replace after the check."""
+    path = folder / name
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, mode)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+    return path
+
+
 @contextmanager
 def entry_lock(path: Path, timeout_s: float = LOCK_TIMEOUT_S) -> Iterator[None]:
     """Hold ``flock`` on ``PATH.lock`` (made if missing, never through a link) while one entry is built.

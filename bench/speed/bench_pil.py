@@ -25,7 +25,7 @@ from baselines import best_of
 
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.targets import hil
-from accelnav.hil_sim.targets.firmware import manifest
+from accelnav.hil_sim.targets.firmware import firmware_images, manifest
 from accelnav.hil_sim.targets.qemu import MACHINES
 from accelnav.link.decoder import decode_all
 from accelnav.model.load import load_model
@@ -77,7 +77,7 @@ def main() -> None:
             sil = hil.run_sil(model, stim)
             rate = model.rate_hz
             for board in boards:
-                hil.make_firmware(board, model.source)  # build outside the timing too
+                firmware_images(board, model.source)  # build outside the timing too
                 feed, tel_feed = pil_rate(model, stim, n, board, "feed", tmp)
                 same = tel_feed == sil
                 uart_col, ratio = "-", "-"

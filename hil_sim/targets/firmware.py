@@ -7,31 +7,40 @@
   compiled with the strict flags (optionally with AddressSanitizer and
   UndefinedBehaviorSanitizer) into a cffi module: the firmware in-process
   (SIL), driven through :class:`HostFirmware`.
-* :func:`make_firmware`: an image for a board through the firmware's own
+* :func:`firmware_images`: a board's image through the firmware's own
   Makefile fragment (the one ``make firmware BOARD=...`` uses), e.g. the
-  mps2-an385 ELF that hil_sim.qemu runs (PIL).
+  mps2-an385 ELF that hil_sim.qemu runs (PIL); :func:`private_firmware`
+  hands a runner verified copies, :func:`make_firmware` copies into a folder.
 
 The firmware sources are package data (:func:`accelnav.resources.firmware_dir`);
 what is built goes to the cache (:func:`accelnav.resources.cache_root`)
 or a folder the caller names, never into the installed package.
 
-Unlike the other cache entries (:mod:`accelnav.cachefile`), a board's image
-folder is not sealed: ``make`` builds in it incrementally and trusts the
-objects it finds there, so whoever can write the cache folder can change the
-image the emulator runs. Builds of one folder take a lock, one at a time; the
-user guide ("The cache folder") says to keep PIL's cache private.
+An image is a sealed cache entry (:mod:`accelnav.cachefile`) like every other: built by ``make`` in a
+private temporary folder (never from objects someone left in the cache), its files (ELF, hex, bin, the
+host board's program, size.txt) packed into one entry named by the hash of everything it was built from
+and sealed under the user's key. Every use verifies the seal and runs or loads a private copy of the
+verified bytes (:func:`private_firmware`), never the cache file: an image replaced, edited or truncated
+in the cache is rebuilt with one line on stderr, never run. Builders of one image take the entry's lock.
 """
 
 from __future__ import annotations
 
+import atexit
+import hashlib
 import json
+import os
 import re
 import shutil
+import struct
 import subprocess
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import cache
 from pathlib import Path
 
-from accelnav.cachefile import entry_lock
+from accelnav.cachefile import cached, private_copy
+from accelnav.fileio import TempFolder
 from accelnav.native.cbuild import STRICT_WARN
 from accelnav.resources import cache_root, firmware_dir, models_dir
 
@@ -42,6 +51,9 @@ DUTY_MODEL = models_dir() / "adxl202_duty.toml"
 # the cross compiler of each board (firmware.mk's FW_CC) and its Debian packages; the boards not named are ARM
 ARM_TOOLCHAIN = ("arm-none-eabi-gcc", "gcc-arm-none-eabi libnewlib-arm-none-eabi")
 TOOLCHAINS = {"sifive_e": ("riscv64-unknown-elf-gcc", "gcc-riscv64-unknown-elf picolibc-riscv64-unknown-elf")}
+IMAGE_LIMIT = 64 << 20  # the bytes of one board's image files together (an ARM ELF with -g: ~0.5 MB)
+# what of a build folder is kept: the images the runners load and the size report, never objects
+IMAGE_FILE = re.compile(r"(accelnav_fw(\.(elf|hex|bin))?|size\.txt)\Z")
 
 
 @cache
@@ -114,57 +126,141 @@ def build_firmware(model_path: str | None = None, *, sanitize: bool = False, wor
     )
 
 
-def make_firmware(board: str, model_path: str | Path | None = None, out: Path | None = None) -> Path:
-    """Build ``board``'s image with the firmware's Makefile fragment and return its output folder.
-
-    The generated C of the model is written to ``OUT/gen`` first; ``out``
-    defaults to a folder in the cache named by the board and the model's
-    hash, so images of different models never overwrite each other. The build
-    holds a lock on the folder (``OUT.lock``): a second process building the same
-    image waits, then finds it made, instead of relinking it under the first.
-    """
-    from accelnav.model.load import load_model
-
-    model = load_model(model_path)
-    if out is None:
-        out = cache_root() / "firmware" / f"{board}-{model.sha256[:16]}"
-    out = Path(out).resolve()
+def _compiler(board: str) -> str:
+    """The board's compiler, found on PATH, else a one-line FirmwareError naming what to install."""
     if board == "atmega328p":
-        if shutil.which("avr-gcc") is None or shutil.which("avr-size") is None:
-            raise FirmwareError(f"board {board}: avr-gcc not found (Debian: gcc-avr avr-libc)")
-    elif board != "host":
+        cc, packages = "avr-gcc", "gcc-avr avr-libc"
+        if shutil.which("avr-size") is None:
+            raise FirmwareError(f"board {board}: avr-gcc not found (Debian: {packages})")
+    elif board == "host":
+        cc, packages = "cc", "gcc"
+    else:
         cc, packages = TOOLCHAINS.get(board, ARM_TOOLCHAIN)
-        if shutil.which(cc) is None:
-            raise FirmwareError(f"board {board}: {cc} not found (Debian: {packages})")
+    path = shutil.which(cc)
+    if path is None:
+        raise FirmwareError(f"board {board}: {cc} not found (Debian: {packages})")
     if shutil.which("make") is None:
         raise FirmwareError(f"board {board}: make not found (Debian: make)")
-    # one build at a time per folder: two makes in one folder delete and relink each other's image
-    with entry_lock(out):
+    return path
+
+
+@cache
+def _sources_hash() -> bytes:
+    """The firmware's files (sources, Makefile fragments, linker scripts): package data, fixed for a run.
+    Not the fuzzers' growing corpus (``fuzz/``), which no image is built from."""
+    h = hashlib.sha256()
+    files = (q for q in FW.rglob("*") if q.is_file() and not {"__pycache__", "fuzz"} & set(q.relative_to(FW).parts))
+    for p in sorted(files):
+        h.update(str(p.relative_to(FW)).encode() + b"\0" + p.read_bytes() + b"\0")
+    return h.digest()
+
+
+def image_entry(board: str, model_path: str | Path | None = None) -> Path:
+    """The cache entry of ``board``'s image for a model: named by the hash of the board, the firmware's
+    files, the model's generated C and the compiler (its path, size and time: an upgrade rebuilds)."""
+    cc = _compiler(board)
+    st = os.stat(cc)
+    h = hashlib.sha256(board.encode() + b"\0" + _sources_hash())
+    h.update(f"{cc}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
+    for name, text in sorted(generated(str(model_path) if model_path is not None else None).items()):
+        h.update(name.encode() + b"\0" + text.encode() + b"\0")
+    return cache_root() / "firmware" / f"{board}-{h.hexdigest()[:24]}.fw"
+
+
+def _pack(files: dict[str, bytes]) -> bytes:
+    head = json.dumps({name: len(data) for name, data in files.items()}).encode()
+    return struct.pack("<I", len(head)) + head + b"".join(files.values())
+
+
+def _unpack(blob: memoryview) -> dict[str, memoryview]:
+    """The files of an image entry (views of its verified bytes); ValueError for one that is not whole."""
+    if len(blob) < 4:
+        raise ValueError("no image table")
+    (n,) = struct.unpack_from("<I", blob)
+    try:
+        sizes = json.loads(bytes(blob[4 : 4 + n]))
+    except ValueError:
+        raise ValueError("a damaged image table") from None
+    if not isinstance(sizes, dict) or not all(
+        isinstance(k, str) and IMAGE_FILE.match(k) and type(v) is int and v >= 0 for k, v in sizes.items()
+    ):
+        raise ValueError("an image table of other files")
+    at, files = 4 + n, {}
+    for name, size in sizes.items():
+        files[name] = blob[at : at + size]
+        at += size
+    if at != len(blob):
+        raise ValueError(f"{len(blob)} bytes where the image table says {at}")
+    return files
+
+
+def _build(board: str, model_path: str | None) -> bytes:
+    """``make`` in a private temporary folder, from nothing: the packed image files."""
+    with TempFolder(f"fw-{board}") as out:
         gen = out / "gen"
-        gen.mkdir(parents=True, exist_ok=True)
+        gen.mkdir()
         for name, text in generated(model_path).items():
-            path = gen / name
-            if not path.exists() or path.read_text() != text:  # unchanged files keep their time: no rebuild
-                path.write_text(text)
-        cmd = [
-            "make",
-            "--no-print-directory",
-            "-f",
-            str(FW / "firmware.mk"),
-            "firmware",
-            f"BOARD={board}",
-            f"FW_DIR={FW}",
-            f"FW_GEN={gen}",
-            f"FW_OUT={out}",
-            "FW_PREGEN=1",
-        ]
-        done = subprocess.run(cmd, cwd=out, capture_output=True, text=True, timeout=600)
-    if done.returncode != 0:
-        # a model too big for the part: firmware.mk's size check says so in one line, which is the error
-        fit = re.search(r"^BOARD=\S+: this model needs .*$", done.stderr, re.M)
-        if fit:
-            raise FirmwareError(fit[0])
-        raise FirmwareError(f"{' '.join(cmd)} failed:\n{done.stdout[-2000:]}{done.stderr[-4000:]}")
+            (gen / name).write_text(text)
+        cmd = ["make", "--no-print-directory", "-f", str(FW / "firmware.mk"), "firmware", f"BOARD={board}",
+               f"FW_DIR={FW}", f"FW_GEN={gen}", f"FW_OUT={out}", "FW_PREGEN=1"]  # fmt: skip
+        try:
+            done = subprocess.run(cmd, cwd=out, capture_output=True, text=True, timeout=600)
+        except subprocess.TimeoutExpired:
+            raise FirmwareError(f"board {board}: the firmware build did not finish within 600 s") from None
+        if done.returncode != 0:
+            # a model too big for the part: firmware.mk's size check says so in one line, which is the error
+            fit = re.search(r"^BOARD=\S+: this model needs .*$", done.stderr, re.M)
+            if fit:
+                raise FirmwareError(fit[0])
+            raise FirmwareError(f"{' '.join(cmd)} failed:\n{done.stdout[-2000:]}{done.stderr[-4000:]}")
+        return _pack({p.name: p.read_bytes() for p in sorted(out.iterdir()) if IMAGE_FILE.match(p.name)})
+
+
+def firmware_images(board: str, model_path: str | Path | None = None) -> dict[str, memoryview]:
+    """``board``'s image files for a model (the embedded default if None), verified: from the sealed cache
+    entry (:func:`image_entry`), else built (:func:`_build`) and sealed there. One that does not verify is
+    rebuilt with one line on stderr; concurrent callers build it once (the entry's lock)."""
+    model = None if model_path is None else str(model_path)
+    entry = image_entry(board, model)
+    return _unpack(memoryview(cached(entry, lambda: _build(board, model), limit=IMAGE_LIMIT, check=_unpack)))
+
+
+def _write_images(folder: Path, images: dict[str, memoryview]) -> None:
+    for name, data in images.items():
+        private_copy(folder, name, data, 0o700 if name == "accelnav_fw" else 0o600)  # the host board runs
+
+
+@contextmanager
+def private_firmware(board: str, model_path: str | Path | None = None) -> Iterator[Path]:
+    """A private folder (this user's, removed at the end) holding verified copies of ``board``'s image
+    files: what an emulator loads, so a cache entry changed meanwhile cannot be what runs."""
+    images = firmware_images(board, model_path)
+    with TempFolder(f"fw-{board}") as folder:
+        _write_images(folder, images)
+        yield folder
+
+
+def make_firmware(board: str, model_path: str | Path | None = None, out: Path | None = None) -> Path:
+    """``board``'s image files (:func:`firmware_images`, verified) and the model's generated C (``gen/``)
+    copied into a folder, returned.
+
+    ``out``: a folder of the caller's (each file replaced whole); by default a private one of this process,
+    removed when it exits. A runner that loads the image at once uses :func:`private_firmware` instead."""
+    images = firmware_images(board, model_path)
+    gen = {f"gen/{k}": v.encode() for k, v in generated(None if model_path is None else str(model_path)).items()}
+    if out is None:
+        folder = TempFolder(f"fw-{board}")
+        atexit.register(folder.close)
+        (folder.path / "gen").mkdir()
+        _write_images(folder.path, {**images, **gen})
+        return folder.path
+    out = Path(out)
+    (out / "gen").mkdir(parents=True, exist_ok=True)
+    with TempFolder(f"fw-{board}", out) as tmp:  # beside the targets: each rename is atomic
+        (tmp / "gen").mkdir()
+        _write_images(tmp, {**images, **gen})
+        for name in (*images, *gen):
+            os.replace(tmp / name, out / name)
     return out
 
 

@@ -38,6 +38,7 @@ from accelnav.errors import UserError
 from accelnav.estimate.kf import rts_smooth, run_filter
 from accelnav.estimate.pipeline import PositionErrors, error_rows, format_errors, smooth_run
 from accelnav.estimate.zupt import rest_mask
+from accelnav.fileio import Output
 from accelnav.hil_sim.sim.sensor import SimRun
 from accelnav.link.codec import encode_command, encode_stimulus
 from accelnav.link.decoder import Decoder, decode_all, replay_for
@@ -46,7 +47,7 @@ from accelnav.model.design import axis_design
 from accelnav.model.load import G0, Model
 
 from . import simavr
-from .firmware import HostFirmware, build_firmware, make_firmware, manifest
+from .firmware import HostFirmware, build_firmware, manifest, private_firmware
 from .qemu import MACHINES, QemuBoard, QemuError, machine_for, run_feed
 
 STATES = ("r", "u", "a", "eps")
@@ -174,13 +175,14 @@ def run_pil(
     model: Model,
     stim: bytes,
     n_samples: int,
-    log: Path,
+    log: Path | Output,
     *,
     board: str = "mps2_an385",
     timeout_s: float = 600.0,
     link: str = "feed",
 ) -> PilResult:
-    """Run the firmware on the emulated ``board`` with ``stim`` as its input and its telemetry in ``log``.
+    """Run the firmware on the emulated ``board`` with ``stim`` as its input and its telemetry in ``log``
+    (written by the output rule, accelnav.fileio: a FIFO or a device is written through).
 
     ``link="feed"``: through files over semihosting (fast; the emulator exits at the end of
     ``stim``); ``link="uart"``: ``stim`` on the stimulus UART, the telemetry UART recorded by the
@@ -189,20 +191,20 @@ def run_pil(
         return _run_pil_uart(model, stim, n_samples, log, board=board, timeout_s=timeout_s)
     if link != "feed":
         raise ValueError(f"link {link!r}: accepted: feed, uart")
-    from accelnav.link.logfile import LogWriter, read_log
+    from accelnav.link.logfile import LogWriter
 
-    if board in simavr.BOARDS:  # the AVR in simavr: its UART fed from a file by a libsimavr program
-        elf = make_firmware(board, model.source) / "accelnav_fw.elf"
-        source = f"simavr {simavr.MCU} (UART fed from a file)"
-        t0 = time.monotonic()
-        tel = simavr.run_feed(elf, stim, timeout=timeout_s).telemetry
-    else:
-        m = machine_for(board)
-        elf = make_firmware(board, model.source) / "accelnav_fw.elf"
-        source = f"qemu {m.machine} (file feed over semihosting)"
-        t0 = time.monotonic()
-        tel = run_feed(elf, board, stim, timeout=timeout_s)
-    seconds = time.monotonic() - t0
+    # the emulator loads a private copy of the verified image, never the cache's file
+    with private_firmware(board, model.source) as fw:
+        elf = fw / "accelnav_fw.elf"
+        if board in simavr.BOARDS:  # the AVR in simavr: its UART fed from a file by a libsimavr program
+            source = f"simavr {simavr.MCU} (UART fed from a file)"
+            t0 = time.monotonic()
+            tel = simavr.run_feed(elf, stim, timeout=timeout_s).telemetry
+        else:
+            source = f"qemu {machine_for(board).machine} (file feed over semihosting)"
+            t0 = time.monotonic()
+            tel = run_feed(elf, board, stim, timeout=timeout_s)
+        seconds = time.monotonic() - t0
     man = manifest(model.source)
     meta = {
         "manifest": man.data,
@@ -210,33 +212,43 @@ def run_pil(
         "source": source,
         "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
-    with LogWriter(log, meta, overwrite=True, fsync_s=None) as writer:
-        step = writer.max_chunk
-        for a in range(0, len(tel), step):
-            writer.append(tel[a : a + step])
-            writer.flush()
+    try:
+        with LogWriter(log, meta, overwrite=True, fsync_s=None) as writer:
+            step = writer.max_chunk
+            for a in range(0, len(tel), step):
+                writer.append(tel[a : a + step])
+                writer.flush()
+    except OSError as exc:  # a full disk: the log holds what came before, said in one line
+        raise UserError(f"{log}: cannot write the PIL log: {exc.strerror or exc}") from None
     dec = Decoder(man, replay=replay_for(man, model))  # the compact frames' rows need the replay
     dec.feed(tel)
     dec.release()
     stats = dec.stats.as_dict()
     if stats.get("frames", {}).get("sample", 0) < n_samples:
         raise QemuError(f"PIL run ({board}) ended early (end of the stimulus) after {stats.get('frames', {})} frames")
-    return PilResult(log, b"".join(read_log(log).data), seconds, stats)
+    # the telemetry as received, every byte of which the log took: the log is not read back (a FIFO or a
+    # device, which the output rule writes through, cannot be)
+    return PilResult(Path(str(log)), tel, seconds, stats)
 
 
-def _run_pil_uart(model: Model, stim: bytes, n_samples: int, log: Path, *, board: str, timeout_s: float) -> PilResult:
+def _run_pil_uart(
+    model: Model, stim: bytes, n_samples: int, log: Path | Output, *, board: str, timeout_s: float
+) -> PilResult:
     """run_pil over the board's UARTs, recorded by the recorder."""
+    from accelnav.fileio import FILE, output_target
     from accelnav.link.logfile import read_log
     from accelnav.link.recorder import Recorder, Status
 
+    out = output_target(log, stdout="the PIL log goes to a file")
+    if out.kind != FILE:
+        raise UserError(f"{out}: link uart reads the telemetry back from its log; give a file")
     m = machine_for(board)
-    elf = make_firmware(board, model.source) / "accelnav_fw.elf"
     man = manifest(model.source)
-    with QemuBoard(elf, board) as qb:
+    with private_firmware(board, model.source) as fw, QemuBoard(fw / "accelnav_fw.elf", board) as qb:
         tel = qb.open(m.telemetry)
         feed = qb.open(m.stimulus)  # the same port when one UART carries both
         wait_ready(tel, man, board)
-        rec = Recorder(tel, log, man, model_text=model.text, commands=(), overwrite=True, status=Status(enabled=False))
+        rec = Recorder(tel, out, man, model_text=model.text, commands=(), overwrite=True, status=Status(enabled=False))
         # the board reads its feed only while it has room to send: writing it all at once is safe
         writer = threading.Thread(target=feed.write, args=(stim,), daemon=True)
         writer.start()
@@ -245,7 +257,7 @@ def _run_pil_uart(model: Model, stim: bytes, n_samples: int, log: Path, *, board
         writer.join(timeout=5)
     if res.reason != "frames":
         raise QemuError(f"PIL run ({board}) ended early ({res.reason}) after {res.stats.get('frames', {})} frames")
-    return PilResult(log, b"".join(read_log(log).data), res.seconds, res.stats)
+    return PilResult(out.path, b"".join(read_log(out.path).data), res.seconds, res.stats)
 
 
 def wait_ready(tel, man: Manifest, board: str, timeout_s: float = 30.0) -> None:

@@ -15,7 +15,6 @@ A missing toolchain or emulator is an :class:`AvrError` with one line that says 
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
 import subprocess
@@ -377,16 +376,15 @@ def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0, adc: n
     each conversion of channel i gets axis i's next code, and ``stimulus`` (commands) follows them."""
     import tempfile
 
+    from accelnav.cachefile import private_copy
+
     elf = Path(elf).resolve()
     if not elf.is_file():
         raise AvrError(f"{elf}: no firmware image (build it with 'make firmware BOARD=atmega328p')")
     program = harness()
     with tempfile.TemporaryDirectory(prefix="accelnav-simavr-") as tmp:  # mode 0700: only this user's
         folder = Path(tmp)
-        exe = folder / "simavr_feed"  # the verified bytes, run from here, not from the cache
-        fd = os.open(exe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o700)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(program)
+        exe = private_copy(folder, "simavr_feed", program)  # the verified bytes, run from here
         (folder / "stim.bin").write_bytes(stimulus)
         cmd = [str(exe), str(elf), str(folder / "stim.bin"), str(folder / "tel.bin"), str(MAX_RUN_CYCLES)]
         if adc is not None:

@@ -48,6 +48,7 @@ def register(sub) -> None:
 
 
 def cmd_hil(args) -> int:
+    from accelnav.fileio import output_target
     from accelnav.hil_sim.sim.sensor import simulate
     from accelnav.hil_sim.sim.trajectories import require_scenario
     from accelnav.hil_sim.targets import hil
@@ -80,15 +81,17 @@ def cmd_hil(args) -> int:
             raise UserError(str(exc)) from None
         n = len(run.t)
         print(f"model {model.name}, {model.sensor.kind} input, scenario {scenario}, {n} samples, seed {seed}")
+    log = None
+    if args.target == "pil":  # the log by the output rule, before any work: never one of the inputs
+        name = args.out / f"pil_{board}_{model.name}_{_hil_stem(scenario)}.acnlog"
+        log = output_target(name, "--out", inputs=(args.input, args.model), stdout=False)
     try:
         man = manifest(model.source)
         stim = hil.stimulus(man, run)
         sil = hil.run_sil(model, stim)
         print(f"SIL: {n} samples in, {len(sil)} bytes of telemetry out ({len(sil) / max(n, 1):.1f} B per sample)")
         pil = None
-        if args.target == "pil":
-            log = args.out / f"pil_{board}_{model.name}_{_hil_stem(scenario)}.acnlog"
-            log.parent.mkdir(parents=True, exist_ok=True)
+        if log is not None:
             with Progress("pil", n, unit="samples", enabled=None) as bar:
                 res = hil.run_pil(model, stim, n, log, board=board)
                 bar.update(n)

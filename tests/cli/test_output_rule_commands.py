@@ -235,3 +235,60 @@ def test_one_output_at_most_goes_to_standard_output(inputs, capsys):
     status, out, err = _run(["smooth", str(inputs["RUN"]), "--out", "-", "--csv", "-"], capsys)
     assert status == 2 and out == ""
     assert err == "accelnav: error: --csv: '-' is already --out's; one output at most goes to standard output\n"
+
+
+# hil's --out is a folder: its PIL log (pil_BOARD_MODEL_SCENARIO.acnlog) is the file the rule decides on
+HIL = ["hil", "--target", "pil", "--duration", "1", "--out"]
+
+
+def _hil_log(folder, stem: str = "stop_and_go"):
+    from accelnav.model.load import load_model
+
+    return folder / f"pil_mps2_an385_{load_model().name}_{stem}.acnlog"
+
+
+@pytest.fixture
+def needs_pil():
+    import shutil
+
+    if shutil.which("qemu-system-arm") is None or shutil.which("arm-none-eabi-gcc") is None:
+        pytest.skip("PIL on mps2_an385 needs qemu-system-arm and arm-none-eabi-gcc")
+
+
+def test_hil_pil_log_by_the_output_rule(needs_pil, inputs, tmp_path, capsys, monkeypatch):
+    """A FIFO and a device in the log's place are written through (not read back: the result is the run's);
+    a symlink's target is replaced and the link kept."""
+    (tmp_path / "fifo").mkdir()
+    fifo = FifoReader(_hil_log(tmp_path / "fifo"))
+    status, out, err = _run([*HIL, str(tmp_path / "fifo")], capsys)
+    assert status == 0, err
+    _valid(fifo.result(), "acnlog")
+    assert stat.S_ISFIFO(os.lstat(fifo.path).st_mode) and "sample rows, bit-identical" in out, out
+    dev = _hil_log(tmp_path / "dev")
+    dev.parent.mkdir()
+    how = fake_device(dev, monkeypatch)
+    ino = os.lstat(dev).st_ino
+    status, out, err = _run([*HIL, str(tmp_path / "dev")], capsys)
+    assert status == 0 and "sample rows, bit-identical" in out, err
+    assert is_device(dev, how, ino)
+    target = tmp_path / "real.acnlog"
+    target.write_bytes(b"old")
+    link = _hil_log(tmp_path / "link")
+    link.parent.mkdir()
+    link.symlink_to(target)
+    status, out, err = _run([*HIL, str(tmp_path / "link")], capsys)
+    assert status == 0, err
+    assert link.is_symlink() and os.readlink(link) == str(target)
+    _valid(target.read_bytes(), "acnlog")
+    assert all(hidden(tmp_path / d) == [] for d in ("fifo", "dev", "link")) and hidden(tmp_path) == []
+
+
+def test_hil_refuses_its_input_as_the_pil_log_before_any_work(needs_pil, inputs, tmp_path, capsys):
+    src = inputs["LOG"]
+    before = src.read_bytes()
+    link = _hil_log(tmp_path, src.stem)
+    link.symlink_to(src)
+    status, out, err = _run(["hil", "--input", str(src), "--target", "pil", "--out", str(tmp_path)], capsys)
+    assert status == 2 and err.count("\n") == 1, err
+    assert f"--out: {link} is the input {src} (the same file); give another name" in err, err
+    assert "SIL:" not in out and src.read_bytes() == before

@@ -29,7 +29,7 @@ from conftest import MODELS
 from accelnav.cli import main
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.targets import hil, qemu, simavr
-from accelnav.hil_sim.targets.firmware import manifest
+from accelnav.hil_sim.targets.firmware import make_firmware, manifest
 from accelnav.link.decoder import decode_all, replay_for
 from accelnav.model.load import load_model
 
@@ -207,7 +207,7 @@ def test_smoother_with_zupt_beats_filter_in_the_summary(default_model):
 @pytest.mark.parametrize("board_name", BOARDS)
 def test_qemu_is_never_left_behind(tmp_path, board_name):
     _require_pil(board_name)
-    elf = hil.make_firmware(board_name) / "accelnav_fw.elf"
+    elf = make_firmware(board_name) / "accelnav_fw.elf"
     with pytest.raises(RuntimeError, match="inside"):
         with qemu.QemuBoard(elf, board_name) as board:
             board.open(board.machine.telemetry)
@@ -267,7 +267,7 @@ def test_file_feed_errors_are_one_line(tmp_path):
     """A feed whose input file is missing ends the emulator with status 1 and a one-line reason; a feed
     file name the semihosting command line cannot carry is refused before QEMU starts."""
     _require_pil()
-    elf = hil.make_firmware("mps2_an385") / "accelnav_fw.elf"
+    elf = make_firmware("mps2_an385") / "accelnav_fw.elf"
     cmd = qemu.qemu_command(elf.resolve(), machine="mps2-an385", feed=("missing.bin", "tel.bin"))
     done = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert done.returncode == 1
@@ -450,7 +450,7 @@ def test_avr_board_fits_its_ram_with_the_stack_it_measured(tmp_path, model_file)
     run = simulate(model, "shock", 3.0, seed=3)
     cmds = b"".join(encode_command(man, c) for c in ("info", "mode_states", "zupt_begin", "zupt_end", "reset"))
     stim = hil.stimulus(man, run) + cmds + hil.stimulus(man, run) + encode_command(man, "decimate", factor=3)
-    out = hil.make_firmware("atmega328p", model.source)
+    out = make_firmware("atmega328p", model.source)
     res = simavr.run_feed(out / "accelnav_fw.elf", stim, timeout=120)
     info = man.frames["info"]["type"]
     frames = {}
