@@ -228,6 +228,11 @@ def main() -> int:
     ap.add_argument("--fleet", type=int, nargs=2, default=[200, 100_000], metavar=("FILES", "ROWS"),
                     help="the fleet rows: FILES recordings of ROWS rows, --jobs 1 and 2 (0 0: none)")  # fmt: skip
     args = ap.parse_args()
+    # the commands (and Dask's workers) run as an installed package runs, with its bytecode cached: a shell
+    # that forbids writing it (PYTHONDONTWRITEBYTECODE) compiles every module of every command from source,
+    # 1.2 s of a 1e7-sample smooth here and as much again in each fleet worker (measured)
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+    sys.dont_write_bytecode = False
     sizes = [int(s) for s in args.sizes] + ([100_000_000] if args.big else [])
     model = load_model(None)
     n_axes = len(model.axes)
@@ -269,10 +274,10 @@ def main() -> int:
             "smooth NPZ": ["smooth", npz],
             "smooth CSV": ["smooth", csv],
             "smooth NPZ --zupt auto": ["smooth", npz, "--zupt", "auto"],
-            # rests given as intervals (--zupt rests.csv) cost more in the reader than in the engine:
-            # zupt.read_zupt_file builds the mask interval by interval over every sample (349 s at 1e7 with
-            # 3333 intervals, measured)
             "smooth NPZ --fixes --zupt MASK": ["smooth", npz, "--fixes", fixes, "--zupt", mask],
+            # the same rests as 3334 intervals: zupt.read_zupt_file places them by binary search (it painted
+            # each interval over every sample: 349 s at 1e7, measured)
+            "smooth NPZ --fixes --zupt INTERVALS": ["smooth", npz, "--fixes", fixes, "--zupt", rests],
             "smooth NPZ --filter-states": ["smooth", npz, "--filter-states"],
             "smooth NPZ --full": ["smooth", npz, "--full"],
             "filter NPZ": ["filter", npz],

@@ -721,25 +721,74 @@ def read_zupt_file(path, t: np.ndarray, axis_names: list[str]) -> tuple[np.ndarr
         rows = read_table(path, required=("rest",), optional=("t_s", "t"))
         return _mask_from(np.asarray(rows["rest"]), n, n_axes, path_s), sig
     rows = read_table(path, required=("start_s", "end_s"), optional=("axis", "sigma"))
+    return _intervals_mask(rows, t, axis_names, path_s, sig)
+
+
+def _intervals_mask(rows: dict, t: np.ndarray, axis_names: list[str], src: str, sig: np.ndarray):
+    """(mask, sigma) of interval rows, in O(N + K log K) for N samples and K intervals: each interval becomes
+    a range of sample indices by binary search on the sorted clock, and each sample takes the last row that
+    covers it (a later row's sigma wins where intervals overlap, as row-by-row painting gives)."""
+    from accelnav.errors import UserError
+
+    n, n_axes = len(t), len(axis_names)
+    a, b = np.asarray(rows["start_s"], dtype=np.float64), np.asarray(rows["end_s"], dtype=np.float64)
+    k = len(a)
+    axis = np.full(k, -1, dtype=np.int64)  # -1: every axis
+    unknown = np.zeros(k, dtype=bool)
+    if "axis" in rows:
+        names: dict[str, int] = {}
+        for j, name in enumerate(axis_names):
+            names.setdefault(name, j)  # a repeated name means its first axis (list.index)
+        axis = np.array([names.get(ax, -2) for ax in rows["axis"]], dtype=np.int64)
+        unknown = axis == -2
+    sd = np.asarray(rows["sigma"], dtype=np.float64) if "sigma" in rows else None
+    bad_sd = ~(sd > 0) if sd is not None else np.zeros(k, dtype=bool)
+    backwards = ~(b >= a)
+    if (backwards | unknown | bad_sd).any():  # the first bad row, its first fault, in the order they are checked
+        i = int(np.argmax(backwards | unknown | bad_sd))
+        if backwards[i]:
+            raise UserError(f"{src}: row {i + 2}: end_s {b[i]:g} is before start_s {a[i]:g}")
+        if unknown[i]:
+            raise UserError(f"{src}: row {i + 2}: axis {rows['axis'][i]!r}; accepted: {', '.join(axis_names)}")
+        raise UserError(f"{src}: row {i + 2}: sigma is {sd[i]:g}; accepted: a standard deviation > 0 (m/s)")
+    order = None
+    if n > 1 and not np.all(t[1:] >= t[:-1]):  # not sorted (or NaN): work on a sorted copy, mapped back
+        order = np.argsort(t, kind="stable")
+        t = t[order]
+    lo = np.searchsorted(t, a, side="left")  # the first sample with t >= start
+    hi = np.searchsorted(t, b, side="right")  # past the last sample with t <= end
     mask = np.zeros((n, n_axes), dtype=bool)
-    for i, (a, b) in enumerate(zip(rows["start_s"], rows["end_s"], strict=True)):
-        if not b >= a:
-            raise UserError(f"{path_s}: row {i + 2}: end_s {b:g} is before start_s {a:g}")
-        cols = list(range(n_axes))
-        if "axis" in rows:
-            ax = rows["axis"][i]
-            if ax not in axis_names:
-                raise UserError(f"{path_s}: row {i + 2}: axis {ax!r}; accepted: {', '.join(axis_names)}")
-            cols = [axis_names.index(ax)]
-        within = (t >= a) & (t <= b)
-        for j in cols:
-            mask[within, j] = True
-            if "sigma" in rows:
-                sd = rows["sigma"][i]
-                if not sd > 0:
-                    raise UserError(f"{path_s}: row {i + 2}: sigma is {sd:g}; accepted: a standard deviation > 0 (m/s)")
-                sig[within, j] = sd
+    for j in range(n_axes):
+        mine = np.flatnonzero(((axis == -1) | (axis == j)) & (hi > lo))
+        cover = _last_cover(lo[mine], hi[mine], n)
+        hit = cover >= 0
+        mask[:, j] = hit
+        if sd is not None:
+            sig[:, j] = np.where(hit, sd[mine][cover], np.nan)
+    if order is not None:
+        mask[order], sig[order] = mask.copy(), sig.copy()
     return mask, sig
+
+
+def _last_cover(lo: np.ndarray, hi: np.ndarray, n: int) -> np.ndarray:
+    """For each of n samples, the index of the last of the ranges [lo, hi) that covers it (-1: none). The
+    answer is constant between consecutive range ends: one heap sweep over those (2K + 1 segments)."""
+    import heapq
+
+    bounds = np.unique(np.concatenate(([0, n], lo, hi)))
+    best = np.full(len(bounds) - 1, -1, dtype=np.int64)
+    by_start = np.argsort(lo, kind="stable")
+    heap: list[int] = []  # -index: the latest row on top
+    p = 0
+    for s, at in enumerate(bounds[:-1].tolist()):
+        while p < len(by_start) and lo[by_start[p]] == at:
+            heapq.heappush(heap, -int(by_start[p]))
+            p += 1
+        while heap and hi[-heap[0]] <= at:
+            heapq.heappop(heap)
+        if heap:
+            best[s] = -heap[0]
+    return np.repeat(best, np.diff(bounds))
 
 
 def _mask_from(m: np.ndarray, n: int, n_axes: int, src: str) -> np.ndarray:

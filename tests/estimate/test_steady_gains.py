@@ -262,3 +262,21 @@ def test_a_file_changed_after_it_was_read_is_checked_again(fast_design):
     blob[-8:] = np.float64(1e300).tobytes()  # same size, one value changed, in place
     path.write_bytes(bytes(blob))
     assert fs._load_steady(path, good.key) is None
+
+
+def test_a_short_run_reads_the_files_first_rows_once(fast_design, monkeypatch):
+    """Runs shorter than the transient take the first rows of the settled file: read and verified once per
+    process (a fleet of short runs read them for every file), the same rows for each, a longer run reads."""
+    monkeypatch.setattr(fs, "_BLOCK_ROWS", 256)  # the file read by blocks: a short run reads its first ones
+    settled = fs.steady_gains(fast_design)
+    fs.clear_steady_cache()
+    reads = []
+    real = fs._load_steady
+    monkeypatch.setattr(fs, "_load_steady", lambda path, key, need=None: reads.append(need) or real(path, key, need))
+    n = len(settled.rows) // 2
+    first = fs.steady_gains(fast_design, n)
+    again = fs.steady_gains(fast_design, n - 10)
+    assert reads == [n] and again is first and not first.settled
+    assert np.array_equal(first.rows[:n], settled.rows[:n])
+    longer = fs.steady_gains(fast_design, len(first.rows) + 1)
+    assert reads == [n, len(first.rows) + 1] and longer is not first

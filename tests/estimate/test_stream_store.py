@@ -42,3 +42,24 @@ def test_the_filter_alone_writes_the_smoothers_filter_states(tmp_path):
         assert "smooth_x" not in f and not list((tmp_path).glob(".accelnav-*"))
         for key in ("t", "accel", "clipped", "filt_x", "filt_sd"):
             assert np.array_equal(f[key], both[key])
+
+
+@pytest.mark.parametrize(
+    ("budget", "in_memory"),
+    [
+        (2 * 8 * chunked.LROW * 3000 + 8 * chunked.ROW * (3000 - 1402), True),
+        (2 * 8 * chunked.LROW * 3000 + 1000, False),
+    ],
+    ids=["lean and the late full store in memory", "lean in memory, the full store on disk"],
+)
+def test_a_store_is_counted_by_the_rows_it_will_hold(tmp_path, budget, in_memory):
+    """The lean stores (5 doubles a sample) take the budget first; axis 1's full store opens at its clipped
+    sample (n/2, in the chunk from 1402) with rows for the samples left only, in memory if they fit, else on
+    disk: the same file."""
+    model = load_model()
+    n = 3000
+    read = chunked.array_reader(*_data(model, n))
+    a = chunked.smooth_bounded(model, n, read, tmp_path / "mixed.npz", chunk=701, store_memory=budget)
+    b = chunked.smooth_bounded(model, n, read, tmp_path / "disk.npz", chunk=701)
+    assert a["store_in_memory"] is in_memory and not b["store_in_memory"]
+    assert (tmp_path / "mixed.npz").read_bytes() == (tmp_path / "disk.npz").read_bytes()
