@@ -1,0 +1,524 @@
+"""The rest decision: each candidate of the detector (accelnav.estimate.zupt.candidates) is a hypothesis, "the
+body stands still here", accepted only if a zero velocity there agrees with everything else the record knows.
+
+The evidence: a kinematic filter
+--------------------------------
+Per axis, the state s = (r, u, e): position, velocity and the *level* e, everything that adds to the true
+acceleration in the measured one (the bias left after the model's mean, gravity leaking through a tilt, a
+grade). Driven by the measured acceleration x (the model's bias mean removed):
+
+    u[k+1] = u[k] + Ts (x[k] - e[k]),   r[k+1] = r[k] + Ts u[k],   e[k+1] = e[k] + w,  w ~ N(0, q Ts)
+
+plus the velocity noise of integrating the sensor's own noise (R Ts per second). Between two events the
+state moves in closed form (cumulative sums of x: the cost is per event, not per sample). Priors are
+diffuse (nothing is assumed about the start). Aids: the position fixes, and each accepted rest as
+u = 0 at its first and last sample (``sigma``): between them the rest's own acceleration says what its
+level is. The level may wander between rests at ``q``, the recording's own rate: the median over
+consecutive candidates of (change of level)^2 / time between them, clamped to
+[``level_rate_min``^2, ``level_rate_max``^2]. A tilting mount, a jog whose level frame leaks 1-4 m/s^2, a
+foot's rolling frame: each sets its own q, so no level change is refused at a fixed cap; what a large q
+costs is a wide velocity sd between rests, hence more "cannot tell" (a gyro-free level frame cannot tell
+a tilt from an acceleration: the price is paid here, in what the record can decide).
+
+The test of one candidate [a, b)
+--------------------------------
+Two filters, one forward in time and one backward (the same kinematics on the reversed record: velocity
+changes sign, acceleration does not), each taken just *before* the candidate: the forward one at a knows
+the fixes and accepted rests before it, the backward one at b - 1 those after it. Neither holds the
+candidate's own updates: the test is leave-one-out without re-smoothing. Each is then conditioned on the
+candidate's level (its mean acceleration, sd sqrt(R / n): under "rest" or "cruise" alike the mean
+acceleration there is the level; with the level since the last rest the velocity is integrated with
+the level linear between the two, a tilt drifting at any steady rate costs nothing) and gives
+v ± sd per axis. On each side, chi2 = mean over axes of v^2 / (sd^2 + sigma^2):
+
+* **moving**: chi2 > ``gate`` on either side: the fixes or the other rests imply speed there (a cruise
+  between fixes, a hand moving the box). A refusal needs no small sd: a large sd only makes it rarer.
+* **consistent**: chi2 <= ``gate`` on both sides, and at least one side *can tell* (every axis' sd <=
+  ``tell``).
+* neither side can tell (no fix, far from any accepted rest, a level wandering fast): the test says
+  **cannot tell** and the candidate stays out, unless another line of evidence decides:
+
+  - **still start**: a candidate that begins within the first ``start_within_s`` seconds, lasts
+    ``start_s`` at least and is still at the sensor's own noise (mean variance over R <= ``still_k``)
+    anchors: the run starts at rest. An assumption, reported as such (a car already moving on a smooth
+    road for a second would pass it; fixes, when there are any, refuse it as "moving").
+  - **still stand**: a candidate as still as the rests the record proves (still <= max(``still_k``,
+    2 x the median of the proven rests'), lasting ``start_s``), with the kinematics of a stop: the
+    velocity integrated from the last accepted rest (its level linear to the candidate's) rose to a
+    peak and came back to at most ``rel`` of it ("no deceleration" refuses a quiet stretch at cruise).
+
+The fixed point, robust
+-----------------------
+The forward filter decides online (each accepted rest aids the filter from there on); the backward filter
+then re-tests every accepted rest with all the others (leave-one-out, from the other side). Accepted rests
+that the backward side finds moving are withdrawn, the worst of each run of consecutive disagreeing
+rests first (one false rest carries its neighbours: they are tested again without it), candidates the
+backward side confirms where the forward one could not tell are added, and both filters run again, at
+most ``passes`` times (a pass is two runs over the events, no smoother); what still disagrees then is
+withdrawn. No accepted rest vouches for another: each is re-tested against all the others at every
+pass, and one that disagrees leaves.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+DIFFUSE = (1e10, 1e4, 1e2)  # prior variances of r [m^2], u [(m/s)^2], e [(m/s^2)^2]: nothing assumed
+
+
+@dataclass(frozen=True)
+class Side:
+    """What one filter (before or after the candidate) says about its velocity."""
+
+    v: np.ndarray  # (n_axes,) m/s, mean velocity at the candidate given its level
+    sd: np.ndarray  # (n_axes,) m/s
+    chi2: float  # mean over axes of v^2 / (sd^2 + sigma^2)
+    source: str  # the nearest aid that informs it ("the rest at 3.10 s", "the fix at 12.0 s", "no aid")
+    fix: bool  # a fix informs it
+
+
+@dataclass(frozen=True)
+class Candidate:
+    start: int
+    stop: int
+    level: np.ndarray  # (n_axes,) mean acceleration (model's bias mean removed), m/s^2
+    still: float  # mean over axes of its variance / R
+
+
+def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
+    """In place, for the axes ``rows``: the scalar measurement z = s_i + v, v ~ N(0, r)."""
+    Pi = P[rows, :, i]  # (m, 3)
+    S = Pi[:, i] + r
+    K = Pi / S[:, None]
+    X[rows] += K * (z - X[rows, i])[:, None]
+    P[rows] -= K[:, :, None] * Pi[:, None, :]
+    P[rows] = 0.5 * (P[rows] + np.swapaxes(P[rows], 1, 2))
+
+
+class _Kinematic:
+    """The kinematic filter of the module docstring over one direction of time of one record."""
+
+    def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float):
+        n, self.n_axes = x.shape
+        self.Ts, self.q, self.qv = Ts, q, R * Ts
+        self.V = np.zeros((n + 1, self.n_axes))
+        np.cumsum(x * Ts, axis=0, out=self.V[1:])  # V[k] = Ts sum_{i<k} x[i]
+        self.W = np.zeros((n + 1, self.n_axes))
+        np.cumsum(self.V[:-1] * Ts, axis=0, out=self.W[1:])  # W[k] = Ts sum_{i<k} V[i]
+        self.X = np.zeros((self.n_axes, 3))
+        self.P = np.zeros((self.n_axes, 3, 3))
+        self.P[:, [0, 1, 2], [0, 1, 2]] = DIFFUSE
+        self.k = 0
+        self.aid_k = 0  # sample of the last aid
+
+    def copy(self) -> _Kinematic:
+        new = object.__new__(_Kinematic)
+        new.__dict__.update(self.__dict__)
+        new.X, new.P = self.X.copy(), self.P.copy()
+        return new
+
+    def to(self, k: int) -> None:
+        """Propagate the state from sample self.k to sample k."""
+        m = k - self.k
+        if m <= 0:
+            return
+        Ts, q = self.Ts, self.q
+        D = m * Ts
+        c = Ts * Ts * m * (m - 1) / 2.0
+        k0 = self.k
+        dV = self.V[k] - self.V[k0]
+        dW = self.W[k] - self.W[k0] - D * self.V[k0]
+        X = self.X
+        r, u, e = X[:, 0].copy(), X[:, 1].copy(), X[:, 2].copy()
+        X[:, 0] = r + D * u + dW - c * e
+        X[:, 1] = u + dV - D * e
+        F = np.array([[1.0, D, -c], [0.0, 1.0, -D], [0.0, 0.0, 1.0]])
+        P = F @ self.P @ F.T
+        # the level's random walk, integrated once into u and twice into r (signs: u and r get -e)
+        P[:, 2, 2] += q * D
+        P[:, 1, 2] -= q * D**2 / 2
+        P[:, 2, 1] -= q * D**2 / 2
+        P[:, 0, 2] -= q * D**3 / 6
+        P[:, 2, 0] -= q * D**3 / 6
+        P[:, 1, 1] += q * D**3 / 3 + self.qv * D
+        P[:, 0, 1] += q * D**4 / 8 + self.qv * D**2 / 2
+        P[:, 1, 0] += q * D**4 / 8 + self.qv * D**2 / 2
+        P[:, 0, 0] += q * D**5 / 20 + self.qv * D**3 / 3
+        self.P = P
+        self.k = k
+
+    def rest(self, k: int, sigma: float) -> None:
+        self.to(k)
+        _update(self.X, self.P, 1, np.zeros(self.n_axes), np.full(self.n_axes, sigma * sigma))
+        self.aid_k = k
+
+    def fix(self, k: int, j: int, z: float, var: float) -> None:
+        self.to(k)
+        _update(self.X, self.P, 0, np.array([z]), np.array([var]), rows=slice(j, j + 1))
+        self.aid_k = k
+
+    def velocity_given_level(self, level: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(u, sd of u, e) at the current sample, conditioned on e = level (variance ``var``), state unchanged."""
+        X, P = self.X.copy(), self.P.copy()
+        _update(X, P, 2, level, var)
+        return X[:, 1], np.sqrt(np.maximum(P[:, 1, 1], 0.0)), X[:, 2]
+
+
+def level_rate(cands: list[Candidate], Ts: float, lo: float, hi: float) -> float:
+    """sqrt(q), m/s^2 per sqrt(s): the median over consecutive candidates of |change of level|^2 / time between
+    them (mean over axes), clamped to [lo, hi]; lo when there are fewer than two candidates."""
+    if len(cands) < 2:
+        return lo
+    d2 = [
+        float(np.mean((b.level - a.level) ** 2)) / max((b.start - a.stop) * Ts, Ts)
+        for a, b in zip(cands[:-1], cands[1:], strict=True)
+    ]
+    return float(min(max(math.sqrt(float(np.median(d2))), lo), hi))
+
+
+LEAK = 0.25  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
+CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
+WITHIN = 3 * CONFIRM  # ... among the next WITHIN candidates
+MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
+
+ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
+REFUSE_REASONS = ("moving", "level jumped", "cannot tell", "no deceleration")
+
+
+@dataclass(frozen=True)
+class RestDecision:
+    """The verdict on one candidate rest [start, stop), the evidence that decided it, and its statistics."""
+
+    start: int
+    stop: int
+    accepted: bool
+    reason: str  # one of ACCEPT_REASONS or REFUSE_REASONS
+    evidence: str  # in words: what decided (e.g. "fixes imply 14.6 +/- 0.3 m/s (the fix at 120.0 s)")
+    still: float  # mean over axes of the rest's variance / R
+    level: float  # |mean acceleration| over the axes, m/s^2 (the model's bias mean removed)
+    v_before: float  # |v| over the axes from the filter before it, m/s (NaN: not computed)
+    sd_before: float  # its sd (rms over the axes), m/s
+    v_after: float  # the same from the filter after it
+    sd_after: float
+    chi2: float  # the larger of the two sides' mean over axes of v^2 / (sd^2 + sigma^2)
+
+
+@dataclass
+class _Found:
+    """One candidate's state during the passes."""
+
+    reason: str = "cannot tell"
+    evidence: str = ""
+    before: Side | None = None
+    after: Side | None = None
+
+
+def _side(kin: _Kinematic, c: Candidate, R: np.ndarray, sigma: float, source: str, fix: bool, sign: float) -> Side:
+    e_prior, known = kin.X[:, 2].copy(), kin.P[:, 2, 2] < 1.0
+    v, sd, _ = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
+    # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
+    # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
+    D = (kin.k - kin.aid_k) * kin.Ts
+    sd = np.sqrt(sd * sd + np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0))
+    chi2 = float(np.mean(v * v / (sd * sd + sigma * sigma)))
+    return Side(sign * v, sd, chi2, source, fix)
+
+
+def _speed(s: Side) -> str:
+    return f"{float(np.linalg.norm(s.v)):.3g} +/- {float(np.sqrt(np.mean(s.sd**2))):.2g} m/s"
+
+
+def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]:
+    """(sample, order, kind, payload) of one direction, sorted: a candidate's test before anything at its
+    first sample, its end (where an accepted rest's second update goes) at its last."""
+    ev = []
+    for i, c in enumerate(cands):
+        a, e = (n - c.stop, n - 1 - c.start) if reverse else (c.start, c.stop - 1)
+        ev.append((a, 0, "test", i))
+        ev.append((e, 2, "end", i))
+    for j, fx in enumerate(fixes):
+        for m in fx:
+            ev.append((n - 1 - m.k if reverse else m.k, 1, "fix", (j, m.z, m.R, m.k)))
+    ev.sort(key=lambda e: (e[0], e[1]))
+    return ev
+
+
+class _Decider:
+    def __init__(self, x, R, Ts, cands, fixes, p, t):
+        self.x, self.R, self.Ts, self.cands, self.p, self.t = x, R, Ts, cands, p, t
+        self.n = len(x)
+        self.fixes = fixes
+        self.q = p.level_walk**2
+        self.fwd_events = _events(cands, fixes, self.n, False)
+        self.bwd_events = _events(cands, fixes, self.n, True)
+        self.veto: dict[int, str] = {}  # withdrawn: why
+
+    def _tells(self, s: Side) -> bool:
+        return bool(np.all(s.sd <= self.p.tell))
+
+    def forward(self) -> tuple[list[_Found], set[int]]:
+        """The forward filter, deciding online; returns every candidate's state and the accepted set.
+
+        Where nothing can tell (no fix, no rest yet), a candidate may be taken as a *hypothesis*: it is kept
+        when the next ``CONFIRM`` candidates, tested with it, are consistent and the body moved between
+        (a walk's stances: each closes the velocity of the stride before it); when one of them is found
+        moving, or cannot be told, the filter goes back to before the hypothesis and goes on without it."""
+        p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
+        kin = _Kinematic(self.x, Ts, self.R, self.q)
+        found = [_Found() for _ in cands]
+        st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "proven": []}
+        pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations)
+        tried: set[int] = set()  # hypotheses already refuted in this pass
+        ev = self.fwd_events
+        e = 0
+        while e < len(ev) or pending is not None:
+            if e == len(ev):  # the record ended before the hypothesis was borne out: on without it
+                h, e_h, (kin, st), _, _ = pending
+                st = {**st, "acc": set(st["acc"]), "proven": list(st["proven"])}
+                tried.add(h)
+                found[h].reason = "cannot tell"
+                found[h].evidence += "; not borne out: too few candidates after it"
+                pending, e = None, e_h
+                continue
+            k, _, kind, pay = ev[e]
+            e += 1
+            if kind == "fix":
+                j, z, var, _ = pay
+                kin.fix(k, j, z, var)
+                st["source"], st["fix"] = f"the fix at {t[k]:.2f} s", True
+                continue
+            i = pay
+            c = cands[i]
+            acc = st["acc"]
+            if kind == "end":
+                if i in acc:
+                    kin.rest(k, p.sigma)
+                    st["last_end"] = (k, kin.X[:, 1].copy(), kin.X[:, 2].copy())
+                    st["source"] = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
+                continue
+            kin.to(k)
+            jump = self._jump(kin, c)
+            s = _side(kin, c, self.R, p.sigma, st["source"], st["fix"], 1.0)
+            f = found[i]
+            f.before, f.evidence = s, ""
+            moved = self._peak(c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0)
+            allowed = p.level_max if moved[0] >= MOTION else p.level_still
+            if p.gate == 0:
+                f.reason, f.evidence = "gate off", "every candidate accepted (gate 0)"
+            elif i in self.veto:
+                f.reason, f.evidence = "moving", self.veto[i]
+            elif jump > allowed:
+                f.reason = "level jumped"
+                f.evidence = (
+                    f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with "
+                    + ("motion between" if moved[0] >= MOTION else f"no motion between (peak {moved[0]:.2g} m/s)")
+                )
+            elif s.chi2 > p.gate:
+                what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
+                f.reason, f.evidence = "moving", f"{what} {_speed(s)} before it (from {s.source})"
+            elif self._tells(s):
+                f.reason, f.evidence = "consistent", f"v {_speed(s)} before it (from {s.source})"
+                st["proven"].append(c.still)
+            else:
+                f.reason, f.evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], moved)
+                if f.reason == "still start":
+                    st["proven"].append(c.still)
+            if pending is not None:
+                h, e_h, saved, count, seen = pending
+                seen += 1
+                if f.reason in REFUSE_REASONS or seen > WITHIN:  # it fails: back to before it, on without it
+                    tried.add(h)
+                    kin, st = saved
+                    st = {**st, "acc": set(st["acc"]), "proven": list(st["proven"])}
+                    found[h].reason = "cannot tell"
+                    found[h].evidence += (
+                        f"; not borne out: the candidate at {t[c.start]:.2f} s {f.reason} with it"
+                        if f.reason in REFUSE_REASONS
+                        else f"; not borne out by the next {WITHIN} candidates"
+                    )
+                    pending, e = None, e_h
+                    continue
+                if moved[0] >= MOTION:
+                    count += 1
+                pending = (h, e_h, saved, count, seen)
+                if count >= CONFIRM:
+                    found[h].reason = "consistent"
+                    found[h].evidence = (
+                        f"closes the velocity of the next {CONFIRM} (the body moved between; "
+                        f"{found[h].evidence.split(';')[0]})"
+                    )
+                    pending = None
+            elif f.reason == "cannot tell" and pending is None and st["last_end"] is None and i not in tried:
+                # a hypothesis: saved as the filter stands before it
+                pending = (i, e, (kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])}), 0, 0)
+                f.reason = "hypothesis"
+            if f.reason in ACCEPT_REASONS or f.reason == "hypothesis":
+                acc.add(i)
+                kin.rest(k, p.sigma)
+        return found, st["acc"]
+
+    def _jump(self, kin: _Kinematic, c: Candidate) -> float:
+        """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
+        sd = np.sqrt(np.maximum(kin.P[:, 2, 2], 0.0))
+        if np.any(sd >= 1.0):
+            return 0.0
+        return float(np.linalg.norm(np.maximum(np.abs(c.level - kin.X[:, 2]) - 3.0 * sd, 0.0)))
+
+    def _peak(self, c: Candidate, last_end) -> tuple[float, float]:
+        """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
+        from the rest's to the candidate's."""
+        Ts = self.Ts
+        e, u0, e0 = last_end
+        m = np.arange(max(c.start - e, 0) + 1)
+        D = max(c.start - e, 1) * Ts
+        vk = (
+            self._V(e, e + len(m))
+            - e0[None, :] * (m * Ts)[:, None]
+            - (c.level - e0)[None, :] * ((m * Ts) ** 2 / (2 * D))[:, None]
+            + u0[None, :]
+        )
+        speed = np.linalg.norm(vk, axis=1)
+        return float(speed.max()), float(speed[-1])
+
+    def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
+        p, Ts = self.p, self.Ts
+        sd = float(np.max(s.sd))
+        dur = (c.stop - c.start) * Ts
+        cannot = f"cannot tell: sd of v {sd:.2g} m/s before it ({'fixes too far' if fix_seen else 'no fix'})"
+        if last_end is None:
+            if c.start * Ts <= p.start_within_s and dur >= p.start_s and c.still <= p.still_k:
+                return "still start", (
+                    f"still start: {dur:.2f} s at {c.still:.2g} R from {c.start * Ts:.2f} s "
+                    "(assumed: the run starts at rest)"
+                )
+            return "cannot tell", cannot + ", no rest before"
+        bound = max(p.still_k, 2.0 * float(np.median(proven))) if proven else p.still_k
+        if dur < p.start_s or c.still > bound:
+            return "cannot tell", cannot + f"; {dur:.2f} s at {c.still:.2g} R is not a stand (still <= {bound:.2g} R)"
+        # the kinematics of a stop: the velocity since the last rest, its level linear to this one's
+        peak, end = moved
+        if end <= p.rel * peak:
+            return "still stand", (
+                f"still stand: {dur:.2f} s at {c.still:.2g} R; speed since the last rest {end:.2g} m/s after a "
+                f"peak of {peak:.3g} m/s ({cannot})"
+            )
+        return "no deceleration", (
+            f"quiet at {c.still:.2g} R but no deceleration: speed since the last rest {end:.3g} m/s, "
+            f"peak {peak:.3g} m/s ({cannot})"
+        )
+
+    def _V(self, a: int, b: int) -> np.ndarray:
+        """Velocity integral of x from sample a over samples a..b-1 (0 at a)."""
+        V = np.zeros((b - a, self.x.shape[1]))
+        np.cumsum(self.x[a : b - 1] * self.Ts, axis=0, out=V[1:])
+        return V
+
+    def backward(self, acc: set[int]) -> list[Side | None]:
+        """The backward filter with the accepted set ``acc``: every candidate's side after it."""
+        p, cands, t, n = self.p, self.cands, self.t, self.n
+        kin = _Kinematic(self.x[::-1], self.Ts, self.R, self.q)
+        out: list[Side | None] = [None] * len(cands)
+        source, fix_seen = "no aid", False
+        for k, _, kind, pay in self.bwd_events:
+            if kind == "fix":
+                j, z, var, k0 = pay
+                kin.fix(k, j, z, var)
+                source, fix_seen = f"the fix at {t[k0]:.2f} s", True
+                continue
+            i = pay
+            c = cands[i]
+            if kind == "end":
+                if i in acc:
+                    kin.rest(k, p.sigma)
+                    source = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
+                continue
+            kin.to(k)
+            out[i] = _side(kin, c, self.R, p.sigma, source, fix_seen, -1.0)
+            if i in acc:
+                kin.rest(k, p.sigma)
+        assert n == len(self.x)
+        return out
+
+    def run(self) -> tuple[list[_Found], set[int]]:
+        p = self.p
+        for pass_no in range(p.passes + 1):
+            found, acc = self.forward()
+            after = self.backward(acc)
+            for f, s in zip(found, after, strict=True):
+                f.after = s
+            if p.gate == 0:
+                return found, acc
+            bad = sorted(i for i in acc if after[i].chi2 > p.gate)
+            if not bad:
+                return found, acc
+            if pass_no == p.passes:  # out of passes: what still disagrees leaves, nothing is added
+                for i in bad:
+                    self._withdraw(i, after[i])
+                found, acc = self.forward()
+                after = self.backward(acc)
+                for f, s in zip(found, after, strict=True):
+                    f.after = s
+                return found, acc
+            # the worst of each run of consecutive disagreeing accepted rests leaves: its neighbours may
+            # only have disagreed through it
+            order = sorted(acc)
+            pos = {i: r for r, i in enumerate(order)}
+            group: list[int] = []
+            for i in bad + [None]:
+                if i is not None and (not group or pos[i] == pos[group[-1]] + 1):
+                    group.append(i)
+                    continue
+                if group:
+                    worst = max(group, key=lambda g: after[g].chi2)
+                    self._withdraw(worst, after[worst])
+                group = [i] if i is not None else []
+        return found, acc
+
+    def _withdraw(self, i: int, s: Side) -> None:
+        what = "fixes imply" if s.fix and s.source.startswith("the fix") else "v"
+        self.veto[i] = f"{what} {_speed(s)} after it (from {s.source})"
+
+
+def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p) -> tuple[list[RestDecision], float]:
+    """The decision on every candidate span [a, b) of ``spans`` (see the module docstring); also sqrt(q), the
+    level rate the record set. ``x`` (N, n_axes): acceleration less the model's bias mean (0 where not
+    ``ok``); ``fixes``: per axis column a list of position-fix measurements (accelnav.estimate.kf) or None."""
+    n_axes = x.shape[1]
+    fixes = [[] for _ in range(n_axes)] if fixes is None else [list(f) for f in fixes]
+    if len(fixes) != n_axes:
+        raise ValueError(f"fixes: {len(fixes)} axes given; the run has {n_axes}")
+    usable = ok.all(axis=1)
+    cands = []
+    for a, b in spans:
+        use = usable[a:b]
+        xs = x[a:b][use] if use.any() else np.zeros((1, n_axes))
+        var = xs.var(axis=0) if len(xs) > 1 else R.copy()
+        cands.append(Candidate(a, b, xs.mean(axis=0), float(np.mean(var / R))))
+    dec = _Decider(x, R, Ts, cands, fixes, p, t)
+    found, acc = dec.run()
+    out = []
+    nan = float("nan")
+    for i, (c, f) in enumerate(zip(cands, found, strict=True)):
+        b, a = f.before, f.after
+        ev = f.evidence
+        if f.reason == "consistent" and a is not None and not ev:
+            ev = f"v {_speed(a)} after it (from {a.source})"
+        elif f.reason == "consistent" and a is not None:
+            ev += f"; {_speed(a)} after it (from {a.source})"
+
+        def norm(s: Side | None) -> tuple[float, float]:
+            if s is None:
+                return nan, nan
+            return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
+
+        vb, sb = norm(b)
+        va, sa = norm(a)
+        chi2 = max(s.chi2 for s in (b, a) if s is not None) if (b or a) else nan
+        out.append(
+            RestDecision(c.start, c.stop, i in acc, f.reason, ev, c.still, float(np.linalg.norm(c.level)), vb, sb, va,
+                         sa, chi2)
+        )  # fmt: skip
+    return out, math.sqrt(dec.q)
