@@ -155,10 +155,28 @@ def register(sub) -> None:
         ),
         (
             "--zupt-level",
-            "level",
+            "level_still",
             "A",
-            f"a rest's level (tilt or grade leak) may differ from the last rest's by A m/s^2, plus "
-            f"{z.level_rate:g} m/s^2 per second between them, at most {z.level_max:g}; default {z.level:g}",
+            f"a rest's level may differ from the last rest's by A m/s^2 when nothing moved between; default "
+            f"{z.level_still:g}",
+        ),
+        (
+            "--zupt-level-max",
+            "level_max",
+            "A",
+            f"... and by A m/s^2 after a move (a jog's or a tilting mount's leak); default {z.level_max:g}",
+        ),
+        (
+            "--zupt-level-walk",
+            "level_walk",
+            "A",
+            f"random walk of the level between aids, m/s^2 per sqrt(s); default {z.level_walk:g}",
+        ),
+        (
+            "--zupt-tell",
+            "tell",
+            "V",
+            f"the fixes or the other rests can tell a rest when the sd of its velocity is <= V m/s; default {z.tell:g}",
         ),
         (
             "--zupt-trim",
@@ -170,20 +188,7 @@ def register(sub) -> None:
             "--zupt-still",
             "still_k",
             "K",
-            f"a run's first rest (no rest before to check it against): variance <= K R; default {z.still_k:g}",
-        ),
-        (
-            "--zupt-drift",
-            "drift",
-            "A",
-            f"unmodelled mean acceleration error between two rests, m/s^2 (widens the gate); default {z.drift:g}",
-        ),
-        (
-            "--zupt-recover",
-            "recover_s",
-            "S",
-            f"a refused candidate S s or less before the next may anchor it, if the body moved between; "
-            f"default {z.recover_s:g}",
+            f"a still start or stand (when nothing else can tell): variance <= K R; default {z.still_k:g}",
         ),
         ("--zupt-sigma", "sigma", "V", f"update std, m/s; default {z.sigma:g}"),
         ("--zupt-every", "every_s", "S", "one update per S s of rest; default 0: every sample"),
@@ -191,14 +196,15 @@ def register(sub) -> None:
             "--zupt-gate",
             "gate",
             "G",
-            f"per-rest chi-square bound on the velocity since the last rest, 0 = accept every candidate; "
-            f"default {z.gate:g}",
+            f"a rest is refused as moving when the velocity the fixes or the other rests give it, before or after "
+            f"it, has a mean over axes of v^2 / (sd^2 + sigma^2) above G; 0 = accept every candidate; default {z.gate:g}",
         ),
         (
             "--zupt-rel",
             "rel",
             "F",
-            f"per-rest: also accept when the speed fell to F of its peak since the last rest; default {z.rel:g} (off)",
+            f"a still stand (when nothing else can tell): the speed since the last rest came back to F of its peak; "
+            f"default {z.rel:g}",
         ),
     ]
     for flag, field, metavar, text in zupt_opts:
@@ -496,10 +502,20 @@ def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray, gravity: list
     def listed(d: dict[str, int]) -> str:
         return f" ({', '.join(f'{r} {c}' for r, c in d.items())})" if d else ""
 
+    start = next((d for d in decisions if d.reason == "still start"), None)
+    cannot = next((d for d in decisions if d.reason == "cannot tell"), None)
+    why = ""
+    if start is not None:
+        why += f"; {start.evidence}"
+    if not acc and cannot is not None:
+        why += (
+            f"; no rest could be told ({cannot.evidence.split(';')[0]}): position fixes (--fixes), or a still "
+            f"start of {params.start_s:g} s, would give one"
+        )
     return (
         f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} (R + "
         f"{params.tremor:g}^2): {len(decisions)} candidate rests, {sum(acc.values())} accepted{listed(acc)}, "
-        f"{sum(ref.values())} refused{listed(ref)}; {100 * rest.mean():.1f} % of the run at rest"
+        f"{sum(ref.values())} refused{listed(ref)}; {100 * rest.mean():.1f} % of the run at rest{why}"
         + (
             f"; axis {', '.join(gravity)} reads about 1 g (gravity), which the model takes as removed: "
             "drop it with --axis (the others' names)"
@@ -532,11 +548,12 @@ def cmd_smooth(args) -> int:
         window_s=args.zupt_window_s,
         var_k=args.zupt_var_k,
         tremor=args.zupt_tremor,
-        level=args.zupt_level,
+        level_still=args.zupt_level_still,
+        level_max=args.zupt_level_max,
+        level_walk=args.zupt_level_walk,
+        tell=args.zupt_tell,
         trim_k=args.zupt_trim_k,
         still_k=args.zupt_still_k,
-        drift=args.zupt_drift,
-        recover_s=args.zupt_recover_s,
         sigma=args.zupt_sigma,
         every_s=args.zupt_every_s,
         gate=args.zupt_gate,
@@ -551,9 +568,8 @@ def cmd_smooth(args) -> int:
         except ValueError as exc:
             raise UserError(f"--zupt-*: {exc}") from None
     if args.zupt == "auto":
-        cand = zupt.candidates(arrays["accel"], arrays["clipped"], model, params)
-        decisions = zupt.gate_rests(arrays["accel"], arrays["clipped"], cand, model, params)
-        rest = zupt.accepted_mask(decisions, len(cand))
+        found = zupt.decide_rests(arrays["accel"], arrays["clipped"], None, model, params, fixes)
+        decisions, rest = found.decisions, found.mask
         gravity = zupt.gravity_axes(arrays["accel"], arrays["clipped"], model) if not rest.any() else []
         print(_zupt_summary(decisions, params, rest, gravity))
         if args.zupt_report is not None:

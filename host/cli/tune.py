@@ -90,7 +90,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if args.zupt is not None:
         params = zupt.resolved(model, ZuptParams(sigma=args.zupt_sigma))
         if args.zupt == "auto":
-            rest = zupt.rest_mask(accel, arrays["clipped"], model, params)  # gated once per rest, for every axis
+            rest = zupt.rest_mask(accel, arrays["clipped"], model, params, fixes)  # decided once per rest, all axes
         else:
             rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
     extras, n_zupt = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)

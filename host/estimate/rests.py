@@ -223,7 +223,10 @@ def _side(kin: _Kinematic, c: Candidate, R: np.ndarray, sigma: float, source: st
     # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
     D = (kin.k - kin.aid_k) * kin.Ts
     sd = np.sqrt(sd * sd + np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0))
-    chi2 = float(np.mean(v * v / (sd * sd + sigma * sigma)))
+    # over the axes: the mean, or where a fix informs the side, the largest (a fix is measured on its own axis,
+    # and a move along one axis must not be diluted by the others' rest)
+    z2 = v * v / (sd * sd + sigma * sigma)
+    chi2 = float(np.max(z2) if fix else np.mean(z2))
     return Side(sign * v, sd, chi2, source, fix)
 
 
@@ -473,7 +476,17 @@ class _Decider:
                     continue
                 if group:
                     worst = max(group, key=lambda g: after[g].chi2)
-                    self._withdraw(worst, after[worst])
+                    # the rest after it that the disagreement came from may be the false one: of the two, the
+                    # shorter gives way (a ramp's quiet piece beside a stop)
+                    nxt = pos[group[-1]] + 1
+                    if nxt < len(order) and after[worst].source.startswith("the rest"):
+                        j = order[nxt]
+                        c, cj = self.cands[worst], self.cands[j]
+                        if cj.stop - cj.start < c.stop - c.start:
+                            self.veto[j] = f"shorter than the rest at {self.t[c.start]:.2f} s, which it contradicts"
+                            worst = None
+                    if worst is not None:
+                        self._withdraw(worst, after[worst])
                 group = [i] if i is not None else []
         return found, acc
 
