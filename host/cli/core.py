@@ -197,7 +197,8 @@ def register(sub) -> None:
             "gate",
             "G",
             f"a rest is refused as moving when the velocity the fixes or the other rests give it, before or after "
-            f"it, has a mean over axes of v^2 / (sd^2 + sigma^2) above G; 0 = accept every candidate; default {z.gate:g}",
+            f"it, has a mean over axes of v^2 / (sd^2 + sigma^2) above G; 0 = accept every candidate; "
+            f"default {z.gate:g}",
         ),
         (
             "--zupt-rel",

@@ -308,27 +308,7 @@ class _Decider:
             f = found[i]
             f.before, f.evidence = s, ""
             moved = self._peak(c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0)
-            allowed = p.level_max if moved[0] >= MOTION else p.level_still
-            if p.gate == 0:
-                f.reason, f.evidence = "gate off", "every candidate accepted (gate 0)"
-            elif i in self.veto:
-                f.reason, f.evidence = "moving", self.veto[i]
-            elif jump > allowed:
-                f.reason = "level jumped"
-                f.evidence = (
-                    f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with "
-                    + ("motion between" if moved[0] >= MOTION else f"no motion between (peak {moved[0]:.2g} m/s)")
-                )
-            elif s.chi2 > p.gate:
-                what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
-                f.reason, f.evidence = "moving", f"{what} {_speed(s)} before it (from {s.source})"
-            elif self._tells(s):
-                f.reason, f.evidence = "consistent", f"v {_speed(s)} before it (from {s.source})"
-                st["proven"].append(c.still)
-            else:
-                f.reason, f.evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], moved)
-                if f.reason == "still start":
-                    st["proven"].append(c.still)
+            f.reason, f.evidence = self._judge(i, c, s, st, moved, jump)
             if pending is not None:
                 h, e_h, saved, count, seen = pending
                 seen += 1
@@ -362,6 +342,29 @@ class _Decider:
                 acc.add(i)
                 kin.rest(k, p.sigma)
         return found, st["acc"]
+
+    def _judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
+        """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""
+        p = self.p
+        allowed = p.level_max if moved[0] >= MOTION else p.level_still
+        if p.gate == 0:
+            return "gate off", "every candidate accepted (gate 0)"
+        if i in self.veto:
+            return "moving", self.veto[i]
+        if jump > allowed:
+            return "level jumped", f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with " + (
+                "motion between" if moved[0] >= MOTION else f"no motion between (peak {moved[0]:.2g} m/s)"
+            )
+        if s.chi2 > p.gate:
+            what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
+            return "moving", f"{what} {_speed(s)} before it (from {s.source})"
+        if self._tells(s):
+            st["proven"].append(c.still)
+            return "consistent", f"v {_speed(s)} before it (from {s.source})"
+        reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], moved)
+        if reason == "still start":
+            st["proven"].append(c.still)
+        return reason, evidence
 
     def _jump(self, kin: _Kinematic, c: Candidate) -> float:
         """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
