@@ -272,7 +272,7 @@ class _Decider:
         p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
         kin = _Kinematic(self.x, Ts, self.R, self.q)
         found = [_Found() for _ in cands]
-        st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "proven": []}
+        st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
         pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations)
         tried: set[int] = set()  # hypotheses already refuted in this pass
         ev = self.fwd_events
@@ -300,6 +300,8 @@ class _Decider:
                 if i in acc:
                     kin.rest(k, p.sigma)
                     st["last_end"] = (k, kin.X[:, 1].copy(), kin.X[:, 2].copy())
+                    if (c.stop - c.start) * Ts >= p.start_s:  # a stand: what a stop's kinematics start from
+                        st["last_stand"] = st["last_end"]
                     st["source"] = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
                 continue
             kin.to(k)
@@ -361,7 +363,8 @@ class _Decider:
         if self._tells(s):
             st["proven"].append(c.still)
             return "consistent", f"v {_speed(s)} before it (from {s.source})"
-        reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], moved)
+        stand = self._peak(c, st["last_stand"]) if st["last_stand"] is not None else moved
+        reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
         if reason == "still start":
             st["proven"].append(c.still)
         return reason, evidence
@@ -408,11 +411,11 @@ class _Decider:
         peak, end = moved
         if end <= p.rel * peak:
             return "still stand", (
-                f"still stand: {dur:.2f} s at {c.still:.2g} R; speed since the last rest {end:.2g} m/s after a "
+                f"still stand: {dur:.2f} s at {c.still:.2g} R; speed since the last stand {end:.2g} m/s after a "
                 f"peak of {peak:.3g} m/s ({cannot})"
             )
         return "no deceleration", (
-            f"quiet at {c.still:.2g} R but no deceleration: speed since the last rest {end:.3g} m/s, "
+            f"quiet at {c.still:.2g} R but no deceleration: speed since the last stand {end:.3g} m/s, "
             f"peak {peak:.3g} m/s ({cannot})"
         )
 
@@ -481,17 +484,27 @@ class _Decider:
                     worst = max(group, key=lambda g: after[g].chi2)
                     # the rest after it that the disagreement came from may be the false one: of the two, the
                     # shorter gives way (a ramp's quiet piece beside a stop)
-                    nxt = pos[group[-1]] + 1
+                    nxt = pos[worst] + 1
                     if nxt < len(order) and after[worst].source.startswith("the rest"):
                         j = order[nxt]
                         c, cj = self.cands[worst], self.cands[j]
-                        if cj.stop - cj.start < c.stop - c.start:
-                            self.veto[j] = f"shorter than the rest at {self.t[c.start]:.2f} s, which it contradicts"
+                        # of the two, the one with less evidence of its own (its other side, or its stillness)
+                        # gives way; on a tie the shorter
+                        mine = self._support(c, found[worst].before, found[worst].reason)
+                        theirs = self._support(cj, after[j], found[j].reason)
+                        if (theirs, cj.stop - cj.start) < (mine, c.stop - c.start):
+                            self.veto[j] = f"contradicts the rest at {self.t[c.start]:.2f} s, which has more evidence"
                             worst = None
                     if worst is not None:
                         self._withdraw(worst, after[worst])
                 group = [i] if i is not None else []
         return found, acc
+
+    def _support(self, c: Candidate, other: Side | None, reason: str) -> int:
+        """1 when a candidate has evidence besides the rest it disagrees with: a side that tells and agrees,
+        or the stillness of a still start or stand."""
+        told = other is not None and self._tells(other) and other.chi2 <= self.p.gate
+        return int(told or reason in ("still start", "still stand"))
 
     def _withdraw(self, i: int, s: Side) -> None:
         what = "fixes imply" if s.fix and s.source.startswith("the fix") else "v"

@@ -487,11 +487,15 @@ def rest_mask(
 
 
 def accepted_mask(decisions: list[RestDecision], n: int) -> np.ndarray:
-    """(N,) bool: the samples of the accepted rests."""
+    """(N,) bool: the samples of the accepted rests; two accepted rests one sample apart (the sample that keeps
+    two pieces at two levels apart, :func:`candidates`) are one rest."""
     mask = np.zeros(n, dtype=bool)
+    last = None
     for d in decisions:
         if d.accepted:
-            mask[d.start : d.stop] = True
+            start = last if last is not None and d.start - last <= 1 else d.start
+            mask[start : d.stop] = True
+            last = d.stop
     return mask
 
 
