@@ -216,18 +216,33 @@ class _Found:
     after: Side | None = None
 
 
-def _side(kin: _Kinematic, c: Candidate, R: np.ndarray, sigma: float, source: str, fix: bool, sign: float) -> Side:
+def _side(
+    kin: _Kinematic, c: Candidate, R: np.ndarray, sigma: float, drift: float, source: str, fix: bool, sign: float
+) -> Side:
     e_prior, known = kin.X[:, 2].copy(), kin.P[:, 2, 2] < 1.0
     v, sd, _ = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
     # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
     # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
     D = (kin.k - kin.aid_k) * kin.Ts
-    sd = np.sqrt(sd * sd + np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0))
-    # over the axes: the mean, or where a fix informs the side, the largest (a fix is measured on its own axis,
-    # and a move along one axis must not be diluted by the others' rest)
-    z2 = v * v / (sd * sd + sigma * sigma)
-    chi2 = float(np.max(z2) if fix else np.mean(z2))
+    # and a mean acceleration error no level explains (scale factor, a leak changing within the move): drift D
+    sd = np.sqrt(sd * sd + np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2)
+    # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
+    # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
+    chi2 = chi2_equivalent(float(np.sum(v * v / (sd * sd + sigma * sigma))), len(v))
     return Side(sign * v, sd, chi2, source, fix)
+
+
+def chi2_equivalent(x: float, dof: int) -> float:
+    """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom: the test of
+    every axis at once, read on the scale of one axis (9: three sd)."""
+    from scipy.special import erfcinv, gammaincc
+
+    if dof == 1 or not math.isfinite(x):
+        return x
+    tail = float(gammaincc(dof / 2.0, x / 2.0))
+    if tail <= 0.0:
+        return math.inf
+    return float(2.0 * erfcinv(tail) ** 2)
 
 
 def _speed(s: Side) -> str:
@@ -306,7 +321,7 @@ class _Decider:
                 continue
             kin.to(k)
             jump = self._jump(kin, c)
-            s = _side(kin, c, self.R, p.sigma, st["source"], st["fix"], 1.0)
+            s = _side(kin, c, self.R, p.sigma, p.drift, st["source"], st["fix"], 1.0)
             f = found[i]
             f.before, f.evidence = s, ""
             moved = self._peak(c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0)
@@ -445,7 +460,7 @@ class _Decider:
                     source = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
                 continue
             kin.to(k)
-            out[i] = _side(kin, c, self.R, p.sigma, source, fix_seen, -1.0)
+            out[i] = _side(kin, c, self.R, p.sigma, p.drift, source, fix_seen, -1.0)
             if i in acc:
                 kin.rest(k, p.sigma)
         assert n == len(self.x)

@@ -166,7 +166,8 @@ class ZuptParams:
     widen: float = 1.0  # pieces widened by up to widen * (W // 2) samples each side, while samples stay level
     sigma: float = 0.02  # m/s, standard deviation of each zero-velocity update
     every_s: float = 0.0  # s, one update per every_s within a rest; 0: every sample
-    gate: float = 9.0  # a side's mean (largest, by a fix) over axes of v^2 / (sd^2 + sigma^2); 0: accept all
+    gate: float = 9.0  # bound on a side's chi-square of v over the axes, on one axis' scale (9: 3 sd); 0: accept all
+    drift: float = 0.05  # m/s^2, mean acceleration error between aids that no level explains (a scale factor)
     tell: float = 0.5  # m/s, a side can tell a rest when the sd of its velocity is at most this on every axis
     level_still: float = 0.5  # m/s^2, a rest's level may differ this much from the last rest's with no motion between
     level_max: float = 4.0  # m/s^2, ... and this much after a move (a jog's or a tilting mount's leak)
@@ -190,7 +191,7 @@ def resolved(model: Model, p: ZuptParams) -> ZuptParams:
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
-    for name in ("start_s", "start_within_s"):
+    for name in ("start_s", "start_within_s", "drift"):
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
