@@ -181,7 +181,7 @@ def level_rate(cands: list[Candidate], Ts: float, lo: float, hi: float) -> float
 
 LEAK = 0.25  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
 CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
-WITHIN = 3 * CONFIRM  # ... among the next WITHIN candidates
+WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
 
 ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
@@ -351,7 +351,7 @@ class _Decider:
                         f"{found[h].evidence.split(';')[0]})"
                     )
                     pending = None
-            elif f.reason == "cannot tell" and pending is None and st["last_end"] is None and i not in tried:
+            elif f.reason == "cannot tell" and pending is None and i not in tried and st["last_end"] is None:
                 # a hypothesis: saved as the filter stands before it
                 pending = (i, e, (kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])}), 0, 0)
                 f.reason = "hypothesis"
@@ -424,14 +424,14 @@ class _Decider:
             return "cannot tell", cannot + f"; {dur:.2f} s at {c.still:.2g} R is not a stand (still <= {bound:.2g} R)"
         # the kinematics of a stop: the velocity since the last rest, its level linear to this one's
         peak, end = moved
-        if end <= p.rel * peak:
+        if end <= p.rel * peak and peak >= 2.0 * sd:  # a deceleration, and one the uncertainty cannot explain
             return "still stand", (
                 f"still stand: {dur:.2f} s at {c.still:.2g} R; speed since the last stand {end:.2g} m/s after a "
                 f"peak of {peak:.3g} m/s ({cannot})"
             )
         return "no deceleration", (
             f"quiet at {c.still:.2g} R but no deceleration: speed since the last stand {end:.3g} m/s, "
-            f"peak {peak:.3g} m/s ({cannot})"
+            f"peak {peak:.3g} m/s (a stop needs <= {p.rel:g} of a peak >= 2 sd; {cannot})"
         )
 
     def _V(self, a: int, b: int) -> np.ndarray:
