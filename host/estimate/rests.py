@@ -181,6 +181,7 @@ def level_rate(cands: list[Candidate], Ts: float, lo: float, hi: float) -> float
 
 LEAK = 0.25  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
 CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
+LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
 
@@ -363,14 +364,19 @@ class _Decider:
     def _judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
         """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""
         p = self.p
-        allowed = p.level_max if moved[0] >= MOTION else p.level_still
+        # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
+        # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
+        like = not st["proven"] or c.still <= max(p.still_k, LIKE * float(np.median(st["proven"])))
+        allowed = p.level_max if moved[0] >= MOTION and like else p.level_still
         if p.gate == 0:
             return "gate off", "every candidate accepted (gate 0)"
         if i in self.veto:
             return "moving", self.veto[i]
         if jump > allowed:
             return "level jumped", f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with " + (
-                "motion between" if moved[0] >= MOTION else f"no motion between (peak {moved[0]:.2g} m/s)"
+                ("motion between" if like else f"motion between, at {c.still:.2g} R: less still than the rests")
+                if moved[0] >= MOTION
+                else f"no motion between (peak {moved[0]:.2g} m/s)"
             )
         if s.chi2 > p.gate:
             what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
