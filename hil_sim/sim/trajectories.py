@@ -412,10 +412,10 @@ def rest_truth(name: str, t: np.ndarray, ss: np.random.SeedSequence, amax: float
       3-5 s stops between legs (three short stops), parked for good after the fourth (a run is a prefix of
       a longer one, and any run that outlasts the drive ends parked: the drive takes about 300-650 s, 3-6
       km, see :func:`town_drive_end`). Road vibration as on the highway; fixes every 10 s (sigma 1 m).
-    * ``hand_box``: a box moved by hand on a table: a pause of 3-5 s, then moves back and forth (towards
-      the start) at peak speeds of 0.15-0.6 m/s (pulses of 0.5-1.5 m/s^2, a coast of 0-1.5 s) with pauses
-      of 2-6 s; hand tremor while it moves (broadband, 0.1 m/s^2 rms per m/s). Fixes every 5 s (sigma
-      2 cm: a camera or a tape). For an ADXL335-class part.
+    * ``hand_box``: a box moved by hand on a table: a pause of 2-6 s, then moves back and forth (towards
+      the start) at peak speeds of 0.15-0.6 m/s (gentle pulses of 0.1-0.6 m/s^2, a steady glide of 0.5-3 s)
+      with pauses of 2-6 s; hand tremor while it moves (broadband, 0.03 m/s^2 rms per m/s: a glide, or a
+      slow push, reads as still as a pause on an ADXL335-class part). Fixes every 5 s (sigma 2 cm: a camera or a tape).
     * ``tilting_mount``: ``stop_and_go``'s motion (same seed) under a mount whose tilt drifts: on every
       axis the level moves at 0.015-0.11 m/s^2 per second (a new rate every 5-20 s, turning back towards
       level once beyond 0.5 m/s^2), stopped or not.
@@ -454,7 +454,7 @@ def rest_truth(name: str, t: np.ndarray, ss: np.random.SeedSequence, amax: float
     if name == "hand_box":
         moves = _draw_moves(lambda: _draw_hand(rng), float(t[-1]) if n else 0.0)
         r, u, a = _evaluate(moves, t)
-        extra = 0.1 * np.abs(u)[:, None] * _vibration(rng_x, n, n_axes, t)
+        extra = 0.03 * np.abs(u)[:, None] * _vibration(rng_x, n, n_axes, t)
         return RestTruth(r, u, a, extra, u == 0)
     if name == "tilting_mount":
         r, u, a = truth("stop_and_go", t, rng, amax)
@@ -546,9 +546,9 @@ def _draw_hand(rng: np.random.Generator) -> dict[str, np.ndarray]:
     n = _CHUNK
     rest = rng.uniform(2.0, 6.0, n)
     v = rng.uniform(0.15, 0.6, n)
-    A = rng.uniform(0.5, 1.5, n)
-    e, f = _pulse_for(v, A, rng.uniform(0.2, 0.5, n))
-    c = rng.uniform(0.0, 1.5, n)
+    A = rng.uniform(0.1, 0.6, n)
+    e, f = _pulse_for(v, A, rng.uniform(0.3, 1.0, n))
+    c = rng.uniform(0.5, 3.0, n)
     pref = rng.choice([-1.0, 1.0], n)
     return dict(rest=rest, A1=A, e1=e, f1=f, c=c, A2=A, e2=e, f2=f, pref=pref)
 

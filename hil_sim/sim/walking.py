@@ -78,7 +78,7 @@ GAITS = {
     # inside a 16 g part
     "jog": ((0.68, 0.78), (0.28, 0.34), (1.8, 2.1), (4.0, 8.0)),
 }
-JOG_LEAK = (3.0, 0.5)  # m/s^2, jogging: the level frame's leak, its mean size and the swing about it
+JOG_LEAK = (3.0, 0.7, (3.0, 6.0))  # jogging's level leak: mean size and swing (m/s^2), the swing's period (s)
 STILL_START = (0.2, (2.0, 4.0), 0.02)  # walking_still_start: jostle (s), stand (s), jostle's move (m)
 
 
@@ -200,8 +200,8 @@ def scenario_walk(name: str, t: np.ndarray, ss: np.random.SeedSequence, amax: fl
     * ``walking_still_start``: the wearer stands still 2-4 s before walking, but the foot is jostled in the
       first 0.2 s (a 2 cm shuffle along the first heading, u = a = 0 at both ends): the first stand begins
       0.2 s in. The walk proper is the normal walk shifted by the jostle and the stand.
-    * ``jogging``: the jog gait with a level frame leaking 3 +- 0.5 m/s^2 (its size swinging over 20-40 s,
-      its direction turning 30-90 degrees a minute), on top of the tilt leak.
+    * ``jogging``: the jog gait with a level frame leaking 3 +- 0.7 m/s^2 (:func:`jog_leak`), on top of the
+      tilt leak.
     """
     t = np.asarray(t, dtype=np.float64)
     rng = np.random.default_rng(ss)
@@ -241,12 +241,14 @@ def _first_heading(w: Walk) -> np.ndarray:
 
 
 def jog_leak(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """(N, 2) gravity leak [m/s^2] of a jogger's level frame: size JOG_LEAK[0] + JOG_LEAK[1] sin(2 pi t/P + p)
-    (P 20-40 s), direction from a random angle turning 30-90 degrees a minute (drawn from ``rng``)."""
+    """(N, 2) gravity leak [m/s^2] of a jogger's level frame: size 3 + 0.7 sin(2 pi t/P + p) (JOG_LEAK: P 3-6
+    s, so the level moves by up to 1 m/s^2 from one stance to the next), direction from a random angle turning
+    30-90 degrees a minute (drawn from ``rng``)."""
     t = np.asarray(t, dtype=np.float64)
+    mean, swing, periods = JOG_LEAK
     angle0 = rng.uniform(0.0, 2 * np.pi)
     turn = np.radians(rng.uniform(30.0, 90.0)) * rng.choice([-1.0, 1.0]) / 60.0
-    period, phase = rng.uniform(20.0, 40.0), rng.uniform(0.0, 2 * np.pi)
-    size = JOG_LEAK[0] + JOG_LEAK[1] * np.sin(2 * np.pi * t / period + phase)
+    period, phase = rng.uniform(*periods), rng.uniform(0.0, 2 * np.pi)
+    size = mean + swing * np.sin(2 * np.pi * t / period + phase)
     angle = angle0 + turn * t
     return np.stack([size * np.cos(angle), size * np.sin(angle)], axis=1)

@@ -311,7 +311,39 @@ def smooth(csv: Path, model: Path, axes: tuple[str, ...], *, rest=None, fixes: P
     return accelnav.smooth_run(run, m, rest=rest, fixes=fixes)
 
 
-def study_walk(walk: Walk, tmp: Path) -> dict:
+def smooth_command(run: Path, args: list[str], *, rest=None, fixes: Path | None = None) -> dict:
+    """What ``accelnav smooth run ARGS [--zupt auto|FILE] [--fixes FILE]`` writes, run as a user runs it (the
+    command, in-process, its run file read back); its printed lines under "stdout". A refusal fails loudly."""
+    import contextlib
+    import io
+
+    from accelnav.cli import main
+
+    out = Path(run).with_name(Path(run).stem + "_smoothed.npz")
+    argv = ["smooth", str(run), *args, "--out", str(out)]
+    argv += [] if rest is None else ["--zupt", str(rest)]
+    argv += [] if fixes is None else ["--fixes", str(fixes)]
+    text, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(text), contextlib.redirect_stderr(err):
+        code = main(argv)
+    if code != 0:
+        raise AssertionError(f"accelnav {' '.join(argv)}: exit status {code}: {err.getvalue().strip()}")
+    with np.load(out) as z:
+        arrays = {k: z[k] for k in z.files}
+    out.unlink()
+    arrays["stdout"] = text.getvalue()
+    return arrays
+
+
+def smooth_cli(csv: Path, model: Path, axes: tuple[str, ...], *, rest=None, fixes: Path | None = None) -> dict:
+    """:func:`smooth` through the command (:func:`smooth_command`) on a CSV with a time column ``t``."""
+    args = ["--model", str(model), "--time-column", "t"]
+    for a in axes:
+        args += ["--axis", a]
+    return smooth_command(csv, args, rest=rest, fixes=fixes)
+
+
+def study_walk(walk: Walk, tmp: Path, smooth=smooth) -> dict:
     """The three estimates of the distance walked between the bout's first and last initial contact."""
     tag = walk.name.replace("/", "_")
     axes = ("ax", "ay")
@@ -338,9 +370,11 @@ def study_walk(walk: Walk, tmp: Path) -> dict:
     return res
 
 
-def study_drive(drive: Drive, tmp: Path, free: bool = True) -> dict:
+def study_drive(drive: Drive, tmp: Path, free: bool = True, smooth=smooth) -> dict:
     """Along-track distance of the car: with a fix every 10 s (rms at the held-out epochs), and unless
-    ``free`` is false without fixes (rms and final error)."""
+    ``free`` is false without fixes (rms and final error). ``smooth``: :func:`smooth` (the library) or
+    :func:`smooth_cli` (the command). ``rests`` holds each method's applied rests with fixes, ``free_rests``
+    without."""
     axes = ("ax",)
     model = tmp / "car_100hz.toml"
     model.write_text(model_text(DRIVE_RATE, ("x",), 40.0, 50000.0))
@@ -361,7 +395,7 @@ def study_drive(drive: Drive, tmp: Path, free: bool = True) -> dict:
     zupt = {"defaults": "auto", "reference rests": mask, "no ZUPT": None}
     held = np.searchsorted(drive.t, drive.fix_t[~given])
     held = np.minimum(held, len(drive.t) - 1)
-    res = {"drive": drive, "free": {}, "fixed": {}, "rests": {}}
+    res = {"drive": drive, "free": {}, "fixed": {}, "rests": {}, "free_rests": {}}
     for k, rest in zupt.items():
         fixed = smooth(csv, model, axes, rest=rest, fixes=fixes)
         ef = np.asarray(fixed["smooth_x"])[0, :, 0][held] - drive.distance[held]
@@ -369,6 +403,7 @@ def study_drive(drive: Drive, tmp: Path, free: bool = True) -> dict:
         res["rests"][k] = fixed["zupt"][:, 0].astype(bool)
         if free:
             alone = smooth(csv, model, axes, rest=rest)
+            res["free_rests"][k] = alone["zupt"][:, 0].astype(bool)
             e = np.asarray(alone["smooth_x"])[0, :, 0] - drive.distance
             res["free"][k] = (float(np.sqrt(np.mean(e**2))), float(e[-1]))
     interp = np.interp(drive.t[held], drive.fix_t[given], drive.fix_distance[given])
@@ -376,7 +411,7 @@ def study_drive(drive: Drive, tmp: Path, free: bool = True) -> dict:
     return res
 
 
-def study_foot(foot, tmp: Path) -> dict:
+def study_foot(foot, tmp: Path, smooth=smooth) -> dict:
     """gaitmap's foot-mounted walk (tests/support/realdata.py), one foot: mean |stride-length error| per method."""
     axes = ("ax", "ay")
     model = tmp / "foot_204_8hz.toml"
