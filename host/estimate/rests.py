@@ -181,6 +181,7 @@ def level_rate(cands: list[Candidate], Ts: float, lo: float, hi: float) -> float
 
 LEAK = 0.25  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
 CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
+PEAK_POINTS = 256  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
@@ -287,6 +288,7 @@ class _Decider:
         moving, or cannot be told, the filter goes back to before the hypothesis and goes on without it."""
         p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
         kin = _Kinematic(self.x, Ts, self.R, self.q)
+        self.V = kin.V
         found = [_Found() for _ in cands]
         st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
         pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations)
@@ -399,18 +401,16 @@ class _Decider:
 
     def _peak(self, c: Candidate, last_end) -> tuple[float, float]:
         """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
-        from the rest's to the candidate's."""
-        Ts = self.Ts
+        from the rest's to the candidate's; the peak on at most PEAK_POINTS points of the way (a cost per
+        candidate that does not grow with the time since the rest)."""
+        Ts, V = self.Ts, self.V
         e, u0, e0 = last_end
-        m = np.arange(max(c.start - e, 0) + 1)
-        D = max(c.start - e, 1) * Ts
-        vk = (
-            self._V(e, e + len(m))
-            - e0[None, :] * (m * Ts)[:, None]
-            - (c.level - e0)[None, :] * ((m * Ts) ** 2 / (2 * D))[:, None]
-            + u0[None, :]
-        )
-        speed = np.linalg.norm(vk, axis=1)
+        a = max(c.start, e)
+        k = np.unique(np.linspace(e, a, min(a - e + 1, PEAK_POINTS)).round().astype(np.int64))
+        D = max(a - e, 1) * Ts
+        tk = ((k - e) * Ts)[:, None]
+        vk = V[k] - V[e] - e0[None, :] * tk - (c.level - e0)[None, :] * (tk * tk / (2 * D)) + u0[None, :]
+        speed = np.sqrt(np.sum(vk * vk, axis=1))
         return float(speed.max()), float(speed[-1])
 
     def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
@@ -439,12 +439,6 @@ class _Decider:
             f"quiet at {c.still:.2g} R but no deceleration: speed since the last stand {end:.3g} m/s, "
             f"peak {peak:.3g} m/s (a stop needs <= {p.rel:g} of a peak >= 2 sd; {cannot})"
         )
-
-    def _V(self, a: int, b: int) -> np.ndarray:
-        """Velocity integral of x from sample a over samples a..b-1 (0 at a)."""
-        V = np.zeros((b - a, self.x.shape[1]))
-        np.cumsum(self.x[a : b - 1] * self.Ts, axis=0, out=V[1:])
-        return V
 
     def backward(self, acc: set[int]) -> list[Side | None]:
         """The backward filter with the accepted set ``acc``: every candidate's side after it."""
