@@ -179,7 +179,7 @@ def level_rate(cands: list[Candidate], Ts: float, lo: float, hi: float) -> float
     return float(min(max(math.sqrt(float(np.median(d2))), lo), hi))
 
 
-LEAK = 0.25  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
+LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
 CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
 PEAK_POINTS = 256  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
@@ -336,7 +336,7 @@ class _Decider:
                     tried.add(h)
                     kin, st = saved
                     st = {**st, "acc": set(st["acc"]), "proven": list(st["proven"])}
-                    found[h].reason = "cannot tell"
+                    found[h].reason = "level jumped" if found[h].reason == "consistent" else "cannot tell"
                     found[h].evidence += (
                         f"; not borne out: the candidate at {t[c.start]:.2f} s {f.reason} with it"
                         if f.reason in REFUSE_REASONS
@@ -348,16 +348,25 @@ class _Decider:
                     count += 1
                 pending = (h, e_h, saved, count, seen)
                 if count >= CONFIRM:
-                    found[h].reason = "consistent"
                     found[h].evidence = (
-                        f"closes the velocity of the next {CONFIRM} (the body moved between; "
+                        f"{found[h].evidence}; borne out by the next {CONFIRM} (the body moved between)"
+                        if found[h].reason == "consistent"
+                        else f"closes the velocity of the next {CONFIRM} (the body moved between; "
                         f"{found[h].evidence.split(';')[0]})"
                     )
+                    found[h].reason = "consistent"
                     pending = None
-            elif f.reason == "cannot tell" and pending is None and i not in tried and st["last_end"] is None:
-                # a hypothesis: saved as the filter stands before it
+            elif pending is None and i not in tried and p.gate > 0 and (
+                (f.reason == "cannot tell" and st["last_end"] is None)
+                or (f.reason == "consistent" and jump > p.level_still)
+            ):
+                # a hypothesis (nothing could tell it, or its level moved far: a foot that turned, or a push held),
+                # saved as the filter stands before it
                 pending = (i, e, (kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])}), 0, 0)
-                f.reason = "hypothesis"
+                if f.reason == "consistent":
+                    f.evidence += f"; its level moved {jump:.2g} m/s^2"
+                else:
+                    f.reason = "hypothesis"
             if f.reason in ACCEPT_REASONS or f.reason == "hypothesis":
                 acc.add(i)
                 kin.rest(k, p.sigma)
