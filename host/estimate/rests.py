@@ -267,7 +267,8 @@ def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]
 
 
 class _Decider:
-    def __init__(self, x, R, Ts, cands, fixes, p, t):
+    def __init__(self, x, R, Ts, cands, fixes, p, t, start_sd: float = 0.0):
+        self.start_sd = start_sd  # the model's prior sd of the start speed: a still start only when it is small
         self.x, self.R, self.Ts, self.cands, self.p, self.t = x, R, Ts, cands, p, t
         self.n = len(x)
         self.fixes = fixes
@@ -356,9 +357,14 @@ class _Decider:
                     )
                     found[h].reason = "consistent"
                     pending = None
-            elif pending is None and i not in tried and p.gate > 0 and (
-                (f.reason == "cannot tell" and st["last_end"] is None)
-                or (f.reason == "consistent" and jump > p.level_still)
+            elif (
+                pending is None
+                and i not in tried
+                and p.gate > 0
+                and (
+                    (f.reason == "cannot tell" and st["last_end"] is None)
+                    or (f.reason == "consistent" and jump > p.level_still)
+                )
             ):
                 # a hypothesis (nothing could tell it, or its level moved far: a foot that turned, or a push held),
                 # saved as the filter stands before it
@@ -428,6 +434,11 @@ class _Decider:
         dur = (c.stop - c.start) * Ts
         cannot = f"cannot tell: sd of v {sd:.2g} m/s before it ({'fixes too far' if fix_seen else 'no fix'})"
         if last_end is None:
+            if self.start_sd > p.tell:
+                return (
+                    "cannot tell",
+                    cannot + f", no rest before (the model lets the run start at {self.start_sd:.3g} m/s)",
+                )
             if c.start * Ts <= p.start_within_s and dur >= p.start_s and c.still <= p.still_k:
                 return "still start", (
                     f"still start: {dur:.2f} s at {c.still:.2g} R from {c.start * Ts:.2f} s "
@@ -535,7 +546,9 @@ class _Decider:
         self.veto[i] = f"{what} {_speed(s)} after it (from {s.source})"
 
 
-def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p) -> tuple[list[RestDecision], float]:
+def decide(
+    x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0
+) -> tuple[list[RestDecision], float]:
     """The decision on every candidate span [a, b) of ``spans`` (see the module docstring); also sqrt(q), the
     level rate the record set. ``x`` (N, n_axes): acceleration less the model's bias mean (0 where not
     ``ok``); ``fixes``: per axis column a list of position-fix measurements (accelnav.estimate.kf) or None."""
@@ -550,7 +563,7 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p) -> tuple[list[Re
         xs = x[a:b][use] if use.any() else np.zeros((1, n_axes))
         var = xs.var(axis=0) if len(xs) > 1 else R.copy()
         cands.append(Candidate(a, b, xs.mean(axis=0), float(np.mean(var / R))))
-    dec = _Decider(x, R, Ts, cands, fixes, p, t)
+    dec = _Decider(x, R, Ts, cands, fixes, p, t, start_sd)
     found, acc = dec.run()
     out = []
     nan = float("nan")

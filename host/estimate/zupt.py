@@ -435,7 +435,9 @@ def decide_rests(
         rest = candidates(accel, clipped, model, p)
     x, ok, R = _prepared(accel, clipped, model)
     t = np.arange(len(x)) * model.Ts
-    decisions, rate = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p)
+    # the model's own prior on the start speed: a model that says the run may start moving is not overruled
+    start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
+    decisions, rate = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
     return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)), rate)
 
 
