@@ -184,6 +184,7 @@ CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consi
 PEAK_POINTS = 256  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
+STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
 
 ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
@@ -345,7 +346,10 @@ class _Decider:
                     )
                     pending, e = None, e_h
                     continue
-                if moved[0] >= MOTION:
+                # before the first rest, or for a level that moved, a move; where the record lost a rest it had,
+                # a stride's (a car's cruise pieces close on each other after small changes of speed)
+                lost = saved[1]["last_end"] is not None and found[h].reason != "consistent"
+                if moved[0] >= (STRIDE if lost else MOTION):
                     count += 1
                 pending = (h, e_h, saved, count, seen)
                 if count >= CONFIRM:
@@ -361,10 +365,7 @@ class _Decider:
                 pending is None
                 and i not in tried
                 and p.gate > 0
-                and (
-                    (f.reason == "cannot tell" and st["last_end"] is None)
-                    or (f.reason == "consistent" and jump > p.level_still)
-                )
+                and (f.reason == "cannot tell" or (f.reason == "consistent" and jump > p.level_still))
             ):
                 # a hypothesis (nothing could tell it, or its level moved far: a foot that turned, or a push held),
                 # saved as the filter stands before it
