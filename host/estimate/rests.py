@@ -136,17 +136,17 @@ class _Kinematic:
         X[:, 0] = r + D * u + dW - c * e
         X[:, 1] = u + dV - D * e
         F = np.array([[1.0, D, -c], [0.0, 1.0, -D], [0.0, 0.0, 1.0]])
-        P = F @ self.P @ F.T
-        # the level's random walk, integrated once into u and twice into r (signs: u and r get -e)
-        P[:, 2, 2] += q * D
-        P[:, 1, 2] -= q * D**2 / 2
-        P[:, 2, 1] -= q * D**2 / 2
-        P[:, 0, 2] -= q * D**3 / 6
-        P[:, 2, 0] -= q * D**3 / 6
-        P[:, 1, 1] += q * D**3 / 3 + self.qv * D
-        P[:, 0, 1] += q * D**4 / 8 + self.qv * D**2 / 2
-        P[:, 1, 0] += q * D**4 / 8 + self.qv * D**2 / 2
-        P[:, 0, 0] += q * D**5 / 20 + self.qv * D**3 / 3
+        # the level's random walk, integrated once into u and twice into r (signs: u and r get -e), and the
+        # velocity noise of the integrated sensor noise
+        qd = np.array(
+            [
+                [q * D**5 / 20, q * D**4 / 8, -q * D**3 / 6],
+                [q * D**4 / 8, q * D**3 / 3, -q * D**2 / 2],
+                [-q * D**3 / 6, -q * D**2 / 2, q * D],
+            ]
+        )
+        qv = self.qv[:, None, None] * np.array([[D**3 / 3, D**2 / 2, 0.0], [D**2 / 2, D, 0.0], [0.0, 0.0, 0.0]])
+        P = F @ self.P @ F.T + qd + qv
         self.P = P
         self.k = k
 
@@ -181,7 +181,7 @@ def level_rate(cands: list[Candidate], Ts: float, lo: float, hi: float) -> float
 
 LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
 CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
-PEAK_POINTS = 256  # points of the way from the last rest at which a candidate's peak speed is taken
+PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
@@ -422,7 +422,7 @@ class _Decider:
         Ts, V = self.Ts, self.V
         e, u0, e0 = last_end
         a = max(c.start, e)
-        k = np.unique(np.linspace(e, a, min(a - e + 1, PEAK_POINTS)).round().astype(np.int64))
+        k = np.linspace(e, a, min(a - e + 1, PEAK_POINTS)).round().astype(np.int64)
         D = max(a - e, 1) * Ts
         tk = ((k - e) * Ts)[:, None]
         vk = V[k] - V[e] - e0[None, :] * tk - (c.level - e0)[None, :] * (tk * tk / (2 * D)) + u0[None, :]
