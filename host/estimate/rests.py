@@ -9,54 +9,63 @@ grade). Driven by the measured acceleration x (the model's bias mean removed):
 
     u[k+1] = u[k] + Ts (x[k] - e[k]),   r[k+1] = r[k] + Ts u[k],   e[k+1] = e[k] + w,  w ~ N(0, q Ts)
 
-plus the velocity noise of integrating the sensor's own noise (R Ts per second). Between two events the
-state moves in closed form (cumulative sums of x: the cost is per event, not per sample). Priors are
-diffuse (nothing is assumed about the start). Aids: the position fixes, and each accepted rest as
-u = 0 at its first and last sample (``sigma``): between them the rest's own acceleration says what its
-level is. The level may wander between rests at ``q``, the recording's own rate: the median over
-consecutive candidates of (change of level)^2 / time between them, clamped to
-[``level_rate_min``^2, ``level_rate_max``^2]. A tilting mount, a jog whose level frame leaks 1-4 m/s^2, a
-foot's rolling frame: each sets its own q, so no level change is refused at a fixed cap; what a large q
-costs is a wide velocity sd between rests, hence more "cannot tell" (a gyro-free level frame cannot tell
-a tilt from an acceleration: the price is paid here, in what the record can decide).
+(q = ``level_walk``^2) plus the velocity noise of integrating the sensor's own noise (R Ts per second).
+Between two events the state moves in closed form (cumulative sums of x: the cost is per event, not per
+sample). Priors are diffuse: nothing is assumed about the start. Aids: the position fixes, and each
+accepted rest as u = 0 at its first and last sample (sd ``sigma``): between them the rest's own
+acceleration says what its level is.
 
 The test of one candidate [a, b)
 --------------------------------
 Two filters, one forward in time and one backward (the same kinematics on the reversed record: velocity
 changes sign, acceleration does not), each taken just *before* the candidate: the forward one at a knows
 the fixes and accepted rests before it, the backward one at b - 1 those after it. Neither holds the
-candidate's own updates: the test is leave-one-out without re-smoothing. Each is then conditioned on the
-candidate's level (its mean acceleration, sd sqrt(R / n): under "rest" or "cruise" alike the mean
-acceleration there is the level; with the level since the last rest the velocity is integrated with
-the level linear between the two, a tilt drifting at any steady rate costs nothing) and gives
-v ± sd per axis. On each side, chi2 = mean over axes of v^2 / (sd^2 + sigma^2):
+candidate's own updates: the test is leave-one-out without re-smoothing. Each is conditioned on the
+candidate's level (its mean acceleration: under "rest" and under "cruise" alike that is the level there),
+so the velocity is integrated with the level linear from the last aid's to the candidate's (a tilt
+drifting at a steady rate costs nothing), and gives v +- sd per axis, sd widened by ``LEAK`` x (level
+change) x (time since the last aid) (the level's path between is unknown) and ``drift`` x that time (a
+mean acceleration error no level explains). On each side the chi-square of v over the axes is read on one
+axis' scale (:func:`chi2_equivalent`), against ``gate`` (9: three sd):
 
-* **moving**: chi2 > ``gate`` on either side: the fixes or the other rests imply speed there (a cruise
+* **moving**: above the gate on either side: the fixes or the other rests imply speed there (a cruise
   between fixes, a hand moving the box). A refusal needs no small sd: a large sd only makes it rarer.
-* **consistent**: chi2 <= ``gate`` on both sides, and at least one side *can tell* (every axis' sd <=
-  ``tell``).
-* neither side can tell (no fix, far from any accepted rest, a level wandering fast): the test says
-  **cannot tell** and the candidate stays out, unless another line of evidence decides:
+* **level jumped**: the level moved by more than ``level_still`` from the last rest's with no motion
+  between (the velocity integrated since stayed under 0.2 m/s: a ramp's or a push's quiet piece), or by
+  more than ``level_max`` after a move; a candidate far less still than the record's proven rests
+  (``LIKE`` x their median stillness) is held to ``level_still`` even after a move (a push held, not a
+  foot that turned). A level that moved more than ``level_still`` and passes is a *hypothesis* (below).
+* **consistent**: within the gate, and a side can tell (every axis' sd <= ``tell``).
+* neither side can tell: the candidate is refused as **cannot tell**, unless another line of evidence
+  decides:
 
-  - **still start**: a candidate that begins within the first ``start_within_s`` seconds, lasts
-    ``start_s`` at least and is still at the sensor's own noise (mean variance over R <= ``still_k``)
-    anchors: the run starts at rest. An assumption, reported as such (a car already moving on a smooth
-    road for a second would pass it; fixes, when there are any, refuse it as "moving").
-  - **still stand**: a candidate as still as the rests the record proves (still <= max(``still_k``,
-    2 x the median of the proven rests'), lasting ``start_s``), with the kinematics of a stop: the
-    velocity integrated from the last accepted rest (its level linear to the candidate's) rose to a
-    peak and came back to at most ``rel`` of it ("no deceleration" refuses a quiet stretch at cruise).
+  - **still start**: before any rest, a candidate that begins within ``start_within_s``, lasts
+    ``start_s`` and is still at the sensor's own noise (variance <= ``still_k`` R) anchors: the run
+    starts at rest, an assumption the report states; not made when the model's own prior lets the run
+    start moving (its start-speed sd above ``tell``).
+  - **still stand**: as still as the record's proven rests (<= max(``still_k``, 2 x their median)),
+    lasting ``start_s``, with the kinematics of a stop: the speed integrated from the last stand (a rest
+    of ``start_s`` at least, not a short piece that may be a ramp's) rose to a peak of 2 sd at least and
+    came back to ``rel`` of it ("no deceleration" refuses a quiet stretch at cruise).
+  - **a hypothesis**, before the first rest or where the record lost its rests: the candidate is taken as
+    a rest and kept when the next ``CONFIRM`` candidates, tested with it, are consistent with motion
+    between them (0.2 m/s; where the record had rests before, a stride's 1 m/s: a car's cruise pieces
+    close on each other after small changes of speed); when one is moving or cannot be told, or none
+    within ``WITHIN``, the filter goes back to before the hypothesis and on without it.
 
 The fixed point, robust
 -----------------------
-The forward filter decides online (each accepted rest aids the filter from there on); the backward filter
-then re-tests every accepted rest with all the others (leave-one-out, from the other side). Accepted rests
-that the backward side finds moving are withdrawn, the worst of each run of consecutive disagreeing
-rests first (one false rest carries its neighbours: they are tested again without it), candidates the
-backward side confirms where the forward one could not tell are added, and both filters run again, at
-most ``passes`` times (a pass is two runs over the events, no smoother); what still disagrees then is
-withdrawn. No accepted rest vouches for another: each is re-tested against all the others at every
-pass, and one that disagrees leaves.
+The forward filter decides online (each accepted rest aids it from there on); the backward filter then
+re-tests every accepted rest with all the others, from the other side. Of each run of consecutive accepted
+rests the backward side finds moving, the worst is withdrawn, or the rest after it that the disagreement
+came from when that one has less evidence of its own (a side that tells, or the stillness of a start or
+stand; on a tie the shorter), and both filters run again, at most ``passes`` times; what still disagrees
+then is withdrawn. No accepted rest vouches for another: each is re-tested against all the others at
+every pass, and one that disagrees leaves.
+
+What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per
+event in numpy: per sample it grows with the density of candidates, not with the record's length
+(bench/speed/bench_rest_decision.py measures it beside the plain smoother).
 """
 
 from __future__ import annotations
@@ -165,18 +174,6 @@ class _Kinematic:
         X, P = self.X.copy(), self.P.copy()
         _update(X, P, 2, level, var)
         return X[:, 1], np.sqrt(np.maximum(P[:, 1, 1], 0.0)), X[:, 2]
-
-
-def level_rate(cands: list[Candidate], Ts: float, lo: float, hi: float) -> float:
-    """sqrt(q), m/s^2 per sqrt(s): the median over consecutive candidates of |change of level|^2 / time between
-    them (mean over axes), clamped to [lo, hi]; lo when there are fewer than two candidates."""
-    if len(cands) < 2:
-        return lo
-    d2 = [
-        float(np.mean((b.level - a.level) ** 2)) / max((b.start - a.stop) * Ts, Ts)
-        for a, b in zip(cands[:-1], cands[1:], strict=True)
-    ]
-    return float(min(max(math.sqrt(float(np.median(d2))), lo), hi))
 
 
 LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
@@ -547,12 +544,9 @@ class _Decider:
         self.veto[i] = f"{what} {_speed(s)} after it (from {s.source})"
 
 
-def decide(
-    x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0
-) -> tuple[list[RestDecision], float]:
-    """The decision on every candidate span [a, b) of ``spans`` (see the module docstring); also sqrt(q), the
-    level rate the record set. ``x`` (N, n_axes): acceleration less the model's bias mean (0 where not
-    ``ok``); ``fixes``: per axis column a list of position-fix measurements (accelnav.estimate.kf) or None."""
+def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
+    """The decision on every candidate span [a, b) of ``spans`` (see the module docstring). ``x`` (N, n_axes):
+    acceleration less the model's bias mean (0 where not ``ok``); ``fixes``: per axis column a list of position-fix measurements (accelnav.estimate.kf) or None."""
     n_axes = x.shape[1]
     fixes = [[] for _ in range(n_axes)] if fixes is None else [list(f) for f in fixes]
     if len(fixes) != n_axes:
@@ -588,4 +582,4 @@ def decide(
             RestDecision(c.start, c.stop, i in acc, f.reason, ev, c.still, float(np.linalg.norm(c.level)), vb, sb, va,
                          sa, chi2)
         )  # fmt: skip
-    return out, math.sqrt(dec.q)
+    return out

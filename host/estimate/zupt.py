@@ -1,22 +1,20 @@
-"""Automatic zero-velocity updates: find the rests in the raw acceleration, turn them into measurements.
+"""Automatic zero-velocity updates: find candidate rests in the raw acceleration, decide which are rests, turn
+them into measurements.
 
-Which detector, and why
------------------------
-A moving-variance test on acceleration alone: the accelerometer half of the
-generalised likelihood-ratio (GLRT) detectors of Skog et al. (2010,
-"Zero-velocity detection: an algorithm evaluation"), whose SHOE detector adds
-a gyroscope term accelnav does not have. With the rest's acceleration unknown
-(gravity leaking through a tilt error, a grade, an unmodelled bias) the
-accelerometer term is the spread of a window about its own mean (MV). What
-the rest reads is then not compared with the model's bias: a one-axis,
-gyro-free sensor cannot tell a tilt leak from its bias, so each rest's own
-mean is taken as the bias there (the filter's bias state absorbs it), and
-the tests ask whether the rest is *plausible as a stop* instead: it is still,
-its level is steady, its level moved little since the last rest, and the
-velocity integrated from the last rest closes. No threshold hangs on the
-model's ``initial_sigma`` (issue 23: a tuned model's bias prior admitted
-anything); when a candidate cannot be checked, it is refused (no update
-rather than a wrong one).
+Detector and decision, apart
+----------------------------
+The detector (:func:`candidates`, below) finds *candidates*: stretches quiet enough to be a rest, each with
+its stillness. A moving-variance test on acceleration alone: the accelerometer half of the generalised
+likelihood-ratio (GLRT) detectors of Skog et al. (2010, "Zero-velocity detection: an algorithm
+evaluation"), whose SHOE detector adds a gyroscope term accelnav does not have. A quiet window cannot tell
+a rest from a smooth cruise, a coast or a constant-acceleration hold, so a candidate is only a hypothesis.
+The decision (:func:`decide_rests`, accelnav.estimate.rests) accepts one only where a zero velocity agrees
+with everything else the record knows: the position fixes, the other accepted rests, the kinematics of a
+stop, the model. Its module docstring says how; no accepted rest vouches for the next, and where nothing
+can tell, the candidate is refused as "cannot tell" (no update rather than a wrong one). Each decision
+carries its reason and, in words, the evidence that decided it (:class:`RestDecision`, :func:`report_csv`).
+No threshold hangs on the model's ``initial_sigma`` (issue 23: a tuned model's bias prior admitted
+anything); the model's prior on the start speed only says whether a run may be assumed to start at rest.
 
 Candidates (one decision per sample, for the body as a whole)
 ------------------------------------------------------------
@@ -43,7 +41,8 @@ a person standing leans that slowly; over a second a drift cannot be told
 from a vehicle's or a cart's ramp), is part of a ramp and dropped. The gentle start of a move
 is quiet, but its mean walks away from the rest's (a vehicle's, a cart's
 first 0.1 m/s^2), and that is where a rest must end; a constant-acceleration
-hold becomes a piece of its own (refused below for its level). Its ends are
+hold becomes a piece of its own (the decision refuses it: its level jumped with no turn between,
+or the velocity does not close). Its ends are
 trimmed once more against the piece's own measured noise where that is
 below the tremor allowance (a parked car, a resting cart). What that trim
 cuts off is split again, and a piece of it is kept when it holds three
@@ -60,79 +59,10 @@ heel strike or a ramp's start ends it. Pieces at the same level
 less than ``bridge_s`` apart across a break that failed the quiet test are joined (a knock fails every window that
 holds it), and pieces shorter than ``min_rest_s`` are dropped.
 
-The decision (once per candidate, for every axis at once)
----------------------------------------------------------
-A quiet window cannot tell a rest from a constant-velocity coast or cruise,
-nor (once the bias is re-measured) a constant-acceleration hold from a tilt.
-Each candidate is judged against its **anchor**, the last accepted rest
-(bias b0 = its robust mean, see :func:`_robust_mean`), with its own robust
-mean b1:
-
-* **level**: |b1 - b0| <= min(``level`` + ``level_rate`` D, ``level_max``),
-  D the time since the anchor: the tilt or grade leak may change by 0.5
-  m/s^2 (3 degrees: a real foot's level frame moves that much from one
-  stance to the next on gaitmap's walk, where 0.3 refused one stance in six)
-  plus 0.1 m/s^2 a second, never by more than 1 m/s^2 (6 degrees). A
-  vehicle's hold (1 m/s^2 and more, reached within a second or
-  two) is refused; a stop on a road whose grade changed by more than 6
-  degrees since the last stop is refused too (no update rather than a wrong one).
-* **continues the rest**: a candidate within ``recover_s`` of the anchor with
-  no motion between (the largest |v| between them within sqrt(gate) s) and a
-  level within ``level`` of it is the same rest, broken by a knock or a foot
-  rolling from heel to toe; it is accepted and the rest keeps the level it
-  started with (a chain of such pieces cannot walk up a ramp).
-* **velocity closes**: v_j = Ts sum (z_j - b_j(k)) from the anchor's end to
-  the candidate's start, b_j(k) linear from b0 to b1 (a slowly changing tilt
-  or grade is absorbed), is within ``gate`` (16, mean over axes of v^2/s^2,
-  s^2 = R Ts^2 m + sigma^2 + (D/2)^2 (sd(b0)^2 + sd(b1)^2) + (drift D)^2,
-  sd(b) = sqrt(R / n) over the rest's n samples): besides white noise and the
-  two levels' uncertainty from the sensor's noise (not from the rest's own
-  spread: that is the body's sway, and a body at rest keeps its velocity near
-  zero, so the sway leaves its mean far faster than white noise would; taken
-  as white, the spread of a short noisy piece inside a real walk, 88 R over
-  0.12 s, let it "close" at 0.8 m/s and hid 1 m/s of trunk motion from the
-  "no motion between" test above), ``drift`` (0.02
-  m/s^2) of mean acceleration error that no rest re-measures (a coarse ADC's
-  steps while the signal moves, a scale-factor error, a tilt that changed
-  during the move: on the simulated 10-bit cart 0.1-0.4 m/s after a push).
-  A coast or a cruise keeps its speed and is refused. The velocity may also
-  have come back to ``rel`` (0.5) of its peak since the anchor: on gaitmap's
-  real walk a heel strike leaves 0.3-1 m/s in the integral, chi-square
-  refuses a third of the stances there, and the simulated walks never show
-  it. The price: a short piece at the end of a braking ramp can pass it (a
-  cart's, at 0.7 m/s); the rest that follows it supersedes it (below).
-* no anchor yet: a candidate that holds the run's first window is accepted
-  when it is **still** (mean window variance <= ``still_k`` R, no tremor
-  allowance) for at least ``start_s`` (1 s): the run starts at rest, as the
-  filter's prior u = 0 says. A run that starts moving gives no anchor when
-  its road vibration fails the stillness (the simulated highway); KITTI's
-  real drive starts at 8 m/s on a road smooth enough to look still for half
-  a second, hence the duration. A short first stance is not lost: the next
-  one recovers it (below).
-
-**Recovery.** A candidate refused because its velocity does not close (or
-for want of an anchor) can still serve as anchor for the next candidate when
-that one comes within ``recover_s`` (3 s): the pair is accepted if, between
-them, the level moved little, the velocity closes, *and* the body visibly
-moved (the largest |v| between them above sqrt(gate) s: a stride, a push);
-the previous candidate is then accepted too ("confirmed by the next").
-
-**Adjacent rests.** When a candidate follows an anchor within ``recover_s``
-with no motion between, and its level differs by more than ``level`` or the
-anchor is short (under three windows: the tail of a braking ramp, then the
-stop), the longer of the two is the rest: a shorter anchor is withdrawn
-("superseded by a longer rest") and the candidate judged against the rest
-before it, so one short wrong anchor does not make every later stop "move".
-So one missed run of stances no longer poisons the rest of a walk (issue 23:
-27 of 29 later candidates refused), while a cruise, whose quiet spells
-close on each other without any motion between, gives no rest.
-
-``gate = 0`` accepts every candidate. Every decision carries its reason and
-statistics (:class:`RestDecision`, :func:`report_csv`).
-
 Measurements: every sample of an accepted rest gets a zero-velocity update
 (:func:`accelnav.estimate.kf.zero_velocity`, u = 0 with standard deviation
-``sigma``), on every axis (``every_s`` > 0 thins them to one per every_s).
+``sigma``), on every axis (``every_s`` > 0 thins them to one per every_s). The smoother applies them
+ungated: the decision already tested each rest whole, against every axis at once.
 
 All thresholds have command-line overrides (``accelnav smooth --zupt-*``).
 """
@@ -418,7 +348,6 @@ class Rests:
     candidates: np.ndarray  # (N,) bool
     decisions: list[RestDecision]
     mask: np.ndarray  # (N,) bool, the samples of the accepted rests
-    level_rate: float  # m/s^2 per sqrt(s), the level's random walk the record set (accelnav.estimate.rests)
 
 
 def decide_rests(
@@ -437,8 +366,8 @@ def decide_rests(
     t = np.arange(len(x)) * model.Ts
     # the model's own prior on the start speed: a model that says the run may start moving is not overruled
     start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
-    decisions, rate = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
-    return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)), rate)
+    decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
+    return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)))
 
 
 def reason_counts(decisions: list[RestDecision]) -> dict[str, int]:
