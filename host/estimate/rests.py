@@ -546,7 +546,8 @@ class _Decider:
 
 def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
     """The decision on every candidate span [a, b) of ``spans`` (see the module docstring). ``x`` (N, n_axes):
-    acceleration less the model's bias mean (0 where not ``ok``); ``fixes``: per axis column a list of position-fix measurements (accelnav.estimate.kf) or None."""
+    acceleration less the model's bias mean (0 where not ``ok``); ``fixes``: per axis column a list of
+    position-fix measurements (accelnav.estimate.kf) or None."""
     n_axes = x.shape[1]
     fixes = [[] for _ in range(n_axes)] if fixes is None else [list(f) for f in fixes]
     if len(fixes) != n_axes:
