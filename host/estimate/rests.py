@@ -115,6 +115,8 @@ class _Kinematic:
         self.Ts, self.q, self.qv = Ts, q, R * Ts
         self.V = np.zeros((n + 1, self.n_axes))
         np.cumsum(x * Ts, axis=0, out=self.V[1:])  # V[k] = Ts sum_{i<k} x[i]
+        self.A = np.zeros((n + 1, self.n_axes))
+        np.cumsum(np.abs(x) * Ts, axis=0, out=self.A[1:])  # A[k] = Ts sum_{i<k} |x[i]|: how much moved
         self.W = np.zeros((n + 1, self.n_axes))
         np.cumsum(self.V[:-1] * Ts, axis=0, out=self.W[1:])  # W[k] = Ts sum_{i<k} V[i]
         self.X = np.zeros((self.n_axes, 3))
@@ -217,15 +219,28 @@ class _Found:
 
 
 def _side(
-    kin: _Kinematic, c: Candidate, R: np.ndarray, sigma: float, drift: float, source: str, fix: bool, sign: float
+    kin: _Kinematic,
+    c: Candidate,
+    R: np.ndarray,
+    sigma: float,
+    drift: float,
+    scale: float,
+    source: str,
+    fix: bool,
+    sign: float,
 ) -> Side:
     e_prior, known = kin.X[:, 2].copy(), kin.P[:, 2, 2] < 1.0
     v, sd, _ = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
     # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
     # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
     D = (kin.k - kin.aid_k) * kin.Ts
-    # and a mean acceleration error no level explains (scale factor, a leak changing within the move): drift D
-    sd = np.sqrt(sd * sd + np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2)
+    # and a mean acceleration error no level explains (a leak changing within the move): drift D; and errors in
+    # proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a real
+    # foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid
+    moved = kin.A[kin.k] - kin.A[kin.aid_k]
+    sd = np.sqrt(
+        sd * sd + np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2 + (scale * moved) ** 2
+    )
     # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
     # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
     chi2 = chi2_equivalent(float(np.sum(v * v / (sd * sd + sigma * sigma))), len(v))
@@ -323,7 +338,7 @@ class _Decider:
                 continue
             kin.to(k)
             jump = self._jump(kin, c)
-            s = _side(kin, c, self.R, p.sigma, p.drift, st["source"], st["fix"], 1.0)
+            s = _side(kin, c, self.R, p.sigma, p.drift, p.scale, st["source"], st["fix"], 1.0)
             f = found[i]
             f.before, f.evidence = s, ""
             moved = self._peak(c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0)
@@ -478,7 +493,7 @@ class _Decider:
                     source = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
                 continue
             kin.to(k)
-            out[i] = _side(kin, c, self.R, p.sigma, p.drift, source, fix_seen, -1.0)
+            out[i] = _side(kin, c, self.R, p.sigma, p.drift, p.scale, source, fix_seen, -1.0)
             if i in acc:
                 kin.rest(k, p.sigma)
         assert n == len(self.x)

@@ -98,6 +98,7 @@ class ZuptParams:
     every_s: float = 0.0  # s, one update per every_s within a rest; 0: every sample
     gate: float = 9.0  # bound on a side's chi-square of v over the axes, on one axis' scale (9: 3 sd); 0: accept all
     drift: float = 0.05  # m/s^2, mean acceleration error between aids that no level explains (a scale factor)
+    scale: float = 0.03  # share of the acceleration integrated since the last aid that may be error (a scale factor)
     tell: float = 0.5  # m/s, a side can tell a rest when the sd of its velocity is at most this on every axis
     level_still: float = 0.5  # m/s^2, a rest's level may differ this much from the last rest's with no motion between
     level_max: float = 4.0  # m/s^2, ... and this much after a move (a jog's or a tilting mount's leak)
@@ -121,7 +122,7 @@ def resolved(model: Model, p: ZuptParams) -> ZuptParams:
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
-    for name in ("start_s", "start_within_s", "drift"):
+    for name in ("start_s", "start_within_s", "drift", "scale"):
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
