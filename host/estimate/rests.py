@@ -509,8 +509,11 @@ class _Decider:
             if p.gate == 0:
                 return found, acc
             bad = sorted(i for i in acc if after[i].chi2 > p.gate)
-            if not bad:
+            shorts = self._short_before_stands(found, acc)
+            if not bad and not shorts:
                 return found, acc
+            for j, i in shorts.items():  # a short rest that makes a stand after it "move" gives way to it
+                self.veto[j] = f"contradicts the stand at {self.t[self.cands[i].start]:.2f} s, longer and still"
             if pass_no == p.passes:  # out of passes: what still disagrees leaves, nothing is added
                 for i in bad:
                     self._withdraw(i, after[i])
@@ -547,6 +550,22 @@ class _Decider:
                         self._withdraw(worst, after[worst])
                 group = [i] if i is not None else []
         return found, acc
+
+    def _short_before_stands(self, found: list[_Found], acc: set[int]) -> dict[int, int]:
+        """{j: i}: accepted rests j shorter than a stand (``start_s``) that were all that made the stand i after
+        them "moving" (a stand: ``start_s`` long, still at the sensor's noise)."""
+        p, out = self.p, {}
+        order = sorted(acc)
+        for i, f in enumerate(found):
+            c = self.cands[i]
+            if f.reason != "moving" or i in self.veto or f.before is None or not f.before.source.startswith("the rest"):
+                continue
+            if (c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k:
+                continue
+            before = [j for j in order if self.cands[j].stop <= c.start]
+            if before and (self.cands[before[-1]].stop - self.cands[before[-1]].start) * self.Ts < p.start_s:
+                out.setdefault(before[-1], i)
+        return out
 
     def _support(self, c: Candidate, other: Side | None, reason: str) -> int:
         """1 when a candidate has evidence besides the rest it disagrees with: a side that tells and agrees,
