@@ -33,8 +33,8 @@ axis' scale (:func:`chi2_equivalent`), against ``gate`` (9: three sd):
 * **level jumped**: the level moved by more than ``level_still`` from the last rest's with no motion
   between (the velocity integrated since stayed under 0.2 m/s: a ramp's or a push's quiet piece), or by
   more than ``level_max`` after a move; a candidate far less still than the record's proven rests
-  (``LIKE`` x their median stillness) is held to ``level_still`` even after a move (a push held, not a
-  foot that turned). A level that moved more than ``level_still`` and passes is a *hypothesis* (below).
+  (``LIKE`` x their median stillness) is held to ``UNLIKE`` x ``level_still`` after a move (a push held,
+  not a foot that turned). A level that moved more than ``level_still`` and passes is a *hypothesis* (below).
 * **consistent**: within the gate, and a side can tell (every axis' sd <= ``tell``).
 * neither side can tell: the candidate is refused as **cannot tell**, unless another line of evidence
   decides:
@@ -181,6 +181,7 @@ class _Kinematic:
 LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
 CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
+UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
@@ -397,7 +398,7 @@ class _Decider:
         # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
         # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
         like = not st["proven"] or c.still <= max(p.still_k, LIKE * float(np.median(st["proven"])))
-        allowed = p.level_max if moved[0] >= MOTION and like else p.level_still
+        allowed = p.level_still if moved[0] < MOTION else p.level_max if like else UNLIKE * p.level_still
         if p.gate == 0:
             return "gate off", "every candidate accepted (gate 0)"
         if i in self.veto:
