@@ -342,7 +342,7 @@ class _Decider:
             s = _side(kin, c, self.R, p.sigma, p.drift, p.scale, st["source"], st["fix"], 1.0)
             f = found[i]
             f.before, f.evidence = s, ""
-            moved = self._peak(c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0)
+            moved = self._peak(c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
             f.reason, f.evidence = self._judge(i, c, s, st, moved, jump)
             if pending is not None:
                 h, e_h, saved, count, seen = pending
@@ -398,7 +398,10 @@ class _Decider:
         # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
         # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
         like = not st["proven"] or c.still <= max(p.still_k, LIKE * float(np.median(st["proven"])))
-        allowed = p.level_still if moved[0] < MOTION else p.level_max if like else UNLIKE * p.level_still
+        if like:
+            allowed = p.level_max if moved[0] >= MOTION else p.level_still
+        else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
+            allowed = UNLIKE * p.level_still if moved[2] >= MOTION else p.level_still
         if p.gate == 0:
             return "gate off", "every candidate accepted (gate 0)"
         if i in self.veto:
@@ -428,10 +431,10 @@ class _Decider:
             return 0.0
         return float(np.linalg.norm(np.maximum(np.abs(c.level - kin.X[:, 2]) - 3.0 * sd, 0.0)))
 
-    def _peak(self, c: Candidate, last_end) -> tuple[float, float]:
+    def _peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
         """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
-        from the rest's to the candidate's; the peak on at most PEAK_POINTS points of the way (a cost per
-        candidate that does not grow with the time since the rest)."""
+        from the rest's to the candidate's, and the peak with the rest's level kept; the peaks on at most
+        PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest)."""
         Ts, V = self.Ts, self.V
         e, u0, e0 = last_end
         a = max(c.start, e)
@@ -440,7 +443,8 @@ class _Decider:
         tk = ((k - e) * Ts)[:, None]
         vk = V[k] - V[e] - e0[None, :] * tk - (c.level - e0)[None, :] * (tk * tk / (2 * D)) + u0[None, :]
         speed = np.sqrt(np.sum(vk * vk, axis=1))
-        return float(speed.max()), float(speed[-1])
+        flat = vk + (c.level - e0)[None, :] * (tk * tk / (2 * D))  # the rest's own level all the way
+        return float(speed.max()), float(speed[-1]), float(np.sqrt(np.max(np.sum(flat * flat, axis=1))))
 
     def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
         p, Ts = self.p, self.Ts
@@ -463,7 +467,7 @@ class _Decider:
         if dur < p.start_s or c.still > bound:
             return "cannot tell", cannot + f"; {dur:.2f} s at {c.still:.2g} R is not a stand (still <= {bound:.2g} R)"
         # the kinematics of a stop: the velocity since the last rest, its level linear to this one's
-        peak, end = moved
+        peak, end = moved[:2]
         if end <= p.rel * peak and peak >= 2.0 * sd:  # a deceleration, and one the uncertainty cannot explain
             return "still stand", (
                 f"still stand: {dur:.2f} s at {c.still:.2g} R; speed since the last stand {end:.2g} m/s after a "
