@@ -26,7 +26,7 @@ so the velocity is integrated with the level linear from the last aid's to the c
 drifting at a steady rate costs nothing), and gives v +- sd per axis, sd widened by ``LEAK`` x (level
 change) x (time since the last aid) (the level's path between is unknown) and ``drift`` x that time (a
 mean acceleration error no level explains). On each side the chi-square of v over the axes is read on one
-axis' scale (:func:`chi2_equivalent`), against ``gate`` (9: three sd):
+axis' scale (:func:`chi2_equivalent`), against ``gate`` (12: 3.5 sd):
 
 * **moving**: above the gate on either side: the fixes or the other rests imply speed there (a cruise
   between fixes, a hand moving the box). A refusal needs no small sd: a large sd only makes it rarer.

@@ -96,7 +96,7 @@ class ZuptParams:
     widen: float = 1.0  # pieces widened by up to widen * (W // 2) samples each side, while samples stay level
     sigma: float = 0.02  # m/s, standard deviation of each zero-velocity update
     every_s: float = 0.0  # s, one update per every_s within a rest; 0: every sample
-    gate: float = 9.0  # bound on a side's chi-square of v over the axes, on one axis' scale (9: 3 sd); 0: accept all
+    gate: float = 12.0  # a side's chi-square of v over the axes, on one axis' scale (12: 3.5 sd); 0: accept all
     drift: float = 0.05  # m/s^2, mean acceleration error between aids that no level explains (a scale factor)
     scale: float = 0.03  # share of the acceleration integrated since the last aid that may be error (a scale factor)
     tell: float = 0.5  # m/s, a side can tell a rest when the sd of its velocity is at most this on every axis
