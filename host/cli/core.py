@@ -190,6 +190,20 @@ def register(sub) -> None:
             "K",
             f"a still start or stand (when nothing else can tell): variance <= K R; default {z.still_k:g}",
         ),
+        (
+            "--zupt-drift",
+            "drift",
+            "A",
+            f"mean acceleration error between aids that no level explains, m/s^2 (widens the test); "
+            f"default {z.drift:g}",
+        ),
+        (
+            "--zupt-scale",
+            "scale",
+            "F",
+            f"share of the acceleration integrated since the last aid that may be error (widens the test); "
+            f"default {z.scale:g}",
+        ),
         ("--zupt-sigma", "sigma", "V", f"update std, m/s; default {z.sigma:g}"),
         ("--zupt-every", "every_s", "S", "one update per S s of rest; default 0: every sample"),
         (
@@ -197,8 +211,8 @@ def register(sub) -> None:
             "gate",
             "G",
             f"a rest is refused as moving when the velocity the fixes or the other rests give it, before or after "
-            f"it, has a mean over axes of v^2 / (sd^2 + sigma^2) above G; 0 = accept every candidate; "
-            f"default {z.gate:g}",
+            f"it, has a chi-square over the axes above G on one axis' scale (9: 3 sd); 0 = accept every "
+            f"candidate; default {z.gate:g}",
         ),
         (
             "--zupt-rel",
@@ -553,6 +567,8 @@ def cmd_smooth(args) -> int:
         level_max=args.zupt_level_max,
         level_walk=args.zupt_level_walk,
         tell=args.zupt_tell,
+        drift=args.zupt_drift,
+        scale=args.zupt_scale,
         trim_k=args.zupt_trim_k,
         still_k=args.zupt_still_k,
         sigma=args.zupt_sigma,

@@ -64,7 +64,8 @@ Measurements: every sample of an accepted rest gets a zero-velocity update
 ``sigma``), on every axis (``every_s`` > 0 thins them to one per every_s). The smoother applies them
 ungated: the decision already tested each rest whole, against every axis at once.
 
-All thresholds have command-line overrides (``accelnav smooth --zupt-*``).
+The thresholds have command-line overrides (``accelnav smooth --zupt-*``); ``passes`` and
+``start_within_s`` are the library's alone.
 """
 
 from __future__ import annotations
