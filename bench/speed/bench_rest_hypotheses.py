@@ -109,8 +109,8 @@ def simulated(scenario: str, model: Path | None, seconds: float | None, seed: in
             res["rms"][method + tag] = float(np.sqrt(np.mean(np.sum((r.T - truth["r"]) ** 2, axis=1))))
             if "stance" in truth:
                 res["stride"][method + tag] = stride_errors(truth, {method: r})[0].mean_abs
-            applied = out["zupt"].any(axis=1)
             if method == "defaults":
+                applied = out["zupt"].any(axis=1)
                 res["false"][tag or " alone"] = false_rests(applied, speed)
                 a, b = intervals(truth["rest"])[0] if truth["rest"].any() else (0, 0)
                 res["first stand"] = (int(applied[a:b].sum()), b - a, a / float(smodel.rate_hz))

@@ -400,15 +400,21 @@ def study_drive(drive: Drive, tmp: Path, free: bool = True, smooth=smooth) -> di
         fixed = smooth(csv, model, axes, rest=rest, fixes=fixes)
         ef = np.asarray(fixed["smooth_x"])[0, :, 0][held] - drive.distance[held]
         res["fixed"][k] = float(np.sqrt(np.mean(ef**2)))
-        res["rests"][k] = fixed["zupt"][:, 0].astype(bool)
+        res["rests"][k] = _applied(fixed, len(drive.t))
         if free:
             alone = smooth(csv, model, axes, rest=rest)
-            res["free_rests"][k] = alone["zupt"][:, 0].astype(bool)
+            res["free_rests"][k] = _applied(alone, len(drive.t))
             e = np.asarray(alone["smooth_x"])[0, :, 0] - drive.distance
             res["free"][k] = (float(np.sqrt(np.mean(e**2))), float(e[-1]))
     interp = np.interp(drive.t[held], drive.fix_t[given], drive.fix_distance[given])
     res["fixed"]["interpolated fixes"] = float(np.sqrt(np.mean((interp - drive.distance[held]) ** 2)))
     return res
+
+
+def _applied(arrays: dict, n: int) -> np.ndarray:
+    """(n,) the samples whose zero-velocity update was applied (none where the run has no ``zupt``: the
+    command's plain smooth streams and writes none)."""
+    return arrays["zupt"][:, 0].astype(bool) if "zupt" in arrays else np.zeros(n, dtype=bool)
 
 
 def study_foot(foot, tmp: Path, smooth=smooth) -> dict:
