@@ -27,7 +27,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 from support import realdata  # tests/support, on the path bench/run_all.py sets
 from support import realdata_more as rm
 from support.cart_model import adxl335_model
@@ -263,17 +262,9 @@ def main() -> int:
     return 0
 
 
-def _load(what: str, fn):
-    try:
-        return fn()
-    except pytest.skip.Exception as exc:
-        print(f"{what}: not available ({exc})")
-        return None
-
-
 def real(tmp: Path, targets: list) -> None:
     """The real recordings of the tests, through the command (rm.smooth_cli)."""
-    feet = _load("gaitmap foot walk", realdata.load_walk)
+    feet = rm.load_or_none("gaitmap foot walk", realdata.load_walk)
     print("\nReal recordings (tests/support): defaults | reference rests | no ZUPT")
     for foot in feet or ():
         e = rm.study_foot(foot, tmp, smooth=rm.smooth_cli)["error"]
@@ -287,7 +278,7 @@ def real(tmp: Path, targets: list) -> None:
                 auto <= 1.2 * ref,
             )
         )
-    for w in _load("mobgap lower-back walks", rm.load_lowback_walks) or ():
+    for w in rm.load_or_none("mobgap lower-back walks", rm.load_lowback_walks) or ():
         e = rm.study_walk(w, tmp, smooth=rm.smooth_cli)["error"]
         auto, ref, none = (abs(e[m]) for m in rm.WALK_METHODS)
         print(
@@ -304,7 +295,7 @@ def real(tmp: Path, targets: list) -> None:
         )
     drives = [("KITTI drive", rm.load_drive)]
     for name, loader in drives:
-        drive = _load(name, loader)
+        drive = rm.load_or_none(name, loader)
         if drive is not None:
             vehicle(name, drive, tmp, targets)
 

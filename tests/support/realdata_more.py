@@ -117,6 +117,15 @@ def _unavailable(why: str):
     pytest.skip(msg)
 
 
+def load_or_none(what: str, fn):
+    """``fn()``, or None with a line saying why where the data cannot be had (a bench runs on without them)."""
+    try:
+        return fn()
+    except pytest.skip.Exception as exc:
+        print(f"{what}: not available ({exc})")
+        return None
+
+
 def _read_member(archive: Path, name: str) -> bytes:
     if archive.suffix == ".whl":
         with zipfile.ZipFile(archive) as z:
