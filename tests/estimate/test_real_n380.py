@@ -42,26 +42,15 @@ def test_the_recording_and_its_track(drives, key):
     assert d.raw_steps.max() > 1.9 / rm.DRIVE_RATE
 
 
-def _per_second(x: np.ndarray) -> np.ndarray:
-    n = len(x) // int(rm.DRIVE_RATE)
-    return x[: n * int(rm.DRIVE_RATE)].reshape(n, -1).mean(axis=1)
-
-
 @pytest.mark.parametrize("key", sorted(EXPECTED))
 def test_accelerometer_and_gnss_agree(drives, key):
     """Per second, the forward reading is the GNSS speed's change plus the mount's and the road's g sin(pitch):
     correlated above 0.9, within 0.35 m/s^2 rms, and on the same clock (best lag 0). The wrong axis or sign
     correlates below 0.6 or negatively."""
-    d = drives[key]["drive"]
-    dv = _per_second(np.gradient(d.speed, d.t))
-    ax = _per_second(d.longitudinal)
-    lags = {
-        lag: np.corrcoef(ax[max(lag, 0) : len(ax) + min(lag, 0)], dv[max(-lag, 0) : len(dv) - max(lag, 0)])[0, 1]
-        for lag in (-2, -1, 0, 1, 2)
-    }
+    lags, rms = rm.speed_agreement(drives[key]["drive"])
     assert max(lags, key=lags.get) == 0, lags
     assert lags[0] > 0.9, lags
-    assert np.sqrt(np.mean((ax - dv) ** 2)) < 0.35
+    assert rms < 0.35
 
 
 def test_the_reference_stops_are_stops(drives):

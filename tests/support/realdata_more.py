@@ -306,17 +306,29 @@ def load_drive(folder: Path | None = None) -> Drive:
     speed = np.linalg.norm(track(t, 1), axis=1)
     inside = (gps[:, 0] - t0 >= 0) & (gps[:, 0] - t0 <= t[-1])
     fix_t = gps[inside, 0] - t0
-    return Drive(
-        t,
-        longitudinal,
-        gyro_z,
-        distance,
-        speed,
-        speed < REST_SPEED,
-        fix_t,
-        np.interp(fix_t, fine, arc),
-        np.diff(t_raw),
-    )
+    return _drive(t, longitudinal, gyro_z, distance, speed, fix_t, np.interp(fix_t, fine, arc), t_raw)
+
+
+def _drive(t, longitudinal, gyro_z, distance, speed, fix_t, fix_distance, t_raw) -> Drive:
+    """A Drive whose reference rests are where the track's speed is below REST_SPEED."""
+    return Drive(t, longitudinal, gyro_z, distance, speed, speed < REST_SPEED, fix_t, fix_distance, np.diff(t_raw))
+
+
+def _per_second(x: np.ndarray) -> np.ndarray:
+    n = len(x) // int(DRIVE_RATE)
+    return x[: n * int(DRIVE_RATE)].reshape(n, -1).mean(axis=1)
+
+
+def speed_agreement(d: Drive, lags=(-2, -1, 0, 1, 2)) -> tuple[dict[int, float], float]:
+    """How the accelerometer and the track agree, per second: the correlation of the longitudinal reading
+    shifted by each lag (s) with the track's change of speed, and the rms of their difference at lag 0."""
+    dv = _per_second(np.gradient(d.speed, d.t))
+    ax = _per_second(d.longitudinal)
+    corr = {
+        lag: float(np.corrcoef(ax[max(lag, 0) : len(ax) + min(lag, 0)], dv[max(-lag, 0) : len(dv) - max(lag, 0)])[0, 1])
+        for lag in lags
+    }
+    return corr, float(np.sqrt(np.mean((ax - dv) ** 2)))
 
 
 # --- running accelnav as a user would, and the figures of issue 23 ---------------------------------------
@@ -523,15 +535,5 @@ def load_n380_drives(folder: Path | None = None) -> dict[str, Drive]:
         along = track.antiderivative()
         distance = along(t)
         fix_t = tg - t0
-        drives[key] = Drive(
-            t,
-            longitudinal,
-            gyro_z,
-            distance,
-            speed,
-            speed < REST_SPEED,
-            fix_t,
-            along(fix_t),
-            np.diff(t_raw),
-        )
+        drives[key] = _drive(t, longitudinal, gyro_z, distance, speed, fix_t, along(fix_t), t_raw)
     return drives
