@@ -127,7 +127,7 @@ def simulated(scenario: str, model: Path | None, seconds: float | None, seed: in
     return res
 
 
-def cost_per_sample(run: Path, repeat: int = 3) -> dict[str, float]:
+def cost_per_sample(run: Path, repeat: int = 5) -> dict[str, float]:
     """Wall time per sample of smooth plain, with the true rests and with --zupt auto, µs (best of ``repeat``)."""
     from baselines import best_of  # bench/common, on the path bench/run_all.py sets
 
