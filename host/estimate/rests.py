@@ -179,13 +179,13 @@ class _Kinematic:
 
 
 LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
-CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
-UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
+UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
+CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
-STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
+STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
 
 ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
 REFUSE_REASONS = ("moving", "level jumped", "cannot tell", "no deceleration")
