@@ -553,8 +553,22 @@ class _Decider:
                             worst = None
                     if worst is not None:
                         self._withdraw(worst, after[worst])
+                        # the pieces it touches, nothing between (a gap under a window), stand or fall with it:
+                        # a ramp cut into quiet pieces must not survive one piece at a time
+                        for step in (-1, 1):
+                            r = pos[worst]
+                            while 0 <= r + step < len(order) and self._touch(order[min(r, r + step)],
+                                                                             order[max(r, r + step)]):  # fmt: skip
+                                r += step
+                                j = order[r]
+                                self.veto.setdefault(j, f"touches the rest at {self.t[self.cands[worst].start]:.2f} s, "
+                                                        f"withdrawn: {self.veto[worst]}")  # fmt: skip
                 group = [i] if i is not None else []
         return found, acc
+
+    def _touch(self, i: int, j: int) -> bool:
+        """Candidates i < j are pieces of one stretch: less than a window (``bridge_s``) between them."""
+        return (self.cands[j].start - self.cands[i].stop) * self.Ts <= max(self.p.bridge_s, 2 * self.Ts)
 
     def _short_before_stands(self, found: list[_Found], acc: set[int]) -> dict[int, int]:
         """{j: i}: accepted rests j shorter than a stand (``start_s``) that were all that made the stand i after
