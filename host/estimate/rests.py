@@ -553,9 +553,11 @@ class _Decider:
                             worst = None
                     if worst is not None:
                         self._withdraw(worst, after[worst])
-                        # the pieces it touches, nothing between (a gap under a window), stand or fall with it:
-                        # a ramp cut into quiet pieces must not survive one piece at a time
-                        for step in (-1, 1):
+                        # where a fix refuted it, the pieces it touches, nothing between (a gap under a window),
+                        # fall with it: a ramp cut into quiet pieces must not survive one piece at a time (a piece
+                        # the other rests refuted may be the end of a stance whose other piece is sound)
+                        by_fix = after[worst].source.startswith("the fix")
+                        for step in (-1, 1) if by_fix else ():
                             r = pos[worst]
                             while 0 <= r + step < len(order) and self._touch(order[min(r, r + step)],
                                                                              order[max(r, r + step)]):  # fmt: skip
