@@ -105,7 +105,7 @@ class ZuptParams:
     level_max: float = 4.0  # m/s^2, ... and this much after a move (a jog's or a tilting mount's leak)
     level_walk: float = 0.05  # m/s^2 per sqrt(s), the level's random walk between aids (accelnav.estimate.rests)
     rel: float = 0.25  # a still stand: the speed since the last rest came back to at most rel of its peak
-    passes: int = 6  # bound on the decision's passes (each: the forward and the backward kinematic filter)
+    passes: int = 20  # bound on the decision's passes (each: the forward and the backward kinematic filter)
 
 
 def window_samples(model: Model, p: ZuptParams) -> int:
@@ -129,8 +129,8 @@ def resolved(model: Model, p: ZuptParams) -> ZuptParams:
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
     if not (math.isfinite(p.gate) and p.gate >= 0):
         raise ValueError(f"zupt gate: got {p.gate}; accepted: a number >= 0 (0: no gate)")
-    if not (isinstance(p.passes, int) and 1 <= p.passes <= 50):
-        raise ValueError(f"zupt passes: got {p.passes}; accepted: a whole number 1..50")
+    if not (isinstance(p.passes, int) and 1 <= p.passes <= 100):
+        raise ValueError(f"zupt passes: got {p.passes}; accepted: a whole number 1..100")
     return p
 
 
