@@ -431,10 +431,20 @@ class Holdout:
 
     n: int  # fixes left out, all axes
     rms: dict[str, float]  # "smoother" and the BASELINES
+    misses: dict[str, np.ndarray] | None = None  # |miss| at each held-out fix, per method
+
+    def losses(self, baseline: str) -> int:
+        """Held-out fixes the smoother misses by more than ``baseline``."""
+        return int(np.sum(self.misses["smoother"] > self.misses[baseline]))
 
     def worse_than(self) -> list[str]:
-        """The baselines that beat the smoother here."""
-        return [b for b in BASELINES if self.rms["smoother"] > self.rms[b]]
+        """The baselines that beat the smoother here: a larger rms miss, and more misses than a coin would give
+        (a sign test at 5 %: one fix far off cannot decide it); none with fewer than HOLDOUT_MIN held out."""
+        from accelnav.estimate.consistency import HOLDOUT_MIN, sign_test
+
+        if self.n < HOLDOUT_MIN:
+            return []
+        return [b for b in BASELINES if self.rms["smoother"] > self.rms[b] and sign_test(self.losses(b), self.n) < 0.05]
 
 
 def holdout(arrays: dict[str, np.ndarray], model: Model, fixes: list[list], **smooth_kw) -> Holdout | None:
@@ -457,20 +467,48 @@ def holdout(arrays: dict[str, np.ndarray], model: Model, fixes: list[list], **sm
     base = {k: arrays[k] for k in ("t", "axis_names", "accel", "clipped")}
     sm = smooth_run(base, model, fixes=given, covariances=False, **smooth_kw)
     estimates = {"smoother": sm["smooth_x"][:, :, 0], **fix_baselines(base, model, given)}
-    rms = {}
+    rms, misses = {}, {}
     for name, r in estimates.items():
-        e = [r[j, m.k] - m.z for j, h in enumerate(held) for m in h]
+        e = np.array([r[j, m.k] - m.z for j, h in enumerate(held) for m in h])
         rms[name] = float(np.sqrt(np.mean(np.square(e))))
-    return Holdout(sum(len(h) for h in held), rms)
+        misses[name] = np.abs(e)
+    return Holdout(sum(len(h) for h in held), rms, misses)
 
 
-def smooth_checks(smoothed: dict, model, inputs: dict, fixes=None, **smooth_kw) -> SmoothChecks:
+def smooth_checks(
+    smoothed: dict, model, inputs: dict, fixes=None, *, review=None, tuned: bool = False, **smooth_kw
+) -> SmoothChecks:
     """The consistency checks of a smoothed run (``smoothed``, from ``inputs`` with ``fixes`` and
-    ``smooth_kw`` as :func:`accelnav.estimate.pipeline.smooth_run` took them)."""
-    from accelnav.estimate.consistency import SmoothChecks, nis_check
+    ``smooth_kw`` as :func:`accelnav.estimate.pipeline.smooth_run` took them); ``review``: the rests'
+    re-examination (consistency.disagreeing_rests) that chose ``smooth_kw``'s rests; ``tuned``: the model was
+    fitted to this run."""
+    from accelnav.estimate.consistency import ANCHOR_SD, NoAnchor, SmoothChecks, nis_check
+    from accelnav.estimate.zupt import ZuptParams
 
     first = smoothed["zupt_nis"][:, 3] > 0  # each rest's first update (see smooth_run)
     kinds = (("fixes", smoothed["fix_nis"]), ("rests", smoothed["zupt_nis"][first, 2]))
     nis = tuple(nis_check(kind, v) for kind, v in kinds if len(v))
     h = None if fixes is None else holdout(inputs, model, fixes, **smooth_kw)
-    return SmoothChecks(nis, h)
+    no_anchor = None
+    asked = smooth_kw.get("rest") is not None or review is not None
+    if asked and not any(fixes or []) and not np.any(smoothed["zupt"]):
+        sd = smoothed["smooth_sd"][:, -1, 0]
+        j = int(np.argmax(sd))
+        if sd[j] > ANCHOR_SD:
+            params = smooth_kw.get("zupt_params") or ZuptParams()
+            no_anchor = NoAnchor(float(sd[j]), str(smoothed["axis_names"][j]), params.start_s)
+    return SmoothChecks(nis, h, review, tuned, no_anchor)
+
+
+def truth_versus_baselines(rows: list[PositionErrors], tune_helps: bool) -> str:
+    """With truth and fixes: a line if the smoother is worse than a fix-only baseline (rms over the axes), else
+    ''; ``tune_helps``: SmoothChecks.tune_helps, the only case in which it advises --tune."""
+    rms = rms_by_method(rows)
+    worse = [b for b in BASELINES if b in rms and rms["smoother"] > rms[b]]
+    if not worse:
+        return ""
+    return (
+        f"against the truth the smoother ({rms['smoother']:.3g} m rms) is worse than {' and '.join(worse)} "
+        f"({min(rms[b] for b in worse):.3g} m): its model does not fit this recording"
+        + (": try --tune" if tune_helps else "")
+    )
