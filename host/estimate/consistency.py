@@ -151,7 +151,7 @@ class NisCheck:
                 )
             if tuned:
                 return f"{head}: tuning does not fit them: check the fixes' sigma_m and any fix far off the track"
-            return f"{head}; the model's noise figures are too stiff for them: try --tune"
+            return f"{head}; the model's noise figures are too stiff: try --tune"
         if self.verdict == "loose":
             head = (
                 f"{self.kind} agree with the {'tuned ' if tuned else ''}model better than it expects: {fig}, "
@@ -164,7 +164,7 @@ class NisCheck:
                 )
             if tuned:
                 return f"{head}: the fixes' sigma_m may be larger than their real error"
-            return f"{head}; the model's noise figures are too loose for them: try --tune"
+            return f"{head}; the model's noise figures are too loose: try --tune"
         return f"{what}: {fig}, within [{self.low:.3g}, {self.high:.3g}]: consistent with the model"
 
 

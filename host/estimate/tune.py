@@ -77,13 +77,15 @@ MAX_EVALUATIONS = 1500  # search (at most a third), Hessian and profile interval
 PROFILE_DROP = 0.5 * NormalDist().inv_cdf(0.975) ** 2
 R95 = math.sqrt(2.0 * PROFILE_DROP)  # 1.96: the signed root at an end
 LN_BOUNDS = {"sigma_n": (1e-4, 1e3), "sigma_eps": (1e-9, 10.0), "R": (1e-10, 1e4)}
-NOISE_FLOOR_SHARE = 0.1  # R at least a tenth of the datasheet's analog noise power (a part 3x quieter: not credible)
+# R at least a tenth of what the datasheet's noise and the read-out's rounding give (3x quieter: not credible;
+# the rounding is not white where the analog noise is below a step, and the motion's model takes some of it)
+NOISE_FLOOR_SHARE = 0.1
 
 
 def figure_bounds(model: Model) -> dict[str, tuple[float, float, str, str]]:
     """(low, high, why low, why high) of each noise figure's search range, tied to the sensor where it can be.
 
-    R: from the read-out's rounding (step^2 / 12) plus NOISE_FLOOR_SHARE of the datasheet's analog noise power,
+    R: from NOISE_FLOOR_SHARE of the datasheet's analog noise power plus the read-out's rounding (step^2 / 12),
     to the full scale squared; below the floor the filter would take every sample as exact and explain the
     motion's jolts by a huge sigma_n (a foot's heel strikes drove R to the search limit and sigma_n to 26-63).
     sigma_n: up to the full scale per sqrt(s), an acceleration that wanders over the sensor's whole range within
@@ -92,7 +94,7 @@ def figure_bounds(model: Model) -> dict[str, tuple[float, float, str, str]]:
     from accelnav.model.design import steps_and_noise
 
     steps, noise = steps_and_noise(model)
-    floor = float(np.max(steps)) ** 2 / 12.0 + NOISE_FLOOR_SHARE * noise**2
+    floor = NOISE_FLOOR_SHARE * (float(np.max(steps)) ** 2 / 12.0 + noise**2)
     full = model.max_accel_m_s2
     out = {
         "sigma_n": (LN_BOUNDS["sigma_n"][0], full, "the search limit", "the sensor's full scale per sqrt(s)"),
