@@ -1,0 +1,69 @@
+"""What accelnav smooth says about its rests and its model (issue 31, "checks that act"), on simulated runs: the
+rests that disagree dropped and named before any advice, no "try --tune" after --tune, a run with nothing
+anchoring it said. The numbers behind the lines: tests/estimate/test_advice_lines.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support.cli import run_cli
+from support.vehicle_fixes import write_files
+
+from accelnav.data.runfile import load_run
+from accelnav.estimate import zupt
+from accelnav.estimate.kf import position_fix
+from accelnav.hil_sim.sim.sensor import simulate
+
+MOVING = 0.5  # m/s
+
+
+def _files(tmp_path, model, scenario, fix_every_s, fix_sigma):
+    run = simulate(model, scenario, 60.0, 3).to_arrays()
+    rng = np.random.default_rng(3)
+    ks = range(0, len(run["t"]), int(round(fix_every_s * model.rate_hz)))
+    fixes = [
+        [position_fix(k, float(run["r"][k, j] + fix_sigma * rng.standard_normal()), fix_sigma) for k in ks]
+        for j in range(len(run["axis_names"]))
+    ]
+    return write_files(tmp_path, run, model, fixes)
+
+
+def test_rests_at_speed_are_dropped_and_named_before_the_noise_lines(tmp_path, capsys, default_model):
+    path, fx = _files(tmp_path, default_model, "cart_push", 5.0, 0.01)
+    out = tmp_path / "o.npz"
+    status, text, err = run_cli(["smooth", path, "--zupt", "auto", "--fixes", fx, "--out", out], capsys)
+    assert status == 0, err
+    lines = text.splitlines()
+    (i,) = [k for k, x in enumerate(lines) if x.startswith("rests re-examined: 3 of 5 disagree")]
+    assert all(not x.startswith(("fixes ", "rests disagree", "held-out")) for x in lines[:i])
+    arrays, _ = load_run(out)
+    speed = np.linalg.norm(arrays["u"], axis=1)
+    for a, b in zupt.intervals(arrays["zupt"].any(axis=1)):
+        assert speed[a:b].max() < MOVING
+    # the run file's candidates say which were finally used: the dropped ones are not
+    used = arrays["zupt_candidates"][arrays["zupt_candidates"][:, 2] > 0]
+    t = arrays["t"]
+    for t0, t1, _ in used:
+        assert speed[(t >= t0) & (t <= t1)].max() < MOVING
+
+
+def test_no_try_tune_after_tune(tmp_path, capsys, default_model):
+    path, fx = _files(tmp_path, default_model, "highway", 1.0, 1.0)
+    argv = ["smooth", path, "--fixes", fx, "--out", tmp_path / "a.npz"]
+    status, text, err = run_cli(argv, capsys)
+    assert status == 0, err
+    assert "fixes disagree with the model" in text and text.count("try --tune") == 3  # NIS, held out, truth
+    status, text, err = run_cli([*argv[:-2], "--tune", "--tune-evaluations", "10", "--out", tmp_path / "b.npz"], capsys)
+    assert status == 0, err
+    assert "stopped at its budget: the best figures found, not a maximum" in text
+    assert "fixes disagree with the tuned model" in text and "--tune" not in text.split("\ntune: ", 1)[1]
+
+
+@pytest.mark.parametrize("fixes", [False, True])
+def test_nothing_anchoring_the_run_is_said(tmp_path, capsys, default_model, fixes):
+    path, fx = _files(tmp_path, default_model, "highway", 1.0, 1.0)
+    argv = ["smooth", path, "--zupt", "auto", "--out", tmp_path / "h.npz"] + (["--fixes", fx] if fixes else [])
+    status, text, err = run_cli(argv, capsys)
+    assert status == 0, err
+    said = [x for x in text.splitlines() if x.startswith("no rest applied and no fixes: nothing anchors")]
+    assert len(said) == (0 if fixes else 1)
