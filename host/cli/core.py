@@ -88,6 +88,14 @@ def register(sub) -> None:
     p.add_argument("--list-scenarios", action="store_true", help="print the scenario names and exit")
     p.add_argument("--out", type=Path, help="run file to write (.npz)")
     _csv_arg(p)
+    p.add_argument(
+        "--fixes-out",
+        type=Path,
+        default=None,
+        metavar="CSV",
+        help="also write the scenario's position fixes (highway_gnss, town_drive, hand_box) as the CSV "
+        "smooth --fixes reads",
+    )
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser(
@@ -406,13 +414,24 @@ def cmd_sim(args) -> int:
         return 0
     if args.out is None:
         raise UserError("--out: a run file to write is required")
-    from accelnav.hil_sim.sim.trajectories import require_scenario
+    from accelnav.hil_sim.sim.trajectories import FIX_PLANS, require_scenario
 
     model = load_model(args.model)
     require_scenario(args.scenario, "--scenario", UserError)
+    if args.fixes_out is not None and args.scenario not in FIX_PLANS:
+        raise UserError(
+            f"--fixes-out: scenario {args.scenario!r} has no position fixes; those with fixes: {', '.join(FIX_PLANS)}"
+        )
+    if args.fixes_out is not None:
+        check_output(args.fixes_out, "--fixes-out")
     arrays = simulate(model, args.scenario, args.duration, args.seed)
     print(_summary(arrays))
     write_outputs(args, arrays, model)
+    if args.fixes_out is not None:
+        from accelnav.estimate.fixes import fixes_csv
+
+        write_text(args.fixes_out, fixes_csv(arrays["sim_fixes"], arrays["axis_names"]), flag="--fixes-out")
+        print(f"wrote {args.fixes_out} ({len(arrays['sim_fixes'])} position fixes)")
     return 0
 
 
