@@ -485,7 +485,10 @@ def smooth_checks(
     from accelnav.estimate.consistency import ANCHOR_SD, NoAnchor, SmoothChecks, nis_check
     from accelnav.estimate.zupt import ZuptParams
 
-    first = smoothed["zupt_nis"][:, 3] > 0  # each rest's first update (see smooth_run)
+    # each rest's first update (see smooth_run), but a rest at the run's first sample: there the filter's prior
+    # already holds u = 0 exactly, the same statement, so its NIS is 0 by construction and tests nothing
+    z = smoothed["zupt_nis"]
+    first = (z[:, 3] > 0) & (z[:, 0] > smoothed["t"][0])
     kinds = (("fixes", smoothed["fix_nis"]), ("rests", smoothed["zupt_nis"][first, 2]))
     nis = tuple(nis_check(kind, v) for kind, v in kinds if len(v))
     h = None if fixes is None else holdout(inputs, model, fixes, **smooth_kw)

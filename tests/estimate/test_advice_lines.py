@@ -166,3 +166,28 @@ def test_a_run_that_nothing_anchors_says_so(default_model):
     walk, wrest, _ = _case(default_model, "walking", 3)
     sm = smooth_run(walk, default_model, rest=wrest)
     assert smooth_checks(sm, default_model, walk, rest=wrest).no_anchor is None
+
+
+@pytest.mark.parametrize("scenario", ["highway_gnss", "town_drive", "hand_box"])
+def test_issue_31_cases_with_fixes_lose_their_rests_at_speed_and_no_accuracy(default_model, scenario):
+    """The rest-cases scenarios with the fixes a user has there: every rest the detector calls while the body
+    moves is dropped against the fixes, and --zupt auto ends within 1.1x of the fixes alone."""
+    from accelnav.estimate.pipeline import fixes_per_axis
+
+    run = simulate(default_model, scenario, 120.0, 1).to_arrays()
+    fixes = fixes_per_axis({"t": run["t"], "axis_names": run["axis_names"], "fixes": run["sim_fixes"]})
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    rest = zupt.rest_mask(run["accel"], run["clipped"], default_model, p)
+    assert any(_top_speed(run, a, b) > MOVING for a, b in zupt.intervals(rest))  # the detector's mistake is there
+    review = disagreeing_rests(run, default_model, rest, fixes=fixes, params=p)
+    assert review.said and all(r.against == "the fixes" for r in review.dropped)
+    for a, b in zupt.intervals(review.kept.any(axis=1)):
+        assert _top_speed(run, a, b) < MOVING
+    err = {}
+    for name, kw in (("fixes", {}), ("kept", {"rest": review.kept, "zupt_params": p})):
+        sm = smooth_run(run, default_model, fixes=fixes, covariances=False, **kw)
+        err[name] = float(np.sqrt(np.mean((sm["smooth_x"][:, :, 0].T - run["r"]) ** 2)))
+        if name == "kept":  # a still start left alone tests nothing: no line about the rests from it
+            lines = smooth_checks(sm, default_model, run, review=review, rest=review.kept, zupt_params=p).nis
+            assert not any(c.kind == "rests" and c.verdict == "loose" for c in lines)
+    assert err["kept"] <= 1.1 * err["fixes"], err
