@@ -140,5 +140,6 @@ def test_tunes_a_simulated_stop_and_go_from_a_bad_start(default_model):
     _, r = accelnav.tune(run, start, rest=rest, figures=("R", "c2"))
     lo = figure_bounds(start)["R"][0]
     assert r.start["R"] == 0.05 and "c2.y" in r.figures and r.estimate["R"] == pytest.approx(lo, rel=0.06)
-    assert r.why_not_identified("R") == f"at its lower bound (the sensor's rounding and datasheet noise floor, {lo:.3g})"
+    floor = "the sensor's rounding and datasheet noise floor"
+    assert r.why_not_identified("R") == f"at its lower bound ({floor}, {lo:.3g})"
     assert r.unidentified() == f"R not identified: {r.why_not_identified('R')}"
