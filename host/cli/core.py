@@ -603,8 +603,8 @@ def cmd_smooth(args) -> int:
 
 
 def _review_rests(arrays, model: Model, rest: np.ndarray, fixes, params):
-    """(the rests kept, the review) of consistency.disagreeing_rests; (rest, None) without rests."""
-    from accelnav.estimate.consistency import disagreeing_rests
+    """(the rests kept, the review) of pipeline.disagreeing_rests; (rest, None) without rests."""
+    from accelnav.estimate.pipeline import disagreeing_rests
 
     if not rest.any():
         return rest, None

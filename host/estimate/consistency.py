@@ -24,9 +24,9 @@ predicts it from the rest. Fewer than ``HOLDOUT_MIN`` held-out fixes cannot tell
 
 Rests re-examined
 -----------------
-A rest that disagrees with the model is first suspected of not being a rest: :func:`disagreeing_rests` tests
-each rest's zero velocity against a smoothing that did not use it, and names the ones that fail, before any
-line blames the noise figures. Two kinds of evidence, in this order:
+A rest that disagrees with the model is first suspected of not being a rest:
+:func:`accelnav.estimate.pipeline.disagreeing_rests` tests each rest's zero velocity against a smoothing that
+did not use it, and names the ones that fail, before any line blames the noise figures. Two kinds of evidence, in this order:
 
 * **the fixes**: one smoothing with the fixes alone; a rest whose mean smoothed velocity is off zero by more
   than that smoothing's velocity sd allows (chi-square, one dof per axis; the sd scaled up by the fixes' own
@@ -208,7 +208,7 @@ class NoAnchor:
 class SmoothChecks:
     """What a smoothed run says about its model: the NIS of each kind of aid, with fixes the held-out
     comparison (:func:`accelnav.estimate.pipeline.holdout`, or None), the re-examination of the rests
-    (:func:`disagreeing_rests`, or None), and whether anything anchors the run;
+    (:func:`accelnav.estimate.pipeline.disagreeing_rests`, or None), and whether anything anchors the run;
     :func:`accelnav.estimate.pipeline.smooth_checks` makes one. ``tuned``: the model was fitted to this run."""
 
     nis: tuple[NisCheck, ...]
@@ -281,7 +281,8 @@ class RestTest:
 
 @dataclass(frozen=True)
 class RestReview:
-    """The rests re-examined (:func:`disagreeing_rests`): the ones dropped, and how far the test got."""
+    """The rests re-examined (:func:`accelnav.estimate.pipeline.disagreeing_rests`): the ones dropped, and how far
+    the test got."""
 
     tested: int  # rests
     dropped: tuple[RestTest, ...]
@@ -308,7 +309,7 @@ class RestReview:
         return head + (f": {named}{more}" if n else "") + tail
 
 
-def _rest_bound(dof: int, n_tests: int) -> float:
+def rest_bound(dof: int, n_tests: int) -> float:
     """The chi-square (``dof``) point a true rest exceeds with probability REST_ALPHA / n_tests."""
     return 2.0 * float(special.gammainccinv(dof / 2.0, REST_ALPHA / max(n_tests, 1)))
 
@@ -343,85 +344,15 @@ def rest_tests(
             speed2 += ub * ub
             dof += 1
         if dof:
-            out.append(RestTest(a, b, chi2 / scale, dof, _rest_bound(dof, n_tests), math.sqrt(speed2), against))
+            out.append(RestTest(a, b, chi2 / scale, dof, rest_bound(dof, n_tests), math.sqrt(speed2), against))
     return out
 
 
-def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, params=None, rest_sigma=None):
-    """The rests of ``rest`` ((N,) or (N, n_axes) mask) that disagree with the fixes and the other rests (see the
-    module): a :class:`RestReview` whose ``dropped`` name them, with their statistics, and whose ``kept`` is
-    the mask without them. ``inputs`` (t, axis_names, accel, clipped), ``model``, ``fixes`` (per axis),
-    ``params`` (ZuptParams) and ``rest_sigma`` are as :func:`accelnav.estimate.pipeline.smooth_run` takes them.
-    Bounded: one smoothing with the fixes, then at most REVIEW_SMOOTHINGS."""
-    from accelnav.estimate import zupt
-    from accelnav.estimate.pipeline import smooth_run
-
-    params = zupt.ZuptParams() if params is None else params
-    n, n_axes = np.asarray(inputs["accel"]).shape
-    r = np.asarray(rest, dtype=bool)
-    kept = np.array(np.broadcast_to(r[:, None] if r.ndim == 1 else r, (n, n_axes)))
-    sigma = np.full((n, n_axes), float(params.sigma))
-    if rest_sigma is not None:
-        given = np.asarray(rest_sigma, dtype=np.float64)
-        sigma = np.where(np.isfinite(given), given, sigma)
-    updates = np.zeros((n, n_axes), dtype=bool)
-    for j in range(n_axes):
-        updates[zupt.update_samples(kept[:, j], model, params), j] = True
-    rests = zupt.intervals(kept.any(axis=1))
-    base = {k: inputs[k] for k in ("t", "axis_names", "accel", "clipped")}
-    dropped: list[RestTest] = []
-    smoothings = 0
-
-    def drop(tests: list[RestTest]) -> None:
-        for t in tests:
-            kept[t.start : t.stop] = False
-            updates[t.start : t.stop] = False
-            dropped.append(t)
-
-    if fixes is not None and any(fixes) and rests:
-        sm = smooth_run(base, model, fixes=fixes, covariances=False)
-        smoothings += 1
-        inflate = max(1.0, float(np.mean(sm["fix_nis"]))) if len(sm["fix_nis"]) else 1.0
-        drop([t for t in rest_tests(sm, rests, updates, sigma, "the fixes", len(rests), var_scale=inflate) if t.fails])
-    complete = True
-    while True:
-        left = zupt.intervals(kept.any(axis=1))
-        if len(left) < 3:  # two rests that disagree cannot say which is wrong
-            break
-        sm = smooth_run(base, model, fixes=fixes, rest=kept, zupt_params=params, rest_sigma=rest_sigma,
-                        covariances=False)  # fmt: skip
-        smoothings += 1
-        forward = _first_update_nis(sm, left)
-        scale = max(1.0, float(np.median(forward)) / _chi2_median(n_axes))
-        order = np.argsort(-forward)[:REVIEW_SUSPECTS]
-        bound = _rest_bound(n_axes, len(rests))
-        order = [i for i in order if forward[i] / scale > bound]
-        if not order:
-            break
-        if smoothings + len(order) > REVIEW_SMOOTHINGS:
-            complete = False
-            break
-        tests = []
-        for i in order:
-            a, b = left[i]
-            without = kept.copy()
-            without[a:b] = False
-            loo = smooth_run(base, model, fixes=fixes, rest=without, zupt_params=params, rest_sigma=rest_sigma,
-                             covariances=False)  # fmt: skip
-            smoothings += 1
-            tests += rest_tests(loo, [(a, b)], updates, sigma, "the other rests", len(rests), scale)
-        worst = max(tests, key=lambda t: t.chi2)
-        if not worst.fails:
-            break
-        drop([worst])
-    return RestReview(len(rests), tuple(dropped), smoothings, complete, kept, np.asarray(inputs["t"]))
-
-
-def _chi2_median(dof: int) -> float:
+def chi2_median(dof: int) -> float:
     return 2.0 * float(special.gammaincinv(dof / 2.0, 0.5))
 
 
-def _first_update_nis(smoothed: dict, rests: list[tuple[int, int]]) -> np.ndarray:
+def first_update_nis(smoothed: dict, rests: list[tuple[int, int]]) -> np.ndarray:
     """Per rest, the sum over axes of the NIS of its first zero-velocity update (smooth_run's zupt_nis)."""
     rows = smoothed["zupt_nis"]
     first = rows[rows[:, 3] > 0]

@@ -480,7 +480,7 @@ def smooth_checks(
 ) -> SmoothChecks:
     """The consistency checks of a smoothed run (``smoothed``, from ``inputs`` with ``fixes`` and
     ``smooth_kw`` as :func:`accelnav.estimate.pipeline.smooth_run` took them); ``review``: the rests'
-    re-examination (consistency.disagreeing_rests) that chose ``smooth_kw``'s rests; ``tuned``: the model was
+    re-examination (:func:`disagreeing_rests`) that chose ``smooth_kw``'s rests; ``tuned``: the model was
     fitted to this run."""
     from accelnav.estimate.consistency import ANCHOR_SD, NoAnchor, SmoothChecks, nis_check
     from accelnav.estimate.zupt import ZuptParams
@@ -515,3 +515,82 @@ def truth_versus_baselines(rows: list[PositionErrors], tune_helps: bool) -> str:
         f"({min(rms[b] for b in worse):.3g} m): its model does not fit this recording"
         + (": try --tune" if tune_helps else "")
     )
+
+
+def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, params=None, rest_sigma=None):
+    """The rests of ``rest`` ((N,) or (N, n_axes) mask) that disagree with the fixes and the other rests (see
+    accelnav.estimate.consistency): a consistency.RestReview whose ``dropped`` name them, with their statistics,
+    and whose ``kept`` is the mask without them. ``inputs`` (t, axis_names, accel, clipped), ``model``,
+    ``fixes`` (per axis), ``params`` (ZuptParams) and ``rest_sigma`` as :func:`smooth_run` takes them.
+    Bounded: one smoothing with the fixes, then at most consistency.REVIEW_SMOOTHINGS."""
+    from accelnav.estimate import zupt
+    from accelnav.estimate.consistency import (
+        REVIEW_SMOOTHINGS,
+        REVIEW_SUSPECTS,
+        RestReview,
+        RestTest,
+        chi2_median,
+        first_update_nis,
+        rest_bound,
+        rest_tests,
+    )
+
+    params = zupt.ZuptParams() if params is None else params
+    n, n_axes = np.asarray(inputs["accel"]).shape
+    r = np.asarray(rest, dtype=bool)
+    kept = np.array(np.broadcast_to(r[:, None] if r.ndim == 1 else r, (n, n_axes)))
+    sigma = np.full((n, n_axes), float(params.sigma))
+    if rest_sigma is not None:
+        given = np.asarray(rest_sigma, dtype=np.float64)
+        sigma = np.where(np.isfinite(given), given, sigma)
+    updates = np.zeros((n, n_axes), dtype=bool)
+    for j in range(n_axes):
+        updates[zupt.update_samples(kept[:, j], model, params), j] = True
+    rests = zupt.intervals(kept.any(axis=1))
+    base = {k: inputs[k] for k in ("t", "axis_names", "accel", "clipped")}
+    dropped: list[RestTest] = []
+    smoothings = 0
+
+    def drop(tests: list[RestTest]) -> None:
+        for t in tests:
+            kept[t.start : t.stop] = False
+            updates[t.start : t.stop] = False
+            dropped.append(t)
+
+    if fixes is not None and any(fixes) and rests:
+        sm = smooth_run(base, model, fixes=fixes, covariances=False)
+        smoothings += 1
+        inflate = max(1.0, float(np.mean(sm["fix_nis"]))) if len(sm["fix_nis"]) else 1.0
+        drop([t for t in rest_tests(sm, rests, updates, sigma, "the fixes", len(rests), var_scale=inflate) if t.fails])
+    complete = True
+    while True:
+        left = zupt.intervals(kept.any(axis=1))
+        if len(left) < 3:  # two rests that disagree cannot say which is wrong
+            break
+        sm = smooth_run(base, model, fixes=fixes, rest=kept, zupt_params=params, rest_sigma=rest_sigma,
+                        covariances=False)  # fmt: skip
+        smoothings += 1
+        forward = first_update_nis(sm, left)
+        scale = max(1.0, float(np.median(forward)) / chi2_median(n_axes))
+        order = np.argsort(-forward)[:REVIEW_SUSPECTS]
+        bound = rest_bound(n_axes, len(rests))
+        order = [i for i in order if forward[i] / scale > bound]
+        if not order:
+            break
+        if smoothings + len(order) > REVIEW_SMOOTHINGS:
+            complete = False
+            break
+        tests = []
+        for i in order:
+            a, b = left[i]
+            without = kept.copy()
+            without[a:b] = False
+            loo = smooth_run(base, model, fixes=fixes, rest=without, zupt_params=params, rest_sigma=rest_sigma,
+                             covariances=False)  # fmt: skip
+            smoothings += 1
+            tests += rest_tests(loo, [(a, b)], updates, sigma, "the other rests", len(rests), scale)
+        worst = max(tests, key=lambda t: t.chi2)
+        if not worst.fails:
+            break
+        drop([worst])
+    return RestReview(len(rests), tuple(dropped), smoothings, complete, kept, np.asarray(inputs["t"]))

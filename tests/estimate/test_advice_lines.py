@@ -7,9 +7,15 @@ import numpy as np
 import pytest
 
 from accelnav.estimate import zupt
-from accelnav.estimate.consistency import HOLDOUT_MIN, NisCheck, disagreeing_rests, nis_check
+from accelnav.estimate.consistency import HOLDOUT_MIN, NisCheck, nis_check
 from accelnav.estimate.kf import position_fix
-from accelnav.estimate.pipeline import error_rows, smooth_checks, smooth_run, truth_versus_baselines
+from accelnav.estimate.pipeline import (
+    disagreeing_rests,
+    error_rows,
+    smooth_checks,
+    smooth_run,
+    truth_versus_baselines,
+)
 from accelnav.hil_sim.sim.sensor import simulate
 
 MOVING = 0.5  # m/s: a rest whose true speed reaches this is no rest (the vehicle goal)
