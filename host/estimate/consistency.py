@@ -26,7 +26,8 @@ Rests re-examined
 -----------------
 A rest that disagrees with the model is first suspected of not being a rest:
 :func:`accelnav.estimate.pipeline.disagreeing_rests` tests each rest's zero velocity against a smoothing that
-did not use it, and names the ones that fail, before any line blames the noise figures. Two kinds of evidence, in this order:
+did not use it, and names the ones that fail, before any line blames the noise figures.
+Two kinds of evidence, in this order:
 
 * **the fixes**: one smoothing with the fixes alone; a rest whose mean smoothed velocity is off zero by more
   than that smoothing's velocity sd allows (chi-square, one dof per axis; the sd scaled up by the fixes' own
