@@ -147,8 +147,8 @@ class NisCheck:
             head = f"{self.kind} disagree with the {'tuned ' if tuned else ''}model: {fig}, bound {self.high:.3g}"
             if self.kind != "fixes":
                 return (
-                    f"{head}, though none does alone: the noise figures may be too stiff or the rests not quite "
-                    "still; only fixes can tell (tuning on rests takes them as truth)"
+                    f"{head}: the noise figures may be too stiff or the rests not quite still; only fixes can tell "
+                    "(tuning on rests takes them as truth)"
                 )
             if tuned:
                 return f"{head}: tuning does not fit them: check the fixes' sigma_m and any fix far off the track"
@@ -191,17 +191,24 @@ def sign_test(wins: int, n: int) -> float:
 
 @dataclass(frozen=True)
 class NoAnchor:
-    """Rests were asked for, none was applied and there are no fixes: the position is anchored by nothing."""
+    """Rests were asked for, there are no fixes, and the position's sd at the end is above ANCHOR_SD: nothing
+    anchors the run, or nothing since its last rest."""
 
     sd: float  # m, the largest final position sd over the axes
     axis: str
     still_s: float  # s, the still start that would anchor the run (ZuptParams.start_s)
+    last_rest_s: float | None = None  # s, where the last rest applied ends; None: no rest applied
 
     def line(self) -> str:
+        since = "no rest applied" if self.last_rest_s is None else f"no rest applied after {self.last_rest_s:.3g} s"
+        gives = (
+            f"a still start of {self.still_s:g} s, position fixes (--fixes) or a rest file (--zupt FILE)"
+            if self.last_rest_s is None
+            else "position fixes (--fixes) or a rest file (--zupt FILE)"
+        )
         return (
-            f"no rest applied and no fixes: nothing anchors the position, whose sd reaches {self.sd:.3g} m at the "
-            f"end (axis {self.axis}); a still start of {self.still_s:g} s, position fixes (--fixes) or a rest file "
-            "(--zupt FILE) would give one"
+            f"{since} and no fixes: nothing anchors the position, whose sd reaches {self.sd:.3g} m at the end "
+            f"(axis {self.axis}); {gives} would give one"
         )
 
 
@@ -260,6 +267,7 @@ def holdout_lines(h, tune_helps: bool) -> list[str]:
 REST_ALPHA = 1e-3  # a true rest dropped in one run of a thousand (see the module)
 REVIEW_SMOOTHINGS = 60  # leave-one-out smoothings of the rests at most
 REVIEW_SUSPECTS = 4  # rests smoothed without themselves per round: the ones whose first update stands out most
+REVIEW_MEDIAN_MIN = 5  # rests at least for their median to set what is usual; fewer: the model's own chi-square
 _LISTED = 4  # rests named in the line
 
 
@@ -291,10 +299,11 @@ class RestReview:
     complete: bool  # False: REVIEW_SMOOTHINGS ran out with suspects left
     kept: np.ndarray  # (N, n_axes) the rest mask less the dropped rests
     t: np.ndarray  # the run's times, for the line
+    undecided: bool = False  # a rest stands out, but too few rests are left to say which is wrong
 
     @property
     def said(self) -> bool:
-        return bool(self.dropped) or not self.complete
+        return bool(self.dropped) or not self.complete or self.undecided
 
     def line(self) -> str:
         n = len(self.dropped)
@@ -307,6 +316,8 @@ class RestReview:
         more = f"; {n - len(worst)} more" if n > len(worst) else ""
         head = f"rests re-examined: {n} of {self.tested} disagree with the rest of the evidence, dropped"
         tail = "" if self.complete else f"; stopped at {self.smoothings} smoothings with suspects left"
+        if self.undecided:
+            tail += "; the rests left disagree, but two cannot say which of them is wrong (fixes could)"
         return head + (f": {named}{more}" if n else "") + tail
 
 

@@ -494,12 +494,14 @@ def smooth_checks(
     h = None if fixes is None else holdout(inputs, model, fixes, **smooth_kw)
     no_anchor = None
     asked = smooth_kw.get("rest") is not None or review is not None
-    if asked and not any(fixes or []) and not np.any(smoothed["zupt"]):
+    if asked and not any(fixes or []):
         sd = smoothed["smooth_sd"][:, -1, 0]
         j = int(np.argmax(sd))
         if sd[j] > ANCHOR_SD:
             params = smooth_kw.get("zupt_params") or ZuptParams()
-            no_anchor = NoAnchor(float(sd[j]), str(smoothed["axis_names"][j]), params.start_s)
+            used = np.flatnonzero(np.any(smoothed["zupt"], axis=1))
+            last = float(smoothed["t"][used[-1]]) if len(used) else None
+            no_anchor = NoAnchor(float(sd[j]), str(smoothed["axis_names"][j]), params.start_s, last)
     return SmoothChecks(nis, h, review, tuned, no_anchor)
 
 
@@ -525,6 +527,7 @@ def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, para
     Bounded: one smoothing with the fixes, then at most consistency.REVIEW_SMOOTHINGS."""
     from accelnav.estimate import zupt
     from accelnav.estimate.consistency import (
+        REVIEW_MEDIAN_MIN,
         REVIEW_SMOOTHINGS,
         REVIEW_SUSPECTS,
         RestReview,
@@ -562,20 +565,25 @@ def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, para
         smoothings += 1
         inflate = max(1.0, float(np.mean(sm["fix_nis"]))) if len(sm["fix_nis"]) else 1.0
         drop([t for t in rest_tests(sm, rests, updates, sigma, "the fixes", len(rests), var_scale=inflate) if t.fails])
-    complete = True
+    complete, undecided = True, False
     while True:
         left = zupt.intervals(kept.any(axis=1))
-        if len(left) < 3:  # two rests that disagree cannot say which is wrong
+        if not left:
             break
         sm = smooth_run(base, model, fixes=fixes, rest=kept, zupt_params=params, rest_sigma=rest_sigma,
                         covariances=False)  # fmt: skip
         smoothings += 1
         forward = first_update_nis(sm, left)
-        scale = max(1.0, float(np.median(forward)) / chi2_median(n_axes))
-        order = np.argsort(-forward)[:REVIEW_SUSPECTS]
+        # relative to the median rest where there are enough rests for a median to say what is usual
+        scale = max(1.0, float(np.median(forward)) / chi2_median(n_axes)) if len(left) >= REVIEW_MEDIAN_MIN else 1.0
         bound = rest_bound(n_axes, len(rests))
-        order = [i for i in order if forward[i] / scale > bound]
+        order = [i for i in np.argsort(-forward)[:REVIEW_SUSPECTS] if forward[i] / scale > bound]
         if not order:
+            break
+        # witnesses: the rests, and the filter's u = 0 at the start where a rest there confirms it; of two that
+        # disagree, neither can be called wrong
+        if len(left) + (left[0][0] == 0) < 3:
+            undecided = True
             break
         if smoothings + len(order) > REVIEW_SMOOTHINGS:
             complete = False
@@ -593,4 +601,4 @@ def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, para
         if not worst.fails:
             break
         drop([worst])
-    return RestReview(len(rests), tuple(dropped), smoothings, complete, kept, np.asarray(inputs["t"]))
+    return RestReview(len(rests), tuple(dropped), smoothings, complete, kept, np.asarray(inputs["t"]), undecided)

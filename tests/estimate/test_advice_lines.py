@@ -84,7 +84,7 @@ def test_true_rests_are_kept_even_where_the_model_is_too_stiff_for_them(default_
     (rests,) = checks.nis
     assert rests.verdict == "stiff"  # all rests alike: a model too stiff for them, or rests not quite still
     assert checks.lines() == [rests.line()]
-    assert "none does alone" in rests.line() and "--tune" not in rests.line() and not checks.tune_helps
+    assert "only fixes can tell" in rests.line() and "--tune" not in rests.line() and not checks.tune_helps
 
 
 def test_true_rests_with_fixes_are_kept(default_model):
@@ -198,3 +198,35 @@ def test_issue_31_cases_with_fixes_lose_their_rests_at_speed_and_no_accuracy(def
             lines = smooth_checks(sm, default_model, run, review=review, rest=review.kept, zupt_params=p).nis
             assert not any(c.kind == "rests" and c.verdict == "loose" for c in lines)
     assert err["kept"] <= 1.1 * err["fixes"], err
+
+
+def test_without_fixes_a_still_start_outvotes_the_stops_at_speed(default_model):
+    """town_drive without its fixes: the still start (the filter's u = 0 at the start confirms it) and two quiet
+    spells at cruise; both spells go, the start stays, and what is left is said to be anchored by nothing."""
+    run, rest, _ = _case(default_model, "town_drive", 1, duration=120.0)
+    iv = zupt.intervals(rest)
+    assert iv[0][0] == 0 and sum(_top_speed(run, a, b) > MOVING for a, b in iv) == 2
+    review = disagreeing_rests(run, default_model, rest)
+    assert len(review.dropped) == 2 and all(r.against == "the other rests" for r in review.dropped)
+    assert zupt.intervals(review.kept.any(axis=1)) == [iv[0]]
+    sm = smooth_run(run, default_model, rest=review.kept)
+    c = smooth_checks(sm, default_model, run, review=review, rest=review.kept)
+    end = run["t"][iv[0][1] - 1]
+    assert c.lines()[0] == review.line() and c.lines()[-1].startswith(f"no rest applied after {end:.3g} s and no fixes")
+
+
+def test_two_rests_that_disagree_are_said_undecided(cart, default_model):
+    """Two rests, neither at the start: one true, one at speed; nothing says which is wrong, and that is said."""
+    run, rest, _ = cart
+    iv = [(a, b) for a, b in zupt.intervals(rest) if a > 0]
+    true = next((a, b) for a, b in iv if _top_speed(run, a, b) < MOVING)
+    false = [(a, b) for a, b in iv if _top_speed(run, a, b) > MOVING][-1]
+    two = np.zeros(len(rest), dtype=bool)
+    for a, b in (true, false):
+        two[a:b] = True
+    review = disagreeing_rests(run, default_model, two)
+    assert review.undecided and review.dropped == () and review.said
+    assert review.line() == (
+        "rests re-examined: 0 of 2 disagree with the rest of the evidence, dropped; the rests left disagree, but two "
+        "cannot say which of them is wrong (fixes could)"
+    )
