@@ -16,6 +16,7 @@ import numpy as np
 
 from accelnav.cli.core import INPUT_HELP, _input_args, read_args
 from accelnav.errors import UserError
+from accelnav.estimate.pipeline import disagreeing_rests
 from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, aid_measurements, tune, with_figures
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.model.edit import save_model
@@ -91,6 +92,11 @@ def cmd_tune(args: argparse.Namespace) -> int:
         params = zupt.resolved(model, ZuptParams(sigma=args.zupt_sigma))
         if args.zupt == "auto":
             rest = zupt.rest_mask(accel, arrays["clipped"], model, params)  # gated once per rest, for every axis
+            if rest.any():  # rests that disagree with the fixes and the other rests are not tuned to
+                review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params)
+                rest = review.kept
+                if review.said:
+                    print(review.line())
         else:
             rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
     extras, n_zupt = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)

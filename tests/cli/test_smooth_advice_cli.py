@@ -67,3 +67,20 @@ def test_nothing_anchoring_the_run_is_said(tmp_path, capsys, default_model, fixe
     assert status == 0, err
     said = [x for x in text.splitlines() if x.startswith("no rest applied and no fixes: nothing anchors")]
     assert len(said) == (0 if fixes else 1)
+
+
+def test_tune_does_not_fit_the_rests_that_disagree(tmp_path, capsys, default_model):
+    """accelnav tune --zupt auto: the rests at speed are dropped (and named) before the figures are fitted."""
+    path, fx = _files(tmp_path, default_model, "cart_push", 5.0, 0.01)
+    argv = ["tune", path, "--zupt", "auto", "--fixes", fx, "--max-evaluations", "10", "--out", tmp_path / "m.toml"]
+    status, text, err = run_cli(argv, capsys)
+    assert status == 0, err
+    lines = text.splitlines()
+    (i,) = [k for k, x in enumerate(lines) if x.startswith("rests re-examined: 3 of 5 disagree")]
+    (j,) = [k for k, x in enumerate(lines) if "zero-velocity updates per axis" in x]
+    assert i < j
+    arrays, _ = load_run(path)
+    rest = zupt.rest_mask(arrays["accel"], arrays["clipped"], default_model)
+    speed = np.linalg.norm(arrays["u"], axis=1)
+    kept = sum(b - a for a, b in zupt.intervals(rest) if speed[a:b].max() < MOVING)
+    assert f"zero-velocity updates per axis {kept}, {kept};" in lines[j]
