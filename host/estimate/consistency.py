@@ -315,7 +315,7 @@ class RestReview:
         )
         more = f"; {n - len(worst)} more" if n > len(worst) else ""
         head = f"rests re-examined: {n} of {self.tested} disagree with the rest of the evidence, dropped"
-        tail = "" if self.complete else f"; stopped at {self.smoothings} smoothings with suspects left"
+        tail = "" if self.complete else f"; stopped at its budget ({self.smoothings} smoothings) with suspects left"
         if self.undecided:
             tail += "; the rests left disagree, but two cannot say which of them is wrong (fixes could)"
         return head + (f": {named}{more}" if n else "") + tail

@@ -84,3 +84,18 @@ def test_tune_does_not_fit_the_rests_that_disagree(tmp_path, capsys, default_mod
     speed = np.linalg.norm(arrays["u"], axis=1)
     kept = sum(b - a for a, b in zupt.intervals(rest) if speed[a:b].max() < MOVING)
     assert f"zero-velocity updates per axis {kept}, {kept};" in lines[j]
+
+
+def test_tune_says_which_figures_a_walk_does_not_identify(tmp_path, capsys):
+    """A foot's jolts make the likelihood want R -> 0 and sigma_n in the hundreds (issue 31): R stops at the
+    sensor's noise floor, and the line says R is not identified there, and that the budget ran out."""
+    run = tmp_path / "w.npz"
+    assert run_cli(["sim", "--scenario", "walking", "--duration", "20", "--seed", "1", "--out", run], capsys)[0] == 0
+    argv = ["smooth", run, "--zupt", "auto", "--tune", "--tune-evaluations", "150", "--out", tmp_path / "o.npz"]
+    status, text, err = run_cli(argv, capsys)
+    assert status == 0, err
+    (line,) = [x for x in text.splitlines() if x.startswith("tune: sigma_n")]
+    assert "stopped at its budget: the best figures found, not a maximum" in line
+    assert line.endswith(
+        "; R not identified: at its lower bound (the sensor's rounding and datasheet noise floor, 0.00158)"
+    )

@@ -230,3 +230,15 @@ def test_two_rests_that_disagree_are_said_undecided(cart, default_model):
         "rests re-examined: 0 of 2 disagree with the rest of the evidence, dropped; the rests left disagree, but two "
         "cannot say which of them is wrong (fixes could)"
     )
+
+
+def test_the_review_says_when_its_budget_ran_out(cart, default_model, monkeypatch):
+    from accelnav.estimate import consistency
+
+    run, rest, _ = cart
+    monkeypatch.setattr(consistency, "REVIEW_SMOOTHINGS", 1)
+    review = disagreeing_rests(run, default_model, rest)
+    assert not review.complete and review.said and review.dropped == ()
+    assert review.line().endswith("; stopped at its budget (1 smoothings) with suspects left")
+    monkeypatch.undo()
+    assert disagreeing_rests(run, default_model, rest).complete
