@@ -15,6 +15,7 @@ from accelnav.data.runfile import FORMAT, STATE, export_csv, save_run, state_sd
 from accelnav.errors import UserError
 from accelnav.estimate.chunked import memory_available, whole_bytes
 from accelnav.estimate.pipeline import (
+    disagreeing_rests,
     filter_run,
     format_errors,
     format_strides,
@@ -566,9 +567,9 @@ def cmd_smooth(args) -> int:
         return _cmd_streamed(args, arrays, model, ("filt", "smooth") if args.filter_states else ("smooth",))
     if bounded:
         return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
-    review = None
-    if args.zupt == "auto":  # rests that disagree with the rest of the evidence go first
-        rest, review = _review_rests(arrays, model, rest, fixes, params)
+    # automatic rests that disagree with the rest of the evidence go first
+    review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params) if args.zupt == "auto" else None
+    rest = rest if review is None else review.kept
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays
@@ -600,16 +601,6 @@ def cmd_smooth(args) -> int:
         for path in plot_smoothing(arrays, model, args.plots):
             print(f"wrote {path}")
     return 0
-
-
-def _review_rests(arrays, model: Model, rest: np.ndarray, fixes, params):
-    """(the rests kept, the review) of pipeline.disagreeing_rests; (rest, None) without rests."""
-    from accelnav.estimate.pipeline import disagreeing_rests
-
-    if not rest.any():
-        return rest, None
-    review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params)
-    return review.kept, review
 
 
 def _print_truth(arrays, model: Model, checks) -> None:

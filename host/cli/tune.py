@@ -92,11 +92,11 @@ def cmd_tune(args: argparse.Namespace) -> int:
         params = zupt.resolved(model, ZuptParams(sigma=args.zupt_sigma))
         if args.zupt == "auto":
             rest = zupt.rest_mask(accel, arrays["clipped"], model, params)  # gated once per rest, for every axis
-            if rest.any():  # rests that disagree with the fixes and the other rests are not tuned to
-                review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params)
-                rest = review.kept
-                if review.said:
-                    print(review.line())
+            # rests that disagree with the fixes and the other rests are not tuned to
+            review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params)
+            rest = review.kept
+            if review.said:
+                print(review.line())
         else:
             rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
     extras, n_zupt = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)

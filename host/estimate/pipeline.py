@@ -524,7 +524,7 @@ def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, para
     accelnav.estimate.consistency): a consistency.RestReview whose ``dropped`` name them, with their statistics,
     and whose ``kept`` is the mask without them. ``inputs`` (t, axis_names, accel, clipped), ``model``,
     ``fixes`` (per axis), ``params`` (ZuptParams) and ``rest_sigma`` as :func:`smooth_run` takes them.
-    Bounded: one smoothing with the fixes, then at most consistency.REVIEW_SMOOTHINGS."""
+    Bounded: one smoothing with the fixes, then at most consistency.REVIEW_SMOOTHINGS; none without rests."""
     from accelnav.estimate import zupt
     from accelnav.estimate.consistency import (
         REVIEW_MEDIAN_MIN,
