@@ -127,7 +127,7 @@ def report(r: TuneResult) -> list[str]:
     for f in r.start:
         if f in r.figures:
             why = r.why_not_identified(f)
-            ident = "yes" if not why else f"NO ({why})"
+            ident = "yes" if not why else f"NO: {why}"
             lines.append(f"| {f} | {r.start[f]:.4g} | {r.estimate[f]:.4g} | {_fmt_interval(r, f)} | {ident} |")
         else:
             if not f.startswith("c2."):
