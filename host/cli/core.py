@@ -567,9 +567,10 @@ def cmd_smooth(args) -> int:
         return _cmd_streamed(args, arrays, model, ("filt", "smooth") if args.filter_states else ("smooth",))
     if bounded:
         return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
-    # automatic rests that disagree with the rest of the evidence go first
+    # automatic rests that disagree with the rest of the evidence go first, before tuning and any advice
     review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params) if args.zupt == "auto" else None
     rest = rest if review is None else review.kept
+    print_review(review)
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays
@@ -587,7 +588,7 @@ def cmd_smooth(args) -> int:
     if fixes is not None:
         print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
     smooth_kw = dict(rest=rest, zupt_params=params, rest_sigma=rest_sigma)
-    checks = print_checks(arrays, model, inputs, fixes, smooth_kw, review=review, tuned=args.tune)
+    checks = print_checks(arrays, model, inputs, fixes, smooth_kw, tuned=args.tune)
     print(_summary(arrays))
     _print_truth(arrays, model, checks)
     strides = stride_table(arrays, model)
@@ -720,9 +721,14 @@ def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) ->
     return tuned
 
 
+def print_review(review) -> None:
+    """The line of the rests' re-examination (pipeline.disagreeing_rests), when it has something to say."""
+    if review is not None and review.said:
+        print(review.line())
+
+
 def print_checks(arrays, model: Model, inputs, fixes, smooth_kw, **kw):
-    """The checks of the smoothed run (pipeline.smooth_checks, ``kw`` its review and tuned), a line each;
-    returns them."""
+    """The checks of the smoothed run (pipeline.smooth_checks, ``kw`` e.g. tuned), a line each; returns them."""
     from accelnav.estimate.pipeline import smooth_checks
 
     checks = smooth_checks(arrays, model, inputs, fixes, **kw, **smooth_kw)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.cli.core import INPUT_HELP, _input_args, read_args
+from accelnav.cli.core import INPUT_HELP, _input_args, print_review, read_args
 from accelnav.errors import UserError
 from accelnav.estimate.pipeline import disagreeing_rests
 from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, aid_measurements, tune, with_figures
@@ -95,8 +95,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
             # rests that disagree with the fixes and the other rests are not tuned to
             review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params)
             rest = review.kept
-            if review.said:
-                print(review.line())
+            print_review(review)
         else:
             rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
     extras, n_zupt = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)

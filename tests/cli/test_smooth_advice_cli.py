@@ -40,6 +40,13 @@ def test_rests_at_speed_are_dropped_and_named_before_the_noise_lines(tmp_path, c
     speed = np.linalg.norm(arrays["u"], axis=1)
     for a, b in zupt.intervals(arrays["zupt"].any(axis=1)):
         assert speed[a:b].max() < MOVING
+    # with --tune the rests are re-examined before the figures are fitted to them, and said so in that order
+    argv = ["smooth", path, "--zupt", "auto", "--fixes", fx, "--tune", "--tune-evaluations", "10", "--out", out]
+    status, tuned, err = run_cli(argv, capsys)
+    assert status == 0, err
+    order = [x.split(":")[0] for x in tuned.splitlines() if x.startswith(("rests re-examined", "tune:"))]
+    assert order == ["rests re-examined", "tune", "tune"]
+    arrays, _ = load_run(out)
     # the run file's candidates say which were finally used: the dropped ones are not
     used = arrays["zupt_candidates"][arrays["zupt_candidates"][:, 2] > 0]
     t = arrays["t"]
