@@ -15,12 +15,14 @@ from accelnav.data.runfile import FORMAT, STATE, export_csv, save_run, state_sd
 from accelnav.errors import UserError
 from accelnav.estimate.chunked import memory_available, whole_bytes
 from accelnav.estimate.pipeline import (
+    disagreeing_rests,
     filter_run,
     format_errors,
     format_strides,
     position_errors,
     smooth_run,
     stride_table,
+    truth_versus_baselines,
 )
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.fileio import check_output, write_text
@@ -598,6 +600,10 @@ def cmd_smooth(args) -> int:
         return _cmd_streamed(args, arrays, model, ("filt", "smooth") if args.filter_states else ("smooth",))
     if bounded:
         return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
+    # automatic rests that disagree with the rest of the evidence go first, before tuning and any advice
+    review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params) if args.zupt == "auto" else None
+    rest = rest if review is None else review.kept
+    print_review(review)
     if args.tune:
         model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
     inputs = arrays
@@ -607,18 +613,17 @@ def cmd_smooth(args) -> int:
     if args.zupt == "auto":  # kept in the run file for the plots: [start_s, end_s, accepted] per candidate
         t = arrays["t"]
         arrays["zupt_candidates"] = np.array(
-            [[t[d.start], t[d.stop - 1], float(d.accepted)] for d in decisions], dtype=np.float64
+            [[t[d.start], t[d.stop - 1], float(d.accepted and rest[d.start : d.stop].any())] for d in decisions],
+            dtype=np.float64,
         ).reshape(-1, 3)
     if rest is not None:
         print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
     if fixes is not None:
         print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
-    print_checks(arrays, model, inputs, fixes, dict(rest=rest, zupt_params=params, rest_sigma=rest_sigma))
+    smooth_kw = dict(rest=rest, zupt_params=params, rest_sigma=rest_sigma)
+    checks = print_checks(arrays, model, inputs, fixes, smooth_kw, tuned=args.tune)
     print(_summary(arrays))
-    rows = position_errors(arrays, model)
-    if rows:
-        print(format_errors(rows))
-        print_truth_versus_baselines(rows)
+    _print_truth(arrays, model, checks)
     strides = stride_table(arrays, model)
     if strides:
         print(format_strides(strides))
@@ -630,6 +635,16 @@ def cmd_smooth(args) -> int:
         for path in plot_smoothing(arrays, model, args.plots):
             print(f"wrote {path}")
     return 0
+
+
+def _print_truth(arrays, model: Model, checks) -> None:
+    """With truth: the error table, and a line if the smoother loses to a fix-only baseline."""
+    rows = position_errors(arrays, model)
+    if rows:
+        print(format_errors(rows))
+        line = truth_versus_baselines(rows, checks.tune_helps)
+        if line:
+            print(line)
 
 
 def _memory_budget_arg(mb: float | None) -> int:
@@ -729,31 +744,27 @@ def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) ->
     except ValueError as exc:
         raise UserError(f"{args.run}: --tune: {exc}") from None
     figs = ", ".join(f"{f} {r.start[f]:.4g} -> {r.estimate[f]:.4g}" for f in FIGURES)
-    stop = "converged" if r.converged else "stopped at its budget"
+    stop = "converged" if r.converged else "stopped at its budget: the best figures found, not a maximum"
     verdict = "used" if r.adopted else "not significantly better (p >= 0.05): the model's figures kept"
+    unknown = r.unidentified()
     print(
         f"tune: {figs}; ln L +{r.ll_estimate - r.ll_start:.4g} (p = {r.p_value:.3g}); {r.evaluations} evaluations, "
-        f"{time.monotonic() - t0[0]:.1f} s, {stop}; {verdict}"
+        f"{time.monotonic() - t0[0]:.1f} s, {stop}; {verdict}" + (f"; {unknown}" if unknown else "")
     )
     return tuned
 
 
-def print_checks(arrays, model: Model, inputs, fixes, smooth_kw) -> None:
-    """The NIS of the aids against their chi^2 bounds, and with fixes the held-out comparison: a line each."""
+def print_review(review) -> None:
+    """The line of the rests' re-examination (pipeline.disagreeing_rests), when it has something to say."""
+    if review is not None and review.said:
+        print(review.line())
+
+
+def print_checks(arrays, model: Model, inputs, fixes, smooth_kw, **kw):
+    """The checks of the smoothed run (pipeline.smooth_checks, ``kw`` e.g. tuned), a line each; returns them."""
     from accelnav.estimate.pipeline import smooth_checks
 
-    for line in smooth_checks(arrays, model, inputs, fixes, **smooth_kw).lines():
+    checks = smooth_checks(arrays, model, inputs, fixes, **kw, **smooth_kw)
+    for line in checks.lines():
         print(line)
-
-
-def print_truth_versus_baselines(rows) -> None:
-    """With truth and fixes: one line if the smoother is worse than a fix-only baseline (rms over the axes)."""
-    from accelnav.estimate.pipeline import BASELINES, rms_by_method
-
-    rms = rms_by_method(rows)
-    worse = [b for b in BASELINES if b in rms and rms["smoother"] > rms[b]]
-    if worse:
-        print(
-            f"against the truth the smoother ({rms['smoother']:.3g} m rms) is worse than {' and '.join(worse)} "
-            f"({min(rms[b] for b in worse):.3g} m): its model does not fit this recording: try --tune"
-        )
+    return checks

@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.cli.core import INPUT_HELP, _input_args, read_args
+from accelnav.cli.core import INPUT_HELP, _input_args, print_review, read_args
 from accelnav.errors import UserError
+from accelnav.estimate.pipeline import disagreeing_rests
 from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, aid_measurements, tune, with_figures
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.model.edit import save_model
@@ -91,6 +92,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
         params = zupt.resolved(model, ZuptParams(sigma=args.zupt_sigma))
         if args.zupt == "auto":
             rest = zupt.rest_mask(accel, arrays["clipped"], model, params, fixes)  # decided once per rest, all axes
+            # rests that a full smoother with the fixes or the other rests refutes are not tuned to
+            review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params)
+            rest = review.kept
+            print_review(review)
         else:
             rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
     extras, n_zupt = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
@@ -121,7 +126,7 @@ def report(r: TuneResult) -> list[str]:
     for f in r.start:
         if f in r.figures:
             why = r.why_not_identified(f)
-            ident = "yes" if not why else f"NO ({why})"
+            ident = "yes" if not why else f"NO: {why}"
             lines.append(f"| {f} | {r.start[f]:.4g} | {r.estimate[f]:.4g} | {_fmt_interval(r, f)} | {ident} |")
         else:
             if not f.startswith("c2."):
