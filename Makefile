@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.accelnav-installed
 # 2-core machine (measured: a fit took 8x the CPU); one thread is faster.
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: setup demo test docs lint format bench bench-coverage bench-studies fuzz fuzz-corpus clean
+.PHONY: setup demo test docs lint format bench bench-coverage bench-studies fuzz fuzz-merge fuzz-corpus clean
 
 include firmware/firmware.mk
 
@@ -65,11 +65,17 @@ bench-studies: setup
 	$(PY) bench/run_all.py studies --out build/bench/studies.md
 
 # libFuzzer on the firmware's receive path (clang + libclang-rt-14-dev): FUZZ_SECONDS of fuzzing from
-# the seed corpus; the corpus it grows and any failing input stay in build/fuzz/. CI runs a
-# bounded run of the same harness (tests/firmware/test_fuzz_rx.py).
+# the seeds and firmware/fuzz/grown; the corpus it grows stays in build/fuzz/, a failing input is
+# also kept in firmware/fuzz/regressions (replayed by every test run). CI runs a bounded run of the
+# same harness (tests/firmware/test_fuzz_rx.py).
 FUZZ_SECONDS ?= 600
 fuzz: setup
 	$(PY) firmware/fuzz/fuzz.py run --seconds $(FUZZ_SECONDS) --out build/fuzz
+
+# minimise build/fuzz/corpus (a long `make fuzz`) and firmware/fuzz/grown into firmware/fuzz/grown
+# (libFuzzer -merge=1 over the seeds): commit what it adds, and the next CI run starts from there
+fuzz-merge: setup
+	$(PY) firmware/fuzz/fuzz.py merge build/fuzz/corpus --out build/fuzz
 
 # rewrite firmware/fuzz/corpus from the frame layout (after a layout change)
 fuzz-corpus: setup

@@ -14,7 +14,7 @@ not a 10-bit ADC is refused in one line (ModelError), as the Uno has six analog 
 
 from __future__ import annotations
 
-from accelnav.model.load import Model, ModelError
+from accelnav.model.load import Model, ModelError, c_identifier_from
 from accelnav.resources import firmware_dir
 
 from .generated import generate
@@ -26,8 +26,9 @@ APP_SOURCES = ("app.c", "app.h", "filter_adapter.c", "filter_adapter.h", "link.c
 
 
 def library_name(model: Model) -> str:
-    """The library's (and its folder's) name: the model's name, already a C identifier by the loader."""
-    return f"accelnav_{model.name}"
+    """The library's name, which is also its folder's and what a Makefile's ARDUINO_LIBS names: the model's name
+    (which may hold spaces, ':', '=', ...) through the C-identifier rule."""
+    return c_identifier_from(model.name, "accelnav_")
 
 
 def library(model: Model, form: str | None = None) -> dict[str, str]:

@@ -8,15 +8,19 @@ The generator takes seconds (the gain schedule's longer), so its output is kept 
 (:func:`accelnav.native.cbuild.cache_dir`) keyed by the model's text and the source of every module of
 the generator: an edited generator never serves stale C. A model the generator refuses is refused
 here each time (nothing is cached for it).
+
+The cached text is compiled (SIL, the log replay), so it is a sealed entry (:mod:`accelnav.cachefile`):
+verified under the user's key before any of it is used, and checked to hold the files the generator
+writes; an entry edited, truncated or not sealed by this user is regenerated with one line on stderr.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import os
 from pathlib import Path
 
+from accelnav.cachefile import cached
 from accelnav.model.load import Model
 from accelnav.native.cbuild import cache_dir
 
@@ -43,14 +47,25 @@ def _key(model: Model) -> str:
     return key.hexdigest()[:20]
 
 
+MAX_GENERATED_BYTES = 64 << 20  # the gain schedule of a long fast run is a few MB of C
+
+
+def _files(data) -> dict[str, str]:
+    """The cached JSON as the generator's files (ValueError if it is not: a foreign or damaged entry)."""
+    try:
+        files = json.loads(bytes(data))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"not the generator's JSON ({exc})") from None
+    if not isinstance(files, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in files.items()):
+        raise ValueError("not a map of file names to text")
+    missing = {f"accelnav.{e}" for e in "hc"} - files.keys()
+    if missing:
+        raise ValueError(f"no {', '.join(sorted(missing))}")
+    return files
+
+
 def generated_files(model: Model) -> dict[str, str]:
     """accelnav.{h,c,json} (the filter) and acnframe.{h,c,json} (the frames) of ``model``."""
     path = cache_dir() / f"gen-{_key(model)}.json"
-    if path.exists():
-        return json.loads(path.read_text())
-    files = generate(model)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(files))
-    os.replace(tmp, path)  # atomic: a concurrent reader sees the whole file or none
-    return files
+    data = cached(path, lambda: json.dumps(generate(model)).encode(), limit=MAX_GENERATED_BYTES, check=_files)
+    return _files(data)

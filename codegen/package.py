@@ -120,11 +120,11 @@ def write(files: dict[str, str], out: Path) -> list[Path]:
     """Write ``files`` into ``out``; a name that would land anywhere but directly in ``out`` is refused
     (ValueError) before anything is written. A file whose text is already there is left alone (its time
     too), so that the firmware's make does not rebuild what did not change."""
-    root = out.resolve()
     paths = []
     for name, text in sorted(files.items()):
         path = out / name
-        if Path(name).is_absolute() or path.resolve().parent != root:
+        # a bare name: directly in out (a symlink already there is followed, by the output rule)
+        if Path(name).is_absolute() or Path(name).name != name or name in (".", ".."):
             raise ValueError(f"{ascii(name[:80])}: a generated file name must stay inside {out}")
         paths.append((path, text))
     out.mkdir(parents=True, exist_ok=True)

@@ -98,10 +98,16 @@ def detect_rests(
     params: ZuptParams | None = None,
     fixes: PathLike | Sequence[Sequence[Any]] | None = None,
 ) -> np.ndarray:
-    """(N,) bool: the samples of the rests the zero-velocity decision accepts (``accelnav smooth --zupt auto``),
-    judged against ``fixes`` too when given (as :func:`smooth_run` takes them): a rest where the fixes imply
-    speed is refused. :func:`decide_rests` gives each candidate's decision and its evidence."""
-    return decide_rests(run, model, params, fixes).mask
+    """(N,) bool: the samples of the rests ``accelnav smooth --zupt auto`` applies: those the zero-velocity
+    decision accepts, judged against ``fixes`` too when given (as :func:`smooth_run` takes them; a rest where
+    the fixes imply speed is refused), less those its review then finds refuted by a full smoother with the
+    fixes or the other rests. :func:`decide_rests` gives each candidate's decision and its evidence."""
+    from accelnav.estimate import engine, zupt
+
+    arrays = dict(run)
+    _check(arrays, model, "detect_rests")
+    rests = engine.Rests(zupt.ZuptParams() if params is None else params, detect=True)
+    return engine.rest_stage(model, arrays, rests, fixes=_fixes(fixes, arrays)).mask
 
 
 def decide_rests(
@@ -111,7 +117,8 @@ def decide_rests(
     fixes: PathLike | Sequence[Sequence[Any]] | None = None,
 ):
     """The detector's candidates and the decision on each (accelnav.estimate.zupt.Rests: ``decisions``, each with
-    its reason and evidence in words, and ``mask``, what :func:`detect_rests` returns)."""
+    its reason and evidence in words, and ``mask``, the accepted ones: :func:`detect_rests` less the rests its
+    review drops)."""
     from accelnav.estimate import zupt
 
     arrays = dict(run)

@@ -28,7 +28,17 @@ def note(text: str) -> None:
 class Progress:
     """``with Progress("filter", total=n) as p: ... p.update(done)``"""
 
-    def __init__(self, label: str, total: int, *, stream=None, enabled: bool | None = None, unit: str = "samples"):
+    def __init__(
+        self,
+        label: str,
+        total: int,
+        *,
+        stream=None,
+        enabled: bool | None = None,
+        unit: str = "samples",
+        after: float = 0.0,
+    ):
+        """``after``: seconds of work before the first line is drawn (work done sooner draws nothing)."""
         self.label = label
         self.total = max(int(total), 1)
         self.unit = unit
@@ -38,6 +48,8 @@ class Progress:
         self.enabled = enabled
         self._t0 = time.monotonic()
         self._last = 0.0
+        self.after = after
+        self.drawn = False
         self.done = 0
 
     def update(self, done: int) -> None:
@@ -45,8 +57,9 @@ class Progress:
         if not self.enabled:
             return
         now = time.monotonic()
-        if now - self._last < 0.1 and done < self.total:
+        if now - self._last < 0.1 and done < self.total or now - self._t0 < self.after:
             return
+        self.drawn = True
         self._last = now
         frac = min(done / self.total, 1.0)
         elapsed = now - self._t0
@@ -64,5 +77,6 @@ class Progress:
     def __exit__(self, *exc) -> None:
         if self.enabled:
             self.update(self.total if exc[0] is None else self.done)
+        if self.drawn:
             self.stream.write("\n")
             self.stream.flush()

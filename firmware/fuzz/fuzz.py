@@ -2,6 +2,7 @@
 
     python firmware/fuzz/fuzz.py corpus             # rewrite the seed corpus from the frame layout
     python firmware/fuzz/fuzz.py run --seconds 600  # build, then fuzz (make fuzz)
+    python firmware/fuzz/fuzz.py merge              # minimise build/fuzz/corpus into grown/ (make fuzz-merge)
 
 The harness is compiled with clang (-fsanitize=fuzzer,address,undefined) against the firmware's
 sources and the generated frame code and filter of a model, written by the project's generator
@@ -12,6 +13,17 @@ The seed corpus (corpus/) holds one small input per frame kind and a few session
 harness's modes (see fuzz_rx.c): raw inputs are the wire bytes of valid frames, structured ones the
 harness's operation lists. It is generated from the manifest, so a layout change is one
 `corpus` run away.
+
+What fuzzing found carries from one run to the next through two more folders in the repository:
+
+* grown/: the inputs that reach coverage the seeds do not, from long runs (`make fuzz`, whose corpus
+  stays in build/fuzz/corpus), minimised by libFuzzer's ``-merge=1`` (`make fuzz-merge`): the seeds
+  come first, so only inputs adding features to them and to each other are kept. Kept under
+  GROWN_MAX_BYTES: a merge that would pass it is refused (fuzz with a smaller ``-max_len``).
+* regressions/: every failing input a run found (copied there by `run`); once the bug is fixed
+  it stays, and tests/firmware/test_fuzz_rx.py replays it with the seeds and grown/ every run.
+
+CI's bounded run starts from seeds + grown/, so each long run's coverage is where the next starts.
 """
 
 from __future__ import annotations
@@ -26,6 +38,9 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 HARNESS = HERE / "fuzz_rx.c"
 SEEDS = HERE / "corpus"
+GROWN = HERE / "grown"
+REGRESSIONS = HERE / "regressions"
+GROWN_MAX_BYTES = 64 * 1024  # the repository's corpus stays small enough to review and to load in a second
 FW_SRC = ("app.c", "link.c", "cobs.c", "crc32.c", "filter_adapter.c")
 SANITIZE = ["-fsanitize=fuzzer,address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
 
@@ -91,9 +106,11 @@ def _cc(cmd: list[str]) -> None:
 
 
 def run(exe: Path, seconds: int, out: Path, seeds: Path = SEEDS, fresh: bool = False) -> dict:
-    """Fuzz for ``seconds`` from the seeds; returns libFuzzer's figures and any inputs that failed.
+    """Fuzz for ``seconds`` from the seeds and the grown corpus; returns libFuzzer's figures and any inputs
+    that failed.
 
-    New inputs go to out/corpus (kept between runs unless ``fresh``), failing ones to out/crashes/.
+    New inputs go to out/corpus (kept between runs unless ``fresh``), failing ones to out/crashes/; the
+    repository's folders are only read.
     """
     work, crashes = out / "corpus", out / "crashes"
     if fresh and work.exists():
@@ -110,6 +127,7 @@ def run(exe: Path, seconds: int, out: Path, seeds: Path = SEEDS, fresh: bool = F
         f"-artifact_prefix={crashes}/",
         str(work),
         str(seeds),
+        *([str(GROWN)] if GROWN.is_dir() else []),
     ]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=seconds + 300)
     figures = parse(done.stderr)
@@ -118,6 +136,65 @@ def run(exe: Path, seconds: int, out: Path, seeds: Path = SEEDS, fresh: bool = F
     figures["log_tail"] = done.stderr[-6000:]
     figures["command"] = " ".join(cmd)
     return figures
+
+
+def replay(exe: Path, inputs: list[Path], timeout_s: int = 300) -> subprocess.CompletedProcess:
+    """Run the harness once on each of ``inputs`` (libFuzzer runs files given by name and exits): a failing
+    one aborts with a non-zero status and its name in the log."""
+    cmd = [str(exe), "-timeout=10", "-rss_limit_mb=1024", *map(str, inputs)]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s)
+
+
+def committed_inputs() -> list[Path]:
+    """Every input the repository keeps: the seeds, grown/ and regressions/."""
+    return sorted(p for d in (SEEDS, GROWN, REGRESSIONS) if d.is_dir() for p in d.iterdir() if p.is_file())
+
+
+def keep_findings(artifacts: list[str], folder: Path = REGRESSIONS) -> list[Path]:
+    """Copy the failing inputs a run found into ``folder`` (named by content: the same input once)."""
+    import hashlib
+
+    folder.mkdir(parents=True, exist_ok=True)
+    kept = []
+    for a in artifacts:
+        data = Path(a).read_bytes()
+        kind = Path(a).name.split("-", 1)[0]  # crash, leak, timeout, oom
+        path = folder / f"{kind}-{hashlib.sha1(data).hexdigest()[:16]}"
+        if not path.exists():
+            path.write_bytes(data)
+        kept.append(path)
+    return kept
+
+
+def merge(exe: Path, runs: list[Path], work: Path) -> dict:
+    """Minimise grown/ plus the corpora of ``runs`` into grown/ with ``-merge=1`` over the seeds: (figures)."""
+    stage = work / "merge"
+    if stage.exists():
+        shutil.rmtree(stage)
+    stage.mkdir(parents=True)
+    seed_names = set()
+    for p in SEEDS.iterdir():  # the seeds first: their features count as had, so no input repeats them
+        shutil.copyfile(p, stage / p.name)
+        seed_names.add(p.name)
+    sources = [d for d in (GROWN, *runs) if d.is_dir()]
+    cmd = [str(exe), "-merge=1", "-timeout=10", "-rss_limit_mb=1024", str(stage), *map(str, sources)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=3600)
+    if done.returncode != 0:
+        raise FuzzError(f"{' '.join(cmd)} failed:\n{done.stderr[-4000:]}")
+    keep = {p.name: p.read_bytes() for p in stage.iterdir() if p.name not in seed_names}
+    size = sum(map(len, keep.values()))
+    if size > GROWN_MAX_BYTES:
+        raise FuzzError(
+            f"the merged corpus holds {size} bytes in {len(keep)} inputs, over {GROWN_MAX_BYTES}: grown/ left "
+            "as it was; fuzz with a smaller -max_len or merge fewer runs"
+        )
+    before = {p.name for p in GROWN.iterdir()} if GROWN.is_dir() else set()
+    GROWN.mkdir(exist_ok=True)
+    for name in before - set(keep):
+        (GROWN / name).unlink()
+    for name, data in keep.items():
+        (GROWN / name).write_bytes(data)
+    return {"inputs": len(keep), "bytes": size, "added": len(set(keep) - before), "dropped": len(before - set(keep))}
 
 
 def parse(log: str) -> dict:
@@ -202,6 +279,10 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--seconds", type=int, default=600)
     r.add_argument("--out", type=Path, default=Path("build/fuzz"))
     r.add_argument("--model")
+    m = sub.add_parser("merge", help="minimise the runs' corpora and grown/ into grown/ (libFuzzer -merge=1)")
+    m.add_argument("runs", type=Path, nargs="*", default=[Path("build/fuzz/corpus")])
+    m.add_argument("--out", type=Path, default=Path("build/fuzz"))
+    m.add_argument("--model")
     args = ap.parse_args(argv)
     if args.what == "corpus":
         paths = write_corpus(model=args.model)
@@ -212,13 +293,23 @@ def main(argv: list[str] | None = None) -> int:
     except FuzzError as e:
         print(f"fuzz: {e}", file=sys.stderr)
         return 2
+    if args.what == "merge":
+        try:
+            fig = merge(exe, args.runs, args.out)
+        except FuzzError as e:
+            print(f"fuzz: {e}", file=sys.stderr)
+            return 2
+        print(" ".join(f"{k}={v}" for k, v in fig.items()) + f" in {GROWN} (commit it)")
+        return 0
     fig = run(exe, args.seconds, args.out)
     tail = fig.pop("log_tail")
     if fig["returncode"]:
         print(tail, end="")
     print(" ".join(f"{k}={v}" for k, v in fig.items()))
     if fig["returncode"] != 0 or fig["artifacts"]:
-        print(f"fuzz: failed; reproduce with {exe} {' '.join(fig['artifacts'])}", file=sys.stderr)
+        kept = keep_findings(fig["artifacts"])
+        print(f"fuzz: failed; reproduce with {exe} {' '.join(map(str, kept))}", file=sys.stderr)
+        print(f"fuzz: {len(kept)} input(s) kept in {REGRESSIONS}: commit them with the fix", file=sys.stderr)
         return 1
     return 0
 

@@ -14,6 +14,12 @@
 The firmware sources are package data (:func:`accelnav.resources.firmware_dir`);
 what is built goes to the cache (:func:`accelnav.resources.cache_root`)
 or a folder the caller names, never into the installed package.
+
+Unlike the other cache entries (:mod:`accelnav.cachefile`), a board's image
+folder is not sealed: ``make`` builds in it incrementally and trusts the
+objects it finds there, so whoever can write the cache folder can change the
+image the emulator runs. Builds of one folder take a lock, one at a time; the
+user guide ("The cache folder") says to keep PIL's cache private.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ import subprocess
 from functools import cache
 from pathlib import Path
 
+from accelnav.cachefile import entry_lock
 from accelnav.native.cbuild import STRICT_WARN
 from accelnav.resources import cache_root, firmware_dir, models_dir
 
@@ -112,7 +119,9 @@ def make_firmware(board: str, model_path: str | Path | None = None, out: Path | 
 
     The generated C of the model is written to ``OUT/gen`` first; ``out``
     defaults to a folder in the cache named by the board and the model's
-    hash, so images of different models never overwrite each other.
+    hash, so images of different models never overwrite each other. The build
+    holds a lock on the folder (``OUT.lock``): a second process building the same
+    image waits, then finds it made, instead of relinking it under the first.
     """
     from accelnav.model.load import load_model
 
@@ -129,25 +138,27 @@ def make_firmware(board: str, model_path: str | Path | None = None, out: Path | 
             raise FirmwareError(f"board {board}: {cc} not found (Debian: {packages})")
     if shutil.which("make") is None:
         raise FirmwareError(f"board {board}: make not found (Debian: make)")
-    gen = out / "gen"
-    gen.mkdir(parents=True, exist_ok=True)
-    for name, text in generated(model_path).items():
-        path = gen / name
-        if not path.exists() or path.read_text() != text:  # unchanged files keep their time: no rebuild
-            path.write_text(text)
-    cmd = [
-        "make",
-        "--no-print-directory",
-        "-f",
-        str(FW / "firmware.mk"),
-        "firmware",
-        f"BOARD={board}",
-        f"FW_DIR={FW}",
-        f"FW_GEN={gen}",
-        f"FW_OUT={out}",
-        "FW_PREGEN=1",
-    ]
-    done = subprocess.run(cmd, cwd=out, capture_output=True, text=True, timeout=600)
+    # one build at a time per folder: two makes in one folder delete and relink each other's image
+    with entry_lock(out):
+        gen = out / "gen"
+        gen.mkdir(parents=True, exist_ok=True)
+        for name, text in generated(model_path).items():
+            path = gen / name
+            if not path.exists() or path.read_text() != text:  # unchanged files keep their time: no rebuild
+                path.write_text(text)
+        cmd = [
+            "make",
+            "--no-print-directory",
+            "-f",
+            str(FW / "firmware.mk"),
+            "firmware",
+            f"BOARD={board}",
+            f"FW_DIR={FW}",
+            f"FW_GEN={gen}",
+            f"FW_OUT={out}",
+            "FW_PREGEN=1",
+        ]
+        done = subprocess.run(cmd, cwd=out, capture_output=True, text=True, timeout=600)
     if done.returncode != 0:
         # a model too big for the part: firmware.mk's size check says so in one line, which is the error
         fit = re.search(r"^BOARD=\S+: this model needs .*$", done.stderr, re.M)

@@ -15,6 +15,7 @@ A missing toolchain or emulator is an :class:`AvrError` with one line that says 
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -333,32 +334,38 @@ class FeedRun:
     stack: int
 
 
-def harness() -> Path:
+def harness() -> bytes:
     """The simavr feed program (firmware/boards/atmega328p/simavr_feed.c) built with the host's cc
-    against libsimavr, once per source text, into the cache. AvrError names what to install."""
+    against libsimavr, once per source text and flags, kept in the cache as a sealed entry
+    (:mod:`accelnav.cachefile`). Returned as its verified bytes: :func:`run_feed` runs a private copy of
+    them, never the cache file, which anyone with write access to the cache could replace.
+    AvrError names what to install."""
     import hashlib
+    import tempfile
 
+    from accelnav.cachefile import cached
     from accelnav.resources import cache_root, firmware_dir
 
     src = firmware_dir() / "boards" / "atmega328p" / "simavr_feed.c"
     text = src.read_bytes()
-    exe = cache_root() / "simavr" / f"simavr_feed-{hashlib.sha256(text).hexdigest()[:16]}"
-    if exe.is_file():
-        return exe
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
-        raise AvrError("no host C compiler (cc) to build the simavr feed program: install Debian's gcc")
-    exe.parent.mkdir(parents=True, exist_ok=True)
-    tmp = exe.with_name(exe.name + ".tmp")
-    done = subprocess.run([cc, *HOST_CFLAGS, str(src), "-lsimavr", "-o", str(tmp)],
-                          capture_output=True, text=True)  # fmt: skip
-    if done.returncode:
-        err = done.stderr
-        if ("simavr/" in err and "No such file" in err) or "cannot find -lsimavr" in err:
-            raise AvrError("libsimavr's headers or library not found: install Debian's libsimavr-dev")
-        raise AvrError("cc (simavr feed program): " + (done.stderr.strip().splitlines() or ["failed"])[0])
-    tmp.replace(exe)  # whole or not at all: a parallel build never runs half a file
-    return exe
+    key = hashlib.sha256(text + "\0".join(HOST_CFLAGS).encode()).hexdigest()[:16]
+
+    def build() -> bytes:
+        cc = shutil.which("cc") or shutil.which("gcc")
+        if cc is None:
+            raise AvrError("no host C compiler (cc) to build the simavr feed program: install Debian's gcc")
+        with tempfile.TemporaryDirectory(prefix="accelnav-simavr-build-") as tmp:
+            exe = Path(tmp) / "simavr_feed"
+            done = subprocess.run([cc, *HOST_CFLAGS, str(src), "-lsimavr", "-o", str(exe)],
+                                  capture_output=True, text=True)  # fmt: skip
+            if done.returncode:
+                err = done.stderr
+                if ("simavr/" in err and "No such file" in err) or "cannot find -lsimavr" in err:
+                    raise AvrError("libsimavr's headers or library not found: install Debian's libsimavr-dev")
+                raise AvrError("cc (simavr feed program): " + (done.stderr.strip().splitlines() or ["failed"])[0])
+            return exe.read_bytes()
+
+    return bytes(cached(cache_root() / "simavr" / f"simavr_feed-{key}", build, limit=64 << 20))
 
 
 def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0, adc: np.ndarray | None = None) -> FeedRun:
@@ -373,9 +380,13 @@ def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0, adc: n
     elf = Path(elf).resolve()
     if not elf.is_file():
         raise AvrError(f"{elf}: no firmware image (build it with 'make firmware BOARD=atmega328p')")
-    exe = harness()
-    with tempfile.TemporaryDirectory(prefix="accelnav-simavr-") as tmp:
+    program = harness()
+    with tempfile.TemporaryDirectory(prefix="accelnav-simavr-") as tmp:  # mode 0700: only this user's
         folder = Path(tmp)
+        exe = folder / "simavr_feed"  # the verified bytes, run from here, not from the cache
+        fd = os.open(exe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o700)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(program)
         (folder / "stim.bin").write_bytes(stimulus)
         cmd = [str(exe), str(elf), str(folder / "stim.bin"), str(folder / "tel.bin"), str(MAX_RUN_CYCLES)]
         if adc is not None:

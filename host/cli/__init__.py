@@ -24,6 +24,7 @@ a leading underscore does not count):
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
 
@@ -109,11 +110,17 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from accelnav.cli.args import outputs_args
+    from accelnav.fileio import input_limit
     from accelnav.model.load import ModelError
     from accelnav.native.cbuild import BuildError
 
     try:
-        return int(args.func(args) or 0)
+        input_limit()  # a bad ACCELNAV_MAX_INPUT_BYTES is refused before any work, whatever the command
+        # every output checked by the one rule before any work; with '-' the data alone goes to stdout
+        quiet_stdout = outputs_args(args)
+        with contextlib.redirect_stdout(sys.stderr) if quiet_stdout else contextlib.nullcontext():
+            return int(args.func(args) or 0)
     except (UserError, ModelError) as exc:
         print(f"accelnav: error: {exc}", file=sys.stderr)
         return 2
@@ -126,6 +133,14 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader went away (accelnav ... | head): not an error of ours
         sys.stderr.close()
         return 0
+    except OSError as exc:
+        from accelnav.fileio import write_failure
+
+        if not write_failure(exc):
+            raise
+        # a full disk where no writer turned it into its own line (a scratch file, say): still one line
+        print(f"accelnav: error: {exc.filename or 'writing'}: {exc.strerror}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -11,23 +10,18 @@ import numpy as np
 from accelnav.api import simulate
 from accelnav.cli.args import clock_args, reader_options
 from accelnav.data.inputs import read_input
-from accelnav.data.runfile import FORMAT, STATE, export_csv, save_run, state_sd
+from accelnav.data.runfile import STATE, export_csv, save_run, state_sd
 from accelnav.errors import UserError
-from accelnav.estimate.chunked import memory_available, whole_bytes
 from accelnav.estimate.pipeline import (
-    disagreeing_rests,
-    filter_run,
     format_errors,
     format_strides,
     position_errors,
-    smooth_run,
     stride_table,
     truth_versus_baselines,
 )
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.fileio import check_output, write_text
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model
-from accelnav.progress import note
 
 TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
 TUNE_SECONDS = 60.0
@@ -121,10 +115,25 @@ def register(sub) -> None:
         "computed once per model and run length, then a few operations per sample. Zero-velocity detection: "
         "accelnav.estimate.zupt.",
     )
-    p.add_argument("run", type=Path, help=INPUT_HELP)
+    p.add_argument("run", type=Path, nargs="+", help=INPUT_HELP + "; several with --out-dir (a fleet)")
     _model_arg(p, "; default: the model embedded in the input, else the embedded default")
     _input_args(p)
-    p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
+    p.add_argument("--out", type=Path, default=None, help="run file to write (.npz); one input")
+    p.add_argument(
+        "--out-dir",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="a run file per input, DIR/<input name>.npz: many recordings in one command; a file that fails is "
+        "reported and the others finish (exit status 1 if any failed)",
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="with --out-dir: smooth N inputs at a time in worker processes (the memory budget shared); default 1",
+    )
     p.add_argument(
         "--fixes",
         type=Path,
@@ -273,9 +282,17 @@ def register(sub) -> None:
         type=float,
         default=None,
         metavar="MB",
-        help="memory the whole-array smoother may take; a longer run is smoothed in bounded memory (chunks, a "
-        "store on disk beside --out; not with --tune, --plots, --csv; the output keeps standard deviations, "
-        "not covariances, and the aids' consistency checks are skipped); default: half the memory free",
+        help="memory the run may take; a longer run is smoothed in chunks (its store in memory within the budget, "
+        "without one within 1 GiB, else on disk beside --out; the aids' consistency checks are skipped); "
+        "--covariances, --tune and --plots need the whole run in memory and are refused over it; default: half "
+        "the memory free",
+    )
+    p.add_argument(
+        "--full",
+        action="store_true",
+        help="write every state (r, u, a, eps) and its sd at float64 and echo the input (accel, clipped, raw counts, "
+        "truth): the run file accelnav-run/2, about 77 B per sample per axis; default: r, u and their sd at float32 "
+        "beside t, 20 B per sample per axis at 2 axes (accelnav-run/3)",
     )
     _output_args(p)
     _csv_arg(p)
@@ -321,113 +338,6 @@ def read_args(args) -> tuple[dict[str, np.ndarray], Model]:
     return read_input(args.run, args.model, allow_gaps=args.allow_gaps, **reader_options(args))
 
 
-def _csv_size_args(args) -> tuple[int, int] | None:
-    """(estimated rows, axes) of a plain CSV input, from its size and first lines; None for another input."""
-    from accelnav.data.stream import estimate_rows
-
-    rows = estimate_rows(args.run)
-    if rows is None:
-        return None
-    return rows, len(args.axis) if args.axis else len(load_model(args.model).axes)
-
-
-def _whole_input_args(args, why: str) -> None:
-    """Refuse, before reading it, a CSV whose numbers exceed what one input may hold in memory."""
-    from accelnav.fileio import input_limit
-
-    size = _csv_size_args(args)
-    if size is None:
-        return
-    rows, n_axes = size
-    need, limit = rows * 8 * (2 + n_axes), input_limit()
-    if need > limit:
-        raise UserError(
-            f"{args.run}: about {rows} rows x {n_axes} axes need about {need / 1e9:.3g} GB in memory; {why} and "
-            f"may take {limit / 1e9:.3g} GB here (ACCELNAV_MAX_INPUT_BYTES); plain smooth streams any length"
-        )
-
-
-def stream_args(args, budget: int):
-    """A CSV input smoothed in bounded memory, opened as a stream (accelnav.data.stream) before anything is
-    read whole, or None: read it whole (not a CSV, within the budget, or not streamed: see NotStreamed).
-
-    Decided from the file's size: the whole-array smoother's memory against ``budget``. Only the plain
-    smoother streams; the aids (--fixes, --zupt, --tune) and --plots, --csv, --covariances need every
-    sample in memory, so with them an input that cannot be held is refused here in one line."""
-    from accelnav.data.stream import NotStreamed, open_stream
-    from accelnav.estimate.chunked import disk_needed
-
-    size = _csv_size_args(args)
-    if size is None or whole_bytes(*size) <= budget:
-        return None
-    flags = (("--fixes", args.fixes), ("--zupt", args.zupt), ("--tune", args.tune), ("--plots", args.plots),
-             ("--csv", args.csv), ("--covariances", args.covariances))  # fmt: skip
-    if any(v for _, v in flags):
-        _whole_input_args(args, f"{', '.join(f for f, v in flags if v)} need(s) every sample in memory, which")
-        return None
-    for flag in ("out", "csv"):
-        if getattr(args, flag, None) is not None:
-            check_output(getattr(args, flag), f"--{flag}")
-    rows, n_axes = size
-    workdir = Path(args.out).resolve().parent
-    need = rows * 8 * (2 + n_axes) + disk_needed(
-        rows, n_axes, n_stages=1 + bool(args.filter_states)
-    )  # input store + smoother
-    free = shutil.disk_usage(workdir).free
-    if need > free:
-        raise UserError(
-            f"{args.run}: about {rows} rows x {n_axes} axes need about {need / 1e9:.3g} GB of disk in {workdir} "
-            f"to be smoothed in bounded memory; {free / 1e9:.3g} GB are free"
-        )
-    try:
-        return open_stream(
-            args.run, args.model, axes=args.axis, time_column=args.time_column, rate_hz=args.rate,
-            time_unit=args.time_unit, unit=args.unit, allow_gaps=args.allow_gaps, workdir=workdir,
-        )  # fmt: skip
-    except NotStreamed as exc:
-        note(f"{exc}; reading it whole")
-        return None
-
-
-def _smooth_streamed(args, stream) -> int:
-    """Plain smooth of a streamed CSV: its rows go from the store to the chunked smoother, never all in memory;
-    the same stages, store and summary as _cmd_streamed, which takes a run held in memory."""
-    from accelnav.estimate.chunked import BUDGET, smooth_bounded
-
-    clipped: dict[int, np.ndarray] = {}
-
-    def read(s: int, e: int):
-        t, accel, c = stream(s, e)
-        clipped[s] = c.sum(axis=0)  # by chunk start: a chunk read twice counts once
-        return t, accel, c
-
-    with stream:
-        model = stream.model
-        if args.warm_start:
-            from accelnav.model.edit import warm_started
-
-            model = warm_started(model)
-            note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
-        budget = _memory_budget_arg(args.memory_budget)
-        stages = ("filt", "smooth") if args.filter_states else ("smooth",)
-        info = smooth_bounded(
-            model, stream.n, read, args.out, axis_names=stream.axis_names, run_format=FORMAT, stages=stages,
-            budget=min(BUDGET, budget), store_memory=budget,
-        )  # fmt: skip
-        ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
-        ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
-        t_ends = np.array([stream.t0, stream.t0 + (stream.n - 1) * stream.Ts])
-        counts = np.sum(list(clipped.values()), axis=0)[None, :]
-        print(_summary({"t": t_ends, "axis_names": stream.axis_names, "clipped": counts, **ends}, n=stream.n))
-    where = "in memory" if info["store_in_memory"] else f"on disk beside {args.out}"
-    print(
-        f"{args.run}: streamed from the CSV (its numbers in a store on disk while it ran) and smoothed in bounded "
-        f"memory: {info['chunks']} chunks of {info['chunk']} samples, the smoother's store {where}"
-    )
-    print(f"wrote {args.out}")
-    return 0
-
-
 def cmd_sim(args) -> int:
     if args.list_scenarios:
         from accelnav.hil_sim.sim.trajectories import ALL_SCENARIOS as SCENARIOS
@@ -457,53 +367,54 @@ def cmd_sim(args) -> int:
     return 0
 
 
-# keys of a run the streaming path writes again (the recording's) or recomputes (a previous stage's output)
-_STREAM_KEYS = {"t", "accel", "clipped", "axis_names", "format", "model_toml", "model_source"}
-_STAGE_KEYS = ("filt_", "smooth_", "zupt", "fixes", "fix_nis")
+def _job_options(args, **kw):
+    """The engine's Job from the command's flags."""
+    from accelnav.estimate.engine import Job
+
+    return Job(
+        covariances=args.covariances,
+        full=getattr(args, "full", True),  # filter: its file is smooth's input (sim -> filter -> smooth)
+        budget=_memory_budget_arg(getattr(args, "memory_budget", None)),
+        **kw,
+    )
 
 
-def _stream_args(args, arrays: dict[str, np.ndarray]) -> bool:
-    """Plain filtering or smoothing streams through the chunked kernels (accelnav.estimate.chunked: the
-    input read once, the output written once, in place, at any length) unless a feature needs every
-    sample in memory: covariances, CSV export, compression, and keys of the input the run file keeps
-    (raw codes, a simulation's truth, which the truth tables print)."""
-    if args.covariances or args.csv is not None or getattr(args, "compress", False):
-        return False
-    return all(k in _STREAM_KEYS or k.startswith(_STAGE_KEYS) for k in arrays)
+def _read_options(args) -> dict:
+    return dict(allow_gaps=args.allow_gaps, **reader_options(args))
 
 
-def _cmd_streamed(args, arrays: dict[str, np.ndarray], model: Model, stages: tuple[str, ...]) -> int:
-    """filter or smooth of a plain run in chunks; the same numbers as the whole-array path (to 1e-12)."""
-    from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
+def _print_run(args, outcome) -> None:
+    """The summary of a filtered or smoothed run, then how it was cut and where it went."""
+    from accelnav.data.smoothing import summary_arrays
 
-    n = len(arrays["t"])
-    read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
-    budget = _memory_budget_arg(getattr(args, "memory_budget", None))
-    info = smooth_bounded(
-        model, n, read, args.out, axis_names=arrays["axis_names"], run_format=FORMAT, stages=stages,
-        budget=min(BUDGET, budget), store_memory=budget,
-    )  # fmt: skip
-    ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
-    ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
-    print(_summary({"t": arrays["t"], "axis_names": arrays["axis_names"], "clipped": arrays["clipped"], **ends}))
-    where = "in memory" if info["store_in_memory"] else f"on disk beside {args.out}"
-    store = f", the store {where}" if "smooth" in stages else ""
-    print(f"streamed in bounded memory: {info['chunks']} chunks of {info['chunk']} samples{store}")
-    print(f"wrote {args.out}")
-    return 0
+    arrays, n = summary_arrays(outcome)
+    print(_summary(arrays, n))
+    if outcome.arrays is not None:
+        rows = position_errors(arrays, outcome.model)
+        if rows:
+            print(format_errors(rows))
+            line = truth_versus_baselines(rows, outcome.checks is not None and outcome.checks.tune_helps)
+            if "smooth_x" in arrays and line:
+                print(line)
+        strides = stride_table(arrays, outcome.model) if "smooth_x" in arrays else []
+        if strides:
+            print(format_strides(strides))
+    else:
+        p = outcome.plan
+        store = "in memory" if outcome.store_in_memory else f"on disk beside {args.out}"
+        src = f"; the input streamed from the {outcome.streamed} a chunk at a time" if outcome.streamed else ""
+        verb = "smoothed" if "smooth_x" in outcome.ends else "filtered"
+        print(f"{args.run}: {verb} in bounded memory, streamed: {p.why}, the store {store}{src}")
+    for path in outcome.written:
+        print(f"wrote {path}")
 
 
 def cmd_filter(args) -> int:
-    _whole_input_args(args, "filter holds the run in memory")
-    arrays, model = read_args(args)
-    if _stream_args(args, arrays):
-        return _cmd_streamed(args, arrays, model, ("filt",))
-    arrays = filter_run(arrays, model, covariances=args.covariances)
-    print(_summary(arrays))
-    rows = position_errors(arrays, model)
-    if rows:
-        print(format_errors(rows))
-    write_outputs(args, arrays, model)
+    from accelnav.data.smoothing import smooth_file
+
+    outcome = smooth_file(args.run, args.out, args.model, job=_job_options(args, stages=("filt",)), csv=args.csv,
+                          compress=args.compress, **_read_options(args))  # fmt: skip
+    _print_run(args, outcome)
     return 0
 
 
@@ -543,24 +454,9 @@ def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray, gravity: list
 
 
 def cmd_smooth(args) -> int:
-    from accelnav.estimate import zupt
-    from accelnav.estimate.fixes import read_fixes
+    from accelnav.data.smoothing import smooth_file
+    from accelnav.estimate.engine import Tune
 
-    stream = stream_args(args, _memory_budget_arg(args.memory_budget))
-    if stream is not None:
-        return _smooth_streamed(args, stream)
-    arrays, model = read_args(args)
-    if args.warm_start:  # the same for every path below (bounded, --tune, the aids' checks) and the run file
-        from accelnav.model.edit import warm_started
-
-        model = warm_started(model)
-        note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
-    budget = _memory_budget_arg(args.memory_budget)
-    bounded = whole_bytes(*arrays["accel"].shape) > budget
-    if bounded:  # what the bounded path cannot do is refused before any work
-        _bounded_args(args, arrays, budget)
-    names = [str(a) for a in arrays["axis_names"]]
-    fixes = read_fixes(args.fixes, arrays["t"], names) if args.fixes is not None else None
     params = ZuptParams(
         window_s=args.zupt_window_s,
         var_k=args.zupt_var_k,
@@ -578,193 +474,120 @@ def cmd_smooth(args) -> int:
         gate=args.zupt_gate,
         rel=args.zupt_rel,
     )
-    if args.zupt_report is not None and args.zupt != "auto":
-        raise UserError("--zupt-report: only with --zupt auto (it lists the detector's candidates)")
-    rest = rest_sigma = None
-    if args.zupt is not None:
-        try:
-            params = zupt.resolved(model, params)
-        except ValueError as exc:
-            raise UserError(f"--zupt-*: {exc}") from None
-    if args.zupt == "auto":
-        found = zupt.decide_rests(arrays["accel"], arrays["clipped"], None, model, params, fixes)
-        decisions, rest = found.decisions, found.mask
-        gravity = zupt.gravity_axes(arrays["accel"], arrays["clipped"], model) if not rest.any() else []
-        print(_zupt_summary(decisions, params, rest, gravity))
-        if args.zupt_report is not None:
-            write_text(args.zupt_report, zupt.report_csv(decisions, arrays["t"]), flag="--zupt-report")
-            print(f"wrote {args.zupt_report}")
-    elif args.zupt is not None:
-        rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
-    if fixes is None and rest is None and not args.tune and args.plots is None and _stream_args(args, arrays):
-        return _cmd_streamed(args, arrays, model, ("filt", "smooth") if args.filter_states else ("smooth",))
-    if bounded:
-        return _smooth_bounded(args, arrays, model, budget, fixes, rest, rest_sigma, params)
-    # automatic rests that disagree with the rest of the evidence go first, before tuning and any advice
-    review = disagreeing_rests(arrays, model, rest, fixes=fixes, params=params) if args.zupt == "auto" else None
-    rest = rest if review is None else review.kept
-    print_review(review)
+    from accelnav.estimate.tune import FIGURES
+
+    tune = None
     if args.tune:
-        model = _smooth_tune(args, arrays, model, fixes, rest, rest_sigma, params)
-    inputs = arrays
-    arrays = smooth_run(
-        arrays, model, fixes=fixes, rest=rest, zupt_params=params, rest_sigma=rest_sigma, covariances=args.covariances
-    )
-    if args.zupt == "auto":  # kept in the run file for the plots: [start_s, end_s, accepted] per candidate
-        t = arrays["t"]
-        arrays["zupt_candidates"] = np.array(
-            [[t[d.start], t[d.stop - 1], float(d.accepted and rest[d.start : d.stop].any())] for d in decisions],
-            dtype=np.float64,
-        ).reshape(-1, 3)
-    if rest is not None:
-        print(f"zero-velocity updates applied per axis: {', '.join(str(int(c)) for c in arrays['zupt'].sum(axis=0))}")
-    if fixes is not None:
-        print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
-    smooth_kw = dict(rest=rest, zupt_params=params, rest_sigma=rest_sigma)
-    checks = print_checks(arrays, model, inputs, fixes, smooth_kw, tuned=args.tune)
-    print(_summary(arrays))
-    _print_truth(arrays, model, checks)
-    strides = stride_table(arrays, model)
-    if strides:
-        print(format_strides(strides))
-    write_outputs(args, arrays, model)
+        if args.tune_evaluations < 10:
+            raise UserError(f"--tune-evaluations: got {args.tune_evaluations}; accepted: 10 or more")
+        if not args.tune_seconds > 0:
+            raise UserError(f"--tune-seconds: got {args.tune_seconds:g}; accepted: a time > 0 s")
+
+        def announce(n: int, m: int, aids: int) -> None:
+            print(
+                f"tune: fitting {', '.join(FIGURES)} to {n} samples x {m} axes with {aids} aids; budget "
+                f"{args.tune_evaluations} evaluations, {args.tune_seconds:g} s"
+            )
+
+        tune = Tune(args.tune_evaluations, args.tune_seconds, announce)
+    stages = ("filt", "smooth") if args.filter_states else ("smooth",)
+    if args.out_dir is not None or len(args.run) > 1:
+        return _smooth_fleet(args, params, stages)
+    if args.out is None:
+        raise UserError("--out: a run file to write is required (or --out-dir DIR for several inputs)")
+    args.run = args.run[0]
+    job = _job_options(args, stages=stages, tune=tune, warm_start=args.warm_start,
+               in_memory=("--plots",) if args.plots is not None else ())  # fmt: skip
+    outcome = smooth_file(
+        args.run, args.out, args.model, job=job, fixes=args.fixes, zupt=args.zupt, zupt_params=params,
+        zupt_report=args.zupt_report, csv=args.csv, compress=args.compress, rests_decided=_print_rests,
+        **_read_options(args),
+    )  # fmt: skip
+    if outcome.tune is not None:
+        _print_tune(outcome.tune, outcome.model)
+    if outcome.applied is not None:
+        print(f"zero-velocity updates applied per axis: {', '.join(map(str, outcome.applied))}")
+    if outcome.fixes is not None:
+        print(f"position fixes per axis: {', '.join(map(str, outcome.fixes))}")
+    if outcome.checks is not None:
+        for line in outcome.checks.lines():
+            print(line)
+    _print_run(args, outcome)
     if args.plots is not None:
         from accelnav.plots.run import plot_run, plot_smoothing
 
-        print(f"wrote {plot_run(arrays, model, args.plots / 'smooth.png')}")
-        for path in plot_smoothing(arrays, model, args.plots):
+        print(f"wrote {plot_run(outcome.arrays, outcome.model, args.plots / 'smooth.png')}")
+        for path in plot_smoothing(outcome.arrays, outcome.model, args.plots):
             print(f"wrote {path}")
     return 0
 
 
-def _print_truth(arrays, model: Model, checks) -> None:
-    """With truth: the error table, and a line if the smoother loses to a fix-only baseline."""
-    rows = position_errors(arrays, model)
-    if rows:
-        print(format_errors(rows))
-        line = truth_versus_baselines(rows, checks.tune_helps)
-        if line:
-            print(line)
+def _smooth_fleet(args, params: ZuptParams, stages: tuple[str, ...]) -> int:
+    """smooth over many inputs (accelnav.data.smoothing.smooth_files): a line per input as it finishes."""
+    from accelnav.data.smoothing import smooth_files
+
+    if args.out_dir is None:
+        raise UserError(f"{len(args.run)} inputs: give --out-dir DIR (a run file per input), not --out")
+    single = [f for f, v in (("--out", args.out), ("--csv", args.csv), ("--plots", args.plots),
+                             ("--zupt-report", args.zupt_report), ("--fixes", args.fixes), ("--tune", args.tune))
+              if v]  # fmt: skip
+    if args.zupt not in (None, "auto"):
+        single.append("--zupt FILE")
+    if single:
+        raise UserError(f"--out-dir: {', '.join(single)} belong(s) to one input; accepted with a fleet: --zupt auto")
+    job = _job_options(args, stages=stages, warm_start=args.warm_start)
+
+    def done(r) -> None:
+        print(f"{'ok' if r.ok else 'FAILED'} {r.path}: {r.message}" + (f" -> {r.out}" if r.ok else ""), flush=True)
+
+    results = smooth_files(
+        args.run, args.out_dir, jobs=args.jobs, done=done, model=args.model, job=job, zupt=args.zupt,
+        zupt_params=params, compress=args.compress, **_read_options(args),
+    )  # fmt: skip
+    failed = [r for r in results if not r.ok]
+    print(f"{len(results) - len(failed)} of {len(results)} inputs smoothed into {args.out_dir}"
+          + (f"; {len(failed)} failed: {', '.join(r.path for r in failed)}" if failed else ""))  # fmt: skip
+    return 1 if failed else 0
 
 
-def _memory_budget_arg(mb: float | None) -> int:
+def _memory_budget_arg(mb: float | None) -> int | None:
     if mb is None:
-        return memory_available() // 2
+        return None  # the engine's default
     if not mb > 0:
         raise UserError(f"--memory-budget: got {mb:g}; accepted: megabytes > 0")
     return int(mb * (1 << 20))
 
 
-def format_over_budget(args, arrays, budget: int) -> str:
-    n, n_axes = arrays["accel"].shape
-    return (
-        f"{args.run}: {n} samples x {n_axes} axes need about {whole_bytes(n, n_axes) / 1e9:.3g} GB on the "
-        f"whole-array path, over the memory budget of {budget / 1e9:.3g} GB (--memory-budget)"
-    )
+def _print_tune(tuned, model: Model) -> None:
+    """smooth --tune's line: the figures found, the likelihood gained, the search's cost, the verdict."""
+    from accelnav.estimate.tune import FIGURES
 
-
-def _bounded_args(args, arrays, budget: int) -> None:
-    flags = (("--plots", args.plots), ("--csv", args.csv), ("--tune", args.tune), ("--covariances", args.covariances))
-    given = [f for f, v in flags if v]
-    if given:
-        raise UserError(f"{format_over_budget(args, arrays, budget)}; bounded memory does not do {', '.join(given)}")
-
-
-def _smooth_bounded(args, arrays, model: Model, budget: int, fixes, rest, rest_sigma, params) -> int:
-    """smooth of a run over the memory budget, in chunks with a store on disk (accelnav.estimate.chunked)."""
-    from accelnav.estimate import zupt
-    from accelnav.estimate.chunked import BUDGET, array_reader, smooth_bounded
-    from accelnav.estimate.kf import Aids
-
-    n, n_axes = arrays["accel"].shape
-    fix_lists = [list(fixes[j]) if fixes is not None else [] for j in range(n_axes)]
-    extras = [Aids.of(f) for f in fix_lists]  # fixes first, then the rests' updates, as arrays (no object each)
-    zupt_ks = [np.zeros(0, dtype=np.int64)] * n_axes
-    if rest is not None:
-        r2 = np.broadcast_to(rest[:, None] if rest.ndim == 1 else rest, (n, n_axes))
-        for j in range(n_axes):
-            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
-            za = zupt.axis_aids(r2[:, j], sigma, model, params)
-            zupt_ks[j] = za.k
-            extras[j] = extras[j].concat(za)
-    gates = [np.zeros(len(e)) for e in extras]
-    n_fix = [len(f) for f in fix_lists]
-
-    def more(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
-        """The run file's zupt mask and fixes rows, as the whole-array path writes them."""
-        mask = np.zeros((n, n_axes), dtype=bool)
-        for j in range(n_axes):
-            mask[zupt_ks[j][applied[j][n_fix[j] :]], j] = True
-        rows = [(arrays["t"][m.k], j, m.z, np.sqrt(m.R)) for j in range(n_axes) for m in fix_lists[j]]
-        return {"zupt": mask, "fixes": np.array(rows, dtype=np.float64).reshape(-1, 4)}
-
-    read = array_reader(arrays["t"], arrays["accel"], arrays["clipped"])
-    info = smooth_bounded(
-        model, n, read, args.out, axis_names=arrays["axis_names"], extras=extras, gates=gates,
-        budget=min(BUDGET, budget), run_format=FORMAT, more=more,
-    )  # fmt: skip
-    print(
-        f"{format_over_budget(args, arrays, budget)}: smoothed in bounded memory, {info['chunks']} chunks of "
-        f"{info['chunk']} samples with a store on disk; the output has standard deviations (filt_sd, smooth_sd), "
-        "not covariances, and no consistency checks"
-    )
-    if rest is not None:
-        counts = [int(a[k:].sum()) for a, k in zip(info["applied"], n_fix, strict=True)]
-        print(f"zero-velocity updates applied per axis: {', '.join(map(str, counts))}")
-    if fixes is not None:
-        print(f"position fixes per axis: {', '.join(str(len(f)) for f in fixes)}")
-    print(f"wrote {args.out}")
-    return 0
-
-
-def _smooth_tune(args, arrays, model: Model, fixes, rest, rest_sigma, params) -> Model:
-    """smooth --tune: its flags checked, the search run (estimate.tune.tune_run), its two lines printed."""
-    import time
-
-    from accelnav.estimate.tune import FIGURES, tune_run
-
-    if args.tune_evaluations < 10:
-        raise UserError(f"--tune-evaluations: got {args.tune_evaluations}; accepted: 10 or more")
-    if not args.tune_seconds > 0:
-        raise UserError(f"--tune-seconds: got {args.tune_seconds:g}; accepted: a time > 0 s")
-    t0 = [time.monotonic()]
-
-    def announce(n: int, m: int, aids: int) -> None:
-        print(
-            f"tune: fitting {', '.join(FIGURES)} to {n} samples x {m} axes with {aids} aids; budget "
-            f"{args.tune_evaluations} evaluations, {args.tune_seconds:g} s"
-        )
-        t0[0] = time.monotonic()
-
-    try:
-        tuned, r = tune_run(
-            model, arrays, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params,
-            max_evaluations=args.tune_evaluations, max_seconds=args.tune_seconds, announce=announce,
-        )  # fmt: skip
-    except ValueError as exc:
-        raise UserError(f"{args.run}: --tune: {exc}") from None
+    r, seconds = tuned
     figs = ", ".join(f"{f} {r.start[f]:.4g} -> {r.estimate[f]:.4g}" for f in FIGURES)
     stop = "converged" if r.converged else "stopped at its budget: the best figures found, not a maximum"
     verdict = "used" if r.adopted else "not significantly better (p >= 0.05): the model's figures kept"
     unknown = r.unidentified()
     print(
         f"tune: {figs}; ln L +{r.ll_estimate - r.ll_start:.4g} (p = {r.p_value:.3g}); {r.evaluations} evaluations, "
-        f"{time.monotonic() - t0[0]:.1f} s, {stop}; {verdict}" + (f"; {unknown}" if unknown else "")
+        f"{seconds:.1f} s, {stop}; {verdict}" + (f"; {unknown}" if unknown else "")
     )
-    return tuned
+
+
+def _print_rests(r) -> None:
+    """The rest stage's lines (an engine.RestOutcome), printed as it is decided: the decision's summary, then
+    its review (the rests dropped, before --tune and any advice)."""
+    if not r.detected:
+        return
+    print(_zupt_summary(r.decisions, r.params, r.mask, r.gravity))
+    if not r.reviewed:
+        print(
+            "rests not re-examined against a smoother with the fixes and the other rests: the run is over the "
+            "memory budget of the whole-array path (--memory-budget)"
+        )
+    print_review(r.review)
 
 
 def print_review(review) -> None:
     """The line of the rests' re-examination (pipeline.disagreeing_rests), when it has something to say."""
     if review is not None and review.said:
         print(review.line())
-
-
-def print_checks(arrays, model: Model, inputs, fixes, smooth_kw, **kw):
-    """The checks of the smoothed run (pipeline.smooth_checks, ``kw`` e.g. tuned), a line each; returns them."""
-    from accelnav.estimate.pipeline import smooth_checks
-
-    checks = smooth_checks(arrays, model, inputs, fixes, **kw, **smooth_kw)
-    for line in checks.lines():
-        print(line)
-    return checks

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from accelnav.data.logs import decoded_run
 from accelnav.errors import UserError
+from accelnav.fileio import write_text
 from accelnav.model.load import DEFAULT_MODEL, load_model
 
 FIX_SIGMA_M = 0.05  # the final position fix's standard deviation: a good fix, as at the end of the paper's walk
@@ -64,7 +65,7 @@ def _demo_quiet(argv: list[str], log: Path) -> None:
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         status = main(argv)
-    log.write_text(buf.getvalue())
+    write_text(log, buf.getvalue(), flag="demo log")
     if status != 0:
         raise UserError(f"accelnav {argv[0]} failed (status {status}); see {log}")
 
@@ -197,7 +198,7 @@ def cmd_demo(args) -> int:
         "",
         *[f"![{p.stem}]({p.name})" for p in figures],
     ]
-    (out / "report.md").write_text("\n".join(lines) + "\n")
+    write_text(out / "report.md", "\n".join(lines) + "\n")  # the output rule, as every file the demo writes
     print()
     print(f"wrote {out / 'report.md'}, figures {', '.join(p.name for p in figures)}, fit figures in {out / 'fit'}")
     print(f"total {time.monotonic() - steps.t0:.1f} s")

@@ -41,6 +41,7 @@ def register(sub) -> None:
         "the bias and calibration are placeholders that fit-bias and calibrate then measure.",
     )
     p.add_argument("--out", type=Path, required=True, metavar="OUT.toml", help="model file to write")
+    p.add_argument("--force", action="store_true", help="replace an existing model file")
     p.add_argument("--part", default=None, help="a preset's datasheet values (adxl335, adxl250, adxl202)")
     p.add_argument("--kind", choices=("analog", "duty_cycle", "digital", "calibrated"), default=None)
     p.add_argument("--name", default=None, help="model name; default: from --out")
@@ -62,12 +63,16 @@ def _init_ask(text: str, kind=float):
 
 
 def cmd_init(args: argparse.Namespace) -> int:
-    from accelnav.fileio import check_output
+    from accelnav.fileio import output_target
     from accelnav.model.edit import save_model
     from accelnav.model.load import model_name_from
     from accelnav.model.new import new_model, preset
 
-    check_output(args.out)
+    out = output_target(args.out)
+    if out.kind == "file" and out.path.exists() and not args.force:
+        raise UserError(f"--out: {args.out} exists; give --force to replace it")
+    if args.axes is not None and not all(a.strip() for a in args.axes.split(",")):
+        raise UserError(f"--axes: got {args.axes!r}; accepted: axis names, comma separated (x,y,z)")
     values = preset(args.part, args.supply) if args.part else {}
     kind = args.kind or values.get("kind")
     asking = sys.stdin.isatty()
@@ -90,7 +95,7 @@ def cmd_init(args: argparse.Namespace) -> int:
         else:
             values[FIELDS[dest][0]] = _init_ask(FIELDS[dest][1], int if dest == "adc_bits" else float)
     axes = values.pop("axes", ("x", "y"))
-    if args.axes:
+    if args.axes is not None:
         axes = tuple(a.strip() for a in args.axes.split(","))
     if args.unit:
         values["unit"] = args.unit

@@ -9,9 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from accelnav.cli.args import NO_STDOUT
 from accelnav.data.logs import _decoded, log_run_arrays, log_summary
 from accelnav.errors import UserError
-from accelnav.fileio import atomic_output, check_output
+from accelnav.fileio import atomic_output, check_output, output_target
 
 
 def register(sub) -> None:
@@ -106,7 +107,8 @@ def cmd_record(args) -> int:
     from accelnav.link.accounting import format_counts, link_counts
     from accelnav.link.recorder import Recorder, Status
 
-    if args.out.exists() and not args.force:
+    out = output_target(args.out, stdout=NO_STDOUT["record"])
+    if out.kind == "file" and out.path.exists() and not args.force:  # a FIFO or a device is written through
         raise UserError(f"--out: {args.out} exists; give --force to overwrite it")
     if args.give_up_after is not None and args.give_up_after < 0:
         raise UserError(f"--give-up-after: got {args.give_up_after}; accepted: 0 or more seconds")
@@ -186,8 +188,12 @@ def cmd_log_plot(args) -> int:
     if not args.seconds > 0:
         raise UserError(f"--seconds: got {args.seconds}; accepted: more than 0")
     check_output(args.out)
+    from accelnav.link.logfile import LogError
+
     try:
         plot = plot_log(args.log, args.out, _record_model_text(args), args.seconds)
+    except LogError as exc:
+        raise UserError(str(exc)) from None
     except OSError as exc:
         raise UserError(f"--out: {args.out}: cannot write: {exc.strerror or exc}") from None
     print(f"accelnav log plot: {args.out}: the last {min(plot.pushed, plot.capacity)} of {plot.pushed} samples")

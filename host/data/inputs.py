@@ -76,6 +76,11 @@ def read_input(
     return _on_model(path, rec, override, chosen=bool(axes))
 
 
+def _part(model: Model) -> str:
+    kind = model.sensor.kind.replace("_", "-")
+    return f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} part"
+
+
 def _unit(model: Model | None) -> str | None:
     """The unit a column that does not name one is in: a calibrated model's (its samples' unit), or raw ADC
     counts for an analog model (what its firmware samples)."""
@@ -208,6 +213,11 @@ def _with_model(path, arrays, model: Model, override: Model | None, opts: dict) 
         if opts[key] not in (None, []):
             raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
     if override is not None:
+        if override.sensor.kind != model.sensor.kind:  # before the rate and axes, which would name a symptom
+            raise UserError(
+                f"{override.source}: {_part(override)}, but {path} was recorded from {_part(model)} "
+                f"({model.source}): give a model of that part"
+            )
         if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:
             raise UserError(
                 f"{override.source}: axes {[a.name for a in override.axes]} do not match the run's "

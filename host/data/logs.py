@@ -24,6 +24,14 @@ def _decoded(log, model_text: str):
         d = decode_log(log, model_text)
     except LogError as exc:
         raise UserError(str(exc)) from None
+    if d.stats["unreplayed"] and not len(d.frames["sample"]) and (d.meta.get("model_toml") or model_text):
+        # a model was there, but the replay could not be made of it (not the firmware's, a compiler or cache
+        # failure): the reason, not a request for what was given
+        why = d.warnings[-1] if d.warnings else "no replay"  # decode_log's warnings are the replay's
+        raise UserError(
+            f"{log}: its {d.stats['unreplayed']} samples came in compact frames and no replay of the model "
+            f"could be made to turn them into rows: {why.removeprefix(f'{log}: ')}"
+        )
     if d.stats["unreplayed"] and not len(d.frames["sample"]):  # compact frames, no model: samples but no rows
         raise UserError(
             f"{log}: its {d.stats['unreplayed']} samples came in compact frames, which only the model the "

@@ -149,9 +149,16 @@ def read_recording(
     path = check_input(path)  # a regular file: a FIFO or /dev/zero is refused before it is read
     try:
         with path.open("rb") as fh:
-            head = fh.read(4)
+            head = fh.read(8)
     except OSError as exc:
         raise UserError(f"{path}: cannot read: {exc.strerror}") from None
+    from accelnav.link.logfile import MAGIC
+
+    if head == MAGIC:  # binary: the CSV reader would stop at a NUL byte or at UTF-8, naming neither
+        raise UserError(
+            f"{path}: a recorder log, not a recording (CSV, gzip CSV or NPZ): export its samples first with "
+            f"accelnav log export {path} --out FILE.csv"
+        )
     if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
         raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
     if time_unit is not None and time_unit not in TIME_UNITS:

@@ -22,7 +22,6 @@ import errno
 import os
 import shutil
 import stat
-import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -30,7 +29,7 @@ import numpy as np
 
 from accelnav.data import recording as rc
 from accelnav.errors import UserError
-from accelnav.fileio import check_input, pread_exact
+from accelnav.fileio import TempFolder, check_input, pread_exact
 from accelnav.model.load import Model, load_model
 from accelnav.progress import note
 
@@ -60,6 +59,8 @@ class Stream:
     t0: float = 0.0
     Ts: float = 0.0
     _fds: dict = field(default_factory=dict)
+    _scratch: TempFolder | None = None  # the store's folder (fileio.TempFolder: removed on close)
+    kind: str = "CSV"
 
     @property
     def width(self) -> int:
@@ -110,7 +111,8 @@ class Stream:
         for fd in self._fds.values():
             os.close(fd)
         self._fds.clear()
-        shutil.rmtree(self.folder, ignore_errors=True)
+        if self._scratch is not None:
+            self._scratch.close()
 
     def __enter__(self) -> Stream:
         return self
@@ -138,12 +140,41 @@ def estimate_rows(path: str | os.PathLike[str]) -> int | None:
                     parts.append(fh.read(SAMPLE))
     except OSError:
         return None
-    if head[:2] in (b"PK", b"\x1f\x8b") or b"\0" in head:
+    if head[:2] == b"\x1f\x8b":
+        return _gzip_rows(path, size)
+    if head[:2] == b"PK" or b"\0" in head:
         return None
     lines = sum(p.count(b"\n") + p.count(b"\r") - p.count(b"\r\n") for p in parts)
     if lines == 0:
         return 0
     return int(size * lines / sum(map(len, parts)))
+
+
+def _gzip_rows(path: Path, size: int) -> int | None:
+    """Rows of a gzip CSV estimated from its first compressed bytes: their text's lines per byte times the
+    compression ratio so far times the file's size (a recording compresses about evenly along its length)."""
+    import zlib
+
+    d = zlib.decompressobj(31)
+    text, used = b"", 0
+    try:
+        with open(path, "rb") as fh:
+            while len(text) < 4 * SAMPLE:
+                piece = fh.read(SAMPLE // 4)
+                if not piece:
+                    break
+                text += d.decompress(piece)
+                used += len(piece) - len(d.unused_data)
+                if d.eof:
+                    break
+    except (OSError, zlib.error):
+        return None
+    if b"\0" in text[:SAMPLE] or not used:
+        return None
+    lines = text.count(b"\n") + text.count(b"\r") - text.count(b"\r\n")
+    if not text:
+        return 0
+    return int(size * (len(text) / used) * lines / len(text))
 
 
 def open_stream(
@@ -176,24 +207,27 @@ def open_stream(
         raise UserError(f"--time-unit: got {time_unit!r}; accepted: {', '.join(rc.TIME_UNITS)}")
     with open(path, "rb") as fh:
         magic = fh.read(2)
-    if magic == b"PK" or is_log(path):
-        raise NotStreamed(f"{src}: not a CSV (a run file, NPZ or recorder log is read whole)")
-    folder = Path(tempfile.mkdtemp(prefix=".accelnav-input-", dir=workdir))
+    if magic == b"PK":
+        return _npz_stream(path, override, axes, time_column, rate_hz, time_unit, unit, block)
+    if is_log(path):
+        raise NotStreamed(f"{src}: a recorder log is read whole")
+    scratch = TempFolder("input", workdir)
     st = None
     try:
-        st = _parse(path, folder, magic == b"\x1f\x8b", override, _unit(override), axes, unit, rate_hz, time_column)
+        st = _parse(path, scratch, magic == b"\x1f\x8b", override, _unit(override), axes, unit, rate_hz, time_column)
         st.rate_hz, st.time_unit = rate_hz, time_unit
         _check(st, override, time_unit, chosen=bool(axes), model_axes=model_axes, block=block)
     except BaseException:  # Ctrl-C too: the store goes with the error
         if st is not None:
             st.close()
-        shutil.rmtree(folder, ignore_errors=True)
+        scratch.close()
         raise
     return st
 
 
-def _parse(path: Path, folder: Path, gz: bool, override, default, axes, unit, rate_hz, time_column) -> Stream:
+def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, unit, rate_hz, time_column) -> Stream:
     """The CSV's numbers and lines into the store, by the whole reader's parser."""
+    folder = scratch.path
     src = str(path)
     size = path.stat().st_size
     n, head = 0, None
@@ -218,6 +252,7 @@ def _parse(path: Path, folder: Path, gz: bool, override, default, axes, unit, ra
     if n < 2:
         raise UserError(f"{src}: {n} data rows; a recording needs many more")
     st = Stream(src, n, override, np.array([]), head, folder, rate_hz, None)
+    st._scratch = scratch
     st._fds = {k: os.open(folder / f"{k}.bin", os.O_RDONLY) for k in ("store", "lines")}
     return st
 
@@ -361,3 +396,114 @@ def _grid_pass(st: Stream, rate: float, block: int) -> None:
         if np.any(dk > 1):
             raise NotStreamed(f"{src}: samples missing from its clock are filled in by the whole reader")
         k_prev = int(k[-1])
+
+
+def npz_rows(path: str | os.PathLike[str]) -> int | None:
+    """Samples of an NPZ recording or run file from its ``accel`` member's header (None: not such an NPZ)."""
+    import zipfile
+
+    from accelnav.estimate.chunked import _stored_member
+
+    path = Path(path)
+    try:
+        if not stat.S_ISREG(path.stat().st_mode):
+            return None
+        with zipfile.ZipFile(path) as zf:
+            _, shape, _ = _stored_member(path, zf, "accel")
+    except (OSError, zipfile.BadZipFile, KeyError, UserError):
+        return None
+    return int(shape[0]) if len(shape) == 2 else None
+
+
+# what an NPZ recording may hold to be streamed: anything else (a unit, a rate, a model, raw counts, a
+# simulation's truth) goes to the whole reader, which knows it
+_NPZ_STREAMED = {"t", "accel", "axis_names", "clipped"}
+_RUN_STREAMED = _NPZ_STREAMED | {"format", "model_toml", "model_source"}
+
+
+class _NpzStream(Stream):
+    """A :class:`Stream` whose rows are read from an uncompressed NPZ's ``t`` and ``accel`` members (no
+    store: the file is one); the same checks as a CSV's, as if its columns were ``t`` and the axes in m/s^2.
+    A run file (``format``) keeps its own time stamps, model and clipped flags, as load_run gives them."""
+
+    def rows(self, s: int, e: int, lines: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        t, accel, _ = self._npz(s, e)
+        table = np.column_stack((t, accel)) if e > s else np.empty((0, self.width))
+        return table, (np.arange(s, e) + 1 if lines else None)
+
+    def __call__(self, s: int, e: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self.run_file:  # as stored: its own clock, accel and clipped flags
+            return self._npz(s, e)
+        t, accel, clipped = super().__call__(s, e)
+        if "clipped" in self._npz.members:
+            clipped |= self._npz.part("clipped", s, e).astype(bool)
+        return t, accel, clipped
+
+    def close(self) -> None:
+        self._npz.close()
+
+
+def _npz_stream(path: Path, override, axes, time_column, rate_hz, time_unit, unit, block: int) -> Stream:
+    """An uncompressed NPZ recording (t, accel, optional axis_names, clipped) or run file read block by block."""
+    import zipfile
+
+    from accelnav.data.recording import GAP_FACTOR, _Header
+    from accelnav.estimate.chunked import NpzReader
+    from accelnav.model.load import loads_model
+
+    src = str(path)
+    try:
+        with zipfile.ZipFile(path) as zf:
+            keys = {n.removesuffix(".npy") for n in zf.namelist()}
+    except (OSError, zipfile.BadZipFile):
+        raise NotStreamed(f"{src}: not a readable NPZ") from None
+    run_file = "format" in keys
+    options = [f for f, v in (("--axis", axes), ("--time-column", time_column), ("--rate", rate_hz),
+                              ("--time-unit", time_unit), ("--unit", unit)) if v]  # fmt: skip
+    if not keys <= (_RUN_STREAMED if run_file else _NPZ_STREAMED) or options or ("t" not in keys):
+        raise NotStreamed(
+            f"{src}: an NPZ with {', '.join(sorted(keys - _RUN_STREAMED)) or 'these options'} is read whole"
+        )
+    try:
+        small = {k: np.load(path, allow_pickle=False)[k] for k in ("axis_names", "model_toml", "format") if k in keys}
+    except (OSError, ValueError) as exc:
+        raise UserError(f"{src}: not a readable NPZ ({exc})") from None
+    reader = NpzReader(path)  # refuses compressed members and disagreeing shapes in one line
+    try:
+        k = reader.n_axes
+        names = (
+            [str(a) for a in small["axis_names"].reshape(-1)] if "axis_names" in small else [f"a{i}" for i in range(k)]
+        )
+        if len(names) != k:
+            raise UserError(f"{src}: {len(names)} axis_names for {k} accel columns")
+        if run_file and override is None:
+            override = loads_model(str(small["model_toml"]), source=f"{src}:model_toml")
+        if reader.n < 2:
+            raise NotStreamed(f"{src}: {reader.n} samples")
+        head = _Header(",", ["t", *names], "t", names, ["m/s^2"] * k, names, list(range(k + 1)))
+        st = _NpzStream(src, reader.n, override, np.array([]), head, path.parent, None, None, kind="NPZ")
+        st._npz, st.run_file = reader, run_file
+        if run_file:  # load_run's and _with_model's checks: the model's axes and rate, no gap
+            if names != [a.name for a in override.axes]:
+                raise UserError(
+                    f"{override.source}: axes {[a.name for a in override.axes]} do not match the run's {names}"
+                )
+            clock = _time_pass(st, block)
+            step = clock.median(st.n - 1)
+            if not abs(step * override.rate_hz - 1) <= 0.01:
+                raise UserError(
+                    f"{src}: the run is sampled at {1 / step:.6g} Hz but the model {override.source} has "
+                    f"sampling.rate_hz = {override.rate_hz:g} Hz"
+                )
+            if clock.dmax > GAP_FACTOR * step:
+                raise UserError(f"{src}: gap in time of {clock.dmax:.6g} s; a run file is not filled in")
+            st.model, st.axis_names, st.t0 = override, np.array(names), clock.t0
+            st.Ts = (clock.tl - clock.t0) / (st.n - 1)
+        else:
+            from accelnav.data.inputs import model_axes
+
+            _check(st, override, None, chosen=False, model_axes=model_axes, block=block)
+    except BaseException:
+        reader.close()
+        raise
+    return st

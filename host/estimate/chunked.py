@@ -46,8 +46,7 @@ temporary files are removed on success and on error.
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
+import time
 import zipfile
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
@@ -60,11 +59,13 @@ from accelnav.errors import UserError
 from accelnav.estimate import fastsmooth
 from accelnav.estimate.kf import Measurement
 from accelnav.estimate.npzout import NpzWriter
-from accelnav.fileio import pread_exact, pwrite_all
+from accelnav.fileio import Output, TempFolder, free_bytes, output_target, pread_exact, pwrite_all
 from accelnav.model.design import AxisDesign, axis_design
 from accelnav.model.load import Model
+from accelnav.progress import Progress
 
 BUDGET = 256 << 20  # bytes of chunk buffers
+PROGRESS_AFTER = 2.0  # s: a run that takes longer shows its passes' progress (accelnav.progress: stderr, not -q)
 # peak bytes per sample and axis of `accelnav smooth` on the whole-array path (issue 24 measured 2.5 KB per
 # two-axis sample at 1e6): what decides that a run goes to the bounded path
 WHOLE_BYTES = 1250
@@ -74,6 +75,9 @@ GROW = 14  # the same for the general path (ACN_GROW): the posterior (the backwa
 # held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
 CHUNK_BYTES = 8 * GROW + 8 + 1 + 2 * 32 + 2 * 8
 OUT_KEYS = ("filt_x", "filt_sd", "smooth_x", "smooth_sd")
+# the compact output: states r, u (of r, u, a, eps) and their standard deviations, at float32 (24-bit
+# mantissa: 6e-8 relative, 0.6 mm at 10 km); with t, 8 + 16 n_axes bytes per sample
+COMPACT = (2, np.float32)
 RUN_FORMAT = "accelnav-run/1"  # the CLI passes accelnav.data.runfile.FORMAT (a layer above this one)
 
 # read rows s..e of the input: (t (e-s,), accel (e-s, n_axes), clipped (e-s, n_axes) bool)
@@ -170,16 +174,16 @@ class NpzReader:
         self.n, self.n_axes = n, shape[1]
         self.fd = os.open(path, os.O_RDONLY)
 
-    def _part(self, key: str, s: int, e: int) -> np.ndarray:
+    def part(self, key: str, s: int, e: int) -> np.ndarray:
         offset, shape, dtype = self.members[key]
         buf = np.empty((e - s, *shape[1:]), dtype=dtype)
         pread_exact(self.fd, buf, offset + s * int(np.prod(shape[1:])) * dtype.itemsize)
         return buf
 
     def __call__(self, s: int, e: int):
-        t, accel = self._part("t", s, e).astype(np.float64), self._part("accel", s, e).astype(np.float64)
+        t, accel = self.part("t", s, e).astype(np.float64), self.part("accel", s, e).astype(np.float64)
         if "clipped" in self.members:
-            return t, accel, self._part("clipped", s, e).astype(bool)
+            return t, accel, self.part("clipped", s, e).astype(bool)
         return t, accel, np.zeros((e - s, self.n_axes), dtype=bool)
 
     def close(self) -> None:
@@ -190,6 +194,42 @@ class NpzReader:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class NpzMember:
+    """One uncompressed (n_axes, N, k) member of an NPZ, read at chosen samples without loading it."""
+
+    def __init__(self, path: str | Path, name: str) -> None:
+        path = Path(path)
+        with zipfile.ZipFile(path) as zf:
+            self.offset, self.shape, self.dtype = _stored_member(path, zf, name)
+        self.fd = os.open(path, os.O_RDONLY)
+
+    def rows_at(self, at: np.ndarray, state: int, span: int = 1 << 16) -> np.ndarray:
+        """(n_axes, len(at)) values of ``state`` at samples ``at``: one read per group of them within ``span``
+        samples, so that memory is ``span`` rows whatever ``at`` covers."""
+        n_axes, n, k = self.shape
+        out = np.empty((n_axes, len(at)))
+        order = np.argsort(at, kind="stable")
+        sa = np.asarray(at)[order]
+        if len(sa) and (sa[0] < 0 or sa[-1] >= n):
+            raise IndexError(f"samples {sa[0]}..{sa[-1]} outside 0..{n - 1}")
+        for j in range(n_axes):
+            i = 0
+            while i < len(sa):
+                lo = int(sa[i])
+                e = int(np.searchsorted(sa, lo + span))
+                buf = np.empty((int(sa[e - 1]) - lo + 1, k), dtype=self.dtype)
+                pread_exact(self.fd, buf, self.offset + (j * n + lo) * k * self.dtype.itemsize)
+                out[j, order[i:e]] = buf[sa[i:e] - lo, state]
+                i = e
+        return out
+
+    def __enter__(self) -> NpzMember:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        os.close(self.fd)
 
 
 @dataclass
@@ -234,6 +274,7 @@ class _Run:
     out: NpzWriter
     axes: list[_Axis]
     smooth: bool  # False: the filter alone (no store, no backward passes)
+    states: int  # states written per sample: 4 (r, u, a, eps) or 2 (r, u)
     store: np.ndarray = field(init=False)
     xa: np.ndarray = field(init=False)
     sa: np.ndarray = field(init=False)
@@ -255,8 +296,9 @@ class _Run:
         return fastsmooth._ptr(self.ffi, a, ctype)
 
     def put(self, key: str, j: int, s: int, data: np.ndarray) -> None:
-        """Rows s.. of axis j of the (n_axes, N, 4) output ``key``."""
-        self.out.write(key, 4 * (j * self.n + s), data)
+        """Rows s.. of axis j of the (n_axes, N, states) output ``key``, from their (m, 4) values."""
+        k, data = self.states, np.atleast_2d(data)
+        self.out.write(key, k * (j * self.n + s), data if k == 4 else data[:, :k])
         if len(data) and s == 0:
             self.first.setdefault(key, np.zeros((len(self.axes), 4)))[j] = data[0]
         if len(data) and s + len(data) == self.n:
@@ -307,7 +349,7 @@ def smooth_bounded(
     model: Model,
     n: int,
     read: Reader,
-    out: str | Path,
+    out: str | Path | Output,
     *,
     axis_names: np.ndarray | None = None,
     extras: Sequence[Sequence[Measurement] | fastsmooth.Extras] | None = None,
@@ -319,6 +361,7 @@ def smooth_bounded(
     more: Callable[[list[np.ndarray]], dict[str, np.ndarray]] | None = None,
     stages: tuple[str, ...] = ("filt", "smooth"),
     store_memory: int = 0,
+    full: bool = True,
 ) -> dict:
     """Filter and RTS-smooth every axis of an n-sample run in bounded memory; write ``out``.
 
@@ -331,6 +374,8 @@ def smooth_bounded(
     ``stages``: the states written, ``filt`` (x[k|k]: filt_x, filt_sd) and ``smooth`` (x[k|N-1]:
     smooth_x, smooth_sd); without ``smooth`` only the forward pass runs (the filter, no store).
     ``store_memory``: bytes the store may take in memory (default 0: on disk, in ``workdir``).
+    ``full``: write every state (r, u, a, eps) at float64 and the input (accel, clipped); else r and u and
+    their standard deviations at float32 beside t (:data:`COMPACT`, the run file's ``/3`` form).
     Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras were
     applied, in their given order, "first", "last": {output key: its (n_axes, 4) values at sample 0, N-1},
     "store_in_memory": where the store was}.
@@ -341,7 +386,6 @@ def smooth_bounded(
         raise UserError("bounded smoother: at least one sample is needed")
     if not set(stages) <= {"filt", "smooth"} or not stages:
         raise ValueError(f"stages: {stages!r}; accepted: filt, smooth or both")
-    out = Path(out)
     n_axes = len(model.axes)
     names = np.array([a.name for a in model.axes]) if axis_names is None else np.asarray(axis_names)
     chunk = int(chunk) if chunk is not None else chunk_samples(n_axes, budget)
@@ -350,7 +394,8 @@ def smooth_bounded(
     exs = _sorted_extras(extras, n_axes, n)
     designs = [axis_design(model, j) for j in range(n_axes)]
     general = [exs[j] is not None or bool(np.any(np.asarray(d.P0)[:2, 2:] != 0)) for j, d in enumerate(designs)]
-    workdir = Path(workdir) if workdir is not None else out.resolve().parent
+    out = output_target(out)  # the output rule (accelnav.fileio), refused before any work
+    workdir = Path(workdir) if workdir is not None else out.workdir
     smooth = "smooth" in stages
     in_memory = smooth and 8 * n * (ROW * (n_axes - sum(general)) + GROW * sum(general)) <= store_memory
     _check_disk(n, n_axes, sum(general), workdir, len(stages), smooth and not in_memory)
@@ -358,12 +403,14 @@ def smooth_bounded(
     ffi, lib = mod.ffi, mod.lib
     small = {"format": np.array(run_format), "model_toml": np.array(model.text),
              "model_source": np.array(str(model.source)), "axis_names": names}  # fmt: skip
-    big = {"t": ((n,), np.float64), "accel": ((n, n_axes), np.float64), "clipped": ((n, n_axes), np.bool_)}
+    big = {"t": ((n,), np.float64)}
+    if full:
+        big.update(accel=((n, n_axes), np.float64), clipped=((n, n_axes), np.bool_))
+    k, dtype = (4, np.float64) if full else COMPACT
     for st in stages:
-        big[f"{st}_x"] = big[f"{st}_sd"] = ((n_axes, n, 4), np.float64)
+        big[f"{st}_x"] = big[f"{st}_sd"] = ((n_axes, n, k), dtype)
     with ExitStack() as stack:
-        tmp = Path(tempfile.mkdtemp(prefix=".accelnav-smooth-", dir=workdir))
-        stack.callback(shutil.rmtree, tmp, True)
+        tmp = stack.enter_context(TempFolder("smooth", workdir))
         writer = stack.enter_context(NpzWriter(out, {**small, **big}))
         axes = [_axis(ffi, j, d, exs[j], gates, general[j], n) for j, d in enumerate(designs)]
         for ax in axes:
@@ -372,19 +419,30 @@ def smooth_bounded(
                 ax.lean = _Store(tmp / f"lean-{ax.j}.bin", 8 * LROW * n if ax.width == ROW else 0, in_memory)
                 stack.callback(ax.store.close)
                 stack.callback(ax.lean.close)
-        run = _Run(ffi, lib, n, chunk, writer, axes, smooth)
+        run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k)
         starts = list(range(0, n, chunk))
-        for s in starts:  # 1. forward: the filter; for the smoother, rows into each axis's store
-            _forward(run, s, min(s + chunk, n), read, "filt" in stages)
+        t0 = time.monotonic()
+
+        def bar(label: str, total: int, unit: str = "samples") -> Progress:  # drawn after PROGRESS_AFTER s
+            return Progress(label, total, unit=unit, after=max(0.0, PROGRESS_AFTER - (time.monotonic() - t0)))
+
+        with bar("forward" if smooth else "filter", n) as p:
+            for s in starts:  # 1. forward: the filter; for the smoother, rows into each axis's store
+                _forward(run, s, min(s + chunk, n), read, "filt" in stages)
+                p.update(min(s + chunk, n))
         if smooth:
-            for s in reversed(starts):  # 2. backward: the general smoother; the plain (a, eps) into the store
-                for ax in axes:
-                    _backward(run, ax, s, min(s + chunk, n))
-            for ax in axes:  # 3. plain path, forward: smoothed r, u
-                if ax.width == ROW:
-                    _smooth_ru(run, ax, starts)
-                ax.store.close()  # freed before the small arrays are added
-                ax.lean.close()
+            with bar("backward", n) as p:
+                for s in reversed(starts):  # 2. backward: the general smoother; the plain (a, eps) into the store
+                    for ax in axes:
+                        _backward(run, ax, s, min(s + chunk, n))
+                    p.update(n - s)
+            with bar("r, u", n_axes, "axes") as p:
+                for ax in axes:  # 3. plain path, forward: smoothed r, u
+                    if ax.width == ROW:
+                        _smooth_ru(run, ax, starts)
+                    ax.store.close()  # freed before the small arrays are added
+                    ax.lean.close()
+                    p.update(ax.j + 1)
         applied = []
         for ax in axes:
             done = np.zeros(0 if ax.ex is None else len(ax.ex), dtype=bool)
@@ -411,7 +469,7 @@ def _sorted_extras(extras, n_axes: int, n: int) -> list[fastsmooth.Extras | None
 
 def _check_disk(n: int, n_axes: int, n_general: int, workdir: Path, n_stages: int, smooth: bool) -> None:
     need = disk_needed(n, n_axes, n_general, n_stages=n_stages, store=smooth)
-    free = shutil.disk_usage(workdir).free
+    free = free_bytes(workdir)
     if need > free:
         raise UserError(
             f"bounded smoother: {n} samples x {n_axes} axes need {need / 1e9:.3g} GB of disk in {workdir} for the "
@@ -437,8 +495,9 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
     n_axes = len(run.axes)
     t, accel, clipped = read(s, e)
     run.out.write("t", s, t)
-    run.out.write("accel", s * n_axes, accel)
-    run.out.write("clipped", s * n_axes, clipped)
+    if "accel" in run.out.members:
+        run.out.write("accel", s * n_axes, accel)
+        run.out.write("clipped", s * n_axes, clipped)
     m = e - s
     zc, ok, bad = run.zc[:m], run.ok[:m], run.bad[:m]
     for ax in run.axes:

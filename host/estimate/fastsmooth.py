@@ -30,7 +30,10 @@ to (r, u) cross terms in the eps row). Hence:
    blocks) reaches a steady state and never depends on N: it is computed once
    per design up to that state and kept on disk (:func:`steady_gains`), every
    later sample reading its last row; only the r, u rows of P, which never
-   settle, are propagated per run (acn_plain_cov_steady).
+   settle, are propagated per run (acn_plain_cov_steady). What is kept on disk
+   is a cache entry like any (:mod:`accelnav.cachefile`): sealed with the user's
+   key in blocks of rows, read (never mapped) and verified block by block, so an
+   edited file is recomputed and a truncated one cannot raise SIGBUS.
 2. The smoothed (a, eps) of the 4-state RTS smoother are those of the 2-state
    RTS smoother of s, because the marginal of s given all z is the 2-state
    smoothing posterior (s is Markov and z depends on s alone).
@@ -72,8 +75,11 @@ sample, upper triangle by rows: rr ru ra re uu ua ue aa ae ee); use
 from __future__ import annotations
 
 import hashlib
+import hmac
+import io
 import os
 import threading
+import zipfile
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -81,9 +87,8 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.errors import UserError
+from accelnav.cachefile import cache_note, cached, open_entry, read_into, tag, write_entry
 from accelnav.estimate.kf import Aids, Measurement
-from accelnav.fileio import atomic_output
 from accelnav.model.design import AxisDesign
 from accelnav.native.cbuild import STRICT_FLAGS
 from accelnav.native.kernels import SMOOTHER, build, prebuilt
@@ -226,7 +231,10 @@ _cache_lock = threading.Lock()
 
 
 def gain_cache_dir() -> Path | None:
-    """Optional disk cache for :func:`plain_gains`: ``$ACCELNAV_GAIN_CACHE`` (off when unset)."""
+    """Optional disk cache for :func:`plain_gains`: ``$ACCELNAV_GAIN_CACHE`` (off when unset). Its entries are
+    sealed like every cache entry (:mod:`accelnav.cachefile`) and their arrays checked for the shapes and
+    types the kernels assume before any reaches them: a folder others can write costs rebuilds, not reads
+    past an array."""
     env = os.environ.get("ACCELNAV_GAIN_CACHE")
     return Path(env) if env else None
 
@@ -263,11 +271,11 @@ def plain_gains(
             _CACHE.move_to_end(key)
             return _CACHE[key]
     cache_dir = cache_dir if cache_dir is not None else gain_cache_dir()
-    g = _load_gains(cache_dir, key) if cache_dir is not None else None
-    if g is None:
+    if cache_dir is None:
         g = _compute_gains(d, n, valid, key, steady)
-        if cache_dir is not None:
-            _save_gains(cache_dir, g)
+    else:
+        path = Path(cache_dir) / f"gains-{key}.npz"
+        g = _cached_gains(path, key, n, lambda: _compute_gains(d, n, valid, key, steady))
     with _cache_lock:
         _CACHE[key] = g
         while len(_CACHE) > _CACHE_SIZE:
@@ -354,7 +362,7 @@ GAIN_RU_RTOL = 1e-9
 _PROBE0 = 1 << 17
 PROBE_MAX = 1 << 21  # samples (235 MB of rows, once per design); not steady within it: per-run gains
 _STEADY: OrderedDict[str, SteadyGains | None] = OrderedDict()
-_STEADY_MAGIC = b"ACNSTDY1"
+_STEADY_MAGIC = b"ACNSTDY2"
 
 
 def steady_key(d: AxisDesign) -> str:
@@ -426,11 +434,13 @@ def steady_gains(d: AxisDesign, n: int | None = None, *, cache_dir: Path | None 
             return _STEADY[key]
     cache_dir = Path(cache_dir) if cache_dir is not None else steady_cache_dir()
     path = cache_dir / f"steady-{key}.bin"
-    st = _load_steady(path, key)
+    st = _load_steady(path, key, n)
+    if st is not None and not st.settled:  # the file's first rows, enough for this run: read no more
+        return st
     if st is None and n is not None and n <= PROBE_MAX:
         n = int(n)
         prefix = cache_dir / f"prefix-{key}.bin"  # the longest unsettled run's rows: exact for any shorter one
-        pre = _load_steady(prefix, key) if n >= _PROBE0 else None
+        pre = _load_steady(prefix, key, n) if n >= _PROBE0 else None
         if pre is not None and len(pre.rows) >= n:
             return SteadyGains(key, pre.rows[:n], settled=False)
         rows = _plain_rows(d, n)
@@ -455,65 +465,66 @@ def steady_gains(d: AxisDesign, n: int | None = None, *, cache_dir: Path | None 
     return st
 
 
-# file: magic (8), nt (int64 LE), sha256 of key + nt + payload (32), payload: the rows as float64 LE.
-# Trusted only if the size and the hash agree; anything else is recomputed and overwritten.
+# file: header = magic (8), the key (24 ASCII), nt (int64 LE), nb (int64 LE); the header's tag (32); nb block
+# tags (32 each); the rows as float64 LE. Tags are HMACs under the user's key (accelnav.cachefile.tag), bound
+# to the file's name: the header's covers the header and every block tag, block i's covers its index and
+# its _BLOCK_ROWS rows (the last block fewer). A run of n samples reads and verifies only the blocks holding
+# its first n rows; a file that does not verify or does not fit is recomputed and overwritten, in one line.
+_BLOCK_ROWS = 1 << 14  # 1.8 MB of rows: a run reads the blocks holding its rows (5 % more at most for long ones)
+_STEADY_HEAD = len(_STEADY_MAGIC) + 24 + 8 + 8
 
 
-def _steady_digest(key: str, nt: bytes, payload) -> bytes:
-    h = hashlib.sha256(key.encode() + nt)
-    h.update(payload)  # a buffer (bytes or the mapped rows): never concatenated into a copy
-    return h.digest()
+def _block_tag(name: str, i: int, rows) -> bytes:
+    return tag(name, b"block", i.to_bytes(8, "little"), rows)
 
 
-def _load_steady(path: Path, key: str) -> SteadyGains | None:
-    """The rows mapped from the file, not read into fresh memory: reading and copying 90 MB cost more
-    (1.2 s per axis, measured) than the whole data pass of a million samples. The hash is checked first."""
+def _load_steady(path: Path, key: str, need: int | None = None) -> SteadyGains | None:
+    """The rows of a verified file, read into memory: all of them, or (``need``) at least the first ``need``
+    (whole blocks), then marked unsettled (exact for runs of that length or less, never kept as the
+    design's steady state). Never mapped: a file truncated under a mapping raises SIGBUS in whatever touches
+    the rows next, and a cache is a file anyone may truncate (bench/speed/bench_cache_warm.py: the cost)."""
     try:
-        size = path.stat().st_size
-        head = len(_STEADY_MAGIC) + 8 + 32
-        if size < head:
-            return None
-        with open(path, "rb") as fh:
-            blob = fh.read(head)
-        if blob[:8] != _STEADY_MAGIC:
-            return None
-        nt_b, digest = blob[8:16], blob[16:head]
-        nt = int.from_bytes(nt_b, "little")
-        if nt < 1 or size - head != nt * SROW * 8:
-            return None
-        rows = np.memmap(path, dtype="<f8", mode="r", offset=head, shape=(nt, SROW))
-        stamp = _stamp(path, digest)
-        seen = path.with_name(path.name + ".ok")
-        if seen.is_file() and seen.read_bytes() == stamp:  # hashed before, and untouched since
-            return SteadyGains(key, rows)
-    except (OSError, ValueError):
+        with open_entry(path, _STEADY_HEAD + 32 * (1 + PROBE_MAX) + PROBE_MAX * SROW * 8) as (fh, size):
+            head = bytearray(_STEADY_HEAD + 32)
+            read_into(fh, head)
+            if head[:8] != _STEADY_MAGIC:
+                raise ValueError("not steady rows of this accelnav version (an older layout, or something else)")
+            if head[8:32] != key.encode():
+                raise ValueError("not the rows of this design")
+            nt, nb = (int.from_bytes(head[i : i + 8], "little") for i in (32, 40))
+            if not 1 <= nt <= PROBE_MAX or nb != -(-nt // _BLOCK_ROWS):
+                raise ValueError(f"nt = {nt} rows in {nb} blocks")
+            if size != _STEADY_HEAD + 32 * (1 + nb) + nt * SROW * 8:
+                raise ValueError(f"{size} bytes where nt = {nt} needs {_STEADY_HEAD + 32 * (1 + nb) + nt * SROW * 8}")
+            table = bytearray(32 * nb)
+            read_into(fh, table)
+            if not hmac.compare_digest(head[_STEADY_HEAD:], tag(path.name, head[:_STEADY_HEAD], table)):
+                raise ValueError("its seal does not verify (edited, damaged, or sealed under another key)")
+            blocks = nb if need is None else min(nb, -(-int(need) // _BLOCK_ROWS))
+            m = min(nt, blocks * _BLOCK_ROWS)
+            rows = np.empty((m, SROW), dtype="<f8")
+            read_into(fh, rows)
+            for i in range(blocks):
+                part = rows[i * _BLOCK_ROWS : (i + 1) * _BLOCK_ROWS]
+                if not hmac.compare_digest(table[32 * i : 32 * (i + 1)], _block_tag(path.name, i, part)):
+                    raise ValueError(f"rows block {i} does not verify (edited, damaged, or sealed under another key)")
+    except FileNotFoundError:
         return None
-    if _steady_digest(key, nt_b, rows) != digest:
+    except (OSError, ValueError) as exc:
+        cache_note(path, getattr(exc, "strerror", None) or str(exc))
         return None
-    try:  # hashing 90 MB took 0.2-0.4 s of every run; the stamp says the file has not changed since
-        with atomic_output(seen, "wb", "gain cache") as fh:
-            fh.write(stamp)
-    except (OSError, UserError):
-        pass
-    return SteadyGains(key, rows)
-
-
-def _stamp(path: Path, digest: bytes) -> bytes:
-    """What changes whenever the file does: its inode, size and status-change time (which no user call
-    sets back, unlike the modification time), with the digest it carries."""
-    st = path.stat()
-    return digest + b"%d %d %d" % (st.st_ino, st.st_size, st.st_ctime_ns)
+    rows.flags.writeable = False
+    return SteadyGains(key, rows, settled=m == nt)
 
 
 def _save_steady(path: Path, st: SteadyGains) -> None:
     """Best effort: a cache that cannot be written (read-only home, full disk) costs only time."""
-    payload = st.rows.astype("<f8").tobytes()
-    nt_b = len(st.rows).to_bytes(8, "little")
-    try:
-        with atomic_output(path, "wb", "gain cache") as fh:
-            fh.write(_STEADY_MAGIC + nt_b + _steady_digest(st.key, nt_b, payload) + payload)
-    except (OSError, UserError):
-        pass
+    rows = np.ascontiguousarray(st.rows, dtype="<f8")
+    nt = len(rows)
+    nb = -(-nt // _BLOCK_ROWS)
+    head = _STEADY_MAGIC + st.key.encode() + nt.to_bytes(8, "little") + nb.to_bytes(8, "little")
+    table = b"".join(_block_tag(path.name, i, rows[i * _BLOCK_ROWS : (i + 1) * _BLOCK_ROWS]) for i in range(nb))
+    write_entry(path, head, tag(path.name, head, table), table, memoryview(rows).cast("B"))
 
 
 def clear_steady_cache() -> None:
@@ -522,25 +533,50 @@ def clear_steady_cache() -> None:
         _STEADY.clear()
 
 
-def _load_gains(cache_dir: Path, key: str) -> PlainGains | None:
-    path = Path(cache_dir) / f"gains-{key}.npz"
+_GAIN_NAMES = ("K", "Cs", "P_prior", "P_post", "Ps")
+
+
+def _cached_gains(path: Path, key: str, n: int, compute) -> PlainGains:
+    """``compute()``'s gains through the sealed entry at ``path`` (``$ACCELNAV_GAIN_CACHE``): read back only
+    if it verifies and every array has the shape and type the C kernels will assume for ``n`` samples."""
+    made: list[PlainGains] = []
+
+    def build() -> bytes:
+        made.append(compute())
+        buf = io.BytesIO()
+        g = made[0]
+        np.savez(buf, **{k: getattr(g, k) for k in _GAIN_NAMES}, all_valid=np.bool_(g.all_valid))
+        return buf.getvalue()
+
+    limit = (2 * 4 + 3 * 10) * 8 * n + (1 << 16)  # the arrays of n samples and the zip's headers
+    data = cached(path, build, limit=limit, check=lambda b: _gains_from(b, key, n))
+    return made[0] if made else _gains_from(data, key, n)
+
+
+def _gains_from(data, key: str, n: int) -> PlainGains:
+    """The gains of a cached entry, refused (ValueError) unless each array is what the kernels read: K and
+    Cs (m, 4) float64 with m = n (or 1 <= m <= n, all valid: the steady transient), P (n, 10) float64."""
     try:
-        with np.load(path, allow_pickle=False) as f:
-            arrays = [f[k] for k in ("K", "Cs", "P_prior", "P_post", "Ps")]
-            all_valid = bool(f["all_valid"])
-    except (OSError, KeyError, ValueError):
-        return None
-    for a in arrays:
+        with np.load(io.BytesIO(data), allow_pickle=False) as f:
+            if sorted(f.files) != sorted((*_GAIN_NAMES, "all_valid")):
+                raise ValueError(f"arrays {', '.join(f.files)}")
+            arrays = {k: f[k] for k in _GAIN_NAMES}
+            all_valid = f["all_valid"]
+    except (OSError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"not the gains' NPZ ({exc})") from None
+    if all_valid.shape != () or all_valid.dtype != np.bool_:
+        raise ValueError("all_valid: not one bool")
+    m = len(arrays["K"]) if arrays["K"].ndim else 0
+    for k, a in arrays.items():
+        want = (m, 4) if k in ("K", "Cs") else (n, 10)
+        if a.dtype != np.float64 or a.shape != want or not a.flags.c_contiguous:
+            said = "(rows, 4)" if k in ("K", "Cs") else str(want)
+            raise ValueError(f"{k}: {a.dtype} {a.shape}, expected C-ordered float64 {said}")
+    if not (m == n or (bool(all_valid) and 1 <= m <= n)):
+        raise ValueError(f"K: {m} rows for {n} samples")
+    for a in arrays.values():
         a.flags.writeable = False
-    return PlainGains(key, *arrays, all_valid)
-
-
-def _save_gains(cache_dir: Path, g: PlainGains) -> None:
-    cache_dir = Path(cache_dir)
-    cache_dir.mkdir(parents=True, exist_ok=True)
-    tmp = cache_dir / f"gains-{g.key}.{os.getpid()}.tmp.npz"
-    np.savez(tmp, K=g.K, Cs=g.Cs, P_prior=g.P_prior, P_post=g.P_post, Ps=g.Ps, all_valid=g.all_valid)
-    os.replace(tmp, cache_dir / f"gains-{g.key}.npz")
+    return PlainGains(key, *arrays.values(), bool(all_valid))
 
 
 def plain_data(d: AxisDesign, z: np.ndarray, valid: np.ndarray | None, g: PlainGains, *, out=None):

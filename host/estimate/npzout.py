@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.fileio import pwrite_all
+from accelnav.fileio import Output, OutputFile, pwrite_all, write_failure
 
 _POLY = 0xEDB88320  # CRC-32 (zip), reflected
 SLOTS = 3  # pieces in flight behind the caller (each a copy of one write: memory is SLOTS pieces)
@@ -75,13 +75,18 @@ class _Member:
 class NpzWriter:
     """An NPZ at ``path`` of the given members: each a small array (written now) or ``(shape, dtype)``,
     filled later by :meth:`write` at flat element offsets, in any order. :meth:`close` checks that every
-    byte was written, then writes the headers; the file appears at ``path`` only then (renamed from a
-    ``.part`` beside it). Use as a context manager: on error the partial file is removed."""
+    byte was written, then writes the headers; the file appears at ``path`` only then, by the output rule
+    (:class:`accelnav.fileio.OutputFile`: an exclusive temporary file beside it, renamed; a FIFO, a device
+    or ``-`` gets the bytes copied from an unnamed temporary file). Use as a context manager: on error
+    nothing is left, and an OSError (a full disk, in the output or a store written beside it) becomes
+    one line."""
 
-    def __init__(self, path: str | Path, members: dict[str, np.ndarray | tuple[tuple[int, ...], object]]) -> None:
-        self.path = Path(path)
-        self.part = self.path.with_name(self.path.name + ".part")
-        self.fd = os.open(self.part, os.O_RDWR | os.O_CREAT | os.O_TRUNC, 0o644)
+    def __init__(
+        self, path: str | Path | Output, members: dict[str, np.ndarray | tuple[tuple[int, ...], object]]
+    ) -> None:
+        self.output = OutputFile(path, seekable=True)
+        self.path = Path(str(path))
+        self.fd = self.output.fd
         # large pieces are copied into one of SLOTS slots and written by a writer thread (their CRC by a
         # third) while the caller computes the next: the write, not the kernels, was the larger part of a
         # 1e7-sample smooth (pwrite 1.5 s beside 1.2-1.8 s of kernels, measured); the slots bound the memory
@@ -89,6 +94,13 @@ class NpzWriter:
         self._crc = ThreadPoolExecutor(1)  # the CRC beside the write: each was ~1 s of a 1e7-sample smooth
         self._slots: list[list] = [[None, None] for _ in range(SLOTS)]  # [buffer, pending future]
         self._turn = 0
+        try:
+            self._lay_out(members)
+        except BaseException:
+            self.abort()
+            raise
+
+    def _lay_out(self, members: dict) -> None:
         self.members: dict[str, _Member] = {}
         self.dtypes: dict[str, np.dtype] = {}
         small: list[tuple[str, np.ndarray]] = []
@@ -180,7 +192,7 @@ class NpzWriter:
             # local header: version 4.5 (zip64), stored, 1980-01-01, sizes in the zip64 extra field
             local = struct.pack("<IHHHHHIIIHH", 0x04034B50, 45, 0, 0, 0, 0x21, crc, 0xFFFFFFFF, 0xFFFFFFFF,
                                 len(m.name), 20)  # fmt: skip
-            os.pwrite(self.fd, local + m.name + struct.pack("<HHQQ", 1, 16, m.size, m.size), m.local)
+            pwrite_all(self.fd, local + m.name + struct.pack("<HHQQ", 1, 16, m.size, m.size), m.local)
             central.append(
                 struct.pack(
                     "<IHHHHHHIIIHHHHHII",
@@ -211,12 +223,11 @@ class NpzWriter:
         loc = struct.pack("<IIQI", 0x07064B50, 0, self.end + len(cd), 1)
         eocd = struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, 0xFFFF, 0xFFFF, 0xFFFFFFFF, 0xFFFFFFFF, 0)
         tail = cd + z64 + loc + eocd
-        os.pwrite(self.fd, tail, self.end)
-        os.close(self.fd)
-        self.fd = -1
+        pwrite_all(self.fd, tail, self.end)
         self._writer.shutdown()
         self._crc.shutdown()
-        os.replace(self.part, self.path)
+        self.output.commit()
+        self.fd = -1
 
     def abort(self) -> None:
         try:
@@ -225,16 +236,22 @@ class NpzWriter:
             pass  # the error that brought us here is the one to report
         self._writer.shutdown()
         self._crc.shutdown()
-        if self.fd >= 0:
-            os.close(self.fd)
-            self.fd = -1
-        self.part.unlink(missing_ok=True)
+        self.output.abort()
+        self.fd = -1
 
     def __enter__(self) -> NpzWriter:
         return self
 
-    def __exit__(self, exc_type, *exc) -> None:
+    def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
-            self.close()
-        else:
-            self.abort()
+            try:
+                self.close()
+            except OSError as err:
+                self.abort()
+                if not write_failure(err):
+                    raise
+                raise self.output.error(err) from None
+            return
+        self.abort()
+        if isinstance(exc, OSError) and write_failure(exc):  # a full disk here or in a store beside it
+            raise self.output.error(exc) from None

@@ -11,91 +11,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from accelnav.estimate import engine
 from accelnav.estimate.checks import check_run
-from accelnav.estimate.kf import Aids, double_integrate, run_filter
+from accelnav.estimate.kf import double_integrate, run_filter
 from accelnav.model.design import axis_design
-from accelnav.model.edit import warm_started
 from accelnav.model.load import Model
 
 if TYPE_CHECKING:  # consistency loads scipy: imported where it is used
     from accelnav.estimate.consistency import SmoothChecks
-
-# packed index (accelnav.estimate.fastsmooth.PACKED, upper triangle by rows) of each entry of a 4x4,
-# row-major: np.take with it unpacks (N, 10) into (N, 16) in one pass, no fancy-index scatter
-_FULL = np.array([0, 1, 2, 3, 1, 4, 5, 6, 2, 5, 7, 8, 3, 6, 8, 9])
-_DIAG = np.array([0, 4, 7, 9])
-
-
-class _Out:
-    """The per-axis outputs, written axis by axis into arrays allocated once (no list then np.stack,
-    which held every array twice at the peak)."""
-
-    def __init__(self, n_axes: int, n: int, stages: tuple[str, ...], covariances: bool):
-        self.arrays: dict[str, np.ndarray] = {}
-        for st in stages:
-            self.arrays[f"{st}_x"] = np.empty((n_axes, n, 4))
-            self.arrays[f"{st}_sd"] = np.empty((n_axes, n, 4))
-            if covariances:
-                self.arrays[f"{st}_P"] = np.empty((n_axes, n, 4, 4))
-        if covariances and "filt" in stages:
-            self.arrays["filt_x_prior"] = np.empty((n_axes, n, 4))
-            self.arrays["filt_P_prior"] = np.empty((n_axes, n, 4, 4))
-
-    def plain(self, j: int, d, z: np.ndarray, valid: np.ndarray) -> None:
-        """Axis j by the compiled plain path, its means written straight into the output rows: what
-        fastsmooth.smooth_plain does, without its two (N, 4) copies and without the priors (a matmul over
-        every sample) unless the covariances were asked for."""
-        from accelnav.estimate import fastsmooth
-
-        a = self.arrays
-        z = np.asarray(z, dtype=np.float64)
-        ok = np.isfinite(z) & np.asarray(valid, dtype=bool)
-        mask = None if ok.all() else ok
-        g = fastsmooth.plain_gains(d, len(z), mask)
-        xf = a["filt_x"][j]
-        xs = a["smooth_x"][j] if "smooth_x" in a else np.empty_like(xf)
-        fastsmooth.plain_data(d, np.where(ok, z, 0.0), mask, g, out=(xf, xs))
-        self.put(j, "filt", None, g.P_post)
-        self.put(j, "smooth", None, g.Ps)
-        if "filt_x_prior" in a:
-            x_prior = a["filt_x_prior"][j]
-            x_prior[0] = d.x0
-            x_prior[1:] = xf[:-1] @ np.asarray(d.F).T + np.asarray(d.b)
-            self.put(j, "filt_prior", None, g.P_prior)
-
-    def put(self, j: int, key: str, x: np.ndarray | None, Pp: np.ndarray | None = None) -> None:
-        """Axis j of ``key`` (a state, e.g. "smooth") from its (N, 4) means and (N, 10) packed covariances."""
-        a = self.arrays
-        suffix = "_prior" if key.endswith("_prior") else ""
-        stage = key.removesuffix("_prior")
-        if f"{stage}_x{suffix}" not in a:
-            return
-        if x is not None:  # None: already written in place
-            a[f"{stage}_x{suffix}"][j] = x
-        if not suffix:
-            sd = a[f"{stage}_sd"][j]
-            np.take(Pp, _DIAG, axis=1, out=sd, mode="clip")  # "raise" would buffer out
-            np.sqrt(sd, out=sd)
-        if f"{stage}_P{suffix}" in a:
-            np.take(Pp, _FULL, axis=1, out=a[f"{stage}_P{suffix}"][j].reshape(len(Pp), 16), mode="clip")
-
-
-def _plain_ok(d) -> bool:
-    """The plain path needs P0 without (r, u)-(a, eps) cross terms (accelnav.estimate.fastsmooth.smooth)."""
-    return not np.any(np.asarray(d.P0)[:2, 2:] != 0)
-
-
-def _kernel_extras(a: Aids):
-    """``a`` as the sorted arrays the compiled general path takes (fastsmooth.Extras.of, without objects)."""
-    from accelnav.estimate.fastsmooth import Extras
-
-    return Extras.of(a)
-
-
-def _stale(out: dict, stage: str) -> None:
-    """Drop a previous run's keys of ``stage``, so that no old covariance sits beside new means."""
-    for k in [k for k in out if k.startswith(f"{stage}_")]:
-        del out[k]
 
 
 def filter_run(
@@ -108,26 +31,13 @@ def filter_run(
     accelnav.estimate.kf.run_filter to 1e-9; tests/estimate/test_smooth_output.py compares the two).
     ``progress`` is accepted for symmetry (the C is quick).
     """
-    from accelnav.estimate import fastsmooth
+    return _engine_run(engine.Job(stages=("filt",), covariances=covariances), arrays, model)
 
-    check_run(arrays, model, "filter_run")
-    n, n_axes = arrays["accel"].shape
-    res_out = _Out(n_axes, n, ("filt",), covariances)
-    for j in range(n_axes):
-        d = axis_design(model, j)
-        z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
-        if _plain_ok(d):
-            res_out.plain(j, d, z, valid)
-            continue
-        res = fastsmooth.smooth_general(d, z, valid=valid)
-        res_out.put(j, "filt", res.x_post, res.P_post)
-        res_out.put(j, "filt_prior", res.x_prior, res.P_prior)
-        del res
-    out = dict(arrays)
-    for stage in ("filt", "smooth"):  # a new filter run makes an old smoothing stale
-        _stale(out, stage)
-    out.update(res_out.arrays)
-    return out
+
+def _engine_run(job, arrays: dict[str, np.ndarray], model: Model) -> dict[str, np.ndarray]:
+    """One run of the engine over arrays in memory, its outputs returned (one chunk)."""
+    check_run(arrays, model, "smooth_run" if "smooth" in job.stages else "filter_run")
+    return engine.run(model, engine.Source.of(arrays), job).arrays
 
 
 def reference_filter_run(arrays: dict[str, np.ndarray], model: Model, *, progress: bool | None = None) -> dict:
@@ -178,67 +88,9 @@ def smooth_run(
     beside ``fixes``, ``zupt_nis`` (K, 4) [t, axis column, NIS, 1 for the first update of its rest].
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
-    from accelnav.estimate import fastsmooth, zupt
-
-    check_run(arrays, model, "smooth_run")
-    if warm_start:
-        model = warm_started(model)
-    params = zupt.ZuptParams() if zupt_params is None else zupt_params
-    n = len(arrays["t"])
-    n_axes = len(arrays["axis_names"])
-    rest2 = None
-    if rest is not None:
-        rest2 = np.asarray(rest, dtype=bool)
-        rest2 = np.broadcast_to(rest2[:, None] if rest2.ndim == 1 else rest2, (n, n_axes))
-    res_out = _Out(n_axes, n, ("filt", "smooth"), covariances)
-    applied = np.zeros((n, n_axes), dtype=bool)
-    fix_rows, fix_nis, zupt_nis = [], [], []
-    for j in range(n_axes):
-        d = axis_design(model, j)
-        fx = Aids.of(fixes[j] if fixes is not None else [])
-        za = Aids.of([])
-        if rest2 is not None:
-            sigma = None if rest_sigma is None else np.asarray(rest_sigma)[:, j]
-            za = zupt.axis_aids(rest2[:, j], sigma, model, params)
-        extras = fx.concat(za)
-        gates = np.zeros(len(fx) + len(za))  # no innovation gate: rests are gated whole by the detector
-        z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
-        if not len(extras) and _plain_ok(d):
-            res_out.plain(j, d, z, valid)
-            continue
-        res = fastsmooth.smooth_general(d, z, valid=valid, extras=_kernel_extras(extras), gates=gates)
-        res_out.put(j, "filt", res.x_post, res.P_post)
-        res_out.put(j, "filt_prior", res.x_prior, res.P_prior)
-        res_out.put(j, "smooth", res.xs, res.Ps)
-        if len(za):
-            applied[za.k[res.applied[len(fx) :]], j] = True
-        fix_rows += list(zip(arrays["t"][fx.k], [j] * len(fx), fx.z, np.sqrt(fx.R), strict=True))
-        if len(extras):  # NIS only where there are aids: the plain path pays nothing
-            # the innovations as the compiled filter met them (consistency.aid_innovations replays the same)
-            sel = np.flatnonzero(res.applied)
-            used = extras.take(sel)
-            y, S = res.y[sel], res.S[sel]
-            nis = y * y / S
-            n_fix_used = int(np.sum(res.applied[: len(fx)]))  # fixes are never gated: all of them
-            fix_nis += list(nis[:n_fix_used])
-            zk = used.k[n_fix_used:]
-            if len(zk):
-                # the first update of each rest carries the velocity gathered since the last aid: the test of
-                # the model; the later ones mostly test the zero-velocity sigma, a chosen pseudo-noise
-                moving = np.concatenate(([0], np.cumsum(~rest2[:, j])))  # non-rest samples before each sample
-                first = np.ones(len(zk), dtype=bool)
-                first[1:] = moving[zk[1:]] != moving[zk[:-1]]
-                zupt_nis.append(np.column_stack((arrays["t"][zk], np.full(len(zk), j), nis[n_fix_used:], first)))
-        del res
-    out = dict(arrays)
-    for stage in ("filt", "smooth"):
-        _stale(out, stage)
-    out.update(res_out.arrays)
-    out["zupt"] = applied
-    out["fixes"] = np.array(fix_rows, dtype=np.float64).reshape(-1, 4)
-    out["fix_nis"] = np.array(fix_nis, dtype=np.float64)
-    out["zupt_nis"] = np.concatenate(zupt_nis) if zupt_nis else np.zeros((0, 4))
-    return out
+    rests = None if rest is None else engine.Rests(zupt_params, mask=rest, sigma=rest_sigma)
+    job = engine.Job(("filt", "smooth"), fixes, rests, covariances=covariances, checks=False, warm_start=warm_start)
+    return _engine_run(job, arrays, model)
 
 
 @dataclass(frozen=True)

@@ -52,16 +52,42 @@ class SampleOrder:
         self.before_reset: tuple[int, int, int, int] | None = None
         self._since_reset = 0
         self.mark: tuple[int, int] | None = None  # (seq, index) the next sample frame starts from
+        self.closed = False  # seq counted up to a compact checkpoint: no sample frame delivered since
         self.lost = 0
         self.duplicates = 0
 
-    def compact(self, seq: int, index: int) -> None:
+    def compact(self, seq: int | None, index: int) -> None:
         """A compact-mode checkpoint, in stream order with the sample frames: the firmware had sent sample
         frames up to ``seq`` (the next one's) when the compact stream reached ``index``. The first sample
         frame after it counts the frames it missed from there (a mode change whose first frames were lost),
-        however long the compact stretch was."""
+        however long the compact stretch was. The sample frames missing before it (the last ones of the state
+        mode) are counted here from ``seq`` alone (the index may be damage the compact rule refuses later),
+        as no sample frame may follow (a recording that ends in the compact mode): seq then stands at the
+        frame before the checkpoint (``closed``), so that a missing frame turning up late is an older frame,
+        not 65535 more lost."""
+        if seq is None:
+            self.mode_end(index)
+            return
         if self.last_index is None or index > self.last_index:
             self.mark = (seq, index)
+            if self.last_seq is not None and 0 < (seq - self.last_seq) % _WRAP < _HALF:
+                self.lost += (seq - 1 - self.last_seq) % _WRAP
+                self.last_seq = (seq - 1) % _WRAP
+                self.decimation, self.stops = None, []
+                self.closed = True
+
+    def mode_end(self, index: int) -> None:
+        """The ack of a change to the compact mode at ``index``: the state mode's sample frames ended at the one
+        of ``index - 1``. Those after the last delivered are counted lost here when each sample had its frame
+        (decimation 1 and no stop since), since the compact mode's checkpoints, which would say it by seq,
+        may never come (a stream cut short)."""
+        if self.last_index is None or self.closed or self.stops or self.decimation != 1:
+            return
+        n = index - 1 - self.last_index
+        if 0 < n < _HALF:
+            self.lost += n
+            self.last_seq, self.last_index = (self.last_seq + n) % _WRAP, index - 1
+            self.closed = True
 
     def ack(self, command: int, index: int) -> None:
         """An ack frame, in stream order with the sample frames."""
@@ -82,8 +108,12 @@ class SampleOrder:
             if self.last_index is None or mi > self.last_index:
                 self.lost += (seq - ms) % _WRAP  # the frames sent between the compact stretch and this one
                 self.last_seq, self.last_index = seq, index
-                self.decimation, self.stops = None, []
+                self.decimation, self.stops, self.closed = None, [], False
                 return True
+        if self.closed and index > self.last_index and not 1 <= (seq - self.last_seq) % _WRAP < _HALF:
+            self.duplicates += 1  # a frame counted lost at a checkpoint after it, arriving late
+            return False
+        self.closed = False
         if self.last_seq is None:
             self.last_seq, self.last_index = seq, index
             return True
@@ -139,10 +169,11 @@ class SampleOrder:
     def run(self, seq, index, flags, stops: list[tuple[int, int]] = (), marks: list = ()) -> np.ndarray:
         """:meth:`step` over arrays (stream order), vectorised between irregular frames: the keep mask.
         ``stops``: (number of these sample frames before the ack in the stream, index) of stop acks;
-        ``marks``: (number of sample frames before it, seq, index) of compact checkpoints (:meth:`compact`)."""
+        ``marks``: (number of sample frames before it, seq, index) of compact checkpoints (:meth:`compact`), seq
+        None for the ack of a change to the compact mode (:meth:`mode_end`)."""
         n = len(seq)
         keep = np.ones(n, bool)
-        marks = sorted(marks)
+        marks = sorted(marks, key=lambda m: m[0])
         if n == 0:
             for _, s in stops:
                 self.stops.append(s)

@@ -91,6 +91,9 @@ class CompactStream:
         self.run: int | None = None  # the run id (boot id + resets) of the run being decoded
         self.past_runs: set[int] = set()  # runs before it: their frames, re-sent, are repeats
         self.pause_from: int | None = None  # end of the run at a pause, until a checkpoint's paused_at says more
+        self.known_pause = -1  # the latest paused_at the run's checkpoints said so far
+        self.blind_gap: tuple[int, int] | None = None  # (end, index after) of the last unflagged gap, until a
+        # checkpoint says whether a pause fell inside it (:meth:`_Walk._unseen_pause`)
         self.pending = None  # (kind, record): a frame waiting for the next batch to confirm it
         self.defer = None
         self.seg_len = [int(man.frames[n]["size"]) + 5 for n in ("block", "checkpoint")]  # bytes, no delimiter
@@ -143,9 +146,11 @@ class CompactStream:
         return w.acc, w.breaks, w.events
 
     # ------------------------------------------------------------------
-    def feed(self, blocks: np.ndarray, bpos: np.ndarray, cks: np.ndarray, cpos: np.ndarray):
-        """Accepted block and checkpoint frames of one batch with their stream positions: (rows, row positions)."""
-        self.held_pos = np.full(len(self.held_pos), -1, np.int64)  # held rows: from before this batch now
+    def feed(self, blocks: np.ndarray, bpos: np.ndarray, cks: np.ndarray, cpos: np.ndarray, more: bool = False):
+        """Accepted block and checkpoint frames of one batch with their stream positions: (rows, row positions).
+        ``more``: frames of the batch fed before too (split at sample frames): the held rows keep positions."""
+        if not more:
+            self.held_pos = np.full(len(self.held_pos), -1, np.int64)  # held rows: from before this batch now
         if self.pending is not None:  # the frame the last batch left undecided goes first (before position 0)
             kind, rec = self.pending
             self.pending = None
@@ -181,6 +186,7 @@ class CompactStream:
             fl[isb], fl[~isb] = b_flags[ids[isb]], c_flags[ids[~isb]]
             regular = bool(np.all(idx == self.end + nbefore) and not np.any(fl & (self.R | self.X)))
             regular = regular and bool(np.all(b_run == self.run) and np.all(c_run == self.run))
+            regular = regular and self.blind_gap is None  # a checkpoint may still tell of a pause inside it
             if regular and nc:  # and no checkpoint twice (the rule counts a repeat)
                 ax_o, idx_o = c_axis[ids[~isb]], c_index[ids[~isb]]
                 for j in range(len(self.axes)):
@@ -198,6 +204,8 @@ class CompactStream:
             for p, i in zip(ck_at.tolist(), ck_ids.tolist(), strict=True):
                 events[int(c_axis[i])].append([p, i, True, True])
                 self.last_ck[int(c_axis[i])] = int(c_index[i])
+            if nc:
+                self.known_pause = max(self.known_pause, int(cks["paused_at"].max()))
             self.end = self.end + int(b_n.sum())
         else:
             acc, breaks, events = self.order(
@@ -220,6 +228,18 @@ class CompactStream:
                 kind, i = self.defer
                 self.pending = (kind, (blocks if kind == 0 else cks)[i : i + 1].copy())
         return self._rows(blocks[acc], bpos[acc], breaks, events, cks)
+
+    def state_frames(self, index: int) -> None:
+        """Sample frames of the state mode reached ``index`` (the last one's) since the frames fed before: the
+        run went on there. Its samples are the state mode's to count, not a gap of the compact stream, and
+        the replay's carried state is stale (a break)."""
+        if self.pending is not None or (self.end is not None and index < self.end):
+            return
+        if self.end is None and self.run is not None:
+            return  # a new run's first frames were judged damage: its start is not known
+        self.end = index + 1  # (the stream's first frames: the run is the next compact frame's)
+        self.carry = [None] * len(self.axes)
+        self.pause_from = self.blind_gap = None
 
     def _runs(self, kinds, ids, isb, n_sel, b_index, b_n, b_flags, c_index, c_flags, c_axis, b_run, c_run):
         """For :meth:`order`: which frames continue the one before them in the stream (vectorised)."""
@@ -309,8 +329,8 @@ class CompactStream:
             self._assemble(rows, blk, mism)
         if held_mism.any():
             whole["flags"][:h] |= np.where(held_mism, self.MISMATCH, 0).astype(whole["flags"].dtype)
-        # the held rows came before this batch (position -1)
-        rpos = np.r_[np.full(h, -1, np.int64), np.repeat(bpos, ns)]
+        # the held rows came before these frames (position -1 when from an earlier batch)
+        rpos = np.r_[self.held_pos[:h], np.repeat(bpos, ns)]
         g = np.r_[held_g, g0 + np.arange(N)]
         if not valid.all():  # drop the runs of rows without a state: whole runs copied (a record gather is slow)
             keep = np.r_[np.ones(h, bool), valid]
@@ -556,6 +576,10 @@ class _Walk:
                     break
                 cs.last_ck[f.c_axis[j]] = f.c_index[j]
                 self.events[f.c_axis[j]].append([self.pos + nb[p] - nb[q], j, True, True])
+                if f.c_paused[j] is not None:
+                    if cs.blind_gap is not None:
+                        self._unseen_pause(f.c_index[j], f.c_paused[j])
+                    cs.known_pause = max(cs.known_pause, int(f.c_paused[j]))
         if r <= q:
             return None
         blk = [f.ids[p] for p in range(q, r) if f.kinds[p] == 0]
@@ -570,7 +594,7 @@ class _Walk:
         cs, f = self.cs, self.f
         kind, i = f.kinds[q], f.ids[q]
         run, idx = (f.b_run[i], f.b_index[i]) if kind == 0 else (f.c_run[i], f.c_index[i])
-        new_run = self.end is not None and run != cs.run
+        new_run = self.end is not None and cs.run is not None and run != cs.run
         if new_run and run in cs.past_runs:  # a frame of an earlier run, sent again
             if kind == 0:
                 cs.duplicates += f.b_n[i]
@@ -590,10 +614,11 @@ class _Walk:
             if len(cs.past_runs) > 64:
                 cs.past_runs = set(sorted(cs.past_runs)[-64:])
             cs.run = run
-            cs.pause_from = None
+            cs.pause_from = cs.blind_gap = None
+            cs.known_pause = -1
             self._brk(self.pos)
             self.end = None  # the new run's first frame: no gap counted against the old run
-        if self.end is None:
+        if self.end is None or cs.run is None:
             cs.run = run
         return self._block(i, idx) if kind == 0 else self._checkpoint(i, idx)
 
@@ -602,8 +627,28 @@ class _Walk:
         if flags & self.cs.R:
             self.cs.pause_from = self.end  # a pause: paused_at will tell what was lost before it
         else:
-            self.cs.lost += idx - self.end
+            self.cs.lost += idx - self.end  # unless a checkpoint later shows a pause inside it
+            self.cs.blind_gap = (self.end, idx)
         self._brk(self.pos)
+
+    def _unseen_pause(self, idx: int, paused: int | None) -> None:
+        """A checkpoint at ``idx`` after a gap without a resume flag (its frames lost): a ``paused_at`` the run
+        had not said yet means the firmware paused inside the gap, and the samples from there to where it
+        resumed were never sent, not lost. Where it resumed: the countdown puts the first checkpoint after a
+        resume a whole number of ``checkpoint_samples`` after it, and the resume came before the gap's
+        first frame (which carried no resume flag): the latest such index at or after the pause. When no
+        index fits (a stop or flush came sooner after the resume), the gap stays counted as it was."""
+        cs = self.cs
+        gap, cs.blind_gap = cs.blind_gap, None
+        if paused is None or gap is None or paused <= cs.known_pause:
+            return
+        start, after = gap
+        if not start <= paused < after:
+            return
+        C = cs.window // 4
+        resumed = idx - -(-(idx - (after - 1)) // C) * C  # the latest idx - k C at or before after - 1
+        if resumed >= paused:
+            cs.lost -= resumed - paused
 
     def _block(self, i: int, idx: int) -> bool:
         n = self.f.b_n[i]
@@ -638,6 +683,10 @@ class _Walk:
             # samples the firmware sent before the pause that never arrived
             cs.lost += max(0, min(int(f.c_paused[i]), idx) - cs.pause_from)
             cs.pause_from = None
+        if cs.blind_gap is not None:
+            self._unseen_pause(idx, f.c_paused[i])
+        if f.c_paused[i] is not None:
+            cs.known_pause = max(cs.known_pause, int(f.c_paused[i]))
         cs.last_ck[ax] = idx
         self.events[ax].append([self.pos, i, not self._broken_here(), True])
         return True

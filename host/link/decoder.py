@@ -26,6 +26,7 @@ import numpy as np
 
 from .accounting import SampleOrder, Stats
 from .codec import cobs_decode_rows, crc_rows
+from .compact import concat_records
 from .manifest import Manifest
 from .wirekernel import decode_frames
 
@@ -67,6 +68,7 @@ class Decoder:
         self._tail = b""
         self._overlong = False  # the tail exceeded every frame length: the segment is refused at its delimiter
         self.order = SampleOrder(1 << manifest.flags["reset"], manifest.frames["cmd_stop"]["type"])
+        self.mode_compact = manifest.frames.get("cmd_mode_compact", {}).get("type")
         self.stats = Stats(frames={n: 0 for n in self.names})
         self.compact = None
         if "block" in self.names and "checkpoint" in self.names:
@@ -159,6 +161,11 @@ class Decoder:
         if cks is not None and len(cks):
             before = np.searchsorted(where.get("sample", np.zeros(0, np.int64)), where["checkpoint"])
             marks = list(zip(before.tolist(), cks["seq"].tolist(), cks["index"].tolist(), strict=True))
+        if acks is not None and len(acks) and self.mode_compact is not None:
+            is_mc = acks["command"] == self.mode_compact
+            if is_mc.any():
+                before = np.searchsorted(where.get("sample", np.zeros(0, np.int64)), where["ack"][is_mc])
+                marks += [(p, None, i) for p, i in zip(before.tolist(), acks["index"][is_mc].tolist(), strict=True)]
         lost0, dup0 = self.order.lost, self.order.duplicates
         keep = self.order.run(smp["seq"], smp["index"], smp["flags"], stops, marks)
         if not keep.all():
@@ -183,7 +190,7 @@ class Decoder:
         e = np.zeros(0, np.int64)
         before = {k: getattr(c, k) for k in _COMPACT_COUNTS}
         dmg0 = c.damaged, c.damaged_bytes
-        rows, rpos = c.feed(out["block"], where.get("block", e), out["checkpoint"], where.get("checkpoint", e))
+        rows, rpos = self._compact_around_states(out, where, e)
         if len(out["sample"]):  # held rows before a state-mode frame go out before it, never after
             early, epos = c.release_before(int(where["sample"][-1]))
             if len(early):
@@ -202,6 +209,31 @@ class Decoder:
         for k, b in before.items():  # this batch's counts, added to the decoder's
             setattr(self.stats, k, getattr(self.stats, k) + getattr(c, k) - b)
         return c.lost - before["lost"]
+
+    def _compact_around_states(self, out: dict, where: dict, e: np.ndarray):
+        """:meth:`CompactStream.feed` of the batch's block and checkpoint frames, in groups split where the
+        state mode's sample frames came between them (:meth:`CompactStream.state_frames` told each time)."""
+        c = self.compact
+        blk, bpos = out["block"], where.get("block", e)
+        cks, cpos = out["checkpoint"], where.get("checkpoint", e)
+        spos = where.get("sample", e)
+        if not len(spos):
+            return c.feed(blk, bpos, cks, cpos)
+        sidx = out["sample"]["index"].astype(np.int64)
+        gb, gc = np.searchsorted(spos, bpos), np.searchsorted(spos, cpos)  # sample frames before each frame
+        rows, rpos, done = [], [], 0
+        # group 0 even when empty: the frame an earlier batch left pending and the held rows' positions (from
+        # an earlier batch now) are settled before the sample frames move the stream on
+        for g in np.unique(np.r_[0, gb, gc]).tolist():
+            if g > done:
+                c.state_frames(int(sidx[done:g].max()))
+                done = g
+            r, p = c.feed(blk[gb == g], bpos[gb == g], cks[gc == g], cpos[gc == g], more=bool(rows))
+            rows.append(r)
+            rpos.append(p)
+        if done < len(spos):
+            c.state_frames(int(sidx[done:].max()))
+        return concat_records(rows, c.sample_dtype), np.concatenate(rpos) if rpos else e
 
     @property
     def received(self) -> int:

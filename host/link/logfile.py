@@ -21,6 +21,7 @@ at the next chunk magic after a damaged one, so a log stays readable.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import stat
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from accelnav.errors import UserError
-from accelnav.fileio import check_input
+from accelnav.fileio import OutputFile, check_input, output_target
 
 MAGIC = b"ACNLOG1\n"
 CHUNK = b"ACNK"
@@ -72,16 +73,30 @@ class LogWriter:
         overwrite: bool = False,
         clock=time.time_ns,
     ):
-        self.path = Path(path)
+        self.path = Path(str(path))
         self.flush_ns = int(flush_s * 1e9)
         self.fsync_ns = None if fsync_s is None else int(fsync_s * 1e9)
         self.max_chunk = max_chunk
         self.clock = clock
-        flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | (os.O_TRUNC if overwrite else os.O_EXCL)
-        self.fd = os.open(self.path, flags, 0o644)
+        # the output rule (accelnav.fileio): a file appears with its whole header, replacing an existing log
+        # only with ``overwrite``, and is then appended in place (a crash keeps what came); a FIFO or a
+        # device is written through
+        out = output_target(path, stdout="a recording goes to a file, a FIFO or a device")
+        w = OutputFile(out)
         head = json.dumps({"format": FORMAT, **meta}, sort_keys=True).encode()
-        os.write(self.fd, MAGIC + struct.pack("<I", len(head)) + head + struct.pack("<I", zlib.crc32(head)))
-        os.fsync(self.fd)
+        view = memoryview(MAGIC + struct.pack("<I", len(head)) + head + struct.pack("<I", zlib.crc32(head)))
+        try:
+            while view:  # os.write here, as for the chunks: one place where this module meets the disk
+                view = view[os.write(w.fd, view) :]
+        except OSError as exc:
+            w.abort()
+            raise w.error(exc) from None
+        try:
+            w.commit(replace=overwrite, keep_open=True)
+        except FileExistsError:
+            raise FileExistsError(errno.EEXIST, "exists", str(path)) from None
+        self.fd = w.fd
+        self._sync = out.kind == "file"  # fsync: a pipe or a device has nothing to sync
         self._buf = bytearray()
         self.error: OSError | None = None  # the write that failed, if one did
         self._t_first = 0
@@ -106,7 +121,8 @@ class LogWriter:
         if self._buf and (now - self._t_first >= self.flush_ns or len(self._buf) >= self.max_chunk):
             self.flush()
         if self.fsync_ns is not None and now - self._last_sync >= self.fsync_ns and self.error is None:
-            os.fsync(self.fd)
+            if self._sync:
+                os.fsync(self.fd)
             self._last_sync = now
 
     def flush(self) -> None:
@@ -138,7 +154,7 @@ class LogWriter:
             return
         try:
             self.flush()
-            if self.error is None:
+            if self.error is None and self._sync:
                 os.fsync(self.fd)
         finally:
             os.close(self.fd)

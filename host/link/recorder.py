@@ -153,6 +153,7 @@ class Recorder:
             "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         }
         self.log = LogWriter(out, meta, flush_s=flush_s, overwrite=overwrite)
+        self.model_text = model_text
         self.info_ok: bool | None = None
         self._stop = False
 
@@ -243,8 +244,9 @@ class Recorder:
                     break
                 if max_frames is not None and self.decoder.stats.frames.get("sample", 0) >= max_frames:
                     reason = "frames"
-                    self._end_of_frame()
                     break
+            if reason in ("duration", "frames", "stopped") and self.ser is not None:
+                self._end_of_frame()  # a clean stop ends on a frame boundary, not on a torn frame counted damaged
         except OSError as exc:
             if self.log.error is None:  # not the log's write: not ours to explain
                 raise
@@ -256,12 +258,29 @@ class Recorder:
                 self.on_rows(rest)
             self.status.note = ""
             self.status.update(time.monotonic() - t0, self.decoder, final=True)
-        return Result(reason, time.monotonic() - t0, self.decoder.stats.as_dict(), self.info_ok, self.warnings, gaps)
+        stats = self.decoder.stats.as_dict()
+        if self.log.error is not None:  # bytes decoded here never reached the log: count what it holds
+            stats = self._logged_stats(stats)
+        hint = garbage_hint(stats, self.man, self.baud)
+        if hint:
+            self.warnings.append(f"{self.url}: {hint}")
+        return Result(reason, time.monotonic() - t0, stats, self.info_ok, self.warnings, gaps)
+
+    def _logged_stats(self, decoded: dict) -> dict:
+        """The counts of the log as written (a write failed: the last chunk is torn or missing), as
+        ``log info`` will show them; the decoder's own counts if the log cannot be read back."""
+        from accelnav.link.logfile import LogError
+
+        try:
+            return decode_log(self.log.path, self.model_text, rows=False).stats
+        except (LogError, OSError) as exc:
+            self.warnings.append(f"{self.log.path}: cannot read the log back to count it ({exc}): counts as received")
+            return decoded
 
     def _end_of_frame(self, wait_s: float = 0.5) -> None:
-        """Stopping at a frame count with a frame under way (the next one began in the same read): read on,
-        at most ``wait_s``, up to its delimiter, so that the log ends on a frame boundary rather than in a
-        torn frame that would read as damage."""
+        """Stopping (a frame count, the duration, Ctrl-C) with a frame under way (the next one began in the
+        same read): read on, at most ``wait_s``, up to its delimiter, so that the log ends on a frame boundary
+        rather than in a torn frame that would read as damage."""
         end = time.monotonic() + wait_s
         while self.decoder.mid_frame and time.monotonic() < end:
             try:
@@ -296,14 +315,15 @@ class Recorder:
             self.ser.write(encode_command(self.man, name, **args))
 
     def _lost(self, t: float, exc: Exception) -> dict:
-        """The link went away: close the port, keep the log, refuse the unfinished frame."""
+        """The link went away: close the port, keep the log. The unfinished frame stays with the decoder: the
+        bytes after the link comes back join it, as they join in the log, so the recorder counts damage as
+        every reader of the log does (it was refused here as well, one damaged frame more per outage)."""
         try:
             self.ser.close()
         except (serial.SerialException, OSError):
             pass
         self.ser = None
         self.log.flush()
-        self.decoder.finish()
         gap = {"lost_s": round(t, 3), "error": str(exc), "index_before": self.decoder.last_index, "attempts": 0}
         self.status.event(t, f"link lost ({exc}); the log stays open, retrying {self.url}")
         return gap
@@ -386,7 +406,8 @@ def _replay(man: Manifest, model_text: str, warnings: list, source: str = "the r
         return None
     try:
         return replay_for(man, model_text)
-    except (ValueError, BuildError) as exc:  # ReplayError, ModelError, no compiler: one line
+    except (ValueError, BuildError, ImportError, OSError) as exc:  # ReplayError, ModelError, no compiler, a
+        # cached build that does not load: one line, read by whoever asks why the samples have no rows
         warnings.append(f"{source}: {str(exc).splitlines()[0]}")
         return None
 
@@ -427,9 +448,10 @@ def decode_log(path, model_text: str = "", *, rows: bool = True) -> DecodedLog:
         except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
             raise LogError(f"{path}: the header's frame manifest is not valid ({str(exc)[:60]})") from None
         warnings: list[str] = []
-        if own:  # the log's model is someone else's file: the loader's rule first, or nothing is read (ModelError)
-            loads_model(own, source=f"{path}:model_toml")
         text = own or model_text
+        if text:  # the log's model is someone else's file: the loader's rule first, or nothing is read (ModelError)
+            model = loads_model(text, source=f"{path}:model_toml" if own else "--model")
+            same_input(model, man, str(path), "its model_toml" if own else "the model given")
         dec = Decoder(man, replay=_replay(man, text, warnings, str(path)))
         parts: dict[str, list] = {n: [] for n in dec.names}
         times: list = []
@@ -457,6 +479,40 @@ def decode_log(path, model_text: str = "", *, rows: bool = True) -> DecodedLog:
         log.torn_bytes,
         warnings,
     )
+
+
+def garbage_hint(stats: dict, man: Manifest, baud: int) -> str | None:
+    """Why a link that sent bytes gave no frame at all, from what came (None when a frame came, or nothing):
+    no delimiter in the bytes is what a wrong baud rate gives; delimited segments none of which is a frame
+    of this manifest are a firmware of another layout (or a baud rate that keeps the zero bytes)."""
+    if stats["bytes"] == 0 or any(stats["frames"].values()):
+        return None
+    n, segs = stats["bytes"], stats["bad_frames"]
+    sizes = sorted({int(f["size"]) + 5 for f in man.frames.values() if f["direction"] == "up"})
+    if segs <= 1:
+        return (
+            f"{n} bytes and no frame delimiter (zero byte) in them: a wrong baud rate garbles every byte "
+            f"(now {baud}: give the firmware's with --baud)"
+        )
+    return (
+        f"{n} bytes in {segs} delimited segments (mean {n / segs:.0f} bytes; this manifest's frames are "
+        f"{sizes[0]} to {sizes[-1]}), none a frame of this manifest: a firmware of another model or layout "
+        f"(give its --manifest or --model), or a wrong baud rate (now {baud}: --baud)"
+    )
+
+
+def same_input(model, man: Manifest, log: str, who: str) -> None:
+    """Refuse in one line a model whose part is read otherwise than the log's frames carry (a duty-cycle model
+    for ADC codes, or the reverse): its conversion cannot take them."""
+    duty = model.sensor.kind == "duty_cycle"
+    if duty != (man.input == "duty_cycle"):
+        from accelnav.link.logfile import LogError
+
+        frames = "(T1, T2) duty-cycle pairs" if man.input == "duty_cycle" else "ADC codes"
+        raise LogError(
+            f"{log}: {who} is a {model.sensor.kind.replace('_', '-')} part but the log's frames carry {frames}: "
+            "not the model the firmware was built with"
+        )
 
 
 def _keep(parts: list, rows, every: bool) -> None:

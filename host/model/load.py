@@ -84,6 +84,23 @@ def name_problem(kind: str, value: object) -> str | None:
     return None
 
 
+def c_identifier_from(text: str, prefix: str) -> str:
+    """``prefix`` + ``text`` made a name that passes the C-identifier rule (``_C_IDENT``: what axis names and the
+    C prefix must be), for names that reach C, a Makefile and a file name at once (the Arduino library's).
+    Each run of characters outside A-Z a-z 0-9 becomes one _; when that changed ``text`` or the rule's 32
+    characters cut it, 6 hex digits of its sha256 follow, so models whose names differ keep apart."""
+    body = re.sub(r"[^A-Za-z0-9]+", "_", text).strip("_")
+    room = 32 - len(prefix)
+    if body != text or len(body) > room:
+        tag = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:6]
+        body = f"{body[: room - 7].rstrip('_')}_{tag}".lstrip("_")
+    name = prefix + body
+    problem = name_problem("C prefix", name)
+    if problem:  # a prefix that is no C identifier itself: the caller's bug, not the user's
+        raise ValueError(f"{name!r}: {problem}")
+    return name
+
+
 def model_name_from(text: str) -> str:
     """A model name that passes the rule, made from free text (a recording's file name): every other
     character becomes _, cut to the rule's 64."""

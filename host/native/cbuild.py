@@ -5,9 +5,16 @@
 ``.lib``). The module name carries a hash of everything that goes into the
 build (sources, headers, cdef, flags, Python and cffi versions), so an edit
 gives a new module and an unchanged source is compiled once per cache
-folder. The compile happens in a private temporary folder and the finished
-``.so`` is moved into place with an atomic rename, so two processes building
-the same module at once cannot see a half-written file.
+folder. The compile happens in a private temporary folder; the finished
+``.so`` is kept as a sealed cache entry (:mod:`accelnav.cachefile`: an
+HMAC under the user's key, written whole by a rename, built under a lock
+so two processes needing it compile it once).
+
+A cached module is code: its bytes are read whole and verified before any
+of them is loaded, then loaded from those very bytes (a sealed memfd on
+Linux), never from the cache file again, so a module edited, swapped or
+truncated in the cache is rebuilt (one line on stderr), never run, and
+cannot raise SIGBUS under a running process.
 
 Cache folder: ``cffi/`` under :func:`accelnav.resources.cache_root`
 (``$ACCELNAV_CACHE_DIR``, else ``~/.cache/accelnav``): never inside the
@@ -20,7 +27,9 @@ one builder.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
+import importlib.machinery
 import importlib.util
 import os
 import platform
@@ -34,6 +43,7 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
+from accelnav.cachefile import cached
 from accelnav.resources import cache_root, firmware_dir
 
 
@@ -53,6 +63,9 @@ STRICT_FLAGS = (*STRICT_WARN, "-O2")
 # for a build that links a board's startup.c (not ours: its vector table casts function pointers to
 # void *, which -pedantic refuses), as firmware.mk builds that file
 BOARD_WARN = tuple(f for f in STRICT_WARN if f != "-pedantic")
+
+
+MAX_MODULE_BYTES = 256 << 20  # a cached module larger than this is no module of ours (ours: tens of kB to a few MB)
 
 
 class BuildError(RuntimeError):
@@ -93,16 +106,17 @@ def build_module(
     key = "\0".join(
         [cdef, preamble, *mains, *(f"{k}\0{v}" for k, v in sorted(sources.items()))]
         + [*extra_compile_args, "--link", *extra_link_args, sys.version, cffi.__version__, platform.machine()]
+        + [os.environ.get("CC", "cc")]
     )
     modname = f"_{stem}_{hashlib.sha256(key.encode()).hexdigest()[:16]}"
     if modname in sys.modules:
         return sys.modules[modname]
     root = Path(workdir) if workdir is not None else cache_dir()
-    root.mkdir(parents=True, exist_ok=True)
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
-    so = root / f"{modname}{suffix}"
-    if not so.exists():
-        tmp = Path(tempfile.mkdtemp(prefix=f"{modname}.", dir=root))
+
+    def compile_so() -> bytes:
+        root.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{modname}.", dir=root))
         try:
             for name, text in sources.items():
                 (tmp / name).write_text(text)
@@ -123,7 +137,7 @@ def build_module(
             # setuptools, which Python 3.12 and later no longer carry (and a user's venv need not have).
             ffi = cffi.FFI()
             ffi.cdef(cdef)
-            ffi.set_source(modname, preamble)
+            ffi.set_source(modname, preamble, compiler_verbose=0)  # no 'generating ...' on stdout
             wrapper = tmp / f"{modname}.c"
             ffi.emit_c_code(str(wrapper))
             built = tmp / f"{modname}{suffix}"
@@ -135,11 +149,49 @@ def build_module(
             done = subprocess.run(cmd, capture_output=True, text=True)
             if done.returncode != 0:
                 raise BuildError(f"{' '.join(cmd)} failed:\n{done.stderr}")
-            os.replace(built, so)
+            return built.read_bytes()
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-    spec = importlib.util.spec_from_file_location(modname, so)
+
+    # the module's bytes, verified (sealed with the user's key) before anything of them is loaded
+    data = cached(root / f"{modname}{suffix}.sealed", compile_so, limit=MAX_MODULE_BYTES)
+    mod = _load_extension(modname, data, suffix)
+    sys.modules[modname] = mod
+    return mod
+
+
+# memfds of the modules loaded from memory: kept open for the process's life, since the dynamic loader
+# knows a loaded library by its path and a closed descriptor's number (hence its /proc path) is reused
+_loaded_fds: list[int] = []
+
+
+def _load_extension(modname: str, data: bytes, suffix: str):
+    """Import an extension module from verified bytes, without reading its file again: on Linux from a
+    sealed memfd (nobody can change or truncate it while it is mapped); elsewhere from a copy in a private
+    temporary folder. Either way the bytes loaded are the bytes verified."""
+    if hasattr(os, "memfd_create"):
+        fd = os.memfd_create(modname, os.MFD_CLOEXEC | os.MFD_ALLOW_SEALING)
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view) :]
+            seals = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_WRITE | fcntl.F_SEAL_SEAL
+            fcntl.fcntl(fd, fcntl.F_ADD_SEALS, seals)
+            mod = _import_from(modname, f"/proc/self/fd/{fd}")
+        except (OSError, ImportError):
+            os.close(fd)  # a kernel that will not map a memfd executable: the private copy below
+        else:
+            _loaded_fds.append(fd)
+            return mod
+    with tempfile.TemporaryDirectory(prefix="accelnav-so-") as tmp:  # mode 0700: only this user can change it
+        path = Path(tmp) / f"{modname}{suffix}"
+        path.write_bytes(data)
+        return _import_from(modname, str(path))  # the mapping outlives the file, which goes with the folder
+
+
+def _import_from(modname: str, path: str):
+    loader = importlib.machinery.ExtensionFileLoader(modname, path)
+    spec = importlib.util.spec_from_file_location(modname, path, loader=loader)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    sys.modules[modname] = mod
     return mod

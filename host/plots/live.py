@@ -13,12 +13,14 @@ daemon thread redraws at most ``1 / interval_s`` times a second from a snapshot 
 from __future__ import annotations
 
 import http.server
-import os
+import sys
 import threading
 from pathlib import Path
 
 import numpy as np
 
+from accelnav.errors import UserError
+from accelnav.fileio import atomic_output
 from accelnav.link.manifest import Manifest, sample_columns
 
 RING_SECONDS = 10.0  # what a person on a bench watches: the last few seconds
@@ -127,20 +129,25 @@ class LivePlot:
     def save(self, path: str | Path) -> Path:
         """Draw and write a PNG in place: to a hidden file beside it, then renamed, so a viewer never reads
         half a file. No fsync: this is a view, redrawn a moment later, not data."""
-        path = Path(path)
-        tmp = path.with_name(f".{path.name}.part")
         fig = self.figure()
-        with self._draw_lock:
-            fig.savefig(tmp, format="png")
-        os.replace(tmp, path)
-        return path
+        with self._draw_lock, atomic_output(path, flag="live plot", fsync=False) as fh:  # the output rule
+            fig.savefig(fh, format="png")
+        return Path(path)
 
 
 class LiveView:
     """Redraw ``plot`` to ``png`` every ``interval_s`` from a daemon thread while anything new came, and
-    optionally serve a self-reloading page of it on 127.0.0.1:``port`` (0: any free port)."""
+    optionally serve a self-reloading page of it on 127.0.0.1:``port`` (0: any free port). The page answers
+    only requests naming this machine (:func:`host_allowed`); ``log`` gets one line per refused Host."""
 
-    def __init__(self, plot: LivePlot, png: str | Path, interval_s: float = REFRESH_S, port: int | None = None):
+    def __init__(
+        self,
+        plot: LivePlot,
+        png: str | Path,
+        interval_s: float = REFRESH_S,
+        port: int | None = None,
+        log=None,
+    ):
         self.plot = plot
         self.png = Path(png)
         self.interval_s = interval_s
@@ -151,7 +158,7 @@ class LiveView:
         self._server = None
         self.url: str | None = None
         if port is not None:
-            self._server = _serve(self.png, port, interval_s)
+            self._server = _serve(self.png, port, interval_s, log or _log_stderr)
             self.url = f"http://127.0.0.1:{self._server.server_address[1]}/"
 
     def start(self) -> LiveView:
@@ -172,6 +179,8 @@ class LiveView:
             self.frames_drawn += 1
         except OSError as exc:
             self.error = f"{self.png}: {exc.strerror or exc}"
+        except UserError as exc:  # the output rule's one line (a full disk, another writer)
+            self.error = str(exc)
 
     def close(self) -> None:
         """Stop the thread, draw the final state once, stop the page."""
@@ -191,11 +200,40 @@ _PAGE = (
 )
 
 
-def _serve(png: Path, port: int, interval_s: float):
-    """A page and the PNG on 127.0.0.1 only (never another host), from a daemon thread."""
+LOOPBACK_NAMES = ("localhost", "127.0.0.1", "[::1]")
+
+
+def host_allowed(host: str | None, port: int) -> bool:
+    """Is ``host`` (a request's Host header) this machine's loopback on ``port``? Binding 127.0.0.1 keeps other
+    machines out, but a page from elsewhere can point its own name at 127.0.0.1 (DNS rebinding) and read
+    ours as same-origin; its requests then carry its name in Host, so only loopback names pass."""
+    if host is None:
+        return False
+    return host.strip().lower() in {f"{name}:{port}" for name in LOOPBACK_NAMES}
+
+
+def _log_stderr(line: str) -> None:
+    print(f"accelnav record: live plot: {line}", file=sys.stderr)
+
+
+def _serve(png: Path, port: int, interval_s: float, log):
+    """A page and the PNG on 127.0.0.1 only, from a daemon thread. No option binds another address: the plot
+    is for the person at this machine. Requests whose Host is not a loopback name with our port get 403; each
+    such Host is logged once (a rebinding page retries: the log stays bounded)."""
+    refused: set[str] = set()
 
     class Handler(http.server.BaseHTTPRequestHandler):
         def do_GET(self):  # noqa: N802 (http.server's name)
+            host = self.headers.get("Host")
+            bound = self.server.server_address[1]
+            if not host_allowed(host, bound):
+                self.send_error(403, "Host not allowed")
+                shown = repr(host)[:80]
+                if shown not in refused and len(refused) < 100:
+                    refused.add(shown)
+                    names = ", ".join(LOOPBACK_NAMES)
+                    log(f"refused a request with Host {shown} (403): only {names} on port {bound}")
+                return
             if self.path.split("?")[0] == "/live.png":
                 try:
                     body, kind = png.read_bytes(), "image/png"

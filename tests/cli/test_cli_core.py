@@ -28,7 +28,7 @@ def test_sim_filter_smooth_chain(tmp_path, capsys):
     assert "smooth_x" not in arrays and "filt_P" not in arrays  # the covariances only on request
     assert str(arrays["format"]) == FORMAT
 
-    status, out, _ = _run(["smooth", filt, "--out", smooth, "--plots", tmp_path / "plots"], capsys)
+    status, out, _ = _run(["smooth", filt, "--full", "--out", smooth, "--plots", tmp_path / "plots"], capsys)
     assert status == 0 and "smoother at start" in out
     arrays, _ = load_run(smooth)
     # the smoother's last sample is the filter's
@@ -48,7 +48,7 @@ def test_smooth_runs_the_filter_when_needed_and_duty_model(tmp_path, capsys):
     model = MODELS / "adxl202_duty.toml"
     status, _, _ = _run(["sim", "--model", model, "--scenario", "sinusoid", "--duration", 3, "--out", sim], capsys)
     assert status == 0
-    status, _, _ = _run(["smooth", sim, "--out", smooth], capsys)
+    status, _, _ = _run(["smooth", sim, "--full", "--out", smooth], capsys)
     arrays, m = load_run(smooth)
     assert status == 0 and m.sensor.kind == "duty_cycle"
     assert "t1" in arrays and "filt_x" in arrays and "smooth_x" in arrays

@@ -78,7 +78,9 @@ def test_chain_init_fit_bias_smooth_counts(tmp_path, capsys):
     move = sensor.simulate(real, "vehicle", 60.0, seed=3)
     _write_counts(tmp_path / "move.csv", move, "xyz")
     out = tmp_path / "move.npz"
-    code = main(["smooth", str(tmp_path / "move.csv"), "--model", str(fitted), "--unit", "counts", "--out", str(out)])
+    code = main(
+        ["smooth", str(tmp_path / "move.csv"), "--model", str(fitted), "--unit", "counts", "--full", "--out", str(out)]
+    )
     assert code == 0, capsys.readouterr().err
     with np.load(out) as z:
         accel = z["accel"]

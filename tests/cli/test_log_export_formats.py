@@ -6,31 +6,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.firmware_log import firmware_log
 
 from accelnav.cli import main as cli_main
 from accelnav.data.runfile import load_run
-from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
-from accelnav.link.codec import encode_command, encode_stimulus
-from accelnav.link.logfile import LogWriter
-from accelnav.model.load import DEFAULT_MODEL, load_model
+from accelnav.model.load import DEFAULT_MODEL
 
 N = 700  # samples sent
 
 
 def _log(tmp_path, mode: str, with_model: bool):
     """A log of the firmware's telemetry as the recorder writes it (with --model or with --manifest)."""
-    man = manifest(None)
-    fw = HostFirmware(build_firmware(None))
-    if mode == "states":
-        fw.rx(encode_command(man, "mode_states"))
-        fw.take()
-    fw.rx(encode_stimulus(man, code=2048 + np.random.default_rng(5).integers(-60, 60, (N, 2))))
-    fw.rx(encode_command(man, "flush"))  # the last partial block and a checkpoint: every sample sent
-    path = tmp_path / f"{mode}_{int(with_model)}.acnlog"
-    meta = {"manifest": man.data, "model_toml": load_model().text if with_model else "", "source": "test"}
-    with LogWriter(path, meta, fsync_s=None) as log:
-        log.append(fw.take())
-    return path
+    return firmware_log(tmp_path / f"{mode}_{int(with_model)}.acnlog", mode, with_model, N)
 
 
 @pytest.mark.parametrize("mode", ["states", "compact"])

@@ -100,7 +100,17 @@ def test_init_fit_bias_calibrate_codegen_hil_smooth_on_counts(tmp_path, capsys):
     # smooth --unit counts: the calibrated model's own conversion of the counts, the firmware's input
     out = tmp_path / "move.npz"
     _ok(
-        ["smooth", str(tmp_path / "move.csv"), "--model", str(calibrated), "--unit", "counts", "--out", str(out)],
+        [
+            "smooth",
+            str(tmp_path / "move.csv"),
+            "--model",
+            str(calibrated),
+            "--unit",
+            "counts",
+            "--full",
+            "--out",
+            str(out),
+        ],
         capsys,
     )
     with np.load(out) as z:

@@ -61,6 +61,8 @@ def test_a_full_disk_ends_the_recording_and_the_log_stays_readable(tmp_path, man
     d = decode_log(out)
     assert 0 < len(d.frames["sample"]) < 2000 and d.torn_bytes > 0  # a prefix of the stream, readable
     np.testing.assert_array_equal(d.frames["sample"]["index"], np.arange(len(d.frames["sample"])))
+    # the summary counts what the log holds (it said 8 192 samples where the log held 8 128)
+    assert res.stats == d.stats
 
 
 def test_record_on_a_full_disk_says_so_in_one_line_with_its_summary(tmp_path, capsys, monkeypatch):

@@ -29,19 +29,24 @@ def _files(tmp_path, model, scenario, fix_every_s, fix_sigma):
 
 
 def test_rests_at_speed_are_dropped_and_named_before_the_noise_lines(tmp_path, capsys, default_model):
+    """Every candidate accepted (--zupt-gate 0): the review drops the ones at speed against the fixes, named in
+    the first line of the checks."""
     path, fx = _files(tmp_path, default_model, "cart_push", 5.0, 0.01)
     out = tmp_path / "o.npz"
-    status, text, err = run_cli(["smooth", path, "--zupt", "auto", "--fixes", fx, "--out", out], capsys)
+    eager = ["--zupt", "auto", "--zupt-gate", "0", "--fixes", fx]
+    status, text, err = run_cli(["smooth", path, *eager, "--out", out], capsys)
     assert status == 0, err
     lines = text.splitlines()
-    (i,) = [k for k, x in enumerate(lines) if x.startswith("rests re-examined: 3 of 5 disagree")]
+    (i,) = [k for k, x in enumerate(lines) if x.startswith("rests re-examined: ")]
+    assert int(lines[i].split()[2]) > 0
+    assert "disagree with the rest of the evidence, dropped: " in lines[i] and "(against the fixes: " in lines[i]
     assert all(not x.startswith(("fixes ", "rests disagree", "held-out")) for x in lines[:i])
     arrays, _ = load_run(out)
-    speed = np.linalg.norm(arrays["u"], axis=1)
+    speed = np.linalg.norm(load_run(path)[0]["u"], axis=1)  # the truth, in the input
     for a, b in zupt.intervals(arrays["zupt"].any(axis=1)):
         assert speed[a:b].max() < MOVING
     # with --tune the rests are re-examined before the figures are fitted to them, and said so in that order
-    argv = ["smooth", path, "--zupt", "auto", "--fixes", fx, "--tune", "--tune-evaluations", "10", "--out", out]
+    argv = ["smooth", path, *eager, "--tune", "--tune-evaluations", "10", "--out", out]
     status, tuned, err = run_cli(argv, capsys)
     assert status == 0, err
     order = [x.split(":")[0] for x in tuned.splitlines() if x.startswith(("rests re-examined", "tune:"))]
@@ -76,20 +81,33 @@ def test_nothing_anchoring_the_run_is_said(tmp_path, capsys, default_model, fixe
     assert len(said) == (0 if fixes else 1)
 
 
-def test_tune_does_not_fit_the_rests_that_disagree(tmp_path, capsys, default_model):
-    """accelnav tune --zupt auto: the rests at speed are dropped (and named) before the figures are fitted."""
+def test_tune_does_not_fit_the_rests_that_disagree(tmp_path, capsys, default_model, monkeypatch):
+    """accelnav tune --zupt auto with an over-eager decision (every candidate accepted): the rests at speed are
+    dropped (and named) before the figures are fitted, and only the rests kept are tuned to."""
+    from dataclasses import replace
+
+    from accelnav.estimate import engine
+
+    eager = zupt.decide_rests
+    monkeypatch.setattr(zupt, "decide_rests", lambda *a, **k: eager(*a[:4], replace(a[4], gate=0.0), *a[5:], **k))
     path, fx = _files(tmp_path, default_model, "cart_push", 5.0, 0.01)
     argv = ["tune", path, "--zupt", "auto", "--fixes", fx, "--max-evaluations", "10", "--out", tmp_path / "m.toml"]
     status, text, err = run_cli(argv, capsys)
     assert status == 0, err
     lines = text.splitlines()
-    (i,) = [k for k, x in enumerate(lines) if x.startswith("rests re-examined: 3 of 5 disagree")]
+    (i,) = [k for k, x in enumerate(lines) if x.startswith("rests re-examined: ")]
     (j,) = [k for k, x in enumerate(lines) if "zero-velocity updates per axis" in x]
-    assert i < j
+    assert i < j and int(lines[i].split()[2]) > 0
     arrays, _ = load_run(path)
-    rest = zupt.rest_mask(arrays["accel"], arrays["clipped"], default_model)
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    names = [str(a) for a in arrays["axis_names"]]
+    from accelnav.estimate.fixes import read_fixes
+
+    rest = engine.rest_stage(default_model, arrays, engine.Rests(p, detect=True),
+                             fixes=read_fixes(fx, arrays["t"], names)).mask  # fmt: skip
     speed = np.linalg.norm(arrays["u"], axis=1)
-    kept = sum(b - a for a, b in zupt.intervals(rest) if speed[a:b].max() < MOVING)
+    assert all(speed[a:b].max() < MOVING for a, b in zupt.intervals(rest))
+    kept = int(rest.sum())
     assert f"zero-velocity updates per axis {kept}, {kept};" in lines[j]
 
 

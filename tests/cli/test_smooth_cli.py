@@ -22,7 +22,7 @@ def sim(tmp_path_factory):
 def test_plain_smooth_writes_the_library_result(sim, tmp_path, capsys, flags):
     """The file holds accelnav.smooth_run's result (checked against the reference in
     tests/api/test_smooth_run_reference.py); the covariances only on request."""
-    status, out, _ = _run(["smooth", sim, "--out", tmp_path / "s.npz", *flags], capsys)
+    status, out, _ = _run(["smooth", sim, "--out", tmp_path / "s.npz", "--full", *flags], capsys)
     assert status == 0
     arrays, model = load_run(tmp_path / "s.npz")
     assert ("smooth_P" in arrays) == bool(flags)  # the covariances only on request

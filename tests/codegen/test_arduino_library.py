@@ -95,3 +95,43 @@ def test_arduino_refuses_a_model_it_cannot_read_in_one_line(tmp_path, capsys):
     assert not any(tmp_path.iterdir())
     assert main(["codegen", str(MODELS / "adxl250_default.toml")]) == 2
     assert "give --out DIR (the generated C) or --arduino DIR" in capsys.readouterr().err
+
+
+HOSTILE_NAME = "x:y=z (1)+2, 3.."  # legal for the loader's model-name rule; no C identifier, file or make name
+
+
+def test_a_model_name_that_is_no_identifier_gives_a_library_with_valid_names(tmp_path, capsys):
+    """The library's name (its folder, library.properties, the example's ARDUINO_LIBS) was the model's name
+    as given, ':' '=' spaces and all: arduino-mk could not find it. It goes through the C-identifier rule."""
+    text = _uno_model(tmp_path).read_text().replace('name = "adxl250_default"', f'name = "{HOSTILE_NAME}"', 1)
+    path = tmp_path / "hostile.toml"
+    path.write_text(text)
+    assert loads_model(text, source=str(path)).name == HOSTILE_NAME
+    assert main(["codegen", str(path), "--arduino", str(tmp_path / "libs")]) == 0
+    (lib,) = (tmp_path / "libs").iterdir()
+    ident = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
+    assert ident.fullmatch(lib.name) and lib.name.startswith("accelnav_x_y_z_1_2_3_"), lib.name
+    props = dict(line.split("=", 1) for line in (lib / "library.properties").read_text().splitlines() if line)
+    assert props["name"] == lib.name
+    sketch = lib / "examples" / "AccelnavStream"
+    assert f"ARDUINO_LIBS = {lib.name}\n" in (sketch / "Makefile").read_text()
+    for f in lib.rglob("*"):
+        assert re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.]*", f.name), f
+    # the name is still shown as the user wrote it where text may hold it (a comment, the description)
+    assert f"model {HOSTILE_NAME}." in props["sentence"]
+    assert f"model '{HOSTILE_NAME}'" in (sketch / "AccelnavStream.ino").read_text()
+    _require_arduino()
+    done = subprocess.run(["make", "-s"], cwd=sketch, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (sketch / "build-uno" / "AccelnavStream_.elf").is_file()
+
+
+def test_the_library_name_rule_keeps_names_apart():
+    from accelnav.model.load import c_identifier_from, name_problem
+
+    assert c_identifier_from("adxl250_default", "accelnav_") == "accelnav_adxl250_default"  # a clean name as is
+    a, b = c_identifier_from("a b", "accelnav_"), c_identifier_from("a:b", "accelnav_")
+    assert a != b and a.startswith("accelnav_a_b_")
+    for name in (HOSTILE_NAME, "9" * 64, "(((", "a" * 64):
+        got = c_identifier_from(name, "accelnav_")
+        assert name_problem("C prefix", got) is None and len(got) <= 32, got

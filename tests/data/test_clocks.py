@@ -52,7 +52,7 @@ def test_a_jittery_200_hz_clock_is_read_onto_its_grid(walk, tmp_path, capsys, ki
     np.testing.assert_allclose(np.diff(rec.t), 1 / 200.0, rtol=1e-9)
     assert len(rec.notes) == 1 and "jitters" in rec.notes[0] and "200 Hz grid" in rec.notes[0]
     status, out, err = _run(
-        ["smooth", path, "--model", FOOT, "--axis", "ax", "--axis", "ay", "--out", tmp_path / "o.npz"], capsys
+        ["smooth", path, "--model", FOOT, "--axis", "ax", "--axis", "ay", "--full", "--out", tmp_path / "o.npz"], capsys
     )
     assert status == 0, err
     assert "jitters" in out
@@ -74,7 +74,7 @@ def test_a_clock_that_fits_no_rate_is_refused_saying_how_to_resample(walk, tmp_p
 
 def test_rate_with_a_time_column_is_checked_or_overrides_and_says_which(walk, tmp_path, capsys):
     path = _write(tmp_path / "ok.csv", walk.t, walk.accel)
-    argv = ["smooth", path, "--model", FOOT, "--axis", "ax", "--axis", "ay", "--out", tmp_path / "o.npz"]
+    argv = ["smooth", path, "--model", FOOT, "--axis", "ax", "--axis", "ay", "--full", "--out", tmp_path / "o.npz"]
     status, out, err = _run([*argv, "--rate", "200"], capsys)
     assert status == 0, err
     assert "--rate 200 Hz checked against the time column 't': it fits" in out
@@ -100,7 +100,7 @@ def millis(tmp_path_factory):
 COMMANDS = {
     "fit-bias": ["fit-bias", "{p}", "--out", "{o}/m.toml"],
     "filter": ["filter", "{p}", "--out", "{o}/f.npz"],
-    "smooth": ["smooth", "{p}", "--out", "{o}/s.npz"],
+    "smooth": ["smooth", "{p}", "--full", "--out", "{o}/s.npz"],
     "tune": ["tune", "{p}", "--figures", "R", "--max-evaluations", "10", "--out", "{o}/t.toml"],
 }
 

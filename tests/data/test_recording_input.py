@@ -37,7 +37,21 @@ def rec(tmp_path, walk):
 
 
 def test_smooth_a_csv_on_a_calibrated_model_with_auto_zupt(rec, tmp_path, capsys, walk):
-    argv = ["smooth", rec, "--model", FOOT, "--time-column", "t", "--axis", "ax", "--axis", "ay", "--zupt", "auto"]
+    argv = [
+        "smooth",
+        rec,
+        "--model",
+        FOOT,
+        "--time-column",
+        "t",
+        "--axis",
+        "ax",
+        "--axis",
+        "ay",
+        "--zupt",
+        "auto",
+        "--full",
+    ]
     status, out, err = _run([*argv, "--out", tmp_path / "o.npz"], capsys)
     assert status == 0, err
     assert "columns ax, ay -> model axes x, y" in out and "zero-velocity detector:" in out and " accepted" in out
@@ -63,7 +77,20 @@ def test_gzip_csv_and_npz_recordings_are_read_too(tmp_path, capsys, walk):
 def _refusal(tmp_path, capsys, lines, *extra, model=FOOT):
     path = tmp_path / "bad.csv"
     path.write_text("\n".join(lines) + "\n")
-    argv = ["smooth", path, "--model", model, "--axis", "ax", "--axis", "ay", *extra, "--out", tmp_path / "o.npz"]
+    argv = [
+        "smooth",
+        path,
+        "--model",
+        model,
+        "--axis",
+        "ax",
+        "--axis",
+        "ay",
+        "--full",
+        *extra,
+        "--out",
+        tmp_path / "o.npz",
+    ]
     status, _, err = _run(argv, capsys)
     assert status == 2 and err.startswith("accelnav: error: ") and err.count("\n") == 1, err
     assert not (tmp_path / "o.npz").exists()
@@ -104,6 +131,7 @@ def test_gap_is_refused_with_its_line_or_filled_predict_only(tmp_path, capsys, w
         "--axis",
         "ay",
         "--allow-gaps",
+        "--full",
         "--out",
         tmp_path / "o.npz",
     ]

@@ -210,7 +210,7 @@ def test_cli_streams_a_csv_over_budget_to_the_whole_paths_numbers(tmp_path, caps
         fh.write("t_s,acc_x_m_s2,acc_y_m_s2\n")
         np.savetxt(fh, np.column_stack((np.arange(n) / 100.0, rng.normal(0, 0.3, (n, 2)))), delimiter=",", fmt="%.9g")
     small, whole = tmp_path / "small.npz", tmp_path / "whole.npz"
-    flags = ["--filter-states"]  # both stages, so that the filter's numbers are compared too
+    flags = ["--filter-states", "--full"]  # both stages, so that the filter's numbers are compared too
     assert main(["smooth", str(path), "--out", str(small), "--memory-budget", "16", *flags]) == 0
     said = capsys.readouterr().out
     assert "streamed from the CSV" in said
@@ -232,7 +232,7 @@ def test_cli_streams_a_csv_over_budget_to_the_whole_paths_numbers(tmp_path, caps
 @pytest.mark.parametrize(
     "argv,said",
     [
-        (["filter"], "filter holds the run in memory"),
+        (["filter", "--covariances"], "--covariances need(s) every sample in memory"),
         (["smooth", "--zupt", "auto", "--memory-budget", "0.01"], "--zupt need(s) every sample in memory"),
     ],
 )

@@ -8,6 +8,7 @@ import zlib
 import numpy as np
 import pytest
 
+from accelnav.errors import UserError
 from accelnav.estimate.npzout import NpzWriter, crc32_combine
 
 
@@ -79,7 +80,7 @@ def test_a_write_error_on_the_writer_thread_is_raised_and_leaves_no_file(tmp_pat
 
     monkeypatch.setattr(os, "pwrite", full)
     n = 4 * (1 << 17)
-    with pytest.raises(OSError, match="No space"):
+    with pytest.raises(UserError, match="cannot write: No space left on device; nothing was left behind"):
         with NpzWriter(tmp_path / "full.npz", {"x": ((n,), np.float64)}) as w:
             for s in range(0, n, 1 << 17):
                 w.write("x", s, np.ones(1 << 17))

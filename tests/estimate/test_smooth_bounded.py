@@ -83,12 +83,13 @@ def test_temporary_files_are_removed_on_error(tmp_path):
 
 
 def test_too_little_disk_is_refused_in_one_line_before_work(tmp_path, monkeypatch):
+    import shutil
     from collections import namedtuple
 
     model = load_model()
     t, accel, clipped = _data(model, 100)
     usage = namedtuple("usage", "total used free")
-    monkeypatch.setattr(chunked.shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 1000, 1000))
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 1000, 1000))
     called = []
     with pytest.raises(chunked.UserError, match=r"need .* GB of disk .* are free") as exc:
         chunked.smooth_bounded(model, 100, lambda s, e: called.append(s), tmp_path / "o.npz")
@@ -105,10 +106,11 @@ def sim(tmp_path_factory):
 
 def test_smooth_over_its_memory_budget_runs_the_bounded_path(sim, tmp_path, capsys):
     """A budget of 0.02 MB sends a 3000-sample run to the chunked path; it gives the whole path's numbers."""
-    status, out, err = _run(["smooth", sim, "--out", tmp_path / "b.npz", "--memory-budget", "0.02"], capsys)
+    argv = ["smooth", sim, "--out", tmp_path / "b.npz", "--memory-budget", "0.02", "--filter-states", "--full"]
+    status, out, err = _run(argv, capsys)
     assert status == 0, err
     assert "smoothed in bounded memory" in out and "chunks of" in out
-    status, _, err = _run(["smooth", sim, "--out", tmp_path / "w.npz"], capsys)
+    status, _, err = _run(["smooth", sim, "--out", tmp_path / "w.npz", "--full"], capsys)
     assert status == 0, err
     b, _ = load_run(tmp_path / "b.npz")
     w, _ = load_run(tmp_path / "w.npz")
@@ -118,7 +120,7 @@ def test_smooth_over_its_memory_budget_runs_the_bounded_path(sim, tmp_path, caps
         assert_rel_close(b[f"{key}_sd"], sd, 0.0, RTOL, f"{key}_sd")
 
 
-@pytest.mark.parametrize("flags", [["--csv", "PLOTS"], ["--tune"], ["--plots", "PLOTS"]])
+@pytest.mark.parametrize("flags", [["--covariances"], ["--tune"], ["--plots", "PLOTS"]])
 def test_a_run_too_large_for_what_was_asked_is_refused_in_one_line(sim, tmp_path, capsys, flags):
     flags = [str(tmp_path / "p") if f == "PLOTS" else f for f in flags]
     status, out, err = _run(["smooth", sim, "--out", tmp_path / "x.npz", "--memory-budget", "0.02", *flags], capsys)
@@ -135,7 +137,7 @@ def test_fixes_and_auto_zupt_over_the_budget_give_the_whole_paths_numbers(sim, t
     for k in (1000, 1500, 2999):
         rows += [f"{t[k]:.4f},x,{r[k, 0]:.6f},0.05", f"{t[k]:.4f},y,{r[k, 1]:.6f},0.05"]
     (tmp_path / "fixes.csv").write_text("\n".join(rows) + "\n")
-    argv = ["smooth", sim, "--fixes", tmp_path / "fixes.csv", "--zupt", "auto"]
+    argv = ["smooth", sim, "--fixes", tmp_path / "fixes.csv", "--zupt", "auto", "--filter-states", "--full"]
     status, out, err = _run([*argv, "--out", tmp_path / "b.npz", "--memory-budget", "0.05"], capsys)
     assert status == 0, err
     assert "smoothed in bounded memory" in out and "position fixes per axis: 3, 3" in out
@@ -233,3 +235,19 @@ def test_chunked_general_path_equals_the_whole_array_path(tmp_path, n, chunk):
             assert_rel_close(f[f"{key}_x"][j], x, sd, RTOL, f"{key}_x axis {j}")
             assert_rel_close(f[f"{key}_sd"][j], sd, 0.0, RTOL, f"{key}_sd axis {j}")
     assert [p.name for p in tmp_path.iterdir()] == ["o.npz"]
+
+
+@pytest.mark.parametrize("verbosity, drawn", [(2, True), (0, False)])
+def test_each_pass_shows_its_progress_unless_quiet(tmp_path, monkeypatch, capsys, verbosity, drawn):
+    """A run past PROGRESS_AFTER seconds (here 0) draws the forward, backward and r, u passes on stderr; -q none."""
+    from accelnav import progress
+
+    model = load_model()
+    t, accel, clipped = _data(model, 1000)
+    monkeypatch.setattr(chunked, "PROGRESS_AFTER", 0.0)
+    monkeypatch.setattr(progress, "VERBOSITY", verbosity)
+    chunked.smooth_bounded(model, 1000, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz", chunk=97)
+    err = capsys.readouterr().err
+    for label in ("forward", "backward", "r, u"):
+        assert (f"{label} [" in err) == drawn, err
+    assert ("100.0%" in err) == drawn

@@ -1,7 +1,9 @@
 """The libFuzzer harness of the firmware's receive path (firmware/fuzz/), run for a bounded time.
 
-CI runs it for FUZZ_SECONDS from the seed corpus kept in the repo, with ASan and UBSan and the
-harness's own check of every frame the firmware sends. Without clang (or its fuzzer runtime) the
+CI runs it for FUZZ_SECONDS from the corpus kept in the repo (the seeds and grown/, which long runs
+grow through `make fuzz-merge`), with ASan and UBSan and the harness's own check of every frame the
+firmware sends; before that, every committed input (seeds, grown/, regressions/: what earlier runs
+found) is replayed once. Without clang (or its fuzzer runtime) the
 test skips and says why; with ACCELNAV_REQUIRE_FUZZ=1 (set by .ci/run, which installs them) that
 is a failure. A crash fails the test; the failing input is kept under the cache folder and its
 bytes are printed in the failure so a CI log is enough to reproduce it.
@@ -48,12 +50,45 @@ def test_seed_corpus_matches_the_frame_layout(fuzz):
     assert sum(map(len, kept.values())) < 4096
 
 
-def test_libfuzzer_receive_path(fuzz):
+def _harness(fuzz) -> tuple[Path, Path]:
     out = cache_root() / "fuzz" / "rx"
     missing = fuzz.runtime_missing(out)
     if missing:
         _unavailable(missing)
-    exe = fuzz.build(out)  # with the tools there, a harness that does not build is a failure
+    return fuzz.build(out), out  # with the tools there, a harness that does not build is a failure
+
+
+def test_the_repository_corpus_stays_small(fuzz):
+    grown = [p for p in fuzz.GROWN.iterdir()] if fuzz.GROWN.is_dir() else []
+    assert sum(p.stat().st_size for p in grown) <= fuzz.GROWN_MAX_BYTES
+    assert not set(p.name for p in grown) & set(p.name for p in fuzz.SEEDS.iterdir())
+
+
+def test_every_committed_input_replays_clean(fuzz):
+    """The seeds, grown/ and every finding kept in regressions/ (fixed since): each run once, none fails."""
+    inputs = fuzz.committed_inputs()
+    assert len(inputs) > len(list(fuzz.SEEDS.iterdir()))  # grown/ is there, not only the seeds
+    exe, _ = _harness(fuzz)
+    done = fuzz.replay(exe, inputs)
+    assert done.returncode == 0, done.stderr[-4000:]
+    ran = done.stderr.count("Running: ")
+    assert ran == len(inputs), f"{ran} of {len(inputs)} inputs ran:\n{done.stderr[-2000:]}"
+
+
+def test_a_finding_is_kept_as_a_regression_input_once(fuzz, tmp_path):
+    art = tmp_path / "crashes"
+    art.mkdir()
+    (art / "crash-abc").write_bytes(b"\x01\x03\xff")
+    (art / "timeout-def").write_bytes(b"\x00zz")
+    reg = tmp_path / "regressions"
+    kept = fuzz.keep_findings([str(art / "crash-abc"), str(art / "timeout-def")], reg)
+    again = fuzz.keep_findings([str(art / "crash-abc")], reg)
+    assert sorted(p.name.split("-")[0] for p in reg.iterdir()) == ["crash", "timeout"]
+    assert kept[0] == again[0] and kept[0].read_bytes() == b"\x01\x03\xff"
+
+
+def test_libfuzzer_receive_path(fuzz):
+    exe, out = _harness(fuzz)
     fig = fuzz.run(exe, FUZZ_SECONDS, out, fresh=True)
     saved = "".join(f"\n  {p}: {Path(p).read_bytes().hex()}" for p in fig["artifacts"])
     assert fig["returncode"] == 0 and not fig["artifacts"], (
@@ -63,5 +98,5 @@ def test_libfuzzer_receive_path(fuzz):
     print(
         f"\nlibFuzzer fuzz_rx, {FUZZ_SECONDS} s: {fig['number_of_executed_units']} execs, "
         f"{fig['average_exec_per_sec']} exec/s, cov {fig['done_cov']} ft {fig['done_ft']} "
-        f"(seeds alone: cov {fig['inited_cov']} ft {fig['inited_ft']}), {fig['new_units_added']} new units"
+        f"(repository corpus alone: cov {fig['inited_cov']} ft {fig['inited_ft']}), {fig['new_units_added']} new units"
     )

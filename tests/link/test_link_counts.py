@@ -4,15 +4,12 @@ recording ended, and the unfinished frame at its end)."""
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
-import serial
+from support.loop_record import record_loop
 
 from accelnav.data.logs import log_summary
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
 from accelnav.link.codec import encode_stimulus
-from accelnav.link.recorder import Recorder, Status
 from accelnav.model.load import load_model
 
 
@@ -23,14 +20,8 @@ def test_recorder_summary_and_log_info_agree(tmp_path):
     data = fw.take()  # no flush: the rows since the last checkpoint wait for one that never comes
     cut = data.index(b"\0", 200) + 1  # between two frames
     data = data[:cut] + b"\x05" * 40 + b"\0" + data[cut:] + data[-150:-1]  # junk, and a torn frame at the end
-    port = serial.serial_for_url("loop://", timeout=0.02)
-    writer = threading.Thread(target=port.write, args=(data,), daemon=True)
     out = tmp_path / "counts.acnlog"
-    rec = Recorder(port, out, man, commands=(), model_text=load_model().text, status=Status(enabled=False))
-    writer.start()
-    res = rec.run(duration=1.0)
-    rec.close()
-    writer.join(5)
+    res = record_loop(man, out, data, model_text=load_model().text, duration=1.0)
     info = log_summary(out)  # what ``accelnav log info --json`` prints
     for k in ("lost", "duplicates", "bad_frames", "garbage_bytes"):
         assert res.stats[k] == info[k], k

@@ -17,11 +17,13 @@ import serial
 from conftest import REPO
 from support.frames import split_frames
 from support.link_server import server
+from support.loop_record import record_loop
 
 from accelnav.cli import main as cli_main
 from accelnav.data.logs import log_summary
 from accelnav.data.runfile import load_run
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, generated
+from accelnav.link.accounting import format_counts, link_counts
 from accelnav.link.codec import encode_command, encode_stimulus
 from accelnav.link.decoder import decode_all
 from accelnav.link.logfile import LogError, LogWriter, read_log
@@ -216,25 +218,37 @@ def _feeder(master_fd, frames: list[bytes], rate_hz: float, sent: list, stop: th
         sent.append((time.monotonic(), k))
 
 
-def test_stop_at_a_frame_count_ends_the_log_on_a_frame_boundary(tmp_path, man, telemetry):
-    """The read that completes the count also brings the start of the next frame (its rest comes 0.1 s
-    later): the recorder reads on to that frame's delimiter, so the log holds no torn frame (which
-    would read as one damaged frame)."""
+@pytest.mark.parametrize("stop", ["frames", "duration"])
+def test_a_stop_ends_the_log_on_a_frame_boundary(tmp_path, man, telemetry, stop):
+    """The read that completes the count, or the duration's last read, also brings the start of the next frame
+    (its rest comes a moment later): the recorder reads on to that frame's delimiter (at most 0.5 s), so the
+    log holds no torn frame. A clean --duration stop was summed up as "damaged 1 frames"."""
     frames = split_frames(telemetry)
     head, extra = b"".join(frames[:20]), frames[20]
-    port = serial.serial_for_url("loop://", timeout=0.02)
-    port.write(head + extra[:30])
-    later = threading.Timer(0.1, port.write, args=(extra[30:],))
-    out = tmp_path / "count.acnlog"
-    rec = Recorder(port, out, man, commands=(), model_text=load_model().text, status=Status(enabled=False))
-    later.start()
-    res = rec.run(max_frames=20, duration=10)
-    rec.close()
-    later.join(5)
-    assert res.reason == "frames"
+    out = tmp_path / f"{stop}.acnlog"
+    run = {"max_frames": 20, "duration": 10} if stop == "frames" else {"duration": 0.3}
+    later_s = 0.1 if stop == "frames" else 0.45
+    text = load_model().text
+    res = record_loop(man, out, head + extra[:30], later=extra[30:], later_s=later_s, model_text=text, **run)
+    assert res.reason == stop
+    assert res.stats["bad_frames"] == 0 and res.stats["frames"]["sample"] == 21
+    assert "damaged 0 frames" in format_counts(link_counts(res.stats))
     d = decode_log(out)
     assert d.stats["bad_frames"] == 0 and d.stats["garbage_bytes"] == 0
     assert len(d.frames["sample"]) == 21
+
+
+@pytest.mark.parametrize("zeros", [False, True])
+def test_a_device_sending_only_garbage_gets_a_hint(tmp_path, man, zeros):
+    """Bytes and not one frame: the summary said only "0 samples ... damaged N frames". It says what came
+    and what to check: no delimiter at all points at the baud rate, segments at another layout too."""
+    junk = np.random.default_rng(3).integers(1, 256, 20_000, dtype=np.uint8)
+    if zeros:
+        junk[::97] = 0
+    res = record_loop(man, tmp_path / "junk.acnlog", junk.tobytes(), baud=115200, duration=1.0)
+    (hint,) = [w for w in res.warnings if "baud" in w]
+    assert "\n" not in hint and "now 115200" in hint and "20000 bytes" in hint
+    assert ("none a frame of this manifest" in hint) == zeros and ("no frame delimiter" in hint) != zeros
 
 
 def _pty():
@@ -318,6 +332,29 @@ def test_recorder_reconnects_and_records_the_gap(tmp_path, man, telemetry):
     assert (d.stats["lost"], d.stats["duplicates"], d.stats["crc_errors"]) == (200, 50, 0)
     assert res.stats["lost"] == 200 and res.stats["duplicates"] == 50
     print(f"\nreconnect: {g}")
+
+
+def test_damage_at_outages_is_counted_as_the_log_counts_it(tmp_path, man, telemetry):
+    """Each connection ends inside a frame and the next begins inside one: the recorder refused the torn end
+    at each outage and then the torn start (5 damaged frames over two outages), the log reads both as one
+    segment (3). The recorder now counts what the log holds, one way."""
+    f = split_frames(telemetry)
+    parts = [
+        b"".join(f[:300]) + f[300][:20],
+        f[310][30:] + b"".join(f[311:600]) + f[600][:10],
+        f[605][5:] + b"".join(f[606:]),
+    ]
+    url, th, _ = server(parts, down_s=0.3)
+    out = tmp_path / "outages.acnlog"
+    rec = Recorder(url, out, man, commands=(), status=Status(io.StringIO(), enabled=False))
+    res = rec.run(max_frames=300 + len(f[311:600]) + len(f[606:]), duration=60)
+    rec.close()
+    th.join(30)
+    assert len(res.gaps) == 2, res.gaps
+    d = decode_log(out)
+    keys = ("bad_frames", "garbage_bytes", "crc_errors", "lost", "duplicates")
+    assert {k: res.stats[k] for k in keys} == {k: d.stats[k] for k in keys}
+    assert d.stats["bad_frames"] == 2  # one joined segment per outage
 
 
 def test_status_line_says_the_link_is_being_retried(man):

@@ -116,7 +116,7 @@ def test_commands_work_from_an_empty_folder(wheel, tmp_path):
     for f in ("run.npz", "filtered.npz", "smoothed.npz", "fitted.toml"):
         assert (work / f).is_file(), f
     assert _tree(site) == before, "a run wrote into the installed package"
-    assert any(cache.rglob("*.so")), "SIL builds were expected in the cache folder"
+    assert any(cache.rglob("*.so.sealed")), "SIL builds were expected in the cache folder"
 
 
 def test_a_run_time_build_without_a_compiler_is_refused_in_one_line(tmp_path):

@@ -1,0 +1,333 @@
+"""filter and smooth of a file: the input opened (streamed or whole), the engine run, the outputs written.
+
+The engine (:mod:`accelnav.estimate.engine`) decides how the passes are cut; here only how the input
+is read: a CSV, gzip CSV or uncompressed NPZ whose numbers exceed what one input may hold in memory
+(:data:`STREAM_ABOVE` without a budget; with one, when the whole-array run would exceed it) is streamed
+(:func:`accelnav.data.stream.open_stream`); anything else is read whole by
+:func:`accelnav.data.inputs.read_input`. Aids (fixes, rests) and what the engine runs as one chunk need
+the input in memory: over the input limit they are refused in one line before anything is parsed.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Sequence
+from contextlib import ExitStack
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from accelnav.data.inputs import read_input
+from accelnav.data.runfile import FORMAT, FORMAT_V3, compact, export_csv, save_run
+from accelnav.errors import UserError
+from accelnav.estimate import engine
+from accelnav.estimate.chunked import disk_needed, whole_bytes
+from accelnav.fileio import atomic_output, check_output, free_bytes, input_limit, output_target, write_text
+from accelnav.model.load import Model, load_model
+from accelnav.progress import note
+
+
+def smooth_file(
+    path: str | Path,
+    out: str | Path,
+    model: Model | str | Path | None = None,
+    *,
+    job: engine.Job | None = None,
+    fixes: str | Path | None = None,
+    zupt: str | Path | None = None,
+    zupt_params=None,
+    zupt_report: str | Path | None = None,
+    csv: str | Path | None = None,
+    compress: bool = False,
+    rests_decided=None,
+    **read,
+) -> engine.Outcome:
+    """Filter or smooth the recording or run file ``path`` as ``job`` says; write the run file ``out``
+    (and ``csv``, ``zupt_report``). ``fixes``: a fixes CSV (accelnav.estimate.fixes.read_fixes); ``zupt``:
+    "auto" (the rest decision, with ``zupt_params``) or a rest file (accelnav.estimate.zupt.read_zupt_file);
+    ``rests_decided(rest)``: called with the rest stage's engine.RestOutcome as soon as it is decided (before
+    ``--tune``); ``read``: read_input's keywords (axes, time_column, rate_hz, time_unit, unit, allow_gaps).
+    Returns the engine's :class:`~accelnav.estimate.engine.Outcome`; ``Outcome.written`` lists the files."""
+    from accelnav.estimate import zupt as zu
+
+    job = engine.Job() if job is None else job
+    for p, flag in ((out, "--out"), (csv, "--csv"), (zupt_report, "--zupt-report")):
+        if p is not None:
+            check_output(p, flag)
+    if zupt_report is not None and zupt != "auto":
+        raise UserError("--zupt-report: only with --zupt auto (it lists the detector's candidates)")
+    in_memory = job.in_memory
+    smooth = "smooth" in job.stages
+    rests = None
+    if smooth and zupt is not None:
+        rests = engine.Rests(zupt_params, detect=zupt == "auto", decided=rests_decided)
+    # the plan before any reading: what cannot be done within the budget is refused now
+    job = replace(job, in_memory=in_memory, rests=rests, fixes=[] if smooth and fixes is not None else None,
+                  full=job.full or job.covariances)  # fmt: skip
+    whole = _whole_reasons(job, fixes, zupt)
+    workdir = output_target(out).workdir  # the output rule (accelnav.fileio): where its temporaries go
+    out = Path(out)
+    with ExitStack() as stack:
+        source, model = _open(path, model, job, whole, read, workdir, stack)
+        if job.aided:
+            arrays = source.whole()
+            names = [str(a) for a in arrays["axis_names"]]
+            if fixes is not None:
+                from accelnav.estimate.fixes import read_fixes
+
+                job = replace(job, fixes=read_fixes(fixes, arrays["t"], names))
+            if zupt is not None and zupt != "auto":
+                mask, sigma = zu.read_zupt_file(zupt, arrays["t"], names)
+                job = replace(job, rests=replace(rests, mask=mask, sigma=sigma))
+        fmt = FORMAT if job.full else FORMAT_V3
+        outcome = engine.run(model, source, job, out, workdir=workdir, run_format=fmt)
+        if outcome.arrays is not None and job.aided and job.checks and "smooth" in job.stages:
+            outcome.checks = _checks(outcome, source.whole(), job.fixes)
+        written = [out]
+        if outcome.arrays is not None:
+            kept = outcome.arrays if job.full else compact(outcome.arrays, job.stages)
+            save_run(out, kept, outcome.model, compress=compress)
+            if csv is not None:
+                export_csv(csv, outcome.arrays)
+        else:  # written in place by the chunked passes: the CSV and the deflated copy read it back in pieces
+            if csv is not None:
+                csv_in_pieces(out, csv)
+            if compress:
+                deflate_in_pieces(out)
+        if csv is not None:
+            written.append(Path(csv))
+        if zupt_report is not None and outcome.rests is not None:
+            write_text(zupt_report, zu.report_csv(outcome.rests.decisions, source.whole()["t"]), flag="--zupt-report")
+            written.append(Path(zupt_report))
+        outcome.written = written
+        return outcome
+
+
+STREAM_ABOVE = 1 << 30  # bytes of input in memory above which an input is streamed, without a budget given
+PIECE = 1 << 16  # samples per piece of csv_in_pieces (and 64 MiB of bytes per piece of deflate_in_pieces)
+
+
+def deflate_in_pieces(path: Path) -> None:
+    """Rewrite the stored NPZ ``path`` deflated, member by member, a piece at a time (bounded memory)."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as src, atomic_output(path) as fh, zipfile.ZipFile(fh, "w", zipfile.ZIP_DEFLATED) as dst:
+        for info in src.infolist():
+            with src.open(info) as r, dst.open(info.filename, "w", force_zip64=True) as w:
+                shutil.copyfileobj(r, w, PIECE << 10)
+
+
+def csv_in_pieces(npz: Path, csv: str | Path) -> None:
+    """export_csv of a run file written by the chunked passes, reading ``PIECE`` samples of it at a time."""
+    import zipfile
+
+    from accelnav.data.runfile import csv_columns
+    from accelnav.estimate.chunked import _stored_member
+    from accelnav.fileio import pread_exact
+
+    with zipfile.ZipFile(npz) as zf:
+        names = [i.filename.removesuffix(".npy") for i in zf.infolist()]
+        members = {k: _stored_member(npz, zf, k) for k in names}
+    n = members["t"][1][0]
+    small = {k: np.load(npz)[k] for k in ("axis_names",)}
+    n_axes = len(small["axis_names"])
+    per_sample = {k: m for k, m in members.items() if m[1][:1] == (n,) or m[1][:2] == (n_axes, n)}
+    fd = os.open(npz, os.O_RDONLY)
+    try:
+        with atomic_output(csv, "w", "--csv") as fh:
+            for s in range(0, n, PIECE):
+                e = min(s + PIECE, n)
+                piece = dict(small)
+                for k, (off, shape, dtype) in per_sample.items():
+                    if shape[:1] == (n,) and k != "axis_names":
+                        row = int(np.prod(shape[1:], dtype=np.int64)) * dtype.itemsize
+                        buf = np.empty((e - s, *shape[1:]), dtype=dtype)
+                        pread_exact(fd, buf, off + s * row)
+                    else:  # (n_axes, N, k): a slice per axis
+                        row = int(np.prod(shape[2:], dtype=np.int64)) * dtype.itemsize
+                        buf = np.empty((shape[0], e - s, *shape[2:]), dtype=dtype)
+                        for j in range(shape[0]):
+                            pread_exact(fd, buf[j], off + (j * n + s) * row)
+                    piece[k] = buf
+                cols = csv_columns(piece)
+                header = ",".join(c for c, _ in cols) if s == 0 else ""
+                np.savetxt(fh, np.column_stack([c for _, c in cols]), delimiter=",", header=header, comments="",
+                           fmt="%.10g")  # fmt: skip
+    finally:
+        os.close(fd)
+
+
+def _checks(outcome: engine.Outcome, inputs: dict, fixes):
+    """The aids' consistency checks of a run smoothed in memory (accelnav.estimate.pipeline.smooth_checks); a
+    model just tuned is not advised to be tuned again."""
+    from accelnav.estimate.pipeline import smooth_checks
+
+    r = outcome.rests
+    kw = dict(rest=None, zupt_params=None, rest_sigma=None)
+    if r is not None:
+        kw = dict(rest=r.mask, zupt_params=r.params, rest_sigma=r.sigma)
+    # the rests' review (Outcome.rests.review) is said where the rests are decided, not among these lines
+    return smooth_checks(outcome.arrays, outcome.model, inputs, fixes, tuned=outcome.tune is not None, **kw)
+
+
+def _whole_reasons(job: engine.Job, fixes, zupt) -> str:
+    """The flags for which the input is read whole (the aids are placed on its clock), in words."""
+    flags = [f for f, v in (("--fixes", fixes), ("--zupt", zupt), ("--tune", job.tune)) if v is not None]
+    flags += [f for f in job.in_memory if f not in flags]
+    if job.covariances:
+        flags.append("--covariances")
+    return ", ".join(flags)
+
+
+def input_size(path, model: Model | str | Path | None, axes) -> tuple[int, int] | None:
+    """(estimated rows, axes) of a CSV, gzip CSV or NPZ input from its size and first bytes, before it is
+    parsed; None for another input (a recorder log, an unreadable file: read whole, which says why)."""
+    from accelnav.data.stream import estimate_rows, npz_rows
+
+    rows = estimate_rows(path)
+    if rows is None:
+        rows = npz_rows(path)
+    if rows is None:
+        return None
+    if axes:
+        return rows, len(axes)
+    m = model if isinstance(model, Model) else load_model(model)
+    return rows, len(m.axes)
+
+
+def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, stack: ExitStack):
+    """(engine.Source, model): the input streamed when it is large and nothing needs it whole, else read whole."""
+    if not isinstance(path, (str, Path)):
+        run, m = read_input(path, model, **read)
+        return engine.Source.of(run, "<arrays>"), m
+    size = input_size(path, model, read.get("axes"))
+    if size is not None:
+        rows, n_axes = size
+        engine.plan(rows, n_axes, job, label=str(path))  # refuses before reading what the budget cannot do
+        held, limit = rows * 8 * (2 + n_axes), input_limit()
+        # with a budget given, an input whose whole-array run exceeds it streams; without one, an input over
+        # STREAM_ABOVE in memory (a store read again three times costs more than reading it whole once)
+        big = whole_bytes(rows, n_axes) > job.budget if job.budget is not None else held > STREAM_ABOVE
+        if (big or held > limit) and whole:
+            if held > limit:
+                raise UserError(
+                    f"{path}: about {rows} rows x {n_axes} axes need about {held / 1e9:.3g} GB in memory; {whole} "
+                    f"need(s) every sample in memory, which may take {limit / 1e9:.3g} GB here "
+                    "(ACCELNAV_MAX_INPUT_BYTES); plain smooth streams any length"
+                )
+        elif big or held > limit:
+            source = _stream(path, model, job, read, rows, n_axes, workdir, stack)
+            if source is not None:
+                return source
+    run, m = read_input(path, model, **read)
+    return engine.Source.of(run, str(path)), m
+
+
+def _stream(path, model, job: engine.Job, read: dict, rows: int, n_axes: int, workdir: Path, stack: ExitStack):
+    """The input opened as a stream (its store in ``workdir``), or None when only the whole reader takes it."""
+    from accelnav.data.stream import NotStreamed, open_stream
+
+    need = rows * 8 * (2 + n_axes) + disk_needed(rows, n_axes, n_stages=len(job.stages))
+    free = free_bytes(workdir)
+    if need > free:
+        raise UserError(
+            f"{path}: about {rows} rows x {n_axes} axes need about {need / 1e9:.3g} GB of disk in {workdir} "
+            f"to be smoothed in bounded memory; {free / 1e9:.3g} GB are free"
+        )
+    try:
+        st = stack.enter_context(open_stream(path, model, workdir=workdir, **read))
+    except NotStreamed as exc:
+        note(f"{exc}; reading it whole")
+        return None
+    t_ends = (st.t0, st.t0 + (st.n - 1) * st.Ts)
+    return engine.Source(st.n, st.axis_names, st, None, str(path), t_ends, streamed=st.kind), st.model
+
+
+def summary_arrays(outcome: engine.Outcome) -> tuple[dict[str, np.ndarray], int]:
+    """(arrays, samples) for a summary of the run: the whole run, or its outputs' ends when it was chunked."""
+    if outcome.arrays is not None:
+        return outcome.arrays, outcome.n
+    t = np.array(outcome.t_ends)
+    return {"t": t, "axis_names": outcome.axis_names, "clipped": outcome.clipped[None, :], **outcome.ends}, outcome.n
+
+
+@dataclass(frozen=True)
+class FileResult:
+    """One input of :func:`smooth_files`: where it went, and on failure the one-line reason."""
+
+    path: str
+    out: str
+    ok: bool
+    message: str  # "N samples, S s" or the error's line
+    seconds: float
+
+
+def fleet_outputs(paths: Sequence[str | Path], out_dir: str | Path) -> list[Path]:
+    """``out_dir/<input name without its extensions>.npz`` for each input; two inputs that would share an
+    output are refused in one line before any work."""
+    out_dir = Path(out_dir)
+    outs, seen = [], {}
+    for p in map(Path, paths):
+        stem = p.name.split(".")[0] or p.name
+        out = out_dir / f"{stem}.npz"
+        if out in seen:
+            raise UserError(f"--out-dir: {seen[out]} and {p} would both write {out}; rename one of them")
+        seen[out] = p
+        outs.append(out)
+    return outs
+
+
+def smooth_one(path: str | Path, out: str | Path, kw: dict) -> FileResult:
+    """:func:`smooth_file` of one input of a fleet, its failure caught and said in one line (a worker's task:
+    top level, so that a process pool or Dask can send it)."""
+    import time
+
+    t0 = time.monotonic()
+    try:
+        outcome = smooth_file(path, out, **kw)
+    except UserError as exc:
+        return FileResult(str(path), str(out), False, str(exc), time.monotonic() - t0)
+    except Exception as exc:  # a file that breaks something else must not stop the others
+        return FileResult(str(path), str(out), False, f"{type(exc).__name__}: {exc}", time.monotonic() - t0)
+    sec = time.monotonic() - t0
+    return FileResult(str(path), str(out), True, f"{outcome.n} samples, {sec:.2f} s", sec)
+
+
+def _quiet_worker() -> None:
+    from accelnav import progress
+
+    progress.set_verbosity(0)  # the parent reports each file; a worker's notes and bars would interleave
+
+
+def smooth_files(
+    paths: Sequence[str | Path], out_dir: str | Path, *, jobs: int = 1, done=None, **kw
+) -> list[FileResult]:
+    """:func:`smooth_file` over many inputs, each to ``out_dir`` (:func:`fleet_outputs`), ``jobs`` at a time
+    in worker processes (concurrent.futures; a budget given is shared among them). A failed input is
+    reported in its :class:`FileResult` and the others go on. ``done(result)`` is called as each finishes.
+    For a cluster, map :func:`smooth_one` over the inputs with Dask (see docs/python.rst)."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from multiprocessing import get_context
+
+    if jobs < 1:
+        raise UserError(f"--jobs: got {jobs}; accepted: 1 or more")
+    outs = fleet_outputs(paths, out_dir)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    job = kw.get("job") or engine.Job()
+    kw["job"] = replace(job, budget=engine.budget_bytes(job.budget) // jobs if job.budget else None)
+    results: dict[int, FileResult] = {}
+    if jobs == 1:
+        for i, (p, o) in enumerate(zip(paths, outs, strict=True)):
+            results[i] = smooth_one(p, o, kw)
+            if done is not None:
+                done(results[i])
+    else:
+        with ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=_quiet_worker) as pool:
+            futures = {pool.submit(smooth_one, p, o, kw): i for i, (p, o) in enumerate(zip(paths, outs, strict=True))}
+            for f in as_completed(futures):
+                results[futures[f]] = f.result()
+                if done is not None:
+                    done(results[futures[f]])
+    return [results[i] for i in range(len(outs))]

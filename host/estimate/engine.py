@@ -1,0 +1,580 @@
+"""One engine for filter and smooth: read -> filter pass -> store -> backward pass -> write.
+
+Every option goes through :func:`run`, which decides once, from the run's size against the memory
+budget and from what was asked, how the passes are cut (:func:`plan`), and says why:
+
+* **chunked** (:func:`accelnav.estimate.chunked.smooth_bounded`): the passes over chunks of the input,
+  the store in memory or on disk, the output written in place into the run file. A run that fits the
+  budget is one chunk. Plain runs, ``--filter-states``, fixes, given and detected rests, raw counts and
+  truth columns of an input held in memory (echoed into the file) take this path at any length; the
+  caller then writes ``--csv`` and ``--compress`` from the file a piece at a time
+  (:mod:`accelnav.data.smoothing`).
+* **one chunk in memory** (:func:`smooth_arrays`, :func:`filter_arrays`: the same kernels' whole-array
+  entry points): what needs every output sample in memory at once, namely full covariances and the
+  filter's priors, the aids' consistency checks (NIS of each aid, the held-out fixes), ``--tune``
+  (its likelihood is a whole-run search), and a library call that wants arrays back. A run over the
+  budget that asks for one of them is refused in one line before any work.
+
+The stages are called from one place each: the rest decision (:func:`rest_stage`:
+:func:`accelnav.estimate.zupt.decide_rests` with the run's fixes, then the review
+:func:`accelnav.estimate.pipeline.disagreeing_rests`), the aids
+(:func:`axis_extras`), the tune search, then the passes. A decision that needs a smoother pass over
+the run is given ``smooth_pass`` (a callable running the bounded passes with trial aids and returning
+per-axis smoothed velocities at chosen samples) so that it never holds the run's outputs whole.
+
+Both paths agree to 1e-12 relative (tests/data/test_smoothing.py runs each option chunked at a small
+budget against one chunk).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from accelnav.errors import UserError
+from accelnav.estimate import chunked
+from accelnav.estimate.checks import check_run
+from accelnav.estimate.kf import Aids, Measurement
+from accelnav.model.design import axis_design
+from accelnav.model.load import Model
+from accelnav.progress import note
+
+# the recording's own keys; any other key of an input held in memory (raw counts, a simulation's truth) is
+# echoed into the run file, and the outputs of an earlier stage (filt_*, smooth_*, aids) are recomputed
+RECORDING_KEYS = ("t", "accel", "clipped", "axis_names", "format", "model_toml", "model_source")
+STAGE_KEYS = ("filt_", "smooth_", "zupt", "fixes", "fix_nis")
+
+# packed index (accelnav.estimate.fastsmooth.PACKED, upper triangle by rows) of each entry of a 4x4,
+# row-major: np.take with it unpacks (N, 10) into (N, 16) in one pass, no fancy-index scatter
+_FULL = np.array([0, 1, 2, 3, 1, 4, 5, 6, 2, 5, 7, 8, 3, 6, 8, 9])
+_DIAG = np.array([0, 4, 7, 9])
+STORE_MEMORY = 1 << 30  # bytes of store held in memory without a --memory-budget
+
+
+@dataclass(frozen=True)
+class Rests:
+    """Zero-velocity updates: ``detect`` (the rest decision on the acceleration, with ``params``), or a
+    given (N,) or (N, n_axes) ``mask`` with optional per-sample ``sigma`` (NaN: ``params.sigma``)."""
+
+    params: object = None  # zupt.ZuptParams; None: its defaults
+    detect: bool = False
+    mask: np.ndarray | None = None
+    sigma: np.ndarray | None = None
+    decided: Callable[[RestOutcome], None] | None = None  # called with the rest stage's outcome once decided
+
+
+@dataclass(frozen=True)
+class Tune:
+    """``--tune``: fit the noise figures first, in at most ``max_evaluations`` and ``max_seconds``."""
+
+    max_evaluations: int = 300
+    max_seconds: float = 60.0
+    announce: Callable[[int, int, int], None] | None = None
+
+
+@dataclass(frozen=True)
+class Job:
+    """What one filter or smooth is asked for (the command's flags as library values).
+
+    ``stages``: the states written, ("filt",) for the filter, ("smooth",) or ("filt", "smooth");
+    ``in_memory``: what else of the caller needs every sample in memory, by flag (``--csv``, ``--plots``,
+    ``--compress``), so that the plan can refuse it over the budget; ``budget``: bytes (None: half the
+    memory available); ``checks``: compute the aids' consistency checks (in memory) when the run fits."""
+
+    stages: tuple[str, ...] = ("smooth",)
+    fixes: Sequence[Sequence[Measurement]] | None = None
+    rests: Rests | None = None
+    tune: Tune | None = None
+    covariances: bool = False
+    in_memory: tuple[str, ...] = ()
+    budget: int | None = None
+    checks: bool = True
+    warm_start: bool = False
+    full: bool = False  # write every state at float64 and echo the input (else r, u and sds at float32)
+
+    @property
+    def aided(self) -> bool:
+        return self.fixes is not None or self.rests is not None
+
+
+@dataclass
+class Source:
+    """The input: ``n`` samples of ``axis_names``, rows read by ``read(s, e)`` (t, accel, clipped);
+    ``arrays``: the whole run when it is held in memory (its other keys are echoed into the output)."""
+
+    n: int
+    axis_names: np.ndarray
+    read: chunked.Reader
+    arrays: dict | None = None
+    label: str = "the run"
+    t_ends: tuple[float, float] = (0.0, 0.0)
+    streamed: str = ""  # the input's kind ("CSV", "NPZ") when it is read from a store or the file, not memory
+
+    @classmethod
+    def of(cls, arrays, label: str = "the run") -> Source:
+        a = dict(arrays)
+        t = np.asarray(a["t"])
+        return cls(len(t), np.asarray(a["axis_names"]), chunked.array_reader(t, a["accel"], a["clipped"]), a, label,
+                   (float(t[0]), float(t[-1])) if len(t) else (0.0, 0.0))  # fmt: skip
+
+    def whole(self) -> dict:
+        """The run in memory (read now when it was not)."""
+        if self.arrays is None:
+            t, accel, clipped = self.read(0, self.n)
+            self.arrays = {"t": t, "axis_names": self.axis_names, "accel": accel, "clipped": clipped}
+        return self.arrays
+
+    def extra_keys(self) -> dict:
+        """Keys of an input in memory that the run file keeps beside the outputs (raw counts, truth)."""
+        if self.arrays is None:
+            return {}
+        return {k: v for k, v in self.arrays.items() if k not in RECORDING_KEYS and not k.startswith(STAGE_KEYS)}
+
+
+@dataclass(frozen=True)
+class Plan:
+    """How a run is cut: ``whole`` (one chunk in memory, every output array returned) or chunked into
+    ``chunk``-sample pieces written into the run file; ``why`` in words."""
+
+    whole: bool
+    chunk: int
+    chunks: int
+    budget: int
+    why: str
+
+
+@dataclass
+class RestOutcome:
+    """The rest stage's result: the (N,) mask of accepted rests and, when detected, the decisions."""
+
+    mask: np.ndarray
+    sigma: np.ndarray | None
+    params: object
+    decisions: list = field(default_factory=list)
+    gravity: list = field(default_factory=list)
+    detected: bool = False
+    review: object = None  # consistency.RestReview of the detected rests, or None
+    reviewed: bool = True  # False: detected rests over the memory budget, not re-examined (said by the CLI)
+
+    def candidate_rows(self, t: np.ndarray) -> np.ndarray:
+        """[start_s, end_s, accepted] per candidate (kept in the run file for the plots); a rest the review
+        dropped is not accepted."""
+        m = self.mask if self.mask.ndim == 1 else self.mask.any(axis=1)
+        rows = [[t[d.start], t[d.stop - 1], float(d.accepted and m[d.start : d.stop].any())] for d in self.decisions]
+        return np.array(rows, dtype=np.float64).reshape(-1, 3)
+
+
+@dataclass
+class Outcome:
+    """What :func:`run` did: the plan, the model used, the stages' results, and either the whole run
+    with its outputs (``arrays``, one chunk in memory) or the ends of the outputs written (``ends``)."""
+
+    model: Model
+    plan: Plan
+    n: int
+    axis_names: np.ndarray
+    t_ends: tuple[float, float]
+    clipped: np.ndarray  # (n_axes,) samples not used per axis
+    arrays: dict | None = None
+    ends: dict = field(default_factory=dict)
+    rests: RestOutcome | None = None
+    applied: list[int] | None = None  # zero-velocity updates applied per axis
+    fixes: list[int] | None = None  # fixes per axis
+    tune: object = None  # (TuneResult, seconds)
+    checks: object = None  # consistency.SmoothChecks (accelnav.data.smoothing adds them)
+    store_in_memory: bool = True
+    streamed: str = ""
+    written: list = field(default_factory=list)  # files written (filled in by the caller that writes them)
+
+
+def budget_bytes(budget: int | None) -> int:
+    """The memory budget in bytes (None: half of what the machine has available now)."""
+    return chunked.memory_available() // 2 if budget is None else int(budget)
+
+
+def store_memory(job: Job) -> int:
+    """Bytes the chunked passes' store may take in memory: the budget given, else at most STORE_MEMORY (in
+    memory the store never waits on the disk's write-back, 8 s of 17 at 1e7 samples, measured; a longer
+    run's store goes to disk, so that its memory stays the chunk buffers whatever its length)."""
+    return budget_bytes(job.budget) if job.budget is not None else min(budget_bytes(None), STORE_MEMORY)
+
+
+def over_budget(label: str, n: int, n_axes: int, budget: int) -> str:
+    return (
+        f"{label}: {n} samples x {n_axes} axes need about {chunked.whole_bytes(n, n_axes) / 1e9:.3g} GB on the "
+        f"whole-array path, over the memory budget of {budget / 1e9:.3g} GB (--memory-budget)"
+    )
+
+
+def plan(n: int, n_axes: int, job: Job, *, label: str = "the run", to_file: bool = True, echo: bool = False) -> Plan:
+    """The one path choice, from the run's size and what ``job`` asks: one chunk in memory for what needs
+    every output sample at once, else chunked to the file; refused (UserError) when that does not fit."""
+    budget = budget_bytes(job.budget)
+    fits = chunked.whole_bytes(n, n_axes) <= budget
+    needs = [f for f, v in (("--covariances", job.covariances), ("--tune", job.tune is not None)) if v]
+    needs += list(job.in_memory)
+    if not to_file:
+        needs.append("arrays returned in memory")
+    if needs and not fits:
+        raise UserError(f"{over_budget(label, n, n_axes, budget)}; bounded memory does not do {', '.join(needs)}")
+    if needs or (fits and ((job.aided and job.checks) or echo)):
+        why = ", ".join(needs) if needs else ("the aids' consistency checks" if job.aided else "the input's truth")
+        return Plan(True, max(n, 1), 1, budget, f"one chunk in memory ({why})")
+    chunk = chunked.chunk_samples(n_axes, min(chunked.BUDGET, budget))
+    chunks = -(-n // chunk)
+    why = "one chunk" if chunks == 1 else f"{chunks} chunks of {chunk} samples"
+    return Plan(False, chunk, chunks, budget, f"{why} (memory budget {budget / 1e9:.3g} GB)")
+
+
+def rest_stage(
+    model: Model, arrays: dict, rests: Rests, *, fixes=None, smooth_pass=None, review_budget: int | None = None
+) -> RestOutcome:
+    """The rest decision, called here and nowhere else: detected rests (``rests.detect``: the candidates and
+    the decision on each, accelnav.estimate.zupt.decide_rests, weighed against the run's position ``fixes``)
+    then their review (accelnav.estimate.pipeline.disagreeing_rests: whole-run smoothings, done when the run
+    fits ``review_budget`` bytes on the whole-array path, None: always; ``RestOutcome.reviewed`` says
+    whether it was), or the given mask;
+    ``smooth_pass(extras, at)`` (:func:`smoother_pass` bound to this run) smooths it with trial aids in
+    bounded memory and gives the velocities at samples ``at``, for a decision that needs a smoother pass."""
+    from accelnav.estimate import zupt
+
+    params = zupt.ZuptParams() if rests.params is None else rests.params
+    try:
+        params = zupt.resolved(model, params)
+    except ValueError as exc:
+        raise UserError(f"--zupt-*: {exc}") from None
+    if not rests.detect:
+        return RestOutcome(np.asarray(rests.mask, dtype=bool), rests.sigma, params)
+    accel, clipped = arrays["accel"], arrays["clipped"]
+    found = zupt.decide_rests(accel, clipped, None, model, params, fixes)
+    mask, review = found.mask, None
+    if mask.any() and (review_budget is None or chunked.whole_bytes(len(mask), accel.shape[1]) <= review_budget):
+        # the check that acts after the decision: rests a full smoother with the fixes or the other rests
+        # refutes are dropped and named (pipeline.disagreeing_rests), before tuning and any advice
+        from accelnav.estimate.pipeline import disagreeing_rests
+
+        review = disagreeing_rests(arrays, model, mask, fixes=fixes, params=params)
+        mask = review.kept.any(axis=1)
+    gravity = zupt.gravity_axes(accel, clipped, model) if not mask.any() else []
+    return RestOutcome(mask, None, params, found.decisions, gravity, detected=True, review=review,
+                       reviewed=review is not None or not found.mask.any())  # fmt: skip
+
+
+def smoother_pass(model: Model, source: Source, extras, at: np.ndarray, *, workdir, budget: int | None = None):
+    """One more pass of the chunked smoother over ``source`` with ``extras[j]`` (kf.Aids or measurements) per
+    axis, in bounded memory (its output in a temporary file in ``workdir``, removed after); returns the
+    smoothed velocity and its sd at samples ``at``, (n_axes, len(at), 2) [u, sd_u], float64."""
+    import os
+    import uuid
+
+    at = np.asarray(at, dtype=np.int64)
+    exs = [Aids.of(e) if not isinstance(e, Aids) else e for e in extras]
+    # a file beside the others, not inside a TempFolder: the writer locks the folder it writes in
+    out = Path(workdir) / f".accelnav-pass-{os.getpid()}-{uuid.uuid4().hex[:8]}.npz"
+    try:
+        chunk = chunked.chunk_samples(len(exs), min(chunked.BUDGET, budget_bytes(budget)))
+        chunked.smooth_bounded(model, source.n, source.read, out, extras=exs, gates=[np.zeros(len(e)) for e in exs],
+                               chunk=chunk, workdir=workdir, stages=("smooth",), store_memory=min(
+                                   budget_bytes(budget), STORE_MEMORY))  # fmt: skip
+        with chunked.NpzMember(out, "smooth_x") as x, chunked.NpzMember(out, "smooth_sd") as sd:
+            return np.stack([x.rows_at(at, 1), sd.rows_at(at, 1)], axis=-1)
+    finally:
+        out.unlink(missing_ok=True)
+
+
+def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None) -> tuple[Aids, Aids]:
+    """Axis j's aids as arrays: (its position fixes, its zero-velocity updates)."""
+    from accelnav.estimate import zupt
+
+    fx = Aids.of(list(fixes[j]) if fixes is not None else [])
+    if rest is None:
+        return fx, Aids.of([])
+    m = rest.mask
+    col = m if m.ndim == 1 else m[:, j]
+    sigma = None if rest.sigma is None else np.asarray(rest.sigma)[:, j]
+    return fx, zupt.axis_aids(np.broadcast_to(col, (n,)), sigma, model, rest.params)
+
+
+def run(
+    model: Model, source: Source, job: Job, out: str | Path | None = None, *, workdir=None, run_format: str = ""
+) -> Outcome:
+    """Filter or smooth ``source`` as ``job`` asks. With ``out`` the chunked path writes the run file
+    itself (its format string ``run_format``: the caller's, a layer above); on the one-chunk path (and
+    without ``out``) the whole run with its outputs comes back in ``Outcome.arrays`` for the caller to
+    write."""
+    n, n_axes = source.n, len(source.axis_names)
+    if n < 1:
+        raise UserError(f"{source.label}: 0 samples; nothing to process")
+    if job.warm_start:
+        from accelnav.model.edit import warm_started
+
+        model = warm_started(model)
+        note("--warm-start: bias prior at c1 + c2 = " + ", ".join(f"{a.c2:.4g}" for a in model.axes) + " m/s^2")
+    smooth = "smooth" in job.stages
+    echo = job.full and bool(source.extra_keys())
+    p = plan(n, n_axes, job, label=source.label, to_file=out is not None, echo=echo)
+    arrays = source.whole() if (p.whole or job.aided) else None
+    rest = None
+    if smooth and job.rests is not None:
+
+        def smooth_pass(extras, at):
+            return smoother_pass(model, source, extras, at, workdir=workdir or Path(out or ".").resolve().parent)
+
+        rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass, review_budget=p.budget)
+        if job.rests.decided is not None:  # said where it happens: before tuning fits the figures to the rests
+            job.rests.decided(rest)
+    outcome = Outcome(model, p, n, source.axis_names, source.t_ends, np.zeros(n_axes, dtype=np.int64), rests=rest,
+                      streamed=source.streamed)  # fmt: skip
+    if smooth and job.tune is not None:
+        model = outcome.model = _tune(model, arrays, job, rest, source.label, outcome)
+    if p.whole:
+        _whole(model, arrays, job, rest, outcome)
+    else:
+        _chunked(model, source, job, rest, out, workdir, outcome, run_format)
+    return outcome
+
+
+def _tune(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, label: str, outcome: Outcome) -> Model:
+    from accelnav.estimate.tune import tune_run
+
+    t0 = [time.monotonic()]
+
+    def announce(*a) -> None:
+        if job.tune.announce is not None:
+            job.tune.announce(*a)
+        t0[0] = time.monotonic()
+
+    kw = {} if rest is None else dict(rest=rest.mask, rest_sigma=rest.sigma, params=rest.params)
+    try:
+        tuned, r = tune_run(model, arrays, fixes=job.fixes, max_evaluations=job.tune.max_evaluations,
+                            max_seconds=job.tune.max_seconds, announce=announce, **kw)  # fmt: skip
+    except ValueError as exc:
+        raise UserError(f"{label}: --tune: {exc}") from None
+    outcome.tune = (r, time.monotonic() - t0[0])
+    return tuned
+
+
+def _whole(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, outcome: Outcome) -> None:
+    """One chunk in memory: the whole-array kernels, then the checks."""
+    if "smooth" in job.stages:
+        kw = {} if rest is None else dict(rest=rest.mask, rest_sigma=rest.sigma, zupt_params=rest.params)
+        res = smooth_arrays(arrays, model, fixes=job.fixes, covariances=job.covariances, **kw)
+        if rest is not None and rest.detected:  # for the plots: [start_s, end_s, accepted] per candidate
+            t = res["t"]
+            res["zupt_candidates"] = rest.candidate_rows(t)
+        if rest is not None:
+            outcome.applied = [int(c) for c in res["zupt"].sum(axis=0)]
+        if job.fixes is not None:
+            outcome.fixes = [len(f) for f in job.fixes]
+    else:
+        res = filter_arrays(arrays, model, covariances=job.covariances)
+    outcome.arrays = res
+    outcome.clipped = res["clipped"].sum(axis=0)
+
+
+def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outcome, run_format: str) -> None:
+    """The passes over chunks, the output written in place (accelnav.estimate.chunked)."""
+    n, n_axes = source.n, len(source.axis_names)
+    smooth = "smooth" in job.stages
+    fixes = job.fixes if smooth else None
+    aids = [axis_extras(model, n, j, fixes, rest) for j in range(n_axes)] if smooth else []
+    extras = [fx.concat(za) for fx, za in aids] or None
+    gates = [np.zeros(len(e)) for e in extras] if extras else None  # rests are gated whole by the decision
+    echo = source.extra_keys() if job.full else {}
+    counts: dict[int, np.ndarray] = {}
+
+    def read(s: int, e: int):
+        t, accel, c = source.read(s, e)
+        counts[s] = c.sum(axis=0)  # by chunk start: a chunk read twice counts once
+        return t, accel, c
+
+    def more(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
+        """The aids' rows as the one-chunk path writes them, and the input's other keys."""
+        add = dict(echo)
+        if not job.aided or not smooth:
+            return add
+        t = source.whole()["t"]
+        mask = np.zeros((n, n_axes), dtype=bool)
+        for j, (fx, za) in enumerate(aids):
+            mask[za.k[applied[j][len(fx) :]], j] = True
+        rows = [
+            (t[k], j, z, np.sqrt(r)) for j, (fx, _) in enumerate(aids) for k, z, r in zip(fx.k, fx.z, fx.R, strict=True)
+        ]
+        add.update(zupt=mask, fixes=np.array(rows, dtype=np.float64).reshape(-1, 4))
+        if rest is not None and rest.detected:
+            add["zupt_candidates"] = rest.candidate_rows(t)
+        return add
+
+    info = chunked.smooth_bounded(
+        model, n, read, out, axis_names=source.axis_names, extras=extras, gates=gates, chunk=outcome.plan.chunk,
+        workdir=workdir, run_format=run_format, more=more, stages=job.stages, store_memory=store_memory(job),
+        full=job.full,
+    )  # fmt: skip
+    ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
+    ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
+    outcome.ends = ends
+    outcome.store_in_memory = info["store_in_memory"]
+    outcome.clipped = np.sum(list(counts.values()), axis=0) if counts else np.zeros(n_axes, dtype=np.int64)
+    if rest is not None:
+        outcome.applied = [int(a[len(fx) :].sum()) for a, (fx, _) in zip(info["applied"], aids, strict=True)]
+    if fixes is not None:
+        outcome.fixes = [len(f) for f in fixes]
+
+
+# -- one chunk in memory: the whole-array entry points of the kernels ---------------------------------------------
+
+
+class _Out:
+    """The per-axis outputs, written axis by axis into arrays allocated once (no list then np.stack,
+    which held every array twice at the peak)."""
+
+    def __init__(self, n_axes: int, n: int, stages: tuple[str, ...], covariances: bool):
+        self.arrays: dict[str, np.ndarray] = {}
+        for st in stages:
+            self.arrays[f"{st}_x"] = np.empty((n_axes, n, 4))
+            self.arrays[f"{st}_sd"] = np.empty((n_axes, n, 4))
+            if covariances:
+                self.arrays[f"{st}_P"] = np.empty((n_axes, n, 4, 4))
+        if covariances and "filt" in stages:
+            self.arrays["filt_x_prior"] = np.empty((n_axes, n, 4))
+            self.arrays["filt_P_prior"] = np.empty((n_axes, n, 4, 4))
+
+    def plain(self, j: int, d, z: np.ndarray, valid: np.ndarray) -> None:
+        """Axis j by the compiled plain path, its means written straight into the output rows: what
+        fastsmooth.smooth_plain does, without its two (N, 4) copies and without the priors (a matmul over
+        every sample) unless the covariances were asked for."""
+        from accelnav.estimate import fastsmooth
+
+        a = self.arrays
+        z = np.asarray(z, dtype=np.float64)
+        ok = np.isfinite(z) & np.asarray(valid, dtype=bool)
+        mask = None if ok.all() else ok
+        g = fastsmooth.plain_gains(d, len(z), mask)
+        xf = a["filt_x"][j]
+        xs = a["smooth_x"][j] if "smooth_x" in a else np.empty_like(xf)
+        fastsmooth.plain_data(d, np.where(ok, z, 0.0), mask, g, out=(xf, xs))
+        self.put(j, "filt", None, g.P_post)
+        self.put(j, "smooth", None, g.Ps)
+        if "filt_x_prior" in a:
+            x_prior = a["filt_x_prior"][j]
+            x_prior[0] = d.x0
+            x_prior[1:] = xf[:-1] @ np.asarray(d.F).T + np.asarray(d.b)
+            self.put(j, "filt_prior", None, g.P_prior)
+
+    def put(self, j: int, key: str, x: np.ndarray | None, Pp: np.ndarray | None = None) -> None:
+        """Axis j of ``key`` (a state, e.g. "smooth") from its (N, 4) means and (N, 10) packed covariances."""
+        a = self.arrays
+        suffix = "_prior" if key.endswith("_prior") else ""
+        stage = key.removesuffix("_prior")
+        if f"{stage}_x{suffix}" not in a:
+            return
+        if x is not None:  # None: already written in place
+            a[f"{stage}_x{suffix}"][j] = x
+        if not suffix:
+            sd = a[f"{stage}_sd"][j]
+            np.take(Pp, _DIAG, axis=1, out=sd, mode="clip")  # "raise" would buffer out
+            np.sqrt(sd, out=sd)
+        if f"{stage}_P{suffix}" in a:
+            np.take(Pp, _FULL, axis=1, out=a[f"{stage}_P{suffix}"][j].reshape(len(Pp), 16), mode="clip")
+
+
+def _plain_ok(d) -> bool:
+    """The plain path needs P0 without (r, u)-(a, eps) cross terms (accelnav.estimate.fastsmooth.smooth)."""
+    return not np.any(np.asarray(d.P0)[:2, 2:] != 0)
+
+
+def _fresh(arrays: dict) -> dict:
+    """``arrays`` without a previous run's outputs, so that no old covariance sits beside new means."""
+    return {k: v for k, v in arrays.items() if not k.startswith(("filt_", "smooth_"))}
+
+
+def filter_arrays(arrays: dict, model: Model, *, covariances: bool = True) -> dict:
+    """The filter over every axis of a run in memory, one chunk: ``arrays`` with filt_x, filt_sd (with
+    ``covariances`` also filt_P and the priors filt_x_prior, filt_P_prior)."""
+    from accelnav.estimate import fastsmooth
+
+    check_run(arrays, model, "filter_run")
+    n, n_axes = arrays["accel"].shape
+    res_out = _Out(n_axes, n, ("filt",), covariances)
+    for j in range(n_axes):
+        d = axis_design(model, j)
+        z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
+        if _plain_ok(d):
+            res_out.plain(j, d, z, valid)
+            continue
+        res = fastsmooth.smooth_general(d, z, valid=valid)
+        res_out.put(j, "filt", res.x_post, res.P_post)
+        res_out.put(j, "filt_prior", res.x_prior, res.P_prior)
+        del res
+    out = _fresh(arrays)
+    out.update(res_out.arrays)
+    return out
+
+
+def smooth_arrays(
+    arrays: dict,
+    model: Model,
+    *,
+    fixes=None,
+    rest: np.ndarray | None = None,
+    zupt_params=None,
+    rest_sigma: np.ndarray | None = None,
+    covariances: bool = True,
+) -> dict:
+    """Filter and smoother over every axis of a run in memory, one chunk (see
+    :func:`accelnav.estimate.pipeline.smooth_run` for the keys it adds)."""
+    from accelnav.estimate import fastsmooth, zupt
+
+    check_run(arrays, model, "smooth_run")
+    params = zupt.ZuptParams() if zupt_params is None else zupt_params
+    n = len(arrays["t"])
+    n_axes = len(arrays["axis_names"])
+    r = None if rest is None else RestOutcome(np.asarray(rest, dtype=bool), rest_sigma, params)
+    rest2 = None if r is None else np.broadcast_to(r.mask[:, None] if r.mask.ndim == 1 else r.mask, (n, n_axes))
+    res_out = _Out(n_axes, n, ("filt", "smooth"), covariances)
+    applied = np.zeros((n, n_axes), dtype=bool)
+    fix_rows, fix_nis, zupt_nis = [], [], []
+    for j in range(n_axes):
+        d = axis_design(model, j)
+        fx, za = axis_extras(model, n, j, fixes, r)
+        extras = fx.concat(za)
+        gates = np.zeros(len(fx) + len(za))  # no innovation gate: rests are gated whole by the decision
+        z, valid = arrays["accel"][:, j], ~arrays["clipped"][:, j]
+        if not len(extras) and _plain_ok(d):
+            res_out.plain(j, d, z, valid)
+            continue
+        res = fastsmooth.smooth_general(d, z, valid=valid, extras=fastsmooth.Extras.of(extras), gates=gates)
+        res_out.put(j, "filt", res.x_post, res.P_post)
+        res_out.put(j, "filt_prior", res.x_prior, res.P_prior)
+        res_out.put(j, "smooth", res.xs, res.Ps)
+        if len(za):
+            applied[za.k[res.applied[len(fx) :]], j] = True
+        fix_rows += list(zip(arrays["t"][fx.k], [j] * len(fx), fx.z, np.sqrt(fx.R), strict=True))
+        if len(extras):  # NIS only where there are aids: the plain path pays nothing
+            # the innovations as the compiled filter met them (consistency.aid_innovations replays the same)
+            sel = np.flatnonzero(res.applied)
+            used = extras.take(sel)
+            y, S = res.y[sel], res.S[sel]
+            nis = y * y / S
+            n_fix_used = int(np.sum(res.applied[: len(fx)]))  # fixes are never gated: all of them
+            fix_nis += list(nis[:n_fix_used])
+            zk = used.k[n_fix_used:]
+            if len(zk):
+                # the first update of each rest carries the velocity gathered since the last aid: the test of
+                # the model; the later ones mostly test the zero-velocity sigma, a chosen pseudo-noise
+                moving = np.concatenate(([0], np.cumsum(~rest2[:, j])))  # non-rest samples before each sample
+                first = np.ones(len(zk), dtype=bool)
+                first[1:] = moving[zk[1:]] != moving[zk[:-1]]
+                zupt_nis.append(np.column_stack((arrays["t"][zk], np.full(len(zk), j), nis[n_fix_used:], first)))
+        del res
+    out = _fresh(arrays)
+    out.update(res_out.arrays)
+    out["zupt"] = applied
+    out["fixes"] = np.array(fix_rows, dtype=np.float64).reshape(-1, 4)
+    out["fix_nis"] = np.array(fix_nis, dtype=np.float64)
+    out["zupt_nis"] = np.concatenate(zupt_nis) if zupt_nis else np.zeros((0, 4))
+    return out

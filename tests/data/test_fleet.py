@@ -1,0 +1,88 @@
+"""Many recordings in one command (accelnav smooth --out-dir --jobs) and through Dask: each gives what a run of
+its own gives; a broken one is reported in one line and the others finish.
+
+Dask is the fleet extra (and in the test extra, which make setup installs); without it the Dask test skips,
+unless ACCELNAV_REQUIRE_DASK=1 (set by .ci/run), where a missing Dask is a failure.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from support.cli import run_cli
+
+from accelnav.data.runfile import load_run
+from accelnav.data.smoothing import smooth_one
+from accelnav.model.load import load_model
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    """Three NPZ recordings of different lengths and a file that is not one."""
+    folder = tmp_path_factory.mktemp("fleet")
+    model = load_model()
+    rng = np.random.default_rng(8)
+    paths = []
+    for i, n in enumerate((500, 1200, 800)):
+        path = folder / f"rec{i}.npz"
+        accel = np.cumsum(rng.normal(0, 0.05, (n, len(model.axes))), axis=0)
+        np.savez(path, t=np.arange(n) / model.rate_hz, accel=accel)
+        paths.append(path)
+    bad = folder / "broken.csv"
+    bad.write_text("t_s,acc_x_m_s2\n0.0,abc\n")
+    return paths, bad
+
+
+def _same_as_alone(out, path, tmp_path, capsys):
+    status, _, err = run_cli(["smooth", path, "--out", tmp_path / "alone.npz"], capsys)
+    assert status == 0, err
+    got, ref = load_run(out)[0], load_run(tmp_path / "alone.npz")[0]
+    for key in ("t", "smooth_x", "smooth_sd"):
+        np.testing.assert_array_equal(got[key], ref[key], err_msg=key)
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_fleet_smooths_each_input_and_reports_the_one_that_fails(fleet, tmp_path, capsys, jobs):
+    paths, bad = fleet
+    argv = ["smooth", paths[0], bad, *paths[1:], "--out-dir", tmp_path / "out", "--jobs", str(jobs)]
+    status, out, err = run_cli(argv, capsys)
+    assert status == 1 and "Traceback" not in err, err
+    lines = out.strip().splitlines()
+    assert sum(line.startswith("ok ") for line in lines) == 3
+    (failed,) = [line for line in lines if line.startswith("FAILED")]
+    assert str(bad) in failed and "line 2" in failed
+    assert lines[-1].startswith("3 of 4 inputs smoothed") and "1 failed" in lines[-1]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["rec0.npz", "rec1.npz", "rec2.npz"]
+    _same_as_alone(tmp_path / "out" / "rec1.npz", paths[1], tmp_path, capsys)
+
+
+def test_a_fleet_refuses_what_belongs_to_one_input_and_outputs_that_collide(fleet, tmp_path, capsys):
+    paths, _ = fleet
+    for extra in (["--fixes", paths[0]], ["--csv", tmp_path / "x.csv"], ["--out", tmp_path / "o.npz"]):
+        status, _, err = run_cli(["smooth", *paths, "--out-dir", tmp_path / "o", *extra], capsys)
+        assert status == 2 and len(err.strip().splitlines()) == 1 and extra[0] in err, err
+    twin = tmp_path / "d" / "rec0.npz"
+    twin.parent.mkdir()
+    twin.write_bytes(paths[0].read_bytes())
+    status, _, err = run_cli(["smooth", paths[0], twin, "--out-dir", tmp_path / "o"], capsys)
+    assert status == 2 and "would both write" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_library_under_dask(fleet, tmp_path, capsys):
+    """The same task (smooth_one) mapped by a Dask bag over processes: the results of the command."""
+    try:
+        import dask.bag as db
+    except ImportError:
+        if os.environ.get("ACCELNAV_REQUIRE_DASK") == "1":
+            pytest.fail("ACCELNAV_REQUIRE_DASK=1 but dask is not installed (pip install 'accelnav[fleet]')")
+        pytest.skip("dask is not installed (the fleet extra: pip install 'accelnav[fleet]')")
+    paths, bad = fleet
+    outs = [tmp_path / f"{p.name.split('.')[0]}.npz" for p in (*paths, bad)]
+    bag = db.from_sequence(list(zip([*paths, bad], outs, strict=True)), npartitions=2)
+    results = bag.map(lambda po: smooth_one(po[0], po[1], {})).compute(scheduler="processes", num_workers=2)
+    assert [r.ok for r in results] == [True, True, True, False]
+    assert "line 2" in results[-1].message
+    _same_as_alone(outs[1], paths[1], tmp_path, capsys)

@@ -1,0 +1,179 @@
+"""The one engine (accelnav.estimate.engine through accelnav.data.smoothing.smooth_file): every option taken
+chunked at a small memory budget gives the one-chunk result, from every input format; what needs every sample
+in memory is refused over the budget in one line before any work.
+
+Chunked and one-chunk runs do the same operations in the same order; 1e-12 relative (to |value| + its sigma)
+is the room the bounded tests leave for a compiler's contractions (tests/estimate/test_smooth_bounded.py).
+"""
+
+from __future__ import annotations
+
+import gzip
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from conftest import assert_rel_close
+
+from accelnav.cli import main
+from accelnav.data.runfile import load_run
+from accelnav.data.smoothing import smooth_file
+from accelnav.errors import UserError
+from accelnav.estimate.engine import Job, Tune
+
+RTOL = 1e-12
+SMALL = 20_000  # bytes: a 3000-sample run in several chunks
+LARGE = 1 << 34
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    """A simulated run file (truth, raw counts) and its recording as NPZ, CSV and gzip CSV, with fixes and rests."""
+    folder = tmp_path_factory.mktemp("engine")
+    sim = folder / "sim.npz"
+    assert main(["sim", "--scenario", "stop_and_go", "--duration", "30", "--seed", "4", "--out", str(sim)]) == 0
+    arrays, _ = load_run(sim)
+    t, accel = arrays["t"], arrays["accel"]
+    np.savez(folder / "rec.npz", t=t, accel=accel, axis_names=arrays["axis_names"])
+    text = "t_s,acc_x_m_s2,acc_y_m_s2\n" + "".join(
+        f"{a:.17g},{b:.17g},{c:.17g}\n" for a, (b, c) in zip(t, accel, strict=True)
+    )
+    (folder / "rec.csv").write_text(text)
+    (folder / "rec.csv.gz").write_bytes(gzip.compress(text.encode()))
+    rows = ["time_s,axis,position_m,sigma_m"]
+    for k in (1000, 1500, 2999):
+        rows += [f"{t[k]:.4f},{ax},{arrays['r'][k, j]:.6f},0.05" for j, ax in enumerate("xy")]
+    (folder / "fixes.csv").write_text("\n".join(rows) + "\n")
+    (folder / "rests.csv").write_text("start_s,end_s\n2.0,4.0\n12.5,14.0\n")
+    return folder
+
+
+def _pair(inputs, tmp_path, source, stages=("filt", "smooth"), **kw):
+    """(chunked outcome, its file, one-chunk outcome, its file) of the same request."""
+    a = smooth_file(inputs / source, tmp_path / "a.npz", job=Job(stages=stages, budget=SMALL, full=True), **kw)
+    b = smooth_file(inputs / source, tmp_path / "b.npz", job=Job(stages=stages, budget=LARGE, full=True), **kw)
+    assert not a.plan.whole and a.plan.chunks > 3, a.plan
+    assert b.plan.chunks == 1, b.plan
+    return a, load_run(tmp_path / "a.npz")[0], b, load_run(tmp_path / "b.npz")[0]
+
+
+def _same(got, ref, stages):
+    for st in stages:
+        sd = ref[f"{st}_sd"]
+        assert_rel_close(got[f"{st}_x"], ref[f"{st}_x"], sd, RTOL, f"{st}_x")
+        assert_rel_close(got[f"{st}_sd"], sd, 0.0, RTOL, f"{st}_sd")
+    for key in ("t", "accel", "clipped", "zupt", "fixes", "zupt_candidates"):
+        if key in got:  # the aids' keys: only where there are aids on the chunked path (the test says which)
+            np.testing.assert_array_equal(got[key], ref[key], err_msg=key)
+
+
+OPTIONS = {
+    "plain": {},
+    "fixes": {"fixes": "fixes.csv"},
+    "rests given": {"zupt": "rests.csv"},
+    "rests detected": {"zupt": "auto"},
+    "fixes and detected rests": {"fixes": "fixes.csv", "zupt": "auto"},
+}
+
+
+@pytest.mark.parametrize("option", OPTIONS)
+def test_each_option_chunked_equals_one_chunk(inputs, tmp_path, option):
+    kw = {k: (v if v == "auto" else inputs / v) for k, v in OPTIONS[option].items()}
+    a, got, b, ref = _pair(inputs, tmp_path, "sim.npz", **kw)
+    _same(got, ref, ("filt", "smooth"))
+    assert ("zupt" in got) == ("fixes" in got) == bool(kw)
+    assert ("zupt_candidates" in got) == (kw.get("zupt") == "auto")
+    if "zupt" in kw:
+        assert got["zupt"].sum() > 100 and a.applied == b.applied
+    if "fixes" in kw:
+        assert len(got["fixes"]) == 6 and a.fixes == b.fixes == [3, 3]
+    # the simulation's truth and raw counts are kept on both paths
+    for key in ("r", "u", "a", "eps", "code"):
+        if key in ref:
+            np.testing.assert_array_equal(got[key], ref[key], err_msg=key)
+    assert "r" in got
+
+
+@pytest.mark.parametrize("source", ["rec.npz", "rec.csv", "rec.csv.gz"])
+@pytest.mark.parametrize("stages", [("smooth",), ("filt",), ("filt", "smooth")])
+def test_every_input_format_streams_to_the_one_chunk_numbers(inputs, tmp_path, source, stages):
+    a, got, b, ref = _pair(inputs, tmp_path, source, stages)
+    assert a.streamed == ("NPZ" if source.endswith(".npz") else "CSV") and not b.streamed
+    _same(got, ref, stages)
+    assert {k for k in got if k.startswith(("filt_", "smooth_"))} == {
+        f"{s}_{x}" for s in stages for x in "x sd".split()
+    }
+
+
+@pytest.mark.parametrize(
+    "flag, kw",
+    [
+        ("--covariances", {"job": Job(covariances=True, budget=SMALL)}),
+        ("--tune", {"job": Job(tune=Tune(), budget=SMALL)}),
+        ("--plots", {"job": Job(in_memory=("--plots",), budget=SMALL)}),
+    ],
+)
+def test_what_needs_every_sample_in_memory_is_refused_over_the_budget(inputs, tmp_path, flag, kw):
+    with pytest.raises(UserError) as exc:
+        smooth_file(inputs / "rec.npz", tmp_path / "o.npz", **kw)
+    assert "over the memory budget" in str(exc.value) and flag in str(exc.value) and "\n" not in str(exc.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("source", ["rec.npz", "sim.npz"])
+@pytest.mark.parametrize("budget", [SMALL, LARGE])
+def test_the_default_output_is_r_u_and_their_sds_at_float32_without_the_input(inputs, tmp_path, source, budget):
+    """20 B per sample per axis at 2 axes (t's 8 B shared), the full file's r, u rounded to float32, no echo."""
+    import zipfile
+
+    from accelnav.data.runfile import csv_columns
+
+    kw = {"zupt": "auto"} if source == "sim.npz" else {}
+    smooth_file(inputs / source, tmp_path / "c.npz", job=Job(budget=budget), **kw)
+    smooth_file(inputs / source, tmp_path / "f.npz", job=Job(budget=budget, full=True), **kw)
+    c, _ = load_run(tmp_path / "c.npz")
+    f, _ = load_run(tmp_path / "f.npz")
+    assert str(c["format"]) == "accelnav-run/3" and str(f["format"]) == "accelnav-run/2"
+    per_sample = {"t", "smooth_x", "smooth_sd"} | ({"zupt"} if kw else set())
+    assert {k for k in c if np.ndim(c[k]) and len(c[k]) and k != "axis_names"} >= per_sample
+    assert not {"accel", "clipped", "r", "u", "code", "filt_x"} & set(c)
+    for key in ("smooth_x", "smooth_sd"):
+        assert c[key].dtype == np.float32 and c[key].shape == (2, 3000, 2)
+        np.testing.assert_array_equal(c[key], f[key][..., :2].astype(np.float32), err_msg=key)
+    with zipfile.ZipFile(tmp_path / "c.npz") as z:
+        data = sum(i.file_size for i in z.infolist() if i.filename.removesuffix(".npy") in per_sample)
+    assert data / (3000 * 2) <= 24 - (0 if kw else 1)  # ~128 B of npy headers per member on top of 20 (21 with rests)
+    names = [n for n, _ in csv_columns(c)]
+    assert names == ["t_s", "x_smooth_r", "x_smooth_r_sd", "x_smooth_u", "x_smooth_u_sd"] + [
+        "y_smooth_r", "y_smooth_r_sd", "y_smooth_u", "y_smooth_u_sd"]  # fmt: skip
+
+
+def test_csv_and_compression_of_a_chunked_run_are_those_of_one_chunk(inputs, tmp_path, monkeypatch):
+    """Written from the run file a piece at a time: the CSV's text and the deflated file's arrays are the one
+    chunk's (every state, the truth columns too: --full --filter-states)."""
+    import zipfile
+
+    from accelnav.data import smoothing
+
+    kw = {"zupt": "auto", "compress": True}
+    job = Job(stages=("filt", "smooth"), full=True)
+    old = smoothing.PIECE
+    smoothing.PIECE = 700  # several pieces of the 3000 samples
+    try:
+        a = smooth_file(
+            inputs / "sim.npz", tmp_path / "a.npz", job=replace(job, budget=SMALL), csv=tmp_path / "a.csv", **kw
+        )
+    finally:
+        smoothing.PIECE = old
+    b = smooth_file(
+        inputs / "sim.npz", tmp_path / "b.npz", job=replace(job, budget=LARGE), csv=tmp_path / "b.csv", **kw
+    )
+    assert not a.plan.whole and b.plan.whole
+    ta, tb = (tmp_path / "a.csv").read_text().splitlines(), (tmp_path / "b.csv").read_text().splitlines()
+    assert ta[0] == tb[0] and "x_true_r" in ta[0] and "y_smooth_eps_sd" in ta[0] and len(ta) == len(tb) == 3001
+    ra, rb = np.loadtxt(ta[1:], delimiter=","), np.loadtxt(tb[1:], delimiter=",")
+    np.testing.assert_allclose(ra, rb, rtol=1e-9, atol=1e-300)  # %.10g text: the same digits but a last-bit tie
+    with zipfile.ZipFile(tmp_path / "a.npz") as z:
+        assert {i.compress_type for i in z.infolist()} == {zipfile.ZIP_DEFLATED}
+    got, ref = load_run(tmp_path / "a.npz")[0], load_run(tmp_path / "b.npz")[0]
+    _same(got, ref, ("filt", "smooth"))
