@@ -121,7 +121,8 @@ def simulated(scenario: str, model: Path | None, seconds: float | None, seed: in
                 a, b = intervals(truth["rest"])[0] if truth["rest"].any() else (0, 0)
                 res["first stand"] = (int(applied[a:b].sum()), b - a, a / float(smodel.rate_hz))
             if method == "no ZUPT" and given is not None:
-                base = fix_baselines(out, smodel)
+                # the run file holds the outputs, not the input (the compact default): the input's from the sim
+                base = fix_baselines({**out, "accel": truth["accel"], "clipped": truth["clipped"]}, smodel)
                 for name, est in base.items():
                     res["rms"][name] = float(np.sqrt(np.mean(np.sum((est.T - truth["r"]) ** 2, axis=1))))
     return res
