@@ -53,11 +53,21 @@ axis' scale (:func:`chi2_equivalent`), against ``gate`` (12: 3.5 sd):
     close on each other after small changes of speed); when one is moving or cannot be told, or none
     within ``WITHIN``, the filter goes back to before the hypothesis and on without it.
 
+The positions, across it
+------------------------
+A quiet stretch at cruise can look still from either side alone: on a changing grade the level a side is
+conditioned on hides the speed (a real car at 5 m/s on a hill read 0.7 +/- 0.5 m/s from the fix 3 s before).
+The fixes also fix where the body is: where both sides know the position through the fixes, a rest puts the
+forward side's position at its start and the backward side's at its end in one place (within the rest's own
+sigma over its length). Their distance, against both sds widened like the velocity's, read as one axis'
+chi-square (:meth:`_Decider._gap`), refutes it like a side's velocity does ("fixes imply it moved 14 m during
+it"), and the pieces it touches fall with it (it is the fixes' refutation).
+
 The fixed point, robust
 -----------------------
 The forward filter decides online (each accepted rest aids it from there on); the backward filter then
-re-tests every accepted rest with all the others, from the other side. Of each run of consecutive accepted
-rests the backward side finds moving, the worst is withdrawn, or the rest after it that the disagreement
+re-tests every accepted rest with all the others, from the other side and by the positions across it. Of
+each run of consecutive accepted rests found moving, the worst is withdrawn, or the rest after it that the disagreement
 came from when that one has less evidence of its own (a side that tells, or the stillness of a start or
 stand; on a tie the shorter), and both filters run again, at most ``passes`` times; what still disagrees
 then is withdrawn. No accepted rest vouches for another: each is re-tested against all the others at
@@ -87,6 +97,8 @@ class Side:
     chi2: float  # mean over axes of v^2 / (sd^2 + sigma^2)
     source: str  # the nearest aid that informs it ("the rest at 3.10 s", "the fix at 12.0 s", "no aid")
     fix: bool  # a fix informs it
+    r: np.ndarray | None = None  # (n_axes,) m, position at the candidate's edge given its level
+    r_sd: np.ndarray | None = None  # (n_axes,) m, its sd
 
 
 @dataclass(frozen=True)
@@ -171,11 +183,13 @@ class _Kinematic:
         _update(self.X, self.P, 0, np.array([z]), np.array([var]), rows=slice(j, j + 1))
         self.aid_k = k
 
-    def velocity_given_level(self, level: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(u, sd of u, e) at the current sample, conditioned on e = level (variance ``var``), state unchanged."""
+    def velocity_given_level(self, level: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(u, sd of u, e, r, sd of r) at the current sample, conditioned on e = level (variance ``var``), state
+        unchanged."""
         X, P = self.X.copy(), self.P.copy()
         _update(X, P, 2, level, var)
-        return X[:, 1], np.sqrt(np.maximum(P[:, 1, 1], 0.0)), X[:, 2]
+        sd = np.sqrt(np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0))
+        return X[:, 1], sd[:, 1], X[:, 2], X[:, 0], sd[:, 0]
 
 
 LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
@@ -231,7 +245,7 @@ def _side(
     sign: float,
 ) -> Side:
     e_prior, known = kin.X[:, 2].copy(), kin.P[:, 2, 2] < 1.0
-    v, sd, _ = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
+    v, sd0, _, r, r_sd = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
     # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
     # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
     D = (kin.k - kin.aid_k) * kin.Ts
@@ -239,13 +253,14 @@ def _side(
     # proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a real
     # foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid
     moved = kin.A[kin.k] - kin.A[kin.aid_k]
-    sd = np.sqrt(
-        sd * sd + np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2 + (scale * moved) ** 2
-    )
+    widen = np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2 + (scale * moved) ** 2
+    sd = np.sqrt(sd0 * sd0 + widen)
+    # the position the same way: the velocity's widening over the time since the aid
+    r_sd = np.sqrt(r_sd * r_sd + widen * D * D)
     # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
     # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
     chi2 = chi2_equivalent(float(np.sum(v * v / (sd * sd + sigma * sigma))), len(v))
-    return Side(sign * v, sd, chi2, source, fix)
+    return Side(sign * v, sd, chi2, source, fix, r, r_sd)
 
 
 def chi2_equivalent(x: float, dof: int) -> float:
@@ -513,7 +528,9 @@ class _Decider:
                 f.after = s
             if p.gate == 0:
                 return found, acc
-            bad = sorted(i for i in acc if after[i].chi2 > p.gate)
+            # each accepted rest against the other side, and against the positions both sides give it
+            score = {i: max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i])) for i in acc}
+            bad = sorted(i for i in acc if score[i] > p.gate)
             shorts = self._short_before_stands(found, acc)
             if not bad and not shorts:
                 return found, acc
@@ -521,7 +538,7 @@ class _Decider:
                 self.veto[j] = f"contradicts the stand at {self.t[self.cands[i].start]:.2f} s, longer and still"
             if pass_no == p.passes:  # out of passes: what still disagrees leaves, nothing is added
                 for i in bad:
-                    self._withdraw(i, after[i])
+                    self._withdraw(i, after[i], found[i].before)
                 found, acc = self.forward()
                 after = self.backward(acc)
                 for f, s in zip(found, after, strict=True):
@@ -537,11 +554,12 @@ class _Decider:
                     group.append(i)
                     continue
                 if group:
-                    worst = max(group, key=lambda g: after[g].chi2)
+                    worst = max(group, key=lambda g: score[g])
+                    gapped = score[worst] > after[worst].chi2  # refuted by the positions: by the fixes
                     # the rest after it that the disagreement came from may be the false one: of the two, the
                     # shorter gives way (a ramp's quiet piece beside a stop)
                     nxt = pos[worst] + 1
-                    if nxt < len(order) and after[worst].source.startswith("the rest"):
+                    if not gapped and nxt < len(order) and after[worst].source.startswith("the rest"):
                         j = order[nxt]
                         c, cj = self.cands[worst], self.cands[j]
                         # of the two, the one with less evidence of its own (its other side, or its stillness)
@@ -552,11 +570,11 @@ class _Decider:
                             self.veto[j] = f"contradicts the rest at {self.t[c.start]:.2f} s, which has more evidence"
                             worst = None
                     if worst is not None:
-                        self._withdraw(worst, after[worst])
+                        self._withdraw(worst, after[worst], found[worst].before)
                         # where a fix refuted it, the pieces it touches, nothing between (a gap under a window),
                         # fall with it: a ramp cut into quiet pieces must not survive one piece at a time (a piece
                         # the other rests refuted may be the end of a stance whose other piece is sound)
-                        by_fix = after[worst].source.startswith("the fix")
+                        by_fix = after[worst].source.startswith("the fix") or gapped
                         for step in (-1, 1) if by_fix else ():
                             r = pos[worst]
                             while 0 <= r + step < len(order) and self._touch(order[min(r, r + step)],
@@ -594,7 +612,30 @@ class _Decider:
         told = other is not None and self._tells(other) and other.chi2 <= self.p.gate
         return int(told or reason in ("still start", "still stand"))
 
-    def _withdraw(self, i: int, s: Side) -> None:
+    def _gap(self, before: Side | None, after: Side | None, c: Candidate) -> float:
+        """How far apart the positions of the two sides are, for a body that stood still between them: the
+        forward filter's at the candidate's start (the fixes and rests before it) against the backward one's at
+        its end (those after it), their sds and the rest's own sigma over its length; as the chi-square of one
+        axis (:func:`chi2_equivalent`). Two sides that know the position only through the fixes and the other
+        rests: a quiet stretch at cruise between two fixes is refuted by the distance they put between its
+        ends, whatever its velocity looks like from either side alone (a diffuse side gives 0)."""
+        if before is None or after is None or before.r is None or after.r is None:
+            return 0.0
+        if not (before.fix and after.fix):
+            return 0.0
+        own = self.p.sigma * (c.stop - c.start) * self.Ts
+        d = after.r - before.r
+        return chi2_equivalent(float(np.sum(d * d / (before.r_sd**2 + after.r_sd**2 + own * own))), len(d))
+
+    def _withdraw(self, i: int, s: Side, before: Side | None = None) -> None:
+        c = self.cands[i]
+        if s.chi2 < self._gap(before, s, c):
+            moved = float(np.linalg.norm(s.r - before.r))
+            self.veto[i] = (
+                f"fixes imply it moved {moved:.3g} m during it (position from {before.source} before it, "
+                f"from {s.source} after it)"
+            )
+            return
         what = "fixes imply" if s.fix and s.source.startswith("the fix") else "v"
         self.veto[i] = f"{what} {_speed(s)} after it (from {s.source})"
 

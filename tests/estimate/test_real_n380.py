@@ -77,3 +77,32 @@ def test_fixes_with_the_accelerometer_beat_interpolating_them(drives, key):
     fixed = drives[key]["fixed"]
     assert fixed["reference rests"] < fixed["interpolated fixes"], fixed
     assert fixed["no ZUPT"] < fixed["interpolated fixes"], fixed
+
+
+def test_with_fixes_the_decision_itself_accepts_no_rest_while_the_car_moves(drives, tmp_path):
+    """The decision alone (no review after it), with a fix every 10 s: no accepted candidate while the car moves
+    faster than 0.5 m/s. On the hill a string of quiet pieces at 4-5 m/s looks still from either side (the
+    grade changes under it); the positions the fixes give its two ends refute it, and the evidence says so."""
+    from accelnav.data.inputs import read_input
+    from accelnav.estimate import zupt
+    from accelnav.estimate.fixes import read_fixes
+
+    said = {}
+    for key, r in drives.items():
+        d = r["drive"]
+        model = tmp_path / "car.toml"
+        model.write_text(rm.model_text(rm.DRIVE_RATE, ("x",), 40.0, 50000.0))
+        csv = tmp_path / f"{key}.csv"
+        np.savetxt(csv, np.column_stack([d.t, d.longitudinal]), delimiter=",", header="t,ax", comments="", fmt="%.8g")
+        run, m = read_input(csv, model, axes=("ax",), time_column="t")
+        given = np.zeros(len(d.fix_t), dtype=bool)
+        given[:: rm.FIX_EVERY_S] = True
+        given[-1] = True
+        fx = tmp_path / "fixes.csv"
+        rows = [f"{t:.4f},{s:.4f},{rm.FIX_SIGMA_M}" for t, s in zip(d.fix_t[given], d.fix_distance[given], strict=True)]
+        fx.write_text("time_s,position_m,sigma_m\n" + "\n".join(rows) + "\n")
+        found = zupt.decide_rests(run["accel"], run["clipped"], None, m, fixes=read_fixes(fx, run["t"], ["ax"]))
+        moving = [x for x in found.decisions if d.speed[x.start : x.stop].max() > 0.5]
+        assert not any(x.accepted for x in moving), key
+        said[key] = [x.evidence for x in moving]
+    assert any("fixes imply it moved" in e for e in said["hill"])  # the hill's pieces, by the positions
