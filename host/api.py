@@ -92,17 +92,42 @@ def smooth_run(
     return Run(_smooth(arrays, model, fixes=fixes, rest=rest, zupt_params=params, rest_sigma=rest_sigma))
 
 
-def detect_rests(run: Mapping[str, np.ndarray], model: Model, params: ZuptParams | None = None) -> np.ndarray:
-    """(N,) bool: the samples of the rests the zero-velocity detector accepts (``accelnav smooth --zupt auto``)."""
-    from accelnav.estimate import zupt
+def detect_rests(
+    run: Mapping[str, np.ndarray],
+    model: Model,
+    params: ZuptParams | None = None,
+    fixes: PathLike | Sequence[Sequence[Any]] | None = None,
+) -> np.ndarray:
+    """(N,) bool: the samples of the rests ``accelnav smooth --zupt auto`` applies: those the zero-velocity
+    decision accepts, judged against ``fixes`` too when given (as :func:`smooth_run` takes them; a rest where
+    the fixes imply speed is refused), less those its review then finds refuted by a full smoother with the
+    fixes or the other rests. :func:`decide_rests` gives each candidate's decision and its evidence."""
+    from accelnav.estimate import engine, zupt
 
     arrays = dict(run)
     _check(arrays, model, "detect_rests")
+    rests = engine.Rests(zupt.ZuptParams() if params is None else params, detect=True)
+    return engine.rest_stage(model, arrays, rests, fixes=_fixes(fixes, arrays)).mask
+
+
+def decide_rests(
+    run: Mapping[str, np.ndarray],
+    model: Model,
+    params: ZuptParams | None = None,
+    fixes: PathLike | Sequence[Sequence[Any]] | None = None,
+):
+    """The detector's candidates and the decision on each (accelnav.estimate.zupt.Rests: ``decisions``, each with
+    its reason and evidence in words, and ``mask``, the accepted ones: :func:`detect_rests` less the rests its
+    review drops)."""
+    from accelnav.estimate import zupt
+
+    arrays = dict(run)
+    _check(arrays, model, "decide_rests")
     try:
         params = zupt.resolved(model, zupt.ZuptParams() if params is None else params)
     except ValueError as exc:
         raise UserError(f"params: {exc}") from None
-    return zupt.rest_mask(arrays["accel"], arrays["clipped"], model, params)
+    return zupt.decide_rests(arrays["accel"], arrays["clipped"], None, model, params, _fixes(fixes, arrays))
 
 
 def position_errors(run: Mapping[str, np.ndarray], model: Model) -> Table:
@@ -223,6 +248,7 @@ def _fixes(fixes, arrays: dict):
 __all__ = [
     "Table",
     "as_run",
+    "decide_rests",
     "detect_rests",
     "filter_run",
     "generate",

@@ -31,7 +31,6 @@ import io
 import tempfile
 from pathlib import Path
 
-import pytest
 from support import realdata  # tests/support, on the path bench/run_all.py sets
 from support import realdata_more as rm
 
@@ -48,14 +47,6 @@ def _quietly(verbose: bool, fn, *args, **kw):
         return fn(*args, **kw)
 
 
-def _load(what: str, fn):
-    try:
-        return fn()
-    except pytest.skip.Exception as exc:
-        print(f"{what}: not available ({exc})")
-        return None
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--verbose-cli", action="store_true", help="show accelnav smooth's own output")
@@ -68,7 +59,7 @@ def main() -> int:
             (name, "defaults <= 1.5 x reference rests", f"{auto:.3g} vs {ref:.3g} {unit}", auto <= 1.5 * ref)
         )
 
-    feet = _load("gaitmap foot walk", realdata.load_walk)
+    feet = rm.load_or_none("gaitmap foot walk", realdata.load_walk)
     if feet:
         print("\nFoot-mounted walk (gaitmap 2.6.0 example, 204.8 Hz): mean |stride-length error|")
         print(f"{'foot':<8}{'strides':>8}" + "".join(f"{m:>22}" for m in METHODS))
@@ -84,7 +75,7 @@ def main() -> int:
             pct = 100 * auto / mean_len
             targets.append((f"foot {foot.name}", "defaults <= 3 % of distance", f"{pct:.1f} %", pct <= 3.0))
 
-    walks = _load("mobgap lower-back walks", rm.load_lowback_walks)
+    walks = rm.load_or_none("mobgap lower-back walks", rm.load_lowback_walks)
     if walks:
         print("\nLower-back walks (mobgap 1.2.0 example, 100 Hz): distance between first and last contact")
         print(f"{'walk':<15}{'true [m]':>9}" + "".join(f"{m:>22}" for m in METHODS) + f"{'rests found / true [s]':>26}")
@@ -99,7 +90,7 @@ def main() -> int:
             pct = 100 * auto / w.length
             targets.append((f"walk {w.name}", "defaults <= 3 % of distance", f"{pct:.1f} %", pct <= 3.0))
 
-    drive = _load("KITTI drive", rm.load_drive)
+    drive = rm.load_or_none("KITTI drive", rm.load_drive)
     if drive:
         r = _quietly(args.verbose_cli, rm.study_drive, drive, tmp)
         total = drive.distance[-1]

@@ -55,16 +55,19 @@ no motion, and the run carries the true stance mask (``stance``) from which
 stride lengths are scored.
 
 The rest-detection scenarios (:data:`accelnav.hil_sim.sim.trajectories.REST_SCENARIOS`: ``walking_drift``,
-``walking_fast``, ``stop_and_go_graded``, ``highway``, ``cart_push``) carry the true rests as ``rest``
-(and the walks their ``stance`` as well); what the sensor reads beside the motion (a drifting level, a
-grade, vibration) is added like the walk's tilt leak, to the measurement and not to the truth.
+``walking_fast``, ``walking_still_start``, ``jogging``, ``stop_and_go_graded``, ``highway``, ``cart_push``,
+``highway_gnss``, ``town_drive``, ``hand_box``, ``tilting_mount``) carry the true rests as ``rest`` (and the
+walks their ``stance`` as well); what the sensor reads beside the motion (a drifting level, a grade,
+vibration) is added like the walk's tilt leak, to the measurement and not to the truth. Those of
+:data:`~accelnav.hil_sim.sim.trajectories.FIX_PLANS` also carry position fixes, ``fixes`` (run file key
+``sim_fixes``): :func:`scenario_fixes`, from a fifth stream of the seed (``SeedSequence(seed).spawn(5)[4]``).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -73,6 +76,7 @@ from accelnav.model.design import input_conversion
 from accelnav.model.load import G0, Model
 
 from .trajectories import (
+    FIX_PLANS,
     REST_SCENARIOS,
     TUMBLE_HOLD_S,
     TUMBLE_TURN_S,
@@ -119,6 +123,7 @@ class SimRun:
     initial_random: bool = field(default=True)
     stance: np.ndarray | None = None  # (N,) bool, walking only: the foot is on the ground
     rest: np.ndarray | None = None  # (N,) bool, rest scenarios only: the true rests (the body is still)
+    fixes: np.ndarray | None = None  # (M, 4) [t, column, r, sigma], scenarios of FIX_PLANS only: position fixes
 
     @property
     def n_axes(self) -> int:
@@ -156,6 +161,8 @@ class SimRun:
             d["stance"] = self.stance
         if self.rest is not None:
             d["rest"] = self.rest
+        if self.fixes is not None:
+            d["sim_fixes"] = self.fixes
         if self.code is not None:
             d["code"] = self.code
         elif self.t1 is not None:
@@ -215,6 +222,7 @@ class SimRun:
             initial_random=bool(np.asarray(d.get("initial_random", True))[()]),
             stance=_readonly(np.asarray(d["stance"], dtype=bool)) if "stance" in d else None,
             rest=_readonly(np.asarray(d["rest"], dtype=bool)) if "rest" in d else None,
+            fixes=_readonly(np.asarray(d["sim_fixes"], dtype=np.float64).reshape(-1, 4)) if "sim_fixes" in d else None,
         )
 
 
@@ -260,15 +268,12 @@ def simulate(
 
     n = max(1, math.ceil(float(duration_s) * model.rate_hz - 1e-9))
     t = np.arange(n, dtype=np.float64) / model.rate_hz
-    motion_ss, *axis_ss = np.random.SeedSequence(int(seed)).spawn(1 + MAX_AXES)
+    motion_ss, *axis_ss, fix_ss = np.random.SeedSequence(int(seed)).spawn(2 + MAX_AXES)
     stance = turned = rest = extra = None
     if scenario == "walking" or scenario in WALK_SCENARIOS:
-        from .walking import level_drift, walk
+        from .walking import scenario_walk
 
-        gait = "fast" if scenario == "walking_fast" else "normal"
-        w = walk(t, np.random.default_rng(motion_ss), model.max_accel_m_s2, gait)
-        if scenario == "walking_drift":  # its own stream: the strides are those of the same seed's walk
-            w = replace(w, leak=w.leak + level_drift(t, np.random.default_rng(motion_ss.spawn(1)[0])))
+        w = scenario_walk(scenario, t, motion_ss, model.max_accel_m_s2)
         stance = w.stance
         rest = None if scenario == "walking" else stance
     elif scenario in REST_SCENARIOS:
@@ -317,13 +322,15 @@ def simulate(
 
     analog = model.sensor.kind == "analog"
     duty = model.sensor.kind == "duty_cycle"
+    r_all = stack("r", np.float64)
+    fixes = scenario_fixes(scenario, t, r_all, indices, fix_ss) if scenario in FIX_PLANS else None
     return SimRun(
         model=model,
         scenario=scenario,
         seed=int(seed),
         t=_readonly(t),
         axis_names=tuple(model.axes[i].name for i in indices),
-        r=stack("r", np.float64),
+        r=r_all,
         u=stack("u", np.float64),
         a=stack("a", np.float64),
         eps=stack("eps", np.float64),
@@ -335,7 +342,28 @@ def simulate(
         initial_random=initial_random,
         stance=None if stance is None else _readonly(np.array(stance)),
         rest=None if rest is None else _readonly(np.array(rest)),
+        fixes=None if fixes is None else _readonly(fixes),
     )
+
+
+def scenario_fixes(
+    scenario: str, t: np.ndarray, r: np.ndarray, indices: Sequence[int], ss: np.random.SeedSequence
+) -> np.ndarray:
+    """Position fixes of ``scenario`` (FIX_PLANS: every ``period`` s from t = 0, standard deviation
+    ``sigma``) on the true positions r (N, columns), the columns being model axes ``indices``: (M, 4) rows
+    [t, column, r + sigma w, sigma], column by column, w ~ N(0, 1) drawn per fix and model axis from ``ss``
+    (so a shorter run's fixes are a prefix of a longer one's, and an axis's fixes do not depend on which
+    other axes are simulated)."""
+    period, sigma = FIX_PLANS[scenario]
+    Ts = float(t[1] - t[0]) if len(t) > 1 else 1.0
+    k = np.rint(np.arange(0.0, float(t[-1]) + Ts / 2, period) / Ts).astype(np.int64)
+    k = k[k < len(t)]
+    w = np.random.default_rng(ss).standard_normal((len(k), MAX_AXES))
+    rows = [
+        np.column_stack([t[k], np.full(len(k), float(j)), r[k, j] + sigma * w[:, i], np.full(len(k), sigma)])
+        for j, i in enumerate(indices)
+    ]
+    return np.concatenate(rows, axis=0)
 
 
 def _axis_indices(model: Model, axes: Sequence[str | int] | None) -> list[int]:

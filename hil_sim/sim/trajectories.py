@@ -52,9 +52,22 @@ SCENARIOS = ("stationary", "stop_and_go", "sinusoid", "vehicle", "stress", "shoc
 MULTI_AXIS_SCENARIOS = ("tumble", "tumble_any")
 # Scenarios made to test rest detection (issue 23), with a truth rest mask and sensor-side disturbances
 # (tilt and grade leaks, vibration); see rest_truth and accelnav.hil_sim.sim.walking
-WALK_SCENARIOS = ("walking_drift", "walking_fast")
-REST_SCENARIOS = (*WALK_SCENARIOS, "stop_and_go_graded", "highway", "cart_push")
+WALK_SCENARIOS = ("walking_drift", "walking_fast", "walking_still_start", "jogging")
+# Cases where a rest decision must weigh other evidence (issue 31): a cruise that looks still, stops between
+# fixes, a hand-moved box, a mount that tilts; with FIX_PLANS, the position fixes a user would have
+LINE_SCENARIOS = (
+    "stop_and_go_graded",
+    "highway",
+    "cart_push",
+    "highway_gnss",
+    "town_drive",
+    "hand_box",
+    "tilting_mount",
+)
+REST_SCENARIOS = (*WALK_SCENARIOS, *LINE_SCENARIOS)
 ALL_SCENARIOS = SCENARIOS + MULTI_AXIS_SCENARIOS + REST_SCENARIOS
+# Scenarios that come with position fixes: (period s, sigma m); see scenario_fixes
+FIX_PLANS = {"highway_gnss": (1.0, 1.0), "town_drive": (10.0, 1.0), "hand_box": (5.0, 0.02)}
 
 
 def require_scenario(name: str, what: str = "scenario", error: type[Exception] = ValueError) -> None:
@@ -386,6 +399,26 @@ def rest_truth(name: str, t: np.ndarray, ss: np.random.SeedSequence, amax: float
     * ``cart_push``: a hand-pushed cart: a pause of 3-5 s, then pushes of exactly 5 m (u = 5/d (1 - cos 2 pi
       s/d) over d = 5-8 s, alternately forward and back) with pauses of 2-5 s between; rolling vibration
       while it moves (broadband, rms 0.15 m/s^2 per m/s). For an ADXL335-class part at 100 Hz.
+
+    Issue 31's cases (:func:`_speed_profile` chains raised-cosine speed changes and holds; a hold at speed
+    reads as still as a stop to an accelerometer, which is the point):
+
+    * ``highway_gnss``: already at 10-18 m/s at t = 0, never stops: holds of 10-60 s at a constant speed,
+      then a change to another speed within 8-20 m/s over 10-25 s; road vibration of 0.002 m/s^2 rms per
+      m/s (0.016-0.04 m/s^2), below the noise of any shipped model, so a cruise looks still. With fixes
+      (FIX_PLANS: 1 Hz, sigma 1 m, a consumer GNSS). No true rest.
+    * ``town_drive``: parked 10-20 s, then four legs, each: pull away to 8-16 m/s (at most 2.5 m/s^2), one
+      or two holds of 15-40 s with a change to 6-16 m/s between, a last hold, a stop (at most 3 m/s^2);
+      3-5 s stops between legs (three short stops), parked for good after the fourth (a run is a prefix of
+      a longer one, and any run that outlasts the drive ends parked: the drive takes about 300-650 s, 3-6
+      km, see :func:`town_drive_end`). Road vibration as on the highway; fixes every 10 s (sigma 1 m).
+    * ``hand_box``: a box moved by hand on a table: a pause of 2-6 s, then moves back and forth (towards
+      the start) at peak speeds of 0.15-0.6 m/s (gentle pulses of 0.1-0.6 m/s^2, a steady glide of 0.5-3 s)
+      with pauses of 2-6 s; hand tremor while it moves (broadband, 0.03 m/s^2 rms per m/s: a glide, or a
+      slow push, reads as still as a pause on an ADXL335-class part). Fixes every 5 s (sigma 2 cm: a camera or a tape).
+    * ``tilting_mount``: ``stop_and_go``'s motion (same seed) under a mount whose tilt drifts: on every
+      axis the level moves at 0.015-0.11 m/s^2 per second (a new rate every 5-20 s, turning back towards
+      level once beyond 0.5 m/s^2), stopped or not.
     """
     t = np.asarray(t, dtype=np.float64)
     rng, rng_x = np.random.default_rng(ss), np.random.default_rng(ss.spawn(1)[0])
@@ -410,7 +443,131 @@ def rest_truth(name: str, t: np.ndarray, ss: np.random.SeedSequence, amax: float
         r, u, a = _cart(t, rng)
         extra = 0.15 * np.abs(u)[:, None] * _vibration(rng_x, n, n_axes, t)
         return RestTruth(r, u, a, extra, u == 0)
-    raise ValueError(f"name: {name!r} is not one of {', '.join(REST_SCENARIOS[2:])}")
+    if name == "highway_gnss":
+        r, u, a = _speed_profile(t, *_highway_segments(rng, float(t[-1]) if n else 0.0))
+        extra = ROAD_VIBRATION * u[:, None] * _vibration(rng_x, n, n_axes, t)
+        return RestTruth(r, u, a, extra, np.zeros(n, dtype=bool))
+    if name == "town_drive":
+        r, u, a = _speed_profile(t, *_town_segments(rng, float(t[-1]) if n else 0.0))
+        extra = ROAD_VIBRATION * u[:, None] * _vibration(rng_x, n, n_axes, t)
+        return RestTruth(r, u, a, extra, u == 0)
+    if name == "hand_box":
+        moves = _draw_moves(lambda: _draw_hand(rng), float(t[-1]) if n else 0.0)
+        r, u, a = _evaluate(moves, t)
+        extra = 0.03 * np.abs(u)[:, None] * _vibration(rng_x, n, n_axes, t)
+        return RestTruth(r, u, a, extra, u == 0)
+    if name == "tilting_mount":
+        r, u, a = truth("stop_and_go", t, rng, amax)
+        extra = np.stack([_tilt_drift(t, rng_x) for _ in range(n_axes)], axis=1)
+        return RestTruth(r, u, a, extra, u == 0)
+    raise ValueError(f"name: {name!r} is not one of {', '.join(LINE_SCENARIOS)}")
+
+
+ROAD_VIBRATION = 0.002  # m/s^2 rms per m/s: highway_gnss, town_drive (below the sensor noise)
+TILT_RATE = (0.015, 0.11)  # m/s^2 per s: tilting_mount's level drift
+TOWN_LEGS = 4  # town_drive: legs, with a short stop between two
+
+
+def _speed_profile(t: np.ndarray, d: np.ndarray, u0: np.ndarray, du: np.ndarray):
+    """(r, u, a) of a chain of segments: in segment j (duration d_j, start speed u0_j) the speed moves by
+    du_j along half a raised cosine, u = u0 + du sin^2(pi x/2), x = s/d (du = 0: a hold). The last segment
+    must reach past t[-1]. A segment with u0 = du = 0 has u = a = 0 exactly (a true rest)."""
+    start = np.concatenate(([0.0], np.cumsum(d)[:-1]))
+    r0 = np.concatenate(([0.0], np.cumsum(u0 * d + du * d / 2.0)[:-1]))
+    j = np.clip(np.searchsorted(start, t, side="right") - 1, 0, len(d) - 1)
+    s = t - start[j]
+    dj, duj = d[j], du[j]
+    x = np.clip(s / dj, 0.0, 1.0)
+    u = u0[j] + duj * np.sin(0.5 * np.pi * x) ** 2
+    a = duj * np.pi / (2.0 * dj) * np.sin(np.pi * x)
+    r = r0[j] + u0[j] * s + duj * (s / 2.0 - dj / (2.0 * np.pi) * np.sin(np.pi * x))
+    return r, u, a
+
+
+def _chain(steps: list[tuple[float, float]], u_start: float, t_end: float):
+    """Segment arrays (d, u0, du) of ``steps`` = [(duration, speed at its end), ...] from ``u_start``, the
+    last speed held until past ``t_end``."""
+    d, u0, du = [], [], []
+    u = u_start
+    for dur, target in steps:
+        d.append(dur)
+        u0.append(u)
+        du.append(target - u)
+        u = target
+    d.append(max(1.0, t_end + 1.0 - sum(d)))
+    u0.append(u)
+    du.append(0.0)
+    return np.array(d), np.array(u0), np.array(du)
+
+
+def _highway_segments(rng: np.random.Generator, t_end: float):
+    u = cur = rng.uniform(10.0, 18.0)
+    steps: list[tuple[float, float]] = []
+    covered = 0.0
+    while covered <= t_end + 1.0:
+        hold = rng.uniform(10.0, 60.0, _CHUNK)
+        speed = rng.uniform(*HIGHWAY_SPEED, _CHUNK)
+        change = rng.uniform(10.0, 25.0, _CHUNK)
+        for h, v, c in zip(hold, speed, change, strict=True):
+            steps += [(h, cur), (c, v)]
+            cur = v
+        covered += float(hold.sum() + change.sum())
+    return _chain(steps, u, t_end)
+
+
+def _town_steps(rng: np.random.Generator) -> list[tuple[float, float]]:
+    """The drive of ``town_drive``, independent of the run's length: [(duration, speed at its end), ...]."""
+    steps = [(rng.uniform(10.0, 20.0), 0.0)]
+    for leg in range(TOWN_LEGS):
+        v = rng.uniform(8.0, 16.0)
+        steps.append((max(rng.uniform(6.0, 12.0), v * np.pi / (2 * 2.5)), v))  # peak a = dv pi / (2 d)
+        for _ in range(int(rng.integers(1, 3))):
+            hold, v_next, change = rng.uniform(15.0, 40.0), rng.uniform(6.0, 16.0), rng.uniform(6.0, 12.0)
+            steps += [(hold, v), (max(change, abs(v_next - v) * np.pi / (2 * 2.5)), v_next)]
+            v = v_next
+        hold, brake, stop = rng.uniform(15.0, 40.0), rng.uniform(5.0, 10.0), rng.uniform(3.0, 5.0)
+        steps += [(hold, v), (max(brake, v * np.pi / (2 * 3.0)), 0.0)]
+        if leg < TOWN_LEGS - 1:
+            steps.append((stop, 0.0))
+    return steps
+
+
+def _town_segments(rng: np.random.Generator, t_end: float):
+    return _chain(_town_steps(rng), 0.0, t_end)
+
+
+def town_drive_end(ss: np.random.SeedSequence) -> float:
+    """When ``town_drive`` parks for good (s) for the motion stream ``ss`` (a run's
+    ``np.random.SeedSequence(seed).spawn(1)[0]``, see accelnav.hil_sim.sim.sensor)."""
+    return float(sum(d for d, _ in _town_steps(np.random.default_rng(ss))))
+
+
+def _draw_hand(rng: np.random.Generator) -> dict[str, np.ndarray]:
+    n = _CHUNK
+    rest = rng.uniform(2.0, 6.0, n)
+    v = rng.uniform(0.15, 0.6, n)
+    A = rng.uniform(0.1, 0.6, n)
+    e, f = _pulse_for(v, A, rng.uniform(0.3, 1.0, n))
+    c = rng.uniform(0.5, 3.0, n)
+    pref = rng.choice([-1.0, 1.0], n)
+    return dict(rest=rest, A1=A, e1=e, f1=f, c=c, A2=A, e2=e, f2=f, pref=pref)
+
+
+def _tilt_drift(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(N,) level error [m/s^2]: piecewise linear from 0, a rate of TILT_RATE (either sign) per 5-20 s
+    segment, turned back towards 0 while beyond 0.5 m/s^2. Segments drawn in chunks (prefix-consistent)."""
+    t_end = float(t[-1]) if len(t) else 0.0
+    knots_t, knots_v = [0.0], [0.0]
+    while knots_t[-1] <= t_end + 1.0:
+        dur = rng.uniform(5.0, 20.0, _CHUNK)
+        rate = rng.uniform(*TILT_RATE, _CHUNK)
+        sign = rng.choice([-1.0, 1.0], _CHUNK)
+        for d, q, s in zip(dur, rate, sign, strict=True):
+            v = knots_v[-1]
+            s = -np.sign(v) if abs(v) > 0.5 else s
+            knots_t.append(knots_t[-1] + d)
+            knots_v.append(v + s * q * d)
+    return np.interp(t, knots_t, knots_v)
 
 
 def _grade(r: np.ndarray, rng: np.random.Generator) -> np.ndarray:

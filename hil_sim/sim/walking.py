@@ -50,7 +50,7 @@ chunks of a fixed size, so a shorter run is a prefix of a longer one.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -70,20 +70,28 @@ class Walk:
     stance: np.ndarray  # bool, the foot is on the ground (u == a == 0 exactly)
 
 
-# (cycle time s, stance share of the cycle) ranges of a gait
-GAITS = {"normal": ((0.95, 1.10), (0.30, 0.40)), "fast": ((0.70, 0.80), (0.20, 0.26))}
+# (cycle time s, stance share of the cycle, stride length m, shock peak g) ranges of a gait
+GAITS = {
+    "normal": ((0.95, 1.10), (0.30, 0.40), (1.2, 1.5), (8.0, 16.0)),
+    "fast": ((0.70, 0.80), (0.20, 0.26), (1.2, 1.5), (8.0, 16.0)),
+    # a jog: 0.47-0.56 s swings of 1.8-2.1 m (the foot at up to 9 m/s, 6.5 g), so smaller shocks keep the sum
+    # inside a 16 g part
+    "jog": ((0.68, 0.78), (0.28, 0.34), (1.8, 2.1), (4.0, 8.0)),
+}
+JOG_LEAK = (3.0, 0.7, (3.0, 6.0))  # jogging's level leak: mean size and swing (m/s^2), the swing's period (s)
+STILL_START = (0.2, (2.0, 4.0), 0.02)  # walking_still_start: jostle (s), stand (s), jostle's move (m)
 
 
 def _draw_strides(rng: np.random.Generator, amax: float, gait: str = "normal") -> dict[str, np.ndarray]:
     n = _CHUNK
-    cycle_range, frac_range = GAITS[gait]
+    cycle_range, frac_range, length_range, peak_range = GAITS[gait]
     cycle = rng.uniform(*cycle_range, n)
     frac = rng.uniform(*frac_range, n)
-    length = rng.uniform(1.2, 1.5, n)
+    length = rng.uniform(*length_range, n)
     turn_every = rng.integers(6, 13, n)
     turn = rng.uniform(np.pi / 3, 2 * np.pi / 3, n) * rng.choice([-1.0, 1.0], n)
     wiggle = rng.normal(0.0, np.radians(3.0), n)
-    peak = np.minimum(rng.uniform(8.0, 16.0, (n, 2)) * G0, 0.8 * amax)
+    peak = np.minimum(rng.uniform(*peak_range, (n, 2)) * G0, 0.8 * amax)
     tau = rng.uniform(0.030, 0.050, (n, 2))
     return dict(
         cycle=cycle, frac=frac, length=length, turn_every=turn_every, turn=turn, wiggle=wiggle, peak=peak, tau=tau
@@ -93,8 +101,9 @@ def _draw_strides(rng: np.random.Generator, amax: float, gait: str = "normal") -
 def walk(t: np.ndarray, rng: np.random.Generator, amax: float, gait: str = "normal") -> Walk:
     """The walk at the instants ``t`` (s, from 0); ``amax`` is the sensor's full scale in m/s^2.
 
-    ``gait``: "normal" (the module docstring) or "fast" (cycle 0.70-0.80 s, stance 20-26 % of it:
-    0.14-0.21 s on the ground, the short stances a brisk walker's foot-flat phase gives).
+    ``gait``: "normal" (the module docstring), "fast" (cycle 0.70-0.80 s, stance 20-26 % of it:
+    0.14-0.21 s on the ground, the short stances a brisk walker's foot-flat phase gives) or "jog" (see
+    GAITS).
     """
     t = np.asarray(t, dtype=np.float64)
     n = len(t)
@@ -177,5 +186,69 @@ def level_drift(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     angle0 = rng.uniform(0.0, 2 * np.pi)
     turn = np.radians(rng.uniform(30.0, 90.0)) * rng.choice([-1.0, 1.0]) / 60.0
     size = 0.2 + 0.7 * np.minimum(t / 60.0, 1.0)
+    angle = angle0 + turn * t
+    return np.stack([size * np.cos(angle), size * np.sin(angle)], axis=1)
+
+
+def scenario_walk(name: str, t: np.ndarray, ss: np.random.SeedSequence, amax: float) -> Walk:
+    """The walk of scenario ``name`` (``walking`` or one of trajectories.WALK_SCENARIOS) from the motion
+    stream ``ss``: the strides come from ``ss`` itself (a variant walks as ``walking`` of the same seed
+    does, with its gait), what a variant adds from ``ss.spawn(1)[0]``.
+
+    * ``walking_drift``: the normal walk plus :func:`level_drift`.
+    * ``walking_fast``: the fast gait.
+    * ``walking_still_start``: the wearer stands still 2-4 s before walking, but the foot is jostled in the
+      first 0.2 s (a 2 cm shuffle along the first heading, u = a = 0 at both ends): the first stand begins
+      0.2 s in. The walk proper is the normal walk shifted by the jostle and the stand.
+    * ``jogging``: the jog gait with a level frame leaking 3 +- 0.7 m/s^2 (:func:`jog_leak`), on top of the
+      tilt leak.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    rng = np.random.default_rng(ss)
+    if name == "walking_still_start":
+        jostle, stand_range, move = STILL_START
+        extra = np.random.default_rng(ss.spawn(1)[0])
+        t0 = jostle + extra.uniform(*stand_range)
+        w = walk(t - t0, rng, amax)  # stands (first stance) until t0, then walks
+        x = np.clip(t / jostle, 0.0, 1.0)
+        on = t < jostle
+        w2 = 2 * np.pi * x
+        first = _first_heading(w)
+        r1 = move * (x - np.sin(w2) / (2 * np.pi))
+        u1 = np.where(on, move / jostle * (1 - np.cos(w2)), 0.0)
+        a1 = np.where(on, 2 * np.pi * move / jostle**2 * np.sin(w2), 0.0)
+        return Walk(
+            r=w.r + r1[:, None] * first,
+            u=w.u + u1[:, None] * first,
+            a=w.a + a1[:, None] * first,
+            leak=w.leak,
+            stance=w.stance & ~on,
+        )
+    gait = {"walking_fast": "fast", "jogging": "jog"}.get(name, "normal")
+    w = walk(t, rng, amax, gait)
+    if name == "walking_drift":
+        return replace(w, leak=w.leak + level_drift(t, np.random.default_rng(ss.spawn(1)[0])))
+    if name == "jogging":
+        return replace(w, leak=w.leak + jog_leak(t, np.random.default_rng(ss.spawn(1)[0])))
+    return w
+
+
+def _first_heading(w: Walk) -> np.ndarray:
+    """Unit direction of the walk's first swing (x if the run ends before one)."""
+    moving = np.flatnonzero(np.linalg.norm(w.u, axis=1) > 0)
+    v = w.u[moving[0]] if len(moving) else np.array([1.0, 0.0])
+    return v / np.linalg.norm(v)
+
+
+def jog_leak(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(N, 2) gravity leak [m/s^2] of a jogger's level frame: size 3 + 0.7 sin(2 pi t/P + p) (JOG_LEAK: P 3-6
+    s, so the level moves by up to 1 m/s^2 from one stance to the next), direction from a random angle turning
+    30-90 degrees a minute (drawn from ``rng``)."""
+    t = np.asarray(t, dtype=np.float64)
+    mean, swing, periods = JOG_LEAK
+    angle0 = rng.uniform(0.0, 2 * np.pi)
+    turn = np.radians(rng.uniform(30.0, 90.0)) * rng.choice([-1.0, 1.0]) / 60.0
+    period, phase = rng.uniform(*periods), rng.uniform(0.0, 2 * np.pi)
+    size = mean + swing * np.sin(2 * np.pi * t / period + phase)
     angle = angle0 + turn * t
     return np.stack([size * np.cos(angle), size * np.sin(angle)], axis=1)

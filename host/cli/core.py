@@ -17,9 +17,10 @@ from accelnav.estimate.pipeline import (
     format_strides,
     position_errors,
     stride_table,
+    truth_versus_baselines,
 )
 from accelnav.estimate.zupt import ZuptParams
-from accelnav.fileio import check_output
+from accelnav.fileio import check_output, write_text
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model
 
 TUNE_EVALUATIONS = 300  # smooth --tune: the estimate only (no intervals): a few hundred filter runs
@@ -82,6 +83,14 @@ def register(sub) -> None:
     p.add_argument("--list-scenarios", action="store_true", help="print the scenario names and exit")
     p.add_argument("--out", type=Path, help="run file to write (.npz)")
     _csv_arg(p)
+    p.add_argument(
+        "--fixes-out",
+        type=Path,
+        default=None,
+        metavar="CSV",
+        help="also write the scenario's position fixes (highway_gnss, town_drive, hand_box) as the CSV "
+        "smooth --fixes reads",
+    )
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser(
@@ -157,10 +166,28 @@ def register(sub) -> None:
         ),
         (
             "--zupt-level",
-            "level",
+            "level_still",
             "A",
-            f"a rest's level (tilt or grade leak) may differ from the last rest's by A m/s^2, plus "
-            f"{z.level_rate:g} m/s^2 per second between them, at most {z.level_max:g}; default {z.level:g}",
+            f"a rest's level may differ from the last rest's by A m/s^2 when nothing moved between; default "
+            f"{z.level_still:g}",
+        ),
+        (
+            "--zupt-level-max",
+            "level_max",
+            "A",
+            f"... and by A m/s^2 after a move (a jog's or a tilting mount's leak); default {z.level_max:g}",
+        ),
+        (
+            "--zupt-level-walk",
+            "level_walk",
+            "A",
+            f"random walk of the level between aids, m/s^2 per sqrt(s); default {z.level_walk:g}",
+        ),
+        (
+            "--zupt-tell",
+            "tell",
+            "V",
+            f"the fixes or the other rests can tell a rest when the sd of its velocity is <= V m/s; default {z.tell:g}",
         ),
         (
             "--zupt-trim",
@@ -172,20 +199,21 @@ def register(sub) -> None:
             "--zupt-still",
             "still_k",
             "K",
-            f"a run's first rest (no rest before to check it against): variance <= K R; default {z.still_k:g}",
+            f"a still start or stand (when nothing else can tell): variance <= K R; default {z.still_k:g}",
         ),
         (
             "--zupt-drift",
             "drift",
             "A",
-            f"unmodelled mean acceleration error between two rests, m/s^2 (widens the gate); default {z.drift:g}",
+            f"mean acceleration error between aids that no level explains, m/s^2 (widens the test); "
+            f"default {z.drift:g}",
         ),
         (
-            "--zupt-recover",
-            "recover_s",
-            "S",
-            f"a refused candidate S s or less before the next may anchor it, if the body moved between; "
-            f"default {z.recover_s:g}",
+            "--zupt-scale",
+            "scale",
+            "F",
+            f"share of the acceleration integrated since the last aid that may be error (widens the test); "
+            f"default {z.scale:g}",
         ),
         ("--zupt-sigma", "sigma", "V", f"update std, m/s; default {z.sigma:g}"),
         ("--zupt-every", "every_s", "S", "one update per S s of rest; default 0: every sample"),
@@ -193,14 +221,16 @@ def register(sub) -> None:
             "--zupt-gate",
             "gate",
             "G",
-            f"per-rest chi-square bound on the velocity since the last rest, 0 = accept every candidate; "
-            f"default {z.gate:g}",
+            f"a rest is refused as moving when the velocity the fixes or the other rests give it, before or after "
+            f"it, has a chi-square over the axes above G on one axis' scale (9: 3 sd); 0 = accept every "
+            f"candidate; default {z.gate:g}",
         ),
         (
             "--zupt-rel",
             "rel",
             "F",
-            f"per-rest: also accept when the speed fell to F of its peak since the last rest; default {z.rel:g} (off)",
+            f"a still stand (when nothing else can tell): the speed since the last rest came back to F of its peak; "
+            f"default {z.rel:g}",
         ),
     ]
     for flag, field, metavar, text in zupt_opts:
@@ -316,13 +346,24 @@ def cmd_sim(args) -> int:
         return 0
     if args.out is None:
         raise UserError("--out: a run file to write is required")
-    from accelnav.hil_sim.sim.trajectories import require_scenario
+    from accelnav.hil_sim.sim.trajectories import FIX_PLANS, require_scenario
 
     model = load_model(args.model)
     require_scenario(args.scenario, "--scenario", UserError)
+    if args.fixes_out is not None and args.scenario not in FIX_PLANS:
+        raise UserError(
+            f"--fixes-out: scenario {args.scenario!r} has no position fixes; those with fixes: {', '.join(FIX_PLANS)}"
+        )
+    if args.fixes_out is not None:
+        check_output(args.fixes_out, "--fixes-out")
     arrays = simulate(model, args.scenario, args.duration, args.seed)
     print(_summary(arrays))
     write_outputs(args, arrays, model)
+    if args.fixes_out is not None:
+        from accelnav.estimate.fixes import fixes_csv
+
+        write_text(args.fixes_out, fixes_csv(arrays["sim_fixes"], arrays["axis_names"]), flag="--fixes-out")
+        print(f"wrote {args.fixes_out} ({len(arrays['sim_fixes'])} position fixes)")
     return 0
 
 
@@ -352,8 +393,9 @@ def _print_run(args, outcome) -> None:
         rows = position_errors(arrays, outcome.model)
         if rows:
             print(format_errors(rows))
-            if "smooth_x" in arrays:
-                print_truth_versus_baselines(rows)
+            line = truth_versus_baselines(rows, outcome.checks is not None and outcome.checks.tune_helps)
+            if "smooth_x" in arrays and line:
+                print(line)
         strides = stride_table(arrays, outcome.model) if "smooth_x" in arrays else []
         if strides:
             print(format_strides(strides))
@@ -388,10 +430,20 @@ def _zupt_summary(decisions, params: ZuptParams, rest: np.ndarray, gravity: list
     def listed(d: dict[str, int]) -> str:
         return f" ({', '.join(f'{r} {c}' for r, c in d.items())})" if d else ""
 
+    start = next((d for d in decisions if d.reason == "still start"), None)
+    cannot = next((d for d in decisions if d.reason == "cannot tell"), None)
+    why = ""
+    if start is not None:
+        why += f"; {start.evidence}"
+    if not acc and cannot is not None:
+        why += (
+            f"; no rest could be told ({cannot.evidence.split(';')[0]}): position fixes (--fixes), or a still "
+            f"start of {params.start_s:g} s, would give one"
+        )
     return (
         f"zero-velocity detector: window {params.window_s:g} s, variance <= {params.var_k:g} (R + "
         f"{params.tremor:g}^2): {len(decisions)} candidate rests, {sum(acc.values())} accepted{listed(acc)}, "
-        f"{sum(ref.values())} refused{listed(ref)}; {100 * rest.mean():.1f} % of the run at rest"
+        f"{sum(ref.values())} refused{listed(ref)}; {100 * rest.mean():.1f} % of the run at rest{why}"
         + (
             f"; axis {', '.join(gravity)} reads about 1 g (gravity), which the model takes as removed: "
             "drop it with --axis (the others' names)"
@@ -409,11 +461,14 @@ def cmd_smooth(args) -> int:
         window_s=args.zupt_window_s,
         var_k=args.zupt_var_k,
         tremor=args.zupt_tremor,
-        level=args.zupt_level,
+        level_still=args.zupt_level_still,
+        level_max=args.zupt_level_max,
+        level_walk=args.zupt_level_walk,
+        tell=args.zupt_tell,
+        drift=args.zupt_drift,
+        scale=args.zupt_scale,
         trim_k=args.zupt_trim_k,
         still_k=args.zupt_still_k,
-        drift=args.zupt_drift,
-        recover_s=args.zupt_recover_s,
         sigma=args.zupt_sigma,
         every_s=args.zupt_every_s,
         gate=args.zupt_gate,
@@ -445,13 +500,11 @@ def cmd_smooth(args) -> int:
                in_memory=("--plots",) if args.plots is not None else ())  # fmt: skip
     outcome = smooth_file(
         args.run, args.out, args.model, job=job, fixes=args.fixes, zupt=args.zupt, zupt_params=params,
-        zupt_report=args.zupt_report, csv=args.csv, compress=args.compress, **_read_options(args),
+        zupt_report=args.zupt_report, csv=args.csv, compress=args.compress, rests_decided=_print_rests,
+        **_read_options(args),
     )  # fmt: skip
     if outcome.tune is not None:
         _print_tune(outcome.tune, outcome.model)
-    r = outcome.rests
-    if r is not None and r.detected:
-        print(_zupt_summary(r.decisions, r.params, r.mask, r.gravity))
     if outcome.applied is not None:
         print(f"zero-velocity updates applied per axis: {', '.join(map(str, outcome.applied))}")
     if outcome.fixes is not None:
@@ -511,22 +564,30 @@ def _print_tune(tuned, model: Model) -> None:
 
     r, seconds = tuned
     figs = ", ".join(f"{f} {r.start[f]:.4g} -> {r.estimate[f]:.4g}" for f in FIGURES)
-    stop = "converged" if r.converged else "stopped at its budget"
+    stop = "converged" if r.converged else "stopped at its budget: the best figures found, not a maximum"
     verdict = "used" if r.adopted else "not significantly better (p >= 0.05): the model's figures kept"
+    unknown = r.unidentified()
     print(
         f"tune: {figs}; ln L +{r.ll_estimate - r.ll_start:.4g} (p = {r.p_value:.3g}); {r.evaluations} evaluations, "
-        f"{seconds:.1f} s, {stop}; {verdict}"
+        f"{seconds:.1f} s, {stop}; {verdict}" + (f"; {unknown}" if unknown else "")
     )
 
 
-def print_truth_versus_baselines(rows) -> None:
-    """With truth and fixes: one line if the smoother is worse than a fix-only baseline (rms over the axes)."""
-    from accelnav.estimate.pipeline import BASELINES, rms_by_method
-
-    rms = rms_by_method(rows)
-    worse = [b for b in BASELINES if b in rms and rms["smoother"] > rms[b]]
-    if worse:
+def _print_rests(r) -> None:
+    """The rest stage's lines (an engine.RestOutcome), printed as it is decided: the decision's summary, then
+    its review (the rests dropped, before --tune and any advice)."""
+    if not r.detected:
+        return
+    print(_zupt_summary(r.decisions, r.params, r.mask, r.gravity))
+    if not r.reviewed:
         print(
-            f"against the truth the smoother ({rms['smoother']:.3g} m rms) is worse than {' and '.join(worse)} "
-            f"({min(rms[b] for b in worse):.3g} m): its model does not fit this recording: try --tune"
+            "rests not re-examined against a smoother with the fixes and the other rests: the run is over the "
+            "memory budget of the whole-array path (--memory-budget)"
         )
+    print_review(r.review)
+
+
+def print_review(review) -> None:
+    """The line of the rests' re-examination (pipeline.disagreeing_rests), when it has something to say."""
+    if review is not None and review.said:
+        print(review.line())

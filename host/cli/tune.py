@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.cli.core import INPUT_HELP, _input_args, read_args
+from accelnav.cli.core import INPUT_HELP, _input_args, print_review, read_args
 from accelnav.errors import UserError
+from accelnav.estimate.engine import Rests, rest_stage
 from accelnav.estimate.tune import FIGURES, MAX_EVALUATIONS, TuneResult, aid_measurements, tune, with_figures
 from accelnav.estimate.zupt import ZuptParams
 from accelnav.model.edit import save_model
@@ -90,7 +91,11 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if args.zupt is not None:
         params = zupt.resolved(model, ZuptParams(sigma=args.zupt_sigma))
         if args.zupt == "auto":
-            rest = zupt.rest_mask(accel, arrays["clipped"], model, params)  # gated once per rest, for every axis
+            # the rest stage of smooth --zupt auto: decided once per rest for all axes, with the fixes, then the
+            # rests a full smoother with the fixes or the other rests refutes dropped: they are not tuned to
+            found = rest_stage(model, arrays, Rests(params, detect=True), fixes=fixes)
+            rest = found.mask
+            print_review(found.review)
         else:
             rest, rest_sigma = zupt.read_zupt_file(args.zupt, arrays["t"], names)
     extras, n_zupt = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
@@ -121,7 +126,7 @@ def report(r: TuneResult) -> list[str]:
     for f in r.start:
         if f in r.figures:
             why = r.why_not_identified(f)
-            ident = "yes" if not why else f"NO ({why})"
+            ident = "yes" if not why else f"NO: {why}"
             lines.append(f"| {f} | {r.start[f]:.4g} | {r.estimate[f]:.4g} | {_fmt_interval(r, f)} | {ident} |")
         else:
             if not f.startswith("c2."):

@@ -18,6 +18,9 @@ key                       shape, dtype           meaning
 ``r u a eps``             (N, n_axes), float64   simulated truth (``accelnav sim`` only)
 ``scenario``, ``seed``    ()                     simulation settings (``accelnav sim`` only)
 ``stance``                (N,), bool             the foot is on the ground (``walking`` scenario only)
+``rest``                  (N,), bool             the body is still (rest scenarios only)
+``sim_fixes``             (M, 4), float64        a scenario's position fixes [t, axis column, r, sigma]
+                                                 (``accelnav sim`` only; smooth takes fixes from ``--fixes``)
 ``filt_x``                (n_axes, N, 4)         filter posterior x[k|k] = [r, u, a, eps] (a streamed smooth:
                                                  with ``--filter-states``)
 ``filt_sd``               (n_axes, N, 4)         its standard deviations

@@ -42,12 +42,14 @@ def smooth_file(
     zupt_report: str | Path | None = None,
     csv: str | Path | None = None,
     compress: bool = False,
+    rests_decided=None,
     **read,
 ) -> engine.Outcome:
     """Filter or smooth the recording or run file ``path`` as ``job`` says; write the run file ``out``
     (and ``csv``, ``zupt_report``). ``fixes``: a fixes CSV (accelnav.estimate.fixes.read_fixes); ``zupt``:
     "auto" (the rest decision, with ``zupt_params``) or a rest file (accelnav.estimate.zupt.read_zupt_file);
-    ``read``: read_input's keywords (axes, time_column, rate_hz, time_unit, unit, allow_gaps).
+    ``rests_decided(rest)``: called with the rest stage's engine.RestOutcome as soon as it is decided (before
+    ``--tune``); ``read``: read_input's keywords (axes, time_column, rate_hz, time_unit, unit, allow_gaps).
     Returns the engine's :class:`~accelnav.estimate.engine.Outcome`; ``Outcome.written`` lists the files."""
     from accelnav.estimate import zupt as zu
 
@@ -63,7 +65,7 @@ def smooth_file(
     smooth = "smooth" in job.stages
     rests = None
     if smooth and zupt is not None:
-        rests = engine.Rests(zupt_params, detect=zupt == "auto")
+        rests = engine.Rests(zupt_params, detect=zupt == "auto", decided=rests_decided)
     # the plan before any reading: what cannot be done within the budget is refused now
     job = replace(job, in_memory=in_memory, rests=rests, fixes=[] if smooth and fixes is not None else None,
                   full=job.full or job.covariances)  # fmt: skip
@@ -161,14 +163,16 @@ def csv_in_pieces(npz: Path, csv: str | Path) -> None:
 
 
 def _checks(outcome: engine.Outcome, inputs: dict, fixes):
-    """The aids' consistency checks of a run smoothed in memory (accelnav.estimate.pipeline.smooth_checks)."""
+    """The aids' consistency checks of a run smoothed in memory (accelnav.estimate.pipeline.smooth_checks); a
+    model just tuned is not advised to be tuned again."""
     from accelnav.estimate.pipeline import smooth_checks
 
     r = outcome.rests
     kw = dict(rest=None, zupt_params=None, rest_sigma=None)
     if r is not None:
         kw = dict(rest=r.mask, zupt_params=r.params, rest_sigma=r.sigma)
-    return smooth_checks(outcome.arrays, outcome.model, inputs, fixes, **kw)
+    # the rests' review (Outcome.rests.review) is said where the rests are decided, not among these lines
+    return smooth_checks(outcome.arrays, outcome.model, inputs, fixes, tuned=outcome.tune is not None, **kw)
 
 
 def _whole_reasons(job: engine.Job, fixes, zupt) -> str:

@@ -20,7 +20,34 @@ Two things a user can do with fixes alone, which a smoother given the same fixes
   on the next fix. That is the double integral plus the straight line through its misses at the fixes.
 
 Without truth, :func:`holdout` compares them on fixes left out: every other fix is hidden, each method
-predicts it from the rest.
+predicts it from the rest. Fewer than ``HOLDOUT_MIN`` held-out fixes cannot tell the methods apart (below).
+
+Rests re-examined
+-----------------
+A rest that disagrees with the model is first suspected of not being a rest:
+:func:`accelnav.estimate.pipeline.disagreeing_rests` tests each rest's zero velocity against a smoothing that
+did not use it, and names the ones that fail, before any line blames the noise figures.
+Two kinds of evidence, in this order:
+
+* **the fixes**: one smoothing with the fixes alone; a rest whose mean smoothed velocity is off zero by more
+  than that smoothing's velocity sd allows (chi-square, one dof per axis; the sd scaled up by the fixes' own
+  mean NIS where that is above 1, so a model too stiff for the fixes does not condemn true rests) is dropped,
+  all such rests at once: no rest vouches for another here;
+* **the other rests**: leave-one-out. The rests whose first update's NIS (the velocity gathered since the
+  previous aid, forward) stands out are smoothed without each in turn, the worst dropped if its velocity there
+  is off zero, and the rest re-smoothed, one at a time (a false rest makes its true neighbour look wrong too:
+  dropping the worst first clears it). Each statistic is taken relative to the median rest's (a model too stiff
+  for all rests inflates them all alike, and is the noise lines' business, not a reason to drop rests); so
+  rests that are mostly false, with no fixes, cannot be told from true ones, and none is dropped for it.
+
+Each rest is held to the chi-square point that a true rest passes with probability 1 - ``REST_ALPHA`` / (the
+number of rests): over the whole run, one true rest dropped in a thousand runs.
+
+Advice
+------
+"try --tune" is printed only where tuning can help: when the fixes' NIS is off and the model was not just
+tuned. Rests cannot ask for it: a rest that is not one (a cruise called still) disagrees with any noise
+figures, and tuning to it inflates them.
 """
 
 from __future__ import annotations
@@ -111,21 +138,35 @@ class NisCheck:
             return ""
         return "stiff" if self.mean > self.high else "loose" if self.mean < self.low else ""
 
-    def line(self) -> str:
-        """One line: the figure, and what it says about the model."""
+    def line(self, tuned: bool = False) -> str:
+        """One line: the figure, and what it says about the model; ``tuned``: the model was just fitted to this
+        run (accelnav smooth --tune), so tuning is not advised again."""
         what = "position fixes" if self.kind == "fixes" else "rests (first zero-velocity update of each)"
-        head = f"{what}: mean NIS {self.mean:.3g} over {self.n}"
+        fig = f"mean NIS {self.mean:.3g} over {self.n} {self.kind}"
         if self.verdict == "stiff":
-            return (
-                f"{self.kind} disagree with the model: mean NIS {self.mean:.3g} over {self.n} {self.kind}, bound "
-                f"{self.high:.3g}; the model's noise figures are too stiff: try --tune"
-            )
+            head = f"{self.kind} disagree with the {'tuned ' if tuned else ''}model: {fig}, bound {self.high:.3g}"
+            if self.kind != "fixes":
+                return (
+                    f"{head}: the noise figures may be too stiff or the rests not quite still; only fixes can tell "
+                    "(tuning on rests takes them as truth)"
+                )
+            if tuned:
+                return f"{head}: tuning does not fit them: check the fixes' sigma_m and any fix far off the track"
+            return f"{head}; the model's noise figures are too stiff: try --tune"
         if self.verdict == "loose":
-            return (
-                f"{self.kind} agree with the model better than it expects: mean NIS {self.mean:.3g} over {self.n} "
-                f"{self.kind}, bound {self.low:.3g}; the model's noise figures are too loose: try --tune"
+            head = (
+                f"{self.kind} agree with the {'tuned ' if tuned else ''}model better than it expects: {fig}, "
+                f"bound {self.low:.3g}"
             )
-        return f"{head}, within [{self.low:.3g}, {self.high:.3g}]: consistent with the model"
+            if self.kind != "fixes":
+                return (
+                    f"{head}: the noise figures may be too loose, or rests follow each other with no motion "
+                    "between (one stop in pieces, or a steady cruise called still); only fixes can tell"
+                )
+            if tuned:
+                return f"{head}: the fixes' sigma_m may be larger than their real error"
+            return f"{head}; the model's noise figures are too loose: try --tune"
+        return f"{what}: {fig}, within [{self.low:.3g}, {self.high:.3g}]: consistent with the model"
 
 
 def nis_check(kind: str, nis: np.ndarray) -> NisCheck:
@@ -139,33 +180,200 @@ def nis_check(kind: str, nis: np.ndarray) -> NisCheck:
     return NisCheck(kind, n, float(np.mean(nis)), lo, hi)
 
 
+HOLDOUT_MIN = 5  # held-out fixes to judge on: the smoother losing at all of 4 has chance 1/16 > 5 % (sign test)
+ANCHOR_SD = 1.0  # m: a final position sd above this with nothing anchoring the run is said
+
+
+def sign_test(wins: int, n: int) -> float:
+    """One-sided p of ``wins`` or more out of ``n`` fair coin flips."""
+    return sum(math.comb(n, k) for k in range(wins, n + 1)) / 2.0**n
+
+
+@dataclass(frozen=True)
+class NoAnchor:
+    """Rests were asked for, there are no fixes, and the position's sd at the end is above ANCHOR_SD: nothing
+    anchors the run, or nothing since its last rest."""
+
+    sd: float  # m, the largest final position sd over the axes
+    axis: str
+    still_s: float  # s, the still start that would anchor the run (ZuptParams.start_s)
+    last_rest_s: float | None = None  # s, where the last rest applied ends; None: no rest applied
+
+    def line(self) -> str:
+        since = "no rest applied" if self.last_rest_s is None else f"no rest applied after {self.last_rest_s:.3g} s"
+        gives = (
+            f"a still start of {self.still_s:g} s, position fixes (--fixes) or a rest file (--zupt FILE)"
+            if self.last_rest_s is None
+            else "position fixes (--fixes) or a rest file (--zupt FILE)"
+        )
+        return (
+            f"{since} and no fixes: nothing anchors the position, whose sd reaches {self.sd:.3g} m at the end "
+            f"(axis {self.axis}); {gives} would give one"
+        )
+
+
 @dataclass(frozen=True)
 class SmoothChecks:
-    """What a smoothed run says about its model: the NIS of each kind of aid, and with fixes the held-out
-    comparison (:func:`accelnav.estimate.pipeline.holdout`, or None); :func:`accelnav.estimate.pipeline.smooth_checks`
-    makes one."""
+    """What a smoothed run says about its model: the NIS of each kind of aid, with fixes the held-out
+    comparison (:func:`accelnav.estimate.pipeline.holdout`, or None), the re-examination of the rests
+    (:func:`accelnav.estimate.pipeline.disagreeing_rests`, or None), and whether anything anchors the run;
+    :func:`accelnav.estimate.pipeline.smooth_checks` makes one. ``tuned``: the model was fitted to this run."""
 
     nis: tuple[NisCheck, ...]
     holdout: object | None
+    review: RestReview | None = None
+    tuned: bool = False
+    no_anchor: NoAnchor | None = None
+
+    @property
+    def tune_helps(self) -> bool:
+        """Whether to advise --tune: the fixes' NIS is off and the model was not just tuned (see the module)."""
+        return not self.tuned and any(c.kind == "fixes" and c.verdict for c in self.nis)
 
     def lines(self) -> list[str]:
-        """A line per check, as ``accelnav smooth`` prints them."""
-        out = [c.line() for c in self.nis]
+        """A line per check, as ``accelnav smooth`` prints them: the rests' re-examination first."""
+        out = [] if self.review is None or not self.review.said else [self.review.line()]
+        out += [c.line(self.tuned) for c in self.nis]
         h = self.holdout
-        if h is None:
-            return out
-        out.append(
-            f"held-out fixes (every other one left out, {h.n} predicted): rms miss "
-            + ", ".join(f"{k} {v:.3g} m" for k, v in h.rms.items())
-        )
-        worse = h.worse_than()
-        if worse:
-            out.append(
-                f"the smoother misses the held-out fixes more than {' and '.join(worse)} "
-                f"({h.rms['smoother']:.3g} m against {min(h.rms[b] for b in worse):.3g} m): its model does not "
-                "fit this recording: try --tune"
-            )
+        if h is not None:
+            out += holdout_lines(h, self.tune_helps)
+        if self.no_anchor is not None:
+            out.append(self.no_anchor.line())
         return out
+
+
+def holdout_lines(h, tune_helps: bool) -> list[str]:
+    """The held-out comparison (:class:`accelnav.estimate.pipeline.Holdout`) in a line or two."""
+    if h.n < HOLDOUT_MIN:
+        return [
+            f"held-out fixes (every other one left out): {h.n} predicted, too few to judge the smoother against "
+            f"fixes alone: {HOLDOUT_MIN} at least (losing at all of fewer has a chance above 5 %)"
+        ]
+    out = [
+        f"held-out fixes (every other one left out, {h.n} predicted): rms miss "
+        + ", ".join(f"{k} {v:.3g} m" for k, v in h.rms.items())
+    ]
+    worse = h.worse_than()
+    if worse:
+        lost = min(h.losses(b) for b in worse)
+        out.append(
+            f"the smoother misses the held-out fixes more than {' and '.join(worse)} ({h.rms['smoother']:.3g} m "
+            f"against {min(h.rms[b] for b in worse):.3g} m, further at {lost} of {h.n}): its model does not fit "
+            "this recording" + (": try --tune" if tune_helps else "")
+        )
+    return out
+
+
+REST_ALPHA = 1e-3  # a true rest dropped in one run of a thousand (see the module)
+REVIEW_SMOOTHINGS = 60  # leave-one-out smoothings of the rests at most
+REVIEW_SUSPECTS = 4  # rests smoothed without themselves per round: the ones whose first update stands out most
+REVIEW_MEDIAN_MIN = 5  # rests at least for their median to set what is usual; fewer: the model's own chi-square
+_LISTED = 4  # rests named in the line
+
+
+@dataclass(frozen=True)
+class RestTest:
+    """One rest [start, stop) tested against a smoothing that did not use it."""
+
+    start: int
+    stop: int
+    chi2: float  # sum over axes of (mean smoothed velocity)^2 / (its variance + the rest's own), scaled
+    dof: int  # axes
+    bound: float  # the chi-square point it is held to
+    speed: float  # m/s, |mean smoothed velocity| over the axes
+    against: str  # "the fixes" or "the other rests"
+
+    @property
+    def fails(self) -> bool:
+        return self.chi2 > self.bound
+
+
+@dataclass(frozen=True)
+class RestReview:
+    """The rests re-examined (:func:`accelnav.estimate.pipeline.disagreeing_rests`): the ones dropped, and how far
+    the test got."""
+
+    tested: int  # rests
+    dropped: tuple[RestTest, ...]
+    smoothings: int
+    complete: bool  # False: REVIEW_SMOOTHINGS ran out with suspects left
+    kept: np.ndarray  # (N, n_axes) the rest mask less the dropped rests
+    t: np.ndarray  # the run's times, for the line
+    undecided: bool = False  # a rest stands out, but too few rests are left to say which is wrong
+
+    @property
+    def said(self) -> bool:
+        return bool(self.dropped) or not self.complete or self.undecided
+
+    def line(self) -> str:
+        n = len(self.dropped)
+        worst = sorted(self.dropped, key=lambda r: -r.chi2)[:_LISTED]
+        named = "; ".join(
+            f"{self.t[r.start]:.3g}-{self.t[r.stop - 1]:.3g} s (against {r.against}: {r.speed:.2g} m/s, chi2 "
+            f"{r.chi2:.3g} > {r.bound:.3g})"
+            for r in worst
+        )
+        more = f"; {n - len(worst)} more" if n > len(worst) else ""
+        head = f"rests re-examined: {n} of {self.tested} disagree with the rest of the evidence, dropped"
+        tail = "" if self.complete else f"; stopped at its budget ({self.smoothings} smoothings) with suspects left"
+        if self.undecided:
+            tail += "; the rests left disagree, but two cannot say which of them is wrong (fixes could)"
+        return head + (f": {named}{more}" if n else "") + tail
+
+
+def rest_bound(dof: int, n_tests: int) -> float:
+    """The chi-square (``dof``) point a true rest exceeds with probability REST_ALPHA / n_tests."""
+    return 2.0 * float(special.gammainccinv(dof / 2.0, REST_ALPHA / max(n_tests, 1)))
+
+
+def rest_tests(
+    smoothed: dict,
+    rests: Sequence[tuple[int, int]],
+    updates: np.ndarray,
+    sigma: np.ndarray,
+    against: str,
+    n_tests: int,
+    scale: float = 1.0,
+    var_scale: float = 1.0,
+) -> list[RestTest]:
+    """Each rest [a, b) of ``rests`` against ``smoothed`` (a smoothing that did not use it): on each axis with
+    zero-velocity updates there (``updates`` (N, n_axes) bool, their sds ``sigma`` (N, n_axes)), the mean
+    smoothed velocity against its variance (``var_scale`` times the mean smoothed one: the samples of a rest
+    are nearly one velocity, so the mean's variance is about theirs) plus the updates' own (1 / sum 1/sigma^2);
+    the sum over axes divided by ``scale``."""
+    u = smoothed["smooth_x"][:, :, 1]
+    vu = smoothed["smooth_sd"][:, :, 1] ** 2
+    out = []
+    for a, b in rests:
+        chi2, speed2, dof = 0.0, 0.0, 0
+        for j in range(u.shape[0]):
+            ks = a + np.flatnonzero(updates[a:b, j])
+            if not len(ks):
+                continue
+            ub = float(u[j, ks].mean())
+            own = 1.0 / float(np.sum(1.0 / sigma[ks, j] ** 2))
+            chi2 += ub * ub / (var_scale * float(vu[j, ks].mean()) + own)
+            speed2 += ub * ub
+            dof += 1
+        if dof:
+            out.append(RestTest(a, b, chi2 / scale, dof, rest_bound(dof, n_tests), math.sqrt(speed2), against))
+    return out
+
+
+def chi2_median(dof: int) -> float:
+    return 2.0 * float(special.gammaincinv(dof / 2.0, 0.5))
+
+
+def first_update_nis(smoothed: dict, rests: list[tuple[int, int]]) -> np.ndarray:
+    """Per rest, the sum over axes of the NIS of its first zero-velocity update (smooth_run's zupt_nis)."""
+    rows = smoothed["zupt_nis"]
+    first = rows[rows[:, 3] > 0]
+    t = np.asarray(smoothed["t"])
+    starts = np.array([t[a] for a, _ in rests])
+    stops = np.array([t[b - 1] for _, b in rests])
+    which = np.searchsorted(starts, first[:, 0], side="right") - 1
+    ok = (which >= 0) & (first[:, 0] <= stops[np.clip(which, 0, None)])
+    return np.bincount(which[ok], weights=first[ok, 2], minlength=len(rests))
 
 
 def _fix_points(t: np.ndarray, fixes: Sequence[Measurement]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

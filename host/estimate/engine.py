@@ -15,8 +15,9 @@ budget and from what was asked, how the passes are cut (:func:`plan`), and says 
   (its likelihood is a whole-run search), and a library call that wants arrays back. A run over the
   budget that asks for one of them is refused in one line before any work.
 
-The stages are called from one place each: the rest decision (:func:`rest_stage`, today
-:func:`accelnav.estimate.zupt.candidates` then :func:`accelnav.estimate.zupt.gate_rests`), the aids
+The stages are called from one place each: the rest decision (:func:`rest_stage`:
+:func:`accelnav.estimate.zupt.decide_rests` with the run's fixes, then the review
+:func:`accelnav.estimate.pipeline.disagreeing_rests`), the aids
 (:func:`axis_extras`), the tune search, then the passes. A decision that needs a smoother pass over
 the run is given ``smooth_pass`` (a callable running the bounded passes with trial aids and returning
 per-axis smoothed velocities at chosen samples) so that it never holds the run's outputs whole.
@@ -63,6 +64,7 @@ class Rests:
     detect: bool = False
     mask: np.ndarray | None = None
     sigma: np.ndarray | None = None
+    decided: Callable[[RestOutcome], None] | None = None  # called with the rest stage's outcome once decided
 
 
 @dataclass(frozen=True)
@@ -155,6 +157,15 @@ class RestOutcome:
     decisions: list = field(default_factory=list)
     gravity: list = field(default_factory=list)
     detected: bool = False
+    review: object = None  # consistency.RestReview of the detected rests, or None
+    reviewed: bool = True  # False: detected rests over the memory budget, not re-examined (said by the CLI)
+
+    def candidate_rows(self, t: np.ndarray) -> np.ndarray:
+        """[start_s, end_s, accepted] per candidate (kept in the run file for the plots); a rest the review
+        dropped is not accepted."""
+        m = self.mask if self.mask.ndim == 1 else self.mask.any(axis=1)
+        rows = [[t[d.start], t[d.stop - 1], float(d.accepted and m[d.start : d.stop].any())] for d in self.decisions]
+        return np.array(rows, dtype=np.float64).reshape(-1, 3)
 
 
 @dataclass
@@ -219,9 +230,14 @@ def plan(n: int, n_axes: int, job: Job, *, label: str = "the run", to_file: bool
     return Plan(False, chunk, chunks, budget, f"{why} (memory budget {budget / 1e9:.3g} GB)")
 
 
-def rest_stage(model: Model, arrays: dict, rests: Rests, *, fixes=None, smooth_pass=None) -> RestOutcome:
-    """The rest decision, called here and nowhere else: detected rests (``rests.detect``) or the given mask.
-    ``fixes`` are the run's position fixes, which a decision may weigh the candidates against;
+def rest_stage(
+    model: Model, arrays: dict, rests: Rests, *, fixes=None, smooth_pass=None, review_budget: int | None = None
+) -> RestOutcome:
+    """The rest decision, called here and nowhere else: detected rests (``rests.detect``: the candidates and
+    the decision on each, accelnav.estimate.zupt.decide_rests, weighed against the run's position ``fixes``)
+    then their review (accelnav.estimate.pipeline.disagreeing_rests: whole-run smoothings, done when the run
+    fits ``review_budget`` bytes on the whole-array path, None: always; ``RestOutcome.reviewed`` says
+    whether it was), or the given mask;
     ``smooth_pass(extras, at)`` (:func:`smoother_pass` bound to this run) smooths it with trial aids in
     bounded memory and gives the velocities at samples ``at``, for a decision that needs a smoother pass."""
     from accelnav.estimate import zupt
@@ -234,11 +250,18 @@ def rest_stage(model: Model, arrays: dict, rests: Rests, *, fixes=None, smooth_p
     if not rests.detect:
         return RestOutcome(np.asarray(rests.mask, dtype=bool), rests.sigma, params)
     accel, clipped = arrays["accel"], arrays["clipped"]
-    cand = zupt.candidates(accel, clipped, model, params)
-    decisions = zupt.gate_rests(accel, clipped, cand, model, params)
-    mask = zupt.accepted_mask(decisions, len(cand))
+    found = zupt.decide_rests(accel, clipped, None, model, params, fixes)
+    mask, review = found.mask, None
+    if mask.any() and (review_budget is None or chunked.whole_bytes(len(mask), accel.shape[1]) <= review_budget):
+        # the check that acts after the decision: rests a full smoother with the fixes or the other rests
+        # refutes are dropped and named (pipeline.disagreeing_rests), before tuning and any advice
+        from accelnav.estimate.pipeline import disagreeing_rests
+
+        review = disagreeing_rests(arrays, model, mask, fixes=fixes, params=params)
+        mask = review.kept.any(axis=1)
     gravity = zupt.gravity_axes(accel, clipped, model) if not mask.any() else []
-    return RestOutcome(mask, None, params, decisions, gravity, detected=True)
+    return RestOutcome(mask, None, params, found.decisions, gravity, detected=True, review=review,
+                       reviewed=review is not None or not found.mask.any())  # fmt: skip
 
 
 def smoother_pass(model: Model, source: Source, extras, at: np.ndarray, *, workdir, budget: int | None = None):
@@ -301,7 +324,9 @@ def run(
         def smooth_pass(extras, at):
             return smoother_pass(model, source, extras, at, workdir=workdir or Path(out or ".").resolve().parent)
 
-        rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass)
+        rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass, review_budget=p.budget)
+        if job.rests.decided is not None:  # said where it happens: before tuning fits the figures to the rests
+            job.rests.decided(rest)
     outcome = Outcome(model, p, n, source.axis_names, source.t_ends, np.zeros(n_axes, dtype=np.int64), rests=rest,
                       streamed=source.streamed)  # fmt: skip
     if smooth and job.tune is not None:
@@ -340,9 +365,7 @@ def _whole(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, outco
         res = smooth_arrays(arrays, model, fixes=job.fixes, covariances=job.covariances, **kw)
         if rest is not None and rest.detected:  # for the plots: [start_s, end_s, accepted] per candidate
             t = res["t"]
-            res["zupt_candidates"] = np.array(
-                [[t[d.start], t[d.stop - 1], float(d.accepted)] for d in rest.decisions], dtype=np.float64
-            ).reshape(-1, 3)
+            res["zupt_candidates"] = rest.candidate_rows(t)
         if rest is not None:
             outcome.applied = [int(c) for c in res["zupt"].sum(axis=0)]
         if job.fixes is not None:
@@ -383,9 +406,7 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
         ]
         add.update(zupt=mask, fixes=np.array(rows, dtype=np.float64).reshape(-1, 4))
         if rest is not None and rest.detected:
-            add["zupt_candidates"] = np.array(
-                [[t[d.start], t[d.stop - 1], float(d.accepted)] for d in rest.decisions], dtype=np.float64
-            ).reshape(-1, 3)
+            add["zupt_candidates"] = rest.candidate_rows(t)
         return add
 
     info = chunked.smooth_bounded(

@@ -107,3 +107,13 @@ def read_fixes(path, t: np.ndarray, axis_names: list[str]) -> list[list[Measurem
     for j, kk, rr, ss in zip(ax.tolist(), k.tolist(), r.tolist(), s.tolist(), strict=True):
         per_axis[j].append(position_fix(kk, rr, ss))
     return per_axis
+
+
+def fixes_csv(rows: np.ndarray, axis_names) -> str:
+    """The text :func:`read_fixes` reads, of fixes as rows [t, axis column, position, sigma] (the run file's
+    ``fixes`` layout, and a simulated scenario's ``sim_fixes``); floats written to round-trip exactly."""
+    rows = np.asarray(rows, dtype=np.float64).reshape(-1, 4)
+    names = [str(a) for a in axis_names]
+    lines = ["time_s,axis,position_m,sigma_m"]
+    lines += [f"{t!r},{names[int(j)]},{r!r},{s!r}" for t, j, r, s in rows.tolist()]
+    return "\n".join(lines) + "\n"

@@ -283,10 +283,20 @@ class Holdout:
 
     n: int  # fixes left out, all axes
     rms: dict[str, float]  # "smoother" and the BASELINES
+    misses: dict[str, np.ndarray] | None = None  # |miss| at each held-out fix, per method
+
+    def losses(self, baseline: str) -> int:
+        """Held-out fixes the smoother misses by more than ``baseline``."""
+        return int(np.sum(self.misses["smoother"] > self.misses[baseline]))
 
     def worse_than(self) -> list[str]:
-        """The baselines that beat the smoother here."""
-        return [b for b in BASELINES if self.rms["smoother"] > self.rms[b]]
+        """The baselines that beat the smoother here: a larger rms miss, and more misses than a coin would give
+        (a sign test at 5 %: one fix far off cannot decide it); none with fewer than HOLDOUT_MIN held out."""
+        from accelnav.estimate.consistency import HOLDOUT_MIN, sign_test
+
+        if self.n < HOLDOUT_MIN:
+            return []
+        return [b for b in BASELINES if self.rms["smoother"] > self.rms[b] and sign_test(self.losses(b), self.n) < 0.05]
 
 
 def holdout(arrays: dict[str, np.ndarray], model: Model, fixes: list[list], **smooth_kw) -> Holdout | None:
@@ -309,20 +319,138 @@ def holdout(arrays: dict[str, np.ndarray], model: Model, fixes: list[list], **sm
     base = {k: arrays[k] for k in ("t", "axis_names", "accel", "clipped")}
     sm = smooth_run(base, model, fixes=given, covariances=False, **smooth_kw)
     estimates = {"smoother": sm["smooth_x"][:, :, 0], **fix_baselines(base, model, given)}
-    rms = {}
+    rms, misses = {}, {}
     for name, r in estimates.items():
-        e = [r[j, m.k] - m.z for j, h in enumerate(held) for m in h]
+        e = np.array([r[j, m.k] - m.z for j, h in enumerate(held) for m in h])
         rms[name] = float(np.sqrt(np.mean(np.square(e))))
-    return Holdout(sum(len(h) for h in held), rms)
+        misses[name] = np.abs(e)
+    return Holdout(sum(len(h) for h in held), rms, misses)
 
 
-def smooth_checks(smoothed: dict, model, inputs: dict, fixes=None, **smooth_kw) -> SmoothChecks:
+def smooth_checks(
+    smoothed: dict, model, inputs: dict, fixes=None, *, review=None, tuned: bool = False, **smooth_kw
+) -> SmoothChecks:
     """The consistency checks of a smoothed run (``smoothed``, from ``inputs`` with ``fixes`` and
-    ``smooth_kw`` as :func:`accelnav.estimate.pipeline.smooth_run` took them)."""
-    from accelnav.estimate.consistency import SmoothChecks, nis_check
+    ``smooth_kw`` as :func:`accelnav.estimate.pipeline.smooth_run` took them); ``review``: the rests'
+    re-examination (:func:`disagreeing_rests`) that chose ``smooth_kw``'s rests; ``tuned``: the model was
+    fitted to this run."""
+    from accelnav.estimate.consistency import ANCHOR_SD, NoAnchor, SmoothChecks, nis_check
+    from accelnav.estimate.zupt import ZuptParams
 
-    first = smoothed["zupt_nis"][:, 3] > 0  # each rest's first update (see smooth_run)
+    # each rest's first update (see smooth_run), but a rest at the run's first sample: there the filter's prior
+    # already holds u = 0 exactly, the same statement, so its NIS is 0 by construction and tests nothing
+    z = smoothed["zupt_nis"]
+    first = (z[:, 3] > 0) & (z[:, 0] > smoothed["t"][0])
     kinds = (("fixes", smoothed["fix_nis"]), ("rests", smoothed["zupt_nis"][first, 2]))
     nis = tuple(nis_check(kind, v) for kind, v in kinds if len(v))
     h = None if fixes is None else holdout(inputs, model, fixes, **smooth_kw)
-    return SmoothChecks(nis, h)
+    no_anchor = None
+    asked = smooth_kw.get("rest") is not None or review is not None
+    if asked and not any(fixes or []):
+        sd = smoothed["smooth_sd"][:, -1, 0]
+        j = int(np.argmax(sd))
+        if sd[j] > ANCHOR_SD:
+            params = smooth_kw.get("zupt_params") or ZuptParams()
+            used = np.flatnonzero(np.any(smoothed["zupt"], axis=1))
+            last = float(smoothed["t"][used[-1]]) if len(used) else None
+            no_anchor = NoAnchor(float(sd[j]), str(smoothed["axis_names"][j]), params.start_s, last)
+    return SmoothChecks(nis, h, review, tuned, no_anchor)
+
+
+def truth_versus_baselines(rows: list[PositionErrors], tune_helps: bool) -> str:
+    """With truth and fixes: a line if the smoother is worse than a fix-only baseline (rms over the axes), else
+    ''; ``tune_helps``: SmoothChecks.tune_helps, the only case in which it advises --tune."""
+    rms = rms_by_method(rows)
+    worse = [b for b in BASELINES if b in rms and rms["smoother"] > rms[b]]
+    if not worse:
+        return ""
+    return (
+        f"against the truth the smoother ({rms['smoother']:.3g} m rms) is worse than {' and '.join(worse)} "
+        f"({min(rms[b] for b in worse):.3g} m): its model does not fit this recording"
+        + (": try --tune" if tune_helps else "")
+    )
+
+
+def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, params=None, rest_sigma=None):
+    """The rests of ``rest`` ((N,) or (N, n_axes) mask) that disagree with the fixes and the other rests (see
+    accelnav.estimate.consistency): a consistency.RestReview whose ``dropped`` name them, with their statistics,
+    and whose ``kept`` is the mask without them. ``inputs`` (t, axis_names, accel, clipped), ``model``,
+    ``fixes`` (per axis), ``params`` (ZuptParams) and ``rest_sigma`` as :func:`smooth_run` takes them.
+    Bounded: one smoothing with the fixes, then at most consistency.REVIEW_SMOOTHINGS; none without rests."""
+    from accelnav.estimate import zupt
+    from accelnav.estimate.consistency import (
+        REVIEW_MEDIAN_MIN,
+        REVIEW_SMOOTHINGS,
+        REVIEW_SUSPECTS,
+        RestReview,
+        RestTest,
+        chi2_median,
+        first_update_nis,
+        rest_bound,
+        rest_tests,
+    )
+
+    params = zupt.ZuptParams() if params is None else params
+    n, n_axes = np.asarray(inputs["accel"]).shape
+    r = np.asarray(rest, dtype=bool)
+    kept = np.array(np.broadcast_to(r[:, None] if r.ndim == 1 else r, (n, n_axes)))
+    sigma = np.full((n, n_axes), float(params.sigma))
+    if rest_sigma is not None:
+        given = np.asarray(rest_sigma, dtype=np.float64)
+        sigma = np.where(np.isfinite(given), given, sigma)
+    updates = np.zeros((n, n_axes), dtype=bool)
+    for j in range(n_axes):
+        updates[zupt.update_samples(kept[:, j], model, params), j] = True
+    rests = zupt.intervals(kept.any(axis=1))
+    base = {k: inputs[k] for k in ("t", "axis_names", "accel", "clipped")}
+    dropped: list[RestTest] = []
+    smoothings = 0
+
+    def drop(tests: list[RestTest]) -> None:
+        for t in tests:
+            kept[t.start : t.stop] = False
+            updates[t.start : t.stop] = False
+            dropped.append(t)
+
+    if fixes is not None and any(fixes) and rests:
+        sm = smooth_run(base, model, fixes=fixes, covariances=False)
+        smoothings += 1
+        inflate = max(1.0, float(np.mean(sm["fix_nis"]))) if len(sm["fix_nis"]) else 1.0
+        drop([t for t in rest_tests(sm, rests, updates, sigma, "the fixes", len(rests), var_scale=inflate) if t.fails])
+    complete, undecided = True, False
+    while True:
+        left = zupt.intervals(kept.any(axis=1))
+        if not left:
+            break
+        sm = smooth_run(base, model, fixes=fixes, rest=kept, zupt_params=params, rest_sigma=rest_sigma,
+                        covariances=False)  # fmt: skip
+        smoothings += 1
+        forward = first_update_nis(sm, left)
+        # relative to the median rest where there are enough rests for a median to say what is usual
+        scale = max(1.0, float(np.median(forward)) / chi2_median(n_axes)) if len(left) >= REVIEW_MEDIAN_MIN else 1.0
+        bound = rest_bound(n_axes, len(rests))
+        order = [i for i in np.argsort(-forward)[:REVIEW_SUSPECTS] if forward[i] / scale > bound]
+        if not order:
+            break
+        # witnesses: the rests, and the filter's u = 0 at the start where a rest there confirms it; of two that
+        # disagree, neither can be called wrong
+        if len(left) + (left[0][0] == 0) < 3:
+            undecided = True
+            break
+        if smoothings + len(order) > REVIEW_SMOOTHINGS:
+            complete = False
+            break
+        tests = []
+        for i in order:
+            a, b = left[i]
+            without = kept.copy()
+            without[a:b] = False
+            loo = smooth_run(base, model, fixes=fixes, rest=without, zupt_params=params, rest_sigma=rest_sigma,
+                             covariances=False)  # fmt: skip
+            smoothings += 1
+            tests += rest_tests(loo, [(a, b)], updates, sigma, "the other rests", len(rests), scale)
+        worst = max(tests, key=lambda t: t.chi2)
+        if not worst.fails:
+            break
+        drop([worst])
+    return RestReview(len(rests), tuple(dropped), smoothings, complete, kept, np.asarray(inputs["t"]), undecided)

@@ -31,7 +31,7 @@ central-difference Hessian of -ln L in theta) covers the truth too rarely. Each 
 the signed root r = sqrt(2 (profile - min)), nearly linear in ln(figure), from the Wald guess, with the
 other figures re-optimised at every step (Nelder-Mead, started from the Hessian's linear prediction or the
 previous step's optimum, whichever fits better). An end that is not reached inside the search range
-(``LN_BOUNDS``) is open: the figure is then reported as not identified by the data, as it is when its
+(:func:`figure_bounds`) is open: the figure is then reported as not identified by the data, as it is when its
 interval spans more than a factor e^(2 x 1.96 x ``NOT_IDENTIFIED_SE``) ~ 50, or when the evaluation budget
 ran out before an end closed (said as such).
 c2 keeps the normal interval from the observed information (the innovations are linear in c2).
@@ -77,6 +77,36 @@ MAX_EVALUATIONS = 1500  # search (at most a third), Hessian and profile interval
 PROFILE_DROP = 0.5 * NormalDist().inv_cdf(0.975) ** 2
 R95 = math.sqrt(2.0 * PROFILE_DROP)  # 1.96: the signed root at an end
 LN_BOUNDS = {"sigma_n": (1e-4, 1e3), "sigma_eps": (1e-9, 10.0), "R": (1e-10, 1e4)}
+# R at least a tenth of what the datasheet's noise and the read-out's rounding give (3x quieter: not credible;
+# the rounding is not white where the analog noise is below a step, and the motion's model takes some of it)
+NOISE_FLOOR_SHARE = 0.1
+
+
+def figure_bounds(model: Model) -> dict[str, tuple[float, float, str, str]]:
+    """(low, high, why low, why high) of each noise figure's search range, tied to the sensor where it can be.
+
+    R: from NOISE_FLOOR_SHARE of the datasheet's analog noise power plus the read-out's rounding (step^2 / 12),
+    to the full scale squared; below the floor the filter would take every sample as exact and explain the
+    motion's jolts by a huge sigma_n (a foot's heel strikes drove R to the search limit and sigma_n to 26-63).
+    sigma_n: up to the full scale per sqrt(s), an acceleration that wanders over the sensor's whole range within
+    a second (1 sd); beyond it, the motion is no random walk the model can describe. sigma_eps: LN_BOUNDS.
+    A bound the starting model lies outside is moved to it (the user's model is the user's call)."""
+    from accelnav.model.design import steps_and_noise
+
+    steps, noise = steps_and_noise(model)
+    floor = NOISE_FLOOR_SHARE * (float(np.max(steps)) ** 2 / 12.0 + noise**2)
+    full = model.max_accel_m_s2
+    out = {
+        "sigma_n": (LN_BOUNDS["sigma_n"][0], full, "the search limit", "the sensor's full scale per sqrt(s)"),
+        "sigma_eps": (*LN_BOUNDS["sigma_eps"], "the search limit", "the search limit"),
+        "R": (max(floor, LN_BOUNDS["R"][0]), full**2, "the sensor's rounding and datasheet noise floor",
+              "the full scale squared"),
+    }  # fmt: skip
+    for f, (lo, hi, wl, wh) in out.items():
+        v = float(getattr(model.noise, f))
+        if v > 0:
+            out[f] = (min(lo, v), max(hi, v), wl, wh)
+    return out
 
 
 def _axis_loglik(
@@ -151,6 +181,8 @@ class TuneResult:
     evaluations: int
     converged: bool
     at_bound: tuple[str, ...] = ()  # figures whose estimate sits on the search bound
+    # each noise figure's search range: (low, high, why low, why high), figure_bounds
+    bounds: dict[str, tuple[float, float, str, str]] = dataclasses.field(default_factory=dict)
     # noise figures: how each end of the profile interval ended: "closed", "open" (the profile does not rise
     # 1.92 inside the search range: that end is the search bound) or "budget" (evaluations ran out: nan)
     ends: dict[str, tuple[str, str]] = dataclasses.field(default_factory=dict)
@@ -161,7 +193,7 @@ class TuneResult:
     def why_not_identified(self, name: str) -> str:
         """'' when ``name`` is identified by the data; else the reason, in a few words."""
         if name in self.at_bound:
-            return "at the search bound"
+            return self.bound_said(name)
         s = self.se_ln[name]
         if _is_c2(name):
             ok = math.isfinite(s) and s <= NOT_IDENTIFIED_SE * C2_SCALE * 10  # c2 known to 0.1 m/s^2 (10 mg)
@@ -176,6 +208,18 @@ class TuneResult:
         if not (lo > 0 and hi / lo <= math.exp(2 * 1.96 * NOT_IDENTIFIED_SE)):
             return "interval too wide"
         return ""
+
+    def bound_said(self, name: str) -> str:
+        """'at its lower bound (why, value)' for a figure at a bound of its search range."""
+        if name not in self.bounds:
+            return "at the search bound"
+        lo, hi, wl, wh = self.bounds[name]
+        low = abs(math.log(self.estimate[name] / lo)) <= abs(math.log(self.estimate[name] / hi))
+        return f"at its {'lower' if low else 'upper'} bound ({wl if low else wh}, {lo if low else hi:.3g})"
+
+    def unidentified(self) -> str:
+        """'R not identified: at its lower bound (...)', one clause per figure at a bound; '' if none."""
+        return "; ".join(f"{f} not identified: {self.bound_said(f)}" for f in self.figures if f in self.at_bound)
 
     @property
     def chosen(self) -> dict[str, float]:
@@ -228,8 +272,9 @@ def tune(
     if first["sigma_eps"] <= 0 and "sigma_eps" in figures:
         first["sigma_eps"] = 1e-6  # ln 0 is not a starting point
     span = model.max_accel_m_s2 / C2_SCALE
-    lo = np.array([-span if _is_c2(f) else math.log(LN_BOUNDS[f][0]) for f in figures])
-    hi = np.array([span if _is_c2(f) else math.log(LN_BOUNDS[f][1]) for f in figures])
+    bounds = figure_bounds(model)
+    lo = np.array([-span if _is_c2(f) else math.log(bounds[f][0]) for f in figures])
+    hi = np.array([span if _is_c2(f) else math.log(bounds[f][1]) for f in figures])
     count = [0]
     deadline = None  # set once the start is evaluated, so that there is always a best point
     best = [math.inf, None]
@@ -306,6 +351,7 @@ def tune(
         converged=converged,
         at_bound=_at_bound(figures, theta, lo, hi),
         ends=ends,
+        bounds={f: bounds[f] for f in figures if not _is_c2(f)},
     )
 
 

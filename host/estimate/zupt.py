@@ -1,22 +1,20 @@
-"""Automatic zero-velocity updates: find the rests in the raw acceleration, turn them into measurements.
+"""Automatic zero-velocity updates: find candidate rests in the raw acceleration, decide which are rests, turn
+them into measurements.
 
-Which detector, and why
------------------------
-A moving-variance test on acceleration alone: the accelerometer half of the
-generalised likelihood-ratio (GLRT) detectors of Skog et al. (2010,
-"Zero-velocity detection: an algorithm evaluation"), whose SHOE detector adds
-a gyroscope term accelnav does not have. With the rest's acceleration unknown
-(gravity leaking through a tilt error, a grade, an unmodelled bias) the
-accelerometer term is the spread of a window about its own mean (MV). What
-the rest reads is then not compared with the model's bias: a one-axis,
-gyro-free sensor cannot tell a tilt leak from its bias, so each rest's own
-mean is taken as the bias there (the filter's bias state absorbs it), and
-the tests ask whether the rest is *plausible as a stop* instead: it is still,
-its level is steady, its level moved little since the last rest, and the
-velocity integrated from the last rest closes. No threshold hangs on the
-model's ``initial_sigma`` (issue 23: a tuned model's bias prior admitted
-anything); when a candidate cannot be checked, it is refused (no update
-rather than a wrong one).
+Detector and decision, apart
+----------------------------
+The detector (:func:`candidates`, below) finds *candidates*: stretches quiet enough to be a rest, each with
+its stillness. A moving-variance test on acceleration alone: the accelerometer half of the generalised
+likelihood-ratio (GLRT) detectors of Skog et al. (2010, "Zero-velocity detection: an algorithm
+evaluation"), whose SHOE detector adds a gyroscope term accelnav does not have. A quiet window cannot tell
+a rest from a smooth cruise, a coast or a constant-acceleration hold, so a candidate is only a hypothesis.
+The decision (:func:`decide_rests`, accelnav.estimate.rests) accepts one only where a zero velocity agrees
+with everything else the record knows: the position fixes, the other accepted rests, the kinematics of a
+stop, the model. Its module docstring says how; no accepted rest vouches for the next, and where nothing
+can tell, the candidate is refused as "cannot tell" (no update rather than a wrong one). Each decision
+carries its reason and, in words, the evidence that decided it (:class:`RestDecision`, :func:`report_csv`).
+No threshold hangs on the model's ``initial_sigma`` (issue 23: a tuned model's bias prior admitted
+anything); the model's prior on the start speed only says whether a run may be assumed to start at rest.
 
 Candidates (one decision per sample, for the body as a whole)
 ------------------------------------------------------------
@@ -43,7 +41,8 @@ a person standing leans that slowly; over a second a drift cannot be told
 from a vehicle's or a cart's ramp), is part of a ramp and dropped. The gentle start of a move
 is quiet, but its mean walks away from the rest's (a vehicle's, a cart's
 first 0.1 m/s^2), and that is where a rest must end; a constant-acceleration
-hold becomes a piece of its own (refused below for its level). Its ends are
+hold becomes a piece of its own (the decision refuses it: its level jumped with no turn between,
+or the velocity does not close). Its ends are
 trimmed once more against the piece's own measured noise where that is
 below the tremor allowance (a parked car, a resting cart). What that trim
 cuts off is split again, and a piece of it is kept when it holds three
@@ -60,91 +59,24 @@ heel strike or a ramp's start ends it. Pieces at the same level
 less than ``bridge_s`` apart across a break that failed the quiet test are joined (a knock fails every window that
 holds it), and pieces shorter than ``min_rest_s`` are dropped.
 
-The decision (once per candidate, for every axis at once)
----------------------------------------------------------
-A quiet window cannot tell a rest from a constant-velocity coast or cruise,
-nor (once the bias is re-measured) a constant-acceleration hold from a tilt.
-Each candidate is judged against its **anchor**, the last accepted rest
-(bias b0 = its robust mean, see :func:`_robust_mean`), with its own robust
-mean b1:
-
-* **level**: |b1 - b0| <= min(``level`` + ``level_rate`` D, ``level_max``),
-  D the time since the anchor: the tilt or grade leak may change by 0.5
-  m/s^2 (3 degrees: a real foot's level frame moves that much from one
-  stance to the next on gaitmap's walk, where 0.3 refused one stance in six)
-  plus 0.1 m/s^2 a second, never by more than 1 m/s^2 (6 degrees). A
-  vehicle's hold (1 m/s^2 and more, reached within a second or
-  two) is refused; a stop on a road whose grade changed by more than 6
-  degrees since the last stop is refused too (no update rather than a wrong one).
-* **continues the rest**: a candidate within ``recover_s`` of the anchor with
-  no motion between (the largest |v| between them within sqrt(gate) s) and a
-  level within ``level`` of it is the same rest, broken by a knock or a foot
-  rolling from heel to toe; it is accepted and the rest keeps the level it
-  started with (a chain of such pieces cannot walk up a ramp).
-* **velocity closes**: v_j = Ts sum (z_j - b_j(k)) from the anchor's end to
-  the candidate's start, b_j(k) linear from b0 to b1 (a slowly changing tilt
-  or grade is absorbed), is within ``gate`` (16, mean over axes of v^2/s^2,
-  s^2 = R Ts^2 m + sigma^2 + (D/2)^2 (sd(b0)^2 + sd(b1)^2) + (drift D)^2,
-  sd(b) = sqrt(R / n) over the rest's n samples): besides white noise and the
-  two levels' uncertainty from the sensor's noise (not from the rest's own
-  spread: that is the body's sway, and a body at rest keeps its velocity near
-  zero, so the sway leaves its mean far faster than white noise would; taken
-  as white, the spread of a short noisy piece inside a real walk, 88 R over
-  0.12 s, let it "close" at 0.8 m/s and hid 1 m/s of trunk motion from the
-  "no motion between" test above), ``drift`` (0.02
-  m/s^2) of mean acceleration error that no rest re-measures (a coarse ADC's
-  steps while the signal moves, a scale-factor error, a tilt that changed
-  during the move: on the simulated 10-bit cart 0.1-0.4 m/s after a push).
-  A coast or a cruise keeps its speed and is refused. The velocity may also
-  have come back to ``rel`` (0.5) of its peak since the anchor: on gaitmap's
-  real walk a heel strike leaves 0.3-1 m/s in the integral, chi-square
-  refuses a third of the stances there, and the simulated walks never show
-  it. The price: a short piece at the end of a braking ramp can pass it (a
-  cart's, at 0.7 m/s); the rest that follows it supersedes it (below).
-* no anchor yet: a candidate that holds the run's first window is accepted
-  when it is **still** (mean window variance <= ``still_k`` R, no tremor
-  allowance) for at least ``start_s`` (1 s): the run starts at rest, as the
-  filter's prior u = 0 says. A run that starts moving gives no anchor when
-  its road vibration fails the stillness (the simulated highway); KITTI's
-  real drive starts at 8 m/s on a road smooth enough to look still for half
-  a second, hence the duration. A short first stance is not lost: the next
-  one recovers it (below).
-
-**Recovery.** A candidate refused because its velocity does not close (or
-for want of an anchor) can still serve as anchor for the next candidate when
-that one comes within ``recover_s`` (3 s): the pair is accepted if, between
-them, the level moved little, the velocity closes, *and* the body visibly
-moved (the largest |v| between them above sqrt(gate) s: a stride, a push);
-the previous candidate is then accepted too ("confirmed by the next").
-
-**Adjacent rests.** When a candidate follows an anchor within ``recover_s``
-with no motion between, and its level differs by more than ``level`` or the
-anchor is short (under three windows: the tail of a braking ramp, then the
-stop), the longer of the two is the rest: a shorter anchor is withdrawn
-("superseded by a longer rest") and the candidate judged against the rest
-before it, so one short wrong anchor does not make every later stop "move".
-So one missed run of stances no longer poisons the rest of a walk (issue 23:
-27 of 29 later candidates refused), while a cruise, whose quiet spells
-close on each other without any motion between, gives no rest.
-
-``gate = 0`` accepts every candidate. Every decision carries its reason and
-statistics (:class:`RestDecision`, :func:`report_csv`).
-
 Measurements: every sample of an accepted rest gets a zero-velocity update
 (:func:`accelnav.estimate.kf.zero_velocity`, u = 0 with standard deviation
-``sigma``), on every axis (``every_s`` > 0 thins them to one per every_s).
+``sigma``), on every axis (``every_s`` > 0 thins them to one per every_s). The smoother applies them
+ungated: the decision already tested each rest whole, against every axis at once.
 
-All thresholds have command-line overrides (``accelnav smooth --zupt-*``).
+The thresholds have command-line overrides (``accelnav smooth --zupt-*``); ``passes`` and
+``start_within_s`` are the library's alone.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from accelnav.estimate.kf import Aids, Measurement, bias_model
+from accelnav.estimate.rests import ACCEPT_REASONS, REFUSE_REASONS, RestDecision, decide
 from accelnav.fileio import check_input, excerpt, load_npz
 from accelnav.model.design import axis_design
 from accelnav.model.load import G0, Model
@@ -156,20 +88,24 @@ class ZuptParams:
     var_k: float = 10.0  # quiet if mean over axes of window variance / (R + tremor^2) <= var_k
     tremor: float = 0.12  # m/s^2 rms, the motion of a body at rest (a stance's sway, an idling engine)
     trim_k: float = 3.0  # rest ends trimmed while the window mean is this many sd off the rest's own
-    level: float = 0.5  # m/s^2, change of the rest level (tilt leak) allowed since the last rest ...
-    level_rate: float = 0.1  # m/s^3, ... plus this per second since it ...
-    level_max: float = 1.0  # m/s^2, ... never more than this
-    still_k: float = 3.0  # a run's first rest: mean window variance <= still_k R (no tremor allowance) ...
+    level_rate: float = 0.1  # m/s^3, a candidate's level may drift this fast (a lean), faster is a ramp
+    still_k: float = 3.0  # a still start or stand: mean variance <= still_k R (no tremor allowance) ...
     start_s: float = 1.0  # s, ... and lasting this long (a car at a smooth cruise is still for a moment)
+    start_within_s: float = 3.0  # s, a still start begins this early at the latest
     min_rest_s: float = 0.1  # s, shortest rest kept (after widening)
     bridge_s: float = 0.1  # s, a break in a rest this short (a knock, a glitch) does not split it
     widen: float = 1.0  # pieces widened by up to widen * (W // 2) samples each side, while samples stay level
     sigma: float = 0.02  # m/s, standard deviation of each zero-velocity update
     every_s: float = 0.0  # s, one update per every_s within a rest; 0: every sample
-    gate: float = 16.0  # per-rest chi-square bound (mean over axes); 0 accepts every candidate rest
-    drift: float = 0.02  # m/s^2, unmodelled mean acceleration error between rests (ADC steps, scale, tilt)
-    rel: float = 0.5  # per-rest: also accepted if |v| <= rel * the largest |v| since the anchor (0: off)
-    recover_s: float = 3.0  # s, a refused candidate this recent may anchor the next one (with motion between)
+    gate: float = 12.0  # a side's chi-square of v over the axes, on one axis' scale (12: 3.5 sd); 0: accept all
+    drift: float = 0.05  # m/s^2, mean acceleration error between aids that no level explains (a scale factor)
+    scale: float = 0.03  # share of the acceleration integrated since the last aid that may be error (a scale factor)
+    tell: float = 0.5  # m/s, a side can tell a rest when the sd of its velocity is at most this on every axis
+    level_still: float = 0.5  # m/s^2, a rest's level may differ this much from the last rest's with no motion between
+    level_max: float = 4.0  # m/s^2, ... and this much after a move (a jog's or a tilting mount's leak)
+    level_walk: float = 0.05  # m/s^2 per sqrt(s), the level's random walk between aids (accelnav.estimate.rests)
+    rel: float = 0.25  # a still stand: the speed since the last rest came back to at most rel of its peak
+    passes: int = 20  # bound on the decision's passes (each: the forward and the backward kinematic filter)
 
 
 def window_samples(model: Model, p: ZuptParams) -> int:
@@ -178,8 +114,8 @@ def window_samples(model: Model, p: ZuptParams) -> int:
 
 
 def resolved(model: Model, p: ZuptParams) -> ZuptParams:
-    """``p`` checked (ValueError naming the field); nothing is taken from the model any more."""
-    for name in ("window_s", "var_k", "sigma", "still_k"):
+    """``p`` checked (ValueError naming the field); nothing is taken from the model."""
+    for name in ("window_s", "var_k", "sigma", "still_k", "tell", "level_walk", "level_still", "level_max"):
         v = getattr(p, name)
         if not (math.isfinite(v) and v > 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number > 0")
@@ -187,16 +123,14 @@ def resolved(model: Model, p: ZuptParams) -> ZuptParams:
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
-    for name in ("recover_s", "drift", "start_s"):
+    for name in ("start_s", "start_within_s", "drift", "scale"):
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
-    for name in ("level", "level_max"):
-        v = getattr(p, name)
-        if not (math.isfinite(v) and v > 0):
-            raise ValueError(f"zupt {name}: got {v}; accepted: a number > 0 (m/s^2)")
     if not (math.isfinite(p.gate) and p.gate >= 0):
         raise ValueError(f"zupt gate: got {p.gate}; accepted: a number >= 0 (0: no gate)")
+    if not (isinstance(p.passes, int) and 1 <= p.passes <= 100):
+        raise ValueError(f"zupt passes: got {p.passes}; accepted: a whole number 1..100")
     return p
 
 
@@ -396,179 +330,46 @@ def _steady_pieces(
 _MAX_AXES = 8  # acn_rest_pieces: sums over axes are numpy's sequential ones up to 8 terms
 
 
-# why a candidate was accepted or refused (the report's reason column)
-ACCEPT_REASONS = ("closes", "continues the rest", "still at start", "recovered", "confirmed by the next", "gate off")
-REFUSE_REASONS = (
-    "level moved",
-    "velocity does not close",
-    "not still at start",
-    "no rest before",
-    "superseded by a longer rest",
-)
+def gate_rests(
+    accel: np.ndarray,
+    clipped: np.ndarray,
+    rest: np.ndarray,
+    model: Model,
+    params: ZuptParams = ZuptParams(),
+    fixes: list[list[Measurement]] | None = None,
+) -> list[RestDecision]:
+    """Decide once per candidate rest of ``rest`` (:func:`candidates`), for all axes together, against the
+    fixes (per axis column, accelnav.estimate.fixes.read_fixes) and the other rests: accelnav.estimate.rests."""
+    return decide_rests(accel, clipped, rest, model, params, fixes).decisions
 
 
 @dataclass(frozen=True)
-class RestDecision:
-    """The verdict on one candidate rest [start, stop), with the statistics it rests on."""
+class Rests:
+    """The detector's candidates, the decision on each, and what the CLI reports of them."""
 
-    start: int
-    stop: int
-    accepted: bool
-    reason: str  # one of ACCEPT_REASONS or REFUSE_REASONS
-    chi2: float  # mean over axes of v_j^2 / s_j^2 against the anchor (NaN: not computed)
-    speed: float  # |v| at the rest's start, m/s (NaN: not computed)
-    peak: float  # largest |v| since the anchor, m/s (NaN: not computed)
-    level: float  # |b1 - b0|, m/s^2, change of the rest level since the anchor (NaN: no anchor)
-    level_bound: float  # m/s^2, the bound it was held to (NaN: no anchor)
-    still: float  # mean over axes of the rest's variance / R
-    anchor: int  # sample where the velocity integral started (end of the anchor rest); -1: none
+    candidates: np.ndarray  # (N,) bool
+    decisions: list[RestDecision]
+    mask: np.ndarray  # (N,) bool, the samples of the accepted rests
 
 
-@dataclass
-class _Anchor:
-    start: int
-    end: int
-    b: np.ndarray
-    sd: np.ndarray  # sd of b from the sensor's noise: sqrt(R / samples)
-
-
-class _Closure:
-    """The velocity closure of :func:`gate_rests` over one recording: the per-sample sum runs in C
-    (acn_rest_closure, numpy's steps in numpy's order: the same numbers as the array code it replaced, which
-    spent as long on its dozen array calls per candidate as on the sums)."""
-
-    def __init__(self, x: np.ndarray, ok: np.ndarray, R: np.ndarray, Ts: float, p: ZuptParams):
-        from accelnav.estimate.fastsmooth import _lib
-
-        if x.shape[1] > _MAX_AXES:
-            raise ValueError(f"rest detector: {x.shape[1]} axes; accepted: at most {_MAX_AXES}")
-        mod = _lib()
-        self.ffi, self.lib = mod.ffi, mod.lib
-        self.x = np.ascontiguousarray(x, dtype=np.float64)
-        self.ok = np.ascontiguousarray(ok, dtype=bool).view(np.uint8)
-        self.px = self.ffi.cast("double *", self.ffi.from_buffer(self.x))
-        self.pok = self.ffi.cast("unsigned char *", self.ffi.from_buffer(self.ok))
-        self.R, self.Ts, self.p = R, Ts, p
-        self.n_axes = x.shape[1]
-        # b0, b1, s2 in, v out: buffers made once, each call copies its few numbers in
-        self.buf = np.empty((4, self.n_axes))
-        self.pbuf = [self.ffi.cast("double *", self.ffi.from_buffer(self.buf[i])) for i in range(4)]
-        self.peaks = self.ffi.new("double[2]")
-
-    def __call__(self, anc: _Anchor, a: int, here: _Anchor) -> tuple[float, float, float, float]:
-        """(chi2, |v|, peak |v|, peak chi2) of the velocity integrated from the anchor to sample a, the bias
-        linear from the anchor's level to the candidate's."""
-        m = a - anc.end
-        if m <= 0:
-            return 0.0, 0.0, 0.0, 0.0
-        R, Ts, p = self.R, self.Ts, self.p
-        D = m * Ts
-        s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
-        buf, pb = self.buf, self.pbuf
-        buf[0], buf[1], buf[2] = anc.b, here.b, s2
-        k = anc.end * self.n_axes
-        self.lib.acn_rest_closure(
-            m, self.n_axes, self.px + k, self.pok + k, pb[0], pb[1], Ts, pb[2], pb[3], self.peaks, self.peaks + 1
-        )
-        v = buf[3].copy()
-        chi2 = float(np.mean(v * v / s2))
-        return chi2, float(np.sqrt(v @ v)), float(self.peaks[0]), float(self.peaks[1])
-
-
-def gate_rests(
-    accel: np.ndarray, clipped: np.ndarray, rest: np.ndarray, model: Model, params: ZuptParams = ZuptParams()
-) -> list[RestDecision]:
-    """Decide once per candidate rest, for all axes together (see the module docstring)."""
+def decide_rests(
+    accel: np.ndarray,
+    clipped: np.ndarray,
+    rest: np.ndarray | None,
+    model: Model,
+    params: ZuptParams = ZuptParams(),
+    fixes: list[list[Measurement]] | None = None,
+) -> Rests:
+    """Candidates (``rest``, or :func:`candidates` when None) and the decision on each (accelnav.estimate.rests)."""
     p = resolved(model, params)
+    if rest is None:
+        rest = candidates(accel, clipped, model, p)
     x, ok, R = _prepared(accel, clipped, model)
-    n_axes = x.shape[1]
-    Ts = model.Ts
-    w = window_samples(model, p)
-    nan = float("nan")
-    still_len = 3 * w  # a rest shorter than this next to a longer one, nothing moving between: the longer wins
-    anchors: list[tuple[_Anchor, int]] = []  # accepted rests (as anchors) and their index in ``out``
-    prev: tuple[_Anchor, str] | None = None  # the previous candidate, as a possible anchor, and its verdict
-    out: list[RestDecision] = []
-    closure = _Closure(x, ok, R, Ts, p)
-    usable = ok.all(axis=1)
-    for a, stop in intervals(rest):
-        use = usable[a:stop]
-        xs = x[a:stop] if use.all() else x[a:stop][use] if use.any() else np.zeros((1, n_axes))
-        b1, kept = _robust_mean(xs, R)
-        var = xs.var(axis=0) if len(xs) > 1 else R.copy()
-        still = float(np.mean(var / R))
-        # the level's uncertainty is the sensor's noise averaged over the rest, not the rest's own spread: a body
-        # at rest sways, but its velocity stays near zero, so the sway averages out of its mean far faster than
-        # white noise would; taken as white, it let a noisy 0.12 s piece in a walk "close" at 0.8 m/s
-        here = _Anchor(a, stop, b1, np.sqrt(R / kept))
-        while True:
-            anchor = anchors[-1][0] if anchors else None
-            chi2 = speed = peak = lev = bound = nan
-            used = -1
-            moved = True
-            if p.gate == 0:
-                accepted, reason = True, "gate off"
-            elif anchor is None and a <= w:
-                accepted = still <= p.still_k and (stop - a) * Ts >= p.start_s
-                reason = "still at start" if accepted else "not still at start"
-            else:
-                accepted, reason = False, "no rest before"
-                if anchor is not None:
-                    used = anchor.end
-                    chi2, speed, peak, peak_chi2 = closure(anchor, a, here)
-                    moved = peak_chi2 > p.gate
-                    near = not moved and (a - anchor.end) * Ts <= p.recover_s
-                    lev, bound = _level(p, anchor, b1, a, Ts, p.level if near else None)
-                    if lev > bound:
-                        reason = "level moved"
-                    elif near:  # the same rest, broken by a knock or a roll of the foot
-                        accepted, reason = True, "continues the rest"
-                    else:
-                        accepted = chi2 <= p.gate or speed <= p.rel * peak
-                        reason = "closes" if accepted else "velocity does not close"
-            if (
-                anchor is not None
-                and not moved
-                and (a - anchor.end) * Ts <= p.recover_s
-                and stop - a > anchor.end - anchor.start
-                and len(anchors) > 1
-                and (reason == "level moved" or anchor.end - anchor.start < still_len)
-            ):
-                # two rests with no motion between at different levels: the longer one is the stop, the short
-                # one before it the tail of a ramp; it gives up its place, and this one is judged without it
-                k = anchors.pop()[1]
-                out[k] = replace(out[k], accepted=False, reason="superseded by a longer rest")
-                continue
-            break
-        if not accepted and prev is not None and prev[1] in ("velocity does not close", "no rest before",
-                                                             "not still at start"):  # fmt: skip
-            cand = prev[0]
-            lev2, bound2 = _level(p, cand, b1, a, Ts)
-            if (a - cand.end) * Ts <= p.recover_s and lev2 <= bound2:
-                c2, sp2, pk2, pk_chi2 = closure(cand, a, here)
-                if (c2 <= p.gate or sp2 <= p.rel * pk2) and pk_chi2 > p.gate:
-                    accepted, reason = True, "recovered"
-                    chi2, speed, peak, lev, bound, used = c2, sp2, pk2, lev2, bound2, cand.end
-                    # the pair closes on itself: the previous candidate was a rest too
-                    out[-1] = replace(out[-1], accepted=True, reason="confirmed by the next")
-                    anchors.append((cand, len(out) - 1))
-        out.append(RestDecision(a, stop, bool(accepted), reason, chi2, speed, peak, lev, bound, still, used))
-        if accepted and reason == "continues the rest":  # the rest goes on at the level it started with
-            anchors[-1][0].end = stop
-        elif accepted:
-            anchors.append((here, len(out) - 1))
-        prev = (here, reason)
-    return out
-
-
-def _level(
-    p: ZuptParams, anc: _Anchor, b1: np.ndarray, a: int, Ts: float, still: float | None = None
-) -> tuple[float, float]:
-    """(|b1 - b0|, its bound) for a candidate starting at sample a; ``still``: the bound when nothing moved
-    between them (no allowance for the time between: a level does not drift while the body stands)."""
-    D = max(0, a - anc.end) * Ts
-    bound = min(p.level + p.level_rate * D, p.level_max) if still is None else still
-    return float(np.sqrt(np.sum((b1 - anc.b) ** 2))), bound
+    t = np.arange(len(x)) * model.Ts
+    # the model's own prior on the start speed: a model that says the run may start moving is not overruled
+    start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
+    decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
+    return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)))
 
 
 def reason_counts(decisions: list[RestDecision]) -> dict[str, int]:
@@ -579,61 +380,56 @@ def reason_counts(decisions: list[RestDecision]) -> dict[str, int]:
     return {r: c for r, c in counts.items() if c}
 
 
+REPORT_COLUMNS = (
+    "start_s", "end_s", "samples", "decision", "reason", "evidence", "still_R", "level_m_s2", "v_before_m_s",
+    "sd_before_m_s", "v_after_m_s", "sd_after_m_s", "chi2",
+)  # fmt: skip
+
+
 def report_csv(decisions: list[RestDecision], t: np.ndarray) -> str:
-    """One CSV row per candidate: times, samples, statistics, decision and reason (``smooth --zupt-report``)."""
+    """One CSV row per candidate: times, samples, decision, reason, the evidence in words and the statistics
+    it rests on (``smooth --zupt-report``)."""
+    import csv
+    import io
+
     t = np.asarray(t, dtype=np.float64)
-    head = "start_s,end_s,samples,decision,reason,still_R,level_m_s2,level_bound_m_s2,speed_m_s,peak_m_s,chi2,anchor_s"
-    lines = [head]
 
     def f(v: float) -> str:
         return "" if not math.isfinite(v) else f"{v:.6g}"
 
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(REPORT_COLUMNS)
     for d in decisions:
-        anchor = f"{t[d.anchor - 1]:.6f}" if d.anchor > 0 else ""
-        lines.append(
-            f"{t[d.start]:.6f},{t[d.stop - 1]:.6f},{d.stop - d.start},{'accepted' if d.accepted else 'refused'},"
-            f"{d.reason},{f(d.still)},{f(d.level)},{f(d.level_bound)},{f(d.speed)},{f(d.peak)},{f(d.chi2)},{anchor}"
-        )
-    return "\n".join(lines) + "\n"
+        w.writerow(
+            [f"{t[d.start]:.6f}", f"{t[d.stop - 1]:.6f}", d.stop - d.start, "accepted" if d.accepted else "refused",
+             d.reason, d.evidence, f(d.still), f(d.level), f(d.v_before), f(d.sd_before), f(d.v_after),
+             f(d.sd_after), f(d.chi2)]
+        )  # fmt: skip
+    return buf.getvalue()
 
 
-def _robust_mean(x: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per column, the mean of the samples within 5 sqrt(R) of the median (a knock left out), and their count.
-
-    Not the median itself: a coarse ADC (the default's step is 3.6 sqrt(R)) puts the median on a code.
-    """
-    k = len(x)  # the median as np.median computes it, without its overhead per call
-    if k % 2:
-        med = np.partition(x, k // 2, axis=0)[k // 2]
-    else:
-        part = np.partition(x, (k // 2 - 1, k // 2), axis=0)
-        med = (part[k // 2 - 1] + part[k // 2]) / 2.0
-    near = np.abs(x - med) <= 5.0 * np.sqrt(R)
-    kept = np.maximum(near.sum(axis=0), 1)
-    return np.where(near, x, 0.0).sum(axis=0) / kept, kept
-
-
-def rest_mask(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams = ZuptParams()) -> np.ndarray:
-    """(N,) bool: samples of the accepted rests (detector, then the per-rest gate)."""
-    rest = candidates(accel, clipped, model, params)
-    return accepted_mask(gate_rests(accel, clipped, rest, model, params), len(rest))
+def rest_mask(
+    accel: np.ndarray,
+    clipped: np.ndarray,
+    model: Model,
+    params: ZuptParams = ZuptParams(),
+    fixes: list[list[Measurement]] | None = None,
+) -> np.ndarray:
+    """(N,) bool: samples of the accepted rests (the detector's candidates, then the decision)."""
+    return decide_rests(accel, clipped, None, model, params, fixes).mask
 
 
 def accepted_mask(decisions: list[RestDecision], n: int) -> np.ndarray:
-    """(N,) bool: the samples of the accepted rests; a rest's continuation is joined to it across the one
-    sample that keeps two pieces at two levels apart (:func:`candidates`), not across a break that failed
-    the quiet test or a clipped sample."""
+    """(N,) bool: the samples of the accepted rests; two accepted rests one sample apart (the sample that keeps
+    two pieces at two levels apart, :func:`candidates`) are one rest."""
     mask = np.zeros(n, dtype=bool)
-    bridge = 1
     last = None
     for d in decisions:
-        if not d.accepted:
-            continue
-        start = d.start
-        if d.reason == "continues the rest" and last is not None and d.start - last <= bridge:
-            start = last
-        mask[start : d.stop] = True
-        last = d.stop
+        if d.accepted:
+            start = last if last is not None and d.start - last <= 1 else d.start
+            mask[start : d.stop] = True
+            last = d.stop
     return mask
 
 

@@ -16,9 +16,9 @@ import numpy as np
 from accelnav.data.recording import Recording, in_accel, read_recording
 from accelnav.errors import UserError
 from accelnav.identify.calibrate import Calibration, CalibrationError, calibrate, detect_poses, native
-from accelnav.model.design import input_conversion
+from accelnav.model.design import steps_and_noise
 from accelnav.model.edit import revalidate
-from accelnav.model.load import DEFAULT_MODEL, G0, Model, ModelError, load_model, loads_model
+from accelnav.model.load import DEFAULT_MODEL, Model, ModelError, load_model, loads_model
 from accelnav.progress import Progress, note
 
 MAX_SAMPLES = 10_000_000  # about 28 h at 100 Hz; the pose search holds a few copies of the samples
@@ -62,20 +62,6 @@ def base_model(path: Path | None, model_toml: str | None, source: str) -> tuple[
     if model_toml is not None:
         return loads_model(model_toml, source=f"{source}:model_toml"), f"the model embedded in {source}"
     return load_model(DEFAULT_MODEL), f"the embedded default {DEFAULT_MODEL.name}"
-
-
-def steps_and_noise(model: Model) -> tuple[np.ndarray, float]:
-    """Read-out step per model axis [m/s^2] and the analog noise sd in front of it [m/s^2]."""
-    steps = []
-    for i in range(len(model.axes)):
-        conv = input_conversion(model, i)
-        if model.sensor.kind == "analog":
-            steps.append(conv.scale)
-        else:
-            steps.append(G0 / (model.sensor.duty_cycle.t2_counts * model.axes[i].sensitivity))
-    s = model.sensor
-    noise = s.noise_density_g_rthz * G0 * math.sqrt(math.pi / 2.0 * s.bandwidth_hz)
-    return np.array(steps), noise
 
 
 def apply(model: Model, cal: Calibration, since_power_on: float | None) -> Model:

@@ -19,6 +19,7 @@ is the paper's eps(t) = c1 (1 - exp(-t/T)) + c2; its fixed point is c1 + c2.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -188,3 +189,21 @@ def input_conversion(model: Model, axis: str | int = 0) -> AnalogConversion | Du
         return AnalogConversion(scale=scale, offset=-ax.zero_g / ax.sensitivity * G0, full_code=2**an.adc_bits - 1)
     dc = model.sensor.duty_cycle
     return DutyConversion(zero_g_duty=ax.zero_g, duty_per_g=ax.sensitivity, t2_nominal=dc.t2_counts)
+
+
+def steps_and_noise(model: Model) -> tuple[np.ndarray, float]:
+    """Read-out step per model axis [m/s^2] (0 for samples that come calibrated without a stated resolution) and
+    the analog noise sd in front of it [m/s^2]: the datasheet's density over the output filter's equivalent
+    noise bandwidth (one pole: pi/2 x -3 dB)."""
+    s = model.sensor
+    steps = []
+    for i in range(len(model.axes)):
+        if s.kind == "analog":
+            steps.append(input_conversion(model, i).scale)
+        elif s.kind == "duty_cycle":
+            steps.append(G0 / (s.duty_cycle.t2_counts * model.axes[i].sensitivity))
+        else:
+            lsb = s.calibrated.lsb_per_g if s.calibrated is not None else 0.0
+            steps.append(G0 / lsb if lsb > 0 else 0.0)
+    noise = s.noise_density_g_rthz * G0 * math.sqrt(math.pi / 2.0 * s.bandwidth_hz)
+    return np.array(steps), noise

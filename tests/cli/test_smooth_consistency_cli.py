@@ -46,7 +46,7 @@ def test_right_model_is_quiet_and_tune_saves_the_librarys_model(vehicle, tmp_pat
     status, text, err = run_cli(argv, capsys)
     assert status == 0, err
     assert "budget 300 evaluations, 60 s" in text and "; used" in text
-    assert "try --tune" not in text
+    assert "try --tune" not in text and "not identified" not in text and "converged" in text
     _, model = load_run(tmp_path / "t.npz")  # the saved run carries the tuned model
     expected, _ = tune_run(shipped, run, fixes=fixes, max_evaluations=300)
     assert model.noise == expected.noise

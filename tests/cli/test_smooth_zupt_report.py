@@ -58,3 +58,27 @@ def test_report_needs_the_detector(drift_walk, tmp_path, capsys):
         ["smooth", drift_walk, "--zupt-report", tmp_path / "r.csv", "--out", tmp_path / "s.npz"], capsys
     )
     assert status == 2 and "--zupt-report" in err and err.count("\n") == 1
+
+
+def test_fixes_decide_and_the_report_names_them(tmp_path, capsys):
+    """``--zupt auto --fixes``: the town drive's quiet stretches at speed are refused because the fixes imply
+    speed there, and the report's evidence column says so; the still start is named as an assumption."""
+    run, fixes = tmp_path / "town.npz", tmp_path / "fixes.csv"
+    argv = ["sim", "--scenario", "town_drive", "--duration", "120", "--seed", "1", "--out", run, "--fixes-out", fixes]
+    assert _run(argv, capsys)[0] == 0
+    report = tmp_path / "rests.csv"
+    status, out, _ = _run(
+        ["smooth", run, "--zupt", "auto", "--fixes", fixes, "--zupt-report", report, "--out", tmp_path / "s.npz"],
+        capsys,
+    )
+    assert status == 0
+    line = next(s for s in out.splitlines() if s.startswith("zero-velocity detector:"))
+    assert "still start" in line and "assumed: the run starts at rest" in line
+    with open(report, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert all(r["evidence"] for r in rows)
+    vetoed = [r for r in rows if r["reason"] == "moving" and "fixes imply" in r["evidence"]]
+    assert vetoed, [(r["reason"], r["evidence"]) for r in rows]
+    arrays, _ = load_run(tmp_path / "s.npz")
+    speed = np.linalg.norm(load_run(run)[0]["u"], axis=1)  # the truth, in the input
+    assert speed[arrays["zupt"][:, 0]].max(initial=0.0) < 0.5  # no update where the car moves

@@ -64,3 +64,16 @@ def test_takes_a_csv_recording_and_a_zupt_file(tmp_path, capsys):
     # a rate that is not the model's is refused in one line, as for smooth
     assert main([*args[:2], "--rate", "50", "--axis", "ax_m_s2", "--out", str(out)]) == 2
     assert "\n" not in capsys.readouterr().err.strip()
+
+
+def test_report_names_a_figure_at_the_sensors_bound(default_model):
+    """A simulated walk drives R to the sensor's noise floor (issue 31's foot case): the report says so."""
+    from accelnav.cli.tune import report
+    from accelnav.estimate.tune import tune_run
+
+    run = accelnav.simulate(default_model, "walking", 20.0, seed=1)
+    _, r = tune_run(default_model, run, rest=accelnav.detect_rests(run, default_model), max_evaluations=150)
+    lines = report(r)
+    (row,) = [x for x in lines if x.startswith("| R |")]
+    assert row.endswith("| NO: at its lower bound (the sensor's rounding and datasheet noise floor, 0.00158) |")
+    assert "(the search stopped at its evaluation limit)" in [x for x in lines if x.startswith("ln L")][0]

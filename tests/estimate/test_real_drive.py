@@ -39,24 +39,13 @@ def test_the_recording_and_its_track(drive):
     assert 10 < d.speed.max() < 15
 
 
-def _per_second(x: np.ndarray) -> np.ndarray:
-    n = len(x) // int(rm.DRIVE_RATE)
-    return x[: n * int(rm.DRIVE_RATE)].reshape(n, -1).mean(axis=1)
-
-
 def test_accelerometer_and_gnss_agree(drive):
     """Per second, the longitudinal reading is the track's change of speed plus the grade's g sin(theta):
     correlated above 0.95, within 0.3 m/s^2 rms (a 3 % grade), and on the same clock (best lag 0)."""
-    d = drive["drive"]
-    dv = _per_second(np.gradient(d.speed, d.t))
-    ax = _per_second(d.longitudinal)
-    lags = {
-        lag: np.corrcoef(ax[max(lag, 0) : len(ax) + min(lag, 0)], dv[max(-lag, 0) : len(dv) - max(lag, 0)])[0, 1]
-        for lag in (-2, -1, 0, 1, 2)
-    }
+    lags, rms = rm.speed_agreement(drive["drive"])
     assert max(lags, key=lags.get) == 0, lags
     assert lags[0] > 0.95, lags
-    assert np.sqrt(np.mean((ax - dv) ** 2)) < 0.3
+    assert rms < 0.3
 
 
 def test_the_reference_stop_is_a_stop(drive):

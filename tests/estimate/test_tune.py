@@ -15,7 +15,7 @@ from scipy import optimize
 from support.tune_cases import TRUE, one_axis_model, process
 
 import accelnav
-from accelnav.estimate.tune import all_figures, loglik, tune, with_figures
+from accelnav.estimate.tune import all_figures, figure_bounds, loglik, tune, with_figures
 from accelnav.model.edit import revalidate, with_noise
 
 
@@ -135,6 +135,11 @@ def test_tunes_a_simulated_stop_and_go_from_a_bad_start(default_model):
     assert "sigma_n" in r.figures and r.adopted  # significantly better: the estimate is written
     # the simulator's noise: 8.9 mg analog + the ADC's rounding; R is far below the bad start's 0.05
     assert 0.005 < m.noise.R < 0.025 and m.noise.sigma_n < 5.0
-    # with sigma_n held at the bad 5, the likelihood drives R to its search bound: said, not called identified
+    # with sigma_n held at the bad 5, the likelihood drives R to its lower bound, the sensor's noise floor (not
+    # the search's 1e-10): said, not called identified
     _, r = accelnav.tune(run, start, rest=rest, figures=("R", "c2"))
-    assert r.start["R"] == 0.05 and r.why_not_identified("R") == "at the search bound" and "c2.y" in r.figures
+    lo = figure_bounds(start)["R"][0]
+    assert r.start["R"] == 0.05 and "c2.y" in r.figures and r.estimate["R"] == pytest.approx(lo, rel=0.06)
+    floor = "the sensor's rounding and datasheet noise floor"
+    assert r.why_not_identified("R") == f"at its lower bound ({floor}, {lo:.3g})"
+    assert r.unidentified() == f"R not identified: {r.why_not_identified('R')}"

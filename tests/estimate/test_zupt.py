@@ -43,7 +43,7 @@ def test_detector_finds_rests_and_not_holds_or_coasts(default_model):
     # what is flagged outside a rest has (near) zero acceleration: the gentle start or end of a move, not
     # a hold (1 m/s^2 and more): below the level bound, plus what a smooth edge adds over the widening
     flagged_moving = rest & ~true_rest
-    level = zupt.resolved(default_model, zupt.ZuptParams()).level
+    level = zupt.resolved(default_model, zupt.ZuptParams()).level_still
     assert np.all(np.abs(run.a[flagged_moving, 0]) < level + 0.1)
     # the coasts (a == 0, u != 0) are refused by the per-rest gate: no accepted sample moves fast
     assert np.all(np.abs(run.u[rest, 0]) < 0.1)

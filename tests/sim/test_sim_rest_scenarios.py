@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from accelnav.hil_sim.sim.sensor import simulate
-from accelnav.hil_sim.sim.trajectories import REST_SCENARIOS
+from accelnav.hil_sim.sim.trajectories import REST_SCENARIOS, WALK_SCENARIOS
 
 MOVING = ("stop_and_go_graded", "highway", "cart_push")
 
@@ -20,12 +20,15 @@ def test_truth_rests_are_still_and_runs_are_prefixes(default_model, scenario):
         assert np.array_equal(long[key][:n], short[key]), key
     rest = long["rest"]
     assert np.all(long["u"][rest] == 0) and np.all(long["a"][rest] == 0)
-    if scenario == "highway":
+    if scenario.startswith("highway"):
         assert not rest.any() and np.abs(long["u"][:, 0]).min() >= 8.0 and np.abs(long["u"][:, 0]).max() <= 20.0
-    else:
-        assert 0.1 < rest.mean() < 0.6
-    if scenario.startswith("walking"):
+    else:  # a box moved by hand pauses more than it moves
+        assert 0.1 < rest.mean() < (0.8 if scenario == "hand_box" else 0.6)
+    if scenario in WALK_SCENARIOS:
         assert np.array_equal(long["stance"], rest)
+    for j in range(long["r"].shape[1]) if "sim_fixes" in long else ():
+        a, b = (f[f[:, 1] == j] for f in (long["sim_fixes"], short["sim_fixes"]))
+        assert len(b) and np.array_equal(a[: len(b)], b)
 
 
 @pytest.mark.parametrize("scenario", MOVING)

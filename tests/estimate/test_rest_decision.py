@@ -1,0 +1,137 @@
+"""The rest decision (accelnav.estimate.rests, issue 31) on constructed records: each candidate is a hypothesis
+tested against the fixes and the other rests, and each verdict names the evidence that decided it.
+
+The records are written here sample by sample (an acceleration profile, the default model's noise and bias
+mean), the candidates are given (the detector is tested elsewhere), so that each case holds exactly the
+evidence it is about.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from accelnav.estimate import zupt
+from accelnav.estimate.kf import bias_model, position_fix
+from accelnav.estimate.rests import ACCEPT_REASONS, REFUSE_REASONS, chi2_equivalent
+from accelnav.model.design import axis_design
+
+RATE = 100.0
+
+
+def _record(model, pieces, seed=1, u0=0.0):
+    """(accel (N, n_axes), clipped, r (N,), u (N,)) of a body moving along every axis alike: ``pieces`` are
+    (seconds, acceleration m/s^2); the sensor reads it plus the model's bias mean and white noise of sd sqrt(R)."""
+    a = np.concatenate([np.full(int(round(s * RATE)), acc) for s, acc in pieces])
+    n = len(a)
+    u = u0 + np.concatenate(([0.0], np.cumsum(a[:-1]) / RATE))
+    r = np.concatenate(([0.0], np.cumsum(u[:-1]) / RATE))
+    rng = np.random.default_rng(seed)
+    accel = np.empty((n, len(model.axes)))
+    for j in range(len(model.axes)):
+        d = axis_design(model, j)
+        accel[:, j] = a + bias_model(d, n) + rng.normal(0.0, np.sqrt(d.R), n)
+    return accel, np.zeros_like(accel, dtype=bool), r, u
+
+
+def _mask(n, *spans):
+    m = np.zeros(n, dtype=bool)
+    for a, b in spans:
+        m[int(a * RATE) : int(b * RATE)] = True
+    return m
+
+
+def _fixes(model, r, times, sigma=0.05):
+    return [[position_fix(int(t * RATE), float(r[int(t * RATE)]), sigma) for t in times] for _ in model.axes]
+
+
+def _at(decisions, t):
+    return next(d for d in decisions if d.start <= t * RATE < d.stop)
+
+
+def test_a_cruise_candidate_is_refused_by_the_fixes(default_model):
+    """Still, then 2 m/s^2 for 5 s, then a quiet cruise at 10 m/s with a fix every second: the quiet stretch
+    of the cruise is refused, and the fixes are named as what decided."""
+    accel, clipped, r, u = _record(default_model, [(3, 0.0), (5, 2.0), (12, 0.0)])
+    cand = _mask(len(u), (0.0, 3.0), (11.0, 14.0))
+    fixes = _fixes(default_model, r, np.arange(9.0, 20.0, 1.0))
+    found = zupt.decide_rests(accel, clipped, cand, default_model, fixes=fixes)
+    cruise = _at(found.decisions, 12.0)
+    assert not cruise.accepted and cruise.reason == "moving"
+    assert "fixes imply" in cruise.evidence and "the fix at" in cruise.evidence
+    assert cruise.v_before > 5.0 or cruise.v_after > 5.0
+    assert _at(found.decisions, 1.0).accepted
+    assert not found.mask[int(11 * RATE) : int(14 * RATE)].any()
+
+
+def test_a_cruise_after_a_still_start_is_refused_without_fixes(default_model):
+    """The same drive without fixes: the still start anchors, the velocity integrated from it refuses the
+    quiet cruise (an accelerometer alone cannot tell a cruise from a stop; the still start can)."""
+    accel, clipped, r, u = _record(default_model, [(3, 0.0), (5, 2.0), (12, 0.0)])
+    cand = _mask(len(u), (0.0, 3.0), (11.0, 14.0))
+    found = zupt.decide_rests(accel, clipped, cand, default_model)
+    start, cruise = _at(found.decisions, 1.0), _at(found.decisions, 12.0)
+    assert start.accepted and start.reason == "still start" and "assumed" in start.evidence
+    assert not cruise.accepted and cruise.reason in REFUSE_REASONS
+    assert "from the rest at 0.00" in cruise.evidence or "since the last stand" in cruise.evidence
+
+
+def test_a_still_start_two_tenths_in_anchors(default_model):
+    """The first candidate starts 0.2 s in (after a first window that failed the quiet test): still the run's
+    start, and the rests after it are told from it."""
+    accel, clipped, r, u = _record(
+        default_model, [(2.2, 0.0), (1, 1.5), (1, -1.5), (2, 0.0), (1, 1.0), (1, -1.0), (2, 0.0)]
+    )
+    cand = _mask(len(u), (0.2, 2.2), (4.3, 6.0), (8.3, 10.0))
+    found = zupt.decide_rests(accel, clipped, cand, default_model)
+    first = _at(found.decisions, 1.0)
+    assert first.accepted and first.reason == "still start" and "from 0.20 s" in first.evidence
+    later = [_at(found.decisions, t) for t in (5.0, 9.0)]
+    assert all(d.accepted and d.reason == "consistent" for d in later), later
+
+
+def test_a_false_rest_does_not_carry_the_next(default_model):
+    """A run that starts at cruise (3 m/s, quiet: the still start takes it for a rest), a second quiet stretch
+    at the same speed (consistent with the first: nothing moved between), then fixes: the fixes refute the
+    second, and the first, which alone made the second look right, is withdrawn too."""
+    accel, clipped, r, u = _record(default_model, [(12.0, 0.0)], u0=3.0)
+    cand = _mask(len(u), (0.0, 2.0), (4.0, 6.0))
+    fixes = _fixes(default_model, r, (8.0, 9.0, 10.0, 11.0))
+    found = zupt.decide_rests(accel, clipped, cand, default_model, fixes=fixes)
+    assert not found.mask.any(), [(d.reason, d.evidence) for d in found.decisions]
+    for d in found.decisions:
+        assert d.reason in REFUSE_REASONS and d.evidence
+    # without the fixes the same record gives no way to tell: the start is taken (a stated assumption)
+    alone = zupt.decide_rests(accel, clipped, cand, default_model)
+    assert _at(alone.decisions, 1.0).reason == "still start"
+
+
+def test_cannot_tell_stays_out_and_says_so(default_model):
+    """A quiet stretch 20 s into a run that started moving, no fix, no rest before: no evidence can tell a zero
+    velocity there; it is refused as "cannot tell", with the sd that was too large and the missing fix."""
+    accel, clipped, r, u = _record(default_model, [(10, 0.3), (10, -0.3), (5, 0.0), (5, 0.5)], u0=2.0)
+    cand = _mask(len(u), (20.5, 24.5))
+    found = zupt.decide_rests(accel, clipped, cand, default_model)
+    (d,) = found.decisions
+    assert not d.accepted and d.reason == "cannot tell"
+    assert d.evidence.startswith("cannot tell: sd of v") and "no fix" in d.evidence
+
+
+def test_every_decision_is_explained_in_the_report(default_model):
+    accel, clipped, r, u = _record(default_model, [(3, 0.0), (5, 2.0), (12, 0.0)])
+    cand = _mask(len(u), (0.0, 3.0), (11.0, 14.0))
+    found = zupt.decide_rests(accel, clipped, cand, default_model, fixes=_fixes(default_model, r, (10.0, 15.0)))
+    rows = zupt.report_csv(found.decisions, np.arange(len(u)) / RATE).splitlines()
+    assert rows[0].split(",") == list(zupt.REPORT_COLUMNS)
+    assert len(rows) == 1 + len(found.decisions)
+    for d in found.decisions:
+        assert d.reason in (ACCEPT_REASONS if d.accepted else REFUSE_REASONS) and d.evidence
+
+
+@pytest.mark.parametrize("dof", (1, 2, 3))
+def test_chi2_equivalent_keeps_the_tail(dof):
+    from scipy.stats import chi2
+
+    x = float(chi2.isf(chi2.sf(9.0, 1), dof))
+    assert chi2_equivalent(x, dof) == pytest.approx(9.0, rel=1e-6)
+    assert chi2_equivalent(0.5 * x, dof) < 9.0 < chi2_equivalent(2.0 * x, dof)
