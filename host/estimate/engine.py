@@ -257,7 +257,12 @@ def rest_stage(
         # refutes are dropped and named (pipeline.disagreeing_rests), before tuning and any advice
         from accelnav.estimate.pipeline import disagreeing_rests
 
-        review = disagreeing_rests(arrays, model, mask, fixes=fixes, params=params)
+        # without fixes, the review's smoother knows the velocity between rests from the model alone: a stop's
+        # kinematics the decision saw outweighs it; with fixes its leave-one-out is theirs too
+        stands = [] if any(fixes or []) else [
+            (d.start, d.stop) for d in found.decisions if d.accepted and d.reason == "still stand"
+        ]  # fmt: skip
+        review = disagreeing_rests(arrays, model, mask, fixes=fixes, params=params, stands=stands)
         mask = review.kept.any(axis=1)
     gravity = zupt.gravity_axes(accel, clipped, model) if not mask.any() else []
     return RestOutcome(mask, None, params, found.decisions, gravity, detected=True, review=review,

@@ -371,11 +371,16 @@ def truth_versus_baselines(rows: list[PositionErrors], tune_helps: bool) -> str:
     )
 
 
-def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, params=None, rest_sigma=None):
+def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, params=None, rest_sigma=None, stands=()):
     """The rests of ``rest`` ((N,) or (N, n_axes) mask) that disagree with the fixes and the other rests (see
     accelnav.estimate.consistency): a consistency.RestReview whose ``dropped`` name them, with their statistics,
     and whose ``kept`` is the mask without them. ``inputs`` (t, axis_names, accel, clipped), ``model``,
     ``fixes`` (per axis), ``params`` (ZuptParams) and ``rest_sigma`` as :func:`smooth_run` takes them.
+    ``stands``: (start, stop) spans of rests decided on evidence of their own that the smoother's model does
+    not weigh (the kinematics of a stop: accelnav.estimate.rests' "still stand"; the engine gives them where
+    there are no fixes); the rests holding one are tested against the fixes but not dropped against the other
+    rests (without fixes, a model too stiff for a car's 40 s drive called a real stop after a braking from
+    23 m/s "6.3 m/s").
     Bounded: one smoothing with the fixes, then at most consistency.REVIEW_SMOOTHINGS; none without rests."""
     from accelnav.estimate import zupt
     from accelnav.estimate.consistency import (
@@ -429,7 +434,8 @@ def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, para
         # relative to the median rest where there are enough rests for a median to say what is usual
         scale = max(1.0, float(np.median(forward)) / chi2_median(n_axes)) if len(left) >= REVIEW_MEDIAN_MIN else 1.0
         bound = rest_bound(n_axes, len(rests))
-        order = [i for i in np.argsort(-forward)[:REVIEW_SUSPECTS] if forward[i] / scale > bound]
+        own = {i for i, (a, b) in enumerate(left) if any(sa < b and a < sb for sa, sb in stands)}
+        order = [i for i in np.argsort(-forward)[:REVIEW_SUSPECTS] if forward[i] / scale > bound and i not in own]
         if not order:
             break
         # witnesses: the rests, and the filter's u = 0 at the start where a rest there confirms it; of two that

@@ -106,3 +106,28 @@ def test_with_fixes_the_decision_itself_accepts_no_rest_while_the_car_moves(driv
         assert not any(x.accepted for x in moving), key
         said[key] = [x.evidence for x in moving]
     assert any("fixes imply it moved" in e for e in said["hill"])  # the hill's pieces, by the positions
+
+
+def test_without_fixes_a_stop_after_a_braking_is_kept_through_the_review(drives, tmp_path):
+    """The stoplight drive without fixes: the end stop, 20 s still after a braking from 23 m/s ("still stand":
+    the kinematics of a stop), stays applied; the review's smoother, whose model is too stiff for 40 s of
+    driving, would call it 6 m/s against the still start and drop it."""
+    from accelnav.data.inputs import read_input
+    from accelnav.estimate import engine, zupt
+    from accelnav.estimate.pipeline import disagreeing_rests
+
+    d = drives["stoplight"]["drive"]
+    model = tmp_path / "car.toml"
+    model.write_text(rm.model_text(rm.DRIVE_RATE, ("x",), 40.0, 50000.0))
+    csv = tmp_path / "stoplight.csv"
+    np.savetxt(csv, np.column_stack([d.t, d.longitudinal]), delimiter=",", header="t,ax", comments="", fmt="%.8g")
+    run, m = read_input(csv, model, axes=("ax",), time_column="t")
+    p = zupt.resolved(m, zupt.ZuptParams())
+    stage = engine.rest_stage(m, run, engine.Rests(p, detect=True))
+    (a, b) = intervals(d.rest)[-1]
+    stand = [x for x in stage.decisions if x.accepted and x.reason == "still stand"]
+    assert stand and all(a <= x.start and x.stop <= b for x in stand)  # the decision's stand is the true stop
+    assert stage.mask[stand[0].start : stand[0].stop].all() and not stage.review.dropped
+    # the review without the decision's evidence drops it: what the stands keep from it
+    bare = disagreeing_rests(run, m, zupt.accepted_mask(stage.decisions, len(stage.mask)), params=p)
+    assert any(r.start <= stand[0].start < r.stop for r in bare.dropped)
