@@ -15,7 +15,8 @@ range proof, not a limit of the host tools). Sizes 1e5, 1e6, 1e7 rows; 1e8 only 
 Usage: python bench/run_all.py bench/speed/bench_smooth_e2e.py [--sizes 1e5 1e6 1e7] [--big]
        [--n-baseline 20000] [--keep DIR] [--cases "smooth NPZ" ...] [--python EXE]
 --python runs the commands with another interpreter (another build of accelnav: before/after in one
-session); the kernel-alone row is always this interpreter's.
+session); the kernel-alone row is always this interpreter's. The commands run with their bytecode cached
+(PYTHONDONTWRITEBYTECODE is dropped), as an installed package runs: the first command writes it.
 """
 
 from __future__ import annotations
