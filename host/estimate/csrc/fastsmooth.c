@@ -1004,48 +1004,6 @@ long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, d
     return count;
 }
 
-/*
- * The rest detector's velocity closure (host/estimate/zupt.py, _closure): the
- * velocity integrated over the m samples x[0..m-1] (n_axes columns) between
- * an anchor rest and a candidate, the bias linear from b0 to b1 across them,
- * unusable values (ok[i * n_axes + j] == 0) adding nothing:
- *   v[i] = Ts sum_{l <= i} (x[l] - (b0 + (l + 0.5) / m (b1 - b0)))
- * Writes v at the last sample (n_axes), the largest |v[i]| and the largest
- * mean over axes of v[i]^2 / s2. numpy's steps in numpy's order (a running
- * sum row by row, sums over axes axis by axis), so the same numbers.
- */
-void acn_rest_closure(long m, int n_axes, const double *x, const unsigned char *ok,
-                      const double *b0, const double *b1, double Ts, const double *s2, double *v,
-                      double *peak, double *peak_chi2)
-{
-    double c[ACN_REST_MAX_AXES], db[ACN_REST_MAX_AXES];
-    double best = 0.0, best_chi2 = 0.0;
-    for (int j = 0; j < n_axes; j++)
-        db[j] = b1[j] - b0[j];
-    for (long i = 0; i < m; i++) {
-        double frac = ((double)i + 0.5) / (double)m;
-        double sp = 0.0, ch = 0.0;
-        for (int j = 0; j < n_axes; j++) {
-            double seg = ok[i * n_axes + j] ? x[i * n_axes + j] - (b0[j] + frac * db[j]) : 0.0;
-            c[j] = i == 0 ? seg : c[j] + seg;
-            double vj = c[j] * Ts;
-            double v2 = vj * vj;
-            sp = j == 0 ? v2 : sp + v2;
-            ch = j == 0 ? v2 / s2[j] : ch + v2 / s2[j];
-        }
-        sp = sqrt(sp);
-        ch = ch / (double)n_axes;
-        if (i == 0 || sp > best)
-            best = sp;
-        if (i == 0 || ch > best_chi2)
-            best_chi2 = ch;
-    }
-    for (int j = 0; j < n_axes; j++)
-        v[j] = c[j] * Ts;
-    *peak = best;
-    *peak_chi2 = best_chi2;
-}
-
 /* ------------------------------------------------------------------------- */
 /* Plain path in bounded memory: acn_plain_cov + acn_plain_data split into      */
 /* chunks, every number computed by the same operations in the same order, so  */

@@ -68,14 +68,6 @@ long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, d
                      double *pref, double *pown);
 
 /*
- * The rest detector's velocity closure over m samples (host/estimate/zupt.py,
- * _Closure): v at the last sample, the largest |v| and mean v^2 / s2 on the way.
- */
-void acn_rest_closure(long m, int n_axes, const double *x, const unsigned char *ok,
-                      const double *b0, const double *b1, double Ts, const double *s2, double *v,
-                      double *peak, double *peak_chi2);
-
-/*
  * Plain path in bounded memory (host/estimate/chunked.py): the same numbers as
  * acn_plain_cov + acn_plain_data, computed chunk by chunk in three passes over
  * a store of ACN_ROW doubles per sample (kept on disk by the caller):
