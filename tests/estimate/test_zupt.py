@@ -84,7 +84,8 @@ def test_update_samples_and_intervals(default_model):
 
 
 @pytest.mark.parametrize(
-    "field,value", [("window_s", 0.0), ("var_k", -1.0), ("sigma", math.nan), ("gate", -1.0), ("tremor", -0.1)]
+    "field,value",
+    [("window_s", 0.0), ("var_k", -1.0), ("sigma", math.nan), ("gate", -1.0), ("tremor", -0.1), ("leak_rate", -1.0)],
 )
 def test_bad_parameters_refused(default_model, field, value):
     from dataclasses import replace
