@@ -129,6 +129,9 @@ def _makefile(name: str) -> str:
         "CFLAGS += -mcall-prologues\n"
         "CXXFLAGS += -mcall-prologues\n"
         "LDFLAGS += -mcall-prologues\n"
+        "# `accelnav codegen --arduino DIR --board uno` links with the flash region raised here (ACN_LDFLAGS), so that a\n"
+        "# sketch too big still links and its size can be stated\n"
+        "LDFLAGS += $(ACN_LDFLAGS)\n"
         "include $(ARDUINO_DIR)/Arduino.mk\n"
     )
 
@@ -357,7 +360,8 @@ def sketch_fit(files: dict[str, str], name: str, board: str) -> tuple[list[str],
         for ex in EXAMPLES:
             folder = root / "examples" / ex
             try:
-                done = subprocess.run(["make", "-s"], cwd=folder, capture_output=True, text=True,
+                lift = "ACN_LDFLAGS=-Wl,--defsym=__TEXT_REGION_LENGTH__=0x40000"
+                done = subprocess.run(["make", "-s", lift], cwd=folder, capture_output=True, text=True,
                                       timeout=SKETCH_TIMEOUT_S)  # fmt: skip
             except subprocess.TimeoutExpired:
                 raise ValueError(f"--board {board}: {ex} did not build within {SKETCH_TIMEOUT_S} s") from None

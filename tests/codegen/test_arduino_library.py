@@ -246,3 +246,16 @@ def test_the_library_name_rule_keeps_names_apart():
     for name in (HOSTILE_NAME, "9" * 64, "(((", "a" * 64):
         got = c_identifier_from(name, "accelnav_")
         assert name_problem("C prefix", got) is None and len(got) <= 32, got
+
+
+def test_a_sketch_that_would_not_fit_the_uno_is_refused_in_one_line(tmp_path, capsys):
+    """`--arduino --board uno` links the example sketches before writing anything: the gain schedule's tables
+    do not fit beside the bootloader, and the refusal states the linked size."""
+    _require_arduino()
+    argv = ["codegen", str(_uno_model(tmp_path)), "--arduino", str(tmp_path / "libs"), *WHO, "--board", "uno"]
+    status = main([*argv, "--form", "gain_schedule"])
+    err = capsys.readouterr().err
+    m = re.search(r"--board uno: the AccelnavStream sketch does not fit: needs (\d+) B flash of 32256 \(linked\)", err)
+    assert status == 2 and err.count("\n") == 1 and m, err
+    assert int(m[1]) > 32256
+    assert not (tmp_path / "libs").exists()
