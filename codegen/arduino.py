@@ -129,8 +129,8 @@ def _makefile(name: str) -> str:
         "CFLAGS += -mcall-prologues\n"
         "CXXFLAGS += -mcall-prologues\n"
         "LDFLAGS += -mcall-prologues\n"
-        "# `accelnav codegen --arduino DIR --board uno` links with the flash region raised here (ACN_LDFLAGS), so that a\n"
-        "# sketch too big still links and its size can be stated\n"
+        "# `accelnav codegen --arduino DIR --board uno` links with the flash region raised (ACN_LDFLAGS), so that\n"
+        "# a sketch too big still links and its size can be stated\n"
         "LDFLAGS += $(ACN_LDFLAGS)\n"
         "include $(ARDUINO_DIR)/Arduino.mk\n"
     )
