@@ -12,15 +12,7 @@ extern "C" {
 #include "acn_app.h"
 }
 
-#define WIRE(size) ((size) + 6u) /* CRC 4, COBS code 1, delimiter 1: every frame is < 254 bytes */
-#define MAX2(a, b) ((a) > (b) ? (a) : (b))
-/* The most telemetry one received byte or one sample can queue: a block and every axis' checkpoint
- * (or a sample frame, or info), then an ack. */
-#define TX_NEED                                                                                    \
-    (MAX2(MAX2(WIRE(ACNF_BLOCK_SIZE) + ACNF_NAXES * WIRE(ACNF_CHECKPOINT_SIZE),                    \
-               WIRE(ACNF_SAMPLE_SIZE)),                                                            \
-          WIRE(ACNF_INFO_SIZE)) +                                                                  \
-     WIRE(ACNF_ACK_SIZE))
+#define TX_NEED ACN_TX_NEED /* acn_board.h */
 #if TX_NEED <= 256u
 #define TX_SIZE 256u
 #else
