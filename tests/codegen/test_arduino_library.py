@@ -21,6 +21,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import MODELS
 
@@ -259,3 +260,82 @@ def test_a_sketch_that_would_not_fit_the_uno_is_refused_in_one_line(tmp_path, ca
     assert status == 2 and err.count("\n") == 1 and m, err
     assert int(m[1]) > 32256
     assert not (tmp_path / "libs").exists()
+
+
+PROBE = r"""/* a test's sketch: the class' text telemetry, then its numbers as float bits and its status */
+#include <AccelNav.h>
+#include <string.h>
+
+AccelNav nav;
+
+static void bits(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    Serial.print(' ');
+    Serial.print(u, HEX);
+}
+
+void setup()
+{
+    Serial.begin(500000);
+    nav.begin(Serial, AccelNav::TEXT);
+}
+
+void loop()
+{
+    if (nav.due()) {
+        nav.update();
+        Serial.print(nav.status());
+        for (uint8_t i = 0; i < AccelNav::AXES; ++i) {
+            bits(nav.position(i));
+            bits(nav.velocity(i));
+            bits(nav.acceleration(i));
+            bits(nav.bias(i));
+        }
+        Serial.println();
+    }
+}
+"""
+
+
+def test_the_class_gives_the_hosts_states_as_numbers_and_its_status(tmp_path):
+    """A sketch of the test's own on the class: begin(Serial, TEXT) prints the positions' line at each
+    update(), and position, velocity, acceleration and bias are the host firmware's states as float32 (the
+    fixed-point value rounded once, bit for bit); status() says REFUSED exactly at the samples whose input
+    hit a rail, and nothing else."""
+    _require_arduino()
+    path = _uno_model(tmp_path)  # one axis (x): the probe's printing beside two filters passes the Uno's flash
+    path.write_text(re.sub(r'\n\[\[axes\]\]\nname = "y".*?(?=\n\[noise\])', "", path.read_text(), flags=re.S))
+    assert main(["codegen", str(path), "--arduino", str(tmp_path / "libs"), *WHO, "--board", "none"]) == 0
+    (lib,) = (tmp_path / "libs").iterdir()
+    sketch = lib / "examples" / "Probe"
+    sketch.mkdir()
+    (sketch / "Probe.ino").write_text(PROBE)
+    (sketch / "Makefile").write_text((lib / "examples" / "AccelnavPlotter" / "Makefile").read_text())
+    elf = _make(sketch)
+    model = loads_model(path.read_text(), source=str(path))
+    run = simulate(model, "shock", 1.5, seed=5)
+    assert run.clipped.any()
+    pil = simavr.run_feed(elf, b"", adc=run.code, timeout=300)
+    man = manifest(model.source)
+    fw = HostFirmware(build_firmware(model.source))
+    fw.rx(encode_command(man, "mode_states") + encode_stimulus(man, code=run.code))
+    states = decode_all(man, fw.take())[0]["sample"]
+    axes = [a.name for a in model.axes]
+    frac = {(a, s): man.field("sample", f"{a}.{s}")["frac"] for a in axes for s in "ruae"}
+    lines = pil.telemetry.decode("ascii").split("\r\n")[: 2 * len(states)]
+    assert len(lines) == 2 * len(states)
+    refused = 0
+    for k, s in enumerate(states):
+        text, numbers = lines[2 * k], lines[2 * k + 1].split()
+        assert text == " ".join(f"{a}:{_fixed(int(s[f'{a}.r']), frac[a, 'r'])}" for a in axes)
+        hit = any(int(s[f"{a}.flags"]) & 1 for a in axes)  # ACNF_AXIS_SKIPPED: a rail, predicted over
+        assert int(numbers[0]) == (1 if hit else 0), (k, numbers[0])  # AccelNav::REFUSED
+        refused += hit
+        want = [
+            np.int64(s[f"{a}.{q}"]).astype(np.float32) * np.float32(2.0 ** -frac[a, q]) for a in axes for q in "ruae"
+        ]
+        got = [np.frombuffer(int(h, 16).to_bytes(4, "little"), "<f4")[0] for h in numbers[1:]]
+        assert [w.tobytes() for w in want] == [g.tobytes() for g in got], k
+    assert refused > 0
