@@ -182,3 +182,14 @@ def test_the_report_states_the_size_of_the_linked_firmware(tmp_path, capsys, n_a
         assert rc == 2 and refused and err.count("\n") == 1, err
         stated = int(refused[1])
     assert abs(stated - real_flash) <= 0.02 * real_flash, (stated, real_flash)
+
+
+def test_a_filter_the_firmware_does_not_link_gets_its_object_size_and_no_verdict(tmp_path, capsys):
+    """float32 (or another prefix) is not what the firmware links: the report sizes the filter's object, says
+    that it is not the image, and neither passes nor refuses it."""
+    _need("atmega328p", "ACCELNAV_REQUIRE_AVR")
+    rc, out, err = _codegen(tmp_path, capsys, "--float32", "--target", "atmega328p")
+    block = out[out.index("target atmega328p:") :].splitlines()
+    assert rc == 0 and err == "" and len(block) == 2, out
+    assert re.fullmatch(r"  the firmware links the fixed-point filter of prefix accelnav: covariance filter object "
+                        r"alone \d+ B flash, \d+ B RAM, not linked: no verdict", block[1]), block  # fmt: skip
