@@ -340,12 +340,14 @@ def sketch_fit(files: dict[str, str], name: str, board: str) -> tuple[list[str],
     import tempfile
     from pathlib import Path
 
-    from .targets import image_size, part
+    from .targets import image_size, missing_tools, part
 
     if board not in BOARDS:
         raise ValueError(f"--board: got {ascii(board[:40])}; accepted: {', '.join(BOARDS)} (or none: no link)")
     limits = _board_limits(board)
     p = part("atmega328p")
+    if missing_tools(p):
+        return [f"board {board}: {missing_tools(p)}: the sketches not linked, no verdict"], None
     if limits is None or shutil.which("make") is None or not Path(ARDUINO_DIR, "Arduino.mk").is_file():
         return [f"board {board}: arduino-mk or arduino-core-avr not found: the sketches not linked, no verdict"], None
     flash_max, ram_max = limits

@@ -255,3 +255,16 @@ def test_the_library_needs_its_maintainer_and_url(tmp_path, capsys):
     status = main(["codegen", str(MODELS / "adxl250_default.toml"), "--arduino", str(tmp_path)])
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1 and "give --maintainer" in err
+
+
+def test_without_the_toolchain_the_library_is_written_and_no_fit_is_claimed(tmp_path, capsys, monkeypatch):
+    path = tmp_path / "uno.toml"
+    path.write_text((MODELS / "adxl250_default.toml").read_text().replace("adc_bits = 12", "adc_bits = 10"))
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    argv = ["codegen", str(path), "--arduino", str(tmp_path / "libs"), "--maintainer", "A", "--url", "https://a.org"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "board uno: avr-gcc, avr-size, make not found: no figure for the atmega328p: the sketches not linked, " \
+           "no verdict\n" in out  # fmt: skip
+    assert "fits" not in out
+    assert (tmp_path / "libs" / "accelnav_adxl250_default" / "src" / "AccelNav.h").is_file()

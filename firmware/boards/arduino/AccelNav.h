@@ -44,7 +44,7 @@ class AccelNav
     };
     static const uint8_t AXES = ACNF_NAXES;
 
-    /* The filters from their initial state, no telemetry. */
+    /* The filters from their initial state; the telemetry as last chosen (none at first). */
     void begin();
     /* The same, with telemetry on out: BINARY frames, or a TEXT line every `every` samples. Inline,
      * so that a sketch that asks for no text links no text code. */
