@@ -26,6 +26,7 @@ import pytest
 from conftest import MODELS
 
 from accelnav.cli import main
+from accelnav.codegen import targets
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.hil_sim.targets import hil, simavr
 from accelnav.hil_sim.targets.firmware import HostFirmware, build_firmware, manifest
@@ -107,6 +108,8 @@ def test_arduino_example_builds_and_runs_bit_identical_to_sil(tmp_path, capsys):
     frames, stats = decode_all(man, pil.telemetry)
     assert stats.as_dict()["lost"] == 0 and len(frames["block"]) >= len(run.t) // man.data["block_samples"]
     assert pil.telemetry == sil
+    # the stack the fit check keeps free (the firmware's, parts.mk) holds the sketch's deepest stack too
+    assert 0 < pil.stack <= targets.part("atmega328p").stack, pil.stack
 
 
 def _fixed(v: int, frac: int) -> str:
@@ -160,6 +163,7 @@ def test_the_plotter_example_prints_the_hosts_positions(tmp_path):
     assert lines[: len(want)] == want
     assert any(float(v.split(":")[1]) != 0.0 for v in want[-1].split())  # the shock moved something
     assert pil.refs == 1  # a 5 V reference: the Uno's default, AVCC
+    assert 0 < pil.stack <= targets.part("atmega328p").stack, pil.stack
 
 
 def test_a_model_with_a_3v3_reference_selects_the_external_reference(tmp_path):
