@@ -145,8 +145,10 @@ def _tz(values):
 def _values(values) -> np.ndarray:
     """A pandas column or index as numpy; tz-aware times as their UTC datetime64 (numpy has no time zones)."""
     if _tz(values) is not None:
-        utc = values.dt if hasattr(values, "dt") else values
-        values = utc.tz_convert("UTC").tz_localize(None)
+        if hasattr(values, "dt"):  # a Series: its times through .dt
+            values = values.dt.tz_convert("UTC").dt.tz_localize(None)
+        else:
+            values = values.tz_convert("UTC").tz_localize(None)
     return values.to_numpy()
 
 
@@ -251,6 +253,10 @@ def _with_model(path, arrays, model: Model, override: Model | None, opts: dict) 
     for key, flag in FLAGS.items():
         if opts[key] not in (None, []):
             raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
+    if "accel" not in arrays:
+        from accelnav.data.recording import no_input
+
+        no_input(str(path), arrays)
     recorded = model
     if override is not None:
         if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:

@@ -48,7 +48,10 @@ MAX_LAG_PERIODS = 5.0  # stamps that jitter more than half a period may still be
 MIN_CLOCK_HZ = 5.0  # a time column in seconds slower than this is no accelerometer's: a ms clock, say
 EPOCH_S = (946684800.0, 4102444800.0)  # 2000-01-01 .. 2100-01-01 UTC: a clock there is a calendar's, not uptime
 MAX_CLOCK_HZ = 1e5  # no accelerometer this package reads samples faster
-RAIL_SHARE = 0.2  # read in the claimed unit, this share of samples beyond the sensor's range: the unit is wrong
+# read in the claimed unit, this share of samples beyond the sensor's range (by BEYOND: a clipped sensor sits at
+# its rail, it never reads past it) while another unit leaves under 1 % there: the unit is wrong
+RAIL_SHARE = 0.05
+BEYOND = 1.05
 MIN_DURATION_S = 60.0
 MIN_SAMPLES = 1000
 CHUNK_CHARS = 1 << 18  # CSV text parsed per piece: the reader's memory beyond the numbers it keeps
@@ -154,6 +157,7 @@ def _read_npz(path: Path, axes, unit, rate_hz, default_unit=None, model_axes=Non
     src = str(path)
     data = load_npz(path, src)  # sizes checked before anything is inflated; no pickles
     if "accel" not in data:
+        no_input(src, data)
         raise UserError(
             f"{src}: no 'accel' array; keys: {', '.join(sorted(data)) or 'none'} (expected accelnav sim's layout)"
         )
@@ -212,6 +216,17 @@ def _read_npz(path: Path, axes, unit, rate_hz, default_unit=None, model_axes=Non
     rec = _finish(src, t, accel, names, names, (u,) * len(names), model_toml, clipped)
     tcol = "t" if "t" in data else None
     return replace(rec, time_column=tcol, time_unit=None if tcol else "s", unit_from=(said,) * len(names))
+
+
+def no_input(src: str, keys) -> None:
+    """Refuse an estimator's output written without its input (smooth's and filter's default: states, no
+    acceleration), saying so, rather than as a recording that lacks a column (``keys``: its arrays, or its
+    CSV columns past the axis name)."""
+    if any(k.startswith(("smooth_", "filt_", "_smooth_", "_filt_")) for k in keys):
+        raise UserError(
+            f"{src}: an estimator's output without its input (positions and velocities, no acceleration): read the "
+            "recording it was made from, or write the output with --full to keep the input in it"
+        )
 
 
 def _numbers(data: dict, key: str, src: str, dtype=np.float64) -> np.ndarray:
@@ -502,6 +517,7 @@ def _choose(cols: list[str], src: str, axes, unit, rate_hz, time_column, default
         accel = {short[c] for c in chosen if unit_of(c) != "counts"}
         chosen = [c for c in chosen if unit_of(c) != "counts" or short[c] not in accel]
         if not chosen:
+            no_input(src, [c[c.find("_") :] for c in cols])
             raise UserError(
                 f"{src}: no acceleration column (acc_x_g, ax, x, Acceleration x (m/s^2), ...); name one with --axis; "
                 f"columns: {_cols(cols)}"
@@ -990,7 +1006,7 @@ LEVEL_TOL = 0.1  # a mean within 10 % of 9.80665 in a column read as g: a gravit
 
 def unit_evidence(accel: np.ndarray, units, full_scale: float | None) -> np.ndarray:
     """What the data say of their units, to add up over blocks: per axis the sum of the samples [m/s^2], the
-    finite samples, and how many lie beyond ``full_scale`` [m/s^2] read in each of _ALT_UNITS."""
+    finite samples, and how many lie beyond ``full_scale`` [m/s^2] (by BEYOND) read in each of _ALT_UNITS."""
     out = np.zeros((accel.shape[1], 2 + len(_ALT_UNITS)))
     for j, u in enumerate(units):
         a = accel[:, j][np.isfinite(accel[:, j])]
@@ -998,13 +1014,13 @@ def unit_evidence(accel: np.ndarray, units, full_scale: float | None) -> np.ndar
         if u in _ALT_UNITS and full_scale is not None:
             mag = np.abs(a)
             for k, alt in enumerate(_ALT_UNITS):  # the same numbers in alt: a * UNITS[alt] / UNITS[u]
-                out[j, 2 + k] = np.count_nonzero(mag * (UNITS[alt] / UNITS[u]) >= full_scale)
+                out[j, 2 + k] = np.count_nonzero(mag * (UNITS[alt] / UNITS[u]) > BEYOND * full_scale)
     return out
 
 
 def check_units(src: str, columns, units, unit_from, evidence: np.ndarray, full_scale: float | None, whose: str):
     """Refuse, naming the unit it most likely has, a column whose unit no name said (--unit or the model's) when
-    its data make that unit implausible: a share RAIL_SHARE of its samples beyond the sensor's range where
+    its data make that unit implausible: a share RAIL_SHARE of its samples past the sensor's range where
     another unit leaves under 1 % there, or a mean of about 9.8 read as g (a gravity in m/s^2). The data stay
     out when they cannot tell (a level trace read in either unit, a few samples clipped)."""
     for j, (col, u, said) in enumerate(zip(columns, units, unit_from, strict=True)):

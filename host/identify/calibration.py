@@ -111,10 +111,9 @@ def calibrate_recording(
         base, label = base_model(None, rec.model_toml, rec.source)
     rec = _on_axes(rec, base)
     check_rec_units(rec, base.max_accel_m_s2 if model is not None else None, label)
-    if "counts" in rec.units:
-        if model is None and rec.model_toml is None:
-            raise UserError(f"{rec.source}: raw counts need the model of their read-out: give --model")
-        rec = in_accel(rec, base)  # the model's own conversion (its current zero-g and sensitivity), as the firmware's
+    if "counts" in rec.units:  # the model's own conversion (its current zero-g and sensitivity), as the firmware's;
+        rec = in_accel(rec, base)  # without --model the default's, as filter and smooth read counts, said in a note
+        note(rec.notes[-1])
     names = tuple(a.name for a in base.axes)
     missing = [n for n in names if n not in rec.axis_names]
     if missing:

@@ -271,10 +271,9 @@ def characterise(
     else:
         base, base_label, given = base_model(None, rec)
     rec = _on_axes(rec, base)  # columns A0, A1 fit the model's x, y (the default's too), as smooth reads them
-    if "counts" in rec.units:
-        if not given:
-            raise UserError(f"{rec.source}: raw counts need the model of their read-out: give --model")
-        rec = in_accel(rec, base)  # the model's own conversion, as the firmware's
+    if "counts" in rec.units:  # the model's own conversion, as the firmware's; without --model the default's, as
+        rec = in_accel(rec, base)  # filter and smooth read counts, said in a note
+        note(rec.notes[-1])
     full_scale = base.max_accel_m_s2 if given else None
     check_rec_units(rec, full_scale, base_label)  # a unit no name said, against what the data say
     if given:  # the model keeps its rate: the recording must have it (the check filter and smooth make)
