@@ -55,8 +55,7 @@ def test_axes_and_units_from_names_in_every_column_order(tmp_path, spelling, ord
     with open_stream(path, unit=unit, block=700) as st:  # the streamed reader takes the same rules
         t, accel, _ = st(0, st.n)
     assert accel == pytest.approx(run["accel"], abs=1e-12)
-    frame = pytest.importorskip("pandas").DataFrame({n: d for n, d in zip([names[i] for i in order],
-                                                                          [data[i] for i in order], strict=True)})  # fmt: skip
+    frame = pytest.importorskip("pandas").DataFrame({names[i]: data[i] for i in order})
     accel = read_input(frame, unit=unit)[0]["accel"]  # the numbers themselves, not their text
     assert accel[:, 0] == pytest.approx(X, abs=1e-12) and accel[:, 1] == pytest.approx(Y, abs=1e-12)
 
@@ -122,11 +121,6 @@ def test_the_data_stay_out_when_they_cannot_tell(tmp_path):
 
 
 # --------------------------------------------------------------------------- times
-
-
-def _frame(time):
-    pd = pytest.importorskip("pandas")
-    return pd.DataFrame({"acc_x_m_s2": X, "acc_y_m_s2": Y}, index=time) if time is not None else pd
 
 
 START = "2024-09-29 08:53:20"
