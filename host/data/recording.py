@@ -4,16 +4,15 @@ Formats
 -------
 * **CSV** (plain or gzip, told apart by content, not by name): one header
   row of column names, then numbers; ``#`` comment lines before the header
-  are skipped; comma, semicolon or tab separated. Acceleration columns are
-  the ones named with ``--axis`` (a column name, or its short axis name), by
-  default every column whose name starts with ``acc`` or is ``a`` and an
-  axis letter (``ax``, ``a_y``, ``az_g``). Their unit comes from
-  the name's suffix (``_g``, ``_mg``, ``_m_s2``, ``_mps2``, ``_ms2``) or
-  from ``unit``. Time comes from a column ``t``/``time`` (suffix ``_s``,
-  ``_ms`` or ``_us`` for its unit, seconds without one) or from ``rate_hz``.
-  The short axis name drops an ``acc_``/``accel_`` prefix and the unit
-  suffix: ``acc_x_g`` is axis ``x``, and so is ``ax_g``. With ``;`` or tab
-  as separator a decimal comma (``0,01188``) is read as a decimal point.
+  are skipped; comma, semicolon or tab separated. Which columns are time and
+  acceleration, and their units, the names say by the column rules of
+  :mod:`accelnav.data.columns` (``t_ms``, ``acc_x_g``, ``ax_m_s2``, ``x``,
+  phone apps' ``Linear Acceleration x (m/s^2)``, ``Time (s)``); ``--axis``
+  picks columns by name or axis, ``--unit`` serves names that say no unit
+  (one that contradicts a name is refused), and a time column whose name says
+  no unit is in seconds, or in the unit of Unix time its numbers show. With
+  the model's axis names the columns come in the model's order. With ``;`` or
+  tab as separator a decimal comma (``0,01188``) is read as a decimal point.
 * **NPZ** as written by ``accelnav sim``: ``t`` (N,), ``axis_names``
   (n_axes,), ``accel`` (N, n_axes) in m/s^2, optionally a 0-d
   ``model_toml`` string and a ``clipped`` (N, n_axes) mask. ``accel`` may be
@@ -24,7 +23,8 @@ Refusals (:class:`accelnav.errors.UserError`, one line each, saying where):
 unreadable file, missing column, unknown unit, no time and no rate, time not
 finite or not increasing, a gap in time, a non-finite sample, too short a
 recording, a constant signal, a clipped signal (samples flagged in the file,
-at the model's full scale, or piled up on the extreme value as a rail does).
+at the model's full scale, or piled up on the extreme value as a rail does), a unit no name said that the
+data contradict (:func:`check_units`, naming the unit they most likely have).
 """
 
 from __future__ import annotations
