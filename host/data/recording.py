@@ -1049,6 +1049,6 @@ def check_units(src: str, columns, units, unit_from, evidence: np.ndarray, full_
 
 def check_rec_units(rec: Recording, full_scale: float | None, whose: str) -> None:
     """:func:`check_units` of a whole recording in memory."""
-    if rec.unit_from:
+    if any(f != "name" for f in rec.unit_from):  # names said every unit: nothing to weigh (nor to cost)
         ev = unit_evidence(rec.accel, rec.units, full_scale)
         check_units(rec.source, rec.columns, rec.units, rec.unit_from, ev, full_scale, whose)

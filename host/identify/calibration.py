@@ -98,7 +98,7 @@ def calibrate_recording(
         raise UserError(f"--min-pose: got {min_pose_s:g}; accepted: seconds > 0")
     if since_power_on is not None and since_power_on < 0:
         raise UserError(f"--since-power-on: got {since_power_on:g}; accepted: seconds >= 0")
-    from accelnav.identify.characterise import _on_axes, read_stationary
+    from accelnav.identify.characterise import as_model_axes, read_stationary
 
     if model is not None and not isinstance(model, Model):
         model = load_model(Path(model))
@@ -109,7 +109,7 @@ def calibrate_recording(
         base, label = model, str(model.source)
     else:
         base, label = base_model(None, rec.model_toml, rec.source)
-    rec = _on_axes(rec, base)
+    rec = as_model_axes(rec, base)
     check_rec_units(rec, base.max_accel_m_s2 if model is not None else None, label)
     if "counts" in rec.units:  # the model's own conversion (its current zero-g and sensitivity), as the firmware's;
         rec = in_accel(rec, base)  # without --model the default's, as filter and smooth read counts, said in a note

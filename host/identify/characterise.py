@@ -109,7 +109,7 @@ def read_stationary(
     return rec
 
 
-def _on_axes(rec: Recording, model: Model) -> Recording:
+def as_model_axes(rec: Recording, model: Model) -> Recording:
     """``rec`` with its axes named as ``model``'s when none of its names is one and the counts agree (columns
     A0, A1 for a model of x, y), as filter and smooth take them; said in a note."""
     names = [a.name for a in model.axes]
@@ -270,7 +270,7 @@ def characterise(
         base, base_label, given = model, str(model.source), True
     else:
         base, base_label, given = base_model(None, rec)
-    rec = _on_axes(rec, base)  # columns A0, A1 fit the model's x, y (the default's too), as smooth reads them
+    rec = as_model_axes(rec, base)  # columns A0, A1 fit the model's x, y (the default's too), as smooth reads them
     if "counts" in rec.units:  # the model's own conversion, as the firmware's; without --model the default's, as
         rec = in_accel(rec, base)  # filter and smooth read counts, said in a note
         note(rec.notes[-1])
