@@ -106,11 +106,6 @@ def _spelled(axis: str, by_model: dict[str, str]) -> str:
     return by_model.get(axis.lower(), axis.lower() if len(axis) == 1 else axis)
 
 
-def short_name(col: str, model_axes: list[str] | None = None) -> str:
-    """The axis name a column is known by (``--axis x`` picks ``acc_x_g``); the column itself when none."""
-    return axis_of(col, model_axes) or col
-
-
 def is_time(col: str) -> bool:
     return bool(_TIME_NAME.match(col))
 
