@@ -233,26 +233,21 @@ class Mps2Board(QemuBoard):
         super().__init__(elf, "mps2_an385", start_timeout=start_timeout)
 
 
-def run_feed(elf: str | Path, board: str, stimulus: bytes, *, timeout: float = 600.0) -> bytes:
-    """Run a firmware image on ``board``'s machine in feed mode and return its telemetry.
-
-    The stimulus goes in and the telemetry comes out through files over semihosting, a block per
-    trap (firmware/boards/emu_feed.h); the board exits at the end of the stimulus. Nothing is
-    paced by a UART or by the host: the emulated core runs flat out. The files live in a
-    temporary folder that is removed afterwards; the emulator is killed if it overruns ``timeout``."""
-    m = machine_for(board)
-    elf = Path(elf).resolve()
-    if not elf.is_file():
-        raise QemuError(f"{elf}: no firmware image (build it with 'make firmware BOARD={board}')")
-    require_qemu(m.qemu)
-    with tempfile.TemporaryDirectory(prefix="accelnav-feed-") as tmp:
+def _run_in_folder(
+    m: Machine, board: str, elf: Path, files: dict[str, bytes], what: str, timeout: float, **cmd
+) -> bytes:
+    """Run ``elf`` on ``m`` in a temporary folder holding ``files``, with :func:`qemu_command`'s keywords
+    ``cmd``, and return the telemetry file ``tel.bin`` it wrote; the folder is removed afterwards, the
+    emulator killed past ``timeout`` (``what`` did not finish: the one-line error says so)."""
+    with tempfile.TemporaryDirectory(prefix="accelnav-qemu-") as tmp:
         folder = Path(tmp)
-        (folder / "stim.bin").write_bytes(stimulus)
-        cmd = qemu_command(elf, machine=m.machine, feed=("stim.bin", "tel.bin"), qemu=m.qemu)
+        for name, data in files.items():
+            (folder / name).write_bytes(data)
+        argv = qemu_command(elf, machine=m.machine, qemu=m.qemu, **cmd)
         try:
-            done = subprocess.run(cmd, cwd=folder, capture_output=True, timeout=timeout)
+            done = subprocess.run(argv, cwd=folder, capture_output=True, timeout=timeout)
         except subprocess.TimeoutExpired:
-            raise QemuError(f"{m.qemu} ({board}): the file feed did not finish within {timeout:g} s") from None
+            raise QemuError(f"{m.qemu} ({board}): {what} did not finish within {timeout:g} s") from None
         err = (done.stdout + done.stderr).decode(errors="replace").strip()
         if done.returncode != 0:
             raise QemuError(f"{m.qemu} ({board}) exited with status {done.returncode}: {err[-500:]}")
@@ -264,6 +259,27 @@ def run_feed(elf: str | Path, board: str, stimulus: bytes, *, timeout: float = 6
         return out.read_bytes()
 
 
+def _image(elf: str | Path, board: str, m: Machine) -> Path:
+    elf = Path(elf).resolve()
+    if not elf.is_file():
+        raise QemuError(f"{elf}: no firmware image (build it with 'make firmware BOARD={board}')")
+    require_qemu(m.qemu)
+    return elf
+
+
+def run_feed(elf: str | Path, board: str, stimulus: bytes, *, timeout: float = 600.0) -> bytes:
+    """Run a firmware image on ``board``'s machine in feed mode and return its telemetry.
+
+    The stimulus goes in and the telemetry comes out through files over semihosting, a block per
+    trap (firmware/boards/emu_feed.h); the board exits at the end of the stimulus. Nothing is
+    paced by a UART or by the host: the emulated core runs flat out. The files live in a
+    temporary folder that is removed afterwards; the emulator is killed if it overruns ``timeout``."""
+    m = machine_for(board)
+    elf = _image(elf, board, m)
+    files = {"stim.bin": stimulus}
+    return _run_in_folder(m, board, elf, files, "the file feed", timeout, feed=("stim.bin", "tel.bin"))
+
+
 def run_adc(elf: str | Path, board: str, periods: int, commands: bytes = b"", *, timeout: float = 120.0) -> bytes:
     """Run an ADC board's image (:data:`ADC_MACHINES`) for ``periods`` sample periods and return what it sent
     on its telemetry UART. ``commands`` (command frames) reach the board before its sample clock starts.
@@ -271,31 +287,16 @@ def run_adc(elf: str | Path, board: str, periods: int, commands: bytes = b"", *,
     try:
         m = ADC_MACHINES[board]
     except KeyError:
-        raise QemuError(f"board {board!r} does not sample on QEMU's peripherals; accepted: {', '.join(ADC_MACHINES)}")
+        accepted = ", ".join(ADC_MACHINES)
+        raise QemuError(f"board {board!r} does not sample on QEMU's peripherals; accepted: {accepted}") from None
     if not 1 <= periods <= 100_000_000:
         raise ValueError(f"periods {periods}: 1 .. 100000000")
-    elf = Path(elf).resolve()
-    if not elf.is_file():
-        raise QemuError(f"{elf}: no firmware image (build it with 'make firmware BOARD={board}')")
-    require_qemu(m.qemu)
-    with tempfile.TemporaryDirectory(prefix="accelnav-adc-") as tmp:
-        folder = Path(tmp)
-        words: tuple[str, ...] = (ADC_MARKER, str(periods))
-        if commands:
-            (folder / "cmd.bin").write_bytes(commands)
-            words += ("cmd.bin",)
-        cmd = qemu_command(elf, machine=m.machine, qemu=m.qemu, args=words, warp=True, serial_file="tel.bin")
-        try:
-            done = subprocess.run(cmd, cwd=folder, capture_output=True, timeout=timeout)
-        except subprocess.TimeoutExpired:
-            raise QemuError(f"{m.qemu} ({board}): {periods} sample periods did not finish within {timeout:g} s") from None
-        err = (done.stdout + done.stderr).decode(errors="replace").strip()
-        if done.returncode != 0:
-            raise QemuError(f"{m.qemu} ({board}) exited with status {done.returncode}: {err[-500:]}")
-        out = folder / "tel.bin"
-        if not out.is_file():
-            raise QemuError(f"{m.qemu} ({board}): no telemetry file")
-        return out.read_bytes()
+    elf = _image(elf, board, m)
+    words: tuple[str, ...] = (ADC_MARKER, str(periods))
+    files = {"cmd.bin": commands} if commands else {}
+    words += tuple(files)
+    what = f"{periods} sample periods"
+    return _run_in_folder(m, board, elf, files, what, timeout, args=words, warp=True, serial_file="tel.bin")
 
 
 def run_to_exit(

@@ -12,16 +12,18 @@ from __future__ import annotations
 
 import os
 import shutil
+import subprocess
 
 import numpy as np
 import pytest
 from conftest import MODELS
 
 from accelnav.hil_sim.targets import hil, qemu
-from accelnav.hil_sim.targets.firmware import manifest
+from accelnav.hil_sim.targets.firmware import generated, manifest
 from accelnav.link.codec import encode_stimulus
 from accelnav.link.decoder import decode_all, replay_for
 from accelnav.model.load import load_model
+from accelnav.resources import firmware_dir
 
 QEMU_ADC_STEP = 7  # QEMU's STM32F2 ADC model: each DR read after SWSTART returns the last value + 7
 
@@ -83,3 +85,18 @@ def test_adc_board_errors_are_one_line(tmp_path):
     _require_pil()
     with pytest.raises(qemu.QemuError, match="no firmware image"):
         qemu.run_adc(tmp_path / "x.elf", "netduino2", 10)
+
+
+def test_netduino2_real_part_variant_compiles(tmp_path, model):
+    """The emulated build sets ACN_STM32_QEMU; the part's code paths (ready flags and EOC waited for, TXE
+    interrupt) are compiled here with the same strict flags, so they cannot rot unseen."""
+    _require_pil()
+    for name, text in generated(str(model.source)).items():
+        (tmp_path / name).write_text(text)
+    boards = firmware_dir() / "boards"
+    cmd = ["arm-none-eabi-gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-mcpu=cortex-m3", "-mthumb",
+           "-ffreestanding", "-fsyntax-only", f"-I{boards / 'netduino2'}", f"-I{boards}",
+           f"-I{firmware_dir() / 'src'}", f"-I{tmp_path}", str(boards / "netduino2" / "board_netduino2.c"),
+           str(boards / "stm32_link.c")]  # fmt: skip
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr

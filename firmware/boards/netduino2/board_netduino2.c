@@ -15,13 +15,15 @@
  *    prescaler differs; its period is ARR counts there, ARR + 1 on the part (0.1 % short at 1 kHz);
  *  - QEMU's ADC never sets EOC: the conversion is not waited for; its DR read, after SWSTART with
  *    ADON, returns the previous value + 7 (masked to the resolution), whatever the channel;
- *  - the USART raises no TXE interrupt, so the main loop moves the transmit ring itself.
+ *  - the USART raises no TXE interrupt, so the main loop moves the transmit ring itself
+ *    (stm32_link.h: the link code of the stm32f103 port).
  * The run length is given on QEMU's semihosting command line, `accelnav-adc N [CMDS]`: N sample
  * periods, then the transmit ring is emptied and the emulator exits (SYS_EXIT); CMDS, a file of
  * command frames, goes to the command receiver before the sample clock starts. Without that command
  * line the board samples and streams for ever. QEMU must be started with semihosting on. */
 #include "acn_board.h"
 #include "semihost.h"
+#include "stm32_link.h"
 #include "stm32f2_regs.h"
 
 #define SYSCLK_HZ 120000000u /* HSI 16 MHz / 16 x 240 / 2; QEMU's netduino2: a fixed 120 MHz */
@@ -59,15 +61,6 @@
 #error                                                                                             \
     "netduino2: the STM32F2's ADC converts 12, 10, 8 or 6 bits; the model's ADC has another width"
 #endif
-
-/* ---- link ---- */
-#define TX_SIZE 1024u /* powers of two */
-#define RX_SIZE 128u
-static uint8_t tx_ring[TX_SIZE];
-static volatile uint32_t tx_head, tx_tail;
-static uint8_t rx_ring[RX_SIZE];
-static volatile uint32_t rx_head, rx_tail;
-static volatile uint32_t rx_lost;
 
 /* ---- time base and samples ---- */
 static volatile uint32_t time_ms;
@@ -116,6 +109,7 @@ static void usart_init(void)
     gpio_mode(GPIOA, 10, GPIO_MODE_AF, GPIO_AF_USART1);
     USART1->BRR = (APB2_HZ + BAUD / 2u) / BAUD; /* 65: 923077 baud, +0.16 % */
     USART1->CR1 = USART_CR1_UE | USART_CR1_TE | USART_CR1_RE | USART_CR1_RXNEIE;
+    stm32_link_init(USART1);
     nvic_enable(IRQ_USART1);
 }
 
@@ -161,24 +155,7 @@ void tim3_handler(void)
     sample_ready = true;
 }
 
-static void tx_move(void)
-{
-    if (tx_tail != tx_head) {
-        USART1->DR = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
-    } else {
-        USART1->CR1 &= ~USART_CR1_TXEIE;
-    }
-}
-
 #ifdef ACN_STM32_QEMU
-/* The transmit ring into DR while the USART takes bytes (QEMU's raises no TXE interrupt). */
-static void tx_drain(void)
-{
-    while (tx_tail != tx_head && (USART1->SR & USART_SR_TXE)) {
-        tx_move();
-    }
-}
-
 static void board_exit(uint32_t status, const char *why)
 {
     if (why) {
@@ -241,8 +218,8 @@ static void take_commands(void)
             board_exit(SEMIHOST_EXIT_ERROR, "accelnav-adc: cannot read the command file\n");
         }
         for (i = 0; i < sizeof buf - (uint32_t)left; ++i) {
-            while (TX_SIZE - (tx_head - tx_tail) < 3u * ACNF_MAX_UP_WIRE) {
-                tx_drain(); /* room for what a command may answer */
+            while (stm32_link_tx_free() < 3u * ACNF_MAX_UP_WIRE) {
+                stm32_link_tx_poll(); /* room for what a command may answer */
             }
             app_rx(APP_CH_HOST, &buf[i], 1);
         }
@@ -275,11 +252,6 @@ uint16_t board_boot_id(void)
     return 1u; /* no retained counter: the value the host board uses too */
 }
 
-uint32_t board_rx_lost(void)
-{
-    return rx_lost;
-}
-
 uint32_t board_time_ms(void)
 {
     return time_ms;
@@ -290,46 +262,9 @@ void systick_handler(void)
     ++time_ms;
 }
 
-bool board_uart_write(const uint8_t *p, size_t n)
-{
-    size_t i;
-    uint32_t head = tx_head;
-    if (n > TX_SIZE - (head - tx_tail)) {
-        return false;
-    }
-    for (i = 0; i < n; ++i) {
-        tx_ring[head++ & (TX_SIZE - 1u)] = p[i];
-    }
-    tx_head = head;
-#ifndef ACN_STM32_QEMU /* there the main loop empties the ring */
-    irq_disable();
-    USART1->CR1 |= USART_CR1_TXEIE;
-    irq_enable();
-#endif
-    return true;
-}
-
-void usart1_handler(void)
-{
-    uint32_t sr = USART1->SR;
-    if (sr & (USART_SR_RXNE | USART_SR_ORE)) {
-        uint8_t b = (uint8_t)USART1->DR; /* reading DR after SR clears RXNE and ORE */
-        if (sr & USART_SR_ORE) {
-            ++rx_lost;
-        }
-        if (rx_head - rx_tail < RX_SIZE) {
-            rx_ring[rx_head++ & (RX_SIZE - 1u)] = b;
-        } else {
-            ++rx_lost;
-        }
-    }
-    if ((sr & USART_SR_TXE) && (USART1->CR1 & USART_CR1_TXEIE)) {
-        tx_move();
-    }
-}
-
 bool board_poll(void)
 {
+    uint8_t b;
     if (!started) { /* after app_init: the commands, then the sample clock */
         started = true;
 #ifdef ACN_STM32_QEMU
@@ -351,28 +286,26 @@ bool board_poll(void)
         app_missed(overrun - missed_seen);
 #ifdef ACN_STM32_QEMU
         periods_done += 1u + (overrun - missed_seen);
-#endif
         missed_seen = overrun;
-#ifdef ACN_STM32_QEMU
         if (run_periods != 0u && periods_done >= run_periods) {
             TIM3->CR1 = 0; /* the run is over: send what is queued, then end the emulator */
-            while (tx_tail != tx_head) {
-                tx_drain();
+            while (!stm32_link_tx_empty()) {
+                stm32_link_tx_poll();
             }
             board_exit(SEMIHOST_EXIT_OK, 0);
         }
+#else
+        missed_seen = overrun;
 #endif
     }
-    while (rx_tail != rx_head) {
-        uint8_t b = rx_ring[rx_tail & (RX_SIZE - 1u)];
-        ++rx_tail;
+    while (stm32_link_rx(&b)) {
         app_rx(APP_CH_HOST, &b, 1);
     }
 #ifdef ACN_STM32_QEMU
-    tx_drain();
+    stm32_link_tx_poll();
 #endif
     irq_disable();
-    if (!sample_ready && rx_tail == rx_head && tx_tail == tx_head) {
+    if (!sample_ready && stm32_link_rx_empty()) {
         __asm__ volatile("wfi"); /* an interrupt wakes it even with interrupts masked */
     }
     irq_enable();

@@ -1,13 +1,12 @@
 /* The few STM32F205 registers the netduino2 board uses (RM0033), written for accelnav: RCC, FLASH,
- * GPIO, TIM3, ADC1, USART1, SysTick, NVIC. Register blocks are structs laid out at their
- * reference-manual offsets. The F2 moved its peripherals from the F1's addresses and changed RCC,
- * GPIO and the ADC (F1 code does not carry over); its timers and USARTs kept the F1's layout. */
+ * GPIO, TIM3, ADC1, USART1 (the USART and SysTick blocks: stm32_common.h). Register blocks are
+ * structs laid out at their reference-manual offsets. The F2 moved its peripherals from the F1's
+ * addresses and changed RCC, GPIO and the ADC (F1 code does not carry over); its timers and USARTs
+ * kept the F1's layout. */
 #ifndef STM32F2_REGS_H
 #define STM32F2_REGS_H
 
-#include <stdint.h>
-
-#define REG volatile uint32_t
+#include "stm32_common.h" /* REG, USART, SysTick, NVIC */
 
 typedef struct {
     REG CR, PLLCFGR, CFGR, CIR, AHB1RSTR, AHB2RSTR, AHB3RSTR, RESERVED0, APB1RSTR, APB2RSTR,
@@ -25,12 +24,6 @@ typedef struct {
 typedef struct {
     REG SR, CR1, CR2, SMPR1, SMPR2, JOFR[4], HTR, LTR, SQR1, SQR2, SQR3, JSQR, JDR[4], DR;
 } adc_t;
-typedef struct {
-    REG SR, DR, BRR, CR1, CR2, CR3, GTPR;
-} usart_t;
-typedef struct {
-    REG CSR, RVR, CVR, CALIB;
-} systick_t;
 
 #define RCC ((rcc_t *)0x40023800u)
 #define FLASH ((flash_t *)0x40023c00u)
@@ -39,8 +32,6 @@ typedef struct {
 #define ADC1 ((adc_t *)0x40012000u)
 #define ADC_CCR ((REG *)0x40012304u) /* common to the three ADCs: the prescaler */
 #define USART1 ((usart_t *)0x40011000u)
-#define SYSTICK ((systick_t *)0xe000e010u)
-#define NVIC_ISER ((REG *)0xe000e100u) /* ISER[n]: bit k enables IRQ 32 n + k */
 
 /* RCC */
 #define RCC_CR_HSION (1u << 0)
@@ -80,33 +71,8 @@ typedef struct {
 #define ADC_CR2_SWSTART (1u << 30)
 #define ADC_CCR_ADCPRE_DIV4 (1u << 16)
 
-/* USART */
-#define USART_SR_ORE (1u << 3)
-#define USART_SR_RXNE (1u << 5)
-#define USART_SR_TXE (1u << 7)
-#define USART_CR1_RE (1u << 2)
-#define USART_CR1_TE (1u << 3)
-#define USART_CR1_RXNEIE (1u << 5)
-#define USART_CR1_TXEIE (1u << 7)
-#define USART_CR1_UE (1u << 13)
-
 /* IRQ numbers (STM32F2xx): the F1's for TIM3 and USART1, so the stm32f103 vector table serves */
 #define IRQ_TIM3 29
 #define IRQ_USART1 37
-
-static inline void nvic_enable(int irq)
-{
-    NVIC_ISER[irq >> 5] = 1u << (irq & 31);
-}
-
-static inline void irq_disable(void)
-{
-    __asm__ volatile("cpsid i" ::: "memory");
-}
-
-static inline void irq_enable(void)
-{
-    __asm__ volatile("cpsie i" ::: "memory");
-}
 
 #endif
