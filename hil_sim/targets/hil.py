@@ -197,8 +197,6 @@ def run_pil(
         return _run_pil_uart(model, stim, n_samples, log, board=board, timeout_s=timeout_s)
     if link != "feed":
         raise ValueError(f"link {link!r}: accepted: feed, uart")
-    from accelnav.link.logfile import LogWriter
-
     # the emulator loads a private copy of the verified image, never the cache's file
     with private_firmware(board, model.source) as fw:
         elf = fw / "accelnav_fw.elf"
@@ -212,6 +210,22 @@ def run_pil(
             tel = run_feed(elf, board, stim, timeout=timeout_s)
         seconds = time.monotonic() - t0
     man = manifest(model.source)
+    _write_log(log, man, model, source, tel)
+    dec = Decoder(man, replay=replay_for(man, model))  # the compact frames' rows need the replay
+    dec.feed(tel)
+    dec.release()
+    stats = dec.stats.as_dict()
+    if stats.get("frames", {}).get("sample", 0) < n_samples:
+        raise QemuError(f"PIL run ({board}) ended early (end of the stimulus) after {stats.get('frames', {})} frames")
+    # the telemetry as received, every byte of which the log took: the log is not read back (a FIFO or a
+    # device, which the output rule writes through, cannot be)
+    return PilResult(Path(str(log)), tel, seconds, stats)
+
+
+def _write_log(log: Path | Output, man: Manifest, model: Model, source: str, tel: bytes) -> None:
+    """The telemetry of a PIL run as a recorder log (the output rule: a FIFO or a device is written through)."""
+    from accelnav.link.logfile import LogWriter
+
     meta = {
         "manifest": man.data,
         "model_toml": model.text,
@@ -226,15 +240,6 @@ def run_pil(
                 writer.flush()
     except OSError as exc:  # a full disk: the log holds what came before, said in one line
         raise UserError(f"{log}: cannot write the PIL log: {exc.strerror or exc}") from None
-    dec = Decoder(man, replay=replay_for(man, model))  # the compact frames' rows need the replay
-    dec.feed(tel)
-    dec.release()
-    stats = dec.stats.as_dict()
-    if stats.get("frames", {}).get("sample", 0) < n_samples:
-        raise QemuError(f"PIL run ({board}) ended early (end of the stimulus) after {stats.get('frames', {})} frames")
-    # the telemetry as received, every byte of which the log took: the log is not read back (a FIFO or a
-    # device, which the output rule writes through, cannot be)
-    return PilResult(Path(str(log)), tel, seconds, stats)
 
 
 @dataclass(frozen=True)
@@ -251,7 +256,13 @@ class AdcPilResult:
 
 
 def run_adc_pil(
-    model: Model, n_samples: int, *, board: str = "netduino2", commands: tuple[str, ...] = (), timeout_s: float = 120.0
+    model: Model,
+    n_samples: int,
+    *,
+    board: str = "netduino2",
+    commands: tuple[str, ...] = (),
+    timeout_s: float = 120.0,
+    log: Path | Output | None = None,
 ) -> AdcPilResult:
     """Run ``model``'s firmware on an ADC board for ``n_samples`` sample periods (after ``commands``, names of
     argument-free commands such as ``mode_states``), then SIL on the codes it read, and compare.
@@ -260,13 +271,15 @@ def run_adc_pil(
     SIL runs on exactly what the emulated ADC produced; in compact mode a last, unfinished block is not sent,
     and so not compared. A board that missed a sample (its main loop too slow)
     predicted over it without a code: SIL has no stimulus for that, so such a run is refused (QemuError),
-    never called identical."""
+    never called identical. ``log``: the board's telemetry also written there as a recorder log."""
     man = manifest(model.source)
     cmd = b"".join(encode_command(man, c) for c in commands)
     with private_firmware(board, model.source) as fw:
         t0 = time.monotonic()
         tel = run_adc(fw / "accelnav_fw.elf", board, n_samples, cmd, timeout=timeout_s)
         seconds = time.monotonic() - t0
+    if log is not None:
+        _write_log(log, man, model, f"qemu {board} (its TIM3 and ADC1 models; USART1 to a file)", tel)
     frames, st = decode_all(man, tel, replay_for(man, model))
     rows = frames["sample"]
     stats = st.as_dict()

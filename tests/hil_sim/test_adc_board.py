@@ -18,10 +18,12 @@ import numpy as np
 import pytest
 from conftest import MODELS
 
+from accelnav.cli import main
 from accelnav.hil_sim.targets import hil, qemu
 from accelnav.hil_sim.targets.firmware import generated, manifest
 from accelnav.link.codec import encode_stimulus
 from accelnav.link.decoder import decode_all, replay_for
+from accelnav.link.logfile import read_log
 from accelnav.model.load import load_model
 from accelnav.resources import firmware_dir
 
@@ -100,3 +102,22 @@ def test_netduino2_real_part_variant_compiles(tmp_path, model):
            str(boards / "stm32_link.c")]  # fmt: skip
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
+
+
+def test_hil_cli_pil_on_the_adc_board(tmp_path, capsys):
+    _require_pil()
+    status = main(["hil", "--target", "pil", "--board", "netduino2", "--duration", "3.2", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert "320 sample periods on netduino2" in out
+    assert "PIL vs SIL on those codes: 320 samples, bit-identical" in out
+    log = tmp_path / "pil_netduino2_adxl250_default_adc.acnlog"
+    assert b"".join(read_log(log).data) == hil.run_adc_pil(load_model(None), 320).telemetry  # the same run again
+
+
+def test_hil_cli_adc_board_refuses_a_scenario_and_a_duty_model(tmp_path, capsys):
+    assert main(["hil", "--target", "pil", "--board", "netduino2", "--scenario", "shock"]) == 2
+    assert "--scenario: not with --board netduino2" in capsys.readouterr().err
+    duty = ["hil", "--target", "pil", "--board", "netduino2", "--model", str(MODELS / "adxl202_duty.toml")]
+    assert main([*duty, "--out", str(tmp_path)]) == 2
+    assert "samples an ADC; the model's sensor is duty_cycle" in capsys.readouterr().err
