@@ -62,7 +62,7 @@ FW_CC      := $(ARM_CC)
 FW_CFLAGS  := $(FW_WARN) $(PART_CFLAGS_stm32f103) -I$(FW_DIR)/boards/stm32f103 \
               $(if $(filter stm32vldiscovery,$(BOARD)),-DACN_STM32_QEMU)
 FW_SRCS    := $(FW_DIR)/boards/stm32f103/startup_stm32f103.c $(FW_DIR)/boards/stm32f103/board_stm32.c \
-              $(FW_DIR)/boards/stm32_link.c $(if $(filter stm32vldiscovery,$(BOARD)),$(FW_DIR)/boards/emu_feed.c)
+              $(FW_DIR)/boards/stm32_rt.c $(if $(filter stm32vldiscovery,$(BOARD)),$(FW_DIR)/boards/emu_feed.c)
 FW_LD      := $(if $(filter stm32vldiscovery,$(BOARD)),stm32f100rb_qemu.ld,stm32f103c8.ld)
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -L$(FW_DIR)/boards/stm32f103 -T$(FW_DIR)/boards/stm32f103/$(FW_LD) \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
@@ -73,7 +73,7 @@ else ifeq ($(BOARD),netduino2)
 FW_CC      := $(ARM_CC)
 FW_CFLAGS  := $(FW_WARN) $(PART_CFLAGS_stm32f103) -I$(FW_DIR)/boards/netduino2 -DACN_STM32_QEMU
 FW_SRCS    := $(FW_DIR)/boards/stm32f103/startup_stm32f103.c $(FW_DIR)/boards/netduino2/board_netduino2.c \
-              $(FW_DIR)/boards/stm32_link.c
+              $(FW_DIR)/boards/stm32_rt.c
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -L$(FW_DIR)/boards/stm32f103 -T$(FW_DIR)/boards/netduino2/netduino2.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size

@@ -99,7 +99,7 @@ def test_netduino2_real_part_variant_compiles(tmp_path, model):
     cmd = ["arm-none-eabi-gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-mcpu=cortex-m3", "-mthumb",
            "-ffreestanding", "-fsyntax-only", f"-I{boards / 'netduino2'}", f"-I{boards}",
            f"-I{firmware_dir() / 'src'}", f"-I{tmp_path}", str(boards / "netduino2" / "board_netduino2.c"),
-           str(boards / "stm32_link.c")]  # fmt: skip
+           str(boards / "stm32_rt.c")]  # fmt: skip
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
 

@@ -16,14 +16,14 @@
  *  - QEMU's ADC never sets EOC: the conversion is not waited for; its DR read, after SWSTART with
  *    ADON, returns the previous value + 7 (masked to the resolution), whatever the channel;
  *  - the USART raises no TXE interrupt, so the main loop moves the transmit ring itself
- *    (stm32_link.h: the link code of the stm32f103 port).
+ *    (stm32_rt.h: the link and time base of the stm32f103 port).
  * The run length is given on QEMU's semihosting command line, `accelnav-adc N [CMDS]`: N sample
  * periods, then the transmit ring is emptied and the emulator exits (SYS_EXIT); CMDS, a file of
  * command frames, goes to the command receiver before the sample clock starts. Without that command
  * line the board samples and streams for ever. QEMU must be started with semihosting on. */
 #include "acn_board.h"
 #include "semihost.h"
-#include "stm32_link.h"
+#include "stm32_rt.h"
 #include "stm32f2_regs.h"
 
 #define SYSCLK_HZ 120000000u /* HSI 16 MHz / 16 x 240 / 2; QEMU's netduino2: a fixed 120 MHz */
@@ -63,7 +63,6 @@
 #endif
 
 /* ---- time base and samples ---- */
-static volatile uint32_t time_ms;
 static volatile bool sample_ready;
 static volatile uint32_t sample_overrun;
 static uint32_t missed_seen;
@@ -231,9 +230,7 @@ static void take_commands(void)
 void board_init(void)
 {
     clock_init();
-    SYSTICK->RVR = SYSCLK_HZ / 1000u - 1u;
-    SYSTICK->CVR = 0;
-    SYSTICK->CSR = 7u; /* core clock, interrupt, enable */
+    stm32_time_init(SYSCLK_HZ);
     usart_init();
     adc_init();
     sample_clock_init();
@@ -245,21 +242,6 @@ void board_init(void)
 uint8_t board_id(void)
 {
     return ACNF_BOARD_NETDUINO2;
-}
-
-uint16_t board_boot_id(void)
-{
-    return 1u; /* no retained counter: the value the host board uses too */
-}
-
-uint32_t board_time_ms(void)
-{
-    return time_ms;
-}
-
-void systick_handler(void)
-{
-    ++time_ms;
 }
 
 bool board_poll(void)

@@ -30,7 +30,7 @@
  * file feed (emu_feed.h: how PIL runs), the QEMU build takes its input from that file and empties
  * its transmit ring into the other one instead of USART2 and USART1. */
 #include "acn_board.h"
-#include "stm32_link.h"
+#include "stm32_rt.h"
 #include "stm32f103_regs.h"
 #ifdef ACN_STM32_QEMU
 #include "emu_feed.h"
@@ -56,7 +56,6 @@
 #endif
 
 /* ---- time base and samples ---- */
-static volatile uint32_t time_ms;
 static volatile bool sample_ready;
 static volatile uint32_t sample_overrun; /* samples the main loop was too slow to take */
 static uint32_t missed_seen;             /* sample_overrun already handed to app_missed */
@@ -276,9 +275,7 @@ void tim3_handler(void)
 void board_init(void)
 {
     clock_init();
-    SYSTICK->RVR = SYSCLK_HZ / 1000u - 1u;
-    SYSTICK->CVR = 0;
-    SYSTICK->CSR = 7u; /* core clock, interrupt, enable */
+    stm32_time_init(SYSCLK_HZ);
     usart_init();
     sample_clock_init();
     input_init();
@@ -294,21 +291,6 @@ uint8_t board_id(void)
 #else
     return ACNF_BOARD_STM32F103;
 #endif
-}
-
-uint16_t board_boot_id(void)
-{
-    return 1u; /* no retained counter set up on this board yet: the value the host board uses too */
-}
-
-uint32_t board_time_ms(void)
-{
-    return time_ms;
-}
-
-void systick_handler(void)
-{
-    ++time_ms;
 }
 
 bool board_poll(void)

@@ -1,5 +1,5 @@
-/* The STM32 boards' USART1 link: see stm32_link.h. */
-#include "stm32_link.h"
+/* The STM32 boards' USART1 link: see stm32_rt.h. */
+#include "stm32_rt.h"
 
 #include "acn_board.h"
 
@@ -12,6 +12,30 @@ static volatile uint32_t tx_head, tx_tail;
 static uint8_t rx_ring[RX_SIZE];
 static volatile uint32_t rx_head, rx_tail;
 static volatile uint32_t rx_lost; /* bytes lost to a full ring or a hardware overrun */
+static volatile uint32_t time_ms;
+
+void stm32_time_init(uint32_t core_hz)
+{
+    SYSTICK->RVR = core_hz / 1000u - 1u;
+    SYSTICK->CVR = 0;
+    SYSTICK->CSR = 7u; /* core clock, interrupt, enable */
+}
+
+void systick_handler(void)
+{
+    ++time_ms;
+}
+
+uint32_t board_time_ms(void)
+{
+    return time_ms;
+}
+
+uint16_t board_boot_id(void)
+{
+    return 1u; /* no retained counter set up on these boards yet: the value the host board uses too
+                */
+}
 
 void stm32_link_init(usart_t *usart)
 {
