@@ -44,12 +44,11 @@ def model():
     return load_model(MODELS / "adxl250_default.toml")  # 2 axes, 12-bit ADC, 100 Hz
 
 
-# 640 samples, 1280 conversions: the ramp passes full scale (4095 = 585 x 7, a rail the filter refuses)
-# and wraps; compact mode: 20 block frames and checkpoints every 256 samples
-@pytest.mark.parametrize("commands", [(), ("mode_states",)], ids=["compact", "states"])
-def test_netduino2_adc_pil_equals_sil(model, commands):
+# 2 n conversions: the ramp passes full scale (4095 = 585 x 7, a rail the filter refuses) and wraps;
+# compact mode: 20 block frames and checkpoints every 256 samples; states: a sample frame each (320)
+@pytest.mark.parametrize(("commands", "n"), [((), 640), (("mode_states",), 320)], ids=["compact", "states"])
+def test_netduino2_adc_pil_equals_sil(model, commands, n):
     _require_pil()
-    n = 640
     res = hil.run_adc_pil(model, n, commands=commands)
     # the firmware read QEMU's ADC: one conversion per axis per sample, in channel order
     expect = (QEMU_ADC_STEP * np.arange(1, 2 * n + 1)) % 4096
