@@ -20,7 +20,7 @@ from conftest import MODELS
 
 from accelnav.cli import main
 from accelnav.hil_sim.targets import hil, qemu
-from accelnav.hil_sim.targets.firmware import generated, manifest
+from accelnav.hil_sim.targets.firmware import generated, manifest, private_firmware
 from accelnav.link.codec import encode_stimulus
 from accelnav.link.decoder import decode_all, replay_for
 from accelnav.link.logfile import read_log
@@ -120,3 +120,14 @@ def test_hil_cli_adc_board_refuses_a_scenario_and_a_duty_model(tmp_path, capsys)
     duty = ["hil", "--target", "pil", "--board", "netduino2", "--model", str(MODELS / "adxl202_duty.toml")]
     assert main([*duty, "--out", str(tmp_path)]) == 2
     assert "samples an ADC; the model's sensor is duty_cycle" in capsys.readouterr().err
+
+
+def test_netduino2_answers_info_with_its_board_id(model):
+    """A command before the sample clock starts is answered through USART1, naming the board."""
+    _require_pil()
+    man = manifest(model.source)
+    with private_firmware("netduino2", model.source) as fw:
+        tel = qemu.run_adc(fw / "accelnav_fw.elf", "netduino2", 32, hil.encode_command(man, "info"))
+    frames, _ = decode_all(man, tel)
+    assert len(frames["info"]) == 1 and len(frames["block"]) == 1
+    assert frames["info"]["board"][0] == man.data["boards"]["netduino2"]
