@@ -562,7 +562,7 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         if ax.width == GROW:
             _forward_general(run, ax, s, e, zc, ok, buf)
         else:
-            _forward_plain(run, ax, s, e, zc, ok, buf)
+            _forward_plain(run, ax, s, e, zc, ok, buf, write_filt)
             if lean:
                 ax.lean_end = e
         if run.smooth:
@@ -591,12 +591,17 @@ def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: n
     )  # fmt: skip
 
 
-def _forward_plain(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:
+def _forward_plain(
+    run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray, states: bool
+) -> None:
+    """``states``: the filter's states are written; without them the steady kernel writes only the chunk's first
+    and last and jumps its covariance over the steady samples (no step per sample: acn_chunk_fwd_steady)."""
     p, m, last = run.ptr, e - s, int(e == run.n)
     tail = (p(ax.carry_f), p(buf), p(run.xa), p(run.sa), p(ax.Pf0), p(ax.Pfn))
     if ax.steady is not None:
         sr = ax.steady.rows
-        rc = run.lib.acn_chunk_fwd_steady(ax.m, s, m, last, p(zc), p(sr), len(sr), *tail)
+        sd = tail[3] if states else run.ffi.NULL
+        rc = run.lib.acn_chunk_fwd_steady(ax.m, s, m, last, p(zc), p(sr), len(sr), *tail[:3], sd, *tail[4:])
     else:
         rc = run.lib.acn_chunk_fwd(ax.m, s, m, last, p(zc), p(ok.view(np.uint8), "unsigned char *"), *tail)
     if rc != 0:
