@@ -36,6 +36,10 @@ Where every sample so far was valid and the design's steady rows exist (fastsmoo
 plain path's forward pass keeps a lean store (``LROW`` = 5 doubles: the filter's, then the smoothed,
 a and eps, and the smoothed (a, eps) covariance) and the backward passes read the rest (gains,
 smoother gains, the filter's (a, eps) covariances) from those rows, the same numbers in the same order.
+When the filter's states are not written (the smoother alone), only the run's last sample needs the
+filter's r, u covariance: on steady rows it is not stepped per sample but jumped over each chunk (the
+step is affine there; csrc/fastsmooth.c, steady_jump), which leaves every other output's bits alone and
+moves the last sample's sds by less than the per-sample steps' own rounding drift (within 1e-9).
 
 The store is in memory when ``store_memory`` holds it (on disk, the write-back of a store the size of
 the output throttled the run: 8 s of 17 at 1e7 samples, measured), else in a file in ``workdir``.

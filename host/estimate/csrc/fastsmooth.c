@@ -1207,33 +1207,17 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
         const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
         double *row = store + ACN_LROW * k;
         int end = last && k == n - 1;
-        if (sdf == NULL && g >= nt - 1 && g > 0 && !end) {
-            /* the means alone, as below; the covariance step is counted */
-            double y = z[k] - a - ep;
-            r += sr[0] * y;
-            u += sr[1] * y;
-            double ka = sr[2], ke = sr[3], zk = z[k];
-            double an = (a - ka * a) + ka * (zk - ep);
-            e = (ep - ke * ep) + ke * (zk - a);
-            a = an;
-            row[0] = a, row[1] = e;
-            if (k == 0 || k == n - 1) {
-                double *o = xf + 4 * k;
-                o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        /* skip: the covariance step of this sample is counted, taken later by steady_jump */
+        int skip = sdf == NULL && g >= nt - 1 && g > 0 && !end;
+        if (!skip) {
+            if (pending > 0) {
+                steady_jump(m, steady, pending, P);
+                pending = 0;
             }
-            pending++;
-            r = r + f01 * u + f02 * a;
-            u = u + f12 * a;
-            ep = phi * e + b;
-            continue;
+            /* the prior's (a, eps) block is the stored one (as acn_plain_cov_steady) */
+            P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9], P[3][3] = sr[10];
+            steady_update(P, sr, m->R);
         }
-        if (pending > 0) {
-            steady_jump(m, steady, pending, P);
-            pending = 0;
-        }
-        /* the prior's (a, eps) block is the stored one (as acn_plain_cov_steady) */
-        P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9], P[3][3] = sr[10];
-        steady_update(P, sr, m->R);
         /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
         double y = z[k] - a - ep;
         r += sr[0] * y;
@@ -1256,10 +1240,14 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
             pack(P, Pfn);
             break;
         }
-        predict_ru(m, P);
-        const double *sn =
-            srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1); /* the next prior's (a, eps) */
-        P[2][2] = sn[8], P[2][3] = P[3][2] = sn[9], P[3][3] = sn[10];
+        if (skip) {
+            pending++;
+        } else {
+            predict_ru(m, P);
+            const double *sn =
+                srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1); /* the next prior's (a, eps) */
+            P[2][2] = sn[8], P[2][3] = P[3][2] = sn[9], P[3][3] = sn[10];
+        }
         r = r + f01 * u + f02 * a;
         u = u + f12 * a;
         ep = phi * e + b;
