@@ -115,15 +115,20 @@ def dask_fleet(paths: list[Path], out: Path, workers: int) -> float:
 
 
 def run(argv: list[str], folder: Path) -> tuple[float, float, int, str]:
-    """(wall s, peak RSS MB, exit status, last stderr line) of one command. The RSS comes from GNU time
-    between us and the command: a child forked from this big process would count our pages until exec."""
+    """(wall s, peak RSS MB, exit status, note) of one command: the note is its last stderr line when it
+    failed, else its CPU seconds (user + system: on a machine shared with others' work, the figure that
+    wall time hides). The RSS comes from GNU time between us and the command: a child forked from this big
+    process would count our pages until exec."""
     rss_file = folder / "rss.txt"
-    timer = ["/usr/bin/time", "-q", "-f", "%M", "-o", str(rss_file)] if Path("/usr/bin/time").exists() else []
+    timer = ["/usr/bin/time", "-q", "-f", "%M %U %S", "-o", str(rss_file)] if Path("/usr/bin/time").exists() else []
     t0 = time.perf_counter()
     p = subprocess.run([*timer, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     wall = time.perf_counter() - t0
-    rss = float(rss_file.read_text().split()[-1]) / 1024 if timer else float("nan")
-    return wall, rss, p.returncode, (p.stderr.strip().splitlines() or [""])[-1]
+    rss, cpu = float("nan"), ""
+    if timer:
+        fields = rss_file.read_text().split()[-3:]
+        rss, cpu = float(fields[0]) / 1024, f"CPU {float(fields[1]) + float(fields[2]):.2f} s"
+    return wall, rss, p.returncode, (p.stderr.strip().splitlines() or [""])[-1] if p.returncode else cpu
 
 
 def write_alone(path: Path, size: int, piece: int = 16 << 20) -> float:
@@ -309,8 +314,7 @@ def main() -> int:
             if out_bytes.get(name):  # the floor under the command: its output's bytes written, nothing computed
                 sec = write_alone(folder / "floor.bin", out_bytes[name])
                 results[f"writing {name}'s {out_bytes[name] / 1e9:.2f} GB alone"] = (sec, float("nan"), 0, "")
-        for name, (sec, rss, status, err) in results.items():
-            note = err if status else ""
+        for name, (sec, rss, _, note) in results.items():
             rate = n / sec
             rss_s = "" if rss != rss else f"{rss:,.0f}"
             print(f"| {n:.0e} | {name} | {sec:.2f} | {rate:,.0f} | {rate / k_rate:.3f} | {rate / fp_rate:,.1f} | "
