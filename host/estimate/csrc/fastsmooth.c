@@ -1391,12 +1391,9 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
         const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
         double *o = xs + 4 * k, *sd = sds + 4 * k;
         o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
-        sd[0] = carry[2], sd[1] = carry[5], sd[2] = row[2], sd[3] = row[4];
+        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(row[2]), sd[3] = sqrt(row[4]);
         ru_step(m, carry, row[0], row[2], nx[0], nx[2], nx[3], sr + 4);
     }
-    /* the square roots apart from the recursion: a loop the compiler vectorises */
-    for (long i = 0; i < 4 * n; i++)
-        sds[i] = sqrt(sds[i]);
 }
 
 /* ------------------------------------------------------------------------- */
