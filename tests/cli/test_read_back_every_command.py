@@ -20,7 +20,8 @@ from accelnav.model.load import load_model
 SCENARIO = {"fit-bias": "stationary", "calibrate": "tumble", "tune": "stop_and_go", "smooth": "stop_and_go",
             "filter": "stop_and_go", "hil": "stop_and_go"}  # fmt: skip
 DURATION = {"stationary": 61, "tumble": 61, "stop_and_go": 30}
-FILES = ("sim.npz", "sim.csv", "smooth_full.npz", "smooth_full.csv", "filter.npz", "filter.csv", "rec.acnlog",
+FILES = ("sim.npz", "sim.csv", "smooth_full.npz", "smooth_full.csv", "filter_full.npz", "filter_full.csv",
+         "rec.acnlog",
          "log.csv", "log.npz")  # fmt: skip
 
 
@@ -45,6 +46,7 @@ def written(tmp_path_factory) -> dict[str, Path]:
             ["sim", "--scenario", scenario, "--duration", seconds, "--out", d / "sim.npz", "--csv", d / "sim.csv"],
             ["smooth", d / "sim.npz", "--full", "--out", d / "smooth_full.npz", "--csv", d / "smooth_full.csv"],
             ["smooth", d / "sim.npz", "--out", d / "smooth.npz", "--csv", d / "smooth.csv"],
+            ["filter", d / "sim.npz", "--full", "--out", d / "filter_full.npz", "--csv", d / "filter_full.csv"],
             ["filter", d / "sim.npz", "--out", d / "filter.npz", "--csv", d / "filter.csv"],
         ]
         for argv in steps:
@@ -70,7 +72,7 @@ def test_every_command_reads_every_file_accelnav_writes(written, tmp_path, capsy
     assert status == 0, (stderr or stdout).strip().splitlines()[-1]
 
 
-@pytest.mark.parametrize("name", ["smooth.npz", "smooth.csv"])
+@pytest.mark.parametrize("name", ["smooth.npz", "smooth.csv", "filter.npz", "filter.csv"])
 def test_an_output_without_its_input_is_refused_saying_so(written, tmp_path, capsys, name):
     path = written["stop_and_go"] / name
     for command in ("smooth", "fit-bias"):
