@@ -190,7 +190,7 @@ def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
             f"    /* z = code * scale + offset: (code << {p.conv_shift}) x SCALE (Q.{fs}, unsigned) is"
             f" Q.{fs + p.conv_shift}, its high word Q.{fz} (floor;",
             "     * OFFSET carries half an LSB, so the sum rounds) */",
-            f"    *z = (int32_t)(((uint64_t)((uint32_t)code << {p.conv_shift}) * {P}_SCALE) >> 32) + {P}_OFFSET;",
+            f"    *z = (int32_t)acn_umulhi((uint32_t)code << {p.conv_shift}, {P}_SCALE) + {P}_OFFSET;",
             "    return true;",
         ]
         return "int32_t code", "code", body
@@ -227,6 +227,16 @@ def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
     return "int32_t t1, int32_t t2", "t1, t2", body
 
 
+def _mul_round32(a: str, b: str, frm: int, to: int, comment: str = "") -> str:
+    """(a b: int32 x int32, frac bits frm) -> frac bits to, rounded to nearest, as an int32 (its low word
+    where it does not fit: the caller's int32 arithmetic wraps). One call on every target
+    (acn_mul_rshr32: on AVR a product and a byte-wise shift instead of libgcc's 64-bit helpers)."""
+    s = frm - to
+    if 1 <= s <= 63:
+        return f"acn_mul_rshr32({a}, {b}, {s}) /* Q.{frm} -> Q.{to}, round{comment} */"
+    return f"(int32_t){_shift(f'acn_mul({a}, {b})', frm, to, comment)}"
+
+
 def _sh(expr: str, s: int, what: str) -> str:
     """expr (int64) >> s, floor (arithmetic shift); s <= 0 multiplies. Comment: what it converts."""
     if s > 0:
@@ -238,7 +248,7 @@ def _sh(expr: str, s: int, what: str) -> str:
 
 def _hi_round(expr: str) -> str:
     """The high word of an int64, rounded to nearest (ties up)."""
-    return f"(int32_t)(((uint64_t)({expr}) + UINT64_C(0x80000000)) >> 32)"
+    return f"acn_hi_round({expr})"
 
 
 def _term(t: Term, P: str) -> str:
@@ -281,10 +291,13 @@ def _hsum(h: HSum) -> str:
     the folded constants and the rounding offset (half an LSB, or the dither) start it, then one SMLAL
     per variable."""
     acc = f"INT64_C({h.lit}) + (int64_t){h.dither}" if h.dither else _c_int(h.lit + 2**31, 64)
-    for x, k, ki, (val, q) in h.ops:
+    if not h.ops:
+        return f"(int32_t)(({acc}) >> 32) /* Q.{h.F} -> Q.{h.ft}, high word */"
+    for i, (x, k, ki, (val, q)) in enumerate(h.ops):
         cm = f"2^{q}" if val is None else f"{val:.6g} Q.{q}"
-        acc = f"acn_mac({acc}, {f'({x} >> {k})' if k else x}, {_c_int(ki, 32)} /* {cm} */)"
-    return f"(int32_t)(({acc}) >> 32) /* Q.{h.F} -> Q.{h.ft}, high word */"
+        mac = "acn_mac_hi" if i == len(h.ops) - 1 else "acn_mac"  # the last one gives the high word
+        acc = f"{mac}({acc}, {f'({x} >> {k})' if k else x}, {_c_int(ki, 32)} /* {cm} */)"
+    return f"{acc} /* Q.{h.F} -> Q.{h.ft}, high word */"
 
 
 def _entry(how, P: str) -> str:
@@ -379,12 +392,12 @@ def _gains_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
         f"    x >>= {nmax} - n;",
         "    xs = (int32_t)(x >> 1); /* below 2^31: each product is one signed 32x32 multiply */",
         "    /* w = y / S (|w| <= max|y| / R: fits, no saturation) */",
-        f"    w = (int32_t)ACN_RSHR(acn_mul(y, xs), {sw}); /* Q.{fy} x Q.{fx} -> {p.vars['w'].fmt}, round */",
+        f"    w = {_mul_round32('y', 'xs', fy + fx, fw)}; /* Q.{fy} x Q.{fx} -> {p.vars['w'].fmt} */",
         "    /* x = x + K y = x + c w (K = c / S), c the prior block: r and v = Ts u take K_r y, K_v y here,",
         "     * the rest of their step in the core */",
         f"    s->r += {_sh('acn_mul(cr, w)', pr['r'] - fr, 'Q.{} -> Q.{}'.format(pr['r'], fr))};",
         f"    s->v += {_sh('acn_mul(cv, w)', pr['v'] - fv, 'Q.{} -> Q.{}'.format(pr['v'], fv))};",
-        f"    s->a += (int32_t)ACN_RSHR(acn_mul(ca, w), {pr['a'] - fy}); /* Q.{pr['a']} -> Q.{fy}, round */",
+        f"    s->a = (int32_t)((uint32_t)s->a + (uint32_t){_mul_round32('ca', 'w', pr['a'], fy)});",
         f"    s->e = acn_mac(s->e, ce, w); /* Q.{fe}, exact */"
         if pr["e"] == fe
         # c_e in a format finer than the one whose product with w lands in eps's (its fine format,
@@ -397,19 +410,19 @@ def _gains_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
         else f"    s->e += {_sh('acn_mul(ce, w)', pr['e'] - fe, 'Q.{} -> Q.{}'.format(pr['e'], fe))};",
         "    /* P = P - c c' / S: c_i -= c_i kappa with kappa = (S - R) / S in [0, 1), Q0.31;",
         "     * P_ie -= c_i K_e with K_e = c_e / S */",
-        f"    kap = (int32_t)ACN_RSHR(acn_mul(S - {P}_{Rn}, xs), {fca + fx - 31}); /* Q.{fca + fx} -> Q0.31, round */",
+        f"    kap = {_mul_round32(f'S - {P}_{Rn}', 'xs', fca + fx, 31)}; /* kappa, Q0.31 */",
         # K_e without saturation when the planner found it fits int32 for any c_e (codegen.plan_cov)
-        f"    Ke = (int32_t)ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}); /* Q.{fce + fx} -> {p.vars['Ke'].fmt},"
-        " round; fits for any c_e */"
+        f"    Ke = {_mul_round32('ce', 'xs', fce + fx, fKe)}; /* K_e {p.vars['Ke'].fmt}: fits for any c_e */"
         if sums.ke_free
         else f"    Ke = acn_sat32(ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}), &s->overflow);"
         f" /* Q.{fce + fx} -> {p.vars['Ke'].fmt}, round */",
     ]
+    # the posterior entries in 32-bit arithmetic: the same low word as the int64 difference cast back
     for dst, ci in (("Pre", "cr"), ("Pve", "cv"), ("Pae", "ca")):
-        dec = _shift(f"acn_mul({ci}, Ke)", p.f(ci) + fKe, p.f(dst))
-        L.append(f"    s->{dst} = (int32_t)((int64_t)s->{dst} - {dec});")
+        dec = _mul_round32(ci, "Ke", p.f(ci) + fKe, p.f(dst))
+        L.append(f"    s->{dst} = (int32_t)((uint32_t)s->{dst} - (uint32_t){dec});")
     for ci in ("cr", "cv", "ca", "ce"):
-        L.append(f"    s->{ci} = (int32_t)((int64_t){ci} - {_shift(f'acn_mul({ci}, kap)', p.f(ci) + 31, p.f(ci))});")
+        L.append(f"    s->{ci} = (int32_t)((uint32_t){ci} - (uint32_t){_mul_round32(ci, 'kap', p.f(ci) + 31, p.f(ci))});")
     return L
 
 
@@ -962,8 +975,8 @@ def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[st
     src += _core_cov_coarse(c, P, T) + ["}", ""]
     src += [
         "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
-        f" * with z [m/s^2] {p.vars['z'].fmt}. Inlined into update, skip and step. */",
-        f"ACN_INLINE void {T}_core({T}_t *s, int32_t z, bool valid)",
+        f" * with z [m/s^2] {p.vars['z'].fmt}. Inlined into update, skip and step (one copy on AVR, ACN_CORE). */",
+        f"ACN_CORE void {T}_core({T}_t *s, int32_t z, bool valid)",
         "{",
     ]
     src += _core_fixed(c, P, T)
