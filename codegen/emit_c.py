@@ -372,7 +372,7 @@ def _gains_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
     ce_a = f"(((ce >> {d - 1}) + 1) >> 1) /* Q.{fce} -> Q.{fca}, round */" if d > 0 else ""
     fy, fw, fr, fv, fe = p.f("y"), p.f("w"), p.f("r"), p.f("v"), p.f("e")
     pr = cf["prod"]
-    sw = fy + fx - fw  # its shifts, and kappa's, K_e's and a's, are checked in range by the planner
+    # w's shift, and kappa's, K_e's and a's, are checked in range by the planner
     L = [
         "    int32_t cr = s->cr, cv = s->cv, ca = s->ca, ce = s->ce, S, xs, w, kap, Ke;",
         "    uint32_t x;",
@@ -422,7 +422,8 @@ def _gains_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
         dec = _mul_round32(ci, "Ke", p.f(ci) + fKe, p.f(dst))
         L.append(f"    s->{dst} = (int32_t)((uint32_t)s->{dst} - (uint32_t){dec});")
     for ci in ("cr", "cv", "ca", "ce"):
-        L.append(f"    s->{ci} = (int32_t)((uint32_t){ci} - (uint32_t){_mul_round32(ci, 'kap', p.f(ci) + 31, p.f(ci))});")
+        dec = _mul_round32(ci, "kap", p.f(ci) + 31, p.f(ci))
+        L.append(f"    s->{ci} = (int32_t)((uint32_t){ci} - (uint32_t){dec});")
     return L
 
 
