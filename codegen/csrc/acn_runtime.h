@@ -112,11 +112,13 @@ int32_t acn_avr_smac_hi(int64_t acc, int32_t a, int32_t b) __asm__("acn_avr_smac
 int32_t acn_avr_umac_hi(int64_t acc, uint32_t a, uint32_t b) __asm__("acn_avr_umac"); /* unsigned */
 int32_t acn_avr_rshr32(int64_t x, uint8_t s); /* the low word of (x + 2^(s-1)) >> s, 1 <= s <= 63 */
 int32_t acn_avr_hi_round(int64_t x);          /* the high word of x + 2^31 */
+int32_t acn_avr_add_sat32(int32_t b, int32_t a, uint32_t *overflow); /* acn_add_sat32(a, b, overflow) */
 __asm__(".section .text.acn_avr,\"ax\",@progbits\n"
         ".weak acn_avr_smac\n.type acn_avr_smac, @function\n"
         ".weak acn_avr_umac\n.type acn_avr_umac, @function\n"
         ".weak acn_avr_rshr32\n.type acn_avr_rshr32, @function\n"
         ".weak acn_avr_hi_round\n.type acn_avr_hi_round, @function\n"
+        ".weak acn_avr_add_sat32\n.type acn_avr_add_sat32, @function\n"
         /* signed: a b = ua ub - 2^32 ((a < 0) ub + (b < 0) ua) mod 2^64, the corrections first */
         "acn_avr_smac:\n"
         "sbrs r17, 7\nrjmp 1f\nsub r22, r10\nsbc r23, r11\nsbc r24, r12\nsbc r25, r13\n"
@@ -159,6 +161,15 @@ __asm__(".section .text.acn_avr,\"ax\",@progbits\n"
         /* x - (-2^31): bytes 3..7 only (the lower three subtract 0) */
         "acn_avr_hi_round:\n"
         "subi r21, 0x80\nsbci r22, 0xff\nsbci r23, 0xff\nsbci r24, 0xff\nsbci r25, 0xff\nret\n"
+        /* b (r22..r25) + a (r18..r21); on a signed overflow a's bound (INT32_MIN or INT32_MAX) and one more
+         * in *overflow (r16:r17) */
+        "acn_avr_add_sat32:\n"
+        "add r22, r18\nadc r23, r19\nadc r24, r20\nadc r25, r21\nbrvs 1f\nret\n"
+        "1: ldi r22, 0xff\nldi r23, 0xff\nldi r24, 0xff\nldi r25, 0x7f\nsbrs r21, 7\nrjmp 2f\n"
+        "ldi r22, 0\nldi r23, 0\nldi r24, 0\nldi r25, 0x80\n"
+        "2: movw r30, r16\nld r18, Z\nldd r19, Z+1\nldd r20, Z+2\nldd r21, Z+3\n"
+        "subi r18, 0xff\nsbci r19, 0xff\nsbci r20, 0xff\nsbci r21, 0xff\n"
+        "st Z, r18\nstd Z+1, r19\nstd Z+2, r20\nstd Z+3, r21\nret\n"
         ".text\n");
 #endif
 
@@ -307,9 +318,11 @@ static inline int32_t acn_sat32(int64_t x, uint32_t *overflow)
 /* a + b saturated to int32, counting: the same value and count as acn_sat32((int64_t)a + b) (the
  * 32-bit add overflows exactly when the sum leaves int32, and then the sum has a's sign); one ADDS
  * and one branch on the overflow flag in the common case. */
-static inline int32_t acn_add_sat32(int32_t a, int32_t b, uint32_t *overflow)
+ACN_MATH int32_t acn_add_sat32(int32_t a, int32_t b, uint32_t *overflow)
 {
-#if defined(__GNUC__)
+#if defined(ACN_AVR_ASM)
+    return acn_avr_add_sat32(b, a, overflow);
+#elif defined(__GNUC__)
     int32_t r;
     if (__builtin_expect(__builtin_add_overflow(a, b, &r), 0)) {
         ++*overflow;
