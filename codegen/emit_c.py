@@ -219,9 +219,12 @@ def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
         "    }",
         "    /* duty = t1 / t2 without a division: 1/t2 = x 2^(n-62) */",
         "    x = acn_recip((uint32_t)t2, &n);",
-        "    duty = (int32_t)ACN_RSHR((int64_t)t1 * x, 31 - n); /* Q(62-n) -> Q0.31, round */",
+        "    duty = acn_rshr32((int64_t)acn_umul((uint32_t)t1, x), 31 - n); /* Q(62-n) -> Q0.31, round (t1 > 0) */",
         f"    /* z = duty * g0/duty_per_g - zero_g * g0/duty_per_g: Q.{31 + cg.frac} -> {p.vars['z'].fmt} */",
-        f"    *z = (int32_t){_shift(f'(int64_t)duty * {P}_DGAIN - {P}_DZERO', 31 + cg.frac, fz)};",
+        f"    *z = acn_rshr32(acn_mac(-{P}_DZERO, duty, {P}_DGAIN), {31 + cg.frac - fz}); /* Q.{31 + cg.frac} ->"
+        f" Q.{fz}, round */"
+        if 1 <= 31 + cg.frac - fz <= 63 and cg.word == 32 and p.consts["DZERO"][0] > -(2.0**62)  # -DZERO fits int64
+        else f"    *z = (int32_t){_shift(f'(int64_t)duty * {P}_DGAIN - {P}_DZERO', 31 + cg.frac, fz)};",
         "    return true;",
     ]
     return "int32_t t1, int32_t t2", "t1, t2", body
@@ -455,9 +458,9 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
     eh = _hi_round("e")
     fH2, fT2 = p.consts["H2"][1].frac, p.consts["T2"][1].frac
     decay = (
-        f"e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
+        f"e -= {_sh(f'acn_mul({P}_OMP, {eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
         if fo != 32
-        else f"e += (int64_t)-{P}_OMP * ({eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */"
+        else f"e = acn_mac(e, -{P}_OMP, {eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */"
     )
     com = "/* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar), eps by its rounded high word */"
     if sfx:  # the coarse step: the first sample has no predict
@@ -474,8 +477,8 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
         "    /* r += Ts u + Ts^2/2 a,  u += Ts a (K_r y and K_v y are in already); u and a are the previous",
         "     * posteriors, and at k = 0 both increments are zero (x0 has r = u = a = 0): no test of k */",
         f"    r = s->r + {_sh('v0', fv - fr, f'Q.{fv} -> Q.{fr}')}"
-        f" + {_sh(f'(int64_t){P}_H2 * a', fH2 + fy - fr, f'Q.{fH2 + fy} -> Q.{fr}')};",
-        f"    v = s->v + {_sh(f'(int64_t){P}_T2 * a', fT2 + fy - fv, f'Q.{fT2 + fy} -> Q.{fv}')};",
+        f" + {_sh(f'acn_mul({P}_H2, a)', fH2 + fy - fr, f'Q.{fH2 + fy} -> Q.{fr}')};",
+        f"    v = s->v + {_sh(f'acn_mul({P}_T2, a)', fT2 + fy - fv, f'Q.{fT2 + fy} -> Q.{fv}')};",
         f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
         f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
         tail,

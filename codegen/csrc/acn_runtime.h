@@ -110,6 +110,7 @@
 int64_t acn_avr_smac(int64_t acc, int32_t a, int32_t b);                          /* acc + a b */
 int32_t acn_avr_smac_hi(int64_t acc, int32_t a, int32_t b) __asm__("acn_avr_smac"); /* its high word */
 int32_t acn_avr_umac_hi(int64_t acc, uint32_t a, uint32_t b) __asm__("acn_avr_umac"); /* unsigned */
+uint64_t acn_avr_umac(uint64_t acc, uint32_t a, uint32_t b); /* acc + a b, unsigned */
 int32_t acn_avr_rshr32(int64_t x, uint8_t s); /* the low word of (x + 2^(s-1)) >> s, 1 <= s <= 63 */
 int32_t acn_avr_hi_round(int64_t x);          /* the high word of x + 2^31 */
 int32_t acn_avr_add_sat32(int32_t b, int32_t a, uint32_t *overflow); /* acn_add_sat32(a, b, overflow) */
@@ -214,6 +215,16 @@ ACN_MATH int32_t acn_mac_hi(int64_t acc, int32_t a, int32_t b)
     return acn_avr_smac_hi(acc, a, b);
 #else
     return (int32_t)(acn_mac(acc, a, b) >> 32);
+#endif
+}
+
+/* a b, unsigned 32 x 32 -> 64. */
+ACN_MATH uint64_t acn_umul(uint32_t a, uint32_t b)
+{
+#if defined(ACN_AVR_ASM)
+    return acn_avr_umac(0, a, b);
+#else
+    return (uint64_t)a * b;
 #endif
 }
 

@@ -2,7 +2,7 @@
 acn_avr_hi_round, acn_avr_add_sat32: hand-written assembly in codegen/csrc/acn_runtime.h) give the
 integers their C contracts define.
 
-The runtime's helpers (acn_mul, acn_mac, acn_mac_hi, acn_umulhi, acn_rshr32, acn_mul_rshr32,
+The runtime's helpers (acn_mul, acn_mac, acn_mac_hi, acn_umulhi, acn_umul, acn_rshr32, acn_mul_rshr32,
 acn_hi_round, acn_add_sat32) run on a table of operands (the int32 and int64 edges, every shift count
 1..63, seeded random values) in simavr and on the host (the plain C of the same helpers); both are
 compared with the exact integers computed here in Python. The filters' own runs (test_avr_portable)
@@ -60,13 +60,14 @@ def _expected(acc: int, a: int, b: int, s: int) -> str:
         mac,  # acn_mac
         mac >> 32,  # acn_mac_hi
         ((a % M32) * (b % M32)) >> 32,  # acn_umulhi
+        (a % M32) * (b % M32),  # acn_umul
         ((acc + 2 ** (s - 1)) >> s) % M32,  # acn_rshr32: the exact rounded shift, its low word
         ((a * b + 2 ** (s - 1)) >> s) % M32,  # acn_mul_rshr32
         ((acc % M64 + 2**31) % M64) >> 32,  # acn_hi_round
         sat % M32,  # acn_add_sat32
         int(sat != total),  # ... and its count
     ]
-    widths = (16, 16, 8, 8, 8, 8, 8, 8, 8)
+    widths = (16, 16, 8, 8, 16, 8, 8, 8, 8, 8)
     return "R" + "".join(f"{v:0{w}x}" for v, w in zip(fields, widths, strict=True))
 
 
@@ -127,6 +128,7 @@ int main(void)
         hex((uint64_t)acn_mac(c.acc, c.a, c.b), 16u);
         hex((uint32_t)acn_mac_hi(c.acc, c.a, c.b), 8u);
         hex(acn_umulhi((uint32_t)c.a, (uint32_t)c.b), 8u);
+        hex(acn_umul((uint32_t)c.a, (uint32_t)c.b), 16u);
         hex((uint32_t)acn_rshr32(c.acc, c.s), 8u);
         hex((uint32_t)acn_mul_rshr32(c.a, c.b, c.s), 8u);
         hex((uint32_t)acn_hi_round(c.acc), 8u);
