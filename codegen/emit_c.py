@@ -152,6 +152,31 @@ def _checkpoint_c(c: AxisCode, P: str, T: str, fields: list[tuple[str, str, str]
 
     what = "with the row as its index in the table" if gs else "the state struct's bytes on a little-endian target"
     src = [f"/* The checkpoint image ({P}_CK_BYTES bytes, {what}). */"]
+    if not gs:  # on AVR (little-endian, no padding) the image is the struct's bytes: copied, not built member by member
+        same = " && ".join(f"offsetof({T}_t, {nm}) == {off[nm]}" for _, nm, _ in ck)
+        src += [
+            "#if defined(__AVR__)",
+            "/* the image's layout is the struct's here (a compile error if not): a copy byte by byte, a few dozen",
+            " * instructions where the members one by one took some 900 bytes of the part's flash */",
+            f"typedef char {T}_ck_is_the_struct[sizeof({T}_t) == {P}_CK_BYTES && {same} ? 1 : -1];",
+            f"void {T}_save(const {T}_t *s, uint8_t *out)",
+            "{",
+            "    const uint8_t *p = (const uint8_t *)s;",
+            f"    for (unsigned i = 0; i < {P}_CK_BYTES; i++) {{",
+            "        out[i] = p[i];",
+            "    }",
+            "}",
+            "",
+            f"bool {T}_load({T}_t *s, const uint8_t *in)",
+            "{",
+            "    uint8_t *p = (uint8_t *)s;",
+            f"    for (unsigned i = 0; i < {P}_CK_BYTES; i++) {{",
+            "        p[i] = in[i];",
+            "    }",
+            "    return true;",
+            "}",
+            "#else",
+        ]
     src += [f"void {T}_save(const {T}_t *s, uint8_t *out)", "{"]
     for t, nm, _ in ck:
         src += put(t, nm)
@@ -173,7 +198,7 @@ def _checkpoint_c(c: AxisCode, P: str, T: str, fields: list[tuple[str, str, str]
         ]
     for t, nm, _ in ck:
         src += get(t, nm)
-    src += ["    return true;", "}", ""]
+    src += ["    return true;", "}"] + ([] if gs else ["#endif"]) + [""]
     return src
 
 

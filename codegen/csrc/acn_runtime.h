@@ -358,7 +358,11 @@ static inline int64_t acn_limit(int64_t x, int32_t hmax, uint32_t *overflow)
 
 /* round(x * c / 2^s) for int64 x, int32 c, 1 <= s <= 62, without a 96-bit
  * product: x = hi 2^32 + lo, lo unsigned. Contract: the result fits int64. */
+#if defined(ACN_AVR_ASM) /* one copy for every axis' read: half a kilobyte each on AVR, and no step calls it */
+static __attribute__((noinline, unused)) int64_t acn_mul64x32(int64_t x, int32_t c, int s)
+#else
 static inline int64_t acn_mul64x32(int64_t x, int32_t c, int s)
+#endif
 {
     int64_t hi = (x >> 32) * c;                          /* |.| < 2^62 */
     int64_t t = (int64_t)(uint32_t)(x & UINT32_C(0xFFFFFFFF)) * c; /* |.| < 2^63 */
