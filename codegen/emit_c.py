@@ -502,8 +502,8 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
         "    /* r += Ts u + Ts^2/2 a,  u += Ts a (K_r y and K_v y are in already); u and a are the previous",
         "     * posteriors, and at k = 0 both increments are zero (x0 has r = u = a = 0): no test of k */",
         f"    r = s->r + {_sh('v0', fv - fr, f'Q.{fv} -> Q.{fr}')}"
-        f" + {_sh(f'acn_mul({P}_H2, a)', fH2 + fy - fr, f'Q.{fH2 + fy} -> Q.{fr}')};",
-        f"    v = s->v + {_sh(f'acn_mul({P}_T2, a)', fT2 + fy - fv, f'Q.{fT2 + fy} -> Q.{fv}')};",
+        f" + {_sh(f'acn_wmul({P}_H2, a)', fH2 + fy - fr, f'Q.{fH2 + fy} -> Q.{fr}')};",
+        f"    v = s->v + {_sh(f'acn_wmul({P}_T2, a)', fT2 + fy - fv, f'Q.{fT2 + fy} -> Q.{fv}')};",
         f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
         f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
         tail,

@@ -208,6 +208,17 @@ ACN_MATH int64_t acn_mac(int64_t acc, int32_t a, int32_t b)
 #endif
 }
 
+/* a b as int64 where the compiler multiplies well by itself and may fold the product into what follows
+ * (a shift, an add: gcc for Cortex-M3 does, through an asm it cannot); the AVR routine on AVR. */
+ACN_MATH int64_t acn_wmul(int32_t a, int32_t b)
+{
+#if defined(ACN_AVR_ASM)
+    return acn_avr_smac(0, a, b);
+#else
+    return (int64_t)a * b;
+#endif
+}
+
 /* The high word of acc + a b (an SMLAL's high register). */
 ACN_MATH int32_t acn_mac_hi(int64_t acc, int32_t a, int32_t b)
 {
