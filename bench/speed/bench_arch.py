@@ -157,7 +157,8 @@ def uno_fit(tmp: Path) -> tuple[int, int, str]:
         m = need.search(str(e))
         if not m:
             raise SystemExit(f"bench: {e}") from None
-        return int(m[1]), int(m[2]) + int(m[3]), "the firmware build's refusal (flash linked, RAM + stack)"
+        why = f"the firmware build's refusal: {m[1]} B flash linked, {m[2]} B static RAM + its {m[3]} B stack reserve"
+        return int(m[1]), int(m[2]) + int(m[3]), why
     size = subprocess.run(["avr-size", "-A", str(out / "accelnav_fw.elf")], capture_output=True, text=True).stdout
     sec = {a: int(b) for a, b in (ln.split()[:2] for ln in size.splitlines() if ln.startswith("."))}
     stated = need.search((out / "size.txt").read_text()) if (out / "size.txt").exists() else None
@@ -203,8 +204,8 @@ def before_after(model, codes, q, avr, sz, base_fn, tmp: Path, nax: int) -> None
     print("|---|---:|---:|---|")
     for goal, b, m, ok in rows:
         print(f"| {goal} | {b} | {m} | {'yes' if ok else 'no'} |")
-    print(f"\n3-axis figures: {how}; baseline: not built with the base generator (the issue measured a 3-axis")
-    print("link overflowing the part by 7 014 B).")
+    print(f"\n3-axis figures: {how} (firmware.mk); baseline: not built with the base generator (the issue")
+    print("measured a 3-axis link overflowing the part by 7 014 B).")
 
 
 def main(argv=None) -> int:
