@@ -182,8 +182,8 @@ __asm__(".section .text.acn_avr,\"ax\",@progbits\n"
  * product), so on Thumb-2 it is spelled out; the result is the same integer everywhere. */
 ACN_MATH int64_t acn_mul(int32_t a, int32_t b)
 {
-#if defined(ACN_AVR_ASM)
-    return acn_avr_smac(0, a, b);
+#if defined(ACN_AVR_ASM) /* b, the generator's constant if any, into r14..r17: two of its bytes take an LDI */
+    return acn_avr_smac(0, b, a);
 #elif defined(__arm__) && defined(__thumb2__)
     uint32_t lo, hi;
     __asm__("smull %0, %1, %2, %3" : "=&r"(lo), "=&r"(hi) : "r"(a), "r"(b));
@@ -198,7 +198,7 @@ ACN_MATH int64_t acn_mul(int32_t a, int32_t b)
 ACN_MATH int64_t acn_mac(int64_t acc, int32_t a, int32_t b)
 {
 #if defined(ACN_AVR_ASM)
-    return acn_avr_smac(acc, a, b);
+    return acn_avr_smac(acc, b, a);
 #elif defined(__arm__) && defined(__thumb2__)
     uint32_t lo = (uint32_t)acc, hi = (uint32_t)((uint64_t)acc >> 32);
     __asm__("smlal %0, %1, %2, %3" : "+r"(lo), "+r"(hi) : "r"(a), "r"(b));
@@ -213,7 +213,7 @@ ACN_MATH int64_t acn_mac(int64_t acc, int32_t a, int32_t b)
 ACN_MATH int64_t acn_wmul(int32_t a, int32_t b)
 {
 #if defined(ACN_AVR_ASM)
-    return acn_avr_smac(0, a, b);
+    return acn_avr_smac(0, b, a);
 #else
     return (int64_t)a * b;
 #endif
@@ -223,7 +223,7 @@ ACN_MATH int64_t acn_wmul(int32_t a, int32_t b)
 ACN_MATH int32_t acn_mac_hi(int64_t acc, int32_t a, int32_t b)
 {
 #if defined(ACN_AVR_ASM)
-    return acn_avr_smac_hi(acc, a, b);
+    return acn_avr_smac_hi(acc, b, a);
 #else
     return (int32_t)(acn_mac(acc, a, b) >> 32);
 #endif
