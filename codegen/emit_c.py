@@ -152,6 +152,31 @@ def _checkpoint_c(c: AxisCode, P: str, T: str, fields: list[tuple[str, str, str]
 
     what = "with the row as its index in the table" if gs else "the state struct's bytes on a little-endian target"
     src = [f"/* The checkpoint image ({P}_CK_BYTES bytes, {what}). */"]
+    if not gs:  # on AVR (little-endian, no padding) the image is the struct's bytes: copied, not built member by member
+        same = " && ".join(f"offsetof({T}_t, {nm}) == {off[nm]}" for _, nm, _ in ck)
+        src += [
+            "#if defined(__AVR__)",
+            "/* the image's layout is the struct's here (a compile error if not): a copy byte by byte, a few dozen",
+            " * instructions where the members one by one took some 900 bytes of the part's flash */",
+            f"typedef char {T}_ck_is_the_struct[sizeof({T}_t) == {P}_CK_BYTES && {same} ? 1 : -1];",
+            f"void {T}_save(const {T}_t *s, uint8_t *out)",
+            "{",
+            "    const uint8_t *p = (const uint8_t *)s;",
+            f"    for (unsigned i = 0; i < {P}_CK_BYTES; i++) {{",
+            "        out[i] = p[i];",
+            "    }",
+            "}",
+            "",
+            f"bool {T}_load({T}_t *s, const uint8_t *in)",
+            "{",
+            "    uint8_t *p = (uint8_t *)s;",
+            f"    for (unsigned i = 0; i < {P}_CK_BYTES; i++) {{",
+            "        p[i] = in[i];",
+            "    }",
+            "    return true;",
+            "}",
+            "#else",
+        ]
     src += [f"void {T}_save(const {T}_t *s, uint8_t *out)", "{"]
     for t, nm, _ in ck:
         src += put(t, nm)
@@ -173,7 +198,7 @@ def _checkpoint_c(c: AxisCode, P: str, T: str, fields: list[tuple[str, str, str]
         ]
     for t, nm, _ in ck:
         src += get(t, nm)
-    src += ["    return true;", "}", ""]
+    src += ["    return true;", "}"] + ([] if gs else ["#endif"]) + [""]
     return src
 
 
@@ -190,7 +215,7 @@ def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
             f"    /* z = code * scale + offset: (code << {p.conv_shift}) x SCALE (Q.{fs}, unsigned) is"
             f" Q.{fs + p.conv_shift}, its high word Q.{fz} (floor;",
             "     * OFFSET carries half an LSB, so the sum rounds) */",
-            f"    *z = (int32_t)(((uint64_t)((uint32_t)code << {p.conv_shift}) * {P}_SCALE) >> 32) + {P}_OFFSET;",
+            f"    *z = (int32_t)acn_umulhi((uint32_t)code << {p.conv_shift}, {P}_SCALE) + {P}_OFFSET;",
             "    return true;",
         ]
         return "int32_t code", "code", body
@@ -219,12 +244,25 @@ def _input_fixed(p: AxisPlan, P: str) -> tuple[str, str, list[str]]:
         "    }",
         "    /* duty = t1 / t2 without a division: 1/t2 = x 2^(n-62) */",
         "    x = acn_recip((uint32_t)t2, &n);",
-        "    duty = (int32_t)ACN_RSHR((int64_t)t1 * x, 31 - n); /* Q(62-n) -> Q0.31, round */",
+        "    duty = acn_rshr32((int64_t)acn_umul((uint32_t)t1, x), 31 - n); /* Q(62-n) -> Q0.31, round (t1 > 0) */",
         f"    /* z = duty * g0/duty_per_g - zero_g * g0/duty_per_g: Q.{31 + cg.frac} -> {p.vars['z'].fmt} */",
-        f"    *z = (int32_t){_shift(f'(int64_t)duty * {P}_DGAIN - {P}_DZERO', 31 + cg.frac, fz)};",
+        f"    *z = acn_rshr32(acn_mac(-{P}_DZERO, duty, {P}_DGAIN), {31 + cg.frac - fz}); /* Q.{31 + cg.frac} ->"
+        f" Q.{fz}, round */"
+        if 1 <= 31 + cg.frac - fz <= 63 and cg.word == 32 and p.consts["DZERO"][0] > -(2.0**62)  # -DZERO fits int64
+        else f"    *z = (int32_t){_shift(f'(int64_t)duty * {P}_DGAIN - {P}_DZERO', 31 + cg.frac, fz)};",
         "    return true;",
     ]
     return "int32_t t1, int32_t t2", "t1, t2", body
+
+
+def _mul_round32(a: str, b: str, frm: int, to: int, comment: str = "") -> str:
+    """(a b: int32 x int32, frac bits frm) -> frac bits to, rounded to nearest, as an int32 (its low word
+    where it does not fit: the caller's int32 arithmetic wraps). One call on every target
+    (acn_mul_rshr32: on AVR a product and a byte-wise shift instead of libgcc's 64-bit helpers)."""
+    s = frm - to
+    if 1 <= s <= 63:
+        return f"acn_mul_rshr32({a}, {b}, {s}) /* Q.{frm} -> Q.{to}, round{comment} */"
+    return f"(int32_t){_shift(f'acn_mul({a}, {b})', frm, to, comment)}"
 
 
 def _sh(expr: str, s: int, what: str) -> str:
@@ -238,7 +276,7 @@ def _sh(expr: str, s: int, what: str) -> str:
 
 def _hi_round(expr: str) -> str:
     """The high word of an int64, rounded to nearest (ties up)."""
-    return f"(int32_t)(((uint64_t)({expr}) + UINT64_C(0x80000000)) >> 32)"
+    return f"acn_hi_round({expr})"
 
 
 def _term(t: Term, P: str) -> str:
@@ -281,10 +319,13 @@ def _hsum(h: HSum) -> str:
     the folded constants and the rounding offset (half an LSB, or the dither) start it, then one SMLAL
     per variable."""
     acc = f"INT64_C({h.lit}) + (int64_t){h.dither}" if h.dither else _c_int(h.lit + 2**31, 64)
-    for x, k, ki, (val, q) in h.ops:
+    if not h.ops:
+        return f"(int32_t)(({acc}) >> 32) /* Q.{h.F} -> Q.{h.ft}, high word */"
+    for i, (x, k, ki, (val, q)) in enumerate(h.ops):
         cm = f"2^{q}" if val is None else f"{val:.6g} Q.{q}"
-        acc = f"acn_mac({acc}, {f'({x} >> {k})' if k else x}, {_c_int(ki, 32)} /* {cm} */)"
-    return f"(int32_t)(({acc}) >> 32) /* Q.{h.F} -> Q.{h.ft}, high word */"
+        mac = "acn_mac_hi" if i == len(h.ops) - 1 else "acn_mac"  # the last one gives the high word
+        acc = f"{mac}({acc}, {f'({x} >> {k})' if k else x}, {_c_int(ki, 32)} /* {cm} */)"
+    return f"{acc} /* Q.{h.F} -> Q.{h.ft}, high word */"
 
 
 def _entry(how, P: str) -> str:
@@ -359,7 +400,7 @@ def _gains_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
     ce_a = f"(((ce >> {d - 1}) + 1) >> 1) /* Q.{fce} -> Q.{fca}, round */" if d > 0 else ""
     fy, fw, fr, fv, fe = p.f("y"), p.f("w"), p.f("r"), p.f("v"), p.f("e")
     pr = cf["prod"]
-    sw = fy + fx - fw  # its shifts, and kappa's, K_e's and a's, are checked in range by the planner
+    # w's shift, and kappa's, K_e's and a's, are checked in range by the planner
     L = [
         "    int32_t cr = s->cr, cv = s->cv, ca = s->ca, ce = s->ce, S, xs, w, kap, Ke;",
         "    uint32_t x;",
@@ -379,12 +420,12 @@ def _gains_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
         f"    x >>= {nmax} - n;",
         "    xs = (int32_t)(x >> 1); /* below 2^31: each product is one signed 32x32 multiply */",
         "    /* w = y / S (|w| <= max|y| / R: fits, no saturation) */",
-        f"    w = (int32_t)ACN_RSHR(acn_mul(y, xs), {sw}); /* Q.{fy} x Q.{fx} -> {p.vars['w'].fmt}, round */",
+        f"    w = {_mul_round32('y', 'xs', fy + fx, fw)}; /* Q.{fy} x Q.{fx} -> {p.vars['w'].fmt} */",
         "    /* x = x + K y = x + c w (K = c / S), c the prior block: r and v = Ts u take K_r y, K_v y here,",
         "     * the rest of their step in the core */",
         f"    s->r += {_sh('acn_mul(cr, w)', pr['r'] - fr, 'Q.{} -> Q.{}'.format(pr['r'], fr))};",
         f"    s->v += {_sh('acn_mul(cv, w)', pr['v'] - fv, 'Q.{} -> Q.{}'.format(pr['v'], fv))};",
-        f"    s->a += (int32_t)ACN_RSHR(acn_mul(ca, w), {pr['a'] - fy}); /* Q.{pr['a']} -> Q.{fy}, round */",
+        f"    s->a = (int32_t)((uint32_t)s->a + (uint32_t){_mul_round32('ca', 'w', pr['a'], fy)});",
         f"    s->e = acn_mac(s->e, ce, w); /* Q.{fe}, exact */"
         if pr["e"] == fe
         # c_e in a format finer than the one whose product with w lands in eps's (its fine format,
@@ -397,19 +438,20 @@ def _gains_cov(sums: CovSums, p: AxisPlan, P: str) -> list[str]:
         else f"    s->e += {_sh('acn_mul(ce, w)', pr['e'] - fe, 'Q.{} -> Q.{}'.format(pr['e'], fe))};",
         "    /* P = P - c c' / S: c_i -= c_i kappa with kappa = (S - R) / S in [0, 1), Q0.31;",
         "     * P_ie -= c_i K_e with K_e = c_e / S */",
-        f"    kap = (int32_t)ACN_RSHR(acn_mul(S - {P}_{Rn}, xs), {fca + fx - 31}); /* Q.{fca + fx} -> Q0.31, round */",
+        f"    kap = {_mul_round32(f'S - {P}_{Rn}', 'xs', fca + fx, 31)}; /* kappa, Q0.31 */",
         # K_e without saturation when the planner found it fits int32 for any c_e (codegen.plan_cov)
-        f"    Ke = (int32_t)ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}); /* Q.{fce + fx} -> {p.vars['Ke'].fmt},"
-        " round; fits for any c_e */"
+        f"    Ke = {_mul_round32('ce', 'xs', fce + fx, fKe)}; /* K_e {p.vars['Ke'].fmt}: fits for any c_e */"
         if sums.ke_free
         else f"    Ke = acn_sat32(ACN_RSHR(acn_mul(ce, xs), {fce + fx - fKe}), &s->overflow);"
         f" /* Q.{fce + fx} -> {p.vars['Ke'].fmt}, round */",
     ]
+    # the posterior entries in 32-bit arithmetic: the same low word as the int64 difference cast back
     for dst, ci in (("Pre", "cr"), ("Pve", "cv"), ("Pae", "ca")):
-        dec = _shift(f"acn_mul({ci}, Ke)", p.f(ci) + fKe, p.f(dst))
-        L.append(f"    s->{dst} = (int32_t)((int64_t)s->{dst} - {dec});")
+        dec = _mul_round32(ci, "Ke", p.f(ci) + fKe, p.f(dst))
+        L.append(f"    s->{dst} = (int32_t)((uint32_t)s->{dst} - (uint32_t){dec});")
     for ci in ("cr", "cv", "ca", "ce"):
-        L.append(f"    s->{ci} = (int32_t)((int64_t){ci} - {_shift(f'acn_mul({ci}, kap)', p.f(ci) + 31, p.f(ci))});")
+        dec = _mul_round32(ci, "kap", p.f(ci) + 31, p.f(ci))
+        L.append(f"    s->{ci} = (int32_t)((uint32_t){ci} - (uint32_t){dec});")
     return L
 
 
@@ -441,9 +483,9 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
     eh = _hi_round("e")
     fH2, fT2 = p.consts["H2"][1].frac, p.consts["T2"][1].frac
     decay = (
-        f"e -= {_sh(f'(int64_t){P}_OMP * ({eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
+        f"e -= {_sh(f'acn_mul({P}_OMP, {eh} - {P}_EBAR)', fo - 32, f'Q.{fo + fy} -> Q.{fe}')};"
         if fo != 32
-        else f"e += (int64_t)-{P}_OMP * ({eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */"
+        else f"e = acn_mac(e, -{P}_OMP, {eh} - {P}_EBAR); /* Q.{fo + fy}, exact: one SMLAL */"
     )
     com = "/* eps = phi eps + b = eps - (1 - phi) (eps - eps_bar), eps by its rounded high word */"
     if sfx:  # the coarse step: the first sample has no predict
@@ -460,8 +502,8 @@ def _cov_step(p: AxisPlan, P: str, T: str, sfx: str, tail: str, back: list[str] 
         "    /* r += Ts u + Ts^2/2 a,  u += Ts a (K_r y and K_v y are in already); u and a are the previous",
         "     * posteriors, and at k = 0 both increments are zero (x0 has r = u = a = 0): no test of k */",
         f"    r = s->r + {_sh('v0', fv - fr, f'Q.{fv} -> Q.{fr}')}"
-        f" + {_sh(f'(int64_t){P}_H2 * a', fH2 + fy - fr, f'Q.{fH2 + fy} -> Q.{fr}')};",
-        f"    v = s->v + {_sh(f'(int64_t){P}_T2 * a', fT2 + fy - fv, f'Q.{fT2 + fy} -> Q.{fv}')};",
+        f" + {_sh(f'acn_wmul({P}_H2, a)', fH2 + fy - fr, f'Q.{fH2 + fy} -> Q.{fr}')};",
+        f"    v = s->v + {_sh(f'acn_wmul({P}_T2, a)', fT2 + fy - fv, f'Q.{fT2 + fy} -> Q.{fv}')};",
         f"    s->r = acn_limit(r, {P}_RHI, &s->overflow);",
         f"    s->v = acn_limit(v, {P}_VHI, &s->overflow);",
         tail,
@@ -962,8 +1004,8 @@ def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[st
     src += _core_cov_coarse(c, P, T) + ["}", ""]
     src += [
         "/* One sample: predict (from the second sample on), then, if the sample is valid, the update",
-        f" * with z [m/s^2] {p.vars['z'].fmt}. Inlined into update, skip and step. */",
-        f"ACN_INLINE void {T}_core({T}_t *s, int32_t z, bool valid)",
+        f" * with z [m/s^2] {p.vars['z'].fmt}. Inlined into update, skip and step (one copy on AVR, ACN_CORE). */",
+        f"ACN_CORE void {T}_core({T}_t *s, int32_t z, bool valid)",
         "{",
     ]
     src += _core_fixed(c, P, T)

@@ -328,7 +328,7 @@ MUTATIONS = {
     "OFFSET +1 LSB": (r"(#define ACCELNAV_X_OFFSET INT32_C\()(-?\d+)", lambda m: f"{m.group(1)}{int(m.group(2)) + 1}"),
     # K_a y shifted one bit too far (K_a read in the wrong format); the covariance form adds c_a w
     "Ka shift +1": (
-        r"((?:acn_add_round\(a, |ACN_RSHR\()acn_mul\((?:Ka, y|ca, w)\), )(\d+)",
+        r"((?:acn_add_round\(a, |ACN_RSHR\()acn_mul\((?:Ka, y|ca, w)\), |acn_mul_rshr32\(ca, w, )(\d+)",
         lambda m: f"{m.group(1)}{int(m.group(2)) + 1}",
     ),
     # eps_bar off by 1 %: the bias's fixed point
