@@ -109,38 +109,45 @@ class Candidate:
     still: float  # mean over axes of its variance / R
 
 
-def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
-    """In place, for the axes ``rows``: the scalar measurement z = s_i + v, v ~ N(0, r)."""
-    Pi = P[rows, :, i]  # (m, 3)
-    S = Pi[:, i] + r
-    K = Pi / S[:, None]
-    X[rows] += K * (z - X[rows, i])[:, None]
-    P[rows] -= K[:, :, None] * Pi[:, None, :]
-    P[rows] = 0.5 * (P[rows] + np.swapaxes(P[rows], 1, 2))
-
-
 class _Kinematic:
-    """The kinematic filter of the module docstring over one direction of time of one record."""
+    """The kinematic filter of the module docstring over one direction of time of one record.
+
+    The axes do not couple: each holds its state (r, u, e) and the six entries of its symmetric covariance as
+    plain floats, [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee]. A decision makes a few hundred small steps, each a
+    few dozen multiplications per axis: on floats they cost a fraction of what numpy's per-call overhead does
+    on (n_axes, 3, 3) arrays (bench/speed/bench_rest_decision.py)."""
 
     def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float):
         n, self.n_axes = x.shape
-        self.Ts, self.q, self.qv = Ts, q, R * Ts
+        self.Ts, self.q, self.qv = Ts, q, [float(v) * Ts for v in R]
         self.V = np.zeros((n + 1, self.n_axes))
         np.cumsum(x * Ts, axis=0, out=self.V[1:])  # V[k] = Ts sum_{i<k} x[i]
         self.A = np.zeros((n + 1, self.n_axes))
         np.cumsum(np.abs(x) * Ts, axis=0, out=self.A[1:])  # A[k] = Ts sum_{i<k} |x[i]|: how much moved
         self.W = np.zeros((n + 1, self.n_axes))
         np.cumsum(self.V[:-1] * Ts, axis=0, out=self.W[1:])  # W[k] = Ts sum_{i<k} V[i]
-        self.X = np.zeros((self.n_axes, 3))
-        self.P = np.zeros((self.n_axes, 3, 3))
-        self.P[:, [0, 1, 2], [0, 1, 2]] = DIFFUSE
+        self.s = [[0.0, 0.0, 0.0, DIFFUSE[0], 0.0, 0.0, DIFFUSE[1], 0.0, DIFFUSE[2]] for _ in range(self.n_axes)]
         self.k = 0
         self.aid_k = 0  # sample of the last aid
+
+    @property
+    def X(self) -> np.ndarray:
+        """(n_axes, 3): r, u, e per axis (a copy)."""
+        return np.array([s[:3] for s in self.s])
+
+    @property
+    def P(self) -> np.ndarray:
+        """(n_axes, 3, 3): the covariance per axis (a copy)."""
+        return np.array([[[a, b, c], [b, d, f], [c, f, g]] for _, _, _, a, b, c, d, f, g in self.s])
+
+    def level(self) -> tuple[np.ndarray, np.ndarray]:
+        """(e, its variance) per axis."""
+        return np.array([s[2] for s in self.s]), np.array([s[8] for s in self.s])
 
     def copy(self) -> _Kinematic:
         new = object.__new__(_Kinematic)
         new.__dict__.update(self.__dict__)
-        new.X, new.P = self.X.copy(), self.P.copy()
+        new.s = [list(s) for s in self.s]
         return new
 
     def to(self, k: int) -> None:
@@ -152,44 +159,64 @@ class _Kinematic:
         D = m * Ts
         c = Ts * Ts * m * (m - 1) / 2.0
         k0 = self.k
-        dV = self.V[k] - self.V[k0]
-        dW = self.W[k] - self.W[k0] - D * self.V[k0]
-        X = self.X
-        r, u, e = X[:, 0].copy(), X[:, 1].copy(), X[:, 2].copy()
-        X[:, 0] = r + D * u + dW - c * e
-        X[:, 1] = u + dV - D * e
-        F = np.array([[1.0, D, -c], [0.0, 1.0, -D], [0.0, 0.0, 1.0]])
+        dV = (self.V[k] - self.V[k0]).tolist()
+        dW = (self.W[k] - self.W[k0] - D * self.V[k0]).tolist()
+        D2 = D * D
+        D3 = D2 * D
         # the level's random walk, integrated once into u and twice into r (signs: u and r get -e), and the
         # velocity noise of the integrated sensor noise
-        qd = np.array(
-            [
-                [q * D**5 / 20, q * D**4 / 8, -q * D**3 / 6],
-                [q * D**4 / 8, q * D**3 / 3, -q * D**2 / 2],
-                [-q * D**3 / 6, -q * D**2 / 2, q * D],
-            ]
-        )
-        qv = self.qv[:, None, None] * np.array([[D**3 / 3, D**2 / 2, 0.0], [D**2 / 2, D, 0.0], [0.0, 0.0, 0.0]])
-        P = F @ self.P @ F.T + qd + qv
-        self.P = P
+        qrr, qru, qre = q * D3 * D2 / 20, q * D2 * D2 / 8, -q * D3 / 6
+        quu, que, qee = q * D3 / 3, -q * D2 / 2, q * D
+        for j, s in enumerate(self.s):
+            r, u, e, a, b, cc, d, f, g = s
+            qv = self.qv[j]
+            # F P F' with F = [[1, D, -c], [0, 1, -D], [0, 0, 1]]: the rows of F P first
+            x0, x1, x2 = a + D * b - c * cc, b + D * d - c * f, cc + D * f - c * g
+            y1, y2 = d - D * f, f - D * g
+            s[0] = r + D * u + dW[j] - c * e
+            s[1] = u + dV[j] - D * e
+            s[3] = x0 + D * x1 - c * x2 + qrr + qv * D3 / 3
+            s[4] = x1 - D * x2 + qru + qv * D2 / 2
+            s[5] = x2 + qre
+            s[6] = y1 - D * y2 + quu + qv * D
+            s[7] = y2 + que
+            s[8] = g + qee
         self.k = k
+
+    @staticmethod
+    def _update(s: list, i: int, z: float, var: float) -> None:
+        """In place on one axis' state: the scalar measurement z = s_i + v, v ~ N(0, var)."""
+        r, u, e, a, b, c, d, f, g = s
+        P = ((a, b, c), (b, d, f), (c, f, g))[i]
+        S = P[i] + var
+        K = (P[0] / S, P[1] / S, P[2] / S)
+        innov = z - s[i]
+        s[0], s[1], s[2] = r + K[0] * innov, u + K[1] * innov, e + K[2] * innov
+        s[3], s[4], s[5] = a - K[0] * P[0], b - K[0] * P[1], c - K[0] * P[2]
+        s[6], s[7], s[8] = d - K[1] * P[1], f - K[1] * P[2], g - K[2] * P[2]
 
     def rest(self, k: int, sigma: float) -> None:
         self.to(k)
-        _update(self.X, self.P, 1, np.zeros(self.n_axes), np.full(self.n_axes, sigma * sigma))
+        var = sigma * sigma
+        for s in self.s:
+            self._update(s, 1, 0.0, var)
         self.aid_k = k
 
     def fix(self, k: int, j: int, z: float, var: float) -> None:
         self.to(k)
-        _update(self.X, self.P, 0, np.array([z]), np.array([var]), rows=slice(j, j + 1))
+        self._update(self.s[j], 0, float(z), float(var))
         self.aid_k = k
 
     def velocity_given_level(self, level: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, ...]:
         """(u, sd of u, e, r, sd of r) at the current sample, conditioned on e = level (variance ``var``), state
         unchanged."""
-        X, P = self.X.copy(), self.P.copy()
-        _update(X, P, 2, level, var)
-        sd = np.sqrt(np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0))
-        return X[:, 1], sd[:, 1], X[:, 2], X[:, 0], sd[:, 0]
+        out = []
+        for s, z, v in zip(self.s, level.tolist(), var.tolist(), strict=True):
+            s = list(s)
+            self._update(s, 2, z, v)
+            out.append((s[1], math.sqrt(max(s[6], 0.0)), s[2], s[0], math.sqrt(max(s[3], 0.0))))
+        u, su, e, r, sr = (np.array(col) for col in zip(*out, strict=True))
+        return u, su, e, r, sr
 
 
 LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)

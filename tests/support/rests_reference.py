@@ -1,0 +1,92 @@
+"""The rest decision's kinematic filter as it was before it was rewritten on plain floats (issue 31, its cost):
+numpy on (n_axes, 3, 3) arrays per event. Kept as the reference the rewrite must decide exactly like
+(tests/estimate/test_rest_decision_same.py swaps it into accelnav.estimate.rests)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from accelnav.estimate.rests import DIFFUSE
+
+
+def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
+    """In place, for the axes ``rows``: the scalar measurement z = s_i + v, v ~ N(0, r)."""
+    Pi = P[rows, :, i]  # (m, 3)
+    S = Pi[:, i] + r
+    K = Pi / S[:, None]
+    X[rows] += K * (z - X[rows, i])[:, None]
+    P[rows] -= K[:, :, None] * Pi[:, None, :]
+    P[rows] = 0.5 * (P[rows] + np.swapaxes(P[rows], 1, 2))
+
+
+class ReferenceKinematic:
+    """The kinematic filter of the module docstring over one direction of time of one record."""
+
+    def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float):
+        n, self.n_axes = x.shape
+        self.Ts, self.q, self.qv = Ts, q, R * Ts
+        self.V = np.zeros((n + 1, self.n_axes))
+        np.cumsum(x * Ts, axis=0, out=self.V[1:])  # V[k] = Ts sum_{i<k} x[i]
+        self.A = np.zeros((n + 1, self.n_axes))
+        np.cumsum(np.abs(x) * Ts, axis=0, out=self.A[1:])  # A[k] = Ts sum_{i<k} |x[i]|: how much moved
+        self.W = np.zeros((n + 1, self.n_axes))
+        np.cumsum(self.V[:-1] * Ts, axis=0, out=self.W[1:])  # W[k] = Ts sum_{i<k} V[i]
+        self.X = np.zeros((self.n_axes, 3))
+        self.P = np.zeros((self.n_axes, 3, 3))
+        self.P[:, [0, 1, 2], [0, 1, 2]] = DIFFUSE
+        self.k = 0
+        self.aid_k = 0  # sample of the last aid
+
+    def copy(self) -> ReferenceKinematic:
+        new = object.__new__(ReferenceKinematic)
+        new.__dict__.update(self.__dict__)
+        new.X, new.P = self.X.copy(), self.P.copy()
+        return new
+
+    def to(self, k: int) -> None:
+        """Propagate the state from sample self.k to sample k."""
+        m = k - self.k
+        if m <= 0:
+            return
+        Ts, q = self.Ts, self.q
+        D = m * Ts
+        c = Ts * Ts * m * (m - 1) / 2.0
+        k0 = self.k
+        dV = self.V[k] - self.V[k0]
+        dW = self.W[k] - self.W[k0] - D * self.V[k0]
+        X = self.X
+        r, u, e = X[:, 0].copy(), X[:, 1].copy(), X[:, 2].copy()
+        X[:, 0] = r + D * u + dW - c * e
+        X[:, 1] = u + dV - D * e
+        F = np.array([[1.0, D, -c], [0.0, 1.0, -D], [0.0, 0.0, 1.0]])
+        # the level's random walk, integrated once into u and twice into r (signs: u and r get -e), and the
+        # velocity noise of the integrated sensor noise
+        qd = np.array(
+            [
+                [q * D**5 / 20, q * D**4 / 8, -q * D**3 / 6],
+                [q * D**4 / 8, q * D**3 / 3, -q * D**2 / 2],
+                [-q * D**3 / 6, -q * D**2 / 2, q * D],
+            ]
+        )
+        qv = self.qv[:, None, None] * np.array([[D**3 / 3, D**2 / 2, 0.0], [D**2 / 2, D, 0.0], [0.0, 0.0, 0.0]])
+        P = F @ self.P @ F.T + qd + qv
+        self.P = P
+        self.k = k
+
+    def rest(self, k: int, sigma: float) -> None:
+        self.to(k)
+        _update(self.X, self.P, 1, np.zeros(self.n_axes), np.full(self.n_axes, sigma * sigma))
+        self.aid_k = k
+
+    def fix(self, k: int, j: int, z: float, var: float) -> None:
+        self.to(k)
+        _update(self.X, self.P, 0, np.array([z]), np.array([var]), rows=slice(j, j + 1))
+        self.aid_k = k
+
+    def velocity_given_level(self, level: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(u, sd of u, e, r, sd of r) at the current sample, conditioned on e = level (variance ``var``), state
+        unchanged."""
+        X, P = self.X.copy(), self.P.copy()
+        _update(X, P, 2, level, var)
+        sd = np.sqrt(np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0))
+        return X[:, 1], sd[:, 1], X[:, 2], X[:, 0], sd[:, 0]
