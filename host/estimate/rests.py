@@ -271,23 +271,33 @@ def _side(
     fix: bool,
     sign: float,
 ) -> Side:
-    e_prior, known = kin.X[:, 2].copy(), kin.P[:, 2, 2] < 1.0
-    v, sd0, _, r, r_sd = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
     # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
     # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
     D = (kin.k - kin.aid_k) * kin.Ts
     # and a mean acceleration error no level explains (a leak changing within the move): drift D; and errors in
     # proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a real
     # foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid
-    moved = kin.A[kin.k] - kin.A[kin.aid_k]
-    widen = np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2 + (scale * moved) ** 2
-    sd = np.sqrt(sd0 * sd0 + widen)
-    # the position the same way: the velocity's widening over the time since the aid
-    r_sd = np.sqrt(r_sd * r_sd + widen * D * D)
+    moved = (kin.A[kin.k] - kin.A[kin.aid_k]).tolist()
+    level, var = c.level.tolist(), (R / max(c.stop - c.start, 1)).tolist()
+    v, sd, r, r_sd = [], [], [], []
+    total, sigma2 = 0.0, sigma * sigma
+    for j, s in enumerate(kin.s):
+        e_prior, known = s[2], s[8] < 1.0
+        s = list(s)  # conditioned on the candidate's level, the filter's own state unchanged
+        kin._update(s, 2, level[j], var[j])
+        widen = ((LEAK * (level[j] - e_prior) * D) ** 2 if known else 0.0) + (drift * D) ** 2 + (scale * moved[j]) ** 2
+        sd0, r_sd0 = math.sqrt(max(s[6], 0.0)), math.sqrt(max(s[3], 0.0))
+        sd_j = math.sqrt(sd0 * sd0 + widen)
+        v.append(s[1])
+        sd.append(sd_j)
+        r.append(s[0])
+        # the position the same way: the velocity's widening over the time since the aid
+        r_sd.append(math.sqrt(r_sd0 * r_sd0 + widen * D * D))
+        total += s[1] * s[1] / (sd_j * sd_j + sigma2)
     # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
     # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
-    chi2 = chi2_equivalent(float(np.sum(v * v / (sd * sd + sigma * sigma))), len(v))
-    return Side(sign * v, sd, chi2, source, fix, r, r_sd)
+    chi2 = chi2_equivalent(total, len(v))
+    return Side(sign * np.array(v), np.array(sd), chi2, source, fix, np.array(r), np.array(r_sd))
 
 
 def chi2_equivalent(x: float, dof: int) -> float:
@@ -301,6 +311,14 @@ def chi2_equivalent(x: float, dof: int) -> float:
     if tail <= 0.0:
         return math.inf
     return float(2.0 * erfcinv(tail) ** 2)
+
+
+def _median(values: list[float]) -> float:
+    """The median of a short list (np.median's own: the mean of the two middle values of an even count), without
+    numpy's per-call overhead."""
+    s = sorted(values)
+    h = len(s) // 2
+    return s[h] if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
 
 
 def _speed(s: Side) -> str:
@@ -439,7 +457,7 @@ class _Decider:
         p = self.p
         # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
         # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
-        like = not st["proven"] or c.still <= max(p.still_k, LIKE * float(np.median(st["proven"])))
+        like = not st["proven"] or c.still <= max(p.still_k, LIKE * _median(st["proven"]))
         if like:
             allowed = p.level_max if moved[0] >= MOTION else p.level_still
         else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
@@ -468,10 +486,11 @@ class _Decider:
 
     def _jump(self, kin: _Kinematic, c: Candidate) -> float:
         """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
-        sd = np.sqrt(np.maximum(kin.P[:, 2, 2], 0.0))
-        if np.any(sd >= 1.0):
+        sd = [math.sqrt(max(s[8], 0.0)) for s in kin.s]
+        if any(x >= 1.0 for x in sd):
             return 0.0
-        return float(np.linalg.norm(np.maximum(np.abs(c.level - kin.X[:, 2]) - 3.0 * sd, 0.0)))
+        off = [max(abs(lv - s[2]) - 3.0 * x, 0.0) for lv, s, x in zip(c.level.tolist(), kin.s, sd, strict=True)]
+        return math.sqrt(sum(o * o for o in off))
 
     def _peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
         """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
@@ -505,7 +524,7 @@ class _Decider:
                     "(assumed: the run starts at rest)"
                 )
             return "cannot tell", cannot + ", no rest before"
-        bound = max(p.still_k, 2.0 * float(np.median(proven))) if proven else p.still_k
+        bound = max(p.still_k, 2.0 * _median(proven)) if proven else p.still_k
         if dur < p.start_s or c.still > bound:
             return "cannot tell", cannot + f"; {dur:.2f} s at {c.still:.2g} R is not a stand (still <= {bound:.2g} R)"
         # the kinematics of a stop: the velocity since the last rest, its level linear to this one's

@@ -1,8 +1,8 @@
 """The rest decision's kinematic filter on plain floats (issue 31, its cost) decides exactly as the numpy one it
 replaced: on every scenario of the rest benches (bench/speed/bench_rest_hypotheses.py, bench_rest_decision.py),
 with and without their fixes, the same candidates are accepted with the same reasons and the same evidence in
-words. The old filter is kept in tests/support/rests_reference.py and swapped in here, run beside the new one
-on the same record.
+words. The old filter and the old functions on it (the side's test, the level's jump, the median) are kept in
+tests/support/rests_reference.py and swapped in here, run beside the new ones on the same record.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 from conftest import MODELS, edited_model
 from support.cart_model import adxl335_model
-from support.rests_reference import ReferenceKinematic
+from support.rests_reference import ReferenceKinematic, reference_jump, reference_median, reference_side
 
 from accelnav.estimate import rests, zupt
 from accelnav.estimate.pipeline import fixes_per_axis
@@ -52,6 +52,9 @@ def test_the_float_filter_decides_as_the_numpy_one(monkeypatch, scenario, model_
         new = _verdicts(arrays, model, fixes)
         with monkeypatch.context() as m:
             m.setattr(rests, "_Kinematic", ReferenceKinematic)
+            m.setattr(rests, "_side", reference_side)
+            m.setattr(rests, "_median", reference_median)
+            m.setattr(rests._Decider, "_jump", reference_jump)
             old = _verdicts(arrays, model, fixes)
         assert new, f"{scenario}: no candidates: the comparison would hold nothing"
         what = "with fixes" if fixes else "without fixes"

@@ -1,12 +1,13 @@
 """The rest decision's kinematic filter as it was before it was rewritten on plain floats (issue 31, its cost):
-numpy on (n_axes, 3, 3) arrays per event. Kept as the reference the rewrite must decide exactly like
-(tests/estimate/test_rest_decision_same.py swaps it into accelnav.estimate.rests)."""
+numpy on (n_axes, 3, 3) arrays per event, with the functions that read it as arrays (a side's test, the level's
+jump) and np.median. Kept as the reference the rewrite must decide exactly like
+(tests/estimate/test_rest_decision_same.py swaps them into accelnav.estimate.rests)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from accelnav.estimate.rests import DIFFUSE
+from accelnav.estimate.rests import DIFFUSE, LEAK, Candidate, Side, chi2_equivalent
 
 
 def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
@@ -90,3 +91,45 @@ class ReferenceKinematic:
         _update(X, P, 2, level, var)
         sd = np.sqrt(np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0))
         return X[:, 1], sd[:, 1], X[:, 2], X[:, 0], sd[:, 0]
+
+
+def reference_side(
+    kin: ReferenceKinematic,
+    c: Candidate,
+    R: np.ndarray,
+    sigma: float,
+    drift: float,
+    scale: float,
+    source: str,
+    fix: bool,
+    sign: float,
+) -> Side:
+    e_prior, known = kin.X[:, 2].copy(), kin.P[:, 2, 2] < 1.0
+    v, sd0, _, r, r_sd = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
+    # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
+    # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
+    D = (kin.k - kin.aid_k) * kin.Ts
+    # and a mean acceleration error no level explains (a leak changing within the move): drift D; and errors in
+    # proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a real
+    # foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid
+    moved = kin.A[kin.k] - kin.A[kin.aid_k]
+    widen = np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2 + (scale * moved) ** 2
+    sd = np.sqrt(sd0 * sd0 + widen)
+    # the position the same way: the velocity's widening over the time since the aid
+    r_sd = np.sqrt(r_sd * r_sd + widen * D * D)
+    # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
+    # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
+    chi2 = chi2_equivalent(float(np.sum(v * v / (sd * sd + sigma * sigma))), len(v))
+    return Side(sign * v, sd, chi2, source, fix, r, r_sd)
+
+
+def reference_jump(self, kin: ReferenceKinematic, c: Candidate) -> float:
+    """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
+    sd = np.sqrt(np.maximum(kin.P[:, 2, 2], 0.0))
+    if np.any(sd >= 1.0):
+        return 0.0
+    return float(np.linalg.norm(np.maximum(np.abs(c.level - kin.X[:, 2]) - 3.0 * sd, 0.0)))
+
+
+def reference_median(values: list[float]) -> float:
+    return float(np.median(values))
