@@ -80,6 +80,7 @@ event in numpy: per sample it grows with the density of candidates, not with the
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -300,13 +301,20 @@ def _side(
     return Side(sign * np.array(v), np.array(sd), chi2, source, fix, np.array(r), np.array(r_sd))
 
 
+@functools.cache
+def _special():
+    """scipy's erfcinv and gammaincc, imported on first use (not at the package's import)."""
+    from scipy.special import erfcinv, gammaincc
+
+    return erfcinv, gammaincc
+
+
 def chi2_equivalent(x: float, dof: int) -> float:
     """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom: the test of
     every axis at once, read on the scale of one axis (9: three sd)."""
-    from scipy.special import erfcinv, gammaincc
-
     if dof == 1 or not math.isfinite(x):
         return x
+    erfcinv, gammaincc = _special()
     tail = float(gammaincc(dof / 2.0, x / 2.0))
     if tail <= 0.0:
         return math.inf
@@ -350,6 +358,14 @@ class _Decider:
         self.fwd_events = _events(cands, fixes, self.n, False)
         self.bwd_events = _events(cands, fixes, self.n, True)
         self.veto: dict[int, str] = {}  # withdrawn: why
+        self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
+
+    def _fresh(self, reverse: bool) -> _Kinematic:
+        """A filter at the start of one direction of time: its sums over the record made once, every pass
+        starting from a copy."""
+        if reverse not in self._start:
+            self._start[reverse] = _Kinematic(self.x[::-1] if reverse else self.x, self.Ts, self.R, self.q)
+        return self._start[reverse].copy()
 
     def _tells(self, s: Side) -> bool:
         return bool(np.all(s.sd <= self.p.tell))
@@ -362,7 +378,7 @@ class _Decider:
         (a walk's stances: each closes the velocity of the stride before it); when one of them is found
         moving, or cannot be told, the filter goes back to before the hypothesis and goes on without it."""
         p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
-        kin = _Kinematic(self.x, Ts, self.R, self.q)
+        kin = self._fresh(False)
         self.V = kin.V
         found = [_Found() for _ in cands]
         st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
@@ -502,10 +518,15 @@ class _Decider:
         k = np.linspace(e, a, min(a - e + 1, PEAK_POINTS)).round().astype(np.int64)
         D = max(a - e, 1) * Ts
         tk = ((k - e) * Ts)[:, None]
-        vk = V[k] - V[e] - e0[None, :] * tk - (c.level - e0)[None, :] * (tk * tk / (2 * D)) + u0[None, :]
-        speed = np.sqrt(np.sum(vk * vk, axis=1))
-        flat = vk + (c.level - e0)[None, :] * (tk * tk / (2 * D))  # the rest's own level all the way
-        return float(speed.max()), float(speed[-1]), float(np.sqrt(np.max(np.sum(flat * flat, axis=1))))
+        ramp = (c.level - e0)[None, :] * (tk * tk / (2 * D))
+        vk = V[k] - V[e] - e0[None, :] * tk - ramp + u0[None, :]
+        speed2 = np.sum(vk * vk, axis=1)  # the square root taken of the two it returns (it keeps the order)
+        flat = vk + ramp  # the rest's own level all the way
+        return (
+            math.sqrt(float(speed2.max())),
+            math.sqrt(float(speed2[-1])),
+            math.sqrt(float(np.max(np.sum(flat * flat, axis=1)))),
+        )
 
     def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
         p, Ts = self.p, self.Ts
@@ -542,7 +563,7 @@ class _Decider:
     def backward(self, acc: set[int]) -> list[Side | None]:
         """The backward filter with the accepted set ``acc``: every candidate's side after it."""
         p, cands, t, n = self.p, self.cands, self.t, self.n
-        kin = _Kinematic(self.x[::-1], self.Ts, self.R, self.q)
+        kin = self._fresh(True)
         out: list[Side | None] = [None] * len(cands)
         source, fix_seen = "no aid", False
         for k, _, kind, pay in self.bwd_events:
