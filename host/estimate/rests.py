@@ -330,7 +330,8 @@ def _median(values: list[float]) -> float:
 
 
 def _speed(s: Side) -> str:
-    return f"{float(np.linalg.norm(s.v)):.3g} +/- {float(np.sqrt(np.mean(s.sd**2))):.2g} m/s"
+    v, sd = s.v.tolist(), s.sd.tolist()
+    return f"{math.sqrt(sum(x * x for x in v)):.3g} +/- {math.sqrt(sum(x * x for x in sd) / len(sd)):.2g} m/s"
 
 
 def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]:
@@ -515,7 +516,15 @@ class _Decider:
         Ts, V = self.Ts, self.V
         e, u0, e0 = last_end
         a = max(c.start, e)
-        k = np.linspace(e, a, min(a - e + 1, PEAK_POINTS)).round().astype(np.int64)
+        num = min(a - e + 1, PEAK_POINTS)  # np.linspace(e, a, num), without its per-call checks
+        k = np.arange(num, dtype=np.float64)
+        if num > 1:
+            k *= (a - e) / (num - 1)
+            k += e
+            k[-1] = a
+        else:
+            k += e
+        k = k.round().astype(np.int64)
         D = max(a - e, 1) * Ts
         tk = ((k - e) * Ts)[:, None]
         ramp = (c.level - e0)[None, :] * (tk * tk / (2 * D))
