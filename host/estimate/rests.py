@@ -74,8 +74,11 @@ then is withdrawn. No accepted rest vouches for another: each is re-tested again
 every pass, and one that disagrees leaves.
 
 What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per
-event in numpy: per sample it grows with the density of candidates, not with the record's length
-(bench/speed/bench_rest_decision.py measures it beside the plain smoother).
+event on plain floats per axis (numpy's per-call overhead on such small arrays cost twice the arithmetic), and
+a candidate's peak speed on at most ``PEAK_POINTS`` points in numpy: per sample it grows with the density of
+candidates and with the passes and the hypotheses' replays, not with the record's length. Every pass runs
+both filters from the start again (bench/speed/bench_rest_decision.py measures it beside the plain smoother
+and beside the numpy filter it replaced).
 """
 
 from __future__ import annotations
