@@ -7,9 +7,10 @@ decision on them (zupt.decide_rests: the kinematic filters, forward and backward
 fixes, at most ``passes`` passes), best of --repeat each, in microseconds per sample; then the ratio
 decision / plain and the issue's goal (<= 3 x) as goal | measured | met. The decision's cost grows with the
 number of candidates and fixes (its events), not with the samples between them: the table lists both.
-Beside it, from the same run, the decision as it was with its kinematic filter in numpy on (n_axes, 3, 3)
-arrays (tests/support/rests_reference.py, swapped in): the baseline the float filter is measured against
-(tests/estimate/test_rest_decision_same.py shows both decide alike).
+Beside it, from the same run, the decision as it was before its rewrite for speed (its kinematic filter in
+numpy on (n_axes, 3, 3) arrays, every candidate's peak speed computed, a new filter per pass:
+tests/support/rests_reference.py, swapped in): the baseline (tests/estimate/test_rest_decision_same.py shows
+both decide alike).
 
 Usage: python bench/run_all.py bench/speed/bench_rest_decision.py [--repeat 3], or from bench/speed:
   PYTHONPATH=../common python bench_rest_decision.py
@@ -22,7 +23,7 @@ import argparse
 from baselines import best_of  # bench/common, on the path bench/run_all.py sets
 from support import rests_reference as ref  # tests/support, on the path bench/run_all.py sets
 
-from accelnav.estimate import rests, zupt
+from accelnav.estimate import zupt
 from accelnav.estimate.pipeline import fixes_per_axis, smooth_run
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.load import load_model
@@ -36,24 +37,12 @@ CASES = (  # scenario, model (None: the default), seconds
     ("tilting_mount", None, 300.0),
 )
 GOAL = 3.0  # issue 31: the decision within 3 x the plain smoother per sample
-NUMPY = {  # the decision's parts as they were (numpy on arrays per event), and where they go
-    (rests, "_Kinematic"): ref.ReferenceKinematic,
-    (rests, "_side"): ref.reference_side,
-    (rests, "_median"): ref.reference_median,
-    (rests._Decider, "_jump"): ref.reference_jump,
-}
 
 
-def numpy_filter(run):
-    """run() with the decision's numpy parts swapped in; the float ones put back after."""
-    kept = {key: getattr(*key) for key in NUMPY}
-    try:
-        for (owner, name), old in NUMPY.items():
-            setattr(owner, name, old)
+def old_parts(run):
+    """run() with the decision's parts as they were before its rewrite (tests/support/rests_reference.py)."""
+    with ref.swapped():
         return run()
-    finally:
-        for (owner, name), new in kept.items():
-            setattr(owner, name, new)
 
 
 def main() -> int:
@@ -62,7 +51,7 @@ def main() -> int:
     args = ap.parse_args()
     print(
         "| case | samples | candidates | fixes | plain µs/sample | candidates µs/sample | decision µs/sample "
-        "| decision / plain | numpy filter µs/sample | numpy filter / plain |"
+        "| decision / plain | before µs/sample | before / plain |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|")
     ratios = []
@@ -79,7 +68,7 @@ def main() -> int:
             return zupt.decide_rests(a["accel"], a["clipped"], cand, model, fixes=fixes)  # noqa: B023
 
         t_dec = best_of(decision, args.repeat)
-        t_old = best_of(lambda: numpy_filter(decision), args.repeat)  # noqa: B023
+        t_old = best_of(lambda: old_parts(decision), args.repeat)  # noqa: B023
         n_cand = len(zupt.intervals(cand))
         n_fix = sum(len(f) for f in fixes) if fixes else 0
         us = [1e6 * x / n for x in (t_plain, t_cand, t_dec, t_old)]
@@ -90,7 +79,7 @@ def main() -> int:
         )
     print("\n| case | goal | measured | met |\n|---|---|---|---|")
     for scenario, r, old in ratios:
-        print(f"| {scenario} | decision <= {GOAL:g} x the plain smoother per sample | {r:.1f} x (numpy filter "
+        print(f"| {scenario} | decision <= {GOAL:g} x the plain smoother per sample | {r:.1f} x (before "
               f"{old:.1f} x) | {'yes' if r <= GOAL else 'NO'} |")  # fmt: skip
     return 0
 

@@ -352,6 +352,21 @@ def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]
     return ev
 
 
+class _Lazy:
+    """f(*args), computed on the first look at one of its items (a candidate's peak speed: most verdicts never
+    need it)."""
+
+    __slots__ = ("f", "args", "value")
+
+    def __init__(self, f, *args):
+        self.f, self.args, self.value = f, args, None
+
+    def __getitem__(self, i):
+        if self.value is None:
+            self.value = self.f(*self.args)
+        return self.value[i]
+
+
 class _Decider:
     def __init__(self, x, R, Ts, cands, fixes, p, t, start_sd: float = 0.0):
         self.start_sd = start_sd  # the model's prior sd of the start speed: a still start only when it is small
@@ -422,7 +437,7 @@ class _Decider:
             s = _side(kin, c, self.R, p.sigma, p.drift, p.scale, st["source"], st["fix"], 1.0)
             f = found[i]
             f.before, f.evidence = s, ""
-            moved = self._peak(c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
+            moved = _Lazy(self._peak, c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
             f.reason, f.evidence = self._judge(i, c, s, st, moved, jump)
             if pending is not None:
                 h, e_h, saved, count, seen = pending
@@ -478,14 +493,19 @@ class _Decider:
         # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
         # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
         like = not st["proven"] or c.still <= max(p.still_k, LIKE * _median(st["proven"]))
-        if like:
-            allowed = p.level_max if moved[0] >= MOTION else p.level_still
-        else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
-            allowed = UNLIKE * p.level_still if moved[2] >= MOTION else p.level_still
         if p.gate == 0:
             return "gate off", "every candidate accepted (gate 0)"
         if i in self.veto:
             return "moving", self.veto[i]
+        # the bound on the level's jump depends on the motion since the last rest: looked at only when the jump
+        # could exceed one of its values (the peak speed is the costliest figure here)
+        options = (p.level_max, p.level_still) if like else (UNLIKE * p.level_still, p.level_still)
+        if jump <= min(options):
+            allowed = math.inf
+        elif like:
+            allowed = p.level_max if moved[0] >= MOTION else p.level_still
+        else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
+            allowed = UNLIKE * p.level_still if moved[2] >= MOTION else p.level_still
         if jump > allowed:
             return "level jumped", f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with " + (
                 ("motion between" if like else f"motion between, at {c.still:.2g} R: less still than the rests")
@@ -498,7 +518,7 @@ class _Decider:
         if self._tells(s):
             st["proven"].append(c.still)
             return "consistent", f"v {_speed(s)} before it (from {s.source})"
-        stand = self._peak(c, st["last_stand"]) if st["last_stand"] is not None else moved
+        stand = _Lazy(self._peak, c, st["last_stand"]) if st["last_stand"] is not None else moved
         reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
         if reason == "still start":
             st["proven"].append(c.still)

@@ -1,8 +1,8 @@
 """The rest decision's kinematic filter on plain floats (issue 31, its cost) decides exactly as the numpy one it
 replaced: on every scenario of the rest benches (bench/speed/bench_rest_hypotheses.py, bench_rest_decision.py),
 with and without their fixes, the same candidates are accepted with the same reasons and the same evidence in
-words. The old filter and the old functions on it (the side's test, the level's jump, the median) are kept in
-tests/support/rests_reference.py and swapped in here, run beside the new ones on the same record.
+words. Every part the rewrite changed is kept as it was in tests/support/rests_reference.py and swapped in here:
+the module as it was runs beside the new one on the same record.
 """
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ from __future__ import annotations
 import pytest
 from conftest import MODELS, edited_model
 from support.cart_model import adxl335_model
-from support.rests_reference import ReferenceKinematic, reference_jump, reference_median, reference_side
+from support.rests_reference import swapped
 
-from accelnav.estimate import rests, zupt
+from accelnav.estimate import zupt
 from accelnav.estimate.pipeline import fixes_per_axis
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.load import load_model
@@ -44,20 +44,16 @@ def _verdicts(arrays, model, fixes):
 
 
 @pytest.mark.parametrize("scenario,model_name,seconds", CASES)
-def test_the_float_filter_decides_as_the_numpy_one(monkeypatch, scenario, model_name, seconds):
+def test_the_float_filter_decides_as_the_numpy_one(scenario, model_name, seconds):
     model = _model(model_name)
     arrays = simulate(model, scenario, seconds, 1).to_arrays()
     given = [None] + ([fixes_per_axis({**arrays, "fixes": arrays["sim_fixes"]})] if "sim_fixes" in arrays else [])
     for fixes in given:
         new = _verdicts(arrays, model, fixes)
-        with monkeypatch.context() as m:
-            m.setattr(rests, "_Kinematic", ReferenceKinematic)
-            m.setattr(rests, "_side", reference_side)
-            m.setattr(rests, "_median", reference_median)
-            m.setattr(rests._Decider, "_jump", reference_jump)
+        with swapped():
             old = _verdicts(arrays, model, fixes)
         assert new, f"{scenario}: no candidates: the comparison would hold nothing"
         what = "with fixes" if fixes else "without fixes"
         for o, n in zip(old, new, strict=True):
-            assert n == o, f"{scenario} {what}: the numpy filter decided\n  {o}\nthe float one\n  {n}"
+            assert n == o, f"{scenario} {what}: the old parts decided\n  {o}\nthe new ones\n  {n}"
         assert len(new) == len(old)

@@ -1,13 +1,18 @@
-"""The rest decision's kinematic filter as it was before it was rewritten on plain floats (issue 31, its cost):
-numpy on (n_axes, 3, 3) arrays per event, with the functions that read it as arrays (a side's test, the level's
-jump) and np.median. Kept as the reference the rewrite must decide exactly like
-(tests/estimate/test_rest_decision_same.py swaps them into accelnav.estimate.rests)."""
+"""The parts of the rest decision (accelnav.estimate.rests) as they were before its rewrite for speed (issue 31,
+its cost): the kinematic filter in numpy on (n_axes, 3, 3) arrays per event, the functions that read it as
+arrays (a side's test, the level's jump), np.median and np.linalg.norm, every candidate's peak speed computed
+at once, a new filter per pass. Kept as the reference the rewrite must decide exactly like:
+tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`), and
+bench/speed/bench_rest_decision.py times both."""
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
-from accelnav.estimate.rests import DIFFUSE, LEAK, Candidate, Side, chi2_equivalent
+from accelnav.estimate import rests
+from accelnav.estimate.rests import DIFFUSE, LEAK, LIKE, MOTION, PEAK_POINTS, UNLIKE, Candidate, Side, chi2_equivalent
 
 
 def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
@@ -133,3 +138,94 @@ def reference_jump(self, kin: ReferenceKinematic, c: Candidate) -> float:
 
 def reference_median(values: list[float]) -> float:
     return float(np.median(values))
+
+
+def reference_judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
+    """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""
+    p = self.p
+    # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
+    # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
+    like = not st["proven"] or c.still <= max(p.still_k, LIKE * reference_median(st["proven"]))
+    if like:
+        allowed = p.level_max if moved[0] >= MOTION else p.level_still
+    else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
+        allowed = UNLIKE * p.level_still if moved[2] >= MOTION else p.level_still
+    if p.gate == 0:
+        return "gate off", "every candidate accepted (gate 0)"
+    if i in self.veto:
+        return "moving", self.veto[i]
+    if jump > allowed:
+        return "level jumped", f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with " + (
+            ("motion between" if like else f"motion between, at {c.still:.2g} R: less still than the rests")
+            if moved[0] >= MOTION
+            else f"no motion between (peak {moved[0]:.2g} m/s)"
+        )
+    if s.chi2 > p.gate:
+        what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
+        return "moving", f"{what} {reference_speed(s)} before it (from {s.source})"
+    if self._tells(s):
+        st["proven"].append(c.still)
+        return "consistent", f"v {reference_speed(s)} before it (from {s.source})"
+    stand = self._peak(c, st["last_stand"]) if st["last_stand"] is not None else moved
+    reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
+    if reason == "still start":
+        st["proven"].append(c.still)
+    return reason, evidence
+
+
+def reference_peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
+    """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
+    from the rest's to the candidate's, and the peak with the rest's level kept; the peaks on at most
+    PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest)."""
+    Ts, V = self.Ts, self.V
+    e, u0, e0 = last_end
+    a = max(c.start, e)
+    k = np.linspace(e, a, min(a - e + 1, PEAK_POINTS)).round().astype(np.int64)
+    D = max(a - e, 1) * Ts
+    tk = ((k - e) * Ts)[:, None]
+    vk = V[k] - V[e] - e0[None, :] * tk - (c.level - e0)[None, :] * (tk * tk / (2 * D)) + u0[None, :]
+    speed = np.sqrt(np.sum(vk * vk, axis=1))
+    flat = vk + (c.level - e0)[None, :] * (tk * tk / (2 * D))  # the rest's own level all the way
+    return float(speed.max()), float(speed[-1]), float(np.sqrt(np.max(np.sum(flat * flat, axis=1))))
+
+
+def reference_speed(s: Side) -> str:
+    return f"{float(np.linalg.norm(s.v)):.3g} +/- {float(np.sqrt(np.mean(s.sd**2))):.2g} m/s"
+
+
+def reference_eager(f, *args):
+    """The peak speed computed as the old forward filter did: at once, for every candidate."""
+    return f(*args)
+
+
+def reference_fresh(self, reverse: bool):
+    """A new filter per pass, its sums over the record made again, as the old passes did."""
+    return rests._Kinematic(self.x[::-1] if reverse else self.x, self.Ts, self.R, self.q)
+
+
+# where each old part goes in accelnav.estimate.rests: swapped in together, they make the module decide as it
+# did before its rewrite
+SWAPS = {
+    (rests, "_Kinematic"): ReferenceKinematic,
+    (rests, "_side"): reference_side,
+    (rests, "_median"): reference_median,
+    (rests, "_speed"): reference_speed,
+    (rests, "_Lazy"): reference_eager,
+    (rests._Decider, "_jump"): reference_jump,
+    (rests._Decider, "_judge"): reference_judge,
+    (rests._Decider, "_peak"): reference_peak,
+    (rests._Decider, "_fresh"): reference_fresh,
+}
+
+
+@contextlib.contextmanager
+def swapped():
+    """accelnav.estimate.rests with its old parts in, the new ones put back after."""
+    kept = {key: getattr(*key) for key in SWAPS}
+    try:
+        for (owner, name), old in SWAPS.items():
+            setattr(owner, name, old)
+        yield
+    finally:
+        for (owner, name), new in kept.items():
+            setattr(owner, name, new)
