@@ -14,8 +14,9 @@ is the default with ranges.max_run_s raised to the run (the shipped 3600 s is th
 range proof, not a limit of the host tools). Sizes 1e5, 1e6, 1e7 rows; 1e8 only with --big.
 Usage: python bench/run_all.py bench/speed/bench_smooth_e2e.py [--sizes 1e5 1e6 1e7] [--big]
        [--n-baseline 20000] [--keep DIR] [--cases "smooth NPZ" ...] [--python EXE]
---python runs the commands with another interpreter (another build of accelnav: before/after in one
-session); the kernel-alone row is always this interpreter's. The commands run with their bytecode cached
+--python runs the commands with another interpreter (another build of accelnav); --before EXE runs each
+command again with EXE (an earlier build) right after, rows marked "(before)": before and after in one run.
+The kernel-alone row is always this interpreter's. The commands run with their bytecode cached
 (PYTHONDONTWRITEBYTECODE is dropped), as an installed package runs: the first command writes it.
 """
 
@@ -114,15 +115,20 @@ def dask_fleet(paths: list[Path], out: Path, workers: int) -> float:
 
 
 def run(argv: list[str], folder: Path) -> tuple[float, float, int, str]:
-    """(wall s, peak RSS MB, exit status, last stderr line) of one command. The RSS comes from GNU time
-    between us and the command: a child forked from this big process would count our pages until exec."""
+    """(wall s, peak RSS MB, exit status, note) of one command: the note is its last stderr line when it
+    failed, else its CPU seconds (user + system: on a machine shared with others' work, the figure that
+    wall time hides). The RSS comes from GNU time between us and the command: a child forked from this big
+    process would count our pages until exec."""
     rss_file = folder / "rss.txt"
-    timer = ["/usr/bin/time", "-q", "-f", "%M", "-o", str(rss_file)] if Path("/usr/bin/time").exists() else []
+    timer = ["/usr/bin/time", "-q", "-f", "%M %U %S", "-o", str(rss_file)] if Path("/usr/bin/time").exists() else []
     t0 = time.perf_counter()
     p = subprocess.run([*timer, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     wall = time.perf_counter() - t0
-    rss = float(rss_file.read_text().split()[-1]) / 1024 if timer else float("nan")
-    return wall, rss, p.returncode, (p.stderr.strip().splitlines() or [""])[-1]
+    rss, cpu = float("nan"), ""
+    if timer:
+        fields = rss_file.read_text().split()[-3:]
+        rss, cpu = float(fields[0]) / 1024, f"CPU {float(fields[1]) + float(fields[2]):.2f} s"
+    return wall, rss, p.returncode, (p.stderr.strip().splitlines() or [""])[-1] if p.returncode else cpu
 
 
 def write_alone(path: Path, size: int, piece: int = 16 << 20) -> float:
@@ -187,21 +193,26 @@ def print_targets(last, fleet: dict, count: int, rows: int, n_axes: int) -> None
     def line(goal, value, met, good):
         print(f"| {goal} | {value} | {'yes' if good and met else 'no'} |")
 
+    def was(name: str, f) -> str:  # the earlier build's figure beside this one's (--before)
+        return f" (before: {f(sec[name + ' (before)'])})" if name + " (before)" in sec else ""
+
     r = (n / sec["smooth NPZ"]) / k_rate
-    line("smooth from NPZ >= 10 % of the kernel's speed", f"{100 * r:.1f} %", ok["smooth NPZ"], r >= 0.10)
+    before = was("smooth NPZ", lambda s: f"{100 * n / s / k_rate:.1f} %")
+    line("smooth from NPZ >= 10 % of the kernel's speed", f"{100 * r:.1f} %{before}", ok["smooth NPZ"], r >= 0.10)
     if "pandas.read_csv of the CSV" in sec:
         r = sec["smooth CSV"] / sec["pandas.read_csv of the CSV"]
         line("smooth from CSV within 3x of pandas reading it", f"{r:.1f}x", ok["smooth CSV"], r <= 3)
     r = sec["smooth NPZ --zupt auto"] / sec["smooth NPZ"]
     line("--zupt auto within 2x of plain", f"{r:.2f}x", ok["smooth NPZ --zupt auto"], r <= 2)
     r = (n / sec["filter NPZ"]) / k_rate
-    line("filter >= 1/5 of the smoother kernel's speed", f"{r:.3f}", ok["filter NPZ"], r >= 0.2)
+    before = was("filter NPZ", lambda s: f"{n / s / k_rate:.3f}")
+    line("filter >= 1/5 of the smoother kernel's speed", f"{r:.3f}{before}", ok["filter NPZ"], r >= 0.2)
     name = "smooth NPZ --fixes --zupt MASK"
     r = sec[name] / sec["smooth NPZ"]
     line("fixes + rests (given as a mask) within 2x of plain", f"{r:.2f}x", ok[name], r <= 2)
     b = out_bytes["smooth NPZ"] / (n * n_axes)
     line("default output <= 24 B per sample per axis", f"{b:.1f} B", ok["smooth NPZ"], b <= 24)
-    for name in (k for k in sec if k.startswith(("smooth ", "filter "))):
+    for name in (k for k in sec if k.startswith(("smooth ", "filter ")) and not k.endswith("(before)")):
         big = "" if n >= 100_000_000 else f" (measured at {n:.0e}, not 1e8)"
         line(
             f"peak RSS <= 1 GB at 1e8 rows: {name}",
@@ -226,6 +237,8 @@ def main() -> int:
     ap.add_argument("--keep", type=Path, default=None, help="keep the data in DIR (default: a temporary folder)")
     ap.add_argument("--cases", nargs="*", default=None, help="only these command rows (names as printed)")
     ap.add_argument("--python", default=sys.executable, help="interpreter that runs the commands")
+    ap.add_argument("--before", default=None, metavar="EXE",
+                    help="also run each command with EXE (an earlier build): rows '... (before)'")  # fmt: skip
     ap.add_argument("--fleet", type=int, nargs=2, default=[200, 100_000], metavar=("FILES", "ROWS"),
                     help="the fleet rows: FILES recordings of ROWS rows, --jobs 1 and 2 (0 0: none)")  # fmt: skip
     args = ap.parse_args()
@@ -286,8 +299,12 @@ def main() -> int:
         if args.cases is not None:
             cases = {k: v for k, v in cases.items() if k in args.cases}
         out_bytes = {}
-        for name, argv in cases.items():
-            results[name] = run([*exe, *map(str, argv), "--model", str(toml), "--out", str(out)], folder)
+        runs = [(name, exe, argv) for name, argv in cases.items()]
+        if args.before:  # each command with the earlier build right after this one's: the same load on both
+            runs = [r for name, argv in cases.items() for r in ((name, exe, argv),
+                    (f"{name} (before)", [args.before, "-m", "accelnav.cli"], argv))]  # fmt: skip
+        for name, cmd, argv in runs:
+            results[name] = run([*cmd, *map(str, argv), "--model", str(toml), "--out", str(out)], folder)
             out_bytes[name] = out.stat().st_size if out.exists() else 0
             out.unlink(missing_ok=True)
         for name, b in out_bytes.items():
@@ -297,8 +314,7 @@ def main() -> int:
             if out_bytes.get(name):  # the floor under the command: its output's bytes written, nothing computed
                 sec = write_alone(folder / "floor.bin", out_bytes[name])
                 results[f"writing {name}'s {out_bytes[name] / 1e9:.2f} GB alone"] = (sec, float("nan"), 0, "")
-        for name, (sec, rss, status, err) in results.items():
-            note = err if status else ""
+        for name, (sec, rss, _, note) in results.items():
             rate = n / sec
             rss_s = "" if rss != rss else f"{rss:,.0f}"
             print(f"| {n:.0e} | {name} | {sec:.2f} | {rate:,.0f} | {rate / k_rate:.3f} | {rate / fp_rate:,.1f} | "

@@ -103,6 +103,13 @@ def register(sub) -> None:
     _model_arg(p, "; default: the model embedded in the input, else the embedded default")
     _input_args(p)
     p.add_argument("--out", type=Path, required=True, help="run file to write (.npz)")
+    p.add_argument(
+        "--full",
+        action="store_true",
+        help="write every state (r, u, a, eps) and its sd at float64 and echo the input (accel, clipped, raw counts, "
+        "truth): the run file accelnav-run/2, about 77 B per sample per axis, which accelnav smooth reads again; "
+        "default: r, u and their sd at float32 beside t, 20 B per sample per axis at 2 axes (accelnav-run/3)",
+    )
     _output_args(p)
     _csv_arg(p)
     p.set_defaults(func=cmd_filter)
@@ -373,7 +380,7 @@ def _job_options(args, **kw):
 
     return Job(
         covariances=args.covariances,
-        full=getattr(args, "full", True),  # filter: its file is smooth's input (sim -> filter -> smooth)
+        full=args.full,
         budget=_memory_budget_arg(getattr(args, "memory_budget", None)),
         **kw,
     )

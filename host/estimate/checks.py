@@ -16,6 +16,11 @@ RATE_TOL = 0.01  # the median step may differ from the model's period by 1 % (th
 def check_run(arrays, model: Model, where: str = "the run") -> None:
     """Refuse, in one line, arrays that lack a run's keys or shapes, or whose rate or axes are not the model's."""
     missing = [k for k in REQUIRED if k not in arrays]
+    if missing and str(arrays.get("format", "")).endswith("/3"):  # the compact run file holds no input
+        raise UserError(
+            f"{where}: a run file as filter and smooth write it by default (accelnav-run/3) holds their output, "
+            "not the recording; give the recording, or write this file with --full to filter or smooth it again"
+        )
     if missing:
         keys = ", ".join(sorted(map(str, arrays))) or "none"
         raise UserError(

@@ -36,6 +36,10 @@ Where every sample so far was valid and the design's steady rows exist (fastsmoo
 plain path's forward pass keeps a lean store (``LROW`` = 5 doubles: the filter's, then the smoothed,
 a and eps, and the smoothed (a, eps) covariance) and the backward passes read the rest (gains,
 smoother gains, the filter's (a, eps) covariances) from those rows, the same numbers in the same order.
+When the filter's states are not written (the smoother alone), only the run's last sample needs the
+filter's r, u covariance: on steady rows it is not stepped per sample but jumped over each chunk (the
+step is affine there; csrc/fastsmooth.c, steady_jump), which leaves every other output's bits alone and
+moves the last sample's sds by less than the per-sample steps' own rounding drift (within 1e-9).
 
 The store is in memory when ``store_memory`` holds it (on disk, the write-back of a store the size of
 the output throttled the run: 8 s of 17 at 1e7 samples, measured), else in a file in ``workdir``.
@@ -562,7 +566,7 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         if ax.width == GROW:
             _forward_general(run, ax, s, e, zc, ok, buf)
         else:
-            _forward_plain(run, ax, s, e, zc, ok, buf)
+            _forward_plain(run, ax, s, e, zc, ok, buf, write_filt)
             if lean:
                 ax.lean_end = e
         if run.smooth:
@@ -591,12 +595,17 @@ def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: n
     )  # fmt: skip
 
 
-def _forward_plain(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:
+def _forward_plain(
+    run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray, states: bool
+) -> None:
+    """``states``: the filter's states are written; without them the steady kernel writes only the chunk's first
+    and last and jumps its covariance over the steady samples (no step per sample: acn_chunk_fwd_steady)."""
     p, m, last = run.ptr, e - s, int(e == run.n)
     tail = (p(ax.carry_f), p(buf), p(run.xa), p(run.sa), p(ax.Pf0), p(ax.Pfn))
     if ax.steady is not None:
         sr = ax.steady.rows
-        rc = run.lib.acn_chunk_fwd_steady(ax.m, s, m, last, p(zc), p(sr), len(sr), *tail)
+        sd = tail[3] if states else run.ffi.NULL
+        rc = run.lib.acn_chunk_fwd_steady(ax.m, s, m, last, p(zc), p(sr), len(sr), *tail[:3], sd, *tail[4:])
     else:
         rc = run.lib.acn_chunk_fwd(ax.m, s, m, last, p(zc), p(ok.view(np.uint8), "unsigned char *"), *tail)
     if rc != 0:

@@ -9,7 +9,7 @@ import pytest
 from conftest import MODELS
 from support.cli import run_cli as _run
 
-from accelnav.data.runfile import FORMAT, FORMAT_V1, load_run
+from accelnav.data.runfile import FORMAT, FORMAT_V1, FORMAT_V3, load_run
 
 
 def test_sim_filter_smooth_chain(tmp_path, capsys):
@@ -21,9 +21,21 @@ def test_sim_filter_smooth_chain(tmp_path, capsys):
     assert str(arrays["format"]) == FORMAT_V1 and model.name == "adxl250_default"
     assert arrays["code"].dtype == np.int32 and arrays["accel"].shape == (500, 2)
 
-    status, out, _ = _run(["filter", sim, "--out", filt, "--csv", tmp_path / "f.csv"], capsys)
+    # by default the filter writes the need (r, u and their sds at float32, no echo); --full what smooth reads again
+    status, out, _ = _run(["filter", sim, "--out", filt], capsys)
+    assert status == 0 and "filter at end" in out
+    arrays, _ = load_run(filt)
+    assert str(arrays["format"]) == FORMAT_V3 and "accel" not in arrays
+    assert arrays["filt_x"].shape == (2, 500, 2) and arrays["filt_x"].dtype == np.float32
+    assert arrays["filt_sd"].shape == (2, 500, 2) and arrays["filt_sd"].dtype == np.float32
+    compact_r = arrays["filt_x"][:, :, 0].copy()
+    status, _, err = _run(["smooth", filt, "--out", smooth], capsys)  # it holds no input to smooth: said so
+    assert status != 0 and "accelnav-run/3" in err and "--full" in err and len(err.strip().splitlines()) == 1
+
+    status, out, _ = _run(["filter", sim, "--full", "--out", filt, "--csv", tmp_path / "f.csv"], capsys)
     assert status == 0 and "filter at end" in out and "double integration" in out
     arrays, _ = load_run(filt)
+    np.testing.assert_allclose(compact_r, arrays["filt_x"][:, :, 0], rtol=1e-7, atol=1e-7)
     assert arrays["filt_x"].shape == (2, 500, 4) and arrays["filt_sd"].shape == (2, 500, 4)
     assert "smooth_x" not in arrays and "filt_P" not in arrays  # the covariances only on request
     assert str(arrays["format"]) == FORMAT

@@ -48,7 +48,7 @@ def test_smooth_streams_and_equals_the_whole_array_path(rec, tmp_path, capsys, f
 
 
 def test_filter_streams_and_equals_the_whole_array_path(rec, tmp_path, capsys):
-    status, out, err = _run(["filter", rec, "--out", tmp_path / "f.npz"], capsys)
+    status, out, err = _run(["filter", rec, "--full", "--out", tmp_path / "f.npz"], capsys)
     assert status == 0, err
     assert "in bounded memory, streamed" in out and "filter at end" in out
     got, model = load_run(tmp_path / "f.npz")
@@ -56,6 +56,13 @@ def test_filter_streams_and_equals_the_whole_array_path(rec, tmp_path, capsys):
     ref = filter_run({k: got[k] for k in ("t", "axis_names", "accel", "clipped")}, model, covariances=False)
     assert_rel_close(got["filt_x"], ref["filt_x"], ref["filt_sd"], RTOL, "filt_x")
     assert_rel_close(got["filt_sd"], ref["filt_sd"], 0.0, RTOL, "filt_sd")
+    # the default: r, u and their sds at float32 (24-bit mantissa), nothing else
+    status, out, err = _run(["filter", rec, "--out", tmp_path / "c.npz"], capsys)
+    assert status == 0, err
+    small, _ = load_run(tmp_path / "c.npz")
+    assert "accel" not in small and small["filt_x"].dtype == np.float32 and small["filt_x"].shape[-1] == 2
+    assert_rel_close(small["filt_x"], ref["filt_x"][..., :2], ref["filt_sd"][..., :2], 2**-23, "filt_x compact")
+    assert_rel_close(small["filt_sd"], ref["filt_sd"][..., :2], 0.0, 2**-23, "filt_sd compact")
 
 
 def test_what_needs_the_whole_arrays_still_gets_them(rec, tmp_path, capsys):

@@ -59,6 +59,36 @@ def test_chunked_smoothing_equals_the_whole_array_path(tmp_path, n, chunk):
     assert [p.name for p in tmp_path.iterdir()] == ["o.npz"], "temporary files left behind"
 
 
+def test_the_smoother_alone_jumps_the_steady_covariance_and_keeps_the_numbers(tmp_path):
+    """Without the filter's states written, the forward pass takes no covariance step per steady sample but one
+    jump per chunk (acn_chunk_fwd_steady, steady_jump). Every output but the last sample's is untouched by it:
+    the same bits as the whole path. The last sample's sds carry the jump: within 1e-9 of the per-sample steps,
+    which themselves drift (each steady step adds the same increment and rounds it the same way: 1.6e-12 here,
+    3e-11 at 1.2e6 samples, where the jump agrees with the same steps taken in long double)."""
+    # bias time constants of 3 s, not 300 s: the gains settle in 8e3 samples, not 8e5
+    model = edited_model([("T = 300.0", "T = 3.0"), ("T = 240.0", "T = 2.4")])
+    n = fs._PROBE0 + 20_000  # the shortest run whose steady state is looked for
+    t, accel, _ = _data(model, n)
+    clipped = np.zeros(accel.shape, dtype=bool)  # all valid: the steady rows hold to the end
+    st = fs.steady_gains(axis_design(model, 0), n)
+    assert st is not None and st.settled and len(st.rows) < n // 10, "test setup: most samples must be steady"
+    ends = []
+    for chunk in (40_001, n):
+        out = tmp_path / f"o-{chunk}.npz"
+        chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), out, chunk=chunk, stages=("smooth",))
+        f = np.load(out)
+        assert "filt_x" not in f
+        for j in range(len(model.axes)):
+            ref = fs.smooth_plain(axis_design(model, j), accel[:, j])
+            sd = fs.packed_sd(ref.Ps)
+            assert_rel_close(f["smooth_x"][j], ref.xs, sd, RTOL, f"smooth_x axis {j}")
+            assert_rel_close(f["smooth_sd"][j, :-1], sd[:-1], 0.0, RTOL, f"smooth_sd axis {j}")
+            assert_rel_close(f["smooth_sd"][j, -1], sd[-1], 0.0, 1e-9, f"smooth_sd axis {j}, last sample")
+        ends.append(f["smooth_sd"][:, -1])
+    # a jump per chunk or one over the run: the same map raised to powers that add up
+    assert_rel_close(ends[0], ends[1], 0.0, RTOL, "last sample's sds, chunked against one chunk")
+
+
 def test_the_chunk_size_comes_from_the_budget():
     for n_axes in (1, 2, 3):
         per = chunked.sample_bytes(n_axes)

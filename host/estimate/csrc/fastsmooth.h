@@ -85,6 +85,7 @@ int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
                   const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
                   double *Pf0, double *Pfn);
 
+/* sdf NULL: the filter's states unwanted, the steady covariance jumped over (fastsmooth.c) */
 int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
                          const double *srows, long nt, double *carry, double *store, double *xf,
                          double *sdf, double *Pf0, double *Pfn);
