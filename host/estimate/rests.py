@@ -333,8 +333,16 @@ def _median(values: list[float]) -> float:
 
 
 def _speed(s: Side) -> str:
+    v, sd = _norms(s)
+    return f"{v:.3g} +/- {sd:.2g} m/s"
+
+
+def _norms(s: Side | None) -> tuple[float, float]:
+    """(|v| over the axes, rms of its sd) of one side; NaN without one."""
+    if s is None:
+        return math.nan, math.nan
     v, sd = s.v.tolist(), s.sd.tolist()
-    return f"{math.sqrt(sum(x * x for x in v)):.3g} +/- {math.sqrt(sum(x * x for x in sd) / len(sd)):.2g} m/s"
+    return math.sqrt(sum(x * x for x in v)), math.sqrt(sum(x * x for x in sd) / len(sd))
 
 
 def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]:
@@ -765,14 +773,8 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float 
             ev = f"v {_speed(a)} after it (from {a.source})"
         elif f.reason == "consistent" and a is not None:
             ev += f"; {_speed(a)} after it (from {a.source})"
-
-        def norm(s: Side | None) -> tuple[float, float]:
-            if s is None:
-                return nan, nan
-            return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
-
-        vb, sb = norm(b)
-        va, sa = norm(a)
+        vb, sb = _norms(b)
+        va, sa = _norms(a)
         chi2 = max(s.chi2 for s in (b, a) if s is not None) if (b or a) else nan
         out.append(
             RestDecision(c.start, c.stop, i in acc, f.reason, ev, c.still, float(np.linalg.norm(c.level)), vb, sb, va,

@@ -203,6 +203,12 @@ def reference_fresh(self, reverse: bool):
     return rests._Kinematic(self.x[::-1] if reverse else self.x, self.Ts, self.R, self.q)
 
 
+def reference_norms(s: Side | None) -> tuple[float, float]:
+    if s is None:
+        return float("nan"), float("nan")
+    return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
+
+
 # where each old part goes in accelnav.estimate.rests: swapped in together, they make the module decide as it
 # did before its rewrite
 SWAPS = {
@@ -210,6 +216,7 @@ SWAPS = {
     (rests, "_side"): reference_side,
     (rests, "_median"): reference_median,
     (rests, "_speed"): reference_speed,
+    (rests, "_norms"): reference_norms,
     (rests, "_Lazy"): reference_eager,
     (rests._Decider, "_jump"): reference_jump,
     (rests._Decider, "_judge"): reference_judge,
