@@ -7,6 +7,10 @@ decision on them (zupt.decide_rests: the kinematic filters, forward and backward
 fixes, at most ``passes`` passes), best of --repeat each, in microseconds per sample; then the ratio
 decision / plain and the issue's goal (<= 3 x) as goal | measured | met. The decision's cost grows with the
 number of candidates and fixes (its events), not with the samples between them: the table lists both.
+Beside it, from the same run, the decision as it was before its rewrite for speed (its kinematic filter in
+numpy on (n_axes, 3, 3) arrays, every candidate's peak speed computed, a new filter per pass:
+tests/support/rests_reference.py, swapped in): the baseline (tests/estimate/test_rest_decision_same.py shows
+both decide alike).
 
 Usage: python bench/run_all.py bench/speed/bench_rest_decision.py [--repeat 3], or from bench/speed:
   PYTHONPATH=../common python bench_rest_decision.py
@@ -17,6 +21,7 @@ from __future__ import annotations
 import argparse
 
 from baselines import best_of  # bench/common, on the path bench/run_all.py sets
+from support import rests_reference as ref  # tests/support, on the path bench/run_all.py sets
 
 from accelnav.estimate import zupt
 from accelnav.estimate.pipeline import fixes_per_axis, smooth_run
@@ -34,15 +39,21 @@ CASES = (  # scenario, model (None: the default), seconds
 GOAL = 3.0  # issue 31: the decision within 3 x the plain smoother per sample
 
 
+def old_parts(run):
+    """run() with the decision's parts as they were before its rewrite (tests/support/rests_reference.py)."""
+    with ref.swapped():
+        return run()
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
     print(
         "| case | samples | candidates | fixes | plain µs/sample | candidates µs/sample | decision µs/sample "
-        "| decision / plain |"
+        "| decision / plain | before µs/sample | before / plain |"
     )
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     ratios = []
     for scenario, model_name, seconds in CASES:
         model = load_model(None if model_name is None else models_dir() / f"{model_name}.toml")
@@ -52,22 +63,24 @@ def main() -> int:
         t_plain = best_of(lambda: smooth_run(a, model, covariances=False), args.repeat)  # noqa: B023
         t_cand = best_of(lambda: zupt.candidates(a["accel"], a["clipped"], model), args.repeat)  # noqa: B023
         cand = zupt.candidates(a["accel"], a["clipped"], model)
-        t_dec = best_of(
-            lambda: zupt.decide_rests(a["accel"], a["clipped"], cand, model, fixes=fixes),  # noqa: B023
-            args.repeat,
-        )
+
+        def decision():
+            return zupt.decide_rests(a["accel"], a["clipped"], cand, model, fixes=fixes)  # noqa: B023
+
+        t_dec = best_of(decision, args.repeat)
+        t_old = best_of(lambda: old_parts(decision), args.repeat)  # noqa: B023
         n_cand = len(zupt.intervals(cand))
         n_fix = sum(len(f) for f in fixes) if fixes else 0
-        us = [1e6 * x / n for x in (t_plain, t_cand, t_dec)]
-        ratios.append((scenario, t_dec / t_plain))
+        us = [1e6 * x / n for x in (t_plain, t_cand, t_dec, t_old)]
+        ratios.append((scenario, t_dec / t_plain, t_old / t_plain))
         print(
             f"| {scenario} | {n} | {n_cand} | {n_fix} | {us[0]:.3g} | {us[1]:.3g} | {us[2]:.3g} "
-            f"| {t_dec / t_plain:.1f} x |"
+            f"| {t_dec / t_plain:.1f} x | {us[3]:.3g} | {t_old / t_plain:.1f} x |"
         )
     print("\n| case | goal | measured | met |\n|---|---|---|---|")
-    for scenario, r in ratios:
-        print(f"| {scenario} | decision <= {GOAL:g} x the plain smoother per sample | {r:.1f} x | "
-              f"{'yes' if r <= GOAL else 'NO'} |")  # fmt: skip
+    for scenario, r, old in ratios:
+        print(f"| {scenario} | decision <= {GOAL:g} x the plain smoother per sample | {r:.1f} x (before "
+              f"{old:.1f} x) | {'yes' if r <= GOAL else 'NO'} |")  # fmt: skip
     return 0
 
 

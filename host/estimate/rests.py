@@ -74,12 +74,16 @@ then is withdrawn. No accepted rest vouches for another: each is re-tested again
 every pass, and one that disagrees leaves.
 
 What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per
-event in numpy: per sample it grows with the density of candidates, not with the record's length
-(bench/speed/bench_rest_decision.py measures it beside the plain smoother).
+event on plain floats per axis (numpy's per-call overhead on such small arrays cost twice the arithmetic), and
+a candidate's peak speed on at most ``PEAK_POINTS`` points in numpy: per sample it grows with the density of
+candidates and with the passes and the hypotheses' replays, not with the record's length. Every pass runs
+both filters from the start again (bench/speed/bench_rest_decision.py measures it beside the plain smoother
+and beside the numpy filter it replaced).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -109,38 +113,45 @@ class Candidate:
     still: float  # mean over axes of its variance / R
 
 
-def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
-    """In place, for the axes ``rows``: the scalar measurement z = s_i + v, v ~ N(0, r)."""
-    Pi = P[rows, :, i]  # (m, 3)
-    S = Pi[:, i] + r
-    K = Pi / S[:, None]
-    X[rows] += K * (z - X[rows, i])[:, None]
-    P[rows] -= K[:, :, None] * Pi[:, None, :]
-    P[rows] = 0.5 * (P[rows] + np.swapaxes(P[rows], 1, 2))
-
-
 class _Kinematic:
-    """The kinematic filter of the module docstring over one direction of time of one record."""
+    """The kinematic filter of the module docstring over one direction of time of one record.
+
+    The axes do not couple: each holds its state (r, u, e) and the six entries of its symmetric covariance as
+    plain floats, [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee]. A decision makes a few hundred small steps, each a
+    few dozen multiplications per axis: on floats they cost a fraction of what numpy's per-call overhead does
+    on (n_axes, 3, 3) arrays (bench/speed/bench_rest_decision.py)."""
 
     def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float):
         n, self.n_axes = x.shape
-        self.Ts, self.q, self.qv = Ts, q, R * Ts
+        self.Ts, self.q, self.qv = Ts, q, [float(v) * Ts for v in R]
         self.V = np.zeros((n + 1, self.n_axes))
         np.cumsum(x * Ts, axis=0, out=self.V[1:])  # V[k] = Ts sum_{i<k} x[i]
         self.A = np.zeros((n + 1, self.n_axes))
         np.cumsum(np.abs(x) * Ts, axis=0, out=self.A[1:])  # A[k] = Ts sum_{i<k} |x[i]|: how much moved
         self.W = np.zeros((n + 1, self.n_axes))
         np.cumsum(self.V[:-1] * Ts, axis=0, out=self.W[1:])  # W[k] = Ts sum_{i<k} V[i]
-        self.X = np.zeros((self.n_axes, 3))
-        self.P = np.zeros((self.n_axes, 3, 3))
-        self.P[:, [0, 1, 2], [0, 1, 2]] = DIFFUSE
+        self.s = [[0.0, 0.0, 0.0, DIFFUSE[0], 0.0, 0.0, DIFFUSE[1], 0.0, DIFFUSE[2]] for _ in range(self.n_axes)]
         self.k = 0
         self.aid_k = 0  # sample of the last aid
+
+    @property
+    def X(self) -> np.ndarray:
+        """(n_axes, 3): r, u, e per axis (a copy)."""
+        return np.array([s[:3] for s in self.s])
+
+    @property
+    def P(self) -> np.ndarray:
+        """(n_axes, 3, 3): the covariance per axis (a copy)."""
+        return np.array([[[a, b, c], [b, d, f], [c, f, g]] for _, _, _, a, b, c, d, f, g in self.s])
+
+    def level(self) -> tuple[np.ndarray, np.ndarray]:
+        """(e, its variance) per axis."""
+        return np.array([s[2] for s in self.s]), np.array([s[8] for s in self.s])
 
     def copy(self) -> _Kinematic:
         new = object.__new__(_Kinematic)
         new.__dict__.update(self.__dict__)
-        new.X, new.P = self.X.copy(), self.P.copy()
+        new.s = [list(s) for s in self.s]
         return new
 
     def to(self, k: int) -> None:
@@ -152,44 +163,64 @@ class _Kinematic:
         D = m * Ts
         c = Ts * Ts * m * (m - 1) / 2.0
         k0 = self.k
-        dV = self.V[k] - self.V[k0]
-        dW = self.W[k] - self.W[k0] - D * self.V[k0]
-        X = self.X
-        r, u, e = X[:, 0].copy(), X[:, 1].copy(), X[:, 2].copy()
-        X[:, 0] = r + D * u + dW - c * e
-        X[:, 1] = u + dV - D * e
-        F = np.array([[1.0, D, -c], [0.0, 1.0, -D], [0.0, 0.0, 1.0]])
+        dV = (self.V[k] - self.V[k0]).tolist()
+        dW = (self.W[k] - self.W[k0] - D * self.V[k0]).tolist()
+        D2 = D * D
+        D3 = D2 * D
         # the level's random walk, integrated once into u and twice into r (signs: u and r get -e), and the
         # velocity noise of the integrated sensor noise
-        qd = np.array(
-            [
-                [q * D**5 / 20, q * D**4 / 8, -q * D**3 / 6],
-                [q * D**4 / 8, q * D**3 / 3, -q * D**2 / 2],
-                [-q * D**3 / 6, -q * D**2 / 2, q * D],
-            ]
-        )
-        qv = self.qv[:, None, None] * np.array([[D**3 / 3, D**2 / 2, 0.0], [D**2 / 2, D, 0.0], [0.0, 0.0, 0.0]])
-        P = F @ self.P @ F.T + qd + qv
-        self.P = P
+        qrr, qru, qre = q * D3 * D2 / 20, q * D2 * D2 / 8, -q * D3 / 6
+        quu, que, qee = q * D3 / 3, -q * D2 / 2, q * D
+        for j, s in enumerate(self.s):
+            r, u, e, a, b, cc, d, f, g = s
+            qv = self.qv[j]
+            # F P F' with F = [[1, D, -c], [0, 1, -D], [0, 0, 1]]: the rows of F P first
+            x0, x1, x2 = a + D * b - c * cc, b + D * d - c * f, cc + D * f - c * g
+            y1, y2 = d - D * f, f - D * g
+            s[0] = r + D * u + dW[j] - c * e
+            s[1] = u + dV[j] - D * e
+            s[3] = x0 + D * x1 - c * x2 + qrr + qv * D3 / 3
+            s[4] = x1 - D * x2 + qru + qv * D2 / 2
+            s[5] = x2 + qre
+            s[6] = y1 - D * y2 + quu + qv * D
+            s[7] = y2 + que
+            s[8] = g + qee
         self.k = k
+
+    @staticmethod
+    def _update(s: list, i: int, z: float, var: float) -> None:
+        """In place on one axis' state: the scalar measurement z = s_i + v, v ~ N(0, var)."""
+        r, u, e, a, b, c, d, f, g = s
+        P = ((a, b, c), (b, d, f), (c, f, g))[i]
+        S = P[i] + var
+        K = (P[0] / S, P[1] / S, P[2] / S)
+        innov = z - s[i]
+        s[0], s[1], s[2] = r + K[0] * innov, u + K[1] * innov, e + K[2] * innov
+        s[3], s[4], s[5] = a - K[0] * P[0], b - K[0] * P[1], c - K[0] * P[2]
+        s[6], s[7], s[8] = d - K[1] * P[1], f - K[1] * P[2], g - K[2] * P[2]
 
     def rest(self, k: int, sigma: float) -> None:
         self.to(k)
-        _update(self.X, self.P, 1, np.zeros(self.n_axes), np.full(self.n_axes, sigma * sigma))
+        var = sigma * sigma
+        for s in self.s:
+            self._update(s, 1, 0.0, var)
         self.aid_k = k
 
     def fix(self, k: int, j: int, z: float, var: float) -> None:
         self.to(k)
-        _update(self.X, self.P, 0, np.array([z]), np.array([var]), rows=slice(j, j + 1))
+        self._update(self.s[j], 0, float(z), float(var))
         self.aid_k = k
 
     def velocity_given_level(self, level: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, ...]:
         """(u, sd of u, e, r, sd of r) at the current sample, conditioned on e = level (variance ``var``), state
         unchanged."""
-        X, P = self.X.copy(), self.P.copy()
-        _update(X, P, 2, level, var)
-        sd = np.sqrt(np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0))
-        return X[:, 1], sd[:, 1], X[:, 2], X[:, 0], sd[:, 0]
+        out = []
+        for s, z, v in zip(self.s, level.tolist(), var.tolist(), strict=True):
+            s = list(s)
+            self._update(s, 2, z, v)
+            out.append((s[1], math.sqrt(max(s[6], 0.0)), s[2], s[0], math.sqrt(max(s[3], 0.0))))
+        u, su, e, r, sr = (np.array(col) for col in zip(*out, strict=True))
+        return u, su, e, r, sr
 
 
 LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
@@ -244,40 +275,74 @@ def _side(
     fix: bool,
     sign: float,
 ) -> Side:
-    e_prior, known = kin.X[:, 2].copy(), kin.P[:, 2, 2] < 1.0
-    v, sd0, _, r, r_sd = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
     # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
     # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
     D = (kin.k - kin.aid_k) * kin.Ts
     # and a mean acceleration error no level explains (a leak changing within the move): drift D; and errors in
     # proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a real
     # foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid
-    moved = kin.A[kin.k] - kin.A[kin.aid_k]
-    widen = np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2 + (scale * moved) ** 2
-    sd = np.sqrt(sd0 * sd0 + widen)
-    # the position the same way: the velocity's widening over the time since the aid
-    r_sd = np.sqrt(r_sd * r_sd + widen * D * D)
+    moved = (kin.A[kin.k] - kin.A[kin.aid_k]).tolist()
+    level, var = c.level.tolist(), (R / max(c.stop - c.start, 1)).tolist()
+    v, sd, r, r_sd = [], [], [], []
+    total, sigma2 = 0.0, sigma * sigma
+    for j, s in enumerate(kin.s):
+        e_prior, known = s[2], s[8] < 1.0
+        s = list(s)  # conditioned on the candidate's level, the filter's own state unchanged
+        kin._update(s, 2, level[j], var[j])
+        widen = ((LEAK * (level[j] - e_prior) * D) ** 2 if known else 0.0) + (drift * D) ** 2 + (scale * moved[j]) ** 2
+        sd0, r_sd0 = math.sqrt(max(s[6], 0.0)), math.sqrt(max(s[3], 0.0))
+        sd_j = math.sqrt(sd0 * sd0 + widen)
+        v.append(s[1])
+        sd.append(sd_j)
+        r.append(s[0])
+        # the position the same way: the velocity's widening over the time since the aid
+        r_sd.append(math.sqrt(r_sd0 * r_sd0 + widen * D * D))
+        total += s[1] * s[1] / (sd_j * sd_j + sigma2)
     # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
     # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
-    chi2 = chi2_equivalent(float(np.sum(v * v / (sd * sd + sigma * sigma))), len(v))
-    return Side(sign * v, sd, chi2, source, fix, r, r_sd)
+    chi2 = chi2_equivalent(total, len(v))
+    return Side(sign * np.array(v), np.array(sd), chi2, source, fix, np.array(r), np.array(r_sd))
+
+
+@functools.cache
+def _special():
+    """scipy's erfcinv and gammaincc, imported on first use (not at the package's import)."""
+    from scipy.special import erfcinv, gammaincc
+
+    return erfcinv, gammaincc
 
 
 def chi2_equivalent(x: float, dof: int) -> float:
     """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom: the test of
     every axis at once, read on the scale of one axis (9: three sd)."""
-    from scipy.special import erfcinv, gammaincc
-
     if dof == 1 or not math.isfinite(x):
         return x
+    erfcinv, gammaincc = _special()
     tail = float(gammaincc(dof / 2.0, x / 2.0))
     if tail <= 0.0:
         return math.inf
     return float(2.0 * erfcinv(tail) ** 2)
 
 
+def _median(values: list[float]) -> float:
+    """The median of a short list (np.median's own: the mean of the two middle values of an even count), without
+    numpy's per-call overhead."""
+    s = sorted(values)
+    h = len(s) // 2
+    return s[h] if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
+
+
 def _speed(s: Side) -> str:
-    return f"{float(np.linalg.norm(s.v)):.3g} +/- {float(np.sqrt(np.mean(s.sd**2))):.2g} m/s"
+    v, sd = _norms(s)
+    return f"{v:.3g} +/- {sd:.2g} m/s"
+
+
+def _norms(s: Side | None) -> tuple[float, float]:
+    """(|v| over the axes, rms of its sd) of one side; NaN without one."""
+    if s is None:
+        return math.nan, math.nan
+    v, sd = s.v.tolist(), s.sd.tolist()
+    return math.sqrt(sum(x * x for x in v)), math.sqrt(sum(x * x for x in sd) / len(sd))
 
 
 def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]:
@@ -295,6 +360,21 @@ def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]
     return ev
 
 
+class _Lazy:
+    """f(*args), computed on the first look at one of its items (a candidate's peak speed: most verdicts never
+    need it)."""
+
+    __slots__ = ("f", "args", "value")
+
+    def __init__(self, f, *args):
+        self.f, self.args, self.value = f, args, None
+
+    def __getitem__(self, i):
+        if self.value is None:
+            self.value = self.f(*self.args)
+        return self.value[i]
+
+
 class _Decider:
     def __init__(self, x, R, Ts, cands, fixes, p, t, start_sd: float = 0.0):
         self.start_sd = start_sd  # the model's prior sd of the start speed: a still start only when it is small
@@ -305,6 +385,14 @@ class _Decider:
         self.fwd_events = _events(cands, fixes, self.n, False)
         self.bwd_events = _events(cands, fixes, self.n, True)
         self.veto: dict[int, str] = {}  # withdrawn: why
+        self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
+
+    def _fresh(self, reverse: bool) -> _Kinematic:
+        """A filter at the start of one direction of time: its sums over the record made once, every pass
+        starting from a copy."""
+        if reverse not in self._start:
+            self._start[reverse] = _Kinematic(self.x[::-1] if reverse else self.x, self.Ts, self.R, self.q)
+        return self._start[reverse].copy()
 
     def _tells(self, s: Side) -> bool:
         return bool(np.all(s.sd <= self.p.tell))
@@ -317,7 +405,7 @@ class _Decider:
         (a walk's stances: each closes the velocity of the stride before it); when one of them is found
         moving, or cannot be told, the filter goes back to before the hypothesis and goes on without it."""
         p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
-        kin = _Kinematic(self.x, Ts, self.R, self.q)
+        kin = self._fresh(False)
         self.V = kin.V
         found = [_Found() for _ in cands]
         st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
@@ -357,7 +445,7 @@ class _Decider:
             s = _side(kin, c, self.R, p.sigma, p.drift, p.scale, st["source"], st["fix"], 1.0)
             f = found[i]
             f.before, f.evidence = s, ""
-            moved = self._peak(c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
+            moved = _Lazy(self._peak, c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
             f.reason, f.evidence = self._judge(i, c, s, st, moved, jump)
             if pending is not None:
                 h, e_h, saved, count, seen = pending
@@ -412,15 +500,20 @@ class _Decider:
         p = self.p
         # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
         # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
-        like = not st["proven"] or c.still <= max(p.still_k, LIKE * float(np.median(st["proven"])))
-        if like:
-            allowed = p.level_max if moved[0] >= MOTION else p.level_still
-        else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
-            allowed = UNLIKE * p.level_still if moved[2] >= MOTION else p.level_still
+        like = not st["proven"] or c.still <= max(p.still_k, LIKE * _median(st["proven"]))
         if p.gate == 0:
             return "gate off", "every candidate accepted (gate 0)"
         if i in self.veto:
             return "moving", self.veto[i]
+        # the bound on the level's jump depends on the motion since the last rest: looked at only when the jump
+        # could exceed one of its values (the peak speed is the costliest figure here)
+        options = (p.level_max, p.level_still) if like else (UNLIKE * p.level_still, p.level_still)
+        if jump <= min(options):
+            allowed = math.inf
+        elif like:
+            allowed = p.level_max if moved[0] >= MOTION else p.level_still
+        else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
+            allowed = UNLIKE * p.level_still if moved[2] >= MOTION else p.level_still
         if jump > allowed:
             return "level jumped", f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with " + (
                 ("motion between" if like else f"motion between, at {c.still:.2g} R: less still than the rests")
@@ -433,7 +526,7 @@ class _Decider:
         if self._tells(s):
             st["proven"].append(c.still)
             return "consistent", f"v {_speed(s)} before it (from {s.source})"
-        stand = self._peak(c, st["last_stand"]) if st["last_stand"] is not None else moved
+        stand = _Lazy(self._peak, c, st["last_stand"]) if st["last_stand"] is not None else moved
         reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
         if reason == "still start":
             st["proven"].append(c.still)
@@ -441,10 +534,11 @@ class _Decider:
 
     def _jump(self, kin: _Kinematic, c: Candidate) -> float:
         """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
-        sd = np.sqrt(np.maximum(kin.P[:, 2, 2], 0.0))
-        if np.any(sd >= 1.0):
+        sd = [math.sqrt(max(s[8], 0.0)) for s in kin.s]
+        if any(x >= 1.0 for x in sd):
             return 0.0
-        return float(np.linalg.norm(np.maximum(np.abs(c.level - kin.X[:, 2]) - 3.0 * sd, 0.0)))
+        off = [max(abs(lv - s[2]) - 3.0 * x, 0.0) for lv, s, x in zip(c.level.tolist(), kin.s, sd, strict=True)]
+        return math.sqrt(sum(o * o for o in off))
 
     def _peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
         """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
@@ -453,13 +547,26 @@ class _Decider:
         Ts, V = self.Ts, self.V
         e, u0, e0 = last_end
         a = max(c.start, e)
-        k = np.linspace(e, a, min(a - e + 1, PEAK_POINTS)).round().astype(np.int64)
+        num = min(a - e + 1, PEAK_POINTS)  # np.linspace(e, a, num), without its per-call checks
+        k = np.arange(num, dtype=np.float64)
+        if num > 1:
+            k *= (a - e) / (num - 1)
+            k += e
+            k[-1] = a
+        else:
+            k += e
+        k = k.round().astype(np.int64)
         D = max(a - e, 1) * Ts
         tk = ((k - e) * Ts)[:, None]
-        vk = V[k] - V[e] - e0[None, :] * tk - (c.level - e0)[None, :] * (tk * tk / (2 * D)) + u0[None, :]
-        speed = np.sqrt(np.sum(vk * vk, axis=1))
-        flat = vk + (c.level - e0)[None, :] * (tk * tk / (2 * D))  # the rest's own level all the way
-        return float(speed.max()), float(speed[-1]), float(np.sqrt(np.max(np.sum(flat * flat, axis=1))))
+        ramp = (c.level - e0)[None, :] * (tk * tk / (2 * D))
+        vk = V[k] - V[e] - e0[None, :] * tk - ramp + u0[None, :]
+        speed2 = np.sum(vk * vk, axis=1)  # the square root taken of the two it returns (it keeps the order)
+        flat = vk + ramp  # the rest's own level all the way
+        return (
+            math.sqrt(float(speed2.max())),
+            math.sqrt(float(speed2[-1])),
+            math.sqrt(float(np.max(np.sum(flat * flat, axis=1)))),
+        )
 
     def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
         p, Ts = self.p, self.Ts
@@ -478,7 +585,7 @@ class _Decider:
                     "(assumed: the run starts at rest)"
                 )
             return "cannot tell", cannot + ", no rest before"
-        bound = max(p.still_k, 2.0 * float(np.median(proven))) if proven else p.still_k
+        bound = max(p.still_k, 2.0 * _median(proven)) if proven else p.still_k
         if dur < p.start_s or c.still > bound:
             return "cannot tell", cannot + f"; {dur:.2f} s at {c.still:.2g} R is not a stand (still <= {bound:.2g} R)"
         # the kinematics of a stop: the velocity since the last rest, its level linear to this one's
@@ -496,7 +603,7 @@ class _Decider:
     def backward(self, acc: set[int]) -> list[Side | None]:
         """The backward filter with the accepted set ``acc``: every candidate's side after it."""
         p, cands, t, n = self.p, self.cands, self.t, self.n
-        kin = _Kinematic(self.x[::-1], self.Ts, self.R, self.q)
+        kin = self._fresh(True)
         out: list[Side | None] = [None] * len(cands)
         source, fix_seen = "no aid", False
         for k, _, kind, pay in self.bwd_events:
@@ -666,14 +773,8 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float 
             ev = f"v {_speed(a)} after it (from {a.source})"
         elif f.reason == "consistent" and a is not None:
             ev += f"; {_speed(a)} after it (from {a.source})"
-
-        def norm(s: Side | None) -> tuple[float, float]:
-            if s is None:
-                return nan, nan
-            return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
-
-        vb, sb = norm(b)
-        va, sa = norm(a)
+        vb, sb = _norms(b)
+        va, sa = _norms(a)
         chi2 = max(s.chi2 for s in (b, a) if s is not None) if (b or a) else nan
         out.append(
             RestDecision(c.start, c.stop, i in acc, f.reason, ev, c.still, float(np.linalg.norm(c.level)), vb, sb, va,

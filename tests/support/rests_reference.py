@@ -1,0 +1,238 @@
+"""The parts of the rest decision (accelnav.estimate.rests) as they were before its rewrite for speed (issue 31,
+its cost): the kinematic filter in numpy on (n_axes, 3, 3) arrays per event, the functions that read it as
+arrays (a side's test, the level's jump), np.median and np.linalg.norm, every candidate's peak speed computed
+at once, a new filter per pass. Kept as the reference the rewrite must decide exactly like:
+tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`), and
+bench/speed/bench_rest_decision.py times both."""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+
+from accelnav.estimate import rests
+from accelnav.estimate.rests import DIFFUSE, LEAK, LIKE, MOTION, PEAK_POINTS, UNLIKE, Candidate, Side, chi2_equivalent
+
+
+def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
+    """In place, for the axes ``rows``: the scalar measurement z = s_i + v, v ~ N(0, r)."""
+    Pi = P[rows, :, i]  # (m, 3)
+    S = Pi[:, i] + r
+    K = Pi / S[:, None]
+    X[rows] += K * (z - X[rows, i])[:, None]
+    P[rows] -= K[:, :, None] * Pi[:, None, :]
+    P[rows] = 0.5 * (P[rows] + np.swapaxes(P[rows], 1, 2))
+
+
+class ReferenceKinematic:
+    """The kinematic filter of the module docstring over one direction of time of one record."""
+
+    def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float):
+        n, self.n_axes = x.shape
+        self.Ts, self.q, self.qv = Ts, q, R * Ts
+        self.V = np.zeros((n + 1, self.n_axes))
+        np.cumsum(x * Ts, axis=0, out=self.V[1:])  # V[k] = Ts sum_{i<k} x[i]
+        self.A = np.zeros((n + 1, self.n_axes))
+        np.cumsum(np.abs(x) * Ts, axis=0, out=self.A[1:])  # A[k] = Ts sum_{i<k} |x[i]|: how much moved
+        self.W = np.zeros((n + 1, self.n_axes))
+        np.cumsum(self.V[:-1] * Ts, axis=0, out=self.W[1:])  # W[k] = Ts sum_{i<k} V[i]
+        self.X = np.zeros((self.n_axes, 3))
+        self.P = np.zeros((self.n_axes, 3, 3))
+        self.P[:, [0, 1, 2], [0, 1, 2]] = DIFFUSE
+        self.k = 0
+        self.aid_k = 0  # sample of the last aid
+
+    def copy(self) -> ReferenceKinematic:
+        new = object.__new__(ReferenceKinematic)
+        new.__dict__.update(self.__dict__)
+        new.X, new.P = self.X.copy(), self.P.copy()
+        return new
+
+    def to(self, k: int) -> None:
+        """Propagate the state from sample self.k to sample k."""
+        m = k - self.k
+        if m <= 0:
+            return
+        Ts, q = self.Ts, self.q
+        D = m * Ts
+        c = Ts * Ts * m * (m - 1) / 2.0
+        k0 = self.k
+        dV = self.V[k] - self.V[k0]
+        dW = self.W[k] - self.W[k0] - D * self.V[k0]
+        X = self.X
+        r, u, e = X[:, 0].copy(), X[:, 1].copy(), X[:, 2].copy()
+        X[:, 0] = r + D * u + dW - c * e
+        X[:, 1] = u + dV - D * e
+        F = np.array([[1.0, D, -c], [0.0, 1.0, -D], [0.0, 0.0, 1.0]])
+        # the level's random walk, integrated once into u and twice into r (signs: u and r get -e), and the
+        # velocity noise of the integrated sensor noise
+        qd = np.array(
+            [
+                [q * D**5 / 20, q * D**4 / 8, -q * D**3 / 6],
+                [q * D**4 / 8, q * D**3 / 3, -q * D**2 / 2],
+                [-q * D**3 / 6, -q * D**2 / 2, q * D],
+            ]
+        )
+        qv = self.qv[:, None, None] * np.array([[D**3 / 3, D**2 / 2, 0.0], [D**2 / 2, D, 0.0], [0.0, 0.0, 0.0]])
+        P = F @ self.P @ F.T + qd + qv
+        self.P = P
+        self.k = k
+
+    def rest(self, k: int, sigma: float) -> None:
+        self.to(k)
+        _update(self.X, self.P, 1, np.zeros(self.n_axes), np.full(self.n_axes, sigma * sigma))
+        self.aid_k = k
+
+    def fix(self, k: int, j: int, z: float, var: float) -> None:
+        self.to(k)
+        _update(self.X, self.P, 0, np.array([z]), np.array([var]), rows=slice(j, j + 1))
+        self.aid_k = k
+
+    def velocity_given_level(self, level: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(u, sd of u, e, r, sd of r) at the current sample, conditioned on e = level (variance ``var``), state
+        unchanged."""
+        X, P = self.X.copy(), self.P.copy()
+        _update(X, P, 2, level, var)
+        sd = np.sqrt(np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0))
+        return X[:, 1], sd[:, 1], X[:, 2], X[:, 0], sd[:, 0]
+
+
+def reference_side(
+    kin: ReferenceKinematic,
+    c: Candidate,
+    R: np.ndarray,
+    sigma: float,
+    drift: float,
+    scale: float,
+    source: str,
+    fix: bool,
+    sign: float,
+) -> Side:
+    e_prior, known = kin.X[:, 2].copy(), kin.P[:, 2, 2] < 1.0
+    v, sd0, _, r, r_sd = kin.velocity_given_level(c.level, R / max(c.stop - c.start, 1))
+    # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
+    # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
+    D = (kin.k - kin.aid_k) * kin.Ts
+    # and a mean acceleration error no level explains (a leak changing within the move): drift D; and errors in
+    # proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a real
+    # foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid
+    moved = kin.A[kin.k] - kin.A[kin.aid_k]
+    widen = np.where(known, (LEAK * (c.level - e_prior) * D) ** 2, 0.0) + (drift * D) ** 2 + (scale * moved) ** 2
+    sd = np.sqrt(sd0 * sd0 + widen)
+    # the position the same way: the velocity's widening over the time since the aid
+    r_sd = np.sqrt(r_sd * r_sd + widen * D * D)
+    # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
+    # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
+    chi2 = chi2_equivalent(float(np.sum(v * v / (sd * sd + sigma * sigma))), len(v))
+    return Side(sign * v, sd, chi2, source, fix, r, r_sd)
+
+
+def reference_jump(self, kin: ReferenceKinematic, c: Candidate) -> float:
+    """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
+    sd = np.sqrt(np.maximum(kin.P[:, 2, 2], 0.0))
+    if np.any(sd >= 1.0):
+        return 0.0
+    return float(np.linalg.norm(np.maximum(np.abs(c.level - kin.X[:, 2]) - 3.0 * sd, 0.0)))
+
+
+def reference_median(values: list[float]) -> float:
+    return float(np.median(values))
+
+
+def reference_judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
+    """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""
+    p = self.p
+    # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
+    # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
+    like = not st["proven"] or c.still <= max(p.still_k, LIKE * reference_median(st["proven"]))
+    if like:
+        allowed = p.level_max if moved[0] >= MOTION else p.level_still
+    else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
+        allowed = UNLIKE * p.level_still if moved[2] >= MOTION else p.level_still
+    if p.gate == 0:
+        return "gate off", "every candidate accepted (gate 0)"
+    if i in self.veto:
+        return "moving", self.veto[i]
+    if jump > allowed:
+        return "level jumped", f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with " + (
+            ("motion between" if like else f"motion between, at {c.still:.2g} R: less still than the rests")
+            if moved[0] >= MOTION
+            else f"no motion between (peak {moved[0]:.2g} m/s)"
+        )
+    if s.chi2 > p.gate:
+        what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
+        return "moving", f"{what} {reference_speed(s)} before it (from {s.source})"
+    if self._tells(s):
+        st["proven"].append(c.still)
+        return "consistent", f"v {reference_speed(s)} before it (from {s.source})"
+    stand = self._peak(c, st["last_stand"]) if st["last_stand"] is not None else moved
+    reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
+    if reason == "still start":
+        st["proven"].append(c.still)
+    return reason, evidence
+
+
+def reference_peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
+    """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
+    from the rest's to the candidate's, and the peak with the rest's level kept; the peaks on at most
+    PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest)."""
+    Ts, V = self.Ts, self.V
+    e, u0, e0 = last_end
+    a = max(c.start, e)
+    k = np.linspace(e, a, min(a - e + 1, PEAK_POINTS)).round().astype(np.int64)
+    D = max(a - e, 1) * Ts
+    tk = ((k - e) * Ts)[:, None]
+    vk = V[k] - V[e] - e0[None, :] * tk - (c.level - e0)[None, :] * (tk * tk / (2 * D)) + u0[None, :]
+    speed = np.sqrt(np.sum(vk * vk, axis=1))
+    flat = vk + (c.level - e0)[None, :] * (tk * tk / (2 * D))  # the rest's own level all the way
+    return float(speed.max()), float(speed[-1]), float(np.sqrt(np.max(np.sum(flat * flat, axis=1))))
+
+
+def reference_speed(s: Side) -> str:
+    return f"{float(np.linalg.norm(s.v)):.3g} +/- {float(np.sqrt(np.mean(s.sd**2))):.2g} m/s"
+
+
+def reference_eager(f, *args):
+    """The peak speed computed as the old forward filter did: at once, for every candidate."""
+    return f(*args)
+
+
+def reference_fresh(self, reverse: bool):
+    """A new filter per pass, its sums over the record made again, as the old passes did."""
+    return rests._Kinematic(self.x[::-1] if reverse else self.x, self.Ts, self.R, self.q)
+
+
+def reference_norms(s: Side | None) -> tuple[float, float]:
+    if s is None:
+        return float("nan"), float("nan")
+    return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
+
+
+# where each old part goes in accelnav.estimate.rests: swapped in together, they make the module decide as it
+# did before its rewrite
+SWAPS = {
+    (rests, "_Kinematic"): ReferenceKinematic,
+    (rests, "_side"): reference_side,
+    (rests, "_median"): reference_median,
+    (rests, "_speed"): reference_speed,
+    (rests, "_norms"): reference_norms,
+    (rests, "_Lazy"): reference_eager,
+    (rests._Decider, "_jump"): reference_jump,
+    (rests._Decider, "_judge"): reference_judge,
+    (rests._Decider, "_peak"): reference_peak,
+    (rests._Decider, "_fresh"): reference_fresh,
+}
+
+
+@contextlib.contextmanager
+def swapped():
+    """accelnav.estimate.rests with its old parts in, the new ones put back after."""
+    kept = {key: getattr(*key) for key in SWAPS}
+    try:
+        for (owner, name), old in SWAPS.items():
+            setattr(owner, name, old)
+        yield
+    finally:
+        for (owner, name), new in kept.items():
+            setattr(owner, name, new)
