@@ -163,6 +163,11 @@ def cmd_record(args) -> int:
     return 1 if res.reason.startswith(("link lost", "log write failed")) else 0
 
 
+def _record_live_line(line: str) -> None:
+    """The live page's line (a refused request) as the recorder's own, on stderr beside its progress."""
+    print(f"accelnav record: live plot: {line}", file=sys.stderr)
+
+
 def _record_live_view(args, man, model_text: str):
     """The live plot beside the log, drawn from its own thread (the recorder never waits for it)."""
     from accelnav.model.load import loads_model
@@ -173,7 +178,7 @@ def _record_live_view(args, man, model_text: str):
     model = loads_model(model_text, source=str(args.model)) if model_text else None
     png = args.out.with_name(args.out.name + ".live.png")
     try:
-        view = LiveView(LivePlot(man, model), png, port=args.live_plot)
+        view = LiveView(LivePlot(man, model), png, port=args.live_plot, log=_record_live_line)
     except OSError as exc:
         raise UserError(f"--live-plot: 127.0.0.1:{args.live_plot}: cannot serve: {exc.strerror or exc}") from None
     print(f"accelnav record: live plot: {view.url} (also {png})", file=sys.stderr)
