@@ -8,7 +8,8 @@
    arm-none-eabi-gcc are there, checked bit for bit against SIL.
 5. The firmware's telemetry decoded, then filtered and smoothed on the host
    with automatic zero-velocity updates (``accelnav smooth --zupt auto``).
-6. A short report (table of errors, figures) in the output folder.
+6. A short report in the output folder: the table of position errors and two figures (positions, errors)
+   with exactly the table's rows.
 
 The simulator always uses the true sensor (the default model); everything
 downstream of the warm-up only knows what fit-bias identified.
@@ -93,7 +94,7 @@ def cmd_demo(args) -> int:
     from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
     from accelnav.hil_sim.targets.qemu import QemuError
-    from accelnav.plots.run import plot_smoothing
+    from accelnav.plots.run import plot_estimates
 
     true_model = load_model(args.model)
     require_scenario(args.scenario, "--scenario", UserError)
@@ -167,18 +168,15 @@ def cmd_demo(args) -> int:
         ]
         fixed_end = smooth_run(decoded_run(fitted, run, sil, manifest(fitted.source)), fitted, fixes=end_fix)
         save_run(out / "run.npz", arrays, fitted)
-        figures = plot_smoothing(arrays, fitted, out)
 
-    rows = error_rows(
-        run.axis_names,
-        run.r,
-        {
-            "double integration": dead_reckoning(arrays, fitted)[:, :, 0],
-            "firmware filter": arrays["fw_x"][:, :, 0],
-            "smoother + final fix": fixed_end["smooth_x"][:, :, 0],
-            "smoother + ZUPT": arrays["smooth_x"][:, :, 0],
-        },
-    )
+    estimates = {  # the table's rows, and the figures' curves: the same dict
+        "double integration": dead_reckoning(arrays, fitted)[:, :, 0],
+        "firmware filter": arrays["fw_x"][:, :, 0],
+        "smoother + final fix": fixed_end["smooth_x"][:, :, 0],
+        "smoother + ZUPT": arrays["smooth_x"][:, :, 0],
+    }
+    rows = error_rows(run.axis_names, run.r, estimates)
+    figures = plot_estimates(run.t, run.axis_names, run.r, estimates, out, f"{args.scenario}, seed {args.seed}")
     table = format_errors(rows)
     print()
     print(f"position error against the truth, {args.duration:g} s of {args.scenario} (fitted model, seed {args.seed})")
