@@ -71,6 +71,32 @@ def _demo_quiet(argv: list[str], log: Path) -> None:
         raise UserError(f"accelnav {argv[0]} failed (status {status}); see {log}")
 
 
+def _demo_fit(argv: list[str], log: Path):
+    """fit-bias as the command runs it, its report going to ``log``; returns its Characterisation."""
+    from accelnav.cli import build_parser
+    from accelnav.cli.fit_bias import _fit_bias_run
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        fit = _fit_bias_run(build_parser("fit-bias").parse_args(argv))
+    write_text(log, buf.getvalue(), flag="demo log")
+    return fit
+
+
+def _demo_fit_lines(r, true_axis) -> list[str]:
+    """An axis's fitted bias beside the truth, each with its 95 % interval; a truth outside it says why."""
+    f = r.fit
+    names = ("c1", "c2", "T") if f.T_identified else ("c2",)
+    lines = [f"    axis {r.name}:" + ("" if f.T_identified else " constant bias (T not identified)")]
+    for name in names:
+        value, truth, (lo, hi) = getattr(f, name), getattr(true_axis, name), f.interval(name)
+        fmt, unit = (".0f", "s") if name == "T" else ("+.4f", "m/s^2")
+        line = f"      {name:<2} {value:{fmt}} {unit}, 95 % [{lo:{fmt}}, {hi:{fmt}}], true {truth:{fmt}}"
+        why = f.why_truth_outside(name, truth, r.white.white)
+        lines.append(line + (f": outside; {why}" if why else ""))
+    return lines
+
+
 def _demo_pil_wanted(mode: str) -> tuple[bool, str]:
     missing = [t for t in ("qemu-system-arm", "arm-none-eabi-gcc") if shutil.which(t) is None]
     if mode == "off":
@@ -116,17 +142,13 @@ def cmd_demo(args) -> int:
 
     with steps.step("fit the bias model and noise figures (accelnav fit-bias)"):
         fitted_path = out / "fitted.toml"
-        _demo_quiet(
+        fit = _demo_fit(
             ["fit-bias", str(out / "warmup.npz"), "--out", str(fitted_path), "--plots", str(out / "fit")],
             out / "fit-bias.txt",
         )
         fitted = load_model(fitted_path)
-        for ax in fitted.axes:
-            tr = true_model.axis(ax.name)
-            print(
-                f"    axis {ax.name}: c1 {ax.c1:+.4f} (true {tr.c1:+.4f}), c2 {ax.c2:+.4f} (true {tr.c2:+.4f}) m/s^2, "
-                f"T {ax.T:.0f} s (true {tr.T:.0f})"
-            )
+        for r in fit.axes:
+            print("\n".join(_demo_fit_lines(r, true_model.axis(r.name))))
         noise = fitted.noise
         print(f"    R {noise.R:.4g} (m/s^2)^2, sigma_eps {noise.sigma_eps:.3g}; report {out / 'fit-bias.txt'}")
 
