@@ -138,7 +138,8 @@ class LivePlot:
 class LiveView:
     """Redraw ``plot`` to ``png`` every ``interval_s`` from a daemon thread while anything new came, and
     optionally serve a self-reloading page of it on 127.0.0.1:``port`` (0: any free port). The page answers
-    only requests naming this machine (:func:`host_allowed`); ``log`` gets one line per refused Host (default: a warning of this module's logger)."""
+    only requests naming this machine (:func:`host_allowed`);
+    ``log`` gets one line per refused Host (default: a warning of this module's logger)."""
 
     def __init__(
         self,
