@@ -29,7 +29,7 @@ AVR_CC     ?= $(PART_CC_atmega328p)
 # the ATmega328P: flash, and RAM less what the stack needs (measured in simavr: firmware/README.md)
 AVR_FLASH  := $(PART_FLASH_atmega328p)
 AVR_RAM    := $(PART_RAM_atmega328p)
-AVR_STACK  ?= 768
+AVR_STACK  ?= $(PART_STACK_atmega328p)
 
 ifeq ($(BOARD),host)
 FW_CC      := $(CC)
