@@ -18,6 +18,9 @@ extensions = [
     "myst_parser",
     "accelnav_docs",
 ]
+# quotes and ellipses only: docutils' smart dashes turn "--fixes" in running text into "–fixes", which a
+# reader copies into a shell and gets refused (tests/docs/test_docs_build.py scans the built pages for it)
+smartquotes_action = "qe"
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 exclude_patterns = ["_build"]
 myst_heading_anchors = 3

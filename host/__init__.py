@@ -15,6 +15,7 @@ stays quick)::
 * identification: ``characterise`` (bias fit and noise), ``calibrate``, ``tune``
 * C and targets: ``generate`` (file name -> C text), ``simulate``, ``run_sil``, ``run_pil``
 * refusals: ``UserError`` and ``ModelError``, each with a one-line message
+* files to try it on: ``example_path("walk.csv")`` (a shipped recording), ``example_path("foot_imu.toml")``
 
 The packages behind them, lowest first: ``model``, ``native`` -> ``estimate``, ``codegen``,
 ``hil_sim.sim`` -> ``link`` -> ``data`` -> ``identify``, ``hil_sim.targets`` -> ``plots`` -> ``cli``
@@ -49,6 +50,7 @@ _FACE = {
     "simulate": ("accelnav.api", "simulate"),
     "run_sil": ("accelnav.api", "run_sil"),
     "run_pil": ("accelnav.api", "run_pil"),
+    "example_path": ("accelnav.resources", "example_path"),
 }
 
 __all__ = [
@@ -59,6 +61,7 @@ __all__ = [
     "calibrate",
     "characterise",
     "detect_rests",
+    "example_path",
     "filter_run",
     "generate",
     "load_model",

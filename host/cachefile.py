@@ -33,18 +33,20 @@ import errno
 import fcntl
 import hashlib
 import hmac
+import logging
 import os
 import stat
-import sys
 import tempfile
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from accelnav import progress
-from accelnav.errors import UserError
+from accelnav.errors import AccelnavWarning, UserError
 from accelnav.resources import cache_root
+
+_log = logging.getLogger(__name__)
 
 MAGIC = b"ACNSEAL1"
 TAG_BYTES = 32
@@ -130,7 +132,12 @@ def secret() -> bytes:
             _make_key(path)
             _secret = _read_key(path)
     except OSError as exc:
-        _note(f"cache key {path}: {exc.strerror or exc}; nothing is read from or kept in the cache this run")
+        # a warning to act on (the key's folder), not a passing event: every run until it is mended pays for it
+        warnings.warn(
+            f"cache key {path}: {exc.strerror or exc}; nothing is read from or kept in the cache this run",
+            AccelnavWarning,
+            stacklevel=2,
+        )
         _secret, _ephemeral = os.urandom(32), True
     return _secret
 
@@ -150,8 +157,8 @@ def tag(name: str, *parts) -> bytes:
 
 
 def _note(text: str) -> None:
-    if progress.VERBOSITY >= 1:
-        print(f"accelnav: {text}", file=sys.stderr)
+    """A cache that failed and was worked around: a warning of the run, not an error (see accelnav.progress)."""
+    _log.warning(text)
 
 
 def cache_note(path: Path, reason: str) -> None:

@@ -1,4 +1,4 @@
-"""The one exception type the CLI turns into a clear one-line message."""
+"""The exception type the CLI turns into a clear one-line message, and the warning category of the library."""
 
 
 class UserError(Exception):
@@ -8,3 +8,9 @@ class UserError(Exception):
     CLI prints it as ``accelnav: error: ...`` and exits with status 2, never
     with a traceback.
     """
+
+
+class AccelnavWarning(UserWarning):
+    """What the library warns a caller about through :mod:`warnings`: something to act on that did not stop the
+    work. The CLI prints it as ``accelnav: warning: ...``; a program filters it as any warning
+    (``warnings.simplefilter("ignore", AccelnavWarning)``, or ``"error"`` to stop on it)."""

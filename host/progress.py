@@ -1,28 +1,37 @@
-"""A small progress display for long work, written to stderr.
+"""What the library says on its own: notes through :mod:`logging`, and a small progress display.
 
-It draws only when stderr is a terminal (or when forced), redraws at most
-ten times a second, and costs one comparison per call otherwise, so it can
-sit in a loop over chunks without slowing it down.
+Notes (how a clock was read, samples filled in, how columns were taken) are ``INFO`` records of the
+logger named after the module that speaks (``accelnav.data.inputs``, ...); what went wrong and was
+recovered from (a cache entry rebuilt) is a ``WARNING``. The library never prints them: the
+``accelnav`` command shows them as its lines (``-q`` silences them), a program or notebook chooses
+with :mod:`logging` (docs/python.rst).
+
+The progress display draws on stderr only when stderr is a terminal (or when forced), redraws at most
+ten times a second, and costs one comparison per call otherwise, so it can sit in a loop over chunks
+without slowing it down.
 """
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 
-VERBOSITY = 1  # 0: quiet (no notes, no progress), 1: notes, progress on a terminal, 2: progress always
+VERBOSITY = 1  # progress bars: 0 never, 1 on a terminal, 2 always
 
 
 def set_verbosity(level: int) -> None:
-    """How much the library says on its own: 0 nothing, 1 notes (and progress on a terminal), 2 progress always."""
+    """When progress bars draw: 0 never, 1 when stderr is a terminal, 2 always (the notes are logging's)."""
     global VERBOSITY
     VERBOSITY = int(level)
 
 
 def note(text: str) -> None:
-    """A note for the user (how a clock was read, samples filled in) on stdout, unless quiet."""
-    if VERBOSITY >= 1:
-        print(text)
+    """A note for the user, logged at INFO by the logger of the calling module (``accelnav.<module>``), so a
+    user filters notes by where they come from without every caller naming its logger."""
+    caller = sys._getframe(1).f_globals.get("__name__", "")
+    name = caller if caller == "accelnav" or caller.startswith("accelnav.") else "accelnav"
+    logging.getLogger(name).info(text)
 
 
 class Progress:

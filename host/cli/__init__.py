@@ -6,7 +6,10 @@ Only the module of the command being run is imported: the others appear in ``acc
 :data:`COMMANDS` (their name and one line), so that the help and a bad command name cost no numpy, no
 estimator and no compiler module (tests/cli/test_lazy_parser.py checks the lines against the modules).
 Bad input raises :class:`accelnav.errors.UserError` or :class:`accelnav.model.ModelError`; main()
-prints those as one line and exits 2.
+prints those as one line and exits 2. What the library says on its own (``logging`` records under
+``accelnav``, and :class:`accelnav.errors.AccelnavWarning` warnings) main() prints for the length of the
+command as the lines they always were: a note as it is on stdout, a warning after ``accelnav: `` on
+stderr; ``-q`` keeps only the warnings a user must act on (the ``warnings`` ones).
 
 The CLI only parses, runs commands over the library and presents; what computes lives in the library.
 Its top-level functions say which by their names (tests/cli/test_cli_names.py holds every module to it;
@@ -26,7 +29,9 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import logging
 import sys
+import warnings
 
 from accelnav.errors import UserError
 from accelnav.progress import set_verbosity
@@ -102,6 +107,55 @@ def _command_arg(argv: list[str]) -> str | None:
     return first if first in COMMANDS else None
 
 
+class _Lines(logging.Handler):
+    """The library's log records as the command's lines: a note (INFO) on stdout as it is, a warning on stderr
+    after "accelnav: ". The streams are looked up at each record, so a redirected stdout (an output to '-',
+    the demo's captured steps, a test's capture) is followed."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            text = record.getMessage()
+            if record.levelno >= logging.WARNING:
+                print(f"accelnav: {text}", file=sys.stderr)
+            else:
+                print(text)
+        except Exception:
+            self.handleError(record)
+
+
+@contextlib.contextmanager
+def print_library_lines(quiet: bool):
+    """For one command: the ``accelnav`` logger's notes and warnings as lines (none with ``quiet``: only what
+    warnings.warn says then), each once, however deep main() is called (the demo runs commands in itself)."""
+    from accelnav.errors import AccelnavWarning
+
+    logger = logging.getLogger("accelnav")
+    mine = next((h for h in logger.handlers if isinstance(h, _Lines)), None)
+    added = mine is None
+    if added:
+        mine = _Lines()
+        logger.addHandler(mine)
+    level = logger.level
+    logger.setLevel(logging.ERROR if quiet else logging.INFO)
+    shown = warnings.showwarning
+
+    def print_warning(message, category, filename, lineno, file=None, line=None) -> None:
+        """A library warning in one line on stderr, as the command's other warnings; others as Python shows them."""
+        if issubclass(category, AccelnavWarning):
+            print(f"accelnav: warning: {message}", file=sys.stderr)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = print_warning
+    try:
+        yield
+    finally:
+        warnings.showwarning = shown
+        logger.setLevel(level)
+        if added:
+            logger.removeHandler(mine)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_arg(argv))
@@ -115,32 +169,33 @@ def main(argv: list[str] | None = None) -> int:
     from accelnav.model.load import ModelError
     from accelnav.native.cbuild import BuildError
 
-    try:
-        input_limit()  # a bad ACCELNAV_MAX_INPUT_BYTES is refused before any work, whatever the command
-        # every output checked by the one rule before any work; with '-' the data alone goes to stdout
-        quiet_stdout = outputs_args(args)
-        with contextlib.redirect_stdout(sys.stderr) if quiet_stdout else contextlib.nullcontext():
-            return int(args.func(args) or 0)
-    except (UserError, ModelError) as exc:
-        print(f"accelnav: error: {exc}", file=sys.stderr)
-        return 2
-    except BuildError as exc:  # no C compiler for a run-time build (SIL), or the C did not compile
-        print(f"accelnav: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("accelnav: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # the reader went away (accelnav ... | head): not an error of ours
-        sys.stderr.close()
-        return 0
-    except OSError as exc:
-        from accelnav.fileio import write_failure
+    with print_library_lines(args.quiet):
+        try:
+            input_limit()  # a bad ACCELNAV_MAX_INPUT_BYTES is refused before any work, whatever the command
+            # every output checked by the one rule before any work; with '-' the data alone goes to stdout
+            quiet_stdout = outputs_args(args)
+            with contextlib.redirect_stdout(sys.stderr) if quiet_stdout else contextlib.nullcontext():
+                return int(args.func(args) or 0)
+        except (UserError, ModelError) as exc:
+            print(f"accelnav: error: {exc}", file=sys.stderr)
+            return 2
+        except BuildError as exc:  # no C compiler for a run-time build (SIL), or the C did not compile
+            print(f"accelnav: error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("accelnav: interrupted", file=sys.stderr)
+            return 130
+        except BrokenPipeError:  # the reader went away (accelnav ... | head): not an error of ours
+            sys.stderr.close()
+            return 0
+        except OSError as exc:
+            from accelnav.fileio import write_failure
 
-        if not write_failure(exc):
-            raise
-        # a full disk where no writer turned it into its own line (a scratch file, say): still one line
-        print(f"accelnav: error: {exc.filename or 'writing'}: {exc.strerror}", file=sys.stderr)
-        return 2
+            if not write_failure(exc):
+                raise
+            # a full disk where no writer turned it into its own line (a scratch file, say): still one line
+            print(f"accelnav: error: {exc.filename or 'writing'}: {exc.strerror}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":

@@ -8,7 +8,8 @@
    arm-none-eabi-gcc are there, checked bit for bit against SIL.
 5. The firmware's telemetry decoded, then filtered and smoothed on the host
    with automatic zero-velocity updates (``accelnav smooth --zupt auto``).
-6. A short report (table of errors, figures) in the output folder.
+6. A short report in the output folder: the table of position errors and two figures (positions, errors)
+   with exactly the table's rows.
 
 The simulator always uses the true sensor (the default model); everything
 downstream of the warm-up only knows what fit-bias identified.
@@ -70,6 +71,32 @@ def _demo_quiet(argv: list[str], log: Path) -> None:
         raise UserError(f"accelnav {argv[0]} failed (status {status}); see {log}")
 
 
+def _demo_fit(argv: list[str], log: Path):
+    """fit-bias as the command runs it, its report going to ``log``; returns its Characterisation."""
+    from accelnav.cli import build_parser
+    from accelnav.cli.fit_bias import _fit_bias_run
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        fit = _fit_bias_run(build_parser("fit-bias").parse_args(argv))
+    write_text(log, buf.getvalue(), flag="demo log")
+    return fit
+
+
+def _demo_fit_lines(r, true_axis) -> list[str]:
+    """An axis's fitted bias beside the truth, each with its 95 % interval; a truth outside it says why."""
+    f = r.fit
+    names = ("c1", "c2", "T") if f.T_identified else ("c2",)
+    lines = [f"    axis {r.name}:" + ("" if f.T_identified else " constant bias (T not identified)")]
+    for name in names:
+        value, truth, (lo, hi) = getattr(f, name), getattr(true_axis, name), f.interval(name)
+        fmt, unit = (".0f", "s") if name == "T" else ("+.4f", "m/s^2")
+        line = f"      {name:<2} {value:{fmt}} {unit}, 95 % [{lo:{fmt}}, {hi:{fmt}}], true {truth:{fmt}}"
+        why = f.why_truth_outside(name, truth, r.white.white)
+        lines.append(line + (f": outside; {why}" if why else ""))
+    return lines
+
+
 def _demo_pil_wanted(mode: str) -> tuple[bool, str]:
     missing = [t for t in ("qemu-system-arm", "arm-none-eabi-gcc") if shutil.which(t) is None]
     if mode == "off":
@@ -93,7 +120,7 @@ def cmd_demo(args) -> int:
     from accelnav.hil_sim.targets import hil
     from accelnav.hil_sim.targets.firmware import FirmwareError, manifest
     from accelnav.hil_sim.targets.qemu import QemuError
-    from accelnav.plots.run import plot_smoothing
+    from accelnav.plots.run import plot_estimates
 
     true_model = load_model(args.model)
     require_scenario(args.scenario, "--scenario", UserError)
@@ -115,17 +142,13 @@ def cmd_demo(args) -> int:
 
     with steps.step("fit the bias model and noise figures (accelnav fit-bias)"):
         fitted_path = out / "fitted.toml"
-        _demo_quiet(
+        fit = _demo_fit(
             ["fit-bias", str(out / "warmup.npz"), "--out", str(fitted_path), "--plots", str(out / "fit")],
             out / "fit-bias.txt",
         )
         fitted = load_model(fitted_path)
-        for ax in fitted.axes:
-            tr = true_model.axis(ax.name)
-            print(
-                f"    axis {ax.name}: c1 {ax.c1:+.4f} (true {tr.c1:+.4f}), c2 {ax.c2:+.4f} (true {tr.c2:+.4f}) m/s^2, "
-                f"T {ax.T:.0f} s (true {tr.T:.0f})"
-            )
+        for r in fit.axes:
+            print("\n".join(_demo_fit_lines(r, true_model.axis(r.name))))
         noise = fitted.noise
         print(f"    R {noise.R:.4g} (m/s^2)^2, sigma_eps {noise.sigma_eps:.3g}; report {out / 'fit-bias.txt'}")
 
@@ -167,18 +190,15 @@ def cmd_demo(args) -> int:
         ]
         fixed_end = smooth_run(decoded_run(fitted, run, sil, manifest(fitted.source)), fitted, fixes=end_fix)
         save_run(out / "run.npz", arrays, fitted)
-        figures = plot_smoothing(arrays, fitted, out)
 
-    rows = error_rows(
-        run.axis_names,
-        run.r,
-        {
-            "double integration": dead_reckoning(arrays, fitted)[:, :, 0],
-            "firmware filter": arrays["fw_x"][:, :, 0],
-            "smoother + final fix": fixed_end["smooth_x"][:, :, 0],
-            "smoother + ZUPT": arrays["smooth_x"][:, :, 0],
-        },
-    )
+    estimates = {  # the table's rows, and the figures' curves: the same dict
+        "double integration": dead_reckoning(arrays, fitted)[:, :, 0],
+        "firmware filter": arrays["fw_x"][:, :, 0],
+        "smoother + final fix": fixed_end["smooth_x"][:, :, 0],
+        "smoother + ZUPT": arrays["smooth_x"][:, :, 0],
+    }
+    rows = error_rows(run.axis_names, run.r, estimates)
+    figures = plot_estimates(run.t, run.axis_names, run.r, estimates, out, f"{args.scenario}, seed {args.seed}")
     table = format_errors(rows)
     print()
     print(f"position error against the truth, {args.duration:g} s of {args.scenario} (fitted model, seed {args.seed})")

@@ -99,6 +99,12 @@ def register(sub) -> None:
 
 
 def cmd_fit_bias(args: argparse.Namespace) -> int:
+    _fit_bias_run(args)
+    return 0
+
+
+def _fit_bias_run(args: argparse.Namespace):
+    """The command's work and lines; returns the Characterisation (the demo compares it with the truth)."""
     check_output(args.out)  # a directory named as the model to write is refused before the work
     ch = characterise(
         args.recording,
@@ -129,7 +135,7 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
                 )
                 p.update(i + 1)
         print(f"figures: {', '.join(str(p) for p in paths)}")
-    return 0
+    return ch
 
 
 def composite_table(r: AxisResult) -> list[str]:

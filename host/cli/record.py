@@ -163,6 +163,11 @@ def cmd_record(args) -> int:
     return 1 if res.reason.startswith(("link lost", "log write failed")) else 0
 
 
+def _record_live_line(line: str) -> None:
+    """The live page's line (a refused request) as the recorder's own, on stderr beside its progress."""
+    print(f"accelnav record: live plot: {line}", file=sys.stderr)
+
+
 def _record_live_view(args, man, model_text: str):
     """The live plot beside the log, drawn from its own thread (the recorder never waits for it)."""
     from accelnav.model.load import loads_model
@@ -173,7 +178,7 @@ def _record_live_view(args, man, model_text: str):
     model = loads_model(model_text, source=str(args.model)) if model_text else None
     png = args.out.with_name(args.out.name + ".live.png")
     try:
-        view = LiveView(LivePlot(man, model), png, port=args.live_plot)
+        view = LiveView(LivePlot(man, model), png, port=args.live_plot, log=_record_live_line)
     except OSError as exc:
         raise UserError(f"--live-plot: 127.0.0.1:{args.live_plot}: cannot serve: {exc.strerror or exc}") from None
     print(f"accelnav record: live plot: {view.url} (also {png})", file=sys.stderr)
@@ -205,9 +210,46 @@ def cmd_log_info(args) -> int:
     if args.json:
         print(json.dumps(summary, indent=1))
         return 0
-    for k, v in summary.items():
-        print(f"{k:>18}: {v}")
+    print(log_info_table(summary))
     return 0
+
+
+def log_info_table(s: dict) -> str:
+    """``log info`` for a person: one row per subject, values in words and numbers (the JSON keeps every field)."""
+    frames = s["frames"]
+    kinds = sorted(frames, key=lambda k: (k != "sample", k))
+    rows = [
+        ("log", f"{s['log']} (source {s['source'] or 'not recorded'}, started {s['started_utc'] or 'not recorded'})"),
+        ("model", f"{s['model'] or 'not named'}, sha256 {s['model_sha256']}, frame layout {s['layout_hash']}"),
+        ("axes", f"{', '.join(s['axes'])}; {s['input']} input at {s['rate_hz']:g} Hz"),
+    ]
+    if s["index_first"] is None:
+        rows.append(("samples", "none"))
+    else:
+        rows += [
+            ("samples", f"{s['samples']}, sample index {s['index_first']} .. {s['index_last']}"),
+            (
+                "device time",
+                f"{s['device_seconds']:.2f} s: the recording's length, the index span at {s['rate_hz']:g} Hz",
+            ),
+            (
+                "host time",
+                f"{s['host_seconds']:.2f} s: first to last chunk read by the host (not the recording's length: "
+                "shorter when the device had buffered or ran faster than real time, longer when the link stalled)",
+            ),
+            ("tx drops", f"{s['tx_drop_last']} (the device's count of frames it could not send, at the last sample)"),
+        ]
+    rows += [
+        ("link", s["counts"]),
+        ("frames", ", ".join(f"{k} {frames[k]}" for k in kinds)),
+        ("bytes", f"{s['bytes']} in {s['chunks']} chunks; damaged {s['damaged_bytes']}, torn {s['torn_bytes']}"),
+    ]
+    if "device_layout_ok" in s:
+        ok = "matches the manifest" if s["device_layout_ok"] else "DIFFERS from the manifest"
+        rows.append(("device", f"frame layout {ok}; decimation {s['device_decimation']}"))
+    rows += [("warning", w) for w in s["warnings"]] or [("warnings", "none")]
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
 
 def cmd_log_export(args) -> int:

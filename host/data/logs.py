@@ -145,6 +145,10 @@ def log_summary(path: str | Path, model_text: str = "") -> dict:
         **d.stats,
         **link_counts(d.stats),
         "counts": format_counts(link_counts(d.stats)),
+        # two clocks, two different spans: the device's samples (index span at its rate: the recording's length)
+        # and the host's arrivals (first to last chunk read; a device that buffered before the host read, or a
+        # simulator faster than real time, makes it shorter, a stalled link longer)
+        "device_seconds": float((s["index"][-1] - s["index"][0] + 1) / man.rate_hz) if len(s) else 0.0,
         "host_seconds": float((d.host_t_ns[-1] - d.host_t_ns[0]) / 1e9) if len(s) else 0.0,
         "index_first": int(s["index"][0]) if len(s) else None,
         "index_last": int(s["index"][-1]) if len(s) else None,

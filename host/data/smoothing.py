@@ -11,6 +11,7 @@ the input in memory: over the input limit they are refused in one line before an
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 from collections.abc import Sequence
@@ -313,6 +314,7 @@ def _quiet_worker() -> None:
     from accelnav import progress
 
     progress.set_verbosity(0)  # the parent reports each file; a worker's notes and bars would interleave
+    logging.getLogger("accelnav").setLevel(logging.ERROR)
 
 
 def smooth_files(

@@ -163,6 +163,33 @@ class BiasFit:
     def stderr(self, name: str) -> float:
         return self.se[PARAMS.index(name)]
 
+    def why_truth_outside(self, name: str, truth: float, white: bool) -> str:
+        """'' when the 95 % interval of ``name`` holds ``truth`` (a simulation's); else why not, from this fit's
+        own evidence (``white``: did the residuals pass the whiteness tests): the constant-bias fallback, the
+        residuals' long-run correlation (the widened interval holds it), a wandering bias, or, with white
+        residuals, the one miss in twenty that a 95 % interval allows."""
+        i = PARAMS.index(name)
+        lo, hi = self.ci95[i]
+        if lo <= truth <= hi:
+            return ""
+        if not self.T_identified:
+            return (
+                "T was not identified, so the fit fell back to a constant bias (c1 = 0, c2 = the mean): the model "
+                "it fitted is not the one that made the data"
+            )
+        lo_lr, hi_lr = self.ci95_lr[i]
+        if lo_lr <= truth <= hi_lr:
+            return (
+                f"the residuals are correlated (long-run variance x{self.vif:.3g}): the interval widened for that, "
+                f"[{lo_lr:.4g}, {hi_lr:.4g}], holds it"
+            )
+        if not white:
+            return (
+                f"outside the widened [{lo_lr:.4g}, {hi_lr:.4g}] too: the residuals are not white, the bias wanders "
+                "(random walk sigma_eps), and the fit finds this recording's path, not the model's mean curve"
+            )
+        return "the residuals are white and no cause is seen: a 95 % interval misses the truth in 1 fit of 20"
+
 
 # --------------------------------------------------------------------------
 # Profile sums

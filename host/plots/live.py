@@ -13,7 +13,7 @@ daemon thread redraws at most ``1 / interval_s`` times a second from a snapshot 
 from __future__ import annotations
 
 import http.server
-import sys
+import logging
 import threading
 from pathlib import Path
 
@@ -138,7 +138,8 @@ class LivePlot:
 class LiveView:
     """Redraw ``plot`` to ``png`` every ``interval_s`` from a daemon thread while anything new came, and
     optionally serve a self-reloading page of it on 127.0.0.1:``port`` (0: any free port). The page answers
-    only requests naming this machine (:func:`host_allowed`); ``log`` gets one line per refused Host."""
+    only requests naming this machine (:func:`host_allowed`);
+    ``log`` gets one line per refused Host (default: a warning of this module's logger)."""
 
     def __init__(
         self,
@@ -158,7 +159,7 @@ class LiveView:
         self._server = None
         self.url: str | None = None
         if port is not None:
-            self._server = _serve(self.png, port, interval_s, log or _log_stderr)
+            self._server = _serve(self.png, port, interval_s, log or _log_warning)
             self.url = f"http://127.0.0.1:{self._server.server_address[1]}/"
 
     def start(self) -> LiveView:
@@ -212,8 +213,8 @@ def host_allowed(host: str | None, port: int) -> bool:
     return host.strip().lower() in {f"{name}:{port}" for name in LOOPBACK_NAMES}
 
 
-def _log_stderr(line: str) -> None:
-    print(f"accelnav record: live plot: {line}", file=sys.stderr)
+def _log_warning(line: str) -> None:
+    logging.getLogger(__name__).warning("live plot: %s", line)
 
 
 def _serve(png: Path, port: int, interval_s: float, log):

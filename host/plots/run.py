@@ -248,3 +248,51 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
 
 
 pyplot = _pyplot  # public: the other figure modules draw with the same backend set-up
+
+
+def plot_estimates(
+    t: np.ndarray, axis_names, truth_r: np.ndarray, estimates: dict[str, np.ndarray], folder: str | Path, title: str
+) -> list[Path]:
+    """Exactly the rows of a position-error table (:func:`accelnav.estimate.pipeline.error_rows` of the same
+    ``estimates``: name -> (n_axes, N) positions), nothing else, every axis side by side:
+
+    * position.png: the truth and each estimate;
+    * position_error.png: each estimate's error against the truth, its rms in the legend as in the table.
+
+    The y range is the truth's (position) or the other estimates' (error) when one estimate runs away (double
+    integration does): its label then says how far it goes."""
+    plt = _pyplot()
+    folder = Path(folder)
+    t, _ = _from_start(np.asarray(t, dtype=np.float64))
+    names = [str(a) for a in axis_names]
+    colors = ("tab:gray", "tab:blue", "tab:purple", "tab:red", "tab:orange", "tab:green")
+    paths = []
+    for kind, fname in (("position", "position.png"), ("error", "position_error.png")):
+        fig, axes = _axis_columns(plt, len(names), f"{title}: {'position' if kind == 'position' else 'error'}")
+        for j, ax in enumerate(axes):
+            truth = truth_r[:, j]
+            curves = {m: (r[j] - truth if kind == "error" else r[j]) for m, r in estimates.items()}
+            if kind == "position":
+                ax.plot(t, truth, color="black", lw=1.6, label="truth")
+                span = float(np.ptp(truth)) if len(truth) else 1.0
+                lo, hi = float(truth.min()) - 0.5 * span - 1.0, float(truth.max()) + 0.5 * span + 1.0
+            else:
+                ax.axhline(0.0, color="black", lw=0.8)
+                worst = max(curves, key=lambda m: float(np.max(np.abs(curves[m]))))
+                rest = [np.max(np.abs(c)) for m, c in curves.items() if m != worst] or [1.0]
+                lim = 1.5 * float(max(rest)) + 1e-3
+                lo, hi = -lim, lim
+            for k, (m, y) in enumerate(curves.items()):
+                rms = float(np.sqrt(np.mean((estimates[m][j] - truth) ** 2)))
+                label = f"{m} (rms {rms:.3g} m)"
+                if len(y) and (y.min() < lo or y.max() > hi):
+                    label += f", leaves the plot, reaches {float(np.max(np.abs(y))):.3g} m"
+                ax.plot(t, y, color=colors[k % len(colors)], lw=1.2, ls="--" if k == 0 else "-", label=label)
+            ax.set_ylim(lo, hi)
+            ax.set_title(f"axis {names[j]}")
+            ax.set_xlabel(_TIME_LABEL)
+            ax.set_ylabel("position r [m]" if kind == "position" else "error against the truth [m]")
+            ax.grid(True, alpha=0.3)
+            ax.legend(loc="best", fontsize=8)
+        paths.append(_save(plt, fig, folder / fname))
+    return paths

@@ -22,8 +22,9 @@ def test_demo_runs_the_whole_chain(tmp_path, capsys):
     fitted = load_model(tmp_path / "fitted.toml")
     assert fitted.name.endswith("_fit") or fitted.name == "adxl250_default"
     assert {p.name for p in (tmp_path / "gen").iterdir()} >= {"accelnav.c", "accelnav.h", "accelnav.json"}
-    for name in ("fig10_bias.png", "fig11_position_filter.png", "fig12_position_smoother.png", "report.md"):
+    for name in ("position.png", "position_error.png", "report.md"):
         assert (tmp_path / name).stat().st_size > 500, name
+    assert not list(tmp_path.glob("fig1*.png"))  # no figure of curves the table does not list
     assert any((tmp_path / "fit").glob("*_fit.png"))
     # the table: smoothing with zero-velocity updates must beat the firmware's filter at the end of the run
     rows = {}  # (axis, estimate) -> |final error|; columns: axis, estimate, rms, final, max |e|

@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
+import re
 import subprocess
 import sys
 import tomllib
@@ -51,6 +52,14 @@ def test_docs_build_with_no_warnings(tmp_path):
     page = (tmp_path / "model-file.html").read_text()
     assert "sensor.duty_cycle.t2_period_s" in page  # the generated key table is on the page
     assert (tmp_path / "commands" / "smooth.html").is_file()
+    # options as typed: no dash made typographic before an option's name, on any page
+    dashed = {
+        f"{html.relative_to(tmp_path)}: {m}"
+        for html in tmp_path.rglob("*.html")
+        for m in re.findall(r"(?<![\w\u2013\u2014-])[\u2013\u2014]{1,2}[a-z][\w-]*", html.read_text())
+    }
+    assert not dashed, sorted(dashed)
+    assert "Without --fixes and --zupt" in (tmp_path / "commands" / "smooth.html").read_text()
 
 
 def _flat_keys(data: dict, prefix: str = "") -> set[str]:

@@ -14,6 +14,7 @@ import textwrap
 import numpy as np
 import pytest
 from support.cachekey import private_cache
+from support.said import listen, warned
 
 from accelnav import cachefile
 from accelnav.estimate import fastsmooth as fs
@@ -52,8 +53,9 @@ def _forget():
 
 @pytest.mark.parametrize("forgery", ["sha256 recomputed", "sealed under another key"])
 def test_edited_steady_rows_are_refused_and_the_result_is_a_clean_runs(
-    cache, design, forgery, tmp_path, monkeypatch, capsys
+    cache, design, forgery, tmp_path, monkeypatch, caplog
 ):
+    listen(caplog)
     (xf0, xs0), g0 = _smooth(design)
     (path,) = fs.steady_cache_dir().glob("steady-*.bin")
     st = fs._load_steady(path, fs.steady_key(design))
@@ -73,11 +75,11 @@ def test_edited_steady_rows_are_refused_and_the_result_is_a_clean_runs(
     _forget()
     (xf1, xs1), g1 = _smooth(design)
     assert np.array_equal(xf1, xf0) and np.array_equal(xs1, xs0) and np.array_equal(g1.P_post, g0.P_post)
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and f"cache entry {path}: its seal does not verify" in err and "rebuilt" in err
+    (line,) = warned(caplog)
+    assert f"cache entry {path}: its seal does not verify" in line and "rebuilt" in line
 
 
-def test_a_short_run_reads_and_verifies_only_its_blocks(cache, design, monkeypatch, capsys):
+def test_a_short_run_reads_and_verifies_only_its_blocks(cache, design, monkeypatch, caplog):
     """Rows are sealed in blocks: a run of n samples reads the blocks holding its n rows, exact for it, and a
     longer run reads (and checks) every block."""
     monkeypatch.setattr(fs, "_BLOCK_ROWS", 256)
@@ -91,9 +93,10 @@ def test_a_short_run_reads_and_verifies_only_its_blocks(cache, design, monkeypat
     blob[-8:] = np.float64(1e300).tobytes()  # a value in the last block
     path.write_bytes(bytes(blob))
     assert np.array_equal(fs._load_steady(path, full.key, 300).rows, full.rows[:512])
-    assert capsys.readouterr().err == ""
+    assert warned(caplog) == []
     assert fs._load_steady(path, full.key) is None  # the whole transient: the edited block is found
-    assert f"rows block {(nt - 1) // 256} does not verify" in capsys.readouterr().err
+    (line,) = warned(caplog)
+    assert f"rows block {(nt - 1) // 256} does not verify" in line
     _forget()
     for n in (100, nt + 50):
         ref = fs.plain_gains(design, n, steady=False)
@@ -132,7 +135,7 @@ BAD = {
 
 
 @pytest.mark.parametrize("bad", list(BAD))
-def test_gains_of_the_wrong_shape_are_refused_before_c(cache, design, bad, tmp_path, monkeypatch, capsys):
+def test_gains_of_the_wrong_shape_are_refused_before_c(cache, design, bad, tmp_path, monkeypatch, caplog):
     monkeypatch.setenv("ACCELNAV_GAIN_CACHE", str(tmp_path / "gains"))
     valid = np.ones(N, dtype=bool)
     valid[::5] = False
@@ -145,8 +148,8 @@ def test_gains_of_the_wrong_shape_are_refused_before_c(cache, design, bad, tmp_p
     for k in ("K", "Cs"):
         assert getattr(got, k).shape == (N, 4)  # what reaches the kernel: the recomputed gains
     assert all(np.array_equal(a, b) for a, b in zip(fs.plain_data(design, z, valid, got), ref, strict=True))
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and f"cache entry {path}:" in err and "rebuilt" in err, err
+    (line,) = warned(caplog)
+    assert f"cache entry {path}:" in line and "rebuilt" in line, line
 
 
 SCRIPT = """

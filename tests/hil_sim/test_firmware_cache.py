@@ -15,6 +15,7 @@ import time
 import numpy as np
 import pytest
 from support.cachekey import private_cache, seal_with_other_key
+from support.said import listen, one_warning
 
 from accelnav.cachefile import HEAD, entry_lock
 from accelnav.hil_sim.targets import firmware, simavr
@@ -75,7 +76,8 @@ def test_two_builders_of_one_image_build_once_and_both_get_it_whole(cache, tmp_p
     assert a[:4] == b"\x7fELF" and a == b
 
 
-def test_an_image_replaced_in_the_cache_is_never_run(cache, tmp_path, capfd):
+def test_an_image_replaced_in_the_cache_is_never_run(cache, tmp_path, capfd, caplog):
+    listen(caplog)
     with firmware.private_firmware("host") as fw:
         clean = _run_host(fw, tmp_path)
     entry = firmware.image_entry("host")
@@ -90,12 +92,14 @@ def test_an_image_replaced_in_the_cache_is_never_run(cache, tmp_path, capfd):
         planted()
         with firmware.private_firmware("host") as fw:
             assert _run_host(fw, tmp_path) == clean
-        err = capfd.readouterr().err
-        assert err.count("\n") == 1 and f"cache entry {entry}: its seal does not verify" in err, err
-        assert err.rstrip().endswith("; rebuilt") and not marker.exists()
+        assert capfd.readouterr().err == ""  # the warning is logged: nothing else on stderr
+        line = one_warning(caplog)
+        assert f"cache entry {entry}: its seal does not verify" in line, line
+        assert line.endswith("; rebuilt") and not marker.exists()
 
 
-def test_a_valid_image_of_another_model_in_its_place_is_rebuilt(cache, tmp_path, capfd):
+def test_a_valid_image_of_another_model_in_its_place_is_rebuilt(cache, tmp_path, capfd, caplog):
+    listen(caplog)
     duty = models_dir() / "adxl202_duty.toml"
     other = firmware.image_entry("host", duty)
     firmware.firmware_images("host", duty)  # a valid image, sealed under our key, for another model
@@ -106,11 +110,13 @@ def test_a_valid_image_of_another_model_in_its_place_is_rebuilt(cache, tmp_path,
     capfd.readouterr()
     with firmware.private_firmware("host") as fw:
         assert _run_host(fw, tmp_path) == clean
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and f"cache entry {entry}: its seal does not verify" in err and "rebuilt" in err
+    assert capfd.readouterr().err == ""  # the warning is logged: nothing else on stderr
+    line = one_warning(caplog)
+    assert f"cache entry {entry}: its seal does not verify" in line and "rebuilt" in line
 
 
-def test_a_truncated_image_is_rebuilt(cache, tmp_path, capfd):
+def test_a_truncated_image_is_rebuilt(cache, tmp_path, capfd, caplog):
+    listen(caplog)
     with firmware.private_firmware("host") as fw:
         clean = _run_host(fw, tmp_path)
     entry = firmware.image_entry("host")
@@ -119,15 +125,18 @@ def test_a_truncated_image_is_rebuilt(cache, tmp_path, capfd):
     capfd.readouterr()
     with firmware.private_firmware("host") as fw:  # a new build: the same program (its bytes name its folder)
         assert _run_host(fw, tmp_path) == clean
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and f"cache entry {entry}: its seal does not verify" in err and "rebuilt" in err
+    assert capfd.readouterr().err == ""  # the warning is logged: nothing else on stderr
+    line = one_warning(caplog)
+    assert f"cache entry {entry}: its seal does not verify" in line and "rebuilt" in line
     entry.write_bytes(entry.read_bytes()[: HEAD - 1])  # shorter than a seal
     firmware.firmware_images("host")
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and f"cache entry {entry}: not a sealed entry ({HEAD - 1} bytes" in err, err
+    assert capfd.readouterr().err == ""  # the warning is logged: nothing else on stderr
+    line = one_warning(caplog)
+    assert f"cache entry {entry}: not a sealed entry ({HEAD - 1} bytes" in line, line
 
 
-def test_a_feed_program_replaced_in_the_cache_is_never_run(tmp_path, monkeypatch, capfd):
+def test_a_feed_program_replaced_in_the_cache_is_never_run(tmp_path, monkeypatch, capfd, caplog):
+    listen(caplog)
     cache = private_cache(tmp_path, monkeypatch)
     try:
         good = simavr.harness()
@@ -138,15 +147,17 @@ def test_a_feed_program_replaced_in_the_cache_is_never_run(tmp_path, monkeypatch
     hostile = f"#!/bin/sh\ntouch {marker}\n".encode()
     seal_with_other_key(entry, hostile, tmp_path, monkeypatch)
     assert simavr.harness() == good
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and f"cache entry {entry}: its seal does not verify" in err
+    assert capfd.readouterr().err == ""  # the warning is logged: nothing else on stderr
+    line = one_warning(caplog)
+    assert f"cache entry {entry}: its seal does not verify" in line
     entry.write_bytes(entry.read_bytes()[:40] + hostile)  # our header, their program
     assert simavr.harness() == good and not marker.exists()
 
 
-def test_pil_runs_only_the_sealed_image_of_its_model(tmp_path, monkeypatch, capfd):
+def test_pil_runs_only_the_sealed_image_of_its_model(tmp_path, monkeypatch, capfd, caplog):
     """The emulated board, whose semihosting reaches host files: a valid image of another model planted in
     the cache is rebuilt, and the run equals SIL bit for bit."""
+    listen(caplog)
     if shutil.which("qemu-system-arm") is None or shutil.which("arm-none-eabi-gcc") is None:
         pytest.skip("PIL on mps2_an385 needs qemu-system-arm and arm-none-eabi-gcc")
     from accelnav.hil_sim.sim.sensor import simulate
@@ -166,5 +177,6 @@ def test_pil_runs_only_the_sealed_image_of_its_model(tmp_path, monkeypatch, capf
     capfd.readouterr()
     pil = hil.run_pil(model, stim, len(run.t), tmp_path / "p.acnlog", board="mps2_an385")
     assert pil.telemetry == sil
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and f"cache entry {entry}: its seal does not verify" in err and "rebuilt" in err
+    assert capfd.readouterr().err == ""  # the warning is logged: nothing else on stderr
+    line = one_warning(caplog)
+    assert f"cache entry {entry}: its seal does not verify" in line and "rebuilt" in line
