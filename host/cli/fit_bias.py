@@ -34,6 +34,7 @@ from accelnav.data.recording import MIN_DURATION_S, Recording
 from accelnav.fileio import check_output
 from accelnav.identify.characterise import AxisResult, characterise
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO
+from accelnav.identify.quantised import advice
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS
 from accelnav.model.edit import save_model
 from accelnav.model.load import DEFAULT_MODEL, G0, Model
@@ -217,6 +218,12 @@ def axis_report(r: AxisResult) -> list[str]:
             f"    (rejected exponential: c1 = {e.c1:.4g} m/s^2, c2 = {e.c2:.6g} m/s^2, T = {e.T:.4g} s, "
             f"T profile 95 % {_fmt_ci(e.ci95[2], '.4g')}{'' if all(e.T_ci_closed) else ' open'})"
         )
+    q = r.quant
+    if q is not None and q.hidden:
+        out.append(
+            f"    the intervals include +-{q.bias_bound:.4g} m/s^2 on c2 (twice that on c1): with the noise under "
+            f"the read-out step ({q.step:.4g} m/s^2), the mean of the readings may sit that far from the signal's"
+        )
     out.append(
         f"    residual rms {f.sigma:.4g} m/s^2 ({_fmt_mg(f.sigma)}); variance factors for residual correlation: "
         f"short-range srf = {f.srf:.3g}, long-run vif = {f.vif:.3g} (both 1 for white residuals)"
@@ -234,6 +241,9 @@ def axis_report(r: AxisResult) -> list[str]:
             out.append(f"       c1 {_fmt_ci(lr[0])}, c2 {_fmt_ci(lr[1])} m/s^2, T {_fmt_ci(lr[2], '.4g')} s")
         else:
             out.append(f"       c2 {_fmt_ci(lr[1])} m/s^2")
+    if r.noise_hidden:
+        out.append(f"  noise: {advice(q)}")
+        return out
     k = nz.terms
     c = nz.curve
     out.append(f"  noise (overlapping Allan deviation of the residual, tau {c.tau[0]:.3g} .. {c.tau[-1]:.4g} s):")
@@ -280,10 +290,17 @@ def model_report(
         ax = model.axis(r.name)
         how = "fitted" if r.fit.T_identified else "constant bias; T kept, it has no effect on the mean with c1 = 0"
         lines.append(f"  axis {ax.name}: c1 = {ax.c1:.6g}, c2 = {ax.c2:.6g} m/s^2, T = {ax.T:.6g} s ({how})")
-    names = ", ".join(r.name for r in results)
+    seen = [r for r in results if not r.noise_hidden]
+    names = ", ".join(r.name for r in seen)
+    hidden = ", ".join(r.name for r in results if r.noise_hidden)
     n = model.noise
     raised = [r for r in results if r.check is not None and r.check.R_chosen > r.check.R_white]
-    if raised:
+    if not seen:
+        lines.append(
+            f"  R = {n.R:.6g} (m/s^2)^2 and sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) kept from the base model: the "
+            f"read-out step hides the noise on every axis ({hidden}), so the recording gives no noise figure"
+        )
+    elif raised:
         lines.append(
             f"  R = {n.R:.6g} (m/s^2)^2: the band's R, chosen because the white-noise R "
             f"({raised[0].check.R_white:.4g}) misrepresents the noise over "
@@ -292,12 +309,15 @@ def model_report(
         )
     else:
         lines.append(f"  R = {n.R:.6g} (m/s^2)^2 = max over {names} of N^2/Ts at Ts = {model.Ts:.6g} s")
-    bound = any(r.noise.terms.K_is_bound for r in results)
-    lines.append(
-        f"  sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) = max over {names} of K"
-        + (" (an upper bound where no random walk is seen)" if bound else "")
-    )
-    paper = max(r.noise.sigma_n_paper for r in results)
+    if seen:
+        bound = any(r.noise.terms.K_is_bound for r in seen)
+        lines.append(
+            f"  sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) = max over {names} of K"
+            + (" (an upper bound where no random walk is seen)" if bound else "")
+        )
+    if seen and hidden:
+        lines.append(f"  (axes {hidden} left out of R and sigma_eps: the read-out step hides their noise)")
+    paper = max((r.noise.sigma_n_paper for r in seen), default=float("nan"))
     if sigma_n == "paper":
         lines.append(f"  sigma_n = {n.sigma_n:.6g} from the paper's rule (the base model had {base.noise.sigma_n:.6g})")
     else:
@@ -330,6 +350,13 @@ def provenance(rec: Recording, results, base_label: str) -> str:
             lines.append(f"axis {r.name}: T not identified, constant bias c2 = {f.c2:.6g} +- {f.se[1]:.2g} m/s^2")
         verdicts = ", ".join(f"{t.name} {'white' if t.white else 'not white'}" for t in r.white.tests)
         lines.append(f"  residuals: {verdicts}")
+        if r.noise_hidden:
+            q = r.quant
+            lines.append(
+                f"  noise hidden by the read-out step {q.step:.4g} m/s^2 (residual sd {q.spread / q.step:.2g} step): "
+                f"no noise figure fitted; bias intervals include +-{q.bias_bound:.4g} m/s^2"
+            )
+            continue
         lines.append(
             f"  Allan: N = {k.N:.4g} m/s^2/sqrt(Hz), minimum {k.adev_min:.3g} m/s^2 at {k.tau_min:.3g} s, "
             f"K {'<=' if k.K_is_bound else '='} {k.K:.3g} m/s^2/sqrt(s)"

@@ -443,11 +443,16 @@ def fit_bias(
     T_min: float | None = None,
     T_max: float | None = None,
     progress=None,
+    level_bound: float = 0.0,
 ) -> BiasFit:
     """Fit eps(t) = c1 (1 - exp(-(t - t[0])/T)) + c2 to the stationary samples ``y`` at times ``t``.
 
     ``T_min`` / ``T_max`` bound the search (default: 10 sample periods and 10
-    record durations). ``progress`` (a :class:`accelnav.progress.Progress` over
+    record durations). ``level_bound``: how far the samples' mean may sit from the
+    signal's whatever their number (a read-out step that hides the noise:
+    :mod:`accelnav.identify.quantised`); the intervals of c2 (a level) grow by it and
+    those of c1 (two levels' difference) by twice it, and c1 must clear zero by
+    those to identify T. ``progress`` (a :class:`accelnav.progress.Progress` over
     4 stages, or None) is advanced as the stages finish. Raises
     :class:`FitError` for data it cannot use (too few samples, non-finite
     values, time not increasing, a constant signal).
@@ -502,16 +507,21 @@ def fit_bias(
     cov = _cov_from_normal(A, sigma2) * srf
     se = np.sqrt(np.abs(np.diag(cov)))
     z = Z95
-    ci_c1 = (float(c1 - z * se[0]), float(c1 + z * se[0]))
-    ci_c2 = (float(c2 - z * se[1]), float(c2 + z * se[1]))
+    w1, w2 = 2 * level_bound, level_bound
+    ci_c1 = (float(c1 - z * se[0] - w1), float(c1 + z * se[0] + w1))
+    ci_c2 = (float(c2 - z * se[1] - w2), float(c2 + z * se[1] + w2))
     rss_min = min(rss, rss_prof)
     (T_ci, closed) = _profile_interval(prof, T_grid, rss_grid, T_hat, rss_min, CHI2_1_95 * sigma2 * srf)
     inflate = max(1.0, vif, srf)
     (T_ci_lr, closed_lr) = _profile_interval(prof, T_grid, rss_grid, T_hat, rss_min, CHI2_1_95 * sigma2 * inflate)
+    if level_bound > 0:
+        hull = _level_hull(sums, T_grid, ybar, duration, (c1, c2, T_hat), level_bound)
+        T_ci, closed = _joined(T_ci, closed, hull)
+        T_ci_lr, closed_lr = _joined(T_ci_lr, closed_lr, hull)
     zl = Z95 * math.sqrt(inflate / srf)
     ci95_lr = (
-        (float(c1 - zl * se[0]), float(c1 + zl * se[0])),
-        (float(c2 - zl * se[1]), float(c2 + zl * se[1])),
+        (float(c1 - zl * se[0] - w1), float(c1 + zl * se[0] + w1)),
+        (float(c2 - zl * se[1] - w2), float(c2 + zl * se[1] + w2)),
         T_ci_lr,
     )
     exp_fit = ExpFit(
@@ -578,8 +588,8 @@ def fit_bias(
         c2=ybar,
         T=nan,
         se=(nan, se_c2, nan),
-        ci95=((nan, nan), (ybar - Z95 * se_c2, ybar + Z95 * se_c2), (nan, nan)),
-        ci95_lr=((nan, nan), (ybar - Z95 * se_lr, ybar + Z95 * se_lr), (nan, nan)),
+        ci95=((nan, nan), (ybar - Z95 * se_c2 - w2, ybar + Z95 * se_c2 + w2), (nan, nan)),
+        ci95_lr=((nan, nan), (ybar - Z95 * se_lr - w2, ybar + Z95 * se_lr + w2), (nan, nan)),
         T_identified=False,
         verdict=verdict + "; falling back to a constant bias (c1 = 0, c2 = mean)",
         vif=vif0,
@@ -590,6 +600,32 @@ def fit_bias(
         duration=duration,
         residuals=_readonly(r0),
         exp=exp_fit,
+    )
+
+
+def _level_hull(sums, T_grid, ybar, duration, best, bound):
+    """The T of the grid whose best curve stays within +-``bound`` of the best fit's over the record: T the
+    samples cannot tell apart when their mean is known to +-bound only. Returns (lo, hi, closed below,
+    closed above): the outermost such T, one grid point further out, and whether that is inside the grid."""
+    c1, c2, T_hat = best
+    _, b0, b1 = sums.profile(1.0 / T_grid)
+    tt = np.unique(np.concatenate([np.linspace(0.0, duration, 400), np.geomspace(duration * 1e-6, duration, 400)]))
+    fitted = c2 - c1 * np.expm1(-tt / T_hat)
+    curves = ybar + b0[:, None] + b1[:, None] * np.exp(-tt[None, :] / T_grid[:, None])
+    ok = np.nonzero(np.max(np.abs(curves - fitted[None, :]), axis=1) <= bound)[0]
+    if len(ok) == 0:
+        return (T_hat, T_hat, True, True)
+    i, j = int(ok[0]), int(ok[-1])
+    last = len(T_grid) - 1
+    return (float(T_grid[max(i - 1, 0)]), float(T_grid[min(j + 1, last)]), i > 0, j < last)
+
+
+def _joined(ci, closed, hull):
+    """A profile interval of T grown to the level hull (:func:`_level_hull`)."""
+    lo, hi, c_lo, c_hi = hull
+    return (
+        (min(ci[0], lo), max(ci[1], hi)),
+        (closed[0] and (c_lo or ci[0] < lo), closed[1] and (c_hi or ci[1] > hi)),
     )
 
 

@@ -15,6 +15,7 @@ from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
+from accelnav.identify.quantised import Quantisation, grid_step, quantisation
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
 from accelnav.model.edit import revalidate, with_axis_bias, with_noise
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model, model_name_from
@@ -31,6 +32,12 @@ class AxisResult:
     noise: NoiseId
     composite: Composite
     check: BandCheck | None = None
+    quant: Quantisation | None = None  # the read-out step, where the samples have one
+
+    @property
+    def noise_hidden(self) -> bool:
+        """The step hides this axis's noise: its noise figures are not the sensor's."""
+        return self.quant is not None and self.quant.hidden
 
 
 def analyse_axis(
@@ -41,16 +48,31 @@ def analyse_axis(
     full_scale: float | None,
     lags: int,
     sensor_range: tuple[float, str] | None = None,
+    step: float = 0.0,
+    hints: dict | None = None,
 ) -> AxisResult:
-    """Check, fit, test and identify one axis of ``rec`` (with progress on stderr)."""
-    y = check_axis(rec, axis, min_duration_s=min_duration_s, full_scale=full_scale, sensor_range=sensor_range)
+    """Check, fit, test and identify one axis of ``rec`` (with progress on stderr). ``step`` [m/s^2]: the
+    read-out step of its samples (the model's, for raw counts); 0: the step of the grid they sit on, if any.
+    ``hints``: what the model says about a finer read-out (Quantisation's sensor_noise, finer)."""
     j = rec.column(axis)
+    source = "the model's read-out"
+    if step <= 0:
+        step, source = grid_step(rec.accel[:, j]), "the samples' own grid"
+    y = check_axis(
+        rec, axis, min_duration_s=min_duration_s, full_scale=full_scale, sensor_range=sensor_range, step=step
+    )
     name = rec.axis_names[j]
     try:
         with Progress(f"fit {name}", total=4, unit="stages") as p:
             fit = fit_bias(rec.t, y, progress=p)
     except FitError as exc:
         raise UserError(f"{rec.source}: axis {name!r}: {exc}") from None
+    quant = quantisation(y, fit.residuals, step, source) if step > 0 else None
+    if quant is not None:
+        quant = dataclasses.replace(quant, **(hints or {}))
+        if quant.bias_bound > 0:  # again, with the step's bound on the mean in its intervals and its decision on T
+            with Progress(f"fit {name} (read-out step)", total=4, unit="stages") as p:
+                fit = fit_bias(rec.t, y, progress=p, level_bound=quant.bias_bound)
     with Progress(f"white {name}", total=1, unit="tests") as p:
         white = whiteness(fit.residuals, lb_lags=lags)
         p.update(1)
@@ -62,7 +84,7 @@ def analyse_axis(
         except ValueError as exc:
             raise UserError(f"{rec.source}: axis {name!r}: composite noise model: {exc}") from None
         p.update(1)
-    return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise, comp)
+    return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise, comp, quant=quant)
 
 
 def read_stationary(
@@ -107,6 +129,30 @@ def base_model(path: Path | None, rec: Recording) -> tuple[Model, str, bool]:
     return load_model(DEFAULT_MODEL), f"the embedded default {DEFAULT_MODEL.name}", False
 
 
+def read_out_steps(model: Model, rec: Recording) -> dict[str, float]:
+    """The read-out step [m/s^2] of each axis of ``rec``, by the model axis its counts were converted with
+    (the axis of its name, else of its place, as :func:`accelnav.data.recording.in_accel` maps them)."""
+    from accelnav.model.design import steps_and_noise
+
+    steps, _ = steps_and_noise(model)
+    names = [a.name for a in model.axes]
+    return {n: float(steps[names.index(n) if n in names else j]) for j, n in enumerate(rec.axis_names)}
+
+
+def finer_read_out(model: Model) -> dict:
+    """What the model says of a finer read-out for the advice when a step hides the noise: the datasheet's
+    noise sd, and for an analog part on a reference above its supply, the step of a reference at the supply."""
+    from accelnav.model.design import steps_and_noise
+
+    _, noise = steps_and_noise(model)
+    hints: dict = {"sensor_noise": noise if noise > 0 else None}
+    a = model.sensor.analog
+    if a is not None and a.adc_ref_v > a.supply_v:
+        step = a.supply_v / 2**a.adc_bits / a.sensitivity_v_per_g * 1e3  # mg
+        hints["finer"] = f"a {a.supply_v:g} V reference (the supply: ratiometric; step {step:.3g} mg)"
+    return hints
+
+
 def _sig(x: float, digits: int = 6) -> float:
     return float(f"{x:.{digits}g}")
 
@@ -135,12 +181,13 @@ def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: st
             raise UserError(f"axis name {r.name!r} cannot name a model axis (it must be a C identifier); use --axis")
         model = with_axis_bias(model, r.name, _sig(c1), _sig(c2), _sig(T))
     Ts = model.Ts
-    R = max(r.noise.R(Ts) for r in results)
-    sigma_eps = max(r.noise.sigma_eps for r in results)
-    values = {"R": _sig(R), "sigma_eps": _sig(sigma_eps)}
-    if sigma_n == "paper":
-        values["sigma_n"] = _sig(max(r.noise.sigma_n_paper for r in results))
-    model = with_noise(model, **values)
+    seen = [r for r in results if not r.noise_hidden]  # an axis whose noise the step hides gives no figure
+    values = {}
+    if seen:
+        values = {"R": _sig(max(r.noise.R(Ts) for r in seen)), "sigma_eps": _sig(max(r.noise.sigma_eps for r in seen))}
+        if sigma_n == "paper":
+            values["sigma_n"] = _sig(max(r.noise.sigma_n_paper for r in seen))
+    model = with_noise(model, **values) if values else model
     if len(model.axes) > 3:
         raise UserError(
             f"the model would have {len(model.axes)} axes ({', '.join(a.name for a in model.axes)}); "
@@ -153,6 +200,9 @@ def check_noise_band(model: Model, rec: Recording, results: list[AxisResult], ba
     """Check each axis's composite noise against the merged model's noise over ``band``; raise R where needed."""
     out = []
     for r in results:
+        if r.noise_hidden:  # no noise figure to check
+            out.append(r)
+            continue
         try:
             chk = check_band(
                 r.noise.curve,
@@ -166,7 +216,7 @@ def check_noise_band(model: Model, rec: Recording, results: list[AxisResult], ba
         except ValueError as exc:
             raise UserError(f"{rec.source}: axis {r.name!r}: --noise-band: {exc}") from None
         out.append(dataclasses.replace(r, check=chk))
-    R = max(r.check.R_chosen for r in out)
+    R = max((r.check.R_chosen for r in out if r.check is not None), default=0.0)
     if R > model.noise.R:
         model = revalidate(with_noise(model, R=_sig(R)))
     return out, model
@@ -190,6 +240,8 @@ class Characterisation:
         rows = []
         for r in self.axes:
             f, k = r.fit, r.noise.terms
+            if r.noise_hidden:  # the step hides the noise: no figure from it
+                k = dataclasses.replace(k, N=float("nan"), B=float("nan"), K=float("nan"))
             rows.append(
                 {
                     "axis": r.name,
@@ -242,7 +294,8 @@ def characterise(
         base, base_label, given = model, str(model.source), True
     else:
         base, base_label, given = base_model(None if model is None else Path(model), rec)
-    if "counts" in rec.units:
+    counts = "counts" in rec.units
+    if counts:
         if not given:
             raise UserError(f"{rec.source}: raw counts need the model of their read-out: give --model")
         rec = in_accel(rec, base)  # the model's own conversion, as the firmware's
@@ -254,8 +307,19 @@ def characterise(
         f"axes {', '.join(rec.axis_names)}"
     )
     sensor_range = (base.max_accel_m_s2, f"the sensor of {base_label}")  # the range the written model claims
+    steps = read_out_steps(base, rec) if counts else {}
+    hints = finer_read_out(base) if given else {}
     results = [
-        analyse_axis(rec, a, min_duration_s=min_duration_s, full_scale=full_scale, lags=lags, sensor_range=sensor_range)
+        analyse_axis(
+            rec,
+            a,
+            min_duration_s=min_duration_s,
+            full_scale=full_scale,
+            lags=lags,
+            sensor_range=sensor_range,
+            step=steps.get(a, 0.0),
+            hints=hints,
+        )
         for a in rec.axis_names
     ]
     merged = merge(base, rec, results, sigma_n=sigma_n, keep_rate=given)
