@@ -70,7 +70,7 @@ def analyse_axis(
     quant = quantisation(y, fit.residuals, step, source) if step > 0 else None
     if quant is not None:
         quant = dataclasses.replace(quant, **(hints or {}))
-        if quant.bias_bound > 0:  # again, with the step's bound on the mean in its intervals and its decision on T
+        if quant.hidden:  # again, with the step's bound on the mean in its intervals and its decision on T
             with Progress(f"fit {name} (read-out step)", total=4, unit="stages") as p:
                 fit = fit_bias(rec.t, y, progress=p, level_bound=quant.bias_bound)
     with Progress(f"white {name}", total=1, unit="tests") as p:

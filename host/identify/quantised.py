@@ -12,8 +12,9 @@ A reading Q(x) = q round(x / q) of x = mu + n, n white with sd sigma:
 
 :func:`quantisation` decides which case a fit's residuals are in, by the Sheppard-corrected sd against
 half a step (the one threshold, ``HIDDEN_BELOW``), and gives the half-width that the bias intervals must
-grow by. :func:`grid_step` finds the step of samples that sit on a regular grid (a recording already
-converted from codes). :func:`advice` says in one line how to make the noise visible.
+grow by where the noise is hidden (elsewhere the bound is under 0.3 % of a step, and left out).
+:func:`grid_step` finds the step of samples that sit on a regular grid (a recording already converted
+from codes). :func:`advice` says in one line how to make the noise visible.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 HIDDEN_BELOW = 0.5  # noise sd, in steps, below which the step hides the noise (see the module notes)
-GRID_RTOL = 1e-6  # spacings that are whole multiples of the smallest to this share of it: a grid
+GRID_TOL = 0.01  # spacings within this share of a step of whole steps: a grid (a file's decimals round them)
 MAX_GRID_VALUES = 1 << 16  # more distinct values than this: not read as a grid (a 16-bit span at most)
 
 
@@ -57,19 +58,17 @@ class Quantisation:
 
 
 def grid_step(y: np.ndarray) -> float:
-    """The step of a regular grid that every sample of ``y`` sits on (its values' spacings all whole
-    multiples of the smallest), or 0 when the samples are not on one (or hold too many values to be)."""
+    """The step of a regular grid that every sample of ``y`` sits on (the spacings of its values all whole
+    steps, to GRID_TOL of one: codes converted and written with a few decimals), or 0 when the samples are not
+    on one (or hold too many values to be)."""
     values = np.unique(y[np.isfinite(y)])
     if len(values) < 2 or len(values) > MAX_GRID_VALUES:
         return 0.0
     gaps = np.diff(values)
-    q = float(gaps.min())
-    if q <= 0:
-        return 0.0
-    ratio = gaps / q
-    if np.all(np.abs(ratio - np.round(ratio)) <= GRID_RTOL * np.maximum(1.0, ratio)):
-        # refine on the span: (max - min) / whole steps is the step to float precision
-        return float((values[-1] - values[0]) / np.round(ratio).sum())
+    k = np.round(gaps / gaps.min())
+    q = float(gaps.sum() / k.sum())  # least squares over every spacing: the smallest alone carries its rounding
+    if q > 0 and np.all(np.abs(gaps - k * q) <= GRID_TOL * q):
+        return q
     return 0.0
 
 

@@ -101,3 +101,18 @@ def test_clipping_at_the_adc_rail_is_still_refused(uno, tmp_path, capsys):
     assert main(["fit-bias", str(path), "--model", str(described), "--out", str(tmp_path / "f.toml")]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "axis 'x': 500 samples are flagged clipped, the first at sample 30000" in err
+
+
+def test_samples_in_g_on_the_adcs_grid_are_read_as_quantised(uno, tmp_path, capsys):
+    """The same run converted to g by the board and written with 6 decimals, no model given: the step is the
+    samples' own grid, and the still part on its few codes is no more clipping than in counts."""
+    _, _, run, _ = uno
+    path = tmp_path / "still_g.csv"
+    g = run.accel / 9.80665
+    np.savetxt(path, np.column_stack([run.t, g]), delimiter=",", header="t,acc_x_g,acc_y_g,acc_z_g", comments="",
+               fmt=["%.6f", "%.6f", "%.6f", "%.6f"])  # fmt: skip
+    code = main(["fit-bias", str(path), "--out", str(tmp_path / "f.toml")])
+    said = capsys.readouterr()
+    assert code == 0, said.err
+    lines = [line for line in said.out.splitlines() if line.startswith("  noise: ")]
+    assert len(lines) == 3 and all("14.8 mg (the samples' own grid) hides the noise" in x for x in lines), lines

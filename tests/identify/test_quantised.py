@@ -19,6 +19,8 @@ def test_grid_step_of_converted_codes_and_of_none():
     codes = np.array([336, 337, 339, 338, 340, 337])
     y = codes * (5 / 1024 / 0.33 * 9.80665) - 1.65 / 0.33 * 9.80665  # as the model's conversion makes them
     assert grid_step(y) == pytest.approx(5 / 1024 / 0.33 * 9.80665, rel=1e-9)
+    written = np.round(y / 9.80665, 6) * 9.80665  # converted to g and written with 6 decimals
+    assert grid_step(written) == pytest.approx(5 / 1024 / 0.33 * 9.80665, rel=1e-4)
     assert grid_step(np.random.default_rng(1).standard_normal(1000)) == 0.0  # continuous samples: no grid
     assert grid_step(np.full(10, 0.3)) == 0.0  # one value: no spacing to read
 
