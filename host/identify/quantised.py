@@ -95,7 +95,7 @@ def advice(q: Quantisation) -> str:
     if noise is not None and 0 < 2 * noise < q.step:
         bits = math.ceil(math.log2(q.step / (2 * noise)))
         fixes.append(
-            f"{bits} more ADC bit{'s' if bits > 1 else ''} (the datasheet's noise, {noise * mg:.2g} mg rms, "
+            f"{bits} more ADC bit{'s' if bits > 1 else ''} (the model's sensor noise, {noise * mg:.2g} mg rms, "
             f"shows at a step of {2 * noise * mg:.2g} mg or less)"
         )
     return line + "; to measure it: " + ", or ".join(fixes)

@@ -167,3 +167,11 @@ def test_init_asks_to_record_what_the_model_is_proved_for(tmp_path, capsys):
     run = load_model(out).ranges.max_run_s
     assert float(minutes.group(1)) * 60 == run and float(minutes.group(2)) == run
     assert "or more" not in said
+
+
+def test_a_noise_density_given_replaces_the_parts_per_axis_figures(tmp_path):
+    out = tmp_path / "m.toml"
+    assert main([*INIT, "--noise-density", "200e-6", "--out", str(out)]) == 0
+    m = load_model(out)
+    assert m.sensor.noise_density_g_rthz == 200e-6  # the one figure given, for every axis (z's 300 dropped)
+    assert "Noise density per axis" not in out.read_text()
