@@ -297,8 +297,9 @@ def model_report(
     raised = [r for r in results if r.check is not None and r.check.R_chosen > r.check.R_white]
     if not seen:
         lines.append(
-            f"  R = {n.R:.6g} (m/s^2)^2 and sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) kept from the base model: the "
-            f"read-out step hides the noise on every axis ({hidden}), so the recording gives no noise figure"
+            f"  R = {n.R:.6g} (m/s^2)^2: {_hidden_R(n.R, base, results)}; sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) "
+            f"kept from the base model: the read-out step hides the noise on every axis ({hidden}), so the recording "
+            "gives no noise figure"
         )
     elif raised:
         lines.append(
@@ -316,7 +317,10 @@ def model_report(
             + (" (an upper bound where no random walk is seen)" if bound else "")
         )
     if seen and hidden:
-        lines.append(f"  (axes {hidden} left out of R and sigma_eps: the read-out step hides their noise)")
+        lines.append(
+            f"  (axes {hidden}: the read-out step hides their noise, so they give no figure to R and sigma_eps; "
+            f"R is at least {_hidden_R(None, base, results)})"
+        )
     paper = max((r.noise.sigma_n_paper for r in seen), default=float("nan"))
     if sigma_n == "paper":
         lines.append(f"  sigma_n = {n.sigma_n:.6g} from the paper's rule (the base model had {base.noise.sigma_n:.6g})")
@@ -331,6 +335,21 @@ def model_report(
             "R is mapped to the model's rate"
         )
     return lines
+
+
+def _hidden_R(R: float | None, base: Model, results) -> str:
+    """Where R comes from for axes whose noise the read-out step hides (see characterise.merge)."""
+    q = max(r.quant.step for r in results if r.noise_hidden)
+    if R is not None and R == base.noise.R:
+        return "kept from the base model"
+    if R is not None and R > q**2 / 12 * (1 + 1e-5):
+        return (
+            f"q^2/12 + (q/2)^2 at the step q = {q:.4g} m/s^2, rounding and a noise of up to half a step: the most "
+            "these data allow (no model of this sensor given)"
+        )
+    if R is not None:
+        return f"the step's rounding q^2/12 at q = {q:.4g} m/s^2 (the base model's R is less)"
+    return f"the base model's R {base.noise.R:.4g} and the step's rounding q^2/12 = {q**2 / 12:.4g}"
 
 
 def provenance(rec: Recording, results, base_label: str) -> str:

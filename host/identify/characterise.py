@@ -15,7 +15,7 @@ from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
-from accelnav.identify.quantised import Quantisation, grid_step, quantisation
+from accelnav.identify.quantised import HIDDEN_BELOW, Quantisation, grid_step, quantisation
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
 from accelnav.model.edit import revalidate, with_axis_bias, with_noise
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model, model_name_from
@@ -157,8 +157,11 @@ def _sig(x: float, digits: int = 6) -> float:
     return float(f"{x:.{digits}g}")
 
 
-def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: str, keep_rate: bool) -> Model:
-    """The base model with the fitted axes and noise figures merged in (see the module notes)."""
+def merge(
+    base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: str, keep_rate: bool, described: bool = True
+) -> Model:
+    """The base model with the fitted axes and noise figures merged in (see the module notes). ``described``:
+    the base model describes this sensor (its R may stand where the read-out step hides the noise)."""
     model = base
     if not keep_rate:
         model = dataclasses.replace(model, rate_hz=_sig(rec.rate_hz, 9))
@@ -187,6 +190,11 @@ def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: st
         values = {"R": _sig(max(r.noise.R(Ts) for r in seen)), "sigma_eps": _sig(max(r.noise.sigma_eps for r in seen))}
         if sigma_n == "paper":
             values["sigma_n"] = _sig(max(r.noise.sigma_n_paper for r in seen))
+    hidden = [r.quant.step for r in results if r.noise_hidden]
+    if hidden:  # R covers at least the step's rounding; with no model of the sensor, a noise of up to half a step too
+        floor = max(hidden) ** 2 * (1 / 12 + (0 if described else HIDDEN_BELOW**2))
+        R = max(values.get("R", 0.0), model.noise.R if described else 0.0, floor)
+        values["R"] = _sig(R)
     model = with_noise(model, **values) if values else model
     if len(model.axes) > 3:
         raise UserError(
@@ -322,6 +330,6 @@ def characterise(
         )
         for a in rec.axis_names
     ]
-    merged = merge(base, rec, results, sigma_n=sigma_n, keep_rate=given)
+    merged = merge(base, rec, results, sigma_n=sigma_n, keep_rate=given, described=given)
     results, merged = check_noise_band(merged, rec, results, (float(lo), float(hi)))
     return Characterisation(merged, base, base_label, rec, results)

@@ -58,7 +58,10 @@ def test_fit_bias_accepts_and_says_what_the_step_hides(uno, tmp_path, capsys):
         assert "the read-out step 14.8 mg (the model's read-out) hides the noise" in line
         assert "to measure it: dither" in line
         assert "a 3.3 V reference" in line and "more ADC bits" in line
-    assert "kept from the base model: the read-out step hides the noise on every axis" in said.out
+    assert (
+        "R = 0.00243436 (m/s^2)^2: kept from the base model; sigma_eps = 0.001 m/s^2/sqrt(s) kept from the base "
+        "model: the read-out step hides the noise on every axis (x, y, z)" in said.out
+    )
     base, fitted = load_model(described), load_model(out)
     assert (fitted.noise.R, fitted.noise.sigma_eps) == (base.noise.R, base.noise.sigma_eps)  # no figure made up
 
@@ -116,3 +119,7 @@ def test_samples_in_g_on_the_adcs_grid_are_read_as_quantised(uno, tmp_path, caps
     assert code == 0, said.err
     lines = [line for line in said.out.splitlines() if line.startswith("  noise: ")]
     assert len(lines) == 3 and all("14.8 mg (the samples' own grid) hides the noise" in x for x in lines), lines
+    # no model of this sensor: R is the most the data allow, rounding and a noise of up to half a step
+    q = 5 / 1024 / 0.33 * 9.80665
+    assert load_model(tmp_path / "f.toml").noise.R == pytest.approx(q**2 / 12 + (q / 2) ** 2, rel=1e-4)
+    assert "the most these data allow (no model of this sensor given)" in said.out
