@@ -21,7 +21,15 @@ default) with the fitted axes merged in and the noise figures replaced:
   band), and the model's header comments say so with the numbers;
   sigma_eps = max over the fitted axes of K (fitted or bound);
 * sigma_n is kept from the base model (a stationary recording cannot identify
-  it) unless ``--sigma-n paper`` asks for the paper's rule.
+  it) unless ``--sigma-n paper`` asks for the paper's rule;
+* samples read through a step (raw counts: the model's read-out; else a grid the
+  samples sit on) whose noise is under half a step
+  (:mod:`accelnav.identify.quantised`) give no noise figure: the report says so
+  in one line with the fixes, such axes are left out of R and sigma_eps (R is at
+  least the base model's and the step's rounding q^2/12, or q^2/12 + (q/2)^2 with
+  no model of the sensor), and their bias intervals carry the rounding's +-q/2.
+  A pile of samples at the data's own extreme is then no sign of clipping: only
+  the rails decide.
 """
 
 from __future__ import annotations
@@ -126,7 +134,15 @@ def cmd_fit_bias(args: argparse.Namespace) -> int:
             for i, r in enumerate(results):
                 y = rec.axis(r.name)
                 paths += plot_all(
-                    rec.t, y, rec.rate_hz, r.fit, r.white, r.noise, args.plots, r.name, (r.composite, r.check)
+                    rec.t,
+                    y,
+                    rec.rate_hz,
+                    r.fit,
+                    r.white,
+                    r.noise,
+                    args.plots,
+                    r.name,
+                    (r.composite, r.check) if r.check is not None else None,
                 )
                 p.update(i + 1)
         print(f"figures: {', '.join(str(p) for p in paths)}")
