@@ -23,11 +23,12 @@ default) with the fitted axes merged in and the noise figures replaced:
 * sigma_n is kept from the base model (a stationary recording cannot identify
   it) unless ``--sigma-n paper`` asks for the paper's rule;
 * samples read through a step (raw counts: the model's read-out; else a grid the
-  samples sit on) whose noise is under half a step
+  samples sit on) whose noise is under a quarter step
   (:mod:`accelnav.identify.quantised`) give no noise figure: the report says so
   in one line with the fixes, such axes are left out of R and sigma_eps (R is at
-  least the base model's and the step's rounding q^2/12, or q^2/12 + (q/2)^2 with
-  no model of the sensor), and their bias intervals carry the rounding's +-q/2.
+  least the base model's and the step's rounding q^2/12, or with no model of the
+  sensor q^2/12 plus the most noise the codes allow); wherever the rounding's
+  bound on the mean matters, the bias intervals carry it.
   A pile of samples at the data's own extreme is then no sign of clipping: only
   the rails decide.
 """
@@ -235,10 +236,16 @@ def axis_report(r: AxisResult) -> list[str]:
             f"T profile 95 % {_fmt_ci(e.ci95[2], '.4g')}{'' if all(e.T_ci_closed) else ' open'})"
         )
     q = r.quant
-    if q is not None and q.hidden:
+    if q is not None and q.hidden:  # characterise refitted with the bound
         out.append(
-            f"    the intervals include +-{q.bias_bound:.4g} m/s^2 on c2 (twice that on c1): with the noise under "
-            f"the read-out step ({q.step:.4g} m/s^2), the mean of the readings may sit that far from the signal's"
+            f"    the intervals include +-{q.bias_bound:.4g} m/s^2 on c2 (twice that on c1): with a noise of "
+            f"{q.noise_sd / q.step:.2g} read-out step ({q.step:.4g} m/s^2), the mean of the readings may sit that far "
+            "from the signal's"
+        )
+    elif q is not None and q.bias_bound > 1e-3 * q.step:
+        out.append(
+            f"    not in the intervals: the rounding may move a level by up to {q.bias_bound:.3g} m/s^2 (the noise, "
+            f"{q.noise_sd / q.step:.2g} read-out step of {q.step:.4g} m/s^2, dithers it; the figure is its worst case)"
         )
     out.append(
         f"    residual rms {f.sigma:.4g} m/s^2 ({_fmt_mg(f.sigma)}); variance factors for residual correlation: "
@@ -355,13 +362,14 @@ def model_report(
 
 def _hidden_R(R: float | None, base: Model, results) -> str:
     """Where R comes from for axes whose noise the read-out step hides (see characterise.merge)."""
-    q = max(r.quant.step for r in results if r.noise_hidden)
+    hidden = [r.quant for r in results if r.noise_hidden]
+    q = max(x.step for x in hidden)
     if R is not None and R == base.noise.R:
         return "kept from the base model"
     if R is not None and R > q**2 / 12 * (1 + 1e-5):
         return (
-            f"q^2/12 + (q/2)^2 at the step q = {q:.4g} m/s^2, rounding and a noise of up to half a step: the most "
-            "these data allow (no model of this sensor given)"
+            "the step's rounding q^2/12 plus the most noise the codes' shares allow (their 95 % upper end): "
+            "no model of this sensor given"
         )
     if R is not None:
         return f"the step's rounding q^2/12 at q = {q:.4g} m/s^2 (the base model's R is less)"
@@ -388,8 +396,8 @@ def provenance(rec: Recording, results, base_label: str) -> str:
         if r.noise_hidden:
             q = r.quant
             lines.append(
-                f"  noise hidden by the read-out step {q.step:.4g} m/s^2 (residual sd {q.spread / q.step:.2g} step): "
-                f"no noise figure fitted; bias intervals include +-{q.bias_bound:.4g} m/s^2"
+                f"  noise hidden by the read-out step {q.step:.4g} m/s^2 ({q.noise_sd / q.step:.2g} step from the "
+                f"codes): no noise figure fitted; bias intervals include +-{q.bias_bound:.4g} m/s^2"
             )
             continue
         lines.append(

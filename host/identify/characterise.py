@@ -15,7 +15,7 @@ from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
-from accelnav.identify.quantised import HIDDEN_BELOW, Quantisation, grid_step, quantisation
+from accelnav.identify.quantised import Quantisation, grid_step, quantisation
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
 from accelnav.model.edit import revalidate, with_axis_bias, with_noise
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model, model_name_from
@@ -190,9 +190,9 @@ def merge(
         values = {"R": _sig(max(r.noise.R(Ts) for r in seen)), "sigma_eps": _sig(max(r.noise.sigma_eps for r in seen))}
         if sigma_n == "paper":
             values["sigma_n"] = _sig(max(r.noise.sigma_n_paper for r in seen))
-    hidden = [r.quant.step for r in results if r.noise_hidden]
-    if hidden:  # R covers at least the step's rounding; with no model of the sensor, a noise of up to half a step too
-        floor = max(hidden) ** 2 * (1 / 12 + (0 if described else HIDDEN_BELOW**2))
+    hidden = [r.quant for r in results if r.noise_hidden]
+    if hidden:  # R covers at least the step's rounding; with no model of the sensor, the most noise the codes allow
+        floor = max(q.step**2 / 12 + (0.0 if described else q.noise_ci[1] ** 2) for q in hidden)
         R = max(values.get("R", 0.0), model.noise.R if described else 0.0, floor)
         values["R"] = _sig(R)
     model = with_noise(model, **values) if values else model
