@@ -128,6 +128,7 @@ BOARDS = {
     "sifive_e": 6,
     "atmega328p": 7,
     "arduino": 8,
+    "netduino2": 9,
 }
 
 

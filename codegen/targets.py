@@ -2,9 +2,11 @@
 
 The parts (memories, usual clock, compiler, flags) come from the firmware's own table,
 ``firmware/parts.mk``, which firmware.mk includes for its builds and its ATmega328P size check: the
-report and the build read the same numbers. Sizes are measured, never estimated: the generated
-filter is compiled with that part's compiler and the firmware's flags, and its sections summed
-(``size -A``). A missing toolchain is said in one line and gives no figure.
+report and the build read the same numbers. Sizes are measured, never estimated: the verdict reads the
+part's firmware image linked as ``make firmware BOARD=PART`` links it (firmware.mk: the part's compiler,
+flags, libc and --gc-sections), so code the linker drops is not counted and the application, libc and
+libgcc's helpers are; :func:`measure` sizes the filter's object alone (each axis' state struct, the
+per-architecture bench). A missing toolchain is said in one line and gives no figure.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ class Part:
     cc: str
     size: str
     cflags: tuple[str, ...]  # the part's flags; FW_WARN comes first, as in firmware.mk
+    stack: int = 0  # bytes of RAM kept for the stack (measured in simavr); 0: not known, not counted
 
 
 @functools.cache
@@ -62,6 +65,7 @@ def _table(path: Path) -> dict[str, Part]:
             f["CC"],
             f["SIZE"],
             tuple(f["CFLAGS"].split()),
+            int(f.get("STACK", "0")),
         )  # fmt: skip
         for key, f in fields.items()
     }
@@ -92,8 +96,8 @@ def part(name: str) -> Part:
 
 
 def missing_tools(p: Part) -> str | None:
-    """One line naming the part's missing compiler or size tool, or None."""
-    gone = [t for t in (p.cc, p.size) if shutil.which(t) is None]
+    """One line naming the part's missing compiler, size tool or make (the image's link), or None."""
+    gone = [t for t in (p.cc, p.size, "make") if shutil.which(t) is None]
     return f"{', '.join(gone)} not found: no figure for the {p.key}" if gone else None
 
 
@@ -156,15 +160,61 @@ def measure(p: Part, files: dict[str, str], prefix: str, form: str) -> Sized:
 
 
 @dataclass(frozen=True)
+class Linked:
+    """The part's firmware image of one form, linked: flash (text + data) and static RAM (data + bss:
+    every axis' state, the telemetry buffers, libc's), as GNU size counts them."""
+
+    form: str
+    flash: int
+    ram: int
+
+
+LINK_TIMEOUT_S = 300
+
+
+def image_size(p: Part, elf: Path) -> tuple[int, int]:
+    """(flash, static RAM) of a linked image: text + data and data + bss of ``size`` (Berkeley)."""
+    out = subprocess.run([p.size, str(elf)], capture_output=True, text=True, check=True).stdout
+    text, data, bss = (int(x) for x in out.splitlines()[1].split()[:3])
+    return text + data, data + bss
+
+
+def link(p: Part, files: dict[str, str], form: str) -> Linked:
+    """The firmware image of part ``p`` around the generated ``files`` (the filter and frame code of prefix
+    accelnav), linked by firmware.mk in a private folder, and sized. The ATmega328P's own size check is
+    lifted (its limits raised) so that an image too big still gives its figures."""
+    fw = firmware_dir()
+    with tempfile.TemporaryDirectory(prefix="accelnav-link-") as tmp:
+        gen, out = Path(tmp, "gen"), Path(tmp, "out")
+        gen.mkdir()
+        for name, text in files.items():
+            (gen / name).write_text(text)
+        cmd = ["make", "--no-print-directory", "-f", str(fw / "firmware.mk"), "firmware", f"BOARD={p.key}",
+               f"FW_DIR={fw}", f"FW_GEN={gen}", f"FW_OUT={out}", "FW_PREGEN=1", "AVR_FLASH=16777216",
+               "AVR_RAM=16777216"]  # fmt: skip
+        try:
+            done = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True, timeout=LINK_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            raise TargetError(f"the {p.key} image ({form} form) did not link within {LINK_TIMEOUT_S} s") from None
+        if done.returncode:
+            why = [ln for ln in done.stderr.splitlines() if "error" in ln.lower()] or done.stderr.splitlines()
+            raise TargetError(f"linking the {p.key} image ({form} form): " + (why or ["failed"])[0][:300])
+        elf = out / ("accelnav_fw" if p.key == "host" else "accelnav_fw.elf")
+        flash, ram = image_size(p, elf)
+    return Linked(form, flash, ram)
+
+
+@dataclass(frozen=True)
 class Fit:
     part: Part
     form: str  # the form asked for
-    sized: dict[str, Sized]  # per form measured; empty without the toolchain
+    sized: dict[str, Linked]  # per form, its image linked; empty without the toolchain
     missing: str | None  # the one line that says why there is no figure
+    states: dict[str, int] | None = None  # each axis' state struct of the form asked for
 
     def fits(self, form: str) -> bool:
         s = self.sized[form]
-        return s.flash <= self.part.flash and s.ram <= self.part.ram
+        return s.flash <= self.part.flash and s.ram + self.part.stack <= self.part.ram
 
     def refusal(self) -> str | None:
         """One line when the form asked for does not fit, naming the form that does; None when it
@@ -175,13 +225,13 @@ class Fit:
         need = []
         if s.flash > p.flash:
             need.append(f"{s.flash} B flash of {p.flash}")
-        if s.ram > p.ram:
-            need.append(f"{s.ram} B RAM of {p.ram}")
+        if s.ram + p.stack > p.ram:
+            need.append(f"{s.ram} B RAM + {p.stack} B stack of {p.ram}" if p.stack else f"{s.ram} B RAM of {p.ram}")
         other = [self.sized[f] for f in self.sized if f != self.form and self.fits(f)]
         alt = "no form fits"
         if other:
             alt = f"the {other[0].form.replace('_', ' ')} form fits: {other[0].flash} B flash, {other[0].ram} B RAM"
-        return f"{self.form} form on the {p.key} does not fit: needs {' and '.join(need)}; {alt}"
+        return f"{self.form} form on the {p.key} does not fit: needs {' and '.join(need)} (linked image); {alt}"
 
     def lines(self) -> list[str]:
         p = self.part
@@ -191,30 +241,38 @@ class Fit:
         ]
         if self.missing:
             return out + [f"  {self.missing}"]
-        head = f"  {'form':<14} {'flash B':>8} {'RAM B':>6}  {'verdict':<13}"
-        out.append(head + " the filter alone: static RAM + each axis' state")
+        stack = f" + {p.stack} B stack (measured)" if p.stack else " (stack not counted)"
+        out.append(f"  {'form':<14} {'flash B':>8} {'RAM B':>6}  verdict: the firmware image linked (make firmware "
+                   f"BOARD={p.key}), static RAM{stack}")  # fmt: skip
         for form, s in self.sized.items():
-            axes = " + ".join(f"{a} {n}" for a, n in s.states.items())
             verdict = "fits" if self.fits(form) else "does not fit"
             mark = " (asked for)" if form == self.form else ""
-            out.append(f"  {form:<14} {s.flash:8d} {s.ram:6d}  {verdict:<13} {s.static_ram} + {axes}{mark}")
-        verdict = self.refusal() or f"the {self.form} form fits the {p.key}"
-        out.append(f"  {verdict} (the filter object alone: libgcc's helpers and the application need their own share)")
+            out.append(f"  {form:<14} {s.flash:8d} {s.ram:6d}  {verdict}{mark}")
+        if self.states:
+            each = ", ".join(f"{a} {n} B" for a, n in self.states.items())
+            out.append(f"  each axis' state (in the RAM above): {each}")
+        out.append(f"  {self.refusal() or f'the {self.form} form fits the {p.key}'}")
         return out
 
 
 def fit(p: Part, model, form: str, arith: str, files: dict[str, str], prefix: str) -> Fit:
-    """Measure the form asked for (``files``, already emitted) and, fixed point, the other form too."""
-    from .emit_c import emit
+    """Link the part's firmware image with the form asked for (``files``, already emitted) and, fixed
+    point, with the other form too. The firmware reads the fixed-point filter of prefix accelnav: for
+    another arithmetic or prefix the filter's object alone is sized, and said so."""
+    from .generated import generate
 
     missing = missing_tools(p)
     if missing:
         return Fit(p, form, {}, missing)
+    if arith != "fixed" or prefix != "accelnav":
+        s = measure(p, files, prefix, form)
+        why = f"the firmware links the fixed-point filter of prefix accelnav: {form} filter object alone "
+        return Fit(p, form, {}, why + f"{s.flash} B flash, {s.ram} B RAM, not linked: no verdict")
     todo = {form: files}
-    if arith == "fixed":
-        for other in FORMS:
-            if other != form:
-                todo[other] = emit(model, form=other, arith=arith, prefix=prefix)
+    for other in FORMS:
+        if other != form:
+            todo[other] = generate(model, form=other)
     with ThreadPoolExecutor(max_workers=2) as pool:
-        sized = {s.form: s for s in pool.map(lambda kv: measure(p, kv[1], prefix, kv[0]), todo.items())}
-    return Fit(p, form, sized, None)
+        states = pool.submit(measure, p, files, prefix, form)
+        sized = {s.form: s for s in pool.map(lambda kv: link(p, kv[1], kv[0]), todo.items())}
+        return Fit(p, form, sized, None, states.result().states)

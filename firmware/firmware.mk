@@ -1,6 +1,6 @@
 # Firmware build, included by the top-level Makefile.
 #
-#   make firmware BOARD=host|mps2_an385|microbit|stm32f103|stm32vldiscovery|sifive_e|atmega328p [MODEL=models/x.toml]
+#   make firmware BOARD=host|mps2_an385|microbit|stm32f103|stm32vldiscovery|netduino2|sifive_e|atmega328p [MODEL=models/x.toml]
 #   make flash BOARD=stm32f103 [FLASH_TOOL=openocd|st-flash]
 #
 # The filter (accelnav.*) and the frame code (acnframe.*) of MODEL are
@@ -29,7 +29,7 @@ AVR_CC     ?= $(PART_CC_atmega328p)
 # the ATmega328P: flash, and RAM less what the stack needs (measured in simavr: firmware/README.md)
 AVR_FLASH  := $(PART_FLASH_atmega328p)
 AVR_RAM    := $(PART_RAM_atmega328p)
-AVR_STACK  ?= 768
+AVR_STACK  ?= $(PART_STACK_atmega328p)
 
 ifeq ($(BOARD),host)
 FW_CC      := $(CC)
@@ -62,9 +62,19 @@ FW_CC      := $(ARM_CC)
 FW_CFLAGS  := $(FW_WARN) $(PART_CFLAGS_stm32f103) -I$(FW_DIR)/boards/stm32f103 \
               $(if $(filter stm32vldiscovery,$(BOARD)),-DACN_STM32_QEMU)
 FW_SRCS    := $(FW_DIR)/boards/stm32f103/startup_stm32f103.c $(FW_DIR)/boards/stm32f103/board_stm32.c \
-              $(if $(filter stm32vldiscovery,$(BOARD)),$(FW_DIR)/boards/emu_feed.c)
+              $(FW_DIR)/boards/stm32_rt.c $(if $(filter stm32vldiscovery,$(BOARD)),$(FW_DIR)/boards/emu_feed.c)
 FW_LD      := $(if $(filter stm32vldiscovery,$(BOARD)),stm32f100rb_qemu.ld,stm32f103c8.ld)
 FW_LDFLAGS := -nostartfiles --specs=nano.specs -L$(FW_DIR)/boards/stm32f103 -T$(FW_DIR)/boards/stm32f103/$(FW_LD) \
+              -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
+FW_SIZE    := arm-none-eabi-size
+else ifeq ($(BOARD),netduino2)
+# QEMU's netduino2 (STM32F205): TIM3 and ADC1 sample, USART1 streams (board_netduino2.c); the
+# stm32f103 port's vector table (same IRQ numbers for TIM3 and USART1) and image layout
+FW_CC      := $(ARM_CC)
+FW_CFLAGS  := $(FW_WARN) $(PART_CFLAGS_stm32f103) -I$(FW_DIR)/boards/netduino2 -DACN_STM32_QEMU
+FW_SRCS    := $(FW_DIR)/boards/stm32f103/startup_stm32f103.c $(FW_DIR)/boards/netduino2/board_netduino2.c \
+              $(FW_DIR)/boards/stm32_rt.c
+FW_LDFLAGS := -nostartfiles --specs=nano.specs -L$(FW_DIR)/boards/stm32f103 -T$(FW_DIR)/boards/netduino2/netduino2.ld \
               -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map
 FW_SIZE    := arm-none-eabi-size
 else ifeq ($(BOARD),sifive_e)
@@ -89,7 +99,7 @@ FW_LDFLAGS := -Wl,--gc-sections -Wl,-Map=$(FW_OUT)/accelnav_fw.map \
               -Wl,--defsym=__TEXT_REGION_LENGTH__=0x40000 -Wl,--defsym=__DATA_REGION_LENGTH__=0xff00
 FW_SIZE    := avr-size
 else
-$(error BOARD=$(BOARD): accepted: host, mps2_an385, microbit, stm32f103, stm32vldiscovery, sifive_e, atmega328p)
+$(error BOARD=$(BOARD): accepted: host, mps2_an385, microbit, stm32f103, stm32vldiscovery, netduino2, sifive_e, atmega328p)
 endif
 
 FW_ELF := $(FW_OUT)/accelnav_fw$(if $(filter host,$(BOARD)),,.elf)

@@ -4,7 +4,8 @@
 # `accelnav codegen --report --target PART`), so the two cannot disagree on a number.
 #
 # Keep every line `NAME := value`, literal (no $(...)): the Python side reads them with a regex.
-# PART_<FIELD>_<part>, FIELD one of NAME ALIASES FLASH RAM MHZ CC SIZE CFLAGS.
+# PART_<FIELD>_<part>, FIELD one of NAME ALIASES FLASH RAM MHZ CC SIZE CFLAGS, and STACK where the RAM the
+# stack needs was measured (the fit check keeps it free).
 
 # flags of every firmware source, every part
 FW_WARN := -std=c99 -Wall -Wextra -Werror -pedantic
@@ -18,6 +19,8 @@ PART_MHZ_atmega328p     := 16
 PART_CC_atmega328p      := avr-gcc
 PART_SIZE_atmega328p    := avr-size
 PART_CFLAGS_atmega328p  := -mmcu=atmega328p -DF_CPU=16000000UL -Os -ffunction-sections -fdata-sections -g
+# the firmware's deepest stack in simavr, with margin (firmware/README.md)
+PART_STACK_atmega328p   := 768
 
 # FE310-G000 manual: 16 KiB DTIM (data RAM), code from off-chip SPI flash; the HiFive1's 16 MiB part
 # leaves 12 MiB from 0x20400000 above its boot loader (sifive_e.ld); 320 MHz on the HiFive1

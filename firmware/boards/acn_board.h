@@ -14,6 +14,19 @@
 
 #include "acnframe.h"
 
+/* Bytes of one frame on the wire: CRC 4, COBS code 1, delimiter 1 (every frame is < 254 bytes). */
+#define ACN_WIRE(size) ((size) + 6u)
+#define ACN_MAX2(a, b) ((a) > (b) ? (a) : (b))
+/* The most telemetry one received byte or one sample can queue: it completes at most one frame,
+ * and a sample (a block and every axis' checkpoint) or a command (flush: the same, then its ack;
+ * info: info and ack) sends at most this much. A board with a telemetry ring takes a byte in only
+ * while the ring has this much room, so that a command never costs a frame. */
+#define ACN_TX_NEED                                                                                \
+    (ACN_MAX2(ACN_MAX2(ACN_WIRE(ACNF_BLOCK_SIZE) + ACNF_NAXES * ACN_WIRE(ACNF_CHECKPOINT_SIZE),    \
+                       ACN_WIRE(ACNF_SAMPLE_SIZE)),                                                \
+              ACN_WIRE(ACNF_INFO_SIZE)) +                                                          \
+     ACN_WIRE(ACNF_ACK_SIZE))
+
 /* Set up clocks, pins, UARTs and the sample source. */
 void board_init(void);
 

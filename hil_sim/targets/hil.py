@@ -19,6 +19,12 @@
   ``socket://`` port): the real link, slower, kept for the benchmark and one
   test.
 
+The ADC boards (:data:`hil_sim.qemu.ADC_MACHINES`: netduino2) take no stimulus:
+QEMU's ADC model makes the values. :func:`run_adc_pil` runs one for a number of
+sample periods, takes the codes the firmware read from its ADC out of its own
+telemetry, runs SIL on those codes, and compares the two telemetry streams byte
+for byte.
+
 :func:`compare` puts the frames side by side: PIL against SIL bit for bit,
 frame by frame; both against the float64 reference (accelnav.estimate.kf) on the same
 raw input, in units of the reference's own standard deviation; and truth
@@ -48,7 +54,7 @@ from accelnav.model.load import G0, Model
 
 from . import simavr
 from .firmware import HostFirmware, build_firmware, manifest, private_firmware
-from .qemu import MACHINES, QemuBoard, QemuError, machine_for, run_feed
+from .qemu import MACHINES, QemuBoard, QemuError, machine_for, run_adc, run_feed
 
 STATES = ("r", "u", "a", "eps")
 PIL_BOARDS = (*MACHINES, *simavr.BOARDS)  # the boards `accelnav hil --target pil --board` runs
@@ -191,8 +197,6 @@ def run_pil(
         return _run_pil_uart(model, stim, n_samples, log, board=board, timeout_s=timeout_s)
     if link != "feed":
         raise ValueError(f"link {link!r}: accepted: feed, uart")
-    from accelnav.link.logfile import LogWriter
-
     # the emulator loads a private copy of the verified image, never the cache's file
     with private_firmware(board, model.source) as fw:
         elf = fw / "accelnav_fw.elf"
@@ -206,6 +210,22 @@ def run_pil(
             tel = run_feed(elf, board, stim, timeout=timeout_s)
         seconds = time.monotonic() - t0
     man = manifest(model.source)
+    _write_log(log, man, model, source, tel)
+    dec = Decoder(man, replay=replay_for(man, model))  # the compact frames' rows need the replay
+    dec.feed(tel)
+    dec.release()
+    stats = dec.stats.as_dict()
+    if stats.get("frames", {}).get("sample", 0) < n_samples:
+        raise QemuError(f"PIL run ({board}) ended early (end of the stimulus) after {stats.get('frames', {})} frames")
+    # the telemetry as received, every byte of which the log took: the log is not read back (a FIFO or a
+    # device, which the output rule writes through, cannot be)
+    return PilResult(Path(str(log)), tel, seconds, stats)
+
+
+def _write_log(log: Path | Output, man: Manifest, model: Model, source: str, tel: bytes) -> None:
+    """The telemetry of a PIL run as a recorder log (the output rule: a FIFO or a device is written through)."""
+    from accelnav.link.logfile import LogWriter
+
     meta = {
         "manifest": man.data,
         "model_toml": model.text,
@@ -220,15 +240,62 @@ def run_pil(
                 writer.flush()
     except OSError as exc:  # a full disk: the log holds what came before, said in one line
         raise UserError(f"{log}: cannot write the PIL log: {exc.strerror or exc}") from None
-    dec = Decoder(man, replay=replay_for(man, model))  # the compact frames' rows need the replay
-    dec.feed(tel)
-    dec.release()
-    stats = dec.stats.as_dict()
-    if stats.get("frames", {}).get("sample", 0) < n_samples:
-        raise QemuError(f"PIL run ({board}) ended early (end of the stimulus) after {stats.get('frames', {})} frames")
-    # the telemetry as received, every byte of which the log took: the log is not read back (a FIFO or a
-    # device, which the output rule writes through, cannot be)
-    return PilResult(Path(str(log)), tel, seconds, stats)
+
+
+@dataclass(frozen=True)
+class AdcPilResult:
+    """An ADC board's run: its telemetry, SIL's on the codes it read, and the verdict."""
+
+    telemetry: bytes
+    sil: bytes
+    codes: np.ndarray  # (n, n_axes): what the firmware read from its ADC, taken from its frames
+    seconds: float  # the emulator's wall-clock time
+    equal: bool  # the two telemetry streams are the same bytes
+    first_difference: int | None  # byte offset of the first difference (or the shorter length)
+    stats: dict  # the decoder's counts on the board's telemetry
+
+
+def run_adc_pil(
+    model: Model,
+    n_samples: int,
+    *,
+    board: str = "netduino2",
+    commands: tuple[str, ...] = (),
+    timeout_s: float = 120.0,
+    log: Path | Output | None = None,
+) -> AdcPilResult:
+    """Run ``model``'s firmware on an ADC board for ``n_samples`` sample periods (after ``commands``, names of
+    argument-free commands such as ``mode_states``), then SIL on the codes it read, and compare.
+
+    The codes come from the board's own frames (block frames in compact mode, sample frames otherwise), so
+    SIL runs on exactly what the emulated ADC produced; in compact mode a last, unfinished block is not sent,
+    and so not compared. A board that missed a sample (its main loop too slow)
+    predicted over it without a code: SIL has no stimulus for that, so such a run is refused (QemuError),
+    never called identical. ``log``: the board's telemetry also written there as a recorder log."""
+    man = manifest(model.source)
+    cmd = b"".join(encode_command(man, c) for c in commands)
+    with private_firmware(board, model.source) as fw:
+        t0 = time.monotonic()
+        tel = run_adc(fw / "accelnav_fw.elf", board, n_samples, cmd, timeout=timeout_s)
+        seconds = time.monotonic() - t0
+    if log is not None:
+        _write_log(log, man, model, f"qemu {board} (its TIM3 and ADC1 models; USART1 to a file)", tel)
+    frames, st = decode_all(man, tel, replay_for(man, model))
+    rows = frames["sample"]
+    stats = st.as_dict()
+    # the compact mode sends whole blocks: the samples of the last, unfinished one are not in the telemetry
+    block = man.data["block_samples"] if "block" in man.frames and "mode_states" not in commands else 1
+    if len(rows) != n_samples - n_samples % block:
+        raise QemuError(f"{board}: {len(rows)} samples in the telemetry for {n_samples} sample periods")
+    missed = int(rows["missed"][-1])
+    if missed:
+        raise QemuError(f"{board}: the board missed {missed} samples (no code read): SIL cannot replay them")
+    codes = sample_columns(man, rows)["code"]
+    sil = run_sil(model, cmd + encode_stimulus(man, code=codes))
+    same = min(len(tel), len(sil))
+    diff = np.flatnonzero(np.frombuffer(tel[:same], np.uint8) != np.frombuffer(sil[:same], np.uint8))
+    first = int(diff[0]) if len(diff) else (None if len(tel) == len(sil) else same)
+    return AdcPilResult(tel, sil, codes, seconds, first is None, first, stats)
 
 
 def _run_pil_uart(

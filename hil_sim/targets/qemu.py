@@ -5,6 +5,9 @@ The machines (:data:`MACHINES`), one per firmware board that runs in QEMU:
 one UART), ``stm32vldiscovery`` (STM32F100, Cortex-M3: the stm32f103
 port's code, see firmware/boards/stm32f103/board_stm32.c) and ``sifive_e``
 (SiFive FE310, RV32IMAC without FPU, one UART; qemu-system-riscv32).
+:data:`ADC_MACHINES`: the boards whose samples come from a peripheral QEMU
+models, not from a stimulus: ``netduino2`` (STM32F205, Cortex-M3: TIM3 and
+ADC1 sample, USART1 streams; firmware/boards/netduino2/board_netduino2.c).
 
 Two uses, one command line (:func:`qemu_command`):
 
@@ -20,6 +23,10 @@ Two uses, one command line (:func:`qemu_command`):
   trap, so the emulated core runs flat out instead of waiting for QEMU to move one UART byte per poll of its socket
   (firmware/boards/emu_feed.h). The same image runs on its UARTs when the
   command line names no feed.
+* :func:`run_adc`: an ADC board for a number of sample periods, its telemetry
+  UART written to a file; ``-icount shift=0,sleep=off``: the virtual clock
+  counts instructions and jumps over the idle time to the next timer event,
+  so the run is the same on every host and takes no wall-clock sample period.
 * :func:`run_to_exit`: a bare-metal program that prints over semihosting and
   exits through it (the instruction-count benchmark), with ``-icount
   shift=0`` so one instruction is one tick of virtual time and the counts are
@@ -69,6 +76,14 @@ MACHINES = {
 }
 
 
+# the boards that sample through QEMU's models of their peripherals (run by run_adc, no stimulus)
+ADC_MACHINES = {
+    m.board: m
+    for m in (Machine("netduino2", "netduino2", "Cortex-M3 (STM32F205)", 1, 0, 0),)  # USART1: telemetry only
+}
+ADC_MARKER = "accelnav-adc"  # the first word of the command line of an ADC board's run (board_netduino2.c)
+
+
 def machine_for(board: str) -> Machine:
     """The QEMU machine of a firmware board, or QemuError naming the boards that run in QEMU."""
     try:
@@ -101,23 +116,31 @@ def qemu_command(
     machine: str = MACHINE,
     feed: tuple[str, str] | None = None,
     qemu: str = QEMU,
+    args: tuple[str, ...] = (),
+    warp: bool = False,
+    serial_file: str | None = None,
 ) -> list[str]:
     """The emulator's command line: ``elf`` on ``machine``, UARTs as loopback TCP servers in port order.
 
     ``feed``: the names of the stimulus and telemetry files, relative to the emulator's working folder,
     for the board's file feed over semihosting (firmware/boards/emu_feed.h) instead of its UARTs.
-    ``qemu``: the emulator binary (the machine's :attr:`Machine.qemu`)."""
+    ``qemu``: the emulator binary (the machine's :attr:`Machine.qemu`). ``args``: more words of the
+    semihosting command line (plain words). ``warp``: ``-icount shift=0,sleep=off`` (deterministic, idle
+    time skipped). ``serial_file``: the first UART written to this file (a plain name) instead."""
     cmd = [qemu, "-M", machine, "-display", "none", "-monitor", "none"]
     semi = "enable=on,target=native"
-    if feed is not None:
-        for name in feed:
-            if not name or any(c in name for c in " ,/"):
-                raise ValueError(f"feed file name {name!r}: a plain file name (no spaces, commas or folders)")
-        semi += f",arg={FEED_MARKER},arg={feed[0]},arg={feed[1]}"
+    words = ((FEED_MARKER, *feed) if feed is not None else ()) + tuple(args)
+    for name in (*words, *((serial_file,) if serial_file is not None else ())):
+        if not name or any(c in name for c in " ,/:"):
+            raise ValueError(f"feed file name {name!r}: a plain file name (no spaces, commas or folders)")
+    semi += "".join(f",arg={w}" for w in words)
     cmd += ["-semihosting-config", semi, "-kernel", str(elf)]
-    if icount:
-        cmd += ["-icount", "shift=0"]  # one instruction per ns of virtual time: deterministic counts
-    if not uart_ports:
+    if icount or warp:
+        # one instruction per ns of virtual time: deterministic counts; sleep=off: idle time is skipped
+        cmd += ["-icount", "shift=0,sleep=off" if warp else "shift=0"]
+    if serial_file is not None:
+        cmd += ["-serial", f"file:{serial_file}"]
+    elif not uart_ports:
         cmd += ["-serial", "none"]
     for i, port in enumerate(uart_ports):
         cmd += ["-chardev", f"socket,id=uart{i},host=127.0.0.1,port={port},server=on,wait=off"]
@@ -210,26 +233,21 @@ class Mps2Board(QemuBoard):
         super().__init__(elf, "mps2_an385", start_timeout=start_timeout)
 
 
-def run_feed(elf: str | Path, board: str, stimulus: bytes, *, timeout: float = 600.0) -> bytes:
-    """Run a firmware image on ``board``'s machine in feed mode and return its telemetry.
-
-    The stimulus goes in and the telemetry comes out through files over semihosting, a block per
-    trap (firmware/boards/emu_feed.h); the board exits at the end of the stimulus. Nothing is
-    paced by a UART or by the host: the emulated core runs flat out. The files live in a
-    temporary folder that is removed afterwards; the emulator is killed if it overruns ``timeout``."""
-    m = machine_for(board)
-    elf = Path(elf).resolve()
-    if not elf.is_file():
-        raise QemuError(f"{elf}: no firmware image (build it with 'make firmware BOARD={board}')")
-    require_qemu(m.qemu)
-    with tempfile.TemporaryDirectory(prefix="accelnav-feed-") as tmp:
+def _run_in_folder(
+    m: Machine, board: str, elf: Path, files: dict[str, bytes], what: str, timeout: float, **cmd
+) -> bytes:
+    """Run ``elf`` on ``m`` in a temporary folder holding ``files``, with :func:`qemu_command`'s keywords
+    ``cmd``, and return the telemetry file ``tel.bin`` it wrote; the folder is removed afterwards, the
+    emulator killed past ``timeout`` (``what`` did not finish: the one-line error says so)."""
+    with tempfile.TemporaryDirectory(prefix="accelnav-qemu-") as tmp:
         folder = Path(tmp)
-        (folder / "stim.bin").write_bytes(stimulus)
-        cmd = qemu_command(elf, machine=m.machine, feed=("stim.bin", "tel.bin"), qemu=m.qemu)
+        for name, data in files.items():
+            (folder / name).write_bytes(data)
+        argv = qemu_command(elf, machine=m.machine, qemu=m.qemu, **cmd)
         try:
-            done = subprocess.run(cmd, cwd=folder, capture_output=True, timeout=timeout)
+            done = subprocess.run(argv, cwd=folder, capture_output=True, timeout=timeout)
         except subprocess.TimeoutExpired:
-            raise QemuError(f"{m.qemu} ({board}): the file feed did not finish within {timeout:g} s") from None
+            raise QemuError(f"{m.qemu} ({board}): {what} did not finish within {timeout:g} s") from None
         err = (done.stdout + done.stderr).decode(errors="replace").strip()
         if done.returncode != 0:
             raise QemuError(f"{m.qemu} ({board}) exited with status {done.returncode}: {err[-500:]}")
@@ -239,6 +257,46 @@ def run_feed(elf: str | Path, board: str, stimulus: bytes, *, timeout: float = 6
                 f"{m.qemu} ({board}): the firmware wrote no telemetry file (an image without the file feed?)"
             )
         return out.read_bytes()
+
+
+def _image(elf: str | Path, board: str, m: Machine) -> Path:
+    elf = Path(elf).resolve()
+    if not elf.is_file():
+        raise QemuError(f"{elf}: no firmware image (build it with 'make firmware BOARD={board}')")
+    require_qemu(m.qemu)
+    return elf
+
+
+def run_feed(elf: str | Path, board: str, stimulus: bytes, *, timeout: float = 600.0) -> bytes:
+    """Run a firmware image on ``board``'s machine in feed mode and return its telemetry.
+
+    The stimulus goes in and the telemetry comes out through files over semihosting, a block per
+    trap (firmware/boards/emu_feed.h); the board exits at the end of the stimulus. Nothing is
+    paced by a UART or by the host: the emulated core runs flat out. The files live in a
+    temporary folder that is removed afterwards; the emulator is killed if it overruns ``timeout``."""
+    m = machine_for(board)
+    elf = _image(elf, board, m)
+    files = {"stim.bin": stimulus}
+    return _run_in_folder(m, board, elf, files, "the file feed", timeout, feed=("stim.bin", "tel.bin"))
+
+
+def run_adc(elf: str | Path, board: str, periods: int, commands: bytes = b"", *, timeout: float = 120.0) -> bytes:
+    """Run an ADC board's image (:data:`ADC_MACHINES`) for ``periods`` sample periods and return what it sent
+    on its telemetry UART. ``commands`` (command frames) reach the board before its sample clock starts.
+    The emulator runs in a temporary folder that is removed afterwards, and is killed past ``timeout``."""
+    try:
+        m = ADC_MACHINES[board]
+    except KeyError:
+        accepted = ", ".join(ADC_MACHINES)
+        raise QemuError(f"board {board!r} does not sample on QEMU's peripherals; accepted: {accepted}") from None
+    if not 1 <= periods <= 100_000_000:
+        raise ValueError(f"periods {periods}: 1 .. 100000000")
+    elf = _image(elf, board, m)
+    words: tuple[str, ...] = (ADC_MARKER, str(periods))
+    files = {"cmd.bin": commands} if commands else {}
+    words += tuple(files)
+    what = f"{periods} sample periods"
+    return _run_in_folder(m, board, elf, files, what, timeout, args=words, warp=True, serial_file="tel.bin")
 
 
 def run_to_exit(

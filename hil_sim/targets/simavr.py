@@ -326,11 +326,14 @@ MAX_RUN_CYCLES = 10**12  # a run that never ends is stopped by its wall-clock ti
 
 @dataclass(frozen=True)
 class FeedRun:
-    """One PIL run in simavr: the telemetry, the CPU cycles from reset to the end, the deepest stack."""
+    """One PIL run in simavr: the telemetry, the CPU cycles from reset to the end, the deepest stack; for a
+    sketch fed ADC codes, the ADC reference its first conversion selected (ADMUX's REFS bits: 0 AREF, 1 AVCC,
+    3 internal; None without a conversion or without codes)."""
 
     telemetry: bytes
     cycles: int
     stack: int
+    refs: int | None = None
 
 
 def harness() -> bytes:
@@ -373,7 +376,8 @@ def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0, adc: n
     stimulus (firmware/boards/atmega328p/simavr_feed.c says how the end is found).
 
     ``adc``: (samples, axes) ADC codes for a sketch that reads analogRead (accelnav codegen --arduino):
-    each conversion of channel i gets axis i's next code, and ``stimulus`` (commands) follows them."""
+    each conversion of channel i gets axis i's next code, and ``stimulus`` (commands) follows them; an empty
+    ``stimulus`` (a text sketch) ends the run 20 ms after the first conversion past the last code."""
     import tempfile
 
     from accelnav.cachefile import private_copy
@@ -402,4 +406,5 @@ def run_feed(elf: str | Path, stimulus: bytes, *, timeout: float = 600.0, adc: n
         m = re.search(r"^cycles (\d+) stack (\d+)$", done.stdout, re.M)
         if m is None:
             raise AvrError(f"simavr ({MCU}): the feed program printed no summary: {done.stdout[-200:]!r}")
-        return FeedRun((folder / "tel.bin").read_bytes(), int(m[1]), int(m[2]))
+        r = re.search(r"^aref (\d+)$", done.stdout, re.M)
+        return FeedRun((folder / "tel.bin").read_bytes(), int(m[1]), int(m[2]), int(r[1]) if r else None)

@@ -25,9 +25,10 @@ def clock_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--time-unit",
-        choices=("s", "ms", "us"),
+        choices=("s", "ms", "us", "ns"),
         default=None,
-        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s",
+        help="CSV/NPZ: unit of the time column when its name does not say it (t_ms does); default s, or for Unix "
+        "time (stamps from 2000 to 2100) the unit its numbers show, said in a note",
     )
 
 

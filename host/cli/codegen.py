@@ -25,8 +25,17 @@ def register(sub) -> None:
         "--arduino",
         type=Path,
         metavar="DIR",
-        help="write an Arduino library instead: DIR/accelnav_MODELNAME/ (library.properties, src/, an example "
-        "sketch reading analogRead at the model's rate and streaming the telemetry)",
+        help="write an Arduino library instead: DIR/accelnav_MODELNAME/ (the AccelNav class, library.properties "
+        "and library.json, two example sketches); needs --maintainer and --url",
+    )
+    p.add_argument("--maintainer", metavar="'NAME <EMAIL>'", help="--arduino: who maintains the library")
+    p.add_argument("--url", metavar="URL", help="--arduino: where a person reads about the library (http/https)")
+    p.add_argument(
+        "--board",
+        metavar="BOARD",
+        default="uno",
+        help="--arduino: link the example sketches for BOARD (uno, the default; none: no link) and refuse a model "
+        "whose sketch would not fit",
     )
     p.add_argument("--form", choices=("covariance", "gain_schedule"), help="override [filter] form of the model")
     p.add_argument("--float32", action="store_true", help="emit the float32 variant instead of fixed point")
@@ -85,14 +94,23 @@ def cmd_codegen(args: argparse.Namespace) -> int:
 
 def _codegen_arduino(args: argparse.Namespace) -> int:
     """The model's Arduino library in DIR/accelnav_MODELNAME/: each folder written by the generator's writer."""
-    from accelnav.codegen.arduino import library, library_name
+    from accelnav.codegen.arduino import library, library_name, sketch_fit
 
     if args.out is not None or args.float32 or args.prefix != "accelnav":
         raise UserError("--arduino DIR: the library's folder and names are fixed; drop --out, --float32 and --prefix")
     if args.arduino.exists() and not args.arduino.is_dir():
         raise UserError(f"--arduino: {args.arduino} is a file; give a directory for the library")
+    if args.maintainer is None or args.url is None:
+        raise UserError("--arduino: give --maintainer 'NAME <EMAIL>' and --url URL (library.properties and "
+                        "library.json name who maintains the library and where to read about it)")  # fmt: skip
     model = load_model(args.model)
-    files = library(model, form=args.form)
+    try:
+        files = library(model, form=args.form, maintainer=args.maintainer, url=args.url)
+        fit = [] if args.board == "none" else sketch_fit(files, library_name(model), args.board)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    if fit and fit[1]:
+        raise UserError(fit[1])  # measured before anything is written: a sketch that does not fit is not written
     root = args.arduino / library_name(model)
     folders: dict[str, dict[str, str]] = {}
     for path, text in files.items():
@@ -101,5 +119,7 @@ def _codegen_arduino(args: argparse.Namespace) -> int:
     for folder, group in sorted(folders.items()):
         for path in write(group, root / folder if folder else root):
             print(path)
+    if fit:
+        print("\n".join(fit[0]))
     print(f"Arduino library {root.name} in {root}: open examples/*/ in the IDE, or `make` there (arduino-mk)")
     return 0

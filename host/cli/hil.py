@@ -7,7 +7,7 @@ from pathlib import Path
 
 from accelnav.cli.args import clock_args, reader_options
 from accelnav.errors import UserError
-from accelnav.hil_sim.targets.qemu import MACHINES
+from accelnav.hil_sim.targets.qemu import ADC_MACHINES, MACHINES
 from accelnav.hil_sim.targets.simavr import BOARDS as AVR_BOARDS
 from accelnav.model.load import DEFAULT_MODEL, load_model
 
@@ -36,11 +36,12 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--board",
-        choices=(*MACHINES, *AVR_BOARDS),
+        choices=(*MACHINES, *AVR_BOARDS, *ADC_MACHINES),
         default=None,
         help="emulated board for --target pil: mps2_an385 (Cortex-M3, default), microbit (Cortex-M0), "
         "stm32vldiscovery (the STM32 port's code on an STM32F100), sifive_e (RV32IMAC, SiFive FE310), "
-        "atmega328p (AVR in simavr)",
+        "atmega328p (AVR in simavr), netduino2 (STM32F205: samples QEMU's timer and ADC models for "
+        "--duration seconds; no scenario)",
     )
     p.add_argument("--out", type=Path, default=Path("build/hil"), help="folder for the PIL log; default build/hil")
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write hil.png into DIR")
@@ -60,6 +61,8 @@ def cmd_hil(args) -> int:
     if args.board is not None and args.target != "pil":
         raise UserError(f"--board {args.board}: a board is emulated only with --target pil")
     board = args.board or "mps2_an385"
+    if board in ADC_MACHINES:
+        return _hil_adc(args, board)
     if args.input is not None:
         run, model = _hil_recorded(args)
         scenario = args.input.name
@@ -108,6 +111,44 @@ def cmd_hil(args) -> int:
         path = plot_hil(run, c, args.plots / "hil.png", f"accelnav hil ({args.target}): {model.name}, {scenario}")
         print(f"wrote {path}")
     return 0 if c.pil_equal_sil in (None, True) and c.max_of_bound <= 1.0 else 1
+
+
+def _hil_adc(args, board: str) -> int:
+    """PIL on a board that samples QEMU's ADC model: its input is what the model makes, not a scenario."""
+    from accelnav.data.inputs import FLAGS
+    from accelnav.fileio import output_target
+    from accelnav.hil_sim.targets import hil
+    from accelnav.hil_sim.targets.firmware import FirmwareError
+    from accelnav.hil_sim.targets.qemu import QemuError
+
+    for flag in ("input", "scenario", "seed", "plots"):
+        if getattr(args, flag) is not None:
+            raise UserError(f"--{flag}: not with --board {board} (its samples come from QEMU's ADC model)")
+    for key, value in reader_options(args).items():
+        if value is not None:
+            raise UserError(f"--{FLAGS[key].replace('_', '-')}: only with --input (a recording)")
+    model = load_model(args.model)
+    if model.sensor.kind != "analog":
+        raise UserError(f"{model.source}: --board {board} samples an ADC; the model's sensor is {model.sensor.kind}")
+    seconds = 20.0 if args.duration is None else args.duration
+    n = round(seconds * model.rate_hz)
+    if not 1 <= n <= 1_000_000:
+        raise UserError(f"--duration {seconds:g}: 1 .. 1000000 samples at {model.rate_hz:g} Hz")
+    name = args.out / f"pil_{board}_{model.name}_adc.acnlog"
+    log = output_target(name, "--out", inputs=(args.model,), stdout=False)
+    print(f"model {model.name}, {n} sample periods on {board}: TIM3 and ADC1 as QEMU models them")
+    try:
+        res = hil.run_adc_pil(model, n, board=board, log=log, timeout_s=60.0 + n / 100.0)
+    except (QemuError, FirmwareError) as exc:
+        raise UserError(str(exc).splitlines()[0]) from None
+    rows = len(res.codes)
+    print(f"PIL ({board}): {n} sample periods in {res.seconds:.1f} s, {len(res.telemetry)} bytes, log {log}")
+    sent = "" if rows == n else f"; {rows} sent: the compact mode sends whole blocks"
+    print(f"codes the firmware read from its ADC: {res.codes.min()} .. {res.codes.max()}{sent}")
+    where = "" if res.equal else f" from byte {res.first_difference}"
+    verdict = "bit-identical (the same bytes)" if res.equal else f"DIFFERENT{where}"
+    print(f"PIL vs SIL on those codes: {rows} samples, {verdict}")
+    return 0 if res.equal else 1
 
 
 def _hil_recorded(args):

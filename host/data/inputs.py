@@ -74,8 +74,15 @@ def read_input(
     # a recording: CSV, gzip CSV, or an NPZ of t and accel
     from accelnav.data.recording import read_recording
 
-    rec = read_recording(path, **opts, allow_gaps=allow_gaps, default_unit=_unit(override))
+    rec = read_recording(
+        path, **opts, allow_gaps=allow_gaps, default_unit=_unit(override), model_axes=target_axes(override)
+    )
     return _on_model(path, rec, override, chosen=bool(axes))
+
+
+def target_axes(model: Model | None) -> list[str]:
+    """The axis names a recording's columns are matched to by name: the model's, else the embedded default's."""
+    return [a.name for a in (model if model is not None else load_model(None)).axes]
 
 
 def _part(model: Model) -> str:
@@ -99,9 +106,12 @@ def _from_memory(source, override: Model | None, opts: dict, allow_gaps: bool) -
 
     if hasattr(source, "columns") and hasattr(source, "index"):  # a pandas DataFrame
         label = "<DataFrame>"
-        columns = {str(c): source[c].to_numpy() for c in source.columns}
-        if source.index.name is not None and str(source.index.name) not in columns:  # time as the index
-            columns = {str(source.index.name): source.index.to_numpy(), **columns}
+        columns = {str(c): _values(source[c]) for c in source.columns}
+        index = source.index
+        timed = _tz(index) is not None or index.dtype.kind in "Mm"
+        name = index.name if index.name is not None else "time" if timed else None
+        if name is not None and str(name) not in columns:  # time as the index (a DatetimeIndex, say)
+            columns = {str(name): _values(index), **columns}
     elif isinstance(source, Mapping):
         label = "<arrays>"
         columns = {str(k): v for k, v in source.items()}
@@ -121,8 +131,25 @@ def _from_memory(source, override: Model | None, opts: dict, allow_gaps: bool) -
         else:
             model = load_model(None)
         return _with_model(label, arrays, model, None, opts)
-    rec = from_columns(label, columns, **opts, allow_gaps=allow_gaps, default_unit=_unit(override))
+    rec = from_columns(
+        label, columns, **opts, allow_gaps=allow_gaps, default_unit=_unit(override), model_axes=target_axes(override)
+    )
     return _on_model(label, rec, override, chosen=bool(opts["axes"]))
+
+
+def _tz(values):
+    """The time zone of tz-aware pandas times (a Series' or an index's dtype has one), else None."""
+    return getattr(values.dtype, "tz", None)
+
+
+def _values(values) -> np.ndarray:
+    """A pandas column or index as numpy; tz-aware times as their UTC datetime64 (numpy has no time zones)."""
+    if _tz(values) is not None:
+        if hasattr(values, "dt"):  # a Series: its times through .dt
+            values = values.dt.tz_convert("UTC").dt.tz_localize(None)
+        else:
+            values = values.tz_convert("UTC").tz_localize(None)
+    return values.to_numpy()
 
 
 def _on_model(path, rec, model: Model | None, chosen: bool = False) -> tuple[Run, Model]:
@@ -130,13 +157,14 @@ def _on_model(path, rec, model: Model | None, chosen: bool = False) -> tuple[Run
 
     ``chosen``: the columns were named with --axis; naming fewer than the model has, each by a model
     axis's name, narrows the model to those axes (a 3-axis part with one axis on gravity, say)."""
-    from accelnav.data.recording import check_rate, in_accel, on_grid
+    from accelnav.data.recording import check_rate, check_rec_units, in_accel, on_grid
 
     for text in rec.notes:
         note(text)
     if model is None:
         model = load_model(None) if rec.model_toml is None else loads_model(rec.model_toml, source=f"{path}:model_toml")
     check_rate(rec, model.rate_hz, str(model.source))
+    check_rec_units(rec, model.max_accel_m_s2, f"{model.source}")
     model, names = model_axes(path, model, list(rec.axis_names), list(rec.columns), chosen)
     said = len(rec.notes)
     rec = in_accel(rec, model)  # raw counts -> m/s^2 by the model's own read-out and calibration
@@ -225,6 +253,10 @@ def _with_model(path, arrays, model: Model, override: Model | None, opts: dict) 
     for key, flag in FLAGS.items():
         if opts[key] not in (None, []):
             raise UserError(f"--{flag.replace('_', '-')}: only for CSV and NPZ recordings; {path} is a run file")
+    if "accel" not in arrays:
+        from accelnav.data.recording import no_input
+
+        no_input(str(path), arrays)
     recorded = model
     if override is not None:
         if [a.name for a in override.axes] != [str(a) for a in arrays["axis_names"]]:

@@ -4,16 +4,15 @@ Formats
 -------
 * **CSV** (plain or gzip, told apart by content, not by name): one header
   row of column names, then numbers; ``#`` comment lines before the header
-  are skipped; comma, semicolon or tab separated. Acceleration columns are
-  the ones named with ``--axis`` (a column name, or its short axis name), by
-  default every column whose name starts with ``acc`` or is ``a`` and an
-  axis letter (``ax``, ``a_y``, ``az_g``). Their unit comes from
-  the name's suffix (``_g``, ``_mg``, ``_m_s2``, ``_mps2``, ``_ms2``) or
-  from ``unit``. Time comes from a column ``t``/``time`` (suffix ``_s``,
-  ``_ms`` or ``_us`` for its unit, seconds without one) or from ``rate_hz``.
-  The short axis name drops an ``acc_``/``accel_`` prefix and the unit
-  suffix: ``acc_x_g`` is axis ``x``, and so is ``ax_g``. With ``;`` or tab
-  as separator a decimal comma (``0,01188``) is read as a decimal point.
+  are skipped; comma, semicolon or tab separated. Which columns are time and
+  acceleration, and their units, the names say by the column rules of
+  :mod:`accelnav.data.columns` (``t_ms``, ``acc_x_g``, ``ax_m_s2``, ``x``,
+  phone apps' ``Linear Acceleration x (m/s^2)``, ``Time (s)``); ``--axis``
+  picks columns by name or axis, ``--unit`` serves names that say no unit
+  (one that contradicts a name is refused), and a time column whose name says
+  no unit is in seconds, or in the unit of Unix time its numbers show. With
+  the model's axis names the columns come in the model's order. With ``;`` or
+  tab as separator a decimal comma (``0,01188``) is read as a decimal point.
 * **NPZ** as written by ``accelnav sim``: ``t`` (N,), ``axis_names``
   (n_axes,), ``accel`` (N, n_axes) in m/s^2, optionally a 0-d
   ``model_toml`` string and a ``clipped`` (N, n_axes) mask. ``accel`` may be
@@ -24,51 +23,35 @@ Refusals (:class:`accelnav.errors.UserError`, one line each, saying where):
 unreadable file, missing column, unknown unit, no time and no rate, time not
 finite or not increasing, a gap in time, a non-finite sample, too short a
 recording, a constant signal, a clipped signal (samples flagged in the file,
-at the model's full scale, or piled up on the extreme value as a rail does).
+at the model's full scale, or piled up on the extreme value as a rail does), a unit no name said that the
+data contradict (:func:`check_units`, naming the unit they most likely have).
 """
 
 from __future__ import annotations
 
 import gzip
 import io
-import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from accelnav.data.columns import TIME_SCALE, TIME_UNITS, UNITS, axis_of, parse_unit, pick_time, time_unit_of, unit_of
 from accelnav.errors import UserError
 from accelnav.fileio import EXCERPT_CHARS, check_input, excerpt, input_limit, load_npz
 from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.progress import Progress
 
-# "counts": raw read-out codes (ADC, digital LSB), kept as they are here; the model's own conversion turns
-# them into acceleration (accelnav.data.inputs), so the scale is 1
-UNITS = {"g": G0, "mg": G0 * 1e-3, "m/s^2": 1.0, "counts": 1.0}
-UNIT_ALIASES = {
-    "counts": "counts",
-    "count": "counts",
-    "lsb": "counts",
-    "g": "g",
-    "mg": "mg",
-    "m/s^2": "m/s^2",
-    "m/s2": "m/s^2",
-    "mps2": "m/s^2",
-    "m_s2": "m/s^2",
-    "ms2": "m/s^2",
-}
-_UNIT_SUFFIX = re.compile(r"(?:_|\[|\()(g|mg|m_s2|mps2|ms2|m/s\^?2|counts|count|lsb)[\])]?$", re.IGNORECASE)
-_TIME_NAME = re.compile(r"^(t|time|timestamp)(?:_(s|ms|us))?$", re.IGNORECASE)
-_TIME_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6}
-_ACC_PREFIX = re.compile(r"^(acceleration|accel|acc)_?", re.IGNORECASE)
-# the other common spelling: "a" and one axis letter (ax, a_y, az_g), as phone and logger apps write it
-_A_AXIS = re.compile(r"^a_?([xyz])$", re.IGNORECASE)
-
 GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap
 SNAP_TOL = 0.01  # a clock within 1 % of a whole number of Hz (>= 10 Hz) is taken as that nominal rate
 MAX_LAG_PERIODS = 5.0  # stamps that jitter more than half a period may still be read by order, within this
 MIN_CLOCK_HZ = 5.0  # a time column in seconds slower than this is no accelerometer's: a ms clock, say
-TIME_UNITS = ("s", "ms", "us")
+EPOCH_S = (946684800.0, 4102444800.0)  # 2000-01-01 .. 2100-01-01 UTC: a clock there is a calendar's, not uptime
+MAX_CLOCK_HZ = 1e5  # no accelerometer this package reads samples faster
+# read in the claimed unit, this share of samples beyond the sensor's range (by BEYOND: a clipped sensor sits at
+# its rail, it never reads past it) while another unit leaves under 1 % there: the unit is wrong
+RAIL_SHARE = 0.05
+BEYOND = 1.05
 MIN_DURATION_S = 60.0
 MIN_SAMPLES = 1000
 CHUNK_CHARS = 1 << 18  # CSV text parsed per piece: the reader's memory beyond the numbers it keeps
@@ -94,6 +77,7 @@ class Recording:
     time_column: str | None = None  # where t came from (a CSV column, the NPZ key); None: from the rate
     notes: tuple[str, ...] = ()  # one line each, for the caller to print: how the clock was read
     first: int = 0  # the index in the whole file of sample 0 here (a block of a streamed input)
+    unit_from: tuple[str, ...] = ()  # per axis, what said its unit: "name", "--unit", "model" or "file"
 
     def where(self, k: int) -> str:
         """Where sample k is in the file: its line (CSV) or its index."""
@@ -118,13 +102,6 @@ class Recording:
         return self.accel[:, self.column(axis)]
 
 
-def parse_unit(unit: str) -> str:
-    key = unit.strip().lower()
-    if key not in UNIT_ALIASES:
-        raise UserError(f"unit {excerpt(unit)} is not known; accepted: g, mg, m/s^2, counts")
-    return UNIT_ALIASES[key]
-
-
 def read_recording(
     path: str | Path,
     *,
@@ -135,11 +112,13 @@ def read_recording(
     allow_gaps: bool = False,
     time_unit: str | None = None,
     default_unit: str | None = None,
+    model_axes: list[str] | None = None,
 ) -> Recording:
     """Read ``path`` (CSV, gzip CSV or NPZ); see the module notes. Checks the format, not the content.
 
     ``unit`` is the unit of every acceleration column; without it each column's name says its unit,
-    and ``default_unit`` (a calibrated model's) serves a column whose name does not.
+    and ``default_unit`` (a calibrated model's) serves a column whose name does not. ``model_axes``: the
+    model's axis names; a column named as one is that axis, and the axes come in the model's order.
 
     ``allow_gaps`` lets gaps in time through (the caller fills them, see :func:`on_grid`). ``time_unit``
     (s, ms, us) is the time column's unit when its name does not say it. ``rate_hz`` with a time column
@@ -164,19 +143,21 @@ def read_recording(
     if time_unit is not None and time_unit not in TIME_UNITS:
         raise UserError(f"--time-unit: got {time_unit!r}; accepted: {', '.join(TIME_UNITS)}")
     if head.startswith(b"PK"):
-        rec = _read_npz(path, axes, unit, rate_hz, default_unit)
+        rec = _read_npz(path, axes, unit, rate_hz, default_unit, model_axes)
     else:
-        rec = _read_csv(path, axes, unit, rate_hz, time_column, gz=head.startswith(b"\x1f\x8b"), default=default_unit)
+        gz = head.startswith(b"\x1f\x8b")
+        rec = _read_csv(path, axes, unit, rate_hz, time_column, gz, default_unit, model_axes)
     return _check_time(_with_time_unit(rec, time_unit, path), rate_hz, allow_gaps)
 
 
 # --------------------------------------------------------------------------
 
 
-def _read_npz(path: Path, axes, unit, rate_hz, default_unit=None) -> Recording:
+def _read_npz(path: Path, axes, unit, rate_hz, default_unit=None, model_axes=None) -> Recording:
     src = str(path)
     data = load_npz(path, src)  # sizes checked before anything is inflated; no pickles
     if "accel" not in data:
+        no_input(src, data)
         raise UserError(
             f"{src}: no 'accel' array; keys: {', '.join(sorted(data)) or 'none'} (expected accelnav sim's layout)"
         )
@@ -215,25 +196,37 @@ def _read_npz(path: Path, axes, unit, rate_hz, default_unit=None) -> Recording:
         if rate is None:
             raise UserError(f"{src}: no 't' array and no sample rate; give --rate HZ")
         t = np.arange(n) / rate
-    u = "m/s^2"
+    u, said = "m/s^2", "file"
     if unit is not None:
-        u = parse_unit(unit)
+        u, said = parse_unit(unit), "--unit"
     elif "unit" in data:
         u = parse_unit(str(data["unit"][()]))
     elif default_unit is not None and default_unit != "counts":
         # an NPZ's accel is in m/s^2 unless it says otherwise: raw counts only when asked (--unit, 'unit')
-        u = parse_unit(default_unit)
+        u, said = parse_unit(default_unit), "model"
     if UNITS[u] != 1.0:  # m/s^2 as stored: no copy of what may be gigabytes
         accel = accel * UNITS[u]
-    cols = names
-    if axes:
-        idx = [_pick(a, names, names, src) for a in axes]
+    idx = [_pick(a, names, names, src) for a in axes] if axes else list(range(k))
+    if model_axes and len(set(names)) == k and {names[i] for i in idx} <= set(model_axes):  # by name
+        idx.sort(key=lambda i: list(model_axes).index(names[i]))
+    if idx != list(range(k)):
         accel = accel[:, idx]
         names = tuple(names[i] for i in idx)
-        cols = names
         clipped = None if clipped is None else clipped[:, idx]
-    rec = _finish(src, t, accel, names, cols, (u,) * len(names), model_toml, clipped)
-    return replace(rec, time_column="t" if "t" in data else None, time_unit=None if "t" in data else "s")
+    rec = _finish(src, t, accel, names, names, (u,) * len(names), model_toml, clipped)
+    tcol = "t" if "t" in data else None
+    return replace(rec, time_column=tcol, time_unit=None if tcol else "s", unit_from=(said,) * len(names))
+
+
+def no_input(src: str, keys) -> None:
+    """Refuse an estimator's output written without its input (smooth's and filter's default: states, no
+    acceleration), saying so, rather than as a recording that lacks a column (``keys``: its arrays, or its
+    CSV columns past the axis name)."""
+    if any(k.startswith(("smooth_", "filt_", "_smooth_", "_filt_")) for k in keys):
+        raise UserError(
+            f"{src}: an estimator's output without its input (positions and velocities, no acceleration): read the "
+            "recording it was made from, or write the output with --full to keep the input in it"
+        )
 
 
 def _numbers(data: dict, key: str, src: str, dtype=np.float64) -> np.ndarray:
@@ -319,7 +312,7 @@ def _fields_per_line(text: str, delim: str) -> np.ndarray:
     return np.diff(bounds)
 
 
-def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: str | None = None) -> Recording:
+def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default=None, model_axes=None) -> Recording:
     """Streamed: the text is parsed piece by piece, only the numbers (and each sample's line) are kept."""
     src = str(path)
     head = None
@@ -327,7 +320,7 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: s
     line_nos: list[np.ndarray] = []
     held = 0
     limit = input_limit()
-    for h, table, nums in csv_pieces(path, axes, unit, rate_hz, time_column, gz, default):
+    for h, table, nums in csv_pieces(path, axes, unit, rate_hz, time_column, gz, default, model_axes):
         head = h
         pieces.append(table)
         line_nos.append(nums)
@@ -343,22 +336,21 @@ def _read_csv(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: s
     with np.errstate(over="ignore"):  # a number beyond float64 once in m/s^2 becomes inf, refused by name below
         accel = csv_accel(head, table)
     rec = _finish(src, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
-    return replace(rec, lines=data_lines, time_unit=time_unit, time_column=head.tcol)
+    return replace(rec, lines=data_lines, time_unit=time_unit, time_column=head.tcol, unit_from=head.unit_from)
 
 
 def csv_time_unit(head: _Header) -> str:
     """The unit of the time column as its name says it (None: unsaid), "s" for time from the rate."""
     if head.tcol is None:
         return "s"
-    m = _TIME_NAME.match(head.tcol)  # a column may be named "" (--time-column '')
-    return m.group(2).lower() if m and m.group(2) else None
+    return time_unit_of(head.tcol)
 
 
 def csv_time(head: _Header, table: np.ndarray, first: int, rate_hz: float | None) -> np.ndarray:
     """Time [s, or the column's unsaid unit] of parsed rows ``first``.. of a CSV: its column, or from the rate."""
     if head.tcol is None:
         return np.arange(first, first + table.shape[0]) / rate_hz
-    return table[:, 0] * _TIME_SCALE[csv_time_unit(head)]
+    return table[:, 0] * TIME_SCALE[csv_time_unit(head)]
 
 
 def csv_accel(head: _Header, table: np.ndarray) -> np.ndarray:
@@ -367,7 +359,7 @@ def csv_accel(head: _Header, table: np.ndarray) -> np.ndarray:
     return data * np.array([UNITS[u] for u in head.units])
 
 
-def csv_pieces(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: str | None = None):
+def csv_pieces(path: Path, axes, unit, rate_hz, time_column, gz: bool, default=None, model_axes=None):
     """(header, numbers (rows, len(header.use)), their file lines) per piece of the CSV's text: the one
     parser of the format, for the whole-file reader and the streamed one (accelnav.data.stream)."""
     src = str(path)
@@ -391,7 +383,7 @@ def csv_pieces(path: Path, axes, unit, rate_hz, time_column, gz: bool, default: 
             if not s or s.startswith("#"):
                 continue
             if head is None:
-                head = _header(line, first + i, src, axes, unit, rate_hz, time_column, default)
+                head = _header(line, first + i, src, axes, unit, rate_hz, time_column, default, model_axes)
                 continue
             if line.count(head.delim) != len(head.cols) - 1:
                 hint = ""
@@ -472,6 +464,7 @@ class _Header:
     units: list[str]
     names: list[str]
     use: list[int]
+    unit_from: tuple[str, ...] = ()  # per axis: "name", "--unit" or "model" (what said the unit)
 
 
 def _cols(cols) -> str:
@@ -480,7 +473,9 @@ def _cols(cols) -> str:
     return text if len(text) <= 4 * EXCERPT_CHARS else text[: 4 * EXCERPT_CHARS - 3] + "..."
 
 
-def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_column, default=None) -> _Header:
+def _header(
+    header: str, line_no: int, src: str, axes, unit, rate_hz, time_column, default=None, model_axes=None
+) -> _Header:
     delim = max((",", ";", "\t"), key=header.count)
     if header.count(delim) == 0:
         delim = ","
@@ -490,57 +485,67 @@ def _header(header: str, line_no: int, src: str, axes, unit, rate_hz, time_colum
     if len(set(cols)) != len(cols):
         raise UserError(f"{src}: duplicate column names in the header: {_cols(cols)}")
 
-    # time column
-    tcol = None
+    tcol, chosen, units, unit_from, names = _choose(cols, src, axes, unit, rate_hz, time_column, default, model_axes)
+    # every data row must have the header's number of fields: an extra or a missing cell is refused
+    # (loadtxt with usecols would drop an extra one silently); the line of each sample is kept for messages
+    use = ([cols.index(tcol)] if tcol is not None else []) + [cols.index(c) for c in chosen]
+    return _Header(delim, cols, tcol, chosen, units, names, use, unit_from)
+
+
+def _choose(cols: list[str], src: str, axes, unit, rate_hz, time_column, default, model_axes):
+    """(time column, acceleration columns, their units, where each unit came from, their axis names) by
+    the column rules (accelnav.data.columns); the axes in the model's order when every one is a model axis."""
     if time_column is not None:
         if time_column not in cols:
             raise UserError(f"{src}: no time column {excerpt(time_column)}; columns: {_cols(cols)}")
         tcol = time_column
     else:
-        for c in cols:
-            if _TIME_NAME.match(c):
-                tcol = c
-                break
+        tcol = pick_time(cols)
     if tcol is None and rate_hz is None:
         raise UserError(f"{src}: no time column (t, t_s, time, ...) and no --rate; columns: {_cols(cols)}")
-
-    # acceleration columns and their short names
-    short = {c: _short_name(c) for c in cols}
+    short = {c: axis_of(c, model_axes) for c in cols}
     if axes:
         chosen = []
         for a in axes:
-            hits = [c for c in cols if a in (c, short[c])]
+            hits = [c for c in cols if a == c] or [c for c in cols if short[c] is not None and a == short[c]]
             if not hits:
                 raise UserError(f"{src}: no column {excerpt(a)}; columns: {_cols(cols)}")
             chosen.append(hits[0])
     else:
-        chosen = [c for c in cols if _is_accel_name(c) and c != tcol]
+        chosen = [c for c in cols if short[c] is not None and c != tcol]
+        # accelnav's own CSVs hold an axis twice, as raw codes and in m/s^2: the acceleration is taken
+        accel = {short[c] for c in chosen if unit_of(c) != "counts"}
+        chosen = [c for c in chosen if unit_of(c) != "counts" or short[c] not in accel]
         if not chosen:
+            no_input(src, [c[c.find("_") :] for c in cols])
             raise UserError(
-                f"{src}: no acceleration column (acc..., ax/ay/az); name one with --axis; columns: {_cols(cols)}"
+                f"{src}: no acceleration column (acc_x_g, ax, x, Acceleration x (m/s^2), ...); name one with --axis; "
+                f"columns: {_cols(cols)}"
             )
-    units = []
+    flag = None if unit is None else parse_unit(unit)
+    units, unit_from = [], []
     for c in chosen:
-        if unit is not None:
-            units.append(parse_unit(unit))
-            continue
-        m = _UNIT_SUFFIX.search(c)
-        if not m and default is not None:  # the name does not say it: the calibrated model's unit
-            units.append(parse_unit(default))
-            continue
-        if not m:
+        said = unit_of(c)
+        if flag is not None and said is not None and said != flag:
+            raise UserError(
+                f"{src}: --unit {unit} contradicts column {excerpt(c)}, whose name says {said}; drop --unit or "
+                "rename the column"
+            )
+        if said is None and flag is None and default is None:
             raise UserError(
                 f"{src}: column {excerpt(c)} does not say its unit (suffix _g, _mg, _m_s2, _counts); "
                 "give --unit g, m/s^2 or counts"
             )
-        units.append(parse_unit(m.group(1)))
-    names = [short[c] for c in chosen]
+        # the name, else --unit, else the model's (a calibrated part's samples, an analog part's raw codes)
+        units.append(said or flag or parse_unit(default))
+        unit_from.append("name" if said else "--unit" if flag else "model")
+    names = [short[c] or c for c in chosen]
     if len(set(names)) != len(names):
         names = list(chosen)
-    # every data row must have the header's number of fields: an extra or a missing cell is refused
-    # (loadtxt with usecols would drop an extra one silently); the line of each sample is kept for messages
-    use = ([cols.index(tcol)] if tcol is not None else []) + [cols.index(c) for c in chosen]
-    return _Header(delim, cols, tcol, chosen, units, names, use)
+    elif model_axes and set(names) <= set(model_axes):  # matched by name, whatever the columns' order
+        order = sorted(range(len(names)), key=lambda i: list(model_axes).index(names[i]))
+        chosen, units, unit_from, names = ([x[i] for i in order] for x in (chosen, units, unit_from, names))
+    return tcol, chosen, units, tuple(unit_from), names
 
 
 def _is_number(s: str) -> bool:
@@ -549,19 +554,6 @@ def _is_number(s: str) -> bool:
     except ValueError:
         return False
     return True
-
-
-def _is_accel_name(col: str) -> bool:
-    return bool(_ACC_PREFIX.match(col) or _A_AXIS.match(_UNIT_SUFFIX.sub("", col)))
-
-
-def _short_name(col: str) -> str:
-    name = _UNIT_SUFFIX.sub("", col)
-    m = _A_AXIS.match(name)
-    if m:
-        return m.group(1)
-    name = _ACC_PREFIX.sub("", name) or name
-    return name.strip("_") or col
 
 
 def _locate_bad_cell(lines, nums, delim, cols, use, src, comma=False) -> None:
@@ -619,7 +611,7 @@ def _with_time_unit(rec: Recording, time_unit: str | None, where) -> Recording:
             f"--time-unit {time_unit}: the time column {rec.time_column!r} says its unit is {rec.time_unit}"
         )
     if rec.time_unit is None:
-        rec = replace(rec, t=rec.t * _TIME_SCALE[time_unit], time_unit=time_unit)
+        rec = replace(rec, t=rec.t * TIME_SCALE[time_unit], time_unit=time_unit)
     return rec
 
 
@@ -651,6 +643,12 @@ def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> R
     clock = rec.time_column
     if clock is None:  # the time came from the rate: a perfect grid
         return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]))
+    if rec.time_unit is None:
+        unit, said = epoch_unit(src, clock, float(t[0]), step)
+        if unit is not None:
+            scale = TIME_SCALE[unit]
+            rec = replace(rec, t=t * scale, time_unit=unit, notes=rec.notes + (said,))
+            t, dt, step = rec.t, dt * scale, step * scale
     if rec.time_unit is None and 1.0 / step < MIN_CLOCK_HZ:
         raise UserError(
             f"{src}: the time column {clock!r} steps by {step:.6g} (median): read as seconds that is "
@@ -705,6 +703,24 @@ def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> R
     if regular and not jumps.any():  # a regular clock the rate agrees with: its stamps as they are
         return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]), notes=notes)
     return replace(rec, t=t[0] + k / f, rate_hz=float(f), notes=notes)
+
+
+def epoch_unit(src: str, col: str, t0: float, step: float) -> tuple[str | None, str | None]:
+    """(unit, a note saying it) of a time column whose name and flags say no unit, when its numbers are a
+    calendar's (Unix time in s, ms, us or ns: the first stamp between 2000 and 2100) and that unit gives a
+    rate an accelerometer has; (None, None) when the numbers cannot tell (relative times: uptime, elapsed)."""
+    import datetime
+
+    for unit in TIME_UNITS:
+        scale = TIME_SCALE[unit]
+        if EPOCH_S[0] <= t0 * scale <= EPOCH_S[1] and MIN_CLOCK_HZ <= 1.0 / (step * scale) <= MAX_CLOCK_HZ:
+            when = datetime.datetime.fromtimestamp(t0 * scale, datetime.UTC).strftime("%Y-%m-%d %H:%M:%S")
+            words = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}[unit]
+            return unit, (
+                f"{src}: time column {col!r} read as Unix time in {words} (first stamp {when} UTC, "
+                f"{1.0 / (step * scale):.6g} Hz); give --time-unit if it is not"
+            )
+    return None, None
 
 
 def _order_place(t: np.ndarray, f: float):
@@ -873,11 +889,13 @@ def from_columns(
     allow_gaps: bool = False,
     time_unit: str | None = None,
     default_unit: str | None = None,
+    model_axes: list[str] | None = None,
 ) -> Recording:
     """A recording from named columns held in memory (numpy arrays, a DataFrame's columns).
 
     The columns are read as a CSV with that header would be: the same names pick the time and the
-    acceleration columns and say their units, and the same clock, rate and gap checks follow.
+    acceleration columns and say their units, and the same clock, rate and gap checks follow. A datetime64
+    or timedelta64 column is read as seconds (the clock when no column is named as time).
     """
     names = [str(c) for c in columns]
     bad = [c for c in names if any(d in c for d in ",;\t\n")]
@@ -887,11 +905,25 @@ def from_columns(
         raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
     if time_unit is not None and time_unit not in TIME_UNITS:
         raise UserError(f"--time-unit: got {time_unit!r}; accepted: {', '.join(TIME_UNITS)}")
-    head = _header(",".join(names), 1, source, axes, unit, rate_hz, time_column, default_unit)
-    table = []
+    arrays = dict(zip(names, columns.values(), strict=True))
+    typed = [c for c in names if np.asarray(arrays[c]).dtype.kind in "Mm"]  # datetime64, timedelta64
+    if time_column is None and typed and pick_time(names) is None:
+        time_column = typed[0]  # no column is named as time, one holds times: it is the clock
+    head = _header(",".join(names), 1, source, axes, unit, rate_hz, time_column, default_unit, model_axes)
+    table, notes = [], ()
     for j in head.use:
+        raw = np.asarray(arrays[head.cols[j]]).reshape(-1)
+        if raw.dtype.kind in "Mm":
+            if head.cols[j] != head.tcol:
+                raise UserError(f"{source}: column {excerpt(head.cols[j])} holds {raw.dtype} values, not acceleration")
+            col, said = _seconds(raw)
+            if time_unit is not None:
+                raise UserError(f"--time-unit {time_unit}: the time column {head.tcol!r} is {raw.dtype}, which says it")
+            notes += (f"{source}: time column {head.tcol!r} read from its {raw.dtype} values {said}",)
+            table.append(col)
+            continue
         try:
-            col = np.asarray(columns[list(columns)[j]], dtype=np.float64).reshape(-1)
+            col = np.asarray(raw, dtype=np.float64)
         except (TypeError, ValueError):
             raise UserError(f"{source}: column {excerpt(head.cols[j])} is not numbers") from None
         table.append(col)
@@ -900,17 +932,26 @@ def from_columns(
     table = np.column_stack(table)
     if table.shape[0] < 2:
         raise UserError(f"{source}: {table.shape[0]} samples; a recording needs many more")
-    tu = None
     if head.tcol is not None:
-        m = _TIME_NAME.match(head.tcol)
-        tu = m.group(2).lower() if m and m.group(2) else None
-        t, data = table[:, 0] * _TIME_SCALE[tu], table[:, 1:]
+        tu = "s" if notes else time_unit_of(head.tcol)
+        t, data = table[:, 0] * TIME_SCALE[tu], table[:, 1:]
     else:
         t, data, tu = np.arange(table.shape[0]) / rate_hz, table, "s"
     accel = data * np.array([UNITS[u] for u in head.units])
     rec = _finish(source, t, accel, tuple(head.names), tuple(head.chosen), tuple(head.units), None, None)
-    rec = replace(rec, time_unit=tu, time_column=head.tcol)
+    rec = replace(rec, time_unit=tu, time_column=head.tcol, unit_from=head.unit_from, notes=notes)
     return _check_time(_with_time_unit(rec, time_unit, source), rate_hz, allow_gaps)
+
+
+def _seconds(raw: np.ndarray) -> tuple[np.ndarray, str]:
+    """Seconds of datetime64 (since the epoch) or timedelta64 values, NaT as NaN; and how, for a note."""
+    ns = raw.astype("datetime64[ns]" if raw.dtype.kind == "M" else "timedelta64[ns]")
+    sec = ns.view(np.int64).astype(np.float64) * 1e-9
+    sec[np.isnat(ns)] = np.nan
+    if raw.dtype.kind == "m":
+        return sec, "as seconds"
+    first = str(ns[~np.isnat(ns)][0]) if (~np.isnat(ns)).any() else "NaT"
+    return sec, f"as seconds since 1970-01-01 UTC (first {first[:23]})"
 
 
 def in_accel(rec: Recording, model) -> Recording:
@@ -961,3 +1002,59 @@ def in_accel(rec: Recording, model) -> Recording:
     said = (f"{rec.source}: columns {', '.join(rec.columns)} read as raw ADC codes of {model.source} "
             "(converted by its read-out and calibration; give --unit g or m/s^2 if they are not codes)")  # fmt: skip
     return replace(rec, accel=accel, clipped=clipped, units=units, notes=rec.notes + (said,))
+
+
+# the units a column may be read in, for the evidence (raw counts go through the model's read-out instead)
+_ALT_UNITS = ("g", "mg", "m/s^2")
+_SUFFIX = {"g": "_g", "mg": "_mg", "m/s^2": "_m_s2"}
+LEVEL_TOL = 0.1  # a mean within 10 % of 9.80665 in a column read as g: a gravity in m/s^2
+
+
+def unit_evidence(accel: np.ndarray, units, full_scale: float | None) -> np.ndarray:
+    """What the data say of their units, to add up over blocks: per axis the sum of the samples [m/s^2], the
+    finite samples, and how many lie beyond ``full_scale`` [m/s^2] (by BEYOND) read in each of _ALT_UNITS."""
+    out = np.zeros((accel.shape[1], 2 + len(_ALT_UNITS)))
+    for j, u in enumerate(units):
+        a = accel[:, j][np.isfinite(accel[:, j])]
+        out[j, :2] = float(a.sum()), len(a)
+        if u in _ALT_UNITS and full_scale is not None:
+            mag = np.abs(a)
+            for k, alt in enumerate(_ALT_UNITS):  # the same numbers in alt: a * UNITS[alt] / UNITS[u]
+                out[j, 2 + k] = np.count_nonzero(mag * (UNITS[alt] / UNITS[u]) > BEYOND * full_scale)
+    return out
+
+
+def check_units(src: str, columns, units, unit_from, evidence: np.ndarray, full_scale: float | None, whose: str):
+    """Refuse, naming the unit it most likely has, a column whose unit no name said (--unit or the model's) when
+    its data make that unit implausible: a share RAIL_SHARE of its samples past the sensor's range where
+    another unit leaves under 1 % there, or a mean of about 9.8 read as g (a gravity in m/s^2). The data stay
+    out when they cannot tell (a level trace read in either unit, a few samples clipped)."""
+    for j, (col, u, said) in enumerate(zip(columns, units, unit_from, strict=True)):
+        total, n = evidence[j, :2]
+        if said == "name" or u not in _ALT_UNITS or n == 0:
+            continue
+        how = "--unit" if said == "--unit" else f"the unit of {whose}" if said == "model" else "the file's unit"
+        mean = total / n / UNITS[u]  # in the claimed unit
+        if full_scale is not None:
+            share = evidence[j, 2 + _ALT_UNITS.index(u)] / n
+            fits = [a for k, a in enumerate(_ALT_UNITS) if a != u and evidence[j, 2 + k] / n < 0.01]
+            if share >= RAIL_SHARE and fits:
+                alt = min(fits, key=lambda a: abs(np.log(UNITS[a] / UNITS[u])))  # the nearest unit that fits
+                raise UserError(
+                    f"{src}: column {excerpt(col, 40)} read in {u} ({how}) puts {100 * share:.0f} % of its samples "
+                    f"beyond the sensor's range +-{full_scale / UNITS[u]:.4g} {u} ({whose}); in {alt} none of "
+                    f"them would be: it is most likely in {alt}: give --unit {alt} or name it ..{_SUFFIX[alt]}"
+                )
+        if u == "g" and abs(abs(mean) - G0) <= LEVEL_TOL * G0:
+            raise UserError(
+                f"{src}: column {excerpt(col, 40)} read in g ({how}) holds {mean:.4g} g on average, a "
+                f"{abs(mean) * G0:.3g} m/s^2 push no still or moving sensor keeps; as m/s^2 it is 1 g of gravity: "
+                f"it is most likely in m/s^2: give --unit m/s^2 or name it .._m_s2"
+            )
+
+
+def check_rec_units(rec: Recording, full_scale: float | None, whose: str) -> None:
+    """:func:`check_units` of a whole recording in memory."""
+    if any(f != "name" for f in rec.unit_from):  # names said every unit: nothing to weigh (nor to cost)
+        ev = unit_evidence(rec.accel, rec.units, full_scale)
+        check_units(rec.source, rec.columns, rec.units, rec.unit_from, ev, full_scale, whose)

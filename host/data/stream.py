@@ -80,7 +80,7 @@ class Stream:
         """Time of rows s.. in seconds, as read_recording makes it (column or rate, then --time-unit)."""
         t = rc.csv_time(self.head, table, s, self.rate_hz)
         if self.time_unit is not None and self.head.tcol is not None and rc.csv_time_unit(self.head) is None:
-            t = t * rc._TIME_SCALE[self.time_unit]
+            t = t * rc.TIME_SCALE[self.time_unit]
         return t
 
     def block(self, s: int, e: int, lines: bool = True) -> rc.Recording:
@@ -195,7 +195,7 @@ def open_stream(
     are UserError in one line (the same as read_input's); NotStreamed when only the whole reader can
     take it. ``allow_gaps`` is accepted for the same signature; a gap refuses or goes to the whole
     reader, as it would there. Close the result (or use it in a ``with``) to remove the store."""
-    from accelnav.data.inputs import _unit, model_axes
+    from accelnav.data.inputs import _unit, model_axes, target_axes
     from accelnav.link.logfile import is_log
 
     override = model if isinstance(model, Model) or model is None else load_model(model)
@@ -214,7 +214,8 @@ def open_stream(
     scratch = TempFolder("input", workdir)
     st = None
     try:
-        st = _parse(path, scratch, magic == b"\x1f\x8b", override, _unit(override), axes, unit, rate_hz, time_column)
+        gz, default = magic == b"\x1f\x8b", _unit(override)
+        st = _parse(path, scratch, gz, override, default, axes, unit, rate_hz, time_column, target_axes(override))
         st.rate_hz, st.time_unit = rate_hz, time_unit
         _check(st, override, time_unit, chosen=bool(axes), model_axes=model_axes, block=block)
     except BaseException:  # Ctrl-C too: the store goes with the error
@@ -225,14 +226,14 @@ def open_stream(
     return st
 
 
-def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, unit, rate_hz, time_column) -> Stream:
+def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, unit, rate_hz, time_column, names=None):
     """The CSV's numbers and lines into the store, by the whole reader's parser."""
     folder = scratch.path
     src = str(path)
     size = path.stat().st_size
     n, head = 0, None
     with open(folder / "store.bin", "wb") as fs, open(folder / "lines.bin", "wb") as fl:
-        for head, table, nums in rc.csv_pieces(path, axes, unit, rate_hz, time_column, gz, default):  # noqa: B007
+        for head, table, nums in rc.csv_pieces(path, axes, unit, rate_hz, time_column, gz, default, names):  # noqa: B007
             if n == 0 and not gz:  # disk: the whole store from the first piece's rows per character
                 est = int(len(nums) * max(1.0, size / rc.CHUNK_CHARS) * 1.05)
                 need, free = est * 8 * (table.shape[1] + 1), shutil.disk_usage(folder).free
@@ -272,6 +273,16 @@ def _check(st: Stream, override: Model | None, time_unit, *, chosen: bool, model
             raise UserError(f"--time-unit {time_unit}: the time column {h.tcol!r} says its unit is {tu}")
         tu = time_unit if tu is None else tu
     clock = _time_pass(st, block)
+    if tu is None and h.tcol is not None:  # a calendar's clock (Unix time) says its unit by its numbers
+        unit, said = rc.epoch_unit(src, h.tcol, clock.t0, clock.median(st.n - 1))
+        if unit is not None:
+            scale = rc.TIME_SCALE[unit]
+            clock.t0, clock.tl, clock.dmin, clock.dmax = (
+                x * scale for x in (clock.t0, clock.tl, clock.dmin, clock.dmax)
+            )
+            clock.vals = clock.vals * scale
+            st.time_unit = tu = unit
+            note(said)
     step = _clock_verdict(st, clock, tu)
     rate = (st.n - 1) / (clock.tl - clock.t0)
     # read_input._on_model: the model, its rate, its axes
@@ -362,8 +373,9 @@ def _clock_verdict(st: Stream, clock: _Clock, tu: str | None) -> float:
 
 def _grid_pass(st: Stream, rate: float, block: int) -> None:
     """Counts converted, NaN, each sample on the grid (recording.on_grid), as the reader will give them."""
-    src, n, t0 = st.source, st.n, st.t0
+    src, n, t0, h = st.source, st.n, st.t0, st.head
     said, k_prev = False, -1
+    fs, evidence = st.model.max_accel_m_s2, 0.0
     for s in range(0, n, block):
         e = min(s + block, n)
         try:
@@ -396,6 +408,10 @@ def _grid_pass(st: Stream, rate: float, block: int) -> None:
         if np.any(dk > 1):
             raise NotStreamed(f"{src}: samples missing from its clock are filled in by the whole reader")
         k_prev = int(k[-1])
+        if h.unit_from and any(f != "name" for f in h.unit_from):  # a unit no name said: what the data say of it
+            evidence = evidence + rc.unit_evidence(rec.accel, h.units, fs)
+    if h.unit_from and any(f != "name" for f in h.unit_from):
+        rc.check_units(src, h.chosen, h.units, h.unit_from, evidence, fs, str(st.model.source))
 
 
 def npz_rows(path: str | os.PathLike[str]) -> int | None:
@@ -480,7 +496,7 @@ def _npz_stream(path: Path, override, axes, time_column, rate_hz, time_unit, uni
             override = loads_model(str(small["model_toml"]), source=f"{src}:model_toml")
         if reader.n < 2:
             raise NotStreamed(f"{src}: {reader.n} samples")
-        head = _Header(",", ["t", *names], "t", names, ["m/s^2"] * k, names, list(range(k + 1)))
+        head = _Header(",", ["t", *names], "t", names, ["m/s^2"] * k, names, list(range(k + 1)), ("file",) * k)
         st = _NpzStream(src, reader.n, override, np.array([]), head, path.parent, None, None, kind="NPZ")
         st._npz, st.run_file = reader, run_file
         if run_file:  # load_run's and _with_model's checks: the model's axes and rate, no gap

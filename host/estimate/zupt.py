@@ -38,7 +38,11 @@ one piece, the parts either side are split again; a piece whose first and
 last thirds differ by more than their own noise allows, and faster than a
 tilt may drift beyond its first second (``level_rate``, 0.1 m/s^2 a second:
 a person standing leans that slowly; over a second a drift cannot be told
-from a vehicle's or a cart's ramp), is part of a ramp and dropped. The gentle start of a move
+from a vehicle's or a cart's ramp), is part of a ramp and dropped; a piece that is a whole run, a move
+the window sees on both sides (a stance between two swings), may drift at ``leak_rate`` (2 m/s^2 a second:
+a jogger's level frame leaks 3 m/s^2 and swings by up to 1.5 m/s^2 a second, 0.3 m/s^2 within one stance).
+A part of a run with no window near its median (a long quiet drive under a drifting tilt) is halved and
+each half split on its own. The gentle start of a move
 is quiet, but its mean walks away from the rest's (a vehicle's, a cart's
 first 0.1 m/s^2), and that is where a rest must end; a constant-acceleration
 hold becomes a piece of its own (the decision refuses it: its level jumped with no turn between,
@@ -89,6 +93,7 @@ class ZuptParams:
     tremor: float = 0.12  # m/s^2 rms, the motion of a body at rest (a stance's sway, an idling engine)
     trim_k: float = 3.0  # rest ends trimmed while the window mean is this many sd off the rest's own
     level_rate: float = 0.1  # m/s^3, a candidate's level may drift this fast (a lean), faster is a ramp
+    leak_rate: float = 2.0  # m/s^3, ... and a whole quiet run between two moves this fast (a jog's level leak)
     still_k: float = 3.0  # a still start or stand: mean variance <= still_k R (no tremor allowance) ...
     start_s: float = 1.0  # s, ... and lasting this long (a car at a smooth cruise is still for a moment)
     start_within_s: float = 3.0  # s, a still start begins this early at the latest
@@ -119,7 +124,7 @@ def resolved(model: Model, p: ZuptParams) -> ZuptParams:
         v = getattr(p, name)
         if not (math.isfinite(v) and v > 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number > 0")
-    for name in ("every_s", "min_rest_s", "rel", "widen", "bridge_s", "tremor", "trim_k", "level_rate"):
+    for name in ("every_s", "min_rest_s", "rel", "widen", "bridge_s", "tremor", "trim_k", "level_rate", "leak_rate"):
         v = getattr(p, name)
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"zupt {name}: got {v}; accepted: a number >= 0")
@@ -220,6 +225,7 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
             w,
             p.level_rate * model.Ts,
             int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
+            p.leak_rate * model.Ts,
         )
     ]  # in sample order: runs are, and so are the pieces of each
     # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
@@ -284,16 +290,23 @@ def _steady_pieces(
     w: int,
     tilt_rate: float,
     lean: int,
+    leak_rate: float = 0.0,
 ) -> list[tuple[int, int, np.ndarray, float]]:
     """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
     piece's median: the longest such stretch about the run's median is kept, the parts either side are split
-    again. The ends of a piece are trimmed again with the bound scaled to the piece's own variance (of ``x``,
-    summed over axes, against ``total``, the sum of R + tremor^2) when that is smaller; a piece whose first
+    again; a part with no window near its median (a long quiet drive whose level a drifting tilt spread wide)
+    is halved, each half split on its own. The ends of a piece are trimmed again with the bound scaled to the
+    piece's own variance (of ``x``, summed over axes, against ``total``, the sum of R + tremor^2) when that is
+    smaller; a piece whose first
     and last thirds differ by more than trim_k sd of a window mean (from the piece's own variance) plus
     ``tilt_rate`` (m/s^2 per sample) times their distance beyond ``lean`` samples is a stretch of a ramp
     and dropped (the level moving across it no faster than a tilt may, over more than ``lean`` samples, is a
     lean: a person standing leans over seconds; over a second or less a drift cannot be told from a
-    vehicle's or a cart's ramp). What the trim cuts off is split again (a standing whose level stepped, by
+    vehicle's or a cart's ramp). A piece that is the whole run, motion on both sides (a stance between two
+    swings), may drift at ``leak_rate`` (m/s^2 per sample) over their whole distance instead: a jogger's level
+    frame leaks 3 m/s^2 that swings by 1.5 m/s^2 a second; a rest that runs into a gentle ramp is one quiet
+    run and keeps the tilt's rate, and the decision tests every candidate against the kinematics besides.
+    What the trim cuts off is split again (a standing whose level stepped, by
     0.1 m/s^2 on a real lower-back recording, keeps its second level as a piece of its own); a piece from it
     is kept when it holds three windows at least (thirds of a window each: shorter, a ramp's start cannot be
     told from a step) and its level does not walk away from the piece it was cut from (a ramp leaving a
@@ -318,7 +331,7 @@ def _steady_pieces(
     ref, own = np.empty((max(m, 1), n_axes)), np.empty(max(m, 1))
     count = mod.lib.acn_rest_pieces(
         m, n_axes, ffi.from_buffer("double[]", mc), ffi.from_buffer("double[]", xc), bound2, total, w,
-        tilt_rate, lean, ffi.from_buffer("long[]", start), ffi.from_buffer("long[]", stop),
+        tilt_rate, lean, leak_rate, ffi.from_buffer("long[]", start), ffi.from_buffer("long[]", stop),
         ffi.from_buffer("double[]", ref), ffi.from_buffer("double[]", own),
     )  # fmt: skip
     if count < 0:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.recording import Recording, in_accel, read_recording
+from accelnav.data.recording import Recording, check_rec_units, in_accel
 from accelnav.errors import UserError
 from accelnav.identify.calibrate import Calibration, CalibrationError, calibrate, detect_poses, native
 from accelnav.model.design import steps_and_noise
@@ -98,19 +98,22 @@ def calibrate_recording(
         raise UserError(f"--min-pose: got {min_pose_s:g}; accepted: seconds > 0")
     if since_power_on is not None and since_power_on < 0:
         raise UserError(f"--since-power-on: got {since_power_on:g}; accepted: seconds >= 0")
-    rec = read_recording(source, axes=None, unit=unit, rate_hz=rate_hz, time_column=time_column, time_unit=time_unit)
-    for text in rec.notes:
-        note(text)
+    from accelnav.identify.characterise import as_model_axes, read_stationary
+
+    if model is not None and not isinstance(model, Model):
+        model = load_model(Path(model))
+    rec = read_stationary(source, unit=unit, rate_hz=rate_hz, time_column=time_column, time_unit=time_unit, model=model)
     if rec.n > MAX_SAMPLES:
         raise UserError(f"{rec.source}: {rec.n} samples; accepted: at most {MAX_SAMPLES} (cut the recording)")
     if isinstance(model, Model):
         base, label = model, str(model.source)
     else:
-        base, label = base_model(None if model is None else Path(model), rec.model_toml, rec.source)
-    if "counts" in rec.units:
-        if model is None and rec.model_toml is None:
-            raise UserError(f"{rec.source}: raw counts need the model of their read-out: give --model")
-        rec = in_accel(rec, base)  # the model's own conversion (its current zero-g and sensitivity), as the firmware's
+        base, label = base_model(None, rec.model_toml, rec.source)
+    rec = as_model_axes(rec, base)
+    check_rec_units(rec, base.max_accel_m_s2 if model is not None else None, label)
+    if "counts" in rec.units:  # the model's own conversion (its current zero-g and sensitivity), as the firmware's;
+        rec = in_accel(rec, base)  # without --model the default's, as filter and smooth read counts, said in a note
+        note(rec.notes[-1])
     names = tuple(a.name for a in base.axes)
     missing = [n for n in names if n not in rec.axis_names]
     if missing:

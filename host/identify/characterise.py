@@ -10,7 +10,15 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from accelnav.data.recording import MIN_DURATION_S, Recording, check_axis, check_rate, in_accel, read_recording
+from accelnav.data.recording import (
+    MIN_DURATION_S,
+    Recording,
+    check_axis,
+    check_rate,
+    check_rec_units,
+    in_accel,
+    read_recording,
+)
 from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, BandCheck, Composite, check_band, fit_composite
@@ -95,8 +103,10 @@ def read_stationary(
     rate_hz: float | None = None,
     time_column: str | None = None,
     time_unit: str | None = None,
+    model: Model | None = None,
 ) -> Recording:
-    """The recording: a CSV, gzip CSV or NPZ through the checked reader, or a recorder log read directly."""
+    """The recording: a CSV, gzip CSV or NPZ through the checked reader (the columns matched to ``model``'s
+    axes by name, a column that names no unit in its unit), or a recorder log read directly."""
     from accelnav.link.logfile import is_log
 
     path = Path(source)
@@ -110,10 +120,25 @@ def read_stationary(
                 raise UserError(f"--{flag.replace('_', '-')}: not for a recorder log, which says its own")
         arrays, _ = log_run_arrays(path)
         return from_arrays(str(path), arrays, axes)
-    rec = read_recording(path, axes=axes, unit=unit, rate_hz=rate_hz, time_column=time_column, time_unit=time_unit)
+    from accelnav.data.inputs import _unit
+
+    rec = read_recording(
+        path, axes=axes, unit=unit, rate_hz=rate_hz, time_column=time_column, time_unit=time_unit,
+        default_unit=_unit(model), model_axes=None if model is None else [a.name for a in model.axes],
+    )  # fmt: skip
     for text in rec.notes:
         note(text)
     return rec
+
+
+def as_model_axes(rec: Recording, model: Model) -> Recording:
+    """``rec`` with its axes named as ``model``'s when none of its names is one and the counts agree (columns
+    A0, A1 for a model of x, y), as filter and smooth take them; said in a note."""
+    names = [a.name for a in model.axes]
+    if set(rec.axis_names) & set(names) or len(rec.axis_names) != len(names):
+        return rec
+    note(f"{rec.source}: columns {', '.join(rec.columns)} -> model axes {', '.join(names)}")
+    return dataclasses.replace(rec, axis_names=tuple(names))
 
 
 def base_model(path: Path | None, rec: Recording) -> tuple[Model, str, bool]:
@@ -297,17 +322,21 @@ def characterise(
         raise UserError(f"--noise-band: got {lo:g} {hi:g}; accepted: two times in s, 0 < LO < HI")
     if sigma_n not in ("keep", "paper"):
         raise UserError(f"--sigma-n: got {sigma_n!r}; accepted: keep, paper")
-    rec = read_stationary(source, axes=axes, unit=unit, rate_hz=rate_hz, time_column=time_column, time_unit=time_unit)
+    if model is not None and not isinstance(model, Model):
+        model = load_model(Path(model))
+    opts = dict(axes=axes, unit=unit, rate_hz=rate_hz, time_column=time_column, time_unit=time_unit)
+    rec = read_stationary(source, **opts, model=model)
     if isinstance(model, Model):
         base, base_label, given = model, str(model.source), True
     else:
-        base, base_label, given = base_model(None if model is None else Path(model), rec)
+        base, base_label, given = base_model(None, rec)
+    rec = as_model_axes(rec, base)  # columns A0, A1 fit the model's x, y (the default's too), as smooth reads them
     counts = "counts" in rec.units
-    if counts:
-        if not given:
-            raise UserError(f"{rec.source}: raw counts need the model of their read-out: give --model")
-        rec = in_accel(rec, base)  # the model's own conversion, as the firmware's
+    if counts:  # the model's own conversion, as the firmware's; without --model the default's, as
+        rec = in_accel(rec, base)  # filter and smooth read counts, said in a note
+        note(rec.notes[-1])
     full_scale = base.max_accel_m_s2 if given else None
+    check_rec_units(rec, full_scale, base_label)  # a unit no name said, against what the data say
     if given:  # the model keeps its rate: the recording must have it (the check filter and smooth make)
         check_rate(rec, base.rate_hz, base_label)
     note(

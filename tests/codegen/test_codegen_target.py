@@ -45,7 +45,7 @@ def test_gain_schedule_on_atmega328p_is_refused_naming_the_covariance_form(tmp_p
     p = _need("atmega328p", "ACCELNAV_REQUIRE_AVR")
     rc, _, err = _codegen(tmp_path, capsys, "--form", "gain_schedule", "--report", "--target", "atmega328p")
     assert rc == 2 and err.count("\n") == 1, err
-    m = re.search(r"does not fit: needs (\d+) B flash of (\d+); the covariance form fits: (\d+) B flash", err)
+    m = re.search(r"does not fit: needs (\d+) B flash of (\d+).*; the covariance form fits: (\d+) B flash", err)
     assert m, err
     assert int(m[2]) == p.flash == 32768
     assert int(m[1]) > p.flash >= int(m[3]) > 0
@@ -98,7 +98,7 @@ def test_a_missing_toolchain_is_said_and_gives_no_figure(tmp_path, capsys, monke
     rc, out, _ = _codegen(tmp_path, capsys, "--form", "gain_schedule", "--target", "atmega328p")
     assert rc == 0  # not measured, so not refused
     block = out[out.index("target atmega328p:") :].splitlines()
-    assert block[1:] == ["  avr-gcc, avr-size not found: no figure for the atmega328p"], block
+    assert block[1:] == ["  avr-gcc, avr-size, make not found: no figure for the atmega328p"], block
 
 
 def test_the_build_compiles_and_checks_with_the_part_table(tmp_path):
@@ -132,3 +132,64 @@ def test_the_linker_scripts_agree_with_the_part_table(key, script, flash, ram):
 
     p = targets.parts()[key]
     assert (length(flash), length(ram)) == (p.flash, p.ram)
+
+
+Z_AXIS = '\n[[axes]]\nname = "z"\nc1 = 0.03\nc2 = -0.07\nT = 410.0\nzero_g_v = 2.497\n'
+
+
+def fitted_model(tmp_path, n_axes: int):
+    """The default model with 1, 2 or 3 axes, each with its own bias constants, as fit-bias writes them."""
+    text = (MODELS / "adxl250_default.toml").read_text()
+    head, _, rest = text.partition("[[axes]]")
+    x, _, rest = rest.partition("[[axes]]")
+    y, _, tail = rest.partition("\n[noise]")
+    axes = ["[[axes]]" + x, "[[axes]]" + y, Z_AXIS.lstrip("\n") + "\n"][:n_axes]
+    path = tmp_path / f"fitted{n_axes}.toml"
+    path.write_text(head + "".join(axes) + "\n[noise]" + tail)
+    return path
+
+
+@pytest.mark.parametrize("n_axes", [1, 2, 3])
+def test_the_report_states_the_size_of_the_linked_firmware(tmp_path, capsys, n_axes):
+    """`--report --target atmega328p` states flash and RAM of the image as `make firmware BOARD=atmega328p`
+    links it (within 2 %), not of the filter's object before the linker drops and adds code: the real link
+    here is the firmware build the PIL runs use (hil_sim), whose own size check states what does not fit."""
+    from accelnav.hil_sim.targets.firmware import FirmwareError, firmware_images
+
+    p = _need("atmega328p", "ACCELNAV_REQUIRE_AVR")
+    path = fitted_model(tmp_path, n_axes)
+    rc = main(["codegen", str(path), "--out", str(tmp_path / "gen"), "--report", "--target", "atmega328p"])
+    out, err = capsys.readouterr()
+    row = re.search(r"^  covariance +(\d+) +(\d+)  (fits|does not fit)", out, re.M)
+    refused = re.search(r"covariance form on the atmega328p does not fit: needs (\d+) B flash of", err)
+    try:
+        images = firmware_images("atmega328p", str(path))
+    except FirmwareError as e:  # too big: the build's check says what it needs
+        m = re.search(r"needs (\d+) B flash and (\d+) B RAM", str(e))
+        real_flash, real_ram = int(m[1]), int(m[2])
+    else:
+        elf = tmp_path / "fw.elf"
+        elf.write_bytes(images["accelnav_fw.elf"])
+        size = subprocess.run(["avr-size", "-A", str(elf)], capture_output=True, text=True, check=True).stdout
+        sec = {k: int(v) for k, v in re.findall(r"^(\.\w+)\s+(\d+)", size, re.M)}
+        real_flash, real_ram = sec[".text"] + sec[".data"], sec[".data"] + sec.get(".bss", 0)
+    fits = real_flash <= p.flash and real_ram + p.stack <= p.ram
+    if fits:
+        assert rc == 0 and row and row[3] == "fits", out + err
+        assert abs(int(row[2]) - real_ram) <= 0.02 * real_ram, (row[2], real_ram)
+        stated = int(row[1])
+    else:
+        assert rc == 2 and refused and err.count("\n") == 1, err
+        stated = int(refused[1])
+    assert abs(stated - real_flash) <= 0.02 * real_flash, (stated, real_flash)
+
+
+def test_a_filter_the_firmware_does_not_link_gets_its_object_size_and_no_verdict(tmp_path, capsys):
+    """float32 (or another prefix) is not what the firmware links: the report sizes the filter's object, says
+    that it is not the image, and neither passes nor refuses it."""
+    _need("atmega328p", "ACCELNAV_REQUIRE_AVR")
+    rc, out, err = _codegen(tmp_path, capsys, "--float32", "--target", "atmega328p")
+    block = out[out.index("target atmega328p:") :].splitlines()
+    assert rc == 0 and err == "" and len(block) == 2, out
+    assert re.fullmatch(r"  the firmware links the fixed-point filter of prefix accelnav: covariance filter object "
+                        r"alone \d+ B flash, \d+ B RAM, not linked: no verdict", block[1]), block  # fmt: skip

@@ -27,7 +27,9 @@ DATA = (
     "accelnav/firmware/src/app.c",
     "accelnav/firmware/boards/acn_board.h",
     "accelnav/firmware/boards/host/board_host.c",
-    "accelnav/firmware/boards/emu_feed.c",  # PIL's file feed: `accelnav demo --pil on` from the wheel builds it
+    "accelnav/firmware/boards/emu_feed.c",
+    "accelnav/firmware/boards/arduino/AccelNav.cpp",  # the Arduino library's class, and its licence text
+    "accelnav/firmware/boards/arduino/LICENSE",  # PIL's file feed: `accelnav demo --pil on` from the wheel builds it
     "accelnav/firmware/boards/mps2_an385/mps2_an385.ld",
     "accelnav/firmware/boards/stm32f103/stm32f103c8.ld",
     "accelnav/estimate/csrc/fastsmooth.c",

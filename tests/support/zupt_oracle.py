@@ -2,6 +2,8 @@
 accelnav.estimate.zupt): the oracle the new one must agree with, sample for sample. Test support only;
 not part of the package. Copied verbatim (docstrings shortened); do not "fix" it. (Its chain of per-rest
 gates is gone: issue 31 replaced the decision, tests/estimate/test_rest_decision.py tests the new one.)
+Issue 31 changed the split into pieces twice, and both changes are made here too: a part with no window near
+its median is halved instead of dropped, and a piece that is its whole run may drift at ``leak_rate``.
 """
 
 from __future__ import annotations
@@ -85,6 +87,7 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
             w,
             p.level_rate * model.Ts,
             int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
+            p.leak_rate * model.Ts,
         )
     )
     # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
@@ -133,6 +136,7 @@ def _steady_pieces(
     w: int,
     tilt_rate: float,
     lean: int,
+    leak_rate: float,
 ) -> list[tuple[int, int, np.ndarray]]:
     """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
     piece's median: the longest such stretch about the run's median is kept, the parts either side are split
@@ -144,15 +148,20 @@ def _steady_pieces(
     windows at least and its level does not walk away from the piece it was cut from (see below).
     Returns (first, last + 1, median level, own variance) per piece."""
     out = []
+    run = (a, b)
     todo: list[tuple[int, int, np.ndarray | None, int]] = [(a, b, None, 0)]
     while todo:
         a, b, parent, side = todo.pop()
         if b <= a:
             continue
+        whole = (a, b) == run and parent is None
         ref = np.median(means[a:b], axis=0)
         near = np.sum((means[a:b] - ref) ** 2, axis=1) <= bound2
         runs = intervals(near)
         if not runs:
+            if parent is None and b - a >= 2:  # issue 31: halved, each half split on its own
+                h = a + (b - a) // 2
+                todo += [(a, h, None, 0), (h, b, None, 0)]
             continue
         p, q = max(runs, key=lambda r: r[1] - r[0])
         todo += [(a, a + p, None, 0), (a + q, b, None, 0)]
@@ -173,7 +182,8 @@ def _steady_pieces(
         # moves no faster than a tilt may over more than ``lean`` samples (level_rate: a person standing leans
         # over seconds; over a second or less a drift cannot be told from a vehicle's or a cart's ramp)
         third = (q - p) // 3
-        allowed = math.sqrt(bound2 * own / total) + tilt_rate * max(0, q - p - third - lean)
+        drift = max(tilt_rate * max(0, q - p - third - lean), leak_rate * (q - p - third) if whole else 0.0)
+        allowed = math.sqrt(bound2 * own / total) + drift  # issue 31: a whole run may drift as a leak does
         if not third:  # too short to tell: kept as a piece of the run, not as a trimmed end
             if parent is None:
                 out.append((p, q, ref, own))

@@ -24,16 +24,7 @@
 #define TICKS_PER_MS 250u /* Timer1 at 16 MHz / 64 */
 #define IDLE_PIN (1u << PB5)
 
-#define WIRE(size) ((size) + 6u) /* CRC 4, COBS code 1, delimiter 1: every frame is < 254 bytes */
-#define MAX2(a, b) ((a) > (b) ? (a) : (b))
-/* The most telemetry one received byte can queue: it completes at most one frame, and a sample (a
- * block and every axis' checkpoint) or a command (flush: the same, then its ack; info: info and
- * ack) sends at most this much. */
-#define TX_NEED                                                                                    \
-    (MAX2(MAX2(WIRE(ACNF_BLOCK_SIZE) + ACNF_NAXES * WIRE(ACNF_CHECKPOINT_SIZE),                    \
-               WIRE(ACNF_SAMPLE_SIZE)),                                                            \
-          WIRE(ACNF_INFO_SIZE)) +                                                                  \
-     WIRE(ACNF_ACK_SIZE))
+#define TX_NEED ACN_TX_NEED /* acn_board.h */
 #if TX_NEED <= 256u
 #define TX_SIZE 256u
 #elif TX_NEED <= 512u

@@ -18,11 +18,15 @@
  * the sketch starts on channel i (simavr's ADC trigger) gets the next code of axis i: AVCC is set
  * to 1023 "mV", so that simavr's conversion (mV * 1023 / AVCC) gives the code itself. Once every
  * code has been converted, COMMANDS.bin is fed into USART0 (e.g. a stop, which flushes the last
- * block); the run ends when nothing has come out of the UART for 20 ms of simulated time.
+ * block); the run ends when nothing has come out of the UART for 20 ms of simulated time. With an
+ * empty COMMANDS.bin (a sketch that streams text and takes no command) it ends 20 ms after the
+ * first conversion past the last code: every sample's output is out by then.
  *
- * On stdout, one line: "cycles N stack S" (the CPU cycles of the run; the deepest stack seen, in
- * bytes below RAMEND). Exit status 0; 1 with a one-line reason on stderr if the image cannot be
- * loaded, the core crashes or sleeps for good, or MAX_CYCLES pass before the end. */
+ * On stdout: "cycles N stack S" (the CPU cycles of the run; the deepest stack seen, in bytes below
+ * RAMEND) and, in the second form, "aref R": REFS1..0 of ADMUX at the first conversion (0: AREF,
+ * external; 1: AVCC, the Arduino default; 3: the internal 1.1 V; -1: no conversion). Exit status 0;
+ * 1 with a one-line reason on stderr if the image cannot be loaded, the core crashes or sleeps for
+ * good, or MAX_CYCLES pass before the end. */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -54,6 +58,8 @@ static unsigned long long last_out;   /* the cycle of the last byte sent */
 static uint8_t *codes; /* the ADC mode's codes: samples x axes, little-endian uint16 */
 static unsigned long n_codes, axes, next_code[8];
 static int adc_done;
+static int refs = -1;                  /* ADMUX's REFS bits at the first conversion */
+static unsigned long long past_end_at; /* the cycle of the first conversion past the last code */
 static avr_irq_t *adc_in;
 
 static void on_output(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -109,6 +115,12 @@ static void on_adc_start(struct avr_irq_t *irq, uint32_t value, void *param)
     if (e.mux.kind != ADC_MUX_SINGLE || ch >= axes) {
         return;
     }
+    if (refs < 0) {
+        refs = avr->data[0x7c] >> 6; /* ADMUX (data address 0x7C): REFS1..0 in bits 7..6 */
+    }
+    if (next_code[ch] >= n_codes && !past_end_at) {
+        past_end_at = avr->cycle;
+    }
     k = next_code[ch] < n_codes ? next_code[ch]++ : n_codes - 1u;
     at = 2u * (k * axes + ch);
     avr_raise_irq(adc_in + ch, (uint32_t)(codes[at] | codes[at + 1u] << 8));
@@ -131,7 +143,7 @@ int main(int argc, char **argv)
     uint32_t flags = 0;
     unsigned long long max_cycles, end_at = 0, fed_at = 0;
     unsigned rises_at_last = 0;
-    int c, fed_all = 0;
+    int c, fed_all = 0, fed_any = 0;
     uint16_t sp, sp_min = 0xffffu;
     avr_irq_t *uart_in;
     if (argc != 5 && argc != 7) {
@@ -200,6 +212,7 @@ int main(int argc, char **argv)
                 fed_at = avr->cycle;
                 rises_at_last = idle_rises;
             } else {
+                fed_any = 1;
                 avr_raise_irq(uart_in, (uint32_t)c);
             }
         }
@@ -210,6 +223,9 @@ int main(int argc, char **argv)
         sp = (uint16_t)(avr->data[R_SPL] | avr->data[R_SPH] << 8);
         if (sp < sp_min) {
             sp_min = sp;
+        }
+        if (codes && fed_all && !fed_any && !end_at && past_end_at) {
+            end_at = past_end_at + F_CPU / 50u;
         }
         if (codes && fed_all && !end_at && avr->cycle - last_out >= F_CPU / 50u &&
             avr->cycle - fed_at >= F_CPU / 50u) {
@@ -231,5 +247,8 @@ int main(int argc, char **argv)
     }
     printf("cycles %llu stack %u\n", (unsigned long long)avr->cycle,
            (unsigned)(avr->ramend - sp_min));
+    if (codes) {
+        printf("aref %d\n", refs);
+    }
     return 0;
 }

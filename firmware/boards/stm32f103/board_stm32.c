@@ -30,6 +30,7 @@
  * file feed (emu_feed.h: how PIL runs), the QEMU build takes its input from that file and empties
  * its transmit ring into the other one instead of USART2 and USART1. */
 #include "acn_board.h"
+#include "stm32_rt.h"
 #include "stm32f103_regs.h"
 #ifdef ACN_STM32_QEMU
 #include "emu_feed.h"
@@ -54,17 +55,7 @@
 #error "stm32f103: at most 3 analog axes (PA0..PA2) or 2 duty-cycle axes (TIM2, TIM4)"
 #endif
 
-/* ---- link ---- */
-#define TX_SIZE 1024u /* powers of two */
-#define RX_SIZE 128u
-static uint8_t tx_ring[TX_SIZE];
-static volatile uint32_t tx_head, tx_tail;
-static uint8_t rx_ring[RX_SIZE];
-static volatile uint32_t rx_head, rx_tail;
-static volatile uint32_t rx_lost; /* bytes lost to a full ring or a hardware overrun */
-
 /* ---- time base and samples ---- */
-static volatile uint32_t time_ms;
 static volatile bool sample_ready;
 static volatile uint32_t sample_overrun; /* samples the main loop was too slow to take */
 static uint32_t missed_seen;             /* sample_overrun already handed to app_missed */
@@ -99,6 +90,7 @@ static void usart_init(void)
     gpio_mode(GPIOA, 10, GPIO_INPUT_FLOATING);
     USART1->BRR = (SYSCLK_HZ + BAUD / 2u) / BAUD; /* 78: 923077 baud, +0.16 % */
     USART1->CR1 = USART_CR1_UE | USART_CR1_TE | USART_CR1_RE | USART_CR1_RXNEIE;
+    stm32_link_init(USART1);
     nvic_enable(IRQ_USART1);
 }
 
@@ -126,23 +118,19 @@ static bool feed; /* the file feed (emu_feed.h) instead of USART2 and USART1 */
 /* The transmit ring as the file feed sees it. */
 uint32_t emu_txq_free(void)
 {
-    return TX_SIZE - (tx_head - tx_tail);
+    return stm32_link_tx_free();
 }
 
 bool emu_txq_next(uint8_t *b)
 {
-    if (tx_tail == tx_head) {
-        return false;
-    }
-    *b = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
-    return true;
+    return stm32_link_tx_next(b);
 }
 
 /* One stimulus byte, when there is one and the telemetry ring has room for what it may produce:
  * QEMU's USART takes the next byte from its socket only after DR is read, so the feed waits. */
 static void stim_poll(void)
 {
-    if ((USART2->SR & USART_SR_RXNE) && TX_SIZE - (tx_head - tx_tail) >= 3u * ACNF_MAX_UP_WIRE) {
+    if ((USART2->SR & USART_SR_RXNE) && stm32_link_tx_free() >= 3u * ACNF_MAX_UP_WIRE) {
         uint8_t b = (uint8_t)USART2->DR;
         app_rx(APP_CH_STIM, &b, 1);
     }
@@ -287,9 +275,7 @@ void tim3_handler(void)
 void board_init(void)
 {
     clock_init();
-    SYSTICK->RVR = SYSCLK_HZ / 1000u - 1u;
-    SYSTICK->CVR = 0;
-    SYSTICK->CSR = 7u; /* core clock, interrupt, enable */
+    stm32_time_init(SYSCLK_HZ);
     usart_init();
     sample_clock_init();
     input_init();
@@ -307,76 +293,9 @@ uint8_t board_id(void)
 #endif
 }
 
-uint16_t board_boot_id(void)
-{
-    return 1u; /* no retained counter set up on this board yet: the value the host board uses too */
-}
-
-uint32_t board_rx_lost(void)
-{
-    return rx_lost;
-}
-
-uint32_t board_time_ms(void)
-{
-    return time_ms;
-}
-
-void systick_handler(void)
-{
-    ++time_ms;
-}
-
-bool board_uart_write(const uint8_t *p, size_t n)
-{
-    size_t i;
-    uint32_t head = tx_head;
-    if (n > TX_SIZE - (head - tx_tail)) {
-        return false;
-    }
-    for (i = 0; i < n; ++i) {
-        tx_ring[head++ & (TX_SIZE - 1u)] = p[i];
-    }
-    tx_head = head;
-#ifndef ACN_STM32_QEMU /* there the main loop empties the ring (board_poll) */
-    irq_disable();
-    USART1->CR1 |= USART_CR1_TXEIE;
-    irq_enable();
-#endif
-    return true;
-}
-
-/* The next byte of the ring into DR, or the TXE interrupt off when the ring is empty. */
-static void tx_move(void)
-{
-    if (tx_tail != tx_head) {
-        USART1->DR = tx_ring[tx_tail++ & (TX_SIZE - 1u)];
-    } else {
-        USART1->CR1 &= ~USART_CR1_TXEIE;
-    }
-}
-
-void usart1_handler(void)
-{
-    uint32_t sr = USART1->SR;
-    if (sr & (USART_SR_RXNE | USART_SR_ORE)) {
-        uint8_t b = (uint8_t)USART1->DR; /* reading DR after SR clears RXNE and ORE */
-        if (sr & USART_SR_ORE) {
-            ++rx_lost;
-        }
-        if (rx_head - rx_tail < RX_SIZE) {
-            rx_ring[rx_head++ & (RX_SIZE - 1u)] = b;
-        } else {
-            ++rx_lost;
-        }
-    }
-    if ((sr & USART_SR_TXE) && (USART1->CR1 & USART_CR1_TXEIE)) {
-        tx_move();
-    }
-}
-
 bool board_poll(void)
 {
+    uint8_t b;
 #ifdef ACN_STM32_QEMU
     if (feed) {
         emu_feed_poll();
@@ -395,19 +314,15 @@ bool board_poll(void)
         app_missed(overrun - missed_seen); /* predict over them, in order, after it */
         missed_seen = overrun;
     }
-    while (rx_tail != rx_head) {
-        uint8_t b = rx_ring[rx_tail & (RX_SIZE - 1u)];
-        ++rx_tail;
+    while (stm32_link_rx(&b)) {
         app_rx(APP_CH_HOST, &b, 1);
     }
 #ifdef ACN_STM32_QEMU
-    while (tx_tail != tx_head && (USART1->SR & USART_SR_TXE)) {
-        tx_move();
-    }
+    stm32_link_tx_poll();
     stim_poll();
 #else
     irq_disable();
-    if (!sample_ready && rx_tail == rx_head) {
+    if (!sample_ready && stm32_link_rx_empty()) {
         __asm__ volatile("wfi"); /* an interrupt wakes it even with interrupts masked */
     }
     irq_enable();

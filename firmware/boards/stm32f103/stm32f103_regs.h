@@ -5,9 +5,7 @@
 #ifndef STM32F103_REGS_H
 #define STM32F103_REGS_H
 
-#include <stdint.h>
-
-#define REG volatile uint32_t
+#include "stm32_common.h" /* REG, USART, SysTick, NVIC */
 
 typedef struct {
     REG CR, CFGR, CIR, APB2RSTR, APB1RSTR, AHBENR, APB2ENR, APB1ENR, BDCR, CSR;
@@ -33,12 +31,6 @@ typedef struct {
     REG ISR, IFCR;
     dma_channel_t CH[7]; /* CH[0] is channel 1 */
 } dma_t;
-typedef struct {
-    REG SR, DR, BRR, CR1, CR2, CR3, GTPR;
-} usart_t;
-typedef struct {
-    REG CSR, RVR, CVR, CALIB;
-} systick_t;
 
 #define RCC ((rcc_t *)0x40021000u)
 #define FLASH ((flash_t *)0x40022000u)
@@ -51,8 +43,6 @@ typedef struct {
 #define DMA1 ((dma_t *)0x40020000u)
 #define USART1 ((usart_t *)0x40013800u)
 #define USART2 ((usart_t *)0x40004400u)
-#define SYSTICK ((systick_t *)0xe000e010u)
-#define NVIC_ISER ((REG *)0xe000e100u) /* ISER[n]: bit k enables IRQ 32 n + k */
 
 /* RCC */
 #define RCC_CR_HSEON (1u << 16)
@@ -119,36 +109,11 @@ typedef struct {
 #define DMA_CCR_MSIZE16 (1u << 10)
 #define DMA_IFCR_CGIF1 (1u << 0)
 
-/* USART */
-#define USART_SR_RXNE (1u << 5)
-#define USART_SR_TXE (1u << 7)
-#define USART_SR_ORE (1u << 3)
-#define USART_CR1_RE (1u << 2)
-#define USART_CR1_TE (1u << 3)
-#define USART_CR1_RXNEIE (1u << 5)
-#define USART_CR1_TXEIE (1u << 7)
-#define USART_CR1_UE (1u << 13)
-
 /* IRQ numbers (STM32F103 medium density) */
 #define IRQ_DMA1_CH1 11
 #define IRQ_TIM2 28
 #define IRQ_TIM3 29
 #define IRQ_TIM4 30
 #define IRQ_USART1 37
-
-static inline void nvic_enable(int irq)
-{
-    NVIC_ISER[irq >> 5] = 1u << (irq & 31);
-}
-
-static inline void irq_disable(void)
-{
-    __asm__ volatile("cpsid i" ::: "memory");
-}
-
-static inline void irq_enable(void)
-{
-    __asm__ volatile("cpsie i" ::: "memory");
-}
 
 #endif

@@ -873,8 +873,8 @@ typedef struct {
 } rest_item;
 
 long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, double bound2,
-                     double total, long w, double tilt_rate, long lean, long *pstart, long *pstop,
-                     double *pref, double *pown)
+                     double total, long w, double tilt_rate, long lean, double leak_rate,
+                     long *pstart, long *pstop, double *pref, double *pown)
 {
     if (n < 1)
         return 0;
@@ -915,8 +915,22 @@ long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, d
                 run = -1;
             }
         }
-        if (best_p < 0)
+        if (best_p < 0) {
+            /* no window near the median (levels spread over a long drive under a drifting tilt):
+             * the halves are split on their own rather than the whole stretch lost */
+            if (it.side == 0 && b - a >= 2) {
+                long h = a + (b - a) / 2;
+                todo[top].a = a;
+                todo[top].b = h;
+                todo[top].side = 0;
+                top++;
+                todo[top].a = h;
+                todo[top].b = b;
+                todo[top].side = 0;
+                top++;
+            }
             continue;
+        }
         long p = best_p, q = best_p + best_len;
         if (p > a) {
             todo[top].a = a;
@@ -977,8 +991,12 @@ long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, d
                 continue;
         } else {
             long beyond = q - p - third - lean;
-            double allowed =
-                sqrt(bound2 * own / total) + tilt_rate * (double)(beyond > 0 ? beyond : 0);
+            double tilt = tilt_rate * (double)(beyond > 0 ? beyond : 0);
+            /* a whole run, motion on both sides (a stance between two swings), may drift as a
+             * level leak does */
+            double leak =
+                it.side == 0 && it.a == 0 && it.b == n ? leak_rate * (double)(q - p - third) : 0.0;
+            double allowed = sqrt(bound2 * own / total) + (leak > tilt ? leak : tilt);
             mean_rows(means, n_axes, p, p + third, first);
             mean_rows(means, n_axes, q - third, q, last);
             if (it.side != 0) {
