@@ -21,7 +21,16 @@ default) with the fitted axes merged in and the noise figures replaced:
   band), and the model's header comments say so with the numbers;
   sigma_eps = max over the fitted axes of K (fitted or bound);
 * sigma_n is kept from the base model (a stationary recording cannot identify
-  it) unless ``--sigma-n paper`` asks for the paper's rule.
+  it) unless ``--sigma-n paper`` asks for the paper's rule;
+* samples read through a step (raw counts: the model's read-out; else a grid the
+  samples sit on) whose noise is under a quarter step
+  (:mod:`accelnav.identify.quantised`) give no noise figure: the report says so
+  in one line with the fixes, such axes are left out of R and sigma_eps (R is at
+  least the base model's and the step's rounding q^2/12, or with no model of the
+  sensor q^2/12 plus the most noise the codes allow); wherever the rounding's
+  bound on the mean matters, the bias intervals carry it.
+  A pile of samples at the data's own extreme is then no sign of clipping: only
+  the rails decide.
 """
 
 from __future__ import annotations
@@ -34,6 +43,7 @@ from accelnav.data.recording import MIN_DURATION_S, Recording
 from accelnav.fileio import check_output
 from accelnav.identify.characterise import AxisResult, characterise
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, WARN_RATIO
+from accelnav.identify.quantised import advice
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS
 from accelnav.model.edit import save_model
 from accelnav.model.load import DEFAULT_MODEL, G0, Model
@@ -131,7 +141,15 @@ def _fit_bias_run(args: argparse.Namespace):
             for i, r in enumerate(results):
                 y = rec.axis(r.name)
                 paths += plot_all(
-                    rec.t, y, rec.rate_hz, r.fit, r.white, r.noise, args.plots, r.name, (r.composite, r.check)
+                    rec.t,
+                    y,
+                    rec.rate_hz,
+                    r.fit,
+                    r.white,
+                    r.noise,
+                    args.plots,
+                    r.name,
+                    (r.composite, r.check) if r.check is not None else None,
                 )
                 p.update(i + 1)
         print(f"figures: {', '.join(str(p) for p in paths)}")
@@ -223,6 +241,18 @@ def axis_report(r: AxisResult) -> list[str]:
             f"    (rejected exponential: c1 = {e.c1:.4g} m/s^2, c2 = {e.c2:.6g} m/s^2, T = {e.T:.4g} s, "
             f"T profile 95 % {_fmt_ci(e.ci95[2], '.4g')}{'' if all(e.T_ci_closed) else ' open'})"
         )
+    q = r.quant
+    if q is not None and q.hidden:  # characterise refitted with the bound
+        out.append(
+            f"    the intervals include +-{q.bias_bound:.4g} m/s^2 on c2 (twice that on c1): with a noise of "
+            f"{q.noise_sd / q.step:.2g} read-out step ({q.step:.4g} m/s^2), the mean of the readings may sit that far "
+            "from the signal's"
+        )
+    elif q is not None and q.bias_bound > 1e-3 * q.step:
+        out.append(
+            f"    not in the intervals: the rounding may move a level by up to {q.bias_bound:.3g} m/s^2 (the noise, "
+            f"{q.noise_sd / q.step:.2g} read-out step of {q.step:.4g} m/s^2, dithers it; the figure is its worst case)"
+        )
     out.append(
         f"    residual rms {f.sigma:.4g} m/s^2 ({_fmt_mg(f.sigma)}); variance factors for residual correlation: "
         f"short-range srf = {f.srf:.3g}, long-run vif = {f.vif:.3g} (both 1 for white residuals)"
@@ -240,6 +270,9 @@ def axis_report(r: AxisResult) -> list[str]:
             out.append(f"       c1 {_fmt_ci(lr[0])}, c2 {_fmt_ci(lr[1])} m/s^2, T {_fmt_ci(lr[2], '.4g')} s")
         else:
             out.append(f"       c2 {_fmt_ci(lr[1])} m/s^2")
+    if r.noise_hidden:
+        out.append(f"  noise: {advice(q)}")
+        return out
     k = nz.terms
     c = nz.curve
     out.append(f"  noise (overlapping Allan deviation of the residual, tau {c.tau[0]:.3g} .. {c.tau[-1]:.4g} s):")
@@ -286,10 +319,18 @@ def model_report(
         ax = model.axis(r.name)
         how = "fitted" if r.fit.T_identified else "constant bias; T kept, it has no effect on the mean with c1 = 0"
         lines.append(f"  axis {ax.name}: c1 = {ax.c1:.6g}, c2 = {ax.c2:.6g} m/s^2, T = {ax.T:.6g} s ({how})")
-    names = ", ".join(r.name for r in results)
+    seen = [r for r in results if not r.noise_hidden]
+    names = ", ".join(r.name for r in seen)
+    hidden = ", ".join(r.name for r in results if r.noise_hidden)
     n = model.noise
     raised = [r for r in results if r.check is not None and r.check.R_chosen > r.check.R_white]
-    if raised:
+    if not seen:
+        lines.append(
+            f"  R = {n.R:.6g} (m/s^2)^2: {_hidden_R(n.R, base, results)}; sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) "
+            f"kept from the base model: the read-out step hides the noise on every axis ({hidden}), so the recording "
+            "gives no noise figure"
+        )
+    elif raised:
         lines.append(
             f"  R = {n.R:.6g} (m/s^2)^2: the band's R, chosen because the white-noise R "
             f"({raised[0].check.R_white:.4g}) misrepresents the noise over "
@@ -298,12 +339,18 @@ def model_report(
         )
     else:
         lines.append(f"  R = {n.R:.6g} (m/s^2)^2 = max over {names} of N^2/Ts at Ts = {model.Ts:.6g} s")
-    bound = any(r.noise.terms.K_is_bound for r in results)
-    lines.append(
-        f"  sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) = max over {names} of K"
-        + (" (an upper bound where no random walk is seen)" if bound else "")
-    )
-    paper = max(r.noise.sigma_n_paper for r in results)
+    if seen:
+        bound = any(r.noise.terms.K_is_bound for r in seen)
+        lines.append(
+            f"  sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) = max over {names} of K"
+            + (" (an upper bound where no random walk is seen)" if bound else "")
+        )
+    if seen and hidden:
+        lines.append(
+            f"  (axes {hidden}: the read-out step hides their noise, so they give no figure to R and sigma_eps; "
+            f"R is at least {_hidden_R(None, base, results)})"
+        )
+    paper = max((r.noise.sigma_n_paper for r in seen), default=float("nan"))
     if sigma_n == "paper":
         lines.append(f"  sigma_n = {n.sigma_n:.6g} from the paper's rule (the base model had {base.noise.sigma_n:.6g})")
     else:
@@ -317,6 +364,22 @@ def model_report(
             "R is mapped to the model's rate"
         )
     return lines
+
+
+def _hidden_R(R: float | None, base: Model, results) -> str:
+    """Where R comes from for axes whose noise the read-out step hides (see characterise.merge)."""
+    hidden = [r.quant for r in results if r.noise_hidden]
+    q = max(x.step for x in hidden)
+    if R is not None and R == base.noise.R:
+        return "kept from the base model"
+    if R is not None and R > q**2 / 12 * (1 + 1e-5):
+        return (
+            "the step's rounding q^2/12 plus the most noise the codes' shares allow (their 95 % upper end): "
+            "no model of this sensor given"
+        )
+    if R is not None:
+        return f"the step's rounding q^2/12 at q = {q:.4g} m/s^2 (the base model's R is less)"
+    return f"the base model's R {base.noise.R:.4g} and the step's rounding q^2/12 = {q**2 / 12:.4g}"
 
 
 def provenance(rec: Recording, results, base_label: str) -> str:
@@ -336,6 +399,13 @@ def provenance(rec: Recording, results, base_label: str) -> str:
             lines.append(f"axis {r.name}: T not identified, constant bias c2 = {f.c2:.6g} +- {f.se[1]:.2g} m/s^2")
         verdicts = ", ".join(f"{t.name} {'white' if t.white else 'not white'}" for t in r.white.tests)
         lines.append(f"  residuals: {verdicts}")
+        if r.noise_hidden:
+            q = r.quant
+            lines.append(
+                f"  noise hidden by the read-out step {q.step:.4g} m/s^2 ({q.noise_sd / q.step:.2g} step from the "
+                f"codes): no noise figure fitted; bias intervals include +-{q.bias_bound:.4g} m/s^2"
+            )
+            continue
         lines.append(
             f"  Allan: N = {k.N:.4g} m/s^2/sqrt(Hz), minimum {k.adev_min:.3g} m/s^2 at {k.tau_min:.3g} s, "
             f"K {'<=' if k.K_is_bound else '='} {k.K:.3g} m/s^2/sqrt(s)"

@@ -66,15 +66,18 @@ def cmd_init(args: argparse.Namespace) -> int:
     from accelnav.fileio import output_target
     from accelnav.model.edit import save_model
     from accelnav.model.load import model_name_from
-    from accelnav.model.new import new_model, preset
+    from accelnav.model.new import new_model, part_values, preset
 
     out = output_target(args.out)
     if out.kind == "file" and out.path.exists() and not args.force:
         raise UserError(f"--out: {args.out} exists; give --force to replace it")
     if args.axes is not None and not all(a.strip() for a in args.axes.split(",")):
         raise UserError(f"--axes: got {args.axes!r}; accepted: axis names, comma separated (x,y,z)")
-    values = preset(args.part, args.supply) if args.part else {}
-    kind = args.kind or values.get("kind")
+    # flags and answers fill one dict of model keys; the part's preset is applied to it once, after both
+    # (a ratiometric sensitivity scaled by the supply however it was given: one path, one model)
+    known = preset(args.part) if args.part else {}
+    given = {key: getattr(args, dest) for dest, (key, _) in FIELDS.items() if getattr(args, dest) is not None}
+    kind = args.kind or known.get("kind")
     asking = sys.stdin.isatty()
     if kind is None:
         if not asking:
@@ -82,18 +85,17 @@ def cmd_init(args: argparse.Namespace) -> int:
         kind = input("kind (analog, duty_cycle, digital, calibrated): ").strip()
         if kind not in NEEDED:
             raise UserError(f"init: kind {kind!r}; accepted: {', '.join(NEEDED)}")
-    for dest, (key, _) in FIELDS.items():
-        if getattr(args, dest) is not None:
-            values[key] = getattr(args, dest)
     rate = args.rate
-    missing = [d for d in NEEDED[kind] if values.get(FIELDS[d][0]) is None] + (["rate"] if rate is None else [])
+    have = {**known, **given}
+    missing = [d for d in NEEDED[kind] if have.get(FIELDS[d][0]) is None] + (["rate"] if rate is None else [])
     if missing and not asking:
         raise UserError(f"init: {kind} part: give {', '.join('--' + m.replace('_', '-') for m in missing)}")
     for dest in missing:
         if dest == "rate":
             rate = _init_ask("sample rate, Hz")
         else:
-            values[FIELDS[dest][0]] = _init_ask(FIELDS[dest][1], int if dest == "adc_bits" else float)
+            given[FIELDS[dest][0]] = _init_ask(FIELDS[dest][1], int if dest == "adc_bits" else float)
+    values = part_values(args.part, given)
     axes = values.pop("axes", ("x", "y"))
     if args.axes is not None:
         axes = tuple(a.strip() for a in args.axes.split(","))

@@ -813,11 +813,15 @@ def check_axis(
     min_samples: int = MIN_SAMPLES,
     full_scale: float | None = None,
     sensor_range: tuple[float, str] | None = None,
+    step: float = 0.0,
 ) -> np.ndarray:
     """The samples of ``axis`` if the bias fit can use them; otherwise a UserError saying what and where.
 
     ``sensor_range``: (largest |a| in m/s^2, whose range it is); a sample beyond it is a glitch or a wrong
-    unit, named by its place, rather than left to wreck the fit."""
+    unit, named by its place, rather than left to wreck the fit. ``step``: the read-out step the samples
+    are quantised to [m/s^2] (0: none known). Where the noise is below one step, one or two codes hold most
+    samples wherever the rails are, so a pile at the data's own extreme is no evidence of clipping: only
+    the rails (flagged samples, the full scale) decide then."""
     j = rec.column(axis)
     y = rec.accel[:, j]
     where = f"{rec.source}: axis {rec.axis_names[j]!r}"
@@ -827,6 +831,13 @@ def check_axis(
         raise UserError(
             f"{where}: {int(bad.sum())} samples are not numbers (NaN/inf), the first at sample {k} "
             f"(t = {rec.t[k]:.6g} s); gaps in the data are not accepted"
+        )
+    # a code at the ADC's rails is named as clipped before its value is judged against the range
+    if rec.clipped is not None and rec.clipped[:, j].any():
+        c = rec.clipped[:, j]
+        k = int(np.argmax(c))
+        raise UserError(
+            f"{where}: {int(c.sum())} samples are flagged clipped, the first at sample {k} (t = {rec.t[k]:.6g} s)"
         )
     if sensor_range is not None:
         out = np.abs(y) > sensor_range[0]
@@ -845,12 +856,6 @@ def check_axis(
     lo, hi = float(y.min()), float(y.max())
     if lo == hi:
         raise UserError(f"{where}: the signal is constant ({lo:.6g} m/s^2 in every sample); a sensor that is not alive")
-    if rec.clipped is not None and rec.clipped[:, j].any():
-        c = rec.clipped[:, j]
-        k = int(np.argmax(c))
-        raise UserError(
-            f"{where}: {int(c.sum())} samples are flagged clipped, the first at sample {k} (t = {rec.t[k]:.6g} s)"
-        )
     if full_scale is not None:
         at_rail = np.abs(y) >= full_scale * (1 - 1e-6)
         if at_rail.any():
@@ -860,7 +865,8 @@ def check_axis(
                 f"the first at sample {k} (t = {rec.t[k]:.6g} s): the signal is clipped"
             )
     values, counts = np.unique(y, return_counts=True)
-    if len(values) >= 3:
+    coarse = step > 0 and np.std(np.diff(y)) / np.sqrt(2) < step  # short-term spread under one step
+    if len(values) >= 3 and not coarse:
         for end, inner, label in ((-1, -2, "maximum"), (0, 1, "minimum")):
             if counts[end] >= PILEUP_FRACTION * len(y) and counts[end] > counts[inner]:
                 k = int(np.argmax(y == values[end]))

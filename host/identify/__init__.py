@@ -10,5 +10,6 @@ __all__ = [
     "characterise",
     "noisecomp",
     "noiseid",
+    "quantised",
     "whiteness",
 ]

@@ -470,11 +470,16 @@ def fit_bias(
     T_min: float | None = None,
     T_max: float | None = None,
     progress=None,
+    level_bound: float = 0.0,
 ) -> BiasFit:
     """Fit eps(t) = c1 (1 - exp(-(t - t[0])/T)) + c2 to the stationary samples ``y`` at times ``t``.
 
     ``T_min`` / ``T_max`` bound the search (default: 10 sample periods and 10
-    record durations). ``progress`` (a :class:`accelnav.progress.Progress` over
+    record durations). ``level_bound``: how far the samples' mean may sit from the
+    signal's whatever their number (a read-out step that hides the noise:
+    :mod:`accelnav.identify.quantised`); the intervals of c2 (a level) grow by it and
+    those of c1 (two levels' difference) by twice it, and c1 must clear zero by
+    those to identify T. ``progress`` (a :class:`accelnav.progress.Progress` over
     4 stages, or None) is advanced as the stages finish. Raises
     :class:`FitError` for data it cannot use (too few samples, non-finite
     values, time not increasing, a constant signal).
@@ -529,18 +534,25 @@ def fit_bias(
     cov = _cov_from_normal(A, sigma2) * srf
     se = np.sqrt(np.abs(np.diag(cov)))
     z = Z95
-    ci_c1 = (float(c1 - z * se[0]), float(c1 + z * se[0]))
-    ci_c2 = (float(c2 - z * se[1]), float(c2 + z * se[1]))
+    w1, w2 = 2 * level_bound, level_bound
+    ci_c1 = (float(c1 - z * se[0] - w1), float(c1 + z * se[0] + w1))
+    ci_c2 = (float(c2 - z * se[1] - w2), float(c2 + z * se[1] + w2))
     rss_min = min(rss, rss_prof)
     (T_ci, closed) = _profile_interval(prof, T_grid, rss_grid, T_hat, rss_min, CHI2_1_95 * sigma2 * srf)
     inflate = max(1.0, vif, srf)
     (T_ci_lr, closed_lr) = _profile_interval(prof, T_grid, rss_grid, T_hat, rss_min, CHI2_1_95 * sigma2 * inflate)
     zl = Z95 * math.sqrt(inflate / srf)
     ci95_lr = (
-        (float(c1 - zl * se[0]), float(c1 + zl * se[0])),
-        (float(c2 - zl * se[1]), float(c2 + zl * se[1])),
+        (float(c1 - zl * se[0] - w1), float(c1 + zl * se[0] + w1)),
+        (float(c2 - zl * se[1] - w2), float(c2 + zl * se[1] + w2)),
         T_ci_lr,
     )
+    if level_bound > 0:  # every T the bound leaves open, with its c1 and c2
+        hull, span1, span2 = _level_hull(sums, T_grid, ybar, duration, (c1, c2, T_hat), level_bound)
+        T_ci, closed = _joined(T_ci, closed, hull)
+        T_ci_lr, closed_lr = _joined(ci95_lr[2], closed_lr, hull)
+        ci_c1, ci_c2 = _spanned(ci_c1, span1, w1), _spanned(ci_c2, span2, w2)
+        ci95_lr = (_spanned(ci95_lr[0], span1, w1), _spanned(ci95_lr[1], span2, w2), T_ci_lr)
     exp_fit = ExpFit(
         c1=float(c1),
         c2=float(c2),
@@ -605,8 +617,8 @@ def fit_bias(
         c2=ybar,
         T=nan,
         se=(nan, se_c2, nan),
-        ci95=((nan, nan), (ybar - Z95 * se_c2, ybar + Z95 * se_c2), (nan, nan)),
-        ci95_lr=((nan, nan), (ybar - Z95 * se_lr, ybar + Z95 * se_lr), (nan, nan)),
+        ci95=((nan, nan), (ybar - Z95 * se_c2 - w2, ybar + Z95 * se_c2 + w2), (nan, nan)),
+        ci95_lr=((nan, nan), (ybar - Z95 * se_lr - w2, ybar + Z95 * se_lr + w2), (nan, nan)),
         T_identified=False,
         verdict=verdict + "; falling back to a constant bias (c1 = 0, c2 = mean)",
         vif=vif0,
@@ -618,6 +630,44 @@ def fit_bias(
         residuals=_readonly(r0),
         exp=exp_fit,
     )
+
+
+def _level_hull(sums, T_grid, ybar, duration, best, bound):
+    """The T of the grid whose best curve stays within +-2 ``bound`` of the best fit's over the record: T the
+    samples cannot tell apart when their mean is known to +-bound only (each curve may be off the signal by
+    bound, as c1's interval allows). Returns ((lo, hi, closed below, closed above), (c1 range), (c2 range)):
+    the outermost such T, one grid point further out, whether that is inside the grid, and the best c1, c2
+    over those T."""
+    c1, c2, T_hat = best
+    _, b0, b1 = sums.profile(1.0 / T_grid)
+    tt = np.unique(np.concatenate([np.linspace(0.0, duration, 400), np.geomspace(duration * 1e-6, duration, 400)]))
+    fitted = c2 - c1 * np.expm1(-tt / T_hat)
+    curves = ybar + b0[:, None] + b1[:, None] * np.exp(-tt[None, :] / T_grid[:, None])
+    ok = np.nonzero(np.max(np.abs(curves - fitted[None, :]), axis=1) <= 2 * bound)[0]
+    if len(ok) == 0:
+        return (T_hat, T_hat, True, True), (c1, c1), (c2, c2)
+    i, j = int(ok[0]), int(ok[-1])
+    last = len(T_grid) - 1
+    c1s, c2s = -b1[ok], ybar + b0[ok] + b1[ok]
+    return (
+        (float(T_grid[max(i - 1, 0)]), float(T_grid[min(j + 1, last)]), i > 0, j < last),
+        (float(min(c1, c1s.min())), float(max(c1, c1s.max()))),
+        (float(min(c2, c2s.min())), float(max(c2, c2s.max()))),
+    )
+
+
+def _joined(ci, closed, hull):
+    """A profile interval of T grown to the level hull (:func:`_level_hull`)."""
+    lo, hi, c_lo, c_hi = hull
+    return (
+        (min(ci[0], lo), max(ci[1], hi)),
+        (closed[0] and (c_lo or ci[0] < lo), closed[1] and (c_hi or ci[1] > hi)),
+    )
+
+
+def _spanned(ci, span, w):
+    """An interval grown to hold ``span`` widened by +-w."""
+    return (float(min(ci[0], span[0] - w)), float(max(ci[1], span[1] + w)))
 
 
 def _profile_interval(prof, T_grid, rss_grid, T_hat, rss_min, delta):

@@ -23,6 +23,7 @@ from accelnav.errors import UserError
 from accelnav.identify.biasfit import BiasFit, FitError, fit_bias
 from accelnav.identify.noisecomp import DEFAULT_BAND_S, BandCheck, Composite, check_band, fit_composite
 from accelnav.identify.noiseid import NoiseId, identify_noise
+from accelnav.identify.quantised import Quantisation, grid_step, quantisation
 from accelnav.identify.whiteness import DEFAULT_LB_LAGS, Whiteness, whiteness
 from accelnav.model.edit import revalidate, with_axis_bias, with_noise
 from accelnav.model.load import DEFAULT_MODEL, Model, load_model, loads_model, model_name_from
@@ -39,6 +40,12 @@ class AxisResult:
     noise: NoiseId
     composite: Composite
     check: BandCheck | None = None
+    quant: Quantisation | None = None  # the read-out step, where the samples have one
+
+    @property
+    def noise_hidden(self) -> bool:
+        """The step hides this axis's noise: its noise figures are not the sensor's."""
+        return self.quant is not None and self.quant.hidden
 
 
 def analyse_axis(
@@ -49,16 +56,31 @@ def analyse_axis(
     full_scale: float | None,
     lags: int,
     sensor_range: tuple[float, str] | None = None,
+    step: float = 0.0,
+    hints: dict | None = None,
 ) -> AxisResult:
-    """Check, fit, test and identify one axis of ``rec`` (with progress on stderr)."""
-    y = check_axis(rec, axis, min_duration_s=min_duration_s, full_scale=full_scale, sensor_range=sensor_range)
+    """Check, fit, test and identify one axis of ``rec`` (with progress on stderr). ``step`` [m/s^2]: the
+    read-out step of its samples (the model's, for raw counts); 0: the step of the grid they sit on, if any.
+    ``hints``: what the model says about a finer read-out (Quantisation's sensor_noise, finer)."""
     j = rec.column(axis)
+    source = "the model's read-out"
+    if step <= 0:
+        step, source = grid_step(rec.accel[:, j]), "the samples' own grid"
+    y = check_axis(
+        rec, axis, min_duration_s=min_duration_s, full_scale=full_scale, sensor_range=sensor_range, step=step
+    )
     name = rec.axis_names[j]
     try:
         with Progress(f"fit {name}", total=4, unit="stages") as p:
             fit = fit_bias(rec.t, y, progress=p)
     except FitError as exc:
         raise UserError(f"{rec.source}: axis {name!r}: {exc}") from None
+    quant = quantisation(y, fit.residuals, step, source) if step > 0 else None
+    if quant is not None:
+        quant = dataclasses.replace(quant, **(hints or {}))
+        if quant.hidden:  # again, with the step's bound on the mean in its intervals and its decision on T
+            with Progress(f"fit {name} (read-out step)", total=4, unit="stages") as p:
+                fit = fit_bias(rec.t, y, progress=p, level_bound=quant.bias_bound)
     with Progress(f"white {name}", total=1, unit="tests") as p:
         white = whiteness(fit.residuals, lb_lags=lags)
         p.update(1)
@@ -70,7 +92,7 @@ def analyse_axis(
         except ValueError as exc:
             raise UserError(f"{rec.source}: axis {name!r}: composite noise model: {exc}") from None
         p.update(1)
-    return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise, comp)
+    return AxisResult(name, rec.columns[j], rec.units[j], fit, white, noise, comp, quant=quant)
 
 
 def read_stationary(
@@ -132,12 +154,39 @@ def base_model(path: Path | None, rec: Recording) -> tuple[Model, str, bool]:
     return load_model(DEFAULT_MODEL), f"the embedded default {DEFAULT_MODEL.name}", False
 
 
+def read_out_steps(model: Model, rec: Recording) -> dict[str, float]:
+    """The read-out step [m/s^2] of each axis of ``rec``, by the model axis its counts were converted with
+    (the axis of its name, else of its place, as :func:`accelnav.data.recording.in_accel` maps them)."""
+    from accelnav.model.design import steps_and_noise
+
+    steps, _ = steps_and_noise(model)
+    names = [a.name for a in model.axes]
+    return {n: float(steps[names.index(n) if n in names else j]) for j, n in enumerate(rec.axis_names)}
+
+
+def finer_read_out(model: Model) -> dict:
+    """What the model says of a finer read-out for the advice when a step hides the noise: the datasheet's
+    noise sd, and for an analog part on a reference above its supply, the step of a reference at the supply."""
+    from accelnav.model.design import steps_and_noise
+
+    _, noise = steps_and_noise(model)
+    hints: dict = {"sensor_noise": noise if noise > 0 else None}
+    a = model.sensor.analog
+    if a is not None and a.adc_ref_v > a.supply_v:
+        step = a.supply_v / 2**a.adc_bits / a.sensitivity_v_per_g * 1e3  # mg
+        hints["finer"] = f"a {a.supply_v:g} V reference (the supply: ratiometric; step {step:.3g} mg)"
+    return hints
+
+
 def _sig(x: float, digits: int = 6) -> float:
     return float(f"{x:.{digits}g}")
 
 
-def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: str, keep_rate: bool) -> Model:
-    """The base model with the fitted axes and noise figures merged in (see the module notes)."""
+def merge(
+    base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: str, keep_rate: bool, described: bool = True
+) -> Model:
+    """The base model with the fitted axes and noise figures merged in (see the module notes). ``described``:
+    the base model describes this sensor (its R may stand where the read-out step hides the noise)."""
     model = base
     if not keep_rate:
         model = dataclasses.replace(model, rate_hz=_sig(rec.rate_hz, 9))
@@ -160,12 +209,18 @@ def merge(base: Model, rec: Recording, results: list[AxisResult], *, sigma_n: st
             raise UserError(f"axis name {r.name!r} cannot name a model axis (it must be a C identifier); use --axis")
         model = with_axis_bias(model, r.name, _sig(c1), _sig(c2), _sig(T))
     Ts = model.Ts
-    R = max(r.noise.R(Ts) for r in results)
-    sigma_eps = max(r.noise.sigma_eps for r in results)
-    values = {"R": _sig(R), "sigma_eps": _sig(sigma_eps)}
-    if sigma_n == "paper":
-        values["sigma_n"] = _sig(max(r.noise.sigma_n_paper for r in results))
-    model = with_noise(model, **values)
+    seen = [r for r in results if not r.noise_hidden]  # an axis whose noise the step hides gives no figure
+    values = {}
+    if seen:
+        values = {"R": _sig(max(r.noise.R(Ts) for r in seen)), "sigma_eps": _sig(max(r.noise.sigma_eps for r in seen))}
+        if sigma_n == "paper":
+            values["sigma_n"] = _sig(max(r.noise.sigma_n_paper for r in seen))
+    hidden = [r.quant for r in results if r.noise_hidden]
+    if hidden:  # R covers at least the step's rounding; with no model of the sensor, the most noise the codes allow
+        floor = max(q.step**2 / 12 + (0.0 if described else q.noise_ci[1] ** 2) for q in hidden)
+        R = max(values.get("R", 0.0), model.noise.R if described else 0.0, floor)
+        values["R"] = _sig(R)
+    model = with_noise(model, **values) if values else model
     if len(model.axes) > 3:
         raise UserError(
             f"the model would have {len(model.axes)} axes ({', '.join(a.name for a in model.axes)}); "
@@ -178,6 +233,9 @@ def check_noise_band(model: Model, rec: Recording, results: list[AxisResult], ba
     """Check each axis's composite noise against the merged model's noise over ``band``; raise R where needed."""
     out = []
     for r in results:
+        if r.noise_hidden:  # no noise figure to check
+            out.append(r)
+            continue
         try:
             chk = check_band(
                 r.noise.curve,
@@ -191,7 +249,7 @@ def check_noise_band(model: Model, rec: Recording, results: list[AxisResult], ba
         except ValueError as exc:
             raise UserError(f"{rec.source}: axis {r.name!r}: --noise-band: {exc}") from None
         out.append(dataclasses.replace(r, check=chk))
-    R = max(r.check.R_chosen for r in out)
+    R = max((r.check.R_chosen for r in out if r.check is not None), default=0.0)
     if R > model.noise.R:
         model = revalidate(with_noise(model, R=_sig(R)))
     return out, model
@@ -215,6 +273,8 @@ class Characterisation:
         rows = []
         for r in self.axes:
             f, k = r.fit, r.noise.terms
+            if r.noise_hidden:  # the step hides the noise: no figure from it
+                k = dataclasses.replace(k, N=float("nan"), B=float("nan"), K=float("nan"))
             rows.append(
                 {
                     "axis": r.name,
@@ -271,7 +331,8 @@ def characterise(
     else:
         base, base_label, given = base_model(None, rec)
     rec = as_model_axes(rec, base)  # columns A0, A1 fit the model's x, y (the default's too), as smooth reads them
-    if "counts" in rec.units:  # the model's own conversion, as the firmware's; without --model the default's, as
+    counts = "counts" in rec.units
+    if counts:  # the model's own conversion, as the firmware's; without --model the default's, as
         rec = in_accel(rec, base)  # filter and smooth read counts, said in a note
         note(rec.notes[-1])
     full_scale = base.max_accel_m_s2 if given else None
@@ -283,10 +344,21 @@ def characterise(
         f"axes {', '.join(rec.axis_names)}"
     )
     sensor_range = (base.max_accel_m_s2, f"the sensor of {base_label}")  # the range the written model claims
+    steps = read_out_steps(base, rec) if counts else {}
+    hints = finer_read_out(base) if given else {}
     results = [
-        analyse_axis(rec, a, min_duration_s=min_duration_s, full_scale=full_scale, lags=lags, sensor_range=sensor_range)
+        analyse_axis(
+            rec,
+            a,
+            min_duration_s=min_duration_s,
+            full_scale=full_scale,
+            lags=lags,
+            sensor_range=sensor_range,
+            step=steps.get(a, 0.0),
+            hints=hints,
+        )
         for a in rec.axis_names
     ]
-    merged = merge(base, rec, results, sigma_n=sigma_n, keep_rate=given)
+    merged = merge(base, rec, results, sigma_n=sigma_n, keep_rate=given, described=given)
     results, merged = check_noise_band(merged, rec, results, (float(lo), float(hi)))
     return Characterisation(merged, base, base_label, rec, results)

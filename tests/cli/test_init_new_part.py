@@ -34,9 +34,10 @@ def test_init_writes_a_commented_model_that_loads(tmp_path, capsys):
     assert (m.sensor.kind, a.adc_bits, a.supply_v, a.adc_ref_v, m.rate_hz) == ("analog", 10, 3.3, 3.3, 100.0)
     assert [x.name for x in m.axes] == ["x", "y", "z"]
     assert a.sensitivity_v_per_g == pytest.approx(0.3 * 3.3 / 3.0) and a.zero_g_v == pytest.approx(1.65)
-    # R: datasheet noise over the one-pole filter's noise bandwidth plus the ADC step's rounding
+    # R: datasheet noise over the one-pole filter's noise bandwidth plus the ADC step's rounding; the
+    # noisiest axis (Z, 300 ug/sqrt(Hz)) sets the one R of the model
     step = 3.3 / 1024 / a.sensitivity_v_per_g * G0
-    expect = (150e-6 * G0) ** 2 * 50 * np.pi / 2 + step**2 / 12
+    expect = (300e-6 * G0) ** 2 * 50 * np.pi / 2 + step**2 / 12
     assert m.noise.R == pytest.approx(expect, rel=1e-5)
     text = out.read_text()
     assert "ADXL335 datasheet" in text and "placeholders" in text
@@ -85,3 +86,92 @@ def test_chain_init_fit_bias_smooth_counts(tmp_path, capsys):
     with np.load(out) as z:
         accel = z["accel"]
     np.testing.assert_array_equal(accel, move.accel)  # the model's own conversion of the counts
+
+
+def _asked(monkeypatch, answers: dict[str, str]):
+    """A terminal on stdin whose user answers each prompt (matched by its start) from ``answers``."""
+    import builtins
+    import sys
+
+    asked = []
+
+    def answer(prompt=""):
+        asked.append(prompt)
+        return next(v for k, v in answers.items() if prompt.startswith(k))
+
+    monkeypatch.setattr(sys.stdin, "isatty", lambda: True, raising=False)
+    monkeypatch.setattr(builtins, "input", answer)
+    return asked
+
+
+def test_init_answers_and_flags_give_the_same_model(tmp_path, monkeypatch, capsys):
+    """The supply answered at the prompt scales the ratiometric sensitivity exactly as --supply does."""
+    flags = tmp_path / "flags.toml"
+    assert main([*INIT, "--adc-ref", "5", "--name", "m", "--out", str(flags)]) == 0
+    asked = _asked(monkeypatch, {"supply": "3.3", "ADC bits": "10", "sample rate": "100"})
+    answered = tmp_path / "asked.toml"
+    assert main(["init", "--part", "adxl335", "--adc-ref", "5", "--name", "m", "--out", str(answered)]) == 0
+    assert len(asked) == 3  # supply, bits and rate were asked, not taken from anywhere else
+    assert answered.read_text() == flags.read_text()
+    assert load_model(answered).sensor.analog.sensitivity_v_per_g == pytest.approx(0.33)
+
+
+@pytest.mark.parametrize(
+    ("extra", "key", "said"),
+    [
+        (["--supply", "5"], "supply_v", "the ADXL335 runs on 1.8 to 3.6 V"),
+        (["--supply", "1.5"], "supply_v", "the ADXL335 runs on 1.8 to 3.6 V"),
+        (["--supply", "3.3", "--range-g", "8"], "range_g", "the ADXL335 measures +-3.6 g"),
+    ],
+)
+def test_init_refuses_what_the_parts_datasheet_does_not_allow(tmp_path, capsys, extra, key, said):
+    out = tmp_path / "m.toml"
+    argv = ["init", "--part", "adxl335", "--adc-bits", "10", "--rate", "100", *extra, "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and f"init: {key}:" in err and said in err, err
+    assert not out.exists()
+
+
+def test_init_supply_refused_for_the_part_even_when_answered(tmp_path, monkeypatch, capsys):
+    _asked(monkeypatch, {"supply": "5", "ADC bits": "10", "sample rate": "100"})
+    assert main(["init", "--part", "adxl335", "--out", str(tmp_path / "m.toml")]) == 2
+    assert "the ADXL335 runs on 1.8 to 3.6 V" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("axes", "density"), [("x,y,z", 300e-6), ("x,y", 150e-6), ("z", 300e-6)])
+def test_init_R_is_the_variance_of_the_noisiest_axis(tmp_path, axes, density):
+    """R computed apart from accelnav: the one-pole output filter's noise power integrated over frequency
+    (d^2 / (1 + (f/B)^2) from 0 to infinity), plus a uniform rounding error over one ADC step."""
+    from scipy.integrate import quad
+
+    out = tmp_path / "m.toml"
+    assert main([*INIT, "--adc-ref", "5", "--axes", axes, "--out", str(out)]) == 0
+    m = load_model(out)
+    bw = 50.0
+    power, _ = quad(lambda f: (density * G0) ** 2 / (1 + (f / bw) ** 2), 0, np.inf)
+    step = 5.0 / 2**10 / 0.33 * G0  # 5 V reference, 10 bits, 0.33 V/g at 3.3 V
+    rounding = np.mean((np.linspace(-0.5, 0.5, 200001) * step) ** 2)
+    assert m.noise.R == pytest.approx(power + rounding, rel=1e-4)
+    assert m.sensor.noise_density_g_rthz == density  # R follows from the file's own keys
+
+
+def test_init_asks_to_record_what_the_model_is_proved_for(tmp_path, capsys):
+    out = tmp_path / "m.toml"
+    assert main([*INIT, "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    import re
+
+    minutes = re.search(r"record the part still for ([0-9.]+) min \(([0-9.]+) s", said)
+    assert minutes, said
+    run = load_model(out).ranges.max_run_s
+    assert float(minutes.group(1)) * 60 == run and float(minutes.group(2)) == run
+    assert "or more" not in said
+
+
+def test_a_noise_density_given_replaces_the_parts_per_axis_figures(tmp_path):
+    out = tmp_path / "m.toml"
+    assert main([*INIT, "--noise-density", "200e-6", "--out", str(out)]) == 0
+    m = load_model(out)
+    assert m.sensor.noise_density_g_rthz == 200e-6  # the one figure given, for every axis (z's 300 dropped)
+    assert "Noise density per axis" not in out.read_text()
