@@ -982,7 +982,10 @@ def in_accel(rec: Recording, model) -> Recording:
     for j, name in enumerate(rec.axis_names):
         axis = name if name in names else j
         if isinstance(axis, int) and axis >= len(names):
-            raise UserError(f"{rec.source}: counts column {rec.columns[j]!r} has no model axis to convert it")
+            raise UserError(
+                f"{rec.source}: counts column {rec.columns[j]!r} has no axis in {model.source} (axes "
+                f"{', '.join(names)}) to convert it; give the part's own model with --model"
+            )
         codes = rec.accel[:, j]
         if model.sensor.kind == "calibrated":
             accel[:, j] = codes / model.sensor.calibrated.lsb_per_g * G0
