@@ -326,7 +326,8 @@ def model_report(
     raised = [r for r in results if r.check is not None and r.check.R_chosen > r.check.R_white]
     if not seen:
         lines.append(
-            f"  R = {n.R:.6g} (m/s^2)^2: {_hidden_R(n.R, base, results)}; sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) "
+            f"  R = {n.R:.6g} (m/s^2)^2: {format_hidden_R(n.R, base, results)}; "
+            f"sigma_eps = {n.sigma_eps:.6g} m/s^2/sqrt(s) "
             f"kept from the base model: the read-out step hides the noise on every axis ({hidden}), so the recording "
             "gives no noise figure"
         )
@@ -348,7 +349,7 @@ def model_report(
     if seen and hidden:
         lines.append(
             f"  (axes {hidden}: the read-out step hides their noise, so they give no figure to R and sigma_eps; "
-            f"R is at least {_hidden_R(None, base, results)})"
+            f"R is at least {format_hidden_R(None, base, results)})"
         )
     paper = max((r.noise.sigma_n_paper for r in seen), default=float("nan"))
     if sigma_n == "paper":
@@ -366,7 +367,7 @@ def model_report(
     return lines
 
 
-def _hidden_R(R: float | None, base: Model, results) -> str:
+def format_hidden_R(R: float | None, base: Model, results) -> str:
     """Where R comes from for axes whose noise the read-out step hides (see characterise.merge)."""
     hidden = [r.quant for r in results if r.noise_hidden]
     q = max(x.step for x in hidden)
