@@ -1,9 +1,9 @@
-"""The parts of the rest decision (accelnav.estimate.rests) as they were before its rewrite for speed (issue 31,
+"""The parts of the rest decision (accelnav.estimate.rests) as they were before its rewrites for speed (issue 31,
 its cost): the kinematic filter in numpy on (n_axes, 3, 3) arrays per event, the functions that read it as
-arrays (a side's test, the level's jump), np.median and np.linalg.norm, every candidate's peak speed computed
-at once, a new filter per pass. Kept as the reference the rewrite must decide exactly like:
-tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`), and
-bench/speed/bench_rest_decision.py times both."""
+arrays (a side's test, the level's jump), each candidate's statistics in numpy span by span, np.median and
+np.linalg.norm, every candidate's peak speed computed at once, a new filter per pass. Kept as the reference the
+rewrites must decide exactly like: tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`),
+and bench/speed/bench_rest_decision.py times both."""
 
 from __future__ import annotations
 
@@ -209,6 +209,19 @@ def reference_norms(s: Side | None) -> tuple[float, float]:
     return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
 
 
+def reference_candidates(x, ok, R, spans) -> list[Candidate]:
+    """Each candidate's statistics in numpy, span by span, as decide() made them."""
+    n_axes = x.shape[1]
+    usable = ok.all(axis=1)
+    cands = []
+    for a, b in spans:
+        use = usable[a:b]
+        xs = x[a:b][use] if use.any() else np.zeros((1, n_axes))
+        var = xs.var(axis=0) if len(xs) > 1 else R.copy()
+        cands.append(Candidate(a, b, xs.mean(axis=0), float(np.mean(var / R))))
+    return cands
+
+
 # where each old part goes in accelnav.estimate.rests: swapped in together, they make the module decide as it
 # did before its rewrite
 SWAPS = {
@@ -218,6 +231,7 @@ SWAPS = {
     (rests, "_speed"): reference_speed,
     (rests, "_norms"): reference_norms,
     (rests, "_Lazy"): reference_eager,
+    (rests, "_candidates"): reference_candidates,
     (rests._Decider, "_jump"): reference_jump,
     (rests._Decider, "_judge"): reference_judge,
     (rests._Decider, "_peak"): reference_peak,

@@ -1497,3 +1497,161 @@ int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *s
     memcpy(carry + 4, P1, sizeof P1);
     return 0;
 }
+
+/* ---- the rest decision's kinematic filter (rests.py, _Kinematic; fastsmooth.h) ----------------
+ */
+
+/* Python's max(x, 0.0): x unless 0.0 is larger (a NaN stays) */
+static double kin_pos(double x)
+{
+    return 0.0 > x ? 0.0 : x;
+}
+
+void acn_kin_to(int n_axes, double *s, const double *V, const double *W, long k0, long k, double Ts,
+                double q, const double *qv)
+{
+    long m = k - k0;
+    if (m <= 0) {
+        return;
+    }
+    double D = (double)m * Ts;
+    double c = Ts * Ts * (double)m * (double)(m - 1) / 2.0;
+    double D2 = D * D;
+    double D3 = D2 * D;
+    /* the level's random walk, integrated once into u and twice into r (signs: u and r get -e), and
+       the velocity noise of the integrated sensor noise */
+    double qrr = q * D3 * D2 / 20, qru = q * D2 * D2 / 8, qre = -q * D3 / 6;
+    double quu = q * D3 / 3, que = -q * D2 / 2, qee = q * D;
+    for (int j = 0; j < n_axes; j++) {
+        double *x = s + 9 * j;
+        double r = x[0], u = x[1], e = x[2], a = x[3], b = x[4], cc = x[5], d = x[6], f = x[7],
+               g = x[8];
+        double dV = V[k * n_axes + j] - V[k0 * n_axes + j];
+        double dW = W[k * n_axes + j] - W[k0 * n_axes + j] - D * V[k0 * n_axes + j];
+        /* F P F' with F = [[1, D, -c], [0, 1, -D], [0, 0, 1]]: the rows of F P first */
+        double x0 = a + D * b - c * cc, x1 = b + D * d - c * f, x2 = cc + D * f - c * g;
+        double y1 = d - D * f, y2 = f - D * g;
+        x[0] = r + D * u + dW - c * e;
+        x[1] = u + dV - D * e;
+        x[3] = x0 + D * x1 - c * x2 + qrr + qv[j] * D3 / 3;
+        x[4] = x1 - D * x2 + qru + qv[j] * D2 / 2;
+        x[5] = x2 + qre;
+        x[6] = y1 - D * y2 + quu + qv[j] * D;
+        x[7] = y2 + que;
+        x[8] = g + qee;
+    }
+}
+
+/* in place on one axis' 9 doubles: the scalar measurement z = state i + v, v ~ N(0, var) */
+static void kin_update(double *x, int i, double z, double var)
+{
+    double r = x[0], u = x[1], e = x[2], a = x[3], b = x[4], c = x[5], d = x[6], f = x[7], g = x[8];
+    double P0 = i == 0 ? a : i == 1 ? b : c;
+    double P1 = i == 0 ? b : i == 1 ? d : f;
+    double P2 = i == 0 ? c : i == 1 ? f : g;
+    double S = (i == 0 ? P0 : i == 1 ? P1 : P2) + var;
+    double K0 = P0 / S, K1 = P1 / S, K2 = P2 / S;
+    double innov = z - x[i];
+    x[0] = r + K0 * innov;
+    x[1] = u + K1 * innov;
+    x[2] = e + K2 * innov;
+    x[3] = a - K0 * P0;
+    x[4] = b - K0 * P1;
+    x[5] = c - K0 * P2;
+    x[6] = d - K1 * P1;
+    x[7] = f - K1 * P2;
+    x[8] = g - K2 * P2;
+}
+
+void acn_kin_aid(int n_axes, double *s, const double *V, const double *W, long k0, long k,
+                 double Ts, double q, const double *qv, int axis, int i, double z, double var)
+{
+    acn_kin_to(n_axes, s, V, W, k0, k, Ts, q, qv);
+    for (int j = 0; j < n_axes; j++) {
+        if (axis < 0 || axis == j) {
+            kin_update(s + 9 * j, i, z, var);
+        }
+    }
+}
+
+double acn_kin_side(int n_axes, const double *s, const double *A, long k, long aid_k, double Ts,
+                    const double *level, const double *R, long len, double leak, double drift,
+                    double scale, double sigma2, double sign, double *out)
+{
+    double D = (double)(k - aid_k) * Ts;
+    double total = 0.0;
+    for (int j = 0; j < n_axes; j++) {
+        double x[9];
+        memcpy(x, s + 9 * j, sizeof x);
+        double e_prior = x[2];
+        int known = x[8] < 1.0;
+        double moved = A[k * n_axes + j] - A[aid_k * n_axes + j];
+        /* conditioned on the candidate's level, the filter's own state unchanged */
+        kin_update(x, 2, level[j], R[j] / (double)(len > 1 ? len : 1));
+        double lk = leak * (level[j] - e_prior) * D, dr = drift * D, sc = scale * moved;
+        double widen = (known ? lk * lk : 0.0) + dr * dr + sc * sc;
+        double sd0 = sqrt(kin_pos(x[6])), r_sd0 = sqrt(kin_pos(x[3]));
+        double sd = sqrt(sd0 * sd0 + widen);
+        out[j] = sign * x[1];
+        out[n_axes + j] = sd;
+        out[2 * n_axes + j] = x[0];
+        out[3 * n_axes + j] = sqrt(r_sd0 * r_sd0 + widen * D * D);
+        total += x[1] * x[1] / (sd * sd + sigma2);
+    }
+    return total;
+}
+
+double acn_kin_jump(int n_axes, const double *s, const double *level)
+{
+    double sum = 0.0;
+    for (int j = 0; j < n_axes; j++) {
+        if (sqrt(kin_pos(s[9 * j + 8])) >= 1.0) {
+            return 0.0;
+        }
+    }
+    for (int j = 0; j < n_axes; j++) {
+        double off = kin_pos(fabs(level[j] - s[9 * j + 2]) - 3.0 * sqrt(kin_pos(s[9 * j + 8])));
+        sum += off * off;
+    }
+    return sqrt(sum);
+}
+
+void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, long n_spans,
+                   const long *start, const long *stop, const double *R, double *level,
+                   double *still)
+{
+    for (long i = 0; i < n_spans; i++) {
+        double *mean = level + i * n_axes;
+        long m = 0;
+        for (int j = 0; j < n_axes; j++) {
+            mean[j] = 0.0;
+        }
+        for (long k = start[i]; k < stop[i]; k++) {
+            if (usable[k]) {
+                for (int j = 0; j < n_axes; j++) {
+                    mean[j] += x[k * n_axes + j];
+                }
+                m++;
+            }
+        }
+        if (m <= 1) { /* the mean of none: 0; of one: that row */
+            still[i] = 1.0;
+            continue;
+        }
+        for (int j = 0; j < n_axes; j++) {
+            mean[j] = mean[j] / (double)m;
+        }
+        double var_r = 0.0;
+        for (int j = 0; j < n_axes; j++) {
+            double ss = 0.0;
+            for (long k = start[i]; k < stop[i]; k++) {
+                if (usable[k]) {
+                    double d = x[k * n_axes + j] - mean[j];
+                    ss += d * d;
+                }
+            }
+            var_r += ss / (double)m / R[j];
+        }
+        still[i] = var_r / (double)n_axes;
+    }
+}
