@@ -509,30 +509,22 @@ class _Decider:
     def _peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
         """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
         from the rest's to the candidate's, and the peak with the rest's level kept; the peaks on at most
-        PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest)."""
-        Ts, V = self.Ts, self.V
+        PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest), by the
+        kernel (acn_kin_peak)."""
+        from accelnav.estimate.fastsmooth import _lib
+
+        mod = _lib()
+        ffi = mod.ffi
         e, u0, e0 = last_end
         a = max(c.start, e)
-        num = min(a - e + 1, PEAK_POINTS)  # np.linspace(e, a, num), without its per-call checks
-        k = np.arange(num, dtype=np.float64)
-        if num > 1:
-            k *= (a - e) / (num - 1)
-            k += e
-            k[-1] = a
-        else:
-            k += e
-        k = k.round().astype(np.int64)
-        D = max(a - e, 1) * Ts
-        tk = ((k - e) * Ts)[:, None]
-        ramp = (c.level - e0)[None, :] * (tk * tk / (2 * D))
-        vk = V[k] - V[e] - e0[None, :] * tk - ramp + u0[None, :]
-        speed2 = np.sum(vk * vk, axis=1)  # the square root taken of the two it returns (it keeps the order)
-        flat = vk + ramp  # the rest's own level all the way
-        return (
-            math.sqrt(float(speed2.max())),
-            math.sqrt(float(speed2[-1])),
-            math.sqrt(float(np.max(np.sum(flat * flat, axis=1)))),
-        )
+        num = min(a - e + 1, PEAK_POINTS)
+        out = ffi.new("double[3]")
+        mod.lib.acn_kin_peak(
+            len(u0), ffi.from_buffer("double[]", self.V), self.Ts, e, a, num,
+            *(ffi.from_buffer("double[]", np.ascontiguousarray(v, dtype=np.float64)) for v in (u0, e0, c.level)), out,
+        )  # fmt: skip
+        # the square root taken of the peak's square (it keeps the order)
+        return math.sqrt(out[0]), math.sqrt(out[1]), math.sqrt(out[2])
 
     def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
         p, Ts = self.p, self.Ts

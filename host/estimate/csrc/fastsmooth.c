@@ -1655,3 +1655,28 @@ void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, lon
         still[i] = var_r / (double)n_axes;
     }
 }
+
+void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long num,
+                  const double *u0, const double *e0, const double *level, double *out)
+{
+    double D = (double)(a - e > 1 ? a - e : 1) * Ts;
+    double step = num > 1 ? (double)(a - e) / (double)(num - 1) : 0.0;
+    out[0] = out[1] = out[2] = 0.0; /* sums of squares: none below 0 */
+    for (long i = 0; i < num; i++) {
+        /* np.linspace(e, a, num).round(), as rests.py made it */
+        long k = (num > 1 && i == num - 1) ? a : (long)rint((double)i * step + (double)e);
+        double tk = (double)(k - e) * Ts;
+        double w = tk * tk / (2 * D);
+        double s2 = 0.0, f2 = 0.0;
+        for (int j = 0; j < n_axes; j++) {
+            double ramp = (level[j] - e0[j]) * w;
+            double v = V[k * n_axes + j] - V[e * n_axes + j] - e0[j] * tk - ramp + u0[j];
+            double flat = v + ramp; /* the rest's own level all the way */
+            s2 += v * v;
+            f2 += flat * flat;
+        }
+        out[0] = s2 > out[0] ? s2 : out[0];
+        out[1] = s2;
+        out[2] = f2 > out[2] ? f2 : out[2];
+    }
+}

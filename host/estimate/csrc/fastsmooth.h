@@ -140,6 +140,16 @@ double acn_kin_jump(int n_axes, const double *s, const double *level);
 void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, long n_spans,
                    const long *start, const long *stop, const double *R, double *level,
                    double *still);
+/*
+ * A candidate's peak speed (rests.py, _Decider._peak): from the last rest's end
+ * e (its velocity u0 and level e0 per axis) to the candidate's start a >= e, on
+ * num points of the way (the first e, the last a, rounded half to even between),
+ * the velocity integrated from V (n + 1 rows of n_axes) with the level linear
+ * from e0 to the candidate's level. out: the peak and the last speed squared,
+ * and the peak squared with the level e0 kept all the way.
+ */
+void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long num,
+                  const double *u0, const double *e0, const double *level, double *out);
 /* ACN-CDEF-END */
 
 #endif
