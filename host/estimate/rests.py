@@ -741,6 +741,12 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float 
     fixes = [[] for _ in range(n_axes)] if fixes is None else [list(f) for f in fixes]
     if len(fixes) != n_axes:
         raise ValueError(f"fixes: {len(fixes)} axes given; the run has {n_axes}")
+    # the kernels read the record's sums at these samples and R per axis: anything outside is refused here
+    if np.shape(R) != (n_axes,):
+        raise ValueError(f"R: shape {np.shape(R)}; the run has {n_axes} axes")
+    outside = [m.k for f in fixes for m in f if not 0 <= m.k < len(x)]
+    if outside:
+        raise ValueError(f"fixes: sample {outside[0]} outside the record's {len(x)} samples")
     cands = _candidates(x, ok, R, spans)
     dec = _Decider(x, R, Ts, cands, fixes, p, t, start_sd)
     found, acc = dec.run()
