@@ -365,7 +365,8 @@ class _Decider:
         return words
 
     def _tells(self, s: Side) -> bool:
-        return bool(np.all(s.sd <= self.p.tell))
+        tell = self.p.tell  # every axis' sd within it (a NaN never is), on floats: cheaper than numpy's overhead
+        return all(sd <= tell for sd in s.sd.tolist())
 
     def forward(self) -> tuple[list[_Found], set[int]]:
         """The forward filter, deciding online; returns every candidate's state and the accepted set.
@@ -405,7 +406,8 @@ class _Decider:
             if kind == "end":
                 if i in acc:
                     kin.rest(k, p.sigma)
-                    st["last_end"] = (k, kin.X[:, 1].copy(), kin.X[:, 2].copy())
+                    X = kin.X  # a copy: its columns are the rest's own
+                    st["last_end"] = (k, X[:, 1].copy(), X[:, 2].copy())
                     if (c.stop - c.start) * Ts >= p.start_s:  # a stand: what a stop's kinematics start from
                         st["last_stand"] = st["last_end"]
                     st["source"] = self._source("rest", i)
