@@ -340,6 +340,7 @@ class _Decider:
         self.bwd_events = _events(cands, fixes, self.n, True)
         self.veto: dict[int, str] = {}  # withdrawn: why
         self._sources: dict[tuple[str, int], str] = {}  # the words naming each aid (_source)
+        self._bwd = None  # the backward events as the kernel reads them (backward)
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
 
     def _fresh(self, reverse: bool) -> _Kinematic:
@@ -561,28 +562,46 @@ class _Decider:
         )
 
     def backward(self, acc: set[int]) -> list[Side | None]:
-        """The backward filter with the accepted set ``acc``: every candidate's side after it."""
+        """The backward filter with the accepted set ``acc``: every candidate's side after it. It decides nothing
+        (the sides are read after it): its whole run over the events is the kernel's (acn_kin_backward), the words
+        naming each side's aid made here."""
         p, cands, n = self.p, self.cands, self.n
         kin = self._fresh(True)
-        out: list[Side | None] = [None] * len(cands)
-        source, fix_seen = "no aid", False
-        for k, _, kind, pay in self.bwd_events:
-            if kind == "fix":
-                j, z, var, k0 = pay
-                kin.fix(k, j, z, var)
-                source, fix_seen = self._source("fix", k0), True
-                continue
-            i = pay
-            c = cands[i]
-            if kind == "end":
-                if i in acc:
-                    kin.rest(k, p.sigma)
-                    source = self._source("rest", i)
-                continue
-            kin.to(k)
-            out[i] = _side(kin, c, self.R, p.sigma, p.drift, p.scale, source, fix_seen, -1.0)
-            if i in acc:
-                kin.rest(k, p.sigma)
+        ffi, m, n_axes = kin.ffi, len(cands), kin.n_axes
+        if self._bwd is None:  # the events as arrays, and each candidate's level and length: once per decision
+            ev = self.bwd_events
+            kinds = {"test": 0, "fix": 1, "end": 2}
+            self._bwd = (
+                np.array([e[0] for e in ev], dtype=np.int64),
+                np.array([kinds[e[2]] for e in ev], dtype=np.intc),
+                np.array([e[3][0] if e[2] == "fix" else e[3] for e in ev], dtype=np.int64),
+                np.array([e[3][1] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
+                np.array([e[3][2] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
+                np.array([c.level for c in cands], dtype=np.float64).reshape(m, n_axes),
+                np.array([c.stop - c.start for c in cands], dtype=np.int64),
+            )
+        ev_k, ev_kind, ev_i, ev_z, ev_var, level, length = self._bwd
+        accm = np.zeros(m, dtype=np.uint8)
+        accm[sorted(acc)] = 1
+        sides = np.full((m, 4, n_axes), np.nan)
+        total = np.full(m, np.nan)
+        aid = np.full(m, -1, dtype=np.int64)
+        fix = np.zeros(m, dtype=np.uint8)
+        buf = ffi.from_buffer
+        kin.lib.acn_kin_backward(
+            n_axes, kin.s, kin._V, kin._W, kin._A, kin.Ts, kin.q, kin._qv, kin._R, len(ev_k), buf("long[]", ev_k),
+            buf("int[]", ev_kind), buf("long[]", ev_i), buf("double[]", ev_z), buf("double[]", ev_var),
+            buf("unsigned char[]", accm), buf("double[]", level), buf("long[]", length), LEAK, p.drift, p.scale,
+            p.sigma, buf("double[]", sides), buf("double[]", total), buf("long[]", aid), buf("unsigned char[]", fix),
+        )  # fmt: skip
+        out: list[Side | None] = []
+        for s, tot, e, f in zip(sides, total.tolist(), aid.tolist(), fix.tolist(), strict=True):  # each tested once
+            if e < 0:
+                source = "no aid"
+            else:
+                _, _, kind, pay = self.bwd_events[e]
+                source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
+            out.append(Side(s[0], s[1], chi2_equivalent(tot, n_axes), source, bool(f), s[2], s[3]))
         assert n == len(self.x)
         return out
 

@@ -1680,3 +1680,41 @@ void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long n
         out[2] = f2 > out[2] ? f2 : out[2];
     }
 }
+
+void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, const double *A,
+                      double Ts, double q, const double *qv, const double *R, long n_ev,
+                      const long *ev_k, const int *ev_kind, const long *ev_i, const double *ev_z,
+                      const double *ev_var, const unsigned char *acc, const double *level,
+                      const long *len, double leak, double drift, double scale, double sigma,
+                      double *out, double *total, long *aid, unsigned char *fix)
+{
+    long k_now = 0, aid_k = 0, aid_ev = -1;
+    unsigned char fix_seen = 0;
+    double var = sigma * sigma;
+    for (long e = 0; e < n_ev; e++) {
+        long k = ev_k[e], i = ev_i[e];
+        int kind = ev_kind[e];
+        if (kind == 1 || (kind == 2 && acc[i])) { /* an aid: a fix, or a rest's end */
+            acn_kin_aid(n_axes, s, V, W, k_now, k, Ts, q, qv, kind == 1 ? (int)i : -1,
+                        kind == 1 ? 0 : 1, kind == 1 ? ev_z[e] : 0.0, kind == 1 ? ev_var[e] : var);
+            k_now = k > k_now ? k : k_now;
+            aid_k = k;
+            aid_ev = e;
+            fix_seen = (unsigned char)(fix_seen || kind == 1);
+            continue;
+        }
+        if (kind != 0) {
+            continue;
+        }
+        acn_kin_to(n_axes, s, V, W, k_now, k, Ts, q, qv);
+        k_now = k > k_now ? k : k_now;
+        total[i] = acn_kin_side(n_axes, s, A, k_now, aid_k, Ts, level + i * n_axes, R, len[i], leak,
+                                drift, scale, var, -1.0, out + 4 * n_axes * i);
+        aid[i] = aid_ev;
+        fix[i] = fix_seen;
+        if (acc[i]) {
+            acn_kin_aid(n_axes, s, V, W, k_now, k, Ts, q, qv, -1, 1, 0.0, var);
+            aid_k = k;
+        }
+    }
+}
