@@ -73,11 +73,11 @@ stand; on a tie the shorter), and both filters run again, at most ``passes`` tim
 then is withdrawn. No accepted rest vouches for another: each is re-tested against all the others at
 every pass, and one that disagrees leaves.
 
-What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per
-event on plain floats per axis (numpy's per-call overhead on such small arrays cost twice the arithmetic), and
-a candidate's peak speed on at most ``PEAK_POINTS`` points in numpy: per sample it grows with the density of
-candidates and with the passes and the hypotheses' replays, not with the record's length. Every pass runs
-both filters from the start again (bench/speed/bench_rest_decision.py measures it beside the plain smoother
+What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per event,
+in C beside the smoother's kernels (acn_kin_* in csrc/fastsmooth.c: the filter's steps, a candidate's statistics
+and peak speed, the whole backward run), the verdicts and their words in Python: per sample it grows with the
+density of candidates and with the passes and the hypotheses' replays, not with the record's length. Every pass
+runs both filters from the start again (bench/speed/bench_rest_decision.py measures it beside the plain smoother
 and beside the numpy filter it replaced).
 """
 
