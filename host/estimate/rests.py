@@ -122,19 +122,20 @@ class _Kinematic:
     hundred small steps per pass, each a few dozen multiplications per axis: Python's own per-step overhead cost
     more than the arithmetic (bench/speed/bench_rest_decision.py)."""
 
-    def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float):
+    def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float, reverse: bool = False):
+        """The filter before any event on the record ``x`` (N, n_axes), its rows last first when ``reverse``."""
         from accelnav.estimate.fastsmooth import _lib  # the kernels (not loaded at the package's import)
 
         mod = _lib()
         self.ffi, self.lib = mod.ffi, mod.lib
         n, self.n_axes = x.shape
         self.Ts, self.q = Ts, q
-        self.V = np.zeros((n + 1, self.n_axes))
-        np.cumsum(x * Ts, axis=0, out=self.V[1:])  # V[k] = Ts sum_{i<k} x[i]
-        self.A = np.zeros((n + 1, self.n_axes))
-        np.cumsum(np.abs(x) * Ts, axis=0, out=self.A[1:])  # A[k] = Ts sum_{i<k} |x[i]|: how much moved
-        self.W = np.zeros((n + 1, self.n_axes))
-        np.cumsum(self.V[:-1] * Ts, axis=0, out=self.W[1:])  # W[k] = Ts sum_{i<k} V[i]
+        # V[k] = Ts sum_{i<k} x[i]; A[k] = Ts sum_{i<k} |x[i]|: how much moved; W[k] = Ts sum_{i<k} V[i]; in one
+        # pass over the record (acn_kin_sums), numpy's cumsums' order
+        self.V, self.A, self.W = (np.empty((n + 1, self.n_axes)) for _ in range(3))
+        buf = self.ffi.from_buffer
+        self.lib.acn_kin_sums(n, self.n_axes, buf("double[]", np.ascontiguousarray(x, dtype=np.float64)), reverse, Ts,
+                              *(buf("double[]", a) for a in (self.V, self.A, self.W)))  # fmt: skip
         self.R = np.ascontiguousarray(R, dtype=np.float64)
         self.qv = self.R * Ts
         # the kernels read these through pointers made once (the arrays are kept alive beside them)
@@ -347,7 +348,7 @@ class _Decider:
         """A filter at the start of one direction of time: its sums over the record made once, every pass
         starting from a copy."""
         if reverse not in self._start:
-            self._start[reverse] = _Kinematic(self.x[::-1] if reverse else self.x, self.Ts, self.R, self.q)
+            self._start[reverse] = _Kinematic(self.x, self.Ts, self.R, self.q, reverse)
         return self._start[reverse].copy()
 
     def _source(self, kind: str, at: int) -> str:

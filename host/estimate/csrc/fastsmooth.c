@@ -1718,3 +1718,21 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
         }
     }
 }
+
+void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, double *V, double *A,
+                  double *W)
+{
+    for (int j = 0; j < n_axes; j++) {
+        V[j] = A[j] = W[j] = 0.0;
+    }
+    for (long k = 0; k < n; k++) {
+        const double *row = x + (reverse ? n - 1 - k : k) * n_axes;
+        const double *v = V + k * n_axes, *a = A + k * n_axes, *w = W + k * n_axes;
+        for (int j = 0; j < n_axes; j++) {
+            /* the first of each numpy cumsum is the term itself; 0 + term is the same double */
+            V[(k + 1) * n_axes + j] = v[j] + row[j] * Ts;
+            A[(k + 1) * n_axes + j] = a[j] + fabs(row[j]) * Ts;
+            W[(k + 1) * n_axes + j] = w[j] + v[j] * Ts;
+        }
+    }
+}

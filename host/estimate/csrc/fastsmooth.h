@@ -167,6 +167,14 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
                       const double *ev_var, const unsigned char *acc, const double *level,
                       const long *len, double leak, double drift, double scale, double sigma,
                       double *out, double *total, long *aid, unsigned char *fix);
+/*
+ * The sums the kinematic filter reads (rests.py, _Kinematic), n + 1 rows of
+ * n_axes each, over x (n rows of n_axes; reverse: its rows last first):
+ * V[k] = Ts sum_{i<k} x[i], A[k] = Ts sum_{i<k} |x[i]|, W[k] = Ts sum_{i<k} V[i],
+ * summed in row order as numpy's cumsum.
+ */
+void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, double *V, double *A,
+                  double *W);
 /* ACN-CDEF-END */
 
 #endif
