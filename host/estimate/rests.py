@@ -518,15 +518,13 @@ class _Decider:
         from accelnav.estimate.fastsmooth import _lib
 
         mod = _lib()
-        ffi = mod.ffi
+        ffi, buf = mod.ffi, mod.ffi.from_buffer  # row vectors, contiguous (from_buffer refuses any other)
         e, u0, e0 = last_end
         a = max(c.start, e)
         num = min(a - e + 1, PEAK_POINTS)
         out = ffi.new("double[3]")
-        mod.lib.acn_kin_peak(
-            len(u0), ffi.from_buffer("double[]", self.V), self.Ts, e, a, num,
-            *(ffi.from_buffer("double[]", np.ascontiguousarray(v, dtype=np.float64)) for v in (u0, e0, c.level)), out,
-        )  # fmt: skip
+        mod.lib.acn_kin_peak(len(u0), buf("double[]", self.V), self.Ts, e, a, num, buf("double[]", u0),
+                             buf("double[]", e0), buf("double[]", c.level), out)  # fmt: skip
         # the square root taken of the peak's square (it keeps the order)
         return math.sqrt(out[0]), math.sqrt(out[1]), math.sqrt(out[2])
 
