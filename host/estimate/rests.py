@@ -156,7 +156,7 @@ class _Kinematic:
         new = object.__new__(_Kinematic)
         new.__dict__.update(self.__dict__)
         new.s = self.ffi.new("double[]", 9 * self.n_axes)
-        self.ffi.memmove(new.s, self.s, 9 * self.n_axes * 8)
+        self.ffi.memmove(new.s, self.s, self.ffi.sizeof(self.s))
         return new
 
     def to(self, k: int) -> None:
@@ -726,17 +726,17 @@ class _Decider:
 
 
 def _candidates(x, ok, R, spans) -> list[Candidate]:
-    """Each span [a, b) as a candidate: over its samples where every axis is ``ok``, the mean acceleration and
-    the mean over axes of its variance / R (none usable: level 0; one or none: variance R). The kernel's sums
-    (acn_kin_cands) run in numpy's order over axis 0: a mean and variance of each span without numpy's
-    per-call overhead, which cost more than the sums."""
+    """Each span [a, b) (non-empty, within the record) as a candidate: over its samples where every axis is ``ok``,
+    the mean acceleration and the mean over axes of its variance / R (none usable: level 0; one or none: variance
+    R). The kernel's sums (acn_kin_cands) run in numpy's order over axis 0: a mean and variance of each span
+    without numpy's per-call overhead, which cost more than the sums."""
     from accelnav.estimate.fastsmooth import _lib
 
     n, n_axes = x.shape
     starts = np.array([a for a, _ in spans], dtype=np.int64).reshape(-1)
     stops = np.array([b for _, b in spans], dtype=np.int64).reshape(-1)
-    if np.any(starts < 0) or np.any(stops < starts) or np.any(stops > n):
-        raise ValueError(f"spans: each [a, b) must lie within the record's {n} samples")
+    if np.any(starts < 0) or np.any(stops <= starts) or np.any(stops > n):
+        raise ValueError(f"spans: each [a, b) must be non-empty and lie within the record's {n} samples")
     mod = _lib()
     ffi = mod.ffi
     x = np.ascontiguousarray(x, dtype=np.float64)

@@ -139,7 +139,7 @@ def test_chi2_equivalent_keeps_the_tail(dof):
 
 def test_what_the_kernels_would_read_outside_the_record_is_refused(default_model):
     """The decision's kernels read the record's sums at the fixes' and candidates' samples: a fix past the
-    record's end, or a candidate span outside it, is refused with a message, never read."""
+    record's end, or a candidate span outside it or empty, is refused with a message, never read."""
     from accelnav.estimate import rests
 
     accel, clipped, r, u = _record(default_model, [(3, 0.0), (2, 1.0)])
@@ -148,5 +148,6 @@ def test_what_the_kernels_would_read_outside_the_record_is_refused(default_model
     with pytest.raises(ValueError, match=f"sample {n + 5} outside the record's {n} samples"):
         zupt.decide_rests(accel, clipped, _mask(n, (0.0, 2.0)), default_model, fixes=late)
     x = np.zeros((n, len(default_model.axes)))
-    with pytest.raises(ValueError, match="must lie within the record's"):
-        rests._candidates(x, np.ones_like(x, dtype=bool), np.ones(x.shape[1]), [(n - 10, n + 10)])
+    for span in ((n - 10, n + 10), (-1, 5), (n, n)):
+        with pytest.raises(ValueError, match="must be non-empty and lie within the record's"):
+            rests._candidates(x, np.ones_like(x, dtype=bool), np.ones(x.shape[1]), [span])
