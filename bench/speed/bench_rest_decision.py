@@ -7,10 +7,11 @@ decision on them (zupt.decide_rests: the kinematic filters, forward and backward
 fixes, at most ``passes`` passes), best of --repeat each, in microseconds per sample; then the ratio
 decision / plain and the issue's goal (<= 3 x) as goal | measured | met. The decision's cost grows with the
 number of candidates and fixes (its events), not with the samples between them: the table lists both.
-Beside it, from the same run, the decision as it was before its rewrite for speed (its kinematic filter in
-numpy on (n_axes, 3, 3) arrays, every candidate's peak speed computed, a new filter per pass:
-tests/support/rests_reference.py, swapped in): the baseline (tests/estimate/test_rest_decision_same.py shows
-both decide alike).
+Beside it, from the same run, the decision as it was before its rewrites for speed (its kinematic filter in
+numpy on (n_axes, 3, 3) arrays, each candidate's statistics and peak speed in numpy, every peak computed, the
+backward filter event by event in Python, a new filter per pass: tests/support/rests_reference.py, swapped in):
+the baseline (tests/estimate/test_rest_decision_same.py shows both decide alike). Where the time goes now: the
+forward filter's verdicts and their words, in Python (accelnav.estimate.rests).
 
 Usage: python bench/run_all.py bench/speed/bench_rest_decision.py [--repeat 3], or from bench/speed:
   PYTHONPATH=../common python bench_rest_decision.py

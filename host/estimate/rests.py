@@ -73,11 +73,11 @@ stand; on a tie the shorter), and both filters run again, at most ``passes`` tim
 then is withdrawn. No accepted rest vouches for another: each is re-tested against all the others at
 every pass, and one that disagrees leaves.
 
-What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per
-event on plain floats per axis (numpy's per-call overhead on such small arrays cost twice the arithmetic), and
-a candidate's peak speed on at most ``PEAK_POINTS`` points in numpy: per sample it grows with the density of
-candidates and with the passes and the hypotheses' replays, not with the record's length. Every pass runs
-both filters from the start again (bench/speed/bench_rest_decision.py measures it beside the plain smoother
+What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per event,
+in C beside the smoother's kernels (acn_kin_* in csrc/fastsmooth.c: the filter's steps, a candidate's statistics
+and peak speed, the whole backward run), the verdicts and their words in Python: per sample it grows with the
+density of candidates and with the passes and the hypotheses' replays, not with the record's length. Every pass
+runs both filters from the start again (bench/speed/bench_rest_decision.py measures it beside the plain smoother
 and beside the numpy filter it replaced).
 """
 
@@ -116,111 +116,83 @@ class Candidate:
 class _Kinematic:
     """The kinematic filter of the module docstring over one direction of time of one record.
 
-    The axes do not couple: each holds its state (r, u, e) and the six entries of its symmetric covariance as
-    plain floats, [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee]. A decision makes a few hundred small steps, each a
-    few dozen multiplications per axis: on floats they cost a fraction of what numpy's per-call overhead does
-    on (n_axes, 3, 3) arrays (bench/speed/bench_rest_decision.py)."""
+    The axes do not couple: each holds its state (r, u, e) and the six entries of its symmetric covariance, 9
+    doubles [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee], in one C buffer; the steps on it (propagation, an aid, a
+    side's test, the level's jump) are the kernels' (acn_kin_* in csrc/fastsmooth.c). A decision makes a few
+    hundred small steps per pass, each a few dozen multiplications per axis: Python's own per-step overhead cost
+    more than the arithmetic (bench/speed/bench_rest_decision.py)."""
 
-    def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float):
+    def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float, reverse: bool = False):
+        """The filter before any event on the record ``x`` (N, n_axes), its rows last first when ``reverse``."""
+        from accelnav.estimate.fastsmooth import _lib  # the kernels (not loaded at the package's import)
+
+        mod = _lib()
+        self.ffi, self.lib = mod.ffi, mod.lib
         n, self.n_axes = x.shape
-        self.Ts, self.q, self.qv = Ts, q, [float(v) * Ts for v in R]
-        self.V = np.zeros((n + 1, self.n_axes))
-        np.cumsum(x * Ts, axis=0, out=self.V[1:])  # V[k] = Ts sum_{i<k} x[i]
-        self.A = np.zeros((n + 1, self.n_axes))
-        np.cumsum(np.abs(x) * Ts, axis=0, out=self.A[1:])  # A[k] = Ts sum_{i<k} |x[i]|: how much moved
-        self.W = np.zeros((n + 1, self.n_axes))
-        np.cumsum(self.V[:-1] * Ts, axis=0, out=self.W[1:])  # W[k] = Ts sum_{i<k} V[i]
-        self.s = [[0.0, 0.0, 0.0, DIFFUSE[0], 0.0, 0.0, DIFFUSE[1], 0.0, DIFFUSE[2]] for _ in range(self.n_axes)]
+        self.Ts, self.q = Ts, q
+        # V[k] = Ts sum_{i<k} x[i]; A[k] = Ts sum_{i<k} |x[i]|: how much moved; W[k] = Ts sum_{i<k} V[i]; in one
+        # pass over the record (acn_kin_sums), numpy's cumsums' order
+        self.V, self.A, self.W = (np.empty((n + 1, self.n_axes)) for _ in range(3))
+        buf = self.ffi.from_buffer
+        self.lib.acn_kin_sums(n, self.n_axes, buf("double[]", np.ascontiguousarray(x, dtype=np.float64)), reverse, Ts,
+                              *(buf("double[]", a) for a in (self.V, self.A, self.W)))  # fmt: skip
+        self.R = np.ascontiguousarray(R, dtype=np.float64)
+        self.qv = self.R * Ts
+        # the kernels read these through pointers made once (the arrays are kept alive beside them)
+        self._V, self._W, self._A, self._R, self._qv = (
+            self.ffi.from_buffer("double[]", a) for a in (self.V, self.W, self.A, self.R, self.qv)
+        )
+        self.s = self.ffi.new("double[]", [v for _ in range(self.n_axes) for v in (0.0, 0.0, 0.0, DIFFUSE[0],
+                                           0.0, 0.0, DIFFUSE[1], 0.0, DIFFUSE[2])])  # fmt: skip
         self.k = 0
         self.aid_k = 0  # sample of the last aid
 
     @property
     def X(self) -> np.ndarray:
         """(n_axes, 3): r, u, e per axis (a copy)."""
-        return np.array([s[:3] for s in self.s])
-
-    @property
-    def P(self) -> np.ndarray:
-        """(n_axes, 3, 3): the covariance per axis (a copy)."""
-        return np.array([[[a, b, c], [b, d, f], [c, f, g]] for _, _, _, a, b, c, d, f, g in self.s])
-
-    def level(self) -> tuple[np.ndarray, np.ndarray]:
-        """(e, its variance) per axis."""
-        return np.array([s[2] for s in self.s]), np.array([s[8] for s in self.s])
+        return np.frombuffer(self.ffi.buffer(self.s), dtype=np.float64).reshape(self.n_axes, 9)[:, :3].copy()
 
     def copy(self) -> _Kinematic:
         new = object.__new__(_Kinematic)
         new.__dict__.update(self.__dict__)
-        new.s = [list(s) for s in self.s]
+        new.s = self.ffi.new("double[]", 9 * self.n_axes)
+        self.ffi.memmove(new.s, self.s, self.ffi.sizeof(self.s))
         return new
 
     def to(self, k: int) -> None:
         """Propagate the state from sample self.k to sample k."""
-        m = k - self.k
-        if m <= 0:
-            return
-        Ts, q = self.Ts, self.q
-        D = m * Ts
-        c = Ts * Ts * m * (m - 1) / 2.0
-        k0 = self.k
-        dV = (self.V[k] - self.V[k0]).tolist()
-        dW = (self.W[k] - self.W[k0] - D * self.V[k0]).tolist()
-        D2 = D * D
-        D3 = D2 * D
-        # the level's random walk, integrated once into u and twice into r (signs: u and r get -e), and the
-        # velocity noise of the integrated sensor noise
-        qrr, qru, qre = q * D3 * D2 / 20, q * D2 * D2 / 8, -q * D3 / 6
-        quu, que, qee = q * D3 / 3, -q * D2 / 2, q * D
-        for j, s in enumerate(self.s):
-            r, u, e, a, b, cc, d, f, g = s
-            qv = self.qv[j]
-            # F P F' with F = [[1, D, -c], [0, 1, -D], [0, 0, 1]]: the rows of F P first
-            x0, x1, x2 = a + D * b - c * cc, b + D * d - c * f, cc + D * f - c * g
-            y1, y2 = d - D * f, f - D * g
-            s[0] = r + D * u + dW[j] - c * e
-            s[1] = u + dV[j] - D * e
-            s[3] = x0 + D * x1 - c * x2 + qrr + qv * D3 / 3
-            s[4] = x1 - D * x2 + qru + qv * D2 / 2
-            s[5] = x2 + qre
-            s[6] = y1 - D * y2 + quu + qv * D
-            s[7] = y2 + que
-            s[8] = g + qee
-        self.k = k
+        if k > self.k:
+            self.lib.acn_kin_to(self.n_axes, self.s, self._V, self._W, self.k, k, self.Ts, self.q, self._qv)
+            self.k = k
 
-    @staticmethod
-    def _update(s: list, i: int, z: float, var: float) -> None:
-        """In place on one axis' state: the scalar measurement z = s_i + v, v ~ N(0, var)."""
-        r, u, e, a, b, c, d, f, g = s
-        P = ((a, b, c), (b, d, f), (c, f, g))[i]
-        S = P[i] + var
-        K = (P[0] / S, P[1] / S, P[2] / S)
-        innov = z - s[i]
-        s[0], s[1], s[2] = r + K[0] * innov, u + K[1] * innov, e + K[2] * innov
-        s[3], s[4], s[5] = a - K[0] * P[0], b - K[0] * P[1], c - K[0] * P[2]
-        s[6], s[7], s[8] = d - K[1] * P[1], f - K[1] * P[2], g - K[2] * P[2]
+    def _aid(self, k: int, axis: int, i: int, z: float, var: float) -> None:
+        """Propagate to sample k, then the scalar measurement z of state i (0: r, 1: u) with variance var on
+        ``axis`` (-1: every axis)."""
+        self.lib.acn_kin_aid(self.n_axes, self.s, self._V, self._W, self.k, k, self.Ts, self.q, self._qv, axis, i,
+                             z, var)  # fmt: skip
+        self.k = max(self.k, k)
+        self.aid_k = k
 
     def rest(self, k: int, sigma: float) -> None:
-        self.to(k)
-        var = sigma * sigma
-        for s in self.s:
-            self._update(s, 1, 0.0, var)
-        self.aid_k = k
+        self._aid(k, -1, 1, 0.0, sigma * sigma)
 
     def fix(self, k: int, j: int, z: float, var: float) -> None:
-        self.to(k)
-        self._update(self.s[j], 0, float(z), float(var))
-        self.aid_k = k
+        self._aid(k, j, 0, float(z), float(var))
 
-    def velocity_given_level(self, level: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, ...]:
-        """(u, sd of u, e, r, sd of r) at the current sample, conditioned on e = level (variance ``var``), state
-        unchanged."""
-        out = []
-        for s, z, v in zip(self.s, level.tolist(), var.tolist(), strict=True):
-            s = list(s)
-            self._update(s, 2, z, v)
-            out.append((s[1], math.sqrt(max(s[6], 0.0)), s[2], s[0], math.sqrt(max(s[3], 0.0))))
-        u, su, e, r, sr = (np.array(col) for col in zip(*out, strict=True))
-        return u, su, e, r, sr
+    def side(self, level: np.ndarray, n: int, leak: float, drift: float, scale: float, sigma: float, sign: float):
+        """(v, sd, r, sd of r) per axis, rows of one (4, n_axes) array, and the sum over the axes of
+        v^2 / (sd^2 + sigma^2): a side's test (:func:`_side`) of a candidate of n samples at ``level``."""
+        out = np.empty((4, self.n_axes))
+        lv = self.ffi.from_buffer("double[]", np.ascontiguousarray(level, dtype=np.float64))
+        total = self.lib.acn_kin_side(self.n_axes, self.s, self._A, self.k, self.aid_k, self.Ts, lv, self._R, n,
+                                      leak, drift, scale, sigma * sigma, sign,
+                                      self.ffi.from_buffer("double[]", out))  # fmt: skip
+        return out, total
+
+    def jump(self, level: np.ndarray) -> float:
+        """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
+        lv = self.ffi.from_buffer("double[]", np.ascontiguousarray(level, dtype=np.float64))
+        return self.lib.acn_kin_jump(self.n_axes, self.s, lv)
 
 
 LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
@@ -276,32 +248,15 @@ def _side(
     sign: float,
 ) -> Side:
     # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
-    # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd)
-    D = (kin.k - kin.aid_k) * kin.Ts
-    # and a mean acceleration error no level explains (a leak changing within the move): drift D; and errors in
-    # proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a real
-    # foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid
-    moved = (kin.A[kin.k] - kin.A[kin.aid_k]).tolist()
-    level, var = c.level.tolist(), (R / max(c.stop - c.start, 1)).tolist()
-    v, sd, r, r_sd = [], [], [], []
-    total, sigma2 = 0.0, sigma * sigma
-    for j, s in enumerate(kin.s):
-        e_prior, known = s[2], s[8] < 1.0
-        s = list(s)  # conditioned on the candidate's level, the filter's own state unchanged
-        kin._update(s, 2, level[j], var[j])
-        widen = ((LEAK * (level[j] - e_prior) * D) ** 2 if known else 0.0) + (drift * D) ** 2 + (scale * moved[j]) ** 2
-        sd0, r_sd0 = math.sqrt(max(s[6], 0.0)), math.sqrt(max(s[3], 0.0))
-        sd_j = math.sqrt(sd0 * sd0 + widen)
-        v.append(s[1])
-        sd.append(sd_j)
-        r.append(s[0])
-        # the position the same way: the velocity's widening over the time since the aid
-        r_sd.append(math.sqrt(r_sd0 * r_sd0 + widen * D * D))
-        total += s[1] * s[1] / (sd_j * sd_j + sigma2)
+    # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd); and a mean
+    # acceleration error no level explains (a leak changing within the move): drift D (D the time since the last
+    # aid); and errors in proportion to the acceleration itself (a scale factor, a level frame turned during a
+    # stride: on a real foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the
+    # last aid. The position is widened likewise, by the velocity's widening over D (acn_kin_side).
+    out, total = kin.side(c.level, c.stop - c.start, LEAK, drift, scale, sigma, sign)
     # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
     # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
-    chi2 = chi2_equivalent(total, len(v))
-    return Side(sign * np.array(v), np.array(sd), chi2, source, fix, np.array(r), np.array(r_sd))
+    return Side(out[0], out[1], chi2_equivalent(total, kin.n_axes), source, fix, out[2], out[3])
 
 
 @functools.cache
@@ -385,17 +340,35 @@ class _Decider:
         self.fwd_events = _events(cands, fixes, self.n, False)
         self.bwd_events = _events(cands, fixes, self.n, True)
         self.veto: dict[int, str] = {}  # withdrawn: why
+        self._sources: dict[tuple[str, int], str] = {}  # the words naming each aid (_source)
+        self._bwd = None  # the backward events as the kernel reads them (backward)
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
 
     def _fresh(self, reverse: bool) -> _Kinematic:
         """A filter at the start of one direction of time: its sums over the record made once, every pass
         starting from a copy."""
         if reverse not in self._start:
-            self._start[reverse] = _Kinematic(self.x[::-1] if reverse else self.x, self.Ts, self.R, self.q)
+            self._start[reverse] = _Kinematic(self.x, self.Ts, self.R, self.q, reverse)
         return self._start[reverse].copy()
 
+    def _source(self, kind: str, at: int) -> str:
+        """The words naming an aid (the fix at sample ``at``, the rest of candidate ``at``), made once per decision:
+        every pass names the same aids again."""
+        key = (kind, at)
+        words = self._sources.get(key)
+        if words is None:
+            t = self.t
+            if kind == "fix":
+                words = f"the fix at {t[at]:.2f} s"
+            else:
+                c = self.cands[at]
+                words = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
+            self._sources[key] = words
+        return words
+
     def _tells(self, s: Side) -> bool:
-        return bool(np.all(s.sd <= self.p.tell))
+        tell = self.p.tell  # every axis' sd within it (a NaN never is), on floats: cheaper than numpy's overhead
+        return all(sd <= tell for sd in s.sd.tolist())
 
     def forward(self) -> tuple[list[_Found], set[int]]:
         """The forward filter, deciding online; returns every candidate's state and the accepted set.
@@ -427,7 +400,7 @@ class _Decider:
             if kind == "fix":
                 j, z, var, _ = pay
                 kin.fix(k, j, z, var)
-                st["source"], st["fix"] = f"the fix at {t[k]:.2f} s", True
+                st["source"], st["fix"] = self._source("fix", k), True
                 continue
             i = pay
             c = cands[i]
@@ -435,10 +408,11 @@ class _Decider:
             if kind == "end":
                 if i in acc:
                     kin.rest(k, p.sigma)
-                    st["last_end"] = (k, kin.X[:, 1].copy(), kin.X[:, 2].copy())
+                    X = kin.X  # a copy: its columns are the rest's own
+                    st["last_end"] = (k, X[:, 1].copy(), X[:, 2].copy())
                     if (c.stop - c.start) * Ts >= p.start_s:  # a stand: what a stop's kinematics start from
                         st["last_stand"] = st["last_end"]
-                    st["source"] = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
+                    st["source"] = self._source("rest", i)
                 continue
             kin.to(k)
             jump = self._jump(kin, c)
@@ -534,39 +508,25 @@ class _Decider:
 
     def _jump(self, kin: _Kinematic, c: Candidate) -> float:
         """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
-        sd = [math.sqrt(max(s[8], 0.0)) for s in kin.s]
-        if any(x >= 1.0 for x in sd):
-            return 0.0
-        off = [max(abs(lv - s[2]) - 3.0 * x, 0.0) for lv, s, x in zip(c.level.tolist(), kin.s, sd, strict=True)]
-        return math.sqrt(sum(o * o for o in off))
+        return kin.jump(c.level)
 
     def _peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
         """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
         from the rest's to the candidate's, and the peak with the rest's level kept; the peaks on at most
-        PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest)."""
-        Ts, V = self.Ts, self.V
+        PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest), by the
+        kernel (acn_kin_peak)."""
+        from accelnav.estimate.fastsmooth import _lib
+
+        mod = _lib()
+        ffi, buf = mod.ffi, mod.ffi.from_buffer  # row vectors, contiguous (from_buffer refuses any other)
         e, u0, e0 = last_end
         a = max(c.start, e)
-        num = min(a - e + 1, PEAK_POINTS)  # np.linspace(e, a, num), without its per-call checks
-        k = np.arange(num, dtype=np.float64)
-        if num > 1:
-            k *= (a - e) / (num - 1)
-            k += e
-            k[-1] = a
-        else:
-            k += e
-        k = k.round().astype(np.int64)
-        D = max(a - e, 1) * Ts
-        tk = ((k - e) * Ts)[:, None]
-        ramp = (c.level - e0)[None, :] * (tk * tk / (2 * D))
-        vk = V[k] - V[e] - e0[None, :] * tk - ramp + u0[None, :]
-        speed2 = np.sum(vk * vk, axis=1)  # the square root taken of the two it returns (it keeps the order)
-        flat = vk + ramp  # the rest's own level all the way
-        return (
-            math.sqrt(float(speed2.max())),
-            math.sqrt(float(speed2[-1])),
-            math.sqrt(float(np.max(np.sum(flat * flat, axis=1)))),
-        )
+        num = min(a - e + 1, PEAK_POINTS)
+        out = ffi.new("double[3]")
+        mod.lib.acn_kin_peak(len(u0), buf("double[]", self.V), self.Ts, e, a, num, buf("double[]", u0),
+                             buf("double[]", e0), buf("double[]", c.level), out)  # fmt: skip
+        # the square root taken of the peak's square (it keeps the order)
+        return math.sqrt(out[0]), math.sqrt(out[1]), math.sqrt(out[2])
 
     def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
         p, Ts = self.p, self.Ts
@@ -601,28 +561,46 @@ class _Decider:
         )
 
     def backward(self, acc: set[int]) -> list[Side | None]:
-        """The backward filter with the accepted set ``acc``: every candidate's side after it."""
-        p, cands, t, n = self.p, self.cands, self.t, self.n
+        """The backward filter with the accepted set ``acc``: every candidate's side after it. It decides nothing
+        (the sides are read after it): its whole run over the events is the kernel's (acn_kin_backward), the words
+        naming each side's aid made here."""
+        p, cands, n = self.p, self.cands, self.n
         kin = self._fresh(True)
-        out: list[Side | None] = [None] * len(cands)
-        source, fix_seen = "no aid", False
-        for k, _, kind, pay in self.bwd_events:
-            if kind == "fix":
-                j, z, var, k0 = pay
-                kin.fix(k, j, z, var)
-                source, fix_seen = f"the fix at {t[k0]:.2f} s", True
-                continue
-            i = pay
-            c = cands[i]
-            if kind == "end":
-                if i in acc:
-                    kin.rest(k, p.sigma)
-                    source = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
-                continue
-            kin.to(k)
-            out[i] = _side(kin, c, self.R, p.sigma, p.drift, p.scale, source, fix_seen, -1.0)
-            if i in acc:
-                kin.rest(k, p.sigma)
+        ffi, m, n_axes = kin.ffi, len(cands), kin.n_axes
+        if self._bwd is None:  # the events as arrays, and each candidate's level and length: once per decision
+            ev = self.bwd_events
+            kinds = {"test": 0, "fix": 1, "end": 2}
+            self._bwd = (
+                np.array([e[0] for e in ev], dtype=np.int64),
+                np.array([kinds[e[2]] for e in ev], dtype=np.intc),
+                np.array([e[3][0] if e[2] == "fix" else e[3] for e in ev], dtype=np.int64),
+                np.array([e[3][1] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
+                np.array([e[3][2] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
+                np.array([c.level for c in cands], dtype=np.float64).reshape(m, n_axes),
+                np.array([c.stop - c.start for c in cands], dtype=np.int64),
+            )
+        ev_k, ev_kind, ev_i, ev_z, ev_var, level, length = self._bwd
+        accm = np.zeros(m, dtype=np.uint8)
+        accm[sorted(acc)] = 1
+        sides = np.full((m, 4, n_axes), np.nan)
+        total = np.full(m, np.nan)
+        aid = np.full(m, -1, dtype=np.int64)
+        fix = np.zeros(m, dtype=np.uint8)
+        buf = ffi.from_buffer
+        kin.lib.acn_kin_backward(
+            n_axes, kin.s, kin._V, kin._W, kin._A, kin.Ts, kin.q, kin._qv, kin._R, len(ev_k), buf("long[]", ev_k),
+            buf("int[]", ev_kind), buf("long[]", ev_i), buf("double[]", ev_z), buf("double[]", ev_var),
+            buf("unsigned char[]", accm), buf("double[]", level), buf("long[]", length), LEAK, p.drift, p.scale,
+            p.sigma, buf("double[]", sides), buf("double[]", total), buf("long[]", aid), buf("unsigned char[]", fix),
+        )  # fmt: skip
+        out: list[Side | None] = []
+        for s, tot, e, f in zip(sides, total.tolist(), aid.tolist(), fix.tolist(), strict=True):  # each tested once
+            if e < 0:
+                source = "no aid"
+            else:
+                _, _, kind, pay = self.bwd_events[e]
+                source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
+            out.append(Side(s[0], s[1], chi2_equivalent(tot, n_axes), source, bool(f), s[2], s[3]))
         assert n == len(self.x)
         return out
 
@@ -747,6 +725,34 @@ class _Decider:
         self.veto[i] = f"{what} {_speed(s)} after it (from {s.source})"
 
 
+def _candidates(x, ok, R, spans) -> list[Candidate]:
+    """Each span [a, b) (non-empty, within the record) as a candidate: over its samples where every axis is ``ok``,
+    the mean acceleration and the mean over axes of its variance / R (none usable: level 0; one or none: variance
+    R). The kernel's sums (acn_kin_cands) run in numpy's order over axis 0: a mean and variance of each span
+    without numpy's per-call overhead, which cost more than the sums."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    n, n_axes = x.shape
+    starts = np.array([a for a, _ in spans], dtype=np.int64).reshape(-1)
+    stops = np.array([b for _, b in spans], dtype=np.int64).reshape(-1)
+    if np.any(starts < 0) or np.any(stops <= starts) or np.any(stops > n):
+        raise ValueError(f"spans: each [a, b) must be non-empty and lie within the record's {n} samples")
+    mod = _lib()
+    ffi = mod.ffi
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    usable = np.ascontiguousarray(ok.all(axis=1), dtype=np.uint8)
+    R = np.ascontiguousarray(R, dtype=np.float64)
+    level = np.zeros((len(starts), n_axes))
+    still = np.zeros(len(starts))
+    if len(starts):
+        mod.lib.acn_kin_cands(
+            n_axes, ffi.from_buffer("double[]", x), ffi.from_buffer("unsigned char[]", usable), len(starts),
+            ffi.from_buffer("long[]", starts), ffi.from_buffer("long[]", stops), ffi.from_buffer("double[]", R),
+            ffi.from_buffer("double[]", level), ffi.from_buffer("double[]", still),
+        )  # fmt: skip
+    return [Candidate(int(a), int(b), lv, float(s)) for a, b, lv, s in zip(starts, stops, level, still, strict=True)]
+
+
 def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
     """The decision on every candidate span [a, b) of ``spans`` (see the module docstring). ``x`` (N, n_axes):
     acceleration less the model's bias mean (0 where not ``ok``); ``fixes``: per axis column a list of
@@ -755,13 +761,13 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float 
     fixes = [[] for _ in range(n_axes)] if fixes is None else [list(f) for f in fixes]
     if len(fixes) != n_axes:
         raise ValueError(f"fixes: {len(fixes)} axes given; the run has {n_axes}")
-    usable = ok.all(axis=1)
-    cands = []
-    for a, b in spans:
-        use = usable[a:b]
-        xs = x[a:b][use] if use.any() else np.zeros((1, n_axes))
-        var = xs.var(axis=0) if len(xs) > 1 else R.copy()
-        cands.append(Candidate(a, b, xs.mean(axis=0), float(np.mean(var / R))))
+    # the kernels read the record's sums at these samples and R per axis: anything outside is refused here
+    if np.shape(R) != (n_axes,):
+        raise ValueError(f"R: shape {np.shape(R)}; the run has {n_axes} axes")
+    outside = [m.k for f in fixes for m in f if not 0 <= m.k < len(x)]
+    if outside:
+        raise ValueError(f"fixes: sample {outside[0]} outside the record's {len(x)} samples")
+    cands = _candidates(x, ok, R, spans)
     dec = _Decider(x, R, Ts, cands, fixes, p, t, start_sd)
     found, acc = dec.run()
     out = []

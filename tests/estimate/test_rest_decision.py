@@ -135,3 +135,19 @@ def test_chi2_equivalent_keeps_the_tail(dof):
     x = float(chi2.isf(chi2.sf(9.0, 1), dof))
     assert chi2_equivalent(x, dof) == pytest.approx(9.0, rel=1e-6)
     assert chi2_equivalent(0.5 * x, dof) < 9.0 < chi2_equivalent(2.0 * x, dof)
+
+
+def test_what_the_kernels_would_read_outside_the_record_is_refused(default_model):
+    """The decision's kernels read the record's sums at the fixes' and candidates' samples: a fix past the
+    record's end, or a candidate span outside it or empty, is refused with a message, never read."""
+    from accelnav.estimate import rests
+
+    accel, clipped, r, u = _record(default_model, [(3, 0.0), (2, 1.0)])
+    n = len(u)
+    late = [[position_fix(n + 5, 0.0, 0.1)] for _ in default_model.axes]
+    with pytest.raises(ValueError, match=f"sample {n + 5} outside the record's {n} samples"):
+        zupt.decide_rests(accel, clipped, _mask(n, (0.0, 2.0)), default_model, fixes=late)
+    x = np.zeros((n, len(default_model.axes)))
+    for span in ((n - 10, n + 10), (-1, 5), (n, n)):
+        with pytest.raises(ValueError, match="must be non-empty and lie within the record's"):
+            rests._candidates(x, np.ones_like(x, dtype=bool), np.ones(x.shape[1]), [span])

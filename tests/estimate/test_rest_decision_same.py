@@ -1,9 +1,10 @@
-"""The rest decision rewritten for speed (issue 31, its cost: its kinematic filter on plain floats, a
-candidate's peak speed computed only when looked at) decides exactly as it did: on every scenario of the rest
-benches (bench/speed/bench_rest_hypotheses.py, bench_rest_decision.py), with and without their fixes, the same
-candidates are accepted with the same reasons and the same evidence in words, and the statistics of each
-verdict agree to rounding. Every part the rewrite changed is kept as it was in tests/support/rests_reference.py
-and swapped in here: the module as it was runs beside the new one on the same record.
+"""The rest decision rewritten for speed (issue 31, its cost: its kinematic filter and each candidate's
+statistics in C, a candidate's peak speed computed only when looked at) decides exactly as it did: on every
+scenario of the rest benches (bench/speed/bench_rest_hypotheses.py, bench_rest_decision.py), with and without
+their fixes, the same candidates are accepted with the same reasons and the same evidence in words, and the
+statistics of each verdict agree to rounding. Every part the rewrite changed is kept as it was in
+tests/support/rests_reference.py and swapped in here: the module as it was runs beside the new one on the same
+record.
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
-"""The parts of the rest decision (accelnav.estimate.rests) as they were before its rewrite for speed (issue 31,
+"""The parts of the rest decision (accelnav.estimate.rests) as they were before its rewrites for speed (issue 31,
 its cost): the kinematic filter in numpy on (n_axes, 3, 3) arrays per event, the functions that read it as
-arrays (a side's test, the level's jump), np.median and np.linalg.norm, every candidate's peak speed computed
-at once, a new filter per pass. Kept as the reference the rewrite must decide exactly like:
-tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`), and
-bench/speed/bench_rest_decision.py times both."""
+arrays (a side's test, the level's jump), each candidate's statistics in numpy span by span, the backward
+filter event by event in Python, np.median and np.linalg.norm, every candidate's peak speed computed at once, a
+new filter per pass. Kept as the reference the rewrites must decide exactly like:
+tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`), and bench/speed/bench_rest_decision.py
+times both."""
 
 from __future__ import annotations
 
@@ -209,6 +210,46 @@ def reference_norms(s: Side | None) -> tuple[float, float]:
     return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
 
 
+def reference_candidates(x, ok, R, spans) -> list[Candidate]:
+    """Each candidate's statistics in numpy, span by span, as decide() made them."""
+    n_axes = x.shape[1]
+    usable = ok.all(axis=1)
+    cands = []
+    for a, b in spans:
+        use = usable[a:b]
+        xs = x[a:b][use] if use.any() else np.zeros((1, n_axes))
+        var = xs.var(axis=0) if len(xs) > 1 else R.copy()
+        cands.append(Candidate(a, b, xs.mean(axis=0), float(np.mean(var / R))))
+    return cands
+
+
+def reference_backward(self, acc: set[int]) -> list[Side | None]:
+    """The backward filter event by event in Python, as it was."""
+    p, cands, t, n = self.p, self.cands, self.t, self.n
+    kin = self._fresh(True)
+    out: list[Side | None] = [None] * len(cands)
+    source, fix_seen = "no aid", False
+    for k, _, kind, pay in self.bwd_events:
+        if kind == "fix":
+            j, z, var, k0 = pay
+            kin.fix(k, j, z, var)
+            source, fix_seen = f"the fix at {t[k0]:.2f} s", True
+            continue
+        i = pay
+        c = cands[i]
+        if kind == "end":
+            if i in acc:
+                kin.rest(k, p.sigma)
+                source = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
+            continue
+        kin.to(k)
+        out[i] = rests._side(kin, c, self.R, p.sigma, p.drift, p.scale, source, fix_seen, -1.0)
+        if i in acc:
+            kin.rest(k, p.sigma)
+    assert n == len(self.x)
+    return out
+
+
 # where each old part goes in accelnav.estimate.rests: swapped in together, they make the module decide as it
 # did before its rewrite
 SWAPS = {
@@ -218,10 +259,12 @@ SWAPS = {
     (rests, "_speed"): reference_speed,
     (rests, "_norms"): reference_norms,
     (rests, "_Lazy"): reference_eager,
+    (rests, "_candidates"): reference_candidates,
     (rests._Decider, "_jump"): reference_jump,
     (rests._Decider, "_judge"): reference_judge,
     (rests._Decider, "_peak"): reference_peak,
     (rests._Decider, "_fresh"): reference_fresh,
+    (rests._Decider, "backward"): reference_backward,
 }
 
 

@@ -1497,3 +1497,242 @@ int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *s
     memcpy(carry + 4, P1, sizeof P1);
     return 0;
 }
+
+/* ---- the rest decision's kinematic filter (rests.py, _Kinematic; fastsmooth.h) ----------------
+ */
+
+/* Python's max(x, 0.0): x unless 0.0 is larger (a NaN stays) */
+static double kin_pos(double x)
+{
+    return 0.0 > x ? 0.0 : x;
+}
+
+void acn_kin_to(int n_axes, double *s, const double *V, const double *W, long k0, long k, double Ts,
+                double q, const double *qv)
+{
+    long m = k - k0;
+    if (m <= 0) {
+        return;
+    }
+    double D = (double)m * Ts;
+    double c = Ts * Ts * (double)m * (double)(m - 1) / 2.0;
+    double D2 = D * D;
+    double D3 = D2 * D;
+    /* the level's random walk, integrated once into u and twice into r (signs: u and r get -e), and
+       the velocity noise of the integrated sensor noise */
+    double qrr = q * D3 * D2 / 20, qru = q * D2 * D2 / 8, qre = -q * D3 / 6;
+    double quu = q * D3 / 3, que = -q * D2 / 2, qee = q * D;
+    for (int j = 0; j < n_axes; j++) {
+        double *x = s + 9 * j;
+        double r = x[0], u = x[1], e = x[2], a = x[3], b = x[4], cc = x[5], d = x[6], f = x[7],
+               g = x[8];
+        double dV = V[k * n_axes + j] - V[k0 * n_axes + j];
+        double dW = W[k * n_axes + j] - W[k0 * n_axes + j] - D * V[k0 * n_axes + j];
+        /* F P F' with F = [[1, D, -c], [0, 1, -D], [0, 0, 1]]: the rows of F P first */
+        double x0 = a + D * b - c * cc, x1 = b + D * d - c * f, x2 = cc + D * f - c * g;
+        double y1 = d - D * f, y2 = f - D * g;
+        x[0] = r + D * u + dW - c * e;
+        x[1] = u + dV - D * e;
+        x[3] = x0 + D * x1 - c * x2 + qrr + qv[j] * D3 / 3;
+        x[4] = x1 - D * x2 + qru + qv[j] * D2 / 2;
+        x[5] = x2 + qre;
+        x[6] = y1 - D * y2 + quu + qv[j] * D;
+        x[7] = y2 + que;
+        x[8] = g + qee;
+    }
+}
+
+/* in place on one axis' 9 doubles: the scalar measurement z = state i + v, v ~ N(0, var) */
+static void kin_update(double *x, int i, double z, double var)
+{
+    double r = x[0], u = x[1], e = x[2], a = x[3], b = x[4], c = x[5], d = x[6], f = x[7], g = x[8];
+    double P0 = i == 0 ? a : i == 1 ? b : c;
+    double P1 = i == 0 ? b : i == 1 ? d : f;
+    double P2 = i == 0 ? c : i == 1 ? f : g;
+    double S = (i == 0 ? P0 : i == 1 ? P1 : P2) + var;
+    double K0 = P0 / S, K1 = P1 / S, K2 = P2 / S;
+    double innov = z - x[i];
+    x[0] = r + K0 * innov;
+    x[1] = u + K1 * innov;
+    x[2] = e + K2 * innov;
+    x[3] = a - K0 * P0;
+    x[4] = b - K0 * P1;
+    x[5] = c - K0 * P2;
+    x[6] = d - K1 * P1;
+    x[7] = f - K1 * P2;
+    x[8] = g - K2 * P2;
+}
+
+void acn_kin_aid(int n_axes, double *s, const double *V, const double *W, long k0, long k,
+                 double Ts, double q, const double *qv, int axis, int i, double z, double var)
+{
+    acn_kin_to(n_axes, s, V, W, k0, k, Ts, q, qv);
+    for (int j = 0; j < n_axes; j++) {
+        if (axis < 0 || axis == j) {
+            kin_update(s + 9 * j, i, z, var);
+        }
+    }
+}
+
+double acn_kin_side(int n_axes, const double *s, const double *A, long k, long aid_k, double Ts,
+                    const double *level, const double *R, long len, double leak, double drift,
+                    double scale, double sigma2, double sign, double *out)
+{
+    double D = (double)(k - aid_k) * Ts;
+    double total = 0.0;
+    for (int j = 0; j < n_axes; j++) {
+        double x[9];
+        memcpy(x, s + 9 * j, sizeof x);
+        double e_prior = x[2];
+        int known = x[8] < 1.0;
+        double moved = A[k * n_axes + j] - A[aid_k * n_axes + j];
+        /* conditioned on the candidate's level, the filter's own state unchanged */
+        kin_update(x, 2, level[j], R[j] / (double)(len > 1 ? len : 1));
+        double lk = leak * (level[j] - e_prior) * D, dr = drift * D, sc = scale * moved;
+        double widen = (known ? lk * lk : 0.0) + dr * dr + sc * sc;
+        double sd0 = sqrt(kin_pos(x[6])), r_sd0 = sqrt(kin_pos(x[3]));
+        double sd = sqrt(sd0 * sd0 + widen);
+        out[j] = sign * x[1];
+        out[n_axes + j] = sd;
+        out[2 * n_axes + j] = x[0];
+        out[3 * n_axes + j] = sqrt(r_sd0 * r_sd0 + widen * D * D);
+        total += x[1] * x[1] / (sd * sd + sigma2);
+    }
+    return total;
+}
+
+double acn_kin_jump(int n_axes, const double *s, const double *level)
+{
+    double sum = 0.0;
+    for (int j = 0; j < n_axes; j++) {
+        if (sqrt(kin_pos(s[9 * j + 8])) >= 1.0) {
+            return 0.0;
+        }
+    }
+    for (int j = 0; j < n_axes; j++) {
+        double off = kin_pos(fabs(level[j] - s[9 * j + 2]) - 3.0 * sqrt(kin_pos(s[9 * j + 8])));
+        sum += off * off;
+    }
+    return sqrt(sum);
+}
+
+void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, long n_spans,
+                   const long *start, const long *stop, const double *R, double *level,
+                   double *still)
+{
+    for (long i = 0; i < n_spans; i++) {
+        double *mean = level + i * n_axes;
+        long m = 0;
+        for (int j = 0; j < n_axes; j++) {
+            mean[j] = 0.0;
+        }
+        for (long k = start[i]; k < stop[i]; k++) {
+            if (usable[k]) {
+                for (int j = 0; j < n_axes; j++) {
+                    mean[j] += x[k * n_axes + j];
+                }
+                m++;
+            }
+        }
+        if (m <= 1) { /* the mean of none: 0; of one: that row */
+            still[i] = 1.0;
+            continue;
+        }
+        for (int j = 0; j < n_axes; j++) {
+            mean[j] = mean[j] / (double)m;
+        }
+        double var_r = 0.0;
+        for (int j = 0; j < n_axes; j++) {
+            double ss = 0.0;
+            for (long k = start[i]; k < stop[i]; k++) {
+                if (usable[k]) {
+                    double d = x[k * n_axes + j] - mean[j];
+                    ss += d * d;
+                }
+            }
+            var_r += ss / (double)m / R[j];
+        }
+        still[i] = var_r / (double)n_axes;
+    }
+}
+
+void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long num,
+                  const double *u0, const double *e0, const double *level, double *out)
+{
+    double D = (double)(a - e > 1 ? a - e : 1) * Ts;
+    double step = num > 1 ? (double)(a - e) / (double)(num - 1) : 0.0;
+    out[0] = out[1] = out[2] = 0.0; /* sums of squares: none below 0 */
+    for (long i = 0; i < num; i++) {
+        /* np.linspace(e, a, num).round(), as rests.py made it */
+        long k = (num > 1 && i == num - 1) ? a : (long)rint((double)i * step + (double)e);
+        double tk = (double)(k - e) * Ts;
+        double w = tk * tk / (2 * D);
+        double s2 = 0.0, f2 = 0.0;
+        for (int j = 0; j < n_axes; j++) {
+            double ramp = (level[j] - e0[j]) * w;
+            double v = V[k * n_axes + j] - V[e * n_axes + j] - e0[j] * tk - ramp + u0[j];
+            double flat = v + ramp; /* the rest's own level all the way */
+            s2 += v * v;
+            f2 += flat * flat;
+        }
+        out[0] = s2 > out[0] ? s2 : out[0];
+        out[1] = s2;
+        out[2] = f2 > out[2] ? f2 : out[2];
+    }
+}
+
+void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, const double *A,
+                      double Ts, double q, const double *qv, const double *R, long n_ev,
+                      const long *ev_k, const int *ev_kind, const long *ev_i, const double *ev_z,
+                      const double *ev_var, const unsigned char *acc, const double *level,
+                      const long *len, double leak, double drift, double scale, double sigma,
+                      double *out, double *total, long *aid, unsigned char *fix)
+{
+    long k_now = 0, aid_k = 0, aid_ev = -1;
+    unsigned char fix_seen = 0;
+    double var = sigma * sigma;
+    for (long e = 0; e < n_ev; e++) {
+        long k = ev_k[e], i = ev_i[e];
+        int kind = ev_kind[e];
+        if (kind == 1 || (kind == 2 && acc[i])) { /* an aid: a fix, or a rest's end */
+            acn_kin_aid(n_axes, s, V, W, k_now, k, Ts, q, qv, kind == 1 ? (int)i : -1,
+                        kind == 1 ? 0 : 1, kind == 1 ? ev_z[e] : 0.0, kind == 1 ? ev_var[e] : var);
+            k_now = k > k_now ? k : k_now;
+            aid_k = k;
+            aid_ev = e;
+            fix_seen = (unsigned char)(fix_seen || kind == 1);
+            continue;
+        }
+        if (kind != 0) {
+            continue;
+        }
+        acn_kin_to(n_axes, s, V, W, k_now, k, Ts, q, qv);
+        k_now = k > k_now ? k : k_now;
+        total[i] = acn_kin_side(n_axes, s, A, k_now, aid_k, Ts, level + i * n_axes, R, len[i], leak,
+                                drift, scale, var, -1.0, out + 4 * n_axes * i);
+        aid[i] = aid_ev;
+        fix[i] = fix_seen;
+        if (acc[i]) {
+            acn_kin_aid(n_axes, s, V, W, k_now, k, Ts, q, qv, -1, 1, 0.0, var);
+            aid_k = k;
+        }
+    }
+}
+
+void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, double *V, double *A,
+                  double *W)
+{
+    for (int j = 0; j < n_axes; j++) {
+        V[j] = A[j] = W[j] = 0.0;
+    }
+    for (long k = 0; k < n; k++) {
+        const double *row = x + (reverse ? n - 1 - k : k) * n_axes;
+        const double *v = V + k * n_axes, *a = A + k * n_axes, *w = W + k * n_axes;
+        for (int j = 0; j < n_axes; j++) {
+            /* the first of each numpy cumsum is the term itself; 0 + term is the same double */
+            V[(k + 1) * n_axes + j] = v[j] + row[j] * Ts;
+            A[(k + 1) * n_axes + j] = a[j] + fabs(row[j]) * Ts;
+            W[(k + 1) * n_axes + j] = w[j] + v[j] * Ts;
+        }
+    }
+}

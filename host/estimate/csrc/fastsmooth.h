@@ -108,6 +108,73 @@ int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *s
 
 void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
                   double *sds);
+/*
+ * The rest decision's kinematic filter (host/estimate/rests.py, _Kinematic): per
+ * axis the state (r, u, e) and its symmetric covariance, 9 doubles
+ *   r u e  Prr Pru Pre Puu Pue Pee
+ * n_axes of them side by side in s. V, W, A: the record's sums, n + 1 rows of
+ * n_axes (rests.py says which). The arithmetic is the Python's, in its order.
+ *   acn_kin_to    propagate s from sample k0 to k (k > k0)
+ *   acn_kin_aid   propagate, then the scalar measurement z of state i (0: r,
+ *                 1: u) with variance var on axis `axis`, or on every axis (-1)
+ *   acn_kin_side  a side's test of a candidate of `len` samples and the given
+ *                 level: v, its sd, r, its sd per axis into out (4 rows of
+ *                 n_axes, v times sign); returns sum of v^2 / (sd^2 + sigma2)
+ *   acn_kin_jump  the level's jump beyond 3 sd of the filter's (0: it has none)
+ */
+void acn_kin_to(int n_axes, double *s, const double *V, const double *W, long k0, long k, double Ts,
+                double q, const double *qv);
+void acn_kin_aid(int n_axes, double *s, const double *V, const double *W, long k0, long k,
+                 double Ts, double q, const double *qv, int axis, int i, double z, double var);
+double acn_kin_side(int n_axes, const double *s, const double *A, long k, long aid_k, double Ts,
+                    const double *level, const double *R, long len, double leak, double drift,
+                    double scale, double sigma2, double sign, double *out);
+double acn_kin_jump(int n_axes, const double *s, const double *level);
+/*
+ * The rest decision's candidates (rests.py, decide): for each span [start, stop)
+ * of x (n rows of n_axes), over its rows with usable[row] set, the mean per axis
+ * into level (n_spans rows of n_axes) and the mean over axes of the variance / R
+ * into still; a span with none usable: level 0, with one: still 1 (its variance
+ * taken as R). Sums in row order, as numpy's over axis 0.
+ */
+void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, long n_spans,
+                   const long *start, const long *stop, const double *R, double *level,
+                   double *still);
+/*
+ * A candidate's peak speed (rests.py, _Decider._peak): from the last rest's end
+ * e (its velocity u0 and level e0 per axis) to the candidate's start a >= e, on
+ * num points of the way (the first e, the last a, rounded half to even between),
+ * the velocity integrated from V (n + 1 rows of n_axes) with the level linear
+ * from e0 to the candidate's level. out: the peak and the last speed squared,
+ * and the peak squared with the level e0 kept all the way.
+ */
+void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long num,
+                  const double *u0, const double *e0, const double *level, double *out);
+/*
+ * The backward filter of the rest decision (rests.py, _Decider.backward): from
+ * the state s at sample 0 of the reversed record, its n_ev events in order,
+ * each at sample ev_k with kind ev_kind (0: a candidate's test, 1: a fix of
+ * value ev_z, variance ev_var on axis ev_i, 2: a candidate's end; ev_i the
+ * candidate otherwise). A candidate with acc set is a rest: u = 0 (variance
+ * sigma^2) at its test and its end. Per candidate i tested: its side (as
+ * acn_kin_side, sign -1) into out + 4 n_axes i and total[i]; the event of the
+ * last aid before it (a fix, or the end of a rest) into aid[i] (-1: none) and
+ * whether a fix came before it into fix[i].
+ */
+void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, const double *A,
+                      double Ts, double q, const double *qv, const double *R, long n_ev,
+                      const long *ev_k, const int *ev_kind, const long *ev_i, const double *ev_z,
+                      const double *ev_var, const unsigned char *acc, const double *level,
+                      const long *len, double leak, double drift, double scale, double sigma,
+                      double *out, double *total, long *aid, unsigned char *fix);
+/*
+ * The sums the kinematic filter reads (rests.py, _Kinematic), n + 1 rows of
+ * n_axes each, over x (n rows of n_axes; reverse: its rows last first):
+ * V[k] = Ts sum_{i<k} x[i], A[k] = Ts sum_{i<k} |x[i]|, W[k] = Ts sum_{i<k} V[i],
+ * summed in row order as numpy's cumsum.
+ */
+void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, double *V, double *A,
+                  double *W);
 /* ACN-CDEF-END */
 
 #endif
