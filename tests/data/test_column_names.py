@@ -7,6 +7,7 @@ import itertools
 
 import numpy as np
 import pytest
+from support.said import listen, notes
 
 from accelnav.data.inputs import read_input
 from accelnav.data.stream import open_stream
@@ -146,12 +147,13 @@ def _times():
     ["datetime64 column", "datetime64 column not named as time", "DatetimeIndex", "Timedelta column",
      "tz-aware column", "tz-aware index"],
 )  # fmt: skip
-def test_each_pandas_time_type_reads_as_seconds(kind, capsys):
+def test_each_pandas_time_type_reads_as_seconds(kind, caplog):
+    listen(caplog)
     run, _ = read_input(_times()[kind])
     dt = np.diff(run["t"])
     assert dt == pytest.approx(0.01, abs=1e-6) and len(run["t"]) == N
     assert run["accel"][:, 0] == pytest.approx(X)
-    said = [line for line in capsys.readouterr().out.splitlines() if "read from its" in line]
+    said = [line for line in notes(caplog) if "read from its" in line]
     assert len(said) == 1 and ("timedelta64" in said[0] or "since 1970-01-01 UTC" in said[0])
 
 
@@ -163,7 +165,8 @@ def test_a_tz_aware_time_is_read_in_utc():
 
 
 @pytest.mark.parametrize(("unit", "scale"), [("s", 1), ("ms", 10**3), ("us", 10**6), ("ns", 10**9)])
-def test_unix_time_in_each_unit_is_read_from_its_numbers_and_said(tmp_path, capsys, unit, scale):
+def test_unix_time_in_each_unit_is_read_from_its_numbers_and_said(tmp_path, caplog, unit, scale):
+    listen(caplog)
     start = 1_727_600_000
     # integers, as loggers write them (seconds with their two decimals)
     stamps = [f"{start + k / 100:.2f}" if unit == "s" else start * scale + k * scale // 100 for k in range(N)]
@@ -173,8 +176,8 @@ def test_unix_time_in_each_unit_is_read_from_its_numbers_and_said(tmp_path, caps
     run, _ = read_input(path)
     assert run["t"][0] == pytest.approx(start) and np.diff(run["t"]) == pytest.approx(0.01, abs=1e-6)
     words = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}[unit]
-    assert (
-        f"time column 't' read as Unix time in {words} (first stamp 2024-09-29 08:53:20 UTC" in capsys.readouterr().out
+    assert f"time column 't' read as Unix time in {words} (first stamp 2024-09-29 08:53:20 UTC" in "\n".join(
+        notes(caplog)
     )
     with open_stream(path, block=700) as st:  # the streamed reader decides the same
         assert st(0, st.n)[0] == pytest.approx(run["t"])
