@@ -231,7 +231,8 @@ class Fit:
         alt = "no form fits"
         if other:
             alt = f"the {other[0].form.replace('_', ' ')} form fits: {other[0].flash} B flash, {other[0].ram} B RAM"
-        return f"{self.form} form on the {p.key} does not fit: needs {' and '.join(need)} (linked image); {alt}"
+        image = "linked image" if s.flash > p.flash else f"linked image; its {s.flash} B flash of {p.flash} would fit"
+        return f"{self.form} form on the {p.key} does not fit: needs {' and '.join(need)} ({image}); {alt}"
 
     def lines(self) -> list[str]:
         p = self.part
