@@ -1047,7 +1047,8 @@ def _cov_uniform(c: AxisCode, prefix: str) -> str:
     finally:
         _EXPLICIT_SHIFTS.reset(tok)
     values = dict(re.findall(rf"^#define {P}_(\w+) (\S+)", "\n".join(_fixed_consts(c, P) + _clamp_defines(c, P)), re.M))
-    text = re.sub(rf"\b{P}_(\w+)\b", lambda m: values[m[1]], text)
+    # a name with no value here stays (and, the axes' names differing, merge says the steps cannot be shared)
+    text = re.sub(rf"\b{P}_(\w+)\b", lambda m: values.get(m[1], m[0]), text)
     text = text.replace(f"{T}_t *s", f"{st} *s, const {kt} *acn_k __attribute__((unused))")
     text = re.sub(rf"\b{T}_(\w+)\(s\b", rf"{fn}\1(s, acn_k", text)
     return text.replace(f"{T}_", fn)

@@ -90,6 +90,8 @@ def merge(texts: list[str]) -> Shared | str:
     order = sorted(fields.items(), key=lambda kv: (_ORDER.index(_KIND[kinds[kv[1]]][0]), int(kv[1][1:])))
     members = [f"{_KIND[kinds[n]][0]} {n};" for _, n in order]
     inits = [[col[a] for col, _ in order] for a in range(len(texts))]
+    if not members:  # the axes' numbers all alike: C has no empty struct
+        members, inits = ["uint8_t none; /* the axes' steps are the same */"], [["0"] for _ in texts]
     return Shared(_join(out).replace(" >> 0)", ")"), members, inits)  # shifts by zero in every axis: none
 
 

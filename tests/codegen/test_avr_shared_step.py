@@ -84,3 +84,15 @@ def test_merge_refuses_what_is_more_than_a_number(a, b, said):
 def test_merge_takes_int32_min_beside_int32_c():
     sh = merge(["x = INT32_MIN;", "x = INT32_C(3);"])
     assert isinstance(sh, Shared) and sh.members == ["int32_t f0;"] and sh.inits == [["INT32_MIN"], ["INT32_C(3)"]]
+
+
+def test_two_alike_axes_share_a_step_whose_table_is_not_empty(tmp_path, avr_tools):
+    """Two axes with the same numbers: their table has a member (C has no empty struct) and builds."""
+    text = (MODELS / "adxl250_default.toml").read_text()
+    head, x, y = re.split(r"(?=^\[\[axes\]\])", text, flags=re.M)
+    twin = x.replace('name = "x"', 'name = "w"')
+    model = loads_model(head + x + twin + y[y.index("[noise]") :], source="twins")
+    files = {k: v for k, v in emit(model, form="covariance").items() if k.endswith((".c", ".h"))}
+    assert "AVR: axes x, w share one copy of the covariance step" in files["accelnav.c"]
+    _, ram = simavr.object_size(files, tmp_path)  # compiles for the ATmega328P, -Werror
+    assert ram == 0
