@@ -26,13 +26,13 @@
 
 #define TX_NEED ACN_TX_NEED /* acn_board.h */
 /* The ring: what one received byte can make the application send (a byte is taken only while the
- * ring has that much room, so no frame is ever refused), plus 128 B of slack, so that the board
- * goes on reading while the last telemetry drains. Sized by the model, not rounded up to a power of
- * two: that took 1 KiB for three axes, more than the part's RAM leaves them. The slack is of the
- * order the power-of-two rings left two axes (78 B); with 14 B, simavr's feed lost the last input
- * bytes of some runs (test_hil's atmega328p runs: too few sample frames; the cause in simavr's UART
- * not found). */
-#define TX_SIZE (TX_NEED + 128u)
+ * ring has that much room, so no frame is ever refused), plus 64 B of slack, so that the board goes
+ * on reading while the last telemetry drains. Sized by the model, not rounded up to a power of two:
+ * that took 1 KiB for three axes, more than the part's RAM leaves them (with 64 B, a 3-axis image
+ * takes 1 206 B static beside the 768 B stack reserve). The power-of-two rings left two axes 78 B;
+ * with 14 B, simavr's feed lost the last input bytes of some runs (test_hil's atmega328p runs: too
+ * few sample frames; the cause in simavr's UART not found); 64 B and 128 B pass them. */
+#define TX_SIZE (TX_NEED + 64u)
 
 static uint8_t tx_ring[TX_SIZE]; /* indices wrap at TX_SIZE by a compare: any size */
 static uint16_t tx_head;         /* next write */
