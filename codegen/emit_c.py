@@ -1054,17 +1054,18 @@ def _cov_uniform(c: AxisCode, prefix: str) -> str:
     return text.replace(f"{T}_", fn)
 
 
-def _shared_c(sh: Shared, codes: list[AxisCode], prefix: str) -> list[str]:
-    """C of the shared step (AVR only): the state type every axis' state is read through, the table
-    type, the step functions."""
+def _shared_c(sh: Shared, codes: list[AxisCode], prefix: str) -> tuple[list[str], list[str]]:
+    """C of the shared step (AVR only), in two parts: before the axes, the state type every axis' state
+    is read as, the table type and the step's declaration; after them, the step's functions (so that
+    the first copy of each line in the file is the x axis' own, which every target but AVR compiles)."""
     fn, st, kt = _shared_names(prefix)
     axes = ", ".join(c.p.design.axis.name for c in codes)
     members = [f"    {t}{'' if t.endswith('*') else ' '}{n};" for t, n in state_members("covariance")]
-    return [
-        f"/* ---- AVR: axes {axes} share one copy of the covariance step (codegen.share); each axis' constants",
-        " * and shifts in its own table in flash. Each axis' state is read as this type, whose members are",
-        " * its own (may_alias: accesses through either type alias). Elsewhere every axis has its own step,",
-        " * its constants and shifts compiled in. ---- */",
+    head = [
+        f"/* ---- AVR: axes {axes} share one copy of the covariance step (codegen.share; its functions follow",
+        " * the axes); each axis' constants and shifts in its own table in flash. Each axis' state is read as",
+        " * this type, whose members are its own (may_alias: accesses through either type alias). Elsewhere",
+        " * every axis has its own step, its constants and shifts compiled in. ---- */",
         "#if defined(__AVR__)",
         "typedef struct __attribute__((may_alias)) {",
         *members,
@@ -1074,10 +1075,12 @@ def _shared_c(sh: Shared, codes: list[AxisCode], prefix: str) -> list[str]:
         *[f"    {m}" for m in sh.members],
         f"}} {kt};",
         "",
-        sh.text,
+        f"ACN_CORE void {fn}core({st} *s, const {kt} *acn_k, int32_t z, bool valid);",
         "#endif",
         "",
     ]
+    tail = [f"/* ---- AVR: the covariance step axes {axes} share (codegen.share) ---- */", "#if defined(__AVR__)"]
+    return head, tail + [sh.text, "#endif", ""]
 
 
 def _shared_axis(sh: Shared, i: int, c: AxisCode, prefix: str) -> list[str]:
@@ -1246,8 +1249,10 @@ def emit(
     codes = plan(model, form)  # every number and every range check, before any text
     H, S, MAN = [], [], []
     sh = merge([_cov_uniform(c, prefix) for c in codes]) if form == "covariance" and len(codes) > 1 else None
+    shared_tail = []
     if isinstance(sh, Shared):
-        S += _shared_c(sh, codes, prefix)
+        head, shared_tail = _shared_c(sh, codes, prefix)
+        S += head
     elif sh is not None:
         S += [f"/* AVR: one step per axis, as everywhere: the axes' steps cannot be shared ({sh}) */", ""]
     for i, c in enumerate(codes):
@@ -1255,6 +1260,7 @@ def emit(
         H += h + [""]
         S += s
         MAN.append(man)
+    S += shared_tail
     return package(
         model,
         prefix,
