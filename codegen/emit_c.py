@@ -19,6 +19,7 @@ The header carries the plain declarations between ``ACCELNAV-CDEF-BEGIN`` /
 
 from __future__ import annotations
 
+import contextvars
 import functools
 import re
 
@@ -41,6 +42,10 @@ from .plan import (  # noqa: F401  (the schedule's settings and schedule_for: re
 )
 from .plan_cov import Acc, CovSums, HSum, Term
 from .ranges import DEV, FINE, AxisPlan, refuse_calibrated
+from .share import Shared, merge
+
+# Every shift written out, even by zero: the axes' steps then line up token by token (codegen.share).
+_EXPLICIT_SHIFTS = contextvars.ContextVar("explicit_shifts", default=False)
 
 
 def _c_int(v: int, word: int) -> str:
@@ -267,7 +272,7 @@ def _mul_round32(a: str, b: str, frm: int, to: int, comment: str = "") -> str:
 
 def _sh(expr: str, s: int, what: str) -> str:
     """expr (int64) >> s, floor (arithmetic shift); s <= 0 multiplies. Comment: what it converts."""
-    if s > 0:
+    if s > 0 or (s == 0 and _EXPLICIT_SHIFTS.get()):
         return f"(({expr}) >> {s}) /* {what}, floor */"
     if s == 0:
         return f"({expr}) /* {what}, exact */"
@@ -304,7 +309,8 @@ def _acc(a: Acc, P: str) -> str:
     out = " ".join(f"{t.sign} {_term(t, P)}" for t in a.exact).lstrip("+ ")
     if a.fine:
         parts = " ".join(
-            f"{t.sign} " + (f"(({_term(t, P)}) >> {sh})" if sh else f"({_term(t, P)})") for t, sh in a.fine
+            f"{t.sign} " + (f"(({_term(t, P)}) >> {sh})" if sh or _EXPLICIT_SHIFTS.get() else f"({_term(t, P)})")
+            for t, sh in a.fine
         )
         if a.dither is not None:
             off = f"(int64_t)({a.dither} >> {32 - g})" if g < 32 else f"(int64_t){a.dither}"
@@ -324,7 +330,8 @@ def _hsum(h: HSum) -> str:
     for i, (x, k, ki, (val, q)) in enumerate(h.ops):
         cm = f"2^{q}" if val is None else f"{val:.6g} Q.{q}"
         mac = "acn_mac_hi" if i == len(h.ops) - 1 else "acn_mac"  # the last one gives the high word
-        acc = f"{mac}({acc}, {f'({x} >> {k})' if k else x}, {_c_int(ki, 32)} /* {cm} */)"
+        x = f"({x} >> {k})" if k or _EXPLICIT_SHIFTS.get() else x
+        acc = f"{mac}({acc}, {x}, {_c_int(ki, 32)} /* {cm} */)"
     return f"{acc} /* Q.{h.F} -> Q.{h.ft}, high word */"
 
 
@@ -527,7 +534,7 @@ def _core_cov_coarse(c: AxisCode, P: str, T: str) -> list[str]:
             to_f.append(f"            s->{nm} *= INT32_C(1) << {dd}; /* {fc} -> {ff}, exact */")
         th = c.switch[nm]
         # |c| <= th as one unsigned compare; th 2^dd fits the fine format (it holds GUARD theta)
-        test.append(f"(uint32_t)s->{nm} + {th}u <= {2 * th}u")
+        test.append(f"(uint32_t)s->{nm} + UINT32_C({th}) <= UINT32_C({2 * th})")
     back = [
         "        /* back to the fine formats once c_r, c_v, c_a, c_e are within their switch levels */",
         "        if (" + " && ".join(test) + ") {",
@@ -983,9 +990,9 @@ def _gs_gains_c(c: AxisCode, P: str, T: str) -> list[str]:
     ] + emit_follow(c.follow, P, T)
 
 
-def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[str]:
-    """The covariance form: its block's predict and update (fine and coarse formats), T_core_c, T_core and
-    the entry points update, skip and step."""
+def _cov_step_fns(c: AxisCode, P: str, T: str) -> list[str]:
+    """The covariance form's step: its block's predict and update (fine and coarse formats), T_core_c
+    and T_core (what axes share on AVR, codegen.share)."""
     p = c.p
     src = []
     # the predict of the covariance block in a function of its own: its registers do not crowd the
@@ -1010,6 +1017,93 @@ def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str) -> list[st
     ]
     src += _core_fixed(c, P, T)
     src += ["}", ""]
+    return src
+
+
+def _clamp_defines(c: AxisCode, P: str) -> list[str]:
+    p = c.p
+    return [
+        f"#define {P}_{nm} INT32_C({h}) /* clamp: |{key}| <= {h} 2^32 LSB"
+        f" ({h * 2.0 ** (32 - p.vars[key].fmt.frac):.6g} m >= {bound:.6g} m) */"
+        for nm, (key, bound, h) in c.clamps.items()
+    ]
+
+
+def _shared_names(prefix: str) -> tuple[str, str, str]:
+    """The shared step's function prefix, state type and table type: PREFIX__ (two underscores), which no
+    axis' names can take (an axis name begins with a letter)."""
+    return f"{prefix}__", f"{prefix}__cov_t", f"{prefix}__k_t"
+
+
+def _cov_uniform(c: AxisCode, prefix: str) -> str:
+    """Axis c's step (_cov_step_fns) with every shift explicit, its constants' names replaced by their
+    values and its own names by the shared ones: the text codegen.share.merge lines up across axes."""
+    ax = c.p.design.axis.name
+    P, T = f"{prefix.upper()}_{ax.upper()}", f"{prefix}_{ax}"
+    fn, st, kt = _shared_names(prefix)
+    tok = _EXPLICIT_SHIFTS.set(True)
+    try:
+        text = "\n".join(_cov_step_fns(c, P, T))
+    finally:
+        _EXPLICIT_SHIFTS.reset(tok)
+    values = dict(re.findall(rf"^#define {P}_(\w+) (\S+)", "\n".join(_fixed_consts(c, P) + _clamp_defines(c, P)), re.M))
+    # a name with no value here stays (and, the axes' names differing, merge says the steps cannot be shared)
+    text = re.sub(rf"\b{P}_(\w+)\b", lambda m: values.get(m[1], m[0]), text)
+    text = text.replace(f"{T}_t *s", f"{st} *s, const {kt} *acn_k __attribute__((unused))")
+    text = re.sub(rf"\b{T}_(\w+)\(s\b", rf"{fn}\1(s, acn_k", text)
+    return text.replace(f"{T}_", fn)
+
+
+def _shared_c(sh: Shared, codes: list[AxisCode], prefix: str) -> tuple[list[str], list[str]]:
+    """C of the shared step (AVR only), in two parts: before the axes, the state type every axis' state
+    is read as, the table type and the step's declaration; after them, the step's functions (so that
+    the first copy of each line in the file is the x axis' own, which every target but AVR compiles)."""
+    fn, st, kt = _shared_names(prefix)
+    axes = ", ".join(c.p.design.axis.name for c in codes)
+    members = [f"    {t}{'' if t.endswith('*') else ' '}{n};" for t, n in state_members("covariance")]
+    head = [
+        f"/* ---- AVR: axes {axes} share one copy of the covariance step (codegen.share; its functions follow",
+        " * the axes); each axis' constants and shifts in its own table in flash. Each axis' state is read as",
+        " * this type, whose members are its own (may_alias: accesses through either type alias). Elsewhere",
+        " * every axis has its own step, its constants and shifts compiled in. ---- */",
+        "#if defined(__AVR__)",
+        "typedef struct __attribute__((may_alias)) {",
+        *members,
+        f"}} {st};",
+        "",
+        "typedef struct {",
+        *[f"    {m}" for m in sh.members],
+        f"}} {kt};",
+        "",
+        f"ACN_CORE void {fn}core({st} *s, const {kt} *acn_k, int32_t z, bool valid);",
+        "#endif",
+        "",
+    ]
+    tail = [f"/* ---- AVR: the covariance step axes {axes} share (codegen.share) ---- */", "#if defined(__AVR__)"]
+    return head, tail + [sh.text, "#endif", ""]
+
+
+def _shared_axis(sh: Shared, i: int, c: AxisCode, prefix: str) -> list[str]:
+    """Axis i's table and its T_core, which runs the shared step on it (AVR)."""
+    fn, st, kt = _shared_names(prefix)
+    T = f"{prefix}_{c.p.design.axis.name}"
+    return [
+        f"typedef char {T}_is_{st}[sizeof({T}_t) == sizeof({st}) ? 1 : -1];",
+        f"static const {kt} {T}_k ACN_ROM = {{{', '.join(sh.inits[i])}}};",
+        "",
+        f"ACN_INLINE void {T}_core({T}_t *s, int32_t z, bool valid)",
+        "{",
+        f"    {fn}core(({st} *)s, &{T}_k, z, valid);",
+        "}",
+        "",
+    ]
+
+
+def _cov_entries(c: AxisCode, P: str, T: str, params: str, args: str, shared: list[str] | None = None) -> list[str]:
+    """The covariance form: its step (_cov_step_fns; on AVR the shared one's table and call when given)
+    and the entry points update, skip and step."""
+    step = _cov_step_fns(c, P, T)
+    src = step if shared is None else ["#if defined(__AVR__)", *shared, "#else", *step, "#endif", ""]
     src += [f"void {T}_update({T}_t *s, int32_t z)", "{", f"    {T}_core(s, z, true);", "}", ""]
     src += [
         "/* A sample that must be skipped (rail-clipped, missing capture): predict only. */",
@@ -1099,8 +1193,11 @@ def _manifest(c: AxisCode, T: str) -> dict:
     return man
 
 
-def _axis_fixed(c: AxisCode, prefix: str) -> tuple[list[str], list[str], list[str], dict]:
-    """(header decls, cdef decls, source lines, manifest) of one planned axis."""
+def _axis_fixed(
+    c: AxisCode, prefix: str, shared: list[str] | None = None
+) -> tuple[list[str], list[str], list[str], dict]:
+    """(header decls, cdef decls, source lines, manifest) of one planned axis; ``shared``: its table and
+    core on AVR when the axes share one step (_shared_axis)."""
     p = c.p
     ax = p.design.axis.name
     P = f"{prefix.upper()}_{ax.upper()}"
@@ -1121,17 +1218,15 @@ def _axis_fixed(c: AxisCode, prefix: str) -> tuple[list[str], list[str], list[st
     cdef = struct + out_struct + protos
 
     src = [f"/* ---- axis {ax}: {p.form} form ---- */", ""] + _fixed_consts(c, P) + [""]
-    for nm, (key, bound, h) in c.clamps.items():
-        src.append(
-            f"#define {P}_{nm} INT32_C({h}) /* clamp: |{key}| <= {h} 2^32 LSB"
-            f" ({h * 2.0 ** (32 - p.vars[key].fmt.frac):.6g} m >= {bound:.6g} m) */"
-        )
+    src += _clamp_defines(c, P)
     gs = p.form == "gain_schedule"
     src += (_gs_defines(c, P) if gs else []) + [""]
     src += _gs_table(c, P, T) if gs else []
     src += _init_c(c, T)
     src += [f"bool {T}_convert({params}, int32_t *z)", "{"] + in_body + ["}", ""]
-    src += _gs_gains_c(c, P, T) + _gs_entries(c, P, T, params, args) if gs else _cov_entries(c, P, T, params, args)
+    src += (
+        _gs_gains_c(c, P, T) + _gs_entries(c, P, T, params, args) if gs else _cov_entries(c, P, T, params, args, shared)
+    )
     src += _read_c(c, P, T)
     src += _checkpoint_c(c, P, T, fields)
     return header, cdef, src, _manifest(c, T)
@@ -1153,11 +1248,19 @@ def emit(
         return emit_f32(model, form=form, prefix=prefix)
     codes = plan(model, form)  # every number and every range check, before any text
     H, S, MAN = [], [], []
-    for c in codes:
-        h, _, s, man = _axis_fixed(c, prefix)
+    sh = merge([_cov_uniform(c, prefix) for c in codes]) if form == "covariance" and len(codes) > 1 else None
+    shared_tail = []
+    if isinstance(sh, Shared):
+        head, shared_tail = _shared_c(sh, codes, prefix)
+        S += head
+    elif sh is not None:
+        S += [f"/* AVR: one step per axis, as everywhere: the axes' steps cannot be shared ({sh}) */", ""]
+    for i, c in enumerate(codes):
+        h, _, s, man = _axis_fixed(c, prefix, _shared_axis(sh, i, c, prefix) if isinstance(sh, Shared) else None)
         H += h + [""]
         S += s
         MAN.append(man)
+    S += shared_tail
     return package(
         model,
         prefix,

@@ -26,6 +26,10 @@
 #define ACN_ROM_U16(p) ((uint16_t)pgm_read_word(p))
 #define ACN_ROM_U32(p) ((uint32_t)pgm_read_dword(p))
 #define ACN_ROM_I32(p) ((int32_t)pgm_read_dword(p))
+#define ACN_ROM_U8(p) ((uint8_t)pgm_read_byte(p))
+/* little-endian: the low word first */
+#define ACN_ROM_I64(p)                                                                             \
+    ((int64_t)((uint64_t)pgm_read_dword((const uint8_t *)(p) + 4) << 32 | pgm_read_dword(p)))
 /* two 32-bit fields of a gain-schedule row, as ACN_LD2 (below) reads them from RAM */
 #define ACN_SEG2(a, b, base, T, f1, f2) ((a) = ACN_ROM_U32(&(base)->f1), (b) = ACN_ROM_U32(&(base)->f2))
 #else
@@ -33,6 +37,8 @@
 #define ACN_ROM_U16(p) (*(p))
 #define ACN_ROM_U32(p) (*(p))
 #define ACN_ROM_I32(p) (*(p))
+#define ACN_ROM_U8(p) (*(p))
+#define ACN_ROM_I64(p) (*(p))
 #define ACN_SEG2(a, b, base, T, f1, f2) ACN_LD2(a, b, base, T, f1, f2)
 #endif
 /* The per-sample core is inlined into each entry point (it is small, and a call costs a register
