@@ -13,14 +13,13 @@ extern "C" {
 }
 
 #define TX_NEED ACN_TX_NEED /* acn_board.h */
-#if TX_NEED <= 256u
-#define TX_SIZE 256u
-#else
-#define TX_SIZE 512u
-#endif
+/* the most one received byte can make the application send, and slack as on the AVR board: a power
+ * of two would round a 3-axis model's ring up to 512 B, more RAM than an Uno has beside the stack
+ */
+#define TX_SIZE (TX_NEED + 64u)
 
-static uint8_t acn_tx_ring[TX_SIZE]; /* a power of two: the indices wrap through it */
-static uint16_t acn_tx_head, acn_tx_tail;
+static uint8_t acn_tx_ring[TX_SIZE]; /* indices wrap at TX_SIZE by a compare: any size */
+static uint16_t acn_tx_head, acn_tx_tail, acn_tx_used;
 static bool acn_binary; /* frames go out; otherwise they are not made (the app is stopped) */
 
 static const uint8_t acn_pins[ACNF_NAXES] = ACN_PINS;
@@ -34,7 +33,7 @@ static const int8_t acn_frac[ACNF_NAXES][4] = {ACNF_AXES(ACN_FRAC)};
 
 static uint16_t acn_tx_free(void)
 {
-    return (uint16_t)(TX_SIZE - (uint16_t)(acn_tx_head - acn_tx_tail));
+    return (uint16_t)(TX_SIZE - acn_tx_used);
 }
 
 extern "C" bool acn_board_uart_write(const uint8_t *p, size_t n)
@@ -44,8 +43,12 @@ extern "C" bool acn_board_uart_write(const uint8_t *p, size_t n)
         return false; /* the application counts it (tx_drop): the link is too slow for the rate */
     }
     for (i = 0; i < n; ++i) {
-        acn_tx_ring[acn_tx_head++ & (TX_SIZE - 1u)] = p[i];
+        acn_tx_ring[acn_tx_head] = p[i];
+        if (++acn_tx_head == TX_SIZE) {
+            acn_tx_head = 0u;
+        }
     }
+    acn_tx_used = (uint16_t)(acn_tx_used + n);
     return true;
 }
 
@@ -74,7 +77,7 @@ void AccelNav::begin()
     /* before any analogRead: an external reference on AREF while the ADC drives AVCC onto it
      * shorts the two (the Arduino reference's warning) */
     analogReference(ACN_AREF);
-    acn_tx_head = acn_tx_tail = 0;
+    acn_tx_head = acn_tx_tail = acn_tx_used = 0;
     acn_app_init();
     acn_binary = mode_ == BINARY && out_ != nullptr;
     acn_app.running = acn_binary; /* stopped: filters only, no frame made */
@@ -157,8 +160,12 @@ void AccelNav::service()
         uint8_t b = (uint8_t)out_->read();
         acn_app_rx(APP_CH_HOST, &b, 1);
     }
-    while (acn_tx_tail != acn_tx_head && out_->availableForWrite() > 0) {
-        out_->write(acn_tx_ring[acn_tx_tail++ & (TX_SIZE - 1u)]);
+    while (acn_tx_used > 0u && out_->availableForWrite() > 0) {
+        out_->write(acn_tx_ring[acn_tx_tail]);
+        if (++acn_tx_tail == TX_SIZE) {
+            acn_tx_tail = 0u;
+        }
+        --acn_tx_used;
     }
 }
 
