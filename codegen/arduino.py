@@ -99,6 +99,8 @@ def _names_h(model: Model) -> str:
                   f"{GENERATOR_VERSION} --arduino", model.name, model.sha256)  # fmt: skip
     lines = [head + "#ifndef ACN_NAMES_H", "#define ACN_NAMES_H", ""]
     lines += [f"#define {g} acn_{g}" for g in APP_GLOBALS]
+    lines += ["", "/* the sketch reads its own ADC: no stimulus link, one receive buffer less (acn_board.h) */",
+              "#define ACN_NO_STIM_CHANNEL 1"]  # fmt: skip
     return "\n".join(lines + ["", "#endif", ""])
 
 

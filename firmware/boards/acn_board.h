@@ -56,7 +56,16 @@ uint32_t board_rx_lost(void);
 /* ---- implemented by the application (firmware/src/app.c) ---- */
 
 /* Channels of app_rx(): they carry the same frames; each has its own receiver. */
+/* A board with no stimulus link (the Arduino library reads its own ADC) defines
+ * ACN_NO_STIM_CHANNEL: the application keeps one receive buffer less, and bytes given for the
+ * stimulus channel are refused. */
+#if defined(ACN_NO_STIM_CHANNEL)
+#define APP_HAS_STIM 0
+enum { APP_CH_HOST = 0, APP_CH_STIM = 1, APP_NCH = 1 };
+#else
+#define APP_HAS_STIM 1
 enum { APP_CH_HOST = 0, APP_CH_STIM = 1, APP_NCH = 2 };
+#endif
 
 void app_init(void);
 /* The raw input of one sample: ADC codes or T1/T2 counts, and per axis a

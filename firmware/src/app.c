@@ -130,7 +130,10 @@ APP_OUT_OF_LINE static void app_send_info(void)
 {
     acnf_info_t info;
     uint8_t payload[ACNF_INFO_SIZE];
-    uint32_t err = app.rx[APP_CH_HOST].errors + app.rx[APP_CH_STIM].errors;
+    uint32_t err = app.rx[APP_CH_HOST].errors;
+#if APP_HAS_STIM
+    err += app.rx[APP_CH_STIM].errors;
+#endif
     info.protocol = ACNF_PROTOCOL_VERSION;
     info.layout_hash = ACNF_LAYOUT_HASH;
     info.runtime_api = ACN_RUNTIME_API;
@@ -142,7 +145,7 @@ APP_OUT_OF_LINE static void app_send_info(void)
     info.seq = app.seq;
     info.uptime_ms = board_time_ms();
     info.rx_errors = (uint16_t)err;
-    memcpy(info.model_sha256, acn_model_sha256, sizeof info.model_sha256);
+    ACN_COPY_MODEL_SHA256(info.model_sha256);
     (void)link_send(payload, acnf_pack_info(&info, payload));
 }
 

@@ -8,7 +8,7 @@
 ACNF_AXES(ACN_SIZE_CHECK)
 #endif
 
-const uint8_t acn_model_sha256[32] = ACNF_MODEL_SHA256_BYTES;
+const uint8_t acn_model_sha256[32] ACN_SHA_FLASH = ACNF_MODEL_SHA256_BYTES;
 
 #define ACN_INIT(name, NAME, i) accelnav_##name##_init(&f->name);
 void acn_filters_init(acn_filters_t *f)

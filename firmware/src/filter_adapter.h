@@ -40,8 +40,17 @@ void acn_filter_state(const acn_filters_t *f, unsigned i, uint8_t *out);
 /* Saturations counted by the filter of axis i since init. */
 uint32_t acn_filter_overflow(const acn_filters_t *f, unsigned i);
 
-/* 32-byte model hash and runtime API of the generated filter. */
-extern const uint8_t acn_model_sha256[32];
+/* 32-byte model hash and runtime API of the generated filter. On the AVR the hash stays in flash
+ * (32 B of RAM otherwise): ACN_COPY_MODEL_SHA256 copies it out wherever it lives. */
+#if defined(__AVR__)
+#include <avr/pgmspace.h>
+#define ACN_SHA_FLASH PROGMEM
+#define ACN_COPY_MODEL_SHA256(dst) memcpy_P((dst), acn_model_sha256, 32u)
+#else
+#define ACN_SHA_FLASH
+#define ACN_COPY_MODEL_SHA256(dst) memcpy((dst), acn_model_sha256, 32u)
+#endif
+extern const uint8_t acn_model_sha256[32] ACN_SHA_FLASH;
 #define ACN_RUNTIME_API ACCELNAV_RUNTIME_API
 
 #endif

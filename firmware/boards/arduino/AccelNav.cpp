@@ -13,10 +13,11 @@ extern "C" {
 }
 
 #define TX_NEED ACN_TX_NEED /* acn_board.h */
-/* the most one received byte can make the application send, and slack as on the AVR board: a power
- * of two would round a 3-axis model's ring up to 512 B, more RAM than an Uno has beside the stack
- */
-#define TX_SIZE (TX_NEED + 64u)
+/* the most one received byte can make the application send, and 48 B of slack for the frames still
+ * going out while a command is taken (a power of two would round a 3-axis model's 519 B up to 1
+ * KiB; 48 rather than the AVR board's 64 keeps a 3-axis sketch within an Uno's RAM beside the
+ * stack) */
+#define TX_SIZE (TX_NEED + 48u)
 
 static uint8_t acn_tx_ring[TX_SIZE]; /* indices wrap at TX_SIZE by a compare: any size */
 static uint16_t acn_tx_head, acn_tx_tail, acn_tx_used;
