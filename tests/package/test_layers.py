@@ -27,6 +27,7 @@ LAYERS: dict[str, float] = {
     "accelnav.identify": 5,
     "accelnav.hil_sim.targets": 5,
     "accelnav.data": 4,
+    "accelnav.level": 3,  # body-frame IMU records -> level frame; stands on estimate (rests)
     "accelnav.link": 3,
     # inside the link: the decoder stands on the codec and the loss accounting, both on the manifest
     "accelnav.link.decoder": 3,
@@ -49,6 +50,7 @@ LAYERS: dict[str, float] = {
 
 # the float64 oracle and everything a user's data passes through never stand on the generator
 NEVER_CODEGEN = ("accelnav.model", "accelnav.native", "accelnav.estimate", "accelnav.identify", "accelnav.data",
+                 "accelnav.level",
                  "accelnav.hil_sim.sim", "accelnav.plots")  # fmt: skip
 # what the generator may stand on
 CODEGEN_BASE = ("accelnav.codegen", "accelnav.model", "accelnav.native", "accelnav.resources", "accelnav.fileio",
