@@ -30,7 +30,9 @@ def test_tilted_still_sensor_levels_to_no_acceleration():
     acc = rotate(_conj(tilt), np.tile([0.0, 0.0, G], (n, 1)))  # gravity seen in the body
     out = level_frame(ImuRecord(t, acc, gyro=np.zeros((n, 3))))
     assert np.abs(out.acc[-200:]).max() < 0.02
-    assert "Fusion" in out.method
+    assert "tilt corrected at 1 rests" in out.method and out.rests.all()  # still throughout: one rest
+    alone = level_frame(ImuRecord(t, acc, gyro=np.zeros((n, 3))), passes=0)  # no correction: Fusion's attitude
+    assert "Fusion" in alone.method and np.abs(alone.acc[-200:]).max() < 0.02
 
 
 def test_given_orientation_is_applied_and_heading_starts_along_x():
