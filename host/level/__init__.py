@@ -13,8 +13,9 @@ Rests correct the attitude
 At a rest the accelerometer reads gravity alone, so tilt and the gyroscope's bias are observable there:
 
 1. **Rests**: given by the caller, or found by the gyroscope-aided detector (accelnav.level.rests, SHOE).
-2. **Gyroscope bias**: its mean over the rests lasting ``BIAS_REST_S`` or more, removed (a foot's
-   stance rolls too much to tell a bias; a standing of a second does not).
+2. **Gyroscope bias**: its mean over the middle half of the rests lasting ``BIAS_REST_S`` or more,
+   removed (a foot's stance rolls too much to tell a bias, a standing of a second does not; a rest's ends
+   hold the tails of the moves either side).
 3. **Attitude between rests**: where the rests are at most ``STRAPDOWN_GAP_S`` apart (a walk, a stop-and-go
    ride), the gyroscope integrated exactly, as a foot-mounted navigator does: between rests the
    accelerometer holds motion, not gravity. Otherwise x-io's Fusion AHRS (``imufusion``, MIT, a C core:
@@ -248,12 +249,12 @@ def _gyro_bias(imu: ImuRecord, found: list[tuple[int, int]], notes: list[str]) -
     if not long:
         notes.append(f"gyro bias not measured: no rest of {BIAS_REST_S:g} s")
         return np.zeros(3)
-    sel = np.concatenate([np.arange(a, b) for a, b in long])
+    sel = np.concatenate([np.arange(a + (b - a) // 4, b - (b - a) // 4) for a, b in long])  # a move's ends out
     bias = imu.gyro[sel].mean(axis=0)
     deg = np.degrees(bias)
     notes.append(
         f"gyro bias ({deg[0]:.3g}, {deg[1]:.3g}, {deg[2]:.3g}) deg/s measured over {len(long)} rests "
-        f"of {BIAS_REST_S:g} s or more, removed"
+        f"of {BIAS_REST_S:g} s or more (their middle half), removed"
     )
     return bias
 
