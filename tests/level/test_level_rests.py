@@ -24,8 +24,8 @@ def _conj(q: np.ndarray) -> np.ndarray:
 
 
 def _rocking(n_cycles=6, still_s=1.0, move_s=1.0, bias_dps=(0.0, 0.0, 0.0), seed=1):
-    """A sensor still for ``still_s``, then turned once round x for ``move_s`` (the rate a half sine, zero only at the ends) for
-    ``move_s``, repeated; its gyro reads the rate plus ``bias_dps`` and noise, its accelerometer gravity
+    """A sensor still for ``still_s``, then turned once round x for ``move_s`` (the rate a half sine, zero
+    only at the ends), repeated; its gyro reads the rate plus ``bias_dps`` and noise, its accelerometer gravity
     (the rocking's own acceleration left out: a pure rotation about the sensor)."""
     rng = np.random.default_rng(seed)
     ns, nm = int(still_s * RATE), int(move_s * RATE)
