@@ -9,11 +9,13 @@ magnitude g, and how large the angular rate is. Here the two are read in physica
 
 ``acc_tol`` (m/s^2) is the rms departure of the specific force from a still gravity vector a rest may
 show, ``gyro_tol`` (rad/s) the rms angular rate it may show (b: the gyroscope's bias, when known), the
-two added in quadrature (SHOE's threshold gamma is 1 on this scale). The defaults are set from real
-recordings (tests/level/test_level_real.py, bench/studies/study_level.py): a foot in mid-stance turns at
-0.05-0.5 rad/s as it rolls over and its specific force stays within 0.3-0.6 m/s^2 of gravity, its swing
-turns at 3-10 rad/s; quiet standing on the lower back reads 0.02-0.05 rad/s, walking there 0.2-0.9
-rad/s with 1-3 m/s^2 of acceleration. The accelerometer term alone cannot tell a smooth cruise from a
+two added in quadrature (SHOE's threshold gamma is 1 on this scale). The defaults (0.4 m/s^2, 0.5 rad/s)
+were measured on real recordings: on gaitmap's foot walk a mid-stance turns at 0.3-0.65 rad/s (the window's
+rms) as the foot rolls over and its specific force stays within 0.25-0.45 m/s^2 of gravity, the swing turns
+at 3-10 rad/s; every reference stance of both feet holds a rest, 97 % of the motion-capture mid-stances
+are inside one. On mobgap's lower-back walks (quiet standing 0.02-0.05 rad/s, walking 0.2-0.9 rad/s with
+1-3 m/s^2) 0-5 % of the walking is called rest; with the looser (1.0 m/s^2, 0.6 rad/s) 14-19 % was. The
+accelerometer term alone cannot tell a smooth cruise from a
 stop (accelnav.estimate.zupt's candidates, the path for parts without a gyroscope); the gyroscope term
 sees the turning a moving foot or body cannot avoid.
 
@@ -37,8 +39,8 @@ G = 9.80665  # m/s^2, the standard gravity (the level frame subtracts it)
 @dataclass(frozen=True)
 class RestParams:
     window_s: float = 0.05  # s, centred window of the test (SHOE's W: 3-11 samples at 100-200 Hz)
-    acc_tol: float = 1.0  # m/s^2, rms departure of the specific force from one still gravity vector
-    gyro_tol: float = 0.6  # rad/s (34 deg/s), rms angular rate a rest may show (a foot rolling in stance)
+    acc_tol: float = 0.4  # m/s^2, rms departure of the specific force from one still gravity vector
+    gyro_tol: float = 0.5  # rad/s (29 deg/s), rms angular rate a rest may show (a foot rolling in stance)
     min_rest_s: float = 0.05  # s, shorter runs of still samples are dropped
 
     def checked(self) -> RestParams:
