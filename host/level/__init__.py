@@ -232,12 +232,12 @@ def _strapdown(imu: ImuRecord, bias: np.ndarray, first: tuple[int, int]) -> np.n
     start levelled by the first anchor's gravity; the products by a parallel prefix scan (log2 N numpy
     passes) rather than a loop over samples."""
     dt = np.diff(imu.t, prepend=imu.t[0])
-    q = _rotvec_quat((imu.gyro - bias) * dt[:, None])
+    q4 = np.ascontiguousarray(_rotvec_quat((imu.gyro - bias) * dt[:, None]).T)  # (4, N): rows contiguous
     d = 1
-    while d < len(q):  # q[i] <- q[0] q[1] ... q[i] (Hillis-Steele)
-        q[d:] = _qmul(q[:-d], q[d:])
+    while d < q4.shape[1]:  # q[i] <- q[0] q[1] ... q[i] (Hillis-Steele)
+        q4[:, d:] = _qmul4(q4[:, :-d], q4[:, d:])
         d *= 2
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q = q4.T / np.linalg.norm(q4, axis=0)[:, None]
     a, b = first
     f = rotate(q[a:b], imu.acc[a:b]).mean(axis=0)  # gravity at the first anchor, in the start's frame
     horiz = np.hypot(f[0], f[1])
@@ -267,8 +267,10 @@ def _anchors(found: list[tuple[int, int]], rate: float) -> list[tuple[int, int]]
     step = max(1, int(round(ANCHOR_S * rate)))
     out = []
     for a, b in found:
-        k = max(1, int(np.ceil((b - a) / step)))
-        edges = np.linspace(a, b, k + 1).round().astype(int)
+        if b - a <= step:
+            out.append((a, b))
+            continue
+        edges = np.linspace(a, b, -(-(b - a) // step) + 1).round().astype(int)
         out += [(int(lo), int(hi)) for lo, hi in zip(edges[:-1], edges[1:], strict=True) if hi > lo]
     return out
 
@@ -312,17 +314,19 @@ def _rotvec_quat(phi: np.ndarray) -> np.ndarray:
 
 def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Hamilton products p q of (N, 4) or (1, 4) quaternions (w, x, y, z)."""
-    w1, x1, y1, z1 = p.T
-    w2, x2, y2, z2 = q.T
-    return np.stack(
-        [
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        ],
-        axis=1,
-    )
+    return _qmul4(p.T, q.T).T
+
+
+def _qmul4(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Hamilton products p q of quaternions stored as (4, N) or (4, 1) columns (w, x, y, z)."""
+    w1, x1, y1, z1 = p
+    w2, x2, y2, z2 = q
+    out = np.empty(np.broadcast_shapes(p.shape, q.shape))
+    out[0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    out[1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    out[2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    out[3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+    return out
 
 
 def _unit(q: np.ndarray) -> np.ndarray:
