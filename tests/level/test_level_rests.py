@@ -4,23 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.quaternions import about, conj
 
 from accelnav.errors import UserError
 from accelnav.level import G, ImuRecord, level_frame, rotate
 from accelnav.level.rests import RestParams, shoe_statistic, spans, still_mask
 
 RATE = 100.0
-
-
-def _about(axis: int, angle: np.ndarray) -> np.ndarray:
-    q = np.zeros((np.size(angle), 4))
-    q[:, 0] = np.cos(angle / 2)
-    q[:, 1 + axis] = np.sin(angle / 2)
-    return q
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def _rocking(n_cycles=6, still_s=1.0, move_s=1.0, bias_dps=(0.0, 0.0, 0.0), seed=1):
@@ -35,8 +25,8 @@ def _rocking(n_cycles=6, still_s=1.0, move_s=1.0, bias_dps=(0.0, 0.0, 0.0), seed
     n = angle.size
     t = np.arange(n) / RATE
     rate = np.gradient(angle, t)
-    q = _about(0, angle)
-    acc = rotate(_conj(q), np.tile([0.0, 0.0, G], (n, 1))) + 0.02 * rng.standard_normal((n, 3))
+    q = about(0, angle)
+    acc = rotate(conj(q), np.tile([0.0, 0.0, G], (n, 1))) + 0.02 * rng.standard_normal((n, 3))
     gyro = (
         np.column_stack([rate, np.zeros(n), np.zeros(n)]) + np.radians(bias_dps) + 0.002 * rng.standard_normal((n, 3))
     )
@@ -91,7 +81,7 @@ def test_a_record_that_never_rests_says_so():
     t = np.arange(n) / RATE
     spin = np.column_stack([np.full(n, 2.0), np.zeros(n), np.zeros(n)])  # turning at 2 rad/s throughout
     angle = 2.0 * t
-    acc = rotate(_conj(_about(0, angle)), np.tile([0.0, 0.0, G], (n, 1)))
+    acc = rotate(conj(about(0, angle)), np.tile([0.0, 0.0, G], (n, 1)))
     out = level_frame(ImuRecord(t, acc, gyro=spin))
     assert not np.isfinite(out.leak) and "no rest to measure it" in out.summary()
     assert "Fusion" in out.method and any("no rest" in s for s in out.notes)
