@@ -32,7 +32,9 @@ At a rest the accelerometer reads gravity alone, so tilt and the gyroscope's bia
    ``passes`` > 1 repeats it: a second pass changes the stride error by < 0.03 cm on the foot walk, so
    one is the default.
 5. **Leak**: the rms over the rests of the mean horizontal level-frame acceleration over each rest's
-   middle half (mid-stance): what gravity still leaks where the body is known still.
+   middle half (mid-stance): what gravity still leaks where the body is known still. The rests make it
+   small by construction, so a note says what the correction is unsure of between rests too: how far each
+   rest's tilt lies from the line through its neighbours' (before correction), in m/s^2 of leak.
 
 Fusion's settings were measured, not chosen by taste: on the foot walk with Fusion alone (its leak at
 mid-stance, its strides with the true rests) and on the lower-back walks with Fusion between the reference
@@ -191,6 +193,12 @@ def level_frame(
             if anchors and passes:
                 notes.append(f"rests up to {gap:.3g} s apart (> {STRAPDOWN_GAP_S:g} s): Fusion's attitude between them")
     if anchors and passes:
+        between = _between(quat, imu.acc, found, imu.t)
+        if np.isfinite(between):
+            notes.append(
+                f"between rests: a rest's tilt foretold from its two neighbours' misses by {between:.3g} m/s^2 "
+                f"rms over {len(found) - 2} rests (the leak the interpolation may leave between them)"
+            )
         for _ in range(passes):
             quat = _tilt_corrected(quat, imu.acc, anchors, imu.t)
         method += f", tilt corrected at {len(found)} rests"
@@ -263,7 +271,7 @@ def _gyro_bias(imu: ImuRecord, found: list[tuple[int, int]], notes: list[str]) -
     bias = imu.gyro[sel].mean(axis=0)
     deg = np.degrees(bias)
     notes.append(
-        f"gyro bias ({deg[0]:.3g}, {deg[1]:.3g}, {deg[2]:.3g}) deg/s measured over {len(long)} rests "
+        f"gyro bias ({deg[0]:.3g}, {deg[1]:.3g}, {deg[2]:.3g}) deg/s measured over {len(long)} rest{'s' if len(long) > 1 else ''} "
         f"of {BIAS_REST_S:g} s or more (their middle half), removed"
     )
     return bias
@@ -282,22 +290,40 @@ def _anchors(found: list[tuple[int, int]], rate: float) -> list[tuple[int, int]]
     return out
 
 
-def _tilt_corrected(quat: np.ndarray, acc: np.ndarray, anchors: list[tuple[int, int]], t: np.ndarray) -> np.ndarray:
-    """``quat`` turned about horizontal axes so that the mean level-frame specific force of every anchor is
-    vertical, the turn interpolated linearly in time between anchors' middles (held before the first and
-    after the last): what a backward smoothing pass of the tilt error between rests would do. Heading kept."""
+def _tilt_vectors(quat: np.ndarray, acc: np.ndarray, pieces: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """Per piece, the small rotation (phi_x, phi_y) taking its mean level-frame specific force onto +z, and
+    the piece's (lo, hi) sample bounds as arrays."""
     f = rotate(quat, acc)
     c = np.concatenate([np.zeros((1, 3)), np.cumsum(f, axis=0)])
-    lo = np.array([a for a, _ in anchors])
-    hi = np.array([b for _, b in anchors])
+    lo = np.array([a for a, _ in pieces])
+    hi = np.array([b for _, b in pieces])
     fm = (c[hi] - c[lo]) / (hi - lo)[:, None]
     # the rotation taking fm onto +z: about fm x z, by the angle between them
     horiz = np.hypot(fm[:, 0], fm[:, 1])
     angle = np.arctan2(horiz, fm[:, 2])
     scale = np.divide(angle, horiz, out=np.zeros_like(angle), where=horiz > 0)
-    phi_x, phi_y = fm[:, 1] * scale, -fm[:, 0] * scale
+    return np.column_stack([fm[:, 1] * scale, -fm[:, 0] * scale]), np.stack([lo, hi])
+
+
+def _between(quat: np.ndarray, acc: np.ndarray, found: list[tuple[int, int]], t: np.ndarray) -> float:
+    """rms over the rests but the first and last of how far each rest's tilt (before correction) is from the
+    line through its neighbours', as g sin(angle) in m/s^2: NaN with fewer than 3 rests."""
+    if len(found) < 3:
+        return float("nan")
+    phi, (lo, hi) = _tilt_vectors(quat, acc, found)
     tm = 0.5 * (t[lo] + t[hi - 1])
-    phi = np.column_stack([np.interp(t, tm, phi_x), np.interp(t, tm, phi_y), np.zeros(t.size)])
+    w = ((tm[1:-1] - tm[:-2]) / (tm[2:] - tm[:-2]))[:, None]
+    miss = phi[1:-1] - ((1 - w) * phi[:-2] + w * phi[2:])
+    return float(G * np.sqrt(np.mean(np.sum(np.sin(miss) ** 2, axis=1))))
+
+
+def _tilt_corrected(quat: np.ndarray, acc: np.ndarray, anchors: list[tuple[int, int]], t: np.ndarray) -> np.ndarray:
+    """``quat`` turned about horizontal axes so that the mean level-frame specific force of every anchor is
+    vertical, the turn interpolated linearly in time between anchors' middles (held before the first and
+    after the last): what a backward smoothing pass of the tilt error between rests would do. Heading kept."""
+    at, (lo, hi) = _tilt_vectors(quat, acc, anchors)
+    tm = 0.5 * (t[lo] + t[hi - 1])
+    phi = np.column_stack([np.interp(t, tm, at[:, 0]), np.interp(t, tm, at[:, 1]), np.zeros(t.size)])
     return _qmul(_rotvec_quat(phi), quat)
 
 
