@@ -270,8 +270,9 @@ def _gyro_bias(imu: ImuRecord, found: list[tuple[int, int]], notes: list[str]) -
     sel = np.concatenate([np.arange(a + (b - a) // 4, b - (b - a) // 4) for a, b in long])  # a move's ends out
     bias = imu.gyro[sel].mean(axis=0)
     deg = np.degrees(bias)
+    over = f"{len(long)} rests" if len(long) > 1 else "1 rest"
     notes.append(
-        f"gyro bias ({deg[0]:.3g}, {deg[1]:.3g}, {deg[2]:.3g}) deg/s measured over {len(long)} rest{'s' if len(long) > 1 else ''} "
+        f"gyro bias ({deg[0]:.3g}, {deg[1]:.3g}, {deg[2]:.3g}) deg/s measured over {over} "
         f"of {BIAS_REST_S:g} s or more (their middle half), removed"
     )
     return bias
