@@ -218,17 +218,17 @@ def find_rests(t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, params: RestPar
     p = params.checked()
     rate = (t.size - 1) / float(t[-1] - t[0])
     notes = []
-    if p.acc_noise is not None:
-        noise, why = Noise(p.acc_noise, p.gyro_noise, G, np.zeros(3), "as stated"), ""
-    else:
-        noise, why = measure_noise(acc, gyro, rate)
+    noise, why = measure_noise(acc, gyro, rate)
+    if p.acc_noise is not None:  # the stated figures; the quietest windows' bias and g where they prove them
+        g, b = (G, np.zeros(3)) if noise is None else (noise.g, noise.bias)
+        noise, why = Noise(p.acc_noise, p.gyro_noise, g, b, "as stated"), ""
     cand = still_mask(acc, gyro, rate, p)
     if noise is None:
         still = np.zeros(t.size, dtype=bool)
         notes.append(f"the record proves no noise floor: {why}; stillness judged by the tolerances alone")
         bias = np.zeros(3)
     else:
-        dev, w2 = _terms(acc, gyro, _window(rate, p.window_s), noise.bias if p.acc_noise is None else None, noise.g)
+        dev, w2 = _terms(acc, gyro, _window(rate, p.window_s), noise.bias, noise.g)
         k2 = 3.0 * p.noise_k**2  # three axes
         still = _dilated((dev <= k2 * noise.acc**2) & (w2 <= k2 * noise.gyro**2), rate, p)
         notes.append(

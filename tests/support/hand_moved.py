@@ -11,7 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 
 G = 9.80665
-MOVE_S, PAUSE_S = 4.0, 2.0
 
 
 @dataclass
@@ -25,16 +24,25 @@ class HandMoved:
 
 
 def hand_moved(
-    n: int, rate: float = 200.0, acc_noise: float = 0.0, gyro_noise: float = 0.0, bias_dps=(0.0, 0.0, 0.0), seed=1
+    n: int,
+    rate: float = 200.0,
+    acc_noise: float = 0.0,
+    gyro_noise: float = 0.0,
+    bias_dps=(0.0, 0.0, 0.0),
+    move_s: float = 4.0,
+    pause_s: float = 2.0,
+    seed: int = 1,
 ) -> HandMoved:
+    """``n`` samples at ``rate``; white noise of ``acc_noise`` m/s^2 and ``gyro_noise`` rad/s rms per axis, a
+    gyroscope bias of ``bias_dps``; moves of ``move_s`` and pauses of ``pause_s`` (0: never still)."""
     from scipy.spatial.transform import Rotation
 
     rng = np.random.default_rng(seed)
     t = np.arange(n) / rate
-    phase = t % (MOVE_S + PAUSE_S)
-    moving = phase < MOVE_S
-    a = np.where(moving, np.sin(2 * np.pi * phase / MOVE_S), 0.0)
-    heading = 0.7 * np.floor(t / (MOVE_S + PAUSE_S))
+    phase = t % (move_s + pause_s)
+    moving = phase < move_s
+    a = np.where(moving, np.sin(2 * np.pi * phase / move_s), 0.0)
+    heading = 0.7 * np.floor(t / (move_s + pause_s))
     level = np.stack([a * np.cos(heading), a * np.sin(heading), 0.3 * a], axis=1)
     tau = np.cumsum(moving) / rate  # the attitude moves only while the unit does
     roll = np.deg2rad(20.0) * np.sin(2 * np.pi * 0.11 * tau)
