@@ -12,10 +12,13 @@ Rests correct the attitude
 --------------------------
 At a rest the accelerometer reads gravity alone, so tilt and the gyroscope's bias are observable there:
 
-1. **Rests**: given by the caller, or found by the gyroscope-aided detector (accelnav.level.rests, SHOE).
-2. **Gyroscope bias**: its mean over the middle half of the rests lasting ``BIAS_REST_S`` or more,
-   removed (a foot's stance rolls too much to tell a bias, a standing of a second does not; a rest's ends
-   hold the tails of the moves either side).
+1. **Rests**: given by the caller, or found by the gyroscope-aided detector (accelnav.level.rests: SHOE
+   candidates, stillness against the sensor's own noise, the speed a rest would imply, gravity carried by
+   the gyroscope).
+2. **Gyroscope bias**: its mean over the middle half of the rests still within the sensor's noise (or
+   given) for ``BIAS_REST_S`` or more, removed (a foot's stance rolls too much to tell a bias, a standing of
+   a second does not; a rest's ends hold the tails of the moves either side). Not measured where rests
+   cover more than ``COVER_MAX`` of the record: a detector calling most of a record rest is not trusted.
 3. **Attitude between rests**: where the rests are at most ``STRAPDOWN_GAP_S`` apart (a walk, a stop-and-go
    ride), the gyroscope integrated exactly, as a foot-mounted navigator does: between rests the
    accelerometer holds motion, not gravity. Otherwise x-io's Fusion AHRS (``imufusion``, MIT, a C core:

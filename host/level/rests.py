@@ -22,6 +22,26 @@ sees the turning a moving foot or body cannot avoid.
 The window is centred; a centre that passes makes every sample of its window a rest sample (every sample
 in it was seen still), and runs shorter than ``min_rest_s`` are dropped. All of it is vectorised:
 moving sums by cumulative sums, no loop over samples.
+
+A foot's tolerance is not stillness: a slowly hand-moved unit (1 m/s^2, 0.25 rad/s) stays inside it
+throughout and was called 99 % rest. :func:`find_rests` therefore decides on all the evidence:
+
+* **the sensor's own noise** (rms per axis), measured over the record's quietest windows of
+  ``NOISE_WINDOW_S`` (or stated: ``acc_noise``, ``gyro_noise``), proven only where those windows vary,
+  turn and accelerate as little as a still sensor can (else the note says why and the tolerances decide
+  alone). A window is *still* where its angular rate (less the quiet windows' bias) and its specific
+  force's departure from their g are both within ``noise_k`` times that noise;
+* the SHOE tolerance test above gives *candidates* (a foot's rolling stance);
+* every run of still or candidate samples is a hypothesis: its specific force, held in a frame the
+  gyroscope fixes, less its mean (gravity, wherever it points), integrated, is the speed it implies; a
+  rest implies at most ``speed_tol`` (gravity turns in the body only as the gyroscope says). A run that
+  implies more keeps only its still parts that pass the same test;
+* a candidate holding no still sample is also compared with gravity as the still rests show it,
+  carried by the gyroscope (within ``GRAVITY_REACH_S`` and ``GRAVITY_REACH_RAD`` of turning): off by
+  more than ``acc_tol``, it is a move (a short quiet spell inside a smooth move passes every window test).
+
+The notes say which evidence refused what; ``still`` marks the rests that prove stillness (the only ones
+a gyroscope's bias may be measured over).
 """
 
 from __future__ import annotations
