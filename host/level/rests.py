@@ -272,20 +272,24 @@ def find_rests(t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, params: RestPar
         for (lo, hi), u in zip(parts, implied_speed(f_world, rate, parts), strict=True):
             if u <= p.speed_tol:
                 mask[lo:hi] = True
-    if refused:
-        secs = sum(b - a for a, b, _ in refused) / rate
-        top = max(v for _, _, v in refused)
-        notes.append(
-            f"{len(refused)} candidate stretches ({secs:.3g} s) refused: gravity turns in the body beyond what the "
-            f"gyroscope explains (up to {top:.3g} m/s implied, a rest <= {p.speed_tol:g}); their still parts kept"
-        )
-    if tilted:
-        secs = sum(b - a for a, b, _ in tilted) / rate
-        top = max(v for _, _, v in tilted)
-        notes.append(
-            f"{len(tilted)} candidate stretches ({secs:.3g} s) refused: their specific force is up to {top:.3g} "
-            f"m/s^2 from the gravity the gyroscope carries from the still rests (a rest <= {p.acc_tol:g})"
-        )
+    why_refused = (
+        (
+            refused,
+            "gravity turns in the body beyond what the gyroscope explains (up to {:.3g} m/s implied, a rest "
+            f"<= {p.speed_tol:g}); their still parts kept",
+        ),
+        (
+            tilted,
+            "their specific force is up to {:.3g} m/s^2 from the gravity the gyroscope carries from the "
+            f"still rests (a rest <= {p.acc_tol:g})",
+        ),
+    )
+    for runs_out, said in why_refused:
+        if runs_out:
+            secs = sum(b - a for a, b, _ in runs_out) / rate
+            top = max(v for _, _, v in runs_out)
+            many = "candidate stretches" if len(runs_out) > 1 else "candidate stretch"
+            notes.append(f"{len(runs_out)} {many} ({secs:.3g} s) refused: " + said.format(top))
     mask = drop_short(mask, int(math.ceil(p.min_rest_s * rate)))
     if mask.mean() > COVER_MAX:
         notes.append(
