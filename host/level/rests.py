@@ -220,11 +220,11 @@ def measure_noise(acc: np.ndarray, gyro: np.ndarray, rate: float) -> tuple[Noise
     return noise, ""
 
 
-def implied_speed(f_world: np.ndarray, rate: float, runs: list[tuple[int, int]]) -> np.ndarray:
+def implied_speed(c: np.ndarray, runs: list[tuple[int, int]]) -> np.ndarray:
     """Per run, the largest speed its specific force implies when the run is a rest: the specific force in a
     frame fixed by the gyroscope, less its mean over the run (gravity, wherever it points), integrated;
-    at a rest gravity's direction in the body turns only as the gyroscope says and this stays near zero."""
-    c = np.concatenate([np.zeros((1, 3)), np.cumsum(f_world, axis=0) / rate])
+    at a rest gravity's direction in the body turns only as the gyroscope says and this stays near zero.
+    ``c`` (N + 1, 3): that specific force's running integral from the start (m/s), computed once."""
     out = np.zeros(len(runs))
     for i, (a, b) in enumerate(runs):
         v = c[a : b + 1] - c[a]
@@ -257,8 +257,9 @@ def find_rests(t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, params: RestPar
         )
         bias = noise.bias
     f_world = rotate(integrate(t, gyro - bias), acc)
+    c = np.concatenate([np.zeros((1, 3)), np.cumsum(f_world, axis=0) / rate])
     runs = spans(cand | still)
-    speed = implied_speed(f_world, rate, runs)
+    speed = implied_speed(c, runs)
     turned = np.cumsum(np.linalg.norm(gyro - bias, axis=1)) / rate
     gravity = _gravity_carried(f_world, t, turned, still, runs)
     mask = np.zeros(t.size, dtype=bool)
@@ -269,7 +270,7 @@ def find_rests(t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, params: RestPar
             continue
         (refused if v > p.speed_tol else tilted).append((a, b, v if v > p.speed_tol else off))
         parts = [(a + lo, a + hi) for lo, hi in spans(still[a:b])]
-        for (lo, hi), u in zip(parts, implied_speed(f_world, rate, parts), strict=True):
+        for (lo, hi), u in zip(parts, implied_speed(c, parts), strict=True):
             if u <= p.speed_tol:
                 mask[lo:hi] = True
     why_refused = (
