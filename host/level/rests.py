@@ -214,10 +214,9 @@ def measure_noise(acc: np.ndarray, gyro: np.ndarray, rate: float) -> tuple[Noise
         return None, f"{where} turn at up to {turn:.3g} deg/s (more than a bias, {math.degrees(BIAS_MAX):.3g})"
     if abs(gmag - G) > G_OFF_MAX:
         return None, f"{where} read a specific force of {gmag:.4g} m/s^2, not g"
-    noise = Noise(
-        max(sa, ACC_NOISE_FLOOR), max(sg, GYRO_NOISE_FLOOR), gmag, rates.mean(axis=0), f"measured over {where}"
-    )
-    return noise, ""
+    raised = ", raised to the floor no sensor reads below" if sa < ACC_NOISE_FLOOR or sg < GYRO_NOISE_FLOOR else ""
+    floor = (max(sa, ACC_NOISE_FLOOR), max(sg, GYRO_NOISE_FLOOR))
+    return Noise(*floor, gmag, rates.mean(axis=0), f"measured over {where}{raised}"), ""
 
 
 def implied_speed(c: np.ndarray, runs: list[tuple[int, int]]) -> np.ndarray:
