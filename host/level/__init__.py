@@ -12,10 +12,13 @@ Rests correct the attitude
 --------------------------
 At a rest the accelerometer reads gravity alone, so tilt and the gyroscope's bias are observable there:
 
-1. **Rests**: given by the caller, or found by the gyroscope-aided detector (accelnav.level.rests, SHOE).
-2. **Gyroscope bias**: its mean over the middle half of the rests lasting ``BIAS_REST_S`` or more,
-   removed (a foot's stance rolls too much to tell a bias, a standing of a second does not; a rest's ends
-   hold the tails of the moves either side).
+1. **Rests**: given by the caller, or found by the gyroscope-aided detector (accelnav.level.rests: SHOE
+   candidates, stillness against the sensor's own noise, the speed a rest would imply, gravity carried by
+   the gyroscope).
+2. **Gyroscope bias**: its mean over the middle half of the rests still within the sensor's noise (or
+   given) for ``BIAS_REST_S`` or more, removed (a foot's stance rolls too much to tell a bias, a standing of
+   a second does not; a rest's ends hold the tails of the moves either side). Not measured where rests
+   cover more than ``COVER_MAX`` of the record: a detector calling most of a record rest is not trusted.
 3. **Attitude between rests**: where the rests are at most ``STRAPDOWN_GAP_S`` apart (a walk, a stop-and-go
    ride), the gyroscope integrated exactly, as a foot-mounted navigator does: between rests the
    accelerometer holds motion, not gravity. Otherwise x-io's Fusion AHRS (``imufusion``, MIT, a C core:
@@ -53,7 +56,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from accelnav.errors import UserError
-from accelnav.level.rests import G, RestParams, still_mask
+from accelnav.level.quat import integrate, qmul, rotate, rotvec_quat
+from accelnav.level.rests import COVER_MAX, G, RestParams, find_rests
 from accelnav.level.rests import spans as rest_spans
 
 GAIN = 0.2  # Fusion's gain (its default 0.5): measured, see the module docstring
@@ -131,14 +135,6 @@ class LevelResult:
         return f"levelled {self.t.size} samples by {self.method}; residual level leak {leak}"
 
 
-def rotate(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate the rows of ``v`` (N, 3) by the unit quaternions ``quat`` (N, 4) (w, x, y, z)."""
-    w = quat[:, :1]
-    u = quat[:, 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
-
-
 def level_frame(
     imu: ImuRecord,
     *,
@@ -163,25 +159,25 @@ def level_frame(
         raise UserError(f"level_frame passes: got {passes!r}; accepted: an integer from 0 to 5")
     notes: list[str] = []
     n = imu.t.size
+    still = None  # the rests that prove stillness (None: given, the caller vouches for them)
     if rests is not None:
         mask, said = _given_rests(rests, imu.t), "given"
     elif imu.gyro is not None:
-        mask, said = (
-            still_mask(imu.acc, imu.gyro, imu.rate, detector or RestParams()),
-            "found by the gyroscope and accelerometer",
-        )
+        finding = find_rests(imu.t, imu.acc, imu.gyro, detector or RestParams())
+        mask, still, said = finding.mask, finding.still, "found by the gyroscope and accelerometer"
+        notes += finding.notes
     else:
         mask, said = np.zeros(n, dtype=bool), ""
     found = rest_spans(mask)
     if said:
-        notes.append(f"{len(found)} rests {said}, {mask.mean():.0%} of the record")
+        notes.insert(0, f"{len(found)} rests {said}, {mask.mean():.0%} of the record")
     else:
         notes.append("no gyroscope to find rests by, none given: the orientation as recorded")
     anchors = _anchors(found, imu.rate)
     if imu.quat is not None:
         quat, method = _unit(imu.quat), "the recording's own orientation"
     else:
-        bias = _gyro_bias(imu, found, notes)
+        bias = _gyro_bias(imu, mask, still, notes)
         gap = _longest_gap(anchors, imu.t)
         if passes and gap <= STRAPDOWN_GAP_S:
             quat = _strapdown(imu, bias, anchors[0])
@@ -243,37 +239,42 @@ def _longest_gap(anchors: list[tuple[int, int]], t: np.ndarray) -> float:
 
 
 def _strapdown(imu: ImuRecord, bias: np.ndarray, first: tuple[int, int]) -> np.ndarray:
-    """The gyroscope integrated exactly (each sample's rotation over its step, as a rotation vector), from a
-    start levelled by the first anchor's gravity; the products by a parallel prefix scan (log2 N numpy
-    passes) rather than a loop over samples."""
-    dt = np.diff(imu.t, prepend=imu.t[0])
-    q4 = np.ascontiguousarray(_rotvec_quat((imu.gyro - bias) * dt[:, None]).T)  # (4, N): rows contiguous
-    d = 1
-    while d < q4.shape[1]:  # q[i] <- q[0] q[1] ... q[i] (Hillis-Steele)
-        q4[:, d:] = _qmul4(q4[:, :-d], q4[:, d:])
-        d *= 2
-    q = q4.T / np.linalg.norm(q4, axis=0)[:, None]
+    """The gyroscope integrated exactly (accelnav.level.quat.integrate), from a start levelled by the first
+    anchor's gravity."""
+    q = integrate(imu.t, imu.gyro - bias)
     a, b = first
     f = rotate(q[a:b], imu.acc[a:b]).mean(axis=0)  # gravity at the first anchor, in the start's frame
     horiz = np.hypot(f[0], f[1])
     angle = np.arctan2(horiz, f[2])
     k = angle / horiz if horiz > 0 else 0.0
-    return _qmul(_rotvec_quat(np.array([[f[1] * k, -f[0] * k, 0.0]])), q)
+    return qmul(rotvec_quat(np.array([[f[1] * k, -f[0] * k, 0.0]])), q)
 
 
-def _gyro_bias(imu: ImuRecord, found: list[tuple[int, int]], notes: list[str]) -> np.ndarray:
-    """The gyroscope's mean over the rests that last ``BIAS_REST_S`` at least (a foot's short stances roll)."""
-    long = [(a, b) for a, b in found if b - a >= BIAS_REST_S * imu.rate]
+def _gyro_bias(imu: ImuRecord, mask: np.ndarray, still: np.ndarray | None, notes: list[str]) -> np.ndarray:
+    """The gyroscope's mean over the middle half of the rests that prove stillness (within the sensor's noise,
+    found) or are given, lasting ``BIAS_REST_S`` at least (a foot's short stances roll); none where rests
+    cover more than ``COVER_MAX`` of the record (a detector calling most of a record rest is not
+    to be trusted with a bias)."""
+    if mask.mean() > COVER_MAX:
+        notes.append(
+            f"gyro bias not measured: rests cover {mask.mean():.0%} of the record (> {COVER_MAX:.0%}), "
+            "too much to trust them still"
+        )
+        return np.zeros(3)
+    kind = "given" if still is None else "still within the sensor's noise"
+    proven = mask if still is None else mask & still
+    long = [(a, b) for a, b in rest_spans(proven) if b - a >= BIAS_REST_S * imu.rate]
     if not long:
-        notes.append(f"gyro bias not measured: no rest of {BIAS_REST_S:g} s")
+        notes.append(f"gyro bias not measured: no rest {kind} for {BIAS_REST_S:g} s")
         return np.zeros(3)
     sel = np.concatenate([np.arange(a + (b - a) // 4, b - (b - a) // 4) for a, b in long])  # a move's ends out
     bias = imu.gyro[sel].mean(axis=0)
     deg = np.degrees(bias)
-    over = f"{len(long)} rests" if len(long) > 1 else "1 rest"
+    secs = sum(b - a for a, b in long) / imu.rate
     notes.append(
-        f"gyro bias ({deg[0]:.3g}, {deg[1]:.3g}, {deg[2]:.3g}) deg/s measured over {over} "
-        f"of {BIAS_REST_S:g} s or more (their middle half), removed"
+        f"gyro bias ({deg[0]:.3g}, {deg[1]:.3g}, {deg[2]:.3g}) deg/s measured over {len(long)} "
+        f"rest{'s' if len(long) > 1 else ''} {kind} for {BIAS_REST_S:g} s or more ({secs:.3g} s, their middle "
+        "half), removed"
     )
     return bias
 
@@ -325,7 +326,7 @@ def _tilt_corrected(quat: np.ndarray, acc: np.ndarray, anchors: list[tuple[int, 
     at, (lo, hi) = _tilt_vectors(quat, acc, anchors)
     tm = 0.5 * (t[lo] + t[hi - 1])
     phi = np.column_stack([np.interp(t, tm, at[:, 0]), np.interp(t, tm, at[:, 1]), np.zeros(t.size)])
-    return _qmul(_rotvec_quat(phi), quat)
+    return qmul(rotvec_quat(phi), quat)
 
 
 def _leak(acc: np.ndarray, found: list[tuple[int, int]]) -> float:
@@ -337,30 +338,6 @@ def _leak(acc: np.ndarray, found: list[tuple[int, int]]) -> float:
     hi = np.array([max(b - (b - a) // 4, lo_ + 1) for (a, b), lo_ in zip(found, lo, strict=True)])
     m = (c[hi] - c[lo]) / (hi - lo)[:, None]
     return float(np.sqrt(np.mean(np.sum(m * m, axis=1))))
-
-
-def _rotvec_quat(phi: np.ndarray) -> np.ndarray:
-    angle = np.linalg.norm(phi, axis=1, keepdims=True)
-    half = 0.5 * angle
-    s = np.divide(np.sin(half), angle, out=np.full_like(angle, 0.5), where=angle > 1e-12)
-    return np.concatenate([np.cos(half), s * phi], axis=1)
-
-
-def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton products p q of (N, 4) or (1, 4) quaternions (w, x, y, z)."""
-    return _qmul4(p.T, q.T).T
-
-
-def _qmul4(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton products p q of quaternions stored as (4, N) or (4, 1) columns (w, x, y, z)."""
-    w1, x1, y1, z1 = p
-    w2, x2, y2, z2 = q
-    out = np.empty(np.broadcast_shapes(p.shape, q.shape))
-    out[0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
-    out[1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
-    out[2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
-    out[3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
-    return out
 
 
 def _unit(q: np.ndarray) -> np.ndarray:
@@ -403,4 +380,4 @@ def _start_heading(quat: np.ndarray) -> np.ndarray:
     x0 = rotate(quat[:1], np.array([[1.0, 0.0, 0.0]]))[0]
     yaw = np.arctan2(x0[1], x0[0])
     turn = np.array([[np.cos(-yaw / 2), 0.0, 0.0, np.sin(-yaw / 2)]])
-    return _qmul(turn, quat)
+    return qmul(turn, quat)

@@ -55,7 +55,8 @@ def test_the_statistic_is_in_physical_units():
 
 
 def test_rests_correct_a_gyro_bias_and_the_leak_is_stated():
-    t, acc, gyro, still = _rocking(bias_dps=(1.0, -0.8, 0.3))
+    # still spells of 1.2 s: the bias is measured over rests still within the noise for 1 s or more
+    t, acc, gyro, still = _rocking(still_s=1.2, bias_dps=(1.0, -0.8, 0.3))
     out = level_frame(ImuRecord(t, acc, gyro=gyro))
     assert np.abs(out.acc[still, :2]).max() < 0.1, np.abs(out.acc[still, :2]).max()
     assert out.leak < 0.05 and "residual level leak" in out.summary()
