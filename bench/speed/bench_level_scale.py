@@ -28,9 +28,9 @@ The cost of the attitude filter does not depend on the motion; the data only kee
 Goal (ours: the issue names none): levelling costs at most the plain smoother's cost per row (k = 1), so
 the front end at most doubles the time of smoothing the levelled run. Both are O(N) passes of a few
 hundred flops per row in compiled code (Fusion's update, a 4-state filter and smoother per axis); a
-levelling that costs more than that is paying for something else (a per-sample Python loop). The rows and the goal are printed
-for N = 1e5 and 1e6. Usage: python bench/run_all.py bench/speed/bench_level_scale.py [--sizes 1e5 1e6]
-[--repeat 3]
+levelling that costs more than that is paying for something else (a per-sample Python loop). The rows
+and the goal are printed for N = 1e5 and 1e6.
+Usage: python bench/run_all.py bench/speed/bench_level_scale.py [--sizes 1e5 1e6] [--repeat 3]
 """
 
 from __future__ import annotations
