@@ -20,8 +20,9 @@ meets them alike.
 
 Data: a hand-moved unit at 200 Hz (models/foot_imu.toml, calibrated in m/s^2, its two axes made three
 and ranges.max_run_s raised to hold the run): 4 s moves along a level path with 2 s pauses, the
-attitude swaying in roll and pitch by up to 20 degrees and turning about the vertical, the gyroscope the
-attitude's exact rate and the accelerometer the level acceleration plus gravity rotated into the body.
+attitude swaying in roll and pitch by up to 20 degrees and turning about the vertical while it moves and
+still at the pauses, the gyroscope the attitude's exact rate and the accelerometer the level
+acceleration plus gravity rotated into the body.
 The cost of the attitude filter does not depend on the motion; the data only keep it on its normal path
 (no start-up, no overrange).
 
@@ -58,9 +59,10 @@ def imu_record(n: int):
     a = np.where(moving, np.sin(2 * np.pi * phase / 4.0), 0.0)
     heading = 0.7 * np.floor(t / 6.0)  # each move in another direction
     level = np.stack([a * np.cos(heading), a * np.sin(heading), 0.3 * a], axis=1)
-    roll = np.deg2rad(20.0) * np.sin(2 * np.pi * 0.11 * t)
-    pitch = np.deg2rad(15.0) * np.sin(2 * np.pi * 0.07 * t + 1.0)
-    yaw = 0.2 * np.sin(2 * np.pi * 0.03 * t)
+    tau = np.cumsum(moving) / RATE  # the attitude moves only while the unit does: still at the pauses
+    roll = np.deg2rad(20.0) * np.sin(2 * np.pi * 0.11 * tau)
+    pitch = np.deg2rad(15.0) * np.sin(2 * np.pi * 0.07 * tau + 1.0)
+    yaw = 0.2 * np.sin(2 * np.pi * 0.03 * tau)
     att = Rotation.from_euler("ZYX", np.stack([yaw, pitch, roll], axis=1))  # body -> level
     acc = att.inv().apply(level + [0.0, 0.0, G])
     steps = (att[:-1].inv() * att[1:]).as_rotvec() * RATE  # body-frame rate over each step
