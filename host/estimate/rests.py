@@ -83,7 +83,7 @@ and beside the numpy filter it replaced).
 
 from __future__ import annotations
 
-import functools
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -181,13 +181,14 @@ class _Kinematic:
 
     def side(self, level: np.ndarray, n: int, leak: float, drift: float, scale: float, sigma: float, sign: float):
         """(v, sd, r, sd of r) per axis, rows of one (4, n_axes) array, and the sum over the axes of
-        v^2 / (sd^2 + sigma^2): a side's test (:func:`_side`) of a candidate of n samples at ``level``."""
+        v^2 / (sd^2 + sigma^2) read as one axis' chi-square (:func:`chi2_equivalent`): a side's test
+        (:func:`_side`) of a candidate of n samples at ``level``."""
         out = np.empty((4, self.n_axes))
         lv = self.ffi.from_buffer("double[]", np.ascontiguousarray(level, dtype=np.float64))
         total = self.lib.acn_kin_side(self.n_axes, self.s, self._A, self.k, self.aid_k, self.Ts, lv, self._R, n,
                                       leak, drift, scale, sigma * sigma, sign,
                                       self.ffi.from_buffer("double[]", out))  # fmt: skip
-        return out, total
+        return out, self.lib.acn_chi2_equivalent(total, self.n_axes)
 
     def jump(self, level: np.ndarray) -> float:
         """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
@@ -253,36 +254,25 @@ def _side(
     # aid); and errors in proportion to the acceleration itself (a scale factor, a level frame turned during a
     # stride: on a real foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the
     # last aid. The position is widened likewise, by the velocity's widening over D (acn_kin_side).
-    out, total = kin.side(c.level, c.stop - c.start, LEAK, drift, scale, sigma, sign)
     # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
     # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
-    return Side(out[0], out[1], chi2_equivalent(total, kin.n_axes), source, fix, out[2], out[3])
-
-
-@functools.cache
-def _special():
-    """scipy's erfcinv and gammaincc, imported on first use (not at the package's import)."""
-    from scipy.special import erfcinv, gammaincc
-
-    return erfcinv, gammaincc
+    out, chi2 = kin.side(c.level, c.stop - c.start, LEAK, drift, scale, sigma, sign)
+    return Side(out[0], out[1], chi2, source, fix, out[2], out[3])
 
 
 def chi2_equivalent(x: float, dof: int) -> float:
     """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom: the test of
-    every axis at once, read on the scale of one axis (9: three sd)."""
-    if dof == 1 or not math.isfinite(x):
-        return x
-    erfcinv, gammaincc = _special()
-    tail = float(gammaincc(dof / 2.0, x / 2.0))
-    if tail <= 0.0:
-        return math.inf
-    return float(2.0 * erfcinv(tail) ** 2)
+    every axis at once, read on the scale of one axis (9: three sd). The kernel's (acn_chi2_equivalent): the tail
+    in closed form and its inverse by a few Newton-like steps, scipy's gammaincc and erfcinv to ~1e-11, at a
+    quarter of their calls' cost (a decision reads a few thousand)."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    return _lib().lib.acn_chi2_equivalent(float(x), int(dof))
 
 
-def _median(values: list[float]) -> float:
-    """The median of a short list (np.median's own: the mean of the two middle values of an even count), without
-    numpy's per-call overhead."""
-    s = sorted(values)
+def _median(s: list[float]) -> float:
+    """The median of a short sorted list (np.median's own: the mean of the two middle values of an even count),
+    without numpy's per-call overhead (the forward filter keeps the proven rests' stillness sorted)."""
     h = len(s) // 2
     return s[h] if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
 
@@ -342,6 +332,7 @@ class _Decider:
         self.veto: dict[int, str] = {}  # withdrawn: why
         self._sources: dict[tuple[str, int], str] = {}  # the words naming each aid (_source)
         self._bwd = None  # the backward events as the kernel reads them (backward)
+        self._pk = None  # the record's sums and an output as the peak's kernel reads them (_peak)
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
 
     def _fresh(self, reverse: bool) -> _Kinematic:
@@ -498,12 +489,12 @@ class _Decider:
             what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
             return "moving", f"{what} {_speed(s)} before it (from {s.source})"
         if self._tells(s):
-            st["proven"].append(c.still)
+            bisect.insort(st["proven"], c.still)
             return "consistent", f"v {_speed(s)} before it (from {s.source})"
         stand = _Lazy(self._peak, c, st["last_stand"]) if st["last_stand"] is not None else moved
         reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
         if reason == "still start":
-            st["proven"].append(c.still)
+            bisect.insort(st["proven"], c.still)
         return reason, evidence
 
     def _jump(self, kin: _Kinematic, c: Candidate) -> float:
@@ -515,16 +506,18 @@ class _Decider:
         from the rest's to the candidate's, and the peak with the rest's level kept; the peaks on at most
         PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest), by the
         kernel (acn_kin_peak)."""
-        from accelnav.estimate.fastsmooth import _lib
+        if self._pk is None or self._pk[0] is not self.V:  # the kernel's pointers, made once per decision
+            from accelnav.estimate.fastsmooth import _lib
 
-        mod = _lib()
-        ffi, buf = mod.ffi, mod.ffi.from_buffer  # row vectors, contiguous (from_buffer refuses any other)
+            mod = _lib()
+            self._pk = (self.V, mod.lib, mod.ffi.from_buffer, mod.ffi.from_buffer("double[]", self.V),
+                        mod.ffi.new("double[3]"))  # fmt: skip
+        _, lib, buf, V, out = self._pk  # row vectors, contiguous (from_buffer refuses any other)
         e, u0, e0 = last_end
         a = max(c.start, e)
         num = min(a - e + 1, PEAK_POINTS)
-        out = ffi.new("double[3]")
-        mod.lib.acn_kin_peak(len(u0), buf("double[]", self.V), self.Ts, e, a, num, buf("double[]", u0),
-                             buf("double[]", e0), buf("double[]", c.level), out)  # fmt: skip
+        lib.acn_kin_peak(len(u0), V, self.Ts, e, a, num, buf("double[]", u0), buf("double[]", e0),
+                               buf("double[]", c.level), out)  # fmt: skip
         # the square root taken of the peak's square (it keeps the order)
         return math.sqrt(out[0]), math.sqrt(out[1]), math.sqrt(out[2])
 
@@ -594,13 +587,14 @@ class _Decider:
             p.sigma, buf("double[]", sides), buf("double[]", total), buf("long[]", aid), buf("unsigned char[]", fix),
         )  # fmt: skip
         out: list[Side | None] = []
+        chi2 = kin.lib.acn_chi2_equivalent
         for s, tot, e, f in zip(sides, total.tolist(), aid.tolist(), fix.tolist(), strict=True):  # each tested once
             if e < 0:
                 source = "no aid"
             else:
                 _, _, kind, pay = self.bwd_events[e]
                 source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
-            out.append(Side(s[0], s[1], chi2_equivalent(tot, n_axes), source, bool(f), s[2], s[3]))
+            out.append(Side(s[0], s[1], chi2(tot, n_axes), source, bool(f), s[2], s[3]))
         assert n == len(self.x)
         return out
 

@@ -2,18 +2,32 @@
 its cost): the kinematic filter in numpy on (n_axes, 3, 3) arrays per event, the functions that read it as
 arrays (a side's test, the level's jump), each candidate's statistics in numpy span by span, the backward
 filter event by event in Python, np.median and np.linalg.norm, every candidate's peak speed computed at once, a
-new filter per pass. Kept as the reference the rewrites must decide exactly like:
+new filter per pass, the chi-square's tail by scipy. Kept as the reference the rewrites must decide exactly like:
 tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`), and bench/speed/bench_rest_decision.py
 times both."""
 
 from __future__ import annotations
 
 import contextlib
+import math
 
 import numpy as np
 
 from accelnav.estimate import rests
-from accelnav.estimate.rests import DIFFUSE, LEAK, LIKE, MOTION, PEAK_POINTS, UNLIKE, Candidate, Side, chi2_equivalent
+from accelnav.estimate.rests import DIFFUSE, LEAK, LIKE, MOTION, PEAK_POINTS, UNLIKE, Candidate, Side
+
+
+def chi2_equivalent(x: float, dof: int) -> float:
+    """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom, by scipy's
+    gammaincc and erfcinv, as it was before the kernel's closed form."""
+    if dof == 1 or not math.isfinite(x):
+        return x
+    from scipy.special import erfcinv, gammaincc
+
+    tail = float(gammaincc(dof / 2.0, x / 2.0))
+    if tail <= 0.0:
+        return math.inf
+    return float(2.0 * erfcinv(tail) ** 2)
 
 
 def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
@@ -260,6 +274,7 @@ SWAPS = {
     (rests, "_norms"): reference_norms,
     (rests, "_Lazy"): reference_eager,
     (rests, "_candidates"): reference_candidates,
+    (rests, "chi2_equivalent"): chi2_equivalent,
     (rests._Decider, "_jump"): reference_jump,
     (rests._Decider, "_judge"): reference_judge,
     (rests._Decider, "_peak"): reference_peak,
