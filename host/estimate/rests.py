@@ -76,9 +76,11 @@ every pass, and one that disagrees leaves.
 What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per event,
 in C beside the smoother's kernels (acn_kin_* in csrc/fastsmooth.c: the filter's steps, a candidate's statistics
 and peak speed, the whole backward run), the verdicts and their words in Python: per sample it grows with the
-density of candidates and with the passes and the hypotheses' replays, not with the record's length. Every pass
-runs both filters from the start again (bench/speed/bench_rest_decision.py measures it beside the plain smoother
-and beside the numpy filter it replaced).
+density of candidates and with the passes and the hypotheses' replays, not with the record's length. A pass
+after the first runs the forward filter again only from the first candidate whose veto is new (it resumes at a
+mark the last pass left before that candidate's test: before it, nothing differs), the backward filter from the
+start (bench/speed/bench_rest_decision.py measures it beside the plain smoother and beside the numpy filter it
+replaced).
 """
 
 from __future__ import annotations
@@ -333,6 +335,11 @@ class _Decider:
         self._sources: dict[tuple[str, int], str] = {}  # the words naming each aid (_source)
         self._bwd = None  # the backward events as the kernel reads them (backward)
         self._pk = None  # the record's sums and an output as the peak's kernel reads them (_peak)
+        # the forward filter's marks, {candidate: (event index of its test, filter, state)} made at each test with no
+        # hypothesis open, its last pass's verdicts and the vetoes that pass saw (forward)
+        self._marks: dict[int, tuple] = {}
+        self._found: list[_Found] = []
+        self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
 
     def _fresh(self, reverse: bool) -> _Kinematic:
@@ -369,14 +376,10 @@ class _Decider:
         (a walk's stances: each closes the velocity of the stride before it); when one of them is found
         moving, or cannot be told, the filter goes back to before the hypothesis and goes on without it."""
         p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
-        kin = self._fresh(False)
-        self.V = kin.V
-        found = [_Found() for _ in cands]
-        st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
+        e, kin, st, found = self._resume()
         pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations)
         tried: set[int] = set()  # hypotheses already refuted in this pass
         ev = self.fwd_events
-        e = 0
         while e < len(ev) or pending is not None:
             if e == len(ev):  # the record ended before the hypothesis was borne out: on without it
                 h, e_h, (kin, st), _, _ = pending
@@ -396,6 +399,9 @@ class _Decider:
             i = pay
             c = cands[i]
             acc = st["acc"]
+            if kind == "test" and pending is None:  # a mark: the filter and its state as they stand before the test
+                # (no hypothesis open: nothing after it goes back before it), the last visit's kept
+                self._marks[i] = (e - 1, kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])})
             if kind == "end":
                 if i in acc:
                     kin.rest(k, p.sigma)
@@ -459,6 +465,28 @@ class _Decider:
                 acc.add(i)
                 kin.rest(k, p.sigma)
         return found, st["acc"]
+
+    def _resume(self) -> tuple[int, _Kinematic, dict, list[_Found]]:
+        """Where the forward filter starts: (event index, filter, state, verdicts). A pass after the first decides as
+        the last did up to the first candidate whose veto is new: it resumes at the last mark before it, the
+        verdicts before the mark kept; the first pass, at the record's start."""
+        kin = self._fresh(False)
+        self.V = kin.V
+        found = [_Found() for _ in self.cands]
+        st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
+        e = 0
+        first = min((i for i, why in self.veto.items() if self._seen_veto.get(i) != why), default=len(self.cands))
+        resume = max((i for i in self._marks if i <= first), default=None)
+        self._seen_veto = dict(self.veto)
+        if resume is None:
+            self._marks = {}
+        else:
+            e, saved_kin, saved_st = self._marks[resume]
+            kin, st = saved_kin.copy(), {**saved_st, "acc": set(saved_st["acc"]), "proven": list(saved_st["proven"])}
+            found[:resume] = [_Found(f.reason, f.evidence, f.before) for f in self._found[:resume]]
+            self._marks = {i: m for i, m in self._marks.items() if i <= resume}
+        self._found = found
+        return e, kin, st, found
 
     def _judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
         """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""

@@ -2,7 +2,8 @@
 its cost): the kinematic filter in numpy on (n_axes, 3, 3) arrays per event, the functions that read it as
 arrays (a side's test, the level's jump), each candidate's statistics in numpy span by span, the backward
 filter event by event in Python, np.median and np.linalg.norm, every candidate's peak speed computed at once, a
-new filter per pass, the chi-square's tail by scipy. Kept as the reference the rewrites must decide exactly like:
+new filter per pass, each pass's forward filter from the start, the chi-square's tail by scipy. Kept as the
+reference the rewrites must decide exactly like:
 tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`), and bench/speed/bench_rest_decision.py
 times both."""
 
@@ -224,6 +225,15 @@ def reference_norms(s: Side | None) -> tuple[float, float]:
     return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
 
 
+_FORWARD = rests._Decider.forward
+
+
+def reference_forward(self):
+    """Every pass's forward filter from the record's start, as the old passes ran it (no marks to resume at)."""
+    self._marks, self._seen_veto = {}, {}
+    return _FORWARD(self)
+
+
 def reference_candidates(x, ok, R, spans) -> list[Candidate]:
     """Each candidate's statistics in numpy, span by span, as decide() made them."""
     n_axes = x.shape[1]
@@ -280,6 +290,7 @@ SWAPS = {
     (rests._Decider, "_peak"): reference_peak,
     (rests._Decider, "_fresh"): reference_fresh,
     (rests._Decider, "backward"): reference_backward,
+    (rests._Decider, "forward"): reference_forward,
 }
 
 
