@@ -105,6 +105,15 @@ class Side:
     fix: bool  # a fix informs it
     r: np.ndarray | None = None  # (n_axes,) m, position at the candidate's edge given its level
     r_sd: np.ndarray | None = None  # (n_axes,) m, its sd
+    norms: tuple[float, float] | None = None  # (|v|, rms of sd) as the kernel summed them; None: from v and sd
+
+
+def _made(v, sd, chi2, source, fix, r, r_sd, norms) -> Side:
+    """A Side without the frozen dataclass' per-field checks (its __init__ sets each field through
+    object.__setattr__; a forward pass makes hundreds): the same fields, set at once."""
+    s = object.__new__(Side)
+    s.__dict__.update(v=v, sd=sd, chi2=chi2, source=source, fix=fix, r=r, r_sd=r_sd, norms=norms)
+    return s
 
 
 @dataclass(frozen=True)
@@ -148,6 +157,7 @@ class _Kinematic:
                                            0.0, 0.0, DIFFUSE[1], 0.0, DIFFUSE[2])])  # fmt: skip
         self.k = 0
         self.aid_k = 0  # sample of the last aid
+        self._res = self.ffi.new("double[4]")  # the figures of a test (test); its copies share it, read at once
 
     @property
     def X(self) -> np.ndarray:
@@ -181,24 +191,22 @@ class _Kinematic:
     def fix(self, k: int, j: int, z: float, var: float) -> None:
         self._aid(k, j, 0, float(z), float(var))
 
-    def side(self, level: np.ndarray, n: int, leak: float, drift: float, scale: float, sigma: float, sign: float):
-        """(v, sd, r, sd of r) per axis, rows of one (4, n_axes) array, and the sum over the axes of
-        v^2 / (sd^2 + sigma^2) read as one axis' chi-square (:func:`chi2_equivalent`): a side's test
-        (:func:`_side`) of a candidate of n samples at ``level``."""
+    def test(self, k: int, level, n: int, leak: float, drift: float, scale: float, sigma: float):
+        """Propagate to sample k, then a forward side's test (:meth:`_Decider._test`) of a candidate of n samples at
+        ``level`` (a pointer the kernel reads): (v, sd, r, sd of r) per axis, rows of one (4, n_axes) array; then
+        the sum over the axes of v^2 / (sd^2 + sigma^2) read as one axis' chi-square (:func:`chi2_equivalent`), the
+        level's jump (|level - the filter's level| over the axes beyond 3 sd of the filter's; 0 while it has
+        none), |v| over the axes and the rms of the sds: one kernel call (acn_kin_test)."""
         out = np.empty((4, self.n_axes))
-        lv = self.ffi.from_buffer("double[]", np.ascontiguousarray(level, dtype=np.float64))
-        total = self.lib.acn_kin_side(self.n_axes, self.s, self._A, self.k, self.aid_k, self.Ts, lv, self._R, n,
-                                      leak, drift, scale, sigma * sigma, sign,
-                                      self.ffi.from_buffer("double[]", out))  # fmt: skip
-        return out, self.lib.acn_chi2_equivalent(total, self.n_axes)
-
-    def jump(self, level: np.ndarray) -> float:
-        """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
-        lv = self.ffi.from_buffer("double[]", np.ascontiguousarray(level, dtype=np.float64))
-        return self.lib.acn_kin_jump(self.n_axes, self.s, lv)
+        res = self._res
+        self.lib.acn_kin_test(self.n_axes, self.s, self._V, self._W, self._A, self.k, k, self.Ts, self.q, self._qv,
+                              self.aid_k, level, self._R, n, leak, drift, scale, sigma * sigma,
+                              self.ffi.from_buffer("double[]", out), res)  # fmt: skip
+        self.k = max(self.k, k)
+        return out, res[0], res[1], (res[2], res[3])
 
 
-LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
+LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _Decider._test)
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
@@ -239,29 +247,6 @@ class _Found:
     after: Side | None = None
 
 
-def _side(
-    kin: _Kinematic,
-    c: Candidate,
-    R: np.ndarray,
-    sigma: float,
-    drift: float,
-    scale: float,
-    source: str,
-    fix: bool,
-    sign: float,
-) -> Side:
-    # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
-    # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd); and a mean
-    # acceleration error no level explains (a leak changing within the move): drift D (D the time since the last
-    # aid); and errors in proportion to the acceleration itself (a scale factor, a level frame turned during a
-    # stride: on a real foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the
-    # last aid. The position is widened likewise, by the velocity's widening over D (acn_kin_side).
-    # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
-    # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
-    out, chi2 = kin.side(c.level, c.stop - c.start, LEAK, drift, scale, sigma, sign)
-    return Side(out[0], out[1], chi2, source, fix, out[2], out[3])
-
-
 def chi2_equivalent(x: float, dof: int) -> float:
     """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom: the test of
     every axis at once, read on the scale of one axis (9: three sd). The kernel's (acn_chi2_equivalent): the tail
@@ -288,6 +273,8 @@ def _norms(s: Side | None) -> tuple[float, float]:
     """(|v| over the axes, rms of its sd) of one side; NaN without one."""
     if s is None:
         return math.nan, math.nan
+    if s.norms is not None:
+        return s.norms
     v, sd = s.v.tolist(), s.sd.tolist()
     return math.sqrt(sum(x * x for x in v)), math.sqrt(sum(x * x for x in sd) / len(sd))
 
@@ -335,6 +322,7 @@ class _Decider:
         self._sources: dict[tuple[str, int], str] = {}  # the words naming each aid (_source)
         self._bwd = None  # the backward events as the kernel reads them (backward)
         self._pk = None  # the record's sums and an output as the peak's kernel reads them (_peak)
+        self._lv = None  # each candidate's level as the kernels read it (_test)
         # the forward filter's marks, {candidate: (event index of its test, filter, state)} made at each test with no
         # hypothesis open, its last pass's verdicts and the vetoes that pass saw (forward)
         self._marks: dict[int, tuple] = {}
@@ -411,9 +399,7 @@ class _Decider:
                         st["last_stand"] = st["last_end"]
                     st["source"] = self._source("rest", i)
                 continue
-            kin.to(k)
-            jump = self._jump(kin, c)
-            s = _side(kin, c, self.R, p.sigma, p.drift, p.scale, st["source"], st["fix"], 1.0)
+            jump, s = self._test(kin, k, i, st)
             f = found[i]
             f.before, f.evidence = s, ""
             moved = _Lazy(self._peak, c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
@@ -525,9 +511,23 @@ class _Decider:
             bisect.insort(st["proven"], c.still)
         return reason, evidence
 
-    def _jump(self, kin: _Kinematic, c: Candidate) -> float:
-        """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
-        return kin.jump(c.level)
+    def _test(self, kin: _Kinematic, k: int, i: int, st: dict) -> tuple[float, Side]:
+        """The forward filter taken to candidate i's first sample k: the level's jump there and its side.
+
+        The level's path between the last aid and here is taken as linear; a leak that changed by L since then may
+        have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd); and a mean acceleration
+        error no level explains (a leak changing within the move): drift D (D the time since the last aid); and
+        errors in proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a
+        real foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid. The
+        position is widened likewise, by the velocity's widening over D. Over the axes: the sum, as the
+        chi-square of one axis with the same tail (chi2_equivalent): a move along one axis is not diluted by the
+        others' rest, and three quiet axes do not add up to a move (acn_kin_test, acn_kin_side)."""
+        p, c = self.p, self.cands[i]
+        if self._lv is None:  # each candidate's level as the kernel reads it, made once per decision
+            self._lv = [kin.ffi.from_buffer("double[]", np.ascontiguousarray(d.level, dtype=np.float64))
+                        for d in self.cands]  # fmt: skip
+        out, chi2, jump, norms = kin.test(k, self._lv[i], c.stop - c.start, LEAK, p.drift, p.scale, p.sigma)
+        return jump, _made(out[0], out[1], chi2, st["source"], st["fix"], out[2], out[3], norms)
 
     def _peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
         """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear

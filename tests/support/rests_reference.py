@@ -152,6 +152,15 @@ def reference_jump(self, kin: ReferenceKinematic, c: Candidate) -> float:
     return float(np.linalg.norm(np.maximum(np.abs(c.level - kin.X[:, 2]) - 3.0 * sd, 0.0)))
 
 
+def reference_test(self, kin: ReferenceKinematic, k: int, i: int, st: dict) -> tuple[float, Side]:
+    """The forward filter taken to candidate i's first sample k: the level's jump there and its side, as the old
+    forward filter made them (its own lines, gathered here)."""
+    p, c = self.p, self.cands[i]
+    kin.to(k)
+    jump = reference_jump(self, kin, c)
+    return jump, reference_side(kin, c, self.R, p.sigma, p.drift, p.scale, st["source"], st["fix"], 1.0)
+
+
 def reference_median(values: list[float]) -> float:
     return float(np.median(values))
 
@@ -267,7 +276,7 @@ def reference_backward(self, acc: set[int]) -> list[Side | None]:
                 source = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
             continue
         kin.to(k)
-        out[i] = rests._side(kin, c, self.R, p.sigma, p.drift, p.scale, source, fix_seen, -1.0)
+        out[i] = reference_side(kin, c, self.R, p.sigma, p.drift, p.scale, source, fix_seen, -1.0)
         if i in acc:
             kin.rest(k, p.sigma)
     assert n == len(self.x)
@@ -278,14 +287,13 @@ def reference_backward(self, acc: set[int]) -> list[Side | None]:
 # did before its rewrite
 SWAPS = {
     (rests, "_Kinematic"): ReferenceKinematic,
-    (rests, "_side"): reference_side,
     (rests, "_median"): reference_median,
     (rests, "_speed"): reference_speed,
     (rests, "_norms"): reference_norms,
     (rests, "_Lazy"): reference_eager,
     (rests, "_candidates"): reference_candidates,
     (rests, "chi2_equivalent"): chi2_equivalent,
-    (rests._Decider, "_jump"): reference_jump,
+    (rests._Decider, "_test"): reference_test,
     (rests._Decider, "_judge"): reference_judge,
     (rests._Decider, "_peak"): reference_peak,
     (rests._Decider, "_fresh"): reference_fresh,

@@ -1672,6 +1672,27 @@ double acn_kin_jump(int n_axes, const double *s, const double *level)
     return sqrt(sum);
 }
 
+void acn_kin_test(int n_axes, double *s, const double *V, const double *W, const double *A, long k0,
+                  long k, double Ts, double q, const double *qv, long aid_k, const double *level,
+                  const double *R, long len, double leak, double drift, double scale, double sigma2,
+                  double *out, double *res)
+{
+    acn_kin_to(n_axes, s, V, W, k0, k, Ts, q, qv);
+    long now = k > k0 ? k : k0;
+    res[1] = acn_kin_jump(n_axes, s, level);
+    double total = acn_kin_side(n_axes, s, A, now, aid_k, Ts, level, R, len, leak, drift, scale,
+                                sigma2, 1.0, out);
+    res[0] = acn_chi2_equivalent(total, n_axes);
+    /* rests.py's _norms, its sums in the same order: |v| and the rms of the sds */
+    double v2 = 0.0, sd2 = 0.0;
+    for (int j = 0; j < n_axes; j++) {
+        v2 += out[j] * out[j];
+        sd2 += out[n_axes + j] * out[n_axes + j];
+    }
+    res[2] = sqrt(v2);
+    res[3] = sqrt(sd2 / (double)n_axes);
+}
+
 void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, long n_spans,
                    const long *start, const long *stop, const double *R, double *level,
                    double *still)
