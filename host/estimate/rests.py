@@ -551,7 +551,7 @@ class _Decider:
 
     def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
         p, Ts = self.p, self.Ts
-        sd = float(np.max(s.sd))
+        sd = float(s.sd.max())  # np.max's value (a NaN kept) without its wrapper
         dur = (c.stop - c.start) * Ts
         cannot = f"cannot tell: sd of v {sd:.2g} m/s before it ({'fixes too far' if fix_seen else 'no fix'})"
         if last_end is None:
@@ -622,7 +622,7 @@ class _Decider:
             else:
                 _, _, kind, pay = self.bwd_events[e]
                 source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
-            out.append(Side(s[0], s[1], chi2(tot, n_axes), source, bool(f), s[2], s[3]))
+            out.append(_made(s[0], s[1], chi2(tot, n_axes), source, bool(f), s[2], s[3], None))
         assert n == len(self.x)
         return out
 
@@ -702,13 +702,18 @@ class _Decider:
         them "moving" (a stand: ``start_s`` long, still at the sensor's noise)."""
         p, out = self.p, {}
         order = sorted(acc)
+        stops = [self.cands[j].stop for j in order]
+        monotone = all(a <= b for a, b in zip(stops, stops[1:], strict=False))  # the detector's spans: in order
         for i, f in enumerate(found):
             c = self.cands[i]
             if f.reason != "moving" or i in self.veto or f.before is None or not f.before.source.startswith("the rest"):
                 continue
             if (c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k:
                 continue
-            before = [j for j in order if self.cands[j].stop <= c.start]
+            if monotone:  # the accepted rests that end before it: a prefix of the order
+                before = order[: bisect.bisect_right(stops, c.start)]
+            else:
+                before = [j for j in order if self.cands[j].stop <= c.start]
             if before and (self.cands[before[-1]].stop - self.cands[before[-1]].start) * self.Ts < p.start_s:
                 out.setdefault(before[-1], i)
         return out

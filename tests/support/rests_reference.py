@@ -2,8 +2,8 @@
 its cost): the kinematic filter in numpy on (n_axes, 3, 3) arrays per event, the functions that read it as
 arrays (a side's test, the level's jump), each candidate's statistics in numpy span by span, the backward
 filter event by event in Python, np.median and np.linalg.norm, every candidate's peak speed computed at once, a
-new filter per pass, each pass's forward filter from the start, the chi-square's tail by scipy. Kept as the
-reference the rewrites must decide exactly like:
+new filter per pass, each pass's forward filter from the start, the rests before a stand listed whole, the
+chi-square's tail by scipy. Kept as the reference the rewrites must decide exactly like:
 tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`), and bench/speed/bench_rest_decision.py
 times both."""
 
@@ -234,6 +234,22 @@ def reference_norms(s: Side | None) -> tuple[float, float]:
     return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
 
 
+def reference_short_before_stands(self, found, acc: set[int]) -> dict[int, int]:
+    """The short rests before stands, the rests before each stand listed whole, as it was."""
+    p, out = self.p, {}
+    order = sorted(acc)
+    for i, f in enumerate(found):
+        c = self.cands[i]
+        if f.reason != "moving" or i in self.veto or f.before is None or not f.before.source.startswith("the rest"):
+            continue
+        if (c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k:
+            continue
+        before = [j for j in order if self.cands[j].stop <= c.start]
+        if before and (self.cands[before[-1]].stop - self.cands[before[-1]].start) * self.Ts < p.start_s:
+            out.setdefault(before[-1], i)
+    return out
+
+
 _FORWARD = rests._Decider.forward
 
 
@@ -299,6 +315,7 @@ SWAPS = {
     (rests._Decider, "_fresh"): reference_fresh,
     (rests._Decider, "backward"): reference_backward,
     (rests._Decider, "forward"): reference_forward,
+    (rests._Decider, "_short_before_stands"): reference_short_before_stands,
 }
 
 
