@@ -250,8 +250,8 @@ class _Found:
 def chi2_equivalent(x: float, dof: int) -> float:
     """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom: the test of
     every axis at once, read on the scale of one axis (9: three sd). The kernel's (acn_chi2_equivalent): the tail
-    in closed form and its inverse by a few Newton-like steps, scipy's gammaincc and erfcinv to ~1e-11, at a
-    quarter of their calls' cost (a decision reads a few thousand)."""
+    in closed form and its inverse by Halley's steps on erfc: scipy's gammaincc and erfcinv to 1e-11 (1e-10 where the
+    tail is subnormal), at a quarter of their calls' cost (a decision reads a few thousand)."""
     from accelnav.estimate.fastsmooth import _lib
 
     return _lib().lib.acn_chi2_equivalent(float(x), int(dof))
