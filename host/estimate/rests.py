@@ -214,6 +214,7 @@ CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consi
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
 STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
+MARK_EVERY = 4  # a pass after the first resumes at a mark left at every this many candidates' tests (forward)
 
 ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
 REFUSE_REASONS = ("moving", "level jumped", "cannot tell", "no deceleration")
@@ -387,8 +388,9 @@ class _Decider:
             i = pay
             c = cands[i]
             acc = st["acc"]
-            if kind == "test" and pending is None:  # a mark: the filter and its state as they stand before the test
-                # (no hypothesis open: nothing after it goes back before it), the last visit's kept
+            if kind == "test" and pending is None and i % MARK_EVERY == 0:
+                # a mark: the filter and its state as they stand before the test (no hypothesis open: nothing after
+                # it goes back before it), the last visit's kept
                 self._marks[i] = (e - 1, kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])})
             if kind == "end":
                 if i in acc:
