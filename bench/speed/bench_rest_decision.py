@@ -11,7 +11,8 @@ Beside it, from the same run, the decision as it was before its rewrites for spe
 numpy on (n_axes, 3, 3) arrays, each candidate's statistics and peak speed in numpy, every peak computed, the
 backward filter event by event in Python, a new filter per pass: tests/support/rests_reference.py, swapped in):
 the baseline (tests/estimate/test_rest_decision_same.py shows both decide alike). Where the time goes now: the
-forward filter's verdicts and their words, in Python (accelnav.estimate.rests).
+forward filter's loop, its verdicts, hypotheses and their words, in Python (accelnav.estimate.rests); its side
+tests, chi-squares and the backward run are C.
 
 Usage: python bench/run_all.py bench/speed/bench_rest_decision.py [--repeat 3], or from bench/speed:
   PYTHONPATH=../common python bench_rest_decision.py

@@ -74,8 +74,10 @@ then is withdrawn. No accepted rest vouches for another: each is re-tested again
 every pass, and one that disagrees leaves.
 
 What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per event,
-in C beside the smoother's kernels (acn_kin_* in csrc/fastsmooth.c: the filter's steps, a candidate's statistics
-and peak speed, the whole backward run), the verdicts and their words in Python: per sample it grows with the
+in C beside the smoother's kernels (acn_kin_* in csrc/fastsmooth.c: the filter's steps, a forward side's whole
+test in one call, the chi-square's tail, a candidate's statistics and peak speed, the whole backward run), the
+forward filter's loop, its verdicts, hypotheses and words in Python (most of the cost left: a few tens of
+microseconds per candidate test, against the plain smoother's fraction of one per sample): per sample it grows with the
 density of candidates and with the passes and the hypotheses' replays, not with the record's length. A pass
 after the first runs the forward filter again only from the first candidate whose veto is new (it resumes at a
 mark the last pass left before that candidate's test: before it, nothing differs), the backward filter from the
