@@ -714,13 +714,19 @@ class _Decider:
                 continue
             if (c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k:
                 continue
-            if monotone:  # the accepted rests that end before it: a prefix of the order
-                before = order[: bisect.bisect_right(stops, c.start)]
-            else:
-                before = [j for j in order if self.cands[j].stop <= c.start]
-            if before and (self.cands[before[-1]].stop - self.cands[before[-1]].start) * self.Ts < p.start_s:
-                out.setdefault(before[-1], i)
+            j = self._last_before(order, stops if monotone else None, c.start)
+            if j is not None and (self.cands[j].stop - self.cands[j].start) * self.Ts < p.start_s:
+                out.setdefault(j, i)
         return out
+
+    def _last_before(self, order: list[int], stops: list[int] | None, k: int) -> int | None:
+        """The last of the accepted rests ``order`` (sorted) that ends by sample k; None: none does. ``stops``: their
+        ends when sorted (the detector's spans come in time order), bisected; None: each looked at."""
+        if stops is not None:
+            n = bisect.bisect_right(stops, k)
+            return order[n - 1] if n else None
+        before = [j for j in order if self.cands[j].stop <= k]
+        return before[-1] if before else None
 
     def _support(self, c: Candidate, other: Side | None, reason: str) -> int:
         """1 when a candidate has evidence besides the rest it disagrees with: a side that tells and agrees,

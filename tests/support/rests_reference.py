@@ -234,20 +234,10 @@ def reference_norms(s: Side | None) -> tuple[float, float]:
     return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
 
 
-def reference_short_before_stands(self, found, acc: set[int]) -> dict[int, int]:
-    """The short rests before stands, the rests before each stand listed whole, as it was."""
-    p, out = self.p, {}
-    order = sorted(acc)
-    for i, f in enumerate(found):
-        c = self.cands[i]
-        if f.reason != "moving" or i in self.veto or f.before is None or not f.before.source.startswith("the rest"):
-            continue
-        if (c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k:
-            continue
-        before = [j for j in order if self.cands[j].stop <= c.start]
-        if before and (self.cands[before[-1]].stop - self.cands[before[-1]].start) * self.Ts < p.start_s:
-            out.setdefault(before[-1], i)
-    return out
+def reference_last_before(self, order: list[int], stops, k: int):
+    """The last accepted rest that ends by sample k, the rests before it listed whole, as it was."""
+    before = [j for j in order if self.cands[j].stop <= k]
+    return before[-1] if before else None
 
 
 _FORWARD = rests._Decider.forward
@@ -315,7 +305,7 @@ SWAPS = {
     (rests._Decider, "_fresh"): reference_fresh,
     (rests._Decider, "backward"): reference_backward,
     (rests._Decider, "forward"): reference_forward,
-    (rests._Decider, "_short_before_stands"): reference_short_before_stands,
+    (rests._Decider, "_last_before"): reference_last_before,
 }
 
 
