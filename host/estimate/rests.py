@@ -257,6 +257,8 @@ def chi2_equivalent(x: float, dof: int) -> float:
     tail is subnormal), at a quarter of their calls' cost (a decision reads a few thousand)."""
     from accelnav.estimate.fastsmooth import _lib
 
+    if int(dof) < 1:
+        raise ValueError(f"dof: {dof}; a chi-square has one degree of freedom at least")
     return _lib().lib.acn_chi2_equivalent(float(x), int(dof))
 
 

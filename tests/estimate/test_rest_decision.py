@@ -149,6 +149,8 @@ def test_chi2_equivalent_is_scipys_tail_read_on_one_axis(dof):
     # 1e-11 where the tail is a normal double, 1e-10 where it is subnormal (x > 1417 at 2 dof): within the 1e-9 the
     # decision's statistics are held to (test_rest_decision_same); equal infs and NaNs pass, nothing else does
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-15)
+    with pytest.raises(ValueError, match="degree of freedom"):
+        chi2_equivalent(1.0, 0)
 
 
 def test_what_the_kernels_would_read_outside_the_record_is_refused(default_model):
