@@ -39,9 +39,12 @@ DATA = (
     "accelnav/codegen/csrc/acn_runtime.h",  # the fixed-point runtime the generator copies into every filter
     "accelnav/link/csrc/acnwire.c",
     "accelnav/link/csrc/acnwire.h",
+    "accelnav/data/csrc/csvnum.c",
+    "accelnav/data/csrc/csvnum.h",
 )
 # the C kernels compiled into the wheel (setup.py's cffi_modules): used with no C compiler on the machine
-KERNELS = ("accelnav.estimate._fastsmooth", "accelnav.codegen._riccati", "accelnav.link._acnwire")
+KERNELS = ("accelnav.estimate._fastsmooth", "accelnav.codegen._riccati", "accelnav.link._acnwire",
+           "accelnav.data._csvnum")  # fmt: skip
 
 
 def test_wheel_has_one_top_level_name_and_its_data(wheel):
