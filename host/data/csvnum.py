@@ -64,9 +64,12 @@ def csv_lib():
         return _built[0]
 
 
-def parse(mod, buf: bytes, delim: str, ncols: int, use: list[int]) -> np.ndarray | Refused:
+def parse(
+    mod, buf: bytes, delim: str, ncols: int, use: list[int], out: np.ndarray | None = None
+) -> np.ndarray | Refused:
     """The numbers of fields ``use`` of every line of ``buf`` (whole lines split by ``\\n``, the last
-    one without), (lines, len(use)) float64, through the kernel module ``mod``; or where it stopped."""
+    one without), (lines, len(use)) float64 (into ``out`` if given), through the kernel module ``mod``;
+    or where it stopped."""
     if len(delim) != 1 or not 0 < ord(delim) < 128 or delim == "\n":
         return Refused(-1, -1, WHY[ARGS])
     if ncols < 1 or not use or any(not 0 <= j < ncols for j in use) or len(set(use)) != len(use):
@@ -74,7 +77,10 @@ def parse(mod, buf: bytes, delim: str, ncols: int, use: list[int]) -> np.ndarray
     slot = np.full(ncols, -1, dtype=np.int64)
     slot[use] = np.arange(len(use))
     nrows = buf.count(b"\n") + 1
-    out = np.empty((nrows, len(use)), dtype=np.float64)
+    if out is None:
+        out = np.empty((nrows, len(use)), dtype=np.float64)
+    elif out.shape != (nrows, len(use)) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        return Refused(-1, -1, WHY[ARGS])
     bad = np.empty(2, dtype=np.int64)
     ffi = mod.ffi
     rc = mod.lib.acsv_parse(
@@ -100,5 +106,8 @@ def piece(text: str, delim: str, ncols: int, use: list[int]) -> np.ndarray | Non
     mod = csv_lib()
     if mod is None:
         return None
-    got = parse(mod, text.encode("utf-8", "surrogatepass"), delim, ncols, use)
+    # the table before the text's bytes: it takes the place the last piece's bytes left, and these, freed
+    # on top of the heap, leave fewer holes (whole reader at 1e7 rows: peak RSS 830 -> 790 MB; numpy's 770-820)
+    out = np.empty((text.count("\n") + 1, len(use)), dtype=np.float64)
+    got = parse(mod, text.encode("utf-8", "surrogatepass"), delim, ncols, use, out)
     return None if isinstance(got, Refused) else got
