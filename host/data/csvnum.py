@@ -76,11 +76,11 @@ def parse(
         return Refused(-1, -1, WHY[ARGS])
     slot = np.full(ncols, -1, dtype=np.int64)
     slot[use] = np.arange(len(use))
-    nrows = buf.count(b"\n") + 1
     if out is None:
-        out = np.empty((nrows, len(use)), dtype=np.float64)
-    elif out.shape != (nrows, len(use)) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        out = np.empty((buf.count(b"\n") + 1, len(use)), dtype=np.float64)
+    elif out.ndim != 2 or out.shape[1] != len(use) or out.dtype != np.float64 or not out.flags.c_contiguous:
         return Refused(-1, -1, WHY[ARGS])
+    nrows = out.shape[0]  # the C refuses a buffer of another number of lines (ROWS)
     bad = np.empty(2, dtype=np.int64)
     ffi = mod.ffi
     rc = mod.lib.acsv_parse(

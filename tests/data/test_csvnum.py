@@ -125,8 +125,11 @@ def test_a_field_not_wanted_is_not_read():
 def test_arguments_that_disagree_are_refused_before_any_read():
     for delim, ncols, use in ((",", 2, [2]), (",", 2, []), (",", 2, [0, 0]), ("\n", 2, [0]), (",;", 2, [0])):
         assert _c("1,2", delim, ncols, use) == csvnum.Refused(-1, -1, "arguments disagree")
-    for out in (np.empty((2, 2)), np.empty((1, 2), np.float32), np.empty((1, 4))[:, ::2]):  # not (1 line, 2 fields)
+    for out in (np.empty((1, 3)), np.empty((1, 2), np.float32), np.empty((1, 4))[:, ::2]):  # not 2 float64 fields
         assert csvnum.parse(MOD, b"1,2", ",", 2, [0, 1], out) == csvnum.Refused(-1, -1, "arguments disagree")
+    for rows in (0, 2):  # a table for another number of lines: the C counts them
+        got = csvnum.parse(MOD, b"1,2", ",", 2, [0, 1], np.empty((rows, 2)))
+        assert got == csvnum.Refused(min(rows, 1), -1, "another number of lines")  # where it stopped
     ffi, lib = MOD.ffi, MOD.lib
     bad = np.empty(2, np.int64)
     out = np.empty(2)

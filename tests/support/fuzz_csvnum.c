@@ -1,10 +1,10 @@
 /*
- * libFuzzer harness of the CSV reader's C parser (host/data/csrc/csvnum.c), built with ASan and UBSan
- * by tests/data/test_csvnum_fuzz.py. The input's first three bytes choose the delimiter, the number of
- * fields and which are wanted; the rest is the piece, copied into a buffer of exactly its length (and
- * the output sized exactly), so a read or write past either is a crash. Every number the parser
- * accepts is checked against strtod on that field alone (NUL-terminated, the decimal comma made a
- * point, the C locale): the exact fast path must give strtod's correctly rounded bits.
+ * libFuzzer harness of the CSV reader's C parser (host/data/csrc/csvnum.c), built with ASan and
+ * UBSan by tests/data/test_csvnum_fuzz.py. The input's first three bytes choose the delimiter, the
+ * number of fields and which are wanted; the rest is the piece, copied into a buffer of exactly its
+ * length (and the output sized exactly), so a read or write past either is a crash. Every number
+ * the parser accepts is checked against strtod on that field alone (NUL-terminated, the decimal
+ * comma made a point, the C locale): the exact fast path must give strtod's correctly rounded bits.
  */
 #include "csvnum.h"
 #include <stdint.h>
@@ -68,7 +68,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 char text[512], *end;
                 double want;
                 if (!field_bounds(buf, len, delim, r, col_of[j], &a, &b) || b - a >= sizeof text)
-                    abort(); /* an accepted field the harness cannot find, or longer than accepted */
+                    abort(); /* an accepted field the harness cannot find, or longer than accepted
+                              */
                 for (i = a; i < b; i++)
                     text[i - a] = (delim != ',' && buf[i] == ',') ? '.' : (char)buf[i];
                 text[b - a] = '\0';

@@ -28,8 +28,8 @@ static int is_blank(uint8_t c)
     return c == ' ' || c == '\t';
 }
 
-/* The number in p[0..n) into *v; 0 when the field is outside the grammar (csvnum.h). */
-static int parse_number(const uint8_t *p, int64_t n, int comma_is_point, double *v)
+/* The number in p[0..n) into *v; 0 when the field is outside the grammar (csvnum.h). Any number. */
+static int parse_any(const uint8_t *p, int64_t n, int comma_is_point, double *v)
 {
     int64_t i = 0, sig = 0, digits = 0, nfrac = 0, k = 0, num, mend;
     int neg = 0, inexact = 0;
@@ -108,6 +108,49 @@ static int parse_number(const uint8_t *p, int64_t n, int comma_is_point, double 
     k += snprintf(scratch + k, sizeof scratch - (size_t)k, "e%ld", written - (long)nfrac);
     *v = strtod(scratch, &end);
     return end == scratch + k;
+}
+
+/* parse_any's result for a field, faster for the common one: no exponent, at most 19 significant
+ * digits, a value below 2^53 with at most 22 decimals (m / 10^nfrac: one correctly rounded
+ * division) */
+static int parse_number(const uint8_t *p, int64_t n, int comma_is_point, double *v)
+{
+    int64_t i = 0, s, digits, nfrac = 0, sig;
+    uint64_t m = 0;
+    int neg = 0;
+    double d;
+
+    while (i < n && is_blank(p[i]))
+        i++;
+    while (n > i && is_blank(p[n - 1]))
+        n--;
+    if (i < n && (p[i] == '+' || p[i] == '-'))
+        neg = p[i++] == '-';
+    s = i;
+    while (i < n && p[i] == '0')
+        i++; /* leading zeros */
+    for (sig = i; i < n && is_digit(p[i]); i++)
+        m = m * 10u + (uint64_t)(p[i] - '0'); /* wraps past 19 digits: then refused below */
+    sig = i - sig;
+    digits = i - s;
+    if (i < n && (p[i] == '.' || (comma_is_point && p[i] == ','))) {
+        int64_t f = ++i;
+        if (m == 0)
+            while (i < n && p[i] == '0')
+                i++; /* zeros before the first significant digit */
+        for (s = i; i < n && is_digit(p[i]); i++)
+            m = m * 10u + (uint64_t)(p[i] - '0');
+        sig += i - s;
+        nfrac = i - f;
+        digits += nfrac;
+    }
+    if (i != n || digits == 0 || sig > MAX_DIGITS || m > (UINT64_C(1) << 53) || nfrac > 22)
+        return parse_any(p, n, comma_is_point, v); /* an exponent, many digits, or not a number */
+    d = (double)m;                                 /* exact: m <= 2^53 */
+    if (nfrac)
+        d /= pow10_exact[nfrac];
+    *v = neg ? -d : d;
+    return 1;
 }
 
 int acsv_parse(const uint8_t *buf, int64_t len, int delim, int comma_is_point, int64_t ncols,
