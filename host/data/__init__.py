@@ -2,6 +2,7 @@
 
 # its modules, which users import by name (``from accelnav.data import inputs``)
 __all__ = [
+    "csvnum",
     "inputs",
     "logs",
     "recording",
