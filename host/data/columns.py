@@ -127,3 +127,62 @@ def pick_time(cols: list[str]) -> str | None:
     times = [c for c in cols if is_time(c)]
     said = [c for c in times if time_unit_of(c) is not None]
     return (said or times or [None])[0]
+
+
+# --- IMU columns: gyroscope, orientation quaternion, gravity (accelnav.data.imu) -----------------------------------
+# A rate says its unit as an acceleration does, by a suffix or in brackets (gx_rad_s, gyro_x_dps, "Gyroscope x
+# (rad/s)", wx[deg/s]); the unit words below. A quaternion's parts are named by letter (qw, quat_x, "q x"):
+# numbered parts (q0..q3) do not say which one is w and are refused by the IMU reader.
+RATE_UNITS = {"rad/s": 1.0, "deg/s": 3.141592653589793 / 180.0}
+_RATE_ALIASES = {"rad/s": "rad/s", "rad_s": "rad/s", "rads": "rad/s", "rps": "rad/s",
+                 "deg/s": "deg/s", "deg_s": "deg/s", "dps": "deg/s", "°/s": "deg/s"}  # fmt: skip
+_RATE_SUFFIX = re.compile(r"(?:_|\s*\[\s*|\s*\(\s*)(rad/s|rad_s|rads|rps|deg/s|deg_s|dps|°/s)\s*[\])]?$", re.IGNORECASE)
+_GYRO_NAME = re.compile(
+    r"^(?:gyro(?:scope)?|gyr|rot(?:ation)?[ _-]?rate|angular[ _-]?(?:rate|velocity)|omega|w|g)[ _-]?(?P<axis>[xyz])$",
+    re.IGNORECASE,
+)
+_QUAT_NAME = re.compile(r"^(?:q|quat(?:ernion)?|orientation[ _-]?q)[ _-]?(?P<part>[wxyz0-3])$", re.IGNORECASE)
+_GRAVITY_NAME = re.compile(r"^(?:gravity|grav)[ _-]?(?P<axis>[xyz])$", re.IGNORECASE)
+_LINEAR = re.compile(r"^(?:linear|lin|user)[ _-]?acc", re.IGNORECASE)
+
+
+def _bare(col: str) -> str:
+    """A name without its unit (an acceleration's or a rate's), for the IMU rules."""
+    return _RATE_SUFFIX.sub("", _UNIT_SUFFIX.sub("", col)).strip()
+
+
+def rate_unit_of(col: str) -> str | None:
+    """The unit a rate column's name says (``gx_dps``: deg/s; ``Gyroscope x (rad/s)``: rad/s), else None."""
+    m = _RATE_SUFFIX.search(col)
+    return _RATE_ALIASES[m.group(1).lower()] if m else None
+
+
+def gyro_axis_of(col: str) -> str | None:
+    """The axis a gyroscope column holds (``gx``, ``gyro_y_dps``, ``wz``, ``Gyroscope x (rad/s)``), else None."""
+    m = _GYRO_NAME.match(_bare(col))
+    return m.group("axis").lower() if m else None
+
+
+def quat_part_of(col: str) -> str | None:
+    """The part a quaternion column holds (``qw``: w, ``quat_x``: x; ``q0``: 0, which the reader refuses), else None."""
+    m = _QUAT_NAME.match(_bare(col))
+    return m.group("part").lower() if m else None
+
+
+def gravity_axis_of(col: str) -> str | None:
+    """The axis of a gravity-vector column (``grav_x``, ``gravity_y_m_s2``, ``Gravity z (m/s^2)``), else None."""
+    m = _GRAVITY_NAME.match(_bare(col))
+    return m.group("axis").lower() if m else None
+
+
+def is_linear(col: str) -> bool:
+    """An acceleration column named as gravity removed (phyphox ``Linear Acceleration x``, ``lin_acc_x``,
+    ``user_acc_x``): an app's linear acceleration, in the device's frame."""
+    return bool(_LINEAR.match(col.strip()))
+
+
+def linear_axis_of(col: str) -> str | None:
+    """The axis of a linear-acceleration column (gravity removed: :func:`is_linear`), else None."""
+    if not is_linear(col):
+        return None
+    return axis_of(re.sub(r"^(?:linear|lin|user)[ _-]?", "", col.strip(), flags=re.IGNORECASE))

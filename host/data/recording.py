@@ -125,6 +125,10 @@ def read_recording(
     is the nominal rate the clock is checked against (and overridden by, see :func:`_check_time`). The
     clock is read as :func:`_check_time` says; ``notes`` of the result tell the caller how, one line each.
     """
+    from accelnav.data import imu
+
+    if imu.sniff(path):  # a phone or IMU log (body frame, gravity in): levelled first, one reader for every command
+        return _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes)
     path = check_input(path)  # a regular file: a FIFO or /dev/zero is refused before it is read
     try:
         with path.open("rb") as fh:
@@ -148,6 +152,23 @@ def read_recording(
         gz = head.startswith(b"\x1f\x8b")
         rec = _read_csv(path, axes, unit, rate_hz, time_column, gz, default_unit, model_axes)
     return _check_time(_with_time_unit(rec, time_unit, path), rate_hz, allow_gaps)
+
+
+def _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes) -> Recording:
+    """An IMU log as a recording of its level frame (accelnav.data.imu.level_recording): axes x, y, z in m/s^2,
+    gravity removed, on the accelerometer's clock; the notes say how it was read and levelled."""
+    from accelnav.data.imu import level_recording
+
+    for flag, value in (("time-column", time_column), ("time-unit", time_unit)):
+        if value is not None:
+            raise UserError(f"--{flag}: {path} is an IMU log, whose format says its clocks")
+    if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
+    t, acc, names, notes = level_recording(path, axes=axes, unit=unit, model_axes=model_axes)
+    cols = tuple(f"{a}_level" for a in names)
+    rec = _finish(str(path), t, acc, tuple(names), cols, ("m/s^2",) * len(names), None, None)
+    rec = replace(rec, time_unit="s", time_column="t", notes=tuple(notes), unit_from=("name",) * len(names))
+    return _check_time(rec, rate_hz, allow_gaps)
 
 
 # --------------------------------------------------------------------------
