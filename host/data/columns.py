@@ -37,6 +37,9 @@ UNIT_ALIASES = {
 _UNIT_WORDS = r"g|mg|m_s2|mps2|ms2|m/s\^?2|m/s²|counts|count|lsb"
 _UNIT_SUFFIX = re.compile(rf"(?:_|\s*\[\s*|\s*\(\s*)({_UNIT_WORDS})\s*[\])]?$", re.IGNORECASE)
 
+MIN_CLOCK_HZ = 5.0  # a time column in seconds slower than this is no accelerometer's: a ms clock, say
+EPOCH_S = (946684800.0, 4102444800.0)  # 2000-01-01 .. 2100-01-01 UTC: a clock there is a calendar's, not uptime
+MAX_CLOCK_HZ = 1e5  # no accelerometer this package reads samples faster
 TIME_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 TIME_UNITS = ("s", "ms", "us", "ns")
 _TIME_UNIT_WORDS = {"s": "s", "sec": "s", "ms": "ms", "us": "us", "µs": "us", "μs": "us", "ns": "ns"}
@@ -186,3 +189,21 @@ def linear_axis_of(col: str) -> str | None:
     if not is_linear(col):
         return None
     return axis_of(re.sub(r"^(?:linear|lin|user)[ _-]?", "", col.strip(), flags=re.IGNORECASE))
+
+
+def epoch_unit(src: str, col: str, t0: float, step: float) -> tuple[str | None, str | None]:
+    """(unit, a note saying it) of a time column whose name and flags say no unit, when its numbers are a
+    calendar's (Unix time in s, ms, us or ns: the first stamp between 2000 and 2100) and that unit gives a
+    rate an accelerometer has; (None, None) when the numbers cannot tell (relative times: uptime, elapsed)."""
+    import datetime
+
+    for unit in TIME_UNITS:
+        scale = TIME_SCALE[unit]
+        if EPOCH_S[0] <= t0 * scale <= EPOCH_S[1] and MIN_CLOCK_HZ <= 1.0 / (step * scale) <= MAX_CLOCK_HZ:
+            when = datetime.datetime.fromtimestamp(t0 * scale, datetime.UTC).strftime("%Y-%m-%d %H:%M:%S")
+            words = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}[unit]
+            return unit, (
+                f"{src}: time column {col!r} read as Unix time in {words} (first stamp {when} UTC, "
+                f"{1.0 / (step * scale):.6g} Hz); give --time-unit if it is not"
+            )
+    return None, None

@@ -106,10 +106,8 @@ def imu_from_frame(frame, *, source: str = "<arrays>", unit: str | None = None) 
     if tcol is None:
         raise UserError(f"{source}: no time column (t, time, time_ms, ...); columns: {_names(names)}")
     raw = cols[tcol].reshape(-1)
-    if raw.dtype.kind in "Mm":
-        from accelnav.data.recording import _seconds
-
-        t = _seconds(raw)[0]
+    if raw.dtype.kind in "Mm":  # datetime64 (since the epoch) or timedelta64: seconds
+        t = raw.astype("datetime64[ns]" if raw.dtype.kind == "M" else "timedelta64[ns]").view(np.int64) * 1e-9
     else:
         t = _floats(source, tcol, raw) * cr.TIME_SCALE[cr.time_unit_of(tcol) or "s"]
     table = {c: _floats(source, c, cols[c].reshape(-1)) for c in names if c != tcol and cols[c].dtype.kind in "biuf"}
@@ -544,10 +542,8 @@ def _generic(src: str, files: dict[str, str], unit) -> ImuRecord:
     data = _csv(src, text, [tcol, *wanted])
     tu = cr.time_unit_of(tcol)
     t = data.pop(tcol)
-    if tu is None:
-        from accelnav.data.recording import epoch_unit
-
-        tu = epoch_unit(src, tcol, float(t[0]), float(np.median(np.diff(t))))[0] or "s"
+    if tu is None:  # Unix time by its numbers (the clock rule of accelnav.data.columns), else seconds
+        tu = cr.epoch_unit(src, tcol, float(t[0]), float(np.median(np.diff(t))))[0] or "s"
     return _generic_columns(src, t * cr.TIME_SCALE[tu], tcol, data, unit)
 
 
@@ -747,3 +743,15 @@ def _mul(a, b):
         w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
         w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
     )
+
+
+def write_level_csv(path, result, *, inputs=()) -> Path:
+    """Write a :class:`accelnav.level.LevelResult` as the recording ``smooth`` reads: ``t, x_accel, y_accel,
+    z_accel`` (s; m/s^2 in the level frame, gravity removed), by the output rule (accelnav.fileio)."""
+    from accelnav.fileio import atomic_output
+
+    table = np.column_stack([result.t, result.acc])
+    with atomic_output(path, "w", "--out", inputs=inputs) as fh:
+        fh.write("t,x_accel,y_accel,z_accel\n")
+        np.savetxt(fh, table, delimiter=",", fmt=["%.9f", "%.7g", "%.7g", "%.7g"])
+    return Path(path)

@@ -36,7 +36,18 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.columns import TIME_SCALE, TIME_UNITS, UNITS, axis_of, parse_unit, pick_time, time_unit_of, unit_of
+from accelnav.data.columns import (  # the clock's rules (MIN_CLOCK_HZ, epoch_unit) live with the names'
+    MIN_CLOCK_HZ,
+    TIME_SCALE,
+    TIME_UNITS,
+    UNITS,
+    axis_of,
+    epoch_unit,
+    parse_unit,
+    pick_time,
+    time_unit_of,
+    unit_of,
+)
 from accelnav.errors import UserError
 from accelnav.fileio import EXCERPT_CHARS, check_input, excerpt, input_limit, load_npz
 from accelnav.model.load import G0, ModelError, loads_model
@@ -45,9 +56,6 @@ from accelnav.progress import Progress
 GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap
 SNAP_TOL = 0.01  # a clock within 1 % of a whole number of Hz (>= 10 Hz) is taken as that nominal rate
 MAX_LAG_PERIODS = 5.0  # stamps that jitter more than half a period may still be read by order, within this
-MIN_CLOCK_HZ = 5.0  # a time column in seconds slower than this is no accelerometer's: a ms clock, say
-EPOCH_S = (946684800.0, 4102444800.0)  # 2000-01-01 .. 2100-01-01 UTC: a clock there is a calendar's, not uptime
-MAX_CLOCK_HZ = 1e5  # no accelerometer this package reads samples faster
 # read in the claimed unit, this share of samples beyond the sensor's range (by BEYOND: a clipped sensor sits at
 # its rail, it never reads past it) while another unit leaves under 1 % there: the unit is wrong
 RAIL_SHARE = 0.05
@@ -724,24 +732,6 @@ def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> R
     if regular and not jumps.any():  # a regular clock the rate agrees with: its stamps as they are
         return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]), notes=notes)
     return replace(rec, t=t[0] + k / f, rate_hz=float(f), notes=notes)
-
-
-def epoch_unit(src: str, col: str, t0: float, step: float) -> tuple[str | None, str | None]:
-    """(unit, a note saying it) of a time column whose name and flags say no unit, when its numbers are a
-    calendar's (Unix time in s, ms, us or ns: the first stamp between 2000 and 2100) and that unit gives a
-    rate an accelerometer has; (None, None) when the numbers cannot tell (relative times: uptime, elapsed)."""
-    import datetime
-
-    for unit in TIME_UNITS:
-        scale = TIME_SCALE[unit]
-        if EPOCH_S[0] <= t0 * scale <= EPOCH_S[1] and MIN_CLOCK_HZ <= 1.0 / (step * scale) <= MAX_CLOCK_HZ:
-            when = datetime.datetime.fromtimestamp(t0 * scale, datetime.UTC).strftime("%Y-%m-%d %H:%M:%S")
-            words = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}[unit]
-            return unit, (
-                f"{src}: time column {col!r} read as Unix time in {words} (first stamp {when} UTC, "
-                f"{1.0 / (step * scale):.6g} Hz); give --time-unit if it is not"
-            )
-    return None, None
 
 
 def _order_place(t: np.ndarray, f: float):
