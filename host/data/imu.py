@@ -183,14 +183,13 @@ _PHYPHOX_FILES = ("accelerometer.csv", "linear accelerometer.csv", "gyroscope.cs
 
 
 def _folder_kind(files: dict[str, str]) -> str | None:
-    acc = files.get("accelerometer.csv") or files.get("totalacceleration.csv")
-    if acc is None:
-        return None
-    head = _header_line(acc)
-    cols = [c.lower() for c in head[1]] if head else []
-    if "seconds_elapsed" in cols or "time" in cols and {"x", "y", "z"} <= set(cols):
+    """Sensor Logger when any of its files has its clock (``seconds_elapsed``); phyphox when a sensor file has
+    a time column that says its unit (``Time (s)``); else None."""
+    heads = {name: _header_line(text) for name, text in files.items()}
+    cols = {name: [c.lower() for c in h[1]] for name, h in heads.items() if h}
+    if any("seconds_elapsed" in c for c in cols.values()):
         return "sensor-logger"
-    if any(cr.time_unit_of(c) for c in cols) and "gyroscope.csv" in files:
+    if any(cr.time_unit_of(c) for name in _PHYPHOX_FILES for c in cols.get(name, [])):
         return "phyphox"
     return None
 

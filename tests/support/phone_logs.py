@@ -5,7 +5,7 @@ The truth: 3 s still, a 6 s minimum-jerk move of MOVE metres in the world's x an
 TURN about the vertical, 3 s still; tilted TILT about its own x axis throughout, so its x axis stays
 horizontal and its heading at the start (0) makes the level frame the world frame. The sensors: specific
 force (gravity in, Android's sign) and body rates with a little seeded noise, the gyroscope on a clock 3 ms
-behind the accelerometer's and the orientation at half the rate, as loggers give them.
+behind the accelerometer's and the orientation at half the rate 1 ms ahead, as loggers give them.
 """
 
 from __future__ import annotations
@@ -113,7 +113,7 @@ def phone(seed: int = 1, duration: float = 2 * STILL_S + MOVE_S) -> Phone:
     tg = t - 0.003
     _, gyro = _attitude(tg)
     gyro = gyro + rng.normal(0, 0.002, gyro.shape)
-    tq = t[::2] + 0.001  # half the rate
+    tq = t[::2] - 0.001  # half the rate
     quat, _ = _attitude(tq)
     return Phone(t, f, grav, tg, gyro, tq, quat, a_level, r_level)
 
@@ -231,6 +231,15 @@ def generic_csv(path: Path, p: Phone, quat: bool = False) -> Path:
         cols += list(q.T)
     path.write_text(_csv(head, cols, "%.10g"))
     return path
+
+
+def truth_at(t: np.ndarray):
+    """(specific force without noise, body rates, attitude) at times ``t`` [s from the start]."""
+    s, _, dds = _profile(t)
+    (_, ax), (_, ay) = _shake(t, SHAKE_HZ[0]), _shake(t, SHAKE_HZ[1])
+    q, w = _attitude(t)
+    a = np.column_stack([MOVE[0] * dds + ax, MOVE[1] * dds + ay, np.full(t.size, G)])
+    return rotate(_conj(q), a), w, q
 
 
 def displacement(t: np.ndarray, a: np.ndarray) -> np.ndarray:
