@@ -129,7 +129,7 @@ def _csv(header: list[str], cols: list[np.ndarray], fmt: str = "%.9g") -> str:
 def _zip(path: Path, files: dict[str, str]) -> Path:
     with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
         for name, text in files.items():
-            z.writestr(name, text)
+            z.writestr(zipfile.ZipInfo(name, (2025, 11, 28, 12, 0, 0)), text, zipfile.ZIP_DEFLATED)  # the same bytes
     return path
 
 
