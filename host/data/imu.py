@@ -123,26 +123,32 @@ def sniff(path: str | os.PathLike[str]) -> str | None:
         return None
 
 
-def level_recording(path, *, axes=None, unit=None, model_axes=None):
-    """(t, level-frame acceleration (N, k), axis names, notes) of an IMU log, levelled by
-    :func:`accelnav.level.level_frame`: the axes ``axes`` name (x, y, z), else the model's when they are
-    level axes (x, y and z), else all three; the notes end with the levelling's summary."""
+def level_recording(path, *, axes=None, unit=None, model_axes=None, level: bool = True):
+    """(t, acceleration (N, k), axis names, notes) of an IMU log: levelled by :func:`accelnav.level.level_frame`
+    (x, y horizontal, z up, gravity removed; the notes end with its summary), or with ``level`` False its
+    accelerometer in the device's own axes as recorded (gravity in). The axes: those ``axes`` name (x, y, z),
+    else the model's when they are among them, else all three."""
     imu = read_imu(path, unit=unit)
-    res = level_frame(imu)
     names = ["x", "y", "z"]
     if axes:
         bad = [a for a in axes if a not in names]
         if bad:
-            raise UserError(f"--axis {bad[0]}: {path} is an IMU log, levelled into axes x, y, z; choose among them")
+            raise UserError(f"--axis {bad[0]}: {path} is an IMU log, read into axes x, y, z; choose among them")
         chosen = list(axes)
     elif model_axes and set(model_axes) <= set(names):
         chosen = list(model_axes)
     else:
         chosen = names
+    pick = [names.index(a) for a in chosen]
+    if not level:
+        said = (f"{imu.source}: axes {', '.join(chosen)} in the device's own frame, gravity in, not levelled: at rest "
+                "an attitude filter aligns gravity with what the accelerometer reads, so levelling would hide each "
+                "axis' bias in the attitude")  # fmt: skip
+        return imu.t, imu.acc[:, pick], chosen, imu.notes + (said,)
+    res = level_frame(imu)
     said = f"{imu.source}: levelled ({res.summary()}); axes {', '.join(chosen)} of the level frame (x, y horizontal, "
     said += "x along the device's first heading, z up), gravity removed"
-    notes = imu.notes + res.notes + (said,)
-    return res.t, res.acc[:, [names.index(a) for a in chosen]], chosen, notes
+    return res.t, res.acc[:, pick], chosen, imu.notes + res.notes + (said,)
 
 
 # --- finding the files ----------------------------------------------------------------------------------------------

@@ -121,8 +121,13 @@ def read_recording(
     time_unit: str | None = None,
     default_unit: str | None = None,
     model_axes: list[str] | None = None,
+    level: bool = True,
 ) -> Recording:
     """Read ``path`` (CSV, gzip CSV or NPZ); see the module notes. Checks the format, not the content.
+
+    A phone or IMU log (:func:`accelnav.data.imu.sniff`) is levelled (:func:`accelnav.data.imu.level_recording`);
+    with ``level`` False (a stationary recording for the bias fit) its accelerometer is read in the device's own
+    axes: a logger's export through the IMU reader, a generic IMU CSV as any CSV (its acceleration columns).
 
     ``unit`` is the unit of every acceleration column; without it each column's name says its unit,
     and ``default_unit`` (a calibrated model's) serves a column whose name does not. ``model_axes``: the
@@ -135,8 +140,9 @@ def read_recording(
     """
     from accelnav.data import imu
 
-    if imu.sniff(path):  # a phone or IMU log (body frame, gravity in): levelled first, one reader for every command
-        return _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes)
+    kind = imu.sniff(path)  # a phone or IMU log (body frame, gravity in): levelled first, one reader for every command
+    if kind is not None and (level or kind != "imu-csv"):
+        return _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes, level)
     path = check_input(path)  # a regular file: a FIFO or /dev/zero is refused before it is read
     try:
         with path.open("rb") as fh:
@@ -162,9 +168,10 @@ def read_recording(
     return _check_time(_with_time_unit(rec, time_unit, path), rate_hz, allow_gaps)
 
 
-def _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes) -> Recording:
+def _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes, level=True) -> Recording:
     """An IMU log as a recording of its level frame (accelnav.data.imu.level_recording): axes x, y, z in m/s^2,
-    gravity removed, on the accelerometer's clock; the notes say how it was read and levelled."""
+    gravity removed (or the device's axes, with ``level`` False), on the accelerometer's clock; the notes say
+    how it was read and levelled."""
     from accelnav.data.imu import level_recording
 
     for flag, value in (("time-column", time_column), ("time-unit", time_unit)):
@@ -172,8 +179,8 @@ def _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, mod
             raise UserError(f"--{flag}: {path} is an IMU log, whose format says its clocks")
     if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
         raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
-    t, acc, names, notes = level_recording(path, axes=axes, unit=unit, model_axes=model_axes)
-    cols = tuple(f"{a}_level" for a in names)
+    t, acc, names, notes = level_recording(path, axes=axes, unit=unit, model_axes=model_axes, level=level)
+    cols = tuple(f"{a}_{'level' if level else 'device'}" for a in names)
     rec = _finish(str(path), t, acc, tuple(names), cols, ("m/s^2",) * len(names), None, None)
     rec = replace(rec, time_unit="s", time_column="t", notes=tuple(notes), unit_from=("name",) * len(names))
     return _check_time(rec, rate_hz, allow_gaps)

@@ -118,6 +118,17 @@ def phone(seed: int = 1, duration: float = 2 * STILL_S + MOVE_S) -> Phone:
     return Phone(t, f, grav, tg, gyro, tq, quat, a_level, r_level)
 
 
+def still(duration: float, seed: int = 2) -> Phone:
+    """The phone lying still, tilted TILT, for ``duration`` s (a stationary recording for the bias fit)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(round(duration * RATE)) + 1) / RATE
+    q = _about(0, np.full(t.size, TILT))
+    grav = rotate(_conj(q), np.tile([0.0, 0.0, G], (t.size, 1)))
+    zero = np.zeros((t.size, 3))
+    f = grav + rng.normal(0, 0.02, zero.shape)
+    return Phone(t, f, grav, t - 0.003, rng.normal(0, 0.002, zero.shape), t[::2] - 0.001, q[::2], zero, zero)
+
+
 def _csv(header: list[str], cols: list[np.ndarray], fmt: str = "%.9g") -> str:
     """``cols`` under ``header``; an integer column (Sensor Logger's nanoseconds) written whole."""
     lines = [",".join(header)]
