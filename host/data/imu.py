@@ -65,6 +65,14 @@ SENSOR_LOGGER_FILES = ("totalacceleration.csv", "accelerometer.csv", "gravity.cs
                        "orientation.csv", "metadata.csv")  # fmt: skip
 
 
+GRAVITY_BAND = (0.7, 1.3)  # a generic CSV's accelerometer carries gravity: its median |a| within this many g
+
+
+class NotLevelled(UserError):
+    """A generic CSV whose acceleration carries no gravity: not a body-frame accelerometer to level (the
+    recording reader reads it as level axes instead, saying so)."""
+
+
 @dataclass(frozen=True)
 class _Series:
     """One sensor as its file gave it: time [s] and values (N, k), named for messages."""
@@ -578,6 +586,12 @@ def _generic_columns(src: str, t: np.ndarray, tcol: str, table: dict[str, np.nda
         )
     else:
         raise UserError(f"{src}: no acceleration columns (ax, acc_x_g, ...); columns: {_names(names)}")
+    mag = float(np.median(np.linalg.norm(acc, axis=1)))
+    if not GRAVITY_BAND[0] * G <= mag <= GRAVITY_BAND[1] * G:
+        raise NotLevelled(
+            f"{src}: its acceleration holds no gravity (median |a| {mag:.3g} m/s^2, 1 g is {G:.5g}): not a body-frame "
+            "accelerometer to level"
+        )
     gx = _xyz(src, names, cr.gyro_axis_of)
     gyro = None if gx is None else np.column_stack([table[c] for c in gx]) * _rate_scale(src, gx)
     parts = {cr.quat_part_of(c): c for c in names if cr.quat_part_of(c)}

@@ -141,8 +141,16 @@ def read_recording(
     from accelnav.data import imu
 
     kind = imu.sniff(path)  # a phone or IMU log (body frame, gravity in): levelled first, one reader for every command
-    if kind is not None and (level or kind != "imu-csv"):
-        return _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes, level)
+    # a generic IMU CSV is read as plain columns for the bias fit, and when --axis names its own columns
+    plain = kind == "imu-csv" and (not level or bool(axes) and not set(axes) <= {"x", "y", "z"})
+    said = ()
+    if kind is not None and not plain:
+        try:
+            return _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes, level)
+        except imu.NotLevelled as exc:
+            if kind != "imu-csv":
+                raise
+            said = (f"{exc}: read as level axes, not levelled",)
     path = check_input(path)  # a regular file: a FIFO or /dev/zero is refused before it is read
     try:
         with path.open("rb") as fh:
@@ -165,7 +173,8 @@ def read_recording(
     else:
         gz = head.startswith(b"\x1f\x8b")
         rec = _read_csv(path, axes, unit, rate_hz, time_column, gz, default_unit, model_axes)
-    return _check_time(_with_time_unit(rec, time_unit, path), rate_hz, allow_gaps)
+    rec = _check_time(_with_time_unit(rec, time_unit, path), rate_hz, allow_gaps)
+    return replace(rec, notes=said + rec.notes) if said else rec
 
 
 def _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes, level=True) -> Recording:

@@ -227,3 +227,28 @@ def test_plain_recordings_are_not_imu_logs(tmp_path):
     path.write_text("t,acc_x_g,acc_y_g\n0,0,0\n0.01,0,0\n")
     assert sniff(path) is None
     assert sniff(tmp_path) is None  # a folder without a logger's files
+
+
+def test_a_csv_without_gravity_is_read_as_level_axes_and_said(tmp_path):
+    """Gyroscope columns beside acceleration that holds no gravity (already levelled): levelling it again would
+    be nonsense, so the recording reader reads its axes as they are, and says why."""
+    from accelnav.data.recording import read_recording
+
+    path = tmp_path / "levelled.csv"
+    rows = [f"{k / 100:.2f},{0.1 * np.sin(k / 10):.5f},0.0,0.0,0,0,0" for k in range(200)]
+    path.write_text("t,ax_m_s2,ay_m_s2,az_m_s2,gx_dps,gy_dps,gz_dps\n" + "\n".join(rows) + "\n")
+    with pytest.raises(UserError, match="holds no gravity"):
+        read_imu(path)
+    rec = read_recording(path)
+    assert rec.columns == ("ax_m_s2", "ay_m_s2", "az_m_s2")
+    assert any("holds no gravity" in n and "not levelled" in n for n in rec.notes)
+
+
+def test_axis_naming_a_column_of_a_generic_imu_csv_reads_it_plain(phone, tmp_path):
+    from accelnav.data.recording import read_recording
+
+    path = pl.generic_csv(tmp_path / "g.csv", phone)
+    rec = read_recording(path, axes=["ax_g", "ay_g"])
+    assert rec.columns == ("ax_g", "ay_g")
+    levelled = read_recording(path, axes=["x", "y"])
+    assert levelled.columns == ("x_level", "y_level")
