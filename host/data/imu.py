@@ -271,18 +271,20 @@ def _zip_texts(path: Path, header_only: bool) -> dict[str, str]:
                     f"{src}: its sensor files hold {total >> 20} MiB of text; an IMU log is read whole, at most "
                     f"{cap >> 20} MiB (a quarter of ACCELNAV_MAX_INPUT_BYTES): cut the recording"
                 )
+            held = 0
             for info in infos:
                 name = Path(info.filename).name.lower()
                 if name in out:
                     raise UserError(f"{src}: two members named {excerpt(name)}; one recording per zip")
                 with zf.open(info) as fh:
-                    data = fh.read(cap + 1)
+                    data = fh.read(cap + 1 - held)  # what inflates, whatever the headers declared
+                held += 0 if header_only else len(data)
                 where = f"{src}:{excerpt(info.filename, 60)}"
                 if header_only:
                     data = data[:cap]
                     out[name] = data[: data.rfind(b"\n") + 1 or len(data)].decode("utf-8-sig", errors="replace")
                 else:
-                    out[name] = _decode(data, where, cap)
+                    out[name] = _decode(data, where, cap - held + len(data))
     except (zipfile.BadZipFile, zipfile.LargeZipFile, RuntimeError, NotImplementedError, OSError, EOFError) as exc:
         raise UserError(f"{src}: not a readable zip: {excerpt(str(exc))}") from None
     return out
@@ -316,19 +318,24 @@ def _csv(src: str, text: str, wanted: list[str], strings: tuple[str, ...] = ()) 
     if delim != ",":
         body = body.replace(",", ".")  # ';' or tab between fields: a comma is a decimal comma
     out = {}
-    for w in wanted:
-        j = cols.index(w)
-        kind = str if w in strings else np.float64
-        try:
-            a = np.loadtxt(io.StringIO(body), delimiter=delim, usecols=[j], dtype=kind, comments="#", quotechar='"',
-                           ndmin=1)  # fmt: skip
+    numbers = [w for w in wanted if w not in strings]
+    for group, kind in ((numbers, np.float64), ([w for w in wanted if w in strings], str)):
+        if not group:
+            continue
+        use = [cols.index(w) for w in group]
+        try:  # one pass over the text for every numeric column
+            a = np.loadtxt(io.StringIO(body), delimiter=delim, usecols=use, dtype=kind, comments="#", quotechar='"',
+                           ndmin=2)  # fmt: skip
         except ValueError as exc:
             said = str(exc).splitlines()[0] if str(exc) else "not a number"
-            raise UserError(f"{src}: column {excerpt(w, 40)}: {excerpt(said, 120)}") from None
-        if kind is not str and not np.all(np.isfinite(a)):
-            k = int(np.argmax(~np.isfinite(a)))
-            raise UserError(f"{src}: column {excerpt(w, 40)}, data row {k + 1} is not a finite number")
-        out[w] = a
+            m = re.search(r"column (\d+)", said)
+            name = cols[int(m.group(1)) - 1] if m and 0 < int(m.group(1)) <= len(cols) else ", ".join(group)
+            raise UserError(f"{src}: column {excerpt(name, 40)}: {excerpt(said, 120)}") from None
+        out.update({w: a[:, k] for k, w in enumerate(group)})
+    bad = [w for w in numbers if not np.all(np.isfinite(out[w]))]
+    if bad:
+        k = int(np.argmax(~np.isfinite(out[bad[0]])))
+        raise UserError(f"{src}: column {excerpt(bad[0], 40)}, data row {k + 1} is not a finite number")
     n = {len(a) for a in out.values()}
     if len(n) > 1 or not n or min(n) < 2:
         raise UserError(f"{src}: {min(n) if n else 0} data rows; a recording needs many more")
@@ -522,6 +529,11 @@ def _sensorlog(src: str, files: dict[str, str], unit) -> ImuRecord:
     def pick(stamp: str, names: list[str], scale: float, what: str) -> _Series | None:
         if not all(n.lower() in by for n in names):
             return None
+        said = {re.search(r"\(([^)]*)\)$", by[n.lower()]) for n in names}
+        units = {m.group(1) if m else "" for m in said}
+        expected = {"G"} if scale != 1.0 else {"rad/s", "R"}
+        if not units <= expected:
+            raise UserError(f"{src}: {what} columns in {', '.join(sorted(units))}; SensorLog writes {min(expected)}")
         if stamp.lower() not in by:
             raise UserError(f"{src}: {what} columns without their clock {stamp}")
         data = _csv(src, text, [by[stamp.lower()], *[by[n.lower()] for n in names]])

@@ -252,3 +252,10 @@ def test_axis_naming_a_column_of_a_generic_imu_csv_reads_it_plain(phone, tmp_pat
     assert rec.columns == ("ax_g", "ay_g")
     levelled = read_recording(path, axes=["x", "y"])
     assert levelled.columns == ("x_level", "y_level")
+
+
+def test_sensorlog_units_are_the_apps(phone, tmp_path):
+    path = pl.sensorlog_csv(tmp_path / "s.csv", phone)
+    text = path.read_text()
+    path.write_text(text.replace("accelerometerAccelerationX(G)", "accelerometerAccelerationX(m/s^2)", 1))
+    _refused(path, "accelerometer columns in")
