@@ -259,3 +259,13 @@ def test_sensorlog_units_are_the_apps(phone, tmp_path):
     text = path.read_text()
     path.write_text(text.replace("accelerometerAccelerationX(G)", "accelerometerAccelerationX(m/s^2)", 1))
     _refused(path, "accelerometer columns in")
+
+
+def test_phyphox_acceleration_without_g_alone_is_refused(phone, tmp_path):
+    text = pl._csv(['"Time (s)"', '"Linear Acceleration x (m/s^2)"', '"Linear Acceleration y (m/s^2)"',
+                    '"Linear Acceleration z (m/s^2)"'], [phone.t, *(phone.f - phone.grav).T], "%.9E")  # fmt: skip
+    with zipfile.ZipFile(pl.phyphox_zip(tmp_path / "p.zip", phone)) as z:
+        gyro = z.read("Gyroscope.csv").decode()
+    path = _zip(tmp_path / "lin.zip", {"Linear Accelerometer.csv": text, "Gyroscope.csv": gyro})
+    assert sniff(path) == "phyphox"
+    _refused(path, "Acceleration with g")
