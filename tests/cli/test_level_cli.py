@@ -42,6 +42,14 @@ def test_smooth_takes_a_phone_export_to_a_track(layout, phone, tmp_path, capsys)
     np.testing.assert_allclose(_end(tmp_path / "o.npz"), pl.MOVE, atol=0.03)  # metres, of a 1.1 m move
 
 
+def test_a_phones_jittering_clock_is_placed_on_the_models_grid(phone, tmp_path, capsys):
+    src = pl.sensor_logger_zip(tmp_path / "rec.zip", pl.jittered(phone, 0.002))  # +-2 ms at 5 ms steps
+    status, out, err = run_cli(["smooth", src, "--model", FOOT, "--zupt", "auto", "--out", tmp_path / "o.npz"], capsys)
+    assert status == 0, err
+    assert any("jitters" in line for line in out.splitlines()), out
+    np.testing.assert_allclose(_end(tmp_path / "o.npz"), pl.MOVE, atol=0.03)
+
+
 def test_level_writes_the_recording_smooth_reads(phone, tmp_path, capsys):
     src = pl.sensor_logger_zip(tmp_path / "rec.zip", phone)
     status, out, err = run_cli(["level", src, "--out", tmp_path / "level.csv"], capsys)

@@ -129,6 +129,18 @@ def still(duration: float, seed: int = 2) -> Phone:
     return Phone(t, f, grav, t - 0.003, rng.normal(0, 0.002, zero.shape), t[::2] - 0.001, q[::2], zero, zero)
 
 
+def jittered(p: Phone, jitter: float, seed: int = 0) -> Phone:
+    """``p`` with its accelerometer's stamps off their grid by up to ``jitter`` s (as a phone's sensor events
+    arrive), the specific force taken at those times."""
+    rng = np.random.default_rng(seed)
+    t = p.t + rng.uniform(-jitter, jitter, p.t.size)
+    t = np.maximum.accumulate(t) + np.arange(t.size) * 1e-9  # still increasing
+    f, _, q = truth_at(t)
+    f = f + rng.normal(0, 0.02, f.shape)
+    grav = rotate(_conj(q), np.tile([0.0, 0.0, G], (t.size, 1)))
+    return Phone(t, f, grav, p.tg, p.gyro, p.tq, p.quat, p.a_level, p.r_level)
+
+
 def _csv(header: list[str], cols: list[np.ndarray], fmt: str = "%.9g") -> str:
     """``cols`` under ``header``; an integer column (Sensor Logger's nanoseconds) written whole."""
     lines = [",".join(header)]
