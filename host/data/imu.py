@@ -180,6 +180,9 @@ def _kind(path: Path, _header_only: bool) -> tuple[str | None, dict[str, str]]:
         for p in sorted(path.iterdir()):
             if p.name.lower() in SENSOR_LOGGER_FILES or p.name.lower() in _PHYPHOX_FILES:
                 files[p.name.lower()] = _text(check_input(p), _header_only)
+                held = sum(map(len, files.values()))
+                if not _header_only and held > _cap():  # the bound is on the folder's texts together
+                    _too_much(str(path), _cap())
         return _folder_kind(files), files
     check_input(path)
     with open(path, "rb") as fh:
@@ -223,12 +226,16 @@ def _cap() -> int:
     return input_limit() // TEXT_SHARE
 
 
+def _too_much(src: str, cap: int) -> None:
+    raise UserError(
+        f"{src}: more than {cap >> 20} MiB of text; an IMU log is read whole, its text at most a quarter of the "
+        "input limit (ACCELNAV_MAX_INPUT_BYTES): cut the recording"
+    )
+
+
 def _decode(data: bytes, src: str, cap: int) -> str:
     if len(data) > cap:
-        raise UserError(
-            f"{src}: more than {cap >> 20} MiB of text; an IMU log is read whole, its text at most a quarter of the "
-            "input limit (ACCELNAV_MAX_INPUT_BYTES): cut the recording"
-        )
+        _too_much(src, cap)
     if b"\0" in data:
         raise UserError(f"{src}: holds a NUL byte: binary data, not CSV text")
     try:

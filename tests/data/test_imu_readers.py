@@ -214,6 +214,9 @@ def test_text_beyond_the_bound_is_refused_before_parsing(phone, tmp_path, monkey
     _refused(path, "read whole")
     big = pl.sensor_logger_zip(tmp_path / "a.zip", phone)
     _refused(big, "read whole")
+    monkeypatch.setenv("ACCELNAV_MAX_INPUT_BYTES", str(4 * 200_000))  # each file fits, not the three together
+    _refused(_unzipped(tmp_path, phone), "read whole")
+    _refused(big, "read whole")
 
 
 def test_binary_data_is_refused(tmp_path):
