@@ -56,6 +56,7 @@ from accelnav.data import columns as cr
 from accelnav.errors import UserError
 from accelnav.fileio import check_input, excerpt, input_limit
 from accelnav.level import G, ImuRecord, level_frame, rotate
+from accelnav.level.quat import qmul
 
 UP_TOL_DEG = 5.0  # the accelerometer's mean turned by the orientation: this close to up, else the quaternion is out
 RATE_TOL = 0.5  # rms of (quaternion rate - gyroscope) over the gyroscope's rms rate, where that rate tells
@@ -752,8 +753,7 @@ def _check_quat(t, f, gyro, q, said: str) -> tuple[np.ndarray | None, str]:
         )
     rate = ""
     if gyro is not None:
-        w, x, y, z = q[:-1].T
-        dq = np.stack(_mul((w, -x, -y, -z), q[1:].T), axis=1)  # conj(q_k) q_k+1: the turn in the device's axes
+        dq = qmul(q[:-1] * [1.0, -1.0, -1.0, -1.0], q[1:])  # conj(q_k) q_k+1: the turn in the device's axes
         dq *= np.sign(dq[:, :1] + (dq[:, :1] == 0))
         omega = 2.0 * dq[:, 1:] / np.diff(t)[:, None]
         mid = 0.5 * (gyro[1:] + gyro[:-1])
@@ -770,17 +770,6 @@ def _check_quat(t, f, gyro, q, said: str) -> tuple[np.ndarray | None, str]:
         else:
             rate = f"; the gyroscope turns too little ({spin:.2g} rad/s rms) to check its rate"
     return q, f"orientation used ({said}): the mean accelerometer turned by it is {off:.2g} deg from up{rate}"
-
-
-def _mul(a, b):
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return (
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    )
 
 
 def write_level_csv(path, result, *, inputs=()) -> Path:
