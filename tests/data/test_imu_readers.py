@@ -11,10 +11,12 @@ import zipfile
 import numpy as np
 import pytest
 from support import phone_logs as pl
+from support.quaternions import about, conj
 
 from accelnav.data.imu import imu_from_frame, read_imu, sniff
 from accelnav.errors import UserError
-from accelnav.level import G, level_frame
+from accelnav.level import G, level_frame, rotate
+from accelnav.level.quat import qmul
 
 
 @pytest.fixture(scope="module")
@@ -96,10 +98,10 @@ def test_a_data_frame_reads_as_a_generic_csv(phone):
 def _turning(n=800, tilt=0.0, rate=0.8):
     """Arrays of a phone turning about the vertical at ``rate`` rad/s, tilted ``tilt`` about its x axis."""
     t = np.arange(n) / 100.0
-    yaw, q_tilt = rate * t, pl._about(0, np.full(n, tilt))
-    q = pl._mul(pl._about(2, yaw), q_tilt)
-    f = pl.rotate(pl._conj(q), np.tile([0.0, 0.0, G], (n, 1)))
-    w = pl.rotate(pl._conj(q), np.tile([0.0, 0.0, rate], (n, 1)))
+    yaw, q_tilt = rate * t, about(0, np.full(n, tilt))
+    q = qmul(about(2, yaw), q_tilt)
+    f = rotate(conj(q), np.tile([0.0, 0.0, G], (n, 1)))
+    w = rotate(conj(q), np.tile([0.0, 0.0, rate], (n, 1)))
     return t, f, w, q
 
 
@@ -120,7 +122,7 @@ def test_a_quaternion_the_stated_convention_fits_is_used():
 
 def test_a_conjugated_quaternion_is_dropped_by_gravity():
     t, f, w, q = _turning(tilt=np.radians(20.0))
-    imu = imu_from_frame(_columns(t, f, w, pl._conj(q)))  # level -> device: gravity turned 40 deg off
+    imu = imu_from_frame(_columns(t, f, w, conj(q)))  # level -> device: gravity turned 40 deg off
     assert imu.quat is None
     (said,) = [n for n in imu.notes if "orientation" in n]
     assert "not used" in said and "from up" in said
@@ -129,7 +131,7 @@ def test_a_conjugated_quaternion_is_dropped_by_gravity():
 def test_a_conjugated_quaternion_of_a_flat_phone_is_dropped_by_the_gyroscope():
     """Flat, the conjugate turns gravity up as well: only the turn (the other way round) tells them apart."""
     t, f, w, q = _turning(tilt=0.0)
-    imu = imu_from_frame(_columns(t, f, w, pl._conj(q)))
+    imu = imu_from_frame(_columns(t, f, w, conj(q)))
     assert imu.quat is None
     (said,) = [n for n in imu.notes if "orientation" in n]
     assert "not used" in said and "gyroscope" in said

@@ -15,8 +15,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from support.quaternions import about, conj
 
 from accelnav.level import G, rotate
+from accelnav.level.quat import qmul
 
 RATE = 200.0
 MOVE = np.array([1.0, 0.5])  # metres along the world's x and y
@@ -40,25 +42,6 @@ class Phone:
     r_level: np.ndarray  # and position
 
 
-def _about(axis: int, angle) -> np.ndarray:
-    angle = np.atleast_1d(angle)
-    q = np.zeros((angle.size, 4))
-    q[:, 0] = np.cos(angle / 2)
-    q[:, 1 + axis] = np.sin(angle / 2)
-    return q
-
-
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a.T
-    w2, x2, y2, z2 = b.T
-    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=1)  # fmt: skip
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
 def _profile(t: np.ndarray):
     """(s, s', s'') of the minimum-jerk move over [STILL_S, STILL_S + MOVE_S]."""
     tau = np.clip((t - STILL_S) / MOVE_S, 0.0, 1.0)
@@ -70,9 +53,9 @@ def _profile(t: np.ndarray):
 
 def _attitude(t: np.ndarray):
     s, ds, _ = _profile(t)
-    q = _mul(_about(2, TURN * s), _about(0, np.full(t.size, TILT)))  # yaw after the tilt: device -> world
+    q = qmul(about(2, TURN * s), about(0, np.full(t.size, TILT)))  # yaw after the tilt: device -> world
     w_world = np.column_stack([np.zeros(t.size), np.zeros(t.size), TURN * ds])
-    return q, rotate(_conj(q), w_world)
+    return q, rotate(conj(q), w_world)
 
 
 def _fade(tau: np.ndarray, edge: float = 0.1):
@@ -108,8 +91,8 @@ def phone(seed: int = 1, duration: float = 2 * STILL_S + MOVE_S) -> Phone:
     a_level = np.column_stack([MOVE[0] * dds + ax, MOVE[1] * dds + ay, np.zeros(n)])
     r_level = np.column_stack([MOVE[0] * s + rx, MOVE[1] * s + ry, np.zeros(n)])
     q, _ = _attitude(t)
-    f = rotate(_conj(q), a_level + [0.0, 0.0, G]) + rng.normal(0, 0.02, (n, 3))
-    grav = rotate(_conj(q), np.tile([0.0, 0.0, G], (n, 1)))
+    f = rotate(conj(q), a_level + [0.0, 0.0, G]) + rng.normal(0, 0.02, (n, 3))
+    grav = rotate(conj(q), np.tile([0.0, 0.0, G], (n, 1)))
     tg = t - 0.003
     _, gyro = _attitude(tg)
     gyro = gyro + rng.normal(0, 0.002, gyro.shape)
@@ -122,8 +105,8 @@ def still(duration: float, seed: int = 2) -> Phone:
     """The phone lying still, tilted TILT, for ``duration`` s (a stationary recording for the bias fit)."""
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration * RATE)) + 1) / RATE
-    q = _about(0, np.full(t.size, TILT))
-    grav = rotate(_conj(q), np.tile([0.0, 0.0, G], (t.size, 1)))
+    q = about(0, np.full(t.size, TILT))
+    grav = rotate(conj(q), np.tile([0.0, 0.0, G], (t.size, 1)))
     zero = np.zeros((t.size, 3))
     f = grav + rng.normal(0, 0.02, zero.shape)
     return Phone(t, f, grav, t - 0.003, rng.normal(0, 0.002, zero.shape), t[::2] - 0.001, q[::2], zero, zero)
@@ -137,7 +120,7 @@ def jittered(p: Phone, jitter: float, seed: int = 0) -> Phone:
     t = np.maximum.accumulate(t) + np.arange(t.size) * 1e-9  # still increasing
     f, _, q = truth_at(t)
     f = f + rng.normal(0, 0.02, f.shape)
-    grav = rotate(_conj(q), np.tile([0.0, 0.0, G], (t.size, 1)))
+    grav = rotate(conj(q), np.tile([0.0, 0.0, G], (t.size, 1)))
     return Phone(t, f, grav, p.tg, p.gyro, p.tq, p.quat, p.a_level, p.r_level)
 
 
@@ -262,7 +245,7 @@ def truth_at(t: np.ndarray):
     (_, ax), (_, ay) = _shake(t, SHAKE_HZ[0]), _shake(t, SHAKE_HZ[1])
     q, w = _attitude(t)
     a = np.column_stack([MOVE[0] * dds + ax, MOVE[1] * dds + ay, np.full(t.size, G)])
-    return rotate(_conj(q), a), w, q
+    return rotate(conj(q), a), w, q
 
 
 def displacement(t: np.ndarray, a: np.ndarray) -> np.ndarray:
