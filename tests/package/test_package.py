@@ -22,6 +22,7 @@ DATA = (
     "accelnav/py.typed",  # the public API is typed (PEP 561)
     "accelnav/models/adxl250_default.toml",
     "accelnav/models/adxl202_duty.toml",
+    "accelnav/models/examples/phone_move.zip",  # the README's phone block reads it (accelnav.example_path)
     "accelnav/firmware/firmware.mk",
     "accelnav/firmware/parts.mk",  # the part table firmware.mk and the codegen report share
     "accelnav/firmware/src/app.c",
