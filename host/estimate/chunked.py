@@ -184,8 +184,12 @@ class NpzReader:
         pread_exact(self.fd, buf, offset + s * int(np.prod(shape[1:])) * dtype.itemsize)
         return buf
 
+    def column(self, key: str, s: int, e: int) -> np.ndarray:
+        """Rows s..e of member ``key`` as float64 (read straight in, no copy, when it is stored so)."""
+        return self.part(key, s, e).astype(np.float64, copy=False)
+
     def __call__(self, s: int, e: int):
-        t, accel = self.part("t", s, e).astype(np.float64), self.part("accel", s, e).astype(np.float64)
+        t, accel = self.column("t", s, e), self.column("accel", s, e)
         if "clipped" in self.members:
             return t, accel, self.part("clipped", s, e).astype(bool)
         return t, accel, np.zeros((e - s, self.n_axes), dtype=bool)

@@ -394,7 +394,8 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
 
     def read(s: int, e: int):
         t, accel, c = source.read(s, e)
-        counts[s] = c.sum(axis=0)  # by chunk start: a chunk read twice counts once
+        # by chunk start: a chunk read twice counts once; none clipped (the rule) is told by one pass
+        counts[s] = c.sum(axis=0) if c.any() else np.zeros(c.shape[1], dtype=np.int64)
         return t, accel, c
 
     def more(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
