@@ -1295,7 +1295,8 @@ static inline void bwd_ae_mean(double phi, double b, const double *c, const doub
     *as = an;
 }
 
-/* The covariance half of bwd_ae_step: the lean path runs it apart from the means (it needs no data). */
+/* The covariance half of bwd_ae_step: the lean path runs it apart from the means (it needs no
+ * data). */
 static inline void bwd_ae_cov(const double *c, const double *pf, const double *pn, double *saa,
                               double *sae, double *see)
 {
