@@ -37,14 +37,15 @@ from baselines import best_of, filterpy_smooth
 from accelnav.estimate import fastsmooth as fs
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.design import axis_design
-from accelnav.model.load import DEFAULT_MODEL, load_model
+from accelnav.model.load import DEFAULT_MODEL, MAX_RUN_S, load_model
 
 
 def make_data(folder: Path, n: int, model, with_csv: bool = True) -> tuple[Path, Path, Path]:
     """(NPZ, CSV, model file) of n rows, written once per size into ``folder`` (the CSV only if asked)."""
     npz, csv, toml = folder / f"rec-{n}.npz", folder / f"rec-{n}.csv", folder / f"model-{n}.toml"
     if not toml.exists():
-        run_s = max(model.ranges.max_run_s, n / model.rate_hz * 1.01)
+        # 1 % over the run, within what a model accepts (1e8 rows at 100 Hz are 1e6 s, the bound itself)
+        run_s = min(MAX_RUN_S, max(model.ranges.max_run_s, n / model.rate_hz * 1.01))
         text = DEFAULT_MODEL.read_text().replace(f"max_run_s = {model.ranges.max_run_s!r}", f"max_run_s = {run_s!r}")
         assert f"max_run_s = {run_s!r}" in text, "the default model's max_run_s line moved"
         toml.write_text(text)

@@ -86,7 +86,8 @@ def main() -> int:
                     done = status == 0
                     cpu = note.removeprefix("CPU ").removesuffix(" s") if done else ""
                     met = done and n >= GOAL_ROWS and rss <= GOAL_MB
-                    why = "" if done else f"exit {status}: {note[:90]}"
+                    said = note.removeprefix("accelnav: error: ").removeprefix(f"{npz}: ")
+                    why = "" if done else f"refused (exit {status}): {said[:110]}"
                     if done and n < GOAL_ROWS:
                         why = f"measured at {n:.0e}, not 1e8"
                     print(f"| {n:.0e} | {name}{tag} | {sec:.1f} | {cpu} | peak RSS <= {GOAL_MB} MB | "
