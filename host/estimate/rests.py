@@ -216,7 +216,10 @@ CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consi
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
 STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
-MARK_EVERY = 4  # a pass after the first resumes at a mark left at every this many candidates' tests (forward)
+MARK_EVERY = 4  # a pass after the first resumes at a mark left at every this many candidates' tests (forward) ...
+MARKS = 128  # ... or sparser, so that no more marks than this are kept: each holds a copy of the accepted set and the
+# proven stillness, so marks at every 4th of 60 000 candidates (a 1e7-sample drive) held 4.4 GB; any mark before the
+# first new veto resumes to the same verdicts, a sparser one only replays more
 
 ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
 REFUSE_REASONS = ("moving", "level jumped", "cannot tell", "no deceleration")
@@ -331,6 +334,7 @@ class _Decider:
         # the forward filter's marks, {candidate: (event index of its test, filter, state)} made at each test with no
         # hypothesis open, its last pass's verdicts and the vetoes that pass saw (forward)
         self._marks: dict[int, tuple] = {}
+        self._mark_every = max(MARK_EVERY, -(-len(cands) // MARKS))
         self._found: list[_Found] = []
         self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
@@ -392,7 +396,7 @@ class _Decider:
             i = pay
             c = cands[i]
             acc = st["acc"]
-            if kind == "test" and pending is None and i % MARK_EVERY == 0:
+            if kind == "test" and pending is None and i % self._mark_every == 0:
                 # a mark: the filter and its state as they stand before the test (no hypothesis open: nothing after
                 # it goes back before it), the last visit's kept
                 self._marks[i] = (e - 1, kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])})

@@ -64,3 +64,30 @@ def test_the_float_filter_decides_as_the_numpy_one(scenario, model_name, seconds
         assert len(new) == len(old)
         # the statistics each verdict reports: the same sums in another order, equal to rounding
         np.testing.assert_allclose(new_stats, old_stats, rtol=1e-9, atol=1e-12, equal_nan=True, err_msg=scenario)
+
+
+@pytest.mark.parametrize(
+    "scenario,model_name,seconds", [("stop_and_go", "default", 300.0), ("tilting_mount", "default", 300.0)]
+)
+def test_few_marks_decide_as_many(scenario, model_name, seconds, monkeypatch):
+    """A pass resumes at the last mark before the first new veto; marks kept sparse (so that a long drive's copies
+    stay bounded) only replay more: the same verdicts, and never more marks than the cap."""
+    from accelnav.estimate import rests
+
+    model = _model(model_name)
+    arrays = simulate(model, scenario, seconds, 1).to_arrays()
+    dense, dense_stats = _verdicts(arrays, model, None)
+    kept = []
+    real = rests._Decider._resume
+
+    def counting(self):
+        kept.append(len(self._marks))
+        return real(self)
+
+    monkeypatch.setattr(rests, "MARKS", 3)
+    monkeypatch.setattr(rests._Decider, "_resume", counting)
+    sparse, sparse_stats = _verdicts(arrays, model, None)
+    assert len(kept) > 1, f"{scenario}: one pass only: no resume was tried"
+    assert max(kept) <= 3 + 1, f"{scenario}: {max(kept)} marks kept, the cap is 3"
+    assert sparse == dense
+    np.testing.assert_array_equal(sparse_stats, dense_stats)
