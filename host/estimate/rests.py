@@ -685,7 +685,7 @@ class _Decider:
         # sample order too (the detector's spans), a binary search rather than a scan of every accepted rest for
         # every candidate (quadratic: minutes at 1e7 samples)
         stops = [self.cands[j].stop for j in order]
-        monotone = all(a <= b for a, b in zip(stops, stops[1:]))
+        monotone = all(a <= b for a, b in zip(stops[:-1], stops[1:], strict=True))
         for i, f in enumerate(found):
             c = self.cands[i]
             if f.reason != "moving" or i in self.veto or f.before is None or not f.before.source.startswith("the rest"):
