@@ -280,10 +280,10 @@ def chi2_equivalent(x: float, dof: int) -> float:
     return float(2.0 * erfcinv(tail) ** 2)
 
 
-def _median(values: list[float]) -> float:
-    """The median of a short list (np.median's own: the mean of the two middle values of an even count), without
-    numpy's per-call overhead."""
-    s = sorted(values)
+def _median(s: list[float]) -> float:
+    """The median of a short *sorted* list (np.median's own: the mean of the two middle values of an even count),
+    without numpy's per-call overhead. The proven rests' stillness is kept sorted as it grows (bisect.insort):
+    sorting it again for every candidate was quadratic in the rests (341 s of 535 at 1e7 samples)."""
     h = len(s) // 2
     return s[h] if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
 
@@ -382,6 +382,7 @@ class _Decider:
         kin = self._fresh(False)
         self.V = kin.V
         found = [_Found() for _ in cands]
+        # proven: the stillness of the rests a side told or a still start proved, sorted (for _median)
         st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
         pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations)
         tried: set[int] = set()  # hypotheses already refuted in this pass
@@ -499,12 +500,12 @@ class _Decider:
             what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
             return "moving", f"{what} {_speed(s)} before it (from {s.source})"
         if self._tells(s):
-            st["proven"].append(c.still)
+            bisect.insort(st["proven"], c.still)
             return "consistent", f"v {_speed(s)} before it (from {s.source})"
         stand = _Lazy(self._peak, c, st["last_stand"]) if st["last_stand"] is not None else moved
         reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
         if reason == "still start":
-            st["proven"].append(c.still)
+            bisect.insort(st["proven"], c.still)
         return reason, evidence
 
     def _jump(self, kin: _Kinematic, c: Candidate) -> float:
