@@ -295,14 +295,20 @@ def smoother_pass(model: Model, source: Source, extras, at: np.ndarray, *, workd
         out.unlink(missing_ok=True)
 
 
-def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None) -> tuple[Aids, Aids]:
-    """Axis j's aids as arrays: (its position fixes, its zero-velocity updates)."""
+def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None, shared: dict | None = None):
+    """Axis j's aids as arrays: (its position fixes, its zero-velocity updates). ``shared``: a dict kept across
+    the axes of one run, in which rests the same on every axis (one mask, no per-sample sigma: the detector's)
+    are made once and given to each axis (millions of updates at 56 B each: not one copy per axis)."""
     from accelnav.estimate import zupt
 
     fx = Aids.of(list(fixes[j]) if fixes is not None else [])
     if rest is None:
         return fx, Aids.of([])
     m = rest.mask
+    if shared is not None and m.ndim == 1 and rest.sigma is None:
+        if "rests" not in shared:
+            shared["rests"] = zupt.axis_aids(np.broadcast_to(m, (n,)), None, model, rest.params)
+        return fx, shared["rests"]
     col = m if m.ndim == 1 else m[:, j]
     sigma = None if rest.sigma is None else np.asarray(rest.sigma)[:, j]
     return fx, zupt.axis_aids(np.broadcast_to(col, (n,)), sigma, model, rest.params)
@@ -400,7 +406,8 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
     n, n_axes = source.n, len(source.axis_names)
     smooth = "smooth" in job.stages
     fixes = job.fixes if smooth else None
-    aids = [axis_extras(model, n, j, fixes, rest) for j in range(n_axes)] if smooth else []
+    shared: dict = {}
+    aids = [axis_extras(model, n, j, fixes, rest, shared) for j in range(n_axes)] if smooth else []
     extras = [fx.concat(za) for fx, za in aids] or None
     gates = [np.zeros(len(e)) for e in extras] if extras else None  # rests are gated whole by the decision
     echo = source.extra_keys() if job.full else {}
