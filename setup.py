@@ -2,7 +2,7 @@
 # because cffi's build hook (cffi_modules) has no pyproject.toml form: it
 # compiles the C kernels into the wheel (host/native/kernels.py), so that a
 # plain install needs no C compiler for the smoother, codegen's gain recursion
-# and schedule search, and the telemetry decoder's frame kernel.
+# and schedule search, the telemetry decoder's frame kernel and the CSV reader's numbers.
 from setuptools import setup
 
 setup(
@@ -12,5 +12,6 @@ setup(
         "host/native/kernels.py:smoother",
         "host/native/kernels.py:riccati",
         "host/native/kernels.py:wire",
+        "host/native/kernels.py:csvnum",
     ],
 )

@@ -97,16 +97,20 @@ def detect_rests(
     model: Model,
     params: ZuptParams | None = None,
     fixes: PathLike | Sequence[Sequence[Any]] | None = None,
+    *,
+    candidates: np.ndarray | None = None,
 ) -> np.ndarray:
     """(N,) bool: the samples of the rests ``accelnav smooth --zupt auto`` applies: those the zero-velocity
     decision accepts, judged against ``fixes`` too when given (as :func:`smooth_run` takes them; a rest where
     the fixes imply speed is refused), less those its review then finds refuted by a full smoother with the
-    fixes or the other rests. :func:`decide_rests` gives each candidate's decision and its evidence."""
+    fixes or the other rests. :func:`decide_rests` gives each candidate's decision and its evidence.
+    ``candidates``: an (N,) bool mask of rests found elsewhere (``accelnav.level``'s gyroscope-aided
+    ``LevelResult.rests``) decided on instead of the accelerometer-only detector's."""
     from accelnav.estimate import engine, zupt
 
     arrays = dict(run)
     _check(arrays, model, "detect_rests")
-    rests = engine.Rests(zupt.ZuptParams() if params is None else params, detect=True)
+    rests = engine.Rests(zupt.ZuptParams() if params is None else params, detect=True, candidates=candidates)
     return engine.rest_stage(model, arrays, rests, fixes=_fixes(fixes, arrays)).mask
 
 
@@ -115,11 +119,13 @@ def decide_rests(
     model: Model,
     params: ZuptParams | None = None,
     fixes: PathLike | Sequence[Sequence[Any]] | None = None,
+    *,
+    candidates: np.ndarray | None = None,
 ):
     """The detector's candidates and the decision on each (accelnav.estimate.zupt.Rests: ``decisions``, each with
     its reason and evidence in words, and ``mask``, the accepted ones: :func:`detect_rests` less the rests its
-    review drops)."""
-    from accelnav.estimate import zupt
+    review drops). ``candidates``: as :func:`detect_rests` takes them."""
+    from accelnav.estimate import engine, zupt
 
     arrays = dict(run)
     _check(arrays, model, "decide_rests")
@@ -127,7 +133,8 @@ def decide_rests(
         params = zupt.resolved(model, zupt.ZuptParams() if params is None else params)
     except ValueError as exc:
         raise UserError(f"params: {exc}") from None
-    return zupt.decide_rests(arrays["accel"], arrays["clipped"], None, model, params, _fixes(fixes, arrays))
+    given = engine.candidate_mask(candidates, len(arrays["accel"]))
+    return zupt.decide_rests(arrays["accel"], arrays["clipped"], given, model, params, _fixes(fixes, arrays))
 
 
 def position_errors(run: Mapping[str, np.ndarray], model: Model) -> Table:

@@ -40,11 +40,13 @@ def example_path(name: str) -> Path:
     """A file shipped to try accelnav with, by name: a model (``foot_imu.toml``, ``adxl250_default.toml``, ...) or
     an example recording (``walk.csv``: 20 s of a simulated walk as a phone app writes it, a millisecond clock and
     two level horizontal axes in g with gravity removed, at the 200 Hz of ``foot_imu.toml``; ``walk_fixes.csv``:
-    three position fixes per axis of it). UserError, listing the names, for any other."""
+    three position fixes per axis of it; ``phone_move.zip``: a phone logger's export, Sensor Logger's Android layout,
+    of a tilted, turning phone moved 1 m along x and 0.5 m along y at 200 Hz). UserError, listing the names, for any
+    other."""
     from accelnav.errors import UserError
 
     folders = (models_dir(), models_dir() / "examples")
-    shipped = sorted(p.name for folder in folders for p in folder.iterdir() if p.suffix in (".toml", ".csv"))
+    shipped = sorted(p.name for folder in folders for p in folder.iterdir() if p.suffix in (".toml", ".csv", ".zip"))
     if name not in shipped:
         raise UserError(f"example {name!r}: not shipped; accepted: {', '.join(shipped)}")
     return next(folder / name for folder in folders if (folder / name).is_file())

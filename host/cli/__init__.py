@@ -44,6 +44,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "accelnav.cli.core",
         "filter and RTS-smooth a run file (compiled), optionally with position fixes and zero-velocity updates",
     ),
+    "level": (
+        "accelnav.cli.level",
+        "level a phone or IMU log (body frame, gravity in) into a level-frame recording smooth reads",
+    ),
     "init": (
         "accelnav.cli.init",
         "describe a new part (analog, duty-cycle, digital, calibrated) and write its model file",

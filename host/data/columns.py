@@ -37,6 +37,9 @@ UNIT_ALIASES = {
 _UNIT_WORDS = r"g|mg|m_s2|mps2|ms2|m/s\^?2|m/s²|counts|count|lsb"
 _UNIT_SUFFIX = re.compile(rf"(?:_|\s*\[\s*|\s*\(\s*)({_UNIT_WORDS})\s*[\])]?$", re.IGNORECASE)
 
+MIN_CLOCK_HZ = 5.0  # a time column in seconds slower than this is no accelerometer's: a ms clock, say
+EPOCH_S = (946684800.0, 4102444800.0)  # 2000-01-01 .. 2100-01-01 UTC: a clock there is a calendar's, not uptime
+MAX_CLOCK_HZ = 1e5  # no accelerometer this package reads samples faster
 TIME_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 TIME_UNITS = ("s", "ms", "us", "ns")
 _TIME_UNIT_WORDS = {"s": "s", "sec": "s", "ms": "ms", "us": "us", "µs": "us", "μs": "us", "ns": "ns"}
@@ -127,3 +130,80 @@ def pick_time(cols: list[str]) -> str | None:
     times = [c for c in cols if is_time(c)]
     said = [c for c in times if time_unit_of(c) is not None]
     return (said or times or [None])[0]
+
+
+# --- IMU columns: gyroscope, orientation quaternion, gravity (accelnav.data.imu) -----------------------------------
+# A rate says its unit as an acceleration does, by a suffix or in brackets (gx_rad_s, gyro_x_dps, "Gyroscope x
+# (rad/s)", wx[deg/s]); the unit words below. A quaternion's parts are named by letter (qw, quat_x, "q x"):
+# numbered parts (q0..q3) do not say which one is w and are refused by the IMU reader.
+RATE_UNITS = {"rad/s": 1.0, "deg/s": 3.141592653589793 / 180.0}
+_RATE_ALIASES = {"rad/s": "rad/s", "rad_s": "rad/s", "rads": "rad/s", "rps": "rad/s",
+                 "deg/s": "deg/s", "deg_s": "deg/s", "dps": "deg/s", "°/s": "deg/s"}  # fmt: skip
+_RATE_SUFFIX = re.compile(r"(?:_|\s*\[\s*|\s*\(\s*)(rad/s|rad_s|rads|rps|deg/s|deg_s|dps|°/s)\s*[\])]?$", re.IGNORECASE)
+_GYRO_NAME = re.compile(
+    r"^(?:gyro(?:scope)?|gyr|rot(?:ation)?[ _-]?rate|angular[ _-]?(?:rate|velocity)|omega|w|g)[ _-]?(?P<axis>[xyz])$",
+    re.IGNORECASE,
+)
+_QUAT_NAME = re.compile(r"^(?:q|quat(?:ernion)?|orientation[ _-]?q)[ _-]?(?P<part>[wxyz0-3])$", re.IGNORECASE)
+_GRAVITY_NAME = re.compile(r"^(?:gravity|grav)[ _-]?(?P<axis>[xyz])$", re.IGNORECASE)
+_LINEAR = re.compile(r"^(?:linear|lin|user)[ _-]?acc", re.IGNORECASE)
+
+
+def _bare(col: str) -> str:
+    """A name without its unit (an acceleration's or a rate's), for the IMU rules."""
+    return _RATE_SUFFIX.sub("", _UNIT_SUFFIX.sub("", col)).strip()
+
+
+def rate_unit_of(col: str) -> str | None:
+    """The unit a rate column's name says (``gx_dps``: deg/s; ``Gyroscope x (rad/s)``: rad/s), else None."""
+    m = _RATE_SUFFIX.search(col)
+    return _RATE_ALIASES[m.group(1).lower()] if m else None
+
+
+def gyro_axis_of(col: str) -> str | None:
+    """The axis a gyroscope column holds (``gx``, ``gyro_y_dps``, ``wz``, ``Gyroscope x (rad/s)``), else None."""
+    m = _GYRO_NAME.match(_bare(col))
+    return m.group("axis").lower() if m else None
+
+
+def quat_part_of(col: str) -> str | None:
+    """The part a quaternion column holds (``qw``: w, ``quat_x``: x; ``q0``: 0, which the reader refuses), else None."""
+    m = _QUAT_NAME.match(_bare(col))
+    return m.group("part").lower() if m else None
+
+
+def gravity_axis_of(col: str) -> str | None:
+    """The axis of a gravity-vector column (``grav_x``, ``gravity_y_m_s2``, ``Gravity z (m/s^2)``), else None."""
+    m = _GRAVITY_NAME.match(_bare(col))
+    return m.group("axis").lower() if m else None
+
+
+def is_linear(col: str) -> bool:
+    """An acceleration column named as gravity removed (phyphox ``Linear Acceleration x``, ``lin_acc_x``,
+    ``user_acc_x``): an app's linear acceleration, in the device's frame."""
+    return bool(_LINEAR.match(col.strip()))
+
+
+def linear_axis_of(col: str) -> str | None:
+    """The axis of a linear-acceleration column (gravity removed: :func:`is_linear`), else None."""
+    if not is_linear(col):
+        return None
+    return axis_of(re.sub(r"^(?:linear|lin|user)[ _-]?", "", col.strip(), flags=re.IGNORECASE))
+
+
+def epoch_unit(src: str, col: str, t0: float, step: float) -> tuple[str | None, str | None]:
+    """(unit, a note saying it) of a time column whose name and flags say no unit, when its numbers are a
+    calendar's (Unix time in s, ms, us or ns: the first stamp between 2000 and 2100) and that unit gives a
+    rate an accelerometer has; (None, None) when the numbers cannot tell (relative times: uptime, elapsed)."""
+    import datetime
+
+    for unit in TIME_UNITS:
+        scale = TIME_SCALE[unit]
+        if EPOCH_S[0] <= t0 * scale <= EPOCH_S[1] and MIN_CLOCK_HZ <= 1.0 / (step * scale) <= MAX_CLOCK_HZ:
+            when = datetime.datetime.fromtimestamp(t0 * scale, datetime.UTC).strftime("%Y-%m-%d %H:%M:%S")
+            words = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}[unit]
+            return unit, (
+                f"{src}: time column {col!r} read as Unix time in {words} (first stamp {when} UTC, "
+                f"{1.0 / (step * scale):.6g} Hz); give --time-unit if it is not"
+            )
+    return None, None

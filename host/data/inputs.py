@@ -56,19 +56,19 @@ def read_input(
     override = model if isinstance(model, Model) or model is None else load_model(model)
     if not isinstance(source, (str, os.PathLike)):
         return _from_memory(source, override, opts, allow_gaps)
-    path = check_input(source)  # what it is, when not a readable file (a FIFO is refused before a read)
+    from accelnav.data.imu import sniff
     from accelnav.link.logfile import is_log
 
-    if is_log(path):
+    imu_log = sniff(source) is not None  # a phone or IMU log (a file, its zip, its folder): read_recording levels it
+    path = Path(source) if imu_log else check_input(source)  # what it is, when not a readable file
+    if not imu_log and is_log(path):
         from accelnav.data.logs import log_run_arrays
 
         arrays, model = log_run_arrays(path)
         if override is not None:  # a log's frames came from firmware built for its part: another kind is wrong
             _other_part(path, override, model)
         return _with_model(path, arrays, model, override, opts)
-    with open(path, "rb") as fh:
-        zipped = fh.read(2) == b"PK"  # an NPZ, whatever its name
-    if (zipped or path.suffix.lower() == ".npz") and not _is_recording_npz(path):
+    if not imu_log and _is_run_file(path):
         arrays, model = load_run(path)
         return _with_model(path, arrays, model, override, opts)
     # a recording: CSV, gzip CSV, or an NPZ of t and accel
@@ -221,6 +221,13 @@ def narrowed(model: Model, axes: list[str]) -> Model:
 
     kept = tuple(model.axis(a) for a in axes)
     return revalidate(dataclasses.replace(model, axes=kept), source=f"{model.source} (axes {', '.join(axes)})")
+
+
+def _is_run_file(path: Path) -> bool:
+    """An NPZ (whatever its name) that is not a recording's NPZ of t and accel: an accelnav run file."""
+    with open(path, "rb") as fh:
+        zipped = fh.read(2) == b"PK"
+    return (zipped or path.suffix.lower() == ".npz") and not _is_recording_npz(path)
 
 
 def _is_recording_npz(path: Path) -> bool:

@@ -36,7 +36,19 @@ from pathlib import Path
 
 import numpy as np
 
-from accelnav.data.columns import TIME_SCALE, TIME_UNITS, UNITS, axis_of, parse_unit, pick_time, time_unit_of, unit_of
+from accelnav.data import csvnum
+from accelnav.data.columns import (  # the clock's rules (MIN_CLOCK_HZ, epoch_unit) live with the names'
+    MIN_CLOCK_HZ,
+    TIME_SCALE,
+    TIME_UNITS,
+    UNITS,
+    axis_of,
+    epoch_unit,
+    parse_unit,
+    pick_time,
+    time_unit_of,
+    unit_of,
+)
 from accelnav.errors import UserError
 from accelnav.fileio import EXCERPT_CHARS, check_input, excerpt, input_limit, load_npz
 from accelnav.model.load import G0, ModelError, loads_model
@@ -45,9 +57,6 @@ from accelnav.progress import Progress
 GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap
 SNAP_TOL = 0.01  # a clock within 1 % of a whole number of Hz (>= 10 Hz) is taken as that nominal rate
 MAX_LAG_PERIODS = 5.0  # stamps that jitter more than half a period may still be read by order, within this
-MIN_CLOCK_HZ = 5.0  # a time column in seconds slower than this is no accelerometer's: a ms clock, say
-EPOCH_S = (946684800.0, 4102444800.0)  # 2000-01-01 .. 2100-01-01 UTC: a clock there is a calendar's, not uptime
-MAX_CLOCK_HZ = 1e5  # no accelerometer this package reads samples faster
 # read in the claimed unit, this share of samples beyond the sensor's range (by BEYOND: a clipped sensor sits at
 # its rail, it never reads past it) while another unit leaves under 1 % there: the unit is wrong
 RAIL_SHARE = 0.05
@@ -113,8 +122,13 @@ def read_recording(
     time_unit: str | None = None,
     default_unit: str | None = None,
     model_axes: list[str] | None = None,
+    level: bool = True,
 ) -> Recording:
     """Read ``path`` (CSV, gzip CSV or NPZ); see the module notes. Checks the format, not the content.
+
+    A phone or IMU log (:func:`accelnav.data.imu.sniff`) is levelled (:func:`accelnav.data.imu.level_recording`);
+    with ``level`` False (a stationary recording for the bias fit) its accelerometer is read in the device's own
+    axes: a logger's export through the IMU reader, a generic IMU CSV as any CSV (its acceleration columns).
 
     ``unit`` is the unit of every acceleration column; without it each column's name says its unit,
     and ``default_unit`` (a calibrated model's) serves a column whose name does not. ``model_axes``: the
@@ -125,6 +139,19 @@ def read_recording(
     is the nominal rate the clock is checked against (and overridden by, see :func:`_check_time`). The
     clock is read as :func:`_check_time` says; ``notes`` of the result tell the caller how, one line each.
     """
+    from accelnav.data import imu
+
+    kind = imu.sniff(path)  # a phone or IMU log (body frame, gravity in): levelled first, one reader for every command
+    # a generic IMU CSV is read as plain columns for the bias fit, and when --axis names its own columns
+    plain = kind == "imu-csv" and (not level or bool(axes) and not set(axes) <= {"x", "y", "z"})
+    said = ()
+    if kind is not None and not plain:
+        try:
+            return _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes, level)
+        except imu.NotLevelled as exc:
+            if kind != "imu-csv":
+                raise
+            said = (f"{exc}: read as level axes, not levelled",)
     path = check_input(path)  # a regular file: a FIFO or /dev/zero is refused before it is read
     try:
         with path.open("rb") as fh:
@@ -147,7 +174,26 @@ def read_recording(
     else:
         gz = head.startswith(b"\x1f\x8b")
         rec = _read_csv(path, axes, unit, rate_hz, time_column, gz, default_unit, model_axes)
-    return _check_time(_with_time_unit(rec, time_unit, path), rate_hz, allow_gaps)
+    rec = _check_time(_with_time_unit(rec, time_unit, path), rate_hz, allow_gaps)
+    return replace(rec, notes=said + rec.notes) if said else rec
+
+
+def _levelled(path, axes, unit, rate_hz, time_column, time_unit, allow_gaps, model_axes, level=True) -> Recording:
+    """An IMU log as a recording of its level frame (accelnav.data.imu.level_recording): axes x, y, z in m/s^2,
+    gravity removed (or the device's axes, with ``level`` False), on the accelerometer's clock; the notes say
+    how it was read and levelled."""
+    from accelnav.data.imu import level_recording
+
+    for flag, value in (("time-column", time_column), ("time-unit", time_unit)):
+        if value is not None:
+            raise UserError(f"--{flag}: {path} is an IMU log, whose format says its clocks")
+    if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise UserError(f"--rate: got {rate_hz}; accepted: a positive sample rate in Hz")
+    t, acc, names, notes = level_recording(path, axes=axes, unit=unit, model_axes=model_axes, level=level)
+    cols = tuple(f"{a}_{'level' if level else 'device'}" for a in names)
+    rec = _finish(str(path), t, acc, tuple(names), cols, ("m/s^2",) * len(names), None, None)
+    rec = replace(rec, time_unit="s", time_column="t", notes=tuple(notes), unit_from=("name",) * len(names))
+    return _check_time(rec, rate_hz, allow_gaps)
 
 
 # --------------------------------------------------------------------------
@@ -366,7 +412,10 @@ def csv_pieces(path: Path, axes, unit, rate_hz, time_column, gz: bool, default=N
     head = None
     for first, text in _blocks(path, gz, src):
         if head is not None and len(head.cols) > 1 and "#" not in text:
-            table = _every_column(text, head)
+            # the C parser (accelnav.data.csvnum) first; what it does not read, numpy's paths read or refuse
+            table = csvnum.piece(text, head.delim, len(head.cols), head.use)
+            if table is None:
+                table = _every_column(text, head)
             if table is not None:
                 yield head, table, np.arange(first, first + len(table), dtype=np.int64)
                 continue
@@ -703,24 +752,6 @@ def _check_time(rec: Recording, rate_given: float | None, allow_gaps: bool) -> R
     if regular and not jumps.any():  # a regular clock the rate agrees with: its stamps as they are
         return replace(rec, rate_hz=(len(t) - 1) / float(t[-1] - t[0]), notes=notes)
     return replace(rec, t=t[0] + k / f, rate_hz=float(f), notes=notes)
-
-
-def epoch_unit(src: str, col: str, t0: float, step: float) -> tuple[str | None, str | None]:
-    """(unit, a note saying it) of a time column whose name and flags say no unit, when its numbers are a
-    calendar's (Unix time in s, ms, us or ns: the first stamp between 2000 and 2100) and that unit gives a
-    rate an accelerometer has; (None, None) when the numbers cannot tell (relative times: uptime, elapsed)."""
-    import datetime
-
-    for unit in TIME_UNITS:
-        scale = TIME_SCALE[unit]
-        if EPOCH_S[0] <= t0 * scale <= EPOCH_S[1] and MIN_CLOCK_HZ <= 1.0 / (step * scale) <= MAX_CLOCK_HZ:
-            when = datetime.datetime.fromtimestamp(t0 * scale, datetime.UTC).strftime("%Y-%m-%d %H:%M:%S")
-            words = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}[unit]
-            return unit, (
-                f"{src}: time column {col!r} read as Unix time in {words} (first stamp {when} UTC, "
-                f"{1.0 / (step * scale):.6g} Hz); give --time-unit if it is not"
-            )
-    return None, None
 
 
 def _order_place(t: np.ndarray, f: float):

@@ -195,10 +195,13 @@ def open_stream(
     are UserError in one line (the same as read_input's); NotStreamed when only the whole reader can
     take it. ``allow_gaps`` is accepted for the same signature; a gap refuses or goes to the whole
     reader, as it would there. Close the result (or use it in a ``with``) to remove the store."""
+    from accelnav.data.imu import sniff
     from accelnav.data.inputs import _unit, model_axes, target_axes
     from accelnav.link.logfile import is_log
 
     override = model if isinstance(model, Model) or model is None else load_model(model)
+    if sniff(path):  # its columns are the body frame's: only the whole reader levels them
+        raise NotStreamed(f"{path}: an IMU log is levelled whole")
     path = check_input(path)
     src = str(path)
     if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):

@@ -65,6 +65,7 @@ class Rests:
     mask: np.ndarray | None = None
     sigma: np.ndarray | None = None
     decided: Callable[[RestOutcome], None] | None = None  # called with the rest stage's outcome once decided
+    candidates: np.ndarray | None = None  # (N,) bool, candidates to decide on (accelnav.level's rests); None: detected
 
 
 @dataclass(frozen=True)
@@ -253,7 +254,7 @@ def rest_stage(
     if not rests.detect:
         return RestOutcome(np.asarray(rests.mask, dtype=bool), rests.sigma, params)
     accel, clipped = arrays["accel"], arrays["clipped"]
-    found = zupt.decide_rests(accel, clipped, None, model, params, fixes)
+    found = zupt.decide_rests(accel, clipped, candidate_mask(rests.candidates, len(accel)), model, params, fixes)
     mask, review, smoothed = found.mask, None, None
     if mask.any() and (review_budget is None or chunked.whole_bytes(len(mask), accel.shape[1]) <= review_budget):
         # the check that acts after the decision: rests a full smoother with the fixes or the other rests
@@ -271,6 +272,16 @@ def rest_stage(
     gravity = zupt.gravity_axes(accel, clipped, model) if not mask.any() else []
     return RestOutcome(mask, None, params, found.decisions, gravity, detected=True, review=review,
                        reviewed=review is not None or not found.mask.any(), smoothed=smoothed)  # fmt: skip
+
+
+def candidate_mask(mask: np.ndarray | None, n: int) -> np.ndarray | None:
+    """``mask`` checked as the candidates of an N-sample run (None stays None: the detector's own)."""
+    if mask is None:
+        return None
+    m = np.asarray(mask)
+    if m.shape != (n,) or m.dtype != bool:
+        raise UserError(f"rest candidates: an (N,) bool mask of the run's {n} samples, got {m.dtype} {m.shape}")
+    return m
 
 
 def smoother_pass(model: Model, source: Source, extras, at: np.ndarray, *, workdir, budget: int | None = None):

@@ -74,17 +74,20 @@ then is withdrawn. No accepted rest vouches for another: each is re-tested again
 every pass, and one that disagrees leaves.
 
 What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per event,
-in C beside the smoother's kernels (acn_kin_* in csrc/fastsmooth.c: the filter's steps, a candidate's statistics
-and peak speed, the whole backward run), the verdicts and their words in Python: per sample it grows with the
-density of candidates and with the passes and the hypotheses' replays, not with the record's length. Every pass
-runs both filters from the start again (bench/speed/bench_rest_decision.py measures it beside the plain smoother
-and beside the numpy filter it replaced).
+in C beside the smoother's kernels (acn_kin_* in csrc/fastsmooth.c: the filter's steps, a forward side's whole
+test in one call, the chi-square's tail, a candidate's statistics and peak speed, the whole backward run), the
+forward filter's loop, its verdicts, hypotheses and words in Python (most of the cost left: a few tens of
+microseconds per candidate test, against the plain smoother's fraction of one per sample): per sample it grows with the
+density of candidates and with the passes and the hypotheses' replays, not with the record's length. A pass
+after the first runs the forward filter again only from the first candidate whose veto is new (it resumes at a
+mark the last pass left before that candidate's test: before it, nothing differs), the backward filter from the
+start (bench/speed/bench_rest_decision.py measures it beside the plain smoother and beside the numpy filter it
+replaced).
 """
 
 from __future__ import annotations
 
 import bisect
-import functools
 import math
 from dataclasses import dataclass
 
@@ -104,6 +107,15 @@ class Side:
     fix: bool  # a fix informs it
     r: np.ndarray | None = None  # (n_axes,) m, position at the candidate's edge given its level
     r_sd: np.ndarray | None = None  # (n_axes,) m, its sd
+    norms: tuple[float, float] | None = None  # (|v|, rms of sd) as the kernel summed them; None: from v and sd
+
+
+def _made(v, sd, chi2, source, fix, r, r_sd, norms) -> Side:
+    """A Side without the frozen dataclass' per-field checks (its __init__ sets each field through
+    object.__setattr__; a forward pass makes hundreds): the same fields, set at once."""
+    s = object.__new__(Side)
+    s.__dict__.update(v=v, sd=sd, chi2=chi2, source=source, fix=fix, r=r, r_sd=r_sd, norms=norms)
+    return s
 
 
 @dataclass(frozen=True)
@@ -147,6 +159,7 @@ class _Kinematic:
                                            0.0, 0.0, DIFFUSE[1], 0.0, DIFFUSE[2])])  # fmt: skip
         self.k = 0
         self.aid_k = 0  # sample of the last aid
+        self._res = self.ffi.new("double[4]")  # the figures of a test (test); its copies share it, read at once
 
     @property
     def X(self) -> np.ndarray:
@@ -180,23 +193,22 @@ class _Kinematic:
     def fix(self, k: int, j: int, z: float, var: float) -> None:
         self._aid(k, j, 0, float(z), float(var))
 
-    def side(self, level: np.ndarray, n: int, leak: float, drift: float, scale: float, sigma: float, sign: float):
-        """(v, sd, r, sd of r) per axis, rows of one (4, n_axes) array, and the sum over the axes of
-        v^2 / (sd^2 + sigma^2): a side's test (:func:`_side`) of a candidate of n samples at ``level``."""
+    def test(self, k: int, level, n: int, leak: float, drift: float, scale: float, sigma: float):
+        """Propagate to sample k, then a forward side's test (:meth:`_Decider._test`) of a candidate of n samples at
+        ``level`` (a pointer the kernel reads): (v, sd, r, sd of r) per axis, rows of one (4, n_axes) array; then
+        the sum over the axes of v^2 / (sd^2 + sigma^2) read as one axis' chi-square (:func:`chi2_equivalent`), the
+        level's jump (|level - the filter's level| over the axes beyond 3 sd of the filter's; 0 while it has
+        none), |v| over the axes and the rms of the sds: one kernel call (acn_kin_test)."""
         out = np.empty((4, self.n_axes))
-        lv = self.ffi.from_buffer("double[]", np.ascontiguousarray(level, dtype=np.float64))
-        total = self.lib.acn_kin_side(self.n_axes, self.s, self._A, self.k, self.aid_k, self.Ts, lv, self._R, n,
-                                      leak, drift, scale, sigma * sigma, sign,
-                                      self.ffi.from_buffer("double[]", out))  # fmt: skip
-        return out, total
-
-    def jump(self, level: np.ndarray) -> float:
-        """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
-        lv = self.ffi.from_buffer("double[]", np.ascontiguousarray(level, dtype=np.float64))
-        return self.lib.acn_kin_jump(self.n_axes, self.s, lv)
+        res = self._res
+        self.lib.acn_kin_test(self.n_axes, self.s, self._V, self._W, self._A, self.k, k, self.Ts, self.q, self._qv,
+                              self.aid_k, level, self._R, n, leak, drift, scale, sigma * sigma,
+                              self.ffi.from_buffer("double[]", out), res)  # fmt: skip
+        self.k = max(self.k, k)
+        return out, res[0], res[1], (res[2], res[3])
 
 
-LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _side)
+LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _Decider._test)
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
@@ -204,6 +216,7 @@ CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consi
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
 STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
+MARK_EVERY = 4  # a pass after the first resumes at a mark left at every this many candidates' tests (forward)
 
 ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
 REFUSE_REASONS = ("moving", "level jumped", "cannot tell", "no deceleration")
@@ -237,53 +250,21 @@ class _Found:
     after: Side | None = None
 
 
-def _side(
-    kin: _Kinematic,
-    c: Candidate,
-    R: np.ndarray,
-    sigma: float,
-    drift: float,
-    scale: float,
-    source: str,
-    fix: bool,
-    sign: float,
-) -> Side:
-    # the level's path between the last aid and here is taken as linear; a leak that changed by L since then
-    # may have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd); and a mean
-    # acceleration error no level explains (a leak changing within the move): drift D (D the time since the last
-    # aid); and errors in proportion to the acceleration itself (a scale factor, a level frame turned during a
-    # stride: on a real foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the
-    # last aid. The position is widened likewise, by the velocity's widening over D (acn_kin_side).
-    out, total = kin.side(c.level, c.stop - c.start, LEAK, drift, scale, sigma, sign)
-    # over the axes: the sum, as the chi-square of one axis with the same tail (chi2_equivalent): a move along one
-    # axis is not diluted by the others' rest, and three quiet axes do not add up to a move
-    return Side(out[0], out[1], chi2_equivalent(total, kin.n_axes), source, fix, out[2], out[3])
-
-
-@functools.cache
-def _special():
-    """scipy's erfcinv and gammaincc, imported on first use (not at the package's import)."""
-    from scipy.special import erfcinv, gammaincc
-
-    return erfcinv, gammaincc
-
-
 def chi2_equivalent(x: float, dof: int) -> float:
     """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom: the test of
-    every axis at once, read on the scale of one axis (9: three sd)."""
-    if dof == 1 or not math.isfinite(x):
-        return x
-    erfcinv, gammaincc = _special()
-    tail = float(gammaincc(dof / 2.0, x / 2.0))
-    if tail <= 0.0:
-        return math.inf
-    return float(2.0 * erfcinv(tail) ** 2)
+    every axis at once, read on the scale of one axis (9: three sd). The kernel's (acn_chi2_equivalent): the tail
+    in closed form and its inverse by Halley's steps on erfc: scipy's gammaincc and erfcinv to 1e-11 (1e-10 where the
+    tail is subnormal), at a quarter of their calls' cost (a decision reads a few thousand)."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    if int(dof) < 1:
+        raise ValueError(f"dof: {dof}; a chi-square has one degree of freedom at least")
+    return _lib().lib.acn_chi2_equivalent(float(x), int(dof))
 
 
 def _median(s: list[float]) -> float:
-    """The median of a short *sorted* list (np.median's own: the mean of the two middle values of an even count),
-    without numpy's per-call overhead. The proven rests' stillness is kept sorted as it grows (bisect.insort):
-    sorting it again for every candidate was quadratic in the rests (341 s of 535 at 1e7 samples)."""
+    """The median of a short sorted list (np.median's own: the mean of the two middle values of an even count),
+    without numpy's per-call overhead (the forward filter keeps the proven rests' stillness sorted)."""
     h = len(s) // 2
     return s[h] if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
 
@@ -297,6 +278,8 @@ def _norms(s: Side | None) -> tuple[float, float]:
     """(|v| over the axes, rms of its sd) of one side; NaN without one."""
     if s is None:
         return math.nan, math.nan
+    if s.norms is not None:
+        return s.norms
     v, sd = s.v.tolist(), s.sd.tolist()
     return math.sqrt(sum(x * x for x in v)), math.sqrt(sum(x * x for x in sd) / len(sd))
 
@@ -343,6 +326,13 @@ class _Decider:
         self.veto: dict[int, str] = {}  # withdrawn: why
         self._sources: dict[tuple[str, int], str] = {}  # the words naming each aid (_source)
         self._bwd = None  # the backward events as the kernel reads them (backward)
+        self._pk = None  # the record's sums and an output as the peak's kernel reads them (_peak)
+        self._lv = None  # each candidate's level as the kernels read it (_test)
+        # the forward filter's marks, {candidate: (event index of its test, filter, state)} made at each test with no
+        # hypothesis open, its last pass's verdicts and the vetoes that pass saw (forward)
+        self._marks: dict[int, tuple] = {}
+        self._found: list[_Found] = []
+        self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
 
     def _fresh(self, reverse: bool) -> _Kinematic:
@@ -379,15 +369,10 @@ class _Decider:
         (a walk's stances: each closes the velocity of the stride before it); when one of them is found
         moving, or cannot be told, the filter goes back to before the hypothesis and goes on without it."""
         p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
-        kin = self._fresh(False)
-        self.V = kin.V
-        found = [_Found() for _ in cands]
-        # proven: the stillness of the rests a side told or a still start proved, sorted (for _median)
-        st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
+        e, kin, st, found = self._resume()
         pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations)
         tried: set[int] = set()  # hypotheses already refuted in this pass
         ev = self.fwd_events
-        e = 0
         while e < len(ev) or pending is not None:
             if e == len(ev):  # the record ended before the hypothesis was borne out: on without it
                 h, e_h, (kin, st), _, _ = pending
@@ -407,6 +392,10 @@ class _Decider:
             i = pay
             c = cands[i]
             acc = st["acc"]
+            if kind == "test" and pending is None and i % MARK_EVERY == 0:
+                # a mark: the filter and its state as they stand before the test (no hypothesis open: nothing after
+                # it goes back before it), the last visit's kept
+                self._marks[i] = (e - 1, kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])})
             if kind == "end":
                 if i in acc:
                     kin.rest(k, p.sigma)
@@ -416,9 +405,7 @@ class _Decider:
                         st["last_stand"] = st["last_end"]
                     st["source"] = self._source("rest", i)
                 continue
-            kin.to(k)
-            jump = self._jump(kin, c)
-            s = _side(kin, c, self.R, p.sigma, p.drift, p.scale, st["source"], st["fix"], 1.0)
+            jump, s = self._test(kin, k, i, st)
             f = found[i]
             f.before, f.evidence = s, ""
             moved = _Lazy(self._peak, c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
@@ -471,6 +458,28 @@ class _Decider:
                 kin.rest(k, p.sigma)
         return found, st["acc"]
 
+    def _resume(self) -> tuple[int, _Kinematic, dict, list[_Found]]:
+        """Where the forward filter starts: (event index, filter, state, verdicts). A pass after the first decides as
+        the last did up to the first candidate whose veto is new: it resumes at the last mark before it, the
+        verdicts before the mark kept; the first pass, at the record's start."""
+        kin = self._fresh(False)
+        self.V = kin.V
+        found = [_Found() for _ in self.cands]
+        st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
+        e = 0
+        first = min((i for i, why in self.veto.items() if self._seen_veto.get(i) != why), default=len(self.cands))
+        resume = max((i for i in self._marks if i <= first), default=None)
+        self._seen_veto = dict(self.veto)
+        if resume is None:
+            self._marks = {}
+        else:
+            e, saved_kin, saved_st = self._marks[resume]
+            kin, st = saved_kin.copy(), {**saved_st, "acc": set(saved_st["acc"]), "proven": list(saved_st["proven"])}
+            found[:resume] = [_Found(f.reason, f.evidence, f.before) for f in self._found[:resume]]
+            self._marks = {i: m for i, m in self._marks.items() if i <= resume}
+        self._found = found
+        return e, kin, st, found
+
     def _judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
         """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""
         p = self.p
@@ -508,31 +517,47 @@ class _Decider:
             bisect.insort(st["proven"], c.still)
         return reason, evidence
 
-    def _jump(self, kin: _Kinematic, c: Candidate) -> float:
-        """|level - the filter's level| over the axes, beyond 3 sd of the filter's level; 0 while it has none."""
-        return kin.jump(c.level)
+    def _test(self, kin: _Kinematic, k: int, i: int, st: dict) -> tuple[float, Side]:
+        """The forward filter taken to candidate i's first sample k: the level's jump there and its side.
+
+        The level's path between the last aid and here is taken as linear; a leak that changed by L since then may
+        have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd); and a mean acceleration
+        error no level explains (a leak changing within the move): drift D (D the time since the last aid); and
+        errors in proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a
+        real foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid. The
+        position is widened likewise, by the velocity's widening over D. Over the axes: the sum, as the
+        chi-square of one axis with the same tail (chi2_equivalent): a move along one axis is not diluted by the
+        others' rest, and three quiet axes do not add up to a move (acn_kin_test, acn_kin_side)."""
+        p, c = self.p, self.cands[i]
+        if self._lv is None:  # each candidate's level as the kernel reads it, made once per decision
+            self._lv = [kin.ffi.from_buffer("double[]", np.ascontiguousarray(d.level, dtype=np.float64))
+                        for d in self.cands]  # fmt: skip
+        out, chi2, jump, norms = kin.test(k, self._lv[i], c.stop - c.start, LEAK, p.drift, p.scale, p.sigma)
+        return jump, _made(out[0], out[1], chi2, st["source"], st["fix"], out[2], out[3], norms)
 
     def _peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
         """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
         from the rest's to the candidate's, and the peak with the rest's level kept; the peaks on at most
         PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest), by the
         kernel (acn_kin_peak)."""
-        from accelnav.estimate.fastsmooth import _lib
+        if self._pk is None or self._pk[0] is not self.V:  # the kernel's pointers, made once per decision
+            from accelnav.estimate.fastsmooth import _lib
 
-        mod = _lib()
-        ffi, buf = mod.ffi, mod.ffi.from_buffer  # row vectors, contiguous (from_buffer refuses any other)
+            mod = _lib()
+            self._pk = (self.V, mod.lib, mod.ffi.from_buffer, mod.ffi.from_buffer("double[]", self.V),
+                        mod.ffi.new("double[3]"))  # fmt: skip
+        _, lib, buf, V, out = self._pk  # row vectors, contiguous (from_buffer refuses any other)
         e, u0, e0 = last_end
         a = max(c.start, e)
         num = min(a - e + 1, PEAK_POINTS)
-        out = ffi.new("double[3]")
-        mod.lib.acn_kin_peak(len(u0), buf("double[]", self.V), self.Ts, e, a, num, buf("double[]", u0),
-                             buf("double[]", e0), buf("double[]", c.level), out)  # fmt: skip
+        lib.acn_kin_peak(len(u0), V, self.Ts, e, a, num, buf("double[]", u0), buf("double[]", e0),
+                               buf("double[]", c.level), out)  # fmt: skip
         # the square root taken of the peak's square (it keeps the order)
         return math.sqrt(out[0]), math.sqrt(out[1]), math.sqrt(out[2])
 
     def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
         p, Ts = self.p, self.Ts
-        sd = float(np.max(s.sd))
+        sd = float(s.sd.max())  # np.max's value (a NaN kept) without its wrapper
         dur = (c.stop - c.start) * Ts
         cannot = f"cannot tell: sd of v {sd:.2g} m/s before it ({'fixes too far' if fix_seen else 'no fix'})"
         if last_end is None:
@@ -596,13 +621,14 @@ class _Decider:
             p.sigma, buf("double[]", sides), buf("double[]", total), buf("long[]", aid), buf("unsigned char[]", fix),
         )  # fmt: skip
         out: list[Side | None] = []
+        chi2 = kin.lib.acn_chi2_equivalent
         for s, tot, e, f in zip(sides, total.tolist(), aid.tolist(), fix.tolist(), strict=True):  # each tested once
             if e < 0:
                 source = "no aid"
             else:
                 _, _, kind, pay = self.bwd_events[e]
                 source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
-            out.append(Side(s[0], s[1], chi2_equivalent(tot, n_axes), source, bool(f), s[2], s[3]))
+            out.append(_made(s[0], s[1], chi2(tot, n_axes), source, bool(f), s[2], s[3], None))
         assert n == len(self.x)
         return out
 
@@ -682,26 +708,27 @@ class _Decider:
         them "moving" (a stand: ``start_s`` long, still at the sensor's noise)."""
         p, out = self.p, {}
         order = sorted(acc)
-        # the last accepted rest (in index order) ending by a candidate's start: where the accepted rests end in
-        # sample order too (the detector's spans), a binary search rather than a scan of every accepted rest for
-        # every candidate (quadratic: minutes at 1e7 samples)
         stops = [self.cands[j].stop for j in order]
-        monotone = all(a <= b for a, b in zip(stops[:-1], stops[1:], strict=True))
+        monotone = all(a <= b for a, b in zip(stops, stops[1:], strict=False))  # the detector's spans: in order
         for i, f in enumerate(found):
             c = self.cands[i]
             if f.reason != "moving" or i in self.veto or f.before is None or not f.before.source.startswith("the rest"):
                 continue
             if (c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k:
                 continue
-            if monotone:
-                r = bisect.bisect_right(stops, c.start)
-                last = order[r - 1] if r else None
-            else:
-                before = [j for j in order if self.cands[j].stop <= c.start]
-                last = before[-1] if before else None
-            if last is not None and (self.cands[last].stop - self.cands[last].start) * self.Ts < p.start_s:
-                out.setdefault(last, i)
+            j = self._last_before(order, stops if monotone else None, c.start)
+            if j is not None and (self.cands[j].stop - self.cands[j].start) * self.Ts < p.start_s:
+                out.setdefault(j, i)
         return out
+
+    def _last_before(self, order: list[int], stops: list[int] | None, k: int) -> int | None:
+        """The last of the accepted rests ``order`` (sorted) that ends by sample k; None: none does. ``stops``: their
+        ends when sorted (the detector's spans come in time order), bisected; None: each looked at."""
+        if stops is not None:
+            n = bisect.bisect_right(stops, k)
+            return order[n - 1] if n else None
+        before = [j for j in order if self.cands[j].stop <= k]
+        return before[-1] if before else None
 
     def _support(self, c: Candidate, other: Side | None, reason: str) -> int:
         """1 when a candidate has evidence besides the rest it disagrees with: a side that tells and agrees,

@@ -125,6 +125,7 @@ def read_stationary(
     rec = read_recording(
         path, axes=axes, unit=unit, rate_hz=rate_hz, time_column=time_column, time_unit=time_unit,
         default_unit=_unit(model), model_axes=None if model is None else [a.name for a in model.axes],
+        level=False,  # a phone or IMU log's accelerometer in its own axes: levelling would hide each axis' bias
     )  # fmt: skip
     for text in rec.notes:
         note(text)

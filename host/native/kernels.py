@@ -1,7 +1,7 @@
 """The C kernels compiled into the package: the smoother's, codegen's Riccati recursion and schedule
-search, and the telemetry decoder's frame kernel.
+search, the telemetry decoder's frame kernel and the CSV reader's number parser.
 
-setup.py names :func:`smoother`, :func:`riccati` and :func:`wire` in ``cffi_modules``, so each kernel
+setup.py names :func:`smoother`, :func:`riccati`, :func:`wire` and :func:`csvnum` in ``cffi_modules``, so each kernel
 is compiled when the wheel (or an editable install) is built, and a user's machine needs no C compiler
 for them. cffi runs this file on its own, not as part of the package, so at module level it imports
 nothing but the standard library (cffi and the project's builder are imported inside the functions).
@@ -49,6 +49,8 @@ RICCATI = Kernel(
 WIRE = Kernel(
     "accelnav.link._acnwire", "host/link/csrc", ("acnwire.c", "acnwire.h"), "acnw_source", ("-std=c99", "-O2")
 )
+# the CSV body's numbers: correctly rounded like Python's float(), so no contraction and no fast math
+CSVNUM = Kernel("accelnav.data._csvnum", "host/data/csrc", ("csvnum.c", "csvnum.h"), "acsv_source", RICCATI_FLAGS)
 
 
 def source_hash(k: Kernel, csrc: Path) -> str:
@@ -95,6 +97,10 @@ def riccati():
 
 def wire():
     return _ffibuilder(WIRE)
+
+
+def csvnum():
+    return _ffibuilder(CSVNUM)
 
 
 def prebuilt(k: Kernel, csrc: Path):

@@ -230,3 +230,22 @@ def test_run_sil_gives_the_firmwares_states_as_hil_compares_them():
     for i, key in enumerate(("r", "u", "a", "eps")):
         np.testing.assert_array_equal(out["fw_x"][:, :, i].T, c.fw[key])
     np.testing.assert_array_equal(out["r"], run["r"])  # the truth rides along
+
+
+def test_rests_found_elsewhere_are_decided_as_candidates(walk):
+    """detect_rests(candidates=): the decision runs on the given candidates (accelnav.level's gyro-aided rests)
+    instead of the accelerometer-only detector's, accepts only among them, and refuses a mask that is not one."""
+    from accelnav.api import decide_rests
+
+    model = accelnav.load_model(FOOT)
+    run, model = accelnav.read_input(_arrays(walk), model)
+    own = decide_rests(run, model)
+    half = own.mask.copy()
+    half[len(half) // 2 :] = False  # only the first half's rests offered
+    given = decide_rests(run, model, candidates=half)
+    np.testing.assert_array_equal(given.candidates, half)
+    rest = accelnav.detect_rests(run, model, candidates=half)
+    assert rest.any() and not rest[len(rest) // 2 :].any()
+    for bad in (half[:-1], half.astype(int)):
+        with pytest.raises(accelnav.UserError, match="rest candidates: an \\(N,\\) bool mask"):
+            accelnav.detect_rests(run, model, candidates=bad)

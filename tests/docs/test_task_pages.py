@@ -14,7 +14,7 @@ import pytest
 from conftest import REPO
 
 # page -> how many of its sh blocks run here (None: all); the Uno page's last block records from the board
-PAGES = {"phone-csv": None, "car-gnss": None, "adxl335-uno": 1}
+PAGES = {"phone-csv": None, "phone-logger": None, "car-gnss": None, "adxl335-uno": 1}
 
 
 def _commands(page: str) -> list[str]:

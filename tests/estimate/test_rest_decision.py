@@ -137,6 +137,22 @@ def test_chi2_equivalent_keeps_the_tail(dof):
     assert chi2_equivalent(0.5 * x, dof) < 9.0 < chi2_equivalent(2.0 * x, dof)
 
 
+@pytest.mark.parametrize("dof", (1, 2, 3, 4, 5, 6))
+def test_chi2_equivalent_is_scipys_tail_read_on_one_axis(dof):
+    """The kernel's closed form (acn_chi2_equivalent) against scipy's gammaincc and erfcinv, which it replaced: from
+    a whisper to where the tail underflows (scipy's inf there too), and at the bounds (0, inf, NaN)."""
+    from support.rests_reference import chi2_equivalent as scipys  # the function as it was, by scipy
+
+    xs = np.concatenate([np.geomspace(1e-6, 1600.0, 3001), np.linspace(1400.0, 1460.0, 601), [0.0, np.inf, np.nan]])
+    got = np.array([chi2_equivalent(float(x), dof) for x in xs])
+    want = np.array([scipys(float(x), dof) for x in xs])
+    # 1e-11 where the tail is a normal double, 1e-10 where it is subnormal (x > 1417 at 2 dof): within the 1e-9 the
+    # decision's statistics are held to (test_rest_decision_same); equal infs and NaNs pass, nothing else does
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-15)
+    with pytest.raises(ValueError, match="degree of freedom"):
+        chi2_equivalent(1.0, 0)
+
+
 def test_what_the_kernels_would_read_outside_the_record_is_refused(default_model):
     """The decision's kernels read the record's sums at the fixes' and candidates' samples: a fix past the
     record's end, or a candidate span outside it or empty, is refused with a message, never read."""

@@ -11,36 +11,20 @@ bytes are printed in the failure so a CI log is enough to reproduce it.
 
 from __future__ import annotations
 
-import importlib.util
 import os
 from pathlib import Path
 
 import pytest
+from support.libfuzzer import fuzz_module, unavailable
 
-from accelnav.resources import cache_root, firmware_dir
+from accelnav.resources import cache_root
 
 FUZZ_SECONDS = int(os.environ.get("ACCELNAV_FUZZ_SECONDS", "60"))
 
 
-def _fuzz_module():
-    path = firmware_dir() / "fuzz" / "fuzz.py"
-    if not path.is_file():
-        pytest.skip(f"{path} absent (an installed wheel carries no fuzz harness)")
-    spec = importlib.util.spec_from_file_location("accelnav_fuzz_rx", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def _unavailable(reason: str):
-    if os.environ.get("ACCELNAV_REQUIRE_FUZZ") == "1":
-        pytest.fail(f"ACCELNAV_REQUIRE_FUZZ=1 but {reason}")
-    pytest.skip(reason)
-
-
 @pytest.fixture(scope="module")
 def fuzz():
-    return _fuzz_module()
+    return fuzz_module()
 
 
 def test_seed_corpus_matches_the_frame_layout(fuzz):
@@ -54,7 +38,7 @@ def _harness(fuzz) -> tuple[Path, Path]:
     out = cache_root() / "fuzz" / "rx"
     missing = fuzz.runtime_missing(out)
     if missing:
-        _unavailable(missing)
+        unavailable(missing)
     return fuzz.build(out), out  # with the tools there, a harness that does not build is a failure
 
 

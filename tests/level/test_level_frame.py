@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.quaternions import about, conj
 
 from accelnav.errors import UserError
 from accelnav.level import G, ImuRecord, level_frame, rotate
@@ -12,35 +13,26 @@ from accelnav.level import G, ImuRecord, level_frame, rotate
 RATE = 100.0
 
 
-def _about(axis: int, angle: np.ndarray) -> np.ndarray:
-    q = np.zeros((np.size(angle), 4))
-    q[:, 0] = np.cos(angle / 2)
-    q[:, 1 + axis] = np.sin(angle / 2)
-    return q
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
 def test_tilted_still_sensor_levels_to_no_acceleration():
     n = 1500
     t = np.arange(n) / RATE
-    tilt = _about(0, np.full(n, np.radians(25.0)))  # body -> level
-    acc = rotate(_conj(tilt), np.tile([0.0, 0.0, G], (n, 1)))  # gravity seen in the body
+    tilt = about(0, np.full(n, np.radians(25.0)))  # body -> level
+    acc = rotate(conj(tilt), np.tile([0.0, 0.0, G], (n, 1)))  # gravity seen in the body
     out = level_frame(ImuRecord(t, acc, gyro=np.zeros((n, 3))))
     assert np.abs(out.acc[-200:]).max() < 0.02
-    assert "Fusion" in out.method
+    assert "tilt corrected at 1 rests" in out.method and out.rests.all()  # still throughout: one rest
+    alone = level_frame(ImuRecord(t, acc, gyro=np.zeros((n, 3))), passes=0)  # no correction: Fusion's attitude
+    assert "Fusion" in alone.method and np.abs(alone.acc[-200:]).max() < 0.02
 
 
 def test_given_orientation_is_applied_and_heading_starts_along_x():
     n = 400
     t = np.arange(n) / RATE
     yaw = np.radians(40.0) + 0.5 * t  # turning at 0.5 rad/s, starting at 40 deg
-    q = _about(2, yaw)
+    q = about(2, yaw)
     a_level = np.column_stack([np.sin(t), np.cos(t), np.zeros(n)])
-    start = _about(2, np.full(n, -np.radians(40.0)))
-    body = rotate(_conj(q), rotate(_conj(start), a_level) + [0.0, 0.0, G])
+    start = about(2, np.full(n, -np.radians(40.0)))
+    body = rotate(conj(q), rotate(conj(start), a_level) + [0.0, 0.0, G])
     out = level_frame(ImuRecord(t, body, quat=q))
     np.testing.assert_allclose(out.acc, a_level, atol=1e-9)
     np.testing.assert_allclose(rotate(out.quat[:1], np.array([[1.0, 0, 0]])), [[1.0, 0, 0]], atol=1e-12)

@@ -19,6 +19,7 @@ from conftest import MODELS
 from accelnav.codegen import gains
 from accelnav.codegen.bounds import error_bound
 from accelnav.codegen.ranges import plan_axis
+from accelnav.data import csvnum
 from accelnav.estimate import fastsmooth
 from accelnav.link import wirekernel
 from accelnav.model.load import load_model
@@ -29,6 +30,7 @@ from accelnav.native.kernels import RICCATI_FLAGS as WHEEL_FLAGS
 KERNELS = {
     "riccati": (gains, "_riccati_prebuilt", "riccati.c"),
     "wire": (wirekernel, "_prebuilt", "acnwire.c"),
+    "csvnum": (csvnum, "_prebuilt", "csvnum.c"),
     "fastsmooth": (fastsmooth, "_prebuilt", "fastsmooth.c"),
 }
 REINSTALL = "the package's build of this kernel is missing or stale: reinstall (pip install -e . / make setup)"

@@ -22,6 +22,7 @@ DATA = (
     "accelnav/py.typed",  # the public API is typed (PEP 561)
     "accelnav/models/adxl250_default.toml",
     "accelnav/models/adxl202_duty.toml",
+    "accelnav/models/examples/phone_move.zip",  # the README's phone block reads it (accelnav.example_path)
     "accelnav/firmware/firmware.mk",
     "accelnav/firmware/parts.mk",  # the part table firmware.mk and the codegen report share
     "accelnav/firmware/src/app.c",
@@ -39,9 +40,12 @@ DATA = (
     "accelnav/codegen/csrc/acn_runtime.h",  # the fixed-point runtime the generator copies into every filter
     "accelnav/link/csrc/acnwire.c",
     "accelnav/link/csrc/acnwire.h",
+    "accelnav/data/csrc/csvnum.c",
+    "accelnav/data/csrc/csvnum.h",
 )
 # the C kernels compiled into the wheel (setup.py's cffi_modules): used with no C compiler on the machine
-KERNELS = ("accelnav.estimate._fastsmooth", "accelnav.codegen._riccati", "accelnav.link._acnwire")
+KERNELS = ("accelnav.estimate._fastsmooth", "accelnav.codegen._riccati", "accelnav.link._acnwire",
+           "accelnav.data._csvnum")  # fmt: skip
 
 
 def test_wheel_has_one_top_level_name_and_its_data(wheel):
@@ -94,11 +98,12 @@ def test_commands_work_from_an_empty_folder(wheel, tmp_path):
     assert "smoother" in out.lower()
     _run(site, work, cache, "sim", "--scenario", "stationary", "--duration", "300", "--seed", "4", "--out", "st.npz")
     _run(site, work, cache, "fit-bias", "st.npz", "--out", "fitted.toml")
-    # the same for codegen's Riccati kernel (in Python its codegen takes 30x longer) and the decoder's frame kernel
+    # the same for codegen's Riccati kernel (in Python its codegen takes 30x longer), the decoder's frame kernel
+    # and the CSV reader's number parser
     code = (
         "from accelnav.codegen import gains; from accelnav.link import wirekernel; "
-        "from accelnav.estimate import fastsmooth; "
-        "used = fastsmooth._lib(), gains._riccati_module(), wirekernel.wire_lib(); "
+        "from accelnav.estimate import fastsmooth; from accelnav.data import csvnum; "
+        "used = fastsmooth._lib(), gains._riccati_module(), wirekernel.wire_lib(), csvnum.csv_lib(); "
         "print(*(getattr(m, '__name__', m) for m in used))"
     )
     used = subprocess.run(

@@ -141,6 +141,14 @@ def _imu(folder: Path) -> tuple[np.ndarray, dict[tuple[str, str], int]]:
     return np.loadtxt(folder / "imu_sample.csv", delimiter=",", skiprows=2), cols
 
 
+def body_frame(foot: str, folder: Path | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One foot's raw sensor data as recorded: (acc (N, 3) m/s^2 with gravity, gyro (N, 3) rad/s), body frame."""
+    raw, cols = _imu(fetch() if folder is None else folder)
+    sensor = f"{foot}_sensor"
+    acc = raw[:, [cols[(sensor, f"acc_{c}")] for c in "xyz"]]
+    return acc, np.deg2rad(raw[:, [cols[(sensor, f"gyr_{c}")] for c in "xyz"]])
+
+
 def _events(folder: Path) -> list[dict[str, str]]:
     rows = (folder / "stride_events_sample.csv").read_text().strip().splitlines()
     head = rows[0].split(",")

@@ -2,18 +2,33 @@
 its cost): the kinematic filter in numpy on (n_axes, 3, 3) arrays per event, the functions that read it as
 arrays (a side's test, the level's jump), each candidate's statistics in numpy span by span, the backward
 filter event by event in Python, np.median and np.linalg.norm, every candidate's peak speed computed at once, a
-new filter per pass. Kept as the reference the rewrites must decide exactly like:
+new filter per pass, each pass's forward filter from the start, the rests before a stand listed whole, the
+chi-square's tail by scipy. Kept as the reference the rewrites must decide exactly like:
 tests/estimate/test_rest_decision_same.py swaps them in (:func:`swapped`), and bench/speed/bench_rest_decision.py
 times both."""
 
 from __future__ import annotations
 
 import contextlib
+import math
 
 import numpy as np
 
 from accelnav.estimate import rests
-from accelnav.estimate.rests import DIFFUSE, LEAK, LIKE, MOTION, PEAK_POINTS, UNLIKE, Candidate, Side, chi2_equivalent
+from accelnav.estimate.rests import DIFFUSE, LEAK, LIKE, MOTION, PEAK_POINTS, UNLIKE, Candidate, Side
+
+
+def chi2_equivalent(x: float, dof: int) -> float:
+    """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom, by scipy's
+    gammaincc and erfcinv, as it was before the kernel's closed form."""
+    if dof == 1 or not math.isfinite(x):
+        return x
+    from scipy.special import erfcinv, gammaincc
+
+    tail = float(gammaincc(dof / 2.0, x / 2.0))
+    if tail <= 0.0:
+        return math.inf
+    return float(2.0 * erfcinv(tail) ** 2)
 
 
 def _update(X: np.ndarray, P: np.ndarray, i: int, z: np.ndarray, r: np.ndarray, rows=slice(None)) -> None:
@@ -137,6 +152,15 @@ def reference_jump(self, kin: ReferenceKinematic, c: Candidate) -> float:
     return float(np.linalg.norm(np.maximum(np.abs(c.level - kin.X[:, 2]) - 3.0 * sd, 0.0)))
 
 
+def reference_test(self, kin: ReferenceKinematic, k: int, i: int, st: dict) -> tuple[float, Side]:
+    """The forward filter taken to candidate i's first sample k: the level's jump there and its side, as the old
+    forward filter made them (its own lines, gathered here)."""
+    p, c = self.p, self.cands[i]
+    kin.to(k)
+    jump = reference_jump(self, kin, c)
+    return jump, reference_side(kin, c, self.R, p.sigma, p.drift, p.scale, st["source"], st["fix"], 1.0)
+
+
 def reference_median(values: list[float]) -> float:
     return float(np.median(values))
 
@@ -210,6 +234,21 @@ def reference_norms(s: Side | None) -> tuple[float, float]:
     return float(np.linalg.norm(s.v)), float(np.sqrt(np.mean(s.sd**2)))
 
 
+def reference_last_before(self, order: list[int], stops, k: int):
+    """The last accepted rest that ends by sample k, the rests before it listed whole, as it was."""
+    before = [j for j in order if self.cands[j].stop <= k]
+    return before[-1] if before else None
+
+
+_FORWARD = rests._Decider.forward
+
+
+def reference_forward(self):
+    """Every pass's forward filter from the record's start, as the old passes ran it (no marks to resume at)."""
+    self._marks, self._seen_veto = {}, {}
+    return _FORWARD(self)
+
+
 def reference_candidates(x, ok, R, spans) -> list[Candidate]:
     """Each candidate's statistics in numpy, span by span, as decide() made them."""
     n_axes = x.shape[1]
@@ -243,7 +282,7 @@ def reference_backward(self, acc: set[int]) -> list[Side | None]:
                 source = f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
             continue
         kin.to(k)
-        out[i] = rests._side(kin, c, self.R, p.sigma, p.drift, p.scale, source, fix_seen, -1.0)
+        out[i] = reference_side(kin, c, self.R, p.sigma, p.drift, p.scale, source, fix_seen, -1.0)
         if i in acc:
             kin.rest(k, p.sigma)
     assert n == len(self.x)
@@ -254,17 +293,19 @@ def reference_backward(self, acc: set[int]) -> list[Side | None]:
 # did before its rewrite
 SWAPS = {
     (rests, "_Kinematic"): ReferenceKinematic,
-    (rests, "_side"): reference_side,
     (rests, "_median"): reference_median,
     (rests, "_speed"): reference_speed,
     (rests, "_norms"): reference_norms,
     (rests, "_Lazy"): reference_eager,
     (rests, "_candidates"): reference_candidates,
-    (rests._Decider, "_jump"): reference_jump,
+    (rests, "chi2_equivalent"): chi2_equivalent,
+    (rests._Decider, "_test"): reference_test,
     (rests._Decider, "_judge"): reference_judge,
     (rests._Decider, "_peak"): reference_peak,
     (rests._Decider, "_fresh"): reference_fresh,
     (rests._Decider, "backward"): reference_backward,
+    (rests._Decider, "forward"): reference_forward,
+    (rests._Decider, "_last_before"): reference_last_before,
 }
 
 

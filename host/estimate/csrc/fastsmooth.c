@@ -1601,6 +1601,62 @@ double acn_kin_side(int n_axes, const double *s, const double *A, long k, long a
     return total;
 }
 
+/* erfc(z) = q for 0 < q <= 1 (z >= 0): Halley's steps on erfc from a start near the root, until
+   the step is below an ulp of z; a few steps (the convergence is cubic) */
+static double kin_erfcinv(double q)
+{
+    if (q >= 1.0) {
+        return 0.0;
+    }
+    /* erfc(z) ~ exp(-z^2) / (z sqrt(pi)) for large z; near q = 1, erfc(z) ~ 1 - 2 z / sqrt(pi) */
+    double z = q > 0.3 ? (1.0 - q) * 0.886226925452758 : sqrt(-log(q));
+    for (int it = 0; it < 100; it++) {
+        double slope = -1.1283791670955126 * exp(-z * z); /* d erfc / dz */
+        double r = (erfc(z) - q) / slope;
+        double step = r / (1.0 + z * r);
+        z -= step;
+        if (fabs(step) <= 2e-16 * fabs(z)) {
+            break;
+        }
+    }
+    return z;
+}
+
+double acn_chi2_equivalent(double x, int dof)
+{
+    if (dof == 1 || !isfinite(x)) {
+        return x;
+    }
+    /* the upper tail Q(dof / 2, x / 2) of a chi-square with dof degrees of freedom, in closed form:
+       even dof from Q(1, y) = exp(-y), odd from Q(1/2, y) = erfc(sqrt(y)), each step up adding
+       y^a exp(-y) / Gamma(a + 1) */
+    double y = x / 2.0, tail, term;
+    /* a tail below exp(-709.78) is none (as scipy's gammaincc, cephes' igamc, has it) */
+    if (y > 0.0 && (dof / 2.0) * log(y) - y - lgamma(dof / 2.0) < -709.782712893384) {
+        return INFINITY;
+    }
+    if (dof % 2) {
+        tail = erfc(sqrt(y));
+        term = sqrt(y) * exp(-y) / 0.886226925452758; /* Gamma(3/2) */
+        for (double a = 0.5; a + 1.0 <= dof / 2.0;) {
+            tail += term;
+            a += 1.0;
+            term *= y / a;
+        }
+    } else {
+        tail = term = exp(-y);
+        for (int a = 1; a < dof / 2; a++) {
+            term *= y / a;
+            tail += term;
+        }
+    }
+    if (tail <= 0.0) {
+        return INFINITY;
+    }
+    double z = kin_erfcinv(tail);
+    return 2.0 * z * z;
+}
+
 double acn_kin_jump(int n_axes, const double *s, const double *level)
 {
     double sum = 0.0;
@@ -1614,6 +1670,27 @@ double acn_kin_jump(int n_axes, const double *s, const double *level)
         sum += off * off;
     }
     return sqrt(sum);
+}
+
+void acn_kin_test(int n_axes, double *s, const double *V, const double *W, const double *A, long k0,
+                  long k, double Ts, double q, const double *qv, long aid_k, const double *level,
+                  const double *R, long len, double leak, double drift, double scale, double sigma2,
+                  double *out, double *res)
+{
+    acn_kin_to(n_axes, s, V, W, k0, k, Ts, q, qv);
+    long now = k > k0 ? k : k0;
+    res[1] = acn_kin_jump(n_axes, s, level);
+    double total = acn_kin_side(n_axes, s, A, now, aid_k, Ts, level, R, len, leak, drift, scale,
+                                sigma2, 1.0, out);
+    res[0] = acn_chi2_equivalent(total, n_axes);
+    /* rests.py's _norms, its sums in the same order: |v| and the rms of the sds */
+    double v2 = 0.0, sd2 = 0.0;
+    for (int j = 0; j < n_axes; j++) {
+        v2 += out[j] * out[j];
+        sd2 += out[n_axes + j] * out[n_axes + j];
+    }
+    res[2] = sqrt(v2);
+    res[3] = sqrt(sd2 / (double)n_axes);
 }
 
 void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, long n_spans,

@@ -131,6 +131,23 @@ double acn_kin_side(int n_axes, const double *s, const double *A, long k, long a
                     double scale, double sigma2, double sign, double *out);
 double acn_kin_jump(int n_axes, const double *s, const double *level);
 /*
+ * A forward side's whole test of a candidate (rests.py, _Decider._test): s
+ * propagated from k0 to k, then as acn_kin_side (sign +1) into out, with
+ * res = [its chi-square read on one axis (acn_chi2_equivalent), the level's
+ * jump (acn_kin_jump), |v| over the axes, the rms of the sds].
+ */
+void acn_kin_test(int n_axes, double *s, const double *V, const double *W, const double *A, long k0,
+                  long k, double Ts, double q, const double *qv, long aid_k, const double *level,
+                  const double *R, long len, double leak, double drift, double scale, double sigma2,
+                  double *out, double *res);
+/*
+ * The one-degree chi-square value with the upper tail of x under dof degrees of
+ * freedom (rests.py, chi2_equivalent): the tail in closed form, its inverse by
+ * Halley's steps on erfc; x itself for dof 1 or x not finite, inf where the
+ * tail underflows.
+ */
+double acn_chi2_equivalent(double x, int dof);
+/*
  * The rest decision's candidates (rests.py, decide): for each span [start, stop)
  * of x (n rows of n_axes), over its rows with usable[row] set, the mean per axis
  * into level (n_spans rows of n_axes) and the mean over axes of the variance / R

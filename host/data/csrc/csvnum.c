@@ -1,0 +1,208 @@
+/* Numbers of CSV lines: see csvnum.h.
+ *
+ * Each number is rounded correctly, as Python's float() (numpy's reader) rounds it. A mantissa of
+ * at most 19 significant digits, at most 2^53, times or over a power of ten up to 1e22 is one IEEE
+ * operation on two exact doubles, hence correctly rounded. Every other number goes to strtod
+ * (correctly rounded in glibc and the BSDs) written as digits and an exponent only, with no decimal
+ * point, so that no locale's radix character can change what it reads. */
+#include "csvnum.h"
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#define MAX_DIGITS 19 /* a uint64 holds any 19 decimal digits */
+#define SCRATCH 400   /* longest field given to strtod; a longer one is refused (numpy takes it) */
+#define EXP_CLAMP 100000L /* past +-this (< SCRATCH digits) every value is inf or 0 */
+
+static const double pow10_exact[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                       1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                                       1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+
+static int is_digit(uint8_t c)
+{
+    return c >= '0' && c <= '9';
+}
+
+static int is_blank(uint8_t c)
+{
+    return c == ' ' || c == '\t';
+}
+
+/* The number in p[0..n) into *v; 0 when the field is outside the grammar (csvnum.h). Any number. */
+static int parse_any(const uint8_t *p, int64_t n, int comma_is_point, double *v)
+{
+    int64_t i = 0, sig = 0, digits = 0, nfrac = 0, k = 0, num, mend;
+    int neg = 0, inexact = 0;
+    uint64_t m = 0;
+    long scale = 0, written = 0; /* value = m * 10^(scale + written) */
+    char scratch[SCRATCH + 32];
+    char *end;
+
+    while (i < n && is_blank(p[i]))
+        i++;
+    while (n > i && is_blank(p[n - 1]))
+        n--;
+    if (n - i > SCRATCH)
+        return 0;
+    if (i < n && (p[i] == '+' || p[i] == '-'))
+        neg = p[i++] == '-';
+    for (num = i; i < n && is_digit(p[i]); i++, digits++) {
+        if (m == 0 && p[i] == '0')
+            continue; /* a leading zero */
+        if (sig < MAX_DIGITS) {
+            m = m * 10u + (uint64_t)(p[i] - '0');
+            sig++;
+        } else {
+            inexact = 1;
+            scale++; /* a dropped integer digit scales what was kept */
+        }
+    }
+    if (i < n && (p[i] == '.' || (comma_is_point && p[i] == ','))) {
+        for (i++; i < n && is_digit(p[i]); i++, digits++, nfrac++) {
+            if (m == 0 && p[i] == '0') {
+                scale--;
+            } else if (sig < MAX_DIGITS) {
+                m = m * 10u + (uint64_t)(p[i] - '0');
+                sig++;
+                scale--;
+            } else {
+                inexact = 1;
+            }
+        }
+    }
+    if (digits == 0)
+        return 0;
+    mend = i;
+    if (i < n && (p[i] == 'e' || p[i] == 'E')) {
+        long x = 0, sign = 1;
+        int64_t start;
+        i++;
+        if (i < n && (p[i] == '+' || p[i] == '-'))
+            sign = p[i++] == '-' ? -1 : 1;
+        for (start = i; i < n && is_digit(p[i]); i++)
+            if (x <= EXP_CLAMP)
+                x = x * 10 + (p[i] - '0');
+        if (i == start)
+            return 0;
+        written = sign * (x > EXP_CLAMP ? EXP_CLAMP : x);
+    }
+    if (i != n)
+        return 0;
+    if (m == 0) {
+        *v = neg ? -0.0 : 0.0;
+        return 1;
+    }
+    scale += written;
+    if (!inexact && m <= (UINT64_C(1) << 53) && scale >= -22 && scale <= 22) {
+        double d = (double)m; /* exact: m <= 2^53 */
+        d = scale >= 0 ? d * pow10_exact[scale] : d / pow10_exact[-scale];
+        *v = neg ? -d : d;
+        return 1;
+    }
+    /* every digit as written, the fraction's count taken off the exponent: "12.5e3" -> "125e2" */
+    if (neg)
+        scratch[k++] = '-';
+    for (; num < mend; num++)
+        if (is_digit(p[num]))
+            scratch[k++] = (char)p[num];
+    k += snprintf(scratch + k, sizeof scratch - (size_t)k, "e%ld", written - (long)nfrac);
+    *v = strtod(scratch, &end);
+    return end == scratch + k;
+}
+
+/* parse_any's result for a field, faster for the common one: no exponent, at most 19 significant
+ * digits, a value below 2^53 with at most 22 decimals (m / 10^nfrac: one correctly rounded
+ * division) */
+static int parse_number(const uint8_t *p, int64_t n, int comma_is_point, double *v)
+{
+    int64_t i = 0, s, digits, nfrac = 0, sig;
+    uint64_t m = 0;
+    int neg = 0;
+    double d;
+
+    while (i < n && is_blank(p[i]))
+        i++;
+    while (n > i && is_blank(p[n - 1]))
+        n--;
+    if (i < n && (p[i] == '+' || p[i] == '-'))
+        neg = p[i++] == '-';
+    s = i;
+    while (i < n && p[i] == '0')
+        i++; /* leading zeros */
+    for (sig = i; i < n && is_digit(p[i]); i++)
+        m = m * 10u + (uint64_t)(p[i] - '0'); /* wraps past 19 digits: then refused below */
+    sig = i - sig;
+    digits = i - s;
+    if (i < n && (p[i] == '.' || (comma_is_point && p[i] == ','))) {
+        int64_t f = ++i;
+        if (m == 0)
+            while (i < n && p[i] == '0')
+                i++; /* zeros before the first significant digit */
+        for (s = i; i < n && is_digit(p[i]); i++)
+            m = m * 10u + (uint64_t)(p[i] - '0');
+        sig += i - s;
+        nfrac = i - f;
+        digits += nfrac;
+    }
+    if (i != n || digits == 0 || sig > MAX_DIGITS || m > (UINT64_C(1) << 53) || nfrac > 22)
+        return parse_any(p, n, comma_is_point, v); /* an exponent, many digits, or not a number */
+    d = (double)m;                                 /* exact: m <= 2^53 */
+    if (nfrac)
+        d /= pow10_exact[nfrac];
+    *v = neg ? -d : d;
+    return 1;
+}
+
+int acsv_parse(const uint8_t *buf, int64_t len, int delim, int comma_is_point, int64_t ncols,
+               const int64_t *slot, int64_t nuse, int64_t nrows, double *out, int64_t *bad)
+{
+    int64_t pos = 0, row = 0, j;
+    bad[0] = bad[1] = -1;
+    if (len < 0 || ncols < 1 || nuse < 0 || nrows < 0 || delim < 0 || delim > 255 ||
+        delim == '\n' || (nuse > 0 && nrows > INT64_MAX / nuse))
+        return ACSV_ARGS;
+    for (j = 0; j < ncols; j++)
+        if (slot[j] < -1 || slot[j] >= nuse)
+            return ACSV_ARGS;
+    for (;;) {
+        if (row >= nrows) {
+            bad[0] = row;
+            return ACSV_ROWS;
+        }
+        if (pos >= len || buf[pos] == '\n') {
+            bad[0] = row;
+            return ACSV_FIELDS; /* an empty line (the numpy reader skips it) */
+        }
+        for (j = 0; j < ncols; j++) {
+            int64_t start = pos;
+            while (pos < len && buf[pos] != delim && buf[pos] != '\n')
+                pos++;
+            if (slot[j] >= 0 && !parse_number(buf + start, pos - start, comma_is_point,
+                                              out + row * nuse + slot[j])) {
+                bad[0] = row;
+                bad[1] = j;
+                return ACSV_FIELD;
+            }
+            if (j + 1 < ncols) {
+                if (pos >= len || buf[pos] != delim) {
+                    bad[0] = row;
+                    return ACSV_FIELDS; /* too few fields */
+                }
+                pos++;
+            }
+        }
+        if (pos < len && buf[pos] != '\n') {
+            bad[0] = row;
+            return ACSV_FIELDS; /* too many fields */
+        }
+        row++;
+        if (pos >= len)
+            break;
+        pos++; /* the '\n' */
+    }
+    if (row != nrows) {
+        bad[0] = row;
+        return ACSV_ROWS;
+    }
+    return ACSV_OK;
+}
