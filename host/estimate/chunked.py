@@ -33,9 +33,12 @@ covariance array would be 13 GB per axis). Every member's size is known before t
 file is laid out up front and each chunk written once, in place (:mod:`accelnav.estimate.npzout`).
 
 Where every sample so far was valid and the design's steady rows exist (fastsmooth.steady_gains), the
-plain path's forward pass keeps a lean store (``LROW`` = 5 doubles: the filter's, then the smoothed,
-a and eps, and the smoothed (a, eps) covariance) and the backward passes read the rest (gains,
-smoother gains, the filter's (a, eps) covariances) from those rows, the same numbers in the same order.
+plain path's forward pass keeps a lean store (``LROW`` = 2 doubles: the filter's, then the smoothed, a
+and eps) and the backward passes read the rest (gains, smoother gains, the filter's (a, eps)
+covariances) from those rows, the same numbers in the same order. The smoothed (a, eps) covariance needs
+no data: the r, u pass steps it again over each chunk from the covariance the backward pass carried into
+that chunk (3 doubles a chunk), the same doubles, rather than keeping 3 more doubles a sample (a store's
+fresh pages cost more than the kernels writing them: 0.8 s of system time for 800 MB, measured).
 When the filter's states are not written (the smoother alone), only the run's last sample needs the
 filter's r, u covariance: on steady rows it is not stepped per sample but jumped over each chunk (the
 step is affine there; csrc/fastsmooth.c, steady_jump), which leaves every other output's bits alone and
@@ -74,7 +77,7 @@ PROGRESS_AFTER = 2.0  # s: a run that takes longer shows its passes' progress (a
 # two-axis sample at 1e6): what decides that a run goes to the bounded path
 WHOLE_BYTES = 1250
 ROW = 12  # doubles per sample and axis in the store (csrc/fastsmooth.c, ACN_ROW)
-LROW = 5  # the same for all-valid samples of the plain path with steady rows (ACN_LROW)
+LROW = 2  # the same for all-valid samples of the plain path with steady rows (ACN_LROW)
 GROW = 14  # the same for the general path (ACN_GROW): the posterior (the backward pass predicts again)
 # held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
 CHUNK_BYTES = 8 * GROW + 8 + 1 + 2 * 32 + 2 * 8
@@ -184,8 +187,12 @@ class NpzReader:
         pread_exact(self.fd, buf, offset + s * int(np.prod(shape[1:])) * dtype.itemsize)
         return buf
 
+    def column(self, key: str, s: int, e: int) -> np.ndarray:
+        """Rows s..e of member ``key`` as float64 (read straight in, no copy, when it is stored so)."""
+        return self.part(key, s, e).astype(np.float64, copy=False)
+
     def __call__(self, s: int, e: int):
-        t, accel = self.part("t", s, e).astype(np.float64), self.part("accel", s, e).astype(np.float64)
+        t, accel = self.column("t", s, e), self.column("accel", s, e)
         if "clipped" in self.members:
             return t, accel, self.part("clipped", s, e).astype(bool)
         return t, accel, np.zeros((e - s, self.n_axes), dtype=bool)
@@ -253,6 +260,8 @@ class _Axis:
     store: _Store | None = None  # rows of `width` doubles, sample s at byte 8 * width * s
     lean: _Store | None = None  # the lean store (LROW doubles per sample) of samples before lean_end
     lean_end: int = 0  # samples 0 .. lean_end - 1 went through acn_chunk_fwd_steady (all valid)
+    # per lean chunk start: the smoothed (a, eps) covariance its backward pass started from (None: the run's end)
+    cov_after: dict[int, np.ndarray | None] = field(default_factory=dict)
     carry_b: np.ndarray = field(default_factory=lambda: np.zeros(14))  # backward carry
     carry_r: np.ndarray = field(default_factory=lambda: np.zeros(11))  # r, u carry (plain)
     Pf0: np.ndarray = field(default_factory=lambda: np.zeros(10))
@@ -298,6 +307,7 @@ class _Run:
         # fault per 4 KiB: fresh memory filled at 0.2-0.8 GB/s against 2.5 GB/s for pages in use, measured)
         self.store = np.empty((self.chunk + 1) * GROW)
         self.xa, self.sa = np.empty((self.chunk, 4)), np.empty((self.chunk, 4))
+        self.cov = np.empty((self.chunk + 1, 3))  # a lean chunk's smoothed (a, eps) covariance, its next sample's
         self.zc, self.ok = np.empty(self.chunk), np.empty(self.chunk, dtype=bool)
         self.bad = np.empty(self.chunk, dtype=bool)
 
@@ -625,6 +635,7 @@ def _backward(run: _Run, ax: _Axis, s: int, e: int) -> None:
     elif s < ax.lean_end:
         buf = ax.lean.rows(run.store, LROW, s, m)
         sr = ax.steady_rows
+        ax.cov_after[s] = None if last else ax.carry_b[2:5].copy()
         run.lib.acn_chunk_bwd_lean(ax.m, s, m, last, p(sr), len(sr), p(buf), p(ax.carry_b))
         ax.lean.done(buf, s)
     else:
@@ -647,11 +658,18 @@ def _smooth_ru(run: _Run, ax: _Axis, starts: list[int]) -> None:
                 ax.lean.read(buf[:m], 8 * LROW * s)
                 nx = np.empty(ROW)
                 ax.store.read(nx, 8 * ROW * e)
-                buf[m] = nx[[0, 1, 6, 7, 8]]
+                buf[m] = nx[[0, 1]]
             else:
                 buf = ax.lean.rows(run.store, LROW, s, m + 1)
-            sr = ax.steady_rows
-            run.lib.acn_chunk_ru_lean(ax.m, s, m, p(buf), p(sr), len(sr), p(ax.carry_r), p(run.xa), p(run.sa))
+            sr, after = ax.steady_rows, ax.cov_after[s]
+            cov = run.cov[: e - s + 1]
+            ends = run.ffi.NULL if after is None else p(after)  # None: the chunk ends the run
+            run.lib.acn_chunk_cov_lean(ax.m, s, e - s, int(after is None), p(sr), len(sr), ends, p(cov))
+            if after is not None:
+                cov[e - s] = after  # the next sample's, for the chunk's last transition
+            run.lib.acn_chunk_ru_lean(
+                ax.m, s, m, p(buf), p(cov), p(sr), len(sr), p(ax.carry_r), p(run.xa), p(run.sa)
+            )  # fmt: skip
         else:
             buf = ax.store.rows(run.store, ROW, s, m + 1)
             run.lib.acn_chunk_ru(ax.m, m, p(buf), p(ax.carry_r), p(run.xa), p(run.sa))

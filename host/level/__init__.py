@@ -60,6 +60,8 @@ from accelnav.level.quat import integrate, qmul, rotate, rotvec_quat
 from accelnav.level.rests import COVER_MAX, G, RestParams, find_rests
 from accelnav.level.rests import spans as rest_spans
 
+__all__ = ["G", "ImuRecord", "LevelResult", "RestParams", "find_rests", "level_frame", "quat", "rests", "rotate"]
+
 GAIN = 0.2  # Fusion's gain (its default 0.5): measured, see the module docstring
 ACCELERATION_REJECTION = 20.0  # degrees, Fusion's acceleration rejection (its default 0: off)
 REJECTION_TIMEOUT_S = 10.0  # s, Fusion's recovery: rejected this long, the accelerometer is trusted again

@@ -71,6 +71,7 @@ OPTIONS = {
     "plain": {},
     "fixes": {"fixes": "fixes.csv"},
     "rests given": {"zupt": "rests.csv"},
+    "fixes and rests given": {"fixes": "fixes.csv", "zupt": "rests.csv"},
     "rests detected": {"zupt": "auto"},
     "fixes and detected rests": {"fixes": "fixes.csv", "zupt": "auto"},
 }

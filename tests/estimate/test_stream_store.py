@@ -53,7 +53,7 @@ def test_the_filter_alone_writes_the_smoothers_filter_states(tmp_path):
     ids=["lean and the late full store in memory", "lean in memory, the full store on disk"],
 )
 def test_a_store_is_counted_by_the_rows_it_will_hold(tmp_path, budget, in_memory):
-    """The lean stores (5 doubles a sample) take the budget first; axis 1's full store opens at its clipped
+    """The lean stores (chunked.LROW doubles a sample) take the budget first; axis 1's full store opens at its clipped
     sample (n/2, in the chunk from 1402) with rows for the samples left only, in memory if they fit, else on
     disk: the same file."""
     model = load_model()

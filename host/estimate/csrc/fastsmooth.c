@@ -1202,9 +1202,9 @@ static void steady_jump(const acn_axis *m, const double *sr, long s, double P[4]
  * the rows of acn_plain_rows (nt of them, the last steady): the gains, smoother
  * gains and (a, eps) blocks are read, the r, u rows of P propagated as in
  * acn_plain_cov_steady. Same arguments and outputs, but a lean store of
- * ACN_LROW doubles per sample: the filter's a, eps (0, 1); acn_chunk_bwd_lean
- * adds the smoothed ones and their covariance (0..4). Everything else the
- * backward passes need is data-independent: they read it from the rows.
+ * ACN_LROW doubles per sample: the filter's a, eps, which acn_chunk_bwd_lean
+ * turns into the smoothed ones. Everything else the backward passes need is
+ * data-independent: they read it from the rows.
  * sdf NULL: the filter's states are not wanted (the smoother alone), so xf gets
  * only its first and last rows, and on steady rows the covariance is not
  * stepped per sample but jumped (steady_jump) to where it is needed: the run's
@@ -1283,9 +1283,8 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
  * its covariance (aa, ae, ee) and pn the next prior's. Updates the smoothed
  * values in place; the full and the lean chunk stores lay these out apart.
  */
-static inline void bwd_ae_step(double phi, double b, const double *c, const double *x,
-                               const double *pf, const double *pn, double *as, double *es,
-                               double *saa, double *sae, double *see)
+static inline void bwd_ae_mean(double phi, double b, const double *c, const double *x, double *as,
+                               double *es)
 {
     double c00 = c[0], c01 = c[1], c10 = c[2], c11 = c[3];
     /* s[k] = s_post[k] + C[k] (s[k+1] - Fs s_post[k] - b), acn_plain_data's order */
@@ -1294,6 +1293,14 @@ static inline void bwd_ae_step(double phi, double b, const double *c, const doub
     double an = c00 * *as + c01 * *es + ca;
     *es = c10 * *as + c11 * *es + ce;
     *as = an;
+}
+
+/* The covariance half of bwd_ae_step: the lean path runs it apart from the means (it needs no
+ * data). */
+static inline void bwd_ae_cov(const double *c, const double *pf, const double *pn, double *saa,
+                              double *sae, double *see)
+{
+    double c00 = c[0], c01 = c[1], c10 = c[2], c11 = c[3];
     /* Ps = Pf + C (Ps[k+1] - Pp) C' */
     double daa = *saa - pn[0], dae = *sae - pn[1], dee = *see - pn[2];
     double t00 = c00 * daa + c01 * dae, t01 = c00 * dae + c01 * dee;
@@ -1303,12 +1310,23 @@ static inline void bwd_ae_step(double phi, double b, const double *c, const doub
     *see = pf[2] + t10 * c10 + t11 * c11;
 }
 
+static inline void bwd_ae_step(double phi, double b, const double *c, const double *x,
+                               const double *pf, const double *pn, double *as, double *es,
+                               double *saa, double *sae, double *see)
+{
+    bwd_ae_mean(phi, b, c, x, as, es);
+    bwd_ae_cov(c, pf, pn, saa, sae, see);
+}
+
 /*
  * acn_chunk_bwd over a lean store (acn_chunk_fwd_steady's) of samples k0 ..
  * k0 + n - 1: the smoother gain, the filter's (a, eps) covariance and the next
  * prior's from the rows (row min(k, nt - 1)), the same operations in the same
- * order as acn_chunk_bwd. Writes the smoothed a, eps, P_aa, P_ae, P_ee into the
- * store row; carry as in acn_chunk_bwd.
+ * order as acn_chunk_bwd. Writes the smoothed a, eps into the store row; carry
+ * as in acn_chunk_bwd. The smoothed (a, eps) covariance is not stored: it needs
+ * no data, and acn_chunk_cov_lean gives the same numbers for the r, u pass (the
+ * store is 2 doubles a sample, not 5: its fresh pages were most of a run's
+ * system time).
  */
 void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
                         double *store, double *carry)
@@ -1317,10 +1335,9 @@ void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const doub
     double as = carry[0], es = carry[1], saa = carry[2], sae = carry[3], see = carry[4];
     long k = n - 1;
     if (last) { /* the run's last sample is the filter's */
-        double *row = store + ACN_LROW * k;
+        const double *row = store + ACN_LROW * k;
         const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
         as = row[0], es = row[1], saa = sr[11], sae = sr[12], see = sr[13];
-        row[2] = saa, row[3] = sae, row[4] = see;
         k--;
     }
     for (; k >= 0; k--) {
@@ -1328,10 +1345,41 @@ void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const doub
         long g = k0 + k;
         const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
         const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
-        bwd_ae_step(phi, b, sr + 4, row, sr + 11, sn + 8, &as, &es, &saa, &sae, &see);
-        row[0] = as, row[1] = es, row[2] = saa, row[3] = sae, row[4] = see;
+        bwd_ae_mean(phi, b, sr + 4, row, &as, &es);
+        bwd_ae_cov(sr + 4, sr + 11, sn + 8, &saa, &sae, &see);
+        row[0] = as, row[1] = es;
     }
     carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
+}
+
+/*
+ * The smoothed (a, eps) covariance (P_aa, P_ae, P_ee) of samples k0 .. k0 + n - 1
+ * into cov (3 doubles a sample), as acn_chunk_bwd_lean steps it: from the run's
+ * last row (last) or from after, that of sample k0 + n (the carry that chunk's
+ * backward pass started from). The same operations on the same numbers: the
+ * same doubles.
+ */
+void acn_chunk_cov_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
+                        const double *after, double *cov)
+{
+    (void)m;
+    double saa, sae, see;
+    long k = n - 1;
+    if (last) {
+        const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
+        saa = sr[11], sae = sr[12], see = sr[13];
+        cov[3 * k] = saa, cov[3 * k + 1] = sae, cov[3 * k + 2] = see;
+        k--;
+    } else {
+        saa = after[0], sae = after[1], see = after[2];
+    }
+    for (; k >= 0; k--) {
+        long g = k0 + k;
+        const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
+        const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
+        bwd_ae_cov(sr + 4, sr + 11, sn + 8, &saa, &sae, &see);
+        cov[3 * k] = saa, cov[3 * k + 1] = sae, cov[3 * k + 2] = see;
+    }
 }
 
 /*
@@ -1400,17 +1448,22 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
     }
 }
 
-/* acn_chunk_ru over a lean store (after acn_chunk_bwd_lean) of samples k0 .., C from the rows. */
-void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *srows,
-                       long nt, double *carry, double *xs, double *sds)
+/*
+ * acn_chunk_ru over a lean store (after acn_chunk_bwd_lean) of samples k0 ..,
+ * C from the rows, the smoothed (a, eps) covariance from cov (acn_chunk_cov_lean:
+ * rows 0 .. n, row n the next sample's).
+ */
+void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *cov,
+                       const double *srows, long nt, double *carry, double *xs, double *sds)
 {
     for (long k = 0; k < n; k++) {
         const double *row = store + ACN_LROW * k, *nx = row + ACN_LROW;
+        const double *pc = cov + 3 * k, *pn = pc + 3;
         const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
         double *o = xs + 4 * k, *sd = sds + 4 * k;
         o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
-        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(row[2]), sd[3] = sqrt(row[4]);
-        ru_step(m, carry, row[0], row[2], nx[0], nx[2], nx[3], sr + 4);
+        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(pc[0]), sd[3] = sqrt(pc[2]);
+        ru_step(m, carry, row[0], pc[0], nx[0], pn[0], pn[1], sr + 4);
     }
 }
 

@@ -79,7 +79,7 @@ long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, d
  * (acn_chunkg_fwd, acn_chunkg_bwd): the same steps as acn_general.
  * The carried state between chunks is a small array documented at each call.
  */
-enum { ACN_ROW = 12, ACN_GROW = 14, ACN_SROW = 14, ACN_LROW = 5 };
+enum { ACN_ROW = 12, ACN_GROW = 14, ACN_SROW = 14, ACN_LROW = 2 };
 
 int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
                   const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
@@ -91,12 +91,16 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
                          double *sdf, double *Pf0, double *Pfn);
 void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry);
 
-/* all-valid samples from the steady rows: a lean store of ACN_LROW doubles per sample */
+/* all-valid samples from the steady rows: a lean store of ACN_LROW doubles per sample (a, eps);
+ * their smoothed covariance is data-independent: acn_chunk_cov_lean computes it again per chunk */
 void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
                         double *store, double *carry);
 
-void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *srows,
-                       long nt, double *carry, double *xs, double *sds);
+void acn_chunk_cov_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
+                        const double *after, double *cov);
+
+void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *cov,
+                       const double *srows, long nt, double *carry, double *xs, double *sds);
 
 void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                     const unsigned char *valid, long n_extra, const long *ek, const double *eh,
