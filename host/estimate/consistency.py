@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -300,6 +300,9 @@ class RestReview:
     kept: np.ndarray  # (N, n_axes) the rest mask less the dropped rests
     t: np.ndarray  # the run's times, for the line
     undecided: bool = False  # a rest stands out, but too few rests are left to say which is wrong
+    # the review's last smoothing, made with exactly ``kept``'s rests (covariances off), or None: the one-chunk
+    # path's output when nothing after the review changes the aids (accelnav.estimate.engine.run), not made twice
+    smoothed: dict | None = field(default=None, repr=False, compare=False)
 
     @property
     def said(self) -> bool:

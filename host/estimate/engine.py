@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -163,6 +163,9 @@ class RestOutcome:
     detected: bool = False
     review: object = None  # consistency.RestReview of the detected rests, or None
     reviewed: bool = True  # False: detected rests over the memory budget, not re-examined (said by the CLI)
+    # the review's last smoothing, with exactly ``mask``'s rests (consistency.RestReview.smoothed): :func:`run`
+    # takes it as the one-chunk output when nothing after the review changes the aids, else drops it at once
+    smoothed: dict | None = field(default=None, repr=False)
 
     def candidate_rows(self, t: np.ndarray) -> np.ndarray:
         """[start_s, end_s, accepted] per candidate (kept in the run file for the plots); a rest the review
@@ -255,7 +258,7 @@ def rest_stage(
         return RestOutcome(np.asarray(rests.mask, dtype=bool), rests.sigma, params)
     accel, clipped = arrays["accel"], arrays["clipped"]
     found = zupt.decide_rests(accel, clipped, candidate_mask(rests.candidates, len(accel)), model, params, fixes)
-    mask, review = found.mask, None
+    mask, review, smoothed = found.mask, None, None
     if mask.any() and (review_budget is None or chunked.whole_bytes(len(mask), accel.shape[1]) <= review_budget):
         # the check that acts after the decision: rests a full smoother with the fixes or the other rests
         # refutes are dropped and named (pipeline.disagreeing_rests), before tuning and any advice
@@ -268,9 +271,10 @@ def rest_stage(
         ]  # fmt: skip
         review = disagreeing_rests(arrays, model, mask, fixes=fixes, params=params, stands=stands)
         mask = review.kept.any(axis=1)
+        smoothed, review = review.smoothed, replace(review, smoothed=None)  # held in one place only
     gravity = zupt.gravity_axes(accel, clipped, model) if not mask.any() else []
     return RestOutcome(mask, None, params, found.decisions, gravity, detected=True, review=review,
-                       reviewed=review is not None or not found.mask.any())  # fmt: skip
+                       reviewed=review is not None or not found.mask.any(), smoothed=smoothed)  # fmt: skip
 
 
 def candidate_mask(mask: np.ndarray | None, n: int) -> np.ndarray | None:
@@ -305,14 +309,20 @@ def smoother_pass(model: Model, source: Source, extras, at: np.ndarray, *, workd
         out.unlink(missing_ok=True)
 
 
-def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None) -> tuple[Aids, Aids]:
-    """Axis j's aids as arrays: (its position fixes, its zero-velocity updates)."""
+def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None, shared: dict | None = None):
+    """Axis j's aids as arrays: (its position fixes, its zero-velocity updates). ``shared``: a dict kept across
+    the axes of one run, in which rests the same on every axis (one mask, no per-sample sigma: the detector's)
+    are made once and given to each axis (millions of updates at 56 B each: not one copy per axis)."""
     from accelnav.estimate import zupt
 
     fx = Aids.of(list(fixes[j]) if fixes is not None else [])
     if rest is None:
         return fx, Aids.of([])
     m = rest.mask
+    if shared is not None and m.ndim == 1 and rest.sigma is None:
+        if "rests" not in shared:
+            shared["rests"] = zupt.axis_aids(np.broadcast_to(m, (n,)), None, model, rest.params)
+        return fx, shared["rests"]
     col = m if m.ndim == 1 else m[:, j]
     sigma = None if rest.sigma is None else np.asarray(rest.sigma)[:, j]
     return fx, zupt.axis_aids(np.broadcast_to(col, (n,)), sigma, model, rest.params)
@@ -337,21 +347,26 @@ def run(
     echo = job.full and bool(source.extra_keys())
     p = plan(n, n_axes, job, label=source.label, to_file=out is not None, echo=echo)
     arrays = source.whole() if (p.whole or job.aided) else None
-    rest = None
+    rest = reuse = None
     if smooth and job.rests is not None:
 
         def smooth_pass(extras, at):
             return smoother_pass(model, source, extras, at, workdir=workdir or Path(out or ".").resolve().parent)
 
         rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass, review_budget=p.budget)
+        reuse, rest.smoothed = rest.smoothed, None
         if job.rests.decided is not None:  # said where it happens: before tuning fits the figures to the rests
             job.rests.decided(rest)
+    # the review's last smoothing had this run's model, fixes and rests: the one-chunk output when nothing else
+    # is asked of it (no covariances, no tuned model); else it is not held through the passes
+    if not (p.whole and smooth and reuse is not None and not job.covariances and job.tune is None):
+        reuse = None
     outcome = Outcome(model, p, n, source.axis_names, source.t_ends, np.zeros(n_axes, dtype=np.int64), rests=rest,
                       streamed=source.streamed)  # fmt: skip
     if smooth and job.tune is not None:
         model = outcome.model = _tune(model, arrays, job, rest, source.label, outcome)
     if p.whole:
-        _whole(model, arrays, job, rest, outcome)
+        _whole(model, arrays, job, rest, outcome, reuse)
     else:
         _chunked(model, source, job, rest, out, workdir, outcome, run_format)
     return outcome
@@ -377,11 +392,16 @@ def _tune(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, label:
     return tuned
 
 
-def _whole(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, outcome: Outcome) -> None:
-    """One chunk in memory: the whole-array kernels, then the checks."""
+def _whole(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, outcome: Outcome, smoothed=None) -> None:
+    """One chunk in memory: the whole-array kernels, then the checks. ``smoothed``: this very smoothing, made
+    already (the rests' review's last, :func:`rest_stage`), taken rather than made again."""
     if "smooth" in job.stages:
         kw = {} if rest is None else dict(rest=rest.mask, rest_sigma=rest.sigma, zupt_params=rest.params)
-        res = smooth_arrays(arrays, model, fixes=job.fixes, covariances=job.covariances, **kw)
+        if smoothed is not None:
+            check_run(arrays, model, "smooth_run")
+            res = {**_fresh(arrays), **smoothed}  # the input's other keys beside its outputs, as smooth_arrays
+        else:
+            res = smooth_arrays(arrays, model, fixes=job.fixes, covariances=job.covariances, **kw)
         if rest is not None and rest.detected:  # for the plots: [start_s, end_s, accepted] per candidate
             t = res["t"]
             res["zupt_candidates"] = rest.candidate_rows(t)
@@ -400,7 +420,8 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
     n, n_axes = source.n, len(source.axis_names)
     smooth = "smooth" in job.stages
     fixes = job.fixes if smooth else None
-    aids = [axis_extras(model, n, j, fixes, rest) for j in range(n_axes)] if smooth else []
+    shared: dict = {}
+    aids = [axis_extras(model, n, j, fixes, rest, shared) for j in range(n_axes)] if smooth else []
     extras = [fx.concat(za) for fx, za in aids] or None
     gates = [np.zeros(len(e)) for e in extras] if extras else None  # rests are gated whole by the decision
     echo = source.extra_keys() if job.full else {}

@@ -666,9 +666,11 @@ class Extras:
         if isinstance(extras, Aids):
             if len(extras) and not np.all(extras.R > 0):
                 raise ValueError(f"extra measurement at sample {int(extras.k[~(extras.R > 0)][0])} has variance <= 0")
-            k = extras.k  # rests' updates come sorted: no sort of 1e6 and more of them then
-            order = np.arange(len(k)) if np.all(k[1:] >= k[:-1]) else np.argsort(k, kind="stable")
+            k = extras.k  # rests' updates come sorted: no sort of 1e6 and more of them then, and no copy
             c = np.ascontiguousarray
+            if np.all(k[1:] >= k[:-1]):
+                return cls(c(extras.k), c(extras.h), c(extras.z), c(extras.R), np.arange(len(k)))
+            order = np.argsort(k, kind="stable")
             return cls(c(extras.k[order]), c(extras.h[order]), c(extras.z[order]), c(extras.R[order]), order)
         ne = len(extras)
         ek = np.array([m.k for m in extras], dtype=np.int64).reshape(ne)

@@ -82,7 +82,12 @@ class Aids:
         return cls(ks, h, np.zeros(len(ks)), R)
 
     def concat(self, other: Aids) -> Aids:
-        """These, then ``other``."""
+        """These, then ``other``: the other itself when these are none (a run's rests without fixes are
+        millions of updates, 56 B each per axis: not copied whole to add nothing), and the reverse."""
+        if not len(self):
+            return other
+        if not len(other):
+            return self
         return Aids(*(np.concatenate((a, b)) for a, b in zip(self._parts(), other._parts(), strict=True)))
 
     def take(self, idx: np.ndarray) -> Aids:

@@ -381,7 +381,9 @@ def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, para
     there are no fixes); the rests holding one are tested against the fixes but not dropped against the other
     rests (without fixes, a model too stiff for a car's 40 s drive called a real stop after a braking from
     23 m/s "6.3 m/s").
-    Bounded: one smoothing with the fixes, then at most consistency.REVIEW_SMOOTHINGS; none without rests."""
+    Bounded: one smoothing with the fixes, then at most consistency.REVIEW_SMOOTHINGS; none without rests. At most
+    two whole-run smoothings are held at once (the one with ``kept``'s rests and one leave-one-out); the last made
+    with the rests kept comes back in ``RestReview.smoothed`` (None when a rest was dropped after it)."""
     from accelnav.estimate import zupt
     from accelnav.estimate.consistency import (
         REVIEW_MEDIAN_MIN,
@@ -422,7 +424,9 @@ def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, para
         smoothings += 1
         inflate = max(1.0, float(np.mean(sm["fix_nis"]))) if len(sm["fix_nis"]) else 1.0
         drop([t for t in rest_tests(sm, rests, updates, sigma, "the fixes", len(rests), var_scale=inflate) if t.fails])
+        del sm  # not held while the next smoothing is made
     complete, undecided = True, False
+    sm = None  # the smoothing with ``kept``'s rests; None once a rest it holds is dropped
     while True:
         left = zupt.intervals(kept.any(axis=1))
         if not left:
@@ -455,8 +459,11 @@ def disagreeing_rests(inputs: dict, model, rest: np.ndarray, *, fixes=None, para
                              covariances=False)  # fmt: skip
             smoothings += 1
             tests += rest_tests(loo, [(a, b)], updates, sigma, "the other rests", len(rests), scale)
+            del loo  # not held while the next one is made
         worst = max(tests, key=lambda t: t.chi2)
         if not worst.fails:
             break
         drop([worst])
-    return RestReview(len(rests), tuple(dropped), smoothings, complete, kept, np.asarray(inputs["t"]), undecided)
+        sm = None  # it held the rest just dropped: freed before the next smoothing
+    return RestReview(len(rests), tuple(dropped), smoothings, complete, kept, np.asarray(inputs["t"]), undecided,
+                      smoothed=sm)  # fmt: skip

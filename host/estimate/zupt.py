@@ -189,7 +189,11 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
     ``accel``, ``clipped`` are (N, n_axes) as in a run file; columns are the model's axes in order.
     """
     p = resolved(model, params)
-    x, ok, R = _prepared(accel, clipped, model)
+    return _detect(*_prepared(accel, clipped, model), model, p)
+
+
+def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptParams) -> np.ndarray:
+    """:func:`candidates` on the prepared record (:func:`_prepared`), which the decision reads too."""
     n, n_axes = x.shape
     w = window_samples(model, p)
     bad = _moving((~ok.all(axis=1)).astype(np.float64), w)
@@ -375,9 +379,9 @@ def decide_rests(
 ) -> Rests:
     """Candidates (``rest``, or :func:`candidates` when None) and the decision on each (accelnav.estimate.rests)."""
     p = resolved(model, params)
+    x, ok, R = _prepared(accel, clipped, model)  # once: the detector and the decision read the same
     if rest is None:
-        rest = candidates(accel, clipped, model, p)
-    x, ok, R = _prepared(accel, clipped, model)
+        rest = _detect(x, ok, R, model, p)
     t = np.arange(len(x)) * model.Ts
     # the model's own prior on the start speed: a model that says the run may start moving is not overruled
     start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))

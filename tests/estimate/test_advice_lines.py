@@ -259,3 +259,14 @@ def test_the_review_says_when_its_budget_ran_out(cart, default_model, monkeypatc
     assert review.line().endswith("; stopped at its budget (1 smoothings) with suspects left")
     monkeypatch.undo()
     assert disagreeing_rests(run, default_model, rest).complete
+
+
+def test_the_reviews_last_smoothing_is_the_one_with_the_rests_it_kept(cart, default_model):
+    """Rests dropped one at a time against the others: the smoothing the review hands on (for the one-chunk
+    output) is made with the rests left after the last drop, never one that still held a dropped rest."""
+    run, rest, _ = cart
+    review = disagreeing_rests(run, default_model, rest)
+    assert review.dropped and review.smoothed is not None
+    ref = smooth_run(run, default_model, rest=review.kept, covariances=False)
+    for key in ("smooth_x", "smooth_sd", "zupt", "zupt_nis"):
+        np.testing.assert_array_equal(review.smoothed[key], ref[key], err_msg=key)

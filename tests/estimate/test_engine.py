@@ -53,3 +53,31 @@ def test_a_stages_extra_smoother_pass_gives_the_whole_array_numbers(tmp_path):
         assert_rel_close(got[j, :, 0], ref["smooth_x"][j, at, 1], sd, 1e-12, f"u axis {j}")
         assert_rel_close(got[j, :, 1], sd, 0.0, 1e-12, f"sd_u axis {j}")
     assert list(tmp_path.iterdir()) == []  # its temporary output removed
+
+
+_OUTPUTS = ("filt_x", "filt_sd", "smooth_x", "smooth_sd", "zupt", "fixes", "fix_nis", "zupt_nis")
+
+
+@pytest.mark.parametrize("with_fixes", [False, True])
+def test_detected_rests_one_chunk_output_is_a_smoothing_with_the_rests_kept(default_model, with_fixes):
+    """--zupt auto on one chunk takes the rests' review's last smoothing as its output (not made twice): it must
+    be the smoothing with the rests the stage kept, the fixes and the model, as a fresh one gives it."""
+    from accelnav.estimate import zupt
+    from accelnav.estimate.pipeline import fixes_per_axis
+    from accelnav.hil_sim.sim.sensor import simulate
+
+    run = simulate(default_model, "hand_box", 120.0, 1).to_arrays()
+    fixes = fixes_per_axis({"t": run["t"], "axis_names": run["axis_names"], "fixes": run["sim_fixes"]})
+    fixes = fixes if with_fixes else None
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    job = engine.Job(stages=("filt", "smooth"), fixes=fixes, rests=engine.Rests(p, detect=True))
+    got = engine.run(default_model, engine.Source.of(run), job)
+    stage = got.rests
+    assert got.plan.whole and stage.review is not None and stage.mask.any()  # the review ran, rests were kept
+    assert stage.smoothed is None and stage.review.smoothed is None  # not held beyond the run
+    # the case holds rests the review drops (against the fixes, else one at a time against the other rests): a
+    # smoothing that still held one would differ
+    assert stage.review.dropped
+    ref = smooth_run(run, default_model, fixes=fixes, rest=stage.mask, zupt_params=p, covariances=False)
+    for key in _OUTPUTS:
+        np.testing.assert_array_equal(got.arrays[key], ref[key], err_msg=key)
