@@ -131,10 +131,21 @@ class LevelResult:
     leak: float = float("nan")
     notes: tuple[str, ...] = field(default_factory=tuple)
     rests: np.ndarray | None = None  # (N,) bool, the rests that corrected the attitude (given or found)
+    # m/s^2, rms over the inner rests of how far each one's tilt lies from the line through its neighbours'
+    # (before correction): the leak the interpolation may leave between rests, which ``leak`` cannot show
+    between: float = float("nan")
 
     def summary(self) -> str:
-        leak = "no rest to measure it" if not np.isfinite(self.leak) else f"{self.leak:.3g} m/s^2 at rest"
-        return f"levelled {self.t.size} samples by {self.method}; residual level leak {leak}"
+        if not np.isfinite(self.leak):
+            return f"levelled {self.t.size} samples by {self.method}; residual level leak: no rest to measure it"
+        # the correction makes the leak small at the rests by construction: the figure between them is the one to act on
+        away = (
+            f"about {self.between:.3g} m/s^2 between them (a rest's tilt foretold from its neighbours')"
+            if np.isfinite(self.between)
+            else "unknown between them (fewer than 3 rests to foretell one from its neighbours)"
+        )
+        done = f"levelled {self.t.size} samples by {self.method}"
+        return f"{done}; residual level leak {self.leak:.3g} m/s^2 at the rests, {away}"
 
 
 def level_frame(
@@ -190,6 +201,7 @@ def level_frame(
             method = "Fusion AHRS on the gyroscope and accelerometer"
             if anchors and passes:
                 notes.append(f"rests up to {gap:.3g} s apart (> {STRAPDOWN_GAP_S:g} s): Fusion's attitude between them")
+    between = float("nan")
     if anchors and passes:
         between = _between(quat, imu.acc, found, imu.t)
         if np.isfinite(between):
@@ -208,7 +220,7 @@ def level_frame(
     leak = _leak(acc, found)
     if np.isfinite(leak):
         notes.append(f"leak: rms over {len(found)} rests of the mean horizontal acceleration in their middle half")
-    return LevelResult(imu.t, acc, quat, method, leak, tuple(notes), mask)
+    return LevelResult(imu.t, acc, quat, method, leak, tuple(notes), mask, between)
 
 
 def _given_rests(rests, t: np.ndarray) -> np.ndarray:

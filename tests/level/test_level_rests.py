@@ -60,6 +60,8 @@ def test_rests_correct_a_gyro_bias_and_the_leak_is_stated():
     out = level_frame(ImuRecord(t, acc, gyro=gyro))
     assert np.abs(out.acc[still, :2]).max() < 0.1, np.abs(out.acc[still, :2]).max()
     assert out.leak < 0.05 and "residual level leak" in out.summary()
+    # the leak at the rests is small by construction: the summary also says what is left between them
+    assert np.isfinite(out.between) and f"about {out.between:.3g} m/s^2 between them" in out.summary()
     notes = " ".join(out.notes)
     assert "7 rests found" in notes and "gyro bias (1, -0.8" in notes
     # without the rests' correction the uncorrected bias tilts the frame between them
