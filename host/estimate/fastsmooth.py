@@ -330,7 +330,8 @@ def _from_steady(d: AxisDesign, n: int, st: SteadyGains, key: str) -> PlainGains
         raise ValueError(f"plain path: the (a, eps) prior covariance is singular at sample {-rc}")
     for a in (Pp, Pf, Ps):
         a.flags.writeable = False
-    return PlainGains(key, st.rows[:, 0:4], st.rows[:, 4:8], Pp, Pf, Ps, True, st.rows)
+    rows = st.rows[:n]  # a run shorter than the transient a longer one settled on keeps its own rows only
+    return PlainGains(key, rows[:, 0:4], rows[:, 4:8], Pp, Pf, Ps, True, st.rows)
 
 
 # --------------------------------------------------------------------------

@@ -161,3 +161,21 @@ def test_single_sample_and_nan_input(default_model):
         res = fs.smooth(d, z)
         f = run_filter(d, z)
         _assert_all(res, f, rts_smooth(d, f), f"n={len(z)}")
+
+
+def test_disk_gains_of_a_short_run_after_a_long_one(default_model, tmp_path):
+    """The steady rows a long run settled on (held in memory, or in the cache folder) are more rows than a short
+    run has: the short run's gains keep only its own, so their disk entry stays within its kind's size limit and
+    reads back (it raised "built ... bytes, more than the ..." once a long run had left its rows)."""
+    d = axis_design(default_model, 0)
+    st = fs.steady_gains(d, 10_000_000)
+    assert st is not None and st.settled and len(st.rows) > 300, "settled in fewer rows than the short run: no test"
+    fs.clear_gain_cache()
+    g = fs.plain_gains(d, 300, cache_dir=tmp_path)
+    assert len(g.K) <= 300 and (tmp_path / f"gains-{g.key}.npz").is_file()
+    fs.clear_gain_cache()
+    again = fs.plain_gains(d, 300, cache_dir=tmp_path)
+    ref = fs.plain_gains(d, 300, steady=False)
+    np.testing.assert_array_equal(again.K, g.K)
+    np.testing.assert_allclose(again.Ps, ref.Ps, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(again.K, ref.K[: len(again.K)], rtol=1e-12, atol=1e-15)
