@@ -99,6 +99,18 @@ def build(out: Path, model: str | None = None) -> Path:
     return exe
 
 
+RSS_MB = 1024  # the memory a harness may use of its own
+
+
+def rss_limit() -> str:
+    """libFuzzer's ``-rss_limit_mb`` for a harness started from this process: RSS_MB above this process's peak.
+    Linux carries a parent's peak RSS into its child's ``ru_maxrss`` across fork and exec, which libFuzzer reads
+    as its own: started from a test run holding 1.4 GB, a harness was "out of memory" before its first input."""
+    import resource
+
+    return f"-rss_limit_mb={RSS_MB + resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024}"
+
+
 def _cc(cmd: list[str]) -> None:
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     if done.returncode != 0:
@@ -123,7 +135,7 @@ def run(exe: Path, seconds: int, out: Path, seeds: Path = SEEDS, fresh: bool = F
         f"-max_total_time={seconds}",
         "-print_final_stats=1",
         "-timeout=10",
-        "-rss_limit_mb=1024",
+        rss_limit(),
         f"-artifact_prefix={crashes}/",
         str(work),
         str(seeds),
@@ -141,7 +153,7 @@ def run(exe: Path, seconds: int, out: Path, seeds: Path = SEEDS, fresh: bool = F
 def replay(exe: Path, inputs: list[Path], timeout_s: int = 300) -> subprocess.CompletedProcess:
     """Run the harness once on each of ``inputs`` (libFuzzer runs files given by name and exits): a failing
     one aborts with a non-zero status and its name in the log."""
-    cmd = [str(exe), "-timeout=10", "-rss_limit_mb=1024", *map(str, inputs)]
+    cmd = [str(exe), "-timeout=10", rss_limit(), *map(str, inputs)]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s)
 
 
@@ -177,7 +189,7 @@ def merge(exe: Path, runs: list[Path], work: Path) -> dict:
         shutil.copyfile(p, stage / p.name)
         seed_names.add(p.name)
     sources = [d for d in (GROWN, *runs) if d.is_dir()]
-    cmd = [str(exe), "-merge=1", "-timeout=10", "-rss_limit_mb=1024", str(stage), *map(str, sources)]
+    cmd = [str(exe), "-merge=1", "-timeout=10", rss_limit(), str(stage), *map(str, sources)]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=3600)
     if done.returncode != 0:
         raise FuzzError(f"{' '.join(cmd)} failed:\n{done.stderr[-4000:]}")

@@ -44,7 +44,7 @@ def test_libfuzzer_csv_parser(tmp_path):
     for i, data in enumerate(SEEDS.values()):
         (seeds / f"seed{i}").write_bytes(data)
     cmd = [str(exe), f"-max_total_time={FUZZ_SECONDS}", "-print_final_stats=1", "-timeout=10", "-max_len=4096",
-           "-rss_limit_mb=1024", f"-artifact_prefix={crashes}/", str(seeds)]  # fmt: skip
+           fuzz.rss_limit(), f"-artifact_prefix={crashes}/", str(seeds)]  # fmt: skip
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=FUZZ_SECONDS + 300)
     fig = fuzz.parse(done.stderr)
     found = "".join(f"\n  {p.name}: {p.read_bytes().hex()}" for p in crashes.iterdir())

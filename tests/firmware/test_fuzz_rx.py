@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 from support.libfuzzer import fuzz_module, unavailable
 
@@ -84,3 +85,13 @@ def test_libfuzzer_receive_path(fuzz):
         f"{fig['average_exec_per_sec']} exec/s, cov {fig['done_cov']} ft {fig['done_ft']} "
         f"(repository corpus alone: cov {fig['inited_cov']} ft {fig['inited_ft']}), {fig['new_units_added']} new units"
     )
+
+
+def test_a_large_parent_is_not_the_harness_memory(fuzz, tmp_path):
+    """A harness started from a process holding more than its own memory limit (a long test run) fuzzes as from a
+    small one: Linux hands the parent's peak RSS to the child, which libFuzzer reads as its own."""
+    exe, _ = _harness(fuzz)
+    held = np.ones((fuzz.RSS_MB + 256) << 17)  # RSS_MB + 256 MiB of float64, touched
+    fig = fuzz.run(exe, 3, tmp_path / "run")
+    assert held[-1] == 1.0
+    assert fig["returncode"] == 0 and not fig["artifacts"], f"{fig['artifacts']}\n{fig['log_tail'][-2000:]}"
