@@ -23,6 +23,8 @@
 #define ACCELNAV_FASTSMOOTH_H
 
 #define ACN_FASTSMOOTH_API 1
+/* the figures of one verdict of the rest decision's forward filter (acn_kin_fwd_out.num) */
+#define ACN_KIN_NUM 8
 
 /* ACN-CDEF-BEGIN */
 typedef struct {
@@ -196,6 +198,63 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
  */
 void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, double *V, double *A,
                   double *W);
+/*
+ * The forward filter of the rest decision (rests.py, _Decider.forward), deciding
+ * online: its events as acn_kin_backward's (in order of sample), its candidates
+ * [start, stop) in time order with their level (m rows of n_axes) and
+ * stillness, the decision's figures (zupt.py's ZuptParams and rests.py's
+ * constants), veto[i] set where a candidate was withdrawn. Marks: a pass starts
+ * at candidate `resume`'s mark (a multiple of mark_every whose mark a pass left;
+ * -1: at the record's start), the verdicts before it kept from the last pass.
+ */
+typedef struct {
+    int n_axes;
+    long n; /* samples: V, W, A have n + 1 rows of n_axes */
+    const double *V, *W, *A, *R, *qv;
+    double Ts, q;
+    const double *diffuse; /* the prior variances of r, u, e */
+    long n_ev;
+    const long *ev_k;
+    const int *ev_kind;
+    const long *ev_i;
+    const double *ev_z, *ev_var;
+    long m;
+    const long *start, *stop;
+    const double *level, *still;
+    const unsigned char *veto;
+    double leak, drift, scale, sigma, gate, tell, level_still, level_max, still_k, start_s;
+    double start_within_s, rel, start_sd, like, unlike, motion, stride;
+    long confirm, within, peak_points, mark_every, n_marks;
+} acn_kin_fwd;
+/*
+ * What it says, per candidate i at or after the resumed one: reason[i] (0..3
+ * rests.py's ACCEPT_REASONS, 4..7 its REFUSE_REASONS), the evidence's kind
+ * base[i] with flags[i] (1: as still as the proven rests, 2: its level moved,
+ * a hypothesis) and figures num + ACN_KIN_NUM i (the level's jump, the jump
+ * allowed, the peak speed since the last rest, the largest sd, the stillness
+ * bound, the peak and end speed since the last stand); a hypothesis' outcome[i]
+ * (1: refuted by candidate oarg[2 i] of reason oarg[2 i + 1], 2: not borne out
+ * within, 3: the record ended, 4: confirmed, its reason before in oarg[2 i + 1]);
+ * its side as acn_kin_test's (side + 4 n_axes i; stat + 3 i: chi-square, |v|,
+ * rms sd), the event of its last aid aid[i] (-1: none) and whether a fix came
+ * fix[i]. acc, proven: the accepted rests and the proven stillness, carried
+ * from pass to pass. mark_l (9 longs), mark_d (13 n_axes doubles), mark_ok:
+ * n_marks marks. work: 2 m doubles, tried: m bytes, scratch. Returns 0, or -1
+ * (nothing done) where a length or an index lies outside its array.
+ */
+typedef struct {
+    int *reason, *base, *flags, *outcome;
+    long *oarg;
+    double *num, *side, *stat;
+    long *aid;
+    unsigned char *fix, *acc, *proven;
+    long *mark_l;
+    double *mark_d;
+    unsigned char *mark_ok;
+    double *work;
+    unsigned char *tried;
+} acn_kin_fwd_out;
+long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o);
 /* ACN-CDEF-END */
 
 #endif
