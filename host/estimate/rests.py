@@ -494,7 +494,10 @@ class _Decider:
         elif base == _EV["start sd"]:
             ev = cannot + f", no rest before (the model lets the run start at {self.start_sd:.3g} m/s)"
         elif base == _EV["still start"]:
-            ev = f"still start: {dur:.2f} s at {c.still:.2g} R from {c.start * Ts:.2f} s (assumed: the run starts at rest)"
+            ev = (
+                f"still start: {dur:.2f} s at {c.still:.2g} R from {c.start * Ts:.2f} s "
+                "(assumed: the run starts at rest)"
+            )
         elif base == _EV["no rest"]:
             ev = cannot + ", no rest before"
         elif base == _EV["not stand"]:

@@ -40,8 +40,9 @@ def _model(name: str):
     return load_model(None if name == "default" else MODELS / f"{name}.toml")
 
 
-def _verdicts(arrays, model, fixes, params=zupt.ZuptParams()):
+def _verdicts(arrays, model, fixes, params=None):
     cand = zupt.candidates(arrays["accel"], arrays["clipped"], model)
+    params = params or zupt.ZuptParams()
     dec = zupt.decide_rests(arrays["accel"], arrays["clipped"], cand, model, params, fixes=fixes).decisions
     return [(d.start, d.stop, d.accepted, d.reason, d.evidence) for d in dec], np.array(
         [(d.still, d.level, d.v_before, d.sd_before, d.v_after, d.sd_after, d.chi2) for d in dec]
@@ -93,9 +94,9 @@ def test_few_marks_decide_as_many(scenario, model_name, seconds, monkeypatch):
     np.testing.assert_array_equal(sparse_stats, dense_stats)
 
 
-
-
-@pytest.mark.parametrize("scenario,model_name,seconds", [("tilting_mount", "default", 300.0), ("hand_box", "adxl335", 120.0)])
+@pytest.mark.parametrize(
+    "scenario,model_name,seconds", [("tilting_mount", "default", 300.0), ("hand_box", "adxl335", 120.0)]
+)
 def test_a_resumed_pass_reads_the_proven_rests_before_its_mark(scenario, model_name, seconds):
     """A pass that resumes at a mark carries the stillness the rests before the mark proved (the kernel rebuilds it
     from the verdicts it keeps, not from a copy per mark). With a stillness bound of 1.5 R these records resume

@@ -1867,13 +1867,34 @@ void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, d
     }
 }
 
-/* ---- the rest decision's forward filter (rests.py, _Decider.forward; fastsmooth.h) ------------ */
+/* ---- the rest decision's forward filter (rests.py, _Decider.forward; fastsmooth.h) ------------
+ */
 
 enum { KIN_AXES = 8 }; /* the most axes the forward filter holds on its stack */
-enum { KIN_CONSISTENT, KIN_START, KIN_STAND, KIN_GATE_OFF, KIN_MOVING, KIN_LEVEL, KIN_CANNOT,
-       KIN_NO_DECEL, KIN_HYPOTHESIS };
-enum { EV_GATE_OFF, EV_VETO, EV_LEVEL, EV_MOVING, EV_CONSISTENT, EV_START_SD, EV_STILL_START,
-       EV_NO_REST, EV_NOT_STAND, EV_STILL_STAND, EV_NO_DECEL };
+enum {
+    KIN_CONSISTENT,
+    KIN_START,
+    KIN_STAND,
+    KIN_GATE_OFF,
+    KIN_MOVING,
+    KIN_LEVEL,
+    KIN_CANNOT,
+    KIN_NO_DECEL,
+    KIN_HYPOTHESIS
+};
+enum {
+    EV_GATE_OFF,
+    EV_VETO,
+    EV_LEVEL,
+    EV_MOVING,
+    EV_CONSISTENT,
+    EV_START_SD,
+    EV_STILL_START,
+    EV_NO_REST,
+    EV_NOT_STAND,
+    EV_STILL_STAND,
+    EV_NO_DECEL
+};
 enum { OUT_NONE, OUT_REFUTED, OUT_WITHIN, OUT_TOO_FEW, OUT_CONFIRMED };
 
 /* what the forward filter knows besides s (rests.py's dict `st`): its sample, its last aid's sample
@@ -2040,8 +2061,8 @@ static void kin_fwd_mark(const acn_kin_fwd *f, acn_kin_fwd_out *o, long slot, lo
     long *ml = o->mark_l + KIN_MARK_L * slot;
     double *md = o->mark_d + 13 * f->n_axes * slot;
     size_t ns = sizeof(double) * 9 * (size_t)f->n_axes, ne = sizeof(double) * 4 * (size_t)f->n_axes;
-    long *fields[8] = {&w->st.k,       &w->st.aid_k,     &w->st.src,       &w->st.fix,
-                       &w->st.has_end, &w->st.end_k,     &w->st.has_stand, &w->st.stand_k};
+    long *fields[8] = {&w->st.k,       &w->st.aid_k, &w->st.src,       &w->st.fix,
+                       &w->st.has_end, &w->st.end_k, &w->st.has_stand, &w->st.stand_k};
     if (save) {
         ml[0] = *e;
         for (int j = 0; j < 8; j++) {
@@ -2242,7 +2263,8 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
                 h = -1;
             }
         } else if (!o->tried[i] && f->gate > 0.0 &&
-                   (reason == KIN_CANNOT || (reason == KIN_CONSISTENT && res[1] > f->level_still))) {
+                   (reason == KIN_CANNOT ||
+                    (reason == KIN_CONSISTENT && res[1] > f->level_still))) {
             /* a hypothesis, the filter saved as it stands before it */
             h = i;
             e_h = e;
