@@ -89,6 +89,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import operator
 from dataclasses import dataclass
 
 import numpy as np
@@ -241,7 +242,7 @@ def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]
     for j, fx in enumerate(fixes):
         for m in fx:
             ev.append((n - 1 - m.k if reverse else m.k, 1, "fix", (j, m.z, m.R, m.k)))
-    ev.sort(key=lambda e: (e[0], e[1]))
+    ev.sort(key=operator.itemgetter(0, 1))  # stable: fixes at one sample keep their order
     return ev
 
 
@@ -275,12 +276,17 @@ class _Verdict:
     """One candidate's verdict of a forward pass: its reason; its side and its evidence in words made when read
     (most are never read but for the last pass's, and the words only once, at the end)."""
 
-    __slots__ = ("_d", "_ps", "_i", "reason", "after", "_before")
+    __slots__ = ("_d", "_ps", "_i", "reason", "_before")
 
     def __init__(self, d: _Decider, ps: _Pass, i: int, reason: str):
         self._d, self._ps, self._i, self.reason = d, ps, i, reason
-        self.after: Side | None = None
         self._before: Side | None = None
+
+    @property
+    def after(self) -> Side | None:
+        """Its side after it, from the last backward pass (None before the first)."""
+        after = self._d._after
+        return None if after is None else after[self._i]
 
     @property
     def before(self) -> Side:
@@ -291,6 +297,26 @@ class _Verdict:
     @property
     def evidence(self) -> str:
         return self._d._words(self._ps, self._i, self.before)
+
+
+class _Sides:
+    """The sides of one backward pass (acn_kin_backward), candidate by candidate, each made when first read."""
+
+    __slots__ = ("_d", "_rows", "_made")
+
+    def __init__(self, d: _Decider, sides: np.ndarray, stat: np.ndarray, aid: np.ndarray, fix: np.ndarray):
+        self._d, self._rows = d, (sides, stat, aid, fix)
+        self._made: dict[int, Side] = {}
+
+    def __len__(self) -> int:
+        return len(self._rows[1])
+
+    def __getitem__(self, i: int) -> Side:
+        s = self._made.get(i)
+        if s is None:
+            sides, stat, aid, fix = self._rows
+            s = self._made[i] = self._d._after_side(sides[i], stat[i], int(aid[i]), int(fix[i]))
+        return s
 
 
 @dataclass
@@ -320,6 +346,7 @@ class _Decider:
         self._sources: dict[tuple[str, int], str] = {}  # the words naming each aid (_source)
         self._bwd = None  # the backward events as the kernel reads them (backward)
         self._fwd: _Forward | None = None  # the forward filter's inputs as the kernel reads them (_kernel)
+        self._after: _Sides | None = None  # the last backward pass's sides (_attach)
         # the forward filter's marks, {candidate: its slot in the kernel's marks} (the filter and its state before the
         # candidate's test, made at each test with no hypothesis open), its last pass's verdicts and the vetoes that
         # pass saw (forward)
@@ -529,7 +556,7 @@ class _Decider:
             )
         return ev
 
-    def backward(self, acc: set[int]) -> list[Side | None]:
+    def backward(self, acc: set[int]) -> _Sides:
         """The backward filter with the accepted set ``acc``: every candidate's side after it. It decides nothing
         (the sides are read after it): its whole run over the events is the kernel's (acn_kin_backward), the words
         naming each side's aid made here."""
@@ -552,7 +579,7 @@ class _Decider:
         accm = np.zeros(m, dtype=np.uint8)
         accm[sorted(acc)] = 1
         sides = np.full((m, 4, n_axes), np.nan)
-        total = np.full(m, np.nan)
+        stat = np.full((m, 3), np.nan)
         aid = np.full(m, -1, dtype=np.int64)
         fix = np.zeros(m, dtype=np.uint8)
         buf = ffi.from_buffer
@@ -560,27 +587,31 @@ class _Decider:
             n_axes, kin.s, kin._V, kin._W, kin._A, kin.Ts, kin.q, kin._qv, kin._R, len(ev_k), buf("long[]", ev_k),
             buf("int[]", ev_kind), buf("long[]", ev_i), buf("double[]", ev_z), buf("double[]", ev_var),
             buf("unsigned char[]", accm), buf("double[]", level), buf("long[]", length), LEAK, p.drift, p.scale,
-            p.sigma, buf("double[]", sides), buf("double[]", total), buf("long[]", aid), buf("unsigned char[]", fix),
+            p.sigma, buf("double[]", sides), buf("double[]", stat), buf("long[]", aid), buf("unsigned char[]", fix),
         )  # fmt: skip
-        out: list[Side | None] = []
-        chi2 = kin.lib.acn_chi2_equivalent
-        for s, tot, e, f in zip(sides, total.tolist(), aid.tolist(), fix.tolist(), strict=True):  # each tested once
-            if e < 0:
-                source = "no aid"
-            else:
-                _, _, kind, pay = self.bwd_events[e]
-                source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
-            out.append(_made(s[0], s[1], chi2(tot, n_axes), source, bool(f), s[2], s[3], None))
         assert n == len(self.x)
-        return out
+        return _Sides(self, sides, stat, aid, fix)
+
+    def _attach(self, found: list, after: _Sides) -> None:
+        """Each verdict's side after it: the last backward pass's (:attr:`_Verdict.after` reads it when looked at)."""
+        self._after = after
+
+    def _after_side(self, sides: np.ndarray, stat: np.ndarray, aid: int, fix: int) -> Side:
+        """A backward side (one row of acn_kin_backward's outputs) as a Side, its aid named."""
+        if aid < 0:
+            source = "no aid"
+        else:
+            _, _, kind, pay = self.bwd_events[aid]
+            source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
+        chi2, v, sd = stat.tolist()
+        return _made(sides[0], sides[1], chi2, source, bool(fix), sides[2], sides[3], (v, sd))
 
     def run(self) -> tuple[list, set[int]]:
         p = self.p
         for pass_no in range(p.passes + 1):
             found, acc = self.forward()
             after = self.backward(acc)
-            for f, s in zip(found, after, strict=True):
-                f.after = s
+            self._attach(found, after)
             if p.gate == 0:
                 return found, acc
             # each accepted rest against the other side, and against the positions both sides give it
@@ -596,8 +627,7 @@ class _Decider:
                     self._withdraw(i, after[i], found[i].before)
                 found, acc = self.forward()
                 after = self.backward(acc)
-                for f, s in zip(found, after, strict=True):
-                    f.after = s
+                self._attach(found, after)
                 return found, acc
             # the worst of each run of consecutive disagreeing accepted rests leaves: its neighbours may
             # only have disagreed through it
@@ -763,8 +793,11 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float 
         vb, sb = _norms(b)
         va, sa = _norms(a)
         chi2 = max(s.chi2 for s in (b, a) if s is not None) if (b or a) else nan
-        out.append(
-            RestDecision(c.start, c.stop, i in acc, f.reason, ev, c.still, float(np.linalg.norm(c.level)), vb, sb, va,
-                         sa, chi2)
+        lv = c.level  # np.linalg.norm's own sum for a vector (its dot), without its checks
+        d = object.__new__(RestDecision)  # the frozen dataclass' fields set at once, not one __setattr__ each
+        d.__dict__.update(
+            start=c.start, stop=c.stop, accepted=i in acc, reason=f.reason, evidence=ev, still=c.still,
+            level=math.sqrt(lv.dot(lv)), v_before=vb, sd_before=sb, v_after=va, sd_after=sa, chi2=chi2,
         )  # fmt: skip
+        out.append(d)
     return out

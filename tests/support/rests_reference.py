@@ -430,6 +430,12 @@ def reference_backward(self, acc: set[int]) -> list[Side | None]:
     return out
 
 
+def reference_attach(self, found, after) -> None:
+    """Each verdict's side after it, set on it, as the passes did."""
+    for f, s in zip(found, after, strict=True):
+        f.after = s
+
+
 # where each old part goes in accelnav.estimate.rests: swapped in together, they make the module decide as it
 # did before its rewrite
 SWAPS = {
@@ -440,6 +446,7 @@ SWAPS = {
     (rests, "chi2_equivalent"): chi2_equivalent,
     (rests._Decider, "_fresh"): reference_fresh,
     (rests._Decider, "backward"): reference_backward,
+    (rests._Decider, "_attach"): reference_attach,
     (rests._Decider, "forward"): reference_forward,
     (rests._Decider, "_last_before"): reference_last_before,
 }

@@ -1816,7 +1816,7 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
                       const long *ev_k, const int *ev_kind, const long *ev_i, const double *ev_z,
                       const double *ev_var, const unsigned char *acc, const double *level,
                       const long *len, double leak, double drift, double scale, double sigma,
-                      double *out, double *total, long *aid, unsigned char *fix)
+                      double *out, double *stat, long *aid, unsigned char *fix)
 {
     long k_now = 0, aid_k = 0, aid_ev = -1;
     unsigned char fix_seen = 0;
@@ -1838,8 +1838,17 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
         }
         acn_kin_to(n_axes, s, V, W, k_now, k, Ts, q, qv);
         k_now = k > k_now ? k : k_now;
-        total[i] = acn_kin_side(n_axes, s, A, k_now, aid_k, Ts, level + i * n_axes, R, len[i], leak,
-                                drift, scale, var, -1.0, out + 4 * n_axes * i);
+        double *side = out + 4 * n_axes * i, v2 = 0.0, sd2 = 0.0;
+        double total = acn_kin_side(n_axes, s, A, k_now, aid_k, Ts, level + i * n_axes, R, len[i],
+                                    leak, drift, scale, var, -1.0, side);
+        /* as acn_kin_test's: the chi-square read on one axis, |v| and the rms of the sds */
+        for (int j = 0; j < n_axes; j++) {
+            v2 += side[j] * side[j];
+            sd2 += side[n_axes + j] * side[n_axes + j];
+        }
+        stat[3 * i] = acn_chi2_equivalent(total, n_axes);
+        stat[3 * i + 1] = sqrt(v2);
+        stat[3 * i + 2] = sqrt(sd2 / (double)n_axes);
         aid[i] = aid_ev;
         fix[i] = fix_seen;
         if (acc[i]) {

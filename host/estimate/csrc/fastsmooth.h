@@ -180,16 +180,17 @@ void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long n
  * value ev_z, variance ev_var on axis ev_i, 2: a candidate's end; ev_i the
  * candidate otherwise). A candidate with acc set is a rest: u = 0 (variance
  * sigma^2) at its test and its end. Per candidate i tested: its side (as
- * acn_kin_side, sign -1) into out + 4 n_axes i and total[i]; the event of the
- * last aid before it (a fix, or the end of a rest) into aid[i] (-1: none) and
- * whether a fix came before it into fix[i].
+ * acn_kin_side, sign -1) into out + 4 n_axes i and, as acn_kin_test's res, its
+ * chi-square read on one axis, |v| and the rms of the sds into stat + 3 i; the
+ * event of the last aid before it (a fix, or the end of a rest) into aid[i]
+ * (-1: none) and whether a fix came before it into fix[i].
  */
 void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, const double *A,
                       double Ts, double q, const double *qv, const double *R, long n_ev,
                       const long *ev_k, const int *ev_kind, const long *ev_i, const double *ev_z,
                       const double *ev_var, const unsigned char *acc, const double *level,
                       const long *len, double leak, double drift, double scale, double sigma,
-                      double *out, double *total, long *aid, unsigned char *fix);
+                      double *out, double *stat, long *aid, unsigned char *fix);
 /*
  * The sums the kinematic filter reads (rests.py, _Kinematic), n + 1 rows of
  * n_axes each, over x (n rows of n_axes; reverse: its rows last first):
