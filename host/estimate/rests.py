@@ -402,7 +402,9 @@ class _Decider:
         for (name, _), c in zip(_Pass.FIELDS, keep, strict=True):
             setattr(o, name, c)
         if k.lib.acn_kin_forward(k.f, -1 if resume is None else resume, o) != 0:
-            raise ValueError("rest decision: the forward filter's events or candidates lie outside the record")
+            raise ValueError(
+                "rest decision: the forward filter's candidates or events are out of order or outside the record"
+            )
         start = 0 if resume is None else resume
         reasons = [_REASONS[r] for r in ps.reason[start:].tolist()]
         found = self._found[:start] + [_Verdict(self, ps, i, r) for i, r in enumerate(reasons, start)]
@@ -684,9 +686,14 @@ class _Decider:
         monotone = all(a <= b for a, b in zip(stops, stops[1:], strict=False))  # the detector's spans: in order
         for i, f in enumerate(found):
             c = self.cands[i]
-            if f.reason != "moving" or i in self.veto or f.before is None or not f.before.source.startswith("the rest"):
+            if (
+                f.reason != "moving"
+                or i in self.veto
+                or (c.stop - c.start) * self.Ts < p.start_s
+                or c.still > p.still_k
+            ):
                 continue
-            if (c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k:
+            if f.before is None or not f.before.source.startswith("the rest"):
                 continue
             j = self._last_before(order, stops if monotone else None, c.start)
             if j is not None and (self.cands[j].stop - self.cands[j].start) * self.Ts < p.start_s:
@@ -748,10 +755,14 @@ def _candidates(x, ok, R, spans) -> list[Candidate]:
     stops = np.array([b for _, b in spans], dtype=np.int64).reshape(-1)
     if np.any(starts < 0) or np.any(stops <= starts) or np.any(stops > n):
         raise ValueError(f"spans: each [a, b) must be non-empty and lie within the record's {n} samples")
+    if np.any(starts[1:] <= starts[:-1]):  # the forward filter's kernel tests them in this order
+        raise ValueError("spans: in time order, each starting after the one before")
     mod = _lib()
     ffi = mod.ffi
     x = np.ascontiguousarray(x, dtype=np.float64)
-    usable = np.ascontiguousarray(ok.all(axis=1), dtype=np.uint8)
+    usable = np.array(ok[:, 0], dtype=np.uint8)  # ok.all(axis=1), column by column: numpy's strided all is slower
+    for j in range(1, n_axes):
+        usable &= ok[:, j]
     R = np.ascontiguousarray(R, dtype=np.float64)
     level = np.zeros((len(starts), n_axes))
     still = np.zeros(len(starts))
@@ -761,7 +772,8 @@ def _candidates(x, ok, R, spans) -> list[Candidate]:
             ffi.from_buffer("long[]", starts), ffi.from_buffer("long[]", stops), ffi.from_buffer("double[]", R),
             ffi.from_buffer("double[]", level), ffi.from_buffer("double[]", still),
         )  # fmt: skip
-    return [Candidate(int(a), int(b), lv, float(s)) for a, b, lv, s in zip(starts, stops, level, still, strict=True)]
+    spans = zip(starts.tolist(), stops.tolist(), level, still.tolist(), strict=True)
+    return [Candidate(a, b, lv, s) for a, b, lv, s in spans]
 
 
 def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:

@@ -167,3 +167,26 @@ def test_what_the_kernels_would_read_outside_the_record_is_refused(default_model
     for span in ((n - 10, n + 10), (-1, 5), (n, n)):
         with pytest.raises(ValueError, match="must be non-empty and lie within the record's"):
             rests._candidates(x, np.ones_like(x, dtype=bool), np.ones(x.shape[1]), [span])
+    with pytest.raises(ValueError, match="in time order"):
+        rests._candidates(x, np.ones_like(x, dtype=bool), np.ones(x.shape[1]), [(20, 30), (5, 10)])
+
+
+def test_the_forward_kernel_refuses_what_it_cannot_read(default_model):
+    """The forward filter's kernel checks every index it reads (candidates within the record and in time order,
+    events in order, a fix's axis): handed candidates past the record's end or out of order by a caller that skipped
+    decide()'s checks, it refuses the pass (-1) and the decision says so, rather than reading outside its arrays."""
+    from accelnav.estimate import rests
+
+    n, n_axes = 200, len(default_model.axes)
+    x = np.zeros((n, n_axes))
+    R = np.ones(n_axes)
+    t = np.arange(n) * default_model.Ts
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    fixes = [[] for _ in range(n_axes)]
+    level = np.zeros(n_axes)
+    sound = [rests.Candidate(10, 50, level, 1.0), rests.Candidate(80, 120, level, 1.0)]
+    assert len(rests._Decider(x, R, default_model.Ts, sound, fixes, p, t).run()[0]) == 2  # the same, in order: decided
+    for cands in (sound[::-1], [rests.Candidate(10, 50, level, 1.0), rests.Candidate(150, n + 40, level, 1.0)]):
+        dec = rests._Decider(x, R, default_model.Ts, cands, fixes, p, t)
+        with pytest.raises(ValueError, match="outside the record"):
+            dec.run()
