@@ -74,15 +74,18 @@ then is withdrawn. No accepted rest vouches for another: each is re-tested again
 every pass, and one that disagrees leaves.
 
 What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per event,
-in C beside the smoother's kernels (acn_kin_* in csrc/fastsmooth.c: the filter's steps, a forward side's whole
-test in one call, the chi-square's tail, a candidate's statistics and peak speed, the whole backward run), the
-forward filter's loop, its verdicts, hypotheses and words in Python (most of the cost left: a few tens of
-microseconds per candidate test, against the plain smoother's fraction of one per sample): per sample it grows with the
-density of candidates and with the passes and the hypotheses' replays, not with the record's length. A pass
-after the first runs the forward filter again only from the first candidate whose veto is new (it resumes at a
-mark the last pass left before that candidate's test: before it, nothing differs), the backward filter from the
-start (bench/speed/bench_rest_decision.py measures it beside the plain smoother and beside the numpy filter it
-replaced).
+both whole in C beside the smoother's kernels (csrc/fastsmooth.c: acn_kin_forward decides online, with the
+filter, one saved copy for a hypothesis' replay and the marks; acn_kin_backward gives the sides after; the
+chi-square's tail, each candidate's statistics and peak speed). The forward kernel says of each verdict a reason,
+the kind of its evidence and its figures; the words are made here, and only when read (:meth:`_Decider._words`,
+the same words the Python filter it replaced wrote: tests/estimate/test_rest_decision_same.py). What is left in
+Python per pass is the re-test of the accepted rests and the withdrawals (:meth:`_Decider.run`), a few
+microseconds per candidate: per sample the cost grows with the density of candidates and with the passes, not
+with the record's length. A pass after the first runs the forward filter again only from the first candidate
+whose veto is new (it resumes at a mark the last pass left before that candidate's test: before it, nothing
+differs; a mark holds the filter only, the accepted set and the proven stillness before it are the kept
+verdicts'), the backward filter from the start (bench/speed/bench_rest_decision.py measures it beside the plain
+smoother and beside the numpy filter of the first version).
 """
 
 from __future__ import annotations
@@ -131,10 +134,10 @@ class _Kinematic:
     """The kinematic filter of the module docstring over one direction of time of one record.
 
     The axes do not couple: each holds its state (r, u, e) and the six entries of its symmetric covariance, 9
-    doubles [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee], in one C buffer; the steps on it (propagation, an aid, a
-    side's test, the level's jump) are the kernels' (acn_kin_* in csrc/fastsmooth.c). A decision makes a few
-    hundred small steps per pass, each a few dozen multiplications per axis: Python's own per-step overhead cost
-    more than the arithmetic (bench/speed/bench_rest_decision.py)."""
+    doubles [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee], in one C buffer; the record's sums it reads are made here once,
+    every run over the events (acn_kin_forward, acn_kin_backward in csrc/fastsmooth.c) starts from a copy. A
+    decision makes a few hundred small steps per pass, each a few dozen multiplications per axis: Python's own
+    per-step overhead cost more than the arithmetic (bench/speed/bench_rest_decision.py)."""
 
     def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float, reverse: bool = False):
         """The filter before any event on the record ``x`` (N, n_axes), its rows last first when ``reverse``."""
@@ -169,7 +172,7 @@ class _Kinematic:
         return new
 
 
-LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _Decider._test)
+LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (acn_kin_side)
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
@@ -178,9 +181,10 @@ WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
 STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
 MARK_EVERY = 4  # a pass after the first resumes at a mark left at every this many candidates' tests (forward) ...
-MARKS = 128  # ... or sparser, so that no more marks than this are kept: each holds a copy of the accepted set and the
-# proven stillness, so marks at every 4th of 60 000 candidates (a 1e7-sample drive) held 4.4 GB; any mark before the
-# first new veto resumes to the same verdicts, a sparser one only replays more
+MARKS = 128  # ... or sparser, so that no more marks than this are kept (when each held a copy of the accepted set and
+# the proven stillness, marks at every 4th of 60 000 candidates, a 1e7-sample drive, held 4.4 GB; now each is the
+# filter alone, 13 doubles per axis); any mark before the first new veto resumes to the same verdicts, a sparser one
+# only replays more
 
 ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
 REFUSE_REASONS = ("moving", "level jumped", "cannot tell", "no deceleration")

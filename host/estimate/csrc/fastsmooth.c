@@ -1945,7 +1945,7 @@ static int kin_refuses(int reason)
            reason == KIN_NO_DECEL;
 }
 
-/* the peak's figures (rests.py, _Decider._peak) of candidate i from the rest that ended at end_k
+/* the peak speed's figures (acn_kin_peak) of candidate i from the rest that ended at end_k
    with velocity u0 and level e0: peak, end and flat peak speeds */
 static void kin_fwd_peak(const acn_kin_fwd *f, long i, long end_k, const double *u0,
                          const double *e0, double *out)
@@ -1958,9 +1958,10 @@ static void kin_fwd_peak(const acn_kin_fwd *f, long i, long end_k, const double 
     }
 }
 
-/* rests.py's _judge and _other_evidence for candidate i, its side's figures in side (4 rows of
-   n_axes) and stat (chi2, |v|, rms sd), jump the level's jump: the reason; the evidence's kind and
-   figures into base, flags and num (jump, allowed, moved peak, sd, bound, peak, end) */
+/* the verdict on candidate i (the reference's judge and other evidence), its side's figures in side
+   (4 rows of n_axes) and stat (chi2, |v|, rms sd), jump the level's jump: the reason; the
+   evidence's kind and figures into base, flags and num (jump, allowed, moved peak, sd, bound, peak,
+   end) */
 static int kin_judge(const acn_kin_fwd *f, long i, const kin_fwd_state *w, const double *proven,
                      long n_proven, double jump, const double *side, double chi2, int *base,
                      int *flags, double *num)

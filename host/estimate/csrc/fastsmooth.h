@@ -119,13 +119,19 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
  * axis the state (r, u, e) and its symmetric covariance, 9 doubles
  *   r u e  Prr Pru Pre Puu Pue Pee
  * n_axes of them side by side in s. V, W, A: the record's sums, n + 1 rows of
- * n_axes (rests.py says which). The arithmetic is the Python's, in its order.
+ * n_axes (rests.py says which). The arithmetic is the Python reference's
+ * (tests/support/rests_reference.py), in its order.
  *   acn_kin_to    propagate s from sample k0 to k (k > k0)
  *   acn_kin_aid   propagate, then the scalar measurement z of state i (0: r,
  *                 1: u) with variance var on axis `axis`, or on every axis (-1)
  *   acn_kin_side  a side's test of a candidate of `len` samples and the given
  *                 level: v, its sd, r, its sd per axis into out (4 rows of
- *                 n_axes, v times sign); returns sum of v^2 / (sd^2 + sigma2)
+ *                 n_axes, v times sign); returns sum of v^2 / (sd^2 + sigma2).
+ *                 The level's path since the last aid (D ago) is taken as
+ *                 linear; the sd is widened by a leak that changed by L along
+ *                 any path (leak L D), a mean acceleration error no level
+ *                 explains (drift D) and a scale factor's share of what moved
+ *                 since (scale x the integral of |x|); r's by that times D
  *   acn_kin_jump  the level's jump beyond 3 sd of the filter's (0: it has none)
  */
 void acn_kin_to(int n_axes, double *s, const double *V, const double *W, long k0, long k, double Ts,
@@ -137,7 +143,7 @@ double acn_kin_side(int n_axes, const double *s, const double *A, long k, long a
                     double scale, double sigma2, double sign, double *out);
 double acn_kin_jump(int n_axes, const double *s, const double *level);
 /*
- * A forward side's whole test of a candidate (rests.py, _Decider._test): s
+ * A forward side's whole test of a candidate (acn_kin_forward's): s
  * propagated from k0 to k, then as acn_kin_side (sign +1) into out, with
  * res = [its chi-square read on one axis (acn_chi2_equivalent), the level's
  * jump (acn_kin_jump), |v| over the axes, the rms of the sds].
@@ -164,7 +170,7 @@ void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, lon
                    const long *start, const long *stop, const double *R, double *level,
                    double *still);
 /*
- * A candidate's peak speed (rests.py, _Decider._peak): from the last rest's end
+ * A candidate's peak speed (acn_kin_forward's): from the last rest's end
  * e (its velocity u0 and level e0 per axis) to the candidate's start a >= e, on
  * num points of the way (the first e, the last a, rounded half to even between),
  * the velocity integrated from V (n + 1 rows of n_axes) with the level linear
