@@ -258,8 +258,8 @@ _EV = {k: i for i, k in enumerate(("gate off", "veto", "level", "moving", "consi
 
 
 class _Pass:
-    """One forward pass's verdicts as the kernel wrote them (acn_kin_fwd_out, fastsmooth.h): rows of the candidates
-    it decided, the rows before its resume left as they were made (the earlier pass's verdicts are kept whole)."""
+    """The forward passes' verdicts as the kernel wrote them (acn_kin_fwd_out, fastsmooth.h), a row per candidate: a
+    pass writes the rows from its resume on, the rows before are the verdicts it keeps."""
 
     FIELDS = (("reason", "int"), ("base", "int"), ("flags", "int"), ("outcome", "int"), ("oarg", "long"),
               ("num", "double"), ("side", "double"), ("stat", "double"), ("aid", "long"),
@@ -335,6 +335,7 @@ class _Forward:
     veto: np.ndarray  # (m,) uint8, the kernel's view of the vetoes
     acc: np.ndarray  # (m,) uint8, the accepted set
     mark_ok: np.ndarray  # the marks left
+    ps: _Pass  # the verdicts' rows
 
 
 class _Decider:
@@ -396,21 +397,15 @@ class _Decider:
         moving, or cannot be told, the filter goes back to before the hypothesis and goes on without it."""
         resume = self._resume()
         k = self._kernel()
-        ffi, m, n_axes = k.ffi, len(self.cands), self.x.shape[1]
         k.veto[:] = 0  # the vetoes the kernel reads
         k.veto[list(self.veto)] = 1
-        ps = _Pass(m, n_axes)
-        o = k.out
-        buf = ffi.from_buffer
-        keep = [buf(f"{t}[]", getattr(ps, name)) for name, t in _Pass.FIELDS]
-        for (name, _), c in zip(_Pass.FIELDS, keep, strict=True):
-            setattr(o, name, c)
-        if k.lib.acn_kin_forward(k.f, -1 if resume is None else resume, o) != 0:
+        ps = k.ps
+        if k.lib.acn_kin_forward(k.f, -1 if resume is None else resume, k.out) != 0:
             raise ValueError(
                 "rest decision: the forward filter's candidates or events are out of order or outside the record"
             )
         start = 0 if resume is None else resume
-        reasons = [_REASONS[r] for r in ps.reason[start:].tolist()]
+        reasons = [_REASONS[r] for r in ps.reason[start : len(self.cands)].tolist()]
         found = self._found[:start] + [_Verdict(self, ps, i, r) for i, r in enumerate(reasons, start)]
         self._found = found
         every = self._mark_every
@@ -488,7 +483,14 @@ class _Decider:
             c = ffi.from_buffer(types[a.dtype], a)
             keep.append(c)
             setattr(o, name, c)
-        self._fwd = _Forward(ffi, lib, f, o, keep, arrays["veto"], carried["acc"], carried["mark_ok"])
+        # the verdicts' rows, one set for every pass: a pass writes the rows from its resume on, the rows before it
+        # are the verdicts it keeps (and the verdicts of an earlier pass after its resume are no longer read)
+        ps = _Pass(m, n_axes)
+        for name, t in _Pass.FIELDS:
+            c = ffi.from_buffer(f"{t}[]", getattr(ps, name))
+            keep.append(c)
+            setattr(o, name, c)
+        self._fwd = _Forward(ffi, lib, f, o, keep, arrays["veto"], carried["acc"], carried["mark_ok"], ps)
         return self._fwd
 
     def _side(self, ps: _Pass, i: int) -> Side:
