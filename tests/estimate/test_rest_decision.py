@@ -190,3 +190,14 @@ def test_the_forward_kernel_refuses_what_it_cannot_read(default_model):
         dec = rests._Decider(x, R, default_model.Ts, cands, fixes, p, t)
         with pytest.raises(ValueError, match="outside the record"):
             dec.run()
+
+
+def test_no_candidates_no_verdicts(default_model):
+    """A record with no candidate gives no verdict (the kernel's rows are never fewer than one: none is read)."""
+    from accelnav.estimate import rests
+
+    n, n_axes = 100, len(default_model.axes)
+    x = np.zeros((n, n_axes))
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    t = np.arange(n) * default_model.Ts
+    assert rests.decide(x, np.ones_like(x, dtype=bool), np.ones(n_axes), default_model.Ts, t, [], None, p) == []
