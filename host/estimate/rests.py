@@ -798,7 +798,17 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float 
         raise ValueError(f"fixes: sample {outside[0]} outside the record's {len(x)} samples")
     cands = _candidates(x, ok, R, spans)
     dec = _Decider(x, R, Ts, cands, fixes, p, t, start_sd)
-    found, acc = dec.run()
+    try:
+        return _verdicts(cands, *dec.run())
+    finally:
+        # the verdicts and the sides refer back to the decider (they make their words and sides from it when read):
+        # without them it goes with its last reference, and its record's sums (1.4 GB on a 1e7-sample drive) with
+        # it, not at the next collection of cycles, while the smoother runs
+        dec._found, dec._after = [], None
+
+
+def _verdicts(cands: list[Candidate], found: list, acc: set[int]) -> list[RestDecision]:
+    """Each candidate's record: its verdict, the evidence in words and the statistics."""
     out = []
     nan = float("nan")
     for i, (c, f) in enumerate(zip(cands, found, strict=True)):
