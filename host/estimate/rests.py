@@ -535,7 +535,10 @@ class _Decider:
         stand = _Lazy(self._peak, c, st["last_stand"]) if st["last_stand"] is not None else moved
         reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
         if bound < p.tell and self._tells(s):
-            evidence += f"; at {c.still:.2g} R, far less still than the proven rests and shorter than a stand: told only within {bound:g} m/s"
+            evidence += (
+                f"; at {c.still:.2g} R, far less still than the proven rests and shorter than a stand: told only "
+                f"within {bound:g} m/s"
+            )
         if reason == "still start":
             bisect.insort(st["proven"], c.still)
         return reason, evidence
