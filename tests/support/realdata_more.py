@@ -233,9 +233,10 @@ def _trial(folder: Path, subject: str, trial: str):
 def load_lowback_walks(folder: Path | None = None, frame: str = "hand") -> list[Walk]:
     """The three straight walks (see the module docstring). ``frame``: "hand", the level frame made here from the
     reference standings; "library", accelnav.level.level_frame on the recording alone (its own rests and gyroscope
-    bias: what a user of ``accelnav.level`` gets, no reference used)."""
-    if frame not in ("hand", "library"):
-        raise ValueError(f"frame: {frame!r}; accepted: 'hand' or 'library'")
+    bias: what a user of ``accelnav.level`` gets, no reference used); "library at standings", level_frame told the
+    reference standings as its rests."""
+    if frame not in ("hand", "library", "library at standings"):
+        raise ValueError(f"frame: {frame!r}; accepted: 'hand', 'library' or 'library at standings'")
     folder = fetch(MOBGAP) if folder is None else folder
     walks = []
     for subject, trial in WALKS:
@@ -258,12 +259,11 @@ def load_lowback_walks(folder: Path | None = None, frame: str = "hand") -> list[
         while b > i1 and gmean[b - 1] < QUIET_DPS:
             b -= 1
         rest[b:] = True
-        if frame == "library":
+        if frame != "hand":
             from accelnav.level import ImuRecord, level_frame
 
-            world = level_frame(
-                ImuRecord(t=np.arange(n) / WALK_RATE, acc=acc, gyro=gyr, source=f"mobgap {subject}")
-            ).acc
+            imu = ImuRecord(t=np.arange(n) / WALK_RATE, acc=acc, gyro=gyr, source=f"mobgap {subject}")
+            world = level_frame(imu, rests=rest if frame == "library at standings" else None).acc
         else:
             # The gyroscope's offset (1-2 deg/s, a tilt error of g sin(10 deg) within 5 s) is taken from the
             # standing before the walk, and gravity re-measured where the standing ends and where it resumes.
