@@ -4,16 +4,16 @@ Every case goes through the commands with shipped defaults: ``accelnav sim --sce
 [--fixes-out fixes.csv]`` for the simulated ones (issue 31's cases and the plain walk), a CSV and a shipped
 model for the real recordings (tests/support/realdata.py, realdata_more.py: gaitmap's foot walk, mobgap's
 lower-back walks (in the level frame made from their reference standings, in accelnav.level's from the
-recording alone and in accelnav.level's told those standings), the KITTI drive and the two HGuide n380
-drives with stops), then ``accelnav smooth`` three ways from the same run: ``--zupt auto`` (the defaults),
-the true rests as a mask (``--zupt run.npz``, its ``rest``; the reference rests for a real recording) and no ZUPT; where the case has fixes, each of the three
-again with ``--fixes`` ("fixes alone" is fixes without ZUPT), and for the 1 Hz GNSS case fix-to-fix double
-integration (accelnav.estimate.pipeline.fix_baselines). highway_gnss runs on the default model with a
-20 m/s prior on the start speed (it starts on the road; the shipped prior asserts u = 0 at sample 0, which
-alone costs 12 m rms). Figures: position error against the truth, rms over
+recording alone and in accelnav.level's told those standings), the KITTI drive and the two HGuide n380 drives
+with stops), then ``accelnav smooth`` three ways from the same run: ``--zupt auto`` (the defaults), the true
+rests as a mask (``--zupt run.npz``, its ``rest``; the reference rests for a real recording) and no ZUPT;
+where the case has fixes, each of the three again with ``--fixes`` ("fixes alone" is fixes without ZUPT), and
+for the 1 Hz GNSS case fix-to-fix double integration (accelnav.estimate.pipeline.fix_baselines). highway_gnss
+runs on the default model with a 20 m/s prior on the start speed (it starts on the road; the shipped prior
+asserts u = 0 at sample 0, which alone costs 12 m rms). Figures: position error against the truth, rms over
 the run of the distance over all axes (walks: mean |stride-length error| between stance midpoints), mean over
-the seeds; rests the defaults accepted while the body moved faster than 0.5 m/s; the cost of the decision
-per sample against the plain smoother. Then the targets table (goal | measured | met) that bench/run_all.py
+the seeds; rests the defaults accepted while the body moved faster than 0.5 m/s; the cost of the decision per
+sample against the plain smoother. Then the targets table (goal | measured | met) that bench/run_all.py
 gathers; the baselines (true rests, no ZUPT, fixes alone, fix-to-fix) come from the same run.
 
 Usage: python bench/run_all.py bench/speed/bench_rest_hypotheses.py [--seeds 2] [--no-real]
