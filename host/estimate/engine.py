@@ -332,20 +332,15 @@ def smoother_pass(model: Model, source: Source, extras, at: np.ndarray, *, workd
         out.unlink(missing_ok=True)
 
 
-def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None, shared: dict | None = None):
-    """Axis j's aids as arrays: (its position fixes, its zero-velocity updates). ``shared``: a dict kept across
-    the axes of one run, in which rests the same on every axis (one mask, no per-sample sigma: the detector's)
-    are made once and given to each axis (millions of updates at 56 B each: not one copy per axis)."""
+def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None):
+    """Axis j's aids as arrays for a run in memory: (its position fixes, its zero-velocity updates); the chunked
+    passes make them chunk by chunk instead (:class:`_AxisAids`)."""
     from accelnav.estimate import zupt
 
     fx = Aids.of(list(fixes[j]) if fixes is not None else [])
     if rest is None:
         return fx, Aids.of([])
     m = rest.mask
-    if shared is not None and m.ndim == 1 and rest.sigma is None:
-        if "rests" not in shared:
-            shared["rests"] = zupt.axis_aids(np.broadcast_to(m, (n,)), None, model, rest.params)
-        return fx, shared["rests"]
     col = m if m.ndim == 1 else m[:, j]
     sigma = None if rest.sigma is None else np.asarray(rest.sigma)[:, j]
     return fx, zupt.axis_aids(np.broadcast_to(col, (n,)), sigma, model, rest.params)
