@@ -35,7 +35,9 @@ axis' scale (:func:`chi2_equivalent`), against ``gate`` (12: 3.5 sd):
   more than ``level_max`` after a move; a candidate far less still than the record's proven rests
   (``LIKE`` x their median stillness) is held to ``UNLIKE`` x ``level_still`` after a move (a push held,
   not a foot that turned). A level that moved more than ``level_still`` and passes is a *hypothesis* (below).
-* **consistent**: within the gate, and a side can tell (every axis' sd <= ``tell``).
+* **consistent**: within the gate, and a side can tell (every axis' sd <= ``tell``; for a candidate far less
+  still than the proven rests and shorter than ``start_s``, <= ``UNLIKE_TELL`` x ``tell``: a trunk mid-stride is that
+  quiet for a tenth of a second).
 * neither side can tell: the candidate is refused as **cannot tell**, unless another line of evidence
   decides:
 
@@ -176,6 +178,7 @@ LEAK = 0.1  # share of (level change x time since the last aid) allowed as veloc
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
+UNLIKE_TELL = 0.5  # ... and, shorter than a stand, is told by a side only within UNLIKE_TELL x tell (acn_kin_forward)
 CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
@@ -383,8 +386,10 @@ class _Decider:
             self._sources[key] = words
         return words
 
-    def _tells(self, s: Side) -> bool:
-        tell = self.p.tell  # every axis' sd within it (a NaN never is), on floats: cheaper than numpy's overhead
+    def _tells(self, s: Side, tell: float | None = None) -> bool:
+        """Every axis' sd within ``tell`` (default: the parameter's; a NaN never is), on floats: cheaper than numpy's
+        overhead."""
+        tell = self.p.tell if tell is None else tell
         return all(sd <= tell for sd in s.sd.tolist())
 
     def forward(self) -> tuple[list[_Verdict], set[int]]:
@@ -465,7 +470,8 @@ class _Decider:
         for name in ("drift", "scale", "sigma", "gate", "tell", "level_still", "level_max", "still_k", "start_s",
                      "start_within_s", "rel"):  # fmt: skip
             setattr(f, name, float(getattr(p, name)))
-        f.leak, f.start_sd, f.like, f.unlike, f.motion, f.stride = LEAK, self.start_sd, LIKE, UNLIKE, MOTION, STRIDE
+        f.leak, f.start_sd, f.like, f.unlike, f.unlike_tell = LEAK, self.start_sd, LIKE, UNLIKE, UNLIKE_TELL
+        f.motion, f.stride = MOTION, STRIDE
         f.confirm, f.within, f.peak_points = CONFIRM, WITHIN, PEAK_POINTS
         f.mark_every, f.n_marks = self._mark_every, m // self._mark_every + 1
         # carried from pass to pass: the accepted set, the proven stillness, the marks; scratch
@@ -508,7 +514,7 @@ class _Decider:
         and its side ``s`` (what rests.py said of each verdict before the forward filter moved to C)."""
         p, c, Ts = self.p, self.cands[i], self.Ts
         base, flags = int(ps.base[i]), int(ps.flags[i])
-        jump, allowed, moved, sd, bound, peak, end, _ = ps.num[i].tolist()
+        jump, allowed, moved, sd, bound, peak, end, tell = ps.num[i].tolist()
         dur = (c.stop - c.start) * Ts
         cannot = f"cannot tell: sd of v {sd:.2g} m/s before it ({'fixes too far' if s.fix else 'no fix'})"
         if base == _EV["gate off"]:
@@ -546,6 +552,11 @@ class _Decider:
             ev = (
                 f"quiet at {c.still:.2g} R but no deceleration: speed since the last stand {end:.3g} m/s, "
                 f"peak {peak:.3g} m/s (a stop needs <= {p.rel:g} of a peak >= 2 sd; {cannot})"
+            )
+        if flags & 4:  # a side within tell, refused by the bound for a short piece far less still than the rests
+            ev += (
+                f"; at {c.still:.2g} R, far less still than the proven rests and shorter than a stand: told only "
+                f"within {tell:g} m/s"
             )
         if flags & 2:  # a hypothesis for a level that moved
             ev += f"; its level moved {jump:.2g} m/s^2"

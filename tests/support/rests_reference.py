@@ -27,6 +27,7 @@ from accelnav.estimate.rests import (
     REFUSE_REASONS,
     STRIDE,
     UNLIKE,
+    UNLIKE_TELL,
     WITHIN,
     Candidate,
     Side,
@@ -180,6 +181,18 @@ def reference_median(values: list[float]) -> float:
     return float(np.median(values))
 
 
+def reference_tell_bound(self, c: Candidate, like: bool) -> float:
+    """The sd a side must reach to call a candidate consistent: ``tell``, or UNLIKE_TELL x ``tell`` for one far less
+    still than the record's proven rests and shorter than a stand (``start_s``). Such a piece is a moment of a body
+    that moves (a trunk mid-stride) unless the velocity is known well: a lower back walking reads 20-120 R in its
+    quietest tenth of a second against 1-2 R standing, and mobgap's MS_001 trial 1 (levelled by accelnav.level at its
+    standings) accepted a 0.19 s piece at 94 R mid-walk on a side of 0.86 +/- 0.37 m/s, which then refused the
+    standing after the walk as moving. A stand's length keeps ``tell``: a stop with a knock in it, or an idling
+    engine, is unsteady but long."""
+    short = (c.stop - c.start) * self.Ts < self.p.start_s
+    return UNLIKE_TELL * self.p.tell if short and not like else self.p.tell
+
+
 def reference_judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
     """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""
     p = self.p
@@ -203,11 +216,20 @@ def reference_judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: 
     if s.chi2 > p.gate:
         what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
         return "moving", f"{what} {reference_speed(s)} before it (from {s.source})"
-    if self._tells(s):
+    # a rule added after the rewrites (level-track: a short piece far less still than the proven rests is told only
+    # on a side within UNLIKE_TELL x tell): new behaviour, not a part the rewrites changed, so the reference
+    # decides by it too and the comparison stays one of the rewritten code paths
+    bound = reference_tell_bound(self, c, like)
+    if self._tells(s, bound):
         st["proven"].append(c.still)
         return "consistent", f"v {reference_speed(s)} before it (from {s.source})"
     stand = reference_peak(self, c, st["last_stand"]) if st["last_stand"] is not None else moved
     reason, evidence = reference_other_evidence(self, c, s, st["last_end"], st["proven"], st["fix"], stand)
+    if bound < p.tell and self._tells(s):
+        evidence += (
+            f"; at {c.still:.2g} R, far less still than the proven rests and shorter than a stand: told only "
+            f"within {bound:g} m/s"
+        )
     if reason == "still start":
         st["proven"].append(c.still)
     return reason, evidence

@@ -2005,11 +2005,17 @@ static int kin_judge(const acn_kin_fwd *f, long i, const kin_fwd_state *w, const
         *base = EV_MOVING;
         return KIN_MOVING;
     }
-    int tells = 1;
+    /* a piece far less still than the proven rests and shorter than a stand is told only within
+       unlike_tell x tell (a trunk mid-stride is that quiet for a tenth of a second); a stand keeps
+       tell */
+    double dur = (double)(f->stop[i] - f->start[i]) * f->Ts;
+    double bound_tell = dur < f->start_s && !like ? f->unlike_tell * f->tell : f->tell;
+    int tells = 1, tells_any = 1;
     double sd = side[n_axes];
     for (int j = 0; j < n_axes; j++) {
         double v = side[n_axes + j];
-        tells = tells && v <= f->tell;
+        tells = tells && v <= bound_tell;
+        tells_any = tells_any && v <= f->tell;
         if (isnan(v) || isnan(sd)) { /* np.max keeps a NaN */
             sd = NAN;
         } else if (v > sd) {
@@ -2021,7 +2027,10 @@ static int kin_judge(const acn_kin_fwd *f, long i, const kin_fwd_state *w, const
         return KIN_CONSISTENT;
     }
     num[3] = sd;
-    double dur = (double)(f->stop[i] - f->start[i]) * f->Ts;
+    num[7] = bound_tell;
+    if (bound_tell < f->tell && tells_any) {
+        *flags |= 4; /* the words say the bound refused it */
+    }
     if (!w->st.has_end) {
         if (f->start_sd > f->tell) {
             *base = EV_START_SD;

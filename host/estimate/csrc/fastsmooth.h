@@ -230,16 +230,18 @@ typedef struct {
     const double *level, *still;
     const unsigned char *veto;
     double leak, drift, scale, sigma, gate, tell, level_still, level_max, still_k, start_s;
-    double start_within_s, rel, start_sd, like, unlike, motion, stride;
+    double start_within_s, rel, start_sd, like, unlike, unlike_tell, motion, stride;
     long confirm, within, peak_points, mark_every, n_marks;
 } acn_kin_fwd;
 /*
  * What it says, per candidate i at or after the resumed one: reason[i] (0..3
  * rests.py's ACCEPT_REASONS, 4..7 its REFUSE_REASONS), the evidence's kind
  * base[i] with flags[i] (1: as still as the proven rests, 2: its level moved,
- * a hypothesis) and figures num + ACN_KIN_NUM i (the level's jump, the jump
- * allowed, the peak speed since the last rest, the largest sd, the stillness
- * bound, the peak and end speed since the last stand); a hypothesis' outcome[i]
+ * a hypothesis, 4: a side within tell that the bound for a short piece far less
+ * still than the proven rests refused) and figures num + ACN_KIN_NUM i (the
+ * level's jump, the jump allowed, the peak speed since the last rest, the
+ * largest sd, the stillness bound, the peak and end speed since the last stand,
+ * the sd a side had to reach); a hypothesis' outcome[i]
  * (1: refuted by candidate oarg[2 i] of reason oarg[2 i + 1], 2: not borne out
  * within, 3: the record ended, 4: confirmed, its reason before in oarg[2 i + 1]);
  * its side as acn_kin_test's (side + 4 n_axes i; stat + 3 i: chi-square, |v|,
