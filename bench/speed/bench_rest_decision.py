@@ -11,9 +11,10 @@ them: the table lists both.
 Beside it, from the same run, the decision as it was before its rewrites for speed (its kinematic filter in
 numpy on (n_axes, 3, 3) arrays, each candidate's statistics and peak speed in numpy, every peak computed, the
 backward filter event by event in Python, a new filter per pass: tests/support/rests_reference.py, swapped in):
-the baseline (tests/estimate/test_rest_decision_same.py shows both decide alike). Where the time goes now: the
-forward filter's loop, its verdicts, hypotheses and their words, in Python (accelnav.estimate.rests); its side
-tests, chi-squares and the backward run are C.
+the baseline (tests/estimate/test_rest_decision_same.py shows both decide alike). Where the time goes now: both
+filters' runs over the events are C (acn_kin_forward, acn_kin_backward); what is left is Python's per pass (the
+re-test of the accepted rests, the withdrawals) and per decision (the record's preparation, the candidates'
+statistics, the verdicts' words), a few milliseconds on these records.
 
 Usage: python bench/run_all.py bench/speed/bench_rest_decision.py [--repeat 3], or from bench/speed:
   PYTHONPATH=../common python bench_rest_decision.py

@@ -258,11 +258,14 @@ def rts_smooth(d: AxisDesign, f: FilterResult, *, progress: bool | None = None) 
     return SmoothResult(xs, Ps)
 
 
-def bias_model(d: AxisDesign, n: int) -> np.ndarray:
-    """The deterministic bias eps[k] of the model, k = 0 .. n-1 (the filter's prior mean)."""
-    k = np.arange(n)
+def bias_model(d: AxisDesign, n: int, powers: np.ndarray | None = None) -> np.ndarray:
+    """The deterministic bias eps[k] of the model, k = 0 .. n-1 (the filter's prior mean). ``powers``: phi^k for
+    k = 0 .. n-1 when the caller has them (axes that share phi share them: a power per sample costs more than the
+    rest)."""
+    if powers is None:
+        powers = d.phi ** np.arange(n)
     # eps[k] = (c1 + c2) - c1 phi^k: the recursion eps[k+1] = phi eps[k] + b from eps[0] = c2
-    return d.eps_mean - d.axis.c1 * d.phi**k
+    return d.eps_mean - d.axis.c1 * powers
 
 
 def double_integrate(d: AxisDesign, a: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:

@@ -76,21 +76,25 @@ then is withdrawn. No accepted rest vouches for another: each is re-tested again
 every pass, and one that disagrees leaves.
 
 What it costs: two runs over the events (candidates, fixes) per pass, each a few 3 x 3 operations per event,
-in C beside the smoother's kernels (acn_kin_* in csrc/fastsmooth.c: the filter's steps, a forward side's whole
-test in one call, the chi-square's tail, a candidate's statistics and peak speed, the whole backward run), the
-forward filter's loop, its verdicts, hypotheses and words in Python (most of the cost left: a few tens of
-microseconds per candidate test, against the plain smoother's fraction of one per sample): per sample it grows with the
-density of candidates and with the passes and the hypotheses' replays, not with the record's length. A pass
-after the first runs the forward filter again only from the first candidate whose veto is new (it resumes at a
-mark the last pass left before that candidate's test: before it, nothing differs), the backward filter from the
-start (bench/speed/bench_rest_decision.py measures it beside the plain smoother and beside the numpy filter it
-replaced).
+both whole in C beside the smoother's kernels (csrc/fastsmooth.c: acn_kin_forward decides online, with the
+filter, one saved copy for a hypothesis' replay and the marks; acn_kin_backward gives the sides after; the
+chi-square's tail, each candidate's statistics and peak speed). The forward kernel says of each verdict a reason,
+the kind of its evidence and its figures; the words are made here, and only when read (:meth:`_Decider._words`,
+the same words the Python filter it replaced wrote: tests/estimate/test_rest_decision_same.py). What is left in
+Python per pass is the re-test of the accepted rests and the withdrawals (:meth:`_Decider.run`), a few
+microseconds per candidate: per sample the cost grows with the density of candidates and with the passes, not
+with the record's length. A pass after the first runs the forward filter again only from the first candidate
+whose veto is new (it resumes at a mark the last pass left before that candidate's test: before it, nothing
+differs; a mark holds the filter only, the accepted set and the proven stillness before it are the kept
+verdicts'), the backward filter from the start (bench/speed/bench_rest_decision.py measures it beside the plain
+smoother and beside the numpy filter of the first version).
 """
 
 from __future__ import annotations
 
 import bisect
 import math
+import operator
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,10 +136,10 @@ class _Kinematic:
     """The kinematic filter of the module docstring over one direction of time of one record.
 
     The axes do not couple: each holds its state (r, u, e) and the six entries of its symmetric covariance, 9
-    doubles [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee], in one C buffer; the steps on it (propagation, an aid, a
-    side's test, the level's jump) are the kernels' (acn_kin_* in csrc/fastsmooth.c). A decision makes a few
-    hundred small steps per pass, each a few dozen multiplications per axis: Python's own per-step overhead cost
-    more than the arithmetic (bench/speed/bench_rest_decision.py)."""
+    doubles [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee], in one C buffer; the record's sums it reads are made here once,
+    every run over the events (acn_kin_forward, acn_kin_backward in csrc/fastsmooth.c) starts from a copy. A
+    decision makes a few hundred small steps per pass, each a few dozen multiplications per axis: Python's own
+    per-step overhead cost more than the arithmetic (bench/speed/bench_rest_decision.py)."""
 
     def __init__(self, x: np.ndarray, Ts: float, R: np.ndarray, q: float, reverse: bool = False):
         """The filter before any event on the record ``x`` (N, n_axes), its rows last first when ``reverse``."""
@@ -161,12 +165,6 @@ class _Kinematic:
                                            0.0, 0.0, DIFFUSE[1], 0.0, DIFFUSE[2])])  # fmt: skip
         self.k = 0
         self.aid_k = 0  # sample of the last aid
-        self._res = self.ffi.new("double[4]")  # the figures of a test (test); its copies share it, read at once
-
-    @property
-    def X(self) -> np.ndarray:
-        """(n_axes, 3): r, u, e per axis (a copy)."""
-        return np.frombuffer(self.ffi.buffer(self.s), dtype=np.float64).reshape(self.n_axes, 9)[:, :3].copy()
 
     def copy(self) -> _Kinematic:
         new = object.__new__(_Kinematic)
@@ -175,54 +173,21 @@ class _Kinematic:
         self.ffi.memmove(new.s, self.s, self.ffi.sizeof(self.s))
         return new
 
-    def to(self, k: int) -> None:
-        """Propagate the state from sample self.k to sample k."""
-        if k > self.k:
-            self.lib.acn_kin_to(self.n_axes, self.s, self._V, self._W, self.k, k, self.Ts, self.q, self._qv)
-            self.k = k
 
-    def _aid(self, k: int, axis: int, i: int, z: float, var: float) -> None:
-        """Propagate to sample k, then the scalar measurement z of state i (0: r, 1: u) with variance var on
-        ``axis`` (-1: every axis)."""
-        self.lib.acn_kin_aid(self.n_axes, self.s, self._V, self._W, self.k, k, self.Ts, self.q, self._qv, axis, i,
-                             z, var)  # fmt: skip
-        self.k = max(self.k, k)
-        self.aid_k = k
-
-    def rest(self, k: int, sigma: float) -> None:
-        self._aid(k, -1, 1, 0.0, sigma * sigma)
-
-    def fix(self, k: int, j: int, z: float, var: float) -> None:
-        self._aid(k, j, 0, float(z), float(var))
-
-    def test(self, k: int, level, n: int, leak: float, drift: float, scale: float, sigma: float):
-        """Propagate to sample k, then a forward side's test (:meth:`_Decider._test`) of a candidate of n samples at
-        ``level`` (a pointer the kernel reads): (v, sd, r, sd of r) per axis, rows of one (4, n_axes) array; then
-        the sum over the axes of v^2 / (sd^2 + sigma^2) read as one axis' chi-square (:func:`chi2_equivalent`), the
-        level's jump (|level - the filter's level| over the axes beyond 3 sd of the filter's; 0 while it has
-        none), |v| over the axes and the rms of the sds: one kernel call (acn_kin_test)."""
-        out = np.empty((4, self.n_axes))
-        res = self._res
-        self.lib.acn_kin_test(self.n_axes, self.s, self._V, self._W, self._A, self.k, k, self.Ts, self.q, self._qv,
-                              self.aid_k, level, self._R, n, leak, drift, scale, sigma * sigma,
-                              self.ffi.from_buffer("double[]", out), res)  # fmt: skip
-        self.k = max(self.k, k)
-        return out, res[0], res[1], (res[2], res[3])
-
-
-LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (see _Decider._test)
+LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (acn_kin_side)
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
-UNLIKE_TELL = 0.5  # ... and is told by a side only within UNLIKE_TELL x tell (see _Decider._tell_bound)
+UNLIKE_TELL = 0.5  # ... and, shorter than a stand, is told by a side only within UNLIKE_TELL x tell (acn_kin_forward)
 CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
 STRIDE = 1.0  # m/s, ... and where the record lost the rests it had before the hypothesis
 MARK_EVERY = 4  # a pass after the first resumes at a mark left at every this many candidates' tests (forward) ...
-MARKS = 128  # ... or sparser, so that no more marks than this are kept: each holds a copy of the accepted set and the
-# proven stillness, so marks at every 4th of 60 000 candidates (a 1e7-sample drive) held 4.4 GB; any mark before the
-# first new veto resumes to the same verdicts, a sparser one only replays more
+MARKS = 128  # ... or sparser, so that no more marks than this are kept (when each held a copy of the accepted set and
+# the proven stillness, marks at every 4th of 60 000 candidates, a 1e7-sample drive, held 4.4 GB; now each is the
+# filter alone, 13 doubles per axis); any mark before the first new veto resumes to the same verdicts, a sparser one
+# only replays more
 
 ACCEPT_REASONS = ("consistent", "still start", "still stand", "gate off")
 REFUSE_REASONS = ("moving", "level jumped", "cannot tell", "no deceleration")
@@ -246,16 +211,6 @@ class RestDecision:
     chi2: float  # the larger of the two sides' mean over axes of v^2 / (sd^2 + sigma^2)
 
 
-@dataclass
-class _Found:
-    """One candidate's state during the passes."""
-
-    reason: str = "cannot tell"
-    evidence: str = ""
-    before: Side | None = None
-    after: Side | None = None
-
-
 def chi2_equivalent(x: float, dof: int) -> float:
     """The one-degree chi-square value with the upper tail of ``x`` under dof degrees of freedom: the test of
     every axis at once, read on the scale of one axis (9: three sd). The kernel's (acn_chi2_equivalent): the tail
@@ -266,13 +221,6 @@ def chi2_equivalent(x: float, dof: int) -> float:
     if int(dof) < 1:
         raise ValueError(f"dof: {dof}; a chi-square has one degree of freedom at least")
     return _lib().lib.acn_chi2_equivalent(float(x), int(dof))
-
-
-def _median(s: list[float]) -> float:
-    """The median of a short sorted list (np.median's own: the mean of the two middle values of an even count),
-    without numpy's per-call overhead (the forward filter keeps the proven rests' stillness sorted)."""
-    h = len(s) // 2
-    return s[h] if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
 
 
 def _speed(s: Side) -> str:
@@ -301,23 +249,96 @@ def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]
     for j, fx in enumerate(fixes):
         for m in fx:
             ev.append((n - 1 - m.k if reverse else m.k, 1, "fix", (j, m.z, m.R, m.k)))
-    ev.sort(key=lambda e: (e[0], e[1]))
+    ev.sort(key=operator.itemgetter(0, 1))  # stable: fixes at one sample keep their order
     return ev
 
 
-class _Lazy:
-    """f(*args), computed on the first look at one of its items (a candidate's peak speed: most verdicts never
-    need it)."""
+# the kernel's reason codes (acn_kin_forward): the accepted, the refused, a hypothesis still open
+_REASONS = (*ACCEPT_REASONS, *REFUSE_REASONS, "hypothesis")
+# the kinds of evidence it names (acn_kin_fwd_out.base), in its order
+_EV = {k: i for i, k in enumerate(("gate off", "veto", "level", "moving", "consistent", "start sd", "still start",
+                                   "no rest", "not stand", "still stand", "no deceleration"))}  # fmt: skip
 
-    __slots__ = ("f", "args", "value")
 
-    def __init__(self, f, *args):
-        self.f, self.args, self.value = f, args, None
+class _Pass:
+    """The forward passes' verdicts as the kernel wrote them (acn_kin_fwd_out, fastsmooth.h), a row per candidate: a
+    pass writes the rows from its resume on, the rows before are the verdicts it keeps."""
 
-    def __getitem__(self, i):
-        if self.value is None:
-            self.value = self.f(*self.args)
-        return self.value[i]
+    FIELDS = (("reason", "int"), ("base", "int"), ("flags", "int"), ("outcome", "int"), ("oarg", "long"),
+              ("num", "double"), ("side", "double"), ("stat", "double"), ("aid", "long"),
+              ("fix", "unsigned char"))  # fmt: skip
+
+    def __init__(self, m: int, n_axes: int):
+        m = max(m, 1)
+        self.reason, self.base, self.flags, self.outcome = (np.zeros(m, dtype=np.intc) for _ in range(4))
+        self.oarg = np.zeros((m, 2), dtype=np.int64)
+        self.num = np.zeros((m, 8), dtype=np.float64)  # ACN_KIN_NUM
+        self.side = np.zeros((m, 4, n_axes), dtype=np.float64)
+        self.stat = np.zeros((m, 3), dtype=np.float64)
+        self.aid = np.zeros(m, dtype=np.int64)
+        self.fix = np.zeros(m, dtype=np.uint8)
+
+
+class _Verdict:
+    """One candidate's verdict of a forward pass: its reason; its side and its evidence in words made when read
+    (most are never read but for the last pass's, and the words only once, at the end)."""
+
+    __slots__ = ("_d", "_ps", "_i", "reason", "_before")
+
+    def __init__(self, d: _Decider, ps: _Pass, i: int, reason: str):
+        self._d, self._ps, self._i, self.reason = d, ps, i, reason
+        self._before: Side | None = None
+
+    @property
+    def after(self) -> Side | None:
+        """Its side after it, from the last backward pass (None before the first)."""
+        after = self._d._after
+        return None if after is None else after[self._i]
+
+    @property
+    def before(self) -> Side:
+        if self._before is None:
+            self._before = self._d._side(self._ps, self._i)
+        return self._before
+
+    @property
+    def evidence(self) -> str:
+        return self._d._words(self._ps, self._i, self.before)
+
+
+class _Sides:
+    """The sides of one backward pass (acn_kin_backward), candidate by candidate, each made when first read."""
+
+    __slots__ = ("_d", "_rows", "_made")
+
+    def __init__(self, d: _Decider, sides: np.ndarray, stat: np.ndarray, aid: np.ndarray, fix: np.ndarray):
+        self._d, self._rows = d, (sides, stat, aid, fix)
+        self._made: dict[int, Side] = {}
+
+    def __len__(self) -> int:
+        return len(self._rows[1])
+
+    def __getitem__(self, i: int) -> Side:
+        s = self._made.get(i)
+        if s is None:
+            sides, stat, aid, fix = self._rows
+            s = self._made[i] = self._d._after_side(sides[i], stat[i], int(aid[i]), int(fix[i]))
+        return s
+
+
+@dataclass
+class _Forward:
+    """The forward filter's inputs and carried outputs as the kernel reads them (_Decider._kernel)."""
+
+    ffi: object
+    lib: object
+    f: object  # acn_kin_fwd *
+    out: object  # acn_kin_fwd_out *
+    keep: list  # the buffers the two point into
+    veto: np.ndarray  # (m,) uint8, the kernel's view of the vetoes
+    acc: np.ndarray  # (m,) uint8, the accepted set
+    mark_ok: np.ndarray  # the marks left
+    ps: _Pass  # the verdicts' rows
 
 
 class _Decider:
@@ -332,13 +353,14 @@ class _Decider:
         self.veto: dict[int, str] = {}  # withdrawn: why
         self._sources: dict[tuple[str, int], str] = {}  # the words naming each aid (_source)
         self._bwd = None  # the backward events as the kernel reads them (backward)
-        self._pk = None  # the record's sums and an output as the peak's kernel reads them (_peak)
-        self._lv = None  # each candidate's level as the kernels read it (_test)
-        # the forward filter's marks, {candidate: (event index of its test, filter, state)} made at each test with no
-        # hypothesis open, its last pass's verdicts and the vetoes that pass saw (forward)
-        self._marks: dict[int, tuple] = {}
+        self._fwd: _Forward | None = None  # the forward filter's inputs as the kernel reads them (_kernel)
+        self._after: _Sides | None = None  # the last backward pass's sides (_attach)
+        # the forward filter's marks, {candidate: its slot in the kernel's marks} (the filter and its state before the
+        # candidate's test, made at each test with no hypothesis open), its last pass's verdicts and the vetoes that
+        # pass saw (forward)
+        self._marks: dict[int, int] = {}
         self._mark_every = max(MARK_EVERY, -(-len(cands) // MARKS))
-        self._found: list[_Found] = []
+        self._found: list[_Verdict] = []
         self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
 
@@ -370,250 +392,190 @@ class _Decider:
         tell = self.p.tell if tell is None else tell
         return all(sd <= tell for sd in s.sd.tolist())
 
-    def _tell_bound(self, c: Candidate, like: bool) -> float:
-        """The sd a side must reach to call a candidate consistent: ``tell``, or UNLIKE_TELL x ``tell`` for one far
-        less still than the record's proven rests and shorter than a stand (``start_s``). Such a piece is a moment of
-        a body that moves (a trunk mid-stride) unless the velocity is known well: a lower back walking reads 20-120
-        R in its quietest tenth of a second against 1-2 R standing, and mobgap's MS_001 trial 1 (levelled by
-        accelnav.level at its standings) accepted a 0.19 s piece at 94 R mid-walk on a side of 0.86 +/- 0.37 m/s,
-        which then refused the standing after the walk as moving. A stand's length keeps ``tell``: a stop with a
-        knock in it, or an idling engine, is unsteady but long."""
-        short = (c.stop - c.start) * self.Ts < self.p.start_s
-        return UNLIKE_TELL * self.p.tell if short and not like else self.p.tell
-
-    def forward(self) -> tuple[list[_Found], set[int]]:
-        """The forward filter, deciding online; returns every candidate's state and the accepted set.
+    def forward(self) -> tuple[list[_Verdict], set[int]]:
+        """The forward filter, deciding online; returns every candidate's verdict and the accepted set: the kernel's
+        whole run over the events (acn_kin_forward), its verdicts' words made here when read (:meth:`_words`).
 
         Where nothing can tell (no fix, no rest yet), a candidate may be taken as a *hypothesis*: it is kept
         when the next ``CONFIRM`` candidates, tested with it, are consistent and the body moved between
         (a walk's stances: each closes the velocity of the stride before it); when one of them is found
         moving, or cannot be told, the filter goes back to before the hypothesis and goes on without it."""
-        p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
-        e, kin, st, found = self._resume()
-        pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations)
-        tried: set[int] = set()  # hypotheses already refuted in this pass
-        ev = self.fwd_events
-        while e < len(ev) or pending is not None:
-            if e == len(ev):  # the record ended before the hypothesis was borne out: on without it
-                h, e_h, (kin, st), _, _ = pending
-                st = {**st, "acc": set(st["acc"]), "proven": list(st["proven"])}
-                tried.add(h)
-                found[h].reason = "cannot tell"
-                found[h].evidence += "; not borne out: too few candidates after it"
-                pending, e = None, e_h
-                continue
-            k, _, kind, pay = ev[e]
-            e += 1
-            if kind == "fix":
-                j, z, var, _ = pay
-                kin.fix(k, j, z, var)
-                st["source"], st["fix"] = self._source("fix", k), True
-                continue
-            i = pay
-            c = cands[i]
-            acc = st["acc"]
-            if kind == "test" and pending is None and i % self._mark_every == 0:
-                # a mark: the filter and its state as they stand before the test (no hypothesis open: nothing after
-                # it goes back before it), the last visit's kept
-                self._marks[i] = (e - 1, kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])})
-            if kind == "end":
-                if i in acc:
-                    kin.rest(k, p.sigma)
-                    X = kin.X  # a copy: its columns are the rest's own
-                    st["last_end"] = (k, X[:, 1].copy(), X[:, 2].copy())
-                    if (c.stop - c.start) * Ts >= p.start_s:  # a stand: what a stop's kinematics start from
-                        st["last_stand"] = st["last_end"]
-                    st["source"] = self._source("rest", i)
-                continue
-            jump, s = self._test(kin, k, i, st)
-            f = found[i]
-            f.before, f.evidence = s, ""
-            moved = _Lazy(self._peak, c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
-            f.reason, f.evidence = self._judge(i, c, s, st, moved, jump)
-            if pending is not None:
-                h, e_h, saved, count, seen = pending
-                seen += 1
-                if f.reason in REFUSE_REASONS or seen > WITHIN:  # it fails: back to before it, on without it
-                    tried.add(h)
-                    kin, st = saved
-                    st = {**st, "acc": set(st["acc"]), "proven": list(st["proven"])}
-                    found[h].reason = "level jumped" if found[h].reason == "consistent" else "cannot tell"
-                    found[h].evidence += (
-                        f"; not borne out: the candidate at {t[c.start]:.2f} s {f.reason} with it"
-                        if f.reason in REFUSE_REASONS
-                        else f"; not borne out by the next {WITHIN} candidates"
-                    )
-                    pending, e = None, e_h
-                    continue
-                # before the first rest, or for a level that moved, a move; where the record lost a rest it had,
-                # a stride's (a car's cruise pieces close on each other after small changes of speed)
-                lost = saved[1]["last_end"] is not None and found[h].reason != "consistent"
-                if moved[0] >= (STRIDE if lost else MOTION):
-                    count += 1
-                pending = (h, e_h, saved, count, seen)
-                if count >= CONFIRM:
-                    found[h].evidence = (
-                        f"{found[h].evidence}; borne out by the next {CONFIRM} (the body moved between)"
-                        if found[h].reason == "consistent"
-                        else f"closes the velocity of the next {CONFIRM} (the body moved between; "
-                        f"{found[h].evidence.split(';')[0]})"
-                    )
-                    found[h].reason = "consistent"
-                    pending = None
-            elif (
-                pending is None
-                and i not in tried
-                and p.gate > 0
-                and (f.reason == "cannot tell" or (f.reason == "consistent" and jump > p.level_still))
-            ):
-                # a hypothesis (nothing could tell it, or its level moved far: a foot that turned, or a push held),
-                # saved as the filter stands before it
-                pending = (i, e, (kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])}), 0, 0)
-                if f.reason == "consistent":
-                    f.evidence += f"; its level moved {jump:.2g} m/s^2"
-                else:
-                    f.reason = "hypothesis"
-            if f.reason in ACCEPT_REASONS or f.reason == "hypothesis":
-                acc.add(i)
-                kin.rest(k, p.sigma)
-        return found, st["acc"]
+        resume = self._resume()
+        k = self._kernel()
+        k.veto[:] = 0  # the vetoes the kernel reads
+        k.veto[list(self.veto)] = 1
+        ps = k.ps
+        if k.lib.acn_kin_forward(k.f, -1 if resume is None else resume, k.out) != 0:
+            raise ValueError(
+                "rest decision: the forward filter's candidates or events are out of order or outside the record"
+            )
+        start = 0 if resume is None else resume
+        reasons = [_REASONS[r] for r in ps.reason[start : len(self.cands)].tolist()]
+        found = self._found[:start] + [_Verdict(self, ps, i, r) for i, r in enumerate(reasons, start)]
+        self._found = found
+        every = self._mark_every
+        self._marks = {s * every: s for s in np.flatnonzero(k.mark_ok).tolist()}
+        return found, set(np.flatnonzero(k.acc).tolist())
 
-    def _resume(self) -> tuple[int, _Kinematic, dict, list[_Found]]:
-        """Where the forward filter starts: (event index, filter, state, verdicts). A pass after the first decides as
-        the last did up to the first candidate whose veto is new: it resumes at the last mark before it, the
-        verdicts before the mark kept; the first pass, at the record's start."""
-        kin = self._fresh(False)
-        self.V = kin.V
-        found = [_Found() for _ in self.cands]
-        st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
-        e = 0
+    def _resume(self) -> int | None:
+        """The candidate whose mark the forward filter starts at (None: the record's start). A pass after the first
+        decides as the last did up to the first candidate whose veto is new: it resumes at the last mark before it,
+        the verdicts before the mark kept."""
         first = min((i for i, why in self.veto.items() if self._seen_veto.get(i) != why), default=len(self.cands))
         resume = max((i for i in self._marks if i <= first), default=None)
         self._seen_veto = dict(self.veto)
-        if resume is None:
-            self._marks = {}
+        self._marks = {} if resume is None else {i: s for i, s in self._marks.items() if i <= resume}
+        return resume
+
+    def _kernel(self) -> _Forward:
+        """The forward filter's inputs as the kernel reads them, and its carried outputs: made once per decision."""
+        if self._fwd is not None:
+            return self._fwd
+        from accelnav.estimate.fastsmooth import _lib
+
+        mod = _lib()
+        ffi, lib = mod.ffi, mod.lib
+        p, cands, n_axes = self.p, self.cands, self.x.shape[1]
+        kin = self._fresh(False)
+        self.V = kin.V
+        m = len(cands)
+        ev = self.fwd_events
+        kinds = {"test": 0, "fix": 1, "end": 2}
+        arrays = {
+            "ev_k": np.array([e[0] for e in ev], dtype=np.int64),
+            "ev_kind": np.array([kinds[e[2]] for e in ev], dtype=np.intc),
+            "ev_i": np.array([e[3][0] if e[2] == "fix" else e[3] for e in ev], dtype=np.int64),
+            "ev_z": np.array([e[3][1] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
+            "ev_var": np.array([e[3][2] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
+            "start": np.array([c.start for c in cands], dtype=np.int64),
+            "stop": np.array([c.stop for c in cands], dtype=np.int64),
+            "level": np.array([c.level for c in cands], dtype=np.float64).reshape(m, n_axes),
+            "still": np.array([c.still for c in cands], dtype=np.float64),
+            "veto": np.zeros(m, dtype=np.uint8),
+            "diffuse": np.array(DIFFUSE, dtype=np.float64),
+        }
+        types = {np.dtype(np.int64): "long[]", np.dtype(np.intc): "int[]", np.dtype(np.float64): "double[]",
+                 np.dtype(np.uint8): "unsigned char[]"}  # fmt: skip
+        f = ffi.new("acn_kin_fwd *")
+        keep = [kin]
+        for name, a in arrays.items():
+            c = ffi.from_buffer(types[a.dtype], a)
+            keep.append(c)
+            setattr(f, name, c)
+        for name, a in (("V", kin.V), ("W", kin.W), ("A", kin.A), ("R", kin.R), ("qv", kin.qv)):
+            c = ffi.from_buffer("double[]", a)
+            keep.append(c)
+            setattr(f, name, c)
+        f.n_axes, f.n, f.Ts, f.q, f.n_ev, f.m = n_axes, self.n, self.Ts, self.q, len(ev), m
+        for name in ("drift", "scale", "sigma", "gate", "tell", "level_still", "level_max", "still_k", "start_s",
+                     "start_within_s", "rel"):  # fmt: skip
+            setattr(f, name, float(getattr(p, name)))
+        f.leak, f.start_sd, f.like, f.unlike, f.unlike_tell = LEAK, self.start_sd, LIKE, UNLIKE, UNLIKE_TELL
+        f.motion, f.stride = MOTION, STRIDE
+        f.confirm, f.within, f.peak_points = CONFIRM, WITHIN, PEAK_POINTS
+        f.mark_every, f.n_marks = self._mark_every, m // self._mark_every + 1
+        # carried from pass to pass: the accepted set, the proven stillness, the marks; scratch
+        carried = {
+            "acc": np.zeros(m, dtype=np.uint8),
+            "proven": np.zeros(m, dtype=np.uint8),
+            "mark_l": np.zeros((f.n_marks, 9), dtype=np.int64),
+            "mark_d": np.zeros((f.n_marks, 13 * n_axes), dtype=np.float64),
+            "mark_ok": np.zeros(f.n_marks, dtype=np.uint8),
+            "work": np.zeros(2 * max(m, 1), dtype=np.float64),
+            "tried": np.zeros(max(m, 1), dtype=np.uint8),
+        }
+        o = ffi.new("acn_kin_fwd_out *")
+        for name, a in carried.items():
+            c = ffi.from_buffer(types[a.dtype], a)
+            keep.append(c)
+            setattr(o, name, c)
+        # the verdicts' rows, one set for every pass: a pass writes the rows from its resume on, the rows before it
+        # are the verdicts it keeps (and the verdicts of an earlier pass after its resume are no longer read)
+        ps = _Pass(m, n_axes)
+        for name, t in _Pass.FIELDS:
+            c = ffi.from_buffer(f"{t}[]", getattr(ps, name))
+            keep.append(c)
+            setattr(o, name, c)
+        self._fwd = _Forward(ffi, lib, f, o, keep, arrays["veto"], carried["acc"], carried["mark_ok"], ps)
+        return self._fwd
+
+    def _side(self, ps: _Pass, i: int) -> Side:
+        """Candidate i's forward side as the kernel wrote it in pass ``ps``."""
+        s, (chi2, v, sd), aid = ps.side[i], ps.stat[i].tolist(), int(ps.aid[i])
+        if aid < 0:
+            source = "no aid"
         else:
-            e, saved_kin, saved_st = self._marks[resume]
-            kin, st = saved_kin.copy(), {**saved_st, "acc": set(saved_st["acc"]), "proven": list(saved_st["proven"])}
-            found[:resume] = [_Found(f.reason, f.evidence, f.before) for f in self._found[:resume]]
-            self._marks = {i: m for i, m in self._marks.items() if i <= resume}
-        self._found = found
-        return e, kin, st, found
+            k, _, kind, pay = self.fwd_events[aid]
+            source = self._source("fix", k) if kind == "fix" else self._source("rest", pay)
+        return _made(s[0], s[1], chi2, source, bool(ps.fix[i]), s[2], s[3], (v, sd))
 
-    def _judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
-        """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""
-        p = self.p
-        # a level may move far after a move (a foot turns, a mount tilts) in a candidate as still as the record's
-        # proven rests; one far less still (a push held, a braking) keeps the level of a body that did not turn
-        like = not st["proven"] or c.still <= max(p.still_k, LIKE * _median(st["proven"]))
-        if p.gate == 0:
-            return "gate off", "every candidate accepted (gate 0)"
-        if i in self.veto:
-            return "moving", self.veto[i]
-        # the bound on the level's jump depends on the motion since the last rest: looked at only when the jump
-        # could exceed one of its values (the peak speed is the costliest figure here)
-        options = (p.level_max, p.level_still) if like else (UNLIKE * p.level_still, p.level_still)
-        if jump <= min(options):
-            allowed = math.inf
-        elif like:
-            allowed = p.level_max if moved[0] >= MOTION else p.level_still
-        else:  # the motion seen with the rest's own level (the candidate's, a push's, would hide it)
-            allowed = UNLIKE * p.level_still if moved[2] >= MOTION else p.level_still
-        if jump > allowed:
-            return "level jumped", f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with " + (
-                ("motion between" if like else f"motion between, at {c.still:.2g} R: less still than the rests")
-                if moved[0] >= MOTION
-                else f"no motion between (peak {moved[0]:.2g} m/s)"
-            )
-        if s.chi2 > p.gate:
-            what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
-            return "moving", f"{what} {_speed(s)} before it (from {s.source})"
-        bound = self._tell_bound(c, like)
-        if self._tells(s, bound):
-            bisect.insort(st["proven"], c.still)
-            return "consistent", f"v {_speed(s)} before it (from {s.source})"
-        stand = _Lazy(self._peak, c, st["last_stand"]) if st["last_stand"] is not None else moved
-        reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
-        if bound < p.tell and self._tells(s):
-            evidence += (
-                f"; at {c.still:.2g} R, far less still than the proven rests and shorter than a stand: told only "
-                f"within {bound:g} m/s"
-            )
-        if reason == "still start":
-            bisect.insort(st["proven"], c.still)
-        return reason, evidence
-
-    def _test(self, kin: _Kinematic, k: int, i: int, st: dict) -> tuple[float, Side]:
-        """The forward filter taken to candidate i's first sample k: the level's jump there and its side.
-
-        The level's path between the last aid and here is taken as linear; a leak that changed by L since then may
-        have changed along any path: up to L D / 2 of velocity, L D / 4 allowed (one sd); and a mean acceleration
-        error no level explains (a leak changing within the move): drift D (D the time since the last aid); and
-        errors in proportion to the acceleration itself (a scale factor, a level frame turned during a stride: on a
-        real foot a stride leaves 0.2-0.8 m/s in the integral): scale x integral of |x| since the last aid. The
-        position is widened likewise, by the velocity's widening over D. Over the axes: the sum, as the
-        chi-square of one axis with the same tail (chi2_equivalent): a move along one axis is not diluted by the
-        others' rest, and three quiet axes do not add up to a move (acn_kin_test, acn_kin_side)."""
-        p, c = self.p, self.cands[i]
-        if self._lv is None:  # each candidate's level as the kernel reads it, made once per decision
-            self._lv = [kin.ffi.from_buffer("double[]", np.ascontiguousarray(d.level, dtype=np.float64))
-                        for d in self.cands]  # fmt: skip
-        out, chi2, jump, norms = kin.test(k, self._lv[i], c.stop - c.start, LEAK, p.drift, p.scale, p.sigma)
-        return jump, _made(out[0], out[1], chi2, st["source"], st["fix"], out[2], out[3], norms)
-
-    def _peak(self, c: Candidate, last_end) -> tuple[float, float, float]:
-        """(peak, end) speed integrated from the last rest's end to the candidate's start, the level linear
-        from the rest's to the candidate's, and the peak with the rest's level kept; the peaks on at most
-        PEAK_POINTS points of the way (a cost per candidate that does not grow with the time since the rest), by the
-        kernel (acn_kin_peak)."""
-        if self._pk is None or self._pk[0] is not self.V:  # the kernel's pointers, made once per decision
-            from accelnav.estimate.fastsmooth import _lib
-
-            mod = _lib()
-            self._pk = (self.V, mod.lib, mod.ffi.from_buffer, mod.ffi.from_buffer("double[]", self.V),
-                        mod.ffi.new("double[3]"))  # fmt: skip
-        _, lib, buf, V, out = self._pk  # row vectors, contiguous (from_buffer refuses any other)
-        e, u0, e0 = last_end
-        a = max(c.start, e)
-        num = min(a - e + 1, PEAK_POINTS)
-        lib.acn_kin_peak(len(u0), V, self.Ts, e, a, num, buf("double[]", u0), buf("double[]", e0),
-                               buf("double[]", c.level), out)  # fmt: skip
-        # the square root taken of the peak's square (it keeps the order)
-        return math.sqrt(out[0]), math.sqrt(out[1]), math.sqrt(out[2])
-
-    def _other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
-        p, Ts = self.p, self.Ts
-        sd = float(s.sd.max())  # np.max's value (a NaN kept) without its wrapper
+    def _words(self, ps: _Pass, i: int, s: Side) -> str:
+        """Candidate i's evidence in words, from the kind and figures the kernel gave its verdict in pass ``ps``
+        and its side ``s`` (what rests.py said of each verdict before the forward filter moved to C)."""
+        p, c, Ts = self.p, self.cands[i], self.Ts
+        base, flags = int(ps.base[i]), int(ps.flags[i])
+        jump, allowed, moved, sd, bound, peak, end, tell = ps.num[i].tolist()
         dur = (c.stop - c.start) * Ts
-        cannot = f"cannot tell: sd of v {sd:.2g} m/s before it ({'fixes too far' if fix_seen else 'no fix'})"
-        if last_end is None:
-            if self.start_sd > p.tell:
-                return (
-                    "cannot tell",
-                    cannot + f", no rest before (the model lets the run start at {self.start_sd:.3g} m/s)",
-                )
-            if c.start * Ts <= p.start_within_s and dur >= p.start_s and c.still <= p.still_k:
-                return "still start", (
-                    f"still start: {dur:.2f} s at {c.still:.2g} R from {c.start * Ts:.2f} s "
-                    "(assumed: the run starts at rest)"
-                )
-            return "cannot tell", cannot + ", no rest before"
-        bound = max(p.still_k, 2.0 * _median(proven)) if proven else p.still_k
-        if dur < p.start_s or c.still > bound:
-            return "cannot tell", cannot + f"; {dur:.2f} s at {c.still:.2g} R is not a stand (still <= {bound:.2g} R)"
-        # the kinematics of a stop: the velocity since the last rest, its level linear to this one's
-        peak, end = moved[:2]
-        if end <= p.rel * peak and peak >= 2.0 * sd:  # a deceleration, and one the uncertainty cannot explain
-            return "still stand", (
+        cannot = f"cannot tell: sd of v {sd:.2g} m/s before it ({'fixes too far' if s.fix else 'no fix'})"
+        if base == _EV["gate off"]:
+            ev = "every candidate accepted (gate 0)"
+        elif base == _EV["veto"]:
+            ev = self.veto[i]
+        elif base == _EV["level"]:
+            ev = f"level {jump:.2g} m/s^2 off the last rest's, more than {allowed:g} with " + (
+                ("motion between" if flags & 1 else f"motion between, at {c.still:.2g} R: less still than the rests")
+                if moved >= MOTION
+                else f"no motion between (peak {moved:.2g} m/s)"
+            )
+        elif base == _EV["moving"]:
+            what = "fixes imply" if s.fix and s.source.startswith("the fix") else "v"
+            ev = f"{what} {_speed(s)} before it (from {s.source})"
+        elif base == _EV["consistent"]:
+            ev = f"v {_speed(s)} before it (from {s.source})"
+        elif base == _EV["start sd"]:
+            ev = cannot + f", no rest before (the model lets the run start at {self.start_sd:.3g} m/s)"
+        elif base == _EV["still start"]:
+            ev = (
+                f"still start: {dur:.2f} s at {c.still:.2g} R from {c.start * Ts:.2f} s "
+                "(assumed: the run starts at rest)"
+            )
+        elif base == _EV["no rest"]:
+            ev = cannot + ", no rest before"
+        elif base == _EV["not stand"]:
+            ev = cannot + f"; {dur:.2f} s at {c.still:.2g} R is not a stand (still <= {bound:.2g} R)"
+        elif base == _EV["still stand"]:
+            ev = (
                 f"still stand: {dur:.2f} s at {c.still:.2g} R; speed since the last stand {end:.2g} m/s after a "
                 f"peak of {peak:.3g} m/s ({cannot})"
             )
-        return "no deceleration", (
-            f"quiet at {c.still:.2g} R but no deceleration: speed since the last stand {end:.3g} m/s, "
-            f"peak {peak:.3g} m/s (a stop needs <= {p.rel:g} of a peak >= 2 sd; {cannot})"
-        )
+        else:
+            ev = (
+                f"quiet at {c.still:.2g} R but no deceleration: speed since the last stand {end:.3g} m/s, "
+                f"peak {peak:.3g} m/s (a stop needs <= {p.rel:g} of a peak >= 2 sd; {cannot})"
+            )
+        if flags & 4:  # a side within tell, refused by the bound for a short piece far less still than the rests
+            ev += (
+                f"; at {c.still:.2g} R, far less still than the proven rests and shorter than a stand: told only "
+                f"within {tell:g} m/s"
+            )
+        if flags & 2:  # a hypothesis for a level that moved
+            ev += f"; its level moved {jump:.2g} m/s^2"
+        outcome, (by, why) = int(ps.outcome[i]), ps.oarg[i].tolist()
+        if outcome == 1:
+            ev += f"; not borne out: the candidate at {self.t[self.cands[by].start]:.2f} s {_REASONS[why]} with it"
+        elif outcome == 2:
+            ev += f"; not borne out by the next {WITHIN} candidates"
+        elif outcome == 3:
+            ev += "; not borne out: too few candidates after it"
+        elif outcome == 4:
+            ev = (
+                f"{ev}; borne out by the next {CONFIRM} (the body moved between)"
+                if _REASONS[why] == "consistent"
+                else f"closes the velocity of the next {CONFIRM} (the body moved between; {ev.split(';')[0]})"
+            )
+        return ev
 
-    def backward(self, acc: set[int]) -> list[Side | None]:
+    def backward(self, acc: set[int]) -> _Sides:
         """The backward filter with the accepted set ``acc``: every candidate's side after it. It decides nothing
         (the sides are read after it): its whole run over the events is the kernel's (acn_kin_backward), the words
         naming each side's aid made here."""
@@ -636,7 +598,7 @@ class _Decider:
         accm = np.zeros(m, dtype=np.uint8)
         accm[sorted(acc)] = 1
         sides = np.full((m, 4, n_axes), np.nan)
-        total = np.full(m, np.nan)
+        stat = np.full((m, 3), np.nan)
         aid = np.full(m, -1, dtype=np.int64)
         fix = np.zeros(m, dtype=np.uint8)
         buf = ffi.from_buffer
@@ -644,27 +606,31 @@ class _Decider:
             n_axes, kin.s, kin._V, kin._W, kin._A, kin.Ts, kin.q, kin._qv, kin._R, len(ev_k), buf("long[]", ev_k),
             buf("int[]", ev_kind), buf("long[]", ev_i), buf("double[]", ev_z), buf("double[]", ev_var),
             buf("unsigned char[]", accm), buf("double[]", level), buf("long[]", length), LEAK, p.drift, p.scale,
-            p.sigma, buf("double[]", sides), buf("double[]", total), buf("long[]", aid), buf("unsigned char[]", fix),
+            p.sigma, buf("double[]", sides), buf("double[]", stat), buf("long[]", aid), buf("unsigned char[]", fix),
         )  # fmt: skip
-        out: list[Side | None] = []
-        chi2 = kin.lib.acn_chi2_equivalent
-        for s, tot, e, f in zip(sides, total.tolist(), aid.tolist(), fix.tolist(), strict=True):  # each tested once
-            if e < 0:
-                source = "no aid"
-            else:
-                _, _, kind, pay = self.bwd_events[e]
-                source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
-            out.append(_made(s[0], s[1], chi2(tot, n_axes), source, bool(f), s[2], s[3], None))
         assert n == len(self.x)
-        return out
+        return _Sides(self, sides, stat, aid, fix)
 
-    def run(self) -> tuple[list[_Found], set[int]]:
+    def _attach(self, found: list, after: _Sides) -> None:
+        """Each verdict's side after it: the last backward pass's (:attr:`_Verdict.after` reads it when looked at)."""
+        self._after = after
+
+    def _after_side(self, sides: np.ndarray, stat: np.ndarray, aid: int, fix: int) -> Side:
+        """A backward side (one row of acn_kin_backward's outputs) as a Side, its aid named."""
+        if aid < 0:
+            source = "no aid"
+        else:
+            _, _, kind, pay = self.bwd_events[aid]
+            source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
+        chi2, v, sd = stat.tolist()
+        return _made(sides[0], sides[1], chi2, source, bool(fix), sides[2], sides[3], (v, sd))
+
+    def run(self) -> tuple[list, set[int]]:
         p = self.p
         for pass_no in range(p.passes + 1):
             found, acc = self.forward()
             after = self.backward(acc)
-            for f, s in zip(found, after, strict=True):
-                f.after = s
+            self._attach(found, after)
             if p.gate == 0:
                 return found, acc
             # each accepted rest against the other side, and against the positions both sides give it
@@ -680,8 +646,7 @@ class _Decider:
                     self._withdraw(i, after[i], found[i].before)
                 found, acc = self.forward()
                 after = self.backward(acc)
-                for f, s in zip(found, after, strict=True):
-                    f.after = s
+                self._attach(found, after)
                 return found, acc
             # the worst of each run of consecutive disagreeing accepted rests leaves: its neighbours may
             # only have disagreed through it
@@ -729,7 +694,7 @@ class _Decider:
         """Candidates i < j are pieces of one stretch: less than a window (``bridge_s``) between them."""
         return (self.cands[j].start - self.cands[i].stop) * self.Ts <= max(self.p.bridge_s, 2 * self.Ts)
 
-    def _short_before_stands(self, found: list[_Found], acc: set[int]) -> dict[int, int]:
+    def _short_before_stands(self, found: list, acc: set[int]) -> dict[int, int]:
         """{j: i}: accepted rests j shorter than a stand (``start_s``) that were all that made the stand i after
         them "moving" (a stand: ``start_s`` long, still at the sensor's noise)."""
         p, out = self.p, {}
@@ -738,9 +703,14 @@ class _Decider:
         monotone = all(a <= b for a, b in zip(stops, stops[1:], strict=False))  # the detector's spans: in order
         for i, f in enumerate(found):
             c = self.cands[i]
-            if f.reason != "moving" or i in self.veto or f.before is None or not f.before.source.startswith("the rest"):
+            if (
+                f.reason != "moving"
+                or i in self.veto
+                or (c.stop - c.start) * self.Ts < p.start_s
+                or c.still > p.still_k
+            ):
                 continue
-            if (c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k:
+            if f.before is None or not f.before.source.startswith("the rest"):
                 continue
             j = self._last_before(order, stops if monotone else None, c.start)
             if j is not None and (self.cands[j].stop - self.cands[j].start) * self.Ts < p.start_s:
@@ -802,10 +772,14 @@ def _candidates(x, ok, R, spans) -> list[Candidate]:
     stops = np.array([b for _, b in spans], dtype=np.int64).reshape(-1)
     if np.any(starts < 0) or np.any(stops <= starts) or np.any(stops > n):
         raise ValueError(f"spans: each [a, b) must be non-empty and lie within the record's {n} samples")
+    if np.any(starts[1:] <= starts[:-1]):  # the forward filter's kernel tests them in this order
+        raise ValueError("spans: in time order, each starting after the one before")
     mod = _lib()
     ffi = mod.ffi
     x = np.ascontiguousarray(x, dtype=np.float64)
-    usable = np.ascontiguousarray(ok.all(axis=1), dtype=np.uint8)
+    usable = np.array(ok[:, 0], dtype=np.uint8)  # ok.all(axis=1), column by column: numpy's strided all is slower
+    for j in range(1, n_axes):
+        usable &= ok[:, j]
     R = np.ascontiguousarray(R, dtype=np.float64)
     level = np.zeros((len(starts), n_axes))
     still = np.zeros(len(starts))
@@ -815,7 +789,8 @@ def _candidates(x, ok, R, spans) -> list[Candidate]:
             ffi.from_buffer("long[]", starts), ffi.from_buffer("long[]", stops), ffi.from_buffer("double[]", R),
             ffi.from_buffer("double[]", level), ffi.from_buffer("double[]", still),
         )  # fmt: skip
-    return [Candidate(int(a), int(b), lv, float(s)) for a, b, lv, s in zip(starts, stops, level, still, strict=True)]
+    spans = zip(starts.tolist(), stops.tolist(), level, still.tolist(), strict=True)
+    return [Candidate(a, b, lv, s) for a, b, lv, s in spans]
 
 
 def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
@@ -834,7 +809,17 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float 
         raise ValueError(f"fixes: sample {outside[0]} outside the record's {len(x)} samples")
     cands = _candidates(x, ok, R, spans)
     dec = _Decider(x, R, Ts, cands, fixes, p, t, start_sd)
-    found, acc = dec.run()
+    try:
+        return _verdicts(cands, *dec.run())
+    finally:
+        # the verdicts and the sides refer back to the decider (they make their words and sides from it when read):
+        # without them it goes with its last reference, and its record's sums (1.4 GB on a 1e7-sample drive) with
+        # it, not at the next collection of cycles, while the smoother runs
+        dec._found, dec._after = [], None
+
+
+def _verdicts(cands: list[Candidate], found: list, acc: set[int]) -> list[RestDecision]:
+    """Each candidate's record: its verdict, the evidence in words and the statistics."""
     out = []
     nan = float("nan")
     for i, (c, f) in enumerate(zip(cands, found, strict=True)):
@@ -847,8 +832,11 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float 
         vb, sb = _norms(b)
         va, sa = _norms(a)
         chi2 = max(s.chi2 for s in (b, a) if s is not None) if (b or a) else nan
-        out.append(
-            RestDecision(c.start, c.stop, i in acc, f.reason, ev, c.still, float(np.linalg.norm(c.level)), vb, sb, va,
-                         sa, chi2)
+        lv = c.level  # np.linalg.norm's own sum for a vector (its dot), without its checks
+        d = object.__new__(RestDecision)  # the frozen dataclass' fields set at once, not one __setattr__ each
+        d.__dict__.update(
+            start=c.start, stop=c.stop, accepted=i in acc, reason=f.reason, evidence=ev, still=c.still,
+            level=math.sqrt(lv.dot(lv)), v_before=vb, sd_before=sb, v_after=va, sd_after=sa, chi2=chi2,
         )  # fmt: skip
+        out.append(d)
     return out

@@ -159,9 +159,12 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
     x = np.empty((n, n_axes))
     ok = ~clipped & np.isfinite(accel)
     R = np.empty(n_axes)
+    powers: dict[float, np.ndarray] = {}  # phi^k per bias time constant: the axes of a model mostly share one
     for j in range(n_axes):
         d = axis_design(model, j)
-        x[:, j] = np.where(ok[:, j], accel[:, j] - bias_model(d, n), 0.0)
+        if d.phi not in powers:
+            powers[d.phi] = d.phi ** np.arange(n)
+        x[:, j] = np.where(ok[:, j], accel[:, j] - bias_model(d, n, powers[d.phi]), 0.0)
         R[j] = d.R
     return x, ok, R
 

@@ -14,6 +14,7 @@ import pytest
 from accelnav.estimate import zupt
 from accelnav.estimate.kf import bias_model, position_fix
 from accelnav.estimate.rests import ACCEPT_REASONS, LIKE, REFUSE_REASONS, chi2_equivalent
+from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.design import axis_design
 
 RATE = 100.0
@@ -207,3 +208,66 @@ def test_what_the_kernels_would_read_outside_the_record_is_refused(default_model
     for span in ((n - 10, n + 10), (-1, 5), (n, n)):
         with pytest.raises(ValueError, match="must be non-empty and lie within the record's"):
             rests._candidates(x, np.ones_like(x, dtype=bool), np.ones(x.shape[1]), [span])
+    with pytest.raises(ValueError, match="in time order"):
+        rests._candidates(x, np.ones_like(x, dtype=bool), np.ones(x.shape[1]), [(20, 30), (5, 10)])
+
+
+def test_the_forward_kernel_refuses_what_it_cannot_read(default_model):
+    """The forward filter's kernel checks every index it reads (candidates within the record and in time order,
+    events in order, a fix's axis): handed candidates past the record's end or out of order by a caller that skipped
+    decide()'s checks, it refuses the pass (-1) and the decision says so, rather than reading outside its arrays."""
+    from accelnav.estimate import rests
+
+    n, n_axes = 200, len(default_model.axes)
+    x = np.zeros((n, n_axes))
+    R = np.ones(n_axes)
+    t = np.arange(n) * default_model.Ts
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    fixes = [[] for _ in range(n_axes)]
+    level = np.zeros(n_axes)
+    sound = [rests.Candidate(10, 50, level, 1.0), rests.Candidate(80, 120, level, 1.0)]
+    assert len(rests._Decider(x, R, default_model.Ts, sound, fixes, p, t).run()[0]) == 2  # the same, in order: decided
+    for cands in (sound[::-1], [rests.Candidate(10, 50, level, 1.0), rests.Candidate(150, n + 40, level, 1.0)]):
+        dec = rests._Decider(x, R, default_model.Ts, cands, fixes, p, t)
+        with pytest.raises(ValueError, match="outside the record"):
+            dec.run()
+
+
+def test_no_candidates_no_verdicts(default_model):
+    """A record with no candidate gives no verdict (the kernel's rows are never fewer than one: none is read)."""
+    from accelnav.estimate import rests
+
+    n, n_axes = 100, len(default_model.axes)
+    x = np.zeros((n, n_axes))
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    t = np.arange(n) * default_model.Ts
+    assert rests.decide(x, np.ones_like(x, dtype=bool), np.ones(n_axes), default_model.Ts, t, [], None, p) == []
+
+
+def test_the_decider_goes_when_the_decision_returns(default_model, monkeypatch):
+    """The decider holds the record's sums for both directions (1.4 GB on a 1e7-sample drive): its verdicts refer back
+    to it while it decides, and it must not outlive the decision in a cycle that only the collector frees (under
+    `smooth --zupt auto` that kept 450 MB more alive while the smoother ran)."""
+    import gc
+    import weakref
+
+    from accelnav.estimate import rests
+
+    made = []
+    real = rests._Decider.__init__
+
+    def spied(self, *args, **kwargs):
+        made.append(weakref.ref(self))
+        real(self, *args, **kwargs)
+
+    monkeypatch.setattr(rests._Decider, "__init__", spied)
+    arrays = simulate(default_model, "stop_and_go", 120.0, 1).to_arrays()
+    cand = zupt.candidates(arrays["accel"], arrays["clipped"], default_model)
+    gc.collect()
+    gc.disable()
+    try:
+        dec = zupt.decide_rests(arrays["accel"], arrays["clipped"], cand, default_model).decisions
+        assert made and len(dec) > 0 and any(d.accepted for d in dec)
+        assert made[0]() is None, "the decider outlived the decision: a reference cycle holds it"
+    finally:
+        gc.enable()

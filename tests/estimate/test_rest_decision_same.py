@@ -40,9 +40,10 @@ def _model(name: str):
     return load_model(None if name == "default" else MODELS / f"{name}.toml")
 
 
-def _verdicts(arrays, model, fixes):
+def _verdicts(arrays, model, fixes, params=None):
     cand = zupt.candidates(arrays["accel"], arrays["clipped"], model)
-    dec = zupt.decide_rests(arrays["accel"], arrays["clipped"], cand, model, fixes=fixes).decisions
+    params = params or zupt.ZuptParams()
+    dec = zupt.decide_rests(arrays["accel"], arrays["clipped"], cand, model, params, fixes=fixes).decisions
     return [(d.start, d.stop, d.accepted, d.reason, d.evidence) for d in dec], np.array(
         [(d.still, d.level, d.v_before, d.sd_before, d.v_after, d.sd_after, d.chi2) for d in dec]
     )
@@ -91,3 +92,21 @@ def test_few_marks_decide_as_many(scenario, model_name, seconds, monkeypatch):
     assert max(kept) <= 3 + 1, f"{scenario}: {max(kept)} marks kept, the cap is 3"
     assert sparse == dense
     np.testing.assert_array_equal(sparse_stats, dense_stats)
+
+
+@pytest.mark.parametrize(
+    "scenario,model_name,seconds", [("tilting_mount", "default", 300.0), ("hand_box", "adxl335", 120.0)]
+)
+def test_a_resumed_pass_reads_the_proven_rests_before_its_mark(scenario, model_name, seconds):
+    """A pass that resumes at a mark carries the stillness the rests before the mark proved (the kernel rebuilds it
+    from the verdicts it keeps, not from a copy per mark). With a stillness bound of 1.5 R these records resume
+    after rests proved still, and a stand's bound (twice their median) decides verdicts after the mark: a pass
+    that lost them decides otherwise."""
+    model = _model(model_name)
+    arrays = simulate(model, scenario, seconds, 1).to_arrays()
+    params = zupt.ZuptParams(still_k=1.5)
+    new, new_stats = _verdicts(arrays, model, None, params)
+    with swapped():
+        old, old_stats = _verdicts(arrays, model, None, params)
+    assert new == old
+    np.testing.assert_allclose(new_stats, old_stats, rtol=1e-9, atol=1e-12, equal_nan=True)

@@ -11,11 +11,27 @@ from __future__ import annotations
 
 import contextlib
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from accelnav.estimate import rests
-from accelnav.estimate.rests import DIFFUSE, LEAK, LIKE, MOTION, PEAK_POINTS, UNLIKE, Candidate, Side
+from accelnav.estimate.rests import (
+    ACCEPT_REASONS,
+    CONFIRM,
+    DIFFUSE,
+    LEAK,
+    LIKE,
+    MOTION,
+    PEAK_POINTS,
+    REFUSE_REASONS,
+    STRIDE,
+    UNLIKE,
+    UNLIKE_TELL,
+    WITHIN,
+    Candidate,
+    Side,
+)
 
 
 def chi2_equivalent(x: float, dof: int) -> float:
@@ -165,6 +181,18 @@ def reference_median(values: list[float]) -> float:
     return float(np.median(values))
 
 
+def reference_tell_bound(self, c: Candidate, like: bool) -> float:
+    """The sd a side must reach to call a candidate consistent: ``tell``, or UNLIKE_TELL x ``tell`` for one far less
+    still than the record's proven rests and shorter than a stand (``start_s``). Such a piece is a moment of a body
+    that moves (a trunk mid-stride) unless the velocity is known well: a lower back walking reads 20-120 R in its
+    quietest tenth of a second against 1-2 R standing, and mobgap's MS_001 trial 1 (levelled by accelnav.level at its
+    standings) accepted a 0.19 s piece at 94 R mid-walk on a side of 0.86 +/- 0.37 m/s, which then refused the
+    standing after the walk as moving. A stand's length keeps ``tell``: a stop with a knock in it, or an idling
+    engine, is unsteady but long."""
+    short = (c.stop - c.start) * self.Ts < self.p.start_s
+    return UNLIKE_TELL * self.p.tell if short and not like else self.p.tell
+
+
 def reference_judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: float) -> tuple[str, str]:
     """(reason, evidence) of candidate i from the forward side ``s`` and the other lines of evidence."""
     p = self.p
@@ -191,12 +219,12 @@ def reference_judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: 
     # a rule added after the rewrites (level-track: a short piece far less still than the proven rests is told only
     # on a side within UNLIKE_TELL x tell): new behaviour, not a part the rewrites changed, so the reference
     # decides by it too and the comparison stays one of the rewritten code paths
-    bound = self._tell_bound(c, like)
+    bound = reference_tell_bound(self, c, like)
     if self._tells(s, bound):
         st["proven"].append(c.still)
         return "consistent", f"v {reference_speed(s)} before it (from {s.source})"
-    stand = self._peak(c, st["last_stand"]) if st["last_stand"] is not None else moved
-    reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
+    stand = reference_peak(self, c, st["last_stand"]) if st["last_stand"] is not None else moved
+    reason, evidence = reference_other_evidence(self, c, s, st["last_end"], st["proven"], st["fix"], stand)
     if bound < p.tell and self._tells(s):
         evidence += (
             f"; at {c.still:.2g} R, far less still than the proven rests and shorter than a stand: told only "
@@ -227,11 +255,6 @@ def reference_speed(s: Side) -> str:
     return f"{float(np.linalg.norm(s.v)):.3g} +/- {float(np.sqrt(np.mean(s.sd**2))):.2g} m/s"
 
 
-def reference_eager(f, *args):
-    """The peak speed computed as the old forward filter did: at once, for every candidate."""
-    return f(*args)
-
-
 def reference_fresh(self, reverse: bool):
     """A new filter per pass, its sums over the record made again, as the old passes did."""
     return rests._Kinematic(self.x[::-1] if reverse else self.x, self.Ts, self.R, self.q)
@@ -249,13 +272,144 @@ def reference_last_before(self, order: list[int], stops, k: int):
     return before[-1] if before else None
 
 
-_FORWARD = rests._Decider.forward
+@dataclass
+class Found:
+    """One candidate's state during the passes, as the Python forward filter kept it."""
+
+    reason: str = "cannot tell"
+    evidence: str = ""
+    before: Side | None = None
+    after: Side | None = None
+
+
+def reference_other_evidence(self, c: Candidate, s: Side, last_end, proven: list[float], fix_seen: bool, moved):
+    """The lines of evidence besides the sides (a still start, a still stand), as the Python forward filter read
+    them."""
+    p, Ts = self.p, self.Ts
+    sd = float(s.sd.max())
+    dur = (c.stop - c.start) * Ts
+    cannot = f"cannot tell: sd of v {sd:.2g} m/s before it ({'fixes too far' if fix_seen else 'no fix'})"
+    if last_end is None:
+        if self.start_sd > p.tell:
+            return "cannot tell", cannot + f", no rest before (the model lets the run start at {self.start_sd:.3g} m/s)"
+        if c.start * Ts <= p.start_within_s and dur >= p.start_s and c.still <= p.still_k:
+            return "still start", (
+                f"still start: {dur:.2f} s at {c.still:.2g} R from {c.start * Ts:.2f} s "
+                "(assumed: the run starts at rest)"
+            )
+        return "cannot tell", cannot + ", no rest before"
+    bound = max(p.still_k, 2.0 * reference_median(proven)) if proven else p.still_k
+    if dur < p.start_s or c.still > bound:
+        return "cannot tell", cannot + f"; {dur:.2f} s at {c.still:.2g} R is not a stand (still <= {bound:.2g} R)"
+    peak, end = moved[:2]
+    if end <= p.rel * peak and peak >= 2.0 * sd:
+        return "still stand", (
+            f"still stand: {dur:.2f} s at {c.still:.2g} R; speed since the last stand {end:.2g} m/s after a "
+            f"peak of {peak:.3g} m/s ({cannot})"
+        )
+    return "no deceleration", (
+        f"quiet at {c.still:.2g} R but no deceleration: speed since the last stand {end:.3g} m/s, "
+        f"peak {peak:.3g} m/s (a stop needs <= {p.rel:g} of a peak >= 2 sd; {cannot})"
+    )
+
+
+def _source(self, kind: str, at: int) -> str:
+    t = self.t
+    if kind == "fix":
+        return f"the fix at {t[at]:.2f} s"
+    c = self.cands[at]
+    return f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
 
 
 def reference_forward(self):
-    """Every pass's forward filter from the record's start, as the old passes ran it (no marks to resume at)."""
-    self._marks, self._seen_veto = {}, {}
-    return _FORWARD(self)
+    """The forward filter, deciding online, event by event in Python, every pass from the record's start (no marks
+    to resume at), as it was before it moved to C (acn_kin_forward)."""
+    p, cands, Ts, t = self.p, self.cands, self.Ts, self.t
+    self._seen_veto = dict(self.veto)
+    kin = self._fresh(False)
+    self.V = kin.V
+    found = [Found() for _ in cands]
+    st = {"acc": set(), "source": "no aid", "fix": False, "last_end": None, "last_stand": None, "proven": []}
+    e = 0
+    pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations, seen)
+    tried: set[int] = set()  # hypotheses already refuted in this pass
+    ev = self.fwd_events
+    while e < len(ev) or pending is not None:
+        if e == len(ev):  # the record ended before the hypothesis was borne out: on without it
+            h, e_h, (kin, st), _, _ = pending
+            st = {**st, "acc": set(st["acc"]), "proven": list(st["proven"])}
+            tried.add(h)
+            found[h].reason = "cannot tell"
+            found[h].evidence += "; not borne out: too few candidates after it"
+            pending, e = None, e_h
+            continue
+        k, _, kind, pay = ev[e]
+        e += 1
+        if kind == "fix":
+            j, z, var, _ = pay
+            kin.fix(k, j, z, var)
+            st["source"], st["fix"] = _source(self, "fix", k), True
+            continue
+        i = pay
+        c = cands[i]
+        acc = st["acc"]
+        if kind == "end":
+            if i in acc:
+                kin.rest(k, p.sigma)
+                X = kin.X
+                st["last_end"] = (k, X[:, 1].copy(), X[:, 2].copy())
+                if (c.stop - c.start) * Ts >= p.start_s:  # a stand: what a stop's kinematics start from
+                    st["last_stand"] = st["last_end"]
+                st["source"] = _source(self, "rest", i)
+            continue
+        jump, s = reference_test(self, kin, k, i, st)
+        f = found[i]
+        f.before, f.evidence = s, ""
+        moved = reference_peak(self, c, st["last_end"]) if st["last_end"] is not None else (0.0, 0.0, 0.0)
+        f.reason, f.evidence = reference_judge(self, i, c, s, st, moved, jump)
+        if pending is not None:
+            h, e_h, saved, count, seen = pending
+            seen += 1
+            if f.reason in REFUSE_REASONS or seen > WITHIN:  # it fails: back to before it, on without it
+                tried.add(h)
+                kin, st = saved
+                st = {**st, "acc": set(st["acc"]), "proven": list(st["proven"])}
+                found[h].reason = "level jumped" if found[h].reason == "consistent" else "cannot tell"
+                found[h].evidence += (
+                    f"; not borne out: the candidate at {t[c.start]:.2f} s {f.reason} with it"
+                    if f.reason in REFUSE_REASONS
+                    else f"; not borne out by the next {WITHIN} candidates"
+                )
+                pending, e = None, e_h
+                continue
+            lost = saved[1]["last_end"] is not None and found[h].reason != "consistent"
+            if moved[0] >= (STRIDE if lost else MOTION):
+                count += 1
+            pending = (h, e_h, saved, count, seen)
+            if count >= CONFIRM:
+                found[h].evidence = (
+                    f"{found[h].evidence}; borne out by the next {CONFIRM} (the body moved between)"
+                    if found[h].reason == "consistent"
+                    else f"closes the velocity of the next {CONFIRM} (the body moved between; "
+                    f"{found[h].evidence.split(';')[0]})"
+                )
+                found[h].reason = "consistent"
+                pending = None
+        elif (
+            pending is None
+            and i not in tried
+            and p.gate > 0
+            and (f.reason == "cannot tell" or (f.reason == "consistent" and jump > p.level_still))
+        ):
+            pending = (i, e, (kin.copy(), {**st, "acc": set(acc), "proven": list(st["proven"])}), 0, 0)
+            if f.reason == "consistent":
+                f.evidence += f"; its level moved {jump:.2g} m/s^2"
+            else:
+                f.reason = "hypothesis"
+        if f.reason in ACCEPT_REASONS or f.reason == "hypothesis":
+            acc.add(i)
+            kin.rest(k, p.sigma)
+    return found, st["acc"]
 
 
 def reference_candidates(x, ok, R, spans) -> list[Candidate]:
@@ -298,21 +452,23 @@ def reference_backward(self, acc: set[int]) -> list[Side | None]:
     return out
 
 
+def reference_attach(self, found, after) -> None:
+    """Each verdict's side after it, set on it, as the passes did."""
+    for f, s in zip(found, after, strict=True):
+        f.after = s
+
+
 # where each old part goes in accelnav.estimate.rests: swapped in together, they make the module decide as it
 # did before its rewrite
 SWAPS = {
     (rests, "_Kinematic"): ReferenceKinematic,
-    (rests, "_median"): reference_median,
     (rests, "_speed"): reference_speed,
     (rests, "_norms"): reference_norms,
-    (rests, "_Lazy"): reference_eager,
     (rests, "_candidates"): reference_candidates,
     (rests, "chi2_equivalent"): chi2_equivalent,
-    (rests._Decider, "_test"): reference_test,
-    (rests._Decider, "_judge"): reference_judge,
-    (rests._Decider, "_peak"): reference_peak,
     (rests._Decider, "_fresh"): reference_fresh,
     (rests._Decider, "backward"): reference_backward,
+    (rests._Decider, "_attach"): reference_attach,
     (rests._Decider, "forward"): reference_forward,
     (rests._Decider, "_last_before"): reference_last_before,
 }

@@ -1816,7 +1816,7 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
                       const long *ev_k, const int *ev_kind, const long *ev_i, const double *ev_z,
                       const double *ev_var, const unsigned char *acc, const double *level,
                       const long *len, double leak, double drift, double scale, double sigma,
-                      double *out, double *total, long *aid, unsigned char *fix)
+                      double *out, double *stat, long *aid, unsigned char *fix)
 {
     long k_now = 0, aid_k = 0, aid_ev = -1;
     unsigned char fix_seen = 0;
@@ -1838,8 +1838,17 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
         }
         acn_kin_to(n_axes, s, V, W, k_now, k, Ts, q, qv);
         k_now = k > k_now ? k : k_now;
-        total[i] = acn_kin_side(n_axes, s, A, k_now, aid_k, Ts, level + i * n_axes, R, len[i], leak,
-                                drift, scale, var, -1.0, out + 4 * n_axes * i);
+        double *side = out + 4 * n_axes * i, v2 = 0.0, sd2 = 0.0;
+        double total = acn_kin_side(n_axes, s, A, k_now, aid_k, Ts, level + i * n_axes, R, len[i],
+                                    leak, drift, scale, var, -1.0, side);
+        /* as acn_kin_test's: the chi-square read on one axis, |v| and the rms of the sds */
+        for (int j = 0; j < n_axes; j++) {
+            v2 += side[j] * side[j];
+            sd2 += side[n_axes + j] * side[n_axes + j];
+        }
+        stat[3 * i] = acn_chi2_equivalent(total, n_axes);
+        stat[3 * i + 1] = sqrt(v2);
+        stat[3 * i + 2] = sqrt(sd2 / (double)n_axes);
         aid[i] = aid_ev;
         fix[i] = fix_seen;
         if (acc[i]) {
@@ -1865,4 +1874,435 @@ void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, d
             W[(k + 1) * n_axes + j] = w[j] + v[j] * Ts;
         }
     }
+}
+
+/* ---- the rest decision's forward filter (rests.py, _Decider.forward; fastsmooth.h) ------------
+ */
+
+enum { KIN_AXES = 8 }; /* the most axes the forward filter holds on its stack */
+enum {
+    KIN_CONSISTENT,
+    KIN_START,
+    KIN_STAND,
+    KIN_GATE_OFF,
+    KIN_MOVING,
+    KIN_LEVEL,
+    KIN_CANNOT,
+    KIN_NO_DECEL,
+    KIN_HYPOTHESIS
+};
+enum {
+    EV_GATE_OFF,
+    EV_VETO,
+    EV_LEVEL,
+    EV_MOVING,
+    EV_CONSISTENT,
+    EV_START_SD,
+    EV_STILL_START,
+    EV_NO_REST,
+    EV_NOT_STAND,
+    EV_STILL_STAND,
+    EV_NO_DECEL
+};
+enum { OUT_NONE, OUT_REFUTED, OUT_WITHIN, OUT_TOO_FEW, OUT_CONFIRMED };
+
+/* what the forward filter knows besides s (rests.py's dict `st`): its sample, its last aid's sample
+   and event (-1: none), whether a fix came, and the last rest's and the last stand's end (their
+   velocity and level per axis in ends: u, e of the rest, u, e of the stand) */
+typedef struct {
+    long k, aid_k, src, fix, has_end, end_k, has_stand, stand_k;
+} kin_fwd_st;
+
+enum { KIN_MARK_L = 9 }; /* a mark's longs: its event, then kin_fwd_st's eight */
+
+/* the forward filter's whole state: s, st, ends */
+typedef struct {
+    double s[9 * KIN_AXES];
+    double ends[4 * KIN_AXES];
+    kin_fwd_st st;
+} kin_fwd_state;
+
+static double kin_median(const double *v, long n)
+{
+    long h = n / 2;
+    return n % 2 ? v[h] : (v[h - 1] + v[h]) / 2.0;
+}
+
+/* bisect.insort: v (n sorted) gets x after its equals */
+static void kin_insort(double *v, long n, double x)
+{
+    long i = n;
+    while (i > 0 && v[i - 1] > x) {
+        v[i] = v[i - 1];
+        i--;
+    }
+    v[i] = x;
+}
+
+static int kin_refuses(int reason)
+{
+    return reason == KIN_MOVING || reason == KIN_LEVEL || reason == KIN_CANNOT ||
+           reason == KIN_NO_DECEL;
+}
+
+/* the peak speed's figures (acn_kin_peak) of candidate i from the rest that ended at end_k
+   with velocity u0 and level e0: peak, end and flat peak speeds */
+static void kin_fwd_peak(const acn_kin_fwd *f, long i, long end_k, const double *u0,
+                         const double *e0, double *out)
+{
+    long a = f->start[i] > end_k ? f->start[i] : end_k;
+    long num = a - end_k + 1 < f->peak_points ? a - end_k + 1 : f->peak_points;
+    acn_kin_peak(f->n_axes, f->V, f->Ts, end_k, a, num, u0, e0, f->level + i * f->n_axes, out);
+    for (int j = 0; j < 3; j++) {
+        out[j] = sqrt(out[j]);
+    }
+}
+
+/* the verdict on candidate i (the reference's judge and other evidence), its side's figures in side
+   (4 rows of n_axes) and stat (chi2, |v|, rms sd), jump the level's jump: the reason; the
+   evidence's kind and figures into base, flags and num (jump, allowed, moved peak, sd, bound, peak,
+   end) */
+static int kin_judge(const acn_kin_fwd *f, long i, const kin_fwd_state *w, const double *proven,
+                     long n_proven, double jump, const double *side, double chi2, int *base,
+                     int *flags, double *num)
+{
+    int n_axes = f->n_axes;
+    double still = f->still[i];
+    double moved[3] = {0.0, 0.0, 0.0};
+    int have_moved = !w->st.has_end;
+    double lk = f->like * (n_proven ? kin_median(proven, n_proven) : 0.0);
+    int like = !n_proven || still <= (lk > f->still_k ? lk : f->still_k);
+    *flags = like;
+    num[0] = jump;
+    if (f->gate == 0.0) {
+        *base = EV_GATE_OFF;
+        return KIN_GATE_OFF;
+    }
+    if (f->veto[i]) {
+        *base = EV_VETO;
+        return KIN_MOVING;
+    }
+    double opt_a = like ? f->level_max : f->unlike * f->level_still, opt_b = f->level_still;
+    double allowed = INFINITY;
+    if (!(jump <= (opt_b < opt_a ? opt_b : opt_a))) {
+        if (!have_moved) {
+            kin_fwd_peak(f, i, w->st.end_k, w->ends, w->ends + n_axes, moved);
+            have_moved = 1;
+        }
+        if (like) {
+            allowed = moved[0] >= f->motion ? f->level_max : f->level_still;
+        } else {
+            allowed = moved[2] >= f->motion ? f->unlike * f->level_still : f->level_still;
+        }
+    }
+    if (jump > allowed) {
+        num[1] = allowed;
+        num[2] = moved[0];
+        *base = EV_LEVEL;
+        return KIN_LEVEL;
+    }
+    if (chi2 > f->gate) {
+        *base = EV_MOVING;
+        return KIN_MOVING;
+    }
+    /* a piece far less still than the proven rests and shorter than a stand is told only within
+       unlike_tell x tell (a trunk mid-stride is that quiet for a tenth of a second); a stand keeps
+       tell */
+    double dur = (double)(f->stop[i] - f->start[i]) * f->Ts;
+    double bound_tell = dur < f->start_s && !like ? f->unlike_tell * f->tell : f->tell;
+    int tells = 1, tells_any = 1;
+    double sd = side[n_axes];
+    for (int j = 0; j < n_axes; j++) {
+        double v = side[n_axes + j];
+        tells = tells && v <= bound_tell;
+        tells_any = tells_any && v <= f->tell;
+        if (isnan(v) || isnan(sd)) { /* np.max keeps a NaN */
+            sd = NAN;
+        } else if (v > sd) {
+            sd = v;
+        }
+    }
+    if (tells) {
+        *base = EV_CONSISTENT;
+        return KIN_CONSISTENT;
+    }
+    num[3] = sd;
+    num[7] = bound_tell;
+    if (bound_tell < f->tell && tells_any) {
+        *flags |= 4; /* the words say the bound refused it */
+    }
+    if (!w->st.has_end) {
+        if (f->start_sd > f->tell) {
+            *base = EV_START_SD;
+            return KIN_CANNOT;
+        }
+        if ((double)f->start[i] * f->Ts <= f->start_within_s && dur >= f->start_s &&
+            still <= f->still_k) {
+            *base = EV_STILL_START;
+            return KIN_START;
+        }
+        *base = EV_NO_REST;
+        return KIN_CANNOT;
+    }
+    double bound = f->still_k;
+    if (n_proven) {
+        double twice = 2.0 * kin_median(proven, n_proven);
+        bound = twice > f->still_k ? twice : f->still_k;
+    }
+    num[4] = bound;
+    if (dur < f->start_s || still > bound) {
+        *base = EV_NOT_STAND;
+        return KIN_CANNOT;
+    }
+    double stand[3];
+    if (w->st.has_stand) {
+        kin_fwd_peak(f, i, w->st.stand_k, w->ends + 2 * n_axes, w->ends + 3 * n_axes, stand);
+    } else {
+        if (!have_moved) {
+            kin_fwd_peak(f, i, w->st.end_k, w->ends, w->ends + n_axes, moved);
+        }
+        memcpy(stand, moved, sizeof stand);
+    }
+    num[5] = stand[0];
+    num[6] = stand[1];
+    if (stand[1] <= f->rel * stand[0] && stand[0] >= 2.0 * sd) {
+        *base = EV_STILL_STAND;
+        return KIN_STAND;
+    }
+    *base = EV_NO_DECEL;
+    return KIN_NO_DECEL;
+}
+
+/* the mark of slot `slot` made (save) or read back (!save): its event e and the state */
+static void kin_fwd_mark(const acn_kin_fwd *f, acn_kin_fwd_out *o, long slot, long *e,
+                         kin_fwd_state *w, int save)
+{
+    long *ml = o->mark_l + KIN_MARK_L * slot;
+    double *md = o->mark_d + 13 * f->n_axes * slot;
+    size_t ns = sizeof(double) * 9 * (size_t)f->n_axes, ne = sizeof(double) * 4 * (size_t)f->n_axes;
+    long *fields[8] = {&w->st.k,       &w->st.aid_k, &w->st.src,       &w->st.fix,
+                       &w->st.has_end, &w->st.end_k, &w->st.has_stand, &w->st.stand_k};
+    if (save) {
+        ml[0] = *e;
+        for (int j = 0; j < 8; j++) {
+            ml[1 + j] = *fields[j];
+        }
+        memcpy(md, w->s, ns);
+        memcpy(md + 9 * f->n_axes, w->ends, ne);
+        o->mark_ok[slot] = 1;
+    } else {
+        *e = ml[0];
+        for (int j = 0; j < 8; j++) {
+            *fields[j] = ml[1 + j];
+        }
+        memcpy(w->s, md, ns);
+        memcpy(w->ends, md + 9 * f->n_axes, ne);
+    }
+}
+
+/* the inputs' lengths and indices: 0 when every one lies within its array */
+static int kin_fwd_checked(const acn_kin_fwd *f, long resume, const acn_kin_fwd_out *o)
+{
+    if (f->n_axes < 1 || f->n_axes > KIN_AXES || f->n < 0 || f->m < 0 || f->n_ev < 0 ||
+        f->mark_every < 1 || f->n_marks != f->m / f->mark_every + 1 || f->peak_points < 1 ||
+        resume < -1 || resume >= f->m || (resume >= 0 && resume % f->mark_every != 0)) {
+        return -1;
+    }
+    if (resume >= 0 && !o->mark_ok[resume / f->mark_every]) {
+        return -1;
+    }
+    for (long i = 0; i < f->m; i++) { /* in time order, within the record: tests come in order */
+        if (f->start[i] < 0 || f->stop[i] <= f->start[i] || f->stop[i] > f->n ||
+            (i > 0 && f->start[i] <= f->start[i - 1])) {
+            return -1;
+        }
+    }
+    for (long e = 0; e < f->n_ev; e++) {
+        long k = f->ev_k[e], i = f->ev_i[e];
+        int kind = f->ev_kind[e];
+        if (k < 0 || k > f->n || (e > 0 && k < f->ev_k[e - 1]) || kind < 0 || kind > 2 || i < 0 ||
+            i >= (kind == 1 ? f->n_axes : f->m)) {
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* back to before the hypothesis h (the state saved in saved, its event e_h): the candidates after
+   it undone, h kept as refused; returns the event to go on from */
+static long kin_fwd_restore(acn_kin_fwd_out *o, long m, long h, long e_h, kin_fwd_state *w,
+                            const kin_fwd_state *saved, double *proven, long *n_proven,
+                            const double *saved_proven, long saved_n_proven)
+{
+    *w = *saved;
+    *n_proven = saved_n_proven;
+    memcpy(proven, saved_proven, sizeof(double) * (size_t)saved_n_proven);
+    for (long j = h; j < m; j++) {
+        o->acc[j] = 0;
+        if (j > h) {
+            o->proven[j] = 0;
+        }
+    }
+    return e_h;
+}
+
+long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
+{
+    if (kin_fwd_checked(f, resume, o)) {
+        return -1;
+    }
+    int n_axes = f->n_axes;
+    long m = f->m, e = 0, n_proven = 0;
+    double *proven = o->work, *saved_proven = o->work + m;
+    double var = f->sigma * f->sigma;
+    kin_fwd_state w, saved;
+    memset(&w, 0, sizeof w);
+    memset(&saved, 0, sizeof saved);
+    w.st.src = -1;
+    if (resume < 0) {
+        for (int j = 0; j < n_axes; j++) {
+            double *x = w.s + 9 * j;
+            x[3] = f->diffuse[0];
+            x[6] = f->diffuse[1];
+            x[8] = f->diffuse[2];
+        }
+        resume = 0;
+        memset(o->mark_ok, 0, (size_t)f->n_marks);
+    } else {
+        long slot = resume / f->mark_every;
+        kin_fwd_mark(f, o, slot, &e, &w, 0);
+        memset(o->mark_ok + slot + 1, 0, (size_t)(f->n_marks - slot - 1));
+    }
+    /* the verdicts before the mark stand: their accepted rests and proven stillness carry on */
+    for (long i = 0; i < m; i++) {
+        if (i >= resume) {
+            o->acc[i] = o->proven[i] = 0;
+        } else if (o->proven[i]) {
+            kin_insort(proven, n_proven++, f->still[i]);
+        }
+        o->tried[i] = 0;
+    }
+    /* the hypothesis open: its candidate, the event after its test, its confirmations, the
+       candidates seen with it; the state before it in saved */
+    long h = -1, e_h = 0, count = 0, seen = 0, saved_n_proven = 0;
+    double res[4];
+    while (e < f->n_ev || h >= 0) {
+        if (e == f->n_ev) { /* the record ended before the hypothesis was borne out */
+            o->tried[h] = 1;
+            o->reason[h] = KIN_CANNOT;
+            o->outcome[h] = OUT_TOO_FEW;
+            e = kin_fwd_restore(o, m, h, e_h, &w, &saved, proven, &n_proven, saved_proven,
+                                saved_n_proven);
+            h = -1;
+            continue;
+        }
+        long k = f->ev_k[e], i = f->ev_i[e];
+        int kind = f->ev_kind[e];
+        e++;
+        if (kind == 1) {
+            acn_kin_aid(n_axes, w.s, f->V, f->W, w.st.k, k, f->Ts, f->q, f->qv, (int)i, 0,
+                        f->ev_z[e - 1], f->ev_var[e - 1]);
+            w.st.k = k > w.st.k ? k : w.st.k;
+            w.st.aid_k = k;
+            w.st.src = e - 1;
+            w.st.fix = 1;
+            continue;
+        }
+        if (kind == 0 && h < 0 && i % f->mark_every == 0) {
+            long at = e - 1;
+            kin_fwd_mark(f, o, i / f->mark_every, &at, &w, 1);
+        }
+        if (kind == 2) {
+            if (o->acc[i]) {
+                acn_kin_aid(n_axes, w.s, f->V, f->W, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0,
+                            var);
+                w.st.k = k > w.st.k ? k : w.st.k;
+                w.st.aid_k = k;
+                w.st.has_end = 1;
+                w.st.end_k = k;
+                for (int j = 0; j < n_axes; j++) {
+                    w.ends[j] = w.s[9 * j + 1];
+                    w.ends[n_axes + j] = w.s[9 * j + 2];
+                }
+                if ((double)(f->stop[i] - f->start[i]) * f->Ts >= f->start_s) {
+                    w.st.has_stand = 1;
+                    w.st.stand_k = k;
+                    memcpy(w.ends + 2 * n_axes, w.ends, sizeof(double) * 2 * (size_t)n_axes);
+                }
+                w.st.src = e - 1;
+            }
+            continue;
+        }
+        /* a candidate's test: its side, then the verdict */
+        double *side = o->side + 4 * n_axes * i, *num = o->num + ACN_KIN_NUM * i;
+        acn_kin_test(n_axes, w.s, f->V, f->W, f->A, w.st.k, k, f->Ts, f->q, f->qv, w.st.aid_k,
+                     f->level + n_axes * i, f->R, f->stop[i] - f->start[i], f->leak, f->drift,
+                     f->scale, var, side, res);
+        w.st.k = k > w.st.k ? k : w.st.k;
+        o->stat[3 * i] = res[0];
+        o->stat[3 * i + 1] = res[2];
+        o->stat[3 * i + 2] = res[3];
+        o->aid[i] = w.st.src;
+        o->fix[i] = (unsigned char)w.st.fix;
+        o->outcome[i] = OUT_NONE;
+        int reason = kin_judge(f, i, &w, proven, n_proven, res[1], side, res[0], &o->base[i],
+                               &o->flags[i], num);
+        if (reason == KIN_CONSISTENT || reason == KIN_START) {
+            kin_insort(proven, n_proven++, f->still[i]);
+            o->proven[i] = 1;
+        }
+        o->reason[i] = reason;
+        if (h >= 0) {
+            seen++;
+            if (kin_refuses(reason) || seen > f->within) { /* it fails: on without it */
+                o->tried[h] = 1;
+                o->reason[h] = o->reason[h] == KIN_CONSISTENT ? KIN_LEVEL : KIN_CANNOT;
+                o->outcome[h] = kin_refuses(reason) ? OUT_REFUTED : OUT_WITHIN;
+                o->oarg[2 * h] = i;
+                o->oarg[2 * h + 1] = reason;
+                e = kin_fwd_restore(o, m, h, e_h, &w, &saved, proven, &n_proven, saved_proven,
+                                    saved_n_proven);
+                h = -1;
+                continue;
+            }
+            /* a move before the first rest or for a level that moved; a stride's where the record
+               lost the rests it had */
+            int lost = saved.st.has_end && o->reason[h] != KIN_CONSISTENT;
+            double moved[3] = {0.0, 0.0, 0.0};
+            if (w.st.has_end) {
+                kin_fwd_peak(f, i, w.st.end_k, w.ends, w.ends + n_axes, moved);
+            }
+            if (moved[0] >= (lost ? f->stride : f->motion)) {
+                count++;
+            }
+            if (count >= f->confirm) {
+                o->outcome[h] = OUT_CONFIRMED;
+                o->oarg[2 * h + 1] = o->reason[h];
+                o->reason[h] = KIN_CONSISTENT;
+                h = -1;
+            }
+        } else if (!o->tried[i] && f->gate > 0.0 &&
+                   (reason == KIN_CANNOT ||
+                    (reason == KIN_CONSISTENT && res[1] > f->level_still))) {
+            /* a hypothesis, the filter saved as it stands before it */
+            h = i;
+            e_h = e;
+            count = seen = 0;
+            saved = w;
+            saved_n_proven = n_proven;
+            memcpy(saved_proven, proven, sizeof(double) * (size_t)n_proven);
+            if (reason == KIN_CONSISTENT) {
+                o->flags[i] |= 2; /* its level moved */
+            } else {
+                reason = o->reason[i] = KIN_HYPOTHESIS;
+            }
+        }
+        if (reason <= KIN_GATE_OFF || reason == KIN_HYPOTHESIS) {
+            o->acc[i] = 1;
+            acn_kin_aid(n_axes, w.s, f->V, f->W, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0, var);
+            w.st.k = k > w.st.k ? k : w.st.k;
+            w.st.aid_k = k;
+        }
+    }
+    return 0;
 }

@@ -23,6 +23,8 @@
 #define ACCELNAV_FASTSMOOTH_H
 
 #define ACN_FASTSMOOTH_API 1
+/* the figures of one verdict of the rest decision's forward filter (acn_kin_fwd_out.num) */
+#define ACN_KIN_NUM 8
 
 /* ACN-CDEF-BEGIN */
 typedef struct {
@@ -117,13 +119,19 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
  * axis the state (r, u, e) and its symmetric covariance, 9 doubles
  *   r u e  Prr Pru Pre Puu Pue Pee
  * n_axes of them side by side in s. V, W, A: the record's sums, n + 1 rows of
- * n_axes (rests.py says which). The arithmetic is the Python's, in its order.
+ * n_axes (rests.py says which). The arithmetic is the Python reference's
+ * (tests/support/rests_reference.py), in its order.
  *   acn_kin_to    propagate s from sample k0 to k (k > k0)
  *   acn_kin_aid   propagate, then the scalar measurement z of state i (0: r,
  *                 1: u) with variance var on axis `axis`, or on every axis (-1)
  *   acn_kin_side  a side's test of a candidate of `len` samples and the given
  *                 level: v, its sd, r, its sd per axis into out (4 rows of
- *                 n_axes, v times sign); returns sum of v^2 / (sd^2 + sigma2)
+ *                 n_axes, v times sign); returns sum of v^2 / (sd^2 + sigma2).
+ *                 The level's path since the last aid (D ago) is taken as
+ *                 linear; the sd is widened by a leak that changed by L along
+ *                 any path (leak L D), a mean acceleration error no level
+ *                 explains (drift D) and a scale factor's share of what moved
+ *                 since (scale x the integral of |x|); r's by that times D
  *   acn_kin_jump  the level's jump beyond 3 sd of the filter's (0: it has none)
  */
 void acn_kin_to(int n_axes, double *s, const double *V, const double *W, long k0, long k, double Ts,
@@ -135,7 +143,7 @@ double acn_kin_side(int n_axes, const double *s, const double *A, long k, long a
                     double scale, double sigma2, double sign, double *out);
 double acn_kin_jump(int n_axes, const double *s, const double *level);
 /*
- * A forward side's whole test of a candidate (rests.py, _Decider._test): s
+ * A forward side's whole test of a candidate (acn_kin_forward's): s
  * propagated from k0 to k, then as acn_kin_side (sign +1) into out, with
  * res = [its chi-square read on one axis (acn_chi2_equivalent), the level's
  * jump (acn_kin_jump), |v| over the axes, the rms of the sds].
@@ -162,7 +170,7 @@ void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, lon
                    const long *start, const long *stop, const double *R, double *level,
                    double *still);
 /*
- * A candidate's peak speed (rests.py, _Decider._peak): from the last rest's end
+ * A candidate's peak speed (acn_kin_forward's): from the last rest's end
  * e (its velocity u0 and level e0 per axis) to the candidate's start a >= e, on
  * num points of the way (the first e, the last a, rounded half to even between),
  * the velocity integrated from V (n + 1 rows of n_axes) with the level linear
@@ -178,16 +186,17 @@ void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long n
  * value ev_z, variance ev_var on axis ev_i, 2: a candidate's end; ev_i the
  * candidate otherwise). A candidate with acc set is a rest: u = 0 (variance
  * sigma^2) at its test and its end. Per candidate i tested: its side (as
- * acn_kin_side, sign -1) into out + 4 n_axes i and total[i]; the event of the
- * last aid before it (a fix, or the end of a rest) into aid[i] (-1: none) and
- * whether a fix came before it into fix[i].
+ * acn_kin_side, sign -1) into out + 4 n_axes i and, as acn_kin_test's res, its
+ * chi-square read on one axis, |v| and the rms of the sds into stat + 3 i; the
+ * event of the last aid before it (a fix, or the end of a rest) into aid[i]
+ * (-1: none) and whether a fix came before it into fix[i].
  */
 void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, const double *A,
                       double Ts, double q, const double *qv, const double *R, long n_ev,
                       const long *ev_k, const int *ev_kind, const long *ev_i, const double *ev_z,
                       const double *ev_var, const unsigned char *acc, const double *level,
                       const long *len, double leak, double drift, double scale, double sigma,
-                      double *out, double *total, long *aid, unsigned char *fix);
+                      double *out, double *stat, long *aid, unsigned char *fix);
 /*
  * The sums the kinematic filter reads (rests.py, _Kinematic), n + 1 rows of
  * n_axes each, over x (n rows of n_axes; reverse: its rows last first):
@@ -196,6 +205,65 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
  */
 void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, double *V, double *A,
                   double *W);
+/*
+ * The forward filter of the rest decision (rests.py, _Decider.forward), deciding
+ * online: its events as acn_kin_backward's (in order of sample), its candidates
+ * [start, stop) in time order with their level (m rows of n_axes) and
+ * stillness, the decision's figures (zupt.py's ZuptParams and rests.py's
+ * constants), veto[i] set where a candidate was withdrawn. Marks: a pass starts
+ * at candidate `resume`'s mark (a multiple of mark_every whose mark a pass left;
+ * -1: at the record's start), the verdicts before it kept from the last pass.
+ */
+typedef struct {
+    int n_axes;
+    long n; /* samples: V, W, A have n + 1 rows of n_axes */
+    const double *V, *W, *A, *R, *qv;
+    double Ts, q;
+    const double *diffuse; /* the prior variances of r, u, e */
+    long n_ev;
+    const long *ev_k;
+    const int *ev_kind;
+    const long *ev_i;
+    const double *ev_z, *ev_var;
+    long m;
+    const long *start, *stop;
+    const double *level, *still;
+    const unsigned char *veto;
+    double leak, drift, scale, sigma, gate, tell, level_still, level_max, still_k, start_s;
+    double start_within_s, rel, start_sd, like, unlike, unlike_tell, motion, stride;
+    long confirm, within, peak_points, mark_every, n_marks;
+} acn_kin_fwd;
+/*
+ * What it says, per candidate i at or after the resumed one: reason[i] (0..3
+ * rests.py's ACCEPT_REASONS, 4..7 its REFUSE_REASONS), the evidence's kind
+ * base[i] with flags[i] (1: as still as the proven rests, 2: its level moved,
+ * a hypothesis, 4: a side within tell that the bound for a short piece far less
+ * still than the proven rests refused) and figures num + ACN_KIN_NUM i (the
+ * level's jump, the jump allowed, the peak speed since the last rest, the
+ * largest sd, the stillness bound, the peak and end speed since the last stand,
+ * the sd a side had to reach); a hypothesis' outcome[i]
+ * (1: refuted by candidate oarg[2 i] of reason oarg[2 i + 1], 2: not borne out
+ * within, 3: the record ended, 4: confirmed, its reason before in oarg[2 i + 1]);
+ * its side as acn_kin_test's (side + 4 n_axes i; stat + 3 i: chi-square, |v|,
+ * rms sd), the event of its last aid aid[i] (-1: none) and whether a fix came
+ * fix[i]. acc, proven: the accepted rests and the proven stillness, carried
+ * from pass to pass. mark_l (9 longs), mark_d (13 n_axes doubles), mark_ok:
+ * n_marks marks. work: 2 m doubles, tried: m bytes, scratch. Returns 0, or -1
+ * (nothing done) where a length or an index lies outside its array.
+ */
+typedef struct {
+    int *reason, *base, *flags, *outcome;
+    long *oarg;
+    double *num, *side, *stat;
+    long *aid;
+    unsigned char *fix, *acc, *proven;
+    long *mark_l;
+    double *mark_d;
+    unsigned char *mark_ok;
+    double *work;
+    unsigned char *tried;
+} acn_kin_fwd_out;
+long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o);
 /* ACN-CDEF-END */
 
 #endif
