@@ -111,3 +111,31 @@ def piece(text: str, delim: str, ncols: int, use: list[int]) -> np.ndarray | Non
     out = np.empty((text.count("\n") + 1, len(use)), dtype=np.float64)
     got = parse(mod, text.encode("utf-8", "surrogatepass"), delim, ncols, use, out)
     return None if isinstance(got, Refused) else got
+
+
+def grid_block(
+    mod, t: np.ndarray, accel: np.ndarray, t0: float, Ts: float, k_prev: int, first: bool, ratio: np.ndarray, thr: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The grid pass of one block of a streamed recording in one C pass (acsv_grid_block): (found, beyond),
+    found = [first non-finite row, first row off the grid, first grid step below 1 (np.diff's index),
+    1 if a step exceeds 1, the last row's grid index], -1 where none; beyond (n_axes, n_alt) the finite
+    samples with |accel| * ratio > thr. ``ratio`` is (n_axes, n_alt); the numbers of
+    accelnav.data.stream._grid_numpy, which tests/data/test_stream_grid.py holds it to."""
+    t = np.ascontiguousarray(t, dtype=np.float64)
+    accel = np.ascontiguousarray(accel, dtype=np.float64)
+    ratio = np.ascontiguousarray(ratio, dtype=np.float64)
+    m, k = accel.shape
+    if t.shape != (m,) or ratio.ndim != 2 or ratio.shape[0] != k:
+        raise ValueError(f"grid_block: t {t.shape}, accel {accel.shape}, ratio {ratio.shape} disagree")
+    found = np.empty(5, dtype=np.int64)
+    beyond = np.zeros((k, ratio.shape[1]), dtype=np.int64)
+    ffi = mod.ffi
+    rc = mod.lib.acsv_grid_block(
+        m, k, ffi.from_buffer("double[]", t), ffi.from_buffer("double[]", accel), float(t0), float(Ts), int(k_prev),
+        int(first), ratio.shape[1], ffi.from_buffer("double[]", ratio), float(thr),
+        ffi.from_buffer("int64_t[]", found, require_writable=True),
+        ffi.from_buffer("int64_t[]", beyond, require_writable=True),
+    )  # fmt: skip
+    if rc != OK:
+        raise ValueError(f"grid_block: {WHY.get(rc, f'result {rc}')}")
+    return found, beyond

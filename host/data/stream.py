@@ -23,11 +23,13 @@ import os
 import shutil
 import stat
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from accelnav.data import recording as rc
+from accelnav.data.csvnum import grid_block
 from accelnav.errors import UserError
 from accelnav.fileio import TempFolder, check_input, pread_exact
 from accelnav.model.load import Model, load_model
@@ -383,9 +385,13 @@ def _clock_verdict(st: Stream, clock: _Clock, tu: str | None) -> float:
 
 def _grid_pass(st: Stream, rate: float, block: int) -> None:
     """Counts converted, NaN, each sample on the grid (recording.on_grid), as the reader will give them."""
+    from accelnav.data.csvnum import csv_lib
+
     src, n, t0, h = st.source, st.n, st.t0, st.head
     said, k_prev = False, -1
-    fs, evidence = st.model.max_accel_m_s2, 0.0
+    weigh = bool(h.unit_from) and any(f != "name" for f in h.unit_from)  # a unit no name said: what the data say
+    ratio, thr = rc.unit_ratios(h.units, st.model.max_accel_m_s2)
+    mod, evidence = csv_lib(), 0.0
     for s in range(0, n, block):
         e = min(s + block, n)
         try:
@@ -396,32 +402,49 @@ def _grid_pass(st: Stream, rate: float, block: int) -> None:
         if not said and rec.notes:
             note(rec.notes[-1])  # the counts' conversion, once
             said = True
-        located = replace(rec, lines=None)
-        nan = ~np.isfinite(rec.accel)
-        k = np.rint((rec.t - t0) / st.Ts).astype(np.int64)
-        off = np.abs(rec.t - t0 - k * st.Ts) > 0.25 * st.Ts
-        dk = np.diff(np.concatenate(([k_prev], k))) if s else np.diff(k)
-        if nan.any() or off.any() or np.any(dk < 1):
-            located = replace(rec, lines=st.rows(s, e)[1])
-        if nan.any():
-            k = int(np.argmax(nan.any(axis=1)))
-            raise UserError(f"{src}: {located.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
-        if off.any():
-            i = int(np.argmax(off))
+        # one C pass over the block where the C is built (acsv_grid_block), else its numpy twin: the same numbers
+        grid = _grid_numpy if mod is None else partial(grid_block, mod)
+        found, beyond = grid(rec.t, rec.accel, t0, st.Ts, k_prev, s == 0, ratio if weigh else ratio[:, :0], thr)
+        nan, off, dup, gap, k_prev = (int(x) for x in found)
+        located = replace(rec, lines=None if max(nan, off, dup) < 0 else st.rows(s, e)[1])
+        if nan >= 0:
+            raise UserError(f"{src}: {located.where(nan)} is not a number (NaN/inf); a gap in the data is not accepted")
+        if off >= 0:
             raise UserError(
-                f"{src}: {located.where(i)} (t = {rec.t[i]:.6g} s) is off the {rate:.6g} Hz sample grid by more "
+                f"{src}: {located.where(off)} (t = {rec.t[off]:.6g} s) is off the {rate:.6g} Hz sample grid by more "
                 "than a quarter period: the timing jitters too much for a fixed-rate filter"
             )
-        if np.any(dk < 1):
-            i = int(np.argmax(dk < 1)) + (0 if s else 1)
+        if dup >= 0:
+            i = dup + (0 if s else 1)
             raise UserError(f"{src}: {located.where(i)} falls on the same sample period as the one before it")
-        if np.any(dk > 1):
+        if gap:
             raise NotStreamed(f"{src}: samples missing from its clock are filled in by the whole reader")
-        k_prev = int(k[-1])
-        if h.unit_from and any(f != "name" for f in h.unit_from):  # a unit no name said: what the data say of it
-            evidence = evidence + rc.unit_evidence(rec.accel, h.units, fs)
-    if h.unit_from and any(f != "name" for f in h.unit_from):
-        rc.check_units(src, h.chosen, h.units, h.unit_from, evidence, fs, str(st.model.source))
+        if weigh:
+            evidence = evidence + rc.evidence_of(rec.accel, beyond, ratio)
+    if weigh:
+        rc.check_units(src, h.chosen, h.units, h.unit_from, evidence, st.model.max_accel_m_s2, str(st.model.source))
+
+
+def _grid_numpy(t: np.ndarray, accel: np.ndarray, t0: float, Ts: float, k_prev: int, first: bool, ratio, thr):
+    """accelnav.data.csvnum.grid_block's numbers by numpy (where no C is built; the C's oracle in the tests)."""
+    nan = ~np.isfinite(accel)
+    k = np.rint((t - t0) / Ts).astype(np.int64)
+    off = np.abs(t - t0 - k * Ts) > 0.25 * Ts
+    dk = np.diff(k) if first else np.diff(np.concatenate(([k_prev], k)))
+    rows = nan.any(axis=1)
+    found = [
+        int(np.argmax(rows)) if rows.any() else -1,
+        int(np.argmax(off)) if off.any() else -1,
+        int(np.argmax(dk < 1)) if np.any(dk < 1) else -1,
+        int(np.any(dk > 1)),
+        int(k[-1]),
+    ]
+    mag = np.where(nan, 0.0, np.abs(accel))
+    beyond = np.array(
+        [[np.count_nonzero(~nan[:, j] & (mag[:, j] * r > thr)) for r in ratio[j]] for j in range(accel.shape[1])],
+        dtype=np.int64,
+    ).reshape(ratio.shape)
+    return np.array(found, dtype=np.int64), beyond
 
 
 def npz_rows(path: str | os.PathLike[str]) -> int | None:

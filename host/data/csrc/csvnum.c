@@ -6,6 +6,7 @@
  * (correctly rounded in glibc and the BSDs) written as digits and an exponent only, with no decimal
  * point, so that no locale's radix character can change what it reads. */
 #include "csvnum.h"
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -204,5 +205,54 @@ int acsv_parse(const uint8_t *buf, int64_t len, int delim, int comma_is_point, i
         bad[0] = row;
         return ACSV_ROWS;
     }
+    return ACSV_OK;
+}
+
+/* numpy's float64 -> int64 cast on x86-64 (cvttsd2si): out of range or NaN gives INT64_MIN */
+static int64_t grid_index(double q)
+{
+    double r = rint(q); /* round half to even, as np.rint in the default rounding mode */
+    if (!(r >= -9223372036854775808.0 && r < 9223372036854775808.0))
+        return INT64_MIN;
+    return (int64_t)r;
+}
+
+int acsv_grid_block(int64_t m, int64_t naxes, const double *t, const double *accel, double t0,
+                    double Ts, int64_t k_prev, int first, int64_t nalt, const double *ratio,
+                    double thr, int64_t *found, int64_t *beyond)
+{
+    const double quarter = 0.25 * Ts;
+    int64_t i, j, a, prev = k_prev;
+    if (m < 1 || naxes < 1 || nalt < 0)
+        return ACSV_ARGS;
+    found[0] = found[1] = found[2] = -1, found[3] = 0;
+    for (i = 0; i < naxes * nalt; i++)
+        beyond[i] = 0;
+    for (i = 0; i < m; i++) {
+        const double *row = accel + i * naxes;
+        /* k = rint((t - t0) / Ts); off = |t - t0 - k Ts| > Ts / 4, in the twin's order */
+        int64_t k = grid_index((t[i] - t0) / Ts);
+        if (found[1] < 0 && fabs(t[i] - t0 - (double)k * Ts) > quarter)
+            found[1] = i;
+        if (i > 0 || !first) { /* dk = k - previous k (two's complement, as numpy's int64) */
+            int64_t dk = (int64_t)((uint64_t)k - (uint64_t)prev);
+            if (found[2] < 0 && dk < 1)
+                found[2] = first ? i - 1 : i;
+            if (dk > 1)
+                found[3] = 1;
+        }
+        prev = k;
+        for (j = 0; j < naxes; j++) {
+            double v = row[j];
+            if (!isfinite(v)) {
+                if (found[0] < 0)
+                    found[0] = i;
+                continue;
+            }
+            for (a = 0; a < nalt; a++)
+                beyond[j * nalt + a] += fabs(v) * ratio[j * nalt + a] > thr;
+        }
+    }
+    found[4] = prev;
     return ACSV_OK;
 }

@@ -1,0 +1,118 @@
+"""The streamed input's grid pass in C (accelnav.data.csvnum.grid_block) finds what its numpy twin
+(accelnav.data.stream._grid_numpy, the pass as it was) finds, and a streamed NPZ is refused with the very
+line either way: a NaN or an infinity, a stamp off the grid, data in another unit. (Two stamps in one period
+and a missing sample are told by the C and the twin alike, first test; a streamed input never gets that
+far with them: its clock is irregular, and the time pass sends it to the whole reader.)
+
+Blocks of 7 rows put block boundaries everywhere (a bad row first or last in its block)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from accelnav.data import csvnum
+from accelnav.data import recording as rc
+from accelnav.data.stream import NotStreamed, _grid_numpy, open_stream
+from accelnav.errors import UserError
+
+N = 700
+
+
+@pytest.fixture(scope="module")
+def mod():
+    m = csvnum.csv_lib()
+    if m is None:
+        pytest.skip("no C compiler here: the grid pass takes its numpy twin")
+    return m
+
+
+def _block(rng, m, k):
+    t = 5.0 + np.arange(m) * 0.01
+    accel = rng.normal(0, rng.choice([1.0, 300.0, 3000.0]), (m, k))
+    return t, accel
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_c_pass_finds_what_the_numpy_pass_finds(mod, seed):
+    rng = np.random.default_rng(seed)
+    kinds = {"nan": 0, "off": 0, "dup": 0, "gap": 0, "beyond": 0}
+    for _ in range(300):
+        m, k = int(rng.integers(1, 40)), int(rng.integers(1, 4))
+        t, accel = _block(rng, m, k)
+        if rng.random() < 0.3:
+            accel[rng.integers(m), rng.integers(k)] = rng.choice([np.nan, np.inf, -np.inf])
+        if rng.random() < 0.4:
+            t[rng.integers(m)] += rng.choice([0.0026, -0.0026, 0.0024, -0.0049, 0.01, -0.01, 0.02])
+        first = bool(rng.random() < 0.5)
+        k_prev = int(rng.integers(496, 501))
+        units = list(rng.choice(["g", "mg", "m/s^2", "counts"], k))
+        ratio, thr = rc.unit_ratios(units, float(rng.choice([50.0, 490.0])))
+        got = csvnum.grid_block(mod, t, accel, 5.0, 0.01, k_prev, first, ratio, thr)
+        want = _grid_numpy(t, accel, 5.0, 0.01, k_prev, first, ratio, thr)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), (got, want)
+        for name, hit in zip(("nan", "off", "dup"), got[0][:3], strict=True):
+            kinds[name] += hit >= 0
+        kinds["gap"] += got[0][3] == 1
+        kinds["beyond"] += got[1].sum() > 0
+    assert min(kinds.values()) >= 5, kinds  # every kind of finding was met, not only clean blocks
+
+
+def test_evidence_equals_unit_evidence():
+    rng = np.random.default_rng(3)
+    accel = rng.normal(0, 400.0, (1000, 3))
+    units = ["g", "m/s^2", "counts"]
+    ratio, thr = rc.unit_ratios(units, 490.0)
+    _, beyond = _grid_numpy(np.arange(1000) * 0.01, accel, 0.0, 0.01, -1, True, ratio, thr)
+    assert np.array_equal(rc.evidence_of(accel, beyond, ratio), rc.unit_evidence(accel, units, 490.0))
+
+
+def _npz(path, t, accel):
+    np.savez(path, t=t, accel=accel, axis_names=np.array(["x", "y"]))
+    return path
+
+
+def _clean():
+    rng = np.random.default_rng(1)
+    return np.arange(N) / 100.0, rng.normal(0, 0.3, (N, 2))
+
+
+def _spoil(what: str, row: int):
+    t, a = _clean()
+    if what == "nan":
+        a[row, 1] = np.nan
+    elif what == "inf":
+        a[row, 0] = -np.inf
+    elif what == "off the grid":
+        t[row] += 0.003  # beyond a quarter period, while the steps stay regular (0.007 and 0.013 s)
+    elif what == "in mg, said m/s^2":
+        a = a * 1e4  # about 3000 of mg-sized numbers read as m/s^2: far past the sensor's +-490
+    return t, a
+
+
+@pytest.mark.parametrize("row", [7, 13, 14, 350, N - 2])  # not the last: it sets the rate
+@pytest.mark.parametrize("what", ["nan", "inf", "off the grid", "in mg, said m/s^2"])
+def test_a_streamed_npz_is_refused_with_the_same_line_by_either_pass(tmp_path, monkeypatch, what, row, mod):
+    path = _npz(tmp_path / "rec.npz", *_spoil(what, row))
+    with pytest.raises(UserError) as by_c:
+        open_stream(path, block=7)
+    monkeypatch.setattr(csvnum, "csv_lib", lambda: None)
+    with pytest.raises(UserError) as by_numpy:
+        open_stream(path, block=7)
+    assert not isinstance(by_c.value, NotStreamed)
+    assert str(by_c.value) == str(by_numpy.value)
+    said = {"nan": "not a number", "inf": "not a number", "off the grid": "off the", "in mg, said m/s^2": "likely in"}
+    assert said[what] in str(by_c.value)
+    assert what == "in mg, said m/s^2" or f"sample {row} (line {row + 1})" in str(by_c.value)
+
+
+def test_a_clean_npz_streams_alike_by_either_pass(tmp_path, monkeypatch, mod):
+    path = _npz(tmp_path / "rec.npz", *_clean())
+    with open_stream(path, block=7) as st:
+        got = st(0, st.n)
+        ts = (st.t0, st.Ts)
+    monkeypatch.setattr(csvnum, "csv_lib", lambda: None)
+    with open_stream(path, block=7) as st:
+        want = st(0, st.n)
+        assert (st.t0, st.Ts) == ts
+    assert all(np.array_equal(g, w) for g, w in zip(got, want, strict=True))
