@@ -208,10 +208,20 @@ int acsv_parse(const uint8_t *buf, int64_t len, int delim, int comma_is_point, i
     return ACSV_OK;
 }
 
-/* numpy's float64 -> int64 cast on x86-64 (cvttsd2si): out of range or NaN gives INT64_MIN */
+/*
+ * np.rint(q).astype(np.int64): round half to even, then numpy's cast on x86-64 (cvttsd2si), which
+ * gives INT64_MIN out of range or for NaN. Below 2^51 in magnitude the rounding is q + 1.5 2^52
+ * - 1.5 2^52 (the sum's unit in the last place is 1; the same result as rint, without its call:
+ * half the pass).
+ */
 static int64_t grid_index(double q)
 {
-    double r = rint(q); /* round half to even, as np.rint in the default rounding mode */
+    const double magic = 6755399441055744.0; /* 1.5 * 2^52 */
+    double r;
+    if (fabs(q) < 2251799813685248.0) /* 2^51 */
+        r = (q + magic) - magic;
+    else
+        r = rint(q);
     if (!(r >= -9223372036854775808.0 && r < 9223372036854775808.0))
         return INT64_MIN;
     return (int64_t)r;
@@ -221,38 +231,45 @@ int acsv_grid_block(int64_t m, int64_t naxes, const double *t, const double *acc
                     double Ts, int64_t k_prev, int first, int64_t nalt, const double *ratio,
                     double thr, int64_t *found, int64_t *beyond)
 {
+    /* the findings and counts in locals (the counts of ACSV_GRID_CELLS axis-units at most, the rest
+     * in place): stores through found and beyond could alias the rows, which kept every test in
+     * memory */
+    enum { ACSV_GRID_CELLS = 32 };
     const double quarter = 0.25 * Ts;
-    int64_t i, j, a, prev = k_prev;
-    if (m < 1 || naxes < 1 || nalt < 0)
+    int64_t i, j, a, prev = k_prev, nonfinite = -1, off = -1, dup = -1, gap = 0;
+    int64_t cells = naxes * nalt, local[ACSV_GRID_CELLS] = {0};
+    int64_t *count = cells <= ACSV_GRID_CELLS ? local : beyond;
+    if (m < 1 || naxes < 1 || nalt < 0 || naxes > INT64_MAX / (nalt > 0 ? nalt : 1))
         return ACSV_ARGS;
-    found[0] = found[1] = found[2] = -1, found[3] = 0;
-    for (i = 0; i < naxes * nalt; i++)
-        beyond[i] = 0;
+    for (i = 0; i < cells; i++)
+        count[i] = 0;
     for (i = 0; i < m; i++) {
         const double *row = accel + i * naxes;
         /* k = rint((t - t0) / Ts); off = |t - t0 - k Ts| > Ts / 4, in the twin's order */
         int64_t k = grid_index((t[i] - t0) / Ts);
-        if (found[1] < 0 && fabs(t[i] - t0 - (double)k * Ts) > quarter)
-            found[1] = i;
+        if (off < 0 && fabs(t[i] - t0 - (double)k * Ts) > quarter)
+            off = i;
         if (i > 0 || !first) { /* dk = k - previous k (two's complement, as numpy's int64) */
             int64_t dk = (int64_t)((uint64_t)k - (uint64_t)prev);
-            if (found[2] < 0 && dk < 1)
-                found[2] = first ? i - 1 : i;
-            if (dk > 1)
-                found[3] = 1;
+            if (dup < 0 && dk < 1)
+                dup = first ? i - 1 : i;
+            gap |= dk > 1;
         }
         prev = k;
         for (j = 0; j < naxes; j++) {
             double v = row[j];
             if (!isfinite(v)) {
-                if (found[0] < 0)
-                    found[0] = i;
+                if (nonfinite < 0)
+                    nonfinite = i;
                 continue;
             }
             for (a = 0; a < nalt; a++)
-                beyond[j * nalt + a] += fabs(v) * ratio[j * nalt + a] > thr;
+                count[j * nalt + a] += fabs(v) * ratio[j * nalt + a] > thr;
         }
     }
-    found[4] = prev;
+    if (count == local)
+        for (i = 0; i < cells; i++)
+            beyond[i] = local[i];
+    found[0] = nonfinite, found[1] = off, found[2] = dup, found[3] = gap, found[4] = prev;
     return ACSV_OK;
 }
