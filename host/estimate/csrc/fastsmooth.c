@@ -1456,15 +1456,21 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
 void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *cov,
                        const double *srows, long nt, double *carry, double *xs, double *sds)
 {
+    /* the carry and the model in locals: the stores to xs, sds cannot alias them, so the recursion
+     * stays in registers (20 ns a sample, 23-24 through memory, measured); the same operations */
+    const acn_axis mm = *m;
+    double v[11];
+    memcpy(v, carry, sizeof v);
     for (long k = 0; k < n; k++) {
         const double *row = store + ACN_LROW * k, *nx = row + ACN_LROW;
         const double *pc = cov + 3 * k, *pn = pc + 3;
         const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
         double *o = xs + 4 * k, *sd = sds + 4 * k;
-        o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
-        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(pc[0]), sd[3] = sqrt(pc[2]);
-        ru_step(m, carry, row[0], pc[0], nx[0], pn[0], pn[1], sr + 4);
+        o[0] = v[0], o[1] = v[1], o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(v[2]), sd[1] = sqrt(v[5]), sd[2] = sqrt(pc[0]), sd[3] = sqrt(pc[2]);
+        ru_step(&mm, v, row[0], pc[0], nx[0], pn[0], pn[1], sr + 4);
     }
+    memcpy(carry, v, sizeof v);
 }
 
 /* ------------------------------------------------------------------------- */
