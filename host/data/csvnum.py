@@ -139,3 +139,33 @@ def grid_block(
     if rc != OK:
         raise ValueError(f"grid_block: {WHY.get(rc, f'result {rc}')}")
     return found, beyond
+
+
+STEPS_CAP = 1 << 16  # distinct time steps time_block counts in a block; a block with more goes to numpy
+
+
+def time_block(mod, t: np.ndarray, prev: float | None, cap: int = STEPS_CAP):
+    """The time pass of one block of stamps ``t`` (after ``prev``, the stamp before the block, or None) in one C
+    pass (acsv_time_block): (first non-finite stamp, first step <= 0 by np.diff's index, steps <= 0, steps),
+    -1 where none; steps = (least, largest, distinct steps, their counts), or None when a stamp is not
+    finite, there is no step, or there are more than ``cap`` distinct steps. The numbers of
+    accelnav.data.stream._steps_numpy, which tests/data/test_stream_grid.py holds it to."""
+    t = np.ascontiguousarray(t, dtype=np.float64)
+    m = len(t)
+    cap = max(1, min(int(cap), m))
+    found = np.empty(4, dtype=np.int64)
+    span = np.empty(2)
+    vals, counts = np.empty(cap), np.empty(cap, dtype=np.int64)
+    ffi = mod.ffi
+    w = {"require_writable": True}
+    rc = mod.lib.acsv_time_block(
+        m, ffi.from_buffer("double[]", t), int(prev is not None), 0.0 if prev is None else float(prev), cap,
+        ffi.from_buffer("int64_t[]", found, **w), ffi.from_buffer("double[]", span, **w),
+        ffi.from_buffer("double[]", vals, **w), ffi.from_buffer("int64_t[]", counts, **w),
+    )  # fmt: skip
+    if rc != OK:
+        raise ValueError(f"time_block: {WHY.get(rc, f'result {rc}')}")
+    nonfinite, back, n_back, distinct = (int(x) for x in found)
+    n_dt = m - (prev is None)
+    steps = None if distinct < 0 or n_dt == 0 else (float(span[0]), float(span[1]), vals[:distinct], counts[:distinct])
+    return nonfinite, back, n_back, steps

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.data import recording as rc
-from accelnav.data.csvnum import grid_block
+from accelnav.data.csvnum import grid_block, time_block
 from accelnav.errors import UserError
 from accelnav.fileio import TempFolder, check_input, pread_exact
 from accelnav.model.load import Model, load_model
@@ -320,8 +320,12 @@ class _Clock:
 
     def add(self, dt: np.ndarray) -> int:
         """Count the steps ``dt``; returns how many distinct steps there are so far."""
-        self.dmin, self.dmax = min(self.dmin, float(dt.min())), max(self.dmax, float(dt.max()))
-        u, c = np.unique(dt, return_counts=True)
+        return self.add_counted(float(dt.min()), float(dt.max()), *np.unique(dt, return_counts=True))
+
+    def add_counted(self, dmin: float, dmax: float, u: np.ndarray, c: np.ndarray) -> int:
+        """:meth:`add` of steps already counted: their least and largest, the distinct ones ``u`` (any order)
+        and their counts ``c``."""
+        self.dmin, self.dmax = min(self.dmin, dmin), max(self.dmax, dmax)
         self.vals, inv = np.unique(np.concatenate((self.vals, u)), return_inverse=True)
         both = np.concatenate((self.counts, c))
         self.counts = np.bincount(inv, weights=both, minlength=len(self.vals)).astype(np.int64)
@@ -336,24 +340,31 @@ class _Clock:
 
 def _time_pass(st: Stream, block: int) -> _Clock:
     """recording._check_time's first checks over the store: time finite and increasing; the steps counted."""
-    src, n = st.source, st.n
+    from accelnav.data.csvnum import csv_lib
+
+    src, n, mod = st.source, st.n, csv_lib()
     clock, bad, back, n_back, prev = _Clock(), None, None, 0, None
     for s in range(0, n, block):
         t = st.times(s, min(s + block, n))
         if s == 0:
             clock.t0 = float(t[0])
         clock.tl = float(t[-1])
-        if bad is None and not np.isfinite(t).all():
-            bad = s + int(np.argmax(~np.isfinite(t)))
-        dt = np.diff(t) if prev is None else np.diff(np.concatenate(([prev], t)))
+        # one C pass over the block where the C is built (acsv_time_block), else its numpy twin: the same numbers
+        nonfinite, first_back, count_back, steps = (_steps_numpy if mod is None else partial(time_block, mod))(t, prev)
+        if bad is None and nonfinite >= 0:
+            bad = s + nonfinite
         first = s - (prev is not None)  # the sample index of dt[0]'s first sample
+        n_dt = len(t) - (prev is None)
+        if count_back:
+            back = first + first_back if back is None else back  # dt index k: samples k, k + 1
+            n_back += count_back
+        if n_dt and bad is None:
+            if steps is None:  # more distinct steps in the block than the C counts: numpy's
+                dt = np.diff(t) if prev is None else np.diff(np.concatenate(([prev], t)))
+                steps = (float(dt.min()), float(dt.max()), *np.unique(dt, return_counts=True))
+            if clock.add_counted(*steps) > MAX_STEPS:
+                raise NotStreamed(f"{src}: more than {MAX_STEPS} distinct time steps: its clock is read whole")
         prev = t[-1]
-        b = dt <= 0
-        if b.any():
-            back = first + int(np.argmax(b)) if back is None else back  # dt index k: samples k, k + 1
-            n_back += int(b.sum())
-        if len(dt) and bad is None and clock.add(dt) > MAX_STEPS:
-            raise NotStreamed(f"{src}: more than {MAX_STEPS} distinct time steps: its clock is read whole")
     if bad is not None:
         raise UserError(f"{src}: time is not a finite number at {_where(st, bad)}")
     if back is not None:
@@ -363,6 +374,18 @@ def _time_pass(st: Stream, block: int) -> _Clock:
             f"{n_back} such steps"
         )
     return clock
+
+
+def _steps_numpy(t: np.ndarray, prev: float | None):
+    """accelnav.data.csvnum.time_block's numbers by numpy (where no C is built; the C's oracle in the tests)."""
+    finite = np.isfinite(t)
+    dt = np.diff(t) if prev is None else np.diff(np.concatenate(([prev], t)))
+    b = dt <= 0
+    steps = None
+    if finite.all() and len(dt):
+        steps = (float(dt.min()), float(dt.max()), *np.unique(dt, return_counts=True))
+    return (-1 if finite.all() else int(np.argmax(~finite)), int(np.argmax(b)) if b.any() else -1, int(b.sum()),
+            steps)  # fmt: skip
 
 
 def _clock_verdict(st: Stream, clock: _Clock, tu: str | None) -> float:

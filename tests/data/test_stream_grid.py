@@ -1,6 +1,7 @@
-"""The streamed input's grid pass in C (accelnav.data.csvnum.grid_block) finds what its numpy twin
-(accelnav.data.stream._grid_numpy, the pass as it was) finds, and a streamed NPZ is refused with the very
-line either way: a NaN or an infinity, a stamp off the grid, data in another unit. (Two stamps in one period
+"""The streamed input's time and grid passes in C (accelnav.data.csvnum.time_block, grid_block) find what
+their numpy twins (accelnav.data.stream._steps_numpy, _grid_numpy: the passes as they were) find, and a
+streamed NPZ is refused with the very line either way: a NaN or an infinity, a stamp off the grid, data in
+another unit, time not finite or going back. (Two stamps in one period
 and a missing sample are told by the C and the twin alike, first test; a streamed input never gets that
 far with them: its clock is irregular, and the time pass sends it to the whole reader.)
 
@@ -13,7 +14,7 @@ import pytest
 
 from accelnav.data import csvnum
 from accelnav.data import recording as rc
-from accelnav.data.stream import NotStreamed, _grid_numpy, open_stream
+from accelnav.data.stream import NotStreamed, _grid_numpy, _steps_numpy, open_stream
 from accelnav.errors import UserError
 
 N = 700
@@ -58,6 +59,44 @@ def test_the_c_pass_finds_what_the_numpy_pass_finds(mod, seed):
     assert min(kinds.values()) >= 5, kinds  # every kind of finding was met, not only clean blocks
 
 
+def _sorted_steps(steps):
+    if steps is None:
+        return None
+    lo, hi, u, c = steps
+    order = np.argsort(u, kind="stable")
+    return lo, hi, list(np.asarray(u)[order]), list(np.asarray(c)[order])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_c_time_pass_finds_what_the_numpy_pass_finds(mod, seed):
+    rng = np.random.default_rng(seed)
+    kinds = {"nonfinite": 0, "back": 0, "counted": 0, "over cap": 0}
+    for _ in range(300):
+        m = int(rng.integers(1, 40))
+        t = 2.0 + np.arange(m) * 0.01 + rng.choice([0.0, 1e-12, 1e-3]) * rng.normal(size=m)
+        if rng.random() < 0.2:
+            t[rng.integers(m)] = rng.choice([np.nan, np.inf, -np.inf])
+        if rng.random() < 0.3:
+            t[rng.integers(m)] -= rng.choice([0.01, 0.02, 1.0])
+        if rng.random() < 0.1:
+            t[:] = 2.0  # every step 0 (and -0.0 among them, from a stamp minus itself)
+        prev = None if rng.random() < 0.5 else float(t[0] - rng.choice([0.01, 0.0, -0.01]))
+        cap = int(rng.choice([3, 1 << 16]))
+        got = csvnum.time_block(mod, t, prev, cap)
+        with np.errstate(invalid="ignore"):  # inf - inf: numpy says so, the C does not
+            want = _steps_numpy(t, prev)
+        assert got[:3] == want[:3], (got, want)
+        if got[3] is None and want[3] is not None:  # over the C's cap: the caller counts them by numpy
+            assert len(want[3][2]) > cap
+            kinds["over cap"] += 1
+        else:
+            assert _sorted_steps(got[3]) == _sorted_steps(want[3]), (got, want)
+            kinds["counted"] += got[3] is not None
+        kinds["nonfinite"] += got[0] >= 0
+        kinds["back"] += got[1] >= 0
+    assert min(kinds.values()) >= 5, kinds
+
+
 def test_evidence_equals_unit_evidence():
     rng = np.random.default_rng(3)
     accel = rng.normal(0, 400.0, (1000, 3))
@@ -87,11 +126,18 @@ def _spoil(what: str, row: int):
         t[row] += 0.003  # beyond a quarter period, while the steps stay regular (0.007 and 0.013 s)
     elif what == "in mg, said m/s^2":
         a = a * 1e4  # about 3000 of mg-sized numbers read as m/s^2: far past the sensor's +-490
+    elif what == "time not finite":
+        t[row] = np.nan
+    elif what == "time goes back":
+        t[row] = t[row - 1] - 0.01
     return t, a
 
 
+SPOILS = ["nan", "inf", "off the grid", "in mg, said m/s^2", "time not finite", "time goes back"]
+
+
 @pytest.mark.parametrize("row", [7, 13, 14, 350, N - 2])  # not the last: it sets the rate
-@pytest.mark.parametrize("what", ["nan", "inf", "off the grid", "in mg, said m/s^2"])
+@pytest.mark.parametrize("what", SPOILS)
 def test_a_streamed_npz_is_refused_with_the_same_line_by_either_pass(tmp_path, monkeypatch, what, row, mod):
     path = _npz(tmp_path / "rec.npz", *_spoil(what, row))
     with pytest.raises(UserError) as by_c:
@@ -101,7 +147,8 @@ def test_a_streamed_npz_is_refused_with_the_same_line_by_either_pass(tmp_path, m
         open_stream(path, block=7)
     assert not isinstance(by_c.value, NotStreamed)
     assert str(by_c.value) == str(by_numpy.value)
-    said = {"nan": "not a number", "inf": "not a number", "off the grid": "off the", "in mg, said m/s^2": "likely in"}
+    said = {"nan": "not a number", "inf": "not a number", "off the grid": "off the", "in mg, said m/s^2": "likely in",
+            "time not finite": "not a finite", "time goes back": "does not increase"}  # fmt: skip
     assert said[what] in str(by_c.value)
     assert what == "in mg, said m/s^2" or f"sample {row} (line {row + 1})" in str(by_c.value)
 

@@ -10,6 +10,7 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #define MAX_DIGITS 19 /* a uint64 holds any 19 decimal digits */
 #define SCRATCH 400   /* longest field given to strtod; a longer one is refused (numpy takes it) */
@@ -271,5 +272,76 @@ int acsv_grid_block(int64_t m, int64_t naxes, const double *t, const double *acc
         for (i = 0; i < cells; i++)
             beyond[i] = local[i];
     found[0] = nonfinite, found[1] = off, found[2] = dup, found[3] = gap, found[4] = prev;
+    return ACSV_OK;
+}
+
+/* the slot of key in a table of size (a power of two) keys, or the empty one it would take */
+static int64_t step_slot(const uint64_t *keys, const int64_t *index, int64_t size, uint64_t key)
+{
+    uint64_t h =
+        key * 0x9E3779B97F4A7C15ULL; /* Fibonacci hashing: the high bits spread the steps */
+    int64_t i = (int64_t)(h >> 32) & (size - 1);
+    while (index[i] >= 0 && keys[i] != key)
+        i = (i + 1) & (size - 1);
+    return i;
+}
+
+int acsv_time_block(int64_t m, const double *t, int has_prev, double prev, int64_t cap,
+                    int64_t *found, double *range, double *vals, int64_t *counts)
+{
+    int64_t i, size = 2, distinct = 0, nonfinite = -1, back = -1, n_back = 0;
+    double dmin = INFINITY, dmax = -INFINITY;
+    uint64_t *keys;
+    int64_t *index; /* per slot: the step's place in vals and counts, -1 for an empty slot */
+    if (m < 1 || cap < 1 || cap > (INT64_MAX >> 3))
+        return ACSV_ARGS;
+    for (i = 0; i < m; i++)
+        if (!isfinite(t[i])) {
+            nonfinite = i;
+            break;
+        }
+    while (size < 2 * cap)
+        size <<= 1;
+    keys = malloc((size_t)size * sizeof *keys);
+    index = malloc((size_t)size * sizeof *index);
+    if (keys == NULL || index == NULL) {
+        free(keys);
+        free(index);
+        return ACSV_ARGS;
+    }
+    for (i = 0; i < size; i++)
+        index[i] = -1;
+    for (i = has_prev ? 0 : 1; i < m; i++) {
+        double d = t[i] - (i == 0 ? prev : t[i - 1]); /* np.diff's t[i] - t[i - 1] */
+        if (d <= 0.0) {
+            if (back < 0)
+                back = has_prev ? i : i - 1;
+            n_back++;
+        }
+        if (nonfinite >= 0 || distinct < 0)
+            continue; /* the steps are not counted then */
+        dmin = d < dmin ? d : dmin, dmax = d > dmax ? d : dmax;
+        {
+            double key_d = d == 0.0 ? 0.0 : d; /* -0.0 == 0.0, as np.unique has them */
+            uint64_t key;
+            int64_t slot;
+            memcpy(&key, &key_d, sizeof key);
+            slot = step_slot(keys, index, size, key);
+            if (index[slot] >= 0) {
+                counts[index[slot]]++;
+            } else if (distinct == cap) {
+                distinct = -1; /* more distinct steps than cap: the caller counts them */
+            } else {
+                keys[slot] = key, index[slot] = distinct;
+                vals[distinct] = key_d, counts[distinct] = 1;
+                distinct++;
+            }
+        }
+    }
+    free(keys);
+    free(index);
+    found[0] = nonfinite, found[1] = back, found[2] = n_back;
+    found[3] = nonfinite >= 0 ? -1 : distinct;
+    range[0] = dmin, range[1] = dmax;
     return ACSV_OK;
 }
