@@ -3,7 +3,8 @@
 :func:`read_input` holds the whole recording in arrays (about 70 bytes per sample, more while it
 parses), so a 1e8-row CSV cannot go through it. :func:`open_stream` instead parses the CSV once with
 the same parser (:func:`accelnav.data.recording.csv_pieces`: one CSV dialect for both) into a binary
-store of its numbers and their file lines in a temporary folder, makes read_input's checks over that
+store of its numbers and their file lines (none while every line is a row: line = first + row) in a
+temporary folder, makes read_input's checks over that
 store block by block (time finite and increasing, the clock's median step and regularity, the rate
 against the model, the axes, counts converted by the model's read-out, NaN, each sample on the grid),
 and returns a :class:`Stream`: the number of rows and ``read(s, e) -> (t, accel, clipped)`` for
@@ -63,6 +64,8 @@ class Stream:
     _fds: dict = field(default_factory=dict)
     _scratch: TempFolder | None = None  # the store's folder (fileio.TempFolder: removed on close)
     kind: str = "CSV"
+    # row k is on file line first_line + k (every line after the header a data line): no lines store kept
+    first_line: int | None = None
 
     @property
     def width(self) -> int:
@@ -74,7 +77,9 @@ class Stream:
         nums = np.empty(e - s, dtype=np.int64) if lines else None
         if e > s:
             pread_exact(self._fds["store"], table, 8 * self.width * s, "input store", UserError)
-            if lines:
+            if lines and self.first_line is not None:
+                nums[:] = self.first_line + np.arange(s, e)
+            elif lines:
                 pread_exact(self._fds["lines"], nums, 8 * s, "input store", UserError)
         return table, nums
 
@@ -243,9 +248,16 @@ def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, u
     folder = scratch.path
     src = str(path)
     size = path.stat().st_size
-    n, head = 0, None
+    n, head, first_line = 0, None, None  # first_line: while row k is on line first_line + k, no lines are stored
     with open(folder / "store.bin", "wb") as fs, open(folder / "lines.bin", "wb") as fl:
         for head, table, nums in rc.csv_pieces(path, axes, unit, rate_hz, time_column, gz, default, names):  # noqa: B007
+            nums = np.ascontiguousarray(nums, dtype=np.int64)
+            if n == 0 and len(nums):
+                first_line = int(nums[0])
+            if first_line is not None and len(nums) and not (nums[0] == first_line + n and np.all(np.diff(nums) == 1)):
+                for a in range(0, n, 1 << 20):  # a comment or blank line among the rows: their lines from here on
+                    fl.write((first_line + np.arange(a, min(a + (1 << 20), n), dtype=np.int64)).data)
+                first_line = None
             if n == 0 and not gz:  # disk: the whole store from the first piece's rows per character
                 est = int(len(nums) * max(1.0, size / rc.CHUNK_CHARS) * 1.05)
                 need, free = est * 8 * (table.shape[1] + 1), shutil.disk_usage(folder).free
@@ -256,7 +268,8 @@ def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, u
                     )
             try:
                 fs.write(np.ascontiguousarray(table, dtype=np.float64).data)
-                fl.write(np.ascontiguousarray(nums, dtype=np.int64).data)
+                if first_line is None:
+                    fl.write(nums.data)
             except OSError as exc:
                 if exc.errno == errno.ENOSPC:
                     raise UserError(f"{src}: the disk in {folder.parent} filled up at row {n} of its store") from None
@@ -264,7 +277,7 @@ def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, u
             n += len(nums)
     if n < 2:
         raise UserError(f"{src}: {n} data rows; a recording needs many more")
-    st = Stream(src, n, override, np.array([]), head, folder, rate_hz, None)
+    st = Stream(src, n, override, np.array([]), head, folder, rate_hz, None, first_line=first_line)
     st._scratch = scratch
     st._fds = {k: os.open(folder / f"{k}.bin", os.O_RDONLY) for k in ("store", "lines")}
     return st

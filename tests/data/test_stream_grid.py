@@ -163,3 +163,26 @@ def test_a_clean_npz_streams_alike_by_either_pass(tmp_path, monkeypatch, mod):
         want = st(0, st.n)
         assert (st.t0, st.Ts) == ts
     assert all(np.array_equal(g, w) for g, w in zip(got, want, strict=True))
+
+
+@pytest.mark.parametrize("comment_at", [None, 3, 300, 690])
+def test_lines_are_named_alike_with_or_without_a_comment_among_the_rows(tmp_path, comment_at):
+    """The streamed CSV keeps no lines store while every line after the header is a row (row k is on line
+    first + k); a comment among the rows makes it keep them from there: either way the refusal names the
+    line the whole reader names."""
+    from accelnav.data.inputs import read_input
+
+    t, a = _clean()
+    lines = ["t_s,acc_x_m_s2,acc_y_m_s2"] + [f"{x:.9g},{y:.9g},{z:.9g}" for x, y, z in zip(t, *a.T, strict=True)]
+    lines[601] = f"{t[600]:.9g},nan,0.1"
+    if comment_at is not None:
+        lines.insert(comment_at, "# a note among the rows")
+    path = tmp_path / "rec.csv"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(UserError) as whole:
+        read_input(path)
+    with pytest.raises(UserError) as streamed:
+        open_stream(path, block=7, workdir=tmp_path)
+    assert str(streamed.value) == str(whole.value)
+    before = comment_at is not None and comment_at <= 601  # the comment before the bad row moves it a line on
+    assert f"sample 600 (line {602 + before})" in str(streamed.value)
