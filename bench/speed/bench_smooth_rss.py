@@ -11,6 +11,9 @@ after, rows marked "(before)".
 1e8 rows take 2.4 GB of input and, per option, up to tens of GB of output (--full: every state at
 float64; --csv: text): --sizes 3e7 measures the same rows at a size this machine's disk and time allow;
 the chunked path's memory is the chunk buffers whatever the length, the whole-array path's grows with it.
+Fixes and given rests put their axes on the general path, whose store (14 doubles a sample and axis: 22 GB
+at 1e8 with 2 axes) goes to disk beside the output; their aids are made chunk by chunk, so their memory is
+the plain path's.
 Usage: python bench/run_all.py bench/speed/bench_smooth_rss.py [--sizes 1e8] [--cases NAME ...]
        [--before EXE] [--keep DIR]
 """

@@ -5,8 +5,10 @@ is read: a CSV, gzip CSV or uncompressed NPZ whose numbers exceed what one input
 (:data:`STREAM_ABOVE` without a budget, or any uncompressed NPZ; with a budget, when the whole-array run would
 exceed it) is streamed
 (:func:`accelnav.data.stream.open_stream`); anything else is read whole by
-:func:`accelnav.data.inputs.read_input`. Aids (fixes, rests) and what the engine runs as one chunk need
-the input in memory: over the input limit they are refused in one line before anything is parsed.
+:func:`accelnav.data.inputs.read_input`. Fixes and given rests (intervals, an NPZ mask) are placed on the
+run's clock a piece at a time and stream with it; what needs the input in memory (the rest decision of
+``--zupt auto``, a per-sample CSV mask, what the engine runs as one chunk) is refused over the input limit in
+one line before anything is parsed.
 """
 
 from __future__ import annotations
@@ -70,21 +72,20 @@ def smooth_file(
     # the plan before any reading: what cannot be done within the budget is refused now
     job = replace(job, in_memory=in_memory, rests=rests, fixes=[] if smooth and fixes is not None else None,
                   full=job.full or job.covariances)  # fmt: skip
-    whole = _whole_reasons(job, fixes, zupt)
+    whole = _whole_reasons(job, zupt)
     workdir = output_target(out).workdir  # the output rule (accelnav.fileio): where its temporaries go
     out = Path(out)
     with ExitStack() as stack:
         source, model = _open(path, model, job, whole, read, workdir, stack)
-        if job.aided:
-            arrays = source.whole()
-            names = [str(a) for a in arrays["axis_names"]]
+        if job.aided:  # placed on the run's clock, read a piece at a time (the input is not held whole for them)
+            names = [str(a) for a in source.axis_names]
             if fixes is not None:
                 from accelnav.estimate.fixes import read_fixes
 
-                job = replace(job, fixes=read_fixes(fixes, arrays["t"], names))
+                job = replace(job, fixes=read_fixes(fixes, source.clock(), names))
             if zupt is not None and zupt != "auto":
-                mask, sigma = zu.read_zupt_file(zupt, arrays["t"], names)
-                job = replace(job, rests=replace(rests, mask=mask, sigma=sigma))
+                spans = zu.read_rest_spans(zupt, source.clock(), names)
+                job = replace(job, rests=replace(rests, spans=spans))
         fmt = FORMAT if job.full else FORMAT_V3
         outcome = engine.run(model, source, job, out, workdir=workdir, run_format=fmt)
         if outcome.arrays is not None and job.aided and job.checks and "smooth" in job.stages:
@@ -176,9 +177,14 @@ def _checks(outcome: engine.Outcome, inputs: dict, fixes):
     return smooth_checks(outcome.arrays, outcome.model, inputs, fixes, tuned=outcome.tune is not None, **kw)
 
 
-def _whole_reasons(job: engine.Job, fixes, zupt) -> str:
-    """The flags for which the input is read whole (the aids are placed on its clock), in words."""
-    flags = [f for f, v in (("--fixes", fixes), ("--zupt", zupt), ("--tune", job.tune)) if v is not None]
+def _whole_reasons(job: engine.Job, zupt) -> str:
+    """The flags for which the input is read whole, in words: the rest decision reads every sample, and a rest
+    mask given as CSV is read whole (fixes, rest intervals and an NPZ mask are placed a piece at a time)."""
+    from accelnav.estimate.zupt import rest_file_kind
+
+    given = zupt is not None and zupt != "auto"
+    held = zupt == "auto" or (given and "smooth" in job.stages and rest_file_kind(zupt) == "mask")
+    flags = [f for f, v in (("--zupt", zupt if held else None), ("--tune", job.tune)) if v is not None]
     flags += [f for f in job.in_memory if f not in flags]
     if job.covariances:
         flags.append("--covariances")

@@ -12,8 +12,9 @@ csrc/fastsmooth.c, the split of acn_plain_cov + acn_plain_data):
    covariances, written back into the store;
 3. forward: smoothed r, u and their covariances, in closed form from the store.
 
-With extra measurements (fixes, zero-velocity updates; :class:`fastsmooth.Extras`, sliced per
-chunk) an axis takes the general path instead, in two passes (acn_chunkg_fwd, acn_chunkg_bwd: the
+With extra measurements (fixes, zero-velocity updates: whole :class:`fastsmooth.Extras` sliced per chunk,
+or :class:`ChunkAids` made for each chunk alone, so that a run's millions of updates are never held at
+once) an axis takes the general path instead, in two passes (acn_chunkg_fwd, acn_chunkg_bwd: the
 steps of acn_general) over a store of 14 doubles per sample (``GROW``).
 
 Between chunks only a few numbers are carried (the filter's prior, the
@@ -89,6 +90,57 @@ RUN_FORMAT = "accelnav-run/1"  # the CLI passes accelnav.data.runfile.FORMAT (a 
 
 # read rows s..e of the input: (t (e-s,), accel (e-s, n_axes), clipped (e-s, n_axes) bool)
 Reader = Callable[[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class Piece:
+    """One axis's aids of samples s..e-1 in the order the filter takes them (stably sorted by sample, as
+    :meth:`fastsmooth.Extras.of` sorts the whole run's), ``gates`` beside them, and ``marked``: those whose
+    application the run file's ``marks`` member records per sample (zero-velocity updates)."""
+
+    ex: fastsmooth.Extras
+    gates: np.ndarray
+    marked: np.ndarray
+
+
+class ChunkAids:
+    """An axis's aids made chunk by chunk: ``count`` over the run (0: the axis takes the plain path) and
+    :meth:`between`; the forward pass asks for each chunk once, in order."""
+
+    count: int = 0
+
+    def between(self, s: int, e: int) -> Piece:
+        raise NotImplementedError
+
+    def applied(self, piece: Piece, done: np.ndarray) -> None:
+        """Which of ``piece``'s aids the filter applied (bool, its order)."""
+
+
+class _WholeAids(ChunkAids):
+    """Extras given whole (a list of measurements, kf.Aids or fastsmooth.Extras) with their gates, sliced per
+    chunk; which were applied is kept for the run, in the given order."""
+
+    def __init__(self, ex: fastsmooth.Extras, gates) -> None:
+        self.ex, self.count = ex, len(ex)
+        g = None if gates is None or len(gates) == 0 else gates
+        self.gates = np.zeros(len(ex)) if g is None else np.asarray(g, dtype=np.float64).reshape(len(ex))[ex.order]
+        self.done = np.zeros(len(ex), dtype=bool)
+        self.at = 0
+
+    def between(self, s: int, e: int) -> Piece:
+        a, b = int(np.searchsorted(self.ex.k, s)), int(np.searchsorted(self.ex.k, e))
+        self.at = a
+        ex = self.ex
+        part = fastsmooth.Extras(ex.k[a:b], ex.h[a:b], ex.z[a:b], ex.R[a:b], ex.order[a:b])
+        return Piece(part, self.gates[a:b], np.zeros(b - a, dtype=bool))
+
+    def applied(self, piece: Piece, done: np.ndarray) -> None:
+        self.done[self.at : self.at + len(done)] = done
+
+    def given_order(self) -> np.ndarray:
+        out = np.zeros(self.count, dtype=bool)
+        out[self.ex.order] = self.done
+        return out
 
 
 def chunk_samples(n_axes: int, budget: int = BUDGET) -> int:
@@ -250,9 +302,7 @@ class _Axis:
     m: object  # acn_axis
     width: int  # doubles per store row: ROW (plain) or GROW (general)
     carry_f: np.ndarray  # (14,) forward carry: the prior of the next sample
-    ex: fastsmooth.Extras | None  # general path: its extras, sorted by sample
-    gates: np.ndarray  # (n_extras,) in the sorted order
-    applied: np.ndarray  # (n_extras,) uint8 in the sorted order
+    aids: ChunkAids | None  # general path: its extras, given chunk by chunk
     # plain path: the stored transient (fastsmooth.steady_gains), used while every sample so far was valid
     # (the forward rows depend on the mask's prefix only); None after the first invalid one
     steady: fastsmooth.SteadyGains | None = None
@@ -274,11 +324,7 @@ class _Axis:
             if st is not None:
                 st.close()
 
-    def extras_in(self, s: int, e: int) -> slice:
-        """The sorted extras of samples s..e-1."""
-        if self.ex is None:
-            return slice(0, 0)
-        return slice(int(np.searchsorted(self.ex.k, s)), int(np.searchsorted(self.ex.k, e)))
+    marked: int = 0  # marked aids applied so far (zero-velocity updates)
 
 
 @dataclass
@@ -301,6 +347,7 @@ class _Run:
     tmp: Path | None = None  # the folder of the stores on disk
     memory_left: int = 0  # bytes the stores not yet opened may take in memory
     on_disk: bool = False  # a store went to disk
+    marks: str = ""  # the member of the samples where a marked aid was applied ("": none written)
 
     def __post_init__(self) -> None:
         # allocated once and reused by every chunk: fresh pages cost more than the kernels here (a page
@@ -310,6 +357,7 @@ class _Run:
         self.cov = np.empty((self.chunk + 1, 3))  # a lean chunk's smoothed (a, eps) covariance, its next sample's
         self.zc, self.ok = np.empty(self.chunk), np.empty(self.chunk, dtype=bool)
         self.bad = np.empty(self.chunk, dtype=bool)
+        self.marked = np.zeros((self.chunk, len(self.axes)) if self.marks else (0, 0), dtype=bool)
 
     def rows(self, width: int, count: int) -> np.ndarray:
         return self.store[: count * width].reshape(count, width)
@@ -405,7 +453,7 @@ def smooth_bounded(
     out: str | Path | Output,
     *,
     axis_names: np.ndarray | None = None,
-    extras: Sequence[Sequence[Measurement] | fastsmooth.Extras] | None = None,
+    extras: Sequence[Sequence[Measurement] | fastsmooth.Extras | ChunkAids] | None = None,
     gates: Sequence[Sequence[float] | None] | None = None,
     budget: int = BUDGET,
     chunk: int | None = None,
@@ -415,13 +463,15 @@ def smooth_bounded(
     stages: tuple[str, ...] = ("filt", "smooth"),
     store_memory: int = 0,
     full: bool = True,
+    marks: str = "",
 ) -> dict:
     """Filter and RTS-smooth every axis of an n-sample run in bounded memory; write ``out``.
 
     ``read(s, e)`` gives rows s..e of (t, accel, clipped) (:func:`array_reader`, :class:`NpzReader`);
     ``extras[j]`` are axis j's extra measurements (fixes, zero-velocity updates) with ``gates[j]`` as in
     :func:`accelnav.estimate.fastsmooth.smooth_general`: an axis with extras takes the general path
-    (a wider store), one without the plain path. ``chunk`` overrides the chunk size from ``budget``;
+    (a wider store), one without the plain path; a :class:`ChunkAids` gives its own, chunk by chunk.
+    ``chunk`` overrides the chunk size from ``budget``;
     temporary files go to ``workdir`` (default: beside ``out``); ``run_format`` is the run file's format;
     ``more(applied)`` may give small arrays to write beside the others, from which extras were applied.
     ``stages``: the states written, ``filt`` (x[k|k]: filt_x, filt_sd) and ``smooth`` (x[k|N-1]:
@@ -429,9 +479,11 @@ def smooth_bounded(
     ``store_memory``: bytes the store may take in memory (default 0: on disk, in ``workdir``).
     ``full``: write every state (r, u, a, eps) at float64 and the input (accel, clipped); else r and u and
     their standard deviations at float32 beside t (:data:`COMPACT`, the run file's ``/3`` form).
-    Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras were
-    applied, in their given order, "first", "last": {output key: its (n_axes, 4) values at sample 0, N-1},
-    "store_in_memory": where the store was}.
+    ``marks``: the name of an (N, n_axes) bool member written chunk by chunk: the samples where a marked aid
+    (:attr:`Piece.marked`) was applied.
+    Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras given whole were
+    applied, in their given order (None for ChunkAids), "marked": per axis, marked aids applied, "first",
+    "last": {output key: its (n_axes, 4) values at sample 0, N-1}, "store_in_memory": where the store was}.
     Refuses in one line (UserError) before any work when the disk cannot hold the store and the output.
     """
     n = int(n)
@@ -444,7 +496,7 @@ def smooth_bounded(
     chunk = int(chunk) if chunk is not None else chunk_samples(n_axes, budget)
     if chunk < 2:
         raise ValueError("chunk: at least 2 samples")
-    exs = _sorted_extras(extras, n_axes, n)
+    exs = _chunk_aids(extras, gates, n_axes, n)
     designs = [axis_design(model, j) for j in range(n_axes)]
     general = [exs[j] is not None or bool(np.any(np.asarray(d.P0)[:2, 2:] != 0)) for j, d in enumerate(designs)]
     out = output_target(out)  # the output rule (accelnav.fileio), refused before any work
@@ -463,13 +515,15 @@ def smooth_bounded(
     k, dtype = (4, np.float64) if full else COMPACT
     for st in stages:
         big[f"{st}_x"] = big[f"{st}_sd"] = ((n_axes, n, k), dtype)
+    if marks:
+        big[marks] = ((n, n_axes), np.bool_)
     with ExitStack() as stack:
         tmp = stack.enter_context(TempFolder("smooth", workdir))
         writer = stack.enter_context(NpzWriter(out, {**small, **big}))
-        axes = [_axis(ffi, j, d, exs[j], gates, general[j], n) for j, d in enumerate(designs)]
+        axes = [_axis(ffi, j, d, exs[j], general[j], n) for j, d in enumerate(designs)]
         for ax in axes:
             stack.callback(ax.close_stores)
-        run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k, tmp=tmp, memory_left=store_memory)
+        run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k, tmp=tmp, memory_left=store_memory, marks=marks)
         for ax in axes if smooth else []:
             # a lean store (all samples valid so far) first where the design has steady rows: 5 doubles per
             # sample, not 12; the full store is opened at the first sample that needs it (run.full_store)
@@ -500,27 +554,30 @@ def smooth_bounded(
                         _smooth_ru(run, ax, starts)
                     ax.close_stores()  # freed before the small arrays are added
                     p.update(ax.j + 1)
-        applied = []
-        for ax in axes:
-            done = np.zeros(0 if ax.ex is None else len(ax.ex), dtype=bool)
-            if ax.ex is not None:
-                done[ax.ex.order] = ax.applied[: len(ax.ex)].astype(bool)
-            applied.append(done)
+        applied = [
+            (a.given_order() if isinstance(a, _WholeAids) else None) if a is not None else np.zeros(0, dtype=bool)
+            for a in exs
+        ]
         for key, arr in (more(applied) if more is not None else {}).items():
             writer.add(key, arr)
     return {
-        "chunk": chunk, "chunks": len(starts), "applied": applied, "first": run.first, "last": run.last,
-        "store_in_memory": not run.on_disk,
+        "chunk": chunk, "chunks": len(starts), "applied": applied, "marked": [ax.marked for ax in axes],
+        "first": run.first, "last": run.last, "store_in_memory": not run.on_disk,
     }  # fmt: skip
 
 
-def _sorted_extras(extras, n_axes: int, n: int) -> list[fastsmooth.Extras | None]:
-    exs: list[fastsmooth.Extras | None] = [None] * n_axes
+def _chunk_aids(extras, gates, n_axes: int, n: int) -> list[ChunkAids | None]:
+    """Each axis's aids as :class:`ChunkAids` (None: none, the plain path); those given whole are sorted now."""
+    exs: list[ChunkAids | None] = [None] * n_axes
     for j, e in enumerate(extras or []):
+        if isinstance(e, ChunkAids):
+            exs[j] = e if e.count else None
+            continue
         ex = fastsmooth.Extras.of(e)
         if len(ex) and (ex.k[0] < 0 or ex.k[-1] >= n):
             raise UserError(f"bounded smoother: axis {j}: an extra measurement is outside samples 0..{n - 1}")
-        exs[j] = ex if len(ex) else None
+        g = gates[j] if gates is not None and j < len(gates) else None
+        exs[j] = _WholeAids(ex, g) if len(ex) else None
     return exs
 
 
@@ -534,16 +591,12 @@ def _check_disk(n: int, n_axes: int, n_general: int, workdir: Path, n_stages: in
         )
 
 
-def _axis(ffi, j: int, d: AxisDesign, ex, gates, general: bool, n: int) -> _Axis:
+def _axis(ffi, j: int, d: AxisDesign, aids: ChunkAids | None, general: bool, n: int) -> _Axis:
     cf = np.concatenate([np.asarray(d.x0, dtype=np.float64), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
-    ne = 0 if ex is None else len(ex)
-    g = gates[j] if gates is not None and j < len(gates) and ex is not None else None
-    g = None if g is None or len(g) == 0 else g
-    eg = np.zeros(ne) if g is None else np.asarray(g, dtype=np.float64).reshape(ne)[ex.order]
     st = None if general else fastsmooth.steady_gains(d, n)
     return _Axis(
-        j, d, fastsmooth._axis_struct(ffi, d), GROW if general else ROW, cf, ex, np.ascontiguousarray(eg),
-        np.zeros(max(ne, 1), dtype=np.uint8), steady=st, steady_rows=None if st is None else st.rows,
+        j, d, fastsmooth._axis_struct(ffi, d), GROW if general else ROW, cf, aids, steady=st,
+        steady_rows=None if st is None else st.rows,
     )  # fmt: skip
 
 
@@ -557,6 +610,8 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         run.out.write("clipped", s * n_axes, clipped)
     m = e - s
     zc, ok, bad = run.zc[:m], run.ok[:m], run.bad[:m]
+    if run.marks:
+        run.marked[:m] = False
     for ax in run.axes:
         zc[:] = accel[:, ax.j]
         np.isfinite(zc, out=ok)
@@ -586,21 +641,32 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
             ax.xf0 = run.xa[0].copy()
         if e == run.n:
             ax.xfn = run.xa[m - 1].copy()
+    if run.marks:
+        run.out.write(run.marks, s * n_axes, run.marked[:m])
 
 
 def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:
     p, m = run.ptr, e - s
-    sl = ax.extras_in(s, e)
-    ne = sl.stop - sl.start
-    ek = np.ascontiguousarray(ax.ex.k[sl] - s) if ne else np.zeros(1, dtype=np.int64)
-    arrs = [ax.ex.h[sl], ax.ex.z[sl], ax.ex.R[sl], ax.gates[sl]] if ne else [np.zeros(4)] * 4
+    piece = ax.aids.between(s, e) if ax.aids is not None else None
+    ne = 0 if piece is None else len(piece.ex)
+    if ne and (piece.ex.k[0] < s or piece.ex.k[-1] >= e or np.any(piece.ex.k[1:] < piece.ex.k[:-1])):
+        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} are not sorted within them")
+    ek = np.ascontiguousarray(piece.ex.k - s, dtype=np.int64) if ne else np.zeros(1, dtype=np.int64)
+    arrs = [piece.ex.h, piece.ex.z, piece.ex.R, piece.gates] if ne else [np.zeros(4)] * 4
     arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
-    applied = ax.applied[sl.start : sl.start + max(ne, 1)] if ne else np.zeros(1, dtype=np.uint8)
+    applied = np.zeros(max(ne, 1), dtype=np.uint8)
     run.lib.acn_chunkg_fwd(
         ax.m, m, int(e == run.n), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne,
         run.ffi.from_buffer("long[]", ek), *(p(a) for a in arrs), p(applied, "unsigned char *"),
         p(ax.carry_f), p(buf), p(run.xa), p(run.sa),
     )  # fmt: skip
+    if ne:
+        done = applied[:ne].astype(bool)
+        ax.aids.applied(piece, done)
+        hit = done & piece.marked
+        ax.marked += int(hit.sum())
+        if run.marks:
+            run.marked[piece.ex.k[hit] - s, ax.j] = True
 
 
 def _forward_plain(

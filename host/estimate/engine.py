@@ -6,7 +6,10 @@ budget and from what was asked, how the passes are cut (:func:`plan`), and says 
 * **chunked** (:func:`accelnav.estimate.chunked.smooth_bounded`): the passes over chunks of the input,
   the store in memory or on disk, the output written in place into the run file. A run that fits the
   budget is one chunk. Plain runs, ``--filter-states``, fixes, given and detected rests, raw counts and
-  truth columns of an input held in memory (echoed into the file) take this path at any length; the
+  truth columns of an input held in memory (echoed into the file) take this path at any length. Fixes
+  and given rests (:class:`accelnav.estimate.zupt.RestSpans`) are placed on the run's clock a piece at a
+  time and made into each chunk's aids as the forward pass reaches it (:class:`_AxisAids`), so that they
+  need not the input held whole: only the rest decision (``--zupt auto``) reads it whole; the
   caller then writes ``--csv`` and ``--compress`` from the file a piece at a time
   (:mod:`accelnav.data.smoothing`).
 * **one chunk in memory** (:func:`smooth_arrays`, :func:`filter_arrays`: the same kernels' whole-array
@@ -69,6 +72,7 @@ class Rests:
     sigma: np.ndarray | None = None
     decided: Callable[[RestOutcome], None] | None = None  # called with the rest stage's outcome once decided
     candidates: np.ndarray | None = None  # (N,) bool, candidates to decide on (accelnav.level's rests); None: detected
+    spans: object = None  # zupt.RestSpans: given rests as runs of samples (a rest file read on the run's clock)
 
 
 @dataclass(frozen=True)
@@ -125,6 +129,15 @@ class Source:
         return cls(len(t), np.asarray(a["axis_names"]), chunked.array_reader(t, a["accel"], a["clipped"]), a, label,
                    (float(t[0]), float(t[-1])) if len(t) else (0.0, 0.0))  # fmt: skip
 
+    def clock(self):
+        """The run's time stamps read a piece at a time (accelnav.estimate.fixes.Clock): from memory, or through
+        ``read`` (a stream's period is its grid's)."""
+        from accelnav.estimate.fixes import Clock
+
+        if self.arrays is not None:
+            return Clock.of(self.arrays["t"])
+        return Clock(self.n, lambda s, e: self.read(s, e)[0], getattr(self.read, "Ts", None) or None)
+
     def whole(self) -> dict:
         """The run in memory (read now when it was not)."""
         if self.arrays is None:
@@ -153,9 +166,10 @@ class Plan:
 
 @dataclass
 class RestOutcome:
-    """The rest stage's result: the (N,) mask of accepted rests and, when detected, the decisions."""
+    """The rest stage's result: the (N,) mask of accepted rests (None: given as ``spans`` and not painted per
+    sample, the chunked path) and, when detected, the decisions."""
 
-    mask: np.ndarray
+    mask: np.ndarray | None
     sigma: np.ndarray | None
     params: object
     decisions: list = field(default_factory=list)
@@ -166,6 +180,13 @@ class RestOutcome:
     # the review's last smoothing, with exactly ``mask``'s rests (consistency.RestReview.smoothed): :func:`run`
     # takes it as the one-chunk output when nothing after the review changes the aids, else drops it at once
     smoothed: dict | None = field(default=None, repr=False)
+    spans: object = None  # zupt.RestSpans of given rests
+
+    def runs(self, n_axes: int):
+        """The rests as zupt.RestSpans (a mask's runs, made now)."""
+        from accelnav.estimate.zupt import RestSpans
+
+        return self.spans if self.spans is not None else RestSpans.of_mask(self.mask, self.sigma, n_axes)
 
     def candidate_rows(self, t: np.ndarray) -> np.ndarray:
         """[start_s, end_s, accepted] per candidate (kept in the run file for the plots); a rest the review
@@ -255,6 +276,8 @@ def rest_stage(
     except ValueError as exc:
         raise UserError(f"--zupt-*: {exc}") from None
     if not rests.detect:
+        if rests.spans is not None:
+            return RestOutcome(None, None, params, spans=rests.spans)
         return RestOutcome(np.asarray(rests.mask, dtype=bool), rests.sigma, params)
     accel, clipped = arrays["accel"], arrays["clipped"]
     found = zupt.decide_rests(accel, clipped, candidate_mask(rests.candidates, len(accel)), model, params, fixes)
@@ -309,20 +332,15 @@ def smoother_pass(model: Model, source: Source, extras, at: np.ndarray, *, workd
         out.unlink(missing_ok=True)
 
 
-def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None, shared: dict | None = None):
-    """Axis j's aids as arrays: (its position fixes, its zero-velocity updates). ``shared``: a dict kept across
-    the axes of one run, in which rests the same on every axis (one mask, no per-sample sigma: the detector's)
-    are made once and given to each axis (millions of updates at 56 B each: not one copy per axis)."""
+def axis_extras(model: Model, n: int, j: int, fixes, rest: RestOutcome | None):
+    """Axis j's aids as arrays for a run in memory: (its position fixes, its zero-velocity updates); the chunked
+    passes make them chunk by chunk instead (:class:`_AxisAids`)."""
     from accelnav.estimate import zupt
 
     fx = Aids.of(list(fixes[j]) if fixes is not None else [])
     if rest is None:
         return fx, Aids.of([])
     m = rest.mask
-    if shared is not None and m.ndim == 1 and rest.sigma is None:
-        if "rests" not in shared:
-            shared["rests"] = zupt.axis_aids(np.broadcast_to(m, (n,)), None, model, rest.params)
-        return fx, shared["rests"]
     col = m if m.ndim == 1 else m[:, j]
     sigma = None if rest.sigma is None else np.asarray(rest.sigma)[:, j]
     return fx, zupt.axis_aids(np.broadcast_to(col, (n,)), sigma, model, rest.params)
@@ -346,7 +364,8 @@ def run(
     smooth = "smooth" in job.stages
     echo = job.full and bool(source.extra_keys())
     p = plan(n, n_axes, job, label=source.label, to_file=out is not None, echo=echo)
-    arrays = source.whole() if (p.whole or job.aided) else None
+    detect = smooth and job.rests is not None and job.rests.detect
+    arrays = source.whole() if (p.whole or detect) else None  # the decision reads the run whole; given aids do not
     rest = reuse = None
     if smooth and job.rests is not None:
 
@@ -355,6 +374,8 @@ def run(
 
         rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass, review_budget=p.budget)
         reuse, rest.smoothed = rest.smoothed, None
+        if rest.mask is None and p.whole:  # given as runs: per sample for the run in memory
+            rest.mask, rest.sigma = rest.spans.painted()
         if job.rests.decided is not None:  # said where it happens: before tuning fits the figures to the rests
             job.rests.decided(rest)
     # the review's last smoothing had this run's model, fixes and rests: the one-chunk output when nothing else
@@ -415,15 +436,45 @@ def _whole(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, outco
     outcome.clipped = res["clipped"].sum(axis=0)
 
 
+class _AxisAids(chunked.ChunkAids):
+    """Axis j's aids for the chunked passes, made chunk by chunk: its position fixes (few, held whole, sorted
+    stably by sample) and the zero-velocity updates of its rests (zupt.RestSpans.updates, made for the chunk's
+    samples alone), in the order the whole run's ``Extras.of(fixes.concat(rests))`` gives them: by sample, a
+    fix before a rest's update at the same sample; the updates are marked (the run file's ``zupt``)."""
+
+    def __init__(self, model: Model, j: int, fixes: Aids, spans, params) -> None:
+        from accelnav.estimate import fastsmooth
+
+        self.model, self.j, self.spans, self.params = model, j, spans, params
+        self.fx = fastsmooth.Extras.of(fixes)
+        self.count = len(self.fx) + (0 if spans is None else spans.count(j, model, params))
+
+    def between(self, s: int, e: int) -> chunked.Piece:
+        from accelnav.estimate import fastsmooth
+
+        fx = self.fx
+        a, b = int(np.searchsorted(fx.k, s)), int(np.searchsorted(fx.k, e))
+        zs = Aids.of([]) if self.spans is None else Aids.zero_velocity(*self.spans.updates(self.j, s, e, self.model,
+                                                                                         self.params))  # fmt: skip
+        k = np.concatenate((fx.k[a:b], zs.k))
+        order = np.argsort(k, kind="stable")
+        h, z, R = (np.concatenate((f[a:b], r))[order] for f, r in ((fx.h, zs.h), (fx.z, zs.z), (fx.R, zs.R)))
+        marked = (np.arange(len(k)) >= b - a)[order]
+        return chunked.Piece(fastsmooth.Extras(k[order], h, z, R, order), np.zeros(len(k)), marked)
+
+
 def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outcome, run_format: str) -> None:
-    """The passes over chunks, the output written in place (accelnav.estimate.chunked)."""
+    """The passes over chunks, the output written in place (accelnav.estimate.chunked); the aids made for each
+    chunk as the forward pass reaches it (:class:`_AxisAids`), the fixes' times read as it goes."""
     n, n_axes = source.n, len(source.axis_names)
     smooth = "smooth" in job.stages
     fixes = job.fixes if smooth else None
-    shared: dict = {}
-    aids = [axis_extras(model, n, j, fixes, rest, shared) for j in range(n_axes)] if smooth else []
-    extras = [fx.concat(za) for fx, za in aids] or None
-    gates = [np.zeros(len(e)) for e in extras] if extras else None  # rests are gated whole by the decision
+    aided = smooth and job.aided
+    fx = [Aids.of(list(fixes[j]) if fixes is not None else []) for j in range(n_axes)]
+    spans = rest.runs(n_axes) if smooth and rest is not None else None
+    params = rest.params if rest is not None else None
+    extras = [_AxisAids(model, j, fx[j], spans, params) for j in range(n_axes)] if aided else None
+    fix_t = [np.full(len(f), np.nan) for f in fx]  # the run's t at each fix, filled as the chunks are read
     echo = source.extra_keys() if job.full else {}
     counts: dict[int, np.ndarray] = {}
 
@@ -431,37 +482,35 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
         t, accel, c = source.read(s, e)
         # by chunk start: a chunk read twice counts once; none clipped (the rule) is told by one pass
         counts[s] = c.sum(axis=0) if c.any() else np.zeros(c.shape[1], dtype=np.int64)
+        for f, ft in zip(fx, fix_t, strict=True):
+            here = (f.k >= s) & (f.k < e)
+            ft[here] = t[f.k[here] - s]
         return t, accel, c
 
     def more(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
-        """The aids' rows as the one-chunk path writes them, and the input's other keys."""
+        """The fixes' rows as the one-chunk path writes them (the rests' samples went into ``zupt`` chunk by
+        chunk), and the input's other keys."""
         add = dict(echo)
-        if not job.aided or not smooth:
+        if not aided:
             return add
-        t = source.whole()["t"]
-        mask = np.zeros((n, n_axes), dtype=bool)
-        for j, (fx, za) in enumerate(aids):
-            mask[za.k[applied[j][len(fx) :]], j] = True
-        rows = [
-            (t[k], j, z, np.sqrt(r)) for j, (fx, _) in enumerate(aids) for k, z, r in zip(fx.k, fx.z, fx.R, strict=True)
-        ]
-        add.update(zupt=mask, fixes=np.array(rows, dtype=np.float64).reshape(-1, 4))
+        rows = [(ft, j, z, np.sqrt(r)) for j, f in enumerate(fx) for ft, z, r in zip(fix_t[j], f.z, f.R, strict=True)]
+        add["fixes"] = np.array(rows, dtype=np.float64).reshape(-1, 4)
         if rest is not None and rest.detected:
-            add["zupt_candidates"] = rest.candidate_rows(t)
+            add["zupt_candidates"] = rest.candidate_rows(source.whole()["t"])
         return add
 
     info = chunked.smooth_bounded(
-        model, n, read, out, axis_names=source.axis_names, extras=extras, gates=gates, chunk=outcome.plan.chunk,
+        model, n, read, out, axis_names=source.axis_names, extras=extras, chunk=outcome.plan.chunk,
         workdir=workdir, run_format=run_format, more=more, stages=job.stages, store_memory=store_memory(job),
-        full=job.full,
+        full=job.full, marks="zupt" if aided else "",
     )  # fmt: skip
     ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
     ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
     outcome.ends = ends
     outcome.store_in_memory = info["store_in_memory"]
     outcome.clipped = np.sum(list(counts.values()), axis=0) if counts else np.zeros(n_axes, dtype=np.int64)
-    if rest is not None:
-        outcome.applied = [int(a[len(fx) :].sum()) for a, (fx, _) in zip(info["applied"], aids, strict=True)]
+    if rest is not None and smooth:
+        outcome.applied = [int(c) for c in info["marked"]]
     if fixes is not None:
         outcome.fixes = [len(f) for f in fixes]
 

@@ -6,7 +6,8 @@ Format: a header row, then one fix per row, comma-separated:
     time_s,axis,position_m,sigma_m       (any run: axis is an axis name of the run)
 
 time_s is on the run's clock (the run file's ``t``); each fix goes to the
-nearest sample and must lie within half a sample period of the run. sigma_m is
+nearest sample and must lie within half a sample period of the run. The clock is read a piece at a
+time (:class:`Clock`): a run of 1e8 samples is never held whole to place its fixes. sigma_m is
 the fix's standard deviation (> 0). Column order is free; other columns are
 refused (a typo must not silently drop data). Bad files are refused with one
 line naming the file, the row and what is accepted.
@@ -16,6 +17,8 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -67,16 +70,73 @@ def read_table(path, required: tuple[str, ...], optional: tuple[str, ...]) -> di
     return out
 
 
-def read_fixes(path, t: np.ndarray, axis_names: list[str]) -> list[list[Measurement]]:
-    """Position fixes of ``path`` as measurements per axis (index = column of the run).
+@dataclass(frozen=True)
+class Clock:
+    """A run's increasing time stamps, read ``piece`` samples at a time by ``read(s, e)`` (t of samples s..e-1):
+    what placing fixes and rest intervals on samples needs, without the run's t held whole. ``step``: the
+    run's sample period (None: the median step of an array in memory, else the mean over the run)."""
+
+    n: int
+    read: Callable[[int, int], np.ndarray]
+    step: float | None = None
+    piece: int = 1 << 20
+
+    @classmethod
+    def of(cls, t: np.ndarray) -> Clock:
+        t = np.asarray(t, dtype=np.float64)
+        return cls(len(t), lambda s, e: t[s:e], float(np.median(np.diff(t))) if len(t) > 1 else 1.0)
+
+    def pieces(self):
+        """(s, t of samples s..) piece by piece; a clock that goes back is refused in one line."""
+        last = -np.inf
+        for s in range(0, self.n, self.piece):
+            t = np.asarray(self.read(s, min(s + self.piece, self.n)), dtype=np.float64)
+            if len(t) and not (t[0] >= last and np.all(t[1:] >= t[:-1])):
+                raise UserError(
+                    f"the run's time is not increasing near sample {s}; aids are placed on an increasing clock"
+                )
+            last = t[-1] if len(t) else last
+            yield s, t
+
+    def place(self, left: np.ndarray, right: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+        """One pass: (samples with t < each of ``left``, the t just below and just above each of ``left`` (NaN
+        where none), samples with t <= each of ``right``, the run's first and last t): ``np.searchsorted`` on
+        the whole clock, piece by piece."""
+        left = np.asarray(left, dtype=np.float64)
+        right = np.zeros(0) if right is None else np.asarray(right, dtype=np.float64)
+        lo, hi = np.zeros(len(left), dtype=np.int64), np.zeros(len(right), dtype=np.int64)
+        below, above = np.full(len(left), np.nan), np.full(len(left), np.nan)
+        ends = [np.nan, np.nan]
+        for s, t in self.pieces():
+            if not len(t):
+                continue
+            ends[0] = t[0] if s == 0 else ends[0]
+            ends[1] = t[-1]
+            k = np.searchsorted(t, left, side="left")
+            lo += k
+            has = k > 0
+            below[has] = t[k[has] - 1]
+            first = (k < len(t)) & np.isnan(above)
+            above[first] = t[k[first]]
+            hi += np.searchsorted(t, right, side="right")
+        return lo, below, above, hi, ends[0], ends[1]
+
+    def period(self, first: float, last: float) -> float:
+        if self.step is not None:
+            return self.step
+        return (last - first) / (self.n - 1) if self.n > 1 else 1.0
+
+
+def read_fixes(path, t: np.ndarray | Clock, axis_names: list[str]) -> list[list[Measurement]]:
+    """Position fixes of ``path`` as measurements per axis (index = column of the run), on the run's time
+    ``t`` (an array, or a :class:`Clock` read a piece at a time).
 
     Checked and placed with whole-array operations (a GPS at 1 Hz gives 1e5 fixes on a day's run);
     the first bad row is refused, with the first of its faults, as a row-by-row check would.
     """
     rows = read_table(path, required=("time_s", "position_m", "sigma_m"), optional=("axis",))
-    t = np.asarray(t, dtype=np.float64)
-    n = len(t)
-    Ts = float(np.median(np.diff(t))) if n > 1 else 1.0
+    clock = t if isinstance(t, Clock) else Clock.of(t)
+    n = clock.n
     if "axis" not in rows:
         if len(axis_names) != 1:
             raise UserError(
@@ -88,7 +148,9 @@ def read_fixes(path, t: np.ndarray, axis_names: list[str]) -> list[list[Measurem
     ts = np.asarray(rows["time_s"], dtype=np.float64)
     r = np.asarray(rows["position_m"], dtype=np.float64)
     s = np.asarray(rows["sigma_m"], dtype=np.float64)
-    faults = ((ax < 0), ~(s > 0), ~((t[0] - Ts / 2 <= ts) & (ts <= t[-1] + Ts / 2)))
+    k, below, above, _, t0, tn = clock.place(ts)
+    Ts = clock.period(t0, tn)
+    faults = ((ax < 0), ~(s > 0), ~((t0 - Ts / 2 <= ts) & (ts <= tn + Ts / 2)))
     bad = np.logical_or.reduce(faults)
     if bad.any():
         i = int(np.argmax(bad))
@@ -97,11 +159,9 @@ def read_fixes(path, t: np.ndarray, axis_names: list[str]) -> list[list[Measurem
             raise UserError(f"{path}: row {row}: axis {rows['axis'][i]!r}; accepted: {', '.join(axis_names)}")
         if faults[1][i]:
             raise UserError(f"{path}: row {row}: sigma_m is {s[i]:g}; accepted: a standard deviation > 0 (m)")
-        raise UserError(f"{path}: row {row}: time_s {ts[i]:g} is outside the run ({t[0]:g} to {t[-1]:g} s)")
-    # the nearest sample; a tie goes to the earlier one
-    k = np.clip(np.searchsorted(t, ts), 1, max(n - 1, 1))
-    if n > 1:
-        k -= np.abs(t[k - 1] - ts) <= np.abs(t[k] - ts)
+        raise UserError(f"{path}: row {row}: time_s {ts[i]:g} is outside the run ({t0:g} to {tn:g} s)")
+    # the nearest sample; a tie goes to the earlier one (k: the first sample at or after the fix)
+    k = np.where((k > 0) & ((k == n) | (np.abs(below - ts) <= np.abs(above - ts))), k - 1, k)
     k = np.minimum(k, n - 1)
     per_axis: list[list[Measurement]] = [[] for _ in axis_names]
     for j, kk, rr, ss in zip(ax.tolist(), k.tolist(), r.tolist(), s.tolist(), strict=True):

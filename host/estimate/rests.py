@@ -35,7 +35,9 @@ axis' scale (:func:`chi2_equivalent`), against ``gate`` (12: 3.5 sd):
   more than ``level_max`` after a move; a candidate far less still than the record's proven rests
   (``LIKE`` x their median stillness) is held to ``UNLIKE`` x ``level_still`` after a move (a push held,
   not a foot that turned). A level that moved more than ``level_still`` and passes is a *hypothesis* (below).
-* **consistent**: within the gate, and a side can tell (every axis' sd <= ``tell``).
+* **consistent**: within the gate, and a side can tell (every axis' sd <= ``tell``; for a candidate far less
+  still than the proven rests and shorter than ``start_s``, <= ``UNLIKE_TELL`` x ``tell``: a trunk mid-stride is that
+  quiet for a tenth of a second).
 * neither side can tell: the candidate is refused as **cannot tell**, unless another line of evidence
   decides:
 
@@ -212,6 +214,7 @@ LEAK = 0.1  # share of (level change x time since the last aid) allowed as veloc
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
+UNLIKE_TELL = 0.5  # ... and is told by a side only within UNLIKE_TELL x tell (see _Decider._tell_bound)
 CONFIRM = 2  # a hypothesis is kept when this many candidates after it are consistent with it, with motion between
 WITHIN = 6 * CONFIRM  # ... among the next WITHIN candidates
 MOTION = 0.2  # m/s, the speed the body must have reached between two rests for them to test each other
@@ -361,9 +364,22 @@ class _Decider:
             self._sources[key] = words
         return words
 
-    def _tells(self, s: Side) -> bool:
-        tell = self.p.tell  # every axis' sd within it (a NaN never is), on floats: cheaper than numpy's overhead
+    def _tells(self, s: Side, tell: float | None = None) -> bool:
+        """Every axis' sd within ``tell`` (default: the parameter's; a NaN never is), on floats: cheaper than numpy's
+        overhead."""
+        tell = self.p.tell if tell is None else tell
         return all(sd <= tell for sd in s.sd.tolist())
+
+    def _tell_bound(self, c: Candidate, like: bool) -> float:
+        """The sd a side must reach to call a candidate consistent: ``tell``, or UNLIKE_TELL x ``tell`` for one far
+        less still than the record's proven rests and shorter than a stand (``start_s``). Such a piece is a moment of
+        a body that moves (a trunk mid-stride) unless the velocity is known well: a lower back walking reads 20-120
+        R in its quietest tenth of a second against 1-2 R standing, and mobgap's MS_001 trial 1 (levelled by
+        accelnav.level at its standings) accepted a 0.19 s piece at 94 R mid-walk on a side of 0.86 +/- 0.37 m/s,
+        which then refused the standing after the walk as moving. A stand's length keeps ``tell``: a stop with a
+        knock in it, or an idling engine, is unsteady but long."""
+        short = (c.stop - c.start) * self.Ts < self.p.start_s
+        return UNLIKE_TELL * self.p.tell if short and not like else self.p.tell
 
     def forward(self) -> tuple[list[_Found], set[int]]:
         """The forward filter, deciding online; returns every candidate's state and the accepted set.
@@ -512,11 +528,17 @@ class _Decider:
         if s.chi2 > p.gate:
             what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
             return "moving", f"{what} {_speed(s)} before it (from {s.source})"
-        if self._tells(s):
+        bound = self._tell_bound(c, like)
+        if self._tells(s, bound):
             bisect.insort(st["proven"], c.still)
             return "consistent", f"v {_speed(s)} before it (from {s.source})"
         stand = _Lazy(self._peak, c, st["last_stand"]) if st["last_stand"] is not None else moved
         reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
+        if bound < p.tell and self._tells(s):
+            evidence += (
+                f"; at {c.still:.2g} R, far less still than the proven rests and shorter than a stand: told only "
+                f"within {bound:g} m/s"
+            )
         if reason == "still start":
             bisect.insort(st["proven"], c.still)
         return reason, evidence

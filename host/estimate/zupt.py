@@ -81,7 +81,7 @@ import numpy as np
 
 from accelnav.estimate.kf import Aids, Measurement, bias_model
 from accelnav.estimate.rests import ACCEPT_REASONS, REFUSE_REASONS, RestDecision, decide
-from accelnav.fileio import check_input, excerpt, load_npz
+from accelnav.fileio import check_input, excerpt
 from accelnav.model.design import axis_design
 from accelnav.model.load import G0, Model
 
@@ -497,53 +497,235 @@ def axis_updates(
     return a.k, a.measurements()
 
 
+MAX_SPANS = 1 << 23  # separate rests per axis a rest file may give (24 B each in memory: 200 MB)
+_PIECE = 1 << 20  # samples of an NPZ rest mask read at a time
+
+
+@dataclass(frozen=True)
+class RestSpans:
+    """Given rests as runs of samples per axis, never a per-sample array (a run of 1e8 samples): axis j rests at
+    samples ``lo[j][i] .. hi[j][i] - 1`` (disjoint, ascending), its updates' standard deviation there ``sd[j][i]``
+    (NaN: ``--zupt-sigma``). Two runs that touch (``hi == lo``) are one rest with two sigmas."""
+
+    n: int
+    lo: tuple[np.ndarray, ...]
+    hi: tuple[np.ndarray, ...]
+    sd: tuple[np.ndarray, ...]
+
+    @classmethod
+    def of_mask(cls, mask: np.ndarray, sigma: np.ndarray | None = None, n_axes: int | None = None) -> RestSpans:
+        """The spans of an (N,) or (N, n_axes) ``mask`` with an optional per-sample ``sigma`` of the same shape."""
+        m = np.asarray(mask, dtype=bool)
+        m = m[:, None] if m.ndim == 1 else m
+        sig = None if sigma is None else np.asarray(sigma, dtype=np.float64).reshape(len(m), -1)
+        b = _SpanBuilder(m.shape[1] if n_axes is None else n_axes, "the rest mask")
+        b.add(0, m, sig)
+        return b.done(len(m))
+
+    def __len__(self) -> int:
+        return len(self.lo)
+
+    def count(self, j: int, model: Model, params: ZuptParams) -> int:
+        """Axis j's zero-velocity updates over the run (:meth:`updates`' count, none made): every sample of a rest,
+        or one per every_s from each rest's start (runs that touch are one rest)."""
+        lo, hi = self.lo[j], self.hi[j]
+        step = max(1, int(round(params.every_s * model.rate_hz)))
+        if step == 1:
+            return int(np.sum(hi - lo))
+        new = np.ones(len(lo), dtype=bool)
+        new[1:] = lo[1:] != hi[:-1]
+        last = np.ones(len(lo), dtype=bool)
+        last[:-1] = new[1:]
+        return int(np.sum(-(-(hi[last] - lo[new]) // step)))
+
+    def updates(self, j: int, s: int, e: int, model: Model, params: ZuptParams) -> tuple[np.ndarray, np.ndarray]:
+        """(samples, standard deviations) of axis j's zero-velocity updates in samples s..e-1: those
+        :func:`axis_aids` gives the whole run, made for these samples alone."""
+        lo, hi, sd = self.lo[j], self.hi[j], self.sd[j]
+        i0, i1 = int(np.searchsorted(hi, s, side="right")), int(np.searchsorted(lo, e, side="left"))
+        a, b = np.maximum(lo[i0:i1], s), np.minimum(hi[i0:i1], e)
+        lens = np.maximum(b - a, 0)
+        seg = np.repeat(np.arange(i0, i1), lens)
+        ks = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(a - (np.cumsum(lens) - lens), lens)
+        step = max(1, int(round(params.every_s * model.rate_hz)))
+        if step > 1 and len(ks):  # counted from the start of each rest (touching runs are one rest)
+            new = np.ones(len(lo), dtype=bool)
+            new[1:] = lo[1:] != hi[:-1]
+            first = lo[np.maximum.accumulate(np.where(new, np.arange(len(lo)), 0))]
+            keep = (ks - first[seg]) % step == 0
+            ks, seg = ks[keep], seg[keep]
+        given = sd[seg]
+        return ks, np.where(np.isfinite(given), given, float(params.sigma))
+
+    def painted(self) -> tuple[np.ndarray, np.ndarray]:
+        """((N, n_axes) mask, (N, n_axes) sigma, NaN where none given): the per-sample form, for a run in memory."""
+        mask = np.zeros((self.n, len(self)), dtype=bool)
+        sig = np.full((self.n, len(self)), np.nan)
+        for j, (lo, hi, sd) in enumerate(zip(self.lo, self.hi, self.sd, strict=True)):
+            at = np.zeros(self.n + 1, dtype=np.int64)  # disjoint runs: +(i+1) at each start, -(i+1) at each end
+            np.add.at(at, lo, np.arange(1, len(lo) + 1))
+            np.add.at(at, hi, -np.arange(1, len(lo) + 1))
+            seg = np.cumsum(at[:-1]) - 1
+            mask[:, j] = seg >= 0
+            sig[:, j] = np.where(seg >= 0, sd[np.maximum(seg, 0)] if len(sd) else np.nan, np.nan)
+        return mask, sig
+
+
+class _SpanBuilder:
+    """Spans of a per-sample mask (and sigma) given a block of samples at a time, in order."""
+
+    def __init__(self, n_axes: int, src: str) -> None:
+        self.src = src
+        self.prev = np.zeros(n_axes, dtype=bool)
+        self.prev_sd = np.full(n_axes, np.nan)
+        self.lo: list[list[np.ndarray]] = [[] for _ in range(n_axes)]
+        self.hi: list[list[np.ndarray]] = [[] for _ in range(n_axes)]
+        self.sd: list[list[np.ndarray]] = [[] for _ in range(n_axes)]
+        self.count = np.zeros(n_axes, dtype=np.int64)
+
+    def add(self, s: int, m: np.ndarray, sig: np.ndarray | None) -> None:
+        """Samples s.. of an (k, 1) or (k, n_axes) mask (a column for every axis when one) and sigma."""
+        if not len(m):
+            return
+        for j in range(len(self.prev)):
+            col = m[:, j if m.shape[1] > 1 else 0]
+            pm = np.concatenate(([self.prev[j]], col[:-1]))
+            change = col != pm
+            if sig is not None:
+                sc = sig[:, j if sig.shape[1] > 1 else 0]
+                ps = np.concatenate(([self.prev_sd[j]], sc[:-1]))
+                change |= col & pm & ~((sc == ps) | (np.isnan(sc) & np.isnan(ps)))
+                self.prev_sd[j] = sc[-1]
+            q = np.flatnonzero(change)
+            opens, closes = q[col[q]], q[pm[q]]
+            self.lo[j].append(s + opens)
+            self.hi[j].append(s + closes)
+            self.sd[j].append(sc[opens] if sig is not None else np.full(len(opens), np.nan))
+            self.prev[j] = col[-1]
+            self.count[j] += len(opens)
+            if self.count[j] > MAX_SPANS:
+                from accelnav.errors import UserError
+
+                raise UserError(f"{self.src}: more than {MAX_SPANS} separate rests on one axis; accepted: that many")
+
+    def done(self, n: int) -> RestSpans:
+        def cat(parts, dtype):
+            return np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype=dtype)
+
+        his = [cat(h + ([np.array([n])] if p else []), np.int64) for h, p in zip(self.hi, self.prev, strict=True)]
+        return RestSpans(n, tuple(cat(x, np.int64) for x in self.lo), tuple(his),
+                         tuple(cat(x, np.float64) for x in self.sd))  # fmt: skip
+
+
 def read_zupt_file(path, t: np.ndarray, axis_names: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Zero-velocity updates given by the user: ((N, n_axes) bool mask, (N, n_axes) sigma [m/s], NaN = default).
-
-    Two forms, told apart by content:
-
-    * **intervals**, CSV with columns ``start_s,end_s`` (inclusive, on the run's
-      clock), and optionally ``axis`` (an axis name of the run; without it
-      the interval holds for every axis) and ``sigma`` (m/s, the updates'
-      standard deviation there; default ``--zupt-sigma``);
-    * **per-sample mask**: an NPZ with a 0/1 array ``rest`` of N samples (or
-      (N, n_axes)), or a CSV with a header ``rest`` (optionally ``t_s,rest``)
-      and one 0/1 row per sample of the run.
-    """
-    from accelnav.errors import UserError
-    from accelnav.estimate.fixes import read_table
+    """Zero-velocity updates given by the user: ((N, n_axes) bool mask, (N, n_axes) sigma [m/s], NaN = default),
+    as :func:`read_rest_spans` reads them, painted per sample (t in any order)."""
+    from accelnav.estimate.fixes import Clock
 
     t = np.asarray(t, dtype=np.float64)
-    n, n_axes = len(t), len(axis_names)
-    path_s = str(path)
-    sig = np.full((n, n_axes), np.nan)
+    order = None
+    if len(t) > 1 and not np.all(t[1:] >= t[:-1]):  # not sorted (or NaN): work on a sorted copy, mapped back
+        order = np.argsort(t, kind="stable")
+        t = t[order]
+    mask, sig = read_rest_spans(path, Clock(len(t), lambda s, e: t[s:e]), axis_names, _checked=False).painted()
+    if order is not None:
+        mask[order], sig[order] = mask.copy(), sig.copy()
+    return mask, sig
+
+
+def rest_file_kind(path) -> str:
+    """ "npz", "mask" (a CSV of one 0/1 row per sample) or "intervals": the form of a rest file, by content."""
+    from accelnav.errors import UserError
+
     check_input(path)  # a FIFO or a device is refused before it is read
     try:
         with open(path, "rb") as fh:
             head = fh.read(2)
+        if head == b"PK":
+            return "npz"
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            first = fh.readline().strip().replace(" ", "")
     except OSError as exc:
-        raise UserError(f"{path_s}: cannot read: {exc.strerror}") from None
-    if head == b"PK":
-        f = load_npz(path)  # sizes checked before anything is inflated
-        if "rest" not in f:
-            raise UserError(f"{path_s}: no 'rest' array; keys: {excerpt(', '.join(f)) if f else 'none'}")
-        return _mask_from(np.asarray(f["rest"]), n, n_axes, path_s), sig
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        first = fh.readline().strip().replace(" ", "")
-    if first in ("rest", "t_s,rest", "t,rest"):
+        raise UserError(f"{path}: cannot read: {exc.strerror}") from None
+    return "mask" if first in ("rest", "t_s,rest", "t,rest") else "intervals"
+
+
+def read_rest_spans(path, clock, axis_names: list[str], *, _checked: bool = True) -> RestSpans:
+    """Zero-velocity updates given by the user, as :class:`RestSpans` on the run's increasing ``clock``
+    (accelnav.estimate.fixes.Clock, read a piece at a time). Two forms, told apart by content:
+
+    * **intervals**, CSV with columns ``start_s,end_s`` (inclusive, on the run's
+      clock), and optionally ``axis`` (an axis name of the run; without it
+      the interval holds for every axis) and ``sigma`` (m/s, the updates'
+      standard deviation there; default ``--zupt-sigma``); where intervals overlap, the later row's sigma;
+    * **per-sample mask**: an NPZ with a 0/1 array ``rest`` of N samples (or
+      (N, n_axes)), read a piece at a time, or a CSV with a header ``rest`` (optionally ``t_s,rest``)
+      and one 0/1 row per sample of the run.
+    """
+    from accelnav.estimate.fixes import read_table
+
+    n, n_axes, src = clock.n, len(axis_names), str(path)
+    kind = rest_file_kind(path)
+    if kind == "npz":
+        return _npz_spans(path, n, n_axes, src)
+    if kind == "mask":
         rows = read_table(path, required=("rest",), optional=("t_s", "t"))
-        return _mask_from(np.asarray(rows["rest"]), n, n_axes, path_s), sig
+        b = _SpanBuilder(n_axes, src)
+        b.add(0, _mask_from(np.asarray(rows["rest"]), n, n_axes, src), None)
+        return b.done(n)
     rows = read_table(path, required=("start_s", "end_s"), optional=("axis", "sigma"))
-    return _intervals_mask(rows, t, axis_names, path_s, sig)
+    return _interval_spans(rows, clock, axis_names, src, _checked)
 
 
-def _intervals_mask(rows: dict, t: np.ndarray, axis_names: list[str], src: str, sig: np.ndarray):
-    """(mask, sigma) of interval rows, in O(N + K log K) for N samples and K intervals: each interval becomes
-    a range of sample indices by binary search on the sorted clock, and each sample takes the last row that
-    covers it (a later row's sigma wins where intervals overlap, as row-by-row painting gives)."""
+def _npz_spans(path, n: int, n_axes: int, src: str) -> RestSpans:
+    """The ``rest`` member of an NPZ read a piece at a time (stored or deflated), checked as :func:`_mask_from`."""
+    import zipfile
+
+    from numpy.lib import format as npy
+
     from accelnav.errors import UserError
 
-    n, n_axes = len(t), len(axis_names)
+    try:
+        with zipfile.ZipFile(path) as zf:
+            names = [i.filename for i in zf.infolist()]
+            if "rest.npy" not in names:
+                keys = ", ".join(x.removesuffix(".npy") for x in names)
+                raise UserError(f"{src}: no 'rest' array; keys: {excerpt(keys) if keys else 'none'}")
+            with zf.open("rest.npy") as fh:
+                version = npy.read_magic(fh)
+                header = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+                shape, fortran, dtype = header(fh)
+                if dtype.hasobject or fortran or len(shape) not in (1, 2):
+                    raise UserError(f"{src}: 'rest' is not a plain 0/1 array of the run's samples")
+                if shape[0] != n or (len(shape) == 2 and shape[1] not in (1, n_axes)):
+                    raise UserError(f"{src}: the rest mask has {shape[0]} samples; the run has {n} (and {n_axes} axes)")
+                width = 1 if len(shape) == 1 else shape[1]
+                b = _SpanBuilder(n_axes, src)
+                for s in range(0, n, _PIECE):
+                    k = min(_PIECE, n - s)
+                    raw = fh.read(k * width * dtype.itemsize)
+                    if len(raw) != k * width * dtype.itemsize:
+                        raise UserError(f"{src}: the 'rest' array ends early: the file is damaged")
+                    m = np.frombuffer(raw, dtype=dtype).reshape(k, width)
+                    ok = (m == 0) | (m == 1)
+                    if not ok.all():
+                        bad = int(np.argmax(~ok.all(axis=1)))
+                        raise UserError(f"{src}: rest mask sample {s + bad}: {m[bad].tolist()}; accepted: 0 or 1")
+                    b.add(s, m.astype(bool), None)
+    except UserError:
+        raise
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, ValueError, OSError) as exc:
+        raise UserError(f"{src}: damaged NPZ: {excerpt(str(exc))}") from None
+    return b.done(n)
+
+
+def _interval_spans(rows: dict, clock, axis_names: list[str], src: str, checked: bool = True) -> RestSpans:
+    """The spans of interval rows in O(N + K log K) for N samples and K intervals: each interval becomes a range of
+    samples by one counting pass over the clock, and each sample takes the last row that covers it (a later
+    row's sigma wins where intervals overlap, as row-by-row painting gives)."""
+    from accelnav.errors import UserError
+
+    n, n_axes = clock.n, len(axis_names)
     a, b = np.asarray(rows["start_s"], dtype=np.float64), np.asarray(rows["end_s"], dtype=np.float64)
     k = len(a)
     axis = np.full(k, -1, dtype=np.int64)  # -1: every axis
@@ -564,28 +746,28 @@ def _intervals_mask(rows: dict, t: np.ndarray, axis_names: list[str], src: str, 
         if unknown[i]:
             raise UserError(f"{src}: row {i + 2}: axis {rows['axis'][i]!r}; accepted: {', '.join(axis_names)}")
         raise UserError(f"{src}: row {i + 2}: sigma is {sd[i]:g}; accepted: a standard deviation > 0 (m/s)")
-    order = None
-    if n > 1 and not np.all(t[1:] >= t[:-1]):  # not sorted (or NaN): work on a sorted copy, mapped back
-        order = np.argsort(t, kind="stable")
-        t = t[order]
-    lo = np.searchsorted(t, a, side="left")  # the first sample with t >= start
-    hi = np.searchsorted(t, b, side="right")  # past the last sample with t <= end
-    mask = np.zeros((n, n_axes), dtype=bool)
+    # the first sample with t >= start; past the last sample with t <= end (``checked``: the clock is read a piece
+    # at a time and must increase; else an array in memory, sorted by the caller, NaN last as searchsorted takes it)
+    lo, _, _, hi, _, _ = clock.place(a, b) if checked else _place_unchecked(clock, a, b)
+    los, his, sds = [], [], []
     for j in range(n_axes):
         mine = np.flatnonzero(((axis == -1) | (axis == j)) & (hi > lo))
-        cover = _last_cover(lo[mine], hi[mine], n)
-        hit = cover >= 0
-        mask[:, j] = hit
-        if sd is not None:
-            sig[:, j] = np.where(hit, sd[mine][cover], np.nan)
-    if order is not None:
-        mask[order], sig[order] = mask.copy(), sig.copy()
-    return mask, sig
+        bounds, best = _last_cover(lo[mine], hi[mine], n)
+        on = best >= 0
+        los.append(bounds[:-1][on].astype(np.int64))
+        his.append(bounds[1:][on].astype(np.int64))
+        sds.append(sd[mine][best[on]] if sd is not None else np.full(int(on.sum()), np.nan))
+    return RestSpans(n, tuple(los), tuple(his), tuple(sds))
 
 
-def _last_cover(lo: np.ndarray, hi: np.ndarray, n: int) -> np.ndarray:
-    """For each of n samples, the index of the last of the ranges [lo, hi) that covers it (-1: none). The
-    answer is constant between consecutive range ends: one heap sweep over those (2K + 1 segments)."""
+def _place_unchecked(clock, a: np.ndarray, b: np.ndarray):
+    t = clock.read(0, clock.n)
+    return np.searchsorted(t, a, side="left"), None, None, np.searchsorted(t, b, side="right"), None, None
+
+
+def _last_cover(lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(bounds, best): samples bounds[i] .. bounds[i+1] - 1 are covered last by the range [lo, hi) number best[i]
+    (-1: none). The answer is constant between consecutive range ends: one heap sweep over those (2K + 1)."""
     import heapq
 
     bounds = np.unique(np.concatenate(([0, n], lo, hi)))
@@ -601,7 +783,7 @@ def _last_cover(lo: np.ndarray, hi: np.ndarray, n: int) -> np.ndarray:
             heapq.heappop(heap)
         if heap:
             best[s] = -heap[0]
-    return np.repeat(best, np.diff(bounds))
+    return bounds, best
 
 
 def _mask_from(m: np.ndarray, n: int, n_axes: int, src: str) -> np.ndarray:

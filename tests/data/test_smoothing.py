@@ -178,3 +178,55 @@ def test_csv_and_compression_of_a_chunked_run_are_those_of_one_chunk(inputs, tmp
         assert {i.compress_type for i in z.infolist()} == {zipfile.ZIP_DEFLATED}
     got, ref = load_run(tmp_path / "a.npz")[0], load_run(tmp_path / "b.npz")[0]
     _same(got, ref, ("filt", "smooth"))
+
+
+@pytest.mark.parametrize("rests", ["intervals", "npz mask", "none"])
+@pytest.mark.parametrize("every_s", [0.0, 0.03])
+def test_given_aids_stream_chunk_by_chunk_across_chunk_boundaries(inputs, tmp_path, monkeypatch, rests, every_s):
+    """Fixes and given rests on a streamed input: placed on its clock a piece at a time and made per chunk, never
+    the input whole; a fix on a chunk's first sample and on its last, an interval straddling a boundary, two
+    touching at one with two sigmas, a rest's every_s updates counted across it: the one-chunk numbers."""
+    from accelnav.estimate import chunked, engine
+    from accelnav.estimate.zupt import ZuptParams
+
+    t = np.load(inputs / "rec.npz")["t"].tolist()
+    c = chunked.chunk_samples(2, SMALL)
+    b1, b2, b3 = 11 * c, 23 * c, 40 * c  # chunk boundaries
+    fixes = [(b1, "x"), (b1 - 1, "y"), (b2, "y"), (b2 - 1, "x"), (b2, "x"), (2999, "x")]
+    (tmp_path / "fixes.csv").write_text(
+        "time_s,axis,position_m,sigma_m\n" + "".join(f"{t[k]!r},{ax},{0.01 * k},0.05\n" for k, ax in fixes)
+    )
+    spans = [(b1 - 7, b1 + 9, "x", 0.02), (b2 - 30, b2 - 1, "y", 0.03), (b2, b2 + 4, "y", 0.05), (b3 - 1, b3, "", 0.04)]
+    kw = {"fixes": tmp_path / "fixes.csv"}
+    if rests == "intervals":
+        kw["zupt"] = tmp_path / "rests.csv"
+        rows = [(t[a] - 0.003, t[b] + 0.003, x, sd) for a, b, ax, sd in spans for x in (ax or "xy")]
+        kw["zupt"].write_text("start_s,end_s,axis,sigma\n" + "".join(f"{a!r},{b!r},{x},{sd}\n" for a, b, x, sd in rows))
+    elif rests == "npz mask":
+        mask = np.zeros((len(t), 2), dtype=np.uint8)
+        for a, b, ax, _ in spans:
+            mask[a : b + 1, [0, 1] if not ax else ["xy".index(ax)]] = 1
+        kw["zupt"] = tmp_path / "rests.npz"
+        np.savez(kw["zupt"], rest=mask)
+    params = ZuptParams(every_s=every_s)
+    whole = engine.Source.whole
+
+    def not_whole(self):
+        raise AssertionError("the chunked run read its input whole")
+
+    monkeypatch.setattr(engine.Source, "whole", not_whole)
+    a = smooth_file(inputs / "rec.npz", tmp_path / "a.npz", job=Job(stages=("filt", "smooth"), budget=SMALL, full=True),
+                    zupt_params=params, **kw)  # fmt: skip
+    monkeypatch.setattr(engine.Source, "whole", whole)
+    b = smooth_file(inputs / "rec.npz", tmp_path / "b.npz", job=Job(stages=("filt", "smooth"), budget=LARGE, full=True),
+                    zupt_params=params, **kw)  # fmt: skip
+    assert a.streamed == "NPZ" and a.plan.chunks > 40 and a.plan.chunk == c and b.plan.whole
+    got, ref = load_run(tmp_path / "a.npz")[0], load_run(tmp_path / "b.npz")[0]
+    _same(got, ref, ("filt", "smooth"))
+    assert a.fixes == b.fixes == [4, 2] and a.applied == b.applied
+    assert len(got["fixes"]) == 6 and "zupt" in got
+    if rests != "none":
+        assert got["zupt"][b1 - 7 : b1 + 10, 0].sum() == (17 if not every_s else 6)
+        assert got["zupt"][b2 - 30 : b2 + 5, 1].sum() == (35 if not every_s else 12)  # touching: one rest's steps
+    else:
+        assert not got["zupt"].any() and a.applied is None

@@ -265,3 +265,28 @@ def test_ctrl_c_removes_the_store(tmp_path, monkeypatch, where):
     with pytest.raises(KeyboardInterrupt):
         open_stream(_write(tmp_path, CASES["comma"]), workdir=tmp_path)
     assert not list(tmp_path.glob(".accelnav-input-*"))
+
+
+def test_fixes_and_given_rests_stream_over_the_input_limit_a_csv_mask_does_not(tmp_path, monkeypatch, capsys):
+    """Over the input limit and the budget, fixes with rest intervals or an NPZ mask are placed on the streamed
+    clock (the run goes on, streamed); a per-sample rest mask given as CSV is read whole: refused in one line."""
+    path = _write(tmp_path, CASES["comma"])
+    t = _rows(N)[0].tolist()
+    fixes, rests, mask_npz, mask_csv = (tmp_path / f for f in ("f.csv", "r.csv", "m.npz", "m.csv"))
+    fixes.write_text(f"time_s,axis,position_m,sigma_m\n{t[5]!r},x,0.0,1.0\n{t[-3]!r},y,0.5,1.0\n")
+    rests.write_text(f"start_s,end_s\n{t[10]!r},{t[20]!r}\n")
+    rest = (np.arange(N) % 50 < 10).astype(np.uint8)
+    np.savez(mask_npz, rest=rest)
+    mask_csv.write_text("rest\n" + "".join(f"{v}\n" for v in rest))
+    monkeypatch.setenv("ACCELNAV_MAX_INPUT_BYTES", "1000")
+    for zupt in (rests, mask_npz):
+        out = tmp_path / f"o-{zupt.stem}.npz"
+        argv = ["smooth", str(path), "--fixes", str(fixes), "--zupt", str(zupt), "--memory-budget", "0.01"]
+        assert main([*argv, "--out", str(out)]) == 0
+        said = capsys.readouterr().out
+        assert "streamed from the CSV" in said and np.load(out)["zupt"].sum() == (
+            22 if zupt == rests else 2 * rest.sum()
+        )
+    assert main(["smooth", str(path), "--zupt", str(mask_csv), "--out", str(tmp_path / "o.npz")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert "--zupt need(s) every sample in memory" in err and len(err.splitlines()) == 1

@@ -13,7 +13,7 @@ import pytest
 
 from accelnav.estimate import zupt
 from accelnav.estimate.kf import bias_model, position_fix
-from accelnav.estimate.rests import ACCEPT_REASONS, REFUSE_REASONS, chi2_equivalent
+from accelnav.estimate.rests import ACCEPT_REASONS, LIKE, REFUSE_REASONS, chi2_equivalent
 from accelnav.model.design import axis_design
 
 RATE = 100.0
@@ -115,6 +115,46 @@ def test_cannot_tell_stays_out_and_says_so(default_model):
     (d,) = found.decisions
     assert not d.accepted and d.reason == "cannot tell"
     assert d.evidence.startswith("cannot tell: sd of v") and "no fix" in d.evidence
+
+
+def _shaken(model, accel, start, stop, k, seed=7):
+    """``accel`` with white noise of sd k sqrt(R) added over [start, stop) s: a body that jiggles (a trunk
+    mid-stride) reads k^2 + 1 times R there, however still its mean."""
+    rng = np.random.default_rng(seed)
+    a, b = int(start * RATE), int(stop * RATE)
+    out = accel.copy()
+    for j in range(accel.shape[1]):
+        out[a:b, j] += rng.normal(0.0, k * np.sqrt(axis_design(model, j).R), b - a)
+    return out
+
+
+def test_a_candidate_far_less_still_than_the_rests_needs_a_side_that_knows_the_speed_well(default_model):
+    """A still start, then 0.2 m/s^2 for 2.5 s and a cruise at 0.5 m/s per axis whose 0.3 s candidate jiggles at
+    26 R (a lower back's quietest moment mid-stride): the side from the start says 1.5 +/- 0.4 m/s, within the
+    gate and within ``tell``, which alone would accept a rest at 0.7 m/s. Far less still than the start, it must
+    be told within UNLIKE_TELL x tell: refused, and the words say why."""
+    accel, clipped, r, u = _record(default_model, [(3, 0.0), (2.5, 0.2), (6, 0.0)])
+    accel = _shaken(default_model, accel, 9.0, 9.3, 5.0)
+    cand = _mask(len(u), (0.0, 3.0), (9.0, 9.3))
+    found = zupt.decide_rests(accel, clipped, cand, default_model)
+    start, cruise = _at(found.decisions, 1.0), _at(found.decisions, 9.1)
+    assert start.accepted and start.still < 3.0
+    assert cruise.still > LIKE * start.still and 0.25 < cruise.sd_before <= 0.5  # tell: 0.5
+    assert not cruise.accepted and cruise.reason == "cannot tell", cruise.evidence
+    assert "far less still than the proven rests and shorter than a stand: told only within 0.25 m/s" in cruise.evidence
+    assert not found.mask[int(9 * RATE) : int(9.3 * RATE)].any()
+
+
+def test_a_candidate_far_less_still_than_the_rests_is_a_rest_where_the_speed_is_known(default_model):
+    """The same jiggling candidate after a move that returns to rest within 1 s of the start (0.3 m/s^2 out and
+    back): the side from the start knows the speed within UNLIKE_TELL x tell, and the rest is accepted."""
+    accel, clipped, r, u = _record(default_model, [(3, 0.0), (0.5, 0.3), (0.5, -0.3), (3, 0.0)])
+    accel = _shaken(default_model, accel, 4.2, 4.5, 5.0)
+    cand = _mask(len(u), (0.0, 3.0), (4.2, 4.5))
+    found = zupt.decide_rests(accel, clipped, cand, default_model)
+    stand = _at(found.decisions, 4.3)
+    assert stand.still > LIKE * _at(found.decisions, 1.0).still
+    assert stand.accepted and stand.reason == "consistent", stand.evidence
 
 
 def test_every_decision_is_explained_in_the_report(default_model):

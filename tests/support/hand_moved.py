@@ -1,4 +1,4 @@
-"""A simulated hand-moved unit (after bench/speed/bench_level_scale.py's record): 4 s smooth moves along a
+"""A simulated hand-moved unit (the record bench/speed/bench_level.py times at scale): 4 s smooth moves along a
 level path with up to 1 m/s^2 (a sine period of acceleration: still at both ends), each in another direction,
 the attitude swaying in roll and pitch by up to 20 degrees and turning about the vertical (<= 0.25 rad/s)
 while it moves, fully still in the 2 s pauses. Body frame, gravity in; the gyroscope the attitude's exact

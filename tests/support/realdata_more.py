@@ -230,8 +230,13 @@ def _trial(folder: Path, subject: str, trial: str):
     return getattr(mat["data"].TimeMeasure1.Test5, trial)
 
 
-def load_lowback_walks(folder: Path | None = None) -> list[Walk]:
-    """The three straight walks (see the module docstring)."""
+def load_lowback_walks(folder: Path | None = None, frame: str = "hand") -> list[Walk]:
+    """The three straight walks (see the module docstring). ``frame``: "hand", the level frame made here from the
+    reference standings; "library", accelnav.level.level_frame on the recording alone (its own rests and gyroscope
+    bias: what a user of ``accelnav.level`` gets, no reference used); "library at standings", level_frame told the
+    reference standings as its rests."""
+    if frame not in ("hand", "library", "library at standings"):
+        raise ValueError(f"frame: {frame!r}; accepted: 'hand', 'library' or 'library at standings'")
     folder = fetch(MOBGAP) if folder is None else folder
     walks = []
     for subject, trial in WALKS:
@@ -254,11 +259,17 @@ def load_lowback_walks(folder: Path | None = None) -> list[Walk]:
         while b > i1 and gmean[b - 1] < QUIET_DPS:
             b -= 1
         rest[b:] = True
-        # The gyroscope's offset (1-2 deg/s, a tilt error of g sin(10 deg) within 5 s) is taken from the
-        # standing before the walk, and gravity re-measured where the standing ends and where it resumes.
-        gyr = gyr - gyr[:a].mean(axis=0)
-        resets = [0, max(a - 1, 0)] + ([b] if b < n else [])
-        world = realdata.level_frame(acc, gyr, resets, WALK_RATE)
+        if frame != "hand":
+            from accelnav.level import ImuRecord, level_frame
+
+            imu = ImuRecord(t=np.arange(n) / WALK_RATE, acc=acc, gyro=gyr, source=f"mobgap {subject}")
+            world = level_frame(imu, rests=rest if frame == "library at standings" else None).acc
+        else:
+            # The gyroscope's offset (1-2 deg/s, a tilt error of g sin(10 deg) within 5 s) is taken from the
+            # standing before the walk, and gravity re-measured where the standing ends and where it resumes.
+            gyr = gyr - gyr[:a].mean(axis=0)
+            resets = [0, max(a - 1, 0)] + ([b] if b < n else [])
+            world = realdata.level_frame(acc, gyr, resets, WALK_RATE)
         other = np.atleast_1d(tr.Standards.INDIP.MicroWB)
         indip = (float(other[0].Start), float(other[0].End), float(other[0].Length)) if len(other) == 1 else None
         t = np.arange(n) / WALK_RATE

@@ -188,11 +188,20 @@ def reference_judge(self, i: int, c: Candidate, s: Side, st: dict, moved, jump: 
     if s.chi2 > p.gate:
         what = "fixes imply" if s.fix and st["source"].startswith("the fix") else "v"
         return "moving", f"{what} {reference_speed(s)} before it (from {s.source})"
-    if self._tells(s):
+    # a rule added after the rewrites (level-track: a short piece far less still than the proven rests is told only
+    # on a side within UNLIKE_TELL x tell): new behaviour, not a part the rewrites changed, so the reference
+    # decides by it too and the comparison stays one of the rewritten code paths
+    bound = self._tell_bound(c, like)
+    if self._tells(s, bound):
         st["proven"].append(c.still)
         return "consistent", f"v {reference_speed(s)} before it (from {s.source})"
     stand = self._peak(c, st["last_stand"]) if st["last_stand"] is not None else moved
     reason, evidence = self._other_evidence(c, s, st["last_end"], st["proven"], st["fix"], stand)
+    if bound < p.tell and self._tells(s):
+        evidence += (
+            f"; at {c.still:.2g} R, far less still than the proven rests and shorter than a stand: told only "
+            f"within {bound:g} m/s"
+        )
     if reason == "still start":
         st["proven"].append(c.still)
     return reason, evidence
