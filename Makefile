@@ -17,7 +17,7 @@ include firmware/firmware.mk
 setup: $(STAMP)
 
 # the editable install also compiles the C kernels of setup.py's cffi_modules: redo it when they change
-KERNELS := setup.py $(wildcard host/estimate/csrc/* codegen/csrc/* host/link/csrc/* host/native/*.py)
+KERNELS := setup.py $(wildcard host/estimate/csrc/* host/data/csrc/* codegen/csrc/* host/link/csrc/* host/native/*.py)
 
 $(STAMP): pyproject.toml $(KERNELS)
 	$(PYTHON) -m venv $(VENV)

@@ -111,3 +111,61 @@ def piece(text: str, delim: str, ncols: int, use: list[int]) -> np.ndarray | Non
     out = np.empty((text.count("\n") + 1, len(use)), dtype=np.float64)
     got = parse(mod, text.encode("utf-8", "surrogatepass"), delim, ncols, use, out)
     return None if isinstance(got, Refused) else got
+
+
+def grid_block(
+    mod, t: np.ndarray, accel: np.ndarray, t0: float, Ts: float, k_prev: int, first: bool, ratio: np.ndarray, thr: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The grid pass of one block of a streamed recording in one C pass (acsv_grid_block): (found, beyond),
+    found = [first non-finite row, first row off the grid, first grid step below 1 (np.diff's index),
+    1 if a step exceeds 1, the last row's grid index], -1 where none; beyond (n_axes, n_alt) the finite
+    samples with |accel| * ratio > thr. ``ratio`` is (n_axes, n_alt); the numbers of
+    accelnav.data.stream._grid_numpy, which tests/data/test_stream_grid.py holds it to."""
+    t = np.ascontiguousarray(t, dtype=np.float64)
+    accel = np.ascontiguousarray(accel, dtype=np.float64)
+    ratio = np.ascontiguousarray(ratio, dtype=np.float64)
+    m, k = accel.shape
+    if t.shape != (m,) or ratio.ndim != 2 or ratio.shape[0] != k:
+        raise ValueError(f"grid_block: t {t.shape}, accel {accel.shape}, ratio {ratio.shape} disagree")
+    found = np.empty(5, dtype=np.int64)
+    beyond = np.zeros((k, ratio.shape[1]), dtype=np.int64)
+    ffi = mod.ffi
+    rc = mod.lib.acsv_grid_block(
+        m, k, ffi.from_buffer("double[]", t), ffi.from_buffer("double[]", accel), float(t0), float(Ts), int(k_prev),
+        int(first), ratio.shape[1], ffi.from_buffer("double[]", ratio), float(thr),
+        ffi.from_buffer("int64_t[]", found, require_writable=True),
+        ffi.from_buffer("int64_t[]", beyond, require_writable=True),
+    )  # fmt: skip
+    if rc != OK:
+        raise ValueError(f"grid_block: {WHY.get(rc, f'result {rc}')}")
+    return found, beyond
+
+
+STEPS_CAP = 1 << 16  # distinct time steps time_block counts in a block; a block with more goes to numpy
+
+
+def time_block(mod, t: np.ndarray, prev: float | None, cap: int = STEPS_CAP):
+    """The time pass of one block of stamps ``t`` (after ``prev``, the stamp before the block, or None) in one C
+    pass (acsv_time_block): (first non-finite stamp, first step <= 0 by np.diff's index, steps <= 0, steps),
+    -1 where none; steps = (least, largest, distinct steps, their counts), or None when a stamp is not
+    finite, there is no step, or there are more than ``cap`` distinct steps. The numbers of
+    accelnav.data.stream._steps_numpy, which tests/data/test_stream_grid.py holds it to."""
+    t = np.ascontiguousarray(t, dtype=np.float64)
+    m = len(t)
+    cap = max(1, min(int(cap), m))
+    found = np.empty(4, dtype=np.int64)
+    span = np.empty(2)
+    vals, counts = np.empty(cap), np.empty(cap, dtype=np.int64)
+    ffi = mod.ffi
+    w = {"require_writable": True}
+    rc = mod.lib.acsv_time_block(
+        m, ffi.from_buffer("double[]", t), int(prev is not None), 0.0 if prev is None else float(prev), cap,
+        ffi.from_buffer("int64_t[]", found, **w), ffi.from_buffer("double[]", span, **w),
+        ffi.from_buffer("double[]", vals, **w), ffi.from_buffer("int64_t[]", counts, **w),
+    )  # fmt: skip
+    if rc != OK:
+        raise ValueError(f"time_block: {WHY.get(rc, f'result {rc}')}")
+    nonfinite, back, n_back, distinct = (int(x) for x in found)
+    n_dt = m - (prev is None)
+    steps = None if distinct < 0 or n_dt == 0 else (float(span[0]), float(span[1]), vals[:distinct], counts[:distinct])
+    return nonfinite, back, n_back, steps

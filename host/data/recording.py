@@ -1058,6 +1058,26 @@ def unit_evidence(accel: np.ndarray, units, full_scale: float | None) -> np.ndar
     return out
 
 
+def unit_ratios(units, full_scale: float | None) -> tuple[np.ndarray, float]:
+    """:func:`unit_evidence`'s counts as factors: (ratio (n_axes, len(_ALT_UNITS)), thr), a sample a of axis j
+    counted for unit k when |a| * ratio[j, k] > thr; ratio 0 where unit_evidence counts nothing (thr > 0)."""
+    ratio = np.zeros((len(units), len(_ALT_UNITS)))
+    for j, u in enumerate(units):
+        if u in _ALT_UNITS and full_scale is not None:
+            ratio[j] = [UNITS[alt] / UNITS[u] for alt in _ALT_UNITS]
+    return ratio, BEYOND * full_scale if full_scale is not None else np.inf
+
+
+def evidence_of(accel: np.ndarray, beyond: np.ndarray, ratio: np.ndarray) -> np.ndarray:
+    """:func:`unit_evidence` of a block with every sample finite, its counts ``beyond`` made already by
+    :func:`unit_ratios`' rule (``ratio``): the same numbers (the sums of the same contiguous columns)."""
+    out = np.zeros((accel.shape[1], 2 + len(_ALT_UNITS)))
+    for j in range(accel.shape[1]):
+        out[j, :2] = float(np.ascontiguousarray(accel[:, j]).sum()), len(accel)
+    out[:, 2:] = np.where(ratio > 0, beyond, 0)
+    return out
+
+
 def check_units(src: str, columns, units, unit_from, evidence: np.ndarray, full_scale: float | None, whose: str):
     """Refuse, naming the unit it most likely has, a column whose unit no name said (--unit or the model's) when
     its data make that unit implausible: a share RAIL_SHARE of its samples past the sensor's range where

@@ -3,7 +3,8 @@
 :func:`read_input` holds the whole recording in arrays (about 70 bytes per sample, more while it
 parses), so a 1e8-row CSV cannot go through it. :func:`open_stream` instead parses the CSV once with
 the same parser (:func:`accelnav.data.recording.csv_pieces`: one CSV dialect for both) into a binary
-store of its numbers and their file lines in a temporary folder, makes read_input's checks over that
+store of its numbers and their file lines (none while every line is a row: line = first + row) in a
+temporary folder, makes read_input's checks over that
 store block by block (time finite and increasing, the clock's median step and regularity, the rate
 against the model, the axes, counts converted by the model's read-out, NaN, each sample on the grid),
 and returns a :class:`Stream`: the number of rows and ``read(s, e) -> (t, accel, clipped)`` for
@@ -23,11 +24,13 @@ import os
 import shutil
 import stat
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from accelnav.data import recording as rc
+from accelnav.data.csvnum import grid_block, time_block
 from accelnav.errors import UserError
 from accelnav.fileio import TempFolder, check_input, pread_exact
 from accelnav.model.load import Model, load_model
@@ -61,6 +64,8 @@ class Stream:
     _fds: dict = field(default_factory=dict)
     _scratch: TempFolder | None = None  # the store's folder (fileio.TempFolder: removed on close)
     kind: str = "CSV"
+    # row k is on file line first_line + k (every line after the header a data line): no lines store kept
+    first_line: int | None = None
 
     @property
     def width(self) -> int:
@@ -72,7 +77,9 @@ class Stream:
         nums = np.empty(e - s, dtype=np.int64) if lines else None
         if e > s:
             pread_exact(self._fds["store"], table, 8 * self.width * s, "input store", UserError)
-            if lines:
+            if lines and self.first_line is not None:
+                nums[:] = self.first_line + np.arange(s, e)
+            elif lines:
                 pread_exact(self._fds["lines"], nums, 8 * s, "input store", UserError)
         return table, nums
 
@@ -241,9 +248,16 @@ def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, u
     folder = scratch.path
     src = str(path)
     size = path.stat().st_size
-    n, head = 0, None
+    n, head, first_line = 0, None, None  # first_line: while row k is on line first_line + k, no lines are stored
     with open(folder / "store.bin", "wb") as fs, open(folder / "lines.bin", "wb") as fl:
         for head, table, nums in rc.csv_pieces(path, axes, unit, rate_hz, time_column, gz, default, names):  # noqa: B007
+            nums = np.ascontiguousarray(nums, dtype=np.int64)
+            if n == 0 and len(nums):
+                first_line = int(nums[0])
+            if first_line is not None and len(nums) and not (nums[0] == first_line + n and np.all(np.diff(nums) == 1)):
+                for a in range(0, n, 1 << 20):  # a comment or blank line among the rows: their lines from here on
+                    fl.write((first_line + np.arange(a, min(a + (1 << 20), n), dtype=np.int64)).data)
+                first_line = None
             if n == 0 and not gz:  # disk: the whole store from the first piece's rows per character
                 est = int(len(nums) * max(1.0, size / rc.CHUNK_CHARS) * 1.05)
                 need, free = est * 8 * (table.shape[1] + 1), shutil.disk_usage(folder).free
@@ -254,7 +268,8 @@ def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, u
                     )
             try:
                 fs.write(np.ascontiguousarray(table, dtype=np.float64).data)
-                fl.write(np.ascontiguousarray(nums, dtype=np.int64).data)
+                if first_line is None:
+                    fl.write(nums.data)
             except OSError as exc:
                 if exc.errno == errno.ENOSPC:
                     raise UserError(f"{src}: the disk in {folder.parent} filled up at row {n} of its store") from None
@@ -262,7 +277,7 @@ def _parse(path: Path, scratch: TempFolder, gz: bool, override, default, axes, u
             n += len(nums)
     if n < 2:
         raise UserError(f"{src}: {n} data rows; a recording needs many more")
-    st = Stream(src, n, override, np.array([]), head, folder, rate_hz, None)
+    st = Stream(src, n, override, np.array([]), head, folder, rate_hz, None, first_line=first_line)
     st._scratch = scratch
     st._fds = {k: os.open(folder / f"{k}.bin", os.O_RDONLY) for k in ("store", "lines")}
     return st
@@ -318,8 +333,12 @@ class _Clock:
 
     def add(self, dt: np.ndarray) -> int:
         """Count the steps ``dt``; returns how many distinct steps there are so far."""
-        self.dmin, self.dmax = min(self.dmin, float(dt.min())), max(self.dmax, float(dt.max()))
-        u, c = np.unique(dt, return_counts=True)
+        return self.add_counted(float(dt.min()), float(dt.max()), *np.unique(dt, return_counts=True))
+
+    def add_counted(self, dmin: float, dmax: float, u: np.ndarray, c: np.ndarray) -> int:
+        """:meth:`add` of steps already counted: their least and largest, the distinct ones ``u`` (any order)
+        and their counts ``c``."""
+        self.dmin, self.dmax = min(self.dmin, dmin), max(self.dmax, dmax)
         self.vals, inv = np.unique(np.concatenate((self.vals, u)), return_inverse=True)
         both = np.concatenate((self.counts, c))
         self.counts = np.bincount(inv, weights=both, minlength=len(self.vals)).astype(np.int64)
@@ -334,24 +353,31 @@ class _Clock:
 
 def _time_pass(st: Stream, block: int) -> _Clock:
     """recording._check_time's first checks over the store: time finite and increasing; the steps counted."""
-    src, n = st.source, st.n
+    from accelnav.data.csvnum import csv_lib
+
+    src, n, mod = st.source, st.n, csv_lib()
     clock, bad, back, n_back, prev = _Clock(), None, None, 0, None
     for s in range(0, n, block):
         t = st.times(s, min(s + block, n))
         if s == 0:
             clock.t0 = float(t[0])
         clock.tl = float(t[-1])
-        if bad is None and not np.isfinite(t).all():
-            bad = s + int(np.argmax(~np.isfinite(t)))
-        dt = np.diff(t) if prev is None else np.diff(np.concatenate(([prev], t)))
+        # one C pass over the block where the C is built (acsv_time_block), else its numpy twin: the same numbers
+        nonfinite, first_back, count_back, steps = (_steps_numpy if mod is None else partial(time_block, mod))(t, prev)
+        if bad is None and nonfinite >= 0:
+            bad = s + nonfinite
         first = s - (prev is not None)  # the sample index of dt[0]'s first sample
+        n_dt = len(t) - (prev is None)
+        if count_back:
+            back = first + first_back if back is None else back  # dt index k: samples k, k + 1
+            n_back += count_back
+        if n_dt and bad is None:
+            if steps is None:  # more distinct steps in the block than the C counts: numpy's
+                dt = np.diff(t) if prev is None else np.diff(np.concatenate(([prev], t)))
+                steps = (float(dt.min()), float(dt.max()), *np.unique(dt, return_counts=True))
+            if clock.add_counted(*steps) > MAX_STEPS:
+                raise NotStreamed(f"{src}: more than {MAX_STEPS} distinct time steps: its clock is read whole")
         prev = t[-1]
-        b = dt <= 0
-        if b.any():
-            back = first + int(np.argmax(b)) if back is None else back  # dt index k: samples k, k + 1
-            n_back += int(b.sum())
-        if len(dt) and bad is None and clock.add(dt) > MAX_STEPS:
-            raise NotStreamed(f"{src}: more than {MAX_STEPS} distinct time steps: its clock is read whole")
     if bad is not None:
         raise UserError(f"{src}: time is not a finite number at {_where(st, bad)}")
     if back is not None:
@@ -361,6 +387,18 @@ def _time_pass(st: Stream, block: int) -> _Clock:
             f"{n_back} such steps"
         )
     return clock
+
+
+def _steps_numpy(t: np.ndarray, prev: float | None):
+    """accelnav.data.csvnum.time_block's numbers by numpy (where no C is built; the C's oracle in the tests)."""
+    finite = np.isfinite(t)
+    dt = np.diff(t) if prev is None else np.diff(np.concatenate(([prev], t)))
+    b = dt <= 0
+    steps = None
+    if finite.all() and len(dt):
+        steps = (float(dt.min()), float(dt.max()), *np.unique(dt, return_counts=True))
+    return (-1 if finite.all() else int(np.argmax(~finite)), int(np.argmax(b)) if b.any() else -1, int(b.sum()),
+            steps)  # fmt: skip
 
 
 def _clock_verdict(st: Stream, clock: _Clock, tu: str | None) -> float:
@@ -383,9 +421,13 @@ def _clock_verdict(st: Stream, clock: _Clock, tu: str | None) -> float:
 
 def _grid_pass(st: Stream, rate: float, block: int) -> None:
     """Counts converted, NaN, each sample on the grid (recording.on_grid), as the reader will give them."""
+    from accelnav.data.csvnum import csv_lib
+
     src, n, t0, h = st.source, st.n, st.t0, st.head
     said, k_prev = False, -1
-    fs, evidence = st.model.max_accel_m_s2, 0.0
+    weigh = bool(h.unit_from) and any(f != "name" for f in h.unit_from)  # a unit no name said: what the data say
+    ratio, thr = rc.unit_ratios(h.units, st.model.max_accel_m_s2)
+    mod, evidence = csv_lib(), 0.0
     for s in range(0, n, block):
         e = min(s + block, n)
         try:
@@ -396,32 +438,49 @@ def _grid_pass(st: Stream, rate: float, block: int) -> None:
         if not said and rec.notes:
             note(rec.notes[-1])  # the counts' conversion, once
             said = True
-        located = replace(rec, lines=None)
-        nan = ~np.isfinite(rec.accel)
-        k = np.rint((rec.t - t0) / st.Ts).astype(np.int64)
-        off = np.abs(rec.t - t0 - k * st.Ts) > 0.25 * st.Ts
-        dk = np.diff(np.concatenate(([k_prev], k))) if s else np.diff(k)
-        if nan.any() or off.any() or np.any(dk < 1):
-            located = replace(rec, lines=st.rows(s, e)[1])
-        if nan.any():
-            k = int(np.argmax(nan.any(axis=1)))
-            raise UserError(f"{src}: {located.where(k)} is not a number (NaN/inf); a gap in the data is not accepted")
-        if off.any():
-            i = int(np.argmax(off))
+        # one C pass over the block where the C is built (acsv_grid_block), else its numpy twin: the same numbers
+        grid = _grid_numpy if mod is None else partial(grid_block, mod)
+        found, beyond = grid(rec.t, rec.accel, t0, st.Ts, k_prev, s == 0, ratio if weigh else ratio[:, :0], thr)
+        nan, off, dup, gap, k_prev = (int(x) for x in found)
+        located = replace(rec, lines=None if max(nan, off, dup) < 0 else st.rows(s, e)[1])
+        if nan >= 0:
+            raise UserError(f"{src}: {located.where(nan)} is not a number (NaN/inf); a gap in the data is not accepted")
+        if off >= 0:
             raise UserError(
-                f"{src}: {located.where(i)} (t = {rec.t[i]:.6g} s) is off the {rate:.6g} Hz sample grid by more "
+                f"{src}: {located.where(off)} (t = {rec.t[off]:.6g} s) is off the {rate:.6g} Hz sample grid by more "
                 "than a quarter period: the timing jitters too much for a fixed-rate filter"
             )
-        if np.any(dk < 1):
-            i = int(np.argmax(dk < 1)) + (0 if s else 1)
+        if dup >= 0:
+            i = dup + (0 if s else 1)
             raise UserError(f"{src}: {located.where(i)} falls on the same sample period as the one before it")
-        if np.any(dk > 1):
+        if gap:
             raise NotStreamed(f"{src}: samples missing from its clock are filled in by the whole reader")
-        k_prev = int(k[-1])
-        if h.unit_from and any(f != "name" for f in h.unit_from):  # a unit no name said: what the data say of it
-            evidence = evidence + rc.unit_evidence(rec.accel, h.units, fs)
-    if h.unit_from and any(f != "name" for f in h.unit_from):
-        rc.check_units(src, h.chosen, h.units, h.unit_from, evidence, fs, str(st.model.source))
+        if weigh:
+            evidence = evidence + rc.evidence_of(rec.accel, beyond, ratio)
+    if weigh:
+        rc.check_units(src, h.chosen, h.units, h.unit_from, evidence, st.model.max_accel_m_s2, str(st.model.source))
+
+
+def _grid_numpy(t: np.ndarray, accel: np.ndarray, t0: float, Ts: float, k_prev: int, first: bool, ratio, thr):
+    """accelnav.data.csvnum.grid_block's numbers by numpy (where no C is built; the C's oracle in the tests)."""
+    nan = ~np.isfinite(accel)
+    k = np.rint((t - t0) / Ts).astype(np.int64)
+    off = np.abs(t - t0 - k * Ts) > 0.25 * Ts
+    dk = np.diff(k) if first else np.diff(np.concatenate(([k_prev], k)))
+    rows = nan.any(axis=1)
+    found = [
+        int(np.argmax(rows)) if rows.any() else -1,
+        int(np.argmax(off)) if off.any() else -1,
+        int(np.argmax(dk < 1)) if np.any(dk < 1) else -1,
+        int(np.any(dk > 1)),
+        int(k[-1]),
+    ]
+    mag = np.where(nan, 0.0, np.abs(accel))
+    beyond = np.array(
+        [[np.count_nonzero(~nan[:, j] & (mag[:, j] * r > thr)) for r in ratio[j]] for j in range(accel.shape[1])],
+        dtype=np.int64,
+    ).reshape(ratio.shape)
+    return np.array(found, dtype=np.int64), beyond
 
 
 def npz_rows(path: str | os.PathLike[str]) -> int | None:

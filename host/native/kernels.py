@@ -50,7 +50,9 @@ WIRE = Kernel(
     "accelnav.link._acnwire", "host/link/csrc", ("acnwire.c", "acnwire.h"), "acnw_source", ("-std=c99", "-O2")
 )
 # the CSV body's numbers: correctly rounded like Python's float(), so no contraction and no fast math
-CSVNUM = Kernel("accelnav.data._csvnum", "host/data/csrc", ("csvnum.c", "csvnum.h"), "acsv_source", RICCATI_FLAGS)
+CSVNUM = Kernel(
+    "accelnav.data._csvnum", "host/data/csrc", ("csvnum.c", "csvnum.h"), "acsv_source", RICCATI_FLAGS, ("m",)
+)  # fmt: skip
 
 
 def source_hash(k: Kernel, csrc: Path) -> str:

@@ -1198,6 +1198,23 @@ static void steady_jump(const acn_axis *m, const double *sr, long s, double P[4]
 }
 
 /*
+ * sqrt(x), taken again only when x's bits differ from the last x's (bits, root: the last x's and
+ * its root). The smoothed (a, eps) variances (acn_chunk_cov_lean) stay the same double away from
+ * the run's ends, and their roots were half the square roots of the r, u pass (acn_chunk_ru_lean:
+ * 20 -> 16-18 ns a sample, measured). The same bits in, the same root out.
+ */
+static inline double sqrt_again(double x, unsigned long long *bits, double *root)
+{
+    unsigned long long b = 0; /* at least 64 bits (C99): a double's fit */
+    memcpy(&b, &x, sizeof x);
+    if (b != *bits) {
+        *bits = b;
+        *root = sqrt(x);
+    }
+    return *root;
+}
+
+/*
  * acn_chunk_fwd for a chunk of valid samples that follows only valid ones, from
  * the rows of acn_plain_rows (nt of them, the last steady): the gains, smoother
  * gains and (a, eps) blocks are read, the r, u rows of P propagated as in
@@ -1456,15 +1473,24 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
 void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *cov,
                        const double *srows, long nt, double *carry, double *xs, double *sds)
 {
+    /* the carry and the model in locals: the stores to xs, sds cannot alias them, so the recursion
+     * stays in registers (20 ns a sample, 23-24 through memory, measured); the same operations */
+    const acn_axis mm = *m;
+    double v[11], aa_root = 0.0, ee_root = 0.0;
+    unsigned long long aa_bits = ~0ULL, ee_bits = ~0ULL;
+    memcpy(v, carry, sizeof v);
     for (long k = 0; k < n; k++) {
         const double *row = store + ACN_LROW * k, *nx = row + ACN_LROW;
         const double *pc = cov + 3 * k, *pn = pc + 3;
         const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
         double *o = xs + 4 * k, *sd = sds + 4 * k;
-        o[0] = carry[0], o[1] = carry[1], o[2] = row[0], o[3] = row[1];
-        sd[0] = sqrt(carry[2]), sd[1] = sqrt(carry[5]), sd[2] = sqrt(pc[0]), sd[3] = sqrt(pc[2]);
-        ru_step(m, carry, row[0], pc[0], nx[0], pn[0], pn[1], sr + 4);
+        o[0] = v[0], o[1] = v[1], o[2] = row[0], o[3] = row[1];
+        sd[0] = sqrt(v[2]), sd[1] = sqrt(v[5]);
+        sd[2] = sqrt_again(pc[0], &aa_bits, &aa_root);
+        sd[3] = sqrt_again(pc[2], &ee_bits, &ee_root);
+        ru_step(&mm, v, row[0], pc[0], nx[0], pn[0], pn[1], sr + 4);
     }
+    memcpy(carry, v, sizeof v);
 }
 
 /* ------------------------------------------------------------------------- */
