@@ -139,10 +139,10 @@ def resolved(model: Model, p: ZuptParams) -> ZuptParams:
     return p
 
 
-def _windows(x: np.ndarray, ok: np.ndarray, allow: np.ndarray, w: int, var_k: float):
+def _windows(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k: float):
     """(means, wvar, centre) over the centred window of w (odd) samples about each sample: the window mean per axis
     (N, n_axes), the window variance summed over the axes (N,), and the quiet centres (N,) bool: every sample of
-    the window usable on every axis and the mean over axes of variance / ``allow`` at most ``var_k``. NaN (False)
+    the window ``usable`` (N,) and the mean over axes of variance / ``allow`` at most ``var_k``. NaN (False)
     where the window leaves the run.
 
     Compiled (acn_rest_windows in csrc/fastsmooth.c): in numpy these were a dozen whole-record passes (cumsums,
@@ -155,7 +155,7 @@ def _windows(x: np.ndarray, ok: np.ndarray, allow: np.ndarray, w: int, var_k: fl
     mod = _lib()
     ffi = mod.ffi
     xc = np.ascontiguousarray(x, dtype=np.float64)
-    usable = np.ascontiguousarray(ok.all(axis=1), dtype=np.uint8)
+    usable = np.ascontiguousarray(usable, dtype=bool).view(np.uint8)
     allow = np.ascontiguousarray(allow, dtype=np.float64)
     means, wvar, quiet = np.empty((n, n_axes)), np.empty(n), np.empty(n)
     centre = np.empty(n, dtype=np.uint8)
@@ -235,7 +235,8 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     """:func:`candidates` on the prepared record (:func:`_prepared`), which the decision reads too."""
     n, n_axes = x.shape
     w = window_samples(model, p)
-    means, wvar, centre = _windows(x, ok, R + p.tremor**2, w, p.var_k)
+    usable = ok.all(axis=1)
+    means, wvar, centre = _windows(x, usable, R + p.tremor**2, w, p.var_k)
     # split each run into pieces of steady level: a move that starts gently is quiet, but its mean walks away
     total = float(np.sum(R + p.tremor**2))
     bound2 = p.trim_k**2 * total / w
@@ -264,7 +265,6 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     # pieces at two levels stay apart by a sample at least, so each is judged on its own
     h = int(round(p.widen * (w // 2)))
     bridge = int(round(p.bridge_s * model.rate_hz))
-    usable = ok.all(axis=1)
     starts = np.array([q[0] for q in pieces], dtype=np.int64)
     stops = np.array([q[1] for q in pieces], dtype=np.int64)
     refs = np.array([q[2] for q in pieces]).reshape(len(pieces), n_axes)
@@ -287,11 +287,11 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
                 a = max(a, merged[-1][1] + 1)
             merged.append([a, b, ref, run])
     shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
-    kept = np.array([(a, b) for a, b, _, _ in merged if b - a >= shortest], dtype=np.int64).reshape(-1, 2)
-    edges = np.zeros(n + 1, dtype=np.int64)
-    np.add.at(edges, kept[:, 0], 1)
-    np.add.at(edges, kept[:, 1], -1)
-    return np.cumsum(edges[:n]) > 0
+    mask = np.zeros(n, dtype=bool)
+    for a, b, _, _ in merged:  # a slice per rest: tens of thousands, where a count per sample passed the record thrice
+        if b - a >= shortest:
+            mask[a:b] = True
+    return mask
 
 
 def _level_steps(

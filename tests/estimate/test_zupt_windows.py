@@ -25,7 +25,7 @@ def assert_same(accel, clipped, model, params=None) -> int:
     assert np.array_equal(x.view(np.int64), x0.view(np.int64)), "x differs in some bit"
     assert np.array_equal(R, R0)
     w = zupt.window_samples(model, p)
-    got = zupt._windows(x, ok, R + p.tremor**2, w, p.var_k)
+    got = zupt._windows(x, ok.all(axis=1), R + p.tremor**2, w, p.var_k)
     want = ref.windows(x0, ok0, R0, w, p.tremor, p.var_k)
     for name, g, e in zip(("means", "wvar"), got[:2], want[:2], strict=True):
         bits, bits0 = g.view(np.int64), e.view(np.int64)
@@ -101,7 +101,7 @@ def test_a_window_on_the_bound_is_quiet():
     quiet = ref.windows(x, ok, R, w, p.tremor, p.var_k)[3]
     k = 200
     var_k = float(quiet[k] / x.shape[1])
-    got = zupt._windows(x, ok, R + p.tremor**2, w, var_k)[2]
+    got = zupt._windows(x, ok.all(axis=1), R + p.tremor**2, w, var_k)[2]
     want = ref.windows(x, ok, R, w, p.tremor, var_k)[2]
     assert want[k] and np.array_equal(got, want)
     assert 0 < want.sum() < len(want) - w  # the bound splits the record: some windows above it, some on or below
