@@ -1,15 +1,16 @@
 """Issue 32: the rest detector's record and window pass in C (acn_rest_prepare, acn_rest_windows) give the very
-doubles the numpy they replaced gave (tests/support/zupt_windows_reference.py), so the candidates and every
-decision on them are unchanged: on the bench's tiled stop-and-go, on simulated scenarios, and on random records
-with NaN, infinite and clipped samples, gaps of unusable rows, windows at the record's ends and records shorter
-than a window."""
+doubles the numpy they replaced gave, so the candidates and every decision on them are unchanged. The numpy is
+tests/support/zupt_oracle.py's (main's detector before issue 24; its record and window pass are main's to the
+bit, and tests/estimate/test_zupt_arrays.py holds the present candidates to its). On the bench's tiled
+stop-and-go, simulated scenarios, random records with NaN, infinite and clipped samples and gaps of unusable
+rows, windows at the record's ends, records about a window long, and a window exactly on the var_k bound."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from conftest import MODELS
-from support import zupt_windows_reference as ref
+from support import zupt_oracle as ref
 
 from accelnav.estimate import zupt
 from accelnav.hil_sim.sim.sensor import simulate
