@@ -148,7 +148,7 @@ def _windows(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k
     Compiled (acn_rest_windows in csrc/fastsmooth.c): in numpy these were a dozen whole-record passes (cumsums,
     differences, temporaries), the largest share of the detector's time. The C differences numpy's cumsums in
     numpy's order, so every figure is the same double (tests/estimate/test_zupt_windows.py holds it to the numpy
-    it replaced, tests/support/zupt_windows_reference.py)."""
+    it replaced, kept in tests/support/zupt_oracle.py)."""
     from accelnav.estimate.fastsmooth import _lib
 
     n, n_axes = x.shape
@@ -176,7 +176,8 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
     """(x, ok, R): acceleration minus the bias mean (0 where unusable), the usable mask, R per axis.
 
     Compiled past the bias' powers (acn_rest_prepare: the mask, the bias and the difference in one pass per axis,
-    numpy's operations in numpy's order); the powers stay numpy's own, so x is the same double."""
+    numpy's operations in numpy's order, kf.bias_model's formula); the powers stay numpy's own, so x is the same
+    double (tests/estimate/test_zupt_windows.py)."""
     from accelnav.estimate.fastsmooth import _lib
 
     accel = np.ascontiguousarray(accel, dtype=np.float64)
