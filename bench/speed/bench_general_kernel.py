@@ -59,10 +59,10 @@ def measure(n: int, repeat: int) -> dict[str, float]:
         t0 = time.perf_counter()
         lib.acn_chunkg_fwd(
             ax, n, 1, p(z), p(valid.view(np.uint8), "unsigned char *"), len(ex), ek, p(ex.h), p(ex.z), p(ex.R),
-            p(gates), p(applied, "unsigned char *"), p(carry_f), p(store), p(xa), p(sa),
+            p(gates), p(applied, "unsigned char *"), p(carry_f), p(store), p(xa), p(sa), ffi.NULL, ffi.NULL,
         )  # fmt: skip
         t1 = time.perf_counter()
-        if lib.acn_chunkg_bwd(ax, 0, n, 1, p(store), p(carry_b), p(xa), p(sa)) != 0:
+        if lib.acn_chunkg_bwd(ax, 0, n, 1, p(store), p(carry_b), p(xa), p(sa), ffi.NULL) != 0:
             raise SystemExit("acn_chunkg_bwd refused the run")
         t2 = time.perf_counter()
         best["acn_chunkg_fwd"] = min(best["acn_chunkg_fwd"], t1 - t0)

@@ -150,7 +150,7 @@ def test_smooth_over_its_memory_budget_runs_the_bounded_path(sim, tmp_path, caps
         assert_rel_close(b[f"{key}_sd"], sd, 0.0, RTOL, f"{key}_sd")
 
 
-@pytest.mark.parametrize("flags", [["--covariances"], ["--tune"], ["--plots", "PLOTS"]])
+@pytest.mark.parametrize("flags", [["--tune"], ["--plots", "PLOTS"]])
 def test_a_run_too_large_for_what_was_asked_is_refused_in_one_line(sim, tmp_path, capsys, flags):
     flags = [str(tmp_path / "p") if f == "PLOTS" else f for f in flags]
     status, out, err = _run(["smooth", sim, "--out", tmp_path / "x.npz", "--memory-budget", "0.02", *flags], capsys)
