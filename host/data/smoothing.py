@@ -213,7 +213,9 @@ def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, s
     size = input_size(path, model, read.get("axes"))
     if size is not None:
         rows, n_axes = size
-        engine.plan(rows, n_axes, job, label=str(path))  # refuses before reading what the budget cannot do
+        p = engine.plan(rows, n_axes, job, label=str(path))  # refuses before reading what the budget cannot do
+        if p.whole and job.covariances and not whole:  # within the budget: one chunk in memory, the input read whole
+            whole = "--covariances"
         held, limit = rows * 8 * (2 + n_axes), input_limit()
         # with a budget given, an input whose whole-array run exceeds it streams; without one, an input over
         # STREAM_ABOVE in memory (a store read again three times costs more than reading it whole once)
