@@ -318,3 +318,27 @@ def test_covariances_with_invalid_samples_equal_one_chunk(tmp_path):
     for key in ("filt_x", "smooth_x", "filt_x_prior"):
         sd = np.sqrt(np.einsum("akii->aki", ref[key.replace("_x", "_P")]))
         assert_rel_close(got[key], ref[key], sd, 1e-9, key)
+
+
+@pytest.mark.parametrize("covariances", [False, True])
+def test_the_disk_check_refuses_one_byte_short_and_runs_at_the_count(tmp_path, monkeypatch, covariances):
+    """smooth_bounded's disk check is the store plus the output as laid out: one byte less is refused in one line
+    before any file is made; exactly the count runs, its per-sample members the counted bytes."""
+    from accelnav.errors import UserError
+
+    model = load_model()
+    n = 500
+    t, accel, clipped = _data(model, n)
+    need = chunked.disk_needed(n, 2, n_stages=2, full=True, covariances=covariances)
+    kw = dict(chunk=64, covariances=covariances, workdir=tmp_path / "w")
+    (tmp_path / "w").mkdir()
+    monkeypatch.setattr(chunked, "free_bytes", lambda _: need - 1)
+    with pytest.raises(UserError, match="need .* GB of disk") as exc:
+        chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz", **kw)
+    assert "\n" not in str(exc.value) and not (tmp_path / "o.npz").exists()
+    monkeypatch.setattr(chunked, "free_bytes", lambda _: need)
+    chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz", **kw)
+    with np.load(tmp_path / "o.npz") as f:
+        assert sum(f[k].nbytes for k in f.files if n in f[k].shape[:2]) == n * chunked.output_bytes(
+            2, 2, full=True, covariances=covariances
+        )
