@@ -47,6 +47,9 @@ def measure(n: int, repeat: int) -> dict[str, float]:
         return ffi.cast(t, ffi.from_buffer(a))
 
     ax = fastsmooth._axis_struct(ffi, d)
+    # the covariance outputs (NULL: not written), which a baseline built before them does not take
+    fwd_cov = (ffi.NULL,) * (len(ffi.typeof(lib.acn_chunkg_fwd).args) - 16)
+    bwd_cov = (ffi.NULL,) * (len(ffi.typeof(lib.acn_chunkg_bwd).args) - 8)
     store, xa, sa = np.empty((n, 14)), np.empty((n, 4)), np.empty((n, 4))
     gates, applied = np.zeros(len(ex)), np.zeros(len(ex), dtype=np.uint8)
     ek = ffi.from_buffer("long[]", ex.k)
@@ -59,10 +62,10 @@ def measure(n: int, repeat: int) -> dict[str, float]:
         t0 = time.perf_counter()
         lib.acn_chunkg_fwd(
             ax, n, 1, p(z), p(valid.view(np.uint8), "unsigned char *"), len(ex), ek, p(ex.h), p(ex.z), p(ex.R),
-            p(gates), p(applied, "unsigned char *"), p(carry_f), p(store), p(xa), p(sa),
+            p(gates), p(applied, "unsigned char *"), p(carry_f), p(store), p(xa), p(sa), *fwd_cov,
         )  # fmt: skip
         t1 = time.perf_counter()
-        if lib.acn_chunkg_bwd(ax, 0, n, 1, p(store), p(carry_b), p(xa), p(sa)) != 0:
+        if lib.acn_chunkg_bwd(ax, 0, n, 1, p(store), p(carry_b), p(xa), p(sa), *bwd_cov) != 0:
             raise SystemExit("acn_chunkg_bwd refused the run")
         t2 = time.perf_counter()
         best["acn_chunkg_fwd"] = min(best["acn_chunkg_fwd"], t1 - t0)

@@ -13,7 +13,9 @@ float64; --csv: text): --sizes 3e7 measures the same rows at a size this machine
 the chunked path's memory is the chunk buffers whatever the length, the whole-array path's grows with it.
 Fixes and given rests put their axes on the general path, whose store (14 doubles a sample and axis: 22 GB
 at 1e8 with 2 axes) goes to disk beside the output; their aids are made chunk by chunk, so their memory is
-the plain path's.
+the plain path's. --covariances takes the general path on every axis and writes 1 116 B a sample at 2 axes
+(chunked.output_bytes): with its store, 137 GB at 1e8, refused up front on a smaller disk; its memory is the
+chunk buffers too, so 1e7 measures it.
 Usage: python bench/run_all.py bench/speed/bench_smooth_rss.py [--sizes 1e8] [--cases NAME ...]
        [--before EXE] [--keep DIR]
 """

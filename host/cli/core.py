@@ -276,7 +276,7 @@ def register(sub) -> None:
         action="store_true",
         help="also write the forward filter's states filt_x, filt_sd when the run streams (by default it writes "
         "the smoother's alone: the filter's doubled the file and its writing time; accelnav filter writes "
-        "them, and runs that keep every sample in memory (--plots, --covariances, aids, ...) always do)",
+        "them, and so do --covariances and runs that keep every sample in memory (--plots, aids, ...))",
     )
     p.add_argument(
         "--warm-start",
@@ -291,7 +291,8 @@ def register(sub) -> None:
         metavar="MB",
         help="memory the run may take; a longer run is smoothed in chunks (its store in memory within the budget, "
         "without one within 1 GiB, else on disk beside --out; the aids' consistency checks are skipped); "
-        "--covariances, --tune and --plots need the whole run in memory and are refused over it; default: half "
+        "--covariances are written chunk by chunk (the general path: 544 B per sample and axis); --tune and "
+        "--plots need the whole run in memory and are refused over it; default: half "
         "the memory free",
     )
     p.add_argument(

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from accelnav.data.inputs import read_input
-from accelnav.data.runfile import FORMAT, FORMAT_V3, compact, export_csv, save_run
+from accelnav.data.runfile import FORMAT, FORMAT_V1, FORMAT_V3, compact, export_csv, save_run
 from accelnav.errors import UserError
 from accelnav.estimate import engine
 from accelnav.estimate.chunked import disk_needed, whole_bytes
@@ -86,7 +86,7 @@ def smooth_file(
             if zupt is not None and zupt != "auto":
                 spans = zu.read_rest_spans(zupt, source.clock(), names)
                 job = replace(job, rests=replace(rests, spans=spans))
-        fmt = FORMAT if job.full else FORMAT_V3
+        fmt = FORMAT_V1 if job.covariances else FORMAT if job.full else FORMAT_V3  # as save_run names them
         outcome = engine.run(model, source, job, out, workdir=workdir, run_format=fmt)
         if outcome.arrays is not None and job.aided and job.checks and "smooth" in job.stages:
             outcome.checks = _checks(outcome, source.whole(), job.fixes)
@@ -186,8 +186,6 @@ def _whole_reasons(job: engine.Job, zupt) -> str:
     held = zupt == "auto" or (given and "smooth" in job.stages and rest_file_kind(zupt) == "mask")
     flags = [f for f, v in (("--zupt", zupt if held else None), ("--tune", job.tune)) if v is not None]
     flags += [f for f in job.in_memory if f not in flags]
-    if job.covariances:
-        flags.append("--covariances")
     return ", ".join(flags)
 
 
@@ -215,7 +213,9 @@ def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, s
     size = input_size(path, model, read.get("axes"))
     if size is not None:
         rows, n_axes = size
-        engine.plan(rows, n_axes, job, label=str(path))  # refuses before reading what the budget cannot do
+        p = engine.plan(rows, n_axes, job, label=str(path))  # refuses before reading what the budget cannot do
+        if p.whole and job.covariances and not whole:  # within the budget: one chunk in memory, the input read whole
+            whole = "--covariances"
         held, limit = rows * 8 * (2 + n_axes), input_limit()
         # with a budget given, an input whose whole-array run exceeds it streams; without one, an input over
         # STREAM_ABOVE in memory (a store read again three times costs more than reading it whole once)
@@ -250,7 +250,14 @@ def _stream(path, model, job: engine.Job, read: dict, rows: int, n_axes: int, wo
     """The input opened as a stream (its store in ``workdir``), or None when only the whole reader takes it."""
     from accelnav.data.stream import NotStreamed, open_stream
 
-    need = rows * 8 * (2 + n_axes) + disk_needed(rows, n_axes, n_stages=len(job.stages))
+    smooth = "smooth" in job.stages
+    # the output as it will be laid out (compact or full, covariances, the aids' marks); aided axes take the
+    # general path's wider store
+    stages = 2 if smooth and job.covariances else len(job.stages)
+    need = rows * 8 * (2 + n_axes) + disk_needed(
+        rows, n_axes, n_axes if smooth and job.aided else 0, n_stages=stages, store=smooth, full=job.full,
+        covariances=job.covariances, marks=smooth and (job.aided or job.covariances),
+    )  # fmt: skip
     free = free_bytes(workdir)
     if need > free:
         raise UserError(

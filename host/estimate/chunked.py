@@ -29,8 +29,10 @@ multiply-adds differently).
 
 Output: an uncompressed run-file NPZ with ``t``, ``axis_names``, ``accel``, ``clipped`` and the states
 asked for (``stages``): the filter's and/or the smoother's ``filt_x``, ``smooth_x`` (n_axes, N, 4) and
-their standard deviations ``filt_sd``, ``smooth_sd``, not full covariances (at 1e8 samples each
-covariance array would be 13 GB per axis). Every member's size is known before the first chunk, so the
+their standard deviations ``filt_sd``, ``smooth_sd``; full covariances only when asked (``covariances``: at
+1e8 samples each covariance array is 13 GB per axis, written chunk by chunk: every axis then takes the
+general path, whose kernels hold each sample's covariances, acn_chunkg_fwd's priors and acn_chunkg_bwd's
+smoothed ones; the plain path's lean store does not). Every member's size is known before the first chunk, so the
 file is laid out up front and each chunk written once, in place (:mod:`accelnav.estimate.npzout`).
 
 Where every sample so far was valid and the design's steady rows exist (fastsmooth.steady_gains), the
@@ -82,6 +84,9 @@ LROW = 2  # the same for all-valid samples of the plain path with steady rows (A
 GROW = 14  # the same for the general path (ACN_GROW): the posterior (the backward pass predicts again)
 # held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
 CHUNK_BYTES = 8 * GROW + 8 + 1 + 2 * 32 + 2 * 8
+# --covariances, per sample, shared by the axes: two packed covariances and a prior mean (_Run.pa, pb, xb) and the
+# (m, 16) unpacked copy written out
+COV_BYTES = 8 * (10 + 10 + 4 + 16)
 OUT_KEYS = ("filt_x", "filt_sd", "smooth_x", "smooth_sd")
 # the compact output: states r, u (of r, u, a, eps) and their standard deviations, at float32 (24-bit
 # mantissa: 6e-8 relative, 0.6 mm at 10 km); with t, 8 + 16 n_axes bytes per sample
@@ -143,14 +148,15 @@ class _WholeAids(ChunkAids):
         return out
 
 
-def chunk_samples(n_axes: int, budget: int = BUDGET) -> int:
+def chunk_samples(n_axes: int, budget: int = BUDGET, covariances: bool = False) -> int:
     """Samples per chunk so that the chunk buffers of all axes fit ``budget`` bytes (2 at least)."""
-    return max(2, int(budget) // sample_bytes(n_axes))
+    return max(2, int(budget) // sample_bytes(n_axes, covariances))
 
 
-def sample_bytes(n_axes: int) -> int:
-    """Bytes held in memory per sample of a chunk: every axis's buffers and the input's t, accel, clipped."""
-    return n_axes * CHUNK_BYTES + 8 + n_axes * 9
+def sample_bytes(n_axes: int, covariances: bool = False) -> int:
+    """Bytes held in memory per sample of a chunk: every axis's buffers and the input's t, accel, clipped (with
+    ``covariances``, the shared buffers of a chunk's covariances: :data:`COV_BYTES`)."""
+    return n_axes * CHUNK_BYTES + 8 + n_axes * 9 + (COV_BYTES if covariances else 0)
 
 
 def memory_available() -> int:
@@ -170,11 +176,36 @@ def whole_bytes(n: int, n_axes: int) -> int:
     return int(n) * n_axes * WHOLE_BYTES
 
 
-def disk_needed(n: int, n_axes: int, n_general: int = 0, *, n_stages: int = 2, store: bool = True) -> int:
+def disk_needed(
+    n: int,
+    n_axes: int,
+    n_general: int = 0,
+    *,
+    n_stages: int = 2,
+    store: bool = True,
+    full: bool = True,
+    covariances: bool = False,
+    marks: bool = False,
+) -> int:
     """Bytes of disk the bounded path needs at its peak: the store (``store``: smoothing; ``n_general`` of
-    the axes on the general path, whose store is wider) and the output, written once in place."""
-    out = 8 * n * (1 + n_axes) + n * n_axes + 8 * n * n_axes * 8 * n_stages
-    return (8 * n * (ROW * (n_axes - n_general) + GROW * n_general) if store else 0) + out
+    the axes on the general path, whose store is wider; ``covariances``: every axis) and the output, written
+    once in place, as :func:`smooth_bounded` lays it out for ``full``, ``covariances`` and ``marks``."""
+    n_general = n_axes if covariances else n_general
+    return (8 * n * (ROW * (n_axes - n_general) + GROW * n_general) if store else 0) + n * output_bytes(
+        n_axes, n_stages, full=full, covariances=covariances, marks=marks
+    )
+
+
+def output_bytes(n_axes: int, n_stages: int, *, full: bool, covariances: bool = False, marks: bool = False) -> int:
+    """Bytes per sample of :func:`smooth_bounded`'s output (its per-sample members; the small ones aside): t,
+    each stage's x and sd (:data:`COMPACT`, or 4 states at float64 with the input echoed: ``full``), with
+    ``covariances`` each stage's 4x4 covariance and the filter's prior mean and covariance (float64), and the
+    marks (one byte per axis)."""
+    k, dtype = (4, np.float64) if full or covariances else COMPACT
+    per_axis = 2 * n_stages * k * np.dtype(dtype).itemsize + (9 if full or covariances else 0) + int(marks)
+    if covariances:
+        per_axis += 8 * (16 * n_stages + 4 + 16)
+    return 8 + n_axes * per_axis
 
 
 def array_reader(t: np.ndarray, accel: np.ndarray, clipped: np.ndarray) -> Reader:
@@ -348,6 +379,7 @@ class _Run:
     memory_left: int = 0  # bytes the stores not yet opened may take in memory
     on_disk: bool = False  # a store went to disk
     marks: str = ""  # the member of the samples where a marked aid was applied ("": none written)
+    covariances: bool = False  # the full covariances written (filt_P, smooth_P, the filter's priors)
 
     def __post_init__(self) -> None:
         # allocated once and reused by every chunk: fresh pages cost more than the kernels here (a page
@@ -358,6 +390,9 @@ class _Run:
         self.zc, self.ok = np.empty(self.chunk), np.empty(self.chunk, dtype=bool)
         self.bad = np.empty(self.chunk, dtype=bool)
         self.marked = np.zeros((self.chunk, len(self.axes)) if self.marks else (0, 0), dtype=bool)
+        # --covariances: a chunk's packed covariances (10 a sample) and the filter's prior means
+        c = self.chunk if self.covariances else 0
+        self.pa, self.pb, self.xb = np.empty((c, 10)), np.empty((c, 10)), np.empty((c, 4))
 
     def rows(self, width: int, count: int) -> np.ndarray:
         return self.store[: count * width].reshape(count, width)
@@ -377,6 +412,12 @@ class _Run:
         if ax.store is None:
             ax.store = self.open_store(f"store-{ax.j}", ax.width, s)
         return ax.store
+
+    def put_cov(self, key: str, j: int, s: int, packed: np.ndarray) -> None:
+        """Rows s.. of axis j of the (n_axes, N, 4, 4) output ``key`` from their (m, 10) packed covariances,
+        unpacked as the one-chunk path does (engine._Out.put)."""
+        full = np.take(packed, fastsmooth.UNPACK, axis=1)
+        self.out.write(key, 16 * (j * self.n + s), full)
 
     def ptr(self, a: np.ndarray, ctype: str = "double *"):
         return fastsmooth._ptr(self.ffi, a, ctype)
@@ -464,6 +505,7 @@ def smooth_bounded(
     store_memory: int = 0,
     full: bool = True,
     marks: str = "",
+    covariances: bool = False,
 ) -> dict:
     """Filter and RTS-smooth every axis of an n-sample run in bounded memory; write ``out``.
 
@@ -481,6 +523,10 @@ def smooth_bounded(
     their standard deviations at float32 beside t (:data:`COMPACT`, the run file's ``/3`` form).
     ``marks``: the name of an (N, n_axes) bool member written chunk by chunk: the samples where a marked aid
     (:attr:`Piece.marked`) was applied.
+    ``covariances``: also each stage's full covariances ``filt_P``, ``smooth_P`` (n_axes, N, 4, 4) and, with
+    ``filt``, the filter's priors ``filt_x_prior`` (n_axes, N, 4), ``filt_P_prior``, at float64 as the
+    one-chunk path writes them (implies ``full``): every axis then takes the general path, whose kernels hold
+    each sample's covariances (the plain path's lean store does not), written chunk by chunk.
     Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras given whole were
     applied, in their given order (None for ChunkAids), "marked": per axis, marked aids applied, "first",
     "last": {output key: its (n_axes, 4) values at sample 0, N-1}, "store_in_memory": where the store was}.
@@ -498,13 +544,17 @@ def smooth_bounded(
         raise ValueError("chunk: at least 2 samples")
     exs = _chunk_aids(extras, gates, n_axes, n)
     designs = [axis_design(model, j) for j in range(n_axes)]
-    general = [exs[j] is not None or bool(np.any(np.asarray(d.P0)[:2, 2:] != 0)) for j, d in enumerate(designs)]
+    general = [
+        covariances or exs[j] is not None or bool(np.any(np.asarray(d.P0)[:2, 2:] != 0)) for j, d in enumerate(designs)
+    ]
+    full = full or covariances
     out = output_target(out)  # the output rule (accelnav.fileio), refused before any work
     workdir = Path(workdir) if workdir is not None else out.workdir
     smooth = "smooth" in stages
     # the disk is checked for the worst case: every store on disk but what fits in memory at its widest rows
     worst_in_memory = smooth and 8 * n * (ROW * (n_axes - sum(general)) + GROW * sum(general)) <= store_memory
-    _check_disk(n, n_axes, sum(general), workdir, len(stages), smooth and not worst_in_memory)
+    _check_disk(n, n_axes, sum(general), workdir, len(stages), smooth and not worst_in_memory,
+                full=full, covariances=covariances, marks=bool(marks))  # fmt: skip
     mod = fastsmooth._lib()
     ffi, lib = mod.ffi, mod.lib
     small = {"format": np.array(run_format), "model_toml": np.array(model.text),
@@ -515,6 +565,10 @@ def smooth_bounded(
     k, dtype = (4, np.float64) if full else COMPACT
     for st in stages:
         big[f"{st}_x"] = big[f"{st}_sd"] = ((n_axes, n, k), dtype)
+        if covariances:
+            big[f"{st}_P"] = ((n_axes, n, 4, 4), np.float64)
+    if covariances and "filt" in stages:
+        big.update(filt_x_prior=((n_axes, n, 4), np.float64), filt_P_prior=((n_axes, n, 4, 4), np.float64))
     if marks:
         big[marks] = ((n, n_axes), np.bool_)
     with ExitStack() as stack:
@@ -523,7 +577,8 @@ def smooth_bounded(
         axes = [_axis(ffi, j, d, exs[j], general[j], n) for j, d in enumerate(designs)]
         for ax in axes:
             stack.callback(ax.close_stores)
-        run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k, tmp=tmp, memory_left=store_memory, marks=marks)
+        run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k, tmp=tmp, memory_left=store_memory, marks=marks,
+                   covariances=covariances)  # fmt: skip
         for ax in axes if smooth else []:
             # a lean store (all samples valid so far) first where the design has steady rows: 5 doubles per
             # sample, not 12; the full store is opened at the first sample that needs it (run.full_store)
@@ -581,8 +636,8 @@ def _chunk_aids(extras, gates, n_axes: int, n: int) -> list[ChunkAids | None]:
     return exs
 
 
-def _check_disk(n: int, n_axes: int, n_general: int, workdir: Path, n_stages: int, smooth: bool) -> None:
-    need = disk_needed(n, n_axes, n_general, n_stages=n_stages, store=smooth)
+def _check_disk(n: int, n_axes: int, n_general: int, workdir: Path, n_stages: int, smooth: bool, **out) -> None:
+    need = disk_needed(n, n_axes, n_general, n_stages=n_stages, store=smooth, **out)
     free = free_bytes(workdir)
     if need > free:
         raise UserError(
@@ -655,11 +710,16 @@ def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: n
     arrs = [piece.ex.h, piece.ex.z, piece.ex.R, piece.gates] if ne else [np.zeros(4)] * 4
     arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
     applied = np.zeros(max(ne, 1), dtype=np.uint8)
+    prior = (p(run.xb), p(run.pb)) if run.covariances else (run.ffi.NULL, run.ffi.NULL)
     run.lib.acn_chunkg_fwd(
         ax.m, m, int(e == run.n), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne,
         run.ffi.from_buffer("long[]", ek), *(p(a) for a in arrs), p(applied, "unsigned char *"),
-        p(ax.carry_f), p(buf), p(run.xa), p(run.sa),
+        p(ax.carry_f), p(buf), p(run.xa), p(run.sa), *prior,
     )  # fmt: skip
+    if run.covariances and "filt_P" in run.out.members:
+        run.put_cov("filt_P", ax.j, s, buf[:m, 4:])
+        run.out.write("filt_x_prior", 4 * (ax.j * run.n + s), run.xb[:m])
+        run.put_cov("filt_P_prior", ax.j, s, run.pb[:m])
     if ne:
         done = applied[:ne].astype(bool)
         ax.aids.applied(piece, done)
@@ -691,9 +751,12 @@ def _backward(run: _Run, ax: _Axis, s: int, e: int) -> None:
     p, m, last = run.ptr, e - s, int(e == run.n)
     if ax.width == GROW:
         buf = ax.store.rows(run.store, GROW, s, m)
-        rc = run.lib.acn_chunkg_bwd(ax.m, s, m, last, p(buf), p(ax.carry_b), p(run.xa), p(run.sa))
+        ps = p(run.pa) if run.covariances else run.ffi.NULL
+        rc = run.lib.acn_chunkg_bwd(ax.m, s, m, last, p(buf), p(ax.carry_b), p(run.xa), p(run.sa), ps)
         if rc != 0:
             raise UserError(f"bounded smoother: the prior covariance is not positive definite at {-rc}")
+        if run.covariances:
+            run.put_cov("smooth_P", ax.j, s, run.pa[:m])
         run.put("smooth_x", ax.j, s, run.xa[:m])
         run.put("smooth_sd", ax.j, s, run.sa[:m])
     elif s < ax.lean_end:

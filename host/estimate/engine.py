@@ -13,10 +13,11 @@ budget and from what was asked, how the passes are cut (:func:`plan`), and says 
   caller then writes ``--csv`` and ``--compress`` from the file a piece at a time
   (:mod:`accelnav.data.smoothing`).
 * **one chunk in memory** (:func:`smooth_arrays`, :func:`filter_arrays`: the same kernels' whole-array
-  entry points): what needs every output sample in memory at once, namely full covariances and the
-  filter's priors, the aids' consistency checks (NIS of each aid, the held-out fixes), ``--tune``
-  (its likelihood is a whole-run search), and a library call that wants arrays back. A run over the
-  budget that asks for one of them is refused in one line before any work.
+  entry points): what needs every output sample in memory at once, namely the aids' consistency checks
+  (NIS of each aid, the held-out fixes), ``--tune`` (its likelihood is a whole-run search), and a
+  library call that wants arrays back. A run over the
+  budget that asks for one of them is refused in one line before any work. ``--covariances`` within the
+  budget is one chunk in memory; over it, it is chunked, its covariances written chunk by chunk.
 
 The stages are called from one place each: the rest decision (:func:`rest_stage`:
 :func:`accelnav.estimate.zupt.decide_rests` with the run's fixes, then the review
@@ -51,9 +52,7 @@ from accelnav.progress import note
 RECORDING_KEYS = ("t", "accel", "clipped", "axis_names", "format", "model_toml", "model_source")
 STAGE_KEYS = ("filt_", "smooth_", "zupt", "fixes", "fix_nis")
 
-# packed index (accelnav.estimate.fastsmooth.PACKED, upper triangle by rows) of each entry of a 4x4,
-# row-major: np.take with it unpacks (N, 10) into (N, 16) in one pass, no fancy-index scatter
-_FULL = np.array([0, 1, 2, 3, 1, 4, 5, 6, 2, 5, 7, 8, 3, 6, 8, 9])
+_FULL = chunked.fastsmooth.UNPACK  # packed (N, 10) -> (N, 16) row-major
 _DIAG = np.array([0, 4, 7, 9])
 # bytes of store held in memory without a --memory-budget: with the chunk buffers (chunked.BUDGET) and the
 # interpreter (~300 MB at 1e7 samples, measured) a run stays under 1 GB at any length; 2 x 2e7 samples of
@@ -243,16 +242,18 @@ def plan(n: int, n_axes: int, job: Job, *, label: str = "the run", to_file: bool
     every output sample at once, else chunked to the file; refused (UserError) when that does not fit."""
     budget = budget_bytes(job.budget)
     fits = chunked.whole_bytes(n, n_axes) <= budget
-    needs = [f for f, v in (("--covariances", job.covariances), ("--tune", job.tune is not None)) if v]
+    needs = [f for f, v in (("--tune", job.tune is not None),) if v]
     needs += list(job.in_memory)
     if not to_file:
         needs.append("arrays returned in memory")
     if needs and not fits:
         raise UserError(f"{over_budget(label, n, n_axes, budget)}; bounded memory does not do {', '.join(needs)}")
-    if needs or (fits and ((job.aided and job.checks) or echo)):
-        why = ", ".join(needs) if needs else ("the aids' consistency checks" if job.aided else "the input's truth")
-        return Plan(True, max(n, 1), 1, budget, f"one chunk in memory ({why})")
-    chunk = chunked.chunk_samples(n_axes, min(chunked.BUDGET, budget))
+    # --covariances within the budget: one chunk in memory, as before; over it, chunked (written chunk by chunk)
+    held = [why for why, v in (("--covariances", job.covariances), ("the aids' consistency checks",
+                               job.aided and job.checks), ("the input's truth", echo)) if v]  # fmt: skip
+    if needs or (fits and held):
+        return Plan(True, max(n, 1), 1, budget, f"one chunk in memory ({', '.join(needs or held[:1])})")
+    chunk = chunked.chunk_samples(n_axes, min(chunked.BUDGET, budget), job.covariances)
     chunks = -(-n // chunk)
     why = "one chunk" if chunks == 1 else f"{chunks} chunks of {chunk} samples"
     return Plan(False, chunk, chunks, budget, f"{why} (memory budget {budget / 1e9:.3g} GB)")
@@ -470,6 +471,8 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
     smooth = "smooth" in job.stages
     fixes = job.fixes if smooth else None
     aided = smooth and job.aided
+    # --covariances smoothed writes the filter's states too, as the one-chunk path (smooth_arrays) does
+    stages = ("filt", "smooth") if smooth and job.covariances else job.stages
     fx = [Aids.of(list(fixes[j]) if fixes is not None else []) for j in range(n_axes)]
     spans = rest.runs(n_axes) if smooth and rest is not None else None
     params = rest.params if rest is not None else None
@@ -492,6 +495,8 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
         chunk), and the input's other keys."""
         add = dict(echo)
         if not aided:
+            if job.covariances and smooth:  # the one-chunk file's members, empty without aids
+                add.update(fixes=np.zeros((0, 4)), fix_nis=np.zeros(0), zupt_nis=np.zeros((0, 4)))
             return add
         rows = [(ft, j, z, np.sqrt(r)) for j, f in enumerate(fx) for ft, z, r in zip(fix_t[j], f.z, f.R, strict=True)]
         add["fixes"] = np.array(rows, dtype=np.float64).reshape(-1, 4)
@@ -501,8 +506,8 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
 
     info = chunked.smooth_bounded(
         model, n, read, out, axis_names=source.axis_names, extras=extras, chunk=outcome.plan.chunk,
-        workdir=workdir, run_format=run_format, more=more, stages=job.stages, store_memory=store_memory(job),
-        full=job.full, marks="zupt" if aided else "",
+        workdir=workdir, run_format=run_format, more=more, stages=stages, store_memory=store_memory(job),
+        full=job.full, marks="zupt" if aided or (smooth and job.covariances) else "", covariances=job.covariances,
     )  # fmt: skip
     ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
     ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})

@@ -48,10 +48,11 @@ def inputs(tmp_path_factory):
     return folder
 
 
-def _pair(inputs, tmp_path, source, stages=("filt", "smooth"), **kw):
+def _pair(inputs, tmp_path, source, stages=("filt", "smooth"), covariances=False, **kw):
     """(chunked outcome, its file, one-chunk outcome, its file) of the same request."""
-    a = smooth_file(inputs / source, tmp_path / "a.npz", job=Job(stages=stages, budget=SMALL, full=True), **kw)
-    b = smooth_file(inputs / source, tmp_path / "b.npz", job=Job(stages=stages, budget=LARGE, full=True), **kw)
+    job = Job(stages=stages, full=True, covariances=covariances)
+    a = smooth_file(inputs / source, tmp_path / "a.npz", job=replace(job, budget=SMALL), **kw)
+    b = smooth_file(inputs / source, tmp_path / "b.npz", job=replace(job, budget=LARGE), **kw)
     assert not a.plan.whole and a.plan.chunks > 3, a.plan
     assert b.plan.chunks == 1, b.plan
     return a, load_run(tmp_path / "a.npz")[0], b, load_run(tmp_path / "b.npz")[0]
@@ -95,6 +96,64 @@ def test_each_option_chunked_equals_one_chunk(inputs, tmp_path, option):
     assert "r" in got
 
 
+@pytest.mark.parametrize(
+    "option, stages",
+    [
+        ("plain", ("smooth",)),
+        ("fixes and rests given", ("smooth",)),
+        ("rests detected", ("smooth",)),
+        ("plain", ("filt",)),
+    ],
+)
+def test_covariances_chunked_equal_the_one_chunk_file(inputs, tmp_path, option, stages):
+    """--covariances over the budget: written chunk by chunk, the same members, shapes, dtypes and format as the
+    one-chunk file, every number within 1e-9. Every axis takes the general path (no steady rows): its chunk
+    boundaries fall where the covariances move fast (the first 50 samples: the (a, eps) block by 2e-4 to 1e-5 a
+    sample) and where they move slowly (to the run's end)."""
+    kw = {k: (v if v == "auto" else inputs / v) for k, v in OPTIONS[option].items()}
+    a, got, b, ref = _pair(inputs, tmp_path, "rec.npz", stages, covariances=True, **kw)
+    assert a.plan.chunk < 50 and a.plan.chunks > 100, a.plan
+    # the aids' NIS are their consistency checks, made in memory (none over the budget)
+    assert set(got) == set(ref) - ({"fix_nis", "zupt_nis"} if kw else set())
+    assert str(got["format"]) == str(ref["format"]) == "accelnav-run/1"
+    for key in got:
+        assert (got[key].shape, got[key].dtype) == (ref[key].shape, ref[key].dtype), key
+    st = ("filt", "smooth") if "smooth" in stages else stages
+    _same(got, ref, st)
+    for key in [f"{s}_P" for s in st] + ["filt_P_prior"]:
+        d = np.sqrt(np.einsum("akii->aki", np.abs(ref[key])))
+        assert_rel_close(got[key], ref[key], d[..., :, None] * d[..., None, :], 1e-9, key)
+    sd = np.sqrt(np.einsum("akii->aki", ref["filt_P_prior"]))
+    assert_rel_close(got["filt_x_prior"], ref["filt_x_prior"], sd, 1e-9, "filt_x_prior")
+    for key in ("zupt", "fixes", "zupt_candidates"):
+        if key in ref:
+            np.testing.assert_array_equal(got[key], ref[key], err_msg=key)
+
+
+def test_the_disk_check_counts_the_output_as_it_is_written(inputs, tmp_path):
+    """chunked.disk_needed's output part is the file's per-sample bytes, compact, full or with covariances."""
+    from accelnav.estimate.chunked import output_bytes
+
+    n = 3000
+    cases = [
+        (Job(budget=SMALL), {}),
+        (Job(budget=SMALL, full=True), {}),
+        (Job(budget=SMALL), {"zupt": "rests.csv"}),
+        (Job(budget=SMALL, covariances=True), {}),
+        (Job(stages=("filt",), budget=SMALL, covariances=True), {}),
+    ]
+    for i, (job, kw) in enumerate(cases):
+        out = tmp_path / f"{i}.npz"
+        a = smooth_file(inputs / "rec.npz", out, job=job, **{k: inputs / v for k, v in kw.items()})
+        assert not a.plan.whole
+        with np.load(out) as f:
+            big = sum(f[k].nbytes for k in f.files if n in f[k].shape[:2])
+        stages = 2 if job.covariances and "smooth" in job.stages else len(job.stages)
+        want = output_bytes(2, stages, full=job.full, covariances=job.covariances, marks=bool(kw) or job.covariances
+                            and "smooth" in job.stages)  # fmt: skip
+        assert big == n * want, (i, big, n * want)
+
+
 @pytest.mark.parametrize("source", ["rec.npz", "rec.csv", "rec.csv.gz"])
 @pytest.mark.parametrize("stages", [("smooth",), ("filt",), ("filt", "smooth")])
 def test_every_input_format_streams_to_the_one_chunk_numbers(inputs, tmp_path, source, stages):
@@ -109,7 +168,6 @@ def test_every_input_format_streams_to_the_one_chunk_numbers(inputs, tmp_path, s
 @pytest.mark.parametrize(
     "flag, kw",
     [
-        ("--covariances", {"job": Job(covariances=True, budget=SMALL)}),
         ("--tune", {"job": Job(tune=Tune(), budget=SMALL)}),
         ("--plots", {"job": Job(in_memory=("--plots",), budget=SMALL)}),
     ],

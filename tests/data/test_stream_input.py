@@ -232,7 +232,7 @@ def test_cli_streams_a_csv_over_budget_to_the_whole_paths_numbers(tmp_path, caps
 @pytest.mark.parametrize(
     "argv,said",
     [
-        (["filter", "--covariances"], "--covariances need(s) every sample in memory"),
+        (["smooth", "--tune"], "--tune need(s) every sample in memory"),
         (["smooth", "--zupt", "auto", "--memory-budget", "0.01"], "--zupt need(s) every sample in memory"),
     ],
 )

@@ -33,8 +33,12 @@ def test_the_plan_cuts_by_size_and_says_why():
     assert p.whole and "consistency checks" in p.why  # within the budget the aids' checks need every sample
     p = engine.plan(small, 2, engine.Job(budget=per * small, covariances=True))
     assert p.whole and "--covariances" in p.why
-    with pytest.raises(UserError, match="over the memory budget.*--covariances"):
-        engine.plan(big, 2, engine.Job(budget=per * small, covariances=True))
+    # over the budget the covariances are written chunk by chunk, in smaller chunks (their buffers count)
+    p = engine.plan(big, 2, engine.Job(budget=per * small, covariances=True))
+    assert not p.whole and p.chunk == chunked.chunk_samples(2, min(chunked.BUDGET, per * small), covariances=True)
+    assert p.chunk < engine.plan(big, 2, engine.Job(budget=per * small)).chunk
+    with pytest.raises(UserError, match="over the memory budget.*--tune"):
+        engine.plan(big, 2, engine.Job(budget=per * small, tune=engine.Tune()))
 
 
 def test_a_stages_extra_smoother_pass_gives_the_whole_array_numbers(tmp_path):

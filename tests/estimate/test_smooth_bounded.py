@@ -150,7 +150,7 @@ def test_smooth_over_its_memory_budget_runs_the_bounded_path(sim, tmp_path, caps
         assert_rel_close(b[f"{key}_sd"], sd, 0.0, RTOL, f"{key}_sd")
 
 
-@pytest.mark.parametrize("flags", [["--covariances"], ["--tune"], ["--plots", "PLOTS"]])
+@pytest.mark.parametrize("flags", [["--tune"], ["--plots", "PLOTS"]])
 def test_a_run_too_large_for_what_was_asked_is_refused_in_one_line(sim, tmp_path, capsys, flags):
     flags = [str(tmp_path / "p") if f == "PLOTS" else f for f in flags]
     status, out, err = _run(["smooth", sim, "--out", tmp_path / "x.npz", "--memory-budget", "0.02", *flags], capsys)
@@ -281,3 +281,64 @@ def test_each_pass_shows_its_progress_unless_quiet(tmp_path, monkeypatch, capsys
     for label in ("forward", "backward", "r, u"):
         assert (f"{label} [" in err) == drawn, err
     assert ("100.0%" in err) == drawn
+
+
+def test_covariances_over_the_budget_are_written_chunk_by_chunk(sim, tmp_path, capsys):
+    """smooth --covariances at a budget of 0.02 MB: chunked, the one-chunk file's members and numbers (1e-9)."""
+    argv = ["smooth", sim, "--covariances"]
+    status, out, err = _run([*argv, "--out", tmp_path / "b.npz", "--memory-budget", "0.02"], capsys)
+    assert status == 0, err
+    assert "smoothed in bounded memory" in out and "chunks of" in out
+    status, out, err = _run([*argv, "--out", tmp_path / "w.npz"], capsys)
+    assert status == 0 and "bounded memory" not in out, err
+    b, _ = load_run(tmp_path / "b.npz")
+    w, _ = load_run(tmp_path / "w.npz")
+    assert set(b) == set(w) and str(b["format"]) == str(w["format"])
+    for key in ("filt_P", "smooth_P", "filt_P_prior"):
+        d = np.sqrt(np.einsum("akii->aki", w[key]))
+        assert_rel_close(b[key], w[key], d[..., :, None] * d[..., None, :], 1e-9, key)
+
+
+def test_covariances_with_invalid_samples_equal_one_chunk(tmp_path):
+    """Clipped samples across a chunk edge (200..210, edge at 205) and a missing one: the chunked covariances
+    are the one-chunk ones (1e-9)."""
+    from accelnav.estimate.engine import smooth_arrays
+
+    model = load_model()
+    n = 600
+    t, accel, clipped = _data(model, n)
+    names = np.array([a.name for a in model.axes])
+    read = chunked.array_reader(t, accel, clipped)
+    chunked.smooth_bounded(model, n, read, tmp_path / "o.npz", chunk=41, covariances=True, axis_names=names)
+    ref = smooth_arrays({"t": t, "axis_names": names, "accel": accel, "clipped": clipped}, model)
+    got = np.load(tmp_path / "o.npz")
+    for key in ("filt_P", "smooth_P", "filt_P_prior"):
+        d = np.sqrt(np.einsum("akii->aki", ref[key]))
+        assert_rel_close(got[key], ref[key], d[..., :, None] * d[..., None, :], 1e-9, key)
+    for key in ("filt_x", "smooth_x", "filt_x_prior"):
+        sd = np.sqrt(np.einsum("akii->aki", ref[key.replace("_x", "_P")]))
+        assert_rel_close(got[key], ref[key], sd, 1e-9, key)
+
+
+@pytest.mark.parametrize("covariances", [False, True])
+def test_the_disk_check_refuses_one_byte_short_and_runs_at_the_count(tmp_path, monkeypatch, covariances):
+    """smooth_bounded's disk check is the store plus the output as laid out: one byte less is refused in one line
+    before any file is made; exactly the count runs, its per-sample members the counted bytes."""
+    from accelnav.errors import UserError
+
+    model = load_model()
+    n = 500
+    t, accel, clipped = _data(model, n)
+    need = chunked.disk_needed(n, 2, n_stages=2, full=True, covariances=covariances)
+    kw = dict(chunk=64, covariances=covariances, workdir=tmp_path / "w")
+    (tmp_path / "w").mkdir()
+    monkeypatch.setattr(chunked, "free_bytes", lambda _: need - 1)
+    with pytest.raises(UserError, match="need .* GB of disk") as exc:
+        chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz", **kw)
+    assert "\n" not in str(exc.value) and not (tmp_path / "o.npz").exists()
+    monkeypatch.setattr(chunked, "free_bytes", lambda _: need)
+    chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz", **kw)
+    with np.load(tmp_path / "o.npz") as f:
+        assert sum(f[k].nbytes for k in f.files if n in f[k].shape[:2]) == n * chunked.output_bytes(
+            2, 2, full=True, covariances=covariances
+        )

@@ -1506,12 +1506,14 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
  * Forward over samples k0 .. k0 + n - 1, extras as in acn_general with ek
  * counted from the chunk's first sample. carry: the prior mean (4) and packed
  * covariance (10) of the chunk's first sample; on return, of the next sample.
- * Writes the store rows and the filter means xf and standard deviations sdf (n x 4).
+ * Writes the store rows and the filter means xf and standard deviations sdf (n x 4);
+ * xpr, ppr (NULL: not written): each sample's prior mean (n x 4) and packed
+ * covariance (n x 10), for --covariances (the row holds the posterior only).
  */
 void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                     const unsigned char *valid, long n_extra, const long *ek, const double *eh,
                     const double *ez, const double *eR, const double *egate, unsigned char *applied,
-                    double *carry, double *store, double *xf, double *sdf)
+                    double *carry, double *store, double *xf, double *sdf, double *xpr, double *ppr)
 {
     double p[10], x[4];
     long ei = 0;
@@ -1519,6 +1521,10 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
     memcpy(p, carry + 4, sizeof p);
     for (long k = 0; k < n; k++) {
         double *row = store + ACN_GROW * k;
+        if (xpr != NULL) {
+            memcpy(xpr + 4 * k, x, sizeof x);
+            memcpy(ppr + 10 * k, p, sizeof p);
+        }
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, p, ei, n_extra, ek, eh, ez,
                             eR, egate, applied, NULL, NULL);
         for (int i = 0; i < 4; i++)
@@ -1539,11 +1545,12 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
  * Backward over the n store rows of one chunk (last: it ends the run, whose
  * last sample is the filter's). carry: the smoothed mean (4) and packed
  * covariance (10) of the sample after the chunk; on return, of its first.
- * Writes xs and the standard deviations sds (n x 4). k0 names samples in the
+ * Writes xs and the standard deviations sds (n x 4), and ps (NULL: not written)
+ * the packed covariances (n x 10), for --covariances. k0 names samples in the
  * error: returns -(k + 1) if the prior of sample k + 1 is not positive definite.
  */
 int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
-                   double *xs, double *sds)
+                   double *xs, double *sds, double *ps)
 {
     double x1[4], P1[10];
     memcpy(x1, carry, sizeof x1);
@@ -1556,6 +1563,8 @@ int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *s
         memcpy(xs + 4 * k, x1, sizeof x1);
         sds[4 * k + 0] = sqrt(P1[RR]), sds[4 * k + 1] = sqrt(P1[UU]);
         sds[4 * k + 2] = sqrt(P1[AA]), sds[4 * k + 3] = sqrt(P1[EE]);
+        if (ps != NULL)
+            memcpy(ps + 10 * k, P1, sizeof P1);
         k--;
     }
     for (; k >= 0; k--) {
@@ -1572,6 +1581,8 @@ int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *s
         memcpy(xs + 4 * k, x1, sizeof x1);
         sds[4 * k + 0] = sqrt(P1[RR]), sds[4 * k + 1] = sqrt(P1[UU]);
         sds[4 * k + 2] = sqrt(P1[AA]), sds[4 * k + 3] = sqrt(P1[EE]);
+        if (ps != NULL)
+            memcpy(ps + 10 * k, P1, sizeof P1);
     }
     memcpy(carry, x1, sizeof x1);
     memcpy(carry + 4, P1, sizeof P1);
