@@ -79,7 +79,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from accelnav.estimate.kf import Aids, Measurement, bias_model
+from accelnav.estimate.kf import Aids, Measurement
 from accelnav.estimate.rests import ACCEPT_REASONS, REFUSE_REASONS, RestDecision, decide
 from accelnav.fileio import check_input, excerpt
 from accelnav.model.design import axis_design
@@ -139,32 +139,69 @@ def resolved(model: Model, p: ZuptParams) -> ZuptParams:
     return p
 
 
-def _moving(x: np.ndarray, w: int) -> np.ndarray:
-    """Centred moving sum over w (odd) samples; NaN where the window leaves the run."""
-    n = len(x)
-    out = np.full(n, np.nan)
-    if n < w:
-        return out
-    c = np.concatenate(([0.0], np.cumsum(x)))
-    h = w // 2
-    out[h : n - h] = c[w:] - c[: n - w + 1]
-    return out
+def _windows(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k: float):
+    """(means, wvar, centre) over the centred window of w (odd) samples about each sample: the window mean per axis
+    (N, n_axes), the window variance summed over the axes (N,), and the quiet centres (N,) bool: every sample of
+    the window ``usable`` (N,) and the mean over axes of variance / ``allow`` at most ``var_k``. NaN (False)
+    where the window leaves the run.
+
+    Compiled (acn_rest_windows in csrc/fastsmooth.c): in numpy these were a dozen whole-record passes (cumsums,
+    differences, temporaries), the largest share of the detector's time. The C differences numpy's cumsums in
+    numpy's order, so every figure is the same double (tests/estimate/test_zupt_windows.py holds it to the numpy
+    it replaced, kept in tests/support/zupt_oracle.py)."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    n, n_axes = x.shape
+    mod = _lib()
+    ffi = mod.ffi
+    xc = np.ascontiguousarray(x, dtype=np.float64)
+    usable = np.ascontiguousarray(usable, dtype=bool).view(np.uint8)
+    allow = np.ascontiguousarray(allow, dtype=np.float64)
+    means, wvar, quiet = np.empty((n, n_axes)), np.empty(n), np.empty(n)
+    centre = np.empty(n, dtype=np.uint8)
+    if len(allow) != n_axes or len(usable) != n:
+        raise ValueError(f"rest detector: {len(allow)} noise figures and {len(usable)} rows for {n} x {n_axes} samples")
+    d, u = (lambda a: ffi.from_buffer("double[]", a)), (lambda a: ffi.from_buffer("unsigned char[]", a))
+    status = mod.lib.acn_rest_windows(
+        n, n_axes, d(xc), u(usable), w, d(allow), float(var_k), d(means), d(wvar), d(quiet), u(centre)
+    )
+    if status != 0:
+        raise ValueError(
+            f"rest detector: a window of {w} samples over {n} x {n_axes}; accepted: an odd window, 1+ axes"
+        )
+    return means, wvar, centre.view(bool)
 
 
 def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(x, ok, R): acceleration minus the bias mean (0 where unusable), the usable mask, R per axis."""
-    accel = np.asarray(accel, dtype=np.float64)
-    clipped = np.asarray(clipped, dtype=bool)
+    """(x, ok, R): acceleration minus the bias mean (0 where unusable), the usable mask, R per axis.
+
+    Compiled past the bias' powers (acn_rest_prepare: the mask, the bias and the difference in one pass per axis,
+    numpy's operations in numpy's order, kf.bias_model's formula); the powers stay numpy's own, so x is the same
+    double (tests/estimate/test_zupt_windows.py)."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    accel = np.ascontiguousarray(accel, dtype=np.float64)
+    clipped = np.ascontiguousarray(clipped, dtype=bool)
     n, n_axes = accel.shape
+    if clipped.shape != accel.shape:
+        raise ValueError(f"rest detector: clipped is {clipped.shape}; accel is {accel.shape}")
     x = np.empty((n, n_axes))
-    ok = ~clipped & np.isfinite(accel)
+    ok = np.empty((n, n_axes), dtype=bool)
     R = np.empty(n_axes)
+    mod = _lib()
+    buf = mod.ffi.from_buffer
+    a_p, c_p = buf("double[]", accel), buf("unsigned char[]", clipped.view(np.uint8))
+    x_p, ok_p = buf("double[]", x), buf("unsigned char[]", ok.view(np.uint8))
     powers: dict[float, np.ndarray] = {}  # phi^k per bias time constant: the axes of a model mostly share one
     for j in range(n_axes):
         d = axis_design(model, j)
         if d.phi not in powers:
-            powers[d.phi] = d.phi ** np.arange(n)
-        x[:, j] = np.where(ok[:, j], accel[:, j] - bias_model(d, n, powers[d.phi]), 0.0)
+            powers[d.phi] = np.ascontiguousarray(d.phi ** np.arange(n), dtype=np.float64)
+        # kf.bias_model's eps[k] = eps_mean - c1 phi^k, taken from the ok samples
+        if mod.lib.acn_rest_prepare(
+            n, n_axes, j, a_p, c_p, buf("double[]", powers[d.phi]), float(d.eps_mean), float(d.axis.c1), x_p, ok_p
+        ):
+            raise ValueError(f"rest detector: {n} x {n_axes} samples; accepted: 1+ axes")
         R[j] = d.R
     return x, ok, R
 
@@ -199,20 +236,8 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     """:func:`candidates` on the prepared record (:func:`_prepared`), which the decision reads too."""
     n, n_axes = x.shape
     w = window_samples(model, p)
-    bad = _moving((~ok.all(axis=1)).astype(np.float64), w)
-    quiet = np.zeros(n)
-    wvar = np.zeros(n)  # window variance, summed over the axes
-    means = np.empty((n, n_axes))
-    for j in range(n_axes):
-        s1 = _moving(x[:, j], w)
-        s2 = _moving(x[:, j] * x[:, j], w)
-        with np.errstate(invalid="ignore"):
-            means[:, j] = s1 / w
-            v = (s2 - w * means[:, j] ** 2) / (w - 1)
-            quiet += v / (R[j] + p.tremor**2)
-            wvar += v
-    with np.errstate(invalid="ignore"):
-        centre = (bad == 0) & (quiet / n_axes <= p.var_k)
+    usable = ok.all(axis=1)
+    means, wvar, centre = _windows(x, usable, R + p.tremor**2, w, p.var_k)
     # split each run into pieces of steady level: a move that starts gently is quiet, but its mean walks away
     total = float(np.sum(R + p.tremor**2))
     bound2 = p.trim_k**2 * total / w
@@ -241,7 +266,6 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     # pieces at two levels stay apart by a sample at least, so each is judged on its own
     h = int(round(p.widen * (w // 2)))
     bridge = int(round(p.bridge_s * model.rate_hz))
-    usable = ok.all(axis=1)
     starts = np.array([q[0] for q in pieces], dtype=np.int64)
     stops = np.array([q[1] for q in pieces], dtype=np.int64)
     refs = np.array([q[2] for q in pieces]).reshape(len(pieces), n_axes)
@@ -264,11 +288,11 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
                 a = max(a, merged[-1][1] + 1)
             merged.append([a, b, ref, run])
     shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
-    kept = np.array([(a, b) for a, b, _, _ in merged if b - a >= shortest], dtype=np.int64).reshape(-1, 2)
-    edges = np.zeros(n + 1, dtype=np.int64)
-    np.add.at(edges, kept[:, 0], 1)
-    np.add.at(edges, kept[:, 1], -1)
-    return np.cumsum(edges[:n]) > 0
+    mask = np.zeros(n, dtype=bool)
+    for a, b, _, _ in merged:  # a slice per rest: tens of thousands, where a count per sample passed the record thrice
+        if b - a >= shortest:
+            mask[a:b] = True
+    return mask
 
 
 def _level_steps(

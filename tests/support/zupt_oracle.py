@@ -4,6 +4,8 @@ not part of the package. Copied verbatim (docstrings shortened); do not "fix" it
 gates is gone: issue 31 replaced the decision, tests/estimate/test_rest_decision.py tests the new one.)
 Issue 31 changed the split into pieces twice, and both changes are made here too: a part with no window near
 its median is halved instead of dropped, and a piece that is its whole run may drift at ``leak_rate``.
+Issue 32 lifted the window pass out of :func:`candidates` into :func:`windows`, unchanged, to hold the C that
+replaced it to the same doubles.
 """
 
 from __future__ import annotations
@@ -45,15 +47,10 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
     return x, ok, R
 
 
-def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams) -> np.ndarray:
-    """(N,) bool: samples the detector calls rest, before the per-rest decision (see the module docstring).
-
-    ``accel``, ``clipped`` are (N, n_axes) as in a run file; columns are the model's axes in order.
-    """
-    p = resolved(model, params)
-    x, ok, R = _prepared(accel, clipped, model)
+def windows(x: np.ndarray, ok: np.ndarray, R: np.ndarray, w: int, tremor: float, var_k: float):
+    """(means, wvar, centre, quiet): the window pass at the head of :func:`candidates`, lifted out unchanged (issue
+    32 compiled it, acn_rest_windows; tests/estimate/test_zupt_windows.py holds the C to these doubles)."""
     n, n_axes = x.shape
-    w = window_samples(model, p)
     bad = _moving((~ok.all(axis=1)).astype(np.float64), w)
     quiet = np.zeros(n)
     wvar = np.zeros(n)  # window variance, summed over the axes
@@ -64,10 +61,23 @@ def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: Zup
         with np.errstate(invalid="ignore"):
             means[:, j] = s1 / w
             v = (s2 - w * means[:, j] ** 2) / (w - 1)
-            quiet += v / (R[j] + p.tremor**2)
+            quiet += v / (R[j] + tremor**2)
             wvar += v
     with np.errstate(invalid="ignore"):
-        centre = (bad == 0) & (quiet / n_axes <= p.var_k)
+        centre = (bad == 0) & (quiet / n_axes <= var_k)
+    return means, wvar, centre, quiet
+
+
+def candidates(accel: np.ndarray, clipped: np.ndarray, model: Model, params: ZuptParams) -> np.ndarray:
+    """(N,) bool: samples the detector calls rest, before the per-rest decision (see the module docstring).
+
+    ``accel``, ``clipped`` are (N, n_axes) as in a run file; columns are the model's axes in order.
+    """
+    p = resolved(model, params)
+    x, ok, R = _prepared(accel, clipped, model)
+    n, n_axes = x.shape
+    w = window_samples(model, p)
+    means, wvar, centre, _ = windows(x, ok, R, w, p.tremor, p.var_k)
     # split each run into pieces of steady level: a move that starts gently is quiet, but its mean walks away
     total = float(np.sum(R + p.tremor**2))
     bound2 = p.trim_k**2 * total / w

@@ -6,6 +6,7 @@
  */
 #include "fastsmooth.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdlib.h>
@@ -2340,6 +2341,84 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
             w.st.k = k > w.st.k ? k : w.st.k;
             w.st.aid_k = k;
         }
+    }
+    return 0;
+}
+
+/* the prefix sum C[m] = x[0] + ... + x[m-1] of column j (stride n_axes), one row on: numpy's
+   cumsum, whose first term is x[0] itself (not 0 + x[0]) */
+static double rest_prefix_step(double c, long m, const double *x, int n_axes, int j, int square)
+{
+    double v = x[m * n_axes + j];
+    if (square)
+        v = v * v;
+    return m == 0 ? v : c + v;
+}
+
+long acn_rest_windows(long n, int n_axes, const double *x, const unsigned char *usable, long w,
+                      const double *allow, double var_k, double *means, double *wvar, double *quiet,
+                      unsigned char *centre)
+{
+    if (n < 0 || n_axes < 1 || w < 1 || w % 2 == 0 || n > LONG_MAX / n_axes)
+        return -1;
+    long h = w / 2;
+    for (long k = 0; k < n; k++) {
+        wvar[k] = NAN;
+        quiet[k] = NAN;
+        centre[k] = 0;
+        for (int j = 0; j < n_axes; j++)
+            means[k * n_axes + j] = NAN;
+    }
+    if (n < w)
+        return 0;
+    for (long i = 0; i + w <= n; i++) { /* zupt.py starts both sums from np.zeros */
+        wvar[h + i] = 0.0;
+        quiet[h + i] = 0.0;
+    }
+    for (int j = 0; j < n_axes; j++) {
+        /* lead = C[i + w], trail = C[i] for the window of rows i .. i + w - 1, centred on h + i */
+        double lead1 = 0.0, lead2 = 0.0, trail1 = 0.0, trail2 = 0.0;
+        for (long m = 0; m < w; m++) {
+            lead1 = rest_prefix_step(lead1, m, x, n_axes, j, 0);
+            lead2 = rest_prefix_step(lead2, m, x, n_axes, j, 1);
+        }
+        for (long i = 0; i + w <= n; i++) {
+            if (i > 0) {
+                lead1 = rest_prefix_step(lead1, i + w - 1, x, n_axes, j, 0);
+                lead2 = rest_prefix_step(lead2, i + w - 1, x, n_axes, j, 1);
+                trail1 = rest_prefix_step(trail1, i - 1, x, n_axes, j, 0);
+                trail2 = rest_prefix_step(trail2, i - 1, x, n_axes, j, 1);
+            }
+            double mean = (lead1 - trail1) / (double)w;
+            double v = ((lead2 - trail2) - (double)w * (mean * mean)) / (double)(w - 1);
+            means[(h + i) * n_axes + j] = mean;
+            quiet[h + i] += v / allow[j];
+            wvar[h + i] += v;
+        }
+    }
+    long bad = 0; /* unusable rows in the window: a count, exact as numpy's sum of 0s and 1s */
+    for (long m = 0; m < w; m++)
+        bad += usable[m] ? 0 : 1;
+    for (long i = 0; i + w <= n; i++) {
+        if (i > 0)
+            bad += (usable[i + w - 1] ? 0 : 1) - (usable[i - 1] ? 0 : 1);
+        centre[h + i] = bad == 0 && quiet[h + i] / (double)n_axes <= var_k;
+    }
+    return 0;
+}
+
+long acn_rest_prepare(long n, int n_axes, int j, const double *accel, const unsigned char *clipped,
+                      const double *powers, double eps_mean, double c1, double *x,
+                      unsigned char *ok)
+{
+    if (n < 0 || n_axes < 1 || j < 0 || j >= n_axes || n > LONG_MAX / n_axes)
+        return -1;
+    for (long k = 0; k < n; k++) {
+        long i = k * n_axes + j;
+        double a = accel[i];
+        int good = !clipped[i] && isfinite(a);
+        ok[i] = (unsigned char)good;
+        x[i] = good ? a - (eps_mean - c1 * powers[k]) : 0.0;
     }
     return 0;
 }

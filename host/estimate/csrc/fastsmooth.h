@@ -265,6 +265,30 @@ typedef struct {
     unsigned char *tried;
 } acn_kin_fwd_out;
 long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o);
+/*
+ * The rest detector's window pass (host/estimate/zupt.py, _detect): over the
+ * centred window of w (odd) rows about each row of x (n rows of n_axes), the
+ * window mean per axis into means (n rows of n_axes), the window variance summed
+ * over axes into wvar (n) and the sum over axes of variance / allow[j] into quiet
+ * (n); NaN where the window leaves the record. centre[k] (n bytes) is 1 where
+ * every row of k's window has usable set and quiet / n_axes <= var_k. The sums
+ * are numpy's cumsums (in row order, one axis after the other) differenced, so
+ * every figure is the one zupt.py's numpy gave. Returns 0, or -1 (nothing
+ * written) where a length is out of range.
+ */
+long acn_rest_windows(long n, int n_axes, const double *x, const unsigned char *usable, long w,
+                      const double *allow, double var_k, double *means, double *wvar, double *quiet,
+                      unsigned char *centre);
+/*
+ * The rest detector's record (host/estimate/zupt.py, _prepared), axis j of
+ * accel and clipped (n rows of n_axes): ok = not clipped and finite, and x the
+ * acceleration minus the model's bias mean eps_mean - c1 powers[k] (powers:
+ * phi^k, n of them, numpy's) where ok, 0 elsewhere; into column j of x and ok.
+ * Returns 0, or -1 (nothing written) where a length or j is out of range.
+ */
+long acn_rest_prepare(long n, int n_axes, int j, const double *accel, const unsigned char *clipped,
+                      const double *powers, double eps_mean, double c1, double *x,
+                      unsigned char *ok);
 /* ACN-CDEF-END */
 
 #endif

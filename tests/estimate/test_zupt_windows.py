@@ -1,0 +1,108 @@
+"""Issue 32: the rest detector's record and window pass in C (acn_rest_prepare, acn_rest_windows) give the very
+doubles the numpy they replaced gave, so the candidates and every decision on them are unchanged. The numpy is
+tests/support/zupt_oracle.py's (main's detector before issue 24; its record and window pass are main's to the
+bit, and tests/estimate/test_zupt_arrays.py holds the present candidates to its). On the bench's tiled
+stop-and-go, simulated scenarios, random records with NaN, infinite and clipped samples and gaps of unusable
+rows, windows at the record's ends, records about a window long, and a window exactly on the var_k bound."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import MODELS
+from support import zupt_oracle as ref
+
+from accelnav.estimate import zupt
+from accelnav.hil_sim.sim.sensor import simulate
+from accelnav.model.load import load_model
+
+
+def assert_same(accel, clipped, model, params=None) -> int:
+    """Record, window pass and candidates against the reference, bit for bit; returns the candidates' count."""
+    p = zupt.resolved(model, params or zupt.ZuptParams())
+    x, ok, R = zupt._prepared(accel, clipped, model)
+    x0, ok0, R0 = ref._prepared(accel, clipped, model)
+    assert np.array_equal(ok, ok0)
+    assert np.array_equal(x.view(np.int64), x0.view(np.int64)), "x differs in some bit"
+    assert np.array_equal(R, R0)
+    w = zupt.window_samples(model, p)
+    got = zupt._windows(x, ok.all(axis=1), R + p.tremor**2, w, p.var_k)
+    want = ref.windows(x0, ok0, R0, w, p.tremor, p.var_k)
+    for name, g, e in zip(("means", "wvar"), got[:2], want[:2], strict=True):
+        bits, bits0 = g.view(np.int64), e.view(np.int64)
+        assert np.array_equal(bits, bits0), f"{name} differs at {np.argwhere(bits != bits0)[:3]}"
+    assert np.array_equal(got[2], want[2]), f"centres differ at {np.flatnonzero(got[2] != want[2])[:5]}"
+    c, c0 = zupt.candidates(accel, clipped, model, p), ref.candidates(accel, clipped, model, p)
+    assert np.array_equal(c, c0), f"candidate samples differ at {np.flatnonzero(c != c0)[:5]}"
+    return len(zupt.intervals(c))
+
+
+def test_bench_stop_and_go_and_its_decisions():
+    """The bench's record (stop-and-go tiled), the candidates and the decision on them as with the reference's."""
+    model = load_model(None)
+    s = simulate(model, "stop_and_go", 200.0, seed=7)
+    accel = np.resize(s.accel, (60_000, s.accel.shape[1]))
+    clipped = np.zeros(accel.shape, dtype=bool)
+    assert assert_same(accel, clipped, model) > 100
+    p = zupt.resolved(model, zupt.ZuptParams())
+    got = zupt.decide_rests(accel, clipped, None, model, p)
+    want = zupt.decide_rests(accel, clipped, ref.candidates(accel, clipped, model, p), model, p)
+    assert [(d.start, d.stop, d.reason, d.evidence) for d in got.decisions] == [
+        (d.start, d.stop, d.reason, d.evidence) for d in want.decisions
+    ]
+
+
+@pytest.mark.parametrize(
+    "scenario,model_name,seconds,seed",
+    [("walking_drift", "default", 40.0, 1), ("jogging", "foot_imu", 20.0, 1), ("tilting_mount", "default", 300.0, 1)],
+)
+def test_simulated(scenario, model_name, seconds, seed):
+    model = load_model(None if model_name == "default" else MODELS / f"{model_name}.toml")
+    s = simulate(model, scenario, seconds, seed=seed)
+    assert assert_same(s.accel, s.clipped, model) > 3
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_records_with_bad_samples(seed):
+    """Quiet stretches between moves, with NaN, inf and clipped samples, gaps of unusable rows (at the ends too)."""
+    rng = np.random.default_rng(seed)
+    model = load_model(None)
+    n = int(rng.integers(2_000, 12_000))
+    n_axes = len(model.axes)
+    level = np.repeat(rng.normal(0, 1.5, size=(n // 200 + 1, n_axes)), 200, axis=0)[:n]
+    loud = np.repeat(rng.random(n // 150 + 1) < 0.4, 150)[:n, None]
+    accel = level * loud + rng.normal(0, 0.02 + 2.0 * loud, size=(n, n_axes))
+    clipped = rng.random((n, n_axes)) < 0.002
+    accel[rng.random((n, n_axes)) < 0.002] = np.nan
+    accel[rng.random((n, n_axes)) < 0.0005] = np.inf
+    for _ in range(3):  # gaps: a run of unusable rows on one axis
+        a = int(rng.integers(0, n - 50))
+        clipped[a : a + int(rng.integers(1, 40)), int(rng.integers(0, n_axes))] = True
+    accel[:3, 0] = np.nan  # the record's first and last windows hold bad samples
+    clipped[-2:, -1] = True
+    assert assert_same(accel, clipped, model) > 10
+    assert assert_same(accel, clipped, model, zupt.ZuptParams(window_s=0.05, tremor=0.0, var_k=3.0)) > 10
+
+
+@pytest.mark.parametrize("n", [0, 1, 5, 11, 12])
+def test_records_about_one_window_long(n):
+    model = load_model(None)  # a window of 11 samples at its rate
+    assert zupt.window_samples(model, zupt.ZuptParams()) == 11
+    accel = np.random.default_rng(n).normal(0, 0.01, size=(n, len(model.axes)))
+    assert_same(accel, np.zeros(accel.shape, dtype=bool), model)
+
+
+def test_a_window_on_the_bound_is_quiet():
+    """var_k set to one window's own statistic: that centre passes (at most var_k), as the reference says."""
+    model = load_model(None)
+    accel = np.random.default_rng(9).normal(0, 0.05, size=(400, len(model.axes)))
+    x, ok, R = ref._prepared(accel, np.zeros(accel.shape, dtype=bool), model)
+    p = zupt.ZuptParams()
+    w = zupt.window_samples(model, p)
+    quiet = ref.windows(x, ok, R, w, p.tremor, p.var_k)[3]
+    k = 200
+    var_k = float(quiet[k] / x.shape[1])
+    got = zupt._windows(x, ok.all(axis=1), R + p.tremor**2, w, var_k)[2]
+    want = ref.windows(x, ok, R, w, p.tremor, var_k)[2]
+    assert want[k] and np.array_equal(got, want)
+    assert 0 < want.sum() < len(want) - w  # the bound splits the record: some windows above it, some on or below
