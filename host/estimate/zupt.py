@@ -486,16 +486,9 @@ def intervals(mask: np.ndarray) -> list[tuple[int, int]]:
 
 def update_samples(mask: np.ndarray, model: Model, params: ZuptParams = ZuptParams()) -> np.ndarray:
     """Sample indices that get a zero-velocity update: every sample of each rest run, or every every_s seconds
-    (counted from the run's first sample). Whole-array operations: no Python loop over the rests."""
-    step = max(1, int(round(params.every_s * model.rate_hz)))
+    (counted from each rest's first sample): :meth:`RestSpans.updates` over the whole (N,) ``mask``."""
     m = np.asarray(mask, dtype=bool).reshape(-1)
-    idx = np.flatnonzero(m).astype(np.int64)
-    if step == 1 or not len(idx):
-        return idx
-    starts = m.copy()
-    starts[1:] &= ~m[:-1]
-    run_start = np.maximum.accumulate(np.where(starts, np.arange(len(m)), 0))[idx]
-    return idx[(idx - run_start) % step == 0]
+    return RestSpans.of_mask(m).updates(0, 0, len(m), model, params)[0]
 
 
 def measurements(ks: np.ndarray, params: ZuptParams = ZuptParams()) -> tuple[list[Measurement], list[float]]:
@@ -507,12 +500,10 @@ def measurements(ks: np.ndarray, params: ZuptParams = ZuptParams()) -> tuple[lis
 def axis_aids(rest: np.ndarray, sigma: np.ndarray | None, model: Model, params: ZuptParams = ZuptParams()) -> Aids:
     """The zero-velocity updates of one axis as arrays: at the samples of its (N,) rest mask that get one
     (:func:`update_samples`), with the per-sample ``sigma`` of a ZUPT file where it gives one (NaN or None:
-    ``params.sigma``)."""
-    ks = update_samples(rest, model, params)
-    sd = np.full(len(ks), float(params.sigma))
-    if sigma is not None:
-        given = np.asarray(sigma, dtype=np.float64)[ks]
-        sd = np.where(np.isfinite(given), given, sd)
+    ``params.sigma``). One implementation with the chunked runs': :meth:`RestSpans.updates` over every sample."""
+    m = np.asarray(rest, dtype=bool).reshape(-1)
+    sig = None if sigma is None else np.asarray(sigma, dtype=np.float64).reshape(-1, 1)
+    ks, sd = RestSpans.of_mask(m, sig).updates(0, 0, len(m), model, params)
     return Aids.zero_velocity(ks, sd)
 
 
