@@ -268,7 +268,8 @@ def register(sub) -> None:
         type=float,
         default=TUNE_SECONDS,
         metavar="S",
-        help=f"--tune: wall time of the search at most (the best figures by then are used); default {TUNE_SECONDS:g}",
+        help=f"--tune: wall time of the search at most (the best figures by then are used; a run whose evaluations "
+        f"this cuts short is told so first); default {TUNE_SECONDS:g}",
     )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     p.add_argument(
@@ -291,8 +292,9 @@ def register(sub) -> None:
         metavar="MB",
         help="memory the run may take; a longer run is smoothed in chunks (its store in memory within the budget, "
         "without one within 1 GiB, else on disk beside --out; the aids' consistency checks are skipped); "
-        "--covariances are written chunk by chunk (the general path: 544 B per sample and axis); --tune and "
-        "--plots need the whole run in memory and are refused over it; default: half "
+        "--covariances are written chunk by chunk (the general path: 544 B per sample and axis); --tune reads "
+        "the input again for every likelihood evaluation; --plots needs the whole run in memory and is refused "
+        "over it; default: half "
         "the memory free",
     )
     p.add_argument(

@@ -14,10 +14,11 @@ budget and from what was asked, how the passes are cut (:func:`plan`), and says 
   (:mod:`accelnav.data.smoothing`).
 * **one chunk in memory** (:func:`smooth_arrays`, :func:`filter_arrays`: the same kernels' whole-array
   entry points): what needs every output sample in memory at once, namely the aids' consistency checks
-  (NIS of each aid, the held-out fixes), ``--tune`` (its likelihood is a whole-run search), and a
-  library call that wants arrays back. A run over the
+  (NIS of each aid, the held-out fixes), and a library call that wants arrays back. A run over the
   budget that asks for one of them is refused in one line before any work. ``--covariances`` within the
-  budget is one chunk in memory; over it, it is chunked, its covariances written chunk by chunk.
+  budget is one chunk in memory; over it, it is chunked, its covariances written chunk by chunk. So is
+  ``--tune``: over the budget its likelihood is summed chunk by chunk (:func:`accelnav.estimate.tune.tune_data`:
+  every evaluation reads the input again, its aids made per chunk), the search in the memory of a chunk.
 
 The stages are called from one place each: the rest decision (:func:`rest_stage`:
 :func:`accelnav.estimate.zupt.decide_rests` with the run's fixes, then the review
@@ -242,15 +243,16 @@ def plan(n: int, n_axes: int, job: Job, *, label: str = "the run", to_file: bool
     every output sample at once, else chunked to the file; refused (UserError) when that does not fit."""
     budget = budget_bytes(job.budget)
     fits = chunked.whole_bytes(n, n_axes) <= budget
-    needs = [f for f, v in (("--tune", job.tune is not None),) if v]
-    needs += list(job.in_memory)
+    needs = list(job.in_memory)
     if not to_file:
         needs.append("arrays returned in memory")
     if needs and not fits:
         raise UserError(f"{over_budget(label, n, n_axes, budget)}; bounded memory does not do {', '.join(needs)}")
     # --covariances within the budget: one chunk in memory, as before; over it, chunked (written chunk by chunk)
+    # --tune within it: one chunk in memory, as before; over it, its likelihood read chunk by chunk (_tune)
     held = [why for why, v in (("--covariances", job.covariances), ("the aids' consistency checks",
-                               job.aided and job.checks), ("the input's truth", echo)) if v]  # fmt: skip
+                               job.aided and job.checks), ("the input's truth", echo), ("--tune", job.tune is not None))
+            if v]  # fmt: skip
     if needs or (fits and held):
         return Plan(True, max(n, 1), 1, budget, f"one chunk in memory ({', '.join(needs or held[:1])})")
     chunk = chunked.chunk_samples(n_axes, min(chunked.BUDGET, budget), job.covariances)
@@ -386,7 +388,7 @@ def run(
     outcome = Outcome(model, p, n, source.axis_names, source.t_ends, np.zeros(n_axes, dtype=np.int64), rests=rest,
                       streamed=source.streamed)  # fmt: skip
     if smooth and job.tune is not None:
-        model = outcome.model = _tune(model, arrays, job, rest, source.label, outcome)
+        model = outcome.model = _tune(model, arrays if p.whole else source, job, rest, source.label, outcome)
     if p.whole:
         _whole(model, arrays, job, rest, outcome, reuse)
     else:
@@ -394,8 +396,11 @@ def run(
     return outcome
 
 
-def _tune(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, label: str, outcome: Outcome) -> Model:
-    from accelnav.estimate.tune import tune_run
+def _tune(model: Model, run, job: Job, rest: RestOutcome | None, label: str, outcome: Outcome) -> Model:
+    """The tune search on ``run``: the arrays in memory (one chunk), or the :class:`Source` read a chunk at a time
+    for every evaluation of the likelihood, its aids made for each chunk (:class:`_AxisAids`), in the memory of
+    a chunk whatever the run's length."""
+    from accelnav.estimate import tune
 
     t0 = [time.monotonic()]
 
@@ -404,10 +409,18 @@ def _tune(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, label:
             job.tune.announce(*a)
         t0[0] = time.monotonic()
 
-    kw = {} if rest is None else dict(rest=rest.mask, rest_sigma=rest.sigma, params=rest.params)
+    bounds = dict(max_evaluations=job.tune.max_evaluations, max_seconds=job.tune.max_seconds, announce=announce)
     try:
-        tuned, r = tune_run(model, arrays, fixes=job.fixes, max_evaluations=job.tune.max_evaluations,
-                            max_seconds=job.tune.max_seconds, announce=announce, **kw)  # fmt: skip
+        if isinstance(run, Source):
+            n_axes = len(run.axis_names)
+            fx = [Aids.of(list(job.fixes[j]) if job.fixes is not None else []) for j in range(n_axes)]
+            spans = rest.runs(n_axes) if rest is not None else None
+            aids = [_AxisAids(model, j, fx[j], spans, rest.params if rest is not None else None) for j in range(n_axes)]
+            chunk = tune.chunk_samples(n_axes, min(chunked.BUDGET, outcome.plan.budget))
+            tuned, r = tune.tune_data(model, tune.RunData(run.n, n_axes, run.read, aids, chunk), **bounds)
+        else:
+            kw = {} if rest is None else dict(rest=rest.mask, rest_sigma=rest.sigma, params=rest.params)
+            tuned, r = tune.tune_run(model, run, fixes=job.fixes, **bounds, **kw)
     except ValueError as exc:
         raise UserError(f"{label}: --tune: {exc}") from None
     outcome.tune = (r, time.monotonic() - t0[0])

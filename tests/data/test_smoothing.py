@@ -165,13 +165,29 @@ def test_every_input_format_streams_to_the_one_chunk_numbers(inputs, tmp_path, s
     }
 
 
-@pytest.mark.parametrize(
-    "flag, kw",
-    [
-        ("--tune", {"job": Job(tune=Tune(), budget=SMALL)}),
-        ("--plots", {"job": Job(in_memory=("--plots",), budget=SMALL)}),
-    ],
-)
+@pytest.mark.parametrize("option", ["plain", "fixes and rests given"])
+def test_tune_chunked_equals_one_chunk(inputs, tmp_path, option):
+    """--tune over the budget: its likelihood summed chunk by chunk, every evaluation reading the input again and
+    making its aids per chunk; the same search as on one chunk in memory: the figures found, the likelihoods
+    to 1e-9, and the run smoothed with them."""
+    kw = {k: inputs / v for k, v in OPTIONS[option].items()}
+    job = Job(stages=("filt", "smooth"), full=True, tune=Tune(max_evaluations=30, max_seconds=None))
+    a = smooth_file(inputs / "rec.npz", tmp_path / "a.npz", job=replace(job, budget=SMALL), **kw)
+    b = smooth_file(inputs / "rec.npz", tmp_path / "b.npz", job=replace(job, budget=LARGE), **kw)
+    assert not a.plan.whole and a.plan.chunks > 3, a.plan
+    assert b.plan.whole, b.plan
+    (ra, _), (rb, _) = a.tune, b.tune
+    assert ra.evaluations == rb.evaluations and ra.figures == rb.figures
+    for f in ra.figures:
+        assert ra.estimate[f] == pytest.approx(rb.estimate[f], rel=1e-9, abs=0), f
+    for key in ("ll_start", "ll_estimate"):
+        assert getattr(ra, key) == pytest.approx(getattr(rb, key), rel=1e-9, abs=0), key
+    assert ra.ll_estimate > ra.ll_start  # the search moved: its path, not only its start, is compared
+    assert a.model.noise == b.model.noise
+    _same(load_run(tmp_path / "a.npz")[0], load_run(tmp_path / "b.npz")[0], ("filt", "smooth"))
+
+
+@pytest.mark.parametrize("flag, kw", [("--plots", {"job": Job(in_memory=("--plots",), budget=SMALL)})])
 def test_what_needs_every_sample_in_memory_is_refused_over_the_budget(inputs, tmp_path, flag, kw):
     with pytest.raises(UserError) as exc:
         smooth_file(inputs / "rec.npz", tmp_path / "o.npz", **kw)
