@@ -237,7 +237,15 @@ def _chunk_loglik(d, z: np.ndarray, ok: np.ndarray, xp: np.ndarray, Pa: np.ndarr
     # only the (a, eps) block enters S, only the extras' samples are unpacked
     S = Pa[:, pk((2, 2))] + 2.0 * Pa[:, pk((2, 3))] + Pa[:, pk((3, 3))] + d.R
     y = z - (xp[:, 2] + xp[:, 3])
-    ll = -0.5 * float(np.sum(np.log(2.0 * math.pi * S[ok]) + y[ok] ** 2 / S[ok]))
+    if not ok.all():  # every sample valid (the common case): no copies of S and y
+        S, y = S[ok], y[ok]
+    # log(2 pi S) + y^2 / S, in place: the same doubles, summed in the same order, as the expression written out
+    y *= y
+    y /= S
+    S *= 2.0 * math.pi
+    np.log(S, out=S)
+    S += y
+    ll = -0.5 * float(np.sum(S))
     if ex is None or not len(ex):
         return ll
     # the extras' terms, replayed from the prior of their sample (acceleration update first, then the extras in
