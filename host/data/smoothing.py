@@ -214,8 +214,8 @@ def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, s
     if size is not None:
         rows, n_axes = size
         p = engine.plan(rows, n_axes, job, label=str(path))  # refuses before reading what the budget cannot do
-        if p.whole and not whole and (job.covariances or job.tune):  # within the budget: one chunk in memory, the
-            whole = "--covariances" if job.covariances else "--tune"  # input read whole
+        if p.whole and not whole and (job.covariances or job.tune or job.envelope):  # within the budget: one chunk
+            whole = "--covariances" if job.covariances else "--tune" if job.tune else "--plots"  # in memory, read whole
         held, limit = rows * 8 * (2 + n_axes), input_limit()
         # with a budget given, an input whose whole-array run exceeds it streams; without one, an input over
         # STREAM_ABOVE in memory (a store read again three times costs more than reading it whole once)
