@@ -611,23 +611,16 @@ def tune_run(
                      intervals=intervals, announce=announce)  # fmt: skip
 
 
-def tune_data(
-    model: Model,
-    data: RunData,
-    *,
-    figures: Sequence[str] = FIGURES,
-    max_evaluations: int = MAX_EVALUATIONS,
-    max_seconds: float | None = None,
-    intervals: bool = False,
-    announce=None,
-) -> tuple[Model, TuneResult]:
+def tune_data(model: Model, data: RunData, *, announce=None, **bounds) -> tuple[Model, TuneResult]:
     """:func:`tune_run` of a run read chunk by chunk (``data``: its aids made already), in the memory of a chunk
-    whatever the run's length."""
-    _check_budget(max_evaluations, max_seconds)
+    whatever the run's length; ``bounds``: :func:`search`'s keywords (``intervals`` False unless given)."""
+    bounds = {"intervals": False, **bounds}
+    _check_budget(bounds.get("max_evaluations", MAX_EVALUATIONS), bounds.get("max_seconds"))
     if announce is not None:
         announce(data.n, data.n_axes, data.count)
-    r = search(model, data, figures=tuple(figures), max_evaluations=max_evaluations, max_seconds=max_seconds,
-               intervals=intervals)  # fmt: skip
+    if "figures" in bounds:
+        bounds["figures"] = tuple(bounds["figures"])
+    r = search(model, data, **bounds)
     return with_figures(model, {f: float(f"{v:.6g}") for f, v in r.chosen.items()}), r
 
 
