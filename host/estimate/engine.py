@@ -11,7 +11,8 @@ budget and from what was asked, how the passes are cut (:func:`plan`), and says 
   time and made into each chunk's aids as the forward pass reaches it (:class:`_AxisAids`), so that they
   need not the input held whole: only the rest decision (``--zupt auto``) reads it whole; the
   caller then writes ``--csv`` and ``--compress`` from the file a piece at a time
-  (:mod:`accelnav.data.smoothing`).
+  (:mod:`accelnav.data.smoothing`). ``--plots`` over the budget keeps each series' min and max per bin of
+  samples as the chunks go by (:class:`_RunEnvelope`, ``Outcome.envelope``): the figures draw that.
 * **one chunk in memory** (:func:`smooth_arrays`, :func:`filter_arrays`: the same kernels' whole-array
   entry points): what needs every output sample in memory at once, namely the aids' consistency checks
   (NIS of each aid, the held-out fixes), and a library call that wants arrays back. A run over the
@@ -89,8 +90,8 @@ class Job:
     """What one filter or smooth is asked for (the command's flags as library values).
 
     ``stages``: the states written, ("filt",) for the filter, ("smooth",) or ("filt", "smooth");
-    ``in_memory``: what else of the caller needs every sample in memory, by flag (``--csv``, ``--plots``,
-    ``--compress``), so that the plan can refuse it over the budget; ``budget``: bytes (None: half the
+    ``in_memory``: what else of the caller needs every sample in memory, by flag, so that the plan can refuse it
+    over the budget; ``budget``: bytes (None: half the
     memory available); ``checks``: compute the aids' consistency checks (in memory) when the run fits."""
 
     stages: tuple[str, ...] = ("smooth",)
