@@ -124,8 +124,10 @@ def plot_outcome(outcome, folder: str | Path) -> list[Path]:
     folder = Path(folder)
     if outcome.arrays is not None:
         view = _Samples(outcome.arrays, outcome.model)
-    else:
+    elif outcome.envelope is not None:
         view = _Envelope(outcome.envelope, outcome.axis_names)
+    else:
+        raise ValueError("plot_outcome: a chunked run keeps what its figures draw only when asked (Job(envelope=True))")
     return [_draw_run(view, outcome.model, folder / "smooth.png"), *_draw_smoothing(view, outcome.model, folder)]
 
 

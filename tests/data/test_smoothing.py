@@ -358,3 +358,12 @@ def test_plots_over_the_budget_are_drawn_from_the_envelope(inputs, tmp_path):
     assert [p.name for p in paths] == ["smooth.png", "fig10_bias.png", "fig11_position_filter.png",
                                        "fig12_position_smoother.png"]  # fmt: skip
     assert all(p.stat().st_size > 10_000 for p in paths)
+
+
+def test_a_chunked_run_without_its_envelope_is_not_drawn(inputs, tmp_path):
+    from accelnav.plots.run import plot_outcome
+
+    a = smooth_file(inputs / "sim.npz", tmp_path / "a.npz", job=Job(budget=SMALL))
+    with pytest.raises(ValueError, match="envelope=True"):
+        plot_outcome(a, tmp_path / "p")
+    assert not (tmp_path / "p").exists()
