@@ -51,6 +51,7 @@ def cases(npz: Path, fixes: Path, rests: Path, mask: Path, folder: Path) -> dict
         "smooth --fixes --zupt INTERVALS": ["smooth", npz, "--fixes", fixes, "--zupt", rests],
         "smooth --zupt auto": ["smooth", npz, "--zupt", "auto"],
         "smooth --tune": ["smooth", npz, "--tune"],
+        "smooth --plots": ["smooth", npz, "--plots", folder / "plots"],
         "filter": ["filter", npz],
     }
 

@@ -268,7 +268,8 @@ def register(sub) -> None:
         type=float,
         default=TUNE_SECONDS,
         metavar="S",
-        help=f"--tune: wall time of the search at most (the best figures by then are used); default {TUNE_SECONDS:g}",
+        help=f"--tune: wall time of the search at most (the best figures by then are used; a run whose evaluations "
+        f"this cuts short is told so first); default {TUNE_SECONDS:g}",
     )
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
     p.add_argument(
@@ -291,8 +292,9 @@ def register(sub) -> None:
         metavar="MB",
         help="memory the run may take; a longer run is smoothed in chunks (its store in memory within the budget, "
         "without one within 1 GiB, else on disk beside --out; the aids' consistency checks are skipped); "
-        "--covariances are written chunk by chunk (the general path: 544 B per sample and axis); --tune and "
-        "--plots need the whole run in memory and are refused over it; default: half "
+        "--covariances are written chunk by chunk (the general path: 544 B per sample and axis); --tune reads "
+        "the input again for every likelihood evaluation; --plots draws from each series' min and max per "
+        "pixel column, kept while the chunks are written; default: half "
         "the memory free",
     )
     p.add_argument(
@@ -505,7 +507,7 @@ def cmd_smooth(args) -> int:
         raise UserError("--out: a run file to write is required (or --out-dir DIR for several inputs)")
     args.run = args.run[0]
     job = _job_options(args, stages=stages, tune=tune, warm_start=args.warm_start,
-               in_memory=("--plots",) if args.plots is not None else ())  # fmt: skip
+               envelope=args.plots is not None)  # fmt: skip
     outcome = smooth_file(
         args.run, args.out, args.model, job=job, fixes=args.fixes, zupt=args.zupt, zupt_params=params,
         zupt_report=args.zupt_report, csv=args.csv, compress=args.compress, rests_decided=_print_rests,
@@ -522,10 +524,9 @@ def cmd_smooth(args) -> int:
             print(line)
     _print_run(args, outcome)
     if args.plots is not None:
-        from accelnav.plots.run import plot_run, plot_smoothing
+        from accelnav.plots.run import plot_outcome
 
-        print(f"wrote {plot_run(outcome.arrays, outcome.model, args.plots / 'smooth.png')}")
-        for path in plot_smoothing(outcome.arrays, outcome.model, args.plots):
+        for path in plot_outcome(outcome, args.plots):
             print(f"wrote {path}")
     return 0
 

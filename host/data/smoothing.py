@@ -184,7 +184,7 @@ def _whole_reasons(job: engine.Job, zupt) -> str:
 
     given = zupt is not None and zupt != "auto"
     held = zupt == "auto" or (given and "smooth" in job.stages and rest_file_kind(zupt) == "mask")
-    flags = [f for f, v in (("--zupt", zupt if held else None), ("--tune", job.tune)) if v is not None]
+    flags = [f for f, v in (("--zupt", zupt if held else None),) if v is not None]
     flags += [f for f in job.in_memory if f not in flags]
     return ", ".join(flags)
 
@@ -214,8 +214,8 @@ def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, s
     if size is not None:
         rows, n_axes = size
         p = engine.plan(rows, n_axes, job, label=str(path))  # refuses before reading what the budget cannot do
-        if p.whole and job.covariances and not whole:  # within the budget: one chunk in memory, the input read whole
-            whole = "--covariances"
+        if p.whole and not whole and (job.covariances or job.tune or job.envelope):  # within the budget: one chunk
+            whole = "--covariances" if job.covariances else "--tune" if job.tune else "--plots"  # in memory, read whole
         held, limit = rows * 8 * (2 + n_axes), input_limit()
         # with a budget given, an input whose whole-array run exceeds it streams; without one, an input over
         # STREAM_ABOVE in memory (a store read again three times costs more than reading it whole once)

@@ -380,6 +380,7 @@ class _Run:
     on_disk: bool = False  # a store went to disk
     marks: str = ""  # the member of the samples where a marked aid was applied ("": none written)
     covariances: bool = False  # the full covariances written (filt_P, smooth_P, the filter's priors)
+    tap: Callable | None = None  # tap(key, j, s, values): each output as it is written (j = -1: the marks, all axes)
 
     def __post_init__(self) -> None:
         # allocated once and reused by every chunk: fresh pages cost more than the kernels here (a page
@@ -426,6 +427,8 @@ class _Run:
         """Rows s.. of axis j of the (n_axes, N, states) output ``key``, from their (m, 4) values."""
         k, data = self.states, np.atleast_2d(data)
         self.out.write(key, k * (j * self.n + s), data if k == 4 else data[:, :k])
+        if self.tap is not None:
+            self.tap(key, j, s, data)
         if len(data) and s == 0:
             self.first.setdefault(key, np.zeros((len(self.axes), 4)))[j] = data[0]
         if len(data) and s + len(data) == self.n:
@@ -506,6 +509,7 @@ def smooth_bounded(
     full: bool = True,
     marks: str = "",
     covariances: bool = False,
+    tap: Callable[[str, int, int, np.ndarray], None] | None = None,
 ) -> dict:
     """Filter and RTS-smooth every axis of an n-sample run in bounded memory; write ``out``.
 
@@ -527,6 +531,8 @@ def smooth_bounded(
     ``filt``, the filter's priors ``filt_x_prior`` (n_axes, N, 4), ``filt_P_prior``, at float64 as the
     one-chunk path writes them (implies ``full``): every axis then takes the general path, whose kernels hold
     each sample's covariances (the plain path's lean store does not), written chunk by chunk.
+    ``tap(key, j, s, values)``: each (n_axes, N, 4) output's rows s.. of axis j, all four states at float64 as
+    computed (before the compact cut), and the marks' rows (j = -1), as they are written (a figure's envelope).
     Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras given whole were
     applied, in their given order (None for ChunkAids), "marked": per axis, marked aids applied, "first",
     "last": {output key: its (n_axes, 4) values at sample 0, N-1}, "store_in_memory": where the store was}.
@@ -578,7 +584,7 @@ def smooth_bounded(
         for ax in axes:
             stack.callback(ax.close_stores)
         run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k, tmp=tmp, memory_left=store_memory, marks=marks,
-                   covariances=covariances)  # fmt: skip
+                   covariances=covariances, tap=tap)  # fmt: skip
         for ax in axes if smooth else []:
             # a lean store (all samples valid so far) first where the design has steady rows: 5 doubles per
             # sample, not 12; the full store is opened at the first sample that needs it (run.full_store)
@@ -698,6 +704,8 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
             ax.xfn = run.xa[m - 1].copy()
     if run.marks:
         run.out.write(run.marks, s * n_axes, run.marked[:m])
+        if run.tap is not None:
+            run.tap(run.marks, -1, s, run.marked[:m])
 
 
 def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:

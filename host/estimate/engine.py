@@ -11,13 +11,15 @@ budget and from what was asked, how the passes are cut (:func:`plan`), and says 
   time and made into each chunk's aids as the forward pass reaches it (:class:`_AxisAids`), so that they
   need not the input held whole: only the rest decision (``--zupt auto``) reads it whole; the
   caller then writes ``--csv`` and ``--compress`` from the file a piece at a time
-  (:mod:`accelnav.data.smoothing`).
+  (:mod:`accelnav.data.smoothing`). ``--plots`` over the budget keeps each series' min and max per bin of
+  samples as the chunks go by (:class:`_RunEnvelope`, ``Outcome.envelope``): the figures draw that.
 * **one chunk in memory** (:func:`smooth_arrays`, :func:`filter_arrays`: the same kernels' whole-array
   entry points): what needs every output sample in memory at once, namely the aids' consistency checks
-  (NIS of each aid, the held-out fixes), ``--tune`` (its likelihood is a whole-run search), and a
-  library call that wants arrays back. A run over the
+  (NIS of each aid, the held-out fixes), and a library call that wants arrays back. A run over the
   budget that asks for one of them is refused in one line before any work. ``--covariances`` within the
-  budget is one chunk in memory; over it, it is chunked, its covariances written chunk by chunk.
+  budget is one chunk in memory; over it, it is chunked, its covariances written chunk by chunk. So is
+  ``--tune``: over the budget its likelihood is summed chunk by chunk (:func:`accelnav.estimate.tune.tune_data`:
+  every evaluation reads the input again, its aids made per chunk), the search in the memory of a chunk.
 
 The stages are called from one place each: the rest decision (:func:`rest_stage`:
 :func:`accelnav.estimate.zupt.decide_rests` with the run's fixes, then the review
@@ -88,8 +90,8 @@ class Job:
     """What one filter or smooth is asked for (the command's flags as library values).
 
     ``stages``: the states written, ("filt",) for the filter, ("smooth",) or ("filt", "smooth");
-    ``in_memory``: what else of the caller needs every sample in memory, by flag (``--csv``, ``--plots``,
-    ``--compress``), so that the plan can refuse it over the budget; ``budget``: bytes (None: half the
+    ``in_memory``: what else of the caller needs every sample in memory, by flag, so that the plan can refuse it
+    over the budget; ``budget``: bytes (None: half the
     memory available); ``checks``: compute the aids' consistency checks (in memory) when the run fits."""
 
     stages: tuple[str, ...] = ("smooth",)
@@ -102,6 +104,9 @@ class Job:
     checks: bool = True
     warm_start: bool = False
     full: bool = False  # write every state at float64 and echo the input (else r, u and sds at float32)
+    # --plots: within the budget the run is one chunk in memory (the figures draw every sample); over it the
+    # outputs' min and max per bin of samples are kept as the chunks are written (Outcome.envelope)
+    envelope: bool = False
 
     @property
     def aided(self) -> bool:
@@ -212,6 +217,7 @@ class Outcome:
     applied: list[int] | None = None  # zero-velocity updates applied per axis
     fixes: list[int] | None = None  # fixes per axis
     tune: object = None  # (TuneResult, seconds)
+    envelope: object = None  # accelnav.estimate.envelope.Envelope of a chunked run's series (Job.envelope)
     checks: object = None  # consistency.SmoothChecks (accelnav.data.smoothing adds them)
     store_in_memory: bool = True
     streamed: str = ""
@@ -242,15 +248,17 @@ def plan(n: int, n_axes: int, job: Job, *, label: str = "the run", to_file: bool
     every output sample at once, else chunked to the file; refused (UserError) when that does not fit."""
     budget = budget_bytes(job.budget)
     fits = chunked.whole_bytes(n, n_axes) <= budget
-    needs = [f for f, v in (("--tune", job.tune is not None),) if v]
-    needs += list(job.in_memory)
+    needs = list(job.in_memory)
     if not to_file:
         needs.append("arrays returned in memory")
     if needs and not fits:
         raise UserError(f"{over_budget(label, n, n_axes, budget)}; bounded memory does not do {', '.join(needs)}")
     # --covariances within the budget: one chunk in memory, as before; over it, chunked (written chunk by chunk)
+    # --tune within it: one chunk in memory, as before; over it, its likelihood read chunk by chunk (_tune); --plots
+    # within it: one chunk in memory, every sample drawn; over it, chunked, drawn from the outputs' envelope
     held = [why for why, v in (("--covariances", job.covariances), ("the aids' consistency checks",
-                               job.aided and job.checks), ("the input's truth", echo)) if v]  # fmt: skip
+                               job.aided and job.checks), ("the input's truth", echo), ("--tune", job.tune is not None),
+                               ("--plots", job.envelope)) if v]  # fmt: skip
     if needs or (fits and held):
         return Plan(True, max(n, 1), 1, budget, f"one chunk in memory ({', '.join(needs or held[:1])})")
     chunk = chunked.chunk_samples(n_axes, min(chunked.BUDGET, budget), job.covariances)
@@ -386,7 +394,7 @@ def run(
     outcome = Outcome(model, p, n, source.axis_names, source.t_ends, np.zeros(n_axes, dtype=np.int64), rests=rest,
                       streamed=source.streamed)  # fmt: skip
     if smooth and job.tune is not None:
-        model = outcome.model = _tune(model, arrays, job, rest, source.label, outcome)
+        model = outcome.model = _tune(model, arrays if p.whole else source, job, rest, source.label, outcome)
     if p.whole:
         _whole(model, arrays, job, rest, outcome, reuse)
     else:
@@ -394,8 +402,11 @@ def run(
     return outcome
 
 
-def _tune(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, label: str, outcome: Outcome) -> Model:
-    from accelnav.estimate.tune import tune_run
+def _tune(model: Model, run, job: Job, rest: RestOutcome | None, label: str, outcome: Outcome) -> Model:
+    """The tune search on ``run``: the arrays in memory (one chunk), or the :class:`Source` read a chunk at a time
+    for every evaluation of the likelihood, its aids made for each chunk (:class:`_AxisAids`), in the memory of
+    a chunk whatever the run's length."""
+    from accelnav.estimate import tune
 
     t0 = [time.monotonic()]
 
@@ -404,10 +415,18 @@ def _tune(model: Model, arrays: dict, job: Job, rest: RestOutcome | None, label:
             job.tune.announce(*a)
         t0[0] = time.monotonic()
 
-    kw = {} if rest is None else dict(rest=rest.mask, rest_sigma=rest.sigma, params=rest.params)
+    bounds = dict(max_evaluations=job.tune.max_evaluations, max_seconds=job.tune.max_seconds, announce=announce)
     try:
-        tuned, r = tune_run(model, arrays, fixes=job.fixes, max_evaluations=job.tune.max_evaluations,
-                            max_seconds=job.tune.max_seconds, announce=announce, **kw)  # fmt: skip
+        if isinstance(run, Source):
+            n_axes = len(run.axis_names)
+            fx = [Aids.of(list(job.fixes[j]) if job.fixes is not None else []) for j in range(n_axes)]
+            spans = rest.runs(n_axes) if rest is not None else None
+            aids = [_AxisAids(model, j, fx[j], spans, rest.params if rest is not None else None) for j in range(n_axes)]
+            chunk = tune.chunk_samples(n_axes, min(chunked.BUDGET, outcome.plan.budget))
+            tuned, r = tune.tune_data(model, tune.RunData(run.n, n_axes, run.read, aids, chunk), **bounds)
+        else:
+            kw = {} if rest is None else dict(rest=rest.mask, rest_sigma=rest.sigma, params=rest.params)
+            tuned, r = tune.tune_run(model, run, fixes=job.fixes, **bounds, **kw)
     except ValueError as exc:
         raise UserError(f"{label}: --tune: {exc}") from None
     outcome.tune = (r, time.monotonic() - t0[0])
@@ -464,6 +483,67 @@ class _AxisAids(chunked.ChunkAids):
         return chunked.Piece(fastsmooth.Extras(k[order], h, z, R, order), np.zeros(len(k)), marked)
 
 
+class _RunEnvelope:
+    """What the figures of a chunked run draw, kept as the chunks go by (accelnav.estimate.envelope.Envelope): the
+    time, plain double integration of the input (accelnav.estimate.kf.double_integrate, its sums carried from
+    chunk to chunk: the same doubles), the model's mean bias, the input's truth when it is held, the filter's and
+    the smoother's states with their +-1 sigma bands (``tap``) and the zero-velocity updates applied."""
+
+    def __init__(self, model: Model, n: int, source: Source) -> None:
+        from accelnav.estimate.envelope import Envelope
+
+        self.env, self.n, self.source = Envelope(n), n, source
+        self.designs = [axis_design(model, j) for j in range(len(source.axis_names))]
+        # per axis: the running sum of a, of the position steps, the last u, a, and the last valid a (forward fill)
+        self.carry = [[0.0, 0.0, 0.0, 0.0, 0.0] for _ in self.designs]
+        self.held: dict[tuple[str, int, int], np.ndarray] = {}
+        self.done: set[int] = set()
+
+    def read(self, s: int, t: np.ndarray, accel: np.ndarray, clipped: np.ndarray) -> None:
+        if s in self.done:  # a chunk read again (a later pass) is added once
+            return
+        self.done.add(s)
+        e = s + len(t)
+        self.env.add("t", s, t)
+        truth = self.source.arrays or {}
+        for j, d in enumerate(self.designs):
+            self.env.add(f"dr/{j}", s, self._integrate(j, s, accel[:, j], ~clipped[:, j], d.Ts))
+            self.env.add(f"bias/{j}", s, d.eps_mean - d.axis.c1 * d.phi ** np.arange(s, e))
+            for key in ("r", "u", "a", "eps"):
+                if key in truth:
+                    self.env.add(f"{key}/{j}", s, np.asarray(truth[key][s:e, j], dtype=np.float64))
+
+    def _integrate(self, j: int, s: int, a: np.ndarray, ok: np.ndarray, Ts: float) -> np.ndarray:
+        """double_integrate's [r, u] of samples s.., from the sums carried over the samples before."""
+        A, Rm, u_prev, a_prev, last = self.carry[j]
+        m = len(a)
+        idx = np.maximum.accumulate(np.where(ok, np.arange(m), -1))
+        a = np.where(idx >= 0, np.asarray(a, dtype=np.float64)[np.maximum(idx, 0)], last)  # invalid: the last valid
+        Aext = np.cumsum(np.concatenate(([A], a)))  # A[s-1], A[s], .. (u[k] = Ts A[k-1])
+        u = Ts * Aext[:-1]
+        if s == 0:
+            w = Ts * u[:-1] + 0.5 * Ts * Ts * a[:-1]  # r[k] = the sum of w up to k-1
+            r = np.cumsum(np.concatenate(([0.0], w)))
+        else:
+            w = Ts * np.concatenate(([u_prev], u[:-1])) + 0.5 * Ts * Ts * np.concatenate(([a_prev], a[:-1]))
+            r = np.cumsum(np.concatenate(([Rm], w)))[1:]
+        self.carry[j] = [float(Aext[-1]), float(r[-1]), float(u[-1]), float(a[-1]), float(a[-1])]
+        return np.column_stack((r, u))
+
+    def tap(self, key: str, j: int, s: int, values: np.ndarray) -> None:
+        if j < 0:  # the zero-velocity updates applied, every axis
+            self.env.add(key, s, values)
+            return
+        stage, what = key.split("_", 1)
+        if what == "x":
+            self.held[stage, j, s] = np.array(values, dtype=np.float64)
+            self.env.add(f"{stage}_x/{j}", s, values)
+        elif what == "sd":  # after the chunk's means: its band
+            x = self.held.pop((stage, j, s))
+            self.env.add(f"{stage}_lo/{j}", s, x - values)
+            self.env.add(f"{stage}_hi/{j}", s, x + values)
+
+
 def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outcome, run_format: str) -> None:
     """The passes over chunks, the output written in place (accelnav.estimate.chunked); the aids made for each
     chunk as the forward pass reaches it (:class:`_AxisAids`), the fixes' times read as it goes."""
@@ -472,7 +552,9 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
     fixes = job.fixes if smooth else None
     aided = smooth and job.aided
     # --covariances smoothed writes the filter's states too, as the one-chunk path (smooth_arrays) does
-    stages = ("filt", "smooth") if smooth and job.covariances else job.stages
+    # --plots: the figures draw the filter's states too: they are computed, and so written, beside the smoother's
+    stages = ("filt", "smooth") if smooth and (job.covariances or job.envelope) else job.stages
+    env = _RunEnvelope(model, n, source) if job.envelope else None
     fx = [Aids.of(list(fixes[j]) if fixes is not None else []) for j in range(n_axes)]
     spans = rest.runs(n_axes) if smooth and rest is not None else None
     params = rest.params if rest is not None else None
@@ -483,6 +565,8 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
 
     def read(s: int, e: int):
         t, accel, c = source.read(s, e)
+        if env is not None:
+            env.read(s, t, accel, c)
         # by chunk start: a chunk read twice counts once; none clipped (the rule) is told by one pass
         counts[s] = c.sum(axis=0) if c.any() else np.zeros(c.shape[1], dtype=np.int64)
         for f, ft in zip(fx, fix_t, strict=True):
@@ -504,11 +588,19 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
             add["zupt_candidates"] = rest.candidate_rows(source.whole()["t"])
         return add
 
+    def kept(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
+        add = more(applied)
+        if env is not None:
+            env.env.extra.update({k: v for k, v in add.items() if k in ("fixes", "zupt_candidates")})
+        return add
+
     info = chunked.smooth_bounded(
         model, n, read, out, axis_names=source.axis_names, extras=extras, chunk=outcome.plan.chunk,
-        workdir=workdir, run_format=run_format, more=more, stages=stages, store_memory=store_memory(job),
+        workdir=workdir, run_format=run_format, more=kept, stages=stages, store_memory=store_memory(job),
         full=job.full, marks="zupt" if aided or (smooth and job.covariances) else "", covariances=job.covariances,
+        tap=None if env is None else env.tap,
     )  # fmt: skip
+    outcome.envelope = None if env is None else env.env
     ends = {k: v[:, None, :] for k, v in info["last"].items() if k.startswith("filt_")}
     ends.update({k: v[:, None, :] for k, v in info["first"].items() if k.startswith("smooth_")})
     outcome.ends = ends

@@ -54,18 +54,21 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from statistics import NormalDist
 
 import numpy as np
 
 from accelnav.estimate import fastsmooth
+from accelnav.estimate.chunked import GROW
 from accelnav.estimate.kf import Measurement, batch_update
 from accelnav.lazy import lazy_module
 from accelnav.model.design import axis_design
 from accelnav.model.edit import revalidate, with_noise
 from accelnav.model.load import Model
+from accelnav.progress import note
 
 optimize = lazy_module("scipy.optimize")
 stats = lazy_module("scipy.stats")
@@ -109,25 +112,145 @@ def figure_bounds(model: Model) -> dict[str, tuple[float, float, str, str]]:
     return out
 
 
-def _axis_loglik(
-    model: Model, j: int, z: np.ndarray, valid: np.ndarray, extras: Sequence[Measurement] | fastsmooth.Extras
-) -> float:
-    d = axis_design(model, j)
-    ex = fastsmooth.Extras.of(extras)
-    # the general path: the plain one caches gains per design, and every theta is a new design
-    res = fastsmooth.smooth_general(d, z, valid=valid, extras=ex)
-    xp = res.x_prior
+@dataclass(frozen=True)
+class RunData:
+    """The run a likelihood reads, a chunk at a time: ``n`` samples of ``n_axes`` axes, rows s..e read by
+    ``read(s, e)`` -> (t, accel (m, n_axes), clipped (m, n_axes) bool) in pieces of ``chunk`` samples, and each
+    axis's aids: :class:`fastsmooth.Extras` held whole, or ``chunked.ChunkAids`` made for each chunk alone (a long
+    run's rests are millions of updates), or None. The whole run in memory is one chunk (:meth:`of`)."""
+
+    n: int
+    n_axes: int
+    read: Callable
+    aids: Sequence
+    chunk: int
+    scratch: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)  # buffers, kept between passes
+
+    def buffers(self, j: int) -> list[np.ndarray]:
+        """Axis j's chunk buffers, allocated once for every evaluation (fresh pages on every pass cost time)."""
+        if j not in self.scratch:
+            size = min(self.chunk, self.n)
+            self.scratch[j] = [np.empty((size, w)) for w in (GROW, 4, 4, 4, 10)]
+        return self.scratch[j]
+
+    @classmethod
+    def of(cls, accel: np.ndarray, valid: np.ndarray, extras, chunk: int | None = None) -> RunData:
+        """Arrays in memory, one chunk unless ``chunk`` says otherwise."""
+        n, m = accel.shape
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != accel.shape:
+            raise ValueError(f"valid: shape {valid.shape}, expected {accel.shape}")
+        aids = [fastsmooth.Extras.of(e) for e in extras]  # once: the search filters them hundreds of times
+        for ex in aids:
+            if len(ex) and (ex.k[0] < 0 or ex.k[-1] >= n):
+                bad = int(ex.k[(ex.k < 0) | (ex.k >= n)][0])
+                raise ValueError(f"extra measurement at sample {bad} is outside 0..{n - 1}")
+        return cls(n, m, lambda s, e: (None, accel[s:e], ~valid[s:e]), aids, max(1, n if chunk is None else chunk))
+
+    @property
+    def count(self) -> int:
+        """Aids over every axis."""
+        return sum(_aid_count(a) for a in self.aids)
+
+
+def _aid_count(aid) -> int:
+    return 0 if aid is None else len(aid) if isinstance(aid, fastsmooth.Extras) else int(aid.count)
+
+
+def _piece(aid, s: int, e: int) -> fastsmooth.Extras | None:
+    """The aids of samples s..e-1 (sample numbers of the run), in the filter's order."""
+    if aid is None or not _aid_count(aid):
+        return None
+    if isinstance(aid, fastsmooth.Extras):
+        a, b = int(np.searchsorted(aid.k, s)), int(np.searchsorted(aid.k, e))
+        return fastsmooth.Extras(aid.k[a:b], aid.h[a:b], aid.z[a:b], aid.R[a:b], aid.order[a:b])
+    return aid.between(s, e).ex
+
+
+# bytes per sample and axis a chunk of the likelihood holds: acn_chunkg_fwd's store row, its four outputs (filter
+# means and sds, prior means and packed covariances), the input's z and its flags, and the terms' temporaries
+SAMPLE_BYTES = 8 * (GROW + 4 + 4 + 4 + 10) + 8 * 8 + 2
+
+
+def chunk_samples(n_axes: int, budget: int) -> int:
+    """Samples per chunk of the likelihood so that its buffers fit ``budget`` bytes (2 at least)."""
+    return max(2, int(budget) // (n_axes * SAMPLE_BYTES + 8))
+
+
+class _Pass:
+    """The filter's forward pass over one axis, chunk by chunk (acn_chunkg_fwd, the same steps as acn_general's
+    forward half: the priors of every sample, bit for bit): the prior carried between chunks, the buffers
+    reused for every chunk."""
+
+    def __init__(self, d, buffers: list[np.ndarray]) -> None:
+        mod = fastsmooth._lib()
+        self.ffi, self.lib, self.d = mod.ffi, mod.lib, d
+        self.m = fastsmooth._axis_struct(self.ffi, d)
+        self.carry = np.concatenate([np.asarray(d.x0, dtype=np.float64), fastsmooth.pack(np.asarray(d.P0, float))])
+        # acn_chunkg_fwd's store rows (scratch here), filter means and sds, prior means and packed covariances
+        self.store, self.xf, self.sdf, self.xp, self.Pp = buffers
+
+    def priors(self, zc: np.ndarray, ok: np.ndarray, ex: fastsmooth.Extras | None, s: int, last: bool):
+        """The (m, 4) prior means and (m, 10) packed prior covariances of samples s..s+m-1."""
+        m, ne = len(zc), 0 if ex is None else len(ex)
+        p, ffi = (lambda a, c="double *": fastsmooth._ptr(self.ffi, a, c)), self.ffi
+        ek = np.ascontiguousarray(ex.k - s, dtype=np.int64) if ne else np.zeros(1, dtype=np.int64)
+        arrs = [ex.h, ex.z, ex.R, np.zeros(ne)] if ne else [np.zeros(4)] * 4
+        arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
+        applied = np.zeros(max(ne, 1), dtype=np.uint8)
+        self.lib.acn_chunkg_fwd(
+            self.m, m, int(last), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne, ffi.from_buffer("long[]", ek),
+            *(p(a) for a in arrs), p(applied, "unsigned char *"), p(self.carry), p(self.store), p(self.xf),
+            p(self.sdf), p(self.xp), p(self.Pp),
+        )  # fmt: skip
+        return self.xp[:m], self.Pp[:m]
+
+
+def data_loglik(model: Model, data: RunData, after_chunk: Callable[[int], None] | None = None) -> float:
+    """ln L of ``data`` under ``model``: the filter's pass over every chunk, each axis's terms summed chunk by
+    chunk (one chunk: the very sums of a whole-array pass). ``after_chunk(samples done)`` is called after each
+    chunk (a time bound stops an evaluation there)."""
+    n, size = data.n, min(data.chunk, data.n)
+    passes = [_Pass(axis_design(model, j), data.buffers(j)) for j in range(data.n_axes)]
+    ll = [0.0] * data.n_axes
+    for s in range(0, n, size):
+        e = min(s + size, n)
+        _, accel, clipped = data.read(s, e)
+        for j, ps in enumerate(passes):
+            z = np.asarray(accel[:, j], dtype=np.float64)
+            ok = ~np.asarray(clipped[:, j], dtype=bool) & np.isfinite(z)
+            ex = _piece(data.aids[j], s, e)
+            xp, Pa = ps.priors(np.ascontiguousarray(np.where(ok, z, 0.0)), ok, ex, s, e == n)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ll[j] += _chunk_loglik(ps.d, z, ok, xp, Pa, ex, s)
+        if after_chunk is not None:
+            after_chunk(e)
+    total = sum(ll)
+    if not math.isfinite(total):  # an innovation variance <= 0: a covariance that is not positive definite
+        raise ValueError("the likelihood is not finite: a prior covariance is not positive definite")
+    return total
+
+
+def _chunk_loglik(d, z: np.ndarray, ok: np.ndarray, xp: np.ndarray, Pa: np.ndarray, ex, s: int) -> float:
+    """One axis's terms of samples s..s+m-1 from their priors ``xp``, ``Pa`` (packed) and their aids ``ex``."""
     pk = fastsmooth.PACKED.index
-    Pa = res.P_prior  # packed: only the (a, eps) block enters S, only the extras' samples are unpacked
+    # only the (a, eps) block enters S, only the extras' samples are unpacked
     S = Pa[:, pk((2, 2))] + 2.0 * Pa[:, pk((2, 3))] + Pa[:, pk((3, 3))] + d.R
     y = z - (xp[:, 2] + xp[:, 3])
-    ok = valid & np.isfinite(z)
-    ll = -0.5 * float(np.sum(np.log(2.0 * math.pi * S[ok]) + y[ok] ** 2 / S[ok]))
-    if not len(ex):
+    if not ok.all():  # every sample valid (the common case): no copies of S and y
+        S, y = S[ok], y[ok]
+    # log(2 pi S) + y^2 / S, in place: the same doubles, summed in the same order, as the expression written out
+    y *= y
+    y /= S
+    S *= 2.0 * math.pi
+    np.log(S, out=S)
+    S += y
+    ll = -0.5 * float(np.sum(S))
+    if ex is None or not len(ex):
         return ll
     # the extras' terms, replayed from the prior of their sample (acceleration update first, then the extras in
     # order): every sample's replay is independent of the others', so all samples are replayed at once
-    ks, hs, zs, rs = ex.k, ex.h, ex.z, ex.R
+    ks, hs, zs, rs = ex.k - s, ex.h, ex.z, ex.R
     uk, first, group = np.unique(ks, return_index=True, return_inverse=True)
     rank = np.arange(len(ks)) - first[group]
     X = xp[uk].copy()
@@ -156,7 +279,7 @@ def loglik(
     extras: Sequence[Sequence[Measurement] | fastsmooth.Extras],
 ) -> float:
     """ln L of the accelerations (N, axes) and each axis's extra measurements under ``model``."""
-    return sum(_axis_loglik(model, j, accel[:, j], valid[:, j], extras[j]) for j in range(accel.shape[1]))
+    return data_loglik(model, RunData.of(np.asarray(accel, dtype=np.float64), valid, extras))
 
 
 C2_SCALE = 0.01  # m/s^2 per unit of the search variable for c2 (the noise figures are searched as logarithms)
@@ -250,6 +373,16 @@ def tune(
     accel: np.ndarray,
     valid: np.ndarray,
     extras: Sequence[Sequence[Measurement]],
+    **kw,
+) -> TuneResult:
+    """Maximum-likelihood figures (of sigma_n, sigma_eps, R, and "c2" for every axis's c2) from ``accel`` (N,
+    axes) held in memory, one chunk; the keywords are :func:`search`'s."""
+    return search(model, RunData.of(np.asarray(accel, dtype=np.float64), valid, extras), **kw)
+
+
+def search(
+    model: Model,
+    data: RunData,
     *,
     figures: Sequence[str] = FIGURES,
     progress=None,
@@ -257,16 +390,16 @@ def tune(
     max_seconds: float | None = None,
     intervals: bool = True,
 ) -> TuneResult:
-    """Maximum-likelihood figures (of sigma_n, sigma_eps, R, and "c2" for every axis's c2) from ``accel``.
+    """Maximum-likelihood figures (of sigma_n, sigma_eps, R, and "c2" for every axis's c2) from ``data``, its
+    likelihood computed chunk by chunk (every evaluation reads the run again).
 
     ``max_seconds`` bounds the search's wall time (the best point found by then is the estimate; the
-    intervals are then skipped); ``intervals=False`` skips the Hessian and the profile intervals (se and
+    intervals are then skipped), checked after every chunk, so that an evaluation of a long run stops within a
+    chunk of it; the first evaluation (the starting model) is timed, and when the bound will cut the search
+    short that is said before it starts. ``intervals=False`` skips the Hessian and the profile intervals (se and
     intervals are NaN), for a caller that only wants the estimate.
     """
-    import time
-
     figures = _figure_names(model, figures)
-    extras = [fastsmooth.Extras.of(e) for e in extras]  # once: the search filters them hundreds of times
     start = all_figures(model)
     first = dict(start)
     if first["sigma_eps"] <= 0 and "sigma_eps" in figures:
@@ -283,15 +416,18 @@ def tune(
         th = np.clip(theta, lo, hi)
         return {f: float(t * C2_SCALE if _is_c2(f) else math.exp(t)) for f, t in zip(figures, th, strict=True)}
 
-    def nll(theta) -> float:
+    def in_time(_done: int) -> None:
         if deadline is not None and time.monotonic() > deadline:
             raise _OutOfTime
+
+    def nll(theta) -> float:
+        in_time(0)
         count[0] += 1
         if progress is not None:
             progress.update(min(count[0], progress.total))
         try:
             m = with_figures(model, values(theta), check=False)
-            v = -loglik(m, accel, valid, extras)
+            v = -data_loglik(m, data, in_time)
         except ValueError:  # a covariance that is not positive definite at an extreme theta
             return 1e300
         # outside the bounds: the clipped value plus a penalty, so the search turns back
@@ -301,7 +437,10 @@ def tune(
         return v
 
     theta0 = np.array([first[f] / C2_SCALE if _is_c2(f) else math.log(first[f]) for f in figures])
+    t0 = time.monotonic()
     ll0 = -nll(theta0)
+    share = max(10, max_evaluations // (3 if intervals else 1))
+    _say_pace(data, time.monotonic() - t0, share, max_seconds)
     deadline = None if max_seconds is None else time.monotonic() + max_seconds
     try:
         res = optimize.minimize(
@@ -311,7 +450,7 @@ def tune(
             options={
                 "xatol": 1e-3,
                 "fatol": 1e-3,
-                "maxfev": max(10, max_evaluations // (3 if intervals else 1)),
+                "maxfev": share,
                 "initial_simplex": np.vstack([theta0] + [theta0 + 0.5 * e for e in np.eye(len(figures))]),
             },
         )
@@ -352,6 +491,17 @@ def tune(
         at_bound=_at_bound(figures, theta, lo, hi),
         ends=ends,
         bounds={f: bounds[f] for f in figures if not _is_c2(f)},
+    )
+
+
+def _say_pace(data: RunData, seconds: float, share: int, max_seconds: float | None) -> None:
+    """Say, before the search, when its time bound will stop it short of its evaluations (a long run's)."""
+    if max_seconds is None or seconds <= 0 or seconds * share <= max_seconds:
+        return
+    fit = int(max_seconds // seconds)
+    note(
+        f"tune: one likelihood evaluation of {data.n} samples x {data.n_axes} axes takes {seconds:.3g} s: about {fit} "
+        f"of the search's {share} evaluations fit in {max_seconds:g} s; the best figures found by then are used"
     )
 
 
@@ -447,30 +597,38 @@ def tune_run(
 ) -> tuple[Model, TuneResult]:
     """The model with this run's maximum-likelihood noise figures, found with the run's aids (fixes, rests)
     in a stated budget; and the result. ``accelnav.tune`` asks for the intervals too, ``accelnav smooth
-    --tune`` only for the estimate.
+    --tune`` only for the estimate. The run is held in memory (one chunk); :func:`tune_data` reads one a chunk
+    at a time.
 
     The figures are rounded to 6 digits, as a model file holds them. ``announce(samples, axes, aids)`` is
     called once before the search, which may take the whole budget."""
+    _check_budget(max_evaluations, max_seconds)
+    accel = np.asarray(run["accel"], dtype=np.float64)
+    n, m = accel.shape
+    extras, _ = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
+    data = RunData.of(accel, ~np.asarray(run["clipped"], dtype=bool), extras)
+    return tune_data(model, data, figures=figures, max_evaluations=max_evaluations, max_seconds=max_seconds,
+                     intervals=intervals, announce=announce)  # fmt: skip
+
+
+def tune_data(model: Model, data: RunData, *, announce=None, **bounds) -> tuple[Model, TuneResult]:
+    """:func:`tune_run` of a run read chunk by chunk (``data``: its aids made already), in the memory of a chunk
+    whatever the run's length; ``bounds``: :func:`search`'s keywords (``intervals`` False unless given)."""
+    bounds = {"intervals": False, **bounds}
+    _check_budget(bounds.get("max_evaluations", MAX_EVALUATIONS), bounds.get("max_seconds"))
+    if announce is not None:
+        announce(data.n, data.n_axes, data.count)
+    if "figures" in bounds:
+        bounds["figures"] = tuple(bounds["figures"])
+    r = search(model, data, **bounds)
+    return with_figures(model, {f: float(f"{v:.6g}") for f, v in r.chosen.items()}), r
+
+
+def _check_budget(max_evaluations: int, max_seconds: float | None) -> None:
     if max_evaluations < 10:
         raise ValueError(f"max_evaluations: got {max_evaluations}; accepted: 10 or more")
     if max_seconds is not None and not max_seconds > 0:
         raise ValueError(f"max_seconds: got {max_seconds:g}; accepted: a time > 0 s")
-    accel = np.asarray(run["accel"], dtype=np.float64)
-    n, m = accel.shape
-    extras, _ = aid_measurements(n, m, model, fixes=fixes, rest=rest, rest_sigma=rest_sigma, params=params)
-    if announce is not None:
-        announce(n, m, sum(map(len, extras)))
-    r = tune(
-        model,
-        accel,
-        ~np.asarray(run["clipped"], dtype=bool),
-        extras,
-        figures=tuple(figures),
-        max_evaluations=max_evaluations,
-        max_seconds=max_seconds,
-        intervals=intervals,
-    )
-    return with_figures(model, {f: float(f"{v:.6g}") for f, v in r.chosen.items()}), r
 
 
 class _OutOfTime(Exception):

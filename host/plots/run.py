@@ -21,46 +21,151 @@ def _pyplot():
     return plt
 
 
-def _band(ax, t, x, sd, color, label, ls="-"):
+def _band(ax, t, x, lo, hi, color, label, ls="-"):
     ax.plot(t, x, color=color, lw=1.2, ls=ls, label=label)
-    ax.fill_between(t, x - sd, x + sd, color=color, alpha=0.18, lw=0)
+    ax.fill_between(t, lo, hi, color=color, alpha=0.18, lw=0)
+
+
+class _Samples:
+    """What the figures draw, from a run held in memory: every sample."""
+
+    def __init__(self, arrays: dict[str, np.ndarray], model: Model) -> None:
+        self.arrays, self.model = arrays, model
+        self.t, self.start = _from_start(arrays["t"])
+        self.names = [str(a) for a in arrays["axis_names"]]
+        self._plain = None
+
+    def has(self, key: str) -> bool:
+        return key in self.arrays
+
+    def truth(self, key: str, j: int) -> np.ndarray:
+        return self.arrays[key][:, j]
+
+    def dead_reckoning(self, j: int, i: int) -> np.ndarray:
+        if self._plain is None:
+            self._plain = dead_reckoning(self.arrays, self.model)
+        return self._plain[j, :, i]
+
+    def x(self, stage: str, j: int, i: int) -> np.ndarray:
+        return self.arrays[f"{stage}_x"][j, :, i]
+
+    def band(self, stage: str, j: int, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(x, x - sd, x + sd) of state i of axis j."""
+        x, sd = self.x(stage, j, i), state_sd(self.arrays, stage)[j, :, i]
+        return x, x - sd, x + sd
+
+    def bias_mean(self, j: int) -> np.ndarray:
+        from accelnav.estimate.kf import bias_model
+        from accelnav.model.design import axis_design
+
+        return bias_model(axis_design(self.model, j), len(self.t))
+
+    def zupt_spans(self, j: int) -> list[tuple[float, float]]:
+        """Where zero-velocity updates were applied: an update every few samples, so runs joined over gaps up to
+        a second."""
+        arrays, t = self.arrays, self.t
+        if "zupt" not in arrays or not arrays["zupt"][:, j].any():
+            return []
+        from accelnav.estimate.zupt import intervals
+
+        z = arrays["zupt"][:, j].astype(float)
+        w = max(1, int(round(1.0 / max(t[1] - t[0], 1e-9)))) if len(t) > 1 else 1
+        joined = np.convolve(z, np.ones(w), mode="same") > 0
+        return [(t[a], t[b - 1]) for a, b in intervals(joined)]
+
+    def small(self, key: str):
+        return self.arrays.get(key)
+
+
+class _Envelope:
+    """What the figures draw, from a chunked run's envelope (accelnav.estimate.envelope.Envelope): per bin of
+    samples (narrower than a pixel column) each series' min then max, and each band's lowest and highest."""
+
+    def __init__(self, env, axis_names) -> None:
+        self.env = env
+        self.start = float(env.lo["t"][0])
+        self.t = env.times() - self.start
+        self.names = [str(a) for a in axis_names]
+
+    def has(self, key: str) -> bool:
+        return f"{key}/0" in self.env
+
+    def truth(self, key: str, j: int) -> np.ndarray:
+        return self.env.lines(f"{key}/{j}")
+
+    def dead_reckoning(self, j: int, i: int) -> np.ndarray:
+        return self.env.lines(f"dr/{j}")[:, i]
+
+    def x(self, stage: str, j: int, i: int) -> np.ndarray:
+        return self.env.lines(f"{stage}_x/{j}")[:, i]
+
+    def band(self, stage: str, j: int, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        lo, hi = self.env.lo[f"{stage}_lo/{j}"][:, i], self.env.hi[f"{stage}_hi/{j}"][:, i]
+        return self.x(stage, j, i), np.repeat(lo, 2), np.repeat(hi, 2)
+
+    def bias_mean(self, j: int) -> np.ndarray:
+        return self.env.lines(f"bias/{j}")
+
+    def zupt_spans(self, j: int) -> list[tuple[float, float]]:
+        if "zupt" not in self.env:
+            return []
+        from accelnav.estimate.zupt import intervals
+
+        first, last = self.t[0::2], self.t[1::2]
+        return [(first[a], last[b - 1]) for a, b in intervals(self.env.hi["zupt"][:, j] > 0)]
+
+    def small(self, key: str):
+        return self.env.extra.get(key)
+
+
+def plot_outcome(outcome, folder: str | Path) -> list[Path]:
+    """smooth.png and the paper's figures of a smoothing (accelnav.estimate.engine.Outcome): from its arrays
+    when the run was one chunk in memory, else from the envelope kept while its chunks were written."""
+    folder = Path(folder)
+    if outcome.arrays is not None:
+        view = _Samples(outcome.arrays, outcome.model)
+    elif outcome.envelope is not None:
+        view = _Envelope(outcome.envelope, outcome.axis_names)
+    else:
+        raise ValueError("plot_outcome: a chunked run keeps what its figures draw only when asked (Job(envelope=True))")
+    return [_draw_run(view, outcome.model, folder / "smooth.png"), *_draw_smoothing(view, outcome.model, folder)]
 
 
 def plot_run(arrays: dict[str, np.ndarray], model: Model, path: str | Path, title: str = "") -> Path:
     """Position, velocity and bias of every axis: truth, double integration, filter and smoother (+-1 sigma);
     on the velocity row, the detector's accepted and refused rests when the run has ``zupt_candidates``."""
+    return _draw_run(_Samples(arrays, model), model, path, title)
+
+
+def _draw_run(view, model: Model, path: str | Path, title: str = "") -> Path:
     plt = _pyplot()
-    t, start = _from_start(arrays["t"])
-    names = [str(a) for a in arrays["axis_names"]]
-    plain = dead_reckoning(arrays, model)
+    t, names = view.t, view.names
     fig, axes = plt.subplots(3, len(names), figsize=(6.5 * len(names), 9.5), sharex=True, squeeze=False)
     rows = (("position r [m]", 0), ("velocity u [m/s]", 1), ("bias eps [m/s^2]", 3))
     truth_keys = ("r", "u", "a", "eps")
     for j, name in enumerate(names):
         for row, (label, i) in enumerate(rows):
             ax = axes[row, j]
-            if truth_keys[i] in arrays:
-                ax.plot(t, arrays[truth_keys[i]][:, j], color="black", lw=1.6, label="truth")
+            if view.has(truth_keys[i]):
+                ax.plot(t, view.truth(truth_keys[i], j), color="black", lw=1.6, label="truth")
             if i < 2:
-                dr = ax.plot(t, plain[j, :, i], color="tab:gray", lw=1.0, ls="--", label="double integration")[0]
+                dr = ax.plot(t, view.dead_reckoning(j, i), color="tab:gray", lw=1.0, ls="--",
+                             label="double integration")[0]  # fmt: skip
             # the smoother underneath, the filter dashed on top: they coincide where no future data helps
             for stage, color, lab, ls in (("smooth", "tab:red", "smoother", "-"), ("filt", "tab:blue", "filter", "--")):
-                if f"{stage}_x" in arrays:
-                    x = arrays[f"{stage}_x"][j, :, i]
-                    sd = state_sd(arrays, stage)[j, :, i]
-                    _band(ax, t, x, sd, color, f"{lab} +-1 sigma", ls)
+                if view.has(f"{stage}_x"):
+                    _band(ax, t, *view.band(stage, j, i), color, f"{lab} +-1 sigma", ls)
             if i == 1:
-                _rest_marks(ax, arrays, start)
-            if i < 2 and "r" not in arrays:
-                stage = "smooth" if "smooth_x" in arrays else "filt"
-                if f"{stage}_x" in arrays:
-                    _clip_to_track(ax, dr, arrays[f"{stage}_x"][j, :, i], state_sd(arrays, stage)[j, :, i])
-            if i < 2 and "r" in arrays:
+                _rest_marks(ax, view.small("zupt_candidates"), view.start)
+            if i < 2 and not view.has("r"):
+                stage = "smooth" if view.has("smooth_x") else "filt"
+                if view.has(f"{stage}_x"):
+                    _clip_to_track(ax, dr, *view.band(stage, j, i)[1:])
+            if i < 2 and view.has("r"):
                 # keep the truth readable when dead reckoning runs away
-                span = np.ptp(arrays[truth_keys[i]][:, j])
-                lo = arrays[truth_keys[i]][:, j].min() - 0.5 * span - 1.0
-                hi = arrays[truth_keys[i]][:, j].max() + 0.5 * span + 1.0
-                ax.set_ylim(lo, hi)
+                truth = view.truth(truth_keys[i], j)
+                span = np.nanmax(truth) - np.nanmin(truth)
+                ax.set_ylim(np.nanmin(truth) - 0.5 * span - 1.0, np.nanmax(truth) + 0.5 * span + 1.0)
             ax.set_ylabel(label)
             ax.grid(True, alpha=0.3)
             if row == 0:
@@ -86,16 +191,17 @@ def _from_start(t: np.ndarray) -> tuple[np.ndarray, float]:
     return t - start, start
 
 
-def _clip_to_track(ax, line, x: np.ndarray, sd: np.ndarray) -> None:
-    """Limit the y range to an estimate's track (+-1 sigma, with a margin) so that double integration,
-    which runs away quadratically, does not flatten it; the curve's label says when it leaves the plot."""
-    lo, hi = float(np.min(x - sd)), float(np.max(x + sd))
+def _clip_to_track(ax, line, lower: np.ndarray, upper: np.ndarray) -> None:
+    """Limit the y range to an estimate's track (its +-1 sigma band ``lower``..``upper``, with a margin) so that
+    double integration, which runs away quadratically, does not flatten it; the curve's label says when it
+    leaves the plot."""
+    lo, hi = float(np.nanmin(lower)), float(np.nanmax(upper))
     pad = 0.15 * (hi - lo) + 1e-3
     lo, hi = lo - pad, hi + pad
     y = np.asarray(line.get_ydata(), dtype=np.float64)
     ax.set_ylim(lo, hi)
-    if len(y) and (y.min() < lo or y.max() > hi):
-        worst = float(np.max(np.abs(y)))
+    if len(y) and (np.nanmin(y) < lo or np.nanmax(y) > hi):
+        worst = float(np.nanmax(np.abs(y)))
         line.set_label(f"{line.get_label()} (leaves the plot, reaches {worst:.3g})")
 
 
@@ -113,10 +219,10 @@ def _save(plt, fig, path: Path) -> Path:
     return path
 
 
-def _rest_marks(ax, arrays, start: float = 0.0) -> None:
-    """The detector's candidate rests (key ``zupt_candidates``, rows [start_s, end_s, accepted]): accepted ones
-    shaded green, refused ones hatched red, so that a refused stop or an accepted 'rest' at speed shows."""
-    rows = arrays.get("zupt_candidates")
+def _rest_marks(ax, rows, start: float = 0.0) -> None:
+    """The detector's candidate rests (``rows`` of the run's ``zupt_candidates``: [start_s, end_s, accepted]):
+    accepted ones shaded green, refused ones hatched red, so that a refused stop or an accepted 'rest' at speed
+    shows."""
     if rows is None or not len(rows):
         return
     first = {True: True, False: True}
@@ -131,24 +237,16 @@ def _rest_marks(ax, arrays, start: float = 0.0) -> None:
             ax.axvspan(t0, t1, facecolor="none", edgecolor="tab:red", hatch="///", alpha=0.5, lw=0, label=label)
 
 
-def _marks(ax, arrays, j, t, start: float = 0.0):
+def _marks(ax, view, j):
     """Shade the samples whose zero-velocity update was applied; dots for position fixes."""
-    if "zupt" in arrays and arrays["zupt"][:, j].any():
-        from accelnav.estimate.zupt import intervals
-
-        # an update every few samples: join the runs with gaps up to a second
-        z = arrays["zupt"][:, j].astype(float)
-        w = max(1, int(round(1.0 / max(t[1] - t[0], 1e-9)))) if len(t) > 1 else 1
-        joined = np.convolve(z, np.ones(w), mode="same") > 0
-        for i, (a, b) in enumerate(intervals(joined)):
-            ax.axvspan(
-                t[a], t[b - 1], color="tab:green", alpha=0.08, lw=0, label="zero-velocity updates" if i == 0 else None
-            )
-    if "fixes" in arrays and len(arrays["fixes"]):
-        f = arrays["fixes"][arrays["fixes"][:, 1] == j]
+    for i, (a, b) in enumerate(view.zupt_spans(j)):
+        ax.axvspan(a, b, color="tab:green", alpha=0.08, lw=0, label="zero-velocity updates" if i == 0 else None)
+    fixes = view.small("fixes")
+    if fixes is not None and len(fixes):
+        f = fixes[fixes[:, 1] == j]
         if len(f):
             ax.errorbar(
-                f[:, 0] - start,
+                f[:, 0] - view.start,
                 f[:, 2],
                 yerr=f[:, 3],
                 fmt="o",
@@ -169,33 +267,23 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
       (+-1 sigma), and the truth; zero-velocity updates shaded, fixes as dots, and the detector's
       candidate rests (accepted green, refused hatched red) when ``zupt_candidates`` is present.
     """
-    from accelnav.estimate.kf import bias_model
-    from accelnav.model.design import axis_design
+    return _draw_smoothing(_Samples(arrays, model), model, folder)
 
+
+def _draw_smoothing(view, model: Model, folder: str | Path) -> list[Path]:
     plt = _pyplot()
     folder = Path(folder)
-    t, start = _from_start(arrays["t"])
-    names = [str(a) for a in arrays["axis_names"]]
-    plain = dead_reckoning(arrays, model)
-    has_truth = "r" in arrays
+    t, names = view.t, view.names
+    has_truth = view.has("r")
     paths = []
 
     fig, axes = _axis_columns(plt, len(names), f"Bias estimate (cf. paper Fig. 10): {model.name}")
     for j, ax in enumerate(axes):
-        d = axis_design(model, j)
         if has_truth:
-            ax.plot(t, arrays["eps"][:, j], color="black", lw=1.4, label="truth")
-        ax.plot(t, bias_model(d, len(t)), color="tab:gray", ls=":", lw=1.2, label="model mean c1(1-exp(-t/T))+c2")
+            ax.plot(t, view.truth("eps", j), color="black", lw=1.4, label="truth")
+        ax.plot(t, view.bias_mean(j), color="tab:gray", ls=":", lw=1.2, label="model mean c1(1-exp(-t/T))+c2")
         for stage, color, lab, ls in (("smooth", "tab:red", "smoother", "-"), ("filt", "tab:blue", "filter", "--")):
-            _band(
-                ax,
-                t,
-                arrays[f"{stage}_x"][j, :, 3],
-                state_sd(arrays, stage)[j, :, 3],
-                color,
-                f"{lab} +-1 sigma",
-                ls,
-            )
+            _band(ax, t, *view.band(stage, j, 3), color, f"{lab} +-1 sigma", ls)
         ax.set_title(f"axis {names[j]}")
         ax.set_xlabel(_TIME_LABEL)
         ax.set_ylabel("bias eps [m/s^2]")
@@ -206,12 +294,12 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
     fig, axes = _axis_columns(plt, len(names), f"Position, filter (cf. paper Fig. 11): {model.name}")
     for j, ax in enumerate(axes):
         if has_truth:
-            ax.plot(t, arrays["r"][:, j], color="black", lw=1.4, label="truth")
-        dr = ax.plot(t, plain[j, :, 0], color="tab:gray", ls="--", lw=1.0, label="double integration")[0]
-        _band(ax, t, arrays["filt_x"][j, :, 0], state_sd(arrays, "filt")[j, :, 0], "tab:blue", "filter +-1 sigma")
+            ax.plot(t, view.truth("r", j), color="black", lw=1.4, label="truth")
+        dr = ax.plot(t, view.dead_reckoning(j, 0), color="tab:gray", ls="--", lw=1.0, label="double integration")[0]
+        _band(ax, t, *view.band("filt", j, 0), "tab:blue", "filter +-1 sigma")
         if not has_truth:
-            _clip_to_track(ax, dr, arrays["filt_x"][j, :, 0], state_sd(arrays, "filt")[j, :, 0])
-        _marks(ax, arrays, j, t, start)
+            _clip_to_track(ax, dr, *view.band("filt", j, 0)[1:])
+        _marks(ax, view, j)
         ax.set_title(f"axis {names[j]}")
         ax.set_xlabel(_TIME_LABEL)
         ax.set_ylabel("position r [m]")
@@ -221,23 +309,16 @@ def plot_smoothing(arrays: dict[str, np.ndarray], model: Model, folder: str | Pa
 
     fig, axes = _axis_columns(plt, len(names), f"Position, smoother (cf. paper Fig. 12): {model.name}")
     for j, ax in enumerate(axes):
-        ref = arrays["r"][:, j] if has_truth else arrays["smooth_x"][j, :, 0]
+        ref = view.truth("r", j) if has_truth else view.x("smooth", j, 0)
         if has_truth:
             ax.plot(t, ref, color="black", lw=1.4, label="truth")
-        _band(
-            ax,
-            t,
-            arrays["filt_x"][j, :, 0],
-            state_sd(arrays, "filt")[j, :, 0],
-            "tab:blue",
-            "filter +-1 sigma",
-            "--",
-        )
-        _band(ax, t, arrays["smooth_x"][j, :, 0], state_sd(arrays, "smooth")[j, :, 0], "tab:red", "smoother +-1 sigma")
-        _marks(ax, arrays, j, t, start)
-        _rest_marks(ax, arrays, start)
-        span = np.ptp(ref) if len(ref) else 1.0
-        ax.set_ylim(ref.min() - 0.5 * span - 1.0, ref.max() + 0.5 * span + 1.0)  # the filter may run far away
+        _band(ax, t, *view.band("filt", j, 0), "tab:blue", "filter +-1 sigma", "--")
+        _band(ax, t, *view.band("smooth", j, 0), "tab:red", "smoother +-1 sigma")
+        _marks(ax, view, j)
+        _rest_marks(ax, view.small("zupt_candidates"), view.start)
+        span = np.nanmax(ref) - np.nanmin(ref) if len(ref) else 1.0
+        # the filter may run far away
+        ax.set_ylim(np.nanmin(ref) - 0.5 * span - 1.0, np.nanmax(ref) + 0.5 * span + 1.0)
         ax.set_title(f"axis {names[j]}")
         ax.set_xlabel(_TIME_LABEL)
         ax.set_ylabel("position r [m]")

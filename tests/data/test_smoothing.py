@@ -165,13 +165,29 @@ def test_every_input_format_streams_to_the_one_chunk_numbers(inputs, tmp_path, s
     }
 
 
-@pytest.mark.parametrize(
-    "flag, kw",
-    [
-        ("--tune", {"job": Job(tune=Tune(), budget=SMALL)}),
-        ("--plots", {"job": Job(in_memory=("--plots",), budget=SMALL)}),
-    ],
-)
+@pytest.mark.parametrize("option", ["plain", "fixes and rests given"])
+def test_tune_chunked_equals_one_chunk(inputs, tmp_path, option):
+    """--tune over the budget: its likelihood summed chunk by chunk, every evaluation reading the input again and
+    making its aids per chunk; the same search as on one chunk in memory: the figures found, the likelihoods
+    to 1e-9, and the run smoothed with them."""
+    kw = {k: inputs / v for k, v in OPTIONS[option].items()}
+    job = Job(stages=("filt", "smooth"), full=True, tune=Tune(max_evaluations=30, max_seconds=None))
+    a = smooth_file(inputs / "rec.npz", tmp_path / "a.npz", job=replace(job, budget=SMALL), **kw)
+    b = smooth_file(inputs / "rec.npz", tmp_path / "b.npz", job=replace(job, budget=LARGE), **kw)
+    assert not a.plan.whole and a.plan.chunks > 3 and a.streamed == "NPZ", a.plan  # the input read in pieces
+    assert b.plan.whole, b.plan
+    (ra, _), (rb, _) = a.tune, b.tune
+    assert ra.evaluations == rb.evaluations and ra.figures == rb.figures
+    for f in ra.figures:
+        assert ra.estimate[f] == pytest.approx(rb.estimate[f], rel=1e-9, abs=0), f
+    for key in ("ll_start", "ll_estimate"):
+        assert getattr(ra, key) == pytest.approx(getattr(rb, key), rel=1e-9, abs=0), key
+    assert ra.ll_estimate > ra.ll_start  # the search moved: its path, not only its start, is compared
+    assert a.model.noise == b.model.noise
+    _same(load_run(tmp_path / "a.npz")[0], load_run(tmp_path / "b.npz")[0], ("filt", "smooth"))
+
+
+@pytest.mark.parametrize("flag, kw", [("--plots", {"job": Job(in_memory=("--plots",), budget=SMALL)})])
 def test_what_needs_every_sample_in_memory_is_refused_over_the_budget(inputs, tmp_path, flag, kw):
     with pytest.raises(UserError) as exc:
         smooth_file(inputs / "rec.npz", tmp_path / "o.npz", **kw)
@@ -288,3 +304,66 @@ def test_given_aids_stream_chunk_by_chunk_across_chunk_boundaries(inputs, tmp_pa
         assert got["zupt"][b2 - 30 : b2 + 5, 1].sum() == (35 if not every_s else 12)  # touching: one rest's steps
     else:
         assert not got["zupt"].any() and a.applied is None
+
+
+@pytest.mark.parametrize("option", ["plain", "fixes and rests given"])
+def test_plots_over_the_budget_draw_the_one_chunk_runs_envelope(inputs, tmp_path, option):
+    """--plots over the budget: what the figures draw (each series' min and max per bin of samples, kept while the
+    chunks are written) is the envelope of the one-chunk run's arrays: the input's double integration, the
+    model's mean bias and the truth bit for bit, the states and their bands to 1e-9."""
+    from accelnav.estimate.envelope import Envelope
+    from accelnav.estimate.kf import bias_model
+    from accelnav.estimate.pipeline import dead_reckoning
+    from accelnav.model.design import axis_design
+
+    kw = {k: inputs / v for k, v in OPTIONS[option].items()}
+    job = Job(envelope=True)
+    a = smooth_file(inputs / "sim.npz", tmp_path / "a.npz", job=replace(job, budget=SMALL), **kw)
+    b = smooth_file(inputs / "sim.npz", tmp_path / "b.npz", job=replace(job, budget=LARGE), **kw)
+    assert not a.plan.whole and a.plan.chunks > 3 and a.arrays is None, a.plan
+    assert b.plan.whole and b.envelope is None, b.plan
+    got, arrays, n = a.envelope, b.arrays, b.n
+    assert got.bins == 1500 < n  # decimated: 3000 samples, 2 a bin
+    want = Envelope(n)
+    want.add("t", 0, arrays["t"])
+    plain = dead_reckoning(arrays, b.model)
+    for j in range(len(arrays["axis_names"])):
+        want.add(f"dr/{j}", 0, plain[j])
+        want.add(f"bias/{j}", 0, bias_model(axis_design(b.model, j), n))
+        for key in ("r", "u", "a", "eps"):
+            want.add(f"{key}/{j}", 0, arrays[key][:, j])
+        for st in ("filt", "smooth"):
+            x, sd = arrays[f"{st}_x"][j], arrays[f"{st}_sd"][j]
+            want.add(f"{st}_x/{j}", 0, x)
+            want.add(f"{st}_lo/{j}", 0, x - sd)
+            want.add(f"{st}_hi/{j}", 0, x + sd)
+    if kw:
+        want.add("zupt", 0, arrays["zupt"])
+        np.testing.assert_array_equal(got.extra["fixes"], arrays["fixes"])
+    assert set(got.lo) == set(want.lo)
+    for key in want.lo:
+        for side in ("lo", "hi"):
+            g, w = getattr(got, side)[key], getattr(want, side)[key]
+            if key.startswith(("t", "dr/", "bias/", "r/", "u/", "a/", "eps/", "zupt")):
+                np.testing.assert_array_equal(g, w, err_msg=f"{key} {side}")
+            else:
+                np.testing.assert_allclose(g, w, rtol=1e-9, atol=1e-12, err_msg=f"{key} {side}")
+
+
+def test_plots_over_the_budget_are_drawn_from_the_envelope(inputs, tmp_path):
+    from accelnav.plots.run import plot_outcome
+
+    a = smooth_file(inputs / "sim.npz", tmp_path / "a.npz", job=Job(envelope=True, budget=SMALL))
+    paths = plot_outcome(a, tmp_path / "p")
+    assert [p.name for p in paths] == ["smooth.png", "fig10_bias.png", "fig11_position_filter.png",
+                                       "fig12_position_smoother.png"]  # fmt: skip
+    assert all(p.stat().st_size > 10_000 for p in paths)
+
+
+def test_a_chunked_run_without_its_envelope_is_not_drawn(inputs, tmp_path):
+    from accelnav.plots.run import plot_outcome
+
+    a = smooth_file(inputs / "sim.npz", tmp_path / "a.npz", job=Job(budget=SMALL))
+    with pytest.raises(ValueError, match="envelope=True"):
+        plot_outcome(a, tmp_path / "p")
+    assert not (tmp_path / "p").exists()

@@ -150,14 +150,19 @@ def test_smooth_over_its_memory_budget_runs_the_bounded_path(sim, tmp_path, caps
         assert_rel_close(b[f"{key}_sd"], sd, 0.0, RTOL, f"{key}_sd")
 
 
-@pytest.mark.parametrize("flags", [["--tune"], ["--plots", "PLOTS"]])
-def test_a_run_too_large_for_what_was_asked_is_refused_in_one_line(sim, tmp_path, capsys, flags):
+@pytest.mark.parametrize("flags", [["--tune", "--tune-evaluations", "10"], ["--plots", "PLOTS"]])
+def test_tune_and_plots_over_the_budget_are_done_chunked(sim, tmp_path, capsys, flags):
+    """Once refused over the budget (they needed every sample in memory): --tune's likelihood is now summed
+    chunk by chunk, and --plots draws from the outputs' envelope kept while the chunks are written."""
     flags = [str(tmp_path / "p") if f == "PLOTS" else f for f in flags]
     status, out, err = _run(["smooth", sim, "--out", tmp_path / "x.npz", "--memory-budget", "0.02", *flags], capsys)
-    assert status == 2 and "Traceback" not in err
-    (line,) = err.strip().splitlines()
-    assert "over the memory budget" in line and flags[0] in line
-    assert not (tmp_path / "x.npz").exists()
+    assert status == 0, err
+    assert "smoothed in bounded memory" in out and "chunks of" in out
+    if "--tune" in flags:
+        assert "tune: sigma_n" in out and "evaluations" in out
+    else:
+        for name in ("smooth.png", "fig10_bias.png", "fig11_position_filter.png", "fig12_position_smoother.png"):
+            assert (tmp_path / "p" / name).stat().st_size > 10_000, name
 
 
 def test_fixes_and_auto_zupt_over_the_budget_give_the_whole_paths_numbers(sim, tmp_path, capsys):
