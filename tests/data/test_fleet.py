@@ -8,6 +8,9 @@ unless ACCELNAV_REQUIRE_DASK=1 (set by .ci/run), where a missing Dask is a failu
 from __future__ import annotations
 
 import os
+import platform
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -15,7 +18,7 @@ from support.cachekey import private_cache
 from support.cli import run_cli
 
 from accelnav.data.runfile import load_run
-from accelnav.data.smoothing import smooth_one
+from accelnav.data.smoothing import smooth_batch, smooth_one
 from accelnav.estimate import fastsmooth as fs
 from accelnav.model.load import load_model
 
@@ -92,6 +95,29 @@ def test_the_library_under_dask(fleet, tmp_path, capsys):
     assert [r.ok for r in results] == [True, True, True, False]
     assert "line 2" in results[-1].message
     _same_as_alone(outs[1], paths[1], tmp_path, capsys)
+
+
+def test_a_partition_under_dask_and_the_process_set_up_for_it(fleet, tmp_path, capsys):
+    """smooth_batch over a Dask bag's partitions (the documented batch task): each partition's files in turn in
+    one worker, the results of smooth_one in the inputs' order, the broken file reported; and glibc takes the
+    settings of keep_freed_memory (True; False where the C library has no mallopt or refuses them)."""
+    try:
+        import dask.bag as db
+    except ImportError:
+        if os.environ.get("ACCELNAV_REQUIRE_DASK") == "1":
+            pytest.fail("ACCELNAV_REQUIRE_DASK=1 but dask is not installed (pip install 'accelnav[fleet]')")
+        pytest.skip("dask is not installed (the fleet extra: pip install 'accelnav[fleet]')")
+    paths, bad = fleet
+    outs = [tmp_path / f"{p.name.split('.')[0]}.npz" for p in (*paths, bad)]
+    bag = db.from_sequence(list(zip([*paths, bad], outs, strict=True)), npartitions=2)
+    results = bag.map_partitions(smooth_batch, {}).compute(scheduler="processes", num_workers=2)
+    assert [r.path for r in results] == [str(p) for p in (*paths, bad)]
+    assert [r.ok for r in results] == [True, True, True, False] and "line 2" in results[-1].message
+    _same_as_alone(outs[2], paths[2], tmp_path, capsys)
+    if sys.platform == "linux" and platform.libc_ver()[0] == "glibc":
+        code = "from accelnav.data.smoothing import keep_freed_memory as k; print(k())"
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+        assert done.stdout.strip() == "True", done.stderr
 
 
 def test_an_output_named_like_its_input_is_refused_and_the_input_kept(fleet, capsys):
