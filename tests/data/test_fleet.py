@@ -11,6 +11,7 @@ import os
 import platform
 import subprocess
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ from support.cachekey import private_cache
 from support.cli import run_cli
 
 from accelnav.data.runfile import load_run
-from accelnav.data.smoothing import smooth_batch, smooth_one
+from accelnav.data.smoothing import _start_method, smooth_batch, smooth_files, smooth_one
 from accelnav.estimate import fastsmooth as fs
 from accelnav.model.load import load_model
 
@@ -118,6 +119,26 @@ def test_a_partition_under_dask_and_the_process_set_up_for_it(fleet, tmp_path, c
         code = "from accelnav.data.smoothing import keep_freed_memory as k; print(k())"
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
         assert done.stdout.strip() == "True", done.stderr
+
+
+def test_workers_are_forked_only_where_no_other_thread_could_hold_a_lock(fleet, tmp_path, capsys):
+    """A process of one thread (the command's) forks its workers on Linux, ready at once; with another thread
+    running (a notebook's, a server's) they are spawned, and the fleet gives the same files."""
+    code = "from accelnav.data.smoothing import _start_method as s; print(s())"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.stdout.strip() == ("fork" if sys.platform == "linux" else "spawn"), done.stderr
+    paths, _ = fleet
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert _start_method() == "spawn"
+        results = smooth_files(paths[:2], tmp_path / "out", jobs=2)
+    finally:
+        stop.set()
+        other.join()
+    assert [r.ok for r in results] == [True, True]
+    _same_as_alone(tmp_path / "out" / paths[0].name, paths[0], tmp_path, capsys)
 
 
 def test_an_output_named_like_its_input_is_refused_and_the_input_kept(fleet, capsys):
