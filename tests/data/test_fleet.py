@@ -81,17 +81,22 @@ def test_a_fleet_refuses_what_belongs_to_one_input_and_outputs_that_collide(flee
     assert not (tmp_path / "o").exists()
 
 
-def test_the_library_under_dask(fleet, tmp_path, capsys):
-    """The same task (smooth_one) mapped by a Dask bag over processes: the results of the command."""
+def _dask_bag(pairs):
+    """A Dask bag of two partitions over ``pairs``; the test skips without Dask, unless ACCELNAV_REQUIRE_DASK=1."""
     try:
         import dask.bag as db
     except ImportError:
         if os.environ.get("ACCELNAV_REQUIRE_DASK") == "1":
             pytest.fail("ACCELNAV_REQUIRE_DASK=1 but dask is not installed (pip install 'accelnav[fleet]')")
         pytest.skip("dask is not installed (the fleet extra: pip install 'accelnav[fleet]')")
+    return db.from_sequence(pairs, npartitions=2)
+
+
+def test_the_library_under_dask(fleet, tmp_path, capsys):
+    """The same task (smooth_one) mapped by a Dask bag over processes: the results of the command."""
     paths, bad = fleet
     outs = [tmp_path / f"{p.name.split('.')[0]}.npz" for p in (*paths, bad)]
-    bag = db.from_sequence(list(zip([*paths, bad], outs, strict=True)), npartitions=2)
+    bag = _dask_bag(list(zip([*paths, bad], outs, strict=True)))
     results = bag.map(lambda po: smooth_one(po[0], po[1], {})).compute(scheduler="processes", num_workers=2)
     assert [r.ok for r in results] == [True, True, True, False]
     assert "line 2" in results[-1].message
@@ -102,15 +107,9 @@ def test_a_partition_under_dask_and_the_process_set_up_for_it(fleet, tmp_path, c
     """smooth_batch over a Dask bag's partitions (the documented batch task): each partition's files in turn in
     one worker, the results of smooth_one in the inputs' order, the broken file reported; and glibc takes the
     settings of keep_freed_memory (True; False where the C library has no mallopt or refuses them)."""
-    try:
-        import dask.bag as db
-    except ImportError:
-        if os.environ.get("ACCELNAV_REQUIRE_DASK") == "1":
-            pytest.fail("ACCELNAV_REQUIRE_DASK=1 but dask is not installed (pip install 'accelnav[fleet]')")
-        pytest.skip("dask is not installed (the fleet extra: pip install 'accelnav[fleet]')")
     paths, bad = fleet
     outs = [tmp_path / f"{p.name.split('.')[0]}.npz" for p in (*paths, bad)]
-    bag = db.from_sequence(list(zip([*paths, bad], outs, strict=True)), npartitions=2)
+    bag = _dask_bag(list(zip([*paths, bad], outs, strict=True)))
     results = bag.map_partitions(smooth_batch, {}).compute(scheduler="processes", num_workers=2)
     assert [r.path for r in results] == [str(p) for p in (*paths, bad)]
     assert [r.ok for r in results] == [True, True, True, False] and "line 2" in results[-1].message
