@@ -390,7 +390,7 @@ def loads_model(text: str | bytes, source: str = "<model>") -> Model:
     if model is None:
         model = _PARSED[key] = _loads(raw, source, key[1])
         while len(_PARSED) > _PARSED_MAX:
-            _PARSED.pop(next(iter(_PARSED)))
+            _PARSED.pop(next(iter(_PARSED), None), None)  # the oldest; another thread may have taken it
     return model
 
 
