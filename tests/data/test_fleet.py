@@ -8,13 +8,19 @@ unless ACCELNAV_REQUIRE_DASK=1 (set by .ci/run), where a missing Dask is a failu
 from __future__ import annotations
 
 import os
+import platform
+import subprocess
+import sys
+import threading
 
 import numpy as np
 import pytest
+from support.cachekey import private_cache
 from support.cli import run_cli
 
 from accelnav.data.runfile import load_run
-from accelnav.data.smoothing import smooth_one
+from accelnav.data.smoothing import _start_method, smooth_batch, smooth_files, smooth_one
+from accelnav.estimate import fastsmooth as fs
 from accelnav.model.load import load_model
 
 
@@ -36,6 +42,8 @@ def fleet(tmp_path_factory):
 
 
 def _same_as_alone(out, path, tmp_path, capsys):
+    fs.clear_steady_cache()  # alone: its gains computed for it, not the rows a longer input of the fleet left
+    fs.clear_gain_cache()
     status, _, err = run_cli(["smooth", path, "--out", tmp_path / "alone.npz"], capsys)
     assert status == 0, err
     got, ref = load_run(out)[0], load_run(tmp_path / "alone.npz")[0]
@@ -44,7 +52,8 @@ def _same_as_alone(out, path, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("jobs", [1, 2])
-def test_a_fleet_smooths_each_input_and_reports_the_one_that_fails(fleet, tmp_path, capsys, jobs):
+def test_a_fleet_smooths_each_input_and_reports_the_one_that_fails(fleet, tmp_path, capsys, jobs, monkeypatch):
+    private_cache(tmp_path, monkeypatch)  # no settled rows on disk: each process computes the rows it keeps
     paths, bad = fleet
     argv = ["smooth", paths[0], bad, *paths[1:], "--out-dir", tmp_path / "out", "--jobs", str(jobs)]
     status, out, err = run_cli(argv, capsys)
@@ -55,7 +64,8 @@ def test_a_fleet_smooths_each_input_and_reports_the_one_that_fails(fleet, tmp_pa
     assert str(bad) in failed and "line 2" in failed
     assert lines[-1].startswith("3 of 4 inputs smoothed") and "1 failed" in lines[-1]
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["rec0.npz", "rec1.npz", "rec2.npz"]
-    _same_as_alone(tmp_path / "out" / "rec1.npz", paths[1], tmp_path, capsys)
+    for p in paths:  # rec2 after rec1 in one process: the kept rows of the longer run (fastsmooth.steady_gains)
+        _same_as_alone(tmp_path / "out" / p.name, p, tmp_path, capsys)
 
 
 def test_a_fleet_refuses_what_belongs_to_one_input_and_outputs_that_collide(fleet, tmp_path, capsys):
@@ -71,21 +81,63 @@ def test_a_fleet_refuses_what_belongs_to_one_input_and_outputs_that_collide(flee
     assert not (tmp_path / "o").exists()
 
 
-def test_the_library_under_dask(fleet, tmp_path, capsys):
-    """The same task (smooth_one) mapped by a Dask bag over processes: the results of the command."""
+def _dask_bag(pairs):
+    """A Dask bag of two partitions over ``pairs``; the test skips without Dask, unless ACCELNAV_REQUIRE_DASK=1."""
     try:
         import dask.bag as db
     except ImportError:
         if os.environ.get("ACCELNAV_REQUIRE_DASK") == "1":
             pytest.fail("ACCELNAV_REQUIRE_DASK=1 but dask is not installed (pip install 'accelnav[fleet]')")
         pytest.skip("dask is not installed (the fleet extra: pip install 'accelnav[fleet]')")
+    return db.from_sequence(pairs, npartitions=2)
+
+
+def test_the_library_under_dask(fleet, tmp_path, capsys):
+    """The same task (smooth_one) mapped by a Dask bag over processes: the results of the command."""
     paths, bad = fleet
     outs = [tmp_path / f"{p.name.split('.')[0]}.npz" for p in (*paths, bad)]
-    bag = db.from_sequence(list(zip([*paths, bad], outs, strict=True)), npartitions=2)
+    bag = _dask_bag(list(zip([*paths, bad], outs, strict=True)))
     results = bag.map(lambda po: smooth_one(po[0], po[1], {})).compute(scheduler="processes", num_workers=2)
     assert [r.ok for r in results] == [True, True, True, False]
     assert "line 2" in results[-1].message
     _same_as_alone(outs[1], paths[1], tmp_path, capsys)
+
+
+def test_a_partition_under_dask_and_the_process_set_up_for_it(fleet, tmp_path, capsys):
+    """smooth_batch over a Dask bag's partitions (the documented batch task): each partition's files in turn in
+    one worker, the results of smooth_one in the inputs' order, the broken file reported; and glibc takes the
+    settings of keep_freed_memory (True; False where the C library has no mallopt or refuses them)."""
+    paths, bad = fleet
+    outs = [tmp_path / f"{p.name.split('.')[0]}.npz" for p in (*paths, bad)]
+    bag = _dask_bag(list(zip([*paths, bad], outs, strict=True)))
+    results = bag.map_partitions(smooth_batch, {}).compute(scheduler="processes", num_workers=2)
+    assert [r.path for r in results] == [str(p) for p in (*paths, bad)]
+    assert [r.ok for r in results] == [True, True, True, False] and "line 2" in results[-1].message
+    _same_as_alone(outs[2], paths[2], tmp_path, capsys)
+    if sys.platform == "linux" and platform.libc_ver()[0] == "glibc":
+        code = "from accelnav.data.smoothing import keep_freed_memory as k; print(k())"
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+        assert done.stdout.strip() == "True", done.stderr
+
+
+def test_workers_are_forked_only_where_no_other_thread_could_hold_a_lock(fleet, tmp_path, capsys):
+    """A process of one thread (the command's) forks its workers on Linux, ready at once; with another thread
+    running (a notebook's, a server's) they are spawned, and the fleet gives the same files."""
+    code = "from accelnav.data.smoothing import _start_method as s; print(s())"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.stdout.strip() == ("fork" if sys.platform == "linux" else "spawn"), done.stderr
+    paths, _ = fleet
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert _start_method() == "spawn"
+        results = smooth_files(paths[:2], tmp_path / "out", jobs=2)
+    finally:
+        stop.set()
+        other.join()
+    assert [r.ok for r in results] == [True, True]
+    _same_as_alone(tmp_path / "out" / paths[0].name, paths[0], tmp_path, capsys)
 
 
 def test_an_output_named_like_its_input_is_refused_and_the_input_kept(fleet, capsys):

@@ -243,8 +243,11 @@ def test_an_unsettled_run_keeps_its_rows_apart_for_runs_no_longer(fast_design, m
     first = fs.steady_gains(fast_design, n)
     assert not first.settled and calls == [n]
     assert not list(fs.steady_cache_dir().glob("steady-*.bin")) and list(fs.steady_cache_dir().glob("prefix-*"))
-    again = fs.steady_gains(fast_design, n - 100)
-    assert calls == [n] and np.array_equal(again.rows, first.rows[: n - 100]) and not again.settled
+    again = fs.steady_gains(fast_design, n - 100)  # from memory (the rows kept), the same first rows
+    assert calls == [n] and np.array_equal(again.rows[: n - 100], first.rows[: n - 100]) and not again.settled
+    fs.clear_steady_cache()
+    from_file = fs.steady_gains(fast_design, n - 100)  # from the prefix file
+    assert calls == [n] and np.array_equal(from_file.rows, first.rows[: n - 100]) and not from_file.settled
     fs.plain_gains(fast_design, n + 50)
     assert calls == [n, n + 50]
     m = n - 100
@@ -280,3 +283,25 @@ def test_a_short_run_reads_the_files_first_rows_once(fast_design, monkeypatch):
     assert np.array_equal(first.rows[:n], settled.rows[:n])
     longer = fs.steady_gains(fast_design, len(first.rows) + 1)
     assert reads == [n, len(first.rows) + 1] and longer is not first
+
+
+def test_a_fleet_of_runs_shorter_than_the_probe_computes_their_rows_once(fast_design, monkeypatch):
+    """Runs shorter than _PROBE0 (a fleet's 1e5-row files) compute their rows once per process and take the
+    kept rows after, with the outputs their own rows give to the bit; a longer run computes its own. Fails when
+    each run computes its rows again (32 ms of a 1e5-row file's 80 ms of CPU, two axes)."""
+    calls = []
+    real = fs._plain_rows
+    monkeypatch.setattr(fs, "_plain_rows", lambda d, n: calls.append(n) or real(d, n))
+    n = 700  # inside the ~1 200-sample transient
+    first = fs.steady_gains(fast_design, n)
+    assert fs.steady_gains(fast_design, n - 50) is first and calls == [n] and not first.settled
+    kept = fs.plain_gains(fast_design, n - 50)
+    assert calls == [n]
+    fs.clear_gain_cache()
+    fs.clear_steady_cache()
+    own = fs.plain_gains(fast_design, n - 50)
+    assert calls == [n, n - 50]
+    z = _z(fast_design, n - 50)
+    for a, b in zip(fs.plain_data(fast_design, z, None, kept), fs.plain_data(fast_design, z, None, own), strict=True):
+        assert np.array_equal(a, b)
+    assert len(fs.steady_gains(fast_design, n + 50).rows) == n + 50 and calls == [n, n - 50, n + 50]

@@ -162,6 +162,22 @@ def test_cli_prints_one_line_not_a_traceback(tmp_path, capsys):
     assert "sensor.analog.adc_bits" in err and str(bad) in err
 
 
+def test_a_text_is_parsed_once_per_source_and_an_edit_is_read_again(tmp_path):
+    """A fleet loads the same model for every input: parsed once (the Model is immutable, one object serves
+    all); the same text under another name, an edited file and a bad file are each read as they are."""
+    path = tmp_path / "m.toml"
+    path.write_text(model_text())
+    first = load_model(path)
+    assert load_model(path) is first
+    assert loads_model(model_text(), source="other.toml") is not first
+    path.write_text(model_text().replace("rate_hz = 100.0", "rate_hz = 50.0"))
+    assert load_model(path).rate_hz == 50 and first.rate_hz == 100
+    path.write_text(model_text().replace("adc_bits = 12", "adc_bits = 99"))
+    for _ in range(2):
+        with pytest.raises(ModelError, match="adc_bits"):
+            load_model(path)
+
+
 def test_model_hash_tracks_content():
     a = loads_model(model_text(), source="a.toml")
     b = loads_model(model_text() + "\n# a comment\n", source="b.toml")
