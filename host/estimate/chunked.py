@@ -396,6 +396,13 @@ class _Bufs:
     def rows(self, width: int, count: int) -> np.ndarray:
         return self.store[: count * width].reshape(count, width)
 
+    def compact(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """Two (count, 2) float32 arrays for a chunk's compact r, u and their sds, in ``sa``'s memory (the
+        compact r, u pass writes nothing else there)."""
+        flat = self.sa.reshape(-1).view(np.float32)
+        half = len(flat) // 2
+        return flat[: 2 * count].reshape(count, 2), flat[half : half + 2 * count].reshape(count, 2)
+
 
 @dataclass
 class _Run:
@@ -479,6 +486,13 @@ class _Run:
 
     def ptr(self, a: np.ndarray, ctype: str = "double *"):
         return fastsmooth._ptr(self.ffi, a, ctype)
+
+    def put_rows(self, key: str, j: int, s: int, data: np.ndarray, head: np.ndarray) -> None:
+        """Rows s.. of axis j of ``key`` as written (``states`` values a sample); ``head``: sample s's 4 values
+        (r, u, a, eps), kept when s is the run's first."""
+        self.out.write(key, self.states * (j * self.n + s), data)
+        if len(data) and s == 0:
+            self.first.setdefault(key, np.zeros((len(self.axes), 4)))[j] = head
 
     def put(self, key: str, j: int, s: int, data: np.ndarray) -> None:
         """Rows s.. of axis j of the (n_axes, N, states) output ``key``, from their (m, 4) values."""
@@ -862,8 +876,17 @@ def _smooth_ru(run: _Run, ax: _Axis, starts: list[int]) -> None:
             run.lib.acn_chunk_cov_lean(ax.m, s, e - s, int(after is None), p(sr), len(sr), ends, p(cov))
             if after is not None:
                 cov[e - s] = after  # the next sample's, for the chunk's last transition
+            if run.states == 2:  # the compact output straight from the kernel, at float32 (no cast pass)
+                x32, s32 = b.compact(m)
+                v = ax.carry_r  # sample s's values as the full form has them, for the summary line
+                head = (np.array([v[0], v[1], buf[0, 0], buf[0, 1]]), np.sqrt([v[2], v[5], cov[0, 0], cov[0, 2]]))
+                f, out32 = run.ffi.NULL, (p(x32, "float *"), p(s32, "float *"))
+                run.lib.acn_chunk_ru_lean(ax.m, s, m, p(buf), p(cov), p(sr), len(sr), p(ax.carry_r), f, f, *out32)
+                run.put_rows("smooth_x", ax.j, s, x32, head[0])
+                run.put_rows("smooth_sd", ax.j, s, s32, head[1])
+                continue
             run.lib.acn_chunk_ru_lean(
-                ax.m, s, m, p(buf), p(cov), p(sr), len(sr), p(ax.carry_r), p(b.xa), p(b.sa)
+                ax.m, s, m, p(buf), p(cov), p(sr), len(sr), p(ax.carry_r), p(b.xa), p(b.sa), run.ffi.NULL, run.ffi.NULL
             )  # fmt: skip
         else:
             buf = ax.store.rows(b.store, ROW, s, m + 1)

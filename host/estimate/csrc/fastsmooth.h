@@ -101,8 +101,10 @@ void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const doub
 void acn_chunk_cov_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
                         const double *after, double *cov);
 
+/* x32 != NULL: r, u and their sds only, as float (2 a sample each, x32, sd32); xs, sds unused */
 void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *cov,
-                       const double *srows, long nt, double *carry, double *xs, double *sds);
+                       const double *srows, long nt, double *carry, double *xs, double *sds,
+                       float *x32, float *sd32);
 
 void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                     const unsigned char *valid, long n_extra, const long *ek, const double *eh,
