@@ -392,6 +392,7 @@ class _Bufs:
         self.cov = np.empty((chunk + 1, 3))
         self.zc, self.ok = np.empty(chunk), np.empty(chunk, dtype=bool)
         self.bad = np.empty(chunk, dtype=bool)
+        self.ends = np.empty((4, 4))  # a compact forward chunk's first and last states, then their sds
 
     def rows(self, width: int, count: int) -> np.ndarray:
         return self.store[: count * width].reshape(count, width)
@@ -487,12 +488,16 @@ class _Run:
     def ptr(self, a: np.ndarray, ctype: str = "double *"):
         return fastsmooth._ptr(self.ffi, a, ctype)
 
-    def put_rows(self, key: str, j: int, s: int, data: np.ndarray, head: np.ndarray) -> None:
-        """Rows s.. of axis j of ``key`` as written (``states`` values a sample); ``head``: sample s's 4 values
-        (r, u, a, eps), kept when s is the run's first."""
+    def put_rows(
+        self, key: str, j: int, s: int, data: np.ndarray, head: np.ndarray, tail: np.ndarray | None = None
+    ) -> None:
+        """Rows s.. of axis j of ``key`` as written (``states`` values a sample); ``head``, ``tail``: the 4 values
+        (r, u, a, eps) of the rows' first and last sample, kept when those are the run's first and last."""
         self.out.write(key, self.states * (j * self.n + s), data)
         if len(data) and s == 0:
             self.first.setdefault(key, np.zeros((len(self.axes), 4)))[j] = head
+        if len(data) and s + len(data) == self.n and tail is not None:
+            self.last.setdefault(key, np.zeros((len(self.axes), 4)))[j] = tail
 
     def put(self, key: str, j: int, s: int, data: np.ndarray) -> None:
         """Rows s.. of axis j of the (n_axes, N, states) output ``key``, from their (m, 4) values."""
@@ -761,21 +766,27 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         store = ax.lean if lean or not run.smooth else run.full_store(ax, s)
         # the filter alone keeps no store: its rows go to the scratch buffer and are dropped
         buf = store.rows(b.store, width, s, m, fill=False) if run.smooth else b.rows(width, m)
+        compact = False
         if ax.width == GROW:
             _forward_general(run, ax, s, e, zc, ok, buf)
         else:
-            _forward_plain(run, ax, s, e, zc, ok, buf, write_filt)
+            compact = _forward_plain(run, ax, s, e, zc, ok, buf, write_filt)
             if lean:
                 ax.lean_end = e
         if run.smooth:
             store.done(buf, s)
-        if write_filt:
+        first, last = (b.ends[0], b.ends[1]) if compact else (b.xa[0], b.xa[m - 1])
+        if write_filt and compact:
+            x32, s32 = b.compact(m)
+            run.put_rows("filt_x", ax.j, s, x32, b.ends[0], b.ends[1])
+            run.put_rows("filt_sd", ax.j, s, s32, b.ends[2], b.ends[3])
+        elif write_filt:
             run.put("filt_x", ax.j, s, b.xa[:m])
             run.put("filt_sd", ax.j, s, b.sa[:m])
         if s == 0:
-            ax.xf0 = b.xa[0].copy()
+            ax.xf0 = first.copy()
         if e == run.n:
-            ax.xfn = b.xa[m - 1].copy()
+            ax.xfn = last.copy()
 
     run.each(axis)
     if run.marks:
@@ -813,19 +824,30 @@ def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: n
 
 def _forward_plain(
     run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray, states: bool
-) -> None:
+) -> bool:
     """``states``: the filter's states are written; without them the steady kernel writes only the chunk's first
-    and last and jumps its covariance over the steady samples (no step per sample: acn_chunk_fwd_steady)."""
+    and last and jumps its covariance over the steady samples (no step per sample: acn_chunk_fwd_steady).
+    Returns True when the steady kernel wrote the compact states at float32 (:meth:`_Bufs.compact`, the
+    chunk's first and last full rows in ``ends``), as the compact output wants them."""
     p, m, last, b = run.ptr, e - s, int(e == run.n), run.buf(ax)
     tail = (p(ax.carry_f), p(buf), p(b.xa), p(b.sa), p(ax.Pf0), p(ax.Pfn))
-    if ax.steady is not None:
+    compact = states and run.states == 2 and ax.steady is not None
+    if compact:
+        ends, f32 = b.ends, [p(a, "float *") for a in b.compact(m)]
+        sr = ax.steady.rows
+        rc = run.lib.acn_chunk_fwd_steady(
+            ax.m, s, m, last, p(zc), p(sr), len(sr), *tail[:2], p(ends[0:2]), p(ends[2:4]), *tail[4:], *f32
+        )  # fmt: skip
+    elif ax.steady is not None:
         sr = ax.steady.rows
         sd = tail[3] if states else run.ffi.NULL
-        rc = run.lib.acn_chunk_fwd_steady(ax.m, s, m, last, p(zc), p(sr), len(sr), *tail[:3], sd, *tail[4:])
+        f = run.ffi.NULL
+        rc = run.lib.acn_chunk_fwd_steady(ax.m, s, m, last, p(zc), p(sr), len(sr), *tail[:3], sd, *tail[4:], f, f)
     else:
         rc = run.lib.acn_chunk_fwd(ax.m, s, m, last, p(zc), p(ok.view(np.uint8), "unsigned char *"), *tail)
     if rc != 0:
         raise UserError(f"bounded smoother: the (a, eps) prior covariance is singular at sample {-rc}")
+    return compact
 
 
 def _backward(run: _Run, ax: _Axis, s: int, e: int) -> None:

@@ -47,10 +47,12 @@ def _record(model, n, invalid: bool, seed=7):
     return t, accel, clipped
 
 
-def _smooth(model, n, tmp_path, name, invalid=False, **kw):
+def _smooth(model, n, tmp_path, name, invalid=False, stages=("smooth",), info=None, **kw):
     t, accel, clipped = _record(model, n, invalid)
     out = tmp_path / f"{name}.npz"
-    chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), out, stages=("smooth",), **kw)
+    got = chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), out, stages=stages, **kw)
+    if info is not None:
+        info.update(got)
     with np.load(out) as f:
         return {k: f[k] for k in f.files}
 
@@ -92,15 +94,22 @@ def test_the_skipped_covariance_steps_give_the_doubles_of_every_step(settles, tm
         np.testing.assert_array_equal(sd[: n - 1, 3], np.sqrt(ref[: n - 1, 2]), f"sd eps, axis {j}")
 
 
+@pytest.mark.parametrize("stages", [("smooth",), ("filt",), ("filt", "smooth")])
 @pytest.mark.parametrize("invalid", [False, True])
-@pytest.mark.parametrize("chunk", [None, 997, 5])
-def test_the_compact_output_is_the_full_doubles_cast_to_float32(settles, tmp_path, chunk, invalid):
-    """All valid (the lean kernels throughout) and with clipped and NaN samples (the full store after them)."""
-    n = 3000
+@pytest.mark.parametrize("chunk", [None, 997, 5, 2])
+def test_the_compact_output_is_the_full_doubles_cast_to_float32(settles, tmp_path, chunk, invalid, stages):
+    """All valid (the lean kernels throughout) and with clipped and NaN samples (the full store after them); the
+    filter's and the smoother's states; the run's first and last states (the summary line's) the same too."""
+    n = 3001
     for j in range(len(settles.axes)):
         fs.steady_gains(axis_design(settles, j))
-    full = _smooth(settles, n, tmp_path, "full", invalid, full=True, chunk=chunk)
-    compact = _smooth(settles, n, tmp_path, "compact", invalid, full=False, chunk=chunk)
-    for key in ("smooth_x", "smooth_sd"):
+    got_full, got_compact = {}, {}
+    full = _smooth(settles, n, tmp_path, "full", invalid, stages, got_full, full=True, chunk=chunk)
+    compact = _smooth(settles, n, tmp_path, "compact", invalid, stages, got_compact, full=False, chunk=chunk)
+    for key in [f"{st}_{q}" for st in stages for q in ("x", "sd")]:
         assert compact[key].dtype == np.float32 and compact[key].shape == (len(settles.axes), n, 2)
         np.testing.assert_array_equal(compact[key], full[key][..., :2].astype(np.float32), key)
+    for end in ("first", "last"):
+        assert got_compact[end].keys() == got_full[end].keys()
+        for key, v in got_full[end].items():
+            np.testing.assert_array_equal(got_compact[end][key], v, f"{end} {key}")

@@ -1230,7 +1230,7 @@ static inline double sqrt_again(double x, unsigned long long *bits, double *root
  */
 int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
                          const double *srows, long nt, double *carry, double *store, double *xf,
-                         double *sdf, double *Pf0, double *Pfn)
+                         double *sdf, double *Pf0, double *Pfn, float *x32, float *sd32)
 {
     const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
     const double *steady = srows + ACN_SROW * (nt - 1);
@@ -1262,13 +1262,25 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
         double an = (a - ka * a) + ka * (zk - ep);
         e = (ep - ke * ep) + ke * (zk - a);
         a = an;
-        if (sdf != NULL || k == 0 || k == n - 1) {
-            double *o = xf + 4 * k;
-            o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        if (x32 != NULL) { /* compact: r, u and their sds as float; xf, sdf the chunk's ends */
+            x32[2 * k] = (float)r, x32[2 * k + 1] = (float)u;
+            sd32[2 * k] = (float)sqrt(P[0][0]), sd32[2 * k + 1] = (float)sqrt(P[1][1]);
+            for (int end = 0; end < 2; end++) /* row 0: the first sample's, row 1: the last's */
+                if (k == (end ? n - 1 : 0)) {
+                    double *o = xf + 4 * end, *sd = sdf + 4 * end;
+                    o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+                    for (int i = 0; i < 4; i++)
+                        sd[i] = sqrt(P[i][i]);
+                }
+        } else {
+            if (sdf != NULL || k == 0 || k == n - 1) {
+                double *o = xf + 4 * k;
+                o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+            }
+            if (sdf != NULL)
+                for (int i = 0; i < 4; i++)
+                    sdf[4 * k + i] = sqrt(P[i][i]);
         }
-        if (sdf != NULL)
-            for (int i = 0; i < 4; i++)
-                sdf[4 * k + i] = sqrt(P[i][i]);
         if (g == 0)
             pack(P, Pf0);
         row[0] = a, row[1] = e;
