@@ -75,6 +75,7 @@ from accelnav.fileio import Output, TempFolder, free_bytes, output_target, pread
 from accelnav.model.design import AxisDesign, axis_design
 from accelnav.model.load import Model
 from accelnav.progress import Progress
+from accelnav.resources import threads
 
 BUDGET = 256 << 20  # bytes of chunk buffers
 PROGRESS_AFTER = 2.0  # s: a run that takes longer shows its passes' progress (accelnav.progress: stderr, not -q)
@@ -97,24 +98,6 @@ RUN_FORMAT = "accelnav-run/1"  # the CLI passes accelnav.data.runfile.FORMAT (a 
 
 # runs of at most this many samples work on their axes in order: a thread pool's start costs more than it saves
 THREADS_FROM = 1 << 16
-THREADS_ENV = "ACCELNAV_THREADS"
-
-
-def threads() -> int:
-    """Threads a run's plain axes may use at once: ``$ACCELNAV_THREADS`` (a whole number >= 1; 1 works on the
-    axes in order), else every CPU; never more than ``os.cpu_count()`` or the run's axes. Refused in one line
-    (UserError) when set to anything else."""
-    cpus = os.cpu_count() or 1
-    env = os.environ.get(THREADS_ENV)
-    if env is None or env == "":
-        return cpus
-    try:
-        k = int(env)
-    except ValueError:
-        k = 0
-    if k < 1:
-        raise UserError(f"{THREADS_ENV}: got {env[:40]!r}; accepted: a whole number of threads >= 1")
-    return min(k, cpus)
 
 
 # read rows s..e of the input: (t (e-s,), accel (e-s, n_axes), clipped (e-s, n_axes) bool)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from conftest import edited_model
 
+from accelnav import resources
 from accelnav.errors import UserError
 from accelnav.estimate import chunked
 from accelnav.estimate import fastsmooth as fs
@@ -96,16 +97,32 @@ def test_the_store_on_disk_with_threads_writes_the_same_bytes(tmp_path, monkeypa
 
 @pytest.mark.parametrize("value", ["0", "-2", "two", "1.5"])
 def test_a_bad_thread_count_is_refused_in_one_line(monkeypatch, value):
-    monkeypatch.setenv(chunked.THREADS_ENV, value)
-    with pytest.raises(UserError, match=chunked.THREADS_ENV):
-        chunked.threads()
+    monkeypatch.setenv(resources.THREADS_ENV, value)
+    with pytest.raises(UserError, match=resources.THREADS_ENV):
+        resources.threads()
 
 
 def test_the_thread_count_is_bounded_by_the_cpus(monkeypatch):
-    monkeypatch.setattr(chunked.os, "cpu_count", lambda: 2)
-    monkeypatch.setenv(chunked.THREADS_ENV, "64")
-    assert chunked.threads() == 2
-    monkeypatch.setenv(chunked.THREADS_ENV, "1")
-    assert chunked.threads() == 1
-    monkeypatch.delenv(chunked.THREADS_ENV)
-    assert chunked.threads() == 2
+    monkeypatch.setattr(resources.os, "cpu_count", lambda: 2)
+    monkeypatch.setenv(resources.THREADS_ENV, "64")
+    assert resources.threads() == 2
+    monkeypatch.setenv(resources.THREADS_ENV, "1")
+    assert resources.threads() == 1
+    monkeypatch.delenv(resources.THREADS_ENV)
+    assert resources.threads() == 2
+
+
+def test_the_allocator_is_tuned_only_where_it_applies(monkeypatch):
+    """glibc: the command asks it to reuse freed blocks (True); the user's own MALLOC_* settings stand."""
+    import ctypes
+    import sys
+
+    try:
+        glibc = hasattr(ctypes.CDLL(None), "gnu_get_libc_version")
+    except OSError:
+        glibc = False
+    monkeypatch.delenv("MALLOC_MMAP_THRESHOLD_", raising=False)
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    assert resources.reuse_freed_memory() is (glibc and sys.platform.startswith("linux"))
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "1")
+    assert resources.reuse_freed_memory() is False
