@@ -17,13 +17,7 @@ from accelnav.model.design import axis_design
 from accelnav.model.edit import with_axis_bias, with_noise
 from accelnav.model.load import load_model
 
-
-@pytest.fixture(autouse=True)
-def own_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("ACCELNAV_CACHE_DIR", str(tmp_path / "cache"))
-    fs.clear_steady_cache()
-    yield
-    fs.clear_steady_cache()
+pytestmark = pytest.mark.usefixtures("own_steady_cache")
 
 
 @pytest.fixture(scope="module")

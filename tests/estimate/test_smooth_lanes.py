@@ -61,12 +61,7 @@ def _run(monkeypatch, tmp_path, model, n, lanes, name, **kw):
     return _members(out)
 
 
-@pytest.fixture(autouse=True)
-def own_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("ACCELNAV_CACHE_DIR", str(tmp_path / "cache"))
-    fs.clear_steady_cache()
-    yield
-    fs.clear_steady_cache()
+pytestmark = pytest.mark.usefixtures("own_steady_cache")
 
 
 @pytest.mark.parametrize("model", list(MODELS))
