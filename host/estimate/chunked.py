@@ -60,7 +60,7 @@ import threading
 import time
 import zipfile
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -438,12 +438,14 @@ class _Run:
             for ax in axes:
                 work(ax)
             return
-        for f in [self.pool.submit(work, ax) for ax in axes]:
+        futures = [self.pool.submit(work, ax) for ax in axes]
+        wait(futures)  # every axis done before any error goes up: none may write while the output is dropped
+        for f in futures:
             f.result()
 
     def close(self) -> None:
         if self.pool is not None:
-            self.pool.shutdown()
+            self.pool.shutdown(cancel_futures=True)
 
     def open_store(self, name: str, width: int, s: int) -> _Store:
         """A store of ``width`` doubles per sample for samples s.. (the earlier ones are never touched): in

@@ -121,3 +121,30 @@ def test_the_allocator_is_tuned_only_where_it_applies(monkeypatch):
     assert resources.reuse_freed_memory() is (glibc and sys.platform.startswith("linux"))
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "1")
     assert resources.reuse_freed_memory() is False
+
+
+def test_an_axis_failing_on_its_thread_raises_after_the_others_are_done(tmp_path, monkeypatch):
+    """The error goes up only once every axis's thread has returned (none writes while the output is dropped);
+    nothing is left behind."""
+    import time
+
+    m = MODELS["two"]
+    real, finished = chunked._backward, []
+
+    def backward(run, ax, s, e):
+        if ax.j == 0:
+            raise UserError("axis 0 fails")
+        time.sleep(0.05)
+        real(run, ax, s, e)
+        finished.append(s)
+
+    monkeypatch.setattr(chunked, "_backward", backward)
+    monkeypatch.setattr(chunked, "threads", lambda: 2)
+    monkeypatch.setattr(chunked, "THREADS_FROM", 0)
+    t, accel, clipped = _record(m, 1000)
+    out = tmp_path / "o" / "o.npz"
+    out.parent.mkdir()
+    with pytest.raises(UserError, match="axis 0 fails"):
+        chunked.smooth_bounded(m, 1000, chunked.array_reader(t, accel, clipped), out, chunk=300, store_memory=1 << 30)
+    assert finished == [900], "axis 1 had finished its chunk before the error went up"
+    assert list(out.parent.iterdir()) == []
