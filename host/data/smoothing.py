@@ -323,10 +323,11 @@ def smooth_one(path: str | Path, out: str | Path, kw: dict) -> FileResult:
     return FileResult(str(path), str(out), True, f"{outcome.n} samples, {sec:.2f} s", sec)
 
 
-def _quiet_worker() -> None:
-    from accelnav import progress
+def _quiet_worker(threads: int = 1) -> None:
+    from accelnav import progress, resources
 
     progress.set_verbosity(0)  # the parent reports each file; a worker's notes and bars would interleave
+    os.environ[resources.THREADS_ENV] = str(threads)  # its share of the CPUs (accelnav.resources.threads)
     logging.getLogger("accelnav").setLevel(logging.ERROR)
 
 
@@ -339,6 +340,8 @@ def smooth_files(
     For a cluster, map :func:`smooth_one` over the inputs with Dask (see docs/python.rst)."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from multiprocessing import get_context
+
+    from accelnav import resources
 
     if jobs < 1:
         raise UserError(f"--jobs: got {jobs}; accepted: 1 or more")
@@ -353,7 +356,10 @@ def smooth_files(
             if done is not None:
                 done(results[i])
     else:
-        with ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=_quiet_worker) as pool:
+        share = max(1, resources.threads() // jobs)  # the CPUs shared among the jobs (a bad setting refused here)
+        with ProcessPoolExecutor(
+            jobs, mp_context=get_context("spawn"), initializer=_quiet_worker, initargs=(share,)
+        ) as pool:
             futures = {pool.submit(smooth_one, p, o, kw): i for i, (p, o) in enumerate(zip(paths, outs, strict=True))}
             for f in as_completed(futures):
                 results[futures[f]] = f.result()
