@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 
 import pytest
@@ -18,6 +19,14 @@ def test_a_fleet_refuses_a_bad_thread_count_before_starting_its_workers(tmp_path
 
 
 def test_a_worker_takes_its_share_of_the_threads(monkeypatch):
+    from accelnav import progress
+
     monkeypatch.setenv(resources.THREADS_ENV, "8")
-    smoothing._quiet_worker(3)
+    monkeypatch.setattr(progress, "VERBOSITY", progress.VERBOSITY)  # the worker's quiet, undone after
+    log = logging.getLogger("accelnav")
+    level = log.level
+    try:
+        smoothing._quiet_worker(3)
+    finally:
+        log.setLevel(level)
     assert os.environ[resources.THREADS_ENV] == "3"
