@@ -90,7 +90,7 @@ def threads() -> int:
 
 
 # glibc's mallopt parameters (malloc.h)
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_ARENA_MAX = -1, -3, -8
 REUSE_BLOCK = 32 << 20  # blocks up to this size come from (and go back to) the heap: glibc's largest setting
 REUSE_KEEP = 128 << 20  # freed memory kept at the heap's top for the next block, not given back to the system
 
@@ -102,13 +102,16 @@ def reuse_freed_memory() -> bool:
     free, so each chunk's arrays were fresh pages, zeroed by the kernel: at 1e7 samples about 1 s of the
     2 s of system time of `accelnav smooth` (bench/speed/bench_smooth_e2e.py; 28 MB more peak RSS).
     Called once by the command (a process of its own; a library call leaves the host's allocator alone).
-    False where it does not apply: no glibc, or the user set MALLOC_MMAP_THRESHOLD_ or MALLOC_TRIM_THRESHOLD_
-    (theirs stands)."""
+    One arena for every thread: the axes' and the CSV parser's threads (:func:`threads`) then reuse the same
+    freed blocks, where an arena per thread mapped and trimmed its own (smooth CSV at 1e7 on two threads:
+    3.7-4.8 s of system time against 1.7-2.4 with one arena, measured).
+    False where it does not apply: no glibc, or the user set MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_
+    or MALLOC_ARENA_MAX (theirs stand)."""
     import ctypes
     import sys
 
     if not sys.platform.startswith("linux") or any(
-        k in os.environ for k in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")
+        k in os.environ for k in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_ARENA_MAX")
     ):
         return False
     try:
@@ -119,4 +122,5 @@ def reuse_freed_memory() -> bool:
         return False
     del gnu
     mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
-    return bool(mallopt(_M_MMAP_THRESHOLD, REUSE_BLOCK)) and bool(mallopt(_M_TRIM_THRESHOLD, REUSE_KEEP))
+    return all(bool(mallopt(p, v)) for p, v in ((_M_MMAP_THRESHOLD, REUSE_BLOCK), (_M_TRIM_THRESHOLD, REUSE_KEEP),
+                                                 (_M_ARENA_MAX, 1)))  # fmt: skip

@@ -118,6 +118,7 @@ def test_the_allocator_is_tuned_only_where_it_applies(monkeypatch):
         glibc = False
     monkeypatch.delenv("MALLOC_MMAP_THRESHOLD_", raising=False)
     monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
     assert resources.reuse_freed_memory() is (glibc and sys.platform.startswith("linux"))
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "1")
     assert resources.reuse_freed_memory() is False
