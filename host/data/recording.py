@@ -413,8 +413,8 @@ def csv_pieces(path: Path, axes, unit, rate_hz, time_column, gz: bool, default=N
     """(header, numbers (rows, len(header.use)), their file lines) per piece of the CSV's text: the one
     parser of the format, for the whole-file reader and the streamed one (accelnav.data.stream).
 
-    Once the header is known, the C parser reads up to PARSE_AHEAD pieces ahead on other threads
-    (:func:`accelnav.resources.threads`; it releases the interpreter's lock), while this one reads the
+    Once the header is known, and threads are asked for (:func:`accelnav.resources.threads`), the C parser
+    reads up to PARSE_AHEAD pieces ahead on other threads (it releases the interpreter's lock), while this one reads the
     text and the caller takes the pieces, in order: the same numbers, the same refusals, in the same
     place."""
     src = str(path)

@@ -47,9 +47,10 @@ filter's r, u covariance: on steady rows it is not stepped per sample but jumped
 step is affine there; csrc/fastsmooth.c, steady_jump), which leaves every other output's bits alone and
 moves the last sample's sds by less than the per-sample steps' own rounding drift (within 1e-9).
 
-Plain axes (no aids, no covariances) are worked on at once, one thread each (:func:`accelnav.resources.threads`,
-``ACCELNAV_THREADS``), each with its own chunk buffers; the kernels release the interpreter's lock and the
-writer takes pieces from any thread, so the file's bytes are those of the axes in order. The compact output
+Asked for threads (:func:`accelnav.resources.threads`, ``ACCELNAV_THREADS``; one by default), plain axes (no
+aids, no covariances) are worked on at once, one thread each, each with its own chunk buffers; the kernels
+release the interpreter's lock and the writer takes pieces from any thread, so the file's bytes are those of
+the axes in order. The compact output
 (r, u and their sds at float32) is written by the kernels themselves, rounded as numpy's cast rounds, and the
 smoothed (a, eps) covariance is not stepped again once it stands at its fixed point on the steady rows (the
 same doubles: tests/estimate/test_smooth_compact.py).

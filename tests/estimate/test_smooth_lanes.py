@@ -104,7 +104,7 @@ def test_the_thread_count_is_bounded_by_the_cpus(monkeypatch):
     monkeypatch.setenv(resources.THREADS_ENV, "1")
     assert resources.threads() == 1
     monkeypatch.delenv(resources.THREADS_ENV)
-    assert resources.threads() == 2
+    assert resources.threads() == 1  # one unless asked
 
 
 def test_the_allocator_is_tuned_only_where_it_applies(monkeypatch):
