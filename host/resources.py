@@ -65,3 +65,64 @@ def cache_root() -> Path:
         return Path(env)
     xdg = os.environ.get("XDG_CACHE_HOME")
     return (Path(xdg) if xdg else Path.home() / ".cache") / "accelnav"
+
+
+THREADS_ENV = "ACCELNAV_THREADS"
+
+
+def threads() -> int:
+    """Threads a run may keep busy at once (its axes' passes, the CSV parser): ``$ACCELNAV_THREADS`` (a whole
+    number >= 1), else 1 (one thing after the other); never more than ``os.cpu_count()``. Refused in one
+    line (UserError) when set to anything else. One by default: on a machine whose CPUs others share, two
+    threads took more CPU and no less wall time than one (smooth NPZ at 1e7, 2 CPUs under a load of 3-5:
+    3.8-4.9 s of CPU and 4.2-5.7 s wall on two threads, 3.2-3.8 s and 3.6-4.6 s on one, measured)."""
+    from accelnav.errors import UserError
+
+    cpus = os.cpu_count() or 1
+    env = os.environ.get(THREADS_ENV)
+    if env is None or env == "":
+        return 1
+    try:
+        k = int(env)
+    except ValueError:
+        k = 0
+    if k < 1:
+        raise UserError(f"{THREADS_ENV}: got {env[:40]!r}; accepted: a whole number of threads >= 1")
+    return min(k, cpus)
+
+
+# glibc's mallopt parameters (malloc.h)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_ARENA_MAX = -1, -3, -8
+REUSE_BLOCK = 32 << 20  # blocks up to this size come from (and go back to) the heap: glibc's largest setting
+REUSE_KEEP = 128 << 20  # freed memory kept at the heap's top for the next block, not given back to the system
+
+
+def reuse_freed_memory() -> bool:
+    """Ask glibc's malloc to reuse freed memory for a run's chunk-sized arrays (a chunk's input, its temporary
+    arrays, a block of the input's checks: 1-30 MB, allocated and freed again for every chunk) instead of
+    mapping fresh pages for each. By default it maps every block over its threshold anew and unmaps it on
+    free, so each chunk's arrays were fresh pages, zeroed by the kernel: at 1e7 samples about 1 s of the
+    2 s of system time of `accelnav smooth` (bench/speed/bench_smooth_e2e.py; 28 MB more peak RSS).
+    Called once by the command (a process of its own; a library call leaves the host's allocator alone).
+    One arena for every thread: the axes' and the CSV parser's threads (:func:`threads`) then reuse the same
+    freed blocks, where an arena per thread mapped and trimmed its own (smooth CSV at 1e7 on two threads:
+    3.7-4.8 s of system time against 1.7-2.4 with one arena, measured).
+    False where it does not apply: no glibc, or the user set MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_
+    or MALLOC_ARENA_MAX (theirs stand)."""
+    import ctypes
+    import sys
+
+    if not sys.platform.startswith("linux") or any(
+        k in os.environ for k in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_ARENA_MAX")
+    ):
+        return False
+    try:
+        libc = ctypes.CDLL(None)
+        gnu = libc.gnu_get_libc_version  # glibc's own: musl's mallopt is a stub that does nothing
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    del gnu
+    mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+    return all(bool(mallopt(p, v)) for p, v in ((_M_MMAP_THRESHOLD, REUSE_BLOCK), (_M_TRIM_THRESHOLD, REUSE_KEEP),
+                                                 (_M_ARENA_MAX, 1)))  # fmt: skip

@@ -41,6 +41,17 @@ def model(request, default_model, duty_model):
     return default_model if request.param == "default" else duty_model
 
 
+@pytest.fixture
+def own_steady_cache(tmp_path, monkeypatch):
+    """A test's own cache folder and no steady rows held from another test (fastsmooth.steady_gains)."""
+    from accelnav.estimate import fastsmooth
+
+    monkeypatch.setenv("ACCELNAV_CACHE_DIR", str(tmp_path / "cache"))
+    fastsmooth.clear_steady_cache()
+    yield
+    fastsmooth.clear_steady_cache()
+
+
 @pytest.fixture(scope="module")
 def avr_tools():
     """simavr and avr-gcc, or a skip saying what is missing (a failure under ACCELNAV_REQUIRE_AVR=1)."""

@@ -173,6 +173,10 @@ def print_library_lines(quiet: bool):
 
 
 def main(argv: list[str] | None = None) -> int:
+    if argv is None:  # the command's own process (not a caller's, whose allocator is its own)
+        from accelnav.resources import reuse_freed_memory
+
+        reuse_freed_memory()
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_arg(argv))
     args = parser.parse_args(argv)

@@ -533,7 +533,7 @@ def cmd_smooth(args) -> int:
 
 def _smooth_fleet(args, params: ZuptParams, stages: tuple[str, ...]) -> int:
     """smooth over many inputs (accelnav.data.smoothing.smooth_files): a line per input as it finishes."""
-    from accelnav.data.smoothing import keep_freed_memory, smooth_files
+    from accelnav.data.smoothing import smooth_files
 
     if args.out_dir is None:
         raise UserError(f"{len(args.run)} inputs: give --out-dir DIR (a run file per input), not --out")
@@ -545,7 +545,6 @@ def _smooth_fleet(args, params: ZuptParams, stages: tuple[str, ...]) -> int:
     if single:
         raise UserError(f"--out-dir: {', '.join(single)} belong(s) to one input; accepted with a fleet: --zupt auto")
     job = _job_options(args, stages=stages, warm_start=args.warm_start)
-    keep_freed_memory()  # this process is the command's: set up for file after file, as the workers are
 
     def done(r) -> None:
         print(f"{'ok' if r.ok else 'FAILED'} {r.path}: {r.message}" + (f" -> {r.out}" if r.ok else ""), flush=True)

@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import gzip
 import io
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -53,6 +55,7 @@ from accelnav.errors import UserError
 from accelnav.fileio import EXCERPT_CHARS, check_input, excerpt, input_limit, load_npz
 from accelnav.model.load import G0, ModelError, loads_model
 from accelnav.progress import Progress
+from accelnav.resources import threads
 
 GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap
 SNAP_TOL = 0.01  # a clock within 1 % of a whole number of Hz (>= 10 Hz) is taken as that nominal rate
@@ -64,6 +67,7 @@ BEYOND = 1.05
 MIN_DURATION_S = 60.0
 MIN_SAMPLES = 1000
 CHUNK_CHARS = 1 << 18  # CSV text parsed per piece: the reader's memory beyond the numbers it keeps
+PARSE_AHEAD = 4  # pieces the C parser reads ahead on other threads (their text and numbers held: ~10 MB)
 MAX_LINE_CHARS = 1 << 16  # a longer line is not a CSV row (a binary file, a file without newlines)
 PILEUP_FRACTION = 0.005  # an extreme value holding this share of the samples, more than its neighbour: a rail
 
@@ -407,52 +411,97 @@ def csv_accel(head: _Header, table: np.ndarray) -> np.ndarray:
 
 def csv_pieces(path: Path, axes, unit, rate_hz, time_column, gz: bool, default=None, model_axes=None):
     """(header, numbers (rows, len(header.use)), their file lines) per piece of the CSV's text: the one
-    parser of the format, for the whole-file reader and the streamed one (accelnav.data.stream)."""
+    parser of the format, for the whole-file reader and the streamed one (accelnav.data.stream).
+
+    Once the header is known, and threads are asked for (:func:`accelnav.resources.threads`), the C parser
+    reads up to PARSE_AHEAD pieces ahead on other threads (it releases the interpreter's lock), while this one reads the
+    text and the caller takes the pieces, in order: the same numbers, the same refusals, in the same
+    place."""
     src = str(path)
-    head = None
-    for first, text in _blocks(path, gz, src):
-        if head is not None and len(head.cols) > 1 and "#" not in text:
-            # the C parser (accelnav.data.csvnum) first; what it does not read, numpy's paths read or refuse
-            table = csvnum.piece(text, head.delim, len(head.cols), head.use)
-            if table is None:
-                table = _every_column(text, head)
-            if table is not None:
-                yield head, table, np.arange(first, first + len(table), dtype=np.int64)
+    lanes = threads()
+    pool = ThreadPoolExecutor(lanes, thread_name_prefix="accelnav-csv") if lanes > 1 else None
+    ahead: deque = deque()  # (first, text, the C parser's table in the making) of pieces after the header
+    try:
+        head = None
+        for first, text in _blocks(path, gz, src):
+            fast = head is not None and len(head.cols) > 1 and "#" not in text
+            if pool is None or not fast:
+                while ahead:  # the pieces before this one first, in order
+                    yield from _piece(*ahead.popleft(), head, src)
+                if fast:
+                    # the C parser (accelnav.data.csvnum) first; what it does not read, numpy's paths read or refuse
+                    yield from _piece(first, text, csvnum.piece(text, head.delim, len(head.cols), head.use), head, src)
+                    continue
+            else:
+                ahead.append((first, text, pool.submit(csvnum.piece, text, head.delim, len(head.cols), head.use)))
+                while len(ahead) > PARSE_AHEAD:
+                    yield from _piece(*ahead.popleft(), head, src)
                 continue
-            # fast path: no comment, and every line has the header's delimiters (so none is blank)
-            n_delims = _fields_per_line(text, head.delim)
-            if np.all(n_delims == len(head.cols) - 1):
-                nums = np.arange(first, first + len(n_delims), dtype=np.int64)
-                yield head, _parse_piece(text, nums, head, src), nums
-                continue
-        lines = text.split("\n")
-        rows, nums = [], []
-        for i, line in enumerate(lines):
-            s = line.strip()
-            if not s or s.startswith("#"):
-                continue
-            if head is None:
-                head = _header(line, first + i, src, axes, unit, rate_hz, time_column, default, model_axes)
-                continue
-            if line.count(head.delim) != len(head.cols) - 1:
-                hint = ""
-                if head.delim == "," and line.count(",") > len(head.cols) - 1:
-                    # "0,01188" between commas cannot be told from two fields
-                    hint = (
-                        "; if the numbers have a decimal comma (0,01188), separate the fields with ';' "
-                        "(read as decimal commas) or write decimal points"
-                    )
-                raise UserError(
-                    f"{src}: line {first + i}: {line.count(head.delim) + 1} fields; "
-                    f"the header has {len(head.cols)}{hint}"
+            for got in _lines_piece(first, text, head, src, axes, unit, rate_hz, time_column, default, model_axes):
+                head = got[0]
+                if got[1] is not None:
+                    yield got
+        while ahead:
+            yield from _piece(*ahead.popleft(), head, src)
+        if head is None:
+            raise UserError(f"{src}: no header row (the file is empty)")
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+
+
+def _piece(first: int, text: str, table, head: _Header, src: str):
+    """A piece with the header's fields and no comment: the C parser's ``table`` (or its future), else numpy's
+    paths; what none of them reads goes line by line (:func:`_lines_piece`), which says what is wrong."""
+    if isinstance(table, Future):
+        table = table.result()
+    if table is None:
+        table = _every_column(text, head)
+    if table is not None:
+        yield head, table, np.arange(first, first + len(table), dtype=np.int64)
+        return
+    # fast path: no comment, and every line has the header's delimiters (so none is blank)
+    n_delims = _fields_per_line(text, head.delim)
+    if np.all(n_delims == len(head.cols) - 1):
+        nums = np.arange(first, first + len(n_delims), dtype=np.int64)
+        yield head, _parse_piece(text, nums, head, src), nums
+        return
+    for got in _lines_piece(first, text, head, src):
+        if got[1] is not None:
+            yield got
+
+
+def _lines_piece(first: int, text: str, head, src: str, *header_args):
+    """A piece line by line (comments, blank lines, the header): (header, numbers, their lines) of its rows,
+    else (header, None, None) once the header is known; ``header_args`` make the header (axes, unit,
+    rate_hz, time_column, default, model_axes) where the piece holds it."""
+    lines = text.split("\n")
+    rows, nums = [], []
+    for i, line in enumerate(lines):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        if head is None:
+            head = _header(line, first + i, src, *header_args)
+            continue
+        if line.count(head.delim) != len(head.cols) - 1:
+            hint = ""
+            if head.delim == "," and line.count(",") > len(head.cols) - 1:
+                # "0,01188" between commas cannot be told from two fields
+                hint = (
+                    "; if the numbers have a decimal comma (0,01188), separate the fields with ';' "
+                    "(read as decimal commas) or write decimal points"
                 )
-            rows.append(line)
-            nums.append(first + i)
-        if rows:
-            nums = np.asarray(nums, dtype=np.int64)
-            yield head, _parse_piece(rows, nums, head, src), nums
-    if head is None:
-        raise UserError(f"{src}: no header row (the file is empty)")
+            raise UserError(
+                f"{src}: line {first + i}: {line.count(head.delim) + 1} fields; the header has {len(head.cols)}{hint}"
+            )
+        rows.append(line)
+        nums.append(first + i)
+    if rows:
+        nums = np.asarray(nums, dtype=np.int64)
+        yield head, _parse_piece(rows, nums, head, src), nums
+    elif head is not None:
+        yield head, None, None
 
 
 def _every_column(text: str, head: _Header) -> np.ndarray | None:

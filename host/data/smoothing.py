@@ -326,42 +326,24 @@ def smooth_one(path: str | Path, out: str | Path, kw: dict) -> FileResult:
 def smooth_batch(pairs: Sequence[tuple[str | Path, str | Path]], kw: dict | None = None) -> list[FileResult]:
     """:func:`smooth_one` over ``pairs`` of (input, output) in turn, in a process given to the fleet (a Dask
     partition's task, ``bag.map_partitions(smooth_batch, kw)``: one task per partition, not per file), the
-    process set up as the command's workers are (:func:`keep_freed_memory`)."""
-    keep_freed_memory()
+    process set up as the command's workers are (:func:`accelnav.resources.reuse_freed_memory`)."""
+    from accelnav.resources import reuse_freed_memory
+
+    reuse_freed_memory()
     kw = {} if kw is None else kw
     return [smooth_one(p, o, kw) for p, o in pairs]
 
 
-# glibc's mallopt parameters (malloc.h): M_TRIM_THRESHOLD, M_MMAP_THRESHOLD
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-KEEP_BELOW = 32 << 20  # bytes: blocks under this come from the heap (glibc's own largest dynamic threshold)
-KEEP_FREE = 128 << 20  # bytes of free heap kept for the next file before any is given back
-
-
-def keep_freed_memory() -> bool:
-    """Set up this process for smoothing file after file: glibc's malloc keeps the freed blocks under
-    KEEP_BELOW (and up to KEEP_FREE of free heap) for the next file instead of giving them back to the system
-    and having the next file's pages faulted in and zeroed again: a 1e5-row file's CPU 60 -> 46 ms, most of it
-    system time (100 files, 2 axes, measured). Process-wide, so only for a process given to the fleet (the
-    command's and its workers'; :func:`smooth_batch` calls it). False, and nothing changed, without glibc."""
-    import ctypes
-
-    try:
-        mallopt = ctypes.CDLL(None).mallopt  # the C library this process runs on (musl's: a stub that says 0)
-    except (OSError, AttributeError):
-        return False
-    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
-    return bool(mallopt(_M_MMAP_THRESHOLD, KEEP_BELOW)) and bool(mallopt(_M_TRIM_THRESHOLD, KEEP_FREE))
-
-
-def _fleet_worker() -> None:
+def _fleet_worker(threads: int = 1) -> None:
     """A worker process of :func:`smooth_files`: quiet (the parent reports each file; a worker's notes and
-    bars would interleave), and set up for file after file (:func:`keep_freed_memory`)."""
-    from accelnav import progress
+    bars would interleave), its share of the CPUs (accelnav.resources.threads), and set up for file after
+    file as the command's process is (:func:`accelnav.resources.reuse_freed_memory`)."""
+    from accelnav import progress, resources
 
     progress.set_verbosity(0)
+    os.environ[resources.THREADS_ENV] = str(threads)
     logging.getLogger("accelnav").setLevel(logging.ERROR)
-    keep_freed_memory()
+    resources.reuse_freed_memory()
 
 
 def _start_method() -> str:
@@ -384,9 +366,11 @@ def smooth_files(
     is called as each finishes.
     For a cluster, map :func:`smooth_batch` over partitions of the inputs with Dask (see docs/python.rst).
     With ``jobs`` = 1 the files are smoothed in this process, as it is: the command sets it up first
-    (:func:`keep_freed_memory`); a worker process is set up the same way."""
+    (:func:`accelnav.resources.reuse_freed_memory`); a worker process is set up the same way."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from multiprocessing import get_context
+
+    from accelnav import resources
 
     if jobs < 1:
         raise UserError(f"--jobs: got {jobs}; accepted: 1 or more")
@@ -401,7 +385,10 @@ def smooth_files(
             if done is not None:
                 done(results[i])
     else:
-        with ProcessPoolExecutor(jobs, mp_context=get_context(_start_method()), initializer=_fleet_worker) as pool:
+        share = max(1, resources.threads() // jobs)  # the CPUs shared among the jobs (a bad setting refused here)
+        with ProcessPoolExecutor(
+            jobs, mp_context=get_context(_start_method()), initializer=_fleet_worker, initargs=(share,)
+        ) as pool:
             futures = {pool.submit(smooth_one, p, o, kw): i for i, (p, o) in enumerate(zip(paths, outs, strict=True))}
             for f in as_completed(futures):
                 results[futures[f]] = f.result()

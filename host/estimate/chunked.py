@@ -47,6 +47,14 @@ filter's r, u covariance: on steady rows it is not stepped per sample but jumped
 step is affine there; csrc/fastsmooth.c, steady_jump), which leaves every other output's bits alone and
 moves the last sample's sds by less than the per-sample steps' own rounding drift (within 1e-9).
 
+Asked for threads (:func:`accelnav.resources.threads`, ``ACCELNAV_THREADS``; one by default), plain axes (no
+aids, no covariances) are worked on at once, one thread each, each with its own chunk buffers; the kernels
+release the interpreter's lock and the writer takes pieces from any thread, so the file's bytes are those of
+the axes in order. The compact output
+(r, u and their sds at float32) is written by the kernels themselves, rounded as numpy's cast rounds, and the
+smoothed (a, eps) covariance is not stepped again once it stands at its fixed point on the steady rows (the
+same doubles: tests/estimate/test_smooth_compact.py).
+
 The store is in memory when ``store_memory`` holds it (on disk, the write-back of a store the size of
 the output throttled the run: 8 s of 17 at 1e7 samples, measured), else in a file in ``workdir``.
 Disk needed: the output, plus the store when it is on disk; checked before any work starts, and the
@@ -56,9 +64,11 @@ temporary files are removed on success and on error.
 from __future__ import annotations
 
 import os
+import threading
 import time
 import zipfile
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -73,6 +83,7 @@ from accelnav.fileio import Output, TempFolder, free_bytes, output_target, pread
 from accelnav.model.design import AxisDesign, axis_design
 from accelnav.model.load import Model
 from accelnav.progress import Progress
+from accelnav.resources import threads
 
 BUDGET = 256 << 20  # bytes of chunk buffers
 PROGRESS_AFTER = 2.0  # s: a run that takes longer shows its passes' progress (accelnav.progress: stderr, not -q)
@@ -92,6 +103,10 @@ OUT_KEYS = ("filt_x", "filt_sd", "smooth_x", "smooth_sd")
 # mantissa: 6e-8 relative, 0.6 mm at 10 km); with t, 8 + 16 n_axes bytes per sample
 COMPACT = (2, np.float32)
 RUN_FORMAT = "accelnav-run/1"  # the CLI passes accelnav.data.runfile.FORMAT (a layer above this one)
+
+# runs of at most this many samples work on their axes in order: a thread pool's start costs more than it saves
+THREADS_FROM = 1 << 16
+
 
 # read rows s..e of the input: (t (e-s,), accel (e-s, n_axes), clipped (e-s, n_axes) bool)
 Reader = Callable[[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]
@@ -358,6 +373,29 @@ class _Axis:
     marked: int = 0  # marked aids applied so far (zero-velocity updates)
 
 
+class _Bufs:
+    """One lane's chunk buffers: the store's scratch rows, a chunk's states and sds, the lean chunk's smoothed
+    (a, eps) covariance (and its next sample's), the measurements and their valid mask."""
+
+    def __init__(self, chunk: int) -> None:
+        self.store = np.empty((chunk + 1) * GROW)
+        self.xa, self.sa = np.empty((chunk, 4)), np.empty((chunk, 4))
+        self.cov = np.empty((chunk + 1, 3))
+        self.zc, self.ok = np.empty(chunk), np.empty(chunk, dtype=bool)
+        self.bad = np.empty(chunk, dtype=bool)
+        self.ends = np.empty((4, 4))  # a compact forward chunk's first and last states, then their sds
+
+    def rows(self, width: int, count: int) -> np.ndarray:
+        return self.store[: count * width].reshape(count, width)
+
+    def compact(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """Two (count, 2) float32 arrays for a chunk's compact r, u and their sds, in ``sa``'s memory (the
+        compact r, u pass writes nothing else there)."""
+        flat = self.sa.reshape(-1).view(np.float32)
+        half = len(flat) // 2
+        return flat[: 2 * count].reshape(count, 2), flat[half : half + 2 * count].reshape(count, 2)
+
+
 @dataclass
 class _Run:
     """What the passes share: the kernels, the sizes, the output and the chunk buffers."""
@@ -370,9 +408,6 @@ class _Run:
     axes: list[_Axis]
     smooth: bool  # False: the filter alone (no store, no backward passes)
     states: int  # states written per sample: 4 (r, u, a, eps) or 2 (r, u)
-    store: np.ndarray = field(init=False)
-    xa: np.ndarray = field(init=False)
-    sa: np.ndarray = field(init=False)
     first: dict[str, np.ndarray] = field(default_factory=dict)  # each output's sample 0, (n_axes, 4)
     last: dict[str, np.ndarray] = field(default_factory=dict)  # and its sample N-1 (for a summary line)
     tmp: Path | None = None  # the folder of the stores on disk
@@ -381,31 +416,55 @@ class _Run:
     marks: str = ""  # the member of the samples where a marked aid was applied ("": none written)
     covariances: bool = False  # the full covariances written (filt_P, smooth_P, the filter's priors)
     tap: Callable | None = None  # tap(key, j, s, values): each output as it is written (j = -1: the marks, all axes)
+    threads: int = 1  # axes worked on at once (plain axes only: see :meth:`each`)
+    bufs: list[_Bufs] = field(init=False)
+    pool: ThreadPoolExecutor | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
         # allocated once and reused by every chunk: fresh pages cost more than the kernels here (a page
-        # fault per 4 KiB: fresh memory filled at 0.2-0.8 GB/s against 2.5 GB/s for pages in use, measured)
-        self.store = np.empty((self.chunk + 1) * GROW)
-        self.xa, self.sa = np.empty((self.chunk, 4)), np.empty((self.chunk, 4))
-        self.cov = np.empty((self.chunk + 1, 3))  # a lean chunk's smoothed (a, eps) covariance, its next sample's
-        self.zc, self.ok = np.empty(self.chunk), np.empty(self.chunk, dtype=bool)
-        self.bad = np.empty(self.chunk, dtype=bool)
+        # fault per 4 KiB: fresh memory filled at 0.2-0.8 GB/s against 2.5 GB/s for pages in use, measured).
+        # Axes worked on at once have their own (CHUNK_BYTES counts them per axis); else the axes share one set
+        plain = not (self.marks or self.covariances) and all(ax.aids is None for ax in self.axes)
+        if self.threads > 1 and plain and len(self.axes) > 1:
+            self.pool = ThreadPoolExecutor(min(self.threads, len(self.axes)), thread_name_prefix="accelnav-axis")
+        self.bufs = [_Bufs(self.chunk) for _ in (self.axes if self.pool is not None else self.axes[:1])]
         self.marked = np.zeros((self.chunk, len(self.axes)) if self.marks else (0, 0), dtype=bool)
         # --covariances: a chunk's packed covariances (10 a sample) and the filter's prior means
         c = self.chunk if self.covariances else 0
         self.pa, self.pb, self.xb = np.empty((c, 10)), np.empty((c, 10)), np.empty((c, 4))
+        self._lock = threading.Lock()  # memory_left, on_disk: stores opened by axes on several threads
 
-    def rows(self, width: int, count: int) -> np.ndarray:
-        return self.store[: count * width].reshape(count, width)
+    def buf(self, ax: _Axis) -> _Bufs:
+        """The chunk buffers of axis ``ax`` (its own when axes run at once)."""
+        return self.bufs[ax.j if self.pool is not None else 0]
+
+    def each(self, work: Callable[[_Axis], None], axes: Sequence[_Axis] | None = None) -> None:
+        """``work(ax)`` for every axis: on :attr:`threads` threads at once when every axis is plain (the
+        kernels release the GIL and touch only their axis's carries, stores and buffers; the writer takes
+        pieces from any thread), else in order. The first error is raised once all have returned."""
+        axes = self.axes if axes is None else axes
+        if self.pool is None:
+            for ax in axes:
+                work(ax)
+            return
+        futures = [self.pool.submit(work, ax) for ax in axes]
+        wait(futures)  # every axis done before any error goes up: none may write while the output is dropped
+        for f in futures:
+            f.result()
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(cancel_futures=True)
 
     def open_store(self, name: str, width: int, s: int) -> _Store:
         """A store of ``width`` doubles per sample for samples s.. (the earlier ones are never touched): in
         memory while the stores opened so far leave room for its rows, else on disk."""
         need = 8 * width * (self.n - s)
-        in_memory = need <= self.memory_left
-        if in_memory:
-            self.memory_left -= need
-        self.on_disk |= not in_memory
+        with self._lock:
+            in_memory = need <= self.memory_left
+            if in_memory:
+                self.memory_left -= need
+            self.on_disk |= not in_memory
         return _Store(self.tmp / f"{name}.bin", 8 * width * self.n, in_memory)
 
     def full_store(self, ax: _Axis, s: int) -> _Store:
@@ -422,6 +481,17 @@ class _Run:
 
     def ptr(self, a: np.ndarray, ctype: str = "double *"):
         return fastsmooth._ptr(self.ffi, a, ctype)
+
+    def put_rows(
+        self, key: str, j: int, s: int, data: np.ndarray, head: np.ndarray, tail: np.ndarray | None = None
+    ) -> None:
+        """Rows s.. of axis j of ``key`` as written (``states`` values a sample); ``head``, ``tail``: the 4 values
+        (r, u, a, eps) of the rows' first and last sample, kept when those are the run's first and last."""
+        self.out.write(key, self.states * (j * self.n + s), data)
+        if len(data) and s == 0:
+            self.first.setdefault(key, np.zeros((len(self.axes), 4)))[j] = head
+        if len(data) and s + len(data) == self.n and tail is not None:
+            self.last.setdefault(key, np.zeros((len(self.axes), 4)))[j] = tail
 
     def put(self, key: str, j: int, s: int, data: np.ndarray) -> None:
         """Rows s.. of axis j of the (n_axes, N, states) output ``key``, from their (m, 4) values."""
@@ -532,7 +602,9 @@ def smooth_bounded(
     one-chunk path writes them (implies ``full``): every axis then takes the general path, whose kernels hold
     each sample's covariances (the plain path's lean store does not), written chunk by chunk.
     ``tap(key, j, s, values)``: each (n_axes, N, 4) output's rows s.. of axis j, all four states at float64 as
-    computed (before the compact cut), and the marks' rows (j = -1), as they are written (a figure's envelope).
+    computed (before the compact cut), and the marks' rows (j = -1), as they are written (a figure's envelope):
+    with a tap the axes run one after the other and the compact output is cut from those doubles, not written at
+    float32 by the kernels (the same bytes).
     Returns {"chunk": samples per chunk, "chunks": how many, "applied": per axis, which extras given whole were
     applied, in their given order (None for ChunkAids), "marked": per axis, marked aids applied, "first",
     "last": {output key: its (n_axes, 4) values at sample 0, N-1}, "store_in_memory": where the store was}.
@@ -584,7 +656,9 @@ def smooth_bounded(
         for ax in axes:
             stack.callback(ax.close_stores)
         run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k, tmp=tmp, memory_left=store_memory, marks=marks,
-                   covariances=covariances, tap=tap)  # fmt: skip
+                   covariances=covariances, tap=tap,
+                   threads=threads() if n > THREADS_FROM and tap is None else 1)  # fmt: skip
+        stack.callback(run.close)
         for ax in axes if smooth else []:
             # a lean store (all samples valid so far) first where the design has steady rows: 5 doubles per
             # sample, not 12; the full store is opened at the first sample that needs it (run.full_store)
@@ -606,15 +680,20 @@ def smooth_bounded(
         if smooth:
             with bar("backward", n) as p:
                 for s in reversed(starts):  # 2. backward: the general smoother; the plain (a, eps) into the store
-                    for ax in axes:
-                        _backward(run, ax, s, min(s + chunk, n))
+                    run.each(lambda ax, s=s: _backward(run, ax, s, min(s + chunk, n)))
                     p.update(n - s)
             with bar("r, u", n_axes, "axes") as p:
-                for ax in axes:  # 3. plain path, forward: smoothed r, u
+                done = []
+
+                def ru(ax: _Axis) -> None:  # 3. plain path, forward: smoothed r, u
                     if ax.width == ROW:
                         _smooth_ru(run, ax, starts)
                     ax.close_stores()  # freed before the small arrays are added
-                    p.update(ax.j + 1)
+                    with run._lock:
+                        done.append(ax.j)
+                        p.update(len(done))
+
+                run.each(ru)
         applied = [
             (a.given_order() if isinstance(a, _WholeAids) else None) if a is not None else np.zeros(0, dtype=bool)
             for a in exs
@@ -670,10 +749,12 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         run.out.write("accel", s * n_axes, accel)
         run.out.write("clipped", s * n_axes, clipped)
     m = e - s
-    zc, ok, bad = run.zc[:m], run.ok[:m], run.bad[:m]
     if run.marks:
         run.marked[:m] = False
-    for ax in run.axes:
+
+    def axis(ax: _Axis) -> None:
+        b = run.buf(ax)
+        zc, ok, bad = b.zc[:m], b.ok[:m], b.bad[:m]
         zc[:] = accel[:, ax.j]
         np.isfinite(zc, out=ok)
         np.logical_not(clipped[:, ax.j], out=bad)
@@ -686,22 +767,30 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         width = LROW if lean else ax.width
         store = ax.lean if lean or not run.smooth else run.full_store(ax, s)
         # the filter alone keeps no store: its rows go to the scratch buffer and are dropped
-        buf = store.rows(run.store, width, s, m, fill=False) if run.smooth else run.rows(width, m)
+        buf = store.rows(b.store, width, s, m, fill=False) if run.smooth else b.rows(width, m)
+        compact = False
         if ax.width == GROW:
             _forward_general(run, ax, s, e, zc, ok, buf)
         else:
-            _forward_plain(run, ax, s, e, zc, ok, buf, write_filt)
+            compact = _forward_plain(run, ax, s, e, zc, ok, buf, write_filt)
             if lean:
                 ax.lean_end = e
         if run.smooth:
             store.done(buf, s)
-        if write_filt:
-            run.put("filt_x", ax.j, s, run.xa[:m])
-            run.put("filt_sd", ax.j, s, run.sa[:m])
+        first, last = (b.ends[0], b.ends[1]) if compact else (b.xa[0], b.xa[m - 1])
+        if write_filt and compact:
+            x32, s32 = b.compact(m)
+            run.put_rows("filt_x", ax.j, s, x32, b.ends[0], b.ends[1])
+            run.put_rows("filt_sd", ax.j, s, s32, b.ends[2], b.ends[3])
+        elif write_filt:
+            run.put("filt_x", ax.j, s, b.xa[:m])
+            run.put("filt_sd", ax.j, s, b.sa[:m])
         if s == 0:
-            ax.xf0 = run.xa[0].copy()
+            ax.xf0 = first.copy()
         if e == run.n:
-            ax.xfn = run.xa[m - 1].copy()
+            ax.xfn = last.copy()
+
+    run.each(axis)
     if run.marks:
         run.out.write(run.marks, s * n_axes, run.marked[:m])
         if run.tap is not None:
@@ -709,7 +798,7 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
 
 
 def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:
-    p, m = run.ptr, e - s
+    p, m, b = run.ptr, e - s, run.buf(ax)
     piece = ax.aids.between(s, e) if ax.aids is not None else None
     ne = 0 if piece is None else len(piece.ex)
     if ne and (piece.ex.k[0] < s or piece.ex.k[-1] >= e or np.any(piece.ex.k[1:] < piece.ex.k[:-1])):
@@ -722,7 +811,7 @@ def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: n
     run.lib.acn_chunkg_fwd(
         ax.m, m, int(e == run.n), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne,
         run.ffi.from_buffer("long[]", ek), *(p(a) for a in arrs), p(applied, "unsigned char *"),
-        p(ax.carry_f), p(buf), p(run.xa), p(run.sa), *prior,
+        p(ax.carry_f), p(buf), p(b.xa), p(b.sa), *prior,
     )  # fmt: skip
     if run.covariances and "filt_P" in run.out.members:
         run.put_cov("filt_P", ax.j, s, buf[:m, 4:])
@@ -739,49 +828,60 @@ def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: n
 
 def _forward_plain(
     run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray, states: bool
-) -> None:
+) -> bool:
     """``states``: the filter's states are written; without them the steady kernel writes only the chunk's first
-    and last and jumps its covariance over the steady samples (no step per sample: acn_chunk_fwd_steady)."""
-    p, m, last = run.ptr, e - s, int(e == run.n)
-    tail = (p(ax.carry_f), p(buf), p(run.xa), p(run.sa), p(ax.Pf0), p(ax.Pfn))
-    if ax.steady is not None:
+    and last and jumps its covariance over the steady samples (no step per sample: acn_chunk_fwd_steady).
+    Returns True when the steady kernel wrote the compact states at float32 (:meth:`_Bufs.compact`, the
+    chunk's first and last full rows in ``ends``), as the compact output wants them."""
+    p, m, last, b = run.ptr, e - s, int(e == run.n), run.buf(ax)
+    tail = (p(ax.carry_f), p(buf), p(b.xa), p(b.sa), p(ax.Pf0), p(ax.Pfn))
+    compact = states and run.states == 2 and ax.steady is not None and run.tap is None  # a tap reads the doubles
+    if compact:
+        ends, f32 = b.ends, [p(a, "float *") for a in b.compact(m)]
+        sr = ax.steady.rows
+        rc = run.lib.acn_chunk_fwd_steady(
+            ax.m, s, m, last, p(zc), p(sr), len(sr), *tail[:2], p(ends[0:2]), p(ends[2:4]), *tail[4:], *f32
+        )  # fmt: skip
+    elif ax.steady is not None:
         sr = ax.steady.rows
         sd = tail[3] if states else run.ffi.NULL
-        rc = run.lib.acn_chunk_fwd_steady(ax.m, s, m, last, p(zc), p(sr), len(sr), *tail[:3], sd, *tail[4:])
+        f = run.ffi.NULL
+        rc = run.lib.acn_chunk_fwd_steady(ax.m, s, m, last, p(zc), p(sr), len(sr), *tail[:3], sd, *tail[4:], f, f)
     else:
         rc = run.lib.acn_chunk_fwd(ax.m, s, m, last, p(zc), p(ok.view(np.uint8), "unsigned char *"), *tail)
     if rc != 0:
         raise UserError(f"bounded smoother: the (a, eps) prior covariance is singular at sample {-rc}")
+    return compact
 
 
 def _backward(run: _Run, ax: _Axis, s: int, e: int) -> None:
     """Samples e-1..s: the general path's smoother outright, the plain path's (a, eps) into its store."""
-    p, m, last = run.ptr, e - s, int(e == run.n)
+    p, m, last, b = run.ptr, e - s, int(e == run.n), run.buf(ax)
     if ax.width == GROW:
-        buf = ax.store.rows(run.store, GROW, s, m)
+        buf = ax.store.rows(b.store, GROW, s, m)
         ps = p(run.pa) if run.covariances else run.ffi.NULL
-        rc = run.lib.acn_chunkg_bwd(ax.m, s, m, last, p(buf), p(ax.carry_b), p(run.xa), p(run.sa), ps)
+        rc = run.lib.acn_chunkg_bwd(ax.m, s, m, last, p(buf), p(ax.carry_b), p(b.xa), p(b.sa), ps)
         if rc != 0:
             raise UserError(f"bounded smoother: the prior covariance is not positive definite at {-rc}")
         if run.covariances:
             run.put_cov("smooth_P", ax.j, s, run.pa[:m])
-        run.put("smooth_x", ax.j, s, run.xa[:m])
-        run.put("smooth_sd", ax.j, s, run.sa[:m])
+        run.put("smooth_x", ax.j, s, b.xa[:m])
+        run.put("smooth_sd", ax.j, s, b.sa[:m])
     elif s < ax.lean_end:
-        buf = ax.lean.rows(run.store, LROW, s, m)
+        buf = ax.lean.rows(b.store, LROW, s, m)
         sr = ax.steady_rows
         ax.cov_after[s] = None if last else ax.carry_b[2:5].copy()
         run.lib.acn_chunk_bwd_lean(ax.m, s, m, last, p(sr), len(sr), p(buf), p(ax.carry_b))
         ax.lean.done(buf, s)
     else:
-        buf = ax.store.rows(run.store, ROW, s, m)
+        buf = ax.store.rows(b.store, ROW, s, m)
         run.lib.acn_chunk_bwd(ax.m, m, last, p(buf), p(ax.carry_b))
         ax.store.done(buf, s)
 
 
 def _smooth_ru(run: _Run, ax: _Axis, starts: list[int]) -> None:
     """The plain path's third pass over one axis: smoothed r, u; the run's last sample is the filter's."""
-    p, n = run.ptr, run.n
+    p, n, b = run.ptr, run.n, run.buf(ax)
     ax.carry_r[0:2] = ax.xf0[0:2]
     ax.carry_r[2], ax.carry_r[3], ax.carry_r[5] = ax.Pf0[0], ax.Pf0[1], ax.Pf0[4]
     for s in starts:
@@ -789,26 +889,35 @@ def _smooth_ru(run: _Run, ax: _Axis, starts: list[int]) -> None:
         m = e - s if e < n else e - s - 1  # transitions to the next sample; the last sample is written below
         if s < ax.lean_end:
             if e == ax.lean_end and e < n:  # the next sample is in the full store: its fields, lean order
-                buf = run.rows(LROW, m + 1)
+                buf = b.rows(LROW, m + 1)
                 ax.lean.read(buf[:m], 8 * LROW * s)
                 nx = np.empty(ROW)
                 ax.store.read(nx, 8 * ROW * e)
                 buf[m] = nx[[0, 1]]
             else:
-                buf = ax.lean.rows(run.store, LROW, s, m + 1)
+                buf = ax.lean.rows(b.store, LROW, s, m + 1)
             sr, after = ax.steady_rows, ax.cov_after[s]
-            cov = run.cov[: e - s + 1]
+            cov = b.cov[: e - s + 1]
             ends = run.ffi.NULL if after is None else p(after)  # None: the chunk ends the run
             run.lib.acn_chunk_cov_lean(ax.m, s, e - s, int(after is None), p(sr), len(sr), ends, p(cov))
             if after is not None:
                 cov[e - s] = after  # the next sample's, for the chunk's last transition
+            if run.states == 2 and run.tap is None:  # the compact output from the kernel, at float32 (no cast pass)
+                x32, s32 = b.compact(m)
+                v = ax.carry_r  # sample s's values as the full form has them, for the summary line
+                head = (np.array([v[0], v[1], buf[0, 0], buf[0, 1]]), np.sqrt([v[2], v[5], cov[0, 0], cov[0, 2]]))
+                f, out32 = run.ffi.NULL, (p(x32, "float *"), p(s32, "float *"))
+                run.lib.acn_chunk_ru_lean(ax.m, s, m, p(buf), p(cov), p(sr), len(sr), p(ax.carry_r), f, f, *out32)
+                run.put_rows("smooth_x", ax.j, s, x32, head[0])
+                run.put_rows("smooth_sd", ax.j, s, s32, head[1])
+                continue
             run.lib.acn_chunk_ru_lean(
-                ax.m, s, m, p(buf), p(cov), p(sr), len(sr), p(ax.carry_r), p(run.xa), p(run.sa)
+                ax.m, s, m, p(buf), p(cov), p(sr), len(sr), p(ax.carry_r), p(b.xa), p(b.sa), run.ffi.NULL, run.ffi.NULL
             )  # fmt: skip
         else:
-            buf = ax.store.rows(run.store, ROW, s, m + 1)
-            run.lib.acn_chunk_ru(ax.m, m, p(buf), p(ax.carry_r), p(run.xa), p(run.sa))
-        run.put("smooth_x", ax.j, s, run.xa[:m])
-        run.put("smooth_sd", ax.j, s, run.sa[:m])
+            buf = ax.store.rows(b.store, ROW, s, m + 1)
+            run.lib.acn_chunk_ru(ax.m, m, p(buf), p(ax.carry_r), p(b.xa), p(b.sa))
+        run.put("smooth_x", ax.j, s, b.xa[:m])
+        run.put("smooth_sd", ax.j, s, b.sa[:m])
     run.put("smooth_x", ax.j, n - 1, ax.xfn)
     run.put("smooth_sd", ax.j, n - 1, np.sqrt(ax.Pfn[fastsmooth._DIAG]))

@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import io
 import os
+import queue
 import struct
 import zlib
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -89,11 +91,15 @@ class NpzWriter:
         self.fd = self.output.fd
         # large pieces are copied into one of SLOTS slots and written by a writer thread (their CRC by a
         # third) while the caller computes the next: the write, not the kernels, was the larger part of a
-        # 1e7-sample smooth (pwrite 1.5 s beside 1.2-1.8 s of kernels, measured); the slots bound the memory
+        # 1e7-sample smooth (pwrite 1.5 s beside 1.2-1.8 s of kernels, measured); the slots bound the memory.
+        # Callers on several threads (the axes of a run, accelnav.estimate.chunked) may write at once: a slot
+        # is taken from the queue of free ones and comes back only when its piece is on disk, so no two
+        # callers ever fill the same slot
         self._writer = ThreadPoolExecutor(1)
         self._crc = ThreadPoolExecutor(1)  # the CRC beside the write: each was ~1 s of a 1e7-sample smooth
-        self._slots: list[list] = [[None, None] for _ in range(SLOTS)]  # [buffer, pending future]
-        self._turn = 0
+        self._free: queue.SimpleQueue[list] = queue.SimpleQueue()  # free slots: [buffer, its last piece's future]
+        for _ in range(SLOTS):
+            self._free.put([None, None])
         try:
             self._lay_out(members)
         except BaseException:
@@ -131,8 +137,9 @@ class NpzWriter:
             self._write_piece(m, at, view)
             return
         slot, piece = self._slot(len(view))
-        piece[:] = view
-        self._submit(slot, m, at, piece)
+        with self._owned(slot):
+            piece[:] = view
+            self._submit(slot, m, at, piece)
 
     @staticmethod
     def _check(m: _Member, at: int, nbytes: int) -> None:
@@ -140,33 +147,53 @@ class NpzWriter:
             raise ValueError(f"{m.name.decode()}: bytes {at}..{at + nbytes} outside 0..{m.size}")
 
     def _slot(self, nbytes: int) -> tuple[list, memoryview]:
-        """The next slot, free (its previous piece on disk), and its first ``nbytes`` to fill."""
-        slot = self._slots[self._turn]
-        self._turn = (self._turn + 1) % len(self._slots)
-        if slot[1] is not None:
-            slot[1].result()  # the slot's previous piece is on disk (its error, a full disk say, raised here)
+        """A free slot (its previous piece on disk), and its first ``nbytes`` to fill; the caller owns it
+        until :meth:`_submit`."""
+        slot = self._free.get()
+        done, slot[1] = slot[1], None
+        if done is not None:
+            try:
+                done.result()  # the slot's previous piece's error (a full disk, say) is raised here
+            except BaseException:
+                self._free.put(slot)
+                raise
         if slot[0] is None or len(slot[0]) < nbytes:
             slot[0] = np.empty(nbytes, dtype=np.uint8)
         return slot, memoryview(slot[0])[:nbytes]
 
+    @contextmanager
+    def _owned(self, slot: list):
+        """A slot taken by :meth:`_slot`: back to the queue if the caller fails before :meth:`_submit` gives it
+        to the writer (else :meth:`_drain` would wait for it forever)."""
+        try:
+            yield
+        except BaseException:
+            if slot[1] is None:
+                self._free.put(slot)
+            raise
+
     def _submit(self, slot: list, m: _Member, at: int, piece: memoryview) -> None:
         crc = self._crc.submit(zlib.crc32, piece)
-        slot[1] = self._writer.submit(self._write_piece, m, at, piece, crc)
+        slot[1] = fut = self._writer.submit(self._write_piece, m, at, piece, crc)
+        fut.add_done_callback(lambda _, slot=slot: self._free.put(slot))  # free again once on disk
 
     def _write_piece(self, m: _Member, at: int, view: memoryview, crc=None) -> None:
         pwrite_all(self.fd, view, m.data + at)
         m.pieces.append((at, len(view), zlib.crc32(view) if crc is None else crc.result()))
 
     def _drain(self) -> None:
-        """Wait for every piece in flight; the first error among them is raised."""
+        """Wait for every piece in flight (every slot back in the queue); the first error among them is raised.
+        Called once no caller writes any more."""
+        slots = [self._free.get() for _ in range(SLOTS)]
         errors = []
-        for slot in self._slots:
+        for slot in slots:
             if slot[1] is not None:
                 try:
                     slot[1].result()
                 except BaseException as exc:
                     errors.append(exc)
                 slot[1] = None
+            self._free.put(slot)
         if errors:
             raise errors[0]
 
@@ -179,8 +206,9 @@ class NpzWriter:
         if nbytes >= 1 << 20:  # cast straight into a slot: one pass, no fresh array (a page fault per 4 KiB)
             self._check(m, m.head + item * dt.itemsize, nbytes)
             slot, piece = self._slot(nbytes)
-            np.copyto(np.frombuffer(piece, dtype=dt).reshape(data.shape), data, casting="unsafe")
-            self._submit(slot, m, m.head + item * dt.itemsize, piece)
+            with self._owned(slot):
+                np.copyto(np.frombuffer(piece, dtype=dt).reshape(data.shape), data, casting="unsafe")
+                self._submit(slot, m, m.head + item * dt.itemsize, piece)
             return
         arr = np.ascontiguousarray(data, dtype=dt)
         if arr.size:

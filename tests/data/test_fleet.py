@@ -106,7 +106,8 @@ def test_the_library_under_dask(fleet, tmp_path, capsys):
 def test_a_partition_under_dask_and_the_process_set_up_for_it(fleet, tmp_path, capsys):
     """smooth_batch over a Dask bag's partitions (the documented batch task): each partition's files in turn in
     one worker, the results of smooth_one in the inputs' order, the broken file reported; and glibc takes the
-    settings of keep_freed_memory (True; False where the C library has no mallopt or refuses them)."""
+    settings of accelnav.resources.reuse_freed_memory in a fresh process (True; False where the C library has
+    no mallopt or refuses them)."""
     paths, bad = fleet
     outs = [tmp_path / f"{p.name.split('.')[0]}.npz" for p in (*paths, bad)]
     bag = _dask_bag(list(zip([*paths, bad], outs, strict=True)))
@@ -115,7 +116,7 @@ def test_a_partition_under_dask_and_the_process_set_up_for_it(fleet, tmp_path, c
     assert [r.ok for r in results] == [True, True, True, False] and "line 2" in results[-1].message
     _same_as_alone(outs[2], paths[2], tmp_path, capsys)
     if sys.platform == "linux" and platform.libc_ver()[0] == "glibc":
-        code = "from accelnav.data.smoothing import keep_freed_memory as k; print(k())"
+        code = "from accelnav.resources import reuse_freed_memory as k; print(k())"
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
         assert done.stdout.strip() == "True", done.stderr
 

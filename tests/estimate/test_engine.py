@@ -37,8 +37,14 @@ def test_the_plan_cuts_by_size_and_says_why():
     p = engine.plan(big, 2, engine.Job(budget=per * small, covariances=True))
     assert not p.whole and p.chunk == chunked.chunk_samples(2, min(chunked.BUDGET, per * small), covariances=True)
     assert p.chunk < engine.plan(big, 2, engine.Job(budget=per * small)).chunk
-    with pytest.raises(UserError, match="over the memory budget.*--tune"):
-        engine.plan(big, 2, engine.Job(budget=per * small, tune=engine.Tune()))
+    # --tune and --plots: one chunk within the budget, chunked over it (the likelihood and the envelope streamed)
+    for job in (engine.Job(budget=per * small, tune=engine.Tune()), engine.Job(budget=per * small, envelope=True)):
+        assert engine.plan(small, 2, job).whole
+        p = engine.plan(big, 2, job)
+        assert not p.whole and p.chunks > 1
+    # what still needs every sample in memory is refused over the budget, in one line that names it
+    with pytest.raises(UserError, match="over the memory budget.*arrays returned in memory"):
+        engine.plan(big, 2, engine.Job(budget=per * small), to_file=False)
 
 
 def test_a_stages_extra_smoother_pass_gives_the_whole_array_numbers(tmp_path):

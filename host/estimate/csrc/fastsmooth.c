@@ -1230,7 +1230,7 @@ static inline double sqrt_again(double x, unsigned long long *bits, double *root
  */
 int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
                          const double *srows, long nt, double *carry, double *store, double *xf,
-                         double *sdf, double *Pf0, double *Pfn)
+                         double *sdf, double *Pf0, double *Pfn, float *x32, float *sd32)
 {
     const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
     const double *steady = srows + ACN_SROW * (nt - 1);
@@ -1262,13 +1262,25 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
         double an = (a - ka * a) + ka * (zk - ep);
         e = (ep - ke * ep) + ke * (zk - a);
         a = an;
-        if (sdf != NULL || k == 0 || k == n - 1) {
-            double *o = xf + 4 * k;
-            o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+        if (x32 != NULL) { /* compact: r, u and their sds as float; xf, sdf the chunk's ends */
+            x32[2 * k] = (float)r, x32[2 * k + 1] = (float)u;
+            sd32[2 * k] = (float)sqrt(P[0][0]), sd32[2 * k + 1] = (float)sqrt(P[1][1]);
+            for (int end = 0; end < 2; end++) /* row 0: the first sample's, row 1: the last's */
+                if (k == (end ? n - 1 : 0)) {
+                    double *o = xf + 4 * end, *sd = sdf + 4 * end;
+                    o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+                    for (int i = 0; i < 4; i++)
+                        sd[i] = sqrt(P[i][i]);
+                }
+        } else {
+            if (sdf != NULL || k == 0 || k == n - 1) {
+                double *o = xf + 4 * k;
+                o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+            }
+            if (sdf != NULL)
+                for (int i = 0; i < 4; i++)
+                    sdf[4 * k + i] = sqrt(P[i][i]);
         }
-        if (sdf != NULL)
-            for (int i = 0; i < 4; i++)
-                sdf[4 * k + i] = sqrt(P[i][i]);
         if (g == 0)
             pack(P, Pf0);
         row[0] = a, row[1] = e;
@@ -1337,6 +1349,23 @@ static inline void bwd_ae_step(double phi, double b, const double *c, const doub
 }
 
 /*
+ * One backward step of the smoothed (a, eps) covariance from rows sr (sample k's)
+ * and sn (k + 1's), as bwd_ae_cov; returns 1 when the step left the three doubles
+ * as they were and both rows are the steady one (steady != 0). The step is then a
+ * function of nothing but those same doubles, so every further step on steady
+ * rows gives them again, bit for bit: the callers skip those steps (most of a
+ * long run's samples) and keep the values.
+ */
+static inline int cov_fixed_step(const double *sr, const double *sn, int steady, double *saa,
+                                 double *sae, double *see)
+{
+    double v[3] = {*saa, *sae, *see}, w[3];
+    bwd_ae_cov(sr + 4, sr + 11, sn + 8, saa, sae, see);
+    w[0] = *saa, w[1] = *sae, w[2] = *see;
+    return steady && memcmp(v, w, sizeof v) == 0;
+}
+
+/*
  * acn_chunk_bwd over a lean store (acn_chunk_fwd_steady's) of samples k0 ..
  * k0 + n - 1: the smoother gain, the filter's (a, eps) covariance and the next
  * prior's from the rows (row min(k, nt - 1)), the same operations in the same
@@ -1351,6 +1380,7 @@ void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const doub
 {
     const double phi = m->phi, b = m->b_eps;
     double as = carry[0], es = carry[1], saa = carry[2], sae = carry[3], see = carry[4];
+    int fixed = 0; /* the covariance is at its fixed point on steady rows (cov_fixed_step) */
     long k = n - 1;
     if (last) { /* the run's last sample is the filter's */
         const double *row = store + ACN_LROW * k;
@@ -1364,7 +1394,8 @@ void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const doub
         const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
         const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
         bwd_ae_mean(phi, b, sr + 4, row, &as, &es);
-        bwd_ae_cov(sr + 4, sr + 11, sn + 8, &saa, &sae, &see);
+        if (!fixed || g < nt - 1)
+            fixed = cov_fixed_step(sr, sn, g >= nt - 1, &saa, &sae, &see);
         row[0] = as, row[1] = es;
     }
     carry[0] = as, carry[1] = es, carry[2] = saa, carry[3] = sae, carry[4] = see;
@@ -1395,8 +1426,11 @@ void acn_chunk_cov_lean(const acn_axis *m, long k0, long n, int last, const doub
         long g = k0 + k;
         const double *sr = srows + ACN_SROW * (g < nt ? g : nt - 1);
         const double *sn = srows + ACN_SROW * (g + 1 < nt ? g + 1 : nt - 1);
-        bwd_ae_cov(sr + 4, sr + 11, sn + 8, &saa, &sae, &see);
+        int fixed = cov_fixed_step(sr, sn, g >= nt - 1, &saa, &sae, &see);
         cov[3 * k] = saa, cov[3 * k + 1] = sae, cov[3 * k + 2] = see;
+        /* at the fixed point, every sample down to row nt - 1 gets these same doubles */
+        for (long stop = nt - 1 - k0; fixed && k - 1 >= stop && k - 1 >= 0; k--)
+            cov[3 * (k - 1)] = saa, cov[3 * (k - 1) + 1] = sae, cov[3 * (k - 1) + 2] = see;
     }
 }
 
@@ -1472,7 +1506,8 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
  * rows 0 .. n, row n the next sample's).
  */
 void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *cov,
-                       const double *srows, long nt, double *carry, double *xs, double *sds)
+                       const double *srows, long nt, double *carry, double *xs, double *sds,
+                       float *x32, float *sd32)
 {
     /* the carry and the model in locals: the stores to xs, sds cannot alias them, so the recursion
      * stays in registers (20 ns a sample, 23-24 through memory, measured); the same operations */
@@ -1480,6 +1515,19 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
     double v[11], aa_root = 0.0, ee_root = 0.0;
     unsigned long long aa_bits = ~0ULL, ee_bits = ~0ULL;
     memcpy(v, carry, sizeof v);
+    if (x32 !=
+        NULL) { /* the compact output: r, u and their sds rounded to float as numpy casts them */
+        for (long k = 0; k < n; k++) {
+            const double *row = store + ACN_LROW * k, *nx = row + ACN_LROW;
+            const double *pc = cov + 3 * k, *pn = pc + 3;
+            const double *sr = srows + ACN_SROW * (k0 + k < nt ? k0 + k : nt - 1);
+            x32[2 * k] = (float)v[0], x32[2 * k + 1] = (float)v[1];
+            sd32[2 * k] = (float)sqrt(v[2]), sd32[2 * k + 1] = (float)sqrt(v[5]);
+            ru_step(&mm, v, row[0], pc[0], nx[0], pn[0], pn[1], sr + 4);
+        }
+        memcpy(carry, v, sizeof v);
+        return;
+    }
     for (long k = 0; k < n; k++) {
         const double *row = store + ACN_LROW * k, *nx = row + ACN_LROW;
         const double *pc = cov + 3 * k, *pn = pc + 3;

@@ -87,10 +87,12 @@ int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
                   const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
                   double *Pf0, double *Pfn);
 
-/* sdf NULL: the filter's states unwanted, the steady covariance jumped over (fastsmooth.c) */
+/* sdf NULL: the filter's states unwanted, the steady covariance jumped over (fastsmooth.c);
+ * x32 != NULL: r, u and their sds as float (2 a sample each, x32, sd32), xf and sdf two rows: the
+ * chunk's first and last sample's */
 int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const double *z,
                          const double *srows, long nt, double *carry, double *store, double *xf,
-                         double *sdf, double *Pf0, double *Pfn);
+                         double *sdf, double *Pf0, double *Pfn, float *x32, float *sd32);
 void acn_chunk_bwd(const acn_axis *m, long n, int last, double *store, double *carry);
 
 /* all-valid samples from the steady rows: a lean store of ACN_LROW doubles per sample (a, eps);
@@ -101,8 +103,10 @@ void acn_chunk_bwd_lean(const acn_axis *m, long k0, long n, int last, const doub
 void acn_chunk_cov_lean(const acn_axis *m, long k0, long n, int last, const double *srows, long nt,
                         const double *after, double *cov);
 
+/* x32 != NULL: r, u and their sds only, as float (2 a sample each, x32, sd32); xs, sds unused */
 void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, const double *cov,
-                       const double *srows, long nt, double *carry, double *xs, double *sds);
+                       const double *srows, long nt, double *carry, double *xs, double *sds,
+                       float *x32, float *sd32);
 
 void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                     const unsigned char *valid, long n_extra, const long *ek, const double *eh,
