@@ -454,12 +454,13 @@ class _Run:
             self.last.setdefault(key, np.zeros((len(self.axes), 4)))[j] = data[-1]
 
 
-def _anonymous(nbytes: int) -> np.ndarray:
-    """``nbytes`` of fresh memory for a store, in private 4 KiB pages taken as rows are written (an untouched page
-    costs nothing). Neither a shared mapping (mmap's default, shmem: where shmem_enabled is "never", the usual
-    setting, it never gets huge pages and its faults cost more) nor np.empty (numpy asks huge pages for it,
-    and where the kernel compacts memory to give them the faults stall): 320 MB, the store of 1e7 samples x 2
-    axes, took 0.21-0.26 s of CPU private, 0.32-0.38 s shared, 0.05-0.9 s in huge pages (measured)."""
+def fresh_pages(nbytes: int) -> np.ndarray:
+    """``nbytes`` of fresh memory for a store (or another large array filled once), in private 4 KiB pages taken
+    as rows are written (an untouched page costs nothing). Neither a shared mapping (mmap's default, shmem:
+    where shmem_enabled is "never", the usual setting, it never gets huge pages and its faults cost more) nor
+    np.empty (numpy asks huge pages for it, and where the kernel compacts memory to give them the faults stall):
+    320 MB, the store of 1e7 samples x 2 axes, took 0.21-0.26 s of CPU private, 0.32-0.38 s shared, 0.05-0.9 s
+    in huge pages (measured)."""
     import mmap
 
     if nbytes < 1 << 21:
@@ -475,7 +476,7 @@ class _Store:
     folder. Memory is taken page by page as rows are written (an untouched page costs nothing)."""
 
     def __init__(self, path: Path, nbytes: int, in_memory: bool) -> None:
-        self.mem = _anonymous(nbytes) if in_memory else None
+        self.mem = fresh_pages(nbytes) if in_memory else None
         self.fd = -1 if in_memory else os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
 
     def read(self, buf: np.ndarray, pos: int) -> None:

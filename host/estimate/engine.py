@@ -457,6 +457,9 @@ class _AxisAids(chunked.ChunkAids):
         a, b = int(np.searchsorted(fx.k, s)), int(np.searchsorted(fx.k, e))
         zs = Aids.of([]) if self.spans is None else Aids.zero_velocity(*self.spans.updates(self.j, s, e, self.model,
                                                                                          self.params))  # fmt: skip
+        if a == b and not np.any(zs.k[1:] < zs.k[:-1]):  # rests alone, in order: the sort below would change nothing
+            return chunked.Piece(fastsmooth.Extras(zs.k, zs.h, zs.z, zs.R, np.arange(len(zs.k))), np.zeros(len(zs.k)),
+                                 np.ones(len(zs.k), dtype=bool))  # fmt: skip
         k = np.concatenate((fx.k[a:b], zs.k))
         order = np.argsort(k, kind="stable")
         h, z, R = (np.concatenate((f[a:b], r))[order] for f, r in ((fx.h, zs.h), (fx.z, zs.z), (fx.R, zs.R)))
