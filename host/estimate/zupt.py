@@ -192,18 +192,41 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
     buf = mod.ffi.from_buffer
     a_p, c_p = buf("double[]", accel), buf("unsigned char[]", clipped.view(np.uint8))
     x_p, ok_p = buf("double[]", x), buf("unsigned char[]", ok.view(np.uint8))
-    powers: dict[float, np.ndarray] = {}  # phi^k per bias time constant: the axes of a model mostly share one
+    powers: dict[tuple, np.ndarray] = {}  # phi^k per bias time constant: the axes of a model mostly share one
     for j in range(n_axes):
         d = axis_design(model, j)
-        if d.phi not in powers:
-            powers[d.phi] = np.ascontiguousarray(d.phi ** np.arange(n), dtype=np.float64)
+        c1, eps_mean = float(d.axis.c1), float(d.eps_mean)
+        key = (d.phi, _bias_settled(d.phi, c1, eps_mean, n))
+        if key not in powers:
+            powers[key] = _bias_powers(d.phi, *key[1:], n)
         # kf.bias_model's eps[k] = eps_mean - c1 phi^k, taken from the ok samples
-        if mod.lib.acn_rest_prepare(
-            n, n_axes, j, a_p, c_p, buf("double[]", powers[d.phi]), float(d.eps_mean), float(d.axis.c1), x_p, ok_p
-        ):
+        if mod.lib.acn_rest_prepare(n, n_axes, j, a_p, c_p, buf("double[]", powers[key]), eps_mean, c1, x_p, ok_p):
             raise ValueError(f"rest detector: {n} x {n_axes} samples; accepted: 1+ axes")
         R[j] = d.R
     return x, ok, R
+
+
+def _bias_settled(phi: float, c1: float, eps_mean: float, n: int) -> int:
+    """The first sample k (at most n) from which c1 phi^k is below an eighth of eps_mean's spacing: eps_mean - c1 phi^k
+    is then eps_mean itself, the same double as with c1 phi^k = 0 (a bias settled to the last bit; at 100 Hz with a
+    300 s time constant, after 1.1e6 samples)."""
+    if not (0.0 < phi < 1.0) or c1 == 0.0 or not math.isfinite(c1):
+        return n if c1 != 0.0 else 0
+    tiny = float(np.spacing(abs(eps_mean))) / 8.0 / abs(c1)
+    if not tiny > 0.0:
+        return n
+    k = max(0, math.ceil(math.log(tiny) / math.log(phi)))
+    while k < n and float(phi ** np.arange(k, k + 1, dtype=np.int64)[0]) > tiny:  # numpy's power, not the log's
+        k += 1
+    return min(n, k)
+
+
+def _bias_powers(phi: float, settled: int, n: int) -> np.ndarray:
+    """phi^k for k < n as numpy computes them (phi ** np.arange), 0 from ``settled`` on (:func:`_bias_settled`:
+    there they change nothing; numpy's powers of 1e7 samples took 0.5 s an axis, measured)."""
+    out = np.zeros(n)
+    out[:settled] = phi ** np.arange(settled)
+    return out
 
 
 GRAVITY_TOL = 0.25  # g: an axis whose median reads within this of +-1 g is taken as carrying gravity
