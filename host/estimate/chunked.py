@@ -708,7 +708,7 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         # the filter alone keeps no store: its rows go to the scratch buffer and are dropped
         buf = store.rows(run.store, width, s, m, fill=False) if run.smooth else run.rows(width, m)
         if ax.general:
-            _forward_general(run, ax, s, e, zc, ok, buf)
+            _forward_general(run, ax, s, e, zc, ok, buf, write_filt)
         else:
             _forward_plain(run, ax, s, e, zc, ok, buf, write_filt)
             if lean:
@@ -718,15 +718,17 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         if write_filt:
             run.put("filt_x", ax.j, s, run.xa[:m])
             run.put("filt_sd", ax.j, s, run.sa[:m])
-        if s == 0:
+        if s == 0 and not ax.general:  # the plain path's r, u pass starts from them (the general path may not make them)
             ax.xf0 = run.xa[0].copy()
-        if e == run.n:
+        if e == run.n and not ax.general:
             ax.xfn = run.xa[m - 1].copy()
     if run.marks:
         run.out.write(run.marks, s * n_axes, run.marked[:m])
 
 
-def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:
+def _forward_general(
+    run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray, write_filt: bool = True
+) -> None:
     p, m = run.ptr, e - s
     piece = ax.aids.between(s, e) if ax.aids is not None else None
     ne = 0 if piece is None else len(piece.ex)
@@ -741,6 +743,8 @@ def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: n
             p(ax.carry_f), p(buf), p(run.xa), p(run.sa))  # fmt: skip
     if ax.width == GLROW:
         p0 = ax.carry_f[4:].copy()
+        if not write_filt:  # the filter's states unwanted: not made
+            args = (*args[:-2], run.ffi.NULL, run.ffi.NULL)
         run.lib.acn_chunkg_fwd_lean(*args)
         if run.smooth:  # what acn_chunkg_cov needs to make the chunk's covariances again
             ax.p_start[s] = (p0, None if ok.all() else np.packbits(ok), np.packbits(applied[:ne]), ne)

@@ -74,6 +74,7 @@ The thresholds have command-line overrides (``accelnav smooth --zupt-*``); ``pas
 
 from __future__ import annotations
 
+import gc
 import math
 from dataclasses import dataclass
 
@@ -427,16 +428,26 @@ def decide_rests(
     params: ZuptParams = ZuptParams(),
     fixes: list[list[Measurement]] | None = None,
 ) -> Rests:
-    """Candidates (``rest``, or :func:`candidates` when None) and the decision on each (accelnav.estimate.rests)."""
-    p = resolved(model, params)
-    x, ok, R = _prepared(accel, clipped, model)  # once: the detector and the decision read the same
-    if rest is None:
-        rest = _detect(x, ok, R, model, p)
-    t = np.arange(len(x)) * model.Ts
-    # the model's own prior on the start speed: a model that says the run may start moving is not overruled
-    start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
-    decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
-    return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)))
+    """Candidates (``rest``, or :func:`candidates` when None) and the decision on each (accelnav.estimate.rests).
+
+    Python's cycle collector is held off meanwhile: the pieces, events, sides and verdicts of a long record are
+    hundreds of thousands of small objects, none in a cycle that must go before the end, and each full collection
+    walked all of them (0.5-1 s CPU of 8-9 at 1e7 samples, measured)."""
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        p = resolved(model, params)
+        x, ok, R = _prepared(accel, clipped, model)  # once: the detector and the decision read the same
+        if rest is None:
+            rest = _detect(x, ok, R, model, p)
+        t = np.arange(len(x)) * model.Ts
+        # the model's own prior on the start speed: a model that says the run may start moving is not overruled
+        start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
+        decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
+        return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)))
+    finally:
+        if collecting:
+            gc.enable()
 
 
 def reason_counts(decisions: list[RestDecision]) -> dict[str, int]:

@@ -1529,10 +1529,12 @@ static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double 
         }
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, p, ei, n_extra, ek, eh, ez,
                             eR, egate, applied, NULL, NULL);
-        for (int i = 0; i < 4; i++)
-            row[i] = xf[4 * k + i] = x[i];
-        sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
-        sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
+        memcpy(row, x, sizeof x);
+        if (xf != NULL) {
+            memcpy(xf + 4 * k, x, sizeof x);
+            sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
+            sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
+        }
         if (width == ACN_GROW)
             memcpy(row + 4, p, sizeof p);
         if (last && k == n - 1)
@@ -1557,8 +1559,8 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
  * acn_chunkg_fwd with a lean store: rows of ACN_GLROW doubles, the posterior
  * mean alone. Its covariance needs no data: acn_chunkg_cov makes it again for
  * the backward pass from the chunk's first prior covariance (the 10 doubles a
- * sample written to disk and read back were most of `smooth --zupt auto`'s time
- * at 1e7 samples).
+ * sample written to disk and read back were a third of `smooth --zupt auto`'s
+ * time at 1e7 samples). xf, sdf NULL: the filter's states are not wanted.
  */
 void acn_chunkg_fwd_lean(const acn_axis *m, long n, int last, const double *z,
                          const unsigned char *valid, long n_extra, const long *ek, const double *eh,
