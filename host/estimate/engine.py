@@ -191,8 +191,10 @@ class RestOutcome:
         """[start_s, end_s, accepted] per candidate (kept in the run file for the plots); a rest the review
         dropped is not accepted."""
         m = self.mask if self.mask.ndim == 1 else self.mask.any(axis=1)
-        rows = [[t[d.start], t[d.stop - 1], float(d.accepted and m[d.start : d.stop].any())] for d in self.decisions]
-        return np.array(rows, dtype=np.float64).reshape(-1, 3)
+        ends = np.array([(d.start, d.stop, d.accepted) for d in self.decisions], dtype=np.int64).reshape(-1, 3)
+        held = np.concatenate(([0], np.cumsum(m, dtype=np.int64)))  # rest samples before each: any in a span, at once
+        kept = (ends[:, 2] != 0) & (held[ends[:, 1]] > held[ends[:, 0]])
+        return np.column_stack((t[ends[:, 0]], t[ends[:, 1] - 1], kept.astype(np.float64))).reshape(-1, 3)
 
 
 @dataclass
