@@ -152,11 +152,9 @@ class _Kinematic:
         # V[k] = Ts sum_{i<k} x[i]; A[k] = Ts sum_{i<k} |x[i]|: how much moved; W[k] = Ts sum_{i<k} V[i]; in one
         # pass over the record (acn_kin_sums), numpy's cumsums' order; in private pages, not np.empty's (its huge
         # pages' faults took 1-1.6 s of system time for the three of a 1e7-sample record, these 0.4 s, measured)
-        from accelnav.estimate.chunked import fresh_pages
+        from accelnav.estimate.chunked import fresh_array
 
-        self.V, self.A, self.W = (
-            fresh_pages(8 * (n + 1) * self.n_axes).view(np.float64).reshape(n + 1, self.n_axes) for _ in range(3)
-        )
+        self.V, self.A, self.W = (fresh_array((n + 1, self.n_axes)) for _ in range(3))
         buf = self.ffi.from_buffer
         self.lib.acn_kin_sums(n, self.n_axes, buf("double[]", np.ascontiguousarray(x, dtype=np.float64)), reverse, Ts,
                               *(buf("double[]", a) for a in (self.V, self.A, self.W)))  # fmt: skip

@@ -150,6 +150,7 @@ def _windows(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k
     differences, temporaries), the largest share of the detector's time. The C differences numpy's cumsums in
     numpy's order, so every figure is the same double (tests/estimate/test_zupt_windows.py holds it to the numpy
     it replaced, kept in tests/support/zupt_oracle.py)."""
+    from accelnav.estimate.chunked import fresh_array
     from accelnav.estimate.fastsmooth import _lib
 
     n, n_axes = x.shape
@@ -158,8 +159,8 @@ def _windows(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k
     xc = np.ascontiguousarray(x, dtype=np.float64)
     usable = np.ascontiguousarray(usable, dtype=bool).view(np.uint8)
     allow = np.ascontiguousarray(allow, dtype=np.float64)
-    means, wvar, quiet = np.empty((n, n_axes)), np.empty(n), np.empty(n)
-    centre = np.empty(n, dtype=np.uint8)
+    means, wvar, quiet = fresh_array((n, n_axes)), fresh_array((n,)), fresh_array((n,))
+    centre = fresh_array((n,), np.uint8)
     if len(allow) != n_axes or len(usable) != n:
         raise ValueError(f"rest detector: {len(allow)} noise figures and {len(usable)} rows for {n} x {n_axes} samples")
     d, u = (lambda a: ffi.from_buffer("double[]", a)), (lambda a: ffi.from_buffer("unsigned char[]", a))
@@ -179,6 +180,7 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
     Compiled past the bias' powers (acn_rest_prepare: the mask, the bias and the difference in one pass per axis,
     numpy's operations in numpy's order, kf.bias_model's formula); the powers stay numpy's own, so x is the same
     double (tests/estimate/test_zupt_windows.py)."""
+    from accelnav.estimate.chunked import fresh_array
     from accelnav.estimate.fastsmooth import _lib
 
     accel = np.ascontiguousarray(accel, dtype=np.float64)
@@ -186,8 +188,8 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
     n, n_axes = accel.shape
     if clipped.shape != accel.shape:
         raise ValueError(f"rest detector: clipped is {clipped.shape}; accel is {accel.shape}")
-    x = np.empty((n, n_axes))
-    ok = np.empty((n, n_axes), dtype=bool)
+    x = fresh_array((n, n_axes))
+    ok = fresh_array((n, n_axes), bool)
     R = np.empty(n_axes)
     mod = _lib()
     buf = mod.ffi.from_buffer
