@@ -680,7 +680,7 @@ class _Decider:
             if p.gate == 0:
                 return found, acc
             # each accepted rest against the other side, and against the positions both sides give it
-            score = {i: max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i])) for i in acc}
+            score = self._scores(found, acc, after)
             bad = sorted(i for i in acc if score[i] > p.gate)
             shorts = self._short_before_stands(found, acc)
             if not bad and not shorts:
@@ -735,6 +735,22 @@ class _Decider:
                                                         f"withdrawn: {self.veto[worst]}")  # fmt: skip
                 group = [i] if i is not None else []
         return found, acc
+
+    def _scores(self, found: list, acc: set[int], after) -> dict[int, float]:
+        """Each accepted rest's score: the larger of its side after it and the distance of the positions both sides
+        give it (:meth:`_gap`, 0 unless both sides know the position through fixes). From the kernels' rows where
+        they hold it (the sides made only for a rest with a fix on both sides), else from the sides."""
+        if not isinstance(after, _Sides) or not all(isinstance(found[i], _Verdict) for i in acc):
+            return {i: max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i])) for i in acc}
+        chi2, fixed = after._rows[1][:, 0].tolist(), after._rows[3]
+        fix_before = found[0]._ps.fix if found else None
+        out = {}
+        for i in acc:
+            if fix_before[i] and fixed[i]:
+                out[i] = max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i]))
+            else:
+                out[i] = max(chi2[i], 0.0)  # _gap's 0
+        return out
 
     def _touch(self, i: int, j: int) -> bool:
         """Candidates i < j are pieces of one stretch: less than a window (``bridge_s``) between them."""
