@@ -409,6 +409,7 @@ class _Decider:
         self._found: list[_Verdict] = []
         self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
+        self._stands: list[int] | None = None  # the candidates that may be stands (_short_before_stands)
 
     def _fresh(self, reverse: bool) -> _Kinematic:
         """A filter at the start of one direction of time: its sums over the record made once, every pass
@@ -763,14 +764,12 @@ class _Decider:
         order = sorted(acc)
         stops = [self.cands[j].stop for j in order]
         monotone = all(a <= b for a, b in zip(stops, stops[1:], strict=False))  # the detector's spans: in order
-        for i, f in enumerate(found):
-            c = self.cands[i]
-            if (
-                f.reason != "moving"
-                or i in self.veto
-                or (c.stop - c.start) * self.Ts < p.start_s
-                or c.still > p.still_k
-            ):
+        if self._stands is None:  # the candidates long and still enough for a stand: the same every pass
+            self._stands = [i for i, c in enumerate(self.cands)
+                            if not ((c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k)]  # fmt: skip
+        for i in self._stands:
+            f, c = found[i], self.cands[i]
+            if f.reason != "moving" or i in self.veto:
                 continue
             if f.before is None or not f.before.source.startswith("the rest"):
                 continue
