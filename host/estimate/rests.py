@@ -242,13 +242,30 @@ def _evidence(f: _Verdict, after: Side | None) -> str:
     return ev
 
 
+class Clock:
+    """A record's times on its grid, ``t[k]`` = k Ts as ``np.arange(n) * Ts`` gives them (the same doubles), made for
+    the samples read: what :func:`decide` names in its words, without an array of the record's length."""
+
+    def __init__(self, n: int, Ts: float):
+        self.n, self.Ts = int(n), float(Ts)
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, k):
+        k = np.asarray(k, dtype=np.int64)
+        if np.any((k < -self.n) | (k >= self.n)):
+            raise IndexError(f"sample {k}: outside the record's {self.n}")
+        return np.where(k < 0, k + self.n, k).astype(np.float64)[()] * self.Ts  # [()]: a scalar for one sample
+
+
 class _TimesAt:
     """The record's times at a few samples (those the words name: the candidates' ends, the fixes), read as ``t[k]``
     is: what the verdicts keep of ``t`` when they make their words later (not the whole record's times)."""
 
     def __init__(self, t: np.ndarray, at: np.ndarray):
         self.k = np.unique(np.asarray(at, dtype=np.int64))
-        self.v = np.asarray(t)[self.k]
+        self.v = t[self.k] if isinstance(t, Clock) else np.asarray(t)[self.k]
 
     def __getitem__(self, k: int):
         i = int(np.searchsorted(self.k, k))
@@ -854,10 +871,10 @@ def _candidates(x, ok, R, spans) -> list[Candidate]:
     return [Candidate(a, b, lv, s) for a, b, lv, s in spans]
 
 
-def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
+def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
     """The decision on every candidate span [a, b) of ``spans`` (see the module docstring). ``x`` (N, n_axes):
-    acceleration less the model's bias mean (0 where not ``ok``); ``fixes``: per axis column a list of
-    position-fix measurements (accelnav.estimate.kf) or None."""
+    acceleration less the model's bias mean (0 where not ``ok``); ``t``: the times (N,), or a :class:`Clock`;
+    ``fixes``: per axis column a list of position-fix measurements (accelnav.estimate.kf) or None."""
     n_axes = x.shape[1]
     fixes = [[] for _ in range(n_axes)] if fixes is None else [list(f) for f in fixes]
     if len(fixes) != n_axes:

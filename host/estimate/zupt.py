@@ -81,7 +81,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from accelnav.estimate.kf import Aids, Measurement
-from accelnav.estimate.rests import ACCEPT_REASONS, REFUSE_REASONS, RestDecision, decide
+from accelnav.estimate.rests import ACCEPT_REASONS, REFUSE_REASONS, Clock, RestDecision, decide
 from accelnav.fileio import check_input, excerpt
 from accelnav.model.design import axis_design
 from accelnav.model.load import G0, Model
@@ -442,7 +442,7 @@ def decide_rests(
         x, ok, R = _prepared(accel, clipped, model)  # once: the detector and the decision read the same
         if rest is None:
             rest = _detect(x, ok, R, model, p)
-        t = np.arange(len(x)) * model.Ts
+        t = Clock(len(x), model.Ts)  # the record's times where the words name them, not an array of them
         # the model's own prior on the start speed: a model that says the run may start moving is not overruled
         start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
         decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
