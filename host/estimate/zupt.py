@@ -270,10 +270,8 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     runs = intervals(centre)
     # a body swaying more than the tremor allowance (a real stance) has a level that wanders as much: the bound
     # grows with the run's own typical window variance (not with a ramp, whose windows stay quiet)
-    pieces = [
-        (*q, k)
-        for k, (a, b) in enumerate(runs)
-        for q in _steady_pieces(
+    parts = [
+        _steady_pieces(
             means,
             a,
             b,
@@ -285,6 +283,7 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
             int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
             p.leak_rate * model.Ts,
         )
+        for a, b in runs
     ]  # in sample order: runs are, and so are the pieces of each
     # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
     # sample while a sample stays within trim_k sd of the piece's level: a heel strike or the start of a ramp
@@ -292,19 +291,21 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     # pieces at two levels stay apart by a sample at least, so each is judged on its own
     h = int(round(p.widen * (w // 2)))
     bridge = int(round(p.bridge_s * model.rate_hz))
-    starts = np.array([q[0] for q in pieces], dtype=np.int64)
-    stops = np.array([q[1] for q in pieces], dtype=np.int64)
-    refs = np.array([q[2] for q in pieces]).reshape(len(pieces), n_axes)
-    lim2 = p.trim_k**2 * np.array([q[3] for q in pieces])
+    # the pieces of every run as arrays (a tuple and a row view per piece cost more than the pieces' C at 1e7)
+    starts = np.concatenate([q[0] for q in parts]) if parts else np.zeros(0, dtype=np.int64)
+    stops = np.concatenate([q[1] for q in parts]) if parts else np.zeros(0, dtype=np.int64)
+    refs = np.concatenate([q[2] for q in parts]).reshape(-1, n_axes) if parts else np.zeros((0, n_axes))
+    lim2 = p.trim_k**2 * (np.concatenate([q[3] for q in parts]) if parts else np.zeros(0))
+    run_of = np.repeat(np.arange(len(parts)), [len(q[0]) for q in parts]).tolist()
     starts = starts - _level_steps(x, usable, refs, lim2, starts, -1, h)
     stops = stops + _level_steps(x, usable, refs, lim2, stops - 1, 1, h)
-    merged: list[list] = []
-    for (_, _, ref, _, run), a, b in zip(pieces, starts.tolist(), stops.tolist(), strict=True):
+    merged: list[list] = []  # [start, stop, its first piece (whose level it keeps), the run of its last piece]
+    for i, (run, a, b) in enumerate(zip(run_of, starts.tolist(), stops.tolist(), strict=True)):
         if (
             merged
             and run != merged[-1][3]  # a break that failed the quiet test, not a change of level
             and a - merged[-1][1] <= bridge
-            and np.sum((ref - merged[-1][2]) ** 2) <= bound2
+            and np.sum((refs[i] - refs[merged[-1][2]]) ** 2) <= bound2
             and usable[merged[-1][1] : a].all()  # a knock, not clipped or missing samples
         ):
             merged[-1][1] = b
@@ -312,7 +313,7 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
         else:
             if merged:
                 a = max(a, merged[-1][1] + 1)
-            merged.append([a, b, ref, run])
+            merged.append([a, b, i, run])
     shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
     mask = np.zeros(n, dtype=bool)
     for a, b, _, _ in merged:  # a slice per rest: tens of thousands, where a count per sample passed the record thrice
@@ -348,7 +349,7 @@ def _steady_pieces(
     tilt_rate: float,
     lean: int,
     leak_rate: float = 0.0,
-) -> list[tuple[int, int, np.ndarray, float]]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
     piece's median: the longest such stretch about the run's median is kept, the parts either side are split
     again; a part with no window near its median (a long quiet drive whose level a drifting tilt spread wide)
@@ -368,7 +369,7 @@ def _steady_pieces(
     is kept when it holds three windows at least (thirds of a window each: shorter, a ramp's start cannot be
     told from a step) and its level does not walk away from the piece it was cut from (a ramp leaving a
     rest does; a body that settled at a new level, or sways about it, does not).
-    Returns (first, last + 1, median level, own variance) per piece, in sample order.
+    Returns the pieces' (first, last + 1, median level, own variance) as four arrays, in sample order.
 
     Compiled (acn_rest_pieces in csrc/fastsmooth.c): a ramp is cut into pieces of a sample or two, tens of
     thousands per million samples, each a few array calls in Python. The C takes numpy's steps in numpy's
@@ -394,7 +395,7 @@ def _steady_pieces(
     if count < 0:
         raise MemoryError("rest detector: no memory for a run's pieces")
     order = np.argsort(start[:count], kind="stable")
-    return [(a + int(start[i]), a + int(stop[i]), ref[i], float(own[i])) for i in order]
+    return a + start[order], a + stop[order], ref[order], own[order]
 
 
 _MAX_AXES = 8  # acn_rest_pieces: sums over axes are numpy's sequential ones up to 8 terms
