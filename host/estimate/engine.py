@@ -192,8 +192,16 @@ class RestOutcome:
         dropped is not accepted."""
         m = self.mask if self.mask.ndim == 1 else self.mask.any(axis=1)
         ends = np.array([(d.start, d.stop, d.accepted) for d in self.decisions], dtype=np.int64).reshape(-1, 3)
-        held = np.concatenate(([0], np.cumsum(m, dtype=np.int64)))  # rest samples before each: any in a span, at once
-        kept = (ends[:, 2] != 0) & (held[ends[:, 1]] > held[ends[:, 0]])
+        a, b = ends[:, 0], ends[:, 1]
+        if len(ends) and np.all(b > a) and np.all(a[1:] >= b[:-1]) and a[0] >= 0 and b[-1] <= len(m):
+            # the detector's spans, in order and apart: one reduction over the mask's [start, stop) of each (the
+            # reductions between them, over [stop, next start), are dropped)
+            cut = np.column_stack((a, b)).reshape(-1)
+            any_in = np.logical_or.reduceat(m, cut[:-1] if cut[-1] == len(m) else cut)[0::2]
+        else:  # any spans: the rest samples before each sample
+            held = np.concatenate(([0], np.cumsum(m, dtype=np.int64)))
+            any_in = held[b] > held[a]
+        kept = (ends[:, 2] != 0) & any_in
         return np.column_stack((t[ends[:, 0]], t[ends[:, 1] - 1], kept.astype(np.float64))).reshape(-1, 3)
 
 

@@ -253,6 +253,11 @@ class Clock:
         return self.n
 
     def __getitem__(self, k):
+        if isinstance(k, int | np.integer):  # one sample, as the words read them: no array made
+            k = int(k)
+            if not -self.n <= k < self.n:
+                raise IndexError(f"sample {k}: outside the record's {self.n}")
+            return np.float64(k + self.n if k < 0 else k) * self.Ts
         k = np.asarray(k, dtype=np.int64)
         if np.any((k < -self.n) | (k >= self.n)):
             raise IndexError(f"sample {k}: outside the record's {self.n}")
