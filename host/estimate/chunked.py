@@ -15,7 +15,11 @@ csrc/fastsmooth.c, the split of acn_plain_cov + acn_plain_data):
 With extra measurements (fixes, zero-velocity updates: whole :class:`fastsmooth.Extras` sliced per chunk,
 or :class:`ChunkAids` made for each chunk alone, so that a run's millions of updates are never held at
 once) an axis takes the general path instead, in two passes (acn_chunkg_fwd, acn_chunkg_bwd: the
-steps of acn_general) over a store of 14 doubles per sample (``GROW``).
+steps of acn_general) over a store of the filter's posterior means, 4 doubles per sample (``GLROW``):
+their covariances need no data, and the backward pass makes each chunk's again (acn_chunkg_cov) from its
+first prior, the samples' validity and which aids the forward pass applied (at 1e7 samples with rests,
+writing the 10 more doubles per sample to disk and reading them back was a third of the run). With
+``covariances`` (written by the forward pass) the store keeps them: 14 doubles per sample (``GROW``).
 
 Between chunks only a few numbers are carried (the filter's prior, the
 smoother's state), so memory is the chunk buffers, whatever the run's length.
@@ -93,6 +97,7 @@ WHOLE_BYTES = 1250
 ROW = 12  # doubles per sample and axis in the store (csrc/fastsmooth.c, ACN_ROW)
 LROW = 2  # the same for all-valid samples of the plain path with steady rows (ACN_LROW)
 GROW = 14  # the same for the general path (ACN_GROW): the posterior (the backward pass predicts again)
+GLROW = 4  # ... without its covariance, made again per chunk (ACN_GLROW: the general path without covariances)
 # held in memory per sample and axis during a chunk: store row, z, valid, two (4,) outputs, their copies
 CHUNK_BYTES = 8 * GROW + 8 + 1 + 2 * 32 + 2 * 8
 # --covariances, per sample, shared by the axes: two packed covariances and a prior mean (_Run.pa, pb, xb) and the
@@ -125,7 +130,8 @@ class Piece:
 
 class ChunkAids:
     """An axis's aids made chunk by chunk: ``count`` over the run (0: the axis takes the plain path) and
-    :meth:`between`; the forward pass asks for each chunk once, in order."""
+    :meth:`between`; the forward pass asks for each chunk once, in order (the lean general path's backward pass
+    asks again, last chunk first: the result must be the same)."""
 
     count: int = 0
 
@@ -206,7 +212,8 @@ def disk_needed(
     the axes on the general path, whose store is wider; ``covariances``: every axis) and the output, written
     once in place, as :func:`smooth_bounded` lays it out for ``full``, ``covariances`` and ``marks``."""
     n_general = n_axes if covariances else n_general
-    return (8 * n * (ROW * (n_axes - n_general) + GROW * n_general) if store else 0) + n * output_bytes(
+    gw = GROW if covariances else GLROW
+    return (8 * n * (ROW * (n_axes - n_general) + gw * n_general) if store else 0) + n * output_bytes(
         n_axes, n_stages, full=full, covariances=covariances, marks=marks
     )
 
@@ -346,7 +353,7 @@ class _Axis:
     j: int
     d: AxisDesign
     m: object  # acn_axis
-    width: int  # doubles per store row: ROW (plain) or GROW (general)
+    width: int  # doubles per store row: ROW (plain), GROW or GLROW (general, with or without covariances)
     carry_f: np.ndarray  # (14,) forward carry: the prior of the next sample
     aids: ChunkAids | None  # general path: its extras, given chunk by chunk
     # plain path: the stored transient (fastsmooth.steady_gains), used while every sample so far was valid
@@ -371,6 +378,13 @@ class _Axis:
                 st.close()
 
     marked: int = 0  # marked aids applied so far (zero-velocity updates)
+    # the lean general path (GLROW), per chunk start: the prior covariance of its first sample, its valid samples
+    # (packed bits; None: all), the aids the forward pass applied (packed bits): acn_chunkg_cov's inputs
+    p_start: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray, int]] = field(default_factory=dict)
+
+    @property
+    def general(self) -> bool:
+        return self.width != ROW
 
 
 class _Bufs:
@@ -384,9 +398,17 @@ class _Bufs:
         self.zc, self.ok = np.empty(chunk), np.empty(chunk, dtype=bool)
         self.bad = np.empty(chunk, dtype=bool)
         self.ends = np.empty((4, 4))  # a compact forward chunk's first and last states, then their sds
+        self.extra = np.empty(0)  # the lean general path's second buffer (scratch)
 
     def rows(self, width: int, count: int) -> np.ndarray:
         return self.store[: count * width].reshape(count, width)
+
+    def scratch(self, width: int) -> np.ndarray:
+        """A second chunk buffer of ``width`` doubles per sample (the lean general path's means read from a store
+        on disk while ``store`` holds the chunk's covariances), allocated on first use."""
+        if len(self.extra) < len(self.zc) * width:
+            self.extra = np.empty(len(self.zc) * width)
+        return self.extra
 
     def compact(self, count: int) -> tuple[np.ndarray, np.ndarray]:
         """Two (count, 2) float32 arrays for a chunk's compact r, u and their sds, in ``sa``'s memory (the
@@ -505,12 +527,13 @@ class _Run:
             self.last.setdefault(key, np.zeros((len(self.axes), 4)))[j] = data[-1]
 
 
-def _anonymous(nbytes: int) -> np.ndarray:
-    """``nbytes`` of fresh memory for a store, in private 4 KiB pages taken as rows are written (an untouched page
-    costs nothing). Neither a shared mapping (mmap's default, shmem: where shmem_enabled is "never", the usual
-    setting, it never gets huge pages and its faults cost more) nor np.empty (numpy asks huge pages for it,
-    and where the kernel compacts memory to give them the faults stall): 320 MB, the store of 1e7 samples x 2
-    axes, took 0.21-0.26 s of CPU private, 0.32-0.38 s shared, 0.05-0.9 s in huge pages (measured)."""
+def fresh_pages(nbytes: int) -> np.ndarray:
+    """``nbytes`` of fresh memory for a store (or another large array filled once), in private 4 KiB pages taken
+    as rows are written (an untouched page costs nothing). Neither a shared mapping (mmap's default, shmem:
+    where shmem_enabled is "never", the usual setting, it never gets huge pages and its faults cost more) nor
+    np.empty (numpy asks huge pages for it, and where the kernel compacts memory to give them the faults stall):
+    320 MB, the store of 1e7 samples x 2 axes, took 0.21-0.26 s of CPU private, 0.32-0.38 s shared, 0.05-0.9 s
+    in huge pages (measured)."""
     import mmap
 
     if nbytes < 1 << 21:
@@ -520,13 +543,20 @@ def _anonymous(nbytes: int) -> np.ndarray:
     return np.frombuffer(m, dtype=np.uint8)
 
 
+def fresh_array(shape: tuple[int, ...], dtype=np.float64) -> np.ndarray:
+    """An uninitialised array of ``shape`` in :func:`fresh_pages` (a record-sized array filled once: the rest
+    detector's and the decision's, whose np.empty pages faulted at a third of the speed, measured)."""
+    dtype = np.dtype(dtype)
+    return fresh_pages(int(np.prod(shape, dtype=np.int64)) * dtype.itemsize).view(dtype).reshape(shape)
+
+
 class _Store:
     """One axis's store: in memory when the caller's budget holds it (the disk's write-back then never
     throttles the run: at 1e7 samples its 1.6 GB on disk cost 8 s here, measured), else a file in the work
     folder. Memory is taken page by page as rows are written (an untouched page costs nothing)."""
 
     def __init__(self, path: Path, nbytes: int, in_memory: bool) -> None:
-        self.mem = _anonymous(nbytes) if in_memory else None
+        self.mem = fresh_pages(nbytes) if in_memory else None
         self.fd = -1 if in_memory else os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
 
     def read(self, buf: np.ndarray, pos: int) -> None:
@@ -630,7 +660,8 @@ def smooth_bounded(
     workdir = Path(workdir) if workdir is not None else out.workdir
     smooth = "smooth" in stages
     # the disk is checked for the worst case: every store on disk but what fits in memory at its widest rows
-    worst_in_memory = smooth and 8 * n * (ROW * (n_axes - sum(general)) + GROW * sum(general)) <= store_memory
+    gw = GROW if covariances else GLROW
+    worst_in_memory = smooth and 8 * n * (ROW * (n_axes - sum(general)) + gw * sum(general)) <= store_memory
     _check_disk(n, n_axes, sum(general), workdir, len(stages), smooth and not worst_in_memory,
                 full=full, covariances=covariances, marks=bool(marks))  # fmt: skip
     mod = fastsmooth._lib()
@@ -652,7 +683,8 @@ def smooth_bounded(
     with ExitStack() as stack:
         tmp = stack.enter_context(TempFolder("smooth", workdir))
         writer = stack.enter_context(NpzWriter(out, {**small, **big}))
-        axes = [_axis(ffi, j, d, exs[j], general[j], n) for j, d in enumerate(designs)]
+        axes = [_axis(ffi, j, d, exs[j], general[j] and (GROW if covariances else GLROW), n)
+                for j, d in enumerate(designs)]  # fmt: skip
         for ax in axes:
             stack.callback(ax.close_stores)
         run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k, tmp=tmp, memory_left=store_memory, marks=marks,
@@ -731,11 +763,12 @@ def _check_disk(n: int, n_axes: int, n_general: int, workdir: Path, n_stages: in
         )
 
 
-def _axis(ffi, j: int, d: AxisDesign, aids: ChunkAids | None, general: bool, n: int) -> _Axis:
+def _axis(ffi, j: int, d: AxisDesign, aids: ChunkAids | None, general: int, n: int) -> _Axis:
+    """``general``: the general path's store width (GROW or GLROW); 0: the plain path."""
     cf = np.concatenate([np.asarray(d.x0, dtype=np.float64), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
     st = None if general else fastsmooth.steady_gains(d, n)
     return _Axis(
-        j, d, fastsmooth._axis_struct(ffi, d), GROW if general else ROW, cf, aids, steady=st,
+        j, d, fastsmooth._axis_struct(ffi, d), general or ROW, cf, aids, steady=st,
         steady_rows=None if st is None else st.rows,
     )  # fmt: skip
 
@@ -769,8 +802,8 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         # the filter alone keeps no store: its rows go to the scratch buffer and are dropped
         buf = store.rows(b.store, width, s, m, fill=False) if run.smooth else b.rows(width, m)
         compact = False
-        if ax.width == GROW:
-            _forward_general(run, ax, s, e, zc, ok, buf)
+        if ax.general:
+            _forward_general(run, ax, s, e, zc, ok, buf, write_filt)
         else:
             compact = _forward_plain(run, ax, s, e, zc, ok, buf, write_filt)
             if lean:
@@ -785,9 +818,9 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         elif write_filt:
             run.put("filt_x", ax.j, s, b.xa[:m])
             run.put("filt_sd", ax.j, s, b.sa[:m])
-        if s == 0:
+        if s == 0 and not ax.general:  # the plain path's r, u pass starts from them (the general may not make them)
             ax.xf0 = first.copy()
-        if e == run.n:
+        if e == run.n and not ax.general:
             ax.xfn = last.copy()
 
     run.each(axis)
@@ -797,7 +830,9 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
             run.tap(run.marks, -1, s, run.marked[:m])
 
 
-def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray) -> None:
+def _forward_general(
+    run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray, write_filt: bool = True
+) -> None:
     p, m, b = run.ptr, e - s, run.buf(ax)
     piece = ax.aids.between(s, e) if ax.aids is not None else None
     ne = 0 if piece is None else len(piece.ex)
@@ -807,12 +842,19 @@ def _forward_general(run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: n
     arrs = [piece.ex.h, piece.ex.z, piece.ex.R, piece.gates] if ne else [np.zeros(4)] * 4
     arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
     applied = np.zeros(max(ne, 1), dtype=np.uint8)
-    prior = (p(run.xb), p(run.pb)) if run.covariances else (run.ffi.NULL, run.ffi.NULL)
-    run.lib.acn_chunkg_fwd(
-        ax.m, m, int(e == run.n), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne,
-        run.ffi.from_buffer("long[]", ek), *(p(a) for a in arrs), p(applied, "unsigned char *"),
-        p(ax.carry_f), p(buf), p(b.xa), p(b.sa), *prior,
-    )  # fmt: skip
+    args = (ax.m, m, int(e == run.n), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne,
+            run.ffi.from_buffer("long[]", ek), *(p(a) for a in arrs), p(applied, "unsigned char *"),
+            p(ax.carry_f), p(buf), p(b.xa), p(b.sa))  # fmt: skip
+    if ax.width == GLROW:
+        p0 = ax.carry_f[4:].copy()
+        if not write_filt:  # the filter's states unwanted: not made
+            args = (*args[:-2], run.ffi.NULL, run.ffi.NULL)
+        run.lib.acn_chunkg_fwd_lean(*args)
+        if run.smooth:  # what acn_chunkg_cov needs to make the chunk's covariances again
+            ax.p_start[s] = (p0, None if ok.all() else np.packbits(ok), np.packbits(applied[:ne]), ne)
+    else:
+        prior = (p(run.xb), p(run.pb)) if run.covariances else (run.ffi.NULL, run.ffi.NULL)
+        run.lib.acn_chunkg_fwd(*args, *prior)
     if run.covariances and "filt_P" in run.out.members:
         run.put_cov("filt_P", ax.j, s, buf[:m, 4:])
         run.out.write("filt_x_prior", 4 * (ax.j * run.n + s), run.xb[:m])
@@ -857,10 +899,16 @@ def _forward_plain(
 def _backward(run: _Run, ax: _Axis, s: int, e: int) -> None:
     """Samples e-1..s: the general path's smoother outright, the plain path's (a, eps) into its store."""
     p, m, last, b = run.ptr, e - s, int(e == run.n), run.buf(ax)
-    if ax.width == GROW:
-        buf = ax.store.rows(b.store, GROW, s, m)
-        ps = p(run.pa) if run.covariances else run.ffi.NULL
-        rc = run.lib.acn_chunkg_bwd(ax.m, s, m, last, p(buf), p(ax.carry_b), p(b.xa), p(b.sa), ps)
+    if ax.general:
+        if ax.width == GLROW:
+            pst = b.store[: 10 * m]  # the chunk's filter covariances, made again
+            _chunk_cov(run, ax, s, e, pst)
+            buf = ax.store.rows(b.scratch(GLROW), GLROW, s, m)
+            rc = run.lib.acn_chunkg_bwd_lean(ax.m, s, m, last, p(buf), p(pst), p(ax.carry_b), p(b.xa), p(b.sa))
+        else:
+            buf = ax.store.rows(b.store, GROW, s, m)
+            ps = p(run.pa) if run.covariances else run.ffi.NULL
+            rc = run.lib.acn_chunkg_bwd(ax.m, s, m, last, p(buf), p(ax.carry_b), p(b.xa), p(b.sa), ps)
         if rc != 0:
             raise UserError(f"bounded smoother: the prior covariance is not positive definite at {-rc}")
         if run.covariances:
@@ -877,6 +925,23 @@ def _backward(run: _Run, ax: _Axis, s: int, e: int) -> None:
         buf = ax.store.rows(b.store, ROW, s, m)
         run.lib.acn_chunk_bwd(ax.m, m, last, p(buf), p(ax.carry_b))
         ax.store.done(buf, s)
+
+
+def _chunk_cov(run: _Run, ax: _Axis, s: int, e: int, pst: np.ndarray) -> None:
+    """The filter's posterior covariances of samples s..e-1 (packed, into ``pst``) made again (acn_chunkg_cov) from
+    what the forward pass kept of the chunk, its aids asked for again."""
+    p, m = run.ptr, e - s
+    p0, ok_bits, done_bits, n_done = ax.p_start.pop(s)
+    piece = ax.aids.between(s, e) if ax.aids is not None else None
+    ne = 0 if piece is None else len(piece.ex)
+    if ne != n_done or (ne and (piece.ex.k[0] < s or piece.ex.k[-1] >= e)):
+        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} differ from the forward pass's")
+    ek = np.ascontiguousarray(piece.ex.k - s, dtype=np.int64) if ne else np.zeros(1, dtype=np.int64)
+    h, R = (np.ascontiguousarray(a, dtype=np.float64) for a in ((piece.ex.h, piece.ex.R) if ne else (np.zeros(4),) * 2))
+    done = np.unpackbits(done_bits, count=ne) if ne else np.zeros(1, dtype=np.uint8)
+    valid = run.ffi.NULL if ok_bits is None else p(np.unpackbits(ok_bits, count=m), "unsigned char *")
+    run.lib.acn_chunkg_cov(ax.m, m, int(e == run.n), valid, ne, run.ffi.from_buffer("long[]", ek), p(h), p(R),
+                           p(done, "unsigned char *"), p(p0), p(pst))  # fmt: skip
 
 
 def _smooth_ru(run: _Run, ax: _Axis, starts: list[int]) -> None:

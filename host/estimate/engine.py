@@ -196,8 +196,18 @@ class RestOutcome:
         """[start_s, end_s, accepted] per candidate (kept in the run file for the plots); a rest the review
         dropped is not accepted."""
         m = self.mask if self.mask.ndim == 1 else self.mask.any(axis=1)
-        rows = [[t[d.start], t[d.stop - 1], float(d.accepted and m[d.start : d.stop].any())] for d in self.decisions]
-        return np.array(rows, dtype=np.float64).reshape(-1, 3)
+        ends = np.array([(d.start, d.stop, d.accepted) for d in self.decisions], dtype=np.int64).reshape(-1, 3)
+        a, b = ends[:, 0], ends[:, 1]
+        if len(ends) and np.all(b > a) and np.all(a[1:] >= b[:-1]) and a[0] >= 0 and b[-1] <= len(m):
+            # the detector's spans, in order and apart: one reduction over the mask's [start, stop) of each (the
+            # reductions between them, over [stop, next start), are dropped)
+            cut = np.column_stack((a, b)).reshape(-1)
+            any_in = np.logical_or.reduceat(m, cut[:-1] if cut[-1] == len(m) else cut)[0::2]
+        else:  # any spans: the rest samples before each sample
+            held = np.concatenate(([0], np.cumsum(m, dtype=np.int64)))
+            any_in = held[b] > held[a]
+        kept = (ends[:, 2] != 0) & any_in
+        return np.column_stack((t[ends[:, 0]], t[ends[:, 1] - 1], kept.astype(np.float64))).reshape(-1, 3)
 
 
 @dataclass
@@ -476,6 +486,9 @@ class _AxisAids(chunked.ChunkAids):
         a, b = int(np.searchsorted(fx.k, s)), int(np.searchsorted(fx.k, e))
         zs = Aids.of([]) if self.spans is None else Aids.zero_velocity(*self.spans.updates(self.j, s, e, self.model,
                                                                                          self.params))  # fmt: skip
+        if a == b and not np.any(zs.k[1:] < zs.k[:-1]):  # rests alone, in order: the sort below would change nothing
+            return chunked.Piece(fastsmooth.Extras(zs.k, zs.h, zs.z, zs.R, np.arange(len(zs.k))), np.zeros(len(zs.k)),
+                                 np.ones(len(zs.k), dtype=bool))  # fmt: skip
         k = np.concatenate((fx.k[a:b], zs.k))
         order = np.argsort(k, kind="stable")
         h, z, R = (np.concatenate((f[a:b], r))[order] for f, r in ((fx.h, zs.h), (fx.z, zs.z), (fx.R, zs.R)))

@@ -150,8 +150,11 @@ class _Kinematic:
         n, self.n_axes = x.shape
         self.Ts, self.q = Ts, q
         # V[k] = Ts sum_{i<k} x[i]; A[k] = Ts sum_{i<k} |x[i]|: how much moved; W[k] = Ts sum_{i<k} V[i]; in one
-        # pass over the record (acn_kin_sums), numpy's cumsums' order
-        self.V, self.A, self.W = (np.empty((n + 1, self.n_axes)) for _ in range(3))
+        # pass over the record (acn_kin_sums), numpy's cumsums' order; in private pages, not np.empty's (its huge
+        # pages' faults took 1-1.6 s of system time for the three of a 1e7-sample record, these 0.4 s, measured)
+        from accelnav.estimate.chunked import fresh_array
+
+        self.V, self.A, self.W = (fresh_array((n + 1, self.n_axes)) for _ in range(3))
         buf = self.ffi.from_buffer
         self.lib.acn_kin_sums(n, self.n_axes, buf("double[]", np.ascontiguousarray(x, dtype=np.float64)), reverse, Ts,
                               *(buf("double[]", a) for a in (self.V, self.A, self.W)))  # fmt: skip
@@ -209,6 +212,71 @@ class RestDecision:
     v_after: float  # the same from the filter after it
     sd_after: float
     chi2: float  # the larger of the two sides' mean over axes of v^2 / (sd^2 + sigma^2)
+
+
+class _Decided(RestDecision):
+    """A verdict of :func:`decide` whose evidence in words is made when first read: a long record's tens of
+    thousands of verdicts are counted, their words read for a few (the same words: :meth:`_Decider._words`)."""
+
+    @property
+    def evidence(self) -> str:
+        d = self.__dict__
+        ev = d.get("_evidence")
+        if ev is None:
+            f, after, i = d.pop("_of")
+            ev = d["_evidence"] = _evidence(f, None if after is None else after[i])
+        return ev
+
+    @evidence.setter
+    def evidence(self, words: str) -> None:  # the dataclass' own __init__ (dataclasses.replace)
+        self.__dict__["_evidence"] = words
+
+
+def _evidence(f: _Verdict, after: Side | None) -> str:
+    """A verdict's evidence in words: the forward pass's, and for a consistent one the side after it."""
+    ev = f.evidence
+    if f.reason == "consistent" and after is not None and not ev:
+        ev = f"v {_speed(after)} after it (from {after.source})"
+    elif f.reason == "consistent" and after is not None:
+        ev += f"; {_speed(after)} after it (from {after.source})"
+    return ev
+
+
+class Clock:
+    """A record's times on its grid, ``t[k]`` = k Ts as ``np.arange(n) * Ts`` gives them (the same doubles), made for
+    the samples read: what :func:`decide` names in its words, without an array of the record's length."""
+
+    def __init__(self, n: int, Ts: float):
+        self.n, self.Ts = int(n), float(Ts)
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, k):
+        if isinstance(k, int | np.integer):  # one sample, as the words read them: no array made
+            k = int(k)
+            if not -self.n <= k < self.n:
+                raise IndexError(f"sample {k}: outside the record's {self.n}")
+            return np.float64(k + self.n if k < 0 else k) * self.Ts
+        k = np.asarray(k, dtype=np.int64)
+        if np.any((k < -self.n) | (k >= self.n)):
+            raise IndexError(f"sample {k}: outside the record's {self.n}")
+        return np.where(k < 0, k + self.n, k).astype(np.float64)[()] * self.Ts  # [()]: a scalar for one sample
+
+
+class _TimesAt:
+    """The record's times at a few samples (those the words name: the candidates' ends, the fixes), read as ``t[k]``
+    is: what the verdicts keep of ``t`` when they make their words later (not the whole record's times)."""
+
+    def __init__(self, t: np.ndarray, at: np.ndarray):
+        self.k = np.unique(np.asarray(at, dtype=np.int64))
+        self.v = t[self.k] if isinstance(t, Clock) else np.asarray(t)[self.k]
+
+    def __getitem__(self, k: int):
+        i = int(np.searchsorted(self.k, k))
+        if i == len(self.k) or self.k[i] != k:
+            raise IndexError(f"sample {k}: not one whose time was kept")
+        return self.v[i]
 
 
 def chi2_equivalent(x: float, dof: int) -> float:
@@ -363,6 +431,7 @@ class _Decider:
         self._found: list[_Verdict] = []
         self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
+        self._stands: list[int] | None = None  # the candidates that may be stands (_short_before_stands)
 
     def _fresh(self, reverse: bool) -> _Kinematic:
         """A filter at the start of one direction of time: its sums over the record made once, every pass
@@ -634,7 +703,7 @@ class _Decider:
             if p.gate == 0:
                 return found, acc
             # each accepted rest against the other side, and against the positions both sides give it
-            score = {i: max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i])) for i in acc}
+            score = self._scores(found, acc, after)
             bad = sorted(i for i in acc if score[i] > p.gate)
             shorts = self._short_before_stands(found, acc)
             if not bad and not shorts:
@@ -690,6 +759,22 @@ class _Decider:
                 group = [i] if i is not None else []
         return found, acc
 
+    def _scores(self, found: list, acc: set[int], after) -> dict[int, float]:
+        """Each accepted rest's score: the larger of its side after it and the distance of the positions both sides
+        give it (:meth:`_gap`, 0 unless both sides know the position through fixes). From the kernels' rows where
+        they hold it (the sides made only for a rest with a fix on both sides), else from the sides."""
+        if not isinstance(after, _Sides) or not all(isinstance(found[i], _Verdict) for i in acc):
+            return {i: max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i])) for i in acc}
+        chi2, fixed = after._rows[1][:, 0].tolist(), after._rows[3]
+        fix_before = found[0]._ps.fix if found else None
+        out = {}
+        for i in acc:
+            if fix_before[i] and fixed[i]:
+                out[i] = max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i]))
+            else:
+                out[i] = max(chi2[i], 0.0)  # _gap's 0
+        return out
+
     def _touch(self, i: int, j: int) -> bool:
         """Candidates i < j are pieces of one stretch: less than a window (``bridge_s``) between them."""
         return (self.cands[j].start - self.cands[i].stop) * self.Ts <= max(self.p.bridge_s, 2 * self.Ts)
@@ -701,14 +786,12 @@ class _Decider:
         order = sorted(acc)
         stops = [self.cands[j].stop for j in order]
         monotone = all(a <= b for a, b in zip(stops, stops[1:], strict=False))  # the detector's spans: in order
-        for i, f in enumerate(found):
-            c = self.cands[i]
-            if (
-                f.reason != "moving"
-                or i in self.veto
-                or (c.stop - c.start) * self.Ts < p.start_s
-                or c.still > p.still_k
-            ):
+        if self._stands is None:  # the candidates long and still enough for a stand: the same every pass
+            self._stands = [i for i, c in enumerate(self.cands)
+                            if not ((c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k)]  # fmt: skip
+        for i in self._stands:
+            f, c = found[i], self.cands[i]
+            if f.reason != "moving" or i in self.veto:
                 continue
             if f.before is None or not f.before.source.startswith("the rest"):
                 continue
@@ -793,10 +876,10 @@ def _candidates(x, ok, R, spans) -> list[Candidate]:
     return [Candidate(a, b, lv, s) for a, b, lv, s in spans]
 
 
-def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
+def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
     """The decision on every candidate span [a, b) of ``spans`` (see the module docstring). ``x`` (N, n_axes):
-    acceleration less the model's bias mean (0 where not ``ok``); ``fixes``: per axis column a list of
-    position-fix measurements (accelnav.estimate.kf) or None."""
+    acceleration less the model's bias mean (0 where not ``ok``); ``t``: the times (N,), or a :class:`Clock`;
+    ``fixes``: per axis column a list of position-fix measurements (accelnav.estimate.kf) or None."""
     n_axes = x.shape[1]
     fixes = [[] for _ in range(n_axes)] if fixes is None else [list(f) for f in fixes]
     if len(fixes) != n_axes:
@@ -810,32 +893,63 @@ def decide(x, ok, R, Ts: float, t: np.ndarray, spans, fixes, p, start_sd: float 
     cands = _candidates(x, ok, R, spans)
     dec = _Decider(x, R, Ts, cands, fixes, p, t, start_sd)
     try:
-        return _verdicts(cands, *dec.run())
+        found, acc = dec.run()
+        after = dec._after
     finally:
         # the verdicts and the sides refer back to the decider (they make their words and sides from it when read):
         # without them it goes with its last reference, and its record's sums (1.4 GB on a 1e7-sample drive) with
         # it, not at the next collection of cycles, while the smoother runs
         dec._found, dec._after = [], None
+    # they refer to a copy of it that holds what the words read (the aids' names, the vetoes, the parameters), not
+    # the record, its sums or its times
+    words = object.__new__(_Decider)
+    keep = ("p", "cands", "Ts", "veto", "start_sd", "fwd_events", "bwd_events", "_sources")
+    words.__dict__.update({k: dec.__dict__[k] for k in keep}, _after=None)
+    at = [k for c in cands for k in (c.start, c.stop - 1)] + [m.k for f in fixes for m in f]
+    words.t = _TimesAt(t, np.array(at, dtype=np.int64))
+    for f in found:
+        if isinstance(f, _Verdict):
+            f._d = words
+    if isinstance(after, _Sides):
+        after._d = words
+    return _verdicts(cands, found, acc, after)
 
 
-def _verdicts(cands: list[Candidate], found: list, acc: set[int]) -> list[RestDecision]:
-    """Each candidate's record: its verdict, the evidence in words and the statistics."""
+def _verdicts(cands: list[Candidate], found: list[_Verdict], acc: set[int], after: _Sides | None) -> list[RestDecision]:
+    """Each candidate's record: its verdict, the statistics, the evidence in words made when read (:class:`_Decided`).
+    The statistics are the kernels' rows as they wrote them (the sides' (chi2, |v|, sd): the forward pass's rows, one
+    set that each pass rewrote from its resume on, and the last backward pass's), read without making the sides."""
     out = []
-    nan = float("nan")
+    m = len(found)
+    if not all(isinstance(f, _Verdict) for f in found) or not isinstance(after, _Sides | None):
+        return _verdicts_of_sides(cands, found, acc)
+    before = found[0]._ps.stat[:m].tolist() if m else []
+    behind = after._rows[1][:m].tolist() if after is not None and m else [[math.nan] * 3] * m
+    for i, (c, f, (cb, vb, sb), (ca, va, sa)) in enumerate(zip(cands, found, before, behind, strict=True)):
+        lv = c.level  # np.linalg.norm's own sum for a vector (its dot), without its checks
+        d = object.__new__(_Decided)  # the frozen dataclass' fields set at once, not one __setattr__ each
+        d.__dict__.update(
+            start=c.start, stop=c.stop, accepted=i in acc, reason=f.reason, _of=(f, after, i), still=c.still,
+            level=math.sqrt(lv.dot(lv)), v_before=vb, sd_before=sb, v_after=va, sd_after=sa,
+            chi2=cb if after is None else max(cb, ca),
+        )  # fmt: skip
+        out.append(d)
+    return out
+
+
+def _verdicts_of_sides(cands: list[Candidate], found: list, acc: set[int]) -> list[RestDecision]:
+    """:func:`_verdicts` of verdicts that hold their sides (``before``, ``after``: a filter in Python, the reference
+    of tests/support/rests_reference.py), the words made at once."""
+    out = []
     for i, (c, f) in enumerate(zip(cands, found, strict=True)):
         b, a = f.before, f.after
-        ev = f.evidence
-        if f.reason == "consistent" and a is not None and not ev:
-            ev = f"v {_speed(a)} after it (from {a.source})"
-        elif f.reason == "consistent" and a is not None:
-            ev += f"; {_speed(a)} after it (from {a.source})"
         vb, sb = _norms(b)
         va, sa = _norms(a)
-        chi2 = max(s.chi2 for s in (b, a) if s is not None) if (b or a) else nan
-        lv = c.level  # np.linalg.norm's own sum for a vector (its dot), without its checks
-        d = object.__new__(RestDecision)  # the frozen dataclass' fields set at once, not one __setattr__ each
+        chi2 = max(s.chi2 for s in (b, a) if s is not None) if (b or a) else math.nan
+        lv = c.level
+        d = object.__new__(RestDecision)
         d.__dict__.update(
-            start=c.start, stop=c.stop, accepted=i in acc, reason=f.reason, evidence=ev, still=c.still,
+            start=c.start, stop=c.stop, accepted=i in acc, reason=f.reason, evidence=_evidence(f, a), still=c.still,
             level=math.sqrt(lv.dot(lv)), v_before=vb, sd_before=sb, v_after=va, sd_after=sa, chi2=chi2,
         )  # fmt: skip
         out.append(d)

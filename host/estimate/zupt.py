@@ -74,13 +74,14 @@ The thresholds have command-line overrides (``accelnav smooth --zupt-*``); ``pas
 
 from __future__ import annotations
 
+import gc
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from accelnav.estimate.kf import Aids, Measurement
-from accelnav.estimate.rests import ACCEPT_REASONS, REFUSE_REASONS, RestDecision, decide
+from accelnav.estimate.rests import ACCEPT_REASONS, REFUSE_REASONS, Clock, RestDecision, decide
 from accelnav.fileio import check_input, excerpt
 from accelnav.model.design import axis_design
 from accelnav.model.load import G0, Model
@@ -149,6 +150,7 @@ def _windows(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k
     differences, temporaries), the largest share of the detector's time. The C differences numpy's cumsums in
     numpy's order, so every figure is the same double (tests/estimate/test_zupt_windows.py holds it to the numpy
     it replaced, kept in tests/support/zupt_oracle.py)."""
+    from accelnav.estimate.chunked import fresh_array
     from accelnav.estimate.fastsmooth import _lib
 
     n, n_axes = x.shape
@@ -157,8 +159,8 @@ def _windows(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k
     xc = np.ascontiguousarray(x, dtype=np.float64)
     usable = np.ascontiguousarray(usable, dtype=bool).view(np.uint8)
     allow = np.ascontiguousarray(allow, dtype=np.float64)
-    means, wvar, quiet = np.empty((n, n_axes)), np.empty(n), np.empty(n)
-    centre = np.empty(n, dtype=np.uint8)
+    means, wvar, quiet = fresh_array((n, n_axes)), fresh_array((n,)), fresh_array((n,))
+    centre = fresh_array((n,), np.uint8)
     if len(allow) != n_axes or len(usable) != n:
         raise ValueError(f"rest detector: {len(allow)} noise figures and {len(usable)} rows for {n} x {n_axes} samples")
     d, u = (lambda a: ffi.from_buffer("double[]", a)), (lambda a: ffi.from_buffer("unsigned char[]", a))
@@ -178,6 +180,7 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
     Compiled past the bias' powers (acn_rest_prepare: the mask, the bias and the difference in one pass per axis,
     numpy's operations in numpy's order, kf.bias_model's formula); the powers stay numpy's own, so x is the same
     double (tests/estimate/test_zupt_windows.py)."""
+    from accelnav.estimate.chunked import fresh_array
     from accelnav.estimate.fastsmooth import _lib
 
     accel = np.ascontiguousarray(accel, dtype=np.float64)
@@ -185,25 +188,48 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
     n, n_axes = accel.shape
     if clipped.shape != accel.shape:
         raise ValueError(f"rest detector: clipped is {clipped.shape}; accel is {accel.shape}")
-    x = np.empty((n, n_axes))
-    ok = np.empty((n, n_axes), dtype=bool)
+    x = fresh_array((n, n_axes))
+    ok = fresh_array((n, n_axes), bool)
     R = np.empty(n_axes)
     mod = _lib()
     buf = mod.ffi.from_buffer
     a_p, c_p = buf("double[]", accel), buf("unsigned char[]", clipped.view(np.uint8))
     x_p, ok_p = buf("double[]", x), buf("unsigned char[]", ok.view(np.uint8))
-    powers: dict[float, np.ndarray] = {}  # phi^k per bias time constant: the axes of a model mostly share one
+    powers: dict[tuple, np.ndarray] = {}  # phi^k per bias time constant: the axes of a model mostly share one
     for j in range(n_axes):
         d = axis_design(model, j)
-        if d.phi not in powers:
-            powers[d.phi] = np.ascontiguousarray(d.phi ** np.arange(n), dtype=np.float64)
+        c1, eps_mean = float(d.axis.c1), float(d.eps_mean)
+        key = (d.phi, _bias_settled(d.phi, c1, eps_mean, n))
+        if key not in powers:
+            powers[key] = _bias_powers(d.phi, *key[1:], n)
         # kf.bias_model's eps[k] = eps_mean - c1 phi^k, taken from the ok samples
-        if mod.lib.acn_rest_prepare(
-            n, n_axes, j, a_p, c_p, buf("double[]", powers[d.phi]), float(d.eps_mean), float(d.axis.c1), x_p, ok_p
-        ):
+        if mod.lib.acn_rest_prepare(n, n_axes, j, a_p, c_p, buf("double[]", powers[key]), eps_mean, c1, x_p, ok_p):
             raise ValueError(f"rest detector: {n} x {n_axes} samples; accepted: 1+ axes")
         R[j] = d.R
     return x, ok, R
+
+
+def _bias_settled(phi: float, c1: float, eps_mean: float, n: int) -> int:
+    """The first sample k (at most n) from which c1 phi^k is below an eighth of eps_mean's spacing: eps_mean - c1 phi^k
+    is then eps_mean itself, the same double as with c1 phi^k = 0 (a bias settled to the last bit; at 100 Hz with a
+    300 s time constant, after 1.1e6 samples)."""
+    if not (0.0 < phi < 1.0) or c1 == 0.0 or not math.isfinite(c1):
+        return n if c1 != 0.0 else 0
+    tiny = float(np.spacing(abs(eps_mean))) / 8.0 / abs(c1)
+    if not tiny > 0.0:
+        return n
+    k = max(0, math.ceil(math.log(tiny) / math.log(phi)))
+    while k < n and float(phi ** np.arange(k, k + 1, dtype=np.int64)[0]) > tiny:  # numpy's power, not the log's
+        k += 1
+    return min(n, k)
+
+
+def _bias_powers(phi: float, settled: int, n: int) -> np.ndarray:
+    """phi^k for k < n as numpy computes them (phi ** np.arange), 0 from ``settled`` on (:func:`_bias_settled`:
+    there they change nothing; numpy's powers of 1e7 samples took 0.5 s an axis, measured)."""
+    out = np.zeros(n)
+    out[:settled] = phi ** np.arange(settled)
+    return out
 
 
 GRAVITY_TOL = 0.25  # g: an axis whose median reads within this of +-1 g is taken as carrying gravity
@@ -244,10 +270,8 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     runs = intervals(centre)
     # a body swaying more than the tremor allowance (a real stance) has a level that wanders as much: the bound
     # grows with the run's own typical window variance (not with a ramp, whose windows stay quiet)
-    pieces = [
-        (*q, k)
-        for k, (a, b) in enumerate(runs)
-        for q in _steady_pieces(
+    parts = [
+        _steady_pieces(
             means,
             a,
             b,
@@ -259,6 +283,7 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
             int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
             p.leak_rate * model.Ts,
         )
+        for a, b in runs
     ]  # in sample order: runs are, and so are the pieces of each
     # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
     # sample while a sample stays within trim_k sd of the piece's level: a heel strike or the start of a ramp
@@ -266,19 +291,21 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     # pieces at two levels stay apart by a sample at least, so each is judged on its own
     h = int(round(p.widen * (w // 2)))
     bridge = int(round(p.bridge_s * model.rate_hz))
-    starts = np.array([q[0] for q in pieces], dtype=np.int64)
-    stops = np.array([q[1] for q in pieces], dtype=np.int64)
-    refs = np.array([q[2] for q in pieces]).reshape(len(pieces), n_axes)
-    lim2 = p.trim_k**2 * np.array([q[3] for q in pieces])
+    # the pieces of every run as arrays (a tuple and a row view per piece cost more than the pieces' C at 1e7)
+    starts = np.concatenate([q[0] for q in parts]) if parts else np.zeros(0, dtype=np.int64)
+    stops = np.concatenate([q[1] for q in parts]) if parts else np.zeros(0, dtype=np.int64)
+    refs = np.concatenate([q[2] for q in parts]).reshape(-1, n_axes) if parts else np.zeros((0, n_axes))
+    lim2 = p.trim_k**2 * (np.concatenate([q[3] for q in parts]) if parts else np.zeros(0))
+    run_of = np.repeat(np.arange(len(parts)), [len(q[0]) for q in parts]).tolist()
     starts = starts - _level_steps(x, usable, refs, lim2, starts, -1, h)
     stops = stops + _level_steps(x, usable, refs, lim2, stops - 1, 1, h)
-    merged: list[list] = []
-    for (_, _, ref, _, run), a, b in zip(pieces, starts.tolist(), stops.tolist(), strict=True):
+    merged: list[list] = []  # [start, stop, its first piece (whose level it keeps), the run of its last piece]
+    for i, (run, a, b) in enumerate(zip(run_of, starts.tolist(), stops.tolist(), strict=True)):
         if (
             merged
             and run != merged[-1][3]  # a break that failed the quiet test, not a change of level
             and a - merged[-1][1] <= bridge
-            and np.sum((ref - merged[-1][2]) ** 2) <= bound2
+            and np.sum((refs[i] - refs[merged[-1][2]]) ** 2) <= bound2
             and usable[merged[-1][1] : a].all()  # a knock, not clipped or missing samples
         ):
             merged[-1][1] = b
@@ -286,7 +313,7 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
         else:
             if merged:
                 a = max(a, merged[-1][1] + 1)
-            merged.append([a, b, ref, run])
+            merged.append([a, b, i, run])
     shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
     mask = np.zeros(n, dtype=bool)
     for a, b, _, _ in merged:  # a slice per rest: tens of thousands, where a count per sample passed the record thrice
@@ -322,7 +349,7 @@ def _steady_pieces(
     tilt_rate: float,
     lean: int,
     leak_rate: float = 0.0,
-) -> list[tuple[int, int, np.ndarray, float]]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
     piece's median: the longest such stretch about the run's median is kept, the parts either side are split
     again; a part with no window near its median (a long quiet drive whose level a drifting tilt spread wide)
@@ -342,7 +369,7 @@ def _steady_pieces(
     is kept when it holds three windows at least (thirds of a window each: shorter, a ramp's start cannot be
     told from a step) and its level does not walk away from the piece it was cut from (a ramp leaving a
     rest does; a body that settled at a new level, or sways about it, does not).
-    Returns (first, last + 1, median level, own variance) per piece, in sample order.
+    Returns the pieces' (first, last + 1, median level, own variance) as four arrays, in sample order.
 
     Compiled (acn_rest_pieces in csrc/fastsmooth.c): a ramp is cut into pieces of a sample or two, tens of
     thousands per million samples, each a few array calls in Python. The C takes numpy's steps in numpy's
@@ -368,7 +395,7 @@ def _steady_pieces(
     if count < 0:
         raise MemoryError("rest detector: no memory for a run's pieces")
     order = np.argsort(start[:count], kind="stable")
-    return [(a + int(start[i]), a + int(stop[i]), ref[i], float(own[i])) for i in order]
+    return a + start[order], a + stop[order], ref[order], own[order]
 
 
 _MAX_AXES = 8  # acn_rest_pieces: sums over axes are numpy's sequential ones up to 8 terms
@@ -404,16 +431,26 @@ def decide_rests(
     params: ZuptParams = ZuptParams(),
     fixes: list[list[Measurement]] | None = None,
 ) -> Rests:
-    """Candidates (``rest``, or :func:`candidates` when None) and the decision on each (accelnav.estimate.rests)."""
-    p = resolved(model, params)
-    x, ok, R = _prepared(accel, clipped, model)  # once: the detector and the decision read the same
-    if rest is None:
-        rest = _detect(x, ok, R, model, p)
-    t = np.arange(len(x)) * model.Ts
-    # the model's own prior on the start speed: a model that says the run may start moving is not overruled
-    start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
-    decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
-    return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)))
+    """Candidates (``rest``, or :func:`candidates` when None) and the decision on each (accelnav.estimate.rests).
+
+    Python's cycle collector is held off meanwhile: the pieces, events, sides and verdicts of a long record are
+    hundreds of thousands of small objects, none in a cycle that must go before the end, and each full collection
+    walked all of them (0.5-1 s CPU of 8-9 at 1e7 samples, measured)."""
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        p = resolved(model, params)
+        x, ok, R = _prepared(accel, clipped, model)  # once: the detector and the decision read the same
+        if rest is None:
+            rest = _detect(x, ok, R, model, p)
+        t = Clock(len(x), model.Ts)  # the record's times where the words name them, not an array of them
+        # the model's own prior on the start speed: a model that says the run may start moving is not overruled
+        start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
+        decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
+        return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)))
+    finally:
+        if collecting:
+            gc.enable()
 
 
 def reason_counts(decisions: list[RestDecision]) -> dict[str, int]:

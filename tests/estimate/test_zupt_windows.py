@@ -106,3 +106,26 @@ def test_a_window_on_the_bound_is_quiet():
     want = ref.windows(x, ok, R, w, p.tremor, var_k)[2]
     assert want[k] and np.array_equal(got, want)
     assert 0 < want.sum() < len(want) - w  # the bound splits the record: some windows above it, some on or below
+
+
+@pytest.mark.parametrize("phi, c1, eps_mean", [(0.99, 0.08, 0.13), (0.999, -0.05, 0.07), (0.95, 3.0, 0.5),
+                                               (0.99, 0.08, 0.0), (0.99, 0.0, 0.1), (1.0, 0.08, 0.1)])  # fmt: skip
+def test_the_settled_bias_powers_change_no_bit(phi, c1, eps_mean):
+    """The record's bias eps_mean - c1 phi^k with numpy's powers up to where the bias settled and zeros after
+    (zupt._bias_powers) is numpy's whole-record one bit for bit; where it cannot settle (eps_mean 0, phi 1) every
+    power is numpy's, and without c1 none is needed."""
+    n = 40_000
+    full = phi ** np.arange(n)
+    settled = zupt._bias_settled(phi, c1, eps_mean, n)
+    lean = zupt._bias_powers(phi, settled, n)
+    want, got = eps_mean - c1 * full, eps_mean - c1 * lean
+    assert np.array_equal(got.view(np.int64), want.view(np.int64))
+    np.testing.assert_array_equal(lean[:settled], full[:settled])
+    if c1 == 0.0:
+        assert settled == 0
+    elif eps_mean == 0.0 or phi == 1.0:
+        assert settled == n
+    else:
+        assert 0 < settled < n  # it did settle: the zeros were tested
+        # and a power short of it would have changed a bit: the bound is not loose by orders
+        assert eps_mean - c1 * full[settled // 2] != eps_mean

@@ -1558,28 +1558,33 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
  * xpr, ppr (NULL: not written): each sample's prior mean (n x 4) and packed
  * covariance (n x 10), for --covariances (the row holds the posterior only).
  */
-void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
-                    const unsigned char *valid, long n_extra, const long *ek, const double *eh,
-                    const double *ez, const double *eR, const double *egate, unsigned char *applied,
-                    double *carry, double *store, double *xf, double *sdf, double *xpr, double *ppr)
+static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
+                              const unsigned char *valid, long n_extra, const long *ek,
+                              const double *eh, const double *ez, const double *eR,
+                              const double *egate, unsigned char *applied, double *carry,
+                              double *store, int width, double *xf, double *sdf, double *xpr,
+                              double *ppr)
 {
     double p[10], x[4];
     long ei = 0;
     memcpy(x, carry, sizeof x);
     memcpy(p, carry + 4, sizeof p);
     for (long k = 0; k < n; k++) {
-        double *row = store + ACN_GROW * k;
+        double *row = store + width * k;
         if (xpr != NULL) {
             memcpy(xpr + 4 * k, x, sizeof x);
             memcpy(ppr + 10 * k, p, sizeof p);
         }
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, p, ei, n_extra, ek, eh, ez,
                             eR, egate, applied, NULL, NULL);
-        for (int i = 0; i < 4; i++)
-            row[i] = xf[4 * k + i] = x[i];
-        sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
-        sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
-        memcpy(row + 4, p, sizeof p);
+        memcpy(row, x, sizeof x);
+        if (xf != NULL) {
+            memcpy(xf + 4 * k, x, sizeof x);
+            sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
+            sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
+        }
+        if (width == ACN_GROW)
+            memcpy(row + 4, p, sizeof p);
         if (last && k == n - 1)
             break;
         predict_mean(m, x);
@@ -1587,6 +1592,66 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
     }
     memcpy(carry, x, sizeof x);
     memcpy(carry + 4, p, sizeof p);
+}
+
+void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
+                    const unsigned char *valid, long n_extra, const long *ek, const double *eh,
+                    const double *ez, const double *eR, const double *egate, unsigned char *applied,
+                    double *carry, double *store, double *xf, double *sdf, double *xpr, double *ppr)
+{
+    chunkg_fwd(m, n, last, z, valid, n_extra, ek, eh, ez, eR, egate, applied, carry, store,
+               ACN_GROW, xf, sdf, xpr, ppr);
+}
+
+/*
+ * acn_chunkg_fwd with a lean store: rows of ACN_GLROW doubles, the posterior
+ * mean alone. Its covariance needs no data: acn_chunkg_cov makes it again for
+ * the backward pass from the chunk's first prior covariance (the 10 doubles a
+ * sample written to disk and read back were a third of `smooth --zupt auto`'s
+ * time at 1e7 samples). xf, sdf NULL: the filter's states are not wanted.
+ */
+void acn_chunkg_fwd_lean(const acn_axis *m, long n, int last, const double *z,
+                         const unsigned char *valid, long n_extra, const long *ek, const double *eh,
+                         const double *ez, const double *eR, const double *egate,
+                         unsigned char *applied, double *carry, double *store, double *xf,
+                         double *sdf)
+{
+    chunkg_fwd(m, n, last, z, valid, n_extra, ek, eh, ez, eR, egate, applied, carry, store,
+               ACN_GLROW, xf, sdf, NULL, NULL);
+}
+
+/*
+ * The filter's posterior covariance (packed, n x 10 into pst) of a chunk's n
+ * samples, as acn_chunkg_fwd stepped it: from p0, the prior covariance of the
+ * chunk's first sample, the acceleration where valid, then the extras ek[i] ==
+ * k that the forward pass applied (applied[i]: a gated one it skipped is
+ * skipped). update_sparse's covariance reads neither the mean nor z: the same
+ * operations on the same numbers, so the same doubles.
+ */
+void acn_chunkg_cov(const acn_axis *m, long n, int last, const unsigned char *valid, long n_extra,
+                    const long *ek, const double *eh, const double *eR,
+                    const unsigned char *applied, const double *p0, double *pst)
+{
+    double p[10], x[4] = {0.0, 0.0, 0.0, 0.0}, S;
+    long ei = 0;
+    memcpy(p, p0, sizeof p);
+    for (long k = 0; k < n; k++) {
+        if (valid == NULL || valid[k])
+            update_sparse(x, p, H_ACC, NZ_ACC, 2, 0.0, m->R, &S);
+        for (; ei < n_extra && ek[ei] == k; ei++) {
+            const double *h = eh + 4 * ei;
+            int nz[4], nn = 0;
+            for (int j = 0; j < 4; j++)
+                if (h[j] != 0.0)
+                    nz[nn++] = j;
+            if (applied[ei])
+                update_aid(x, p, h, nz, nn, 0.0, eR[ei], &S);
+        }
+        memcpy(pst + 10 * k, p, sizeof p);
+        if (last && k == n - 1)
+            break;
+        predict_p(m, p);
+    }
 }
 
 /*
@@ -1597,17 +1662,17 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
  * the packed covariances (n x 10), for --covariances. k0 names samples in the
  * error: returns -(k + 1) if the prior of sample k + 1 is not positive definite.
  */
-int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
-                   double *xs, double *sds, double *ps)
+static inline int chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *xst,
+                             int xw, const double *pst, int pw, double *carry, double *xs,
+                             double *sds, double *ps)
 {
     double x1[4], P1[10];
     memcpy(x1, carry, sizeof x1);
     memcpy(P1, carry + 4, sizeof P1);
     long k = n - 1;
     if (last) {
-        const double *row = store + ACN_GROW * k;
-        memcpy(x1, row, sizeof x1);
-        memcpy(P1, row + 4, sizeof P1);
+        memcpy(x1, xst + xw * k, sizeof x1);
+        memcpy(P1, pst + pw * k, sizeof P1);
         memcpy(xs + 4 * k, x1, sizeof x1);
         sds[4 * k + 0] = sqrt(P1[RR]), sds[4 * k + 1] = sqrt(P1[UU]);
         sds[4 * k + 2] = sqrt(P1[AA]), sds[4 * k + 3] = sqrt(P1[EE]);
@@ -1616,13 +1681,13 @@ int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *s
         k--;
     }
     for (; k >= 0; k--) {
-        const double *row = store + ACN_GROW * k;
+        const double *xk = xst + xw * k, *pk = pst + pw * k;
         double xp[4], pp[10], B[4][4]; /* the prior of k + 1, predicted again from row k */
-        memcpy(xp, row, sizeof xp);
+        memcpy(xp, xk, sizeof xp);
         predict_mean(m, xp);
-        fp_rows(m, row + 4, B);
+        fp_rows(m, pk, B);
         predict_packed(m, B, pp);
-        if (rts_step(B, row, row + 4, xp, pp, x1, P1, x1, P1) != 0) {
+        if (rts_step(B, xk, pk, xp, pp, x1, P1, x1, P1) != 0) {
             long at = k0 + k + 1;
             return -(int)(at > 1000000000L ? 1000000000L : at);
         }
@@ -1635,6 +1700,22 @@ int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *s
     memcpy(carry, x1, sizeof x1);
     memcpy(carry + 4, P1, sizeof P1);
     return 0;
+}
+
+int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
+                   double *xs, double *sds, double *ps)
+{
+    return chunkg_bwd(m, k0, n, last, store, ACN_GROW, store + 4, ACN_GROW, carry, xs, sds, ps);
+}
+
+/*
+ * acn_chunkg_bwd over a lean store: the posterior means from xst (ACN_GLROW a
+ * sample), their covariances from pst (10 a sample, acn_chunkg_cov's).
+ */
+int acn_chunkg_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *xst,
+                        const double *pst, double *carry, double *xs, double *sds)
+{
+    return chunkg_bwd(m, k0, n, last, xst, ACN_GLROW, pst, 10, carry, xs, sds, NULL);
 }
 
 /* ---- the rest decision's kinematic filter (rests.py, _Kinematic; fastsmooth.h) ----------------

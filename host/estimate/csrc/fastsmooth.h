@@ -81,7 +81,7 @@ long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, d
  * (acn_chunkg_fwd, acn_chunkg_bwd): the same steps as acn_general.
  * The carried state between chunks is a small array documented at each call.
  */
-enum { ACN_ROW = 12, ACN_GROW = 14, ACN_SROW = 14, ACN_LROW = 2 };
+enum { ACN_ROW = 12, ACN_GROW = 14, ACN_SROW = 14, ACN_LROW = 2, ACN_GLROW = 4 };
 
 int acn_chunk_fwd(const acn_axis *m, long k0, long n, int last, const double *z,
                   const unsigned char *valid, double *carry, double *store, double *xf, double *sdf,
@@ -116,6 +116,21 @@ void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
 
 int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
                    double *xs, double *sds, double *ps);
+
+/* the general path with a lean store of ACN_GLROW doubles per sample (the posterior mean): its
+ * covariance made again per chunk by acn_chunkg_cov for the backward pass (fastsmooth.c) */
+void acn_chunkg_fwd_lean(const acn_axis *m, long n, int last, const double *z,
+                         const unsigned char *valid, long n_extra, const long *ek, const double *eh,
+                         const double *ez, const double *eR, const double *egate,
+                         unsigned char *applied, double *carry, double *store, double *xf,
+                         double *sdf);
+
+void acn_chunkg_cov(const acn_axis *m, long n, int last, const unsigned char *valid, long n_extra,
+                    const long *ek, const double *eh, const double *eR,
+                    const unsigned char *applied, const double *p0, double *pst);
+
+int acn_chunkg_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *xst,
+                        const double *pst, double *carry, double *xs, double *sds);
 
 void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
                   double *sds);

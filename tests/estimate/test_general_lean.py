@@ -1,0 +1,106 @@
+"""The general path's lean store (issue 32): the bounded smoother keeps the filter's posterior means alone
+(chunked.GLROW doubles per sample) and makes each chunk's covariances again for the backward pass
+(acn_chunkg_cov). The covariances need no data, so they must be the very doubles the forward pass had."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from accelnav.estimate import chunked
+from accelnav.estimate import fastsmooth as fs
+from accelnav.estimate.kf import position_fix, zero_velocity
+from accelnav.model.design import axis_design
+from accelnav.model.load import load_model
+
+
+def _chunk_inputs(n: int):
+    rng = np.random.default_rng(11)
+    z = np.cumsum(rng.normal(0, 0.05, n))
+    ok = np.ones(n, dtype=np.uint8)
+    ok[n // 3 : n // 3 + 5] = 0
+    ek = np.r_[np.arange(n // 4, n // 4 + 30, 2), n // 2, n // 2].astype(np.int64)
+    eh = np.tile([0.0, 1.0, 0.0, 0.0], (len(ek), 1))
+    eh[-2:] = [1.0, 0.0, 0.0, 0.0]  # two fixes on one sample, the second an outlier its gate rejects
+    ez = np.zeros(len(ek))
+    ez[-1] = 1e4
+    eR = np.full(len(ek), 0.01)
+    eg = np.zeros(len(ek))
+    eg[-1] = 9.0
+    return z, ok, ek, eh, ez, eR, eg
+
+
+@pytest.mark.parametrize("last", [0, 1])
+def test_the_remade_covariances_are_the_forward_pass_own(last):
+    """acn_chunkg_cov from the chunk's first prior, its valid samples and the aids applied gives acn_chunkg_fwd's
+    stored covariances bit for bit (a gated aid the filter rejected is skipped), and the lean forward pass the same
+    means and carry as the full one."""
+    d = axis_design(load_model(), 0)
+    mod = fs._lib()
+    ffi, lib = mod.ffi, mod.lib
+
+    def p(a, t="double *"):
+        return fs._ptr(ffi, a, t)
+
+    n = 400
+    z, ok, ek, eh, ez, eR, eg = _chunk_inputs(n)
+    ne = len(ek)
+    ax = fs._axis_struct(ffi, d)
+    carry0 = np.concatenate([np.asarray(d.x0, dtype=np.float64), fs.pack(np.asarray(d.P0, dtype=float))])
+    outs = {}
+    for name, width in (("full", chunked.GROW), ("lean", chunked.GLROW)):
+        carry, store = carry0.copy(), np.empty((n, width))
+        xf, sf, applied = np.empty((n, 4)), np.empty((n, 4)), np.zeros(ne, dtype=np.uint8)
+        args = (ax, n, last, p(z), p(ok, "unsigned char *"), ne, ffi.from_buffer("long[]", ek), p(eh), p(ez), p(eR),
+                p(eg), p(applied, "unsigned char *"), p(carry), p(store), p(xf), p(sf))  # fmt: skip
+        if name == "full":
+            lib.acn_chunkg_fwd(*args, ffi.NULL, ffi.NULL)
+        else:
+            lib.acn_chunkg_fwd_lean(*args)
+        outs[name] = (carry, store, xf, sf, applied)
+    (cf, full, xf, sf, applied), (cl, lean, xl, sl, applied_l) = outs["full"], outs["lean"]
+    assert applied.sum() == ne - 1 and not applied[-1]  # the outlier was rejected
+    np.testing.assert_array_equal(applied_l, applied)
+    for a, b in ((cl, cf), (lean, full[:, :4]), (xl, xf), (sl, sf)):
+        np.testing.assert_array_equal(a, b)
+    pst = np.empty((n, 10))
+    lib.acn_chunkg_cov(ax, n, last, p(ok, "unsigned char *"), ne, ffi.from_buffer("long[]", ek), p(eh), p(eR),
+                       p(applied, "unsigned char *"), p(carry0[4:].copy()), p(pst))  # fmt: skip
+    np.testing.assert_array_equal(pst, full[:, 4:])
+    # an aid marked not applied is not applied: the remade covariances then differ (the test can tell)
+    skipped = applied.copy()
+    skipped[0] = 0
+    lib.acn_chunkg_cov(ax, n, last, p(ok, "unsigned char *"), ne, ffi.from_buffer("long[]", ek), p(eh), p(eR),
+                       p(skipped, "unsigned char *"), p(carry0[4:].copy()), p(pst))  # fmt: skip
+    assert not np.array_equal(pst, full[:, 4:])
+
+
+def test_the_lean_store_smooths_to_the_full_stores_numbers(tmp_path):
+    """smooth_bounded without covariances (lean store, on disk and in memory) writes the same doubles as with them
+    (the full store, the covariances kept), over chunks that cut rests and a clipped stretch."""
+    model = load_model()
+    n, n_axes = 900, len(model.axes)
+    rng = np.random.default_rng(4)
+    t = np.arange(n) / model.rate_hz
+    accel = np.cumsum(rng.normal(0, 0.05, (n, n_axes)), axis=0)
+    clipped = np.zeros((n, n_axes), dtype=bool)
+    clipped[300:311, 0] = True
+    extras = [[position_fix(450, 1.0, 2.0)] + [zero_velocity(k, 0.05) for k in range(100, 180)] for _ in model.axes]
+    gates = [[0.0] + [9.0] * 80 for _ in model.axes]
+    read = chunked.array_reader(t, accel, clipped)
+    got = {}
+    cases = (("full", dict(covariances=True)), ("disk", {}), ("memory", dict(store_memory=1 << 30)),
+             ("smoother alone", dict(stages=("smooth",))))  # fmt: skip
+    for name, kw in cases:
+        out = tmp_path / f"{name}.npz"
+        chunked.smooth_bounded(model, n, read, out, chunk=97, extras=extras, gates=gates, full=True, **kw)
+        with np.load(out) as f:
+            got[name] = {k: f[k] for k in ("filt_x", "filt_sd", "smooth_x", "smooth_sd") if k in f.files}
+    assert set(got["smoother alone"]) == {"smooth_x", "smooth_sd"}
+    for name in ("disk", "memory", "smoother alone"):
+        for k, v in got[name].items():
+            np.testing.assert_array_equal(v, got["full"][k], err_msg=f"{name}: {k}")
+    # the lean store's disk need is the means' alone
+    assert chunked.disk_needed(n, n_axes, n_axes, full=True) - chunked.disk_needed(n, n_axes, 0, full=True) == (
+        8 * n * n_axes * (chunked.GLROW - chunked.ROW)
+    )
