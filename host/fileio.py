@@ -74,17 +74,24 @@ def _available_bytes() -> int | None:
         return None
 
 
+def env_count(name: str, unit: str) -> int | None:
+    """The whole number > 0 the environment variable ``name`` sets, None when it is unset or empty; anything
+    else is refused in one line that names it and what it takes (``unit``: what it counts)."""
+    env = os.environ.get(name)
+    if not env:
+        return None
+    try:
+        k = int(env)
+    except ValueError:
+        k = 0
+    if k < 1:
+        raise UserError(f"{name}: got {excerpt(env)}; accepted: a whole number of {unit} > 0")
+    return k
+
+
 def input_limit() -> int:
     """How many bytes of decoded data one input may bring (see the module notes)."""
-    limit = MAX_INPUT_BYTES
-    env = os.environ.get("ACCELNAV_MAX_INPUT_BYTES")
-    if env:
-        try:
-            limit = int(env)
-        except ValueError:
-            limit = 0
-        if limit < 1:
-            raise UserError(f"ACCELNAV_MAX_INPUT_BYTES: got {excerpt(env)}; accepted: a whole number of bytes > 0")
+    limit = env_count("ACCELNAV_MAX_INPUT_BYTES", "bytes") or MAX_INPUT_BYTES
     avail = _available_bytes()
     return min(limit, avail // 2) if avail else limit
 

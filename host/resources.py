@@ -76,19 +76,9 @@ def threads() -> int:
     line (UserError) when set to anything else. One by default: on a machine whose CPUs others share, two
     threads took more CPU and no less wall time than one (smooth NPZ at 1e7, 2 CPUs under a load of 3-5:
     3.8-4.9 s of CPU and 4.2-5.7 s wall on two threads, 3.2-3.8 s and 3.6-4.6 s on one, measured)."""
-    from accelnav.errors import UserError
+    from accelnav.fileio import env_count
 
-    cpus = os.cpu_count() or 1
-    env = os.environ.get(THREADS_ENV)
-    if env is None or env == "":
-        return 1
-    try:
-        k = int(env)
-    except ValueError:
-        k = 0
-    if k < 1:
-        raise UserError(f"{THREADS_ENV}: got {env[:40]!r}; accepted: a whole number of threads >= 1")
-    return min(k, cpus)
+    return min(env_count(THREADS_ENV, "threads") or 1, os.cpu_count() or 1)
 
 
 # glibc's mallopt parameters (malloc.h)
