@@ -93,7 +93,9 @@ def reuse_freed_memory() -> bool:
     mapping fresh pages for each. By default it maps every block over its threshold anew and unmaps it on
     free, so each chunk's arrays were fresh pages, zeroed by the kernel: at 1e7 samples about 1 s of the
     2 s of system time of `accelnav smooth` (bench/speed/bench_smooth_e2e.py; 28 MB more peak RSS).
-    Called once by the command (a process of its own; a library call leaves the host's allocator alone).
+    Called once by the command (a process of its own) and by the fleet's workers and
+    :func:`accelnav.data.smoothing.smooth_batch`, whose processes are given to the fleet; any other library
+    call leaves the host's allocator alone.
     One arena for every thread: the axes' and the CSV parser's threads (:func:`threads`) then reuse the same
     freed blocks, where an arena per thread mapped and trimmed its own (smooth CSV at 1e7 on two threads:
     3.7-4.8 s of system time against 1.7-2.4 with one arena, measured).

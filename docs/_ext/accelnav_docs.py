@@ -156,7 +156,8 @@ def model_keys() -> list[KeyInfo]:
         return check_name(t, key, value, kind)
 
     models = sorted(Path(models_dir()).glob("*.toml"))
-    with _swapped(load, _Table=Recorder, _check_name=recording_check_name):
+    # an empty parsed-model cache: a model this process loaded before would come back without being read
+    with _swapped(load, _Table=Recorder, _check_name=recording_check_name, _PARSED={}):
         for path in models:
             model = load.load_model(path)
             kinds_seen.add(model.sensor.kind)

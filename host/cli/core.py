@@ -277,7 +277,8 @@ def register(sub) -> None:
         action="store_true",
         help="also write the forward filter's states filt_x, filt_sd when the run streams (by default it writes "
         "the smoother's alone: the filter's doubled the file and its writing time; accelnav filter writes "
-        "them, and so do --covariances and runs that keep every sample in memory (--plots, aids, ...))",
+        "them, and so do --covariances, --plots and runs that keep every sample in memory (aids within the "
+        "budget, ...))",
     )
     p.add_argument(
         "--warm-start",

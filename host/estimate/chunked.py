@@ -682,6 +682,7 @@ def smooth_bounded(
         big[marks] = ((n, n_axes), np.bool_)
     with ExitStack() as stack:
         tmp = stack.enter_context(TempFolder("smooth", workdir))
+        lanes = threads()  # asked first: a bad ACCELNAV_THREADS is refused whatever the run's length
         writer = stack.enter_context(NpzWriter(out, {**small, **big}))
         axes = [_axis(ffi, j, d, exs[j], general[j] and (GROW if covariances else GLROW), n)
                 for j, d in enumerate(designs)]  # fmt: skip
@@ -689,7 +690,7 @@ def smooth_bounded(
             stack.callback(ax.close_stores)
         run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k, tmp=tmp, memory_left=store_memory, marks=marks,
                    covariances=covariances, tap=tap,
-                   threads=threads() if n > THREADS_FROM and tap is None else 1)  # fmt: skip
+                   threads=lanes if n > THREADS_FROM and tap is None else 1)  # fmt: skip
         stack.callback(run.close)
         for ax in axes if smooth else []:
             # a lean store (all samples valid so far) first where the design has steady rows: 5 doubles per

@@ -187,7 +187,8 @@ def test_tune_chunked_equals_one_chunk(inputs, tmp_path, option):
     _same(load_run(tmp_path / "a.npz")[0], load_run(tmp_path / "b.npz")[0], ("filt", "smooth"))
 
 
-@pytest.mark.parametrize("flag, kw", [("--plots", {"job": Job(in_memory=("--plots",), budget=SMALL)})])
+# a library caller's own need (Job.in_memory: --plots and --tune stream now, no command sets it)
+@pytest.mark.parametrize("flag, kw", [("my figure", {"job": Job(in_memory=("my figure",), budget=SMALL)})])
 def test_what_needs_every_sample_in_memory_is_refused_over_the_budget(inputs, tmp_path, flag, kw):
     with pytest.raises(UserError) as exc:
         smooth_file(inputs / "rec.npz", tmp_path / "o.npz", **kw)

@@ -77,7 +77,16 @@ def test_axes_on_threads_write_the_bytes_of_axes_in_order(tmp_path, monkeypatch,
             assert len(fs.steady_gains(axis_design(m, j)).rows) < n // 2
     kw = dict(stages=stages, full=full, chunk=chunk, store_memory=1 << 30)
     seq = _run(monkeypatch, tmp_path, m, n, 1, model, **kw)
+    pools = []
+
+    class Pool(chunked.ThreadPoolExecutor):  # the threaded run did go on threads (not axes in order twice)
+        def submit(self, *a, **k):
+            pools.append(self)
+            return super().submit(*a, **k)
+
+    monkeypatch.setattr(chunked, "ThreadPoolExecutor", Pool)
     par = _run(monkeypatch, tmp_path, m, n, 2, model, **kw)
+    assert bool(pools) == (len(m.axes) > 1)
     assert seq.keys() == par.keys()
     for key in seq:
         assert par[key] == seq[key], f"{key}: threaded output differs from axes in order"
@@ -91,10 +100,15 @@ def test_the_store_on_disk_with_threads_writes_the_same_bytes(tmp_path, monkeypa
 
 
 @pytest.mark.parametrize("value", ["0", "-2", "two", "1.5"])
-def test_a_bad_thread_count_is_refused_in_one_line(monkeypatch, value):
+def test_a_bad_thread_count_is_refused_in_one_line(monkeypatch, tmp_path, value):
     monkeypatch.setenv(resources.THREADS_ENV, value)
     with pytest.raises(UserError, match=resources.THREADS_ENV):
         resources.threads()
+    m = MODELS["two"]  # a run too short for threads refuses it too, before it writes anything
+    t, accel, clipped = _record(m, 500)
+    with pytest.raises(UserError, match=resources.THREADS_ENV):
+        chunked.smooth_bounded(m, 500, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_the_thread_count_is_bounded_by_the_cpus(monkeypatch):
