@@ -198,10 +198,11 @@ class _Pass:
         arrs = [ex.h, ex.z, ex.R, np.zeros(ne)] if ne else [np.zeros(4)] * 4
         arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
         applied = np.zeros(max(ne, 1), dtype=np.uint8)
+        # NULL for the filter's means and sds: nothing here reads them, so the kernel makes none
         self.lib.acn_chunkg_fwd(
             self.m, m, int(last), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne, ffi.from_buffer("long[]", ek),
-            *(p(a) for a in arrs), p(applied, "unsigned char *"), p(self.carry), p(self.store), p(self.xf),
-            p(self.sdf), p(self.xp), p(self.Pp),
+            *(p(a) for a in arrs), p(applied, "unsigned char *"), p(self.carry), p(self.store), ffi.NULL,
+            ffi.NULL, p(self.xp), p(self.Pp),
         )  # fmt: skip
         return self.xp[:m], self.Pp[:m]
 
