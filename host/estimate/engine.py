@@ -429,9 +429,7 @@ def _tune(model: Model, run, job: Job, rest: RestOutcome | None, label: str, out
     try:
         if isinstance(run, Source):
             n_axes = len(run.axis_names)
-            fx = [Aids.of(list(job.fixes[j]) if job.fixes is not None else []) for j in range(n_axes)]
-            spans = rest.runs(n_axes) if rest is not None else None
-            aids = [_AxisAids(model, j, fx[j], spans, rest.params if rest is not None else None) for j in range(n_axes)]
+            _, aids = _AxisAids.each(model, job.fixes, rest, n_axes)
             chunk = tune.chunk_samples(n_axes, min(chunked.BUDGET, outcome.plan.budget))
             tuned, r = tune.tune_data(model, tune.RunData(run.n, n_axes, run.read, aids, chunk), **bounds)
         else:
@@ -478,6 +476,14 @@ class _AxisAids(chunked.ChunkAids):
         self.model, self.j, self.spans, self.params = model, j, spans, params
         self.fx = fastsmooth.Extras.of(fixes)
         self.count = len(self.fx) + (0 if spans is None else spans.count(j, model, params))
+
+    @classmethod
+    def each(cls, model: Model, fixes, rest, n_axes: int) -> tuple[list[Aids], list[_AxisAids]]:
+        """Every axis's fixes and its aids made chunk by chunk, from the run's fixes (per axis, or None) and
+        rests (RestOutcome, or None): the one recipe of the chunked passes and of --tune's likelihood."""
+        fx = [Aids.of(list(fixes[j]) if fixes is not None else []) for j in range(n_axes)]
+        spans, params = (None, None) if rest is None else (rest.runs(n_axes), rest.params)
+        return fx, [cls(model, j, fx[j], spans, params) for j in range(n_axes)]
 
     def between(self, s: int, e: int) -> chunked.Piece:
         from accelnav.estimate import fastsmooth
@@ -568,10 +574,8 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
     # --plots: the figures draw the filter's states too: they are computed, and so written, beside the smoother's
     stages = ("filt", "smooth") if smooth and (job.covariances or job.envelope) else job.stages
     env = _RunEnvelope(model, n, source) if job.envelope else None
-    fx = [Aids.of(list(fixes[j]) if fixes is not None else []) for j in range(n_axes)]
-    spans = rest.runs(n_axes) if smooth and rest is not None else None
-    params = rest.params if rest is not None else None
-    extras = [_AxisAids(model, j, fx[j], spans, params) for j in range(n_axes)] if aided else None
+    fx, extras = _AxisAids.each(model, fixes, rest if smooth else None, n_axes)
+    extras = extras if aided else None
     fix_t = [np.full(len(f), np.nan) for f in fx]  # the run's t at each fix, filled as the chunks are read
     echo = source.extra_keys() if job.full else {}
     counts: dict[int, np.ndarray] = {}

@@ -121,21 +121,24 @@ def test_the_thread_count_is_bounded_by_the_cpus(monkeypatch):
     assert resources.threads() == 1  # one unless asked
 
 
-def test_the_allocator_is_tuned_only_where_it_applies(monkeypatch):
-    """glibc: the command asks it to reuse freed blocks (True); the user's own MALLOC_* settings stand."""
+def test_the_allocator_is_tuned_only_where_it_applies():
+    """glibc: the command asks it to reuse freed blocks (True); the user's own MALLOC_* settings stand. Asked in a
+    process of its own: the settings hold for the process's life, and this one runs every other test."""
     import ctypes
+    import os
+    import subprocess
     import sys
 
     try:
         glibc = hasattr(ctypes.CDLL(None), "gnu_get_libc_version")
     except OSError:
         glibc = False
-    monkeypatch.delenv("MALLOC_MMAP_THRESHOLD_", raising=False)
-    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
-    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
-    assert resources.reuse_freed_memory() is (glibc and sys.platform.startswith("linux"))
-    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "1")
-    assert resources.reuse_freed_memory() is False
+    code = "from accelnav.resources import reuse_freed_memory as k; print(k())"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    for extra, want in (({}, glibc and sys.platform.startswith("linux")), ({"MALLOC_TRIM_THRESHOLD_": "1"}, False)):
+        done = subprocess.run([sys.executable, "-c", code], env={**env, **extra}, capture_output=True, text=True,
+                              timeout=60)  # fmt: skip
+        assert done.stdout.strip() == str(want), done.stderr
 
 
 def test_an_axis_failing_on_its_thread_raises_after_the_others_are_done(tmp_path, monkeypatch):
