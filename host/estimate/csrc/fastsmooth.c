@@ -1297,6 +1297,36 @@ static void fwd_on_steady(const acn_axis *m, const double *sr, long k, long stop
 }
 
 /*
+ * The filter's means alone on the steady row sr for samples k .. stop - 1, as
+ * acn_chunk_fwd_steady's loop takes them where the filter's states are not wanted (their covariance
+ * steps are counted by the caller and jumped): the same operations in the same order, without the
+ * loop's per-sample tests (11.3 -> 5.8 ns a sample, measured). st: r, u, a, eps in and out, as
+ * fwd_on_steady.
+ */
+static void means_on_steady(const acn_axis *m, const double *sr, long k, long stop, const double *z,
+                            double st[4], double *store)
+{
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    const double k0 = sr[0], k1 = sr[1], ka = sr[2], ke = sr[3];
+    double r = st[0], u = st[1], a = st[2], ep = st[3];
+    for (; k < stop; k++) {
+        double y = z[k] - a - ep;
+        r += k0 * y;
+        u += k1 * y;
+        double zk = z[k];
+        double an = (a - ka * a) + ka * (zk - ep);
+        double e = (ep - ke * ep) + ke * (zk - a);
+        a = an;
+        double *row = store + ACN_LROW * k;
+        row[0] = a, row[1] = e;
+        r = r + f01 * u + f02 * a;
+        u = u + f12 * a;
+        ep = phi * e + b;
+    }
+    st[0] = r, st[1] = u, st[2] = a, st[3] = ep;
+}
+
+/*
  * acn_chunk_fwd for a chunk of valid samples that follows only valid ones, from
  * the rows of acn_plain_rows (nt of them, the last steady): the gains, smoother
  * gains and (a, eps) blocks are read, the r, u rows of P propagated as in
@@ -1320,10 +1350,16 @@ int acn_chunk_fwd_steady(const acn_axis *m, long k0, long n, int last, const dou
     long pending = 0; /* steady covariance steps not yet taken */
     unpack(carry + 4, P);
     for (long k = 0; k < n; k++) {
-        /* the filter's states wanted, the steady row from here to the chunk's end: its own loop */
-        if (sdf != NULL && k > 0 && k < n - 1 && k0 + k >= nt - 1) {
+        /* the steady row from here to the chunk's end: its own loop (means alone, their covariance
+         * steps counted, when the filter's states are not wanted) */
+        if (k > 0 && k < n - 1 && k0 + k >= nt - 1) {
             double st[4] = {r, u, a, ep};
-            fwd_on_steady(m, steady, k, n - 1, z, P, st, store, xf, sdf, x32, sd32);
+            if (sdf != NULL) {
+                fwd_on_steady(m, steady, k, n - 1, z, P, st, store, xf, sdf, x32, sd32);
+            } else {
+                means_on_steady(m, steady, k, n - 1, z, st, store);
+                pending += n - 1 - k;
+            }
             r = st[0], u = st[1], a = st[2], ep = st[3];
             k = n - 1;
         }
