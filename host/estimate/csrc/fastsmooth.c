@@ -1216,6 +1216,30 @@ static inline double sqrt_again(double x, unsigned long long *bits, double *root
 }
 
 /*
+ * The filter's mean update of one sample on the gains k = (K_r, K_u, K_a, K_eps): y = z - (a +
+ * eps), x = x + K y, in acn_plain_data's order. x: r, u, a, eps of the prior in; r, u, a of the
+ * posterior out. Returns the posterior's eps.
+ */
+static inline double mean_update(const double k[4], double zk, double x[4])
+{
+    double y = zk - x[2] - x[3];
+    x[0] += k[0] * y;
+    x[1] += k[1] * y;
+    double an = (x[2] - k[2] * x[2]) + k[2] * (zk - x[3]);
+    double e = (x[3] - k[3] * x[3]) + k[3] * (zk - x[2]);
+    x[2] = an;
+    return e;
+}
+
+/* x = F x + b from the posterior (r, u, a in x, eps in e); f: f01, f02, f12, phi, b_eps */
+static inline void mean_predict(const double f[5], double e, double x[4])
+{
+    x[0] = x[0] + f[0] * x[1] + f[1] * x[2];
+    x[1] = x[1] + f[2] * x[2];
+    x[3] = f[3] * e + f[4];
+}
+
+/*
  * The filter's state of one sample after another on the steady row sr, written as the loop of
  * acn_chunk_fwd_steady writes it (states: x32/sd32 compact, else xf/sdf, 4 a sample), for samples
  * k .. stop - 1 with k > 0 and stop below the chunk's last sample. Every operation is the loop's
@@ -1229,12 +1253,12 @@ static void fwd_on_steady(const acn_axis *m, const double *sr, long k, long stop
                           double P[4][4], double st[4], double *store, double *xf, double *sdf,
                           float *x32, float *sd32)
 {
-    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
+    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
+    const double fm[5] = {f01, f02, f12, phi, m->b_eps}, kg[4] = {sr[0], sr[1], sr[2], sr[3]};
     const double q0 = m->q[0], q1 = m->q[1], q2 = m->q[2], q3 = m->q[3];
     const double q4 = m->q[4], q5 = m->q[5], q6 = m->q[6];
     const double k0 = sr[0], k1 = sr[1], ka = sr[2], ke = sr[3];
-    /* steady_update's (a, eps) prior block is the row's: S and (P H')_a, (P H')_eps are constants
-     */
+    /* steady_update's (a, eps) prior is the row's: S, (P H')_a and (P H')_eps are constants */
     const double S = sr[8] + 2.0 * sr[9] + sr[10] + m->R;
     const double ph2 = sr[8] + sr[9], ph3 = sr[9] + sr[10];
     const double c00 = k0 * k0 * S, c01 = k0 * k1 * S, c02 = k0 * ka * S, c03 = k0 * ke * S;
@@ -1244,7 +1268,7 @@ static void fwd_on_steady(const acn_axis *m, const double *sr, long k, long stop
     const double paa = sr[11], pae = sr[12], sda = sqrt(sr[11]), sde = sqrt(sr[13]);
     double p00 = P[0][0], p01 = P[0][1], p02 = P[0][2], p03 = P[0][3];
     double p11 = P[1][1], p12 = P[1][2], p13 = P[1][3];
-    double r = st[0], u = st[1], a = st[2], ep = st[3];
+    double x[4] = {st[0], st[1], st[2], st[3]};
     for (; k < stop; k++) {
         /* steady_update: P_ij -= K_i (P H')_j + (P H')_i K_j - K_i K_j S */
         double ph0 = p02 + p03, ph1 = p12 + p13;
@@ -1255,26 +1279,18 @@ static void fwd_on_steady(const acn_axis *m, const double *sr, long k, long stop
         p11 -= k1 * ph1 + ph1 * k1 - c11;
         p12 -= k1p2 + ph1 * ka - c12;
         p13 -= k1p3 + ph1 * ke - c13;
-        /* y = z - (a + eps), x = x + K y, in acn_plain_data's order */
-        double y = z[k] - a - ep;
-        r += k0 * y;
-        u += k1 * y;
-        double zk = z[k];
-        double an = (a - ka * a) + ka * (zk - ep);
-        double e = (ep - ke * ep) + ke * (zk - a);
-        a = an;
+        double e = mean_update(kg, z[k], x);
         if (x32 != NULL) {
-            x32[2 * k] = (float)r, x32[2 * k + 1] = (float)u;
+            x32[2 * k] = (float)x[0], x32[2 * k + 1] = (float)x[1];
             sd32[2 * k] = (float)sqrt(p00), sd32[2 * k + 1] = (float)sqrt(p11);
         } else {
             double *o = xf + 4 * k, *sd = sdf + 4 * k;
-            o[0] = r, o[1] = u, o[2] = a, o[3] = e;
+            o[0] = x[0], o[1] = x[1], o[2] = x[2], o[3] = e;
             sd[0] = sqrt(p00), sd[1] = sqrt(p11), sd[2] = sda, sd[3] = sde;
         }
         double *row = store + ACN_LROW * k;
-        row[0] = a, row[1] = e;
-        /* predict_ru: rows 0, 1 of G = F P, then of G F' + Q (P's (a, eps) block the posterior's)
-         */
+        row[0] = x[2], row[1] = e;
+        /* predict_ru: rows 0, 1 of G = F P, then of G F' + Q (P's a, eps block the posterior's) */
         double g00 = p00 + f01 * p01 + f02 * p02, g01 = p01 + f01 * p11 + f02 * p12;
         double g02 = p02 + f01 * p12 + f02 * paa, g03 = p03 + f01 * p13 + f02 * pae;
         double g11 = p11 + f12 * p12, g12 = p12 + f12 * paa, g13 = p13 + f12 * pae;
@@ -1285,15 +1301,13 @@ static void fwd_on_steady(const acn_axis *m, const double *sr, long k, long stop
         p11 = (g11 + f12 * g12) + q4;
         p12 = g12 + q5;
         p13 = phi * g13 + q6;
-        r = r + f01 * u + f02 * a;
-        u = u + f12 * a;
-        ep = phi * e + b;
+        mean_predict(fm, e, x);
     }
     P[0][0] = p00, P[0][1] = P[1][0] = p01, P[0][2] = P[2][0] = p02, P[0][3] = P[3][0] = p03;
     P[1][1] = p11, P[1][2] = P[2][1] = p12, P[1][3] = P[3][1] = p13;
-    P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9],
-    P[3][3] = sr[10]; /* the next prior's, as the loop */
-    st[0] = r, st[1] = u, st[2] = a, st[3] = ep;
+    /* the next prior's (a, eps) block, as the loop sets it */
+    P[2][2] = sr[8], P[2][3] = P[3][2] = sr[9], P[3][3] = sr[10];
+    memcpy(st, x, sizeof x);
 }
 
 /*
@@ -1306,24 +1320,16 @@ static void fwd_on_steady(const acn_axis *m, const double *sr, long k, long stop
 static void means_on_steady(const acn_axis *m, const double *sr, long k, long stop, const double *z,
                             double st[4], double *store)
 {
-    const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi, b = m->b_eps;
-    const double k0 = sr[0], k1 = sr[1], ka = sr[2], ke = sr[3];
-    double r = st[0], u = st[1], a = st[2], ep = st[3];
+    const double fm[5] = {m->f01, m->f02, m->f12, m->phi, m->b_eps};
+    const double kg[4] = {sr[0], sr[1], sr[2], sr[3]};
+    double x[4] = {st[0], st[1], st[2], st[3]};
     for (; k < stop; k++) {
-        double y = z[k] - a - ep;
-        r += k0 * y;
-        u += k1 * y;
-        double zk = z[k];
-        double an = (a - ka * a) + ka * (zk - ep);
-        double e = (ep - ke * ep) + ke * (zk - a);
-        a = an;
+        double e = mean_update(kg, z[k], x);
         double *row = store + ACN_LROW * k;
-        row[0] = a, row[1] = e;
-        r = r + f01 * u + f02 * a;
-        u = u + f12 * a;
-        ep = phi * e + b;
+        row[0] = x[2], row[1] = e;
+        mean_predict(fm, e, x);
     }
-    st[0] = r, st[1] = u, st[2] = a, st[3] = ep;
+    memcpy(st, x, sizeof x);
 }
 
 /*
