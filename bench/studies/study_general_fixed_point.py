@@ -16,8 +16,8 @@ counts, sample by sample:
 Scenarios: the e2e bench's aids (a fix per axis every 60 s, sd 5 m; a rest of 1 s every 30 s), a rest at every
 sample (a stationary recording under ``--zupt auto``), and no aid at all (the plain path's case). The (a, eps)
 block is the control that the count finds a fixed point where there is one: it settles under rests at every
-sample, and without aids after a few 1e5 samples (the plain path's transient). Every sample's acceleration is valid: a gap only moves the
-covariance further from any fixed point.
+sample, and without aids after a few 1e5 samples (the plain path's transient). Every sample's acceleration is
+valid: a gap only moves the covariance further from any fixed point.
 Usage: python bench/run_all.py bench/studies/study_general_fixed_point.py [--n 1e6]
 """
 
@@ -98,9 +98,10 @@ def main() -> int:
             grew = f"{P[a, 0]:.3g} to {P[b, 0]:.3g} over {b - a} samples" if b > a else "(no stretch)"
             print(f"| {name} | {j} | " + " | ".join(f"{c:.4f}" for c in cells) + f" | {grew} |")
     print(
-        "\nP_rr: the position variance at the start and the end of the longest stretch without an aid. Position is not observed through the acceleration, so P_rr grows at every step between "
-        "fixes (rests hold the velocity, not the position): the packed covariance, its gain and the smoother gain "
-        "never repeat, and the reuse has nothing to reuse."
+        "\nP_rr: the position variance at the start and the end of the longest stretch without an aid. Position is "
+        "not observed through the acceleration, so P_rr grows at every step between fixes (rests hold the "
+        "velocity, not the position): the packed covariance, its gain and the smoother gain never repeat, and "
+        "the reuse has nothing to reuse."
     )
     return 0
 
