@@ -444,7 +444,7 @@ void acn_plain_data(const acn_axis *m, long n, const double *z, const unsigned c
 enum { RR, RU, RA, RE, UU, UA, UE, AA, AE, EE };
 
 /* B = F P, all 16 entries (rows 2 and 3 are P's own, the last scaled by phi). */
-static void fp_rows(const acn_axis *m, const double *p, double B[4][4])
+static inline void fp_rows(const acn_axis *m, const double *p, double B[4][4])
 {
     const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
     const double P0[4] = {p[RR], p[RU], p[RA], p[RE]}, P1[4] = {p[RU], p[UU], p[UA], p[UE]};
@@ -458,7 +458,7 @@ static void fp_rows(const acn_axis *m, const double *p, double B[4][4])
 }
 
 /* P = B F' + Q with B = F P: the upper triangle of predict_cov's second half. */
-static void predict_packed(const acn_axis *m, double B[4][4], double *p)
+static inline void predict_packed(const acn_axis *m, double B[4][4], double *p)
 {
     const double f01 = m->f01, f02 = m->f02, f12 = m->f12, phi = m->phi;
     const double *q = m->q;
@@ -475,7 +475,7 @@ static void predict_packed(const acn_axis *m, double B[4][4], double *p)
 }
 
 /* P = F P F' + Q on the packed P */
-static void predict_p(const acn_axis *m, double *p)
+static inline void predict_p(const acn_axis *m, double *p)
 {
     double B[4][4];
     fp_rows(m, p, B);
