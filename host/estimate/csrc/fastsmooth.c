@@ -754,8 +754,7 @@ static int rts_step(double B[4][4], const double *xpost, const double *pf, const
         for (int j = 0; j < 4; j++)
             T[i][j] =
                 Ct[0][i] * D[0][j] + Ct[1][i] * D[1][j] + Ct[2][i] * D[2][j] + Ct[3][i] * D[3][j];
-    /* row i of the upper triangle is contiguous in the packed layout: PK[i][j] = PK[i][i] + j - i
-     */
+    /* row i of C D C' over all four j (rows of Ct: two at a time), its upper triangle kept */
     for (int i = 0; i < 4; i++) {
         double row[4];
         for (int j = 0; j < 4; j++)
