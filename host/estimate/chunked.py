@@ -71,7 +71,6 @@ import os
 import threading
 import time
 import zipfile
-import zlib
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import ExitStack
@@ -381,7 +380,7 @@ class _Axis:
     marked: int = 0  # marked aids applied so far (zero-velocity updates)
     # the lean general path (GLROW), per chunk start: the prior covariance of its first sample, its valid samples
     # (packed bits; None: all), the aids the forward pass applied (packed bits) and their count and digest
-    # (_aids_digest: the backward pass checks that it was given the same aids again): acn_chunkg_cov's inputs
+    # (acn_aids_digest: the backward pass checks that it was given the same aids again): acn_chunkg_cov's inputs
     p_start: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray, int, int]] = field(default_factory=dict)
 
     @property
@@ -854,8 +853,8 @@ def _forward_general(
             args = (*args[:-2], run.ffi.NULL, run.ffi.NULL)
         run.lib.acn_chunkg_fwd_lean(*args)
         if run.smooth:  # what acn_chunkg_cov needs to make the chunk's covariances again
-            kept = np.packbits(applied[:ne])
-            ax.p_start[s] = (p0, None if ok.all() else np.packbits(ok), kept, ne, _aids_digest(piece, ne))
+            digest = int(run.lib.acn_aids_digest(ne, args[6], p(arrs[0]), p(arrs[2])))  # ek, h, R
+            ax.p_start[s] = (p0, None if ok.all() else np.packbits(ok), np.packbits(applied[:ne]), ne, digest)
     else:
         prior = (p(run.xb), p(run.pb)) if run.covariances else (run.ffi.NULL, run.ffi.NULL)
         run.lib.acn_chunkg_fwd(*args, *prior)
@@ -938,26 +937,15 @@ def _chunk_cov(run: _Run, ax: _Axis, s: int, e: int, pst: np.ndarray) -> None:
     p0, ok_bits, done_bits, n_done, digest = ax.p_start.pop(s)
     piece = ax.aids.between(s, e) if ax.aids is not None else None
     ne = 0 if piece is None else len(piece.ex)
-    if ne != n_done or _aids_digest(piece, ne) != digest:
-        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} differ from the forward pass's")
     ek = np.ascontiguousarray(piece.ex.k - s, dtype=np.int64) if ne else np.zeros(1, dtype=np.int64)
     h, R = (np.ascontiguousarray(a, dtype=np.float64) for a in ((piece.ex.h, piece.ex.R) if ne else (np.zeros(4),) * 2))
+    ekb = run.ffi.from_buffer("long[]", ek)
+    if ne != n_done or int(run.lib.acn_aids_digest(ne, ekb, p(h), p(R))) != digest:  # not the forward pass's aids
+        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} differ from the forward pass's")
     done = np.unpackbits(done_bits, count=ne) if ne else np.zeros(1, dtype=np.uint8)
     valid = run.ffi.NULL if ok_bits is None else p(np.unpackbits(ok_bits, count=m), "unsigned char *")
-    run.lib.acn_chunkg_cov(ax.m, m, int(e == run.n), valid, ne, run.ffi.from_buffer("long[]", ek), p(h), p(R),
+    run.lib.acn_chunkg_cov(ax.m, m, int(e == run.n), valid, ne, ekb, p(h), p(R),
                            p(done, "unsigned char *"), p(p0), p(pst))  # fmt: skip
-
-
-def _aids_digest(piece: Piece | None, ne: int) -> int:
-    """A CRC-32 of what acn_chunkg_cov reads of a chunk's aids (their samples, h and R, in order): the backward
-    pass asks for them again and must get the ones the forward pass applied, or it would make other covariances
-    than the filter's without a word. A guard against a ChunkAids that answers twice differently, not against an
-    adversary: CRC-32 reads 2.5 GB/s here (48 bytes an aid), a cryptographic hash a fifth of that."""
-    crc = 0
-    if ne:
-        for a, t in ((piece.ex.k, np.int64), (piece.ex.h, np.float64), (piece.ex.R, np.float64)):
-            crc = zlib.crc32(memoryview(np.ascontiguousarray(a, dtype=t)).cast("B"), crc)
-    return crc
 
 
 def _smooth_ru(run: _Run, ax: _Axis, starts: list[int]) -> None:
