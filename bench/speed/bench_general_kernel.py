@@ -2,11 +2,15 @@
 
 The general path (fixes, rests) as `smooth --zupt auto` drives it: half the samples in rests (a
 zero-velocity update each), a position fix every 1e4 samples, one sample in 37 invalid. Times, best of
---repeat, with buffers reused (no page faults): acn_general (filter, store, smoother, whole run) and the
-bounded path's acn_chunkg_fwd and acn_chunkg_bwd over one chunk. The baseline runs this very script with
-its own python (default /work/main/.venv) in a subprocess, interleaved; ratios hold on a loaded machine.
+--repeat, with buffers reused (no page faults): acn_general (filter, store, smoother, whole run), the
+bounded path's acn_chunkg_fwd and acn_chunkg_bwd over one chunk, and the three kernels `smooth` runs on an
+aided axis (its lean store): acn_chunkg_fwd_lean (no filter states wanted), acn_chunkg_cov (the covariances
+made again) and acn_chunkg_bwd_lean. Times are the calling thread's CPU seconds (time.thread_time: on a
+machine shared with other work, wall time counts theirs, and a process's CPU time counts idle BLAS threads). The
+baseline runs this very script with its own python (default /work/main/.venv) in a subprocess, the builds
+alternating over --rounds (the other first each round), the best of all kept.
 Usage: python bench/run_all.py speed --only bench_general_kernel, or from bench/speed:
-  python bench_general_kernel.py [--n 1e6] [--baseline /work/main] [--repeat 3]
+  python bench_general_kernel.py [--n 1e6] [--baseline /work/main] [--repeat 3] [--rounds 3]
 """
 
 from __future__ import annotations
@@ -38,7 +42,8 @@ def measure(n: int, repeat: int) -> dict[str, float]:
     rest = k[(k // 500) % 2 == 0]
     aids = [zero_velocity(int(i), 1e-3) for i in rest] + [position_fix(i, 0.0, 1.0) for i in range(100, n, 10_000)]
     ex = Extras.of(aids)
-    best = {"acn_general": np.inf, "acn_chunkg_fwd": np.inf, "acn_chunkg_bwd": np.inf}
+    names = ("acn_general", "acn_chunkg_fwd", "acn_chunkg_bwd", "acn_chunkg_fwd_lean", "acn_chunkg_cov")
+    best = dict.fromkeys((*names, "acn_chunkg_bwd_lean"), np.inf)
     out = fastsmooth.smooth_general(d, z, valid=valid, extras=ex)
     mod = fastsmooth._lib()
     ffi, lib = mod.ffi, mod.lib
@@ -51,25 +56,44 @@ def measure(n: int, repeat: int) -> dict[str, float]:
     fwd_cov = (ffi.NULL,) * (len(ffi.typeof(lib.acn_chunkg_fwd).args) - 16)
     bwd_cov = (ffi.NULL,) * (len(ffi.typeof(lib.acn_chunkg_bwd).args) - 8)
     store, xa, sa = np.empty((n, 14)), np.empty((n, 4)), np.empty((n, 4))
+    lean, pst = np.empty((n, 4)), np.empty((n, 10))
     gates, applied = np.zeros(len(ex)), np.zeros(len(ex), dtype=np.uint8)
     ek = ffi.from_buffer("long[]", ex.k)
     for _ in range(repeat):
-        t = time.perf_counter()
+        t = time.thread_time()
         fastsmooth.smooth_general(d, z, valid=valid, extras=ex, out=out)
-        best["acn_general"] = min(best["acn_general"], time.perf_counter() - t)
+        best["acn_general"] = min(best["acn_general"], time.thread_time() - t)
         carry_f = np.concatenate([np.asarray(d.x0, dtype=float), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
         carry_b = np.zeros(14)
-        t0 = time.perf_counter()
+        t0 = time.thread_time()
         lib.acn_chunkg_fwd(
             ax, n, 1, p(z), p(valid.view(np.uint8), "unsigned char *"), len(ex), ek, p(ex.h), p(ex.z), p(ex.R),
             p(gates), p(applied, "unsigned char *"), p(carry_f), p(store), p(xa), p(sa), *fwd_cov,
         )  # fmt: skip
-        t1 = time.perf_counter()
+        t1 = time.thread_time()
         if lib.acn_chunkg_bwd(ax, 0, n, 1, p(store), p(carry_b), p(xa), p(sa), *bwd_cov) != 0:
             raise SystemExit("acn_chunkg_bwd refused the run")
-        t2 = time.perf_counter()
+        t2 = time.thread_time()
         best["acn_chunkg_fwd"] = min(best["acn_chunkg_fwd"], t1 - t0)
         best["acn_chunkg_bwd"] = min(best["acn_chunkg_bwd"], t2 - t1)
+        carry_f = np.concatenate([np.asarray(d.x0, dtype=float), fastsmooth.pack(np.asarray(d.P0, dtype=float))])
+        p0 = carry_f[4:].copy()
+        t0 = time.thread_time()
+        lib.acn_chunkg_fwd_lean(
+            ax, n, 1, p(z), p(valid.view(np.uint8), "unsigned char *"), len(ex), ek, p(ex.h), p(ex.z), p(ex.R),
+            p(gates), p(applied, "unsigned char *"), p(carry_f), p(lean), ffi.NULL, ffi.NULL,
+        )  # fmt: skip
+        t1 = time.thread_time()
+        lib.acn_chunkg_cov(
+            ax, n, 1, p(valid.view(np.uint8), "unsigned char *"), len(ex), ek, p(ex.h), p(ex.R),
+            p(applied, "unsigned char *"), p(p0), p(pst),
+        )  # fmt: skip
+        t2 = time.thread_time()
+        if lib.acn_chunkg_bwd_lean(ax, 0, n, 1, p(lean), p(pst), p(np.zeros(14)), p(xa), p(sa)) != 0:
+            raise SystemExit("acn_chunkg_bwd_lean refused the run")
+        t3 = time.thread_time()
+        for key, v in zip(names[3:] + ("acn_chunkg_bwd_lean",), (t1 - t0, t2 - t1, t3 - t2), strict=True):
+            best[key] = min(best[key], v)
     return {key: v * 1e9 / n for key, v in best.items()}
 
 
@@ -78,6 +102,7 @@ def main() -> int:
     ap.add_argument("--n", type=float, default=1e6)
     ap.add_argument("--baseline", type=Path, default=Path("/work/main"), help="checkout with its own .venv")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=3, help="runs of each build, alternating")
     ap.add_argument("--inner", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     n = int(args.n)
@@ -86,14 +111,22 @@ def main() -> int:
         return 0
     builds = baseline_builds(args.baseline)
     res: dict[str, dict[str, float]] = {}
-    for build, py in builds.items():
-        cmd = [py, __file__, "--inner", "--n", str(n), "--repeat", str(args.repeat)]
-        got = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        if got.returncode:
-            print(f"{build} failed: {got.stderr.strip().splitlines()[-1:]}")
-            continue
-        res[build] = json.loads(got.stdout.strip().splitlines()[-1])
-    print(f"General smoother kernel, N = {n:.0e}, ns per sample per axis (best of {args.repeat}):\n")
+    failed: set[str] = set()
+    for r in range(args.rounds):
+        for build, py in list(builds.items())[:: 1 if r % 2 == 0 else -1]:
+            if build in failed:
+                continue
+            cmd = [py, __file__, "--inner", "--n", str(n), "--repeat", str(args.repeat)]
+            got = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            if got.returncode:
+                print(f"{build} failed: {got.stderr.strip().splitlines()[-1:]}")
+                failed.add(build)
+                res.pop(build, None)
+                continue
+            new = json.loads(got.stdout.strip().splitlines()[-1])
+            res[build] = {k: min(v, res.get(build, new)[k]) for k, v in new.items()}
+    res = {b: res[b] for b in builds if b in res}  # this, then the baseline
+    print(f"General smoother kernel, N = {n:.0e}, ns per sample per axis (best of {args.repeat} x {args.rounds}):\n")
     print("| kernel | " + " | ".join(res) + (" | baseline / this |" if len(res) == 2 else " |"))
     print("|---|" + "---|" * (len(res) + (len(res) == 2)))
     for key in next(iter(res.values()), {}):

@@ -379,8 +379,9 @@ class _Axis:
 
     marked: int = 0  # marked aids applied so far (zero-velocity updates)
     # the lean general path (GLROW), per chunk start: the prior covariance of its first sample, its valid samples
-    # (packed bits; None: all), the aids the forward pass applied (packed bits): acn_chunkg_cov's inputs
-    p_start: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray, int]] = field(default_factory=dict)
+    # (packed bits; None: all), the aids the forward pass applied (packed bits) and their count and digest
+    # (acn_aids_digest: the backward pass checks that it was given the same aids again): acn_chunkg_cov's inputs
+    p_start: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray, int, int]] = field(default_factory=dict)
 
     @property
     def general(self) -> bool:
@@ -852,7 +853,8 @@ def _forward_general(
             args = (*args[:-2], run.ffi.NULL, run.ffi.NULL)
         run.lib.acn_chunkg_fwd_lean(*args)
         if run.smooth:  # what acn_chunkg_cov needs to make the chunk's covariances again
-            ax.p_start[s] = (p0, None if ok.all() else np.packbits(ok), np.packbits(applied[:ne]), ne)
+            digest = int(run.lib.acn_aids_digest(ne, args[6], p(arrs[0]), p(arrs[2])))  # ek, h, R
+            ax.p_start[s] = (p0, None if ok.all() else np.packbits(ok), np.packbits(applied[:ne]), ne, digest)
     else:
         prior = (p(run.xb), p(run.pb)) if run.covariances else (run.ffi.NULL, run.ffi.NULL)
         run.lib.acn_chunkg_fwd(*args, *prior)
@@ -932,16 +934,17 @@ def _chunk_cov(run: _Run, ax: _Axis, s: int, e: int, pst: np.ndarray) -> None:
     """The filter's posterior covariances of samples s..e-1 (packed, into ``pst``) made again (acn_chunkg_cov) from
     what the forward pass kept of the chunk, its aids asked for again."""
     p, m = run.ptr, e - s
-    p0, ok_bits, done_bits, n_done = ax.p_start.pop(s)
+    p0, ok_bits, done_bits, n_done, digest = ax.p_start.pop(s)
     piece = ax.aids.between(s, e) if ax.aids is not None else None
     ne = 0 if piece is None else len(piece.ex)
-    if ne != n_done or (ne and (piece.ex.k[0] < s or piece.ex.k[-1] >= e)):
-        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} differ from the forward pass's")
     ek = np.ascontiguousarray(piece.ex.k - s, dtype=np.int64) if ne else np.zeros(1, dtype=np.int64)
     h, R = (np.ascontiguousarray(a, dtype=np.float64) for a in ((piece.ex.h, piece.ex.R) if ne else (np.zeros(4),) * 2))
+    ekb = run.ffi.from_buffer("long[]", ek)
+    if ne != n_done or int(run.lib.acn_aids_digest(ne, ekb, p(h), p(R))) != digest:  # not the forward pass's aids
+        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} differ from the forward pass's")
     done = np.unpackbits(done_bits, count=ne) if ne else np.zeros(1, dtype=np.uint8)
     valid = run.ffi.NULL if ok_bits is None else p(np.unpackbits(ok_bits, count=m), "unsigned char *")
-    run.lib.acn_chunkg_cov(ax.m, m, int(e == run.n), valid, ne, run.ffi.from_buffer("long[]", ek), p(h), p(R),
+    run.lib.acn_chunkg_cov(ax.m, m, int(e == run.n), valid, ne, ekb, p(h), p(R),
                            p(done, "unsigned char *"), p(p0), p(pst))  # fmt: skip
 
 

@@ -104,3 +104,47 @@ def test_the_lean_store_smooths_to_the_full_stores_numbers(tmp_path):
     assert chunked.disk_needed(n, n_axes, n_axes, full=True) - chunked.disk_needed(n, n_axes, 0, full=True) == (
         8 * n * n_axes * (chunked.GLROW - chunked.ROW)
     )
+
+
+class _Twice(chunked.ChunkAids):
+    """Rests at samples 100..179 made per chunk; ``change`` alters the aids of one chunk when it is asked for the
+    second time (the backward pass), keeping their count."""
+
+    def __init__(self, change) -> None:
+        self.change, self.asked = change, {}
+        self.count = 80
+
+    def between(self, s: int, e: int) -> chunked.Piece:
+        k = np.arange(max(s, 100), min(e, 180), dtype=np.int64)
+        h, R = np.tile([0.0, 1.0, 0.0, 0.0], (len(k), 1)), np.full(len(k), 0.05**2)
+        self.asked[s] = self.asked.get(s, 0) + 1
+        if self.asked[s] == 2 and len(k):
+            self.change(k, h, R)
+        ex = fs.Extras(k, h, np.zeros(len(k)), R, np.arange(len(k)))
+        return chunked.Piece(ex, np.zeros(len(k)), np.zeros(len(k), dtype=bool))
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        lambda k, h, R: R.__setitem__(-1, 0.06**2),
+        lambda k, h, R: h.__setitem__((0, slice(None)), [1.0, 0.0, 0.0, 0.0]),
+        lambda k, h, R: k.__setitem__(0, k[0] - 1),  # still sorted and within the chunk
+    ],
+    ids=["R", "h", "sample"],
+)
+def test_the_backward_pass_refuses_other_aids_than_the_forward_pass(tmp_path, change):
+    """The lean store's covariances are made again from the aids asked for again: aids of the same count but
+    another R, h or sample the second time are refused (acn_aids_digest), not smoothed with the wrong
+    covariances; the same aids twice smooth (the check passes what it should)."""
+    model = load_model()
+    n = 400
+    t = np.arange(n) / model.rate_hz
+    accel = np.cumsum(np.random.default_rng(5).normal(0, 0.05, (n, len(model.axes))), axis=0)
+    read = chunked.array_reader(t, accel, np.zeros(accel.shape, dtype=bool))
+    same = [_Twice(lambda k, h, R: None) for _ in model.axes]
+    chunked.smooth_bounded(model, n, read, tmp_path / "same.npz", chunk=97, extras=same, full=True)
+    assert all(a.asked[97] == 2 for a in same)  # the chunk with the rests was asked for twice
+    other = [_Twice(change) for _ in model.axes]
+    with pytest.raises(ValueError, match="differ from the forward pass's"):
+        chunked.smooth_bounded(model, n, read, tmp_path / "other.npz", chunk=97, extras=other, full=True)

@@ -129,6 +129,10 @@ void acn_chunkg_cov(const acn_axis *m, long n, int last, const unsigned char *va
                     const long *ek, const double *eh, const double *eR,
                     const unsigned char *applied, const double *p0, double *pst);
 
+/* a digest of n aids as acn_chunkg_cov reads them (samples, h, R): the backward pass checks that
+ * the aids it was given again are the forward pass's own (fastsmooth.c) */
+unsigned long long acn_aids_digest(long n, const long *ek, const double *eh, const double *eR);
+
 int acn_chunkg_bwd_lean(const acn_axis *m, long k0, long n, int last, const double *xst,
                         const double *pst, double *carry, double *xs, double *sds);
 
