@@ -74,8 +74,10 @@ The thresholds have command-line overrides (``accelnav smooth --zupt-*``); ``pas
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -435,10 +437,9 @@ def decide_rests(
 
     Python's cycle collector is held off meanwhile: the pieces, events, sides and verdicts of a long record are
     hundreds of thousands of small objects, none in a cycle that must go before the end, and each full collection
-    walked all of them (0.5-1 s CPU of 8-9 at 1e7 samples, measured)."""
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
+    walked all of them (0.5-1 s CPU of 8-9 at 1e7 samples, measured). The caller's own setting comes back however
+    the decision ends (:func:`collector_held`)."""
+    with collector_held():
         p = resolved(model, params)
         x, ok, R = _prepared(accel, clipped, model)  # once: the detector and the decision read the same
         if rest is None:
@@ -448,9 +449,30 @@ def decide_rests(
         start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
         decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
         return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)))
+
+
+_held = {"count": 0, "was": False}  # decisions holding the collector off now, and its setting before the first
+_held_lock = threading.Lock()
+
+
+@contextlib.contextmanager
+def collector_held():
+    """Python's cycle collector off within, process-wide (the collector has no per-thread switch): the setting the
+    process had before the first of the decisions holding it comes back when the last of them ends, by return or by
+    exception. Two threads deciding at once: the first to end does not turn it back on under the other, the other
+    does not leave it off."""
+    with _held_lock:
+        if _held["count"] == 0:
+            _held["was"] = gc.isenabled()
+            gc.disable()
+        _held["count"] += 1
+    try:
+        yield
     finally:
-        if collecting:
-            gc.enable()
+        with _held_lock:
+            _held["count"] -= 1
+            if _held["count"] == 0 and _held["was"]:
+                gc.enable()
 
 
 def reason_counts(decisions: list[RestDecision]) -> dict[str, int]:
