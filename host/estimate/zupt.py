@@ -491,11 +491,16 @@ REPORT_COLUMNS = (
 
 def report_csv(decisions: list[RestDecision], t: np.ndarray) -> str:
     """One CSV row per candidate: times, samples, decision, reason, the evidence in words and the statistics
-    it rests on (``smooth --zupt-report``)."""
+    it rests on (``smooth --zupt-report``). ``t``: the run's times, or a function giving them at samples (a run
+    not held whole: engine.Source.times_at)."""
     import csv
     import io
 
-    t = np.asarray(t, dtype=np.float64)
+    if callable(t):
+        at = np.array([k for d in decisions for k in (d.start, d.stop - 1)], dtype=np.int64)
+        t = dict(zip(at.tolist(), np.asarray(t(at), dtype=np.float64), strict=True))
+    else:
+        t = np.asarray(t, dtype=np.float64)
 
     def f(v: float) -> str:
         return "" if not math.isfinite(v) else f"{v:.6g}"
