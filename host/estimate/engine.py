@@ -271,9 +271,10 @@ def over_budget(label: str, n: int, n_axes: int, budget: int) -> str:
 
 
 # the rest decision's peak per sample, measured at 1e7 samples and 2 axes (bench/speed/bench_smooth_rss.py): the record
-# read whole (t, each axis' acceleration and clipped flag) and the detector's arrays beside it (x, ok, the window means
-# per axis; the window variance, the quiet statistic and the flags once), 75 B of 80; its sums are read from
-# checkpoints (accelnav.estimate.rests.SUMS_EVERY), not held
+# held whole (t, each axis' acceleration and clipped flag: a run in memory) and the detector's arrays beside it (x, ok,
+# the window means per axis; the window variance, the quiet statistic and the flags once), 75 B of 80; a streamed run
+# over the budget is read a chunk at a time, 50 B (zupt.decide_rests_read); its sums are read from checkpoints
+# (accelnav.estimate.rests.SUMS_EVERY), not held
 REST_SAMPLE_BYTES, REST_AXIS_BYTES = 32, 26
 REST_FLOOR = 64 << 20  # a decision needing less is not refused by a smaller budget: the process itself takes more
 
@@ -316,7 +317,15 @@ def plan(n: int, n_axes: int, job: Job, *, label: str = "the run", to_file: bool
 
 
 def rest_stage(
-    model: Model, arrays: dict, rests: Rests, *, fixes=None, smooth_pass=None, review_budget: int | None = None
+    model: Model,
+    arrays: dict | None,
+    rests: Rests,
+    *,
+    fixes=None,
+    smooth_pass=None,
+    review_budget: int | None = None,
+    source: Source | None = None,
+    chunk: int = 1 << 20,
 ) -> RestOutcome:
     """The rest decision, called here and nowhere else: detected rests (``rests.detect``: the candidates and
     the decision on each, accelnav.estimate.zupt.decide_rests, weighed against the run's position ``fixes``)
@@ -324,7 +333,9 @@ def rest_stage(
     fits ``review_budget`` bytes on the whole-array path, None: always; ``RestOutcome.reviewed`` says
     whether it was), or the given mask;
     ``smooth_pass(extras, at)`` (:func:`smoother_pass` bound to this run) smooths it with trial aids in
-    bounded memory and gives the velocities at samples ``at``, for a decision that needs a smoother pass."""
+    bounded memory and gives the velocities at samples ``at``, for a decision that needs a smoother pass.
+    ``arrays`` None: the run is read from ``source`` ``chunk`` samples at a time for the decision, not held whole
+    beside it (not reviewed: a run over the budget of the whole-array path)."""
     from accelnav.estimate import zupt
 
     params = zupt.ZuptParams() if rests.params is None else rests.params
@@ -336,6 +347,13 @@ def rest_stage(
         if rests.spans is not None:
             return RestOutcome(None, None, params, spans=rests.spans)
         return RestOutcome(np.asarray(rests.mask, dtype=bool), rests.sigma, params)
+    if arrays is None:  # read a chunk at a time (26 B a sample at 2 axes not held beside the detector's arrays)
+        n, n_axes = source.n, len(source.axis_names)
+        cands = candidate_mask(rests.candidates, n)
+        found = zupt.decide_rests_read(source.read, n, n_axes, cands, model, params, fixes, chunk=chunk)
+        gravity = zupt.gravity_axes_read(source.read, n, n_axes, model, chunk=chunk) if not found.mask.any() else []
+        return RestOutcome(found.mask, None, params, found.decisions, gravity, detected=True,
+                           reviewed=not found.mask.any())  # fmt: skip
     accel, clipped = arrays["accel"], arrays["clipped"]
     found = zupt.decide_rests(accel, clipped, candidate_mask(rests.candidates, len(accel)), model, params, fixes)
     mask, review, smoothed = found.mask, None, None
@@ -422,14 +440,18 @@ def run(
     echo = job.full and bool(source.extra_keys())
     p = plan(n, n_axes, job, label=source.label, to_file=out is not None, echo=echo)
     detect = smooth and job.rests is not None and job.rests.detect
-    arrays = source.whole() if (p.whole or detect) else None  # the decision reads the run whole; given aids do not
+    # the decision reads every sample: from memory, or a streamed run over the whole-array path's budget (never
+    # reviewed) from the stream, a chunk at a time; given aids are read with the chunks
+    streamed = detect and not p.whole and bool(source.streamed) and chunked.whole_bytes(n, n_axes) > p.budget
+    arrays = source.whole() if (p.whole or (detect and not streamed)) else None
     rest = reuse = None
     if smooth and job.rests is not None:
 
         def smooth_pass(extras, at):
             return smoother_pass(model, source, extras, at, workdir=workdir or Path(out or ".").resolve().parent)
 
-        rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass, review_budget=p.budget)
+        rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass, review_budget=p.budget,
+                          source=source, chunk=p.chunk)  # fmt: skip
         reuse, rest.smoothed = rest.smoothed, None
         if not p.whole and source.streamed and arrays is not None:
             # read whole for the decision only: the chunked passes read the stream again, a chunk at a time (at 1e7
