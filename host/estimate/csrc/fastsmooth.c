@@ -2034,8 +2034,13 @@ void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, lon
 void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long num, const double *u0,
                   const double *e0, const double *level, double *out)
 {
-    double ve[8];
-    memcpy(ve, kin_rec_row(r, e), sizeof(double) * (size_t)n_axes);
+    /* the points go up from e: each row summed on from the last point's (cur, at sample at), or
+       from its checkpoint when that is nearer, without the kept rows' bookkeeping of a read */
+    double ve[8], cur[24];
+    int w3 = 3 * n_axes;
+    memcpy(cur, kin_rec_row(r, e), sizeof(double) * (size_t)w3);
+    memcpy(ve, cur, sizeof(double) * (size_t)n_axes);
+    long at = e;
     double D = (double)(a - e > 1 ? a - e : 1) * Ts;
     double step = num > 1 ? (double)(a - e) / (double)(num - 1) : 0.0;
     out[0] = out[1] = out[2] = 0.0; /* sums of squares: none below 0 */
@@ -2045,10 +2050,17 @@ void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long nu
         double tk = (double)(k - e) * Ts;
         double w = tk * tk / (2 * D);
         double s2 = 0.0, f2 = 0.0;
-        const double *vk = kin_rec_row(r, k);
+        long base = (k / r->every) * r->every;
+        if (at < base || at > k) {
+            memcpy(cur, r->cp + (base / r->every) * w3, sizeof(double) * (size_t)w3);
+            at = base;
+        }
+        for (; at < k; at++) {
+            kin_rec_step(n_axes, kin_rec_x(r, at), r->Ts, cur);
+        }
         for (int j = 0; j < n_axes; j++) {
             double ramp = (level[j] - e0[j]) * w;
-            double v = vk[j] - ve[j] - e0[j] * tk - ramp + u0[j];
+            double v = cur[j] - ve[j] - e0[j] * tk - ramp + u0[j];
             double flat = v + ramp; /* the rest's own level all the way */
             s2 += v * v;
             f2 += flat * flat;
