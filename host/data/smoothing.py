@@ -8,7 +8,8 @@ exceed it) is streamed
 :func:`accelnav.data.inputs.read_input`. Fixes and given rests (intervals, an NPZ mask) are placed on the
 run's clock a piece at a time and stream with it; what needs the input in memory (the rest decision of
 ``--zupt auto``, a per-sample CSV mask, what the engine runs as one chunk) is refused over the input limit in
-one line before anything is parsed.
+one line before anything is parsed (the rest decision also over the memory budget: engine.rest_bytes). A chunked
+run's rest decision reads a streamed input whole once; the chunked passes read the stream again.
 """
 
 from __future__ import annotations
@@ -104,7 +105,7 @@ def smooth_file(
         if csv is not None:
             written.append(Path(csv))
         if zupt_report is not None and outcome.rests is not None:
-            write_text(zupt_report, zu.report_csv(outcome.rests.decisions, source.whole()["t"]), flag="--zupt-report")
+            write_text(zupt_report, zu.report_csv(outcome.rests.decisions, source.times_at), flag="--zupt-report")
             written.append(Path(zupt_report))
         outcome.written = written
         return outcome
@@ -223,6 +224,8 @@ def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, s
         # checked block by block and never held whole (1e7 samples, 2 axes: 6.6 s of CPU against 7.7 read
         # whole, and 1.09 GB peak against 1.30, measured; the same output file)
         big = whole_bytes(rows, n_axes) > job.budget if job.budget is not None else held > STREAM_ABOVE or _is_npz(path)
+        # the rest decision alone of a chunked run reads every sample (the stream, read whole once, then dropped)
+        decided = whole == "--zupt" and not p.whole and job.rests is not None and job.rests.detect and not job.full
         if (big or held > limit) and whole:
             if held > limit:
                 raise UserError(
@@ -230,6 +233,10 @@ def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, s
                     f"need(s) every sample in memory, which may take {limit / 1e9:.3g} GB here "
                     "(ACCELNAV_MAX_INPUT_BYTES); plain smooth streams any length"
                 )
+            if decided:
+                source = _stream(path, model, job, read, rows, n_axes, workdir, stack)
+                if source is not None:
+                    return source
         elif big or held > limit:
             source = _stream(path, model, job, read, rows, n_axes, workdir, stack)
             if source is not None:

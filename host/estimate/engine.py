@@ -149,6 +149,20 @@ class Source:
             self.arrays = {"t": t, "axis_names": self.axis_names, "accel": accel, "clipped": clipped}
         return self.arrays
 
+    def times_at(self, k) -> np.ndarray:
+        """The run's t at samples ``k`` (any order): from memory, or read in one pass over the clock (a run read
+        whole for the rest decision and dropped after it names its candidates' times this way)."""
+        k = np.asarray(k, dtype=np.int64)
+        if self.arrays is not None:
+            return np.asarray(self.arrays["t"])[k]
+        out = np.empty(len(k))
+        order = np.argsort(k, kind="stable")
+        ks = k[order]
+        for s, t in self.clock().pieces():
+            lo, hi = np.searchsorted(ks, s), np.searchsorted(ks, s + len(t))
+            out[order[lo:hi]] = t[ks[lo:hi] - s]
+        return out
+
     def extra_keys(self) -> dict:
         """Keys of an input in memory that the run file keeps beside the outputs (raw counts, truth)."""
         if self.arrays is None:
@@ -192,9 +206,10 @@ class RestOutcome:
 
         return self.spans if self.spans is not None else RestSpans.of_mask(self.mask, self.sigma, n_axes)
 
-    def candidate_rows(self, t: np.ndarray) -> np.ndarray:
+    def candidate_rows(self, t) -> np.ndarray:
         """[start_s, end_s, accepted] per candidate (kept in the run file for the plots); a rest the review
-        dropped is not accepted."""
+        dropped is not accepted. ``t``: the run's times, or a function giving them at samples
+        (:meth:`Source.times_at`)."""
         m = self.mask if self.mask.ndim == 1 else self.mask.any(axis=1)
         ends = np.array([(d.start, d.stop, d.accepted) for d in self.decisions], dtype=np.int64).reshape(-1, 3)
         a, b = ends[:, 0], ends[:, 1]
@@ -207,7 +222,9 @@ class RestOutcome:
             held = np.concatenate(([0], np.cumsum(m, dtype=np.int64)))
             any_in = held[b] > held[a]
         kept = (ends[:, 2] != 0) & any_in
-        return np.column_stack((t[ends[:, 0]], t[ends[:, 1] - 1], kept.astype(np.float64))).reshape(-1, 3)
+        at = np.concatenate((ends[:, 0], ends[:, 1] - 1))
+        tt = t(at) if callable(t) else np.asarray(t)[at]
+        return np.column_stack((tt[: len(ends)], tt[len(ends) :], kept.astype(np.float64))).reshape(-1, 3)
 
 
 @dataclass
@@ -253,10 +270,32 @@ def over_budget(label: str, n: int, n_axes: int, budget: int) -> str:
     )
 
 
+# the rest decision's peak per sample, measured at 1e7 samples and 2 axes (bench/speed/bench_smooth_rss.py): the record
+# held whole (t, each axis' acceleration and clipped flag: a run in memory) and the detector's arrays beside it (x, ok,
+# the window means per axis; the window variance, the quiet statistic and the flags once), 75 B of 80; a streamed run
+# over the budget is read a chunk at a time, 50 B (zupt.decide_rests_read); its sums are read from checkpoints
+# (accelnav.estimate.rests.SUMS_EVERY), not held
+REST_SAMPLE_BYTES, REST_AXIS_BYTES = 32, 26
+REST_FLOOR = 64 << 20  # a decision needing less is not refused by a smaller budget: the process itself takes more
+
+
+def rest_bytes(n: int, n_axes: int) -> int:
+    """Estimated peak memory of the rest decision (``--zupt auto``) over n samples: it reads every sample."""
+    return int(n) * (REST_SAMPLE_BYTES + REST_AXIS_BYTES * n_axes)
+
+
 def plan(n: int, n_axes: int, job: Job, *, label: str = "the run", to_file: bool = True, echo: bool = False) -> Plan:
     """The one path choice, from the run's size and what ``job`` asks: one chunk in memory for what needs
-    every output sample at once, else chunked to the file; refused (UserError) when that does not fit."""
+    every output sample at once, else chunked to the file; refused (UserError) when that does not fit, the rest
+    decision (:func:`rest_bytes`) included."""
     budget = budget_bytes(job.budget)
+    detect = "smooth" in job.stages and job.rests is not None and job.rests.detect
+    if detect and rest_bytes(n, n_axes) > max(budget, REST_FLOOR):
+        raise UserError(
+            f"{label}: {n} samples x {n_axes} axes need about {rest_bytes(n, n_axes) / 1e9:.3g} GB in memory for the "
+            f"rest decision of --zupt auto (it reads every sample), over the memory budget of {budget / 1e9:.3g} GB "
+            "(--memory-budget); given rests (--zupt FILE) stream any length"
+        )
     fits = chunked.whole_bytes(n, n_axes) <= budget
     needs = list(job.in_memory)
     if not to_file:
@@ -278,7 +317,15 @@ def plan(n: int, n_axes: int, job: Job, *, label: str = "the run", to_file: bool
 
 
 def rest_stage(
-    model: Model, arrays: dict, rests: Rests, *, fixes=None, smooth_pass=None, review_budget: int | None = None
+    model: Model,
+    arrays: dict | None,
+    rests: Rests,
+    *,
+    fixes=None,
+    smooth_pass=None,
+    review_budget: int | None = None,
+    source: Source | None = None,
+    chunk: int = 1 << 20,
 ) -> RestOutcome:
     """The rest decision, called here and nowhere else: detected rests (``rests.detect``: the candidates and
     the decision on each, accelnav.estimate.zupt.decide_rests, weighed against the run's position ``fixes``)
@@ -286,7 +333,9 @@ def rest_stage(
     fits ``review_budget`` bytes on the whole-array path, None: always; ``RestOutcome.reviewed`` says
     whether it was), or the given mask;
     ``smooth_pass(extras, at)`` (:func:`smoother_pass` bound to this run) smooths it with trial aids in
-    bounded memory and gives the velocities at samples ``at``, for a decision that needs a smoother pass."""
+    bounded memory and gives the velocities at samples ``at``, for a decision that needs a smoother pass.
+    ``arrays`` None: the run is read from ``source`` ``chunk`` samples at a time for the decision, not held whole
+    beside it (not reviewed: a run over the budget of the whole-array path)."""
     from accelnav.estimate import zupt
 
     params = zupt.ZuptParams() if rests.params is None else rests.params
@@ -298,6 +347,13 @@ def rest_stage(
         if rests.spans is not None:
             return RestOutcome(None, None, params, spans=rests.spans)
         return RestOutcome(np.asarray(rests.mask, dtype=bool), rests.sigma, params)
+    if arrays is None:  # read a chunk at a time (26 B a sample at 2 axes not held beside the detector's arrays)
+        n, n_axes = source.n, len(source.axis_names)
+        cands = candidate_mask(rests.candidates, n)
+        found = zupt.decide_rests_read(source.read, n, n_axes, cands, model, params, fixes, chunk=chunk)
+        gravity = zupt.gravity_axes_read(source.read, n, n_axes, model, chunk=chunk) if not found.mask.any() else []
+        return RestOutcome(found.mask, None, params, found.decisions, gravity, detected=True,
+                           reviewed=not found.mask.any())  # fmt: skip
     accel, clipped = arrays["accel"], arrays["clipped"]
     found = zupt.decide_rests(accel, clipped, candidate_mask(rests.candidates, len(accel)), model, params, fixes)
     mask, review, smoothed = found.mask, None, None
@@ -384,15 +440,23 @@ def run(
     echo = job.full and bool(source.extra_keys())
     p = plan(n, n_axes, job, label=source.label, to_file=out is not None, echo=echo)
     detect = smooth and job.rests is not None and job.rests.detect
-    arrays = source.whole() if (p.whole or detect) else None  # the decision reads the run whole; given aids do not
+    # the decision reads every sample: from memory, or a streamed run over the whole-array path's budget (never
+    # reviewed) from the stream, a chunk at a time; given aids are read with the chunks
+    streamed = detect and not p.whole and bool(source.streamed) and chunked.whole_bytes(n, n_axes) > p.budget
+    arrays = source.whole() if (p.whole or (detect and not streamed)) else None
     rest = reuse = None
     if smooth and job.rests is not None:
 
         def smooth_pass(extras, at):
             return smoother_pass(model, source, extras, at, workdir=workdir or Path(out or ".").resolve().parent)
 
-        rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass, review_budget=p.budget)
+        rest = rest_stage(model, arrays, job.rests, fixes=job.fixes, smooth_pass=smooth_pass, review_budget=p.budget,
+                          source=source, chunk=p.chunk)  # fmt: skip
         reuse, rest.smoothed = rest.smoothed, None
+        if not p.whole and source.streamed and arrays is not None:
+            # read whole for the decision only: the chunked passes read the stream again, a chunk at a time (at 1e7
+            # samples and 2 axes the run held 310 MB more through them)
+            source.arrays = arrays = None
         if rest.mask is None and p.whole:  # given as runs: per sample for the run in memory
             rest.mask, rest.sigma = rest.spans.painted()
         if job.rests.decided is not None:  # said where it happens: before tuning fits the figures to the rests
@@ -602,7 +666,7 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
         rows = [(ft, j, z, np.sqrt(r)) for j, f in enumerate(fx) for ft, z, r in zip(fix_t[j], f.z, f.R, strict=True)]
         add["fixes"] = np.array(rows, dtype=np.float64).reshape(-1, 4)
         if rest is not None and rest.detected:
-            add["zupt_candidates"] = rest.candidate_rows(source.whole()["t"])
+            add["zupt_candidates"] = rest.candidate_rows(source.times_at)
         return add
 
     def kept(applied: list[np.ndarray]) -> dict[str, np.ndarray]:

@@ -136,8 +136,9 @@ class _Kinematic:
     """The kinematic filter of the module docstring over one direction of time of one record.
 
     The axes do not couple: each holds its state (r, u, e) and the six entries of its symmetric covariance, 9
-    doubles [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee], in one C buffer; the record's sums it reads are made here once,
-    every run over the events (acn_kin_forward, acn_kin_backward in csrc/fastsmooth.c) starts from a copy. A
+    doubles [r, u, e, Prr, Pru, Pre, Puu, Pue, Pee], in one C buffer; the record's sums it reads (V, A, W below) are
+    read by the kernels at the samples they need, from checkpoints made here once (:data:`SUMS_EVERY`), every run
+    over the events (acn_kin_forward, acn_kin_backward in csrc/fastsmooth.c) starting from a copy. A
     decision makes a few hundred small steps per pass, each a few dozen multiplications per axis: Python's own
     per-step overhead cost more than the arithmetic (bench/speed/bench_rest_decision.py)."""
 
@@ -149,21 +150,24 @@ class _Kinematic:
         self.ffi, self.lib = mod.ffi, mod.lib
         n, self.n_axes = x.shape
         self.Ts, self.q = Ts, q
-        # V[k] = Ts sum_{i<k} x[i]; A[k] = Ts sum_{i<k} |x[i]|: how much moved; W[k] = Ts sum_{i<k} V[i]; in one
-        # pass over the record (acn_kin_sums), numpy's cumsums' order; in private pages, not np.empty's (its huge
-        # pages' faults took 1-1.6 s of system time for the three of a 1e7-sample record, these 0.4 s, measured)
-        from accelnav.estimate.chunked import fresh_array
-
-        self.V, self.A, self.W = (fresh_array((n + 1, self.n_axes)) for _ in range(3))
-        buf = self.ffi.from_buffer
-        self.lib.acn_kin_sums(n, self.n_axes, buf("double[]", np.ascontiguousarray(x, dtype=np.float64)), reverse, Ts,
-                              *(buf("double[]", a) for a in (self.V, self.A, self.W)))  # fmt: skip
+        # V[k] = Ts sum_{i<k} x[i]; A[k] = Ts sum_{i<k} |x[i]|: how much moved; W[k] = Ts sum_{i<k} V[i]; numpy's
+        # cumsums' order (acn_kin_sums). Not held: 48 B a sample at 2 axes each way, 960 MB of a 1e7-sample record's
+        # 1.57 GB peak. The kernels read a sample's row summed on from the checkpoint or the row they read last
+        # before it (acn_kin_rec), step by step as acn_kin_sums sums: the same doubles (test_rest_sums.py)
+        if self.n_axes > KIN_MAX_AXES:
+            raise ValueError(f"rest decision: {self.n_axes} axes; accepted: at most {KIN_MAX_AXES}")
+        self.x = np.ascontiguousarray(x, dtype=np.float64)  # the kernels read it through rec
+        self.cp = np.empty((n // SUMS_EVERY + 1, 3 * self.n_axes))
+        self.rec = self.ffi.new("acn_kin_rec *")
+        self._x = self.ffi.from_buffer("double[]", self.x)
+        self.rec.n, self.rec.n_axes, self.rec.x, self.rec.reverse = n, self.n_axes, self._x, bool(reverse)
+        self.rec.Ts, self.rec.every = Ts, SUMS_EVERY
+        self._cp = self.ffi.from_buffer("double[]", self.cp)
+        self.lib.acn_kin_checkpoints(self.rec, self._cp)
         self.R = np.ascontiguousarray(R, dtype=np.float64)
         self.qv = self.R * Ts
         # the kernels read these through pointers made once (the arrays are kept alive beside them)
-        self._V, self._W, self._A, self._R, self._qv = (
-            self.ffi.from_buffer("double[]", a) for a in (self.V, self.W, self.A, self.R, self.qv)
-        )
+        self._R, self._qv = (self.ffi.from_buffer("double[]", a) for a in (self.R, self.qv))
         self.s = self.ffi.new("double[]", [v for _ in range(self.n_axes) for v in (0.0, 0.0, 0.0, DIFFUSE[0],
                                            0.0, 0.0, DIFFUSE[1], 0.0, DIFFUSE[2])])  # fmt: skip
         self.k = 0
@@ -177,6 +181,9 @@ class _Kinematic:
         return new
 
 
+SUMS_EVERY = 256  # the decision's sums kept at every this many samples (3 n_axes doubles each, both ways: 3.75 MB for
+# a 1e7-sample record at 2 axes, for 960 MB whole); a read sums on at most this many rows, or from the row read last
+KIN_MAX_AXES = 8  # acn_kin_rec holds a row of at most 8 axes
 LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (acn_kin_side)
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
@@ -506,7 +513,6 @@ class _Decider:
         ffi, lib = mod.ffi, mod.lib
         p, cands, n_axes = self.p, self.cands, self.x.shape[1]
         kin = self._fresh(False)
-        self.V = kin.V
         m = len(cands)
         ev = self.fwd_events
         kinds = {"test": 0, "fix": 1, "end": 2}
@@ -531,10 +537,11 @@ class _Decider:
             c = ffi.from_buffer(types[a.dtype], a)
             keep.append(c)
             setattr(f, name, c)
-        for name, a in (("V", kin.V), ("W", kin.W), ("A", kin.A), ("R", kin.R), ("qv", kin.qv)):
+        for name, a in (("R", kin.R), ("qv", kin.qv)):
             c = ffi.from_buffer("double[]", a)
             keep.append(c)
             setattr(f, name, c)
+        f.rec = kin.rec
         f.n_axes, f.n, f.Ts, f.q, f.n_ev, f.m = n_axes, self.n, self.Ts, self.q, len(ev), m
         for name in ("drift", "scale", "sigma", "gate", "tell", "level_still", "level_max", "still_k", "start_s",
                      "start_within_s", "rel"):  # fmt: skip
@@ -672,7 +679,7 @@ class _Decider:
         fix = np.zeros(m, dtype=np.uint8)
         buf = ffi.from_buffer
         kin.lib.acn_kin_backward(
-            n_axes, kin.s, kin._V, kin._W, kin._A, kin.Ts, kin.q, kin._qv, kin._R, len(ev_k), buf("long[]", ev_k),
+            n_axes, kin.s, kin.rec, kin.Ts, kin.q, kin._qv, kin._R, len(ev_k), buf("long[]", ev_k),
             buf("int[]", ev_kind), buf("long[]", ev_i), buf("double[]", ev_z), buf("double[]", ev_var),
             buf("unsigned char[]", accm), buf("double[]", level), buf("long[]", length), LEAK, p.drift, p.scale,
             p.sigma, buf("double[]", sides), buf("double[]", stat), buf("long[]", aid), buf("unsigned char[]", fix),

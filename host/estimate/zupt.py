@@ -74,8 +74,10 @@ The thresholds have command-line overrides (``accelnav smooth --zupt-*``); ``pas
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -180,32 +182,48 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
     Compiled past the bias' powers (acn_rest_prepare: the mask, the bias and the difference in one pass per axis,
     numpy's operations in numpy's order, kf.bias_model's formula); the powers stay numpy's own, so x is the same
     double (tests/estimate/test_zupt_windows.py)."""
+    accel = np.asarray(accel)
+    if np.shape(clipped) != accel.shape:
+        raise ValueError(f"rest detector: clipped is {np.shape(clipped)}; accel is {accel.shape}")
+    n = len(accel)
+    return _prepared_read(lambda s, e: (None, accel[s:e], clipped[s:e]), n, accel.shape[1], model, max(n, 1))
+
+
+def _prepared_read(read, n: int, n_axes: int, model: Model, chunk: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_prepared` of a record read ``chunk`` rows at a time by ``read(s, e)`` (t, accel, clipped of rows s..e-1,
+    an engine.Source's reader): the record is not held whole beside x and ok (26 B a sample at 2 axes). Row by row,
+    so the same doubles whatever the chunks."""
     from accelnav.estimate.chunked import fresh_array
     from accelnav.estimate.fastsmooth import _lib
 
-    accel = np.ascontiguousarray(accel, dtype=np.float64)
-    clipped = np.ascontiguousarray(clipped, dtype=bool)
-    n, n_axes = accel.shape
-    if clipped.shape != accel.shape:
-        raise ValueError(f"rest detector: clipped is {clipped.shape}; accel is {accel.shape}")
     x = fresh_array((n, n_axes))
     ok = fresh_array((n, n_axes), bool)
     R = np.empty(n_axes)
     mod = _lib()
     buf = mod.ffi.from_buffer
-    a_p, c_p = buf("double[]", accel), buf("unsigned char[]", clipped.view(np.uint8))
-    x_p, ok_p = buf("double[]", x), buf("unsigned char[]", ok.view(np.uint8))
     powers: dict[tuple, np.ndarray] = {}  # phi^k per bias time constant: the axes of a model mostly share one
+    axes = []
     for j in range(n_axes):
         d = axis_design(model, j)
         c1, eps_mean = float(d.axis.c1), float(d.eps_mean)
         key = (d.phi, _bias_settled(d.phi, c1, eps_mean, n))
         if key not in powers:
             powers[key] = _bias_powers(d.phi, *key[1:], n)
-        # kf.bias_model's eps[k] = eps_mean - c1 phi^k, taken from the ok samples
-        if mod.lib.acn_rest_prepare(n, n_axes, j, a_p, c_p, buf("double[]", powers[key]), eps_mean, c1, x_p, ok_p):
-            raise ValueError(f"rest detector: {n} x {n_axes} samples; accepted: 1+ axes")
+        axes.append((powers[key], eps_mean, c1))
         R[j] = d.R
+    for s in range(0, n, chunk):
+        e = min(n, s + chunk)
+        _, accel, clipped = read(s, e)
+        accel = np.ascontiguousarray(accel, dtype=np.float64)
+        clipped = np.ascontiguousarray(clipped, dtype=bool)
+        if accel.shape != (e - s, n_axes) or clipped.shape != accel.shape:
+            raise ValueError(f"rest detector: rows {s}..{e} read as {accel.shape} and {clipped.shape}")
+        a_p, c_p = buf("double[]", accel), buf("unsigned char[]", clipped.view(np.uint8))
+        x_p, ok_p = buf("double[]", x[s:e]), buf("unsigned char[]", ok[s:e].view(np.uint8))
+        for j, (pw, eps_mean, c1) in enumerate(axes):
+            # kf.bias_model's eps[k] = eps_mean - c1 phi^k, taken from the ok samples
+            if mod.lib.acn_rest_prepare(e - s, n_axes, j, a_p, c_p, buf("double[]", pw[s:e]), eps_mean, c1, x_p, ok_p):
+                raise ValueError(f"rest detector: {n} x {n_axes} samples; accepted: 1+ axes")
     return x, ok, R
 
 
@@ -241,7 +259,11 @@ def gravity_axes(accel: np.ndarray, clipped: np.ndarray, model: Model) -> list[s
     The model takes gravity as removed (a level frame, or the axis held horizontal); a tilt of such an
     axis moves its reading by the whole of g, which the detector sees as motion or a level change. Only
     for the summary: the detector's decisions do not read this."""
-    x, ok, _ = _prepared(accel, clipped, model)
+    return gravity_of(*_prepared(accel, clipped, model)[:2], model)
+
+
+def gravity_of(x: np.ndarray, ok: np.ndarray, model: Model) -> list[str]:
+    """:func:`gravity_axes` of the prepared record (:func:`_prepared`)."""
     out = []
     for j, ax in enumerate(model.axes):
         if ok[:, j].any() and abs(abs(float(np.median(x[ok[:, j], j]))) - G0) <= GRAVITY_TOL * G0:
@@ -435,22 +457,60 @@ def decide_rests(
 
     Python's cycle collector is held off meanwhile: the pieces, events, sides and verdicts of a long record are
     hundreds of thousands of small objects, none in a cycle that must go before the end, and each full collection
-    walked all of them (0.5-1 s CPU of 8-9 at 1e7 samples, measured)."""
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
+    walked all of them (0.5-1 s CPU of 8-9 at 1e7 samples, measured). The caller's own setting comes back however
+    the decision ends (:func:`collector_held`)."""
+    with collector_held():
         p = resolved(model, params)
-        x, ok, R = _prepared(accel, clipped, model)  # once: the detector and the decision read the same
-        if rest is None:
-            rest = _detect(x, ok, R, model, p)
-        t = Clock(len(x), model.Ts)  # the record's times where the words name them, not an array of them
-        # the model's own prior on the start speed: a model that says the run may start moving is not overruled
-        start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
-        decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
-        return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)))
+        return _decided(*_prepared(accel, clipped, model), rest, model, p, fixes)
+
+
+def decide_rests_read(read, n: int, n_axes: int, rest: np.ndarray | None, model: Model,
+                      params: ZuptParams = ZuptParams(), fixes=None, *, chunk: int = 1 << 20) -> Rests:  # fmt: skip
+    """:func:`decide_rests` of a record read ``chunk`` rows at a time by ``read(s, e)`` (t, accel, clipped;
+    engine.Source's reader): the same decisions, the record not held whole."""
+    with collector_held():
+        p = resolved(model, params)
+        return _decided(*_prepared_read(read, n, n_axes, model, max(int(chunk), 1)), rest, model, p, fixes)
+
+
+def gravity_axes_read(read, n: int, n_axes: int, model: Model, *, chunk: int = 1 << 20) -> list[str]:
+    """:func:`gravity_axes` of a record read ``chunk`` rows at a time (:func:`decide_rests_read`)."""
+    return gravity_of(*_prepared_read(read, n, n_axes, model, max(int(chunk), 1))[:2], model)
+
+
+def _decided(x, ok, R, rest, model: Model, p: ZuptParams, fixes) -> Rests:
+    """The detector (unless ``rest`` gives the candidates) and the decision on the prepared record, which both read."""
+    if rest is None:
+        rest = _detect(x, ok, R, model, p)
+    t = Clock(len(x), model.Ts)  # the record's times where the words name them, not an array of them
+    # the model's own prior on the start speed: a model that says the run may start moving is not overruled
+    start_sd = max(float(np.sqrt(axis_design(model, j).P0[1, 1])) for j in range(x.shape[1]))
+    decisions = decide(x, ok, R, model.Ts, t, intervals(rest), fixes, p, start_sd)
+    return Rests(np.asarray(rest, dtype=bool), decisions, accepted_mask(decisions, len(rest)))
+
+
+_held = {"count": 0, "was": False}  # decisions holding the collector off now, and its setting before the first
+_held_lock = threading.Lock()
+
+
+@contextlib.contextmanager
+def collector_held():
+    """Python's cycle collector off within, process-wide (the collector has no per-thread switch): the setting the
+    process had before the first of the decisions holding it comes back when the last of them ends, by return or by
+    exception. Two threads deciding at once: the first to end does not turn it back on under the other, the other
+    does not leave it off."""
+    with _held_lock:
+        if _held["count"] == 0:
+            _held["was"] = gc.isenabled()
+            gc.disable()
+        _held["count"] += 1
+    try:
+        yield
     finally:
-        if collecting:
-            gc.enable()
+        with _held_lock:
+            _held["count"] -= 1
+            if _held["count"] == 0 and _held["was"]:
+                gc.enable()
 
 
 def reason_counts(decisions: list[RestDecision]) -> dict[str, int]:
@@ -469,11 +529,16 @@ REPORT_COLUMNS = (
 
 def report_csv(decisions: list[RestDecision], t: np.ndarray) -> str:
     """One CSV row per candidate: times, samples, decision, reason, the evidence in words and the statistics
-    it rests on (``smooth --zupt-report``)."""
+    it rests on (``smooth --zupt-report``). ``t``: the run's times, or a function giving them at samples (a run
+    not held whole: engine.Source.times_at)."""
     import csv
     import io
 
-    t = np.asarray(t, dtype=np.float64)
+    if callable(t):
+        at = np.array([k for d in decisions for k in (d.start, d.stop - 1)], dtype=np.int64)
+        t = dict(zip(at.tolist(), np.asarray(t(at), dtype=np.float64), strict=True))
+    else:
+        t = np.asarray(t, dtype=np.float64)
 
     def f(v: float) -> str:
         return "" if not math.isfinite(v) else f"{v:.6g}"

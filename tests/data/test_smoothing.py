@@ -368,3 +368,37 @@ def test_a_chunked_run_without_its_envelope_is_not_drawn(inputs, tmp_path):
     with pytest.raises(ValueError, match="envelope=True"):
         plot_outcome(a, tmp_path / "p")
     assert not (tmp_path / "p").exists()
+
+
+def test_detected_rests_of_a_streamed_input_never_hold_it_whole(inputs, tmp_path, monkeypatch):
+    """--zupt auto over the budget on a streamed NPZ: the decision reads the stream a chunk at a time, and so do the
+    chunked passes after it (the run never held whole), and the run file and the rest report are those of the same
+    input held in memory, number for number."""
+    from accelnav.estimate import engine
+
+    seen, read_whole = [], []
+    real, whole = engine._chunked, engine.Source.whole
+
+    def spied(model, source, *args, **kwargs):
+        seen.append((source.streamed, source.arrays is None))
+        return real(model, source, *args, **kwargs)
+
+    def spied_whole(self):
+        read_whole.append(self.arrays is None)
+        return whole(self)
+
+    monkeypatch.setattr(engine, "_chunked", spied)
+    monkeypatch.setattr(engine.Source, "whole", spied_whole)
+    from accelnav.data.inputs import read_input
+
+    held, _ = read_input(inputs / "rec.npz", None)  # as the run was read before: whole
+    job = Job(budget=SMALL)
+    a = smooth_file(inputs / "rec.npz", tmp_path / "a.npz", job=job, zupt="auto", zupt_report=tmp_path / "a.csv")
+    b = smooth_file(held, tmp_path / "b.npz", job=job, zupt="auto", zupt_report=tmp_path / "b.csv")
+    assert seen == [("NPZ", True), ("", False)] and True not in read_whole
+    assert a.plan.chunks > 3 and sum(d.accepted for d in a.rests.decisions) > 0 and a.applied == b.applied
+    got, ref = load_run(tmp_path / "a.npz")[0], load_run(tmp_path / "b.npz")[0]
+    assert sorted(got) == sorted(ref) and "zupt_candidates" in got
+    for key in ref:
+        np.testing.assert_array_equal(got[key], ref[key], err_msg=key)
+    assert (tmp_path / "a.csv").read_text() == (tmp_path / "b.csv").read_text()

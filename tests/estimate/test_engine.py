@@ -3,6 +3,8 @@ gives the numbers of the whole-array smoother."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from conftest import assert_rel_close
@@ -91,3 +93,22 @@ def test_detected_rests_one_chunk_output_is_a_smoothing_with_the_rests_kept(defa
     ref = smooth_run(run, default_model, fixes=fixes, rest=stage.mask, zupt_params=p, covariances=False)
     for key in _OUTPUTS:
         np.testing.assert_array_equal(got.arrays[key], ref[key], err_msg=key)
+
+
+def test_the_rest_decision_is_refused_over_the_budget_in_one_line():
+    """--zupt auto reads every sample into memory for its decision (engine.rest_bytes): a run whose decision needs
+    more than the budget is refused by the plan, before anything is read; within it, or given rests, it is not."""
+    auto = engine.Job(rests=engine.Rests(detect=True))
+    n, need = 10**7, engine.rest_bytes(10**7, 2)
+    assert need == n * (engine.REST_SAMPLE_BYTES + 2 * engine.REST_AXIS_BYTES)
+    with pytest.raises(UserError) as exc:
+        engine.plan(n, 2, replace(auto, budget=need - 1))
+    assert "rest decision of --zupt auto" in str(exc.value) and "\n" not in str(exc.value)
+    assert not engine.plan(n, 2, replace(auto, budget=need)).whole  # within it: chunked, the decision whole
+    for job in (engine.Job(budget=need // 10, rests=engine.Rests(mask=np.zeros(n, dtype=bool))),
+                replace(auto, budget=need // 10, stages=("filt",))):  # fmt: skip
+        engine.plan(n, 2, job)  # given rests stream; the filter decides no rests
+    small = engine.REST_FLOOR // engine.rest_bytes(1, 2)  # under the process' own floor: a tiny budget cuts chunks
+    assert engine.plan(small, 2, replace(auto, budget=20_000)).chunks > 1
+    with pytest.raises(UserError, match="rest decision"):
+        engine.plan(small + 1, 2, replace(auto, budget=20_000))

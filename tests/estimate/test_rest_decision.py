@@ -271,3 +271,59 @@ def test_the_decider_goes_when_the_decision_returns(default_model, monkeypatch):
         assert made[0]() is None, "the decider outlived the decision: a reference cycle holds it"
     finally:
         gc.enable()
+
+
+def test_the_callers_cycle_collector_setting_comes_back_however_the_decision_ends(default_model, monkeypatch):
+    """The decision holds Python's cycle collector off (process-wide): a library caller's own setting, on or off,
+    is the same after it, whether it returned or raised; while it decides, the collector is off."""
+    import gc
+
+    from accelnav.estimate import rests
+    from accelnav.estimate.kf import position_fix
+
+    arrays = simulate(default_model, "stop_and_go", 60.0, 1).to_arrays()
+    accel, clipped = arrays["accel"], arrays["clipped"]
+    seen = []
+    real = rests.decide
+
+    def spied(*args, **kwargs):
+        seen.append(gc.isenabled())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(zupt, "decide", spied)
+    outside = [[position_fix(len(accel) + 5, 0.0, 1.0)] for _ in default_model.axes]  # refused by the decision
+    was = gc.isenabled()
+    try:
+        for setting in (True, False):
+            (gc.enable if setting else gc.disable)()
+            zupt.decide_rests(accel, clipped, None, default_model)
+            assert gc.isenabled() is setting
+            with pytest.raises(ValueError, match="outside the record"):
+                zupt.decide_rests(accel, clipped, None, default_model, fixes=outside)
+            assert gc.isenabled() is setting
+        assert seen == [False] * 4
+    finally:
+        (gc.enable if was else gc.disable)()
+
+
+def test_two_decisions_at_once_leave_the_collector_as_it_was():
+    """Two threads' decisions overlapping: the first to end does not turn the collector back on under the other,
+    and the last puts back the setting from before the first."""
+    import gc
+
+    was = gc.isenabled()
+    try:
+        gc.enable()
+        first, second = zupt.collector_held(), zupt.collector_held()
+        first.__enter__()
+        second.__enter__()
+        first.__exit__(None, None, None)
+        assert not gc.isenabled()
+        second.__exit__(None, None, None)
+        assert gc.isenabled()
+        gc.disable()
+        with zupt.collector_held():
+            pass
+        assert not gc.isenabled()
+    finally:
+        (gc.enable if was else gc.disable)()

@@ -13,6 +13,7 @@ from conftest import MODELS
 from support import zupt_oracle as ref
 
 from accelnav.estimate import zupt
+from accelnav.estimate.kf import position_fix
 from accelnav.hil_sim.sim.sensor import simulate
 from accelnav.model.load import load_model
 
@@ -129,3 +130,38 @@ def test_the_settled_bias_powers_change_no_bit(phi, c1, eps_mean):
         assert 0 < settled < n  # it did settle: the zeros were tested
         # and a power short of it would have changed a bit: the bound is not loose by orders
         assert eps_mean - c1 * full[settled // 2] != eps_mean
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 1000, 10**6])
+def test_the_decision_of_a_record_read_in_chunks_is_the_decision_of_it_whole(default_model, chunk):
+    """zupt.decide_rests_read (a streamed run's decision, read a chunk at a time) against decide_rests on the record
+    in memory: the same candidates, verdicts, figures and words, and the same gravity axes, whatever the chunks."""
+    arrays = simulate(default_model, "stop_and_go", 60.0, 3).to_arrays()
+    accel, clipped = arrays["accel"].copy(), arrays["clipped"].copy()
+    clipped[500:520, 0] = True  # unusable samples across chunk edges
+    accel[900, 1] = np.nan
+    fixes = [[position_fix(3000, 1.0, 0.5)], []]
+
+    def read(s, e):
+        return arrays["t"][s:e], accel[s:e], clipped[s:e]
+
+    n, n_axes = accel.shape
+    for cands in (None, zupt.candidates(accel, clipped, default_model)):
+        ref = zupt.decide_rests(accel, clipped, cands, default_model, fixes=fixes)
+        got = zupt.decide_rests_read(read, n, n_axes, cands, default_model, fixes=fixes, chunk=chunk)
+        np.testing.assert_array_equal(got.candidates, ref.candidates)
+        np.testing.assert_array_equal(got.mask, ref.mask)
+        assert len(ref.decisions) > 5 and any(d.accepted for d in ref.decisions)
+        words = ("start", "stop", "accepted", "reason", "evidence")
+        assert [[getattr(d, k) for k in words] for d in got.decisions] == [
+            [getattr(d, k) for k in words] for d in ref.decisions
+        ]
+        figures = ("still", "level", "v_before", "sd_before", "v_after", "sd_after", "chi2")
+        np.testing.assert_array_equal(*(np.array([[getattr(d, k) for k in figures] for d in dec.decisions])
+                                        for dec in (got, ref)))  # fmt: skip
+    x, ok, _ = zupt._prepared(accel, clipped, default_model)
+    xr, okr, _ = zupt._prepared_read(read, n, n_axes, default_model, chunk)
+    assert x.tobytes() == xr.tobytes() and ok.tobytes() == okr.tobytes()
+    assert zupt.gravity_axes_read(read, n, n_axes, default_model, chunk=chunk) == zupt.gravity_axes(
+        accel, clipped, default_model
+    )

@@ -1897,8 +1897,85 @@ static double kin_pos(double x)
     return 0.0 > x ? 0.0 : x;
 }
 
-void acn_kin_to(int n_axes, double *s, const double *V, const double *W, long k0, long k, double Ts,
-                double q, const double *qv)
+/* one row of the sums on: [V, A, W] (3 n_axes) at sample k to k + 1 in place, row x[k] summed as
+   acn_kin_sums sums it (W from the V before) */
+static void kin_rec_step(int n_axes, const double *row, double Ts, double *vaw)
+{
+    for (int j = 0; j < n_axes; j++) {
+        double v = vaw[j];
+        vaw[j] = v + row[j] * Ts;
+        vaw[n_axes + j] = vaw[n_axes + j] + fabs(row[j]) * Ts;
+        vaw[2 * n_axes + j] = vaw[2 * n_axes + j] + v * Ts;
+    }
+}
+
+static const double *kin_rec_x(const acn_kin_rec *r, long k)
+{
+    return r->x + (r->reverse ? r->n - 1 - k : k) * r->n_axes;
+}
+
+void acn_kin_checkpoints(acn_kin_rec *r, double *cp)
+{
+    int w = 3 * r->n_axes;
+    double vaw[24] = {0.0};
+    for (long k = 0; k <= r->n; k++) {
+        if (k % r->every == 0) {
+            memcpy(cp + (k / r->every) * w, vaw, sizeof(double) * (size_t)w);
+        }
+        if (k < r->n) {
+            kin_rec_step(r->n_axes, kin_rec_x(r, k), r->Ts, vaw);
+        }
+    }
+    r->cp = cp;
+    for (int i = 0; i < 4; i++) {
+        r->at[i] = -1;
+        r->used[i] = 0;
+    }
+    r->clock = 0;
+}
+
+/* sample k's row [V, A, W]: a kept row, or one summed on from the nearest checkpoint or kept row
+   before k (into the least recently read slot, unless it goes on from a kept one) */
+static const double *kin_rec_row(acn_kin_rec *r, long k)
+{
+    int w = 3 * r->n_axes, from = -1, lru = 0;
+    long base = (k / r->every) * r->every;
+    for (int i = 0; i < 4; i++) {
+        if (r->at[i] == k) {
+            r->used[i] = ++r->clock;
+            return r->row + 24 * i;
+        }
+        if (r->at[i] > base && r->at[i] < k && (from < 0 || r->at[i] > r->at[from])) {
+            from = i;
+            base = r->at[i];
+        }
+        if (r->used[i] < r->used[lru]) {
+            lru = i;
+        }
+    }
+    double *row = r->row + 24 * lru;
+    if (from >= 0) {
+        if (from != lru) {
+            memcpy(row, r->row + 24 * from, sizeof(double) * (size_t)w);
+        }
+    } else {
+        memcpy(row, r->cp + (base / r->every) * w, sizeof(double) * (size_t)w);
+    }
+    for (long i = base; i < k; i++) {
+        kin_rec_step(r->n_axes, kin_rec_x(r, i), r->Ts, row);
+    }
+    r->at[lru] = k;
+    r->used[lru] = ++r->clock;
+    return row;
+}
+
+void acn_kin_sums_at(acn_kin_rec *r, long k, double *out)
+{
+    memcpy(out, kin_rec_row(r, k), sizeof(double) * 3 * (size_t)r->n_axes);
+}
+
+void acn_kin_to(int n_axes, double *s, acn_kin_rec *rec, long k0, long k, double Ts, double q,
+                const double *qv)
 {
     long m = k - k0;
     if (m <= 0) {
@@ -1912,12 +1989,13 @@ void acn_kin_to(int n_axes, double *s, const double *V, const double *W, long k0
        the velocity noise of the integrated sensor noise */
     double qrr = q * D3 * D2 / 20, qru = q * D2 * D2 / 8, qre = -q * D3 / 6;
     double quu = q * D3 / 3, que = -q * D2 / 2, qee = q * D;
+    const double *rk = kin_rec_row(rec, k), *r0 = kin_rec_row(rec, k0);
     for (int j = 0; j < n_axes; j++) {
         double *x = s + 9 * j;
         double r = x[0], u = x[1], e = x[2], a = x[3], b = x[4], cc = x[5], d = x[6], f = x[7],
                g = x[8];
-        double dV = V[k * n_axes + j] - V[k0 * n_axes + j];
-        double dW = W[k * n_axes + j] - W[k0 * n_axes + j] - D * V[k0 * n_axes + j];
+        double dV = rk[j] - r0[j];
+        double dW = rk[2 * n_axes + j] - r0[2 * n_axes + j] - D * r0[j];
         /* F P F' with F = [[1, D, -c], [0, 1, -D], [0, 0, 1]]: the rows of F P first */
         double x0 = a + D * b - c * cc, x1 = b + D * d - c * f, x2 = cc + D * f - c * g;
         double y1 = d - D * f, y2 = f - D * g;
@@ -1953,10 +2031,10 @@ static void kin_update(double *x, int i, double z, double var)
     x[8] = g - K2 * P2;
 }
 
-void acn_kin_aid(int n_axes, double *s, const double *V, const double *W, long k0, long k,
-                 double Ts, double q, const double *qv, int axis, int i, double z, double var)
+void acn_kin_aid(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
+                 const double *qv, int axis, int i, double z, double var)
 {
-    acn_kin_to(n_axes, s, V, W, k0, k, Ts, q, qv);
+    acn_kin_to(n_axes, s, r, k0, k, Ts, q, qv);
     for (int j = 0; j < n_axes; j++) {
         if (axis < 0 || axis == j) {
             kin_update(s + 9 * j, i, z, var);
@@ -1964,18 +2042,19 @@ void acn_kin_aid(int n_axes, double *s, const double *V, const double *W, long k
     }
 }
 
-double acn_kin_side(int n_axes, const double *s, const double *A, long k, long aid_k, double Ts,
+double acn_kin_side(int n_axes, const double *s, acn_kin_rec *r, long k, long aid_k, double Ts,
                     const double *level, const double *R, long len, double leak, double drift,
                     double scale, double sigma2, double sign, double *out)
 {
     double D = (double)(k - aid_k) * Ts;
     double total = 0.0;
+    const double *ak = kin_rec_row(r, k) + n_axes, *a0 = kin_rec_row(r, aid_k) + n_axes;
     for (int j = 0; j < n_axes; j++) {
         double x[9];
         memcpy(x, s + 9 * j, sizeof x);
         double e_prior = x[2];
         int known = x[8] < 1.0;
-        double moved = A[k * n_axes + j] - A[aid_k * n_axes + j];
+        double moved = ak[j] - a0[j];
         /* conditioned on the candidate's level, the filter's own state unchanged */
         kin_update(x, 2, level[j], R[j] / (double)(len > 1 ? len : 1));
         double lk = leak * (level[j] - e_prior) * D, dr = drift * D, sc = scale * moved;
@@ -2062,15 +2141,14 @@ double acn_kin_jump(int n_axes, const double *s, const double *level)
     return sqrt(sum);
 }
 
-void acn_kin_test(int n_axes, double *s, const double *V, const double *W, const double *A, long k0,
-                  long k, double Ts, double q, const double *qv, long aid_k, const double *level,
-                  const double *R, long len, double leak, double drift, double scale, double sigma2,
-                  double *out, double *res)
+void acn_kin_test(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
+                  const double *qv, long aid_k, const double *level, const double *R, long len,
+                  double leak, double drift, double scale, double sigma2, double *out, double *res)
 {
-    acn_kin_to(n_axes, s, V, W, k0, k, Ts, q, qv);
+    acn_kin_to(n_axes, s, r, k0, k, Ts, q, qv);
     long now = k > k0 ? k : k0;
     res[1] = acn_kin_jump(n_axes, s, level);
-    double total = acn_kin_side(n_axes, s, A, now, aid_k, Ts, level, R, len, leak, drift, scale,
+    double total = acn_kin_side(n_axes, s, r, now, aid_k, Ts, level, R, len, leak, drift, scale,
                                 sigma2, 1.0, out);
     res[0] = acn_chi2_equivalent(total, n_axes);
     /* rests.py's _norms, its sums in the same order: |v| and the rms of the sds */
@@ -2123,9 +2201,16 @@ void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, lon
     }
 }
 
-void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long num,
-                  const double *u0, const double *e0, const double *level, double *out)
+void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long num, const double *u0,
+                  const double *e0, const double *level, double *out)
 {
+    /* the points go up from e: each row summed on from the last point's (cur, at sample at), or
+       from its checkpoint when that is nearer, without the kept rows' bookkeeping of a read */
+    double ve[8], cur[24];
+    int w3 = 3 * n_axes;
+    memcpy(cur, kin_rec_row(r, e), sizeof(double) * (size_t)w3);
+    memcpy(ve, cur, sizeof(double) * (size_t)n_axes);
+    long at = e;
     double D = (double)(a - e > 1 ? a - e : 1) * Ts;
     double step = num > 1 ? (double)(a - e) / (double)(num - 1) : 0.0;
     out[0] = out[1] = out[2] = 0.0; /* sums of squares: none below 0 */
@@ -2135,9 +2220,17 @@ void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long n
         double tk = (double)(k - e) * Ts;
         double w = tk * tk / (2 * D);
         double s2 = 0.0, f2 = 0.0;
+        long base = (k / r->every) * r->every;
+        if (at < base || at > k) {
+            memcpy(cur, r->cp + (base / r->every) * w3, sizeof(double) * (size_t)w3);
+            at = base;
+        }
+        for (; at < k; at++) {
+            kin_rec_step(n_axes, kin_rec_x(r, at), r->Ts, cur);
+        }
         for (int j = 0; j < n_axes; j++) {
             double ramp = (level[j] - e0[j]) * w;
-            double v = V[k * n_axes + j] - V[e * n_axes + j] - e0[j] * tk - ramp + u0[j];
+            double v = cur[j] - ve[j] - e0[j] * tk - ramp + u0[j];
             double flat = v + ramp; /* the rest's own level all the way */
             s2 += v * v;
             f2 += flat * flat;
@@ -2148,12 +2241,12 @@ void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long n
     }
 }
 
-void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, const double *A,
-                      double Ts, double q, const double *qv, const double *R, long n_ev,
-                      const long *ev_k, const int *ev_kind, const long *ev_i, const double *ev_z,
-                      const double *ev_var, const unsigned char *acc, const double *level,
-                      const long *len, double leak, double drift, double scale, double sigma,
-                      double *out, double *stat, long *aid, unsigned char *fix)
+void acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q, const double *qv,
+                      const double *R, long n_ev, const long *ev_k, const int *ev_kind,
+                      const long *ev_i, const double *ev_z, const double *ev_var,
+                      const unsigned char *acc, const double *level, const long *len, double leak,
+                      double drift, double scale, double sigma, double *out, double *stat,
+                      long *aid, unsigned char *fix)
 {
     long k_now = 0, aid_k = 0, aid_ev = -1;
     unsigned char fix_seen = 0;
@@ -2162,7 +2255,7 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
         long k = ev_k[e], i = ev_i[e];
         int kind = ev_kind[e];
         if (kind == 1 || (kind == 2 && acc[i])) { /* an aid: a fix, or a rest's end */
-            acn_kin_aid(n_axes, s, V, W, k_now, k, Ts, q, qv, kind == 1 ? (int)i : -1,
+            acn_kin_aid(n_axes, s, r, k_now, k, Ts, q, qv, kind == 1 ? (int)i : -1,
                         kind == 1 ? 0 : 1, kind == 1 ? ev_z[e] : 0.0, kind == 1 ? ev_var[e] : var);
             k_now = k > k_now ? k : k_now;
             aid_k = k;
@@ -2173,10 +2266,10 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
         if (kind != 0) {
             continue;
         }
-        acn_kin_to(n_axes, s, V, W, k_now, k, Ts, q, qv);
+        acn_kin_to(n_axes, s, r, k_now, k, Ts, q, qv);
         k_now = k > k_now ? k : k_now;
         double *side = out + 4 * n_axes * i, v2 = 0.0, sd2 = 0.0;
-        double total = acn_kin_side(n_axes, s, A, k_now, aid_k, Ts, level + i * n_axes, R, len[i],
+        double total = acn_kin_side(n_axes, s, r, k_now, aid_k, Ts, level + i * n_axes, R, len[i],
                                     leak, drift, scale, var, -1.0, side);
         /* as acn_kin_test's: the chi-square read on one axis, |v| and the rms of the sds */
         for (int j = 0; j < n_axes; j++) {
@@ -2189,7 +2282,7 @@ void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, c
         aid[i] = aid_ev;
         fix[i] = fix_seen;
         if (acc[i]) {
-            acn_kin_aid(n_axes, s, V, W, k_now, k, Ts, q, qv, -1, 1, 0.0, var);
+            acn_kin_aid(n_axes, s, r, k_now, k, Ts, q, qv, -1, 1, 0.0, var);
             aid_k = k;
         }
     }
@@ -2289,7 +2382,7 @@ static void kin_fwd_peak(const acn_kin_fwd *f, long i, long end_k, const double 
 {
     long a = f->start[i] > end_k ? f->start[i] : end_k;
     long num = a - end_k + 1 < f->peak_points ? a - end_k + 1 : f->peak_points;
-    acn_kin_peak(f->n_axes, f->V, f->Ts, end_k, a, num, u0, e0, f->level + i * f->n_axes, out);
+    acn_kin_peak(f->n_axes, f->rec, f->Ts, end_k, a, num, u0, e0, f->level + i * f->n_axes, out);
     for (int j = 0; j < 3; j++) {
         out[j] = sqrt(out[j]);
     }
@@ -2440,6 +2533,9 @@ static void kin_fwd_mark(const acn_kin_fwd *f, acn_kin_fwd_out *o, long slot, lo
 /* the inputs' lengths and indices: 0 when every one lies within its array */
 static int kin_fwd_checked(const acn_kin_fwd *f, long resume, const acn_kin_fwd_out *o)
 {
+    if (f->rec == NULL || f->rec->n != f->n || f->rec->n_axes != f->n_axes || f->rec->every < 1) {
+        return -1;
+    }
     if (f->n_axes < 1 || f->n_axes > KIN_AXES || f->n < 0 || f->m < 0 || f->n_ev < 0 ||
         f->mark_every < 1 || f->n_marks != f->m / f->mark_every + 1 || f->peak_points < 1 ||
         resume < -1 || resume >= f->m || (resume >= 0 && resume % f->mark_every != 0)) {
@@ -2537,7 +2633,7 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         int kind = f->ev_kind[e];
         e++;
         if (kind == 1) {
-            acn_kin_aid(n_axes, w.s, f->V, f->W, w.st.k, k, f->Ts, f->q, f->qv, (int)i, 0,
+            acn_kin_aid(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, (int)i, 0,
                         f->ev_z[e - 1], f->ev_var[e - 1]);
             w.st.k = k > w.st.k ? k : w.st.k;
             w.st.aid_k = k;
@@ -2551,8 +2647,7 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         }
         if (kind == 2) {
             if (o->acc[i]) {
-                acn_kin_aid(n_axes, w.s, f->V, f->W, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0,
-                            var);
+                acn_kin_aid(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0, var);
                 w.st.k = k > w.st.k ? k : w.st.k;
                 w.st.aid_k = k;
                 w.st.has_end = 1;
@@ -2572,7 +2667,7 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         }
         /* a candidate's test: its side, then the verdict */
         double *side = o->side + 4 * n_axes * i, *num = o->num + ACN_KIN_NUM * i;
-        acn_kin_test(n_axes, w.s, f->V, f->W, f->A, w.st.k, k, f->Ts, f->q, f->qv, w.st.aid_k,
+        acn_kin_test(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, w.st.aid_k,
                      f->level + n_axes * i, f->R, f->stop[i] - f->start[i], f->leak, f->drift,
                      f->scale, var, side, res);
         w.st.k = k > w.st.k ? k : w.st.k;
@@ -2636,7 +2731,7 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         }
         if (reason <= KIN_GATE_OFF || reason == KIN_HYPOTHESIS) {
             o->acc[i] = 1;
-            acn_kin_aid(n_axes, w.s, f->V, f->W, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0, var);
+            acn_kin_aid(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0, var);
             w.st.k = k > w.st.k ? k : w.st.k;
             w.st.aid_k = k;
         }

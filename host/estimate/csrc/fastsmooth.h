@@ -142,8 +142,8 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
  * The rest decision's kinematic filter (host/estimate/rests.py, _Kinematic): per
  * axis the state (r, u, e) and its symmetric covariance, 9 doubles
  *   r u e  Prr Pru Pre Puu Pue Pee
- * n_axes of them side by side in s. V, W, A: the record's sums, n + 1 rows of
- * n_axes (rests.py says which). The arithmetic is the Python reference's
+ * n_axes of them side by side in s. r: the record's sums V, A, W (acn_kin_rec,
+ * below; rests.py says which). The arithmetic is the Python reference's
  * (tests/support/rests_reference.py), in its order.
  *   acn_kin_to    propagate s from sample k0 to k (k > k0)
  *   acn_kin_aid   propagate, then the scalar measurement z of state i (0: r,
@@ -158,11 +158,36 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
  *                 since (scale x the integral of |x|); r's by that times D
  *   acn_kin_jump  the level's jump beyond 3 sd of the filter's (0: it has none)
  */
-void acn_kin_to(int n_axes, double *s, const double *V, const double *W, long k0, long k, double Ts,
-                double q, const double *qv);
-void acn_kin_aid(int n_axes, double *s, const double *V, const double *W, long k0, long k,
-                 double Ts, double q, const double *qv, int axis, int i, double z, double var);
-double acn_kin_side(int n_axes, const double *s, const double *A, long k, long aid_k, double Ts,
+/*
+ * The record's sums the kinematic filter reads (rests.py, _Kinematic), V, A, W
+ * as acn_kin_sums gives them, without their n + 1 rows in memory: x (n rows of
+ * n_axes, reverse: read last first) and checkpoints cp, the row [V, A, W] (3
+ * n_axes doubles) at every `every`-th sample (n / every + 1 of them, made by
+ * acn_kin_checkpoints); a sample's row is summed on from the nearest checkpoint
+ * or kept row before it (at[], row: 4 rows kept, the least recently read
+ * replaced), step by step as acn_kin_sums sums: the same doubles.
+ * acn_kin_sums_at copies sample k's row into out. n_axes at most 8.
+ */
+typedef struct {
+    long n;
+    int n_axes;
+    const double *x;
+    int reverse;
+    double Ts;
+    long every;
+    const double *cp;
+    long at[4];
+    long used[4];
+    long clock;
+    double row[96];
+} acn_kin_rec;
+void acn_kin_checkpoints(acn_kin_rec *r, double *cp);
+void acn_kin_sums_at(acn_kin_rec *r, long k, double *out);
+void acn_kin_to(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
+                const double *qv);
+void acn_kin_aid(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
+                 const double *qv, int axis, int i, double z, double var);
+double acn_kin_side(int n_axes, const double *s, acn_kin_rec *r, long k, long aid_k, double Ts,
                     const double *level, const double *R, long len, double leak, double drift,
                     double scale, double sigma2, double sign, double *out);
 double acn_kin_jump(int n_axes, const double *s, const double *level);
@@ -172,10 +197,9 @@ double acn_kin_jump(int n_axes, const double *s, const double *level);
  * res = [its chi-square read on one axis (acn_chi2_equivalent), the level's
  * jump (acn_kin_jump), |v| over the axes, the rms of the sds].
  */
-void acn_kin_test(int n_axes, double *s, const double *V, const double *W, const double *A, long k0,
-                  long k, double Ts, double q, const double *qv, long aid_k, const double *level,
-                  const double *R, long len, double leak, double drift, double scale, double sigma2,
-                  double *out, double *res);
+void acn_kin_test(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
+                  const double *qv, long aid_k, const double *level, const double *R, long len,
+                  double leak, double drift, double scale, double sigma2, double *out, double *res);
 /*
  * The one-degree chi-square value with the upper tail of x under dof degrees of
  * freedom (rests.py, chi2_equivalent): the tail in closed form, its inverse by
@@ -197,12 +221,12 @@ void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, lon
  * A candidate's peak speed (acn_kin_forward's): from the last rest's end
  * e (its velocity u0 and level e0 per axis) to the candidate's start a >= e, on
  * num points of the way (the first e, the last a, rounded half to even between),
- * the velocity integrated from V (n + 1 rows of n_axes) with the level linear
+ * the velocity integrated from r's V with the level linear
  * from e0 to the candidate's level. out: the peak and the last speed squared,
  * and the peak squared with the level e0 kept all the way.
  */
-void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long num,
-                  const double *u0, const double *e0, const double *level, double *out);
+void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long num, const double *u0,
+                  const double *e0, const double *level, double *out);
 /*
  * The backward filter of the rest decision (rests.py, _Decider.backward): from
  * the state s at sample 0 of the reversed record, its n_ev events in order,
@@ -215,12 +239,12 @@ void acn_kin_peak(int n_axes, const double *V, double Ts, long e, long a, long n
  * event of the last aid before it (a fix, or the end of a rest) into aid[i]
  * (-1: none) and whether a fix came before it into fix[i].
  */
-void acn_kin_backward(int n_axes, double *s, const double *V, const double *W, const double *A,
-                      double Ts, double q, const double *qv, const double *R, long n_ev,
-                      const long *ev_k, const int *ev_kind, const long *ev_i, const double *ev_z,
-                      const double *ev_var, const unsigned char *acc, const double *level,
-                      const long *len, double leak, double drift, double scale, double sigma,
-                      double *out, double *stat, long *aid, unsigned char *fix);
+void acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q, const double *qv,
+                      const double *R, long n_ev, const long *ev_k, const int *ev_kind,
+                      const long *ev_i, const double *ev_z, const double *ev_var,
+                      const unsigned char *acc, const double *level, const long *len, double leak,
+                      double drift, double scale, double sigma, double *out, double *stat,
+                      long *aid, unsigned char *fix);
 /*
  * The sums the kinematic filter reads (rests.py, _Kinematic), n + 1 rows of
  * n_axes each, over x (n rows of n_axes; reverse: its rows last first):
@@ -240,8 +264,9 @@ void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, d
  */
 typedef struct {
     int n_axes;
-    long n; /* samples: V, W, A have n + 1 rows of n_axes */
-    const double *V, *W, *A, *R, *qv;
+    long n; /* samples: the sums have n + 1 rows */
+    acn_kin_rec *rec;
+    const double *R, *qv;
     double Ts, q;
     const double *diffuse; /* the prior variances of r, u, e */
     long n_ev;

@@ -1,0 +1,54 @@
+"""The rest decision's sums read at a sample (acn_kin_rec, rests._Kinematic): from checkpoints and the rows read
+before, the same doubles as acn_kin_sums' whole n + 1 rows, whatever the order of the reads; and the filter's
+memory no longer grows with the record by those rows."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from accelnav.estimate import rests
+from accelnav.estimate.fastsmooth import _lib
+
+
+def _whole(x: np.ndarray, Ts: float, reverse: bool) -> np.ndarray:
+    """acn_kin_sums' rows [V, A, W] of every sample, (n + 1, 3 n_axes)."""
+    mod = _lib()
+    n, n_axes = x.shape
+    V, A, W = (np.zeros((n + 1, n_axes)) for _ in range(3))
+    buf = mod.ffi.from_buffer
+    mod.lib.acn_kin_sums(n, n_axes, buf("double[]", x), reverse, Ts, *(buf("double[]", a) for a in (V, A, W)))
+    return np.hstack((V, A, W))
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+@pytest.mark.parametrize(("n", "n_axes"), [(0, 1), (1, 2), (255, 2), (256, 3), (3000, 2), (1031, 8)])
+def test_every_sample_read_in_any_order_is_the_whole_sums_row(n, n_axes, reverse):
+    rng = np.random.default_rng(n + n_axes)
+    x = rng.normal(0.0, 3.0, (n, n_axes)) * rng.choice([1e-6, 1.0, 1e3], (n, n_axes))  # sums that lose bits
+    Ts = 0.01
+    want = _whole(x, Ts, reverse)
+    kin = rests._Kinematic(x, Ts, np.full(n_axes, 0.01), 0.0025, reverse)
+    assert kin.cp.nbytes == (n // rests.SUMS_EVERY + 1) * 3 * n_axes * 8
+    mod = _lib()
+    out = np.empty(3 * n_axes)
+    p = mod.ffi.from_buffer("double[]", out)
+    # in order, backwards, at random, the same sample twice, and the kernels' pattern: a row, one far back, on again
+    orders = [np.arange(n + 1), np.arange(n, -1, -1), rng.integers(0, n + 1, 3 * n + 5), np.repeat([0, n], 3)]
+    orders.append(np.ravel([(k, max(k - 700, 0), min(k + 3, n)) for k in range(0, n + 1, 97)]))
+    for order in orders:
+        for k in order.tolist():
+            mod.lib.acn_kin_sums_at(kin.rec, k, p)
+            np.testing.assert_array_equal(out, want[k], err_msg=f"sample {k} of {n}, reverse {reverse}")
+
+
+def test_the_filter_holds_checkpoints_not_the_record_sums():
+    n, n_axes = 200_000, 2
+    kin = rests._Kinematic(np.ones((n, n_axes)), 0.01, np.ones(n_axes), 0.0025)
+    held = sum(v.nbytes for v in vars(kin).values() if isinstance(v, np.ndarray) and v is not kin.x)
+    assert held < 3 * n * n_axes * 8 / 100  # the three sums whole: 9.6 MB; their checkpoints: 37.5 kB
+
+
+def test_more_axes_than_a_row_holds_are_refused():
+    with pytest.raises(ValueError, match="at most 8"):
+        rests._Kinematic(np.zeros((10, 9)), 0.01, np.ones(9), 0.0025)
