@@ -19,7 +19,7 @@ from support.cachekey import private_cache
 from support.cli import run_cli
 
 from accelnav.data.runfile import load_run
-from accelnav.data.smoothing import _start_method, smooth_batch, smooth_files, smooth_one
+from accelnav.data.smoothing import start_method, smooth_batch, smooth_files, smooth_one
 from accelnav.estimate import fastsmooth as fs
 from accelnav.model.load import load_model
 
@@ -124,7 +124,7 @@ def test_a_partition_under_dask_and_the_process_set_up_for_it(fleet, tmp_path, c
 def test_workers_are_forked_only_where_no_other_thread_could_hold_a_lock(fleet, tmp_path, capsys):
     """A process of one thread (the command's) forks its workers on Linux, ready at once; with another thread
     running (a notebook's, a server's) they are spawned, and the fleet gives the same files."""
-    code = "from accelnav.data.smoothing import _start_method as s; print(s())"
+    code = "from accelnav.data.smoothing import start_method as s; print(s())"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.stdout.strip() == ("fork" if sys.platform == "linux" else "spawn"), done.stderr
     paths, _ = fleet
@@ -132,7 +132,7 @@ def test_workers_are_forked_only_where_no_other_thread_could_hold_a_lock(fleet, 
     other = threading.Thread(target=stop.wait)
     other.start()
     try:
-        assert _start_method() == "spawn"
+        assert start_method() == "spawn"
         results = smooth_files(paths[:2], tmp_path / "out", jobs=2)
     finally:
         stop.set()
