@@ -329,11 +329,24 @@ def smooth_batch(pairs: Sequence[tuple[str | Path, str | Path]], kw: dict | None
     partition's task, ``bag.map_partitions(smooth_batch, kw)``: one task per partition, not per file; the
     recipe, with the settings that share the partitions among the processes, is in docs/python.rst), the
     process set up as the command's workers are (:func:`accelnav.resources.reuse_freed_memory`)."""
-    from accelnav.resources import reuse_freed_memory
+    from accelnav.resources import MALLOC_ENV, reuse_freed_memory
 
-    reuse_freed_memory()
+    global _said_malloc
+    if not reuse_freed_memory() and not _said_malloc:
+        given = [k for k in MALLOC_ENV if k in os.environ]
+        if given:  # said once per process: a fleet's worker runs many partitions
+            _said_malloc = True
+            logging.getLogger(__name__).warning(
+                "%s set in this worker (dask.distributed's workers set MALLOC_TRIM_THRESHOLD_ by default): glibc "
+                "keeps it, and each file's arrays are fresh pages, about twice the CPU of a 1e5-row file (measured); "
+                "unset it for the workers as docs/python.rst says ('Files of any length, and many of them')",
+                ", ".join(given),
+            )
     kw = {} if kw is None else kw
     return [smooth_one(p, o, kw) for p, o in pairs]
+
+
+_said_malloc = False  # smooth_batch's warning that the environment's malloc settings stand, given in this process
 
 
 def _fleet_worker(threads: int = 1) -> None:

@@ -8,6 +8,7 @@ unless ACCELNAV_REQUIRE_DASK=1 (set by .ci/run), where a missing Dask is a failu
 from __future__ import annotations
 
 import json
+import logging
 import os
 import platform
 import re
@@ -21,6 +22,7 @@ from conftest import REPO
 from support.cachekey import private_cache
 from support.cli import run_cli
 
+from accelnav.data import smoothing
 from accelnav.data.runfile import load_run
 from accelnav.data.smoothing import smooth_batch, smooth_files, smooth_one, start_method
 from accelnav.estimate import fastsmooth as fs
@@ -190,6 +192,18 @@ def test_the_documented_dask_block_hands_a_partition_to_a_free_process(fleet, tm
     )
     for p in paths:
         _same_as_alone(out / p.name, p, tmp_path, capsys)
+
+
+def test_a_batch_says_once_that_the_environment_keeps_glibc_as_it_is(monkeypatch, caplog):
+    """dask.distributed's workers start with MALLOC_TRIM_THRESHOLD_ set: accelnav leaves glibc as the environment
+    says, and the worker says so once (not once per partition), naming the variable and what it costs. (The
+    variable set, reuse_freed_memory changes nothing in this process.)"""
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+    monkeypatch.setattr(smoothing, "_said_malloc", False)
+    with caplog.at_level(logging.WARNING, logger="accelnav"):
+        assert smooth_batch([], {}) == [] and smooth_batch([], {}) == []
+    said = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(said) == 1 and "MALLOC_TRIM_THRESHOLD_ set" in said[0] and "twice the CPU" in said[0], said
 
 
 def test_workers_are_forked_only_where_no_other_thread_could_hold_a_lock(fleet, tmp_path, capsys):
