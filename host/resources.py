@@ -81,6 +81,8 @@ def threads() -> int:
     return min(env_count(THREADS_ENV, "threads") or 1, os.cpu_count() or 1)
 
 
+# glibc's settings a user may give in the environment: any of them set, reuse_freed_memory leaves glibc alone
+MALLOC_ENV = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_ARENA_MAX")
 # glibc's mallopt parameters (malloc.h)
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_ARENA_MAX = -1, -3, -8
 REUSE_BLOCK = 32 << 20  # blocks up to this size come from (and go back to) the heap: glibc's largest setting
@@ -104,9 +106,7 @@ def reuse_freed_memory() -> bool:
     import ctypes
     import sys
 
-    if not sys.platform.startswith("linux") or any(
-        k in os.environ for k in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_ARENA_MAX")
-    ):
+    if not sys.platform.startswith("linux") or any(k in os.environ for k in MALLOC_ENV):
         return False
     try:
         libc = ctypes.CDLL(None)

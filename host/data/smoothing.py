@@ -19,7 +19,7 @@ import os
 import shutil
 from collections.abc import Sequence
 from contextlib import ExitStack
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -297,6 +297,7 @@ class FileResult:
     ok: bool
     message: str  # "N samples, S s" or the error's line
     seconds: float
+    pid: int = field(default_factory=os.getpid)  # the process that smoothed it (how a fleet's work was shared)
 
 
 def fleet_outputs(paths: Sequence[str | Path], out_dir: str | Path) -> list[Path]:
@@ -332,13 +333,27 @@ def smooth_one(path: str | Path, out: str | Path, kw: dict) -> FileResult:
 
 def smooth_batch(pairs: Sequence[tuple[str | Path, str | Path]], kw: dict | None = None) -> list[FileResult]:
     """:func:`smooth_one` over ``pairs`` of (input, output) in turn, in a process given to the fleet (a Dask
-    partition's task, ``bag.map_partitions(smooth_batch, kw)``: one task per partition, not per file), the
+    partition's task, ``bag.map_partitions(smooth_batch, kw)``: one task per partition, not per file; the
+    recipe, with the settings that share the partitions among the processes, is in docs/python.rst), the
     process set up as the command's workers are (:func:`accelnav.resources.reuse_freed_memory`)."""
-    from accelnav.resources import reuse_freed_memory
+    from accelnav.resources import MALLOC_ENV, reuse_freed_memory
 
-    reuse_freed_memory()
+    global _said_malloc
+    if not reuse_freed_memory() and not _said_malloc:
+        given = [k for k in MALLOC_ENV if k in os.environ]
+        if given:  # said once per process: a fleet's worker runs many partitions
+            _said_malloc = True
+            logging.getLogger(__name__).warning(
+                "%s set in this worker (dask.distributed's workers set MALLOC_TRIM_THRESHOLD_ by default): glibc "
+                "keeps it, and each file's arrays are fresh pages, about twice the CPU of a 1e5-row file (measured); "
+                "unset it for the workers as docs/python.rst says ('Files of any length, and many of them')",
+                ", ".join(given),
+            )
     kw = {} if kw is None else kw
     return [smooth_one(p, o, kw) for p, o in pairs]
+
+
+_said_malloc = False  # smooth_batch's warning that the environment's malloc settings stand, given in this process
 
 
 def _fleet_worker(threads: int = 1) -> None:
@@ -353,11 +368,12 @@ def _fleet_worker(threads: int = 1) -> None:
     resources.reuse_freed_memory()
 
 
-def _start_method() -> str:
+def start_method() -> str:
     """How the workers start: forked where that is safe (Linux, and no other thread of this process's Python
     that could hold a lock across the fork): a copy of this process, its imports done, ready at once; else
     spawned, each importing numpy and accelnav afresh (0.45 s of CPU per worker before its first file, measured:
-    with 1e5-row files at 40 ms each, a tenth of a 200-file fleet's time on 2 cores)."""
+    with 1e5-row files at 40 ms each, a tenth of a 200-file fleet's time on 2 cores). The command's workers
+    start so, and Dask's local processes in the recipe of docs/python.rst (``multiprocessing.context``)."""
     import sys
     import threading
 
@@ -368,7 +384,7 @@ def smooth_files(
     paths: Sequence[str | Path], out_dir: str | Path, *, jobs: int = 1, done=None, **kw
 ) -> list[FileResult]:
     """:func:`smooth_file` over many inputs, each to ``out_dir`` (:func:`fleet_outputs`), ``jobs`` at a time
-    in worker processes (concurrent.futures, started as :func:`_start_method` says; a budget given is shared
+    in worker processes (concurrent.futures, started as :func:`start_method` says; a budget given is shared
     among them). A failed input is reported in its :class:`FileResult` and the others go on. ``done(result)``
     is called as each finishes.
     For a cluster, map :func:`smooth_batch` over partitions of the inputs with Dask (see docs/python.rst).
@@ -394,7 +410,7 @@ def smooth_files(
     else:
         share = max(1, resources.threads() // jobs)  # the CPUs shared among the jobs (a bad setting refused here)
         with ProcessPoolExecutor(
-            jobs, mp_context=get_context(_start_method()), initializer=_fleet_worker, initargs=(share,)
+            jobs, mp_context=get_context(start_method()), initializer=_fleet_worker, initargs=(share,)
         ) as pool:
             futures = {pool.submit(smooth_one, p, o, kw): i for i, (p, o) in enumerate(zip(paths, outs, strict=True))}
             for f in as_completed(futures):

@@ -7,19 +7,24 @@ unless ACCELNAV_REQUIRE_DASK=1 (set by .ci/run), where a missing Dask is a failu
 
 from __future__ import annotations
 
+import json
+import logging
 import os
 import platform
+import re
 import subprocess
 import sys
 import threading
 
 import numpy as np
 import pytest
+from conftest import REPO
 from support.cachekey import private_cache
 from support.cli import run_cli
 
+from accelnav.data import smoothing
 from accelnav.data.runfile import load_run
-from accelnav.data.smoothing import _start_method, smooth_batch, smooth_files, smooth_one
+from accelnav.data.smoothing import smooth_batch, smooth_files, smooth_one, start_method
 from accelnav.estimate import fastsmooth as fs
 from accelnav.model.load import load_model
 
@@ -81,14 +86,21 @@ def test_a_fleet_refuses_what_belongs_to_one_input_and_outputs_that_collide(flee
     assert not (tmp_path / "o").exists()
 
 
-def _dask_bag(pairs):
-    """A Dask bag of two partitions over ``pairs``; the test skips without Dask, unless ACCELNAV_REQUIRE_DASK=1."""
+def _need_dask() -> None:
+    """The test skips without Dask, unless ACCELNAV_REQUIRE_DASK=1."""
     try:
-        import dask.bag as db
+        import dask.bag  # noqa: F401
     except ImportError:
         if os.environ.get("ACCELNAV_REQUIRE_DASK") == "1":
             pytest.fail("ACCELNAV_REQUIRE_DASK=1 but dask is not installed (pip install 'accelnav[fleet]')")
         pytest.skip("dask is not installed (the fleet extra: pip install 'accelnav[fleet]')")
+
+
+def _dask_bag(pairs):
+    """A Dask bag of two partitions over ``pairs`` (the test skips without Dask)."""
+    _need_dask()
+    import dask.bag as db
+
     return db.from_sequence(pairs, npartitions=2)
 
 
@@ -121,10 +133,83 @@ def test_a_partition_under_dask_and_the_process_set_up_for_it(fleet, tmp_path, c
         assert done.stdout.strip() == "True", done.stderr
 
 
+def _documented_block() -> str:
+    """docs/python.rst's Dask block, as printed there."""
+    blocks = re.findall(r"\.\. code-block:: python\n\n((?:   .*\n|\n)+)", (REPO / "docs" / "python.rst").read_text())
+    (block,) = [b for b in blocks if "map_partitions(smooth_batch" in b]
+    return "\n".join(line[3:] for line in block.splitlines())
+
+
+# run in a fresh interpreter (one thread: start_method() forks, as for a user's script): the block as printed,
+# then again without its chunksize=1; Dask's pretask/posttask callbacks count the tasks handed to the processes
+# and not yet back
+_PROBE = """
+import json
+from dask.callbacks import Callback
+
+flight = {{"now": 0, "most": 0}}
+def _pre(key, dsk, state):
+    flight["now"] += 1
+    flight["most"] = max(flight["most"], flight["now"])
+def _post(key, result, dsk, state, worker_id):
+    flight["now"] -= 1
+Callback(pretask=_pre, posttask=_post).register()
+paths, options, workers = {paths!r}, {{}}, 2
+seen = {{}}
+for out_dir, block in (({out!r}, {block!r}), ({out2!r}, {batched!r})):
+    flight["most"] = 0
+    exec(block)
+    seen[out_dir] = {{"most": flight["most"], "ok": [r.ok for r in results], "failed": [r.message for r in failed],
+                      "pids": sorted({{r.pid for r in results}})}}
+print(json.dumps(seen))
+"""
+
+
+def test_the_documented_dask_block_hands_a_partition_to_a_free_process(fleet, tmp_path, capsys):
+    """docs/python.rst's Dask recipe (what bench_smooth_e2e's fleet row runs) smooths each input as a run of its
+    own, reports the broken one, and never hands a process more partitions than it can start: at most one per
+    process in flight. Without its chunksize=1 Dask hands the ready partitions out six at a time, decided before
+    any runs (all four here went to one process in one batch): the count says so."""
+    _need_dask()
+    paths, bad = fleet
+    block = _documented_block()
+    assert "chunksize=1" in block and "start_method()" in block, block
+    batched = block.replace(", chunksize=1", "")
+    assert batched != block
+    out, out2 = tmp_path / "out", tmp_path / "batched"
+    code = _PROBE.format(paths=[str(p) for p in (*paths, bad)], out=str(out), out2=str(out2), block=block,
+                         batched=batched)  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    seen = json.loads(done.stdout.strip().splitlines()[-1])
+    recipe, without = seen[str(out)], seen[str(out2)]
+    assert recipe["ok"] == [True, True, True, False] and len(recipe["failed"]) == 1, recipe
+    assert "line 2" in recipe["failed"][0]
+    assert 1 <= recipe["most"] <= 2, recipe  # a partition each, handed out as a process frees
+    # the probe sees the batching the setting prevents: all four in one batch, to one process
+    assert without["most"] == 4 and len(without["pids"]) == 1, (
+        f"Dask no longer batches, the probe cannot tell: {without}"
+    )
+    for p in paths:
+        _same_as_alone(out / p.name, p, tmp_path, capsys)
+
+
+def test_a_batch_says_once_that_the_environment_keeps_glibc_as_it_is(monkeypatch, caplog):
+    """dask.distributed's workers start with MALLOC_TRIM_THRESHOLD_ set: accelnav leaves glibc as the environment
+    says, and the worker says so once (not once per partition), naming the variable and what it costs. (The
+    variable set, reuse_freed_memory changes nothing in this process.)"""
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+    monkeypatch.setattr(smoothing, "_said_malloc", False)
+    with caplog.at_level(logging.WARNING, logger="accelnav"):
+        assert smooth_batch([], {}) == [] and smooth_batch([], {}) == []
+    said = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(said) == 1 and "MALLOC_TRIM_THRESHOLD_ set" in said[0] and "twice the CPU" in said[0], said
+
+
 def test_workers_are_forked_only_where_no_other_thread_could_hold_a_lock(fleet, tmp_path, capsys):
     """A process of one thread (the command's) forks its workers on Linux, ready at once; with another thread
     running (a notebook's, a server's) they are spawned, and the fleet gives the same files."""
-    code = "from accelnav.data.smoothing import _start_method as s; print(s())"
+    code = "from accelnav.data.smoothing import start_method as s; print(s())"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.stdout.strip() == ("fork" if sys.platform == "linux" else "spawn"), done.stderr
     paths, _ = fleet
@@ -132,7 +217,7 @@ def test_workers_are_forked_only_where_no_other_thread_could_hold_a_lock(fleet, 
     other = threading.Thread(target=stop.wait)
     other.start()
     try:
-        assert _start_method() == "spawn"
+        assert start_method() == "spawn"
         results = smooth_files(paths[:2], tmp_path / "out", jobs=2)
     finally:
         stop.set()
