@@ -15,7 +15,8 @@ budget and from what was asked, how the passes are cut (:func:`plan`), and says 
   samples as the chunks go by (:class:`_RunEnvelope`, ``Outcome.envelope``): the figures draw that.
 * **one chunk in memory** (:func:`smooth_arrays`, :func:`filter_arrays`: the same kernels' whole-array
   entry points): what needs every output sample in memory at once, namely the aids' consistency checks
-  (NIS of each aid, the held-out fixes), and a library call that wants arrays back. A run over the
+  (the held-out fixes; the aids' NIS a chunked run writes too: fix_nis, zupt_nis), and a library call that
+  wants arrays back. A run over the
   budget that asks for one of them is refused in one line before any work. ``--covariances`` within the
   budget is one chunk in memory; over it, it is chunked, its covariances written chunk by chunk. So is
   ``--tune``: over the budget its likelihood is summed chunk by chunk (:func:`accelnav.estimate.tune.tune_data`:

@@ -176,10 +176,16 @@ def test_fixes_and_auto_zupt_over_the_budget_give_the_whole_paths_numbers(sim, t
     status, out, err = _run([*argv, "--out", tmp_path / "b.npz", "--memory-budget", "0.05"], capsys)
     assert status == 0, err
     assert "smoothed in bounded memory" in out and "position fixes per axis: 3, 3" in out
-    status, _, err = _run([*argv, "--out", tmp_path / "w.npz"], capsys)
+    status, whole, err = _run([*argv, "--out", tmp_path / "w.npz"], capsys)
     assert status == 0, err
+    # the aids' NIS checks, from the members fix_nis and zupt_nis: the same lines over the budget
+    nis = [line for line in whole.splitlines() if "mean NIS" in line]
+    assert len(nis) == 2 and any("over 6 fixes" in line for line in nis), whole
+    assert [line for line in out.splitlines() if "mean NIS" in line] == nis, out
     b, _ = load_run(tmp_path / "b.npz")
     w, _ = load_run(tmp_path / "w.npz")
+    for key in ("fix_nis", "zupt_nis"):
+        np.testing.assert_array_equal(b[key], w[key], err_msg=key)  # the same operations: the same doubles
     assert b["zupt"].sum() > 100
     np.testing.assert_array_equal(b["zupt"], w["zupt"])
     np.testing.assert_array_equal(b["fixes"], w["fixes"])
