@@ -214,14 +214,18 @@ def disk_needed(
     full: bool = True,
     covariances: bool = False,
     marks: bool = False,
+    nis_rows: int = 0,
 ) -> int:
     """Bytes of disk the bounded path needs at its peak: the store (``store``: smoothing; ``n_general`` of
     the axes on the general path, whose store is wider; ``covariances``: every axis) and the output, written
-    once in place, as :func:`smooth_bounded` lays it out for ``full``, ``covariances`` and ``marks``."""
+    once in place, as :func:`smooth_bounded` lays it out for ``full``, ``covariances``, ``marks`` and the
+    ``nis`` member's rows (4 doubles each: one per zero-velocity update, up to 32 B per sample and axis)."""
     n_general = n_axes if covariances else n_general
     gw = GROW if covariances else GLROW
-    return (8 * n * (ROW * (n_axes - n_general) + gw * n_general) if store else 0) + n * output_bytes(
-        n_axes, n_stages, full=full, covariances=covariances, marks=marks
+    return (
+        (8 * n * (ROW * (n_axes - n_general) + gw * n_general) if store else 0)
+        + n * output_bytes(n_axes, n_stages, full=full, covariances=covariances, marks=marks)
+        + 32 * nis_rows
     )
 
 
@@ -676,8 +680,9 @@ def smooth_bounded(
     # the disk is checked for the worst case: every store on disk but what fits in memory at its widest rows
     gw = GROW if covariances else GLROW
     worst_in_memory = smooth and 8 * n * (ROW * (n_axes - sum(general)) + gw * sum(general)) <= store_memory
+    nis_rows = [a.nis_rows if a is not None and nis else 0 for a in exs]
     _check_disk(n, n_axes, sum(general), workdir, len(stages), smooth and not worst_in_memory,
-                full=full, covariances=covariances, marks=bool(marks))  # fmt: skip
+                full=full, covariances=covariances, marks=bool(marks), nis_rows=sum(nis_rows))  # fmt: skip
     mod = fastsmooth._lib()
     ffi, lib = mod.ffi, mod.lib
     small = {"format": np.array(run_format), "model_toml": np.array(model.text),
@@ -694,7 +699,6 @@ def smooth_bounded(
         big.update(filt_x_prior=((n_axes, n, 4), np.float64), filt_P_prior=((n_axes, n, 4, 4), np.float64))
     if marks:
         big[marks] = ((n, n_axes), np.bool_)
-    nis_rows = [a.nis_rows if a is not None and nis else 0 for a in exs]
     big.update({nis: ((sum(nis_rows), 4), np.float64)} if nis else {})
     with ExitStack() as stack:
         tmp = stack.enter_context(TempFolder("smooth", workdir))
