@@ -55,6 +55,7 @@ def measure(n: int, repeat: int) -> dict[str, float]:
     # the covariance outputs (NULL: not written), which a baseline built before them does not take
     fwd_cov = (ffi.NULL,) * (len(ffi.typeof(lib.acn_chunkg_fwd).args) - 16)
     bwd_cov = (ffi.NULL,) * (len(ffi.typeof(lib.acn_chunkg_bwd).args) - 8)
+    lean_nis = (ffi.NULL,) * (len(ffi.typeof(lib.acn_chunkg_fwd_lean).args) - 16)  # the aids' y, S: not wanted
     store, xa, sa = np.empty((n, 14)), np.empty((n, 4)), np.empty((n, 4))
     lean, pst = np.empty((n, 4)), np.empty((n, 10))
     gates, applied = np.zeros(len(ex)), np.zeros(len(ex), dtype=np.uint8)
@@ -81,7 +82,7 @@ def measure(n: int, repeat: int) -> dict[str, float]:
         t0 = time.thread_time()
         lib.acn_chunkg_fwd_lean(
             ax, n, 1, p(z), p(valid.view(np.uint8), "unsigned char *"), len(ex), ek, p(ex.h), p(ex.z), p(ex.R),
-            p(gates), p(applied, "unsigned char *"), p(carry_f), p(lean), ffi.NULL, ffi.NULL,
+            p(gates), p(applied, "unsigned char *"), p(carry_f), p(lean), ffi.NULL, ffi.NULL, *lean_nis,
         )  # fmt: skip
         t1 = time.thread_time()
         lib.acn_chunkg_cov(

@@ -292,7 +292,7 @@ def register(sub) -> None:
         default=None,
         metavar="MB",
         help="memory the run may take; a longer run is smoothed in chunks (its store in memory within the budget, "
-        "without one within 1 GiB, else on disk beside --out; the aids' consistency checks are skipped); "
+        "without one within 1 GiB, else on disk beside --out; of the aids' consistency checks only their NIS); "
         "--covariances are written chunk by chunk (the general path: 544 B per sample and axis); --tune reads "
         "the input again for every likelihood evaluation; --plots draws from each series' min and max per "
         "pixel column, kept while the chunks are written; default: half "

@@ -91,6 +91,8 @@ def smooth_file(
         outcome = engine.run(model, source, job, out, workdir=workdir, run_format=fmt)
         if outcome.arrays is not None and job.aided and job.checks and "smooth" in job.stages:
             outcome.checks = _checks(outcome, source.whole(), job.fixes)
+        elif job.aided and job.checks and "smooth" in job.stages:
+            outcome.checks = _file_checks(out, tuned=outcome.tune is not None)
         written = [out]
         if outcome.arrays is not None:
             kept = outcome.arrays if job.full else compact(outcome.arrays, job.stages)
@@ -176,6 +178,36 @@ def _checks(outcome: engine.Outcome, inputs: dict, fixes):
         kw = dict(rest=r.mask, zupt_params=r.params, rest_sigma=r.sigma)
     # the rests' review (Outcome.rests.review) is said where the rests are decided, not among these lines
     return smooth_checks(outcome.arrays, outcome.model, inputs, fixes, tuned=outcome.tune is not None, **kw)
+
+
+def _file_checks(out: Path, tuned: bool):
+    """The aids' NIS checks of a run written chunk by chunk, from its members fix_nis and zupt_nis (one row per
+    rest update: read a piece at a time); the held-out fixes and the anchor check re-smooth or read the run whole
+    and are not made here."""
+    import zipfile
+
+    from accelnav.estimate.chunked import _stored_member
+    from accelnav.estimate.consistency import SmoothChecks, first_rest_nis, nis_check
+    from accelnav.fileio import pread_exact
+
+    with zipfile.ZipFile(out) as zf:
+        members = {k: _stored_member(out, zf, k) for k in ("t", "fix_nis", "zupt_nis")}
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        t0 = np.empty(1)
+        pread_exact(fd, t0, members["t"][0])
+        fix = np.empty(members["fix_nis"][1])
+        pread_exact(fd, fix, members["fix_nis"][0])
+        offset, (rows, _), _ = members["zupt_nis"]
+        rest = []
+        for s in range(0, rows, PIECE):
+            piece = np.empty((min(PIECE, rows - s), 4))
+            pread_exact(fd, piece, offset + 32 * s)
+            rest.append(first_rest_nis(piece, float(t0[0])))
+    finally:
+        os.close(fd)
+    kinds = (("fixes", fix), ("rests", np.concatenate(rest) if rest else np.zeros(0)))
+    return SmoothChecks(tuple(nis_check(kind, v) for kind, v in kinds if len(v)), None, None, tuned)
 
 
 def _whole_reasons(job: engine.Job, zupt) -> str:

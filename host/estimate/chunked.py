@@ -134,12 +134,19 @@ class ChunkAids:
     asks again, last chunk first: the result must be the same)."""
 
     count: int = 0
+    nis_rows: int = 0  # rows this axis writes into smooth_bounded's ``nis`` member over the run
 
     def between(self, s: int, e: int) -> Piece:
         raise NotImplementedError
 
     def applied(self, piece: Piece, done: np.ndarray) -> None:
         """Which of ``piece``'s aids the filter applied (bool, its order)."""
+
+    def innovations(self, piece: Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """``piece``'s aids seen by the filter: their innovations ``y`` and variances ``S`` (its order), applied or
+        not (``done``), ``t`` the time of each. Returns the chunk's rows of the ``nis`` member (r, 4), in
+        order: :attr:`nis_rows` over the run in all."""
+        return np.zeros((0, 4))
 
 
 class _WholeAids(ChunkAids):
@@ -207,14 +214,18 @@ def disk_needed(
     full: bool = True,
     covariances: bool = False,
     marks: bool = False,
+    nis_rows: int = 0,
 ) -> int:
     """Bytes of disk the bounded path needs at its peak: the store (``store``: smoothing; ``n_general`` of
     the axes on the general path, whose store is wider; ``covariances``: every axis) and the output, written
-    once in place, as :func:`smooth_bounded` lays it out for ``full``, ``covariances`` and ``marks``."""
+    once in place, as :func:`smooth_bounded` lays it out for ``full``, ``covariances``, ``marks`` and the
+    ``nis`` member's rows (4 doubles each: one per zero-velocity update, up to 32 B per sample and axis)."""
     n_general = n_axes if covariances else n_general
     gw = GROW if covariances else GLROW
-    return (8 * n * (ROW * (n_axes - n_general) + gw * n_general) if store else 0) + n * output_bytes(
-        n_axes, n_stages, full=full, covariances=covariances, marks=marks
+    return (
+        (8 * n * (ROW * (n_axes - n_general) + gw * n_general) if store else 0)
+        + n * output_bytes(n_axes, n_stages, full=full, covariances=covariances, marks=marks)
+        + 32 * nis_rows
     )
 
 
@@ -378,6 +389,8 @@ class _Axis:
                 st.close()
 
     marked: int = 0  # marked aids applied so far (zero-velocity updates)
+    nis_at: int = 0  # the next row this axis writes into the run's ``nis`` member, and where its rows end
+    nis_end: int = 0
     # the lean general path (GLROW), per chunk start: the prior covariance of its first sample, its valid samples
     # (packed bits; None: all), the aids the forward pass applied (packed bits) and their count and digest
     # (acn_aids_digest: the backward pass checks that it was given the same aids again): acn_chunkg_cov's inputs
@@ -437,6 +450,7 @@ class _Run:
     memory_left: int = 0  # bytes the stores not yet opened may take in memory
     on_disk: bool = False  # a store went to disk
     marks: str = ""  # the member of the samples where a marked aid was applied ("": none written)
+    nis: str = ""  # the member of the aids' rows given by ChunkAids.innovations ("": none written)
     covariances: bool = False  # the full covariances written (filt_P, smooth_P, the filter's priors)
     tap: Callable | None = None  # tap(key, j, s, values): each output as it is written (j = -1: the marks, all axes)
     threads: int = 1  # axes worked on at once (plain axes only: see :meth:`each`)
@@ -609,6 +623,7 @@ def smooth_bounded(
     store_memory: int = 0,
     full: bool = True,
     marks: str = "",
+    nis: str = "",
     covariances: bool = False,
     tap: Callable[[str, int, int, np.ndarray], None] | None = None,
 ) -> dict:
@@ -628,6 +643,8 @@ def smooth_bounded(
     their standard deviations at float32 beside t (:data:`COMPACT`, the run file's ``/3`` form).
     ``marks``: the name of an (N, n_axes) bool member written chunk by chunk: the samples where a marked aid
     (:attr:`Piece.marked`) was applied.
+    ``nis``: the name of an (R, 4) float64 member written chunk by chunk: each axis's
+    :meth:`ChunkAids.innovations` rows in turn, axis 0's first (R: the axes' :attr:`ChunkAids.nis_rows`).
     ``covariances``: also each stage's full covariances ``filt_P``, ``smooth_P`` (n_axes, N, 4, 4) and, with
     ``filt``, the filter's priors ``filt_x_prior`` (n_axes, N, 4), ``filt_P_prior``, at float64 as the
     one-chunk path writes them (implies ``full``): every axis then takes the general path, whose kernels hold
@@ -663,8 +680,9 @@ def smooth_bounded(
     # the disk is checked for the worst case: every store on disk but what fits in memory at its widest rows
     gw = GROW if covariances else GLROW
     worst_in_memory = smooth and 8 * n * (ROW * (n_axes - sum(general)) + gw * sum(general)) <= store_memory
+    nis_rows = [a.nis_rows if a is not None and nis else 0 for a in exs]
     _check_disk(n, n_axes, sum(general), workdir, len(stages), smooth and not worst_in_memory,
-                full=full, covariances=covariances, marks=bool(marks))  # fmt: skip
+                full=full, covariances=covariances, marks=bool(marks), nis_rows=sum(nis_rows))  # fmt: skip
     mod = fastsmooth._lib()
     ffi, lib = mod.ffi, mod.lib
     small = {"format": np.array(run_format), "model_toml": np.array(model.text),
@@ -681,6 +699,7 @@ def smooth_bounded(
         big.update(filt_x_prior=((n_axes, n, 4), np.float64), filt_P_prior=((n_axes, n, 4, 4), np.float64))
     if marks:
         big[marks] = ((n, n_axes), np.bool_)
+    big.update({nis: ((sum(nis_rows), 4), np.float64)} if nis else {})
     with ExitStack() as stack:
         tmp = stack.enter_context(TempFolder("smooth", workdir))
         lanes = threads()  # asked first: a bad ACCELNAV_THREADS is refused whatever the run's length
@@ -689,8 +708,10 @@ def smooth_bounded(
                 for j, d in enumerate(designs)]  # fmt: skip
         for ax in axes:
             stack.callback(ax.close_stores)
+            ax.nis_at = sum(nis_rows[: ax.j])
+            ax.nis_end = ax.nis_at + nis_rows[ax.j]
         run = _Run(ffi, lib, n, chunk, writer, axes, smooth, k, tmp=tmp, memory_left=store_memory, marks=marks,
-                   covariances=covariances, tap=tap,
+                   nis=nis, covariances=covariances, tap=tap,
                    threads=lanes if n > THREADS_FROM and tap is None else 1)  # fmt: skip
         stack.callback(run.close)
         for ax in axes if smooth else []:
@@ -711,6 +732,7 @@ def smooth_bounded(
             for s in starts:  # 1. forward: the filter; for the smoother, rows into each axis's store
                 _forward(run, s, min(s + chunk, n), read, "filt" in stages)
                 p.update(min(s + chunk, n))
+        _check_nis(axes, nis)
         if smooth:
             with bar("backward", n) as p:
                 for s in reversed(starts):  # 2. backward: the general smoother; the plain (a, eps) into the store
@@ -738,6 +760,13 @@ def smooth_bounded(
         "chunk": chunk, "chunks": len(starts), "applied": applied, "marked": [ax.marked for ax in axes],
         "first": run.first, "last": run.last, "store_in_memory": not run.on_disk,
     }  # fmt: skip
+
+
+def _check_nis(axes: Sequence[_Axis], nis: str) -> None:
+    """The ``nis`` member was laid out from the aids' nis_rows: a file with rows never written is refused."""
+    short = [ax.j for ax in axes if ax.nis_at != ax.nis_end]
+    if short:
+        raise ValueError(f"axes {short}: fewer {nis} rows than their aids' nis_rows")
 
 
 def _chunk_aids(extras, gates, n_axes: int, n: int) -> list[ChunkAids | None]:
@@ -805,7 +834,7 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
         buf = store.rows(b.store, width, s, m, fill=False) if run.smooth else b.rows(width, m)
         compact = False
         if ax.general:
-            _forward_general(run, ax, s, e, zc, ok, buf, write_filt)
+            _forward_general(run, ax, s, e, zc, ok, buf, write_filt, t)
         else:
             compact = _forward_plain(run, ax, s, e, zc, ok, buf, write_filt)
             if lean:
@@ -833,7 +862,15 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
 
 
 def _forward_general(
-    run: _Run, ax: _Axis, s: int, e: int, zc: np.ndarray, ok: np.ndarray, buf: np.ndarray, write_filt: bool = True
+    run: _Run,
+    ax: _Axis,
+    s: int,
+    e: int,
+    zc: np.ndarray,
+    ok: np.ndarray,
+    buf: np.ndarray,
+    write_filt: bool = True,
+    t: np.ndarray | None = None,
 ) -> None:
     p, m, b = run.ptr, e - s, run.buf(ax)
     piece = ax.aids.between(s, e) if ax.aids is not None else None
@@ -844,20 +881,22 @@ def _forward_general(
     arrs = [piece.ex.h, piece.ex.z, piece.ex.R, piece.gates] if ne else [np.zeros(4)] * 4
     arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
     applied = np.zeros(max(ne, 1), dtype=np.uint8)
+    ey, eS = np.zeros(max(ne, 1)), np.zeros(max(ne, 1))  # the aids' innovations and variances as the filter met them
     args = (ax.m, m, int(e == run.n), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne,
             run.ffi.from_buffer("long[]", ek), *(p(a) for a in arrs), p(applied, "unsigned char *"),
             p(ax.carry_f), p(buf), p(b.xa), p(b.sa))  # fmt: skip
+    nis = (p(ey), p(eS))
     if ax.width == GLROW:
         p0 = ax.carry_f[4:].copy()
         if not write_filt:  # the filter's states unwanted: not made
             args = (*args[:-2], run.ffi.NULL, run.ffi.NULL)
-        run.lib.acn_chunkg_fwd_lean(*args)
+        run.lib.acn_chunkg_fwd_lean(*args, *nis)
         if run.smooth:  # what acn_chunkg_cov needs to make the chunk's covariances again
             digest = int(run.lib.acn_aids_digest(ne, args[6], p(arrs[0]), p(arrs[2])))  # ek, h, R
             ax.p_start[s] = (p0, None if ok.all() else np.packbits(ok), np.packbits(applied[:ne]), ne, digest)
     else:
         prior = (p(run.xb), p(run.pb)) if run.covariances else (run.ffi.NULL, run.ffi.NULL)
-        run.lib.acn_chunkg_fwd(*args, *prior)
+        run.lib.acn_chunkg_fwd(*args, *prior, *nis)
     if run.covariances and "filt_P" in run.out.members:
         run.put_cov("filt_P", ax.j, s, buf[:m, 4:])
         run.out.write("filt_x_prior", 4 * (ax.j * run.n + s), run.xb[:m])
@@ -865,6 +904,13 @@ def _forward_general(
     if ne:
         done = applied[:ne].astype(bool)
         ax.aids.applied(piece, done)
+        at = t[piece.ex.k - s] if t is not None else np.full(ne, np.nan)
+        rows = ax.aids.innovations(piece, done, ey[:ne], eS[:ne], at)
+        if run.nis and len(rows):
+            if ax.nis_at + len(rows) > ax.nis_end:
+                raise ValueError(f"axis {ax.j}: more {run.nis} rows than its aids' nis_rows")
+            run.out.write(run.nis, 4 * ax.nis_at, np.ascontiguousarray(rows, dtype=np.float64))
+            ax.nis_at += len(rows)
         hit = done & piece.marked
         ax.marked += int(hit.sum())
         if run.marks:

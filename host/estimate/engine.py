@@ -15,7 +15,8 @@ budget and from what was asked, how the passes are cut (:func:`plan`), and says 
   samples as the chunks go by (:class:`_RunEnvelope`, ``Outcome.envelope``): the figures draw that.
 * **one chunk in memory** (:func:`smooth_arrays`, :func:`filter_arrays`: the same kernels' whole-array
   entry points): what needs every output sample in memory at once, namely the aids' consistency checks
-  (NIS of each aid, the held-out fixes), and a library call that wants arrays back. A run over the
+  (the held-out fixes; the aids' NIS a chunked run writes too: fix_nis, zupt_nis), and a library call that
+  wants arrays back. A run over the
   budget that asks for one of them is refused in one line before any work. ``--covariances`` within the
   budget is one chunk in memory; over it, it is chunked, its covariances written chunk by chunk. So is
   ``--tune``: over the budget its likelihood is summed chunk by chunk (:func:`accelnav.estimate.tune.tune_data`:
@@ -539,7 +540,16 @@ class _AxisAids(chunked.ChunkAids):
 
         self.model, self.j, self.spans, self.params = model, j, spans, params
         self.fx = fastsmooth.Extras.of(fixes)
-        self.count = len(self.fx) + (0 if spans is None else spans.count(j, model, params))
+        self.nis_rows = 0 if spans is None else spans.count(j, model, params)  # one zupt_nis row per update
+        self.count = len(self.fx) + self.nis_rows
+        self.at = 0  # the first fix of the chunk last asked for (its innovations follow at once)
+        self.fix_nis = np.full(len(self.fx), np.nan)  # each fix's NIS, in the given order, as the filter meets it
+        if spans is not None:  # each span's rest: the first of its touching spans (one rest, two sigmas)
+            lo, hi = spans.lo[j], spans.hi[j]
+            new = np.ones(len(lo), dtype=bool)
+            new[1:] = lo[1:] != hi[:-1]
+            self.rest_of = np.maximum.accumulate(np.where(new, np.arange(len(lo)), 0))
+        self.last_rest = -1  # the rest of the last update met (chunk to chunk): a new one's first update is marked
 
     @classmethod
     def each(cls, model: Model, fixes, rest, n_axes: int) -> tuple[list[Aids], list[_AxisAids]]:
@@ -554,6 +564,7 @@ class _AxisAids(chunked.ChunkAids):
 
         fx = self.fx
         a, b = int(np.searchsorted(fx.k, s)), int(np.searchsorted(fx.k, e))
+        self.at = a
         zs = Aids.of([]) if self.spans is None else Aids.zero_velocity(*self.spans.updates(self.j, s, e, self.model,
                                                                                          self.params))  # fmt: skip
         if a == b and not np.any(zs.k[1:] < zs.k[:-1]):  # rests alone, in order: the sort below would change nothing
@@ -564,6 +575,21 @@ class _AxisAids(chunked.ChunkAids):
         h, z, R = (np.concatenate((f[a:b], r))[order] for f, r in ((fx.h, zs.h), (fx.z, zs.z), (fx.R, zs.R)))
         marked = (np.arange(len(k)) >= b - a)[order]
         return chunked.Piece(fastsmooth.Extras(k[order], h, z, R, order), np.zeros(len(k)), marked)
+
+    def innovations(self, piece: chunked.Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray):
+        """The fixes' NIS kept (fix_nis, few); the applied updates' rows of ``zupt_nis`` returned, as
+        smooth_arrays makes them: [t, axis, y^2 / S, 1 for the first update of its rest]."""
+        nis = y * y / S
+        fix = ~piece.marked & done
+        self.fix_nis[self.fx.order[self.at + piece.ex.order[fix]]] = nis[fix]
+        rest = piece.marked & done
+        if not rest.any():
+            return np.zeros((0, 4))
+        k = piece.ex.k[rest]
+        ids = self.rest_of[np.searchsorted(self.spans.hi[self.j], k, side="right")]
+        first = ids != np.concatenate(([self.last_rest], ids[:-1]))
+        self.last_rest = int(ids[-1])
+        return np.column_stack((t[rest], np.full(len(k), self.j), nis[rest], first))
 
 
 class _RunEnvelope:
@@ -665,6 +691,10 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
             return add
         rows = [(ft, j, z, np.sqrt(r)) for j, f in enumerate(fx) for ft, z, r in zip(fix_t[j], f.z, f.R, strict=True)]
         add["fixes"] = np.array(rows, dtype=np.float64).reshape(-1, 4)
+        # the aids' NIS as the one-chunk path writes them (the rests' rows went into zupt_nis chunk by chunk)
+        add["fix_nis"] = np.concatenate([a.fix_nis for a in extras])
+        if rest is None:
+            add["zupt_nis"] = np.zeros((0, 4))
         if rest is not None and rest.detected:
             add["zupt_candidates"] = rest.candidate_rows(source.times_at)
         return add
@@ -679,6 +709,7 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
         model, n, read, out, axis_names=source.axis_names, extras=extras, chunk=outcome.plan.chunk,
         workdir=workdir, run_format=run_format, more=kept, stages=stages, store_memory=store_memory(job),
         full=job.full, marks="zupt" if aided or (smooth and job.covariances) else "", covariances=job.covariances,
+        nis="zupt_nis" if aided and rest is not None else "",
         tap=None if env is None else env.tap,
     )  # fmt: skip
     outcome.envelope = None if env is None else env.env

@@ -334,14 +334,10 @@ def smooth_checks(
     ``smooth_kw`` as :func:`accelnav.estimate.pipeline.smooth_run` took them); ``review``: the rests'
     re-examination (:func:`disagreeing_rests`) that chose ``smooth_kw``'s rests; ``tuned``: the model was
     fitted to this run."""
-    from accelnav.estimate.consistency import ANCHOR_SD, NoAnchor, SmoothChecks, nis_check
+    from accelnav.estimate.consistency import ANCHOR_SD, NoAnchor, SmoothChecks, first_rest_nis, nis_check
     from accelnav.estimate.zupt import ZuptParams
 
-    # each rest's first update (see smooth_run), but a rest at the run's first sample: there the filter's prior
-    # already holds u = 0 exactly, the same statement, so its NIS is 0 by construction and tests nothing
-    z = smoothed["zupt_nis"]
-    first = (z[:, 3] > 0) & (z[:, 0] > smoothed["t"][0])
-    kinds = (("fixes", smoothed["fix_nis"]), ("rests", smoothed["zupt_nis"][first, 2]))
+    kinds = (("fixes", smoothed["fix_nis"]), ("rests", first_rest_nis(smoothed["zupt_nis"], smoothed["t"][0])))
     nis = tuple(nis_check(kind, v) for kind, v in kinds if len(v))
     h = None if fixes is None else holdout(inputs, model, fixes, **smooth_kw)
     no_anchor = None

@@ -202,7 +202,7 @@ class _Pass:
         self.lib.acn_chunkg_fwd(
             self.m, m, int(last), p(zc), p(ok.view(np.uint8), "unsigned char *"), ne, ffi.from_buffer("long[]", ek),
             *(p(a) for a in arrs), p(applied, "unsigned char *"), p(self.carry), p(self.store), ffi.NULL,
-            ffi.NULL, p(self.xp), p(self.Pp),
+            ffi.NULL, p(self.xp), p(self.Pp), ffi.NULL, ffi.NULL,
         )  # fmt: skip
         return self.xp[:m], self.Pp[:m]
 

@@ -54,9 +54,9 @@ def test_the_remade_covariances_are_the_forward_pass_own(last):
         args = (ax, n, last, p(z), p(ok, "unsigned char *"), ne, ffi.from_buffer("long[]", ek), p(eh), p(ez), p(eR),
                 p(eg), p(applied, "unsigned char *"), p(carry), p(store), p(xf), p(sf))  # fmt: skip
         if name == "full":
-            lib.acn_chunkg_fwd(*args, ffi.NULL, ffi.NULL)
+            lib.acn_chunkg_fwd(*args, ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL)
         else:
-            lib.acn_chunkg_fwd_lean(*args)
+            lib.acn_chunkg_fwd_lean(*args, ffi.NULL, ffi.NULL)
         outs[name] = (carry, store, xf, sf, applied)
     (cf, full, xf, sf, applied), (cl, lean, xl, sl, applied_l) = outs["full"], outs["lean"]
     assert applied.sum() == ne - 1 and not applied[-1]  # the outlier was rejected

@@ -176,10 +176,16 @@ def test_fixes_and_auto_zupt_over_the_budget_give_the_whole_paths_numbers(sim, t
     status, out, err = _run([*argv, "--out", tmp_path / "b.npz", "--memory-budget", "0.05"], capsys)
     assert status == 0, err
     assert "smoothed in bounded memory" in out and "position fixes per axis: 3, 3" in out
-    status, _, err = _run([*argv, "--out", tmp_path / "w.npz"], capsys)
+    status, whole, err = _run([*argv, "--out", tmp_path / "w.npz"], capsys)
     assert status == 0, err
+    # the aids' NIS checks, from the members fix_nis and zupt_nis: the same lines over the budget
+    nis = [line for line in whole.splitlines() if "mean NIS" in line]
+    assert len(nis) == 2 and any("over 6 fixes" in line for line in nis), whole
+    assert [line for line in out.splitlines() if "mean NIS" in line] == nis, out
     b, _ = load_run(tmp_path / "b.npz")
     w, _ = load_run(tmp_path / "w.npz")
+    for key in ("fix_nis", "zupt_nis"):
+        np.testing.assert_array_equal(b[key], w[key], err_msg=key)  # the same operations: the same doubles
     assert b["zupt"].sum() > 100
     np.testing.assert_array_equal(b["zupt"], w["zupt"])
     np.testing.assert_array_equal(b["fixes"], w["fixes"])
@@ -347,3 +353,54 @@ def test_the_disk_check_refuses_one_byte_short_and_runs_at_the_count(tmp_path, m
         assert sum(f[k].nbytes for k in f.files if n in f[k].shape[:2]) == n * chunked.output_bytes(
             2, 2, full=True, covariances=covariances
         )
+
+
+class _EverySeventh(chunked.ChunkAids):
+    """A zero-velocity update at every 7th sample of an axis, its ``nis`` rows [t, k, y^2 / S, applied]."""
+
+    def __init__(self, n: int) -> None:
+        self.k = np.arange(0, n, 7)
+        self.count = self.nis_rows = len(self.k)
+
+    def extras(self, s: int, e: int) -> fs.Extras:
+        k = self.k[(self.k >= s) & (self.k < e)]
+        m = len(k)
+        return fs.Extras(k, np.tile([0.0, 1.0, 0.0, 0.0], (m, 1)), np.zeros(m), np.full(m, 1e-4), np.arange(m))
+
+    def between(self, s: int, e: int) -> chunked.Piece:
+        ex = self.extras(s, e)
+        return chunked.Piece(ex, np.zeros(len(ex)), np.ones(len(ex), dtype=bool))
+
+    def innovations(self, piece, done, y, S, t):
+        return np.column_stack((t, piece.ex.k, y * y / S, done))
+
+
+@pytest.mark.parametrize("covariances", [False, True])
+def test_the_aids_nis_rows_are_streamed_as_the_whole_path_sees_them(tmp_path, monkeypatch, covariances):
+    """smooth_bounded's ``nis`` member: each chunk's rows from ChunkAids.innovations, the aids' y and S as the
+    filter met them (the lean and the full general kernels), the whole path's to the last bit (the same operations);
+    its bytes are in the disk check: one byte short is refused before any file is made."""
+    from accelnav.errors import UserError
+
+    model = load_model()
+    n = 500
+    t, accel, clipped = _data(model, n)
+    aids = _EverySeventh(n)
+    need = chunked.disk_needed(
+        n, 2, 2 if covariances else 1, n_stages=2, full=True, covariances=covariances, nis_rows=aids.nis_rows
+    )
+    kw = dict(extras=[aids], chunk=64, covariances=covariances, nis="nis", workdir=tmp_path)
+    monkeypatch.setattr(chunked, "free_bytes", lambda _: need - 1)
+    with pytest.raises(UserError, match="need .* GB of disk"):
+        chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz", **kw)
+    assert not (tmp_path / "o.npz").exists()
+    monkeypatch.setattr(chunked, "free_bytes", lambda _: need)
+    chunked.smooth_bounded(model, n, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz", **kw)
+    ref = fs.smooth_general(axis_design(model, 0), accel[:, 0], valid=~clipped[:, 0], extras=aids.extras(0, n),
+                            gates=np.zeros(aids.count))  # fmt: skip
+    with np.load(tmp_path / "o.npz") as f:
+        got = f["nis"]
+    assert got.shape == (aids.count, 4) and np.all(got[:, 3] == 1)
+    np.testing.assert_array_equal(got[:, 0], t[aids.k])
+    np.testing.assert_array_equal(got[:, 1], aids.k)
+    np.testing.assert_array_equal(got[:, 2], ref.y * ref.y / ref.S)

@@ -1701,13 +1701,15 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
  * Writes the store rows and the filter means xf and standard deviations sdf (n x 4);
  * xpr, ppr (NULL: not written): each sample's prior mean (n x 4) and packed
  * covariance (n x 10), for --covariances (the row holds the posterior only).
+ * ey, eS (NULL: not written): each extra's innovation and its variance, as
+ * general_update gives them (the aids' NIS of a run over the memory budget).
  */
 static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                               const unsigned char *valid, long n_extra, const long *ek,
                               const double *eh, const double *ez, const double *eR,
                               const double *egate, unsigned char *applied, double *carry,
                               double *store, int width, double *xf, double *sdf, double *xpr,
-                              double *ppr)
+                              double *ppr, double *ey, double *eS)
 {
     double p[10], x[4];
     long ei = 0;
@@ -1720,7 +1722,7 @@ static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double 
             memcpy(ppr + 10 * k, p, sizeof p);
         }
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, p, ei, n_extra, ek, eh, ez,
-                            eR, egate, applied, NULL, NULL);
+                            eR, egate, applied, ey, eS);
         memcpy(row, x, sizeof x);
         if (xf != NULL) {
             memcpy(xf + 4 * k, x, sizeof x);
@@ -1741,10 +1743,11 @@ static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double 
 void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                     const unsigned char *valid, long n_extra, const long *ek, const double *eh,
                     const double *ez, const double *eR, const double *egate, unsigned char *applied,
-                    double *carry, double *store, double *xf, double *sdf, double *xpr, double *ppr)
+                    double *carry, double *store, double *xf, double *sdf, double *xpr, double *ppr,
+                    double *ey, double *eS)
 {
     chunkg_fwd(m, n, last, z, valid, n_extra, ek, eh, ez, eR, egate, applied, carry, store,
-               ACN_GROW, xf, sdf, xpr, ppr);
+               ACN_GROW, xf, sdf, xpr, ppr, ey, eS);
 }
 
 /*
@@ -1758,10 +1761,10 @@ void acn_chunkg_fwd_lean(const acn_axis *m, long n, int last, const double *z,
                          const unsigned char *valid, long n_extra, const long *ek, const double *eh,
                          const double *ez, const double *eR, const double *egate,
                          unsigned char *applied, double *carry, double *store, double *xf,
-                         double *sdf)
+                         double *sdf, double *ey, double *eS)
 {
     chunkg_fwd(m, n, last, z, valid, n_extra, ek, eh, ez, eR, egate, applied, carry, store,
-               ACN_GLROW, xf, sdf, NULL, NULL);
+               ACN_GLROW, xf, sdf, NULL, NULL, ey, eS);
 }
 
 /*

@@ -111,8 +111,8 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
 void acn_chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                     const unsigned char *valid, long n_extra, const long *ek, const double *eh,
                     const double *ez, const double *eR, const double *egate, unsigned char *applied,
-                    double *carry, double *store, double *xf, double *sdf, double *xpr,
-                    double *ppr);
+                    double *carry, double *store, double *xf, double *sdf, double *xpr, double *ppr,
+                    double *ey, double *eS);
 
 int acn_chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *store, double *carry,
                    double *xs, double *sds, double *ps);
@@ -123,7 +123,7 @@ void acn_chunkg_fwd_lean(const acn_axis *m, long n, int last, const double *z,
                          const unsigned char *valid, long n_extra, const long *ek, const double *eh,
                          const double *ez, const double *eR, const double *egate,
                          unsigned char *applied, double *carry, double *store, double *xf,
-                         double *sdf);
+                         double *sdf, double *ey, double *eS);
 
 void acn_chunkg_cov(const acn_axis *m, long n, int last, const unsigned char *valid, long n_extra,
                     const long *ek, const double *eh, const double *eR,
