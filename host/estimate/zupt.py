@@ -262,10 +262,13 @@ def _prepared_read(read, n: int, n_axes: int, model: Model, chunk: int) -> tuple
             raise ValueError(f"rest detector: rows {s}..{e} read as {accel.shape} and {clipped.shape}")
         a_p, c_p = buf("double[]", accel), buf("unsigned char[]", clipped.view(np.uint8))
         x_p, ok_p = buf("double[]", x[s:e]), buf("unsigned char[]", ok[s:e].view(np.uint8))
+        chunk_powers: dict[int, np.ndarray] = {}  # the chunk's powers, one array per time constant as above
         for j, (pw, eps_mean, c1) in enumerate(axes):
             # kf.bias_model's eps[k] = eps_mean - c1 phi^k, taken from the ok samples
-            pw_c = np.zeros(e - s)
-            pw_c[: max(0, min(e, len(pw)) - s)] = pw[s:e]
+            if id(pw) not in chunk_powers:
+                chunk_powers[id(pw)] = np.zeros(e - s)
+                chunk_powers[id(pw)][: max(0, min(e, len(pw)) - s)] = pw[s:e]
+            pw_c = chunk_powers[id(pw)]
             if mod.lib.acn_rest_prepare(e - s, n_axes, j, a_p, c_p, buf("double[]", pw_c), eps_mean, c1, x_p, ok_p):
                 raise ValueError(f"rest detector: {n} x {n_axes} samples; accepted: 1+ axes")
     return x, ok, R
