@@ -250,7 +250,7 @@ def _prepared_read(read, n: int, n_axes: int, model: Model, chunk: int) -> tuple
         c1, eps_mean = float(d.axis.c1), float(d.eps_mean)
         key = (d.phi, _bias_settled(d.phi, c1, eps_mean, n))
         if key not in powers:
-            powers[key] = _bias_powers(d.phi, key[1], key[1])  # 0 past them: made a chunk at a time below
+            powers[key] = _bias_powers(d.phi, *key[1:], n)
         axes.append((powers[key], eps_mean, c1))
         R[j] = d.R
     for s in range(0, n, chunk):
@@ -262,14 +262,9 @@ def _prepared_read(read, n: int, n_axes: int, model: Model, chunk: int) -> tuple
             raise ValueError(f"rest detector: rows {s}..{e} read as {accel.shape} and {clipped.shape}")
         a_p, c_p = buf("double[]", accel), buf("unsigned char[]", clipped.view(np.uint8))
         x_p, ok_p = buf("double[]", x[s:e]), buf("unsigned char[]", ok[s:e].view(np.uint8))
-        chunk_powers: dict[int, np.ndarray] = {}  # the chunk's powers, one array per time constant as above
         for j, (pw, eps_mean, c1) in enumerate(axes):
             # kf.bias_model's eps[k] = eps_mean - c1 phi^k, taken from the ok samples
-            if id(pw) not in chunk_powers:
-                chunk_powers[id(pw)] = np.zeros(e - s)
-                chunk_powers[id(pw)][: max(0, min(e, len(pw)) - s)] = pw[s:e]
-            pw_c = chunk_powers[id(pw)]
-            if mod.lib.acn_rest_prepare(e - s, n_axes, j, a_p, c_p, buf("double[]", pw_c), eps_mean, c1, x_p, ok_p):
+            if mod.lib.acn_rest_prepare(e - s, n_axes, j, a_p, c_p, buf("double[]", pw[s:e]), eps_mean, c1, x_p, ok_p):
                 raise ValueError(f"rest detector: {n} x {n_axes} samples; accepted: 1+ axes")
     return x, ok, R
 
