@@ -275,7 +275,7 @@ def over_budget(label: str, n: int, n_axes: int, budget: int) -> str:
 # record's). On the stop-and-go bench record at 1e7 the whole decision takes 60 B (36 B streamed, a chunk at a time:
 # zupt.decide_rests_read): the sums are read from checkpoints (accelnav.estimate.rests.SUMS_EVERY) and the window
 # figures a run at a time (zupt._Spans), not held whole. A record that is one long rest takes the most, 86 B at 3e6
-# (the decision stage's peak, the detector's under it; 60 B streamed): the bound is that case's, 88 B
+# (the detector's, that run's window figures and pieces; 55 B streamed, bench_rest_stages.py): the bound is its, 88 B
 REST_SAMPLE_BYTES, REST_AXIS_BYTES = 36, 26
 REST_FLOOR = 64 << 20  # a decision needing less is not refused by a smaller budget: the process itself takes more
 
