@@ -1,5 +1,5 @@
-"""Issue 32: the rest detector's record and window pass in C (acn_rest_prepare, acn_rest_windows) give the very
-doubles the numpy they replaced gave, so the candidates and every decision on them are unchanged. The numpy is
+"""Issue 32: the rest detector's record and window pass in C (acn_rest_prepare; acn_rest_centres, acn_rest_span) give
+the very doubles the numpy they replaced gave, so the candidates and every decision on them are unchanged. The numpy is
 tests/support/zupt_oracle.py's (main's detector before issue 24; its record and window pass are main's to the
 bit, and tests/estimate/test_zupt_arrays.py holds the present candidates to its). On the bench's tiled
 stop-and-go, simulated scenarios, random records with NaN, infinite and clipped samples and gaps of unusable
