@@ -271,12 +271,13 @@ def over_budget(label: str, n: int, n_axes: int, budget: int) -> str:
     )
 
 
-# the rest decision's peak per sample, measured at 1e7 samples and 2 axes (bench/speed/bench_smooth_rss.py): the record
-# held whole (t, each axis' acceleration and clipped flag: a run in memory) and the detector's arrays beside it (x, ok,
-# the window means per axis; the window variance, the quiet statistic and the flags once), 75 B of 80; a streamed run
-# over the budget is read a chunk at a time, 50 B (zupt.decide_rests_read); its sums are read from checkpoints
-# (accelnav.estimate.rests.SUMS_EVERY), not held
-REST_SAMPLE_BYTES, REST_AXIS_BYTES = 32, 26
+# the rest decision's peak per sample at 2 axes, measured a stage at a time (VmHWM): a run in memory holds its record
+# whole (t; each axis' acceleration and clipped flag) and the detector's x and ok beside it (18 B an axis with the
+# record's). On the stop-and-go bench record at 1e7 the whole decision takes 60 B (36 B streamed, a chunk at a time:
+# zupt.decide_rests_read): the sums are read from checkpoints (accelnav.estimate.rests.SUMS_EVERY) and the window
+# figures a run at a time (zupt._Spans), not held whole. A record that is one long rest takes the most, 86 B at 3e6
+# (the detector's, that run's window figures and pieces; 55 B streamed, bench_rest_stages.py): the bound is its, 88 B
+REST_SAMPLE_BYTES, REST_AXIS_BYTES = 36, 26
 REST_FLOOR = 64 << 20  # a decision needing less is not refused by a smaller budget: the process itself takes more
 
 

@@ -146,12 +146,24 @@ def _windows(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k
     """(means, wvar, centre) over the centred window of w (odd) samples about each sample: the window mean per axis
     (N, n_axes), the window variance summed over the axes (N,), and the quiet centres (N,) bool: every sample of
     the window ``usable`` (N,) and the mean over axes of variance / ``allow`` at most ``var_k``. NaN (False)
-    where the window leaves the run.
+    where the window leaves the run. Every figure whole: the detector holds only the flags
+    (:func:`_centres`) and the figures of one run at a time (:class:`_Spans`); tests hold both to this.
 
-    Compiled (acn_rest_windows in csrc/fastsmooth.c): in numpy these were a dozen whole-record passes (cumsums,
-    differences, temporaries), the largest share of the detector's time. The C differences numpy's cumsums in
-    numpy's order, so every figure is the same double (tests/estimate/test_zupt_windows.py holds it to the numpy
-    it replaced, kept in tests/support/zupt_oracle.py)."""
+    Compiled (acn_rest_centres, acn_rest_span in csrc/fastsmooth.c): in numpy these were a dozen whole-record
+    passes (cumsums, differences, temporaries), the largest share of the detector's time. The C differences numpy's
+    cumsums in numpy's order, so every figure is the same double (tests/estimate/test_zupt_windows.py holds it to
+    the numpy it replaced, kept in tests/support/zupt_oracle.py)."""
+    n, n_axes = np.shape(x)
+    centre = _centres(x, usable, allow, w, var_k)
+    means, wvar = np.full((n, n_axes), np.nan), np.full(n, np.nan)
+    h = w // 2
+    if n >= w:
+        means[h : n - h], wvar[h : n - h] = _Spans(x, w).of(h, n - h)
+    return means, wvar, centre
+
+
+def _centres(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k: float) -> np.ndarray:
+    """The quiet centres of :func:`_windows` (N,) bool, nothing else held a sample."""
     from accelnav.estimate.chunked import fresh_array
     from accelnav.estimate.fastsmooth import _lib
 
@@ -161,19 +173,49 @@ def _windows(x: np.ndarray, usable: np.ndarray, allow: np.ndarray, w: int, var_k
     xc = np.ascontiguousarray(x, dtype=np.float64)
     usable = np.ascontiguousarray(usable, dtype=bool).view(np.uint8)
     allow = np.ascontiguousarray(allow, dtype=np.float64)
-    means, wvar, quiet = fresh_array((n, n_axes)), fresh_array((n,)), fresh_array((n,))
+    state, at = np.zeros(4 * n_axes), np.full(n_axes, -1, dtype=np.int64)
     centre = fresh_array((n,), np.uint8)
     if len(allow) != n_axes or len(usable) != n:
         raise ValueError(f"rest detector: {len(allow)} noise figures and {len(usable)} rows for {n} x {n_axes} samples")
     d, u = (lambda a: ffi.from_buffer("double[]", a)), (lambda a: ffi.from_buffer("unsigned char[]", a))
-    status = mod.lib.acn_rest_windows(
-        n, n_axes, d(xc), u(usable), w, d(allow), float(var_k), d(means), d(wvar), d(quiet), u(centre)
+    status = mod.lib.acn_rest_centres(
+        n, n_axes, d(xc), u(usable), w, d(allow), float(var_k), d(state), ffi.from_buffer("long[]", at), u(centre)
     )
     if status != 0:
         raise ValueError(
             f"rest detector: a window of {w} samples over {n} x {n_axes}; accepted: an odd window, 1+ axes"
         )
-    return means, wvar, centre.view(bool)
+    return centre.view(bool)
+
+
+class _Spans:
+    """The window means (rows, n_axes) and variances summed over axes (rows,) of :func:`_windows` for the centres
+    of one span at a time, spans asked in sample order: the sums carried from one span to the next (a few doubles
+    an axis), so the same doubles as the whole pass, and only a span's figures held."""
+
+    def __init__(self, x: np.ndarray, w: int) -> None:
+        from accelnav.estimate.fastsmooth import _lib
+
+        self.x = np.ascontiguousarray(x, dtype=np.float64)
+        self.w = int(w)
+        n_axes = self.x.shape[1]
+        self.state, self.at = np.zeros(4 * n_axes), np.full(n_axes, -1, dtype=np.int64)
+        self.mod = _lib()
+
+    def of(self, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+        n, n_axes = self.x.shape
+        means, wvar = np.empty((max(hi - lo, 0), n_axes)), np.empty(max(hi - lo, 0))
+        buf = self.mod.ffi.from_buffer
+        status = self.mod.lib.acn_rest_span(
+            n, n_axes, buf("double[]", self.x), self.w, int(lo), int(hi), buf("double[]", self.state),
+            buf("long[]", self.at), buf("double[]", means), buf("double[]", wvar),
+        )  # fmt: skip
+        if status != 0:
+            raise ValueError(
+                f"rest detector: centres {lo}..{hi} of {n} x {n_axes} with a window of {self.w}, after "
+                f"{self.at.max()}; accepted: windows inside the record, asked in order"
+            )
+        return means, wvar
 
 
 def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -285,7 +327,8 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     n, n_axes = x.shape
     w = window_samples(model, p)
     usable = ok.all(axis=1)
-    means, wvar, centre = _windows(x, usable, R + p.tremor**2, w, p.var_k)
+    centre = _centres(x, usable, R + p.tremor**2, w, p.var_k)
+    spans = _Spans(x, w)  # one run's window figures at a time, not the record's (24 B a sample at 2 axes)
     # split each run into pieces of steady level: a move that starts gently is quiet, but its mean walks away
     total = float(np.sum(R + p.tremor**2))
     bound2 = p.trim_k**2 * total / w
@@ -297,7 +340,7 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
             means,
             a,
             b,
-            bound2 * max(1.0, float(np.median(wvar[a:b])) / total),
+            bound2 * max(1.0, float(np.median(wvar)) / total),
             x,
             total,
             w,
@@ -306,6 +349,7 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
             p.leak_rate * model.Ts,
         )
         for a, b in runs
+        for means, wvar in [spans.of(a, b)]
     ]  # in sample order: runs are, and so are the pieces of each
     # widen each piece towards its windows' extent (every sample of a passing window was quiet), sample by
     # sample while a sample stays within trim_k sd of the piece's level: a heel strike or the start of a ramp
@@ -391,6 +435,7 @@ def _steady_pieces(
     is kept when it holds three windows at least (thirds of a window each: shorter, a ramp's start cannot be
     told from a step) and its level does not walk away from the piece it was cut from (a ramp leaving a
     rest does; a body that settled at a new level, or sways about it, does not).
+    ``means`` are the window means of the run's centres alone (b - a rows, :class:`_Spans`).
     Returns the pieces' (first, last + 1, median level, own variance) as four arrays, in sample order.
 
     Compiled (acn_rest_pieces in csrc/fastsmooth.c): a ramp is cut into pieces of a sample or two, tens of
@@ -405,7 +450,7 @@ def _steady_pieces(
     m = b - a
     mod = _lib()
     ffi = mod.ffi
-    mc = np.ascontiguousarray(means[a:b], dtype=np.float64)
+    mc = np.ascontiguousarray(means, dtype=np.float64)
     xc = np.ascontiguousarray(x[a:b], dtype=np.float64)
     start, stop = np.empty(max(m, 1), dtype=np.int64), np.empty(max(m, 1), dtype=np.int64)
     ref, own = np.empty((max(m, 1), n_axes)), np.empty(max(m, 1))

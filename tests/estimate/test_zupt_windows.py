@@ -1,5 +1,5 @@
-"""Issue 32: the rest detector's record and window pass in C (acn_rest_prepare, acn_rest_windows) give the very
-doubles the numpy they replaced gave, so the candidates and every decision on them are unchanged. The numpy is
+"""Issue 32: the rest detector's record and window pass in C (acn_rest_prepare; acn_rest_centres, acn_rest_span) give
+the very doubles the numpy they replaced gave, so the candidates and every decision on them are unchanged. The numpy is
 tests/support/zupt_oracle.py's (main's detector before issue 24; its record and window pass are main's to the
 bit, and tests/estimate/test_zupt_arrays.py holds the present candidates to its). On the bench's tiled
 stop-and-go, simulated scenarios, random records with NaN, infinite and clipped samples and gaps of unusable
@@ -165,3 +165,25 @@ def test_the_decision_of_a_record_read_in_chunks_is_the_decision_of_it_whole(def
     assert zupt.gravity_axes_read(read, n, n_axes, default_model, chunk=chunk) == zupt.gravity_axes(
         accel, clipped, default_model
     )
+
+
+def test_runs_spans_are_the_whole_pass_figures():
+    """The detector holds a run's window figures at a time (zupt._Spans, the sums carried from span to span):
+    spans asked in order, with gaps, of one centre, and at the record's first and last window, are the whole pass'
+    doubles bit for bit (the whole pass held to the numpy above); a span behind what was asked is refused."""
+    model = load_model(None)
+    s = simulate(model, "stop_and_go", 60.0, seed=3)
+    x, ok, R = zupt._prepared(s.accel, np.zeros(s.accel.shape, dtype=bool), model)
+    p = zupt.resolved(model, zupt.ZuptParams())
+    w = zupt.window_samples(model, p)
+    means, wvar, _ = zupt._windows(x, ok.all(axis=1), R + p.tremor**2, w, p.var_k)
+    n, h = len(x), w // 2
+    spans = zupt._Spans(x, w)
+    for a, b in [(h, h + 1), (h + 5, h + 40), (h + 40, h + 41), (1000, 1999), (3000, n - h - 7), (n - h - 1, n - h)]:
+        m, v = spans.of(a, b)
+        assert np.array_equal(m.view(np.int64), means[a:b].view(np.int64)), f"means of {a}..{b}"
+        assert np.array_equal(v.view(np.int64), wvar[a:b].view(np.int64)), f"wvar of {a}..{b}"
+    with pytest.raises(ValueError, match="asked in order"):
+        spans.of(1000, 1001)
+    with pytest.raises(ValueError, match="inside the record"):
+        zupt._Spans(x, w).of(h - 1, h + 3)

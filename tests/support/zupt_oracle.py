@@ -49,7 +49,8 @@ def _prepared(accel, clipped, model: Model) -> tuple[np.ndarray, np.ndarray, np.
 
 def windows(x: np.ndarray, ok: np.ndarray, R: np.ndarray, w: int, tremor: float, var_k: float):
     """(means, wvar, centre, quiet): the window pass at the head of :func:`candidates`, lifted out unchanged (issue
-    32 compiled it, acn_rest_windows; tests/estimate/test_zupt_windows.py holds the C to these doubles)."""
+    32 compiled it, acn_rest_centres and acn_rest_span; tests/estimate/test_zupt_windows.py holds the C to these
+    doubles)."""
     n, n_axes = x.shape
     bad = _moving((~ok.all(axis=1)).astype(np.float64), w)
     quiet = np.zeros(n)

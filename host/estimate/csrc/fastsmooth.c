@@ -2752,54 +2752,84 @@ static double rest_prefix_step(double c, long m, const double *x, int n_axes, in
     return m == 0 ? v : c + v;
 }
 
-long acn_rest_windows(long n, int n_axes, const double *x, const unsigned char *usable, long w,
-                      const double *allow, double var_k, double *means, double *wvar, double *quiet,
+/* axis j's window sums brought to window i (rows i .. i + w - 1): st[0..1] the trailing prefix sums
+   C[i] (of x and x^2), st[2..3] the leading ones C[i + w], *at the window they hold (-1: none yet).
+   Stepped row by row from where they are, as one pass over the record steps them, so the same
+   doubles whatever the windows asked for (in order) */
+static void rest_window_to(const double *x, int n_axes, int j, long w, long i, double *st, long *at)
+{
+    if (*at < 0) { /* zupt.py starts both sums from np.zeros */
+        st[0] = st[1] = st[2] = st[3] = 0.0;
+        for (long m = 0; m < w; m++) {
+            st[2] = rest_prefix_step(st[2], m, x, n_axes, j, 0);
+            st[3] = rest_prefix_step(st[3], m, x, n_axes, j, 1);
+        }
+        *at = 0;
+    }
+    for (long k = *at + 1; k <= i; k++) {
+        st[2] = rest_prefix_step(st[2], k + w - 1, x, n_axes, j, 0);
+        st[3] = rest_prefix_step(st[3], k + w - 1, x, n_axes, j, 1);
+        st[0] = rest_prefix_step(st[0], k - 1, x, n_axes, j, 0);
+        st[1] = rest_prefix_step(st[1], k - 1, x, n_axes, j, 1);
+    }
+    if (i > *at)
+        *at = i;
+}
+
+static double rest_window_var(const double *st, long w, double *mean)
+{
+    *mean = (st[2] - st[0]) / (double)w;
+    return ((st[3] - st[1]) - (double)w * (*mean * *mean)) / (double)(w - 1);
+}
+
+long acn_rest_centres(long n, int n_axes, const double *x, const unsigned char *usable, long w,
+                      const double *allow, double var_k, double *state, long *at,
                       unsigned char *centre)
 {
     if (n < 0 || n_axes < 1 || w < 1 || w % 2 == 0 || n > LONG_MAX / n_axes)
         return -1;
     long h = w / 2;
-    for (long k = 0; k < n; k++) {
-        wvar[k] = NAN;
-        quiet[k] = NAN;
+    for (long k = 0; k < n; k++)
         centre[k] = 0;
-        for (int j = 0; j < n_axes; j++)
-            means[k * n_axes + j] = NAN;
-    }
     if (n < w)
         return 0;
-    for (long i = 0; i + w <= n; i++) { /* zupt.py starts both sums from np.zeros */
-        wvar[h + i] = 0.0;
-        quiet[h + i] = 0.0;
-    }
-    for (int j = 0; j < n_axes; j++) {
-        /* lead = C[i + w], trail = C[i] for the window of rows i .. i + w - 1, centred on h + i */
-        double lead1 = 0.0, lead2 = 0.0, trail1 = 0.0, trail2 = 0.0;
-        for (long m = 0; m < w; m++) {
-            lead1 = rest_prefix_step(lead1, m, x, n_axes, j, 0);
-            lead2 = rest_prefix_step(lead2, m, x, n_axes, j, 1);
-        }
-        for (long i = 0; i + w <= n; i++) {
-            if (i > 0) {
-                lead1 = rest_prefix_step(lead1, i + w - 1, x, n_axes, j, 0);
-                lead2 = rest_prefix_step(lead2, i + w - 1, x, n_axes, j, 1);
-                trail1 = rest_prefix_step(trail1, i - 1, x, n_axes, j, 0);
-                trail2 = rest_prefix_step(trail2, i - 1, x, n_axes, j, 1);
-            }
-            double mean = (lead1 - trail1) / (double)w;
-            double v = ((lead2 - trail2) - (double)w * (mean * mean)) / (double)(w - 1);
-            means[(h + i) * n_axes + j] = mean;
-            quiet[h + i] += v / allow[j];
-            wvar[h + i] += v;
-        }
-    }
     long bad = 0; /* unusable rows in the window: a count, exact as numpy's sum of 0s and 1s */
     for (long m = 0; m < w; m++)
         bad += usable[m] ? 0 : 1;
     for (long i = 0; i + w <= n; i++) {
         if (i > 0)
             bad += (usable[i + w - 1] ? 0 : 1) - (usable[i - 1] ? 0 : 1);
-        centre[h + i] = bad == 0 && quiet[h + i] / (double)n_axes <= var_k;
+        double quiet = 0.0, mean;
+        for (int j = 0; j < n_axes;
+             j++) { /* summed over the axes in their order, as numpy's += per axis */
+            rest_window_to(x, n_axes, j, w, i, state + 4 * j, at + j);
+            quiet += rest_window_var(state + 4 * j, w, &mean) / allow[j];
+        }
+        centre[h + i] = bad == 0 && quiet / (double)n_axes <= var_k;
+    }
+    return 0;
+}
+
+long acn_rest_span(long n, int n_axes, const double *x, long w, long lo, long hi, double *state,
+                   long *at, double *means, double *wvar)
+{
+    long h = w / 2;
+    if (n < 0 || n_axes < 1 || w < 1 || w % 2 == 0 || n > LONG_MAX / n_axes || lo < h || hi < lo ||
+        hi > n - h)
+        return -1;
+    for (int j = 0; j < n_axes; j++)
+        if (at[j] > lo - h)
+            return -1;
+    for (long c = lo; c < hi; c++)
+        wvar[c - lo] = 0.0;
+    for (int j = 0; j < n_axes; j++) {
+        for (long c = lo; c < hi; c++) {
+            double mean;
+            rest_window_to(x, n_axes, j, w, c - h, state + 4 * j, at + j);
+            double v = rest_window_var(state + 4 * j, w, &mean);
+            means[(c - lo) * n_axes + j] = mean;
+            wvar[c - lo] += v;
+        }
     }
     return 0;
 }

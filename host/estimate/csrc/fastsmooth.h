@@ -314,19 +314,26 @@ typedef struct {
 } acn_kin_fwd_out;
 long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o);
 /*
- * The rest detector's window pass (host/estimate/zupt.py, _detect): over the
- * centred window of w (odd) rows about each row of x (n rows of n_axes), the
- * window mean per axis into means (n rows of n_axes), the window variance summed
- * over axes into wvar (n) and the sum over axes of variance / allow[j] into quiet
- * (n); NaN where the window leaves the record. centre[k] (n bytes) is 1 where
- * every row of k's window has usable set and quiet / n_axes <= var_k. The sums
- * are numpy's cumsums (in row order, one axis after the other) differenced, so
- * every figure is the one zupt.py's numpy gave. Returns 0, or -1 (nothing
- * written) where a length is out of range.
+ * The rest detector's window pass (host/estimate/zupt.py, _detect), over the
+ * centred window of w (odd) rows about each row of x (n rows of n_axes), in two
+ * kernels so that no per-row figure but the flag is held whole. The sums are
+ * numpy's cumsums (in row order, one axis after the other) differenced, stepped
+ * row by row from where state (4 doubles an axis) and at (the window each axis'
+ * state holds, -1: none; one long an axis) left them, so every figure is the one
+ * zupt.py's numpy gave whatever windows were asked for before.
+ * acn_rest_centres: centre[k] (n bytes) is 1 where every row of k's window has
+ * usable set and the mean over axes of variance / allow[j] is at most var_k, 0
+ * where not or where the window leaves the record.
+ * acn_rest_span: for the centres lo .. hi - 1 (each window inside the record, no
+ * axis' state past lo's window), the window mean per axis into means (hi - lo
+ * rows of n_axes) and the variance summed over the axes into wvar (hi - lo).
+ * Both return 0, or -1 (nothing written) where a length is out of range.
  */
-long acn_rest_windows(long n, int n_axes, const double *x, const unsigned char *usable, long w,
-                      const double *allow, double var_k, double *means, double *wvar, double *quiet,
+long acn_rest_centres(long n, int n_axes, const double *x, const unsigned char *usable, long w,
+                      const double *allow, double var_k, double *state, long *at,
                       unsigned char *centre);
+long acn_rest_span(long n, int n_axes, const double *x, long w, long lo, long hi, double *state,
+                   long *at, double *means, double *wvar);
 /*
  * The rest detector's record (host/estimate/zupt.py, _prepared), axis j of
  * accel and clipped (n rows of n_axes): ok = not clipped and finite, and x the
