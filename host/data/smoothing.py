@@ -9,7 +9,8 @@ exceed it) is streamed
 run's clock a piece at a time and stream with it; what needs the input in memory (the rest decision of
 ``--zupt auto``, a per-sample CSV mask, what the engine runs as one chunk) is refused over the input limit in
 one line before anything is parsed (the rest decision also over the memory budget: engine.rest_bytes). A chunked
-run's rest decision reads a streamed input whole once; the chunked passes read the stream again.
+run's rest decision reads a streamed input whole once where it fits the budget, else a chunk at a time
+(zupt.decide_rests_read); the chunked passes read the stream again.
 """
 
 from __future__ import annotations
@@ -256,7 +257,8 @@ def _open(path, model, job: engine.Job, whole: str, read: dict, workdir: Path, s
         # checked block by block and never held whole (1e7 samples, 2 axes: 6.6 s of CPU against 7.7 read
         # whole, and 1.09 GB peak against 1.30, measured; the same output file)
         big = whole_bytes(rows, n_axes) > job.budget if job.budget is not None else held > STREAM_ABOVE or _is_npz(path)
-        # the rest decision alone of a chunked run reads every sample (the stream, read whole once, then dropped)
+        # the rest decision alone of a chunked run reads every sample (the stream read whole once and dropped, or
+        # a chunk at a time over the budget)
         decided = whole == "--zupt" and not p.whole and job.rests is not None and job.rests.detect and not job.full
         if (big or held > limit) and whole:
             if held > limit:

@@ -154,6 +154,8 @@ class Source:
         """The run's t at samples ``k`` (any order): from memory, or read in one pass over the clock (a run read
         whole for the rest decision and dropped after it names its candidates' times this way)."""
         k = np.asarray(k, dtype=np.int64)
+        if len(k) and (k.min() < 0 or k.max() >= self.n):  # the pass below would leave such a time unwritten
+            raise IndexError(f"samples {k.min()}..{k.max()} outside the run's {self.n}")
         if self.arrays is not None:
             return np.asarray(self.arrays["t"])[k]
         out = np.empty(len(k))
@@ -545,11 +547,7 @@ class _AxisAids(chunked.ChunkAids):
         self.count = len(self.fx) + self.nis_rows
         self.at = 0  # the first fix of the chunk last asked for (its innovations follow at once)
         self.fix_nis = np.full(len(self.fx), np.nan)  # each fix's NIS, in the given order, as the filter meets it
-        if spans is not None:  # each span's rest: the first of its touching spans (one rest, two sigmas)
-            lo, hi = spans.lo[j], spans.hi[j]
-            new = np.ones(len(lo), dtype=bool)
-            new[1:] = lo[1:] != hi[:-1]
-            self.rest_of = np.maximum.accumulate(np.where(new, np.arange(len(lo)), 0))
+        self.rest_of = None  # each span's rest (RestSpans.rest_of), made when the first innovations come in
         self.last_rest = -1  # the rest of the last update met (chunk to chunk): a new one's first update is marked
 
     @classmethod
@@ -587,6 +585,8 @@ class _AxisAids(chunked.ChunkAids):
         if not rest.any():
             return np.zeros((0, 4))
         k = piece.ex.k[rest]
+        if self.rest_of is None:  # --tune's aids never ask: 8 B a span held for nothing
+            self.rest_of = self.spans.rest_of(self.j)
         ids = self.rest_of[np.searchsorted(self.spans.hi[self.j], k, side="right")]
         first = ids != np.concatenate(([self.last_rest], ids[:-1]))
         self.last_rest = int(ids[-1])

@@ -163,7 +163,8 @@ class _Kinematic:
         self.rec.n, self.rec.n_axes, self.rec.x, self.rec.reverse = n, self.n_axes, self._x, bool(reverse)
         self.rec.Ts, self.rec.every = Ts, SUMS_EVERY
         self._cp = self.ffi.from_buffer("double[]", self.cp)
-        self.lib.acn_kin_checkpoints(self.rec, self._cp)
+        if self.lib.acn_kin_checkpoints(self.rec, self._cp) != 0:
+            raise ValueError("rest decision: the record's sums were refused by the kernel (axes, length or spacing)")
         self.R = np.ascontiguousarray(R, dtype=np.float64)
         self.qv = self.R * Ts
         # the kernels read these through pointers made once (the arrays are kept alive beside them)
@@ -678,12 +679,14 @@ class _Decider:
         aid = np.full(m, -1, dtype=np.int64)
         fix = np.zeros(m, dtype=np.uint8)
         buf = ffi.from_buffer
-        kin.lib.acn_kin_backward(
+        rc = kin.lib.acn_kin_backward(
             n_axes, kin.s, kin.rec, kin.Ts, kin.q, kin._qv, kin._R, len(ev_k), buf("long[]", ev_k),
             buf("int[]", ev_kind), buf("long[]", ev_i), buf("double[]", ev_z), buf("double[]", ev_var),
             buf("unsigned char[]", accm), buf("double[]", level), buf("long[]", length), LEAK, p.drift, p.scale,
             p.sigma, buf("double[]", sides), buf("double[]", stat), buf("long[]", aid), buf("unsigned char[]", fix),
         )  # fmt: skip
+        if rc != 0:
+            raise ValueError("rest decision: the backward pass was refused by the kernel (its record or events)")
         assert n == len(self.x)
         return _Sides(self, sides, stat, aid, fix)
 

@@ -697,11 +697,18 @@ class RestSpans:
         step = max(1, int(round(params.every_s * model.rate_hz)))
         if step == 1:
             return int(np.sum(hi - lo))
-        new = np.ones(len(lo), dtype=bool)
-        new[1:] = lo[1:] != hi[:-1]
+        new = self.rest_of(j) == np.arange(len(lo))
         last = np.ones(len(lo), dtype=bool)
         last[:-1] = new[1:]
         return int(np.sum(-(-(hi[last] - lo[new]) // step)))
+
+    def rest_of(self, j: int) -> np.ndarray:
+        """Each of axis j's spans' rest, as the index of its first span: spans that touch (one ending where the
+        next starts: two sigmas in one rest) are one rest, its updates counted and its NIS told from its start."""
+        lo, hi = self.lo[j], self.hi[j]
+        new = np.ones(len(lo), dtype=bool)
+        new[1:] = lo[1:] != hi[:-1]
+        return np.maximum.accumulate(np.where(new, np.arange(len(lo)), 0))
 
     def updates(self, j: int, s: int, e: int, model: Model, params: ZuptParams) -> tuple[np.ndarray, np.ndarray]:
         """(samples, standard deviations) of axis j's zero-velocity updates in samples s..e-1: those
@@ -714,9 +721,7 @@ class RestSpans:
         ks = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(a - (np.cumsum(lens) - lens), lens)
         step = max(1, int(round(params.every_s * model.rate_hz)))
         if step > 1 and len(ks):  # counted from the start of each rest (touching runs are one rest)
-            new = np.ones(len(lo), dtype=bool)
-            new[1:] = lo[1:] != hi[:-1]
-            first = lo[np.maximum.accumulate(np.where(new, np.arange(len(lo)), 0))]
+            first = lo[self.rest_of(j)]
             keep = (ks - first[seg]) % step == 0
             ks, seg = ks[keep], seg[keep]
         given = sd[seg]

@@ -45,7 +45,7 @@ def inputs(tmp_path_factory):
         rows += [f"{t[k]:.4f},{ax},{arrays['r'][k, j]:.6f},0.05" for j, ax in enumerate("xy")]
     (folder / "fixes.csv").write_text("\n".join(rows) + "\n")
     (folder / "rests.csv").write_text("start_s,end_s\n2.0,4.0\n12.5,14.0\n")
-    # a per-sample mask: two rests, the second of axis y alone, one ending where the other starts
+    # a per-sample mask: two rests, the second of axis y alone
     rest = np.zeros((len(t), 2), dtype=bool)
     rest[(t >= 2.0) & (t <= 4.0)] = True
     rest[(t >= 12.5) & (t <= 14.0), 1] = True
@@ -328,7 +328,14 @@ def test_given_aids_stream_chunk_by_chunk_across_chunk_boundaries(inputs, tmp_pa
     _same(got, ref, ("filt", "smooth"))
     assert a.fixes == b.fixes == [4, 2] and a.applied == b.applied
     assert len(got["fixes"]) == 6 and "zupt" in got
+    # the aids' NIS: fixes on a chunk's first and last samples, a rest's first update told across a boundary and
+    # across two touching spans (one rest): the one-chunk rows, the NIS itself to RTOL
+    np.testing.assert_allclose(got["fix_nis"], ref["fix_nis"], rtol=RTOL, atol=0)
+    assert got["zupt_nis"].shape == ref["zupt_nis"].shape
+    np.testing.assert_array_equal(got["zupt_nis"][:, [0, 1, 3]], ref["zupt_nis"][:, [0, 1, 3]])
+    np.testing.assert_allclose(got["zupt_nis"][:, 2], ref["zupt_nis"][:, 2], rtol=RTOL, atol=0)
     if rests != "none":
+        assert len(got["zupt_nis"]) == got["zupt"].sum()
         assert got["zupt"][b1 - 7 : b1 + 10, 0].sum() == (17 if not every_s else 6)
         assert got["zupt"][b2 - 30 : b2 + 5, 1].sum() == (35 if not every_s else 12)  # touching: one rest's steps
     else:

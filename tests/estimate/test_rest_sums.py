@@ -52,3 +52,27 @@ def test_the_filter_holds_checkpoints_not_the_record_sums():
 def test_more_axes_than_a_row_holds_are_refused():
     with pytest.raises(ValueError, match="at most 8"):
         rests._Kinematic(np.zeros((10, 9)), 0.01, np.ones(9), 0.0025)
+
+
+@pytest.mark.parametrize(("field", "value"), [("n_axes", 9), ("n_axes", 0), ("every", 0), ("n", -1)])
+def test_the_kernels_refuse_a_record_their_rows_cannot_hold(field, value):
+    """The C entry points check the record themselves (a row holds 8 axes; the checkpoints' spacing divides),
+    not only the Python that fills it: a caller of the cffi module that skips _Kinematic gets -1, not a write past
+    a row or a division by zero."""
+    mod = _lib()
+    x = np.zeros((300, 9))
+    xp = mod.ffi.from_buffer("double[]", x)
+    rec = mod.ffi.new("acn_kin_rec *")
+    rec.n, rec.n_axes, rec.x, rec.reverse, rec.Ts, rec.every = 300, 2, xp, 0, 0.01, rests.SUMS_EVERY
+    cp = np.zeros((300 // rests.SUMS_EVERY + 1, 27))
+    assert mod.lib.acn_kin_checkpoints(rec, mod.ffi.from_buffer("double[]", cp)) == 0  # the record as it was made
+    setattr(rec, field, value)
+    assert mod.lib.acn_kin_checkpoints(rec, mod.ffi.from_buffer("double[]", cp)) == -1
+
+
+def test_the_backward_pass_refuses_a_record_of_other_axes():
+    kin = rests._Kinematic(np.zeros((300, 2)), 0.01, np.ones(2), 0.0025)
+    null = kin.ffi.NULL  # no events: the event, level and output arrays are not read
+    args = (0.01, 0.0025, kin._qv, kin._R, 0, *[null] * 8, 0.0, 0.0, 1.0, 0.1, *[null] * 4)
+    assert kin.lib.acn_kin_backward(3, kin.s, kin.rec, *args) == -1  # the record holds 2
+    assert kin.lib.acn_kin_backward(2, kin.s, kin.rec, *args) == 0

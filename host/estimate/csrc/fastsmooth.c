@@ -1917,8 +1917,17 @@ static const double *kin_rec_x(const acn_kin_rec *r, long k)
     return r->x + (r->reverse ? r->n - 1 - k : k) * r->n_axes;
 }
 
-void acn_kin_checkpoints(acn_kin_rec *r, double *cp)
+/* a record the kernels can read: rows of at most 8 axes (row[96], vaw[24]), checkpoints set */
+static int kin_rec_bad(const acn_kin_rec *r)
 {
+    return r == NULL || r->n < 0 || r->n_axes < 1 || r->n_axes > 8 || r->every < 1 || r->x == NULL;
+}
+
+int acn_kin_checkpoints(acn_kin_rec *r, double *cp)
+{
+    if (kin_rec_bad(r) || cp == NULL) {
+        return -1;
+    }
     int w = 3 * r->n_axes;
     double vaw[24] = {0.0};
     for (long k = 0; k <= r->n; k++) {
@@ -1935,6 +1944,7 @@ void acn_kin_checkpoints(acn_kin_rec *r, double *cp)
         r->used[i] = 0;
     }
     r->clock = 0;
+    return 0;
 }
 
 /* sample k's row [V, A, W]: a kept row, or one summed on from the nearest checkpoint or kept row
@@ -2244,13 +2254,16 @@ void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long nu
     }
 }
 
-void acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q, const double *qv,
-                      const double *R, long n_ev, const long *ev_k, const int *ev_kind,
-                      const long *ev_i, const double *ev_z, const double *ev_var,
-                      const unsigned char *acc, const double *level, const long *len, double leak,
-                      double drift, double scale, double sigma, double *out, double *stat,
-                      long *aid, unsigned char *fix)
+int acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q, const double *qv,
+                     const double *R, long n_ev, const long *ev_k, const int *ev_kind,
+                     const long *ev_i, const double *ev_z, const double *ev_var,
+                     const unsigned char *acc, const double *level, const long *len, double leak,
+                     double drift, double scale, double sigma, double *out, double *stat, long *aid,
+                     unsigned char *fix)
 {
+    if (kin_rec_bad(r) || r->cp == NULL || r->n_axes != n_axes || n_ev < 0) {
+        return -1;
+    }
     long k_now = 0, aid_k = 0, aid_ev = -1;
     unsigned char fix_seen = 0;
     double var = sigma * sigma;
@@ -2289,6 +2302,7 @@ void acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q
             aid_k = k;
         }
     }
+    return 0;
 }
 
 void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, double *V, double *A,

@@ -166,7 +166,8 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
  * acn_kin_checkpoints); a sample's row is summed on from the nearest checkpoint
  * or kept row before it (at[], row: 4 rows kept, the least recently read
  * replaced), step by step as acn_kin_sums sums: the same doubles.
- * acn_kin_sums_at copies sample k's row into out. n_axes at most 8.
+ * acn_kin_sums_at copies sample k's row into out. n_axes at most 8: acn_kin_checkpoints
+ * (and acn_kin_backward) return -1 for a record their rows cannot hold, else 0.
  */
 typedef struct {
     long n;
@@ -181,7 +182,7 @@ typedef struct {
     long clock;
     double row[96];
 } acn_kin_rec;
-void acn_kin_checkpoints(acn_kin_rec *r, double *cp);
+int acn_kin_checkpoints(acn_kin_rec *r, double *cp);
 void acn_kin_sums_at(acn_kin_rec *r, long k, double *out);
 void acn_kin_to(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
                 const double *qv);
@@ -239,12 +240,12 @@ void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long nu
  * event of the last aid before it (a fix, or the end of a rest) into aid[i]
  * (-1: none) and whether a fix came before it into fix[i].
  */
-void acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q, const double *qv,
-                      const double *R, long n_ev, const long *ev_k, const int *ev_kind,
-                      const long *ev_i, const double *ev_z, const double *ev_var,
-                      const unsigned char *acc, const double *level, const long *len, double leak,
-                      double drift, double scale, double sigma, double *out, double *stat,
-                      long *aid, unsigned char *fix);
+int acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q, const double *qv,
+                     const double *R, long n_ev, const long *ev_k, const int *ev_kind,
+                     const long *ev_i, const double *ev_z, const double *ev_var,
+                     const unsigned char *acc, const double *level, const long *len, double leak,
+                     double drift, double scale, double sigma, double *out, double *stat, long *aid,
+                     unsigned char *fix);
 /*
  * The sums the kinematic filter reads (rests.py, _Kinematic), n + 1 rows of
  * n_axes each, over x (n rows of n_axes; reverse: its rows last first):
