@@ -680,7 +680,7 @@ class _Decider:
         fix = np.zeros(m, dtype=np.uint8)
         buf = ffi.from_buffer
         rc = kin.lib.acn_kin_backward(
-            n_axes, kin.s, kin.rec, kin.Ts, kin.q, kin._qv, kin._R, len(ev_k), buf("long[]", ev_k),
+            n_axes, kin.s, kin.rec, kin.Ts, kin.q, kin._qv, kin._R, m, len(ev_k), buf("long[]", ev_k),
             buf("int[]", ev_kind), buf("long[]", ev_i), buf("double[]", ev_z), buf("double[]", ev_var),
             buf("unsigned char[]", accm), buf("double[]", level), buf("long[]", length), LEAK, p.drift, p.scale,
             p.sigma, buf("double[]", sides), buf("double[]", stat), buf("long[]", aid), buf("unsigned char[]", fix),

@@ -70,9 +70,51 @@ def test_the_kernels_refuse_a_record_their_rows_cannot_hold(field, value):
     assert mod.lib.acn_kin_checkpoints(rec, mod.ffi.from_buffer("double[]", cp)) == -1
 
 
-def test_the_backward_pass_refuses_a_record_of_other_axes():
+def test_the_backward_pass_refuses_a_record_of_other_axes_or_events_outside_it():
     kin = rests._Kinematic(np.zeros((300, 2)), 0.01, np.ones(2), 0.0025)
-    null = kin.ffi.NULL  # no events: the event, level and output arrays are not read
-    args = (0.01, 0.0025, kin._qv, kin._R, 0, *[null] * 8, 0.0, 0.0, 1.0, 0.1, *[null] * 4)
-    assert kin.lib.acn_kin_backward(3, kin.s, kin.rec, *args) == -1  # the record holds 2
-    assert kin.lib.acn_kin_backward(2, kin.s, kin.rec, *args) == 0
+    ffi, null = kin.ffi, kin.ffi.NULL  # the calls here read no event value, level or side: NULL for those
+
+    def backward(n_axes, ev_k=(), ev_kind=(), ev_i=(), m=0):
+        ev = [
+            ffi.from_buffer(t, np.asarray(a, dtype=d)) if len(ev_k) else null
+            for t, a, d in (("long[]", ev_k, np.int64), ("int[]", ev_kind, np.int32), ("long[]", ev_i, np.int64))
+        ]
+        outs = [np.zeros(max(m, 1) * 8 * n_axes) for _ in range(2)]
+        acc = np.zeros(max(m, 1), dtype=np.uint8)
+        return kin.lib.acn_kin_backward(
+            n_axes, kin.s, kin.rec, 0.01, 0.0025, kin._qv, kin._R, m, len(ev_k), *ev, null, null,
+            ffi.from_buffer("unsigned char[]", acc), null, null, 0.0, 0.0, 1.0, 0.1,
+            *(ffi.from_buffer("double[]", o) for o in outs), null, null,
+        )  # fmt: skip
+
+    assert backward(3) == -1  # the record holds 2
+    assert backward(2) == 0
+    assert backward(2, [301], [1], [0]) == -1  # a fix after the record's end
+    assert backward(2, [5], [1], [2]) == -1  # a fix on a third axis
+    assert backward(2, [5], [0], [0], m=0) == -1  # a candidate's start with no candidates
+    assert backward(2, [9, 5], [1, 1], [0, 0]) == -1  # out of sample order
+    kin.rec.n = 200  # the checkpoints were made for 300 samples
+    assert backward(2) == -1
+    out = np.empty(6)
+    assert kin.lib.acn_kin_sums_at(kin.rec, 5, ffi.from_buffer("double[]", out)) == -1
+
+
+def test_the_window_pass_starts_from_fresh_sums():
+    """acn_rest_centres is a whole pass: given a state that has stepped (at >= 0) it would skip those windows'
+    sums and flag from a later window's figures, so it refuses."""
+    mod = _lib()
+    ffi = mod.ffi
+    n, w = 50, 5
+    x, usable, allow = np.zeros((n, 1)), np.ones(n, dtype=np.uint8), np.ones(1)
+    centre = np.zeros(n, dtype=np.uint8)
+
+    def centres(at0):
+        state, at = np.zeros(4), np.full(1, at0, dtype=np.int64)
+        return mod.lib.acn_rest_centres(
+            n, 1, ffi.from_buffer("double[]", x), ffi.from_buffer("unsigned char[]", usable), w,
+            ffi.from_buffer("double[]", allow), 1.0, ffi.from_buffer("double[]", state),
+            ffi.from_buffer("long[]", at), ffi.from_buffer("unsigned char[]", centre),
+        )  # fmt: skip
+
+    assert centres(-1) == 0 and centre[w // 2 : n - w // 2].all()
+    assert centres(3) == -1

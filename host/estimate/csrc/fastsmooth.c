@@ -1917,10 +1917,39 @@ static const double *kin_rec_x(const acn_kin_rec *r, long k)
     return r->x + (r->reverse ? r->n - 1 - k : k) * r->n_axes;
 }
 
-/* a record the kernels can read: rows of at most 8 axes (row[96], vaw[24]), checkpoints set */
+/* a record whose rows fit (at most 8 axes: row[96], vaw[24]) and whose length the checkpoints can
+ * index */
 static int kin_rec_bad(const acn_kin_rec *r)
 {
-    return r == NULL || r->n < 0 || r->n_axes < 1 || r->n_axes > 8 || r->every < 1 || r->x == NULL;
+    return r == NULL || r->n < 0 || r->n_axes < 1 || r->n_axes > 8 || r->every < 1 ||
+           r->x == NULL || r->n > LONG_MAX / 24;
+}
+
+/* a record the kernels can read: sound, and its checkpoints made for the n, every and axes it has
+ * now */
+static int kin_rec_ready(const acn_kin_rec *r)
+{
+    return !kin_rec_bad(r) && r->cp != NULL && r->cp_n == r->n && r->cp_every == r->every &&
+           r->cp_axes == r->n_axes;
+}
+
+/* the events of a pass over n samples, m candidates: in sample order within the record, each kind's
+   index within its array (a fix names an axis, a candidate's start or end a candidate) */
+static int kin_events_bad(long n, int n_axes, long m, long n_ev, const long *ev_k,
+                          const int *ev_kind, const long *ev_i)
+{
+    if (m < 0 || n_ev < 0) {
+        return 1;
+    }
+    for (long e = 0; e < n_ev; e++) {
+        long k = ev_k[e], i = ev_i[e];
+        int kind = ev_kind[e];
+        if (k < 0 || k > n || (e > 0 && k < ev_k[e - 1]) || kind < 0 || kind > 2 || i < 0 ||
+            i >= (kind == 1 ? n_axes : m)) {
+            return 1;
+        }
+    }
+    return 0;
 }
 
 int acn_kin_checkpoints(acn_kin_rec *r, double *cp)
@@ -1944,6 +1973,7 @@ int acn_kin_checkpoints(acn_kin_rec *r, double *cp)
         r->used[i] = 0;
     }
     r->clock = 0;
+    r->cp_n = r->n, r->cp_every = r->every, r->cp_axes = r->n_axes;
     return 0;
 }
 
@@ -1982,9 +2012,13 @@ static const double *kin_rec_row(acn_kin_rec *r, long k)
     return row;
 }
 
-void acn_kin_sums_at(acn_kin_rec *r, long k, double *out)
+int acn_kin_sums_at(acn_kin_rec *r, long k, double *out)
 {
+    if (!kin_rec_ready(r) || k < 0 || k > r->n) {
+        return -1;
+    }
     memcpy(out, kin_rec_row(r, k), sizeof(double) * 3 * (size_t)r->n_axes);
+    return 0;
 }
 
 void acn_kin_to(int n_axes, double *s, acn_kin_rec *rec, long k0, long k, double Ts, double q,
@@ -2255,13 +2289,14 @@ void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long nu
 }
 
 int acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q, const double *qv,
-                     const double *R, long n_ev, const long *ev_k, const int *ev_kind,
+                     const double *R, long m, long n_ev, const long *ev_k, const int *ev_kind,
                      const long *ev_i, const double *ev_z, const double *ev_var,
                      const unsigned char *acc, const double *level, const long *len, double leak,
                      double drift, double scale, double sigma, double *out, double *stat, long *aid,
                      unsigned char *fix)
 {
-    if (kin_rec_bad(r) || r->cp == NULL || r->n_axes != n_axes || n_ev < 0) {
+    if (!kin_rec_ready(r) || r->n_axes != n_axes ||
+        kin_events_bad(r->n, n_axes, m, n_ev, ev_k, ev_kind, ev_i)) {
         return -1;
     }
     long k_now = 0, aid_k = 0, aid_ev = -1;
@@ -2550,7 +2585,7 @@ static void kin_fwd_mark(const acn_kin_fwd *f, acn_kin_fwd_out *o, long slot, lo
 /* the inputs' lengths and indices: 0 when every one lies within its array */
 static int kin_fwd_checked(const acn_kin_fwd *f, long resume, const acn_kin_fwd_out *o)
 {
-    if (f->rec == NULL || f->rec->n != f->n || f->rec->n_axes != f->n_axes || f->rec->every < 1) {
+    if (!kin_rec_ready(f->rec) || f->rec->n != f->n || f->rec->n_axes != f->n_axes) {
         return -1;
     }
     if (f->n_axes < 1 || f->n_axes > KIN_AXES || f->n < 0 || f->m < 0 || f->n_ev < 0 ||
@@ -2567,15 +2602,7 @@ static int kin_fwd_checked(const acn_kin_fwd *f, long resume, const acn_kin_fwd_
             return -1;
         }
     }
-    for (long e = 0; e < f->n_ev; e++) {
-        long k = f->ev_k[e], i = f->ev_i[e];
-        int kind = f->ev_kind[e];
-        if (k < 0 || k > f->n || (e > 0 && k < f->ev_k[e - 1]) || kind < 0 || kind > 2 || i < 0 ||
-            i >= (kind == 1 ? f->n_axes : f->m)) {
-            return -1;
-        }
-    }
-    return 0;
+    return kin_events_bad(f->n, f->n_axes, f->m, f->n_ev, f->ev_k, f->ev_kind, f->ev_i) ? -1 : 0;
 }
 
 /* back to before the hypothesis h (the state saved in saved, its event e_h): the candidates after
@@ -2802,6 +2829,10 @@ long acn_rest_centres(long n, int n_axes, const double *x, const unsigned char *
 {
     if (n < 0 || n_axes < 1 || w < 1 || w % 2 == 0 || n > LONG_MAX / n_axes)
         return -1;
+    for (int j = 0; j < n_axes;
+         j++) /* a whole pass: from fresh sums (a state held would be skipped) */
+        if (at[j] >= 0)
+            return -1;
     long h = w / 2;
     for (long k = 0; k < n; k++)
         centre[k] = 0;

@@ -167,7 +167,9 @@ void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry,
  * or kept row before it (at[], row: 4 rows kept, the least recently read
  * replaced), step by step as acn_kin_sums sums: the same doubles.
  * acn_kin_sums_at copies sample k's row into out. n_axes at most 8: acn_kin_checkpoints
- * (and acn_kin_backward) return -1 for a record their rows cannot hold, else 0.
+ * returns -1 for a record its rows cannot hold, else 0; the kernels that read a
+ * record (acn_kin_sums_at, acn_kin_backward, acn_kin_forward) refuse one whose
+ * n, every or n_axes changed after its checkpoints were made.
  */
 typedef struct {
     long n;
@@ -181,9 +183,11 @@ typedef struct {
     long used[4];
     long clock;
     double row[96];
+    long cp_n, cp_every; /* the n and every the checkpoints were made for (acn_kin_checkpoints) */
+    int cp_axes;
 } acn_kin_rec;
 int acn_kin_checkpoints(acn_kin_rec *r, double *cp);
-void acn_kin_sums_at(acn_kin_rec *r, long k, double *out);
+int acn_kin_sums_at(acn_kin_rec *r, long k, double *out);
 void acn_kin_to(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
                 const double *qv);
 void acn_kin_aid(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
@@ -241,7 +245,7 @@ void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long nu
  * (-1: none) and whether a fix came before it into fix[i].
  */
 int acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q, const double *qv,
-                     const double *R, long n_ev, const long *ev_k, const int *ev_kind,
+                     const double *R, long m, long n_ev, const long *ev_k, const int *ev_kind,
                      const long *ev_i, const double *ev_z, const double *ev_var,
                      const unsigned char *acc, const double *level, const long *len, double leak,
                      double drift, double scale, double sigma, double *out, double *stat, long *aid,
