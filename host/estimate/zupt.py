@@ -335,18 +335,21 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     runs = intervals(centre)
     # a body swaying more than the tremor allowance (a real stance) has a level that wanders as much: the bound
     # grows with the run's own typical window variance (not with a ramp, whose windows stay quiet)
+    # (the median partitions the run's variances in place, numpy's own steps on the same values, and the pieces
+    # then take that array as their scratch: a long rest's run holds its means and one array besides, not three)
     parts = [
         _steady_pieces(
             means,
             a,
             b,
-            bound2 * max(1.0, float(np.median(wvar)) / total),
+            bound2 * max(1.0, float(np.median(wvar, overwrite_input=True)) / total),
             x,
             total,
             w,
             p.level_rate * model.Ts,
             int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
             p.leak_rate * model.Ts,
+            scratch=wvar,
         )
         for a, b in runs
         for means, wvar in [spans.of(a, b)]
@@ -415,6 +418,7 @@ def _steady_pieces(
     tilt_rate: float,
     lean: int,
     leak_rate: float = 0.0,
+    scratch: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
     piece's median: the longest such stretch about the run's median is kept, the parts either side are split
@@ -435,7 +439,8 @@ def _steady_pieces(
     is kept when it holds three windows at least (thirds of a window each: shorter, a ramp's start cannot be
     told from a step) and its level does not walk away from the piece it was cut from (a ramp leaving a
     rest does; a body that settled at a new level, or sways about it, does not).
-    ``means`` are the window means of the run's centres alone (b - a rows, :class:`_Spans`).
+    ``means`` are the window means of the run's centres alone (b - a rows, :class:`_Spans`). ``scratch``: b - a
+    float64 the kernel may overwrite (a fresh array when None).
     Returns the pieces' (first, last + 1, median level, own variance) as four arrays, in sample order.
 
     Compiled (acn_rest_pieces in csrc/fastsmooth.c): a ramp is cut into pieces of a sample or two, tens of
@@ -454,10 +459,16 @@ def _steady_pieces(
     xc = np.ascontiguousarray(x[a:b], dtype=np.float64)
     start, stop = np.empty(max(m, 1), dtype=np.int64), np.empty(max(m, 1), dtype=np.int64)
     ref, own = np.empty((max(m, 1), n_axes)), np.empty(max(m, 1))
+    if scratch is None:
+        scratch = np.empty(max(m, 1))
+    if not (scratch.dtype == np.float64 and scratch.flags.c_contiguous and scratch.flags.writeable):
+        raise ValueError("rest detector: the pieces' scratch must be a writable contiguous float64 array")
+    if len(scratch) < m or mc.shape != (m, n_axes) or xc.shape != (m, n_axes):
+        raise ValueError(f"rest detector: {len(scratch)} scratch rows, means {mc.shape}, x {xc.shape} for run {a}..{b}")
     count = mod.lib.acn_rest_pieces(
         m, n_axes, ffi.from_buffer("double[]", mc), ffi.from_buffer("double[]", xc), bound2, total, w,
-        tilt_rate, lean, leak_rate, ffi.from_buffer("long[]", start), ffi.from_buffer("long[]", stop),
-        ffi.from_buffer("double[]", ref), ffi.from_buffer("double[]", own),
+        tilt_rate, lean, leak_rate, ffi.from_buffer("double[]", scratch), ffi.from_buffer("long[]", start),
+        ffi.from_buffer("long[]", stop), ffi.from_buffer("double[]", ref), ffi.from_buffer("double[]", own),
     )  # fmt: skip
     if count < 0:
         raise MemoryError("rest detector: no memory for a run's pieces")

@@ -105,3 +105,32 @@ def test_real_stationary_adis():
         rows = np.loadtxt(fh, delimiter=",", skiprows=1, max_rows=120_000, usecols=(4, 5))
     model = loads_model(rm.model_text(100.0, ("x", "y"), 10.0, 5000.0))
     assert_same_decisions(rows * G0, np.zeros(rows.shape, dtype=bool), model)
+
+
+@pytest.mark.parametrize("m", [601, 602, 4_999, 20_000])
+def test_long_runs_pieces_as_the_oracle(m):
+    """Runs long enough that the C selects its medians through a sample of the run (over 600 rows), odd and even
+    counts, tied levels (a quantised walk, as an ADC's codes give) and a long quiet level with noise: the same
+    pieces, bit for bit, as the Python the C replaced."""
+    rng = np.random.default_rng(m)
+    w, total = 11, 2.0e-3
+    x = rng.normal(0.0, 0.02, (m, 2))
+    walk = np.cumsum(rng.normal(0.0, 0.004, (m, 2)), axis=0)
+    for means, bound2 in ((np.round(walk, 2), 1e-4), (walk, 4e-5), (rng.normal(0.1, 0.003, (m, 2)), 1e-3)):
+        got = zupt._steady_pieces(means, 0, m, bound2, x, total, w, 1e-5, 100, 1e-6)
+        want = sorted(oracle._steady_pieces(means, 0, m, bound2, x, total, w, 1e-5, 100, 1e-6), key=lambda r: r[0])
+        assert len(want) > 0 and len(got[0]) == len(want)
+        assert got[0].tolist() == [r[0] for r in want] and got[1].tolist() == [r[1] for r in want]
+        assert np.array_equal(got[2], np.array([r[2] for r in want]).reshape(-1, 2))
+        assert got[3].tolist() == [r[3] for r in want]
+        # the caller's scratch (the detector's window variances, NaN here): only written, never read
+        kept = means.copy()
+        again = zupt._steady_pieces(means, 0, m, bound2, x, total, w, 1e-5, 100, 1e-6, scratch=np.full(m, np.nan))
+        assert all(np.array_equal(u, v) for u, v in zip(again, got, strict=True)) and np.array_equal(means, kept)
+
+
+def test_pieces_scratch_refused_when_short_or_foreign():
+    means, x = np.zeros((50, 2)), np.zeros((50, 2))
+    for scratch in (np.zeros(49), np.zeros(50, dtype=np.float32), np.zeros(100)[::2]):
+        with pytest.raises(ValueError, match="scratch"):
+            zupt._steady_pieces(means, 0, 50, 1e-3, x, 1e-3, 5, 0.0, 10, scratch=scratch)

@@ -60,15 +60,17 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
  * steady level (host/estimate/zupt.py, _steady_pieces). means, x: n rows of
  * n_axes (at most ACN_REST_MAX_AXES) window means and samples of the run.
  * tilt_rate, leak_rate: level drift allowed per row (beyond lean rows; over a
- * whole run). Writes each piece's first and last + 1 row, its median level
- * (n_axes) and its own variance (summed over axes) into arrays of n; returns the
- * number of pieces, -1 when out of memory, -2 for too many axes.
+ * whole run). scratch: n doubles the kernel overwrites (the caller's, so a long
+ * rest's run does not cost another 8 B a row). Writes each piece's first and
+ * last + 1 row, its median level (n_axes) and its own variance (summed over
+ * axes) into arrays of n; returns the number of pieces, -1 when out of memory,
+ * -2 for too many axes.
  */
 enum { ACN_REST_MAX_AXES = 8 };
 
 long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, double bound2,
                      double total, long w, double tilt_rate, long lean, double leak_rate,
-                     long *pstart, long *pstop, double *pref, double *pown);
+                     double *scratch, long *pstart, long *pstop, double *pref, double *pown);
 
 /*
  * Plain path in bounded memory (host/estimate/chunked.py): the same numbers as
