@@ -134,3 +134,23 @@ def test_pieces_scratch_refused_when_short_or_foreign():
     for scratch in (np.zeros(49), np.zeros(50, dtype=np.float32), np.zeros(100)[::2]):
         with pytest.raises(ValueError, match="scratch"):
             zupt._steady_pieces(means, 0, 50, 1e-3, x, 1e-3, 5, 0.0, 10, scratch=scratch)
+
+
+def test_knocked_rests_join_as_the_oracle():
+    """A knock inside every rest breaks its quiet run in two; the pieces either side join again across it (the
+    joins tested as arrays, then walked in order), except where the gap holds a clipped sample: the oracle's
+    candidates, and the joins happen."""
+    model = load_model(None)
+    s = simulate(model, "stop_and_go", 120.0, seed=101)
+    clean = zupt.intervals(oracle.candidates(s.accel, s.clipped, model, zupt.resolved(model, zupt.ZuptParams())))
+    long_rests = [(a, b) for a, b in clean if b - a > 200]
+    assert len(long_rests) >= 4
+    accel, clipped = np.array(s.accel), np.array(s.clipped)
+    for i, (a, b) in enumerate(long_rests):
+        accel[(a + b) // 2, 0] += 5 * G0
+        if i % 2:  # this one stays apart: its knock is also clipped
+            clipped[(a + b) // 2, 1] = True
+    assert assert_same_decisions(accel, clipped, model) > len(clean)
+    knocked = zupt.intervals(zupt.candidates(accel, clipped, model))
+    joined = [(a, b) for a, b in long_rests if any(p <= a + 50 and q >= b - 50 for p, q in knocked)]
+    assert 0 < len(joined) < len(long_rests)
