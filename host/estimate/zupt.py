@@ -326,7 +326,9 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     """:func:`candidates` on the prepared record (:func:`_prepared`), which the decision reads too."""
     n, n_axes = x.shape
     w = window_samples(model, p)
-    usable = ok.all(axis=1)
+    usable = ok[:, 0].copy()  # ok.all(axis=1) column by column: numpy's strided all took 0.2 s at 1e7 x 2
+    for j in range(1, n_axes):
+        usable &= ok[:, j]
     centre = _centres(x, usable, R + p.tremor**2, w, p.var_k)
     spans = _Spans(x, w)  # one run's window figures at a time, not the record's (24 B a sample at 2 axes)
     # split each run into pieces of steady level: a move that starts gently is quiet, but its mean walks away
