@@ -337,14 +337,14 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     runs = intervals(centre)
     # a body swaying more than the tremor allowance (a real stance) has a level that wanders as much: the bound
     # grows with the run's own typical window variance (not with a ramp, whose windows stay quiet)
-    # (the median partitions the run's variances in place, numpy's own steps on the same values, and the pieces
-    # then take that array as their scratch: a long rest's run holds its means and one array besides, not three)
+    # (the median reorders the run's variances in place, and the pieces then take that array as their scratch: a
+    # long rest's run holds its means and one array besides, not three)
     parts = [
         _steady_pieces(
             means,
             a,
             b,
-            bound2 * max(1.0, float(np.median(wvar, overwrite_input=True)) / total),
+            bound2 * max(1.0, _median_in_place(wvar) / total),
             x,
             total,
             w,
@@ -398,6 +398,17 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     for a, b in zip(a_of[keep].tolist(), b_of[keep].tolist(), strict=True):  # a slice per rest (tens of thousands)
         mask[a:b] = True
     return mask
+
+
+def _median_in_place(v: np.ndarray) -> float:
+    """np.median(v) (the same double: an order statistic, or the mean of the two middle ones), ``v`` reordered.
+    Compiled (acn_rest_median): numpy's partition and mean per run took 0.2-0.4 s CPU over the 1 105 runs of 1e7."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    if not (v.dtype == np.float64 and v.ndim == 1 and v.flags.c_contiguous and v.flags.writeable):
+        raise ValueError("rest detector: a median of a writable contiguous float64 vector only")
+    mod = _lib()
+    return float(mod.lib.acn_rest_median(len(v), mod.ffi.from_buffer("double[]", v)))
 
 
 def _level_steps(

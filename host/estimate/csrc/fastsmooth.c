@@ -921,6 +921,23 @@ static void median_rows(const double *means, int n_axes, long a, long b, double 
     }
 }
 
+double acn_rest_median(long n, double *v)
+{
+    if (n < 1)
+        return NAN;
+    for (long i = 0; i < n; i++)
+        if (v[i] != v[i])
+            return NAN;
+    long h = n / 2;
+    select_fr(v, 0, n - 1, h);
+    if (n % 2)
+        return v[h];
+    double lo = v[0];
+    for (long i = 1; i < h; i++)
+        lo = v[i] > lo ? v[i] : lo;
+    return (lo + v[h]) / 2.0; /* np.mean of the two: their sum over 2 */
+}
+
 /* sum over axes of (row - ref)^2 */
 static double dist2(const double *row, const double *ref, int n_axes)
 {

@@ -71,6 +71,11 @@ enum { ACN_REST_MAX_AXES = 8 };
 long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, double bound2,
                      double total, long w, double tilt_rate, long lean, double leak_rate,
                      double *scratch, long *pstart, long *pstop, double *pref, double *pown);
+/*
+ * The median of v[0..n-1] as np.median gives it: NaN where any value is NaN or
+ * n < 1, the mean of the two middle values for an even n. v is reordered.
+ */
+double acn_rest_median(long n, double *v);
 
 /*
  * Plain path in bounded memory (host/estimate/chunked.py): the same numbers as
