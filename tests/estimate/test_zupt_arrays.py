@@ -171,3 +171,17 @@ def test_run_median_is_numpys():
         assert np.array_equal(np.float64(got), want, equal_nan=True) and (got != got or got.hex() == want.hex())
     with pytest.raises(ValueError, match="median"):
         zupt._median_in_place(np.zeros(4, dtype=np.float32))
+
+
+def test_pieces_refuse_axes_past_numpys_sequential_sums():
+    """From 8 terms numpy sums pairwise, not in order as the C does: 7 axes are taken, 8 refused."""
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(20_000, 8)) ** 2 * 10.0 ** rng.integers(-8, 8, size=(20_000, 8))
+    in_order = [a[:, 0].copy()]
+    for j in range(1, 8):
+        in_order.append(in_order[-1] + a[:, j])
+    assert np.array_equal(np.sum(a[:, :7], axis=1), in_order[6])  # 7 terms: in order
+    assert not np.array_equal(np.sum(a, axis=1), in_order[7])  # 8: not, the reason for the limit
+    zupt._steady_pieces(np.zeros((30, 7)), 0, 30, 1e-3, np.zeros((30, 7)), 1e-3, 5, 0.0, 10)
+    with pytest.raises(ValueError, match="at most 7"):
+        zupt._steady_pieces(np.zeros((30, 8)), 0, 30, 1e-3, np.zeros((30, 8)), 1e-3, 5, 0.0, 10)
