@@ -416,15 +416,35 @@ def _level_steps(
 ) -> np.ndarray:
     """Per piece, how many samples past its ``edge`` sample (walking by ``step``, -1 or 1, at most h, not off
     the run) stay usable and within sqrt(lim2) of the piece's level ``refs`` before the first that does not:
-    the widening of every piece at once."""
-    n = len(x)
-    if h < 1 or not len(edge):
-        return np.zeros(len(edge), dtype=np.int64)
-    idx = edge[:, None] + step * np.arange(1, h + 1)  # (pieces, h)
-    inside = (idx >= 0) & (idx < n)
-    idx = np.clip(idx, 0, n - 1)
-    fits = inside & usable[idx] & (np.sum((x[idx] - refs[:, None, :]) ** 2, axis=2) <= lim2[:, None])
-    return np.where(fits.all(axis=1), h, np.argmin(fits, axis=1))
+    the widening of every piece at once.
+
+    Compiled (acn_rest_widen): numpy's gathers of every piece's h samples took 0.14 s at 1e7 (twice); the C sums
+    the squares over the axes in order, as numpy does for up to 7 (:data:`_MAX_AXES`)."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    n, n_axes = x.shape
+    count = len(edge)
+    if h < 1 or not count:
+        return np.zeros(count, dtype=np.int64)
+    if n_axes > _MAX_AXES:
+        raise ValueError(f"rest detector: {n_axes} axes; accepted: at most {_MAX_AXES}")
+    xc = np.ascontiguousarray(x, dtype=np.float64)
+    ok = np.ascontiguousarray(usable, dtype=bool).view(np.uint8)
+    refs = np.ascontiguousarray(refs, dtype=np.float64)
+    lim2 = np.ascontiguousarray(lim2, dtype=np.float64)
+    edge = np.ascontiguousarray(edge, dtype=np.int64)
+    if len(ok) != n or refs.shape != (count, n_axes) or lim2.shape != (count,):
+        raise ValueError(f"rest detector: {len(ok)} rows, levels {refs.shape}, bounds {lim2.shape} for {count} pieces")
+    out = np.empty(count, dtype=np.int64)
+    mod = _lib()
+    buf = mod.ffi.from_buffer
+    status = mod.lib.acn_rest_widen(
+        n, n_axes, buf("double[]", xc), buf("unsigned char[]", ok), count, buf("double[]", refs),
+        buf("double[]", lim2), buf("long[]", edge), int(step), int(h), buf("long[]", out),
+    )  # fmt: skip
+    if status != 0:
+        raise ValueError(f"rest detector: widening by {step} over {n} x {n_axes}; accepted: a step of -1 or 1")
+    return out
 
 
 def _steady_pieces(

@@ -185,3 +185,33 @@ def test_pieces_refuse_axes_past_numpys_sequential_sums():
     zupt._steady_pieces(np.zeros((30, 7)), 0, 30, 1e-3, np.zeros((30, 7)), 1e-3, 5, 0.0, 10)
     with pytest.raises(ValueError, match="at most 7"):
         zupt._steady_pieces(np.zeros((30, 8)), 0, 30, 1e-3, np.zeros((30, 8)), 1e-3, 5, 0.0, 10)
+
+
+def _widen_numpy(x, usable, refs, lim2, edge, step, h):
+    """zupt._level_steps as numpy computed it before the C (acn_rest_widen)."""
+    n = len(x)
+    idx = edge[:, None] + step * np.arange(1, h + 1)
+    inside = (idx >= 0) & (idx < n)
+    idx = np.clip(idx, 0, n - 1)
+    fits = inside & usable[idx] & (np.sum((x[idx] - refs[:, None, :]) ** 2, axis=2) <= lim2[:, None])
+    return np.where(fits.all(axis=1), h, np.argmin(fits, axis=1))
+
+
+@pytest.mark.parametrize("n_axes", [1, 2, 3, 7])
+def test_widening_as_numpy(n_axes):
+    """Pieces widened sample by sample in C as numpy's gathers did: at the record's ends, across unusable rows,
+    both ways, bounds that some samples just pass."""
+    rng = np.random.default_rng(n_axes)
+    n = 3_000
+    x = rng.normal(0.0, 0.05, (n, n_axes))
+    usable = rng.random(n) > 0.05
+    edge = np.concatenate([[0, 1, n - 2, n - 1], rng.integers(0, n, 500)]).astype(np.int64)
+    refs = x[edge] + rng.normal(0.0, 0.01, (len(edge), n_axes))
+    lim2 = rng.uniform(0.0, 0.02 * n_axes, len(edge))
+    seen = set()
+    for step in (-1, 1):
+        for h in (1, 5, 40):
+            got = zupt._level_steps(x, usable, refs, lim2, edge, step, h)
+            assert np.array_equal(got, _widen_numpy(x, usable, refs, lim2, edge, step, h))
+            seen.update(got.tolist())
+    assert {0, 1, 5, 40} <= seen  # stopped at once, part way and never

@@ -947,6 +947,26 @@ static double dist2(const double *row, const double *ref, int n_axes)
     return s;
 }
 
+long acn_rest_widen(long n, int n_axes, const double *x, const unsigned char *usable, long count,
+                    const double *refs, const double *lim2, const long *edge, int step, long h,
+                    long *out)
+{
+    if (n < 0 || count < 0 || h < 0 || n_axes < 1 || n_axes > ACN_REST_MAX_AXES ||
+        (step != 1 && step != -1) || n > LONG_MAX / n_axes)
+        return -1;
+    for (long i = 0; i < count; i++) {
+        long s = 0;
+        for (; s < h; s++) {
+            long k = edge[i] + step * (s + 1);
+            if (k < 0 || k >= n || !usable[k] ||
+                !(dist2(x + k * n_axes, refs + i * n_axes, n_axes) <= lim2[i]))
+                break;
+        }
+        out[i] = s;
+    }
+    return 0;
+}
+
 /* Per axis, the mean of rows a..b-1 (b > a). */
 static void mean_rows(const double *v, int n_axes, long a, long b, double *out)
 {

@@ -76,6 +76,17 @@ long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, d
  * n < 1, the mean of the two middle values for an even n. v is reordered.
  */
 double acn_rest_median(long n, double *v);
+/*
+ * The widening of count pieces (host/estimate/zupt.py, _level_steps): for piece
+ * i, how many rows past edge[i] (walking by step, -1 or 1; at most h) stay inside
+ * the n rows of x (n_axes columns), usable, and within lim2[i] (squared, summed
+ * over the axes in order) of its level refs[i] (n_axes), before the first that
+ * does not. Into out (count). Returns 0, or -1 (nothing written) where a length
+ * or step is out of range.
+ */
+long acn_rest_widen(long n, int n_axes, const double *x, const unsigned char *usable, long count,
+                    const double *refs, const double *lim2, const long *edge, int step, long h,
+                    long *out);
 
 /*
  * Plain path in bounded memory (host/estimate/chunked.py): the same numbers as
