@@ -807,7 +807,8 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
 /* The same steps in the same order as numpy takes them there, so the pieces  */
 /* are the same numbers: medians are order statistics (the mean of the two    */
 /* middle ones for an even count), sums over rows run row by row, sums over   */
-/* axes axis by axis (numpy's order for these shapes, up to 8 axes).          */
+/* axes axis by axis (numpy's order for these shapes up to 7 axes; from 8     */
+/* numpy sums pairwise, so zupt.py takes at most 7).                          */
 
 /* The k-th smallest of v[0..n-1] (v reordered: v[0..k-1] <= v[k] <= v[k+1..]). */
 static double select_kth(double *v, long n, long k)
