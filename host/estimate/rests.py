@@ -123,7 +123,7 @@ def _made(v, sd, chi2, source, fix, r, r_sd, norms) -> Side:
     return s
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Candidate:
     start: int
     stop: int
@@ -227,9 +227,9 @@ class _Rows:
 
     __slots__ = ("cands", "found", "acc", "after", "before", "behind")
 
-    def __init__(self, cands: list[Candidate], found: list[_Verdict], acc: set[int], after: _Sides | None):
+    def __init__(self, cands: list[Candidate], found: _Found, acc: set[int], after: _Sides | None):
         self.cands, self.found, self.acc, self.after = cands, found, acc, after
-        self.before = found[0]._ps.stat if found else None
+        self.before = found._ps.stat
         self.behind = None if after is None else after._rows[1]
 
 
@@ -247,7 +247,7 @@ _READ = {  # each field of a verdict of decide(), read from its rows (_Rows) and
     "start": lambda r, i: r.cands[i].start,
     "stop": lambda r, i: r.cands[i].stop,
     "accepted": lambda r, i: i in r.acc,
-    "reason": lambda r, i: r.found[i].reason,
+    "reason": lambda r, i: r.found.reasons[i],
     "still": lambda r, i: r.cands[i].still,
     "level": _level_norm,
     "v_before": lambda r, i: float(r.before[i, 1]),
@@ -388,10 +388,10 @@ class _Events:
     """One direction's events as the kernels read them, in sample order: a candidate's test (kind 0) before anything
     at its first sample, a fix (1) then, its end (2: where an accepted rest's second update goes) at its last; fixes
     at one sample keep their order. ``k`` the sample in this direction's time, ``i`` the candidate (a fix: its axis),
-    ``z`` and ``var`` a fix's measurement, ``at`` its sample in the record's time. Arrays, not a tuple per event: a
-    1e7-sample drive has 60 000 candidates, and the list sorted in Python cost 0.6 s and 2 B a sample held."""
+    ``z`` and ``var`` a fix's measurement (:meth:`at`: its sample in the record's time). Arrays, not a tuple per
+    event: a 1e7-sample drive has 60 000 candidates, and the list sorted in Python cost 0.6 s and 2 B a sample held."""
 
-    __slots__ = ("k", "kind", "i", "z", "var", "at")
+    __slots__ = ("k", "kind", "i", "z", "var", "_n", "_reverse")
 
     def __init__(self, cands: list[Candidate], fixes, n: int, reverse: bool):
         m = len(cands)
@@ -407,10 +407,16 @@ class _Events:
         i = np.empty(len(k), dtype=np.int64)
         i[0 : 2 * m : 2] = i[1 : 2 * m : 2] = np.arange(m)
         i[2 * m :] = [j for j, _, _, _ in fx]
-        z, var, at = np.zeros(len(k)), np.zeros(len(k)), np.zeros(len(k), dtype=np.int64)
-        z[2 * m :], var[2 * m :], at[2 * m :] = [v for _, _, v, _ in fx], [v for _, _, _, v in fx], fk
+        z, var = np.zeros(len(k)), np.zeros(len(k))
+        z[2 * m :], var[2 * m :] = [v for _, _, v, _ in fx], [v for _, _, _, v in fx]
         order = np.lexsort((kind, k))  # stable: the order above within one (sample, kind)
-        self.k, self.kind, self.i, self.z, self.var, self.at = (a[order] for a in (k, kind, i, z, var, at))
+        self.k, self.kind, self.i, self.z, self.var = (a[order] for a in (k, kind, i, z, var))
+        self._n, self._reverse = n, reverse
+
+    def at(self, e: int) -> int:
+        """Event e's sample in the record's time."""
+        k = int(self.k[e])
+        return self._n - 1 - k if self._reverse else k
 
     def __len__(self) -> int:
         return len(self.k)
@@ -442,15 +448,61 @@ class _Pass:
         self.fix = np.zeros(m, dtype=np.uint8)
 
 
+class _Found:
+    """The forward passes' verdicts, one per candidate: each reason as a word, the verdict itself (:class:`_Verdict`)
+    made when first read (most never are: a 1e7-sample drive's 60 000 a pass cost 0.2 s and 100 B each). A pass
+    rewrites the kernel's rows from its resume on (:meth:`renew`), and the verdicts made of those rows go with them."""
+
+    __slots__ = ("_d", "_ps", "reasons", "_made")
+
+    def __init__(self, d: _Decider, ps: _Pass):
+        self._d, self._ps = d, ps
+        self.reasons: list[str] = []
+        self._made: dict[int, _Verdict] = {}
+
+    def renew(self, start: int, reasons: list[str]) -> None:
+        """The rows from ``start`` on rewritten by a pass, with these reasons."""
+        del self.reasons[start:]
+        self.reasons.extend(reasons)
+        for i in [i for i in self._made if i >= start]:
+            del self._made[i]
+
+    def __len__(self) -> int:
+        return len(self.reasons)
+
+    def __getitem__(self, i: int) -> _Verdict:
+        v = self._made.get(i)
+        if v is None:
+            if not 0 <= i < len(self.reasons):
+                raise IndexError(f"verdict {i}: {len(self.reasons)} candidates")
+            v = self._made[i] = _Verdict(self, i)
+        return v
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self.reasons)))
+
+
 class _Verdict:
     """One candidate's verdict of a forward pass: its reason; its side and its evidence in words made when read
     (most are never read but for the last pass's, and the words only once, at the end)."""
 
-    __slots__ = ("_d", "_ps", "_i", "reason", "_before")
+    __slots__ = ("_f", "_i", "_before")
 
-    def __init__(self, d: _Decider, ps: _Pass, i: int, reason: str):
-        self._d, self._ps, self._i, self.reason = d, ps, i, reason
+    def __init__(self, found: _Found, i: int):
+        self._f, self._i = found, i
         self._before: Side | None = None
+
+    @property
+    def reason(self) -> str:
+        return self._f.reasons[self._i]
+
+    @property
+    def _d(self) -> _Decider:
+        return self._f._d
+
+    @property
+    def _ps(self) -> _Pass:
+        return self._f._ps
 
     @property
     def after(self) -> Side | None:
@@ -523,7 +575,7 @@ class _Decider:
         # pass saw (forward)
         self._marks: dict[int, int] = {}
         self._mark_every = max(MARK_EVERY, -(-len(cands) // MARKS))
-        self._found: list[_Verdict] = []
+        self._found: _Found | list = []
         self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
         self._stands: list[int] | None = None  # the candidates that may be stands (_short_before_stands)
@@ -563,7 +615,7 @@ class _Decider:
         tell = self.p.tell if tell is None else tell
         return all(sd <= tell for sd in s.sd.tolist())
 
-    def forward(self) -> tuple[list[_Verdict], set[int]]:
+    def forward(self) -> tuple[_Found, set[int]]:
         """The forward filter, deciding online; returns every candidate's verdict and the accepted set: the kernel's
         whole run over the events (acn_kin_forward), its verdicts' words made here when read (:meth:`_words`).
 
@@ -582,8 +634,10 @@ class _Decider:
             )
         start = 0 if resume is None else resume
         reasons = [_REASONS[r] for r in ps.reason[start : len(self.cands)].tolist()]
-        found = self._found[:start] + [_Verdict(self, ps, i, r) for i, r in enumerate(reasons, start)]
-        self._found = found
+        if not isinstance(self._found, _Found):
+            self._found = _Found(self, ps)
+        found = self._found
+        found.renew(start, reasons)
         every = self._mark_every
         self._marks = {s * every: s for s in np.flatnonzero(k.mark_ok).tolist()}
         return found, set(np.flatnonzero(k.acc).tolist())
@@ -676,7 +730,7 @@ class _Decider:
             source = "no aid"
         else:
             ev = self.fwd_events
-            source = self._source("fix", int(ev.at[aid])) if ev.kind[aid] == 1 else self._source("rest", int(ev.i[aid]))
+            source = self._source("fix", ev.at(aid)) if ev.kind[aid] == 1 else self._source("rest", int(ev.i[aid]))
         return _made(s[0], s[1], chi2, source, bool(ps.fix[i]), s[2], s[3], (v, sd))
 
     def _words(self, ps: _Pass, i: int, s: Side) -> str:
@@ -792,7 +846,7 @@ class _Decider:
             source = "no aid"
         else:
             ev = self.bwd_events
-            source = self._source("fix", int(ev.at[aid])) if ev.kind[aid] == 1 else self._source("rest", int(ev.i[aid]))
+            source = self._source("fix", ev.at(aid)) if ev.kind[aid] == 1 else self._source("rest", int(ev.i[aid]))
         chi2, v, sd = stat.tolist()
         return _made(sides[0], sides[1], chi2, source, bool(fix), sides[2], sides[3], (v, sd))
 
@@ -865,10 +919,10 @@ class _Decider:
         """Each accepted rest's score: the larger of its side after it and the distance of the positions both sides
         give it (:meth:`_gap`, 0 unless both sides know the position through fixes). From the kernels' rows where
         they hold it (the sides made only for a rest with a fix on both sides), else from the sides."""
-        if not isinstance(after, _Sides) or not all(isinstance(found[i], _Verdict) for i in acc):
+        if not isinstance(after, _Sides) or found is not self._found:
             return {i: max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i])) for i in acc}
         chi2, fixed = after._rows[1][:, 0].tolist(), after._rows[3]
-        fix_before = found[0]._ps.fix if found else None
+        fix_before = found._ps.fix
         out = {}
         for i in acc:
             if fix_before[i] and fixed[i]:
@@ -905,7 +959,7 @@ class _Decider:
         event's kind; 24 000 sides a 1e7-sample drive no longer makes for their source's first words), else from the
         verdicts' sides."""
         if found and found is self._found:
-            ps, stands = found[0]._ps, np.asarray(self._stands, dtype=np.int64)
+            ps, stands = found._ps, np.asarray(self._stands, dtype=np.int64)
             aid = ps.aid[stands]
             keep = (ps.reason[stands] == _REASONS.index("moving")) & (aid >= 0)
             keep[keep] = self.fwd_events.kind[aid[keep]] != 1  # a rest's end, not a fix: "the rest at ..."
@@ -1035,21 +1089,19 @@ def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd
     words = object.__new__(_Decider)
     keep = ("p", "cands", "Ts", "veto", "start_sd", "fwd_events", "bwd_events", "_sources")
     words.__dict__.update({k: dec.__dict__[k] for k in keep}, _after=None)
-    at = [k for c in cands for k in (c.start, c.stop - 1)] + [m.k for f in fixes for m in f]
-    words.t = _TimesAt(t, np.array(at, dtype=np.int64))
-    for f in found:
-        if isinstance(f, _Verdict):
-            f._d = words
+    words.t = _TimesAt(t, dec.fwd_events.k)  # the candidates' first and last samples, the fixes'
+    if isinstance(found, _Found):
+        found._d = words
     if isinstance(after, _Sides):
         after._d = words
     return _verdicts(cands, found, acc, after)
 
 
-def _verdicts(cands: list[Candidate], found: list[_Verdict], acc: set[int], after: _Sides | None) -> list[RestDecision]:
+def _verdicts(cands: list[Candidate], found: _Found, acc: set[int], after: _Sides | None) -> list[RestDecision]:
     """Each candidate's record: its verdict, the statistics, the evidence in words made when read (:class:`_Decided`).
     The statistics are the kernels' rows as they wrote them (the sides' (chi2, |v|, sd): the forward pass's rows, one
     set that each pass rewrote from its resume on, and the last backward pass's), read without making the sides."""
-    if not all(isinstance(f, _Verdict) for f in found) or not isinstance(after, _Sides | None):
+    if not isinstance(found, _Found) or not isinstance(after, _Sides | None):
         return _verdicts_of_sides(cands, found, acc)
     rows, out, made = _Rows(cands, found, acc, after), [], object.__new__
     for i in range(len(found)):

@@ -36,9 +36,7 @@ def test_the_events_are_the_sorted_list_as_arrays(reverse):
     assert ev.i.tolist() == [e[3][0] if e[2] == "fix" else e[3] for e in want]
     assert ev.z.tolist() == [e[3][1] if e[2] == "fix" else 0.0 for e in want]
     assert ev.var.tolist() == [e[3][2] if e[2] == "fix" else 0.0 for e in want]
-    assert [int(a) for a, e in zip(ev.at, want, strict=True) if e[2] == "fix"] == [
-        e[3][3] for e in want if e[2] == "fix"
-    ]
+    assert [ev.at(j) for j, e in enumerate(want) if e[2] == "fix"] == [e[3][3] for e in want if e[2] == "fix"]
 
 
 def _eager(d) -> RestDecision:

@@ -1959,11 +1959,11 @@ int acn_kin_checkpoints(acn_kin_rec *r, double *cp)
     }
     int w = 3 * r->n_axes;
     double vaw[24] = {0.0};
-    for (long k = 0; k <= r->n; k++) {
-        if (k % r->every == 0) {
-            memcpy(cp + (k / r->every) * w, vaw, sizeof(double) * (size_t)w);
-        }
-        if (k < r->n) {
+    /* a checkpoint, then the rows up to the next one: no division per row */
+    for (long b = 0, c = 0; b <= r->n; b += r->every, c++) {
+        memcpy(cp + c * w, vaw, sizeof(double) * (size_t)w);
+        long end = r->n - b < r->every ? r->n : b + r->every;
+        for (long k = b; k < end; k++) {
             kin_rec_step(r->n_axes, kin_rec_x(r, k), r->Ts, vaw);
         }
     }
