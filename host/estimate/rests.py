@@ -347,7 +347,11 @@ class _TimesAt:
     is: what the verdicts keep of ``t`` when they make their words later (not the whole record's times)."""
 
     def __init__(self, t: np.ndarray, at: np.ndarray):
-        self.k = np.unique(np.asarray(at, dtype=np.int64))
+        at = np.asarray(at, dtype=np.int64)
+        if np.all(at[1:] >= at[:-1]):  # sorted (the events' samples): its unique values without a sort
+            self.k = at[np.concatenate(([True], at[1:] != at[:-1]))] if len(at) else at
+        else:
+            self.k = np.unique(at)
         self.v = t[self.k] if isinstance(t, Clock) else np.asarray(t)[self.k]
 
     def __getitem__(self, k: int):
@@ -579,12 +583,21 @@ class _Decider:
         self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
         self._stands: list[int] | None = None  # the candidates that may be stands (_short_before_stands)
-        self._levels: np.ndarray | None = None  # the candidates' levels as one array (_level)
+        self._levels: tuple | None = None  # the candidates' levels, starts and stops as arrays (_level_arrays)
 
     def _level(self) -> np.ndarray:
         """The candidates' levels as the kernels read them (:func:`_levels`), made once per decision."""
+        return self._level_arrays()[0]
+
+    def _level_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The candidates' levels (:func:`_levels`), first and end samples as arrays, made once per decision."""
         if self._levels is None:
-            self._levels = _levels(self.cands, self.x.shape[1])
+            m = len(self.cands)
+            self._levels = (
+                _levels(self.cands, self.x.shape[1]),
+                np.fromiter((c.start for c in self.cands), dtype=np.int64, count=m),
+                np.fromiter((c.stop for c in self.cands), dtype=np.int64, count=m),
+            )
         return self._levels
 
     def _fresh(self, reverse: bool) -> _Kinematic:
@@ -670,8 +683,8 @@ class _Decider:
             "ev_i": ev.i,
             "ev_z": ev.z,
             "ev_var": ev.var,
-            "start": np.array([c.start for c in cands], dtype=np.int64),
-            "stop": np.array([c.stop for c in cands], dtype=np.int64),
+            "start": self._level_arrays()[1],
+            "stop": self._level_arrays()[2],
             "level": self._level(),
             "still": np.array([c.still for c in cands], dtype=np.float64),
             "veto": np.zeros(m, dtype=np.uint8),
@@ -945,7 +958,17 @@ class _Decider:
         if self._stands is None:  # the candidates long and still enough for a stand: the same every pass
             self._stands = [i for i, c in enumerate(self.cands)
                             if not ((c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k)]  # fmt: skip
-        for i in self._moving_after_rest(found):
+        todo = self._moving_after_rest(found)
+        if monotone and found is self._found and todo and order:  # the kernels' verdicts: bisected at once
+            start, stop = self._level_arrays()[1:]
+            at = np.searchsorted(np.asarray(stops, dtype=np.int64), start[todo], side="right")  # bisect_right's
+            j = np.asarray(order, dtype=np.int64)[np.maximum(at - 1, 0)]
+            short = (at > 0) & ((stop[j] - start[j]) * self.Ts < p.start_s)
+            for i, jj in zip(np.asarray(todo)[short].tolist(), j[short].tolist(), strict=True):
+                if i not in self.veto:
+                    out.setdefault(jj, i)
+            return out
+        for i in todo:
             if i in self.veto:
                 continue
             j = self._last_before(order, stops if monotone else None, self.cands[i].start)

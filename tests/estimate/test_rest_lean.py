@@ -75,3 +75,20 @@ def test_a_verdict_reads_the_fields_it_held(default_model):
     moved = dataclasses.replace(d, accepted=not d.accepted, evidence="given")
     assert moved.accepted is not d.accepted and moved.evidence == "given" and moved.start == d.start
     assert dataclasses.asdict(d) == {name: getattr(d, name) for name in fields}
+
+
+def test_the_short_rests_before_stands_are_picked_from_the_rows_as_from_the_sides(default_model):
+    """The stands found moving from a rest before them, and the short rests that made them move, read from the forward
+    pass' rows (reason codes, aids, the aids' kinds; bisected at once) equal what the verdicts' sides say, each
+    looked at (a plain list of the same verdicts takes that path); the town drive has such a short rest."""
+    arrays = simulate(default_model, "town_drive", 400.0, 3).to_arrays()
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    x, ok, R = zupt._prepared(arrays["accel"], arrays["clipped"], default_model)
+    cands = rests._candidates(x, ok, R, zupt.intervals(zupt._detect(x, ok, R, default_model, p)))
+    fixes = [[] for _ in default_model.axes]
+    dec = rests._Decider(x, R, default_model.Ts, cands, fixes, p, rests.Clock(len(x), default_model.Ts))
+    found, acc = dec.forward()
+    shorts = dec._short_before_stands(found, acc)
+    assert shorts and shorts == dec._short_before_stands(list(found), acc)
+    moving = dec._moving_after_rest(found)
+    assert moving and moving == dec._moving_after_rest(list(found))

@@ -2272,8 +2272,11 @@ void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long nu
             memcpy(cur, r->cp + (base / r->every) * w3, sizeof(double) * (size_t)w3);
             at = base;
         }
-        for (; at < k; at++) {
-            kin_rec_step(n_axes, kin_rec_x(r, at), r->Ts, cur);
+        for (; at < k; at++) { /* V alone (what the points read), as kin_rec_step sums it */
+            const double *row = kin_rec_x(r, at);
+            for (int j = 0; j < n_axes; j++) {
+                cur[j] = cur[j] + row[j] * r->Ts;
+            }
         }
         for (int j = 0; j < n_axes; j++) {
             double ramp = (level[j] - e0[j]) * w;
