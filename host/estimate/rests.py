@@ -94,6 +94,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -227,7 +228,7 @@ class _Rows:
 
     __slots__ = ("cands", "found", "acc", "after", "before", "behind")
 
-    def __init__(self, cands: list[Candidate], found: _Found, acc: set[int], after: _Sides | None):
+    def __init__(self, cands: _Cands, found: _Found, acc: set[int], after: _Sides | None):
         self.cands, self.found, self.acc, self.after = cands, found, acc, after
         self.before = found._ps.stat
         self.behind = None if after is None else after._rows[1]
@@ -239,16 +240,16 @@ def _chi2(r: _Rows, i: int) -> float:
 
 
 def _level_norm(r: _Rows, i: int) -> float:
-    lv = r.cands[i].level  # np.linalg.norm's own sum for a vector (its dot), without its checks
+    lv = r.cands.level[i]  # np.linalg.norm's own sum for a vector (its dot), without its checks
     return math.sqrt(lv.dot(lv))
 
 
 _READ = {  # each field of a verdict of decide(), read from its rows (_Rows) and its index
-    "start": lambda r, i: r.cands[i].start,
-    "stop": lambda r, i: r.cands[i].stop,
+    "start": lambda r, i: int(r.cands.start[i]),
+    "stop": lambda r, i: int(r.cands.stop[i]),
     "accepted": lambda r, i: i in r.acc,
     "reason": lambda r, i: r.found.reasons[i],
-    "still": lambda r, i: r.cands[i].still,
+    "still": lambda r, i: float(r.cands.still[i]),
     "level": _level_norm,
     "v_before": lambda r, i: float(r.before[i, 1]),
     "sd_before": lambda r, i: float(r.before[i, 2]),
@@ -397,10 +398,8 @@ class _Events:
 
     __slots__ = ("k", "kind", "i", "z", "var", "_n", "_reverse")
 
-    def __init__(self, cands: list[Candidate], fixes, n: int, reverse: bool):
-        m = len(cands)
-        starts = np.fromiter((c.start for c in cands), dtype=np.int64, count=m)
-        stops = np.fromiter((c.stop for c in cands), dtype=np.int64, count=m)
+    def __init__(self, cands: _Cands, fixes, n: int, reverse: bool):
+        m, starts, stops = len(cands), cands.start, cands.stop
         fx = [(j, mm.k, mm.z, mm.R) for j, f in enumerate(fixes) for mm in f]
         fk = np.array([k for _, k, _, _ in fx], dtype=np.int64)
         k = np.empty(2 * m + len(fx), dtype=np.int64)
@@ -563,6 +562,7 @@ class _Forward:
 class _Decider:
     def __init__(self, x, R, Ts, cands, fixes, p, t, start_sd: float = 0.0):
         self.start_sd = start_sd  # the model's prior sd of the start speed: a still start only when it is small
+        cands = _Cands.of(cands, x.shape[1])
         self.x, self.R, self.Ts, self.cands, self.p, self.t = x, R, Ts, cands, p, t
         self.n = len(x)
         self.fixes = fixes
@@ -583,22 +583,6 @@ class _Decider:
         self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
         self._stands: list[int] | None = None  # the candidates that may be stands (_short_before_stands)
-        self._levels: tuple | None = None  # the candidates' levels, starts and stops as arrays (_level_arrays)
-
-    def _level(self) -> np.ndarray:
-        """The candidates' levels as the kernels read them (:func:`_levels`), made once per decision."""
-        return self._level_arrays()[0]
-
-    def _level_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The candidates' levels (:func:`_levels`), first and end samples as arrays, made once per decision."""
-        if self._levels is None:
-            m = len(self.cands)
-            self._levels = (
-                _levels(self.cands, self.x.shape[1]),
-                np.fromiter((c.start for c in self.cands), dtype=np.int64, count=m),
-                np.fromiter((c.stop for c in self.cands), dtype=np.int64, count=m),
-            )
-        return self._levels
 
     def _fresh(self, reverse: bool) -> _Kinematic:
         """A filter at the start of one direction of time: its sums over the record made once, every pass
@@ -683,10 +667,10 @@ class _Decider:
             "ev_i": ev.i,
             "ev_z": ev.z,
             "ev_var": ev.var,
-            "start": self._level_arrays()[1],
-            "stop": self._level_arrays()[2],
-            "level": self._level(),
-            "still": np.array([c.still for c in cands], dtype=np.float64),
+            "start": cands.start,
+            "stop": cands.stop,
+            "level": cands.level,
+            "still": cands.still,
             "veto": np.zeros(m, dtype=np.uint8),
             "diffuse": np.array(DIFFUSE, dtype=np.float64),
         }
@@ -827,8 +811,8 @@ class _Decider:
                 ev.i,
                 ev.z,
                 ev.var,
-                self._level(),
-                np.array([c.stop - c.start for c in cands], dtype=np.int64),
+                cands.level,
+                cands.stop - cands.start,
             )
         ev_k, ev_kind, ev_i, ev_z, ev_var, level, length = self._bwd
         accm = np.zeros(m, dtype=np.uint8)
@@ -953,14 +937,15 @@ class _Decider:
         them "moving" (a stand: ``start_s`` long, still at the sensor's noise)."""
         p, out = self.p, {}
         order = sorted(acc)
-        stops = [self.cands[j].stop for j in order]
+        stops = self.cands.stop[order].tolist()
         monotone = all(a <= b for a, b in zip(stops, stops[1:], strict=False))  # the detector's spans: in order
         if self._stands is None:  # the candidates long and still enough for a stand: the same every pass
-            self._stands = [i for i, c in enumerate(self.cands)
-                            if not ((c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k)]  # fmt: skip
+            c = self.cands
+            short = (c.stop - c.start) * self.Ts < p.start_s
+            self._stands = np.flatnonzero(~(short | (c.still > p.still_k))).tolist()
         todo = self._moving_after_rest(found)
         if monotone and found is self._found and todo and order:  # the kernels' verdicts: bisected at once
-            start, stop = self._level_arrays()[1:]
+            start, stop = self.cands.start, self.cands.stop
             at = np.searchsorted(np.asarray(stops, dtype=np.int64), start[todo], side="right")  # bisect_right's
             j = np.asarray(order, dtype=np.int64)[np.maximum(at - 1, 0)]
             short = (at > 0) & ((stop[j] - start[j]) * self.Ts < p.start_s)
@@ -1033,7 +1018,7 @@ class _Decider:
         self.veto[i] = f"{what} {_speed(s)} after it (from {s.source})"
 
 
-def _candidates(x, ok, R, spans) -> list[Candidate]:
+def _candidates(x, ok, R, spans) -> _Cands:
     """Each span [a, b) (non-empty, within the record) as a candidate: over its samples where every axis is ``ok``,
     the mean acceleration and the mean over axes of its variance / R (none usable: level 0; one or none: variance
     R). The kernel's sums (acn_kin_cands) run in numpy's order over axis 0: a mean and variance of each span
@@ -1062,25 +1047,48 @@ def _candidates(x, ok, R, spans) -> list[Candidate]:
             ffi.from_buffer("long[]", starts), ffi.from_buffer("long[]", stops), ffi.from_buffer("double[]", R),
             ffi.from_buffer("double[]", level), ffi.from_buffer("double[]", still),
         )  # fmt: skip
-    spans = zip(starts.tolist(), stops.tolist(), level, still.tolist(), strict=True)
-    return _Cands([Candidate(a, b, lv, s) for a, b, lv, s in spans], level)
+    return _Cands(starts, stops, level, still)
 
 
-class _Cands(list):
-    """The candidates, and their levels as one (m, n_axes) array (each candidate's ``level`` a row of it): what the
-    kernels read, not gathered again from 60 000 small arrays (0.1 s a time at 1e7 samples)."""
+class _Cands(Sequence):
+    """The candidates as arrays, what the kernels read: first samples, ends, levels (m, n_axes) and stillness; each
+    :class:`Candidate` made when read (``cands[i]``: the same numbers, its level a row of ``level``). A drive of 1e7
+    samples has 60 000 candidates: as objects they held 260 B each (its level an array of its own), and their levels
+    gathered again for the kernels cost 0.1 s a time."""
 
-    def __init__(self, cands: list[Candidate], level: np.ndarray):
-        super().__init__(cands)
-        self.level = level
+    __slots__ = ("start", "stop", "level", "still")
 
+    def __init__(self, start: np.ndarray, stop: np.ndarray, level: np.ndarray, still: np.ndarray):
+        self.start, self.stop, self.level, self.still = start, stop, level, still
 
-def _levels(cands: list[Candidate], n_axes: int) -> np.ndarray:
-    """The candidates' levels as one C-contiguous (m, n_axes) float64 array."""
-    level = getattr(cands, "level", None)
-    if isinstance(level, np.ndarray) and level.shape == (len(cands), n_axes) and level.dtype == np.float64:
-        return np.ascontiguousarray(level)
-    return np.array([c.level for c in cands], dtype=np.float64).reshape(len(cands), n_axes)
+    @classmethod
+    def of(cls, cands, n_axes: int) -> _Cands:
+        """``cands`` (a list of :class:`Candidate`, or _Cands) as _Cands."""
+        if isinstance(cands, _Cands):
+            return cands
+        m = len(cands)
+        return cls(
+            np.fromiter((c.start for c in cands), dtype=np.int64, count=m),
+            np.fromiter((c.stop for c in cands), dtype=np.int64, count=m),
+            np.array([c.level for c in cands], dtype=np.float64).reshape(m, n_axes),
+            np.fromiter((c.still for c in cands), dtype=np.float64, count=m),
+        )
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        m = len(self.start)
+        if not -m <= i < m:
+            raise IndexError(f"candidate {i}: {m} candidates")
+        i = i + m if i < 0 else i
+        return Candidate(int(self.start[i]), int(self.stop[i]), self.level[i], float(self.still[i]))
+
+    def __iter__(self):
+        spans = zip(self.start.tolist(), self.stop.tolist(), self.level, self.still.tolist(), strict=True)
+        return (Candidate(a, b, lv, s) for a, b, lv, s in spans)
 
 
 def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
@@ -1097,8 +1105,8 @@ def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd
     outside = [m.k for f in fixes for m in f if not 0 <= m.k < len(x)]
     if outside:
         raise ValueError(f"fixes: sample {outside[0]} outside the record's {len(x)} samples")
-    cands = _candidates(x, ok, R, spans)
-    dec = _Decider(x, R, Ts, cands, fixes, p, t, start_sd)
+    dec = _Decider(x, R, Ts, _candidates(x, ok, R, spans), fixes, p, t, start_sd)
+    cands = dec.cands
     try:
         found, acc = dec.run()
         after = dec._after
@@ -1120,7 +1128,7 @@ def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd
     return _verdicts(cands, found, acc, after)
 
 
-def _verdicts(cands: list[Candidate], found: _Found, acc: set[int], after: _Sides | None) -> list[RestDecision]:
+def _verdicts(cands: _Cands, found: _Found, acc: set[int], after: _Sides | None) -> list[RestDecision]:
     """Each candidate's record: its verdict, the statistics, the evidence in words made when read (:class:`_Decided`).
     The statistics are the kernels' rows as they wrote them (the sides' (chi2, |v|, sd): the forward pass's rows, one
     set that each pass rewrote from its resume on, and the last backward pass's), read without making the sides."""

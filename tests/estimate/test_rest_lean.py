@@ -27,7 +27,7 @@ def test_the_events_are_the_sorted_list_as_arrays(reverse):
     cands = [Candidate(a, b, np.zeros(2), 1.0) for a, b in spans]
     fixes = [[position_fix(k, 0.5 * k, 0.1 + k) for k in (0, 29, 50, 50, 199)],
              [position_fix(k, -0.25 * k, 0.2 + k) for k in (50, 30, 10)]]  # fmt: skip
-    ev = rests._Events(cands, fixes, n, reverse)
+    ev = rests._Events(rests._Cands.of(cands, 2), fixes, n, reverse)
     want = reference_events(SimpleNamespace(n=n, cands=cands, fixes=fixes), reverse)
     kinds = {"test": 0, "fix": 1, "end": 2}
     assert len(ev) == len(want)
