@@ -1120,7 +1120,10 @@ def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd
     words = object.__new__(_Decider)
     keep = ("p", "cands", "Ts", "veto", "start_sd", "fwd_events", "bwd_events", "_sources")
     words.__dict__.update({k: dec.__dict__[k] for k in keep}, _after=None)
-    words.t = _TimesAt(t, dec.fwd_events.k)  # the candidates' first and last samples, the fixes'
+    # the times the words name: the clock itself (two numbers), else the candidates' first and last samples', the fixes'
+    words.t = t if isinstance(t, Clock) else _TimesAt(t, dec.fwd_events.k)
+    for ev in (dec.fwd_events, dec.bwd_events):  # the words name aids by kind and index: the fixes' figures go
+        ev.z = ev.var = None
     if isinstance(found, _Found):
         found._d = words
     if isinstance(after, _Sides):
