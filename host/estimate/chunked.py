@@ -219,7 +219,8 @@ def disk_needed(
     """Bytes of disk the bounded path needs at its peak: the store (``store``: smoothing; ``n_general`` of
     the axes on the general path, whose store is wider; ``covariances``: every axis) and the output, written
     once in place, as :func:`smooth_bounded` lays it out for ``full``, ``covariances``, ``marks`` and the
-    ``nis`` member's rows (4 doubles each: one per zero-velocity update, up to 32 B per sample and axis)."""
+    ``nis`` member's rows (4 doubles each: by default one per rest, with ``--full`` one per zero-velocity
+    update, up to 32 B per sample and axis)."""
     n_general = n_axes if covariances else n_general
     gw = GROW if covariances else GLROW
     return (

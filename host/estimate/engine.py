@@ -536,14 +536,18 @@ class _AxisAids(chunked.ChunkAids):
     """Axis j's aids for the chunked passes, made chunk by chunk: its position fixes (few, held whole, sorted
     stably by sample) and the zero-velocity updates of its rests (zupt.RestSpans.updates, made for the chunk's
     samples alone), in the order the whole run's ``Extras.of(fixes.concat(rests))`` gives them: by sample, a
-    fix before a rest's update at the same sample; the updates are marked (the run file's ``zupt``)."""
+    fix before a rest's update at the same sample; the updates are marked (the run file's ``zupt``).
+    ``every``: a ``zupt_nis`` row per update (``--full``); else only each rest's first update's, the one the NIS
+    checks read (the one-chunk file keeps the same: accelnav.data.runfile.compact)."""
 
-    def __init__(self, model: Model, j: int, fixes: Aids, spans, params) -> None:
+    def __init__(self, model: Model, j: int, fixes: Aids, spans, params, every: bool = False) -> None:
         from accelnav.estimate import fastsmooth
 
-        self.model, self.j, self.spans, self.params = model, j, spans, params
+        self.model, self.j, self.spans, self.params, self.every = model, j, spans, params, every
         self.fx = fastsmooth.Extras.of(fixes)
-        self.nis_rows = 0 if spans is None else spans.count(j, model, params)  # one zupt_nis row per update
+        # the zupt_nis rows over the run: one per update, or one per rest (each rest's first update is applied:
+        # rests are never gated per update)
+        self.nis_rows = 0 if spans is None else spans.count(j, model, params) if every else _rests(spans, j)
         self.count = len(self.fx) + self.nis_rows
         self.at = 0  # the first fix of the chunk last asked for (its innovations follow at once)
         self.fix_nis = np.full(len(self.fx), np.nan)  # each fix's NIS, in the given order, as the filter meets it
@@ -551,12 +555,12 @@ class _AxisAids(chunked.ChunkAids):
         self.last_rest = -1  # the rest of the last update met (chunk to chunk): a new one's first update is marked
 
     @classmethod
-    def each(cls, model: Model, fixes, rest, n_axes: int) -> tuple[list[Aids], list[_AxisAids]]:
+    def each(cls, model: Model, fixes, rest, n_axes: int, every: bool = False) -> tuple[list[Aids], list[_AxisAids]]:
         """Every axis's fixes and its aids made chunk by chunk, from the run's fixes (per axis, or None) and
         rests (RestOutcome, or None): the one recipe of the chunked passes and of --tune's likelihood."""
         fx = [Aids.of(list(fixes[j]) if fixes is not None else []) for j in range(n_axes)]
         spans, params = (None, None) if rest is None else (rest.runs(n_axes), rest.params)
-        return fx, [cls(model, j, fx[j], spans, params) for j in range(n_axes)]
+        return fx, [cls(model, j, fx[j], spans, params, every) for j in range(n_axes)]
 
     def between(self, s: int, e: int) -> chunked.Piece:
         from accelnav.estimate import fastsmooth
@@ -577,7 +581,8 @@ class _AxisAids(chunked.ChunkAids):
 
     def innovations(self, piece: chunked.Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray):
         """The fixes' NIS kept (fix_nis, few); the applied updates' rows of ``zupt_nis`` returned, as
-        smooth_arrays makes them: [t, axis, y^2 / S, 1 for the first update of its rest]."""
+        smooth_arrays makes them: [t, axis, y^2 / S, 1 for the first update of its rest] (without ``every``, the
+        first updates' alone)."""
         nis = y * y / S
         fix = ~piece.marked & done
         self.fix_nis[self.fx.order[self.at + piece.ex.order[fix]]] = nis[fix]
@@ -590,7 +595,17 @@ class _AxisAids(chunked.ChunkAids):
         ids = self.rest_of[np.searchsorted(self.spans.hi[self.j], k, side="right")]
         first = ids != np.concatenate(([self.last_rest], ids[:-1]))
         self.last_rest = int(ids[-1])
+        if not self.every:
+            at = np.flatnonzero(rest)[first]
+            return np.column_stack((t[at], np.full(len(at), self.j), nis[at], np.ones(len(at))))
         return np.column_stack((t[rest], np.full(len(k), self.j), nis[rest], first))
+
+
+def _rests(spans, j: int) -> int:
+    """Axis j's rests that hold an update: its spans' rests (zupt.RestSpans.rest_of: touching spans are one)
+    of at least one sample; each starts with an update, whatever every_s."""
+    held = spans.hi[j] > spans.lo[j]
+    return len(np.unique(spans.rest_of(j)[held]))
 
 
 class _RunEnvelope:
@@ -665,7 +680,7 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
     # --plots: the figures draw the filter's states too: they are computed, and so written, beside the smoother's
     stages = ("filt", "smooth") if smooth and (job.covariances or job.envelope) else job.stages
     env = _RunEnvelope(model, n, source) if job.envelope else None
-    fx, extras = _AxisAids.each(model, fixes, rest if smooth else None, n_axes)
+    fx, extras = _AxisAids.each(model, fixes, rest if smooth else None, n_axes, every=job.full or job.covariances)
     extras = extras if aided else None
     fix_t = [np.full(len(f), np.nan) for f in fx]  # the run's t at each fix, filled as the chunks are read
     echo = source.extra_keys() if job.full else {}
