@@ -142,9 +142,11 @@ class ChunkAids:
     def applied(self, piece: Piece, done: np.ndarray) -> None:
         """Which of ``piece``'s aids the filter applied (bool, its order)."""
 
-    def innovations(self, piece: Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray) -> np.ndarray:
+    def innovations(
+        self, piece: Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray, s: int
+    ) -> np.ndarray:
         """``piece``'s aids seen by the filter: their innovations ``y`` and variances ``S`` (its order), applied or
-        not (``done``), ``t`` the time of each. Returns the chunk's rows of the ``nis`` member (r, 4), in
+        not (``done``), ``t`` the chunk's times from its first sample ``s`` (an aid's: ``t[k - s]``). Returns the chunk's rows of the ``nis`` member (r, 4), in
         order: :attr:`nis_rows` over the run in all."""
         return np.zeros((0, 4))
 
@@ -903,10 +905,9 @@ def _forward_general(
         run.out.write("filt_x_prior", 4 * (ax.j * run.n + s), run.xb[:m])
         run.put_cov("filt_P_prior", ax.j, s, run.pb[:m])
     if ne:
-        done = applied[:ne].astype(bool)
+        done = applied[:ne].view(bool)  # the kernel's 0 or 1
         ax.aids.applied(piece, done)
-        at = t[piece.ex.k - s] if t is not None else np.full(ne, np.nan)
-        rows = ax.aids.innovations(piece, done, ey[:ne], eS[:ne], at)
+        rows = ax.aids.innovations(piece, done, ey[:ne], eS[:ne], np.full(m, np.nan) if t is None else t, s)
         if run.nis and len(rows):
             if ax.nis_at + len(rows) > ax.nis_end:
                 raise ValueError(f"axis {ax.j}: more {run.nis} rows than its aids' nis_rows")

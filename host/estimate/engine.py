@@ -540,7 +540,7 @@ class _AxisAids(chunked.ChunkAids):
     ``every``: a ``zupt_nis`` row per update (``--full``); else only each rest's first update's, the one the NIS
     checks read (the one-chunk file keeps the same: accelnav.data.runfile.compact)."""
 
-    def __init__(self, model: Model, j: int, fixes: Aids, spans, params, every: bool = False) -> None:
+    def __init__(self, model: Model, j: int, fixes: Aids, spans, params, every: bool = False, fill=None) -> None:
         from accelnav.estimate import fastsmooth
 
         self.model, self.j, self.spans, self.params, self.every = model, j, spans, params, every
@@ -551,8 +551,9 @@ class _AxisAids(chunked.ChunkAids):
         self.count = len(self.fx) + self.nis_rows
         self.at = 0  # the first fix of the chunk last asked for (its innovations follow at once)
         self.fix_nis = np.full(len(self.fx), np.nan)  # each fix's NIS, in the given order, as the filter meets it
-        self.rest_of = None  # each span's rest (RestSpans.rest_of), made when the first innovations come in
+        self.rests = None  # each rest's first and end sample and its id (_firsts), made when innovations first come
         self.last_rest = -1  # the rest of the last update met (chunk to chunk): a new one's first update is marked
+        self.fill = _UpdateFill() if fill is None else fill
 
     @classmethod
     def each(cls, model: Model, fixes, rest, n_axes: int, every: bool = False) -> tuple[list[Aids], list[_AxisAids]]:
@@ -560,7 +561,8 @@ class _AxisAids(chunked.ChunkAids):
         rests (RestOutcome, or None): the one recipe of the chunked passes and of --tune's likelihood."""
         fx = [Aids.of(list(fixes[j]) if fixes is not None else []) for j in range(n_axes)]
         spans, params = (None, None) if rest is None else (rest.runs(n_axes), rest.params)
-        return fx, [cls(model, j, fx[j], spans, params, every) for j in range(n_axes)]
+        fill = _UpdateFill()  # the axes take their turns: one set of constant parts for all
+        return fx, [cls(model, j, fx[j], spans, params, every, fill) for j in range(n_axes)]
 
     def between(self, s: int, e: int) -> chunked.Piece:
         from accelnav.estimate import fastsmooth
@@ -568,37 +570,79 @@ class _AxisAids(chunked.ChunkAids):
         fx = self.fx
         a, b = int(np.searchsorted(fx.k, s)), int(np.searchsorted(fx.k, e))
         self.at = a
-        zs = Aids.of([]) if self.spans is None else Aids.zero_velocity(*self.spans.updates(self.j, s, e, self.model,
-                                                                                         self.params))  # fmt: skip
-        if a == b and not np.any(zs.k[1:] < zs.k[:-1]):  # rests alone, in order: the sort below would change nothing
-            return chunked.Piece(fastsmooth.Extras(zs.k, zs.h, zs.z, zs.R, np.arange(len(zs.k))), np.zeros(len(zs.k)),
-                                 np.ones(len(zs.k), dtype=bool))  # fmt: skip
+        if self.spans is None:
+            zs = Aids.of([])
+        else:  # Aids.zero_velocity's arrays, their constant parts shared (read-only) rather than made per chunk
+            ks, sd = self.spans.updates(self.j, s, e, self.model, self.params)
+            ks = np.asarray(ks, dtype=np.int64).reshape(-1)
+            h, zero, ones, order = self.fill.take(len(ks))
+            zs = Aids(ks, h, zero, np.broadcast_to(np.asarray(sd, dtype=np.float64) ** 2, ks.shape).copy())
+            if a == b and not np.any(ks[1:] < ks[:-1]):  # rests alone, in order: the sort below would change nothing
+                return chunked.Piece(fastsmooth.Extras(ks, h, zero, zs.R, order), zero, ones)
         k = np.concatenate((fx.k[a:b], zs.k))
         order = np.argsort(k, kind="stable")
         h, z, R = (np.concatenate((f[a:b], r))[order] for f, r in ((fx.h, zs.h), (fx.z, zs.z), (fx.R, zs.R)))
         marked = (np.arange(len(k)) >= b - a)[order]
         return chunked.Piece(fastsmooth.Extras(k[order], h, z, R, order), np.zeros(len(k)), marked)
 
-    def innovations(self, piece: chunked.Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray):
+    def innovations(self, piece: chunked.Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray, s: int):
         """The fixes' NIS kept (fix_nis, few); the applied updates' rows of ``zupt_nis`` returned, as
         smooth_arrays makes them: [t, axis, y^2 / S, 1 for the first update of its rest] (without ``every``, the
-        first updates' alone)."""
-        nis = y * y / S
-        fix = ~piece.marked & done
-        self.fix_nis[self.fx.order[self.at + piece.ex.order[fix]]] = nis[fix]
+        first updates' alone, their NIS alone computed)."""
+        if len(self.fx):
+            fix = ~piece.marked & done
+            self.fix_nis[self.fx.order[self.at + piece.ex.order[fix]]] = y[fix] * y[fix] / S[fix]
         rest = piece.marked & done
-        if not rest.any():
+        idx = None if rest.all() else np.flatnonzero(rest)  # rests alone, all applied: every aid of the piece
+        k = piece.ex.k if idx is None else piece.ex.k[idx]
+        if not len(k):
             return np.zeros((0, 4))
-        k = piece.ex.k[rest]
-        if self.rest_of is None:  # --tune's aids never ask: 8 B a span held for nothing
-            self.rest_of = self.spans.rest_of(self.j)
-        ids = self.rest_of[np.searchsorted(self.spans.hi[self.j], k, side="right")]
-        first = ids != np.concatenate(([self.last_rest], ids[:-1]))
-        self.last_rest = int(ids[-1])
+        pos = self._firsts(k)
         if not self.every:
-            at = np.flatnonzero(rest)[first]
-            return np.column_stack((t[at], np.full(len(at), self.j), nis[at], np.ones(len(at))))
-        return np.column_stack((t[rest], np.full(len(k), self.j), nis[rest], first))
+            at = pos if idx is None else idx[pos]
+            ya = y[at]
+            return np.column_stack((t[piece.ex.k[at] - s], np.full(len(at), self.j), ya * ya / S[at], np.ones(len(at))))
+        first = np.zeros(len(k), dtype=bool)
+        first[pos] = True
+        ya, Sa = (y, S) if idx is None else (y[idx], S[idx])
+        return np.column_stack((t[k - s], np.full(len(k), self.j), ya * ya / Sa, first))
+
+    def _firsts(self, k: np.ndarray) -> np.ndarray:
+        """Where in the applied updates ``k`` (sorted) a rest's first update is: the first of each rest met here
+        but of the rest the last chunk ended in. A rest is a run of touching spans (zupt.RestSpans.rest_of, its
+        id the index of its first span), so its updates' positions come from its ends, not from each update."""
+        if self.rests is None:  # --tune's aids never ask: 24 B a rest held for nothing
+            lo, hi = self.spans.lo[self.j], self.spans.hi[self.j]
+            new = self.spans.rest_of(self.j) == np.arange(len(lo))
+            last = np.ones(len(lo), dtype=bool)
+            last[:-1] = new[1:]
+            self.rests = (lo[new], hi[last], np.flatnonzero(new))
+        starts, ends, ids = self.rests
+        r0, r1 = int(np.searchsorted(ends, k[0], side="right")), int(np.searchsorted(starts, k[-1], side="right"))
+        p, q = np.searchsorted(k, starts[r0:r1]), np.searchsorted(k, ends[r0:r1])
+        held = p < q
+        p, ids = p[held], ids[r0:r1][held]
+        new = ids != self.last_rest  # only the first can be the last chunk's
+        self.last_rest = int(ids[-1])
+        return p[new]
+
+
+class _UpdateFill:
+    """The constant parts of zero-velocity updates (kf.Aids.zero_velocity: h = [0, 1, 0, 0], z = 0; a Piece's gates
+    0, marked, order 0..n-1) as read-only views of n rows, made once and grown when a chunk has more updates."""
+
+    def __init__(self) -> None:
+        self.n = -1
+
+    def take(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        if n > self.n:
+            h = np.zeros((n, 4))
+            h[:, 1] = 1.0
+            self.parts = (h, np.zeros(n), np.ones(n, dtype=bool), np.arange(n))
+            for a in self.parts:
+                a.flags.writeable = False
+            self.n = n
+        return tuple(a[:n] for a in self.parts)
 
 
 def _rests(spans, j: int) -> int:

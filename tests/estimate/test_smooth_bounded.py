@@ -371,8 +371,8 @@ class _EverySeventh(chunked.ChunkAids):
         ex = self.extras(s, e)
         return chunked.Piece(ex, np.zeros(len(ex)), np.ones(len(ex), dtype=bool))
 
-    def innovations(self, piece, done, y, S, t):
-        return np.column_stack((t, piece.ex.k, y * y / S, done))
+    def innovations(self, piece, done, y, S, t, s):
+        return np.column_stack((t[piece.ex.k - s], piece.ex.k, y * y / S, done))
 
 
 @pytest.mark.parametrize("covariances", [False, True])
