@@ -146,8 +146,8 @@ class ChunkAids:
         self, piece: Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray, s: int
     ) -> np.ndarray:
         """``piece``'s aids seen by the filter: their innovations ``y`` and variances ``S`` (its order), applied or
-        not (``done``), ``t`` the chunk's times from its first sample ``s`` (an aid's: ``t[k - s]``). Returns the chunk's rows of the ``nis`` member (r, 4), in
-        order: :attr:`nis_rows` over the run in all."""
+        not (``done``), ``t`` the chunk's times from its first sample ``s`` (an aid's: ``t[k - s]``). Returns the
+        chunk's rows of the ``nis`` member (r, 4), in order: :attr:`nis_rows` over the run in all."""
         return np.zeros((0, 4))
 
 
