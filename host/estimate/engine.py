@@ -202,6 +202,7 @@ class RestOutcome:
     # takes it as the one-chunk output when nothing after the review changes the aids, else drops it at once
     smoothed: dict | None = field(default=None, repr=False)
     spans: object = None  # zupt.RestSpans of given rests
+    _ends: np.ndarray | None = field(default=None, init=False, repr=False)  # candidate_ends, made once
 
     def runs(self, n_axes: int):
         """The rests as zupt.RestSpans (a mask's runs, made now)."""
@@ -209,12 +210,20 @@ class RestOutcome:
 
         return self.spans if self.spans is not None else RestSpans.of_mask(self.mask, self.sigma, n_axes)
 
+    def candidate_ends(self) -> np.ndarray:
+        """(K, 3) int64 [start, stop, accepted] per decision, made once (a Python loop over 1e4-1e5 of them; the
+        decisions are final once the rest stage returns)."""
+        if self._ends is None or len(self._ends) != len(self.decisions):
+            rows = [(d.start, d.stop, d.accepted) for d in self.decisions]
+            self._ends = np.array(rows, dtype=np.int64).reshape(-1, 3)
+        return self._ends
+
     def candidate_rows(self, t) -> np.ndarray:
         """[start_s, end_s, accepted] per candidate (kept in the run file for the plots); a rest the review
         dropped is not accepted. ``t``: the run's times, or a function giving them at samples
         (:meth:`Source.times_at`)."""
         m = self.mask if self.mask.ndim == 1 else self.mask.any(axis=1)
-        ends = np.array([(d.start, d.stop, d.accepted) for d in self.decisions], dtype=np.int64).reshape(-1, 3)
+        ends = self.candidate_ends()
         a, b = ends[:, 0], ends[:, 1]
         if len(ends) and np.all(b > a) and np.all(a[1:] >= b[:-1]) and a[0] >= 0 and b[-1] <= len(m):
             # the detector's spans, in order and apart: one reduction over the mask's [start, stop) of each (the
@@ -659,7 +668,7 @@ class _Times:
     kept as the chunks are read."""
 
     def __init__(self, rest: RestOutcome, n: int) -> None:
-        ends = np.array([(d.start, d.stop - 1) for d in rest.decisions], dtype=np.int64).reshape(-1)
+        ends = rest.candidate_ends()[:, :2] - np.array([0, 1])
         self.k = np.unique(ends[(ends >= 0) & (ends < n)])
         self.t = np.full(len(self.k), np.nan)
         self.seen = np.zeros(len(self.k), dtype=bool)

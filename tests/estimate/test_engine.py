@@ -121,7 +121,7 @@ def test_candidate_times_are_kept_as_the_chunks_are_read():
 
     n = 100
     t = 0.5 + np.arange(n) / 7.0
-    decisions = [SimpleNamespace(start=a, stop=b) for a, b in ((3, 9), (20, 21), (40, 100))]
+    decisions = [SimpleNamespace(start=a, stop=b, accepted=True) for a, b in ((3, 9), (20, 21), (40, 100))]
     rest = engine.RestOutcome(None, None, None, decisions=decisions, detected=True)
     asked = []
 
