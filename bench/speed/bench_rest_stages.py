@@ -1,15 +1,15 @@
-"""Benchmark: peak RSS of the `--zupt auto` decision a stage at a time (record, detector, decision), same run.
+"""Benchmark: peak RSS and CPU of the `--zupt auto` decision a stage at a time (record, detector, decision), same run.
 
 Issue 32's goal: `smooth --zupt auto` in at most 1 GB at 1e8 rows. The decision reads every sample; this says
 which stage holds what, per sample, so the next step moves the largest holder. Each record is decided in a child
 process per interpreter (this build, and --before EXE an earlier one, rows marked "(before)"), the peak reset
 between stages (/proc/self/clear_refs, VmHWM): "prepare" makes x and ok from the record (streamed, a chunk read
 at a time, where the build has zupt._prepared_read; else the record read whole first, held beside the stage but
-not in its rise), "detect" the
-candidates, "decide" the decision on them. "rise" is the stage's peak over the process' memory when it began, per
-sample. Records (2 axes, the default model): the bench's stop-and-go tiled (rests every few seconds), and one long
-rest (noise alone: the detector's and the decision's costliest case). The whole decision's row is met when its
-peak at 1e8 rows is within the goal; below 1e8 it is listed, not met.
+not in its rise), "detect" the candidates, "decide" the decision on them. "rise" is the stage's peak over the
+process' memory when it began, per sample; "CPU s" the stage's user + system seconds (the machine is shared: CPU,
+not wall time). Records (2 axes, the default model): the bench's stop-and-go tiled (rests every few seconds), and
+one long rest (noise alone: the detector's and the decision's costliest case). The whole decision's row is met
+when its peak at 1e8 rows is within the goal; below 1e8 it is listed, not met.
 Usage: python bench/run_all.py bench/speed/bench_rest_stages.py [--sizes 1e7] [--before EXE]
 """
 
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import gc
+import resource
 import subprocess
 import sys
 import tempfile
@@ -39,7 +40,8 @@ def _status(key: str) -> float:
 
 
 def child(path: Path, n: int) -> None:
-    """Decide on the record in ``path`` (n rows of 2 float64), printing a line per stage: name, peak MB, rise MB."""
+    """Decide on the record in ``path`` (n rows of 2 float64), printing a line per stage: name, peak MB, rise MB, the
+    process' MB at the start, CPU s."""
     from accelnav.estimate import zupt
     from accelnav.estimate.rests import Clock, decide
     from accelnav.model.design import axis_design
@@ -57,9 +59,12 @@ def child(path: Path, n: int) -> None:
         before = _status("VmRSS")
         with open("/proc/self/clear_refs", "w") as fh:
             fh.write("5")  # the peak (VmHWM) from here
+        r0 = resource.getrusage(resource.RUSAGE_SELF)
         out = fn()
+        r1 = resource.getrusage(resource.RUSAGE_SELF)
         peak = _status("VmHWM")
-        print(f"{name} {peak:.1f} {peak - before:.1f} {start:.1f}", flush=True)
+        cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+        print(f"{name} {peak:.1f} {peak - before:.1f} {start:.1f} {cpu:.3f}", flush=True)
         return out
 
     p = zupt.resolved(model, zupt.ZuptParams())
@@ -90,8 +95,8 @@ def make_record(path: Path, n: int, record: str) -> None:
     np.ascontiguousarray(accel, dtype=np.float64).tofile(path)
 
 
-def measure(exe: str, path: Path, n: int) -> tuple[list[tuple[str, float, float]], str]:
-    """(stages as (name, peak MB, rise MB), decisions note) from a child under ``exe``."""
+def measure(exe: str, path: Path, n: int) -> tuple[list[tuple[str, float, float, float]], str]:
+    """(stages as (name, peak MB, rise MB, CPU s), decisions note) from a child under ``exe``."""
     p = subprocess.run([exe, __file__, "--child", str(path), str(n)], capture_output=True, text=True)
     if p.returncode:
         raise SystemExit(f"{exe}: the child failed: {(p.stderr.strip().splitlines() or [''])[-1]}")
@@ -101,9 +106,10 @@ def measure(exe: str, path: Path, n: int) -> tuple[list[tuple[str, float, float]
         if f[0] == "decisions":
             note = f"{f[1]} candidates, {f[2]} accepted"
         else:
-            rows.append((f[0], float(f[1]), float(f[2])))
+            rows.append((f[0], float(f[1]), float(f[2]), float(f[4])))
             start = float(f[3])
-    rows.append(("whole decision", max(r[1] for r in rows), max(r[1] for r in rows) - start))
+    peak = max(r[1] for r in rows)
+    rows.append(("whole decision", peak, peak - start, sum(r[3] for r in rows)))
     return rows, note
 
 
@@ -127,9 +133,9 @@ def main() -> int:
                 make_record(path, n, record)
                 for mark, exe in builds:
                     rows, note = measure(exe, path, n)
-                    for name, peak, rise in rows:
+                    for name, peak, rise, cpu in rows:
                         stages.append(f"| {n:.0e} | {record}{mark} | {name} | {peak:,.0f} | {rise:,.0f} | "
-                                      f"{rise * 2**20 / n:.1f} |")  # fmt: skip
+                                      f"{rise * 2**20 / n:.1f} | {cpu:.2f} |")  # fmt: skip
                     peak = rows[-1][1]
                     met = "yes" if n >= GOAL_ROWS and peak <= GOAL_MB else "no"
                     where = "" if n >= GOAL_ROWS else f"; measured at {n:.0e}, not 1e8"
@@ -137,7 +143,7 @@ def main() -> int:
                                    f"{peak:,.0f} MB | {met} | {note}{where} |")  # fmt: skip
                 path.unlink()
     print("2 axes, the default model; each stage's peak RSS (VmHWM reset at its start) in a child process.\n")
-    print("| N | record | stage | peak MB | rise MB | rise B/sample |\n|---|---|---|---|---|---|")
+    print("| N | record | stage | peak MB | rise MB | rise B/sample | CPU s |\n|---|---|---|---|---|---|---|")
     print("\n".join(stages))
     print("\n| N | record | goal | measured | met | note |\n|---|---|---|---|---|---|")
     print("\n".join(targets))

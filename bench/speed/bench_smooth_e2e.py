@@ -311,9 +311,15 @@ def print_targets(last, fleet: dict, count: int, rows: int, n_axes: int) -> None
     if name in sec and "smooth NPZ" in sec:
         r = sec[name] / sec["smooth NPZ"]
         line("fixes + rests (given as a mask) within 2x of plain", f"{r:.2f}x", ok[name], r <= 2)
-    if "smooth NPZ" in sec:
-        b = out_bytes["smooth NPZ"] / (n * n_axes)
-        line("default output <= 24 B per sample per axis", f"{b:.1f} B", ok["smooth NPZ"], b <= 24)
+    # the default output of every option that has one (not --full, --filter-states, filter), the aids' NIS with it
+    defaults = ("smooth NPZ", "smooth NPZ --zupt auto", "smooth NPZ --fixes --zupt MASK",
+                "smooth NPZ --fixes --zupt INTERVALS")  # fmt: skip
+    for name in (k for k in defaults if out_bytes.get(k)):
+        b = out_bytes[name] / (n * n_axes)
+        earlier = out_bytes.get(name + " (before)")
+        before = f" (before: {earlier / (n * n_axes):.1f} B)" if earlier else ""
+        goal = "default output <= 24 B per sample per axis" + ("" if name == "smooth NPZ" else f": {name}")
+        line(goal, f"{b:.1f} B{before}", ok[name], b <= 24)
     for name in (k for k in sec if k.startswith(("smooth ", "filter ")) and not k.endswith("(before)")):
         big = "" if n >= 100_000_000 else f" (measured at {n:.0e}, not 1e8)"
         line(

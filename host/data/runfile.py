@@ -32,6 +32,11 @@ key                       shape, dtype           meaning
 ``smooth_P``              (n_axes, N, 4, 4)      its covariance (on request)
 ``zupt``                  (N, n_axes), bool      samples whose zero-velocity update was applied
 ``fixes``                 (M, 4), float64        position fixes used: [t, axis column, r, sigma]
+``fix_nis``               (M,), float64          each fix's NIS y^2 / S as the filter met it
+``zupt_nis``              (K, 4), float64        zero-velocity updates' NIS: [t, axis column, y^2 / S, 1 for
+                                                 the first update of its rest]; ``/3`` keeps each rest's
+                                                 first update alone (what the NIS checks read), the others
+                                                 every update
 ``zupt_candidates``       (K, 3), float64        ``--zupt auto``'s candidate rests: [start_s, end_s, accepted]
 ========================  =====================  ===============================================
 
@@ -88,8 +93,10 @@ def save_run(path: str | Path, arrays: dict[str, np.ndarray], model: Model, *, c
 
 def compact(arrays: dict[str, np.ndarray], stages: tuple[str, ...] = STAGES) -> dict[str, np.ndarray]:
     """The ``/3`` contents of a run (see the module notes): r, u and their sds at float32 of ``stages``, no
-    input echo."""
+    input echo, of ``zupt_nis`` each rest's first update."""
     out = {k: arrays[k] for k in COMPACT_KEYS if k in arrays}
+    if "zupt_nis" in out:  # each rest's first update, the NIS checks' evidence: the later ones were 32 B an update
+        out["zupt_nis"] = out["zupt_nis"][out["zupt_nis"][:, 3] == 1]
     for st in stages:
         if f"{st}_x" in arrays:
             out[f"{st}_x"] = np.asarray(arrays[f"{st}_x"][..., :2], dtype=np.float32)

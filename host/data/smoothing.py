@@ -183,8 +183,8 @@ def _checks(outcome: engine.Outcome, inputs: dict, fixes):
 
 def _file_checks(out: Path, tuned: bool):
     """The aids' NIS checks of a run written chunk by chunk, from its members fix_nis and zupt_nis (one row per
-    rest update: read a piece at a time); the held-out fixes and the anchor check re-smooth or read the run whole
-    and are not made here."""
+    rest, or per rest update with --full: read a piece at a time); the held-out fixes and the anchor check
+    re-smooth or read the run whole and are not made here."""
     import zipfile
 
     from accelnav.estimate.chunked import _stored_member

@@ -142,10 +142,12 @@ class ChunkAids:
     def applied(self, piece: Piece, done: np.ndarray) -> None:
         """Which of ``piece``'s aids the filter applied (bool, its order)."""
 
-    def innovations(self, piece: Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray) -> np.ndarray:
+    def innovations(
+        self, piece: Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray, s: int
+    ) -> np.ndarray:
         """``piece``'s aids seen by the filter: their innovations ``y`` and variances ``S`` (its order), applied or
-        not (``done``), ``t`` the time of each. Returns the chunk's rows of the ``nis`` member (r, 4), in
-        order: :attr:`nis_rows` over the run in all."""
+        not (``done``), ``t`` the chunk's times from its first sample ``s`` (an aid's: ``t[k - s]``). Returns the
+        chunk's rows of the ``nis`` member (r, 4), in order: :attr:`nis_rows` over the run in all."""
         return np.zeros((0, 4))
 
 
@@ -219,7 +221,8 @@ def disk_needed(
     """Bytes of disk the bounded path needs at its peak: the store (``store``: smoothing; ``n_general`` of
     the axes on the general path, whose store is wider; ``covariances``: every axis) and the output, written
     once in place, as :func:`smooth_bounded` lays it out for ``full``, ``covariances``, ``marks`` and the
-    ``nis`` member's rows (4 doubles each: one per zero-velocity update, up to 32 B per sample and axis)."""
+    ``nis`` member's rows (4 doubles each: by default one per rest, with ``--full`` one per zero-velocity
+    update, up to 32 B per sample and axis)."""
     n_general = n_axes if covariances else n_general
     gw = GROW if covariances else GLROW
     return (
@@ -861,6 +864,23 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
             run.tap(run.marks, -1, s, run.marked[:m])
 
 
+def _piece(ax: _Axis, s: int, e: int) -> tuple[Piece | None, int]:
+    """Axis ``ax``'s aids of samples s..e-1 (ChunkAids.between, a caller's own among them) and their count, checked
+    before the kernels read them: within the chunk and sorted, h (ne, 4) and k, z, R, gates, marked (ne,)."""
+    piece = ax.aids.between(s, e) if ax.aids is not None else None
+    ne = 0 if piece is None else len(piece.ex)
+    if not ne:
+        return piece, 0
+    ex = piece.ex
+    shapes = [np.shape(a) for a in (ex.h, ex.k, ex.z, ex.R, piece.gates, piece.marked)]
+    if shapes != [(ne, 4)] + [(ne,)] * 5:
+        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} have h, k, z, R, gates, marked of shapes "
+                         f"{shapes}; accepted: ({ne}, 4), then ({ne},)")  # fmt: skip
+    if ex.k[0] < s or ex.k[-1] >= e or np.any(ex.k[1:] < ex.k[:-1]):
+        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} are not sorted within them")
+    return piece, ne
+
+
 def _forward_general(
     run: _Run,
     ax: _Axis,
@@ -873,10 +893,7 @@ def _forward_general(
     t: np.ndarray | None = None,
 ) -> None:
     p, m, b = run.ptr, e - s, run.buf(ax)
-    piece = ax.aids.between(s, e) if ax.aids is not None else None
-    ne = 0 if piece is None else len(piece.ex)
-    if ne and (piece.ex.k[0] < s or piece.ex.k[-1] >= e or np.any(piece.ex.k[1:] < piece.ex.k[:-1])):
-        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} are not sorted within them")
+    piece, ne = _piece(ax, s, e)
     ek = np.ascontiguousarray(piece.ex.k - s, dtype=np.int64) if ne else np.zeros(1, dtype=np.int64)
     arrs = [piece.ex.h, piece.ex.z, piece.ex.R, piece.gates] if ne else [np.zeros(4)] * 4
     arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in arrs]
@@ -902,10 +919,9 @@ def _forward_general(
         run.out.write("filt_x_prior", 4 * (ax.j * run.n + s), run.xb[:m])
         run.put_cov("filt_P_prior", ax.j, s, run.pb[:m])
     if ne:
-        done = applied[:ne].astype(bool)
+        done = applied[:ne].view(bool)  # the kernel's 0 or 1
         ax.aids.applied(piece, done)
-        at = t[piece.ex.k - s] if t is not None else np.full(ne, np.nan)
-        rows = ax.aids.innovations(piece, done, ey[:ne], eS[:ne], at)
+        rows = ax.aids.innovations(piece, done, ey[:ne], eS[:ne], np.full(m, np.nan) if t is None else t, s)
         if run.nis and len(rows):
             if ax.nis_at + len(rows) > ax.nis_end:
                 raise ValueError(f"axis {ax.j}: more {run.nis} rows than its aids' nis_rows")
@@ -981,8 +997,7 @@ def _chunk_cov(run: _Run, ax: _Axis, s: int, e: int, pst: np.ndarray) -> None:
     what the forward pass kept of the chunk, its aids asked for again."""
     p, m = run.ptr, e - s
     p0, ok_bits, done_bits, n_done, digest = ax.p_start.pop(s)
-    piece = ax.aids.between(s, e) if ax.aids is not None else None
-    ne = 0 if piece is None else len(piece.ex)
+    piece, ne = _piece(ax, s, e)
     ek = np.ascontiguousarray(piece.ex.k - s, dtype=np.int64) if ne else np.zeros(1, dtype=np.int64)
     h, R = (np.ascontiguousarray(a, dtype=np.float64) for a in ((piece.ex.h, piece.ex.R) if ne else (np.zeros(4),) * 2))
     ekb = run.ffi.from_buffer("long[]", ek)

@@ -202,6 +202,7 @@ class RestOutcome:
     # takes it as the one-chunk output when nothing after the review changes the aids, else drops it at once
     smoothed: dict | None = field(default=None, repr=False)
     spans: object = None  # zupt.RestSpans of given rests
+    _ends: np.ndarray | None = field(default=None, init=False, repr=False)  # candidate_ends, made once
 
     def runs(self, n_axes: int):
         """The rests as zupt.RestSpans (a mask's runs, made now)."""
@@ -209,12 +210,20 @@ class RestOutcome:
 
         return self.spans if self.spans is not None else RestSpans.of_mask(self.mask, self.sigma, n_axes)
 
+    def candidate_ends(self) -> np.ndarray:
+        """(K, 3) int64 [start, stop, accepted] per decision, made once (a Python loop over 1e4-1e5 of them; the
+        decisions are final once the rest stage returns)."""
+        if self._ends is None or len(self._ends) != len(self.decisions):
+            rows = [(d.start, d.stop, d.accepted) for d in self.decisions]
+            self._ends = np.array(rows, dtype=np.int64).reshape(-1, 3)
+        return self._ends
+
     def candidate_rows(self, t) -> np.ndarray:
         """[start_s, end_s, accepted] per candidate (kept in the run file for the plots); a rest the review
         dropped is not accepted. ``t``: the run's times, or a function giving them at samples
         (:meth:`Source.times_at`)."""
         m = self.mask if self.mask.ndim == 1 else self.mask.any(axis=1)
-        ends = np.array([(d.start, d.stop, d.accepted) for d in self.decisions], dtype=np.int64).reshape(-1, 3)
+        ends = self.candidate_ends()
         a, b = ends[:, 0], ends[:, 1]
         if len(ends) and np.all(b > a) and np.all(a[1:] >= b[:-1]) and a[0] >= 0 and b[-1] <= len(m):
             # the detector's spans, in order and apart: one reduction over the mask's [start, stop) of each (the
@@ -538,27 +547,33 @@ class _AxisAids(chunked.ChunkAids):
     """Axis j's aids for the chunked passes, made chunk by chunk: its position fixes (few, held whole, sorted
     stably by sample) and the zero-velocity updates of its rests (zupt.RestSpans.updates, made for the chunk's
     samples alone), in the order the whole run's ``Extras.of(fixes.concat(rests))`` gives them: by sample, a
-    fix before a rest's update at the same sample; the updates are marked (the run file's ``zupt``)."""
+    fix before a rest's update at the same sample; the updates are marked (the run file's ``zupt``).
+    ``every``: a ``zupt_nis`` row per update (``--full``); else only each rest's first update's, the one the NIS
+    checks read (the one-chunk file keeps the same: accelnav.data.runfile.compact)."""
 
-    def __init__(self, model: Model, j: int, fixes: Aids, spans, params) -> None:
+    def __init__(self, model: Model, j: int, fixes: Aids, spans, params, every: bool = False, fill=None) -> None:
         from accelnav.estimate import fastsmooth
 
-        self.model, self.j, self.spans, self.params = model, j, spans, params
+        self.model, self.j, self.spans, self.params, self.every = model, j, spans, params, every
         self.fx = fastsmooth.Extras.of(fixes)
-        self.nis_rows = 0 if spans is None else spans.count(j, model, params)  # one zupt_nis row per update
+        # the zupt_nis rows over the run: one per update, or one per rest (each rest's first update is applied:
+        # rests are never gated per update)
+        self.nis_rows = 0 if spans is None else spans.count(j, model, params) if every else _rests(spans, j)
         self.count = len(self.fx) + self.nis_rows
         self.at = 0  # the first fix of the chunk last asked for (its innovations follow at once)
         self.fix_nis = np.full(len(self.fx), np.nan)  # each fix's NIS, in the given order, as the filter meets it
-        self.rest_of = None  # each span's rest (RestSpans.rest_of), made when the first innovations come in
+        self.rests = None  # each rest's first and end sample and its id (_firsts), made when innovations first come
         self.last_rest = -1  # the rest of the last update met (chunk to chunk): a new one's first update is marked
+        self.fill = _UpdateFill() if fill is None else fill
 
     @classmethod
-    def each(cls, model: Model, fixes, rest, n_axes: int) -> tuple[list[Aids], list[_AxisAids]]:
+    def each(cls, model: Model, fixes, rest, n_axes: int, every: bool = False) -> tuple[list[Aids], list[_AxisAids]]:
         """Every axis's fixes and its aids made chunk by chunk, from the run's fixes (per axis, or None) and
         rests (RestOutcome, or None): the one recipe of the chunked passes and of --tune's likelihood."""
         fx = [Aids.of(list(fixes[j]) if fixes is not None else []) for j in range(n_axes)]
         spans, params = (None, None) if rest is None else (rest.runs(n_axes), rest.params)
-        return fx, [cls(model, j, fx[j], spans, params) for j in range(n_axes)]
+        fill = _UpdateFill()  # the axes take their turns: one set of constant parts for all
+        return fx, [cls(model, j, fx[j], spans, params, every, fill) for j in range(n_axes)]
 
     def between(self, s: int, e: int) -> chunked.Piece:
         from accelnav.estimate import fastsmooth
@@ -566,33 +581,112 @@ class _AxisAids(chunked.ChunkAids):
         fx = self.fx
         a, b = int(np.searchsorted(fx.k, s)), int(np.searchsorted(fx.k, e))
         self.at = a
-        zs = Aids.of([]) if self.spans is None else Aids.zero_velocity(*self.spans.updates(self.j, s, e, self.model,
-                                                                                         self.params))  # fmt: skip
-        if a == b and not np.any(zs.k[1:] < zs.k[:-1]):  # rests alone, in order: the sort below would change nothing
-            return chunked.Piece(fastsmooth.Extras(zs.k, zs.h, zs.z, zs.R, np.arange(len(zs.k))), np.zeros(len(zs.k)),
-                                 np.ones(len(zs.k), dtype=bool))  # fmt: skip
+        if self.spans is None:
+            zs = Aids.of([])
+        else:  # Aids.zero_velocity's arrays, their constant parts shared (read-only) rather than made per chunk
+            ks, sd = self.spans.updates(self.j, s, e, self.model, self.params)
+            ks = np.asarray(ks, dtype=np.int64).reshape(-1)
+            h, zero, ones, order = self.fill.take(len(ks))
+            sd = np.asarray(sd, dtype=np.float64)
+            zs = Aids(ks, h, zero, sd**2 if sd.shape == ks.shape else np.broadcast_to(sd**2, ks.shape).copy())
+            if a == b and not np.any(ks[1:] < ks[:-1]):  # rests alone, in order: the sort below would change nothing
+                return chunked.Piece(fastsmooth.Extras(ks, h, zero, zs.R, order), zero, ones)
         k = np.concatenate((fx.k[a:b], zs.k))
         order = np.argsort(k, kind="stable")
         h, z, R = (np.concatenate((f[a:b], r))[order] for f, r in ((fx.h, zs.h), (fx.z, zs.z), (fx.R, zs.R)))
         marked = (np.arange(len(k)) >= b - a)[order]
         return chunked.Piece(fastsmooth.Extras(k[order], h, z, R, order), np.zeros(len(k)), marked)
 
-    def innovations(self, piece: chunked.Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray):
+    def innovations(self, piece: chunked.Piece, done: np.ndarray, y: np.ndarray, S: np.ndarray, t: np.ndarray, s: int):
         """The fixes' NIS kept (fix_nis, few); the applied updates' rows of ``zupt_nis`` returned, as
-        smooth_arrays makes them: [t, axis, y^2 / S, 1 for the first update of its rest]."""
-        nis = y * y / S
-        fix = ~piece.marked & done
-        self.fix_nis[self.fx.order[self.at + piece.ex.order[fix]]] = nis[fix]
+        smooth_arrays makes them: [t, axis, y^2 / S, 1 for the first update of its rest] (without ``every``, the
+        first updates' alone, their NIS alone computed)."""
+        if len(self.fx):
+            fix = ~piece.marked & done
+            self.fix_nis[self.fx.order[self.at + piece.ex.order[fix]]] = y[fix] * y[fix] / S[fix]
         rest = piece.marked & done
-        if not rest.any():
+        idx = None if rest.all() else np.flatnonzero(rest)  # rests alone, all applied: every aid of the piece
+        k = piece.ex.k if idx is None else piece.ex.k[idx]
+        if not len(k):
             return np.zeros((0, 4))
-        k = piece.ex.k[rest]
-        if self.rest_of is None:  # --tune's aids never ask: 8 B a span held for nothing
-            self.rest_of = self.spans.rest_of(self.j)
-        ids = self.rest_of[np.searchsorted(self.spans.hi[self.j], k, side="right")]
-        first = ids != np.concatenate(([self.last_rest], ids[:-1]))
+        pos = self._firsts(k)
+        if not self.every:
+            at = pos if idx is None else idx[pos]
+            ya = y[at]
+            return np.column_stack((t[piece.ex.k[at] - s], np.full(len(at), self.j), ya * ya / S[at], np.ones(len(at))))
+        first = np.zeros(len(k), dtype=bool)
+        first[pos] = True
+        ya, Sa = (y, S) if idx is None else (y[idx], S[idx])
+        return np.column_stack((t[k - s], np.full(len(k), self.j), ya * ya / Sa, first))
+
+    def _firsts(self, k: np.ndarray) -> np.ndarray:
+        """Where in the applied updates ``k`` (sorted) a rest's first update is: the first of each rest met here
+        but of the rest the last chunk ended in. A rest is a run of touching spans (zupt.RestSpans.rest_of, its
+        id the index of its first span), so its updates' positions come from its ends, not from each update."""
+        if self.rests is None:  # --tune's aids never ask: 24 B a rest held for nothing
+            lo, hi = self.spans.lo[self.j], self.spans.hi[self.j]
+            new = self.spans.rest_of(self.j) == np.arange(len(lo))
+            last = np.ones(len(lo), dtype=bool)
+            last[:-1] = new[1:]
+            self.rests = (lo[new], hi[last], np.flatnonzero(new))
+        starts, ends, ids = self.rests
+        r0, r1 = int(np.searchsorted(ends, k[0], side="right")), int(np.searchsorted(starts, k[-1], side="right"))
+        p, q = np.searchsorted(k, starts[r0:r1]), np.searchsorted(k, ends[r0:r1])
+        held = p < q
+        p, ids = p[held], ids[r0:r1][held]
+        new = ids != self.last_rest  # only the first can be the last chunk's
         self.last_rest = int(ids[-1])
-        return np.column_stack((t[rest], np.full(len(k), self.j), nis[rest], first))
+        return p[new]
+
+
+class _UpdateFill:
+    """The constant parts of zero-velocity updates (kf.Aids.zero_velocity: h = [0, 1, 0, 0], z = 0; a Piece's gates
+    0, marked, order 0..n-1) as read-only views of n rows, made once and grown when a chunk has more updates."""
+
+    def __init__(self) -> None:
+        self.n = -1
+
+    def take(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        if n > self.n:  # a quarter more: the axes' and chunks' counts differ a little (made again, pages faulted)
+            size = max(n, self.n + self.n // 4)
+            h = np.zeros((size, 4))
+            h[:, 1] = 1.0
+            self.parts = (h, np.zeros(size), np.ones(size, dtype=bool), np.arange(size))
+            for a in self.parts:
+                a.flags.writeable = False
+            self.n = size
+        return tuple(a[:n] for a in self.parts)
+
+
+def _rests(spans, j: int) -> int:
+    """Axis j's rests that hold an update: its spans' rests (zupt.RestSpans.rest_of: touching spans are one)
+    of at least one sample; each starts with an update, whatever every_s."""
+    held = spans.hi[j] > spans.lo[j]
+    return len(np.unique(spans.rest_of(j)[held]))
+
+
+class _Times:
+    """The run's t at the ends of --zupt auto's candidates (RestOutcome.candidate_rows asks for those samples),
+    kept as the chunks are read."""
+
+    def __init__(self, rest: RestOutcome, n: int) -> None:
+        ends = rest.candidate_ends()[:, :2] - np.array([0, 1])
+        self.k = np.unique(ends[(ends >= 0) & (ends < n)])
+        self.t = np.full(len(self.k), np.nan)
+        self.seen = np.zeros(len(self.k), dtype=bool)
+
+    def read(self, s: int, t: np.ndarray) -> None:
+        lo, hi = np.searchsorted(self.k, s), np.searchsorted(self.k, s + len(t))
+        self.t[lo:hi] = t[self.k[lo:hi] - s]
+        self.seen[lo:hi] = True
+
+    def at(self, k: np.ndarray, times_at: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """t at samples ``k``: those kept, else (a sample not asked for, or not read) ``times_at``'s."""
+        k = np.asarray(k, dtype=np.int64)
+        i = np.minimum(np.searchsorted(self.k, k), max(len(self.k) - 1, 0))
+        if len(self.k) and np.array_equal(self.k[i], k) and self.seen[i].all():
+            return self.t[i]
+        return times_at(k)
 
 
 class _RunEnvelope:
@@ -667,11 +761,14 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
     # --plots: the figures draw the filter's states too: they are computed, and so written, beside the smoother's
     stages = ("filt", "smooth") if smooth and (job.covariances or job.envelope) else job.stages
     env = _RunEnvelope(model, n, source) if job.envelope else None
-    fx, extras = _AxisAids.each(model, fixes, rest if smooth else None, n_axes)
+    fx, extras = _AxisAids.each(model, fixes, rest if smooth else None, n_axes, every=job.full or job.covariances)
     extras = extras if aided else None
     fix_t = [np.full(len(f), np.nan) for f in fx]  # the run's t at each fix, filled as the chunks are read
     echo = source.extra_keys() if job.full else {}
     counts: dict[int, np.ndarray] = {}
+    # --zupt auto's candidates' first and last samples (zupt_candidates' times), their t read as the chunks go by:
+    # Source.times_at would read the input once more after the passes (0.27 s of 2.1 at 1e6 rows, measured)
+    cand = _Times(rest, n) if aided and rest is not None and rest.detected else None
 
     def read(s: int, e: int):
         t, accel, c = source.read(s, e)
@@ -682,6 +779,8 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
         for f, ft in zip(fx, fix_t, strict=True):
             here = (f.k >= s) & (f.k < e)
             ft[here] = t[f.k[here] - s]
+        if cand is not None:
+            cand.read(s, t)
         return t, accel, c
 
     def more(applied: list[np.ndarray]) -> dict[str, np.ndarray]:
@@ -699,7 +798,7 @@ def _chunked(model, source: Source, job: Job, rest, out, workdir, outcome: Outco
         if rest is None:
             add["zupt_nis"] = np.zeros((0, 4))
         if rest is not None and rest.detected:
-            add["zupt_candidates"] = rest.candidate_rows(source.times_at)
+            add["zupt_candidates"] = rest.candidate_rows(lambda k: cand.at(k, source.times_at))
         return add
 
     def kept(applied: list[np.ndarray]) -> dict[str, np.ndarray]:

@@ -85,7 +85,8 @@ def smooth_run(
     Adds ``zupt`` (N, n_axes) bool, the samples whose zero-velocity update
     was applied, ``fixes`` (M, 4) [t, axis column, position, sigma], and the normalised innovation
     squared y^2 / S of every aid the filter applied (accelnav.estimate.consistency): ``fix_nis`` (M,)
-    beside ``fixes``, ``zupt_nis`` (K, 4) [t, axis column, NIS, 1 for the first update of its rest].
+    beside ``fixes``, ``zupt_nis`` (K, 4) [t, axis column, NIS, 1 for the first update of its rest] (every update's
+    here; a run file without ``--full`` keeps each rest's first: accelnav.data.runfile.compact).
     ``progress`` is accepted for symmetry with filter_run (the C is quick).
     """
     rests = None if rest is None else engine.Rests(zupt_params, mask=rest, sigma=rest_sigma)

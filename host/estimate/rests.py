@@ -94,7 +94,7 @@ from __future__ import annotations
 
 import bisect
 import math
-import operator
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -124,7 +124,7 @@ def _made(v, sd, chi2, source, fix, r, r_sd, norms) -> Side:
     return s
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Candidate:
     start: int
     stop: int
@@ -222,17 +222,88 @@ class RestDecision:
     chi2: float  # the larger of the two sides' mean over axes of v^2 / (sd^2 + sigma^2)
 
 
+class _Rows:
+    """What the verdicts of one :func:`decide` read, shared by all of them: the candidates, the forward pass'
+    verdicts and rows (chi2, |v|, sd of the side before), the accepted set, the last backward pass' sides and rows."""
+
+    __slots__ = ("cands", "found", "acc", "after", "before", "behind")
+
+    def __init__(self, cands: _Cands, found: _Found, acc: set[int], after: _Sides | None):
+        self.cands, self.found, self.acc, self.after = cands, found, acc, after
+        self.before = found._ps.stat
+        self.behind = None if after is None else after._rows[1]
+
+
+def _chi2(r: _Rows, i: int) -> float:
+    cb = float(r.before[i, 0])
+    return cb if r.behind is None else max(cb, float(r.behind[i, 0]))
+
+
+def _level_norm(r: _Rows, i: int) -> float:
+    lv = r.cands.level[i]  # np.linalg.norm's own sum for a vector (its dot), without its checks
+    return math.sqrt(lv.dot(lv))
+
+
+_READ = {  # each field of a verdict of decide(), read from its rows (_Rows) and its index
+    "start": lambda r, i: int(r.cands.start[i]),
+    "stop": lambda r, i: int(r.cands.stop[i]),
+    "accepted": lambda r, i: i in r.acc,
+    "reason": lambda r, i: r.found.reasons[i],
+    "still": lambda r, i: float(r.cands.still[i]),
+    "level": _level_norm,
+    "v_before": lambda r, i: float(r.before[i, 1]),
+    "sd_before": lambda r, i: float(r.before[i, 2]),
+    "v_after": lambda r, i: math.nan if r.behind is None else float(r.behind[i, 1]),
+    "sd_after": lambda r, i: math.nan if r.behind is None else float(r.behind[i, 2]),
+    "chi2": _chi2,
+}
+
+
+def _field(name: str) -> property:
+    """A field of :class:`_Decided` read from the decision's rows when read; one given to the dataclass' own __init__
+    (dataclasses.replace) is kept instead."""
+    read = _READ[name]
+
+    def get(self):
+        try:
+            rows, i = self._rows, self._i
+        except AttributeError:  # made by __init__: its own fields
+            return self.__dict__[name]
+        return read(rows, i)
+
+    def put(self, value) -> None:
+        self.__dict__[name] = value
+
+    return property(get, put)
+
+
 class _Decided(RestDecision):
-    """A verdict of :func:`decide` whose evidence in words is made when first read: a long record's tens of
-    thousands of verdicts are counted, their words read for a few (the same words: :meth:`_Decider._words`)."""
+    """A verdict of :func:`decide` that holds its index into the decision's rows (:class:`_Rows`), its fields read
+    from them when read and its evidence in words made when first read: a long record's tens of thousands of verdicts
+    are counted, their words read for a few (the same words: :meth:`_Decider._words`). A dict of thirteen fields each
+    held 1 kB a verdict, 6 B a sample of a 1e7-sample drive, and cost 0.4 s to fill."""
+
+    __slots__ = ("_rows", "_i")
+
+    start = _field("start")
+    stop = _field("stop")
+    accepted = _field("accepted")
+    reason = _field("reason")
+    still = _field("still")
+    level = _field("level")
+    v_before = _field("v_before")
+    sd_before = _field("sd_before")
+    v_after = _field("v_after")
+    sd_after = _field("sd_after")
+    chi2 = _field("chi2")
 
     @property
     def evidence(self) -> str:
         d = self.__dict__
         ev = d.get("_evidence")
         if ev is None:
-            f, after, i = d.pop("_of")
-            ev = d["_evidence"] = _evidence(f, None if after is None else after[i])
+            r, i = self._rows, self._i
+            ev = d["_evidence"] = _evidence(r.found[i], None if r.after is None else r.after[i])
         return ev
 
     @evidence.setter
@@ -277,7 +348,11 @@ class _TimesAt:
     is: what the verdicts keep of ``t`` when they make their words later (not the whole record's times)."""
 
     def __init__(self, t: np.ndarray, at: np.ndarray):
-        self.k = np.unique(np.asarray(at, dtype=np.int64))
+        at = np.asarray(at, dtype=np.int64)
+        if np.all(at[1:] >= at[:-1]):  # sorted (the events' samples): its unique values without a sort
+            self.k = at[np.concatenate(([True], at[1:] != at[:-1]))] if len(at) else at
+        else:
+            self.k = np.unique(at)
         self.v = t[self.k] if isinstance(t, Clock) else np.asarray(t)[self.k]
 
     def __getitem__(self, k: int):
@@ -314,19 +389,40 @@ def _norms(s: Side | None) -> tuple[float, float]:
     return math.sqrt(sum(x * x for x in v)), math.sqrt(sum(x * x for x in sd) / len(sd))
 
 
-def _events(cands: list[Candidate], fixes, n: int, reverse: bool) -> list[tuple]:
-    """(sample, order, kind, payload) of one direction, sorted: a candidate's test before anything at its
-    first sample, its end (where an accepted rest's second update goes) at its last."""
-    ev = []
-    for i, c in enumerate(cands):
-        a, e = (n - c.stop, n - 1 - c.start) if reverse else (c.start, c.stop - 1)
-        ev.append((a, 0, "test", i))
-        ev.append((e, 2, "end", i))
-    for j, fx in enumerate(fixes):
-        for m in fx:
-            ev.append((n - 1 - m.k if reverse else m.k, 1, "fix", (j, m.z, m.R, m.k)))
-    ev.sort(key=operator.itemgetter(0, 1))  # stable: fixes at one sample keep their order
-    return ev
+class _Events:
+    """One direction's events as the kernels read them, in sample order: a candidate's test (kind 0) before anything
+    at its first sample, a fix (1) then, its end (2: where an accepted rest's second update goes) at its last; fixes
+    at one sample keep their order. ``k`` the sample in this direction's time, ``i`` the candidate (a fix: its axis),
+    ``z`` and ``var`` a fix's measurement (:meth:`at`: its sample in the record's time). Arrays, not a tuple per
+    event: a 1e7-sample drive has 60 000 candidates, and the list sorted in Python cost 0.6 s and 2 B a sample held."""
+
+    __slots__ = ("k", "kind", "i", "z", "var", "_n", "_reverse")
+
+    def __init__(self, cands: _Cands, fixes, n: int, reverse: bool):
+        m, starts, stops = len(cands), cands.start, cands.stop
+        fx = [(j, mm.k, mm.z, mm.R) for j, f in enumerate(fixes) for mm in f]
+        fk = np.array([k for _, k, _, _ in fx], dtype=np.int64)
+        k = np.empty(2 * m + len(fx), dtype=np.int64)
+        k[0 : 2 * m : 2], k[1 : 2 * m : 2] = (n - stops, n - 1 - starts) if reverse else (starts, stops - 1)
+        k[2 * m :] = n - 1 - fk if reverse else fk
+        kind = np.empty(len(k), dtype=np.intc)
+        kind[0 : 2 * m : 2], kind[1 : 2 * m : 2], kind[2 * m :] = 0, 2, 1
+        i = np.empty(len(k), dtype=np.int64)
+        i[0 : 2 * m : 2] = i[1 : 2 * m : 2] = np.arange(m)
+        i[2 * m :] = [j for j, _, _, _ in fx]
+        z, var = np.zeros(len(k)), np.zeros(len(k))
+        z[2 * m :], var[2 * m :] = [v for _, _, v, _ in fx], [v for _, _, _, v in fx]
+        order = np.lexsort((kind, k))  # stable: the order above within one (sample, kind)
+        self.k, self.kind, self.i, self.z, self.var = (a[order] for a in (k, kind, i, z, var))
+        self._n, self._reverse = n, reverse
+
+    def at(self, e: int) -> int:
+        """Event e's sample in the record's time."""
+        k = int(self.k[e])
+        return self._n - 1 - k if self._reverse else k
+
+    def __len__(self) -> int:
+        return len(self.k)
 
 
 # the kernel's reason codes (acn_kin_forward): the accepted, the refused, a hypothesis still open
@@ -355,15 +451,61 @@ class _Pass:
         self.fix = np.zeros(m, dtype=np.uint8)
 
 
+class _Found:
+    """The forward passes' verdicts, one per candidate: each reason as a word, the verdict itself (:class:`_Verdict`)
+    made when first read (most never are: a 1e7-sample drive's 60 000 a pass cost 0.2 s and 100 B each). A pass
+    rewrites the kernel's rows from its resume on (:meth:`renew`), and the verdicts made of those rows go with them."""
+
+    __slots__ = ("_d", "_ps", "reasons", "_made")
+
+    def __init__(self, d: _Decider, ps: _Pass):
+        self._d, self._ps = d, ps
+        self.reasons: list[str] = []
+        self._made: dict[int, _Verdict] = {}
+
+    def renew(self, start: int, reasons: list[str]) -> None:
+        """The rows from ``start`` on rewritten by a pass, with these reasons."""
+        del self.reasons[start:]
+        self.reasons.extend(reasons)
+        for i in [i for i in self._made if i >= start]:
+            del self._made[i]
+
+    def __len__(self) -> int:
+        return len(self.reasons)
+
+    def __getitem__(self, i: int) -> _Verdict:
+        v = self._made.get(i)
+        if v is None:
+            if not 0 <= i < len(self.reasons):
+                raise IndexError(f"verdict {i}: {len(self.reasons)} candidates")
+            v = self._made[i] = _Verdict(self, i)
+        return v
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self.reasons)))
+
+
 class _Verdict:
     """One candidate's verdict of a forward pass: its reason; its side and its evidence in words made when read
     (most are never read but for the last pass's, and the words only once, at the end)."""
 
-    __slots__ = ("_d", "_ps", "_i", "reason", "_before")
+    __slots__ = ("_f", "_i", "_before")
 
-    def __init__(self, d: _Decider, ps: _Pass, i: int, reason: str):
-        self._d, self._ps, self._i, self.reason = d, ps, i, reason
+    def __init__(self, found: _Found, i: int):
+        self._f, self._i = found, i
         self._before: Side | None = None
+
+    @property
+    def reason(self) -> str:
+        return self._f.reasons[self._i]
+
+    @property
+    def _d(self) -> _Decider:
+        return self._f._d
+
+    @property
+    def _ps(self) -> _Pass:
+        return self._f._ps
 
     @property
     def after(self) -> Side | None:
@@ -420,12 +562,13 @@ class _Forward:
 class _Decider:
     def __init__(self, x, R, Ts, cands, fixes, p, t, start_sd: float = 0.0):
         self.start_sd = start_sd  # the model's prior sd of the start speed: a still start only when it is small
+        cands = _Cands.of(cands, x.shape[1])
         self.x, self.R, self.Ts, self.cands, self.p, self.t = x, R, Ts, cands, p, t
         self.n = len(x)
         self.fixes = fixes
         self.q = p.level_walk**2
-        self.fwd_events = _events(cands, fixes, self.n, False)
-        self.bwd_events = _events(cands, fixes, self.n, True)
+        self.fwd_events = _Events(cands, fixes, self.n, False)
+        self.bwd_events = _Events(cands, fixes, self.n, True)
         self.veto: dict[int, str] = {}  # withdrawn: why
         self._sources: dict[tuple[str, int], str] = {}  # the words naming each aid (_source)
         self._bwd = None  # the backward events as the kernel reads them (backward)
@@ -436,7 +579,7 @@ class _Decider:
         # pass saw (forward)
         self._marks: dict[int, int] = {}
         self._mark_every = max(MARK_EVERY, -(-len(cands) // MARKS))
-        self._found: list[_Verdict] = []
+        self._found: _Found | list = []
         self._seen_veto: dict[int, str] = {}
         self._start: dict[bool, _Kinematic] = {}  # per direction (reversed?), the filter before any event
         self._stands: list[int] | None = None  # the candidates that may be stands (_short_before_stands)
@@ -469,7 +612,7 @@ class _Decider:
         tell = self.p.tell if tell is None else tell
         return all(sd <= tell for sd in s.sd.tolist())
 
-    def forward(self) -> tuple[list[_Verdict], set[int]]:
+    def forward(self) -> tuple[_Found, set[int]]:
         """The forward filter, deciding online; returns every candidate's verdict and the accepted set: the kernel's
         whole run over the events (acn_kin_forward), its verdicts' words made here when read (:meth:`_words`).
 
@@ -488,8 +631,10 @@ class _Decider:
             )
         start = 0 if resume is None else resume
         reasons = [_REASONS[r] for r in ps.reason[start : len(self.cands)].tolist()]
-        found = self._found[:start] + [_Verdict(self, ps, i, r) for i, r in enumerate(reasons, start)]
-        self._found = found
+        if not isinstance(self._found, _Found):
+            self._found = _Found(self, ps)
+        found = self._found
+        found.renew(start, reasons)
         every = self._mark_every
         self._marks = {s * every: s for s in np.flatnonzero(k.mark_ok).tolist()}
         return found, set(np.flatnonzero(k.acc).tolist())
@@ -516,17 +661,16 @@ class _Decider:
         kin = self._fresh(False)
         m = len(cands)
         ev = self.fwd_events
-        kinds = {"test": 0, "fix": 1, "end": 2}
         arrays = {
-            "ev_k": np.array([e[0] for e in ev], dtype=np.int64),
-            "ev_kind": np.array([kinds[e[2]] for e in ev], dtype=np.intc),
-            "ev_i": np.array([e[3][0] if e[2] == "fix" else e[3] for e in ev], dtype=np.int64),
-            "ev_z": np.array([e[3][1] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
-            "ev_var": np.array([e[3][2] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
-            "start": np.array([c.start for c in cands], dtype=np.int64),
-            "stop": np.array([c.stop for c in cands], dtype=np.int64),
-            "level": np.array([c.level for c in cands], dtype=np.float64).reshape(m, n_axes),
-            "still": np.array([c.still for c in cands], dtype=np.float64),
+            "ev_k": ev.k,
+            "ev_kind": ev.kind,
+            "ev_i": ev.i,
+            "ev_z": ev.z,
+            "ev_var": ev.var,
+            "start": cands.start,
+            "stop": cands.stop,
+            "level": cands.level,
+            "still": cands.still,
             "veto": np.zeros(m, dtype=np.uint8),
             "diffuse": np.array(DIFFUSE, dtype=np.float64),
         }
@@ -582,8 +726,8 @@ class _Decider:
         if aid < 0:
             source = "no aid"
         else:
-            k, _, kind, pay = self.fwd_events[aid]
-            source = self._source("fix", k) if kind == "fix" else self._source("rest", pay)
+            ev = self.fwd_events
+            source = self._source("fix", ev.at(aid)) if ev.kind[aid] == 1 else self._source("rest", int(ev.i[aid]))
         return _made(s[0], s[1], chi2, source, bool(ps.fix[i]), s[2], s[3], (v, sd))
 
     def _words(self, ps: _Pass, i: int, s: Side) -> str:
@@ -661,15 +805,14 @@ class _Decider:
         ffi, m, n_axes = kin.ffi, len(cands), kin.n_axes
         if self._bwd is None:  # the events as arrays, and each candidate's level and length: once per decision
             ev = self.bwd_events
-            kinds = {"test": 0, "fix": 1, "end": 2}
             self._bwd = (
-                np.array([e[0] for e in ev], dtype=np.int64),
-                np.array([kinds[e[2]] for e in ev], dtype=np.intc),
-                np.array([e[3][0] if e[2] == "fix" else e[3] for e in ev], dtype=np.int64),
-                np.array([e[3][1] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
-                np.array([e[3][2] if e[2] == "fix" else 0.0 for e in ev], dtype=np.float64),
-                np.array([c.level for c in cands], dtype=np.float64).reshape(m, n_axes),
-                np.array([c.stop - c.start for c in cands], dtype=np.int64),
+                ev.k,
+                ev.kind,
+                ev.i,
+                ev.z,
+                ev.var,
+                cands.level,
+                cands.stop - cands.start,
             )
         ev_k, ev_kind, ev_i, ev_z, ev_var, level, length = self._bwd
         accm = np.zeros(m, dtype=np.uint8)
@@ -699,8 +842,8 @@ class _Decider:
         if aid < 0:
             source = "no aid"
         else:
-            _, _, kind, pay = self.bwd_events[aid]
-            source = self._source("fix", pay[3]) if kind == "fix" else self._source("rest", pay)
+            ev = self.bwd_events
+            source = self._source("fix", ev.at(aid)) if ev.kind[aid] == 1 else self._source("rest", int(ev.i[aid]))
         chi2, v, sd = stat.tolist()
         return _made(sides[0], sides[1], chi2, source, bool(fix), sides[2], sides[3], (v, sd))
 
@@ -773,10 +916,10 @@ class _Decider:
         """Each accepted rest's score: the larger of its side after it and the distance of the positions both sides
         give it (:meth:`_gap`, 0 unless both sides know the position through fixes). From the kernels' rows where
         they hold it (the sides made only for a rest with a fix on both sides), else from the sides."""
-        if not isinstance(after, _Sides) or not all(isinstance(found[i], _Verdict) for i in acc):
+        if not isinstance(after, _Sides) or found is not self._found:
             return {i: max(after[i].chi2, self._gap(found[i].before, after[i], self.cands[i])) for i in acc}
         chi2, fixed = after._rows[1][:, 0].tolist(), after._rows[3]
-        fix_before = found[0]._ps.fix if found else None
+        fix_before = found._ps.fix
         out = {}
         for i in acc:
             if fix_before[i] and fixed[i]:
@@ -794,21 +937,43 @@ class _Decider:
         them "moving" (a stand: ``start_s`` long, still at the sensor's noise)."""
         p, out = self.p, {}
         order = sorted(acc)
-        stops = [self.cands[j].stop for j in order]
+        stops = self.cands.stop[order].tolist()
         monotone = all(a <= b for a, b in zip(stops, stops[1:], strict=False))  # the detector's spans: in order
         if self._stands is None:  # the candidates long and still enough for a stand: the same every pass
-            self._stands = [i for i, c in enumerate(self.cands)
-                            if not ((c.stop - c.start) * self.Ts < p.start_s or c.still > p.still_k)]  # fmt: skip
-        for i in self._stands:
-            f, c = found[i], self.cands[i]
-            if f.reason != "moving" or i in self.veto:
+            c = self.cands
+            short = (c.stop - c.start) * self.Ts < p.start_s
+            self._stands = np.flatnonzero(~(short | (c.still > p.still_k))).tolist()
+        todo = self._moving_after_rest(found)
+        if monotone and found is self._found and todo and order:  # the kernels' verdicts: bisected at once
+            start, stop = self.cands.start, self.cands.stop
+            at = np.searchsorted(np.asarray(stops, dtype=np.int64), start[todo], side="right")  # bisect_right's
+            j = np.asarray(order, dtype=np.int64)[np.maximum(at - 1, 0)]
+            short = (at > 0) & ((stop[j] - start[j]) * self.Ts < p.start_s)
+            for i, jj in zip(np.asarray(todo)[short].tolist(), j[short].tolist(), strict=True):
+                if i not in self.veto:
+                    out.setdefault(jj, i)
+            return out
+        for i in todo:
+            if i in self.veto:
                 continue
-            if f.before is None or not f.before.source.startswith("the rest"):
-                continue
-            j = self._last_before(order, stops if monotone else None, c.start)
+            j = self._last_before(order, stops if monotone else None, self.cands[i].start)
             if j is not None and (self.cands[j].stop - self.cands[j].start) * self.Ts < p.start_s:
                 out.setdefault(j, i)
         return out
+
+    def _moving_after_rest(self, found: list) -> list[int]:
+        """The stands (:meth:`_short_before_stands`) found moving by the forward side from a rest before them, in
+        order. From the forward pass' rows where the verdicts are its (a stand's reason code, its side's aid and that
+        event's kind; 24 000 sides a 1e7-sample drive no longer makes for their source's first words), else from the
+        verdicts' sides."""
+        if found and found is self._found:
+            ps, stands = found._ps, np.asarray(self._stands, dtype=np.int64)
+            aid = ps.aid[stands]
+            keep = (ps.reason[stands] == _REASONS.index("moving")) & (aid >= 0)
+            keep[keep] = self.fwd_events.kind[aid[keep]] != 1  # a rest's end, not a fix: "the rest at ..."
+            return stands[keep].tolist()
+        return [i for i in self._stands if found[i].reason == "moving" and found[i].before is not None
+                and found[i].before.source.startswith("the rest")]  # fmt: skip
 
     def _last_before(self, order: list[int], stops: list[int] | None, k: int) -> int | None:
         """The last of the accepted rests ``order`` (sorted) that ends by sample k; None: none does. ``stops``: their
@@ -853,7 +1018,7 @@ class _Decider:
         self.veto[i] = f"{what} {_speed(s)} after it (from {s.source})"
 
 
-def _candidates(x, ok, R, spans) -> list[Candidate]:
+def _candidates(x, ok, R, spans) -> _Cands:
     """Each span [a, b) (non-empty, within the record) as a candidate: over its samples where every axis is ``ok``,
     the mean acceleration and the mean over axes of its variance / R (none usable: level 0; one or none: variance
     R). The kernel's sums (acn_kin_cands) run in numpy's order over axis 0: a mean and variance of each span
@@ -882,8 +1047,48 @@ def _candidates(x, ok, R, spans) -> list[Candidate]:
             ffi.from_buffer("long[]", starts), ffi.from_buffer("long[]", stops), ffi.from_buffer("double[]", R),
             ffi.from_buffer("double[]", level), ffi.from_buffer("double[]", still),
         )  # fmt: skip
-    spans = zip(starts.tolist(), stops.tolist(), level, still.tolist(), strict=True)
-    return [Candidate(a, b, lv, s) for a, b, lv, s in spans]
+    return _Cands(starts, stops, level, still)
+
+
+class _Cands(Sequence):
+    """The candidates as arrays, what the kernels read: first samples, ends, levels (m, n_axes) and stillness; each
+    :class:`Candidate` made when read (``cands[i]``: the same numbers, its level a row of ``level``). A drive of 1e7
+    samples has 60 000 candidates: as objects they held 260 B each (its level an array of its own), and their levels
+    gathered again for the kernels cost 0.1 s a time."""
+
+    __slots__ = ("start", "stop", "level", "still")
+
+    def __init__(self, start: np.ndarray, stop: np.ndarray, level: np.ndarray, still: np.ndarray):
+        self.start, self.stop, self.level, self.still = start, stop, level, still
+
+    @classmethod
+    def of(cls, cands, n_axes: int) -> _Cands:
+        """``cands`` (a list of :class:`Candidate`, or _Cands) as _Cands."""
+        if isinstance(cands, _Cands):
+            return cands
+        m = len(cands)
+        return cls(
+            np.fromiter((c.start for c in cands), dtype=np.int64, count=m),
+            np.fromiter((c.stop for c in cands), dtype=np.int64, count=m),
+            np.array([c.level for c in cands], dtype=np.float64).reshape(m, n_axes),
+            np.fromiter((c.still for c in cands), dtype=np.float64, count=m),
+        )
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        m = len(self.start)
+        if not -m <= i < m:
+            raise IndexError(f"candidate {i}: {m} candidates")
+        i = i + m if i < 0 else i
+        return Candidate(int(self.start[i]), int(self.stop[i]), self.level[i], float(self.still[i]))
+
+    def __iter__(self):
+        spans = zip(self.start.tolist(), self.stop.tolist(), self.level, self.still.tolist(), strict=True)
+        return (Candidate(a, b, lv, s) for a, b, lv, s in spans)
 
 
 def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd: float = 0.0) -> list[RestDecision]:
@@ -900,8 +1105,8 @@ def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd
     outside = [m.k for f in fixes for m in f if not 0 <= m.k < len(x)]
     if outside:
         raise ValueError(f"fixes: sample {outside[0]} outside the record's {len(x)} samples")
-    cands = _candidates(x, ok, R, spans)
-    dec = _Decider(x, R, Ts, cands, fixes, p, t, start_sd)
+    dec = _Decider(x, R, Ts, _candidates(x, ok, R, spans), fixes, p, t, start_sd)
+    cands = dec.cands
     try:
         found, acc = dec.run()
         after = dec._after
@@ -915,34 +1120,28 @@ def decide(x, ok, R, Ts: float, t: np.ndarray | Clock, spans, fixes, p, start_sd
     words = object.__new__(_Decider)
     keep = ("p", "cands", "Ts", "veto", "start_sd", "fwd_events", "bwd_events", "_sources")
     words.__dict__.update({k: dec.__dict__[k] for k in keep}, _after=None)
-    at = [k for c in cands for k in (c.start, c.stop - 1)] + [m.k for f in fixes for m in f]
-    words.t = _TimesAt(t, np.array(at, dtype=np.int64))
-    for f in found:
-        if isinstance(f, _Verdict):
-            f._d = words
+    # the times the words name: the clock itself (two numbers), else the candidates' first and last samples', the fixes'
+    words.t = t if isinstance(t, Clock) else _TimesAt(t, dec.fwd_events.k)
+    for ev in (dec.fwd_events, dec.bwd_events):  # the words name aids by kind and index: the fixes' figures go
+        ev.z = ev.var = None
+    if isinstance(found, _Found):
+        found._d = words
     if isinstance(after, _Sides):
         after._d = words
     return _verdicts(cands, found, acc, after)
 
 
-def _verdicts(cands: list[Candidate], found: list[_Verdict], acc: set[int], after: _Sides | None) -> list[RestDecision]:
+def _verdicts(cands: _Cands, found: _Found, acc: set[int], after: _Sides | None) -> list[RestDecision]:
     """Each candidate's record: its verdict, the statistics, the evidence in words made when read (:class:`_Decided`).
     The statistics are the kernels' rows as they wrote them (the sides' (chi2, |v|, sd): the forward pass's rows, one
     set that each pass rewrote from its resume on, and the last backward pass's), read without making the sides."""
-    out = []
-    m = len(found)
-    if not all(isinstance(f, _Verdict) for f in found) or not isinstance(after, _Sides | None):
+    if not isinstance(found, _Found) or not isinstance(after, _Sides | None):
         return _verdicts_of_sides(cands, found, acc)
-    before = found[0]._ps.stat[:m].tolist() if m else []
-    behind = after._rows[1][:m].tolist() if after is not None and m else [[math.nan] * 3] * m
-    for i, (c, f, (cb, vb, sb), (ca, va, sa)) in enumerate(zip(cands, found, before, behind, strict=True)):
-        lv = c.level  # np.linalg.norm's own sum for a vector (its dot), without its checks
-        d = object.__new__(_Decided)  # the frozen dataclass' fields set at once, not one __setattr__ each
-        d.__dict__.update(
-            start=c.start, stop=c.stop, accepted=i in acc, reason=f.reason, _of=(f, after, i), still=c.still,
-            level=math.sqrt(lv.dot(lv)), v_before=vb, sd_before=sb, v_after=va, sd_after=sa,
-            chi2=cb if after is None else max(cb, ca),
-        )  # fmt: skip
+    rows, out, made = _Rows(cands, found, acc, after), [], object.__new__
+    for i in range(len(found)):
+        d = made(_Decided)  # the frozen dataclass' fields read from the rows, nothing set but where they are
+        object.__setattr__(d, "_rows", rows)
+        object.__setattr__(d, "_i", i)
         out.append(d)
     return out
 

@@ -125,6 +125,30 @@ def test_aided_chunked_file_has_every_member_of_the_one_chunk_file(inputs, tmp_p
         np.testing.assert_array_equal(got[key], ref[key], err_msg=key)
 
 
+@pytest.mark.parametrize("option", ["rests mask", "fixes and rests given", "rests detected"])
+def test_default_file_keeps_each_rests_first_nis(inputs, tmp_path, option):
+    """Without --full a run file keeps of ``zupt_nis`` each rest's first update's row (the NIS checks read no
+    other), chunked as in one chunk: the same members, the full file's rows whose last column is 1, and the same
+    NIS lines as the chunked full file."""
+    kw = {k: (v if v == "auto" else inputs / v) for k, v in OPTIONS[option].items()}
+    runs = {}
+    for name, budget, full in (("a", SMALL, False), ("b", LARGE, False), ("f", SMALL, True)):
+        job = Job(stages=("filt", "smooth"), budget=budget, full=full)
+        runs[name] = smooth_file(inputs / "sim.npz", tmp_path / f"{name}.npz", job=job, **kw)
+    assert not runs["a"].plan.whole and runs["b"].plan.whole and not runs["f"].plan.whole
+    got, ref, every = (load_run(tmp_path / f"{name}.npz")[0] for name in "abf")
+    assert set(got) == set(ref)
+    for key in ref:
+        assert (got[key].shape, got[key].dtype) == (ref[key].shape, ref[key].dtype), key
+    z = every["zupt_nis"]
+    first = z[z[:, 3] == 1]
+    assert len(z) == every["zupt"].sum() and len(z) > 10 * len(first) and len(first) >= 2
+    for rows in (got["zupt_nis"], ref["zupt_nis"]):
+        np.testing.assert_array_equal(rows[:, [0, 1, 3]], first[:, [0, 1, 3]])
+        np.testing.assert_allclose(rows[:, 2], first[:, 2], rtol=RTOL, atol=0)
+    assert runs["a"].checks.nis == runs["f"].checks.nis and runs["a"].checks.nis
+
+
 @pytest.mark.parametrize(
     "option, stages",
     [
@@ -334,8 +358,15 @@ def test_given_aids_stream_chunk_by_chunk_across_chunk_boundaries(inputs, tmp_pa
     assert got["zupt_nis"].shape == ref["zupt_nis"].shape
     np.testing.assert_array_equal(got["zupt_nis"][:, [0, 1, 3]], ref["zupt_nis"][:, [0, 1, 3]])
     np.testing.assert_allclose(got["zupt_nis"][:, 2], ref["zupt_nis"][:, 2], rtol=RTOL, atol=0)
+    # without --full: each rest's first update's row, counted up front (touching spans one rest, every_s steps)
+    monkeypatch.setattr(engine.Source, "whole", not_whole)
+    smooth_file(inputs / "rec.npz", tmp_path / "c.npz", job=Job(budget=SMALL), zupt_params=params, **kw)
+    kept, first = load_run(tmp_path / "c.npz")[0]["zupt_nis"], ref["zupt_nis"][ref["zupt_nis"][:, 3] == 1]
+    np.testing.assert_array_equal(kept[:, [0, 1, 3]], first[:, [0, 1, 3]])
+    np.testing.assert_allclose(kept[:, 2], first[:, 2], rtol=RTOL, atol=0)
     if rests != "none":
-        assert len(got["zupt_nis"]) == got["zupt"].sum()
+        # 2 rests an axis (y: two touching spans, one)
+        assert len(got["zupt_nis"]) == got["zupt"].sum() and len(kept) == 4
         assert got["zupt"][b1 - 7 : b1 + 10, 0].sum() == (17 if not every_s else 6)
         assert got["zupt"][b2 - 30 : b2 + 5, 1].sum() == (35 if not every_s else 12)  # touching: one rest's steps
     else:

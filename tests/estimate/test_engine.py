@@ -112,3 +112,30 @@ def test_the_rest_decision_is_refused_over_the_budget_in_one_line():
     assert engine.plan(small, 2, replace(auto, budget=20_000)).chunks > 1
     with pytest.raises(UserError, match="rest decision"):
         engine.plan(small + 1, 2, replace(auto, budget=20_000))
+
+
+def test_candidate_times_are_kept_as_the_chunks_are_read():
+    """A chunked --zupt auto run names its candidates' times from the chunks it reads (engine._Times), not from one
+    more pass over the input: the same t as Source.times_at, and that pass still answers what was not read."""
+    from types import SimpleNamespace
+
+    n = 100
+    t = 0.5 + np.arange(n) / 7.0
+    decisions = [SimpleNamespace(start=a, stop=b, accepted=True) for a, b in ((3, 9), (20, 21), (40, 100))]
+    rest = engine.RestOutcome(None, None, None, decisions=decisions, detected=True)
+    asked = []
+
+    def times_at(k):
+        asked.append(np.asarray(k))
+        return t[k]
+
+    times = engine._Times(rest, n)
+    at = np.array([3, 20, 40, 8, 20, 99])
+    for s in range(0, 60, 30):  # samples 60.. not read yet: the pass answers
+        times.read(s, t[s : s + 30])
+    np.testing.assert_array_equal(times.at(at, times_at), t[at])
+    assert len(asked) == 1
+    times.read(60, t[60:])
+    np.testing.assert_array_equal(times.at(at, times_at), t[at])
+    np.testing.assert_array_equal(times.at(np.array([5]), times_at), t[[5]])  # not a candidate's end: asked
+    assert len(asked) == 2

@@ -65,6 +65,19 @@ def test_large_pieces_written_behind_the_caller_still_tile_and_check(tmp_path):
     np.testing.assert_array_equal(np.load(tmp_path / "big.npz")["x"], want)
 
 
+def test_large_pieces_cut_from_wider_rows_are_cast_as_numpy_casts_them(tmp_path):
+    """A piece of 1 MiB and more that is a few columns of wider rows (the compact r, u of (m, 4) states), cast to
+    a narrower dtype column by column: the bytes of numpy's cast of the whole piece."""
+    m = (1 << 18) + 3
+    x = np.random.default_rng(2).normal(size=(m, 4)) * np.logspace(-30, 30, m)[:, None]
+    with NpzWriter(tmp_path / "c.npz", {"y": ((m, 2), np.float32), "z": ((m, 3), np.float32)}) as w:
+        w.write("y", 0, x[:, :2])
+        w.write("z", 0, x[:, 1:])
+    with np.load(tmp_path / "c.npz") as f:
+        assert f["y"].tobytes() == x[:, :2].astype(np.float32).tobytes()
+        assert f["z"].tobytes() == x[:, 1:].astype(np.float32).tobytes()
+
+
 def test_a_write_error_on_the_writer_thread_is_raised_and_leaves_no_file(tmp_path, monkeypatch):
     """A full disk while a piece is written behind the caller: the error reaches the caller (at the next
     write or at close), and neither the output nor its .part remains."""

@@ -371,8 +371,26 @@ class _EverySeventh(chunked.ChunkAids):
         ex = self.extras(s, e)
         return chunked.Piece(ex, np.zeros(len(ex)), np.ones(len(ex), dtype=bool))
 
-    def innovations(self, piece, done, y, S, t):
-        return np.column_stack((t, piece.ex.k, y * y / S, done))
+    def innovations(self, piece, done, y, S, t, s):
+        return np.column_stack((t[piece.ex.k - s], piece.ex.k, y * y / S, done))
+
+
+class _ThreeColumns(_EverySeventh):
+    """A caller's ChunkAids whose h has 3 columns: the kernels read 4 a row."""
+
+    def between(self, s: int, e: int) -> chunked.Piece:
+        ex = self.extras(s, e)
+        ex = fs.Extras(ex.k, np.ascontiguousarray(ex.h[:, :3]), ex.z, ex.R, ex.order)
+        return chunked.Piece(ex, np.zeros(len(ex)), np.ones(len(ex), dtype=bool))
+
+
+def test_a_callers_chunk_aids_of_the_wrong_shape_are_refused_before_the_kernels(tmp_path):
+    model = load_model()
+    t, accel, clipped = _data(model, 200)
+    with pytest.raises(ValueError, match=r"shapes .*\(\d+, 3\).*accepted: \(\d+, 4\)"):
+        chunked.smooth_bounded(model, 200, chunked.array_reader(t, accel, clipped), tmp_path / "o.npz",
+                               extras=[_ThreeColumns(200)], chunk=64, workdir=tmp_path)  # fmt: skip
+    assert not (tmp_path / "o.npz").exists()
 
 
 @pytest.mark.parametrize("covariances", [False, True])

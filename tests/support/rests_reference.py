@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import operator
 from dataclasses import dataclass
 
 import numpy as np
@@ -321,6 +322,21 @@ def _source(self, kind: str, at: int) -> str:
     return f"the rest at {t[c.start]:.2f}-{t[c.stop - 1]:.2f} s"
 
 
+def reference_events(self, reverse: bool) -> list[tuple]:
+    """(sample, order, kind, payload) of one direction, sorted: a candidate's test before anything at its first
+    sample, its end at its last; as the events were before they were arrays (rests._Events)."""
+    n, ev = self.n, []
+    for i, c in enumerate(self.cands):
+        a, e = (n - c.stop, n - 1 - c.start) if reverse else (c.start, c.stop - 1)
+        ev.append((a, 0, "test", i))
+        ev.append((e, 2, "end", i))
+    for j, fx in enumerate(self.fixes):
+        for m in fx:
+            ev.append((n - 1 - m.k if reverse else m.k, 1, "fix", (j, m.z, m.R, m.k)))
+    ev.sort(key=operator.itemgetter(0, 1))  # stable: fixes at one sample keep their order
+    return ev
+
+
 def reference_forward(self):
     """The forward filter, deciding online, event by event in Python, every pass from the record's start (no marks
     to resume at), as it was before it moved to C (acn_kin_forward)."""
@@ -333,7 +349,7 @@ def reference_forward(self):
     e = 0
     pending = None  # (hypothesis i, event index of its test, saved kinematics and state, confirmations, seen)
     tried: set[int] = set()  # hypotheses already refuted in this pass
-    ev = self.fwd_events
+    ev = reference_events(self, False)
     while e < len(ev) or pending is not None:
         if e == len(ev):  # the record ended before the hypothesis was borne out: on without it
             h, e_h, (kin, st), _, _ = pending
@@ -431,7 +447,7 @@ def reference_backward(self, acc: set[int]) -> list[Side | None]:
     kin = self._fresh(True)
     out: list[Side | None] = [None] * len(cands)
     source, fix_seen = "no aid", False
-    for k, _, kind, pay in self.bwd_events:
+    for k, _, kind, pay in reference_events(self, True):
         if kind == "fix":
             j, z, var, k0 = pay
             kin.fix(k, j, z, var)

@@ -2066,11 +2066,11 @@ int acn_kin_checkpoints(acn_kin_rec *r, double *cp)
     }
     int w = 3 * r->n_axes;
     double vaw[24] = {0.0};
-    for (long k = 0; k <= r->n; k++) {
-        if (k % r->every == 0) {
-            memcpy(cp + (k / r->every) * w, vaw, sizeof(double) * (size_t)w);
-        }
-        if (k < r->n) {
+    /* a checkpoint, then the rows up to the next one: no division per row */
+    for (long b = 0, c = 0; b <= r->n; b += r->every, c++) {
+        memcpy(cp + c * w, vaw, sizeof(double) * (size_t)w);
+        long end = r->n - b < r->every ? r->n : b + r->every;
+        for (long k = b; k < end; k++) {
             kin_rec_step(r->n_axes, kin_rec_x(r, k), r->Ts, vaw);
         }
     }
@@ -2379,8 +2379,11 @@ void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long nu
             memcpy(cur, r->cp + (base / r->every) * w3, sizeof(double) * (size_t)w3);
             at = base;
         }
-        for (; at < k; at++) {
-            kin_rec_step(n_axes, kin_rec_x(r, at), r->Ts, cur);
+        for (; at < k; at++) { /* V alone (what the points read), as kin_rec_step sums it */
+            const double *row = kin_rec_x(r, at);
+            for (int j = 0; j < n_axes; j++) {
+                cur[j] = cur[j] + row[j] * r->Ts;
+            }
         }
         for (int j = 0; j < n_axes; j++) {
             double ramp = (level[j] - e0[j]) * w;
@@ -2517,14 +2520,29 @@ static double kin_median(const double *v, long n)
     return n % 2 ? v[h] : (v[h - 1] + v[h]) / 2.0;
 }
 
-/* bisect.insort: v (n sorted) gets x after its equals */
-static void kin_insort(double *v, long n, double x)
+/* bisect.insort: v (n sorted) gets x after its equals. `ordered`: no NaN among the values v is made
+   of, so v is sorted and bisected (the place the scan from the end finds: the first value above x,
+   none for a NaN x); else scanned from the end as bisect.insort's list would be (a NaN stops it). A
+   record's proven rests are thousands: a scan and a move per value cost O(n) each */
+static void kin_insort(double *v, long n, double x, int ordered)
 {
     long i = n;
-    while (i > 0 && v[i - 1] > x) {
-        v[i] = v[i - 1];
-        i--;
+    if (ordered) {
+        long lo = 0;
+        while (lo < i) {
+            long mid = lo + (i - lo) / 2;
+            if (v[mid] > x) {
+                i = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+    } else {
+        while (i > 0 && v[i - 1] > x) {
+            i--;
+        }
     }
+    memmove(v + i + 1, v + i, sizeof(double) * (size_t)(n - i));
     v[i] = x;
 }
 
@@ -2713,15 +2731,18 @@ static int kin_fwd_checked(const acn_kin_fwd *f, long resume, const acn_kin_fwd_
 }
 
 /* back to before the hypothesis h (the state saved in saved, its event e_h): the candidates after
-   it undone, h kept as refused; returns the event to go on from */
-static long kin_fwd_restore(acn_kin_fwd_out *o, long m, long h, long e_h, kin_fwd_state *w,
+   it undone, h kept as refused; returns the event to go on from. Only h .. last (the last candidate
+   tested) can have been marked since: tests come in candidate order, and every candidate after the
+   last tested is unmarked (by the pass' start or an earlier restore), so the rest of the m are not
+   walked (a drive's thousands of hypotheses each walked all 60 000) */
+static long kin_fwd_restore(acn_kin_fwd_out *o, long last, long h, long e_h, kin_fwd_state *w,
                             const kin_fwd_state *saved, double *proven, long *n_proven,
                             const double *saved_proven, long saved_n_proven)
 {
     *w = *saved;
     *n_proven = saved_n_proven;
     memcpy(proven, saved_proven, sizeof(double) * (size_t)saved_n_proven);
-    for (long j = h; j < m; j++) {
+    for (long j = h; j <= last; j++) {
         o->acc[j] = 0;
         if (j > h) {
             o->proven[j] = 0;
@@ -2757,25 +2778,29 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         kin_fwd_mark(f, o, slot, &e, &w, 0);
         memset(o->mark_ok + slot + 1, 0, (size_t)(f->n_marks - slot - 1));
     }
+    int ordered = 1; /* no NaN stillness: the proven ones stay sorted, bisected (kin_insort) */
+    for (long i = 0; i < m; i++) {
+        ordered = ordered && !isnan(f->still[i]);
+    }
     /* the verdicts before the mark stand: their accepted rests and proven stillness carry on */
     for (long i = 0; i < m; i++) {
         if (i >= resume) {
             o->acc[i] = o->proven[i] = 0;
         } else if (o->proven[i]) {
-            kin_insort(proven, n_proven++, f->still[i]);
+            kin_insort(proven, n_proven++, f->still[i], ordered);
         }
         o->tried[i] = 0;
     }
     /* the hypothesis open: its candidate, the event after its test, its confirmations, the
        candidates seen with it; the state before it in saved */
-    long h = -1, e_h = 0, count = 0, seen = 0, saved_n_proven = 0;
+    long h = -1, e_h = 0, count = 0, seen = 0, saved_n_proven = 0, last = -1;
     double res[4];
     while (e < f->n_ev || h >= 0) {
         if (e == f->n_ev) { /* the record ended before the hypothesis was borne out */
             o->tried[h] = 1;
             o->reason[h] = KIN_CANNOT;
             o->outcome[h] = OUT_TOO_FEW;
-            e = kin_fwd_restore(o, m, h, e_h, &w, &saved, proven, &n_proven, saved_proven,
+            e = kin_fwd_restore(o, last, h, e_h, &w, &saved, proven, &n_proven, saved_proven,
                                 saved_n_proven);
             h = -1;
             continue;
@@ -2817,6 +2842,7 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
             continue;
         }
         /* a candidate's test: its side, then the verdict */
+        last = i;
         double *side = o->side + 4 * n_axes * i, *num = o->num + ACN_KIN_NUM * i;
         acn_kin_test(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, w.st.aid_k,
                      f->level + n_axes * i, f->R, f->stop[i] - f->start[i], f->leak, f->drift,
@@ -2831,7 +2857,7 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         int reason = kin_judge(f, i, &w, proven, n_proven, res[1], side, res[0], &o->base[i],
                                &o->flags[i], num);
         if (reason == KIN_CONSISTENT || reason == KIN_START) {
-            kin_insort(proven, n_proven++, f->still[i]);
+            kin_insort(proven, n_proven++, f->still[i], ordered);
             o->proven[i] = 1;
         }
         o->reason[i] = reason;
@@ -2843,7 +2869,7 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
                 o->outcome[h] = kin_refuses(reason) ? OUT_REFUTED : OUT_WITHIN;
                 o->oarg[2 * h] = i;
                 o->oarg[2 * h + 1] = reason;
-                e = kin_fwd_restore(o, m, h, e_h, &w, &saved, proven, &n_proven, saved_proven,
+                e = kin_fwd_restore(o, last, h, e_h, &w, &saved, proven, &n_proven, saved_proven,
                                     saved_n_proven);
                 h = -1;
                 continue;
