@@ -286,9 +286,11 @@ def over_budget(label: str, n: int, n_axes: int, budget: int) -> str:
 # whole (t; each axis' acceleration and clipped flag) and the detector's x and ok beside it (18 B an axis with the
 # record's). On the stop-and-go bench record at 1e7 the whole decision takes 60 B (36 B streamed, a chunk at a time:
 # zupt.decide_rests_read): the sums are read from checkpoints (accelnav.estimate.rests.SUMS_EVERY) and the window
-# figures a run at a time (zupt._Spans), not held whole. A record that is one long rest takes the most, 86 B at 3e6
-# (the detector's, that run's window figures and pieces; 55 B streamed, bench_rest_stages.py): the bound is its, 88 B
-REST_SAMPLE_BYTES, REST_AXIS_BYTES = 36, 26
+# figures a run at a time (zupt._Spans), not held whole. A record that is one long rest takes the most: the
+# detector's, that run's window figures and pieces. It was 86 B at 3e6 (55 B streamed); since the run's median
+# partitions its variances in place and the pieces take that array as their scratch, 70 B at 3e6 and 69 B at 1e7
+# (46 B streamed, bench_rest_stages.py). The bound is its, with the margin it had: 80 B
+REST_SAMPLE_BYTES, REST_AXIS_BYTES = 28, 26
 REST_FLOOR = 64 << 20  # a decision needing less is not refused by a smaller budget: the process itself takes more
 
 

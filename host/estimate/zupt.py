@@ -326,7 +326,9 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     """:func:`candidates` on the prepared record (:func:`_prepared`), which the decision reads too."""
     n, n_axes = x.shape
     w = window_samples(model, p)
-    usable = ok.all(axis=1)
+    usable = ok[:, 0].copy()  # ok.all(axis=1) column by column: numpy's strided all took 0.2 s at 1e7 x 2
+    for j in range(1, n_axes):
+        usable &= ok[:, j]
     centre = _centres(x, usable, R + p.tremor**2, w, p.var_k)
     spans = _Spans(x, w)  # one run's window figures at a time, not the record's (24 B a sample at 2 axes)
     # split each run into pieces of steady level: a move that starts gently is quiet, but its mean walks away
@@ -335,18 +337,21 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     runs = intervals(centre)
     # a body swaying more than the tremor allowance (a real stance) has a level that wanders as much: the bound
     # grows with the run's own typical window variance (not with a ramp, whose windows stay quiet)
+    # (the median reorders the run's variances in place, and the pieces then take that array as their scratch: a
+    # long rest's run holds its means and one array besides, not three)
     parts = [
         _steady_pieces(
             means,
             a,
             b,
-            bound2 * max(1.0, float(np.median(wvar)) / total),
+            bound2 * max(1.0, _median_in_place(wvar) / total),
             x,
             total,
             w,
             p.level_rate * model.Ts,
             int(round(model.rate_hz)),  # a lean is told from a ramp over more than a second
             p.leak_rate * model.Ts,
+            scratch=wvar,
         )
         for a, b in runs
         for means, wvar in [spans.of(a, b)]
@@ -365,27 +370,45 @@ def _detect(x: np.ndarray, ok: np.ndarray, R: np.ndarray, model: Model, p: ZuptP
     run_of = np.repeat(np.arange(len(parts)), [len(q[0]) for q in parts]).tolist()
     starts = starts - _level_steps(x, usable, refs, lim2, starts, -1, h)
     stops = stops + _level_steps(x, usable, refs, lim2, stops - 1, 1, h)
-    merged: list[list] = []  # [start, stop, its first piece (whose level it keeps), the run of its last piece]
-    for i, (run, a, b) in enumerate(zip(run_of, starts.tolist(), stops.tolist(), strict=True)):
-        if (
-            merged
-            and run != merged[-1][3]  # a break that failed the quiet test, not a change of level
-            and a - merged[-1][1] <= bridge
-            and np.sum((refs[i] - refs[merged[-1][2]]) ** 2) <= bound2
-            and usable[merged[-1][1] : a].all()  # a knock, not clipped or missing samples
-        ):
-            merged[-1][1] = b
-            merged[-1][3] = run
-        else:
-            if merged:
-                a = max(a, merged[-1][1] + 1)
-            merged.append([a, b, i, run])
+    # join each piece to the one before it (then to that one's group) across a short knock: a break that failed the
+    # quiet test (another run, not a change of level), within the bridge, every sample of the gap usable (not
+    # clipped or missing), at one level with the group's first piece. All but the level are the two pieces' own
+    # (a group ends where its last piece does), so they are tested as arrays and only the few pieces that pass
+    # them walk in order (a loop over every piece cost 0.2-0.4 s at 1e7)
+    count = len(starts)
+    runs_arr = np.asarray(run_of, dtype=np.int64)
+    joins = np.zeros(count, dtype=bool)
+    if count > 1:
+        joins[1:] = (runs_arr[1:] != runs_arr[:-1]) & (starts[1:] - stops[:-1] <= bridge)
+    group = np.arange(count)  # the first piece of each piece's group, for the few that may join
+    for i in np.flatnonzero(joins).tolist():
+        g = int(group[i - 1])
+        joins[i] = bool(np.sum((refs[i] - refs[g]) ** 2) <= bound2) and bool(usable[stops[i - 1] : starts[i]].all())
+        if joins[i]:
+            group[i] = g
+    firsts = np.flatnonzero(~joins)
+    lasts = np.append(firsts[1:] - 1, count - 1) if count else firsts
+    a_of = starts[firsts]
+    if len(firsts) > 1:  # a group after another starts a sample past it at least: each is judged on its own
+        a_of[1:] = np.maximum(a_of[1:], stops[firsts[1:] - 1] + 1)
+    b_of = stops[lasts]
     shortest = max(1, int(round(p.min_rest_s * model.rate_hz)))
     mask = np.zeros(n, dtype=bool)
-    for a, b, _, _ in merged:  # a slice per rest: tens of thousands, where a count per sample passed the record thrice
-        if b - a >= shortest:
-            mask[a:b] = True
+    keep = b_of - a_of >= shortest
+    for a, b in zip(a_of[keep].tolist(), b_of[keep].tolist(), strict=True):  # a slice per rest (tens of thousands)
+        mask[a:b] = True
     return mask
+
+
+def _median_in_place(v: np.ndarray) -> float:
+    """np.median(v) (the same double: an order statistic, or the mean of the two middle ones), ``v`` reordered.
+    Compiled (acn_rest_median): numpy's partition and mean per run took 0.2-0.4 s CPU over the 1 105 runs of 1e7."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    if not (v.dtype == np.float64 and v.ndim == 1 and v.flags.c_contiguous and v.flags.writeable):
+        raise ValueError("rest detector: a median of a writable contiguous float64 vector only")
+    mod = _lib()
+    return float(mod.lib.acn_rest_median(len(v), mod.ffi.from_buffer("double[]", v)))
 
 
 def _level_steps(
@@ -393,15 +416,35 @@ def _level_steps(
 ) -> np.ndarray:
     """Per piece, how many samples past its ``edge`` sample (walking by ``step``, -1 or 1, at most h, not off
     the run) stay usable and within sqrt(lim2) of the piece's level ``refs`` before the first that does not:
-    the widening of every piece at once."""
-    n = len(x)
-    if h < 1 or not len(edge):
-        return np.zeros(len(edge), dtype=np.int64)
-    idx = edge[:, None] + step * np.arange(1, h + 1)  # (pieces, h)
-    inside = (idx >= 0) & (idx < n)
-    idx = np.clip(idx, 0, n - 1)
-    fits = inside & usable[idx] & (np.sum((x[idx] - refs[:, None, :]) ** 2, axis=2) <= lim2[:, None])
-    return np.where(fits.all(axis=1), h, np.argmin(fits, axis=1))
+    the widening of every piece at once.
+
+    Compiled (acn_rest_widen): numpy's gathers of every piece's h samples took 0.14 s at 1e7 (twice); the C sums
+    the squares over the axes in order, as numpy does for up to 7 (:data:`_MAX_AXES`)."""
+    from accelnav.estimate.fastsmooth import _lib
+
+    n, n_axes = x.shape
+    count = len(edge)
+    if h < 1 or not count:
+        return np.zeros(count, dtype=np.int64)
+    if n_axes > _MAX_AXES:
+        raise ValueError(f"rest detector: {n_axes} axes; accepted: at most {_MAX_AXES}")
+    xc = np.ascontiguousarray(x, dtype=np.float64)
+    ok = np.ascontiguousarray(usable, dtype=bool).view(np.uint8)
+    refs = np.ascontiguousarray(refs, dtype=np.float64)
+    lim2 = np.ascontiguousarray(lim2, dtype=np.float64)
+    edge = np.ascontiguousarray(edge, dtype=np.int64)
+    if len(ok) != n or refs.shape != (count, n_axes) or lim2.shape != (count,):
+        raise ValueError(f"rest detector: {len(ok)} rows, levels {refs.shape}, bounds {lim2.shape} for {count} pieces")
+    out = np.empty(count, dtype=np.int64)
+    mod = _lib()
+    buf = mod.ffi.from_buffer
+    status = mod.lib.acn_rest_widen(
+        n, n_axes, buf("double[]", xc), buf("unsigned char[]", ok), count, buf("double[]", refs),
+        buf("double[]", lim2), buf("long[]", edge), int(step), int(h), buf("long[]", out),
+    )  # fmt: skip
+    if status != 0:
+        raise ValueError(f"rest detector: widening by {step} over {n} x {n_axes}; accepted: a step of -1 or 1")
+    return out
 
 
 def _steady_pieces(
@@ -415,6 +458,7 @@ def _steady_pieces(
     tilt_rate: float,
     lean: int,
     leak_rate: float = 0.0,
+    scratch: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Split the run [a, b) of window centres into pieces whose window means stay within sqrt(bound2) of the
     piece's median: the longest such stretch about the run's median is kept, the parts either side are split
@@ -435,7 +479,8 @@ def _steady_pieces(
     is kept when it holds three windows at least (thirds of a window each: shorter, a ramp's start cannot be
     told from a step) and its level does not walk away from the piece it was cut from (a ramp leaving a
     rest does; a body that settled at a new level, or sways about it, does not).
-    ``means`` are the window means of the run's centres alone (b - a rows, :class:`_Spans`).
+    ``means`` are the window means of the run's centres alone (b - a rows, :class:`_Spans`). ``scratch``: b - a
+    float64 the kernel may overwrite (a fresh array when None).
     Returns the pieces' (first, last + 1, median level, own variance) as four arrays, in sample order.
 
     Compiled (acn_rest_pieces in csrc/fastsmooth.c): a ramp is cut into pieces of a sample or two, tens of
@@ -454,10 +499,16 @@ def _steady_pieces(
     xc = np.ascontiguousarray(x[a:b], dtype=np.float64)
     start, stop = np.empty(max(m, 1), dtype=np.int64), np.empty(max(m, 1), dtype=np.int64)
     ref, own = np.empty((max(m, 1), n_axes)), np.empty(max(m, 1))
+    if scratch is None:
+        scratch = np.empty(max(m, 1))
+    if not (scratch.dtype == np.float64 and scratch.flags.c_contiguous and scratch.flags.writeable):
+        raise ValueError("rest detector: the pieces' scratch must be a writable contiguous float64 array")
+    if len(scratch) < m or mc.shape != (m, n_axes) or xc.shape != (m, n_axes):
+        raise ValueError(f"rest detector: {len(scratch)} scratch rows, means {mc.shape}, x {xc.shape} for run {a}..{b}")
     count = mod.lib.acn_rest_pieces(
         m, n_axes, ffi.from_buffer("double[]", mc), ffi.from_buffer("double[]", xc), bound2, total, w,
-        tilt_rate, lean, leak_rate, ffi.from_buffer("long[]", start), ffi.from_buffer("long[]", stop),
-        ffi.from_buffer("double[]", ref), ffi.from_buffer("double[]", own),
+        tilt_rate, lean, leak_rate, ffi.from_buffer("double[]", scratch), ffi.from_buffer("long[]", start),
+        ffi.from_buffer("long[]", stop), ffi.from_buffer("double[]", ref), ffi.from_buffer("double[]", own),
     )  # fmt: skip
     if count < 0:
         raise MemoryError("rest detector: no memory for a run's pieces")
@@ -465,7 +516,8 @@ def _steady_pieces(
     return a + start[order], a + stop[order], ref[order], own[order]
 
 
-_MAX_AXES = 8  # acn_rest_pieces: sums over axes are numpy's sequential ones up to 8 terms
+_MAX_AXES = 7  # acn_rest_pieces sums over the axes in order, as numpy does up to 7 terms (from 8 numpy's sums are
+# pairwise, measured: the same figures would not be numpy's). Models take 1 to 3 axes
 
 
 def gate_rests(

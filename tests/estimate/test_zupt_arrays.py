@@ -105,3 +105,113 @@ def test_real_stationary_adis():
         rows = np.loadtxt(fh, delimiter=",", skiprows=1, max_rows=120_000, usecols=(4, 5))
     model = loads_model(rm.model_text(100.0, ("x", "y"), 10.0, 5000.0))
     assert_same_decisions(rows * G0, np.zeros(rows.shape, dtype=bool), model)
+
+
+@pytest.mark.parametrize("m", [601, 602, 4_999, 20_000])
+def test_long_runs_pieces_as_the_oracle(m):
+    """Runs long enough that the C selects its medians through a sample of the run (over 600 rows), odd and even
+    counts, tied levels (a quantised walk, as an ADC's codes give) and a long quiet level with noise: the same
+    pieces, bit for bit, as the Python the C replaced."""
+    rng = np.random.default_rng(m)
+    w, total = 11, 2.0e-3
+    x = rng.normal(0.0, 0.02, (m, 2))
+    walk = np.cumsum(rng.normal(0.0, 0.004, (m, 2)), axis=0)
+    for means, bound2 in ((np.round(walk, 2), 1e-4), (walk, 4e-5), (rng.normal(0.1, 0.003, (m, 2)), 1e-3)):
+        got = zupt._steady_pieces(means, 0, m, bound2, x, total, w, 1e-5, 100, 1e-6)
+        want = sorted(oracle._steady_pieces(means, 0, m, bound2, x, total, w, 1e-5, 100, 1e-6), key=lambda r: r[0])
+        assert len(want) > 0 and len(got[0]) == len(want)
+        assert got[0].tolist() == [r[0] for r in want] and got[1].tolist() == [r[1] for r in want]
+        assert np.array_equal(got[2], np.array([r[2] for r in want]).reshape(-1, 2))
+        assert got[3].tolist() == [r[3] for r in want]
+        # the caller's scratch (the detector's window variances, NaN here): only written, never read
+        kept = means.copy()
+        again = zupt._steady_pieces(means, 0, m, bound2, x, total, w, 1e-5, 100, 1e-6, scratch=np.full(m, np.nan))
+        assert all(np.array_equal(u, v) for u, v in zip(again, got, strict=True)) and np.array_equal(means, kept)
+
+
+def test_pieces_scratch_refused_when_short_or_foreign():
+    means, x = np.zeros((50, 2)), np.zeros((50, 2))
+    for scratch in (np.zeros(49), np.zeros(50, dtype=np.float32), np.zeros(100)[::2]):
+        with pytest.raises(ValueError, match="scratch"):
+            zupt._steady_pieces(means, 0, 50, 1e-3, x, 1e-3, 5, 0.0, 10, scratch=scratch)
+
+
+def test_knocked_rests_join_as_the_oracle():
+    """A knock inside every rest breaks its quiet run in two; the pieces either side join again across it (the
+    joins tested as arrays, then walked in order), except where the gap holds a clipped sample: the oracle's
+    candidates, and the joins happen."""
+    model = load_model(None)
+    s = simulate(model, "stop_and_go", 120.0, seed=101)
+    clean = zupt.intervals(oracle.candidates(s.accel, s.clipped, model, zupt.resolved(model, zupt.ZuptParams())))
+    long_rests = [(a, b) for a, b in clean if b - a > 200]
+    assert len(long_rests) >= 4
+    accel, clipped = np.array(s.accel), np.array(s.clipped)
+    for i, (a, b) in enumerate(long_rests):
+        accel[(a + b) // 2, 0] += 5 * G0
+        if i % 2:  # this one stays apart: its knock is also clipped
+            clipped[(a + b) // 2, 1] = True
+    assert assert_same_decisions(accel, clipped, model) > len(clean)
+    knocked = zupt.intervals(zupt.candidates(accel, clipped, model))
+    joined = [(a, b) for a, b in long_rests if any(p <= a + 50 and q >= b - 50 for p, q in knocked)]
+    assert 0 < len(joined) < len(long_rests)
+
+
+def test_run_median_is_numpys():
+    """The detector's median of a run's window variances (acn_rest_median, in place) against np.median, bit for bit:
+    odd and even counts, long enough to select through a sample, ties, infinities, a NaN."""
+    rng = np.random.default_rng(5)
+    cases = [rng.normal(size=m) for m in (1, 2, 3, 4, 601, 602, 5_000, 20_001)]
+    cases += [np.round(rng.normal(size=m), 1) for m in (700, 4_096)]  # many ties
+    cases += [np.cumsum(rng.normal(size=3_000)), np.sort(rng.normal(size=1_000))[::-1].copy()]
+    cases += [np.array([np.inf, 1.0, -np.inf, 2.0]), np.array([np.inf, -np.inf]), np.array([1.0, np.nan, 2.0])]
+    for v in cases:
+        with np.errstate(invalid="ignore"):  # inf - inf's mean
+            want = np.median(v)
+        got = zupt._median_in_place(v.copy())
+        assert np.array_equal(np.float64(got), want, equal_nan=True) and (got != got or got.hex() == want.hex())
+    with pytest.raises(ValueError, match="median"):
+        zupt._median_in_place(np.zeros(4, dtype=np.float32))
+
+
+def test_pieces_refuse_axes_past_numpys_sequential_sums():
+    """From 8 terms numpy sums pairwise, not in order as the C does: 7 axes are taken, 8 refused."""
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(20_000, 8)) ** 2 * 10.0 ** rng.integers(-8, 8, size=(20_000, 8))
+    in_order = [a[:, 0].copy()]
+    for j in range(1, 8):
+        in_order.append(in_order[-1] + a[:, j])
+    assert np.array_equal(np.sum(a[:, :7], axis=1), in_order[6])  # 7 terms: in order
+    assert not np.array_equal(np.sum(a, axis=1), in_order[7])  # 8: not, the reason for the limit
+    zupt._steady_pieces(np.zeros((30, 7)), 0, 30, 1e-3, np.zeros((30, 7)), 1e-3, 5, 0.0, 10)
+    with pytest.raises(ValueError, match="at most 7"):
+        zupt._steady_pieces(np.zeros((30, 8)), 0, 30, 1e-3, np.zeros((30, 8)), 1e-3, 5, 0.0, 10)
+
+
+def _widen_numpy(x, usable, refs, lim2, edge, step, h):
+    """zupt._level_steps as numpy computed it before the C (acn_rest_widen)."""
+    n = len(x)
+    idx = edge[:, None] + step * np.arange(1, h + 1)
+    inside = (idx >= 0) & (idx < n)
+    idx = np.clip(idx, 0, n - 1)
+    fits = inside & usable[idx] & (np.sum((x[idx] - refs[:, None, :]) ** 2, axis=2) <= lim2[:, None])
+    return np.where(fits.all(axis=1), h, np.argmin(fits, axis=1))
+
+
+@pytest.mark.parametrize("n_axes", [1, 2, 3, 7])
+def test_widening_as_numpy(n_axes):
+    """Pieces widened sample by sample in C as numpy's gathers did: at the record's ends, across unusable rows,
+    both ways, bounds that some samples just pass."""
+    rng = np.random.default_rng(n_axes)
+    n = 3_000
+    x = rng.normal(0.0, 0.05, (n, n_axes))
+    usable = rng.random(n) > 0.05
+    edge = np.concatenate([[0, 1, n - 2, n - 1], rng.integers(0, n, 500)]).astype(np.int64)
+    refs = x[edge] + rng.normal(0.0, 0.01, (len(edge), n_axes))
+    lim2 = rng.uniform(0.0, 0.02 * n_axes, len(edge))
+    seen = set()
+    for step in (-1, 1):
+        for h in (1, 5, 40):
+            got = zupt._level_steps(x, usable, refs, lim2, edge, step, h)
+            assert np.array_equal(got, _widen_numpy(x, usable, refs, lim2, edge, step, h))
+            seen.update(got.tolist())
+    assert {0, 1, 5, 40} <= seen  # stopped at once, part way and never

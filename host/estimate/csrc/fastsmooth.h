@@ -60,15 +60,33 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
  * steady level (host/estimate/zupt.py, _steady_pieces). means, x: n rows of
  * n_axes (at most ACN_REST_MAX_AXES) window means and samples of the run.
  * tilt_rate, leak_rate: level drift allowed per row (beyond lean rows; over a
- * whole run). Writes each piece's first and last + 1 row, its median level
- * (n_axes) and its own variance (summed over axes) into arrays of n; returns the
- * number of pieces, -1 when out of memory, -2 for too many axes.
+ * whole run). scratch: n doubles the kernel overwrites (the caller's, so a long
+ * rest's run does not cost another 8 B a row). Writes each piece's first and
+ * last + 1 row, its median level (n_axes) and its own variance (summed over
+ * axes) into arrays of n; returns the number of pieces, -1 when out of memory,
+ * -2 for too many axes.
  */
 enum { ACN_REST_MAX_AXES = 8 };
 
 long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, double bound2,
                      double total, long w, double tilt_rate, long lean, double leak_rate,
-                     long *pstart, long *pstop, double *pref, double *pown);
+                     double *scratch, long *pstart, long *pstop, double *pref, double *pown);
+/*
+ * The median of v[0..n-1] as np.median gives it: NaN where any value is NaN or
+ * n < 1, the mean of the two middle values for an even n. v is reordered.
+ */
+double acn_rest_median(long n, double *v);
+/*
+ * The widening of count pieces (host/estimate/zupt.py, _level_steps): for piece
+ * i, how many rows past edge[i] (walking by step, -1 or 1; at most h) stay inside
+ * the n rows of x (n_axes columns), usable, and within lim2[i] (squared, summed
+ * over the axes in order) of its level refs[i] (n_axes), before the first that
+ * does not. Into out (count). Returns 0, or -1 (nothing written) where a length
+ * or step is out of range.
+ */
+long acn_rest_widen(long n, int n_axes, const double *x, const unsigned char *usable, long count,
+                    const double *refs, const double *lim2, const long *edge, int step, long h,
+                    long *out);
 
 /*
  * Plain path in bounded memory (host/estimate/chunked.py): the same numbers as
