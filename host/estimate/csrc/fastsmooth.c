@@ -1695,6 +1695,79 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
 /* half the store (its writes were a third of `smooth --zupt auto` at 1e7).    */
 
 /*
+ * Extra ei is a zero-velocity update (h = e_u, which update_aid steps with
+ * constant indices) and the only extra of its sample: the common measurement
+ * of an aided run (half the samples of a record with rests). The chunk kernels
+ * run such samples, applied outright, and those with no extra in a loop of
+ * their own with x and p in locals, where the general step's variable indices
+ * keep them in memory.
+ */
+static inline int lone_zupt(long ei, long n_extra, const long *ek, const double *eh)
+{
+    const double *h = eh + 4 * ei;
+    return h[0] == 0.0 && h[1] == 1.0 && h[2] == 0.0 && h[3] == 0.0 &&
+           (ei + 1 == n_extra || ek[ei + 1] != ek[ei]);
+}
+
+/*
+ * chunkg_fwd's steps from sample k while each sample has no extra or a lone
+ * zupt without a gate: general_update's operations on the same numbers in the same order
+ * (update_aid's e_u case), so the same doubles; in (x, p) locals, which the
+ * general step's variable indices keep in memory. Returns the first sample it
+ * did not step (n after the run's last sample, whose prior it does not make).
+ */
+static long fwd_simple(const acn_axis *m, long k, long n, int last, const double *z,
+                       const unsigned char *valid, long *eip, long n_extra, const long *ek,
+                       const double *eh, const double *ez, const double *eR, const double *egate,
+                       unsigned char *applied, double *xio, double *pio, double *store, int width,
+                       double *xf, double *sdf, double *xpr, double *ppr, double *ey, double *eS)
+{
+    double p[10], x[4], S;
+    long ei = *eip;
+    memcpy(x, xio, sizeof x);
+    memcpy(p, pio, sizeof p);
+    for (; k < n; k++) {
+        int aid = ei < n_extra && ek[ei] == k;
+        if (aid && !(lone_zupt(ei, n_extra, ek, eh) && !(egate[ei] > 0.0)))
+            break; /* a gated aid, another h or several: general_update's step */
+        double *row = store + width * k;
+        if (xpr != NULL) {
+            memcpy(xpr + 4 * k, x, sizeof x);
+            memcpy(ppr + 10 * k, p, sizeof p);
+        }
+        if (valid == NULL || valid[k])
+            update_sparse(x, p, H_ACC, NZ_ACC, 2, z[k], m->R, &S);
+        if (aid) {
+            double y = update_sparse(x, p, H_UNIT[1], NZ_UNIT[1], 1, ez[ei], eR[ei], &S);
+            applied[ei] = 1;
+            if (ey != NULL) {
+                ey[ei] = y;
+                eS[ei] = S;
+            }
+            ei++;
+        }
+        memcpy(row, x, sizeof x);
+        if (xf != NULL) {
+            memcpy(xf + 4 * k, x, sizeof x);
+            sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
+            sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
+        }
+        if (width == ACN_GROW)
+            memcpy(row + 4, p, sizeof p);
+        if (last && k == n - 1) {
+            k = n;
+            break;
+        }
+        predict_mean(m, x);
+        predict_p(m, p);
+    }
+    memcpy(xio, x, sizeof x);
+    memcpy(pio, p, sizeof p);
+    *eip = ei;
+    return k;
+}
+
+/*
  * Forward over samples k0 .. k0 + n - 1, extras as in acn_general with ek
  * counted from the chunk's first sample. carry: the prior mean (4) and packed
  * covariance (10) of the chunk's first sample; on return, of the next sample.
@@ -1703,6 +1776,7 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
  * covariance (n x 10), for --covariances (the row holds the posterior only).
  * ey, eS (NULL: not written): each extra's innovation and its variance, as
  * general_update gives them (the aids' NIS of a run over the memory budget).
+ * Runs of samples with no extra or a lone zupt go through fwd_simple.
  */
 static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                               const unsigned char *valid, long n_extra, const long *ek,
@@ -1716,6 +1790,10 @@ static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double 
     memcpy(x, carry, sizeof x);
     memcpy(p, carry + 4, sizeof p);
     for (long k = 0; k < n; k++) {
+        k = fwd_simple(m, k, n, last, z, valid, &ei, n_extra, ek, eh, ez, eR, egate, applied, x, p,
+                       store, width, xf, sdf, xpr, ppr, ey, eS);
+        if (k == n)
+            break;
         double *row = store + width * k;
         if (xpr != NULL) {
             memcpy(xpr + 4 * k, x, sizeof x);
@@ -1775,6 +1853,34 @@ void acn_chunkg_fwd_lean(const acn_axis *m, long n, int last, const double *z,
  * skipped). update_sparse's covariance reads neither the mean nor z: the same
  * operations on the same numbers, so the same doubles.
  */
+/* acn_chunkg_cov's steps from sample k as fwd_simple's (a lone zupt that was applied) */
+static long cov_simple(const acn_axis *m, long k, long n, int last, const unsigned char *valid,
+                       long *eip, long n_extra, const long *ek, const double *eh, const double *eR,
+                       const unsigned char *applied, double *pio, double *pst)
+{
+    double p[10], x[4] = {0.0, 0.0, 0.0, 0.0}, S;
+    long ei = *eip;
+    memcpy(p, pio, sizeof p);
+    for (; k < n; k++) {
+        int aid = ei < n_extra && ek[ei] == k;
+        if (aid && !(applied[ei] && lone_zupt(ei, n_extra, ek, eh)))
+            break;
+        if (valid == NULL || valid[k])
+            update_sparse(x, p, H_ACC, NZ_ACC, 2, 0.0, m->R, &S);
+        if (aid)
+            update_sparse(x, p, H_UNIT[1], NZ_UNIT[1], 1, 0.0, eR[ei++], &S);
+        memcpy(pst + 10 * k, p, sizeof p);
+        if (last && k == n - 1) {
+            k = n;
+            break;
+        }
+        predict_p(m, p);
+    }
+    memcpy(pio, p, sizeof p);
+    *eip = ei;
+    return k;
+}
+
 void acn_chunkg_cov(const acn_axis *m, long n, int last, const unsigned char *valid, long n_extra,
                     const long *ek, const double *eh, const double *eR,
                     const unsigned char *applied, const double *p0, double *pst)
@@ -1783,6 +1889,9 @@ void acn_chunkg_cov(const acn_axis *m, long n, int last, const unsigned char *va
     long ei = 0;
     memcpy(p, p0, sizeof p);
     for (long k = 0; k < n; k++) {
+        k = cov_simple(m, k, n, last, valid, &ei, n_extra, ek, eh, eR, applied, p, pst);
+        if (k == n)
+            break;
         if (valid == NULL || valid[k])
             update_sparse(x, p, H_ACC, NZ_ACC, 2, 0.0, m->R, &S);
         for (; ei < n_extra && ek[ei] == k; ei++) {
