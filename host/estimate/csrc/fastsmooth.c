@@ -734,12 +734,11 @@ static int smoother_gain(const double *pp, double B[4][4], double Ct[4][4])
  * (xs1, ps1) at k + 1; covariances packed. B = F Pf (fp_rows of pf). Returns -1
  * if that prior is not positive definite.
  */
-static int rts_step(double B[4][4], const double *xpost, const double *pf, const double *xprior1,
-                    const double *pp, const double *xs1, const double *ps1, double *xs, double *psm)
+static void rts_apply(double Ct[4][4], const double *xpost, const double *pf, const double *xprior1,
+                      const double *pp, const double *xs1, const double *ps1, double *xs,
+                      double *psm)
 {
-    double Ct[4][4], dx[4], D[4][4], T[4][4]; /* Ct[l][i] = C[i][l] */
-    if (smoother_gain(pp, B, Ct) != 0)
-        return -1;
+    double dx[4], D[4][4], T[4][4]; /* Ct[l][i] = C[i][l] */
     /* xs = x_post + C (xs[k+1] - x_prior[k+1]) */
     for (int i = 0; i < 4; i++)
         dx[i] = xs1[i] - xprior1[i];
@@ -763,6 +762,21 @@ static int rts_step(double B[4][4], const double *xpost, const double *pf, const
         for (int j = i; j < 4; j++)
             psm[PK[i][j]] = pf[PK[i][j]] + row[j];
     }
+}
+
+/*
+ * One RTS step: the smoothed (xs, psm) of sample k from the filter's posterior
+ * (xpost, pf) at k, its prior (xprior1, pp) at k + 1 and the smoothed
+ * (xs1, ps1) at k + 1; covariances packed. B = F Pf (fp_rows of pf). Returns -1
+ * if that prior is not positive definite.
+ */
+static int rts_step(double B[4][4], const double *xpost, const double *pf, const double *xprior1,
+                    const double *pp, const double *xs1, const double *ps1, double *xs, double *psm)
+{
+    double Ct[4][4];
+    if (smoother_gain(pp, B, Ct) != 0)
+        return -1;
+    rts_apply(Ct, xpost, pf, xprior1, pp, xs1, ps1, xs, psm);
     return 0;
 }
 
@@ -1936,6 +1950,23 @@ unsigned long long acn_aids_digest(long n, const long *ek, const double *eh, con
     return d;
 }
 
+/* What the backward step of sample k takes from row k alone: the prior of k + 1 predicted again and
+   the smoother gain (bad: that prior is not positive definite) */
+typedef struct {
+    double xp[4], pp[10], Ct[4][4];
+    int bad;
+} bwd_gain;
+
+static inline void bwd_gain_of(const acn_axis *m, const double *xk, const double *pk, bwd_gain *g)
+{
+    double B[4][4];
+    memcpy(g->xp, xk, sizeof g->xp);
+    predict_mean(m, g->xp);
+    fp_rows(m, pk, B);
+    predict_packed(m, B, g->pp);
+    g->bad = smoother_gain(g->pp, B, g->Ct) != 0;
+}
+
 /*
  * Backward over the n store rows of one chunk (last: it ends the run, whose
  * last sample is the filter's). carry: the smoothed mean (4) and packed
@@ -1943,12 +1974,16 @@ unsigned long long acn_aids_digest(long n, const long *ek, const double *eh, con
  * Writes xs and the standard deviations sds (n x 4), and ps (NULL: not written)
  * the packed covariances (n x 10), for --covariances. k0 names samples in the
  * error: returns -(k + 1) if the prior of sample k + 1 is not positive definite.
+ * rts_step's operations, the gain of sample k - 1 made before sample k's
+ * update: the gains depend on the store alone, the update on the sample
+ * after's, so the divisions of the one overlap the other's products.
  */
 static inline int chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *xst,
                              int xw, const double *pst, int pw, double *carry, double *xs,
                              double *sds, double *ps)
 {
     double x1[4], P1[10];
+    bwd_gain g[2];
     memcpy(x1, carry, sizeof x1);
     memcpy(P1, carry + 4, sizeof P1);
     long k = n - 1;
@@ -1962,17 +1997,18 @@ static inline int chunkg_bwd(const acn_axis *m, long k0, long n, int last, const
             memcpy(ps + 10 * k, P1, sizeof P1);
         k--;
     }
+    if (k >= 0)
+        bwd_gain_of(m, xst + xw * k, pst + pw * k, &g[k & 1]);
     for (; k >= 0; k--) {
         const double *xk = xst + xw * k, *pk = pst + pw * k;
-        double xp[4], pp[10], B[4][4]; /* the prior of k + 1, predicted again from row k */
-        memcpy(xp, xk, sizeof xp);
-        predict_mean(m, xp);
-        fp_rows(m, pk, B);
-        predict_packed(m, B, pp);
-        if (rts_step(B, xk, pk, xp, pp, x1, P1, x1, P1) != 0) {
+        bwd_gain *c = &g[k & 1];
+        if (k > 0)
+            bwd_gain_of(m, xk - xw, pk - pw, &g[(k - 1) & 1]);
+        if (c->bad) {
             long at = k0 + k + 1;
             return -(int)(at > 1000000000L ? 1000000000L : at);
         }
+        rts_apply(c->Ct, xk, pk, c->xp, c->pp, x1, P1, x1, P1);
         memcpy(xs + 4 * k, x1, sizeof x1);
         sds[4 * k + 0] = sqrt(P1[RR]), sds[4 * k + 1] = sqrt(P1[UU]);
         sds[4 * k + 2] = sqrt(P1[AA]), sds[4 * k + 3] = sqrt(P1[EE]);
