@@ -212,7 +212,7 @@ def test_the_chunk_kernels_are_acn_general_bit_for_bit(cuts):
                            p(starts[-1]), p(got["pst"][s:e]))  # fmt: skip
     np.testing.assert_array_equal(carry_lean, carry_full)
     carry_b = np.zeros(14)
-    for s, e, p0 in reversed(list(zip(edges[:-1], edges[1:], starts, strict=True))):
+    for s, e in reversed(list(zip(edges[:-1], edges[1:], strict=True))):
         rc = lib.acn_chunkg_bwd_lean(fs._axis_struct(ffi, d), s, e - s, int(e == n), p(got["lean"][s:e]),
                                      p(got["pst"][s:e]), p(carry_b), p(got["xs"][s:e]), p(got["sds"][s:e]))  # fmt: skip
         assert rc == 0
