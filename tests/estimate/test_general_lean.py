@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -168,11 +170,18 @@ def _mixed_aids(n: int):
     return fs.Extras(k, h, z, R, np.arange(len(k))), gate
 
 
+@pytest.mark.parametrize("collinear", [False, True], ids=["default prior", "r, u collinear"])
 @pytest.mark.parametrize("cuts", [(), (97, 300)], ids=["one chunk", "three chunks"])
-def test_the_chunk_kernels_are_acn_general_bit_for_bit(cuts):
+def test_the_chunk_kernels_are_acn_general_bit_for_bit(cuts, collinear):
     """acn_chunkg_fwd (its priors too), acn_chunkg_fwd_lean, acn_chunkg_cov and acn_chunkg_bwd_lean over chunks give
-    acn_general's filter, aid and smoother numbers bit for bit, whichever of their loops steps a sample."""
+    acn_general's filter, aid and smoother numbers bit for bit, whichever of their loops steps a sample; with r and u
+    collinear to 1e-16 in the first prior and no aid for 50 samples, the smoother gain's guarded fallback decides
+    some steps (test_general_structured), and the backward kernel's gains taken two at a time take it alike."""
     d = axis_design(load_model(), 0)
+    if collinear:
+        P0 = np.array(d.P0, dtype=float)
+        P0[:2, :2] = 1e9 * np.array([[1.0, 1.0 - 1e-16], [1.0 - 1e-16, 1.0]])
+        d = dataclasses.replace(d, P0=P0)
     mod = fs._lib()
     ffi, lib = mod.ffi, mod.lib
 
@@ -185,8 +194,17 @@ def test_the_chunk_kernels_are_acn_general_bit_for_bit(cuts):
     ok = np.ones(n, dtype=np.uint8)
     ok[[1, 60, 61, 62, 149, 300, n - 1]] = 0
     ex, gate = _mixed_aids(n)
+    if collinear:
+        keep = ex.k >= 50
+        ex, gate = (
+            fs.Extras(*(np.ascontiguousarray(v[keep]) for v in (ex.k, ex.h, ex.z, ex.R)), np.arange(keep.sum())),
+            gate[keep],
+        )
     ref = fs.smooth_general(d, z, valid=ok.astype(bool), extras=ex, gates=gate[np.argsort(ex.order)])
     assert 0 < ref.applied.sum() < len(ex)  # the gate rejected one
+    pp = ref.P_prior[1:]  # the priors the smoother's gains solve with
+    pivot_u = (pp[:, 4] - pp[:, 1] ** 2 / pp[:, 0]) / pp[:, 4]  # the LDL' pivot of u, relative to its diagonal
+    assert (pivot_u < 1e-12).any() == collinear
     edges = [0, *cuts, n]
     carry0 = np.concatenate([np.asarray(d.x0, dtype=np.float64), fs.pack(np.asarray(d.P0, dtype=float))])
     got = {key: np.empty((n, w)) for key, w in (("xpr", 4), ("ppr", 10), ("full", chunked.GROW), ("lean", 4),
