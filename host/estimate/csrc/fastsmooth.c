@@ -682,58 +682,67 @@ static int gain_equilibrated(const double *pp, double B[4][4], double Ct[4][4])
  * the prior is not positive definite. Both routes are inaccurate on so
  * ill-conditioned a prior; the fallback keeps the former behaviour there.
  */
-static int smoother_gain(const double *pp, double B[4][4], double Ct[4][4])
+typedef struct {
+    double i0, l10, l20, l30, i1, l21, l31, i2, l32, i3;
+    int ok; /* every pivot passed the guard */
+} ldl4;
+
+/* The LDL' factors of the packed prior pp (reciprocal pivots), all computed; ok says whether the
+   guard lets them decide */
+static inline void ldl_factor(const double *pp, ldl4 *f)
 {
     const double tol = 1e-12;
     const double a00 = pp[RR], a10 = pp[RU], a20 = pp[RA], a30 = pp[RE];
-    double d0 = a00;
-    if (!(d0 > 0.0))
-        return gain_equilibrated(pp, B, Ct);
-    double i0 = 1.0 / d0;
-    double l10 = a10 * i0, l20 = a20 * i0, l30 = a30 * i0;
-    double d1 = pp[UU] - l10 * a10;
-    if (!(d1 > tol * pp[UU]))
-        return gain_equilibrated(pp, B, Ct);
-    double i1 = 1.0 / d1;
-    double t21 = pp[UA] - l20 * a10, t31 = pp[UE] - l30 * a10; /* L21 d1, L31 d1 */
-    double l21 = t21 * i1, l31 = t31 * i1;
-    double d2 = pp[AA] - l20 * a20 - l21 * t21;
-    if (!(d2 > tol * pp[AA]))
-        return gain_equilibrated(pp, B, Ct);
-    double i2 = 1.0 / d2;
-    double t32 = pp[AE] - l30 * a20 - l31 * t21; /* L32 d2 */
-    double l32 = t32 * i2;
-    double d3 = pp[EE] - l30 * a30 - l31 * t31 - l32 * t32;
-    if (!(d3 > tol * pp[EE]))
-        return gain_equilibrated(pp, B, Ct);
-    double i3 = 1.0 / d3;
-    /* L y = b, then L' x = y / d, the four columns c of B side by side (each step the same
-       operations on each column, so a compiler may take two or four at once): x_i[c] is C[c][i],
-       i.e. row i of Ct */
+    f->ok = a00 > 0.0;
+    f->i0 = 1.0 / a00;
+    f->l10 = a10 * f->i0, f->l20 = a20 * f->i0, f->l30 = a30 * f->i0;
+    double d1 = pp[UU] - f->l10 * a10;
+    f->ok = f->ok && d1 > tol * pp[UU];
+    f->i1 = 1.0 / d1;
+    double t21 = pp[UA] - f->l20 * a10, t31 = pp[UE] - f->l30 * a10; /* L21 d1, L31 d1 */
+    f->l21 = t21 * f->i1, f->l31 = t31 * f->i1;
+    double d2 = pp[AA] - f->l20 * a20 - f->l21 * t21;
+    f->ok = f->ok && d2 > tol * pp[AA];
+    f->i2 = 1.0 / d2;
+    double t32 = pp[AE] - f->l30 * a20 - f->l31 * t21; /* L32 d2 */
+    f->l32 = t32 * f->i2;
+    double d3 = pp[EE] - f->l30 * a30 - f->l31 * t31 - f->l32 * t32;
+    f->ok = f->ok && d3 > tol * pp[EE];
+    f->i3 = 1.0 / d3;
+}
+
+/* L y = b, then L' x = y / d, the four columns c of B side by side (each step the same operations
+   on each column, so a compiler may take two or four at once): x_i[c] is C[c][i], i.e. row i of Ct
+ */
+static inline void ldl_solve(const ldl4 *f, double B[4][4], double Ct[4][4])
+{
     double y1[4], y2[4], y3[4];
     for (int c = 0; c < 4; c++)
-        y1[c] = B[1][c] - l10 * B[0][c];
+        y1[c] = B[1][c] - f->l10 * B[0][c];
     for (int c = 0; c < 4; c++)
-        y2[c] = B[2][c] - l20 * B[0][c] - l21 * y1[c];
+        y2[c] = B[2][c] - f->l20 * B[0][c] - f->l21 * y1[c];
     for (int c = 0; c < 4; c++)
-        y3[c] = B[3][c] - l30 * B[0][c] - l31 * y1[c] - l32 * y2[c];
+        y3[c] = B[3][c] - f->l30 * B[0][c] - f->l31 * y1[c] - f->l32 * y2[c];
     for (int c = 0; c < 4; c++)
-        Ct[3][c] = y3[c] * i3;
+        Ct[3][c] = y3[c] * f->i3;
     for (int c = 0; c < 4; c++)
-        Ct[2][c] = y2[c] * i2 - l32 * Ct[3][c];
+        Ct[2][c] = y2[c] * f->i2 - f->l32 * Ct[3][c];
     for (int c = 0; c < 4; c++)
-        Ct[1][c] = y1[c] * i1 - l21 * Ct[2][c] - l31 * Ct[3][c];
+        Ct[1][c] = y1[c] * f->i1 - f->l21 * Ct[2][c] - f->l31 * Ct[3][c];
     for (int c = 0; c < 4; c++)
-        Ct[0][c] = B[0][c] * i0 - l10 * Ct[1][c] - l20 * Ct[2][c] - l30 * Ct[3][c];
+        Ct[0][c] = B[0][c] * f->i0 - f->l10 * Ct[1][c] - f->l20 * Ct[2][c] - f->l30 * Ct[3][c];
+}
+
+static int smoother_gain(const double *pp, double B[4][4], double Ct[4][4])
+{
+    ldl4 f;
+    ldl_factor(pp, &f);
+    if (!f.ok)
+        return gain_equilibrated(pp, B, Ct);
+    ldl_solve(&f, B, Ct);
     return 0;
 }
 
-/*
- * One RTS step: the smoothed (xs, psm) of sample k from the filter's posterior
- * (xpost, pf) at k, its prior (xprior1, pp) at k + 1 and the smoothed
- * (xs1, ps1) at k + 1; covariances packed. B = F Pf (fp_rows of pf). Returns -1
- * if that prior is not positive definite.
- */
 static void rts_apply(double Ct[4][4], const double *xpost, const double *pf, const double *xprior1,
                       const double *pp, const double *xs1, const double *ps1, double *xs,
                       double *psm)
@@ -1712,6 +1721,21 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
 /* forward pass's own predict_mean and predict_packed: the same numbers, and   */
 /* half the store (its writes were a third of `smooth --zupt auto` at 1e7).    */
 
+/* Sample k's filter outputs from its posterior (x, p): its store row, and xf, sdf if wanted */
+static inline void fwd_put(long k, const double x[4], const double *p, double *store, int width,
+                           double *xf, double *sdf)
+{
+    double *row = store + width * k;
+    memcpy(row, x, 4 * sizeof(double));
+    if (xf != NULL) {
+        memcpy(xf + 4 * k, x, 4 * sizeof(double));
+        sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
+        sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
+    }
+    if (width == ACN_GROW)
+        memcpy(row + 4, p, 10 * sizeof(double));
+}
+
 /*
  * Extra ei is a zero-velocity update (h = e_u, which update_aid steps with
  * constant indices) and the only extra of its sample: the common measurement
@@ -1748,7 +1772,6 @@ static long fwd_simple(const acn_axis *m, long k, long n, int last, const double
         int aid = ei < n_extra && ek[ei] == k;
         if (aid && !(lone_zupt(ei, n_extra, ek, eh) && !(egate[ei] > 0.0)))
             break; /* a gated aid, another h or several: general_update's step */
-        double *row = store + width * k;
         if (xpr != NULL) {
             memcpy(xpr + 4 * k, x, sizeof x);
             memcpy(ppr + 10 * k, p, sizeof p);
@@ -1764,14 +1787,7 @@ static long fwd_simple(const acn_axis *m, long k, long n, int last, const double
             }
             ei++;
         }
-        memcpy(row, x, sizeof x);
-        if (xf != NULL) {
-            memcpy(xf + 4 * k, x, sizeof x);
-            sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
-            sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
-        }
-        if (width == ACN_GROW)
-            memcpy(row + 4, p, sizeof p);
+        fwd_put(k, x, p, store, width, xf, sdf);
         if (last && k == n - 1) {
             k = n;
             break;
@@ -1812,21 +1828,13 @@ static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double 
                        store, width, xf, sdf, xpr, ppr, ey, eS);
         if (k == n)
             break;
-        double *row = store + width * k;
         if (xpr != NULL) {
             memcpy(xpr + 4 * k, x, sizeof x);
             memcpy(ppr + 10 * k, p, sizeof p);
         }
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, p, ei, n_extra, ek, eh, ez,
                             eR, egate, applied, ey, eS);
-        memcpy(row, x, sizeof x);
-        if (xf != NULL) {
-            memcpy(xf + 4 * k, x, sizeof x);
-            sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
-            sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
-        }
-        if (width == ACN_GROW)
-            memcpy(row + 4, p, sizeof p);
+        fwd_put(k, x, p, store, width, xf, sdf);
         if (last && k == n - 1)
             break;
         predict_mean(m, x);
@@ -1972,74 +1980,27 @@ static inline void bwd_gain_of(const acn_axis *m, const double *xk, const double
 }
 
 /*
- * bwd_gain_of for rows k (into g[0]) and k - 1 (g[1]) at once: smoother_gain's
- * operations on each, side by side, so that the one's chain of divisions
- * overlaps the other's (each gain waits on its own four in turn). A pivot
- * smoother_gain would not take sends that sample through smoother_gain itself
- * (its fallback), whose first steps are the same operations.
+ * bwd_gain_of for rows k (into g[0]) and k - 1 (g[1]) at once: the two
+ * factorisations side by side, so that the one's chain of divisions overlaps
+ * the other's (each waits on its own four in turn).
  */
 static void bwd_gains2(const acn_axis *m, const double *xst, int xw, const double *pst, int pw,
                        long k, bwd_gain g[2])
 {
-    const double tol = 1e-12;
-    double B[2][4][4], i0[2], l10[2], l20[2], l30[2], i1[2], l21[2], l31[2], t21[2], t31[2];
-    double i2[2], l32[2], t32[2], i3[2];
-    int ok[2];
+    double B[2][4][4];
+    ldl4 f[2];
     for (int l = 0; l < 2; l++) {
         memcpy(g[l].xp, xst + xw * (k - l), sizeof g[l].xp);
         predict_mean(m, g[l].xp);
         fp_rows(m, pst + pw * (k - l), B[l]);
         predict_packed(m, B[l], g[l].pp);
     }
+    for (int l = 0; l < 2; l++)
+        ldl_factor(g[l].pp, &f[l]);
     for (int l = 0; l < 2; l++) {
-        const double *pp = g[l].pp;
-        ok[l] = pp[RR] > 0.0;
-        i0[l] = 1.0 / pp[RR];
-        l10[l] = pp[RU] * i0[l], l20[l] = pp[RA] * i0[l], l30[l] = pp[RE] * i0[l];
-    }
-    for (int l = 0; l < 2; l++) {
-        const double *pp = g[l].pp;
-        double d1 = pp[UU] - l10[l] * pp[RU];
-        ok[l] = ok[l] && d1 > tol * pp[UU];
-        i1[l] = 1.0 / d1;
-        t21[l] = pp[UA] - l20[l] * pp[RU], t31[l] = pp[UE] - l30[l] * pp[RU];
-        l21[l] = t21[l] * i1[l], l31[l] = t31[l] * i1[l];
-    }
-    for (int l = 0; l < 2; l++) {
-        const double *pp = g[l].pp;
-        double d2 = pp[AA] - l20[l] * pp[RA] - l21[l] * t21[l];
-        ok[l] = ok[l] && d2 > tol * pp[AA];
-        i2[l] = 1.0 / d2;
-        t32[l] = pp[AE] - l30[l] * pp[RA] - l31[l] * t21[l];
-        l32[l] = t32[l] * i2[l];
-    }
-    for (int l = 0; l < 2; l++) {
-        const double *pp = g[l].pp;
-        double d3 = pp[EE] - l30[l] * pp[RE] - l31[l] * t31[l] - l32[l] * t32[l];
-        ok[l] = ok[l] && d3 > tol * pp[EE];
-        i3[l] = 1.0 / d3;
-    }
-    for (int l = 0; l < 2; l++) {
-        double(*Bl)[4] = B[l], (*Ct)[4] = g[l].Ct, y1[4], y2[4], y3[4];
-        if (!ok[l]) { /* smoother_gain's own route, from the start */
-            g[l].bad = smoother_gain(g[l].pp, Bl, Ct) != 0;
-            continue;
-        }
-        g[l].bad = 0;
-        for (int c = 0; c < 4; c++)
-            y1[c] = Bl[1][c] - l10[l] * Bl[0][c];
-        for (int c = 0; c < 4; c++)
-            y2[c] = Bl[2][c] - l20[l] * Bl[0][c] - l21[l] * y1[c];
-        for (int c = 0; c < 4; c++)
-            y3[c] = Bl[3][c] - l30[l] * Bl[0][c] - l31[l] * y1[c] - l32[l] * y2[c];
-        for (int c = 0; c < 4; c++)
-            Ct[3][c] = y3[c] * i3[l];
-        for (int c = 0; c < 4; c++)
-            Ct[2][c] = y2[c] * i2[l] - l32[l] * Ct[3][c];
-        for (int c = 0; c < 4; c++)
-            Ct[1][c] = y1[c] * i1[l] - l21[l] * Ct[2][c] - l31[l] * Ct[3][c];
-        for (int c = 0; c < 4; c++)
-            Ct[0][c] = Bl[0][c] * i0[l] - l10[l] * Ct[1][c] - l20[l] * Ct[2][c] - l30[l] * Ct[3][c];
+        g[l].bad = !f[l].ok && gain_equilibrated(g[l].pp, B[l], g[l].Ct) != 0;
+        if (f[l].ok)
+            ldl_solve(&f[l], B[l], g[l].Ct);
     }
 }
 
