@@ -2023,9 +2023,8 @@ static inline void bwd_gains(const acn_axis *m, const double *xst, int xw, const
  * error: returns -(k + 1) if the prior of sample k + 1 is not positive definite.
  * rts_step's operations in another order: the gains depend on the store
  * alone, the update on the sample after's, so the gains are made two samples
- * at a time (bwd_gains2), the next two before the updates of these two, and
- * the divisions of the ones overlap the products of the others (8 % less
- * time than a gain and its update in turn, measured in cache).
+ * at a time (bwd_gains2), the next two before these two's updates, and the
+ * divisions of the ones overlap the products of the others.
  */
 static inline int chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *xst,
                              int xw, const double *pst, int pw, double *carry, double *xs,
