@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -148,3 +150,94 @@ def test_the_backward_pass_refuses_other_aids_than_the_forward_pass(tmp_path, ch
     other = [_Twice(change) for _ in model.axes]
     with pytest.raises(ValueError, match="differ from the forward pass's"):
         chunked.smooth_bounded(model, n, read, tmp_path / "other.npz", chunk=97, extras=other, full=True)
+
+
+def _mixed_aids(n: int):
+    """Aids that enter and leave the chunk kernels' loop of samples with no extra or a lone zupt at every turn:
+    runs of zupts (with invalid samples inside, across chunk edges, at the run's first and last sample), a second
+    zupt or a fix on a zupt's sample, gated zupts (one rejected), zupts of another h (e_u scaled, -0.0 entries)
+    and of varying R."""
+    k = np.sort(np.r_[0, 1, 2, 50:150, 100, 120, 200:220, 230, 231, 250:350, n - 3 : n]).astype(np.int64)
+    h = np.tile([0.0, 1.0, 0.0, 0.0], (len(k), 1))
+    R = 0.01 * (1.0 + (np.arange(len(k)) % 7))
+    z, gate = np.zeros(len(k)), np.zeros(len(k))
+    fix = np.nonzero(k == 120)[0][1]
+    h[fix], z[fix] = [1.0, 0.0, 0.0, 0.0], 0.5  # a fix beside the zupt at 120 (and two zupts at 100)
+    gate[(k >= 200) & (k < 220)] = 9.0
+    z[k == 210] = 1e3  # its gate rejects it
+    h[k == 230] = [0.0, 2.0, 0.0, 0.0]
+    h[k == 231] = [-0.0, 1.0, -0.0, 0.0]
+    return fs.Extras(k, h, z, R, np.arange(len(k))), gate
+
+
+@pytest.mark.parametrize("collinear", [False, True], ids=["default prior", "r, u collinear"])
+@pytest.mark.parametrize("cuts", [(), (97, 300)], ids=["one chunk", "three chunks"])
+def test_the_chunk_kernels_are_acn_general_bit_for_bit(cuts, collinear):
+    """acn_chunkg_fwd (its priors too), acn_chunkg_fwd_lean, acn_chunkg_cov and acn_chunkg_bwd_lean over chunks give
+    acn_general's filter, aid and smoother numbers bit for bit, whichever of their loops steps a sample; with r and u
+    collinear to 1e-16 in the first prior and no aid for 50 samples, the smoother gain's guarded fallback decides
+    some steps (test_general_structured), and the backward kernel's gains taken two at a time take it alike."""
+    d = axis_design(load_model(), 0)
+    if collinear:
+        P0 = np.array(d.P0, dtype=float)
+        P0[:2, :2] = 1e9 * np.array([[1.0, 1.0 - 1e-16], [1.0 - 1e-16, 1.0]])
+        d = dataclasses.replace(d, P0=P0)
+    mod = fs._lib()
+    ffi, lib = mod.ffi, mod.lib
+
+    def p(a, t="double *"):
+        return fs._ptr(ffi, a, t)
+
+    n = 600
+    rng = np.random.default_rng(17)
+    z = np.cumsum(rng.normal(0, 0.05, n))
+    ok = np.ones(n, dtype=np.uint8)
+    ok[[1, 60, 61, 62, 149, 300, n - 1]] = 0
+    ex, gate = _mixed_aids(n)
+    if collinear:
+        keep = ex.k >= 50
+        ex, gate = (
+            fs.Extras(*(np.ascontiguousarray(v[keep]) for v in (ex.k, ex.h, ex.z, ex.R)), np.arange(keep.sum())),
+            gate[keep],
+        )
+    ref = fs.smooth_general(d, z, valid=ok.astype(bool), extras=ex, gates=gate[np.argsort(ex.order)])
+    assert 0 < ref.applied.sum() < len(ex)  # the gate rejected one
+    pp = ref.P_prior[1:]  # the priors the smoother's gains solve with
+    pivot_u = (pp[:, 4] - pp[:, 1] ** 2 / pp[:, 0]) / pp[:, 4]  # the LDL' pivot of u, relative to its diagonal
+    assert (pivot_u < 1e-12).any() == collinear
+    edges = [0, *cuts, n]
+    carry0 = np.concatenate([np.asarray(d.x0, dtype=np.float64), fs.pack(np.asarray(d.P0, dtype=float))])
+    got = {key: np.empty((n, w)) for key, w in (("xpr", 4), ("ppr", 10), ("full", chunked.GROW), ("lean", 4),
+                                                 ("xf", 4), ("pst", 10), ("xs", 4), ("sds", 4))}  # fmt: skip
+    applied, ey, eS = np.zeros(len(ex), dtype=np.uint8), np.zeros(len(ex)), np.zeros(len(ex))
+    carry_full, carry_lean, starts = carry0.copy(), carry0.copy(), []
+    for s, e in zip(edges[:-1], edges[1:], strict=True):
+        a, b = np.searchsorted(ex.k, [s, e])
+        ek = np.ascontiguousarray(ex.k[a:b] - s)
+        args = [p(np.ascontiguousarray(v[a:b])) for v in (ex.h, ex.z, ex.R, gate)]
+        head = (ax := fs._axis_struct(ffi, d), e - s, int(e == n), p(z[s:e]), p(ok[s:e], "unsigned char *"), b - a,
+                ffi.from_buffer("long[]", ek), *args)  # fmt: skip
+        lib.acn_chunkg_fwd(*head, p(applied[a:b], "unsigned char *"), p(carry_full), p(got["full"][s:e]),
+                           p(got["xf"][s:e]), p(np.empty((e - s, 4))), p(got["xpr"][s:e]), p(got["ppr"][s:e]),
+                           p(ey[a:b]), p(eS[a:b]))  # fmt: skip
+        starts.append(carry_lean[4:].copy())
+        lean_applied = np.zeros(b - a, dtype=np.uint8)
+        lib.acn_chunkg_fwd_lean(*head, p(lean_applied, "unsigned char *"), p(carry_lean), p(got["lean"][s:e]),
+                                ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL)  # fmt: skip
+        np.testing.assert_array_equal(lean_applied, applied[a:b])
+        lib.acn_chunkg_cov(ax, e - s, int(e == n), p(ok[s:e], "unsigned char *"), b - a,
+                           ffi.from_buffer("long[]", ek), args[0], args[2], p(applied[a:b], "unsigned char *"),
+                           p(starts[-1]), p(got["pst"][s:e]))  # fmt: skip
+    np.testing.assert_array_equal(carry_lean, carry_full)
+    carry_b = np.zeros(14)
+    for s, e in reversed(list(zip(edges[:-1], edges[1:], strict=True))):
+        rc = lib.acn_chunkg_bwd_lean(fs._axis_struct(ffi, d), s, e - s, int(e == n), p(got["lean"][s:e]),
+                                     p(got["pst"][s:e]), p(carry_b), p(got["xs"][s:e]), p(got["sds"][s:e]))  # fmt: skip
+        assert rc == 0
+    np.testing.assert_array_equal(applied.astype(bool), ref.applied[ex.order])
+    for mine, theirs in ((got["xpr"], ref.x_prior), (got["ppr"], ref.P_prior), (got["full"][:, :4], ref.x_post),
+                         (got["full"][:, 4:], ref.P_post), (got["xf"], ref.x_post), (got["lean"], ref.x_post),
+                         (got["pst"], ref.P_post), (got["xs"], ref.xs), (ey, ref.y[ex.order]),
+                         (eS, ref.S[ex.order])):  # fmt: skip
+        np.testing.assert_array_equal(mine, theirs)
+    np.testing.assert_array_equal(got["sds"], np.sqrt(ref.Ps[:, [0, 4, 7, 9]]))

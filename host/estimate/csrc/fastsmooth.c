@@ -682,64 +682,72 @@ static int gain_equilibrated(const double *pp, double B[4][4], double Ct[4][4])
  * the prior is not positive definite. Both routes are inaccurate on so
  * ill-conditioned a prior; the fallback keeps the former behaviour there.
  */
-static int smoother_gain(const double *pp, double B[4][4], double Ct[4][4])
+typedef struct {
+    double i0, l10, l20, l30, i1, l21, l31, i2, l32, i3;
+    int ok; /* every pivot passed the guard */
+} ldl4;
+
+/* The LDL' factors of the packed prior pp (reciprocal pivots), all computed; ok says whether the
+   guard lets them decide */
+static inline void ldl_factor(const double *pp, ldl4 *f)
 {
     const double tol = 1e-12;
     const double a00 = pp[RR], a10 = pp[RU], a20 = pp[RA], a30 = pp[RE];
-    double d0 = a00;
-    if (!(d0 > 0.0))
-        return gain_equilibrated(pp, B, Ct);
-    double i0 = 1.0 / d0;
-    double l10 = a10 * i0, l20 = a20 * i0, l30 = a30 * i0;
-    double d1 = pp[UU] - l10 * a10;
-    if (!(d1 > tol * pp[UU]))
-        return gain_equilibrated(pp, B, Ct);
-    double i1 = 1.0 / d1;
-    double t21 = pp[UA] - l20 * a10, t31 = pp[UE] - l30 * a10; /* L21 d1, L31 d1 */
-    double l21 = t21 * i1, l31 = t31 * i1;
-    double d2 = pp[AA] - l20 * a20 - l21 * t21;
-    if (!(d2 > tol * pp[AA]))
-        return gain_equilibrated(pp, B, Ct);
-    double i2 = 1.0 / d2;
-    double t32 = pp[AE] - l30 * a20 - l31 * t21; /* L32 d2 */
-    double l32 = t32 * i2;
-    double d3 = pp[EE] - l30 * a30 - l31 * t31 - l32 * t32;
-    if (!(d3 > tol * pp[EE]))
-        return gain_equilibrated(pp, B, Ct);
-    double i3 = 1.0 / d3;
-    /* L y = b, then L' x = y / d, the four columns c of B side by side (each step the same
-       operations on each column, so a compiler may take two or four at once): x_i[c] is C[c][i],
-       i.e. row i of Ct */
+    f->ok = a00 > 0.0;
+    f->i0 = 1.0 / a00;
+    f->l10 = a10 * f->i0, f->l20 = a20 * f->i0, f->l30 = a30 * f->i0;
+    double d1 = pp[UU] - f->l10 * a10;
+    f->ok = f->ok && d1 > tol * pp[UU];
+    f->i1 = 1.0 / d1;
+    double t21 = pp[UA] - f->l20 * a10, t31 = pp[UE] - f->l30 * a10; /* L21 d1, L31 d1 */
+    f->l21 = t21 * f->i1, f->l31 = t31 * f->i1;
+    double d2 = pp[AA] - f->l20 * a20 - f->l21 * t21;
+    f->ok = f->ok && d2 > tol * pp[AA];
+    f->i2 = 1.0 / d2;
+    double t32 = pp[AE] - f->l30 * a20 - f->l31 * t21; /* L32 d2 */
+    f->l32 = t32 * f->i2;
+    double d3 = pp[EE] - f->l30 * a30 - f->l31 * t31 - f->l32 * t32;
+    f->ok = f->ok && d3 > tol * pp[EE];
+    f->i3 = 1.0 / d3;
+}
+
+/* L y = b, then L' x = y / d, the four columns c of B side by side (each step the same operations
+   on each column, so a compiler may take two or four at once): x_i[c] is C[c][i], i.e. row i of Ct
+ */
+static inline void ldl_solve(const ldl4 *f, double B[4][4], double Ct[4][4])
+{
     double y1[4], y2[4], y3[4];
     for (int c = 0; c < 4; c++)
-        y1[c] = B[1][c] - l10 * B[0][c];
+        y1[c] = B[1][c] - f->l10 * B[0][c];
     for (int c = 0; c < 4; c++)
-        y2[c] = B[2][c] - l20 * B[0][c] - l21 * y1[c];
+        y2[c] = B[2][c] - f->l20 * B[0][c] - f->l21 * y1[c];
     for (int c = 0; c < 4; c++)
-        y3[c] = B[3][c] - l30 * B[0][c] - l31 * y1[c] - l32 * y2[c];
+        y3[c] = B[3][c] - f->l30 * B[0][c] - f->l31 * y1[c] - f->l32 * y2[c];
     for (int c = 0; c < 4; c++)
-        Ct[3][c] = y3[c] * i3;
+        Ct[3][c] = y3[c] * f->i3;
     for (int c = 0; c < 4; c++)
-        Ct[2][c] = y2[c] * i2 - l32 * Ct[3][c];
+        Ct[2][c] = y2[c] * f->i2 - f->l32 * Ct[3][c];
     for (int c = 0; c < 4; c++)
-        Ct[1][c] = y1[c] * i1 - l21 * Ct[2][c] - l31 * Ct[3][c];
+        Ct[1][c] = y1[c] * f->i1 - f->l21 * Ct[2][c] - f->l31 * Ct[3][c];
     for (int c = 0; c < 4; c++)
-        Ct[0][c] = B[0][c] * i0 - l10 * Ct[1][c] - l20 * Ct[2][c] - l30 * Ct[3][c];
+        Ct[0][c] = B[0][c] * f->i0 - f->l10 * Ct[1][c] - f->l20 * Ct[2][c] - f->l30 * Ct[3][c];
+}
+
+static int smoother_gain(const double *pp, double B[4][4], double Ct[4][4])
+{
+    ldl4 f;
+    ldl_factor(pp, &f);
+    if (!f.ok)
+        return gain_equilibrated(pp, B, Ct);
+    ldl_solve(&f, B, Ct);
     return 0;
 }
 
-/*
- * One RTS step: the smoothed (xs, psm) of sample k from the filter's posterior
- * (xpost, pf) at k, its prior (xprior1, pp) at k + 1 and the smoothed
- * (xs1, ps1) at k + 1; covariances packed. B = F Pf (fp_rows of pf). Returns -1
- * if that prior is not positive definite.
- */
-static int rts_step(double B[4][4], const double *xpost, const double *pf, const double *xprior1,
-                    const double *pp, const double *xs1, const double *ps1, double *xs, double *psm)
+static void rts_apply(double Ct[4][4], const double *xpost, const double *pf, const double *xprior1,
+                      const double *pp, const double *xs1, const double *ps1, double *xs,
+                      double *psm)
 {
-    double Ct[4][4], dx[4], D[4][4], T[4][4]; /* Ct[l][i] = C[i][l] */
-    if (smoother_gain(pp, B, Ct) != 0)
-        return -1;
+    double dx[4], D[4][4], T[4][4]; /* Ct[l][i] = C[i][l] */
     /* xs = x_post + C (xs[k+1] - x_prior[k+1]) */
     for (int i = 0; i < 4; i++)
         dx[i] = xs1[i] - xprior1[i];
@@ -754,15 +762,34 @@ static int rts_step(double B[4][4], const double *xpost, const double *pf, const
         for (int j = 0; j < 4; j++)
             T[i][j] =
                 Ct[0][i] * D[0][j] + Ct[1][i] * D[1][j] + Ct[2][i] * D[2][j] + Ct[3][i] * D[3][j];
-    /* row i of C D C' over all four j (rows of Ct: two at a time), its upper triangle kept */
-    for (int i = 0; i < 4; i++) {
-        double row[4];
+    /* row i of C D C' over all four j (rows of Ct: two at a time), its upper triangle kept: written
+       out entry by entry, so that the rows stay in registers (the loop over j >= i read them back
+       from memory and looked PK up at run time) */
+    double W[4][4];
+    for (int i = 0; i < 4; i++)
         for (int j = 0; j < 4; j++)
-            row[j] =
+            W[i][j] =
                 T[i][0] * Ct[0][j] + T[i][1] * Ct[1][j] + T[i][2] * Ct[2][j] + T[i][3] * Ct[3][j];
-        for (int j = i; j < 4; j++)
-            psm[PK[i][j]] = pf[PK[i][j]] + row[j];
-    }
+    psm[RR] = pf[RR] + W[0][0], psm[RU] = pf[RU] + W[0][1];
+    psm[RA] = pf[RA] + W[0][2], psm[RE] = pf[RE] + W[0][3];
+    psm[UU] = pf[UU] + W[1][1], psm[UA] = pf[UA] + W[1][2], psm[UE] = pf[UE] + W[1][3];
+    psm[AA] = pf[AA] + W[2][2], psm[AE] = pf[AE] + W[2][3];
+    psm[EE] = pf[EE] + W[3][3];
+}
+
+/*
+ * One RTS step: the smoothed (xs, psm) of sample k from the filter's posterior
+ * (xpost, pf) at k, its prior (xprior1, pp) at k + 1 and the smoothed
+ * (xs1, ps1) at k + 1; covariances packed. B = F Pf (fp_rows of pf). Returns -1
+ * if that prior is not positive definite.
+ */
+static int rts_step(double B[4][4], const double *xpost, const double *pf, const double *xprior1,
+                    const double *pp, const double *xs1, const double *ps1, double *xs, double *psm)
+{
+    double Ct[4][4];
+    if (smoother_gain(pp, B, Ct) != 0)
+        return -1;
+    rts_apply(Ct, xpost, pf, xprior1, pp, xs1, ps1, xs, psm);
     return 0;
 }
 
@@ -1801,6 +1828,86 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
 /* forward pass's own predict_mean and predict_packed: the same numbers, and   */
 /* half the store (its writes were a third of `smooth --zupt auto` at 1e7).    */
 
+/* Sample k's filter outputs from its posterior (x, p): its store row, and xf, sdf if wanted */
+static inline void fwd_put(long k, const double x[4], const double *p, double *store, int width,
+                           double *xf, double *sdf)
+{
+    double *row = store + width * k;
+    memcpy(row, x, 4 * sizeof(double));
+    if (xf != NULL) {
+        memcpy(xf + 4 * k, x, 4 * sizeof(double));
+        sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
+        sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
+    }
+    if (width == ACN_GROW)
+        memcpy(row + 4, p, 10 * sizeof(double));
+}
+
+/*
+ * Extra ei is a zero-velocity update (h = e_u, which update_aid steps with
+ * constant indices) and the only extra of its sample: the common measurement
+ * of an aided run (half the samples of a record with rests). The chunk kernels
+ * run such samples, applied outright, and those with no extra in a loop of
+ * their own with x and p in locals, where the general step's variable indices
+ * keep them in memory.
+ */
+static inline int lone_zupt(long ei, long n_extra, const long *ek, const double *eh)
+{
+    const double *h = eh + 4 * ei;
+    return h[0] == 0.0 && h[1] == 1.0 && h[2] == 0.0 && h[3] == 0.0 &&
+           (ei + 1 == n_extra || ek[ei + 1] != ek[ei]);
+}
+
+/*
+ * chunkg_fwd's steps from sample k while each sample has no extra or a lone
+ * zupt without a gate: general_update's operations on the same numbers in the same order
+ * (update_aid's e_u case), so the same doubles; in (x, p) locals, which the
+ * general step's variable indices keep in memory. Returns the first sample it
+ * did not step (n after the run's last sample, whose prior it does not make).
+ */
+static long fwd_simple(const acn_axis *m, long k, long n, int last, const double *z,
+                       const unsigned char *valid, long *eip, long n_extra, const long *ek,
+                       const double *eh, const double *ez, const double *eR, const double *egate,
+                       unsigned char *applied, double *xio, double *pio, double *store, int width,
+                       double *xf, double *sdf, double *xpr, double *ppr, double *ey, double *eS)
+{
+    double p[10], x[4], S;
+    long ei = *eip;
+    memcpy(x, xio, sizeof x);
+    memcpy(p, pio, sizeof p);
+    for (; k < n; k++) {
+        int aid = ei < n_extra && ek[ei] == k;
+        if (aid && !(lone_zupt(ei, n_extra, ek, eh) && !(egate[ei] > 0.0)))
+            break; /* a gated aid, another h or several: general_update's step */
+        if (xpr != NULL) {
+            memcpy(xpr + 4 * k, x, sizeof x);
+            memcpy(ppr + 10 * k, p, sizeof p);
+        }
+        if (valid == NULL || valid[k])
+            update_sparse(x, p, H_ACC, NZ_ACC, 2, z[k], m->R, &S);
+        if (aid) {
+            double y = update_sparse(x, p, H_UNIT[1], NZ_UNIT[1], 1, ez[ei], eR[ei], &S);
+            applied[ei] = 1;
+            if (ey != NULL) {
+                ey[ei] = y;
+                eS[ei] = S;
+            }
+            ei++;
+        }
+        fwd_put(k, x, p, store, width, xf, sdf);
+        if (last && k == n - 1) {
+            k = n;
+            break;
+        }
+        predict_mean(m, x);
+        predict_p(m, p);
+    }
+    memcpy(xio, x, sizeof x);
+    memcpy(pio, p, sizeof p);
+    *eip = ei;
+    return k;
+}
+
 /*
  * Forward over samples k0 .. k0 + n - 1, extras as in acn_general with ek
  * counted from the chunk's first sample. carry: the prior mean (4) and packed
@@ -1810,6 +1917,7 @@ void acn_chunk_ru_lean(const acn_axis *m, long k0, long n, const double *store, 
  * covariance (n x 10), for --covariances (the row holds the posterior only).
  * ey, eS (NULL: not written): each extra's innovation and its variance, as
  * general_update gives them (the aids' NIS of a run over the memory budget).
+ * Runs of samples with no extra or a lone zupt go through fwd_simple.
  */
 static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double *z,
                               const unsigned char *valid, long n_extra, const long *ek,
@@ -1823,21 +1931,17 @@ static inline void chunkg_fwd(const acn_axis *m, long n, int last, const double 
     memcpy(x, carry, sizeof x);
     memcpy(p, carry + 4, sizeof p);
     for (long k = 0; k < n; k++) {
-        double *row = store + width * k;
+        k = fwd_simple(m, k, n, last, z, valid, &ei, n_extra, ek, eh, ez, eR, egate, applied, x, p,
+                       store, width, xf, sdf, xpr, ppr, ey, eS);
+        if (k == n)
+            break;
         if (xpr != NULL) {
             memcpy(xpr + 4 * k, x, sizeof x);
             memcpy(ppr + 10 * k, p, sizeof p);
         }
         ei = general_update(m, k, valid == NULL || valid[k], z[k], x, p, ei, n_extra, ek, eh, ez,
                             eR, egate, applied, ey, eS);
-        memcpy(row, x, sizeof x);
-        if (xf != NULL) {
-            memcpy(xf + 4 * k, x, sizeof x);
-            sdf[4 * k + 0] = sqrt(p[RR]), sdf[4 * k + 1] = sqrt(p[UU]);
-            sdf[4 * k + 2] = sqrt(p[AA]), sdf[4 * k + 3] = sqrt(p[EE]);
-        }
-        if (width == ACN_GROW)
-            memcpy(row + 4, p, sizeof p);
+        fwd_put(k, x, p, store, width, xf, sdf);
         if (last && k == n - 1)
             break;
         predict_mean(m, x);
@@ -1882,6 +1986,34 @@ void acn_chunkg_fwd_lean(const acn_axis *m, long n, int last, const double *z,
  * skipped). update_sparse's covariance reads neither the mean nor z: the same
  * operations on the same numbers, so the same doubles.
  */
+/* acn_chunkg_cov's steps from sample k as fwd_simple's (a lone zupt that was applied) */
+static long cov_simple(const acn_axis *m, long k, long n, int last, const unsigned char *valid,
+                       long *eip, long n_extra, const long *ek, const double *eh, const double *eR,
+                       const unsigned char *applied, double *pio, double *pst)
+{
+    double p[10], x[4] = {0.0, 0.0, 0.0, 0.0}, S;
+    long ei = *eip;
+    memcpy(p, pio, sizeof p);
+    for (; k < n; k++) {
+        int aid = ei < n_extra && ek[ei] == k;
+        if (aid && !(applied[ei] && lone_zupt(ei, n_extra, ek, eh)))
+            break;
+        if (valid == NULL || valid[k])
+            update_sparse(x, p, H_ACC, NZ_ACC, 2, 0.0, m->R, &S);
+        if (aid)
+            update_sparse(x, p, H_UNIT[1], NZ_UNIT[1], 1, 0.0, eR[ei++], &S);
+        memcpy(pst + 10 * k, p, sizeof p);
+        if (last && k == n - 1) {
+            k = n;
+            break;
+        }
+        predict_p(m, p);
+    }
+    memcpy(pio, p, sizeof p);
+    *eip = ei;
+    return k;
+}
+
 void acn_chunkg_cov(const acn_axis *m, long n, int last, const unsigned char *valid, long n_extra,
                     const long *ek, const double *eh, const double *eR,
                     const unsigned char *applied, const double *p0, double *pst)
@@ -1890,6 +2022,9 @@ void acn_chunkg_cov(const acn_axis *m, long n, int last, const unsigned char *va
     long ei = 0;
     memcpy(p, p0, sizeof p);
     for (long k = 0; k < n; k++) {
+        k = cov_simple(m, k, n, last, valid, &ei, n_extra, ek, eh, eR, applied, p, pst);
+        if (k == n)
+            break;
         if (valid == NULL || valid[k])
             update_sparse(x, p, H_ACC, NZ_ACC, 2, 0.0, m->R, &S);
         for (; ei < n_extra && ek[ei] == k; ei++) {
@@ -1934,6 +2069,58 @@ unsigned long long acn_aids_digest(long n, const long *ek, const double *eh, con
     return d;
 }
 
+/* What the backward step of sample k takes from row k alone: the prior of k + 1 predicted again and
+   the smoother gain (bad: that prior is not positive definite) */
+typedef struct {
+    double xp[4], pp[10], Ct[4][4];
+    int bad;
+} bwd_gain;
+
+static inline void bwd_gain_of(const acn_axis *m, const double *xk, const double *pk, bwd_gain *g)
+{
+    double B[4][4];
+    memcpy(g->xp, xk, sizeof g->xp);
+    predict_mean(m, g->xp);
+    fp_rows(m, pk, B);
+    predict_packed(m, B, g->pp);
+    g->bad = smoother_gain(g->pp, B, g->Ct) != 0;
+}
+
+/*
+ * bwd_gain_of for rows k (into g[0]) and k - 1 (g[1]) at once: the two
+ * factorisations side by side, so that the one's chain of divisions overlaps
+ * the other's (each waits on its own four in turn).
+ */
+static void bwd_gains2(const acn_axis *m, const double *xst, int xw, const double *pst, int pw,
+                       long k, bwd_gain g[2])
+{
+    double B[2][4][4];
+    ldl4 f[2];
+    for (int l = 0; l < 2; l++) {
+        memcpy(g[l].xp, xst + xw * (k - l), sizeof g[l].xp);
+        predict_mean(m, g[l].xp);
+        fp_rows(m, pst + pw * (k - l), B[l]);
+        predict_packed(m, B[l], g[l].pp);
+    }
+    for (int l = 0; l < 2; l++)
+        ldl_factor(g[l].pp, &f[l]);
+    for (int l = 0; l < 2; l++) {
+        g[l].bad = !f[l].ok && gain_equilibrated(g[l].pp, B[l], g[l].Ct) != 0;
+        if (f[l].ok)
+            ldl_solve(&f[l], B[l], g[l].Ct);
+    }
+}
+
+/* The gains of rows k and k - 1 into g[0], g[1] (of row k alone when it is the chunk's first) */
+static inline void bwd_gains(const acn_axis *m, const double *xst, int xw, const double *pst,
+                             int pw, long k, bwd_gain g[2])
+{
+    if (k >= 1)
+        bwd_gains2(m, xst, xw, pst, pw, k, g);
+    else
+        bwd_gain_of(m, xst + xw * k, pst + pw * k, &g[0]);
+}
+
 /*
  * Backward over the n store rows of one chunk (last: it ends the run, whose
  * last sample is the filter's). carry: the smoothed mean (4) and packed
@@ -1941,12 +2128,17 @@ unsigned long long acn_aids_digest(long n, const long *ek, const double *eh, con
  * Writes xs and the standard deviations sds (n x 4), and ps (NULL: not written)
  * the packed covariances (n x 10), for --covariances. k0 names samples in the
  * error: returns -(k + 1) if the prior of sample k + 1 is not positive definite.
+ * rts_step's operations in another order: the gains depend on the store
+ * alone, the update on the sample after's, so the gains are made two samples
+ * at a time (bwd_gains2), the next two before these two's updates, and the
+ * divisions of the ones overlap the products of the others.
  */
 static inline int chunkg_bwd(const acn_axis *m, long k0, long n, int last, const double *xst,
                              int xw, const double *pst, int pw, double *carry, double *xs,
                              double *sds, double *ps)
 {
     double x1[4], P1[10];
+    bwd_gain g[4]; /* the gains of two samples, then of the two before them */
     memcpy(x1, carry, sizeof x1);
     memcpy(P1, carry + 4, sizeof P1);
     long k = n - 1;
@@ -1960,22 +2152,26 @@ static inline int chunkg_bwd(const acn_axis *m, long k0, long n, int last, const
             memcpy(ps + 10 * k, P1, sizeof P1);
         k--;
     }
-    for (; k >= 0; k--) {
-        const double *xk = xst + xw * k, *pk = pst + pw * k;
-        double xp[4], pp[10], B[4][4]; /* the prior of k + 1, predicted again from row k */
-        memcpy(xp, xk, sizeof xp);
-        predict_mean(m, xp);
-        fp_rows(m, pk, B);
-        predict_packed(m, B, pp);
-        if (rts_step(B, xk, pk, xp, pp, x1, P1, x1, P1) != 0) {
-            long at = k0 + k + 1;
-            return -(int)(at > 1000000000L ? 1000000000L : at);
+    int cur = 0;
+    if (k >= 0)
+        bwd_gains(m, xst, xw, pst, pw, k, g);
+    for (; k >= 0; k -= 2, cur = 2 - cur) {
+        bwd_gain *c = g + cur;
+        if (k >= 2)
+            bwd_gains(m, xst, xw, pst, pw, k - 2, g + 2 - cur);
+        for (int h = 0; h < 2 && k - h >= 0; h++) {
+            long j = k - h;
+            if (c[h].bad) {
+                long at = k0 + j + 1;
+                return -(int)(at > 1000000000L ? 1000000000L : at);
+            }
+            rts_apply(c[h].Ct, xst + xw * j, pst + pw * j, c[h].xp, c[h].pp, x1, P1, x1, P1);
+            memcpy(xs + 4 * j, x1, sizeof x1);
+            sds[4 * j + 0] = sqrt(P1[RR]), sds[4 * j + 1] = sqrt(P1[UU]);
+            sds[4 * j + 2] = sqrt(P1[AA]), sds[4 * j + 3] = sqrt(P1[EE]);
+            if (ps != NULL)
+                memcpy(ps + 10 * j, P1, sizeof P1);
         }
-        memcpy(xs + 4 * k, x1, sizeof x1);
-        sds[4 * k + 0] = sqrt(P1[RR]), sds[4 * k + 1] = sqrt(P1[UU]);
-        sds[4 * k + 2] = sqrt(P1[AA]), sds[4 * k + 3] = sqrt(P1[EE]);
-        if (ps != NULL)
-            memcpy(ps + 10 * k, P1, sizeof P1);
     }
     memcpy(carry, x1, sizeof x1);
     memcpy(carry + 4, P1, sizeof P1);
