@@ -771,7 +771,8 @@ class RestSpans:
         i0, i1 = int(np.searchsorted(hi, s, side="right")), int(np.searchsorted(lo, e, side="left"))
         a, b = np.maximum(lo[i0:i1], s), np.minimum(hi[i0:i1], e)
         lens = np.maximum(b - a, 0)
-        ks = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(a - (np.cumsum(lens) - lens), lens)
+        ks = np.repeat(a - (np.cumsum(lens) - lens), lens).astype(np.int64, copy=False)
+        ks += np.arange(len(ks), dtype=np.int64)  # in place: a temporary of millions the less
         step = max(1, int(round(params.every_s * model.rate_hz)))
         own = bool(np.isfinite(sd[i0:i1]).any())
         seg = np.repeat(np.arange(i0, i1), lens) if own or (step > 1 and len(ks)) else None
