@@ -588,7 +588,11 @@ class _AxisAids(chunked.ChunkAids):
             ks = np.asarray(ks, dtype=np.int64).reshape(-1)
             h, zero, ones, order = self.fill.take(len(ks))
             sd = np.asarray(sd, dtype=np.float64)
-            zs = Aids(ks, h, zero, sd**2 if sd.shape == ks.shape else np.broadcast_to(sd**2, ks.shape).copy())
+            if sd.ndim == 0:  # one sigma for all (detected rests): its variance shared like h, not made per chunk
+                R = self.fill.variances(len(ks), float(sd**2))
+            else:
+                R = sd**2 if sd.shape == ks.shape else np.broadcast_to(sd**2, ks.shape).copy()
+            zs = Aids(ks, h, zero, R)
             if a == b and not np.any(ks[1:] < ks[:-1]):  # rests alone, in order: the sort below would change nothing
                 return chunked.Piece(fastsmooth.Extras(ks, h, zero, zs.R, order), zero, ones)
         k = np.concatenate((fx.k[a:b], zs.k))
@@ -641,10 +645,21 @@ class _AxisAids(chunked.ChunkAids):
 
 class _UpdateFill:
     """The constant parts of zero-velocity updates (kf.Aids.zero_velocity: h = [0, 1, 0, 0], z = 0; a Piece's gates
-    0, marked, order 0..n-1) as read-only views of n rows, made once and grown when a chunk has more updates."""
+    0, marked, order 0..n-1; R where one sigma is all the updates') as read-only views of n rows, made once and grown
+    when a chunk has more updates: a chunk's fresh arrays of 1e5 and more rows cost their pages' faults, each call
+    (bench/speed/bench_rest_updates.py)."""
 
     def __init__(self) -> None:
         self.n = -1
+        self.R, self.r = np.zeros(0), None
+
+    def variances(self, n: int, r: float) -> np.ndarray:
+        """n updates' R, each ``r``, read-only; made again for another r (the same double: same bits, but a NaN)."""
+        if n > len(self.R) or r != self.r:
+            self.R = np.full(max(n, len(self.R) + len(self.R) // 4) if n > len(self.R) else len(self.R), r)
+            self.R.flags.writeable = False
+            self.r = r
+        return self.R[:n]
 
     def take(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         if n > self.n:  # a quarter more: the axes' and chunks' counts differ a little (made again, pages faulted)

@@ -764,18 +764,24 @@ class RestSpans:
 
     def updates(self, j: int, s: int, e: int, model: Model, params: ZuptParams) -> tuple[np.ndarray, np.ndarray]:
         """(samples, standard deviations) of axis j's zero-velocity updates in samples s..e-1: those
-        :func:`axis_aids` gives the whole run, made for these samples alone."""
+        :func:`axis_aids` gives the whole run, made for these samples alone. The deviations are one a sample,
+        or one (a 0-d array) for all when none of these spans gives its own (detected rests: ``params.sigma``;
+        the callers broadcast it), rather than a sample's span looked up for each of millions."""
         lo, hi, sd = self.lo[j], self.hi[j], self.sd[j]
         i0, i1 = int(np.searchsorted(hi, s, side="right")), int(np.searchsorted(lo, e, side="left"))
         a, b = np.maximum(lo[i0:i1], s), np.minimum(hi[i0:i1], e)
         lens = np.maximum(b - a, 0)
-        seg = np.repeat(np.arange(i0, i1), lens)
-        ks = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(a - (np.cumsum(lens) - lens), lens)
+        ks = np.repeat(a - (np.cumsum(lens) - lens), lens).astype(np.int64, copy=False)
+        ks += np.arange(len(ks), dtype=np.int64)  # in place: a temporary of millions the less
         step = max(1, int(round(params.every_s * model.rate_hz)))
+        own = bool(np.isfinite(sd[i0:i1]).any())
+        seg = np.repeat(np.arange(i0, i1), lens) if own or (step > 1 and len(ks)) else None
         if step > 1 and len(ks):  # counted from the start of each rest (touching runs are one rest)
             first = lo[self.rest_of(j)]
             keep = (ks - first[seg]) % step == 0
             ks, seg = ks[keep], seg[keep]
+        if not own:
+            return ks, np.asarray(float(params.sigma))
         given = sd[seg]
         return ks, np.where(np.isfinite(given), given, float(params.sigma))
 

@@ -139,3 +139,25 @@ def test_candidate_times_are_kept_as_the_chunks_are_read():
     np.testing.assert_array_equal(times.at(at, times_at), t[at])
     np.testing.assert_array_equal(times.at(np.array([5]), times_at), t[[5]])  # not a candidate's end: asked
     assert len(asked) == 2
+
+
+def test_a_chunks_updates_are_the_whole_runs_with_their_variance_shared(default_model):
+    """_AxisAids.between's updates of detected rests (one sigma for all, RestSpans.updates' 0-d): the whole run's
+    axis_aids, a chunk at a time, their R one read-only array for all chunks, made again for another sigma."""
+    from accelnav.estimate import zupt
+
+    n = 3000
+    mask = np.zeros(n, dtype=bool)
+    mask[100:900] = mask[1500:2950] = True
+    spans = zupt.RestSpans.of_mask(mask)
+    fill = engine._UpdateFill()
+    for sigma in (0.02, 0.03):
+        p = zupt.ZuptParams(sigma=sigma)
+        want = zupt.axis_aids(mask, None, default_model, p)
+        aids = engine._AxisAids(default_model, 0, Aids.of([]), spans, p, fill=fill)
+        pieces = [aids.between(s, min(s + 700, n)) for s in range(0, n, 700)]
+        np.testing.assert_array_equal(np.concatenate([q.ex.k for q in pieces]), want.k)
+        np.testing.assert_array_equal(np.concatenate([q.ex.R for q in pieces]), want.R)
+        assert np.all(np.concatenate([q.ex.R for q in pieces]) == sigma**2)
+        assert all(not q.ex.R.flags.writeable for q in pieces)  # shared: no chunk may write it
+        assert pieces[4].ex.R.base is pieces[3].ex.R.base  # 150 updates after 700: the grown array's first rows

@@ -40,9 +40,13 @@ def test_updates_made_chunk_by_chunk_are_the_whole_runs(default_model, every_s, 
         want = zupt.axis_aids(mask[:, j], None if sig is None else sig[:, j], default_model, p)
         parts = [spans.updates(j, int(s), int(e), default_model, p) for s, e in zip(cuts[:-1], cuts[1:], strict=True)]
         ks = np.concatenate([k for k, _ in parts])
-        sd = np.concatenate([d for _, d in parts])
+        sd = np.concatenate([np.broadcast_to(d, k.shape) for k, d in parts])  # one for all: a 0-d sd
         np.testing.assert_array_equal(ks, want.k)
         np.testing.assert_array_equal(sd**2, want.R)
+        given = np.full(n, np.nan) if sig is None else sig[:, j]  # each sample's own sigma, else --zupt-sigma's
+        np.testing.assert_array_equal(sd, np.where(np.isfinite(given[ks]), given[ks], p.sigma))
+        for (_, d), s, e in zip(parts, cuts[:-1], cuts[1:], strict=True):  # no rest here gives its own: one for all
+            assert np.ndim(d) == (0 if np.isnan(given[s:e][mask[s:e, j]]).all() else 1)
         assert spans.count(j, default_model, p) == len(want.k) > 50
         assert all(((k >= s) & (k < e)).all() for (k, _), s, e in zip(parts, cuts[:-1], cuts[1:], strict=True))
     got_mask, got_sig = spans.painted()
