@@ -433,8 +433,10 @@ def _level_steps(
     refs = np.ascontiguousarray(refs, dtype=np.float64)
     lim2 = np.ascontiguousarray(lim2, dtype=np.float64)
     edge = np.ascontiguousarray(edge, dtype=np.int64)
-    if len(ok) != n or refs.shape != (count, n_axes) or lim2.shape != (count,):
-        raise ValueError(f"rest detector: {len(ok)} rows, levels {refs.shape}, bounds {lim2.shape} for {count} pieces")
+    if ok.shape != (n,) or refs.shape != (count, n_axes) or lim2.shape != (count,):
+        raise ValueError(
+            f"rest detector: usable {ok.shape}, levels {refs.shape}, bounds {lim2.shape} for {count} pieces"
+        )
     out = np.empty(count, dtype=np.int64)
     mod = _lib()
     buf = mod.ffi.from_buffer
@@ -443,7 +445,10 @@ def _level_steps(
         buf("double[]", lim2), buf("long[]", edge), int(step), int(h), buf("long[]", out),
     )  # fmt: skip
     if status != 0:
-        raise ValueError(f"rest detector: widening by {step} over {n} x {n_axes}; accepted: a step of -1 or 1")
+        raise ValueError(
+            f"rest detector: widening by {step} from {count} edges over {n} x {n_axes}; accepted: a step"
+            " of -1 or 1 from edges within -1..n"
+        )
     return out
 
 
@@ -503,7 +508,7 @@ def _steady_pieces(
         scratch = np.empty(max(m, 1))
     if not (scratch.dtype == np.float64 and scratch.flags.c_contiguous and scratch.flags.writeable):
         raise ValueError("rest detector: the pieces' scratch must be a writable contiguous float64 array")
-    if len(scratch) < m or mc.shape != (m, n_axes) or xc.shape != (m, n_axes):
+    if scratch.ndim != 1 or len(scratch) < m or mc.shape != (m, n_axes) or xc.shape != (m, n_axes):
         raise ValueError(f"rest detector: {len(scratch)} scratch rows, means {mc.shape}, x {xc.shape} for run {a}..{b}")
     count = mod.lib.acn_rest_pieces(
         m, n_axes, ffi.from_buffer("double[]", mc), ffi.from_buffer("double[]", xc), bound2, total, w,
