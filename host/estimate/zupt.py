@@ -754,10 +754,17 @@ class RestSpans:
         step = max(1, int(round(params.every_s * model.rate_hz)))
         if step == 1:
             return int(np.sum(hi - lo))
+        starts, ends, _ = self.rests(j)
+        return int(np.sum(-(-(ends - starts) // step)))
+
+    def rests(self, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Axis j's rests (:meth:`rest_of`: touching spans are one): each one's first sample, its last + 1 and its
+        id, the index of its first span."""
+        lo, hi = self.lo[j], self.hi[j]
         new = self.rest_of(j) == np.arange(len(lo))
         last = np.ones(len(lo), dtype=bool)
         last[:-1] = new[1:]
-        return int(np.sum(-(-(hi[last] - lo[new]) // step)))
+        return lo[new], hi[last], np.flatnonzero(new)
 
     def rest_of(self, j: int) -> np.ndarray:
         """Each of axis j's spans' rest, as the index of its first span: spans that touch (one ending where the
