@@ -35,8 +35,9 @@ key                       shape, dtype           meaning
 ``fix_nis``               (M,), float64          each fix's NIS y^2 / S as the filter met it
 ``zupt_nis``              (K, 4), float64        zero-velocity updates' NIS: [t, axis column, y^2 / S, 1 for
                                                  the first update of its rest]; ``/3`` keeps each rest's
-                                                 first update alone (what the NIS checks read), the others
-                                                 every update
+                                                 first update alone (what the NIS checks read; /3 files
+                                                 written before 2026-11-29 keep every
+                                                 update), the others every update
 ``zupt_candidates``       (K, 3), float64        ``--zupt auto``'s candidate rests: [start_s, end_s, accepted]
 ========================  =====================  ===============================================
 

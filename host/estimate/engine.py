@@ -202,7 +202,7 @@ class RestOutcome:
     # takes it as the one-chunk output when nothing after the review changes the aids, else drops it at once
     smoothed: dict | None = field(default=None, repr=False)
     spans: object = None  # zupt.RestSpans of given rests
-    _ends: np.ndarray | None = field(default=None, init=False, repr=False)  # candidate_ends, made once
+    _ends: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)  # candidate_ends, made once
 
     def runs(self, n_axes: int):
         """The rests as zupt.RestSpans (a mask's runs, made now)."""
@@ -284,10 +284,11 @@ def over_budget(label: str, n: int, n_axes: int, budget: int) -> str:
 
 # the rest decision's peak per sample at 2 axes, measured a stage at a time (VmHWM): a run in memory holds its record
 # whole (t; each axis' acceleration and clipped flag) and the detector's x and ok beside it (18 B an axis with the
-# record's). On the stop-and-go bench record at 1e7 the whole decision takes 60 B (36 B streamed, a chunk at a time:
-# zupt.decide_rests_read): the sums are read from checkpoints (accelnav.estimate.rests.SUMS_EVERY) and the window
-# figures a run at a time (zupt._Spans), not held whole. A record that is one long rest takes the most: the
-# detector's, that run's window figures and pieces. It was 86 B at 3e6 (55 B streamed); since the run's median
+# record's). On the stop-and-go bench record at 1e7 the whole decision streamed (a chunk at a time:
+# zupt.decide_rests_read) takes 24 B (36 B before the decision kept its candidates as arrays, rests._Cands): the
+# sums are read from checkpoints (accelnav.estimate.rests.SUMS_EVERY) and the window figures a run at a time
+# (zupt._Spans), not held whole. A record that is one long rest takes the most: the detector's, that run's window
+# figures and pieces. It was 86 B at 3e6 (55 B streamed); since the run's median
 # partitions its variances in place and the pieces take that array as their scratch, 70 B at 3e6 and 69 B at 1e7
 # (46 B streamed, bench_rest_stages.py). The bound is its, with the margin it had: 80 B
 REST_SAMPLE_BYTES, REST_AXIS_BYTES = 28, 26
@@ -628,11 +629,7 @@ class _AxisAids(chunked.ChunkAids):
         but of the rest the last chunk ended in. A rest is a run of touching spans (zupt.RestSpans.rest_of, its
         id the index of its first span), so its updates' positions come from its ends, not from each update."""
         if self.rests is None:  # --tune's aids never ask: 24 B a rest held for nothing
-            lo, hi = self.spans.lo[self.j], self.spans.hi[self.j]
-            new = self.spans.rest_of(self.j) == np.arange(len(lo))
-            last = np.ones(len(lo), dtype=bool)
-            last[:-1] = new[1:]
-            self.rests = (lo[new], hi[last], np.flatnonzero(new))
+            self.rests = self.spans.rests(self.j)
         starts, ends, ids = self.rests
         r0, r1 = int(np.searchsorted(ends, k[0], side="right")), int(np.searchsorted(starts, k[-1], side="right"))
         p, q = np.searchsorted(k, starts[r0:r1]), np.searchsorted(k, ends[r0:r1])
@@ -674,10 +671,10 @@ class _UpdateFill:
 
 
 def _rests(spans, j: int) -> int:
-    """Axis j's rests that hold an update: its spans' rests (zupt.RestSpans.rest_of: touching spans are one)
-    of at least one sample; each starts with an update, whatever every_s."""
-    held = spans.hi[j] > spans.lo[j]
-    return len(np.unique(spans.rest_of(j)[held]))
+    """Axis j's rests that hold an update: its rests (zupt.RestSpans.rests: touching spans are one) of at least
+    one sample; each starts with an update, whatever every_s."""
+    starts, ends, _ = spans.rests(j)
+    return int(np.sum(ends > starts))
 
 
 class _Times:

@@ -185,7 +185,7 @@ class _Kinematic:
 SUMS_EVERY = 256  # the decision's sums kept at every this many samples (3 n_axes doubles each, both ways: 3.75 MB for
 # a 1e7-sample record at 2 axes, for 960 MB whole); a read sums on at most this many rows, or from the row read last
 KIN_MAX_AXES = 8  # acn_kin_rec holds a row of at most 8 axes
-LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (acn_kin_side)
+LEAK = 0.1  # share of (level change x time since the last aid) allowed as velocity sd (fastsmooth.c kin_side)
 PEAK_POINTS = 128  # points of the way from the last rest at which a candidate's peak speed is taken
 LIKE = 10.0  # a candidate up to this many times the median stillness of the proven rests is as still as they
 UNLIKE = 0.5  # ... and one far less still, after a move, keeps its level within UNLIKE x level_still
@@ -281,7 +281,9 @@ class _Decided(RestDecision):
     """A verdict of :func:`decide` that holds its index into the decision's rows (:class:`_Rows`), its fields read
     from them when read and its evidence in words made when first read: a long record's tens of thousands of verdicts
     are counted, their words read for a few (the same words: :meth:`_Decider._words`). A dict of thirteen fields each
-    held 1 kB a verdict, 6 B a sample of a 1e7-sample drive, and cost 0.4 s to fill."""
+    held 1 kB a verdict, 6 B a sample of a 1e7-sample drive, and cost 0.4 s to fill. Its fields are the rows': a field
+    set on it by object.__setattr__ is not read back (dataclasses.replace makes a verdict of its own fields), and a
+    pickled verdict carries its decision's rows."""
 
     __slots__ = ("_rows", "_i")
 
@@ -353,7 +355,7 @@ class _TimesAt:
             self.k = at[np.concatenate(([True], at[1:] != at[:-1]))] if len(at) else at
         else:
             self.k = np.unique(at)
-        self.v = t[self.k] if isinstance(t, Clock) else np.asarray(t)[self.k]
+        self.v = np.asarray(t)[self.k]  # a Clock's times are read from the Clock itself (decide's words.t)
 
     def __getitem__(self, k: int):
         i = int(np.searchsorted(self.k, k))

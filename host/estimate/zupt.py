@@ -433,8 +433,10 @@ def _level_steps(
     refs = np.ascontiguousarray(refs, dtype=np.float64)
     lim2 = np.ascontiguousarray(lim2, dtype=np.float64)
     edge = np.ascontiguousarray(edge, dtype=np.int64)
-    if len(ok) != n or refs.shape != (count, n_axes) or lim2.shape != (count,):
-        raise ValueError(f"rest detector: {len(ok)} rows, levels {refs.shape}, bounds {lim2.shape} for {count} pieces")
+    if ok.shape != (n,) or refs.shape != (count, n_axes) or lim2.shape != (count,):
+        raise ValueError(
+            f"rest detector: usable {ok.shape}, levels {refs.shape}, bounds {lim2.shape} for {count} pieces"
+        )
     out = np.empty(count, dtype=np.int64)
     mod = _lib()
     buf = mod.ffi.from_buffer
@@ -443,7 +445,10 @@ def _level_steps(
         buf("double[]", lim2), buf("long[]", edge), int(step), int(h), buf("long[]", out),
     )  # fmt: skip
     if status != 0:
-        raise ValueError(f"rest detector: widening by {step} over {n} x {n_axes}; accepted: a step of -1 or 1")
+        raise ValueError(
+            f"rest detector: widening by {step} from {count} edges over {n} x {n_axes}; accepted: a step"
+            " of -1 or 1 from edges within -1..n"
+        )
     return out
 
 
@@ -503,7 +508,7 @@ def _steady_pieces(
         scratch = np.empty(max(m, 1))
     if not (scratch.dtype == np.float64 and scratch.flags.c_contiguous and scratch.flags.writeable):
         raise ValueError("rest detector: the pieces' scratch must be a writable contiguous float64 array")
-    if len(scratch) < m or mc.shape != (m, n_axes) or xc.shape != (m, n_axes):
+    if scratch.ndim != 1 or len(scratch) < m or mc.shape != (m, n_axes) or xc.shape != (m, n_axes):
         raise ValueError(f"rest detector: {len(scratch)} scratch rows, means {mc.shape}, x {xc.shape} for run {a}..{b}")
     count = mod.lib.acn_rest_pieces(
         m, n_axes, ffi.from_buffer("double[]", mc), ffi.from_buffer("double[]", xc), bound2, total, w,
@@ -749,10 +754,17 @@ class RestSpans:
         step = max(1, int(round(params.every_s * model.rate_hz)))
         if step == 1:
             return int(np.sum(hi - lo))
+        starts, ends, _ = self.rests(j)
+        return int(np.sum(-(-(ends - starts) // step)))
+
+    def rests(self, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Axis j's rests (:meth:`rest_of`: touching spans are one): each one's first sample, its last + 1 and its
+        id, the index of its first span."""
+        lo, hi = self.lo[j], self.hi[j]
         new = self.rest_of(j) == np.arange(len(lo))
         last = np.ones(len(lo), dtype=bool)
         last[:-1] = new[1:]
-        return int(np.sum(-(-(hi[last] - lo[new]) // step)))
+        return lo[new], hi[last], np.flatnonzero(new)
 
     def rest_of(self, j: int) -> np.ndarray:
         """Each of axis j's spans' rest, as the index of its first span: spans that touch (one ending where the

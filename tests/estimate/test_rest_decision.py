@@ -233,6 +233,27 @@ def test_the_forward_kernel_refuses_what_it_cannot_read(default_model):
             dec.run()
 
 
+@pytest.mark.parametrize("event, field, value", [(2, "i", 0), (2, "k", 81), (3, "k", 100), (1, "i", 1)])
+def test_the_forward_kernel_refuses_events_not_each_candidates_test_and_end(default_model, event, field, value):
+    """The forward kernel undoes a hypothesis over the candidates tested since it opened, and keeps the proven ones in
+    2 m doubles: both rely on each candidate tested once, in order, at its start, and ended at its last sample after its
+    test. Events that test a candidate twice, test it elsewhere, end it elsewhere or end one not yet tested (a caller
+    that skipped decide()'s events) are refused (-1), where they could have written past the proven list."""
+    from accelnav.estimate import rests
+
+    n, n_axes = 200, len(default_model.axes)
+    x, R, t = np.zeros((n, n_axes)), np.ones(n_axes), np.arange(n) * default_model.Ts
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    level, fixes = np.zeros(n_axes), [[] for _ in range(n_axes)]
+    cands = [rests.Candidate(10, 50, level, 1.0), rests.Candidate(80, 120, level, 1.0)]
+    dec = rests._Decider(x, R, default_model.Ts, cands, fixes, p, t)
+    ev = dec.fwd_events
+    assert (ev.k.tolist(), ev.kind.tolist(), ev.i.tolist()) == ([10, 49, 80, 119], [0, 2, 0, 2], [0, 0, 1, 1])
+    getattr(ev, field)[event] = value
+    with pytest.raises(ValueError, match="out of order or outside the record"):
+        dec.run()
+
+
 def test_no_candidates_no_verdicts(default_model):
     """A record with no candidate gives no verdict (the kernel's rows are never fewer than one: none is read)."""
     from accelnav.estimate import rests

@@ -92,3 +92,24 @@ def test_the_short_rests_before_stands_are_picked_from_the_rows_as_from_the_side
     assert shorts and shorts == dec._short_before_stands(list(found), acc)
     moving = dec._moving_after_rest(found)
     assert moving and moving == dec._moving_after_rest(list(found))
+
+
+def test_verdicts_keep_their_fields_through_pickle_copies_and_a_later_decision(default_model):
+    """A verdict reads its fields from its decision's rows: a pickled or copied verdict reads the same ones, and a
+    second decision on another record (new rows, new candidates) leaves the first decision's verdicts as they were."""
+    import copy
+    import pickle
+
+    def decided(scenario: str, seed: int):
+        arrays = simulate(default_model, scenario, 90.0, seed).to_arrays()
+        cand = zupt.candidates(arrays["accel"], arrays["clipped"], default_model)
+        return zupt.decide_rests(arrays["accel"], arrays["clipped"], cand, default_model).decisions
+
+    first = decided("stop_and_go", 3)
+    assert len(first) > 5
+    before = [repr(dataclasses.astuple(d)) for d in first]  # repr: NaN fields compare equal
+    for again in (pickle.loads(pickle.dumps(first)), copy.copy(first), copy.deepcopy(first)):
+        assert [repr(dataclasses.astuple(d)) for d in again] == before
+    other = decided("stop_and_go", 11)
+    assert [repr(dataclasses.astuple(d)) for d in other] != before  # another record, other verdicts
+    assert [repr(dataclasses.astuple(d)) for d in first] == before

@@ -131,7 +131,7 @@ def test_long_runs_pieces_as_the_oracle(m):
 
 def test_pieces_scratch_refused_when_short_or_foreign():
     means, x = np.zeros((50, 2)), np.zeros((50, 2))
-    for scratch in (np.zeros(49), np.zeros(50, dtype=np.float32), np.zeros(100)[::2]):
+    for scratch in (np.zeros(49), np.zeros(50, dtype=np.float32), np.zeros(100)[::2], np.zeros((50, 0))):
         with pytest.raises(ValueError, match="scratch"):
             zupt._steady_pieces(means, 0, 50, 1e-3, x, 1e-3, 5, 0.0, 10, scratch=scratch)
 
@@ -175,6 +175,8 @@ def test_run_median_is_numpys():
 
 def test_pieces_refuse_axes_past_numpys_sequential_sums():
     """From 8 terms numpy sums pairwise, not in order as the C does: 7 axes are taken, 8 refused."""
+    from accelnav.estimate.fastsmooth import _lib
+
     rng = np.random.default_rng(0)
     a = rng.normal(size=(20_000, 8)) ** 2 * 10.0 ** rng.integers(-8, 8, size=(20_000, 8))
     in_order = [a[:, 0].copy()]
@@ -185,6 +187,7 @@ def test_pieces_refuse_axes_past_numpys_sequential_sums():
     zupt._steady_pieces(np.zeros((30, 7)), 0, 30, 1e-3, np.zeros((30, 7)), 1e-3, 5, 0.0, 10)
     with pytest.raises(ValueError, match="at most 7"):
         zupt._steady_pieces(np.zeros((30, 8)), 0, 30, 1e-3, np.zeros((30, 8)), 1e-3, 5, 0.0, 10)
+    assert _lib().lib.ACN_REST_MAX_AXES == zupt._MAX_AXES  # the kernels' own bound is the same one
 
 
 def _widen_numpy(x, usable, refs, lim2, edge, step, h):
@@ -215,3 +218,18 @@ def test_widening_as_numpy(n_axes):
             assert np.array_equal(got, _widen_numpy(x, usable, refs, lim2, edge, step, h))
             seen.update(got.tolist())
     assert {0, 1, 5, 40} <= seen  # stopped at once, part way and never
+
+
+def test_widening_refuses_edges_outside_the_record_and_a_2d_usable():
+    """The kernel steps from each edge until it leaves the record: an edge far outside would overflow on its first
+    step, so only edges in -1..n are taken; a usable of another shape than (n,) is refused before C reads it."""
+    n = 100
+    x, usable = np.zeros((n, 2)), np.ones(n, dtype=bool)
+    refs, lim2 = np.zeros((1, 2)), np.ones(1)
+    for edge in (-1, n):
+        assert zupt._level_steps(x, usable, refs, lim2, np.array([edge]), 1 if edge < 0 else -1, 3).tolist() == [3]
+    for edge in (-2, n + 1, np.iinfo(np.int64).max):
+        with pytest.raises(ValueError, match="edges within -1..n"):
+            zupt._level_steps(x, usable, refs, lim2, np.array([edge]), 1, 3)
+    with pytest.raises(ValueError, match="usable"):
+        zupt._level_steps(x, np.ones((n, 2), dtype=bool), refs, lim2, np.array([5]), 1, 3)

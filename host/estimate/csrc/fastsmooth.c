@@ -982,6 +982,9 @@ long acn_rest_widen(long n, int n_axes, const double *x, const unsigned char *us
     if (n < 0 || count < 0 || h < 0 || n_axes < 1 || n_axes > ACN_REST_MAX_AXES ||
         (step != 1 && step != -1) || n > LONG_MAX / n_axes)
         return -1;
+    for (long i = 0; i < count; i++) /* an edge within the record: its steps cannot overflow */
+        if (edge[i] < -1 || edge[i] > n)
+            return -1;
     for (long i = 0; i < count; i++) {
         long s = 0;
         for (; s < h; s++) {
@@ -2324,8 +2327,28 @@ int acn_kin_sums_at(acn_kin_rec *r, long k, double *out)
     return 0;
 }
 
-void acn_kin_to(int n_axes, double *s, acn_kin_rec *rec, long k0, long k, double Ts, double q,
-                const double *qv)
+/*
+ * The rest decision's kinematic filter (host/estimate/rests.py, _Kinematic): per
+ * axis the state (r, u, e) and its symmetric covariance, 9 doubles
+ *   r u e  Prr Pru Pre Puu Pue Pee
+ * n_axes of them side by side in s. r: the record's sums V, A, W (acn_kin_rec,
+ * below; rests.py says which). The arithmetic is the Python reference's
+ * (tests/support/rests_reference.py), in its order.
+ *   kin_to    propagate s from sample k0 to k (k > k0)
+ *   kin_aid   propagate, then the scalar measurement z of state i (0: r,
+ *                 1: u) with variance var on axis `axis`, or on every axis (-1)
+ *   kin_side  a side's test of a candidate of `len` samples and the given
+ *                 level: v, its sd, r, its sd per axis into out (4 rows of
+ *                 n_axes, v times sign); returns sum of v^2 / (sd^2 + sigma2).
+ *                 The level's path since the last aid (D ago) is taken as
+ *                 linear; the sd is widened by a leak that changed by L along
+ *                 any path (leak L D), a mean acceleration error no level
+ *                 explains (drift D) and a scale factor's share of what moved
+ *                 since (scale x the integral of |x|); r's by that times D
+ *   kin_jump  the level's jump beyond 3 sd of the filter's (0: it has none)
+ */
+static void kin_to(int n_axes, double *s, acn_kin_rec *rec, long k0, long k, double Ts, double q,
+                   const double *qv)
 {
     long m = k - k0;
     if (m <= 0) {
@@ -2381,10 +2404,10 @@ static void kin_update(double *x, int i, double z, double var)
     x[8] = g - K2 * P2;
 }
 
-void acn_kin_aid(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
-                 const double *qv, int axis, int i, double z, double var)
+static void kin_aid(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
+                    const double *qv, int axis, int i, double z, double var)
 {
-    acn_kin_to(n_axes, s, r, k0, k, Ts, q, qv);
+    kin_to(n_axes, s, r, k0, k, Ts, q, qv);
     for (int j = 0; j < n_axes; j++) {
         if (axis < 0 || axis == j) {
             kin_update(s + 9 * j, i, z, var);
@@ -2392,9 +2415,9 @@ void acn_kin_aid(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double 
     }
 }
 
-double acn_kin_side(int n_axes, const double *s, acn_kin_rec *r, long k, long aid_k, double Ts,
-                    const double *level, const double *R, long len, double leak, double drift,
-                    double scale, double sigma2, double sign, double *out)
+static double kin_side(int n_axes, const double *s, acn_kin_rec *r, long k, long aid_k, double Ts,
+                       const double *level, const double *R, long len, double leak, double drift,
+                       double scale, double sigma2, double sign, double *out)
 {
     double D = (double)(k - aid_k) * Ts;
     double total = 0.0;
@@ -2476,7 +2499,7 @@ double acn_chi2_equivalent(double x, int dof)
     return 2.0 * z * z;
 }
 
-double acn_kin_jump(int n_axes, const double *s, const double *level)
+static double kin_jump(int n_axes, const double *s, const double *level)
 {
     double sum = 0.0;
     for (int j = 0; j < n_axes; j++) {
@@ -2491,15 +2514,22 @@ double acn_kin_jump(int n_axes, const double *s, const double *level)
     return sqrt(sum);
 }
 
-void acn_kin_test(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
-                  const double *qv, long aid_k, const double *level, const double *R, long len,
-                  double leak, double drift, double scale, double sigma2, double *out, double *res)
+/*
+ * A forward side's whole test of a candidate (acn_kin_forward's): s
+ * propagated from k0 to k, then as kin_side (sign +1) into out, with
+ * res = [its chi-square read on one axis (acn_chi2_equivalent), the level's
+ * jump (kin_jump), |v| over the axes, the rms of the sds].
+ */
+static void kin_test(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
+                     const double *qv, long aid_k, const double *level, const double *R, long len,
+                     double leak, double drift, double scale, double sigma2, double *out,
+                     double *res)
 {
-    acn_kin_to(n_axes, s, r, k0, k, Ts, q, qv);
+    kin_to(n_axes, s, r, k0, k, Ts, q, qv);
     long now = k > k0 ? k : k0;
-    res[1] = acn_kin_jump(n_axes, s, level);
-    double total = acn_kin_side(n_axes, s, r, now, aid_k, Ts, level, R, len, leak, drift, scale,
-                                sigma2, 1.0, out);
+    res[1] = kin_jump(n_axes, s, level);
+    double total =
+        kin_side(n_axes, s, r, now, aid_k, Ts, level, R, len, leak, drift, scale, sigma2, 1.0, out);
     res[0] = acn_chi2_equivalent(total, n_axes);
     /* rests.py's _norms, its sums in the same order: |v| and the rms of the sds */
     double v2 = 0.0, sd2 = 0.0;
@@ -2551,8 +2581,16 @@ void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, lon
     }
 }
 
-void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long num, const double *u0,
-                  const double *e0, const double *level, double *out)
+/*
+ * A candidate's peak speed (acn_kin_forward's): from the last rest's end
+ * e (its velocity u0 and level e0 per axis) to the candidate's start a >= e, on
+ * num points of the way (the first e, the last a, rounded half to even between),
+ * the velocity integrated from r's V with the level linear
+ * from e0 to the candidate's level. out: the peak and the last speed squared,
+ * and the peak squared with the level e0 kept all the way.
+ */
+static void kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long num,
+                     const double *u0, const double *e0, const double *level, double *out)
 {
     /* the points go up from e: each row summed on from the last point's (cur, at sample at), or
        from its checkpoint when that is nearer, without the kept rows' bookkeeping of a read */
@@ -2612,8 +2650,8 @@ int acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q,
         long k = ev_k[e], i = ev_i[e];
         int kind = ev_kind[e];
         if (kind == 1 || (kind == 2 && acc[i])) { /* an aid: a fix, or a rest's end */
-            acn_kin_aid(n_axes, s, r, k_now, k, Ts, q, qv, kind == 1 ? (int)i : -1,
-                        kind == 1 ? 0 : 1, kind == 1 ? ev_z[e] : 0.0, kind == 1 ? ev_var[e] : var);
+            kin_aid(n_axes, s, r, k_now, k, Ts, q, qv, kind == 1 ? (int)i : -1, kind == 1 ? 0 : 1,
+                    kind == 1 ? ev_z[e] : 0.0, kind == 1 ? ev_var[e] : var);
             k_now = k > k_now ? k : k_now;
             aid_k = k;
             aid_ev = e;
@@ -2623,12 +2661,12 @@ int acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q,
         if (kind != 0) {
             continue;
         }
-        acn_kin_to(n_axes, s, r, k_now, k, Ts, q, qv);
+        kin_to(n_axes, s, r, k_now, k, Ts, q, qv);
         k_now = k > k_now ? k : k_now;
         double *side = out + 4 * n_axes * i, v2 = 0.0, sd2 = 0.0;
-        double total = acn_kin_side(n_axes, s, r, k_now, aid_k, Ts, level + i * n_axes, R, len[i],
-                                    leak, drift, scale, var, -1.0, side);
-        /* as acn_kin_test's: the chi-square read on one axis, |v| and the rms of the sds */
+        double total = kin_side(n_axes, s, r, k_now, aid_k, Ts, level + i * n_axes, R, len[i], leak,
+                                drift, scale, var, -1.0, side);
+        /* as kin_test's: the chi-square read on one axis, |v| and the rms of the sds */
         for (int j = 0; j < n_axes; j++) {
             v2 += side[j] * side[j];
             sd2 += side[n_axes + j] * side[n_axes + j];
@@ -2639,7 +2677,7 @@ int acn_kin_backward(int n_axes, double *s, acn_kin_rec *r, double Ts, double q,
         aid[i] = aid_ev;
         fix[i] = fix_seen;
         if (acc[i]) {
-            acn_kin_aid(n_axes, s, r, k_now, k, Ts, q, qv, -1, 1, 0.0, var);
+            kin_aid(n_axes, s, r, k_now, k, Ts, q, qv, -1, 1, 0.0, var);
             aid_k = k;
         }
     }
@@ -2748,14 +2786,14 @@ static int kin_refuses(int reason)
            reason == KIN_NO_DECEL;
 }
 
-/* the peak speed's figures (acn_kin_peak) of candidate i from the rest that ended at end_k
+/* the peak speed's figures (kin_peak) of candidate i from the rest that ended at end_k
    with velocity u0 and level e0: peak, end and flat peak speeds */
 static void kin_fwd_peak(const acn_kin_fwd *f, long i, long end_k, const double *u0,
                          const double *e0, double *out)
 {
     long a = f->start[i] > end_k ? f->start[i] : end_k;
     long num = a - end_k + 1 < f->peak_points ? a - end_k + 1 : f->peak_points;
-    acn_kin_peak(f->n_axes, f->rec, f->Ts, end_k, a, num, u0, e0, f->level + i * f->n_axes, out);
+    kin_peak(f->n_axes, f->rec, f->Ts, end_k, a, num, u0, e0, f->level + i * f->n_axes, out);
     for (int j = 0; j < 3; j++) {
         out[j] = sqrt(out[j]);
     }
@@ -2923,7 +2961,22 @@ static int kin_fwd_checked(const acn_kin_fwd *f, long resume, const acn_kin_fwd_
             return -1;
         }
     }
-    return kin_events_bad(f->n, f->n_axes, f->m, f->n_ev, f->ev_k, f->ev_kind, f->ev_i) ? -1 : 0;
+    if (kin_events_bad(f->n, f->n_axes, f->m, f->n_ev, f->ev_k, f->ev_kind, f->ev_i)) {
+        return -1;
+    }
+    /* each candidate tested once, in order, at its start, and ended at its last sample after its
+       test: the restore (kin_fwd_restore) and the proven list (2 m doubles of work) rely on it */
+    long tested = 0;
+    for (long e = 0; e < f->n_ev; e++) {
+        long i = f->ev_i[e];
+        if (f->ev_kind[e] == 0 && (i != tested++ || f->ev_k[e] != f->start[i])) {
+            return -1;
+        }
+        if (f->ev_kind[e] == 2 && (i >= tested || f->ev_k[e] != f->stop[i] - 1)) {
+            return -1;
+        }
+    }
+    return tested == f->m ? 0 : -1;
 }
 
 /* back to before the hypothesis h (the state saved in saved, its event e_h): the candidates after
@@ -3005,8 +3058,8 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         int kind = f->ev_kind[e];
         e++;
         if (kind == 1) {
-            acn_kin_aid(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, (int)i, 0,
-                        f->ev_z[e - 1], f->ev_var[e - 1]);
+            kin_aid(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, (int)i, 0, f->ev_z[e - 1],
+                    f->ev_var[e - 1]);
             w.st.k = k > w.st.k ? k : w.st.k;
             w.st.aid_k = k;
             w.st.src = e - 1;
@@ -3019,7 +3072,7 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         }
         if (kind == 2) {
             if (o->acc[i]) {
-                acn_kin_aid(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0, var);
+                kin_aid(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0, var);
                 w.st.k = k > w.st.k ? k : w.st.k;
                 w.st.aid_k = k;
                 w.st.has_end = 1;
@@ -3040,9 +3093,9 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         /* a candidate's test: its side, then the verdict */
         last = i;
         double *side = o->side + 4 * n_axes * i, *num = o->num + ACN_KIN_NUM * i;
-        acn_kin_test(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, w.st.aid_k,
-                     f->level + n_axes * i, f->R, f->stop[i] - f->start[i], f->leak, f->drift,
-                     f->scale, var, side, res);
+        kin_test(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, w.st.aid_k,
+                 f->level + n_axes * i, f->R, f->stop[i] - f->start[i], f->leak, f->drift, f->scale,
+                 var, side, res);
         w.st.k = k > w.st.k ? k : w.st.k;
         o->stat[3 * i] = res[0];
         o->stat[3 * i + 1] = res[2];
@@ -3104,7 +3157,7 @@ long acn_kin_forward(const acn_kin_fwd *f, long resume, acn_kin_fwd_out *o)
         }
         if (reason <= KIN_GATE_OFF || reason == KIN_HYPOTHESIS) {
             o->acc[i] = 1;
-            acn_kin_aid(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0, var);
+            kin_aid(n_axes, w.s, f->rec, w.st.k, k, f->Ts, f->q, f->qv, -1, 1, 0.0, var);
             w.st.k = k > w.st.k ? k : w.st.k;
             w.st.aid_k = k;
         }

@@ -66,7 +66,7 @@ int acn_general(const acn_axis *m, long n, const double *z, const unsigned char 
  * axes) into arrays of n; returns the number of pieces, -1 when out of memory,
  * -2 for too many axes.
  */
-enum { ACN_REST_MAX_AXES = 8 };
+enum { ACN_REST_MAX_AXES = 7 }; /* zupt._MAX_AXES: numpy sums up to 7 terms in order */
 
 long acn_rest_pieces(long n, int n_axes, const double *means, const double *x, double bound2,
                      double total, long w, double tilt_rate, long lean, double leak_rate,
@@ -157,26 +157,6 @@ int acn_chunkg_bwd_lean(const acn_axis *m, long k0, long n, int last, const doub
 void acn_chunk_ru(const acn_axis *m, long n, const double *store, double *carry, double *xs,
                   double *sds);
 /*
- * The rest decision's kinematic filter (host/estimate/rests.py, _Kinematic): per
- * axis the state (r, u, e) and its symmetric covariance, 9 doubles
- *   r u e  Prr Pru Pre Puu Pue Pee
- * n_axes of them side by side in s. r: the record's sums V, A, W (acn_kin_rec,
- * below; rests.py says which). The arithmetic is the Python reference's
- * (tests/support/rests_reference.py), in its order.
- *   acn_kin_to    propagate s from sample k0 to k (k > k0)
- *   acn_kin_aid   propagate, then the scalar measurement z of state i (0: r,
- *                 1: u) with variance var on axis `axis`, or on every axis (-1)
- *   acn_kin_side  a side's test of a candidate of `len` samples and the given
- *                 level: v, its sd, r, its sd per axis into out (4 rows of
- *                 n_axes, v times sign); returns sum of v^2 / (sd^2 + sigma2).
- *                 The level's path since the last aid (D ago) is taken as
- *                 linear; the sd is widened by a leak that changed by L along
- *                 any path (leak L D), a mean acceleration error no level
- *                 explains (drift D) and a scale factor's share of what moved
- *                 since (scale x the integral of |x|); r's by that times D
- *   acn_kin_jump  the level's jump beyond 3 sd of the filter's (0: it has none)
- */
-/*
  * The record's sums the kinematic filter reads (rests.py, _Kinematic), V, A, W
  * as acn_kin_sums gives them, without their n + 1 rows in memory: x (n rows of
  * n_axes, reverse: read last first) and checkpoints cp, the row [V, A, W] (3
@@ -206,23 +186,6 @@ typedef struct {
 } acn_kin_rec;
 int acn_kin_checkpoints(acn_kin_rec *r, double *cp);
 int acn_kin_sums_at(acn_kin_rec *r, long k, double *out);
-void acn_kin_to(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
-                const double *qv);
-void acn_kin_aid(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
-                 const double *qv, int axis, int i, double z, double var);
-double acn_kin_side(int n_axes, const double *s, acn_kin_rec *r, long k, long aid_k, double Ts,
-                    const double *level, const double *R, long len, double leak, double drift,
-                    double scale, double sigma2, double sign, double *out);
-double acn_kin_jump(int n_axes, const double *s, const double *level);
-/*
- * A forward side's whole test of a candidate (acn_kin_forward's): s
- * propagated from k0 to k, then as acn_kin_side (sign +1) into out, with
- * res = [its chi-square read on one axis (acn_chi2_equivalent), the level's
- * jump (acn_kin_jump), |v| over the axes, the rms of the sds].
- */
-void acn_kin_test(int n_axes, double *s, acn_kin_rec *r, long k0, long k, double Ts, double q,
-                  const double *qv, long aid_k, const double *level, const double *R, long len,
-                  double leak, double drift, double scale, double sigma2, double *out, double *res);
 /*
  * The one-degree chi-square value with the upper tail of x under dof degrees of
  * freedom (rests.py, chi2_equivalent): the tail in closed form, its inverse by
@@ -241,23 +204,13 @@ void acn_kin_cands(int n_axes, const double *x, const unsigned char *usable, lon
                    const long *start, const long *stop, const double *R, double *level,
                    double *still);
 /*
- * A candidate's peak speed (acn_kin_forward's): from the last rest's end
- * e (its velocity u0 and level e0 per axis) to the candidate's start a >= e, on
- * num points of the way (the first e, the last a, rounded half to even between),
- * the velocity integrated from r's V with the level linear
- * from e0 to the candidate's level. out: the peak and the last speed squared,
- * and the peak squared with the level e0 kept all the way.
- */
-void acn_kin_peak(int n_axes, acn_kin_rec *r, double Ts, long e, long a, long num, const double *u0,
-                  const double *e0, const double *level, double *out);
-/*
  * The backward filter of the rest decision (rests.py, _Decider.backward): from
  * the state s at sample 0 of the reversed record, its n_ev events in order,
  * each at sample ev_k with kind ev_kind (0: a candidate's test, 1: a fix of
  * value ev_z, variance ev_var on axis ev_i, 2: a candidate's end; ev_i the
  * candidate otherwise). A candidate with acc set is a rest: u = 0 (variance
  * sigma^2) at its test and its end. Per candidate i tested: its side (as
- * acn_kin_side, sign -1) into out + 4 n_axes i and, as acn_kin_test's res, its
+ * kin_side, sign -1) into out + 4 n_axes i and, as kin_test's res, its
  * chi-square read on one axis, |v| and the rms of the sds into stat + 3 i; the
  * event of the last aid before it (a fix, or the end of a rest) into aid[i]
  * (-1: none) and whether a fix came before it into fix[i].
@@ -316,7 +269,7 @@ typedef struct {
  * the sd a side had to reach); a hypothesis' outcome[i]
  * (1: refuted by candidate oarg[2 i] of reason oarg[2 i + 1], 2: not borne out
  * within, 3: the record ended, 4: confirmed, its reason before in oarg[2 i + 1]);
- * its side as acn_kin_test's (side + 4 n_axes i; stat + 3 i: chi-square, |v|,
+ * its side as kin_test's (side + 4 n_axes i; stat + 3 i: chi-square, |v|,
  * rms sd), the event of its last aid aid[i] (-1: none) and whether a fix came
  * fix[i]. acc, proven: the accepted rests and the proven stillness, carried
  * from pass to pass. mark_l (9 longs), mark_d (13 n_axes doubles), mark_ok:
