@@ -254,6 +254,31 @@ def test_the_forward_kernel_refuses_events_not_each_candidates_test_and_end(defa
         dec.run()
 
 
+def test_the_forward_kernel_resumes_only_from_a_mark_it_could_have_saved(default_model):
+    """A pass resumed at a candidate reads its mark (the event of that candidate's test, the filter's samples) back
+    from arrays a caller of the compiled module fills: an event that is not that test, or samples outside the record,
+    are refused (-1) where they would have read the events and the record's sums out of bounds."""
+    from accelnav.estimate import rests
+
+    n, n_axes = 200, len(default_model.axes)
+    x, R, t = np.zeros((n, n_axes)), np.ones(n_axes), np.arange(n) * default_model.Ts
+    p = zupt.resolved(default_model, zupt.ZuptParams())
+    level, fixes = np.zeros(n_axes), [[] for _ in range(n_axes)]
+    cands = [rests.Candidate(10, 50, level, 1.0), rests.Candidate(80, 120, level, 1.0)]
+    dec = rests._Decider(x, R, default_model.Ts, cands, fixes, p, t)
+    dec.forward()
+    k = dec._kernel()
+    assert k.mark_ok[0] and k.lib.acn_kin_forward(k.f, 0, k.out) == 0  # the mark as the pass saved it
+    saved = [k.out.mark_l[j] for j in range(9)]
+    # [event, k, aid_k, src, fix, has_end, end_k, has_stand, stand_k]: not candidate 0's test, past the events,
+    # samples past the record or before it, an aid event past the events
+    for j, bad in ((0, 1), (0, -1), (0, 10**6), (1, n + 1), (2, -1), (3, len(dec.fwd_events)), (6, n + 1), (8, -1)):
+        k.out.mark_l[j] = bad
+        assert k.lib.acn_kin_forward(k.f, 0, k.out) == -1, (j, bad)
+        k.out.mark_l[j] = saved[j]
+    assert k.lib.acn_kin_forward(k.f, 0, k.out) == 0
+
+
 def test_no_candidates_no_verdicts(default_model):
     """A record with no candidate gives no verdict (the kernel's rows are never fewer than one: none is read)."""
     from accelnav.estimate import rests

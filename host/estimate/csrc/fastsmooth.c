@@ -2976,7 +2976,20 @@ static int kin_fwd_checked(const acn_kin_fwd *f, long resume, const acn_kin_fwd_
             return -1;
         }
     }
-    return tested == f->m ? 0 : -1;
+    if (tested != f->m) {
+        return -1;
+    }
+    if (resume >=
+        0) { /* the mark resumed from: saved at that candidate's test, its samples in the record */
+        const long *ml = o->mark_l + KIN_MARK_L * (resume / f->mark_every);
+        long e = ml[0], k = ml[1], aid_k = ml[2], src = ml[3], end_k = ml[6], stand_k = ml[8];
+        if (e < 0 || e >= f->n_ev || f->ev_kind[e] != 0 || f->ev_i[e] != resume || k < 0 ||
+            k > f->n || aid_k < 0 || aid_k > f->n || src < -1 || src >= f->n_ev || end_k < 0 ||
+            end_k > f->n || stand_k < 0 || stand_k > f->n) {
+            return -1;
+        }
+    }
+    return 0;
 }
 
 /* back to before the hypothesis h (the state saved in saved, its event e_h): the candidates after

@@ -237,6 +237,9 @@ void acn_kin_sums(long n, int n_axes, const double *x, int reverse, double Ts, d
  * constants), veto[i] set where a candidate was withdrawn. Marks: a pass starts
  * at candidate `resume`'s mark (a multiple of mark_every whose mark a pass left;
  * -1: at the record's start), the verdicts before it kept from the last pass.
+ * Refused (-1) unless each candidate is tested once, in order, at its start and
+ * ended at stop - 1 after its test, and the mark resumed from names that
+ * candidate's test and samples within the record.
  */
 typedef struct {
     int n_axes;
