@@ -866,19 +866,25 @@ def _forward(run: _Run, s: int, e: int, read: Reader, write_filt: bool) -> None:
 
 def _piece(ax: _Axis, s: int, e: int) -> tuple[Piece | None, int]:
     """Axis ``ax``'s aids of samples s..e-1 (ChunkAids.between, a caller's own among them) and their count, checked
-    before the kernels read them: within the chunk and sorted, h (ne, 4) and k, z, R, gates, marked (ne,)."""
+    before the kernels read them (:func:`checked_piece`)."""
     piece = ax.aids.between(s, e) if ax.aids is not None else None
+    return piece, checked_piece(piece, ax.j, s, e)
+
+
+def checked_piece(piece: Piece | None, j: int, s: int, e: int) -> int:
+    """The count of a ChunkAids piece of samples s..e-1 on axis j, refused unless it is what the kernels read: within
+    the chunk and sorted, h (ne, 4) and k, z, R, gates, marked (ne,) (a caller's own ChunkAids may give anything)."""
     ne = 0 if piece is None else len(piece.ex)
     if not ne:
-        return piece, 0
+        return 0
     ex = piece.ex
     shapes = [np.shape(a) for a in (ex.h, ex.k, ex.z, ex.R, piece.gates, piece.marked)]
     if shapes != [(ne, 4)] + [(ne,)] * 5:
-        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} have h, k, z, R, gates, marked of shapes "
+        raise ValueError(f"axis {j}: the aids of samples {s}..{e - 1} have h, k, z, R, gates, marked of shapes "
                          f"{shapes}; accepted: ({ne}, 4), then ({ne},)")  # fmt: skip
     if ex.k[0] < s or ex.k[-1] >= e or np.any(ex.k[1:] < ex.k[:-1]):
-        raise ValueError(f"axis {ax.j}: the aids of samples {s}..{e - 1} are not sorted within them")
-    return piece, ne
+        raise ValueError(f"axis {j}: the aids of samples {s}..{e - 1} are not sorted within them")
+    return ne
 
 
 def _forward_general(

@@ -62,7 +62,7 @@ from statistics import NormalDist
 import numpy as np
 
 from accelnav.estimate import fastsmooth
-from accelnav.estimate.chunked import GROW
+from accelnav.estimate.chunked import GROW, checked_piece
 from accelnav.estimate.kf import Measurement, batch_update
 from accelnav.lazy import lazy_module
 from accelnav.model.design import axis_design
@@ -157,14 +157,17 @@ def _aid_count(aid) -> int:
     return 0 if aid is None else len(aid) if isinstance(aid, fastsmooth.Extras) else int(aid.count)
 
 
-def _piece(aid, s: int, e: int) -> fastsmooth.Extras | None:
-    """The aids of samples s..e-1 (sample numbers of the run), in the filter's order."""
+def _piece(aid, j: int, s: int, e: int) -> fastsmooth.Extras | None:
+    """Axis j's aids of samples s..e-1 (sample numbers of the run), in the filter's order; a ChunkAids' piece checked
+    as the smoothing passes check it (a caller's own may give anything)."""
     if aid is None or not _aid_count(aid):
         return None
     if isinstance(aid, fastsmooth.Extras):
         a, b = int(np.searchsorted(aid.k, s)), int(np.searchsorted(aid.k, e))
         return fastsmooth.Extras(aid.k[a:b], aid.h[a:b], aid.z[a:b], aid.R[a:b], aid.order[a:b])
-    return aid.between(s, e).ex
+    piece = aid.between(s, e)
+    checked_piece(piece, j, s, e)
+    return None if piece is None else piece.ex
 
 
 # bytes per sample and axis a chunk of the likelihood holds: acn_chunkg_fwd's store row, its four outputs (filter
@@ -220,7 +223,7 @@ def data_loglik(model: Model, data: RunData, after_chunk: Callable[[int], None] 
         for j, ps in enumerate(passes):
             z = np.asarray(accel[:, j], dtype=np.float64)
             ok = ~np.asarray(clipped[:, j], dtype=bool) & np.isfinite(z)
-            ex = _piece(data.aids[j], s, e)
+            ex = _piece(data.aids[j], j, s, e)
             xp, Pa = ps.priors(np.ascontiguousarray(np.where(ok, z, 0.0)), ok, ex, s, e == n)
             with np.errstate(invalid="ignore", divide="ignore"):
                 ll[j] += _chunk_loglik(ps.d, z, ok, xp, Pa, ex, s)

@@ -77,3 +77,32 @@ def test_the_time_bound_stops_an_evaluation_within_a_chunk_and_is_said_up_front(
     assert len(reads) <= 30 + 6  # the start's 30 chunks, then the bound's 5 s and the chunk that passed it
     said = [rec.getMessage() for rec in caplog.records if "one likelihood evaluation" in rec.getMessage()]
     assert len(said) == 1 and "takes 30 s" in said[0] and "about 0 of the search's 300" in said[0], said
+
+
+def test_a_callers_chunk_aids_of_the_wrong_shape_are_refused_before_the_likelihood_reads_them(case):
+    """A RunData's aids may be a caller's own ChunkAids: its pieces are checked as the smoothing passes check them
+    (chunked.checked_piece), so an h of 3 columns is refused in words, not read past its end by the kernel."""
+    from accelnav.estimate import chunked
+    from accelnav.estimate import fastsmooth as fs
+
+    truth, z, valid, extras = case
+    whole = fs.Extras.of(extras[0])
+
+    class Aids:
+        count = len(whole)
+
+        def __init__(self, columns: int):
+            self.columns = columns
+
+        def between(self, s, e):
+            a, b = np.searchsorted(whole.k, s), np.searchsorted(whole.k, e)
+            h = np.ascontiguousarray(whole.h[a:b, : self.columns])
+            ex = fs.Extras(whole.k[a:b], h, whole.z[a:b], whole.R[a:b], whole.order[a:b] - a)
+            return chunked.Piece(ex, np.zeros(b - a), np.ones(b - a, dtype=bool))
+
+    data = RunData.of(z, valid, extras, chunk=500)
+    good = RunData(data.n, data.n_axes, data.read, [Aids(4)], data.chunk)
+    assert data_loglik(truth, good) == pytest.approx(data_loglik(truth, data), rel=1e-12)  # the same aids: accepted
+    bad = RunData(data.n, data.n_axes, data.read, [Aids(3)], data.chunk)
+    with pytest.raises(ValueError, match=r"shapes .*\(\d+, 3\).*accepted: \(\d+, 4\)"):
+        data_loglik(truth, bad)
