@@ -8,7 +8,7 @@ each chunk's call timed --repeat times, its best kept, summed over the run's cal
 a call's cost is mostly its fresh pages, and a total swings by a third with the allocator's state and the
 machine's load (measured).
 Usage: python bench/run_all.py speed --only bench_rest_updates, or from bench/speed:
-  python bench_rest_updates.py [--sizes 1e7] [--before /work/main/.venv/bin/python] [--repeat 30]
+  python bench_rest_updates.py [--sizes 1e7] [--before EXE] [--repeat 30]
 """
 
 from __future__ import annotations
@@ -51,10 +51,13 @@ print(2 * best.sum(), made // repeat)  # asked twice: forward and backward
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", nargs="*", type=float, default=[1e7])
-    ap.add_argument("--before", default="/work/main/.venv/bin/python", help="an earlier build's python")
+    ap.add_argument("--before", default=None, help="an earlier build's python (its row beside this build's)")
     ap.add_argument("--repeat", type=int, default=30)
     args = ap.parse_args()
-    builds = [("this build", sys.executable)] + ([("before", args.before)] if Path(args.before).exists() else [])
+    same = args.before is None or Path(args.before).resolve() == Path(sys.executable).resolve()
+    if not same and not Path(args.before).exists():
+        ap.error(f"--before {args.before}: no such interpreter")
+    builds = [("this build", sys.executable)] + ([] if same else [("before", args.before)])
     print("| N | build | updates a pass | s (2 passes, 2 axes, best per call) | goal | met |")
     print("|---|---|---|---|---|---|")
     for n in (int(s) for s in args.sizes):
