@@ -233,20 +233,25 @@ def test_the_forward_kernel_refuses_what_it_cannot_read(default_model):
             dec.run()
 
 
+def _two_candidates(model, n: int):
+    """A decider over n still samples with candidates 10..49 and 80..119 and no fix, not yet run."""
+    from accelnav.estimate import rests
+
+    n_axes = len(model.axes)
+    x, R, t = np.zeros((n, n_axes)), np.ones(n_axes), np.arange(n) * model.Ts
+    p = zupt.resolved(model, zupt.ZuptParams())
+    level, fixes = np.zeros(n_axes), [[] for _ in range(n_axes)]
+    cands = [rests.Candidate(10, 50, level, 1.0), rests.Candidate(80, 120, level, 1.0)]
+    return rests._Decider(x, R, model.Ts, cands, fixes, p, t)
+
+
 @pytest.mark.parametrize("event, field, value", [(2, "i", 0), (2, "k", 81), (3, "k", 100), (1, "i", 1)])
 def test_the_forward_kernel_refuses_events_not_each_candidates_test_and_end(default_model, event, field, value):
     """The forward kernel undoes a hypothesis over the candidates tested since it opened, and keeps the proven ones in
     2 m doubles: both rely on each candidate tested once, in order, at its start, and ended at its last sample after its
     test. Events that test a candidate twice, test it elsewhere, end it elsewhere or end one not yet tested (a caller
     that skipped decide()'s events) are refused (-1), where they could have written past the proven list."""
-    from accelnav.estimate import rests
-
-    n, n_axes = 200, len(default_model.axes)
-    x, R, t = np.zeros((n, n_axes)), np.ones(n_axes), np.arange(n) * default_model.Ts
-    p = zupt.resolved(default_model, zupt.ZuptParams())
-    level, fixes = np.zeros(n_axes), [[] for _ in range(n_axes)]
-    cands = [rests.Candidate(10, 50, level, 1.0), rests.Candidate(80, 120, level, 1.0)]
-    dec = rests._Decider(x, R, default_model.Ts, cands, fixes, p, t)
+    dec = _two_candidates(default_model, 200)
     ev = dec.fwd_events
     assert (ev.k.tolist(), ev.kind.tolist(), ev.i.tolist()) == ([10, 49, 80, 119], [0, 2, 0, 2], [0, 0, 1, 1])
     getattr(ev, field)[event] = value
@@ -258,14 +263,7 @@ def test_the_forward_kernel_resumes_only_from_a_mark_it_could_have_saved(default
     """A pass resumed at a candidate reads its mark (the event of that candidate's test, the filter's samples) back
     from arrays a caller of the compiled module fills: an event that is not that test, or samples outside the record,
     are refused (-1) where they would have read the events and the record's sums out of bounds."""
-    from accelnav.estimate import rests
-
-    n, n_axes = 200, len(default_model.axes)
-    x, R, t = np.zeros((n, n_axes)), np.ones(n_axes), np.arange(n) * default_model.Ts
-    p = zupt.resolved(default_model, zupt.ZuptParams())
-    level, fixes = np.zeros(n_axes), [[] for _ in range(n_axes)]
-    cands = [rests.Candidate(10, 50, level, 1.0), rests.Candidate(80, 120, level, 1.0)]
-    dec = rests._Decider(x, R, default_model.Ts, cands, fixes, p, t)
+    n, dec = 200, _two_candidates(default_model, 200)
     dec.forward()
     k = dec._kernel()
     assert k.mark_ok[0] and k.lib.acn_kin_forward(k.f, 0, k.out) == 0  # the mark as the pass saved it
